@@ -1,0 +1,64 @@
+//! Forward kinematics: placements, body velocities and accelerations.
+
+use super::Data;
+use crate::error::Result;
+use crate::model::{Model, check_vec};
+use crate::spatial::Motion;
+use nalgebra::DVector;
+
+/// Joint motion `S_i x_i` of joint `i` (child frame) for the coordinates `x` (length nv).
+#[inline]
+pub(crate) fn joint_motion(model: &Model, i: usize, x: &DVector<f64>) -> Motion {
+    let (a, n) = (model.idx_v[i], model.nvs[i]);
+    let mut m = Motion::zero();
+    for c in a..a + n {
+        m += model.subspace[c] * x[c];
+    }
+    m
+}
+
+/// Joint placements only: fills `li_m_i` and `o_m_i` (unchecked `q`).
+#[inline]
+pub(crate) fn placements(model: &Model, data: &mut Data, q: &DVector<f64>) {
+    for i in 1..model.njoints() {
+        let (a, n) = (model.idx_q[i], model.nqs[i]);
+        let xj = model.joints[i].transform(&q.as_slice()[a..a + n]);
+        data.li_m_i[i] = model.placements[i].compose(&xj);
+        let p = model.parents[i];
+        data.o_m_i[i] = data.o_m_i[p].compose(&data.li_m_i[i]);
+    }
+}
+
+/// Forward kinematics: world placements `o_m_i`, relative placements `li_m_i`, body-frame
+/// velocities `v` and (with `a` given) body-frame accelerations `a` without gravity.
+pub fn forward_kinematics(
+    model: &Model,
+    data: &mut Data,
+    q: &DVector<f64>,
+    v: Option<&DVector<f64>>,
+    a: Option<&DVector<f64>>,
+) -> Result<()> {
+    model.check_q(q)?;
+    if let Some(v) = v {
+        check_vec("v", v, model.nv)?;
+    }
+    if let Some(a) = a {
+        check_vec("a", a, model.nv)?;
+    }
+    placements(model, data, q);
+    if let Some(v) = v {
+        data.v[0] = Motion::zero();
+        data.a[0] = Motion::zero();
+        for i in 1..model.njoints() {
+            let p = model.parents[i];
+            let vj = joint_motion(model, i, v);
+            data.v[i] = data.li_m_i[i].inv_act_motion(&data.v[p]) + vj;
+            if let Some(acc) = a {
+                data.a[i] = data.li_m_i[i].inv_act_motion(&data.a[p])
+                    + joint_motion(model, i, acc)
+                    + data.v[i].cross(&vj);
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,25 @@
+//! Algorithms: kinematics, RNEA, CRBA, ABA, the tree-sparse `LᵀDL` factorisation, Jacobians.
+
+mod aba;
+mod crba;
+mod data;
+mod jacobian;
+mod kinematics;
+mod ltl;
+mod rnea;
+
+pub use aba::aba;
+pub use crba::crba;
+pub use data::Data;
+pub use jacobian::{point_drift, point_jacobian, point_position};
+pub use kinematics::forward_kinematics;
+pub use ltl::{factorize_ltl, solve_ltl, solve_ltl_matrix};
+pub use rnea::{nonlinear_effects, rnea};
+
+/// Crate-internal unchecked building blocks shared with the derivative algorithms.
+pub(crate) mod internal {
+    pub(crate) use super::aba::aba_unchecked;
+    pub(crate) use super::kinematics::placements;
+    pub(crate) use super::ltl::{ltl_in_place, ltl_solve_in_place};
+    pub(crate) use super::rnea::check_fext;
+}

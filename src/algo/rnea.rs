@@ -1,0 +1,108 @@
+//! Recursive Newton–Euler inverse dynamics.
+
+use super::Data;
+use super::kinematics::{joint_motion, placements};
+use crate::error::{Error, Result};
+use crate::model::{Model, check_vec};
+use crate::spatial::{Force, Motion};
+use nalgebra::DVector;
+
+/// Checks an external-force list: one force per joint (index 0 ignored), finite.
+pub(crate) fn check_fext(model: &Model, fext: Option<&[Force]>) -> Result<()> {
+    if let Some(fe) = fext {
+        if fe.len() != model.njoints() {
+            return Err(Error::Dimension {
+                what: "fext".into(),
+                expected: model.njoints(),
+                got: fe.len(),
+            });
+        }
+        if let Some(index) =
+            fe.iter().position(|f| !(f.ang.iter().chain(f.lin.iter()).all(|x| x.is_finite())))
+        {
+            return Err(Error::NotFinite { what: "fext".into(), index });
+        }
+    }
+    Ok(())
+}
+
+/// Inverse dynamics `τ = M(q) q̈ + C(q, q̇) q̇ + g(q) − Σ Jᵢᵀ fextᵢ` (RNEA, body frames).
+///
+/// `fext`, when given, holds one spatial force per joint (index 0 ignored) acting on that
+/// joint's body, expressed in the body (joint child) frame, as Pinocchio's `fext` overloads.
+/// Returns `data.tau`.
+pub fn rnea<'a>(
+    model: &Model,
+    data: &'a mut Data,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<&'a DVector<f64>> {
+    model.check_q(q)?;
+    check_vec("v", v, model.nv)?;
+    check_vec("a", a, model.nv)?;
+    check_fext(model, fext)?;
+    rnea_unchecked(model, data, q, v, a, fext);
+    Ok(&data.tau)
+}
+
+/// RNEA without input validation (inputs must have the right lengths).
+pub(crate) fn rnea_unchecked(
+    model: &Model,
+    data: &mut Data,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    fext: Option<&[Force]>,
+) {
+    placements(model, data, q);
+    data.v[0] = Motion::zero();
+    data.a[0] = -model.gravity;
+    let n = model.njoints();
+    for i in 1..n {
+        let p = model.parents[i];
+        let x = data.li_m_i[i];
+        let vj = joint_motion(model, i, v);
+        let vi = x.inv_act_motion(&data.v[p]) + vj;
+        let ai = x.inv_act_motion(&data.a[p]) + joint_motion(model, i, a) + vi.cross(&vj);
+        data.v[i] = vi;
+        data.a[i] = ai;
+        let inertia = &model.inertias[i];
+        let mut f = inertia.mul_motion(&ai) + vi.cross_force(&inertia.mul_motion(&vi));
+        if let Some(fe) = fext {
+            f -= fe[i];
+        }
+        data.f[i] = f;
+    }
+    for i in (1..n).rev() {
+        let (iv, nv) = (model.idx_v[i], model.nvs[i]);
+        let f = data.f[i];
+        for c in iv..iv + nv {
+            data.tau[c] = model.subspace[c].dot(&f);
+        }
+        let p = model.parents[i];
+        if p > 0 {
+            let fp = data.li_m_i[i].act_force(&f);
+            data.f[p] += fp;
+        }
+    }
+}
+
+/// Nonlinear effects `b(q, q̇) = C(q, q̇) q̇ + g(q)` (RNEA with `q̈ = 0`). Returns `data.nle`.
+pub fn nonlinear_effects<'a>(
+    model: &Model,
+    data: &'a mut Data,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+) -> Result<&'a DVector<f64>> {
+    model.check_q(q)?;
+    check_vec("v", v, model.nv)?;
+    let zero = std::mem::replace(&mut data.tmp_v, DVector::zeros(0));
+    let mut zero = zero;
+    zero.fill(0.0);
+    rnea_unchecked(model, data, q, v, &zero, None);
+    data.tmp_v = zero;
+    data.nle.copy_from(&data.tau);
+    Ok(&data.nle)
+}

@@ -1,0 +1,195 @@
+//! `sodyn demo`: every algorithm on a built-in model at a random state, with timings and the
+//! maximum error against the automatic-differentiation oracle of [`crate::reference`].
+
+use crate::algo::{Data, aba, crba, factorize_ltl, point_jacobian, rnea, solve_ltl};
+use crate::cli::load_model;
+use crate::deriv::{
+    FdSoData, SoData, fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives,
+};
+use crate::error::Result;
+use crate::reference;
+use crate::rng::Rng;
+use crate::tensor::Tensor3;
+use nalgebra::{DMatrix, DVector, Matrix3xX, Vector3};
+use std::time::Instant;
+
+/// Median wall time of `f` in microseconds over enough repetitions (about 0.2 s, at most 2000).
+fn time_us(mut f: impl FnMut()) -> f64 {
+    f();
+    let t0 = Instant::now();
+    f();
+    let once = t0.elapsed().as_secs_f64().max(1e-9);
+    let reps = ((0.2 / once) as usize).clamp(3, 2000);
+    let mut samples: Vec<f64> = (0..reps)
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed().as_secs_f64() * 1e6
+        })
+        .collect();
+    samples.sort_by(|a, b| a.total_cmp(b));
+    samples[reps / 2]
+}
+
+fn rel(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
+    (a - b).amax() / b.amax().max(1.0)
+}
+
+fn rel_t(a: &Tensor3, b: &Tensor3) -> f64 {
+    a.max_abs_diff(b) / b.max_abs().max(1.0)
+}
+
+fn rel_v(a: &DVector<f64>, b: &[f64]) -> f64 {
+    let b = DVector::from_column_slice(b);
+    (a - &b).amax() / b.amax().max(1.0)
+}
+
+/// Dual-number Jacobian of a point position: column `c` is `d/dε p(q ⊕ ε e_c)`.
+pub fn point_jacobian_oracle(
+    m: &crate::model::Model,
+    q: &[f64],
+    frame: usize,
+    point: &[f64; 3],
+) -> Matrix3xX<f64> {
+    use num_dual::Dual64;
+    let mut jac = Matrix3xX::zeros(m.nv);
+    let qd: Vec<Dual64> = q.iter().map(|&x| Dual64::from(x)).collect();
+    let pt = point.map(Dual64::from);
+    for c in 0..m.nv {
+        let mut delta = vec![Dual64::from(0.0); m.nv];
+        delta[c] = Dual64::new(0.0, 1.0);
+        let p = reference::point_position(m, &reference::integrate(m, &qd, &delta), frame, &pt);
+        for r in 0..3 {
+            jac[(r, c)] = p[r].eps;
+        }
+    }
+    jac
+}
+
+/// Runs the demo on `spec` (`builtin:NAME` or a URDF path) with random state `seed`.
+pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
+    let m = load_model(spec, false)?;
+    let mut rng = Rng::new(seed);
+    let q = m.random_configuration(&mut rng);
+    let v = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
+    let a = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
+    let tau = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
+    let (qs, vs, as_, ts) = (q.as_slice(), v.as_slice(), a.as_slice(), tau.as_slice());
+    println!(
+        "sodyn demo: model \"{}\" ({spec}), nq = {}, nv = {}, {} bodies, seed {seed}",
+        m.name,
+        m.nq,
+        m.nv,
+        m.njoints() - 1
+    );
+    println!(
+        "errors: max |ours − oracle| / max(1, max |oracle|); oracle = reference code with f64 / dual / hyper-dual numbers\n"
+    );
+    println!("{:<34} {:>12} {:>14}", "algorithm", "median µs", "max rel err");
+    let mut d = Data::new(&m);
+    let mut so = SoData::new(&m);
+    let mut fso = FdSoData::new(&m);
+    let mut worst: f64 = 0.0;
+    let mut row = |name: &str, us: f64, err: f64| {
+        worst = worst.max(err);
+        println!("{name:<34} {us:>12.2} {err:>14.2e}");
+    };
+
+    let t = time_us(|| {
+        rnea(&m, &mut d, &q, &v, &a, None).unwrap();
+    });
+    let tau_id = rnea(&m, &mut d, &q, &v, &a, None)?.clone();
+    row(
+        "rnea (inverse dynamics)",
+        t,
+        rel_v(&tau_id, &reference::rnea::<f64>(&m, qs, vs, as_, None)),
+    );
+
+    let t = time_us(|| {
+        crba(&m, &mut d, &q).unwrap();
+    });
+    let mm = crba(&m, &mut d, &q)?.clone();
+    let mref = reference::mass_matrix::<f64>(&m, qs);
+    row("crba (mass matrix)", t, rel(&mm, &DMatrix::from_fn(m.nv, m.nv, |i, j| mref[i][j])));
+
+    let t = time_us(|| {
+        aba(&m, &mut d, &q, &v, &tau, None).unwrap();
+    });
+    let qdd = aba(&m, &mut d, &q, &v, &tau, None)?.clone();
+    let qdd_ref = reference::aba::<f64>(&m, qs, vs, ts, None);
+    row("aba (forward dynamics)", t, rel_v(&qdd, &qdd_ref));
+
+    crba(&m, &mut d, &q)?;
+    let t = time_us(|| {
+        factorize_ltl(&m, &mut d).unwrap();
+    });
+    let b = reference::nle::<f64>(&m, qs, vs);
+    let mut x = &tau - DVector::from_vec(b);
+    solve_ltl(&m, &d, &mut x)?;
+    row("LᵀDL factorisation + solve", t, rel_v(&x, &qdd_ref));
+
+    let frame = m.frames.len() - 1;
+    let mut jac = Matrix3xX::zeros(m.nv);
+    let point = Vector3::new(0.05, -0.02, 0.1);
+    let t = time_us(|| {
+        point_jacobian(&m, &mut d, &q, frame, &point, &mut jac).unwrap();
+    });
+    let jref = point_jacobian_oracle(&m, qs, frame, &[point.x, point.y, point.z]);
+    row(
+        &format!("point Jacobian ({})", m.frames[frame].name),
+        t,
+        (&jac - &jref).amax() / jref.amax().max(1.0),
+    );
+
+    let t = time_us(|| {
+        id_derivatives(&m, &mut d, &q, &v, &a, None).unwrap();
+    });
+    id_derivatives(&m, &mut d, &q, &v, &a, None)?;
+    row("id_fo (IDSVA) dtau/dq", t, rel(&d.dtau_dq, &reference::d_rnea_dq(&m, qs, vs, as_)));
+    row("      dtau/dv", t, rel(&d.dtau_dv, &reference::d_rnea_dv(&m, qs, vs, as_)));
+
+    let t = time_us(|| {
+        fd_derivatives(&m, &mut d, &q, &v, &tau, None).unwrap();
+    });
+    fd_derivatives(&m, &mut d, &q, &v, &tau, None)?;
+    row("fd_fo dqdd/dq", t, rel(&d.dqdd_dq, &reference::d_aba_dq(&m, qs, vs, ts)));
+    row("      dqdd/dv", t, rel(&d.dqdd_dv, &reference::d_aba_dv(&m, qs, vs, ts)));
+    row("      dqdd/dtau = M⁻¹", t, rel(&d.minv, &reference::d_aba_dtau(&m, qs, vs, ts)));
+
+    let t = time_us(|| {
+        id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None).unwrap();
+    });
+    id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None)?;
+    row(
+        "id_so (IDSVA-SO) d2tau/dq2",
+        t,
+        rel_t(so.d2tau_dq2(), &reference::d2_rnea_dq2(&m, qs, vs, as_)),
+    );
+    row("      d2tau/dv2", t, rel_t(so.d2tau_dv2(), &reference::d2_rnea_dv2(&m, qs, vs, as_)));
+    row("      d2tau/dqdv", t, rel_t(so.d2tau_dqdv(), &reference::d2_rnea_dqdv(&m, qs, vs, as_)));
+    row("      dM/dq", t, rel_t(so.dm_dq(), &reference::dM_dq(&m, qs)));
+
+    let t = time_us(|| {
+        fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &tau, None).unwrap();
+    });
+    fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &tau, None)?;
+    let big = m.nv > 40;
+    if big {
+        row("fd_so (timing only; oracle > 40 DoF)", t, 0.0);
+    } else {
+        row("fd_so d2qdd/dq2", t, rel_t(fso.d2qdd_dq2(), &reference::d2_aba_dq2(&m, qs, vs, ts)));
+        row("      d2qdd/dv2", t, rel_t(fso.d2qdd_dv2(), &reference::d2_aba_dv2(&m, qs, vs, ts)));
+        row(
+            "      d2qdd/dqdv",
+            t,
+            rel_t(fso.d2qdd_dqdv(), &reference::d2_aba_dqdv(&m, qs, vs, ts)),
+        );
+        row(
+            "      d2qdd/dtau dq",
+            t,
+            rel_t(fso.d2qdd_dtaudq(), &reference::d2_aba_dtaudq(&m, qs, vs, ts)),
+        );
+    }
+    println!("\nmaximum relative error against the oracle: {worst:.2e}");
+    Ok(())
+}

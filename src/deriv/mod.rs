@@ -1,0 +1,16 @@
+//! Derivatives of the dynamics, one file per family of the notes.
+//!
+//! * [`id_fo`]: IDSVA, first-order ID derivatives;
+//! * [`id_so`]: IDSVA-SO, second-order ID derivatives and `∂M/∂q`;
+//! * [`zero`]: IDFOZA / IDSOZA zero-velocity shortcuts;
+//! * [`fd`]: first- and second-order forward-dynamics derivatives.
+
+pub mod fd;
+pub mod id_fo;
+pub mod id_so;
+pub mod zero;
+
+pub use fd::{FdSoData, fd_derivatives, fd_so_derivatives};
+pub use id_fo::id_derivatives;
+pub use id_so::{SoData, id_so_derivatives};
+pub use zero::{idfoza, idsoza};

@@ -1,0 +1,23 @@
+//! # sodyn
+//!
+//! Rigid-body dynamics and its exact first- and second-order derivatives, following the notes
+//! "Details of Partial Derivatives of Rigid-Body Inverse Dynamics" (Singh, Russell, Wensing).
+//!
+//! Layout: [`spatial`] (spatial vector algebra), [`model`] (joints, kinematic trees, URDF,
+//! built-in robots), [`algo`] (kinematics, RNEA, CRBA, ABA, LTLᵀ, Jacobians), [`reference`](mod@reference)
+//! (scalar-generic algorithms used as the automatic-differentiation oracle).
+//! Conventions are in `docs/conventions.md`.
+#![deny(missing_docs)]
+
+pub mod algo;
+pub mod cli;
+pub mod demo;
+pub mod deriv;
+pub mod error;
+pub mod model;
+pub mod reference;
+pub mod rng;
+pub mod spatial;
+pub mod tensor;
+
+pub use error::{Error, Result};

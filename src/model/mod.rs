@@ -1,0 +1,10 @@
+//! Kinematic trees: joints, the Model/builder, URDF loading and built-in robots.
+
+pub mod builtin;
+pub mod joint;
+pub mod tree;
+pub mod urdf;
+
+pub use joint::JointType;
+pub use tree::{Frame, Model, ModelBuilder, check_vec};
+pub use urdf::{ROOT_JOINT_NAME, UrdfOptions, load_urdf_file, load_urdf_str};

@@ -1,0 +1,211 @@
+//! `f64`-valued derivative oracles computed by forward-mode automatic differentiation of the
+//! generic reference algorithms.
+//!
+//! First order uses [`Dual64`], one column per evaluation. Second order uses [`HyperDual64`],
+//! one `(j, k)` pair per evaluation, with `ε₁` on the **inner** derivative (index `j`) and `ε₂`
+//! on the **outer** one (index `k`): tensors are returned as [`Tensor3`] with
+//! `T[(i, j, k)] = ∂/∂x_k (∂y_i/∂x_j)`.
+//!
+//! Derivatives with respect to `q` are tangent derivatives: `∂y/∂q_j` means
+//! `d/dε y(q ⊕ ε e_j)` at `ε = 0` ([`integrate`]), and second derivatives with respect to `q`
+//! nest the perturbations as `(q ⊕ δ e_k) ⊕ ε e_j` (the outer one applied first), so that
+//! `T[(i, j, k)]` is the derivative along `δ_k` of the first-order matrix `∂y_i/∂q_j` evaluated
+//! at `q ⊕ δ`. With free-flyer or spherical joints this is not symmetric in `(j, k)`.
+//!
+//! Costs: first order `nv` evaluations, second order `nv²` (or `nv · n` for mixed ones); every
+//! ABA evaluation itself builds the mass matrix (`nv` RNEA passes) and solves densely.
+
+use super::dynamics::{aba, mass_matrix, rnea};
+use super::kinematics::integrate;
+use super::{AdScalar, lift};
+use crate::model::Model;
+use crate::tensor::Tensor3;
+use nalgebra::DMatrix;
+use num_dual::{Dual64, HyperDual64};
+
+/// `x` lifted, plus `e_j · d` (`d`: the derivative seed).
+fn seeded<T: AdScalar>(x: &[f64], j: usize, d: T) -> Vec<T> {
+    let mut out = lift::<T>(x);
+    out[j] += d;
+    out
+}
+
+/// `q ⊕ (d e_j)` with `q` of scalar type `T`.
+fn perturb_q<T: AdScalar>(model: &Model, q: &[T], j: usize, d: T) -> Vec<T> {
+    let mut delta = vec![T::zero(); model.nv];
+    delta[j] = d;
+    integrate(model, q, &delta)
+}
+
+fn eps() -> Dual64 {
+    Dual64::new(0.0, 1.0)
+}
+fn eps1() -> HyperDual64 {
+    HyperDual64::new(0.0, 1.0, 0.0, 0.0)
+}
+fn eps2() -> HyperDual64 {
+    HyperDual64::new(0.0, 0.0, 1.0, 0.0)
+}
+
+/// `nout × ncols` matrix whose column `j` is the `ε` part of `f(j)`.
+fn jacobian(nout: usize, ncols: usize, f: impl Fn(usize) -> Vec<Dual64>) -> DMatrix<f64> {
+    let mut m = DMatrix::zeros(nout, ncols);
+    for j in 0..ncols {
+        for (i, y) in f(j).iter().enumerate() {
+            m[(i, j)] = y.eps;
+        }
+    }
+    m
+}
+
+/// `n1 × n2 × n3` tensor with element `(i, j, k)` the `ε₁ε₂` part of `f(j, k)[i]`.
+fn hessian(
+    n1: usize,
+    n2: usize,
+    n3: usize,
+    f: impl Fn(usize, usize) -> Vec<HyperDual64>,
+) -> Tensor3 {
+    let mut t = Tensor3::zeros(n1, n2, n3);
+    for k in 0..n3 {
+        for j in 0..n2 {
+            for (i, y) in f(j, k).iter().enumerate() {
+                t.set(i, j, k, y.eps1eps2);
+            }
+        }
+    }
+    t
+}
+
+/// `(q ⊕ δ e_k) ⊕ ε e_j` with `δ` seeded by `ε₂` and `ε` by `ε₁`.
+fn nested_q(model: &Model, q: &[f64], j: usize, k: usize) -> Vec<HyperDual64> {
+    let q1 = perturb_q(model, &lift::<HyperDual64>(q), k, eps2());
+    perturb_q(model, &q1, j, eps1())
+}
+
+// ---------------------------------------------------------------------------------------------
+// First order
+// ---------------------------------------------------------------------------------------------
+
+/// `∂τ/∂q` (`nv × nv`, tangent) of [`rnea`] (no external forces).
+pub fn d_rnea_dq(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> DMatrix<f64> {
+    let (v, a) = (lift::<Dual64>(v), lift::<Dual64>(a));
+    jacobian(model.nv, model.nv, |j| {
+        let qd = perturb_q(model, &lift::<Dual64>(q), j, eps());
+        rnea(model, &qd, &v, &a, None)
+    })
+}
+
+/// `∂τ/∂v` (`nv × nv`) of [`rnea`].
+pub fn d_rnea_dv(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> DMatrix<f64> {
+    let (qd, a) = (lift::<Dual64>(q), lift::<Dual64>(a));
+    jacobian(model.nv, model.nv, |j| rnea(model, &qd, &seeded(v, j, eps()), &a, None))
+}
+
+/// `∂q̈/∂q` (`nv × nv`, tangent) of forward dynamics [`aba`].
+pub fn d_aba_dq(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64> {
+    let (v, tau) = (lift::<Dual64>(v), lift::<Dual64>(tau));
+    jacobian(model.nv, model.nv, |j| {
+        let qd = perturb_q(model, &lift::<Dual64>(q), j, eps());
+        aba(model, &qd, &v, &tau, None)
+    })
+}
+
+/// `∂q̈/∂v` (`nv × nv`) of [`aba`].
+pub fn d_aba_dv(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64> {
+    let (qd, tau) = (lift::<Dual64>(q), lift::<Dual64>(tau));
+    jacobian(model.nv, model.nv, |j| aba(model, &qd, &seeded(v, j, eps()), &tau, None))
+}
+
+/// `∂q̈/∂τ = M⁻¹` (`nv × nv`) of [`aba`] (independent of `v`, computed through the same path).
+pub fn d_aba_dtau(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64> {
+    let (qd, v) = (lift::<Dual64>(q), lift::<Dual64>(v));
+    jacobian(model.nv, model.nv, |j| aba(model, &qd, &v, &seeded(tau, j, eps()), None))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Second order
+// ---------------------------------------------------------------------------------------------
+
+/// `T[(i, j, k)] = ∂/∂q_k (∂τ_i/∂q_j)` of [`rnea`] at `(q ⊕ δ_k) ⊕ ε_j` (tangent, nested; not
+/// symmetric in `(j, k)` in general).
+pub fn d2_rnea_dq2(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
+    let n = model.nv;
+    let (v, a) = (lift::<HyperDual64>(v), lift::<HyperDual64>(a));
+    hessian(n, n, n, |j, k| rnea(model, &nested_q(model, q, j, k), &v, &a, None))
+}
+
+/// `T[(i, j, k)] = ∂²τ_i/∂v_j∂v_k` of [`rnea`] (symmetric in `(j, k)`).
+pub fn d2_rnea_dv2(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
+    let n = model.nv;
+    let (qh, a) = (lift::<HyperDual64>(q), lift::<HyperDual64>(a));
+    hessian(n, n, n, |j, k| {
+        let mut vh = seeded(v, j, eps1());
+        vh[k] += eps2();
+        rnea(model, &qh, &vh, &a, None)
+    })
+}
+
+/// `T[(i, j, k)] = ∂/∂v_k (∂τ_i/∂q_j)` of [`rnea`] (tangent in `q`).
+pub fn d2_rnea_dqdv(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
+    let n = model.nv;
+    let a = lift::<HyperDual64>(a);
+    hessian(n, n, n, |j, k| {
+        let qh = perturb_q(model, &lift::<HyperDual64>(q), j, eps1());
+        rnea(model, &qh, &seeded(v, k, eps2()), &a, None)
+    })
+}
+
+/// `T[(i, j, k)] = ∂M_ij/∂q_k` (tangent in `q`) of [`mass_matrix`]; also `∂/∂q_k (∂τ_i/∂a_j)`.
+#[allow(non_snake_case)]
+pub fn dM_dq(model: &Model, q: &[f64]) -> Tensor3 {
+    let n = model.nv;
+    let mut t = Tensor3::zeros(n, n, n);
+    for k in 0..n {
+        let qd = perturb_q(model, &lift::<Dual64>(q), k, eps());
+        let m = mass_matrix(model, &qd);
+        for (i, row) in m.iter().enumerate() {
+            for (j, x) in row.iter().enumerate() {
+                t.set(i, j, k, x.eps);
+            }
+        }
+    }
+    t
+}
+
+/// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂q_j)` of [`aba`] at `(q ⊕ δ_k) ⊕ ε_j` (tangent, nested).
+pub fn d2_aba_dq2(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
+    let n = model.nv;
+    let (v, tau) = (lift::<HyperDual64>(v), lift::<HyperDual64>(tau));
+    hessian(n, n, n, |j, k| aba(model, &nested_q(model, q, j, k), &v, &tau, None))
+}
+
+/// `T[(i, j, k)] = ∂²q̈_i/∂v_j∂v_k` of [`aba`] (symmetric in `(j, k)`).
+pub fn d2_aba_dv2(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
+    let n = model.nv;
+    let (qh, tau) = (lift::<HyperDual64>(q), lift::<HyperDual64>(tau));
+    hessian(n, n, n, |j, k| {
+        let mut vh = seeded(v, j, eps1());
+        vh[k] += eps2();
+        aba(model, &qh, &vh, &tau, None)
+    })
+}
+
+/// `T[(i, j, k)] = ∂/∂v_k (∂q̈_i/∂q_j)` of [`aba`] (tangent in `q`).
+pub fn d2_aba_dqdv(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
+    let n = model.nv;
+    let tau = lift::<HyperDual64>(tau);
+    hessian(n, n, n, |j, k| {
+        let qh = perturb_q(model, &lift::<HyperDual64>(q), j, eps1());
+        aba(model, &qh, &seeded(v, k, eps2()), &tau, None)
+    })
+}
+
+/// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂τ_j)` = `∂(M⁻¹)_ij/∂q_k` (tangent in `q`) of [`aba`].
+pub fn d2_aba_dtaudq(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
+    let n = model.nv;
+    let v = lift::<HyperDual64>(v);
+    hessian(n, n, n, |j, k| {
+        let qh = perturb_q(model, &lift::<HyperDual64>(q), k, eps2());
+        aba(model, &qh, &v, &seeded(tau, j, eps1()), None)
+    })
+}

@@ -1,0 +1,16 @@
+//! Spatial vector algebra (Featherstone), shaped like the notes' section
+//! "Spatial Vector Algebra Identities and Properties". Spatial vectors are `[angular; linear]`.
+
+mod cross;
+mod force;
+mod inertia;
+mod matrix;
+mod motion;
+mod transform;
+
+pub use cross::{coriolis_b, coriolis_b_mul, crff, cross_f, cross_m};
+pub use force::Force;
+pub use inertia::{Inertia, InertiaDefect};
+pub use matrix::*;
+pub use motion::{Motion, skew};
+pub use transform::Transform;

@@ -1,0 +1,126 @@
+//! Rigid transforms stored as rotation + translation.
+
+use super::{Force, Inertia, Motion, skew};
+use nalgebra::{Matrix3, Matrix6, Vector3};
+
+/// Pose of a frame `b` in a frame `a` (`ᵃM_b`): `rot = ᵃR_b`, `trans` = origin of `b` in `a`.
+///
+/// Its action maps spatial vectors expressed in `b` to `a` (the matrix `ᵃX_b`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Transform {
+    /// Rotation `ᵃR_b`.
+    pub rot: Matrix3<f64>,
+    /// Position of the origin of `b`, in `a`.
+    pub trans: Vector3<f64>,
+}
+
+impl Default for Transform {
+    fn default() -> Self {
+        Self::identity()
+    }
+}
+
+impl Transform {
+    /// The identity transform.
+    #[inline]
+    pub fn identity() -> Self {
+        Self { rot: Matrix3::identity(), trans: Vector3::zeros() }
+    }
+    /// From rotation and translation.
+    #[inline]
+    pub fn new(rot: Matrix3<f64>, trans: Vector3<f64>) -> Self {
+        Self { rot, trans }
+    }
+    /// Pure translation.
+    #[inline]
+    pub fn from_translation(trans: Vector3<f64>) -> Self {
+        Self { rot: Matrix3::identity(), trans }
+    }
+    /// From URDF-style roll-pitch-yaw (fixed axes X, Y, Z: `R = Rz(y) Ry(p) Rx(r)`) and translation.
+    pub fn from_rpy_xyz(rpy: [f64; 3], xyz: [f64; 3]) -> Self {
+        let (sr, cr) = rpy[0].sin_cos();
+        let (sp, cp) = rpy[1].sin_cos();
+        let (sy, cy) = rpy[2].sin_cos();
+        let rot = Matrix3::new(
+            cy * cp,
+            cy * sp * sr - sy * cr,
+            cy * sp * cr + sy * sr,
+            sy * cp,
+            sy * sp * sr + cy * cr,
+            sy * sp * cr - cy * sr,
+            -sp,
+            cp * sr,
+            cp * cr,
+        );
+        Self { rot, trans: Vector3::new(xyz[0], xyz[1], xyz[2]) }
+    }
+    /// Composition `ᵃM_c = ᵃM_b ᵇM_c`.
+    #[inline]
+    pub fn compose(&self, o: &Transform) -> Transform {
+        Transform { rot: self.rot * o.rot, trans: self.trans + self.rot * o.trans }
+    }
+    /// Inverse `ᵇM_a`.
+    #[inline]
+    pub fn inverse(&self) -> Transform {
+        let rt = self.rot.transpose();
+        Transform { rot: rt, trans: -(rt * self.trans) }
+    }
+    /// Maps a point of `b` to `a`.
+    #[inline]
+    pub fn act_point(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        self.rot * p + self.trans
+    }
+    /// Motion vector in `b` → in `a` (`ᵃX_b m`).
+    #[inline]
+    pub fn act_motion(&self, m: &Motion) -> Motion {
+        let ang = self.rot * m.ang;
+        Motion { ang, lin: self.rot * m.lin + self.trans.cross(&ang) }
+    }
+    /// Motion vector in `a` → in `b` (`ᵇX_a m`).
+    #[inline]
+    pub fn inv_act_motion(&self, m: &Motion) -> Motion {
+        Motion {
+            ang: self.rot.tr_mul(&m.ang),
+            lin: self.rot.tr_mul(&(m.lin - self.trans.cross(&m.ang))),
+        }
+    }
+    /// Force vector in `b` → in `a` (`ᵃX_b^* f`).
+    #[inline]
+    pub fn act_force(&self, f: &Force) -> Force {
+        let lin = self.rot * f.lin;
+        Force { ang: self.rot * f.ang + self.trans.cross(&lin), lin }
+    }
+    /// Force vector in `a` → in `b`.
+    #[inline]
+    pub fn inv_act_force(&self, f: &Force) -> Force {
+        Force {
+            ang: self.rot.tr_mul(&(f.ang - self.trans.cross(&f.lin))),
+            lin: self.rot.tr_mul(&f.lin),
+        }
+    }
+    /// Spatial inertia expressed in `b` → expressed in `a`.
+    pub fn act_inertia(&self, i: &Inertia) -> Inertia {
+        let rh = self.rot * i.h;
+        let p = skew(&self.trans);
+        let rh_x = skew(&rh);
+        let rot = self.rot * i.rot * self.rot.transpose() - rh_x * p - p * rh_x - p * p * i.mass;
+        Inertia { mass: i.mass, h: rh + self.trans * i.mass, rot: symmetrize(&rot) }
+    }
+    /// Spatial inertia expressed in `a` → expressed in `b`.
+    pub fn inv_act_inertia(&self, i: &Inertia) -> Inertia {
+        self.inverse().act_inertia(i)
+    }
+    /// The 6×6 motion transform `ᵃX_b = [[R, 0], [p×R, R]]`.
+    pub fn motion_matrix(&self) -> Matrix6<f64> {
+        let mut x = Matrix6::zeros();
+        x.fixed_view_mut::<3, 3>(0, 0).copy_from(&self.rot);
+        x.fixed_view_mut::<3, 3>(3, 3).copy_from(&self.rot);
+        x.fixed_view_mut::<3, 3>(3, 0).copy_from(&(skew(&self.trans) * self.rot));
+        x
+    }
+}
+
+#[inline]
+pub(crate) fn symmetrize(m: &Matrix3<f64>) -> Matrix3<f64> {
+    (m + m.transpose()) * 0.5
+}

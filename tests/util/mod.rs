@@ -1,0 +1,86 @@
+//! Shared helpers for the oracle tests.
+#![allow(dead_code)]
+
+use nalgebra::{DMatrix, DVector};
+use sodyn::model::{Model, builtin};
+use sodyn::rng::Rng;
+use sodyn::tensor::Tensor3;
+
+/// Relative error `max|a − b| / max(1, max|b|)`.
+pub fn rel_err_mat(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
+    assert_eq!(a.shape(), b.shape());
+    (a - b).amax() / b.amax().max(1.0)
+}
+
+/// Relative error of vectors.
+pub fn rel_err_vec(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
+    assert_eq!(a.len(), b.len());
+    (a - b).amax() / b.amax().max(1.0)
+}
+
+/// Relative error of tensors.
+pub fn rel_err_tensor(a: &Tensor3, b: &Tensor3) -> f64 {
+    assert_eq!(a.dims(), b.dims());
+    a.max_abs_diff(b) / b.max_abs().max(1.0)
+}
+
+/// A random state (q, v, a-or-tau) for `model`.
+pub fn random_state(model: &Model, rng: &mut Rng) -> (DVector<f64>, DVector<f64>, DVector<f64>) {
+    let q = model.random_configuration(rng);
+    let v = DVector::from_fn(model.nv, |_, _| rng.range(-1.0, 1.0));
+    let a = DVector::from_fn(model.nv, |_, _| rng.range(-1.0, 1.0));
+    (q, v, a)
+}
+
+/// Test models: chains, the built-in robots and random trees mixing every joint type, fixed and
+/// floating base, up to `max_dof` degrees of freedom.
+pub fn test_models(max_dof: usize) -> Vec<Model> {
+    let mut out = vec![builtin::serial_chain(1), builtin::serial_chain(7), builtin::pendulum(2)];
+    out.push(builtin::quadruped());
+    out.push(builtin::humanoid());
+    for seed in 0..6u64 {
+        for &n in &[3usize, 8, 15, 24, 35] {
+            for &ff in &[false, true] {
+                let m = builtin::random_tree(n, seed * 31 + n as u64, ff);
+                out.push(m);
+            }
+        }
+    }
+    out.retain(|m| m.nv <= max_dof);
+    out
+}
+
+/// Tracks and reports the worst relative error of a quantity.
+pub struct Worst {
+    pub name: &'static str,
+    pub err: f64,
+    pub at: String,
+}
+
+impl Worst {
+    pub fn new(name: &'static str) -> Self {
+        Self { name, err: 0.0, at: String::new() }
+    }
+    pub fn add(&mut self, err: f64, at: &str) {
+        assert!(err.is_finite(), "{}: non-finite error at {at}", self.name);
+        if err > self.err {
+            self.err = err;
+            self.at = at.to_string();
+        }
+    }
+    /// Prints and asserts the worst error is at most `tol`.
+    pub fn check(&self, tol: f64) {
+        eprintln!(
+            "{:<28} max rel err {:.3e} (at {}), tolerance {:e}",
+            self.name, self.err, self.at, tol
+        );
+        assert!(
+            self.err <= tol,
+            "{}: max rel err {:e} > {:e} at {}",
+            self.name,
+            self.err,
+            tol,
+            self.at
+        );
+    }
+}
