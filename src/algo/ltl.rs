@@ -1,4 +1,8 @@
 //! Tree-sparse `LᵀDL` factorisation of the mass matrix (Featherstone, RBDA §6.5) and solves.
+//!
+//! The factor is kept in the **upper** triangle of a column-major `nv×nv` matrix: `L(k, i)`
+//! (`i` a strict ancestor DoF of `k`) is stored at `(i, k)`, `D(k)` at `(k, k)`, so each step
+//! walks one contiguous column.
 
 use super::Data;
 use crate::error::{Error, Result};
@@ -14,9 +18,11 @@ pub fn factorize_ltl(model: &Model, data: &mut Data) -> Result<()> {
 }
 
 pub(crate) fn ltl_in_place(model: &Model, h: &mut DMatrix<f64>) -> Result<()> {
-    let scale = (0..model.nv).map(|k| h[(k, k)].abs()).fold(0.0, f64::max);
-    for k in (0..model.nv).rev() {
-        let hkk = h[(k, k)];
+    let n = model.nv;
+    let h = h.as_mut_slice();
+    let scale = (0..n).map(|k| h[k + n * k].abs()).fold(0.0, f64::max);
+    for k in (0..n).rev() {
+        let hkk = h[k + n * k];
         if hkk.is_nan() || hkk <= 1e-14 * scale.max(f64::MIN_POSITIVE) || !hkk.is_finite() {
             let j = model.dof_joint[k];
             return Err(Error::Singular {
@@ -27,16 +33,15 @@ pub(crate) fn ltl_in_place(model: &Model, h: &mut DMatrix<f64>) -> Result<()> {
                 ),
             });
         }
-        let mut i = model.dof_parent[k];
-        while let Some(ii) = i {
-            let a = h[(k, ii)] / hkk;
-            let mut j = Some(ii);
-            while let Some(jj) = j {
-                h[(ii, jj)] -= a * h[(k, jj)];
-                j = model.dof_parent[jj];
+        let anc = model.ancestors_of_dof(k);
+        for (pos, &i) in anc.iter().enumerate() {
+            let a = h[i + n * k] / hkk;
+            // H(i, i) and H(i, j) for the ancestors j of i (the tail of k's list).
+            h[i + n * i] -= a * h[i + n * k];
+            for &j in &anc[pos + 1..] {
+                h[j + n * i] -= a * h[j + n * k];
             }
-            h[(k, ii)] = a;
-            i = model.dof_parent[ii];
+            h[i + n * k] = a;
         }
     }
     Ok(())
@@ -51,24 +56,23 @@ pub fn solve_ltl(model: &Model, data: &Data, b: &mut DVector<f64>) -> Result<()>
 
 /// `x ← M⁻¹ x` with a `LᵀDL` factor `h`.
 pub(crate) fn ltl_solve_in_place(model: &Model, h: &DMatrix<f64>, x: &mut [f64]) {
-    let nv = model.nv;
-    for i in (0..nv).rev() {
+    let n = model.nv;
+    let h = h.as_slice();
+    for i in (0..n).rev() {
         let xi = x[i];
-        let mut j = model.dof_parent[i];
-        while let Some(jj) = j {
-            x[jj] -= h[(i, jj)] * xi;
-            j = model.dof_parent[jj];
+        if xi != 0.0 {
+            for &j in model.ancestors_of_dof(i) {
+                x[j] -= h[j + n * i] * xi;
+            }
         }
     }
-    for i in 0..nv {
-        x[i] /= h[(i, i)];
+    for i in 0..n {
+        x[i] /= h[i + n * i];
     }
-    for i in 0..nv {
-        let mut j = model.dof_parent[i];
+    for i in 0..n {
         let mut acc = x[i];
-        while let Some(jj) = j {
-            acc -= h[(i, jj)] * x[jj];
-            j = model.dof_parent[jj];
+        for &j in model.ancestors_of_dof(i) {
+            acc -= h[j + n * i] * x[j];
         }
         x[i] = acc;
     }

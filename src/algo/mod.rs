@@ -1,6 +1,7 @@
 //! Algorithms: kinematics, RNEA, CRBA, ABA, the tree-sparse `LᵀDL` factorisation, Jacobians.
 
 mod aba;
+mod contact;
 mod crba;
 mod data;
 mod jacobian;
@@ -9,6 +10,7 @@ mod ltl;
 mod rnea;
 
 pub use aba::aba;
+pub use contact::Contact;
 pub use crba::crba;
 pub use data::Data;
 pub use jacobian::{point_drift, point_jacobian, point_position};
@@ -19,7 +21,8 @@ pub use rnea::{nonlinear_effects, rnea};
 /// Crate-internal unchecked building blocks shared with the derivative algorithms.
 pub(crate) mod internal {
     pub(crate) use super::aba::aba_unchecked;
+    pub(crate) use super::crba::crba_unchecked;
     pub(crate) use super::kinematics::placements;
     pub(crate) use super::ltl::{ltl_in_place, ltl_solve_in_place};
-    pub(crate) use super::rnea::check_fext;
+    pub(crate) use super::rnea::{check_fext, rnea_unchecked};
 }

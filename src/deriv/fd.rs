@@ -24,14 +24,12 @@ fn solve_columns(model: &Model, ltl: &DMatrix<f64>, m: &mut DMatrix<f64>) {
 fn fd_fo_from_id(model: &Model, data: &mut Data) -> Result<()> {
     data.ltl.copy_from(&data.m);
     ltl_in_place(model, &mut data.ltl)?;
-    data.dqdd_dq.copy_from(&data.dtau_dq);
-    data.dqdd_dq.neg_mut();
-    solve_columns(model, &data.ltl, &mut data.dqdd_dq);
-    data.dqdd_dv.copy_from(&data.dtau_dv);
-    data.dqdd_dv.neg_mut();
-    solve_columns(model, &data.ltl, &mut data.dqdd_dv);
+    // M⁻¹ by tree-sparse solves of the unit vectors (the first sweep only touches ancestors),
+    // then two dense products.
     data.minv.fill_with_identity();
     solve_columns(model, &data.ltl, &mut data.minv);
+    data.dqdd_dq.gemm(-1.0, &data.minv, &data.dtau_dq, 0.0);
+    data.dqdd_dv.gemm(-1.0, &data.minv, &data.dtau_dv, 0.0);
     Ok(())
 }
 

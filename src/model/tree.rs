@@ -52,6 +52,11 @@ pub struct Model {
     pub dof_joint: Vec<usize>,
     /// Previous degree of freedom on the path to the root, `λ(k)` of the LTLᵀ factorisation.
     pub dof_parent: Vec<Option<usize>>,
+    /// Strict ancestor DoFs of each DoF `k`, nearest first:
+    /// `dof_ancestors[dof_ancestors_start[k]..dof_ancestors_start[k + 1]]`.
+    pub dof_ancestors: Vec<usize>,
+    /// Offsets into [`Model::dof_ancestors`] (length `nv + 1`).
+    pub dof_ancestors_start: Vec<usize>,
     /// Motion-subspace column of each degree of freedom, in its joint's child frame.
     pub subspace: Vec<Motion>,
     /// Gravity as a spatial acceleration in the world frame (default `[0 0 0 0 0 −9.81]`).
@@ -85,6 +90,11 @@ impl Model {
             .iter()
             .position(|f| f.name == name)
             .ok_or_else(|| Error::Unknown { kind: "frame".into(), name: name.into() })
+    }
+    /// Strict ancestor DoFs of DoF `k`, nearest first.
+    #[inline]
+    pub fn ancestors_of_dof(&self, k: usize) -> &[usize] {
+        &self.dof_ancestors[self.dof_ancestors_start[k]..self.dof_ancestors_start[k + 1]]
     }
     /// True if joint `j` is `i` or one of its ancestors (`j ⪯ i`).
     pub fn is_ancestor(&self, j: usize, i: usize) -> bool {
@@ -190,6 +200,8 @@ impl ModelBuilder {
             nv: 0,
             dof_joint: vec![],
             dof_parent: vec![],
+            dof_ancestors: vec![],
+            dof_ancestors_start: vec![0],
             subspace: vec![],
             gravity: Motion::new(Vector3::zeros(), Vector3::new(0.0, 0.0, -9.81)),
             lower: DVector::zeros(0),
@@ -349,7 +361,18 @@ impl ModelBuilder {
     }
 
     /// Finishes the model.
-    pub fn build(self) -> Model {
+    pub fn build(mut self) -> Model {
+        let m = &mut self.m;
+        m.dof_ancestors.clear();
+        m.dof_ancestors_start = vec![0];
+        for k in 0..m.nv {
+            let mut d = m.dof_parent[k];
+            while let Some(a) = d {
+                m.dof_ancestors.push(a);
+                d = m.dof_parent[a];
+            }
+            m.dof_ancestors_start.push(m.dof_ancestors.len());
+        }
         self.m
     }
 }
