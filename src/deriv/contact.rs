@@ -221,10 +221,23 @@ pub(crate) fn sub_djtl_dq(
 /// `nv + 3 nc`. Needs the composite inertias of the current `q` in `data`. Writes `cd.g`.
 pub(crate) fn g_matrix(model: &Model, data: &mut Data, cd: &mut ContactData, z: &[f64]) {
     let n = model.nv;
-    idfoza_core(model, data, &z[..n], &mut cd.zmat);
+    g_matrix_split(model, data, cd, &z[..n], &z[n..], &z[..n]);
+}
+
+/// `G` with separate vectors: `[IDFOZA(z_m) − ∂(Jᵀz₂)/∂q ; ∂(J z_j)/∂q]`.
+pub(crate) fn g_matrix_split(
+    model: &Model,
+    data: &mut Data,
+    cd: &mut ContactData,
+    z_m: &[f64],
+    z2: &[f64],
+    z: &[f64],
+) {
+    let n = model.nv;
+    idfoza_core(model, data, z_m, &mut cd.zmat);
     cd.g.view_mut((0, 0), (n, n)).copy_from(&cd.zmat);
     let mut g = std::mem::replace(&mut cd.g, DMatrix::zeros(0, 0));
-    sub_djtl_dq_rows(model, data, cd, &z[n..], &mut g);
+    sub_djtl_dq_rows(model, data, cd, z2, &mut g);
     // ∂(J z₁)/∂q rows: cumulative Z_j = Σ_{x ⪯ j} S_x z_x along the path.
     let mut zc = std::mem::take(&mut cd.zc);
     for (c, path) in cd.paths.iter().enumerate() {

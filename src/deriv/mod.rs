@@ -6,16 +6,22 @@
 //! * [`fd`]: first- and second-order forward-dynamics derivatives.
 
 pub mod contact;
+pub mod external;
 pub mod fd;
 pub mod id_fo;
 pub mod id_so;
+pub mod impact;
 pub mod kkt;
 pub mod zero;
 
 pub use contact::ContactData;
+pub use external::{constrained_id_derivatives, constrained_id_so_derivatives};
 pub use fd::{FdSoData, fd_derivatives, fd_so_derivatives};
 pub use id_fo::id_derivatives;
 pub use id_so::{SoData, id_so_derivatives};
+pub use impact::{
+    ImpactData, ImpactSo, impact_derivatives, impact_dynamics, impact_so_derivatives,
+};
 pub use kkt::{KktData, KktSo, kkt_derivatives, kkt_dynamics, kkt_so_derivatives};
 pub use zero::{idfoza, idsoza};
 pub(crate) mod contact_kin;

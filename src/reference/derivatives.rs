@@ -24,31 +24,35 @@ use nalgebra::DMatrix;
 use num_dual::{Dual64, HyperDual64};
 
 /// `x` lifted, plus `e_j · d` (`d`: the derivative seed).
-fn seeded<T: AdScalar>(x: &[f64], j: usize, d: T) -> Vec<T> {
+pub(crate) fn seeded<T: AdScalar>(x: &[f64], j: usize, d: T) -> Vec<T> {
     let mut out = lift::<T>(x);
     out[j] += d;
     out
 }
 
 /// `q ⊕ (d e_j)` with `q` of scalar type `T`.
-fn perturb_q<T: AdScalar>(model: &Model, q: &[T], j: usize, d: T) -> Vec<T> {
+pub(crate) fn perturb_q<T: AdScalar>(model: &Model, q: &[T], j: usize, d: T) -> Vec<T> {
     let mut delta = vec![T::zero(); model.nv];
     delta[j] = d;
     integrate(model, q, &delta)
 }
 
-fn eps() -> Dual64 {
+pub(crate) fn eps() -> Dual64 {
     Dual64::new(0.0, 1.0)
 }
-fn eps1() -> HyperDual64 {
+pub(crate) fn eps1() -> HyperDual64 {
     HyperDual64::new(0.0, 1.0, 0.0, 0.0)
 }
-fn eps2() -> HyperDual64 {
+pub(crate) fn eps2() -> HyperDual64 {
     HyperDual64::new(0.0, 0.0, 1.0, 0.0)
 }
 
 /// `nout × ncols` matrix whose column `j` is the `ε` part of `f(j)`.
-fn jacobian(nout: usize, ncols: usize, f: impl Fn(usize) -> Vec<Dual64>) -> DMatrix<f64> {
+pub(crate) fn jacobian(
+    nout: usize,
+    ncols: usize,
+    f: impl Fn(usize) -> Vec<Dual64>,
+) -> DMatrix<f64> {
     let mut m = DMatrix::zeros(nout, ncols);
     for j in 0..ncols {
         for (i, y) in f(j).iter().enumerate() {
@@ -59,7 +63,7 @@ fn jacobian(nout: usize, ncols: usize, f: impl Fn(usize) -> Vec<Dual64>) -> DMat
 }
 
 /// `n1 × n2 × n3` tensor with element `(i, j, k)` the `ε₁ε₂` part of `f(j, k)[i]`.
-fn hessian(
+pub(crate) fn hessian(
     n1: usize,
     n2: usize,
     n3: usize,
@@ -77,7 +81,7 @@ fn hessian(
 }
 
 /// `(q ⊕ δ e_k) ⊕ ε e_j` with `δ` seeded by `ε₂` and `ε` by `ε₁`.
-fn nested_q(model: &Model, q: &[f64], j: usize, k: usize) -> Vec<HyperDual64> {
+pub(crate) fn nested_q(model: &Model, q: &[f64], j: usize, k: usize) -> Vec<HyperDual64> {
     let q1 = perturb_q(model, &lift::<HyperDual64>(q), k, eps2());
     perturb_q(model, &q1, j, eps1())
 }

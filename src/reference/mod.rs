@@ -19,6 +19,8 @@
 //! * [`dynamics`]: the recursive Newton–Euler algorithm ([`rnea`]), the mass matrix by unit
 //!   accelerations ([`mass_matrix`]), the nonlinear effects ([`nle`]) and forward dynamics by a
 //!   dense solve ([`aba`]);
+//! * [`contact`]: point-contact Jacobians and drifts, constrained inverse dynamics, KKT and
+//!   impact dynamics, and their first/second-order `f64` oracles;
 //! * [`derivatives`]: `f64`-valued convenience oracles, first order with [`num_dual::Dual64`]
 //!   and second order with [`num_dual::HyperDual64`].
 //!
@@ -30,11 +32,16 @@
 //! Speed is not a goal: the mass matrix costs `nv` RNEA passes, forward dynamics an `O(nv³)`
 //! elimination, and a second-order tensor `nv²` such evaluations.
 
+pub mod contact;
 pub mod derivatives;
 pub mod dynamics;
 pub mod kinematics;
 pub mod spatial;
 
+pub use contact::{
+    ImpactFo, ImpactSo, KktFo, KktSo, constrained_rnea, contact_drift, contact_jacobian, impact,
+    impact_fo, impact_so, kkt, kkt_fo, kkt_so,
+};
 pub use derivatives::{
     d_aba_dq, d_aba_dtau, d_aba_dv, d_rnea_dq, d_rnea_dv, d2_aba_dq2, d2_aba_dqdv, d2_aba_dtaudq,
     d2_aba_dv2, d2_rnea_dq2, d2_rnea_dqdv, d2_rnea_dv2, dM_dq,

@@ -1,0 +1,90 @@
+//! Constrained inverse dynamics `τ = M q̈ + b − J_cᵀλ` (eq. eqn_IDc) and its derivatives:
+//! first order (IDSVAc, eq. eqn_ID_FO_contact) and second order w.r.t. `q` (IDSVA-SOc).
+//!
+//! The contact forces `λ` are world-frame forces at points fixed on the bodies, so
+//! `f_ext` of the contact body is `[p × λ; λ]` (notes, before eq. eqn_fic_ext_FO_1). Instead of
+//! the extra backward pass of Alg. IDSVAc, the contact term `∂(J_cᵀλ)/∂q` and its second
+//! derivative are evaluated per contact along its root path (`O(d²)` and `O(d³)` entries), with
+//! `∂u_x/∂q_l` (`u_x` the velocity of the contact point per unit `q̇_x`) from identities J1 and
+//! `∂p/∂q_l = J_c(:, l)` (eqs. eqn_fic_ext_FO_1, eqn_fic_ext_FO_2); the second derivative is the
+//! same expression evaluated with dual base quantities (see `contact_kin`).
+
+use super::contact::{ContactData, base, sub_djtl_dq, update_points};
+use super::contact_kin::{Dir, djtl_dq};
+use super::id_fo::id_derivatives_unchecked;
+use super::id_so::{SoData, id_so_unchecked};
+use crate::algo::Data;
+use crate::error::Result;
+use crate::model::{Model, check_vec};
+use nalgebra::{DVector, Vector3};
+
+fn check(
+    model: &Model,
+    cd: &ContactData,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    lambda: &DVector<f64>,
+    q: &DVector<f64>,
+) -> Result<()> {
+    model.check_q(q)?;
+    check_vec("v", v, model.nv)?;
+    check_vec("a", a, model.nv)?;
+    check_vec("lambda", lambda, cd.dim())
+}
+
+/// First-order derivatives of constrained inverse dynamics at `(q, q̇, q̈, λ)`: fills
+/// `data.tau` (`= RNEA − J_cᵀλ`), `data.dtau_dq`, `data.dtau_dv`, `data.m` and `cd.jac`.
+pub fn constrained_id_derivatives(
+    model: &Model,
+    data: &mut Data,
+    cd: &mut ContactData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    lambda: &DVector<f64>,
+) -> Result<()> {
+    check(model, cd, v, a, lambda, q)?;
+    id_derivatives_unchecked(model, data, q, v, a, None);
+    contact_terms_fo(model, data, cd, lambda);
+    Ok(())
+}
+
+fn contact_terms_fo(model: &Model, data: &mut Data, cd: &mut ContactData, lambda: &DVector<f64>) {
+    update_points(model, data, cd, -model.gravity);
+    data.tau.gemv_tr(-1.0, &cd.jac, lambda, 1.0);
+    let mut dq = std::mem::replace(&mut data.dtau_dq, nalgebra::DMatrix::zeros(0, 0));
+    sub_djtl_dq(model, data, cd, lambda.as_slice(), &mut dq);
+    data.dtau_dq = dq;
+}
+
+/// First- and second-order derivatives of constrained inverse dynamics: as
+/// [`constrained_id_derivatives`], plus `so` (IDSVA-SOc): `so.d2tau_dq2()` includes
+/// `−∂²(J_cᵀλ)/∂q²`; `d2tau_dv2`, `d2tau_dqdv` and `dm_dq` do not depend on `λ`.
+#[allow(clippy::too_many_arguments)]
+pub fn constrained_id_so_derivatives(
+    model: &Model,
+    data: &mut Data,
+    cd: &mut ContactData,
+    so: &mut SoData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    lambda: &DVector<f64>,
+) -> Result<()> {
+    check(model, cd, v, a, lambda, q)?;
+    id_so_unchecked(model, data, so, q, v, a, None, -model.gravity);
+    contact_terms_fo(model, data, cd, lambda);
+    let b = base(model, data, cd);
+    let t = so.d2tau_dq2_mut();
+    for (c, path) in cd.paths.iter().enumerate() {
+        let lam = Vector3::new(lambda[3 * c], lambda[3 * c + 1], lambda[3 * c + 2]);
+        for &k in &path.dofs {
+            for &l in &path.dofs {
+                for &x in &path.dofs {
+                    t[(x, l, k)] -= djtl_dq(&b, &path.p, &lam, x, l, Dir::Q(k)).1;
+                }
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,281 @@
+//! Impact dynamics `[M J_cᵀ; J_c 0][q̇⁺; −λ̂] = [M q̇⁻; −e J_c q̇⁻]` (eq. im_eqn_1, with Newton's
+//! restitution sign, see `docs/notes-corrections.md`) and its first- and second-order
+//! derivatives w.r.t. `q` and `q̇⁻` (section "Impact Dynamics FO/SO Derivatives").
+//!
+//! Residual `R = [M(q)(q̇⁺ − q̇⁻) − J_cᵀλ̂ ; J_c q̇⁺ + e J_c q̇⁻]`, `y = (q̇⁺, λ̂)`:
+//! `∂y/∂q = −R_y⁻¹ [∂M/∂q·(q̇⁺ − q̇⁻) − ∂(J_cᵀλ̂)/∂q ; ∂(J_c w)/∂q]` with `w = q̇⁺ + e q̇⁻`
+//! (eq. ID_FO_q_im_1, the `∂M/∂q` product by IDFOZA), `∂y/∂q̇⁻ = R_y⁻¹ [M ; −e J_c]`
+//! (eq. ID_FO_v_im_1); second order (eq. SO_im_general_eqn) with `∂²M/∂q²·(q̇⁺ − q̇⁻)` by IDSOZA
+//! (eq. eqn_IDSOZAc) and the `G` product terms as in the KKT derivatives. `y` is linear in
+//! `q̇⁻`, so `∂²y/∂q̇⁻²` = 0.
+
+use super::contact::{
+    ContactData, base, factor_kkt, g_matrix, g_matrix_split, sub_djtl_dq, update_points,
+};
+use super::contact_kin::{Dir, djtl_dq, djz_dq};
+use super::id_fo::forward_pass_world;
+use super::id_so::{SoData, id_so_unchecked};
+use super::kkt::premultiply;
+use crate::algo::Data;
+use crate::algo::internal::{crba_unchecked, ltl_in_place, ltl_solve_in_place};
+use crate::error::{Error, Result};
+use crate::model::{Model, check_vec};
+use crate::spatial::Motion;
+use crate::tensor::Tensor3;
+use nalgebra::{DMatrix, DVector, Vector3};
+
+/// Impact dynamics results and workspace.
+#[derive(Clone, Debug)]
+pub struct ImpactData {
+    /// Contact workspace.
+    pub cd: ContactData,
+    /// Coefficient of restitution `e` (default 0): `J_c q̇⁺ = −e J_c q̇⁻`.
+    pub restitution: f64,
+    /// Post-impact velocity `q̇⁺`.
+    pub vplus: DVector<f64>,
+    /// Contact impulse `λ̂` (world frame, applied to the robot), `3 nc`.
+    pub impulse: DVector<f64>,
+    /// `∂q̇⁺/∂q`.
+    pub dvplus_dq: DMatrix<f64>,
+    /// `∂q̇⁺/∂q̇⁻`.
+    pub dvplus_dvminus: DMatrix<f64>,
+    /// `∂λ̂/∂q`.
+    pub dimpulse_dq: DMatrix<f64>,
+    /// `∂λ̂/∂q̇⁻`.
+    pub dimpulse_dvminus: DMatrix<f64>,
+    /// Second-order results (allocated by [`ImpactData::with_second_order`]).
+    pub so: Option<ImpactSo>,
+    rq: DMatrix<f64>,
+    rv: DMatrix<f64>,
+    dv: DVector<f64>,
+    w: DVector<f64>,
+    zero: DVector<f64>,
+}
+
+/// Second-order impact derivatives, `T[i][j][k] = ∂/∂x_k (∂y_i/∂u_j)`.
+#[derive(Clone, Debug)]
+pub struct ImpactSo {
+    /// `∂/∂q_k (∂q̇⁺_i/∂q_j)`.
+    pub d2vplus_dq2: Tensor3,
+    /// `∂/∂q̇⁻_k (∂q̇⁺_i/∂q_j)`.
+    pub d2vplus_dqdvminus: Tensor3,
+    /// `∂/∂q_k (∂λ̂_i/∂q_j)`.
+    pub d2impulse_dq2: Tensor3,
+    /// `∂/∂q̇⁻_k (∂λ̂_i/∂q_j)`.
+    pub d2impulse_dqdvminus: Tensor3,
+    id: SoData,
+    r: [Tensor3; 2],
+    ycol: DVector<f64>,
+    e: DVector<f64>,
+}
+
+impl ImpactData {
+    /// Workspace (first order) for `model` and the contacts of `cd`, restitution 0.
+    pub fn new(model: &Model, cd: ContactData) -> Self {
+        let (n, m) = (model.nv, cd.dim());
+        Self {
+            restitution: 0.0,
+            vplus: DVector::zeros(n),
+            impulse: DVector::zeros(m),
+            dvplus_dq: DMatrix::zeros(n, n),
+            dvplus_dvminus: DMatrix::zeros(n, n),
+            dimpulse_dq: DMatrix::zeros(m, n),
+            dimpulse_dvminus: DMatrix::zeros(m, n),
+            so: None,
+            rq: DMatrix::zeros(n + m, n),
+            rv: DMatrix::zeros(n + m, n),
+            dv: DVector::zeros(n),
+            w: DVector::zeros(n),
+            zero: DVector::zeros(n),
+            cd,
+        }
+    }
+    /// Also allocates the second-order tensors.
+    pub fn with_second_order(mut self, model: &Model) -> Self {
+        let (n, m) = (model.nv, self.cd.dim());
+        let t = |r| Tensor3::zeros(r, n, n);
+        self.so = Some(ImpactSo {
+            d2vplus_dq2: t(n),
+            d2vplus_dqdvminus: t(n),
+            d2impulse_dq2: t(m),
+            d2impulse_dqdvminus: t(m),
+            id: SoData::new(model),
+            r: [t(n + m), t(n + m)],
+            ycol: DVector::zeros(n + m),
+            e: DVector::zeros(n),
+        });
+        self
+    }
+}
+
+/// Solves the impact dynamics at `(q, q̇⁻)`: fills `vplus`, `impulse`, `cd.jac`.
+pub fn impact_dynamics(
+    model: &Model,
+    data: &mut Data,
+    im: &mut ImpactData,
+    q: &DVector<f64>,
+    vminus: &DVector<f64>,
+) -> Result<()> {
+    model.check_q(q)?;
+    check_vec("vminus", vminus, model.nv)?;
+    if !im.restitution.is_finite() || im.restitution < 0.0 {
+        return Err(Error::Io(format!(
+            "restitution {} must be finite and non-negative",
+            im.restitution
+        )));
+    }
+    let n = model.nv;
+    let m = im.cd.dim();
+    forward_pass_world(model, data, q, &im.zero, &im.zero, None, Motion::zero());
+    update_points(model, data, &mut im.cd, Motion::zero());
+    crba_unchecked(model, data, q);
+    data.ltl.copy_from(&data.m);
+    ltl_in_place(model, &mut data.ltl)?;
+    data.minv.fill_with_identity();
+    for mut col in data.minv.column_iter_mut() {
+        ltl_solve_in_place(model, &data.ltl, col.as_mut_slice());
+    }
+    factor_kkt(model, data, &mut im.cd)?;
+    let mut rhs = DVector::zeros(n + m);
+    rhs.rows_mut(0, n).copy_from(&(&data.m * vminus));
+    rhs.rows_mut(n, m).copy_from(&(&im.cd.jac * vminus * (-im.restitution)));
+    let y = &im.cd.rinv * rhs;
+    im.vplus.copy_from(&y.rows(0, n));
+    im.impulse.copy_from(&y.rows(n, m));
+    im.dv.copy_from(&(&im.vplus - vminus));
+    im.w.copy_from(&(&im.vplus + vminus * im.restitution));
+    Ok(())
+}
+
+/// First-order derivatives of the impact dynamics (also solves it).
+pub fn impact_derivatives(
+    model: &Model,
+    data: &mut Data,
+    im: &mut ImpactData,
+    q: &DVector<f64>,
+    vminus: &DVector<f64>,
+) -> Result<()> {
+    impact_dynamics(model, data, im, q, vminus)?;
+    first_order(model, data, im);
+    Ok(())
+}
+
+fn first_order(model: &Model, data: &mut Data, im: &mut ImpactData) {
+    let n = model.nv;
+    let m = im.cd.dim();
+    // R_q = [IDFOZA(Δv) − ∂(Jᵀλ̂)/∂q ; ∂(J w)/∂q]
+    let (dv, imp, w) = (im.dv.clone_owned(), im.impulse.clone_owned(), im.w.clone_owned());
+    g_matrix_split(model, data, &mut im.cd, dv.as_slice(), imp.as_slice(), w.as_slice());
+    im.rq.copy_from(&im.cd.g);
+    // R_v⁻ = [−M ; e J]
+    im.rv.view_mut((0, 0), (n, n)).copy_from(&(-&data.m));
+    im.rv.view_mut((n, 0), (m, n)).copy_from(&(&im.cd.jac * im.restitution));
+    let ri = &im.cd.rinv;
+    im.dvplus_dq.gemm(-1.0, &ri.rows(0, n), &im.rq, 0.0);
+    im.dimpulse_dq.gemm(-1.0, &ri.rows(n, m), &im.rq, 0.0);
+    im.dvplus_dvminus.gemm(-1.0, &ri.rows(0, n), &im.rv, 0.0);
+    im.dimpulse_dvminus.gemm(-1.0, &ri.rows(n, m), &im.rv, 0.0);
+}
+
+/// First- and second-order derivatives of the impact dynamics. `im` must have been created
+/// [`ImpactData::with_second_order`].
+pub fn impact_so_derivatives(
+    model: &Model,
+    data: &mut Data,
+    im: &mut ImpactData,
+    q: &DVector<f64>,
+    vminus: &DVector<f64>,
+) -> Result<()> {
+    let mut so = im.so.take().ok_or_else(|| {
+        Error::Io("impact_so_derivatives: ImpactData was created without second order".into())
+    })?;
+    let r = so_inner(model, data, im, &mut so, q, vminus);
+    im.so = Some(so);
+    r
+}
+
+fn so_inner(
+    model: &Model,
+    data: &mut Data,
+    im: &mut ImpactData,
+    so: &mut ImpactSo,
+    q: &DVector<f64>,
+    vminus: &DVector<f64>,
+) -> Result<()> {
+    impact_derivatives(model, data, im, q, vminus)?;
+    let n = model.nv;
+    let m = im.cd.dim();
+    // IDSOZA: ∂²(M Δv)/∂q² (q̇ = 0, no gravity, q̈ = Δv).
+    id_so_unchecked(model, data, &mut so.id, q, &im.zero, &im.dv, None, Motion::zero());
+    update_points(model, data, &mut im.cd, Motion::zero());
+    let [rqq, rqv] = &mut so.r;
+    let src = so.id.d2tau_dq2();
+    for k in 0..n {
+        for j in 0..n {
+            for i in 0..n {
+                rqq[(i, j, k)] = src[(i, j, k)];
+            }
+        }
+    }
+    // − ∂²(Jᵀλ̂)/∂q² and ∂²(J w)/∂q².
+    let mut zc = std::mem::take(&mut im.cd.zc);
+    {
+        let b = base(model, data, &im.cd);
+        for (c, path) in im.cd.paths.iter().enumerate() {
+            let body = *path.joints.last().expect("path");
+            let lam = Vector3::new(im.impulse[3 * c], im.impulse[3 * c + 1], im.impulse[3 * c + 2]);
+            for &j in &path.joints {
+                let parent = model.parents[j];
+                let mut zj = if parent == 0 { Motion::zero() } else { zc[parent] };
+                let iv = model.idx_v[j];
+                for x in iv..iv + model.nvs[j] {
+                    zj += data.s_world[x] * im.w[x];
+                }
+                zc[j] = zj;
+            }
+            for &k in &path.dofs {
+                for &l in &path.dofs {
+                    for &x in &path.dofs {
+                        rqq[(x, l, k)] -= djtl_dq(&b, &path.p, &lam, x, l, Dir::Q(k)).1;
+                    }
+                    let d = djz_dq(&b, &zc, body, &path.p, l, Dir::Q(k)).d;
+                    for r in 0..3 {
+                        rqq[(n + 3 * c + r, l, k)] = d[r];
+                    }
+                }
+            }
+        }
+    }
+    im.cd.zc = zc;
+    // G terms.
+    for k in 0..n {
+        so.ycol.rows_mut(0, n).copy_from(&im.dvplus_dq.column(k));
+        so.ycol.rows_mut(n, m).copy_from(&im.dimpulse_dq.column(k));
+        g_matrix(model, data, &mut im.cd, so.ycol.as_slice());
+        let g = &im.cd.g;
+        for j in 0..n {
+            for i in 0..n + m {
+                let x = g[(i, j)];
+                rqq[(i, j, k)] += x;
+                rqq[(i, k, j)] += x;
+            }
+        }
+        // (q inner, q̇⁻_k outer): G with z_m = ∂q̇⁺/∂q̇⁻_k − e_k, z_J = ∂q̇⁺/∂q̇⁻_k + e e_k.
+        so.e.copy_from(&im.dvplus_dvminus.column(k));
+        so.e[k] -= 1.0;
+        so.ycol.rows_mut(0, n).copy_from(&im.dvplus_dvminus.column(k));
+        so.ycol[k] += im.restitution;
+        let zj = so.ycol.rows(0, n).clone_owned();
+        let z2 = im.dimpulse_dvminus.column(k).clone_owned();
+        g_matrix_split(model, data, &mut im.cd, so.e.as_slice(), z2.as_slice(), zj.as_slice());
+        let mut page = rqv.page_mut(k);
+        page.copy_from(&im.cd.g);
+    }
+    let ri = &im.cd.rinv;
+    premultiply(&ri.rows(0, n), rqq, &mut so.d2vplus_dq2);
+    premultiply(&ri.rows(n, m), rqq, &mut so.d2impulse_dq2);
+    premultiply(&ri.rows(0, n), rqv, &mut so.d2vplus_dqdvminus);
+    premultiply(&ri.rows(n, m), rqv, &mut so.d2impulse_dqdvminus);
+    let _ = sub_djtl_dq;
+    Ok(())
+}

@@ -1,0 +1,530 @@
+//! Generic reference contact dynamics: point-contact Jacobians and drifts, constrained inverse
+//! dynamics, KKT (constrained forward) dynamics and impact dynamics, plus their `f64`
+//! derivative oracles (first order with [`Dual64`], second order with [`HyperDual64`]).
+//!
+//! A contact ([`Contact`]) is a point fixed in a frame. Per contact `c`, rows `3c..3c+3` of the
+//! contact Jacobian `J` are the **world-aligned** linear velocity of the point per unit `q̇`,
+//! and `λ` (`3·nc`) stacks the world-frame forces applied **to the robot** at the points:
+//!
+//! * constrained inverse dynamics: `τ = M q̈ + b − Jᵀ λ` ([`constrained_rnea`]);
+//! * KKT dynamics: `[M Jᵀ; J 0] [q̈; −λ] = [τ − b; −J̇ q̇]` ([`kkt`]);
+//! * impact dynamics with restitution `e`: `[M Jᵀ; J 0] [q̇⁺; −λ̂] = [M q̇⁻; −e J q̇⁻]`
+//!   ([`impact`]), i.e. `J q̇⁺ = −e J q̇⁻` (Newton restitution, Pinocchio's `r_coeff`; the notes
+//!   print `+e`, which agrees for the usual `e = 0`).
+//!
+//! Everything is re-derived from the model description with the reference's own kinematics
+//! (joint subspaces, poses, a body-frame velocity/acceleration recursion) and its dense
+//! [`solve`]; nothing from the optimised algorithms is used. The contact point is read from the
+//! [`Contact`]'s fields only (frame index and coordinates).
+//!
+//! Derivative conventions are those of [`super::derivatives`]: tangent derivatives in `q`
+//! (`q ⊕ ε e_j`), tensors `T[(i, j, k)] = ∂/∂x_k (∂y_i/∂u_j)` with nested perturbations
+//! `(q ⊕ δ e_k) ⊕ ε e_j` for two `q` derivatives; `λ` is held fixed in the world frame when
+//! differentiating the constrained inverse dynamics.
+
+use super::derivatives::{eps, eps1, eps2, hessian, jacobian, nested_q, perturb_q, seeded};
+use super::dynamics::{mass_matrix, nle, rnea, solve};
+use super::kinematics::{forward_kinematics, parent_poses, subspace_column, subspace_mul};
+use super::spatial::{Pose, Sv, lift_v3};
+use super::{AdScalar, lift};
+use crate::algo::Contact;
+use crate::model::Model;
+use crate::tensor::Tensor3;
+use nalgebra::{DMatrix, Vector3};
+use num_dual::{Dual64, HyperDual64};
+
+// ---------------------------------------------------------------------------------------------
+// Kinematics of the contact points
+// ---------------------------------------------------------------------------------------------
+
+/// The joint whose body carries the contact and the point in that joint's (child) frame.
+fn body_point<T: AdScalar>(model: &Model, contact: &Contact) -> (usize, Vector3<T>) {
+    let f = &model.frames[contact.frame];
+    (f.joint, Pose::<T>::lift(&f.placement).act_point(&lift_v3(&contact.point)))
+}
+
+/// Column `c` of joint `joint`'s motion subspace, in its child frame.
+fn subspace_sv<T: AdScalar>(model: &Model, joint: usize, c: usize) -> Sv<T> {
+    let (a, l) = subspace_column(&model.joints[joint], c);
+    Sv::new(lift_v3(&Vector3::from(a)), lift_v3(&Vector3::from(l)))
+}
+
+/// Contact Jacobian given the world poses of the bodies.
+fn jacobian_from_poses<T: AdScalar>(
+    model: &Model,
+    world: &[Pose<T>],
+    contacts: &[Contact],
+) -> Vec<Vec<T>> {
+    let mut jac = vec![vec![T::zero(); model.nv]; 3 * contacts.len()];
+    for (c, contact) in contacts.iter().enumerate() {
+        let (body, r) = body_point::<T>(model, contact);
+        let p = world[body].act_point(&r);
+        let mut j = body;
+        while j > 0 {
+            for col in 0..model.nvs[j] {
+                // World motion subspace column [ω; v_O] (about the world origin), then the
+                // velocity of the point p: v_O + ω × p.
+                let s = world[j].act_motion(&subspace_sv::<T>(model, j, col));
+                let vp = &s.lin + s.ang.cross(&p);
+                for (r, x) in vp.iter().enumerate() {
+                    jac[3 * c + r][model.idx_v[j] + col] = x.clone();
+                }
+            }
+            j = model.parents[j];
+        }
+    }
+    jac
+}
+
+/// Contact drift `J̇ q̇` given the parent-relative and world poses of the bodies.
+fn drift_from_poses<T: AdScalar>(
+    model: &Model,
+    xs: &[Pose<T>],
+    world: &[Pose<T>],
+    v: &[T],
+    contacts: &[Contact],
+) -> Vec<T> {
+    let n = model.joints.len();
+    let mut vel: Vec<Sv<T>> = vec![Sv::zero(); n];
+    let mut acc: Vec<Sv<T>> = vec![Sv::zero(); n];
+    for i in 1..n {
+        let p = model.parents[i];
+        let (b, m) = (model.idx_v[i], model.nvs[i]);
+        let vj = subspace_mul(&model.joints[i], &v[b..b + m]);
+        vel[i] = xs[i].inv_act_motion(&vel[p]).add(&vj);
+        // q̈ = 0: a_i = X a_p + v_i × S q̇_i (S is constant in the child frame).
+        acc[i] = xs[i].inv_act_motion(&acc[p]).add(&vel[i].cross_motion(&vj));
+    }
+    let mut out = Vec::with_capacity(3 * contacts.len());
+    for contact in contacts {
+        let (body, r) = body_point::<T>(model, contact);
+        let (vb, ab) = (&vel[body], &acc[body]);
+        let w = &vb.ang;
+        // Classical acceleration of the body-fixed point r, in body coordinates.
+        let a_body = &ab.lin + ab.ang.cross(&r) + w.cross(&(&vb.lin + w.cross(&r)));
+        let a_world = &world[body].rot * a_body;
+        out.extend(a_world.iter().cloned());
+    }
+    out
+}
+
+fn check_lengths(model: &Model, q: usize, v: &[(&str, usize)]) {
+    assert_eq!(q, model.nq, "reference::contact: q has the wrong length");
+    for (what, n) in v {
+        assert_eq!(*n, model.nv, "reference::contact: {what} has the wrong length");
+    }
+}
+
+/// Contact Jacobian `J(q)` (`3·nc × nv`, rows of a `Vec`): rows `3c..3c+3` are the
+/// world-aligned linear velocity of contact point `c` per unit `q̇`.
+///
+/// Column `k` of dof `k` of an ancestor joint `j` of the contact body is `S.lin + S.ang × p`,
+/// with `S` the world-frame motion subspace column of the dof (about the world origin) and `p`
+/// the world position of the point; other columns are zero.
+///
+/// # Panics
+/// If `q` has the wrong length or a contact's frame index is out of range.
+pub fn contact_jacobian<T: AdScalar>(model: &Model, q: &[T], contacts: &[Contact]) -> Vec<Vec<T>> {
+    check_lengths(model, q.len(), &[]);
+    jacobian_from_poses(model, &forward_kinematics(model, q), contacts)
+}
+
+/// Contact drift `J̇(q, q̇) q̇` (`3·nc`): the world-aligned classical acceleration of each contact
+/// point at `q̈ = 0`, without gravity.
+///
+/// Computed by a body-frame recursion `v_i = ⁱX_p v_p + S q̇_i`,
+/// `a_i = ⁱX_p a_p + v_i × S q̇_i`, then `a_point = a.lin + a.ang × r + ω × (v.lin + ω × r)` for
+/// the point `r` in the body frame, rotated to the world.
+///
+/// # Panics
+/// If `q` or `v` has the wrong length or a contact's frame index is out of range.
+pub fn contact_drift<T: AdScalar>(model: &Model, q: &[T], v: &[T], contacts: &[Contact]) -> Vec<T> {
+    check_lengths(model, q.len(), &[("v", v.len())]);
+    let xs = parent_poses(model, q);
+    let world = forward_kinematics(model, q);
+    drift_from_poses(model, &xs, &world, v, contacts)
+}
+
+/// Constrained inverse dynamics `τ = rnea(q, v, a) − Jᵀ λ`, `λ` (`3·nc`) stacking the
+/// world-frame forces applied to the robot at the contact points.
+///
+/// Computed through [`rnea`]'s external forces: contact `c` on body `m` contributes the
+/// world-frame spatial force `[p × λ_c; λ_c]` (moment about the world origin) to `fext[m]`.
+///
+/// # Panics
+/// If a slice length does not match the model and contacts.
+pub fn constrained_rnea<T: AdScalar>(
+    model: &Model,
+    q: &[T],
+    v: &[T],
+    a: &[T],
+    contacts: &[Contact],
+    lambda: &[T],
+) -> Vec<T> {
+    check_lengths(model, q.len(), &[("v", v.len()), ("a", a.len())]);
+    assert_eq!(lambda.len(), 3 * contacts.len(), "reference::contact: lambda needs 3·nc entries");
+    let world = forward_kinematics(model, q);
+    let mut fext: Vec<[T; 6]> = vec![std::array::from_fn(|_| T::zero()); model.joints.len()];
+    for (c, contact) in contacts.iter().enumerate() {
+        let (body, r) = body_point::<T>(model, contact);
+        let p = world[body].act_point(&r);
+        let l = Vector3::new(
+            lambda[3 * c].clone(),
+            lambda[3 * c + 1].clone(),
+            lambda[3 * c + 2].clone(),
+        );
+        let f = Sv::new(p.cross(&l), l);
+        fext[body] = Sv::from_array(&fext[body]).add(&f).to_array();
+    }
+    rnea(model, q, v, a, Some(&fext))
+}
+
+/// The KKT matrix `[M Jᵀ; J 0]`.
+fn kkt_matrix<T: AdScalar>(m: Vec<Vec<T>>, jac: &[Vec<T>]) -> Vec<Vec<T>> {
+    let nv = m.len();
+    let n = nv + jac.len();
+    let mut k = vec![vec![T::zero(); n]; n];
+    for (i, row) in m.into_iter().enumerate() {
+        k[i][..nv].clone_from_slice(&row);
+    }
+    for (r, jr) in jac.iter().enumerate() {
+        for (c, x) in jr.iter().enumerate() {
+            k[nv + r][c] = x.clone();
+            k[c][nv + r] = x.clone();
+        }
+    }
+    k
+}
+
+/// Splits the solution `[x; −λ]` of a KKT system into `(x, λ)`.
+fn split_solution<T: AdScalar>(mut sol: Vec<T>, nv: usize) -> (Vec<T>, Vec<T>) {
+    let lambda = sol.split_off(nv).into_iter().map(|x| -x).collect();
+    (sol, lambda)
+}
+
+/// KKT (contact-constrained forward) dynamics: solves
+/// `[M Jᵀ; J 0] [q̈; −λ] = [τ − b; −J̇ q̇]` densely ([`solve`], partial pivoting) and returns
+/// `(q̈, λ)`, `λ` being the world-frame contact forces applied to the robot, so that
+/// `M q̈ + b = τ + Jᵀ λ` and `J q̈ + J̇ q̇ = 0`.
+///
+/// # Panics
+/// If a slice length does not match the model, or the KKT matrix is singular (e.g. `J` without
+/// full row rank).
+pub fn kkt<T: AdScalar>(
+    model: &Model,
+    q: &[T],
+    v: &[T],
+    tau: &[T],
+    contacts: &[Contact],
+) -> (Vec<T>, Vec<T>) {
+    check_lengths(model, q.len(), &[("v", v.len()), ("tau", tau.len())]);
+    let xs = parent_poses(model, q);
+    let world = forward_kinematics(model, q);
+    let jac = jacobian_from_poses(model, &world, contacts);
+    let drift = drift_from_poses(model, &xs, &world, v, contacts);
+    let b = nle(model, q, v);
+    let mut rhs: Vec<T> = tau.iter().zip(b).map(|(t, b)| t.clone() - b).collect();
+    rhs.extend(drift.into_iter().map(|x| -x));
+    split_solution(solve(kkt_matrix(mass_matrix(model, q), &jac), rhs), model.nv)
+}
+
+/// Impact dynamics with restitution coefficient `e`: solves
+/// `[M Jᵀ; J 0] [q̇⁺; −λ̂] = [M q̇⁻; −e J q̇⁻]` and returns `(q̇⁺, λ̂)`, `λ̂` being the world-frame
+/// contact impulses applied to the robot: `M (q̇⁺ − q̇⁻) = Jᵀ λ̂` and `J q̇⁺ = −e J q̇⁻`.
+///
+/// # Panics
+/// If a slice length does not match the model, or the KKT matrix is singular.
+pub fn impact<T: AdScalar>(
+    model: &Model,
+    q: &[T],
+    vminus: &[T],
+    contacts: &[Contact],
+    e: f64,
+) -> (Vec<T>, Vec<T>) {
+    check_lengths(model, q.len(), &[("vminus", vminus.len())]);
+    let m = mass_matrix(model, q);
+    let jac = contact_jacobian(model, q, contacts);
+    let matvec = |a: &[Vec<T>]| -> Vec<T> {
+        a.iter()
+            .map(|row| row.iter().zip(vminus).fold(T::zero(), |s, (x, y)| s + x.clone() * y))
+            .collect()
+    };
+    let mut rhs = matvec(&m);
+    rhs.extend(matvec(&jac).into_iter().map(|x| x * (-e)));
+    split_solution(solve(kkt_matrix(m, &jac), rhs), model.nv)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Derivative oracles
+// ---------------------------------------------------------------------------------------------
+
+/// Rows `from..from + n` of a matrix.
+fn rows(m: &DMatrix<f64>, from: usize, n: usize) -> DMatrix<f64> {
+    m.rows(from, n).into_owned()
+}
+
+/// The sub-tensor of rows `from..from + n`.
+fn tensor_rows(t: &Tensor3, from: usize, n: usize) -> Tensor3 {
+    let (_, n2, n3) = t.dims();
+    Tensor3::from_fn(n, n2, n3, |i, j, k| t.get(from + i, j, k))
+}
+
+/// `∂τ/∂q` (`nv × nv`, tangent) of [`constrained_rnea`], `λ` fixed in the world frame.
+pub fn d_constrained_rnea_dq(
+    model: &Model,
+    q: &[f64],
+    v: &[f64],
+    a: &[f64],
+    contacts: &[Contact],
+    lambda: &[f64],
+) -> DMatrix<f64> {
+    let (v, a, l) = (lift::<Dual64>(v), lift::<Dual64>(a), lift::<Dual64>(lambda));
+    jacobian(model.nv, model.nv, |j| {
+        let qd = perturb_q(model, &lift::<Dual64>(q), j, eps());
+        constrained_rnea(model, &qd, &v, &a, contacts, &l)
+    })
+}
+
+/// `∂τ/∂v` (`nv × nv`) of [`constrained_rnea`] (equal to that of [`rnea`]).
+pub fn d_constrained_rnea_dv(
+    model: &Model,
+    q: &[f64],
+    v: &[f64],
+    a: &[f64],
+    contacts: &[Contact],
+    lambda: &[f64],
+) -> DMatrix<f64> {
+    let (qd, a, l) = (lift::<Dual64>(q), lift::<Dual64>(a), lift::<Dual64>(lambda));
+    jacobian(model.nv, model.nv, |j| {
+        constrained_rnea(model, &qd, &seeded(v, j, eps()), &a, contacts, &l)
+    })
+}
+
+/// `T[(i, j, k)] = ∂/∂q_k (∂τ_i/∂q_j)` of [`constrained_rnea`] at `(q ⊕ δ_k) ⊕ ε_j` (tangent,
+/// nested), `λ` fixed in the world frame.
+pub fn d2_constrained_rnea_dq2(
+    model: &Model,
+    q: &[f64],
+    v: &[f64],
+    a: &[f64],
+    contacts: &[Contact],
+    lambda: &[f64],
+) -> Tensor3 {
+    let n = model.nv;
+    let (v, a) = (lift::<HyperDual64>(v), lift::<HyperDual64>(a));
+    let l = lift::<HyperDual64>(lambda);
+    hessian(n, n, n, |j, k| {
+        constrained_rnea(model, &nested_q(model, q, j, k), &v, &a, contacts, &l)
+    })
+}
+
+/// First-order derivatives of the KKT dynamics [`kkt`] (rows: outputs, columns: inputs;
+/// tangent in `q`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct KktFo {
+    /// `∂q̈/∂q` (`nv × nv`).
+    pub dqdd_dq: DMatrix<f64>,
+    /// `∂q̈/∂v` (`nv × nv`).
+    pub dqdd_dv: DMatrix<f64>,
+    /// `∂q̈/∂τ` (`nv × nv`).
+    pub dqdd_dtau: DMatrix<f64>,
+    /// `∂λ/∂q` (`3·nc × nv`).
+    pub dlambda_dq: DMatrix<f64>,
+    /// `∂λ/∂v` (`3·nc × nv`).
+    pub dlambda_dv: DMatrix<f64>,
+    /// `∂λ/∂τ` (`3·nc × nv`).
+    pub dlambda_dtau: DMatrix<f64>,
+}
+
+/// Second-order derivatives of the KKT dynamics [`kkt`]: tensors
+/// `T[(i, j, k)] = ∂/∂x_k (∂y_i/∂u_j)` (`y` = `q̈` (`nv`) or `λ` (`3·nc`)).
+#[derive(Clone, Debug, PartialEq)]
+pub struct KktSo {
+    /// `∂/∂q_k (∂q̈_i/∂q_j)` at `(q ⊕ δ_k) ⊕ ε_j`.
+    pub d2qdd_dq2: Tensor3,
+    /// `∂²q̈_i/∂v_j∂v_k`.
+    pub d2qdd_dv2: Tensor3,
+    /// `∂/∂v_k (∂q̈_i/∂q_j)`.
+    pub d2qdd_dqdv: Tensor3,
+    /// `∂/∂q_k (∂q̈_i/∂τ_j)`.
+    pub d2qdd_dtaudq: Tensor3,
+    /// `∂/∂q_k (∂λ_i/∂q_j)` at `(q ⊕ δ_k) ⊕ ε_j`.
+    pub d2lambda_dq2: Tensor3,
+    /// `∂²λ_i/∂v_j∂v_k`.
+    pub d2lambda_dv2: Tensor3,
+    /// `∂/∂v_k (∂λ_i/∂q_j)`.
+    pub d2lambda_dqdv: Tensor3,
+    /// `∂/∂q_k (∂λ_i/∂τ_j)`.
+    pub d2lambda_dtaudq: Tensor3,
+}
+
+/// `[q̈; λ]` of [`kkt`] as one vector.
+fn kkt_stacked<T: AdScalar>(
+    model: &Model,
+    q: &[T],
+    v: &[T],
+    tau: &[T],
+    contacts: &[Contact],
+) -> Vec<T> {
+    let (mut qdd, lambda) = kkt(model, q, v, tau, contacts);
+    qdd.extend(lambda);
+    qdd
+}
+
+/// First-order derivatives of [`kkt`] w.r.t. `q` (tangent), `v` and `τ` (forward-mode AD).
+///
+/// # Panics
+/// As [`kkt`].
+pub fn kkt_fo(model: &Model, q: &[f64], v: &[f64], tau: &[f64], contacts: &[Contact]) -> KktFo {
+    let (nv, nout) = (model.nv, model.nv + 3 * contacts.len());
+    let (qd, vd, taud) = (lift::<Dual64>(q), lift::<Dual64>(v), lift::<Dual64>(tau));
+    let dq = jacobian(nout, nv, |j| {
+        kkt_stacked(model, &perturb_q(model, &qd, j, eps()), &vd, &taud, contacts)
+    });
+    let dv = jacobian(nout, nv, |j| kkt_stacked(model, &qd, &seeded(v, j, eps()), &taud, contacts));
+    let dtau =
+        jacobian(nout, nv, |j| kkt_stacked(model, &qd, &vd, &seeded(tau, j, eps()), contacts));
+    let nl = nout - nv;
+    KktFo {
+        dqdd_dq: rows(&dq, 0, nv),
+        dqdd_dv: rows(&dv, 0, nv),
+        dqdd_dtau: rows(&dtau, 0, nv),
+        dlambda_dq: rows(&dq, nv, nl),
+        dlambda_dv: rows(&dv, nv, nl),
+        dlambda_dtau: rows(&dtau, nv, nl),
+    }
+}
+
+/// Second-order derivatives of [`kkt`] (hyper-dual AD; `nv²` KKT solves per tensor pair).
+///
+/// # Panics
+/// As [`kkt`].
+pub fn kkt_so(model: &Model, q: &[f64], v: &[f64], tau: &[f64], contacts: &[Contact]) -> KktSo {
+    let (n, nout) = (model.nv, model.nv + 3 * contacts.len());
+    let (qh, vh, tauh) = (lift::<HyperDual64>(q), lift::<HyperDual64>(v), lift::<HyperDual64>(tau));
+    let dq2 = hessian(nout, n, n, |j, k| {
+        kkt_stacked(model, &nested_q(model, q, j, k), &vh, &tauh, contacts)
+    });
+    let dv2 = hessian(nout, n, n, |j, k| {
+        let mut vjk = seeded(v, j, eps1());
+        vjk[k] += eps2();
+        kkt_stacked(model, &qh, &vjk, &tauh, contacts)
+    });
+    let dqdv = hessian(nout, n, n, |j, k| {
+        let qj = perturb_q(model, &qh, j, eps1());
+        kkt_stacked(model, &qj, &seeded(v, k, eps2()), &tauh, contacts)
+    });
+    let dtaudq = hessian(nout, n, n, |j, k| {
+        let qk = perturb_q(model, &qh, k, eps2());
+        kkt_stacked(model, &qk, &vh, &seeded(tau, j, eps1()), contacts)
+    });
+    let nl = nout - n;
+    KktSo {
+        d2qdd_dq2: tensor_rows(&dq2, 0, n),
+        d2qdd_dv2: tensor_rows(&dv2, 0, n),
+        d2qdd_dqdv: tensor_rows(&dqdv, 0, n),
+        d2qdd_dtaudq: tensor_rows(&dtaudq, 0, n),
+        d2lambda_dq2: tensor_rows(&dq2, n, nl),
+        d2lambda_dv2: tensor_rows(&dv2, n, nl),
+        d2lambda_dqdv: tensor_rows(&dqdv, n, nl),
+        d2lambda_dtaudq: tensor_rows(&dtaudq, n, nl),
+    }
+}
+
+/// First-order derivatives of the impact dynamics [`impact`] (rows: outputs, columns: inputs;
+/// tangent in `q`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImpactFo {
+    /// `∂q̇⁺/∂q` (`nv × nv`).
+    pub dvplus_dq: DMatrix<f64>,
+    /// `∂q̇⁺/∂q̇⁻` (`nv × nv`; Pinocchio stores this minus the identity).
+    pub dvplus_dvminus: DMatrix<f64>,
+    /// `∂λ̂/∂q` (`3·nc × nv`).
+    pub dimpulse_dq: DMatrix<f64>,
+    /// `∂λ̂/∂q̇⁻` (`3·nc × nv`).
+    pub dimpulse_dvminus: DMatrix<f64>,
+}
+
+/// Second-order derivatives of the impact dynamics [`impact`]: tensors
+/// `T[(i, j, k)] = ∂/∂x_k (∂y_i/∂u_j)`. The second derivatives w.r.t. `q̇⁻` twice vanish
+/// identically (the outputs are linear in `q̇⁻`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImpactSo {
+    /// `∂/∂q_k (∂q̇⁺_i/∂q_j)` at `(q ⊕ δ_k) ⊕ ε_j`.
+    pub d2vplus_dq2: Tensor3,
+    /// `∂/∂q̇⁻_k (∂q̇⁺_i/∂q_j)`.
+    pub d2vplus_dqdvminus: Tensor3,
+    /// `∂/∂q_k (∂λ̂_i/∂q_j)` at `(q ⊕ δ_k) ⊕ ε_j`.
+    pub d2impulse_dq2: Tensor3,
+    /// `∂/∂q̇⁻_k (∂λ̂_i/∂q_j)`.
+    pub d2impulse_dqdvminus: Tensor3,
+}
+
+/// `[q̇⁺; λ̂]` of [`impact`] as one vector.
+fn impact_stacked<T: AdScalar>(
+    model: &Model,
+    q: &[T],
+    vminus: &[T],
+    contacts: &[Contact],
+    e: f64,
+) -> Vec<T> {
+    let (mut vplus, impulse) = impact(model, q, vminus, contacts, e);
+    vplus.extend(impulse);
+    vplus
+}
+
+/// First-order derivatives of [`impact`] w.r.t. `q` (tangent) and `q̇⁻`.
+///
+/// # Panics
+/// As [`impact`].
+pub fn impact_fo(
+    model: &Model,
+    q: &[f64],
+    vminus: &[f64],
+    contacts: &[Contact],
+    e: f64,
+) -> ImpactFo {
+    let (nv, nout) = (model.nv, model.nv + 3 * contacts.len());
+    let (qd, vd) = (lift::<Dual64>(q), lift::<Dual64>(vminus));
+    let dq = jacobian(nout, nv, |j| {
+        impact_stacked(model, &perturb_q(model, &qd, j, eps()), &vd, contacts, e)
+    });
+    let dv =
+        jacobian(nout, nv, |j| impact_stacked(model, &qd, &seeded(vminus, j, eps()), contacts, e));
+    let nl = nout - nv;
+    ImpactFo {
+        dvplus_dq: rows(&dq, 0, nv),
+        dvplus_dvminus: rows(&dv, 0, nv),
+        dimpulse_dq: rows(&dq, nv, nl),
+        dimpulse_dvminus: rows(&dv, nv, nl),
+    }
+}
+
+/// Second-order derivatives of [`impact`] (hyper-dual AD).
+///
+/// # Panics
+/// As [`impact`].
+pub fn impact_so(
+    model: &Model,
+    q: &[f64],
+    vminus: &[f64],
+    contacts: &[Contact],
+    e: f64,
+) -> ImpactSo {
+    let (n, nout) = (model.nv, model.nv + 3 * contacts.len());
+    let (qh, vh) = (lift::<HyperDual64>(q), lift::<HyperDual64>(vminus));
+    let dq2 = hessian(nout, n, n, |j, k| {
+        impact_stacked(model, &nested_q(model, q, j, k), &vh, contacts, e)
+    });
+    let dqdv = hessian(nout, n, n, |j, k| {
+        let qj = perturb_q(model, &qh, j, eps1());
+        impact_stacked(model, &qj, &seeded(vminus, k, eps2()), contacts, e)
+    });
+    let nl = nout - n;
+    ImpactSo {
+        d2vplus_dq2: tensor_rows(&dq2, 0, n),
+        d2vplus_dqdvminus: tensor_rows(&dqdv, 0, n),
+        d2impulse_dq2: tensor_rows(&dq2, n, nl),
+        d2impulse_dqdvminus: tensor_rows(&dqdv, n, nl),
+    }
+}
