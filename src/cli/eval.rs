@@ -1,6 +1,10 @@
 //! State files and the `eval` output object.
 
-use crate::algo::{Data, aba, crba, nonlinear_effects, rnea};
+use crate::algo::{Contact, Data, aba, crba, nonlinear_effects, rnea};
+use crate::deriv::{
+    ContactData, ImpactData, KktData, SoData, constrained_id_so_derivatives, impact_derivatives,
+    impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
+};
 use crate::deriv::{
     FdSoData, fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives,
 };
@@ -8,6 +12,7 @@ use crate::error::{Error, Result};
 use crate::model::Model;
 use crate::rng::Rng;
 use crate::tensor::Tensor3;
+use nalgebra::Vector3;
 use nalgebra::{DMatrix, DVector};
 use serde_json::{Map, Value, json};
 
@@ -22,6 +27,12 @@ pub struct State {
     pub a: DVector<f64>,
     /// Joint torque (length nv).
     pub tau: DVector<f64>,
+    /// Point contacts (empty: no contact outputs).
+    pub contacts: Vec<Contact>,
+    /// Contact forces for constrained inverse dynamics (length `3 nc`).
+    pub lambda: DVector<f64>,
+    /// Coefficient of restitution of the impact.
+    pub restitution: f64,
 }
 
 impl State {
@@ -32,7 +43,7 @@ impl State {
         let v = r(model.nv);
         let a = r(model.nv);
         let tau = r(model.nv);
-        State { q, v, a, tau }
+        State { q, v, a, tau, contacts: vec![], lambda: DVector::zeros(0), restitution: 0.0 }
     }
 }
 
@@ -77,11 +88,58 @@ pub fn load_state(model: &Model, text: &str, file: &str) -> Result<State> {
     let q = read_vec(obj, "q", model.nq, file)?.unwrap_or_else(|| model.neutral());
     model.check_q(&q)?;
     let z = || DVector::zeros(model.nv);
+    let mut contacts = vec![];
+    if let Some(list) = obj.get("contacts") {
+        let list = list.as_array().ok_or_else(|| {
+            Error::Io(format!(
+                "{file}: key \"contacts\" must be a list of {{\"frame\", \"point\"}} objects"
+            ))
+        })?;
+        for (i, c) in list.iter().enumerate() {
+            let frame = c.get("frame").and_then(|f| f.as_str()).ok_or_else(|| {
+                Error::Io(format!("{file}: contacts[{i}] needs a string \"frame\""))
+            })?;
+            let point = match c.get("point") {
+                None => Vector3::zeros(),
+                Some(p) => {
+                    let arr = p.as_array().filter(|a| a.len() == 3).ok_or_else(|| {
+                        Error::Io(format!(
+                            "{file}: contacts[{i}].point must be a list of 3 numbers"
+                        ))
+                    })?;
+                    let mut x = Vector3::zeros();
+                    for (r, val) in arr.iter().enumerate() {
+                        x[r] = val.as_f64().filter(|v| v.is_finite()).ok_or_else(|| {
+                            Error::Io(format!(
+                                "{file}: contacts[{i}].point[{r}] is not a finite number"
+                            ))
+                        })?;
+                    }
+                    x
+                }
+            };
+            contacts.push(
+                Contact::new(model, frame, point)
+                    .map_err(|e| Error::Io(format!("{file}: contacts[{i}]: {e}")))?,
+            );
+        }
+    }
+    let lambda = read_vec(obj, "lambda", 3 * contacts.len(), file)?
+        .unwrap_or_else(|| DVector::zeros(3 * contacts.len()));
+    let restitution = match obj.get("restitution") {
+        None => 0.0,
+        Some(r) => r.as_f64().filter(|e| e.is_finite() && *e >= 0.0).ok_or_else(|| {
+            Error::Io(format!("{file}: key \"restitution\" must be a non-negative number"))
+        })?,
+    };
     Ok(State {
         q,
         v: read_vec(obj, "v", model.nv, file)?.unwrap_or_else(z),
         a: read_vec(obj, "a", model.nv, file)?.unwrap_or_else(z),
         tau: read_vec(obj, "tau", model.nv, file)?.unwrap_or_else(z),
+        contacts,
+        lambda,
+        restitution,
     })
 }
 
@@ -155,5 +213,93 @@ pub fn eval_json(model: &Model, s: &State, order: u32) -> Result<Value> {
         o.insert("d2qdd_dqdv".into(), tensor_json(f.d2qdd_dqdv()));
         o.insert("d2qdd_dtaudq".into(), tensor_json(f.d2qdd_dtaudq()));
     }
+    if !s.contacts.is_empty() {
+        let o = out.as_object_mut().expect("object");
+        contact_outputs(model, s, order, &mut data, o)?;
+    }
     Ok(out)
+}
+
+/// The `constrained_id`, `kkt` and `impact` objects.
+fn contact_outputs(
+    model: &Model,
+    s: &State,
+    order: u32,
+    data: &mut Data,
+    o: &mut Map<String, Value>,
+) -> Result<()> {
+    let mut cd = ContactData::new(model, &s.contacts)?;
+    let mut so = SoData::new(model);
+    constrained_id_so_derivatives(model, data, &mut cd, &mut so, &s.q, &s.v, &s.a, &s.lambda)?;
+    o.insert(
+        "constrained_id".into(),
+        json!({
+            "tau": data.tau.as_slice(),
+            "dtau_dq": mat_json(&data.dtau_dq),
+            "dtau_dv": mat_json(&data.dtau_dv),
+            "d2tau_dq2": tensor_json(so.d2tau_dq2()),
+        }),
+    );
+    let mut kd = KktData::new(model, cd.clone());
+    if order >= 2 {
+        kd = kd.with_second_order(model);
+        kkt_so_derivatives(model, data, &mut kd, &s.q, &s.v, &s.tau)?;
+    } else {
+        kkt_derivatives(model, data, &mut kd, &s.q, &s.v, &s.tau)?;
+    }
+    let mut k = json!({
+        "qdd": kd.qdd.as_slice(),
+        "lambda": kd.lambda.as_slice(),
+        "dqdd_dq": mat_json(&kd.dqdd_dq),
+        "dqdd_dv": mat_json(&kd.dqdd_dv),
+        "dqdd_dtau": mat_json(&kd.dqdd_dtau),
+        "dlambda_dq": mat_json(&kd.dlambda_dq),
+        "dlambda_dv": mat_json(&kd.dlambda_dv),
+        "dlambda_dtau": mat_json(&kd.dlambda_dtau),
+    });
+    if let Some(t) = &kd.so {
+        let ko = k.as_object_mut().expect("object");
+        for (name, x) in [
+            ("d2qdd_dq2", &t.d2qdd_dq2),
+            ("d2qdd_dv2", &t.d2qdd_dv2),
+            ("d2qdd_dqdv", &t.d2qdd_dqdv),
+            ("d2qdd_dtaudq", &t.d2qdd_dtaudq),
+            ("d2lambda_dq2", &t.d2lambda_dq2),
+            ("d2lambda_dv2", &t.d2lambda_dv2),
+            ("d2lambda_dqdv", &t.d2lambda_dqdv),
+            ("d2lambda_dtaudq", &t.d2lambda_dtaudq),
+        ] {
+            ko.insert(name.into(), tensor_json(x));
+        }
+    }
+    o.insert("kkt".into(), k);
+    let mut im = ImpactData::new(model, cd);
+    im.restitution = s.restitution;
+    if order >= 2 {
+        im = im.with_second_order(model);
+        impact_so_derivatives(model, data, &mut im, &s.q, &s.v)?;
+    } else {
+        impact_derivatives(model, data, &mut im, &s.q, &s.v)?;
+    }
+    let mut i = json!({
+        "vplus": im.vplus.as_slice(),
+        "impulse": im.impulse.as_slice(),
+        "dvplus_dq": mat_json(&im.dvplus_dq),
+        "dvplus_dvminus": mat_json(&im.dvplus_dvminus),
+        "dimpulse_dq": mat_json(&im.dimpulse_dq),
+        "dimpulse_dvminus": mat_json(&im.dimpulse_dvminus),
+    });
+    if let Some(t) = &im.so {
+        let io = i.as_object_mut().expect("object");
+        for (name, x) in [
+            ("d2vplus_dq2", &t.d2vplus_dq2),
+            ("d2vplus_dqdvminus", &t.d2vplus_dqdvminus),
+            ("d2impulse_dq2", &t.d2impulse_dq2),
+            ("d2impulse_dqdvminus", &t.d2impulse_dqdvminus),
+        ] {
+            io.insert(name.into(), tensor_json(x));
+        }
+    }
+    o.insert("impact".into(), i);
+    Ok(())
 }
