@@ -6,7 +6,9 @@ Run with the peer venv (pin==4.1.0), from anywhere:
     /tmp/peer/venv/bin/python scripts/make_fixtures.py
 
 Options:
-    --models a,b,c        only these models (default: all of MODELS below)
+    --models a,b,c        only these models (default: all of MODELS below; "none": no <model>.json)
+    --contact-models a,b  contact fixtures tests/fixtures/contacts_<model>.json for these models
+                          (default: all of CONTACT_MODELS below; "none": skip them)
     --out DIR             output directory (default: <repo>/tests/fixtures)
     --models-dir DIR      URDF directory (default: /work/shared/models)
     --peer DIR            peer harness with reference.py (default: /work/shared/peer)
@@ -22,6 +24,11 @@ The values are Pinocchio's raw outputs, in Pinocchio's conventions (stated in ev
 repr (shortest round-trip representation, i.e. full double precision). Files are written without
 indentation. Deterministic: numpy.random.default_rng(SEED) per model, same sampling as
 /work/shared/peer/reference.py (so state 0/1 equal the first states of `reference.py --seed 0`).
+
+Contact fixtures (contacts_<model>.json, CONTACT_MODELS): one state (= state 0 of <model>.json),
+constraint dynamics + derivatives and impulse dynamics + derivatives for every restitution
+coefficient of CONTACT_R_COEFFS, the joint table and all Pinocchio frames; see
+tests/fixtures/README.md ("Contact fixtures").
 """
 import argparse
 import json
@@ -52,7 +59,17 @@ MODELS = {
 SO_KEYS = ["d2tau_dqdq", "d2tau_dvdv", "d2tau_dqdv", "d2tau_dadq"]
 CONTACT_TYPE = "3D"
 CONTACT_REF = "LOCAL_WORLD_ALIGNED"
-R_COEFF = 0.0  # impulse restitution coefficient
+R_COEFF = 0.0  # impulse restitution coefficient (solo12 in <model>.json)
+ref = None  # /work/shared/peer/reference.py (--peer), imported in main()
+
+# Contact fixtures contacts_<name>.json: name -> contact frames (all free-flyer models, 1 state).
+CONTACT_MODELS = {
+    "hyq_no_sensors": ["lf_foot", "rf_foot", "lh_foot", "rh_foot"],
+    "anymal": ["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"],
+    "talos_reduced": ["left_sole_link", "right_sole_link"],
+    "talos_full_v2": ["left_sole_link", "right_sole_link"],
+}
+CONTACT_R_COEFFS = [0.0, 0.3]  # one impulse_dynamics run per restitution coefficient
 
 
 def L(a):
@@ -163,15 +180,15 @@ def constraint_dyn(model, cmodels, q, v, tau, derivs=True):
     return out
 
 
-def impulse_dyn(model, cmodels, q, v, derivs=True):
+def impulse_dyn(model, cmodels, q, v, derivs=True, r_coeff=R_COEFF):
     d = pin.Data(model)
     cds = [cm.createData() for cm in cmodels]
     pin.initConstraintDynamics(model, d, cmodels, cds)
     s = settings()
-    vp = np.array(pin.impulseDynamics(model, d, q, v, cmodels, cds, R_COEFF, s), copy=True)
+    vp = np.array(pin.impulseDynamics(model, d, q, v, cmodels, cds, r_coeff, s), copy=True)
     out = {"v_after": vp, "impulse": np.array(d.impulse_c, copy=True)}
     if derivs:
-        pin.computeImpulseDynamicsDerivatives(model, d, cmodels, cds, R_COEFF, s)
+        pin.computeImpulseDynamicsDerivatives(model, d, cmodels, cds, r_coeff, s)
         out["dv_after_dq"] = np.array(d.ddq_dq, copy=True)
         out["dv_after_dv_minus_I"] = np.array(d.ddq_dv, copy=True)
         out["dimpulse_dq"] = np.array(d.dlambda_dq, copy=True)
@@ -197,6 +214,12 @@ def fd_jac(model, f, q, v, h=1e-6):
 
 
 def check_contacts(model, cmodels, q, v, tau, c, imp):
+    res = check_constraint(model, cmodels, q, v, tau, c)
+    res.update(check_impulse(model, cmodels, q, v, imp))
+    return res
+
+
+def check_constraint(model, cmodels, q, v, tau, c):
     nv = model.nv
     res = {}
     Jq, Jv = fd_jac(model, lambda qq, vv: constraint_dyn(model, cmodels, qq, vv, tau, False)["ddq"], q, v)
@@ -210,19 +233,142 @@ def check_contacts(model, cmodels, q, v, tau, c, imp):
                     - constraint_dyn(model, cmodels, q, v, tau - h * e, False)["ddq"]) / (2 * h)
                    for e in np.eye(nv)]).T
     res["cd.ddq_dtau"] = relerr(c["ddq_dtau"], Jt)
-    Vq, Vv = fd_jac(model, lambda qq, vv: impulse_dyn(model, cmodels, qq, vv, False)["v_after"], q, v)
-    Iq, Iv = fd_jac(model, lambda qq, vv: impulse_dyn(model, cmodels, qq, vv, False)["impulse"], q, v)
-    res["imp.dv_after_dq"] = relerr(imp["dv_after_dq"], Vq)
-    res["imp.dv_after_dv_minus_I"] = relerr(imp["dv_after_dv_minus_I"], Vv - np.eye(nv))
-    res["imp.dv_after_dv_minus_I(vs FD without -I)"] = relerr(imp["dv_after_dv_minus_I"], Vv)
-    res["imp.dimpulse_dq"] = relerr(imp["dimpulse_dq"], Iq)
-    res["imp.dimpulse_dv"] = relerr(imp["dimpulse_dv"], Iv)
+    Lt = np.array([(constraint_dyn(model, cmodels, q, v, tau + h * e, False)["lambda_c"]
+                    - constraint_dyn(model, cmodels, q, v, tau - h * e, False)["lambda_c"]) / (2 * h)
+                   for e in np.eye(nv)]).T
+    res["cd.dlambda_dtau"] = relerr(c["dlambda_dtau"], Lt)
     return res
+
+
+def check_impulse(model, cmodels, q, v, imp, r_coeff=R_COEFF, ip="imp."):
+    nv = model.nv
+    res = {}
+    Vq, Vv = fd_jac(model, lambda qq, vv: impulse_dyn(model, cmodels, qq, vv, False, r_coeff)["v_after"], q, v)
+    Iq, Iv = fd_jac(model, lambda qq, vv: impulse_dyn(model, cmodels, qq, vv, False, r_coeff)["impulse"], q, v)
+    res[ip + "dv_after_dq"] = relerr(imp["dv_after_dq"], Vq)
+    res[ip + "dv_after_dv_minus_I"] = relerr(imp["dv_after_dv_minus_I"], Vv - np.eye(nv))
+    res[ip + "dv_after_dv_minus_I(vs FD without -I)"] = relerr(imp["dv_after_dv_minus_I"], Vv)
+    res[ip + "dimpulse_dq"] = relerr(imp["dimpulse_dq"], Iq)
+    res[ip + "dimpulse_dv"] = relerr(imp["dimpulse_dv"], Iv)
+    return res
+
+
+CONTACT_CONVENTIONS = {
+    "scope": "contact fixture: ONE state (states[0] = state 0 of <model>.json: same seed and draws); only contact outputs are stored (rnea/aba/... are in <model>.json). The state's a is not stored (unused).",
+    "frames": "model.frames = every Pinocchio frame in model.frames order (universe frame included): name, type (BODY = URDF link, JOINT, FIXED_JOINT, OP_FRAME, ...), parent_joint (Pinocchio joint index, 0 = universe), parent_joint_name, placement = pose of the frame in the parent joint's frame {rotation R [3][3] row-major, translation t [3]}, p_joint = R p_frame + t.",
+    "contacts": "model.contacts: RigidConstraintModel(CONTACT_3D, model, frame.parentJoint, frame.placement, LOCAL_WORLD_ALIGNED) per listed frame, in that order; the contact point is the frame origin; rows stacked 3 per contact; LOCAL_WORLD_ALIGNED = components along the WORLD axes (applied at the contact point). Default ProximalSettings(1e-12, 1e-12, mu=0, max_iter=1) (exact KKT solve, no damping).",
+    "constraint_dynamics": "inputs q, v, tau. ddq = pinocchio.constraintDynamics(...); lambda_c = data.lambda_c = contact forces APPLIED ON THE ROBOT (M ddq + b(q,v) = tau + Jc^T lambda_c, Jc = LWA linear frame Jacobians), acceleration constraint Jc ddq + dJc v = 0 (zero classical contact-point acceleration, no Baumgarte). Then computeConstraintDynamicsDerivatives -> ddq_dq, ddq_dv, ddq_dtau [nv][nv], dlambda_dq, dlambda_dv, dlambda_dtau [3*ncontacts][nv]; derivative[i][j] = d out_i / d x_j with the tangent q convention.",
+    "impulse_dynamics": "a LIST of runs, one per restitution coefficient r_coeff (0.0 and 0.3); input q and v_before = the state's v. v_after = pinocchio.impulseDynamics(model, data, q, v, cmodels, cdatas, r_coeff, settings) (= data.dq_after): M (v_after - v_before) = Jc^T impulse, Jc v_after = -r_coeff Jc v_before; impulse = data.impulse_c (LWA, applied on the robot). computeImpulseDynamicsDerivatives(model, data, cmodels, cdatas, r_coeff, settings) then: dv_after_dq = data.ddq_dq, dv_after_dv_minus_I = data.ddq_dv = d v_after / d v_before MINUS the identity, dimpulse_dq = data.dlambda_dq, dimpulse_dv = data.dlambda_dv (d impulse / d v_before).",
+    "fresh_data": "constraint and impulse runs each use a brand-new pinocchio.Data (and new RigidConstraintData); every result is copied while its Data is alive.",
+    "validation": "not stored: make_fixtures.py prints central finite differences (h=1e-6) of every stored derivative (ddq, lambda_c, v_after, impulse re-solved on fresh Data at q(+)-h e_k, v +- h e_k, tau +- h e_k) and the residuals of the equations stated above.",
+}
+
+
+def frames_info(model):
+    return [{"name": f.name, "type": str(f.type), "parent_joint": int(f.parentJoint),
+             "parent_joint_name": model.names[f.parentJoint],
+             "placement": {"rotation": L(f.placement.rotation), "translation": L(f.placement.translation)}}
+            for f in model.frames]
+
+
+def contact_residuals(model, cmodels, frames, q, v, tau, c, imps):
+    """Checks the physical meaning of the stored quantities: KKT equations with LWA Jacobians,
+    forces/impulses applied on the robot, restitution law. Absolute max residuals."""
+    nv = model.nv
+    d = pin.Data(model)
+    pin.computeJointJacobians(model, d, q)
+    pin.updateFramePlacements(model, d)
+    J = np.vstack([np.array(pin.getFrameJacobian(model, d, model.getFrameId(f),
+                                                 pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3], copy=True)
+                   for f in frames])
+    d2 = pin.Data(model)
+    pin.forwardKinematics(model, d2, q, v, np.zeros(nv))
+    pin.updateFramePlacements(model, d2)
+    drift = np.concatenate([np.array(pin.getFrameClassicalAcceleration(
+        model, d2, model.getFrameId(f), pin.ReferenceFrame.LOCAL_WORLD_ALIGNED).linear, copy=True)
+        for f in frames])
+    M = ref.sym_from_upper(ref.run_fresh(model, pin.crba, q)[0])
+    b = ref.run_fresh(model, pin.rnea, q, v, np.zeros(nv))[0]
+    res = {
+        "res.cd.dynamics(M ddq + b - tau - J^T lambda)": float(np.max(np.abs(M @ c["ddq"] + b - tau - J.T @ c["lambda_c"]))),
+        "res.cd.constraint(J ddq + dJ v)": float(np.max(np.abs(J @ c["ddq"] + drift))),
+        "res.cd.ddq_dtau symmetric": float(np.max(np.abs(c["ddq_dtau"] - c["ddq_dtau"].T))),
+    }
+    for imp in imps:
+        r = imp["r_coeff"]
+        res["res.imp(r=%g).momentum(M dv - J^T impulse)" % r] = float(np.max(np.abs(
+            M @ (imp["v_after"] - v) - J.T @ imp["impulse"])))
+        res["res.imp(r=%g).restitution(J v+ + r J v-)" % r] = float(np.max(np.abs(J @ imp["v_after"] + r * (J @ v))))
+    return res
+
+
+def make_contact_fixture(name, frames, args):
+    """contacts_<name>.json; returns (ok, path)."""
+    urdf = os.path.join(args.models_dir, name + ".urdf")
+    model = pin.buildModelFromUrdf(urdf, pin.JointModelFreeFlyer())
+    nv = model.nv
+    rng = np.random.default_rng(SEED)
+    q = ref.sample_q(model, rng)  # same draws as state 0 of <name>.json
+    v, _a, tau = rng.uniform(-1, 1, nv), rng.uniform(-1, 1, nv), rng.uniform(-1, 1, nv)
+    cmodels = make_contacts(model, frames)
+    c = constraint_dyn(model, cmodels, q, v, tau)
+    imps = []
+    for r in CONTACT_R_COEFFS:
+        imp = impulse_dyn(model, cmodels, q, v, True, r)
+        imp["r_coeff"] = r
+        imps.append(imp)
+    check = {}
+    if not args.no_check:
+        check.update(check_constraint(model, cmodels, q, v, tau, c))
+        for imp in imps:
+            check.update(check_impulse(model, cmodels, q, v, imp, imp["r_coeff"], "imp(r=%g)." % imp["r_coeff"]))
+        check.update(contact_residuals(model, cmodels, frames, q, v, tau, c, imps))
+    ok = True
+    for k, e in check.items():
+        expected_bad = k.endswith("(vs FD without -I)")
+        tol = 1e-9 if k.startswith("res.") else 1e-5
+        flag = "" if (e <= tol) != expected_bad else "  <-- CHECK"
+        if flag and not expected_bad:
+            ok = False
+        print("  contacts_%s state0 %-55s %.3g%s" % (name, k, e, flag))
+    cj = continuous_joints(model)
+    minfo = model_info(model, name, urdf, True, cmodels, frames)
+    minfo["frames"] = frames_info(model)
+    imp_keys = ["v_after", "impulse", "dv_after_dq", "dv_after_dv_minus_I", "dimpulse_dq", "dimpulse_dv"]
+    doc = {
+        "format": "sodyn-pinocchio-contact-fixture/1",
+        "generator": {
+            "command": "/tmp/peer/venv/bin/python scripts/make_fixtures.py --models none --contact-models " + name,
+            "pinocchio": pin.__version__, "numpy": np.__version__, "python": platform.python_version(),
+            "seed": SEED,
+            "sampling": "as <model>.json state 0: numpy.random.default_rng(seed); q = reference.sample_q, then v, a, tau ~ U(-1,1)^nv (a drawn, not stored)",
+        },
+        "conventions": dict(CONVENTIONS, **CONTACT_CONVENTIONS),
+        "model": minfo,
+        "states": [{
+            "q": L(q), "v": L(v), "tau": L(tau),
+            "continuous_theta": [{"joint": model.names[j],
+                                  "theta": float(np.arctan2(q[model.joints[j].idx_q + 1], q[model.joints[j].idx_q]))}
+                                 for j in cj],
+            "outputs": {
+                "constraint_dynamics": {k: L(x) for k, x in c.items()},
+                "impulse_dynamics": [dict({"r_coeff": imp["r_coeff"]}, **{k: L(imp[k]) for k in imp_keys})
+                                     for imp in imps],
+            },
+        }],
+    }
+    path = os.path.join(args.out, "contacts_%s.json" % name)
+    with open(path, "w") as f:
+        json.dump(doc, f, separators=(",", ":"), allow_nan=False)
+    print("wrote %s (%d bytes, nq=%d nv=%d, %d contacts, r_coeff %s)" % (
+        path, os.path.getsize(path), model.nq, nv, len(frames), CONTACT_R_COEFFS), flush=True)
+    return ok
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--models", default=",".join(MODELS))
+    ap.add_argument("--contact-models", default=",".join(CONTACT_MODELS))
     ap.add_argument("--out", default=os.path.join(REPO, "tests", "fixtures"))
     ap.add_argument("--models-dir", default="/work/shared/models")
     ap.add_argument("--peer", default="/work/shared/peer")
@@ -232,6 +378,7 @@ def main():
     args = ap.parse_args()
 
     sys.path.insert(0, args.peer)
+    global ref
     import reference as ref  # sample_q, run_fresh, sym_from_upper, so_tensors, fd_validate*
 
     assert pin.__version__ == "4.1.0", pin.__version__
@@ -242,7 +389,7 @@ def main():
     os.makedirs(args.out, exist_ok=True)
     ok = True
 
-    for name in args.models.split(","):
+    for name in ([] if args.models in ("", "none") else args.models.split(",")):
         ff, nstates, want_so, contact_frames = MODELS[name]
         urdf = os.path.join(args.models_dir, name + ".urdf")
         model = pin.buildModelFromUrdf(urdf, pin.JointModelFreeFlyer()) if ff else pin.buildModelFromUrdf(urdf)
@@ -322,6 +469,8 @@ def main():
         print("wrote %s (%d bytes, nq=%d nv=%d, %d states%s)" % (
             path, os.path.getsize(path), nq, nv, nstates,
             ", second order" if "d2tau_dqdq" in states[0]["outputs"] else ""), flush=True)
+    for name in ([] if args.contact_models in ("", "none") else args.contact_models.split(",")):
+        ok = make_contact_fixture(name, CONTACT_MODELS[name], args) and ok
     if not ok:
         print("SOME CHECKS FAILED", file=sys.stderr)
         sys.exit(1)
