@@ -5,8 +5,8 @@ use super::kinematics::{joint_motion, placements};
 use super::rnea::check_fext;
 use crate::error::{Error, Result};
 use crate::model::{Model, check_vec};
-use crate::spatial::{Force, Motion, Transform};
-use nalgebra::{DVector, Matrix6, Vector6};
+use crate::spatial::{Force, Motion, Transform, skew};
+use nalgebra::{DVector, Matrix3, Matrix6, Vector6};
 
 /// Forward dynamics `q̈ = M⁻¹(τ − b + Σ Jᵢᵀ fextᵢ)` by the articulated-body algorithm.
 /// `fext` as in [`super::rnea()`] (body frames). Returns `data.qdd`. A singular articulated
@@ -31,8 +31,26 @@ pub fn aba<'a>(
 /// articulated inertia to the parent frame.
 #[inline]
 fn congruence_to_parent(x: &Transform, a: &Matrix6<f64>) -> Matrix6<f64> {
-    let xm = x.inverse().motion_matrix();
-    xm.transpose() * a * xm
+    // Rotate the blocks, then translate: with P = [p]×,
+    // [[A, B], [Bᵀ, C]] ↦ [[A − B P + P Bᵀ − P C P, B + P C], [·ᵀ, C]].
+    let r = &x.rot;
+    let rt = r.transpose();
+    let a11: Matrix3<f64> = a.fixed_view::<3, 3>(0, 0).into_owned();
+    let a12: Matrix3<f64> = a.fixed_view::<3, 3>(0, 3).into_owned();
+    let a22: Matrix3<f64> = a.fixed_view::<3, 3>(3, 3).into_owned();
+    let aa = r * a11 * rt;
+    let b = r * a12 * rt;
+    let c = r * a22 * rt;
+    let p = skew(&x.trans);
+    let pc = p * c;
+    let y = b + pc;
+    let xx = aa - b * p + p * b.transpose() - pc * p;
+    let mut out = Matrix6::zeros();
+    out.fixed_view_mut::<3, 3>(0, 0).copy_from(&xx);
+    out.fixed_view_mut::<3, 3>(0, 3).copy_from(&y);
+    out.fixed_view_mut::<3, 3>(3, 0).copy_from(&y.transpose());
+    out.fixed_view_mut::<3, 3>(3, 3).copy_from(&c);
+    out
 }
 
 #[inline]

@@ -58,23 +58,28 @@ pub fn solve_ltl(model: &Model, data: &Data, b: &mut DVector<f64>) -> Result<()>
 pub(crate) fn ltl_solve_in_place(model: &Model, h: &DMatrix<f64>, x: &mut [f64]) {
     let n = model.nv;
     let h = h.as_slice();
-    for i in (0..n).rev() {
-        let xi = x[i];
-        if xi != 0.0 {
-            for &j in model.ancestors_of_dof(i) {
-                x[j] -= h[j + n * i] * xi;
+    assert!(x.len() == n && h.len() == n * n, "ltl_solve_in_place: dimension mismatch");
+    // SAFETY (all `get_unchecked` below): i < n, and every ancestor index j < i < n comes from
+    // `Model::dof_ancestors`, so j + n i < n² = h.len() and j < n = x.len().
+    unsafe {
+        for i in (0..n).rev() {
+            let xi = *x.get_unchecked(i);
+            if xi != 0.0 {
+                for &j in model.ancestors_of_dof(i) {
+                    *x.get_unchecked_mut(j) -= h.get_unchecked(j + n * i) * xi;
+                }
             }
         }
-    }
-    for i in 0..n {
-        x[i] /= h[i + n * i];
-    }
-    for i in 0..n {
-        let mut acc = x[i];
-        for &j in model.ancestors_of_dof(i) {
-            acc -= h[j + n * i] * x[j];
+        for i in 0..n {
+            *x.get_unchecked_mut(i) /= h.get_unchecked(i + n * i);
         }
-        x[i] = acc;
+        for i in 0..n {
+            let mut acc = *x.get_unchecked(i);
+            for &j in model.ancestors_of_dof(i) {
+                acc -= h.get_unchecked(j + n * i) * x.get_unchecked(j);
+            }
+            *x.get_unchecked_mut(i) = acc;
+        }
     }
 }
 

@@ -103,12 +103,29 @@ impl FdSoData {
     }
 }
 
-/// `t ← −M⁻¹ t` for a tensor viewed as the `nv × nv²` matrix of its pages side by side.
-fn premultiply_neg_minv(minv: &DMatrix<f64>, t: &mut Tensor3, tmp: &mut DMatrix<f64>) {
-    let (n, n2, n3) = t.dims();
-    let view = DMatrixView::from_slice(t.as_slice(), n, n2 * n3);
-    tmp.gemm(-1.0, minv, &view, 0.0);
-    t.as_mut_slice().copy_from_slice(tmp.as_slice());
+/// `out ← −M⁻¹ src` for `src` (`nv × nv²`, the pages of a tensor side by side).
+fn premultiply_neg_minv(minv: &DMatrix<f64>, src: &[f64], out: &mut Tensor3) {
+    let (n, n2, n3) = out.dims();
+    let view = DMatrixView::from_slice(src, n, n2 * n3);
+    let mut o = nalgebra::DMatrixViewMut::from_slice(out.as_mut_slice(), n, n2 * n3);
+    o.gemm(-1.0, minv, &view, 0.0);
+}
+
+/// `t[:, j, k] += z[:, k]` and `t[:, k, j] += z[:, k]` for all `k` (`t` as a flat
+/// column-major `n×n×n` slice, `z` an `n×n` column-major matrix).
+#[inline]
+fn add_a_and_rotation(t: &mut [f64], z: &[f64], n: usize, j: usize) {
+    for k in 0..n {
+        let zk = &z[n * k..n * k + n];
+        let a = n * j + n * n * k;
+        for (d, s) in t[a..a + n].iter_mut().zip(zk) {
+            *d += *s;
+        }
+        let b = n * k + n * n * j;
+        for (d, s) in t[b..b + n].iter_mut().zip(zk) {
+            *d += *s;
+        }
+    }
 }
 
 /// Second-order derivatives of forward dynamics at `q̈ = FD(q, q̇, τ)` (eq. eqn_FD_SO_43):
@@ -135,42 +152,36 @@ pub fn fd_so_derivatives(
     id_so_unchecked(model, data, &mut fso.id, q, v, &qdd, fext, -model.gravity);
     data.qdd = qdd;
     fd_fo_from_id(model, data)?;
+    let tmp = fso.tmp.as_mut_slice();
     // ∂²q̈/∂q²: ID_qq + A + A^R with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k].
-    fso.d2qdd_dq2.as_mut_slice().copy_from_slice(fso.id.d2tau_dq2().as_slice());
+    tmp.copy_from_slice(fso.id.d2tau_dq2().as_slice());
     for j in 0..n {
         fso.col.copy_from(&data.dqdd_dq.column(j));
         idfoza_core(model, data, fso.col.as_slice(), &mut fso.zmat);
-        for k in 0..n {
-            for i in 0..n {
-                let z = fso.zmat[(i, k)];
-                fso.d2qdd_dq2[(i, j, k)] += z;
-                fso.d2qdd_dq2[(i, k, j)] += z;
-            }
-        }
+        add_a_and_rotation(tmp, fso.zmat.as_slice(), n, j);
     }
-    // ∂²q̈/∂q∂q̇: ID_qv + B with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j].
-    fso.d2qdd_dqdv.as_mut_slice().copy_from_slice(fso.id.d2tau_dqdv().as_slice());
+    premultiply_neg_minv(&data.minv, tmp, &mut fso.d2qdd_dq2);
+    // ∂²q̈/∂q∂q̇: ID_qv + B with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j] (page k).
+    tmp.copy_from_slice(fso.id.d2tau_dqdv().as_slice());
     for k in 0..n {
         fso.col.copy_from(&data.dqdd_dv.column(k));
         idfoza_core(model, data, fso.col.as_slice(), &mut fso.zmat);
-        let mut page = fso.d2qdd_dqdv.page_mut(k);
-        page += &fso.zmat;
+        for (d, s) in tmp[n * n * k..n * n * (k + 1)].iter_mut().zip(fso.zmat.as_slice()) {
+            *d += *s;
+        }
     }
+    premultiply_neg_minv(&data.minv, tmp, &mut fso.d2qdd_dqdv);
     // ∂(M⁻¹)/∂q: C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k].
     for j in 0..n {
         fso.col.copy_from(&data.minv.column(j));
         idfoza_core(model, data, fso.col.as_slice(), &mut fso.zmat);
         for k in 0..n {
-            for i in 0..n {
-                fso.d2qdd_dtaudq[(i, j, k)] = fso.zmat[(i, k)];
-            }
+            tmp[n * j + n * n * k..n * j + n * n * k + n]
+                .copy_from_slice(&fso.zmat.as_slice()[n * k..n * k + n]);
         }
     }
+    premultiply_neg_minv(&data.minv, tmp, &mut fso.d2qdd_dtaudq);
     // ∂²q̈/∂q̇²: ID_vv (M does not depend on q̇).
-    fso.d2qdd_dv2.as_mut_slice().copy_from_slice(fso.id.d2tau_dv2().as_slice());
-    premultiply_neg_minv(&data.minv, &mut fso.d2qdd_dq2, &mut fso.tmp);
-    premultiply_neg_minv(&data.minv, &mut fso.d2qdd_dqdv, &mut fso.tmp);
-    premultiply_neg_minv(&data.minv, &mut fso.d2qdd_dtaudq, &mut fso.tmp);
-    premultiply_neg_minv(&data.minv, &mut fso.d2qdd_dv2, &mut fso.tmp);
+    premultiply_neg_minv(&data.minv, fso.id.d2tau_dv2().as_slice(), &mut fso.d2qdd_dv2);
     Ok(())
 }

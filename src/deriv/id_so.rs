@@ -142,9 +142,29 @@ fn i_ops(data: &Data, i: usize, c: usize) -> IOps {
     }
 }
 
+/// `t[idx] = x` without a bounds check in release builds: every index written by IDSVA-SO is
+/// built from DoF indices `< nv` of an `nv×nv×nv` tensor (checked in debug builds).
+#[inline(always)]
+fn set(t: &mut [f64], idx: usize, x: f64) {
+    debug_assert!(idx < t.len());
+    // SAFETY: idx = i + n (j + n k) with i, j, k < n and t.len() = n³ (see `SoData::new`).
+    unsafe { *t.get_unchecked_mut(idx) = x }
+}
+
+/// Flat offset of `(i, j, k)` in an `n×n×n` column-major tensor.
+#[inline(always)]
+fn at(n: usize, i: usize, j: usize, k: usize) -> usize {
+    i + n * (j + n * k)
+}
+
 fn backward_step_so(model: &Model, data: &Data, so: &mut SoData, i: usize) {
     let (s_w, psid, psidd, sdot) = (&data.s_world, &data.psid, &data.psidd, &data.sdot);
+    let n = model.nv;
     let dofs = |j: usize| model.idx_v[j]..model.idx_v[j] + model.nvs[j];
+    let qq = so.d2tau_dq2.as_mut_slice();
+    let vv = so.d2tau_dv2.as_mut_slice();
+    let qv = so.d2tau_dqdv.as_mut_slice();
+    let dm = so.dm_dq.as_mut_slice();
     for ip in dofs(i) {
         let o = i_ops(data, i, ip);
         let mut j = i;
@@ -155,110 +175,98 @@ fn backward_step_so(model: &Model, data: &Data, so: &mut SoData, i: usize) {
                 // q–q 1A/2A terms: z1 · Ψ̇_k + z2 · Ψ̈_k
                 let z2 = sj.cross_force(&o.t1);
                 let z1 = mtv(&o.bs, &psidj) * -2.0 + sj.cross_force(&o.t2) * 2.0;
+                // q̇–q̇: u = −2 B(I^C_i,S_i)ᵀ S_j
+                let u = mtv(&o.bs, &sj) * -2.0;
+                let bs_psidj = mv(&o.bs, &psidj);
                 // q–q 1B: w · S_k
                 let w = mv(&o.a, &psidj) + mv(&o.c, &psiddj) + sj.cross_force(&o.g);
-                // q–q 1C and cross 1C: y1 · (·) + y2 · (·)
-                let y1 = mtv(&o.a, &sj);
-                let y2 = mtv(&o.c, &sj);
-                // q̇–q̇: u = −2 B(I^C_i,S_i)ᵀ S_j ; x = 2 B(I^C_i,S_i) S_j
-                let u = mtv(&o.bs, &sj) * -2.0;
-                let x = mv(&o.bs, &sj) * 2.0;
                 // cross 1B: h1 · S_k + z2 · (Ψ̇_k + Ṡ_k)
-                let h1 = mv(&o.bs, &psidj) * -2.0
-                    + psidj.cross_force(&o.t1) * 2.0
-                    + sj.cross_force(&o.t2) * 2.0;
+                let h1 =
+                    bs_psidj * -2.0 + psidj.cross_force(&o.t1) * 2.0 + sj.cross_force(&o.t2) * 2.0;
                 // cross 2B: e · S_k
-                let e = mv(&o.bs, &psidj) * 2.0 + sj.cross_force(&o.t4);
-                // cross 2C: S_k · (A S_j + C(Ψ̇_j + Ṡ_j))
-                let f2c = mv(&o.a, &sj) + mv(&o.c, &(psidj + sdotj));
-                // q̇–q̇ D (j = i): S_k · (D S_j)
-                let dsj = mv(&o.d, &sj);
-                let mut k = j;
+                let e = bs_psidj * 2.0 + sj.cross_force(&o.t4);
+                // Per-(j, t) vectors for the cases with j ≺ i (or the D case at j = i).
+                let (y1, y2, x, f2c, csj, dsj) = if j_is_i {
+                    let z = Force::zero();
+                    (z, z, z, z, z, mv(&o.d, &sj))
+                } else {
+                    (
+                        mtv(&o.a, &sj),
+                        mtv(&o.c, &sj),
+                        mv(&o.bs, &sj) * 2.0,
+                        mv(&o.a, &sj) + mv(&o.c, &(psidj + sdotj)),
+                        mv(&o.c, &sj),
+                        Force::zero(),
+                    )
+                };
+                let y2c = if j_is_i { mtv(&o.c, &sj) } else { y2 };
+                // j = k block (same joint): 1A only, B (v–v) and 1A cross; j ≺ i adds 1C/1E/2A/2C.
+                for kr in dofs(j) {
+                    let (sk, psidk, psiddk, sdotk) = (s_w[kr], psid[kr], psidd[kr], sdot[kr]);
+                    set(qq, at(n, ip, jt, kr), z1.dot(&psidk) + z2.dot(&psiddk)); // 1A
+                    set(vv, at(n, ip, jt, kr), -y2c.dot(&sk)); // B: −S_jᵀ C S_k
+                    let val = u.dot(&psidk); // cross 1A
+                    set(qv, at(n, ip, kr, jt), val);
+                    if !j_is_i {
+                        let v1c = y1.dot(&psidk) + y2.dot(&psiddk); // q–q 1C/2C
+                        set(qq, at(n, jt, kr, ip), v1c);
+                        set(qq, at(n, jt, ip, kr), v1c);
+                        let v1e = -u.dot(&sk); // v–v 1E/2E
+                        set(vv, at(n, jt, kr, ip), v1e);
+                        set(vv, at(n, jt, ip, kr), v1e);
+                        set(qv, at(n, jt, kr, ip), -val); // cross 2A
+                        set(qv, at(n, jt, ip, kr), y1.dot(&sk) + y2.dot(&(psidk + sdotk))); // cross 1C
+                        let vm = csj.dot(&sk); // ∂M 1C/2C
+                        set(dm, at(n, kr, jt, ip), vm);
+                        set(dm, at(n, jt, kr, ip), vm);
+                    }
+                }
+                // Strict ancestors k ≺ j.
+                let mut k = model.parents[j];
                 while k > 0 {
-                    let k_is_j = k == j;
                     for kr in dofs(k) {
                         let (sk, psidk, psiddk, sdotk) = (s_w[kr], psid[kr], psidd[kr], sdot[kr]);
-                        // ---- ∂²τ/∂q² ----
-                        // 1A (k ⪯ j ⪯ i), 2A mirror
+                        let pk = psidk + sdotk;
+                        // ∂²τ/∂q²: 1A + 2A mirror, 1B (+ 2B mirror if j ≺ i)
                         let val = z1.dot(&psidk) + z2.dot(&psiddk);
-                        so.d2tau_dq2[(ip, jt, kr)] = val;
-                        if !k_is_j {
-                            so.d2tau_dq2[(ip, kr, jt)] = val;
-                        }
-                        if !k_is_j {
-                            // 1B (k ≺ j ⪯ i), 2B mirror
-                            let val = w.dot(&sk);
-                            so.d2tau_dq2[(kr, ip, jt)] = val;
-                            if !j_is_i {
-                                so.d2tau_dq2[(kr, jt, ip)] = val;
-                            }
-                        }
-                        if !j_is_i {
-                            // 1C (k ⪯ j ≺ i), 2C mirror
-                            let val = y1.dot(&psidk) + y2.dot(&psiddk);
-                            so.d2tau_dq2[(jt, kr, ip)] = val;
-                            so.d2tau_dq2[(jt, ip, kr)] = val;
-                        }
-                        // ---- ∂²τ/∂q̇² ----
-                        if !k_is_j {
-                            // 1A (k ≺ j ⪯ i), 2A mirror
-                            let val = u.dot(&sk);
-                            so.d2tau_dv2[(ip, jt, kr)] = val;
-                            so.d2tau_dv2[(ip, kr, jt)] = val;
-                            if !j_is_i {
-                                // 1C (k ≺ j ≺ i), 2C mirror
-                                let val = x.dot(&sk);
-                                so.d2tau_dv2[(kr, ip, jt)] = val;
-                                so.d2tau_dv2[(kr, jt, ip)] = val;
-                            } else {
-                                // D (k ≺ j = i)
-                                so.d2tau_dv2[(kr, ip, jt)] = dsj.dot(&sk);
-                            }
+                        set(qq, at(n, ip, jt, kr), val);
+                        set(qq, at(n, ip, kr, jt), val);
+                        let wval = w.dot(&sk);
+                        set(qq, at(n, kr, ip, jt), wval);
+                        // ∂²τ/∂q̇²: 1A + 2A mirror
+                        let val = u.dot(&sk);
+                        set(vv, at(n, ip, jt, kr), val);
+                        set(vv, at(n, ip, kr, jt), val);
+                        // cross: 1A, 1B, 2B
+                        let cval = u.dot(&psidk);
+                        set(qv, at(n, ip, kr, jt), cval);
+                        set(qv, at(n, ip, jt, kr), h1.dot(&sk) + z2.dot(&pk));
+                        set(qv, at(n, kr, jt, ip), e.dot(&sk));
+                        // ∂M/∂q 1B + 2B mirror
+                        let mval = z2.dot(&sk);
+                        set(dm, at(n, kr, ip, jt), mval);
+                        set(dm, at(n, ip, kr, jt), mval);
+                        if j_is_i {
+                            // v–v D (k ≺ j = i)
+                            set(vv, at(n, kr, ip, jt), dsj.dot(&sk));
                         } else {
-                            // B (k = j ⪯ i)
-                            so.d2tau_dv2[(ip, jt, kr)] = -y2.dot(&sk);
+                            set(qq, at(n, kr, jt, ip), wval); // 1B mirror (2B)
+                            let v1c = y1.dot(&psidk) + y2.dot(&psiddk); // q–q 1C/2C
+                            set(qq, at(n, jt, kr, ip), v1c);
+                            set(qq, at(n, jt, ip, kr), v1c);
+                            let xv = x.dot(&sk); // v–v 1C/2C
+                            set(vv, at(n, kr, ip, jt), xv);
+                            set(vv, at(n, kr, jt, ip), xv);
+                            let v1e = -u.dot(&sk); // v–v 1E/2E
+                            set(vv, at(n, jt, kr, ip), v1e);
+                            set(vv, at(n, jt, ip, kr), v1e);
+                            set(qv, at(n, jt, kr, ip), -cval); // cross 2A
+                            set(qv, at(n, jt, ip, kr), y1.dot(&sk) + y2.dot(&pk)); // cross 1C
+                            set(qv, at(n, kr, ip, jt), f2c.dot(&sk)); // cross 2C
+                            let vm = csj.dot(&sk); // ∂M 1C/2C
+                            set(dm, at(n, kr, jt, ip), vm);
+                            set(dm, at(n, jt, kr, ip), vm);
                         }
-                        if !j_is_i {
-                            // 1E (k ⪯ j ≺ i), 2E mirror
-                            let val = -u.dot(&sk);
-                            so.d2tau_dv2[(jt, kr, ip)] = val;
-                            so.d2tau_dv2[(jt, ip, kr)] = val;
-                        }
-                        // ---- ∂²τ/∂q∂q̇: T[out][q][v] ----
-                        // 1A (k ⪯ j ⪯ i; the notes print j ≺ i, but the j = i block is needed
-                        // and is antisymmetric in (p, t) by M24): T[i][k][j]
-                        let val = u.dot(&psidk);
-                        so.d2tau_dqdv[(ip, kr, jt)] = val;
-                        if !j_is_i {
-                            // 2A (k ⪯ j ≺ i): T[j][k][i]
-                            so.d2tau_dqdv[(jt, kr, ip)] = -val;
-                            // 1C (k ⪯ j ≺ i): T[j][i][k]
-                            so.d2tau_dqdv[(jt, ip, kr)] = y1.dot(&sk) + y2.dot(&(psidk + sdotk));
-                        }
-                        if !k_is_j {
-                            // 1B (k ≺ j ⪯ i): T[i][j][k]
-                            so.d2tau_dqdv[(ip, jt, kr)] = h1.dot(&sk) + z2.dot(&(psidk + sdotk));
-                            // 2B (k ≺ j ⪯ i): T[k][j][i]
-                            so.d2tau_dqdv[(kr, jt, ip)] = e.dot(&sk);
-                            if !j_is_i {
-                                // 2C (k ≺ j ≺ i): T[k][i][j]
-                                so.d2tau_dqdv[(kr, ip, jt)] = f2c.dot(&sk);
-                            }
-                        }
-                        // ---- ∂M/∂q: T[row][col][q] ----
-                        if !k_is_j {
-                            // 1B (k ≺ j ⪯ i), 2B mirror
-                            let val = z2.dot(&sk);
-                            so.dm_dq[(kr, ip, jt)] = val;
-                            so.dm_dq[(ip, kr, jt)] = val;
-                        }
-                        if !j_is_i {
-                            // 1C (k ⪯ j ≺ i), 2C mirror
-                            let val = mv(&o.c, &sj).dot(&sk);
-                            so.dm_dq[(kr, jt, ip)] = val;
-                            so.dm_dq[(jt, kr, ip)] = val;
-                        }
-                        // 1A/2A (k ⪯ j ⪯ i): ∂M_ji/∂q_k = 0, structurally (never written).
                     }
                     k = model.parents[k];
                 }

@@ -2,7 +2,7 @@
 //! random and neutral configurations.
 
 use crate::rng::Rng;
-use crate::spatial::{Motion, Transform, skew};
+use crate::spatial::{Motion, Transform};
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 
 /// Tolerance on `| ‖quat‖ − 1 |` accepted for quaternion coordinates.
@@ -228,8 +228,19 @@ impl JointType {
 #[inline]
 pub fn axis_angle(a: &Vector3<f64>, theta: f64) -> Matrix3<f64> {
     let (s, c) = theta.sin_cos();
-    let k = skew(a);
-    Matrix3::identity() + k * s + k * k * (1.0 - c)
+    let t = 1.0 - c;
+    let (x, y, z) = (a.x, a.y, a.z);
+    Matrix3::new(
+        c + t * x * x,
+        t * x * y - s * z,
+        t * x * z + s * y,
+        t * x * y + s * z,
+        c + t * y * y,
+        t * y * z - s * x,
+        t * x * z - s * y,
+        t * y * z + s * x,
+        c + t * z * z,
+    )
 }
 
 /// Rotation matrix of the quaternion `(x, y, z, w)` (assumed unit).

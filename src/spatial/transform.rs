@@ -100,11 +100,19 @@ impl Transform {
     }
     /// Spatial inertia expressed in `b` → expressed in `a`.
     pub fn act_inertia(&self, i: &Inertia) -> Inertia {
+        // Ī' = R Ī Rᵀ − [Rh]×[p]× − [p]×[Rh]× − m [p]×[p]×, with [a]×[b]× = b aᵀ − (a·b) 1.
         let rh = self.rot * i.h;
-        let p = skew(&self.trans);
-        let rh_x = skew(&rh);
-        let rot = self.rot * i.rot * self.rot.transpose() - rh_x * p - p * rh_x - p * p * i.mass;
-        Inertia { mass: i.mass, h: rh + self.trans * i.mass, rot: symmetrize(&rot) }
+        let p = self.trans;
+        let m = i.mass;
+        let mut rot = self.rot * i.rot * self.rot.transpose();
+        let diag = 2.0 * rh.dot(&p) + m * p.norm_squared();
+        for c in 0..3 {
+            for r in 0..3 {
+                rot[(r, c)] -= p[r] * rh[c] + rh[r] * p[c] + m * p[r] * p[c];
+            }
+            rot[(c, c)] += diag;
+        }
+        Inertia { mass: m, h: rh + p * m, rot: symmetrize(&rot) }
     }
     /// Spatial inertia expressed in `a` → expressed in `b`.
     pub fn inv_act_inertia(&self, i: &Inertia) -> Inertia {
