@@ -15,8 +15,11 @@ Options:
     --bench-bin PATH      pin_bench_native (default: $PEER_BUILD/pin_bench_native,
                           PEER_BUILD defaulting to /tmp/peer/build); needed for the
                           second-order tensors
+    --so-sample-models a,b  sampled second-order tensors tests/fixtures/so_samples_<model>.json
+                          for these models (default: all of MODELS; "none": skip them; needs
+                          --bench-bin)
     --no-second-order     skip the second-order tensors (also skipped, with a warning,
-                          when the binary does not exist)
+                          when the binary does not exist); also skips the so_samples files
     --no-check            skip the finite-difference checks (they are printed, never stored)
 
 The values are Pinocchio's raw outputs, in Pinocchio's conventions (stated in every file under
@@ -29,6 +32,12 @@ Contact fixtures (contacts_<model>.json, CONTACT_MODELS): one state (= state 0 o
 constraint dynamics + derivatives and impulse dynamics + derivatives for every restitution
 coefficient of CONTACT_R_COEFFS, the joint table and all Pinocchio frames; see
 tests/fixtures/README.md ("Contact fixtures").
+
+Second-order samples (so_samples_<model>.json, every model of MODELS): one state (= state 0 of
+<model>.json) and, for each of d2tau_dqdq, d2tau_dvdv, d2tau_dqdv, d2tau_dadq, the SO_TOP entries
+of largest magnitude plus SO_RANDOM distinct uniformly random other entries (seeded), as
+[i, j, k, value] in Pinocchio's index order (all entries when nv^3 <= SO_TOP + SO_RANDOM); see
+tests/fixtures/README.md ("Second-order samples").
 """
 import argparse
 import json
@@ -70,6 +79,12 @@ CONTACT_MODELS = {
     "talos_full_v2": ["left_sole_link", "right_sole_link"],
 }
 CONTACT_R_COEFFS = [0.0, 0.3]  # one impulse_dynamics run per restitution coefficient
+
+# Sampled second-order tensors so_samples_<name>.json (every model of MODELS, state 0).
+SO_TOP = 300  # entries of largest |value| per tensor
+SO_RANDOM = 700  # further distinct entries drawn uniformly at random per tensor
+SO_SAMPLE_SEED = 1  # numpy.random.default_rng(SO_SAMPLE_SEED), fresh per model
+SO_MAX_BYTES = 250_000  # size limit per file (checked)
 
 
 def L(a):
@@ -365,10 +380,129 @@ def make_contact_fixture(name, frames, args):
     return ok
 
 
+SO_SAMPLE_CONVENTIONS = {
+    "scope": "second-order sample fixture: ONE state (states[0] = state 0 of <model>.json: same seed and draws; q, v, a, continuous_theta; tau not stored, unused), outputs.rnea_tau = rnea(q, v, a) for checking the state mapping, and SAMPLED entries of the four second-order tensors of that state (the full tensors are too large to store for every model).",
+    "samples": "samples[key] for key in d2tau_dqdq, d2tau_dvdv, d2tau_dqdv, d2tau_dadq (meanings above): {nv, n_total = nv^3, nnz (exact non-zeros of the full tensor), max_abs (of the full tensor), complete, top, random}. Each entry is [i, j, k, value] with value = T[i][j][k], indices in PINOCCHIO's order (Pinocchio velocity/tangent coordinates of the joints table, free-flyer dofs [linear; angular]), NOT sodyn's. top = the %d entries of largest |value|, by decreasing |value| (ties: lower flat index i*nv*nv + j*nv + k first); random = %d further DISTINCT entries drawn uniformly without replacement among the others (rng.choice, replace=False), listed by increasing flat index (many are structural zeros). complete = true when nv^3 <= %d: then top holds ALL nv^3 entries (by decreasing |value|) and random is empty." % (SO_TOP, SO_RANDOM, SO_TOP + SO_RANDOM),
+    "sample_rng": "numpy.random.default_rng(%d), fresh per model, drawn for the tensors in the order d2tau_dqdq, d2tau_dvdv, d2tau_dqdv, d2tau_dadq (independent of the state sampling)" % SO_SAMPLE_SEED,
+    "validation": "not stored: make_fixtures.py prints the C++-vs-Python tau/dtau_dq agreement, central finite differences (h=1e-6, reference.fd_validate) of the FULL tensors, and checks that the stored values round-trip exactly to the full tensors and that no unsampled entry exceeds the smallest top entry.",
+}
+
+
+def so_sample(T, rng):
+    """(top, random, complete) entry lists [i, j, k, value] of one nv^3 tensor, Pinocchio order."""
+    nv = T.shape[0]
+    flat = np.asarray(T, dtype=float).reshape(-1)
+    order = np.argsort(-np.abs(flat), kind="stable")
+    complete = flat.size <= SO_TOP + SO_RANDOM
+    top = order if complete else order[:SO_TOP]
+    if complete:
+        rnd = np.array([], dtype=np.int64)
+    else:
+        rest = np.sort(order[SO_TOP:])
+        rnd = np.sort(rng.choice(rest, size=SO_RANDOM, replace=False))
+
+    def entry(f):
+        i, j, k = np.unravel_index(int(f), (nv, nv, nv))
+        return [int(i), int(j), int(k), float(flat[f])]
+
+    return [entry(f) for f in top], [entry(f) for f in rnd], bool(complete)
+
+
+def make_so_samples(name, args):
+    """so_samples_<name>.json; returns ok."""
+    ff = MODELS[name][0]
+    urdf = os.path.join(args.models_dir, name + ".urdf")
+    model = pin.buildModelFromUrdf(urdf, pin.JointModelFreeFlyer()) if ff else pin.buildModelFromUrdf(urdf)
+    nq, nv = model.nq, model.nv
+    rng = np.random.default_rng(SEED)
+    q = ref.sample_q(model, rng)  # same draws as state 0 of <name>.json
+    v, a, _tau = rng.uniform(-1, 1, nv), rng.uniform(-1, 1, nv), rng.uniform(-1, 1, nv)
+    st = {"q": q, "v": v, "a": a}
+    T = ref.so_tensors(args.bench_bin, urdf, ff, [st], nq, nv)[0]
+    tau = ref.run_fresh(model, pin.rnea, q, v, a)[0]
+    (dtau_dq, _dv, _), _d = ref.run_fresh(model, pin.computeRNEADerivatives, q, v, a)
+    check = {"cpp_vs_py_tau": float(np.max(np.abs(T["tau"] - tau))),
+             "cpp_vs_py_dtau_dq": float(np.max(np.abs(T["dtau_dq"] - dtau_dq)))}
+    if not args.no_check:
+        fv = ref.fd_validate(model, q, v, a, T)
+        check.update({k: fv[k] for k in fv if k.startswith("d2tau") and "swapped" not in k
+                      and "dtau_dv[i,j])/ddq_k" not in k})
+    srng = np.random.default_rng(SO_SAMPLE_SEED)
+    samples = {}
+    for key in SO_KEYS:
+        X = np.asarray(T[key], dtype=float)
+        top, rnd, complete = so_sample(X, srng)
+        samples[key] = {"nv": int(nv), "n_total": int(X.size), "nnz": int(np.count_nonzero(X)),
+                        "max_abs": float(np.max(np.abs(X))), "complete": complete,
+                        "top": top, "random": rnd}
+    cj = continuous_joints(model)
+    doc = {
+        "format": "sodyn-pinocchio-so-samples/1",
+        "generator": {
+            "command": "/tmp/peer/venv/bin/python scripts/make_fixtures.py --models none --contact-models none --so-sample-models " + name,
+            "pinocchio": pin.__version__, "numpy": np.__version__, "python": platform.python_version(),
+            "seed": SEED,
+            "sampling": "as <model>.json state 0: numpy.random.default_rng(seed); q = reference.sample_q, then v, a, tau ~ U(-1,1)^nv (tau drawn, not stored)",
+            "sample_seed": SO_SAMPLE_SEED, "n_top": SO_TOP, "n_random": SO_RANDOM,
+            "second_order_source": "C++ ComputeRNEASecondOrderDerivatives (5-argument overload) via pin_bench_native --so-dump",
+        },
+        "conventions": dict(CONVENTIONS, **SO_SAMPLE_CONVENTIONS),
+        "model": model_info(model, name, urdf, ff, [], None),
+        "states": [{
+            "q": L(q), "v": L(v), "a": L(a),
+            "continuous_theta": [{"joint": model.names[j],
+                                  "theta": float(np.arctan2(q[model.joints[j].idx_q + 1], q[model.joints[j].idx_q]))}
+                                 for j in cj],
+            "outputs": {"rnea_tau": L(tau)},
+            "samples": samples,
+        }],
+    }
+    path = os.path.join(args.out, "so_samples_%s.json" % name)
+    with open(path, "w") as f:
+        json.dump(doc, f, separators=(",", ":"), allow_nan=False)
+    size = os.path.getsize(path)
+    # Stored values must be exactly the full tensors' entries (JSON round trip), and the top
+    # entries must really be the largest ones.
+    with open(path) as f:
+        back = json.load(f)["states"][0]["samples"]
+    rt, gap = 0.0, 0.0
+    for key in SO_KEYS:
+        X = np.asarray(T[key], dtype=float)
+        seen = np.zeros(X.shape, dtype=bool)
+        for part in ("top", "random"):
+            for i, j, k, val in back[key][part]:
+                rt = max(rt, abs(val - X[i, j, k]) if val != X[i, j, k] else 0.0)
+                if seen[i, j, k]:
+                    rt = float("inf")  # duplicate entry
+                seen[i, j, k] = True
+        if not back[key]["complete"]:
+            smallest_top = min(abs(e[3]) for e in back[key]["top"])
+            gap = max(gap, float(np.max(np.abs(X[~seen]), initial=0.0)) - smallest_top)
+    check["samples_roundtrip_max_abs_diff"] = rt
+    check["samples_unsampled_above_top(max|T_other| - min|top|)"] = max(gap, 0.0)
+    check["file_size_over_limit(bytes)"] = float(max(0, size - SO_MAX_BYTES + 1))
+    ok = True
+    for k, e in check.items():
+        if k.startswith("cpp_vs_py"):
+            tol = 1e-12
+        elif k.startswith("samples_") or k.startswith("file_size"):
+            tol = 0.0
+        else:
+            tol = 1e-5
+        flag = "" if e <= tol else "  <-- CHECK"
+        ok = ok and not flag
+        print("  so_samples_%s state0 %-50s %.3g%s" % (name, k, e, flag))
+    print("wrote %s (%d bytes, nq=%d nv=%d, %s)" % (
+        path, size, nq, nv, "complete tensors" if nv ** 3 <= SO_TOP + SO_RANDOM
+        else "%d top + %d random entries per tensor" % (SO_TOP, SO_RANDOM)), flush=True)
+    return ok
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--models", default=",".join(MODELS))
     ap.add_argument("--contact-models", default=",".join(CONTACT_MODELS))
+    ap.add_argument("--so-sample-models", default=",".join(MODELS))
     ap.add_argument("--out", default=os.path.join(REPO, "tests", "fixtures"))
     ap.add_argument("--models-dir", default="/work/shared/models")
     ap.add_argument("--peer", default="/work/shared/peer")
@@ -471,6 +605,9 @@ def main():
             ", second order" if "d2tau_dqdq" in states[0]["outputs"] else ""), flush=True)
     for name in ([] if args.contact_models in ("", "none") else args.contact_models.split(",")):
         ok = make_contact_fixture(name, CONTACT_MODELS[name], args) and ok
+    for name in ([] if (args.so_sample_models in ("", "none") or not do_so)
+                 else args.so_sample_models.split(",")):
+        ok = make_so_samples(name, args) and ok
     if not ok:
         print("SOME CHECKS FAILED", file=sys.stderr)
         sys.exit(1)

@@ -26,6 +26,10 @@ pub struct ContactData {
     pub drift: DVector<f64>,
     pub(crate) y: DMatrix<f64>,
     pub(crate) lam: DMatrix<f64>,
+    pub(crate) del: DMatrix<f64>,
+    pub(crate) yl: DMatrix<f64>,
+    pub(crate) rhs: DVector<f64>,
+    pub(crate) sol: DVector<f64>,
     pub(crate) rinv: DMatrix<f64>,
     pub(crate) g: DMatrix<f64>,
     pub(crate) zmat: DMatrix<f64>,
@@ -84,6 +88,10 @@ impl ContactData {
             drift: DVector::zeros(m),
             y: DMatrix::zeros(n, m),
             lam: DMatrix::zeros(m, m),
+            del: DMatrix::zeros(m, m),
+            yl: DMatrix::zeros(n, m),
+            rhs: DVector::zeros(n + m),
+            sol: DVector::zeros(n + m),
             rinv: DMatrix::zeros(n + m, n + m),
             g: DMatrix::zeros(n + m, n),
             zmat: DMatrix::zeros(n, n),
@@ -162,22 +170,22 @@ pub(crate) fn point_accelerations(data: &Data, cd: &ContactData, out: &mut DVect
 pub(crate) fn factor_kkt(model: &Model, data: &Data, cd: &mut ContactData) -> Result<()> {
     let n = model.nv;
     let m = cd.dim();
-    cd.y.copy_from(&cd.jac.transpose());
+    cd.y.tr_copy_from(&cd.jac);
     for mut col in cd.y.column_iter_mut() {
         ltl_solve_in_place(model, &data.ltl, col.as_mut_slice());
     }
-    let mut d = &cd.jac * &cd.y;
-    for i in 0..m {
-        d[(i, i)] += cd.damping;
+    // Delassus matrix J M⁻¹ Jᵀ (+ μ I), symmetrised, factorised in place (L in the lower part).
+    cd.del.gemm(1.0, &cd.jac, &cd.y, 0.0);
+    for c in 0..m {
+        for r in 0..c {
+            let x = 0.5 * (cd.del[(r, c)] + cd.del[(c, r)]);
+            cd.del[(r, c)] = x;
+            cd.del[(c, r)] = x;
+        }
+        cd.del[(c, c)] += cd.damping;
     }
-    d = (&d + d.transpose()) * 0.5;
-    let scale = (0..m).map(|i| d[(i, i)].abs()).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
-    let chol = nalgebra::Cholesky::new(d.clone());
-    let ok = chol.as_ref().map(|c| {
-        let l = c.l_dirty();
-        (0..m).all(|i| l[(i, i)] * l[(i, i)] > 1e-11 * scale)
-    });
-    if ok != Some(true) {
+    let scale = (0..m).map(|i| cd.del[(i, i)].abs()).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
+    if !cholesky_inverse_in_place(&mut cd.del, &mut cd.lam, 1e-11 * scale) {
         return Err(Error::Singular {
             what: "contact set".into(),
             detail: format!(
@@ -187,15 +195,62 @@ pub(crate) fn factor_kkt(model: &Model, data: &Data, cd: &mut ContactData) -> Re
             ),
         });
     }
-    cd.lam = chol.expect("checked").inverse();
-    let yl = &cd.y * &cd.lam;
-    let mut top = data.minv.clone();
-    top.gemm(-1.0, &yl, &cd.y.transpose(), 1.0);
-    cd.rinv.view_mut((0, 0), (n, n)).copy_from(&top);
-    cd.rinv.view_mut((0, n), (n, m)).copy_from(&yl);
-    cd.rinv.view_mut((n, 0), (m, n)).copy_from(&(-yl.transpose()));
+    cd.yl.gemm(1.0, &cd.y, &cd.lam, 0.0);
+    {
+        let mut top = cd.rinv.view_mut((0, 0), (n, n));
+        top.copy_from(&data.minv);
+        top.gemm(-1.0, &cd.yl, &cd.y.transpose(), 1.0);
+    }
+    cd.rinv.view_mut((0, n), (n, m)).copy_from(&cd.yl);
+    for r in 0..m {
+        for c in 0..n {
+            cd.rinv[(n + r, c)] = -cd.yl[(c, r)];
+        }
+    }
     cd.rinv.view_mut((n, n), (m, m)).copy_from(&cd.lam);
     Ok(())
+}
+
+/// Cholesky factorisation of the symmetric `a` in place (lower triangle) and its inverse into
+/// `inv`, without allocating. `false` if a pivot `l_ii²` is not above `tol`.
+fn cholesky_inverse_in_place(a: &mut DMatrix<f64>, inv: &mut DMatrix<f64>, tol: f64) -> bool {
+    let m = a.nrows();
+    for j in 0..m {
+        let mut d = a[(j, j)];
+        for k in 0..j {
+            d -= a[(j, k)] * a[(j, k)];
+        }
+        if d.is_nan() || d <= tol {
+            return false;
+        }
+        let l = d.sqrt();
+        a[(j, j)] = l;
+        for i in j + 1..m {
+            let mut s = a[(i, j)];
+            for k in 0..j {
+                s -= a[(i, k)] * a[(j, k)];
+            }
+            a[(i, j)] = s / l;
+        }
+    }
+    // inv = L⁻ᵀ L⁻¹, column by column: solve L y = e_c, then Lᵀ x = y.
+    for c in 0..m {
+        for i in 0..m {
+            let mut s = if i == c { 1.0 } else { 0.0 };
+            for k in 0..i {
+                s -= a[(i, k)] * inv[(k, c)];
+            }
+            inv[(i, c)] = s / a[(i, i)];
+        }
+        for i in (0..m).rev() {
+            let mut s = inv[(i, c)];
+            for k in i + 1..m {
+                s -= a[(k, i)] * inv[(k, c)];
+            }
+            inv[(i, c)] = s / a[(i, i)];
+        }
+    }
+    true
 }
 
 /// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `3 nc` world forces) from `out` (`nv×nv`, `[x][l]`).

@@ -151,6 +151,43 @@ fn set(t: &mut [f64], idx: usize, x: f64) {
     unsafe { *t.get_unchecked_mut(idx) = x }
 }
 
+/// A force as `[n; f]` components.
+#[inline(always)]
+fn arr_f(f: &Force) -> [f64; 6] {
+    [f.ang.x, f.ang.y, f.ang.z, f.lin.x, f.lin.y, f.lin.z]
+}
+
+/// A motion as `[ω; v]` components.
+#[inline(always)]
+fn arr(m: &Motion) -> [f64; 6] {
+    [m.ang.x, m.ang.y, m.ang.z, m.lin.x, m.lin.y, m.lin.z]
+}
+
+/// The rows `fs` stored column by column: `out[c][r] = fs[r][c]`.
+#[inline(always)]
+fn rows6<const R: usize>(fs: [&Force; R]) -> [[f64; R]; 6] {
+    let mut out = [[0.0; R]; 6];
+    for (r, f) in fs.iter().enumerate() {
+        let a = arr_f(f);
+        for c in 0..6 {
+            out[c][r] = a[c];
+        }
+    }
+    out
+}
+
+/// `Σ_c rows[c][r] x[c]` for every row `r`.
+#[inline(always)]
+fn matvec<const R: usize>(rows: &[[f64; R]; 6], x: &[f64; 6]) -> [f64; R] {
+    let mut out = [0.0; R];
+    for c in 0..6 {
+        for r in 0..R {
+            out[r] += rows[c][r] * x[c];
+        }
+    }
+    out
+}
+
 /// Flat offset of `(i, j, k)` in an `n×n×n` column-major tensor.
 #[inline(always)]
 fn at(n: usize, i: usize, j: usize, k: usize) -> usize {
@@ -221,51 +258,60 @@ fn backward_step_so(model: &Model, data: &Data, so: &mut SoData, i: usize) {
                         set(dm, at(n, jt, kr, ip), vm);
                     }
                 }
-                // Strict ancestors k ≺ j.
+                // Strict ancestors k ≺ j: all dot products of one k as small matrix–vector
+                // products (rows below), which vectorise.
+                // Dotted with S_k: w, u, h1, e, z2, (x | D S_j), y1, f2c, C S_j.
+                let xd = if j_is_i { dsj } else { x };
+                let rs = rows6([&w, &u, &h1, &e, &z2, &xd, &y1, &f2c, &csj]);
+                // Dotted with Ψ̇_k: z1, u, y1; with Ψ̈_k and Ψ̇_k + Ṡ_k: z2, y2.
+                let rd = rows6([&z1, &u, &y1]);
+                let rz = rows6([&z2, &y2]);
                 let mut k = model.parents[j];
                 while k > 0 {
                     for kr in dofs(k) {
-                        let (sk, psidk, psiddk, sdotk) = (s_w[kr], psid[kr], psidd[kr], sdot[kr]);
-                        let pk = psidk + sdotk;
+                        let s6 = arr(&s_w[kr]);
+                        let d6 = arr(&psid[kr]);
+                        let dd6 = arr(&psidd[kr]);
+                        let p6 = arr(&(psid[kr] + sdot[kr]));
+                        let ds = matvec(&rs, &s6);
+                        let dp = matvec(&rd, &d6);
+                        let ddd = matvec(&rz, &dd6);
+                        let dpk = matvec(&rz, &p6);
                         // ∂²τ/∂q²: 1A + 2A mirror, 1B (+ 2B mirror if j ≺ i)
-                        let val = z1.dot(&psidk) + z2.dot(&psiddk);
+                        let val = dp[0] + ddd[0];
                         set(qq, at(n, ip, jt, kr), val);
                         set(qq, at(n, ip, kr, jt), val);
-                        let wval = w.dot(&sk);
+                        let wval = ds[0];
                         set(qq, at(n, kr, ip, jt), wval);
                         // ∂²τ/∂q̇²: 1A + 2A mirror
-                        let val = u.dot(&sk);
-                        set(vv, at(n, ip, jt, kr), val);
-                        set(vv, at(n, ip, kr, jt), val);
+                        let uval = ds[1];
+                        set(vv, at(n, ip, jt, kr), uval);
+                        set(vv, at(n, ip, kr, jt), uval);
                         // cross: 1A, 1B, 2B
-                        let cval = u.dot(&psidk);
+                        let cval = dp[1];
                         set(qv, at(n, ip, kr, jt), cval);
-                        set(qv, at(n, ip, jt, kr), h1.dot(&sk) + z2.dot(&pk));
-                        set(qv, at(n, kr, jt, ip), e.dot(&sk));
+                        set(qv, at(n, ip, jt, kr), ds[2] + dpk[0]);
+                        set(qv, at(n, kr, jt, ip), ds[3]);
                         // ∂M/∂q 1B + 2B mirror
-                        let mval = z2.dot(&sk);
-                        set(dm, at(n, kr, ip, jt), mval);
-                        set(dm, at(n, ip, kr, jt), mval);
+                        set(dm, at(n, kr, ip, jt), ds[4]);
+                        set(dm, at(n, ip, kr, jt), ds[4]);
                         if j_is_i {
                             // v–v D (k ≺ j = i)
-                            set(vv, at(n, kr, ip, jt), dsj.dot(&sk));
+                            set(vv, at(n, kr, ip, jt), ds[5]);
                         } else {
                             set(qq, at(n, kr, jt, ip), wval); // 1B mirror (2B)
-                            let v1c = y1.dot(&psidk) + y2.dot(&psiddk); // q–q 1C/2C
+                            let v1c = dp[2] + ddd[1]; // q–q 1C/2C
                             set(qq, at(n, jt, kr, ip), v1c);
                             set(qq, at(n, jt, ip, kr), v1c);
-                            let xv = x.dot(&sk); // v–v 1C/2C
-                            set(vv, at(n, kr, ip, jt), xv);
-                            set(vv, at(n, kr, jt, ip), xv);
-                            let v1e = -u.dot(&sk); // v–v 1E/2E
-                            set(vv, at(n, jt, kr, ip), v1e);
-                            set(vv, at(n, jt, ip, kr), v1e);
+                            set(vv, at(n, kr, ip, jt), ds[5]); // v–v 1C/2C
+                            set(vv, at(n, kr, jt, ip), ds[5]);
+                            set(vv, at(n, jt, kr, ip), -uval); // v–v 1E/2E
+                            set(vv, at(n, jt, ip, kr), -uval);
                             set(qv, at(n, jt, kr, ip), -cval); // cross 2A
-                            set(qv, at(n, jt, ip, kr), y1.dot(&sk) + y2.dot(&pk)); // cross 1C
-                            set(qv, at(n, kr, ip, jt), f2c.dot(&sk)); // cross 2C
-                            let vm = csj.dot(&sk); // ∂M 1C/2C
-                            set(dm, at(n, kr, jt, ip), vm);
-                            set(dm, at(n, jt, kr, ip), vm);
+                            set(qv, at(n, jt, ip, kr), ds[6] + dpk[1]); // cross 1C
+                            set(qv, at(n, kr, ip, jt), ds[7]); // cross 2C
+                            set(dm, at(n, kr, jt, ip), ds[8]); // ∂M 1C/2C
+                            set(dm, at(n, jt, kr, ip), ds[8]);
                         }
                     }
                     k = model.parents[k];

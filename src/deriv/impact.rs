@@ -136,14 +136,16 @@ pub fn impact_dynamics(
         ltl_solve_in_place(model, &data.ltl, col.as_mut_slice());
     }
     factor_kkt(model, data, &mut im.cd)?;
-    let mut rhs = DVector::zeros(n + m);
-    rhs.rows_mut(0, n).copy_from(&(&data.m * vminus));
-    rhs.rows_mut(n, m).copy_from(&(&im.cd.jac * vminus * (-im.restitution)));
-    let y = &im.cd.rinv * rhs;
-    im.vplus.copy_from(&y.rows(0, n));
-    im.impulse.copy_from(&y.rows(n, m));
-    im.dv.copy_from(&(&im.vplus - vminus));
-    im.w.copy_from(&(&im.vplus + vminus * im.restitution));
+    let cd = &mut im.cd;
+    cd.rhs.rows_mut(0, n).gemv(1.0, &data.m, vminus, 0.0);
+    cd.rhs.rows_mut(n, m).gemv(-im.restitution, &cd.jac, vminus, 0.0);
+    cd.sol.gemv(1.0, &cd.rinv, &cd.rhs, 0.0);
+    im.vplus.copy_from(&cd.sol.rows(0, n));
+    im.impulse.copy_from(&cd.sol.rows(n, m));
+    for i in 0..n {
+        im.dv[i] = im.vplus[i] - vminus[i];
+        im.w[i] = im.vplus[i] + im.restitution * vminus[i];
+    }
     Ok(())
 }
 
@@ -164,12 +166,24 @@ fn first_order(model: &Model, data: &mut Data, im: &mut ImpactData) {
     let n = model.nv;
     let m = im.cd.dim();
     // R_q = [IDFOZA(Δv) − ∂(Jᵀλ̂)/∂q ; ∂(J w)/∂q]
-    let (dv, imp, w) = (im.dv.clone_owned(), im.impulse.clone_owned(), im.w.clone_owned());
-    g_matrix_split(model, data, &mut im.cd, dv.as_slice(), imp.as_slice(), w.as_slice());
+    g_matrix_split(
+        model,
+        data,
+        &mut im.cd,
+        im.dv.as_slice(),
+        im.impulse.as_slice(),
+        im.w.as_slice(),
+    );
     im.rq.copy_from(&im.cd.g);
     // R_v⁻ = [−M ; e J]
-    im.rv.view_mut((0, 0), (n, n)).copy_from(&(-&data.m));
-    im.rv.view_mut((n, 0), (m, n)).copy_from(&(&im.cd.jac * im.restitution));
+    for c in 0..n {
+        for r in 0..n {
+            im.rv[(r, c)] = -data.m[(r, c)];
+        }
+        for r in 0..m {
+            im.rv[(n + r, c)] = im.restitution * im.cd.jac[(r, c)];
+        }
+    }
     let ri = &im.cd.rinv;
     im.dvplus_dq.gemm(-1.0, &ri.rows(0, n), &im.rq, 0.0);
     im.dimpulse_dq.gemm(-1.0, &ri.rows(n, m), &im.rq, 0.0);
@@ -265,9 +279,9 @@ fn so_inner(
         so.e[k] -= 1.0;
         so.ycol.rows_mut(0, n).copy_from(&im.dvplus_dvminus.column(k));
         so.ycol[k] += im.restitution;
-        let zj = so.ycol.rows(0, n).clone_owned();
-        let z2 = im.dimpulse_dvminus.column(k).clone_owned();
-        g_matrix_split(model, data, &mut im.cd, so.e.as_slice(), z2.as_slice(), zj.as_slice());
+        so.ycol.rows_mut(n, m).copy_from(&im.dimpulse_dvminus.column(k));
+        let (zj, z2) = so.ycol.as_slice().split_at(n);
+        g_matrix_split(model, data, &mut im.cd, so.e.as_slice(), z2, zj);
         let mut page = rqv.page_mut(k);
         page.copy_from(&im.cd.g);
     }

@@ -145,7 +145,10 @@ fn solve_unchecked(
     // b = C q̇ + g  (RNEA with q̈ = 0), and the drift J̇q̇ at q̈ = 0 without gravity.
     kd.tmp_v.fill(0.0);
     rnea_unchecked(model, data, q, v, &kd.tmp_v, None);
-    let r1 = tau - &data.tau;
+    let m = kd.cd.dim();
+    for i in 0..n {
+        kd.cd.rhs[i] = tau[i] - data.tau[i];
+    }
     forward_pass_world(model, data, q, v, &kd.tmp_v, None, Motion::zero());
     update_points(model, data, &mut kd.cd, Motion::zero());
     let mut drift = std::mem::replace(&mut kd.cd.drift, DVector::zeros(0));
@@ -160,14 +163,13 @@ fn solve_unchecked(
         ltl_solve_in_place(model, &data.ltl, col.as_mut_slice());
     }
     factor_kkt(model, data, &mut kd.cd)?;
-    // y = R⁻¹ [τ − b; −J̇q̇]  with y = (q̈, −λ) in the notes' sign, i.e. (q̈, λ) for R.
-    let m = kd.cd.dim();
-    let mut rhs = DVector::zeros(n + m);
-    rhs.rows_mut(0, n).copy_from(&r1);
-    rhs.rows_mut(n, m).copy_from(&(-&kd.cd.drift));
-    let y = &kd.cd.rinv * rhs;
-    kd.qdd.copy_from(&y.rows(0, n));
-    kd.lambda.copy_from(&y.rows(n, m));
+    // (q̈, λ) = R⁻¹ [τ − b; −J̇q̇]  (the notes' unknown is (q̈, −λ) with K = [M Jᵀ; J 0]).
+    for r in 0..m {
+        kd.cd.rhs[n + r] = -kd.cd.drift[r];
+    }
+    kd.cd.sol.gemv(1.0, &kd.cd.rinv, &kd.cd.rhs, 0.0);
+    kd.qdd.copy_from(&kd.cd.sol.rows(0, n));
+    kd.lambda.copy_from(&kd.cd.sol.rows(n, m));
     Ok(())
 }
 
@@ -181,8 +183,9 @@ pub fn kkt_derivatives(
     tau: &DVector<f64>,
 ) -> Result<()> {
     kkt_dynamics(model, data, kd, q, v, tau)?;
-    let qdd = kd.qdd.clone_owned();
+    let qdd = std::mem::replace(&mut kd.qdd, DVector::zeros(0));
     id_derivatives_unchecked(model, data, q, v, &qdd, None);
+    kd.qdd = qdd;
     first_order_from_id(model, data, kd);
     Ok(())
 }
@@ -196,10 +199,12 @@ fn first_order_from_id(model: &Model, data: &mut Data, kd: &mut KktData) {
     kd.rq.fill(0.0);
     kd.rv.fill(0.0);
     kd.rq.view_mut((0, 0), (n, n)).copy_from(&data.dtau_dq);
-    kd.rv.view_mut((0, 0), (n, n)).copy_from(&data.dtau_dv);
-    let mut top = kd.rq.view((0, 0), (n, n)).clone_owned();
+    let mut top = std::mem::replace(&mut kd.cd.zmat, DMatrix::zeros(0, 0));
+    top.copy_from(&data.dtau_dq);
     sub_djtl_dq(model, data, &kd.cd, kd.lambda.as_slice(), &mut top);
     kd.rq.view_mut((0, 0), (n, n)).copy_from(&top);
+    kd.cd.zmat = top;
+    kd.rv.view_mut((0, 0), (n, n)).copy_from(&data.dtau_dv);
     let b = base(model, data, &kd.cd);
     for (c, path) in kd.cd.paths.iter().enumerate() {
         let body = *path.joints.last().expect("path");
@@ -253,8 +258,9 @@ fn kkt_so_inner(
     kkt_dynamics(model, data, kd, q, v, tau)?;
     let n = model.nv;
     let m = kd.cd.dim();
-    let qdd = kd.qdd.clone_owned();
+    let qdd = std::mem::replace(&mut kd.qdd, DVector::zeros(0));
     id_so_unchecked(model, data, &mut so.id, q, v, &qdd, None, -model.gravity);
+    kd.qdd = qdd;
     first_order_from_id(model, data, kd);
     let [rqq, rvv, rqv, rtq] = &mut so.r;
     // Residual second derivatives: ID part (IDSVA-SO) ...
