@@ -14,6 +14,7 @@ pub mod cli;
 pub mod demo;
 pub mod deriv;
 pub mod error;
+mod linalg;
 pub mod model;
 pub mod reference;
 pub mod rng;

@@ -8,6 +8,7 @@ use super::zero::idfoza_core;
 use crate::algo::internal::ltl_solve_in_place;
 use crate::algo::{Contact, Data};
 use crate::error::{Error, Result};
+use crate::linalg::gemm;
 use crate::model::Model;
 use crate::spatial::Motion;
 use nalgebra::{DMatrix, DVector, Vector3};
@@ -175,7 +176,7 @@ pub(crate) fn factor_kkt(model: &Model, data: &Data, cd: &mut ContactData) -> Re
         ltl_solve_in_place(model, &data.ltl, col.as_mut_slice());
     }
     // Delassus matrix J M⁻¹ Jᵀ (+ μ I), symmetrised, factorised in place (L in the lower part).
-    cd.del.gemm(1.0, &cd.jac, &cd.y, 0.0);
+    gemm(1.0, &cd.jac, &cd.y, 0.0, &mut cd.del);
     for c in 0..m {
         for r in 0..c {
             let x = 0.5 * (cd.del[(r, c)] + cd.del[(c, r)]);
@@ -195,11 +196,16 @@ pub(crate) fn factor_kkt(model: &Model, data: &Data, cd: &mut ContactData) -> Re
             ),
         });
     }
-    cd.yl.gemm(1.0, &cd.y, &cd.lam, 0.0);
-    {
-        let mut top = cd.rinv.view_mut((0, 0), (n, n));
-        top.copy_from(&data.minv);
-        top.gemm(-1.0, &cd.yl, &cd.y.transpose(), 1.0);
+    gemm(1.0, &cd.y, &cd.lam, 0.0, &mut cd.yl);
+    // top-left block M⁻¹ − (YΛ) Yᵀ (m is small: a direct loop).
+    for c in 0..n {
+        for r in 0..n {
+            let mut x = data.minv[(r, c)];
+            for l in 0..m {
+                x -= cd.yl[(r, l)] * cd.y[(c, l)];
+            }
+            cd.rinv[(r, c)] = x;
+        }
     }
     cd.rinv.view_mut((0, n), (n, m)).copy_from(&cd.yl);
     for r in 0..m {

@@ -7,6 +7,7 @@ use super::zero::idfoza_core;
 use crate::algo::Data;
 use crate::algo::internal::{aba_unchecked, check_fext, ltl_in_place, ltl_solve_in_place};
 use crate::error::Result;
+use crate::linalg::gemm;
 use crate::model::{Model, check_vec};
 use crate::spatial::Force;
 use crate::tensor::Tensor3;
@@ -28,8 +29,8 @@ fn fd_fo_from_id(model: &Model, data: &mut Data) -> Result<()> {
     // then two dense products.
     data.minv.fill_with_identity();
     solve_columns(model, &data.ltl, &mut data.minv);
-    data.dqdd_dq.gemm(-1.0, &data.minv, &data.dtau_dq, 0.0);
-    data.dqdd_dv.gemm(-1.0, &data.minv, &data.dtau_dv, 0.0);
+    gemm(-1.0, &data.minv, &data.dtau_dq, 0.0, &mut data.dqdd_dq);
+    gemm(-1.0, &data.minv, &data.dtau_dv, 0.0, &mut data.dqdd_dv);
     Ok(())
 }
 
@@ -108,7 +109,7 @@ fn premultiply_neg_minv(minv: &DMatrix<f64>, src: &[f64], out: &mut Tensor3) {
     let (n, n2, n3) = out.dims();
     let view = DMatrixView::from_slice(src, n, n2 * n3);
     let mut o = nalgebra::DMatrixViewMut::from_slice(out.as_mut_slice(), n, n2 * n3);
-    o.gemm(-1.0, minv, &view, 0.0);
+    gemm(-1.0, minv, &view, 0.0, &mut o);
 }
 
 /// `t[:, j, k] += z[:, k]` and `t[:, k, j] += z[:, k]` for all `k` (`t` as a flat

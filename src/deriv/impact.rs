@@ -19,6 +19,7 @@ use super::kkt::premultiply;
 use crate::algo::Data;
 use crate::algo::internal::{crba_unchecked, ltl_in_place, ltl_solve_in_place};
 use crate::error::{Error, Result};
+use crate::linalg::gemm;
 use crate::model::{Model, check_vec};
 use crate::spatial::Motion;
 use crate::tensor::Tensor3;
@@ -185,10 +186,10 @@ fn first_order(model: &Model, data: &mut Data, im: &mut ImpactData) {
         }
     }
     let ri = &im.cd.rinv;
-    im.dvplus_dq.gemm(-1.0, &ri.rows(0, n), &im.rq, 0.0);
-    im.dimpulse_dq.gemm(-1.0, &ri.rows(n, m), &im.rq, 0.0);
-    im.dvplus_dvminus.gemm(-1.0, &ri.rows(0, n), &im.rv, 0.0);
-    im.dimpulse_dvminus.gemm(-1.0, &ri.rows(n, m), &im.rv, 0.0);
+    gemm(-1.0, &ri.rows(0, n), &im.rq, 0.0, &mut im.dvplus_dq);
+    gemm(-1.0, &ri.rows(n, m), &im.rq, 0.0, &mut im.dimpulse_dq);
+    gemm(-1.0, &ri.rows(0, n), &im.rv, 0.0, &mut im.dvplus_dvminus);
+    gemm(-1.0, &ri.rows(n, m), &im.rv, 0.0, &mut im.dimpulse_dvminus);
 }
 
 /// First- and second-order derivatives of the impact dynamics. `im` must have been created

@@ -19,6 +19,7 @@ use super::id_so::{SoData, id_so_unchecked};
 use crate::algo::Data;
 use crate::algo::internal::{crba_unchecked, ltl_in_place, ltl_solve_in_place, rnea_unchecked};
 use crate::error::Result;
+use crate::linalg::gemm;
 use crate::model::{Model, check_vec};
 use crate::spatial::Motion;
 use crate::tensor::Tensor3;
@@ -218,10 +219,10 @@ fn first_order_from_id(model: &Model, data: &mut Data, kd: &mut KktData) {
         }
     }
     let ri = &kd.cd.rinv;
-    kd.dqdd_dq.gemm(-1.0, &ri.rows(0, n), &kd.rq, 0.0);
-    kd.dqdd_dv.gemm(-1.0, &ri.rows(0, n), &kd.rv, 0.0);
-    kd.dlambda_dq.gemm(-1.0, &ri.rows(n, m), &kd.rq, 0.0);
-    kd.dlambda_dv.gemm(-1.0, &ri.rows(n, m), &kd.rv, 0.0);
+    gemm(-1.0, &ri.rows(0, n), &kd.rq, 0.0, &mut kd.dqdd_dq);
+    gemm(-1.0, &ri.rows(0, n), &kd.rv, 0.0, &mut kd.dqdd_dv);
+    gemm(-1.0, &ri.rows(n, m), &kd.rq, 0.0, &mut kd.dlambda_dq);
+    gemm(-1.0, &ri.rows(n, m), &kd.rv, 0.0, &mut kd.dlambda_dv);
     kd.dqdd_dtau.copy_from(&ri.view((0, 0), (n, n)));
     kd.dlambda_dtau.copy_from(&ri.view((n, 0), (m, n)));
 }
@@ -353,5 +354,5 @@ pub(crate) fn premultiply<S>(
     let view = DMatrixView::from_slice(r.as_slice(), rn, n2 * n3);
     let (on, _, _) = out.dims();
     let mut ov = nalgebra::DMatrixViewMut::from_slice(out.as_mut_slice(), on, n2 * n3);
-    ov.gemm(-1.0, a, &view, 0.0);
+    gemm(-1.0, a, &view, 0.0, &mut ov);
 }

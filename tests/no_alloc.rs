@@ -1,0 +1,108 @@
+//! Hot paths allocate nothing: after the workspaces are built, every algorithm runs without a
+//! single heap allocation (counted by a wrapping global allocator).
+
+use nalgebra::{DVector, Vector3};
+use sodyn::algo::*;
+use sodyn::deriv::*;
+use sodyn::model::builtin;
+use sodyn::rng::Rng;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+struct Counting;
+
+thread_local! {
+    static COUNT: Cell<usize> = const { Cell::new(0) };
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        COUNT.with(|c| c.set(c.get() + 1));
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        COUNT.with(|c| c.set(c.get() + 1));
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn allocations(f: impl FnOnce()) -> usize {
+    let before = COUNT.with(|c| c.get());
+    f();
+    COUNT.with(|c| c.get()) - before
+}
+
+#[test]
+fn algorithms_do_not_allocate() {
+    for (m, frames) in [
+        (builtin::humanoid(), vec!["left_sole", "right_sole"]),
+        (builtin::quadruped(), vec!["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"]),
+    ] {
+        let mut rng = Rng::new(1);
+        let q = m.random_configuration(&mut rng);
+        let v = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
+        let a = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
+        let mut d = Data::new(&m);
+        let mut so = SoData::new(&m);
+        let mut fso = FdSoData::new(&m);
+        let contacts: Vec<Contact> =
+            frames.iter().map(|f| Contact::new(&m, f, Vector3::zeros()).unwrap()).collect();
+        let mut cd = ContactData::new(&m, &contacts).unwrap();
+        let mut kd = KktData::new(&m, cd.clone()).with_second_order(&m);
+        let mut im = ImpactData::new(&m, cd.clone()).with_second_order(&m);
+        let lam = DVector::from_element(cd.dim(), 1.0);
+        let mut jac = nalgebra::Matrix3xX::zeros(m.nv);
+        // Each algorithm twice: the first call may touch lazily initialised state.
+        let mut report = vec![];
+        let mut check = |name: &str, f: &mut dyn FnMut()| {
+            f();
+            let n = allocations(f);
+            if n > 0 {
+                report.push(format!("{name}: {n}"));
+            }
+        };
+        let zero = Vector3::zeros();
+        check("rnea", &mut || {
+            rnea(&m, &mut d, &q, &v, &a, None).unwrap();
+        });
+        check("nonlinear_effects", &mut || {
+            nonlinear_effects(&m, &mut d, &q, &v).unwrap();
+        });
+        check("crba", &mut || {
+            crba(&m, &mut d, &q).unwrap();
+        });
+        check("factorize_ltl", &mut || factorize_ltl(&m, &mut d).unwrap());
+        check("aba", &mut || {
+            aba(&m, &mut d, &q, &v, &a, None).unwrap();
+        });
+        check("point_jacobian", &mut || {
+            point_jacobian(&m, &mut d, &q, contacts[0].frame, &zero, &mut jac).unwrap()
+        });
+        check("point_drift", &mut || {
+            point_drift(&m, &mut d, &q, &v, contacts[0].frame, &zero).unwrap();
+        });
+        check("id_fo", &mut || id_derivatives(&m, &mut d, &q, &v, &a, None).unwrap());
+        check("fd_fo", &mut || fd_derivatives(&m, &mut d, &q, &v, &a, None).unwrap());
+        check("id_so", &mut || id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None).unwrap());
+        check("fd_so", &mut || fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &a, None).unwrap());
+        check("constrained_id", &mut || {
+            constrained_id_derivatives(&m, &mut d, &mut cd, &q, &v, &a, &lam).unwrap()
+        });
+        check("kkt_fo", &mut || kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &a).unwrap());
+        check("kkt_so", &mut || kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &a).unwrap());
+        check("impact_fo", &mut || impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap());
+        check("impact_so", &mut || impact_so_derivatives(&m, &mut d, &mut im, &q, &v).unwrap());
+        assert!(
+            report.is_empty(),
+            "{}: heap allocations in hot paths: {}",
+            m.name,
+            report.join(", ")
+        );
+    }
+}
