@@ -3,7 +3,8 @@
 //! `../shared/models`, against the raw Pinocchio outputs in `tests/fixtures/<model>.json`
 //! (schema and conventions: `tests/fixtures/README.md`).
 //!
-//! Convention mapping (ours ← Pinocchio), all done here, nothing in the fixtures is converted:
+//! Convention mapping (ours ← Pinocchio), all done in the tests (helpers in `tests/pin_map`),
+//! nothing in the fixtures is converted:
 //!
 //! * **Joint order.** We number joints depth-first in URDF document order, Pinocchio sorts
 //!   siblings alphabetically. Joints are matched **by name** (our added free flyer and
@@ -28,206 +29,21 @@
 //! Error metric: `max |ours − theirs| / max(1, max |theirs|)` per quantity. Tolerances: 1e-10
 //! for `τ`, `M`, `q̈`; 1e-9 for the first-order derivatives, `M⁻¹` and the tensors.
 
+mod pin_map;
+
 use nalgebra::{DMatrix, DVector};
-use serde_json::Value;
+use pin_map::{
+    assert_our_gravity, build_mapping, load_model, mat_of, our_q, permute_mat, permute_tensor,
+    permute_vec, read_fixture, rel_err, tensor_of, urdf_or_skip, vec_of,
+};
 use sodyn::algo::{Data, aba, crba, rnea};
 use sodyn::deriv::{SoData, fd_derivatives, id_derivatives, id_so_derivatives};
-use sodyn::model::{JointType, Model, UrdfOptions, load_urdf_file};
 use sodyn::tensor::Tensor3;
-use std::path::PathBuf;
-
-const MODELS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/models");
-const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures");
 
 /// Tolerance for `τ`, `M`, `q̈`.
 const TOL_DYN: f64 = 1e-10;
 /// Tolerance for derivatives, `M⁻¹` and second-order tensors.
 const TOL_DERIV: f64 = 1e-9;
-
-fn f64_of(v: &Value) -> f64 {
-    v.as_f64().unwrap_or_else(|| panic!("expected a number, got {v}"))
-}
-
-fn vec_of(v: &Value) -> Vec<f64> {
-    v.as_array().expect("expected an array").iter().map(f64_of).collect()
-}
-
-fn mat_of(v: &Value) -> Vec<Vec<f64>> {
-    v.as_array().expect("expected a matrix").iter().map(vec_of).collect()
-}
-
-fn tensor_of(v: &Value) -> Vec<Vec<Vec<f64>>> {
-    v.as_array().expect("expected a tensor").iter().map(mat_of).collect()
-}
-
-fn usize_of(v: &Value) -> usize {
-    v.as_u64().unwrap_or_else(|| panic!("expected an index, got {v}")) as usize
-}
-
-/// Relative error `max |x − y| / max(1, max |y|)`, with `y` the reference.
-fn rel_err(diff_max: f64, ref_max: f64) -> f64 {
-    diff_max / ref_max.max(1.0)
-}
-
-/// Maps between our coordinates and Pinocchio's for one model.
-struct Mapping {
-    /// Our velocity coordinate `i` is Pinocchio's `perm[i]`.
-    perm: Vec<usize>,
-    /// Pinocchio joint of each of our joints (index into the fixture's `model.joints`), for
-    /// building `q`; index 0 unused.
-    pin_joint: Vec<Option<usize>>,
-    /// Types of the joints owning each of our dofs (for reports).
-    dof_desc: Vec<String>,
-}
-
-/// Whether a Pinocchio joint type string is compatible with our joint type.
-fn types_match(ours: &JointType, pin: &str) -> bool {
-    match ours {
-        JointType::Revolute { .. } => {
-            matches!(
-                pin,
-                "JointModelRX" | "JointModelRY" | "JointModelRZ" | "JointModelRevoluteUnaligned"
-            )
-        }
-        JointType::Continuous { .. } => {
-            matches!(
-                pin,
-                "JointModelRUBX"
-                    | "JointModelRUBY"
-                    | "JointModelRUBZ"
-                    | "JointModelRevoluteUnboundedUnaligned"
-            )
-        }
-        JointType::Prismatic { .. } => {
-            matches!(
-                pin,
-                "JointModelPX" | "JointModelPY" | "JointModelPZ" | "JointModelPrismaticUnaligned"
-            )
-        }
-        JointType::FreeFlyer => pin == "JointModelFreeFlyer",
-        JointType::Spherical => pin == "JointModelSpherical",
-        JointType::Planar => pin == "JointModelPlanar",
-    }
-}
-
-fn build_mapping(model: &Model, fx: &Value) -> Mapping {
-    let pj = fx["model"]["joints"].as_array().expect("model.joints");
-    assert_eq!(model.nv, usize_of(&fx["model"]["nv"]), "nv differs from Pinocchio's");
-    assert_eq!(
-        model.njoints(),
-        usize_of(&fx["model"]["njoints"]),
-        "number of joints differs from Pinocchio's"
-    );
-    let mut perm = vec![usize::MAX; model.nv];
-    let mut pin_joint = vec![None]; // joint 0 (universe) has no counterpart
-    let mut dof_desc = vec![String::new(); model.nv];
-    let mut used = vec![false; pj.len()];
-    for i in 1..model.njoints() {
-        let name = &model.names[i];
-        let k = pj
-            .iter()
-            .position(|j| j["name"].as_str() == Some(name.as_str()))
-            .unwrap_or_else(|| panic!("our joint {name:?} has no Pinocchio counterpart"));
-        assert!(!used[k], "Pinocchio joint {name:?} matched twice");
-        used[k] = true;
-        let j = &pj[k];
-        let ptype = j["type"].as_str().expect("joint type");
-        assert!(
-            types_match(&model.joints[i], ptype),
-            "joint {name:?}: ours {:?}, Pinocchio {ptype}",
-            model.joints[i]
-        );
-        let (pv, pnv) = (usize_of(&j["idx_v"]), usize_of(&j["nv"]));
-        assert_eq!(pnv, model.nvs[i], "joint {name:?}: nv differs");
-        // Parent relation must agree (by name).
-        let pin_parent = usize_of(&j["parent"]);
-        let pin_parent_name = if pin_parent == 0 {
-            "universe".to_string()
-        } else {
-            let pp = pj.iter().find(|x| usize_of(&x["index"]) == pin_parent).expect("parent joint");
-            pp["name"].as_str().unwrap().to_string()
-        };
-        assert_eq!(
-            model.names[model.parents[i]], pin_parent_name,
-            "joint {name:?}: parent differs"
-        );
-        let iv = model.idx_v[i];
-        for c in 0..pnv {
-            perm[iv + c] = match model.joints[i] {
-                // Ours [ω; v], Pinocchio [v; ω].
-                JointType::FreeFlyer => {
-                    if c < 3 {
-                        pv + 3 + c
-                    } else {
-                        pv + c - 3
-                    }
-                }
-                _ => pv + c,
-            };
-            dof_desc[iv + c] = format!("{name} ({}, c{c})", model.joints[i].name());
-        }
-        pin_joint.push(Some(k));
-    }
-    assert!(used.iter().all(|&u| u), "some Pinocchio joints have no counterpart in our model");
-    let mut seen = vec![false; model.nv];
-    for &p in &perm {
-        assert!(p < model.nv && !seen[p], "velocity permutation is not a bijection");
-        seen[p] = true;
-    }
-    Mapping { perm, pin_joint, dof_desc }
-}
-
-/// Our `q` from the fixture's state.
-fn our_q(model: &Model, map: &Mapping, fx: &Value, state: &Value) -> DVector<f64> {
-    let pj = fx["model"]["joints"].as_array().unwrap();
-    let pq = vec_of(&state["q"]);
-    let thetas = state["continuous_theta"].as_array().expect("continuous_theta");
-    let mut q = DVector::zeros(model.nq);
-    for i in 1..model.njoints() {
-        let j = &pj[map.pin_joint[i].unwrap()];
-        let pidx = usize_of(&j["idx_q"]);
-        let iq = model.idx_q[i];
-        match model.joints[i] {
-            JointType::Continuous { .. } => {
-                let name = model.names[i].as_str();
-                let t = thetas
-                    .iter()
-                    .find(|t| t["joint"].as_str() == Some(name))
-                    .unwrap_or_else(|| panic!("no continuous_theta for {name:?}"));
-                let theta = f64_of(&t["theta"]);
-                // Consistency with the stored (cos, sin).
-                assert!(
-                    (theta.cos() - pq[pidx]).abs() < 1e-12
-                        && (theta.sin() - pq[pidx + 1]).abs() < 1e-12
-                );
-                q[iq] = theta;
-            }
-            _ => {
-                let n = model.nqs[i];
-                assert_eq!(n, usize_of(&j["nq"]));
-                for c in 0..n {
-                    q[iq + c] = pq[pidx + c];
-                }
-            }
-        }
-    }
-    q
-}
-
-fn permute_vec(map: &Mapping, x: &[f64]) -> DVector<f64> {
-    DVector::from_fn(map.perm.len(), |i, _| x[map.perm[i]])
-}
-
-fn permute_mat(map: &Mapping, x: &[Vec<f64>]) -> DMatrix<f64> {
-    let n = map.perm.len();
-    DMatrix::from_fn(n, n, |i, j| x[map.perm[i]][map.perm[j]])
-}
-
-fn permute_tensor(map: &Mapping, x: &[Vec<Vec<f64>>]) -> Tensor3 {
-    let n = map.perm.len();
-    let p = &map.perm;
-    Tensor3::from_fn(n, n, n, |i, j, k| x[p[i]][p[j]][p[k]])
-}
 
 /// Worst entry of a comparison.
 struct Worst {
@@ -294,27 +110,10 @@ impl Report {
 }
 
 fn run(model_name: &str) {
-    let urdf = PathBuf::from(MODELS).join(format!("{model_name}.urdf"));
-    if !PathBuf::from(MODELS).is_dir() {
-        eprintln!("{model_name}: skipped: ../shared/models not found");
-        return;
-    }
-    let text = std::fs::read_to_string(PathBuf::from(FIXTURES).join(format!("{model_name}.json")))
-        .expect("fixture file");
-    let fx: Value = serde_json::from_str(&text).expect("fixture JSON");
-    assert_eq!(fx["format"].as_str(), Some("sodyn-pinocchio-fixture/1"));
-    let floating_base = !fx["model"]["root_joint"].is_null();
-    let model = load_urdf_file(&urdf, &UrdfOptions { floating_base }).expect("URDF loads");
-
-    // Gravity: Pinocchio [linear; angular] in the world frame.
-    let g = vec_of(&fx["model"]["gravity"]);
-    assert_eq!(g, vec![0.0, 0.0, -9.81, 0.0, 0.0, 0.0], "fixture gravity");
-    let ours_g = model.gravity.to_vec6();
-    let ours_g: Vec<f64> = ours_g.iter().copied().collect();
-    assert!(
-        ours_g.contains(&-9.81) && ours_g.iter().filter(|&&x| x != 0.0).count() == 1,
-        "our gravity {ours_g:?}"
-    );
+    let Some(urdf) = urdf_or_skip(model_name) else { return };
+    let fx = read_fixture(&format!("{model_name}.json"), &["sodyn-pinocchio-fixture/1"]);
+    let (model, floating_base) = load_model(&urdf, &fx);
+    assert_our_gravity(&model);
 
     let map = build_mapping(&model, &fx);
     let mut report = Report { model: model_name.into(), rows: vec![] };

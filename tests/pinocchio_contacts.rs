@@ -9,8 +9,8 @@
 //!
 //! Convention mapping (ours ← Pinocchio; the fixtures hold raw Pinocchio values):
 //!
-//! * **Joints / dofs**: matched by name, exactly as in `tests/pinocchio.rs` (helpers copied
-//!   from there): our dof `i` is Pinocchio dof `perm[i]`, which also swaps the free flyer's
+//! * **Joints / dofs**: matched by name, exactly as in `tests/pinocchio.rs` (shared helpers in
+//!   `tests/pin_map`): our dof `i` is Pinocchio dof `perm[i]`, which also swaps the free flyer's
 //!   `[lin; ang]` (Pinocchio) to our `[ang; lin]`, for velocities, `τ` and the tangent `δq`.
 //! * **Contact rows**: Pinocchio's `LOCAL_WORLD_ALIGNED` 3D contacts at the frame origin give
 //!   per contact the force/impulse components along the world axes, applied on the robot, in
@@ -26,201 +26,22 @@
 //!
 //! Error metric: `max |ours − theirs| / max(1, max |theirs|)` per quantity; tolerance 1e-8.
 
+mod pin_map;
+
 use nalgebra::{DMatrix, DVector, Vector3};
+use pin_map::{
+    Mapping, assert_our_gravity, build_mapping, f64_of, load_model, mat_of, our_q, permute_cols,
+    permute_mat, permute_vec, read_fixture, rel_err, urdf_or_skip, vec_of,
+};
 use serde_json::Value;
 use sodyn::algo::{Contact, Data};
 use sodyn::deriv::{ContactData, ImpactData, KktData, impact_derivatives, kkt_derivatives};
-use sodyn::model::{JointType, Model, UrdfOptions, load_urdf_file};
-use std::path::PathBuf;
-
-const MODELS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/models");
-const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures");
+use sodyn::model::Model;
 
 /// Tolerance (relative, see the module doc) for every compared quantity.
 const TOL: f64 = 1e-8;
 /// Absolute tolerance on frame placements (both parse the same URDF numbers).
 const TOL_FRAME: f64 = 1e-12;
-
-// ---------------------------------------------------------------------------------------------
-// JSON helpers and the joint mapping (copied from tests/pinocchio.rs)
-// ---------------------------------------------------------------------------------------------
-
-fn f64_of(v: &Value) -> f64 {
-    v.as_f64().unwrap_or_else(|| panic!("expected a number, got {v}"))
-}
-
-fn vec_of(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap_or_else(|| panic!("expected an array, got {v}"))
-        .iter()
-        .map(f64_of)
-        .collect()
-}
-
-fn mat_of(v: &Value) -> Vec<Vec<f64>> {
-    v.as_array().expect("expected a matrix").iter().map(vec_of).collect()
-}
-
-fn usize_of(v: &Value) -> usize {
-    v.as_u64().unwrap_or_else(|| panic!("expected an index, got {v}")) as usize
-}
-
-/// Maps between our coordinates and Pinocchio's for one model.
-struct Mapping {
-    /// Our velocity coordinate `i` is Pinocchio's `perm[i]`.
-    perm: Vec<usize>,
-    /// Pinocchio joint of each of our joints (index into the fixture's `model.joints`), for
-    /// building `q`; index 0 unused.
-    pin_joint: Vec<Option<usize>>,
-    /// Joint owning each of our dofs (for reports).
-    dof_desc: Vec<String>,
-}
-
-/// Whether a Pinocchio joint type string is compatible with our joint type.
-fn types_match(ours: &JointType, pin: &str) -> bool {
-    match ours {
-        JointType::Revolute { .. } => {
-            matches!(
-                pin,
-                "JointModelRX" | "JointModelRY" | "JointModelRZ" | "JointModelRevoluteUnaligned"
-            )
-        }
-        JointType::Continuous { .. } => {
-            matches!(
-                pin,
-                "JointModelRUBX"
-                    | "JointModelRUBY"
-                    | "JointModelRUBZ"
-                    | "JointModelRevoluteUnboundedUnaligned"
-            )
-        }
-        JointType::Prismatic { .. } => {
-            matches!(
-                pin,
-                "JointModelPX" | "JointModelPY" | "JointModelPZ" | "JointModelPrismaticUnaligned"
-            )
-        }
-        JointType::FreeFlyer => pin == "JointModelFreeFlyer",
-        JointType::Spherical => pin == "JointModelSpherical",
-        JointType::Planar => pin == "JointModelPlanar",
-    }
-}
-
-fn build_mapping(model: &Model, fx: &Value) -> Mapping {
-    let pj = fx["model"]["joints"].as_array().expect("model.joints");
-    assert_eq!(model.nv, usize_of(&fx["model"]["nv"]), "nv differs from Pinocchio's");
-    assert_eq!(
-        model.njoints(),
-        usize_of(&fx["model"]["njoints"]),
-        "number of joints differs from Pinocchio's"
-    );
-    let mut perm = vec![usize::MAX; model.nv];
-    let mut pin_joint = vec![None];
-    let mut dof_desc = vec![String::new(); model.nv];
-    let mut used = vec![false; pj.len()];
-    for i in 1..model.njoints() {
-        let name = &model.names[i];
-        let k = pj
-            .iter()
-            .position(|j| j["name"].as_str() == Some(name.as_str()))
-            .unwrap_or_else(|| panic!("our joint {name:?} has no Pinocchio counterpart"));
-        assert!(!used[k], "Pinocchio joint {name:?} matched twice");
-        used[k] = true;
-        let j = &pj[k];
-        let ptype = j["type"].as_str().expect("joint type");
-        assert!(
-            types_match(&model.joints[i], ptype),
-            "joint {name:?}: ours {:?}, Pinocchio {ptype}",
-            model.joints[i]
-        );
-        let (pv, pnv) = (usize_of(&j["idx_v"]), usize_of(&j["nv"]));
-        assert_eq!(pnv, model.nvs[i], "joint {name:?}: nv differs");
-        let pin_parent = usize_of(&j["parent"]);
-        let pin_parent_name = if pin_parent == 0 {
-            "universe".to_string()
-        } else {
-            let pp = pj.iter().find(|x| usize_of(&x["index"]) == pin_parent).expect("parent joint");
-            pp["name"].as_str().unwrap().to_string()
-        };
-        assert_eq!(
-            model.names[model.parents[i]], pin_parent_name,
-            "joint {name:?}: parent differs"
-        );
-        let iv = model.idx_v[i];
-        for c in 0..pnv {
-            perm[iv + c] = match model.joints[i] {
-                // Ours [ω; v], Pinocchio [v; ω].
-                JointType::FreeFlyer => {
-                    if c < 3 {
-                        pv + 3 + c
-                    } else {
-                        pv + c - 3
-                    }
-                }
-                _ => pv + c,
-            };
-            dof_desc[iv + c] = format!("{name} ({}, c{c})", model.joints[i].name());
-        }
-        pin_joint.push(Some(k));
-    }
-    assert!(used.iter().all(|&u| u), "some Pinocchio joints have no counterpart in our model");
-    let mut seen = vec![false; model.nv];
-    for &p in &perm {
-        assert!(p < model.nv && !seen[p], "velocity permutation is not a bijection");
-        seen[p] = true;
-    }
-    Mapping { perm, pin_joint, dof_desc }
-}
-
-/// Our `q` from the fixture's state.
-fn our_q(model: &Model, map: &Mapping, fx: &Value, state: &Value) -> DVector<f64> {
-    let pj = fx["model"]["joints"].as_array().unwrap();
-    let pq = vec_of(&state["q"]);
-    let thetas = state["continuous_theta"].as_array().expect("continuous_theta");
-    let mut q = DVector::zeros(model.nq);
-    for i in 1..model.njoints() {
-        let j = &pj[map.pin_joint[i].unwrap()];
-        let pidx = usize_of(&j["idx_q"]);
-        let iq = model.idx_q[i];
-        match model.joints[i] {
-            JointType::Continuous { .. } => {
-                let name = model.names[i].as_str();
-                let t = thetas
-                    .iter()
-                    .find(|t| t["joint"].as_str() == Some(name))
-                    .unwrap_or_else(|| panic!("no continuous_theta for {name:?}"));
-                let theta = f64_of(&t["theta"]);
-                assert!(
-                    (theta.cos() - pq[pidx]).abs() < 1e-12
-                        && (theta.sin() - pq[pidx + 1]).abs() < 1e-12
-                );
-                q[iq] = theta;
-            }
-            _ => {
-                let n = model.nqs[i];
-                assert_eq!(n, usize_of(&j["nq"]));
-                for c in 0..n {
-                    q[iq + c] = pq[pidx + c];
-                }
-            }
-        }
-    }
-    q
-}
-
-fn permute_vec(map: &Mapping, x: &[f64]) -> DVector<f64> {
-    DVector::from_fn(map.perm.len(), |i, _| x[map.perm[i]])
-}
-
-fn permute_mat(map: &Mapping, x: &[Vec<f64>]) -> DMatrix<f64> {
-    let n = map.perm.len();
-    DMatrix::from_fn(n, n, |i, j| x[map.perm[i]][map.perm[j]])
-}
-
-/// Constraint-row matrix (`3 nc × nv`): rows as stored, columns permuted.
-fn permute_cols(map: &Mapping, x: &[Vec<f64>]) -> DMatrix<f64> {
-    DMatrix::from_fn(x.len(), map.perm.len(), |i, j| x[i][map.perm[j]])
-}
 
 // ---------------------------------------------------------------------------------------------
 // Comparison and report
@@ -259,7 +80,7 @@ fn cmp_mat(ours: &DMatrix<f64>, theirs: &DMatrix<f64>) -> Worst {
             }
         }
     }
-    w.err = diff_max.max(0.0) / ref_max.max(1.0);
+    w.err = rel_err(diff_max.max(0.0), ref_max);
     w
 }
 
@@ -422,38 +243,16 @@ fn impulse_runs(out: &Value) -> Vec<(f64, &Value)> {
 }
 
 fn run(model_name: &str, fixture: &str) {
-    if !PathBuf::from(MODELS).is_dir() {
-        eprintln!("{model_name}: skipped: ../shared/models not found");
-        return;
-    }
-    let urdf = PathBuf::from(MODELS).join(format!("{model_name}.urdf"));
+    let Some(urdf) = urdf_or_skip(model_name) else { return };
     if !urdf.is_file() {
         eprintln!("{model_name}: skipped: {} not found", urdf.display());
         return;
     }
-    let text =
-        std::fs::read_to_string(PathBuf::from(FIXTURES).join(fixture)).expect("fixture file");
-    let fx: Value = serde_json::from_str(&text).expect("fixture JSON");
-    assert!(
-        matches!(
-            fx["format"].as_str(),
-            Some("sodyn-pinocchio-fixture/1" | "sodyn-pinocchio-contact-fixture/1")
-        ),
-        "unknown fixture format {}",
-        fx["format"]
-    );
+    let fx =
+        read_fixture(fixture, &["sodyn-pinocchio-fixture/1", "sodyn-pinocchio-contact-fixture/1"]);
     assert!(!fx["model"]["root_joint"].is_null(), "contact fixtures have a free flyer");
-    let model = load_urdf_file(&urdf, &UrdfOptions { floating_base: true }).expect("URDF loads");
-    assert_eq!(
-        vec_of(&fx["model"]["gravity"]),
-        vec![0.0, 0.0, -9.81, 0.0, 0.0, 0.0],
-        "fixture gravity"
-    );
-    let g: Vec<f64> = model.gravity.to_vec6().iter().copied().collect();
-    assert!(
-        g.contains(&-9.81) && g.iter().filter(|&&x| x != 0.0).count() == 1,
-        "our gravity {g:?}"
-    );
+    let (model, _) = load_model(&urdf, &fx);
+    assert_our_gravity(&model);
 
     let map = build_mapping(&model, &fx);
     let frames = check_contact_frames(&model, &fx);

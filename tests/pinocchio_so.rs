@@ -5,7 +5,8 @@
 //! the 300 entries of largest magnitude plus 700 distinct uniformly random entries (all entries
 //! when `nv³ ≤ 1000`), as `[i, j, k, value]` in **Pinocchio's** index order.
 //!
-//! Convention mapping (ours ← Pinocchio), as in `tests/pinocchio.rs`:
+//! Convention mapping (ours ← Pinocchio), as in `tests/pinocchio.rs` (shared helpers in
+//! `tests/pin_map`):
 //!
 //! * **Joint order.** Ours is depth-first in URDF document order, Pinocchio's sorts siblings by
 //!   name; joints are matched **by name**, giving `perm`: our dof `i` is Pinocchio dof
@@ -23,17 +24,18 @@
 //! `rnea τ` is compared too (tolerance 1e-10) to validate the state mapping, and the fixture
 //! state is checked to be identical to state 0 of `<model>.json`.
 
-use nalgebra::DVector;
+mod pin_map;
+
+use pin_map::{
+    Mapping, build_mapping, f64_of, fixture_path, load_model, our_q, permute_vec, read_fixture,
+    rel_err, urdf_or_skip, usize_of, vec_of,
+};
 use serde_json::Value;
 use sodyn::algo::{Data, rnea};
 use sodyn::deriv::{SoData, id_so_derivatives};
-use sodyn::model::{JointType, Model, UrdfOptions, load_urdf_file};
+use sodyn::model::Model;
 use sodyn::tensor::Tensor3;
 use std::fmt::Write as _;
-use std::path::PathBuf;
-
-const MODELS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/models");
-const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures");
 
 /// Tolerance for the second-order tensors.
 const TOL_SO: f64 = 1e-9;
@@ -42,169 +44,6 @@ const TOL_DYN: f64 = 1e-10;
 
 /// Pinocchio tensor keys, in the fixture's order.
 const SO_KEYS: [&str; 4] = ["d2tau_dqdq", "d2tau_dvdv", "d2tau_dqdv", "d2tau_dadq"];
-
-fn f64_of(v: &Value) -> f64 {
-    v.as_f64().unwrap_or_else(|| panic!("expected a number, got {v}"))
-}
-
-fn vec_of(v: &Value) -> Vec<f64> {
-    v.as_array().expect("expected an array").iter().map(f64_of).collect()
-}
-
-fn usize_of(v: &Value) -> usize {
-    v.as_u64().unwrap_or_else(|| panic!("expected an index, got {v}")) as usize
-}
-
-/// Maps between our coordinates and Pinocchio's for one model.
-struct Mapping {
-    /// Our velocity coordinate `i` is Pinocchio's `perm[i]`.
-    perm: Vec<usize>,
-    /// Inverse of `perm`: Pinocchio's velocity coordinate `p` is our `inv[p]`.
-    inv: Vec<usize>,
-    /// Pinocchio joint of each of our joints (index into the fixture's `model.joints`), for
-    /// building `q`; index 0 unused.
-    pin_joint: Vec<Option<usize>>,
-    /// Description of each of our dofs (for reports).
-    dof_desc: Vec<String>,
-}
-
-/// Whether a Pinocchio joint type string is compatible with our joint type.
-fn types_match(ours: &JointType, pin: &str) -> bool {
-    match ours {
-        JointType::Revolute { .. } => {
-            matches!(
-                pin,
-                "JointModelRX" | "JointModelRY" | "JointModelRZ" | "JointModelRevoluteUnaligned"
-            )
-        }
-        JointType::Continuous { .. } => {
-            matches!(
-                pin,
-                "JointModelRUBX"
-                    | "JointModelRUBY"
-                    | "JointModelRUBZ"
-                    | "JointModelRevoluteUnboundedUnaligned"
-            )
-        }
-        JointType::Prismatic { .. } => {
-            matches!(
-                pin,
-                "JointModelPX" | "JointModelPY" | "JointModelPZ" | "JointModelPrismaticUnaligned"
-            )
-        }
-        JointType::FreeFlyer => pin == "JointModelFreeFlyer",
-        JointType::Spherical => pin == "JointModelSpherical",
-        JointType::Planar => pin == "JointModelPlanar",
-    }
-}
-
-fn build_mapping(model: &Model, fx: &Value) -> Mapping {
-    let pj = fx["model"]["joints"].as_array().expect("model.joints");
-    assert_eq!(model.nv, usize_of(&fx["model"]["nv"]), "nv differs from Pinocchio's");
-    assert_eq!(
-        model.njoints(),
-        usize_of(&fx["model"]["njoints"]),
-        "number of joints differs from Pinocchio's"
-    );
-    let mut perm = vec![usize::MAX; model.nv];
-    let mut pin_joint = vec![None]; // joint 0 (universe) has no counterpart
-    let mut dof_desc = vec![String::new(); model.nv];
-    let mut used = vec![false; pj.len()];
-    for i in 1..model.njoints() {
-        let name = &model.names[i];
-        let k = pj
-            .iter()
-            .position(|j| j["name"].as_str() == Some(name.as_str()))
-            .unwrap_or_else(|| panic!("our joint {name:?} has no Pinocchio counterpart"));
-        assert!(!used[k], "Pinocchio joint {name:?} matched twice");
-        used[k] = true;
-        let j = &pj[k];
-        let ptype = j["type"].as_str().expect("joint type");
-        assert!(
-            types_match(&model.joints[i], ptype),
-            "joint {name:?}: ours {:?}, Pinocchio {ptype}",
-            model.joints[i]
-        );
-        let (pv, pnv) = (usize_of(&j["idx_v"]), usize_of(&j["nv"]));
-        assert_eq!(pnv, model.nvs[i], "joint {name:?}: nv differs");
-        // Parent relation must agree (by name).
-        let pin_parent = usize_of(&j["parent"]);
-        let pin_parent_name = if pin_parent == 0 {
-            "universe".to_string()
-        } else {
-            let pp = pj.iter().find(|x| usize_of(&x["index"]) == pin_parent).expect("parent joint");
-            pp["name"].as_str().unwrap().to_string()
-        };
-        assert_eq!(
-            model.names[model.parents[i]], pin_parent_name,
-            "joint {name:?}: parent differs"
-        );
-        let iv = model.idx_v[i];
-        for c in 0..pnv {
-            perm[iv + c] = match model.joints[i] {
-                // Ours [ω; v], Pinocchio [v; ω].
-                JointType::FreeFlyer => {
-                    if c < 3 {
-                        pv + 3 + c
-                    } else {
-                        pv + c - 3
-                    }
-                }
-                _ => pv + c,
-            };
-            dof_desc[iv + c] = format!("{name} ({}, c{c})", model.joints[i].name());
-        }
-        pin_joint.push(Some(k));
-    }
-    assert!(used.iter().all(|&u| u), "some Pinocchio joints have no counterpart in our model");
-    let mut inv = vec![usize::MAX; model.nv];
-    for (i, &p) in perm.iter().enumerate() {
-        assert!(p < model.nv && inv[p] == usize::MAX, "velocity permutation is not a bijection");
-        inv[p] = i;
-    }
-    Mapping { perm, inv, pin_joint, dof_desc }
-}
-
-/// Our `q` from the fixture's state.
-fn our_q(model: &Model, map: &Mapping, fx: &Value, state: &Value) -> DVector<f64> {
-    let pj = fx["model"]["joints"].as_array().unwrap();
-    let pq = vec_of(&state["q"]);
-    let thetas = state["continuous_theta"].as_array().expect("continuous_theta");
-    let mut q = DVector::zeros(model.nq);
-    for i in 1..model.njoints() {
-        let j = &pj[map.pin_joint[i].unwrap()];
-        let pidx = usize_of(&j["idx_q"]);
-        let iq = model.idx_q[i];
-        match model.joints[i] {
-            JointType::Continuous { .. } => {
-                let name = model.names[i].as_str();
-                let t = thetas
-                    .iter()
-                    .find(|t| t["joint"].as_str() == Some(name))
-                    .unwrap_or_else(|| panic!("no continuous_theta for {name:?}"));
-                let theta = f64_of(&t["theta"]);
-                // Consistency with the stored (cos, sin).
-                assert!(
-                    (theta.cos() - pq[pidx]).abs() < 1e-12
-                        && (theta.sin() - pq[pidx + 1]).abs() < 1e-12
-                );
-                q[iq] = theta;
-            }
-            _ => {
-                let n = model.nqs[i];
-                assert_eq!(n, usize_of(&j["nq"]));
-                for c in 0..n {
-                    q[iq + c] = pq[pidx + c];
-                }
-            }
-        }
-    }
-    q
-}
-
-fn permute_vec(map: &Mapping, x: &[f64]) -> DVector<f64> {
-    DVector::from_fn(map.perm.len(), |i, _| x[map.perm[i]])
-}
 
 /// Result of comparing one sampled tensor.
 struct TensorCmp {
@@ -260,31 +99,21 @@ fn cmp_samples_with(
     }
     assert!(n > 0, "{key}: no samples");
     assert_eq!(ref_max, f64_of(&samples["max_abs"]), "{key}: sample misses the largest entry");
-    TensorCmp { key, n, complete, ref_max, err: diff_max.max(0.0) / ref_max.max(1.0), worst }
+    TensorCmp { key, n, complete, ref_max, err: rel_err(diff_max.max(0.0), ref_max), worst }
 }
 
 fn run(model_name: &str) {
-    if !PathBuf::from(MODELS).is_dir() {
-        eprintln!("{model_name}: skipped: ../shared/models not found");
-        return;
-    }
-    let urdf = PathBuf::from(MODELS).join(format!("{model_name}.urdf"));
-    let path = PathBuf::from(FIXTURES).join(format!("so_samples_{model_name}.json"));
-    let text = std::fs::read_to_string(&path).expect("so_samples fixture file");
-    let fx: Value = serde_json::from_str(&text).expect("fixture JSON");
-    assert_eq!(fx["format"].as_str(), Some("sodyn-pinocchio-so-samples/1"));
-    let floating_base = !fx["model"]["root_joint"].is_null();
-    let model = load_urdf_file(&urdf, &UrdfOptions { floating_base }).expect("URDF loads");
-    let g = vec_of(&fx["model"]["gravity"]);
-    assert_eq!(g, vec![0.0, 0.0, -9.81, 0.0, 0.0, 0.0], "fixture gravity");
+    let Some(urdf) = urdf_or_skip(model_name) else { return };
+    let file = format!("so_samples_{model_name}.json");
+    let fx = read_fixture(&file, &["sodyn-pinocchio-so-samples/1"]);
+    let (model, floating_base) = load_model(&urdf, &fx);
 
     let states = fx["states"].as_array().expect("states");
     assert_eq!(states.len(), 1, "one state per so_samples file");
     let state = &states[0];
 
     // The state must be state 0 of <model>.json (same seed and draws).
-    let main_path = PathBuf::from(FIXTURES).join(format!("{model_name}.json"));
-    if let Ok(main_text) = std::fs::read_to_string(&main_path) {
+    if let Ok(main_text) = std::fs::read_to_string(fixture_path(&format!("{model_name}.json"))) {
         let main: Value = serde_json::from_str(&main_text).expect("fixture JSON");
         let s0 = &main["states"][0];
         for key in ["q", "v", "a", "continuous_theta"] {
@@ -300,7 +129,7 @@ fn run(model_name: &str) {
     let mut data = Data::new(&model);
     let tau = rnea(&model, &mut data, &q, &v, &a, None).expect("rnea").clone();
     let tau_ref = permute_vec(&map, &vec_of(&state["outputs"]["rnea_tau"]));
-    let tau_err = (&tau - &tau_ref).amax() / tau_ref.amax().max(1.0);
+    let tau_err = rel_err((&tau - &tau_ref).amax(), tau_ref.amax());
 
     let mut data = Data::new(&model);
     let mut so = SoData::new(&model);
@@ -311,7 +140,7 @@ fn run(model_name: &str) {
         SO_KEYS.iter().zip(ours).map(|(&k, t)| cmp_samples(k, &map, t, &samples[k])).collect();
     negative_controls(model_name, &model, &map, &so, samples);
 
-    let size = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+    let size = std::fs::metadata(fixture_path(&file)).map(|m| m.len()).unwrap_or(0);
     let moved = map.perm.iter().enumerate().filter(|(i, p)| i != *p).count();
     let mut out = String::new();
     writeln!(
