@@ -10,6 +10,7 @@
 #![deny(missing_docs)]
 
 pub mod algo;
+pub mod batch;
 pub mod cli;
 pub mod demo;
 pub mod deriv;

@@ -1,5 +1,6 @@
-//! The `sodyn` command-line tool: `info`, `random-state`, `eval`, `demo`.
+//! The `sodyn` command-line tool: `info`, `random-state`, `eval`, `demo`, `bench`.
 
+mod bench;
 mod eval;
 
 use crate::error::{Error, Result};
@@ -18,6 +19,8 @@ USAGE:
   sodyn info --model M [--floating-base]
   sodyn random-state --model M [--floating-base] [--seed S] [--output FILE]
   sodyn eval --model M [--floating-base] --state FILE [--order 1|2] [--output FILE]
+  sodyn bench --model M [--floating-base] [--contacts F1,F2] [--algos a,b] [--states N]
+              [--seed S] [--max-seconds X] [--iters N] [--threads N] [--name NAME] [--smoke]
 
 M is a URDF path or builtin:NAME (builtin:humanoid, builtin:quadruped, builtin:chain7,
 builtin:pendulum2, builtin:random_tree20, builtin:random_tree20_ff, ...).
@@ -172,6 +175,10 @@ fn run_inner(args: &[String]) -> Result<()> {
         println!("{USAGE}");
         return Ok(());
     };
+    if cmd == "bench" {
+        // `bench` has options of its own.
+        return bench::run(&args[1..]);
+    }
     let o = parse_options(&args[1..])?;
     match cmd.as_str() {
         "info" => {

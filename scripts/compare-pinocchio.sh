@@ -1,0 +1,168 @@
+#!/usr/bin/env bash
+# Compare sodyn with Pinocchio 4.1.0 (../shared/peer/pin_bench.cpp, the `pin_bench_native` build)
+# on every robot of ../shared/models, interleaved and pinned to one core.
+#
+#   scripts/compare-pinocchio.sh                      # 7 rounds, 1 s per algorithm
+#   ROUNDS=3 MAXSEC=0.5 MODELS="panda solo12" scripts/compare-pinocchio.sh
+#
+# For each round, for each model, for each algorithm pair: `sodyn bench` then
+# `pin_bench_native` (A B A B ...), both with `taskset -c $CPU`, the same options (--name,
+# --nstates 1000, --seed, --max-seconds, ITERS) and the same timing method. The ratio sodyn/Pinocchio is computed within each round,
+# then summarised as the median over rounds with its min-max spread
+# (scripts/compare_pinocchio_table.py), so slow drifts of the shared machine's load cancel.
+#
+# Environment:
+#   ROUNDS      rounds (default 7; at least 3 is advised)
+#   MAXSEC      soft cap in seconds of timed wall time per algorithm and run (default 1)
+#   ITERS       timed calls wanted per algorithm (default 20000; capped by MAXSEC)
+#   CPU         core to pin to (default 1); empty disables pinning
+#   MODELS      space-separated subset of the model names below (default: all)
+#   SHARED      the shared directory (default: ../shared next to the repository)
+#   PEER_VENV   Pinocchio venv (default /tmp/peer/venv)
+#   PEER_BUILD  where pin_bench_native is (default /tmp/peer/build)
+#   OUT         directory for raw outputs and the table (default /tmp/sodyn-compare-<date>)
+#   PNG         chart of the ratios to write (default: none; needs matplotlib in PEER_VENV)
+#   COMPARE     0 skips the comparison (default 1)
+#   SCALING     1 also measures the 1 -> 2 thread scaling of the batched API (sodyn only,
+#               not pinned, ROUNDS interleaved rounds of threads=1 / threads=2 on
+#               SCALING_MODELS, default "solo12 talos_full_v2"); table in scaling.md
+set -euo pipefail
+
+HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+REPO="$(cd "$HERE/.." && pwd)"
+SHARED="${SHARED:-$REPO/../shared}"
+ROUNDS="${ROUNDS:-7}"
+MAXSEC="${MAXSEC:-1}"
+ITERS="${ITERS:-20000}"
+CPU="${CPU-1}"
+SEED="${SEED:-42}"
+export PEER_VENV="${PEER_VENV:-/tmp/peer/venv}"
+export PEER_BUILD="${PEER_BUILD:-/tmp/peer/build}"
+OUT="${OUT:-/tmp/sodyn-compare-$(date +%F)}"
+PIN_BIN="$PEER_BUILD/pin_bench_native"
+SODYN="$REPO/target/release/sodyn"
+MODELS_DIR="$SHARED/models"
+
+[ -d "$MODELS_DIR" ] || { echo "models not found: $MODELS_DIR (set SHARED)" >&2; exit 1; }
+
+# 1. The peer benchmark (Pinocchio), built if missing.
+if [ ! -x "$PIN_BIN" ]; then
+  echo "[compare] $PIN_BIN missing: building it (setup.sh, then build.sh; several minutes)" >&2
+  "$SHARED/peer/setup.sh"
+  VARIANTS=native "$SHARED/peer/build.sh"
+fi
+
+# 2. sodyn, release build.
+echo "[compare] cargo build --release" >&2
+(cd "$REPO" && cargo build --release --quiet)
+mkdir -p "$OUT"
+# Run a private copy: a rebuild in the work tree during the run must not change the binary.
+cp "$SODYN" "$OUT/sodyn"
+SODYN="$OUT/sodyn"
+
+# name | base | contact frames (3D point contacts, for the contact algorithms later;
+# ../shared/models/README.md). Our --name is the URDF stem; pin_bench gets the same --name.
+MODEL_TABLE="
+double_pendulum_continuous|fixed|
+ur5_robot|fixed|
+kinova|fixed|
+panda|fixed|
+baxter|fixed|
+tiago|fixed|
+solo12|ff|FL_FOOT,FR_FOOT,HL_FOOT,HR_FOOT
+hyq_no_sensors|ff|lf_foot,rf_foot,lh_foot,rh_foot
+anymal|ff|LF_FOOT,RF_FOOT,LH_FOOT,RH_FOOT
+talos_reduced|ff|left_sole_link,right_sole_link
+talos_full_v2|ff|left_sole_link,right_sole_link
+"
+# sodyn algorithm <-> pin_bench algorithm; fd_so has no Pinocchio counterpart (timed alone).
+PAIRS="rnea:rnea crba:crba aba:aba id_fo:computeRNEADerivatives fd_fo:computeABADerivatives
+id_so:ComputeRNEASecondOrderDerivatives"
+SODYN_ONLY="fd_so"
+# With contacts (3-D point contacts at the frame origins; Pinocchio LOCAL 3-D contacts; our
+# derivative timings include the forward solve, Pinocchio's forward call runs untimed).
+CONTACT_PAIRS="kkt_fo:computeConstraintDynamicsDerivatives impact_fo:computeImpulseDynamicsDerivatives"
+CONTACT_SODYN_ONLY="kkt_so,impact_so"
+
+PIN=()
+if [ -n "$CPU" ] && command -v taskset >/dev/null; then PIN=(taskset -c "$CPU"); fi
+
+mkdir -p "$OUT"
+META="$OUT/meta.txt"
+{
+  echo "# sodyn vs Pinocchio $(date -u +%FT%TZ)"
+  echo "# cpu: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | sed 's/^ //') ; nproc=$(nproc) ; pinned_to=${CPU:-none}"
+  echo "# kernel: $(uname -r) ; loadavg at start: $(cut -d' ' -f1-3 /proc/loadavg)"
+  echo "# sodyn: $(cd "$REPO" && git rev-parse --short HEAD 2>/dev/null || echo '?')$(cd "$REPO" && git diff --quiet 2>/dev/null || echo ' (with uncommitted changes)') ; $(rustc --version)"
+  echo "# pinocchio: pin_bench_native ($PIN_BIN)"
+  echo "# ROUNDS=$ROUNDS MAXSEC=$MAXSEC ITERS=$ITERS SEED=$SEED"
+} > "$META"
+cat "$META" >&2
+
+for r in $(seq 1 "$ROUNDS"); do
+  [ "${COMPARE:-1}" = 0 ] && break
+  S="$OUT/sodyn-round$r.txt"
+  P="$OUT/pin-round$r.txt"
+  : > "$S"
+  : > "$P"
+  echo "# loadavg at start of round $r: $(cut -d' ' -f1-3 /proc/loadavg)" >> "$META"
+  while IFS='|' read -r name base contacts; do
+    [ -z "$name" ] && continue
+    if [ -n "${MODELS:-}" ] && ! [[ " $MODELS " == *" $name "* ]]; then continue; fi
+    urdf="$MODELS_DIR/$name.urdf"
+    sargs=(bench --model "$urdf" --name "$name" --states 1000
+           --seed "$SEED" --max-seconds "$MAXSEC" --iters "$ITERS")
+    pargs=("$urdf" "$base" "$ITERS" --name "$name" --nstates 1000
+           --seed "$SEED" --max-seconds "$MAXSEC")
+    if [ "$base" = ff ]; then sargs+=(--floating-base); fi
+    if [ -n "$contacts" ]; then sargs+=(--contacts "$contacts"); pargs+=(--contacts "$contacts"); fi
+    # Interleaved per algorithm pair: the two runs of a pair are seconds apart.
+    for pair in $PAIRS; do
+      sa="${pair%%:*}"; pa="${pair#*:}"
+      echo "[compare] round $r/$ROUNDS $name: sodyn $sa, pinocchio $pa" >&2
+      "${PIN[@]}" "$SODYN" "${sargs[@]}" --algos "$sa" >> "$S"
+      "${PIN[@]}" "$PIN_BIN" "${pargs[@]}" --algos "$pa" >> "$P"
+    done
+    if [ -n "$contacts" ]; then
+      for pair in $CONTACT_PAIRS; do
+        sa="${pair%%:*}"; pa="${pair#*:}"
+        echo "[compare] round $r/$ROUNDS $name: sodyn $sa, pinocchio $pa" >&2
+        "${PIN[@]}" "$SODYN" "${sargs[@]}" --algos "$sa" >> "$S"
+        "${PIN[@]}" "$PIN_BIN" "${pargs[@]}" --algos "$pa" >> "$P"
+      done
+    fi
+    only="$SODYN_ONLY"
+    if [ -n "$contacts" ]; then only="$only,$CONTACT_SODYN_ONLY"; fi
+    echo "[compare] round $r/$ROUNDS $name: sodyn $only" >&2
+    "${PIN[@]}" "$SODYN" "${sargs[@]}" --algos "$only" >> "$S"
+  done <<< "$MODEL_TABLE"
+done
+echo "# loadavg at end: $(cut -d' ' -f1-3 /proc/loadavg)" >> "$META"
+
+# 3. Optional: thread scaling of the batched API (both cores, so not pinned).
+if [ "${SCALING:-0}" = 1 ]; then
+  for r in $(seq 1 "$ROUNDS"); do
+    F="$OUT/scaling-round$r.txt"
+    : > "$F"
+    for name in ${SCALING_MODELS:-solo12 talos_full_v2}; do
+      base="$(grep "^$name|" <<< "$MODEL_TABLE" | cut -d'|' -f2)"
+      fb=(); [ "$base" = ff ] && fb=(--floating-base)
+      for t in 1 2; do
+        echo "[compare] scaling round $r/$ROUNDS $name threads=$t" >&2
+        echo "# loadavg=$(cut -d' ' -f1 /proc/loadavg)" >> "$F"
+        "$SODYN" bench --model "$MODELS_DIR/$name.urdf" "${fb[@]}" --name "$name" --threads "$t" \
+          --algos rnea,id_fo,fd_fo,batch_rnea,batch_id_fo,batch_fd_fo --max-seconds "$MAXSEC" \
+          --seed "$SEED" >> "$F"
+      done
+    done
+  done
+  python3 "$HERE/compare_pinocchio_table.py" --scaling "$OUT" | tee "$OUT/scaling.md"
+fi
+[ "${COMPARE:-1}" = 0 ] && exit 0
+
+# 4. Table (and chart).
+PY=python3
+TABLE_ARGS=("$OUT")
+if [ -n "${PNG:-}" ]; then PY="$PEER_VENV/bin/python"; TABLE_ARGS+=(--png "$PNG"); fi
+"$PY" "$HERE/compare_pinocchio_table.py" "${TABLE_ARGS[@]}" | tee "$OUT/table.md"
+echo "[compare] raw outputs and table.md in $OUT" >&2

@@ -1,0 +1,241 @@
+#!/usr/bin/env python3
+"""Markdown tables (and optionally a chart) from the raw outputs of compare-pinocchio.sh.
+
+    compare_pinocchio_table.py OUT_DIR [--png FILE]
+    compare_pinocchio_table.py --scaling OUT_DIR     # thread scaling (scaling-round*.txt)
+
+OUT_DIR holds sodyn-round<r>.txt and pin-round<r>.txt (lines `model=... algo=... median_us=...`).
+For each model and algorithm pair the ratio sodyn/Pinocchio is computed within each round (same
+round = close in time on the shared machine), then reported as the median over rounds with the
+min-max spread. The time columns are medians over rounds of the per-run medians.
+Standard library only, except matplotlib for --png.
+"""
+
+import argparse
+import glob
+import os
+import re
+import statistics
+import sys
+
+PAIRS = [
+    ("rnea", "rnea"),
+    ("crba", "crba"),
+    ("aba", "aba"),
+    ("id_fo", "computeRNEADerivatives"),
+    ("fd_fo", "computeABADerivatives"),
+    ("id_so", "ComputeRNEASecondOrderDerivatives"),
+    ("kkt_fo", "computeConstraintDynamicsDerivatives"),
+    ("impact_fo", "computeImpulseDynamicsDerivatives"),
+]
+
+
+def parse(path):
+    """({(model, algo): median_us}, {(model, algo): p10_us}, {model: (nq, nv)}) of a file."""
+    out = {}
+    p10 = {}
+    nv = {}
+    with open(path) as f:
+        for line in f:
+            if not line.startswith("model="):
+                continue
+            kv = dict(tok.split("=", 1) for tok in line.split() if "=" in tok)
+            out[(kv["model"], kv["algo"])] = float(kv["median_us"])
+            p10[(kv["model"], kv["algo"])] = float(kv["p10_us"])
+            nv[kv["model"]] = (int(kv["nq"]), int(kv["nv"]))
+    return out, p10, nv
+
+
+def rounds(out_dir, prefix):
+    files = glob.glob(os.path.join(out_dir, f"{prefix}-round*.txt"))
+    key = lambda p: int(re.search(r"round(\d+)", p).group(1))
+    return [parse(p) for p in sorted(files, key=key)]
+
+
+def fmt_us(x):
+    if x is None:
+        return "-"
+    return f"{x:.3g}" if x < 100 else f"{x:.0f}"
+
+
+def fmt_ratio(rs):
+    if not rs:
+        return "-", "-"
+    return f"{statistics.median(rs):.2f}", f"{min(rs):.2f}–{max(rs):.2f}"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out_dir")
+    ap.add_argument("--png", help="write a chart of the ratios")
+    ap.add_argument("--scaling", action="store_true", help="thread-scaling table instead")
+    args = ap.parse_args()
+    if args.scaling:
+        scaling(args.out_dir)
+        return
+
+    sod = rounds(args.out_dir, "sodyn")
+    pin = rounds(args.out_dir, "pin")
+    n = min(len(sod), len(pin))
+    if n == 0:
+        sys.exit(f"no sodyn-round*/pin-round* files in {args.out_dir}")
+    sod, pin = sod[:n], pin[:n]
+    models = []
+    dims = {}
+    for s in sod:
+        for (m, _a) in s[0]:
+            if m not in models:
+                models.append(m)
+        dims.update(s[2])
+
+    # ratio[model][algo] = [per-round ratios]
+    ratio = {}
+    print(f"Rounds: {n}. Times: median over rounds of each run's median (µs per call). "
+          "Ratio = sodyn / Pinocchio within each round: median over rounds and min–max. "
+          "p10 ratio: the same with each run's 10 % quantile instead of its median "
+          "(less sensitive to interference from other processes).\n")
+    print("| model | nq | nv | sodyn algo | Pinocchio algo | sodyn µs | Pinocchio µs "
+          "| ratio (median) | ratio min–max | p10 ratio |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for m in models:
+        ratio[m] = {}
+        nq, nv = dims[m]
+        for sa, pa in PAIRS:
+            st = [s[0].get((m, sa)) for s in sod]
+            pt = [p[0].get((m, pa)) for p in pin]
+            rs = [a / b for a, b in zip(st, pt) if a is not None and b]
+            ratio[m][sa] = rs
+            if not any(x is not None for x in st):
+                continue
+            s10 = [s[1].get((m, sa)) for s in sod]
+            p10 = [p[1].get((m, pa)) for p in pin]
+            r10 = [a / b for a, b in zip(s10, p10) if a is not None and b]
+            r10 = f"{statistics.median(r10):.2f}" if r10 else "-"
+            smed = statistics.median([x for x in st if x is not None]) if any(st) else None
+            pmed = statistics.median([x for x in pt if x is not None]) if any(pt) else None
+            med, spread = fmt_ratio(rs)
+            print(f"| {m} | {nq} | {nv} | {sa} | {pa} | {fmt_us(smed)} | {fmt_us(pmed)} "
+                  f"| {med} | {spread} | {r10} |")
+
+    print("\nRatio sodyn / Pinocchio (median over rounds; min–max in brackets):\n")
+    print("| model | nv | " + " | ".join(sa for sa, _ in PAIRS) + " |")
+    print("|---|---|" + "---|" * len(PAIRS))
+    for m in models:
+        cells = []
+        for sa, _ in PAIRS:
+            med, spread = fmt_ratio(ratio[m][sa])
+            cells.append(f"{med} [{spread}]" if med != "-" else "-")
+        print(f"| {m} | {dims[m][1]} | " + " | ".join(cells) + " |")
+
+    print("\nsodyn second-order forward dynamics (no Pinocchio counterpart): fd_so time and "
+          "fd_so / id_so within each round.\n")
+    print("| model | nv | id_so µs | fd_so µs | fd_so / id_so (median) | min–max |")
+    print("|---|---|---|---|---|---|")
+    for m in models:
+        idt = [s[0].get((m, "id_so")) for s in sod]
+        fdt = [s[0].get((m, "fd_so")) for s in sod]
+        rs = [b / a for a, b in zip(idt, fdt) if a and b is not None]
+        if not rs:
+            continue
+        med, spread = fmt_ratio(rs)
+        print(f"| {m} | {dims[m][1]} | {fmt_us(statistics.median(x for x in idt if x))} "
+              f"| {fmt_us(statistics.median(x for x in fdt if x))} | {med} | {spread} |")
+
+    if args.png:
+        plot(args.png, models, dims, ratio, n)
+
+
+def scaling(out_dir):
+    """Table of the 1 -> 2 thread scaling of the batch_* algorithms."""
+    files = sorted(glob.glob(os.path.join(out_dir, "scaling-round*.txt")))
+    if not files:
+        sys.exit(f"no scaling-round*.txt in {out_dir}")
+    batch = {}  # (model, algo) -> {round: {threads: (us, cpu_util)}}
+    single = {}  # (model, algo) -> {round: [us]}
+    for r, path in enumerate(files):
+        with open(path) as f:
+            for line in f:
+                if not line.startswith("model="):
+                    continue
+                kv = dict(tok.split("=", 1) for tok in line.split() if "=" in tok)
+                key = (kv["model"], kv["algo"])
+                us = float(kv["median_us"])
+                if kv["algo"].startswith("batch_"):
+                    util = float(kv.get("cpu_util", "nan"))
+                    batch.setdefault(key, {}).setdefault(r, {})[kv["threads"]] = (us, util)
+                else:
+                    single.setdefault(key, {}).setdefault(r, []).append(us)
+    med = statistics.median
+    print(f"Rounds: {len(files)}. Batched calls over 1000 states, µs per state (median of each "
+          "run); speed-up = (1 thread) / (2 threads) within each round; CPUs used = process CPU "
+          "time / wall time during the timed calls.\n")
+    print("| model | algo | 1 thread µs/state | 2 threads µs/state | speed-up 1→2 [min–max] "
+          "| CPUs used (1 / 2 threads) | CPU µs per state (1 / 2 threads) | single call µs "
+          "| batch (1 thread) / single |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for (m, a), rounds in batch.items():
+        rs = [v for v in rounds.values() if "1" in v and "2" in v]
+        if not rs:
+            continue
+        t1 = [v["1"][0] for v in rs]
+        t2 = [v["2"][0] for v in rs]
+        sp = [v["1"][0] / v["2"][0] for v in rs]
+        u1 = [v["1"][1] for v in rs]
+        u2 = [v["2"][1] for v in rs]
+        c1 = [v["1"][0] * v["1"][1] for v in rs]
+        c2 = [v["2"][0] * v["2"][1] for v in rs]
+        sr = single.get((m, a.replace("batch_", "")), {})
+        s_all = [x for v in sr.values() for x in v]
+        ov = [rounds[r]["1"][0] / med(sr[r]) for r in rounds if r in sr and "1" in rounds[r]]
+        print(f"| {m} | {a} | {fmt_us(med(t1))} | {fmt_us(med(t2))} | {med(sp):.2f} "
+              f"[{min(sp):.2f}–{max(sp):.2f}] | {med(u1):.2f} / {med(u2):.2f} "
+              f"| {fmt_us(med(c1))} / {fmt_us(med(c2))} "
+              f"| {fmt_us(med(s_all)) if s_all else '-'} | {f'{med(ov):.2f}' if ov else '-'} |")
+
+
+def plot(path, models, dims, ratio, n):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.ticker
+
+    algos = [sa for sa, _ in PAIRS]
+    width = 0.8 / len(algos)
+    fig, ax = plt.subplots(figsize=(13, 5.5))
+    for k, a in enumerate(algos):
+        xs, ys, lo, hi = [], [], [], []
+        for i, m in enumerate(models):
+            rs = ratio[m][a]
+            if not rs:
+                continue
+            med = statistics.median(rs)
+            xs.append(i + (k - (len(algos) - 1) / 2) * width)
+            ys.append(med)
+            lo.append(med - min(rs))
+            hi.append(max(rs) - med)
+        ax.bar(xs, ys, width, yerr=[lo, hi], capsize=2, label=a)
+    ax.axhline(1.0, color="black", linewidth=0.8)
+    ax.set_yscale("log")
+    ticks = [0.25, 0.5, 0.75, 1, 1.5, 2, 3, 5, 10, 20, 50]
+    all_r = [x for m in models for a in algos for x in ratio[m][a]]
+    lo_t, hi_t = min(all_r + [1.0]) / 1.2, max(all_r + [1.0]) * 1.35
+    ax.set_ylim(lo_t, hi_t)
+    ax.set_yticks([t for t in ticks if lo_t <= t <= hi_t])
+    ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.set_xticks(range(len(models)))
+    ax.set_xticklabels([f"{m}\n(nv={dims[m][1]})" for m in models], rotation=30, ha="right",
+                       fontsize=8)
+    ax.set_ylabel("time ratio sodyn / Pinocchio (log; <1 = sodyn faster)")
+    ax.set_title(f"sodyn vs Pinocchio 4.1.0, one core, median over {n} interleaved rounds "
+                 "(bars: min–max)")
+    ax.legend(ncol=len(algos), fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.22))
+    ax.grid(axis="y", which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    print(f"\n(chart written to {path})", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()

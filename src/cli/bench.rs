@@ -1,0 +1,580 @@
+//! `sodyn bench`: per-call timings of the algorithms, measured as `../shared/peer/pin_bench.cpp`
+//! measures Pinocchio, and printed in its line format so both outputs can be compared.
+//!
+//! Method (as pin_bench): `--states` random states generated once and used round robin, so
+//! every call sees a different state; a warm-up of at least max(200, iters/10) calls and 50 ms;
+//! calls cheaper than ~10 µs are timed in batches of `K` consecutive calls (per-call time =
+//! batch time / K); the median and the 10 % / 90 % quantiles are taken over the batches. At least
+//! 200 batches are timed, and timing stops once `--max-seconds` have passed after that (or after
+//! `max(200, iters/K)` batches). The `batch_*` algorithms time one batched call over all the
+//! states ([`crate::batch`]) and report the time per state, with at least 20 samples, and
+//! `cpu_util` = process CPU time / wall time over the timed calls (about the number of threads
+//! when the cores are free).
+
+use super::load_model;
+use crate::algo::{Contact, Data, aba, crba, rnea};
+use crate::batch::{BatchPool, aba_batch, fd_derivatives_batch, id_derivatives_batch, rnea_batch};
+use crate::deriv::{
+    ContactData, FdSoData, ImpactData, KktData, SoData, fd_derivatives, fd_so_derivatives,
+    id_derivatives, id_so_derivatives, impact_derivatives, impact_so_derivatives, kkt_derivatives,
+    kkt_so_derivatives,
+};
+use crate::error::{Error, Result};
+use crate::model::{JointType, Model};
+use crate::rng::Rng;
+use nalgebra::{DMatrix, DVector, Vector3};
+use std::hint::black_box;
+use std::path::Path;
+use std::time::Instant;
+
+/// The usage text of `sodyn bench`.
+pub(crate) const USAGE: &str = "\
+sodyn bench --model M [--floating-base] [--contacts F1,F2,...] [--algos a,b,...]
+            [--states N] [--seed S] [--max-seconds X] [--iters N] [--threads N]
+            [--name NAME] [--smoke]
+Prints one line per algorithm:
+  model=<name> nq=<> nv=<> algo=<algo> median_us=<> p10_us=<> p90_us=<> batch=<K> samples=<n>
+Defaults: all algorithms, --states 1000 (8 with --smoke), --seed 42, --max-seconds 4,
+--iters 20000, --threads 1 (worker threads of the batch_* algorithms), --name = the URDF file
+stem or the built-in model's name. --smoke runs every algorithm a few times only.";
+
+/// Algorithms that can be timed, in output order.
+const ALGOS: &[&str] = &[
+    "rnea",
+    "crba",
+    "aba",
+    "id_fo",
+    "fd_fo",
+    "id_so",
+    "fd_so",
+    "batch_rnea",
+    "batch_aba",
+    "batch_id_fo",
+    "batch_fd_fo",
+    "kkt_fo",
+    "kkt_so",
+    "impact_fo",
+    "impact_so",
+];
+
+/// Contact algorithms: they need `--contacts` (3-D point contacts at the frame origins; the
+/// derivative timings include the forward solve).
+const CONTACT_ALGOS: &[&str] = &["kkt_fo", "kkt_so", "impact_fo", "impact_so"];
+
+/// Options of `sodyn bench`.
+#[derive(Clone, Debug)]
+struct BenchOptions {
+    model: Option<String>,
+    floating_base: bool,
+    contacts: Vec<String>,
+    algos: Option<Vec<String>>,
+    states: Option<usize>,
+    seed: u64,
+    max_seconds: f64,
+    iters: usize,
+    threads: usize,
+    name: Option<String>,
+    smoke: bool,
+}
+
+fn parse_number<T: std::str::FromStr>(opt: &str, s: &str, what: &str) -> Result<T> {
+    s.parse().map_err(|_| Error::Io(format!("{opt}: \"{s}\" is not {what}")))
+}
+
+fn parse(args: &[String]) -> Result<BenchOptions> {
+    let mut o = BenchOptions {
+        model: None,
+        floating_base: false,
+        contacts: vec![],
+        algos: None,
+        states: None,
+        seed: 42,
+        max_seconds: 4.0,
+        iters: 20000,
+        threads: 1,
+        name: None,
+        smoke: false,
+    };
+    let mut i = 0;
+    while i < args.len() {
+        let opt = args[i].as_str();
+        let mut value = || -> Result<String> {
+            i += 1;
+            args.get(i)
+                .cloned()
+                .ok_or_else(|| Error::Io(format!("option {opt} needs a value\n\n{USAGE}")))
+        };
+        let list = |s: String| -> Vec<String> {
+            s.split(',').map(str::trim).filter(|x| !x.is_empty()).map(String::from).collect()
+        };
+        match opt {
+            "--model" => o.model = Some(value()?),
+            "--floating-base" => o.floating_base = true,
+            "--contacts" => o.contacts = list(value()?),
+            "--algos" => o.algos = Some(list(value()?)),
+            "--states" => {
+                let n: usize = parse_number(opt, &value()?, "a positive integer")?;
+                if n == 0 {
+                    return Err(Error::Io("--states: must be at least 1".into()));
+                }
+                o.states = Some(n);
+            }
+            "--seed" => o.seed = parse_number(opt, &value()?, "a non-negative integer")?,
+            "--max-seconds" => {
+                let s = value()?;
+                o.max_seconds = parse_number(opt, &s, "a number of seconds")?;
+                if !(o.max_seconds.is_finite() && o.max_seconds >= 0.0) {
+                    return Err(Error::Io(format!("--max-seconds: \"{s}\" must be ≥ 0")));
+                }
+            }
+            "--iters" => o.iters = parse_number(opt, &value()?, "a non-negative integer")?,
+            "--threads" => {
+                o.threads = parse_number(opt, &value()?, "a positive integer")?;
+                if o.threads == 0 {
+                    return Err(Error::Io("--threads: must be at least 1".into()));
+                }
+            }
+            "--name" => o.name = Some(value()?),
+            "--smoke" => o.smoke = true,
+            other => return Err(Error::Io(format!("unknown option \"{other}\"\n\n{USAGE}"))),
+        }
+        i += 1;
+    }
+    Ok(o)
+}
+
+/// Checks the `--algos` list; returns the algorithms to run, in [`ALGOS`] order. Without
+/// `--algos`, the contact algorithms run only when contacts are given.
+fn select_algos(requested: Option<&[String]>, has_contacts: bool) -> Result<Vec<&'static str>> {
+    let Some(req) = requested else {
+        return Ok(ALGOS
+            .iter()
+            .copied()
+            .filter(|a| has_contacts || !CONTACT_ALGOS.contains(a))
+            .collect());
+    };
+    if req.is_empty() {
+        return Err(Error::Io("--algos: empty list".into()));
+    }
+    for a in req {
+        if !ALGOS.contains(&a.as_str()) {
+            return Err(Error::Io(format!(
+                "unknown algorithm \"{a}\"; known algorithms: {}",
+                ALGOS.join(", ")
+            )));
+        }
+        if CONTACT_ALGOS.contains(&a.as_str()) && !has_contacts {
+            return Err(Error::Io(format!(
+                "algorithm \"{a}\" needs contacts: give --contacts F1,F2,... (frame names)"
+            )));
+        }
+    }
+    Ok(ALGOS.iter().copied().filter(|a| req.iter().any(|r| r == a)).collect())
+}
+
+/// Sampling bounds of pin_bench (`sampling_bounds`): the URDF limits where finite, within
+/// ±1000 and non-degenerate, else ±π; free-flyer translations in [-1, 1]. Quaternion
+/// coordinates ignore them (uniform random unit quaternion).
+fn sampling_bounds(model: &Model) -> (DVector<f64>, DVector<f64>) {
+    let (mut lo, mut hi) = (model.lower.clone(), model.upper.clone());
+    for i in 0..model.nq {
+        let bad = !lo[i].is_finite()
+            || !hi[i].is_finite()
+            || lo[i] < -1e3
+            || hi[i] > 1e3
+            || hi[i] <= lo[i];
+        if bad {
+            lo[i] = -std::f64::consts::PI;
+            hi[i] = std::f64::consts::PI;
+        }
+    }
+    for j in 1..model.njoints() {
+        if matches!(model.joints[j], JointType::FreeFlyer) {
+            for c in model.idx_q[j]..model.idx_q[j] + 3 {
+                lo[c] = -1.0;
+                hi[c] = 1.0;
+            }
+        }
+    }
+    (lo, hi)
+}
+
+/// Pre-generated random states, pin_bench's distribution: `q` uniform within the sampling
+/// bounds (uniform unit quaternions), `v`, `a`, `tau` uniform in [-1, 1].
+struct States {
+    q: Vec<DVector<f64>>,
+    v: Vec<DVector<f64>>,
+    a: Vec<DVector<f64>>,
+    tau: Vec<DVector<f64>>,
+}
+
+impl States {
+    fn new(model: &Model, n: usize, seed: u64) -> Self {
+        let (lo, hi) = sampling_bounds(model);
+        let mut rng = Rng::new(seed);
+        let mut s = States { q: vec![], v: vec![], a: vec![], tau: vec![] };
+        for _ in 0..n {
+            let mut q = DVector::zeros(model.nq);
+            for j in 1..model.njoints() {
+                let (a, m) = (model.idx_q[j], model.nqs[j]);
+                model.joints[j].random(
+                    &mut rng,
+                    &lo.as_slice()[a..a + m],
+                    &hi.as_slice()[a..a + m],
+                    &mut q.as_mut_slice()[a..a + m],
+                );
+            }
+            s.q.push(q);
+            let mut r = || DVector::from_fn(model.nv, |_, _| rng.range(-1.0, 1.0));
+            s.v.push(r());
+            s.a.push(r());
+            s.tau.push(r());
+        }
+        s
+    }
+}
+
+/// Timing summary in µs per call.
+#[derive(Clone, Copy, Debug)]
+struct Stats {
+    med: f64,
+    p10: f64,
+    p90: f64,
+    batch: usize,
+    samples: usize,
+    /// Process CPU time / wall time over the timed batches (all threads; Linux only).
+    cpu_util: Option<f64>,
+}
+
+/// pin_bench's quantile: linear interpolation between order statistics.
+fn quantile(sorted: &[f64], q: f64) -> f64 {
+    let pos = q * (sorted.len() - 1) as f64;
+    let (lo, hi) = (pos.floor() as usize, pos.ceil() as usize);
+    sorted[lo] + (pos - lo as f64) * (sorted[hi] - sorted[lo])
+}
+
+fn summarize(mut ns_per_call: Vec<f64>, batch: usize) -> Stats {
+    ns_per_call.sort_by(f64::total_cmp);
+    Stats {
+        med: quantile(&ns_per_call, 0.5) * 1e-3,
+        p10: quantile(&ns_per_call, 0.1) * 1e-3,
+        p90: quantile(&ns_per_call, 0.9) * 1e-3,
+        batch,
+        samples: ns_per_call.len(),
+        cpu_util: None,
+    }
+}
+
+fn ns_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e9
+}
+
+/// How to time one algorithm.
+#[derive(Clone, Copy, Debug)]
+struct Plan {
+    nstates: usize,
+    iters: usize,
+    max_seconds: f64,
+    /// Minimum number of timed samples.
+    min_samples: usize,
+    /// Evaluations per call of `f` (1, or the number of states of a batched call).
+    per_call: usize,
+    /// `--smoke`: a few untimed-warm-up calls only.
+    smoke: bool,
+}
+
+/// Times `f(i)` (the algorithm at state `i`) as pin_bench's `bench()` does.
+fn measure(plan: &Plan, mut f: impl FnMut(usize) -> Result<()>) -> Result<Stats> {
+    let n = plan.nstates;
+    let mut idx = 0;
+    if plan.smoke {
+        let mut samples = vec![];
+        for _ in 0..3 {
+            let t0 = Instant::now();
+            f(idx)?;
+            samples.push(ns_since(t0) / plan.per_call as f64);
+            idx = (idx + 1) % n;
+        }
+        return Ok(summarize(samples, plan.per_call));
+    }
+    // Warm-up: at least max(200, iters/10) evaluations (batched calls count one per state) and
+    // 50 ms; slow calls stop after 2 s and 20 calls.
+    let min_warm = (plan.iters / 10).max(200).div_ceil(plan.per_call);
+    let mut nwarm = 0usize;
+    let w0 = Instant::now();
+    let mut warm_ns;
+    loop {
+        f(idx)?;
+        idx = (idx + 1) % n;
+        nwarm += 1;
+        if nwarm.is_multiple_of(16) || nwarm >= min_warm {
+            warm_ns = ns_since(w0);
+            if nwarm >= min_warm && warm_ns > 5e7 {
+                break;
+            }
+            if warm_ns > 2e9 && nwarm >= 20 {
+                break;
+            }
+        }
+    }
+    let est_ns = warm_ns / nwarm as f64;
+    let k = ((1e4 / est_ns.max(1.0)).ceil() as usize).clamp(1, 1000);
+    let wanted = plan.iters.div_ceil(k).max(plan.min_samples);
+    let mut samples = Vec::with_capacity(wanted);
+    let cpu0 = process_cpu_seconds();
+    let start = Instant::now();
+    for _ in 0..wanted {
+        let t0 = Instant::now();
+        for _ in 0..k {
+            f(idx)?;
+            idx = (idx + 1) % n;
+        }
+        let t1 = Instant::now();
+        samples.push((t1 - t0).as_secs_f64() * 1e9 / (k * plan.per_call) as f64);
+        if samples.len() >= plan.min_samples && (t1 - start).as_secs_f64() > plan.max_seconds {
+            break;
+        }
+    }
+    let wall = start.elapsed().as_secs_f64();
+    let cpu = process_cpu_seconds().zip(cpu0).map(|(c1, c0)| (c1 - c0) / wall);
+    Ok(Stats { cpu_util: cpu, ..summarize(samples, k * plan.per_call) })
+}
+
+/// CPU time (user + system, all threads) of this process in seconds, from `/proc/self/stat`
+/// (clock ticks of 1/100 s); `None` where unavailable.
+fn process_cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name "(...)": state is field 3, utime 14, stime 15.
+    let rest: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    let utime: f64 = rest.get(11)?.parse().ok()?;
+    let stime: f64 = rest.get(12)?.parse().ok()?;
+    Some((utime + stime) / 100.0)
+}
+
+/// Median overhead of two back-to-back clock reads, in ns.
+fn timer_overhead_ns() -> f64 {
+    let mut v: Vec<f64> = (0..10000)
+        .map(|_| {
+            let t0 = Instant::now();
+            let t1 = Instant::now();
+            (t1 - t0).as_secs_f64() * 1e9
+        })
+        .collect();
+    v.sort_by(f64::total_cmp);
+    quantile(&v, 0.5)
+}
+
+/// Workspaces shared by the algorithms (allocated once).
+struct Workspaces {
+    data: Data,
+    so: SoData,
+    fso: FdSoData,
+    out_vec: Vec<DVector<f64>>,
+    out_m1: Vec<DMatrix<f64>>,
+    out_m2: Vec<DMatrix<f64>>,
+    kkt: Option<KktData>,
+    impact: Option<ImpactData>,
+}
+
+/// Times one algorithm.
+fn time_algo(
+    algo: &str,
+    m: &Model,
+    st: &States,
+    ws: &mut Workspaces,
+    pool: &BatchPool,
+    plan: &Plan,
+) -> Result<Stats> {
+    let (q, v, a, tau) = (&st.q, &st.v, &st.a, &st.tau);
+    let batch_plan = Plan { per_call: st.q.len(), min_samples: plan.min_samples.min(20), ..*plan };
+    let Workspaces { data: d, so, fso, out_vec, out_m1, out_m2, kkt, impact } = ws;
+    let no_contacts = || Error::Io(format!("{algo} needs --contacts"));
+    match algo {
+        "rnea" => measure(plan, |i| {
+            black_box(rnea(m, d, &q[i], &v[i], &a[i], None)?);
+            Ok(())
+        }),
+        "crba" => measure(plan, |i| {
+            black_box(crba(m, d, &q[i])?);
+            Ok(())
+        }),
+        "aba" => measure(plan, |i| {
+            black_box(aba(m, d, &q[i], &v[i], &tau[i], None)?);
+            Ok(())
+        }),
+        "id_fo" => measure(plan, |i| {
+            id_derivatives(m, d, &q[i], &v[i], &a[i], None)?;
+            black_box(&d.dtau_dq);
+            Ok(())
+        }),
+        "fd_fo" => measure(plan, |i| {
+            fd_derivatives(m, d, &q[i], &v[i], &tau[i], None)?;
+            black_box(&d.dqdd_dq);
+            Ok(())
+        }),
+        "id_so" => measure(plan, |i| {
+            id_so_derivatives(m, d, so, &q[i], &v[i], &a[i], None)?;
+            black_box(&*so);
+            Ok(())
+        }),
+        "fd_so" => measure(plan, |i| {
+            fd_so_derivatives(m, d, fso, &q[i], &v[i], &tau[i], None)?;
+            black_box(&*fso);
+            Ok(())
+        }),
+        "batch_rnea" => measure(&batch_plan, |_| {
+            pool.install(|| rnea_batch(m, q, v, a, out_vec))?;
+            black_box(&*out_vec);
+            Ok(())
+        }),
+        "batch_aba" => measure(&batch_plan, |_| {
+            pool.install(|| aba_batch(m, q, v, tau, out_vec))?;
+            black_box(&*out_vec);
+            Ok(())
+        }),
+        "batch_id_fo" => measure(&batch_plan, |_| {
+            pool.install(|| id_derivatives_batch(m, q, v, a, out_m1, out_m2))?;
+            black_box(&*out_m1);
+            Ok(())
+        }),
+        "batch_fd_fo" => measure(&batch_plan, |_| {
+            pool.install(|| fd_derivatives_batch(m, q, v, tau, out_m1, out_m2))?;
+            black_box(&*out_m1);
+            Ok(())
+        }),
+        "kkt_fo" => {
+            let kd = kkt.as_mut().ok_or_else(no_contacts)?;
+            measure(plan, |i| {
+                kkt_derivatives(m, d, kd, &q[i], &v[i], &tau[i])?;
+                black_box(&kd.dqdd_dq);
+                Ok(())
+            })
+        }
+        "kkt_so" => {
+            let kd = kkt.as_mut().ok_or_else(no_contacts)?;
+            measure(plan, |i| {
+                kkt_so_derivatives(m, d, kd, &q[i], &v[i], &tau[i])?;
+                black_box(&kd.so);
+                Ok(())
+            })
+        }
+        "impact_fo" => {
+            let im = impact.as_mut().ok_or_else(no_contacts)?;
+            measure(plan, |i| {
+                impact_derivatives(m, d, im, &q[i], &v[i])?;
+                black_box(&im.dvplus_dq);
+                Ok(())
+            })
+        }
+        "impact_so" => {
+            let im = impact.as_mut().ok_or_else(no_contacts)?;
+            measure(plan, |i| {
+                impact_so_derivatives(m, d, im, &q[i], &v[i])?;
+                black_box(&im.so);
+                Ok(())
+            })
+        }
+        other => Err(Error::Io(format!("internal: no timing code for \"{other}\""))),
+    }
+}
+
+/// Default `--name`: the URDF file stem, or the built-in model's name.
+fn default_name(spec: &str) -> String {
+    match spec.strip_prefix("builtin:") {
+        Some(n) => n.to_string(),
+        None => Path::new(spec)
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| spec.to_string()),
+    }
+}
+
+/// Runs `sodyn bench` with its arguments (after the subcommand name).
+pub(crate) fn run(args: &[String]) -> Result<()> {
+    if args.iter().any(|a| a == "--help" || a == "-h") {
+        println!("{USAGE}");
+        return Ok(());
+    }
+    let o = parse(args)?;
+    let spec =
+        o.model.as_deref().ok_or_else(|| Error::Io(format!("--model is required\n\n{USAGE}")))?;
+    let algos = select_algos(o.algos.as_deref(), !o.contacts.is_empty())?;
+    let model = load_model(spec, o.floating_base)?;
+    for c in &o.contacts {
+        model.frame_id(c).map_err(|_| {
+            Error::Io(format!(
+                "--contacts: unknown frame \"{c}\" in model \"{}\" ({spec})",
+                model.name
+            ))
+        })?;
+    }
+    let name = o.name.clone().unwrap_or_else(|| default_name(spec));
+    let nstates = o.states.unwrap_or(if o.smoke { 8 } else { 1000 });
+    let st = States::new(&model, nstates, o.seed);
+    let pool = BatchPool::new(o.threads)?;
+    let nv = model.nv;
+    let needs = |p: &str| algos.iter().any(|a| a.starts_with(p));
+    let mut ws = Workspaces {
+        data: Data::new(&model),
+        so: SoData::new(&model),
+        fso: FdSoData::new(&model),
+        out_vec: if needs("batch_") { vec![DVector::zeros(nv); nstates] } else { vec![] },
+        out_m1: if needs("batch_") { vec![DMatrix::zeros(nv, nv); nstates] } else { vec![] },
+        out_m2: if needs("batch_") { vec![DMatrix::zeros(nv, nv); nstates] } else { vec![] },
+        kkt: None,
+        impact: None,
+    };
+    if !o.contacts.is_empty() {
+        let contacts = o
+            .contacts
+            .iter()
+            .map(|f| Contact::new(&model, f, Vector3::zeros()))
+            .collect::<Result<Vec<_>>>()?;
+        let cd = ContactData::new(&model, &contacts)?;
+        if needs("kkt_") {
+            ws.kkt = Some(KktData::new(&model, cd.clone()).with_second_order(&model));
+        }
+        if needs("impact_") {
+            ws.impact = Some(ImpactData::new(&model, cd).with_second_order(&model));
+        }
+    }
+    let plan = Plan {
+        nstates,
+        iters: o.iters,
+        max_seconds: o.max_seconds,
+        min_samples: 200,
+        per_call: 1,
+        smoke: o.smoke,
+    };
+    println!(
+        "# model={name} source={spec} base={} nq={} nv={} njoints={} nstates={nstates} seed={} \
+         timer_overhead_ns={:.1} contacts={} threads={} smoke={}",
+        if o.floating_base { "ff" } else { "fixed" },
+        model.nq,
+        model.nv,
+        model.njoints(),
+        o.seed,
+        timer_overhead_ns(),
+        if o.contacts.is_empty() { "none".to_string() } else { o.contacts.join(",") },
+        o.threads,
+        o.smoke as u8,
+    );
+    for algo in algos {
+        let s = time_algo(algo, &model, &st, &mut ws, &pool, &plan)
+            .map_err(|e| Error::Io(format!("bench {algo} on {name}: {e}")))?;
+        let extra = if algo.starts_with("batch_") {
+            let util = s.cpu_util.map(|u| format!(" cpu_util={u:.2}")).unwrap_or_default();
+            format!(" threads={} per=state{util}", o.threads)
+        } else {
+            String::new()
+        };
+        println!(
+            "model={name} nq={} nv={} algo={algo} median_us={:.4} p10_us={:.4} p90_us={:.4} \
+             batch={} samples={}{extra}",
+            model.nq, model.nv, s.med, s.p10, s.p90, s.batch, s.samples
+        );
+        use std::io::Write;
+        let _ = std::io::stdout().flush();
+    }
+    Ok(())
+}

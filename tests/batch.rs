@@ -1,0 +1,234 @@
+//! The batched API (`sodyn::batch`): results identical to the sequential calls, whatever the
+//! number of threads; errors name the failing state.
+
+use nalgebra::{DMatrix, DVector};
+use sodyn::Error;
+use sodyn::algo::{Data, aba, crba, rnea};
+use sodyn::batch::*;
+use sodyn::deriv::{
+    FdSoData, SoData, fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives,
+};
+use sodyn::model::{Model, builtin};
+use sodyn::rng::Rng;
+
+struct States {
+    q: Vec<DVector<f64>>,
+    v: Vec<DVector<f64>>,
+    a: Vec<DVector<f64>>,
+    tau: Vec<DVector<f64>>,
+}
+
+fn states(m: &Model, n: usize, seed: u64) -> States {
+    let mut rng = Rng::new(seed);
+    let mut s = States { q: vec![], v: vec![], a: vec![], tau: vec![] };
+    for _ in 0..n {
+        s.q.push(m.random_configuration(&mut rng));
+        let mut r = || DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
+        s.v.push(r());
+        s.a.push(r());
+        s.tau.push(r());
+    }
+    s
+}
+
+fn models() -> Vec<Model> {
+    vec![
+        builtin::quadruped(),
+        builtin::humanoid(),
+        builtin::random_tree(12, 3, true),
+        builtin::random_tree(9, 5, false),
+    ]
+}
+
+fn vecs(m: &Model, n: usize) -> Vec<DVector<f64>> {
+    vec![DVector::zeros(m.nv); n]
+}
+
+fn mats(m: &Model, n: usize) -> Vec<DMatrix<f64>> {
+    vec![DMatrix::zeros(m.nv, m.nv); n]
+}
+
+/// Runs every batched function (in the current pool) and compares with sequential calls.
+fn check_identical(m: &Model, s: &States, label: &str) {
+    let n = s.q.len();
+    let mut d = Data::new(m);
+
+    let mut tau = vecs(m, n);
+    rnea_batch(m, &s.q, &s.v, &s.a, &mut tau).unwrap();
+    let mut mm = mats(m, n);
+    crba_batch(m, &s.q, &mut mm).unwrap();
+    let mut qdd = vecs(m, n);
+    aba_batch(m, &s.q, &s.v, &s.tau, &mut qdd).unwrap();
+    let (mut idq, mut idv) = (mats(m, n), mats(m, n));
+    id_derivatives_batch(m, &s.q, &s.v, &s.a, &mut idq, &mut idv).unwrap();
+    let (mut fdq, mut fdv) = (mats(m, n), mats(m, n));
+    fd_derivatives_batch(m, &s.q, &s.v, &s.tau, &mut fdq, &mut fdv).unwrap();
+
+    for k in 0..n {
+        let at = format!("{label}: model {} state {k}", m.name);
+        assert_eq!(tau[k], *rnea(m, &mut d, &s.q[k], &s.v[k], &s.a[k], None).unwrap(), "rnea {at}");
+        assert_eq!(mm[k], *crba(m, &mut d, &s.q[k]).unwrap(), "crba {at}");
+        assert_eq!(qdd[k], *aba(m, &mut d, &s.q[k], &s.v[k], &s.tau[k], None).unwrap(), "aba {at}");
+        id_derivatives(m, &mut d, &s.q[k], &s.v[k], &s.a[k], None).unwrap();
+        assert_eq!(idq[k], d.dtau_dq, "dtau_dq {at}");
+        assert_eq!(idv[k], d.dtau_dv, "dtau_dv {at}");
+        fd_derivatives(m, &mut d, &s.q[k], &s.v[k], &s.tau[k], None).unwrap();
+        assert_eq!(fdq[k], d.dqdd_dq, "dqdd_dq {at}");
+        assert_eq!(fdv[k], d.dqdd_dv, "dqdd_dv {at}");
+    }
+}
+
+/// Second-order batched functions against sequential calls (small models: nv³ tensors).
+fn check_identical_so(m: &Model, s: &States, label: &str) {
+    let n = s.q.len();
+    let mut d = Data::new(m);
+    let mut so = vec![SoData::new(m); n];
+    id_so_derivatives_batch(m, &s.q, &s.v, &s.a, &mut so).unwrap();
+    let mut fso = vec![FdSoData::new(m); n];
+    fd_so_derivatives_batch(m, &s.q, &s.v, &s.tau, &mut fso).unwrap();
+    let mut so1 = SoData::new(m);
+    let mut fso1 = FdSoData::new(m);
+    for k in 0..n {
+        let at = format!("{label}: model {} state {k}", m.name);
+        id_so_derivatives(m, &mut d, &mut so1, &s.q[k], &s.v[k], &s.a[k], None).unwrap();
+        assert_eq!(so[k].d2tau_dq2().as_slice(), so1.d2tau_dq2().as_slice(), "d2tau_dq2 {at}");
+        assert_eq!(so[k].d2tau_dv2().as_slice(), so1.d2tau_dv2().as_slice(), "d2tau_dv2 {at}");
+        assert_eq!(so[k].d2tau_dqdv().as_slice(), so1.d2tau_dqdv().as_slice(), "d2tau_dqdv {at}");
+        assert_eq!(so[k].dm_dq().as_slice(), so1.dm_dq().as_slice(), "dM_dq {at}");
+        fd_so_derivatives(m, &mut d, &mut fso1, &s.q[k], &s.v[k], &s.tau[k], None).unwrap();
+        assert_eq!(fso[k].d2qdd_dq2().as_slice(), fso1.d2qdd_dq2().as_slice(), "d2qdd_dq2 {at}");
+        assert_eq!(fso[k].d2qdd_dv2().as_slice(), fso1.d2qdd_dv2().as_slice(), "d2qdd_dv2 {at}");
+        assert_eq!(fso[k].d2qdd_dqdv().as_slice(), fso1.d2qdd_dqdv().as_slice(), "d2qdd_dqdv {at}");
+        assert_eq!(
+            fso[k].d2qdd_dtaudq().as_slice(),
+            fso1.d2qdd_dtaudq().as_slice(),
+            "d2qdd_dtaudq {at}"
+        );
+    }
+}
+
+#[test]
+fn batch_equals_sequential_global_pool() {
+    for (i, m) in models().iter().enumerate() {
+        // 37 states: chunks of unequal length.
+        check_identical(m, &states(m, 37, 10 + i as u64), "global pool");
+    }
+}
+
+#[test]
+fn batch_equals_sequential_one_and_two_threads() {
+    for threads in [1, 2] {
+        let pool = BatchPool::new(threads).unwrap();
+        assert_eq!(pool.threads(), threads);
+        for (i, m) in models().iter().enumerate() {
+            let s = states(m, 23, 20 + i as u64);
+            pool.install(|| check_identical(m, &s, &format!("{threads} threads")));
+        }
+    }
+}
+
+#[test]
+fn batch_second_order_equals_sequential() {
+    let pool = BatchPool::new(2).unwrap();
+    for m in [builtin::quadruped(), builtin::random_tree(8, 7, true)] {
+        let s = states(&m, 9, 30);
+        check_identical_so(&m, &s, "global pool");
+        pool.install(|| check_identical_so(&m, &s, "2 threads"));
+    }
+}
+
+#[test]
+fn empty_batch_is_ok() {
+    let m = builtin::quadruped();
+    let mut out: Vec<DVector<f64>> = vec![];
+    rnea_batch(&m, &[], &[], &[], &mut out).unwrap();
+    let (mut a, mut b): (Vec<DMatrix<f64>>, Vec<DMatrix<f64>>) = (vec![], vec![]);
+    id_derivatives_batch(&m, &[], &[], &[], &mut a, &mut b).unwrap();
+}
+
+/// The quadruped has a free-flyer root: a non-unit quaternion in state `k` must be reported
+/// as an error of state `k`.
+#[test]
+fn invalid_configuration_names_the_state() {
+    let m = builtin::quadruped();
+    let n = 40;
+    let k = 29;
+    let mut s = states(&m, n, 4);
+    for x in s.q[k].iter_mut().skip(3).take(4) {
+        *x *= 2.0;
+    }
+    let check = |e: Error| {
+        assert!(matches!(e, Error::InvalidConfiguration { .. }), "variant kept: {e:?}");
+        let msg = e.to_string();
+        assert!(msg.contains(&format!("state {k}")), "message names state {k}: {msg}");
+    };
+    let pool = BatchPool::new(2).unwrap();
+    check(
+        id_derivatives_batch(&m, &s.q, &s.v, &s.a, &mut mats(&m, n), &mut mats(&m, n)).unwrap_err(),
+    );
+    check(
+        pool.install(|| {
+            fd_derivatives_batch(&m, &s.q, &s.v, &s.tau, &mut mats(&m, n), &mut mats(&m, n))
+        })
+        .unwrap_err(),
+    );
+    check(rnea_batch(&m, &s.q, &s.v, &s.a, &mut vecs(&m, n)).unwrap_err());
+    check(aba_batch(&m, &s.q, &s.v, &s.tau, &mut vecs(&m, n)).unwrap_err());
+    check(crba_batch(&m, &s.q, &mut mats(&m, n)).unwrap_err());
+    check(
+        id_so_derivatives_batch(&m, &s.q, &s.v, &s.a, &mut vec![SoData::new(&m); n]).unwrap_err(),
+    );
+}
+
+#[test]
+fn first_failing_state_is_reported() {
+    let m = builtin::random_tree(10, 2, false);
+    let n = 50;
+    let mut s = states(&m, n, 5);
+    // A wrong-length velocity in state 31 and a non-finite acceleration in state 12 (and 44):
+    // the lowest index wins, whatever the thread that met it first.
+    s.v[31] = DVector::zeros(m.nv + 1);
+    s.a[12][0] = f64::NAN;
+    s.a[44][0] = f64::INFINITY;
+    for threads in [1, 2] {
+        let pool = BatchPool::new(threads).unwrap();
+        let e = pool
+            .install(|| {
+                id_derivatives_batch(&m, &s.q, &s.v, &s.a, &mut mats(&m, n), &mut mats(&m, n))
+            })
+            .unwrap_err();
+        assert!(matches!(e, Error::NotFinite { .. }), "{e:?}");
+        assert!(e.to_string().contains("state 12"), "{e}");
+    }
+    s.a[12][0] = 0.0;
+    s.a[44][0] = 0.0;
+    let e = rnea_batch(&m, &s.q, &s.v, &s.a, &mut vecs(&m, n)).unwrap_err();
+    assert!(
+        matches!(e, Error::Dimension { expected, got, .. } if expected == m.nv && got == m.nv + 1)
+    );
+    assert!(e.to_string().contains("state 31"), "{e}");
+}
+
+#[test]
+fn inconsistent_lengths_and_shapes_are_errors() {
+    let m = builtin::quadruped();
+    let s = states(&m, 5, 6);
+    // One velocity too few.
+    let e = rnea_batch(&m, &s.q, &s.v[..4], &s.a, &mut vecs(&m, 5)).unwrap_err();
+    assert!(e.to_string().contains("vs"), "{e}");
+    // One output too few.
+    let e =
+        id_derivatives_batch(&m, &s.q, &s.v, &s.a, &mut mats(&m, 4), &mut mats(&m, 5)).unwrap_err();
+    assert!(e.to_string().contains("out_dq"), "{e}");
+    // A wrongly sized output matrix.
+    let mut dv = mats(&m, 5);
+    dv[3] = DMatrix::zeros(m.nv, m.nv - 1);
+    let e = id_derivatives_batch(&m, &s.q, &s.v, &s.a, &mut mats(&m, 5), &mut dv).unwrap_err();
+    assert!(e.to_string().contains("out_dv[3]"), "{e}");
+    // Tensor workspaces made for another model.
+    let other = builtin::humanoid();
+    let e = id_so_derivatives_batch(&m, &s.q, &s.v, &s.a, &mut vec![SoData::new(&other); 5])
+        .unwrap_err();
+    assert!(e.to_string().contains("out[0]"), "{e}");
+    assert!(BatchPool::new(0).is_err());
+}

@@ -1,0 +1,264 @@
+//! The `sodyn` binary: `info`, `random-state` + `eval` round trip (README schema), error exits,
+//! and `bench --smoke`'s line format.
+
+use nalgebra::{DMatrix, DVector};
+use serde_json::Value;
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn sodyn(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sodyn"))
+        .args(args)
+        .env("RUST_BACKTRACE", "1")
+        .output()
+        .expect("run the sodyn binary")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A fresh path in the test scratch directory.
+fn tmp(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("cli-tests");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(format!("{}-{name}", std::process::id()))
+}
+
+fn assert_ok(o: &Output, what: &str) {
+    assert!(o.status.success(), "{what} failed: {}\n{}", stderr(o), stdout(o));
+}
+
+/// Exit code 1, a `sodyn: error:` message, no panic or backtrace.
+fn assert_clean_failure(o: &Output, what: &str) -> String {
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(1), "{what}: exit code; stderr: {err}");
+    assert!(err.contains("error"), "{what}: {err}");
+    assert!(!err.contains("panicked"), "{what} panicked: {err}");
+    assert!(!err.contains("backtrace"), "{what} printed a backtrace: {err}");
+    err
+}
+
+fn vector(v: &Value, key: &str, n: usize) -> DVector<f64> {
+    let a = v[key].as_array().unwrap_or_else(|| panic!("key {key} is not a list"));
+    assert_eq!(a.len(), n, "length of {key}");
+    DVector::from_iterator(n, a.iter().map(|x| x.as_f64().expect("number")))
+}
+
+fn matrix(v: &Value, key: &str, n: usize) -> DMatrix<f64> {
+    let rows = v[key].as_array().unwrap_or_else(|| panic!("key {key} is not a list"));
+    assert_eq!(rows.len(), n, "rows of {key}");
+    let mut m = DMatrix::zeros(n, n);
+    for (i, r) in rows.iter().enumerate() {
+        let r = r.as_array().unwrap_or_else(|| panic!("{key}[{i}] is not a list"));
+        assert_eq!(r.len(), n, "columns of {key}[{i}]");
+        for (j, x) in r.iter().enumerate() {
+            m[(i, j)] = x.as_f64().expect("number");
+        }
+    }
+    m
+}
+
+fn check_tensor_shape(v: &Value, key: &str, n: usize) {
+    let t = v[key].as_array().unwrap_or_else(|| panic!("key {key} missing"));
+    assert_eq!(t.len(), n, "{key} dim 0");
+    for (i, m) in t.iter().enumerate() {
+        let m = m.as_array().unwrap();
+        assert_eq!(m.len(), n, "{key}[{i}] dim 1");
+        for r in m {
+            let r = r.as_array().unwrap();
+            assert_eq!(r.len(), n, "{key}[{i}][..] dim 2");
+            assert!(r.iter().all(|x| x.as_f64().is_some_and(f64::is_finite)), "{key} finite");
+        }
+    }
+}
+
+#[test]
+fn info_on_builtin_model() {
+    let o = sodyn(&["info", "--model", "builtin:quadruped"]);
+    assert_ok(&o, "info");
+    let out = stdout(&o);
+    assert!(out.contains("nq = 19, nv = 18"), "{out}");
+    assert!(out.contains("root_joint") && out.contains("free_flyer"), "{out}");
+}
+
+#[test]
+fn random_state_eval_round_trip() {
+    let state = tmp("state.json");
+    let s = state.to_str().unwrap();
+    let o = sodyn(&["random-state", "--model", "builtin:quadruped", "--seed", "3", "--output", s]);
+    assert_ok(&o, "random-state");
+    let st: Value = serde_json::from_str(&std::fs::read_to_string(&state).unwrap()).unwrap();
+    let (nq, nv) = (19, 18);
+    let q = vector(&st, "q", nq);
+    let (v, a, tau_in) = (vector(&st, "v", nv), vector(&st, "a", nv), vector(&st, "tau", nv));
+    assert!((q.rows(3, 4).norm() - 1.0).abs() < 1e-12, "unit quaternion");
+    assert!(v.iter().chain(a.iter()).all(|x| x.abs() <= 1.0));
+
+    for order in ["1", "2"] {
+        let o = sodyn(&["eval", "--model", "builtin:quadruped", "--state", s, "--order", order]);
+        assert_ok(&o, "eval");
+        let out: Value = serde_json::from_str(&stdout(&o)).expect("eval prints one JSON object");
+        assert_eq!(out["model"], "quadruped");
+        assert_eq!(out["nq"], nq);
+        assert_eq!(out["nv"], nv);
+        let g = vector(&out, "gravity", 6);
+        assert_eq!(g.as_slice(), &[0.0, 0.0, 0.0, 0.0, 0.0, -9.81]);
+        let joints = out["joints"].as_array().expect("joints");
+        assert_eq!(joints.len(), 13);
+        for key in ["name", "type", "parent", "idx_q", "nq", "idx_v", "nv"] {
+            assert!(joints[0].get(key).is_some(), "joints[0].{key}");
+        }
+        let tau = vector(&out, "tau", nv);
+        let b = vector(&out, "b", nv);
+        let qdd = vector(&out, "qdd", nv);
+        let m = matrix(&out, "M", nv);
+        for key in ["dtau_dq", "dtau_dv", "dqdd_dq", "dqdd_dv"] {
+            matrix(&out, key, nv);
+        }
+        let minv = matrix(&out, "Minv", nv);
+        // Consistency: τ = M a + b, M q̈ + b = τ_in, M M⁻¹ = I.
+        assert!((&m * &a + &b - &tau).amax() < 1e-9, "tau = M a + b");
+        assert!((&m * &qdd + &b - &tau_in).amax() < 1e-9, "M qdd + b = tau");
+        assert!((&m * &minv - DMatrix::identity(nv, nv)).amax() < 1e-9, "M Minv = I");
+        let tensors = [
+            "d2tau_dq2",
+            "d2tau_dv2",
+            "d2tau_dqdv",
+            "dM_dq",
+            "d2qdd_dq2",
+            "d2qdd_dv2",
+            "d2qdd_dqdv",
+            "d2qdd_dtaudq",
+        ];
+        for key in tensors {
+            if order == "2" {
+                check_tensor_shape(&out, key, nv);
+            } else {
+                assert!(out.get(key).is_none(), "{key} only with --order 2");
+            }
+        }
+    }
+}
+
+#[test]
+fn wrong_length_state_key_is_an_error() {
+    let state = tmp("short-v.json");
+    std::fs::write(&state, r#"{"v": [0.1, 0.2, 0.3]}"#).unwrap();
+    let o = sodyn(&["eval", "--model", "builtin:quadruped", "--state", state.to_str().unwrap()]);
+    let err = assert_clean_failure(&o, "short v");
+    assert!(err.contains("\"v\""), "names the key: {err}");
+    assert!(err.contains("expected 18"), "names the expected length: {err}");
+}
+
+#[test]
+fn unknown_model_is_an_error() {
+    let o = sodyn(&["info", "--model", "builtin:no_such_robot"]);
+    let err = assert_clean_failure(&o, "unknown built-in");
+    assert!(err.contains("no_such_robot"), "{err}");
+    let o = sodyn(&["info", "--model", "/nonexistent/robot.urdf"]);
+    let err = assert_clean_failure(&o, "missing URDF");
+    assert!(err.contains("robot.urdf"), "{err}");
+}
+
+#[test]
+fn malformed_urdf_is_a_clean_error() {
+    let path = tmp("broken_robot.urdf");
+    std::fs::write(&path, "<robot name=\"r\">\n  <link name=\"a\">\n    <inertial>\n</robot>\n")
+        .unwrap();
+    for cmd in ["info", "random-state"] {
+        let o = sodyn(&[cmd, "--model", path.to_str().unwrap()]);
+        let err = assert_clean_failure(&o, "malformed URDF");
+        assert!(err.contains("broken_robot.urdf"), "names the file: {err}");
+    }
+    let o = sodyn(&["bench", "--smoke", "--model", path.to_str().unwrap()]);
+    let err = assert_clean_failure(&o, "bench on a malformed URDF");
+    assert!(err.contains("broken_robot.urdf"), "names the file: {err}");
+}
+
+/// Parses `key=value` fields of a bench line, checking the fixed leading fields.
+fn parse_bench_line(line: &str) -> Vec<(String, String)> {
+    let fields: Vec<(String, String)> = line
+        .split_whitespace()
+        .map(|f| {
+            let (k, v) = f.split_once('=').unwrap_or_else(|| panic!("field {f} in {line}"));
+            (k.to_string(), v.to_string())
+        })
+        .collect();
+    let keys: Vec<&str> = fields.iter().take(9).map(|(k, _)| k.as_str()).collect();
+    assert_eq!(
+        keys,
+        ["model", "nq", "nv", "algo", "median_us", "p10_us", "p90_us", "batch", "samples"],
+        "{line}"
+    );
+    for (k, v) in &fields[4..7] {
+        let x: f64 = v.parse().unwrap_or_else(|_| panic!("{k}={v} in {line}"));
+        assert!(x.is_finite() && x > 0.0, "{k}={v} in {line}");
+    }
+    for (k, v) in &fields[7..9] {
+        let n: usize = v.parse().unwrap_or_else(|_| panic!("{k}={v} in {line}"));
+        assert!(n >= 1, "{line}");
+    }
+    fields
+}
+
+#[test]
+fn bench_smoke_prints_the_line_format() {
+    let o = sodyn(&["bench", "--model", "builtin:quadruped", "--smoke", "--name", "quad"]);
+    assert_ok(&o, "bench --smoke");
+    let out = stdout(&o);
+    let mut algos = vec![];
+    for line in out.lines().filter(|l| !l.starts_with('#')) {
+        let f = parse_bench_line(line);
+        assert_eq!(f[0].1, "quad");
+        assert_eq!(f[1].1, "19");
+        assert_eq!(f[2].1, "18");
+        algos.push(f[3].1.clone());
+    }
+    for a in ["rnea", "crba", "aba", "id_fo", "fd_fo", "id_so", "fd_so", "batch_id_fo"] {
+        assert!(algos.iter().any(|x| x == a), "algo {a} missing from:\n{out}");
+    }
+}
+
+#[test]
+fn bench_options_are_validated() {
+    let base = ["bench", "--model", "builtin:quadruped", "--smoke"];
+    let with = |extra: &[&str]| sodyn(&[&base[..], extra].concat());
+
+    let err = assert_clean_failure(&with(&["--algos", "rnea,warp_drive"]), "unknown algo");
+    assert!(err.contains("warp_drive") && err.contains("id_so") && err.contains("fd_fo"), "{err}");
+
+    let err = assert_clean_failure(&with(&["--algos", "kkt_fo"]), "contact algo without contacts");
+    assert!(err.contains("kkt_fo") && err.contains("--contacts"), "{err}");
+
+    let err = assert_clean_failure(&with(&["--contacts", "LF_FOOT,NO_SUCH_FOOT"]), "bad frame");
+    assert!(err.contains("NO_SUCH_FOOT"), "{err}");
+
+    // Valid contact frames are accepted (and recorded in the header line).
+    let o = with(&["--contacts", "LF_FOOT,RF_FOOT,LH_FOOT,RH_FOOT", "--algos", "rnea,batch_id_fo"]);
+    assert_ok(&o, "bench with contacts");
+    let out = stdout(&o);
+    assert!(out.contains("contacts=LF_FOOT,RF_FOOT,LH_FOOT,RH_FOOT"), "{out}");
+    assert_eq!(out.lines().filter(|l| l.starts_with("model=")).count(), 2, "{out}");
+
+    // The contact algorithms run with contacts.
+    let o = with(&[
+        "--contacts",
+        "LF_FOOT,RF_FOOT,LH_FOOT,RH_FOOT",
+        "--algos",
+        "kkt_fo,kkt_so,impact_fo,impact_so",
+    ]);
+    assert_ok(&o, "bench contact algorithms");
+    let out = stdout(&o);
+    for a in ["kkt_fo", "kkt_so", "impact_fo", "impact_so"] {
+        assert!(out.contains(&format!("algo={a} ")), "{a} missing:\n{out}");
+    }
+
+    assert_clean_failure(&with(&["--threads", "0"]), "zero threads");
+    assert_clean_failure(&with(&["--states", "many"]), "bad --states");
+    assert_clean_failure(&sodyn(&["bench", "--smoke"]), "missing --model");
+}
