@@ -376,3 +376,19 @@ fn singular_mass_matrix_is_reported_by_the_factorising_algorithms() {
     assert!(e.to_string().contains("j2"), "{e}");
     assert!(deriv::fd_derivatives(&m, &mut d, &q, &z, &z, None).is_err());
 }
+
+#[test]
+fn workspaces_of_another_model_are_rejected() {
+    let small = builtin::serial_chain(3);
+    let big = builtin::quadruped();
+    let mut rng = Rng::new(10);
+    let (q, v, a) = random_state(&big, &mut rng);
+    let mut d_small = Data::new(&small);
+    assert!(matches!(rnea(&big, &mut d_small, &q, &v, &a, None), Err(Error::Dimension { .. })));
+    let mut d = Data::new(&big);
+    let mut so_small = deriv::SoData::new(&small);
+    let e = deriv::id_so_derivatives(&big, &mut d, &mut so_small, &q, &v, &a, None).unwrap_err();
+    assert!(e.to_string().contains("SoData"), "{e}");
+    let mut fso_small = deriv::FdSoData::new(&small);
+    assert!(deriv::fd_so_derivatives(&big, &mut d, &mut fso_small, &q, &v, &a, None).is_err());
+}

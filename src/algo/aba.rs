@@ -20,6 +20,7 @@ pub fn aba<'a>(
     fext: Option<&[Force]>,
 ) -> Result<&'a DVector<f64>> {
     model.check_q(q)?;
+    data.check(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("tau", tau, model.nv)?;
     check_fext(model, fext)?;

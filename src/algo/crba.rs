@@ -24,6 +24,7 @@ pub(crate) fn world_subspaces_and_inertias(model: &Model, data: &mut Data) {
 /// Also leaves `o_m_i`, `s_world` and `ic_world` (composite) in `data`. Returns `data.m`.
 pub fn crba<'a>(model: &Model, data: &'a mut Data, q: &DVector<f64>) -> Result<&'a DMatrix<f64>> {
     model.check_q(q)?;
+    data.check(model)?;
     crba_unchecked(model, data, q);
     Ok(&data.m)
 }

@@ -81,6 +81,20 @@ pub struct Data {
 }
 
 impl Data {
+    /// Checks that this workspace was built for a model of `model`'s size.
+    pub fn check(&self, model: &Model) -> crate::error::Result<()> {
+        if self.v.len() != model.njoints()
+            || self.tau.len() != model.nv
+            || self.z_psidd.len() != model.nv
+        {
+            return Err(crate::error::Error::Dimension {
+                what: "Data (workspace built for another model): nv".into(),
+                expected: model.nv,
+                got: self.tau.len(),
+            });
+        }
+        Ok(())
+    }
     /// A workspace for `model`.
     pub fn new(model: &Model) -> Self {
         let n = model.njoints();

@@ -39,6 +39,7 @@ pub fn forward_kinematics(
     a: Option<&DVector<f64>>,
 ) -> Result<()> {
     model.check_q(q)?;
+    data.check(model)?;
     if let Some(v) = v {
         check_vec("v", v, model.nv)?;
     }

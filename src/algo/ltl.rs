@@ -13,6 +13,7 @@ use nalgebra::{DMatrix, DVector};
 /// branch-induced sparsity: cost `O(n d²)` for a tree of depth `d`. A non-positive pivot is
 /// reported as [`Error::Singular`] naming the degree of freedom and its joint.
 pub fn factorize_ltl(model: &Model, data: &mut Data) -> Result<()> {
+    data.check(model)?;
     data.ltl.copy_from(&data.m);
     ltl_in_place(model, &mut data.ltl)
 }
@@ -49,6 +50,7 @@ pub(crate) fn ltl_in_place(model: &Model, h: &mut DMatrix<f64>) -> Result<()> {
 
 /// Solves `M x = b` in place with the factor in `data.ltl` (see [`factorize_ltl`]).
 pub fn solve_ltl(model: &Model, data: &Data, b: &mut DVector<f64>) -> Result<()> {
+    data.check(model)?;
     check_vec("b", b, model.nv)?;
     ltl_solve_in_place(model, &data.ltl, b.as_mut_slice());
     Ok(())
@@ -85,6 +87,7 @@ pub(crate) fn ltl_solve_in_place(model: &Model, h: &DMatrix<f64>, x: &mut [f64])
 
 /// Solves `M X = B` column by column in place.
 pub fn solve_ltl_matrix(model: &Model, data: &Data, b: &mut DMatrix<f64>) -> Result<()> {
+    data.check(model)?;
     if b.nrows() != model.nv {
         return Err(Error::Dimension { what: "B rows".into(), expected: model.nv, got: b.nrows() });
     }

@@ -40,6 +40,7 @@ pub fn rnea<'a>(
     fext: Option<&[Force]>,
 ) -> Result<&'a DVector<f64>> {
     model.check_q(q)?;
+    data.check(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("a", a, model.nv)?;
     check_fext(model, fext)?;
@@ -97,6 +98,7 @@ pub fn nonlinear_effects<'a>(
     v: &DVector<f64>,
 ) -> Result<&'a DVector<f64>> {
     model.check_q(q)?;
+    data.check(model)?;
     check_vec("v", v, model.nv)?;
     let zero = std::mem::replace(&mut data.tmp_v, DVector::zeros(0));
     let mut zero = zero;

@@ -29,7 +29,15 @@ fn check(
     model.check_q(q)?;
     check_vec("v", v, model.nv)?;
     check_vec("a", a, model.nv)?;
-    check_vec("lambda", lambda, cd.dim())
+    check_vec("lambda", lambda, cd.dim())?;
+    if cd.jac.ncols() != model.nv {
+        return Err(crate::error::Error::Dimension {
+            what: "ContactData (built for another model): nv".into(),
+            expected: model.nv,
+            got: cd.jac.ncols(),
+        });
+    }
+    Ok(())
 }
 
 /// First-order derivatives of constrained inverse dynamics at `(q, q̇, q̈, λ)`: fills
@@ -44,6 +52,7 @@ pub fn constrained_id_derivatives(
     lambda: &DVector<f64>,
 ) -> Result<()> {
     check(model, cd, v, a, lambda, q)?;
+    data.check(model)?;
     id_derivatives_unchecked(model, data, q, v, a, None);
     contact_terms_fo(model, data, cd, lambda);
     Ok(())
@@ -72,6 +81,8 @@ pub fn constrained_id_so_derivatives(
     lambda: &DVector<f64>,
 ) -> Result<()> {
     check(model, cd, v, a, lambda, q)?;
+    data.check(model)?;
+    so.check(model)?;
     id_so_unchecked(model, data, so, q, v, a, None, -model.gravity);
     contact_terms_fo(model, data, cd, lambda);
     let b = base(model, data, cd);

@@ -47,6 +47,7 @@ pub fn fd_derivatives(
     fext: Option<&[Force]>,
 ) -> Result<()> {
     model.check_q(q)?;
+    data.check(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("tau", tau, model.nv)?;
     check_fext(model, fext)?;
@@ -144,9 +145,18 @@ pub fn fd_so_derivatives(
     fext: Option<&[Force]>,
 ) -> Result<()> {
     model.check_q(q)?;
+    data.check(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("tau", tau, model.nv)?;
     check_fext(model, fext)?;
+    fso.id.check(model)?;
+    if fso.d2qdd_dq2.dims() != (model.nv, model.nv, model.nv) {
+        return Err(crate::error::Error::Dimension {
+            what: "FdSoData (built for another model): nv".into(),
+            expected: model.nv,
+            got: fso.d2qdd_dq2.dims().0,
+        });
+    }
     let n = model.nv;
     aba_unchecked(model, data, q, v, tau, fext)?;
     let qdd = std::mem::replace(&mut data.qdd, DVector::zeros(0));

@@ -31,6 +31,7 @@ pub fn id_derivatives(
     fext: Option<&[Force]>,
 ) -> Result<()> {
     model.check_q(q)?;
+    data.check(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("a", a, model.nv)?;
     check_fext(model, fext)?;

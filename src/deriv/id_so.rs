@@ -38,6 +38,20 @@ impl SoData {
             dm_dq: Tensor3::zeros(n, n, n),
         }
     }
+    /// Checks that this workspace was built for a model with `model.nv` degrees of freedom.
+    pub fn check(&self, model: &Model) -> Result<()> {
+        let n = model.nv;
+        for t in [&self.d2tau_dq2, &self.d2tau_dv2, &self.d2tau_dqdv, &self.dm_dq] {
+            if t.dims() != (n, n, n) {
+                return Err(crate::error::Error::Dimension {
+                    what: "SoData (workspace built for another model): nv".into(),
+                    expected: n,
+                    got: t.dims().0,
+                });
+            }
+        }
+        Ok(())
+    }
     /// `T[(i, j, k)] = ∂/∂q_k (∂τ_i/∂q_j)` (tangent space; not symmetric in `j, k` within a
     /// multi-DoF joint).
     pub fn d2tau_dq2(&self) -> &Tensor3 {
@@ -82,9 +96,11 @@ pub fn id_so_derivatives(
     fext: Option<&[Force]>,
 ) -> Result<()> {
     model.check_q(q)?;
+    data.check(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("a", a, model.nv)?;
     check_fext(model, fext)?;
+    so.check(model)?;
     id_so_unchecked(model, data, so, q, v, a, fext, -model.gravity);
     Ok(())
 }

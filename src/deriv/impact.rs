@@ -118,7 +118,18 @@ pub fn impact_dynamics(
     vminus: &DVector<f64>,
 ) -> Result<()> {
     model.check_q(q)?;
+    data.check(model)?;
     check_vec("vminus", vminus, model.nv)?;
+    if im.vplus.len() != model.nv || im.cd.jac.ncols() != model.nv {
+        return Err(Error::Dimension {
+            what: "ImpactData (built for another model): nv".into(),
+            expected: model.nv,
+            got: im.vplus.len(),
+        });
+    }
+    if let Some(so) = &im.so {
+        so.id.check(model)?;
+    }
     if !im.restitution.is_finite() || im.restitution < 0.0 {
         return Err(Error::Io(format!(
             "restitution {} must be finite and non-negative",

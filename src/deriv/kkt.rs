@@ -129,8 +129,19 @@ pub fn kkt_dynamics(
     tau: &DVector<f64>,
 ) -> Result<()> {
     model.check_q(q)?;
+    data.check(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("tau", tau, model.nv)?;
+    if kd.qdd.len() != model.nv || kd.cd.jac.ncols() != model.nv {
+        return Err(crate::error::Error::Dimension {
+            what: "KktData (built for another model): nv".into(),
+            expected: model.nv,
+            got: kd.qdd.len(),
+        });
+    }
+    if let Some(so) = &kd.so {
+        so.id.check(model)?;
+    }
     solve_unchecked(model, data, kd, q, v, tau)
 }
 

@@ -22,6 +22,7 @@ pub fn idfoza(
     out: &mut DMatrix<f64>,
 ) -> Result<()> {
     model.check_q(q)?;
+    data.check(model)?;
     check_vec("x", x, model.nv)?;
     if out.shape() != (model.nv, model.nv) {
         return Err(Error::Dimension {
@@ -111,7 +112,9 @@ pub fn idsoza<'a>(
     x: &DVector<f64>,
 ) -> Result<&'a Tensor3> {
     model.check_q(q)?;
+    data.check(model)?;
     check_vec("x", x, model.nv)?;
+    so.check(model)?;
     let mut zero = std::mem::replace(&mut data.tmp_v, DVector::zeros(0));
     zero.fill(0.0);
     id_so_unchecked(model, data, so, q, &zero, x, None, Motion::zero());
