@@ -190,6 +190,74 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
             rel_t(fso.d2qdd_dtaudq(), &reference::d2_aba_dtaudq(&m, qs, vs, ts)),
         );
     }
+
+    // Contacts: the two lowest-numbered leaf frames of different bodies for built-ins without
+    // soles; the humanoid's soles, the quadruped's feet.
+    let frames: Vec<&str> = ["left_sole", "right_sole", "LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"]
+        .into_iter()
+        .filter(|f| m.frame_id(f).is_ok())
+        .collect();
+    if !frames.is_empty() {
+        use crate::algo::Contact;
+        use crate::deriv::{
+            ContactData, ImpactData, KktData, constrained_id_so_derivatives, impact_so_derivatives,
+            kkt_so_derivatives,
+        };
+        use crate::reference::contact as oracle;
+        let contacts: Vec<Contact> =
+            frames.iter().map(|f| Contact::new(&m, f, Vector3::zeros())).collect::<Result<_>>()?;
+        println!("\ncontacts on {} (oracle for second order only up to 20 DoF)", frames.join(", "));
+        let cd = ContactData::new(&m, &contacts)?;
+        let lam = DVector::from_fn(cd.dim(), |i, _| if i % 3 == 2 { 50.0 } else { 5.0 });
+        let mut cd1 = cd.clone();
+        let t = time_us(|| {
+            constrained_id_so_derivatives(&m, &mut d, &mut cd1, &mut so, &q, &v, &a, &lam).unwrap();
+        });
+        constrained_id_so_derivatives(&m, &mut d, &mut cd1, &mut so, &q, &v, &a, &lam)?;
+        let ls = lam.as_slice();
+        row(
+            "constrained ID (IDSVA(-SO)c) dtau/dq",
+            t,
+            rel(&d.dtau_dq, &oracle::d_constrained_rnea_dq(&m, qs, vs, as_, &contacts, ls)),
+        );
+        row(
+            "      d2tau/dq2",
+            t,
+            rel_t(so.d2tau_dq2(), &oracle::d2_constrained_rnea_dq2(&m, qs, vs, as_, &contacts, ls)),
+        );
+        let mut kd = KktData::new(&m, cd.clone()).with_second_order(&m);
+        let t = time_us(|| {
+            kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+        });
+        kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau)?;
+        let fo = oracle::kkt_fo(&m, qs, vs, ts, &contacts);
+        row("kkt FO+SO dqdd/dq", t, rel(&kd.dqdd_dq, &fo.dqdd_dq));
+        row("      dlambda/dq", t, rel(&kd.dlambda_dq, &fo.dlambda_dq));
+        row(
+            "      dqdd/dv, dlambda/dv",
+            t,
+            rel(&kd.dqdd_dv, &fo.dqdd_dv).max(rel(&kd.dlambda_dv, &fo.dlambda_dv)),
+        );
+        if m.nv <= 20 {
+            let so_ref = oracle::kkt_so(&m, qs, vs, ts, &contacts);
+            let k = kd.so.as_ref().expect("allocated");
+            row("      d2qdd/dq2", t, rel_t(&k.d2qdd_dq2, &so_ref.d2qdd_dq2));
+            row("      d2lambda/dq2", t, rel_t(&k.d2lambda_dq2, &so_ref.d2lambda_dq2));
+        }
+        let mut im = ImpactData::new(&m, cd).with_second_order(&m);
+        let t = time_us(|| {
+            impact_so_derivatives(&m, &mut d, &mut im, &q, &v).unwrap();
+        });
+        impact_so_derivatives(&m, &mut d, &mut im, &q, &v)?;
+        let fo = oracle::impact_fo(&m, qs, vs, &contacts, 0.0);
+        row("impact FO+SO dvplus/dq", t, rel(&im.dvplus_dq, &fo.dvplus_dq));
+        row("      dimpulse/dq", t, rel(&im.dimpulse_dq, &fo.dimpulse_dq));
+        if m.nv <= 20 {
+            let so_ref = oracle::impact_so(&m, qs, vs, &contacts, 0.0);
+            let k = im.so.as_ref().expect("allocated");
+            row("      d2vplus/dq2", t, rel_t(&k.d2vplus_dq2, &so_ref.d2vplus_dq2));
+        }
+    }
     println!("\nmaximum relative error against the oracle: {worst:.2e}");
     Ok(())
 }

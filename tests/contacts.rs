@@ -289,3 +289,48 @@ fn contact_errors_name_the_problem() {
             .contains("restitution")
     );
 }
+
+/// Workspaces are reused across calls (and across states): a second call on the same state gives
+/// bit-identical results, and a call after another state equals a fresh workspace's.
+#[test]
+fn repeated_calls_on_reused_workspaces_are_identical() {
+    let m = builtin::quadruped();
+    let mut rng = Rng::new(36);
+    let contacts = contacts_of(&m, &["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"], &mut rng);
+    let (q, v, tau) = random_state(&m, &mut rng);
+    let (q2, v2, tau2) = random_state(&m, &mut rng);
+    let cd = ContactData::new(&m, &contacts).unwrap();
+    let mut d = Data::new(&m);
+    let mut kd = KktData::new(&m, cd.clone()).with_second_order(&m);
+    let mut im = ImpactData::new(&m, cd.clone()).with_second_order(&m);
+    kkt_so_derivatives(&m, &mut d, &mut kd, &q2, &v2, &tau2).unwrap();
+    impact_so_derivatives(&m, &mut d, &mut im, &q2, &v2).unwrap();
+    for _ in 0..2 {
+        kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+        impact_so_derivatives(&m, &mut d, &mut im, &q, &v).unwrap();
+    }
+    let mut fresh_d = Data::new(&m);
+    let mut fresh_k = KktData::new(&m, cd.clone()).with_second_order(&m);
+    let mut fresh_i = ImpactData::new(&m, cd).with_second_order(&m);
+    kkt_so_derivatives(&m, &mut fresh_d, &mut fresh_k, &q, &v, &tau).unwrap();
+    impact_so_derivatives(&m, &mut fresh_d, &mut fresh_i, &q, &v).unwrap();
+    let (a, b) = (kd.so.as_ref().unwrap(), fresh_k.so.as_ref().unwrap());
+    for (x, y) in [
+        (&a.d2qdd_dq2, &b.d2qdd_dq2),
+        (&a.d2qdd_dqdv, &b.d2qdd_dqdv),
+        (&a.d2lambda_dq2, &b.d2lambda_dq2),
+        (&a.d2lambda_dtaudq, &b.d2lambda_dtaudq),
+    ] {
+        assert_eq!(x.max_abs_diff(y), 0.0);
+    }
+    let (a, b) = (im.so.as_ref().unwrap(), fresh_i.so.as_ref().unwrap());
+    for (x, y) in [
+        (&a.d2vplus_dq2, &b.d2vplus_dq2),
+        (&a.d2vplus_dqdvminus, &b.d2vplus_dqdvminus),
+        (&a.d2impulse_dq2, &b.d2impulse_dq2),
+    ] {
+        assert_eq!(x.max_abs_diff(y), 0.0);
+    }
+    assert_eq!(kd.dqdd_dq, fresh_k.dqdd_dq);
+    assert_eq!(im.dvplus_dq, fresh_i.dvplus_dq);
+}

@@ -15,7 +15,7 @@ use super::contact::{
 use super::contact_kin::{Dir, djtl_dq, djz_dq};
 use super::id_fo::forward_pass_world;
 use super::id_so::{SoData, id_so_unchecked};
-use super::kkt::premultiply;
+use super::kkt::{copy_rows_zero_rest, premultiply};
 use crate::algo::Data;
 use crate::algo::internal::{crba_unchecked, ltl_in_place, ltl_solve_in_place};
 use crate::error::{Error, Result};
@@ -235,14 +235,8 @@ fn so_inner(
     id_so_unchecked(model, data, &mut so.id, q, &im.zero, &im.dv, None, Motion::zero());
     update_points(model, data, &mut im.cd, Motion::zero());
     let [rqq, rqv] = &mut so.r;
-    let src = so.id.d2tau_dq2();
-    for k in 0..n {
-        for j in 0..n {
-            for i in 0..n {
-                rqq[(i, j, k)] = src[(i, j, k)];
-            }
-        }
-    }
+    // Every entry is rewritten (contact rows zeroed: the G products add to all of them).
+    copy_rows_zero_rest(rqq, so.id.d2tau_dq2(), n);
     // − ∂²(Jᵀλ̂)/∂q² and ∂²(J w)/∂q².
     let mut zc = std::mem::take(&mut im.cd.zc);
     {

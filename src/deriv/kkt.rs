@@ -281,13 +281,9 @@ fn kkt_so_inner(
         (&mut *rvv, so.id.d2tau_dv2()),
         (&mut *rqv, so.id.d2tau_dqdv()),
     ] {
-        for k in 0..n {
-            for j in 0..n {
-                for i in 0..n {
-                    t[(i, j, k)] = src[(i, j, k)];
-                }
-            }
-        }
+        // Every entry is rewritten: ID rows copied, contact rows zeroed (the G products below
+        // add to all of them).
+        copy_rows_zero_rest(t, src, n);
     }
     rtq.fill(0.0);
     // ... minus ∂²(J_cᵀλ)/∂q² (IDSVA-SOc), and the contact-point kinematics rows.
@@ -351,6 +347,16 @@ fn kkt_so_inner(
         premultiply(&ri.rows(n, m), r, tl);
     }
     Ok(())
+}
+
+/// `t[0..n, :, :] = src`, `t[n.., :, :] = 0` (every entry written).
+pub(crate) fn copy_rows_zero_rest(t: &mut Tensor3, src: &Tensor3, n: usize) {
+    let (rows, _, _) = t.dims();
+    let dst = t.as_mut_slice();
+    for (col, s) in dst.chunks_exact_mut(rows).zip(src.as_slice().chunks_exact(n)) {
+        col[..n].copy_from_slice(s);
+        col[n..].fill(0.0);
+    }
 }
 
 /// `out ← −A · r` with `r` viewed as the matrix of its pages side by side.
