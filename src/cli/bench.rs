@@ -31,12 +31,14 @@ use std::time::Instant;
 pub(crate) const USAGE: &str = "\
 sodyn bench --model M [--floating-base] [--contacts F1,F2,...] [--algos a,b,...]
             [--states N] [--seed S] [--max-seconds X] [--iters N] [--threads N]
-            [--name NAME] [--smoke]
+            [--name NAME] [--smoke] [--calls N]
 Prints one line per algorithm:
   model=<name> nq=<> nv=<> algo=<algo> median_us=<> p10_us=<> p90_us=<> batch=<K> samples=<n>
 Defaults: all algorithms, --states 1000 (8 with --smoke), --seed 42, --max-seconds 4,
 --iters 20000, --threads 1 (worker threads of the batch_* algorithms), --name = the URDF file
-stem or the built-in model's name. --smoke runs every algorithm a few times only.";
+stem or the built-in model's name. --smoke runs every algorithm a few times only.
+--calls N makes exactly N untimed calls per algorithm (for instruction counts under
+`valgrind --tool=callgrind`: cost per call = difference of two runs / difference of N).";
 
 /// Algorithms that can be timed, in output order.
 const ALGOS: &[&str] = &[
@@ -75,6 +77,7 @@ struct BenchOptions {
     threads: usize,
     name: Option<String>,
     smoke: bool,
+    calls: Option<usize>,
 }
 
 fn parse_number<T: std::str::FromStr>(opt: &str, s: &str, what: &str) -> Result<T> {
@@ -94,6 +97,7 @@ fn parse(args: &[String]) -> Result<BenchOptions> {
         threads: 1,
         name: None,
         smoke: false,
+        calls: None,
     };
     let mut i = 0;
     while i < args.len() {
@@ -136,6 +140,7 @@ fn parse(args: &[String]) -> Result<BenchOptions> {
             }
             "--name" => o.name = Some(value()?),
             "--smoke" => o.smoke = true,
+            "--calls" => o.calls = Some(parse_number(opt, &value()?, "a non-negative integer")?),
             other => return Err(Error::Io(format!("unknown option \"{other}\"\n\n{USAGE}"))),
         }
         i += 1;
@@ -281,12 +286,21 @@ struct Plan {
     per_call: usize,
     /// `--smoke`: a few untimed-warm-up calls only.
     smoke: bool,
+    /// `--calls N`: exactly `N` untimed calls (instruction counting).
+    calls: Option<usize>,
 }
 
 /// Times `f(i)` (the algorithm at state `i`) as pin_bench's `bench()` does.
 fn measure(plan: &Plan, mut f: impl FnMut(usize) -> Result<()>) -> Result<Stats> {
     let n = plan.nstates;
     let mut idx = 0;
+    if let Some(calls) = plan.calls {
+        for _ in 0..calls {
+            f(idx)?;
+            idx = (idx + 1) % n;
+        }
+        return Ok(summarize(vec![0.0], plan.per_call));
+    }
     if plan.smoke {
         let mut samples = vec![];
         for _ in 0..3 {
@@ -545,6 +559,7 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
         min_samples: 200,
         per_call: 1,
         smoke: o.smoke,
+        calls: o.calls,
     };
     println!(
         "# model={name} source={spec} base={} nq={} nv={} njoints={} nstates={nstates} seed={} \
