@@ -11,7 +11,7 @@ use crate::algo::Data;
 use crate::algo::internal::check_fext;
 use crate::error::Result;
 use crate::model::{Model, check_vec};
-use crate::spatial::{Force, Motion, coriolis_b};
+use crate::spatial::{Force, Inertia, Motion};
 use crate::tensor::Tensor3;
 use nalgebra::{DVector, Matrix6};
 
@@ -25,22 +25,54 @@ pub struct SoData {
     d2tau_dv2: Tensor3,
     d2tau_dqdv: Tensor3,
     dm_dq: Tensor3,
+    /// Per DoF, contiguous: `[S, Ψ̇, Ψ̈, Ψ̇ + Ṡ]` (ground frame), refreshed on every call.
+    dof: Vec<[V6; 4]>,
+    /// DoFs of the strict ancestor joints of joint `j`: `anc_dofs[anc_start[j]..anc_start[j + 1]]`.
+    anc_dofs: Vec<usize>,
+    anc_start: Vec<usize>,
+    /// The tree this workspace was built for (checked on every call).
+    parents: Vec<usize>,
+    nvs: Vec<usize>,
 }
 
 impl SoData {
     /// Workspace for `model`.
     pub fn new(model: &Model) -> Self {
         let n = model.nv;
+        let mut anc_dofs = vec![];
+        let mut anc_start = vec![0];
+        for j in 0..model.njoints() {
+            if j > 0 {
+                let mut k = model.parents[j];
+                while k > 0 {
+                    anc_dofs.extend(model.idx_v[k]..model.idx_v[k] + model.nvs[k]);
+                    k = model.parents[k];
+                }
+            }
+            anc_start.push(anc_dofs.len());
+        }
         Self {
             d2tau_dq2: Tensor3::zeros(n, n, n),
             d2tau_dv2: Tensor3::zeros(n, n, n),
             d2tau_dqdv: Tensor3::zeros(n, n, n),
             dm_dq: Tensor3::zeros(n, n, n),
+            dof: vec![[[0.0; 6]; 4]; n],
+            anc_dofs,
+            anc_start,
+            parents: model.parents.clone(),
+            nvs: model.nvs.clone(),
         }
     }
-    /// Checks that this workspace was built for a model with `model.nv` degrees of freedom.
+    /// Checks that this workspace was built for `model` (same tree and degrees of freedom).
     pub fn check(&self, model: &Model) -> Result<()> {
         let n = model.nv;
+        if self.parents != model.parents || self.nvs != model.nvs || self.dof.len() != n {
+            return Err(crate::error::Error::Dimension {
+                what: "SoData (workspace built for another model): joints".into(),
+                expected: model.njoints(),
+                got: self.parents.len(),
+            });
+        }
         for t in [&self.d2tau_dq2, &self.d2tau_dv2, &self.d2tau_dqdv, &self.dm_dq] {
             if t.dims() != (n, n, n) {
                 return Err(crate::error::Error::Dimension {
@@ -72,16 +104,6 @@ impl SoData {
     pub fn dm_dq(&self) -> &Tensor3 {
         &self.dm_dq
     }
-}
-
-#[inline]
-fn mv(m: &Matrix6<f64>, x: &Motion) -> Force {
-    Force::from_vec6(&(m * x.to_vec6()))
-}
-
-#[inline]
-fn mtv(m: &Matrix6<f64>, x: &Motion) -> Force {
-    Force::from_vec6(&m.tr_mul(&x.to_vec6()))
 }
 
 /// Second-order derivatives of inverse dynamics at `(q, q̇, q̈)` (IDSVA-SO). Also computes the
@@ -118,6 +140,10 @@ pub(crate) fn id_so_unchecked(
     a0: Motion,
 ) {
     forward_pass_world(model, data, q, v, a, fext, a0);
+    for (c, d) in so.dof.iter_mut().enumerate() {
+        let ps = data.psid[c] + data.sdot[c];
+        *d = [v6m(&data.s_world[c]), v6m(&data.psid[c]), v6m(&data.psidd[c]), v6m(&ps)];
+    }
     for i in (1..model.njoints()).rev() {
         backward_step_so(model, data, so, i);
         backward_step_fo(model, data, i);
@@ -125,37 +151,156 @@ pub(crate) fn id_so_unchecked(
     }
 }
 
-/// Per-DoF precomputed operators of body `i` (DoF `p`).
-struct IOps {
-    t1: Force,        // I^C_i S_i
-    t2: Force,        // B^Cᵀ_i S_i
-    bs: Matrix6<f64>, // B(I^C_i, S_i)
-    a: Matrix6<f64>,  // 2(B(I^C_i, Ψ̇_i) + S_i×* B^C_i − B^C_i S_i×)
-    c: Matrix6<f64>,  // S_i×* I^C_i − I^C_i S_i×
-    d: Matrix6<f64>,  // S_i×* I^C_i + (I^C_i S_i)×̄*
-    g: Force,         // 2B^C_i Ψ̇_i + I^C_i Ψ̈_i + f^C_i ×̄* S_i
-    t4: Force,        // 2B^C_i S_i + I^C_i(Ψ̇_i + Ṡ_i)
+/// A spatial vector as plain components `[ang; lin]` (motion or force).
+type V6 = [f64; 6];
+/// A 6×6 matrix stored by columns: `m[c][r]`.
+type M6 = [[f64; 6]; 6];
+
+#[inline(always)]
+fn v6m(m: &Motion) -> V6 {
+    [m.ang.x, m.ang.y, m.ang.z, m.lin.x, m.lin.y, m.lin.z]
 }
 
-fn i_ops(data: &Data, i: usize, c: usize) -> IOps {
-    let ic = &data.ic_world[i];
-    let icm = ic.matrix();
-    let bc = &data.bc[i];
-    let s = data.s_world[c];
-    let psid = data.psid[c];
-    let sx = s.cross_matrix();
-    let sxf = s.cross_force_matrix();
-    let t1 = ic.mul_motion(&s);
-    IOps {
-        t1,
-        t2: mtv(bc, &s),
-        bs: coriolis_b(ic, &s),
-        a: (coriolis_b(ic, &psid) + sxf * bc - bc * sx) * 2.0,
-        c: sxf * icm - icm * sx,
-        d: sxf * icm + t1.crff_matrix(),
-        g: mv(bc, &psid) * 2.0 + ic.mul_motion(&data.psidd[c]) + data.ofc[i].crff(&s),
-        t4: mv(bc, &s) * 2.0 + ic.mul_motion(&(psid + data.sdot[c])),
+#[inline(always)]
+fn v6f(f: &Force) -> V6 {
+    [f.ang.x, f.ang.y, f.ang.z, f.lin.x, f.lin.y, f.lin.z]
+}
+
+#[inline(always)]
+fn dot(a: &V6, b: &V6) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5]
+}
+
+/// `α a + β b`.
+#[inline(always)]
+fn lin2(alpha: f64, a: &V6, beta: f64, b: &V6) -> V6 {
+    std::array::from_fn(|r| alpha * a[r] + beta * b[r])
+}
+
+#[inline(always)]
+fn add(a: &V6, b: &V6) -> V6 {
+    std::array::from_fn(|r| a[r] + b[r])
+}
+
+/// `a × b` of 3-vectors stored at `a[oa..oa + 3]`, `b[ob..ob + 3]`.
+#[inline(always)]
+fn x3(a: &V6, oa: usize, b: &V6, ob: usize) -> [f64; 3] {
+    [
+        a[oa + 1] * b[ob + 2] - a[oa + 2] * b[ob + 1],
+        a[oa + 2] * b[ob] - a[oa] * b[ob + 2],
+        a[oa] * b[ob + 1] - a[oa + 1] * b[ob],
+    ]
+}
+
+/// `m ×* f` (eq. cross_f_defn); also `f ×̄* m` (eq. crff_oper).
+#[inline(always)]
+fn crf(m: &V6, f: &V6) -> V6 {
+    let (a, b, c) = (x3(m, 0, f, 0), x3(m, 3, f, 3), x3(m, 0, f, 3));
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2], c[0], c[1], c[2]]
+}
+
+/// `M x`.
+#[inline(always)]
+fn mv(m: &M6, x: &V6) -> V6 {
+    let mut o = [0.0; 6];
+    for c in 0..6 {
+        for r in 0..6 {
+            o[r] += m[c][r] * x[c];
+        }
     }
+    o
+}
+
+/// `Mᵀ x`.
+#[inline(always)]
+fn mtv(m: &M6, x: &V6) -> V6 {
+    std::array::from_fn(|r| dot(&m[r], x))
+}
+
+#[inline(always)]
+fn transpose(m: &M6) -> M6 {
+    std::array::from_fn(|c| std::array::from_fn(|r| m[r][c]))
+}
+
+/// `α A + β B + γ C`.
+#[inline(always)]
+fn lin3m(alpha: f64, a: &M6, beta: f64, b: &M6, gamma: f64, c: &M6) -> M6 {
+    std::array::from_fn(|j| std::array::from_fn(|r| alpha * a[j][r] + beta * b[j][r] + gamma * c[j][r]))
+}
+
+/// `x ×* M`, column by column.
+#[inline(always)]
+fn crf_cols(x: &V6, m: &M6) -> M6 {
+    std::array::from_fn(|c| crf(x, &m[c]))
+}
+
+/// The matrix of `f ×̄*` (eq. crff_oper): column `k` is `e_k ×* f`.
+#[inline(always)]
+fn crff_m6(f: &V6) -> M6 {
+    std::array::from_fn(|k| {
+        let mut e = [0.0; 6];
+        e[k] = 1.0;
+        crf(&e, f)
+    })
+}
+
+/// The 6×6 matrix of a spatial inertia.
+#[inline(always)]
+fn inertia_m6(i: &Inertia) -> M6 {
+    let (r, h, m) = (&i.rot, &i.h, i.mass);
+    [
+        [r[(0, 0)], r[(1, 0)], r[(2, 0)], 0.0, -h.z, h.y],
+        [r[(0, 1)], r[(1, 1)], r[(2, 1)], h.z, 0.0, -h.x],
+        [r[(0, 2)], r[(1, 2)], r[(2, 2)], -h.y, h.x, 0.0],
+        [0.0, h.z, -h.y, m, 0.0, 0.0],
+        [-h.z, 0.0, h.x, 0.0, m, 0.0],
+        [h.y, -h.x, 0.0, 0.0, 0.0, m],
+    ]
+}
+
+#[inline(always)]
+fn m6(m: &Matrix6<f64>) -> M6 {
+    std::array::from_fn(|c| std::array::from_fn(|r| m[(r, c)]))
+}
+
+/// Per-DoF operators of body `i` (DoF `p`), all ground frame.
+struct IOps {
+    t1: V6, // I^C_i S_i
+    t2: V6, // B^Cᵀ_i S_i
+    bs: M6, // B(I^C_i, S_i)
+    a: M6,  // 2(B(I^C_i, Ψ̇_i) + S_i×* B^C_i − B^C_i S_i×)
+    c: M6,  // S_i×* I^C_i − I^C_i S_i×  (symmetric)
+    d: M6,  // S_i×* I^C_i + (I^C_i S_i)×̄*
+    g: V6,  // 2B^C_i Ψ̇_i + I^C_i Ψ̈_i + f^C_i ×̄* S_i
+    t4: V6, // 2B^C_i S_i + I^C_i(Ψ̇_i + Ṡ_i)
+}
+
+/// The operators of DoF `dof = [S, Ψ̇, Ψ̈, Ψ̇ + Ṡ]` with composite inertia `ic`, Coriolis matrix
+/// `bc` and force `fc`. With `P = S×* I` and `I` symmetric, `I S× = −Pᵀ`, so
+/// `S×* I − I S× = P + Pᵀ`, and `B(I, m) = ½(m×* I − I m× + (I m)×̄*)` (eq. bkm_term_defn);
+/// likewise `−B S× = (S×* Bᵀ)ᵀ`. No 6×6 products.
+#[inline(always)]
+fn i_ops(ic: &M6, bc: &M6, bct: &M6, fc: &V6, dof: &[V6; 4]) -> IOps {
+    let [s, psid, psidd, ps] = dof;
+    let t1 = mv(ic, s);
+    let p = crf_cols(s, ic);
+    let pt = transpose(&p);
+    let r1 = crff_m6(&t1);
+    let c: M6 = std::array::from_fn(|j| add(&p[j], &pt[j]));
+    let d: M6 = std::array::from_fn(|j| add(&p[j], &r1[j]));
+    let bs: M6 = std::array::from_fn(|j| lin2(0.5, &c[j], 0.5, &r1[j]));
+    let pp = crf_cols(psid, ic);
+    let ppt = transpose(&pp);
+    let rp = crff_m6(&mv(ic, psid));
+    let sb = crf_cols(s, bc);
+    let qbt = transpose(&crf_cols(s, bct));
+    // 2B(I, Ψ̇) = P' + P'ᵀ + (IΨ̇)×̄*
+    let b2: M6 = std::array::from_fn(|j| std::array::from_fn(|r| pp[j][r] + ppt[j][r] + rp[j][r]));
+    let a = lin3m(1.0, &b2, 2.0, &sb, 2.0, &qbt);
+    let bpsid = mv(bc, psid);
+    let g = add(&lin2(2.0, &bpsid, 1.0, &mv(ic, psidd)), &crf(s, fc));
+    let t4 = lin2(2.0, &mv(bc, s), 1.0, &mv(ic, ps));
+    IOps { t1, t2: mtv(bc, s), bs, a, c, d, g, t4 }
 }
 
 /// `t[idx] = x` without a bounds check in release builds: every index written by IDSVA-SO is
@@ -167,34 +312,15 @@ fn set(t: &mut [f64], idx: usize, x: f64) {
     unsafe { *t.get_unchecked_mut(idx) = x }
 }
 
-/// A force as `[n; f]` components.
-#[inline(always)]
-fn arr_f(f: &Force) -> [f64; 6] {
-    [f.ang.x, f.ang.y, f.ang.z, f.lin.x, f.lin.y, f.lin.z]
-}
-
-/// A motion as `[ω; v]` components.
-#[inline(always)]
-fn arr(m: &Motion) -> [f64; 6] {
-    [m.ang.x, m.ang.y, m.ang.z, m.lin.x, m.lin.y, m.lin.z]
-}
-
 /// The rows `fs` stored column by column: `out[c][r] = fs[r][c]`.
 #[inline(always)]
-fn rows6<const R: usize>(fs: [&Force; R]) -> [[f64; R]; 6] {
-    let mut out = [[0.0; R]; 6];
-    for (r, f) in fs.iter().enumerate() {
-        let a = arr_f(f);
-        for c in 0..6 {
-            out[c][r] = a[c];
-        }
-    }
-    out
+fn rows6<const R: usize>(fs: [&V6; R]) -> [[f64; R]; 6] {
+    std::array::from_fn(|c| std::array::from_fn(|r| fs[r][c]))
 }
 
 /// `Σ_c rows[c][r] x[c]` for every row `r`.
 #[inline(always)]
-fn matvec<const R: usize>(rows: &[[f64; R]; 6], x: &[f64; 6]) -> [f64; R] {
+fn matvec<const R: usize>(rows: &[[f64; R]; 6], x: &V6) -> [f64; R] {
     let mut out = [0.0; R];
     for c in 0..6 {
         for r in 0..R {
@@ -211,65 +337,72 @@ fn at(n: usize, i: usize, j: usize, k: usize) -> usize {
 }
 
 fn backward_step_so(model: &Model, data: &Data, so: &mut SoData, i: usize) {
-    let (s_w, psid, psidd, sdot) = (&data.s_world, &data.psid, &data.psidd, &data.sdot);
     let n = model.nv;
+    let SoData { d2tau_dq2, d2tau_dv2, d2tau_dqdv, dm_dq, dof, anc_dofs, anc_start, .. } = so;
+    let dof: &[[V6; 4]] = dof;
+    let qq = d2tau_dq2.as_mut_slice();
+    let vv = d2tau_dv2.as_mut_slice();
+    let qv = d2tau_dqdv.as_mut_slice();
+    let dm = dm_dq.as_mut_slice();
+    let ic = inertia_m6(&data.ic_world[i]);
+    let bc = m6(&data.bc[i]);
+    let bct = transpose(&bc);
+    let fc = v6f(&data.ofc[i]);
     let dofs = |j: usize| model.idx_v[j]..model.idx_v[j] + model.nvs[j];
-    let qq = so.d2tau_dq2.as_mut_slice();
-    let vv = so.d2tau_dv2.as_mut_slice();
-    let qv = so.d2tau_dqdv.as_mut_slice();
-    let dm = so.dm_dq.as_mut_slice();
+    let anc = |j: usize| &anc_dofs[anc_start[j]..anc_start[j + 1]];
     for ip in dofs(i) {
-        let o = i_ops(data, i, ip);
+        let o = i_ops(&ic, &bc, &bct, &fc, &dof[ip]);
         let mut j = i;
         while j > 0 {
             let j_is_i = j == i;
             for jt in dofs(j) {
-                let (sj, psidj, psiddj, sdotj) = (s_w[jt], psid[jt], psidd[jt], sdot[jt]);
+                let [sj, psidj, psiddj, psj] = &dof[jt];
                 // q–q 1A/2A terms: z1 · Ψ̇_k + z2 · Ψ̈_k
-                let z2 = sj.cross_force(&o.t1);
-                let z1 = mtv(&o.bs, &psidj) * -2.0 + sj.cross_force(&o.t2) * 2.0;
+                let z2 = crf(sj, &o.t1);
+                let z1 = lin2(-2.0, &mtv(&o.bs, psidj), 2.0, &crf(sj, &o.t2));
                 // q̇–q̇: u = −2 B(I^C_i,S_i)ᵀ S_j
-                let u = mtv(&o.bs, &sj) * -2.0;
-                let bs_psidj = mv(&o.bs, &psidj);
+                let u = mtv(&o.bs, sj).map(|x| -2.0 * x);
+                let bs_psidj = mv(&o.bs, psidj);
                 // q–q 1B: w · S_k
-                let w = mv(&o.a, &psidj) + mv(&o.c, &psiddj) + sj.cross_force(&o.g);
+                let w = add(&add(&mv(&o.a, psidj), &mv(&o.c, psiddj)), &crf(sj, &o.g));
                 // cross 1B: h1 · S_k + z2 · (Ψ̇_k + Ṡ_k)
-                let h1 =
-                    bs_psidj * -2.0 + psidj.cross_force(&o.t1) * 2.0 + sj.cross_force(&o.t2) * 2.0;
+                let h1 = add(
+                    &lin2(-2.0, &bs_psidj, 2.0, &crf(psidj, &o.t1)),
+                    &crf(sj, &o.t2).map(|x| 2.0 * x),
+                );
                 // cross 2B: e · S_k
-                let e = bs_psidj * 2.0 + sj.cross_force(&o.t4);
+                let e = lin2(2.0, &bs_psidj, 1.0, &crf(sj, &o.t4));
+                // C is symmetric: Cᵀ S_j = C S_j.
+                let csj = mv(&o.c, sj);
                 // Per-(j, t) vectors for the cases with j ≺ i (or the D case at j = i).
-                let (y1, y2, x, f2c, csj, dsj) = if j_is_i {
-                    let z = Force::zero();
-                    (z, z, z, z, z, mv(&o.d, &sj))
+                let z = [0.0; 6];
+                let (y1, x, f2c) = if j_is_i {
+                    (z, mv(&o.d, sj), z)
                 } else {
                     (
-                        mtv(&o.a, &sj),
-                        mtv(&o.c, &sj),
-                        mv(&o.bs, &sj) * 2.0,
-                        mv(&o.a, &sj) + mv(&o.c, &(psidj + sdotj)),
-                        mv(&o.c, &sj),
-                        Force::zero(),
+                        mtv(&o.a, sj),
+                        mv(&o.bs, sj).map(|x| 2.0 * x),
+                        add(&mv(&o.a, sj), &mv(&o.c, psj)),
                     )
                 };
-                let y2c = if j_is_i { mtv(&o.c, &sj) } else { y2 };
+                let y2 = csj;
                 // j = k block (same joint): 1A only, B (v–v) and 1A cross; j ≺ i adds 1C/1E/2A/2C.
                 for kr in dofs(j) {
-                    let (sk, psidk, psiddk, sdotk) = (s_w[kr], psid[kr], psidd[kr], sdot[kr]);
-                    set(qq, at(n, ip, jt, kr), z1.dot(&psidk) + z2.dot(&psiddk)); // 1A
-                    set(vv, at(n, ip, jt, kr), -y2c.dot(&sk)); // B: −S_jᵀ C S_k
-                    let val = u.dot(&psidk); // cross 1A
+                    let [sk, psidk, psiddk, psk] = &dof[kr];
+                    set(qq, at(n, ip, jt, kr), dot(&z1, psidk) + dot(&z2, psiddk)); // 1A
+                    set(vv, at(n, ip, jt, kr), -dot(&y2, sk)); // B: −S_jᵀ C S_k
+                    let val = dot(&u, psidk); // cross 1A
                     set(qv, at(n, ip, kr, jt), val);
                     if !j_is_i {
-                        let v1c = y1.dot(&psidk) + y2.dot(&psiddk); // q–q 1C/2C
+                        let v1c = dot(&y1, psidk) + dot(&y2, psiddk); // q–q 1C/2C
                         set(qq, at(n, jt, kr, ip), v1c);
                         set(qq, at(n, jt, ip, kr), v1c);
-                        let v1e = -u.dot(&sk); // v–v 1E/2E
+                        let v1e = -dot(&u, sk); // v–v 1E/2E
                         set(vv, at(n, jt, kr, ip), v1e);
                         set(vv, at(n, jt, ip, kr), v1e);
                         set(qv, at(n, jt, kr, ip), -val); // cross 2A
-                        set(qv, at(n, jt, ip, kr), y1.dot(&sk) + y2.dot(&(psidk + sdotk))); // cross 1C
-                        let vm = csj.dot(&sk); // ∂M 1C/2C
+                        set(qv, at(n, jt, ip, kr), dot(&y1, sk) + dot(&y2, psk)); // cross 1C
+                        let vm = dot(&csj, sk); // ∂M 1C/2C
                         set(dm, at(n, kr, jt, ip), vm);
                         set(dm, at(n, jt, kr, ip), vm);
                     }
@@ -277,60 +410,57 @@ fn backward_step_so(model: &Model, data: &Data, so: &mut SoData, i: usize) {
                 // Strict ancestors k ≺ j: all dot products of one k as small matrix–vector
                 // products (rows below), which vectorise.
                 // Dotted with S_k: w, u, h1, e, z2, (x | D S_j), y1, f2c, C S_j.
-                let xd = if j_is_i { dsj } else { x };
-                let rs = rows6([&w, &u, &h1, &e, &z2, &xd, &y1, &f2c, &csj]);
+                let rs = rows6([&w, &u, &h1, &e, &z2, &x, &y1, &f2c, &csj]);
                 // Dotted with Ψ̇_k: z1, u, y1; with Ψ̈_k and Ψ̇_k + Ṡ_k: z2, y2.
                 let rd = rows6([&z1, &u, &y1]);
                 let rz = rows6([&z2, &y2]);
-                let mut k = model.parents[j];
-                while k > 0 {
-                    for kr in dofs(k) {
-                        let s6 = arr(&s_w[kr]);
-                        let d6 = arr(&psid[kr]);
-                        let dd6 = arr(&psidd[kr]);
-                        let p6 = arr(&(psid[kr] + sdot[kr]));
-                        let ds = matvec(&rs, &s6);
-                        let dp = matvec(&rd, &d6);
-                        let ddd = matvec(&rz, &dd6);
-                        let dpk = matvec(&rz, &p6);
-                        // ∂²τ/∂q²: 1A + 2A mirror, 1B (+ 2B mirror if j ≺ i)
-                        let val = dp[0] + ddd[0];
-                        set(qq, at(n, ip, jt, kr), val);
-                        set(qq, at(n, ip, kr, jt), val);
-                        let wval = ds[0];
-                        set(qq, at(n, kr, ip, jt), wval);
-                        // ∂²τ/∂q̇²: 1A + 2A mirror
-                        let uval = ds[1];
-                        set(vv, at(n, ip, jt, kr), uval);
-                        set(vv, at(n, ip, kr, jt), uval);
-                        // cross: 1A, 1B, 2B
-                        let cval = dp[1];
-                        set(qv, at(n, ip, kr, jt), cval);
-                        set(qv, at(n, ip, jt, kr), ds[2] + dpk[0]);
-                        set(qv, at(n, kr, jt, ip), ds[3]);
-                        // ∂M/∂q 1B + 2B mirror
-                        set(dm, at(n, kr, ip, jt), ds[4]);
-                        set(dm, at(n, ip, kr, jt), ds[4]);
-                        if j_is_i {
-                            // v–v D (k ≺ j = i)
-                            set(vv, at(n, kr, ip, jt), ds[5]);
-                        } else {
-                            set(qq, at(n, kr, jt, ip), wval); // 1B mirror (2B)
-                            let v1c = dp[2] + ddd[1]; // q–q 1C/2C
-                            set(qq, at(n, jt, kr, ip), v1c);
-                            set(qq, at(n, jt, ip, kr), v1c);
-                            set(vv, at(n, kr, ip, jt), ds[5]); // v–v 1C/2C
-                            set(vv, at(n, kr, jt, ip), ds[5]);
-                            set(vv, at(n, jt, kr, ip), -uval); // v–v 1E/2E
-                            set(vv, at(n, jt, ip, kr), -uval);
-                            set(qv, at(n, jt, kr, ip), -cval); // cross 2A
-                            set(qv, at(n, jt, ip, kr), ds[6] + dpk[1]); // cross 1C
-                            set(qv, at(n, kr, ip, jt), ds[7]); // cross 2C
-                            set(dm, at(n, kr, jt, ip), ds[8]); // ∂M 1C/2C
-                            set(dm, at(n, jt, kr, ip), ds[8]);
-                        }
+                let (o_ij, o_i_j, o_ji) = (ip + n * n * jt, ip + n * jt, jt * n);
+                for &kr in anc(j) {
+                    debug_assert!(kr < dof.len());
+                    // SAFETY: the ancestor lists hold DoF indices < nv (`SoData::new`, checked
+                    // against the model by `SoData::check`).
+                    let [sk, psidk, psiddk, psk] = unsafe { dof.get_unchecked(kr) };
+                    let ds = matvec(&rs, sk);
+                    let dp = matvec(&rd, psidk);
+                    let ddd = matvec(&rz, psiddk);
+                    let dpk = matvec(&rz, psk);
+                    let (nk, nnk) = (n * kr, n * n * kr);
+                    // ∂²τ/∂q²: 1A + 2A mirror, 1B (+ 2B mirror if j ≺ i)
+                    let val = dp[0] + ddd[0];
+                    set(qq, o_ij + nk, val); // (ip, kr, jt)
+                    set(qq, ip + n * jt + nnk, val); // (ip, jt, kr)
+                    let wval = ds[0];
+                    set(qq, kr + n * ip + n * n * jt, wval); // (kr, ip, jt)
+                    // ∂²τ/∂q̇²: 1A + 2A mirror
+                    let uval = ds[1];
+                    set(vv, o_i_j + nnk, uval); // (ip, jt, kr)
+                    set(vv, o_ij + nk, uval); // (ip, kr, jt)
+                    // cross: 1A, 1B, 2B
+                    let cval = dp[1];
+                    set(qv, o_ij + nk, cval); // (ip, kr, jt)
+                    set(qv, o_i_j + nnk, ds[2] + dpk[0]); // (ip, jt, kr)
+                    set(qv, kr + o_ji + n * n * ip, ds[3]); // (kr, jt, ip)
+                    // ∂M/∂q 1B + 2B mirror
+                    set(dm, kr + n * ip + n * n * jt, ds[4]); // (kr, ip, jt)
+                    set(dm, o_ij + nk, ds[4]); // (ip, kr, jt)
+                    if j_is_i {
+                        // v–v D (k ≺ j = i)
+                        set(vv, kr + n * ip + n * n * jt, ds[5]); // (kr, ip, jt)
+                    } else {
+                        set(qq, kr + o_ji + n * n * ip, wval); // 1B mirror (2B): (kr, jt, ip)
+                        let v1c = dp[2] + ddd[1]; // q–q 1C/2C
+                        set(qq, jt + nk + n * n * ip, v1c); // (jt, kr, ip)
+                        set(qq, jt + n * ip + nnk, v1c); // (jt, ip, kr)
+                        set(vv, kr + n * ip + n * n * jt, ds[5]); // v–v 1C/2C: (kr, ip, jt)
+                        set(vv, kr + o_ji + n * n * ip, ds[5]); // (kr, jt, ip)
+                        set(vv, jt + nk + n * n * ip, -uval); // v–v 1E/2E: (jt, kr, ip)
+                        set(vv, jt + n * ip + nnk, -uval); // (jt, ip, kr)
+                        set(qv, jt + nk + n * n * ip, -cval); // cross 2A: (jt, kr, ip)
+                        set(qv, jt + n * ip + nnk, ds[6] + dpk[1]); // cross 1C: (jt, ip, kr)
+                        set(qv, kr + n * ip + n * n * jt, ds[7]); // cross 2C: (kr, ip, jt)
+                        set(dm, kr + o_ji + n * n * ip, ds[8]); // ∂M 1C/2C: (kr, jt, ip)
+                        set(dm, jt + nk + n * n * ip, ds[8]); // (jt, kr, ip)
                     }
-                    k = model.parents[k];
                 }
             }
             j = model.parents[j];
