@@ -174,12 +174,20 @@ fn dot(a: &V6, b: &V6) -> f64 {
 /// `α a + β b`.
 #[inline(always)]
 fn lin2(alpha: f64, a: &V6, beta: f64, b: &V6) -> V6 {
-    std::array::from_fn(|r| alpha * a[r] + beta * b[r])
+    let mut o = [0.0; 6];
+    for r in 0..6 {
+        o[r] = alpha * a[r] + beta * b[r];
+    }
+    o
 }
 
 #[inline(always)]
 fn add(a: &V6, b: &V6) -> V6 {
-    std::array::from_fn(|r| a[r] + b[r])
+    let mut o = [0.0; 6];
+    for r in 0..6 {
+        o[r] = a[r] + b[r];
+    }
+    o
 }
 
 /// `a × b` of 3-vectors stored at `a[oa..oa + 3]`, `b[ob..ob + 3]`.
@@ -214,34 +222,59 @@ fn mv(m: &M6, x: &V6) -> V6 {
 /// `Mᵀ x`.
 #[inline(always)]
 fn mtv(m: &M6, x: &V6) -> V6 {
-    std::array::from_fn(|r| dot(&m[r], x))
+    let mut o = [0.0; 6];
+    for r in 0..6 {
+        o[r] = dot(&m[r], x);
+    }
+    o
 }
 
 #[inline(always)]
 fn transpose(m: &M6) -> M6 {
-    std::array::from_fn(|c| std::array::from_fn(|r| m[r][c]))
+    let mut o = [[0.0; 6]; 6];
+    for c in 0..6 {
+        for r in 0..6 {
+            o[c][r] = m[r][c];
+        }
+    }
+    o
 }
 
 /// `α A + β B + γ C`.
 #[inline(always)]
 fn lin3m(alpha: f64, a: &M6, beta: f64, b: &M6, gamma: f64, c: &M6) -> M6 {
-    std::array::from_fn(|j| std::array::from_fn(|r| alpha * a[j][r] + beta * b[j][r] + gamma * c[j][r]))
+    let mut o = [[0.0; 6]; 6];
+    for j in 0..6 {
+        for r in 0..6 {
+            o[j][r] = alpha * a[j][r] + beta * b[j][r] + gamma * c[j][r];
+        }
+    }
+    o
 }
 
 /// `x ×* M`, column by column.
 #[inline(always)]
 fn crf_cols(x: &V6, m: &M6) -> M6 {
-    std::array::from_fn(|c| crf(x, &m[c]))
+    let mut o = [[0.0; 6]; 6];
+    for c in 0..6 {
+        o[c] = crf(x, &m[c]);
+    }
+    o
 }
 
 /// The matrix of `f ×̄*` (eq. crff_oper): column `k` is `e_k ×* f`.
 #[inline(always)]
 fn crff_m6(f: &V6) -> M6 {
-    std::array::from_fn(|k| {
-        let mut e = [0.0; 6];
-        e[k] = 1.0;
-        crf(&e, f)
-    })
+    // [[-n×, -f×], [-f×, 0]] with n = f[0..3], f = f[3..6], column by column (e_k ×* f).
+    let (n0, n1, n2, f0, f1, f2) = (f[0], f[1], f[2], f[3], f[4], f[5]);
+    [
+        [0.0, -n2, n1, 0.0, -f2, f1],
+        [n2, 0.0, -n0, f2, 0.0, -f0],
+        [-n1, n0, 0.0, -f1, f0, 0.0],
+        [0.0, -f2, f1, 0.0, 0.0, 0.0],
+        [f2, 0.0, -f0, 0.0, 0.0, 0.0],
+        [-f1, f0, 0.0, 0.0, 0.0, 0.0],
+    ]
 }
 
 /// The 6×6 matrix of a spatial inertia.
@@ -260,7 +293,12 @@ fn inertia_m6(i: &Inertia) -> M6 {
 
 #[inline(always)]
 fn m6(m: &Matrix6<f64>) -> M6 {
-    std::array::from_fn(|c| std::array::from_fn(|r| m[(r, c)]))
+    let s = m.as_slice();
+    let mut o = [[0.0; 6]; 6];
+    for c in 0..6 {
+        o[c].copy_from_slice(&s[6 * c..6 * c + 6]);
+    }
+    o
 }
 
 /// Per-DoF operators of body `i` (DoF `p`), all ground frame.
@@ -286,16 +324,16 @@ fn i_ops(ic: &M6, bc: &M6, bct: &M6, fc: &V6, dof: &[V6; 4]) -> IOps {
     let p = crf_cols(s, ic);
     let pt = transpose(&p);
     let r1 = crff_m6(&t1);
-    let c: M6 = std::array::from_fn(|j| add(&p[j], &pt[j]));
-    let d: M6 = std::array::from_fn(|j| add(&p[j], &r1[j]));
-    let bs: M6 = std::array::from_fn(|j| lin2(0.5, &c[j], 0.5, &r1[j]));
+    let c = lin3m(1.0, &p, 1.0, &pt, 0.0, &r1);
+    let d = lin3m(1.0, &p, 0.0, &pt, 1.0, &r1);
+    let bs = lin3m(0.5, &p, 0.5, &pt, 0.5, &r1);
     let pp = crf_cols(psid, ic);
     let ppt = transpose(&pp);
     let rp = crff_m6(&mv(ic, psid));
     let sb = crf_cols(s, bc);
     let qbt = transpose(&crf_cols(s, bct));
     // 2B(I, Ψ̇) = P' + P'ᵀ + (IΨ̇)×̄*
-    let b2: M6 = std::array::from_fn(|j| std::array::from_fn(|r| pp[j][r] + ppt[j][r] + rp[j][r]));
+    let b2 = lin3m(1.0, &pp, 1.0, &ppt, 1.0, &rp);
     let a = lin3m(1.0, &b2, 2.0, &sb, 2.0, &qbt);
     let bpsid = mv(bc, psid);
     let g = add(&lin2(2.0, &bpsid, 1.0, &mv(ic, psidd)), &crf(s, fc));
@@ -315,7 +353,13 @@ fn set(t: &mut [f64], idx: usize, x: f64) {
 /// The rows `fs` stored column by column: `out[c][r] = fs[r][c]`.
 #[inline(always)]
 fn rows6<const R: usize>(fs: [&V6; R]) -> [[f64; R]; 6] {
-    std::array::from_fn(|c| std::array::from_fn(|r| fs[r][c]))
+    let mut o = [[0.0; R]; 6];
+    for c in 0..6 {
+        for r in 0..R {
+            o[c][r] = fs[r][c];
+        }
+    }
+    o
 }
 
 /// `Σ_c rows[c][r] x[c]` for every row `r`.
@@ -336,7 +380,37 @@ fn at(n: usize, i: usize, j: usize, k: usize) -> usize {
     i + n * (j + n * k)
 }
 
+/// Whether the CPU has AVX2 and FMA (checked once; cached by the standard library).
+#[inline]
+fn has_avx2_fma() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// The backward step compiled for AVX2/FMA (the 6-vector kernels vectorise 4 wide).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn backward_step_so_avx2(model: &Model, data: &Data, so: &mut SoData, i: usize) {
+    backward_step_so_body(model, data, so, i)
+}
+
 fn backward_step_so(model: &Model, data: &Data, so: &mut SoData, i: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if has_avx2_fma() {
+        // SAFETY: the CPU supports AVX2 and FMA (checked just above).
+        return unsafe { backward_step_so_avx2(model, data, so, i) };
+    }
+    backward_step_so_body(model, data, so, i)
+}
+
+#[inline(always)]
+fn backward_step_so_body(model: &Model, data: &Data, so: &mut SoData, i: usize) {
     let n = model.nv;
     let SoData { d2tau_dq2, d2tau_dv2, d2tau_dqdv, dm_dq, dof, anc_dofs, anc_start, .. } = so;
     let dof: &[[V6; 4]] = dof;
