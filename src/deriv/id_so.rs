@@ -303,19 +303,18 @@ fn m6(m: &Matrix6<f64>) -> M6 {
 
 /// Per-DoF operators of body `i` (DoF `p`), all ground frame.
 struct IOps {
+    s: V6,  // S_i
     t1: V6, // I^C_i S_i
     t2: V6, // B^Cᵀ_i S_i
-    bs: M6, // B(I^C_i, S_i)
     a: M6,  // 2(B(I^C_i, Ψ̇_i) + S_i×* B^C_i − B^C_i S_i×)
     c: M6,  // S_i×* I^C_i − I^C_i S_i×  (symmetric)
-    d: M6,  // S_i×* I^C_i + (I^C_i S_i)×̄*
     g: V6,  // 2B^C_i Ψ̇_i + I^C_i Ψ̈_i + f^C_i ×̄* S_i
     t4: V6, // 2B^C_i S_i + I^C_i(Ψ̇_i + Ṡ_i)
 }
 
 /// The operators of DoF `dof = [S, Ψ̇, Ψ̈, Ψ̇ + Ṡ]` with composite inertia `ic`, Coriolis matrix
 /// `bc` and force `fc`. With `P = S×* I` and `I` symmetric, `I S× = −Pᵀ`, so
-/// `S×* I − I S× = P + Pᵀ`, and `B(I, m) = ½(m×* I − I m× + (I m)×̄*)` (eq. bkm_term_defn);
+/// `C = S×* I − I S× = P + Pᵀ`, and `2B(I, m) = m×* I − I m× + (I m)×̄*` (eq. bkm_term_defn);
 /// likewise `−B S× = (S×* Bᵀ)ᵀ`. No 6×6 products.
 #[inline(always)]
 fn i_ops(ic: &M6, bc: &M6, bct: &M6, fc: &V6, dof: &[V6; 4]) -> IOps {
@@ -323,10 +322,7 @@ fn i_ops(ic: &M6, bc: &M6, bct: &M6, fc: &V6, dof: &[V6; 4]) -> IOps {
     let t1 = mv(ic, s);
     let p = crf_cols(s, ic);
     let pt = transpose(&p);
-    let r1 = crff_m6(&t1);
-    let c = lin3m(1.0, &p, 1.0, &pt, 0.0, &r1);
-    let d = lin3m(1.0, &p, 0.0, &pt, 1.0, &r1);
-    let bs = lin3m(0.5, &p, 0.5, &pt, 0.5, &r1);
+    let c = lin3m(1.0, &p, 1.0, &pt, 0.0, &p);
     let pp = crf_cols(psid, ic);
     let ppt = transpose(&pp);
     let rp = crff_m6(&mv(ic, psid));
@@ -338,7 +334,7 @@ fn i_ops(ic: &M6, bc: &M6, bct: &M6, fc: &V6, dof: &[V6; 4]) -> IOps {
     let bpsid = mv(bc, psid);
     let g = add(&lin2(2.0, &bpsid, 1.0, &mv(ic, psidd)), &crf(s, fc));
     let t4 = lin2(2.0, &mv(bc, s), 1.0, &mv(ic, ps));
-    IOps { t1, t2: mtv(bc, s), bs, a, c, d, g, t4 }
+    IOps { s: *s, t1, t2: mtv(bc, s), a, c, g, t4 }
 }
 
 /// `t[idx] = x` without a bounds check in release builds: every index written by IDSVA-SO is
@@ -431,33 +427,36 @@ fn backward_step_so_body(model: &Model, data: &Data, so: &mut SoData, i: usize) 
             let j_is_i = j == i;
             for jt in dofs(j) {
                 let [sj, psidj, psiddj, psj] = &dof[jt];
+                // B(I^C_i, S_i) = ½(C + R) and B(I^C_i, S_i)ᵀ = ½(C − R), with R x = x ×* (I^C_i S_i)
+                // antisymmetric (eq. crff_oper): every B(I^C_i, S_i) product is C x ± x ×* t1.
+                let (c_s, c_d, c_dd, c_p) = (mv(&o.c, sj), mv(&o.c, psidj), mv(&o.c, psiddj), mv(&o.c, psj));
+                let (a_d, a_s) = (mv(&o.a, psidj), mv(&o.a, sj));
                 // q–q 1A/2A terms: z1 · Ψ̇_k + z2 · Ψ̈_k
                 let z2 = crf(sj, &o.t1);
-                let z1 = lin2(-2.0, &mtv(&o.bs, psidj), 2.0, &crf(sj, &o.t2));
+                let x_t2 = crf(sj, &o.t2);
+                let d_t1 = crf(psidj, &o.t1);
+                // z1 = −2B(I^C_i,S_i)ᵀΨ̇_j + 2 S_j×*(B^Cᵀ_i S_i); the cross-1B vector
+                // h1 = −2B(I^C_i,S_i)Ψ̇_j + 2Ψ̇_j×*(I^C_i S_i) + 2 S_j×*(B^Cᵀ_i S_i) is the same vector.
+                let z1: V6 = std::array::from_fn(|r| d_t1[r] - c_d[r] + 2.0 * x_t2[r]);
+                let h1 = z1;
                 // q̇–q̇: u = −2 B(I^C_i,S_i)ᵀ S_j
-                let u = mtv(&o.bs, sj).map(|x| -2.0 * x);
-                let bs_psidj = mv(&o.bs, psidj);
+                let u: V6 = std::array::from_fn(|r| z2[r] - c_s[r]);
                 // q–q 1B: w · S_k
-                let w = add(&add(&mv(&o.a, psidj), &mv(&o.c, psiddj)), &crf(sj, &o.g));
-                // cross 1B: h1 · S_k + z2 · (Ψ̇_k + Ṡ_k)
-                let h1 = add(
-                    &lin2(-2.0, &bs_psidj, 2.0, &crf(psidj, &o.t1)),
-                    &crf(sj, &o.t2).map(|x| 2.0 * x),
-                );
-                // cross 2B: e · S_k
-                let e = lin2(2.0, &bs_psidj, 1.0, &crf(sj, &o.t4));
+                let w = add(&add(&a_d, &c_dd), &crf(sj, &o.g));
+                // cross 2B: e = 2B(I^C_i,S_i)Ψ̇_j + S_j×* t4
+                let x_t4 = crf(sj, &o.t4);
+                let e: V6 = std::array::from_fn(|r| c_d[r] + d_t1[r] + x_t4[r]);
                 // C is symmetric: Cᵀ S_j = C S_j.
-                let csj = mv(&o.c, sj);
+                let csj = c_s;
                 // Per-(j, t) vectors for the cases with j ≺ i (or the D case at j = i).
                 let z = [0.0; 6];
                 let (y1, x, f2c) = if j_is_i {
-                    (z, mv(&o.d, sj), z)
+                    // D S_j = S_i×*(I^C_i S_j) + S_j ×* (I^C_i S_i)
+                    let ics = mv(&ic, sj);
+                    (z, add(&crf(&o.s, &ics), &z2), z)
                 } else {
-                    (
-                        mtv(&o.a, sj),
-                        mv(&o.bs, sj).map(|x| 2.0 * x),
-                        add(&mv(&o.a, sj), &mv(&o.c, psj)),
-                    )
+                    // 2B(I^C_i,S_i) S_j = C S_j + S_j ×* t1
+                    (mtv(&o.a, sj), add(&c_s, &z2), add(&a_s, &c_p))
                 };
                 let y2 = csj;
                 // j = k block (same joint): 1A only, B (v–v) and 1A cross; j ≺ i adds 1C/1E/2A/2C.
