@@ -459,34 +459,38 @@ fn backward_step_so_body(model: &Model, data: &Data, so: &mut SoData, i: usize) 
                     (mtv(&o.a, sj), add(&c_s, &z2), add(&a_s, &c_p))
                 };
                 let y2 = csj;
-                // j = k block (same joint): 1A only, B (v–v) and 1A cross; j ≺ i adds 1C/1E/2A/2C.
-                for kr in dofs(j) {
-                    let [sk, psidk, psiddk, psk] = &dof[kr];
-                    set(qq, at(n, ip, jt, kr), dot(&z1, psidk) + dot(&z2, psiddk)); // 1A
-                    set(vv, at(n, ip, jt, kr), -dot(&y2, sk)); // B: −S_jᵀ C S_k
-                    let val = dot(&u, psidk); // cross 1A
-                    set(qv, at(n, ip, kr, jt), val);
-                    if !j_is_i {
-                        let v1c = dot(&y1, psidk) + dot(&y2, psiddk); // q–q 1C/2C
-                        set(qq, at(n, jt, kr, ip), v1c);
-                        set(qq, at(n, jt, ip, kr), v1c);
-                        let v1e = -dot(&u, sk); // v–v 1E/2E
-                        set(vv, at(n, jt, kr, ip), v1e);
-                        set(vv, at(n, jt, ip, kr), v1e);
-                        set(qv, at(n, jt, kr, ip), -val); // cross 2A
-                        set(qv, at(n, jt, ip, kr), dot(&y1, sk) + dot(&y2, psk)); // cross 1C
-                        let vm = dot(&csj, sk); // ∂M 1C/2C
-                        set(dm, at(n, kr, jt, ip), vm);
-                        set(dm, at(n, jt, kr, ip), vm);
-                    }
-                }
-                // Strict ancestors k ≺ j: all dot products of one k as small matrix–vector
-                // products (rows below), which vectorise.
-                // Dotted with S_k: w, u, h1, e, z2, (x | D S_j), y1, f2c, C S_j.
+                // All dot products with one k as small matrix–vector products (rows below),
+                // which vectorise. Dotted with S_k: w, u, h1, e, z2, (x | D S_j), y1, f2c, C S_j.
                 let rs = rows6([&w, &u, &h1, &e, &z2, &x, &y1, &f2c, &csj]);
                 // Dotted with Ψ̇_k: z1, u, y1; with Ψ̈_k and Ψ̇_k + Ṡ_k: z2, y2.
                 let rd = rows6([&z1, &u, &y1]);
                 let rz = rows6([&z2, &y2]);
+                // j = k block (same joint): 1A only, B (v–v) and 1A cross; j ≺ i adds 1C/1E/2A/2C.
+                for kr in dofs(j) {
+                    let [sk, psidk, psiddk, psk] = &dof[kr];
+                    let ds = matvec(&rs, sk);
+                    let dp = matvec(&rd, psidk);
+                    let ddd = matvec(&rz, psiddk);
+                    set(qq, at(n, ip, jt, kr), dp[0] + ddd[0]); // 1A
+                    set(vv, at(n, ip, jt, kr), -ds[8]); // B: −S_jᵀ C S_k
+                    let val = dp[1]; // cross 1A
+                    set(qv, at(n, ip, kr, jt), val);
+                    if !j_is_i {
+                        let dpk = matvec(&rz, psk);
+                        let v1c = dp[2] + ddd[1]; // q–q 1C/2C
+                        set(qq, at(n, jt, kr, ip), v1c);
+                        set(qq, at(n, jt, ip, kr), v1c);
+                        let v1e = -ds[1]; // v–v 1E/2E
+                        set(vv, at(n, jt, kr, ip), v1e);
+                        set(vv, at(n, jt, ip, kr), v1e);
+                        set(qv, at(n, jt, kr, ip), -val); // cross 2A
+                        set(qv, at(n, jt, ip, kr), ds[6] + dpk[1]); // cross 1C
+                        let vm = ds[8]; // ∂M 1C/2C
+                        set(dm, at(n, kr, jt, ip), vm);
+                        set(dm, at(n, jt, kr, ip), vm);
+                    }
+                }
+                // Strict ancestors k ≺ j.
                 let (o_ij, o_i_j, o_ji) = (ip + n * n * jt, ip + n * jt, jt * n);
                 for &kr in anc(j) {
                     debug_assert!(kr < dof.len());
