@@ -209,7 +209,7 @@ fn crf(m: &V6, f: &V6) -> V6 {
 
 /// `M x`.
 #[inline(always)]
-fn mv(m: &M6, x: &V6) -> V6 {
+fn mv_portable(m: &M6, x: &V6) -> V6 {
     let mut o = [0.0; 6];
     for c in 0..6 {
         for r in 0..6 {
@@ -221,7 +221,7 @@ fn mv(m: &M6, x: &V6) -> V6 {
 
 /// `Mᵀ x`.
 #[inline(always)]
-fn mtv(m: &M6, x: &V6) -> V6 {
+fn mtv_portable(m: &M6, x: &V6) -> V6 {
     let mut o = [0.0; 6];
     for r in 0..6 {
         o[r] = dot(&m[r], x);
@@ -317,24 +317,24 @@ struct IOps {
 /// `C = S×* I − I S× = P + Pᵀ`, and `2B(I, m) = m×* I − I m× + (I m)×̄*` (eq. bkm_term_defn);
 /// likewise `−B S× = (S×* Bᵀ)ᵀ`. No 6×6 products.
 #[inline(always)]
-fn i_ops(ic: &M6, bc: &M6, bct: &M6, fc: &V6, dof: &[V6; 4]) -> IOps {
+fn i_ops<K: Kern>(ic: &M6, bc: &M6, bct: &M6, fc: &V6, dof: &[V6; 4]) -> IOps {
     let [s, psid, psidd, ps] = dof;
-    let t1 = mv(ic, s);
+    let t1 = K::mv(ic, s);
     let p = crf_cols(s, ic);
     let pt = transpose(&p);
     let c = lin3m(1.0, &p, 1.0, &pt, 0.0, &p);
     let pp = crf_cols(psid, ic);
     let ppt = transpose(&pp);
-    let rp = crff_m6(&mv(ic, psid));
+    let rp = crff_m6(&K::mv(ic, psid));
     let sb = crf_cols(s, bc);
     let qbt = transpose(&crf_cols(s, bct));
     // 2B(I, Ψ̇) = P' + P'ᵀ + (IΨ̇)×̄*
     let b2 = lin3m(1.0, &pp, 1.0, &ppt, 1.0, &rp);
     let a = lin3m(1.0, &b2, 2.0, &sb, 2.0, &qbt);
-    let bpsid = mv(bc, psid);
-    let g = add(&lin2(2.0, &bpsid, 1.0, &mv(ic, psidd)), &crf(s, fc));
-    let t4 = lin2(2.0, &mv(bc, s), 1.0, &mv(ic, ps));
-    IOps { s: *s, t1, t2: mtv(bc, s), a, c, g, t4 }
+    let bpsid = K::mv(bc, psid);
+    let g = add(&lin2(2.0, &bpsid, 1.0, &K::mv(ic, psidd)), &crf(s, fc));
+    let t4 = lin2(2.0, &K::mv(bc, s), 1.0, &K::mv(ic, ps));
+    IOps { s: *s, t1, t2: K::mtv(bc, s), a, c, g, t4 }
 }
 
 /// `t[idx] = x` without a bounds check in release builds: every index written by IDSVA-SO is
@@ -360,7 +360,7 @@ fn rows6<const R: usize>(fs: [&V6; R]) -> [[f64; R]; 6] {
 
 /// `Σ_c rows[c][r] x[c]` for every row `r`.
 #[inline(always)]
-fn matvec<const R: usize>(rows: &[[f64; R]; 6], x: &V6) -> [f64; R] {
+fn matvec_portable<const R: usize>(rows: &[[f64; R]; 6], x: &V6) -> [f64; R] {
     let mut out = [0.0; R];
     for c in 0..6 {
         for r in 0..R {
@@ -368,6 +368,148 @@ fn matvec<const R: usize>(rows: &[[f64; R]; 6], x: &V6) -> [f64; R] {
         }
     }
     out
+}
+
+/// The small dense kernels of the backward step: a portable version and an AVX2/FMA one
+/// (explicit intrinsics: inside the large backward step the compiler does not vectorise the
+/// portable loops by itself).
+trait Kern {
+    /// `M x`.
+    fn mv(m: &M6, x: &V6) -> V6;
+    /// `Mᵀ x`.
+    fn mtv(m: &M6, x: &V6) -> V6;
+    /// `Σ_c rows[c][r] x[c]` for every row `r`.
+    fn matvec<const R: usize>(rows: &[[f64; R]; 6], x: &V6) -> [f64; R];
+}
+
+/// Portable kernels.
+struct Portable;
+
+impl Kern for Portable {
+    #[inline(always)]
+    fn mv(m: &M6, x: &V6) -> V6 {
+        mv_portable(m, x)
+    }
+    #[inline(always)]
+    fn mtv(m: &M6, x: &V6) -> V6 {
+        mtv_portable(m, x)
+    }
+    #[inline(always)]
+    fn matvec<const R: usize>(rows: &[[f64; R]; 6], x: &V6) -> [f64; R] {
+        matvec_portable(rows, x)
+    }
+}
+
+/// AVX2/FMA kernels; only used after `has_avx2_fma()` returned true.
+#[cfg(target_arch = "x86_64")]
+struct Avx2;
+
+#[cfg(target_arch = "x86_64")]
+impl Kern for Avx2 {
+    #[inline(always)]
+    fn mv(m: &M6, x: &V6) -> V6 {
+        // SAFETY: `Avx2` kernels run only on CPUs with AVX2 and FMA (see `backward_step_so`).
+        unsafe { avx::mv(m, x) }
+    }
+    #[inline(always)]
+    fn mtv(m: &M6, x: &V6) -> V6 {
+        // SAFETY: as above.
+        unsafe { avx::mtv(m, x) }
+    }
+    #[inline(always)]
+    fn matvec<const R: usize>(rows: &[[f64; R]; 6], x: &V6) -> [f64; R] {
+        // SAFETY: as above.
+        unsafe { avx::matvec(rows, x) }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx {
+    use super::{M6, V6};
+    use std::arch::x86_64::*;
+
+    /// Sum of the four lanes of `a` and the two of `b`.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn hsum(a: __m256d, b: __m128d) -> f64 {
+        let s = _mm_add_pd(_mm_add_pd(_mm256_castpd256_pd128(a), _mm256_extractf128_pd(a, 1)), b);
+        _mm_cvtsd_f64(_mm_add_sd(s, _mm_unpackhi_pd(s, s)))
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub(super) fn mv(m: &M6, x: &V6) -> V6 {
+        let mut lo = _mm256_setzero_pd();
+        let mut hi = _mm_setzero_pd();
+        for c in 0..6 {
+            // SAFETY: m[c] has 6 elements: [0..4] and [4..6] are in bounds.
+            let (a, b) = unsafe {
+                (_mm256_loadu_pd(m[c].as_ptr()), _mm_loadu_pd(m[c].as_ptr().add(4)))
+            };
+            lo = _mm256_fmadd_pd(a, _mm256_set1_pd(x[c]), lo);
+            hi = _mm_fmadd_pd(b, _mm_set1_pd(x[c]), hi);
+        }
+        let mut o = [0.0; 6];
+        // SAFETY: o has 6 elements.
+        unsafe {
+            _mm256_storeu_pd(o.as_mut_ptr(), lo);
+            _mm_storeu_pd(o.as_mut_ptr().add(4), hi);
+        }
+        o
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub(super) fn mtv(m: &M6, x: &V6) -> V6 {
+        // SAFETY: x and every m[r] have 6 elements.
+        unsafe {
+            let (xl, xh) = (_mm256_loadu_pd(x.as_ptr()), _mm_loadu_pd(x.as_ptr().add(4)));
+            let mut o = [0.0; 6];
+            for r in 0..6 {
+                let a = _mm256_mul_pd(_mm256_loadu_pd(m[r].as_ptr()), xl);
+                let b = _mm_mul_pd(_mm_loadu_pd(m[r].as_ptr().add(4)), xh);
+                o[r] = hsum(a, b);
+            }
+            o
+        }
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub(super) fn matvec<const R: usize>(rows: &[[f64; R]; 6], x: &V6) -> [f64; R] {
+        let mut out = [0.0; R];
+        let mut r = 0;
+        while r + 4 <= R {
+            let mut acc = _mm256_setzero_pd();
+            for c in 0..6 {
+                // SAFETY: r + 4 <= R.
+                let a = unsafe { _mm256_loadu_pd(rows[c].as_ptr().add(r)) };
+                acc = _mm256_fmadd_pd(a, _mm256_set1_pd(x[c]), acc);
+            }
+            // SAFETY: r + 4 <= R.
+            unsafe { _mm256_storeu_pd(out.as_mut_ptr().add(r), acc) };
+            r += 4;
+        }
+        if r + 2 <= R {
+            let mut acc = _mm_setzero_pd();
+            for c in 0..6 {
+                // SAFETY: r + 2 <= R.
+                let a = unsafe { _mm_loadu_pd(rows[c].as_ptr().add(r)) };
+                acc = _mm_fmadd_pd(a, _mm_set1_pd(x[c]), acc);
+            }
+            // SAFETY: r + 2 <= R.
+            unsafe { _mm_storeu_pd(out.as_mut_ptr().add(r), acc) };
+            r += 2;
+        }
+        if r < R {
+            let mut acc = 0.0;
+            for c in 0..6 {
+                acc = rows[c][r].mul_add(x[c], acc);
+            }
+            out[r] = acc;
+        }
+        out
+    }
 }
 
 /// Flat offset of `(i, j, k)` in an `n×n×n` column-major tensor.
@@ -393,7 +535,7 @@ fn has_avx2_fma() -> bool {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn backward_step_so_avx2(model: &Model, data: &Data, so: &mut SoData, i: usize) {
-    backward_step_so_body(model, data, so, i)
+    backward_step_so_body::<Avx2>(model, data, so, i)
 }
 
 fn backward_step_so(model: &Model, data: &Data, so: &mut SoData, i: usize) {
@@ -402,11 +544,11 @@ fn backward_step_so(model: &Model, data: &Data, so: &mut SoData, i: usize) {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
         return unsafe { backward_step_so_avx2(model, data, so, i) };
     }
-    backward_step_so_body(model, data, so, i)
+    backward_step_so_body::<Portable>(model, data, so, i)
 }
 
 #[inline(always)]
-fn backward_step_so_body(model: &Model, data: &Data, so: &mut SoData, i: usize) {
+fn backward_step_so_body<K: Kern>(model: &Model, data: &Data, so: &mut SoData, i: usize) {
     let n = model.nv;
     let SoData { d2tau_dq2, d2tau_dv2, d2tau_dqdv, dm_dq, dof, anc_dofs, anc_start, .. } = so;
     let dof: &[[V6; 4]] = dof;
@@ -421,7 +563,7 @@ fn backward_step_so_body(model: &Model, data: &Data, so: &mut SoData, i: usize) 
     let dofs = |j: usize| model.idx_v[j]..model.idx_v[j] + model.nvs[j];
     let anc = |j: usize| &anc_dofs[anc_start[j]..anc_start[j + 1]];
     for ip in dofs(i) {
-        let o = i_ops(&ic, &bc, &bct, &fc, &dof[ip]);
+        let o = i_ops::<K>(&ic, &bc, &bct, &fc, &dof[ip]);
         let mut j = i;
         while j > 0 {
             let j_is_i = j == i;
@@ -429,8 +571,8 @@ fn backward_step_so_body(model: &Model, data: &Data, so: &mut SoData, i: usize) 
                 let [sj, psidj, psiddj, psj] = &dof[jt];
                 // B(I^C_i, S_i) = ½(C + R) and B(I^C_i, S_i)ᵀ = ½(C − R), with R x = x ×* (I^C_i S_i)
                 // antisymmetric (eq. crff_oper): every B(I^C_i, S_i) product is C x ± x ×* t1.
-                let (c_s, c_d, c_dd, c_p) = (mv(&o.c, sj), mv(&o.c, psidj), mv(&o.c, psiddj), mv(&o.c, psj));
-                let (a_d, a_s) = (mv(&o.a, psidj), mv(&o.a, sj));
+                let (c_s, c_d, c_dd, c_p) = (K::mv(&o.c, sj), K::mv(&o.c, psidj), K::mv(&o.c, psiddj), K::mv(&o.c, psj));
+                let (a_d, a_s) = (K::mv(&o.a, psidj), K::mv(&o.a, sj));
                 // q–q 1A/2A terms: z1 · Ψ̇_k + z2 · Ψ̈_k
                 let z2 = crf(sj, &o.t1);
                 let x_t2 = crf(sj, &o.t2);
@@ -452,11 +594,11 @@ fn backward_step_so_body(model: &Model, data: &Data, so: &mut SoData, i: usize) 
                 let z = [0.0; 6];
                 let (y1, x, f2c) = if j_is_i {
                     // D S_j = S_i×*(I^C_i S_j) + S_j ×* (I^C_i S_i)
-                    let ics = mv(&ic, sj);
+                    let ics = K::mv(&ic, sj);
                     (z, add(&crf(&o.s, &ics), &z2), z)
                 } else {
                     // 2B(I^C_i,S_i) S_j = C S_j + S_j ×* t1
-                    (mtv(&o.a, sj), add(&c_s, &z2), add(&a_s, &c_p))
+                    (K::mtv(&o.a, sj), add(&c_s, &z2), add(&a_s, &c_p))
                 };
                 let y2 = csj;
                 // All dot products with one k as small matrix–vector products (rows below),
@@ -468,15 +610,15 @@ fn backward_step_so_body(model: &Model, data: &Data, so: &mut SoData, i: usize) 
                 // j = k block (same joint): 1A only, B (v–v) and 1A cross; j ≺ i adds 1C/1E/2A/2C.
                 for kr in dofs(j) {
                     let [sk, psidk, psiddk, psk] = &dof[kr];
-                    let ds = matvec(&rs, sk);
-                    let dp = matvec(&rd, psidk);
-                    let ddd = matvec(&rz, psiddk);
+                    let ds = K::matvec(&rs, sk);
+                    let dp = K::matvec(&rd, psidk);
+                    let ddd = K::matvec(&rz, psiddk);
                     set(qq, at(n, ip, jt, kr), dp[0] + ddd[0]); // 1A
                     set(vv, at(n, ip, jt, kr), -ds[8]); // B: −S_jᵀ C S_k
                     let val = dp[1]; // cross 1A
                     set(qv, at(n, ip, kr, jt), val);
                     if !j_is_i {
-                        let dpk = matvec(&rz, psk);
+                        let dpk = K::matvec(&rz, psk);
                         let v1c = dp[2] + ddd[1]; // q–q 1C/2C
                         set(qq, at(n, jt, kr, ip), v1c);
                         set(qq, at(n, jt, ip, kr), v1c);
@@ -497,10 +639,10 @@ fn backward_step_so_body(model: &Model, data: &Data, so: &mut SoData, i: usize) 
                     // SAFETY: the ancestor lists hold DoF indices < nv (`SoData::new`, checked
                     // against the model by `SoData::check`).
                     let [sk, psidk, psiddk, psk] = unsafe { dof.get_unchecked(kr) };
-                    let ds = matvec(&rs, sk);
-                    let dp = matvec(&rd, psidk);
-                    let ddd = matvec(&rz, psiddk);
-                    let dpk = matvec(&rz, psk);
+                    let ds = K::matvec(&rs, sk);
+                    let dp = K::matvec(&rd, psidk);
+                    let ddd = K::matvec(&rz, psiddk);
+                    let dpk = K::matvec(&rz, psk);
                     let (nk, nnk) = (n * kr, n * n * kr);
                     // ∂²τ/∂q²: 1A + 2A mirror, 1B (+ 2B mirror if j ≺ i)
                     let val = dp[0] + ddd[0];
