@@ -443,9 +443,8 @@ mod avx {
         let mut hi = _mm_setzero_pd();
         for c in 0..6 {
             // SAFETY: m[c] has 6 elements: [0..4] and [4..6] are in bounds.
-            let (a, b) = unsafe {
-                (_mm256_loadu_pd(m[c].as_ptr()), _mm_loadu_pd(m[c].as_ptr().add(4)))
-            };
+            let (a, b) =
+                unsafe { (_mm256_loadu_pd(m[c].as_ptr()), _mm_loadu_pd(m[c].as_ptr().add(4))) };
             lo = _mm256_fmadd_pd(a, _mm256_set1_pd(x[c]), lo);
             hi = _mm_fmadd_pd(b, _mm_set1_pd(x[c]), hi);
         }
@@ -538,7 +537,15 @@ fn backward_step_so_avx2(model: &Model, data: &Data, so: &mut SoData, i: usize) 
     backward_step_so_body::<Avx2>(model, data, so, i)
 }
 
+/// Test switch: run the portable kernels even where AVX2/FMA is available.
+#[cfg(test)]
+static FORCE_PORTABLE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
 fn backward_step_so(model: &Model, data: &Data, so: &mut SoData, i: usize) {
+    #[cfg(test)]
+    if FORCE_PORTABLE.load(std::sync::atomic::Ordering::Relaxed) {
+        return backward_step_so_body::<Portable>(model, data, so, i);
+    }
     #[cfg(target_arch = "x86_64")]
     if has_avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
@@ -571,7 +578,8 @@ fn backward_step_so_body<K: Kern>(model: &Model, data: &Data, so: &mut SoData, i
                 let [sj, psidj, psiddj, psj] = &dof[jt];
                 // B(I^C_i, S_i) = ½(C + R) and B(I^C_i, S_i)ᵀ = ½(C − R), with R x = x ×* (I^C_i S_i)
                 // antisymmetric (eq. crff_oper): every B(I^C_i, S_i) product is C x ± x ×* t1.
-                let (c_s, c_d, c_dd, c_p) = (K::mv(&o.c, sj), K::mv(&o.c, psidj), K::mv(&o.c, psiddj), K::mv(&o.c, psj));
+                let (c_s, c_d, c_dd, c_p) =
+                    (K::mv(&o.c, sj), K::mv(&o.c, psidj), K::mv(&o.c, psiddj), K::mv(&o.c, psj));
                 let (a_d, a_s) = (K::mv(&o.a, psidj), K::mv(&o.a, sj));
                 // q–q 1A/2A terms: z1 · Ψ̇_k + z2 · Ψ̈_k
                 let z2 = crf(sj, &o.t1);
@@ -683,6 +691,40 @@ fn backward_step_so_body<K: Kern>(model: &Model, data: &Data, so: &mut SoData, i
                 }
             }
             j = model.parents[j];
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::builtin::random_tree;
+    use crate::rng::Rng;
+
+    /// The portable and the AVX2/FMA kernels give the same tensors (to rounding).
+    #[test]
+    fn portable_and_simd_kernels_agree() {
+        let mut rng = Rng::new(5);
+        for (nj, ff) in [(6, false), (9, true), (14, true)] {
+            let m = random_tree(nj, 77 + nj as u64, ff);
+            let (mut d, mut so_a, mut so_b) = (Data::new(&m), SoData::new(&m), SoData::new(&m));
+            let q = m.random_configuration(&mut rng);
+            let v = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
+            let a = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
+            id_so_derivatives(&m, &mut d, &mut so_a, &q, &v, &a, None).unwrap();
+            FORCE_PORTABLE.store(true, std::sync::atomic::Ordering::Relaxed);
+            id_so_derivatives(&m, &mut d, &mut so_b, &q, &v, &a, None).unwrap();
+            FORCE_PORTABLE.store(false, std::sync::atomic::Ordering::Relaxed);
+            let pairs = [
+                (so_a.d2tau_dq2(), so_b.d2tau_dq2()),
+                (so_a.d2tau_dv2(), so_b.d2tau_dv2()),
+                (so_a.d2tau_dqdv(), so_b.d2tau_dqdv()),
+                (so_a.dm_dq(), so_b.dm_dq()),
+            ];
+            for (x, y) in pairs {
+                let scale = x.as_slice().iter().fold(1.0f64, |s, v| s.max(v.abs()));
+                assert!(x.max_abs_diff(y) <= 1e-12 * scale, "{}", x.max_abs_diff(y));
+            }
         }
     }
 }
