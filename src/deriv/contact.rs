@@ -3,9 +3,8 @@
 //! `R = [[M, −J_cᵀ], [J_c, 0]]` (unknowns `(q̈, λ)` or `(q̇⁺, λ̂)`), and the product terms
 //! `G(z)` of the second-order implicit-function formulas.
 
-use super::contact_kin::{Base, Dir, Path, djtl_dq, djz_dq};
+use super::contact_kin::{Base, Dir, Path, djz_dq};
 use super::zero::idfoza_core;
-use crate::algo::internal::ltl_solve_in_place;
 use crate::algo::{Contact, Data};
 use crate::error::{Error, Result};
 use crate::linalg::gemm;
@@ -29,11 +28,29 @@ pub struct ContactData {
     pub(crate) lam: DMatrix<f64>,
     pub(crate) del: DMatrix<f64>,
     pub(crate) yl: DMatrix<f64>,
-    pub(crate) rhs: DVector<f64>,
     pub(crate) sol: DVector<f64>,
     pub(crate) rinv: DMatrix<f64>,
     pub(crate) g: DMatrix<f64>,
     pub(crate) zmat: DMatrix<f64>,
+    /// `Q = YΛ` transposed (`3 nc × nv`).
+    pub(crate) qt: DMatrix<f64>,
+    /// `P = M⁻¹ − YΛYᵀ` (`nv × nv`), the `∂q̈/∂τ` block of `R⁻¹`.
+    pub(crate) p: DMatrix<f64>,
+    /// `L⁻¹` of the `LᵀDL` factor, transposed (column `i` holds row `i` of `L⁻¹`).
+    gt: DMatrix<f64>,
+    /// Joints on any contact path (ascending).
+    union_joints: Vec<usize>,
+    /// Contact body and point in its joint frame, per contact.
+    local: Vec<(usize, Vector3<f64>)>,
+    /// World motion subspaces of the DoFs on the contact paths (other entries unused).
+    pub(crate) s: Vec<Motion>,
+    /// World body velocities of the path joints (index 0: zero).
+    pub(crate) kvel: Vec<Motion>,
+    /// World body accelerations (no gravity) of the path joints (index 0: zero).
+    pub(crate) kacc: Vec<Motion>,
+    t3: Vec<Vector3<f64>>,
+    tn: Vec<f64>,
+    tn2: Vec<f64>,
     /// Regularisation `μ ≥ 0` added to the Delassus matrix `J M⁻¹ Jᵀ` (default 0: a
     /// rank-deficient contact set is an error). With `μ > 0` the solve is damped:
     /// `(J M⁻¹ Jᵀ + μ I) λ = …`, and all derivatives are those of the damped system.
@@ -80,7 +97,27 @@ impl ContactData {
             }
             paths.push(path);
         }
+        let mut on_path = vec![false; model.njoints()];
+        for p in &paths {
+            for &j in &p.joints {
+                on_path[j] = true;
+            }
+        }
+        let union_joints: Vec<usize> = (1..model.njoints()).filter(|&j| on_path[j]).collect();
+        let local = contacts.iter().map(|c| c.body_point(model)).collect();
+        let maxd = paths.iter().map(|p| p.dofs.len()).max().unwrap_or(0);
         Ok(Self {
+            qt: DMatrix::zeros(m, n),
+            p: DMatrix::zeros(n, n),
+            gt: DMatrix::zeros(n, n),
+            union_joints,
+            local,
+            s: vec![Motion::zero(); n],
+            kvel: vec![Motion::zero(); model.njoints()],
+            kacc: vec![Motion::zero(); model.njoints()],
+            t3: vec![Vector3::zeros(); maxd],
+            tn: vec![0.0; n],
+            tn2: vec![0.0; n],
             contacts: contacts.to_vec(),
             paths,
             acc: vec![Motion::zero(); model.njoints()],
@@ -91,7 +128,6 @@ impl ContactData {
             lam: DMatrix::zeros(m, m),
             del: DMatrix::zeros(m, m),
             yl: DMatrix::zeros(n, m),
-            rhs: DVector::zeros(n + m),
             sol: DVector::zeros(n + m),
             rinv: DMatrix::zeros(n + m, n + m),
             g: DMatrix::zeros(n + m, n),
@@ -152,36 +188,136 @@ pub(crate) fn update_points(model: &Model, data: &Data, cd: &mut ContactData, a0
     }
 }
 
-/// Classical accelerations of the contact points (stacked) from the current `ov` and `acc`.
-pub(crate) fn point_accelerations(data: &Data, cd: &ContactData, out: &mut DVector<f64>) {
-    for (c, path) in cd.paths.iter().enumerate() {
-        let m = cd.body(c);
-        let (v, a, p) = (data.ov[m], cd.acc[m], path.p);
-        let pdot = v.lin + v.ang.cross(&p);
-        let acc = a.lin + a.ang.cross(&p) + v.ang.cross(&pdot);
-        for r in 0..3 {
-            out[3 * c + r] = acc[r];
+/// World subspaces `cd.s` of the path DoFs, body velocities `cd.kvel` (if `v` is given, else
+/// left zero) and accelerations `cd.kacc` at `q̈ = 0` without gravity of the path joints, the
+/// contact points and the Jacobian `cd.jac`, from the current `data.o_m_i`. With `v`, also the
+/// drift `J̇q̇` (classical point accelerations at `q̈ = 0`) into `cd.drift`.
+pub(crate) fn path_kinematics(model: &Model, data: &Data, cd: &mut ContactData, v: Option<&[f64]>) {
+    for &j in &cd.union_joints {
+        let x = data.o_m_i[j];
+        let parent = model.parents[j];
+        let (vp, ap) = (cd.kvel[parent], cd.kacc[parent]);
+        let mut vj = Motion::zero();
+        for c in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
+            let s = x.act_motion(&model.subspace[c]);
+            cd.s[c] = s;
+            if let Some(v) = v {
+                vj += s * v[c];
+            }
+        }
+        let vi = vp + vj;
+        cd.kvel[j] = vi;
+        cd.kacc[j] = ap + vi.cross(&vj);
+    }
+    for (c, &(body, local)) in cd.local.iter().enumerate() {
+        let p = data.o_m_i[body].act_point(&local);
+        let path = &mut cd.paths[c];
+        path.p = p;
+        for &x in &path.dofs {
+            let s = cd.s[x];
+            let u = s.lin + s.ang.cross(&p);
+            for r in 0..3 {
+                cd.jac[(3 * c + r, x)] = u[r];
+            }
+        }
+        if v.is_some() {
+            let (vb, ab) = (cd.kvel[body], cd.kacc[body]);
+            let pdot = vb.lin + vb.ang.cross(&p);
+            let acc = ab.lin + ab.ang.cross(&p) + vb.ang.cross(&pdot);
+            for r in 0..3 {
+                cd.drift[3 * c + r] = acc[r];
+            }
         }
     }
 }
 
-/// With `data.ltl` (factor of `M`) and `data.minv`, computes `Y = M⁻¹Jᵀ`, `Λ = (J Y + μI)⁻¹` and
-/// `R⁻¹ = [[M⁻¹ − YΛYᵀ, YΛ], [−ΛYᵀ, Λ]]`. A rank-deficient contact set is an error naming the
-/// contacts (unless damped).
-pub(crate) fn factor_kkt(model: &Model, data: &Data, cd: &mut ContactData) -> Result<()> {
+/// Adds `Σ_{x ⪯ j} S_x q̈_x` to the path accelerations `cd.kacc` (after [`path_kinematics`]).
+pub(crate) fn add_qdd_to_path_acc(model: &Model, cd: &mut ContactData, qdd: &[f64]) {
+    cd.zc[0] = Motion::zero();
+    for &j in &cd.union_joints {
+        let mut z = cd.zc[model.parents[j]];
+        for c in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
+            z += cd.s[c] * qdd[c];
+        }
+        cd.zc[j] = z;
+        cd.kacc[j] += z;
+    }
+}
+
+/// With `data.ltl` (factor of `M`, `M = LᵀDL`) and `cd.jac`: `M⁻¹ = L⁻¹D⁻¹L⁻ᵀ` into
+/// `data.minv` (tree-sparse `L⁻¹`), `Y = M⁻¹Jᵀ`, `Λ = (J Y + μI)⁻¹` (Cholesky), `Q = YΛ`
+/// (`cd.yl`, and `Qᵀ` in `cd.qt`) and `P = M⁻¹ − YΛYᵀ` (`cd.p`), so that
+/// `R⁻¹ = [[P, Q], [−Qᵀ, Λ]]`. A rank-deficient contact set is an error naming the contacts
+/// (unless damped).
+pub(crate) fn factor_kkt(model: &Model, data: &mut Data, cd: &mut ContactData) -> Result<()> {
     let n = model.nv;
     let m = cd.dim();
-    cd.y.tr_copy_from(&cd.jac);
-    for mut col in cd.y.column_iter_mut() {
-        ltl_solve_in_place(model, &data.ltl, col.as_mut_slice());
+    {
+        let h = data.ltl.as_slice();
+        let g = cd.gt.as_mut_slice();
+        // Row i of L⁻¹: e_i − Σ_{k ≺ i} L_ik (row k of L⁻¹)  (stored as column i of `g`).
+        for i in 0..n {
+            let anc = model.ancestors_of_dof(i);
+            for &j in anc {
+                g[j + n * i] = 0.0;
+            }
+            g[i + n * i] = 1.0;
+            for &k in anc {
+                let lik = h[k + n * i];
+                g[k + n * i] -= lik;
+                for &j in model.ancestors_of_dof(k) {
+                    g[j + n * i] -= lik * g[j + n * k];
+                }
+            }
+            cd.tn[i] = 1.0 / h[i + n * i];
+        }
+        // M⁻¹_ab = Σ_{k ⪯ a, k ⪯ b} (L⁻¹)_ak (L⁻¹)_bk / D_k  (b ≤ a; L⁻¹ is zero off its pattern).
+        let minv = data.minv.as_mut_slice();
+        for a in 0..n {
+            let anc = model.ancestors_of_dof(a);
+            let mut daa = cd.tn[a];
+            for &k in anc {
+                let t = g[k + n * a] * cd.tn[k];
+                cd.tn2[k] = t;
+                daa += t * g[k + n * a];
+            }
+            minv[a + n * a] = daa;
+            for b in 0..a {
+                let mut x = 0.0;
+                for &k in anc {
+                    x += cd.tn2[k] * g[k + n * b];
+                }
+                minv[a + n * b] = x;
+                minv[b + n * a] = x;
+            }
+        }
+    }
+    // Y = M⁻¹Jᵀ (J is zero off the contact paths).
+    let minv = &data.minv;
+    for (c, path) in cd.paths.iter().enumerate() {
+        for r in 3 * c..3 * c + 3 {
+            let mut yc = cd.y.column_mut(r);
+            yc.fill(0.0);
+            for &l in &path.dofs {
+                yc.axpy(cd.jac[(r, l)], &minv.column(l), 1.0);
+            }
+        }
     }
     // Delassus matrix J M⁻¹ Jᵀ (+ μ I), symmetrised, factorised in place (L in the lower part).
-    gemm(1.0, &cd.jac, &cd.y, 0.0, &mut cd.del);
+    for (c, path) in cd.paths.iter().enumerate() {
+        for r1 in 3 * c..3 * c + 3 {
+            for r2 in 0..=r1 {
+                let mut x = 0.0;
+                for &l in &path.dofs {
+                    x += cd.jac[(r1, l)] * cd.y[(l, r2)];
+                }
+                cd.del[(r1, r2)] = x;
+            }
+        }
+    }
     for c in 0..m {
         for r in 0..c {
-            let x = 0.5 * (cd.del[(r, c)] + cd.del[(c, r)]);
-            cd.del[(r, c)] = x;
-            cd.del[(c, r)] = x;
+            cd.del[(r, c)] = cd.del[(c, r)];
         }
         cd.del[(c, c)] += cd.damping;
     }
@@ -197,24 +333,89 @@ pub(crate) fn factor_kkt(model: &Model, data: &Data, cd: &mut ContactData) -> Re
         });
     }
     gemm(1.0, &cd.y, &cd.lam, 0.0, &mut cd.yl);
-    // top-left block M⁻¹ − (YΛ) Yᵀ (m is small: a direct loop).
-    for c in 0..n {
-        for r in 0..n {
-            let mut x = data.minv[(r, c)];
-            for l in 0..m {
-                x -= cd.yl[(r, l)] * cd.y[(c, l)];
-            }
-            cd.rinv[(r, c)] = x;
-        }
-    }
-    cd.rinv.view_mut((0, n), (n, m)).copy_from(&cd.yl);
+    cd.qt.tr_copy_from(&cd.yl);
+    // P = M⁻¹ − (YΛ) Yᵀ.
+    cd.p.copy_from(&data.minv);
     for r in 0..m {
-        for c in 0..n {
-            cd.rinv[(n + r, c)] = -cd.yl[(c, r)];
+        for b in 0..n {
+            let ybr = cd.y[(b, r)];
+            if ybr != 0.0 {
+                cd.p.column_mut(b).axpy(-ybr, &cd.yl.column(r), 1.0);
+            }
         }
     }
-    cd.rinv.view_mut((n, n), (m, m)).copy_from(&cd.lam);
     Ok(())
+}
+
+/// `R⁻¹ = [[P, Q], [−Qᵀ, Λ]]` densely into `cd.rinv` (after [`factor_kkt`]; second order only).
+pub(crate) fn fill_rinv(cd: &mut ContactData) {
+    let n = cd.p.nrows();
+    let m = cd.dim();
+    cd.rinv.view_mut((0, 0), (n, n)).copy_from(&cd.p);
+    cd.rinv.view_mut((0, n), (n, m)).copy_from(&cd.yl);
+    cd.rinv.view_mut((n, 0), (m, n)).copy_from(&cd.qt);
+    cd.rinv.view_mut((n, 0), (m, n)).neg_mut();
+    cd.rinv.view_mut((n, n), (m, m)).copy_from(&cd.lam);
+}
+
+/// Rows `∂a_p/∂q` into `cq` and `∂a_p/∂q̇` into `cv` (`3 nc × nv`, only path columns written) of
+/// the classical contact-point accelerations at fixed `q̈`, from `cd.s`, `cd.kvel`, `cd.kacc`
+/// (with `q̈`) and the points: along `q_l`, `D V_m = S_l × (V_m − V_λ)` (J2),
+/// `D A_m = (A_λ − A_m) × S_l + (V_λ − V_m) × Ψ̇_l` (J6, J7), `D p = u_l`; along `q̇_l`,
+/// `D V_m = S_l` (J8), `D A_m = (V_λ + V_l − V_m) × S_l` (J9).
+pub(crate) fn accel_derivatives(cd: &ContactData, cq: &mut DMatrix<f64>, cv: &mut DMatrix<f64>) {
+    for (c, path) in cd.paths.iter().enumerate() {
+        let body = *path.joints.last().expect("path");
+        let p = path.p;
+        let (vm, am) = (cd.kvel[body], cd.kacc[body]);
+        let w = vm.ang;
+        let pd = vm.lin + w.cross(&p);
+        for (i, &l) in path.dofs.iter().enumerate() {
+            let (jl, ll) = (path.dof_joint[i], path.dof_parent[i]);
+            let s = cd.s[l];
+            let u = s.lin + s.ang.cross(&p);
+            let (vl, al) = (cd.kvel[ll], cd.kacc[ll]);
+            let dv = s.cross(&(vm - vl));
+            let psid = vl.cross(&s);
+            let da = (al - am).cross(&s) + (vl - vm).cross(&psid);
+            let dpd = dv.lin + dv.ang.cross(&p) + w.cross(&u);
+            let rq =
+                da.lin + da.ang.cross(&p) + am.ang.cross(&u) + dv.ang.cross(&pd) + w.cross(&dpd);
+            let dav = (vl + cd.kvel[jl] - vm).cross(&s);
+            let rv = dav.lin + dav.ang.cross(&p) + s.ang.cross(&pd) + w.cross(&u);
+            for r in 0..3 {
+                cq[(3 * c + r, l)] = rq[r];
+                cv[(3 * c + r, l)] = rv[r];
+            }
+        }
+    }
+}
+
+/// Rows `∂(J_c w)/∂q` at fixed `w` into `out` (`3 nc × nv`, only path columns written):
+/// with `Z_j = Σ_{x ⪯ j} S_x w_x`, `D Z_m = S_l × (Z_m − Z_λ)` and `D p = u_l`.
+pub(crate) fn djw_dq(model: &Model, cd: &mut ContactData, w: &[f64], out: &mut DMatrix<f64>) {
+    cd.zc[0] = Motion::zero();
+    for &j in &cd.union_joints {
+        let mut z = cd.zc[model.parents[j]];
+        for c in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
+            z += cd.s[c] * w[c];
+        }
+        cd.zc[j] = z;
+    }
+    for (c, path) in cd.paths.iter().enumerate() {
+        let body = *path.joints.last().expect("path");
+        let p = path.p;
+        let zm = cd.zc[body];
+        for (i, &l) in path.dofs.iter().enumerate() {
+            let s = cd.s[l];
+            let u = s.lin + s.ang.cross(&p);
+            let dz = s.cross(&(zm - cd.zc[path.dof_parent[i]]));
+            let r = dz.lin + dz.ang.cross(&p) + zm.ang.cross(&u);
+            for k in 0..3 {
+                out[(3 * c + k, l)] = r[k];
+            }
+        }
+    }
 }
 
 /// Cholesky factorisation of the symmetric `a` in place (lower triangle) and its inverse into
@@ -259,23 +460,39 @@ fn cholesky_inverse_in_place(a: &mut DMatrix<f64>, inv: &mut DMatrix<f64>, tol: 
     true
 }
 
-/// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `3 nc` world forces) from `out` (`nv×nv`, `[x][l]`).
+/// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `3 nc` world forces) from `out` (`nv×nv`, `[x][l]`), with `s`
+/// the world subspaces of the path DoFs and `cd.jac` current. With `u_x` the Jacobian column
+/// (point velocity of `S_x`) and `w = S.ang`: a perturbation of `q_l` rotates `u_x` rigidly if
+/// `l ⪯ x` (J1 and `∂p/∂q_l = u_l` give `D u_x = w_l × u_x`) and otherwise only moves the point
+/// (`D u_x = w_x × u_l`), so the entry is `w_l·(u_x × λ)` resp. `w_x·(u_l × λ)`.
 pub(crate) fn sub_djtl_dq(
-    model: &Model,
-    data: &Data,
-    cd: &ContactData,
+    s: &[Motion],
+    cd: &mut ContactData,
     lambda: &[f64],
     out: &mut DMatrix<f64>,
 ) {
-    let b = base(model, data, cd);
+    let mut t = std::mem::take(&mut cd.t3);
     for (c, path) in cd.paths.iter().enumerate() {
         let lam = Vector3::new(lambda[3 * c], lambda[3 * c + 1], lambda[3 * c + 2]);
-        for &x in &path.dofs {
-            for &l in &path.dofs {
-                out[(x, l)] -= djtl_dq(&b, &path.p, &lam, x, l, Dir::None).0;
+        if lam == Vector3::zeros() {
+            continue;
+        }
+        for (i, &x) in path.dofs.iter().enumerate() {
+            let u =
+                Vector3::new(cd.jac[(3 * c, x)], cd.jac[(3 * c + 1, x)], cd.jac[(3 * c + 2, x)]);
+            t[i] = u.cross(&lam);
+        }
+        for (il, &l) in path.dofs.iter().enumerate() {
+            let jl = path.dof_joint[il];
+            let wl = s[l].ang;
+            for (ix, &x) in path.dofs.iter().enumerate() {
+                let e =
+                    if jl <= path.dof_joint[ix] { wl.dot(&t[ix]) } else { s[x].ang.dot(&t[il]) };
+                out[(x, l)] -= e;
             }
         }
     }
+    cd.t3 = t;
 }
 
 /// `G(z)` (columns `l`): `[IDFOZA(z₁) − ∂(Jᵀz₂)/∂q ; ∂(J z₁)/∂q]`, `z = (z₁, z₂)` of length
@@ -298,7 +515,7 @@ pub(crate) fn g_matrix_split(
     idfoza_core(model, data, z_m, &mut cd.zmat);
     cd.g.view_mut((0, 0), (n, n)).copy_from(&cd.zmat);
     let mut g = std::mem::replace(&mut cd.g, DMatrix::zeros(0, 0));
-    sub_djtl_dq_rows(model, data, cd, z2, &mut g);
+    sub_djtl_dq(&data.s_world, cd, z2, &mut g);
     // ∂(J z₁)/∂q rows: cumulative Z_j = Σ_{x ⪯ j} S_x z_x along the path.
     let mut zc = std::mem::take(&mut cd.zc);
     for (c, path) in cd.paths.iter().enumerate() {
@@ -324,27 +541,4 @@ pub(crate) fn g_matrix_split(
     }
     cd.zc = zc;
     cd.g = g;
-}
-
-/// Rows `0..nv` of `g`: subtract `∂(Jᵀ z₂)/∂q`.
-fn sub_djtl_dq_rows(
-    model: &Model,
-    data: &Data,
-    cd: &ContactData,
-    z2: &[f64],
-    g: &mut DMatrix<f64>,
-) {
-    let b = base(model, data, cd);
-    for (c, path) in cd.paths.iter().enumerate() {
-        let lam = Vector3::new(z2[3 * c], z2[3 * c + 1], z2[3 * c + 2]);
-        if lam == Vector3::zeros() {
-            continue;
-        }
-        for &x in &path.dofs {
-            for &l in &path.dofs {
-                g[(x, l)] -= djtl_dq(&b, &path.p, &lam, x, l, Dir::None).0;
-            }
-        }
-    }
-    let _ = model;
 }
