@@ -10,8 +10,8 @@
 //! `q̇⁻`, so `∂²y/∂q̇⁻²` = 0.
 
 use super::contact::{
-    ContactData, base, djw_dq, factor_kkt, fill_rinv, g_matrix, g_matrix_split, path_kinematics,
-    sub_djtl_dq, update_points,
+    ContactData, base, copy_block, djw_dq, factor_kkt, fill_rinv, g_matrix, g_matrix_split,
+    path_kinematics, sub_djtl_dq, update_points,
 };
 use super::contact_kin::{Dir, djtl_dq, djz_dq};
 use super::id_so::{SoData, id_so_unchecked};
@@ -49,6 +49,7 @@ pub struct ImpactData {
     pub so: Option<ImpactSo>,
     rq: DMatrix<f64>,
     cq: DMatrix<f64>,
+    out: DMatrix<f64>,
     dv: DVector<f64>,
     w: DVector<f64>,
     zero: DVector<f64>,
@@ -86,6 +87,7 @@ impl ImpactData {
             so: None,
             rq: DMatrix::zeros(n, n),
             cq: DMatrix::zeros(m, n),
+            out: DMatrix::zeros(cd.r1.nrows(), n),
             dv: DVector::zeros(n),
             w: DVector::zeros(n),
             zero: DVector::zeros(n),
@@ -185,16 +187,16 @@ fn first_order(model: &Model, data: &mut Data, im: &mut ImpactData) {
     sub_djtl_dq(&s, cd, im.impulse.as_slice(), &mut im.rq);
     cd.s = s;
     djw_dq(model, cd, im.w.as_slice(), &mut im.cq);
-    gemm(-1.0, &cd.p, &im.rq, 0.0, &mut im.dvplus_dq);
-    gemm(-1.0, &cd.yl, &im.cq, 1.0, &mut im.dvplus_dq);
-    gemm(1.0, &cd.qt, &im.rq, 0.0, &mut im.dimpulse_dq);
-    gemm(-1.0, &cd.lam, &im.cq, 1.0, &mut im.dimpulse_dq);
-    let k = -(1.0 + im.restitution);
-    gemm(k, &cd.yl, &cd.jac, 0.0, &mut im.dvplus_dvminus);
+    gemm(-1.0, &cd.r1, &im.rq, 0.0, &mut im.out);
+    gemm(-1.0, &cd.r2, &im.cq, 1.0, &mut im.out);
+    copy_block(&im.out, 0, 0, &mut im.dvplus_dq);
+    copy_block(&im.out, n, 0, &mut im.dimpulse_dq);
+    gemm(-(1.0 + im.restitution), &cd.r2, &cd.jac, 0.0, &mut im.out);
+    copy_block(&im.out, 0, 0, &mut im.dvplus_dvminus);
+    copy_block(&im.out, n, 0, &mut im.dimpulse_dvminus);
     for i in 0..n {
         im.dvplus_dvminus[(i, i)] += 1.0;
     }
-    gemm(k, &cd.lam, &cd.jac, 0.0, &mut im.dimpulse_dvminus);
 }
 
 /// First- and second-order derivatives of the impact dynamics. `im` must have been created

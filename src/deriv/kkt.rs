@@ -11,8 +11,8 @@
 //! a Cholesky factorisation of the Delassus matrix (no dense inverse of the KKT matrix).
 
 use super::contact::{
-    ContactData, accel_derivatives, add_qdd_to_path_acc, base, factor_kkt, fill_rinv, g_matrix,
-    path_kinematics, sub_djtl_dq, update_points,
+    ContactData, accel_derivatives, add_qdd_to_path_acc, base, copy_block, factor_kkt, fill_rinv,
+    g_matrix, path_kinematics, sub_djtl_dq, update_points,
 };
 use super::contact_kin::{Dir, dap_dq, dap_dv, djtl_dq};
 use super::id_fo::id_derivatives_unchecked;
@@ -48,9 +48,9 @@ pub struct KktData {
     pub dlambda_dtau: DMatrix<f64>,
     /// Second-order results (allocated by [`KktData::with_second_order`]).
     pub so: Option<KktSo>,
-    rq: DMatrix<f64>,
-    cq: DMatrix<f64>,
-    cv: DMatrix<f64>,
+    rx: DMatrix<f64>,
+    cx: DMatrix<f64>,
+    out: DMatrix<f64>,
     tmp_v: DVector<f64>,
 }
 
@@ -92,9 +92,9 @@ impl KktData {
             dlambda_dv: DMatrix::zeros(m, n),
             dlambda_dtau: DMatrix::zeros(m, n),
             so: None,
-            rq: DMatrix::zeros(n, n),
-            cq: DMatrix::zeros(m, n),
-            cv: DMatrix::zeros(m, n),
+            rx: DMatrix::zeros(n, 2 * n),
+            cx: DMatrix::zeros(m, 2 * n),
+            out: DMatrix::zeros(cd.r1.nrows(), 2 * n),
             tmp_v: DVector::zeros(n),
             cd,
         }
@@ -202,25 +202,26 @@ pub fn kkt_derivatives(
 /// `∂q̈/∂x = −(P a + Q c)`, `∂λ/∂x = Qᵀa − Λc` (eqs. FO_general_eqn, ID_FO_q_eqn1,
 /// ID_FO_v_eqn1, ID_FO_tau_eqn).
 fn first_order_from_id(model: &Model, data: &mut Data, kd: &mut KktData) {
+    let n = model.nv;
     let cd = &mut kd.cd;
     add_qdd_to_path_acc(model, cd, kd.qdd.as_slice());
-    // a_q = ∂τ/∂q − ∂(J_cᵀλ)/∂q.
-    kd.rq.copy_from(&data.dtau_dq);
+    // [a_q | a_v] = [∂τ/∂q − ∂(J_cᵀλ)/∂q | ∂τ/∂q̇], [c_q | c_v] the point-acceleration rows.
+    let rx = kd.rx.as_mut_slice();
+    rx[..n * n].copy_from_slice(data.dtau_dq.as_slice());
+    rx[n * n..].copy_from_slice(data.dtau_dv.as_slice());
     let s = std::mem::take(&mut cd.s);
-    sub_djtl_dq(&s, cd, kd.lambda.as_slice(), &mut kd.rq);
+    sub_djtl_dq(&s, cd, kd.lambda.as_slice(), &mut kd.rx);
     cd.s = s;
-    accel_derivatives(cd, &mut kd.cq, &mut kd.cv);
-    gemm(-1.0, &cd.p, &kd.rq, 0.0, &mut kd.dqdd_dq);
-    gemm(-1.0, &cd.yl, &kd.cq, 1.0, &mut kd.dqdd_dq);
-    gemm(-1.0, &cd.p, &data.dtau_dv, 0.0, &mut kd.dqdd_dv);
-    gemm(-1.0, &cd.yl, &kd.cv, 1.0, &mut kd.dqdd_dv);
-    gemm(1.0, &cd.qt, &kd.rq, 0.0, &mut kd.dlambda_dq);
-    gemm(-1.0, &cd.lam, &kd.cq, 1.0, &mut kd.dlambda_dq);
-    gemm(1.0, &cd.qt, &data.dtau_dv, 0.0, &mut kd.dlambda_dv);
-    gemm(-1.0, &cd.lam, &kd.cv, 1.0, &mut kd.dlambda_dv);
-    kd.dqdd_dtau.copy_from(&cd.p);
-    kd.dlambda_dtau.copy_from(&cd.qt);
-    kd.dlambda_dtau.neg_mut();
+    accel_derivatives(cd, &mut kd.cx);
+    // −R⁻¹ [R_q | R_v] by column blocks of R⁻¹ (rows padded for the product kernel).
+    gemm(-1.0, &cd.r1, &kd.rx, 0.0, &mut kd.out);
+    gemm(-1.0, &cd.r2, &kd.cx, 1.0, &mut kd.out);
+    copy_block(&kd.out, 0, 0, &mut kd.dqdd_dq);
+    copy_block(&kd.out, n, 0, &mut kd.dlambda_dq);
+    copy_block(&kd.out, 0, n, &mut kd.dqdd_dv);
+    copy_block(&kd.out, n, n, &mut kd.dlambda_dv);
+    copy_block(&cd.r1, 0, 0, &mut kd.dqdd_dtau);
+    copy_block(&cd.r1, n, 0, &mut kd.dlambda_dtau);
 }
 
 /// First- and second-order derivatives of the KKT dynamics at `(q, q̇, τ)`. `kd` must have been
