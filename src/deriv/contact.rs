@@ -3,9 +3,8 @@
 //! `R = [[M, −J_cᵀ], [J_c, 0]]` (unknowns `(q̈, λ)` or `(q̇⁺, λ̂)`), and the product terms
 //! `G(z)` of the second-order implicit-function formulas.
 
-use super::contact_kin::{Base, Dir, Path, djtl_dq, djz_dq};
+use super::contact_kin::{Base, Dir, Path, djz_dq};
 use super::zero::idfoza_core;
-use crate::algo::internal::ltl_solve_in_place;
 use crate::algo::{Contact, Data};
 use crate::error::{Error, Result};
 use crate::linalg::gemm;
@@ -28,12 +27,33 @@ pub struct ContactData {
     pub(crate) y: DMatrix<f64>,
     pub(crate) lam: DMatrix<f64>,
     pub(crate) del: DMatrix<f64>,
-    pub(crate) yl: DMatrix<f64>,
-    pub(crate) rhs: DVector<f64>,
     pub(crate) sol: DVector<f64>,
     pub(crate) rinv: DMatrix<f64>,
     pub(crate) g: DMatrix<f64>,
     pub(crate) zmat: DMatrix<f64>,
+    /// First `nv` columns of `R⁻¹`, `[P; −Qᵀ]` with `P = M⁻¹ − YΛYᵀ`, `Q = YΛ`, rows padded
+    /// with zeros to a multiple of 8 (`rp × nv`).
+    pub(crate) r1: DMatrix<f64>,
+    /// Last `3 nc` columns of `R⁻¹`, `[Q; Λ]`, rows padded like `r1` (`rp × 3 nc`).
+    pub(crate) r2: DMatrix<f64>,
+    /// `L⁻ᵀ` of the `LᵀDL` factor (column `i` holds row `i` of `L⁻¹`; zero off the tree pattern).
+    gt: DMatrix<f64>,
+    jt: DMatrix<f64>,
+    qt: DMatrix<f64>,
+    /// `L⁻¹ D⁻¹` (column-major; zero off the tree pattern).
+    gd: DMatrix<f64>,
+    /// Joints on any contact path (ascending).
+    union_joints: Vec<usize>,
+    /// Contact body and point in its joint frame, per contact.
+    local: Vec<(usize, Vector3<f64>)>,
+    /// World motion subspaces of the DoFs on the contact paths (other entries unused).
+    pub(crate) s: Vec<Motion>,
+    /// World body velocities of the path joints (index 0: zero).
+    pub(crate) kvel: Vec<Motion>,
+    /// World body accelerations (no gravity) of the path joints (index 0: zero).
+    pub(crate) kacc: Vec<Motion>,
+    t3: Vec<Vector3<f64>>,
+    tn: Vec<f64>,
     /// Regularisation `μ ≥ 0` added to the Delassus matrix `J M⁻¹ Jᵀ` (default 0: a
     /// rank-deficient contact set is an error). With `μ > 0` the solve is damped:
     /// `(J M⁻¹ Jᵀ + μ I) λ = …`, and all derivatives are those of the damped system.
@@ -80,7 +100,29 @@ impl ContactData {
             }
             paths.push(path);
         }
+        let mut on_path = vec![false; model.njoints()];
+        for p in &paths {
+            for &j in &p.joints {
+                on_path[j] = true;
+            }
+        }
+        let union_joints: Vec<usize> = (1..model.njoints()).filter(|&j| on_path[j]).collect();
+        let local = contacts.iter().map(|c| c.body_point(model)).collect();
+        let maxd = paths.iter().map(|p| p.dofs.len()).max().unwrap_or(0);
         Ok(Self {
+            r1: DMatrix::zeros(padded_rows(n + m), n),
+            r2: DMatrix::zeros(padded_rows(n + m), m),
+            gt: DMatrix::zeros(n, n),
+            jt: DMatrix::zeros(n, m),
+            qt: DMatrix::zeros(m, n),
+            gd: DMatrix::zeros(n, n),
+            union_joints,
+            local,
+            s: vec![Motion::zero(); n],
+            kvel: vec![Motion::zero(); model.njoints()],
+            kacc: vec![Motion::zero(); model.njoints()],
+            t3: vec![Vector3::zeros(); maxd],
+            tn: vec![0.0; n],
             contacts: contacts.to_vec(),
             paths,
             acc: vec![Motion::zero(); model.njoints()],
@@ -90,8 +132,6 @@ impl ContactData {
             y: DMatrix::zeros(n, m),
             lam: DMatrix::zeros(m, m),
             del: DMatrix::zeros(m, m),
-            yl: DMatrix::zeros(n, m),
-            rhs: DVector::zeros(n + m),
             sol: DVector::zeros(n + m),
             rinv: DMatrix::zeros(n + m, n + m),
             g: DMatrix::zeros(n + m, n),
@@ -118,6 +158,22 @@ impl ContactData {
             .collect::<Vec<_>>()
             .join(", ")
     }
+}
+
+/// `dst ← src[r0.., c0..]` (block of the size of `dst`), by contiguous column slices.
+pub(crate) fn copy_block(src: &DMatrix<f64>, r0: usize, c0: usize, dst: &mut DMatrix<f64>) {
+    let (rs, (rd, cdn)) = (src.nrows(), dst.shape());
+    assert!(r0 + rd <= rs && c0 + cdn <= src.ncols());
+    let s = src.as_slice();
+    for (j, col) in dst.as_mut_slice().chunks_exact_mut(rd.max(1)).enumerate() {
+        let o = (c0 + j) * rs + r0;
+        col.copy_from_slice(&s[o..o + rd]);
+    }
+}
+
+/// `r` rounded up to a multiple of 8 (row blocks of the product kernel).
+pub(crate) fn padded_rows(r: usize) -> usize {
+    r.div_ceil(8) * 8
 }
 
 /// Base quantities of the current state (after `forward_pass_world` and [`update_points`]).
@@ -152,38 +208,96 @@ pub(crate) fn update_points(model: &Model, data: &Data, cd: &mut ContactData, a0
     }
 }
 
-/// Classical accelerations of the contact points (stacked) from the current `ov` and `acc`.
-pub(crate) fn point_accelerations(data: &Data, cd: &ContactData, out: &mut DVector<f64>) {
-    for (c, path) in cd.paths.iter().enumerate() {
-        let m = cd.body(c);
-        let (v, a, p) = (data.ov[m], cd.acc[m], path.p);
-        let pdot = v.lin + v.ang.cross(&p);
-        let acc = a.lin + a.ang.cross(&p) + v.ang.cross(&pdot);
-        for r in 0..3 {
-            out[3 * c + r] = acc[r];
+/// World subspaces `cd.s` of the path DoFs, body velocities `cd.kvel` (if `v` is given, else
+/// left zero) and accelerations `cd.kacc` at `q̈ = 0` without gravity of the path joints, the
+/// contact points and the Jacobian `cd.jac`, from the current `data.o_m_i`. With `v`, also the
+/// drift `J̇q̇` (classical point accelerations at `q̈ = 0`) into `cd.drift`.
+pub(crate) fn path_kinematics(model: &Model, data: &Data, cd: &mut ContactData, v: Option<&[f64]>) {
+    for &j in &cd.union_joints {
+        let x = data.o_m_i[j];
+        let parent = model.parents[j];
+        let (vp, ap) = (cd.kvel[parent], cd.kacc[parent]);
+        let mut vj = Motion::zero();
+        for c in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
+            let s = x.act_motion(&model.subspace[c]);
+            cd.s[c] = s;
+            if let Some(v) = v {
+                vj += s * v[c];
+            }
+        }
+        let vi = vp + vj;
+        cd.kvel[j] = vi;
+        cd.kacc[j] = ap + vi.cross(&vj);
+    }
+    for (c, &(body, local)) in cd.local.iter().enumerate() {
+        let p = data.o_m_i[body].act_point(&local);
+        let path = &mut cd.paths[c];
+        path.p = p;
+        for &x in &path.dofs {
+            let s = cd.s[x];
+            let u = s.lin + s.ang.cross(&p);
+            for r in 0..3 {
+                cd.jac[(3 * c + r, x)] = u[r];
+            }
+        }
+        if v.is_some() {
+            let (vb, ab) = (cd.kvel[body], cd.kacc[body]);
+            let pdot = vb.lin + vb.ang.cross(&p);
+            let acc = ab.lin + ab.ang.cross(&p) + vb.ang.cross(&pdot);
+            for r in 0..3 {
+                cd.drift[3 * c + r] = acc[r];
+            }
         }
     }
 }
 
-/// With `data.ltl` (factor of `M`) and `data.minv`, computes `Y = M⁻¹Jᵀ`, `Λ = (J Y + μI)⁻¹` and
-/// `R⁻¹ = [[M⁻¹ − YΛYᵀ, YΛ], [−ΛYᵀ, Λ]]`. A rank-deficient contact set is an error naming the
-/// contacts (unless damped).
-pub(crate) fn factor_kkt(model: &Model, data: &Data, cd: &mut ContactData) -> Result<()> {
+/// Adds `Σ_{x ⪯ j} S_x q̈_x` to the path accelerations `cd.kacc` (after [`path_kinematics`]).
+pub(crate) fn add_qdd_to_path_acc(model: &Model, cd: &mut ContactData, qdd: &[f64]) {
+    cd.zc[0] = Motion::zero();
+    for &j in &cd.union_joints {
+        let mut z = cd.zc[model.parents[j]];
+        let iv = model.idx_v[j];
+        for (s, x) in cd.s[iv..iv + model.nvs[j]].iter().zip(&qdd[iv..iv + model.nvs[j]]) {
+            z += *s * *x;
+        }
+        cd.zc[j] = z;
+        cd.kacc[j] += z;
+    }
+}
+
+/// With `data.ltl` (factor of `M`, `M = LᵀDL`) and `cd.jac`: `M⁻¹ = L⁻¹D⁻¹L⁻ᵀ` into
+/// `data.minv` (tree-sparse `L⁻¹`), `Y = M⁻¹Jᵀ`, `Λ = (J Y + μI)⁻¹` (Cholesky), `Q = YΛ` and
+/// `P = M⁻¹ − YΛYᵀ`, i.e. `R⁻¹ = [[P, Q], [−Qᵀ, Λ]]` by column blocks in `cd.r1`, `cd.r2`
+/// (and `Λ` in `cd.lam`). A rank-deficient contact set is an error naming the contacts (unless
+/// damped).
+pub(crate) fn factor_kkt(model: &Model, data: &mut Data, cd: &mut ContactData) -> Result<()> {
     let n = model.nv;
     let m = cd.dim();
-    cd.y.tr_copy_from(&cd.jac);
-    for mut col in cd.y.column_iter_mut() {
-        ltl_solve_in_place(model, &data.ltl, col.as_mut_slice());
-    }
-    // Delassus matrix J M⁻¹ Jᵀ (+ μ I), symmetrised, factorised in place (L in the lower part).
-    gemm(1.0, &cd.jac, &cd.y, 0.0, &mut cd.del);
-    for c in 0..m {
-        for r in 0..c {
-            let x = 0.5 * (cd.del[(r, c)] + cd.del[(c, r)]);
-            cd.del[(r, c)] = x;
-            cd.del[(c, r)] = x;
+    minv_from_ltl(model, data, cd);
+    // Y = M⁻¹Jᵀ and the Delassus matrix J M⁻¹ Jᵀ (+ μ I) (only its lower triangle is read).
+    cd.jt.tr_copy_from(&cd.jac);
+    gemm(1.0, &data.minv, &cd.jt, 0.0, &mut cd.y);
+    {
+        // Lower triangle, J zero off the paths: del(r1, r2) = Σ_{l ∈ path(r1)} J(r1, l) Y(l, r2).
+        let (jac, y, del) = (cd.jac.as_slice(), cd.y.as_slice(), cd.del.as_mut_slice());
+        assert!(jac.len() == m * n && y.len() == n * m && del.len() == m * m);
+        for (c, path) in cd.paths.iter().enumerate() {
+            for r1 in 3 * c..3 * c + 3 {
+                for r2 in 0..=r1 {
+                    let mut x = 0.0;
+                    // SAFETY: path DoFs are < n, r1, r2 < m (checked lengths above).
+                    unsafe {
+                        for &l in &path.dofs {
+                            x += jac.get_unchecked(r1 + m * l) * y.get_unchecked(l + n * r2);
+                        }
+                    }
+                    del[r1 + m * r2] = x;
+                }
+            }
         }
-        cd.del[(c, c)] += cd.damping;
+        for c in 0..m {
+            del[c + m * c] += cd.damping;
+        }
     }
     let scale = (0..m).map(|i| cd.del[(i, i)].abs()).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
     if !cholesky_inverse_in_place(&mut cd.del, &mut cd.lam, 1e-11 * scale) {
@@ -196,86 +310,262 @@ pub(crate) fn factor_kkt(model: &Model, data: &Data, cd: &mut ContactData) -> Re
             ),
         });
     }
-    gemm(1.0, &cd.y, &cd.lam, 0.0, &mut cd.yl);
-    // top-left block M⁻¹ − (YΛ) Yᵀ (m is small: a direct loop).
-    for c in 0..n {
-        for r in 0..n {
-            let mut x = data.minv[(r, c)];
-            for l in 0..m {
-                x -= cd.yl[(r, l)] * cd.y[(c, l)];
+    // r2 = [Q; Λ] with Q = YΛ; r1 = [P; −Qᵀ] with P = M⁻¹ − Y Qᵀ.
+    let rp = cd.r1.nrows();
+    gemm(1.0, &cd.y, &cd.lam, 0.0, &mut cd.r2.rows_mut(0, n));
+    cd.qt.tr_copy_from(&cd.r2.rows(0, n));
+    {
+        let lam = cd.lam.as_slice();
+        let r2 = cd.r2.as_mut_slice();
+        let minv = data.minv.as_slice();
+        let qt = cd.qt.as_slice();
+        let r1 = cd.r1.as_mut_slice();
+        for c in 0..m {
+            r2[c * rp + n..c * rp + n + m].copy_from_slice(&lam[c * m..(c + 1) * m]);
+        }
+        for b in 0..n {
+            r1[b * rp..b * rp + n].copy_from_slice(&minv[b * n..(b + 1) * n]);
+            for (x, q) in r1[b * rp + n..b * rp + n + m].iter_mut().zip(&qt[b * m..(b + 1) * m]) {
+                *x = -q;
             }
-            cd.rinv[(r, c)] = x;
         }
     }
-    cd.rinv.view_mut((0, n), (n, m)).copy_from(&cd.yl);
-    for r in 0..m {
-        for c in 0..n {
-            cd.rinv[(n + r, c)] = -cd.yl[(c, r)];
-        }
-    }
-    cd.rinv.view_mut((n, n), (m, m)).copy_from(&cd.lam);
+    gemm(-1.0, &cd.y, &cd.qt, 1.0, &mut cd.r1.rows_mut(0, n));
     Ok(())
 }
 
-/// Cholesky factorisation of the symmetric `a` in place (lower triangle) and its inverse into
-/// `inv`, without allocating. `false` if a pivot `l_ii²` is not above `tol`.
+/// `M⁻¹ = L⁻¹ D⁻¹ L⁻ᵀ` into `data.minv` from the `LᵀDL` factor in `data.ltl`: rows of `L⁻¹`
+/// by `(L⁻¹)_i = e_i − Σ_{k ≺ i} L_ik (L⁻¹)_k` (tree-sparse), then one dense product
+/// `(L⁻¹D⁻¹)(L⁻¹)ᵀ`.
+fn minv_from_ltl(model: &Model, data: &mut Data, cd: &mut ContactData) {
+    let n = model.nv;
+    let h = data.ltl.as_slice();
+    let g = cd.gt.as_mut_slice();
+    let gd = cd.gd.as_mut_slice();
+    assert!(h.len() == n * n && g.len() == n * n && gd.len() == n * n && cd.tn.len() == n);
+    // SAFETY (get_unchecked below): all indices are DoFs `< n` (ancestor lists of the model), so
+    // every `a + n b < n²`, the length of `h`, `g` and `gd`, and `i < n = tn.len()`.
+    unsafe {
+        for i in 0..n {
+            let anc = model.ancestors_of_dof(i);
+            let gi = n * i;
+            for &j in anc {
+                *g.get_unchecked_mut(j + gi) = 0.0;
+            }
+            *g.get_unchecked_mut(i + gi) = 1.0;
+            for &k in anc {
+                let lik = *h.get_unchecked(k + gi);
+                *g.get_unchecked_mut(k + gi) -= lik;
+                for &j in model.ancestors_of_dof(k) {
+                    *g.get_unchecked_mut(j + gi) -= lik * *g.get_unchecked(j + n * k);
+                }
+            }
+            let di = 1.0 / *h.get_unchecked(i + gi);
+            *cd.tn.get_unchecked_mut(i) = di;
+            // L⁻¹ D⁻¹ (column-major): (i, k) = (L⁻¹)_ik / D_k.
+            *gd.get_unchecked_mut(i + gi) = di;
+            for &k in anc {
+                *gd.get_unchecked_mut(i + n * k) =
+                    *g.get_unchecked(k + gi) * *cd.tn.get_unchecked(k);
+            }
+        }
+    }
+    gemm(1.0, &cd.gd, &cd.gt, 0.0, &mut data.minv);
+}
+
+/// `R⁻¹ = [[P, Q], [−Qᵀ, Λ]]` densely into `cd.rinv` (after [`factor_kkt`]; second order only).
+pub(crate) fn fill_rinv(cd: &mut ContactData) {
+    let (n, m) = (cd.r1.ncols(), cd.dim());
+    cd.rinv.columns_mut(0, n).copy_from(&cd.r1.rows(0, n + m));
+    cd.rinv.columns_mut(n, m).copy_from(&cd.r2.rows(0, n + m));
+}
+
+/// Rows `∂a_p/∂q` into `cq` and `∂a_p/∂q̇` into `cv` (`3 nc × nv`, only path columns written) of
+/// the classical contact-point accelerations at fixed `q̈`, from `cd.s`, `cd.kvel`, `cd.kacc`
+/// (with `q̈`) and the points: along `q_l`, `D V_m = S_l × (V_m − V_λ)` (J2),
+/// `D A_m = (A_λ − A_m) × S_l + (V_λ − V_m) × Ψ̇_l` (J6, J7), `D p = u_l`; along `q̇_l`,
+/// `D V_m = S_l` (J8), `D A_m = (V_λ + V_l − V_m) × S_l` (J9).
+/// `cv` is stored in columns `nv..2nv` of `cx`, `cq` in columns `0..nv`.
+pub(crate) fn accel_derivatives(cd: &ContactData, cx: &mut DMatrix<f64>) {
+    let n = cd.s.len();
+    for (c, path) in cd.paths.iter().enumerate() {
+        let body = *path.joints.last().expect("path");
+        let p = path.p;
+        let (vm, am) = (cd.kvel[body], cd.kacc[body]);
+        let w = vm.ang;
+        let pd = vm.lin + w.cross(&p);
+        for (i, &l) in path.dofs.iter().enumerate() {
+            let (jl, ll) = (path.dof_joint[i], path.dof_parent[i]);
+            let s = cd.s[l];
+            let u = s.lin + s.ang.cross(&p);
+            let (vl, al) = (cd.kvel[ll], cd.kacc[ll]);
+            let dv = s.cross(&(vm - vl));
+            // A joint on the root has V_λ = A_λ = 0 (no gravity here): D A_m = S_l × A_m.
+            let da = if ll == 0 {
+                s.cross(&am)
+            } else {
+                let psid = vl.cross(&s);
+                (al - am).cross(&s) + (vl - vm).cross(&psid)
+            };
+            let dpd = dv.lin + dv.ang.cross(&p) + w.cross(&u);
+            let rq =
+                da.lin + da.ang.cross(&p) + am.ang.cross(&u) + dv.ang.cross(&pd) + w.cross(&dpd);
+            let dav = (vl + cd.kvel[jl] - vm).cross(&s);
+            let rv = dav.lin + dav.ang.cross(&p) + s.ang.cross(&pd) + w.cross(&u);
+            for r in 0..3 {
+                cx[(3 * c + r, l)] = rq[r];
+                cx[(3 * c + r, n + l)] = rv[r];
+            }
+        }
+    }
+}
+
+/// Rows `∂(J_c w)/∂q` at fixed `w` into `out` (`3 nc × nv`, only path columns written):
+/// with `Z_j = Σ_{x ⪯ j} S_x w_x`, `D Z_m = S_l × (Z_m − Z_λ)` and `D p = u_l`.
+pub(crate) fn djw_dq(model: &Model, cd: &mut ContactData, w: &[f64], out: &mut DMatrix<f64>) {
+    cd.zc[0] = Motion::zero();
+    for &j in &cd.union_joints {
+        let mut z = cd.zc[model.parents[j]];
+        let iv = model.idx_v[j];
+        for (s, x) in cd.s[iv..iv + model.nvs[j]].iter().zip(&w[iv..iv + model.nvs[j]]) {
+            z += *s * *x;
+        }
+        cd.zc[j] = z;
+    }
+    for (c, path) in cd.paths.iter().enumerate() {
+        let body = *path.joints.last().expect("path");
+        let p = path.p;
+        let zm = cd.zc[body];
+        for (i, &l) in path.dofs.iter().enumerate() {
+            let s = cd.s[l];
+            let u = s.lin + s.ang.cross(&p);
+            let dz = s.cross(&(zm - cd.zc[path.dof_parent[i]]));
+            let r = dz.lin + dz.ang.cross(&p) + zm.ang.cross(&u);
+            for k in 0..3 {
+                out[(3 * c + k, l)] = r[k];
+            }
+        }
+    }
+}
+
+/// Cholesky factorisation of the symmetric `a` (lower triangle read) in place (lower triangle)
+/// and its inverse into `inv` (full), without allocating. `false` if a pivot `l_ii²` is not
+/// above `tol`.
 fn cholesky_inverse_in_place(a: &mut DMatrix<f64>, inv: &mut DMatrix<f64>, tol: f64) -> bool {
     let m = a.nrows();
+    let a = a.as_mut_slice();
+    let inv = inv.as_mut_slice();
+    assert!(a.len() == m * m && inv.len() == m * m);
+    // Column-oriented (left-looking) factorisation: column j of L is contiguous.
     for j in 0..m {
-        let mut d = a[(j, j)];
         for k in 0..j {
-            d -= a[(j, k)] * a[(j, k)];
+            let ajk = a[j + m * k];
+            if ajk != 0.0 {
+                let (head, tail) = a.split_at_mut(m * j);
+                let colk = &head[m * k + j..m * k + m];
+                for (x, l) in tail[j..m].iter_mut().zip(colk) {
+                    *x -= ajk * l;
+                }
+            }
         }
+        let d = a[j + m * j];
         if d.is_nan() || d <= tol {
             return false;
         }
         let l = d.sqrt();
-        a[(j, j)] = l;
-        for i in j + 1..m {
-            let mut s = a[(i, j)];
-            for k in 0..j {
-                s -= a[(i, k)] * a[(j, k)];
-            }
-            a[(i, j)] = s / l;
+        let r = 1.0 / l;
+        for x in &mut a[j + m * j..m * (j + 1)] {
+            *x *= r;
         }
     }
-    // inv = L⁻ᵀ L⁻¹, column by column: solve L y = e_c, then Lᵀ x = y.
+    // L⁻¹ (lower) into inv by columns: forward substitution with unit vectors.
+    inv.fill(0.0);
     for c in 0..m {
-        for i in 0..m {
-            let mut s = if i == c { 1.0 } else { 0.0 };
-            for k in 0..i {
-                s -= a[(i, k)] * inv[(k, c)];
+        let col = &mut inv[m * c..m * (c + 1)];
+        col[c] = 1.0;
+        for i in c..m {
+            let x = col[i] / a[i + m * i];
+            col[i] = x;
+            if x != 0.0 {
+                for (y, l) in col[i + 1..].iter_mut().zip(&a[i + m * i + 1..m * (i + 1)]) {
+                    *y -= x * l;
+                }
             }
-            inv[(i, c)] = s / a[(i, i)];
         }
-        for i in (0..m).rev() {
-            let mut s = inv[(i, c)];
-            for k in i + 1..m {
-                s -= a[(k, i)] * inv[(k, c)];
+    }
+    // inv ← L⁻ᵀ L⁻¹ (symmetric): (i, c) = Σ_{k ≥ max(i, c)} L⁻¹_ki L⁻¹_kc.
+    for c in 0..m {
+        for i in c..m {
+            let mut x = 0.0;
+            for k in i..m {
+                x += inv[k + m * i] * inv[k + m * c];
             }
-            inv[(i, c)] = s / a[(i, i)];
+            // Stored in the strict upper triangle first (not yet read), then mirrored.
+            if i == c {
+                a[c + m * c] = x; // diagonal of L is no longer needed after this column
+            } else {
+                inv[c + m * i] = x;
+            }
+        }
+    }
+    for c in 0..m {
+        inv[c + m * c] = a[c + m * c];
+        for i in c + 1..m {
+            inv[i + m * c] = inv[c + m * i];
         }
     }
     true
 }
 
-/// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `3 nc` world forces) from `out` (`nv×nv`, `[x][l]`).
+/// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `3 nc` world forces) from `out` (`nv×nv`, `[x][l]`), with `s`
+/// the world subspaces of the path DoFs and `cd.jac` current. With `u_x` the Jacobian column
+/// (point velocity of `S_x`) and `w = S.ang`: a perturbation of `q_l` rotates `u_x` rigidly if
+/// `l ⪯ x` (J1 and `∂p/∂q_l = u_l` give `D u_x = w_l × u_x`) and otherwise only moves the point
+/// (`D u_x = w_x × u_l`), so the entry is `w_l·(u_x × λ)` resp. `w_x·(u_l × λ)`.
 pub(crate) fn sub_djtl_dq(
-    model: &Model,
-    data: &Data,
-    cd: &ContactData,
+    s: &[Motion],
+    cd: &mut ContactData,
     lambda: &[f64],
     out: &mut DMatrix<f64>,
 ) {
-    let b = base(model, data, cd);
+    let mut t = std::mem::take(&mut cd.t3);
+    let ld = out.nrows();
+    let o = out.as_mut_slice();
     for (c, path) in cd.paths.iter().enumerate() {
         let lam = Vector3::new(lambda[3 * c], lambda[3 * c + 1], lambda[3 * c + 2]);
-        for &x in &path.dofs {
-            for &l in &path.dofs {
-                out[(x, l)] -= djtl_dq(&b, &path.p, &lam, x, l, Dir::None).0;
+        if lam == Vector3::zeros() {
+            continue;
+        }
+        for (i, &x) in path.dofs.iter().enumerate() {
+            let u =
+                Vector3::new(cd.jac[(3 * c, x)], cd.jac[(3 * c + 1, x)], cd.jac[(3 * c + 2, x)]);
+            t[i] = u.cross(&lam);
+        }
+        let d = path.dofs.len();
+        assert!(t.len() >= d && path.dof_joint.len() == d);
+        assert!(path.dofs.iter().all(|&x| x < s.len() && x < ld && (x + 1) * ld <= o.len()));
+        // SAFETY: i, ix < d ≤ t.len() = dof_joint.len(); every DoF x on the path satisfies
+        // x < s.len() and x + ld x' < o.len() for any two path DoFs (asserted above).
+        unsafe {
+            for il in 0..d {
+                let l = *path.dofs.get_unchecked(il);
+                let jl = *path.dof_joint.get_unchecked(il);
+                let wl = s.get_unchecked(l).ang;
+                let tl = *t.get_unchecked(il);
+                let col = ld * l;
+                for ix in 0..d {
+                    let x = *path.dofs.get_unchecked(ix);
+                    let e = if jl <= *path.dof_joint.get_unchecked(ix) {
+                        wl.dot(t.get_unchecked(ix))
+                    } else {
+                        s.get_unchecked(x).ang.dot(&tl)
+                    };
+                    *o.get_unchecked_mut(x + col) -= e;
+                }
             }
         }
     }
+    cd.t3 = t;
 }
 
 /// `G(z)` (columns `l`): `[IDFOZA(z₁) − ∂(Jᵀz₂)/∂q ; ∂(J z₁)/∂q]`, `z = (z₁, z₂)` of length
@@ -298,7 +588,7 @@ pub(crate) fn g_matrix_split(
     idfoza_core(model, data, z_m, &mut cd.zmat);
     cd.g.view_mut((0, 0), (n, n)).copy_from(&cd.zmat);
     let mut g = std::mem::replace(&mut cd.g, DMatrix::zeros(0, 0));
-    sub_djtl_dq_rows(model, data, cd, z2, &mut g);
+    sub_djtl_dq(&data.s_world, cd, z2, &mut g);
     // ∂(J z₁)/∂q rows: cumulative Z_j = Σ_{x ⪯ j} S_x z_x along the path.
     let mut zc = std::mem::take(&mut cd.zc);
     for (c, path) in cd.paths.iter().enumerate() {
@@ -324,27 +614,4 @@ pub(crate) fn g_matrix_split(
     }
     cd.zc = zc;
     cd.g = g;
-}
-
-/// Rows `0..nv` of `g`: subtract `∂(Jᵀ z₂)/∂q`.
-fn sub_djtl_dq_rows(
-    model: &Model,
-    data: &Data,
-    cd: &ContactData,
-    z2: &[f64],
-    g: &mut DMatrix<f64>,
-) {
-    let b = base(model, data, cd);
-    for (c, path) in cd.paths.iter().enumerate() {
-        let lam = Vector3::new(z2[3 * c], z2[3 * c + 1], z2[3 * c + 2]);
-        if lam == Vector3::zeros() {
-            continue;
-        }
-        for &x in &path.dofs {
-            for &l in &path.dofs {
-                g[(x, l)] -= djtl_dq(&b, &path.p, &lam, x, l, Dir::None).0;
-            }
-        }
-    }
-    let _ = model;
 }

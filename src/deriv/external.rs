@@ -61,9 +61,7 @@ pub fn constrained_id_derivatives(
 fn contact_terms_fo(model: &Model, data: &mut Data, cd: &mut ContactData, lambda: &DVector<f64>) {
     update_points(model, data, cd, -model.gravity);
     data.tau.gemv_tr(-1.0, &cd.jac, lambda, 1.0);
-    let mut dq = std::mem::replace(&mut data.dtau_dq, nalgebra::DMatrix::zeros(0, 0));
-    sub_djtl_dq(model, data, cd, lambda.as_slice(), &mut dq);
-    data.dtau_dq = dq;
+    sub_djtl_dq(&data.s_world, cd, lambda.as_slice(), &mut data.dtau_dq);
 }
 
 /// First- and second-order derivatives of constrained inverse dynamics: as

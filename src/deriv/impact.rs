@@ -10,14 +10,15 @@
 //! `q̇⁻`, so `∂²y/∂q̇⁻²` = 0.
 
 use super::contact::{
-    ContactData, base, factor_kkt, g_matrix, g_matrix_split, sub_djtl_dq, update_points,
+    ContactData, base, copy_block, djw_dq, factor_kkt, fill_rinv, g_matrix, g_matrix_split,
+    path_kinematics, sub_djtl_dq, update_points,
 };
 use super::contact_kin::{Dir, djtl_dq, djz_dq};
-use super::id_fo::forward_pass_world;
 use super::id_so::{SoData, id_so_unchecked};
 use super::kkt::{copy_rows_zero_rest, premultiply};
+use super::zero::idfoza_core;
 use crate::algo::Data;
-use crate::algo::internal::{crba_unchecked, ltl_in_place, ltl_solve_in_place};
+use crate::algo::internal::{crba_unchecked, ltl_in_place};
 use crate::error::{Error, Result};
 use crate::linalg::gemm;
 use crate::model::{Model, check_vec};
@@ -47,7 +48,8 @@ pub struct ImpactData {
     /// Second-order results (allocated by [`ImpactData::with_second_order`]).
     pub so: Option<ImpactSo>,
     rq: DMatrix<f64>,
-    rv: DMatrix<f64>,
+    cq: DMatrix<f64>,
+    out: DMatrix<f64>,
     dv: DVector<f64>,
     w: DVector<f64>,
     zero: DVector<f64>,
@@ -83,8 +85,9 @@ impl ImpactData {
             dimpulse_dq: DMatrix::zeros(m, n),
             dimpulse_dvminus: DMatrix::zeros(m, n),
             so: None,
-            rq: DMatrix::zeros(n + m, n),
-            rv: DMatrix::zeros(n + m, n),
+            rq: DMatrix::zeros(n, n),
+            cq: DMatrix::zeros(m, n),
+            out: DMatrix::zeros(cd.r1.nrows(), n),
             dv: DVector::zeros(n),
             w: DVector::zeros(n),
             zero: DVector::zeros(n),
@@ -137,26 +140,25 @@ pub fn impact_dynamics(
         )));
     }
     let n = model.nv;
-    let m = im.cd.dim();
-    forward_pass_world(model, data, q, &im.zero, &im.zero, None, Motion::zero());
-    update_points(model, data, &mut im.cd, Motion::zero());
+    // M (with composite inertias), the body inertias for IDFOZA, J and the blocks of R⁻¹.
     crba_unchecked(model, data, q);
+    for i in 1..model.njoints() {
+        data.oinertia[i] = data.o_m_i[i].act_inertia(&model.inertias[i]);
+    }
+    path_kinematics(model, data, &mut im.cd, None);
     data.ltl.copy_from(&data.m);
     ltl_in_place(model, &mut data.ltl)?;
-    data.minv.fill_with_identity();
-    for mut col in data.minv.column_iter_mut() {
-        ltl_solve_in_place(model, &data.ltl, col.as_mut_slice());
-    }
     factor_kkt(model, data, &mut im.cd)?;
+    // λ̂ = −(1 + e) Λ J q̇⁻, q̇⁺ = q̇⁻ + Y λ̂  (block elimination of im_eqn_1).
     let cd = &mut im.cd;
-    cd.rhs.rows_mut(0, n).gemv(1.0, &data.m, vminus, 0.0);
-    cd.rhs.rows_mut(n, m).gemv(-im.restitution, &cd.jac, vminus, 0.0);
-    cd.sol.gemv(1.0, &cd.rinv, &cd.rhs, 0.0);
-    im.vplus.copy_from(&cd.sol.rows(0, n));
-    im.impulse.copy_from(&cd.sol.rows(n, m));
+    let m = cd.dim();
+    let e = im.restitution;
+    cd.sol.rows_mut(0, m).gemv(1.0, &cd.jac, vminus, 0.0);
+    im.impulse.gemv(-(1.0 + e), &cd.lam, &cd.sol.rows(0, m), 0.0);
+    im.dv.gemv(1.0, &cd.y, &im.impulse, 0.0);
     for i in 0..n {
-        im.dv[i] = im.vplus[i] - vminus[i];
-        im.w[i] = im.vplus[i] + im.restitution * vminus[i];
+        im.vplus[i] = vminus[i] + im.dv[i];
+        im.w[i] = im.vplus[i] + e * vminus[i];
     }
     Ok(())
 }
@@ -174,33 +176,27 @@ pub fn impact_derivatives(
     Ok(())
 }
 
+/// `R_q = [a; c]` with `a = IDFOZA(Δv) − ∂(J_cᵀλ̂)/∂q`, `c = ∂(J_c w)/∂q` (eq. ID_FO_q_im_1):
+/// `∂q̇⁺/∂q = −(P a + Q c)`, `∂λ̂/∂q = Qᵀa − Λc`; with `R_v⁻ = [−M; e J]` (eq. ID_FO_v_im_1) and
+/// `P M = I − QJ`, `QᵀM = ΛJ`: `∂q̇⁺/∂q̇⁻ = I − (1 + e) Q J`, `∂λ̂/∂q̇⁻ = −(1 + e) Λ J`.
 fn first_order(model: &Model, data: &mut Data, im: &mut ImpactData) {
     let n = model.nv;
-    let m = im.cd.dim();
-    // R_q = [IDFOZA(Δv) − ∂(Jᵀλ̂)/∂q ; ∂(J w)/∂q]
-    g_matrix_split(
-        model,
-        data,
-        &mut im.cd,
-        im.dv.as_slice(),
-        im.impulse.as_slice(),
-        im.w.as_slice(),
-    );
-    im.rq.copy_from(&im.cd.g);
-    // R_v⁻ = [−M ; e J]
-    for c in 0..n {
-        for r in 0..n {
-            im.rv[(r, c)] = -data.m[(r, c)];
-        }
-        for r in 0..m {
-            im.rv[(n + r, c)] = im.restitution * im.cd.jac[(r, c)];
-        }
+    let cd = &mut im.cd;
+    idfoza_core(model, data, im.dv.as_slice(), &mut im.rq);
+    let s = std::mem::take(&mut cd.s);
+    sub_djtl_dq(&s, cd, im.impulse.as_slice(), &mut im.rq);
+    cd.s = s;
+    djw_dq(model, cd, im.w.as_slice(), &mut im.cq);
+    gemm(-1.0, &cd.r1, &im.rq, 0.0, &mut im.out);
+    gemm(-1.0, &cd.r2, &im.cq, 1.0, &mut im.out);
+    copy_block(&im.out, 0, 0, &mut im.dvplus_dq);
+    copy_block(&im.out, n, 0, &mut im.dimpulse_dq);
+    gemm(-(1.0 + im.restitution), &cd.r2, &cd.jac, 0.0, &mut im.out);
+    copy_block(&im.out, 0, 0, &mut im.dvplus_dvminus);
+    copy_block(&im.out, n, 0, &mut im.dimpulse_dvminus);
+    for i in 0..n {
+        im.dvplus_dvminus[(i, i)] += 1.0;
     }
-    let ri = &im.cd.rinv;
-    gemm(-1.0, &ri.rows(0, n), &im.rq, 0.0, &mut im.dvplus_dq);
-    gemm(-1.0, &ri.rows(n, m), &im.rq, 0.0, &mut im.dimpulse_dq);
-    gemm(-1.0, &ri.rows(0, n), &im.rv, 0.0, &mut im.dvplus_dvminus);
-    gemm(-1.0, &ri.rows(n, m), &im.rv, 0.0, &mut im.dimpulse_dvminus);
 }
 
 /// First- and second-order derivatives of the impact dynamics. `im` must have been created
@@ -234,6 +230,7 @@ fn so_inner(
     // IDSOZA: ∂²(M Δv)/∂q² (q̇ = 0, no gravity, q̈ = Δv).
     id_so_unchecked(model, data, &mut so.id, q, &im.zero, &im.dv, None, Motion::zero());
     update_points(model, data, &mut im.cd, Motion::zero());
+    fill_rinv(&mut im.cd);
     let [rqq, rqv] = &mut so.r;
     // Every entry is rewritten (contact rows zeroed: the G products add to all of them).
     copy_rows_zero_rest(rqq, so.id.d2tau_dq2(), n);

@@ -11,17 +11,17 @@
 //! a Cholesky factorisation of the Delassus matrix (no dense inverse of the KKT matrix).
 
 use super::contact::{
-    ContactData, base, factor_kkt, g_matrix, point_accelerations, sub_djtl_dq, update_points,
+    ContactData, accel_derivatives, add_qdd_to_path_acc, base, copy_block, factor_kkt, fill_rinv,
+    g_matrix, path_kinematics, sub_djtl_dq, update_points,
 };
 use super::contact_kin::{Dir, dap_dq, dap_dv, djtl_dq};
-use super::id_fo::{forward_pass_world, id_derivatives_unchecked};
+use super::id_fo::id_derivatives_unchecked;
 use super::id_so::{SoData, id_so_unchecked};
 use crate::algo::Data;
-use crate::algo::internal::{crba_unchecked, ltl_in_place, ltl_solve_in_place, rnea_unchecked};
+use crate::algo::internal::{crba_unchecked, ltl_in_place, rnea_unchecked};
 use crate::error::Result;
 use crate::linalg::gemm;
 use crate::model::{Model, check_vec};
-use crate::spatial::Motion;
 use crate::tensor::Tensor3;
 use nalgebra::{DMatrix, DMatrixView, DVector, Vector3};
 
@@ -48,8 +48,9 @@ pub struct KktData {
     pub dlambda_dtau: DMatrix<f64>,
     /// Second-order results (allocated by [`KktData::with_second_order`]).
     pub so: Option<KktSo>,
-    rq: DMatrix<f64>,
-    rv: DMatrix<f64>,
+    rx: DMatrix<f64>,
+    cx: DMatrix<f64>,
+    out: DMatrix<f64>,
     tmp_v: DVector<f64>,
 }
 
@@ -91,8 +92,9 @@ impl KktData {
             dlambda_dv: DMatrix::zeros(m, n),
             dlambda_dtau: DMatrix::zeros(m, n),
             so: None,
-            rq: DMatrix::zeros(n + m, n),
-            rv: DMatrix::zeros(n + m, n),
+            rx: DMatrix::zeros(n, 2 * n),
+            cx: DMatrix::zeros(m, 2 * n),
+            out: DMatrix::zeros(cd.r1.nrows(), 2 * n),
             tmp_v: DVector::zeros(n),
             cd,
         }
@@ -119,7 +121,8 @@ impl KktData {
 }
 
 /// Solves the KKT dynamics at `(q, q̇, τ)`: fills `kd.qdd`, `kd.lambda`, `kd.cd.jac`,
-/// `kd.cd.drift`, and leaves `M` factorised with `M⁻¹` and `R⁻¹` in the workspaces.
+/// `kd.cd.drift`, and leaves `M` factorised with `M⁻¹` (`data.minv`) and the blocks of `R⁻¹`
+/// in the workspaces.
 pub fn kkt_dynamics(
     model: &Model,
     data: &mut Data,
@@ -154,34 +157,26 @@ fn solve_unchecked(
     tau: &DVector<f64>,
 ) -> Result<()> {
     let n = model.nv;
-    // b = C q̇ + g  (RNEA with q̈ = 0), and the drift J̇q̇ at q̈ = 0 without gravity.
+    // b = C q̇ + g  (RNEA with q̈ = 0).
     kd.tmp_v.fill(0.0);
     rnea_unchecked(model, data, q, v, &kd.tmp_v, None);
-    let m = kd.cd.dim();
     for i in 0..n {
-        kd.cd.rhs[i] = tau[i] - data.tau[i];
+        kd.tmp_v[i] = tau[i] - data.tau[i];
     }
-    forward_pass_world(model, data, q, v, &kd.tmp_v, None, Motion::zero());
-    update_points(model, data, &mut kd.cd, Motion::zero());
-    let mut drift = std::mem::replace(&mut kd.cd.drift, DVector::zeros(0));
-    point_accelerations(data, &kd.cd, &mut drift);
-    kd.cd.drift = drift;
-    // M, its LᵀDL factor and M⁻¹.
+    // M, its LᵀDL factor; the path kinematics, J and the drift J̇q̇; the blocks of R⁻¹.
     crba_unchecked(model, data, q);
+    path_kinematics(model, data, &mut kd.cd, Some(v.as_slice()));
     data.ltl.copy_from(&data.m);
     ltl_in_place(model, &mut data.ltl)?;
-    data.minv.fill_with_identity();
-    for mut col in data.minv.column_iter_mut() {
-        ltl_solve_in_place(model, &data.ltl, col.as_mut_slice());
-    }
     factor_kkt(model, data, &mut kd.cd)?;
-    // (q̈, λ) = R⁻¹ [τ − b; −J̇q̇]  (the notes' unknown is (q̈, −λ) with K = [M Jᵀ; J 0]).
-    for r in 0..m {
-        kd.cd.rhs[n + r] = -kd.cd.drift[r];
-    }
-    kd.cd.sol.gemv(1.0, &kd.cd.rinv, &kd.cd.rhs, 0.0);
-    kd.qdd.copy_from(&kd.cd.sol.rows(0, n));
-    kd.lambda.copy_from(&kd.cd.sol.rows(n, m));
+    // q̈₀ = M⁻¹(τ − b), λ = −Λ(J q̈₀ + J̇q̇), q̈ = q̈₀ + Yλ  (block elimination of KKT_eqn).
+    let cd = &mut kd.cd;
+    let m = cd.dim();
+    kd.qdd.gemv(1.0, &data.minv, &kd.tmp_v, 0.0);
+    cd.sol.rows_mut(0, m).copy_from(&cd.drift);
+    cd.sol.rows_mut(0, m).gemv(1.0, &cd.jac, &kd.qdd, 1.0);
+    kd.lambda.gemv(-1.0, &cd.lam, &cd.sol.rows(0, m), 0.0);
+    kd.qdd.gemv(1.0, &cd.y, &kd.lambda, 1.0);
     Ok(())
 }
 
@@ -202,40 +197,31 @@ pub fn kkt_derivatives(
     Ok(())
 }
 
-/// Builds `R_q`, `R_v` from the ID derivatives in `data` (at `q̈`) and the contact terms, and the
-/// first-order outputs.
+/// From the ID derivatives in `data` (at `q̈`) and the contact terms: `R_q = [a_q; c_q]`,
+/// `R_v = [a_v; c_v]` and `∂y/∂x = −R⁻¹ R_x` with `R⁻¹ = [[P, Q], [−Qᵀ, Λ]]`, i.e.
+/// `∂q̈/∂x = −(P a + Q c)`, `∂λ/∂x = Qᵀa − Λc` (eqs. FO_general_eqn, ID_FO_q_eqn1,
+/// ID_FO_v_eqn1, ID_FO_tau_eqn).
 fn first_order_from_id(model: &Model, data: &mut Data, kd: &mut KktData) {
     let n = model.nv;
-    let m = kd.cd.dim();
-    update_points(model, data, &mut kd.cd, -model.gravity);
-    kd.rq.fill(0.0);
-    kd.rv.fill(0.0);
-    kd.rq.view_mut((0, 0), (n, n)).copy_from(&data.dtau_dq);
-    let mut top = std::mem::replace(&mut kd.cd.zmat, DMatrix::zeros(0, 0));
-    top.copy_from(&data.dtau_dq);
-    sub_djtl_dq(model, data, &kd.cd, kd.lambda.as_slice(), &mut top);
-    kd.rq.view_mut((0, 0), (n, n)).copy_from(&top);
-    kd.cd.zmat = top;
-    kd.rv.view_mut((0, 0), (n, n)).copy_from(&data.dtau_dv);
-    let b = base(model, data, &kd.cd);
-    for (c, path) in kd.cd.paths.iter().enumerate() {
-        let body = *path.joints.last().expect("path");
-        for &l in &path.dofs {
-            let gq = dap_dq(&b, body, &path.p, l, Dir::None).v;
-            let gv = dap_dv(&b, body, &path.p, l, Dir::None).v;
-            for r in 0..3 {
-                kd.rq[(n + 3 * c + r, l)] = gq[r];
-                kd.rv[(n + 3 * c + r, l)] = gv[r];
-            }
-        }
-    }
-    let ri = &kd.cd.rinv;
-    gemm(-1.0, &ri.rows(0, n), &kd.rq, 0.0, &mut kd.dqdd_dq);
-    gemm(-1.0, &ri.rows(0, n), &kd.rv, 0.0, &mut kd.dqdd_dv);
-    gemm(-1.0, &ri.rows(n, m), &kd.rq, 0.0, &mut kd.dlambda_dq);
-    gemm(-1.0, &ri.rows(n, m), &kd.rv, 0.0, &mut kd.dlambda_dv);
-    kd.dqdd_dtau.copy_from(&ri.view((0, 0), (n, n)));
-    kd.dlambda_dtau.copy_from(&ri.view((n, 0), (m, n)));
+    let cd = &mut kd.cd;
+    add_qdd_to_path_acc(model, cd, kd.qdd.as_slice());
+    // [a_q | a_v] = [∂τ/∂q − ∂(J_cᵀλ)/∂q | ∂τ/∂q̇], [c_q | c_v] the point-acceleration rows.
+    let rx = kd.rx.as_mut_slice();
+    rx[..n * n].copy_from_slice(data.dtau_dq.as_slice());
+    rx[n * n..].copy_from_slice(data.dtau_dv.as_slice());
+    let s = std::mem::take(&mut cd.s);
+    sub_djtl_dq(&s, cd, kd.lambda.as_slice(), &mut kd.rx);
+    cd.s = s;
+    accel_derivatives(cd, &mut kd.cx);
+    // −R⁻¹ [R_q | R_v] by column blocks of R⁻¹ (rows padded for the product kernel).
+    gemm(-1.0, &cd.r1, &kd.rx, 0.0, &mut kd.out);
+    gemm(-1.0, &cd.r2, &kd.cx, 1.0, &mut kd.out);
+    copy_block(&kd.out, 0, 0, &mut kd.dqdd_dq);
+    copy_block(&kd.out, n, 0, &mut kd.dlambda_dq);
+    copy_block(&kd.out, 0, n, &mut kd.dqdd_dv);
+    copy_block(&kd.out, n, n, &mut kd.dlambda_dv);
+    copy_block(&cd.r1, 0, 0, &mut kd.dqdd_dtau);
+    copy_block(&cd.r1, n, 0, &mut kd.dlambda_dtau);
 }
 
 /// First- and second-order derivatives of the KKT dynamics at `(q, q̇, τ)`. `kd` must have been
@@ -274,6 +260,8 @@ fn kkt_so_inner(
     id_so_unchecked(model, data, &mut so.id, q, v, &qdd, None, -model.gravity);
     kd.qdd = qdd;
     first_order_from_id(model, data, kd);
+    update_points(model, data, &mut kd.cd, -model.gravity);
+    fill_rinv(&mut kd.cd);
     let [rqq, rvv, rqv, rtq] = &mut so.r;
     // Residual second derivatives: ID part (IDSVA-SO) ...
     for (t, src) in [
