@@ -3,34 +3,49 @@
 
 use super::id_fo::id_derivatives_unchecked;
 use super::id_so::{SoData, id_so_unchecked};
-use super::zero::idfoza_core;
+use super::zero::idfoza_core_with;
 use crate::algo::Data;
-use crate::algo::internal::{aba_unchecked, check_fext, ltl_in_place, ltl_solve_in_place};
+use crate::algo::internal::{aba_unchecked, check_fext, ltl_in_place, ltl_solve_rows};
 use crate::error::Result;
-use crate::linalg::gemm;
+use crate::linalg::transpose;
 use crate::model::{Model, check_vec};
 use crate::spatial::Force;
 use crate::tensor::Tensor3;
-use nalgebra::{DMatrix, DMatrixView, DVector};
+use nalgebra::{DMatrix, DVector};
 
-/// `x ↦ M⁻¹ x` on each column of `m`, with a `LᵀDL` factor.
-fn solve_columns(model: &Model, ltl: &DMatrix<f64>, m: &mut DMatrix<f64>) {
-    for mut col in m.column_iter_mut() {
-        ltl_solve_in_place(model, ltl, col.as_mut_slice());
-    }
+/// `dst ← α M⁻¹ src` for square `nv×nv` matrices: the tree-sparse multi-right-hand-side solve
+/// runs on `srcᵀ` (rows contiguous) held in `scratch`, then the result is transposed back.
+fn solve_square(
+    model: &Model,
+    ltl: &DMatrix<f64>,
+    src: &DMatrix<f64>,
+    scratch: &mut DMatrix<f64>,
+    dst: &mut DMatrix<f64>,
+    alpha: f64,
+) {
+    let n = model.nv;
+    transpose(src.as_slice(), n, n, scratch.as_mut_slice());
+    ltl_solve_rows(model, ltl, scratch.as_mut_slice(), n, n, alpha);
+    transpose(scratch.as_slice(), n, n, dst.as_mut_slice());
 }
 
 /// FO FD part shared by first and second order: from `data.m`, `data.dtau_dq`, `data.dtau_dv`
 /// (at `q̈ = FD`), factorise `M` and fill `dqdd_dq`, `dqdd_dv`, `minv`.
 fn fd_fo_from_id(model: &Model, data: &mut Data) -> Result<()> {
-    data.ltl.copy_from(&data.m);
+    let n = model.nv;
+    data.ltl.as_mut_slice().copy_from_slice(data.m.as_slice());
     ltl_in_place(model, &mut data.ltl)?;
-    // M⁻¹ by tree-sparse solves of the unit vectors (the first sweep only touches ancestors),
-    // then two dense products.
-    data.minv.fill_with_identity();
-    solve_columns(model, &data.ltl, &mut data.minv);
-    gemm(-1.0, &data.minv, &data.dtau_dq, 0.0, &mut data.dqdd_dq);
-    gemm(-1.0, &data.minv, &data.dtau_dv, 0.0, &mut data.dqdd_dv);
+    // ∂q̈/∂q = −M⁻¹ ∂τ/∂q, ∂q̈/∂q̇ = −M⁻¹ ∂τ/∂q̇ (eq. jain_FO_eqn) by tree-sparse solves
+    // (`minv` serves as scratch before it is computed).
+    solve_square(model, &data.ltl, &data.dtau_dq, &mut data.minv, &mut data.dqdd_dq, -1.0);
+    solve_square(model, &data.ltl, &data.dtau_dv, &mut data.minv, &mut data.dqdd_dv, -1.0);
+    // ∂q̈/∂τ = M⁻¹: the same solve on the identity (symmetric, so no transposition).
+    let minv = data.minv.as_mut_slice();
+    minv.fill(0.0);
+    for i in 0..n {
+        minv[i + n * i] = 1.0;
+    }
+    ltl_solve_rows(model, &data.ltl, minv, n, n, 1.0);
     Ok(())
 }
 
@@ -67,9 +82,9 @@ pub struct FdSoData {
     d2qdd_dv2: Tensor3,
     d2qdd_dqdv: Tensor3,
     d2qdd_dtaudq: Tensor3,
-    zmat: DMatrix<f64>,
     col: DVector<f64>,
-    tmp: DMatrix<f64>,
+    /// Working tensor stored by rows of the solve: `(i, j, k)` at `j + n k + n² i`.
+    tt: Vec<f64>,
 }
 
 impl FdSoData {
@@ -82,9 +97,8 @@ impl FdSoData {
             d2qdd_dv2: Tensor3::zeros(n, n, n),
             d2qdd_dqdv: Tensor3::zeros(n, n, n),
             d2qdd_dtaudq: Tensor3::zeros(n, n, n),
-            zmat: DMatrix::zeros(n, n),
             col: DVector::zeros(n),
-            tmp: DMatrix::zeros(n, n * n),
+            tt: vec![0.0; n * n * n],
         }
     }
     /// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂q_j)`.
@@ -105,29 +119,20 @@ impl FdSoData {
     }
 }
 
-/// `out ← −M⁻¹ src` for `src` (`nv × nv²`, the pages of a tensor side by side).
-fn premultiply_neg_minv(minv: &DMatrix<f64>, src: &[f64], out: &mut Tensor3) {
-    let (n, n2, n3) = out.dims();
-    let view = DMatrixView::from_slice(src, n, n2 * n3);
-    let mut o = nalgebra::DMatrixViewMut::from_slice(out.as_mut_slice(), n, n2 * n3);
-    gemm(-1.0, minv, &view, 0.0, &mut o);
-}
-
-/// `t[:, j, k] += z[:, k]` and `t[:, k, j] += z[:, k]` for all `k` (`t` as a flat
-/// column-major `n×n×n` slice, `z` an `n×n` column-major matrix).
-#[inline]
-fn add_a_and_rotation(t: &mut [f64], z: &[f64], n: usize, j: usize) {
-    for k in 0..n {
-        let zk = &z[n * k..n * k + n];
-        let a = n * j + n * n * k;
-        for (d, s) in t[a..a + n].iter_mut().zip(zk) {
-            *d += *s;
-        }
-        let b = n * k + n * n * j;
-        for (d, s) in t[b..b + n].iter_mut().zip(zk) {
-            *d += *s;
-        }
+/// `out ← −M⁻¹ T` for the tensor `T` held in `tt` by rows (`(i, j, k)` at `j + n k + n² i`):
+/// tree-sparse multi-right-hand-side solves on blocks of `(j, k)` columns (cache-sized), then
+/// one transposition into the column-major `out`.
+fn solve_neg_tensor(model: &Model, ltl: &DMatrix<f64>, tt: &mut [f64], out: &mut Tensor3) {
+    const W: usize = 64;
+    let n = model.nv;
+    let n2 = n * n;
+    let mut b = 0;
+    while b < n2 {
+        let w = W.min(n2 - b);
+        ltl_solve_rows(model, ltl, &mut tt[b..], n2, w, -1.0);
+        b += w;
     }
+    transpose(tt, n2, n, out.as_mut_slice());
 }
 
 /// Second-order derivatives of forward dynamics at `q̈ = FD(q, q̇, τ)` (eq. eqn_FD_SO_43):
@@ -163,36 +168,35 @@ pub fn fd_so_derivatives(
     id_so_unchecked(model, data, &mut fso.id, q, v, &qdd, fext, -model.gravity);
     data.qdd = qdd;
     fd_fo_from_id(model, data)?;
-    let tmp = fso.tmp.as_mut_slice();
+    let n2 = n * n;
+    let tt = &mut fso.tt[..];
+    let col = fso.col.as_mut_slice();
     // ∂²q̈/∂q²: ID_qq + A + A^R with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k].
-    tmp.copy_from_slice(fso.id.d2tau_dq2().as_slice());
+    transpose(fso.id.d2tau_dq2().as_slice(), n, n2, tt);
     for j in 0..n {
-        fso.col.copy_from(&data.dqdd_dq.column(j));
-        idfoza_core(model, data, fso.col.as_slice(), &mut fso.zmat);
-        add_a_and_rotation(tmp, fso.zmat.as_slice(), n, j);
+        col.copy_from_slice(data.dqdd_dq.column(j).as_slice());
+        idfoza_core_with(model, data, col, |i, k, z| {
+            tt[j + n * k + n2 * i] += z;
+            tt[k + n * j + n2 * i] += z;
+        });
     }
-    premultiply_neg_minv(&data.minv, tmp, &mut fso.d2qdd_dq2);
+    solve_neg_tensor(model, &data.ltl, tt, &mut fso.d2qdd_dq2);
     // ∂²q̈/∂q∂q̇: ID_qv + B with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j] (page k).
-    tmp.copy_from_slice(fso.id.d2tau_dqdv().as_slice());
+    transpose(fso.id.d2tau_dqdv().as_slice(), n, n2, tt);
     for k in 0..n {
-        fso.col.copy_from(&data.dqdd_dv.column(k));
-        idfoza_core(model, data, fso.col.as_slice(), &mut fso.zmat);
-        for (d, s) in tmp[n * n * k..n * n * (k + 1)].iter_mut().zip(fso.zmat.as_slice()) {
-            *d += *s;
-        }
+        col.copy_from_slice(data.dqdd_dv.column(k).as_slice());
+        idfoza_core_with(model, data, col, |i, j, z| tt[j + n * k + n2 * i] += z);
     }
-    premultiply_neg_minv(&data.minv, tmp, &mut fso.d2qdd_dqdv);
-    // ∂(M⁻¹)/∂q: C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k].
+    solve_neg_tensor(model, &data.ltl, tt, &mut fso.d2qdd_dqdv);
+    // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k].
+    tt.fill(0.0);
     for j in 0..n {
-        fso.col.copy_from(&data.minv.column(j));
-        idfoza_core(model, data, fso.col.as_slice(), &mut fso.zmat);
-        for k in 0..n {
-            tmp[n * j + n * n * k..n * j + n * n * k + n]
-                .copy_from_slice(&fso.zmat.as_slice()[n * k..n * k + n]);
-        }
+        col.copy_from_slice(data.minv.column(j).as_slice());
+        idfoza_core_with(model, data, col, |i, k, z| tt[j + n * k + n2 * i] = z);
     }
-    premultiply_neg_minv(&data.minv, tmp, &mut fso.d2qdd_dtaudq);
+    solve_neg_tensor(model, &data.ltl, tt, &mut fso.d2qdd_dtaudq);
     // ∂²q̈/∂q̇²: ID_vv (M does not depend on q̇).
-    premultiply_neg_minv(&data.minv, fso.id.d2tau_dv2().as_slice(), &mut fso.d2qdd_dv2);
+    transpose(fso.id.d2tau_dv2().as_slice(), n, n2, tt);
+    solve_neg_tensor(model, &data.ltl, tt, &mut fso.d2qdd_dv2);
     Ok(())
 }

@@ -56,6 +56,19 @@ pub fn idfoza(
 /// IDFOZA core: needs `s_world`, body inertias `oinertia` and composite inertias `ic_world`
 /// (world frame) for the current `q` in `data`. Uses the `z_*` workspaces only.
 pub(crate) fn idfoza_core(model: &Model, data: &mut Data, x: &[f64], out: &mut DMatrix<f64>) {
+    assert!(out.shape() == (model.nv, model.nv), "idfoza_core: out must be nv×nv");
+    idfoza_core_with(model, data, x, |c, r, v| out[(c, r)] = v);
+}
+
+/// IDFOZA core writing through `put(i, k, ∂(M x)_i/∂q_k)`, called once for each structurally
+/// non-zero entry (`i`, `k` on one root path); the other entries are zero.
+#[inline(always)]
+pub(crate) fn idfoza_core_with(
+    model: &Model,
+    data: &mut Data,
+    x: &[f64],
+    mut put: impl FnMut(usize, usize, f64),
+) {
     let n = model.njoints();
     data.z_a[0] = Motion::zero();
     for i in 1..n {
@@ -80,7 +93,7 @@ pub(crate) fn idfoza_core(model: &Model, data: &mut Data, x: &[f64], out: &mut D
             let mut j = i;
             while j > 0 {
                 for r in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
-                    out[(c, r)] = t1.dot(&data.z_psidd[r]);
+                    put(c, r, t1.dot(&data.z_psidd[r]));
                 }
                 j = model.parents[j];
             }
@@ -89,7 +102,7 @@ pub(crate) fn idfoza_core(model: &Model, data: &mut Data, x: &[f64], out: &mut D
             let mut j = model.parents[i];
             while j > 0 {
                 for r in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
-                    out[(r, c)] = data.s_world[r].dot(&t3);
+                    put(r, c, data.s_world[r].dot(&t3));
                 }
                 j = model.parents[j];
             }
