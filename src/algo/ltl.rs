@@ -203,51 +203,176 @@ unsafe fn solve_rows_avx2(
         // z = α D⁻¹ y, then L x = z: row i pulls its (already final) ancestors.
         for i in 0..n {
             let anc = all_anc.get_unchecked(*starts.get_unchecked(i)..*starts.get_unchecked(i + 1));
-            let xi = x.add(i * ld);
             let hi = h.add(n * i);
-            let dinv = _mm256_set1_pd(alpha / *hi.add(i));
-            let mut g = 0;
-            while g + G <= nfull {
-                let mut acc = [_mm256_setzero_pd(); G];
-                for (u, a) in acc.iter_mut().enumerate() {
-                    *a = _mm256_mul_pd(dinv, _mm256_loadu_pd(xi.add(4 * (g + u))));
-                }
-                for &j in anc {
-                    let l = _mm256_broadcast_sd(&*hi.add(j));
-                    let xj = x.add(j * ld + 4 * g);
-                    for (u, a) in acc.iter_mut().enumerate() {
-                        *a = _mm256_fnmadd_pd(l, _mm256_loadu_pd(xj.add(4 * u)), *a);
-                    }
-                }
-                for (u, a) in acc.iter().enumerate() {
-                    _mm256_storeu_pd(xi.add(4 * (g + u)), *a);
-                }
-                g += G;
+            let dinv = alpha / *hi.add(i);
+            pull_row(x, ld, len, mask, i, anc, |j| *hi.add(j), dinv);
+        }
+    }
+}
+
+/// Row `i ← scale·row i − Σ_{j ∈ others} coef(j) row j` (AVX2), by chunks of 8 vectors kept in
+/// registers and a masked ragged end.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+#[allow(clippy::too_many_arguments)]
+unsafe fn pull_row(
+    x: *mut f64,
+    ld: usize,
+    len: usize,
+    mask: std::arch::x86_64::__m256i,
+    i: usize,
+    others: &[usize],
+    coef: impl Fn(usize) -> f64,
+    scale: f64,
+) {
+    use std::arch::x86_64::*;
+    const G: usize = 8;
+    let nfull = len / 4;
+    let rem = len % 4;
+    let sc = _mm256_set1_pd(scale);
+    unsafe {
+        let xi = x.add(i * ld);
+        let mut g = 0;
+        while g + G <= nfull {
+            let mut acc = [_mm256_setzero_pd(); G];
+            for (u, a) in acc.iter_mut().enumerate() {
+                *a = _mm256_mul_pd(sc, _mm256_loadu_pd(xi.add(4 * (g + u))));
             }
-            let gs = nfull - g;
-            if gs > 0 || rem > 0 {
-                let mut acc = [_mm256_setzero_pd(); G];
+            for &j in others {
+                let l = _mm256_set1_pd(coef(j));
+                let xj = x.add(j * ld + 4 * g);
+                for (u, a) in acc.iter_mut().enumerate() {
+                    *a = _mm256_fnmadd_pd(l, _mm256_loadu_pd(xj.add(4 * u)), *a);
+                }
+            }
+            for (u, a) in acc.iter().enumerate() {
+                _mm256_storeu_pd(xi.add(4 * (g + u)), *a);
+            }
+            g += G;
+        }
+        let gs = nfull - g;
+        if gs > 0 || rem > 0 {
+            let mut acc = [_mm256_setzero_pd(); G];
+            for (u, a) in acc.iter_mut().enumerate().take(gs) {
+                *a = _mm256_mul_pd(sc, _mm256_loadu_pd(xi.add(4 * (g + u))));
+            }
+            let mut at = _mm256_mul_pd(sc, _mm256_maskload_pd(xi.add(4 * nfull), mask));
+            for &j in others {
+                let l = _mm256_set1_pd(coef(j));
+                let xj = x.add(j * ld + 4 * g);
                 for (u, a) in acc.iter_mut().enumerate().take(gs) {
-                    *a = _mm256_mul_pd(dinv, _mm256_loadu_pd(xi.add(4 * (g + u))));
-                }
-                let mut at = _mm256_mul_pd(dinv, _mm256_maskload_pd(xi.add(4 * nfull), mask));
-                for &j in anc {
-                    let l = _mm256_broadcast_sd(&*hi.add(j));
-                    let xj = x.add(j * ld + 4 * g);
-                    for (u, a) in acc.iter_mut().enumerate().take(gs) {
-                        *a = _mm256_fnmadd_pd(l, _mm256_loadu_pd(xj.add(4 * u)), *a);
-                    }
-                    if rem > 0 {
-                        at = _mm256_fnmadd_pd(l, _mm256_maskload_pd(xj.add(4 * gs), mask), at);
-                    }
-                }
-                for (u, a) in acc.iter().enumerate().take(gs) {
-                    _mm256_storeu_pd(xi.add(4 * (g + u)), *a);
+                    *a = _mm256_fnmadd_pd(l, _mm256_loadu_pd(xj.add(4 * u)), *a);
                 }
                 if rem > 0 {
-                    _mm256_maskstore_pd(xi.add(4 * nfull), mask, at);
+                    at = _mm256_fnmadd_pd(l, _mm256_maskload_pd(xj.add(4 * gs), mask), at);
                 }
             }
+            for (u, a) in acc.iter().enumerate().take(gs) {
+                _mm256_storeu_pd(xi.add(4 * (g + u)), *a);
+            }
+            if rem > 0 {
+                _mm256_maskstore_pd(xi.add(4 * nfull), mask, at);
+            }
+        }
+    }
+}
+
+/// Strict descendant DoFs of every DoF (the transpose of [`Model::dof_ancestors`]): DoF `j`'s
+/// descendants are `list[starts[j]..starts[j + 1]]`, all `< nv` by construction.
+#[derive(Clone, Debug)]
+pub(crate) struct DofDescendants {
+    nv: usize,
+    starts: Vec<usize>,
+    list: Vec<usize>,
+}
+
+impl DofDescendants {
+    pub(crate) fn new(model: &Model) -> Self {
+        let n = model.nv;
+        let mut count = vec![0usize; n + 1];
+        for i in 0..n {
+            for &j in model.ancestors_of_dof(i) {
+                count[j + 1] += 1;
+            }
+        }
+        for j in 0..n {
+            count[j + 1] += count[j];
+        }
+        let starts = count.clone();
+        let mut list = vec![0usize; starts[n]];
+        for i in 0..n {
+            for &j in model.ancestors_of_dof(i) {
+                list[count[j]] = i;
+                count[j] += 1;
+            }
+        }
+        Self { nv: n, starts, list }
+    }
+}
+
+/// [`ltl_solve_rows`] with the descendant lists of [`DofDescendants`], so that the first sweep
+/// also pulls (`y_j = b_j − Σ_{i ≻ j} L_ij y_i`, accumulated in registers) instead of pushing.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn ltl_solve_rows_desc(
+    model: &Model,
+    h: &DMatrix<f64>,
+    desc: &DofDescendants,
+    x: &mut [f64],
+    ld: usize,
+    len: usize,
+    alpha: f64,
+) {
+    let n = model.nv;
+    let hs = h.as_slice();
+    assert!(
+        hs.len() == n * n && len <= ld && (n == 0 || (n - 1) * ld + len <= x.len()) && desc.nv == n,
+        "ltl_solve_rows_desc: dimension mismatch"
+    );
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: as in `ltl_solve_rows`; descendant indices are < desc.nv = n (by construction).
+        unsafe { return solve_rows_desc_avx2(model, hs, desc, x.as_mut_ptr(), ld, len, alpha) };
+    }
+    solve_rows_impl::<false>(model, hs, x, ld, len, alpha)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn solve_rows_desc_avx2(
+    model: &Model,
+    h: &[f64],
+    desc: &DofDescendants,
+    x: *mut f64,
+    ld: usize,
+    len: usize,
+    alpha: f64,
+) {
+    use std::arch::x86_64::*;
+    let n = model.nv;
+    let h = h.as_ptr();
+    let rem = len % 4;
+    let m = |k: usize| if rem > k { -1i64 } else { 0 };
+    let mask = _mm256_setr_epi64x(m(0), m(1), m(2), 0);
+    let starts = &model.dof_ancestors_start;
+    let all_anc = &model.dof_ancestors;
+    unsafe {
+        // Lᵀ y = b: row j pulls its (already final) descendants, L_ij stored at (j, i).
+        for j in (0..n).rev() {
+            let d = desc
+                .list
+                .get_unchecked(*desc.starts.get_unchecked(j)..*desc.starts.get_unchecked(j + 1));
+            if !d.is_empty() {
+                let hj = h.add(j);
+                pull_row(x, ld, len, mask, j, d, |i| *hj.add(n * i), 1.0);
+            }
+        }
+        // z = α D⁻¹ y, then L x = z.
+        for i in 0..n {
+            let anc = all_anc.get_unchecked(*starts.get_unchecked(i)..*starts.get_unchecked(i + 1));
+            let hi = h.add(n * i);
+            let dinv = alpha / *hi.add(i);
+            pull_row(x, ld, len, mask, i, anc, |j| *hi.add(j), dinv);
         }
     }
 }

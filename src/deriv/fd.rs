@@ -5,7 +5,9 @@ use super::id_fo::id_derivatives_unchecked;
 use super::id_so::{SoData, id_so_unchecked};
 use super::zero::idfoza_core_with;
 use crate::algo::Data;
-use crate::algo::internal::{aba_unchecked, check_fext, ltl_in_place, ltl_solve_rows};
+use crate::algo::internal::{
+    DofDescendants, aba_unchecked, check_fext, ltl_in_place, ltl_solve_rows, ltl_solve_rows_desc,
+};
 use crate::error::Result;
 use crate::linalg::transpose;
 use crate::model::{Model, check_vec};
@@ -85,6 +87,8 @@ pub struct FdSoData {
     col: DVector<f64>,
     /// Working tensor stored by rows of the solve: `(i, j, k)` at `j + n k + n² i`.
     tt: Vec<f64>,
+    /// Descendant DoF lists for the pulling first sweep of the solves.
+    desc: DofDescendants,
 }
 
 impl FdSoData {
@@ -99,6 +103,7 @@ impl FdSoData {
             d2qdd_dtaudq: Tensor3::zeros(n, n, n),
             col: DVector::zeros(n),
             tt: vec![0.0; n * n * n],
+            desc: DofDescendants::new(model),
         }
     }
     /// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂q_j)`.
@@ -122,14 +127,20 @@ impl FdSoData {
 /// `out ← −M⁻¹ T` for the tensor `T` held in `tt` by rows (`(i, j, k)` at `j + n k + n² i`):
 /// tree-sparse multi-right-hand-side solves on blocks of `(j, k)` columns (cache-sized), then
 /// one transposition into the column-major `out`.
-fn solve_neg_tensor(model: &Model, ltl: &DMatrix<f64>, tt: &mut [f64], out: &mut Tensor3) {
+fn solve_neg_tensor(
+    model: &Model,
+    ltl: &DMatrix<f64>,
+    desc: &DofDescendants,
+    tt: &mut [f64],
+    out: &mut Tensor3,
+) {
     const W: usize = 64;
     let n = model.nv;
     let n2 = n * n;
     let mut b = 0;
     while b < n2 {
         let w = W.min(n2 - b);
-        ltl_solve_rows(model, ltl, &mut tt[b..], n2, w, -1.0);
+        ltl_solve_rows_desc(model, ltl, desc, &mut tt[b..], n2, w, -1.0);
         b += w;
     }
     transpose(tt, n2, n, out.as_mut_slice());
@@ -170,33 +181,39 @@ pub fn fd_so_derivatives(
     fd_fo_from_id(model, data)?;
     let n2 = n * n;
     let tt = &mut fso.tt[..];
+    assert!(tt.len() == n * n2);
     let col = fso.col.as_mut_slice();
     // ∂²q̈/∂q²: ID_qq + A + A^R with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k].
     transpose(fso.id.d2tau_dq2().as_slice(), n, n2, tt);
     for j in 0..n {
         col.copy_from_slice(data.dqdd_dq.column(j).as_slice());
-        idfoza_core_with(model, data, col, |i, k, z| {
-            tt[j + n * k + n2 * i] += z;
-            tt[k + n * j + n2 * i] += z;
+        // SAFETY (the three `put` closures): i, k < n and j < n, so every index is < n³ = tt.len().
+        idfoza_core_with(model, data, col, |i, k, z| unsafe {
+            *tt.get_unchecked_mut(j + n * k + n2 * i) += z;
+            *tt.get_unchecked_mut(k + n * j + n2 * i) += z;
         });
     }
-    solve_neg_tensor(model, &data.ltl, tt, &mut fso.d2qdd_dq2);
+    solve_neg_tensor(model, &data.ltl, &fso.desc, tt, &mut fso.d2qdd_dq2);
     // ∂²q̈/∂q∂q̇: ID_qv + B with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j] (page k).
     transpose(fso.id.d2tau_dqdv().as_slice(), n, n2, tt);
     for k in 0..n {
         col.copy_from_slice(data.dqdd_dv.column(k).as_slice());
-        idfoza_core_with(model, data, col, |i, j, z| tt[j + n * k + n2 * i] += z);
+        idfoza_core_with(model, data, col, |i, j, z| unsafe {
+            *tt.get_unchecked_mut(j + n * k + n2 * i) += z
+        });
     }
-    solve_neg_tensor(model, &data.ltl, tt, &mut fso.d2qdd_dqdv);
+    solve_neg_tensor(model, &data.ltl, &fso.desc, tt, &mut fso.d2qdd_dqdv);
     // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k].
     tt.fill(0.0);
     for j in 0..n {
         col.copy_from_slice(data.minv.column(j).as_slice());
-        idfoza_core_with(model, data, col, |i, k, z| tt[j + n * k + n2 * i] = z);
+        idfoza_core_with(model, data, col, |i, k, z| unsafe {
+            *tt.get_unchecked_mut(j + n * k + n2 * i) = z
+        });
     }
-    solve_neg_tensor(model, &data.ltl, tt, &mut fso.d2qdd_dtaudq);
+    solve_neg_tensor(model, &data.ltl, &fso.desc, tt, &mut fso.d2qdd_dtaudq);
     // ∂²q̈/∂q̇²: ID_vv (M does not depend on q̇).
     transpose(fso.id.d2tau_dv2().as_slice(), n, n2, tt);
-    solve_neg_tensor(model, &data.ltl, tt, &mut fso.d2qdd_dv2);
+    solve_neg_tensor(model, &data.ltl, &fso.desc, tt, &mut fso.d2qdd_dv2);
     Ok(())
 }

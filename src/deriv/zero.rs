@@ -83,28 +83,37 @@ pub(crate) fn idfoza_core_with(
         data.z_a[i] = ai;
         data.z_fc[i] = data.oinertia[i].mul_motion(&ai);
     }
+    let nv = model.nv;
+    assert!(
+        data.s_world.len() == nv
+            && data.z_psidd.len() == nv
+            && model.dof_ancestors_start.len() == nv + 1,
+        "idfoza_core: workspace built for another model"
+    );
     for i in (1..n).rev() {
         let ic = data.ic_world[i];
         let fc = data.z_fc[i];
-        for c in model.idx_v[i]..model.idx_v[i] + model.nvs[i] {
+        let iv = model.idx_v[i];
+        let ive = iv + model.nvs[i];
+        for c in iv..ive {
             let s = data.s_world[c];
             let t1 = ic.mul_motion(&s);
-            // dtau_dq_1 with B = 0, Ψ̇ = 0
-            let mut j = i;
-            while j > 0 {
-                for r in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
-                    put(c, r, t1.dot(&data.z_psidd[r]));
-                }
-                j = model.parents[j];
+            let psidd = &data.z_psidd;
+            let sw = &data.s_world;
+            // dtau_dq_1 with B = 0, Ψ̇ = 0: the DoFs of joint i itself...
+            for (r, p) in psidd.iter().enumerate().take(ive).skip(iv) {
+                put(c, r, t1.dot(p));
             }
             // dtau_dq_2 with B = 0, Ψ̇ = 0
-            let t3 = ic.mul_motion(&data.z_psidd[c]) + fc.crff(&s);
-            let mut j = model.parents[i];
-            while j > 0 {
-                for r in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
-                    put(r, c, data.s_world[r].dot(&t3));
+            let t3 = ic.mul_motion(&psidd[c]) + fc.crff(&s);
+            // ... and of the strict ancestor joints (ancestor DoFs below `iv`), both terms.
+            for &r in model.ancestors_of_dof(c) {
+                if r < iv {
+                    // SAFETY: ancestor DoFs are < c < nv = psidd.len() = sw.len() (asserted).
+                    let (pr, sr) = unsafe { (psidd.get_unchecked(r), sw.get_unchecked(r)) };
+                    put(c, r, t1.dot(pr));
+                    put(r, c, sr.dot(&t3));
                 }
-                j = model.parents[j];
             }
         }
         let p = model.parents[i];
