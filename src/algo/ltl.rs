@@ -8,6 +8,7 @@ use super::Data;
 use crate::error::{Error, Result};
 use crate::model::{Model, check_vec};
 use nalgebra::{DMatrix, DVector};
+use std::mem::MaybeUninit;
 
 /// Factorises `data.m` (from [`super::crba`]) as `M = Lᵀ D L` into `data.ltl`, exploiting the
 /// branch-induced sparsity: cost `O(n d²)` for a tree of depth `d`. A non-positive pivot is
@@ -210,8 +211,8 @@ unsafe fn solve_rows_avx2(
     }
 }
 
-/// Row `i ← scale·row i − Σ_{j ∈ others} coef(j) row j` (AVX2), by chunks of 8 vectors kept in
-/// registers and a masked ragged end.
+/// Row `i ← scale·row i − Σ_{j ∈ others} coef(j) row j` (AVX2), by chunks of 8, 4, 2, 1
+/// vectors kept in registers and a masked ragged end.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
@@ -223,101 +224,156 @@ unsafe fn pull_row(
     mask: std::arch::x86_64::__m256i,
     i: usize,
     others: &[usize],
+    coef: impl Fn(usize) -> f64 + Copy,
+    scale: f64,
+) {
+    let nfull = len / 4;
+    unsafe {
+        let mut g = 0;
+        while g + 8 <= nfull {
+            pull_chunk::<8, false>(x, ld, mask, i, 4 * g, others, coef, scale);
+            g += 8;
+        }
+        if g + 4 <= nfull {
+            pull_chunk::<4, false>(x, ld, mask, i, 4 * g, others, coef, scale);
+            g += 4;
+        }
+        if g + 2 <= nfull {
+            pull_chunk::<2, false>(x, ld, mask, i, 4 * g, others, coef, scale);
+            g += 2;
+        }
+        if g < nfull {
+            pull_chunk::<1, false>(x, ld, mask, i, 4 * g, others, coef, scale);
+        }
+        if len % 4 != 0 {
+            pull_chunk::<1, true>(x, ld, mask, i, 4 * nfull, others, coef, scale);
+        }
+    }
+}
+
+/// `K` vectors of row `i` from column `t` (the last one masked if `MASKED`), see [`pull_row`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+#[allow(clippy::too_many_arguments)]
+unsafe fn pull_chunk<const K: usize, const MASKED: bool>(
+    x: *mut f64,
+    ld: usize,
+    mask: std::arch::x86_64::__m256i,
+    i: usize,
+    t: usize,
+    others: &[usize],
     coef: impl Fn(usize) -> f64,
     scale: f64,
 ) {
     use std::arch::x86_64::*;
-    const G: usize = 8;
-    let nfull = len / 4;
-    let rem = len % 4;
-    let sc = _mm256_set1_pd(scale);
     unsafe {
-        let xi = x.add(i * ld);
-        let mut g = 0;
-        while g + G <= nfull {
-            let mut acc = [_mm256_setzero_pd(); G];
-            for (u, a) in acc.iter_mut().enumerate() {
-                *a = _mm256_mul_pd(sc, _mm256_loadu_pd(xi.add(4 * (g + u))));
-            }
-            for &j in others {
-                let l = _mm256_set1_pd(coef(j));
-                let xj = x.add(j * ld + 4 * g);
-                for (u, a) in acc.iter_mut().enumerate() {
-                    *a = _mm256_fnmadd_pd(l, _mm256_loadu_pd(xj.add(4 * u)), *a);
-                }
-            }
-            for (u, a) in acc.iter().enumerate() {
-                _mm256_storeu_pd(xi.add(4 * (g + u)), *a);
-            }
-            g += G;
+        let ld4 =
+            |p: *const f64| if MASKED { _mm256_maskload_pd(p, mask) } else { _mm256_loadu_pd(p) };
+        let sc = _mm256_set1_pd(scale);
+        let xi = x.add(i * ld + t);
+        let mut acc = [_mm256_setzero_pd(); K];
+        for (u, a) in acc.iter_mut().enumerate() {
+            *a = _mm256_mul_pd(sc, ld4(xi.add(4 * u)));
         }
-        let gs = nfull - g;
-        if gs > 0 || rem > 0 {
-            let mut acc = [_mm256_setzero_pd(); G];
-            for (u, a) in acc.iter_mut().enumerate().take(gs) {
-                *a = _mm256_mul_pd(sc, _mm256_loadu_pd(xi.add(4 * (g + u))));
+        for &j in others {
+            let l = _mm256_set1_pd(coef(j));
+            let xj = x.add(j * ld + t);
+            for (u, a) in acc.iter_mut().enumerate() {
+                *a = _mm256_fnmadd_pd(l, ld4(xj.add(4 * u)), *a);
             }
-            let mut at = _mm256_mul_pd(sc, _mm256_maskload_pd(xi.add(4 * nfull), mask));
-            for &j in others {
-                let l = _mm256_set1_pd(coef(j));
-                let xj = x.add(j * ld + 4 * g);
-                for (u, a) in acc.iter_mut().enumerate().take(gs) {
-                    *a = _mm256_fnmadd_pd(l, _mm256_loadu_pd(xj.add(4 * u)), *a);
-                }
-                if rem > 0 {
-                    at = _mm256_fnmadd_pd(l, _mm256_maskload_pd(xj.add(4 * gs), mask), at);
-                }
-            }
-            for (u, a) in acc.iter().enumerate().take(gs) {
-                _mm256_storeu_pd(xi.add(4 * (g + u)), *a);
-            }
-            if rem > 0 {
-                _mm256_maskstore_pd(xi.add(4 * nfull), mask, at);
+        }
+        for (u, a) in acc.iter().enumerate() {
+            if MASKED {
+                _mm256_maskstore_pd(xi.add(4 * u), mask, *a);
+            } else {
+                _mm256_storeu_pd(xi.add(4 * u), *a);
             }
         }
     }
 }
 
-/// Strict descendant DoFs of every DoF (the transpose of [`Model::dof_ancestors`]): DoF `j`'s
-/// descendants are `list[starts[j]..starts[j + 1]]`, all `< nv` by construction.
+/// Strict descendant DoFs of every DoF (the transpose of [`Model::dof_ancestors`]), owned.
 #[derive(Clone, Debug)]
 pub(crate) struct DofDescendants {
-    nv: usize,
     starts: Vec<usize>,
     list: Vec<usize>,
 }
 
+/// Borrowed descendant lists: DoF `j`'s strict descendants are `list[starts[j]..starts[j + 1]]`,
+/// all `< nv` by construction (only built by [`fill_descendants`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct DescView<'a> {
+    nv: usize,
+    starts: &'a [usize],
+    list: &'a [usize],
+}
+
+/// Fills `starts` (length ≥ `nv + 1`) and `list` (length ≥ `model.dof_ancestors.len()`) with
+/// the descendant lists of `model` (the buffers may start uninitialised); `None` if they are
+/// too short.
+pub(crate) fn fill_descendants<'a>(
+    model: &Model,
+    starts: &'a mut [MaybeUninit<usize>],
+    list: &'a mut [MaybeUninit<usize>],
+) -> Option<DescView<'a>> {
+    let n = model.nv;
+    let na = model.dof_ancestors.len();
+    if starts.len() < n + 1 || list.len() < na {
+        return None;
+    }
+    for v in &mut starts[..n + 1] {
+        v.write(0);
+    }
+    // SAFETY: all n + 1 entries were just initialised.
+    let starts: &mut [usize] =
+        unsafe { std::slice::from_raw_parts_mut(starts.as_mut_ptr().cast::<usize>(), n + 1) };
+    for i in 0..n {
+        for &j in model.ancestors_of_dof(i) {
+            starts[j + 1] += 1;
+        }
+    }
+    for j in 0..n {
+        starts[j + 1] += starts[j];
+    }
+    // Place each DoF after the ones already put (starts[j] advances), then shift back. The
+    // counts sum to na, so every entry of list[..na] is written exactly once.
+    for i in 0..n {
+        for &j in model.ancestors_of_dof(i) {
+            list[starts[j]].write(i);
+            starts[j] += 1;
+        }
+    }
+    for j in (1..=n).rev() {
+        starts[j] = starts[j - 1];
+    }
+    starts[0] = 0;
+    // SAFETY: list[..na] has been fully initialised above.
+    let list: &[usize] = unsafe { std::slice::from_raw_parts(list.as_ptr().cast::<usize>(), na) };
+    Some(DescView { nv: n, starts, list })
+}
+
 impl DofDescendants {
     pub(crate) fn new(model: &Model) -> Self {
-        let n = model.nv;
-        let mut count = vec![0usize; n + 1];
-        for i in 0..n {
-            for &j in model.ancestors_of_dof(i) {
-                count[j + 1] += 1;
-            }
-        }
-        for j in 0..n {
-            count[j + 1] += count[j];
-        }
-        let starts = count.clone();
-        let mut list = vec![0usize; starts[n]];
-        for i in 0..n {
-            for &j in model.ancestors_of_dof(i) {
-                list[count[j]] = i;
-                count[j] += 1;
-            }
-        }
-        Self { nv: n, starts, list }
+        let mut starts = vec![MaybeUninit::uninit(); model.nv + 1];
+        let mut list = vec![MaybeUninit::uninit(); model.dof_ancestors.len()];
+        let v =
+            fill_descendants(model, &mut starts, &mut list).expect("buffers sized for the model");
+        Self { starts: v.starts.to_vec(), list: v.list.to_vec() }
+    }
+    /// The lists, valid for models with this `nv`.
+    pub(crate) fn view(&self) -> DescView<'_> {
+        DescView { nv: self.starts.len() - 1, starts: &self.starts, list: &self.list }
     }
 }
 
-/// [`ltl_solve_rows`] with the descendant lists of [`DofDescendants`], so that the first sweep
+/// [`ltl_solve_rows`] with descendant lists ([`DescView`]), so that the first sweep
 /// also pulls (`y_j = b_j − Σ_{i ≻ j} L_ij y_i`, accumulated in registers) instead of pushing.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn ltl_solve_rows_desc(
     model: &Model,
     h: &DMatrix<f64>,
-    desc: &DofDescendants,
+    desc: DescView<'_>,
     x: &mut [f64],
     ld: usize,
     len: usize,
@@ -342,7 +398,7 @@ pub(crate) fn ltl_solve_rows_desc(
 unsafe fn solve_rows_desc_avx2(
     model: &Model,
     h: &[f64],
-    desc: &DofDescendants,
+    desc: DescView<'_>,
     x: *mut f64,
     ld: usize,
     len: usize,

@@ -3,10 +3,11 @@
 
 use super::id_fo::id_derivatives_unchecked;
 use super::id_so::{SoData, id_so_unchecked};
-use super::zero::idfoza_core_with;
+use super::zero::{Idfoza4Ws, idfoza4_core};
 use crate::algo::Data;
 use crate::algo::internal::{
-    DofDescendants, aba_unchecked, check_fext, ltl_in_place, ltl_solve_rows, ltl_solve_rows_desc,
+    DescView, DofDescendants, aba_unchecked, check_fext, fill_descendants, ltl_in_place,
+    ltl_solve_rows, ltl_solve_rows_desc,
 };
 use crate::error::Result;
 use crate::linalg::transpose;
@@ -20,6 +21,7 @@ use nalgebra::{DMatrix, DVector};
 fn solve_square(
     model: &Model,
     ltl: &DMatrix<f64>,
+    desc: Option<DescView<'_>>,
     src: &DMatrix<f64>,
     scratch: &mut DMatrix<f64>,
     dst: &mut DMatrix<f64>,
@@ -27,8 +29,23 @@ fn solve_square(
 ) {
     let n = model.nv;
     transpose(src.as_slice(), n, n, scratch.as_mut_slice());
-    ltl_solve_rows(model, ltl, scratch.as_mut_slice(), n, n, alpha);
+    solve_rows(model, ltl, desc, scratch.as_mut_slice(), n, alpha);
     transpose(scratch.as_slice(), n, n, dst.as_mut_slice());
+}
+
+/// `X ← α M⁻¹ X` on the `nv×nv` row-stored `x`, pulling in both sweeps when `desc` is given.
+fn solve_rows(
+    model: &Model,
+    ltl: &DMatrix<f64>,
+    desc: Option<DescView<'_>>,
+    x: &mut [f64],
+    n: usize,
+    alpha: f64,
+) {
+    match desc {
+        Some(d) => ltl_solve_rows_desc(model, ltl, d, x, n, n, alpha),
+        None => ltl_solve_rows(model, ltl, x, n, n, alpha),
+    }
 }
 
 /// FO FD part shared by first and second order: from `data.m`, `data.dtau_dq`, `data.dtau_dv`
@@ -37,17 +54,21 @@ fn fd_fo_from_id(model: &Model, data: &mut Data) -> Result<()> {
     let n = model.nv;
     data.ltl.as_mut_slice().copy_from_slice(data.m.as_slice());
     ltl_in_place(model, &mut data.ltl)?;
+    // Descendant lists on the stack (no allocation) when the tree is small enough.
+    let mut starts = [std::mem::MaybeUninit::uninit(); 129];
+    let mut list = [std::mem::MaybeUninit::uninit(); 2048];
+    let desc = fill_descendants(model, &mut starts, &mut list);
     // ∂q̈/∂q = −M⁻¹ ∂τ/∂q, ∂q̈/∂q̇ = −M⁻¹ ∂τ/∂q̇ (eq. jain_FO_eqn) by tree-sparse solves
     // (`minv` serves as scratch before it is computed).
-    solve_square(model, &data.ltl, &data.dtau_dq, &mut data.minv, &mut data.dqdd_dq, -1.0);
-    solve_square(model, &data.ltl, &data.dtau_dv, &mut data.minv, &mut data.dqdd_dv, -1.0);
+    solve_square(model, &data.ltl, desc, &data.dtau_dq, &mut data.minv, &mut data.dqdd_dq, -1.0);
+    solve_square(model, &data.ltl, desc, &data.dtau_dv, &mut data.minv, &mut data.dqdd_dv, -1.0);
     // ∂q̈/∂τ = M⁻¹: the same solve on the identity (symmetric, so no transposition).
     let minv = data.minv.as_mut_slice();
     minv.fill(0.0);
     for i in 0..n {
         minv[i + n * i] = 1.0;
     }
-    ltl_solve_rows(model, &data.ltl, minv, n, n, 1.0);
+    solve_rows(model, &data.ltl, desc, minv, n, 1.0);
     Ok(())
 }
 
@@ -84,7 +105,7 @@ pub struct FdSoData {
     d2qdd_dv2: Tensor3,
     d2qdd_dqdv: Tensor3,
     d2qdd_dtaudq: Tensor3,
-    col: DVector<f64>,
+    ws4: Idfoza4Ws,
     /// Working tensor stored by rows of the solve: `(i, j, k)` at `j + n k + n² i`.
     tt: Vec<f64>,
     /// Descendant DoF lists for the pulling first sweep of the solves.
@@ -101,7 +122,7 @@ impl FdSoData {
             d2qdd_dv2: Tensor3::zeros(n, n, n),
             d2qdd_dqdv: Tensor3::zeros(n, n, n),
             d2qdd_dtaudq: Tensor3::zeros(n, n, n),
-            col: DVector::zeros(n),
+            ws4: Idfoza4Ws::new(model),
             tt: vec![0.0; n * n * n],
             desc: DofDescendants::new(model),
         }
@@ -130,7 +151,7 @@ impl FdSoData {
 fn solve_neg_tensor(
     model: &Model,
     ltl: &DMatrix<f64>,
-    desc: &DofDescendants,
+    desc: DescView<'_>,
     tt: &mut [f64],
     out: &mut Tensor3,
 ) {
@@ -144,6 +165,84 @@ fn solve_neg_tensor(
         b += w;
     }
     transpose(tt, n2, n, out.as_mut_slice());
+}
+
+/// Which IDFOZA term of eq. eqn_FD_SO_43 [`add_idfoza_terms`] adds.
+#[derive(Clone, Copy, PartialEq)]
+enum Term {
+    /// `A + A^R`, `A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k]`.
+    Dq2,
+    /// `B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j]`.
+    Dqdv,
+    /// `C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k]` (written, not added).
+    Minv,
+}
+
+/// Adds one IDFOZA term to `tt` (stored by rows, `(i, j, k)` at `j + n k + n² i`), four
+/// right-hand sides at a time (vectorised with AVX2 when available).
+fn add_idfoza_terms(model: &Model, data: &Data, ws: &mut Idfoza4Ws, tt: &mut [f64], term: Term) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU supports the enabled features.
+        unsafe { return add_idfoza_terms_avx2(model, data, ws, tt, term) };
+    }
+    add_idfoza_terms_impl(model, data, ws, tt, term)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn add_idfoza_terms_avx2(
+    model: &Model,
+    data: &Data,
+    ws: &mut Idfoza4Ws,
+    tt: &mut [f64],
+    term: Term,
+) {
+    add_idfoza_terms_impl(model, data, ws, tt, term)
+}
+
+#[inline(always)]
+fn add_idfoza_terms_impl(
+    model: &Model,
+    data: &Data,
+    ws: &mut Idfoza4Ws,
+    tt: &mut [f64],
+    term: Term,
+) {
+    let n = model.nv;
+    let n2 = n * n;
+    assert!(tt.len() == n * n2);
+    let x = match term {
+        Term::Dq2 => data.dqdd_dq.as_slice(),
+        Term::Dqdv => data.dqdd_dv.as_slice(),
+        Term::Minv => data.minv.as_slice(),
+    };
+    let mut j0 = 0;
+    while j0 < n {
+        let nl = 4.min(n - j0);
+        // SAFETY (the `put` closures): i, k < n and j = j0 + l < n for l < nl, so every index
+        // is < n³ = tt.len().
+        match term {
+            Term::Dq2 => idfoza4_core(model, data, ws, x, n, j0, nl, |i, k, z| unsafe {
+                for (l, zl) in z.iter().enumerate().take(nl) {
+                    let j = j0 + l;
+                    *tt.get_unchecked_mut(j + n * k + n2 * i) += zl;
+                    *tt.get_unchecked_mut(k + n * j + n2 * i) += zl;
+                }
+            }),
+            Term::Dqdv => idfoza4_core(model, data, ws, x, n, j0, nl, |i, j, z| unsafe {
+                for (l, zl) in z.iter().enumerate().take(nl) {
+                    *tt.get_unchecked_mut(j + n * (j0 + l) + n2 * i) += zl;
+                }
+            }),
+            Term::Minv => idfoza4_core(model, data, ws, x, n, j0, nl, |i, k, z| unsafe {
+                for (l, zl) in z.iter().enumerate().take(nl) {
+                    *tt.get_unchecked_mut(j0 + l + n * k + n2 * i) = *zl;
+                }
+            }),
+        }
+        j0 += 4;
+    }
 }
 
 /// Second-order derivatives of forward dynamics at `q̈ = FD(q, q̇, τ)` (eq. eqn_FD_SO_43):
@@ -182,38 +281,20 @@ pub fn fd_so_derivatives(
     let n2 = n * n;
     let tt = &mut fso.tt[..];
     assert!(tt.len() == n * n2);
-    let col = fso.col.as_mut_slice();
     // ∂²q̈/∂q²: ID_qq + A + A^R with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k].
     transpose(fso.id.d2tau_dq2().as_slice(), n, n2, tt);
-    for j in 0..n {
-        col.copy_from_slice(data.dqdd_dq.column(j).as_slice());
-        // SAFETY (the three `put` closures): i, k < n and j < n, so every index is < n³ = tt.len().
-        idfoza_core_with(model, data, col, |i, k, z| unsafe {
-            *tt.get_unchecked_mut(j + n * k + n2 * i) += z;
-            *tt.get_unchecked_mut(k + n * j + n2 * i) += z;
-        });
-    }
-    solve_neg_tensor(model, &data.ltl, &fso.desc, tt, &mut fso.d2qdd_dq2);
+    add_idfoza_terms(model, data, &mut fso.ws4, tt, Term::Dq2);
+    solve_neg_tensor(model, &data.ltl, fso.desc.view(), tt, &mut fso.d2qdd_dq2);
     // ∂²q̈/∂q∂q̇: ID_qv + B with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j] (page k).
     transpose(fso.id.d2tau_dqdv().as_slice(), n, n2, tt);
-    for k in 0..n {
-        col.copy_from_slice(data.dqdd_dv.column(k).as_slice());
-        idfoza_core_with(model, data, col, |i, j, z| unsafe {
-            *tt.get_unchecked_mut(j + n * k + n2 * i) += z
-        });
-    }
-    solve_neg_tensor(model, &data.ltl, &fso.desc, tt, &mut fso.d2qdd_dqdv);
+    add_idfoza_terms(model, data, &mut fso.ws4, tt, Term::Dqdv);
+    solve_neg_tensor(model, &data.ltl, fso.desc.view(), tt, &mut fso.d2qdd_dqdv);
     // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k].
     tt.fill(0.0);
-    for j in 0..n {
-        col.copy_from_slice(data.minv.column(j).as_slice());
-        idfoza_core_with(model, data, col, |i, k, z| unsafe {
-            *tt.get_unchecked_mut(j + n * k + n2 * i) = z
-        });
-    }
-    solve_neg_tensor(model, &data.ltl, &fso.desc, tt, &mut fso.d2qdd_dtaudq);
+    add_idfoza_terms(model, data, &mut fso.ws4, tt, Term::Minv);
+    solve_neg_tensor(model, &data.ltl, fso.desc.view(), tt, &mut fso.d2qdd_dtaudq);
     // ∂²q̈/∂q̇²: ID_vv (M does not depend on q̇).
     transpose(fso.id.d2tau_dv2().as_slice(), n, n2, tt);
-    solve_neg_tensor(model, &data.ltl, &fso.desc, tt, &mut fso.d2qdd_dv2);
+    solve_neg_tensor(model, &data.ltl, fso.desc.view(), tt, &mut fso.d2qdd_dv2);
     Ok(())
 }
