@@ -245,7 +245,7 @@ unsafe fn pull_row(
         if g < nfull {
             pull_chunk::<1, false>(x, ld, mask, i, 4 * g, others, coef, scale);
         }
-        if len % 4 != 0 {
+        if !len.is_multiple_of(4) {
             pull_chunk::<1, true>(x, ld, mask, i, 4 * nfull, others, coef, scale);
         }
     }

@@ -311,9 +311,9 @@ pub(crate) fn idfoza4_core(
         }
         let p = model.parents[i];
         if p > 0 {
-            for m in 0..6 {
-                for l in 0..4 {
-                    ws.fc[p][m][l] += fc[m][l];
+            for (d, s) in ws.fc[p].iter_mut().zip(&fc) {
+                for (dl, sl) in d.iter_mut().zip(s) {
+                    *dl += sl;
                 }
             }
         }
