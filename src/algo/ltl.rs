@@ -8,6 +8,7 @@ use super::Data;
 use crate::error::{Error, Result};
 use crate::model::{Model, check_vec};
 use nalgebra::{DMatrix, DVector};
+use std::mem::MaybeUninit;
 
 /// Factorises `data.m` (from [`super::crba`]) as `M = Lᵀ D L` into `data.ltl`, exploiting the
 /// branch-induced sparsity: cost `O(n d²)` for a tree of depth `d`. A non-positive pivot is
@@ -35,14 +36,19 @@ pub(crate) fn ltl_in_place(model: &Model, h: &mut DMatrix<f64>) -> Result<()> {
             });
         }
         let anc = model.ancestors_of_dof(k);
+        // SAFETY: k < n and its ancestors i, j < k come from `Model::dof_ancestors`, so every
+        // index below is < n² = h.len() (asserted by the slice length check).
+        assert!(h.len() == n * n);
         for (pos, &i) in anc.iter().enumerate() {
-            let a = h[i + n * k] / hkk;
-            // H(i, i) and H(i, j) for the ancestors j of i (the tail of k's list).
-            h[i + n * i] -= a * h[i + n * k];
-            for &j in &anc[pos + 1..] {
-                h[j + n * i] -= a * h[j + n * k];
+            unsafe {
+                let a = *h.get_unchecked(i + n * k) / hkk;
+                // H(i, i) and H(i, j) for the ancestors j of i (the tail of k's list).
+                *h.get_unchecked_mut(i + n * i) -= a * *h.get_unchecked(i + n * k);
+                for &j in anc.get_unchecked(pos + 1..) {
+                    *h.get_unchecked_mut(j + n * i) -= a * *h.get_unchecked(j + n * k);
+                }
+                *h.get_unchecked_mut(i + n * k) = a;
             }
-            h[i + n * k] = a;
         }
     }
     Ok(())
@@ -95,4 +101,419 @@ pub fn solve_ltl_matrix(model: &Model, data: &Data, b: &mut DMatrix<f64>) -> Res
         ltl_solve_in_place(model, &data.ltl, col.as_mut_slice());
     }
     Ok(())
+}
+
+/// `X ← α M⁻¹ X` for an `nv × len` matrix `X` stored **by rows**: row `i` is
+/// `x[i·ld .. i·ld + len]` (e.g. the transpose of a column-major right-hand side). With the
+/// tree-sparse `LᵀDL` factor `h`, every elementary step of the sweeps `Lᵀ y = b`, `z = D⁻¹ y`,
+/// `L x = z` is an axpy between two contiguous rows, so the cost is `≈ 2 (Σ depths) len` FMAs,
+/// vectorised along the rows.
+pub(crate) fn ltl_solve_rows(
+    model: &Model,
+    h: &DMatrix<f64>,
+    x: &mut [f64],
+    ld: usize,
+    len: usize,
+    alpha: f64,
+) {
+    let n = model.nv;
+    let h = h.as_slice();
+    assert!(
+        h.len() == n * n && len <= ld && (n == 0 || (n - 1) * ld + len <= x.len()),
+        "ltl_solve_rows: dimension mismatch"
+    );
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU supports the enabled features (checked just above); every row
+        // `x[i·ld .. i·ld + len]`, i < n, lies in `x` (asserted), ancestors j < i < n index `h`
+        // within n², and rows j < i never overlap row i since len ≤ ld.
+        unsafe { return solve_rows_avx2(model, h, x.as_mut_ptr(), ld, len, alpha) };
+    }
+    solve_rows_impl::<false>(model, h, x, ld, len, alpha)
+}
+
+/// AVX2 + FMA version of [`solve_rows_impl`]: rows processed by chunks of 8 vectors kept in
+/// registers, the ragged end with masked loads and stores.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn solve_rows_avx2(
+    model: &Model,
+    h: &[f64],
+    x: *mut f64,
+    ld: usize,
+    len: usize,
+    alpha: f64,
+) {
+    use std::arch::x86_64::*;
+    const G: usize = 8;
+    let n = model.nv;
+    let h = h.as_ptr();
+    let nfull = len / 4;
+    let rem = len % 4;
+    let m = |k: usize| if rem > k { -1i64 } else { 0 };
+    let mask = _mm256_setr_epi64x(m(0), m(1), m(2), 0);
+    let starts = &model.dof_ancestors_start;
+    let all_anc = &model.dof_ancestors;
+    unsafe {
+        // Lᵀ y = b: row i (final once all its descendants are done) is pushed to its ancestors.
+        for i in (1..n).rev() {
+            let anc = all_anc.get_unchecked(*starts.get_unchecked(i)..*starts.get_unchecked(i + 1));
+            if anc.is_empty() {
+                continue;
+            }
+            let xi = x.add(i * ld);
+            let hi = h.add(n * i);
+            let mut g = 0;
+            while g + G <= nfull {
+                let mut s = [_mm256_setzero_pd(); G];
+                for (u, su) in s.iter_mut().enumerate() {
+                    *su = _mm256_loadu_pd(xi.add(4 * (g + u)));
+                }
+                for &j in anc {
+                    let l = _mm256_broadcast_sd(&*hi.add(j));
+                    let xj = x.add(j * ld + 4 * g);
+                    for (u, su) in s.iter().enumerate() {
+                        let p = xj.add(4 * u);
+                        _mm256_storeu_pd(p, _mm256_fnmadd_pd(l, *su, _mm256_loadu_pd(p)));
+                    }
+                }
+                g += G;
+            }
+            let gs = nfull - g;
+            if gs > 0 || rem > 0 {
+                let mut s = [_mm256_setzero_pd(); G];
+                for (u, su) in s.iter_mut().enumerate().take(gs) {
+                    *su = _mm256_loadu_pd(xi.add(4 * (g + u)));
+                }
+                let st = _mm256_maskload_pd(xi.add(4 * nfull), mask);
+                for &j in anc {
+                    let l = _mm256_broadcast_sd(&*hi.add(j));
+                    let xj = x.add(j * ld + 4 * g);
+                    for (u, su) in s.iter().enumerate().take(gs) {
+                        let p = xj.add(4 * u);
+                        _mm256_storeu_pd(p, _mm256_fnmadd_pd(l, *su, _mm256_loadu_pd(p)));
+                    }
+                    if rem > 0 {
+                        let p = xj.add(4 * gs);
+                        let d = _mm256_maskload_pd(p, mask);
+                        _mm256_maskstore_pd(p, mask, _mm256_fnmadd_pd(l, st, d));
+                    }
+                }
+            }
+        }
+        // z = α D⁻¹ y, then L x = z: row i pulls its (already final) ancestors.
+        for i in 0..n {
+            let anc = all_anc.get_unchecked(*starts.get_unchecked(i)..*starts.get_unchecked(i + 1));
+            let hi = h.add(n * i);
+            let dinv = alpha / *hi.add(i);
+            pull_row(x, ld, len, mask, i, anc, |j| *hi.add(j), dinv);
+        }
+    }
+}
+
+/// Row `i ← scale·row i − Σ_{j ∈ others} coef(j) row j` (AVX2), by chunks of 8, 4, 2, 1
+/// vectors kept in registers and a masked ragged end.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+#[allow(clippy::too_many_arguments)]
+unsafe fn pull_row(
+    x: *mut f64,
+    ld: usize,
+    len: usize,
+    mask: std::arch::x86_64::__m256i,
+    i: usize,
+    others: &[usize],
+    coef: impl Fn(usize) -> f64 + Copy,
+    scale: f64,
+) {
+    let nfull = len / 4;
+    unsafe {
+        let mut g = 0;
+        while g + 8 <= nfull {
+            pull_chunk::<8, false>(x, ld, mask, i, 4 * g, others, coef, scale);
+            g += 8;
+        }
+        if g + 4 <= nfull {
+            pull_chunk::<4, false>(x, ld, mask, i, 4 * g, others, coef, scale);
+            g += 4;
+        }
+        if g + 2 <= nfull {
+            pull_chunk::<2, false>(x, ld, mask, i, 4 * g, others, coef, scale);
+            g += 2;
+        }
+        if g < nfull {
+            pull_chunk::<1, false>(x, ld, mask, i, 4 * g, others, coef, scale);
+        }
+        if !len.is_multiple_of(4) {
+            pull_chunk::<1, true>(x, ld, mask, i, 4 * nfull, others, coef, scale);
+        }
+    }
+}
+
+/// `K` vectors of row `i` from column `t` (the last one masked if `MASKED`), see [`pull_row`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+#[allow(clippy::too_many_arguments)]
+unsafe fn pull_chunk<const K: usize, const MASKED: bool>(
+    x: *mut f64,
+    ld: usize,
+    mask: std::arch::x86_64::__m256i,
+    i: usize,
+    t: usize,
+    others: &[usize],
+    coef: impl Fn(usize) -> f64,
+    scale: f64,
+) {
+    use std::arch::x86_64::*;
+    unsafe {
+        let ld4 =
+            |p: *const f64| if MASKED { _mm256_maskload_pd(p, mask) } else { _mm256_loadu_pd(p) };
+        let sc = _mm256_set1_pd(scale);
+        let xi = x.add(i * ld + t);
+        let mut acc = [_mm256_setzero_pd(); K];
+        for (u, a) in acc.iter_mut().enumerate() {
+            *a = _mm256_mul_pd(sc, ld4(xi.add(4 * u)));
+        }
+        for &j in others {
+            let l = _mm256_set1_pd(coef(j));
+            let xj = x.add(j * ld + t);
+            for (u, a) in acc.iter_mut().enumerate() {
+                *a = _mm256_fnmadd_pd(l, ld4(xj.add(4 * u)), *a);
+            }
+        }
+        for (u, a) in acc.iter().enumerate() {
+            if MASKED {
+                _mm256_maskstore_pd(xi.add(4 * u), mask, *a);
+            } else {
+                _mm256_storeu_pd(xi.add(4 * u), *a);
+            }
+        }
+    }
+}
+
+/// Strict descendant DoFs of every DoF (the transpose of [`Model::dof_ancestors`]), owned.
+#[derive(Clone, Debug)]
+pub(crate) struct DofDescendants {
+    starts: Vec<usize>,
+    list: Vec<usize>,
+}
+
+/// Borrowed descendant lists: DoF `j`'s strict descendants are `list[starts[j]..starts[j + 1]]`,
+/// all `< nv` by construction (only built by [`fill_descendants`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct DescView<'a> {
+    nv: usize,
+    starts: &'a [usize],
+    list: &'a [usize],
+}
+
+/// Fills `starts` (length ≥ `nv + 1`) and `list` (length ≥ `model.dof_ancestors.len()`) with
+/// the descendant lists of `model` (the buffers may start uninitialised); `None` if they are
+/// too short.
+pub(crate) fn fill_descendants<'a>(
+    model: &Model,
+    starts: &'a mut [MaybeUninit<usize>],
+    list: &'a mut [MaybeUninit<usize>],
+) -> Option<DescView<'a>> {
+    let n = model.nv;
+    let na = model.dof_ancestors.len();
+    if starts.len() < n + 1 || list.len() < na {
+        return None;
+    }
+    for v in &mut starts[..n + 1] {
+        v.write(0);
+    }
+    // SAFETY: all n + 1 entries were just initialised.
+    let starts: &mut [usize] =
+        unsafe { std::slice::from_raw_parts_mut(starts.as_mut_ptr().cast::<usize>(), n + 1) };
+    for i in 0..n {
+        for &j in model.ancestors_of_dof(i) {
+            starts[j + 1] += 1;
+        }
+    }
+    for j in 0..n {
+        starts[j + 1] += starts[j];
+    }
+    // Place each DoF after the ones already put (starts[j] advances), then shift back. The
+    // counts sum to na, so every entry of list[..na] is written exactly once.
+    for i in 0..n {
+        for &j in model.ancestors_of_dof(i) {
+            list[starts[j]].write(i);
+            starts[j] += 1;
+        }
+    }
+    for j in (1..=n).rev() {
+        starts[j] = starts[j - 1];
+    }
+    starts[0] = 0;
+    // SAFETY: list[..na] has been fully initialised above.
+    let list: &[usize] = unsafe { std::slice::from_raw_parts(list.as_ptr().cast::<usize>(), na) };
+    Some(DescView { nv: n, starts, list })
+}
+
+impl DofDescendants {
+    pub(crate) fn new(model: &Model) -> Self {
+        let mut starts = vec![MaybeUninit::uninit(); model.nv + 1];
+        let mut list = vec![MaybeUninit::uninit(); model.dof_ancestors.len()];
+        let v =
+            fill_descendants(model, &mut starts, &mut list).expect("buffers sized for the model");
+        Self { starts: v.starts.to_vec(), list: v.list.to_vec() }
+    }
+    /// The lists, valid for models with this `nv`.
+    pub(crate) fn view(&self) -> DescView<'_> {
+        DescView { nv: self.starts.len() - 1, starts: &self.starts, list: &self.list }
+    }
+}
+
+/// [`ltl_solve_rows`] with descendant lists ([`DescView`]), so that the first sweep
+/// also pulls (`y_j = b_j − Σ_{i ≻ j} L_ij y_i`, accumulated in registers) instead of pushing.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn ltl_solve_rows_desc(
+    model: &Model,
+    h: &DMatrix<f64>,
+    desc: DescView<'_>,
+    x: &mut [f64],
+    ld: usize,
+    len: usize,
+    alpha: f64,
+) {
+    let n = model.nv;
+    let hs = h.as_slice();
+    assert!(
+        hs.len() == n * n && len <= ld && (n == 0 || (n - 1) * ld + len <= x.len()) && desc.nv == n,
+        "ltl_solve_rows_desc: dimension mismatch"
+    );
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: as in `ltl_solve_rows`; descendant indices are < desc.nv = n (by construction).
+        unsafe { return solve_rows_desc_avx2(model, hs, desc, x.as_mut_ptr(), ld, len, alpha) };
+    }
+    solve_rows_impl::<false>(model, hs, x, ld, len, alpha)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn solve_rows_desc_avx2(
+    model: &Model,
+    h: &[f64],
+    desc: DescView<'_>,
+    x: *mut f64,
+    ld: usize,
+    len: usize,
+    alpha: f64,
+) {
+    use std::arch::x86_64::*;
+    let n = model.nv;
+    let h = h.as_ptr();
+    let rem = len % 4;
+    let m = |k: usize| if rem > k { -1i64 } else { 0 };
+    let mask = _mm256_setr_epi64x(m(0), m(1), m(2), 0);
+    let starts = &model.dof_ancestors_start;
+    let all_anc = &model.dof_ancestors;
+    unsafe {
+        // Lᵀ y = b: row j pulls its (already final) descendants, L_ij stored at (j, i).
+        for j in (0..n).rev() {
+            let d = desc
+                .list
+                .get_unchecked(*desc.starts.get_unchecked(j)..*desc.starts.get_unchecked(j + 1));
+            if !d.is_empty() {
+                let hj = h.add(j);
+                pull_row(x, ld, len, mask, j, d, |i| *hj.add(n * i), 1.0);
+            }
+        }
+        // z = α D⁻¹ y, then L x = z.
+        for i in 0..n {
+            let anc = all_anc.get_unchecked(*starts.get_unchecked(i)..*starts.get_unchecked(i + 1));
+            let hi = h.add(n * i);
+            let dinv = alpha / *hi.add(i);
+            pull_row(x, ld, len, mask, i, anc, |j| *hi.add(j), dinv);
+        }
+    }
+}
+
+/// `d − l s`, fused when the caller is compiled with FMA.
+#[inline(always)]
+fn fnma<const FMA: bool>(l: f64, s: f64, d: f64) -> f64 {
+    if FMA { (-l).mul_add(s, d) } else { d - l * s }
+}
+
+/// Row chunk kept in registers across the ancestor loops.
+const CH: usize = 16;
+
+#[inline(always)]
+fn solve_rows_impl<const FMA: bool>(
+    model: &Model,
+    h: &[f64],
+    x: &mut [f64],
+    ld: usize,
+    len: usize,
+    alpha: f64,
+) {
+    let n = model.nv;
+    // Lᵀ y = b: row i (final once all its descendants are done) is pushed to its ancestors.
+    for i in (1..n).rev() {
+        let anc = model.ancestors_of_dof(i);
+        if anc.is_empty() {
+            continue;
+        }
+        let (lo, hi) = x.split_at_mut(i * ld);
+        let xi = &hi[..len];
+        let mut t = 0;
+        while t + CH <= len {
+            let s: [f64; CH] = xi[t..t + CH].try_into().unwrap();
+            for &j in anc {
+                let l = h[j + n * i];
+                let d: &mut [f64; CH] = (&mut lo[j * ld + t..j * ld + t + CH]).try_into().unwrap();
+                for u in 0..CH {
+                    d[u] = fnma::<FMA>(l, s[u], d[u]);
+                }
+            }
+            t += CH;
+        }
+        if t < len {
+            for &j in anc {
+                let l = h[j + n * i];
+                let d = &mut lo[j * ld + t..j * ld + len];
+                for (d, s) in d.iter_mut().zip(&xi[t..]) {
+                    *d = fnma::<FMA>(l, *s, *d);
+                }
+            }
+        }
+    }
+    // z = α D⁻¹ y, then L x = z: row i pulls its (already final) ancestors.
+    for i in 0..n {
+        let anc = model.ancestors_of_dof(i);
+        let dinv = alpha / h[i + n * i];
+        let (lo, hi) = x.split_at_mut(i * ld);
+        let xi = &mut hi[..len];
+        let mut t = 0;
+        while t + CH <= len {
+            let d: &mut [f64; CH] = (&mut xi[t..t + CH]).try_into().unwrap();
+            let mut acc = [0.0; CH];
+            for u in 0..CH {
+                acc[u] = d[u] * dinv;
+            }
+            for &j in anc {
+                let l = h[j + n * i];
+                let s: &[f64; CH] = lo[j * ld + t..j * ld + t + CH].try_into().unwrap();
+                for u in 0..CH {
+                    acc[u] = fnma::<FMA>(l, s[u], acc[u]);
+                }
+            }
+            *d = acc;
+            t += CH;
+        }
+        if t < len {
+            let d = &mut xi[t..];
+            d.iter_mut().for_each(|v| *v *= dinv);
+            for &j in anc {
+                let l = h[j + n * i];
+                for (d, s) in d.iter_mut().zip(&lo[j * ld + t..j * ld + len]) {
+                    *d = fnma::<FMA>(l, *s, *d);
+                }
+            }
+        }
+    }
 }
