@@ -32,21 +32,30 @@ pub fn crba<'a>(model: &Model, data: &'a mut Data, q: &DVector<f64>) -> Result<&
 pub(crate) fn crba_unchecked(model: &Model, data: &mut Data, q: &DVector<f64>) {
     placements(model, data, q);
     world_subspaces_and_inertias(model, data);
+    let nv = model.nv;
+    assert!(data.m.nrows() == nv && data.m.ncols() == nv && data.s_world.len() == nv);
+    let m = data.m.as_mut_slice();
+    let sw = &data.s_world[..];
     for i in (1..model.njoints()).rev() {
         let (a, n) = (model.idx_v[i], model.nvs[i]);
+        let ic = data.ic_world[i];
         for c in a..a + n {
-            let f = data.ic_world[i].mul_motion(&data.s_world[c]);
-            let mut d = Some(c);
-            while let Some(r) = d {
-                let mrc = data.s_world[r].dot(&f);
-                data.m[(r, c)] = mrc;
-                data.m[(c, r)] = mrc;
-                d = model.dof_parent[r];
+            let sc = sw[c];
+            let f = ic.mul_motion(&sc);
+            m[c + c * nv] = sc.dot(&f);
+            for &r in model.ancestors_of_dof(c) {
+                debug_assert!(r < c);
+                // SAFETY: ancestor DoFs satisfy r < c < nv (built in `ModelBuilder::build`),
+                // `m` is nv×nv (column-major) and `sw` has nv entries (asserted above).
+                unsafe {
+                    let mrc = sw.get_unchecked(r).dot(&f);
+                    *m.get_unchecked_mut(r + c * nv) = mrc;
+                    *m.get_unchecked_mut(c + r * nv) = mrc;
+                }
             }
         }
         let p = model.parents[i];
         if p > 0 {
-            let ic = data.ic_world[i];
             data.ic_world[p] += ic;
         }
     }

@@ -78,6 +78,8 @@ pub struct Data {
     pub z_psidd: Vec<Motion>,
     /// IDFOZA workspace: composite forces.
     pub z_fc: Vec<Force>,
+    /// `Ψ̇ + Ṡ` per degree of freedom (first-order IDSVA forward pass).
+    pub(crate) psid_sdot: Vec<Motion>,
 }
 
 impl Data {
@@ -135,6 +137,7 @@ impl Data {
             z_a: vec![Motion::zero(); n],
             z_psidd: vec![Motion::zero(); nv],
             z_fc: vec![Force::zero(); n],
+            psid_sdot: vec![Motion::zero(); nv],
         }
     }
 }

@@ -20,12 +20,13 @@ pub(crate) fn joint_motion(model: &Model, i: usize, x: &DVector<f64>) -> Motion 
 /// Joint placements only: fills `li_m_i` and `o_m_i` (unchecked `q`).
 #[inline]
 pub(crate) fn placements(model: &Model, data: &mut Data, q: &DVector<f64>) {
+    let q = q.as_slice();
     for i in 1..model.njoints() {
         let (a, n) = (model.idx_q[i], model.nqs[i]);
-        let xj = model.joints[i].transform(&q.as_slice()[a..a + n]);
-        data.li_m_i[i] = model.placements[i].compose(&xj);
+        let li = model.joints[i].placed_transform(&model.placements[i], &q[a..a + n]);
+        data.li_m_i[i] = li;
         let p = model.parents[i];
-        data.o_m_i[i] = data.o_m_i[p].compose(&data.li_m_i[i]);
+        data.o_m_i[i] = data.o_m_i[p].compose(&li);
     }
 }
 

@@ -6,16 +6,32 @@ use crate::algo::internal::{check_fext, placements};
 use crate::error::Result;
 use crate::model::{Model, check_vec};
 use crate::spatial::{Force, Motion, coriolis_b};
-use nalgebra::{DVector, Matrix6};
+use nalgebra::{DVector, Matrix6, Vector3};
 
-#[inline]
-fn mul6(m: &Matrix6<f64>, x: &Motion) -> Force {
-    Force::from_vec6(&(m * x.to_vec6()))
+/// `B x` for a body-level Coriolis matrix with the block structure `[[B₁₁, 0], [B₂₁, 0]]` of
+/// [`coriolis_b`] (kept by the composite sums), from its left 6×3 half.
+#[inline(always)]
+fn mul_b(b: &Matrix6<f64>, x: &Motion) -> Force {
+    let b = b.as_slice(); // column-major
+    let (x0, x1, x2) = (x.ang.x, x.ang.y, x.ang.z);
+    let y = |r: usize| b[r] * x0 + b[r + 6] * x1 + b[r + 12] * x2;
+    Force::new(Vector3::new(y(0), y(1), y(2)), Vector3::new(y(3), y(4), y(5)))
 }
 
-#[inline]
-fn mul6_tr(m: &Matrix6<f64>, x: &Motion) -> Force {
-    Force::from_vec6(&(m.tr_mul(&x.to_vec6())))
+/// Angular part of `Bᵀ x` (its linear part is zero for the structure of [`mul_b`]).
+#[inline(always)]
+fn mul_b_tr_ang(b: &Matrix6<f64>, x: &Motion) -> Vector3<f64> {
+    let b = b.as_slice();
+    let y = |c: usize| {
+        let o = 6 * c;
+        b[o] * x.ang.x
+            + b[o + 1] * x.ang.y
+            + b[o + 2] * x.ang.z
+            + b[o + 3] * x.lin.x
+            + b[o + 4] * x.lin.y
+            + b[o + 5] * x.lin.z
+    };
+    Vector3::new(y(0), y(1), y(2))
 }
 
 /// First-order derivatives of inverse dynamics at `(q, q̇, q̈)`: fills `data.dtau_dq`
@@ -90,7 +106,9 @@ pub(crate) fn forward_pass_world(
         }
         let vi = vp + vj;
         for c in iv..iv + nvi {
-            data.sdot[c] = vi.cross(&data.s_world[c]);
+            let sd = vi.cross(&data.s_world[c]);
+            data.sdot[c] = sd;
+            data.psid_sdot[c] = data.psid[c] + sd;
         }
         let ai = ap + aj + vi.cross(&vj);
         data.ov[i] = vi;
@@ -122,44 +140,69 @@ pub(crate) fn accumulate_to_parent(model: &Model, data: &mut Data, i: usize) {
 /// The first-order IDSVA backward step of body `i` (composites of `i` complete).
 #[inline]
 pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
+    let nv = model.nv;
     let (iv, nvi) = (model.idx_v[i], model.nvs[i]);
     let ic = data.ic_world[i];
     let bc = data.bc[i];
+    debug_assert!(bc.fixed_view::<6, 3>(0, 3).iter().all(|x| *x == 0.0));
     let fc = data.ofc[i];
+    let nn = nv * nv;
+    assert!(
+        data.dtau_dq.len() == nn
+            && data.dtau_dv.len() == nn
+            && data.m.len() == nn
+            && data.s_world.len() == nv
+            && data.psid.len() == nv
+            && data.psidd.len() == nv
+            && data.psid_sdot.len() == nv
+    );
+    let dq = data.dtau_dq.as_mut_slice();
+    let dv = data.dtau_dv.as_mut_slice();
+    let mm = data.m.as_mut_slice();
+    let (sw, psid, psidd, pss) =
+        (&data.s_world[..], &data.psid[..], &data.psidd[..], &data.psid_sdot[..]);
+    // Strict ancestor DoFs of joint i (those of its first DoF).
+    let anc = model.ancestors_of_dof(iv);
     for c in iv..iv + nvi {
-        let s = data.s_world[c];
+        let s = sw[c];
         data.tau[c] = s.dot(&fc);
         let t1 = ic.mul_motion(&s); // I^C S
-        let t2 = mul6_tr(&bc, &s) * 2.0; // 2 B^Cᵀ S
-        // Joint i itself and its ancestors j ⪯ i (eqs. dtau_dq_1, dtau_dqd_1, M).
-        let mut j = i;
-        while j > 0 {
-            for r in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
-                // ∂τ_i/∂q_j = S_iᵀ(2B^C_i Ψ̇_j + I^C_i Ψ̈_j)   (dtau_dq_1)
-                data.dtau_dq[(c, r)] = data.psid[r].dot(&t2) + data.psidd[r].dot(&t1);
-                // ∂τ_i/∂q̇_j = S_iᵀ(2B^C_i S_j + I^C_i(Ψ̇_j + Ṡ_j))   (dtau_dqd_1)
-                data.dtau_dv[(c, r)] =
-                    data.s_world[r].dot(&t2) + (data.psid[r] + data.sdot[r]).dot(&t1);
-                let mcr = data.s_world[r].dot(&t1);
-                data.m[(c, r)] = mcr;
-                data.m[(r, c)] = mcr;
-            }
-            j = model.parents[j];
+        let t2 = mul_b_tr_ang(&bc, &s) * 2.0; // 2 B^Cᵀ S (linear part zero)
+        // ∂τ_i/∂q_j = S_iᵀ(2B^C_i Ψ̇_j + I^C_i Ψ̈_j)   (dtau_dq_1)
+        // ∂τ_i/∂q̇_j = S_iᵀ(2B^C_i S_j + I^C_i(Ψ̇_j + Ṡ_j))   (dtau_dqd_1)
+        let row = |mr: &Motion, pr: &Motion, ppr: &Motion, sr: &Motion| {
+            (mr.ang.dot(&t2) + pr.dot(&t1), sr.ang.dot(&t2) + ppr.dot(&t1), sr.dot(&t1))
+        };
+        // Joint i's own DoFs (eqs. dtau_dq_1, dtau_dqd_1, M).
+        for r in iv..iv + nvi {
+            let (q1, v1, m1) = row(&psid[r], &psidd[r], &pss[r], &sw[r]);
+            dq[c + r * nv] = q1;
+            dv[c + r * nv] = v1;
+            mm[c + r * nv] = m1;
+            mm[r + c * nv] = m1;
         }
-        // Strict ancestors j ≺ i (eqs. dtau_dq_2, dtau_dqd_2).
-        let psid = data.psid[c];
+        let psid_c = psid[c];
         // 2B^C_i Ψ̇_i + I^C_i Ψ̈_i + f^C_i ×̄* S_i   (dtau_dq_2)
-        let t3 = mul6(&bc, &psid) * 2.0 + ic.mul_motion(&data.psidd[c]) + fc.crff(&s);
+        let t3 = mul_b(&bc, &psid_c) * 2.0 + ic.mul_motion(&psidd[c]) + fc.crff(&s);
         // 2B^C_i S_i + I^C_i(Ψ̇_i + Ṡ_i)   (dtau_dqd_2)
-        let t4 = mul6(&bc, &s) * 2.0 + ic.mul_motion(&(psid + data.sdot[c]));
-        let mut j = model.parents[i];
-        while j > 0 {
-            for r in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
-                let sr = data.s_world[r];
-                data.dtau_dq[(r, c)] = sr.dot(&t3);
-                data.dtau_dv[(r, c)] = sr.dot(&t4);
+        let t4 = mul_b(&bc, &s) * 2.0 + ic.mul_motion(&pss[c]);
+        // Strict ancestors j ≺ i: eqs. dtau_dq_1, dtau_dqd_1, M in row c and
+        // dtau_dq_2, dtau_dqd_2 in column c.
+        for &r in anc {
+            debug_assert!(r < iv);
+            // SAFETY: ancestor DoFs satisfy r < iv <= c < nv (`ModelBuilder::build`); the
+            // matrices are nv×nv and the per-DoF arrays have nv entries (asserted above).
+            unsafe {
+                let sr = sw.get_unchecked(r);
+                let (q1, v1, m1) =
+                    row(psid.get_unchecked(r), psidd.get_unchecked(r), pss.get_unchecked(r), sr);
+                *dq.get_unchecked_mut(c + r * nv) = q1;
+                *dv.get_unchecked_mut(c + r * nv) = v1;
+                *mm.get_unchecked_mut(c + r * nv) = m1;
+                *mm.get_unchecked_mut(r + c * nv) = m1;
+                *dq.get_unchecked_mut(r + c * nv) = sr.dot(&t3);
+                *dv.get_unchecked_mut(r + c * nv) = sr.dot(&t4);
             }
-            j = model.parents[j];
         }
     }
 }

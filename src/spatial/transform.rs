@@ -100,19 +100,41 @@ impl Transform {
     }
     /// Spatial inertia expressed in `b` → expressed in `a`.
     pub fn act_inertia(&self, i: &Inertia) -> Inertia {
-        // Ī' = R Ī Rᵀ − [Rh]×[p]× − [p]×[Rh]× − m [p]×[p]×, with [a]×[b]× = b aᵀ − (a·b) 1.
+        // Ī' = R Ī Rᵀ − [Rh]×[p]× − [p]×[Rh]× − m [p]×[p]×, with [a]×[b]× = b aᵀ − (a·b) 1,
+        // i.e. Ī' = R Ī Rᵀ − p h'ᵀ − Rh pᵀ + (2 Rh·p + m p·p) 1 with h' = Rh + m p.
+        let r = self.rot.as_slice(); // column-major: R_ij = r[i + 3j]
+        let ib = i.rot.as_slice();
         let rh = self.rot * i.h;
         let p = self.trans;
         let m = i.mass;
-        let mut rot = self.rot * i.rot * self.rot.transpose();
-        let diag = 2.0 * rh.dot(&p) + m * p.norm_squared();
-        for c in 0..3 {
-            for r in 0..3 {
-                rot[(r, c)] -= p[r] * rh[c] + rh[r] * p[c] + m * p[r] * p[c];
+        let hn = rh + p * m;
+        // T = R Ī (T_ik = Σ_l R_il Ī_lk), then the upper triangle of T Rᵀ.
+        let mut t = [[0.0; 3]; 3];
+        for (row, tr) in t.iter_mut().enumerate() {
+            for (k, x) in tr.iter_mut().enumerate() {
+                *x = r[row] * ib[3 * k] + r[row + 3] * ib[1 + 3 * k] + r[row + 6] * ib[2 + 3 * k];
             }
-            rot[(c, c)] += diag;
         }
-        Inertia { mass: m, h: rh + p * m, rot: symmetrize(&rot) }
+        let diag = 2.0 * rh.dot(&p) + m * p.norm_squared();
+        let (pa, ha, ra) = ([p.x, p.y, p.z], [hn.x, hn.y, hn.z], [rh.x, rh.y, rh.z]);
+        let mut s = [[0.0; 3]; 3];
+        for a in 0..3 {
+            for b in a..3 {
+                let x = t[a][0] * r[b] + t[a][1] * r[b + 3] + t[a][2] * r[b + 6]
+                    - pa[a] * ha[b]
+                    - ra[a] * pa[b];
+                s[a][b] = x;
+                s[b][a] = x;
+            }
+            s[a][a] += diag;
+        }
+        #[rustfmt::skip]
+        let rot = Matrix3::new(
+            s[0][0], s[0][1], s[0][2],
+            s[1][0], s[1][1], s[1][2],
+            s[2][0], s[2][1], s[2][2],
+        );
+        Inertia { mass: m, h: hn, rot }
     }
     /// Spatial inertia expressed in `a` → expressed in `b`.
     pub fn inv_act_inertia(&self, i: &Inertia) -> Inertia {
@@ -126,9 +148,4 @@ impl Transform {
         x.fixed_view_mut::<3, 3>(3, 0).copy_from(&(skew(&self.trans) * self.rot));
         x
     }
-}
-
-#[inline]
-pub(crate) fn symmetrize(m: &Matrix3<f64>) -> Matrix3<f64> {
-    (m + m.transpose()) * 0.5
 }
