@@ -3,7 +3,7 @@
 use super::Data;
 use super::kinematics::placements;
 use crate::error::Result;
-use crate::model::Model;
+use crate::model::{JointType, Model};
 use nalgebra::{DMatrix, DVector};
 
 /// World-frame motion subspaces `s_world` and body inertias `ic_world` (not yet composite).
@@ -34,6 +34,13 @@ pub(crate) fn crba_unchecked(model: &Model, data: &mut Data, q: &DVector<f64>) {
     world_subspaces_and_inertias(model, data);
     let nv = model.nv;
     assert!(data.m.nrows() == nv && data.m.ncols() == nv && data.s_world.len() == nv);
+    // Root free-flyer with the identity subspace (as `JointType::FreeFlyer` builds it): its
+    // block of column c is S_rootᵀ f = Xᵀ f, the force f expressed in the root body frame.
+    let ff_root = model.njoints() > 1
+        && model.joints[1] == JointType::FreeFlyer
+        && model.idx_v[1] == 0
+        && (0..6).all(|k| model.subspace[k] == JointType::FreeFlyer.subspace_column(k));
+    let x_root = data.o_m_i[if ff_root { 1 } else { 0 }];
     let m = data.m.as_mut_slice();
     let sw = &data.s_world[..];
     for i in (1..model.njoints()).rev() {
@@ -43,7 +50,18 @@ pub(crate) fn crba_unchecked(model: &Model, data: &mut Data, q: &DVector<f64>) {
             let sc = sw[c];
             let f = ic.mul_motion(&sc);
             m[c + c * nv] = sc.dot(&f);
-            for &r in model.ancestors_of_dof(c) {
+            let mut anc = model.ancestors_of_dof(c);
+            if ff_root && c >= 6 && anc.last() == Some(&0) {
+                // The last six ancestors are the root's DoFs 5, 4, …, 0.
+                anc = &anc[..anc.len() - 6];
+                let fl = x_root.inv_act_force(&f);
+                let col = [fl.ang.x, fl.ang.y, fl.ang.z, fl.lin.x, fl.lin.y, fl.lin.z];
+                for (r, x) in col.into_iter().enumerate() {
+                    m[r + c * nv] = x;
+                    m[c + r * nv] = x;
+                }
+            }
+            for &r in anc {
                 debug_assert!(r < c);
                 // SAFETY: ancestor DoFs satisfy r < c < nv (built in `ModelBuilder::build`),
                 // `m` is nv×nv (column-major) and `sw` has nv entries (asserted above).

@@ -7,9 +7,12 @@ use crate::spatial::Motion;
 use nalgebra::DVector;
 
 /// Joint motion `S_i x_i` of joint `i` (child frame) for the coordinates `x` (length nv).
-#[inline]
+#[inline(always)]
 pub(crate) fn joint_motion(model: &Model, i: usize, x: &DVector<f64>) -> Motion {
     let (a, n) = (model.idx_v[i], model.nvs[i]);
+    if n == 1 {
+        return model.subspace[a] * x[a];
+    }
     let mut m = Motion::zero();
     for c in a..a + n {
         m += model.subspace[c] * x[c];

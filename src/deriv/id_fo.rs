@@ -5,11 +5,11 @@ use crate::algo::Data;
 use crate::algo::internal::{check_fext, placements};
 use crate::error::Result;
 use crate::model::{Model, check_vec};
-use crate::spatial::{Force, Motion, coriolis_b};
+use crate::spatial::{Force, Motion, coriolis_b_write, dot6};
 use nalgebra::{DVector, Matrix6, Vector3};
 
 /// `B x` for a body-level Coriolis matrix with the block structure `[[B₁₁, 0], [B₂₁, 0]]` of
-/// [`coriolis_b`] (kept by the composite sums), from its left 6×3 half.
+/// [`crate::spatial::coriolis_b`] (kept by the composite sums), from its left 6×3 half.
 #[inline(always)]
 fn mul_b(b: &Matrix6<f64>, x: &Motion) -> Force {
     let b = b.as_slice(); // column-major
@@ -22,16 +22,11 @@ fn mul_b(b: &Matrix6<f64>, x: &Motion) -> Force {
 #[inline(always)]
 fn mul_b_tr_ang(b: &Matrix6<f64>, x: &Motion) -> Vector3<f64> {
     let b = b.as_slice();
-    let y = |c: usize| {
-        let o = 6 * c;
-        b[o] * x.ang.x
-            + b[o + 1] * x.ang.y
-            + b[o + 2] * x.ang.z
-            + b[o + 3] * x.lin.x
-            + b[o + 4] * x.lin.y
-            + b[o + 5] * x.lin.z
-    };
-    Vector3::new(y(0), y(1), y(2))
+    Vector3::new(
+        dot6(b[0], b[1], b[2], b[3], b[4], b[5], &Force::new(x.ang, x.lin)),
+        dot6(b[6], b[7], b[8], b[9], b[10], b[11], &Force::new(x.ang, x.lin)),
+        dot6(b[12], b[13], b[14], b[15], b[16], b[17], &Force::new(x.ang, x.lin)),
+    )
 }
 
 /// First-order derivatives of inverse dynamics at `(q, q̇, q̈)`: fills `data.dtau_dq`
@@ -121,7 +116,7 @@ pub(crate) fn forward_pass_world(
             f -= x.act_force(&fe[i]);
         }
         data.ofc[i] = f;
-        data.bc[i] = coriolis_b(&inertia, &vi);
+        coriolis_b_write(&inertia, &vi, &mut data.bc[i]);
     }
 }
 
@@ -130,10 +125,12 @@ pub(crate) fn forward_pass_world(
 pub(crate) fn accumulate_to_parent(model: &Model, data: &mut Data, i: usize) {
     let p = model.parents[i];
     if p > 0 {
-        let (icv, bcv, fcv) = (data.ic_world[i], data.bc[i], data.ofc[i]);
+        debug_assert!(p < i);
+        let (icv, fcv) = (data.ic_world[i], data.ofc[i]);
         data.ic_world[p] += icv;
-        data.bc[p] += bcv;
         data.ofc[p] += fcv;
+        let (lo, hi) = data.bc.split_at_mut(i);
+        lo[p] += &hi[0];
     }
 }
 
@@ -143,7 +140,7 @@ pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
     let nv = model.nv;
     let (iv, nvi) = (model.idx_v[i], model.nvs[i]);
     let ic = data.ic_world[i];
-    let bc = data.bc[i];
+    let bc = &data.bc[i];
     debug_assert!(bc.fixed_view::<6, 3>(0, 3).iter().all(|x| *x == 0.0));
     let fc = data.ofc[i];
     let nn = nv * nv;
@@ -167,7 +164,7 @@ pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
         let s = sw[c];
         data.tau[c] = s.dot(&fc);
         let t1 = ic.mul_motion(&s); // I^C S
-        let t2 = mul_b_tr_ang(&bc, &s) * 2.0; // 2 B^Cᵀ S (linear part zero)
+        let t2 = mul_b_tr_ang(bc, &s) * 2.0; // 2 B^Cᵀ S (linear part zero)
         // ∂τ_i/∂q_j = S_iᵀ(2B^C_i Ψ̇_j + I^C_i Ψ̈_j)   (dtau_dq_1)
         // ∂τ_i/∂q̇_j = S_iᵀ(2B^C_i S_j + I^C_i(Ψ̇_j + Ṡ_j))   (dtau_dqd_1)
         let row = |mr: &Motion, pr: &Motion, ppr: &Motion, sr: &Motion| {
@@ -183,9 +180,9 @@ pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
         }
         let psid_c = psid[c];
         // 2B^C_i Ψ̇_i + I^C_i Ψ̈_i + f^C_i ×̄* S_i   (dtau_dq_2)
-        let t3 = mul_b(&bc, &psid_c) * 2.0 + ic.mul_motion(&psidd[c]) + fc.crff(&s);
+        let t3 = mul_b(bc, &psid_c) * 2.0 + ic.mul_motion(&psidd[c]) + fc.crff(&s);
         // 2B^C_i S_i + I^C_i(Ψ̇_i + Ṡ_i)   (dtau_dqd_2)
-        let t4 = mul_b(&bc, &s) * 2.0 + ic.mul_motion(&pss[c]);
+        let t4 = mul_b(bc, &s) * 2.0 + ic.mul_motion(&pss[c]);
         // Strict ancestors j ≺ i: eqs. dtau_dq_1, dtau_dqd_1, M in row c and
         // dtau_dq_2, dtau_dqd_2 in column c.
         for &r in anc {

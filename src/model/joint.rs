@@ -270,12 +270,28 @@ fn unit_axis(a: &Vector3<f64>) -> Option<(usize, f64)> {
 /// column `i` becomes `c Rᵢ + s Rⱼ` and column `j` becomes `c Rⱼ − s Rᵢ`.
 #[inline]
 fn rotate_columns(r: &Matrix3<f64>, k: usize, s: f64, c: f64) -> Matrix3<f64> {
-    let (i, j) = ((k + 1) % 3, (k + 2) % 3);
-    let mut out = *r;
-    let (ri, rj) = (r.column(i).into_owned(), r.column(j).into_owned());
-    out.set_column(i, &(ri * c + rj * s));
-    out.set_column(j, &(rj * c - ri * s));
-    out
+    match k {
+        0 => rotate_columns_ij::<1, 2>(r, s, c),
+        1 => rotate_columns_ij::<2, 0>(r, s, c),
+        _ => rotate_columns_ij::<0, 1>(r, s, c),
+    }
+}
+
+#[inline(always)]
+fn rotate_columns_ij<const I: usize, const J: usize>(
+    r: &Matrix3<f64>,
+    s: f64,
+    c: f64,
+) -> Matrix3<f64> {
+    let m = r.as_slice(); // column-major
+    let mut o = [0.0; 9];
+    o.copy_from_slice(m);
+    for t in 0..3 {
+        let (a, b) = (m[3 * I + t], m[3 * J + t]);
+        o[3 * I + t] = c * a + s * b;
+        o[3 * J + t] = c * b - s * a;
+    }
+    Matrix3::from_column_slice(&o)
 }
 
 /// Rodrigues' rotation for a unit axis `a` from `s = sin θ`, `c = cos θ`.

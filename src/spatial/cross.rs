@@ -24,6 +24,14 @@ pub fn crff(f: &Force) -> Matrix6<f64> {
 /// `B = [[½(K + Kᵀ − h uᵀ − u hᵀ + 2(u·h) 1 − [n]×), 0], [−[g]×, 0]]`
 /// (the right block column vanishes because `[ω]×[h]× − [h]×[ω]× = [ω×h]×`).
 pub fn coriolis_b(i: &Inertia, m: &Motion) -> Matrix6<f64> {
+    let mut b = Matrix6::zeros();
+    coriolis_b_write(i, m, &mut b);
+    b
+}
+
+/// [`coriolis_b`] written into `out` (all 36 entries).
+#[inline]
+pub(crate) fn coriolis_b_write(i: &Inertia, m: &Motion, out: &mut Matrix6<f64>) {
     let (w, u, h) = (&m.ang, &m.lin, &i.h);
     let f = i.mul_motion(m);
     let (n, g) = (f.ang, f.lin);
@@ -46,15 +54,15 @@ pub fn coriolis_b(i: &Inertia, m: &Motion) -> Matrix6<f64> {
     }
     let (nh, gx, gy, gz) = (n * 0.5, g.x, g.y, g.z);
     #[rustfmt::skip]
-    let b = Matrix6::new(
-        s[0][0], s[0][1] + nh.z, s[0][2] - nh.y, 0.0, 0.0, 0.0,
-        s[1][0] - nh.z, s[1][1], s[1][2] + nh.x, 0.0, 0.0, 0.0,
-        s[2][0] + nh.y, s[2][1] - nh.x, s[2][2], 0.0, 0.0, 0.0,
-        0.0, gz, -gy, 0.0, 0.0, 0.0,
-        -gz, 0.0, gx, 0.0, 0.0, 0.0,
-        gy, -gx, 0.0, 0.0, 0.0, 0.0,
-    );
-    b
+    let b = [
+        s[0][0], s[1][0] - nh.z, s[2][0] + nh.y, 0.0, -gz, gy,
+        s[0][1] + nh.z, s[1][1], s[2][1] - nh.x, gz, 0.0, -gx,
+        s[0][2] - nh.y, s[1][2] + nh.x, s[2][2], -gy, gx, 0.0,
+        0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+        0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+        0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+    ];
+    out.as_mut_slice().copy_from_slice(&b);
 }
 
 /// `B(I, m) w` without forming the matrix (eq. bkm_term_defn applied to `w`).

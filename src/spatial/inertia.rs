@@ -1,5 +1,6 @@
 //! Spatial rigid-body inertia stored as (mass, first moment, rotational inertia about the origin).
 
+use super::motion::{cross3, mat3_vec};
 use super::{Force, Motion, skew};
 use nalgebra::{Matrix3, Matrix6, SymmetricEigen, Vector3};
 use std::ops::{Add, AddAssign};
@@ -80,8 +81,8 @@ impl Inertia {
     #[inline]
     pub fn mul_motion(&self, v: &Motion) -> Force {
         Force {
-            ang: self.rot * v.ang + self.h.cross(&v.lin),
-            lin: v.lin * self.mass - self.h.cross(&v.ang),
+            ang: mat3_vec(&self.rot, &v.ang) + cross3(&self.h, &v.lin),
+            lin: v.lin * self.mass - cross3(&self.h, &v.ang),
         }
     }
     /// The dense 6×6 matrix `[[Ī_o, h×], [(h×)ᵀ, m 1]]`.

@@ -1,5 +1,6 @@
 //! Rigid transforms stored as rotation + translation.
 
+use super::motion::{cross3, mat3_mul, mat3_tr_vec, mat3_vec};
 use super::{Force, Inertia, Motion, skew};
 use nalgebra::{Matrix3, Matrix6, Vector3};
 
@@ -57,7 +58,10 @@ impl Transform {
     /// Composition `ᵃM_c = ᵃM_b ᵇM_c`.
     #[inline]
     pub fn compose(&self, o: &Transform) -> Transform {
-        Transform { rot: self.rot * o.rot, trans: self.trans + self.rot * o.trans }
+        Transform {
+            rot: mat3_mul(&self.rot, &o.rot),
+            trans: self.trans + mat3_vec(&self.rot, &o.trans),
+        }
     }
     /// Inverse `ᵇM_a`.
     #[inline]
@@ -73,29 +77,29 @@ impl Transform {
     /// Motion vector in `b` → in `a` (`ᵃX_b m`).
     #[inline]
     pub fn act_motion(&self, m: &Motion) -> Motion {
-        let ang = self.rot * m.ang;
-        Motion { ang, lin: self.rot * m.lin + self.trans.cross(&ang) }
+        let ang = mat3_vec(&self.rot, &m.ang);
+        Motion { ang, lin: mat3_vec(&self.rot, &m.lin) + cross3(&self.trans, &ang) }
     }
     /// Motion vector in `a` → in `b` (`ᵇX_a m`).
     #[inline]
     pub fn inv_act_motion(&self, m: &Motion) -> Motion {
         Motion {
-            ang: self.rot.tr_mul(&m.ang),
-            lin: self.rot.tr_mul(&(m.lin - self.trans.cross(&m.ang))),
+            ang: mat3_tr_vec(&self.rot, &m.ang),
+            lin: mat3_tr_vec(&self.rot, &(m.lin - cross3(&self.trans, &m.ang))),
         }
     }
     /// Force vector in `b` → in `a` (`ᵃX_b^* f`).
     #[inline]
     pub fn act_force(&self, f: &Force) -> Force {
-        let lin = self.rot * f.lin;
-        Force { ang: self.rot * f.ang + self.trans.cross(&lin), lin }
+        let lin = mat3_vec(&self.rot, &f.lin);
+        Force { ang: mat3_vec(&self.rot, &f.ang) + cross3(&self.trans, &lin), lin }
     }
     /// Force vector in `a` → in `b`.
     #[inline]
     pub fn inv_act_force(&self, f: &Force) -> Force {
         Force {
-            ang: self.rot.tr_mul(&(f.ang - self.trans.cross(&f.lin))),
-            lin: self.rot.tr_mul(&f.lin),
+            ang: mat3_tr_vec(&self.rot, &(f.ang - cross3(&self.trans, &f.lin))),
+            lin: mat3_tr_vec(&self.rot, &f.lin),
         }
     }
     /// Spatial inertia expressed in `b` → expressed in `a`.
@@ -104,7 +108,7 @@ impl Transform {
         // i.e. Ī' = R Ī Rᵀ − p h'ᵀ − Rh pᵀ + (2 Rh·p + m p·p) 1 with h' = Rh + m p.
         let r = self.rot.as_slice(); // column-major: R_ij = r[i + 3j]
         let ib = i.rot.as_slice();
-        let rh = self.rot * i.h;
+        let rh = mat3_vec(&self.rot, &i.h);
         let p = self.trans;
         let m = i.mass;
         let hn = rh + p * m;
