@@ -1,9 +1,9 @@
 //! Composite-rigid-body algorithm for the joint-space mass matrix, in the world frame.
 
 use super::Data;
-use super::kinematics::placements;
+use super::kinematics::{placements, root_free_flyer};
 use crate::error::Result;
-use crate::model::{JointType, Model};
+use crate::model::Model;
 use nalgebra::{DMatrix, DVector};
 
 /// World-frame motion subspaces `s_world` and body inertias `ic_world` (not yet composite).
@@ -34,12 +34,9 @@ pub(crate) fn crba_unchecked(model: &Model, data: &mut Data, q: &DVector<f64>) {
     world_subspaces_and_inertias(model, data);
     let nv = model.nv;
     assert!(data.m.nrows() == nv && data.m.ncols() == nv && data.s_world.len() == nv);
-    // Root free-flyer with the identity subspace (as `JointType::FreeFlyer` builds it): its
-    // block of column c is S_rootᵀ f = Xᵀ f, the force f expressed in the root body frame.
-    let ff_root = model.njoints() > 1
-        && model.joints[1] == JointType::FreeFlyer
-        && model.idx_v[1] == 0
-        && (0..6).all(|k| model.subspace[k] == JointType::FreeFlyer.subspace_column(k));
+    // Root free-flyer with the identity subspace: its block of column c is
+    // S_rootᵀ f = Xᵀ f, the force f expressed in the root body frame.
+    let ff_root = root_free_flyer(model);
     let x_root = data.o_m_i[if ff_root { 1 } else { 0 }];
     let m = data.m.as_mut_slice();
     let sw = &data.s_world[..];

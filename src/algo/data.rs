@@ -80,6 +80,9 @@ pub struct Data {
     pub z_fc: Vec<Force>,
     /// `Ψ̇ + Ṡ` per degree of freedom (first-order IDSVA forward pass).
     pub(crate) psid_sdot: Vec<Motion>,
+    /// Set by the first-order IDSVA forward pass: the model has a root free-flyer
+    /// (`kinematics::root_free_flyer`).
+    pub(crate) ff_root: bool,
 }
 
 impl Data {
@@ -138,6 +141,7 @@ impl Data {
             z_psidd: vec![Motion::zero(); nv],
             z_fc: vec![Force::zero(); n],
             psid_sdot: vec![Motion::zero(); nv],
+            ff_root: false,
         }
     }
 }

@@ -2,7 +2,7 @@
 
 use super::Data;
 use crate::error::Result;
-use crate::model::{Model, check_vec};
+use crate::model::{JointType, Model, check_vec};
 use crate::spatial::Motion;
 use nalgebra::DVector;
 
@@ -18,6 +18,17 @@ pub(crate) fn joint_motion(model: &Model, i: usize, x: &DVector<f64>) -> Motion 
         m += model.subspace[c] * x[c];
     }
     m
+}
+
+/// True if joint 1 is a free-flyer owning DoFs 0..6 with the identity motion subspace (as
+/// `JointType::FreeFlyer` builds it), so that `S_rootᵀ f` is `f` in the root body frame.
+#[inline]
+pub(crate) fn root_free_flyer(model: &Model) -> bool {
+    model.njoints() > 1
+        && model.joints[1] == JointType::FreeFlyer
+        && model.idx_v[1] == 0
+        && model.nv >= 6
+        && (0..6).all(|k| model.subspace[k] == JointType::FreeFlyer.subspace_column(k))
 }
 
 /// Joint placements only: fills `li_m_i` and `o_m_i` (unchecked `q`).

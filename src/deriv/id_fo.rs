@@ -2,7 +2,7 @@
 //! dtau_dqd_1, dtau_dqd_2), all quantities in the ground frame. Cost `O(N d)`.
 
 use crate::algo::Data;
-use crate::algo::internal::{check_fext, placements};
+use crate::algo::internal::{check_fext, placements, root_free_flyer};
 use crate::error::Result;
 use crate::model::{Model, check_vec};
 use crate::spatial::{Force, Motion, coriolis_b_write, dot6};
@@ -79,6 +79,7 @@ pub(crate) fn forward_pass_world(
     a0: Motion,
 ) {
     placements(model, data, q);
+    data.ff_root = root_free_flyer(model);
     let n = model.njoints();
     data.ov[0] = Motion::zero();
     data.oa[0] = a0;
@@ -159,7 +160,16 @@ pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
     let (sw, psid, psidd, pss) =
         (&data.s_world[..], &data.psid[..], &data.psidd[..], &data.psid_sdot[..]);
     // Strict ancestor DoFs of joint i (those of its first DoF).
-    let anc = model.ancestors_of_dof(iv);
+    let mut anc = model.ancestors_of_dof(iv);
+    // With a root free-flyer (identity subspace, S_root = X), its six DoFs are the last six
+    // ancestors; for them Ψ̇ = v_0 × S = 0, Ψ̈ = a_0 × S and Ψ̇ + Ṡ = v_1 × S, so each block is
+    // one force expressed in the root frame, Xᵀ f, using (a × s)ᵀ f = −sᵀ(a ×* f).
+    let root = if data.ff_root && iv >= 6 && anc.last() == Some(&0) {
+        anc = &anc[..anc.len() - 6];
+        Some((data.o_m_i[1], data.oa[0], data.ov[1]))
+    } else {
+        None
+    };
     for c in iv..iv + nvi {
         let s = sw[c];
         data.tau[c] = s.dot(&fc);
@@ -183,6 +193,23 @@ pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
         let t3 = mul_b(bc, &psid_c) * 2.0 + ic.mul_motion(&psidd[c]) + fc.crff(&s);
         // 2B^C_i S_i + I^C_i(Ψ̇_i + Ṡ_i)   (dtau_dqd_2)
         let t4 = mul_b(bc, &s) * 2.0 + ic.mul_motion(&pss[c]);
+        if let Some((x, a0, v1)) = &root {
+            let arr = |f: Force| [f.ang.x, f.ang.y, f.ang.z, f.lin.x, f.lin.y, f.lin.z];
+            let m1 = arr(x.inv_act_force(&t1));
+            let q1 = arr(x.inv_act_force(&a0.cross_force(&t1)));
+            let v1 =
+                arr(x.inv_act_force(&(Force::new(t2, Vector3::zeros()) - v1.cross_force(&t1))));
+            let q2 = arr(x.inv_act_force(&t3));
+            let v2 = arr(x.inv_act_force(&t4));
+            for r in 0..6 {
+                dq[c + r * nv] = -q1[r];
+                dv[c + r * nv] = v1[r];
+                mm[c + r * nv] = m1[r];
+                mm[r + c * nv] = m1[r];
+                dq[r + c * nv] = q2[r];
+                dv[r + c * nv] = v2[r];
+            }
+        }
         // Strict ancestors j ≺ i: eqs. dtau_dq_1, dtau_dqd_1, M in row c and
         // dtau_dq_2, dtau_dqd_2 in column c.
         for &r in anc {
