@@ -5,8 +5,8 @@ use super::kinematics::{joint_motion, placements};
 use super::rnea::check_fext;
 use crate::error::{Error, Result};
 use crate::model::{Model, check_vec};
-use crate::spatial::{Force, Motion, Transform, skew};
-use nalgebra::{DVector, Matrix3, Matrix6, Vector6};
+use crate::spatial::{Force, Motion, Transform};
+use nalgebra::{DVector, Matrix6, Vector3, Vector6};
 
 /// Forward dynamics `q̈ = M⁻¹(τ − b + Σ Jᵢᵀ fextᵢ)` by the articulated-body algorithm.
 /// `fext` as in [`super::rnea()`] (body frames). Returns `data.qdd`. A singular articulated
@@ -28,30 +28,104 @@ pub fn aba<'a>(
     Ok(&data.qdd)
 }
 
+type M3 = [[f64; 3]; 3];
+
+/// Row-major copy of the 3×3 block at `(r0, c0)` of a column-major 6×6 array.
+#[inline(always)]
+fn block(a: &[f64], r0: usize, c0: usize) -> M3 {
+    let mut m = [[0.0; 3]; 3];
+    for (r, row) in m.iter_mut().enumerate() {
+        for (c, x) in row.iter_mut().enumerate() {
+            *x = a[r0 + r + 6 * (c0 + c)];
+        }
+    }
+    m
+}
+
+/// `R A` for 3×3 row-major arrays.
+#[inline(always)]
+fn mul3(r: &M3, a: &M3) -> M3 {
+    let mut t = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for k in 0..3 {
+            t[i][k] = r[i][0] * a[0][k] + r[i][1] * a[1][k] + r[i][2] * a[2][k];
+        }
+    }
+    t
+}
+
+/// `T Rᵀ`; with `sym` only the upper triangle is computed and mirrored (`T Rᵀ` symmetric).
+#[inline(always)]
+fn mul3_tr(t: &M3, r: &M3, sym: bool) -> M3 {
+    let mut s = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            if sym && j < i {
+                s[i][j] = s[j][i];
+            } else {
+                s[i][j] = t[i][0] * r[j][0] + t[i][1] * r[j][1] + t[i][2] * r[j][2];
+            }
+        }
+    }
+    s
+}
+
+/// `p × x`.
+#[inline(always)]
+fn cross3(p: &[f64; 3], x: [f64; 3]) -> [f64; 3] {
+    [p[1] * x[2] - p[2] * x[1], p[2] * x[0] - p[0] * x[2], p[0] * x[1] - p[1] * x[0]]
+}
+
 /// `Xᵀ A X` for the 6×6 motion transform `X = ⁱX_λ` of `x` (`λ M_i`): maps a body-frame
-/// articulated inertia to the parent frame.
+/// articulated inertia (symmetric) to the parent frame.
 #[inline]
 fn congruence_to_parent(x: &Transform, a: &Matrix6<f64>) -> Matrix6<f64> {
     // Rotate the blocks, then translate: with P = [p]×,
-    // [[A, B], [Bᵀ, C]] ↦ [[A − B P + P Bᵀ − P C P, B + P C], [·ᵀ, C]].
-    let r = &x.rot;
-    let rt = r.transpose();
-    let a11: Matrix3<f64> = a.fixed_view::<3, 3>(0, 0).into_owned();
-    let a12: Matrix3<f64> = a.fixed_view::<3, 3>(0, 3).into_owned();
-    let a22: Matrix3<f64> = a.fixed_view::<3, 3>(3, 3).into_owned();
-    let aa = r * a11 * rt;
-    let b = r * a12 * rt;
-    let c = r * a22 * rt;
-    let p = skew(&x.trans);
-    let pc = p * c;
-    let y = b + pc;
-    let xx = aa - b * p + p * b.transpose() - pc * p;
-    let mut out = Matrix6::zeros();
-    out.fixed_view_mut::<3, 3>(0, 0).copy_from(&xx);
-    out.fixed_view_mut::<3, 3>(0, 3).copy_from(&y);
-    out.fixed_view_mut::<3, 3>(3, 0).copy_from(&y.transpose());
-    out.fixed_view_mut::<3, 3>(3, 3).copy_from(&c);
-    out
+    // [[A, B], [Bᵀ, C]] ↦ [[A − B P + P Bᵀ − P C P, B + P C], [·ᵀ, C]],
+    // computed as Y = B + P C and A + (P Bᵀ)ᵀ + P Yᵀ (C symmetric, Pᵀ = −P).
+    let rs = x.rot.as_slice();
+    let r: M3 = [[rs[0], rs[3], rs[6]], [rs[1], rs[4], rs[7]], [rs[2], rs[5], rs[8]]];
+    let a = a.as_slice();
+    let aa = mul3_tr(&mul3(&r, &block(a, 0, 0)), &r, true);
+    let b = mul3_tr(&mul3(&r, &block(a, 0, 3)), &r, false);
+    let c = mul3_tr(&mul3(&r, &block(a, 3, 3)), &r, true);
+    let p = [x.trans.x, x.trans.y, x.trans.z];
+    // Y = B + P C (column j of P C is p × C_j; C symmetric so C_j is row j).
+    let mut y = b;
+    for j in 0..3 {
+        let e = cross3(&p, c[j]);
+        for i in 0..3 {
+            y[i][j] += e[i];
+        }
+    }
+    let mut out = [0.0; 36];
+    for j in 0..3 {
+        // column j of P Bᵀ is p × (row j of B); column j of P Yᵀ is p × (row j of Y).
+        let z = cross3(&p, b[j]);
+        let w = cross3(&p, y[j]);
+        for i in 0..3 {
+            // X_ij = A_ij + (P Bᵀ)_ji + (P Yᵀ)_ij
+            out[i + 6 * j] += aa[i][j] + w[i];
+            out[j + 6 * i] += z[i];
+            out[i + 6 * (j + 3)] = y[i][j];
+            out[j + 3 + 6 * i] = y[i][j];
+            out[i + 3 + 6 * (j + 3)] = c[i][j];
+        }
+    }
+    Matrix6::from_column_slice(&out)
+}
+
+/// `A x` for a column-major 6×6 array and a motion.
+#[inline(always)]
+fn mat6_mul(a: &[f64], x: &Motion) -> [f64; 6] {
+    let xs = [x.ang.x, x.ang.y, x.ang.z, x.lin.x, x.lin.y, x.lin.z];
+    let mut y = [0.0; 6];
+    for (k, xk) in xs.iter().enumerate() {
+        for (r, yr) in y.iter_mut().enumerate() {
+            *yr += a[r + 6 * k] * xk;
+        }
+    }
+    y
 }
 
 #[inline]
@@ -86,6 +160,10 @@ pub(crate) fn aba_unchecked(
     }
     for i in (1..n).rev() {
         let (iv, nv) = (model.idx_v[i], model.nvs[i]);
+        if nv == 1 {
+            aba_backward_1dof(model, data, i, tau[iv])?;
+            continue;
+        }
         let ia = data.ia[i];
         let pa = data.pa[i];
         let mut d = Matrix6::<f64>::zeros();
@@ -135,6 +213,12 @@ pub(crate) fn aba_unchecked(
         let (iv, nv) = (model.idx_v[i], model.nvs[i]);
         let p = model.parents[i];
         let ai = data.li_m_i[i].inv_act_motion(&data.a[p]) + data.c[i];
+        if nv == 1 {
+            let qdd = data.d_inv[i][(0, 0)] * (data.u[iv] - data.u_cols[iv].dot(&ai));
+            data.qdd[iv] = qdd;
+            data.a[i] = ai + model.subspace[iv] * qdd;
+            continue;
+        }
         let dinv = &data.d_inv[i];
         let mut rhs = [0.0; 6];
         for (c, r) in rhs.iter_mut().enumerate().take(nv) {
@@ -150,6 +234,64 @@ pub(crate) fn aba_unchecked(
             acc += model.subspace[iv + r] * qdd;
         }
         data.a[i] = acc;
+    }
+    Ok(())
+}
+
+/// Backward step of ABA for a single-DoF joint `i` (DoF `k`, torque `tau_k`): scalar `D`.
+#[inline]
+fn aba_backward_1dof(model: &Model, data: &mut Data, i: usize, tau_k: f64) -> Result<()> {
+    let k = model.idx_v[i];
+    let s = model.subspace[k];
+    let ia = data.ia[i];
+    let pa = data.pa[i];
+    let ias = ia.as_slice();
+    let uc = mat6_mul(ias, &s); // U = I^A S
+    let uf = Force::new(Vector3::new(uc[0], uc[1], uc[2]), Vector3::new(uc[3], uc[4], uc[5]));
+    data.u_cols[k] = uf;
+    let d = s.dot(&uf);
+    if d.is_nan() || d <= 1e-14 * d.abs().max(f64::MIN_POSITIVE) || !d.is_finite() {
+        return Err(Error::Singular {
+            what: "articulated-body inertia".into(),
+            detail: format!(
+                "D = SᵀIᴬS of joint \"{}\" is singular (massless subtree?)",
+                model.names[i]
+            ),
+        });
+    }
+    let dinv = 1.0 / d;
+    let u = tau_k - s.dot(&pa);
+    data.u[k] = u;
+    data.d_inv[i][(0, 0)] = dinv;
+    let p = model.parents[i];
+    if p > 0 {
+        // Ia = IA − U D⁻¹ Uᵀ ;  pa = pA + Ia c + U D⁻¹ u
+        let mut ia_a = [0.0; 36];
+        for c in 0..6 {
+            let w = uc[c] * dinv;
+            for r in 0..6 {
+                ia_a[r + 6 * c] = ias[r + 6 * c] - uc[r] * w;
+            }
+        }
+        let iac = mat6_mul(&ia_a, &data.c[i]);
+        let su = u * dinv;
+        let pa_a = Force::new(
+            Vector3::new(
+                pa.ang.x + iac[0] + uc[0] * su,
+                pa.ang.y + iac[1] + uc[1] * su,
+                pa.ang.z + iac[2] + uc[2] * su,
+            ),
+            Vector3::new(
+                pa.lin.x + iac[3] + uc[3] * su,
+                pa.lin.y + iac[4] + uc[4] * su,
+                pa.lin.z + iac[5] + uc[5] * su,
+            ),
+        );
+        let x = data.li_m_i[i];
+        let ia_p = congruence_to_parent(&x, &Matrix6::from_column_slice(&ia_a));
+        data.ia[p] += ia_p;
+        let fp = x.act_force(&pa_a);
+        data.pa[p] += fp;
     }
     Ok(())
 }

@@ -78,6 +78,11 @@ pub struct Data {
     pub z_psidd: Vec<Motion>,
     /// IDFOZA workspace: composite forces.
     pub z_fc: Vec<Force>,
+    /// `Ψ̇ + Ṡ` per degree of freedom (first-order IDSVA forward pass).
+    pub(crate) psid_sdot: Vec<Motion>,
+    /// Set by the first-order IDSVA forward pass: the model has a root free-flyer
+    /// (`kinematics::root_free_flyer`).
+    pub(crate) ff_root: bool,
 }
 
 impl Data {
@@ -135,6 +140,8 @@ impl Data {
             z_a: vec![Motion::zero(); n],
             z_psidd: vec![Motion::zero(); nv],
             z_fc: vec![Force::zero(); n],
+            psid_sdot: vec![Motion::zero(); nv],
+            ff_root: false,
         }
     }
 }

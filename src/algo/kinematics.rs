@@ -2,14 +2,17 @@
 
 use super::Data;
 use crate::error::Result;
-use crate::model::{Model, check_vec};
+use crate::model::{JointType, Model, check_vec};
 use crate::spatial::Motion;
 use nalgebra::DVector;
 
 /// Joint motion `S_i x_i` of joint `i` (child frame) for the coordinates `x` (length nv).
-#[inline]
+#[inline(always)]
 pub(crate) fn joint_motion(model: &Model, i: usize, x: &DVector<f64>) -> Motion {
     let (a, n) = (model.idx_v[i], model.nvs[i]);
+    if n == 1 {
+        return model.subspace[a] * x[a];
+    }
     let mut m = Motion::zero();
     for c in a..a + n {
         m += model.subspace[c] * x[c];
@@ -17,15 +20,27 @@ pub(crate) fn joint_motion(model: &Model, i: usize, x: &DVector<f64>) -> Motion 
     m
 }
 
+/// True if joint 1 is a free-flyer owning DoFs 0..6 with the identity motion subspace (as
+/// `JointType::FreeFlyer` builds it), so that `S_rootᵀ f` is `f` in the root body frame.
+#[inline]
+pub(crate) fn root_free_flyer(model: &Model) -> bool {
+    model.njoints() > 1
+        && model.joints[1] == JointType::FreeFlyer
+        && model.idx_v[1] == 0
+        && model.nv >= 6
+        && (0..6).all(|k| model.subspace[k] == JointType::FreeFlyer.subspace_column(k))
+}
+
 /// Joint placements only: fills `li_m_i` and `o_m_i` (unchecked `q`).
 #[inline]
 pub(crate) fn placements(model: &Model, data: &mut Data, q: &DVector<f64>) {
+    let q = q.as_slice();
     for i in 1..model.njoints() {
         let (a, n) = (model.idx_q[i], model.nqs[i]);
-        let xj = model.joints[i].transform(&q.as_slice()[a..a + n]);
-        data.li_m_i[i] = model.placements[i].compose(&xj);
+        let li = model.joints[i].placed_transform(&model.placements[i], &q[a..a + n]);
+        data.li_m_i[i] = li;
         let p = model.parents[i];
-        data.o_m_i[i] = data.o_m_i[p].compose(&data.li_m_i[i]);
+        data.o_m_i[i] = data.o_m_i[p].compose(&li);
     }
 }
 

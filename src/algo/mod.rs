@@ -22,7 +22,7 @@ pub use rnea::{nonlinear_effects, rnea};
 pub(crate) mod internal {
     pub(crate) use super::aba::aba_unchecked;
     pub(crate) use super::crba::crba_unchecked;
-    pub(crate) use super::kinematics::placements;
+    pub(crate) use super::kinematics::{placements, root_free_flyer};
     pub(crate) use super::ltl::{
         DescView, DofDescendants, fill_descendants, ltl_in_place, ltl_solve_in_place,
         ltl_solve_rows, ltl_solve_rows_desc,

@@ -61,6 +61,17 @@ pub(crate) fn rnea_unchecked(
     data.v[0] = Motion::zero();
     data.a[0] = -model.gravity;
     let n = model.njoints();
+    // Lets the compiler drop the bounds checks of the per-joint arrays.
+    assert!(
+        data.v.len() == n
+            && data.a.len() == n
+            && data.f.len() == n
+            && data.li_m_i.len() == n
+            && model.parents.len() == n
+            && model.inertias.len() == n
+            && model.idx_v.len() == n
+            && model.nvs.len() == n
+    );
     for i in 1..n {
         let p = model.parents[i];
         let x = data.li_m_i[i];

@@ -2,20 +2,31 @@
 //! dtau_dqd_1, dtau_dqd_2), all quantities in the ground frame. Cost `O(N d)`.
 
 use crate::algo::Data;
-use crate::algo::internal::{check_fext, placements};
+use crate::algo::internal::{check_fext, placements, root_free_flyer};
 use crate::error::Result;
 use crate::model::{Model, check_vec};
-use crate::spatial::{Force, Motion, coriolis_b};
-use nalgebra::{DVector, Matrix6};
+use crate::spatial::{Force, Motion, coriolis_b_write, dot6};
+use nalgebra::{DVector, Matrix6, Vector3};
 
-#[inline]
-fn mul6(m: &Matrix6<f64>, x: &Motion) -> Force {
-    Force::from_vec6(&(m * x.to_vec6()))
+/// `B x` for a body-level Coriolis matrix with the block structure `[[B₁₁, 0], [B₂₁, 0]]` of
+/// [`crate::spatial::coriolis_b`] (kept by the composite sums), from its left 6×3 half.
+#[inline(always)]
+fn mul_b(b: &Matrix6<f64>, x: &Motion) -> Force {
+    let b = b.as_slice(); // column-major
+    let (x0, x1, x2) = (x.ang.x, x.ang.y, x.ang.z);
+    let y = |r: usize| b[r] * x0 + b[r + 6] * x1 + b[r + 12] * x2;
+    Force::new(Vector3::new(y(0), y(1), y(2)), Vector3::new(y(3), y(4), y(5)))
 }
 
-#[inline]
-fn mul6_tr(m: &Matrix6<f64>, x: &Motion) -> Force {
-    Force::from_vec6(&(m.tr_mul(&x.to_vec6())))
+/// Angular part of `Bᵀ x` (its linear part is zero for the structure of [`mul_b`]).
+#[inline(always)]
+fn mul_b_tr_ang(b: &Matrix6<f64>, x: &Motion) -> Vector3<f64> {
+    let b = b.as_slice();
+    Vector3::new(
+        dot6(b[0], b[1], b[2], b[3], b[4], b[5], &Force::new(x.ang, x.lin)),
+        dot6(b[6], b[7], b[8], b[9], b[10], b[11], &Force::new(x.ang, x.lin)),
+        dot6(b[12], b[13], b[14], b[15], b[16], b[17], &Force::new(x.ang, x.lin)),
+    )
 }
 
 /// First-order derivatives of inverse dynamics at `(q, q̇, q̈)`: fills `data.dtau_dq`
@@ -68,6 +79,7 @@ pub(crate) fn forward_pass_world(
     a0: Motion,
 ) {
     placements(model, data, q);
+    data.ff_root = root_free_flyer(model);
     let n = model.njoints();
     data.ov[0] = Motion::zero();
     data.oa[0] = a0;
@@ -90,7 +102,9 @@ pub(crate) fn forward_pass_world(
         }
         let vi = vp + vj;
         for c in iv..iv + nvi {
-            data.sdot[c] = vi.cross(&data.s_world[c]);
+            let sd = vi.cross(&data.s_world[c]);
+            data.sdot[c] = sd;
+            data.psid_sdot[c] = data.psid[c] + sd;
         }
         let ai = ap + aj + vi.cross(&vj);
         data.ov[i] = vi;
@@ -103,7 +117,7 @@ pub(crate) fn forward_pass_world(
             f -= x.act_force(&fe[i]);
         }
         data.ofc[i] = f;
-        data.bc[i] = coriolis_b(&inertia, &vi);
+        coriolis_b_write(&inertia, &vi, &mut data.bc[i]);
     }
 }
 
@@ -112,54 +126,107 @@ pub(crate) fn forward_pass_world(
 pub(crate) fn accumulate_to_parent(model: &Model, data: &mut Data, i: usize) {
     let p = model.parents[i];
     if p > 0 {
-        let (icv, bcv, fcv) = (data.ic_world[i], data.bc[i], data.ofc[i]);
+        debug_assert!(p < i);
+        let (icv, fcv) = (data.ic_world[i], data.ofc[i]);
         data.ic_world[p] += icv;
-        data.bc[p] += bcv;
         data.ofc[p] += fcv;
+        let (lo, hi) = data.bc.split_at_mut(i);
+        lo[p] += &hi[0];
     }
 }
 
 /// The first-order IDSVA backward step of body `i` (composites of `i` complete).
 #[inline]
 pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
+    let nv = model.nv;
     let (iv, nvi) = (model.idx_v[i], model.nvs[i]);
     let ic = data.ic_world[i];
-    let bc = data.bc[i];
+    let bc = &data.bc[i];
+    debug_assert!(bc.fixed_view::<6, 3>(0, 3).iter().all(|x| *x == 0.0));
     let fc = data.ofc[i];
+    let nn = nv * nv;
+    assert!(
+        data.dtau_dq.len() == nn
+            && data.dtau_dv.len() == nn
+            && data.m.len() == nn
+            && data.s_world.len() == nv
+            && data.psid.len() == nv
+            && data.psidd.len() == nv
+            && data.psid_sdot.len() == nv
+    );
+    let dq = data.dtau_dq.as_mut_slice();
+    let dv = data.dtau_dv.as_mut_slice();
+    let mm = data.m.as_mut_slice();
+    let (sw, psid, psidd, pss) =
+        (&data.s_world[..], &data.psid[..], &data.psidd[..], &data.psid_sdot[..]);
+    // Strict ancestor DoFs of joint i (those of its first DoF).
+    let mut anc = model.ancestors_of_dof(iv);
+    // With a root free-flyer (identity subspace, S_root = X), its six DoFs are the last six
+    // ancestors; for them Ψ̇ = v_0 × S = 0, Ψ̈ = a_0 × S and Ψ̇ + Ṡ = v_1 × S, so each block is
+    // one force expressed in the root frame, Xᵀ f, using (a × s)ᵀ f = −sᵀ(a ×* f).
+    let root = if data.ff_root && iv >= 6 && anc.last() == Some(&0) {
+        anc = &anc[..anc.len() - 6];
+        Some((data.o_m_i[1], data.oa[0], data.ov[1]))
+    } else {
+        None
+    };
     for c in iv..iv + nvi {
-        let s = data.s_world[c];
+        let s = sw[c];
         data.tau[c] = s.dot(&fc);
         let t1 = ic.mul_motion(&s); // I^C S
-        let t2 = mul6_tr(&bc, &s) * 2.0; // 2 B^Cᵀ S
-        // Joint i itself and its ancestors j ⪯ i (eqs. dtau_dq_1, dtau_dqd_1, M).
-        let mut j = i;
-        while j > 0 {
-            for r in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
-                // ∂τ_i/∂q_j = S_iᵀ(2B^C_i Ψ̇_j + I^C_i Ψ̈_j)   (dtau_dq_1)
-                data.dtau_dq[(c, r)] = data.psid[r].dot(&t2) + data.psidd[r].dot(&t1);
-                // ∂τ_i/∂q̇_j = S_iᵀ(2B^C_i S_j + I^C_i(Ψ̇_j + Ṡ_j))   (dtau_dqd_1)
-                data.dtau_dv[(c, r)] =
-                    data.s_world[r].dot(&t2) + (data.psid[r] + data.sdot[r]).dot(&t1);
-                let mcr = data.s_world[r].dot(&t1);
-                data.m[(c, r)] = mcr;
-                data.m[(r, c)] = mcr;
-            }
-            j = model.parents[j];
+        let t2 = mul_b_tr_ang(bc, &s) * 2.0; // 2 B^Cᵀ S (linear part zero)
+        // ∂τ_i/∂q_j = S_iᵀ(2B^C_i Ψ̇_j + I^C_i Ψ̈_j)   (dtau_dq_1)
+        // ∂τ_i/∂q̇_j = S_iᵀ(2B^C_i S_j + I^C_i(Ψ̇_j + Ṡ_j))   (dtau_dqd_1)
+        let row = |mr: &Motion, pr: &Motion, ppr: &Motion, sr: &Motion| {
+            (mr.ang.dot(&t2) + pr.dot(&t1), sr.ang.dot(&t2) + ppr.dot(&t1), sr.dot(&t1))
+        };
+        // Joint i's own DoFs (eqs. dtau_dq_1, dtau_dqd_1, M).
+        for r in iv..iv + nvi {
+            let (q1, v1, m1) = row(&psid[r], &psidd[r], &pss[r], &sw[r]);
+            dq[c + r * nv] = q1;
+            dv[c + r * nv] = v1;
+            mm[c + r * nv] = m1;
+            mm[r + c * nv] = m1;
         }
-        // Strict ancestors j ≺ i (eqs. dtau_dq_2, dtau_dqd_2).
-        let psid = data.psid[c];
+        let psid_c = psid[c];
         // 2B^C_i Ψ̇_i + I^C_i Ψ̈_i + f^C_i ×̄* S_i   (dtau_dq_2)
-        let t3 = mul6(&bc, &psid) * 2.0 + ic.mul_motion(&data.psidd[c]) + fc.crff(&s);
+        let t3 = mul_b(bc, &psid_c) * 2.0 + ic.mul_motion(&psidd[c]) + fc.crff(&s);
         // 2B^C_i S_i + I^C_i(Ψ̇_i + Ṡ_i)   (dtau_dqd_2)
-        let t4 = mul6(&bc, &s) * 2.0 + ic.mul_motion(&(psid + data.sdot[c]));
-        let mut j = model.parents[i];
-        while j > 0 {
-            for r in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
-                let sr = data.s_world[r];
-                data.dtau_dq[(r, c)] = sr.dot(&t3);
-                data.dtau_dv[(r, c)] = sr.dot(&t4);
+        let t4 = mul_b(bc, &s) * 2.0 + ic.mul_motion(&pss[c]);
+        if let Some((x, a0, v1)) = &root {
+            let arr = |f: Force| [f.ang.x, f.ang.y, f.ang.z, f.lin.x, f.lin.y, f.lin.z];
+            let m1 = arr(x.inv_act_force(&t1));
+            let q1 = arr(x.inv_act_force(&a0.cross_force(&t1)));
+            let v1 =
+                arr(x.inv_act_force(&(Force::new(t2, Vector3::zeros()) - v1.cross_force(&t1))));
+            let q2 = arr(x.inv_act_force(&t3));
+            let v2 = arr(x.inv_act_force(&t4));
+            for r in 0..6 {
+                dq[c + r * nv] = -q1[r];
+                dv[c + r * nv] = v1[r];
+                mm[c + r * nv] = m1[r];
+                mm[r + c * nv] = m1[r];
+                dq[r + c * nv] = q2[r];
+                dv[r + c * nv] = v2[r];
             }
-            j = model.parents[j];
+        }
+        // Strict ancestors j ≺ i: eqs. dtau_dq_1, dtau_dqd_1, M in row c and
+        // dtau_dq_2, dtau_dqd_2 in column c.
+        for &r in anc {
+            debug_assert!(r < iv);
+            // SAFETY: ancestor DoFs satisfy r < iv <= c < nv (`ModelBuilder::build`); the
+            // matrices are nv×nv and the per-DoF arrays have nv entries (asserted above).
+            unsafe {
+                let sr = sw.get_unchecked(r);
+                let (q1, v1, m1) =
+                    row(psid.get_unchecked(r), psidd.get_unchecked(r), pss.get_unchecked(r), sr);
+                *dq.get_unchecked_mut(c + r * nv) = q1;
+                *dv.get_unchecked_mut(c + r * nv) = v1;
+                *mm.get_unchecked_mut(c + r * nv) = m1;
+                *mm.get_unchecked_mut(r + c * nv) = m1;
+                *dq.get_unchecked_mut(r + c * nv) = sr.dot(&t3);
+                *dv.get_unchecked_mut(r + c * nv) = sr.dot(&t4);
+            }
         }
     }
 }

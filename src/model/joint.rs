@@ -117,6 +117,26 @@ impl JointType {
             }
         }
     }
+    /// `placement · X_J(q)`, the pose of the child frame in the parent body's frame, with the
+    /// joint rotation applied in place for revolute joints (two columns of the placement
+    /// rotation mixed when the axis is `±eₖ`) and a translation update for prismatic ones.
+    #[inline]
+    pub(crate) fn placed_transform(&self, placement: &Transform, q: &[f64]) -> Transform {
+        match *self {
+            JointType::Revolute { axis } | JointType::Continuous { axis } => {
+                let (s, c) = q[0].sin_cos();
+                let rot = match unit_axis(&axis) {
+                    Some((k, sign)) => rotate_columns(&placement.rot, k, sign * s, c),
+                    None => placement.rot * axis_angle_sc(&axis, s, c),
+                };
+                Transform::new(rot, placement.trans)
+            }
+            JointType::Prismatic { axis } => {
+                Transform::new(placement.rot, placement.trans + placement.rot * (axis * q[0]))
+            }
+            _ => placement.compose(&self.transform(q)),
+        }
+    }
     /// Writes `q ⊕ δ` (right, body-frame perturbation) into `out`; `q`, `out` have length
     /// `nq()`, `delta` has length `nv()`. Free-flyer and planar use the SE(3)/SE(2)
     /// exponential, spherical the SO(3) exponential; the result quaternion is unit.
@@ -228,6 +248,55 @@ impl JointType {
 #[inline]
 pub fn axis_angle(a: &Vector3<f64>, theta: f64) -> Matrix3<f64> {
     let (s, c) = theta.sin_cos();
+    axis_angle_sc(a, s, c)
+}
+
+/// `Some((k, ±1))` if `a = ±eₖ` exactly.
+#[inline]
+fn unit_axis(a: &Vector3<f64>) -> Option<(usize, f64)> {
+    let (x, y, z) = (a.x, a.y, a.z);
+    if y == 0.0 && z == 0.0 && x.abs() == 1.0 {
+        Some((0, x))
+    } else if x == 0.0 && z == 0.0 && y.abs() == 1.0 {
+        Some((1, y))
+    } else if x == 0.0 && y == 0.0 && z.abs() == 1.0 {
+        Some((2, z))
+    } else {
+        None
+    }
+}
+
+/// `R · Rot(eₖ, θ)` given `s = sin θ`, `c = cos θ`: with `(i, j) = (k+1, k+2) mod 3`,
+/// column `i` becomes `c Rᵢ + s Rⱼ` and column `j` becomes `c Rⱼ − s Rᵢ`.
+#[inline]
+fn rotate_columns(r: &Matrix3<f64>, k: usize, s: f64, c: f64) -> Matrix3<f64> {
+    match k {
+        0 => rotate_columns_ij::<1, 2>(r, s, c),
+        1 => rotate_columns_ij::<2, 0>(r, s, c),
+        _ => rotate_columns_ij::<0, 1>(r, s, c),
+    }
+}
+
+#[inline(always)]
+fn rotate_columns_ij<const I: usize, const J: usize>(
+    r: &Matrix3<f64>,
+    s: f64,
+    c: f64,
+) -> Matrix3<f64> {
+    let m = r.as_slice(); // column-major
+    let mut o = [0.0; 9];
+    o.copy_from_slice(m);
+    for t in 0..3 {
+        let (a, b) = (m[3 * I + t], m[3 * J + t]);
+        o[3 * I + t] = c * a + s * b;
+        o[3 * J + t] = c * b - s * a;
+    }
+    Matrix3::from_column_slice(&o)
+}
+
+/// Rodrigues' rotation for a unit axis `a` from `s = sin θ`, `c = cos θ`.
+#[inline]
+fn axis_angle_sc(a: &Vector3<f64>, s: f64, c: f64) -> Matrix3<f64> {
     let t = 1.0 - c;
     let (x, y, z) = (a.x, a.y, a.z);
     Matrix3::new(

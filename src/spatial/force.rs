@@ -37,7 +37,7 @@ impl Force {
     /// Pairing `selfᵀ m` (power).
     #[inline]
     pub fn dot(&self, m: &Motion) -> f64 {
-        self.ang.dot(&m.ang) + self.lin.dot(&m.lin)
+        m.dot(self)
     }
     /// Swapped force cross product `self ×̄* v = v ×* self` (eq. crff_oper).
     #[inline]

@@ -1,5 +1,6 @@
 //! Spatial rigid-body inertia stored as (mass, first moment, rotational inertia about the origin).
 
+use super::motion::{cross3, mat3_vec};
 use super::{Force, Motion, skew};
 use nalgebra::{Matrix3, Matrix6, SymmetricEigen, Vector3};
 use std::ops::{Add, AddAssign};
@@ -80,19 +81,24 @@ impl Inertia {
     #[inline]
     pub fn mul_motion(&self, v: &Motion) -> Force {
         Force {
-            ang: self.rot * v.ang + self.h.cross(&v.lin),
-            lin: v.lin * self.mass - self.h.cross(&v.ang),
+            ang: mat3_vec(&self.rot, &v.ang) + cross3(&self.h, &v.lin),
+            lin: v.lin * self.mass - cross3(&self.h, &v.ang),
         }
     }
     /// The dense 6×6 matrix `[[Ī_o, h×], [(h×)ᵀ, m 1]]`.
     pub fn matrix(&self) -> Matrix6<f64> {
-        let hx = skew(&self.h);
-        let mut m = Matrix6::zeros();
-        m.fixed_view_mut::<3, 3>(0, 0).copy_from(&self.rot);
-        m.fixed_view_mut::<3, 3>(0, 3).copy_from(&hx);
-        m.fixed_view_mut::<3, 3>(3, 0).copy_from(&hx.transpose());
-        m.fixed_view_mut::<3, 3>(3, 3).copy_from(&(Matrix3::identity() * self.mass));
-        m
+        let r = self.rot.as_slice(); // column-major
+        let (hx, hy, hz, m) = (self.h.x, self.h.y, self.h.z, self.mass);
+        #[rustfmt::skip]
+        let a = [
+            r[0], r[1], r[2], 0.0, -hz, hy,
+            r[3], r[4], r[5], hz, 0.0, -hx,
+            r[6], r[7], r[8], -hy, hx, 0.0,
+            0.0, hz, -hy, m, 0.0, 0.0,
+            -hz, 0.0, hx, 0.0, m, 0.0,
+            hy, -hx, 0.0, 0.0, 0.0, m,
+        ];
+        Matrix6::from_column_slice(&a)
     }
     /// Checks mass ≥ 0, a positive semi-definite rotational inertia about the centre of mass and
     /// the triangle inequality of its principal moments (tolerance relative to the largest moment).

@@ -8,9 +8,13 @@ mod matrix;
 mod motion;
 mod transform;
 
+#[allow(unused_imports)]
+pub(crate) use cross::coriolis_b_write;
 pub use cross::{coriolis_b, coriolis_b_mul, crff, cross_f, cross_m};
 pub use force::Force;
 pub use inertia::{Inertia, InertiaDefect};
 pub use matrix::*;
 pub use motion::{Motion, skew};
+#[allow(unused_imports)]
+pub(crate) use motion::{cross3, dot6, mat3_mul, mat3_tr_vec, mat3_vec};
 pub use transform::Transform;

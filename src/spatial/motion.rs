@@ -43,17 +43,33 @@ impl Motion {
     /// Motion cross product `self × m` (eq. cross_defn).
     #[inline]
     pub fn cross(&self, m: &Motion) -> Motion {
-        Motion { ang: self.ang.cross(&m.ang), lin: self.ang.cross(&m.lin) + self.lin.cross(&m.ang) }
+        let (w, v) = (&self.ang, &self.lin);
+        Motion {
+            ang: cross3(w, &m.ang),
+            lin: Vector3::new(
+                w.y * m.lin.z - w.z * m.lin.y + v.y * m.ang.z - v.z * m.ang.y,
+                w.z * m.lin.x - w.x * m.lin.z + v.z * m.ang.x - v.x * m.ang.z,
+                w.x * m.lin.y - w.y * m.lin.x + v.x * m.ang.y - v.y * m.ang.x,
+            ),
+        }
     }
     /// Force cross product `self ×* f` (eq. cross_f_defn).
     #[inline]
     pub fn cross_force(&self, f: &Force) -> Force {
-        Force { ang: self.ang.cross(&f.ang) + self.lin.cross(&f.lin), lin: self.ang.cross(&f.lin) }
+        let (w, v) = (&self.ang, &self.lin);
+        Force {
+            ang: Vector3::new(
+                w.y * f.ang.z - w.z * f.ang.y + v.y * f.lin.z - v.z * f.lin.y,
+                w.z * f.ang.x - w.x * f.ang.z + v.z * f.lin.x - v.x * f.lin.z,
+                w.x * f.ang.y - w.y * f.ang.x + v.x * f.lin.y - v.y * f.lin.x,
+            ),
+            lin: cross3(w, &f.lin),
+        }
     }
     /// Pairing `selfᵀ f` (power).
     #[inline]
     pub fn dot(&self, f: &Force) -> f64 {
-        self.ang.dot(&f.ang) + self.lin.dot(&f.lin)
+        dot6(self.ang.x, self.ang.y, self.ang.z, self.lin.x, self.lin.y, self.lin.z, f)
     }
     /// The 6×6 matrix of `self ×` (eq. cross_defn).
     pub fn cross_matrix(&self) -> Matrix6<f64> {
@@ -79,6 +95,55 @@ impl Motion {
     pub fn amax(&self) -> f64 {
         self.ang.amax().max(self.lin.amax())
     }
+}
+
+/// `a × b` for 3-vectors, written out.
+#[inline(always)]
+pub(crate) fn cross3(a: &Vector3<f64>, b: &Vector3<f64>) -> Vector3<f64> {
+    Vector3::new(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x)
+}
+
+/// `[a0..a5] · [n; f]`, written out (pairs of lanes, so it can use 2-wide SIMD).
+#[inline(always)]
+pub(crate) fn dot6(a0: f64, a1: f64, a2: f64, a3: f64, a4: f64, a5: f64, f: &Force) -> f64 {
+    let x = a0 * f.ang.x + a2 * f.ang.z + a4 * f.lin.y;
+    let y = a1 * f.ang.y + a3 * f.lin.x + a5 * f.lin.z;
+    x + y
+}
+
+/// `R x` for a 3×3 matrix, written out.
+#[inline(always)]
+pub(crate) fn mat3_vec(r: &Matrix3<f64>, x: &Vector3<f64>) -> Vector3<f64> {
+    let m = r.as_slice(); // column-major
+    Vector3::new(
+        m[0] * x.x + m[3] * x.y + m[6] * x.z,
+        m[1] * x.x + m[4] * x.y + m[7] * x.z,
+        m[2] * x.x + m[5] * x.y + m[8] * x.z,
+    )
+}
+
+/// `Rᵀ x` for a 3×3 matrix, written out.
+#[inline(always)]
+pub(crate) fn mat3_tr_vec(r: &Matrix3<f64>, x: &Vector3<f64>) -> Vector3<f64> {
+    let m = r.as_slice();
+    Vector3::new(
+        m[0] * x.x + m[1] * x.y + m[2] * x.z,
+        m[3] * x.x + m[4] * x.y + m[5] * x.z,
+        m[6] * x.x + m[7] * x.y + m[8] * x.z,
+    )
+}
+
+/// `A B` for 3×3 matrices, written out.
+#[inline(always)]
+pub(crate) fn mat3_mul(a: &Matrix3<f64>, b: &Matrix3<f64>) -> Matrix3<f64> {
+    let (x, y) = (a.as_slice(), b.as_slice());
+    let mut o = [0.0; 9];
+    for j in 0..3 {
+        for i in 0..3 {
+            o[i + 3 * j] = x[i] * y[3 * j] + x[i + 3] * y[1 + 3 * j] + x[i + 6] * y[2 + 3 * j];
+        }
+    }
+    Matrix3::from_column_slice(&o)
 }
 
 impl Add for Motion {

@@ -1,5 +1,6 @@
 //! Rigid transforms stored as rotation + translation.
 
+use super::motion::{cross3, mat3_mul, mat3_tr_vec, mat3_vec};
 use super::{Force, Inertia, Motion, skew};
 use nalgebra::{Matrix3, Matrix6, Vector3};
 
@@ -57,7 +58,10 @@ impl Transform {
     /// Composition `ᵃM_c = ᵃM_b ᵇM_c`.
     #[inline]
     pub fn compose(&self, o: &Transform) -> Transform {
-        Transform { rot: self.rot * o.rot, trans: self.trans + self.rot * o.trans }
+        Transform {
+            rot: mat3_mul(&self.rot, &o.rot),
+            trans: self.trans + mat3_vec(&self.rot, &o.trans),
+        }
     }
     /// Inverse `ᵇM_a`.
     #[inline]
@@ -73,46 +77,68 @@ impl Transform {
     /// Motion vector in `b` → in `a` (`ᵃX_b m`).
     #[inline]
     pub fn act_motion(&self, m: &Motion) -> Motion {
-        let ang = self.rot * m.ang;
-        Motion { ang, lin: self.rot * m.lin + self.trans.cross(&ang) }
+        let ang = mat3_vec(&self.rot, &m.ang);
+        Motion { ang, lin: mat3_vec(&self.rot, &m.lin) + cross3(&self.trans, &ang) }
     }
     /// Motion vector in `a` → in `b` (`ᵇX_a m`).
     #[inline]
     pub fn inv_act_motion(&self, m: &Motion) -> Motion {
         Motion {
-            ang: self.rot.tr_mul(&m.ang),
-            lin: self.rot.tr_mul(&(m.lin - self.trans.cross(&m.ang))),
+            ang: mat3_tr_vec(&self.rot, &m.ang),
+            lin: mat3_tr_vec(&self.rot, &(m.lin - cross3(&self.trans, &m.ang))),
         }
     }
     /// Force vector in `b` → in `a` (`ᵃX_b^* f`).
     #[inline]
     pub fn act_force(&self, f: &Force) -> Force {
-        let lin = self.rot * f.lin;
-        Force { ang: self.rot * f.ang + self.trans.cross(&lin), lin }
+        let lin = mat3_vec(&self.rot, &f.lin);
+        Force { ang: mat3_vec(&self.rot, &f.ang) + cross3(&self.trans, &lin), lin }
     }
     /// Force vector in `a` → in `b`.
     #[inline]
     pub fn inv_act_force(&self, f: &Force) -> Force {
         Force {
-            ang: self.rot.tr_mul(&(f.ang - self.trans.cross(&f.lin))),
-            lin: self.rot.tr_mul(&f.lin),
+            ang: mat3_tr_vec(&self.rot, &(f.ang - cross3(&self.trans, &f.lin))),
+            lin: mat3_tr_vec(&self.rot, &f.lin),
         }
     }
     /// Spatial inertia expressed in `b` → expressed in `a`.
     pub fn act_inertia(&self, i: &Inertia) -> Inertia {
-        // Ī' = R Ī Rᵀ − [Rh]×[p]× − [p]×[Rh]× − m [p]×[p]×, with [a]×[b]× = b aᵀ − (a·b) 1.
-        let rh = self.rot * i.h;
+        // Ī' = R Ī Rᵀ − [Rh]×[p]× − [p]×[Rh]× − m [p]×[p]×, with [a]×[b]× = b aᵀ − (a·b) 1,
+        // i.e. Ī' = R Ī Rᵀ − p h'ᵀ − Rh pᵀ + (2 Rh·p + m p·p) 1 with h' = Rh + m p.
+        let r = self.rot.as_slice(); // column-major: R_ij = r[i + 3j]
+        let ib = i.rot.as_slice();
+        let rh = mat3_vec(&self.rot, &i.h);
         let p = self.trans;
         let m = i.mass;
-        let mut rot = self.rot * i.rot * self.rot.transpose();
-        let diag = 2.0 * rh.dot(&p) + m * p.norm_squared();
-        for c in 0..3 {
-            for r in 0..3 {
-                rot[(r, c)] -= p[r] * rh[c] + rh[r] * p[c] + m * p[r] * p[c];
+        let hn = rh + p * m;
+        // T = R Ī (T_ik = Σ_l R_il Ī_lk), then the upper triangle of T Rᵀ.
+        let mut t = [[0.0; 3]; 3];
+        for (row, tr) in t.iter_mut().enumerate() {
+            for (k, x) in tr.iter_mut().enumerate() {
+                *x = r[row] * ib[3 * k] + r[row + 3] * ib[1 + 3 * k] + r[row + 6] * ib[2 + 3 * k];
             }
-            rot[(c, c)] += diag;
         }
-        Inertia { mass: m, h: rh + p * m, rot: symmetrize(&rot) }
+        let diag = 2.0 * rh.dot(&p) + m * p.norm_squared();
+        let (pa, ha, ra) = ([p.x, p.y, p.z], [hn.x, hn.y, hn.z], [rh.x, rh.y, rh.z]);
+        let mut s = [[0.0; 3]; 3];
+        for a in 0..3 {
+            for b in a..3 {
+                let x = t[a][0] * r[b] + t[a][1] * r[b + 3] + t[a][2] * r[b + 6]
+                    - pa[a] * ha[b]
+                    - ra[a] * pa[b];
+                s[a][b] = x;
+                s[b][a] = x;
+            }
+            s[a][a] += diag;
+        }
+        #[rustfmt::skip]
+        let rot = Matrix3::new(
+            s[0][0], s[0][1], s[0][2],
+            s[1][0], s[1][1], s[1][2],
+            s[2][0], s[2][1], s[2][2],
+        );
+        Inertia { mass: m, h: hn, rot }
     }
     /// Spatial inertia expressed in `a` → expressed in `b`.
     pub fn inv_act_inertia(&self, i: &Inertia) -> Inertia {
@@ -126,9 +152,4 @@ impl Transform {
         x.fixed_view_mut::<3, 3>(3, 0).copy_from(&(skew(&self.trans) * self.rot));
         x
     }
-}
-
-#[inline]
-pub(crate) fn symmetrize(m: &Matrix3<f64>) -> Matrix3<f64> {
-    (m + m.transpose()) * 0.5
 }
