@@ -673,37 +673,3 @@ fn backward_step_so_body<K: Kern>(model: &Model, data: &Data, so: &mut SoData, i
         }
     }
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::model::builtin::random_tree;
-    use crate::rng::Rng;
-
-    /// The portable and the AVX2/FMA kernels give the same tensors (to rounding).
-    #[test]
-    fn portable_and_simd_kernels_agree() {
-        let mut rng = Rng::new(5);
-        for (nj, ff) in [(6, false), (9, true), (14, true)] {
-            let m = random_tree(nj, 77 + nj as u64, ff);
-            let (mut d, mut so_a, mut so_b) = (Data::new(&m), SoData::new(&m), SoData::new(&m));
-            let q = m.random_configuration(&mut rng);
-            let v = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
-            let a = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
-            id_so_derivatives(&m, &mut d, &mut so_a, &q, &v, &a, None).unwrap();
-            crate::simd::FORCE_PORTABLE.store(true, std::sync::atomic::Ordering::Relaxed);
-            id_so_derivatives(&m, &mut d, &mut so_b, &q, &v, &a, None).unwrap();
-            crate::simd::FORCE_PORTABLE.store(false, std::sync::atomic::Ordering::Relaxed);
-            let pairs = [
-                (so_a.d2tau_dq2(), so_b.d2tau_dq2()),
-                (so_a.d2tau_dv2(), so_b.d2tau_dv2()),
-                (so_a.d2tau_dqdv(), so_b.d2tau_dqdv()),
-                (so_a.dm_dq(), so_b.dm_dq()),
-            ];
-            for (x, y) in pairs {
-                let scale = x.as_slice().iter().fold(1.0f64, |s, v| s.max(v.abs()));
-                assert!(x.max_abs_diff(y) <= 1e-12 * scale, "{}", x.max_abs_diff(y));
-            }
-        }
-    }
-}
