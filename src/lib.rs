@@ -19,6 +19,7 @@ mod linalg;
 pub mod model;
 pub mod reference;
 pub mod rng;
+mod simd;
 pub mod spatial;
 pub mod tensor;
 

@@ -400,7 +400,7 @@ impl Kern for Portable {
     }
 }
 
-/// AVX2/FMA kernels; only used after `has_avx2_fma()` returned true.
+/// AVX2/FMA kernels; only used after `crate::simd::avx2_fma()` returned true.
 #[cfg(target_arch = "x86_64")]
 struct Avx2;
 
@@ -517,19 +517,6 @@ fn at(n: usize, i: usize, j: usize, k: usize) -> usize {
     i + n * (j + n * k)
 }
 
-/// Whether the CPU has AVX2 and FMA (checked once; cached by the standard library).
-#[inline]
-fn has_avx2_fma() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
-}
-
 /// The backward step compiled for AVX2/FMA (the 6-vector kernels vectorise 4 wide).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
@@ -537,17 +524,9 @@ fn backward_step_so_avx2(model: &Model, data: &Data, so: &mut SoData, i: usize) 
     backward_step_so_body::<Avx2>(model, data, so, i)
 }
 
-/// Test switch: run the portable kernels even where AVX2/FMA is available.
-#[cfg(test)]
-static FORCE_PORTABLE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
-
 fn backward_step_so(model: &Model, data: &Data, so: &mut SoData, i: usize) {
-    #[cfg(test)]
-    if FORCE_PORTABLE.load(std::sync::atomic::Ordering::Relaxed) {
-        return backward_step_so_body::<Portable>(model, data, so, i);
-    }
     #[cfg(target_arch = "x86_64")]
-    if has_avx2_fma() {
+    if crate::simd::avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
         return unsafe { backward_step_so_avx2(model, data, so, i) };
     }
@@ -691,40 +670,6 @@ fn backward_step_so_body<K: Kern>(model: &Model, data: &Data, so: &mut SoData, i
                 }
             }
             j = model.parents[j];
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::model::builtin::random_tree;
-    use crate::rng::Rng;
-
-    /// The portable and the AVX2/FMA kernels give the same tensors (to rounding).
-    #[test]
-    fn portable_and_simd_kernels_agree() {
-        let mut rng = Rng::new(5);
-        for (nj, ff) in [(6, false), (9, true), (14, true)] {
-            let m = random_tree(nj, 77 + nj as u64, ff);
-            let (mut d, mut so_a, mut so_b) = (Data::new(&m), SoData::new(&m), SoData::new(&m));
-            let q = m.random_configuration(&mut rng);
-            let v = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
-            let a = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
-            id_so_derivatives(&m, &mut d, &mut so_a, &q, &v, &a, None).unwrap();
-            FORCE_PORTABLE.store(true, std::sync::atomic::Ordering::Relaxed);
-            id_so_derivatives(&m, &mut d, &mut so_b, &q, &v, &a, None).unwrap();
-            FORCE_PORTABLE.store(false, std::sync::atomic::Ordering::Relaxed);
-            let pairs = [
-                (so_a.d2tau_dq2(), so_b.d2tau_dq2()),
-                (so_a.d2tau_dv2(), so_b.d2tau_dv2()),
-                (so_a.d2tau_dqdv(), so_b.d2tau_dqdv()),
-                (so_a.dm_dq(), so_b.dm_dq()),
-            ];
-            for (x, y) in pairs {
-                let scale = x.as_slice().iter().fold(1.0f64, |s, v| s.max(v.abs()));
-                assert!(x.max_abs_diff(y) <= 1e-12 * scale, "{}", x.max_abs_diff(y));
-            }
         }
     }
 }
