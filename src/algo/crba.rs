@@ -82,7 +82,7 @@ fn crba_body(model: &Model, data: &mut Data, q: &DVector<f64>) {
         // SAFETY: `parents[i] < i < n = o_m_i.len()` (built in `ModelBuilder::build`).
         let x = unsafe { o_m_i.get_unchecked(p) }.compose(&li);
         o_m_i[i] = x;
-        ic_world[i] = x.act_inertia(&model.inertias[i]);
+        ic_world[i] = x.act_inertia_inline(&model.inertias[i]);
         let (b, k) = (model.idx_v[i], model.nvs[i]);
         debug_assert!(b + k <= nv);
         for c in b..b + k {

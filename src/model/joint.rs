@@ -120,7 +120,7 @@ impl JointType {
     /// `placement · X_J(q)`, the pose of the child frame in the parent body's frame, with the
     /// joint rotation applied in place for revolute joints (two columns of the placement
     /// rotation mixed when the axis is `±eₖ`) and a translation update for prismatic ones.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn placed_transform(&self, placement: &Transform, q: &[f64]) -> Transform {
         match *self {
             JointType::Revolute { axis } | JointType::Continuous { axis } => {
