@@ -4,6 +4,7 @@ use super::Data;
 use super::kinematics::root_free_flyer;
 use crate::error::Result;
 use crate::model::Model;
+use crate::spatial::{Inertia, Transform};
 use nalgebra::{DMatrix, DVector};
 
 /// Joint-space mass matrix `M(q)` (full symmetric), by the composite-rigid-body algorithm with
@@ -39,18 +40,159 @@ pub(crate) fn crba_unchecked(model: &Model, data: &mut Data, q: &DVector<f64>) {
         unsafe { crba_avx2(model, data, q) };
         return;
     }
-    crba_body(model, data, q);
+    crba_body::<Portable>(model, data, q);
 }
 
 /// [`crba_body`] compiled for AVX2/FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn crba_avx2(model: &Model, data: &mut Data, q: &DVector<f64>) {
-    crba_body(model, data, q)
+    crba_body::<Avx2>(model, data, q)
+}
+
+/// The per-body kernels of the forward pass: portable, and AVX2/FMA with explicit intrinsics.
+trait Kern {
+    /// `ᵃM_b ᵇM_c`.
+    fn compose(x: &Transform, y: &Transform) -> Transform;
+    /// `X I` (spatial inertia expressed in `b` → in `a`).
+    fn act_inertia(x: &Transform, i: &Inertia) -> Inertia;
+}
+
+/// Portable kernels.
+struct Portable;
+
+impl Kern for Portable {
+    #[inline(always)]
+    fn compose(x: &Transform, y: &Transform) -> Transform {
+        x.compose(y)
+    }
+    #[inline(always)]
+    fn act_inertia(x: &Transform, i: &Inertia) -> Inertia {
+        x.act_inertia_inline(i)
+    }
+}
+
+/// AVX2/FMA kernels; only used after `has_avx2_fma()` returned true.
+#[cfg(target_arch = "x86_64")]
+struct Avx2;
+
+#[cfg(target_arch = "x86_64")]
+impl Kern for Avx2 {
+    #[inline(always)]
+    fn compose(x: &Transform, y: &Transform) -> Transform {
+        // SAFETY: `Avx2` kernels run only on CPUs with AVX2 and FMA (see `crba_unchecked`).
+        unsafe { avx::compose(x, y) }
+    }
+    #[inline(always)]
+    fn act_inertia(x: &Transform, i: &Inertia) -> Inertia {
+        // SAFETY: as above.
+        unsafe { avx::act_inertia(x, i) }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx {
+    use crate::spatial::{Inertia, Transform};
+    use nalgebra::{Matrix3, Vector3};
+    use std::arch::x86_64::*;
+
+    /// The three columns of a 3×3 matrix as 4-lane vectors (lane 3 unspecified).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn columns(m: &Matrix3<f64>) -> [__m256d; 3] {
+        let r = m.as_slice();
+        // SAFETY: `r` has 9 entries; the loads read r[0..4], r[3..7] and r[5..9].
+        unsafe {
+            let c2 = _mm256_permute4x64_pd(_mm256_loadu_pd(r.as_ptr().add(5)), 0b00_11_10_01);
+            [_mm256_loadu_pd(r.as_ptr()), _mm256_loadu_pd(r.as_ptr().add(3)), c2]
+        }
+    }
+
+    /// `c0 a + c1 b + c2 c` with broadcast scalars.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn comb(c: &[__m256d; 3], a: f64, b: f64, d: f64) -> __m256d {
+        let x = _mm256_mul_pd(c[0], _mm256_set1_pd(a));
+        let x = _mm256_fmadd_pd(c[1], _mm256_set1_pd(b), x);
+        _mm256_fmadd_pd(c[2], _mm256_set1_pd(d), x)
+    }
+
+    /// A 3×3 matrix from three 4-lane columns.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn matrix(c: [__m256d; 3]) -> Matrix3<f64> {
+        let mut o = [0.0; 12];
+        // SAFETY: the stores write o[0..4], o[3..7], o[6..10] (in this order) of 12 entries.
+        unsafe {
+            _mm256_storeu_pd(o.as_mut_ptr(), c[0]);
+            _mm256_storeu_pd(o.as_mut_ptr().add(3), c[1]);
+            _mm256_storeu_pd(o.as_mut_ptr().add(6), c[2]);
+        }
+        Matrix3::from_column_slice(&o[..9])
+    }
+
+    /// The first three lanes.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn vec3(v: __m256d) -> Vector3<f64> {
+        let mut o = [0.0; 4];
+        // SAFETY: `o` has 4 entries.
+        unsafe { _mm256_storeu_pd(o.as_mut_ptr(), v) };
+        Vector3::new(o[0], o[1], o[2])
+    }
+
+    /// `ᵃM_b ᵇM_c`: rotation columns `Σ_l R_l (R')_lk`, translation `p + R p'`.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub(super) fn compose(x: &Transform, y: &Transform) -> Transform {
+        let r = columns(&x.rot);
+        let s = y.rot.as_slice();
+        let c = [comb(&r, s[0], s[1], s[2]), comb(&r, s[3], s[4], s[5]), comb(&r, s[6], s[7], s[8])];
+        let (p, q) = (&x.trans, &y.trans);
+        let t = _mm256_add_pd(comb(&r, q.x, q.y, q.z), _mm256_setr_pd(p.x, p.y, p.z, 0.0));
+        Transform { rot: matrix(c), trans: vec3(t) }
+    }
+
+    /// `X I`: Ī' = R Ī Rᵀ − p h'ᵀ − Rh pᵀ + (2 Rh·p + m p·p) 1 with h' = Rh + m p
+    /// (as [`Transform::act_inertia`]).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub(super) fn act_inertia(x: &Transform, i: &Inertia) -> Inertia {
+        let r = columns(&x.rot);
+        let ib = i.rot.as_slice();
+        let m = i.mass;
+        // T = R Ī (column k: Σ_l R_l Ī_lk).
+        let t = [comb(&r, ib[0], ib[1], ib[2]), comb(&r, ib[3], ib[4], ib[5]), comb(&r, ib[6], ib[7], ib[8])];
+        let rh = comb(&r, i.h.x, i.h.y, i.h.z);
+        let p = x.trans;
+        let pv = _mm256_setr_pd(p.x, p.y, p.z, 0.0);
+        let hn = _mm256_fmadd_pd(pv, _mm256_set1_pd(m), rh);
+        let h = vec3(hn);
+        // 2 Rh·p + m p·p = p·(Rh + h').
+        let d = vec3(_mm256_mul_pd(pv, _mm256_add_pd(rh, hn)));
+        let diag = d.x + d.y + d.z;
+        let ra = x.rot.as_slice();
+        let (pa, ha) = ([p.x, p.y, p.z], [h.x, h.y, h.z]);
+        let e = [
+            _mm256_setr_pd(1.0, 0.0, 0.0, 0.0),
+            _mm256_setr_pd(0.0, 1.0, 0.0, 0.0),
+            _mm256_setr_pd(0.0, 0.0, 1.0, 0.0),
+        ];
+        let dv = _mm256_set1_pd(diag);
+        let col = |b: usize| {
+            // Column b of T Rᵀ: Σ_k T_k R_bk.
+            let s = comb(&t, ra[b], ra[b + 3], ra[b + 6]);
+            let s = _mm256_fnmadd_pd(pv, _mm256_set1_pd(ha[b]), s);
+            let s = _mm256_fnmadd_pd(rh, _mm256_set1_pd(pa[b]), s);
+            _mm256_fmadd_pd(e[b], dv, s)
+        };
+        let rot = matrix([col(0), col(1), col(2)]);
+        Inertia { mass: m, h, rot }
+    }
 }
 
 #[inline(always)]
-fn crba_body(model: &Model, data: &mut Data, q: &DVector<f64>) {
+fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
     let n = model.njoints();
     let nv = model.nv;
     let q = q.as_slice();
@@ -80,9 +222,9 @@ fn crba_body(model: &Model, data: &mut Data, q: &DVector<f64>) {
         let p = model.parents[i];
         debug_assert!(p < i);
         // SAFETY: `parents[i] < i < n = o_m_i.len()` (built in `ModelBuilder::build`).
-        let x = unsafe { o_m_i.get_unchecked(p) }.compose(&li);
+        let x = K::compose(unsafe { o_m_i.get_unchecked(p) }, &li);
         o_m_i[i] = x;
-        ic_world[i] = x.act_inertia_inline(&model.inertias[i]);
+        ic_world[i] = K::act_inertia(&x, &model.inertias[i]);
         let (b, k) = (model.idx_v[i], model.nvs[i]);
         debug_assert!(b + k <= nv);
         for c in b..b + k {
@@ -158,7 +300,7 @@ mod tests {
             let q = m.random_configuration(&mut rng);
             let (mut d1, mut d2) = (Data::new(&m), Data::new(&m));
             crba_unchecked(&m, &mut d1, &q);
-            crba_body(&m, &mut d2, &q);
+            crba_body::<Portable>(&m, &mut d2, &q);
             let scale = d1.m.amax().max(1.0);
             assert!((&d1.m - &d2.m).amax() <= 1e-12 * scale);
             for (a, b) in d1.ic_world.iter().zip(&d2.ic_world) {
