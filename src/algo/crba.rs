@@ -51,11 +51,12 @@ fn crba_avx2(model: &Model, data: &mut Data, q: &DVector<f64>) {
 }
 
 /// The per-body kernels of the forward pass: portable, and AVX2/FMA with explicit intrinsics.
+/// Both write their result in place (no temporaries on the stack).
 trait Kern {
-    /// `ᵃM_b ᵇM_c`.
-    fn compose(x: &Transform, y: &Transform) -> Transform;
-    /// `X I` (spatial inertia expressed in `b` → in `a`).
-    fn act_inertia(x: &Transform, i: &Inertia) -> Inertia;
+    /// `out = ᵃM_b ᵇM_c`.
+    fn compose(x: &Transform, y: &Transform, out: &mut Transform);
+    /// `out = X I` (spatial inertia expressed in `b` → in `a`).
+    fn act_inertia(x: &Transform, i: &Inertia, out: &mut Inertia);
 }
 
 /// Portable kernels.
@@ -63,12 +64,12 @@ struct Portable;
 
 impl Kern for Portable {
     #[inline(always)]
-    fn compose(x: &Transform, y: &Transform) -> Transform {
-        x.compose(y)
+    fn compose(x: &Transform, y: &Transform, out: &mut Transform) {
+        *out = x.compose(y);
     }
     #[inline(always)]
-    fn act_inertia(x: &Transform, i: &Inertia) -> Inertia {
-        x.act_inertia_inline(i)
+    fn act_inertia(x: &Transform, i: &Inertia, out: &mut Inertia) {
+        *out = x.act_inertia_inline(i);
     }
 }
 
@@ -79,14 +80,14 @@ struct Avx2;
 #[cfg(target_arch = "x86_64")]
 impl Kern for Avx2 {
     #[inline(always)]
-    fn compose(x: &Transform, y: &Transform) -> Transform {
+    fn compose(x: &Transform, y: &Transform, out: &mut Transform) {
         // SAFETY: `Avx2` kernels run only on CPUs with AVX2 and FMA (see `crba_unchecked`).
-        unsafe { avx::compose(x, y) }
+        unsafe { avx::compose(x, y, out) }
     }
     #[inline(always)]
-    fn act_inertia(x: &Transform, i: &Inertia) -> Inertia {
+    fn act_inertia(x: &Transform, i: &Inertia, out: &mut Inertia) {
         // SAFETY: as above.
-        unsafe { avx::act_inertia(x, i) }
+        unsafe { avx::act_inertia(x, i, out) }
     }
 }
 
@@ -117,47 +118,51 @@ mod avx {
         _mm256_fmadd_pd(c[2], _mm256_set1_pd(d), x)
     }
 
-    /// A 3×3 matrix from three 4-lane columns.
+    /// Writes three 4-lane columns into a 3×3 matrix.
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    fn matrix(c: [__m256d; 3]) -> Matrix3<f64> {
-        let mut o = [0.0; 12];
-        // SAFETY: the stores write o[0..4], o[3..7], o[6..10] (in this order) of 12 entries.
+    fn store_matrix(c: [__m256d; 3], m: &mut Matrix3<f64>) {
+        let o = m.as_mut_slice().as_mut_ptr();
+        // SAFETY: `o` has 9 entries; the stores write o[0..4], o[3..7] (in this order), o[6..8]
+        // and o[8].
         unsafe {
-            _mm256_storeu_pd(o.as_mut_ptr(), c[0]);
-            _mm256_storeu_pd(o.as_mut_ptr().add(3), c[1]);
-            _mm256_storeu_pd(o.as_mut_ptr().add(6), c[2]);
+            _mm256_storeu_pd(o, c[0]);
+            _mm256_storeu_pd(o.add(3), c[1]);
+            _mm_storeu_pd(o.add(6), _mm256_castpd256_pd128(c[2]));
+            _mm_store_sd(o.add(8), _mm256_extractf128_pd(c[2], 1));
         }
-        Matrix3::from_column_slice(&o[..9])
     }
 
-    /// The first three lanes.
+    /// Writes the first three lanes into a 3-vector.
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    fn vec3(v: __m256d) -> Vector3<f64> {
-        let mut o = [0.0; 4];
-        // SAFETY: `o` has 4 entries.
-        unsafe { _mm256_storeu_pd(o.as_mut_ptr(), v) };
-        Vector3::new(o[0], o[1], o[2])
+    fn store_vec3(v: __m256d, o: &mut Vector3<f64>) {
+        let o = o.as_mut_slice().as_mut_ptr();
+        // SAFETY: `o` has 3 entries.
+        unsafe {
+            _mm_storeu_pd(o, _mm256_castpd256_pd128(v));
+            _mm_store_sd(o.add(2), _mm256_extractf128_pd(v, 1));
+        }
     }
 
     /// `ᵃM_b ᵇM_c`: rotation columns `Σ_l R_l (R')_lk`, translation `p + R p'`.
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    pub(super) fn compose(x: &Transform, y: &Transform) -> Transform {
+    pub(super) fn compose(x: &Transform, y: &Transform, out: &mut Transform) {
         let r = columns(&x.rot);
         let s = y.rot.as_slice();
         let c = [comb(&r, s[0], s[1], s[2]), comb(&r, s[3], s[4], s[5]), comb(&r, s[6], s[7], s[8])];
         let (p, q) = (&x.trans, &y.trans);
         let t = _mm256_add_pd(comb(&r, q.x, q.y, q.z), _mm256_setr_pd(p.x, p.y, p.z, 0.0));
-        Transform { rot: matrix(c), trans: vec3(t) }
+        store_matrix(c, &mut out.rot);
+        store_vec3(t, &mut out.trans);
     }
 
     /// `X I`: Ī' = R Ī Rᵀ − p h'ᵀ − Rh pᵀ + (2 Rh·p + m p·p) 1 with h' = Rh + m p
     /// (as [`Transform::act_inertia`]).
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    pub(super) fn act_inertia(x: &Transform, i: &Inertia) -> Inertia {
+    pub(super) fn act_inertia(x: &Transform, i: &Inertia, out: &mut Inertia) {
         let r = columns(&x.rot);
         let ib = i.rot.as_slice();
         let m = i.mass;
@@ -167,12 +172,15 @@ mod avx {
         let p = x.trans;
         let pv = _mm256_setr_pd(p.x, p.y, p.z, 0.0);
         let hn = _mm256_fmadd_pd(pv, _mm256_set1_pd(m), rh);
-        let h = vec3(hn);
-        // 2 Rh·p + m p·p = p·(Rh + h').
-        let d = vec3(_mm256_mul_pd(pv, _mm256_add_pd(rh, hn)));
-        let diag = d.x + d.y + d.z;
+        let mut ha = [0.0; 4];
+        // SAFETY: `ha` has 4 entries.
+        unsafe { _mm256_storeu_pd(ha.as_mut_ptr(), hn) };
+        // 2 Rh·p + m p·p = p·(Rh + h') (lane 3 of p is zero).
+        let d = _mm256_mul_pd(pv, _mm256_add_pd(rh, hn));
+        let d = _mm_add_pd(_mm256_castpd256_pd128(d), _mm256_extractf128_pd(d, 1));
+        let diag = _mm_cvtsd_f64(_mm_add_sd(d, _mm_unpackhi_pd(d, d)));
         let ra = x.rot.as_slice();
-        let (pa, ha) = ([p.x, p.y, p.z], [h.x, h.y, h.z]);
+        let pa = [p.x, p.y, p.z];
         let e = [
             _mm256_setr_pd(1.0, 0.0, 0.0, 0.0),
             _mm256_setr_pd(0.0, 1.0, 0.0, 0.0),
@@ -186,8 +194,9 @@ mod avx {
             let s = _mm256_fnmadd_pd(rh, _mm256_set1_pd(pa[b]), s);
             _mm256_fmadd_pd(e[b], dv, s)
         };
-        let rot = matrix([col(0), col(1), col(2)]);
-        Inertia { mass: m, h, rot }
+        store_matrix([col(0), col(1), col(2)], &mut out.rot);
+        store_vec3(hn, &mut out.h);
+        out.mass = m;
     }
 }
 
@@ -221,10 +230,11 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
         li_m_i[i] = li;
         let p = model.parents[i];
         debug_assert!(p < i);
-        // SAFETY: `parents[i] < i < n = o_m_i.len()` (built in `ModelBuilder::build`).
-        let x = K::compose(unsafe { o_m_i.get_unchecked(p) }, &li);
-        o_m_i[i] = x;
-        ic_world[i] = K::act_inertia(&x, &model.inertias[i]);
+        let (head, tail) = o_m_i.split_at_mut(i);
+        // SAFETY: `parents[i] < i` (built in `ModelBuilder::build`), so `p` indexes `head`.
+        K::compose(unsafe { head.get_unchecked(p) }, &li, &mut tail[0]);
+        let x = &tail[0];
+        K::act_inertia(x, &model.inertias[i], &mut ic_world[i]);
         let (b, k) = (model.idx_v[i], model.nvs[i]);
         debug_assert!(b + k <= nv);
         for c in b..b + k {
