@@ -4,7 +4,7 @@ use super::Data;
 use super::kinematics::root_free_flyer;
 use crate::error::Result;
 use crate::model::Model;
-use crate::spatial::{Inertia, Transform};
+use crate::spatial::{Inertia, Motion, Transform};
 use nalgebra::{DMatrix, DVector};
 
 /// Joint-space mass matrix `M(q)` (full symmetric), by the composite-rigid-body algorithm with
@@ -50,50 +50,67 @@ fn crba_avx2(model: &Model, data: &mut Data, q: &DVector<f64>) {
     crba_body::<Avx2>(model, data, q)
 }
 
-/// The per-body kernels of the forward pass: portable, and AVX2/FMA with explicit intrinsics.
-/// Both write their result in place (no temporaries on the stack).
+/// The per-body kernel of the forward pass (portable, and AVX2/FMA with explicit intrinsics):
+/// world placement `x = ᵒM_p ᵖM_i`, world inertia `X I` and world subspace columns `X S`,
+/// written in place.
 trait Kern {
-    /// `out = ᵃM_b ᵇM_c`.
-    fn compose(x: &Transform, y: &Transform, out: &mut Transform);
-    /// `out = X I` (spatial inertia expressed in `b` → in `a`).
-    fn act_inertia(x: &Transform, i: &Inertia, out: &mut Inertia);
+    fn body(
+        xp: &Transform,
+        li: &Transform,
+        inertia: &Inertia,
+        sub: &[Motion],
+        x: &mut Transform,
+        ic: &mut Inertia,
+        sw: &mut [Motion],
+    );
 }
 
-/// Portable kernels.
+/// Portable kernel.
 struct Portable;
 
 impl Kern for Portable {
     #[inline(always)]
-    fn compose(x: &Transform, y: &Transform, out: &mut Transform) {
-        *out = x.compose(y);
-    }
-    #[inline(always)]
-    fn act_inertia(x: &Transform, i: &Inertia, out: &mut Inertia) {
-        *out = x.act_inertia_inline(i);
+    fn body(
+        xp: &Transform,
+        li: &Transform,
+        inertia: &Inertia,
+        sub: &[Motion],
+        x: &mut Transform,
+        ic: &mut Inertia,
+        sw: &mut [Motion],
+    ) {
+        *x = xp.compose(li);
+        *ic = x.act_inertia_inline(inertia);
+        for (o, s) in sw.iter_mut().zip(sub) {
+            *o = x.act_motion(s);
+        }
     }
 }
 
-/// AVX2/FMA kernels; only used after `has_avx2_fma()` returned true.
+/// AVX2/FMA kernel; only used after `has_avx2_fma()` returned true.
 #[cfg(target_arch = "x86_64")]
 struct Avx2;
 
 #[cfg(target_arch = "x86_64")]
 impl Kern for Avx2 {
     #[inline(always)]
-    fn compose(x: &Transform, y: &Transform, out: &mut Transform) {
+    fn body(
+        xp: &Transform,
+        li: &Transform,
+        inertia: &Inertia,
+        sub: &[Motion],
+        x: &mut Transform,
+        ic: &mut Inertia,
+        sw: &mut [Motion],
+    ) {
         // SAFETY: `Avx2` kernels run only on CPUs with AVX2 and FMA (see `crba_unchecked`).
-        unsafe { avx::compose(x, y, out) }
-    }
-    #[inline(always)]
-    fn act_inertia(x: &Transform, i: &Inertia, out: &mut Inertia) {
-        // SAFETY: as above.
-        unsafe { avx::act_inertia(x, i, out) }
+        unsafe { avx::body(xp, li, inertia, sub, x, ic, sw) }
     }
 }
 
 #[cfg(target_arch = "x86_64")]
 mod avx {
-    use crate::spatial::{Inertia, Transform};
+    use crate::spatial::{Inertia, Motion, Transform};
     use nalgebra::{Matrix3, Vector3};
     use std::arch::x86_64::*;
 
@@ -145,58 +162,83 @@ mod avx {
         }
     }
 
-    /// `ᵃM_b ᵇM_c`: rotation columns `Σ_l R_l (R')_lk`, translation `p + R p'`.
+    /// `a × b` on the first three lanes (lane 3 unspecified).
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    pub(super) fn compose(x: &Transform, y: &Transform, out: &mut Transform) {
-        let r = columns(&x.rot);
-        let s = y.rot.as_slice();
-        let c = [comb(&r, s[0], s[1], s[2]), comb(&r, s[3], s[4], s[5]), comb(&r, s[6], s[7], s[8])];
-        let (p, q) = (&x.trans, &y.trans);
-        let t = _mm256_add_pd(comb(&r, q.x, q.y, q.z), _mm256_setr_pd(p.x, p.y, p.z, 0.0));
-        store_matrix(c, &mut out.rot);
-        store_vec3(t, &mut out.trans);
+    fn cross(a: __m256d, b: __m256d) -> __m256d {
+        // yzx = lanes [1, 2, 0, 3], zxy = lanes [2, 0, 1, 3].
+        let a_yzx = _mm256_permute4x64_pd(a, 0b11_00_10_01);
+        let a_zxy = _mm256_permute4x64_pd(a, 0b11_01_00_10);
+        let b_yzx = _mm256_permute4x64_pd(b, 0b11_00_10_01);
+        let b_zxy = _mm256_permute4x64_pd(b, 0b11_01_00_10);
+        _mm256_fmsub_pd(a_yzx, b_zxy, _mm256_mul_pd(a_zxy, b_yzx))
     }
 
-    /// `X I`: Ī' = R Ī Rᵀ − p h'ᵀ − Rh pᵀ + (2 Rh·p + m p·p) 1 with h' = Rh + m p
-    /// (as [`Transform::act_inertia`]).
+    /// See `Kern::body`. Placement: rotation columns `Σ_l R_l (R')_lk`, translation
+    /// `p + R p'`. Inertia: Ī' = R Ī Rᵀ − p h'ᵀ − Rh pᵀ + (2 Rh·p + m p·p) 1 with h' = Rh + m p
+    /// (as [`Transform::act_inertia`]). Subspace: `[R a; R l + p × R a]`.
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    pub(super) fn act_inertia(x: &Transform, i: &Inertia, out: &mut Inertia) {
-        let r = columns(&x.rot);
-        let ib = i.rot.as_slice();
-        let m = i.mass;
+    pub(super) fn body(
+        xp: &Transform,
+        li: &Transform,
+        inertia: &Inertia,
+        sub: &[Motion],
+        x: &mut Transform,
+        ic: &mut Inertia,
+        sw: &mut [Motion],
+    ) {
+        let rp = columns(&xp.rot);
+        let s = li.rot.as_slice();
+        let r =
+            [comb(&rp, s[0], s[1], s[2]), comb(&rp, s[3], s[4], s[5]), comb(&rp, s[6], s[7], s[8])];
+        let (tp, tl) = (&xp.trans, &li.trans);
+        let t = _mm256_add_pd(comb(&rp, tl.x, tl.y, tl.z), _mm256_setr_pd(tp.x, tp.y, tp.z, 0.0));
+        // Lane 3 of the translation set to zero (it enters a dot product below).
+        let pv = _mm256_blend_pd(t, _mm256_setzero_pd(), 0b1000);
+        store_matrix(r, &mut x.rot);
+        store_vec3(t, &mut x.trans);
+        let ra = x.rot.as_slice();
+        let pa = [x.trans.x, x.trans.y, x.trans.z];
+
+        let ib = inertia.rot.as_slice();
+        let m = inertia.mass;
+        let h = &inertia.h;
         // T = R Ī (column k: Σ_l R_l Ī_lk).
-        let t = [comb(&r, ib[0], ib[1], ib[2]), comb(&r, ib[3], ib[4], ib[5]), comb(&r, ib[6], ib[7], ib[8])];
-        let rh = comb(&r, i.h.x, i.h.y, i.h.z);
-        let p = x.trans;
-        let pv = _mm256_setr_pd(p.x, p.y, p.z, 0.0);
+        let tt = [
+            comb(&r, ib[0], ib[1], ib[2]),
+            comb(&r, ib[3], ib[4], ib[5]),
+            comb(&r, ib[6], ib[7], ib[8]),
+        ];
+        let rh = comb(&r, h.x, h.y, h.z);
         let hn = _mm256_fmadd_pd(pv, _mm256_set1_pd(m), rh);
-        let mut ha = [0.0; 4];
-        // SAFETY: `ha` has 4 entries.
-        unsafe { _mm256_storeu_pd(ha.as_mut_ptr(), hn) };
+        store_vec3(hn, &mut ic.h);
+        ic.mass = m;
+        let ha = [ic.h.x, ic.h.y, ic.h.z];
         // 2 Rh·p + m p·p = p·(Rh + h') (lane 3 of p is zero).
         let d = _mm256_mul_pd(pv, _mm256_add_pd(rh, hn));
         let d = _mm_add_pd(_mm256_castpd256_pd128(d), _mm256_extractf128_pd(d, 1));
-        let diag = _mm_cvtsd_f64(_mm_add_sd(d, _mm_unpackhi_pd(d, d)));
-        let ra = x.rot.as_slice();
-        let pa = [p.x, p.y, p.z];
+        let dv = _mm256_set1_pd(_mm_cvtsd_f64(_mm_add_sd(d, _mm_unpackhi_pd(d, d))));
         let e = [
             _mm256_setr_pd(1.0, 0.0, 0.0, 0.0),
             _mm256_setr_pd(0.0, 1.0, 0.0, 0.0),
             _mm256_setr_pd(0.0, 0.0, 1.0, 0.0),
         ];
-        let dv = _mm256_set1_pd(diag);
         let col = |b: usize| {
             // Column b of T Rᵀ: Σ_k T_k R_bk.
-            let s = comb(&t, ra[b], ra[b + 3], ra[b + 6]);
-            let s = _mm256_fnmadd_pd(pv, _mm256_set1_pd(ha[b]), s);
-            let s = _mm256_fnmadd_pd(rh, _mm256_set1_pd(pa[b]), s);
-            _mm256_fmadd_pd(e[b], dv, s)
+            let c = comb(&tt, ra[b], ra[b + 3], ra[b + 6]);
+            let c = _mm256_fnmadd_pd(pv, _mm256_set1_pd(ha[b]), c);
+            let c = _mm256_fnmadd_pd(rh, _mm256_set1_pd(pa[b]), c);
+            _mm256_fmadd_pd(e[b], dv, c)
         };
-        store_matrix([col(0), col(1), col(2)], &mut out.rot);
-        store_vec3(hn, &mut out.h);
-        out.mass = m;
+        store_matrix([col(0), col(1), col(2)], &mut ic.rot);
+
+        for (o, sc) in sw.iter_mut().zip(sub) {
+            let ang = comb(&r, sc.ang.x, sc.ang.y, sc.ang.z);
+            let lin = _mm256_add_pd(comb(&r, sc.lin.x, sc.lin.y, sc.lin.z), cross(pv, ang));
+            store_vec3(ang, &mut o.ang);
+            store_vec3(lin, &mut o.lin);
+        }
     }
 }
 
@@ -231,18 +273,18 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
         let p = model.parents[i];
         debug_assert!(p < i);
         let (head, tail) = o_m_i.split_at_mut(i);
-        // SAFETY: `parents[i] < i` (built in `ModelBuilder::build`), so `p` indexes `head`.
-        K::compose(unsafe { head.get_unchecked(p) }, &li, &mut tail[0]);
-        let x = &tail[0];
-        K::act_inertia(x, &model.inertias[i], &mut ic_world[i]);
         let (b, k) = (model.idx_v[i], model.nvs[i]);
-        debug_assert!(b + k <= nv);
-        for c in b..b + k {
-            // SAFETY: `idx_v[i] + nvs[i] <= nv = s_world.len() = subspace.len()` (asserted).
-            unsafe {
-                *sw.get_unchecked_mut(c) = x.act_motion(model.subspace.get_unchecked(c));
-            }
-        }
+        debug_assert!(p < i && b + k <= nv);
+        // SAFETY: `parents[i] < i` (built in `ModelBuilder::build`), so `p` indexes `head`;
+        // `idx_v[i] + nvs[i] <= nv = s_world.len() = subspace.len()` (asserted).
+        let (xp, sub, swi) = unsafe {
+            (
+                head.get_unchecked(p),
+                model.subspace.get_unchecked(b..b + k),
+                sw.get_unchecked_mut(b..b + k),
+            )
+        };
+        K::body(xp, &li, &model.inertias[i], sub, &mut tail[0], &mut ic_world[i], swi);
     }
     // Root free-flyer with the identity subspace: its block of column c is
     // S_rootᵀ f = Xᵀ f, the force f expressed in the root body frame.
