@@ -4,7 +4,7 @@ use super::Data;
 use super::kinematics::root_free_flyer;
 use crate::error::Result;
 use crate::model::Model;
-use crate::spatial::{Inertia, Motion, Transform};
+use crate::spatial::{Force, Inertia, Motion, Transform};
 use nalgebra::{DMatrix, DVector};
 
 /// Joint-space mass matrix `M(q)` (full symmetric), by the composite-rigid-body algorithm with
@@ -63,6 +63,11 @@ trait Kern {
         ic: &mut Inertia,
         sw: &mut [Motion],
     );
+    /// `M_rc = M_cr = S_rᵀ f` for the ancestor DoFs `r` in `anc` of DoF `c`.
+    ///
+    /// # Safety
+    /// Every `r` in `anc` is `< nv = sw.len()`, `c < nv` and `m.len() == nv * nv`.
+    unsafe fn pairs(f: &Force, sw: &[Motion], anc: &[usize], m: &mut [f64], c: usize, nv: usize);
 }
 
 /// Portable kernel.
@@ -83,6 +88,18 @@ impl Kern for Portable {
         *ic = x.act_inertia_inline(inertia);
         for (o, s) in sw.iter_mut().zip(sub) {
             *o = x.act_motion(s);
+        }
+    }
+    #[inline(always)]
+    unsafe fn pairs(f: &Force, sw: &[Motion], anc: &[usize], m: &mut [f64], c: usize, nv: usize) {
+        for &r in anc {
+            debug_assert!(r < c);
+            // SAFETY: see the trait.
+            unsafe {
+                let mrc = sw.get_unchecked(r).dot(f);
+                *m.get_unchecked_mut(r + c * nv) = mrc;
+                *m.get_unchecked_mut(c + r * nv) = mrc;
+            }
         }
     }
 }
@@ -106,11 +123,16 @@ impl Kern for Avx2 {
         // SAFETY: `Avx2` kernels run only on CPUs with AVX2 and FMA (see `crba_unchecked`).
         unsafe { avx::body(xp, li, inertia, sub, x, ic, sw) }
     }
+    #[inline(always)]
+    unsafe fn pairs(f: &Force, sw: &[Motion], anc: &[usize], m: &mut [f64], c: usize, nv: usize) {
+        // SAFETY: the CPU has AVX2 and FMA (as above); the index bounds are the caller's.
+        unsafe { avx::pairs(f, sw, anc, m, c, nv) }
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
 mod avx {
-    use crate::spatial::{Inertia, Motion, Transform};
+    use crate::spatial::{Force, Inertia, Motion, Transform};
     use nalgebra::{Matrix3, Vector3};
     use std::arch::x86_64::*;
 
@@ -159,6 +181,43 @@ mod avx {
         unsafe {
             _mm_storeu_pd(o, _mm256_castpd256_pd128(v));
             _mm_store_sd(o.add(2), _mm256_extractf128_pd(v, 1));
+        }
+    }
+
+    /// See `Kern::pairs`: `S_rᵀ f` as one 4-lane product of `[ω_x ω_y ω_z v_x]` and one of
+    /// the overlapping `[ω_z v_x v_y v_z]` with `[0 0 f_y f_z]`, `Motion` being `repr(C)`.
+    ///
+    /// # Safety
+    /// As `Kern::pairs`.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub(super) unsafe fn pairs(
+        f: &Force,
+        sw: &[Motion],
+        anc: &[usize],
+        m: &mut [f64],
+        c: usize,
+        nv: usize,
+    ) {
+        let flo = _mm256_setr_pd(f.ang.x, f.ang.y, f.ang.z, f.lin.x);
+        let fhi = _mm256_setr_pd(0.0, 0.0, f.lin.y, f.lin.z);
+        let (sp, mp) = (sw.as_ptr(), m.as_mut_ptr());
+        for &r in anc {
+            debug_assert!(r < c && r < sw.len() && c < nv);
+            // SAFETY: `r < sw.len()` and a `Motion` is six contiguous f64 (`repr(C)`), so the
+            // loads read its entries 0..4 and 2..6; the stores are within nv×nv.
+            unsafe {
+                let s = sp.add(r) as *const f64;
+                let p = _mm256_fmadd_pd(
+                    _mm256_loadu_pd(s.add(2)),
+                    fhi,
+                    _mm256_mul_pd(_mm256_loadu_pd(s), flo),
+                );
+                let q = _mm_add_pd(_mm256_castpd256_pd128(p), _mm256_extractf128_pd(p, 1));
+                let mrc = _mm_add_sd(q, _mm_unpackhi_pd(q, q));
+                _mm_store_sd(mp.add(r + c * nv), mrc);
+                _mm_store_sd(mp.add(c + r * nv), mrc);
+            }
         }
     }
 
@@ -316,16 +375,9 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
                     }
                 }
             }
-            for &r in anc {
-                debug_assert!(r < c);
-                // SAFETY: ancestor DoFs satisfy r < c < nv (built in `ModelBuilder::build`),
-                // `m` is nv×nv (column-major) and `sw` has nv entries (asserted above).
-                unsafe {
-                    let mrc = sw.get_unchecked(r).dot(&f);
-                    *m.get_unchecked_mut(r + c * nv) = mrc;
-                    *m.get_unchecked_mut(c + r * nv) = mrc;
-                }
-            }
+            // SAFETY: ancestor DoFs satisfy r < c < nv (built in `ModelBuilder::build`),
+            // `m` is nv×nv (column-major) and `sw` has nv entries (asserted above).
+            unsafe { K::pairs(&f, sw, anc, m, c, nv) };
         }
         let p = model.parents[i];
         if p > 0 {
