@@ -120,7 +120,7 @@ impl JointType {
     /// `placement · X_J(q)`, the pose of the child frame in the parent body's frame, with the
     /// joint rotation applied in place for revolute joints (two columns of the placement
     /// rotation mixed when the axis is `±eₖ`) and a translation update for prismatic ones.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn placed_transform(&self, placement: &Transform, q: &[f64]) -> Transform {
         match *self {
             JointType::Revolute { axis } | JointType::Continuous { axis } => {
@@ -222,7 +222,22 @@ impl JointType {
     }
     /// Checks the configuration coordinates of this joint (finite; unit quaternion within
     /// [`QUAT_NORM_TOL`]). Returns a reason on failure.
+    #[inline]
     pub fn check_configuration(&self, q: &[f64]) -> Result<(), String> {
+        // Fast path: one finite coordinate of a revolute/prismatic joint.
+        if let (
+            JointType::Revolute { .. } | JointType::Continuous { .. } | JointType::Prismatic { .. },
+            [x],
+        ) = (self, q)
+            && x.is_finite()
+        {
+            return Ok(());
+        }
+        self.check_configuration_slow(q)
+    }
+    /// [`Self::check_configuration`] for the general case (kept out of line).
+    #[inline(never)]
+    fn check_configuration_slow(&self, q: &[f64]) -> Result<(), String> {
         if let Some(i) = q.iter().position(|x| !x.is_finite()) {
             return Err(format!("coordinate {i} is not finite"));
         }

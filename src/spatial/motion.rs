@@ -5,7 +5,9 @@ use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 use std::ops::{Add, AddAssign, Mul, Neg, Sub, SubAssign};
 
 /// A spatial motion vector (velocity, acceleration, motion-subspace column), `[angular; linear]`.
+// `repr(C)`: six contiguous f64 `[ω; v]` (the CRBA AVX2 kernel loads them as such).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C)]
 pub struct Motion {
     /// Angular part ω.
     pub ang: Vector3<f64>,

@@ -103,7 +103,13 @@ impl Transform {
         }
     }
     /// Spatial inertia expressed in `b` → expressed in `a`.
+    #[inline]
     pub fn act_inertia(&self, i: &Inertia) -> Inertia {
+        self.act_inertia_inline(i)
+    }
+    /// [`Self::act_inertia`], always inlined (for hot loops).
+    #[inline(always)]
+    pub(crate) fn act_inertia_inline(&self, i: &Inertia) -> Inertia {
         // Ī' = R Ī Rᵀ − [Rh]×[p]× − [p]×[Rh]× − m [p]×[p]×, with [a]×[b]× = b aᵀ − (a·b) 1,
         // i.e. Ī' = R Ī Rᵀ − p h'ᵀ − Rh pᵀ + (2 Rh·p + m p·p) 1 with h' = Rh + m p.
         let r = self.rot.as_slice(); // column-major: R_ij = r[i + 3j]
