@@ -147,6 +147,28 @@ impl Model {
         if q.len() != self.nq {
             return Err(Error::Dimension { what: "q".into(), expected: self.nq, got: q.len() });
         }
+        // Fast path: every coordinate finite and every quaternion of unit norm. Anything else
+        // goes through the per-joint checks below, which name the joint and the problem.
+        let qs = q.as_slice();
+        if qs.iter().fold(true, |ok, x| ok & x.is_finite()) {
+            let mut ok = true;
+            for i in 1..self.njoints() {
+                if self.nqs[i] < 4 {
+                    continue;
+                }
+                let a = self.idx_q[i];
+                let quat = match self.joints[i] {
+                    JointType::Spherical => &qs[a..a + 4],
+                    JointType::FreeFlyer => &qs[a + 3..a + 7],
+                    _ => continue,
+                };
+                let n = quat.iter().map(|x| x * x).sum::<f64>().sqrt();
+                ok &= (n - 1.0).abs() <= super::joint::QUAT_NORM_TOL;
+            }
+            if ok {
+                return Ok(());
+            }
+        }
         for i in 1..self.njoints() {
             let (a, n) = (self.idx_q[i], self.nqs[i]);
             self.joints[i].check_configuration(&q.as_slice()[a..a + n]).map_err(|reason| {
