@@ -5,6 +5,7 @@
 
 use super::contact_kin::{Base, Dir, Path, djz_dq};
 use super::zero::idfoza_core;
+use crate::algo::internal::ltl_solve_rows;
 use crate::algo::{Contact, Data};
 use crate::error::{Error, Result};
 use crate::linalg::gemm;
@@ -24,6 +25,7 @@ pub struct ContactData {
     pub jac: DMatrix<f64>,
     /// Drift `J̇_c q̇` (classical point accelerations at `q̈ = 0`), when computed.
     pub drift: DVector<f64>,
+    /// `Y = M⁻¹Jᵀ`, rows padded with zeros to a multiple of 8 (`np × 3 nc`).
     pub(crate) y: DMatrix<f64>,
     pub(crate) lam: DMatrix<f64>,
     pub(crate) del: DMatrix<f64>,
@@ -38,8 +40,14 @@ pub struct ContactData {
     pub(crate) r2: DMatrix<f64>,
     /// `L⁻ᵀ` of the `LᵀDL` factor (column `i` holds row `i` of `L⁻¹`; zero off the tree pattern).
     gt: DMatrix<f64>,
+    /// `Yᵀ = J M⁻¹`, rows padded (`mp × nv`).
+    pub(crate) yt: DMatrix<f64>,
+    /// `Jᵀ` (`nv × 3 nc`).
     jt: DMatrix<f64>,
-    qt: DMatrix<f64>,
+    /// Padded `3 nc`-row work matrix (`mp × 3 nc`): the Delassus matrix, then `Λ`.
+    delp: DMatrix<f64>,
+    /// `[Qᵀ, −Λ]`, rows padded with zeros to a multiple of 8 (`mp × (nv + 3 nc)`).
+    pub(crate) wq: DMatrix<f64>,
     /// `L⁻¹ D⁻¹` (column-major; zero off the tree pattern).
     gd: DMatrix<f64>,
     /// Joints on any contact path (ascending).
@@ -113,8 +121,10 @@ impl ContactData {
             r1: DMatrix::zeros(padded_rows(n + m), n),
             r2: DMatrix::zeros(padded_rows(n + m), m),
             gt: DMatrix::zeros(n, n),
+            yt: DMatrix::zeros(padded_rows(m), n),
             jt: DMatrix::zeros(n, m),
-            qt: DMatrix::zeros(m, n),
+            delp: DMatrix::zeros(padded_rows(m), m),
+            wq: DMatrix::zeros(padded_rows(m), n + m),
             gd: DMatrix::zeros(n, n),
             union_joints,
             local,
@@ -129,7 +139,7 @@ impl ContactData {
             zc: vec![Motion::zero(); model.njoints()],
             jac: DMatrix::zeros(m, n),
             drift: DVector::zeros(m),
-            y: DMatrix::zeros(n, m),
+            y: DMatrix::zeros(padded_rows(n), m),
             lam: DMatrix::zeros(m, m),
             del: DMatrix::zeros(m, m),
             sol: DVector::zeros(n + m),
@@ -266,38 +276,77 @@ pub(crate) fn add_qdd_to_path_acc(model: &Model, cd: &mut ContactData, qdd: &[f6
 }
 
 /// With `data.ltl` (factor of `M`, `M = LᵀDL`) and `cd.jac`: `M⁻¹ = L⁻¹D⁻¹L⁻ᵀ` into
-/// `data.minv` (tree-sparse `L⁻¹`), `Y = M⁻¹Jᵀ`, `Λ = (J Y + μI)⁻¹` (Cholesky), `Q = YΛ` and
+/// `data.minv` (tree-sparse `L⁻¹`), `Y = M⁻¹Jᵀ`, `Λ = (J Y + μI)⁻¹`, `Q = YΛ` (see
+/// [`factor_delassus`]) and
 /// `P = M⁻¹ − YΛYᵀ`, i.e. `R⁻¹ = [[P, Q], [−Qᵀ, Λ]]` by column blocks in `cd.r1`, `cd.r2`
 /// (and `Λ` in `cd.lam`). A rank-deficient contact set is an error naming the contacts (unless
 /// damped).
 pub(crate) fn factor_kkt(model: &Model, data: &mut Data, cd: &mut ContactData) -> Result<()> {
     let n = model.nv;
     let m = cd.dim();
+    factor_delassus(model, data, cd)?;
     minv_from_ltl(model, data, cd);
-    // Y = M⁻¹Jᵀ and the Delassus matrix J M⁻¹ Jᵀ (+ μ I) (only its lower triangle is read).
-    cd.jt.tr_copy_from(&cd.jac);
-    gemm(1.0, &data.minv, &cd.jt, 0.0, &mut cd.y);
+    // r1 = [P; −Qᵀ] with P = M⁻¹ − Y Qᵀ (r2 = [Q; Λ] is filled by factor_delassus).
+    let (rp, mp) = (cd.r1.nrows(), cd.wq.nrows());
     {
-        // Lower triangle, J zero off the paths: del(r1, r2) = Σ_{l ∈ path(r1)} J(r1, l) Y(l, r2).
-        let (jac, y, del) = (cd.jac.as_slice(), cd.y.as_slice(), cd.del.as_mut_slice());
-        assert!(jac.len() == m * n && y.len() == n * m && del.len() == m * m);
-        for (c, path) in cd.paths.iter().enumerate() {
-            for r1 in 3 * c..3 * c + 3 {
-                for r2 in 0..=r1 {
-                    let mut x = 0.0;
-                    // SAFETY: path DoFs are < n, r1, r2 < m (checked lengths above).
-                    unsafe {
-                        for &l in &path.dofs {
-                            x += jac.get_unchecked(r1 + m * l) * y.get_unchecked(l + n * r2);
-                        }
-                    }
-                    del[r1 + m * r2] = x;
-                }
+        let minv = data.minv.as_slice();
+        let wq = cd.wq.as_slice();
+        let r1 = cd.r1.as_mut_slice();
+        for b in 0..n {
+            r1[b * rp..b * rp + n].copy_from_slice(&minv[b * n..(b + 1) * n]);
+            for (x, q) in r1[b * rp + n..b * rp + n + m].iter_mut().zip(&wq[b * mp..b * mp + m]) {
+                *x = -q;
             }
         }
-        for c in 0..m {
-            del[c + m * c] += cd.damping;
+    }
+    // Rows n.. of the padded Y are zero: rows n..np of r1 are unchanged.
+    let np = cd.y.nrows();
+    gemm(-1.0, &cd.y, &cd.wq.view((0, 0), (m, n)), 1.0, &mut cd.r1.rows_mut(0, np));
+    Ok(())
+}
+
+/// `dst[j + ld·i] = src[i + ls·j]` for `i < rows`, `j < cols` (`src` column-major with leading
+/// dimension `ls ≥ rows`, `dst` with `ld ≥ cols`): a transpose between possibly padded matrices.
+pub(crate) fn transpose_into(
+    src: &[f64],
+    ls: usize,
+    (rows, cols): (usize, usize),
+    dst: &mut [f64],
+    ld: usize,
+) {
+    assert!(ls >= rows && ld >= cols && (rows == 0 || dst.len() >= ld * rows));
+    for j in 0..cols {
+        let col = &src[ls * j..ls * j + rows];
+        for (i, x) in col.iter().enumerate() {
+            // SAFETY: j < cols ≤ ld and i < rows, so j + ld i < ld rows ≤ dst.len() (asserted).
+            unsafe { *dst.get_unchecked_mut(j + ld * i) = *x };
         }
+    }
+}
+
+/// With `data.ltl` (factor of `M`) and `cd.jac`: `Yᵀ = (M⁻¹Jᵀ)ᵀ` into `cd.yt` by one
+/// multi-right-hand-side tree-sparse solve (row `x` of `Jᵀ` is column `x` of `J`), `Y` into
+/// `cd.y`, the Delassus matrix `J Y + μI`, `Λ` (Cholesky), `Qᵀ = ΛYᵀ`,
+/// `r2 = [Q; Λ]` and `wq = [Qᵀ, −Λ]` (rows padded). `M⁻¹` is not formed. A rank-deficient
+/// contact set is an error naming the contacts (unless damped).
+pub(crate) fn factor_delassus(model: &Model, data: &Data, cd: &mut ContactData) -> Result<()> {
+    let n = model.nv;
+    let m = cd.dim();
+    let (mp, np) = (cd.yt.nrows(), cd.y.nrows());
+    {
+        let (jac, yt) = (cd.jac.as_slice(), cd.yt.as_mut_slice());
+        for x in 0..n {
+            yt[x * mp..x * mp + m].copy_from_slice(&jac[x * m..x * m + m]);
+        }
+    }
+    ltl_solve_rows(model, &data.ltl, cd.yt.as_mut_slice(), mp, m, 1.0);
+    transpose_into(cd.yt.as_slice(), mp, (m, n), cd.y.as_mut_slice(), np);
+    transpose_into(cd.jac.as_slice(), m, (m, n), cd.jt.as_mut_slice(), n);
+    // Delassus matrix J M⁻¹ Jᵀ = Yᵀ Jᵀ (padded rows), + μ I.
+    gemm(1.0, &cd.yt, &cd.jt, 0.0, &mut cd.delp);
+    copy_block(&cd.delp, 0, 0, &mut cd.del);
+    for c in 0..m {
+        cd.del[(c, c)] += cd.damping;
     }
     let scale = (0..m).map(|i| cd.del[(i, i)].abs()).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
     if !cholesky_inverse_in_place(&mut cd.del, &mut cd.lam, 1e-11 * scale) {
@@ -310,27 +359,24 @@ pub(crate) fn factor_kkt(model: &Model, data: &mut Data, cd: &mut ContactData) -
             ),
         });
     }
-    // r2 = [Q; Λ] with Q = YΛ; r1 = [P; −Qᵀ] with P = M⁻¹ − Y Qᵀ.
-    let rp = cd.r1.nrows();
-    gemm(1.0, &cd.y, &cd.lam, 0.0, &mut cd.r2.rows_mut(0, n));
-    cd.qt.tr_copy_from(&cd.r2.rows(0, n));
+    // wq = [Qᵀ, −Λ] with Qᵀ = ΛYᵀ; r2 = [Q; Λ].
     {
-        let lam = cd.lam.as_slice();
-        let r2 = cd.r2.as_mut_slice();
-        let minv = data.minv.as_slice();
-        let qt = cd.qt.as_slice();
-        let r1 = cd.r1.as_mut_slice();
+        let (lam, delp) = (cd.lam.as_slice(), cd.delp.as_mut_slice());
         for c in 0..m {
-            r2[c * rp + n..c * rp + n + m].copy_from_slice(&lam[c * m..(c + 1) * m]);
-        }
-        for b in 0..n {
-            r1[b * rp..b * rp + n].copy_from_slice(&minv[b * n..(b + 1) * n]);
-            for (x, q) in r1[b * rp + n..b * rp + n + m].iter_mut().zip(&qt[b * m..(b + 1) * m]) {
-                *x = -q;
-            }
+            delp[c * mp..c * mp + m].copy_from_slice(&lam[c * m..(c + 1) * m]);
         }
     }
-    gemm(-1.0, &cd.y, &cd.qt, 1.0, &mut cd.r1.rows_mut(0, n));
+    gemm(1.0, &cd.delp, &cd.yt.rows(0, m), 0.0, &mut cd.wq.columns_mut(0, n));
+    let rp = cd.r2.nrows();
+    transpose_into(cd.wq.as_slice(), mp, (m, n), cd.r2.as_mut_slice(), rp);
+    let lam = cd.lam.as_slice();
+    let (r2, wq) = (cd.r2.as_mut_slice(), cd.wq.as_mut_slice());
+    for c in 0..m {
+        r2[c * rp + n..c * rp + n + m].copy_from_slice(&lam[c * m..(c + 1) * m]);
+        for (w, l) in wq[(n + c) * mp..(n + c) * mp + m].iter_mut().zip(&lam[c * m..(c + 1) * m]) {
+            *w = -l;
+        }
+    }
     Ok(())
 }
 
@@ -456,62 +502,65 @@ fn cholesky_inverse_in_place(a: &mut DMatrix<f64>, inv: &mut DMatrix<f64>, tol: 
     let a = a.as_mut_slice();
     let inv = inv.as_mut_slice();
     assert!(a.len() == m * m && inv.len() == m * m);
-    // Column-oriented (left-looking) factorisation: column j of L is contiguous.
-    for j in 0..m {
-        for k in 0..j {
-            let ajk = a[j + m * k];
-            if ajk != 0.0 {
-                let (head, tail) = a.split_at_mut(m * j);
-                let colk = &head[m * k + j..m * k + m];
-                for (x, l) in tail[j..m].iter_mut().zip(colk) {
-                    *x -= ajk * l;
+    // SAFETY (all get_unchecked below): every index is r + m c with r, c < m, i.e. < m² = the
+    // length of `a` and `inv` (asserted).
+    unsafe {
+        // Column-oriented (left-looking) factorisation: column j of L is contiguous.
+        for j in 0..m {
+            for k in 0..j {
+                let ajk = *a.get_unchecked(j + m * k);
+                if ajk != 0.0 {
+                    for i in j..m {
+                        *a.get_unchecked_mut(i + m * j) -= ajk * *a.get_unchecked(i + m * k);
+                    }
+                }
+            }
+            let d = *a.get_unchecked(j + m * j);
+            if d.is_nan() || d <= tol {
+                return false;
+            }
+            let r = 1.0 / d.sqrt();
+            for i in j..m {
+                *a.get_unchecked_mut(i + m * j) *= r;
+            }
+            // Reciprocal of the diagonal kept in the (unused) upper triangle's diagonal slot.
+            *a.get_unchecked_mut(j + m * j) = r;
+        }
+        // L⁻¹ (lower) into inv by columns: forward substitution with unit vectors (diagonal of
+        // L stored as its reciprocal).
+        for c in 0..m {
+            for i in 0..c {
+                *inv.get_unchecked_mut(i + m * c) = 0.0;
+            }
+            *inv.get_unchecked_mut(c + m * c) = 1.0;
+            for i in c + 1..m {
+                *inv.get_unchecked_mut(i + m * c) = 0.0;
+            }
+            for i in c..m {
+                let x = *inv.get_unchecked(i + m * c) * *a.get_unchecked(i + m * i);
+                *inv.get_unchecked_mut(i + m * c) = x;
+                for r in i + 1..m {
+                    *inv.get_unchecked_mut(r + m * c) -= x * *a.get_unchecked(r + m * i);
                 }
             }
         }
-        let d = a[j + m * j];
-        if d.is_nan() || d <= tol {
-            return false;
-        }
-        let l = d.sqrt();
-        let r = 1.0 / l;
-        for x in &mut a[j + m * j..m * (j + 1)] {
-            *x *= r;
-        }
-    }
-    // L⁻¹ (lower) into inv by columns: forward substitution with unit vectors.
-    inv.fill(0.0);
-    for c in 0..m {
-        let col = &mut inv[m * c..m * (c + 1)];
-        col[c] = 1.0;
-        for i in c..m {
-            let x = col[i] / a[i + m * i];
-            col[i] = x;
-            if x != 0.0 {
-                for (y, l) in col[i + 1..].iter_mut().zip(&a[i + m * i + 1..m * (i + 1)]) {
-                    *y -= x * l;
+        // inv ← L⁻ᵀ L⁻¹ (symmetric): (i, c) = Σ_{k ≥ max(i, c)} L⁻¹_ki L⁻¹_kc, into the strict
+        // upper triangle of `a` (L is no longer needed) and the diagonal of `a`, then copied.
+        for c in 0..m {
+            for i in c..m {
+                let mut x = 0.0;
+                for k in i..m {
+                    x += *inv.get_unchecked(k + m * i) * *inv.get_unchecked(k + m * c);
                 }
+                *a.get_unchecked_mut(c + m * i) = x;
             }
         }
-    }
-    // inv ← L⁻ᵀ L⁻¹ (symmetric): (i, c) = Σ_{k ≥ max(i, c)} L⁻¹_ki L⁻¹_kc.
-    for c in 0..m {
-        for i in c..m {
-            let mut x = 0.0;
-            for k in i..m {
-                x += inv[k + m * i] * inv[k + m * c];
+        for c in 0..m {
+            for i in c..m {
+                let x = *a.get_unchecked(c + m * i);
+                *inv.get_unchecked_mut(i + m * c) = x;
+                *inv.get_unchecked_mut(c + m * i) = x;
             }
-            // Stored in the strict upper triangle first (not yet read), then mirrored.
-            if i == c {
-                a[c + m * c] = x; // diagonal of L is no longer needed after this column
-            } else {
-                inv[c + m * i] = x;
-            }
-        }
-    }
-    for c in 0..m {
-        inv[c + m * c] = a[c + m * c];
-        for i in c + 1..m {
-            inv[i + m * c] = inv[c + m * i];
         }
     }
     true

@@ -10,15 +10,15 @@
 //! `q̇⁻`, so `∂²y/∂q̇⁻²` = 0.
 
 use super::contact::{
-    ContactData, base, copy_block, djw_dq, factor_kkt, fill_rinv, g_matrix, g_matrix_split,
-    path_kinematics, sub_djtl_dq, update_points,
+    ContactData, base, copy_block, djw_dq, factor_delassus, factor_kkt, fill_rinv, g_matrix,
+    g_matrix_split, padded_rows, path_kinematics, sub_djtl_dq, transpose_into, update_points,
 };
 use super::contact_kin::{Dir, djtl_dq, djz_dq};
 use super::id_so::{SoData, id_so_unchecked};
 use super::kkt::{copy_rows_zero_rest, premultiply};
 use super::zero::idfoza_core;
 use crate::algo::Data;
-use crate::algo::internal::{crba_unchecked, ltl_in_place};
+use crate::algo::internal::{crba_unchecked, ltl_in_place, ltl_solve_rows};
 use crate::error::{Error, Result};
 use crate::linalg::gemm;
 use crate::model::{Model, check_vec};
@@ -49,6 +49,12 @@ pub struct ImpactData {
     pub so: Option<ImpactSo>,
     rq: DMatrix<f64>,
     cq: DMatrix<f64>,
+    /// `∂λ̂/∂q` with rows padded (`mp × nv`).
+    bp: DMatrix<f64>,
+    /// `(∂λ̂/∂q)ᵀ` with rows padded (`np × 3 nc`).
+    bt: DMatrix<f64>,
+    /// Right-hand sides stored by rows for the tree-sparse solve (`np × nv`, transposed).
+    zrows: DMatrix<f64>,
     out: DMatrix<f64>,
     dv: DVector<f64>,
     w: DVector<f64>,
@@ -87,6 +93,9 @@ impl ImpactData {
             so: None,
             rq: DMatrix::zeros(n, n),
             cq: DMatrix::zeros(m, n),
+            bp: DMatrix::zeros(padded_rows(m), n),
+            bt: DMatrix::zeros(padded_rows(n), m),
+            zrows: DMatrix::zeros(padded_rows(n), n),
             out: DMatrix::zeros(cd.r1.nrows(), n),
             dv: DVector::zeros(n),
             w: DVector::zeros(n),
@@ -120,6 +129,18 @@ pub fn impact_dynamics(
     q: &DVector<f64>,
     vminus: &DVector<f64>,
 ) -> Result<()> {
+    solve(model, data, im, q, vminus, false)
+}
+
+/// [`impact_dynamics`]; with `full`, also `M⁻¹` and the blocks of `R⁻¹` (second order).
+fn solve(
+    model: &Model,
+    data: &mut Data,
+    im: &mut ImpactData,
+    q: &DVector<f64>,
+    vminus: &DVector<f64>,
+    full: bool,
+) -> Result<()> {
     model.check_q(q)?;
     data.check(model)?;
     check_vec("vminus", vminus, model.nv)?;
@@ -148,14 +169,18 @@ pub fn impact_dynamics(
     path_kinematics(model, data, &mut im.cd, None);
     data.ltl.copy_from(&data.m);
     ltl_in_place(model, &mut data.ltl)?;
-    factor_kkt(model, data, &mut im.cd)?;
+    if full {
+        factor_kkt(model, data, &mut im.cd)?;
+    } else {
+        factor_delassus(model, data, &mut im.cd)?;
+    }
     // λ̂ = −(1 + e) Λ J q̇⁻, q̇⁺ = q̇⁻ + Y λ̂  (block elimination of im_eqn_1).
     let cd = &mut im.cd;
     let m = cd.dim();
     let e = im.restitution;
     cd.sol.rows_mut(0, m).gemv(1.0, &cd.jac, vminus, 0.0);
     im.impulse.gemv(-(1.0 + e), &cd.lam, &cd.sol.rows(0, m), 0.0);
-    im.dv.gemv(1.0, &cd.y, &im.impulse, 0.0);
+    im.dv.gemv(1.0, &cd.y.rows(0, n), &im.impulse, 0.0);
     for i in 0..n {
         im.vplus[i] = vminus[i] + im.dv[i];
         im.w[i] = im.vplus[i] + e * vminus[i];
@@ -181,16 +206,34 @@ pub fn impact_derivatives(
 /// `P M = I − QJ`, `QᵀM = ΛJ`: `∂q̇⁺/∂q̇⁻ = I − (1 + e) Q J`, `∂λ̂/∂q̇⁻ = −(1 + e) Λ J`.
 fn first_order(model: &Model, data: &mut Data, im: &mut ImpactData) {
     let n = model.nv;
+    let m = im.cd.dim();
     let cd = &mut im.cd;
     idfoza_core(model, data, im.dv.as_slice(), &mut im.rq);
     let s = std::mem::take(&mut cd.s);
     sub_djtl_dq(&s, cd, im.impulse.as_slice(), &mut im.rq);
     cd.s = s;
     djw_dq(model, cd, im.w.as_slice(), &mut im.cq);
-    gemm(-1.0, &cd.r1, &im.rq, 0.0, &mut im.out);
-    gemm(-1.0, &cd.r2, &im.cq, 1.0, &mut im.out);
-    copy_block(&im.out, 0, 0, &mut im.dvplus_dq);
-    copy_block(&im.out, n, 0, &mut im.dimpulse_dq);
+    // ∂λ̂/∂q = B = Qᵀa − Λc; with P = M⁻¹ − YQᵀ, ∂q̇⁺/∂q = −(Pa + Qc) = M⁻¹(JᵀB − a): rows of
+    // JᵀB − a (i.e. BᵀJ − aᵀ), then one multi-right-hand-side tree-sparse solve (no M⁻¹;
+    // eq. ID_FO_q_im_1).
+    gemm(1.0, &cd.wq.columns(0, n), &im.rq, 0.0, &mut im.bp);
+    gemm(1.0, &cd.wq.columns(n, m), &im.cq, 1.0, &mut im.bp);
+    copy_block(&im.bp, 0, 0, &mut im.dimpulse_dq);
+    let np = im.zrows.nrows();
+    transpose_into(im.dimpulse_dq.as_slice(), m, (m, n), im.bt.as_mut_slice(), np);
+    gemm(1.0, &im.bt, &cd.jac, 0.0, &mut im.zrows);
+    {
+        let (rq, zr) = (im.rq.as_slice(), im.zrows.as_mut_slice());
+        assert!(rq.len() == n * n && zr.len() == np * n);
+        for l in 0..n {
+            for (x, a) in rq[n * l..n * l + n].iter().enumerate() {
+                zr[l + np * x] -= a;
+            }
+        }
+    }
+    ltl_solve_rows(model, &data.ltl, im.zrows.as_mut_slice(), np, n, 1.0);
+    transpose_into(im.zrows.as_slice(), np, (n, n), im.dvplus_dq.as_mut_slice(), n);
+    // [∂q̇⁺/∂q̇⁻; ∂λ̂/∂q̇⁻] = [I; 0] − (1 + e) [Q; Λ] J (eq. ID_FO_v_im_1).
     gemm(-(1.0 + im.restitution), &cd.r2, &cd.jac, 0.0, &mut im.out);
     copy_block(&im.out, 0, 0, &mut im.dvplus_dvminus);
     copy_block(&im.out, n, 0, &mut im.dimpulse_dvminus);
@@ -224,7 +267,8 @@ fn so_inner(
     q: &DVector<f64>,
     vminus: &DVector<f64>,
 ) -> Result<()> {
-    impact_derivatives(model, data, im, q, vminus)?;
+    solve(model, data, im, q, vminus, true)?;
+    first_order(model, data, im);
     let n = model.nv;
     let m = im.cd.dim();
     // IDSOZA: ∂²(M Δv)/∂q² (q̇ = 0, no gravity, q̈ = Δv).

@@ -176,7 +176,7 @@ fn solve_unchecked(
     cd.sol.rows_mut(0, m).copy_from(&cd.drift);
     cd.sol.rows_mut(0, m).gemv(1.0, &cd.jac, &kd.qdd, 1.0);
     kd.lambda.gemv(-1.0, &cd.lam, &cd.sol.rows(0, m), 0.0);
-    kd.qdd.gemv(1.0, &cd.y, &kd.lambda, 1.0);
+    kd.qdd.gemv(1.0, &cd.y.rows(0, n), &kd.lambda, 1.0);
     Ok(())
 }
 
