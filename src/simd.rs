@@ -55,6 +55,7 @@ mod tests {
         let ten = |x: &Tensor3| x.as_slice().to_vec();
         let mut out = vec![];
         let mut d = Data::new(m);
+        out.push(mat(crate::algo::crba(m, &mut d, q).unwrap()));
         let mut so = SoData::new(m);
         id_so_derivatives(m, &mut d, &mut so, q, v, u, None).unwrap();
         out.extend([

@@ -17,25 +17,12 @@ pub fn crba<'a>(model: &Model, data: &'a mut Data, q: &DVector<f64>) -> Result<&
     Ok(&data.m)
 }
 
-/// Whether the CPU has AVX2 and FMA (checked once; cached by the standard library).
-#[inline]
-fn has_avx2_fma() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
-}
-
 /// CRBA without input checks (`q` of length `nq`, `data` built for `model`). Leaves the
 /// placements `li_m_i`, `o_m_i`, the world-frame subspaces `s_world` and the composite
 /// world-frame inertias `ic_world` in `data`, and `M(q)` in `data.m`.
 pub(crate) fn crba_unchecked(model: &Model, data: &mut Data, q: &DVector<f64>) {
     #[cfg(target_arch = "x86_64")]
-    if has_avx2_fma() {
+    if crate::simd::avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
         unsafe { crba_avx2(model, data, q) };
         return;
@@ -104,7 +91,7 @@ impl Kern for Portable {
     }
 }
 
-/// AVX2/FMA kernel; only used after `has_avx2_fma()` returned true.
+/// AVX2/FMA kernel; only used after `crate::simd::avx2_fma()` returned true.
 #[cfg(target_arch = "x86_64")]
 struct Avx2;
 
