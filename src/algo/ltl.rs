@@ -22,6 +22,7 @@ pub fn factorize_ltl(model: &Model, data: &mut Data) -> Result<()> {
 pub(crate) fn ltl_in_place(model: &Model, h: &mut DMatrix<f64>) -> Result<()> {
     let n = model.nv;
     let h = h.as_mut_slice();
+    assert!(h.len() == n * n);
     let scale = (0..n).map(|k| h[k + n * k].abs()).fold(0.0, f64::max);
     for k in (0..n).rev() {
         let hkk = h[k + n * k];
@@ -36,18 +37,22 @@ pub(crate) fn ltl_in_place(model: &Model, h: &mut DMatrix<f64>) -> Result<()> {
             });
         }
         let anc = model.ancestors_of_dof(k);
+        let rk = 1.0 / hkk;
+        let hp = h.as_mut_ptr();
         // SAFETY: k < n and its ancestors i, j < k come from `Model::dof_ancestors`, so every
-        // index below is < n² = h.len() (asserted by the slice length check).
-        assert!(h.len() == n * n);
+        // index below is < n² = h.len() (asserted above).
         for (pos, &i) in anc.iter().enumerate() {
             unsafe {
-                let a = *h.get_unchecked(i + n * k) / hkk;
+                let hk = hp.add(n * k);
+                let hi = hp.add(n * i);
+                let hik = *hk.add(i);
+                let a = hik * rk;
                 // H(i, i) and H(i, j) for the ancestors j of i (the tail of k's list).
-                *h.get_unchecked_mut(i + n * i) -= a * *h.get_unchecked(i + n * k);
+                *hi.add(i) -= a * hik;
                 for &j in anc.get_unchecked(pos + 1..) {
-                    *h.get_unchecked_mut(j + n * i) -= a * *h.get_unchecked(j + n * k);
+                    *hi.add(j) -= a * *hk.add(j);
                 }
-                *h.get_unchecked_mut(i + n * k) = a;
+                *hk.add(i) = a;
             }
         }
     }
