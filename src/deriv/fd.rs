@@ -1,7 +1,7 @@
 //! Forward-dynamics derivatives: first order (`∂q̈/∂u = −M⁻¹ ∂ID/∂u`, eq. jain_FO_eqn) and
 //! second order (eq. eqn_FD_SO_43), the latter with IDFOZA for the `∂M/∂q` products.
 
-use super::id_fo::id_derivatives_unchecked;
+use super::id_fo::id_derivatives_placed;
 use super::id_so::{SoData, id_so_unchecked};
 use super::zero::{Idfoza4Ws, idfoza4_core};
 use crate::algo::Data;
@@ -78,7 +78,8 @@ pub fn fd_derivatives(
     check_fext(model, fext)?;
     aba_unchecked(model, data, q, v, tau, fext)?;
     let qdd = std::mem::replace(&mut data.qdd, DVector::zeros(0));
-    id_derivatives_unchecked(model, data, q, v, &qdd, fext);
+    // ABA has just computed the placements at q.
+    id_derivatives_placed(model, data, v, &qdd, fext);
     data.qdd = qdd;
     fd_fo_from_id(model, data)
 }
