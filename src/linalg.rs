@@ -254,43 +254,74 @@ unsafe fn transpose_tiles(
     }
 }
 
+/// 4×4 transposition of the columns `c` into rows.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+fn tile4(c: [std::arch::x86_64::__m256d; 4]) -> [std::arch::x86_64::__m256d; 4] {
+    use std::arch::x86_64::*;
+    let t0 = _mm256_unpacklo_pd(c[0], c[1]); // c0[0] c1[0] c0[2] c1[2]
+    let t1 = _mm256_unpackhi_pd(c[0], c[1]); // c0[1] c1[1] c0[3] c1[3]
+    let t2 = _mm256_unpacklo_pd(c[2], c[3]);
+    let t3 = _mm256_unpackhi_pd(c[2], c[3]);
+    [
+        _mm256_permute2f128_pd(t0, t2, 0x20),
+        _mm256_permute2f128_pd(t1, t3, 0x20),
+        _mm256_permute2f128_pd(t0, t2, 0x31),
+        _mm256_permute2f128_pd(t1, t3, 0x31),
+    ]
+}
+
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
 unsafe fn transpose_avx(src: &[f64], lds: usize, m: usize, n: usize, dst: &mut [f64], ldd: usize) {
     use std::arch::x86_64::*;
-    let m4 = m - m % 4;
-    let n4 = n - n % 4;
     let ps = src.as_ptr();
     let pd = dst.as_mut_ptr();
-    // SAFETY: i + 3 < m4 ≤ m and j + 3 < n4 ≤ n, so every access is inside the validated
-    // blocks.
+    // Lane masks with the first `c` lanes set, c = 0..=4.
+    let masks = [
+        _mm256_setr_epi64x(0, 0, 0, 0),
+        _mm256_setr_epi64x(-1, 0, 0, 0),
+        _mm256_setr_epi64x(-1, -1, 0, 0),
+        _mm256_setr_epi64x(-1, -1, -1, 0),
+        _mm256_setr_epi64x(-1, -1, -1, -1),
+    ];
+    // SAFETY: full tiles have i + 3 < m and j + 3 < n; ragged tiles only load rows i + r < m
+    // of columns j + u < n (masked) and store lanes j + u < n of rows i + r < m, so every
+    // access is inside the validated blocks.
     unsafe {
         // Column blocks of 4, rows by 4×4 tiles; the inner loop walks down 4 source columns.
         let mut j = 0;
-        while j < n4 {
+        while j < n {
+            let jn = (n - j).min(4);
             let mut i = 0;
-            while i < m4 {
-                let c0 = _mm256_loadu_pd(ps.add(i + lds * j));
-                let c1 = _mm256_loadu_pd(ps.add(i + lds * (j + 1)));
-                let c2 = _mm256_loadu_pd(ps.add(i + lds * (j + 2)));
-                let c3 = _mm256_loadu_pd(ps.add(i + lds * (j + 3)));
-                let t0 = _mm256_unpacklo_pd(c0, c1); // c0[0] c1[0] c0[2] c1[2]
-                let t1 = _mm256_unpackhi_pd(c0, c1); // c0[1] c1[1] c0[3] c1[3]
-                let t2 = _mm256_unpacklo_pd(c2, c3);
-                let t3 = _mm256_unpackhi_pd(c2, c3);
-                let r0 = _mm256_permute2f128_pd(t0, t2, 0x20);
-                let r1 = _mm256_permute2f128_pd(t1, t3, 0x20);
-                let r2 = _mm256_permute2f128_pd(t0, t2, 0x31);
-                let r3 = _mm256_permute2f128_pd(t1, t3, 0x31);
-                _mm256_storeu_pd(pd.add(j + ldd * i), r0);
-                _mm256_storeu_pd(pd.add(j + ldd * (i + 1)), r1);
-                _mm256_storeu_pd(pd.add(j + ldd * (i + 2)), r2);
-                _mm256_storeu_pd(pd.add(j + ldd * (i + 3)), r3);
+            while i < m {
+                let im = (m - i).min(4);
+                if jn == 4 && im == 4 {
+                    let r = tile4([
+                        _mm256_loadu_pd(ps.add(i + lds * j)),
+                        _mm256_loadu_pd(ps.add(i + lds * (j + 1))),
+                        _mm256_loadu_pd(ps.add(i + lds * (j + 2))),
+                        _mm256_loadu_pd(ps.add(i + lds * (j + 3))),
+                    ]);
+                    for (u, ru) in r.iter().enumerate() {
+                        _mm256_storeu_pd(pd.add(j + ldd * (i + u)), *ru);
+                    }
+                } else {
+                    let rm = masks[im];
+                    let mut c = [_mm256_setzero_pd(); 4];
+                    for (u, cu) in c.iter_mut().enumerate().take(jn) {
+                        *cu = _mm256_maskload_pd(ps.add(i + lds * (j + u)), rm);
+                    }
+                    let r = tile4(c);
+                    let cm = masks[jn];
+                    for (u, ru) in r.iter().enumerate().take(im) {
+                        _mm256_maskstore_pd(pd.add(j + ldd * (i + u)), cm, *ru);
+                    }
+                }
                 i += 4;
             }
             j += 4;
         }
-        transpose_tiles(src, lds, m4, m, 0, n, dst, ldd);
-        transpose_tiles(src, lds, 0, m4, n4, n, dst, ldd);
     }
 }
