@@ -192,26 +192,50 @@ unsafe fn gemm_generic(
 /// 4×4 register tiles (AVX) or 8×8 cache tiles.
 pub(crate) fn transpose(src: &[f64], m: usize, n: usize, dst: &mut [f64]) {
     assert!(src.len() == m * n && dst.len() == m * n, "transpose: dimension mismatch");
+    transpose_strided(src, m, m, n, dst, n);
+}
+
+/// `dst[j + ldd·i] ← src[i + lds·j]` for `i < m`, `j < n`: the transposition of an `m×n`
+/// column-major block with leading dimension `lds` into one with leading dimension `ldd`.
+pub(crate) fn transpose_strided(
+    src: &[f64],
+    lds: usize,
+    m: usize,
+    n: usize,
+    dst: &mut [f64],
+    ldd: usize,
+) {
+    if m == 0 || n == 0 {
+        return;
+    }
+    assert!(
+        m <= lds && n <= ldd && src.len() >= (n - 1) * lds + m && dst.len() >= (m - 1) * ldd + n,
+        "transpose: dimension mismatch"
+    );
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx") {
         // SAFETY: AVX is available; the lengths are asserted above.
-        unsafe { return transpose_avx(src, m, n, dst) };
+        unsafe { return transpose_avx(src, lds, m, n, dst, ldd) };
     }
-    transpose_tiles(src, 0, m, 0, n, m, n, dst);
+    // SAFETY: the lengths are asserted above.
+    unsafe { transpose_tiles(src, lds, 0, m, 0, n, dst, ldd) };
 }
 
-/// Scalar transposition of the block `rows i0..i1 × cols j0..j1` of `src` (`m×n`).
+/// Scalar transposition of the block `rows i0..i1 × cols j0..j1` (see [`transpose_strided`]).
+///
+/// # Safety
+/// `i1 ≤ m`, `j1 ≤ n` for dimensions validated as in [`transpose_strided`].
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn transpose_tiles(
+unsafe fn transpose_tiles(
     src: &[f64],
+    lds: usize,
     i0: usize,
     i1: usize,
     j0: usize,
     j1: usize,
-    m: usize,
-    n: usize,
     dst: &mut [f64],
+    ldd: usize,
 ) {
     const B: usize = 8;
     for jb in (j0..j1).step_by(B) {
@@ -220,49 +244,84 @@ fn transpose_tiles(
             let ie = (ib + B).min(i1);
             for j in jb..je {
                 for i in ib..ie {
-                    dst[j + n * i] = src[i + m * j];
+                    // SAFETY: i < m, j < n (caller).
+                    unsafe {
+                        *dst.get_unchecked_mut(j + ldd * i) = *src.get_unchecked(i + lds * j)
+                    };
                 }
             }
         }
     }
 }
 
+/// 4×4 transposition of the columns `c` into rows.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
-unsafe fn transpose_avx(src: &[f64], m: usize, n: usize, dst: &mut [f64]) {
+#[inline]
+fn tile4(c: [std::arch::x86_64::__m256d; 4]) -> [std::arch::x86_64::__m256d; 4] {
     use std::arch::x86_64::*;
-    let m4 = m - m % 4;
-    let n4 = n - n % 4;
+    let t0 = _mm256_unpacklo_pd(c[0], c[1]); // c0[0] c1[0] c0[2] c1[2]
+    let t1 = _mm256_unpackhi_pd(c[0], c[1]); // c0[1] c1[1] c0[3] c1[3]
+    let t2 = _mm256_unpacklo_pd(c[2], c[3]);
+    let t3 = _mm256_unpackhi_pd(c[2], c[3]);
+    [
+        _mm256_permute2f128_pd(t0, t2, 0x20),
+        _mm256_permute2f128_pd(t1, t3, 0x20),
+        _mm256_permute2f128_pd(t0, t2, 0x31),
+        _mm256_permute2f128_pd(t1, t3, 0x31),
+    ]
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn transpose_avx(src: &[f64], lds: usize, m: usize, n: usize, dst: &mut [f64], ldd: usize) {
+    use std::arch::x86_64::*;
     let ps = src.as_ptr();
     let pd = dst.as_mut_ptr();
-    // SAFETY: i + 3 < m4 ≤ m and j + 3 < n4 ≤ n, so every access is inside the m·n slices.
+    // Lane masks with the first `c` lanes set, c = 0..=4.
+    let masks = [
+        _mm256_setr_epi64x(0, 0, 0, 0),
+        _mm256_setr_epi64x(-1, 0, 0, 0),
+        _mm256_setr_epi64x(-1, -1, 0, 0),
+        _mm256_setr_epi64x(-1, -1, -1, 0),
+        _mm256_setr_epi64x(-1, -1, -1, -1),
+    ];
+    // SAFETY: full tiles have i + 3 < m and j + 3 < n; ragged tiles only load rows i + r < m
+    // of columns j + u < n (masked) and store lanes j + u < n of rows i + r < m, so every
+    // access is inside the validated blocks.
     unsafe {
         // Column blocks of 4, rows by 4×4 tiles; the inner loop walks down 4 source columns.
         let mut j = 0;
-        while j < n4 {
+        while j < n {
+            let jn = (n - j).min(4);
             let mut i = 0;
-            while i < m4 {
-                let c0 = _mm256_loadu_pd(ps.add(i + m * j));
-                let c1 = _mm256_loadu_pd(ps.add(i + m * (j + 1)));
-                let c2 = _mm256_loadu_pd(ps.add(i + m * (j + 2)));
-                let c3 = _mm256_loadu_pd(ps.add(i + m * (j + 3)));
-                let t0 = _mm256_unpacklo_pd(c0, c1); // c0[0] c1[0] c0[2] c1[2]
-                let t1 = _mm256_unpackhi_pd(c0, c1); // c0[1] c1[1] c0[3] c1[3]
-                let t2 = _mm256_unpacklo_pd(c2, c3);
-                let t3 = _mm256_unpackhi_pd(c2, c3);
-                let r0 = _mm256_permute2f128_pd(t0, t2, 0x20);
-                let r1 = _mm256_permute2f128_pd(t1, t3, 0x20);
-                let r2 = _mm256_permute2f128_pd(t0, t2, 0x31);
-                let r3 = _mm256_permute2f128_pd(t1, t3, 0x31);
-                _mm256_storeu_pd(pd.add(j + n * i), r0);
-                _mm256_storeu_pd(pd.add(j + n * (i + 1)), r1);
-                _mm256_storeu_pd(pd.add(j + n * (i + 2)), r2);
-                _mm256_storeu_pd(pd.add(j + n * (i + 3)), r3);
+            while i < m {
+                let im = (m - i).min(4);
+                if jn == 4 && im == 4 {
+                    let r = tile4([
+                        _mm256_loadu_pd(ps.add(i + lds * j)),
+                        _mm256_loadu_pd(ps.add(i + lds * (j + 1))),
+                        _mm256_loadu_pd(ps.add(i + lds * (j + 2))),
+                        _mm256_loadu_pd(ps.add(i + lds * (j + 3))),
+                    ]);
+                    for (u, ru) in r.iter().enumerate() {
+                        _mm256_storeu_pd(pd.add(j + ldd * (i + u)), *ru);
+                    }
+                } else {
+                    let rm = masks[im];
+                    let mut c = [_mm256_setzero_pd(); 4];
+                    for (u, cu) in c.iter_mut().enumerate().take(jn) {
+                        *cu = _mm256_maskload_pd(ps.add(i + lds * (j + u)), rm);
+                    }
+                    let r = tile4(c);
+                    let cm = masks[jn];
+                    for (u, ru) in r.iter().enumerate().take(im) {
+                        _mm256_maskstore_pd(pd.add(j + ldd * (i + u)), cm, *ru);
+                    }
+                }
                 i += 4;
             }
             j += 4;
         }
     }
-    transpose_tiles(src, m4, m, 0, n, m, n, dst);
-    transpose_tiles(src, 0, m4, n4, n, m, n, dst);
 }

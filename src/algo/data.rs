@@ -83,6 +83,8 @@ pub struct Data {
     /// Set by the first-order IDSVA forward pass: the model has a root free-flyer
     /// (`kinematics::root_free_flyer`).
     pub(crate) ff_root: bool,
+    /// Forward-dynamics derivative workspace (model-constant descendant lists, solve buffer).
+    pub(crate) fd_ws: super::ltl::FdWs,
 }
 
 impl Data {
@@ -142,6 +144,7 @@ impl Data {
             z_fc: vec![Force::zero(); n],
             psid_sdot: vec![Motion::zero(); nv],
             ff_root: false,
+            fd_ws: super::ltl::FdWs::new(model),
         }
     }
 }

@@ -22,6 +22,7 @@ pub fn factorize_ltl(model: &Model, data: &mut Data) -> Result<()> {
 pub(crate) fn ltl_in_place(model: &Model, h: &mut DMatrix<f64>) -> Result<()> {
     let n = model.nv;
     let h = h.as_mut_slice();
+    assert!(h.len() == n * n);
     let scale = (0..n).map(|k| h[k + n * k].abs()).fold(0.0, f64::max);
     for k in (0..n).rev() {
         let hkk = h[k + n * k];
@@ -36,18 +37,22 @@ pub(crate) fn ltl_in_place(model: &Model, h: &mut DMatrix<f64>) -> Result<()> {
             });
         }
         let anc = model.ancestors_of_dof(k);
+        let rk = 1.0 / hkk;
+        let hp = h.as_mut_ptr();
         // SAFETY: k < n and its ancestors i, j < k come from `Model::dof_ancestors`, so every
-        // index below is < n² = h.len() (asserted by the slice length check).
-        assert!(h.len() == n * n);
+        // index below is < n² = h.len() (asserted above).
         for (pos, &i) in anc.iter().enumerate() {
             unsafe {
-                let a = *h.get_unchecked(i + n * k) / hkk;
+                let hk = hp.add(n * k);
+                let hi = hp.add(n * i);
+                let hik = *hk.add(i);
+                let a = hik * rk;
                 // H(i, i) and H(i, j) for the ancestors j of i (the tail of k's list).
-                *h.get_unchecked_mut(i + n * i) -= a * *h.get_unchecked(i + n * k);
+                *hi.add(i) -= a * hik;
                 for &j in anc.get_unchecked(pos + 1..) {
-                    *h.get_unchecked_mut(j + n * i) -= a * *h.get_unchecked(j + n * k);
+                    *hi.add(j) -= a * *hk.add(j);
                 }
-                *h.get_unchecked_mut(i + n * k) = a;
+                *hk.add(i) = a;
             }
         }
     }
@@ -101,114 +106,6 @@ pub fn solve_ltl_matrix(model: &Model, data: &Data, b: &mut DMatrix<f64>) -> Res
         ltl_solve_in_place(model, &data.ltl, col.as_mut_slice());
     }
     Ok(())
-}
-
-/// `X ← α M⁻¹ X` for an `nv × len` matrix `X` stored **by rows**: row `i` is
-/// `x[i·ld .. i·ld + len]` (e.g. the transpose of a column-major right-hand side). With the
-/// tree-sparse `LᵀDL` factor `h`, every elementary step of the sweeps `Lᵀ y = b`, `z = D⁻¹ y`,
-/// `L x = z` is an axpy between two contiguous rows, so the cost is `≈ 2 (Σ depths) len` FMAs,
-/// vectorised along the rows.
-pub(crate) fn ltl_solve_rows(
-    model: &Model,
-    h: &DMatrix<f64>,
-    x: &mut [f64],
-    ld: usize,
-    len: usize,
-    alpha: f64,
-) {
-    let n = model.nv;
-    let h = h.as_slice();
-    assert!(
-        h.len() == n * n && len <= ld && (n == 0 || (n - 1) * ld + len <= x.len()),
-        "ltl_solve_rows: dimension mismatch"
-    );
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-        // SAFETY: the CPU supports the enabled features (checked just above); every row
-        // `x[i·ld .. i·ld + len]`, i < n, lies in `x` (asserted), ancestors j < i < n index `h`
-        // within n², and rows j < i never overlap row i since len ≤ ld.
-        unsafe { return solve_rows_avx2(model, h, x.as_mut_ptr(), ld, len, alpha) };
-    }
-    solve_rows_impl::<false>(model, h, x, ld, len, alpha)
-}
-
-/// AVX2 + FMA version of [`solve_rows_impl`]: rows processed by chunks of 8 vectors kept in
-/// registers, the ragged end with masked loads and stores.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn solve_rows_avx2(
-    model: &Model,
-    h: &[f64],
-    x: *mut f64,
-    ld: usize,
-    len: usize,
-    alpha: f64,
-) {
-    use std::arch::x86_64::*;
-    const G: usize = 8;
-    let n = model.nv;
-    let h = h.as_ptr();
-    let nfull = len / 4;
-    let rem = len % 4;
-    let m = |k: usize| if rem > k { -1i64 } else { 0 };
-    let mask = _mm256_setr_epi64x(m(0), m(1), m(2), 0);
-    let starts = &model.dof_ancestors_start;
-    let all_anc = &model.dof_ancestors;
-    unsafe {
-        // Lᵀ y = b: row i (final once all its descendants are done) is pushed to its ancestors.
-        for i in (1..n).rev() {
-            let anc = all_anc.get_unchecked(*starts.get_unchecked(i)..*starts.get_unchecked(i + 1));
-            if anc.is_empty() {
-                continue;
-            }
-            let xi = x.add(i * ld);
-            let hi = h.add(n * i);
-            let mut g = 0;
-            while g + G <= nfull {
-                let mut s = [_mm256_setzero_pd(); G];
-                for (u, su) in s.iter_mut().enumerate() {
-                    *su = _mm256_loadu_pd(xi.add(4 * (g + u)));
-                }
-                for &j in anc {
-                    let l = _mm256_broadcast_sd(&*hi.add(j));
-                    let xj = x.add(j * ld + 4 * g);
-                    for (u, su) in s.iter().enumerate() {
-                        let p = xj.add(4 * u);
-                        _mm256_storeu_pd(p, _mm256_fnmadd_pd(l, *su, _mm256_loadu_pd(p)));
-                    }
-                }
-                g += G;
-            }
-            let gs = nfull - g;
-            if gs > 0 || rem > 0 {
-                let mut s = [_mm256_setzero_pd(); G];
-                for (u, su) in s.iter_mut().enumerate().take(gs) {
-                    *su = _mm256_loadu_pd(xi.add(4 * (g + u)));
-                }
-                let st = _mm256_maskload_pd(xi.add(4 * nfull), mask);
-                for &j in anc {
-                    let l = _mm256_broadcast_sd(&*hi.add(j));
-                    let xj = x.add(j * ld + 4 * g);
-                    for (u, su) in s.iter().enumerate().take(gs) {
-                        let p = xj.add(4 * u);
-                        _mm256_storeu_pd(p, _mm256_fnmadd_pd(l, *su, _mm256_loadu_pd(p)));
-                    }
-                    if rem > 0 {
-                        let p = xj.add(4 * gs);
-                        let d = _mm256_maskload_pd(p, mask);
-                        _mm256_maskstore_pd(p, mask, _mm256_fnmadd_pd(l, st, d));
-                    }
-                }
-            }
-        }
-        // z = α D⁻¹ y, then L x = z: row i pulls its (already final) ancestors.
-        for i in 0..n {
-            let anc = all_anc.get_unchecked(*starts.get_unchecked(i)..*starts.get_unchecked(i + 1));
-            let hi = h.add(n * i);
-            let dinv = alpha / *hi.add(i);
-            pull_row(x, ld, len, mask, i, anc, |j| *hi.add(j), dinv);
-        }
-    }
 }
 
 /// Row `i ← scale·row i − Σ_{j ∈ others} coef(j) row j` (AVX2), by chunks of 8, 4, 2, 1
@@ -514,6 +411,164 @@ fn solve_rows_impl<const FMA: bool>(
                     *d = fnma::<FMA>(l, *s, *d);
                 }
             }
+        }
+    }
+}
+
+/// Model-constant workspace of the forward-dynamics derivatives: the descendant lists, the
+/// end of each DoF's index range `sub_end[j]` (one past its last descendant, so that every
+/// descendant of `j` lies in `j..sub_end[j]`), and the `nv × 3nv` row-stored right-hand sides.
+#[derive(Clone, Debug)]
+pub(crate) struct FdWs {
+    pub(crate) desc: DofDescendants,
+    pub(crate) sub_end: Vec<usize>,
+    pub(crate) x: Vec<f64>,
+}
+
+impl FdWs {
+    pub(crate) fn new(model: &Model) -> Self {
+        let n = model.nv;
+        let desc = DofDescendants::new(model);
+        let v = desc.view();
+        let sub_end = (0..n)
+            .map(|j| {
+                v.list[v.starts[j]..v.starts[j + 1]].iter().map(|&i| i + 1).max().unwrap_or(j + 1)
+            })
+            .collect();
+        Self { desc, sub_end, x: vec![0.0; 3 * n * n] }
+    }
+}
+
+/// The three forward-dynamics solves in one: `x` holds `nv` rows of length `3nv` (row `i` at
+/// `x[3nv·i..]`): columns `0..2nv` a general right-hand side `B` (overwritten by `−M⁻¹ B`),
+/// columns `2nv..3nv` the identity, of which only the upper triangle (`k ≥ i` in row `i`) must
+/// be initialised (zeros, ones on the diagonal) and is overwritten by the upper triangle of
+/// `M⁻¹`. The identity part exploits `(Lᵀ)⁻¹ e_k` being zero outside `k`'s ancestors: in the
+/// first sweep row `i` only touches columns `i..sub_end[i]`, and the second sweep only forms
+/// the upper triangle (which depends on the upper triangle alone, ancestors having lower index).
+pub(crate) fn ltl_solve_fd(model: &Model, h: &DMatrix<f64>, ws: &mut FdWs) {
+    let n = model.nv;
+    let hs = h.as_slice();
+    let v = ws.desc.view();
+    assert!(
+        hs.len() == n * n && ws.x.len() == 3 * n * n && v.nv == n && ws.sub_end.len() == n,
+        "ltl_solve_fd: dimension mismatch"
+    );
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU supports the enabled features; every row segment addressed below
+        // lies in row i of `x` (columns < 3n), ancestor/descendant indices are < n, and
+        // `sub_end[i] ≤ n` (built from descendant indices < n).
+        unsafe { return solve_fd_avx2(model, hs, v, &ws.sub_end, ws.x.as_mut_ptr()) };
+    }
+    solve_fd_scalar(model, hs, v, &ws.sub_end, &mut ws.x);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn tail_mask(len: usize) -> std::arch::x86_64::__m256i {
+    let rem = len % 4;
+    let m = |k: usize| if rem > k { -1i64 } else { 0 };
+    // SAFETY: plain register construction (SSE2/AVX baseline on x86_64 with AVX enabled at
+    // the call sites).
+    unsafe { std::arch::x86_64::_mm256_setr_epi64x(m(0), m(1), m(2), 0) }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn solve_fd_avx2(
+    model: &Model,
+    h: &[f64],
+    desc: DescView<'_>,
+    sub_end: &[usize],
+    x: *mut f64,
+) {
+    use std::arch::x86_64::*;
+    let n = model.nv;
+    let ld = 3 * n;
+    let w = 2 * n;
+    let h = h.as_ptr();
+    let mask_w = tail_mask(w);
+    let starts = &model.dof_ancestors_start;
+    let all_anc = &model.dof_ancestors;
+    unsafe {
+        let xi0 = x.add(w);
+        for j in (0..n).rev() {
+            // Lᵀ y = b, general part: row j pulls its (final) descendants, L_ij at (j, i).
+            let d = desc
+                .list
+                .get_unchecked(*desc.starts.get_unchecked(j)..*desc.starts.get_unchecked(j + 1));
+            if !d.is_empty() {
+                let hj = h.add(j);
+                pull_row(x, ld, w, mask_w, j, d, |i| *hj.add(n * i), 1.0);
+            }
+            // Identity part: the final row j pushes its columns j..sub_end[j] to its ancestors.
+            let anc = all_anc.get_unchecked(*starts.get_unchecked(j)..*starts.get_unchecked(j + 1));
+            if anc.is_empty() {
+                continue;
+            }
+            let len = *sub_end.get_unchecked(j) - j;
+            let nfull = len / 4;
+            let mask = tail_mask(len);
+            let src = xi0.add(j * ld + j);
+            let hj = h.add(n * j);
+            for &a in anc {
+                let l = _mm256_broadcast_sd(&*hj.add(a));
+                let dst = xi0.add(a * ld + j);
+                for u in 0..nfull {
+                    let p = dst.add(4 * u);
+                    let s = _mm256_loadu_pd(src.add(4 * u));
+                    _mm256_storeu_pd(p, _mm256_fnmadd_pd(l, s, _mm256_loadu_pd(p)));
+                }
+                if len % 4 != 0 {
+                    let p = dst.add(4 * nfull);
+                    let s = _mm256_maskload_pd(src.add(4 * nfull), mask);
+                    let dv = _mm256_maskload_pd(p, mask);
+                    _mm256_maskstore_pd(p, mask, _mm256_fnmadd_pd(l, s, dv));
+                }
+            }
+        }
+        // z = D⁻¹ y (times −1 on the general part), then L x = z: row i pulls its ancestors;
+        // on the identity part only columns i..n.
+        for i in 0..n {
+            let anc = all_anc.get_unchecked(*starts.get_unchecked(i)..*starts.get_unchecked(i + 1));
+            let hi = h.add(n * i);
+            let dinv = 1.0 / *hi.add(i);
+            pull_row(x, ld, w, mask_w, i, anc, |j| *hi.add(j), -dinv);
+            let len = n - i;
+            pull_row(xi0.add(i), ld, len, tail_mask(len), i, anc, |j| *hi.add(j), dinv);
+        }
+    }
+}
+
+/// Portable version of [`solve_fd_avx2`] (same sweeps, scalar).
+fn solve_fd_scalar(model: &Model, h: &[f64], desc: DescView<'_>, sub_end: &[usize], x: &mut [f64]) {
+    let n = model.nv;
+    let ld = 3 * n;
+    let w = 2 * n;
+    for j in (0..n).rev() {
+        for &i in &desc.list[desc.starts[j]..desc.starts[j + 1]] {
+            let l = h[j + n * i];
+            for c in 0..w {
+                x[j * ld + c] -= l * x[i * ld + c];
+            }
+        }
+        for &a in model.ancestors_of_dof(j) {
+            let l = h[a + n * j];
+            for c in w + j..w + sub_end[j] {
+                x[a * ld + c] -= l * x[j * ld + c];
+            }
+        }
+    }
+    for i in 0..n {
+        let dinv = 1.0 / h[i + n * i];
+        let anc = model.ancestors_of_dof(i);
+        for (c, s) in (0..w).map(|c| (c, -dinv)).chain((w + i..ld).map(|c| (c, dinv))) {
+            let mut acc = s * x[i * ld + c];
+            for &j in anc {
+                acc -= h[j + n * i] * x[j * ld + c];
+            }
+            x[i * ld + c] = acc;
         }
     }
 }

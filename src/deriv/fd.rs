@@ -1,52 +1,20 @@
 //! Forward-dynamics derivatives: first order (`∂q̈/∂u = −M⁻¹ ∂ID/∂u`, eq. jain_FO_eqn) and
 //! second order (eq. eqn_FD_SO_43), the latter with IDFOZA for the `∂M/∂q` products.
 
-use super::id_fo::id_derivatives_unchecked;
+use super::id_fo::id_derivatives_placed;
 use super::id_so::{SoData, id_so_unchecked};
 use super::zero::{Idfoza4Ws, idfoza4_core};
 use crate::algo::Data;
 use crate::algo::internal::{
-    DescView, DofDescendants, aba_unchecked, check_fext, fill_descendants, ltl_in_place,
-    ltl_solve_rows, ltl_solve_rows_desc,
+    DescView, DofDescendants, aba_unchecked, check_fext, ltl_in_place, ltl_solve_fd,
+    ltl_solve_rows_desc,
 };
 use crate::error::Result;
-use crate::linalg::transpose;
+use crate::linalg::{transpose, transpose_strided};
 use crate::model::{Model, check_vec};
 use crate::spatial::Force;
 use crate::tensor::Tensor3;
 use nalgebra::{DMatrix, DVector};
-
-/// `dst ← α M⁻¹ src` for square `nv×nv` matrices: the tree-sparse multi-right-hand-side solve
-/// runs on `srcᵀ` (rows contiguous) held in `scratch`, then the result is transposed back.
-fn solve_square(
-    model: &Model,
-    ltl: &DMatrix<f64>,
-    desc: Option<DescView<'_>>,
-    src: &DMatrix<f64>,
-    scratch: &mut DMatrix<f64>,
-    dst: &mut DMatrix<f64>,
-    alpha: f64,
-) {
-    let n = model.nv;
-    transpose(src.as_slice(), n, n, scratch.as_mut_slice());
-    solve_rows(model, ltl, desc, scratch.as_mut_slice(), n, alpha);
-    transpose(scratch.as_slice(), n, n, dst.as_mut_slice());
-}
-
-/// `X ← α M⁻¹ X` on the `nv×nv` row-stored `x`, pulling in both sweeps when `desc` is given.
-fn solve_rows(
-    model: &Model,
-    ltl: &DMatrix<f64>,
-    desc: Option<DescView<'_>>,
-    x: &mut [f64],
-    n: usize,
-    alpha: f64,
-) {
-    match desc {
-        Some(d) => ltl_solve_rows_desc(model, ltl, d, x, n, n, alpha),
-        None => ltl_solve_rows(model, ltl, x, n, n, alpha),
-    }
-}
 
 /// FO FD part shared by first and second order: from `data.m`, `data.dtau_dq`, `data.dtau_dv`
 /// (at `q̈ = FD`), factorise `M` and fill `dqdd_dq`, `dqdd_dv`, `minv`.
@@ -54,21 +22,40 @@ fn fd_fo_from_id(model: &Model, data: &mut Data) -> Result<()> {
     let n = model.nv;
     data.ltl.as_mut_slice().copy_from_slice(data.m.as_slice());
     ltl_in_place(model, &mut data.ltl)?;
-    // Descendant lists on the stack (no allocation) when the tree is small enough.
-    let mut starts = [std::mem::MaybeUninit::uninit(); 129];
-    let mut list = [std::mem::MaybeUninit::uninit(); 2048];
-    let desc = fill_descendants(model, &mut starts, &mut list);
-    // ∂q̈/∂q = −M⁻¹ ∂τ/∂q, ∂q̈/∂q̇ = −M⁻¹ ∂τ/∂q̇ (eq. jain_FO_eqn) by tree-sparse solves
-    // (`minv` serves as scratch before it is computed).
-    solve_square(model, &data.ltl, desc, &data.dtau_dq, &mut data.minv, &mut data.dqdd_dq, -1.0);
-    solve_square(model, &data.ltl, desc, &data.dtau_dv, &mut data.minv, &mut data.dqdd_dv, -1.0);
-    // ∂q̈/∂τ = M⁻¹: the same solve on the identity (symmetric, so no transposition).
-    let minv = data.minv.as_mut_slice();
-    minv.fill(0.0);
-    for i in 0..n {
-        minv[i + n * i] = 1.0;
+    if n == 0 {
+        return Ok(());
     }
-    solve_rows(model, &data.ltl, desc, minv, n, 1.0);
+    let ld = 3 * n;
+    // One tree-sparse solve for the three right-hand sides, stored by rows:
+    // ∂q̈/∂q = −M⁻¹ ∂τ/∂q, ∂q̈/∂q̇ = −M⁻¹ ∂τ/∂q̇, ∂q̈/∂τ = M⁻¹ (eq. jain_FO_eqn).
+    let x = &mut data.fd_ws.x[..];
+    assert!(x.len() == ld * n);
+    transpose_strided(data.dtau_dq.as_slice(), n, n, n, x, ld);
+    transpose_strided(data.dtau_dv.as_slice(), n, n, n, &mut x[n..], ld);
+    for i in 0..n {
+        let row = &mut x[i * ld + 2 * n + i..(i + 1) * ld];
+        row.fill(0.0);
+        row[0] = 1.0;
+    }
+    ltl_solve_fd(model, &data.ltl, &mut data.fd_ws);
+    let x = &data.fd_ws.x[..];
+    transpose_strided(x, ld, n, n, data.dqdd_dq.as_mut_slice(), n);
+    transpose_strided(&x[n..], ld, n, n, data.dqdd_dv.as_mut_slice(), n);
+    // M⁻¹ from its upper triangle (row i, columns k ≥ i of the identity part).
+    let minv = data.minv.as_mut_slice();
+    let xm = &x[2 * n..];
+    assert!(minv.len() == n * n && xm.len() == ld * n - 2 * n);
+    for c in 0..n {
+        // SAFETY: r ≤ c < n, so r·ld + c < (n − 1)·ld + n = xm.len() and r + n·c < n².
+        unsafe {
+            for r in 0..c {
+                *minv.get_unchecked_mut(r + n * c) = *xm.get_unchecked(r * ld + c);
+            }
+            for r in c..n {
+                *minv.get_unchecked_mut(r + n * c) = *xm.get_unchecked(c * ld + r);
+            }
+        }
+    }
     Ok(())
 }
 
@@ -91,7 +78,8 @@ pub fn fd_derivatives(
     check_fext(model, fext)?;
     aba_unchecked(model, data, q, v, tau, fext)?;
     let qdd = std::mem::replace(&mut data.qdd, DVector::zeros(0));
-    id_derivatives_unchecked(model, data, q, v, &qdd, fext);
+    // ABA has just computed the placements at q.
+    id_derivatives_placed(model, data, v, &qdd, fext);
     data.qdd = qdd;
     fd_fo_from_id(model, data)
 }

@@ -58,7 +58,20 @@ pub(crate) fn id_derivatives_unchecked(
     a: &DVector<f64>,
     fext: Option<&[Force]>,
 ) {
-    forward_pass_world(model, data, q, v, a, fext, -model.gravity);
+    placements(model, data, q);
+    id_derivatives_placed(model, data, v, a, fext);
+}
+
+/// [`id_derivatives_unchecked`] with `data.li_m_i`, `data.o_m_i` already computed at `q`
+/// (e.g. by ABA in the forward-dynamics derivatives).
+pub(crate) fn id_derivatives_placed(
+    model: &Model,
+    data: &mut Data,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    fext: Option<&[Force]>,
+) {
+    forward_pass_world_placed(model, data, v, a, fext, -model.gravity);
     for i in (1..model.njoints()).rev() {
         backward_step_fo(model, data, i);
         accumulate_to_parent(model, data, i);
@@ -79,6 +92,19 @@ pub(crate) fn forward_pass_world(
     a0: Motion,
 ) {
     placements(model, data, q);
+    forward_pass_world_placed(model, data, v, a, fext, a0);
+}
+
+/// [`forward_pass_world`] with the placements already computed at `q`.
+#[inline(always)]
+fn forward_pass_world_placed(
+    model: &Model,
+    data: &mut Data,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    fext: Option<&[Force]>,
+    a0: Motion,
+) {
     data.ff_root = root_free_flyer(model);
     let n = model.njoints();
     data.ov[0] = Motion::zero();
