@@ -41,8 +41,7 @@ pub(crate) fn gemm<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
     // every access below stays within (rows < m, cols < k or n) of its matrix.
     unsafe {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-        {
+        if crate::simd::avx2_fma() {
             return gemm_avx2(alpha, pa, lda, pb, ldb, beta, pc, ldc, m, n, k);
         }
         gemm_generic(alpha, pa, lda, pb, ldb, beta, pc, ldc, m, n, k)
@@ -213,8 +212,8 @@ pub(crate) fn transpose_strided(
         "transpose: dimension mismatch"
     );
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx") {
-        // SAFETY: AVX is available; the lengths are asserted above.
+    if crate::simd::avx2_fma() {
+        // SAFETY: AVX (with AVX2 and FMA) is available; the lengths are asserted above.
         unsafe { return transpose_avx(src, lds, m, n, dst, ldd) };
     }
     // SAFETY: the lengths are asserted above.

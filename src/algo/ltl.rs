@@ -283,7 +283,7 @@ pub(crate) fn ltl_solve_rows_desc(
         "ltl_solve_rows_desc: dimension mismatch"
     );
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+    if crate::simd::avx2_fma() {
         // SAFETY: as in `ltl_solve_rows`; descendant indices are < desc.nv = n (by construction).
         unsafe { return solve_rows_desc_avx2(model, hs, desc, x.as_mut_ptr(), ld, len, alpha) };
     }
@@ -455,7 +455,7 @@ pub(crate) fn ltl_solve_fd(model: &Model, h: &DMatrix<f64>, ws: &mut FdWs) {
         "ltl_solve_fd: dimension mismatch"
     );
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+    if crate::simd::avx2_fma() {
         // SAFETY: the CPU supports the enabled features; every row segment addressed below
         // lies in row i of `x` (columns < 3n), ancestor/descendant indices are < n, and
         // `sub_end[i] ≤ n` (built from descendant indices < n).

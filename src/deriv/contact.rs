@@ -5,7 +5,7 @@
 
 use super::contact_kin::{Base, Dir, Path, djz_dq};
 use super::zero::idfoza_core;
-use crate::algo::internal::ltl_solve_rows;
+use crate::algo::internal::ltl_solve_rows_desc;
 use crate::algo::{Contact, Data};
 use crate::error::{Error, Result};
 use crate::linalg::gemm;
@@ -339,7 +339,7 @@ pub(crate) fn factor_delassus(model: &Model, data: &Data, cd: &mut ContactData) 
             yt[x * mp..x * mp + m].copy_from_slice(&jac[x * m..x * m + m]);
         }
     }
-    ltl_solve_rows(model, &data.ltl, cd.yt.as_mut_slice(), mp, m, 1.0);
+    ltl_solve_rows_desc(model, &data.ltl, data.fd_ws.desc.view(), cd.yt.as_mut_slice(), mp, m, 1.0);
     transpose_into(cd.yt.as_slice(), mp, (m, n), cd.y.as_mut_slice(), np);
     transpose_into(cd.jac.as_slice(), m, (m, n), cd.jt.as_mut_slice(), n);
     // Delassus matrix J M⁻¹ Jᵀ = Yᵀ Jᵀ (padded rows), + μ I.

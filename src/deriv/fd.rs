@@ -170,7 +170,7 @@ enum Term {
 /// right-hand sides at a time (vectorised with AVX2 when available).
 fn add_idfoza_terms(model: &Model, data: &Data, ws: &mut Idfoza4Ws, tt: &mut [f64], term: Term) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+    if crate::simd::avx2_fma() {
         // SAFETY: the CPU supports the enabled features.
         unsafe { return add_idfoza_terms_avx2(model, data, ws, tt, term) };
     }

@@ -18,7 +18,7 @@ use super::id_so::{SoData, id_so_unchecked};
 use super::kkt::{copy_rows_zero_rest, premultiply};
 use super::zero::idfoza_core;
 use crate::algo::Data;
-use crate::algo::internal::{crba_unchecked, ltl_in_place, ltl_solve_rows};
+use crate::algo::internal::{crba_unchecked, ltl_in_place, ltl_solve_rows_desc};
 use crate::error::{Error, Result};
 use crate::linalg::gemm;
 use crate::model::{Model, check_vec};
@@ -231,7 +231,15 @@ fn first_order(model: &Model, data: &mut Data, im: &mut ImpactData) {
             }
         }
     }
-    ltl_solve_rows(model, &data.ltl, im.zrows.as_mut_slice(), np, n, 1.0);
+    ltl_solve_rows_desc(
+        model,
+        &data.ltl,
+        data.fd_ws.desc.view(),
+        im.zrows.as_mut_slice(),
+        np,
+        n,
+        1.0,
+    );
     transpose_into(im.zrows.as_slice(), np, (n, n), im.dvplus_dq.as_mut_slice(), n);
     // [∂q̇⁺/∂q̇⁻; ∂λ̂/∂q̇⁻] = [I; 0] − (1 + e) [Q; Λ] J (eq. ID_FO_v_im_1).
     gemm(-(1.0 + im.restitution), &cd.r2, &cd.jac, 0.0, &mut im.out);
