@@ -301,12 +301,9 @@ unsafe fn solve_rows_desc_avx2(
     len: usize,
     alpha: f64,
 ) {
-    use std::arch::x86_64::*;
     let n = model.nv;
     let h = h.as_ptr();
-    let rem = len % 4;
-    let m = |k: usize| if rem > k { -1i64 } else { 0 };
-    let mask = _mm256_setr_epi64x(m(0), m(1), m(2), 0);
+    let mask = tail_mask(len);
     let starts = &model.dof_ancestors_start;
     let all_anc = &model.dof_ancestors;
     unsafe {

@@ -11,9 +11,9 @@ use crate::algo::Data;
 use crate::algo::internal::check_fext;
 use crate::error::Result;
 use crate::model::{Model, check_vec};
-use crate::spatial::{Force, Inertia, Motion};
+use crate::spatial::{Force, Motion};
 use crate::tensor::Tensor3;
-use nalgebra::{DVector, Matrix6};
+use nalgebra::{DVector, Matrix6, Vector3};
 
 /// Second-order inverse-dynamics derivatives, `nv×nv×nv` each, `T[(i, j, k)]` as documented on
 /// the getters. Allocated once by [`SoData::new`]; only [`id_so_derivatives`] writes them, and
@@ -262,35 +262,6 @@ fn crf_cols(x: &V6, m: &M6) -> M6 {
     o
 }
 
-/// The matrix of `f ×̄*` (eq. crff_oper): column `k` is `e_k ×* f`.
-#[inline(always)]
-fn crff_m6(f: &V6) -> M6 {
-    // [[-n×, -f×], [-f×, 0]] with n = f[0..3], f = f[3..6], column by column (e_k ×* f).
-    let (n0, n1, n2, f0, f1, f2) = (f[0], f[1], f[2], f[3], f[4], f[5]);
-    [
-        [0.0, -n2, n1, 0.0, -f2, f1],
-        [n2, 0.0, -n0, f2, 0.0, -f0],
-        [-n1, n0, 0.0, -f1, f0, 0.0],
-        [0.0, -f2, f1, 0.0, 0.0, 0.0],
-        [f2, 0.0, -f0, 0.0, 0.0, 0.0],
-        [-f1, f0, 0.0, 0.0, 0.0, 0.0],
-    ]
-}
-
-/// The 6×6 matrix of a spatial inertia.
-#[inline(always)]
-fn inertia_m6(i: &Inertia) -> M6 {
-    let (r, h, m) = (&i.rot, &i.h, i.mass);
-    [
-        [r[(0, 0)], r[(1, 0)], r[(2, 0)], 0.0, -h.z, h.y],
-        [r[(0, 1)], r[(1, 1)], r[(2, 1)], h.z, 0.0, -h.x],
-        [r[(0, 2)], r[(1, 2)], r[(2, 2)], -h.y, h.x, 0.0],
-        [0.0, h.z, -h.y, m, 0.0, 0.0],
-        [-h.z, 0.0, h.x, 0.0, m, 0.0],
-        [h.y, -h.x, 0.0, 0.0, 0.0, m],
-    ]
-}
-
 #[inline(always)]
 fn m6(m: &Matrix6<f64>) -> M6 {
     let s = m.as_slice();
@@ -325,7 +296,9 @@ fn i_ops<K: Kern>(ic: &M6, bc: &M6, bct: &M6, fc: &V6, dof: &[V6; 4]) -> IOps {
     let c = lin3m(1.0, &p, 1.0, &pt, 0.0, &p);
     let pp = crf_cols(psid, ic);
     let ppt = transpose(&pp);
-    let rp = crff_m6(&K::mv(ic, psid));
+    let ip = K::mv(ic, psid);
+    let rp = m6(&Force::new(Vector3::new(ip[0], ip[1], ip[2]), Vector3::new(ip[3], ip[4], ip[5]))
+        .crff_matrix());
     let sb = crf_cols(s, bc);
     let qbt = transpose(&crf_cols(s, bct));
     // 2B(I, Ψ̇) = P' + P'ᵀ + (IΨ̇)×̄*
@@ -542,7 +515,7 @@ fn backward_step_so_body<K: Kern>(model: &Model, data: &Data, so: &mut SoData, i
     let vv = d2tau_dv2.as_mut_slice();
     let qv = d2tau_dqdv.as_mut_slice();
     let dm = dm_dq.as_mut_slice();
-    let ic = inertia_m6(&data.ic_world[i]);
+    let ic = m6(&data.ic_world[i].matrix());
     let bc = m6(&data.bc[i]);
     let bct = transpose(&bc);
     let fc = v6f(&data.ofc[i]);
