@@ -22,5 +22,6 @@ pub mod rng;
 mod simd;
 pub mod spatial;
 pub mod tensor;
+mod trig;
 
 pub use error::{Error, Result};

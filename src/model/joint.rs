@@ -3,6 +3,7 @@
 
 use crate::rng::Rng;
 use crate::spatial::{Motion, Transform};
+use crate::trig::sin_cos;
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 
 /// Tolerance on `| ‖quat‖ − 1 |` accepted for quaternion coordinates.
@@ -109,7 +110,7 @@ impl JointType {
                 Transform::new(quat_to_rot(q[3], q[4], q[5], q[6]), Vector3::new(q[0], q[1], q[2]))
             }
             JointType::Planar => {
-                let (s, c) = q[2].sin_cos();
+                let (s, c) = sin_cos(q[2]);
                 Transform::new(
                     Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0),
                     Vector3::new(q[0], q[1], 0.0),
@@ -124,7 +125,7 @@ impl JointType {
     pub(crate) fn placed_transform(&self, placement: &Transform, q: &[f64]) -> Transform {
         match *self {
             JointType::Revolute { axis } | JointType::Continuous { axis } => {
-                let (s, c) = q[0].sin_cos();
+                let (s, c) = sin_cos(q[0]);
                 let rot = match unit_axis(&axis) {
                     Some((k, sign)) => rotate_columns(&placement.rot, k, sign * s, c),
                     None => placement.rot * axis_angle_sc(&axis, s, c),
@@ -262,7 +263,7 @@ impl JointType {
 /// Rotation matrix `exp(θ a×)` for a unit axis `a` (Rodrigues).
 #[inline]
 pub fn axis_angle(a: &Vector3<f64>, theta: f64) -> Matrix3<f64> {
-    let (s, c) = theta.sin_cos();
+    let (s, c) = sin_cos(theta);
     axis_angle_sc(a, s, c)
 }
 
