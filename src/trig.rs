@@ -61,19 +61,24 @@ fn sin_cos_fast(x: f64) -> (f64, f64) {
     let r2 = r1 - kp2;
     let e = (r1 - r2) - kp2;
     let r = r2 - (k * P3 - e);
+    // Estrin's scheme (shorter dependency chains than Horner's).
     let s = r * r;
-    let ps = S[0] + s * (S[1] + s * (S[2] + s * (S[3] + s * (S[4] + s * S[5]))));
-    let pc = C[0] + s * (C[1] + s * (C[2] + s * (C[3] + s * (C[4] + s * C[5]))));
+    let (s2, s4) = (s * s, (s * s) * (s * s));
+    let ps = (S[0] + s * S[1]) + s2 * (S[2] + s * S[3]) + s4 * (S[4] + s * S[5]);
+    let pc = (C[0] + s * C[1]) + s2 * (C[2] + s * C[3]) + s4 * (C[4] + s * C[5]);
     // x = ±0 keeps its sign (r + (r s) ps would add +0).
     let sr = if x == 0.0 { x } else { r + (r * s) * ps };
     // 1 − s/2 rounded to w, with its rounding error (1 − w) − s/2 (exact) added back.
-    let (hs, ss) = (0.5 * s, s * s);
+    let hs = 0.5 * s;
     let w = 1.0 - hs;
-    let cr = w + (((1.0 - w) - hs) + ss * pc);
-    // k mod 4 = 0: (s, c); 1: (c, −s); 2: (−s, −c); 3: (−c, s).
-    let (a, b) = if quadrant & 1 == 0 { (sr, cr) } else { (cr, sr) };
-    let sin = f64::from_bits(a.to_bits() ^ ((quadrant & 2) << 62));
-    let cos = f64::from_bits(b.to_bits() ^ ((quadrant.wrapping_add(1) & 2) << 62));
+    let cr = w + (((1.0 - w) - hs) + s2 * pc);
+    // k mod 4 = 0: (s, c); 1: (c, −s); 2: (−s, −c); 3: (−c, s). Without branches (the
+    // quadrant is unpredictable): swap by xor under an all-ones mask when k is odd, then flip
+    // the sign bits.
+    let (sb, cb) = (sr.to_bits(), cr.to_bits());
+    let swap = (sb ^ cb) & (quadrant & 1).wrapping_neg();
+    let sin = f64::from_bits(sb ^ swap ^ ((quadrant & 2) << 62));
+    let cos = f64::from_bits(cb ^ swap ^ ((quadrant.wrapping_add(1) & 2) << 62));
     (sin, cos)
 }
 

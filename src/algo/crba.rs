@@ -335,13 +335,14 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
     // Root free-flyer with the identity subspace: its block of column c is
     // S_rootᵀ f = Xᵀ f, the force f expressed in the root body frame.
     let ff_root = root_free_flyer(model);
-    let x_root = o_m_i[if ff_root { 1 } else { 0 }];
+    let x_root = &o_m_i[if ff_root { 1 } else { 0 }];
     let m = data.m.as_mut_slice();
     let sw = &*sw;
     // Backward pass: composite inertias and the columns of M.
     for i in (1..n).rev() {
         let (b, k) = (model.idx_v[i], model.nvs[i]);
-        let ic = ic_world[i];
+        let (head, tail) = ic_world.split_at_mut(i);
+        let ic = &tail[0];
         for c in b..b + k {
             // SAFETY: c < nv (asserted as above).
             let sc = unsafe { sw.get_unchecked(c) };
@@ -369,8 +370,8 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
         let p = model.parents[i];
         if p > 0 {
             debug_assert!(p < i);
-            // SAFETY: `parents[i] < i < n` (built in `ModelBuilder::build`).
-            *unsafe { ic_world.get_unchecked_mut(p) } += ic;
+            // SAFETY: `parents[i] < i` (built in `ModelBuilder::build`), so `p` indexes `head`.
+            *unsafe { head.get_unchecked_mut(p) } += *ic;
         }
     }
     // Entries between dofs on different branches are structurally zero: they are zero from

@@ -24,6 +24,13 @@ pub(crate) fn joint_motion(model: &Model, i: usize, x: &DVector<f64>) -> Motion 
 /// `JointType::FreeFlyer` builds it), so that `S_rootᵀ f` is `f` in the root body frame.
 #[inline]
 pub(crate) fn root_free_flyer(model: &Model) -> bool {
+    // A free-flyer has nq = nv + 1 (cheap test first, for fixed-base robots).
+    model.nq > model.nv && root_free_flyer_full(model)
+}
+
+/// [`root_free_flyer`] without the shortcut (out of line).
+#[inline(never)]
+fn root_free_flyer_full(model: &Model) -> bool {
     model.njoints() > 1
         && model.joints[1] == JointType::FreeFlyer
         && model.idx_v[1] == 0

@@ -151,17 +151,24 @@ impl Model {
         // goes through the per-joint checks below, which name the joint and the problem.
         let qs = q.as_slice();
         if qs.iter().fold(true, |ok, x| ok & x.is_finite()) {
+            // Each quaternion joint (spherical, free-flyer) has nq = nv + 1 and every other
+            // joint nq = nv: the scan stops after the nq − nv quaternions (none, or the root
+            // free-flyer, for most robots).
+            let mut quats = self.nq.saturating_sub(self.nv);
             let mut ok = true;
-            for i in 1..self.njoints() {
-                if self.nqs[i] < 4 {
-                    continue;
-                }
+            let mut i = 1;
+            while quats > 0 && i < self.njoints() {
                 let a = self.idx_q[i];
                 let quat = match self.joints[i] {
                     JointType::Spherical => &qs[a..a + 4],
                     JointType::FreeFlyer => &qs[a + 3..a + 7],
-                    _ => continue,
+                    _ => {
+                        i += 1;
+                        continue;
+                    }
                 };
+                quats -= 1;
+                i += 1;
                 let n = quat.iter().map(|x| x * x).sum::<f64>().sqrt();
                 ok &= (n - 1.0).abs() <= super::joint::QUAT_NORM_TOL;
             }
