@@ -35,7 +35,11 @@ fn root_free_flyer_full(model: &Model) -> bool {
         && model.joints[1] == JointType::FreeFlyer
         && model.idx_v[1] == 0
         && model.nv >= 6
-        && (0..6).all(|k| model.subspace[k] == JointType::FreeFlyer.subspace_column(k))
+        && model.subspace[..6].iter().enumerate().all(|(k, s)| {
+            // Column k of the identity: entry k of [ω; v] is 1, the others 0.
+            let e = [s.ang.x, s.ang.y, s.ang.z, s.lin.x, s.lin.y, s.lin.z];
+            e.iter().enumerate().all(|(j, &x)| x == if j == k { 1.0 } else { 0.0 })
+        })
 }
 
 /// Joint placements only: fills `li_m_i` and `o_m_i` (unchecked `q`).

@@ -269,7 +269,7 @@ pub fn axis_angle(a: &Vector3<f64>, theta: f64) -> Matrix3<f64> {
 
 /// `Some((k, ±1))` if `a = ±eₖ` exactly.
 #[inline]
-fn unit_axis(a: &Vector3<f64>) -> Option<(usize, f64)> {
+pub(crate) fn unit_axis(a: &Vector3<f64>) -> Option<(usize, f64)> {
     let (x, y, z) = (a.x, a.y, a.z);
     if y == 0.0 && z == 0.0 && x.abs() == 1.0 {
         Some((0, x))
@@ -285,7 +285,7 @@ fn unit_axis(a: &Vector3<f64>) -> Option<(usize, f64)> {
 /// `R · Rot(eₖ, θ)` given `s = sin θ`, `c = cos θ`: with `(i, j) = (k+1, k+2) mod 3`,
 /// column `i` becomes `c Rᵢ + s Rⱼ` and column `j` becomes `c Rⱼ − s Rᵢ`.
 #[inline]
-fn rotate_columns(r: &Matrix3<f64>, k: usize, s: f64, c: f64) -> Matrix3<f64> {
+pub(crate) fn rotate_columns(r: &Matrix3<f64>, k: usize, s: f64, c: f64) -> Matrix3<f64> {
     match k {
         0 => rotate_columns_ij::<1, 2>(r, s, c),
         1 => rotate_columns_ij::<2, 0>(r, s, c),
