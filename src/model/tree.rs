@@ -143,38 +143,63 @@ impl Model {
         Ok(out)
     }
     /// Checks a configuration: length `nq`, finite, unit quaternions.
+    #[inline]
     pub fn check_q(&self, q: &DVector<f64>) -> Result<()> {
+        // Fast path (inline): every coordinate finite and every quaternion of unit norm.
+        // Anything else goes through the per-joint checks, which name the joint and the problem.
+        if q.len() == self.nq && self.q_valid(q.as_slice()) {
+            return Ok(());
+        }
+        self.check_q_slow(q)
+    }
+    /// True if every coordinate of `qs` (length `nq`) is finite and every quaternion has unit
+    /// norm within [`super::joint::QUAT_NORM_TOL`].
+    #[inline]
+    fn q_valid(&self, qs: &[f64]) -> bool {
+        // x · 0 is ±0 for finite x and NaN otherwise: the sums (four lanes) are 0 iff every
+        // coordinate is finite.
+        let mut acc = [0.0f64; 4];
+        let chunks = qs.chunks_exact(4);
+        for (a, &x) in acc.iter_mut().zip(chunks.remainder()) {
+            *a += x * 0.0;
+        }
+        for c in chunks {
+            for (a, &x) in acc.iter_mut().zip(c) {
+                *a += x * 0.0;
+            }
+        }
+        if (acc[0] + acc[1]) + (acc[2] + acc[3]) != 0.0 {
+            return false;
+        }
+        // Each quaternion joint (spherical, free-flyer) has nq = nv + 1 and every other joint
+        // nq = nv: the scan stops after the nq − nv quaternions (none, or the root free-flyer,
+        // for most robots).
+        let mut quats = self.nq.saturating_sub(self.nv);
+        let mut ok = true;
+        let mut i = 1;
+        while quats > 0 && i < self.njoints() {
+            let a = self.idx_q[i];
+            let quat = match self.joints[i] {
+                JointType::Spherical => &qs[a..a + 4],
+                JointType::FreeFlyer => &qs[a + 3..a + 7],
+                _ => {
+                    i += 1;
+                    continue;
+                }
+            };
+            quats -= 1;
+            i += 1;
+            let n = quat.iter().map(|x| x * x).sum::<f64>().sqrt();
+            ok &= (n - 1.0).abs() <= super::joint::QUAT_NORM_TOL;
+        }
+        ok
+    }
+    /// [`Self::check_q`] with the error reporting (out of line).
+    #[cold]
+    #[inline(never)]
+    fn check_q_slow(&self, q: &DVector<f64>) -> Result<()> {
         if q.len() != self.nq {
             return Err(Error::Dimension { what: "q".into(), expected: self.nq, got: q.len() });
-        }
-        // Fast path: every coordinate finite and every quaternion of unit norm. Anything else
-        // goes through the per-joint checks below, which name the joint and the problem.
-        let qs = q.as_slice();
-        if qs.iter().fold(true, |ok, x| ok & x.is_finite()) {
-            // Each quaternion joint (spherical, free-flyer) has nq = nv + 1 and every other
-            // joint nq = nv: the scan stops after the nq − nv quaternions (none, or the root
-            // free-flyer, for most robots).
-            let mut quats = self.nq.saturating_sub(self.nv);
-            let mut ok = true;
-            let mut i = 1;
-            while quats > 0 && i < self.njoints() {
-                let a = self.idx_q[i];
-                let quat = match self.joints[i] {
-                    JointType::Spherical => &qs[a..a + 4],
-                    JointType::FreeFlyer => &qs[a + 3..a + 7],
-                    _ => {
-                        i += 1;
-                        continue;
-                    }
-                };
-                quats -= 1;
-                i += 1;
-                let n = quat.iter().map(|x| x * x).sum::<f64>().sqrt();
-                ok &= (n - 1.0).abs() <= super::joint::QUAT_NORM_TOL;
-            }
-            if ok {
-                return Ok(());
-            }
         }
         for i in 1..self.njoints() {
             let (a, n) = (self.idx_q[i], self.nqs[i]);
