@@ -8,7 +8,7 @@ use super::zero::idfoza_core;
 use crate::algo::internal::ltl_solve_rows_desc;
 use crate::algo::{Contact, Data};
 use crate::error::{Error, Result};
-use crate::linalg::gemm;
+use crate::linalg::{gemm, spd_inverse_in_place, transpose_strided};
 use crate::model::Model;
 use crate::spatial::Motion;
 use nalgebra::{DMatrix, DVector, Vector3};
@@ -314,19 +314,12 @@ pub(crate) fn transpose_into(
     dst: &mut [f64],
     ld: usize,
 ) {
-    assert!(ls >= rows && ld >= cols && (rows == 0 || dst.len() >= ld * rows));
-    for j in 0..cols {
-        let col = &src[ls * j..ls * j + rows];
-        for (i, x) in col.iter().enumerate() {
-            // SAFETY: j < cols ≤ ld and i < rows, so j + ld i < ld rows ≤ dst.len() (asserted).
-            unsafe { *dst.get_unchecked_mut(j + ld * i) = *x };
-        }
-    }
+    transpose_strided(src, ls, rows, cols, dst, ld);
 }
 
 /// With `data.ltl` (factor of `M`) and `cd.jac`: `Yᵀ = (M⁻¹Jᵀ)ᵀ` into `cd.yt` by one
 /// multi-right-hand-side tree-sparse solve (row `x` of `Jᵀ` is column `x` of `J`), `Y` into
-/// `cd.y`, the Delassus matrix `J Y + μI`, `Λ` (Cholesky), `Qᵀ = ΛYᵀ`,
+/// `cd.y`, the Delassus matrix `J Y + μI`, `Λ` (Gauss–Jordan SPD inverse), `Qᵀ = ΛYᵀ`,
 /// `r2 = [Q; Λ]` and `wq = [Qᵀ, −Λ]` (rows padded). `M⁻¹` is not formed. A rank-deficient
 /// contact set is an error naming the contacts (unless damped).
 pub(crate) fn factor_delassus(model: &Model, data: &Data, cd: &mut ContactData) -> Result<()> {
@@ -349,7 +342,8 @@ pub(crate) fn factor_delassus(model: &Model, data: &Data, cd: &mut ContactData) 
         cd.del[(c, c)] += cd.damping;
     }
     let scale = (0..m).map(|i| cd.del[(i, i)].abs()).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
-    if !cholesky_inverse_in_place(&mut cd.del, &mut cd.lam, 1e-11 * scale) {
+    cd.lam.copy_from(&cd.del);
+    if !spd_inverse_in_place(cd.lam.as_mut_slice(), m, 1e-11 * scale) {
         return Err(Error::Singular {
             what: "contact set".into(),
             detail: format!(
@@ -492,78 +486,6 @@ pub(crate) fn djw_dq(model: &Model, cd: &mut ContactData, w: &[f64], out: &mut D
             }
         }
     }
-}
-
-/// Cholesky factorisation of the symmetric `a` (lower triangle read) in place (lower triangle)
-/// and its inverse into `inv` (full), without allocating. `false` if a pivot `l_ii²` is not
-/// above `tol`.
-fn cholesky_inverse_in_place(a: &mut DMatrix<f64>, inv: &mut DMatrix<f64>, tol: f64) -> bool {
-    let m = a.nrows();
-    let a = a.as_mut_slice();
-    let inv = inv.as_mut_slice();
-    assert!(a.len() == m * m && inv.len() == m * m);
-    // SAFETY (all get_unchecked below): every index is r + m c with r, c < m, i.e. < m² = the
-    // length of `a` and `inv` (asserted).
-    unsafe {
-        // Column-oriented (left-looking) factorisation: column j of L is contiguous.
-        for j in 0..m {
-            for k in 0..j {
-                let ajk = *a.get_unchecked(j + m * k);
-                if ajk != 0.0 {
-                    for i in j..m {
-                        *a.get_unchecked_mut(i + m * j) -= ajk * *a.get_unchecked(i + m * k);
-                    }
-                }
-            }
-            let d = *a.get_unchecked(j + m * j);
-            if d.is_nan() || d <= tol {
-                return false;
-            }
-            let r = 1.0 / d.sqrt();
-            for i in j..m {
-                *a.get_unchecked_mut(i + m * j) *= r;
-            }
-            // Reciprocal of the diagonal kept in the (unused) upper triangle's diagonal slot.
-            *a.get_unchecked_mut(j + m * j) = r;
-        }
-        // L⁻¹ (lower) into inv by columns: forward substitution with unit vectors (diagonal of
-        // L stored as its reciprocal).
-        for c in 0..m {
-            for i in 0..c {
-                *inv.get_unchecked_mut(i + m * c) = 0.0;
-            }
-            *inv.get_unchecked_mut(c + m * c) = 1.0;
-            for i in c + 1..m {
-                *inv.get_unchecked_mut(i + m * c) = 0.0;
-            }
-            for i in c..m {
-                let x = *inv.get_unchecked(i + m * c) * *a.get_unchecked(i + m * i);
-                *inv.get_unchecked_mut(i + m * c) = x;
-                for r in i + 1..m {
-                    *inv.get_unchecked_mut(r + m * c) -= x * *a.get_unchecked(r + m * i);
-                }
-            }
-        }
-        // inv ← L⁻ᵀ L⁻¹ (symmetric): (i, c) = Σ_{k ≥ max(i, c)} L⁻¹_ki L⁻¹_kc, into the strict
-        // upper triangle of `a` (L is no longer needed) and the diagonal of `a`, then copied.
-        for c in 0..m {
-            for i in c..m {
-                let mut x = 0.0;
-                for k in i..m {
-                    x += *inv.get_unchecked(k + m * i) * *inv.get_unchecked(k + m * c);
-                }
-                *a.get_unchecked_mut(c + m * i) = x;
-            }
-        }
-        for c in 0..m {
-            for i in c..m {
-                let x = *a.get_unchecked(c + m * i);
-                *inv.get_unchecked_mut(i + m * c) = x;
-                *inv.get_unchecked_mut(c + m * i) = x;
-            }
-        }
-    }
-    true
 }
 
 /// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `3 nc` world forces) from `out` (`nv×nv`, `[x][l]`), with `s`

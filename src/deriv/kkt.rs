@@ -8,7 +8,7 @@
 //! `∂M/∂q · z₁` (IDFOZA), `∂(J_cᵀ z₂)/∂q` and `∂(J_c z₁)/∂q` products (no tensor-matrix
 //! products), `R_qq` comes from IDSVA-SO minus the contact-force term (IDSVA-SOc) and the contact
 //! point kinematics. `R_y⁻¹` is formed by blocks from the tree-sparse `LᵀDL` factor of `M` and
-//! a Cholesky factorisation of the Delassus matrix (no dense inverse of the KKT matrix).
+//! an SPD inverse of the Delassus matrix (no dense inverse of the KKT matrix).
 
 use super::contact::{
     ContactData, accel_derivatives, add_qdd_to_path_acc, base, copy_block, factor_kkt, fill_rinv,
