@@ -419,6 +419,122 @@ unsafe fn spd_inverse_avx2(a: &mut [f64], m: usize, tol: f64) -> bool {
     true
 }
 
+/// [`gemm`] whose rows beyond the last multiple of 8 are computed by a masked AVX2/FMA kernel
+/// (4-row vectors, the last one masked) instead of scalar loops; the same result to rounding.
+pub(crate) fn gemm_masked<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
+    alpha: f64,
+    a: &Matrix<f64, R1, C1, S1>,
+    b: &Matrix<f64, R2, C2, S2>,
+    beta: f64,
+    c: &mut Matrix<f64, R3, C3, S3>,
+) where
+    R1: Dim,
+    C1: Dim,
+    S1: RawStorage<f64, R1, C1>,
+    R2: Dim,
+    C2: Dim,
+    S2: RawStorage<f64, R2, C2>,
+    R3: Dim,
+    C3: Dim,
+    S3: RawStorageMut<f64, R3, C3>,
+{
+    let (m, k) = a.shape();
+    let (k2, n) = b.shape();
+    assert!(k == k2 && c.shape() == (m, n), "gemm_masked: dimension mismatch");
+    let m8 = m - m % 8;
+    #[cfg(target_arch = "x86_64")]
+    if m8 < m && n > 0 && crate::simd::avx2_fma() {
+        let (ra, lda) = a.strides();
+        let (rb, ldb) = b.strides();
+        let (rc, ldc) = c.strides();
+        assert!(ra == 1 && rb == 1 && rc == 1, "gemm_masked: unit row stride required");
+        if m8 > 0 {
+            gemm(alpha, &a.rows(0, m8), b, beta, &mut c.rows_mut(0, m8));
+        }
+        // SAFETY: AVX2 and FMA are available; the tail kernel reads rows m8..m of `a` (k
+        // columns), the k × n block of `b` and writes rows m8..m of the n columns of `c`, all
+        // inside the live matrices of the asserted shapes and strides.
+        unsafe {
+            gemm_tail_avx2(
+                alpha,
+                a.as_ptr().add(m8),
+                lda,
+                b.as_ptr(),
+                ldb,
+                beta,
+                c.as_mut_ptr().add(m8),
+                ldc,
+                m - m8,
+                n,
+                k,
+            )
+        };
+        return;
+    }
+    gemm(alpha, a, b, beta, c);
+}
+
+/// `C ← β C + α A B` for `m < 8` rows by (masked) 4-row vectors, one column of `C` at a time.
+///
+/// # Safety
+/// AVX2 and FMA available; `a` (`m × k`, leading dimension `lda`), `b` (`k × n`, `ldb`) and `c`
+/// (`m × n`, `ldc`) valid for reads (and writes for `c`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn gemm_tail_avx2(
+    alpha: f64,
+    a: *const f64,
+    lda: usize,
+    b: *const f64,
+    ldb: usize,
+    beta: f64,
+    c: *mut f64,
+    ldc: usize,
+    m: usize,
+    n: usize,
+    k: usize,
+) {
+    use std::arch::x86_64::*;
+    debug_assert!(m > 0 && m < 8);
+    let lane = |r: usize, t: usize| if r > t { -1i64 } else { 0 };
+    // Rows 0..4 (masked if m < 4) and 4..m (masked, only if m > 4).
+    let r0 = m.min(4);
+    let r1 = m.saturating_sub(4);
+    let m0 = _mm256_setr_epi64x(lane(r0, 0), lane(r0, 1), lane(r0, 2), lane(r0, 3));
+    let m1 = _mm256_setr_epi64x(lane(r1, 0), lane(r1, 1), lane(r1, 2), 0);
+    let al = _mm256_set1_pd(alpha);
+    let be = _mm256_set1_pd(beta);
+    // SAFETY: masked lanes only touch rows < m; see the function's safety contract.
+    unsafe {
+        for j in 0..n {
+            let mut acc0 = _mm256_setzero_pd();
+            let mut acc1 = _mm256_setzero_pd();
+            for l in 0..k {
+                let bv = _mm256_broadcast_sd(&*b.add(l + j * ldb));
+                let ap = a.add(l * lda);
+                acc0 = _mm256_fmadd_pd(_mm256_maskload_pd(ap, m0), bv, acc0);
+                if r1 > 0 {
+                    acc1 = _mm256_fmadd_pd(_mm256_maskload_pd(ap.add(4), m1), bv, acc1);
+                }
+            }
+            let cp = c.add(j * ldc);
+            let mut v0 = _mm256_mul_pd(al, acc0);
+            if beta != 0.0 {
+                v0 = _mm256_fmadd_pd(be, _mm256_maskload_pd(cp, m0), v0);
+            }
+            _mm256_maskstore_pd(cp, m0, v0);
+            if r1 > 0 {
+                let mut v1 = _mm256_mul_pd(al, acc1);
+                if beta != 0.0 {
+                    v1 = _mm256_fmadd_pd(be, _mm256_maskload_pd(cp.add(4), m1), v1);
+                }
+                _mm256_maskstore_pd(cp.add(4), m1, v1);
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::spd_inverse_in_place;

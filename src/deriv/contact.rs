@@ -43,7 +43,7 @@ pub struct ContactData {
     /// `Yᵀ = J M⁻¹`, rows padded (`mp × nv`).
     pub(crate) yt: DMatrix<f64>,
     /// `Jᵀ` (`nv × 3 nc`).
-    jt: DMatrix<f64>,
+    pub(crate) jt: DMatrix<f64>,
     /// Padded `3 nc`-row work matrix (`mp × 3 nc`): the Delassus matrix, then `Λ`.
     delp: DMatrix<f64>,
     /// `[Qᵀ, −Λ]`, rows padded with zeros to a multiple of 8 (`mp × (nv + 3 nc)`).
@@ -60,6 +60,8 @@ pub struct ContactData {
     pub(crate) kvel: Vec<Motion>,
     /// World body accelerations (no gravity) of the path joints (index 0: zero).
     pub(crate) kacc: Vec<Motion>,
+    /// `T_x = Σ_c u_x^c × λ_c` per DoF (see [`sub_djtl_dq_tree`]).
+    tsum: Vec<Vector3<f64>>,
     t3: Vec<Vector3<f64>>,
     tn: Vec<f64>,
     /// Regularisation `μ ≥ 0` added to the Delassus matrix `J M⁻¹ Jᵀ` (default 0: a
@@ -131,6 +133,7 @@ impl ContactData {
             s: vec![Motion::zero(); n],
             kvel: vec![Motion::zero(); model.njoints()],
             kacc: vec![Motion::zero(); model.njoints()],
+            tsum: vec![Vector3::zeros(); n],
             t3: vec![Vector3::zeros(); maxd],
             tn: vec![0.0; n],
             contacts: contacts.to_vec(),
@@ -420,13 +423,13 @@ pub(crate) fn fill_rinv(cd: &mut ContactData) {
     cd.rinv.columns_mut(n, m).copy_from(&cd.r2.rows(0, n + m));
 }
 
-/// Rows `∂a_p/∂q` into `cq` and `∂a_p/∂q̇` into `cv` (`3 nc × nv`, only path columns written) of
+/// Rows `∂a_p/∂q` and `∂a_p/∂q̇` (`3 nc × nv` each, only path columns written), transposed, of
 /// the classical contact-point accelerations at fixed `q̈`, from `cd.s`, `cd.kvel`, `cd.kacc`
 /// (with `q̈`) and the points: along `q_l`, `D V_m = S_l × (V_m − V_λ)` (J2),
 /// `D A_m = (A_λ − A_m) × S_l + (V_λ − V_m) × Ψ̇_l` (J6, J7), `D p = u_l`; along `q̇_l`,
 /// `D V_m = S_l` (J8), `D A_m = (V_λ + V_l − V_m) × S_l` (J9).
-/// `cv` is stored in columns `nv..2nv` of `cx`, `cq` in columns `0..nv`.
-pub(crate) fn accel_derivatives(cd: &ContactData, cx: &mut DMatrix<f64>) {
+/// `(∂a_p/∂q)ᵀ` is stored in rows `0..nv` of `cxt` (`2nv × 3nc`), `(∂a_p/∂q̇)ᵀ` in rows `nv..2nv`.
+pub(crate) fn accel_derivatives_t(cd: &ContactData, cxt: &mut DMatrix<f64>) {
     let n = cd.s.len();
     for (c, path) in cd.paths.iter().enumerate() {
         let body = *path.joints.last().expect("path");
@@ -453,8 +456,8 @@ pub(crate) fn accel_derivatives(cd: &ContactData, cx: &mut DMatrix<f64>) {
             let dav = (vl + cd.kvel[jl] - vm).cross(&s);
             let rv = dav.lin + dav.ang.cross(&p) + s.ang.cross(&pd) + w.cross(&u);
             for r in 0..3 {
-                cx[(3 * c + r, l)] = rq[r];
-                cx[(3 * c + r, n + l)] = rv[r];
+                cxt[(l, 3 * c + r)] = rq[r];
+                cxt[(n + l, 3 * c + r)] = rv[r];
             }
         }
     }
@@ -539,6 +542,62 @@ pub(crate) fn sub_djtl_dq(
     cd.t3 = t;
 }
 
+/// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `3 nc` world forces) from `out` (`nv×nv`, `[x][l]`), with `s`
+/// the world subspaces of the path DoFs and `cd.jac` current. With `u_x` the Jacobian column
+/// (point velocity of `S_x`) and `w = S.ang`: a perturbation of `q_l` rotates `u_x` rigidly if
+/// `l ⪯ x` (J1 and `∂p/∂q_l = u_l` give `D u_x = w_l × u_x`) and otherwise only moves the point
+/// (`D u_x = w_x × u_l`), so the entry is `w_l·(u_x × λ)` resp. `w_x·(u_l × λ)`. Summed over the
+/// contacts: with `T_x = Σ_{c ∋ x} u_x^c × λ_c` (contacts whose path holds `x`), the entry of an
+/// ancestor `a` and a descendant `d` on a common path is `w_a·T_d` at both `(d, a)` and `(a, d)`
+/// (`w_l·T_x` within one joint), so shared DoFs (e.g. a floating base) are paired once.
+pub(crate) fn sub_djtl_dq_tree(
+    model: &Model,
+    s: &[Motion],
+    cd: &mut ContactData,
+    lambda: &[f64],
+    out: &mut DMatrix<f64>,
+) {
+    let ld = out.nrows();
+    let n = model.nv;
+    assert!(s.len() == n && cd.tsum.len() == n && ld >= n && out.ncols() >= n);
+    let t = &mut cd.tsum;
+    for &j in &cd.union_joints {
+        let iv = model.idx_v[j];
+        t[iv..iv + model.nvs[j]].fill(Vector3::zeros());
+    }
+    for (c, path) in cd.paths.iter().enumerate() {
+        let lam = Vector3::new(lambda[3 * c], lambda[3 * c + 1], lambda[3 * c + 2]);
+        if lam == Vector3::zeros() {
+            continue;
+        }
+        for &x in &path.dofs {
+            let u =
+                Vector3::new(cd.jac[(3 * c, x)], cd.jac[(3 * c + 1, x)], cd.jac[(3 * c + 2, x)]);
+            t[x] += u.cross(&lam);
+        }
+    }
+    let o = out.as_mut_slice();
+    for &j in &cd.union_joints {
+        let iv = model.idx_v[j];
+        for d in iv..iv + model.nvs[j] {
+            let (wd, td) = (s[d].ang, t[d]);
+            o[d + ld * d] -= wd.dot(&td);
+            let anc = model.ancestors_of_dof(d);
+            // SAFETY: ancestor DoFs a < d < nv ≤ ld, so a, d < s.len() = t.len() = nv and
+            // a + ld d, d + ld a < ld nv ≤ o.len() (asserted above).
+            unsafe {
+                for &a in anc {
+                    let wa = s.get_unchecked(a).ang;
+                    let e = wa.dot(&td);
+                    *o.get_unchecked_mut(d + ld * a) -= e;
+                    *o.get_unchecked_mut(a + ld * d) -=
+                        if a < iv { e } else { wd.dot(t.get_unchecked(a)) };
+                }
+            }
+        }
+    }
+}
+
 /// `G(z)` (columns `l`): `[IDFOZA(z₁) − ∂(Jᵀz₂)/∂q ; ∂(J z₁)/∂q]`, `z = (z₁, z₂)` of length
 /// `nv + 3 nc`. Needs the composite inertias of the current `q` in `data`. Writes `cd.g`.
 pub(crate) fn g_matrix(model: &Model, data: &mut Data, cd: &mut ContactData, z: &[f64]) {
@@ -559,7 +618,7 @@ pub(crate) fn g_matrix_split(
     idfoza_core(model, data, z_m, &mut cd.zmat);
     cd.g.view_mut((0, 0), (n, n)).copy_from(&cd.zmat);
     let mut g = std::mem::replace(&mut cd.g, DMatrix::zeros(0, 0));
-    sub_djtl_dq(&data.s_world, cd, z2, &mut g);
+    sub_djtl_dq_tree(model, &data.s_world, cd, z2, &mut g);
     // ∂(J z₁)/∂q rows: cumulative Z_j = Σ_{x ⪯ j} S_x z_x along the path.
     let mut zc = std::mem::take(&mut cd.zc);
     for (c, path) in cd.paths.iter().enumerate() {

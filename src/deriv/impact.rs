@@ -11,7 +11,7 @@
 
 use super::contact::{
     ContactData, base, copy_block, djw_dq, factor_delassus, factor_kkt, fill_rinv, g_matrix,
-    g_matrix_split, padded_rows, path_kinematics, sub_djtl_dq, transpose_into, update_points,
+    g_matrix_split, padded_rows, path_kinematics, sub_djtl_dq_tree, transpose_into, update_points,
 };
 use super::contact_kin::{Dir, djtl_dq, djz_dq};
 use super::id_so::{SoData, id_so_unchecked};
@@ -210,7 +210,7 @@ fn first_order(model: &Model, data: &mut Data, im: &mut ImpactData) {
     let cd = &mut im.cd;
     idfoza_core(model, data, im.dv.as_slice(), &mut im.rq);
     let s = std::mem::take(&mut cd.s);
-    sub_djtl_dq(&s, cd, im.impulse.as_slice(), &mut im.rq);
+    sub_djtl_dq_tree(model, &s, cd, im.impulse.as_slice(), &mut im.rq);
     cd.s = s;
     djw_dq(model, cd, im.w.as_slice(), &mut im.cq);
     // ∂λ̂/∂q = B = Qᵀa − Λc; with P = M⁻¹ − YQᵀ, ∂q̇⁺/∂q = −(Pa + Qc) = M⁻¹(JᵀB − a): rows of
@@ -345,6 +345,5 @@ fn so_inner(
     premultiply(&ri.rows(n, m), rqq, &mut so.d2impulse_dq2);
     premultiply(&ri.rows(0, n), rqv, &mut so.d2vplus_dqdvminus);
     premultiply(&ri.rows(n, m), rqv, &mut so.d2impulse_dqdvminus);
-    let _ = sub_djtl_dq;
     Ok(())
 }
