@@ -336,8 +336,17 @@ pub(crate) fn spd_inverse_in_place(a: &mut [f64], m: usize, tol: f64) -> bool {
     assert!(a.len() == m * m, "spd_inverse_in_place: dimension mismatch");
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2_fma() {
-        // SAFETY: AVX2 and FMA are available; the length is asserted above.
-        return unsafe { spd_inverse_avx2(a, m, tol) };
+        // SAFETY: AVX2 and FMA are available; the length is asserted above (and m ≤ 4 V for
+        // the register-resident versions).
+        return unsafe {
+            match m.div_ceil(4) {
+                1 => spd_inverse_avx2_regs::<1>(a, m, tol),
+                2 => spd_inverse_avx2_regs::<2>(a, m, tol),
+                3 => spd_inverse_avx2_regs::<3>(a, m, tol),
+                4 => spd_inverse_avx2_regs::<4>(a, m, tol),
+                _ => spd_inverse_avx2(a, m, tol),
+            }
+        };
     }
     for k in 0..m {
         let d = a[k + m * k];
@@ -535,6 +544,70 @@ unsafe fn gemm_tail_avx2(
     }
 }
 
+/// [`spd_inverse_avx2`] for `4(V − 1) < m ≤ 4V`: the pivot column is kept in `V` registers
+/// and every column update is fully unrolled.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA; `a.len() == m * m` and `m ≤ 4 V`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn spd_inverse_avx2_regs<const V: usize>(a: &mut [f64], m: usize, tol: f64) -> bool {
+    use std::arch::x86_64::*;
+    debug_assert!(m <= 4 * V && a.len() == m * m);
+    let rem = m - 4 * (V - 1);
+    let lane = |k: usize| if rem > k { -1i64 } else { 0 };
+    // Mask of the last vector of a column (all lanes when m = 4 V).
+    let mask = _mm256_setr_epi64x(lane(0), lane(1), lane(2), lane(3));
+    let p = a.as_mut_ptr();
+    // SAFETY: vector u < V − 1 covers rows 4u..4u + 4 ≤ m; the last one is masked to rows < m;
+    // columns are < m: every access is inside the m² elements of `a`.
+    unsafe {
+        let load = |c: *const f64, u: usize| {
+            if u + 1 < V {
+                _mm256_loadu_pd(c.add(4 * u))
+            } else {
+                _mm256_maskload_pd(c.add(4 * u), mask)
+            }
+        };
+        let store = |c: *mut f64, u: usize, v: __m256d| {
+            if u + 1 < V {
+                _mm256_storeu_pd(c.add(4 * u), v)
+            } else {
+                _mm256_maskstore_pd(c.add(4 * u), mask, v)
+            }
+        };
+        for k in 0..m {
+            let ck = p.add(m * k);
+            let d = *ck.add(k);
+            if d.is_nan() || d <= tol {
+                return false;
+            }
+            let r = 1.0 / d;
+            *ck.add(k) = d - 1.0;
+            let mut u_k = [_mm256_setzero_pd(); V];
+            for (u, x) in u_k.iter_mut().enumerate() {
+                *x = load(ck, u);
+            }
+            for j in 0..m {
+                if j == k {
+                    continue;
+                }
+                let cj = p.add(m * j);
+                let f = _mm256_set1_pd(*cj.add(k) * r);
+                for (u, x) in u_k.iter().enumerate() {
+                    store(cj, u, _mm256_fnmadd_pd(f, *x, load(cj, u)));
+                }
+            }
+            let nr = _mm256_set1_pd(-r);
+            for (u, x) in u_k.iter().enumerate() {
+                store(ck, u, _mm256_mul_pd(nr, *x));
+            }
+            *ck.add(k) = r;
+        }
+    }
+    true
+}
+
 #[cfg(test)]
 mod tests {
     use super::spd_inverse_in_place;
@@ -546,7 +619,7 @@ mod tests {
     #[test]
     fn spd_inverse_matches_identity_and_rejects_singular() {
         let mut rng = Rng::new(11);
-        for m in [1, 2, 3, 4, 5, 6, 9, 12, 13] {
+        for m in [1, 2, 3, 4, 5, 6, 9, 12, 13, 16, 17, 22] {
             let b = DMatrix::from_fn(m, m, |_, _| rng.range(-1.0, 1.0));
             let a = &b * b.transpose() + DMatrix::identity(m, m) * 0.1;
             let mut inv = a.clone();

@@ -45,7 +45,7 @@ pub struct ContactData {
     /// `Jᵀ` (`nv × 3 nc`).
     pub(crate) jt: DMatrix<f64>,
     /// Padded `3 nc`-row work matrix (`mp × 3 nc`): the Delassus matrix, then `Λ`.
-    delp: DMatrix<f64>,
+    pub(crate) delp: DMatrix<f64>,
     /// `[Qᵀ, −Λ]`, rows padded with zeros to a multiple of 8 (`mp × (nv + 3 nc)`).
     pub(crate) wq: DMatrix<f64>,
     /// `L⁻¹ D⁻¹` (column-major; zero off the tree pattern).
@@ -221,26 +221,27 @@ pub(crate) fn update_points(model: &Model, data: &Data, cd: &mut ContactData, a0
     }
 }
 
-/// World subspaces `cd.s` of the path DoFs, body velocities `cd.kvel` (if `v` is given, else
-/// left zero) and accelerations `cd.kacc` at `q̈ = 0` without gravity of the path joints, the
-/// contact points and the Jacobian `cd.jac`, from the current `data.o_m_i`. With `v`, also the
-/// drift `J̇q̇` (classical point accelerations at `q̈ = 0`) into `cd.drift`.
+/// World subspaces `cd.s` of the path DoFs (copied from `data.s_world`), the contact points and
+/// the Jacobian `cd.jac`, from the current `data.o_m_i` and `data.s_world` (as left by the
+/// CRBA). With `v`, also the body velocities `cd.kvel` and accelerations `cd.kacc` at `q̈ = 0`
+/// without gravity of the path joints, and the drift `J̇q̇` (classical point accelerations at
+/// `q̈ = 0`) into `cd.drift` (without `v` these are not touched).
 pub(crate) fn path_kinematics(model: &Model, data: &Data, cd: &mut ContactData, v: Option<&[f64]>) {
     for &j in &cd.union_joints {
-        let x = data.o_m_i[j];
-        let parent = model.parents[j];
-        let (vp, ap) = (cd.kvel[parent], cd.kacc[parent]);
-        let mut vj = Motion::zero();
-        for c in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
-            let s = x.act_motion(&model.subspace[c]);
-            cd.s[c] = s;
-            if let Some(v) = v {
-                vj += s * v[c];
+        let iv = model.idx_v[j];
+        let nj = model.nvs[j];
+        cd.s[iv..iv + nj].copy_from_slice(&data.s_world[iv..iv + nj]);
+        if let Some(v) = v {
+            let parent = model.parents[j];
+            let (vp, ap) = (cd.kvel[parent], cd.kacc[parent]);
+            let mut vj = Motion::zero();
+            for c in iv..iv + nj {
+                vj += cd.s[c] * v[c];
             }
+            let vi = vp + vj;
+            cd.kvel[j] = vi;
+            cd.kacc[j] = ap + vi.cross(&vj);
         }
-        let vi = vp + vj;
-        cd.kvel[j] = vi;
-        cd.kacc[j] = ap + vi.cross(&vj);
     }
     for (c, &(body, local)) in cd.local.iter().enumerate() {
         let p = data.o_m_i[body].act_point(&local);
@@ -287,7 +288,7 @@ pub(crate) fn add_qdd_to_path_acc(model: &Model, cd: &mut ContactData, qdd: &[f6
 pub(crate) fn factor_kkt(model: &Model, data: &mut Data, cd: &mut ContactData) -> Result<()> {
     let n = model.nv;
     let m = cd.dim();
-    factor_delassus(model, data, cd)?;
+    factor_delassus(model, data, cd, true)?;
     minv_from_ltl(model, data, cd);
     // r1 = [P; −Qᵀ] with P = M⁻¹ − Y Qᵀ (r2 = [Q; Λ] is filled by factor_delassus).
     let (rp, mp) = (cd.r1.nrows(), cd.wq.nrows());
@@ -323,9 +324,15 @@ pub(crate) fn transpose_into(
 /// With `data.ltl` (factor of `M`) and `cd.jac`: `Yᵀ = (M⁻¹Jᵀ)ᵀ` into `cd.yt` by one
 /// multi-right-hand-side tree-sparse solve (row `x` of `Jᵀ` is column `x` of `J`), `Y` into
 /// `cd.y`, the Delassus matrix `J Y + μI`, `Λ` (Gauss–Jordan SPD inverse), `Qᵀ = ΛYᵀ`,
-/// `r2 = [Q; Λ]` and `wq = [Qᵀ, −Λ]` (rows padded). `M⁻¹` is not formed. A rank-deficient
+/// `r2 = [Q; Λ]` and `wq = [Qᵀ, −Λ]` (rows padded; only `with_q`), `Λ` with padded rows in
+/// `cd.delp`. `M⁻¹` is not formed. A rank-deficient
 /// contact set is an error naming the contacts (unless damped).
-pub(crate) fn factor_delassus(model: &Model, data: &Data, cd: &mut ContactData) -> Result<()> {
+pub(crate) fn factor_delassus(
+    model: &Model,
+    data: &Data,
+    cd: &mut ContactData,
+    with_q: bool,
+) -> Result<()> {
     let n = model.nv;
     let m = cd.dim();
     let (mp, np) = (cd.yt.nrows(), cd.y.nrows());
@@ -356,13 +363,17 @@ pub(crate) fn factor_delassus(model: &Model, data: &Data, cd: &mut ContactData) 
             ),
         });
     }
-    // wq = [Qᵀ, −Λ] with Qᵀ = ΛYᵀ; r2 = [Q; Λ].
+    // Λ with rows padded into delp (its padding rows stay zero: those of Yᵀ are).
     {
         let (lam, delp) = (cd.lam.as_slice(), cd.delp.as_mut_slice());
         for c in 0..m {
             delp[c * mp..c * mp + m].copy_from_slice(&lam[c * m..(c + 1) * m]);
         }
     }
+    if !with_q {
+        return Ok(());
+    }
+    // wq = [Qᵀ, −Λ] with Qᵀ = ΛYᵀ; r2 = [Q; Λ].
     gemm(1.0, &cd.delp, &cd.yt.rows(0, m), 0.0, &mut cd.wq.columns_mut(0, n));
     let rp = cd.r2.nrows();
     transpose_into(cd.wq.as_slice(), mp, (m, n), cd.r2.as_mut_slice(), rp);
@@ -558,8 +569,22 @@ pub(crate) fn sub_djtl_dq_tree(
     out: &mut DMatrix<f64>,
 ) {
     let ld = out.nrows();
+    assert!(out.ncols() >= model.nv);
+    sub_djtl_dq_strided(model, s, cd, lambda, out.as_mut_slice(), 1, ld);
+}
+
+/// [`sub_djtl_dq_tree`] into a slice where entry `(x, l)` is at `o[rs x + cs l]`.
+pub(crate) fn sub_djtl_dq_strided(
+    model: &Model,
+    s: &[Motion],
+    cd: &mut ContactData,
+    lambda: &[f64],
+    o: &mut [f64],
+    rs: usize,
+    cs: usize,
+) {
     let n = model.nv;
-    assert!(s.len() == n && cd.tsum.len() == n && ld >= n && out.ncols() >= n);
+    assert!(s.len() == n && cd.tsum.len() == n && (n == 0 || (rs + cs) * (n - 1) < o.len()));
     let t = &mut cd.tsum;
     for &j in &cd.union_joints {
         let iv = model.idx_v[j];
@@ -576,21 +601,20 @@ pub(crate) fn sub_djtl_dq_tree(
             t[x] += u.cross(&lam);
         }
     }
-    let o = out.as_mut_slice();
     for &j in &cd.union_joints {
         let iv = model.idx_v[j];
         for d in iv..iv + model.nvs[j] {
             let (wd, td) = (s[d].ang, t[d]);
-            o[d + ld * d] -= wd.dot(&td);
+            o[(rs + cs) * d] -= wd.dot(&td);
             let anc = model.ancestors_of_dof(d);
-            // SAFETY: ancestor DoFs a < d < nv ≤ ld, so a, d < s.len() = t.len() = nv and
-            // a + ld d, d + ld a < ld nv ≤ o.len() (asserted above).
+            // SAFETY: ancestor DoFs a < d < nv, so a, d < s.len() = t.len() = nv and
+            // rs d + cs a, rs a + cs d ≤ (rs + cs)(nv − 1) < o.len() (asserted above).
             unsafe {
                 for &a in anc {
                     let wa = s.get_unchecked(a).ang;
                     let e = wa.dot(&td);
-                    *o.get_unchecked_mut(d + ld * a) -= e;
-                    *o.get_unchecked_mut(a + ld * d) -=
+                    *o.get_unchecked_mut(rs * d + cs * a) -= e;
+                    *o.get_unchecked_mut(rs * a + cs * d) -=
                         if a < iv { e } else { wd.dot(t.get_unchecked(a)) };
                 }
             }

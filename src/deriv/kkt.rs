@@ -12,7 +12,7 @@
 
 use super::contact::{
     ContactData, accel_derivatives_t, add_qdd_to_path_acc, base, factor_delassus, factor_kkt,
-    fill_rinv, g_matrix, path_kinematics, sub_djtl_dq_tree, update_points,
+    fill_rinv, g_matrix, path_kinematics, sub_djtl_dq_strided, update_points,
 };
 use super::contact_kin::{Dir, dap_dq, dap_dv, djtl_dq};
 use super::id_fo::id_derivatives_unchecked;
@@ -50,7 +50,6 @@ pub struct KktData {
     pub dlambda_dtau: DMatrix<f64>,
     /// Second-order results (allocated by [`KktData::with_second_order`]).
     pub so: Option<KktSo>,
-    rx: DMatrix<f64>,
     /// `Wᵀ = (J X + C)ᵀ` (`2 nv × 3 nc`) for `X = −M⁻¹ [a_q | a_v]`, `C = [c_q | c_v]`.
     wt: DMatrix<f64>,
     /// `Bᵀ = [∂λ/∂q | ∂λ/∂q̇ | ∂λ/∂τ]ᵀ` (`3 nv × 3 nc`).
@@ -96,7 +95,6 @@ impl KktData {
             dlambda_dv: DMatrix::zeros(m, n),
             dlambda_dtau: DMatrix::zeros(m, n),
             so: None,
-            rx: DMatrix::zeros(n, 2 * n),
             wt: DMatrix::zeros(2 * n, m),
             bt: DMatrix::zeros(3 * n, m),
             tmp_v: DVector::zeros(n),
@@ -190,7 +188,7 @@ fn solve_unchecked(
     if full {
         factor_kkt(model, data, &mut kd.cd)?;
     } else {
-        factor_delassus(model, data, &mut kd.cd)?;
+        factor_delassus(model, data, &mut kd.cd, true)?;
     }
     // q̈₀ = M⁻¹(τ − b), λ = −Λ(J q̈₀ + J̇q̇), q̈ = q̈₀ + Yλ  (block elimination of KKT_eqn).
     let cd = &mut kd.cd;
@@ -228,17 +226,23 @@ pub fn kkt_derivatives(
 }
 
 /// The residual derivatives from the ID derivatives in `data` (at `q̈`) and the contact terms:
-/// `[a_q | a_v] = [∂τ/∂q − ∂(J_cᵀλ)/∂q | ∂τ/∂q̇]` into `kd.rx`, the point-acceleration rows
-/// `[c_q | c_v]ᵀ` into `kd.wt` (eqs. ID_FO_q_eqn1, ID_FO_v_eqn1).
-fn residual_derivatives(model: &Model, data: &Data, kd: &mut KktData) {
+/// `[a_q | a_v] = [∂τ/∂q − ∂(J_cᵀλ)/∂q | ∂τ/∂q̇]` by rows into `x` (row `i` at `x[3nv·i..]`,
+/// columns `0..2nv`), the point-acceleration rows `[c_q | c_v]ᵀ` into `kd.wt` (eqs.
+/// ID_FO_q_eqn1, ID_FO_v_eqn1).
+fn residual_derivatives(
+    model: &Model,
+    (dtau_dq, dtau_dv): (&DMatrix<f64>, &DMatrix<f64>),
+    kd: &mut KktData,
+    x: &mut [f64],
+) {
     let n = model.nv;
+    let ld = 3 * n;
     let cd = &mut kd.cd;
     add_qdd_to_path_acc(model, cd, kd.qdd.as_slice());
-    let rx = kd.rx.as_mut_slice();
-    rx[..n * n].copy_from_slice(data.dtau_dq.as_slice());
-    rx[n * n..].copy_from_slice(data.dtau_dv.as_slice());
+    transpose_strided(dtau_dq.as_slice(), n, n, n, x, ld);
+    transpose_strided(dtau_dv.as_slice(), n, n, n, &mut x[n..], ld);
     let s = std::mem::take(&mut cd.s);
-    sub_djtl_dq_tree(model, &s, cd, kd.lambda.as_slice(), &mut kd.rx);
+    sub_djtl_dq_strided(model, &s, cd, kd.lambda.as_slice(), x, ld, 1);
     cd.s = s;
     kd.wt.fill(0.0);
     accel_derivatives_t(cd, &mut kd.wt);
@@ -253,12 +257,11 @@ fn residual_derivatives(model: &Model, data: &Data, kd: &mut KktData) {
 fn first_order_by_solve(model: &Model, data: &mut Data, kd: &mut KktData) {
     let n = model.nv;
     let m = kd.cd.dim();
-    residual_derivatives(model, data, kd);
     let (w, ld) = (2 * n, 3 * n);
     {
         // Rows of [a_q | a_v] and the upper triangle of the identity.
         let x = &mut data.fd_ws.x[..];
-        transpose_strided(kd.rx.as_slice(), n, n, w, x, ld);
+        residual_derivatives(model, (&data.dtau_dq, &data.dtau_dv), kd, x);
         for i in 0..n {
             let row = &mut x[ld * i + w + i..ld * (i + 1)];
             row.fill(0.0);
