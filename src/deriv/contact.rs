@@ -235,8 +235,8 @@ pub(crate) fn path_kinematics(model: &Model, data: &Data, cd: &mut ContactData, 
             let parent = model.parents[j];
             let (vp, ap) = (cd.kvel[parent], cd.kacc[parent]);
             let mut vj = Motion::zero();
-            for c in iv..iv + nj {
-                vj += cd.s[c] * v[c];
+            for (s, x) in cd.s[iv..iv + nj].iter().zip(&v[iv..iv + nj]) {
+                vj += *s * *x;
             }
             let vi = vp + vj;
             cd.kvel[j] = vi;
