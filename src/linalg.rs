@@ -324,3 +324,314 @@ unsafe fn transpose_avx(src: &[f64], lds: usize, m: usize, n: usize, dst: &mut [
         }
     }
 }
+
+/// In-place inverse of a symmetric positive-definite `m×m` matrix `a` (column-major, full
+/// storage) by Gauss–Jordan elimination without pivoting: pivot `k` maps
+/// `a_ij ← a_ij − a_ik a_kj / d`, `a_kj ← a_kj / d`, `a_ik ← −a_ik / d`, `a_kk ← 1/d` with
+/// `d = a_kk`; after all pivots `a` holds `a⁻¹`. The pivots are the diagonal entries of the
+/// successive Schur complements (the squared Cholesky diagonal), so `false` is returned, with
+/// `a` partly overwritten, as soon as one is not above `tol` (or is NaN). Whole columns are
+/// updated per pivot (rank-one updates), which vectorises.
+pub(crate) fn spd_inverse_in_place(a: &mut [f64], m: usize, tol: f64) -> bool {
+    assert!(a.len() == m * m, "spd_inverse_in_place: dimension mismatch");
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: AVX2 and FMA are available; the length is asserted above (and m ≤ 4 V for
+        // the register-resident versions).
+        return unsafe {
+            match m.div_ceil(4) {
+                1 => spd_inverse_avx2_regs::<1>(a, m, tol),
+                2 => spd_inverse_avx2_regs::<2>(a, m, tol),
+                3 => spd_inverse_avx2_regs::<3>(a, m, tol),
+                4 => spd_inverse_avx2_regs::<4>(a, m, tol),
+                _ => spd_inverse_avx2(a, m, tol),
+            }
+        };
+    }
+    for k in 0..m {
+        let d = a[k + m * k];
+        if d.is_nan() || d <= tol {
+            return false;
+        }
+        let r = 1.0 / d;
+        // With column k's own entry set to d − 1, `a_kj − (a_kj/d)(d − 1) = a_kj/d`: one
+        // update rule for every row of column j.
+        a[k + m * k] = d - 1.0;
+        let (before, rest) = a.split_at_mut(m * k);
+        let (colk, after) = rest.split_at_mut(m);
+        for col in before.chunks_exact_mut(m).chain(after.chunks_exact_mut(m)) {
+            let f = col[k] * r;
+            for (x, u) in col.iter_mut().zip(colk.iter()) {
+                *x -= f * u;
+            }
+        }
+        colk.iter_mut().for_each(|x| *x *= -r);
+        colk[k] = r;
+    }
+    true
+}
+
+/// AVX2/FMA version of [`spd_inverse_in_place`] (columns by 4-lane vectors, masked tail).
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA; `a.len() == m * m`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn spd_inverse_avx2(a: &mut [f64], m: usize, tol: f64) -> bool {
+    use std::arch::x86_64::*;
+    let nfull = m / 4;
+    let rem = m % 4;
+    let lane = |k: usize| if rem > k { -1i64 } else { 0 };
+    let mask = _mm256_setr_epi64x(lane(0), lane(1), lane(2), 0);
+    let p = a.as_mut_ptr();
+    // SAFETY: every access is to column j < m at rows < m (full vectors cover rows < 4 nfull ≤ m,
+    // the masked one rows 4 nfull.. m), i.e. inside the m² elements of `a`.
+    unsafe {
+        for k in 0..m {
+            let d = *p.add(k + m * k);
+            if d.is_nan() || d <= tol {
+                return false;
+            }
+            let r = 1.0 / d;
+            *p.add(k + m * k) = d - 1.0;
+            let ck = p.add(m * k);
+            for j in (0..m).filter(|&j| j != k) {
+                let cj = p.add(m * j);
+                let f = _mm256_set1_pd(*cj.add(k) * r);
+                for u in 0..nfull {
+                    let x = cj.add(4 * u);
+                    let v = _mm256_fnmadd_pd(f, _mm256_loadu_pd(ck.add(4 * u)), _mm256_loadu_pd(x));
+                    _mm256_storeu_pd(x, v);
+                }
+                if rem != 0 {
+                    let x = cj.add(4 * nfull);
+                    let v = _mm256_fnmadd_pd(
+                        f,
+                        _mm256_maskload_pd(ck.add(4 * nfull), mask),
+                        _mm256_maskload_pd(x, mask),
+                    );
+                    _mm256_maskstore_pd(x, mask, v);
+                }
+            }
+            let nr = _mm256_set1_pd(-r);
+            for u in 0..nfull {
+                let x = ck.add(4 * u);
+                _mm256_storeu_pd(x, _mm256_mul_pd(nr, _mm256_loadu_pd(x)));
+            }
+            if rem != 0 {
+                let x = ck.add(4 * nfull);
+                _mm256_maskstore_pd(x, mask, _mm256_mul_pd(nr, _mm256_maskload_pd(x, mask)));
+            }
+            *ck.add(k) = r;
+        }
+    }
+    true
+}
+
+/// [`gemm`] whose rows beyond the last multiple of 8 are computed by a masked AVX2/FMA kernel
+/// (4-row vectors, the last one masked) instead of scalar loops; the same result to rounding.
+pub(crate) fn gemm_masked<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
+    alpha: f64,
+    a: &Matrix<f64, R1, C1, S1>,
+    b: &Matrix<f64, R2, C2, S2>,
+    beta: f64,
+    c: &mut Matrix<f64, R3, C3, S3>,
+) where
+    R1: Dim,
+    C1: Dim,
+    S1: RawStorage<f64, R1, C1>,
+    R2: Dim,
+    C2: Dim,
+    S2: RawStorage<f64, R2, C2>,
+    R3: Dim,
+    C3: Dim,
+    S3: RawStorageMut<f64, R3, C3>,
+{
+    let (m, k) = a.shape();
+    let (k2, n) = b.shape();
+    assert!(k == k2 && c.shape() == (m, n), "gemm_masked: dimension mismatch");
+    let m8 = m - m % 8;
+    #[cfg(target_arch = "x86_64")]
+    if m8 < m && n > 0 && crate::simd::avx2_fma() {
+        let (ra, lda) = a.strides();
+        let (rb, ldb) = b.strides();
+        let (rc, ldc) = c.strides();
+        assert!(ra == 1 && rb == 1 && rc == 1, "gemm_masked: unit row stride required");
+        if m8 > 0 {
+            gemm(alpha, &a.rows(0, m8), b, beta, &mut c.rows_mut(0, m8));
+        }
+        // SAFETY: AVX2 and FMA are available; the tail kernel reads rows m8..m of `a` (k
+        // columns), the k × n block of `b` and writes rows m8..m of the n columns of `c`, all
+        // inside the live matrices of the asserted shapes and strides.
+        unsafe {
+            gemm_tail_avx2(
+                alpha,
+                a.as_ptr().add(m8),
+                lda,
+                b.as_ptr(),
+                ldb,
+                beta,
+                c.as_mut_ptr().add(m8),
+                ldc,
+                m - m8,
+                n,
+                k,
+            )
+        };
+        return;
+    }
+    gemm(alpha, a, b, beta, c);
+}
+
+/// `C ← β C + α A B` for `m < 8` rows by (masked) 4-row vectors, one column of `C` at a time.
+///
+/// # Safety
+/// AVX2 and FMA available; `a` (`m × k`, leading dimension `lda`), `b` (`k × n`, `ldb`) and `c`
+/// (`m × n`, `ldc`) valid for reads (and writes for `c`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn gemm_tail_avx2(
+    alpha: f64,
+    a: *const f64,
+    lda: usize,
+    b: *const f64,
+    ldb: usize,
+    beta: f64,
+    c: *mut f64,
+    ldc: usize,
+    m: usize,
+    n: usize,
+    k: usize,
+) {
+    use std::arch::x86_64::*;
+    debug_assert!(m > 0 && m < 8);
+    let lane = |r: usize, t: usize| if r > t { -1i64 } else { 0 };
+    // Rows 0..4 (masked if m < 4) and 4..m (masked, only if m > 4).
+    let r0 = m.min(4);
+    let r1 = m.saturating_sub(4);
+    let m0 = _mm256_setr_epi64x(lane(r0, 0), lane(r0, 1), lane(r0, 2), lane(r0, 3));
+    let m1 = _mm256_setr_epi64x(lane(r1, 0), lane(r1, 1), lane(r1, 2), 0);
+    let al = _mm256_set1_pd(alpha);
+    let be = _mm256_set1_pd(beta);
+    // SAFETY: masked lanes only touch rows < m; see the function's safety contract.
+    unsafe {
+        for j in 0..n {
+            let mut acc0 = _mm256_setzero_pd();
+            let mut acc1 = _mm256_setzero_pd();
+            for l in 0..k {
+                let bv = _mm256_broadcast_sd(&*b.add(l + j * ldb));
+                let ap = a.add(l * lda);
+                acc0 = _mm256_fmadd_pd(_mm256_maskload_pd(ap, m0), bv, acc0);
+                if r1 > 0 {
+                    acc1 = _mm256_fmadd_pd(_mm256_maskload_pd(ap.add(4), m1), bv, acc1);
+                }
+            }
+            let cp = c.add(j * ldc);
+            let mut v0 = _mm256_mul_pd(al, acc0);
+            if beta != 0.0 {
+                v0 = _mm256_fmadd_pd(be, _mm256_maskload_pd(cp, m0), v0);
+            }
+            _mm256_maskstore_pd(cp, m0, v0);
+            if r1 > 0 {
+                let mut v1 = _mm256_mul_pd(al, acc1);
+                if beta != 0.0 {
+                    v1 = _mm256_fmadd_pd(be, _mm256_maskload_pd(cp.add(4), m1), v1);
+                }
+                _mm256_maskstore_pd(cp.add(4), m1, v1);
+            }
+        }
+    }
+}
+
+/// [`spd_inverse_avx2`] for `4(V − 1) < m ≤ 4V`: the pivot column is kept in `V` registers
+/// and every column update is fully unrolled.
+///
+/// # Safety
+/// The CPU must support AVX2 and FMA; `a.len() == m * m` and `m ≤ 4 V`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn spd_inverse_avx2_regs<const V: usize>(a: &mut [f64], m: usize, tol: f64) -> bool {
+    use std::arch::x86_64::*;
+    debug_assert!(m <= 4 * V && a.len() == m * m);
+    let rem = m - 4 * (V - 1);
+    let lane = |k: usize| if rem > k { -1i64 } else { 0 };
+    // Mask of the last vector of a column (all lanes when m = 4 V).
+    let mask = _mm256_setr_epi64x(lane(0), lane(1), lane(2), lane(3));
+    let p = a.as_mut_ptr();
+    // SAFETY: vector u < V − 1 covers rows 4u..4u + 4 ≤ m; the last one is masked to rows < m;
+    // columns are < m: every access is inside the m² elements of `a`.
+    unsafe {
+        let load = |c: *const f64, u: usize| {
+            if u + 1 < V {
+                _mm256_loadu_pd(c.add(4 * u))
+            } else {
+                _mm256_maskload_pd(c.add(4 * u), mask)
+            }
+        };
+        let store = |c: *mut f64, u: usize, v: __m256d| {
+            if u + 1 < V {
+                _mm256_storeu_pd(c.add(4 * u), v)
+            } else {
+                _mm256_maskstore_pd(c.add(4 * u), mask, v)
+            }
+        };
+        for k in 0..m {
+            let ck = p.add(m * k);
+            let d = *ck.add(k);
+            if d.is_nan() || d <= tol {
+                return false;
+            }
+            let r = 1.0 / d;
+            *ck.add(k) = d - 1.0;
+            let mut u_k = [_mm256_setzero_pd(); V];
+            for (u, x) in u_k.iter_mut().enumerate() {
+                *x = load(ck, u);
+            }
+            for j in 0..m {
+                if j == k {
+                    continue;
+                }
+                let cj = p.add(m * j);
+                let f = _mm256_set1_pd(*cj.add(k) * r);
+                for (u, x) in u_k.iter().enumerate() {
+                    store(cj, u, _mm256_fnmadd_pd(f, *x, load(cj, u)));
+                }
+            }
+            let nr = _mm256_set1_pd(-r);
+            for (u, x) in u_k.iter().enumerate() {
+                store(ck, u, _mm256_mul_pd(nr, *x));
+            }
+            *ck.add(k) = r;
+        }
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::spd_inverse_in_place;
+    use crate::rng::Rng;
+    use nalgebra::DMatrix;
+
+    /// The Gauss–Jordan inverse of random SPD matrices (sizes with and without a ragged
+    /// vector tail) times the matrix is the identity; a singular matrix is rejected.
+    #[test]
+    fn spd_inverse_matches_identity_and_rejects_singular() {
+        let mut rng = Rng::new(11);
+        for m in [1, 2, 3, 4, 5, 6, 9, 12, 13, 16, 17, 22] {
+            let b = DMatrix::from_fn(m, m, |_, _| rng.range(-1.0, 1.0));
+            let a = &b * b.transpose() + DMatrix::identity(m, m) * 0.1;
+            let mut inv = a.clone();
+            assert!(spd_inverse_in_place(inv.as_mut_slice(), m, 1e-12));
+            let err = (&a * &inv - DMatrix::identity(m, m)).abs().max();
+            assert!(err < 1e-10, "m = {m}: |A A⁻¹ − I| = {err:e}");
+            let asym = (&inv - inv.transpose()).abs().max();
+            assert!(asym < 1e-10, "m = {m}: inverse not symmetric ({asym:e})");
+        }
+        // Rank 2 in 3 dimensions: the third pivot vanishes.
+        let b = DMatrix::from_row_slice(3, 2, &[1.0, 0.0, 0.0, 1.0, 1.0, 1.0]);
+        let mut a = &b * b.transpose();
+        assert!(!spd_inverse_in_place(a.as_mut_slice(), 3, 1e-12));
+    }
+}

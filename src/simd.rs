@@ -1,9 +1,10 @@
 //! Run-time choice between the AVX2/FMA kernels and the portable ones.
 //!
 //! The hot kernels (IDSVA-SO, the multi-right-hand-side `LᵀDL` solves, IDFOZA in FD-SO, the
-//! gemm and transposes) have an AVX2/FMA version compiled with `#[target_feature]` and a portable
-//! version; [`avx2_fma`] picks one per call. Both give the same results to rounding: the unit
-//! test below forces the portable path and compares.
+//! gemm (with its masked-tail variant), transposes and the SPD inverse of the Delassus matrix)
+//! have an AVX2/FMA version compiled with `#[target_feature]` and a portable version;
+//! [`avx2_fma`] picks one per call. Both give the same results to rounding: the unit test below
+//! forces the portable path and compares.
 
 /// Test switch: run the portable kernels even where AVX2/FMA is available.
 #[cfg(test)]
@@ -85,10 +86,18 @@ mod tests {
                 mat(&kd.dqdd_dv),
                 mat(&kd.dlambda_dq),
                 mat(&kd.dqdd_dtau),
+                mat(&kd.dlambda_dv),
+                mat(&kd.dlambda_dtau),
             ]);
             let mut im = ImpactData::new(m, cd);
             impact_derivatives(m, &mut d, &mut im, q, v).unwrap();
-            out.extend([mat(&im.dvplus_dq), mat(&im.dvplus_dvminus), im.vplus.as_slice().to_vec()]);
+            out.extend([
+                mat(&im.dvplus_dq),
+                mat(&im.dvplus_dvminus),
+                mat(&im.dimpulse_dq),
+                mat(&im.dimpulse_dvminus),
+                im.vplus.as_slice().to_vec(),
+            ]);
         }
         out
     }

@@ -8,7 +8,7 @@ use super::zero::idfoza_core;
 use crate::algo::internal::ltl_solve_rows_desc;
 use crate::algo::{Contact, Data};
 use crate::error::{Error, Result};
-use crate::linalg::gemm;
+use crate::linalg::{gemm, spd_inverse_in_place, transpose_strided};
 use crate::model::Model;
 use crate::spatial::Motion;
 use nalgebra::{DMatrix, DVector, Vector3};
@@ -43,9 +43,9 @@ pub struct ContactData {
     /// `Yᵀ = J M⁻¹`, rows padded (`mp × nv`).
     pub(crate) yt: DMatrix<f64>,
     /// `Jᵀ` (`nv × 3 nc`).
-    jt: DMatrix<f64>,
+    pub(crate) jt: DMatrix<f64>,
     /// Padded `3 nc`-row work matrix (`mp × 3 nc`): the Delassus matrix, then `Λ`.
-    delp: DMatrix<f64>,
+    pub(crate) delp: DMatrix<f64>,
     /// `[Qᵀ, −Λ]`, rows padded with zeros to a multiple of 8 (`mp × (nv + 3 nc)`).
     pub(crate) wq: DMatrix<f64>,
     /// `L⁻¹ D⁻¹` (column-major; zero off the tree pattern).
@@ -60,6 +60,8 @@ pub struct ContactData {
     pub(crate) kvel: Vec<Motion>,
     /// World body accelerations (no gravity) of the path joints (index 0: zero).
     pub(crate) kacc: Vec<Motion>,
+    /// `T_x = Σ_c u_x^c × λ_c` per DoF (see [`sub_djtl_dq_tree`]).
+    tsum: Vec<Vector3<f64>>,
     t3: Vec<Vector3<f64>>,
     tn: Vec<f64>,
     /// Regularisation `μ ≥ 0` added to the Delassus matrix `J M⁻¹ Jᵀ` (default 0: a
@@ -131,6 +133,7 @@ impl ContactData {
             s: vec![Motion::zero(); n],
             kvel: vec![Motion::zero(); model.njoints()],
             kacc: vec![Motion::zero(); model.njoints()],
+            tsum: vec![Vector3::zeros(); n],
             t3: vec![Vector3::zeros(); maxd],
             tn: vec![0.0; n],
             contacts: contacts.to_vec(),
@@ -218,26 +221,27 @@ pub(crate) fn update_points(model: &Model, data: &Data, cd: &mut ContactData, a0
     }
 }
 
-/// World subspaces `cd.s` of the path DoFs, body velocities `cd.kvel` (if `v` is given, else
-/// left zero) and accelerations `cd.kacc` at `q̈ = 0` without gravity of the path joints, the
-/// contact points and the Jacobian `cd.jac`, from the current `data.o_m_i`. With `v`, also the
-/// drift `J̇q̇` (classical point accelerations at `q̈ = 0`) into `cd.drift`.
+/// World subspaces `cd.s` of the path DoFs (copied from `data.s_world`), the contact points and
+/// the Jacobian `cd.jac`, from the current `data.o_m_i` and `data.s_world` (as left by the
+/// CRBA). With `v`, also the body velocities `cd.kvel` and accelerations `cd.kacc` at `q̈ = 0`
+/// without gravity of the path joints, and the drift `J̇q̇` (classical point accelerations at
+/// `q̈ = 0`) into `cd.drift` (without `v` these are not touched).
 pub(crate) fn path_kinematics(model: &Model, data: &Data, cd: &mut ContactData, v: Option<&[f64]>) {
     for &j in &cd.union_joints {
-        let x = data.o_m_i[j];
-        let parent = model.parents[j];
-        let (vp, ap) = (cd.kvel[parent], cd.kacc[parent]);
-        let mut vj = Motion::zero();
-        for c in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
-            let s = x.act_motion(&model.subspace[c]);
-            cd.s[c] = s;
-            if let Some(v) = v {
-                vj += s * v[c];
+        let iv = model.idx_v[j];
+        let nj = model.nvs[j];
+        cd.s[iv..iv + nj].copy_from_slice(&data.s_world[iv..iv + nj]);
+        if let Some(v) = v {
+            let parent = model.parents[j];
+            let (vp, ap) = (cd.kvel[parent], cd.kacc[parent]);
+            let mut vj = Motion::zero();
+            for (s, x) in cd.s[iv..iv + nj].iter().zip(&v[iv..iv + nj]) {
+                vj += *s * *x;
             }
+            let vi = vp + vj;
+            cd.kvel[j] = vi;
+            cd.kacc[j] = ap + vi.cross(&vj);
         }
-        let vi = vp + vj;
-        cd.kvel[j] = vi;
-        cd.kacc[j] = ap + vi.cross(&vj);
     }
     for (c, &(body, local)) in cd.local.iter().enumerate() {
         let p = data.o_m_i[body].act_point(&local);
@@ -284,7 +288,7 @@ pub(crate) fn add_qdd_to_path_acc(model: &Model, cd: &mut ContactData, qdd: &[f6
 pub(crate) fn factor_kkt(model: &Model, data: &mut Data, cd: &mut ContactData) -> Result<()> {
     let n = model.nv;
     let m = cd.dim();
-    factor_delassus(model, data, cd)?;
+    factor_delassus(model, data, cd, true)?;
     minv_from_ltl(model, data, cd);
     // r1 = [P; −Qᵀ] with P = M⁻¹ − Y Qᵀ (r2 = [Q; Λ] is filled by factor_delassus).
     let (rp, mp) = (cd.r1.nrows(), cd.wq.nrows());
@@ -314,22 +318,21 @@ pub(crate) fn transpose_into(
     dst: &mut [f64],
     ld: usize,
 ) {
-    assert!(ls >= rows && ld >= cols && (rows == 0 || dst.len() >= ld * rows));
-    for j in 0..cols {
-        let col = &src[ls * j..ls * j + rows];
-        for (i, x) in col.iter().enumerate() {
-            // SAFETY: j < cols ≤ ld and i < rows, so j + ld i < ld rows ≤ dst.len() (asserted).
-            unsafe { *dst.get_unchecked_mut(j + ld * i) = *x };
-        }
-    }
+    transpose_strided(src, ls, rows, cols, dst, ld);
 }
 
 /// With `data.ltl` (factor of `M`) and `cd.jac`: `Yᵀ = (M⁻¹Jᵀ)ᵀ` into `cd.yt` by one
 /// multi-right-hand-side tree-sparse solve (row `x` of `Jᵀ` is column `x` of `J`), `Y` into
-/// `cd.y`, the Delassus matrix `J Y + μI`, `Λ` (Cholesky), `Qᵀ = ΛYᵀ`,
-/// `r2 = [Q; Λ]` and `wq = [Qᵀ, −Λ]` (rows padded). `M⁻¹` is not formed. A rank-deficient
+/// `cd.y`, the Delassus matrix `J Y + μI`, `Λ` (Gauss–Jordan SPD inverse), `Qᵀ = ΛYᵀ`,
+/// `r2 = [Q; Λ]` and `wq = [Qᵀ, −Λ]` (rows padded; only `with_q`), `Λ` with padded rows in
+/// `cd.delp`. `M⁻¹` is not formed. A rank-deficient
 /// contact set is an error naming the contacts (unless damped).
-pub(crate) fn factor_delassus(model: &Model, data: &Data, cd: &mut ContactData) -> Result<()> {
+pub(crate) fn factor_delassus(
+    model: &Model,
+    data: &Data,
+    cd: &mut ContactData,
+    with_q: bool,
+) -> Result<()> {
     let n = model.nv;
     let m = cd.dim();
     let (mp, np) = (cd.yt.nrows(), cd.y.nrows());
@@ -349,7 +352,8 @@ pub(crate) fn factor_delassus(model: &Model, data: &Data, cd: &mut ContactData) 
         cd.del[(c, c)] += cd.damping;
     }
     let scale = (0..m).map(|i| cd.del[(i, i)].abs()).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
-    if !cholesky_inverse_in_place(&mut cd.del, &mut cd.lam, 1e-11 * scale) {
+    cd.lam.copy_from(&cd.del);
+    if !spd_inverse_in_place(cd.lam.as_mut_slice(), m, 1e-11 * scale) {
         return Err(Error::Singular {
             what: "contact set".into(),
             detail: format!(
@@ -359,13 +363,17 @@ pub(crate) fn factor_delassus(model: &Model, data: &Data, cd: &mut ContactData) 
             ),
         });
     }
-    // wq = [Qᵀ, −Λ] with Qᵀ = ΛYᵀ; r2 = [Q; Λ].
+    // Λ with rows padded into delp (its padding rows stay zero: those of Yᵀ are).
     {
         let (lam, delp) = (cd.lam.as_slice(), cd.delp.as_mut_slice());
         for c in 0..m {
             delp[c * mp..c * mp + m].copy_from_slice(&lam[c * m..(c + 1) * m]);
         }
     }
+    if !with_q {
+        return Ok(());
+    }
+    // wq = [Qᵀ, −Λ] with Qᵀ = ΛYᵀ; r2 = [Q; Λ].
     gemm(1.0, &cd.delp, &cd.yt.rows(0, m), 0.0, &mut cd.wq.columns_mut(0, n));
     let rp = cd.r2.nrows();
     transpose_into(cd.wq.as_slice(), mp, (m, n), cd.r2.as_mut_slice(), rp);
@@ -426,13 +434,13 @@ pub(crate) fn fill_rinv(cd: &mut ContactData) {
     cd.rinv.columns_mut(n, m).copy_from(&cd.r2.rows(0, n + m));
 }
 
-/// Rows `∂a_p/∂q` into `cq` and `∂a_p/∂q̇` into `cv` (`3 nc × nv`, only path columns written) of
+/// Rows `∂a_p/∂q` and `∂a_p/∂q̇` (`3 nc × nv` each, only path columns written), transposed, of
 /// the classical contact-point accelerations at fixed `q̈`, from `cd.s`, `cd.kvel`, `cd.kacc`
 /// (with `q̈`) and the points: along `q_l`, `D V_m = S_l × (V_m − V_λ)` (J2),
 /// `D A_m = (A_λ − A_m) × S_l + (V_λ − V_m) × Ψ̇_l` (J6, J7), `D p = u_l`; along `q̇_l`,
 /// `D V_m = S_l` (J8), `D A_m = (V_λ + V_l − V_m) × S_l` (J9).
-/// `cv` is stored in columns `nv..2nv` of `cx`, `cq` in columns `0..nv`.
-pub(crate) fn accel_derivatives(cd: &ContactData, cx: &mut DMatrix<f64>) {
+/// `(∂a_p/∂q)ᵀ` is stored in rows `0..nv` of `cxt` (`2nv × 3nc`), `(∂a_p/∂q̇)ᵀ` in rows `nv..2nv`.
+pub(crate) fn accel_derivatives_t(cd: &ContactData, cxt: &mut DMatrix<f64>) {
     let n = cd.s.len();
     for (c, path) in cd.paths.iter().enumerate() {
         let body = *path.joints.last().expect("path");
@@ -459,8 +467,8 @@ pub(crate) fn accel_derivatives(cd: &ContactData, cx: &mut DMatrix<f64>) {
             let dav = (vl + cd.kvel[jl] - vm).cross(&s);
             let rv = dav.lin + dav.ang.cross(&p) + s.ang.cross(&pd) + w.cross(&u);
             for r in 0..3 {
-                cx[(3 * c + r, l)] = rq[r];
-                cx[(3 * c + r, n + l)] = rv[r];
+                cxt[(l, 3 * c + r)] = rq[r];
+                cxt[(n + l, 3 * c + r)] = rv[r];
             }
         }
     }
@@ -492,78 +500,6 @@ pub(crate) fn djw_dq(model: &Model, cd: &mut ContactData, w: &[f64], out: &mut D
             }
         }
     }
-}
-
-/// Cholesky factorisation of the symmetric `a` (lower triangle read) in place (lower triangle)
-/// and its inverse into `inv` (full), without allocating. `false` if a pivot `l_ii²` is not
-/// above `tol`.
-fn cholesky_inverse_in_place(a: &mut DMatrix<f64>, inv: &mut DMatrix<f64>, tol: f64) -> bool {
-    let m = a.nrows();
-    let a = a.as_mut_slice();
-    let inv = inv.as_mut_slice();
-    assert!(a.len() == m * m && inv.len() == m * m);
-    // SAFETY (all get_unchecked below): every index is r + m c with r, c < m, i.e. < m² = the
-    // length of `a` and `inv` (asserted).
-    unsafe {
-        // Column-oriented (left-looking) factorisation: column j of L is contiguous.
-        for j in 0..m {
-            for k in 0..j {
-                let ajk = *a.get_unchecked(j + m * k);
-                if ajk != 0.0 {
-                    for i in j..m {
-                        *a.get_unchecked_mut(i + m * j) -= ajk * *a.get_unchecked(i + m * k);
-                    }
-                }
-            }
-            let d = *a.get_unchecked(j + m * j);
-            if d.is_nan() || d <= tol {
-                return false;
-            }
-            let r = 1.0 / d.sqrt();
-            for i in j..m {
-                *a.get_unchecked_mut(i + m * j) *= r;
-            }
-            // Reciprocal of the diagonal kept in the (unused) upper triangle's diagonal slot.
-            *a.get_unchecked_mut(j + m * j) = r;
-        }
-        // L⁻¹ (lower) into inv by columns: forward substitution with unit vectors (diagonal of
-        // L stored as its reciprocal).
-        for c in 0..m {
-            for i in 0..c {
-                *inv.get_unchecked_mut(i + m * c) = 0.0;
-            }
-            *inv.get_unchecked_mut(c + m * c) = 1.0;
-            for i in c + 1..m {
-                *inv.get_unchecked_mut(i + m * c) = 0.0;
-            }
-            for i in c..m {
-                let x = *inv.get_unchecked(i + m * c) * *a.get_unchecked(i + m * i);
-                *inv.get_unchecked_mut(i + m * c) = x;
-                for r in i + 1..m {
-                    *inv.get_unchecked_mut(r + m * c) -= x * *a.get_unchecked(r + m * i);
-                }
-            }
-        }
-        // inv ← L⁻ᵀ L⁻¹ (symmetric): (i, c) = Σ_{k ≥ max(i, c)} L⁻¹_ki L⁻¹_kc, into the strict
-        // upper triangle of `a` (L is no longer needed) and the diagonal of `a`, then copied.
-        for c in 0..m {
-            for i in c..m {
-                let mut x = 0.0;
-                for k in i..m {
-                    x += *inv.get_unchecked(k + m * i) * *inv.get_unchecked(k + m * c);
-                }
-                *a.get_unchecked_mut(c + m * i) = x;
-            }
-        }
-        for c in 0..m {
-            for i in c..m {
-                let x = *a.get_unchecked(c + m * i);
-                *inv.get_unchecked_mut(i + m * c) = x;
-                *inv.get_unchecked_mut(c + m * i) = x;
-            }
-        }
-    }
-    true
 }
 
 /// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `3 nc` world forces) from `out` (`nv×nv`, `[x][l]`), with `s`
@@ -617,6 +553,75 @@ pub(crate) fn sub_djtl_dq(
     cd.t3 = t;
 }
 
+/// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `3 nc` world forces) from `out` (`nv×nv`, `[x][l]`), with `s`
+/// the world subspaces of the path DoFs and `cd.jac` current. With `u_x` the Jacobian column
+/// (point velocity of `S_x`) and `w = S.ang`: a perturbation of `q_l` rotates `u_x` rigidly if
+/// `l ⪯ x` (J1 and `∂p/∂q_l = u_l` give `D u_x = w_l × u_x`) and otherwise only moves the point
+/// (`D u_x = w_x × u_l`), so the entry is `w_l·(u_x × λ)` resp. `w_x·(u_l × λ)`. Summed over the
+/// contacts: with `T_x = Σ_{c ∋ x} u_x^c × λ_c` (contacts whose path holds `x`), the entry of an
+/// ancestor `a` and a descendant `d` on a common path is `w_a·T_d` at both `(d, a)` and `(a, d)`
+/// (`w_l·T_x` within one joint), so shared DoFs (e.g. a floating base) are paired once.
+pub(crate) fn sub_djtl_dq_tree(
+    model: &Model,
+    s: &[Motion],
+    cd: &mut ContactData,
+    lambda: &[f64],
+    out: &mut DMatrix<f64>,
+) {
+    let ld = out.nrows();
+    assert!(out.ncols() >= model.nv);
+    sub_djtl_dq_strided(model, s, cd, lambda, out.as_mut_slice(), 1, ld);
+}
+
+/// [`sub_djtl_dq_tree`] into a slice where entry `(x, l)` is at `o[rs x + cs l]`.
+pub(crate) fn sub_djtl_dq_strided(
+    model: &Model,
+    s: &[Motion],
+    cd: &mut ContactData,
+    lambda: &[f64],
+    o: &mut [f64],
+    rs: usize,
+    cs: usize,
+) {
+    let n = model.nv;
+    assert!(s.len() == n && cd.tsum.len() == n && (n == 0 || (rs + cs) * (n - 1) < o.len()));
+    let t = &mut cd.tsum;
+    for &j in &cd.union_joints {
+        let iv = model.idx_v[j];
+        t[iv..iv + model.nvs[j]].fill(Vector3::zeros());
+    }
+    for (c, path) in cd.paths.iter().enumerate() {
+        let lam = Vector3::new(lambda[3 * c], lambda[3 * c + 1], lambda[3 * c + 2]);
+        if lam == Vector3::zeros() {
+            continue;
+        }
+        for &x in &path.dofs {
+            let u =
+                Vector3::new(cd.jac[(3 * c, x)], cd.jac[(3 * c + 1, x)], cd.jac[(3 * c + 2, x)]);
+            t[x] += u.cross(&lam);
+        }
+    }
+    for &j in &cd.union_joints {
+        let iv = model.idx_v[j];
+        for d in iv..iv + model.nvs[j] {
+            let (wd, td) = (s[d].ang, t[d]);
+            o[(rs + cs) * d] -= wd.dot(&td);
+            let anc = model.ancestors_of_dof(d);
+            // SAFETY: ancestor DoFs a < d < nv, so a, d < s.len() = t.len() = nv and
+            // rs d + cs a, rs a + cs d ≤ (rs + cs)(nv − 1) < o.len() (asserted above).
+            unsafe {
+                for &a in anc {
+                    let wa = s.get_unchecked(a).ang;
+                    let e = wa.dot(&td);
+                    *o.get_unchecked_mut(rs * d + cs * a) -= e;
+                    *o.get_unchecked_mut(rs * a + cs * d) -=
+                        if a < iv { e } else { wd.dot(t.get_unchecked(a)) };
+                }
+            }
+        }
+    }
+}
+
 /// `G(z)` (columns `l`): `[IDFOZA(z₁) − ∂(Jᵀz₂)/∂q ; ∂(J z₁)/∂q]`, `z = (z₁, z₂)` of length
 /// `nv + 3 nc`. Needs the composite inertias of the current `q` in `data`. Writes `cd.g`.
 pub(crate) fn g_matrix(model: &Model, data: &mut Data, cd: &mut ContactData, z: &[f64]) {
@@ -637,7 +642,7 @@ pub(crate) fn g_matrix_split(
     idfoza_core(model, data, z_m, &mut cd.zmat);
     cd.g.view_mut((0, 0), (n, n)).copy_from(&cd.zmat);
     let mut g = std::mem::replace(&mut cd.g, DMatrix::zeros(0, 0));
-    sub_djtl_dq(&data.s_world, cd, z2, &mut g);
+    sub_djtl_dq_tree(model, &data.s_world, cd, z2, &mut g);
     // ∂(J z₁)/∂q rows: cumulative Z_j = Σ_{x ⪯ j} S_x z_x along the path.
     let mut zc = std::mem::take(&mut cd.zc);
     for (c, path) in cd.paths.iter().enumerate() {

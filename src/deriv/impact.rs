@@ -11,7 +11,7 @@
 
 use super::contact::{
     ContactData, base, copy_block, djw_dq, factor_delassus, factor_kkt, fill_rinv, g_matrix,
-    g_matrix_split, padded_rows, path_kinematics, sub_djtl_dq, transpose_into, update_points,
+    g_matrix_split, padded_rows, path_kinematics, sub_djtl_dq_tree, transpose_into, update_points,
 };
 use super::contact_kin::{Dir, djtl_dq, djz_dq};
 use super::id_so::{SoData, id_so_unchecked};
@@ -51,11 +51,14 @@ pub struct ImpactData {
     cq: DMatrix<f64>,
     /// `∂λ̂/∂q` with rows padded (`mp × nv`).
     bp: DMatrix<f64>,
+    /// `Yᵀa − c`, then `∂λ̂/∂q̇⁻`, rows padded (`mp × nv`).
+    wp: DMatrix<f64>,
     /// `(∂λ̂/∂q)ᵀ` with rows padded (`np × 3 nc`).
     bt: DMatrix<f64>,
     /// Right-hand sides stored by rows for the tree-sparse solve (`np × nv`, transposed).
     zrows: DMatrix<f64>,
-    out: DMatrix<f64>,
+    /// `Y ∂λ̂/∂q̇⁻` with rows padded (`np × nv`).
+    vp: DMatrix<f64>,
     dv: DVector<f64>,
     w: DVector<f64>,
     zero: DVector<f64>,
@@ -94,9 +97,10 @@ impl ImpactData {
             rq: DMatrix::zeros(n, n),
             cq: DMatrix::zeros(m, n),
             bp: DMatrix::zeros(padded_rows(m), n),
+            wp: DMatrix::zeros(padded_rows(m), n),
             bt: DMatrix::zeros(padded_rows(n), m),
             zrows: DMatrix::zeros(padded_rows(n), n),
-            out: DMatrix::zeros(cd.r1.nrows(), n),
+            vp: DMatrix::zeros(padded_rows(n), n),
             dv: DVector::zeros(n),
             w: DVector::zeros(n),
             zero: DVector::zeros(n),
@@ -172,7 +176,7 @@ fn solve(
     if full {
         factor_kkt(model, data, &mut im.cd)?;
     } else {
-        factor_delassus(model, data, &mut im.cd)?;
+        factor_delassus(model, data, &mut im.cd, false)?;
     }
     // λ̂ = −(1 + e) Λ J q̇⁻, q̇⁺ = q̇⁻ + Y λ̂  (block elimination of im_eqn_1).
     let cd = &mut im.cd;
@@ -210,14 +214,22 @@ fn first_order(model: &Model, data: &mut Data, im: &mut ImpactData) {
     let cd = &mut im.cd;
     idfoza_core(model, data, im.dv.as_slice(), &mut im.rq);
     let s = std::mem::take(&mut cd.s);
-    sub_djtl_dq(&s, cd, im.impulse.as_slice(), &mut im.rq);
+    sub_djtl_dq_tree(model, &s, cd, im.impulse.as_slice(), &mut im.rq);
     cd.s = s;
     djw_dq(model, cd, im.w.as_slice(), &mut im.cq);
-    // ∂λ̂/∂q = B = Qᵀa − Λc; with P = M⁻¹ − YQᵀ, ∂q̇⁺/∂q = −(Pa + Qc) = M⁻¹(JᵀB − a): rows of
-    // JᵀB − a (i.e. BᵀJ − aᵀ), then one multi-right-hand-side tree-sparse solve (no M⁻¹;
-    // eq. ID_FO_q_im_1).
-    gemm(1.0, &cd.wq.columns(0, n), &im.rq, 0.0, &mut im.bp);
-    gemm(1.0, &cd.wq.columns(n, m), &im.cq, 1.0, &mut im.bp);
+    // ∂λ̂/∂q = B = Qᵀa − Λc = Λ(Yᵀa − c); with P = M⁻¹ − YQᵀ, ∂q̇⁺/∂q = −(Pa + Qc) =
+    // M⁻¹(JᵀB − a): rows of JᵀB − a (i.e. BᵀJ − aᵀ), then one multi-right-hand-side
+    // tree-sparse solve (no M⁻¹; eq. ID_FO_q_im_1).
+    gemm(1.0, &cd.yt, &im.rq, 0.0, &mut im.wp);
+    {
+        let (mp, wp, cq) = (im.wp.nrows(), im.wp.as_mut_slice(), im.cq.as_slice());
+        for l in 0..n {
+            for (w, c) in wp[mp * l..mp * l + m].iter_mut().zip(&cq[m * l..m * l + m]) {
+                *w -= c;
+            }
+        }
+    }
+    gemm(1.0, &cd.delp, &im.wp.rows(0, m), 0.0, &mut im.bp);
     copy_block(&im.bp, 0, 0, &mut im.dimpulse_dq);
     let np = im.zrows.nrows();
     transpose_into(im.dimpulse_dq.as_slice(), m, (m, n), im.bt.as_mut_slice(), np);
@@ -241,10 +253,11 @@ fn first_order(model: &Model, data: &mut Data, im: &mut ImpactData) {
         1.0,
     );
     transpose_into(im.zrows.as_slice(), np, (n, n), im.dvplus_dq.as_mut_slice(), n);
-    // [∂q̇⁺/∂q̇⁻; ∂λ̂/∂q̇⁻] = [I; 0] − (1 + e) [Q; Λ] J (eq. ID_FO_v_im_1).
-    gemm(-(1.0 + im.restitution), &cd.r2, &cd.jac, 0.0, &mut im.out);
-    copy_block(&im.out, 0, 0, &mut im.dvplus_dvminus);
-    copy_block(&im.out, n, 0, &mut im.dimpulse_dvminus);
+    // ∂λ̂/∂q̇⁻ = −(1 + e) ΛJ, ∂q̇⁺/∂q̇⁻ = I + Y ∂λ̂/∂q̇⁻ = I − (1 + e) QJ (eq. ID_FO_v_im_1).
+    gemm(-(1.0 + im.restitution), &cd.delp, &cd.jac, 0.0, &mut im.wp);
+    copy_block(&im.wp, 0, 0, &mut im.dimpulse_dvminus);
+    gemm(1.0, &cd.y, &im.wp.rows(0, m), 0.0, &mut im.vp);
+    copy_block(&im.vp, 0, 0, &mut im.dvplus_dvminus);
     for i in 0..n {
         im.dvplus_dvminus[(i, i)] += 1.0;
     }
@@ -345,6 +358,5 @@ fn so_inner(
     premultiply(&ri.rows(n, m), rqq, &mut so.d2impulse_dq2);
     premultiply(&ri.rows(0, n), rqv, &mut so.d2vplus_dqdvminus);
     premultiply(&ri.rows(n, m), rqv, &mut so.d2impulse_dqdvminus);
-    let _ = sub_djtl_dq;
     Ok(())
 }

@@ -8,22 +8,24 @@
 //! `∂M/∂q · z₁` (IDFOZA), `∂(J_cᵀ z₂)/∂q` and `∂(J_c z₁)/∂q` products (no tensor-matrix
 //! products), `R_qq` comes from IDSVA-SO minus the contact-force term (IDSVA-SOc) and the contact
 //! point kinematics. `R_y⁻¹` is formed by blocks from the tree-sparse `LᵀDL` factor of `M` and
-//! a Cholesky factorisation of the Delassus matrix (no dense inverse of the KKT matrix).
+//! an SPD inverse of the Delassus matrix (no dense inverse of the KKT matrix).
 
 use super::contact::{
-    ContactData, accel_derivatives, add_qdd_to_path_acc, base, copy_block, factor_kkt, fill_rinv,
-    g_matrix, path_kinematics, sub_djtl_dq, update_points,
+    ContactData, accel_derivatives_t, add_qdd_to_path_acc, base, factor_delassus, factor_kkt,
+    fill_rinv, g_matrix, path_kinematics, sub_djtl_dq_strided, update_points,
 };
 use super::contact_kin::{Dir, dap_dq, dap_dv, djtl_dq};
 use super::id_fo::id_derivatives_unchecked;
 use super::id_so::{SoData, id_so_unchecked};
 use crate::algo::Data;
-use crate::algo::internal::{crba_unchecked, ltl_in_place, rnea_unchecked};
+use crate::algo::internal::{
+    crba_unchecked, ltl_in_place, ltl_solve_fd, ltl_solve_rows_desc, rnea_unchecked,
+};
 use crate::error::Result;
-use crate::linalg::gemm;
+use crate::linalg::{gemm, gemm_masked, transpose_strided};
 use crate::model::{Model, check_vec};
 use crate::tensor::Tensor3;
-use nalgebra::{DMatrix, DMatrixView, DVector, Vector3};
+use nalgebra::{DMatrix, DMatrixView, DMatrixViewMut, DVector, Vector3};
 
 /// KKT dynamics results and workspace.
 #[derive(Clone, Debug)]
@@ -48,9 +50,10 @@ pub struct KktData {
     pub dlambda_dtau: DMatrix<f64>,
     /// Second-order results (allocated by [`KktData::with_second_order`]).
     pub so: Option<KktSo>,
-    rx: DMatrix<f64>,
-    cx: DMatrix<f64>,
-    out: DMatrix<f64>,
+    /// `Wᵀ = (J X + C)ᵀ` (`2 nv × 3 nc`) for `X = −M⁻¹ [a_q | a_v]`, `C = [c_q | c_v]`.
+    wt: DMatrix<f64>,
+    /// `Bᵀ = [∂λ/∂q | ∂λ/∂q̇ | ∂λ/∂τ]ᵀ` (`3 nv × 3 nc`).
+    bt: DMatrix<f64>,
     tmp_v: DVector<f64>,
 }
 
@@ -92,9 +95,8 @@ impl KktData {
             dlambda_dv: DMatrix::zeros(m, n),
             dlambda_dtau: DMatrix::zeros(m, n),
             so: None,
-            rx: DMatrix::zeros(n, 2 * n),
-            cx: DMatrix::zeros(m, 2 * n),
-            out: DMatrix::zeros(cd.r1.nrows(), 2 * n),
+            wt: DMatrix::zeros(2 * n, m),
+            bt: DMatrix::zeros(3 * n, m),
             tmp_v: DVector::zeros(n),
             cd,
         }
@@ -131,6 +133,18 @@ pub fn kkt_dynamics(
     v: &DVector<f64>,
     tau: &DVector<f64>,
 ) -> Result<()> {
+    check_inputs(model, data, kd, q, v, tau)?;
+    solve_unchecked(model, data, kd, q, v, tau, true)
+}
+
+fn check_inputs(
+    model: &Model,
+    data: &Data,
+    kd: &KktData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+) -> Result<()> {
     model.check_q(q)?;
     data.check(model)?;
     check_vec("v", v, model.nv)?;
@@ -145,9 +159,11 @@ pub fn kkt_dynamics(
     if let Some(so) = &kd.so {
         so.id.check(model)?;
     }
-    solve_unchecked(model, data, kd, q, v, tau)
+    Ok(())
 }
 
+/// With `full`, also `M⁻¹` (`data.minv`) and the blocks `cd.r1` of `R⁻¹`; otherwise only the
+/// Delassus factorisation (`Y`, `Λ`, `Qᵀ`, `cd.r2`) and `q̈₀` by a tree-sparse solve.
 fn solve_unchecked(
     model: &Model,
     data: &mut Data,
@@ -155,6 +171,7 @@ fn solve_unchecked(
     q: &DVector<f64>,
     v: &DVector<f64>,
     tau: &DVector<f64>,
+    full: bool,
 ) -> Result<()> {
     let n = model.nv;
     // b = C q̇ + g  (RNEA with q̈ = 0).
@@ -168,11 +185,21 @@ fn solve_unchecked(
     path_kinematics(model, data, &mut kd.cd, Some(v.as_slice()));
     data.ltl.copy_from(&data.m);
     ltl_in_place(model, &mut data.ltl)?;
-    factor_kkt(model, data, &mut kd.cd)?;
+    if full {
+        factor_kkt(model, data, &mut kd.cd)?;
+    } else {
+        factor_delassus(model, data, &mut kd.cd, true)?;
+    }
     // q̈₀ = M⁻¹(τ − b), λ = −Λ(J q̈₀ + J̇q̇), q̈ = q̈₀ + Yλ  (block elimination of KKT_eqn).
     let cd = &mut kd.cd;
     let m = cd.dim();
-    kd.qdd.gemv(1.0, &data.minv, &kd.tmp_v, 0.0);
+    if full {
+        kd.qdd.gemv(1.0, &data.minv, &kd.tmp_v, 0.0);
+    } else {
+        kd.qdd.copy_from(&kd.tmp_v);
+        let desc = data.fd_ws.desc.view();
+        ltl_solve_rows_desc(model, &data.ltl, desc, kd.qdd.as_mut_slice(), 1, 1, 1.0);
+    }
     cd.sol.rows_mut(0, m).copy_from(&cd.drift);
     cd.sol.rows_mut(0, m).gemv(1.0, &cd.jac, &kd.qdd, 1.0);
     kd.lambda.gemv(-1.0, &cd.lam, &cd.sol.rows(0, m), 0.0);
@@ -189,39 +216,98 @@ pub fn kkt_derivatives(
     v: &DVector<f64>,
     tau: &DVector<f64>,
 ) -> Result<()> {
-    kkt_dynamics(model, data, kd, q, v, tau)?;
+    check_inputs(model, data, kd, q, v, tau)?;
+    solve_unchecked(model, data, kd, q, v, tau, false)?;
     let qdd = std::mem::replace(&mut kd.qdd, DVector::zeros(0));
     id_derivatives_unchecked(model, data, q, v, &qdd, None);
     kd.qdd = qdd;
-    first_order_from_id(model, data, kd);
+    first_order_by_solve(model, data, kd);
     Ok(())
 }
 
-/// From the ID derivatives in `data` (at `q̈`) and the contact terms: `R_q = [a_q; c_q]`,
-/// `R_v = [a_v; c_v]` and `∂y/∂x = −R⁻¹ R_x` with `R⁻¹ = [[P, Q], [−Qᵀ, Λ]]`, i.e.
-/// `∂q̈/∂x = −(P a + Q c)`, `∂λ/∂x = Qᵀa − Λc` (eqs. FO_general_eqn, ID_FO_q_eqn1,
-/// ID_FO_v_eqn1, ID_FO_tau_eqn).
-fn first_order_from_id(model: &Model, data: &mut Data, kd: &mut KktData) {
+/// The residual derivatives from the ID derivatives in `data` (at `q̈`) and the contact terms:
+/// `[a_q | a_v] = [∂τ/∂q − ∂(J_cᵀλ)/∂q | ∂τ/∂q̇]` by rows into `x` (row `i` at `x[3nv·i..]`,
+/// columns `0..2nv`), the point-acceleration rows `[c_q | c_v]ᵀ` into `kd.wt` (eqs.
+/// ID_FO_q_eqn1, ID_FO_v_eqn1).
+fn residual_derivatives(
+    model: &Model,
+    (dtau_dq, dtau_dv): (&DMatrix<f64>, &DMatrix<f64>),
+    kd: &mut KktData,
+    x: &mut [f64],
+) {
     let n = model.nv;
+    let ld = 3 * n;
     let cd = &mut kd.cd;
     add_qdd_to_path_acc(model, cd, kd.qdd.as_slice());
-    // [a_q | a_v] = [∂τ/∂q − ∂(J_cᵀλ)/∂q | ∂τ/∂q̇], [c_q | c_v] the point-acceleration rows.
-    let rx = kd.rx.as_mut_slice();
-    rx[..n * n].copy_from_slice(data.dtau_dq.as_slice());
-    rx[n * n..].copy_from_slice(data.dtau_dv.as_slice());
+    transpose_strided(dtau_dq.as_slice(), n, n, n, x, ld);
+    transpose_strided(dtau_dv.as_slice(), n, n, n, &mut x[n..], ld);
     let s = std::mem::take(&mut cd.s);
-    sub_djtl_dq(&s, cd, kd.lambda.as_slice(), &mut kd.rx);
+    sub_djtl_dq_strided(model, &s, cd, kd.lambda.as_slice(), x, ld, 1);
     cd.s = s;
-    accel_derivatives(cd, &mut kd.cx);
-    // −R⁻¹ [R_q | R_v] by column blocks of R⁻¹ (rows padded for the product kernel).
-    gemm(-1.0, &cd.r1, &kd.rx, 0.0, &mut kd.out);
-    gemm(-1.0, &cd.r2, &kd.cx, 1.0, &mut kd.out);
-    copy_block(&kd.out, 0, 0, &mut kd.dqdd_dq);
-    copy_block(&kd.out, n, 0, &mut kd.dlambda_dq);
-    copy_block(&kd.out, 0, n, &mut kd.dqdd_dv);
-    copy_block(&kd.out, n, n, &mut kd.dlambda_dv);
-    copy_block(&cd.r1, 0, 0, &mut kd.dqdd_dtau);
-    copy_block(&cd.r1, n, 0, &mut kd.dlambda_dtau);
+    kd.wt.fill(0.0);
+    accel_derivatives_t(cd, &mut kd.wt);
+}
+
+/// The first-order derivatives `∂y/∂x = −R⁻¹ R_x` without `M⁻¹`-sized dense products (after
+/// [`factor_delassus`]): with `X = [−M⁻¹a_q | −M⁻¹a_v | M⁻¹]` from one tree-sparse solve with
+/// `3 nv` right-hand sides (the identity part exploiting the tree sparsity) and
+/// `C = [c_q | c_v | 0]`, `P = M⁻¹ − YQᵀ`, `Qᵀ = ΛJM⁻¹` give
+/// `B = [∂λ/∂q | ∂λ/∂q̇ | ∂λ/∂τ] = −Λ(J X + C)` and `[∂q̈/∂q | ∂q̈/∂q̇ | ∂q̈/∂τ] = X + Y B`
+/// (eqs. FO_general_eqn, ID_FO_q_eqn1, ID_FO_v_eqn1, ID_FO_tau_eqn).
+fn first_order_by_solve(model: &Model, data: &mut Data, kd: &mut KktData) {
+    let n = model.nv;
+    let m = kd.cd.dim();
+    let (w, ld) = (2 * n, 3 * n);
+    {
+        // Rows of [a_q | a_v] and the upper triangle of the identity.
+        let x = &mut data.fd_ws.x[..];
+        residual_derivatives(model, (&data.dtau_dq, &data.dtau_dv), kd, x);
+        for i in 0..n {
+            let row = &mut x[ld * i + w + i..ld * (i + 1)];
+            row.fill(0.0);
+            row[0] = 1.0;
+        }
+    }
+    ltl_solve_fd(model, &data.ltl, &mut data.fd_ws);
+    let x = &mut data.fd_ws.x[..];
+    // Lower triangle of M⁻¹ by symmetry.
+    for i in 1..n {
+        let (lo, hi) = x.split_at_mut(ld * i);
+        for (k, d) in hi[w..w + i].iter_mut().enumerate() {
+            *d = lo[ld * k + w + i];
+        }
+    }
+    // Wᵀ = Cᵀ + Xᵀ Jᵀ (X stored by rows is the column-major 3nv × nv matrix Xᵀ).
+    let cd = &kd.cd;
+    {
+        let xt = DMatrixView::from_slice(x, ld, n);
+        gemm_masked(1.0, &xt.rows(0, w), &cd.jt, 1.0, &mut kd.wt);
+    }
+    // Bᵀ = −[Wᵀ Λ ; Q] (Λ symmetric; ∂λ/∂τ = −Qᵀ).
+    gemm_masked(-1.0, &kd.wt, &cd.lam, 0.0, &mut kd.bt.rows_mut(0, w));
+    {
+        let (bt, r2) = (kd.bt.as_mut_slice(), cd.r2.as_slice());
+        let rp = cd.r2.nrows();
+        for c in 0..m {
+            for (b, q) in bt[ld * c + w..ld * (c + 1)].iter_mut().zip(&r2[rp * c..rp * c + n]) {
+                *b = -q;
+            }
+        }
+    }
+    // Xᵀ += Bᵀ Yᵀ.
+    {
+        let mut xt = DMatrixViewMut::from_slice(x, ld, n);
+        gemm_masked(1.0, &kd.bt, &cd.yt.rows(0, m), 1.0, &mut xt);
+    }
+    for (k, dst) in [&mut kd.dqdd_dq, &mut kd.dqdd_dv, &mut kd.dqdd_dtau].into_iter().enumerate() {
+        transpose_strided(&x[n * k..], ld, n, n, dst.as_mut_slice(), n);
+    }
+    let bt = kd.bt.as_slice();
+    for (k, dst) in
+        [&mut kd.dlambda_dq, &mut kd.dlambda_dv, &mut kd.dlambda_dtau].into_iter().enumerate()
+    {
+        transpose_strided(&bt[n * k..], ld, n, m, dst.as_mut_slice(), m);
+    }
 }
 
 /// First- and second-order derivatives of the KKT dynamics at `(q, q̇, τ)`. `kd` must have been
@@ -259,7 +345,7 @@ fn kkt_so_inner(
     let qdd = std::mem::replace(&mut kd.qdd, DVector::zeros(0));
     id_so_unchecked(model, data, &mut so.id, q, v, &qdd, None, -model.gravity);
     kd.qdd = qdd;
-    first_order_from_id(model, data, kd);
+    first_order_by_solve(model, data, kd);
     update_points(model, data, &mut kd.cd, -model.gravity);
     fill_rinv(&mut kd.cd);
     let [rqq, rvv, rqv, rtq] = &mut so.r;

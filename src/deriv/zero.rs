@@ -56,8 +56,11 @@ pub fn idfoza(
 /// IDFOZA core: needs `s_world`, body inertias `oinertia` and composite inertias `ic_world`
 /// (world frame) for the current `q` in `data`. Uses the `z_*` workspaces only.
 pub(crate) fn idfoza_core(model: &Model, data: &mut Data, x: &[f64], out: &mut DMatrix<f64>) {
-    assert!(out.shape() == (model.nv, model.nv), "idfoza_core: out must be nv×nv");
-    idfoza_core_with(model, data, x, |c, r, v| out[(c, r)] = v);
+    let nv = model.nv;
+    assert!(out.shape() == (nv, nv), "idfoza_core: out must be nv×nv");
+    let o = out.as_mut_slice();
+    // SAFETY: `put` is only called with DoF indices c, r < nv, so c + nv r < nv² = o.len().
+    idfoza_core_with(model, data, x, |c, r, v| unsafe { *o.get_unchecked_mut(c + nv * r) = v });
 }
 
 /// IDFOZA core writing through `put(i, k, ∂(M x)_i/∂q_k)`, called once for each structurally
