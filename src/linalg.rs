@@ -187,13 +187,6 @@ unsafe fn gemm_generic(
     }
 }
 
-/// `dst ← srcᵀ` for a column-major `m×n` matrix `src` (`dst` is `n×m`, column-major), by
-/// 4×4 register tiles (AVX) or 8×8 cache tiles.
-pub(crate) fn transpose(src: &[f64], m: usize, n: usize, dst: &mut [f64]) {
-    assert!(src.len() == m * n && dst.len() == m * n, "transpose: dimension mismatch");
-    transpose_strided(src, m, m, n, dst, n);
-}
-
 /// `dst[j + ldd·i] ← src[i + lds·j]` for `i < m`, `j < n`: the transposition of an `m×n`
 /// column-major block with leading dimension `lds` into one with leading dimension `ldd`.
 pub(crate) fn transpose_strided(
@@ -321,6 +314,150 @@ unsafe fn transpose_avx(src: &[f64], lds: usize, m: usize, n: usize, dst: &mut [
                 i += 4;
             }
             j += 4;
+        }
+    }
+}
+
+/// Gathers columns into rows: `rows[l + ld·i] ← Σ_{s < nsrc} srcs[l][s][i]` for `i < m`,
+/// `l < srcs.len()` (a transposition of the column sums). Lanes `srcs.len()..` up to the next
+/// multiple of 4 (at most `ld`) receive unspecified values.
+///
+/// # Safety
+/// Every `srcs[l][s]` (`s < nsrc`) is valid for reading `m` values; `nsrc ≤ 3`.
+pub(crate) unsafe fn gather_cols_to_rows(
+    srcs: &[[*const f64; 3]],
+    nsrc: usize,
+    m: usize,
+    rows: &mut [f64],
+    ld: usize,
+) {
+    let w = srcs.len();
+    assert!(
+        nsrc <= 3 && w.next_multiple_of(4) <= ld && (m == 0 || rows.len() >= (m - 1) * ld + ld)
+    );
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: AVX is available; the pointers as in the contract, `rows` as asserted.
+        unsafe { return gather_cols_to_rows_avx(srcs, nsrc, m, rows, ld) };
+    }
+    for (l, s) in srcs.iter().enumerate() {
+        for i in 0..m {
+            // SAFETY: i < m (caller's contract).
+            rows[l + ld * i] = s[..nsrc].iter().map(|p| unsafe { *p.add(i) }).sum();
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn gather_cols_to_rows_avx(
+    srcs: &[[*const f64; 3]],
+    nsrc: usize,
+    m: usize,
+    rows: &mut [f64],
+    ld: usize,
+) {
+    use std::arch::x86_64::*;
+    let w = srcs.len();
+    let rm =
+        _mm256_setr_epi64x(-1, if m % 4 > 1 { -1 } else { 0 }, if m % 4 > 2 { -1 } else { 0 }, 0);
+    let pr = rows.as_mut_ptr();
+    // SAFETY: lanes l0 + u ≥ w reuse lane w − 1 (valid pointers); full row blocks read rows
+    // i..i + 4 ≤ m, the ragged one only rows < m (masked); stores go to rows < m, lanes < ld.
+    unsafe {
+        let mut l0 = 0;
+        while l0 < w {
+            let lane = |u: usize| &srcs[(l0 + u).min(w - 1)];
+            let mut i = 0;
+            while i < m {
+                let full = i + 4 <= m;
+                let ld4 = |p: *const f64| {
+                    if full { _mm256_loadu_pd(p.add(i)) } else { _mm256_maskload_pd(p.add(i), rm) }
+                };
+                let mut c = [_mm256_setzero_pd(); 4];
+                for (u, cu) in c.iter_mut().enumerate() {
+                    let s = lane(u);
+                    *cu = ld4(s[0]);
+                    for p in &s[1..nsrc] {
+                        *cu = _mm256_add_pd(*cu, ld4(*p));
+                    }
+                }
+                let r = tile4(c);
+                for (t, rt) in r.iter().enumerate().take(m - i) {
+                    _mm256_storeu_pd(pr.add(l0 + ld * (i + t)), *rt);
+                }
+                i += 4;
+            }
+            l0 += 4;
+        }
+    }
+}
+
+/// Scatters rows into columns: `dsts[l][d][i] ← rows[l + ld·i]` for `i < m`, `l < dsts.len()`,
+/// `d < 2` (the inverse of [`gather_cols_to_rows`] with one source; give the same pointer twice
+/// for a single destination).
+///
+/// # Safety
+/// Every `dsts[l][d]` is valid for writing `m` values.
+pub(crate) unsafe fn scatter_rows_to_cols(
+    rows: &[f64],
+    ld: usize,
+    m: usize,
+    dsts: &[[*mut f64; 2]],
+) {
+    let w = dsts.len();
+    assert!(w.next_multiple_of(4) <= ld && (m == 0 || rows.len() >= (m - 1) * ld + ld));
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: AVX is available; the pointers as in the contract, `rows` as asserted.
+        unsafe { return scatter_rows_to_cols_avx(rows, ld, m, dsts) };
+    }
+    for (l, d) in dsts.iter().enumerate() {
+        for i in 0..m {
+            // SAFETY: i < m (caller's contract).
+            unsafe {
+                *d[0].add(i) = rows[l + ld * i];
+                *d[1].add(i) = rows[l + ld * i];
+            }
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn scatter_rows_to_cols_avx(rows: &[f64], ld: usize, m: usize, dsts: &[[*mut f64; 2]]) {
+    use std::arch::x86_64::*;
+    let w = dsts.len();
+    let rm =
+        _mm256_setr_epi64x(-1, if m % 4 > 1 { -1 } else { 0 }, if m % 4 > 2 { -1 } else { 0 }, 0);
+    let pr = rows.as_ptr();
+    // SAFETY: loads read rows < m, lanes < ld (asserted by the caller); stores write rows < m
+    // (masked on the ragged block) of lanes < w.
+    unsafe {
+        let mut l0 = 0;
+        while l0 < w {
+            let mut i = 0;
+            while i < m {
+                let full = i + 4 <= m;
+                let mut r = [_mm256_setzero_pd(); 4];
+                for (t, rt) in r.iter_mut().enumerate().take(m - i) {
+                    *rt = _mm256_loadu_pd(pr.add(l0 + ld * (i + t)));
+                }
+                let c = tile4(r);
+                for (u, cu) in c.iter().enumerate().take(w - l0) {
+                    let [p0, p1] = dsts[l0 + u];
+                    let np = if p1 == p0 { 1 } else { 2 };
+                    for p in [p0, p1].into_iter().take(np) {
+                        if full {
+                            _mm256_storeu_pd(p.add(i), *cu);
+                        } else {
+                            _mm256_maskstore_pd(p.add(i), rm, *cu);
+                        }
+                    }
+                }
+                i += 4;
+            }
+            l0 += 4;
         }
     }
 }

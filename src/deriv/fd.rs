@@ -7,10 +7,10 @@ use super::zero::{Idfoza4Ws, idfoza4_core};
 use crate::algo::Data;
 use crate::algo::internal::{
     DescView, DofDescendants, aba_unchecked, check_fext, ltl_in_place, ltl_solve_fd,
-    ltl_solve_rows_desc,
+    ltl_solve_rows_head,
 };
 use crate::error::Result;
-use crate::linalg::{transpose, transpose_strided};
+use crate::linalg::{gather_cols_to_rows, scatter_rows_to_cols, transpose_strided};
 use crate::model::{Model, check_vec};
 use crate::spatial::Force;
 use crate::tensor::Tensor3;
@@ -84,6 +84,9 @@ pub fn fd_derivatives(
     fd_fo_from_id(model, data)
 }
 
+/// Right-hand-side columns solved side by side in one panel.
+const P: usize = 32;
+
 /// Second-order forward-dynamics derivatives (`nv×nv×nv` each) and their workspace.
 #[derive(Clone, Debug)]
 pub struct FdSoData {
@@ -94,8 +97,11 @@ pub struct FdSoData {
     d2qdd_dqdv: Tensor3,
     d2qdd_dtaudq: Tensor3,
     ws4: Idfoza4Ws,
-    /// Working tensor stored by rows of the solve: `(i, j, k)` at `j + n k + n² i`.
-    tt: Vec<f64>,
+    /// IDFOZA results `S[(i, j, k)] = IDFOZA(X[:, j])[i][k]` at `i + n j + n² k`; only the
+    /// structurally non-zero entries (the same for every `X`) are ever written.
+    s: Vec<f64>,
+    /// Panel of [`P`] right-hand sides stored by rows for the solve: `(i, l)` at `i P + l`.
+    panel: Vec<f64>,
     /// Descendant DoF lists for the pulling first sweep of the solves.
     desc: DofDescendants,
 }
@@ -111,7 +117,8 @@ impl FdSoData {
             d2qdd_dqdv: Tensor3::zeros(n, n, n),
             d2qdd_dtaudq: Tensor3::zeros(n, n, n),
             ws4: Idfoza4Ws::new(model),
-            tt: vec![0.0; n * n * n],
+            s: vec![0.0; n * n * n],
+            panel: vec![0.0; n * P],
             desc: DofDescendants::new(model),
         }
     }
@@ -133,102 +140,130 @@ impl FdSoData {
     }
 }
 
-/// `out ← −M⁻¹ T` for the tensor `T` held in `tt` by rows (`(i, j, k)` at `j + n k + n² i`):
-/// tree-sparse multi-right-hand-side solves on blocks of `(j, k)` columns (cache-sized), then
-/// one transposition into the column-major `out`.
-fn solve_neg_tensor(
+/// How [`solve_neg_columns`] stores each solved column `(j, k)`.
+#[derive(Clone, Copy, PartialEq)]
+enum Store {
+    /// Column `(j, k)` only.
+    Plain,
+    /// Also into column `(k, j)` when `mirror(j, k)` (a symmetry in `(j, k)`).
+    Mirror,
+    /// Column `(j, k)`, exact in rows `i ≤ j` only (the caller completes a symmetry in `(i, j)`).
+    Head,
+}
+
+/// Solves `out[:, j, k] = −M⁻¹ b_jk` for the columns `(j, k)` of `pairs`, with `b_jk` the sum
+/// of the first `nsrc` columns (`n`-vectors) returned by `src(j, k)`. Zero right-hand sides
+/// give zero columns without a solve; the others go through the tree-sparse `LᵀDL` solve [`P`]
+/// at a time in the L1-resident `panel` (gathered and stored by 4×4 transpositions).
+#[allow(clippy::too_many_arguments)]
+fn solve_neg_columns<'a>(
     model: &Model,
     ltl: &DMatrix<f64>,
     desc: DescView<'_>,
-    tt: &mut [f64],
+    panel: &mut [f64],
     out: &mut Tensor3,
+    pairs: impl Iterator<Item = (usize, usize)>,
+    nsrc: usize,
+    src: impl Fn(usize, usize) -> [&'a [f64]; 3],
+    store: Store,
+    mirror: impl Fn(usize, usize) -> bool,
 ) {
-    const W: usize = 64;
     let n = model.nv;
-    let n2 = n * n;
-    let mut b = 0;
-    while b < n2 {
-        let w = W.min(n2 - b);
-        ltl_solve_rows_desc(model, ltl, desc, &mut tt[b..], n2, w, -1.0);
-        b += w;
+    let out = out.as_mut_slice();
+    assert!(out.len() == n * n * n && panel.len() == n * P && (1..=3).contains(&nsrc));
+    // All writes to `out` below go through `base`.
+    let base = out.as_mut_ptr();
+    let mut srcs = [[std::ptr::null::<f64>(); 3]; P];
+    let mut dsts = [[std::ptr::null_mut::<f64>(); 2]; P];
+    let mut rows_end = 0;
+    let mut w = 0;
+    let mut flush =
+        |w: usize, rows_end: usize, srcs: &[[*const f64; 3]], dsts: &[[*mut f64; 2]]| {
+            // SAFETY: the source columns are n-long slices; the destinations are columns of `out`
+            // (offsets n (j + n k) with j, k < n, so n values fit in n³).
+            unsafe { gather_cols_to_rows(&srcs[..w], nsrc, n, panel, P) };
+            let wp = w.next_multiple_of(4);
+            ltl_solve_rows_head(model, ltl, desc, panel, P, wp, -1.0, rows_end);
+            // SAFETY: as above.
+            unsafe { scatter_rows_to_cols(panel, P, n, &dsts[..w]) };
+        };
+    for (j, k) in pairs {
+        assert!(j < n && k < n);
+        let s = src(j, k);
+        assert!(s.iter().take(nsrc).all(|c| c.len() == n));
+        let dst = [base.wrapping_add(n * (j + n * k)), base.wrapping_add(n * (k + n * j))];
+        let dst = if store == Store::Mirror && mirror(j, k) { dst } else { [dst[0], dst[0]] };
+        if s.iter().take(nsrc).all(|c| c.iter().all(|&x| x == 0.0)) {
+            for p in dst {
+                // SAFETY: a column of `out` (see `flush`).
+                unsafe { std::ptr::write_bytes(p, 0, n) };
+            }
+            continue;
+        }
+        srcs[w] = [s[0].as_ptr(), s[1].as_ptr(), s[2].as_ptr()];
+        dsts[w] = dst;
+        rows_end = rows_end.max(if store == Store::Head { j + 1 } else { n });
+        w += 1;
+        if w == P {
+            flush(w, rows_end, &srcs, &dsts);
+            w = 0;
+            rows_end = 0;
+        }
     }
-    transpose(tt, n2, n, out.as_mut_slice());
+    if w > 0 {
+        flush(w, rows_end, &srcs, &dsts);
+    }
 }
 
-/// Which IDFOZA term of eq. eqn_FD_SO_43 [`add_idfoza_terms`] adds.
-#[derive(Clone, Copy, PartialEq)]
-enum Term {
-    /// `A + A^R`, `A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k]`.
-    Dq2,
-    /// `B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j]`.
-    Dqdv,
-    /// `C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k]` (written, not added).
-    Minv,
+/// Fills the strict lower triangle of every page of the `n×n×n` tensor `t` from its upper one.
+fn symmetrise_pages(n: usize, t: &mut [f64]) {
+    assert!(t.len() == n * n * n);
+    for page in t.chunks_exact_mut(n * n) {
+        for j in 0..n {
+            for i in j + 1..n {
+                page[i + n * j] = page[j + n * i];
+            }
+        }
+    }
 }
 
-/// Adds one IDFOZA term to `tt` (stored by rows, `(i, j, k)` at `j + n k + n² i`), four
+/// `s[i + n j + n² k] ← IDFOZA(x[:, j])[i][k]` for the structurally non-zero `(i, k)`, four
 /// right-hand sides at a time (vectorised with AVX2 when available).
-fn add_idfoza_terms(model: &Model, data: &Data, ws: &mut Idfoza4Ws, tt: &mut [f64], term: Term) {
+fn idfoza_tensor(model: &Model, data: &Data, ws: &mut Idfoza4Ws, x: &[f64], s: &mut [f64]) {
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2_fma() {
         // SAFETY: the CPU supports the enabled features.
-        unsafe { return add_idfoza_terms_avx2(model, data, ws, tt, term) };
+        unsafe { return idfoza_tensor_avx2(model, data, ws, x, s) };
     }
-    add_idfoza_terms_impl(model, data, ws, tt, term)
+    idfoza_tensor_impl(model, data, ws, x, s)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn add_idfoza_terms_avx2(
+unsafe fn idfoza_tensor_avx2(
     model: &Model,
     data: &Data,
     ws: &mut Idfoza4Ws,
-    tt: &mut [f64],
-    term: Term,
+    x: &[f64],
+    s: &mut [f64],
 ) {
-    add_idfoza_terms_impl(model, data, ws, tt, term)
+    idfoza_tensor_impl(model, data, ws, x, s)
 }
 
 #[inline(always)]
-fn add_idfoza_terms_impl(
-    model: &Model,
-    data: &Data,
-    ws: &mut Idfoza4Ws,
-    tt: &mut [f64],
-    term: Term,
-) {
+fn idfoza_tensor_impl(model: &Model, data: &Data, ws: &mut Idfoza4Ws, x: &[f64], s: &mut [f64]) {
     let n = model.nv;
     let n2 = n * n;
-    assert!(tt.len() == n * n2);
-    let x = match term {
-        Term::Dq2 => data.dqdd_dq.as_slice(),
-        Term::Dqdv => data.dqdd_dv.as_slice(),
-        Term::Minv => data.minv.as_slice(),
-    };
+    assert!(s.len() == n * n2 && x.len() == n2);
     let mut j0 = 0;
     while j0 < n {
         let nl = 4.min(n - j0);
-        // SAFETY (the `put` closures): i, k < n and j = j0 + l < n for l < nl, so every index
-        // is < n³ = tt.len().
-        match term {
-            Term::Dq2 => idfoza4_core(model, data, ws, x, n, j0, nl, |i, k, z| unsafe {
-                for (l, zl) in z.iter().enumerate().take(nl) {
-                    let j = j0 + l;
-                    *tt.get_unchecked_mut(j + n * k + n2 * i) += zl;
-                    *tt.get_unchecked_mut(k + n * j + n2 * i) += zl;
-                }
-            }),
-            Term::Dqdv => idfoza4_core(model, data, ws, x, n, j0, nl, |i, j, z| unsafe {
-                for (l, zl) in z.iter().enumerate().take(nl) {
-                    *tt.get_unchecked_mut(j + n * (j0 + l) + n2 * i) += zl;
-                }
-            }),
-            Term::Minv => idfoza4_core(model, data, ws, x, n, j0, nl, |i, k, z| unsafe {
-                for (l, zl) in z.iter().enumerate().take(nl) {
-                    *tt.get_unchecked_mut(j0 + l + n * k + n2 * i) = *zl;
-                }
-            }),
-        }
+        // SAFETY: i, k < n and j = j0 + l < n for l < nl, so every index is < n³ = s.len().
+        idfoza4_core(model, data, ws, x, n, j0, nl, |i, k, z| unsafe {
+            for (l, zl) in z.iter().enumerate().take(nl) {
+                *s.get_unchecked_mut(i + n * (j0 + l) + n2 * k) = *zl;
+            }
+        });
         j0 += 4;
     }
 }
@@ -238,6 +273,10 @@ fn add_idfoza_terms_impl(
 /// products by IDFOZA (`O(N d)` per column) instead of tensor products. Also fills the
 /// first-order results in `data` (as [`fd_derivatives`]) and the ID second-order tensors in
 /// `fso.id`.
+///
+/// Symmetries cut the solves: `∂²q̈/∂q̇²` is symmetric in `(j, k)`, and so is `∂²q̈/∂q²` for
+/// DoFs of different joints (the configuration space is a product over joints); the pages of
+/// `∂(M⁻¹)/∂q_k` are symmetric, so only their upper triangles are solved for.
 pub fn fd_so_derivatives(
     model: &Model,
     data: &mut Data,
@@ -266,23 +305,85 @@ pub fn fd_so_derivatives(
     id_so_unchecked(model, data, &mut fso.id, q, v, &qdd, fext, -model.gravity);
     data.qdd = qdd;
     fd_fo_from_id(model, data)?;
-    let n2 = n * n;
-    let tt = &mut fso.tt[..];
-    assert!(tt.len() == n * n2);
-    // ∂²q̈/∂q²: ID_qq + A + A^R with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k].
-    transpose(fso.id.d2tau_dq2().as_slice(), n, n2, tt);
-    add_idfoza_terms(model, data, &mut fso.ws4, tt, Term::Dq2);
-    solve_neg_tensor(model, &data.ltl, fso.desc.view(), tt, &mut fso.d2qdd_dq2);
-    // ∂²q̈/∂q∂q̇: ID_qv + B with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j] (page k).
-    transpose(fso.id.d2tau_dqdv().as_slice(), n, n2, tt);
-    add_idfoza_terms(model, data, &mut fso.ws4, tt, Term::Dqdv);
-    solve_neg_tensor(model, &data.ltl, fso.desc.view(), tt, &mut fso.d2qdd_dqdv);
-    // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k].
-    tt.fill(0.0);
-    add_idfoza_terms(model, data, &mut fso.ws4, tt, Term::Minv);
-    solve_neg_tensor(model, &data.ltl, fso.desc.view(), tt, &mut fso.d2qdd_dtaudq);
-    // ∂²q̈/∂q̇²: ID_vv (M does not depend on q̇).
-    transpose(fso.id.d2tau_dv2().as_slice(), n, n2, tt);
-    solve_neg_tensor(model, &data.ltl, fso.desc.view(), tt, &mut fso.d2qdd_dv2);
+    let s = &mut fso.s[..];
+    assert!(s.len() == n * n * n);
+    /// Column `(j, k)` of the `n×n×n` tensor `t`.
+    fn col(t: &[f64], n: usize, j: usize, k: usize) -> &[f64] {
+        &t[n * (j + n * k)..][..n]
+    }
+    let all = || (0..n).flat_map(move |k| (0..n).map(move |j| (j, k)));
+    let dof_joint = &model.dof_joint;
+    // DoFs of different joints commute (product of the joints' configuration spaces).
+    let commute = |j: usize, k: usize| dof_joint[j] != dof_joint[k];
+    let desc = fso.desc.view();
+    // ∂²q̈/∂q²: −M⁻¹(ID_qq + A + A^R) with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k] = S[i][j][k].
+    idfoza_tensor(model, data, &mut fso.ws4, data.dqdd_dq.as_slice(), s);
+    {
+        let (idt, s) = (fso.id.d2tau_dq2().as_slice(), &*s);
+        solve_neg_columns(
+            model,
+            &data.ltl,
+            desc,
+            &mut fso.panel,
+            &mut fso.d2qdd_dq2,
+            all().filter(|&(j, k)| j <= k || !commute(j, k)),
+            3,
+            |j, k| [col(idt, n, j, k), col(s, n, j, k), col(s, n, k, j)],
+            Store::Mirror,
+            commute,
+        );
+    }
+    // ∂²q̈/∂q∂q̇: −M⁻¹(ID_qv + B) with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j] = S[i][k][j].
+    idfoza_tensor(model, data, &mut fso.ws4, data.dqdd_dv.as_slice(), s);
+    {
+        let (idt, s) = (fso.id.d2tau_dqdv().as_slice(), &*s);
+        solve_neg_columns(
+            model,
+            &data.ltl,
+            desc,
+            &mut fso.panel,
+            &mut fso.d2qdd_dqdv,
+            all(),
+            2,
+            |j, k| [col(idt, n, j, k), col(s, n, k, j), col(s, n, k, j)],
+            Store::Plain,
+            commute,
+        );
+    }
+    // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k] = S[i][j][k]; rows i ≤ j,
+    // by j so that each panel needs few rows.
+    idfoza_tensor(model, data, &mut fso.ws4, data.minv.as_slice(), s);
+    {
+        let s = &*s;
+        solve_neg_columns(
+            model,
+            &data.ltl,
+            desc,
+            &mut fso.panel,
+            &mut fso.d2qdd_dtaudq,
+            (0..n).flat_map(move |j| (0..n).map(move |k| (j, k))),
+            1,
+            |j, k| [col(s, n, j, k); 3],
+            Store::Head,
+            commute,
+        );
+        symmetrise_pages(n, fso.d2qdd_dtaudq.as_mut_slice());
+    }
+    // ∂²q̈/∂q̇²: −M⁻¹ ID_vv (M does not depend on q̇), symmetric in (j, k).
+    {
+        let idt = fso.id.d2tau_dv2().as_slice();
+        solve_neg_columns(
+            model,
+            &data.ltl,
+            desc,
+            &mut fso.panel,
+            &mut fso.d2qdd_dv2,
+            all().filter(|&(j, k)| j <= k),
+            1,
+            |j, k| [col(idt, n, j, k); 3],
+            Store::Mirror,
+            |_, _| true,
+        );
+    }
     Ok(())
 }
