@@ -318,87 +318,147 @@ unsafe fn transpose_avx(src: &[f64], lds: usize, m: usize, n: usize, dst: &mut [
     }
 }
 
-/// Gathers columns into rows: `rows[l + ld·i] ← Σ_{s < nsrc} srcs[l][s][i]` for `i < m`,
-/// `l < srcs.len()` (a transposition of the column sums). Lanes `srcs.len()..` up to the next
-/// multiple of 4 (at most `ld`) receive unspecified values.
+/// One term of the right-hand sides of a group of 4 lanes (see [`gather_group`]): its value
+/// for lane `u`, row `i`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum LaneSrc {
+    /// `p[u][i]` (one contiguous column per lane).
+    Cols([*const f64; 4]),
+    /// `p[u + stride·i]` (the lanes contiguous in each row).
+    Rows(*const f64, usize),
+    /// `p[u][stride·i]`.
+    Strided([*const f64; 4], usize),
+}
+
+/// Value of `s` for lane `u`, row `i`.
 ///
 /// # Safety
-/// Every `srcs[l][s]` (`s < nsrc`) is valid for reading `m` values; `nsrc ≤ 3`.
-pub(crate) unsafe fn gather_cols_to_rows(
-    srcs: &[[*const f64; 3]],
-    nsrc: usize,
-    m: usize,
-    rows: &mut [f64],
-    ld: usize,
-) {
-    let w = srcs.len();
-    assert!(
-        nsrc <= 3 && w.next_multiple_of(4) <= ld && (m == 0 || rows.len() >= (m - 1) * ld + ld)
-    );
-    #[cfg(target_arch = "x86_64")]
-    if crate::simd::avx2_fma() {
-        // SAFETY: AVX is available; the pointers as in the contract, `rows` as asserted.
-        unsafe { return gather_cols_to_rows_avx(srcs, nsrc, m, rows, ld) };
-    }
-    for (l, s) in srcs.iter().enumerate() {
-        for i in 0..m {
-            // SAFETY: i < m (caller's contract).
-            rows[l + ld * i] = s[..nsrc].iter().map(|p| unsafe { *p.add(i) }).sum();
+/// The addressed value is readable.
+#[inline(always)]
+unsafe fn lane_src_val(s: &LaneSrc, u: usize, i: usize) -> f64 {
+    // SAFETY: the caller's.
+    unsafe {
+        match *s {
+            LaneSrc::Cols(p) => *p[u].add(i),
+            LaneSrc::Rows(p, st) => *p.add(u + st * i),
+            LaneSrc::Strided(p, st) => *p[u].add(st * i),
         }
     }
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-unsafe fn gather_cols_to_rows_avx(
-    srcs: &[[*const f64; 3]],
-    nsrc: usize,
+/// Gathers a group of 4 lanes into rows: `rows[l0 + u + ld·i] ← Σ_s srcs[s](u, i)` for `i < m`,
+/// `u < w` (a transposition of the column sums), zero for the lanes `w ≤ u < 4`. Returns
+/// whether any gathered value is non-zero (or NaN).
+///
+/// # Safety
+/// For `u < w`, `i < m` every value addressed by `srcs` is readable; `w ≤ 4`.
+pub(crate) unsafe fn gather_group(
+    srcs: &[LaneSrc],
+    w: usize,
     m: usize,
     rows: &mut [f64],
     ld: usize,
-) {
+    l0: usize,
+) -> bool {
+    assert!(w <= 4 && l0 + 4 <= ld && (m == 0 || rows.len() >= (m - 1) * ld + ld));
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: AVX is available; the sources as in the contract, `rows` as asserted.
+        unsafe { return gather_group_avx(srcs, w, m, rows, ld, l0) };
+    }
+    let mut nz = false;
+    for i in 0..m {
+        for u in 0..4 {
+            let mut v = 0.0;
+            if u < w {
+                for s in srcs {
+                    // SAFETY: u < w, i < m (caller's contract).
+                    v += unsafe { lane_src_val(s, u, i) };
+                }
+            }
+            nz |= v != 0.0 || v.is_nan();
+            rows[l0 + u + ld * i] = v;
+        }
+    }
+    nz
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn gather_group_avx(
+    srcs: &[LaneSrc],
+    w: usize,
+    m: usize,
+    rows: &mut [f64],
+    ld: usize,
+    l0: usize,
+) -> bool {
     use std::arch::x86_64::*;
-    let w = srcs.len();
-    let rm =
-        _mm256_setr_epi64x(-1, if m % 4 > 1 { -1 } else { 0 }, if m % 4 > 2 { -1 } else { 0 }, 0);
+    let mk = |c: usize| {
+        let b = |k: usize| if c > k { -1i64 } else { 0 };
+        _mm256_setr_epi64x(b(0), b(1), b(2), b(3))
+    };
+    let rm = mk(m % 4);
+    let lm = mk(w);
     let pr = rows.as_mut_ptr();
-    // SAFETY: lanes l0 + u ≥ w reuse lane w − 1 (valid pointers); full row blocks read rows
-    // i..i + 4 ≤ m, the ragged one only rows < m (masked); stores go to rows < m, lanes < ld.
+    let zero = _mm256_setzero_pd();
+    let mut nz = zero;
+    // SAFETY: only lanes u < w and rows i < m of the sources are read (masked loads on the
+    // ragged ends); stores go to rows < m, lanes l0..l0 + 4 ≤ ld (asserted by the caller).
     unsafe {
-        let mut l0 = 0;
-        while l0 < w {
-            let lane = |u: usize| &srcs[(l0 + u).min(w - 1)];
-            let mut i = 0;
-            while i < m {
-                let full = i + 4 <= m;
-                let ld4 = |p: *const f64| {
-                    if full { _mm256_loadu_pd(p.add(i)) } else { _mm256_maskload_pd(p.add(i), rm) }
-                };
-                let mut c = [_mm256_setzero_pd(); 4];
-                for (u, cu) in c.iter_mut().enumerate() {
-                    let s = lane(u);
-                    *cu = ld4(s[0]);
-                    for p in &s[1..nsrc] {
-                        *cu = _mm256_add_pd(*cu, ld4(*p));
+        let mut i = 0;
+        while i < m {
+            let h = (m - i).min(4);
+            let mut r = [zero; 4];
+            for s in srcs {
+                match *s {
+                    LaneSrc::Cols(p) => {
+                        let mut c = [zero; 4];
+                        for (u, cu) in c.iter_mut().enumerate().take(w) {
+                            *cu = if h == 4 {
+                                _mm256_loadu_pd(p[u].add(i))
+                            } else {
+                                _mm256_maskload_pd(p[u].add(i), rm)
+                            };
+                        }
+                        let t = tile4(c);
+                        for (rt, tt) in r.iter_mut().zip(t) {
+                            *rt = _mm256_add_pd(*rt, tt);
+                        }
+                    }
+                    LaneSrc::Rows(p, st) => {
+                        for (t, rt) in r.iter_mut().enumerate().take(h) {
+                            let q = p.add(st * (i + t));
+                            let v =
+                                if w == 4 { _mm256_loadu_pd(q) } else { _mm256_maskload_pd(q, lm) };
+                            *rt = _mm256_add_pd(*rt, v);
+                        }
+                    }
+                    LaneSrc::Strided(p, st) => {
+                        for (t, rt) in r.iter_mut().enumerate().take(h) {
+                            let o = st * (i + t);
+                            let g = |u: usize| if u < w { *p[u].add(o) } else { 0.0 };
+                            *rt = _mm256_add_pd(*rt, _mm256_setr_pd(g(0), g(1), g(2), g(3)));
+                        }
                     }
                 }
-                let r = tile4(c);
-                for (t, rt) in r.iter().enumerate().take(m - i) {
-                    _mm256_storeu_pd(pr.add(l0 + ld * (i + t)), *rt);
-                }
-                i += 4;
             }
-            l0 += 4;
+            for (t, rt) in r.iter().enumerate().take(h) {
+                _mm256_storeu_pd(pr.add(l0 + ld * (i + t)), *rt);
+                nz = _mm256_or_pd(nz, _mm256_cmp_pd::<_CMP_NEQ_UQ>(*rt, zero));
+            }
+            i += 4;
         }
+        _mm256_movemask_pd(nz) != 0
     }
 }
 
 /// Scatters rows into columns: `dsts[l][d][i] ← rows[l + ld·i]` for `i < m`, `l < dsts.len()`,
 /// `d < 2` (the inverse of [`gather_cols_to_rows`] with one source; give the same pointer twice
-/// for a single destination).
+/// for a single destination). Lanes whose first pointer is null are skipped.
 ///
 /// # Safety
-/// Every `dsts[l][d]` is valid for writing `m` values.
+/// Every non-null `dsts[l][0]` and its `dsts[l][1]` are valid for writing `m` values.
 pub(crate) unsafe fn scatter_rows_to_cols(
     rows: &[f64],
     ld: usize,
@@ -412,7 +472,7 @@ pub(crate) unsafe fn scatter_rows_to_cols(
         // SAFETY: AVX is available; the pointers as in the contract, `rows` as asserted.
         unsafe { return scatter_rows_to_cols_avx(rows, ld, m, dsts) };
     }
-    for (l, d) in dsts.iter().enumerate() {
+    for (l, d) in dsts.iter().enumerate().filter(|(_, d)| !d[0].is_null()) {
         for i in 0..m {
             // SAFETY: i < m (caller's contract).
             unsafe {
@@ -446,7 +506,13 @@ unsafe fn scatter_rows_to_cols_avx(rows: &[f64], ld: usize, m: usize, dsts: &[[*
                 let c = tile4(r);
                 for (u, cu) in c.iter().enumerate().take(w - l0) {
                     let [p0, p1] = dsts[l0 + u];
-                    let np = if p1 == p0 { 1 } else { 2 };
+                    let np = if p0.is_null() {
+                        0
+                    } else if p1 == p0 {
+                        1
+                    } else {
+                        2
+                    };
                     for p in [p0, p1].into_iter().take(np) {
                         if full {
                             _mm256_storeu_pd(p.add(i), *cu);

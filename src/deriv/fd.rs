@@ -10,7 +10,7 @@ use crate::algo::internal::{
     ltl_solve_rows_head,
 };
 use crate::error::Result;
-use crate::linalg::{gather_cols_to_rows, scatter_rows_to_cols, transpose_strided};
+use crate::linalg::{LaneSrc, gather_group, scatter_rows_to_cols, transpose_strided};
 use crate::model::{Model, check_vec};
 use crate::spatial::Force;
 use crate::tensor::Tensor3;
@@ -140,78 +140,106 @@ impl FdSoData {
     }
 }
 
-/// How [`solve_neg_columns`] stores each solved column `(j, k)`.
+/// How [`solve_neg_groups`] stores each solved column `(j, k)`.
 #[derive(Clone, Copy, PartialEq)]
 enum Store {
-    /// Column `(j, k)` only.
-    Plain,
-    /// Also into column `(k, j)` when `mirror(j, k)` (a symmetry in `(j, k)`).
+    /// Column `(j, k)`, and also column `(k, j)` when `j < k` and `mirror(j, k)` (a symmetry
+    /// in `(j, k)`).
     Mirror,
     /// Column `(j, k)`, exact in rows `i ≤ j` only (the caller completes a symmetry in `(i, j)`).
     Head,
 }
 
-/// Solves `out[:, j, k] = −M⁻¹ b_jk` for the columns `(j, k)` of `pairs`, with `b_jk` the sum
-/// of the first `nsrc` columns (`n`-vectors) returned by `src(j, k)`. Zero right-hand sides
-/// give zero columns without a solve; the others go through the tree-sparse `LᵀDL` solve [`P`]
-/// at a time in the L1-resident `panel` (gathered and stored by 4×4 transpositions).
+/// A group of up to 4 right-hand-side columns: `(j + u, k)` (`by_j`) or `(j, k + u)`, `u < w`.
+#[derive(Clone, Copy)]
+struct Group {
+    j: usize,
+    k: usize,
+    w: usize,
+    by_j: bool,
+}
+
+impl Group {
+    fn lane(&self, u: usize) -> (usize, usize) {
+        if self.by_j { (self.j + u, self.k) } else { (self.j, self.k + u) }
+    }
+}
+
+/// Solves `out[:, j, k] = −M⁻¹ b_jk` for the columns of `groups`, with `b_jk` the sum of the
+/// terms `src(group)` (see [`LaneSrc`]). All-zero groups give zero columns without a solve;
+/// the others go through the tree-sparse `LᵀDL` solve [`P`] columns at a time in the
+/// L1-resident `panel` (gathered and stored by 4×4 transpositions).
+///
+/// # Safety
+/// Every term returned by `src(g)` addresses readable values for the lanes `u < g.w`, rows
+/// `i < n`.
 #[allow(clippy::too_many_arguments)]
-fn solve_neg_columns<'a>(
+unsafe fn solve_neg_groups(
     model: &Model,
     ltl: &DMatrix<f64>,
     desc: DescView<'_>,
     panel: &mut [f64],
     out: &mut Tensor3,
-    pairs: impl Iterator<Item = (usize, usize)>,
-    nsrc: usize,
-    src: impl Fn(usize, usize) -> [&'a [f64]; 3],
+    groups: impl Iterator<Item = Group>,
+    src: impl Fn(&Group) -> ([LaneSrc; 3], usize),
     store: Store,
     mirror: impl Fn(usize, usize) -> bool,
 ) {
     let n = model.nv;
     let out = out.as_mut_slice();
-    assert!(out.len() == n * n * n && panel.len() == n * P && (1..=3).contains(&nsrc));
+    assert!(out.len() == n * n * n && panel.len() == n * P);
     // All writes to `out` below go through `base`.
     let base = out.as_mut_ptr();
-    let mut srcs = [[std::ptr::null::<f64>(); 3]; P];
     let mut dsts = [[std::ptr::null_mut::<f64>(); 2]; P];
     let mut rows_end = 0;
-    let mut w = 0;
-    let mut flush =
-        |w: usize, rows_end: usize, srcs: &[[*const f64; 3]], dsts: &[[*mut f64; 2]]| {
-            // SAFETY: the source columns are n-long slices; the destinations are columns of `out`
-            // (offsets n (j + n k) with j, k < n, so n values fit in n³).
-            unsafe { gather_cols_to_rows(&srcs[..w], nsrc, n, panel, P) };
-            let wp = w.next_multiple_of(4);
-            ltl_solve_rows_head(model, ltl, desc, panel, P, wp, -1.0, rows_end);
-            // SAFETY: as above.
-            unsafe { scatter_rows_to_cols(panel, P, n, &dsts[..w]) };
-        };
-    for (j, k) in pairs {
-        assert!(j < n && k < n);
-        let s = src(j, k);
-        assert!(s.iter().take(nsrc).all(|c| c.len() == n));
-        let dst = [base.wrapping_add(n * (j + n * k)), base.wrapping_add(n * (k + n * j))];
-        let dst = if store == Store::Mirror && mirror(j, k) { dst } else { [dst[0], dst[0]] };
-        if s.iter().take(nsrc).all(|c| c.iter().all(|&x| x == 0.0)) {
-            for p in dst {
-                // SAFETY: a column of `out` (see `flush`).
-                unsafe { std::ptr::write_bytes(p, 0, n) };
+    let mut l0 = 0;
+    let flush = |panel: &mut [f64], l0: usize, rows_end: usize, dsts: &[[*mut f64; 2]]| {
+        ltl_solve_rows_head(model, ltl, desc, panel, P, l0, -1.0, rows_end);
+        // SAFETY: every non-null destination is a column of `out` (offset n (j + n k) with
+        // j, k < n, so n values fit in n³).
+        unsafe { scatter_rows_to_cols(panel, P, n, &dsts[..l0]) };
+    };
+    for g in groups {
+        assert!(g.w <= 4 && g.lane(g.w - 1).0 < n && g.lane(g.w - 1).1 < n);
+        let (terms, nt) = src(&g);
+        // SAFETY: the caller's contract on `src`; l0 + 4 ≤ P.
+        let nz = unsafe { gather_group(&terms[..nt], g.w, n, panel, P, l0) };
+        for u in 0..4 {
+            let d = &mut dsts[l0 + u];
+            *d = [std::ptr::null_mut(); 2];
+            if u < g.w {
+                let (j, k) = g.lane(u);
+                d[0] = base.wrapping_add(n * (j + n * k));
+                d[1] = if store == Store::Mirror && j < k && mirror(j, k) {
+                    base.wrapping_add(n * (k + n * j))
+                } else {
+                    d[0]
+                };
+            }
+        }
+        if !nz {
+            for d in &dsts[l0..l0 + g.w] {
+                for &p in d {
+                    // SAFETY: a column of `out` (see `flush`).
+                    unsafe { std::ptr::write_bytes(p, 0, n) };
+                }
             }
             continue;
         }
-        srcs[w] = [s[0].as_ptr(), s[1].as_ptr(), s[2].as_ptr()];
-        dsts[w] = dst;
-        rows_end = rows_end.max(if store == Store::Head { j + 1 } else { n });
-        w += 1;
-        if w == P {
-            flush(w, rows_end, &srcs, &dsts);
-            w = 0;
+        if store == Store::Head {
+            rows_end = rows_end.max(g.lane(g.w - 1).0 + 1);
+        } else {
+            rows_end = n;
+        }
+        l0 += 4;
+        if l0 == P {
+            flush(panel, l0, rows_end, &dsts);
+            l0 = 0;
             rows_end = 0;
         }
     }
-    if w > 0 {
-        flush(w, rows_end, &srcs, &dsts);
+    if l0 > 0 {
+        flush(panel, l0, rows_end, &dsts);
     }
 }
 
@@ -227,7 +255,7 @@ fn symmetrise_pages(n: usize, t: &mut [f64]) {
     }
 }
 
-/// `s[i + n j + n² k] ← IDFOZA(x[:, j])[i][k]` for the structurally non-zero `(i, k)`, four
+/// `s[j + n i + n² k] ← IDFOZA(x[:, j])[i][k]` for the structurally non-zero `(i, k)`, four
 /// right-hand sides at a time (vectorised with AVX2 when available).
 fn idfoza_tensor(model: &Model, data: &Data, ws: &mut Idfoza4Ws, x: &[f64], s: &mut [f64]) {
     #[cfg(target_arch = "x86_64")]
@@ -259,11 +287,18 @@ fn idfoza_tensor_impl(model: &Model, data: &Data, ws: &mut Idfoza4Ws, x: &[f64],
     while j0 < n {
         let nl = 4.min(n - j0);
         // SAFETY: i, k < n and j = j0 + l < n for l < nl, so every index is < n³ = s.len().
-        idfoza4_core(model, data, ws, x, n, j0, nl, |i, k, z| unsafe {
-            for (l, zl) in z.iter().enumerate().take(nl) {
-                *s.get_unchecked_mut(i + n * (j0 + l) + n2 * k) = *zl;
-            }
-        });
+        if nl == 4 {
+            // Full groups: the four lanes are contiguous.
+            idfoza4_core(model, data, ws, x, n, j0, 4, |i, k, z| unsafe {
+                *s.as_mut_ptr().add(j0 + n * i + n2 * k).cast::<[f64; 4]>() = *z;
+            });
+        } else {
+            idfoza4_core(model, data, ws, x, n, j0, nl, |i, k, z| unsafe {
+                for (l, zl) in z.iter().enumerate().take(nl) {
+                    *s.get_unchecked_mut(j0 + l + n * i + n2 * k) = *zl;
+                }
+            });
+        }
         j0 += 4;
     }
 }
@@ -307,83 +342,130 @@ pub fn fd_so_derivatives(
     fd_fo_from_id(model, data)?;
     let s = &mut fso.s[..];
     assert!(s.len() == n * n * n);
-    /// Column `(j, k)` of the `n×n×n` tensor `t`.
-    fn col(t: &[f64], n: usize, j: usize, k: usize) -> &[f64] {
-        &t[n * (j + n * k)..][..n]
-    }
-    let all = || (0..n).flat_map(move |k| (0..n).map(move |j| (j, k)));
+    let n2 = n * n;
     let dof_joint = &model.dof_joint;
     // DoFs of different joints commute (product of the joints' configuration spaces).
     let commute = |j: usize, k: usize| dof_joint[j] != dof_joint[k];
     let desc = fso.desc.view();
-    // ∂²q̈/∂q²: −M⁻¹(ID_qq + A + A^R) with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k] = S[i][j][k].
+    // Lane u's pointer (lanes past the group repeat its last one).
+    let lanes = |g: &Group, f: &dyn Fn(usize, usize) -> *const f64| {
+        let l = |u: usize| {
+            let (j, k) = g.lane(u.min(g.w - 1));
+            f(j, k)
+        };
+        [l(0), l(1), l(2), l(3)]
+    };
+    // Groups (j0.., k) of page k for j0 < jend(k), by 4.
+    let pages = |jend: &dyn Fn(usize) -> usize| {
+        let jend: Vec<usize> = (0..n).map(jend).collect();
+        (0..n).flat_map(move |k| {
+            (0..jend[k]).step_by(4).map(move |j| Group { j, k, w: 4.min(n - j), by_j: true })
+        })
+    };
+    // ∂²q̈/∂q²: −M⁻¹(ID_qq + A + A^R) with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k], held in
+    // S at j + n i + n² k. Columns j ≤ k (and the non-commuting j > k of k's joint).
     idfoza_tensor(model, data, &mut fso.ws4, data.dqdd_dq.as_slice(), s);
     {
-        let (idt, s) = (fso.id.d2tau_dq2().as_slice(), &*s);
-        solve_neg_columns(
-            model,
-            &data.ltl,
-            desc,
-            &mut fso.panel,
-            &mut fso.d2qdd_dq2,
-            all().filter(|&(j, k)| j <= k || !commute(j, k)),
-            3,
-            |j, k| [col(idt, n, j, k), col(s, n, j, k), col(s, n, k, j)],
-            Store::Mirror,
-            commute,
-        );
+        let (idt, sp) = (fso.id.d2tau_dq2().as_slice().as_ptr(), s.as_ptr());
+        let jend = |k: usize| {
+            let jt = dof_joint[k];
+            (k + 1).max(model.idx_v[jt] + model.nvs[jt])
+        };
+        // SAFETY (pointers): lanes have j, k < n, so the columns of ID_qq (n (j + n k) + i)
+        // and the entries of S (j + n i + n² k, k + n i + n² j) for i < n are in the n³ tensors.
+        unsafe {
+            solve_neg_groups(
+                model,
+                &data.ltl,
+                desc,
+                &mut fso.panel,
+                &mut fso.d2qdd_dq2,
+                pages(&jend),
+                |g| {
+                    let id = lanes(g, &|j, k| idt.wrapping_add(n * (j + n * k)));
+                    let ar = lanes(g, &|j, k| sp.wrapping_add(k + n2 * j));
+                    let a = LaneSrc::Rows(sp.wrapping_add(g.j + n2 * g.k), n);
+                    ([LaneSrc::Cols(id), a, LaneSrc::Strided(ar, n)], 3)
+                },
+                Store::Mirror,
+                commute,
+            )
+        };
     }
-    // ∂²q̈/∂q∂q̇: −M⁻¹(ID_qv + B) with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j] = S[i][k][j].
+    // ∂²q̈/∂q∂q̇: −M⁻¹(ID_qv + B) with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j], held in S at
+    // k + n i + n² j; groups (j, k0..).
     idfoza_tensor(model, data, &mut fso.ws4, data.dqdd_dv.as_slice(), s);
     {
-        let (idt, s) = (fso.id.d2tau_dqdv().as_slice(), &*s);
-        solve_neg_columns(
-            model,
-            &data.ltl,
-            desc,
-            &mut fso.panel,
-            &mut fso.d2qdd_dqdv,
-            all(),
-            2,
-            |j, k| [col(idt, n, j, k), col(s, n, k, j), col(s, n, k, j)],
-            Store::Plain,
-            commute,
-        );
+        let (idt, sp) = (fso.id.d2tau_dqdv().as_slice().as_ptr(), s.as_ptr());
+        let groups = (0..n).flat_map(move |j| {
+            (0..n).step_by(4).map(move |k| Group { j, k, w: 4.min(n - k), by_j: false })
+        });
+        // SAFETY (pointers): as for ∂²q̈/∂q².
+        unsafe {
+            solve_neg_groups(
+                model,
+                &data.ltl,
+                desc,
+                &mut fso.panel,
+                &mut fso.d2qdd_dqdv,
+                groups,
+                |g| {
+                    let id = lanes(g, &|j, k| idt.wrapping_add(n * (j + n * k)));
+                    let b = LaneSrc::Rows(sp.wrapping_add(g.k + n2 * g.j), n);
+                    ([LaneSrc::Cols(id), b, b], 2)
+                },
+                Store::Mirror,
+                |_, _| false,
+            )
+        };
     }
-    // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k] = S[i][j][k]; rows i ≤ j,
-    // by j so that each panel needs few rows.
+    // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k], held in S at
+    // j + n i + n² k; rows i ≤ j, by j so that each panel needs few rows.
     idfoza_tensor(model, data, &mut fso.ws4, data.minv.as_slice(), s);
     {
-        let s = &*s;
-        solve_neg_columns(
-            model,
-            &data.ltl,
-            desc,
-            &mut fso.panel,
-            &mut fso.d2qdd_dtaudq,
-            (0..n).flat_map(move |j| (0..n).map(move |k| (j, k))),
-            1,
-            |j, k| [col(s, n, j, k); 3],
-            Store::Head,
-            commute,
-        );
+        let sp = s.as_ptr();
+        let groups = (0..n)
+            .step_by(4)
+            .flat_map(move |j| (0..n).map(move |k| Group { j, k, w: 4.min(n - j), by_j: true }));
+        // SAFETY (pointers): as for ∂²q̈/∂q².
+        unsafe {
+            solve_neg_groups(
+                model,
+                &data.ltl,
+                desc,
+                &mut fso.panel,
+                &mut fso.d2qdd_dtaudq,
+                groups,
+                |g| {
+                    let c = LaneSrc::Rows(sp.wrapping_add(g.j + n2 * g.k), n);
+                    ([c, c, c], 1)
+                },
+                Store::Head,
+                commute,
+            )
+        };
         symmetrise_pages(n, fso.d2qdd_dtaudq.as_mut_slice());
     }
     // ∂²q̈/∂q̇²: −M⁻¹ ID_vv (M does not depend on q̇), symmetric in (j, k).
     {
-        let idt = fso.id.d2tau_dv2().as_slice();
-        solve_neg_columns(
-            model,
-            &data.ltl,
-            desc,
-            &mut fso.panel,
-            &mut fso.d2qdd_dv2,
-            all().filter(|&(j, k)| j <= k),
-            1,
-            |j, k| [col(idt, n, j, k); 3],
-            Store::Mirror,
-            |_, _| true,
-        );
+        let idt = fso.id.d2tau_dv2().as_slice().as_ptr();
+        // SAFETY (pointers): as for ∂²q̈/∂q².
+        unsafe {
+            solve_neg_groups(
+                model,
+                &data.ltl,
+                desc,
+                &mut fso.panel,
+                &mut fso.d2qdd_dv2,
+                pages(&|k| k + 1),
+                |g| {
+                    let id = LaneSrc::Cols(lanes(g, &|j, k| idt.wrapping_add(n * (j + n * k))));
+                    ([id, id, id], 1)
+                },
+                Store::Mirror,
+                |_, _| true,
+            )
+        };
     }
     Ok(())
 }
