@@ -102,6 +102,8 @@ pub struct FdSoData {
     s: Vec<f64>,
     /// Panel of [`P`] right-hand sides stored by rows for the solve: `(i, l)` at `i P + l`.
     panel: Vec<f64>,
+    /// One `n×n` page (transposition scratch).
+    page: Vec<f64>,
     /// Descendant DoF lists for the pulling first sweep of the solves.
     desc: DofDescendants,
 }
@@ -119,6 +121,7 @@ impl FdSoData {
             ws4: Idfoza4Ws::new(model),
             s: vec![0.0; n * n * n],
             panel: vec![0.0; n * P],
+            page: vec![0.0; n * n],
             desc: DofDescendants::new(model),
         }
     }
@@ -243,14 +246,15 @@ unsafe fn solve_neg_groups(
     }
 }
 
-/// Fills the strict lower triangle of every page of the `n×n×n` tensor `t` from its upper one.
-fn symmetrise_pages(n: usize, t: &mut [f64]) {
-    assert!(t.len() == n * n * n);
+/// Fills the strict lower triangle of every page of the `n×n×n` tensor `t` from its upper one,
+/// through the transposed page in `tmp` (`n²` values).
+fn symmetrise_pages(n: usize, t: &mut [f64], tmp: &mut [f64]) {
+    assert!(t.len() == n * n * n && tmp.len() == n * n);
     for page in t.chunks_exact_mut(n * n) {
+        transpose_strided(page, n, n, n, tmp, n);
         for j in 0..n {
-            for i in j + 1..n {
-                page[i + n * j] = page[j + n * i];
-            }
+            let c = n * j;
+            page[c + j + 1..c + n].copy_from_slice(&tmp[c + j + 1..c + n]);
         }
     }
 }
@@ -444,7 +448,7 @@ pub fn fd_so_derivatives(
                 commute,
             )
         };
-        symmetrise_pages(n, fso.d2qdd_dtaudq.as_mut_slice());
+        symmetrise_pages(n, fso.d2qdd_dtaudq.as_mut_slice(), &mut fso.page);
     }
     // ∂²q̈/∂q̇²: −M⁻¹ ID_vv (M does not depend on q̇), symmetric in (j, k).
     {
