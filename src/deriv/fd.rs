@@ -85,7 +85,7 @@ pub fn fd_derivatives(
 }
 
 /// Right-hand-side columns solved side by side in one panel.
-const P: usize = 32;
+const P: usize = 64;
 
 /// Second-order forward-dynamics derivatives (`nv×nv×nv` each) and their workspace.
 #[derive(Clone, Debug)]
@@ -146,6 +146,8 @@ impl FdSoData {
 /// How [`solve_neg_groups`] stores each solved column `(j, k)`.
 #[derive(Clone, Copy, PartialEq)]
 enum Store {
+    /// Column `(j, k)` only.
+    Plain,
     /// Column `(j, k)`, and also column `(k, j)` when `j < k` and `mirror(j, k)` (a symmetry
     /// in `(j, k)`).
     Mirror,
@@ -351,21 +353,21 @@ pub fn fd_so_derivatives(
     // DoFs of different joints commute (product of the joints' configuration spaces).
     let commute = |j: usize, k: usize| dof_joint[j] != dof_joint[k];
     let desc = fso.desc.view();
-    // Lane u's pointer (lanes past the group repeat its last one).
-    let lanes = |g: &Group, f: &dyn Fn(usize, usize) -> *const f64| {
+    /// Lane u's pointer `f(j_u, k_u)` (lanes past the group repeat its last one).
+    #[inline(always)]
+    fn lanes(g: &Group, f: impl Fn(usize, usize) -> *const f64) -> [*const f64; 4] {
         let l = |u: usize| {
             let (j, k) = g.lane(u.min(g.w - 1));
             f(j, k)
         };
         [l(0), l(1), l(2), l(3)]
-    };
+    }
     // Groups (j0.., k) of page k for j0 < jend(k), by 4.
-    let pages = |jend: &dyn Fn(usize) -> usize| {
-        let jend: Vec<usize> = (0..n).map(jend).collect();
+    fn pages(n: usize, jend: &dyn Fn(usize) -> usize) -> impl Iterator<Item = Group> + '_ {
         (0..n).flat_map(move |k| {
-            (0..jend[k]).step_by(4).map(move |j| Group { j, k, w: 4.min(n - j), by_j: true })
+            (0..jend(k)).step_by(4).map(move |j| Group { j, k, w: 4.min(n - j), by_j: true })
         })
-    };
+    }
     // ∂²q̈/∂q²: −M⁻¹(ID_qq + A + A^R) with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k], held in
     // S at j + n i + n² k. Columns j ≤ k (and the non-commuting j > k of k's joint).
     idfoza_tensor(model, data, &mut fso.ws4, data.dqdd_dq.as_slice(), s);
@@ -384,10 +386,10 @@ pub fn fd_so_derivatives(
                 desc,
                 &mut fso.panel,
                 &mut fso.d2qdd_dq2,
-                pages(&jend),
+                pages(n, &jend),
                 |g| {
-                    let id = lanes(g, &|j, k| idt.wrapping_add(n * (j + n * k)));
-                    let ar = lanes(g, &|j, k| sp.wrapping_add(k + n2 * j));
+                    let id = lanes(g, |j, k| idt.wrapping_add(n * (j + n * k)));
+                    let ar = lanes(g, |j, k| sp.wrapping_add(k + n2 * j));
                     let a = LaneSrc::Rows(sp.wrapping_add(g.j + n2 * g.k), n);
                     ([LaneSrc::Cols(id), a, LaneSrc::Strided(ar, n)], 3)
                 },
@@ -414,11 +416,11 @@ pub fn fd_so_derivatives(
                 &mut fso.d2qdd_dqdv,
                 groups,
                 |g| {
-                    let id = lanes(g, &|j, k| idt.wrapping_add(n * (j + n * k)));
+                    let id = lanes(g, |j, k| idt.wrapping_add(n * (j + n * k)));
                     let b = LaneSrc::Rows(sp.wrapping_add(g.k + n2 * g.j), n);
                     ([LaneSrc::Cols(id), b, b], 2)
                 },
-                Store::Mirror,
+                Store::Plain,
                 |_, _| false,
             )
         };
@@ -461,9 +463,9 @@ pub fn fd_so_derivatives(
                 desc,
                 &mut fso.panel,
                 &mut fso.d2qdd_dv2,
-                pages(&|k| k + 1),
+                pages(n, &|k| k + 1),
                 |g| {
-                    let id = LaneSrc::Cols(lanes(g, &|j, k| idt.wrapping_add(n * (j + n * k))));
+                    let id = LaneSrc::Cols(lanes(g, |j, k| idt.wrapping_add(n * (j + n * k))));
                     ([id, id, id], 1)
                 },
                 Store::Mirror,
