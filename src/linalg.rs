@@ -187,13 +187,6 @@ unsafe fn gemm_generic(
     }
 }
 
-/// `dst ← srcᵀ` for a column-major `m×n` matrix `src` (`dst` is `n×m`, column-major), by
-/// 4×4 register tiles (AVX) or 8×8 cache tiles.
-pub(crate) fn transpose(src: &[f64], m: usize, n: usize, dst: &mut [f64]) {
-    assert!(src.len() == m * n && dst.len() == m * n, "transpose: dimension mismatch");
-    transpose_strided(src, m, m, n, dst, n);
-}
-
 /// `dst[j + ldd·i] ← src[i + lds·j]` for `i < m`, `j < n`: the transposition of an `m×n`
 /// column-major block with leading dimension `lds` into one with leading dimension `ldd`.
 pub(crate) fn transpose_strided(
@@ -321,6 +314,216 @@ unsafe fn transpose_avx(src: &[f64], lds: usize, m: usize, n: usize, dst: &mut [
                 i += 4;
             }
             j += 4;
+        }
+    }
+}
+
+/// One term of the right-hand sides of a group of 4 lanes (see [`gather_group`]): its value
+/// for lane `u`, row `i`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum LaneSrc {
+    /// `p[u][i]` (one contiguous column per lane).
+    Cols([*const f64; 4]),
+    /// `p[u + stride·i]` (the lanes contiguous in each row).
+    Rows(*const f64, usize),
+    /// `p[u][stride·i]`.
+    Strided([*const f64; 4], usize),
+}
+
+/// Value of `s` for lane `u`, row `i`.
+///
+/// # Safety
+/// The addressed value is readable.
+#[inline(always)]
+unsafe fn lane_src_val(s: &LaneSrc, u: usize, i: usize) -> f64 {
+    // SAFETY: the caller's.
+    unsafe {
+        match *s {
+            LaneSrc::Cols(p) => *p[u].add(i),
+            LaneSrc::Rows(p, st) => *p.add(u + st * i),
+            LaneSrc::Strided(p, st) => *p[u].add(st * i),
+        }
+    }
+}
+
+/// Gathers a group of 4 lanes into rows: `rows[l0 + u + ld·i] ← Σ_s srcs[s](u, i)` for `i < m`,
+/// `u < w` (a transposition of the column sums), zero for the lanes `w ≤ u < 4`. Returns
+/// whether any gathered value is non-zero (or NaN).
+///
+/// # Safety
+/// For `u < w`, `i < m` every value addressed by `srcs` is readable; `w ≤ 4`.
+pub(crate) unsafe fn gather_group(
+    srcs: &[LaneSrc],
+    w: usize,
+    m: usize,
+    rows: &mut [f64],
+    ld: usize,
+    l0: usize,
+) -> bool {
+    assert!(w <= 4 && l0 + 4 <= ld && (m == 0 || rows.len() >= (m - 1) * ld + ld));
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: AVX is available; the sources as in the contract, `rows` as asserted.
+        unsafe { return gather_group_avx(srcs, w, m, rows, ld, l0) };
+    }
+    let mut nz = false;
+    for i in 0..m {
+        for u in 0..4 {
+            let mut v = 0.0;
+            if u < w {
+                for s in srcs {
+                    // SAFETY: u < w, i < m (caller's contract).
+                    v += unsafe { lane_src_val(s, u, i) };
+                }
+            }
+            nz |= v != 0.0 || v.is_nan();
+            rows[l0 + u + ld * i] = v;
+        }
+    }
+    nz
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn gather_group_avx(
+    srcs: &[LaneSrc],
+    w: usize,
+    m: usize,
+    rows: &mut [f64],
+    ld: usize,
+    l0: usize,
+) -> bool {
+    use std::arch::x86_64::*;
+    let mk = |c: usize| {
+        let b = |k: usize| if c > k { -1i64 } else { 0 };
+        _mm256_setr_epi64x(b(0), b(1), b(2), b(3))
+    };
+    let rm = mk(m % 4);
+    let lm = mk(w);
+    let pr = rows.as_mut_ptr();
+    let zero = _mm256_setzero_pd();
+    let mut nz = zero;
+    // SAFETY: only lanes u < w and rows i < m of the sources are read (masked loads on the
+    // ragged ends); stores go to rows < m, lanes l0..l0 + 4 ≤ ld (asserted by the caller).
+    unsafe {
+        let mut i = 0;
+        while i < m {
+            let h = (m - i).min(4);
+            let mut r = [zero; 4];
+            for s in srcs {
+                match *s {
+                    LaneSrc::Cols(p) => {
+                        let mut c = [zero; 4];
+                        for (u, cu) in c.iter_mut().enumerate().take(w) {
+                            *cu = if h == 4 {
+                                _mm256_loadu_pd(p[u].add(i))
+                            } else {
+                                _mm256_maskload_pd(p[u].add(i), rm)
+                            };
+                        }
+                        let t = tile4(c);
+                        for (rt, tt) in r.iter_mut().zip(t) {
+                            *rt = _mm256_add_pd(*rt, tt);
+                        }
+                    }
+                    LaneSrc::Rows(p, st) => {
+                        for (t, rt) in r.iter_mut().enumerate().take(h) {
+                            let q = p.add(st * (i + t));
+                            let v =
+                                if w == 4 { _mm256_loadu_pd(q) } else { _mm256_maskload_pd(q, lm) };
+                            *rt = _mm256_add_pd(*rt, v);
+                        }
+                    }
+                    LaneSrc::Strided(p, st) => {
+                        for (t, rt) in r.iter_mut().enumerate().take(h) {
+                            let o = st * (i + t);
+                            let g = |u: usize| if u < w { *p[u].add(o) } else { 0.0 };
+                            *rt = _mm256_add_pd(*rt, _mm256_setr_pd(g(0), g(1), g(2), g(3)));
+                        }
+                    }
+                }
+            }
+            for (t, rt) in r.iter().enumerate().take(h) {
+                _mm256_storeu_pd(pr.add(l0 + ld * (i + t)), *rt);
+                nz = _mm256_or_pd(nz, _mm256_cmp_pd::<_CMP_NEQ_UQ>(*rt, zero));
+            }
+            i += 4;
+        }
+        _mm256_movemask_pd(nz) != 0
+    }
+}
+
+/// Scatters rows into columns: `dsts[l][d][i] ← rows[l + ld·i]` for `i < m`, `l < dsts.len()`,
+/// `d < 2` (the inverse of [`gather_cols_to_rows`] with one source; give the same pointer twice
+/// for a single destination). Lanes whose first pointer is null are skipped.
+///
+/// # Safety
+/// Every non-null `dsts[l][0]` and its `dsts[l][1]` are valid for writing `m` values.
+pub(crate) unsafe fn scatter_rows_to_cols(
+    rows: &[f64],
+    ld: usize,
+    m: usize,
+    dsts: &[[*mut f64; 2]],
+) {
+    let w = dsts.len();
+    assert!(w.next_multiple_of(4) <= ld && (m == 0 || rows.len() >= (m - 1) * ld + ld));
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: AVX is available; the pointers as in the contract, `rows` as asserted.
+        unsafe { return scatter_rows_to_cols_avx(rows, ld, m, dsts) };
+    }
+    for (l, d) in dsts.iter().enumerate().filter(|(_, d)| !d[0].is_null()) {
+        for i in 0..m {
+            // SAFETY: i < m (caller's contract).
+            unsafe {
+                *d[0].add(i) = rows[l + ld * i];
+                *d[1].add(i) = rows[l + ld * i];
+            }
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn scatter_rows_to_cols_avx(rows: &[f64], ld: usize, m: usize, dsts: &[[*mut f64; 2]]) {
+    use std::arch::x86_64::*;
+    let w = dsts.len();
+    let rm =
+        _mm256_setr_epi64x(-1, if m % 4 > 1 { -1 } else { 0 }, if m % 4 > 2 { -1 } else { 0 }, 0);
+    let pr = rows.as_ptr();
+    // SAFETY: loads read rows < m, lanes < ld (asserted by the caller); stores write rows < m
+    // (masked on the ragged block) of lanes < w.
+    unsafe {
+        let mut l0 = 0;
+        while l0 < w {
+            let mut i = 0;
+            while i < m {
+                let full = i + 4 <= m;
+                let mut r = [_mm256_setzero_pd(); 4];
+                for (t, rt) in r.iter_mut().enumerate().take(m - i) {
+                    *rt = _mm256_loadu_pd(pr.add(l0 + ld * (i + t)));
+                }
+                let c = tile4(r);
+                for (u, cu) in c.iter().enumerate().take(w - l0) {
+                    let [p0, p1] = dsts[l0 + u];
+                    let np = if p0.is_null() {
+                        0
+                    } else if p1 == p0 {
+                        1
+                    } else {
+                        2
+                    };
+                    for p in [p0, p1].into_iter().take(np) {
+                        if full {
+                            _mm256_storeu_pd(p.add(i), *cu);
+                        } else {
+                            _mm256_maskstore_pd(p.add(i), rm, *cu);
+                        }
+                    }
+                }
+                i += 4;
+            }
+            l0 += 4;
         }
     }
 }

@@ -3,13 +3,37 @@
 //! The hot kernels (IDSVA-SO, the multi-right-hand-side `LᵀDL` solves, IDFOZA in FD-SO, the
 //! gemm (with its masked-tail variant), transposes and the SPD inverse of the Delassus matrix)
 //! have an AVX2/FMA version compiled with `#[target_feature]` and a portable version;
-//! [`avx2_fma`] picks one per call. Both give the same results to rounding: the unit test below
-//! forces the portable path and compares.
+//! [`avx2_fma`] picks one per call. The panel solves of FD-SO also have an AVX-512F version,
+//! picked by [`avx512f`]. All give the same results to rounding: the unit test below forces the
+//! portable path (and the AVX2 one) and compares.
 
 /// Test switch: run the portable kernels even where AVX2/FMA is available.
 #[cfg(test)]
 pub(crate) static FORCE_PORTABLE: std::sync::atomic::AtomicBool =
     std::sync::atomic::AtomicBool::new(false);
+
+/// Test switch: run the AVX2/FMA kernels where AVX-512 kernels exist and are available.
+#[cfg(test)]
+pub(crate) static FORCE_AVX2: std::sync::atomic::AtomicBool =
+    std::sync::atomic::AtomicBool::new(false);
+
+/// Whether the AVX-512F kernels may run (the CPU has AVX-512F and the AVX2/FMA kernels may
+/// run). Only some kernels have an AVX-512 version; they fall back to AVX2/FMA, then portable.
+#[inline]
+pub(crate) fn avx512f() -> bool {
+    #[cfg(test)]
+    if FORCE_AVX2.load(std::sync::atomic::Ordering::Relaxed) {
+        return false;
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        avx2_fma() && std::arch::is_x86_feature_detected!("avx512f")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
 
 /// Whether the AVX2/FMA kernels may run (the CPU has both features; the result is cached by the
 /// standard library's feature detection).
@@ -31,7 +55,7 @@ pub(crate) fn avx2_fma() -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::FORCE_PORTABLE;
+    use super::{FORCE_AVX2, FORCE_PORTABLE};
     use crate::algo::{Contact, Data};
     use crate::deriv::{
         ContactData, FdSoData, ImpactData, KktData, SoData, fd_derivatives, fd_so_derivatives,
@@ -117,13 +141,22 @@ mod tests {
             let v = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
             let u = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
             let simd = outputs(m, feet, &q, &v, &u);
+            FORCE_AVX2.store(true, Relaxed);
+            let avx2 = outputs(m, feet, &q, &v, &u);
+            FORCE_AVX2.store(false, Relaxed);
             FORCE_PORTABLE.store(true, Relaxed);
             let portable = outputs(m, feet, &q, &v, &u);
             FORCE_PORTABLE.store(false, Relaxed);
-            for (k, (a, b)) in simd.iter().zip(&portable).enumerate() {
-                let scale = a.iter().fold(1.0f64, |s, x| s.max(x.abs()));
-                let err = a.iter().zip(b).fold(0.0f64, |e, (x, y)| e.max((x - y).abs()));
-                assert!(err <= 1e-10 * scale, "{}: output {k} differs by {err:e}", m.name);
+            for (what, fast) in [("SIMD", &simd), ("AVX2", &avx2)] {
+                for (k, (a, b)) in fast.iter().zip(&portable).enumerate() {
+                    let scale = a.iter().fold(1.0f64, |s, x| s.max(x.abs()));
+                    let err = a.iter().zip(b).fold(0.0f64, |e, (x, y)| e.max((x - y).abs()));
+                    assert!(
+                        err <= 1e-10 * scale,
+                        "{}: {what} output {k} differs by {err:e}",
+                        m.name
+                    );
+                }
             }
         }
     }

@@ -569,3 +569,250 @@ fn solve_fd_scalar(model: &Model, h: &[f64], desc: DescView<'_>, sub_end: &[usiz
         }
     }
 }
+
+/// [`ltl_solve_rows_desc`] where only the first `rows_end` rows of the result are needed: the
+/// first sweep (leaves → root) runs on every row, the second (root → leaves) stops before row
+/// `rows_end`, since row `i` of `x = L⁻¹ z` only needs its ancestors (lower indices). Rows
+/// `rows_end..` are left holding intermediate values.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn ltl_solve_rows_head(
+    model: &Model,
+    h: &DMatrix<f64>,
+    desc: DescView<'_>,
+    x: &mut [f64],
+    ld: usize,
+    len: usize,
+    alpha: f64,
+    rows_end: usize,
+) {
+    let n = model.nv;
+    let hs = h.as_slice();
+    assert!(
+        hs.len() == n * n
+            && len <= ld
+            && rows_end <= n
+            && (n == 0 || (n - 1) * ld + len <= x.len())
+            && desc.nv == n,
+        "ltl_solve_rows_head: dimension mismatch"
+    );
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx512f() {
+        // SAFETY: the CPU supports the enabled features; rows are < n with `(n − 1)·ld + len ≤
+        // x.len()` (asserted), ancestor and descendant indices are < n (by construction).
+        unsafe {
+            return solve_rows_head_avx512(
+                model,
+                hs,
+                desc,
+                x.as_mut_ptr(),
+                ld,
+                len,
+                alpha,
+                rows_end,
+            );
+        };
+    }
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: as above.
+        unsafe {
+            return solve_rows_head_avx2(model, hs, desc, x.as_mut_ptr(), ld, len, alpha, rows_end);
+        };
+    }
+    solve_rows_head_portable(model, hs, x, ld, len, alpha, rows_end)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn solve_rows_head_avx2(
+    model: &Model,
+    h: &[f64],
+    desc: DescView<'_>,
+    x: *mut f64,
+    ld: usize,
+    len: usize,
+    alpha: f64,
+    rows_end: usize,
+) {
+    let n = model.nv;
+    let h = h.as_ptr();
+    let mask = tail_mask(len);
+    let starts = &model.dof_ancestors_start;
+    let all_anc = &model.dof_ancestors;
+    unsafe {
+        // Lᵀ y = b: row j pulls its (already final) descendants, L_ij stored at (j, i).
+        for j in (0..n).rev() {
+            let d = desc
+                .list
+                .get_unchecked(*desc.starts.get_unchecked(j)..*desc.starts.get_unchecked(j + 1));
+            if !d.is_empty() {
+                let hj = h.add(j);
+                pull_row(x, ld, len, mask, j, d, |i| *hj.add(n * i), 1.0);
+            }
+        }
+        // z = α D⁻¹ y, then L x = z on rows 0..rows_end.
+        for i in 0..rows_end {
+            let anc = all_anc.get_unchecked(*starts.get_unchecked(i)..*starts.get_unchecked(i + 1));
+            let hi = h.add(n * i);
+            let dinv = alpha / *hi.add(i);
+            pull_row(x, ld, len, mask, i, anc, |j| *hi.add(j), dinv);
+        }
+    }
+}
+
+/// [`solve_rows_head_avx2`] with AVX-512F: rows by chunks of 4, 2, 1 vectors of 8 and a
+/// masked ragged end.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn solve_rows_head_avx512(
+    model: &Model,
+    h: &[f64],
+    desc: DescView<'_>,
+    x: *mut f64,
+    ld: usize,
+    len: usize,
+    alpha: f64,
+    rows_end: usize,
+) {
+    let n = model.nv;
+    let h = h.as_ptr();
+    let starts = &model.dof_ancestors_start;
+    let all_anc = &model.dof_ancestors;
+    unsafe {
+        // Lᵀ y = b: row j pulls its (already final) descendants, L_ij stored at (j, i).
+        for j in (0..n).rev() {
+            let d = desc
+                .list
+                .get_unchecked(*desc.starts.get_unchecked(j)..*desc.starts.get_unchecked(j + 1));
+            if !d.is_empty() {
+                let hj = h.add(j);
+                pull_row512(x, ld, len, j, d, |i| *hj.add(n * i), 1.0);
+            }
+        }
+        // z = α D⁻¹ y, then L x = z on rows 0..rows_end.
+        for i in 0..rows_end {
+            let anc = all_anc.get_unchecked(*starts.get_unchecked(i)..*starts.get_unchecked(i + 1));
+            let hi = h.add(n * i);
+            let dinv = alpha / *hi.add(i);
+            pull_row512(x, ld, len, i, anc, |j| *hi.add(j), dinv);
+        }
+    }
+}
+
+/// [`pull_row`] with AVX-512F vectors of 8.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[inline]
+unsafe fn pull_row512(
+    x: *mut f64,
+    ld: usize,
+    len: usize,
+    i: usize,
+    others: &[usize],
+    coef: impl Fn(usize) -> f64 + Copy,
+    scale: f64,
+) {
+    let nfull = len / 8;
+    let tail = (1u8 << (len % 8)).wrapping_sub(1);
+    unsafe {
+        let mut g = 0;
+        while g + 4 <= nfull {
+            pull_chunk512::<4>(x, ld, 0xff, i, 8 * g, others, coef, scale);
+            g += 4;
+        }
+        if g + 2 <= nfull {
+            pull_chunk512::<2>(x, ld, 0xff, i, 8 * g, others, coef, scale);
+            g += 2;
+        }
+        if g < nfull {
+            pull_chunk512::<1>(x, ld, 0xff, i, 8 * g, others, coef, scale);
+        }
+        if tail != 0 {
+            pull_chunk512::<1>(x, ld, tail, i, 8 * nfull, others, coef, scale);
+        }
+    }
+}
+
+/// `K` vectors of 8 of row `i` from column `t` (the last one under `mask`), see [`pull_row`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[inline]
+#[allow(clippy::too_many_arguments)]
+unsafe fn pull_chunk512<const K: usize>(
+    x: *mut f64,
+    ld: usize,
+    mask: u8,
+    i: usize,
+    t: usize,
+    others: &[usize],
+    coef: impl Fn(usize) -> f64,
+    scale: f64,
+) {
+    use std::arch::x86_64::*;
+    unsafe {
+        let ld8 = |p: *const f64, u: usize| {
+            if u + 1 == K && mask != 0xff {
+                _mm512_maskz_loadu_pd(mask, p)
+            } else {
+                _mm512_loadu_pd(p)
+            }
+        };
+        let sc = _mm512_set1_pd(scale);
+        let xi = x.add(i * ld + t);
+        let mut acc = [_mm512_setzero_pd(); K];
+        for (u, a) in acc.iter_mut().enumerate() {
+            *a = _mm512_mul_pd(sc, ld8(xi.add(8 * u), u));
+        }
+        for &j in others {
+            let l = _mm512_set1_pd(coef(j));
+            let xj = x.add(j * ld + t);
+            for (u, a) in acc.iter_mut().enumerate() {
+                *a = _mm512_fnmadd_pd(l, ld8(xj.add(8 * u), u), *a);
+            }
+        }
+        for (u, a) in acc.iter().enumerate() {
+            if u + 1 == K && mask != 0xff {
+                _mm512_mask_storeu_pd(xi.add(8 * u), mask, *a);
+            } else {
+                _mm512_storeu_pd(xi.add(8 * u), *a);
+            }
+        }
+    }
+}
+
+/// Portable version of [`solve_rows_head_avx2`] (pushing first sweep).
+fn solve_rows_head_portable(
+    model: &Model,
+    h: &[f64],
+    x: &mut [f64],
+    ld: usize,
+    len: usize,
+    alpha: f64,
+    rows_end: usize,
+) {
+    let n = model.nv;
+    for i in (1..n).rev() {
+        let (lo, hi) = x.split_at_mut(i * ld);
+        let xi = &hi[..len];
+        for &j in model.ancestors_of_dof(i) {
+            let l = h[j + n * i];
+            for (d, s) in lo[j * ld..j * ld + len].iter_mut().zip(xi) {
+                *d -= l * s;
+            }
+        }
+    }
+    for i in 0..rows_end {
+        let dinv = alpha / h[i + n * i];
+        let (lo, hi) = x.split_at_mut(i * ld);
+        let xi = &mut hi[..len];
+        xi.iter_mut().for_each(|v| *v *= dinv);
+        for &j in model.ancestors_of_dof(i) {
+            let l = h[j + n * i];
+            for (d, s) in xi.iter_mut().zip(&lo[j * ld..j * ld + len]) {
+                *d -= l * s;
+            }
+        }
+    }
+}

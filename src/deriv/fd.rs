@@ -7,10 +7,10 @@ use super::zero::{Idfoza4Ws, idfoza4_core};
 use crate::algo::Data;
 use crate::algo::internal::{
     DescView, DofDescendants, aba_unchecked, check_fext, ltl_in_place, ltl_solve_fd,
-    ltl_solve_rows_desc,
+    ltl_solve_rows_head,
 };
 use crate::error::Result;
-use crate::linalg::{transpose, transpose_strided};
+use crate::linalg::{LaneSrc, gather_group, scatter_rows_to_cols, transpose_strided};
 use crate::model::{Model, check_vec};
 use crate::spatial::Force;
 use crate::tensor::Tensor3;
@@ -84,6 +84,9 @@ pub fn fd_derivatives(
     fd_fo_from_id(model, data)
 }
 
+/// Right-hand-side columns solved side by side in one panel.
+const P: usize = 64;
+
 /// Second-order forward-dynamics derivatives (`nv×nv×nv` each) and their workspace.
 #[derive(Clone, Debug)]
 pub struct FdSoData {
@@ -94,8 +97,13 @@ pub struct FdSoData {
     d2qdd_dqdv: Tensor3,
     d2qdd_dtaudq: Tensor3,
     ws4: Idfoza4Ws,
-    /// Working tensor stored by rows of the solve: `(i, j, k)` at `j + n k + n² i`.
-    tt: Vec<f64>,
+    /// IDFOZA results `S[(i, j, k)] = IDFOZA(X[:, j])[i][k]` at `i + n j + n² k`; only the
+    /// structurally non-zero entries (the same for every `X`) are ever written.
+    s: Vec<f64>,
+    /// Panel of [`P`] right-hand sides stored by rows for the solve: `(i, l)` at `i P + l`.
+    panel: Vec<f64>,
+    /// One `n×n` page (transposition scratch).
+    page: Vec<f64>,
     /// Descendant DoF lists for the pulling first sweep of the solves.
     desc: DofDescendants,
 }
@@ -111,7 +119,9 @@ impl FdSoData {
             d2qdd_dqdv: Tensor3::zeros(n, n, n),
             d2qdd_dtaudq: Tensor3::zeros(n, n, n),
             ws4: Idfoza4Ws::new(model),
-            tt: vec![0.0; n * n * n],
+            s: vec![0.0; n * n * n],
+            panel: vec![0.0; n * P],
+            page: vec![0.0; n * n],
             desc: DofDescendants::new(model),
         }
     }
@@ -133,101 +143,167 @@ impl FdSoData {
     }
 }
 
-/// `out ← −M⁻¹ T` for the tensor `T` held in `tt` by rows (`(i, j, k)` at `j + n k + n² i`):
-/// tree-sparse multi-right-hand-side solves on blocks of `(j, k)` columns (cache-sized), then
-/// one transposition into the column-major `out`.
-fn solve_neg_tensor(
+/// How [`solve_neg_groups`] stores each solved column `(j, k)`.
+#[derive(Clone, Copy, PartialEq)]
+enum Store {
+    /// Column `(j, k)` only.
+    Plain,
+    /// Column `(j, k)`, and also column `(k, j)` when `j < k` and `mirror(j, k)` (a symmetry
+    /// in `(j, k)`).
+    Mirror,
+    /// Column `(j, k)`, exact in rows `i ≤ j` only (the caller completes a symmetry in `(i, j)`).
+    Head,
+}
+
+/// A group of up to 4 right-hand-side columns: `(j + u, k)` (`by_j`) or `(j, k + u)`, `u < w`.
+#[derive(Clone, Copy)]
+struct Group {
+    j: usize,
+    k: usize,
+    w: usize,
+    by_j: bool,
+}
+
+impl Group {
+    fn lane(&self, u: usize) -> (usize, usize) {
+        if self.by_j { (self.j + u, self.k) } else { (self.j, self.k + u) }
+    }
+}
+
+/// Solves `out[:, j, k] = −M⁻¹ b_jk` for the columns of `groups`, with `b_jk` the sum of the
+/// terms `src(group)` (see [`LaneSrc`]). All-zero groups give zero columns without a solve;
+/// the others go through the tree-sparse `LᵀDL` solve [`P`] columns at a time in the
+/// L1-resident `panel` (gathered and stored by 4×4 transpositions).
+///
+/// # Safety
+/// Every term returned by `src(g)` addresses readable values for the lanes `u < g.w`, rows
+/// `i < n`.
+#[allow(clippy::too_many_arguments)]
+unsafe fn solve_neg_groups(
     model: &Model,
     ltl: &DMatrix<f64>,
     desc: DescView<'_>,
-    tt: &mut [f64],
+    panel: &mut [f64],
     out: &mut Tensor3,
+    groups: impl Iterator<Item = Group>,
+    src: impl Fn(&Group) -> ([LaneSrc; 3], usize),
+    store: Store,
+    mirror: impl Fn(usize, usize) -> bool,
 ) {
-    const W: usize = 64;
     let n = model.nv;
-    let n2 = n * n;
-    let mut b = 0;
-    while b < n2 {
-        let w = W.min(n2 - b);
-        ltl_solve_rows_desc(model, ltl, desc, &mut tt[b..], n2, w, -1.0);
-        b += w;
+    let out = out.as_mut_slice();
+    assert!(out.len() == n * n * n && panel.len() == n * P);
+    // All writes to `out` below go through `base`.
+    let base = out.as_mut_ptr();
+    let mut dsts = [[std::ptr::null_mut::<f64>(); 2]; P];
+    let mut rows_end = 0;
+    let mut l0 = 0;
+    let flush = |panel: &mut [f64], l0: usize, rows_end: usize, dsts: &[[*mut f64; 2]]| {
+        ltl_solve_rows_head(model, ltl, desc, panel, P, l0, -1.0, rows_end);
+        // SAFETY: every non-null destination is a column of `out` (offset n (j + n k) with
+        // j, k < n, so n values fit in n³).
+        unsafe { scatter_rows_to_cols(panel, P, n, &dsts[..l0]) };
+    };
+    for g in groups {
+        assert!(g.w <= 4 && g.lane(g.w - 1).0 < n && g.lane(g.w - 1).1 < n);
+        let (terms, nt) = src(&g);
+        // SAFETY: the caller's contract on `src`; l0 + 4 ≤ P.
+        let nz = unsafe { gather_group(&terms[..nt], g.w, n, panel, P, l0) };
+        for u in 0..4 {
+            let d = &mut dsts[l0 + u];
+            *d = [std::ptr::null_mut(); 2];
+            if u < g.w {
+                let (j, k) = g.lane(u);
+                d[0] = base.wrapping_add(n * (j + n * k));
+                d[1] = if store == Store::Mirror && j < k && mirror(j, k) {
+                    base.wrapping_add(n * (k + n * j))
+                } else {
+                    d[0]
+                };
+            }
+        }
+        if !nz {
+            for d in &dsts[l0..l0 + g.w] {
+                for &p in d {
+                    // SAFETY: a column of `out` (see `flush`).
+                    unsafe { std::ptr::write_bytes(p, 0, n) };
+                }
+            }
+            continue;
+        }
+        if store == Store::Head {
+            rows_end = rows_end.max(g.lane(g.w - 1).0 + 1);
+        } else {
+            rows_end = n;
+        }
+        l0 += 4;
+        if l0 == P {
+            flush(panel, l0, rows_end, &dsts);
+            l0 = 0;
+            rows_end = 0;
+        }
     }
-    transpose(tt, n2, n, out.as_mut_slice());
+    if l0 > 0 {
+        flush(panel, l0, rows_end, &dsts);
+    }
 }
 
-/// Which IDFOZA term of eq. eqn_FD_SO_43 [`add_idfoza_terms`] adds.
-#[derive(Clone, Copy, PartialEq)]
-enum Term {
-    /// `A + A^R`, `A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k]`.
-    Dq2,
-    /// `B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j]`.
-    Dqdv,
-    /// `C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k]` (written, not added).
-    Minv,
+/// Fills the strict lower triangle of every page of the `n×n×n` tensor `t` from its upper one,
+/// through the transposed page in `tmp` (`n²` values).
+fn symmetrise_pages(n: usize, t: &mut [f64], tmp: &mut [f64]) {
+    assert!(t.len() == n * n * n && tmp.len() == n * n);
+    for page in t.chunks_exact_mut(n * n) {
+        transpose_strided(page, n, n, n, tmp, n);
+        for j in 0..n {
+            let c = n * j;
+            page[c + j + 1..c + n].copy_from_slice(&tmp[c + j + 1..c + n]);
+        }
+    }
 }
 
-/// Adds one IDFOZA term to `tt` (stored by rows, `(i, j, k)` at `j + n k + n² i`), four
+/// `s[j + n i + n² k] ← IDFOZA(x[:, j])[i][k]` for the structurally non-zero `(i, k)`, four
 /// right-hand sides at a time (vectorised with AVX2 when available).
-fn add_idfoza_terms(model: &Model, data: &Data, ws: &mut Idfoza4Ws, tt: &mut [f64], term: Term) {
+fn idfoza_tensor(model: &Model, data: &Data, ws: &mut Idfoza4Ws, x: &[f64], s: &mut [f64]) {
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2_fma() {
         // SAFETY: the CPU supports the enabled features.
-        unsafe { return add_idfoza_terms_avx2(model, data, ws, tt, term) };
+        unsafe { return idfoza_tensor_avx2(model, data, ws, x, s) };
     }
-    add_idfoza_terms_impl(model, data, ws, tt, term)
+    idfoza_tensor_impl(model, data, ws, x, s)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn add_idfoza_terms_avx2(
+unsafe fn idfoza_tensor_avx2(
     model: &Model,
     data: &Data,
     ws: &mut Idfoza4Ws,
-    tt: &mut [f64],
-    term: Term,
+    x: &[f64],
+    s: &mut [f64],
 ) {
-    add_idfoza_terms_impl(model, data, ws, tt, term)
+    idfoza_tensor_impl(model, data, ws, x, s)
 }
 
 #[inline(always)]
-fn add_idfoza_terms_impl(
-    model: &Model,
-    data: &Data,
-    ws: &mut Idfoza4Ws,
-    tt: &mut [f64],
-    term: Term,
-) {
+fn idfoza_tensor_impl(model: &Model, data: &Data, ws: &mut Idfoza4Ws, x: &[f64], s: &mut [f64]) {
     let n = model.nv;
     let n2 = n * n;
-    assert!(tt.len() == n * n2);
-    let x = match term {
-        Term::Dq2 => data.dqdd_dq.as_slice(),
-        Term::Dqdv => data.dqdd_dv.as_slice(),
-        Term::Minv => data.minv.as_slice(),
-    };
+    assert!(s.len() == n * n2 && x.len() == n2);
     let mut j0 = 0;
     while j0 < n {
         let nl = 4.min(n - j0);
-        // SAFETY (the `put` closures): i, k < n and j = j0 + l < n for l < nl, so every index
-        // is < n³ = tt.len().
-        match term {
-            Term::Dq2 => idfoza4_core(model, data, ws, x, n, j0, nl, |i, k, z| unsafe {
+        // SAFETY: i, k < n and j = j0 + l < n for l < nl, so every index is < n³ = s.len().
+        if nl == 4 {
+            // Full groups: the four lanes are contiguous.
+            idfoza4_core(model, data, ws, x, n, j0, 4, |i, k, z| unsafe {
+                *s.as_mut_ptr().add(j0 + n * i + n2 * k).cast::<[f64; 4]>() = *z;
+            });
+        } else {
+            idfoza4_core(model, data, ws, x, n, j0, nl, |i, k, z| unsafe {
                 for (l, zl) in z.iter().enumerate().take(nl) {
-                    let j = j0 + l;
-                    *tt.get_unchecked_mut(j + n * k + n2 * i) += zl;
-                    *tt.get_unchecked_mut(k + n * j + n2 * i) += zl;
+                    *s.get_unchecked_mut(j0 + l + n * i + n2 * k) = *zl;
                 }
-            }),
-            Term::Dqdv => idfoza4_core(model, data, ws, x, n, j0, nl, |i, j, z| unsafe {
-                for (l, zl) in z.iter().enumerate().take(nl) {
-                    *tt.get_unchecked_mut(j + n * (j0 + l) + n2 * i) += zl;
-                }
-            }),
-            Term::Minv => idfoza4_core(model, data, ws, x, n, j0, nl, |i, k, z| unsafe {
-                for (l, zl) in z.iter().enumerate().take(nl) {
-                    *tt.get_unchecked_mut(j0 + l + n * k + n2 * i) = *zl;
-                }
-            }),
+            });
         }
         j0 += 4;
     }
@@ -238,6 +314,10 @@ fn add_idfoza_terms_impl(
 /// products by IDFOZA (`O(N d)` per column) instead of tensor products. Also fills the
 /// first-order results in `data` (as [`fd_derivatives`]) and the ID second-order tensors in
 /// `fso.id`.
+///
+/// Symmetries cut the solves: `∂²q̈/∂q̇²` is symmetric in `(j, k)`, and so is `∂²q̈/∂q²` for
+/// DoFs of different joints (the configuration space is a product over joints); the pages of
+/// `∂(M⁻¹)/∂q_k` are symmetric, so only their upper triangles are solved for.
 pub fn fd_so_derivatives(
     model: &Model,
     data: &mut Data,
@@ -266,23 +346,132 @@ pub fn fd_so_derivatives(
     id_so_unchecked(model, data, &mut fso.id, q, v, &qdd, fext, -model.gravity);
     data.qdd = qdd;
     fd_fo_from_id(model, data)?;
+    let s = &mut fso.s[..];
+    assert!(s.len() == n * n * n);
     let n2 = n * n;
-    let tt = &mut fso.tt[..];
-    assert!(tt.len() == n * n2);
-    // ∂²q̈/∂q²: ID_qq + A + A^R with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k].
-    transpose(fso.id.d2tau_dq2().as_slice(), n, n2, tt);
-    add_idfoza_terms(model, data, &mut fso.ws4, tt, Term::Dq2);
-    solve_neg_tensor(model, &data.ltl, fso.desc.view(), tt, &mut fso.d2qdd_dq2);
-    // ∂²q̈/∂q∂q̇: ID_qv + B with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j] (page k).
-    transpose(fso.id.d2tau_dqdv().as_slice(), n, n2, tt);
-    add_idfoza_terms(model, data, &mut fso.ws4, tt, Term::Dqdv);
-    solve_neg_tensor(model, &data.ltl, fso.desc.view(), tt, &mut fso.d2qdd_dqdv);
-    // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k].
-    tt.fill(0.0);
-    add_idfoza_terms(model, data, &mut fso.ws4, tt, Term::Minv);
-    solve_neg_tensor(model, &data.ltl, fso.desc.view(), tt, &mut fso.d2qdd_dtaudq);
-    // ∂²q̈/∂q̇²: ID_vv (M does not depend on q̇).
-    transpose(fso.id.d2tau_dv2().as_slice(), n, n2, tt);
-    solve_neg_tensor(model, &data.ltl, fso.desc.view(), tt, &mut fso.d2qdd_dv2);
+    let dof_joint = &model.dof_joint;
+    // DoFs of different joints commute (product of the joints' configuration spaces).
+    let commute = |j: usize, k: usize| dof_joint[j] != dof_joint[k];
+    let desc = fso.desc.view();
+    /// Lane u's pointer `f(j_u, k_u)` (lanes past the group repeat its last one).
+    #[inline(always)]
+    fn lanes(g: &Group, f: impl Fn(usize, usize) -> *const f64) -> [*const f64; 4] {
+        let l = |u: usize| {
+            let (j, k) = g.lane(u.min(g.w - 1));
+            f(j, k)
+        };
+        [l(0), l(1), l(2), l(3)]
+    }
+    // Groups (j0.., k) of page k for j0 < jend(k), by 4.
+    fn pages(n: usize, jend: &dyn Fn(usize) -> usize) -> impl Iterator<Item = Group> + '_ {
+        (0..n).flat_map(move |k| {
+            (0..jend(k)).step_by(4).map(move |j| Group { j, k, w: 4.min(n - j), by_j: true })
+        })
+    }
+    // ∂²q̈/∂q²: −M⁻¹(ID_qq + A + A^R) with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k], held in
+    // S at j + n i + n² k. Columns j ≤ k (and the non-commuting j > k of k's joint).
+    idfoza_tensor(model, data, &mut fso.ws4, data.dqdd_dq.as_slice(), s);
+    {
+        let (idt, sp) = (fso.id.d2tau_dq2().as_slice().as_ptr(), s.as_ptr());
+        let jend = |k: usize| {
+            let jt = dof_joint[k];
+            (k + 1).max(model.idx_v[jt] + model.nvs[jt])
+        };
+        // SAFETY (pointers): lanes have j, k < n, so the columns of ID_qq (n (j + n k) + i)
+        // and the entries of S (j + n i + n² k, k + n i + n² j) for i < n are in the n³ tensors.
+        unsafe {
+            solve_neg_groups(
+                model,
+                &data.ltl,
+                desc,
+                &mut fso.panel,
+                &mut fso.d2qdd_dq2,
+                pages(n, &jend),
+                |g| {
+                    let id = lanes(g, |j, k| idt.wrapping_add(n * (j + n * k)));
+                    let ar = lanes(g, |j, k| sp.wrapping_add(k + n2 * j));
+                    let a = LaneSrc::Rows(sp.wrapping_add(g.j + n2 * g.k), n);
+                    ([LaneSrc::Cols(id), a, LaneSrc::Strided(ar, n)], 3)
+                },
+                Store::Mirror,
+                commute,
+            )
+        };
+    }
+    // ∂²q̈/∂q∂q̇: −M⁻¹(ID_qv + B) with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j], held in S at
+    // k + n i + n² j; groups (j, k0..).
+    idfoza_tensor(model, data, &mut fso.ws4, data.dqdd_dv.as_slice(), s);
+    {
+        let (idt, sp) = (fso.id.d2tau_dqdv().as_slice().as_ptr(), s.as_ptr());
+        let groups = (0..n).flat_map(move |j| {
+            (0..n).step_by(4).map(move |k| Group { j, k, w: 4.min(n - k), by_j: false })
+        });
+        // SAFETY (pointers): as for ∂²q̈/∂q².
+        unsafe {
+            solve_neg_groups(
+                model,
+                &data.ltl,
+                desc,
+                &mut fso.panel,
+                &mut fso.d2qdd_dqdv,
+                groups,
+                |g| {
+                    let id = lanes(g, |j, k| idt.wrapping_add(n * (j + n * k)));
+                    let b = LaneSrc::Rows(sp.wrapping_add(g.k + n2 * g.j), n);
+                    ([LaneSrc::Cols(id), b, b], 2)
+                },
+                Store::Plain,
+                |_, _| false,
+            )
+        };
+    }
+    // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k], held in S at
+    // j + n i + n² k; rows i ≤ j, by j so that each panel needs few rows.
+    idfoza_tensor(model, data, &mut fso.ws4, data.minv.as_slice(), s);
+    {
+        let sp = s.as_ptr();
+        let groups = (0..n)
+            .step_by(4)
+            .flat_map(move |j| (0..n).map(move |k| Group { j, k, w: 4.min(n - j), by_j: true }));
+        // SAFETY (pointers): as for ∂²q̈/∂q².
+        unsafe {
+            solve_neg_groups(
+                model,
+                &data.ltl,
+                desc,
+                &mut fso.panel,
+                &mut fso.d2qdd_dtaudq,
+                groups,
+                |g| {
+                    let c = LaneSrc::Rows(sp.wrapping_add(g.j + n2 * g.k), n);
+                    ([c, c, c], 1)
+                },
+                Store::Head,
+                commute,
+            )
+        };
+        symmetrise_pages(n, fso.d2qdd_dtaudq.as_mut_slice(), &mut fso.page);
+    }
+    // ∂²q̈/∂q̇²: −M⁻¹ ID_vv (M does not depend on q̇), symmetric in (j, k).
+    {
+        let idt = fso.id.d2tau_dv2().as_slice().as_ptr();
+        // SAFETY (pointers): as for ∂²q̈/∂q².
+        unsafe {
+            solve_neg_groups(
+                model,
+                &data.ltl,
+                desc,
+                &mut fso.panel,
+                &mut fso.d2qdd_dv2,
+                pages(n, &|k| k + 1),
+                |g| {
+                    let id = LaneSrc::Cols(lanes(g, |j, k| idt.wrapping_add(n * (j + n * k))));
+                    ([id, id, id], 1)
+                },
+                Store::Mirror,
+                |_, _| true,
+            )
+        };
+    }
     Ok(())
 }
