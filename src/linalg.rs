@@ -65,6 +65,8 @@ unsafe fn gemm_avx2(
     k: usize,
 ) {
     use std::arch::x86_64::*;
+    // SAFETY: the caller upholds this function's contract: `a`, `b`, `c` are valid for their m×k,
+    // k×n and m×n blocks with the given leading dimensions.
     unsafe {
         // α A B + β C with an 8×6 register-blocked kernel; β is applied where C is written.
         let m8 = m - m % 8;
@@ -149,6 +151,8 @@ unsafe fn gemm_generic(
     n: usize,
     k: usize,
 ) {
+    // SAFETY: the caller upholds this function's contract: `a`, `b`, `c` are valid for their m×k,
+    // k×n and m×n blocks with the given leading dimensions.
     unsafe {
         for j in 0..n {
             let cj = std::slice::from_raw_parts_mut(c.add(j * ldc), m);

@@ -125,6 +125,8 @@ unsafe fn pull_row(
     scale: f64,
 ) {
     let nfull = len / 4;
+    // SAFETY: the caller upholds this function's contract: `x` is valid for the rows < nv (stride
+    // `ld`) and columns used, and every index from the model's ancestor / descendant lists is < nv.
     unsafe {
         let mut g = 0;
         while g + 8 <= nfull {
@@ -164,6 +166,8 @@ unsafe fn pull_chunk<const K: usize, const MASKED: bool>(
     scale: f64,
 ) {
     use std::arch::x86_64::*;
+    // SAFETY: the caller upholds this function's contract: `x` is valid for the rows < nv (stride
+    // `ld`) and columns used, and every index from the model's ancestor / descendant lists is < nv.
     unsafe {
         let ld4 =
             |p: *const f64| if MASKED { _mm256_maskload_pd(p, mask) } else { _mm256_loadu_pd(p) };
@@ -306,6 +310,8 @@ unsafe fn solve_rows_desc_avx2(
     let mask = tail_mask(len);
     let starts = &model.dof_ancestors_start;
     let all_anc = &model.dof_ancestors;
+    // SAFETY: the caller upholds this function's contract: `x` is valid for the rows < nv (stride
+    // `ld`) and columns used, and every index from the model's ancestor / descendant lists is < nv.
     unsafe {
         // Lᵀ y = b: row j pulls its (already final) descendants, L_ij stored at (j, i).
         for j in (0..n).rev() {
@@ -488,6 +494,8 @@ unsafe fn solve_fd_avx2(
     let mask_w = tail_mask(w);
     let starts = &model.dof_ancestors_start;
     let all_anc = &model.dof_ancestors;
+    // SAFETY: the caller upholds this function's contract: `x` is valid for the rows < nv (stride
+    // `ld`) and columns used, and every index from the model's ancestor / descendant lists is < nv.
     unsafe {
         let xi0 = x.add(w);
         for j in (0..n).rev() {
@@ -640,6 +648,8 @@ unsafe fn solve_rows_head_avx2(
     let mask = tail_mask(len);
     let starts = &model.dof_ancestors_start;
     let all_anc = &model.dof_ancestors;
+    // SAFETY: the caller upholds this function's contract: `x` is valid for the rows < nv (stride
+    // `ld`) and columns used, and every index from the model's ancestor / descendant lists is < nv.
     unsafe {
         // Lᵀ y = b: row j pulls its (already final) descendants, L_ij stored at (j, i).
         for j in (0..n).rev() {
@@ -680,6 +690,8 @@ unsafe fn solve_rows_head_avx512(
     let h = h.as_ptr();
     let starts = &model.dof_ancestors_start;
     let all_anc = &model.dof_ancestors;
+    // SAFETY: the caller upholds this function's contract: `x` is valid for the rows < nv (stride
+    // `ld`) and columns used, and every index from the model's ancestor / descendant lists is < nv.
     unsafe {
         // Lᵀ y = b: row j pulls its (already final) descendants, L_ij stored at (j, i).
         for j in (0..n).rev() {
@@ -716,6 +728,8 @@ unsafe fn pull_row512(
 ) {
     let nfull = len / 8;
     let tail = (1u8 << (len % 8)).wrapping_sub(1);
+    // SAFETY: the caller upholds this function's contract: `x` is valid for the rows < nv (stride
+    // `ld`) and columns used, and every index from the model's ancestor / descendant lists is < nv.
     unsafe {
         let mut g = 0;
         while g + 4 <= nfull {
@@ -751,6 +765,8 @@ unsafe fn pull_chunk512<const K: usize>(
     scale: f64,
 ) {
     use std::arch::x86_64::*;
+    // SAFETY: the caller upholds this function's contract: `x` is valid for the rows < nv (stride
+    // `ld`) and columns used, and every index from the model's ancestor / descendant lists is < nv.
     unsafe {
         let ld8 = |p: *const f64, u: usize| {
             if u + 1 == K && mask != 0xff {
