@@ -289,48 +289,9 @@ pub(crate) fn ltl_solve_rows_desc(
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2_fma() {
         // SAFETY: as in `ltl_solve_rows`; descendant indices are < desc.nv = n (by construction).
-        unsafe { return solve_rows_desc_avx2(model, hs, desc, x.as_mut_ptr(), ld, len, alpha) };
+        unsafe { return solve_rows_head_avx2(model, hs, desc, x.as_mut_ptr(), ld, len, alpha, n) };
     }
-    solve_rows_impl::<false>(model, hs, x, ld, len, alpha)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn solve_rows_desc_avx2(
-    model: &Model,
-    h: &[f64],
-    desc: DescView<'_>,
-    x: *mut f64,
-    ld: usize,
-    len: usize,
-    alpha: f64,
-) {
-    let n = model.nv;
-    let h = h.as_ptr();
-    let mask = tail_mask(len);
-    let starts = &model.dof_ancestors_start;
-    let all_anc = &model.dof_ancestors;
-    // SAFETY: the caller upholds this function's contract: `x` is valid for the rows < nv (stride
-    // `ld`) and columns used, and every index from the model's ancestor / descendant lists is < nv.
-    unsafe {
-        // Lᵀ y = b: row j pulls its (already final) descendants, L_ij stored at (j, i).
-        for j in (0..n).rev() {
-            let d = desc
-                .list
-                .get_unchecked(*desc.starts.get_unchecked(j)..*desc.starts.get_unchecked(j + 1));
-            if !d.is_empty() {
-                let hj = h.add(j);
-                pull_row(x, ld, len, mask, j, d, |i| *hj.add(n * i), 1.0);
-            }
-        }
-        // z = α D⁻¹ y, then L x = z.
-        for i in 0..n {
-            let anc = all_anc.get_unchecked(*starts.get_unchecked(i)..*starts.get_unchecked(i + 1));
-            let hi = h.add(n * i);
-            let dinv = alpha / *hi.add(i);
-            pull_row(x, ld, len, mask, i, anc, |j| *hi.add(j), dinv);
-        }
-    }
+    solve_rows_impl::<false>(model, hs, x, ld, len, alpha, n)
 }
 
 /// `d − l s`, fused when the caller is compiled with FMA.
@@ -350,6 +311,7 @@ fn solve_rows_impl<const FMA: bool>(
     ld: usize,
     len: usize,
     alpha: f64,
+    rows_end: usize,
 ) {
     let n = model.nv;
     // Lᵀ y = b: row i (final once all its descendants are done) is pushed to its ancestors.
@@ -382,8 +344,8 @@ fn solve_rows_impl<const FMA: bool>(
             }
         }
     }
-    // z = α D⁻¹ y, then L x = z: row i pulls its (already final) ancestors.
-    for i in 0..n {
+    // z = α D⁻¹ y, then L x = z on rows 0..rows_end: row i pulls its (already final) ancestors.
+    for i in 0..rows_end {
         let anc = model.ancestors_of_dof(i);
         let dinv = alpha / h[i + n * i];
         let (lo, hi) = x.split_at_mut(i * ld);
@@ -627,7 +589,7 @@ pub(crate) fn ltl_solve_rows_head(
             return solve_rows_head_avx2(model, hs, desc, x.as_mut_ptr(), ld, len, alpha, rows_end);
         };
     }
-    solve_rows_head_portable(model, hs, x, ld, len, alpha, rows_end)
+    solve_rows_impl::<false>(model, hs, x, ld, len, alpha, rows_end)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -793,41 +755,6 @@ unsafe fn pull_chunk512<const K: usize>(
                 _mm512_mask_storeu_pd(xi.add(8 * u), mask, *a);
             } else {
                 _mm512_storeu_pd(xi.add(8 * u), *a);
-            }
-        }
-    }
-}
-
-/// Portable version of [`solve_rows_head_avx2`] (pushing first sweep).
-fn solve_rows_head_portable(
-    model: &Model,
-    h: &[f64],
-    x: &mut [f64],
-    ld: usize,
-    len: usize,
-    alpha: f64,
-    rows_end: usize,
-) {
-    let n = model.nv;
-    for i in (1..n).rev() {
-        let (lo, hi) = x.split_at_mut(i * ld);
-        let xi = &hi[..len];
-        for &j in model.ancestors_of_dof(i) {
-            let l = h[j + n * i];
-            for (d, s) in lo[j * ld..j * ld + len].iter_mut().zip(xi) {
-                *d -= l * s;
-            }
-        }
-    }
-    for i in 0..rows_end {
-        let dinv = alpha / h[i + n * i];
-        let (lo, hi) = x.split_at_mut(i * ld);
-        let xi = &mut hi[..len];
-        xi.iter_mut().for_each(|v| *v *= dinv);
-        for &j in model.ancestors_of_dof(i) {
-            let l = h[j + n * i];
-            for (d, s) in xi.iter_mut().zip(&lo[j * ld..j * ld + len]) {
-                *d -= l * s;
             }
         }
     }
