@@ -3,7 +3,9 @@
 
 use super::id_fo::id_derivatives_placed;
 use super::id_so::{SoData, id_so_unchecked};
-use super::zero::{Idfoza4Ws, idfoza4_core};
+#[cfg(target_arch = "x86_64")]
+use super::zero::Avx4;
+use super::zero::{Idfoza4Ws, Lane4, idfoza4_core};
 use crate::algo::Data;
 use crate::algo::internal::{
     DescView, DofDescendants, aba_unchecked, check_fext, ltl_in_place, ltl_solve_fd,
@@ -106,6 +108,10 @@ pub struct FdSoData {
     page: Vec<f64>,
     /// Descendant DoF lists for the pulling first sweep of the solves.
     desc: DofDescendants,
+    /// `related[j + n k]`: DoFs `j` and `k` are equal or one is an ancestor of the other (else
+    /// the column `(j, k)` of `∂²q̈/∂q̇²` is structurally zero and never written; `id.check`
+    /// keeps the workspace to the tree it was built for).
+    related: Vec<bool>,
 }
 
 impl FdSoData {
@@ -123,6 +129,14 @@ impl FdSoData {
             panel: vec![0.0; n * P],
             page: vec![0.0; n * n],
             desc: DofDescendants::new(model),
+            related: (0..n * n)
+                .map(|c| {
+                    let (j, k) = (c % n, c / n);
+                    j == k
+                        || model.ancestors_of_dof(k).contains(&j)
+                        || model.ancestors_of_dof(j).contains(&k)
+                })
+                .collect(),
         }
     }
     /// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂q_j)`.
@@ -269,7 +283,7 @@ fn idfoza_tensor(model: &Model, data: &Data, ws: &mut Idfoza4Ws, x: &[f64], s: &
         // SAFETY: the CPU supports the enabled features.
         unsafe { return idfoza_tensor_avx2(model, data, ws, x, s) };
     }
-    idfoza_tensor_impl(model, data, ws, x, s)
+    idfoza_tensor_impl::<[f64; 4]>(model, data, ws, x, s)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -281,11 +295,18 @@ unsafe fn idfoza_tensor_avx2(
     x: &[f64],
     s: &mut [f64],
 ) {
-    idfoza_tensor_impl(model, data, ws, x, s)
+    // SAFETY: AVX2 and FMA are enabled here, as `Avx4` needs.
+    idfoza_tensor_impl::<Avx4>(model, data, ws, x, s)
 }
 
 #[inline(always)]
-fn idfoza_tensor_impl(model: &Model, data: &Data, ws: &mut Idfoza4Ws, x: &[f64], s: &mut [f64]) {
+fn idfoza_tensor_impl<V: Lane4>(
+    model: &Model,
+    data: &Data,
+    ws: &mut Idfoza4Ws,
+    x: &[f64],
+    s: &mut [f64],
+) {
     let n = model.nv;
     let n2 = n * n;
     assert!(s.len() == n * n2 && x.len() == n2);
@@ -295,11 +316,11 @@ fn idfoza_tensor_impl(model: &Model, data: &Data, ws: &mut Idfoza4Ws, x: &[f64],
         // SAFETY: i, k < n and j = j0 + l < n for l < nl, so every index is < n³ = s.len().
         if nl == 4 {
             // Full groups: the four lanes are contiguous.
-            idfoza4_core(model, data, ws, x, n, j0, 4, |i, k, z| unsafe {
+            idfoza4_core::<V>(model, data, ws, x, n, j0, 4, |i, k, z| unsafe {
                 *s.as_mut_ptr().add(j0 + n * i + n2 * k).cast::<[f64; 4]>() = *z;
             });
         } else {
-            idfoza4_core(model, data, ws, x, n, j0, nl, |i, k, z| unsafe {
+            idfoza4_core::<V>(model, data, ws, x, n, j0, nl, |i, k, z| unsafe {
                 for (l, zl) in z.iter().enumerate().take(nl) {
                     *s.get_unchecked_mut(j0 + l + n * i + n2 * k) = *zl;
                 }
@@ -452,9 +473,13 @@ pub fn fd_so_derivatives(
         };
         symmetrise_pages(n, fso.d2qdd_dtaudq.as_mut_slice(), &mut fso.page);
     }
-    // ∂²q̈/∂q̇²: −M⁻¹ ID_vv (M does not depend on q̇), symmetric in (j, k).
+    // ∂²q̈/∂q̇²: −M⁻¹ ID_vv (M does not depend on q̇), symmetric in (j, k). Its column (j, k)
+    // vanishes unless j = k or one DoF is an ancestor of the other (every velocity product in a
+    // body's bias force is of two of its ancestors): groups without such a column are skipped.
     {
         let idt = fso.id.d2tau_dv2().as_slice().as_ptr();
+        let related = &fso.related;
+        let groups = pages(n, &|k| k + 1).filter(|g| (0..g.w).any(|u| related[g.j + u + n * g.k]));
         // SAFETY (pointers): as for ∂²q̈/∂q².
         unsafe {
             solve_neg_groups(
@@ -463,7 +488,7 @@ pub fn fd_so_derivatives(
                 desc,
                 &mut fso.panel,
                 &mut fso.d2qdd_dv2,
-                pages(n, &|k| k + 1),
+                groups,
                 |g| {
                     let id = LaneSrc::Cols(lanes(g, |j, k| idt.wrapping_add(n * (j + n * k))));
                     ([id, id, id], 1)
@@ -474,4 +499,33 @@ pub fn fd_so_derivatives(
         };
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::builtin::random_tree;
+    use crate::rng::Rng;
+
+    /// A workspace made for a model with the same `nv` but another tree is refused, and the
+    /// caller's data is left as it was.
+    #[test]
+    fn fd_so_workspace_of_another_tree_is_refused() {
+        let a = random_tree(5, 1, false);
+        let b = (2..200)
+            .map(|s| random_tree(5, s, false))
+            .find(|b| b.nv == a.nv && b.dof_ancestors != a.dof_ancestors)
+            .expect("a tree with the same nv and another structure");
+        let mut rng = Rng::new(3);
+        let q = a.random_configuration(&mut rng);
+        let v = DVector::from_fn(a.nv, |_, _| rng.range(-1.0, 1.0));
+        let mut d = Data::new(&a);
+        let mut fso = FdSoData::new(&b);
+        let e = fd_so_derivatives(&a, &mut d, &mut fso, &q, &v, &v, None).unwrap_err();
+        let e = e.to_string();
+        assert!(e.contains("another model") && e.contains("different joint tree"), "{e}");
+        assert!(fso.d2qdd_dv2().as_slice().iter().all(|x| *x == 0.0));
+        let mut fso = FdSoData::new(&a);
+        fd_so_derivatives(&a, &mut d, &mut fso, &q, &v, &v, None).unwrap();
+    }
 }

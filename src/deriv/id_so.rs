@@ -66,6 +66,16 @@ impl SoData {
     /// Checks that this workspace was built for `model` (same tree and degrees of freedom).
     pub fn check(&self, model: &Model) -> Result<()> {
         let n = model.nv;
+        if self.parents.len() == model.parents.len()
+            && (self.parents != model.parents || self.nvs != model.nvs)
+        {
+            return Err(crate::error::Error::Build(format!(
+                "SoData (workspace built for another model): same number of joints ({}) but a \
+                 different joint tree; make it with SoData::new for model \"{}\"",
+                model.njoints(),
+                model.name
+            )));
+        }
         if self.parents != model.parents || self.nvs != model.nvs || self.dof.len() != n {
             return Err(crate::error::Error::Dimension {
                 what: "SoData (workspace built for another model): joints".into(),

@@ -165,68 +165,164 @@ impl Idfoza4Ws {
     }
 }
 
+/// Four `f64` lanes (one per right-hand side) with the arithmetic of [`idfoza4_core`]: the
+/// portable `[f64; 4]`, or an AVX2 register ([`Avx4`]).
+pub(crate) trait Lane4: Copy {
+    /// `[x; 4]`.
+    fn splat(x: f64) -> Self;
+    /// From an array.
+    fn load(a: &[f64; 4]) -> Self;
+    /// To an array.
+    fn store(self) -> [f64; 4];
+    /// Lane-wise `self + b`.
+    fn add(self, b: Self) -> Self;
+    /// Lane-wise `self − b`.
+    fn sub(self, b: Self) -> Self;
+    /// Lane-wise `self · b`.
+    fn mul(self, b: Self) -> Self;
+    /// Lane-wise `self · b + c` (fused where the hardware has it).
+    fn mul_add(self, b: Self, c: Self) -> Self;
+}
+
+impl Lane4 for [f64; 4] {
+    #[inline(always)]
+    fn splat(x: f64) -> Self {
+        [x; 4]
+    }
+    #[inline(always)]
+    fn load(a: &[f64; 4]) -> Self {
+        *a
+    }
+    #[inline(always)]
+    fn store(self) -> [f64; 4] {
+        self
+    }
+    #[inline(always)]
+    fn add(self, b: Self) -> Self {
+        std::array::from_fn(|l| self[l] + b[l])
+    }
+    #[inline(always)]
+    fn sub(self, b: Self) -> Self {
+        std::array::from_fn(|l| self[l] - b[l])
+    }
+    #[inline(always)]
+    fn mul(self, b: Self) -> Self {
+        std::array::from_fn(|l| self[l] * b[l])
+    }
+    #[inline(always)]
+    fn mul_add(self, b: Self, c: Self) -> Self {
+        std::array::from_fn(|l| self[l] * b[l] + c[l])
+    }
+}
+
+/// Four lanes in an AVX2 register. Only created inside functions compiled with
+/// `#[target_feature(enable = "avx2,fma")]` behind the run-time check [`crate::simd::avx2_fma`],
+/// where its methods (always inlined) execute.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+pub(crate) struct Avx4(std::arch::x86_64::__m256d);
+
+#[cfg(target_arch = "x86_64")]
+impl Lane4 for Avx4 {
+    // SAFETY (every method): AVX2 and FMA are available wherever an `Avx4` exists (see the
+    // type's documentation).
+    #[inline(always)]
+    fn splat(x: f64) -> Self {
+        unsafe { Avx4(std::arch::x86_64::_mm256_set1_pd(x)) }
+    }
+    #[inline(always)]
+    fn load(a: &[f64; 4]) -> Self {
+        unsafe { Avx4(std::arch::x86_64::_mm256_loadu_pd(a.as_ptr())) }
+    }
+    #[inline(always)]
+    fn store(self) -> [f64; 4] {
+        let mut a = [0.0; 4];
+        unsafe { std::arch::x86_64::_mm256_storeu_pd(a.as_mut_ptr(), self.0) };
+        a
+    }
+    #[inline(always)]
+    fn add(self, b: Self) -> Self {
+        unsafe { Avx4(std::arch::x86_64::_mm256_add_pd(self.0, b.0)) }
+    }
+    #[inline(always)]
+    fn sub(self, b: Self) -> Self {
+        unsafe { Avx4(std::arch::x86_64::_mm256_sub_pd(self.0, b.0)) }
+    }
+    #[inline(always)]
+    fn mul(self, b: Self) -> Self {
+        unsafe { Avx4(std::arch::x86_64::_mm256_mul_pd(self.0, b.0)) }
+    }
+    #[inline(always)]
+    fn mul_add(self, b: Self, c: Self) -> Self {
+        unsafe { Avx4(std::arch::x86_64::_mm256_fmadd_pd(self.0, b.0, c.0)) }
+    }
+}
+
 #[inline(always)]
 fn v6(ang: &nalgebra::Vector3<f64>, lin: &nalgebra::Vector3<f64>) -> [f64; 6] {
     [ang.x, ang.y, ang.z, lin.x, lin.y, lin.z]
 }
 
-/// `a × b` for lane 3-vectors `a` (components `a[o..o+3]`) and a plain `b`.
 #[inline(always)]
-fn cross_lp(a: &Lanes6, o: usize, b: &[f64], out: &mut Lanes6, p: usize, acc: bool) {
-    for l in 0..4 {
-        let (x, y, z) = (a[o][l], a[o + 1][l], a[o + 2][l]);
-        let r = [y * b[2] - z * b[1], z * b[0] - x * b[2], x * b[1] - y * b[0]];
-        for m in 0..3 {
-            out[p + m][l] = if acc { out[p + m][l] + r[m] } else { r[m] };
-        }
-    }
+fn ld6<V: Lane4>(a: &Lanes6) -> [V; 6] {
+    std::array::from_fn(|m| V::load(&a[m]))
 }
 
-/// `a × b` for a plain `a` and lane 3-vectors `b` (components `b[o..o+3]`).
 #[inline(always)]
-fn cross_pl(a: &[f64], b: &Lanes6, o: usize, out: &mut Lanes6, p: usize, acc: bool) {
-    for l in 0..4 {
-        let (x, y, z) = (b[o][l], b[o + 1][l], b[o + 2][l]);
-        let r = [a[1] * z - a[2] * y, a[2] * x - a[0] * z, a[0] * y - a[1] * x];
-        for m in 0..3 {
-            out[p + m][l] = if acc { out[p + m][l] + r[m] } else { r[m] };
-        }
+fn st6<V: Lane4>(a: &[V; 6]) -> Lanes6 {
+    std::array::from_fn(|m| a[m].store())
+}
+
+/// `a × b` for lane 3-vectors `a` and a plain `b`.
+#[inline(always)]
+fn cross_lp<V: Lane4>(a: &[V], b: &[f64]) -> [V; 3] {
+    let s = |i: usize| V::splat(b[i]);
+    [
+        a[1].mul(s(2)).sub(a[2].mul(s(1))),
+        a[2].mul(s(0)).sub(a[0].mul(s(2))),
+        a[0].mul(s(1)).sub(a[1].mul(s(0))),
+    ]
+}
+
+/// `a × b` for a plain `a` and lane 3-vectors `b`.
+#[inline(always)]
+fn cross_pl<V: Lane4>(a: &[f64], b: &[V]) -> [V; 3] {
+    let s = |i: usize| V::splat(a[i]);
+    [
+        s(1).mul(b[2]).sub(s(2).mul(b[1])),
+        s(2).mul(b[0]).sub(s(0).mul(b[2])),
+        s(0).mul(b[1]).sub(s(1).mul(b[0])),
+    ]
+}
+
+#[inline(always)]
+fn add3<V: Lane4>(a: &mut [V], b: [V; 3]) {
+    for (a, b) in a.iter_mut().zip(b) {
+        *a = a.add(b);
     }
 }
 
 /// `I v` (eq. of [`crate::spatial::Inertia::mul_motion`]) on lanes.
 #[inline(always)]
-fn inertia_mul_l(inr: &crate::spatial::Inertia, v: &Lanes6) -> Lanes6 {
+fn inertia_mul_l<V: Lane4>(inr: &crate::spatial::Inertia, v: &[V; 6]) -> [V; 6] {
     let h = [inr.h.x, inr.h.y, inr.h.z];
-    let mut out = [[0.0; 4]; 6];
-    for m in 0..3 {
-        for l in 0..4 {
-            out[m][l] =
-                inr.rot[(m, 0)] * v[0][l] + inr.rot[(m, 1)] * v[1][l] + inr.rot[(m, 2)] * v[2][l];
-            out[3 + m][l] = v[3 + m][l] * inr.mass;
-        }
-    }
-    cross_pl(&h, v, 3, &mut out, 0, true); // + h × v.lin
-    let mut hw = [[0.0; 4]; 6];
-    cross_pl(&h, v, 0, &mut hw, 0, false); // h × v.ang
-    for m in 0..3 {
-        for l in 0..4 {
-            out[3 + m][l] -= hw[m][l];
-        }
-    }
-    out
+    let r = |m: usize, c: usize| V::splat(inr.rot[(m, c)]);
+    let hl = cross_pl(&h, &v[3..6]); // h × v.lin
+    let ha = cross_pl(&h, &v[0..3]); // h × v.ang
+    let mass = V::splat(inr.mass);
+    let ang = |m: usize| r(m, 0).mul_add(v[0], r(m, 1).mul_add(v[1], r(m, 2).mul_add(v[2], hl[m])));
+    let lin = |m: usize| v[3 + m].mul(mass).sub(ha[m]);
+    [ang(0), ang(1), ang(2), lin(0), lin(1), lin(2)]
 }
 
 /// Lane-wise pairing `Σ_m p[m] v[m]`.
 #[inline(always)]
-fn dot_pl(p: &[f64; 6], v: &Lanes6) -> [f64; 4] {
-    let mut r = [0.0; 4];
-    for (pm, vm) in p.iter().zip(v) {
-        for l in 0..4 {
-            r[l] += pm * vm[l];
-        }
-    }
-    r
+fn dot_pl<V: Lane4>(p: &[f64; 6], v: &[V; 6]) -> [f64; 4] {
+    let s = |m: usize| V::splat(p[m]);
+    let a = s(0).mul_add(v[0], s(1).mul(v[1]));
+    let b = s(2).mul_add(v[2], s(3).mul(v[3]));
+    let c = s(4).mul_add(v[4], s(5).mul(v[5]));
+    a.add(b).add(c).store()
 }
 
 /// IDFOZA ([`idfoza_core_with`]) for four right-hand sides at once, vectorised across them:
@@ -234,7 +330,7 @@ fn dot_pl(p: &[f64; 6], v: &Lanes6) -> [f64; 4] {
 /// `z[l] = ∂(M x_l)_i/∂q_k`. Needs the same `data` fields as [`idfoza_core`] (read only).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn idfoza4_core(
+pub(crate) fn idfoza4_core<V: Lane4>(
     model: &Model,
     data: &Data,
     ws: &mut Idfoza4Ws,
@@ -256,34 +352,32 @@ pub(crate) fn idfoza4_core(
     );
     ws.a[0] = [[0.0; 4]; 6];
     for i in 1..n {
-        let ap = ws.a[model.parents[i]];
+        let ap: [V; 6] = ld6(&ws.a[model.parents[i]]);
         let mut ai = ap;
         let iv = model.idx_v[i];
         for c in iv..iv + model.nvs[i] {
             let s = &data.s_world[c];
             let sv = v6(&s.ang, &s.lin);
             // Ψ̈ = a_λ × s at q̇ = 0
-            let mut ps = [[0.0; 4]; 6];
-            cross_lp(&ap, 0, &sv[0..3], &mut ps, 0, false);
-            cross_lp(&ap, 0, &sv[3..6], &mut ps, 3, false);
-            cross_lp(&ap, 3, &sv[0..3], &mut ps, 3, true);
-            ws.psidd[c] = ps;
+            let pa = cross_lp(&ap[0..3], &sv[0..3]);
+            let mut pl = cross_lp(&ap[0..3], &sv[3..6]);
+            add3(&mut pl, cross_lp(&ap[3..6], &sv[0..3]));
+            ws.psidd[c] = st6(&[pa[0], pa[1], pa[2], pl[0], pl[1], pl[2]]);
             let mut xl = [0.0; 4];
             for (l, v) in xl.iter_mut().enumerate().take(nl) {
                 *v = x[c + ldx * (j0 + l)];
             }
+            let xl = V::load(&xl);
             for m in 0..6 {
-                for l in 0..4 {
-                    ai[m][l] += sv[m] * xl[l];
-                }
+                ai[m] = V::splat(sv[m]).mul_add(xl, ai[m]);
             }
         }
-        ws.a[i] = ai;
-        ws.fc[i] = inertia_mul_l(&data.oinertia[i], &ai);
+        ws.a[i] = st6(&ai);
+        ws.fc[i] = st6(&inertia_mul_l(&data.oinertia[i], &ai));
     }
     for i in (1..n).rev() {
         let ic = &data.ic_world[i];
-        let fc = ws.fc[i];
+        let fc: [V; 6] = ld6(&ws.fc[i]);
         let iv = model.idx_v[i];
         let ive = iv + model.nvs[i];
         for c in iv..ive {
@@ -292,33 +386,30 @@ pub(crate) fn idfoza4_core(
             let t1 = v6(&t1f.ang, &t1f.lin);
             // dtau_dq_1 with B = 0, Ψ̇ = 0: the DoFs of joint i itself...
             for r in iv..ive {
-                put(c, r, &dot_pl(&t1, &ws.psidd[r]));
+                put(c, r, &dot_pl::<V>(&t1, &ld6(&ws.psidd[r])));
             }
             // dtau_dq_2 with B = 0, Ψ̇ = 0: t3 = Ic Ψ̈_c + s ×* f_c
-            let mut t3 = inertia_mul_l(ic, &ws.psidd[c]);
+            let mut t3 = inertia_mul_l(ic, &ld6::<V>(&ws.psidd[c]));
             let sa = [s.ang.x, s.ang.y, s.ang.z];
             let sl = [s.lin.x, s.lin.y, s.lin.z];
-            cross_pl(&sa, &fc, 0, &mut t3, 0, true);
-            cross_pl(&sl, &fc, 3, &mut t3, 0, true);
-            cross_pl(&sa, &fc, 3, &mut t3, 3, true);
+            add3(&mut t3[0..3], cross_pl(&sa, &fc[0..3]));
+            add3(&mut t3[0..3], cross_pl(&sl, &fc[3..6]));
+            add3(&mut t3[3..6], cross_pl(&sa, &fc[3..6]));
             // ... and of the strict ancestor joints (ancestor DoFs below `iv`), both terms.
             for &r in model.ancestors_of_dof(c) {
                 if r < iv {
                     // SAFETY: ancestor DoFs are < c < nv = psidd.len() = s_world.len() (asserted).
                     let (pr, sr) =
                         unsafe { (ws.psidd.get_unchecked(r), data.s_world.get_unchecked(r)) };
-                    put(c, r, &dot_pl(&t1, pr));
+                    put(c, r, &dot_pl::<V>(&t1, &ld6(pr)));
                     put(r, c, &dot_pl(&v6(&sr.ang, &sr.lin), &t3));
                 }
             }
         }
         let p = model.parents[i];
         if p > 0 {
-            for (d, s) in ws.fc[p].iter_mut().zip(&fc) {
-                for (dl, sl) in d.iter_mut().zip(s) {
-                    *dl += sl;
-                }
-            }
+            let fp: [V; 6] = ld6(&ws.fc[p]);
+            ws.fc[p] = st6(&std::array::from_fn(|m| fp[m].add(fc[m])));
         }
     }
 }
