@@ -5,7 +5,7 @@ use crate::algo::Data;
 use crate::algo::internal::{check_fext, placements, root_free_flyer};
 use crate::error::Result;
 use crate::model::{Model, check_vec};
-use crate::spatial::{Force, Motion, coriolis_b_write, dot6};
+use crate::spatial::{Force, Motion, Transform, coriolis_b_write, dot6};
 use nalgebra::{DVector, Matrix6, Vector3};
 
 /// `B x` for a body-level Coriolis matrix with the block structure `[[B₁₁, 0], [B₂₁, 0]]` of
@@ -220,21 +220,8 @@ pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
         // 2B^C_i S_i + I^C_i(Ψ̇_i + Ṡ_i)   (dtau_dqd_2)
         let t4 = mul_b(bc, &s) * 2.0 + ic.mul_motion(&pss[c]);
         if let Some((x, a0, v1)) = &root {
-            let arr = |f: Force| [f.ang.x, f.ang.y, f.ang.z, f.lin.x, f.lin.y, f.lin.z];
-            let m1 = arr(x.inv_act_force(&t1));
-            let q1 = arr(x.inv_act_force(&a0.cross_force(&t1)));
-            let v1 =
-                arr(x.inv_act_force(&(Force::new(t2, Vector3::zeros()) - v1.cross_force(&t1))));
-            let q2 = arr(x.inv_act_force(&t3));
-            let v2 = arr(x.inv_act_force(&t4));
-            for r in 0..6 {
-                dq[c + r * nv] = -q1[r];
-                dv[c + r * nv] = v1[r];
-                mm[c + r * nv] = m1[r];
-                mm[r + c * nv] = m1[r];
-                dq[r + c * nv] = q2[r];
-                dv[r + c * nv] = v2[r];
-            }
+            let t = RootTerms { t1: &t1, t2: &t2, t3: &t3, t4: &t4 };
+            root_block(x, a0, v1, &t, c, nv, [&mut *dq, &mut *dv, &mut *mm]);
         }
         // Strict ancestors j ≺ i: eqs. dtau_dq_1, dtau_dqd_1, M in row c and
         // dtau_dq_2, dtau_dqd_2 in column c.
@@ -253,6 +240,205 @@ pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
                 *dq.get_unchecked_mut(r + c * nv) = sr.dot(&t3);
                 *dv.get_unchecked_mut(r + c * nv) = sr.dot(&t4);
             }
+        }
+    }
+}
+
+/// The per-DoF forces of [`backward_step_fo`] that enter the root free-flyer block:
+/// `t1 = I^C S`, `t2 = 2 B^Cᵀ S` (angular part), `t3`, `t4` (eqs. dtau_dq_2, dtau_dqd_2).
+struct RootTerms<'a> {
+    t1: &'a Force,
+    t2: &'a Vector3<f64>,
+    t3: &'a Force,
+    t4: &'a Force,
+}
+
+/// The root free-flyer block of DoF `c` (`6 <= c < nv`) in [`backward_step_fo`]: with
+/// `X = ᵒX_1`, row `c` / columns `0..6` get `−Xᵀ(a₀ ×* t1)` (∂τ/∂q), `Xᵀ(t2 − v₁ ×* t1)`
+/// (∂τ/∂q̇) and `Xᵀ t1` (M), column `c` / rows `0..6` get `Xᵀ t3`, `Xᵀ t4` and `Xᵀ t1`
+/// (eqs. dtau_dq_1, dtau_dqd_1, dtau_dq_2, dtau_dqd_2). `mats = [∂τ/∂q, ∂τ/∂q̇, M]`, each
+/// `nv×nv` column-major.
+#[inline]
+fn root_block(
+    x: &Transform,
+    a0: &Motion,
+    v1: &Motion,
+    t: &RootTerms,
+    c: usize,
+    nv: usize,
+    mats: [&mut [f64]; 3],
+) {
+    assert!(6 <= c && c < nv && mats.iter().all(|m| m.len() == nv * nv));
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        let [dq, dv, mm] = mats;
+        // SAFETY: the CPU has AVX2 and FMA (checked just above); 6 <= c < nv and the matrices
+        // are nv×nv (asserted above).
+        unsafe {
+            avx::root_block(
+                x,
+                a0,
+                v1,
+                t,
+                c,
+                nv,
+                [dq.as_mut_ptr(), dv.as_mut_ptr(), mm.as_mut_ptr()],
+            )
+        };
+        return;
+    }
+    root_block_portable(x, a0, v1, t, c, nv, mats);
+}
+
+/// Portable [`root_block`].
+#[inline]
+fn root_block_portable(
+    x: &Transform,
+    a0: &Motion,
+    v1: &Motion,
+    t: &RootTerms,
+    c: usize,
+    nv: usize,
+    [dq, dv, mm]: [&mut [f64]; 3],
+) {
+    let arr = |f: Force| [f.ang.x, f.ang.y, f.ang.z, f.lin.x, f.lin.y, f.lin.z];
+    let m1 = arr(x.inv_act_force(t.t1));
+    let q1 = arr(x.inv_act_force(&a0.cross_force(t.t1)));
+    let v1 = arr(x.inv_act_force(&(Force::new(*t.t2, Vector3::zeros()) - v1.cross_force(t.t1))));
+    let q2 = arr(x.inv_act_force(t.t3));
+    let v2 = arr(x.inv_act_force(t.t4));
+    for r in 0..6 {
+        dq[c + r * nv] = -q1[r];
+        dv[c + r * nv] = v1[r];
+        mm[c + r * nv] = m1[r];
+        mm[r + c * nv] = m1[r];
+        dq[r + c * nv] = q2[r];
+        dv[r + c * nv] = v2[r];
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx {
+    use super::RootTerms;
+    use crate::spatial::{Force, Motion, Transform};
+    use nalgebra::Vector3;
+    use std::arch::x86_64::*;
+
+    /// A 3-vector in lanes 0..3 (lane 3 zero).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn v3(v: &Vector3<f64>) -> __m256d {
+        _mm256_setr_pd(v.x, v.y, v.z, 0.0)
+    }
+
+    /// `a × b` on the first three lanes (lane 3: `a₃b₃ − a₃b₃`).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn cross(a: __m256d, b: __m256d) -> __m256d {
+        // yzx = lanes [1, 2, 0, 3], zxy = lanes [2, 0, 1, 3].
+        let a_yzx = _mm256_permute4x64_pd(a, 0b11_00_10_01);
+        let a_zxy = _mm256_permute4x64_pd(a, 0b11_01_00_10);
+        let b_yzx = _mm256_permute4x64_pd(b, 0b11_00_10_01);
+        let b_zxy = _mm256_permute4x64_pd(b, 0b11_01_00_10);
+        _mm256_fmsub_pd(a_yzx, b_zxy, _mm256_mul_pd(a_zxy, b_yzx))
+    }
+
+    /// `Rᵀ v = Σ_l v_l (row l of R)`, given the rows of `R`.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn rt(rows: &[__m256d; 3], v: __m256d) -> __m256d {
+        let x = _mm256_mul_pd(rows[0], _mm256_permute4x64_pd(v, 0b00_00_00_00));
+        let x = _mm256_fmadd_pd(rows[1], _mm256_permute4x64_pd(v, 0b01_01_01_01), x);
+        _mm256_fmadd_pd(rows[2], _mm256_permute4x64_pd(v, 0b10_10_10_10), x)
+    }
+
+    /// Stores lanes 0..3 at `p[0], p[1], p[2]`.
+    ///
+    /// # Safety
+    /// `p` valid for three writes.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    unsafe fn store3(p: *mut f64, v: __m256d) {
+        // SAFETY: see the function's contract.
+        unsafe {
+            _mm_storeu_pd(p, _mm256_castpd256_pd128(v));
+            _mm_store_sd(p.add(2), _mm256_extractf128_pd(v, 1));
+        }
+    }
+
+    /// Stores lanes 0..3 at `p[0], p[s], p[2s]`.
+    ///
+    /// # Safety
+    /// `p` valid for writes at those offsets.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    unsafe fn store3_strided(p: *mut f64, s: usize, v: __m256d) {
+        let lo = _mm256_castpd256_pd128(v);
+        // SAFETY: see the function's contract.
+        unsafe {
+            _mm_store_sd(p, lo);
+            _mm_storeh_pd(p.add(s), lo);
+            _mm_store_sd(p.add(2 * s), _mm256_extractf128_pd(v, 1));
+        }
+    }
+
+    /// See `super::root_block`: `Xᵀ [n; f] = [Rᵀ(n − p × f); Rᵀ f]` and
+    /// `m ×* [n; f] = [ω × n + v × f; ω × f]` for `m = [ω; v]`, on 4-lane vectors.
+    ///
+    /// # Safety
+    /// The CPU has AVX2 and FMA; `6 <= c < nv`; each pointer of `mats` is valid for an `nv×nv`
+    /// column-major matrix.
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn root_block(
+        x: &Transform,
+        a0: &Motion,
+        v1: &Motion,
+        t: &RootTerms,
+        c: usize,
+        nv: usize,
+        [dq, dv, mm]: [*mut f64; 3],
+    ) {
+        let r = x.rot.as_slice(); // column-major: R_lk = r[l + 3k]
+        let rows = [
+            _mm256_setr_pd(r[0], r[3], r[6], 0.0),
+            _mm256_setr_pd(r[1], r[4], r[7], 0.0),
+            _mm256_setr_pd(r[2], r[5], r[8], 0.0),
+        ];
+        let p = v3(&x.trans);
+        let inv = |n: __m256d, f: __m256d| (rt(&rows, _mm256_sub_pd(n, cross(p, f))), rt(&rows, f));
+        let ld = |f: &Force| (v3(&f.ang), v3(&f.lin));
+        let (n1, f1) = ld(t.t1);
+        let (aw, av) = (v3(&a0.ang), v3(&a0.lin));
+        let (vw, vv) = (v3(&v1.ang), v3(&v1.lin));
+        // a₀ ×* t1, and t2 − v₁ ×* t1 (t2 has no linear part).
+        let qa = _mm256_add_pd(cross(aw, n1), cross(av, f1));
+        let ql = cross(aw, f1);
+        let va = _mm256_sub_pd(v3(t.t2), _mm256_add_pd(cross(vw, n1), cross(vv, f1)));
+        let vl = _mm256_sub_pd(_mm256_setzero_pd(), cross(vw, f1));
+        let m1 = inv(n1, f1);
+        let q1 = inv(qa, ql);
+        let v1o = inv(va, vl);
+        let (n3, f3) = ld(t.t3);
+        let q2 = inv(n3, f3);
+        let (n4, f4) = ld(t.t4);
+        let v2 = inv(n4, f4);
+        let neg = _mm256_set1_pd(-0.0);
+        // SAFETY: 6 <= c < nv: column c rows 0..6 (at c·nv..c·nv + 6) and row c columns 0..6
+        // (at c + r·nv, r < 6) lie within nv×nv.
+        unsafe {
+            let col = c * nv;
+            store3(dq.add(col), q2.0);
+            store3(dq.add(col + 3), q2.1);
+            store3(dv.add(col), v2.0);
+            store3(dv.add(col + 3), v2.1);
+            store3(mm.add(col), m1.0);
+            store3(mm.add(col + 3), m1.1);
+            store3_strided(dq.add(c), nv, _mm256_xor_pd(q1.0, neg));
+            store3_strided(dq.add(c + 3 * nv), nv, _mm256_xor_pd(q1.1, neg));
+            store3_strided(dv.add(c), nv, v1o.0);
+            store3_strided(dv.add(c + 3 * nv), nv, v1o.1);
+            store3_strided(mm.add(c), nv, m1.0);
+            store3_strided(mm.add(c + 3 * nv), nv, m1.1);
         }
     }
 }
