@@ -5,7 +5,7 @@ use crate::algo::Data;
 use crate::algo::internal::{check_fext, placements, root_free_flyer};
 use crate::error::Result;
 use crate::model::{Model, check_vec};
-use crate::spatial::{Force, Motion, Transform, coriolis_b_write, dot6};
+use crate::spatial::{Force, Inertia, Motion, Transform, coriolis_b_write, dot6};
 use nalgebra::{DVector, Matrix6, Vector3};
 
 /// `B x` for a body-level Coriolis matrix with the block structure `[[B₁₁, 0], [B₂₁, 0]]` of
@@ -198,9 +198,9 @@ pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
     };
     for c in iv..iv + nvi {
         let s = sw[c];
-        data.tau[c] = s.dot(&fc);
-        let t1 = ic.mul_motion(&s); // I^C S
-        let t2 = mul_b_tr_ang(bc, &s) * 2.0; // 2 B^Cᵀ S (linear part zero)
+        let DofTerms { tau, t1, t2, t3, t4 } =
+            dof_terms(&ic, bc, &fc, &s, &psid[c], &psidd[c], &pss[c]);
+        data.tau[c] = tau;
         // ∂τ_i/∂q_j = S_iᵀ(2B^C_i Ψ̇_j + I^C_i Ψ̈_j)   (dtau_dq_1)
         // ∂τ_i/∂q̇_j = S_iᵀ(2B^C_i S_j + I^C_i(Ψ̇_j + Ṡ_j))   (dtau_dqd_1)
         let row = |mr: &Motion, pr: &Motion, ppr: &Motion, sr: &Motion| {
@@ -214,11 +214,6 @@ pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
             mm[c + r * nv] = m1;
             mm[r + c * nv] = m1;
         }
-        let psid_c = psid[c];
-        // 2B^C_i Ψ̇_i + I^C_i Ψ̈_i + f^C_i ×̄* S_i   (dtau_dq_2)
-        let t3 = mul_b(bc, &psid_c) * 2.0 + ic.mul_motion(&psidd[c]) + fc.crff(&s);
-        // 2B^C_i S_i + I^C_i(Ψ̇_i + Ṡ_i)   (dtau_dqd_2)
-        let t4 = mul_b(bc, &s) * 2.0 + ic.mul_motion(&pss[c]);
         if let Some((x, a0, v1)) = &root {
             let t = RootTerms { t1: &t1, t2: &t2, t3: &t3, t4: &t4 };
             root_block(x, a0, v1, &t, c, nv, [&mut *dq, &mut *dv, &mut *mm]);
@@ -241,6 +236,46 @@ pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
                 *dv.get_unchecked_mut(r + c * nv) = sr.dot(&t4);
             }
         }
+    }
+}
+
+/// The per-DoF terms of [`backward_step_fo`] for DoF `c` of body `i`.
+struct DofTerms {
+    /// `τ_c = S_cᵀ f^C_i`.
+    tau: f64,
+    /// `I^C_i S_c`.
+    t1: Force,
+    /// `2 B^C_iᵀ S_c` (angular part; the linear part is zero).
+    t2: Vector3<f64>,
+    /// `2B^C_i Ψ̇_c + I^C_i Ψ̈_c + f^C_i ×̄* S_c` (dtau_dq_2).
+    t3: Force,
+    /// `2B^C_i S_c + I^C_i(Ψ̇_c + Ṡ_c)` (dtau_dqd_2).
+    t4: Force,
+}
+
+/// [`DofTerms`] from the composites `ic`, `bc`, `fc` of the body and `S_c`, `Ψ̇_c`, `Ψ̈_c`,
+/// `Ψ̇_c + Ṡ_c`.
+#[inline(always)]
+fn dof_terms(
+    ic: &Inertia,
+    bc: &Matrix6<f64>,
+    fc: &Force,
+    s: &Motion,
+    psid: &Motion,
+    psidd: &Motion,
+    pss: &Motion,
+) -> DofTerms {
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: the CPU has AVX2 and FMA (checked just above).
+        return unsafe { avx::dof_terms(ic, bc, fc, s, psid, psidd, pss) };
+    }
+    DofTerms {
+        tau: s.dot(fc),
+        t1: ic.mul_motion(s),
+        t2: mul_b_tr_ang(bc, s) * 2.0,
+        t3: mul_b(bc, psid) * 2.0 + ic.mul_motion(psidd) + fc.crff(s),
+        t4: mul_b(bc, s) * 2.0 + ic.mul_motion(pss),
     }
 }
 
@@ -319,9 +354,9 @@ fn root_block_portable(
 
 #[cfg(target_arch = "x86_64")]
 mod avx {
-    use super::RootTerms;
-    use crate::spatial::{Force, Motion, Transform};
-    use nalgebra::Vector3;
+    use super::{DofTerms, RootTerms};
+    use crate::spatial::{Force, Inertia, Motion, Transform};
+    use nalgebra::{Matrix6, Vector3};
     use std::arch::x86_64::*;
 
     /// A 3-vector in lanes 0..3 (lane 3 zero).
@@ -380,6 +415,107 @@ mod avx {
             _mm_storeh_pd(p.add(s), lo);
             _mm_store_sd(p.add(2 * s), _mm256_extractf128_pd(v, 1));
         }
+    }
+
+    /// Lanes 0..3 into a 3-vector.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn vec3(v: __m256d) -> Vector3<f64> {
+        let mut o = [0.0; 4];
+        // SAFETY: `o` has four entries.
+        unsafe { _mm256_storeu_pd(o.as_mut_ptr(), v) };
+        Vector3::new(o[0], o[1], o[2])
+    }
+
+    /// `c0 x + c1 y + c2 z` with broadcast scalars.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn comb(c: &[__m256d; 3], x: f64, y: f64, z: f64) -> __m256d {
+        let a = _mm256_mul_pd(c[0], _mm256_set1_pd(x));
+        let a = _mm256_fmadd_pd(c[1], _mm256_set1_pd(y), a);
+        _mm256_fmadd_pd(c[2], _mm256_set1_pd(z), a)
+    }
+
+    /// See `super::dof_terms`. `I m = [Ī ω + h × v; m v − h × ω]` for `m = [ω; v]`; `B x` from
+    /// the left 6×3 half of `B` (column `k` loaded as rows 0..4 and rows 3..7, the lanes beyond
+    /// row 2 and row 5 unused); `Bᵀ s` as three 6-term dot products summed across lanes.
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) fn dof_terms(
+        ic: &Inertia,
+        bc: &Matrix6<f64>,
+        fc: &Force,
+        s: &Motion,
+        psid: &Motion,
+        psidd: &Motion,
+        pss: &Motion,
+    ) -> DofTerms {
+        let ir = ic.rot.as_slice();
+        // SAFETY: `ir` has nine entries: the loads read ir[0..4], ir[3..7] and ir[5..9].
+        let icol = unsafe {
+            let p = ir.as_ptr();
+            [
+                _mm256_loadu_pd(p),
+                _mm256_loadu_pd(p.add(3)),
+                _mm256_permute4x64_pd(_mm256_loadu_pd(p.add(5)), 0b00_11_10_01),
+            ]
+        };
+        let h = v3(&ic.h);
+        let mass = _mm256_set1_pd(ic.mass);
+        let imul = |m: &Motion| {
+            let v = v3(&m.lin);
+            let w = v3(&m.ang);
+            let ang = _mm256_add_pd(comb(&icol, m.ang.x, m.ang.y, m.ang.z), cross(h, v));
+            let lin = _mm256_fmsub_pd(v, mass, cross(h, w));
+            (ang, lin)
+        };
+        let b = bc.as_slice();
+        // SAFETY: `b` has 36 entries; the loads read b[6k..6k + 4] and b[6k + 3..6k + 7] for
+        // k < 3, all below 19.
+        let (ba, bl) = unsafe {
+            let p = b.as_ptr();
+            (
+                [_mm256_loadu_pd(p), _mm256_loadu_pd(p.add(6)), _mm256_loadu_pd(p.add(12))],
+                [_mm256_loadu_pd(p.add(3)), _mm256_loadu_pd(p.add(9)), _mm256_loadu_pd(p.add(15))],
+            )
+        };
+        let two = _mm256_set1_pd(2.0);
+        // 2 B x.
+        let bmul2 = |x: &Motion| {
+            let a = comb(&ba, x.ang.x, x.ang.y, x.ang.z);
+            let l = comb(&bl, x.ang.x, x.ang.y, x.ang.z);
+            (_mm256_mul_pd(a, two), _mm256_mul_pd(l, two))
+        };
+        let (sw, sv) = (v3(&s.ang), v3(&s.lin));
+        let (fn_, ff) = (v3(&fc.ang), v3(&fc.lin));
+        // τ = s · f^C (lane 3 zero).
+        let tau = {
+            let p = _mm256_fmadd_pd(sv, ff, _mm256_mul_pd(sw, fn_));
+            let q = _mm_add_pd(_mm256_castpd256_pd128(p), _mm256_extractf128_pd(p, 1));
+            _mm_cvtsd_f64(_mm_add_sd(q, _mm_unpackhi_pd(q, q)))
+        };
+        let t1 = imul(s);
+        // 2 Bᵀ s: lane 3 of sw, sv is zero, so rows 3 and 6 of the loads drop out.
+        let t2 = {
+            let p = |k: usize| _mm256_fmadd_pd(bl[k], sv, _mm256_mul_pd(ba[k], sw));
+            let t = _mm256_hadd_pd(p(0), p(1));
+            let u = _mm256_hadd_pd(p(2), _mm256_setzero_pd());
+            let lo = _mm256_permute2f128_pd(t, u, 0x20);
+            let hi = _mm256_permute2f128_pd(t, u, 0x31);
+            _mm256_mul_pd(_mm256_add_pd(lo, hi), two)
+        };
+        // f^C ×̄* s = s ×* f^C = [ω × n + v × f; ω × f].
+        let (xa, xl) = (_mm256_add_pd(cross(sw, fn_), cross(sv, ff)), cross(sw, ff));
+        let (b3a, b3l) = bmul2(psid);
+        let (i3a, i3l) = imul(psidd);
+        let t3 = (
+            _mm256_add_pd(_mm256_add_pd(b3a, i3a), xa),
+            _mm256_add_pd(_mm256_add_pd(b3l, i3l), xl),
+        );
+        let (b4a, b4l) = bmul2(s);
+        let (i4a, i4l) = imul(pss);
+        let t4 = (_mm256_add_pd(b4a, i4a), _mm256_add_pd(b4l, i4l));
+        let force = |(a, l): (__m256d, __m256d)| Force::new(vec3(a), vec3(l));
+        DofTerms { tau, t1: force(t1), t2: vec3(t2), t3: force(t3), t4: force(t4) }
     }
 
     /// See `super::root_block`: `Xᵀ [n; f] = [Rᵀ(n − p × f); Rᵀ f]` and
