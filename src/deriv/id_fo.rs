@@ -109,6 +109,12 @@ fn forward_pass_world_placed(
     let n = model.njoints();
     data.ov[0] = Motion::zero();
     data.oa[0] = a0;
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: the CPU has AVX2 and FMA (checked just above).
+        unsafe { avx::forward_pass(model, data, v, a, fext) };
+        return;
+    }
     // Forward pass, ground frame.
     for i in 1..n {
         let p = model.parents[i];
@@ -355,8 +361,10 @@ fn root_block_portable(
 #[cfg(target_arch = "x86_64")]
 mod avx {
     use super::{DofTerms, RootTerms};
-    use crate::spatial::{Force, Inertia, Motion, Transform};
-    use nalgebra::{Matrix6, Vector3};
+    use crate::algo::Data;
+    use crate::model::Model;
+    use crate::spatial::{Force, Inertia, Motion, Transform, coriolis_b_write};
+    use nalgebra::{DVector, Matrix6, Vector3};
     use std::arch::x86_64::*;
 
     /// A 3-vector in lanes 0..3 (lane 3 zero).
@@ -516,6 +524,217 @@ mod avx {
         let t4 = (_mm256_add_pd(b4a, i4a), _mm256_add_pd(b4l, i4l));
         let force = |(a, l): (__m256d, __m256d)| Force::new(vec3(a), vec3(l));
         DofTerms { tau, t1: force(t1), t2: vec3(t2), t3: force(t3), t4: force(t4) }
+    }
+
+    /// A motion (or force) as two 3-vectors in lanes 0..3 (lane 3 zero).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn ld(a: &Vector3<f64>, l: &Vector3<f64>) -> (__m256d, __m256d) {
+        (v3(a), v3(l))
+    }
+
+    /// Stores a pair of 3-vectors into a motion.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn stm(v: (__m256d, __m256d), m: &mut Motion) {
+        // SAFETY: each target has three entries.
+        unsafe {
+            store3(m.ang.as_mut_ptr(), v.0);
+            store3(m.lin.as_mut_ptr(), v.1);
+        }
+    }
+
+    /// `m1 × m2 = [ω₁ × ω₂; ω₁ × v₂ + v₁ × ω₂]`.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn mcross(m1: (__m256d, __m256d), m2: (__m256d, __m256d)) -> (__m256d, __m256d) {
+        (cross(m1.0, m2.0), _mm256_add_pd(cross(m1.0, m2.1), cross(m1.1, m2.0)))
+    }
+
+    /// `m ×* f = [ω × n + v × f; ω × f]`.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn fcross(m: (__m256d, __m256d), f: (__m256d, __m256d)) -> (__m256d, __m256d) {
+        (_mm256_add_pd(cross(m.0, f.0), cross(m.1, f.1)), cross(m.0, f.1))
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn add2(a: (__m256d, __m256d), b: (__m256d, __m256d)) -> (__m256d, __m256d) {
+        (_mm256_add_pd(a.0, b.0), _mm256_add_pd(a.1, b.1))
+    }
+
+    /// `a + x b` with a broadcast scalar.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn axpy2(a: (__m256d, __m256d), x: f64, b: (__m256d, __m256d)) -> (__m256d, __m256d) {
+        let x = _mm256_set1_pd(x);
+        (_mm256_fmadd_pd(b.0, x, a.0), _mm256_fmadd_pd(b.1, x, a.1))
+    }
+
+    /// The three columns of a 3×3 matrix as 4-lane vectors (lane 3 unspecified).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn columns(m: &nalgebra::Matrix3<f64>) -> [__m256d; 3] {
+        let r = m.as_slice();
+        // SAFETY: `r` has 9 entries; the loads read r[0..4], r[3..7] and r[5..9].
+        unsafe {
+            let c2 = _mm256_permute4x64_pd(_mm256_loadu_pd(r.as_ptr().add(5)), 0b00_11_10_01);
+            [_mm256_loadu_pd(r.as_ptr()), _mm256_loadu_pd(r.as_ptr().add(3)), c2]
+        }
+    }
+
+    /// Sum of lanes 0..3 and 3 (a full horizontal sum).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn hsum(p: __m256d) -> f64 {
+        let q = _mm_add_pd(_mm256_castpd256_pd128(p), _mm256_extractf128_pd(p, 1));
+        _mm_cvtsd_f64(_mm_add_sd(q, _mm_unpackhi_pd(q, q)))
+    }
+
+    /// The ground-frame forward pass of `super::forward_pass_world_placed` (from body 1 on;
+    /// `ov[0]`, `oa[0]` set by the caller), on 4-lane vectors: `X S = [R a; R l + p × R a]`,
+    /// the spatial cross products, `X I` as `Transform::act_inertia` and
+    /// `f = I a + v ×* (I v)` with `I m = [Ī ω + h × v; m v − h × ω]`.
+    ///
+    /// # Safety
+    /// The CPU has AVX2 and FMA.
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn forward_pass(
+        model: &Model,
+        data: &mut Data,
+        v: &DVector<f64>,
+        a: &DVector<f64>,
+        fext: Option<&[Force]>,
+    ) {
+        let n = model.njoints();
+        let nv = model.nv;
+        assert!(
+            data.o_m_i.len() == n
+                && data.ov.len() == n
+                && data.oa.len() == n
+                && data.ic_world.len() == n
+                && data.oinertia.len() == n
+                && data.ofc.len() == n
+                && data.bc.len() == n
+                && model.inertias.len() == n
+                && data.s_world.len() == nv
+                && data.psid.len() == nv
+                && data.psidd.len() == nv
+                && data.sdot.len() == nv
+                && data.psid_sdot.len() == nv
+                && model.subspace.len() == nv
+                && v.len() == nv
+                && a.len() == nv
+        );
+        let e = [
+            _mm256_setr_pd(1.0, 0.0, 0.0, 0.0),
+            _mm256_setr_pd(0.0, 1.0, 0.0, 0.0),
+            _mm256_setr_pd(0.0, 0.0, 1.0, 0.0),
+        ];
+        for i in 1..n {
+            let p = model.parents[i];
+            let x = &data.o_m_i[i];
+            let r = columns(&x.rot);
+            let pv = v3(&x.trans);
+            let vp = ld(&data.ov[p].ang, &data.ov[p].lin);
+            let ap = ld(&data.oa[p].ang, &data.oa[p].lin);
+            let (iv, nvi) = (model.idx_v[i], model.nvs[i]);
+            assert!(iv + nvi <= nv);
+            let z = _mm256_setzero_pd();
+            let (mut vj, mut aj) = ((z, z), (z, z));
+            for c in iv..iv + nvi {
+                let sl = &model.subspace[c];
+                let ang = comb(&r, sl.ang.x, sl.ang.y, sl.ang.z);
+                let lin = _mm256_add_pd(comb(&r, sl.lin.x, sl.lin.y, sl.lin.z), cross(pv, ang));
+                // Lane 3 of the rotation columns is unspecified: cleared here.
+                let sc = (_mm256_blend_pd(ang, z, 0b1000), _mm256_blend_pd(lin, z, 0b1000));
+                stm(sc, &mut data.s_world[c]);
+                let psid = mcross(vp, sc);
+                stm(psid, &mut data.psid[c]);
+                // Ψ̈ = a_λ × S + v_λ × Ψ̇   (psidot_psidotdot_defn)
+                let psidd = add2(mcross(ap, sc), mcross(vp, psid));
+                stm(psidd, &mut data.psidd[c]);
+                vj = axpy2(vj, v[c], sc);
+                aj = axpy2(aj, a[c], sc);
+            }
+            let vi = add2(vp, vj);
+            for c in iv..iv + nvi {
+                let sc = ld(&data.s_world[c].ang, &data.s_world[c].lin);
+                let sd = mcross(vi, sc);
+                stm(sd, &mut data.sdot[c]);
+                let ps = add2(ld(&data.psid[c].ang, &data.psid[c].lin), sd);
+                stm(ps, &mut data.psid_sdot[c]);
+            }
+            let ai = add2(add2(ap, aj), mcross(vi, vj));
+            stm(vi, &mut data.ov[i]);
+            stm(ai, &mut data.oa[i]);
+            // X I (as `Transform::act_inertia`): Ī' = R Ī Rᵀ − p h'ᵀ − Rh pᵀ + (2 Rh·p + m p·p) 1
+            // with h' = Rh + m p.
+            let inr = &model.inertias[i];
+            let ib = inr.rot.as_slice();
+            let m = inr.mass;
+            let tt = [
+                comb(&r, ib[0], ib[1], ib[2]),
+                comb(&r, ib[3], ib[4], ib[5]),
+                comb(&r, ib[6], ib[7], ib[8]),
+            ];
+            let rh = comb(&r, inr.h.x, inr.h.y, inr.h.z);
+            let hn = _mm256_blend_pd(_mm256_fmadd_pd(pv, _mm256_set1_pd(m), rh), z, 0b1000);
+            let dv = _mm256_set1_pd(hsum(_mm256_mul_pd(pv, _mm256_add_pd(rh, hn))));
+            let xs = x.rot.as_slice();
+            let (pa, ha) = ([x.trans.x, x.trans.y, x.trans.z], {
+                let mut o = [0.0; 4];
+                // SAFETY: `o` has four entries.
+                unsafe { _mm256_storeu_pd(o.as_mut_ptr(), hn) };
+                o
+            });
+            let col = |b: usize| {
+                // Column b of T Rᵀ: Σ_k T_k R_bk.
+                let c = comb(&tt, xs[b], xs[b + 3], xs[b + 6]);
+                let c = _mm256_fnmadd_pd(pv, _mm256_set1_pd(ha[b]), c);
+                let c = _mm256_fnmadd_pd(rh, _mm256_set1_pd(pa[b]), c);
+                _mm256_blend_pd(_mm256_fmadd_pd(e[b], dv, c), z, 0b1000)
+            };
+            let icol = [col(0), col(1), col(2)];
+            let mut inertia = Inertia::zero();
+            inertia.mass = m;
+            // SAFETY: `inertia.rot` has nine entries, `inertia.h` three; the stores write
+            // o[0..4], o[3..7] (in this order), o[6..8] and o[8].
+            unsafe {
+                let o = inertia.rot.as_mut_slice().as_mut_ptr();
+                _mm256_storeu_pd(o, icol[0]);
+                _mm256_storeu_pd(o.add(3), icol[1]);
+                store3(o.add(6), icol[2]);
+                store3(inertia.h.as_mut_ptr(), hn);
+            }
+            data.ic_world[i] = inertia;
+            data.oinertia[i] = inertia;
+            // f = I a + v ×* (I v).
+            let mass = _mm256_set1_pd(m);
+            let imul = |(w, u): (__m256d, __m256d)| {
+                let wv = {
+                    let mut o = [0.0; 4];
+                    // SAFETY: `o` has four entries.
+                    unsafe { _mm256_storeu_pd(o.as_mut_ptr(), w) };
+                    o
+                };
+                let ang = _mm256_add_pd(comb(&icol, wv[0], wv[1], wv[2]), cross(hn, u));
+                (ang, _mm256_fmsub_pd(u, mass, cross(hn, w)))
+            };
+            let f = add2(imul(ai), fcross(vi, imul(vi)));
+            let fo = &mut data.ofc[i];
+            // SAFETY: each target has three entries.
+            unsafe {
+                store3(fo.ang.as_mut_ptr(), f.0);
+                store3(fo.lin.as_mut_ptr(), f.1);
+            }
+            if let Some(fe) = fext {
+                *fo -= x.act_force(&fe[i]);
+            }
+            let vis = data.ov[i];
+            coriolis_b_write(&inertia, &vis, &mut data.bc[i]);
+        }
     }
 
     /// See `super::root_block`: `Xᵀ [n; f] = [Rᵀ(n − p × f); Rᵀ f]` and
