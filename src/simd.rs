@@ -81,6 +81,7 @@ mod tests {
         let mut out = vec![];
         let mut d = Data::new(m);
         out.push(mat(crate::algo::crba(m, &mut d, q).unwrap()));
+        out.push(crate::algo::aba(m, &mut d, q, v, u, None).unwrap().as_slice().to_vec());
         id_derivatives(m, &mut d, q, v, u, None).unwrap();
         out.extend([mat(&d.dtau_dq), mat(&d.dtau_dv), mat(&d.m)]);
         let mut so = SoData::new(m);

@@ -115,6 +115,123 @@ fn congruence_to_parent(x: &Transform, a: &Matrix6<f64>) -> Matrix6<f64> {
     Matrix6::from_column_slice(&out)
 }
 
+/// `out += Xᵀ A X` (see [`congruence_to_parent`]) for a column-major 6×6 array `a`.
+#[inline]
+fn congruence_add_to_parent(x: &Transform, a: &[f64], out: &mut Matrix6<f64>) {
+    assert!(a.len() == 36);
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: the CPU has AVX2 and FMA (checked just above); `a` has 36 entries.
+        unsafe { avx::congruence_add(x, a, out) };
+        return;
+    }
+    *out += congruence_to_parent(x, &Matrix6::from_column_slice(a));
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx {
+    use crate::spatial::Transform;
+    use nalgebra::Matrix6;
+    use std::arch::x86_64::*;
+
+    /// `c0 x + c1 y + c2 z` with broadcast scalars.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn comb(c: &[__m256d; 3], x: f64, y: f64, z: f64) -> __m256d {
+        let a = _mm256_mul_pd(c[0], _mm256_set1_pd(x));
+        let a = _mm256_fmadd_pd(c[1], _mm256_set1_pd(y), a);
+        _mm256_fmadd_pd(c[2], _mm256_set1_pd(z), a)
+    }
+
+    /// `a × b` on the first three lanes.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn cross(a: __m256d, b: __m256d) -> __m256d {
+        // yzx = lanes [1, 2, 0, 3], zxy = lanes [2, 0, 1, 3].
+        let a_yzx = _mm256_permute4x64_pd(a, 0b11_00_10_01);
+        let a_zxy = _mm256_permute4x64_pd(a, 0b11_01_00_10);
+        let b_yzx = _mm256_permute4x64_pd(b, 0b11_00_10_01);
+        let b_zxy = _mm256_permute4x64_pd(b, 0b11_01_00_10);
+        _mm256_fmsub_pd(a_yzx, b_zxy, _mm256_mul_pd(a_zxy, b_yzx))
+    }
+
+    /// Lanes 0..3 of `v` added to `p[0..3]`.
+    ///
+    /// # Safety
+    /// `p` valid for reads and writes of three entries.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    unsafe fn add3(p: *mut f64, v: __m256d) {
+        // SAFETY: see the function's contract.
+        unsafe {
+            let lo = _mm_add_pd(_mm_loadu_pd(p), _mm256_castpd256_pd128(v));
+            let hi = _mm_add_sd(_mm_load_sd(p.add(2)), _mm256_extractf128_pd(v, 1));
+            _mm_storeu_pd(p, lo);
+            _mm_store_sd(p.add(2), hi);
+        }
+    }
+
+    /// `out += Xᵀ A X` for the motion transform `X = ⁱX_λ` of `x = λM_i` and a column-major
+    /// 6×6 `a`, in two column passes: `G = Xᵀ A` (each column of `A` moved by
+    /// `Xᵀ = λX_i^*`: `[n; f] ↦ [R n + p × R f; R f]`), then `G X` (column `j` of `G X` is
+    /// `Σ_k G_k X_kj` with `X = [[Rᵀ, 0], [Rᵀ [p]×ᵀ, Rᵀ]]`).
+    ///
+    /// # Safety
+    /// The CPU has AVX2 and FMA; `a` has 36 entries.
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn congruence_add(x: &Transform, a: &[f64], out: &mut Matrix6<f64>) {
+        let rs = x.rot.as_slice(); // column-major: R_ij = rs[i + 3j]
+        // SAFETY: `rs` has 9 entries; the loads read rs[0..4], rs[3..7] and rs[5..9].
+        let rc = unsafe {
+            let p = rs.as_ptr();
+            [
+                _mm256_loadu_pd(p),
+                _mm256_loadu_pd(p.add(3)),
+                _mm256_permute4x64_pd(_mm256_loadu_pd(p.add(5)), 0b00_11_10_01),
+            ]
+        };
+        let t = &x.trans;
+        let pv = _mm256_setr_pd(t.x, t.y, t.z, 0.0);
+        // G = Xᵀ A, column k as top (rows 0..3) and bottom (rows 3..6).
+        let mut gt = [_mm256_setzero_pd(); 6];
+        let mut gb = [_mm256_setzero_pd(); 6];
+        for k in 0..6 {
+            let c = &a[6 * k..6 * k + 6];
+            let rf = comb(&rc, c[3], c[4], c[5]);
+            gt[k] = _mm256_add_pd(comb(&rc, c[0], c[1], c[2]), cross(pv, rf));
+            gb[k] = rf;
+        }
+        // Rᵀ[p]×ᵀ = Rᵀ[−p]×: column j is Rᵀ(e_j × p); entry (r, j) = R_·r · (e_j × p).
+        let ep = [[0.0, -t.z, t.y], [t.z, 0.0, -t.x], [-t.y, t.x, 0.0]];
+        let l = |r: usize, j: usize| {
+            rs[3 * r] * ep[j][0] + rs[1 + 3 * r] * ep[j][1] + rs[2 + 3 * r] * ep[j][2]
+        };
+        let o = out.as_mut_slice().as_mut_ptr();
+        for j in 0..3 {
+            // Rᵀ_kj = R_jk = rs[j + 3k].
+            let rr = [rs[j], rs[j + 3], rs[j + 6]];
+            let ll = [l(0, j), l(1, j), l(2, j)];
+            let top = _mm256_add_pd(
+                comb(&[gt[0], gt[1], gt[2]], rr[0], rr[1], rr[2]),
+                comb(&[gt[3], gt[4], gt[5]], ll[0], ll[1], ll[2]),
+            );
+            let bot = _mm256_add_pd(
+                comb(&[gb[0], gb[1], gb[2]], rr[0], rr[1], rr[2]),
+                comb(&[gb[3], gb[4], gb[5]], ll[0], ll[1], ll[2]),
+            );
+            let ut = comb(&[gt[3], gt[4], gt[5]], rr[0], rr[1], rr[2]);
+            let ub = comb(&[gb[3], gb[4], gb[5]], rr[0], rr[1], rr[2]);
+            // SAFETY: `out` has 36 entries: columns j and j + 3 (j < 3), rows 0..6.
+            unsafe {
+                add3(o.add(6 * j), top);
+                add3(o.add(6 * j + 3), bot);
+                add3(o.add(6 * (j + 3)), ut);
+                add3(o.add(6 * (j + 3) + 3), ub);
+            }
+        }
+    }
+}
+
 /// `A x` for a column-major 6×6 array and a motion.
 #[inline(always)]
 fn mat6_mul(a: &[f64], x: &Motion) -> [f64; 6] {
@@ -202,8 +319,7 @@ pub(crate) fn aba_unchecked(
             }
             pa_a += ia_a * m6(&data.c[i]);
             let x = data.li_m_i[i];
-            let ia_p = congruence_to_parent(&x, &ia_a);
-            data.ia[p] += ia_p;
+            congruence_add_to_parent(&x, ia_a.as_slice(), &mut data.ia[p]);
             let fp = x.act_force(&Force::from_vec6(&pa_a));
             data.pa[p] += fp;
         }
@@ -288,8 +404,7 @@ fn aba_backward_1dof(model: &Model, data: &mut Data, i: usize, tau_k: f64) -> Re
             ),
         );
         let x = data.li_m_i[i];
-        let ia_p = congruence_to_parent(&x, &Matrix6::from_column_slice(&ia_a));
-        data.ia[p] += ia_p;
+        congruence_add_to_parent(&x, &ia_a, &mut data.ia[p]);
         let fp = x.act_force(&pa_a);
         data.pa[p] += fp;
     }
