@@ -204,9 +204,32 @@ pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
     };
     for c in iv..iv + nvi {
         let s = sw[c];
-        let DofTerms { tau, t1, t2, t3, t4 } =
-            dof_terms(&ic, bc, &fc, &s, &psid[c], &psidd[c], &pss[c]);
-        data.tau[c] = tau;
+        let terms = dof_terms(&ic, bc, &fc, &s, &psid[c], &psidd[c], &pss[c]);
+        data.tau[c] = terms.tau;
+        if let Some((x, a0, v1)) = &root {
+            let t = RootTerms { t1: &terms.t1, t2: &terms.t2, t3: &terms.t3, t4: &terms.t4 };
+            root_block(x, a0, v1, &t, c, nv, [&mut *dq, &mut *dv, &mut *mm]);
+        }
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2_fma() {
+            debug_assert!(anc.iter().all(|&r| r < iv) && iv + nvi <= nv && c < nv);
+            // SAFETY: the CPU has AVX2 and FMA (checked just above); joint i's DoFs and its
+            // ancestor DoFs are < nv (`ModelBuilder::build`), c < nv, the per-DoF arrays have
+            // nv entries and the matrices are nv×nv (asserted above).
+            unsafe {
+                avx::rows(
+                    &terms,
+                    c,
+                    nv,
+                    iv..iv + nvi,
+                    anc,
+                    [sw, psid, psidd, pss],
+                    [dq.as_mut_ptr(), dv.as_mut_ptr(), mm.as_mut_ptr()],
+                )
+            };
+            continue;
+        }
+        let DofTerms { t1, t2, t3, t4, .. } = terms;
         // ∂τ_i/∂q_j = S_iᵀ(2B^C_i Ψ̇_j + I^C_i Ψ̈_j)   (dtau_dq_1)
         // ∂τ_i/∂q̇_j = S_iᵀ(2B^C_i S_j + I^C_i(Ψ̇_j + Ṡ_j))   (dtau_dqd_1)
         let row = |mr: &Motion, pr: &Motion, ppr: &Motion, sr: &Motion| {
@@ -219,10 +242,6 @@ pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
             dv[c + r * nv] = v1;
             mm[c + r * nv] = m1;
             mm[r + c * nv] = m1;
-        }
-        if let Some((x, a0, v1)) = &root {
-            let t = RootTerms { t1: &t1, t2: &t2, t3: &t3, t4: &t4 };
-            root_block(x, a0, v1, &t, c, nv, [&mut *dq, &mut *dv, &mut *mm]);
         }
         // Strict ancestors j ≺ i: eqs. dtau_dq_1, dtau_dqd_1, M in row c and
         // dtau_dq_2, dtau_dqd_2 in column c.
@@ -734,6 +753,92 @@ mod avx {
             }
             let vis = data.ov[i];
             coriolis_b_write(&inertia, &vis, &mut data.bc[i]);
+        }
+    }
+
+    /// See the own-DoF and ancestor loops of `super::backward_step_fo`: for each DoF `r` of
+    /// joint `i` and each ancestor DoF, the dot products `Ψ̇_rᵀ t2 + Ψ̈_rᵀ t1` (∂τ_c/∂q_r),
+    /// `S_r,angᵀ t2 + (Ψ̇_r + Ṡ_r)ᵀ t1` (∂τ_c/∂q̇_r), `S_rᵀ t1` (M) and, for the ancestors,
+    /// `S_rᵀ t3`, `S_rᵀ t4` (eqs. dtau_dq_1, dtau_dqd_1, dtau_dq_2, dtau_dqd_2), four of them
+    /// summed across lanes at once.
+    ///
+    /// # Safety
+    /// The CPU has AVX2 and FMA; `c < nv`, `own.end <= nv`, every `r` in `anc` is `< nv`; the
+    /// four motion slices have `nv` entries and the pointers address `nv×nv` matrices.
+    #[allow(clippy::too_many_arguments)]
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn rows(
+        t: &DofTerms,
+        c: usize,
+        nv: usize,
+        own: std::ops::Range<usize>,
+        anc: &[usize],
+        [sw, psid, psidd, pss]: [&[Motion]; 4],
+        [dq, dv, mm]: [*mut f64; 3],
+    ) {
+        let (t1a, t1l) = (v3(&t.t1.ang), v3(&t.t1.lin));
+        let t2 = v3(&t.t2);
+        let (t3a, t3l) = (v3(&t.t3.ang), v3(&t.t3.lin));
+        let (t4a, t4l) = (v3(&t.t4.ang), v3(&t.t4.lin));
+        let mask = _mm256_setr_epi64x(-1, -1, -1, 0);
+        // [ang; lin] of a motion, lane 3 zero (`Motion` is `repr(C)`: six contiguous f64).
+        let ldm = |m: &Motion| {
+            let p = (m as *const Motion).cast::<f64>();
+            // SAFETY: `p` addresses six f64; the masked loads read p[0..3] and p[3..6].
+            unsafe { (_mm256_maskload_pd(p, mask), _mm256_maskload_pd(p.add(3), mask)) }
+        };
+        // [∂τ_c/∂q_r, ∂τ_c/∂q̇_r, M_rc, S_rᵀ t3] and the lanes of S_rᵀ t4.
+        let dots = |r: usize| {
+            // SAFETY: r < nv = the length of the four slices (the function's contract).
+            let (sr, mr, pr, ppr) = unsafe {
+                (
+                    sw.get_unchecked(r),
+                    psid.get_unchecked(r),
+                    psidd.get_unchecked(r),
+                    pss.get_unchecked(r),
+                )
+            };
+            let (sa, sl) = ldm(sr);
+            let (ma, _) = ldm(mr);
+            let (pa, pl) = ldm(pr);
+            let (qa, ql) = ldm(ppr);
+            let p1 = _mm256_fmadd_pd(pl, t1l, _mm256_fmadd_pd(pa, t1a, _mm256_mul_pd(ma, t2)));
+            let p2 = _mm256_fmadd_pd(ql, t1l, _mm256_fmadd_pd(qa, t1a, _mm256_mul_pd(sa, t2)));
+            let p3 = _mm256_fmadd_pd(sl, t1l, _mm256_mul_pd(sa, t1a));
+            let p4 = _mm256_fmadd_pd(sl, t3l, _mm256_mul_pd(sa, t3a));
+            let p5 = _mm256_fmadd_pd(sl, t4l, _mm256_mul_pd(sa, t4a));
+            let h0 = _mm256_hadd_pd(p1, p2);
+            let h1 = _mm256_hadd_pd(p3, p4);
+            let sum = _mm256_add_pd(
+                _mm256_permute2f128_pd(h0, h1, 0x20),
+                _mm256_permute2f128_pd(h0, h1, 0x31),
+            );
+            let mut o = [0.0; 4];
+            // SAFETY: `o` has four entries.
+            unsafe { _mm256_storeu_pd(o.as_mut_ptr(), sum) };
+            (o, p5)
+        };
+        for r in own {
+            let (o, _) = dots(r);
+            // SAFETY: r, c < nv, so every index is < nv².
+            unsafe {
+                *dq.add(c + r * nv) = o[0];
+                *dv.add(c + r * nv) = o[1];
+                *mm.add(c + r * nv) = o[2];
+                *mm.add(r + c * nv) = o[2];
+            }
+        }
+        for &r in anc {
+            let (o, p5) = dots(r);
+            // SAFETY: r, c < nv, so every index is < nv².
+            unsafe {
+                *dq.add(c + r * nv) = o[0];
+                *dv.add(c + r * nv) = o[1];
+                *mm.add(c + r * nv) = o[2];
+                *mm.add(r + c * nv) = o[2];
+                *dq.add(r + c * nv) = o[3];
+                *dv.add(r + c * nv) = hsum(p5);
+            }
         }
     }
 
