@@ -54,10 +54,9 @@ trait Kern {
     );
     /// [`Kern::body`] for a revolute joint about `±e_k` (`k < 3`), with the joint placement
     /// `li = placement · Rot(e_k, θ)` (given `s = ±sin θ`, `c = cos θ`) also written to `li`.
-    /// `xp = None` for a child of the world (identity placement): then `x = li`.
     #[allow(clippy::too_many_arguments)]
     fn body_revolute(
-        xp: Option<&Transform>,
+        xp: &Transform,
         placement: &Transform,
         k: usize,
         s: f64,
@@ -114,7 +113,7 @@ impl Kern for Portable {
     }
     #[inline(always)]
     fn body_revolute(
-        xp: Option<&Transform>,
+        xp: &Transform,
         placement: &Transform,
         k: usize,
         s: f64,
@@ -127,16 +126,7 @@ impl Kern for Portable {
         sw: &mut [Motion],
     ) {
         *li = Transform::new(rotate_columns(&placement.rot, k, s, c), placement.trans);
-        match xp {
-            Some(xp) => Self::body(xp, li, inertia, sub, x, ic, sw),
-            None => {
-                *x = *li;
-                *ic = x.act_inertia_inline(inertia);
-                for (o, s) in sw.iter_mut().zip(sub) {
-                    *o = x.act_motion(s);
-                }
-            }
-        }
+        Self::body(xp, li, inertia, sub, x, ic, sw);
     }
     type Root = Transform;
     #[inline(always)]
@@ -204,7 +194,7 @@ impl Kern for Avx2 {
     }
     #[inline(always)]
     fn body_revolute(
-        xp: Option<&Transform>,
+        xp: &Transform,
         placement: &Transform,
         k: usize,
         s: f64,
@@ -477,7 +467,7 @@ pub(super) mod avx {
     #[target_feature(enable = "avx2,fma")]
     #[inline]
     pub(super) fn body_revolute(
-        xp: Option<&Transform>,
+        xp: &Transform,
         placement: &Transform,
         k: usize,
         s: f64,
@@ -490,15 +480,8 @@ pub(super) mod avx {
         sw: &mut [Motion],
     ) {
         let (sv, cv) = (_mm256_set1_pd(s), _mm256_set1_pd(c));
-        let lr = rotate(columns(&placement.rot), k, sv, cv);
-        store_matrix(lr, &mut li.rot);
+        store_matrix(rotate(columns(&placement.rot), k, sv, cv), &mut li.rot);
         li.trans = placement.trans;
-        let Some(xp) = xp else {
-            // Child of the world: x = li.
-            let tl = &placement.trans;
-            finish(lr, _mm256_setr_pd(tl.x, tl.y, tl.z, 0.0), inertia, sub, x, ic, sw);
-            return;
-        };
         let rp = columns(&xp.rot);
         let p = placement.rot.as_slice();
         let a =
@@ -618,7 +601,7 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
         if let Some((k, sign)) = rev_axis {
             let (s, c) = sin_cos(q[a]);
             K::body_revolute(
-                if p == 0 { None } else { Some(xp) },
+                xp,
                 placement,
                 k,
                 sign * s,
