@@ -59,7 +59,7 @@ mod tests {
     use crate::algo::{Contact, Data};
     use crate::deriv::{
         ContactData, FdSoData, ImpactData, KktData, SoData, fd_derivatives, fd_so_derivatives,
-        id_so_derivatives, impact_derivatives, kkt_derivatives,
+        id_derivatives, id_so_derivatives, impact_derivatives, kkt_derivatives,
     };
     use crate::model::Model;
     use crate::model::builtin::{quadruped, random_tree};
@@ -81,6 +81,9 @@ mod tests {
         let mut out = vec![];
         let mut d = Data::new(m);
         out.push(mat(crate::algo::crba(m, &mut d, q).unwrap()));
+        out.push(crate::algo::aba(m, &mut d, q, v, u, None).unwrap().as_slice().to_vec());
+        id_derivatives(m, &mut d, q, v, u, None).unwrap();
+        out.extend([mat(&d.dtau_dq), mat(&d.dtau_dv), mat(&d.m)]);
         let mut so = SoData::new(m);
         id_so_derivatives(m, &mut d, &mut so, q, v, u, None).unwrap();
         out.extend([

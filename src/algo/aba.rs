@@ -115,6 +115,256 @@ fn congruence_to_parent(x: &Transform, a: &Matrix6<f64>) -> Matrix6<f64> {
     Matrix6::from_column_slice(&out)
 }
 
+/// `out += Xᵀ A X` (see [`congruence_to_parent`]) for a column-major 6×6 array `a`.
+#[inline]
+fn congruence_add_to_parent(x: &Transform, a: &[f64], out: &mut Matrix6<f64>) {
+    assert!(a.len() == 36);
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: the CPU has AVX2 and FMA (checked just above); `a` has 36 entries.
+        unsafe { avx::congruence_add(x, a, out) };
+        return;
+    }
+    *out += congruence_to_parent(x, &Matrix6::from_column_slice(a));
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx {
+    use super::Data;
+    use crate::model::Model;
+    use crate::spatial::{Force, Transform};
+    use nalgebra::{Matrix6, Vector3};
+    use std::arch::x86_64::*;
+
+    /// `c0 x + c1 y + c2 z` with broadcast scalars.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn comb(c: &[__m256d; 3], x: f64, y: f64, z: f64) -> __m256d {
+        let a = _mm256_mul_pd(c[0], _mm256_set1_pd(x));
+        let a = _mm256_fmadd_pd(c[1], _mm256_set1_pd(y), a);
+        _mm256_fmadd_pd(c[2], _mm256_set1_pd(z), a)
+    }
+
+    /// `a × b` on the first three lanes.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn cross(a: __m256d, b: __m256d) -> __m256d {
+        // yzx = lanes [1, 2, 0, 3], zxy = lanes [2, 0, 1, 3].
+        let a_yzx = _mm256_permute4x64_pd(a, 0b11_00_10_01);
+        let a_zxy = _mm256_permute4x64_pd(a, 0b11_01_00_10);
+        let b_yzx = _mm256_permute4x64_pd(b, 0b11_00_10_01);
+        let b_zxy = _mm256_permute4x64_pd(b, 0b11_01_00_10);
+        _mm256_fmsub_pd(a_yzx, b_zxy, _mm256_mul_pd(a_zxy, b_yzx))
+    }
+
+    /// Lanes 0..3 of `v` added to `p[0..3]`.
+    ///
+    /// # Safety
+    /// `p` valid for reads and writes of three entries.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    unsafe fn add3(p: *mut f64, v: __m256d) {
+        // SAFETY: see the function's contract.
+        unsafe {
+            let lo = _mm_add_pd(_mm_loadu_pd(p), _mm256_castpd256_pd128(v));
+            let hi = _mm_add_sd(_mm_load_sd(p.add(2)), _mm256_extractf128_pd(v, 1));
+            _mm_storeu_pd(p, lo);
+            _mm_store_sd(p.add(2), hi);
+        }
+    }
+
+    /// The three columns of a 3×3 matrix as 4-lane vectors (lane 3 unspecified).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn columns(m: &nalgebra::Matrix3<f64>) -> [__m256d; 3] {
+        let r = m.as_slice();
+        // SAFETY: `r` has 9 entries; the loads read r[0..4], r[3..7] and r[5..9].
+        unsafe {
+            let c2 = _mm256_permute4x64_pd(_mm256_loadu_pd(r.as_ptr().add(5)), 0b00_11_10_01);
+            [_mm256_loadu_pd(r.as_ptr()), _mm256_loadu_pd(r.as_ptr().add(3)), c2]
+        }
+    }
+
+    /// Stores lanes 0..3 at `p[0..3]`.
+    ///
+    /// # Safety
+    /// `p` valid for three writes.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    unsafe fn store3(p: *mut f64, v: __m256d) {
+        // SAFETY: see the function's contract.
+        unsafe {
+            _mm_storeu_pd(p, _mm256_castpd256_pd128(v));
+            _mm_store_sd(p.add(2), _mm256_extractf128_pd(v, 1));
+        }
+    }
+
+    /// See `super::aba_backward_1dof` (same steps on 4-lane vectors): the column `j` of the
+    /// 6×6 `I^A` is held as rows 0..4 (`top`) and rows 3..6 (`bot`, lanes `[3, 4, 5, 2]`), so
+    /// that `U = I^A S`, `I^a = I^A − U D⁻¹ Uᵀ` and `I^a c` are column combinations.
+    /// `Err(D)` (nothing written) if `D = Sᵀ U` is singular.
+    ///
+    /// # Safety
+    /// The CPU has AVX2 and FMA.
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn backward_1dof(
+        model: &Model,
+        data: &mut Data,
+        i: usize,
+        tau_k: f64,
+    ) -> Result<(), f64> {
+        let k = model.idx_v[i];
+        let s = model.subspace[k];
+        let sv = [s.ang.x, s.ang.y, s.ang.z, s.lin.x, s.lin.y, s.lin.z];
+        let ia = data.ia[i].as_slice();
+        assert!(ia.len() == 36);
+        let mut top = [_mm256_setzero_pd(); 6];
+        let mut bot = [_mm256_setzero_pd(); 6];
+        for j in 0..6 {
+            // SAFETY: 6j + 6 <= 36: the loads read ia[6j..6j + 4] and ia[6j + 2..6j + 6].
+            unsafe {
+                let c = ia.as_ptr().add(6 * j);
+                top[j] = _mm256_loadu_pd(c);
+                bot[j] = _mm256_permute4x64_pd(_mm256_loadu_pd(c.add(2)), 0b00_11_10_01);
+            }
+        }
+        let comb6 = |m: &[__m256d; 6], x: &[f64; 6]| {
+            let mut a = _mm256_mul_pd(m[0], _mm256_set1_pd(x[0]));
+            for j in 1..6 {
+                a = _mm256_fmadd_pd(m[j], _mm256_set1_pd(x[j]), a);
+            }
+            a
+        };
+        // U = I^A S: rows 0..4 and rows [3, 4, 5, 2].
+        let (ut, ub) = (comb6(&top, &sv), comb6(&bot, &sv));
+        let mut uc = [0.0; 6];
+        // SAFETY: `uc` has six entries.
+        unsafe {
+            store3(uc.as_mut_ptr(), ut);
+            store3(uc.as_mut_ptr().add(3), ub);
+        }
+        let d = sv.iter().zip(&uc).map(|(a, b)| a * b).sum::<f64>();
+        if super::singular_pivot(d) {
+            return Err(d);
+        }
+        let dinv = 1.0 / d;
+        let pa = data.pa[i];
+        let u = tau_k - s.dot(&pa);
+        data.u_cols[k] =
+            Force::new(Vector3::new(uc[0], uc[1], uc[2]), Vector3::new(uc[3], uc[4], uc[5]));
+        data.u[k] = u;
+        data.d_inv[i][(0, 0)] = dinv;
+        let p = model.parents[i];
+        if p == 0 {
+            return Ok(());
+        }
+        // Ia = IA − U D⁻¹ Uᵀ ;  pa = pA + Ia c + U D⁻¹ u
+        let mut buf = [0.0; 36];
+        for j in 0..6 {
+            let w = _mm256_set1_pd(uc[j] * dinv);
+            top[j] = _mm256_fnmadd_pd(ut, w, top[j]);
+            bot[j] = _mm256_fnmadd_pd(ub, w, bot[j]);
+            // SAFETY: `buf` has 36 entries: the stores write buf[6j..6j + 4], then
+            // buf[6j + 3..6j + 6] (rows 3..6, lanes 0..3 of `bot`).
+            unsafe {
+                _mm256_storeu_pd(buf.as_mut_ptr().add(6 * j), top[j]);
+                store3(buf.as_mut_ptr().add(6 * j + 3), bot[j]);
+            }
+        }
+        let c = &data.c[i];
+        let cv = [c.ang.x, c.ang.y, c.ang.z, c.lin.x, c.lin.y, c.lin.z];
+        let su = _mm256_set1_pd(u * dinv);
+        let pn = _mm256_setr_pd(pa.ang.x, pa.ang.y, pa.ang.z, 0.0);
+        let pf = _mm256_setr_pd(pa.lin.x, pa.lin.y, pa.lin.z, 0.0);
+        let pa_n = _mm256_fmadd_pd(ut, su, _mm256_add_pd(pn, comb6(&top, &cv)));
+        let pa_f = _mm256_fmadd_pd(ub, su, _mm256_add_pd(pf, comb6(&bot, &cv)));
+        let x = data.li_m_i[i];
+        // SAFETY: the CPU has AVX2 and FMA; `buf` has 36 entries.
+        unsafe { congruence_add(&x, &buf, &mut data.ia[p]) };
+        // λX_i^* pa: [R n + p × R f; R f].
+        let mut pav = [0.0; 6];
+        // SAFETY: `pav` has six entries.
+        unsafe {
+            store3(pav.as_mut_ptr(), pa_n);
+            store3(pav.as_mut_ptr().add(3), pa_f);
+        }
+        let rc = columns(&x.rot);
+        let t = &x.trans;
+        let rf = comb(&rc, pav[3], pav[4], pav[5]);
+        let rn = _mm256_add_pd(
+            comb(&rc, pav[0], pav[1], pav[2]),
+            cross(_mm256_setr_pd(t.x, t.y, t.z, 0.0), rf),
+        );
+        let fp = &mut data.pa[p];
+        // SAFETY: each target has three entries.
+        unsafe {
+            add3(fp.ang.as_mut_ptr(), rn);
+            add3(fp.lin.as_mut_ptr(), rf);
+        }
+        Ok(())
+    }
+
+    /// `out += Xᵀ A X` for the motion transform `X = ⁱX_λ` of `x = λM_i` and a column-major
+    /// 6×6 `a`, in two column passes: `G = Xᵀ A` (each column of `A` moved by
+    /// `Xᵀ = λX_i^*`: `[n; f] ↦ [R n + p × R f; R f]`), then `G X` (column `j` of `G X` is
+    /// `Σ_k G_k X_kj` with `X = [[Rᵀ, 0], [Rᵀ [p]×ᵀ, Rᵀ]]`).
+    ///
+    /// # Safety
+    /// The CPU has AVX2 and FMA; `a` has 36 entries.
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn congruence_add(x: &Transform, a: &[f64], out: &mut Matrix6<f64>) {
+        let rs = x.rot.as_slice(); // column-major: R_ij = rs[i + 3j]
+        // SAFETY: `rs` has 9 entries; the loads read rs[0..4], rs[3..7] and rs[5..9].
+        let rc = unsafe {
+            let p = rs.as_ptr();
+            [
+                _mm256_loadu_pd(p),
+                _mm256_loadu_pd(p.add(3)),
+                _mm256_permute4x64_pd(_mm256_loadu_pd(p.add(5)), 0b00_11_10_01),
+            ]
+        };
+        let t = &x.trans;
+        let pv = _mm256_setr_pd(t.x, t.y, t.z, 0.0);
+        // G = Xᵀ A, column k as top (rows 0..3) and bottom (rows 3..6).
+        let mut gt = [_mm256_setzero_pd(); 6];
+        let mut gb = [_mm256_setzero_pd(); 6];
+        for k in 0..6 {
+            let c = &a[6 * k..6 * k + 6];
+            let rf = comb(&rc, c[3], c[4], c[5]);
+            gt[k] = _mm256_add_pd(comb(&rc, c[0], c[1], c[2]), cross(pv, rf));
+            gb[k] = rf;
+        }
+        // Rᵀ[p]×ᵀ = Rᵀ[−p]×: column j is Rᵀ(e_j × p); entry (r, j) = R_·r · (e_j × p).
+        let ep = [[0.0, -t.z, t.y], [t.z, 0.0, -t.x], [-t.y, t.x, 0.0]];
+        let l = |r: usize, j: usize| {
+            rs[3 * r] * ep[j][0] + rs[1 + 3 * r] * ep[j][1] + rs[2 + 3 * r] * ep[j][2]
+        };
+        let o = out.as_mut_slice().as_mut_ptr();
+        for j in 0..3 {
+            // Rᵀ_kj = R_jk = rs[j + 3k].
+            let rr = [rs[j], rs[j + 3], rs[j + 6]];
+            let ll = [l(0, j), l(1, j), l(2, j)];
+            let top = _mm256_add_pd(
+                comb(&[gt[0], gt[1], gt[2]], rr[0], rr[1], rr[2]),
+                comb(&[gt[3], gt[4], gt[5]], ll[0], ll[1], ll[2]),
+            );
+            let bot = _mm256_add_pd(
+                comb(&[gb[0], gb[1], gb[2]], rr[0], rr[1], rr[2]),
+                comb(&[gb[3], gb[4], gb[5]], ll[0], ll[1], ll[2]),
+            );
+            let ut = comb(&[gt[3], gt[4], gt[5]], rr[0], rr[1], rr[2]);
+            let ub = comb(&[gb[3], gb[4], gb[5]], rr[0], rr[1], rr[2]);
+            // SAFETY: `out` has 36 entries: columns j and j + 3 (j < 3), rows 0..6.
+            unsafe {
+                add3(o.add(6 * j), top);
+                add3(o.add(6 * j + 3), bot);
+                add3(o.add(6 * (j + 3)), ut);
+                add3(o.add(6 * (j + 3) + 3), ub);
+            }
+        }
+    }
+}
+
 /// `A x` for a column-major 6×6 array and a motion.
 #[inline(always)]
 fn mat6_mul(a: &[f64], x: &Motion) -> [f64; 6] {
@@ -202,8 +452,7 @@ pub(crate) fn aba_unchecked(
             }
             pa_a += ia_a * m6(&data.c[i]);
             let x = data.li_m_i[i];
-            let ia_p = congruence_to_parent(&x, &ia_a);
-            data.ia[p] += ia_p;
+            congruence_add_to_parent(&x, ia_a.as_slice(), &mut data.ia[p]);
             let fp = x.act_force(&Force::from_vec6(&pa_a));
             data.pa[p] += fp;
         }
@@ -241,6 +490,14 @@ pub(crate) fn aba_unchecked(
 /// Backward step of ABA for a single-DoF joint `i` (DoF `k`, torque `tau_k`): scalar `D`.
 #[inline]
 fn aba_backward_1dof(model: &Model, data: &mut Data, i: usize, tau_k: f64) -> Result<()> {
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: the CPU has AVX2 and FMA (checked just above).
+        return match unsafe { avx::backward_1dof(model, data, i, tau_k) } {
+            Ok(()) => Ok(()),
+            Err(_) => Err(singular_1dof(model, i)),
+        };
+    }
     let k = model.idx_v[i];
     let s = model.subspace[k];
     let ia = data.ia[i];
@@ -250,14 +507,8 @@ fn aba_backward_1dof(model: &Model, data: &mut Data, i: usize, tau_k: f64) -> Re
     let uf = Force::new(Vector3::new(uc[0], uc[1], uc[2]), Vector3::new(uc[3], uc[4], uc[5]));
     data.u_cols[k] = uf;
     let d = s.dot(&uf);
-    if d.is_nan() || d <= 1e-14 * d.abs().max(f64::MIN_POSITIVE) || !d.is_finite() {
-        return Err(Error::Singular {
-            what: "articulated-body inertia".into(),
-            detail: format!(
-                "D = SᵀIᴬS of joint \"{}\" is singular (massless subtree?)",
-                model.names[i]
-            ),
-        });
+    if singular_pivot(d) {
+        return Err(singular_1dof(model, i));
     }
     let dinv = 1.0 / d;
     let u = tau_k - s.dot(&pa);
@@ -288,12 +539,29 @@ fn aba_backward_1dof(model: &Model, data: &mut Data, i: usize, tau_k: f64) -> Re
             ),
         );
         let x = data.li_m_i[i];
-        let ia_p = congruence_to_parent(&x, &Matrix6::from_column_slice(&ia_a));
-        data.ia[p] += ia_p;
+        congruence_add_to_parent(&x, &ia_a, &mut data.ia[p]);
         let fp = x.act_force(&pa_a);
         data.pa[p] += fp;
     }
     Ok(())
+}
+
+/// True if the scalar articulated inertia `D = SᵀIᴬS` cannot be inverted.
+#[inline(always)]
+fn singular_pivot(d: f64) -> bool {
+    d.is_nan() || d <= 1e-14 * d.abs().max(f64::MIN_POSITIVE) || !d.is_finite()
+}
+
+/// The error for a singular `D` of the single-DoF joint `i`.
+#[cold]
+fn singular_1dof(model: &Model, i: usize) -> Error {
+    Error::Singular {
+        what: "articulated-body inertia".into(),
+        detail: format!(
+            "D = SᵀIᴬS of joint \"{}\" is singular (massless subtree?)",
+            model.names[i]
+        ),
+    }
 }
 
 /// Inverse of the leading `n×n` block of `d` (symmetric positive definite expected), by an

@@ -231,7 +231,7 @@ impl Kern for Avx2 {
 }
 
 #[cfg(target_arch = "x86_64")]
-mod avx {
+pub(super) mod avx {
     use crate::spatial::{Inertia, Motion, Transform};
     use nalgebra::{Matrix3, Vector3};
     use std::arch::x86_64::*;
@@ -239,7 +239,7 @@ mod avx {
     /// The three columns of a 3×3 matrix as 4-lane vectors (lane 3 unspecified).
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    fn columns(m: &Matrix3<f64>) -> [__m256d; 3] {
+    pub(in crate::algo) fn columns(m: &Matrix3<f64>) -> [__m256d; 3] {
         let r = m.as_slice();
         // SAFETY: `r` has 9 entries; the loads read r[0..4], r[3..7] and r[5..9].
         unsafe {
@@ -251,7 +251,7 @@ mod avx {
     /// `c0 a + c1 b + c2 c` with broadcast scalars.
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    fn comb(c: &[__m256d; 3], a: f64, b: f64, d: f64) -> __m256d {
+    pub(in crate::algo) fn comb(c: &[__m256d; 3], a: f64, b: f64, d: f64) -> __m256d {
         let x = _mm256_mul_pd(c[0], _mm256_set1_pd(a));
         let x = _mm256_fmadd_pd(c[1], _mm256_set1_pd(b), x);
         _mm256_fmadd_pd(c[2], _mm256_set1_pd(d), x)
@@ -260,7 +260,7 @@ mod avx {
     /// Writes three 4-lane columns into a 3×3 matrix.
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    fn store_matrix(c: [__m256d; 3], m: &mut Matrix3<f64>) {
+    pub(in crate::algo) fn store_matrix(c: [__m256d; 3], m: &mut Matrix3<f64>) {
         let o = m.as_mut_slice().as_mut_ptr();
         // SAFETY: `o` has 9 entries; the stores write o[0..4], o[3..7] (in this order), o[6..8]
         // and o[8].
@@ -275,7 +275,7 @@ mod avx {
     /// Writes the first three lanes into a 3-vector.
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    fn store_vec3(v: __m256d, o: &mut Vector3<f64>) {
+    pub(in crate::algo) fn store_vec3(v: __m256d, o: &mut Vector3<f64>) {
         let o = o.as_mut_slice().as_mut_ptr();
         // SAFETY: `o` has 3 entries.
         unsafe {
@@ -439,7 +439,12 @@ mod avx {
     /// `c Rᵢ + s Rⱼ` and column `j` becomes `c Rⱼ − s Rᵢ` (as `joint::rotate_columns`).
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    fn rotate(r: [__m256d; 3], k: usize, s: __m256d, c: __m256d) -> [__m256d; 3] {
+    pub(in crate::algo) fn rotate(
+        r: [__m256d; 3],
+        k: usize,
+        s: __m256d,
+        c: __m256d,
+    ) -> [__m256d; 3] {
         match k {
             0 => {
                 let (a, b) = rot2(r[1], r[2], s, c);

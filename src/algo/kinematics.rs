@@ -4,6 +4,8 @@ use super::Data;
 use crate::error::Result;
 use crate::model::{JointType, Model, check_vec};
 use crate::spatial::Motion;
+#[cfg(target_arch = "x86_64")]
+use crate::trig::sin_cos;
 use nalgebra::DVector;
 
 /// Joint motion `S_i x_i` of joint `i` (child frame) for the coordinates `x` (length nv).
@@ -45,6 +47,17 @@ fn root_free_flyer_full(model: &Model) -> bool {
 /// Joint placements only: fills `li_m_i` and `o_m_i` (unchecked `q`).
 #[inline]
 pub(crate) fn placements(model: &Model, data: &mut Data, q: &DVector<f64>) {
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: the CPU has AVX2 and FMA (checked just above).
+        unsafe { placements_avx2(model, data, q) };
+        return;
+    }
+    placements_portable(model, data, q);
+}
+
+/// Portable [`placements`].
+fn placements_portable(model: &Model, data: &mut Data, q: &DVector<f64>) {
     let q = q.as_slice();
     for i in 1..model.njoints() {
         let (a, n) = (model.idx_q[i], model.nqs[i]);
@@ -52,6 +65,67 @@ pub(crate) fn placements(model: &Model, data: &mut Data, q: &DVector<f64>) {
         data.li_m_i[i] = li;
         let p = model.parents[i];
         data.o_m_i[i] = data.o_m_i[p].compose(&li);
+    }
+}
+
+/// [`placements`] with the 3×3 products on 4-lane vectors (the CRBA kernels' helpers): for a
+/// revolute joint about `±e_k`, `λM_i = [P Rot(e_k, θ), p_P]` and
+/// `ᵒM_i = [(ᵒR_λ P) Rot(e_k, θ), ᵒp_λ + ᵒR_λ p_P]` (a child of the world: `ᵒM_i = λM_i`);
+/// other joints `ᵒM_i = ᵒM_λ λM_i` from [`JointType::placed_transform`].
+///
+/// # Safety
+/// The CPU has AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn placements_avx2(model: &Model, data: &mut Data, q: &DVector<f64>) {
+    use super::crba::avx::{columns, comb, rotate, store_matrix, store_vec3};
+    use crate::model::joint::unit_axis;
+    use std::arch::x86_64::*;
+    let q = q.as_slice();
+    let n = model.njoints();
+    assert!(data.li_m_i.len() == n && data.o_m_i.len() == n);
+    for i in 1..n {
+        let (a, nq) = (model.idx_q[i], model.nqs[i]);
+        let p = model.parents[i];
+        let placement = &model.placements[i];
+        let rev_axis = match model.joints[i] {
+            JointType::Revolute { axis } | JointType::Continuous { axis } => unit_axis(&axis),
+            _ => None,
+        };
+        let (head, tail) = data.o_m_i.split_at_mut(i);
+        let (xp, x) = (&head[p], &mut tail[0]);
+        let li = &mut data.li_m_i[i];
+        match rev_axis {
+            Some((k, sign)) => {
+                let (s, c) = sin_cos(q[a]);
+                let (sv, cv) = (_mm256_set1_pd(sign * s), _mm256_set1_pd(c));
+                let lr = rotate(columns(&placement.rot), k, sv, cv);
+                store_matrix(lr, &mut li.rot);
+                li.trans = placement.trans;
+                if p == 0 {
+                    *x = *li;
+                    continue;
+                }
+                let rp = columns(&xp.rot);
+                let pr = placement.rot.as_slice();
+                let ar = [
+                    comb(&rp, pr[0], pr[1], pr[2]),
+                    comb(&rp, pr[3], pr[4], pr[5]),
+                    comb(&rp, pr[6], pr[7], pr[8]),
+                ];
+                store_matrix(rotate(ar, k, sv, cv), &mut x.rot);
+                let (tp, tl) = (&xp.trans, &placement.trans);
+                let t = _mm256_add_pd(
+                    comb(&rp, tl.x, tl.y, tl.z),
+                    _mm256_setr_pd(tp.x, tp.y, tp.z, 0.0),
+                );
+                store_vec3(t, &mut x.trans);
+            }
+            None => {
+                *li = model.joints[i].placed_transform(placement, &q[a..a + nq]);
+                *x = xp.compose(li);
+            }
+        }
     }
 }
 

@@ -27,6 +27,64 @@ fn fd_fo_from_id(model: &Model, data: &mut Data) -> Result<()> {
     if n == 0 {
         return Ok(());
     }
+    // Small models: the columns of ∂τ/∂q, ∂τ/∂q̇ and of the identity solved one by one in the
+    // native (column-major) layout; the row-stored multi-right-hand-side solve below costs more
+    // in its transpositions and set-up than it saves when nv is this small.
+    const SMALL_NV: usize = 3;
+    if n <= SMALL_NV {
+        // ∂q̈/∂q = −M⁻¹ ∂τ/∂q, ∂q̈/∂q̇ = −M⁻¹ ∂τ/∂q̇, ∂q̈/∂τ = M⁻¹ (eq. jain_FO_eqn).
+        for (o, s) in data.dqdd_dq.as_mut_slice().iter_mut().zip(data.dtau_dq.as_slice()) {
+            *o = -s;
+        }
+        for (o, s) in data.dqdd_dv.as_mut_slice().iter_mut().zip(data.dtau_dv.as_slice()) {
+            *o = -s;
+        }
+        data.minv.fill_with_identity();
+        let h = data.ltl.as_slice();
+        let mut mats =
+            [data.dqdd_dq.as_mut_slice(), data.dqdd_dv.as_mut_slice(), data.minv.as_mut_slice()];
+        assert!(h.len() == n * n && mats.iter().all(|m| m.len() == n * n));
+        // SAFETY (the unchecked accesses below): i, c < n and the ancestor DoFs j < i come from
+        // `Model::dof_ancestors`, so every index is < n² = the length of `h` and of each matrix.
+        // Lᵀ y = b (L(k, i) at (i, k) of the factor), every column at once.
+        for i in (0..n).rev() {
+            for &j in model.ancestors_of_dof(i) {
+                let l = unsafe { *h.get_unchecked(j + n * i) };
+                for m in mats.iter_mut() {
+                    for c in 0..n {
+                        unsafe {
+                            let xi = *m.get_unchecked(i + n * c);
+                            *m.get_unchecked_mut(j + n * c) -= l * xi;
+                        }
+                    }
+                }
+            }
+        }
+        // x = L⁻¹ D⁻¹ y.
+        for i in 0..n {
+            let anc = model.ancestors_of_dof(i);
+            let dinv = 1.0 / unsafe { *h.get_unchecked(i + n * i) };
+            for m in mats.iter_mut() {
+                for c in 0..n {
+                    unsafe {
+                        let mut acc = *m.get_unchecked(i + n * c) * dinv;
+                        for &j in anc {
+                            acc -= *h.get_unchecked(j + n * i) * *m.get_unchecked(j + n * c);
+                        }
+                        *m.get_unchecked_mut(i + n * c) = acc;
+                    }
+                }
+            }
+        }
+        // M⁻¹ exactly symmetric: the strict lower triangle from the upper one.
+        let minv = &mut mats[2];
+        for c in 0..n {
+            for r in c + 1..n {
+                minv[r + n * c] = minv[c + n * r];
+            }
+        }
+        return Ok(());
+    }
     let ld = 3 * n;
     // One tree-sparse solve for the three right-hand sides, stored by rows:
     // ∂q̈/∂q = −M⁻¹ ∂τ/∂q, ∂q̈/∂q̇ = −M⁻¹ ∂τ/∂q̇, ∂q̈/∂τ = M⁻¹ (eq. jain_FO_eqn).
