@@ -398,62 +398,94 @@ unsafe fn gather_group_avx(
     l0: usize,
 ) -> bool {
     use std::arch::x86_64::*;
+    let zero = _mm256_setzero_pd();
+    // SAFETY: only lanes u < w and rows i < m of the sources are read (masked loads on the
+    // ragged ends); stores go to rows < m, lanes l0..l0 + 4 ≤ ld (asserted by the caller).
+    unsafe {
+        let pr = rows.as_mut_ptr().add(l0);
+        // One pass per source (the first one stores, the others add), then the zero test.
+        match srcs.split_first() {
+            None => (0..m).for_each(|i| _mm256_storeu_pd(pr.add(ld * i), zero)),
+            Some((first, rest)) => {
+                gather_pass::<false>(first, w, m, pr, ld);
+                for s in rest {
+                    gather_pass::<true>(s, w, m, pr, ld);
+                }
+            }
+        }
+        let mut nz = zero;
+        for i in 0..m {
+            let v = _mm256_loadu_pd(pr.add(ld * i));
+            nz = _mm256_or_pd(nz, _mm256_cmp_pd::<_CMP_NEQ_UQ>(v, zero));
+        }
+        _mm256_movemask_pd(nz) != 0
+    }
+}
+
+/// One source of [`gather_group_avx`] into the 4-lane rows at `pr` (stride `ld`): stored, or
+/// added to what is there if `ADD`; lanes `w ≤ u < 4` get zeros.
+///
+/// # Safety
+/// As [`gather_group`], with `pr` the first lane of the group.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn gather_pass<const ADD: bool>(s: &LaneSrc, w: usize, m: usize, pr: *mut f64, ld: usize) {
+    use std::arch::x86_64::*;
     let mk = |c: usize| {
         let b = |k: usize| if c > k { -1i64 } else { 0 };
         _mm256_setr_epi64x(b(0), b(1), b(2), b(3))
     };
-    let rm = mk(m % 4);
-    let lm = mk(w);
-    let pr = rows.as_mut_ptr();
     let zero = _mm256_setzero_pd();
-    let mut nz = zero;
-    // SAFETY: only lanes u < w and rows i < m of the sources are read (masked loads on the
-    // ragged ends); stores go to rows < m, lanes l0..l0 + 4 ≤ ld (asserted by the caller).
+    // SAFETY: the caller's contract (see `gather_group`).
     unsafe {
-        let mut i = 0;
-        while i < m {
-            let h = (m - i).min(4);
-            let mut r = [zero; 4];
-            for s in srcs {
-                match *s {
-                    LaneSrc::Cols(p) => {
-                        let mut c = [zero; 4];
-                        for (u, cu) in c.iter_mut().enumerate().take(w) {
-                            *cu = if h == 4 {
-                                _mm256_loadu_pd(p[u].add(i))
-                            } else {
-                                _mm256_maskload_pd(p[u].add(i), rm)
-                            };
-                        }
-                        let t = tile4(c);
-                        for (rt, tt) in r.iter_mut().zip(t) {
-                            *rt = _mm256_add_pd(*rt, tt);
-                        }
+        let put = |q: *mut f64, v: __m256d| {
+            if ADD {
+                _mm256_storeu_pd(q, _mm256_add_pd(_mm256_loadu_pd(q), v));
+            } else {
+                _mm256_storeu_pd(q, v);
+            }
+        };
+        match *s {
+            LaneSrc::Cols(p) => {
+                let rm = mk(m % 4);
+                let mut i = 0;
+                while i < m {
+                    let h = (m - i).min(4);
+                    let mut c = [zero; 4];
+                    for (u, cu) in c.iter_mut().enumerate().take(w) {
+                        *cu = if h == 4 {
+                            _mm256_loadu_pd(p[u].add(i))
+                        } else {
+                            _mm256_maskload_pd(p[u].add(i), rm)
+                        };
                     }
-                    LaneSrc::Rows(p, st) => {
-                        for (t, rt) in r.iter_mut().enumerate().take(h) {
-                            let q = p.add(st * (i + t));
-                            let v =
-                                if w == 4 { _mm256_loadu_pd(q) } else { _mm256_maskload_pd(q, lm) };
-                            *rt = _mm256_add_pd(*rt, v);
-                        }
+                    for (t, v) in tile4(c).into_iter().enumerate().take(h) {
+                        put(pr.add(ld * (i + t)), v);
                     }
-                    LaneSrc::Strided(p, st) => {
-                        for (t, rt) in r.iter_mut().enumerate().take(h) {
-                            let o = st * (i + t);
-                            let g = |u: usize| if u < w { *p[u].add(o) } else { 0.0 };
-                            *rt = _mm256_add_pd(*rt, _mm256_setr_pd(g(0), g(1), g(2), g(3)));
-                        }
+                    i += 4;
+                }
+            }
+            LaneSrc::Rows(p, st) => {
+                if w == 4 {
+                    for i in 0..m {
+                        put(pr.add(ld * i), _mm256_loadu_pd(p.add(st * i)));
+                    }
+                } else {
+                    let lm = mk(w);
+                    for i in 0..m {
+                        put(pr.add(ld * i), _mm256_maskload_pd(p.add(st * i), lm));
                     }
                 }
             }
-            for (t, rt) in r.iter().enumerate().take(h) {
-                _mm256_storeu_pd(pr.add(l0 + ld * (i + t)), *rt);
-                nz = _mm256_or_pd(nz, _mm256_cmp_pd::<_CMP_NEQ_UQ>(*rt, zero));
+            LaneSrc::Strided(p, st) => {
+                for i in 0..m {
+                    let o = st * i;
+                    let g = |u: usize| if u < w { *p[u].add(o) } else { 0.0 };
+                    put(pr.add(ld * i), _mm256_setr_pd(g(0), g(1), g(2), g(3)));
+                }
             }
-            i += 4;
         }
-        _mm256_movemask_pd(nz) != 0
     }
 }
 
