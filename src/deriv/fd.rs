@@ -49,9 +49,11 @@ fn fd_fo_from_id(model: &Model, data: &mut Data) -> Result<()> {
         // Lᵀ y = b (L(k, i) at (i, k) of the factor), every column at once.
         for i in (0..n).rev() {
             for &j in model.ancestors_of_dof(i) {
+                // SAFETY: j < i < n (see above).
                 let l = unsafe { *h.get_unchecked(j + n * i) };
                 for m in mats.iter_mut() {
                     for c in 0..n {
+                        // SAFETY: i, j, c < n (see above).
                         unsafe {
                             let xi = *m.get_unchecked(i + n * c);
                             *m.get_unchecked_mut(j + n * c) -= l * xi;
@@ -63,9 +65,11 @@ fn fd_fo_from_id(model: &Model, data: &mut Data) -> Result<()> {
         // x = L⁻¹ D⁻¹ y.
         for i in 0..n {
             let anc = model.ancestors_of_dof(i);
+            // SAFETY: i < n (see above).
             let dinv = 1.0 / unsafe { *h.get_unchecked(i + n * i) };
             for m in mats.iter_mut() {
                 for c in 0..n {
+                    // SAFETY: i, c < n and the ancestors j < i (see above).
                     unsafe {
                         let mut acc = *m.get_unchecked(i + n * c) * dinv;
                         for &j in anc {

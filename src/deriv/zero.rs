@@ -224,36 +224,43 @@ pub(crate) struct Avx4(std::arch::x86_64::__m256d);
 
 #[cfg(target_arch = "x86_64")]
 impl Lane4 for Avx4 {
-    // SAFETY (every method): AVX2 and FMA are available wherever an `Avx4` exists (see the
-    // type's documentation).
     #[inline(always)]
     fn splat(x: f64) -> Self {
+        // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant).
         unsafe { Avx4(std::arch::x86_64::_mm256_set1_pd(x)) }
     }
     #[inline(always)]
     fn load(a: &[f64; 4]) -> Self {
+        // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant); `a`
+        // holds the four values read.
         unsafe { Avx4(std::arch::x86_64::_mm256_loadu_pd(a.as_ptr())) }
     }
     #[inline(always)]
     fn store(self) -> [f64; 4] {
         let mut a = [0.0; 4];
+        // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant); `a`
+        // holds the four values written.
         unsafe { std::arch::x86_64::_mm256_storeu_pd(a.as_mut_ptr(), self.0) };
         a
     }
     #[inline(always)]
     fn add(self, b: Self) -> Self {
+        // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant).
         unsafe { Avx4(std::arch::x86_64::_mm256_add_pd(self.0, b.0)) }
     }
     #[inline(always)]
     fn sub(self, b: Self) -> Self {
+        // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant).
         unsafe { Avx4(std::arch::x86_64::_mm256_sub_pd(self.0, b.0)) }
     }
     #[inline(always)]
     fn mul(self, b: Self) -> Self {
+        // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant).
         unsafe { Avx4(std::arch::x86_64::_mm256_mul_pd(self.0, b.0)) }
     }
     #[inline(always)]
     fn mul_add(self, b: Self, c: Self) -> Self {
+        // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant).
         unsafe { Avx4(std::arch::x86_64::_mm256_fmadd_pd(self.0, b.0, c.0)) }
     }
 }
@@ -328,6 +335,8 @@ fn dot_pl<V: Lane4>(p: &[f64; 6], v: &[V; 6]) -> [f64; 4] {
 /// IDFOZA ([`idfoza_core_with`]) for four right-hand sides at once, vectorised across them:
 /// lane `l` uses `x[c + ldx (j0 + l)]` for `l < nl` (zero otherwise) and `put(i, k, z)` receives
 /// `z[l] = ∂(M x_l)_i/∂q_k`. Needs the same `data` fields as [`idfoza_core`] (read only).
+/// The lanes are `V`: `[f64; 4]` anywhere, [`Avx4`] only inside functions compiled with AVX2
+/// and FMA (behind the run-time check).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn idfoza4_core<V: Lane4>(
