@@ -132,30 +132,10 @@ fn congruence_add_to_parent(x: &Transform, a: &[f64], out: &mut Matrix6<f64>) {
 mod avx {
     use super::Data;
     use crate::model::Model;
+    use crate::spatial::avx::{columns, comb, cross, store3};
     use crate::spatial::{Force, Transform};
     use nalgebra::{Matrix6, Vector3};
     use std::arch::x86_64::*;
-
-    /// `c0 x + c1 y + c2 z` with broadcast scalars.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn comb(c: &[__m256d; 3], x: f64, y: f64, z: f64) -> __m256d {
-        let a = _mm256_mul_pd(c[0], _mm256_set1_pd(x));
-        let a = _mm256_fmadd_pd(c[1], _mm256_set1_pd(y), a);
-        _mm256_fmadd_pd(c[2], _mm256_set1_pd(z), a)
-    }
-
-    /// `a × b` on the first three lanes.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn cross(a: __m256d, b: __m256d) -> __m256d {
-        // yzx = lanes [1, 2, 0, 3], zxy = lanes [2, 0, 1, 3].
-        let a_yzx = _mm256_permute4x64_pd(a, 0b11_00_10_01);
-        let a_zxy = _mm256_permute4x64_pd(a, 0b11_01_00_10);
-        let b_yzx = _mm256_permute4x64_pd(b, 0b11_00_10_01);
-        let b_zxy = _mm256_permute4x64_pd(b, 0b11_01_00_10);
-        _mm256_fmsub_pd(a_yzx, b_zxy, _mm256_mul_pd(a_zxy, b_yzx))
-    }
 
     /// Lanes 0..3 of `v` added to `p[0..3]`.
     ///
@@ -170,32 +150,6 @@ mod avx {
             let hi = _mm_add_sd(_mm_load_sd(p.add(2)), _mm256_extractf128_pd(v, 1));
             _mm_storeu_pd(p, lo);
             _mm_store_sd(p.add(2), hi);
-        }
-    }
-
-    /// The three columns of a 3×3 matrix as 4-lane vectors (lane 3 unspecified).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn columns(m: &nalgebra::Matrix3<f64>) -> [__m256d; 3] {
-        let r = m.as_slice();
-        // SAFETY: `r` has 9 entries; the loads read r[0..4], r[3..7] and r[5..9].
-        unsafe {
-            let c2 = _mm256_permute4x64_pd(_mm256_loadu_pd(r.as_ptr().add(5)), 0b00_11_10_01);
-            [_mm256_loadu_pd(r.as_ptr()), _mm256_loadu_pd(r.as_ptr().add(3)), c2]
-        }
-    }
-
-    /// Stores lanes 0..3 at `p[0..3]`.
-    ///
-    /// # Safety
-    /// `p` valid for three writes.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    unsafe fn store3(p: *mut f64, v: __m256d) {
-        // SAFETY: see the function's contract.
-        unsafe {
-            _mm_storeu_pd(p, _mm256_castpd256_pd128(v));
-            _mm_store_sd(p.add(2), _mm256_extractf128_pd(v, 1));
         }
     }
 

@@ -232,57 +232,9 @@ impl Kern for Avx2 {
 
 #[cfg(target_arch = "x86_64")]
 pub(super) mod avx {
+    pub(in crate::algo) use crate::spatial::avx::{columns, comb, cross, store_matrix, store_vec3};
     use crate::spatial::{Inertia, Motion, Transform};
-    use nalgebra::{Matrix3, Vector3};
     use std::arch::x86_64::*;
-
-    /// The three columns of a 3×3 matrix as 4-lane vectors (lane 3 unspecified).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(in crate::algo) fn columns(m: &Matrix3<f64>) -> [__m256d; 3] {
-        let r = m.as_slice();
-        // SAFETY: `r` has 9 entries; the loads read r[0..4], r[3..7] and r[5..9].
-        unsafe {
-            let c2 = _mm256_permute4x64_pd(_mm256_loadu_pd(r.as_ptr().add(5)), 0b00_11_10_01);
-            [_mm256_loadu_pd(r.as_ptr()), _mm256_loadu_pd(r.as_ptr().add(3)), c2]
-        }
-    }
-
-    /// `c0 a + c1 b + c2 c` with broadcast scalars.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(in crate::algo) fn comb(c: &[__m256d; 3], a: f64, b: f64, d: f64) -> __m256d {
-        let x = _mm256_mul_pd(c[0], _mm256_set1_pd(a));
-        let x = _mm256_fmadd_pd(c[1], _mm256_set1_pd(b), x);
-        _mm256_fmadd_pd(c[2], _mm256_set1_pd(d), x)
-    }
-
-    /// Writes three 4-lane columns into a 3×3 matrix.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(in crate::algo) fn store_matrix(c: [__m256d; 3], m: &mut Matrix3<f64>) {
-        let o = m.as_mut_slice().as_mut_ptr();
-        // SAFETY: `o` has 9 entries; the stores write o[0..4], o[3..7] (in this order), o[6..8]
-        // and o[8].
-        unsafe {
-            _mm256_storeu_pd(o, c[0]);
-            _mm256_storeu_pd(o.add(3), c[1]);
-            _mm_storeu_pd(o.add(6), _mm256_castpd256_pd128(c[2]));
-            _mm_store_sd(o.add(8), _mm256_extractf128_pd(c[2], 1));
-        }
-    }
-
-    /// Writes the first three lanes into a 3-vector.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(in crate::algo) fn store_vec3(v: __m256d, o: &mut Vector3<f64>) {
-        let o = o.as_mut_slice().as_mut_ptr();
-        // SAFETY: `o` has 3 entries.
-        unsafe {
-            _mm_storeu_pd(o, _mm256_castpd256_pd128(v));
-            _mm_store_sd(o.add(2), _mm256_extractf128_pd(v, 1));
-        }
-    }
 
     /// The root block of [`column`]: the transposed world subspace of the root DoFs 0..6,
     /// `lo[j] = [S_0j S_1j S_2j S_3j]` and `hi[j] = [S_4j S_5j]` (`S_rj`: entry `j` of
@@ -391,18 +343,6 @@ pub(super) mod avx {
                 _mm_store_sd(mp.add(c + r * nv), mrc);
             }
         }
-    }
-
-    /// `a × b` on the first three lanes (lane 3 unspecified).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn cross(a: __m256d, b: __m256d) -> __m256d {
-        // yzx = lanes [1, 2, 0, 3], zxy = lanes [2, 0, 1, 3].
-        let a_yzx = _mm256_permute4x64_pd(a, 0b11_00_10_01);
-        let a_zxy = _mm256_permute4x64_pd(a, 0b11_01_00_10);
-        let b_yzx = _mm256_permute4x64_pd(b, 0b11_00_10_01);
-        let b_zxy = _mm256_permute4x64_pd(b, 0b11_01_00_10);
-        _mm256_fmsub_pd(a_yzx, b_zxy, _mm256_mul_pd(a_zxy, b_yzx))
     }
 
     /// See `Kern::body`. Placement: rotation columns `Σ_l R_l (R')_lk`, translation

@@ -382,28 +382,10 @@ mod avx {
     use super::{DofTerms, RootTerms};
     use crate::algo::Data;
     use crate::model::Model;
+    use crate::spatial::avx::{columns, comb, cross, store3, v3};
     use crate::spatial::{Force, Inertia, Motion, Transform, coriolis_b_write};
     use nalgebra::{DVector, Matrix6, Vector3};
     use std::arch::x86_64::*;
-
-    /// A 3-vector in lanes 0..3 (lane 3 zero).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn v3(v: &Vector3<f64>) -> __m256d {
-        _mm256_setr_pd(v.x, v.y, v.z, 0.0)
-    }
-
-    /// `a × b` on the first three lanes (lane 3: `a₃b₃ − a₃b₃`).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn cross(a: __m256d, b: __m256d) -> __m256d {
-        // yzx = lanes [1, 2, 0, 3], zxy = lanes [2, 0, 1, 3].
-        let a_yzx = _mm256_permute4x64_pd(a, 0b11_00_10_01);
-        let a_zxy = _mm256_permute4x64_pd(a, 0b11_01_00_10);
-        let b_yzx = _mm256_permute4x64_pd(b, 0b11_00_10_01);
-        let b_zxy = _mm256_permute4x64_pd(b, 0b11_01_00_10);
-        _mm256_fmsub_pd(a_yzx, b_zxy, _mm256_mul_pd(a_zxy, b_yzx))
-    }
 
     /// `Rᵀ v = Σ_l v_l (row l of R)`, given the rows of `R`.
     #[target_feature(enable = "avx2,fma")]
@@ -412,20 +394,6 @@ mod avx {
         let x = _mm256_mul_pd(rows[0], _mm256_permute4x64_pd(v, 0b00_00_00_00));
         let x = _mm256_fmadd_pd(rows[1], _mm256_permute4x64_pd(v, 0b01_01_01_01), x);
         _mm256_fmadd_pd(rows[2], _mm256_permute4x64_pd(v, 0b10_10_10_10), x)
-    }
-
-    /// Stores lanes 0..3 at `p[0], p[1], p[2]`.
-    ///
-    /// # Safety
-    /// `p` valid for three writes.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    unsafe fn store3(p: *mut f64, v: __m256d) {
-        // SAFETY: see the function's contract.
-        unsafe {
-            _mm_storeu_pd(p, _mm256_castpd256_pd128(v));
-            _mm_store_sd(p.add(2), _mm256_extractf128_pd(v, 1));
-        }
     }
 
     /// Stores lanes 0..3 at `p[0], p[s], p[2s]`.
@@ -452,15 +420,6 @@ mod avx {
         // SAFETY: `o` has four entries.
         unsafe { _mm256_storeu_pd(o.as_mut_ptr(), v) };
         Vector3::new(o[0], o[1], o[2])
-    }
-
-    /// `c0 x + c1 y + c2 z` with broadcast scalars.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn comb(c: &[__m256d; 3], x: f64, y: f64, z: f64) -> __m256d {
-        let a = _mm256_mul_pd(c[0], _mm256_set1_pd(x));
-        let a = _mm256_fmadd_pd(c[1], _mm256_set1_pd(y), a);
-        _mm256_fmadd_pd(c[2], _mm256_set1_pd(z), a)
     }
 
     /// See `super::dof_terms`. `I m = [Ī ω + h × v; m v − h × ω]` for `m = [ω; v]`; `B x` from
@@ -589,18 +548,6 @@ mod avx {
     fn axpy2(a: (__m256d, __m256d), x: f64, b: (__m256d, __m256d)) -> (__m256d, __m256d) {
         let x = _mm256_set1_pd(x);
         (_mm256_fmadd_pd(b.0, x, a.0), _mm256_fmadd_pd(b.1, x, a.1))
-    }
-
-    /// The three columns of a 3×3 matrix as 4-lane vectors (lane 3 unspecified).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn columns(m: &nalgebra::Matrix3<f64>) -> [__m256d; 3] {
-        let r = m.as_slice();
-        // SAFETY: `r` has 9 entries; the loads read r[0..4], r[3..7] and r[5..9].
-        unsafe {
-            let c2 = _mm256_permute4x64_pd(_mm256_loadu_pd(r.as_ptr().add(5)), 0b00_11_10_01);
-            [_mm256_loadu_pd(r.as_ptr()), _mm256_loadu_pd(r.as_ptr().add(3)), c2]
-        }
     }
 
     /// Sum of lanes 0..3 and 3 (a full horizontal sum).
