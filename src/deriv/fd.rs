@@ -154,7 +154,8 @@ const P: usize = 64;
 /// Second-order forward-dynamics derivatives (`nv×nv×nv` each) and their workspace.
 #[derive(Clone, Debug)]
 pub struct FdSoData {
-    /// The inverse-dynamics second-order derivatives at `(q, q̇, FD(q, q̇, τ))`.
+    /// The inverse-dynamics second-order derivatives at `(q, q̇, FD(q, q̇, τ))` (the three
+    /// `∂²τ` tensors; its `dm_dq` is empty, the `∂M/∂q` products being done by IDFOZA).
     pub id: SoData,
     d2qdd_dq2: Tensor3,
     d2qdd_dv2: Tensor3,
@@ -181,7 +182,7 @@ impl FdSoData {
     pub fn new(model: &Model) -> Self {
         let n = model.nv;
         Self {
-            id: SoData::new(model),
+            id: SoData::without_dm_dq(model),
             d2qdd_dq2: Tensor3::zeros(n, n, n),
             d2qdd_dv2: Tensor3::zeros(n, n, n),
             d2qdd_dqdv: Tensor3::zeros(n, n, n),

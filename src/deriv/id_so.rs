@@ -24,6 +24,7 @@ pub struct SoData {
     d2tau_dq2: Tensor3,
     d2tau_dv2: Tensor3,
     d2tau_dqdv: Tensor3,
+    /// `n×n×n`, or `0×0×0` in the workspaces of [`SoData::without_dm_dq`].
     dm_dq: Tensor3,
     /// Per DoF, contiguous: `[S, Ψ̇, Ψ̈, Ψ̇ + Ṡ]` (ground frame), refreshed on every call.
     dof: Vec<[V6; 4]>,
@@ -38,7 +39,17 @@ pub struct SoData {
 impl SoData {
     /// Workspace for `model`.
     pub fn new(model: &Model) -> Self {
+        Self::build(model, true)
+    }
+    /// Workspace for `model` that does not compute `∂M/∂q` (its [`SoData::dm_dq`] is an empty
+    /// `0×0×0` tensor): for the callers that only need the three `∂²τ` tensors (forward,
+    /// contact and impact second-order derivatives), sparing the `nv³` writes of `∂M/∂q`.
+    pub(crate) fn without_dm_dq(model: &Model) -> Self {
+        Self::build(model, false)
+    }
+    fn build(model: &Model, with_dm_dq: bool) -> Self {
         let n = model.nv;
+        let nd = if with_dm_dq { n } else { 0 };
         let mut anc_dofs = vec![];
         let mut anc_start = vec![0];
         for j in 0..model.njoints() {
@@ -55,7 +66,7 @@ impl SoData {
             d2tau_dq2: Tensor3::zeros(n, n, n),
             d2tau_dv2: Tensor3::zeros(n, n, n),
             d2tau_dqdv: Tensor3::zeros(n, n, n),
-            dm_dq: Tensor3::zeros(n, n, n),
+            dm_dq: Tensor3::zeros(nd, nd, nd),
             dof: vec![[[0.0; 6]; 4]; n],
             anc_dofs,
             anc_start,
@@ -83,8 +94,9 @@ impl SoData {
                 got: self.parents.len(),
             });
         }
-        for t in [&self.d2tau_dq2, &self.d2tau_dv2, &self.d2tau_dqdv, &self.dm_dq] {
-            if t.dims() != (n, n, n) {
+        let dm_ok = self.dm_dq.dims() == (n, n, n) || self.dm_dq.dims() == (0, 0, 0);
+        for t in [&self.d2tau_dq2, &self.d2tau_dv2, &self.d2tau_dqdv] {
+            if t.dims() != (n, n, n) || !dm_ok {
                 return Err(crate::error::Error::Dimension {
                     what: "SoData (workspace built for another model): nv".into(),
                     expected: n,
@@ -110,7 +122,8 @@ impl SoData {
     pub fn d2tau_dqdv(&self) -> &Tensor3 {
         &self.d2tau_dqdv
     }
-    /// `T[(i, j, k)] = ∂M_ij/∂q_k`.
+    /// `T[(i, j, k)] = ∂M_ij/∂q_k`. Empty (`0×0×0`) in the workspace inside
+    /// [`FdSoData`](super::FdSoData), whose forward-dynamics derivatives do not need it.
     pub fn dm_dq(&self) -> &Tensor3 {
         &self.dm_dq
     }
@@ -503,21 +516,39 @@ fn at(n: usize, i: usize, j: usize, k: usize) -> usize {
 /// The backward step compiled for AVX2/FMA (the 6-vector kernels vectorise 4 wide).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn backward_step_so_avx2(model: &Model, data: &Data, so: &mut SoData, i: usize) {
-    backward_step_so_body::<Avx2>(model, data, so, i)
+fn backward_step_so_avx2<const DM: bool>(model: &Model, data: &Data, so: &mut SoData, i: usize) {
+    backward_step_so_body::<Avx2, DM>(model, data, so, i)
 }
 
 fn backward_step_so(model: &Model, data: &Data, so: &mut SoData, i: usize) {
+    let dm = so.dm_dq.dims().0 == model.nv;
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
-        return unsafe { backward_step_so_avx2(model, data, so, i) };
+        return unsafe {
+            if dm {
+                backward_step_so_avx2::<true>(model, data, so, i)
+            } else {
+                backward_step_so_avx2::<false>(model, data, so, i)
+            }
+        };
     }
-    backward_step_so_body::<Portable>(model, data, so, i)
+    if dm {
+        backward_step_so_body::<Portable, true>(model, data, so, i)
+    } else {
+        backward_step_so_body::<Portable, false>(model, data, so, i)
+    }
 }
 
+/// One backward step of IDSVA-SO for body `i`; `DM`: also write `∂M/∂q` (else `so.dm_dq` is
+/// empty and untouched).
 #[inline(always)]
-fn backward_step_so_body<K: Kern>(model: &Model, data: &Data, so: &mut SoData, i: usize) {
+fn backward_step_so_body<K: Kern, const DM: bool>(
+    model: &Model,
+    data: &Data,
+    so: &mut SoData,
+    i: usize,
+) {
     let n = model.nv;
     let SoData { d2tau_dq2, d2tau_dv2, d2tau_dqdv, dm_dq, dof, anc_dofs, anc_start, .. } = so;
     let dof: &[[V6; 4]] = dof;
@@ -597,9 +628,11 @@ fn backward_step_so_body<K: Kern>(model: &Model, data: &Data, so: &mut SoData, i
                         set(vv, at(n, jt, ip, kr), v1e);
                         set(qv, at(n, jt, kr, ip), -val); // cross 2A
                         set(qv, at(n, jt, ip, kr), ds[6] + dpk[1]); // cross 1C
-                        let vm = ds[8]; // ∂M 1C/2C
-                        set(dm, at(n, kr, jt, ip), vm);
-                        set(dm, at(n, jt, kr, ip), vm);
+                        if DM {
+                            let vm = ds[8]; // ∂M 1C/2C
+                            set(dm, at(n, kr, jt, ip), vm);
+                            set(dm, at(n, jt, kr, ip), vm);
+                        }
                     }
                 }
                 // Strict ancestors k ≺ j.
@@ -629,9 +662,11 @@ fn backward_step_so_body<K: Kern>(model: &Model, data: &Data, so: &mut SoData, i
                     set(qv, o_ij + nk, cval); // (ip, kr, jt)
                     set(qv, o_i_j + nnk, ds[2] + dpk[0]); // (ip, jt, kr)
                     set(qv, kr + o_ji + n * n * ip, ds[3]); // (kr, jt, ip)
-                    // ∂M/∂q 1B + 2B mirror
-                    set(dm, kr + n * ip + n * n * jt, ds[4]); // (kr, ip, jt)
-                    set(dm, o_ij + nk, ds[4]); // (ip, kr, jt)
+                    if DM {
+                        // ∂M/∂q 1B + 2B mirror
+                        set(dm, kr + n * ip + n * n * jt, ds[4]); // (kr, ip, jt)
+                        set(dm, o_ij + nk, ds[4]); // (ip, kr, jt)
+                    }
                     if j_is_i {
                         // v–v D (k ≺ j = i)
                         set(vv, kr + n * ip + n * n * jt, ds[5]); // (kr, ip, jt)
@@ -647,8 +682,10 @@ fn backward_step_so_body<K: Kern>(model: &Model, data: &Data, so: &mut SoData, i
                         set(qv, jt + nk + n * n * ip, -cval); // cross 2A: (jt, kr, ip)
                         set(qv, jt + n * ip + nnk, ds[6] + dpk[1]); // cross 1C: (jt, ip, kr)
                         set(qv, kr + n * ip + n * n * jt, ds[7]); // cross 2C: (kr, ip, jt)
-                        set(dm, kr + o_ji + n * n * ip, ds[8]); // ∂M 1C/2C: (kr, jt, ip)
-                        set(dm, jt + nk + n * n * ip, ds[8]); // (jt, kr, ip)
+                        if DM {
+                            set(dm, kr + o_ji + n * n * ip, ds[8]); // ∂M 1C/2C: (kr, jt, ip)
+                            set(dm, jt + nk + n * n * ip, ds[8]); // (jt, kr, ip)
+                        }
                     }
                 }
             }

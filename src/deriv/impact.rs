@@ -116,7 +116,7 @@ impl ImpactData {
             d2vplus_dqdvminus: t(n),
             d2impulse_dq2: t(m),
             d2impulse_dqdvminus: t(m),
-            id: SoData::new(model),
+            id: SoData::without_dm_dq(model),
             r: [t(n + m), t(n + m)],
             ycol: DVector::zeros(n + m),
             e: DVector::zeros(n),

@@ -114,7 +114,7 @@ impl KktData {
             d2lambda_dv2: t(m),
             d2lambda_dqdv: t(m),
             d2lambda_dtaudq: t(m),
-            id: SoData::new(model),
+            id: SoData::without_dm_dq(model),
             r: [t(n + m), t(n + m), t(n + m), t(n + m)],
             ycol: DVector::zeros(n + m),
         });
