@@ -633,7 +633,7 @@ unsafe fn solve_rows_head_avx2(
     }
 }
 
-/// [`solve_rows_head_avx2`] with AVX-512F: rows by chunks of 4, 2, 1 vectors of 8 and a
+/// [`solve_rows_head_avx2`] with AVX-512F: rows by chunks of 8, 4, 2, 1 vectors of 8 and a
 /// masked ragged end.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx2,fma")]
@@ -694,7 +694,12 @@ unsafe fn pull_row512(
     // `ld`) and columns used, and every index from the model's ancestor / descendant lists is < nv.
     unsafe {
         let mut g = 0;
-        while g + 4 <= nfull {
+        // Eight independent accumulators cover the FMA latency (two FMAs per cycle).
+        while g + 8 <= nfull {
+            pull_chunk512::<8>(x, ld, 0xff, i, 8 * g, others, coef, scale);
+            g += 8;
+        }
+        if g + 4 <= nfull {
             pull_chunk512::<4>(x, ld, 0xff, i, 8 * g, others, coef, scale);
             g += 4;
         }

@@ -165,6 +165,8 @@ pub struct FdSoData {
     /// IDFOZA results `S[(i, j, k)] = IDFOZA(X[:, j])[i][k]` at `i + n j + n² k`; only the
     /// structurally non-zero entries (the same for every `X`) are ever written.
     s: Vec<f64>,
+    /// IDFOZA of four right-hand sides `X[:, j0..j0 + 4]`: `(u, i, k)` at `u + 4 i + 4 n k`.
+    s4: Vec<f64>,
     /// Panel of [`P`] right-hand sides stored by rows for the solve: `(i, l)` at `i P + l`.
     panel: Vec<f64>,
     /// One `n×n` page (transposition scratch).
@@ -189,6 +191,7 @@ impl FdSoData {
             d2qdd_dtaudq: Tensor3::zeros(n, n, n),
             ws4: Idfoza4Ws::new(model),
             s: vec![0.0; n * n * n],
+            s4: vec![0.0; 4 * n * n],
             panel: vec![0.0; n * P],
             page: vec![0.0; n * n],
             desc: DofDescendants::new(model),
@@ -393,6 +396,57 @@ fn idfoza_tensor_impl<V: Lane4>(
     }
 }
 
+/// `out[u + 4 i + 4 n k] ← IDFOZA(x[:, j0 + u])[i][k]` for the structurally non-zero `(i, k)`
+/// (zero in the lanes past `nv`), vectorised with AVX2 when available.
+fn idfoza_block(
+    model: &Model,
+    data: &Data,
+    ws: &mut Idfoza4Ws,
+    x: &[f64],
+    j0: usize,
+    out: &mut [f64],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: the CPU supports the enabled features.
+        unsafe { return idfoza_block_avx2(model, data, ws, x, j0, out) };
+    }
+    idfoza_block_impl::<[f64; 4]>(model, data, ws, x, j0, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn idfoza_block_avx2(
+    model: &Model,
+    data: &Data,
+    ws: &mut Idfoza4Ws,
+    x: &[f64],
+    j0: usize,
+    out: &mut [f64],
+) {
+    // SAFETY: AVX2 and FMA are enabled here, as `Avx4` needs.
+    idfoza_block_impl::<Avx4>(model, data, ws, x, j0, out)
+}
+
+#[inline(always)]
+fn idfoza_block_impl<V: Lane4>(
+    model: &Model,
+    data: &Data,
+    ws: &mut Idfoza4Ws,
+    x: &[f64],
+    j0: usize,
+    out: &mut [f64],
+) {
+    let n = model.nv;
+    assert!(out.len() == 4 * n * n && j0 < n && x.len() == n * n);
+    // Lanes past nv read no column and come out zero.
+    idfoza4_core::<V>(model, data, ws, x, n, j0, 4.min(n - j0), |i, k, z| {
+        debug_assert!(i < n && k < n);
+        // SAFETY: i, k < n, so 4 i + 4 n k + 3 < 4 n² = out.len().
+        unsafe { *out.as_mut_ptr().add(4 * i + 4 * n * k).cast::<[f64; 4]>() = *z };
+    });
+}
+
 /// Second-order derivatives of forward dynamics at `q̈ = FD(q, q̇, τ)` (eq. eqn_FD_SO_43):
 /// `∂²q̈/∂u∂w = −M⁻¹(∂²ID/∂u∂w + ∂M/∂w · ∂FD/∂u + (∂M/∂u · ∂FD/∂w)^R)`, with the `∂M/∂q`
 /// products by IDFOZA (`O(N d)` per column) instead of tensor products. Also fills the
@@ -482,15 +536,25 @@ pub fn fd_so_derivatives(
             )
         };
     }
-    // ∂²q̈/∂q∂q̇: −M⁻¹(ID_qv + B) with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j], held in S at
-    // k + n i + n² j; groups (j, k0..).
-    idfoza_tensor(model, data, &mut fso.ws4, data.dqdd_dv.as_slice(), s);
+    // ∂²q̈/∂q∂q̇: −M⁻¹(ID_qv + B) with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j]; groups
+    // (j, k0..k0 + 4) for every j, by k0: IDFOZA of the four columns k0.. is computed into the
+    // cache-resident block `s4` (at u + 4 i + 4 n j) just before their groups are gathered.
     {
-        let (idt, sp) = (fso.id.d2tau_dqdv().as_slice().as_ptr(), s.as_ptr());
-        let groups = (0..n).flat_map(move |j| {
-            (0..n).step_by(4).map(move |k| Group { j, k, w: 4.min(n - k), by_j: false })
+        let idt = fso.id.d2tau_dqdv().as_slice().as_ptr();
+        let s4 = fso.s4.as_mut_ptr();
+        let ws4 = &mut fso.ws4;
+        let x = data.dqdd_dv.as_slice();
+        let groups = (0..n).step_by(4).flat_map(|k0| {
+            // SAFETY: `s4` is `fso.s4` (4 n² values), not otherwise referenced while this
+            // runs: the gathers read it through raw pointers between the calls.
+            idfoza_block(model, data, ws4, x, k0, unsafe {
+                std::slice::from_raw_parts_mut(s4, 4 * n2)
+            });
+            (0..n).map(move |j| Group { j, k: k0, w: 4.min(n - k0), by_j: false })
         });
-        // SAFETY (pointers): as for ∂²q̈/∂q².
+        let s4 = s4.cast_const();
+        // SAFETY (pointers): lanes have j, k < n, so the columns of ID_qv (n (j + n k) + i) are
+        // in the n³ tensor and the block entries (u + 4 i + 4 n j, u < 4, i < n) in 4 n².
         unsafe {
             solve_neg_groups(
                 model,
@@ -501,7 +565,7 @@ pub fn fd_so_derivatives(
                 groups,
                 |g| {
                     let id = lanes(g, |j, k| idt.wrapping_add(n * (j + n * k)));
-                    let b = LaneSrc::Rows(sp.wrapping_add(g.k + n2 * g.j), n);
+                    let b = LaneSrc::Rows(s4.wrapping_add(4 * n * g.j), 4);
                     ([LaneSrc::Cols(id), b, b], 2)
                 },
                 Store::Plain,
@@ -509,15 +573,22 @@ pub fn fd_so_derivatives(
             )
         };
     }
-    // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k], held in S at
-    // j + n i + n² k; rows i ≤ j, by j so that each panel needs few rows.
-    idfoza_tensor(model, data, &mut fso.ws4, data.minv.as_slice(), s);
+    // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k]; rows i ≤ j, by j0 so that
+    // each panel needs few rows; IDFOZA of the columns j0..j0 + 4 into `s4` (at u + 4 i + 4 n k)
+    // just before their groups are gathered.
     {
-        let sp = s.as_ptr();
-        let groups = (0..n)
-            .step_by(4)
-            .flat_map(move |j| (0..n).map(move |k| Group { j, k, w: 4.min(n - j), by_j: true }));
-        // SAFETY (pointers): as for ∂²q̈/∂q².
+        let s4 = fso.s4.as_mut_ptr();
+        let ws4 = &mut fso.ws4;
+        let x = data.minv.as_slice();
+        let groups = (0..n).step_by(4).flat_map(|j0| {
+            // SAFETY: as for ∂²q̈/∂q∂q̇.
+            idfoza_block(model, data, ws4, x, j0, unsafe {
+                std::slice::from_raw_parts_mut(s4, 4 * n2)
+            });
+            (0..n).map(move |k| Group { j: j0, k, w: 4.min(n - j0), by_j: true })
+        });
+        let s4 = s4.cast_const();
+        // SAFETY (pointers): block entries u + 4 i + 4 n k with u < 4, i, k < n are in 4 n².
         unsafe {
             solve_neg_groups(
                 model,
@@ -527,7 +598,7 @@ pub fn fd_so_derivatives(
                 &mut fso.d2qdd_dtaudq,
                 groups,
                 |g| {
-                    let c = LaneSrc::Rows(sp.wrapping_add(g.j + n2 * g.k), n);
+                    let c = LaneSrc::Rows(s4.wrapping_add(4 * n * g.k), 4);
                     ([c, c, c], 1)
                 },
                 Store::Head,
