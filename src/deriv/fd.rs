@@ -231,7 +231,8 @@ enum Store {
     /// Column `(j, k)`, and also column `(k, j)` when `j < k` and `mirror(j, k)` (a symmetry
     /// in `(j, k)`).
     Mirror,
-    /// Column `(j, k)`, exact in rows `i ≤ j` only (the caller completes a symmetry in `(i, j)`).
+    /// Column `(j, k)`, exact in rows `i ≤ j` only (the caller completes a symmetry in `(i, j)`);
+    /// rows past the panel's last solved row are left as they were.
     Head,
 }
 
@@ -280,9 +281,10 @@ unsafe fn solve_neg_groups(
     let mut l0 = 0;
     let flush = |panel: &mut [f64], l0: usize, rows_end: usize, dsts: &[[*mut f64; 2]]| {
         ltl_solve_rows_head(model, ltl, desc, panel, P, l0, -1.0, rows_end);
+        // Rows past `rows_end` were not solved (`Store::Head`): not stored either.
         // SAFETY: every non-null destination is a column of `out` (offset n (j + n k) with
-        // j, k < n, so n values fit in n³).
-        unsafe { scatter_rows_to_cols(panel, P, n, &dsts[..l0]) };
+        // j, k < n, so n ≥ rows_end values fit in n³).
+        unsafe { scatter_rows_to_cols(panel, P, rows_end, &dsts[..l0]) };
     };
     for g in groups {
         assert!(g.w <= 4 && g.lane(g.w - 1).0 < n && g.lane(g.w - 1).1 < n);
