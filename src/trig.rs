@@ -9,6 +9,9 @@
 //! the same bits on every code path; the result is within 1 ulp of `f64::sin_cos` (the unit test
 //! compares over many arguments, including the quadrant boundaries). Arguments with `|x| > 10⁵` (and non-finite ones)
 //! go to `f64::sin_cos`.
+//!
+//! [`sin_cos4`] evaluates four angles at once with the same operations on AVX2 lanes (still no
+//! FMA), so it returns the same bits as [`sin_cos`] lane by lane.
 
 /// `2/π`.
 const FRAC_2_PI: f64 = std::f64::consts::FRAC_2_PI;
@@ -80,6 +83,90 @@ fn sin_cos_fast(x: f64) -> (f64, f64) {
     let sin = f64::from_bits(sb ^ swap ^ ((quadrant & 2) << 62));
     let cos = f64::from_bits(cb ^ swap ^ ((quadrant.wrapping_add(1) & 2) << 62));
     (sin, cos)
+}
+
+/// [`sin_cos`] of four angles: `(sin xₗ, cos xₗ)` for each lane `l`, the same bits as
+/// [`sin_cos`] (see [`sin_cos4_v`]).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(crate) fn sin_cos4(x: &[f64; 4]) -> ([f64; 4], [f64; 4]) {
+    use std::arch::x86_64::*;
+    // SAFETY: `x` is four contiguous f64.
+    let (sin, cos) = sin_cos4_v(unsafe { _mm256_loadu_pd(x.as_ptr()) });
+    let (mut so, mut co) = ([0.0; 4], [0.0; 4]);
+    // SAFETY: `so` and `co` are four contiguous f64.
+    unsafe {
+        _mm256_storeu_pd(so.as_mut_ptr(), sin);
+        _mm256_storeu_pd(co.as_mut_ptr(), cos);
+    }
+    (so, co)
+}
+
+/// [`sin_cos`] of the four lanes of `x`, in registers: the same bits as [`sin_cos`] lane by
+/// lane (on the fast path the AVX2 lanes run its operations in its order, without FMA; if any
+/// `|xₗ| > 10⁵` or is NaN, every lane goes through [`sin_cos`]).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(crate) fn sin_cos4_v(
+    xv: std::arch::x86_64::__m256d,
+) -> (std::arch::x86_64::__m256d, std::arch::x86_64::__m256d) {
+    use std::arch::x86_64::*;
+    let ax = _mm256_andnot_pd(_mm256_set1_pd(-0.0), xv);
+    // Ordered comparison: false for NaN.
+    let fast = _mm256_cmp_pd::<_CMP_LE_OQ>(ax, _mm256_set1_pd(MAX_FAST));
+    if _mm256_movemask_pd(fast) != 0b1111 {
+        let mut x = [0.0; 4];
+        // SAFETY: `x` is four contiguous f64.
+        unsafe { _mm256_storeu_pd(x.as_mut_ptr(), xv) };
+        let (s, c) = sin_cos4_lanes(&x);
+        // SAFETY: as above.
+        return unsafe { (_mm256_loadu_pd(s.as_ptr()), _mm256_loadu_pd(c.as_ptr())) };
+    }
+    let set = _mm256_set1_pd;
+    let (add, sub, mul) =
+        (|a, b| _mm256_add_pd(a, b), |a, b| _mm256_sub_pd(a, b), |a, b| _mm256_mul_pd(a, b));
+    // The steps of `sin_cos_fast`, one to one.
+    let t = add(mul(xv, set(FRAC_2_PI)), set(ROUND));
+    let k = sub(t, set(ROUND));
+    let quadrant = _mm256_castpd_si256(t);
+    let (r1, kp2) = (sub(xv, mul(k, set(P1))), mul(k, set(P2)));
+    let r2 = sub(r1, kp2);
+    let e = sub(sub(r1, r2), kp2);
+    let r = sub(r2, sub(mul(k, set(P3)), e));
+    let s = mul(r, r);
+    let s2 = mul(s, s);
+    let s4 = mul(s2, s2);
+    let poly = |c: &[f64; 6]| {
+        let a = add(set(c[0]), mul(s, set(c[1])));
+        let b = mul(s2, add(set(c[2]), mul(s, set(c[3]))));
+        add(add(a, b), mul(s4, add(set(c[4]), mul(s, set(c[5])))))
+    };
+    let (ps, pc) = (poly(&S), poly(&C));
+    let zero = _mm256_cmp_pd::<_CMP_EQ_OQ>(xv, _mm256_setzero_pd());
+    let sr = _mm256_blendv_pd(add(r, mul(mul(r, s), ps)), xv, zero);
+    let hs = mul(set(0.5), s);
+    let w = sub(set(1.0), hs);
+    let cr = add(w, add(sub(sub(set(1.0), w), hs), mul(s2, pc)));
+    // Swap where k is odd, then flip the sign bits (as in `sin_cos_fast`).
+    let one = _mm256_set1_epi64x(1);
+    let two = _mm256_set1_epi64x(2);
+    let odd = _mm256_castsi256_pd(_mm256_cmpeq_epi64(_mm256_and_si256(quadrant, one), one));
+    let (a, b) = (_mm256_blendv_pd(sr, cr, odd), _mm256_blendv_pd(cr, sr, odd));
+    let fs = _mm256_slli_epi64::<62>(_mm256_and_si256(quadrant, two));
+    let fc = _mm256_slli_epi64::<62>(_mm256_and_si256(_mm256_add_epi64(quadrant, one), two));
+    (_mm256_xor_pd(a, _mm256_castsi256_pd(fs)), _mm256_xor_pd(b, _mm256_castsi256_pd(fc)))
+}
+
+/// [`sin_cos`] lane by lane (the portable [`sin_cos4`], and its fallback).
+#[inline(never)]
+pub(crate) fn sin_cos4_lanes(x: &[f64; 4]) -> ([f64; 4], [f64; 4]) {
+    let (mut s, mut c) = ([0.0; 4], [0.0; 4]);
+    for l in 0..4 {
+        (s[l], c[l]) = sin_cos(x[l]);
+    }
+    (s, c)
 }
 
 /// The standard library's `sin_cos` (out of line, for the rare arguments).
@@ -161,5 +248,66 @@ mod tests {
             let (s, c) = sin_cos(x);
             assert!(s.is_nan() && c.is_nan());
         }
+    }
+
+    /// `sin_cos4` (AVX2 where available) and `sin_cos4_lanes` return the same bits as
+    /// `sin_cos` lane by lane: random arguments, quadrant boundaries, ±0, and chunks with a
+    /// huge or non-finite lane (which take the lane-wise path).
+    #[test]
+    fn four_lanes_match_scalar() {
+        let mut rng = Rng::new(5);
+        let mut args: Vec<f64> = (0..40_000).map(|_| rng.range(-7.0, 7.0)).collect();
+        args.extend((0..4_000).map(|_| rng.range(-1.0e5, 1.0e5)));
+        for k in -64i32..=64 {
+            let x0 = f64::from(k) * std::f64::consts::FRAC_PI_4;
+            for d in -2i64..=2 {
+                let x = f64::from_bits(x0.to_bits().wrapping_add_signed(d));
+                args.extend([x, -x]);
+            }
+        }
+        for e in -60..17 {
+            args.extend([2f64.powi(e), -(2f64.powi(e)) * 1.37]);
+        }
+        let specials = [
+            0.0,
+            -0.0,
+            1.0e5,
+            -1.0e5,
+            1.0e5 + 1.0,
+            -3.0e300,
+            5e-324,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        args.extend(specials);
+        // Also every special argument in every lane of otherwise ordinary chunks.
+        for (j, &x) in specials.iter().enumerate() {
+            for l in 0..4 {
+                let mut c = [0.3, -2.0, 5.5, 0.0];
+                c[l] = x;
+                c[(l + 1) % 4] = specials[(j + 1) % specials.len()];
+                args.extend(c);
+            }
+        }
+        let same = |a: f64, b: f64| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+        let mut paths = 0;
+        for chunk in args.chunks_exact(4) {
+            let x: [f64; 4] = chunk.try_into().unwrap();
+            let mut results = vec![super::sin_cos4_lanes(&x)];
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU has AVX2 (checked just above).
+                results.push(unsafe { super::sin_cos4(&x) });
+            }
+            paths = results.len();
+            for (s4, c4) in results {
+                for l in 0..4 {
+                    let (s, c) = sin_cos(x[l]);
+                    assert!(same(s4[l], s) && same(c4[l], c), "x = {:e}: lane {l}", x[l]);
+                }
+            }
+        }
+        assert!(paths >= 1);
     }
 }

@@ -44,6 +44,29 @@ fn root_free_flyer_full(model: &Model) -> bool {
         })
 }
 
+/// The angles `q[rev_q[r..r + 4]]` of the next four revolute joints about `±eₖ` (zero past
+/// the end of `model.rev_q`).
+#[inline(always)]
+pub(crate) fn next_angles(model: &Model, q: &[f64], r: usize) -> [f64; 4] {
+    let rq = &model.rev_q[r..];
+    if let Some(a) = model.rev_q_start {
+        // Contiguous angles: the next (up to) four coordinates from `q[a + r]`.
+        let a = a + r;
+        return match q[a..a + rq.len().min(4)] {
+            [x0, x1, x2, x3] => [x0, x1, x2, x3],
+            [x0, x1, x2] => [x0, x1, x2, 0.0],
+            [x0, x1] => [x0, x1, 0.0, 0.0],
+            [x0] => [x0, 0.0, 0.0, 0.0],
+            _ => [0.0; 4],
+        };
+    }
+    let mut x = [0.0; 4];
+    for (o, &a) in x.iter_mut().zip(rq) {
+        *o = q[a];
+    }
+    x
+}
+
 /// Joint placements only: fills `li_m_i` and `o_m_i` (unchecked `q`).
 #[inline]
 pub(crate) fn placements(model: &Model, data: &mut Data, q: &DVector<f64>) {
