@@ -1,17 +1,18 @@
 //! Fast `sin`/`cos` of one angle, for the joint transforms of revolute joints.
 //!
-//! `sin_cos(x)` reduces `x` to `r = x − k π/2` with `|r| ≲ π/4` (Cody–Waite: π/2 split into
-//! three parts of at most 33 significant bits, so `k · part` is exact for `|k| < 2²⁰` and
-//! `x − k · P₁` is exact by Sterbenz' lemma), evaluates `sin r = r + r³ P(r²)` and
-//! `cos r = 1 − r²/2 + r⁴ Q(r²)` with near-minimax polynomials of degree 5 in `r²` (Chebyshev
-//! fits on `[0, (π/4)²]`, truncation error below 2·10⁻¹⁷ relative), and picks the signs and the
-//! swap from `k mod 4`. Only multiplications and additions are used (no FMA), so the results are
-//! the same bits on every code path; the result is within 1 ulp of `f64::sin_cos` (the unit test
-//! compares over many arguments, including the quadrant boundaries). Arguments with `|x| > 10⁵` (and non-finite ones)
-//! go to `f64::sin_cos`.
+//! `sin_cos(x)` reduces `x` to `r + d = x − k π/2` with `|r| ≲ π/4` and `d` of the order of
+//! an ulp of `r` (Cody–Waite: π/2 split into three parts of at most 33 significant bits, so
+//! `k · part` is exact for `|k| < 2²⁰` and `x − k · P₁` is exact by Sterbenz' lemma), evaluates
+//! `sin r = r + r³ P(r²)` and `cos r = 1 − r²/2 + r⁴ Q(r²)` with near-minimax polynomials of
+//! degree 5 in `r²` (Chebyshev fits on `[0, (π/4)²]`, truncation error below 2·10⁻¹⁷
+//! relative), adds `d` to first order, and picks the signs and the swap from `k mod 4`. Only
+//! multiplications and additions are used (no FMA), so the results are the same bits on every
+//! code path; the result is within 1 ulp of `f64::sin_cos` (the unit test compares over many
+//! arguments, including the quadrant boundaries). Arguments with `|x| > 10⁵` (and non-finite
+//! ones) go to `f64::sin_cos`.
 //!
-//! [`sin_cos4`] evaluates four angles at once with the same operations on AVX2 lanes (still no
-//! FMA), so it returns the same bits as [`sin_cos`] lane by lane.
+//! [`sin_cos4_v`] evaluates four angles at once with the same operations on AVX2 lanes (still
+//! no FMA), so it returns the same bits as [`sin_cos`] lane by lane.
 
 /// `2/π`.
 const FRAC_2_PI: f64 = std::f64::consts::FRAC_2_PI;
@@ -19,6 +20,8 @@ const FRAC_2_PI: f64 = std::f64::consts::FRAC_2_PI;
 const P1: f64 = 1.5707963267341256;
 const P2: f64 = 6.077100506303966e-11;
 const P3: f64 = 2.0222662487959506e-21;
+/// `1/6`.
+const SIXTH: f64 = 1.0 / 6.0;
 /// `1.5 · 2⁵²`: adding it rounds a value of magnitude below 2⁵¹ to an integer, which is then
 /// the low bits of the sum's mantissa.
 const ROUND: f64 = 6755399441055744.0;
@@ -57,24 +60,25 @@ fn sin_cos_fast(x: f64) -> (f64, f64) {
     let k = t - ROUND;
     // k mod 4 (two's complement low bits of the mantissa of t ∈ [2⁵², 2⁵³)).
     let quadrant = t.to_bits();
-    // x − k P1 and k P2 are exact; e is the rounding error of r1 − k P2 (exact), added back
-    // with the small k P3 term: one rounding in r, and none for arguments near a multiple of
-    // π/2 (where r1 − k P2 is exact).
+    // x − k P1 and k P2 are exact; x − k π/2 = r + d with r = r1 − k P2 rounded and d its
+    // rounding error (exact) less the small k P3 term (d = 0 for arguments near a multiple of
+    // π/2, where r1 − k P2 is exact). The polynomials take r (not r + d, which would lengthen
+    // the dependency chain) and d enters to first order: sin(r + d) = sin r + d cos r and
+    // cos(r + d) = cos r − d sin r, with cos r ≈ 1 − s/2 and sin r ≈ r − r s/6 there.
     let (r1, kp2) = (x - k * P1, k * P2);
-    let r2 = r1 - kp2;
-    let e = (r1 - r2) - kp2;
-    let r = r2 - (k * P3 - e);
+    let r = r1 - kp2;
+    let d = ((r1 - r) - kp2) - k * P3;
     // Estrin's scheme (shorter dependency chains than Horner's).
     let s = r * r;
     let (s2, s4) = (s * s, (s * s) * (s * s));
     let ps = (S[0] + s * S[1]) + s2 * (S[2] + s * S[3]) + s4 * (S[4] + s * S[5]);
     let pc = (C[0] + s * C[1]) + s2 * (C[2] + s * C[3]) + s4 * (C[4] + s * C[5]);
-    // x = ±0 keeps its sign (r + (r s) ps would add +0).
-    let sr = if x == 0.0 { x } else { r + (r * s) * ps };
+    let (hs, rs) = (0.5 * s, r * s);
+    // x = ±0 keeps its sign (r + … would add +0).
+    let sr = if x == 0.0 { x } else { r + ((d - d * hs) + rs * ps) };
     // 1 − s/2 rounded to w, with its rounding error (1 − w) − s/2 (exact) added back.
-    let hs = 0.5 * s;
     let w = 1.0 - hs;
-    let cr = w + (((1.0 - w) - hs) + s2 * pc);
+    let cr = w + ((((1.0 - w) - hs) - d * (r - rs * SIXTH)) + s2 * pc);
     // k mod 4 = 0: (s, c); 1: (c, −s); 2: (−s, −c); 3: (−c, s). Without branches (the
     // quadrant is unpredictable): swap by xor under an all-ones mask when k is odd, then flip
     // the sign bits.
@@ -132,9 +136,8 @@ pub(crate) fn sin_cos4_v(
     let k = sub(t, set(ROUND));
     let quadrant = _mm256_castpd_si256(t);
     let (r1, kp2) = (sub(xv, mul(k, set(P1))), mul(k, set(P2)));
-    let r2 = sub(r1, kp2);
-    let e = sub(sub(r1, r2), kp2);
-    let r = sub(r2, sub(mul(k, set(P3)), e));
+    let r = sub(r1, kp2);
+    let d = sub(sub(sub(r1, r), kp2), mul(k, set(P3)));
     let s = mul(r, r);
     let s2 = mul(s, s);
     let s4 = mul(s2, s2);
@@ -144,11 +147,12 @@ pub(crate) fn sin_cos4_v(
         add(add(a, b), mul(s4, add(set(c[4]), mul(s, set(c[5])))))
     };
     let (ps, pc) = (poly(&S), poly(&C));
+    let (hs, rs) = (mul(set(0.5), s), mul(r, s));
     let zero = _mm256_cmp_pd::<_CMP_EQ_OQ>(xv, _mm256_setzero_pd());
-    let sr = _mm256_blendv_pd(add(r, mul(mul(r, s), ps)), xv, zero);
-    let hs = mul(set(0.5), s);
+    let sr = _mm256_blendv_pd(add(r, add(sub(d, mul(d, hs)), mul(rs, ps))), xv, zero);
     let w = sub(set(1.0), hs);
-    let cr = add(w, add(sub(sub(set(1.0), w), hs), mul(s2, pc)));
+    let dsr = mul(d, sub(r, mul(rs, set(SIXTH))));
+    let cr = add(w, add(sub(sub(sub(set(1.0), w), hs), dsr), mul(s2, pc)));
     // Swap where k is odd, then flip the sign bits (as in `sin_cos_fast`).
     let one = _mm256_set1_epi64x(1);
     let two = _mm256_set1_epi64x(2);
