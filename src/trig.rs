@@ -89,24 +89,6 @@ fn sin_cos_fast(x: f64) -> (f64, f64) {
     (sin, cos)
 }
 
-/// [`sin_cos`] of four angles: `(sin xₗ, cos xₗ)` for each lane `l`, the same bits as
-/// [`sin_cos`] (see [`sin_cos4_v`]).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-pub(crate) fn sin_cos4(x: &[f64; 4]) -> ([f64; 4], [f64; 4]) {
-    use std::arch::x86_64::*;
-    // SAFETY: `x` is four contiguous f64.
-    let (sin, cos) = sin_cos4_v(unsafe { _mm256_loadu_pd(x.as_ptr()) });
-    let (mut so, mut co) = ([0.0; 4], [0.0; 4]);
-    // SAFETY: `so` and `co` are four contiguous f64.
-    unsafe {
-        _mm256_storeu_pd(so.as_mut_ptr(), sin);
-        _mm256_storeu_pd(co.as_mut_ptr(), cos);
-    }
-    (so, co)
-}
-
 /// [`sin_cos`] of the four lanes of `x`, in registers: the same bits as [`sin_cos`] lane by
 /// lane (on the fast path the AVX2 lanes run its operations in its order, without FMA; if any
 /// `|xₗ| > 10⁵` or is NaN, every lane goes through [`sin_cos`]).
@@ -163,7 +145,7 @@ pub(crate) fn sin_cos4_v(
     (_mm256_xor_pd(a, _mm256_castsi256_pd(fs)), _mm256_xor_pd(b, _mm256_castsi256_pd(fc)))
 }
 
-/// [`sin_cos`] lane by lane (the portable [`sin_cos4`], and its fallback).
+/// [`sin_cos`] lane by lane (the portable [`sin_cos4_v`], and its fallback).
 #[inline(never)]
 pub(crate) fn sin_cos4_lanes(x: &[f64; 4]) -> ([f64; 4], [f64; 4]) {
     let (mut s, mut c) = ([0.0; 4], [0.0; 4]);
@@ -254,7 +236,7 @@ mod tests {
         }
     }
 
-    /// `sin_cos4` (AVX2 where available) and `sin_cos4_lanes` return the same bits as
+    /// `sin_cos4_v` (AVX2 where available) and `sin_cos4_lanes` return the same bits as
     /// `sin_cos` lane by lane: random arguments, quadrant boundaries, ±0, and chunks with a
     /// huge or non-finite lane (which take the lane-wise path).
     #[test]
@@ -301,8 +283,16 @@ mod tests {
             let mut results = vec![super::sin_cos4_lanes(&x)];
             #[cfg(target_arch = "x86_64")]
             if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU has AVX2 (checked just above).
-                results.push(unsafe { super::sin_cos4(&x) });
+                use std::arch::x86_64::*;
+                let (mut s4, mut c4) = ([0.0; 4], [0.0; 4]);
+                // SAFETY: the CPU has AVX2 (checked just above); the arrays are four
+                // contiguous f64.
+                unsafe {
+                    let (s, c) = super::sin_cos4_v(_mm256_loadu_pd(x.as_ptr()));
+                    _mm256_storeu_pd(s4.as_mut_ptr(), s);
+                    _mm256_storeu_pd(c4.as_mut_ptr(), c);
+                }
+                results.push((s4, c4));
             }
             paths = results.len();
             for (s4, c4) in results {

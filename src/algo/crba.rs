@@ -524,17 +524,17 @@ pub(super) mod avx {
         _mm256_setr_pd(x[0], x[1], x[2], x[3])
     }
 
-    /// `(sign · sin, cos)` of lane `l < 4` of `sc`, each broadcast to four lanes (`sign = ±1`:
-    /// the product is its sign bit applied).
+    /// `(sign · sin, cos)` of lane `l < 4` of `(s, c)`, each broadcast to four lanes
+    /// (`sign = ±1`: the product is its sign bit applied).
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    fn lane(sc: &SinCos4, l: usize, sign: f64) -> (__m256d, __m256d) {
+    pub(in crate::algo) fn lane(s: __m256d, c: __m256d, l: usize, sign: f64) -> (__m256d, __m256d) {
         // 32-bit lanes 2l, 2l + 1 repeated.
         let idx = _mm256_set1_epi64x((((2 * l + 1) << 32) | (2 * l)) as i64);
         let pick =
             |v: __m256d| _mm256_castps_pd(_mm256_permutevar8x32_ps(_mm256_castpd_ps(v), idx));
         let flip = _mm256_and_pd(_mm256_set1_pd(sign), _mm256_set1_pd(-0.0));
-        (_mm256_xor_pd(pick(sc.s), flip), pick(sc.c))
+        (_mm256_xor_pd(pick(s), flip), pick(c))
     }
 
     /// A world placement in registers: rotation columns `r` (lane 3 unspecified) and
@@ -643,7 +643,7 @@ pub(super) mod avx {
     ) -> (X, Ic) {
         debug_assert!(sub.len() == 1 && sw.len() == 1);
         debug_assert!(sub[0].lin == nalgebra::Vector3::zeros() && sub[0].ang[k] == sign);
-        let (sv, cv) = lane(sc, l, sign);
+        let (sv, cv) = lane(sc.s, sc.c, l, sign);
         let lr = rotate(columns(&placement.rot), k, sv, cv);
         store_matrix(lr, &mut li.rot);
         li.trans = placement.trans;
