@@ -853,14 +853,20 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::builtin::{humanoid, random_tree};
+    use crate::model::builtin::{humanoid, pendulum, random_tree, serial_chain};
     use crate::rng::Rng;
 
     /// The portable path agrees with the dispatched (AVX2/FMA where available) path.
     #[test]
     fn portable_matches_dispatched() {
         let mut rng = Rng::new(3);
-        for m in [random_tree(6, 11, false), random_tree(14, 12, true), humanoid()] {
+        for m in [
+            random_tree(6, 11, false),
+            random_tree(14, 12, true),
+            humanoid(),
+            serial_chain(7),
+            pendulum(3),
+        ] {
             let q = m.random_configuration(&mut rng);
             let (mut d1, mut d2) = (Data::new(&m), Data::new(&m));
             crba_unchecked(&m, &mut d1, &q);
@@ -869,6 +875,15 @@ mod tests {
             assert!((&d1.m - &d2.m).amax() <= 1e-12 * scale);
             for (a, b) in d1.ic_world.iter().zip(&d2.ic_world) {
                 assert!((a.rot - b.rot).amax() <= 1e-12 * a.rot.amax().max(1.0));
+                assert!((a.h - b.h).amax() <= 1e-12 * a.h.amax().max(1.0));
+                assert!((a.mass - b.mass).abs() <= 1e-12 * a.mass.max(1.0));
+            }
+            // The other outputs: placements and world subspaces.
+            for (a, b) in d1.o_m_i.iter().zip(&d2.o_m_i).chain(d1.li_m_i.iter().zip(&d2.li_m_i)) {
+                assert!((a.rot - b.rot).amax() <= 1e-12 && (a.trans - b.trans).amax() <= 1e-12);
+            }
+            for (a, b) in d1.s_world.iter().zip(&d2.s_world) {
+                assert!((a.ang - b.ang).amax() <= 1e-12 && (a.lin - b.lin).amax() <= 1e-12);
             }
         }
     }
