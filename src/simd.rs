@@ -62,7 +62,7 @@ mod tests {
         id_derivatives, id_so_derivatives, impact_derivatives, kkt_derivatives,
     };
     use crate::model::Model;
-    use crate::model::builtin::{quadruped, random_tree};
+    use crate::model::builtin::{pendulum, quadruped, random_tree, serial_chain};
     use crate::rng::Rng;
     use crate::tensor::Tensor3;
     use nalgebra::{DMatrix, DVector, Vector3};
@@ -137,6 +137,10 @@ mod tests {
         let cases: Vec<(Model, Vec<&str>)> = vec![
             (random_tree(6, 83, false), vec![]),
             (random_tree(14, 91, true), vec![]),
+            // Revolute joints about ±eₖ: angles not contiguous in q (two chunks of the 4-lane
+            // sin/cos), and contiguous with a partial chunk.
+            (serial_chain(7), vec![]),
+            (pendulum(3), vec![]),
             (quad, vec!["LF_FOOT", "RF_FOOT", "LH_FOOT"]),
         ];
         for (m, feet) in &cases {

@@ -1,14 +1,18 @@
 //! Fast `sin`/`cos` of one angle, for the joint transforms of revolute joints.
 //!
-//! `sin_cos(x)` reduces `x` to `r = x − k π/2` with `|r| ≲ π/4` (Cody–Waite: π/2 split into
-//! three parts of at most 33 significant bits, so `k · part` is exact for `|k| < 2²⁰` and
-//! `x − k · P₁` is exact by Sterbenz' lemma), evaluates `sin r = r + r³ P(r²)` and
-//! `cos r = 1 − r²/2 + r⁴ Q(r²)` with near-minimax polynomials of degree 5 in `r²` (Chebyshev
-//! fits on `[0, (π/4)²]`, truncation error below 2·10⁻¹⁷ relative), and picks the signs and the
-//! swap from `k mod 4`. Only multiplications and additions are used (no FMA), so the results are
-//! the same bits on every code path; the result is within 1 ulp of `f64::sin_cos` (the unit test
-//! compares over many arguments, including the quadrant boundaries). Arguments with `|x| > 10⁵` (and non-finite ones)
-//! go to `f64::sin_cos`.
+//! `sin_cos(x)` reduces `x` to `r + d = x − k π/2` with `|r| ≲ π/4` and `d` of the order of
+//! an ulp of `r` (Cody–Waite: π/2 split into three parts of at most 33 significant bits, so
+//! `k · part` is exact for `|k| < 2²⁰` and `x − k · P₁` is exact by Sterbenz' lemma), evaluates
+//! `sin r = r + r³ P(r²)` and `cos r = 1 − r²/2 + r⁴ Q(r²)` with near-minimax polynomials of
+//! degree 5 in `r²` (Chebyshev fits on `[0, (π/4)²]`, truncation error below 2·10⁻¹⁷
+//! relative), adds `d` to first order, and picks the signs and the swap from `k mod 4`. Only
+//! multiplications and additions are used (no FMA), so the results are the same bits on every
+//! code path; the result is within 1 ulp of `f64::sin_cos` (the unit test compares over many
+//! arguments, including the quadrant boundaries). Arguments with `|x| > 10⁵` (and non-finite
+//! ones) go to `f64::sin_cos`.
+//!
+//! [`sin_cos4_v`] evaluates four angles at once with the same operations on AVX2 lanes (still
+//! no FMA), so it returns the same bits as [`sin_cos`] lane by lane.
 
 /// `2/π`.
 const FRAC_2_PI: f64 = std::f64::consts::FRAC_2_PI;
@@ -16,6 +20,8 @@ const FRAC_2_PI: f64 = std::f64::consts::FRAC_2_PI;
 const P1: f64 = 1.5707963267341256;
 const P2: f64 = 6.077100506303966e-11;
 const P3: f64 = 2.0222662487959506e-21;
+/// `1/6`.
+const SIXTH: f64 = 1.0 / 6.0;
 /// `1.5 · 2⁵²`: adding it rounds a value of magnitude below 2⁵¹ to an integer, which is then
 /// the low bits of the sum's mantissa.
 const ROUND: f64 = 6755399441055744.0;
@@ -54,24 +60,25 @@ fn sin_cos_fast(x: f64) -> (f64, f64) {
     let k = t - ROUND;
     // k mod 4 (two's complement low bits of the mantissa of t ∈ [2⁵², 2⁵³)).
     let quadrant = t.to_bits();
-    // x − k P1 and k P2 are exact; e is the rounding error of r1 − k P2 (exact), added back
-    // with the small k P3 term: one rounding in r, and none for arguments near a multiple of
-    // π/2 (where r1 − k P2 is exact).
+    // x − k P1 and k P2 are exact; x − k π/2 = r + d with r = r1 − k P2 rounded and d its
+    // rounding error (exact) less the small k P3 term (d = 0 for arguments near a multiple of
+    // π/2, where r1 − k P2 is exact). The polynomials take r (not r + d, which would lengthen
+    // the dependency chain) and d enters to first order: sin(r + d) = sin r + d cos r and
+    // cos(r + d) = cos r − d sin r, with cos r ≈ 1 − s/2 and sin r ≈ r − r s/6 there.
     let (r1, kp2) = (x - k * P1, k * P2);
-    let r2 = r1 - kp2;
-    let e = (r1 - r2) - kp2;
-    let r = r2 - (k * P3 - e);
+    let r = r1 - kp2;
+    let d = ((r1 - r) - kp2) - k * P3;
     // Estrin's scheme (shorter dependency chains than Horner's).
     let s = r * r;
     let (s2, s4) = (s * s, (s * s) * (s * s));
     let ps = (S[0] + s * S[1]) + s2 * (S[2] + s * S[3]) + s4 * (S[4] + s * S[5]);
     let pc = (C[0] + s * C[1]) + s2 * (C[2] + s * C[3]) + s4 * (C[4] + s * C[5]);
-    // x = ±0 keeps its sign (r + (r s) ps would add +0).
-    let sr = if x == 0.0 { x } else { r + (r * s) * ps };
+    let (hs, rs) = (0.5 * s, r * s);
+    // x = ±0 keeps its sign (r + … would add +0).
+    let sr = if x == 0.0 { x } else { r + ((d - d * hs) + rs * ps) };
     // 1 − s/2 rounded to w, with its rounding error (1 − w) − s/2 (exact) added back.
-    let hs = 0.5 * s;
     let w = 1.0 - hs;
-    let cr = w + (((1.0 - w) - hs) + s2 * pc);
+    let cr = w + ((((1.0 - w) - hs) - d * (r - rs * SIXTH)) + s2 * pc);
     // k mod 4 = 0: (s, c); 1: (c, −s); 2: (−s, −c); 3: (−c, s). Without branches (the
     // quadrant is unpredictable): swap by xor under an all-ones mask when k is odd, then flip
     // the sign bits.
@@ -80,6 +87,72 @@ fn sin_cos_fast(x: f64) -> (f64, f64) {
     let sin = f64::from_bits(sb ^ swap ^ ((quadrant & 2) << 62));
     let cos = f64::from_bits(cb ^ swap ^ ((quadrant.wrapping_add(1) & 2) << 62));
     (sin, cos)
+}
+
+/// [`sin_cos`] of the four lanes of `x`, in registers: the same bits as [`sin_cos`] lane by
+/// lane (on the fast path the AVX2 lanes run its operations in its order, without FMA; if any
+/// `|xₗ| > 10⁵` or is NaN, every lane goes through [`sin_cos`]).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(crate) fn sin_cos4_v(
+    xv: std::arch::x86_64::__m256d,
+) -> (std::arch::x86_64::__m256d, std::arch::x86_64::__m256d) {
+    use std::arch::x86_64::*;
+    let ax = _mm256_andnot_pd(_mm256_set1_pd(-0.0), xv);
+    // Ordered comparison: false for NaN.
+    let fast = _mm256_cmp_pd::<_CMP_LE_OQ>(ax, _mm256_set1_pd(MAX_FAST));
+    if _mm256_movemask_pd(fast) != 0b1111 {
+        let mut x = [0.0; 4];
+        // SAFETY: `x` is four contiguous f64.
+        unsafe { _mm256_storeu_pd(x.as_mut_ptr(), xv) };
+        let (s, c) = sin_cos4_lanes(&x);
+        // SAFETY: as above.
+        return unsafe { (_mm256_loadu_pd(s.as_ptr()), _mm256_loadu_pd(c.as_ptr())) };
+    }
+    let set = _mm256_set1_pd;
+    let (add, sub, mul) =
+        (|a, b| _mm256_add_pd(a, b), |a, b| _mm256_sub_pd(a, b), |a, b| _mm256_mul_pd(a, b));
+    // The steps of `sin_cos_fast`, one to one.
+    let t = add(mul(xv, set(FRAC_2_PI)), set(ROUND));
+    let k = sub(t, set(ROUND));
+    let quadrant = _mm256_castpd_si256(t);
+    let (r1, kp2) = (sub(xv, mul(k, set(P1))), mul(k, set(P2)));
+    let r = sub(r1, kp2);
+    let d = sub(sub(sub(r1, r), kp2), mul(k, set(P3)));
+    let s = mul(r, r);
+    let s2 = mul(s, s);
+    let s4 = mul(s2, s2);
+    let poly = |c: &[f64; 6]| {
+        let a = add(set(c[0]), mul(s, set(c[1])));
+        let b = mul(s2, add(set(c[2]), mul(s, set(c[3]))));
+        add(add(a, b), mul(s4, add(set(c[4]), mul(s, set(c[5])))))
+    };
+    let (ps, pc) = (poly(&S), poly(&C));
+    let (hs, rs) = (mul(set(0.5), s), mul(r, s));
+    let zero = _mm256_cmp_pd::<_CMP_EQ_OQ>(xv, _mm256_setzero_pd());
+    let sr = _mm256_blendv_pd(add(r, add(sub(d, mul(d, hs)), mul(rs, ps))), xv, zero);
+    let w = sub(set(1.0), hs);
+    let dsr = mul(d, sub(r, mul(rs, set(SIXTH))));
+    let cr = add(w, add(sub(sub(sub(set(1.0), w), hs), dsr), mul(s2, pc)));
+    // Swap where k is odd, then flip the sign bits (as in `sin_cos_fast`).
+    let one = _mm256_set1_epi64x(1);
+    let two = _mm256_set1_epi64x(2);
+    let odd = _mm256_castsi256_pd(_mm256_cmpeq_epi64(_mm256_and_si256(quadrant, one), one));
+    let (a, b) = (_mm256_blendv_pd(sr, cr, odd), _mm256_blendv_pd(cr, sr, odd));
+    let fs = _mm256_slli_epi64::<62>(_mm256_and_si256(quadrant, two));
+    let fc = _mm256_slli_epi64::<62>(_mm256_and_si256(_mm256_add_epi64(quadrant, one), two));
+    (_mm256_xor_pd(a, _mm256_castsi256_pd(fs)), _mm256_xor_pd(b, _mm256_castsi256_pd(fc)))
+}
+
+/// [`sin_cos`] lane by lane (the portable [`sin_cos4_v`], and its fallback).
+#[inline(never)]
+pub(crate) fn sin_cos4_lanes(x: &[f64; 4]) -> ([f64; 4], [f64; 4]) {
+    let (mut s, mut c) = ([0.0; 4], [0.0; 4]);
+    for l in 0..4 {
+        (s[l], c[l]) = sin_cos(x[l]);
+    }
+    (s, c)
 }
 
 /// The standard library's `sin_cos` (out of line, for the rare arguments).
@@ -161,5 +234,74 @@ mod tests {
             let (s, c) = sin_cos(x);
             assert!(s.is_nan() && c.is_nan());
         }
+    }
+
+    /// `sin_cos4_v` (AVX2 where available) and `sin_cos4_lanes` return the same bits as
+    /// `sin_cos` lane by lane: random arguments, quadrant boundaries, ±0, and chunks with a
+    /// huge or non-finite lane (which take the lane-wise path).
+    #[test]
+    fn four_lanes_match_scalar() {
+        let mut rng = Rng::new(5);
+        let mut args: Vec<f64> = (0..40_000).map(|_| rng.range(-7.0, 7.0)).collect();
+        args.extend((0..4_000).map(|_| rng.range(-1.0e5, 1.0e5)));
+        for k in -64i32..=64 {
+            let x0 = f64::from(k) * std::f64::consts::FRAC_PI_4;
+            for d in -2i64..=2 {
+                let x = f64::from_bits(x0.to_bits().wrapping_add_signed(d));
+                args.extend([x, -x]);
+            }
+        }
+        for e in -60..17 {
+            args.extend([2f64.powi(e), -(2f64.powi(e)) * 1.37]);
+        }
+        let specials = [
+            0.0,
+            -0.0,
+            1.0e5,
+            -1.0e5,
+            1.0e5 + 1.0,
+            -3.0e300,
+            5e-324,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        args.extend(specials);
+        // Also every special argument in every lane of otherwise ordinary chunks.
+        for (j, &x) in specials.iter().enumerate() {
+            for l in 0..4 {
+                let mut c = [0.3, -2.0, 5.5, 0.0];
+                c[l] = x;
+                c[(l + 1) % 4] = specials[(j + 1) % specials.len()];
+                args.extend(c);
+            }
+        }
+        let same = |a: f64, b: f64| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+        let mut paths = 0;
+        for chunk in args.chunks_exact(4) {
+            let x: [f64; 4] = chunk.try_into().unwrap();
+            let mut results = vec![super::sin_cos4_lanes(&x)];
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                use std::arch::x86_64::*;
+                let (mut s4, mut c4) = ([0.0; 4], [0.0; 4]);
+                // SAFETY: the CPU has AVX2 (checked just above); the arrays are four
+                // contiguous f64.
+                unsafe {
+                    let (s, c) = super::sin_cos4_v(_mm256_loadu_pd(x.as_ptr()));
+                    _mm256_storeu_pd(s4.as_mut_ptr(), s);
+                    _mm256_storeu_pd(c4.as_mut_ptr(), c);
+                }
+                results.push((s4, c4));
+            }
+            paths = results.len();
+            for (s4, c4) in results {
+                for l in 0..4 {
+                    let (s, c) = sin_cos(x[l]);
+                    assert!(same(s4[l], s) && same(c4[l], c), "x = {:e}: lane {l}", x[l]);
+                }
+            }
+        }
+        assert!(paths >= 1);
     }
 }

@@ -1,12 +1,12 @@
 //! Composite-rigid-body algorithm for the joint-space mass matrix, in the world frame.
 
 use super::Data;
-use super::kinematics::root_free_flyer;
+use super::kinematics::{next_angles, root_free_flyer};
 use crate::error::Result;
-use crate::model::joint::{rotate_columns, unit_axis};
-use crate::model::{JointType, Model};
+use crate::model::joint::rotate_columns;
+use crate::model::{JointKin, Model};
 use crate::spatial::{Inertia, Motion, Transform};
-use crate::trig::sin_cos;
+use crate::trig::sin_cos4_lanes;
 use nalgebra::{DMatrix, DVector};
 
 /// Joint-space mass matrix `M(q)` (full symmetric), by the composite-rigid-body algorithm with
@@ -22,6 +22,7 @@ pub fn crba<'a>(model: &Model, data: &'a mut Data, q: &DVector<f64>) -> Result<&
 /// CRBA without input checks (`q` of length `nq`, `data` built for `model`). Leaves the
 /// placements `li_m_i`, `o_m_i`, the world-frame subspaces `s_world` and the composite
 /// world-frame inertias `ic_world` in `data`, and `M(q)` in `data.m`.
+#[inline]
 pub(crate) fn crba_unchecked(model: &Model, data: &mut Data, q: &DVector<f64>) {
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2_fma() {
@@ -29,7 +30,13 @@ pub(crate) fn crba_unchecked(model: &Model, data: &mut Data, q: &DVector<f64>) {
         unsafe { crba_avx2(model, data, q) };
         return;
     }
-    crba_body::<Portable>(model, data, q);
+    crba_portable(model, data, q);
+}
+
+/// [`crba_body`] with the portable kernel (out of line, so that the dispatch inlines).
+#[inline(never)]
+fn crba_portable(model: &Model, data: &mut Data, q: &DVector<f64>) {
+    crba_body::<Portable>(model, data, q)
 }
 
 /// [`crba_body`] compiled for AVX2/FMA.
@@ -40,34 +47,56 @@ fn crba_avx2(model: &Model, data: &mut Data, q: &DVector<f64>) {
 }
 
 /// The per-body kernel of the forward pass (portable, and AVX2/FMA with explicit intrinsics):
-/// world placement `x = ᵒM_p ᵖM_i`, world inertia `X I` and world subspace columns `X S`,
-/// written in place.
+/// world placement `x = ᵒM_p ᵖM_i` (`x = ᵖM_i` for a child of the world, `xp = None`), world
+/// inertia `X I` and world subspace columns `X S`, written in place. The parent placement
+/// comes as a [`Kern::X`] (in registers for AVX2): the one just returned for the previous
+/// joint when that is the parent (chains), else loaded from `o_m_i`.
 trait Kern {
+    /// Four `(sin, cos)` pairs.
+    type SinCos: Copy;
+    /// `(sin, cos)` (the same bits as `trig::sin_cos`) of the angles `q[rev_q[r..r + 4]]` of
+    /// the next four revolute joints about `±eₖ` (see [`next_angles`]).
+    fn angles(model: &Model, q: &[f64], r: usize) -> Self::SinCos;
+    /// A world placement as the kernel holds it.
+    type X: Copy;
+    /// Loads a world placement.
+    fn load(x: &Transform) -> Self::X;
+    /// A (composite) world inertia as the kernel holds it.
+    type Ic: Copy;
+    /// Loads a world inertia.
+    fn load_ic(ic: &Inertia) -> Self::Ic;
+    /// `a + b`.
+    fn add_ic(a: Self::Ic, b: Self::Ic) -> Self::Ic;
+    /// Writes a world inertia.
+    fn store_ic(a: Self::Ic, ic: &mut Inertia);
+    /// Returns the world placement and inertia also written to `x` and `ic`.
     fn body(
-        xp: &Transform,
+        xp: Option<Self::X>,
         li: &Transform,
         inertia: &Inertia,
         sub: &[Motion],
         x: &mut Transform,
         ic: &mut Inertia,
         sw: &mut [Motion],
-    );
-    /// [`Kern::body`] for a revolute joint about `±e_k` (`k < 3`), with the joint placement
-    /// `li = placement · Rot(e_k, θ)` (given `s = ±sin θ`, `c = cos θ`) also written to `li`.
+    ) -> (Self::X, Self::Ic);
+    /// [`Kern::body`] for a revolute joint about `sign · e_k` (`k < 3`, `sign = ±1`) with its
+    /// angle in lane `l` of `sc`: the joint placement `li = placement · Rot(e_k, ±θ)` is also
+    /// written to `li`, and the subspace `sub` is `[sign · e_k; 0]`.
     #[allow(clippy::too_many_arguments)]
     fn body_revolute(
-        xp: &Transform,
+        xp: Option<Self::X>,
         placement: &Transform,
         k: usize,
-        s: f64,
-        c: f64,
+        sign: f64,
+        sc: &Self::SinCos,
+        l: usize,
         inertia: &Inertia,
         sub: &[Motion],
         li: &mut Transform,
         x: &mut Transform,
         ic: &mut Inertia,
         sw: &mut [Motion],
-    );
+    ) -> (Self::X, Self::Ic);
     /// Per-call data for the block of the root free-flyer DoFs `0..6` (see [`Kern::column`]).
     type Root;
     /// Prepares the root block from the root placement `x_root` and the world subspace
@@ -81,7 +110,7 @@ trait Kern {
     /// `6 <= c`.
     #[allow(clippy::too_many_arguments)]
     unsafe fn column(
-        ic: &Inertia,
+        ic: &Self::Ic,
         sw: &[Motion],
         c: usize,
         anc: &[usize],
@@ -95,38 +124,67 @@ trait Kern {
 struct Portable;
 
 impl Kern for Portable {
+    type SinCos = ([f64; 4], [f64; 4]);
+    #[inline(always)]
+    fn angles(model: &Model, q: &[f64], r: usize) -> Self::SinCos {
+        sin_cos4_lanes(&next_angles(model, q, r))
+    }
+    type X = Transform;
+    #[inline(always)]
+    fn load(x: &Transform) -> Transform {
+        *x
+    }
+    type Ic = Inertia;
+    #[inline(always)]
+    fn load_ic(ic: &Inertia) -> Inertia {
+        *ic
+    }
+    #[inline(always)]
+    fn add_ic(a: Inertia, b: Inertia) -> Inertia {
+        a + b
+    }
+    #[inline(always)]
+    fn store_ic(a: Inertia, ic: &mut Inertia) {
+        *ic = a;
+    }
     #[inline(always)]
     fn body(
-        xp: &Transform,
+        xp: Option<Transform>,
         li: &Transform,
         inertia: &Inertia,
         sub: &[Motion],
         x: &mut Transform,
         ic: &mut Inertia,
         sw: &mut [Motion],
-    ) {
-        *x = xp.compose(li);
+    ) -> (Transform, Inertia) {
+        *x = match xp {
+            Some(xp) => xp.compose(li),
+            None => *li,
+        };
         *ic = x.act_inertia_inline(inertia);
         for (o, s) in sw.iter_mut().zip(sub) {
             *o = x.act_motion(s);
         }
+        (*x, *ic)
     }
     #[inline(always)]
     fn body_revolute(
-        xp: &Transform,
+        xp: Option<Transform>,
         placement: &Transform,
         k: usize,
-        s: f64,
-        c: f64,
+        sign: f64,
+        sc: &Self::SinCos,
+        l: usize,
         inertia: &Inertia,
         sub: &[Motion],
         li: &mut Transform,
         x: &mut Transform,
         ic: &mut Inertia,
         sw: &mut [Motion],
-    ) {
+    ) -> (Transform, Inertia) {
+        let (s, c) = (sign * sc.0[l], sc.1[l]);
         *li = Transform::new(rotate_columns(&placement.rot, k, s, c), placement.trans);
-        Self::body(xp, li, inertia, sub, x, ic, sw);
+        Self::body(xp, li, inertia, sub, x, ic, sw)
     }
     type Root = Transform;
     #[inline(always)]
@@ -179,45 +237,74 @@ struct Avx2;
 
 #[cfg(target_arch = "x86_64")]
 impl Kern for Avx2 {
+    type SinCos = avx::SinCos4;
+    #[inline(always)]
+    fn angles(model: &Model, q: &[f64], r: usize) -> avx::SinCos4 {
+        // SAFETY: `Avx2` kernels run only on CPUs with AVX2 and FMA (see `crba_unchecked`).
+        unsafe { avx::angles(model, q, r) }
+    }
+    type X = avx::X;
+    #[inline(always)]
+    fn load(x: &Transform) -> avx::X {
+        // SAFETY: as in `angles`.
+        unsafe { avx::load(x) }
+    }
+    type Ic = avx::Ic;
+    #[inline(always)]
+    fn load_ic(ic: &Inertia) -> avx::Ic {
+        // SAFETY: as in `angles`.
+        unsafe { avx::load_ic(ic) }
+    }
+    #[inline(always)]
+    fn add_ic(a: avx::Ic, b: avx::Ic) -> avx::Ic {
+        // SAFETY: as in `angles`.
+        unsafe { avx::add_ic(a, b) }
+    }
+    #[inline(always)]
+    fn store_ic(a: avx::Ic, ic: &mut Inertia) {
+        // SAFETY: as in `angles`.
+        unsafe { avx::store_ic(a, ic) }
+    }
     #[inline(always)]
     fn body(
-        xp: &Transform,
+        xp: Option<avx::X>,
         li: &Transform,
         inertia: &Inertia,
         sub: &[Motion],
         x: &mut Transform,
         ic: &mut Inertia,
         sw: &mut [Motion],
-    ) {
-        // SAFETY: `Avx2` kernels run only on CPUs with AVX2 and FMA (see `crba_unchecked`).
+    ) -> (avx::X, avx::Ic) {
+        // SAFETY: as in `angles`.
         unsafe { avx::body(xp, li, inertia, sub, x, ic, sw) }
     }
     #[inline(always)]
     fn body_revolute(
-        xp: &Transform,
+        xp: Option<avx::X>,
         placement: &Transform,
         k: usize,
-        s: f64,
-        c: f64,
+        sign: f64,
+        sc: &avx::SinCos4,
+        l: usize,
         inertia: &Inertia,
         sub: &[Motion],
         li: &mut Transform,
         x: &mut Transform,
         ic: &mut Inertia,
         sw: &mut [Motion],
-    ) {
-        // SAFETY: as in `body`.
-        unsafe { avx::body_revolute(xp, placement, k, s, c, inertia, sub, li, x, ic, sw) }
+    ) -> (avx::X, avx::Ic) {
+        // SAFETY: as in `angles`.
+        unsafe { avx::body_revolute(xp, placement, k, sign, sc, l, inertia, sub, li, x, ic, sw) }
     }
     type Root = avx::Root;
     #[inline(always)]
     fn root(_x_root: &Transform, sw: &[Motion]) -> avx::Root {
-        // SAFETY: as in `body`.
+        // SAFETY: as in `angles`.
         unsafe { avx::root(sw) }
     }
     #[inline(always)]
     unsafe fn column(
-        ic: &Inertia,
+        ic: &avx::Ic,
         sw: &[Motion],
         c: usize,
         anc: &[usize],
@@ -232,7 +319,11 @@ impl Kern for Avx2 {
 
 #[cfg(target_arch = "x86_64")]
 pub(super) mod avx {
-    pub(in crate::algo) use crate::spatial::avx::{columns, comb, cross, store_matrix, store_vec3};
+    use super::next_angles;
+    use crate::model::Model;
+    pub(in crate::algo) use crate::spatial::avx::{
+        columns, comb, cross, store_matrix, store_vec3, v3,
+    };
     use crate::spatial::{Inertia, Motion, Transform};
     use std::arch::x86_64::*;
 
@@ -259,9 +350,61 @@ pub(super) mod avx {
         }
     }
 
+    /// A world inertia in registers: the columns of `Ī` (lane 3 unspecified), `h` (lane 3
+    /// zero) and the mass on every lane.
+    #[derive(Clone, Copy)]
+    pub(super) struct Ic {
+        rot: [__m256d; 3],
+        h: __m256d,
+        m: __m256d,
+    }
+
+    /// See `Kern::load_ic`.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub(super) fn load_ic(ic: &Inertia) -> Ic {
+        Ic { rot: columns(&ic.rot), h: v3(&ic.h), m: _mm256_set1_pd(ic.mass) }
+    }
+
+    /// See `Kern::add_ic` (entry by entry, as `Inertia + Inertia`).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub(super) fn add_ic(a: Ic, b: Ic) -> Ic {
+        Ic {
+            rot: std::array::from_fn(|k| _mm256_add_pd(a.rot[k], b.rot[k])),
+            h: _mm256_add_pd(a.h, b.h),
+            m: _mm256_add_pd(a.m, b.m),
+        }
+    }
+
+    /// See `Kern::store_ic`.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub(super) fn store_ic(a: Ic, ic: &mut Inertia) {
+        store_matrix(a.rot, &mut ic.rot);
+        store_vec3(a.h, &mut ic.h);
+        ic.mass = _mm256_cvtsd_f64(a.m);
+    }
+
+    /// Writes the world subspace column `[ang; lin]` as one 4-lane store of
+    /// `[ang_x ang_y ang_z lin_x]` and one 2-lane store of `[lin_y lin_z]`, the two loads of
+    /// [`column`] (so that they are forwarded from these stores).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn store_motion(ang: __m256d, lin: __m256d, o: &mut Motion) {
+        let lo = _mm256_blend_pd(ang, _mm256_permute4x64_pd(lin, 0b00_00_00_00), 0b1000);
+        let hi = _mm256_castpd256_pd128(_mm256_permute4x64_pd(lin, 0b11_11_10_01));
+        let p = o as *mut Motion as *mut f64;
+        // SAFETY: a `Motion` is six contiguous f64 (`repr(C)`).
+        unsafe {
+            _mm256_storeu_pd(p, lo);
+            _mm_storeu_pd(p.add(4), hi);
+        }
+    }
+
     /// See `Kern::column`. `f = [Ī ω + h × v; m v − h × ω]` for `S_c = [ω; v]`; each
     /// `S_rᵀ f` is one 4-lane product of `[ω_x ω_y ω_z v_x]` with `[f_0 f_1 f_2 f_3]` and one
-    /// of the overlapping `[ω_z v_x v_y v_z]` with `[0 0 f_4 f_5]`, `Motion` being `repr(C)`.
+    /// 2-lane product of `[v_y v_z]` with `[f_4 f_5]`, `Motion` being `repr(C)`.
     ///
     /// # Safety
     /// As `Kern::column`.
@@ -269,7 +412,7 @@ pub(super) mod avx {
     #[target_feature(enable = "avx2,fma")]
     #[inline]
     pub(super) unsafe fn column(
-        ic: &Inertia,
+        ic: &Ic,
         sw: &[Motion],
         c: usize,
         anc: &[usize],
@@ -279,20 +422,23 @@ pub(super) mod avx {
     ) {
         debug_assert!(c < sw.len() && m.len() == nv * nv);
         let (sp, mp) = (sw.as_ptr() as *const f64, m.as_mut_ptr());
-        // SAFETY: `c < sw.len()` and a `Motion` is six contiguous f64 (`repr(C)`): the loads
-        // read the entries 0..4 and 2..6 of `sw[c]`.
-        let (w, s2) =
-            unsafe { (_mm256_loadu_pd(sp.add(6 * c)), _mm256_loadu_pd(sp.add(6 * c + 2))) };
-        // [v_x v_y v_z v_z]
-        let v = _mm256_permute4x64_pd(s2, 0b11_11_10_01);
-        let h = _mm256_setr_pd(ic.h.x, ic.h.y, ic.h.z, 0.0);
+        // Entries 0..4 and (zero-extended) 4..6 of `sw[r]`.
+        // SAFETY (for the callers): `r < sw.len()` and a `Motion` is six contiguous f64
+        // (`repr(C)`).
+        let load = |r: usize| unsafe {
+            let p = sp.add(6 * r);
+            (_mm256_loadu_pd(p), _mm256_zextpd128_pd256(_mm_loadu_pd(p.add(4))))
+        };
+        let (w, s2) = load(c);
+        // [v_x v_y v_z 0]
+        let v = _mm256_permute4x64_pd(_mm256_blend_pd(s2, w, 0b1000), 0b10_01_00_11);
         let sc = &sw[c];
-        let ang = _mm256_add_pd(comb(&columns(&ic.rot), sc.ang.x, sc.ang.y, sc.ang.z), cross(h, v));
-        let lin = _mm256_fmsub_pd(v, _mm256_set1_pd(ic.mass), cross(h, w));
-        // [f_0 f_1 f_2 f_3] and [0 0 f_4 f_5].
+        let ang = _mm256_add_pd(comb(&ic.rot, sc.ang.x, sc.ang.y, sc.ang.z), cross(ic.h, v));
+        let lin = _mm256_fmsub_pd(v, ic.m, cross(ic.h, w));
+        // [f_0 f_1 f_2 f_3] and [f_4 f_5 0 0].
         let flo = _mm256_blend_pd(ang, _mm256_permute4x64_pd(lin, 0b00_00_00_00), 0b1000);
         let fhi =
-            _mm256_blend_pd(_mm256_setzero_pd(), _mm256_permute4x64_pd(lin, 0b10_01_00_00), 0b1100);
+            _mm256_blend_pd(_mm256_setzero_pd(), _mm256_permute4x64_pd(lin, 0b11_11_10_01), 0b0011);
         let dot = |a: __m256d, b: __m256d| {
             let p = _mm256_fmadd_pd(b, fhi, _mm256_mul_pd(a, flo));
             let q = _mm_add_pd(_mm256_castpd256_pd128(p), _mm256_extractf128_pd(p, 1));
@@ -308,7 +454,7 @@ pub(super) mod avx {
                 2 => _mm256_permute4x64_pd(x, 0b10_10_10_10),
                 _ => _mm256_permute4x64_pd(x, 0b11_11_11_11),
             };
-            let fj = [b(flo, 0), b(flo, 1), b(flo, 2), b(flo, 3), b(fhi, 2), b(fhi, 3)];
+            let fj = [b(flo, 0), b(flo, 1), b(flo, 2), b(flo, 3), b(fhi, 0), b(fhi, 1)];
             let mut lo = _mm256_mul_pd(rt.lo[0], fj[0]);
             let mut hi = _mm_mul_pd(rt.hi[0], _mm256_castpd256_pd128(fj[0]));
             for ((&l, &h), &f) in rt.lo.iter().zip(&rt.hi).zip(&fj).skip(1) {
@@ -334,15 +480,76 @@ pub(super) mod avx {
         }
         for &r in anc {
             debug_assert!(r < c);
-            // SAFETY: `r < c < sw.len()` (see above for the loads); the stores are within
-            // nv×nv.
+            let (a, b) = load(r);
+            let mrc = dot(a, b);
+            // SAFETY: `r < c < nv`: the stores are within nv×nv.
             unsafe {
-                let s = sp.add(6 * r);
-                let mrc = dot(_mm256_loadu_pd(s), _mm256_loadu_pd(s.add(2)));
                 _mm_store_sd(mp.add(r + c * nv), mrc);
                 _mm_store_sd(mp.add(c + r * nv), mrc);
             }
         }
+    }
+
+    /// Four `(sin, cos)` pairs in registers (see `Kern::SinCos`).
+    #[derive(Clone, Copy)]
+    pub(super) struct SinCos4 {
+        s: __m256d,
+        c: __m256d,
+    }
+
+    /// See `Kern::angles`.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub(super) fn angles(model: &Model, q: &[f64], r: usize) -> SinCos4 {
+        let (s, c) = crate::trig::sin_cos4_v(load_angles(model, q, r));
+        SinCos4 { s, c }
+    }
+
+    /// [`next_angles`] in a register: contiguous angles by one masked load (no round trip
+    /// through memory).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub(in crate::algo) fn load_angles(model: &Model, q: &[f64], r: usize) -> __m256d {
+        if let Some(a) = model.rev_q_start {
+            let (a, m) = (a + r, model.rev_q.len().saturating_sub(r).min(4));
+            assert!(a + m <= q.len());
+            // Lanes l < m.
+            let mask =
+                _mm256_cmpgt_epi64(_mm256_set1_epi64x(m as i64), _mm256_setr_epi64x(0, 1, 2, 3));
+            // SAFETY: the lanes read, a..a + m, are within `q` (asserted); the others are
+            // masked off (not accessed) and set to zero.
+            return unsafe { _mm256_maskload_pd(q.as_ptr().add(a), mask) };
+        }
+        let x = next_angles(model, q, r);
+        _mm256_setr_pd(x[0], x[1], x[2], x[3])
+    }
+
+    /// `(sign · sin, cos)` of lane `l < 4` of `(s, c)`, each broadcast to four lanes
+    /// (`sign = ±1`: the product is its sign bit applied).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub(in crate::algo) fn lane(s: __m256d, c: __m256d, l: usize, sign: f64) -> (__m256d, __m256d) {
+        // 32-bit lanes 2l, 2l + 1 repeated.
+        let idx = _mm256_set1_epi64x((((2 * l + 1) << 32) | (2 * l)) as i64);
+        let pick =
+            |v: __m256d| _mm256_castps_pd(_mm256_permutevar8x32_ps(_mm256_castpd_ps(v), idx));
+        let flip = _mm256_and_pd(_mm256_set1_pd(sign), _mm256_set1_pd(-0.0));
+        (_mm256_xor_pd(pick(s), flip), pick(c))
+    }
+
+    /// A world placement in registers: rotation columns `r` (lane 3 unspecified) and
+    /// translation `t` (lane 3 unspecified).
+    #[derive(Clone, Copy)]
+    pub(super) struct X {
+        r: [__m256d; 3],
+        t: __m256d,
+    }
+
+    /// See `Kern::load`.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    pub(super) fn load(x: &Transform) -> X {
+        X { r: columns(&x.rot), t: v3(&x.trans) }
     }
 
     /// See `Kern::body`. Placement: rotation columns `Σ_l R_l (R')_lk`, translation
@@ -351,21 +558,34 @@ pub(super) mod avx {
     #[target_feature(enable = "avx2,fma")]
     #[inline]
     pub(super) fn body(
-        xp: &Transform,
+        xp: Option<X>,
         li: &Transform,
         inertia: &Inertia,
         sub: &[Motion],
         x: &mut Transform,
         ic: &mut Inertia,
         sw: &mut [Motion],
-    ) {
-        let rp = columns(&xp.rot);
-        let s = li.rot.as_slice();
-        let r =
-            [comb(&rp, s[0], s[1], s[2]), comb(&rp, s[3], s[4], s[5]), comb(&rp, s[6], s[7], s[8])];
-        let (tp, tl) = (&xp.trans, &li.trans);
-        let t = _mm256_add_pd(comb(&rp, tl.x, tl.y, tl.z), _mm256_setr_pd(tp.x, tp.y, tp.z, 0.0));
-        finish(r, t, inertia, sub, x, ic, sw);
+    ) -> (X, Ic) {
+        let xw = match xp {
+            None => load(li),
+            Some(X { r: rp, t: tp }) => {
+                let s = li.rot.as_slice();
+                let r = [
+                    comb(&rp, s[0], s[1], s[2]),
+                    comb(&rp, s[3], s[4], s[5]),
+                    comb(&rp, s[6], s[7], s[8]),
+                ];
+                let tl = &li.trans;
+                X { r, t: _mm256_add_pd(comb(&rp, tl.x, tl.y, tl.z), tp) }
+            }
+        };
+        let (pv, icw) = finish(xw, inertia, x, ic);
+        for (o, sc) in sw.iter_mut().zip(sub) {
+            let ang = comb(&xw.r, sc.ang.x, sc.ang.y, sc.ang.z);
+            let lin = _mm256_add_pd(comb(&xw.r, sc.lin.x, sc.lin.y, sc.lin.z), cross(pv, ang));
+            store_motion(ang, lin, o);
+        }
+        (xw, icw)
     }
 
     /// `[c a + s b, c b − s a]`.
@@ -402,48 +622,64 @@ pub(super) mod avx {
     }
 
     /// See `Kern::body_revolute`: `x.rot = (ᵒR_p P) Rot(e_k, θ)` (the column rotation applied
-    /// after the product), `x.trans = ᵒp_p + ᵒR_p p_P`, `li = [P Rot(e_k, θ), p_P]`.
+    /// after the product), `x.trans = ᵒp_p + ᵒR_p p_P`, `li = [P Rot(e_k, θ), p_P]` (and
+    /// `x = li` for a child of the world); world subspace `±[R e_k; p × R e_k]`.
     #[allow(clippy::too_many_arguments)]
     #[target_feature(enable = "avx2,fma")]
     #[inline]
     pub(super) fn body_revolute(
-        xp: &Transform,
+        xp: Option<X>,
         placement: &Transform,
         k: usize,
-        s: f64,
-        c: f64,
+        sign: f64,
+        sc: &SinCos4,
+        l: usize,
         inertia: &Inertia,
         sub: &[Motion],
         li: &mut Transform,
         x: &mut Transform,
         ic: &mut Inertia,
         sw: &mut [Motion],
-    ) {
-        let (sv, cv) = (_mm256_set1_pd(s), _mm256_set1_pd(c));
-        store_matrix(rotate(columns(&placement.rot), k, sv, cv), &mut li.rot);
+    ) -> (X, Ic) {
+        debug_assert!(sub.len() == 1 && sw.len() == 1);
+        debug_assert!(sub[0].lin == nalgebra::Vector3::zeros() && sub[0].ang[k] == sign);
+        let (sv, cv) = lane(sc.s, sc.c, l, sign);
+        let lr = rotate(columns(&placement.rot), k, sv, cv);
+        store_matrix(lr, &mut li.rot);
         li.trans = placement.trans;
-        let rp = columns(&xp.rot);
-        let p = placement.rot.as_slice();
-        let a =
-            [comb(&rp, p[0], p[1], p[2]), comb(&rp, p[3], p[4], p[5]), comb(&rp, p[6], p[7], p[8])];
-        let r = rotate(a, k, sv, cv);
-        let (tp, tl) = (&xp.trans, &placement.trans);
-        let t = _mm256_add_pd(comb(&rp, tl.x, tl.y, tl.z), _mm256_setr_pd(tp.x, tp.y, tp.z, 0.0));
-        finish(r, t, inertia, sub, x, ic, sw);
+        let xw = match xp {
+            None => X { r: lr, t: v3(&placement.trans) },
+            Some(X { r: rp, t: tp }) => {
+                let p = placement.rot.as_slice();
+                let a = [
+                    comb(&rp, p[0], p[1], p[2]),
+                    comb(&rp, p[3], p[4], p[5]),
+                    comb(&rp, p[6], p[7], p[8]),
+                ];
+                let tl = &placement.trans;
+                X { r: rotate(a, k, sv, cv), t: _mm256_add_pd(comb(&rp, tl.x, tl.y, tl.z), tp) }
+            }
+        };
+        let (pv, icw) = finish(xw, inertia, x, ic);
+        // S = [sign e_k; 0]: world [sign R_k; p × sign R_k].
+        let rk = match k {
+            0 => xw.r[0],
+            1 => xw.r[1],
+            _ => xw.r[2],
+        };
+        let ang = _mm256_mul_pd(rk, _mm256_set1_pd(sign));
+        if let Some(o) = sw.first_mut() {
+            store_motion(ang, cross(pv, ang), o);
+        }
+        (xw, icw)
     }
 
-    /// The rest of `body` given the world rotation columns `r` and translation `t`.
+    /// The world placement `xw` and inertia written to `x` and `ic`; returns the translation
+    /// with lane 3 zero and the world inertia.
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    fn finish(
-        r: [__m256d; 3],
-        t: __m256d,
-        inertia: &Inertia,
-        sub: &[Motion],
-        x: &mut Transform,
-        ic: &mut Inertia,
-        sw: &mut [Motion],
-    ) {
+    fn finish(xw: X, inertia: &Inertia, x: &mut Transform, ic: &mut Inertia) -> (__m256d, Ic) {
+        let X { r, t } = xw;
         // Lane 3 of the translation set to zero (it enters a dot product below).
         let pv = _mm256_blend_pd(t, _mm256_setzero_pd(), 0b1000);
         store_matrix(r, &mut x.rot);
@@ -481,14 +717,10 @@ pub(super) mod avx {
             let c = _mm256_fnmadd_pd(rh, _mm256_set1_pd(pa[b]), c);
             _mm256_fmadd_pd(e[b], dv, c)
         };
-        store_matrix([col(0), col(1), col(2)], &mut ic.rot);
-
-        for (o, sc) in sw.iter_mut().zip(sub) {
-            let ang = comb(&r, sc.ang.x, sc.ang.y, sc.ang.z);
-            let lin = _mm256_add_pd(comb(&r, sc.lin.x, sc.lin.y, sc.lin.z), cross(pv, ang));
-            store_vec3(ang, &mut o.ang);
-            store_vec3(lin, &mut o.lin);
-        }
+        let rot = [col(0), col(1), col(2)];
+        store_matrix(rot, &mut ic.rot);
+        let h = _mm256_blend_pd(hn, _mm256_setzero_pd(), 0b1000);
+        (pv, Ic { rot, h, m: _mm256_set1_pd(m) })
     }
 }
 
@@ -504,71 +736,91 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
             && data.s_world.len() == nv
             && data.m.nrows() == nv
             && data.m.ncols() == nv
-            && model.parents.len() == n
-            && model.idx_q.len() == n
-            && model.nqs.len() == n
-            && model.idx_v.len() == n
-            && model.nvs.len() == n
+            && model.kin.len() == n
             && model.placements.len() == n
             && model.inertias.len() == n
             && model.subspace.len() == nv
     );
     let (li_m_i, o_m_i) = (&mut data.li_m_i[..], &mut data.o_m_i[..]);
     let (ic_world, sw) = (&mut data.ic_world[..], &mut data.s_world[..]);
-    // Forward pass: placements, world subspaces and world body inertias.
+    // Forward pass: placements, world subspaces and world body inertias. The angles of the
+    // revolute joints about `±eₖ` (`model.rev_q`) are evaluated four at a time: `rank` counts
+    // those joints, lane `rank % 4` of `sc` belongs to the current one. `prev` is the world
+    // placement of joint `i − 1`, handed on in registers when it is the parent.
+    let mut rank = 0;
+    let mut sc = None;
+    let mut prev = None;
+    let mut last_ic = None;
     for i in 1..n {
-        let (a, nq) = (model.idx_q[i], model.nqs[i]);
-        let p = model.parents[i];
-        debug_assert!(p < i);
+        let JointKin { parent: p, idx_q: a, nq, idx_v: b, nv: k, axis, sign } = model.kin[i];
         let (head, tail) = o_m_i.split_at_mut(i);
-        let (b, k) = (model.idx_v[i], model.nvs[i]);
         debug_assert!(p < i && b + k <= nv);
-        // SAFETY: `parents[i] < i` (built in `ModelBuilder::build`), so `p` indexes `head`;
-        // `idx_v[i] + nvs[i] <= nv = s_world.len() = subspace.len()` (asserted).
-        let (xp, sub, swi) = unsafe {
-            (
-                head.get_unchecked(p),
-                model.subspace.get_unchecked(b..b + k),
-                sw.get_unchecked_mut(b..b + k),
-            )
+        // ᵒM_0 is the identity: no product for children of the world.
+        let xp = match p {
+            0 => None,
+            _ if p + 1 == i => prev,
+            // SAFETY: `parents[i] < i` (built in `ModelBuilder::build`, copied to `kin`), so
+            // `p` indexes `head`.
+            _ => Some(K::load(unsafe { head.get_unchecked(p) })),
         };
+        // SAFETY: `idx_v[i] + nvs[i] <= nv = s_world.len() = subspace.len()` (built in
+        // `ModelBuilder::build`, copied to `kin`; lengths asserted).
+        let (sub, swi) =
+            unsafe { (model.subspace.get_unchecked(b..b + k), sw.get_unchecked_mut(b..b + k)) };
         let (placement, inertia) = (&model.placements[i], &model.inertias[i]);
         let (x, ic) = (&mut tail[0], &mut ic_world[i]);
-        let rev_axis = match model.joints[i] {
-            JointType::Revolute { axis } | JointType::Continuous { axis } => unit_axis(&axis),
-            _ => None,
-        };
-        if let Some((k, sign)) = rev_axis {
-            let (s, c) = sin_cos(q[a]);
+        let (xw, icw) = if axis < 3 {
+            let l = rank % 4;
+            let sc = match sc {
+                Some(v) if l > 0 => v,
+                _ => *sc.insert(K::angles(model, q, rank)),
+            };
+            debug_assert!(model.rev_q[rank] == a);
+            rank += 1;
             K::body_revolute(
                 xp,
                 placement,
-                k,
-                sign * s,
-                c,
+                axis,
+                sign,
+                &sc,
+                l,
                 inertia,
                 sub,
                 &mut li_m_i[i],
                 x,
                 ic,
                 swi,
-            );
+            )
         } else {
             let li = model.joints[i].placed_transform(placement, &q[a..a + nq]);
             li_m_i[i] = li;
-            K::body(xp, &li, inertia, sub, x, ic, swi);
-        }
+            K::body(xp, &li, inertia, sub, x, ic, swi)
+        };
+        prev = Some(xw);
+        last_ic = Some(icw);
     }
     // Root free-flyer with the identity subspace: the last six ancestors of every other DoF
     // are the root's DoFs 5, 4, …, 0, handled as one block.
     let root = if root_free_flyer(model) { Some(K::root(&o_m_i[1], sw)) } else { None };
     let m = data.m.as_mut_slice();
     let sw = &*sw;
-    // Backward pass: composite inertias and the columns of M.
+    // Backward pass: composite inertias and the columns of M. The children of a joint are
+    // added to its composite inertia in decreasing index order; `carry` hands the composite of
+    // joint i + 1 to its parent i in registers (the last one added). The last joint has no
+    // children: its world inertia comes from the forward pass.
+    let mut carry = None;
     for i in (1..n).rev() {
-        let (b, k) = (model.idx_v[i], model.nvs[i]);
+        let JointKin { parent: p, idx_v: b, nv: k, .. } = model.kin[i];
         let (head, tail) = ic_world.split_at_mut(i);
-        let ic = &tail[0];
+        let ic = match (carry.take(), last_ic.filter(|_| i + 1 == n)) {
+            (_, Some(v)) => v,
+            (Some(ch), None) => {
+                let v = K::add_ic(K::load_ic(&tail[0]), ch);
+                K::store_ic(v, &mut tail[0]);
+                v
+            }
+            (None, None) => K::load_ic(&tail[0]),
+        };
         for c in b..b + k {
             let mut anc = model.ancestors_of_dof(c);
             let mut rt = None;
@@ -582,13 +834,16 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
             // SAFETY: ancestor DoFs satisfy r < c < nv (built in `ModelBuilder::build`), `m`
             // is nv×nv (column-major) and `sw` has nv entries (asserted above); `rt` only for
             // c >= 6.
-            unsafe { K::column(ic, sw, c, anc, rt, m, nv) };
+            unsafe { K::column(&ic, sw, c, anc, rt, m, nv) };
         }
-        let p = model.parents[i];
-        if p > 0 {
+        if p + 1 == i {
+            carry = Some(ic);
+        } else if p > 0 {
             debug_assert!(p < i);
-            // SAFETY: `parents[i] < i` (built in `ModelBuilder::build`), so `p` indexes `head`.
-            *unsafe { head.get_unchecked_mut(p) } += *ic;
+            // SAFETY: `parents[i] < i` (built in `ModelBuilder::build`, copied to `kin`), so `p`
+            // indexes `head`.
+            let icp = unsafe { head.get_unchecked_mut(p) };
+            K::store_ic(K::add_ic(K::load_ic(icp), ic), icp);
         }
     }
     // Entries between dofs on different branches are structurally zero: they are zero from
@@ -598,14 +853,20 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::builtin::{humanoid, random_tree};
+    use crate::model::builtin::{humanoid, pendulum, random_tree, serial_chain};
     use crate::rng::Rng;
 
     /// The portable path agrees with the dispatched (AVX2/FMA where available) path.
     #[test]
     fn portable_matches_dispatched() {
         let mut rng = Rng::new(3);
-        for m in [random_tree(6, 11, false), random_tree(14, 12, true), humanoid()] {
+        for m in [
+            random_tree(6, 11, false),
+            random_tree(14, 12, true),
+            humanoid(),
+            serial_chain(7),
+            pendulum(3),
+        ] {
             let q = m.random_configuration(&mut rng);
             let (mut d1, mut d2) = (Data::new(&m), Data::new(&m));
             crba_unchecked(&m, &mut d1, &q);
@@ -614,6 +875,15 @@ mod tests {
             assert!((&d1.m - &d2.m).amax() <= 1e-12 * scale);
             for (a, b) in d1.ic_world.iter().zip(&d2.ic_world) {
                 assert!((a.rot - b.rot).amax() <= 1e-12 * a.rot.amax().max(1.0));
+                assert!((a.h - b.h).amax() <= 1e-12 * a.h.amax().max(1.0));
+                assert!((a.mass - b.mass).abs() <= 1e-12 * a.mass.max(1.0));
+            }
+            // The other outputs: placements and world subspaces.
+            for (a, b) in d1.o_m_i.iter().zip(&d2.o_m_i).chain(d1.li_m_i.iter().zip(&d2.li_m_i)) {
+                assert!((a.rot - b.rot).amax() <= 1e-12 && (a.trans - b.trans).amax() <= 1e-12);
+            }
+            for (a, b) in d1.s_world.iter().zip(&d2.s_world) {
+                assert!((a.ang - b.ang).amax() <= 1e-12 && (a.lin - b.lin).amax() <= 1e-12);
             }
         }
     }

@@ -2,9 +2,9 @@
 
 use super::Data;
 use crate::error::Result;
-use crate::model::{JointType, Model, check_vec};
-use crate::spatial::Motion;
-#[cfg(target_arch = "x86_64")]
+use crate::model::joint::rotate_columns;
+use crate::model::{JointKin, JointType, Model, check_vec};
+use crate::spatial::{Motion, Transform};
 use crate::trig::sin_cos;
 use nalgebra::DVector;
 
@@ -44,6 +44,29 @@ fn root_free_flyer_full(model: &Model) -> bool {
         })
 }
 
+/// The angles `q[rev_q[r..r + 4]]` of the next four revolute joints about `±eₖ` (zero past
+/// the end of `model.rev_q`).
+#[inline(always)]
+pub(crate) fn next_angles(model: &Model, q: &[f64], r: usize) -> [f64; 4] {
+    let rq = &model.rev_q[r..];
+    if let Some(a) = model.rev_q_start {
+        // Contiguous angles: the next (up to) four coordinates from `q[a + r]`.
+        let a = a + r;
+        return match q[a..a + rq.len().min(4)] {
+            [x0, x1, x2, x3] => [x0, x1, x2, x3],
+            [x0, x1, x2] => [x0, x1, x2, 0.0],
+            [x0, x1] => [x0, x1, 0.0, 0.0],
+            [x0] => [x0, 0.0, 0.0, 0.0],
+            _ => [0.0; 4],
+        };
+    }
+    let mut x = [0.0; 4];
+    for (o, &a) in x.iter_mut().zip(rq) {
+        *o = q[a];
+    }
+    x
+}
+
 /// Joint placements only: fills `li_m_i` and `o_m_i` (unchecked `q`).
 #[inline]
 pub(crate) fn placements(model: &Model, data: &mut Data, q: &DVector<f64>) {
@@ -60,72 +83,95 @@ pub(crate) fn placements(model: &Model, data: &mut Data, q: &DVector<f64>) {
 fn placements_portable(model: &Model, data: &mut Data, q: &DVector<f64>) {
     let q = q.as_slice();
     for i in 1..model.njoints() {
-        let (a, n) = (model.idx_q[i], model.nqs[i]);
-        let li = model.joints[i].placed_transform(&model.placements[i], &q[a..a + n]);
+        let JointKin { parent: p, idx_q: a, nq, axis, sign, .. } = model.kin[i];
+        let placement = &model.placements[i];
+        let li = if axis < 3 {
+            let (s, c) = sin_cos(q[a]);
+            Transform::new(rotate_columns(&placement.rot, axis, sign * s, c), placement.trans)
+        } else {
+            model.joints[i].placed_transform(placement, &q[a..a + nq])
+        };
         data.li_m_i[i] = li;
-        let p = model.parents[i];
-        data.o_m_i[i] = data.o_m_i[p].compose(&li);
+        data.o_m_i[i] = if p == 0 { li } else { data.o_m_i[p].compose(&li) };
     }
 }
 
 /// [`placements`] with the 3×3 products on 4-lane vectors (the CRBA kernels' helpers): for a
 /// revolute joint about `±e_k`, `λM_i = [P Rot(e_k, θ), p_P]` and
 /// `ᵒM_i = [(ᵒR_λ P) Rot(e_k, θ), ᵒp_λ + ᵒR_λ p_P]` (a child of the world: `ᵒM_i = λM_i`);
-/// other joints `ᵒM_i = ᵒM_λ λM_i` from [`JointType::placed_transform`].
+/// other joints `ᵒM_i = ᵒM_λ λM_i` from [`JointType::placed_transform`]. The angles are
+/// evaluated four at a time (`trig::sin_cos4_v`) and the placement of joint `i − 1` is handed
+/// on in registers when it is the parent.
 ///
 /// # Safety
 /// The CPU has AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn placements_avx2(model: &Model, data: &mut Data, q: &DVector<f64>) {
-    use super::crba::avx::{columns, comb, rotate, store_matrix, store_vec3};
-    use crate::model::joint::unit_axis;
+    use super::crba::avx::{
+        columns, comb, lane, load_angles, rotate, store_matrix, store_vec3, v3,
+    };
+    use crate::trig::sin_cos4_v;
     use std::arch::x86_64::*;
     let q = q.as_slice();
     let n = model.njoints();
     assert!(data.li_m_i.len() == n && data.o_m_i.len() == n);
+    let (mut rank, mut sc, mut prev) = (0, None, None);
     for i in 1..n {
-        let (a, nq) = (model.idx_q[i], model.nqs[i]);
-        let p = model.parents[i];
+        let JointKin { parent: p, idx_q: a, nq, axis, sign, .. } = model.kin[i];
         let placement = &model.placements[i];
-        let rev_axis = match model.joints[i] {
-            JointType::Revolute { axis } | JointType::Continuous { axis } => unit_axis(&axis),
-            _ => None,
-        };
         let (head, tail) = data.o_m_i.split_at_mut(i);
-        let (xp, x) = (&head[p], &mut tail[0]);
+        let x = &mut tail[0];
         let li = &mut data.li_m_i[i];
-        match rev_axis {
-            Some((k, sign)) => {
-                let (s, c) = sin_cos(q[a]);
-                let (sv, cv) = (_mm256_set1_pd(sign * s), _mm256_set1_pd(c));
-                let lr = rotate(columns(&placement.rot), k, sv, cv);
-                store_matrix(lr, &mut li.rot);
-                li.trans = placement.trans;
-                if p == 0 {
-                    *x = *li;
-                    continue;
+        // The parent's world rotation columns and translation.
+        let xp = match p {
+            0 => None,
+            _ if p + 1 == i => prev,
+            _ => Some((columns(&head[p].rot), v3(&head[p].trans))),
+        };
+        let (r, t) = if axis < 3 {
+            let l = rank % 4;
+            let (s4, c4) = match sc {
+                Some(v) if l > 0 => v,
+                _ => *sc.insert(sin_cos4_v(load_angles(model, q, rank))),
+            };
+            rank += 1;
+            let (sv, cv) = lane(s4, c4, l, sign);
+            let lr = rotate(columns(&placement.rot), axis, sv, cv);
+            store_matrix(lr, &mut li.rot);
+            li.trans = placement.trans;
+            match xp {
+                None => (lr, v3(&placement.trans)),
+                Some((rp, tp)) => {
+                    let pr = placement.rot.as_slice();
+                    let ar = [
+                        comb(&rp, pr[0], pr[1], pr[2]),
+                        comb(&rp, pr[3], pr[4], pr[5]),
+                        comb(&rp, pr[6], pr[7], pr[8]),
+                    ];
+                    let tl = &placement.trans;
+                    (rotate(ar, axis, sv, cv), _mm256_add_pd(comb(&rp, tl.x, tl.y, tl.z), tp))
                 }
-                let rp = columns(&xp.rot);
-                let pr = placement.rot.as_slice();
-                let ar = [
-                    comb(&rp, pr[0], pr[1], pr[2]),
-                    comb(&rp, pr[3], pr[4], pr[5]),
-                    comb(&rp, pr[6], pr[7], pr[8]),
-                ];
-                store_matrix(rotate(ar, k, sv, cv), &mut x.rot);
-                let (tp, tl) = (&xp.trans, &placement.trans);
-                let t = _mm256_add_pd(
-                    comb(&rp, tl.x, tl.y, tl.z),
-                    _mm256_setr_pd(tp.x, tp.y, tp.z, 0.0),
-                );
-                store_vec3(t, &mut x.trans);
             }
-            None => {
-                *li = model.joints[i].placed_transform(placement, &q[a..a + nq]);
-                *x = xp.compose(li);
+        } else {
+            *li = model.joints[i].placed_transform(placement, &q[a..a + nq]);
+            match xp {
+                None => (columns(&li.rot), v3(&li.trans)),
+                Some((rp, tp)) => {
+                    let s = li.rot.as_slice();
+                    let r = [
+                        comb(&rp, s[0], s[1], s[2]),
+                        comb(&rp, s[3], s[4], s[5]),
+                        comb(&rp, s[6], s[7], s[8]),
+                    ];
+                    let tl = &li.trans;
+                    (r, _mm256_add_pd(comb(&rp, tl.x, tl.y, tl.z), tp))
+                }
             }
-        }
+        };
+        store_matrix(r, &mut x.rot);
+        store_vec3(t, &mut x.trans);
+        prev = Some((r, t));
     }
 }
 

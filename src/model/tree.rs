@@ -1,6 +1,6 @@
 //! The kinematic tree: Model (immutable description) and its builder.
 
-use super::joint::JointType;
+use super::joint::{JointType, unit_axis};
 use crate::error::{Error, Result};
 use crate::rng::Rng;
 use crate::spatial::{Inertia, Motion, Transform};
@@ -70,6 +70,34 @@ pub struct Model {
     pub mimic: Vec<Option<String>>,
     /// Frames (URDF links), first one the world.
     pub frames: Vec<Frame>,
+    /// Per joint, its indices and kind packed for the kinematics kernels (see [`JointKin`]);
+    /// computed by [`ModelBuilder::build`].
+    pub(crate) kin: Vec<JointKin>,
+    /// Configuration index of each joint with a revolute axis `±eₖ` ([`JointKin::axis`]
+    /// `< 3`), in joint order: their angles are evaluated four at a time.
+    pub(crate) rev_q: Vec<usize>,
+    /// `Some(a)` if `rev_q` is `a, a + 1, …` (the angles are contiguous in `q`).
+    pub(crate) rev_q_start: Option<usize>,
+}
+
+/// One joint's entries of [`Model`] used on every call of the kinematics kernels, in one
+/// place, with its revolute axis classified once (`joint::unit_axis`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct JointKin {
+    /// `parents[i]`.
+    pub(crate) parent: usize,
+    /// `idx_q[i]`.
+    pub(crate) idx_q: usize,
+    /// `nqs[i]`.
+    pub(crate) nq: usize,
+    /// `idx_v[i]`.
+    pub(crate) idx_v: usize,
+    /// `nvs[i]`.
+    pub(crate) nv: usize,
+    /// `k` for a revolute or continuous joint about `±eₖ` exactly, otherwise 3.
+    pub(crate) axis: usize,
+    /// The sign of that axis (`±1`; 1 for other joints).
+    pub(crate) sign: f64,
 }
 
 impl Model {
@@ -143,37 +171,23 @@ impl Model {
         Ok(out)
     }
     /// Checks a configuration: length `nq`, finite, unit quaternions.
-    #[inline]
+    #[inline(always)]
     pub fn check_q(&self, q: &DVector<f64>) -> Result<()> {
-        // Fast path (inline): every coordinate finite and every quaternion of unit norm.
-        // Anything else goes through the per-joint checks, which name the joint and the problem.
-        if q.len() == self.nq && self.q_valid(q.as_slice()) {
+        // Fast path (inline): every coordinate finite and every quaternion of unit norm (each
+        // quaternion joint, spherical or free-flyer, has nq = nv + 1 and every other joint
+        // nq = nv, so there is none when nq = nv). Anything else goes through the per-joint
+        // checks, which name the joint and the problem.
+        let qs = q.as_slice();
+        if qs.len() == self.nq && all_finite(qs) && (self.nq == self.nv || self.quats_valid(qs)) {
             return Ok(());
         }
         self.check_q_slow(q)
     }
-    /// True if every coordinate of `qs` (length `nq`) is finite and every quaternion has unit
-    /// norm within [`super::joint::QUAT_NORM_TOL`].
-    #[inline]
-    fn q_valid(&self, qs: &[f64]) -> bool {
-        // x · 0 is ±0 for finite x and NaN otherwise: the sums (four lanes) are 0 iff every
-        // coordinate is finite.
-        let mut acc = [0.0f64; 4];
-        let chunks = qs.chunks_exact(4);
-        for (a, &x) in acc.iter_mut().zip(chunks.remainder()) {
-            *a += x * 0.0;
-        }
-        for c in chunks {
-            for (a, &x) in acc.iter_mut().zip(c) {
-                *a += x * 0.0;
-            }
-        }
-        if (acc[0] + acc[1]) + (acc[2] + acc[3]) != 0.0 {
-            return false;
-        }
-        // Each quaternion joint (spherical, free-flyer) has nq = nv + 1 and every other joint
-        // nq = nv: the scan stops after the nq − nv quaternions (none, or the root free-flyer,
-        // for most robots).
+    /// True if every quaternion of `qs` (length `nq`) has unit norm within
+    /// [`super::joint::QUAT_NORM_TOL`] (out of line: only models with quaternions).
+    #[inline(never)]
+    fn quats_valid(&self, qs: &[f64]) -> bool {
+        // The scan stops after the nq − nv quaternions (the root free-flyer, for most robots).
         let mut quats = self.nq.saturating_sub(self.nv);
         let mut ok = true;
         let mut i = 1;
@@ -216,6 +230,24 @@ impl Model {
     pub fn check_v(&self, what: &str, x: &DVector<f64>) -> Result<()> {
         check_vec(what, x, self.nv)
     }
+}
+
+/// True if every entry of `qs` is finite.
+#[inline(always)]
+fn all_finite(qs: &[f64]) -> bool {
+    // x · 0 is ±0 for finite x and NaN otherwise: the sums (four lanes) are 0 iff every
+    // coordinate is finite.
+    let mut acc = [0.0f64; 4];
+    let chunks = qs.chunks_exact(4);
+    for (a, &x) in acc.iter_mut().zip(chunks.remainder()) {
+        *a += x * 0.0;
+    }
+    for c in chunks {
+        for (a, &x) in acc.iter_mut().zip(c) {
+            *a += x * 0.0;
+        }
+    }
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) == 0.0
 }
 
 /// Checks length and finiteness of an input vector.
@@ -266,6 +298,9 @@ impl ModelBuilder {
                 joint: 0,
                 placement: Transform::identity(),
             }],
+            kin: vec![],
+            rev_q: vec![],
+            rev_q_start: None,
         };
         Self { m }
     }
@@ -427,6 +462,31 @@ impl ModelBuilder {
             }
             m.dof_ancestors_start.push(m.dof_ancestors.len());
         }
+        m.kin = (0..m.joints.len())
+            .map(|i| {
+                let rev = match m.joints[i] {
+                    JointType::Revolute { axis } | JointType::Continuous { axis } if i > 0 => {
+                        unit_axis(&axis)
+                    }
+                    _ => None,
+                };
+                let (axis, sign) = rev.unwrap_or((3, 1.0));
+                JointKin {
+                    parent: m.parents[i],
+                    idx_q: m.idx_q[i],
+                    nq: m.nqs[i],
+                    idx_v: m.idx_v[i],
+                    nv: m.nvs[i],
+                    axis,
+                    sign,
+                }
+            })
+            .collect();
+        m.rev_q = m.kin.iter().filter(|k| k.axis < 3).map(|k| k.idx_q).collect();
+        m.rev_q_start = match m.rev_q.first() {
+            Some(&a) if m.rev_q.iter().enumerate().all(|(r, &b)| b == a + r) => Some(a),
+            _ => None,
+        };
         self.m
     }
 }
