@@ -12,7 +12,7 @@ use crate::algo::internal::{
     ltl_solve_rows_head,
 };
 use crate::error::Result;
-use crate::linalg::{LaneSrc, gather_group, scatter_rows_to_cols, transpose_strided};
+use crate::linalg::{LaneSrc, gather_group, prefetch_l2, scatter_rows_to_cols, transpose_strided};
 use crate::model::{Model, check_vec};
 use crate::spatial::Force;
 use crate::tensor::Tensor3;
@@ -313,10 +313,19 @@ unsafe fn solve_neg_groups(
             }
             continue;
         }
-        if store == Store::Head {
+        let rows = if store == Store::Head {
             rows_end = rows_end.max(g.lane(g.w - 1).0 + 1);
+            g.lane(g.w - 1).0 + 1
         } else {
             rows_end = n;
+            n
+        };
+        // The destination columns into L2 while the panel fills and is solved.
+        for d in &dsts[l0..l0 + g.w] {
+            prefetch_l2(d[0], rows);
+            if d[1] != d[0] {
+                prefetch_l2(d[1], rows);
+            }
         }
         l0 += 4;
         if l0 == P {
