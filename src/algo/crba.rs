@@ -322,7 +322,7 @@ pub(super) mod avx {
     use super::next_angles;
     use crate::model::Model;
     pub(in crate::algo) use crate::spatial::avx::{
-        columns, comb, cross, store_matrix, store_vec3, v3,
+        columns, comb, compose, cross, store_matrix, store_vec3, v3,
     };
     use crate::spatial::{Inertia, Motion, Transform};
     use std::arch::x86_64::*;
@@ -569,14 +569,8 @@ pub(super) mod avx {
         let xw = match xp {
             None => load(li),
             Some(X { r: rp, t: tp }) => {
-                let s = li.rot.as_slice();
-                let r = [
-                    comb(&rp, s[0], s[1], s[2]),
-                    comb(&rp, s[3], s[4], s[5]),
-                    comb(&rp, s[6], s[7], s[8]),
-                ];
-                let tl = &li.trans;
-                X { r, t: _mm256_add_pd(comb(&rp, tl.x, tl.y, tl.z), tp) }
+                let (r, t) = compose(&rp, tp, li);
+                X { r, t }
             }
         };
         let (pv, icw) = finish(xw, inertia, x, ic);
@@ -650,14 +644,8 @@ pub(super) mod avx {
         let xw = match xp {
             None => X { r: lr, t: v3(&placement.trans) },
             Some(X { r: rp, t: tp }) => {
-                let p = placement.rot.as_slice();
-                let a = [
-                    comb(&rp, p[0], p[1], p[2]),
-                    comb(&rp, p[3], p[4], p[5]),
-                    comb(&rp, p[6], p[7], p[8]),
-                ];
-                let tl = &placement.trans;
-                X { r: rotate(a, k, sv, cv), t: _mm256_add_pd(comb(&rp, tl.x, tl.y, tl.z), tp) }
+                let (a, t) = compose(&rp, tp, placement);
+                X { r: rotate(a, k, sv, cv), t }
             }
         };
         let (pv, icw) = finish(xw, inertia, x, ic);

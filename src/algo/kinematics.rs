@@ -109,10 +109,9 @@ fn placements_portable(model: &Model, data: &mut Data, q: &DVector<f64>) {
 #[target_feature(enable = "avx2,fma")]
 unsafe fn placements_avx2(model: &Model, data: &mut Data, q: &DVector<f64>) {
     use super::crba::avx::{
-        columns, comb, lane, load_angles, rotate, store_matrix, store_vec3, v3,
+        columns, compose, lane, load_angles, rotate, store_matrix, store_vec3, v3,
     };
     use crate::trig::sin_cos4_v;
-    use std::arch::x86_64::*;
     let q = q.as_slice();
     let n = model.njoints();
     assert!(data.li_m_i.len() == n && data.o_m_i.len() == n);
@@ -143,30 +142,15 @@ unsafe fn placements_avx2(model: &Model, data: &mut Data, q: &DVector<f64>) {
             match xp {
                 None => (lr, v3(&placement.trans)),
                 Some((rp, tp)) => {
-                    let pr = placement.rot.as_slice();
-                    let ar = [
-                        comb(&rp, pr[0], pr[1], pr[2]),
-                        comb(&rp, pr[3], pr[4], pr[5]),
-                        comb(&rp, pr[6], pr[7], pr[8]),
-                    ];
-                    let tl = &placement.trans;
-                    (rotate(ar, axis, sv, cv), _mm256_add_pd(comb(&rp, tl.x, tl.y, tl.z), tp))
+                    let (ar, t) = compose(&rp, tp, placement);
+                    (rotate(ar, axis, sv, cv), t)
                 }
             }
         } else {
             *li = model.joints[i].placed_transform(placement, &q[a..a + nq]);
             match xp {
                 None => (columns(&li.rot), v3(&li.trans)),
-                Some((rp, tp)) => {
-                    let s = li.rot.as_slice();
-                    let r = [
-                        comb(&rp, s[0], s[1], s[2]),
-                        comb(&rp, s[3], s[4], s[5]),
-                        comb(&rp, s[6], s[7], s[8]),
-                    ];
-                    let tl = &li.trans;
-                    (r, _mm256_add_pd(comb(&rp, tl.x, tl.y, tl.z), tp))
-                }
+                Some((rp, tp)) => compose(&rp, tp, li),
             }
         };
         store_matrix(r, &mut x.rot);

@@ -458,6 +458,39 @@ fn idfoza_block_impl<V: Lane4>(
     });
 }
 
+/// The groups of the `n²` columns that use `IDFOZA(x[:, c0..c0 + 4])`, by `c0` (step 4): for
+/// each `c0`, the block `s4 ← IDFOZA(x[:, c0..c0 + 4])` (see [`idfoza_block`]) is computed when
+/// the iterator reaches it, then its `n` groups follow: `(c0.., m)` if `BY_J`, else `(m, c0..)`,
+/// for `m < n`. The caller gathers each group before asking for the next (as
+/// [`solve_neg_groups`] does), reading the block through `s4`.
+///
+/// # Safety
+/// `s4` is valid for reads and writes of `4 n²` values for `'a`, and no reference into them is
+/// alive while the iterator advances.
+unsafe fn blocked_groups<'a, const BY_J: bool>(
+    model: &'a Model,
+    data: &'a Data,
+    ws4: &'a mut Idfoza4Ws,
+    x: &'a [f64],
+    s4: *mut f64,
+) -> impl Iterator<Item = Group> + 'a {
+    let n = model.nv;
+    (0..n).step_by(4).flat_map(move |c0| {
+        // SAFETY: the function's contract.
+        idfoza_block(model, data, ws4, x, c0, unsafe {
+            std::slice::from_raw_parts_mut(s4, 4 * n * n)
+        });
+        let w = 4.min(n - c0);
+        (0..n).map(move |m| {
+            if BY_J {
+                Group { j: c0, k: m, w, by_j: true }
+            } else {
+                Group { j: m, k: c0, w, by_j: false }
+            }
+        })
+    })
+}
+
 /// Second-order derivatives of forward dynamics at `q̈ = FD(q, q̇, τ)` (eq. eqn_FD_SO_43):
 /// `∂²q̈/∂u∂w = −M⁻¹(∂²ID/∂u∂w + ∂M/∂w · ∂FD/∂u + (∂M/∂u · ∂FD/∂w)^R)`, with the `∂M/∂q`
 /// products by IDFOZA (`O(N d)` per column) instead of tensor products. Also fills the
@@ -552,17 +585,13 @@ pub fn fd_so_derivatives(
     // cache-resident block `s4` (at u + 4 i + 4 n j) just before their groups are gathered.
     {
         let idt = fso.id.d2tau_dqdv().as_slice().as_ptr();
+        assert!(fso.s4.len() == 4 * n2);
         let s4 = fso.s4.as_mut_ptr();
-        let ws4 = &mut fso.ws4;
-        let x = data.dqdd_dv.as_slice();
-        let groups = (0..n).step_by(4).flat_map(|k0| {
-            // SAFETY: `s4` is `fso.s4` (4 n² values), not otherwise referenced while this
-            // runs: the gathers read it through raw pointers between the calls.
-            idfoza_block(model, data, ws4, x, k0, unsafe {
-                std::slice::from_raw_parts_mut(s4, 4 * n2)
-            });
-            (0..n).map(move |j| Group { j, k: k0, w: 4.min(n - k0), by_j: false })
-        });
+        // SAFETY: `s4` is `fso.s4` (4 n² values, asserted), only accessed through this pointer
+        // (writes by the iterator, reads by the gathers) until the solve returns.
+        let groups = unsafe {
+            blocked_groups::<false>(model, data, &mut fso.ws4, data.dqdd_dv.as_slice(), s4)
+        };
         let s4 = s4.cast_const();
         // SAFETY (pointers): lanes have j, k < n, so the columns of ID_qv (n (j + n k) + i) are
         // in the n³ tensor and the block entries (u + 4 i + 4 n j, u < 4, i < n) in 4 n².
@@ -588,16 +617,12 @@ pub fn fd_so_derivatives(
     // each panel needs few rows; IDFOZA of the columns j0..j0 + 4 into `s4` (at u + 4 i + 4 n k)
     // just before their groups are gathered.
     {
+        assert!(fso.s4.len() == 4 * n2);
         let s4 = fso.s4.as_mut_ptr();
-        let ws4 = &mut fso.ws4;
-        let x = data.minv.as_slice();
-        let groups = (0..n).step_by(4).flat_map(|j0| {
-            // SAFETY: as for ∂²q̈/∂q∂q̇.
-            idfoza_block(model, data, ws4, x, j0, unsafe {
-                std::slice::from_raw_parts_mut(s4, 4 * n2)
-            });
-            (0..n).map(move |k| Group { j: j0, k, w: 4.min(n - j0), by_j: true })
-        });
+        // SAFETY: `s4` is `fso.s4` (4 n² values, asserted), only accessed through this pointer
+        // (writes by the iterator, reads by the gathers) until the solve returns.
+        let groups =
+            unsafe { blocked_groups::<true>(model, data, &mut fso.ws4, data.minv.as_slice(), s4) };
         let s4 = s4.cast_const();
         // SAFETY (pointers): block entries u + 4 i + 4 n k with u < 4, i, k < n are in 4 n².
         unsafe {

@@ -33,6 +33,21 @@ pub(crate) fn comb(c: &[__m256d; 3], a: f64, b: f64, d: f64) -> __m256d {
     _mm256_fmadd_pd(c[2], _mm256_set1_pd(d), x)
 }
 
+/// The placement `ᵒM_p · M` from the parent's world rotation columns `rp` and translation `tp`:
+/// rotation columns `Σ_l rp_l M.rot_lk` and translation `tp + rp · M.trans`.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+pub(crate) fn compose(
+    rp: &[__m256d; 3],
+    tp: __m256d,
+    m: &crate::spatial::Transform,
+) -> ([__m256d; 3], __m256d) {
+    let s = m.rot.as_slice();
+    let r = [comb(rp, s[0], s[1], s[2]), comb(rp, s[3], s[4], s[5]), comb(rp, s[6], s[7], s[8])];
+    let tl = &m.trans;
+    (r, _mm256_add_pd(comb(rp, tl.x, tl.y, tl.z), tp))
+}
+
 /// `a × b` on the first three lanes (lane 3: `a₃b₃ − a₃b₃`).
 #[target_feature(enable = "avx2,fma")]
 #[inline]
