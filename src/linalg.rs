@@ -322,274 +322,6 @@ unsafe fn transpose_avx(src: &[f64], lds: usize, m: usize, n: usize, dst: &mut [
     }
 }
 
-/// One term of the right-hand sides of a group of 4 lanes (see [`gather_group`]): its value
-/// for lane `u`, row `i`.
-#[derive(Clone, Copy, Debug)]
-pub(crate) enum LaneSrc {
-    /// `p[u][i]` (one contiguous column per lane).
-    Cols([*const f64; 4]),
-    /// `p[u + stride·i]` (the lanes contiguous in each row).
-    Rows(*const f64, usize),
-    /// `p[u][stride·i]`.
-    Strided([*const f64; 4], usize),
-}
-
-/// Value of `s` for lane `u`, row `i`.
-///
-/// # Safety
-/// The addressed value is readable.
-#[inline(always)]
-unsafe fn lane_src_val(s: &LaneSrc, u: usize, i: usize) -> f64 {
-    // SAFETY: the caller's.
-    unsafe {
-        match *s {
-            LaneSrc::Cols(p) => *p[u].add(i),
-            LaneSrc::Rows(p, st) => *p.add(u + st * i),
-            LaneSrc::Strided(p, st) => *p[u].add(st * i),
-        }
-    }
-}
-
-/// Gathers a group of 4 lanes into rows: `rows[l0 + u + ld·i] ← Σ_s srcs[s](u, i)` for `i < m`,
-/// `u < w` (a transposition of the column sums), zero for the lanes `w ≤ u < 4`. Returns
-/// whether any gathered value is non-zero (or NaN).
-///
-/// # Safety
-/// For `u < w`, `i < m` every value addressed by `srcs` is readable; `w ≤ 4`.
-pub(crate) unsafe fn gather_group(
-    srcs: &[LaneSrc],
-    w: usize,
-    m: usize,
-    rows: &mut [f64],
-    ld: usize,
-    l0: usize,
-) -> bool {
-    assert!(w <= 4 && l0 + 4 <= ld && (m == 0 || rows.len() >= (m - 1) * ld + ld));
-    #[cfg(target_arch = "x86_64")]
-    if crate::simd::avx2_fma() {
-        // SAFETY: AVX is available; the sources as in the contract, `rows` as asserted.
-        unsafe { return gather_group_avx(srcs, w, m, rows, ld, l0) };
-    }
-    let mut nz = false;
-    for i in 0..m {
-        for u in 0..4 {
-            let mut v = 0.0;
-            if u < w {
-                for s in srcs {
-                    // SAFETY: u < w, i < m (caller's contract).
-                    v += unsafe { lane_src_val(s, u, i) };
-                }
-            }
-            nz |= v != 0.0 || v.is_nan();
-            rows[l0 + u + ld * i] = v;
-        }
-    }
-    nz
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-unsafe fn gather_group_avx(
-    srcs: &[LaneSrc],
-    w: usize,
-    m: usize,
-    rows: &mut [f64],
-    ld: usize,
-    l0: usize,
-) -> bool {
-    use std::arch::x86_64::*;
-    let zero = _mm256_setzero_pd();
-    // SAFETY: only lanes u < w and rows i < m of the sources are read (masked loads on the
-    // ragged ends); stores go to rows < m, lanes l0..l0 + 4 ≤ ld (asserted by the caller).
-    unsafe {
-        let pr = rows.as_mut_ptr().add(l0);
-        // One pass per source (the first one stores, the others add), then the zero test.
-        match srcs.split_first() {
-            None => (0..m).for_each(|i| _mm256_storeu_pd(pr.add(ld * i), zero)),
-            Some((first, rest)) => {
-                gather_pass::<false>(first, w, m, pr, ld);
-                for s in rest {
-                    gather_pass::<true>(s, w, m, pr, ld);
-                }
-            }
-        }
-        let mut nz = zero;
-        for i in 0..m {
-            let v = _mm256_loadu_pd(pr.add(ld * i));
-            nz = _mm256_or_pd(nz, _mm256_cmp_pd::<_CMP_NEQ_UQ>(v, zero));
-        }
-        _mm256_movemask_pd(nz) != 0
-    }
-}
-
-/// One source of [`gather_group_avx`] into the 4-lane rows at `pr` (stride `ld`): stored, or
-/// added to what is there if `ADD`; lanes `w ≤ u < 4` get zeros.
-///
-/// # Safety
-/// As [`gather_group`], with `pr` the first lane of the group.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-#[inline]
-unsafe fn gather_pass<const ADD: bool>(s: &LaneSrc, w: usize, m: usize, pr: *mut f64, ld: usize) {
-    use std::arch::x86_64::*;
-    let mk = |c: usize| {
-        let b = |k: usize| if c > k { -1i64 } else { 0 };
-        _mm256_setr_epi64x(b(0), b(1), b(2), b(3))
-    };
-    let zero = _mm256_setzero_pd();
-    // SAFETY: the caller's contract (see `gather_group`).
-    unsafe {
-        let put = |q: *mut f64, v: __m256d| {
-            if ADD {
-                _mm256_storeu_pd(q, _mm256_add_pd(_mm256_loadu_pd(q), v));
-            } else {
-                _mm256_storeu_pd(q, v);
-            }
-        };
-        match *s {
-            LaneSrc::Cols(p) => {
-                let rm = mk(m % 4);
-                let mut i = 0;
-                while i < m {
-                    let h = (m - i).min(4);
-                    let mut c = [zero; 4];
-                    for (u, cu) in c.iter_mut().enumerate().take(w) {
-                        *cu = if h == 4 {
-                            _mm256_loadu_pd(p[u].add(i))
-                        } else {
-                            _mm256_maskload_pd(p[u].add(i), rm)
-                        };
-                    }
-                    for (t, v) in tile4(c).into_iter().enumerate().take(h) {
-                        put(pr.add(ld * (i + t)), v);
-                    }
-                    i += 4;
-                }
-            }
-            LaneSrc::Rows(p, st) => {
-                if w == 4 {
-                    for i in 0..m {
-                        put(pr.add(ld * i), _mm256_loadu_pd(p.add(st * i)));
-                    }
-                } else {
-                    let lm = mk(w);
-                    for i in 0..m {
-                        put(pr.add(ld * i), _mm256_maskload_pd(p.add(st * i), lm));
-                    }
-                }
-            }
-            LaneSrc::Strided(p, st) => {
-                for i in 0..m {
-                    let o = st * i;
-                    let g = |u: usize| if u < w { *p[u].add(o) } else { 0.0 };
-                    put(pr.add(ld * i), _mm256_setr_pd(g(0), g(1), g(2), g(3)));
-                }
-            }
-        }
-    }
-}
-
-/// Hints the caches to fetch the `len` values at `p` into L2 (no effect on results): used for
-/// the output columns of a panel well before it is scattered, so that the stores then find
-/// their lines in L2 instead of waiting on read-for-ownership misses.
-#[inline]
-pub(crate) fn prefetch_l2(p: *const f64, len: usize) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_MM_HINT_T1, _mm_prefetch};
-        if len == 0 {
-            return;
-        }
-        // One hint per 64-byte line, the last value's line included.
-        let mut off = 0;
-        while off < len {
-            // SAFETY: prefetching is a hint that never faults, whatever the address; the
-            // addresses are formed with wrapping arithmetic.
-            unsafe { _mm_prefetch::<_MM_HINT_T1>(p.wrapping_add(off).cast::<i8>()) };
-            off += 8;
-        }
-        // SAFETY: as above.
-        unsafe { _mm_prefetch::<_MM_HINT_T1>(p.wrapping_add(len - 1).cast::<i8>()) };
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (p, len);
-}
-
-/// Scatters rows into columns: `dsts[l][d][i] ← rows[l + ld·i]` for `i < m`, `l < dsts.len()`,
-/// `d < 2` (the inverse of [`gather_cols_to_rows`] with one source; give the same pointer twice
-/// for a single destination). Lanes whose first pointer is null are skipped.
-///
-/// # Safety
-/// Every non-null `dsts[l][0]` and its `dsts[l][1]` are valid for writing `m` values.
-pub(crate) unsafe fn scatter_rows_to_cols(
-    rows: &[f64],
-    ld: usize,
-    m: usize,
-    dsts: &[[*mut f64; 2]],
-) {
-    let w = dsts.len();
-    assert!(w.next_multiple_of(4) <= ld && (m == 0 || rows.len() >= (m - 1) * ld + ld));
-    #[cfg(target_arch = "x86_64")]
-    if crate::simd::avx2_fma() {
-        // SAFETY: AVX is available; the pointers as in the contract, `rows` as asserted.
-        unsafe { return scatter_rows_to_cols_avx(rows, ld, m, dsts) };
-    }
-    for (l, d) in dsts.iter().enumerate().filter(|(_, d)| !d[0].is_null()) {
-        for i in 0..m {
-            // SAFETY: i < m (caller's contract).
-            unsafe {
-                *d[0].add(i) = rows[l + ld * i];
-                *d[1].add(i) = rows[l + ld * i];
-            }
-        }
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-unsafe fn scatter_rows_to_cols_avx(rows: &[f64], ld: usize, m: usize, dsts: &[[*mut f64; 2]]) {
-    use std::arch::x86_64::*;
-    let w = dsts.len();
-    let rm =
-        _mm256_setr_epi64x(-1, if m % 4 > 1 { -1 } else { 0 }, if m % 4 > 2 { -1 } else { 0 }, 0);
-    let pr = rows.as_ptr();
-    // SAFETY: loads read rows < m, lanes < ld (asserted by the caller); stores write rows < m
-    // (masked on the ragged block) of lanes < w.
-    unsafe {
-        let mut l0 = 0;
-        while l0 < w {
-            let mut i = 0;
-            while i < m {
-                let full = i + 4 <= m;
-                let mut r = [_mm256_setzero_pd(); 4];
-                for (t, rt) in r.iter_mut().enumerate().take(m - i) {
-                    *rt = _mm256_loadu_pd(pr.add(l0 + ld * (i + t)));
-                }
-                let c = tile4(r);
-                for (u, cu) in c.iter().enumerate().take(w - l0) {
-                    let [p0, p1] = dsts[l0 + u];
-                    let np = if p0.is_null() {
-                        0
-                    } else if p1 == p0 {
-                        1
-                    } else {
-                        2
-                    };
-                    for p in [p0, p1].into_iter().take(np) {
-                        if full {
-                            _mm256_storeu_pd(p.add(i), *cu);
-                        } else {
-                            _mm256_maskstore_pd(p.add(i), rm, *cu);
-                        }
-                    }
-                }
-                i += 4;
-            }
-            l0 += 4;
-        }
-    }
-}
-
 /// In-place inverse of a symmetric positive-definite `m×m` matrix `a` (column-major, full
 /// storage) by Gauss–Jordan elimination without pivoting: pivot `k` maps
 /// `a_ij ← a_ij − a_ik a_kj / d`, `a_kj ← a_kj / d`, `a_ik ← −a_ik / d`, `a_kk ← 1/d` with
@@ -871,6 +603,236 @@ unsafe fn spd_inverse_avx2_regs<const V: usize>(a: &mut [f64], m: usize, tol: f6
         }
     }
     true
+}
+
+/// Four output columns of `−A B` where only some columns of `A` take part (see
+/// [`neg_gemm4_sparse`]).
+pub(crate) struct Gemm4<'a> {
+    /// `A`, column-major with leading dimension `lda`; every column is readable (and zero, or at
+    /// least finite, past the rows wanted) up to `rows` rounded up to a multiple of 8.
+    pub a: &'a [f64],
+    /// Leading dimension of `a`.
+    pub lda: usize,
+    /// Rows of the result.
+    pub rows: usize,
+    /// Columns `idx[t]` of `A` taking part.
+    pub idx: &'a [u32],
+    /// `B` restricted to the rows `idx`: `b[4 t + u]` multiplies column `idx[t]` of `A` into
+    /// output lane `u`.
+    pub b: &'a [f64],
+}
+
+/// `out[u][r] ← −Σ_t A[r, idx[t]] · b[4 t + u]` for `r < rows`, and the same into `mirror[u]`,
+/// for the lanes `u < 4` whose pointer is non-null: a product whose inner dimension is only the
+/// (structurally or numerically) non-zero rows of the right-hand sides, vectorised down the
+/// contiguous columns of `A` and of the outputs, four output columns sharing each load of `A`.
+///
+/// # Safety
+/// Every non-null `out[u]` and `mirror[u]` is valid for writing `rows` values and does not overlap
+/// `g.a` or `g.b`.
+pub(crate) unsafe fn neg_gemm4_sparse(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror: &[*mut f64; 4]) {
+    let padded = g.rows.div_ceil(8) * 8;
+    assert!(
+        g.b.len() >= 4 * g.idx.len()
+            && g.rows <= g.lda
+            && g.idx.iter().all(|&l| (l as usize) * g.lda + padded <= g.a.len()),
+        "neg_gemm4_sparse: dimension mismatch"
+    );
+    if g.rows == 0 {
+        return;
+    }
+    // SAFETY: every column `idx[t]` of `a` is readable up to `padded ≥` the vector-rounded
+    // rows (asserted), `b` holds 4 values per index; the outputs are the caller's contract.
+    unsafe {
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx512f() {
+            return gemm4_avx512(g, out, mirror);
+        }
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2_fma() {
+            return gemm4_avx2(g, out, mirror);
+        }
+        gemm4_portable(g, out, mirror)
+    }
+}
+
+/// Portable [`neg_gemm4_sparse`].
+///
+/// # Safety
+/// As [`neg_gemm4_sparse`], after its checks.
+unsafe fn gemm4_portable(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror: &[*mut f64; 4]) {
+    let mut acc = [0.0; 4];
+    for r in 0..g.rows {
+        acc.fill(0.0);
+        for (t, &l) in g.idx.iter().enumerate() {
+            let x = g.a[r + g.lda * l as usize];
+            for (u, a) in acc.iter_mut().enumerate() {
+                *a -= x * g.b[4 * t + u];
+            }
+        }
+        for u in 0..4 {
+            for p in [out[u], mirror[u]] {
+                if !p.is_null() {
+                    // SAFETY: the caller's contract (r < rows).
+                    unsafe { *p.add(r) = acc[u] };
+                }
+            }
+        }
+    }
+}
+
+/// [`neg_gemm4_sparse`] with AVX2/FMA: row chunks of up to 3 vectors of 4 (12 accumulators).
+///
+/// # Safety
+/// As [`neg_gemm4_sparse`], after its checks; AVX2 and FMA available.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn gemm4_avx2(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror: &[*mut f64; 4]) {
+    let nvec = g.rows.div_ceil(4);
+    let mut v0 = 0;
+    // SAFETY: the caller's contract.
+    unsafe {
+        while v0 < nvec {
+            match nvec - v0 {
+                1 => chunk_avx2::<1>(g, v0, out, mirror),
+                2 => chunk_avx2::<2>(g, v0, out, mirror),
+                _ => chunk_avx2::<3>(g, v0, out, mirror),
+            }
+            v0 += 3;
+        }
+    }
+}
+
+/// `V` vectors of 4 rows from vector `v0` of [`gemm4_avx2`], the last one stored under the
+/// mask of the rows left.
+///
+/// # Safety
+/// As [`gemm4_avx2`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+unsafe fn chunk_avx2<const V: usize>(
+    g: &Gemm4<'_>,
+    v0: usize,
+    out: &[*mut f64; 4],
+    mirror: &[*mut f64; 4],
+) {
+    use std::arch::x86_64::*;
+    let r0 = 4 * v0;
+    let left = g.rows - r0 - 4 * (V - 1);
+    let m = |k: usize| if left > k { -1i64 } else { 0 };
+    let mask = _mm256_setr_epi64x(m(0), m(1), m(2), m(3));
+    // SAFETY: the caller's contract: columns readable to the padded rows, `b` 4 per index,
+    // outputs writable for `rows` values (the last vector masked to them).
+    unsafe {
+        let mut acc = [[_mm256_setzero_pd(); V]; 4];
+        let a = g.a.as_ptr().add(r0);
+        let b = g.b.as_ptr();
+        for (t, &l) in g.idx.iter().enumerate() {
+            let col = a.add(g.lda * l as usize);
+            let mut x = [_mm256_setzero_pd(); V];
+            for (v, xv) in x.iter_mut().enumerate() {
+                *xv = _mm256_loadu_pd(col.add(4 * v));
+            }
+            for (u, acc_u) in acc.iter_mut().enumerate() {
+                let s = _mm256_broadcast_sd(&*b.add(4 * t + u));
+                for v in 0..V {
+                    acc_u[v] = _mm256_fnmadd_pd(x[v], s, acc_u[v]);
+                }
+            }
+        }
+        for (u, acc_u) in acc.iter().enumerate() {
+            for p in [out[u], mirror[u]] {
+                if !p.is_null() {
+                    let p = p.add(r0);
+                    for (v, x) in acc_u[..V - 1].iter().enumerate() {
+                        _mm256_storeu_pd(p.add(4 * v), *x);
+                    }
+                    _mm256_maskstore_pd(p.add(4 * (V - 1)), mask, acc_u[V - 1]);
+                }
+            }
+        }
+    }
+}
+
+/// [`neg_gemm4_sparse`] with AVX-512F: row chunks of up to 6 vectors of 8 (24 accumulators, 4
+/// broadcasts and one column vector: 29 of the 32 registers), the vectors split evenly.
+///
+/// # Safety
+/// As [`neg_gemm4_sparse`], after its checks; AVX-512F available.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn gemm4_avx512(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror: &[*mut f64; 4]) {
+    let nvec = g.rows.div_ceil(8);
+    let mut v0 = 0;
+    // SAFETY: the caller's contract.
+    unsafe {
+        // nvec vectors in ⌈nvec / 6⌉ chunks of as even sizes as can be (≤ 6).
+        let chunks = nvec.div_ceil(6);
+        for i in 0..chunks {
+            let c = nvec / chunks + usize::from(i < nvec % chunks);
+            match c {
+                1 => chunk_avx512::<1>(g, v0, out, mirror),
+                2 => chunk_avx512::<2>(g, v0, out, mirror),
+                3 => chunk_avx512::<3>(g, v0, out, mirror),
+                4 => chunk_avx512::<4>(g, v0, out, mirror),
+                5 => chunk_avx512::<5>(g, v0, out, mirror),
+                _ => chunk_avx512::<6>(g, v0, out, mirror),
+            }
+            v0 += c;
+        }
+    }
+}
+
+/// `V` vectors of 8 rows from vector `v0` of [`gemm4_avx512`], the last one stored under the
+/// mask of the rows left.
+///
+/// # Safety
+/// As [`gemm4_avx512`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[inline]
+unsafe fn chunk_avx512<const V: usize>(
+    g: &Gemm4<'_>,
+    v0: usize,
+    out: &[*mut f64; 4],
+    mirror: &[*mut f64; 4],
+) {
+    use std::arch::x86_64::*;
+    let r0 = 8 * v0;
+    // Rows in the chunk's last vector (8 unless it is the last chunk).
+    let left = (g.rows - r0 - 8 * (V - 1)).min(8);
+    let mask = ((1u16 << left) - 1) as u8;
+    // SAFETY: the caller's contract: columns readable to the padded rows, `b` 4 per index,
+    // outputs writable for `rows` values (the last vector masked to them).
+    unsafe {
+        let mut acc = [[_mm512_setzero_pd(); V]; 4];
+        let a = g.a.as_ptr().add(r0);
+        let b = g.b.as_ptr();
+        for (t, &l) in g.idx.iter().enumerate() {
+            let col = a.add(g.lda * l as usize);
+            let s: [__m512d; 4] = std::array::from_fn(|u| _mm512_set1_pd(*b.add(4 * t + u)));
+            // One vector of the column at a time, into the four lanes' accumulators.
+            #[allow(clippy::needless_range_loop)]
+            for v in 0..V {
+                let x = _mm512_loadu_pd(col.add(8 * v));
+                for u in 0..4 {
+                    acc[u][v] = _mm512_fnmadd_pd(x, s[u], acc[u][v]);
+                }
+            }
+        }
+        for (u, acc_u) in acc.iter().enumerate() {
+            for p in [out[u], mirror[u]] {
+                if !p.is_null() {
+                    let p = p.add(r0);
+                    for (v, x) in acc_u[..V - 1].iter().enumerate() {
+                        _mm512_storeu_pd(p.add(8 * v), *x);
+                    }
+                    _mm512_mask_storeu_pd(p.add(8 * (V - 1)), mask, acc_u[V - 1]);
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]

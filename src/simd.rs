@@ -137,6 +137,8 @@ mod tests {
         let cases: Vec<(Model, Vec<&str>)> = vec![
             (random_tree(6, 83, false), vec![]),
             (random_tree(14, 91, true), vec![]),
+            // nv > 48: the FD-SO products split the rows of M⁻¹ into several chunks.
+            (random_tree(53, 17, true), vec![]),
             // Revolute joints about ±eₖ: angles not contiguous in q (two chunks of the 4-lane
             // sin/cos), and contiguous with a partial chunk.
             (serial_chain(7), vec![]),

@@ -7,16 +7,13 @@ use super::id_so::{SoData, id_so_unchecked};
 use super::zero::Avx4;
 use super::zero::{Idfoza4Ws, Lane4, idfoza4_core};
 use crate::algo::Data;
-use crate::algo::internal::{
-    DescView, DofDescendants, aba_unchecked, check_fext, ltl_in_place, ltl_solve_fd,
-    ltl_solve_rows_head,
-};
+use crate::algo::internal::{aba_unchecked, check_fext, ltl_in_place, ltl_solve_fd};
 use crate::error::Result;
-use crate::linalg::{LaneSrc, gather_group, prefetch_l2, scatter_rows_to_cols, transpose_strided};
+use crate::linalg::{Gemm4, neg_gemm4_sparse, transpose_strided};
 use crate::model::{Model, check_vec};
 use crate::spatial::Force;
 use crate::tensor::Tensor3;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DVector;
 
 /// FO FD part shared by first and second order: from `data.m`, `data.dtau_dq`, `data.dtau_dv`
 /// (at `q̈ = FD`), factorise `M` and fill `dqdd_dq`, `dqdd_dv`, `minv`.
@@ -148,9 +145,6 @@ pub fn fd_derivatives(
     fd_fo_from_id(model, data)
 }
 
-/// Right-hand-side columns solved side by side in one panel.
-const P: usize = 64;
-
 /// Second-order forward-dynamics derivatives (`nv×nv×nv` each) and their workspace.
 #[derive(Clone, Debug)]
 pub struct FdSoData {
@@ -162,27 +156,55 @@ pub struct FdSoData {
     d2qdd_dqdv: Tensor3,
     d2qdd_dtaudq: Tensor3,
     ws4: Idfoza4Ws,
-    /// IDFOZA results `S[(i, j, k)] = IDFOZA(X[:, j])[i][k]` at `i + n j + n² k`; only the
-    /// structurally non-zero entries (the same for every `X`) are ever written.
+    /// IDFOZA results `S[(i, j, k)] = IDFOZA(X[:, j])[i][k]` by blocks of four `j`: at
+    /// `u + 4 i + 4 n k + 4 n² b` for `j = 4 b + u` (see [`idfoza_block`]), zero past `nv`.
     s: Vec<f64>,
     /// IDFOZA of four right-hand sides `X[:, j0..j0 + 4]`: `(u, i, k)` at `u + 4 i + 4 n k`.
     s4: Vec<f64>,
-    /// Panel of [`P`] right-hand sides stored by rows for the solve: `(i, l)` at `i P + l`.
-    panel: Vec<f64>,
+    /// `M⁻¹` with its columns padded with zeros to [`Self::ld`] rows (whole vectors of 8).
+    minv: Vec<f64>,
+    /// Leading dimension of `minv`: `nv` rounded up to a multiple of 8.
+    ld: usize,
+    /// Words of 64 bits per DoF set.
+    words: usize,
+    /// `related[words j..words (j + 1)]`: the DoFs `l` equal to `j`, or an ancestor or a
+    /// descendant of it, as bits. Row `l` of `∂M/∂q_j` and of `∂τ/∂q_j` vanishes outside it, and
+    /// column `(j, k)` of `∂²q̈/∂q̇²` vanishes unless `k` is in it.
+    related: Vec<u64>,
+    /// `related4[words g..]`: the union of the related sets of the DoFs `4 g..4 g + 4`.
+    related4: Vec<u64>,
+    /// One group's row set (scratch, `words` values).
+    set: Vec<u64>,
+    /// One group's non-zero right-hand-side rows (`nv` values) and their values (4 per row).
+    idx: Vec<u32>,
+    rhs: Vec<f64>,
     /// One `n×n` page (transposition scratch).
     page: Vec<f64>,
-    /// Descendant DoF lists for the pulling first sweep of the solves.
-    desc: DofDescendants,
-    /// `related[j + n k]`: DoFs `j` and `k` are equal or one is an ancestor of the other (else
-    /// the column `(j, k)` of `∂²q̈/∂q̇²` is structurally zero and never written; `id.check`
-    /// keeps the workspace to the tree it was built for).
-    related: Vec<bool>,
 }
 
 impl FdSoData {
     /// Workspace for `model`.
     pub fn new(model: &Model) -> Self {
         let n = model.nv;
+        let words = n.div_ceil(64).max(1);
+        let mut related = vec![0u64; n * words];
+        for j in 0..n {
+            for k in 0..n {
+                if j == k
+                    || model.ancestors_of_dof(k).contains(&j)
+                    || model.ancestors_of_dof(j).contains(&k)
+                {
+                    related[words * j + k / 64] |= 1 << (k % 64);
+                }
+            }
+        }
+        let mut related4 = vec![0u64; n.div_ceil(4) * words];
+        for j in 0..n {
+            for w in 0..words {
+                related4[words * (j / 4) + w] |= related[words * j + w];
+            }
+        }
+        let ld = n.div_ceil(8) * 8;
         Self {
             id: SoData::without_dm_dq(model),
             d2qdd_dq2: Tensor3::zeros(n, n, n),
@@ -190,19 +212,17 @@ impl FdSoData {
             d2qdd_dqdv: Tensor3::zeros(n, n, n),
             d2qdd_dtaudq: Tensor3::zeros(n, n, n),
             ws4: Idfoza4Ws::new(model),
-            s: vec![0.0; n * n * n],
+            s: vec![0.0; 4 * n * n * n.div_ceil(4)],
             s4: vec![0.0; 4 * n * n],
-            panel: vec![0.0; n * P],
+            minv: vec![0.0; ld * n],
+            ld,
+            words,
+            related,
+            related4,
+            set: vec![0; words],
+            idx: vec![0; n],
+            rhs: vec![0.0; 4 * n],
             page: vec![0.0; n * n],
-            desc: DofDescendants::new(model),
-            related: (0..n * n)
-                .map(|c| {
-                    let (j, k) = (c % n, c / n);
-                    j == k
-                        || model.ancestors_of_dof(k).contains(&j)
-                        || model.ancestors_of_dof(j).contains(&k)
-                })
-                .collect(),
         }
     }
     /// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂q_j)`.
@@ -223,119 +243,83 @@ impl FdSoData {
     }
 }
 
-/// How [`solve_neg_groups`] stores each solved column `(j, k)`.
-#[derive(Clone, Copy, PartialEq)]
-enum Store {
-    /// Column `(j, k)` only.
-    Plain,
-    /// Column `(j, k)`, and also column `(k, j)` when `j < k` and `mirror(j, k)` (a symmetry
-    /// in `(j, k)`).
-    Mirror,
-    /// Column `(j, k)`, exact in rows `i ≤ j` only (the caller completes a symmetry in `(i, j)`);
-    /// rows past the panel's last solved row are left as they were.
-    Head,
+/// The dense `M⁻¹` and the scratch of the products `−M⁻¹ b` (see [`solve_group`]).
+struct Products<'a> {
+    minv: &'a [f64],
+    ld: usize,
+    n: usize,
+    words: usize,
+    related: &'a [u64],
+    related4: &'a [u64],
+    set: &'a mut [u64],
+    idx: &'a mut [u32],
+    rhs: &'a mut [f64],
 }
 
-/// A group of up to 4 right-hand-side columns: `(j + u, k)` (`by_j`) or `(j, k + u)`, `u < w`.
-#[derive(Clone, Copy)]
-struct Group {
-    j: usize,
-    k: usize,
-    w: usize,
-    by_j: bool,
-}
-
-impl Group {
-    fn lane(&self, u: usize) -> (usize, usize) {
-        if self.by_j { (self.j + u, self.k) } else { (self.j, self.k + u) }
+impl<'a> Products<'a> {
+    /// DoF `j`'s related set (see [`FdSoData`]).
+    fn related(&self, j: usize) -> &'a [u64] {
+        &self.related[self.words * j..self.words * (j + 1)]
     }
-}
+    /// The union of the related sets of the DoFs `j0..j0 + 4` (`j0` a multiple of 4).
+    fn related4(&self, j0: usize) -> &'a [u64] {
+        &self.related4[self.words * (j0 / 4)..self.words * (j0 / 4 + 1)]
+    }
+    /// `set ← a ∪ b`, or `a ∩ b` if `and` (each `words` values).
+    #[inline(always)]
+    fn build_set(&mut self, a: &[u64], b: &[u64], and: bool) {
+        for ((s, x), y) in self.set.iter_mut().zip(a).zip(b) {
+            *s = if and { x & y } else { x | y };
+        }
+    }
 
-/// Solves `out[:, j, k] = −M⁻¹ b_jk` for the columns of `groups`, with `b_jk` the sum of the
-/// terms `src(group)` (see [`LaneSrc`]). All-zero groups give zero columns without a solve;
-/// the others go through the tree-sparse `LᵀDL` solve [`P`] columns at a time in the
-/// L1-resident `panel` (gathered and stored by 4×4 transpositions).
-///
-/// # Safety
-/// Every term returned by `src(g)` addresses readable values for the lanes `u < g.w`, rows
-/// `i < n`.
-#[allow(clippy::too_many_arguments)]
-unsafe fn solve_neg_groups(
-    model: &Model,
-    ltl: &DMatrix<f64>,
-    desc: DescView<'_>,
-    panel: &mut [f64],
-    out: &mut Tensor3,
-    groups: impl Iterator<Item = Group>,
-    src: impl Fn(&Group) -> ([LaneSrc; 3], usize),
-    store: Store,
-    mirror: impl Fn(usize, usize) -> bool,
-) {
-    let n = model.nv;
-    let out = out.as_mut_slice();
-    assert!(out.len() == n * n * n && panel.len() == n * P);
-    // All writes to `out` below go through `base`.
-    let base = out.as_mut_ptr();
-    let mut dsts = [[std::ptr::null_mut::<f64>(); 2]; P];
-    let mut rows_end = 0;
-    let mut l0 = 0;
-    let flush = |panel: &mut [f64], l0: usize, rows_end: usize, dsts: &[[*mut f64; 2]]| {
-        ltl_solve_rows_head(model, ltl, desc, panel, P, l0, -1.0, rows_end);
-        // Rows past `rows_end` were not solved (`Store::Head`): not stored either.
-        // SAFETY: every non-null destination is a column of `out` (offset n (j + n k) with
-        // j, k < n, so n ≥ rows_end values fit in n³).
-        unsafe { scatter_rows_to_cols(panel, P, rows_end, &dsts[..l0]) };
-    };
-    for g in groups {
-        assert!(g.w <= 4 && g.lane(g.w - 1).0 < n && g.lane(g.w - 1).1 < n);
-        let (terms, nt) = src(&g);
-        // SAFETY: the caller's contract on `src`; l0 + 4 ≤ P.
-        let nz = unsafe { gather_group(&terms[..nt], g.w, n, panel, P, l0) };
-        for u in 0..4 {
-            let d = &mut dsts[l0 + u];
-            *d = [std::ptr::null_mut(); 2];
-            if u < g.w {
-                let (j, k) = g.lane(u);
-                d[0] = base.wrapping_add(n * (j + n * k));
-                d[1] = if store == Store::Mirror && j < k && mirror(j, k) {
-                    base.wrapping_add(n * (k + n * j))
-                } else {
-                    d[0]
-                };
+    /// The four columns `out[u] ← −M⁻¹ b_u` (rows `< rows`; also into `mirror[u]`; lanes with a
+    /// null `out[u]` are not stored), with `b_u[l] = val(l)[u]` for the rows `l` of `set` and zero
+    /// elsewhere. Rows whose four values are all zero are left out of the product; if all are,
+    /// the outputs are set to zero.
+    ///
+    /// # Safety
+    /// `val(l)` may be called for every row `l` of `set`; every non-null `out[u]` and
+    /// `mirror[u]` is valid for writing `rows ≤ nv` values, and none overlaps this workspace.
+    #[inline(always)]
+    unsafe fn solve_group(
+        &mut self,
+        rows: usize,
+        val: impl Fn(usize) -> [f64; 4],
+        out: [*mut f64; 4],
+        mirror: [*mut f64; 4],
+    ) {
+        let mut cnt = 0;
+        for (w, &word) in self.set.iter().enumerate() {
+            let mut bits = word;
+            while bits != 0 {
+                let l = 64 * w + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let b = val(l);
+                // Stored in any case, kept if non-zero (NaN counts as non-zero and propagates).
+                debug_assert!(cnt < self.n);
+                // SAFETY: cnt < the number of rows of `set` ≤ nv = idx.len() = rhs.len() / 4.
+                unsafe {
+                    *self.idx.get_unchecked_mut(cnt) = l as u32;
+                    *self.rhs.as_mut_ptr().add(4 * cnt).cast::<[f64; 4]>() = b;
+                }
+                cnt += usize::from(b.iter().fold(false, |a, x| a | (*x != 0.0)));
             }
         }
-        if !nz {
-            for d in &dsts[l0..l0 + g.w] {
-                for &p in d {
-                    // SAFETY: a column of `out` (see `flush`).
-                    unsafe { std::ptr::write_bytes(p, 0, n) };
+        if cnt == 0 {
+            for p in out.into_iter().chain(mirror) {
+                if !p.is_null() {
+                    // SAFETY: the caller's contract.
+                    unsafe { std::ptr::write_bytes(p, 0, rows) };
                 }
             }
-            continue;
+            return;
         }
-        let rows = if store == Store::Head {
-            rows_end = rows_end.max(g.lane(g.w - 1).0 + 1);
-            g.lane(g.w - 1).0 + 1
-        } else {
-            rows_end = n;
-            n
-        };
-        // The destination columns into L2 while the panel fills and is solved.
-        for d in &dsts[l0..l0 + g.w] {
-            prefetch_l2(d[0], rows);
-            if d[1] != d[0] {
-                prefetch_l2(d[1], rows);
-            }
-        }
-        l0 += 4;
-        if l0 == P {
-            flush(panel, l0, rows_end, &dsts);
-            l0 = 0;
-            rows_end = 0;
-        }
-    }
-    if l0 > 0 {
-        flush(panel, l0, rows_end, &dsts);
+        let g = Gemm4 { a: self.minv, lda: self.ld, rows, idx: &self.idx[..cnt], b: self.rhs };
+        debug_assert!(rows <= self.n);
+        // SAFETY: the caller's contract on the outputs; `minv` has `ld ≥` rows rounded up to 8
+        // values per column (zero padded) for every DoF index of `set`.
+        unsafe { neg_gemm4_sparse(&g, &out, &mirror) };
     }
 }
 
@@ -349,61 +333,6 @@ fn symmetrise_pages(n: usize, t: &mut [f64], tmp: &mut [f64]) {
             let c = n * j;
             page[c + j + 1..c + n].copy_from_slice(&tmp[c + j + 1..c + n]);
         }
-    }
-}
-
-/// `s[j + n i + n² k] ← IDFOZA(x[:, j])[i][k]` for the structurally non-zero `(i, k)`, four
-/// right-hand sides at a time (vectorised with AVX2 when available).
-fn idfoza_tensor(model: &Model, data: &Data, ws: &mut Idfoza4Ws, x: &[f64], s: &mut [f64]) {
-    #[cfg(target_arch = "x86_64")]
-    if crate::simd::avx2_fma() {
-        // SAFETY: the CPU supports the enabled features.
-        unsafe { return idfoza_tensor_avx2(model, data, ws, x, s) };
-    }
-    idfoza_tensor_impl::<[f64; 4]>(model, data, ws, x, s)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn idfoza_tensor_avx2(
-    model: &Model,
-    data: &Data,
-    ws: &mut Idfoza4Ws,
-    x: &[f64],
-    s: &mut [f64],
-) {
-    // SAFETY: AVX2 and FMA are enabled here, as `Avx4` needs.
-    idfoza_tensor_impl::<Avx4>(model, data, ws, x, s)
-}
-
-#[inline(always)]
-fn idfoza_tensor_impl<V: Lane4>(
-    model: &Model,
-    data: &Data,
-    ws: &mut Idfoza4Ws,
-    x: &[f64],
-    s: &mut [f64],
-) {
-    let n = model.nv;
-    let n2 = n * n;
-    assert!(s.len() == n * n2 && x.len() == n2);
-    let mut j0 = 0;
-    while j0 < n {
-        let nl = 4.min(n - j0);
-        // SAFETY: i, k < n and j = j0 + l < n for l < nl, so every index is < n³ = s.len().
-        if nl == 4 {
-            // Full groups: the four lanes are contiguous.
-            idfoza4_core::<V>(model, data, ws, x, n, j0, 4, |i, k, z| unsafe {
-                *s.as_mut_ptr().add(j0 + n * i + n2 * k).cast::<[f64; 4]>() = *z;
-            });
-        } else {
-            idfoza4_core::<V>(model, data, ws, x, n, j0, nl, |i, k, z| unsafe {
-                for (l, zl) in z.iter().enumerate().take(nl) {
-                    *s.get_unchecked_mut(j0 + l + n * i + n2 * k) = *zl;
-                }
-            });
-        }
-        j0 += 4;
     }
 }
 
@@ -458,48 +387,18 @@ fn idfoza_block_impl<V: Lane4>(
     });
 }
 
-/// The groups of the `n²` columns that use `IDFOZA(x[:, c0..c0 + 4])`, by `c0` (step 4): for
-/// each `c0`, the block `s4 ← IDFOZA(x[:, c0..c0 + 4])` (see [`idfoza_block`]) is computed when
-/// the iterator reaches it, then its `n` groups follow: `(c0.., m)` if `BY_J`, else `(m, c0..)`,
-/// for `m < n`. The caller gathers each group before asking for the next (as
-/// [`solve_neg_groups`] does), reading the block through `s4`.
-///
-/// # Safety
-/// `s4` is valid for reads and writes of `4 n²` values for `'a`, and no reference into them is
-/// alive while the iterator advances.
-unsafe fn blocked_groups<'a, const BY_J: bool>(
-    model: &'a Model,
-    data: &'a Data,
-    ws4: &'a mut Idfoza4Ws,
-    x: &'a [f64],
-    s4: *mut f64,
-) -> impl Iterator<Item = Group> + 'a {
-    let n = model.nv;
-    (0..n).step_by(4).flat_map(move |c0| {
-        // SAFETY: the function's contract.
-        idfoza_block(model, data, ws4, x, c0, unsafe {
-            std::slice::from_raw_parts_mut(s4, 4 * n * n)
-        });
-        let w = 4.min(n - c0);
-        (0..n).map(move |m| {
-            if BY_J {
-                Group { j: c0, k: m, w, by_j: true }
-            } else {
-                Group { j: m, k: c0, w, by_j: false }
-            }
-        })
-    })
-}
-
 /// Second-order derivatives of forward dynamics at `q̈ = FD(q, q̇, τ)` (eq. eqn_FD_SO_43):
 /// `∂²q̈/∂u∂w = −M⁻¹(∂²ID/∂u∂w + ∂M/∂w · ∂FD/∂u + (∂M/∂u · ∂FD/∂w)^R)`, with the `∂M/∂q`
 /// products by IDFOZA (`O(N d)` per column) instead of tensor products. Also fills the
 /// first-order results in `data` (as [`fd_derivatives`]) and the ID second-order tensors in
 /// `fso.id`.
 ///
-/// Symmetries cut the solves: `∂²q̈/∂q̇²` is symmetric in `(j, k)`, and so is `∂²q̈/∂q²` for
-/// DoFs of different joints (the configuration space is a product over joints); the pages of
-/// `∂(M⁻¹)/∂q_k` are symmetric, so only their upper triangles are solved for.
+/// Each column `−M⁻¹ b` is a product with the dense `M⁻¹` (from the `LᵀDL` factors) over the
+/// rows where `b` can be non-zero only: row `l` of `∂²τ/∂q_j∂·` and of `∂M/∂q_j · x` vanishes
+/// unless DoF `l` is `j`, an ancestor or a descendant of it. Symmetries cut the columns:
+/// `∂²q̈/∂q̇²` is symmetric in `(j, k)`, and so is `∂²q̈/∂q²` for DoFs of different joints (the
+/// configuration space is a product over joints); the pages of `∂(M⁻¹)/∂q_k` are symmetric, so
+/// only their upper triangles are computed.
 pub fn fd_so_derivatives(
     model: &Model,
     data: &mut Data,
@@ -528,147 +427,195 @@ pub fn fd_so_derivatives(
     id_so_unchecked(model, data, &mut fso.id, q, v, &qdd, fext, -model.gravity);
     data.qdd = qdd;
     fd_fo_from_id(model, data)?;
-    let s = &mut fso.s[..];
-    assert!(s.len() == n * n * n);
+    if n == 0 {
+        return Ok(());
+    }
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: the CPU supports the enabled features.
+        unsafe { so_products_avx2(model, data, fso) };
+        return Ok(());
+    }
+    so_products(model, data, fso);
+    Ok(())
+}
+
+/// [`so_products`] compiled with AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn so_products_avx2(model: &Model, data: &Data, fso: &mut FdSoData) {
+    so_products(model, data, fso)
+}
+
+/// The four values at `p`.
+///
+/// # Safety
+/// `p` is valid for reading four values.
+#[inline(always)]
+unsafe fn ld4(p: *const f64) -> [f64; 4] {
+    // SAFETY: the caller's contract.
+    unsafe { p.cast::<[f64; 4]>().read_unaligned() }
+}
+
+/// The indices `c0 + u` of a group's lanes `u < 4`, those past its width `w` repeating its last.
+#[inline(always)]
+fn lanes(c0: usize, w: usize) -> [usize; 4] {
+    std::array::from_fn(|u| c0 + u.min(w - 1))
+}
+
+/// The four second-order tensors of [`fd_so_derivatives`] from its first-order results in
+/// `data` and the ID second-order tensors in `fso.id` (`nv > 0`).
+#[inline(always)]
+fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
+    let n = model.nv;
     let n2 = n * n;
+    let ld = fso.ld;
+    for (dst, src) in fso.minv.chunks_exact_mut(ld).zip(data.minv.as_slice().chunks_exact(n)) {
+        dst[..n].copy_from_slice(src);
+    }
+    let mut pr = Products {
+        minv: &fso.minv,
+        ld,
+        n,
+        words: fso.words,
+        related: &fso.related,
+        related4: &fso.related4,
+        set: &mut fso.set,
+        idx: &mut fso.idx,
+        rhs: &mut fso.rhs,
+    };
+    let s = &mut fso.s[..];
+    assert!(s.len() == 4 * n2 * n.div_ceil(4) && fso.s4.len() == 4 * n2);
     let dof_joint = &model.dof_joint;
     // DoFs of different joints commute (product of the joints' configuration spaces).
     let commute = |j: usize, k: usize| dof_joint[j] != dof_joint[k];
-    let desc = fso.desc.view();
-    /// Lane u's pointer `f(j_u, k_u)` (lanes past the group repeat its last one).
-    #[inline(always)]
-    fn lanes(g: &Group, f: impl Fn(usize, usize) -> *const f64) -> [*const f64; 4] {
-        let l = |u: usize| {
-            let (j, k) = g.lane(u.min(g.w - 1));
-            f(j, k)
-        };
-        [l(0), l(1), l(2), l(3)]
-    }
-    // Groups (j0.., k) of page k for j0 < jend(k), by 4.
-    fn pages(n: usize, jend: &dyn Fn(usize) -> usize) -> impl Iterator<Item = Group> + '_ {
-        (0..n).flat_map(move |k| {
-            (0..jend(k)).step_by(4).map(move |j| Group { j, k, w: 4.min(n - j), by_j: true })
-        })
-    }
+    // Column (j, k) of an n×n×n output, or null for the lanes past nv.
+    let col = |t: &mut Tensor3, j: usize, k: usize| -> *mut f64 {
+        if j < n { t.as_mut_slice()[n * (j + n * k)..].as_mut_ptr() } else { std::ptr::null_mut() }
+    };
+    let none = [std::ptr::null_mut(); 4];
     // ∂²q̈/∂q²: −M⁻¹(ID_qq + A + A^R) with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k], held in
-    // S at j + n i + n² k. Columns j ≤ k (and the non-commuting j > k of k's joint).
-    idfoza_tensor(model, data, &mut fso.ws4, data.dqdd_dq.as_slice(), s);
-    {
-        let (idt, sp) = (fso.id.d2tau_dq2().as_slice().as_ptr(), s.as_ptr());
-        let jend = |k: usize| {
-            let jt = dof_joint[k];
-            (k + 1).max(model.idx_v[jt] + model.nvs[jt])
-        };
-        // SAFETY (pointers): lanes have j, k < n, so the columns of ID_qq (n (j + n k) + i)
-        // and the entries of S (j + n i + n² k, k + n i + n² j) for i < n are in the n³ tensors.
-        unsafe {
-            solve_neg_groups(
-                model,
-                &data.ltl,
-                desc,
-                &mut fso.panel,
-                &mut fso.d2qdd_dq2,
-                pages(n, &jend),
-                |g| {
-                    let id = lanes(g, |j, k| idt.wrapping_add(n * (j + n * k)));
-                    let ar = lanes(g, |j, k| sp.wrapping_add(k + n2 * j));
-                    let a = LaneSrc::Rows(sp.wrapping_add(g.j + n2 * g.k), n);
-                    ([LaneSrc::Cols(id), a, LaneSrc::Strided(ar, n)], 3)
-                },
-                Store::Mirror,
-                commute,
-            )
-        };
+    // S by blocks of four j. Columns j ≤ k (and the non-commuting j > k of k's joint), four j
+    // at a time; rows related to one of the j or to k.
+    for (b, blk) in s.chunks_exact_mut(4 * n2).enumerate() {
+        idfoza_block(model, data, &mut fso.ws4, data.dqdd_dq.as_slice(), 4 * b, blk);
     }
-    // ∂²q̈/∂q∂q̇: −M⁻¹(ID_qv + B) with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j]; groups
+    {
+        let idt = fso.id.d2tau_dq2().as_slice();
+        let s = &*s;
+        for (k, &jt) in dof_joint.iter().enumerate() {
+            let jend = (k + 1).max(model.idx_v[jt] + model.nvs[jt]);
+            for j0 in (0..jend).step_by(4) {
+                let w = 4.min(n - j0);
+                pr.build_set(pr.related4(j0), pr.related(k), false);
+                let jl = lanes(j0, w);
+                let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dq2, j0 + u, k));
+                let mirror = std::array::from_fn(|u| {
+                    let j = j0 + u;
+                    if u < w && j < k && commute(j, k) {
+                        col(&mut fso.d2qdd_dq2, k, j)
+                    } else {
+                        std::ptr::null_mut()
+                    }
+                });
+                let val = |l| {
+                    // SAFETY: l, k and the lanes' j < n: the block entries are within
+                    // s (4 n² per block of 4 DoFs), the ID entries within n³.
+                    unsafe {
+                        // A: IDFOZA(∂q̈/∂q[:, j0 + u])[l][k], the lanes of one block.
+                        let a = ld4(s.as_ptr().add(4 * n2 * (j0 / 4) + 4 * l + 4 * n * k));
+                        // A^R: IDFOZA(∂q̈/∂q[:, k])[l][j0 + u].
+                        let ar = s.as_ptr().add(4 * n2 * (k / 4) + k % 4 + 4 * l);
+                        let id = idt.as_ptr().add(l + n2 * k);
+                        std::array::from_fn(|u| *id.add(n * jl[u]) + a[u] + *ar.add(4 * n * jl[u]))
+                    }
+                };
+                // SAFETY: rows l < n and lanes j < n index the n³ tensors; the outputs are
+                // distinct columns of d2qdd_dq2.
+                unsafe { pr.solve_group(n, val, out, mirror) };
+            }
+        }
+    }
+    // ∂²q̈/∂q∂q̇: −M⁻¹(ID_qv + B) with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j]; columns
     // (j, k0..k0 + 4) for every j, by k0: IDFOZA of the four columns k0.. is computed into the
-    // cache-resident block `s4` (at u + 4 i + 4 n j) just before their groups are gathered.
+    // cache-resident block `s4` (at u + 4 i + 4 n j) just before it is used. Rows related to j.
     {
-        let idt = fso.id.d2tau_dqdv().as_slice().as_ptr();
-        assert!(fso.s4.len() == 4 * n2);
-        let s4 = fso.s4.as_mut_ptr();
-        // SAFETY: `s4` is `fso.s4` (4 n² values, asserted), only accessed through this pointer
-        // (writes by the iterator, reads by the gathers) until the solve returns.
-        let groups = unsafe {
-            blocked_groups::<false>(model, data, &mut fso.ws4, data.dqdd_dv.as_slice(), s4)
-        };
-        let s4 = s4.cast_const();
-        // SAFETY (pointers): lanes have j, k < n, so the columns of ID_qv (n (j + n k) + i) are
-        // in the n³ tensor and the block entries (u + 4 i + 4 n j, u < 4, i < n) in 4 n².
-        unsafe {
-            solve_neg_groups(
-                model,
-                &data.ltl,
-                desc,
-                &mut fso.panel,
-                &mut fso.d2qdd_dqdv,
-                groups,
-                |g| {
-                    let id = lanes(g, |j, k| idt.wrapping_add(n * (j + n * k)));
-                    let b = LaneSrc::Rows(s4.wrapping_add(4 * n * g.j), 4);
-                    ([LaneSrc::Cols(id), b, b], 2)
-                },
-                Store::Plain,
-                |_, _| false,
-            )
-        };
+        let idt = fso.id.d2tau_dqdv().as_slice();
+        for k0 in (0..n).step_by(4) {
+            idfoza_block(model, data, &mut fso.ws4, data.dqdd_dv.as_slice(), k0, &mut fso.s4);
+            let s4 = &fso.s4[..];
+            let w = 4.min(n - k0);
+            let kl = lanes(k0, w);
+            for j in 0..n {
+                pr.build_set(pr.related(j), pr.related(j), false);
+                let out = std::array::from_fn(|u| {
+                    if u < w { col(&mut fso.d2qdd_dqdv, j, k0 + u) } else { std::ptr::null_mut() }
+                });
+                let val = |l| {
+                    // SAFETY: l, j and the lanes' k < n; idt holds n³ values, s4 4 n².
+                    unsafe {
+                        let b = ld4(s4.as_ptr().add(4 * l + 4 * n * j));
+                        let id = idt.as_ptr().add(l + n * j);
+                        std::array::from_fn(|u| *id.add(n2 * kl[u]) + b[u])
+                    }
+                };
+                // SAFETY: as above (s4 has 4 n² values; its lanes past nv are zero).
+                unsafe { pr.solve_group(n, val, out, none) };
+            }
+        }
     }
-    // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k]; rows i ≤ j, by j0 so that
-    // each panel needs few rows; IDFOZA of the columns j0..j0 + 4 into `s4` (at u + 4 i + 4 n k)
-    // just before their groups are gathered.
+    // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k]: rows i ≤ j of the columns
+    // (j0..j0 + 4, k), by j0, with IDFOZA of the columns j0.. into `s4` (at u + 4 i + 4 n k);
+    // rows of C related to k. The strict lower triangles come from the symmetry of the pages.
     {
-        assert!(fso.s4.len() == 4 * n2);
-        let s4 = fso.s4.as_mut_ptr();
-        // SAFETY: `s4` is `fso.s4` (4 n² values, asserted), only accessed through this pointer
-        // (writes by the iterator, reads by the gathers) until the solve returns.
-        let groups =
-            unsafe { blocked_groups::<true>(model, data, &mut fso.ws4, data.minv.as_slice(), s4) };
-        let s4 = s4.cast_const();
-        // SAFETY (pointers): block entries u + 4 i + 4 n k with u < 4, i, k < n are in 4 n².
-        unsafe {
-            solve_neg_groups(
-                model,
-                &data.ltl,
-                desc,
-                &mut fso.panel,
-                &mut fso.d2qdd_dtaudq,
-                groups,
-                |g| {
-                    let c = LaneSrc::Rows(s4.wrapping_add(4 * n * g.k), 4);
-                    ([c, c, c], 1)
-                },
-                Store::Head,
-                commute,
-            )
-        };
+        for j0 in (0..n).step_by(4) {
+            idfoza_block(model, data, &mut fso.ws4, data.minv.as_slice(), j0, &mut fso.s4);
+            let s4 = &fso.s4[..];
+            let w = 4.min(n - j0);
+            for k in 0..n {
+                pr.build_set(pr.related(k), pr.related(k), false);
+                let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dtaudq, j0 + u, k));
+                // SAFETY: l, k < n and s4 holds 4 n² values.
+                let val = |l| unsafe { ld4(s4.as_ptr().add(4 * l + 4 * n * k)) };
+                // SAFETY: as above.
+                unsafe { pr.solve_group(j0 + w, val, out, none) };
+            }
+        }
         symmetrise_pages(n, fso.d2qdd_dtaudq.as_mut_slice(), &mut fso.page);
     }
     // ∂²q̈/∂q̇²: −M⁻¹ ID_vv (M does not depend on q̇), symmetric in (j, k). Its column (j, k)
-    // vanishes unless j = k or one DoF is an ancestor of the other (every velocity product in a
-    // body's bias force is of two of its ancestors): groups without such a column are skipped.
+    // vanishes unless j and k are related (every velocity product in a body's bias force is of
+    // two of its ancestors): groups without such a column are skipped (never written); rows
+    // related to k and to one of the j.
     {
-        let idt = fso.id.d2tau_dv2().as_slice().as_ptr();
-        let related = &fso.related;
-        let groups = pages(n, &|k| k + 1).filter(|g| (0..g.w).any(|u| related[g.j + u + n * g.k]));
-        // SAFETY (pointers): as for ∂²q̈/∂q².
-        unsafe {
-            solve_neg_groups(
-                model,
-                &data.ltl,
-                desc,
-                &mut fso.panel,
-                &mut fso.d2qdd_dv2,
-                groups,
-                |g| {
-                    let id = LaneSrc::Cols(lanes(g, |j, k| idt.wrapping_add(n * (j + n * k))));
-                    ([id, id, id], 1)
-                },
-                Store::Mirror,
-                |_, _| true,
-            )
-        };
+        let idt = fso.id.d2tau_dv2().as_slice();
+        for k in 0..n {
+            for j0 in (0..k + 1).step_by(4) {
+                let w = 4.min(n - j0);
+                let rk = pr.related(k);
+                if !(j0..j0 + w).any(|j| rk[j / 64] >> (j % 64) & 1 != 0) {
+                    continue;
+                }
+                pr.build_set(pr.related4(j0), pr.related(k), true);
+                let jl = lanes(j0, w);
+                let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dv2, j0 + u, k));
+                let mirror = std::array::from_fn(|u| {
+                    if u < w && j0 + u < k {
+                        col(&mut fso.d2qdd_dv2, k, j0 + u)
+                    } else {
+                        std::ptr::null_mut()
+                    }
+                });
+                let val = |l| {
+                    // SAFETY: l, k and the lanes' j < n; idt holds n³ values.
+                    let id = unsafe { idt.as_ptr().add(l + n2 * k) };
+                    std::array::from_fn(|u| unsafe { *id.add(n * jl[u]) })
+                };
+                // SAFETY: as for ∂²q̈/∂q².
+                unsafe { pr.solve_group(n, val, out, mirror) };
+            }
+        }
     }
-    Ok(())
 }
 
 #[cfg(test)]
