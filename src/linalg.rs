@@ -617,32 +617,51 @@ pub(crate) struct Gemm4<'a> {
     pub rows: usize,
     /// Columns `idx[t]` of `A` taking part.
     pub idx: &'a [u32],
-    /// `B` restricted to the rows `idx`: `b[4 t + u]` multiplies column `idx[t]` of `A` into
-    /// output lane `u`.
-    pub b: &'a [f64],
+    /// Where `B` is read: `B[idx[t], u]` is at `b[u] + bs · key` with `key = idx[t]` if
+    /// `by_row`, else `key = t` (a compacted copy).
+    pub b: [*const f64; 4],
+    /// Stride of `b` per key.
+    pub bs: usize,
+    /// Whether `b` is keyed by the row `idx[t]` (else by `t`).
+    pub by_row: bool,
 }
 
-/// `out[u][r] ← −Σ_t A[r, idx[t]] · b[4 t + u]` for `r < rows`, and the same into `mirror[u]`,
+impl Gemm4<'_> {
+    /// `B[idx[t], u]` for the four lanes.
+    ///
+    /// # Safety
+    /// `t < idx.len()` and the values addressed are readable (the contract of
+    /// [`neg_gemm4_sparse`]).
+    #[inline(always)]
+    unsafe fn b_at(&self, t: usize) -> [f64; 4] {
+        // SAFETY: the caller's contract.
+        unsafe {
+            let key = if self.by_row { *self.idx.get_unchecked(t) as usize } else { t };
+            std::array::from_fn(|u| *self.b[u].add(self.bs * key))
+        }
+    }
+}
+
+/// `out[u][r] ← −Σ_t A[r, idx[t]] · B[idx[t], u]` for `r < rows`, and the same into `mirror[u]`,
 /// for the lanes `u < 4` whose pointer is non-null: a product whose inner dimension is only the
 /// (structurally or numerically) non-zero rows of the right-hand sides, vectorised down the
 /// contiguous columns of `A` and of the outputs, four output columns sharing each load of `A`.
 ///
 /// # Safety
 /// Every non-null `out[u]` and `mirror[u]` is valid for writing `rows` values and does not overlap
-/// `g.a` or `g.b`.
+/// `g.a` or what `g.b` addresses; `B[idx[t], u]` (see [`Gemm4`]) is readable for every `t`,
+/// `u < 4`.
 pub(crate) unsafe fn neg_gemm4_sparse(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror: &[*mut f64; 4]) {
     let padded = g.rows.div_ceil(8) * 8;
     assert!(
-        g.b.len() >= 4 * g.idx.len()
-            && g.rows <= g.lda
-            && g.idx.iter().all(|&l| (l as usize) * g.lda + padded <= g.a.len()),
+        g.rows <= g.lda && g.idx.iter().all(|&l| (l as usize) * g.lda + padded <= g.a.len()),
         "neg_gemm4_sparse: dimension mismatch"
     );
     if g.rows == 0 {
         return;
     }
     // SAFETY: every column `idx[t]` of `a` is readable up to `padded ≥` the vector-rounded
-    // rows (asserted), `b` holds 4 values per index; the outputs are the caller's contract.
+    // rows (asserted); `b` and the outputs are the caller's contract.
     unsafe {
         #[cfg(target_arch = "x86_64")]
         if crate::simd::avx512f() {
@@ -666,8 +685,10 @@ unsafe fn gemm4_portable(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror: &[*mut f64;
         acc.fill(0.0);
         for (t, &l) in g.idx.iter().enumerate() {
             let x = g.a[r + g.lda * l as usize];
-            for (u, a) in acc.iter_mut().enumerate() {
-                *a -= x * g.b[4 * t + u];
+            // SAFETY: the caller's contract.
+            let b = unsafe { g.b_at(t) };
+            for (a, b) in acc.iter_mut().zip(b) {
+                *a -= x * b;
             }
         }
         for u in 0..4 {
@@ -727,15 +748,15 @@ unsafe fn chunk_avx2<const V: usize>(
     unsafe {
         let mut acc = [[_mm256_setzero_pd(); V]; 4];
         let a = g.a.as_ptr().add(r0);
-        let b = g.b.as_ptr();
         for (t, &l) in g.idx.iter().enumerate() {
             let col = a.add(g.lda * l as usize);
+            let b = g.b_at(t);
             let mut x = [_mm256_setzero_pd(); V];
             for (v, xv) in x.iter_mut().enumerate() {
                 *xv = _mm256_loadu_pd(col.add(4 * v));
             }
             for (u, acc_u) in acc.iter_mut().enumerate() {
-                let s = _mm256_broadcast_sd(&*b.add(4 * t + u));
+                let s = _mm256_set1_pd(b[u]);
                 for v in 0..V {
                     acc_u[v] = _mm256_fnmadd_pd(x[v], s, acc_u[v]);
                 }
@@ -808,10 +829,10 @@ unsafe fn chunk_avx512<const V: usize>(
     unsafe {
         let mut acc = [[_mm512_setzero_pd(); V]; 4];
         let a = g.a.as_ptr().add(r0);
-        let b = g.b.as_ptr();
         for (t, &l) in g.idx.iter().enumerate() {
             let col = a.add(g.lda * l as usize);
-            let s: [__m512d; 4] = std::array::from_fn(|u| _mm512_set1_pd(*b.add(4 * t + u)));
+            let b = g.b_at(t);
+            let s: [__m512d; 4] = std::array::from_fn(|u| _mm512_set1_pd(b[u]));
             // One vector of the column at a time, into the four lanes' accumulators.
             #[allow(clippy::needless_range_loop)]
             for v in 0..V {

@@ -306,6 +306,72 @@ impl<'a> Products<'a> {
                 cnt += usize::from(b.iter().fold(false, |a, x| a | (*x != 0.0)));
             }
         }
+        let r = self.rhs.as_ptr();
+        // SAFETY: the caller's contract; rows t < cnt of the compacted copy.
+        unsafe {
+            self.product(rows, cnt, [r, r.add(1), r.add(2), r.add(3)], 4, false, out, mirror)
+        };
+    }
+
+    /// As [`Self::solve_group`] with `b_u[l] = b[u][bs l]` read in place, no rows left out; the
+    /// outputs are set to zero if every value read is zero (when `check`) or `set` is empty.
+    ///
+    /// # Safety
+    /// `b[u] + bs l` is readable for every row `l` of `set`; the outputs as for
+    /// [`Self::solve_group`].
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn solve_group_in_place(
+        &mut self,
+        rows: usize,
+        b: [*const f64; 4],
+        bs: usize,
+        check: bool,
+        out: [*mut f64; 4],
+        mirror: [*mut f64; 4],
+    ) {
+        let mut cnt = 0;
+        let mut nz = !check;
+        for (w, &word) in self.set.iter().enumerate() {
+            let mut bits = word;
+            while bits != 0 {
+                let l = 64 * w + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                debug_assert!(cnt < self.n);
+                // SAFETY: cnt < the number of rows of `set` ≤ nv = idx.len(); b as the
+                // caller's contract.
+                unsafe {
+                    *self.idx.get_unchecked_mut(cnt) = l as u32;
+                    if check {
+                        for p in b {
+                            nz |= *p.add(bs * l) != 0.0;
+                        }
+                    }
+                }
+                cnt += 1;
+            }
+        }
+        let cnt = if nz { cnt } else { 0 };
+        // SAFETY: the caller's contract.
+        unsafe { self.product(rows, cnt, b, bs, true, out, mirror) };
+    }
+
+    /// `out[u] ← −Σ_{t < cnt} M⁻¹[:, idx[t]] B[idx[t], u]` (see [`Gemm4`]), zero if `cnt = 0`.
+    ///
+    /// # Safety
+    /// As [`neg_gemm4_sparse`] for the rows `idx[..cnt]`.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn product(
+        &mut self,
+        rows: usize,
+        cnt: usize,
+        b: [*const f64; 4],
+        bs: usize,
+        by_row: bool,
+        out: [*mut f64; 4],
+        mirror: [*mut f64; 4],
+    ) {
         if cnt == 0 {
             for p in out.into_iter().chain(mirror) {
                 if !p.is_null() {
@@ -315,10 +381,10 @@ impl<'a> Products<'a> {
             }
             return;
         }
-        let g = Gemm4 { a: self.minv, lda: self.ld, rows, idx: &self.idx[..cnt], b: self.rhs };
+        let g = Gemm4 { a: self.minv, lda: self.ld, rows, idx: &self.idx[..cnt], b, bs, by_row };
         debug_assert!(rows <= self.n);
-        // SAFETY: the caller's contract on the outputs; `minv` has `ld ≥` rows rounded up to 8
-        // values per column (zero padded) for every DoF index of `set`.
+        // SAFETY: the caller's contract on `b` and the outputs; `minv` has `ld ≥` rows rounded
+        // up to 8 values per column (zero padded) for every DoF index of `set`.
         unsafe { neg_gemm4_sparse(&g, &out, &mirror) };
     }
 }
@@ -575,10 +641,19 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             for k in 0..n {
                 pr.build_set(pr.related(k), pr.related(k), false);
                 let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dtaudq, j0 + u, k));
-                // SAFETY: l, k < n and s4 holds 4 n² values.
-                let val = |l| unsafe { ld4(s4.as_ptr().add(4 * l + 4 * n * k)) };
-                // SAFETY: as above.
-                unsafe { pr.solve_group(j0 + w, val, out, none) };
+                let b = s4[4 * n * k..].as_ptr();
+                // SAFETY: the rows l < n of page k of s4 (4 n² values) at b + u + 4 l; the
+                // outputs are distinct columns of d2qdd_dtaudq.
+                unsafe {
+                    pr.solve_group_in_place(
+                        j0 + w,
+                        [b, b.add(1), b.add(2), b.add(3)],
+                        4,
+                        true,
+                        out,
+                        none,
+                    )
+                };
             }
         }
         symmetrise_pages(n, fso.d2qdd_dtaudq.as_mut_slice(), &mut fso.page);
@@ -606,13 +681,10 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
                         std::ptr::null_mut()
                     }
                 });
-                let val = |l| {
-                    // SAFETY: l, k and the lanes' j < n; idt holds n³ values.
-                    let id = unsafe { idt.as_ptr().add(l + n2 * k) };
-                    std::array::from_fn(|u| unsafe { *id.add(n * jl[u]) })
-                };
-                // SAFETY: as for ∂²q̈/∂q².
-                unsafe { pr.solve_group(n, val, out, mirror) };
+                let b = jl.map(|j| idt[n * (j + n * k)..].as_ptr());
+                // SAFETY: the columns (j, k) of ID_vv (n values each, rows l < n); the outputs
+                // are distinct columns of d2qdd_dv2.
+                unsafe { pr.solve_group_in_place(n, b, 1, false, out, mirror) };
             }
         }
     }
