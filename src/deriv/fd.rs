@@ -178,8 +178,6 @@ pub struct FdSoData {
     /// One group's non-zero right-hand-side rows (`nv` values) and their values (4 per row).
     idx: Vec<u32>,
     rhs: Vec<f64>,
-    /// One `n×n` page (transposition scratch).
-    page: Vec<f64>,
 }
 
 impl FdSoData {
@@ -222,7 +220,6 @@ impl FdSoData {
             set: vec![0; words],
             idx: vec![0; n],
             rhs: vec![0.0; 4 * n],
-            page: vec![0.0; n * n],
         }
     }
     /// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂q_j)`.
@@ -390,14 +387,25 @@ impl<'a> Products<'a> {
 }
 
 /// Fills the strict lower triangle of every page of the `n×n×n` tensor `t` from its upper one,
-/// through the transposed page in `tmp` (`n²` values).
-fn symmetrise_pages(n: usize, t: &mut [f64], tmp: &mut [f64]) {
-    assert!(t.len() == n * n * n && tmp.len() == n * n);
+/// by strips of four columns: the block below a strip's diagonal tile is the transposed block
+/// right of it (only the lower triangle is written).
+fn symmetrise_pages(n: usize, t: &mut [f64]) {
+    assert!(t.len() == n * n * n);
     for page in t.chunks_exact_mut(n * n) {
-        transpose_strided(page, n, n, n, tmp, n);
-        for j in 0..n {
-            let c = n * j;
-            page[c + j + 1..c + n].copy_from_slice(&tmp[c + j + 1..c + n]);
+        for c0 in (0..n).step_by(4) {
+            let c1 = (c0 + 4).min(n);
+            // The diagonal tile's lower triangle.
+            for c in c0..c1 {
+                for r in c + 1..c1 {
+                    page[r + n * c] = page[c + n * r];
+                }
+            }
+            if c1 < n {
+                // Rows c1.. of the columns c0..c1 end before index n c1 ≤ c0 + n c1, where
+                // the rows c0..c1 of the columns c1.. start.
+                let (lower, upper) = page.split_at_mut(n * c1);
+                transpose_strided(&upper[c0..], n, c1 - c0, n - c1, &mut lower[c1 + n * c0..], n);
+            }
         }
     }
 }
@@ -656,7 +664,7 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
                 };
             }
         }
-        symmetrise_pages(n, fso.d2qdd_dtaudq.as_mut_slice(), &mut fso.page);
+        symmetrise_pages(n, fso.d2qdd_dtaudq.as_mut_slice());
     }
     // ∂²q̈/∂q̇²: −M⁻¹ ID_vv (M does not depend on q̇), symmetric in (j, k). Its column (j, k)
     // vanishes unless j and k are related (every velocity product in a body's bias force is of
