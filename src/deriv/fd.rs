@@ -9,7 +9,7 @@ use super::zero::{Idfoza4Ws, Lane4, idfoza4_core};
 use crate::algo::Data;
 use crate::algo::internal::{aba_unchecked, check_fext, ltl_in_place, ltl_solve_fd};
 use crate::error::Result;
-use crate::linalg::{Gemm4, neg_gemm4_sparse, transpose_strided};
+use crate::linalg::{Gemm4, neg_gemm4_sparse, prefetch_l2, transpose_strided};
 use crate::model::{Model, check_vec};
 use crate::spatial::Force;
 use crate::tensor::Tensor3;
@@ -369,6 +369,13 @@ impl<'a> Products<'a> {
         out: [*mut f64; 4],
         mirror: [*mut f64; 4],
     ) {
+        // The output columns into L2 while the product runs (their stores then find their lines
+        // there instead of waiting on read-for-ownership misses).
+        for p in out.into_iter().chain(mirror) {
+            if !p.is_null() {
+                prefetch_l2(p, rows);
+            }
+        }
         if cnt == 0 {
             for p in out.into_iter().chain(mirror) {
                 if !p.is_null() {
