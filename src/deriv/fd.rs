@@ -240,6 +240,19 @@ impl FdSoData {
     }
 }
 
+/// Calls `f(l)` for the elements `l` of a bit set (bit `l % 64` of word `l / 64`), in
+/// increasing order.
+#[inline(always)]
+fn for_each_row(set: &[u64], mut f: impl FnMut(usize)) {
+    for (w, &word) in set.iter().enumerate() {
+        let mut bits = word;
+        while bits != 0 {
+            f(64 * w + bits.trailing_zeros() as usize);
+            bits &= bits - 1;
+        }
+    }
+}
+
 /// The dense `M⁻¹` and the scratch of the products `−M⁻¹ b` (see [`solve_group`]).
 struct Products<'a> {
     minv: &'a [f64],
@@ -287,22 +300,18 @@ impl<'a> Products<'a> {
         mirror: [*mut f64; 4],
     ) {
         let mut cnt = 0;
-        for (w, &word) in self.set.iter().enumerate() {
-            let mut bits = word;
-            while bits != 0 {
-                let l = 64 * w + bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                let b = val(l);
-                // Stored in any case, kept if non-zero (NaN counts as non-zero and propagates).
-                debug_assert!(cnt < self.n);
-                // SAFETY: cnt < the number of rows of `set` ≤ nv = idx.len() = rhs.len() / 4.
-                unsafe {
-                    *self.idx.get_unchecked_mut(cnt) = l as u32;
-                    *self.rhs.as_mut_ptr().add(4 * cnt).cast::<[f64; 4]>() = b;
-                }
-                cnt += usize::from(b.iter().fold(false, |a, x| a | (*x != 0.0)));
+        let (idx, rhs) = (&mut *self.idx, self.rhs.as_mut_ptr());
+        for_each_row(self.set, |l| {
+            let b = val(l);
+            // Stored in any case, kept if non-zero (NaN counts as non-zero and propagates).
+            debug_assert!(cnt < idx.len());
+            // SAFETY: cnt < the number of rows of `set` ≤ nv = idx.len() = rhs.len() / 4.
+            unsafe {
+                *idx.get_unchecked_mut(cnt) = l as u32;
+                *rhs.add(4 * cnt).cast::<[f64; 4]>() = b;
             }
-        }
+            cnt += usize::from(b.iter().fold(false, |a, x| a | (*x != 0.0)));
+        });
         let r = self.rhs.as_ptr();
         // SAFETY: the caller's contract; rows t < cnt of the compacted copy.
         unsafe {
@@ -329,25 +338,21 @@ impl<'a> Products<'a> {
     ) {
         let mut cnt = 0;
         let mut nz = !check;
-        for (w, &word) in self.set.iter().enumerate() {
-            let mut bits = word;
-            while bits != 0 {
-                let l = 64 * w + bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                debug_assert!(cnt < self.n);
-                // SAFETY: cnt < the number of rows of `set` ≤ nv = idx.len(); b as the
-                // caller's contract.
-                unsafe {
-                    *self.idx.get_unchecked_mut(cnt) = l as u32;
-                    if check {
-                        for p in b {
-                            nz |= *p.add(bs * l) != 0.0;
-                        }
+        let idx = &mut *self.idx;
+        for_each_row(self.set, |l| {
+            debug_assert!(cnt < idx.len());
+            // SAFETY: cnt < the number of rows of `set` ≤ nv = idx.len(); b as the caller's
+            // contract.
+            unsafe {
+                *idx.get_unchecked_mut(cnt) = l as u32;
+                if check {
+                    for p in b {
+                        nz |= *p.add(bs * l) != 0.0;
                     }
                 }
-                cnt += 1;
             }
-        }
+            cnt += 1;
+        });
         let cnt = if nz { cnt } else { 0 };
         // SAFETY: the caller's contract.
         unsafe { self.product(rows, cnt, b, bs, true, out, mirror) };
