@@ -3,8 +3,9 @@
 //! The hot kernels (IDSVA-SO, the multi-right-hand-side `LᵀDL` solves, IDFOZA and the `M⁻¹`
 //! products in FD-SO, the gemm (with its masked-tail variant), transposes and the SPD inverse of
 //! the Delassus matrix) have an AVX2/FMA version compiled with `#[target_feature]` and a portable
-//! version; [`avx2_fma`] picks one per call. The `M⁻¹` products of FD-SO also have an AVX-512F
-//! version, picked by [`avx512f`]. All give the same results to rounding: the unit test below forces the
+//! version; [`avx2_fma`] picks one per call. The `M⁻¹` products of FD-SO and its IDFOZA passes
+//! (eight right-hand sides per pass instead of four) also have an AVX-512F version, picked by
+//! [`avx512f`]. All give the same results to rounding: the unit test below forces the
 //! portable path (and the AVX2 one) and compares.
 
 /// Test switch: run the portable kernels even where AVX2/FMA is available.

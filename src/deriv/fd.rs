@@ -4,8 +4,8 @@
 use super::id_fo::id_derivatives_placed;
 use super::id_so::{SoData, id_so_unchecked};
 #[cfg(target_arch = "x86_64")]
-use super::zero::Avx4;
-use super::zero::{Idfoza4Ws, Lane4, idfoza4_core};
+use super::zero::{Avx4, Avx8};
+use super::zero::{IdfozaWs, Lanes, idfoza_lanes_core};
 use crate::algo::Data;
 use crate::algo::internal::{aba_unchecked, check_fext, ltl_in_place, ltl_solve_fd};
 use crate::error::Result;
@@ -155,11 +155,14 @@ pub struct FdSoData {
     d2qdd_dv2: Tensor3,
     d2qdd_dqdv: Tensor3,
     d2qdd_dtaudq: Tensor3,
-    ws4: Idfoza4Ws,
+    /// IDFOZA workspaces, four and eight right-hand sides.
+    ws4: IdfozaWs<[f64; 4]>,
+    ws8: IdfozaWs<[f64; 8]>,
     /// IDFOZA results `S[(i, j, k)] = IDFOZA(X[:, j])[i][k]` by blocks of four `j`: at
-    /// `u + 4 i + 4 n k + 4 n² b` for `j = 4 b + u` (see [`idfoza_block`]), zero past `nv`.
+    /// `u + 4 i + 4 n k + 4 n² b` for `j = 4 b + u` (see [`idfoza_blocks`]), zero past `nv`.
     s: Vec<f64>,
-    /// IDFOZA of four right-hand sides `X[:, j0..j0 + 4]`: `(u, i, k)` at `u + 4 i + 4 n k`.
+    /// IDFOZA of eight right-hand sides `X[:, j0..j0 + 8]`, as two blocks of four: `(u, i, k)`
+    /// of block `h` at `u + 4 i + 4 n k + 4 n² h`.
     s4: Vec<f64>,
     /// `M⁻¹` with its columns padded with zeros to [`Self::ld`] rows (whole vectors of 8).
     minv: Vec<f64>,
@@ -209,9 +212,10 @@ impl FdSoData {
             d2qdd_dv2: Tensor3::zeros(n, n, n),
             d2qdd_dqdv: Tensor3::zeros(n, n, n),
             d2qdd_dtaudq: Tensor3::zeros(n, n, n),
-            ws4: Idfoza4Ws::new(model),
+            ws4: IdfozaWs::new(model),
+            ws8: IdfozaWs::new(model),
             s: vec![0.0; 4 * n * n * n.div_ceil(4)],
-            s4: vec![0.0; 4 * n * n],
+            s4: vec![0.0; 8 * n * n],
             minv: vec![0.0; ld * n],
             ld,
             words,
@@ -422,22 +426,39 @@ fn symmetrise_pages(n: usize, t: &mut [f64]) {
     }
 }
 
-/// `out[u + 4 i + 4 n k] ← IDFOZA(x[:, j0 + u])[i][k]` for the structurally non-zero `(i, k)`
-/// (zero in the lanes past `nv`), vectorised with AVX2 when available.
-fn idfoza_block(
+/// IDFOZA workspaces of four and eight lanes.
+struct IdfozaWss<'a> {
+    ws4: &'a mut IdfozaWs<[f64; 4]>,
+    ws8: &'a mut IdfozaWs<[f64; 8]>,
+}
+
+/// `out[u + 4 i + 4 n k + 4 n² h] ← IDFOZA(x[:, j0 + 4 h + u])[i][k]` for the structurally
+/// non-zero `(i, k)` (zero in the lanes past `nv`), for the one or two blocks `h` of four
+/// right-hand sides in `out` (`4 n²` values each). Two blocks are one pass of eight lanes with
+/// AVX-512F, else two passes of four lanes (AVX2 when available).
+fn idfoza_blocks(
     model: &Model,
     data: &Data,
-    ws: &mut Idfoza4Ws,
+    ws: &mut IdfozaWss<'_>,
     x: &[f64],
     j0: usize,
     out: &mut [f64],
 ) {
+    let n = model.nv;
     #[cfg(target_arch = "x86_64")]
-    if crate::simd::avx2_fma() {
+    if out.len() == 8 * n * n && crate::simd::avx512f() {
         // SAFETY: the CPU supports the enabled features.
-        unsafe { return idfoza_block_avx2(model, data, ws, x, j0, out) };
+        unsafe { return idfoza_pair_avx512(model, data, ws.ws8, x, j0, out) };
     }
-    idfoza_block_impl::<[f64; 4]>(model, data, ws, x, j0, out)
+    for (h, blk) in out.chunks_exact_mut(4 * n * n).enumerate() {
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2_fma() {
+            // SAFETY: the CPU supports the enabled features.
+            unsafe { idfoza_block_avx2(model, data, ws.ws4, x, j0 + 4 * h, blk) };
+            continue;
+        }
+        idfoza_block_impl::<[f64; 4]>(model, data, ws.ws4, x, j0 + 4 * h, blk)
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -445,7 +466,7 @@ fn idfoza_block(
 unsafe fn idfoza_block_avx2(
     model: &Model,
     data: &Data,
-    ws: &mut Idfoza4Ws,
+    ws: &mut IdfozaWs<[f64; 4]>,
     x: &[f64],
     j0: usize,
     out: &mut [f64],
@@ -454,11 +475,12 @@ unsafe fn idfoza_block_avx2(
     idfoza_block_impl::<Avx4>(model, data, ws, x, j0, out)
 }
 
+/// One block of four right-hand sides (see [`idfoza_blocks`]).
 #[inline(always)]
-fn idfoza_block_impl<V: Lane4>(
+fn idfoza_block_impl<V: Lanes<Arr = [f64; 4]>>(
     model: &Model,
     data: &Data,
-    ws: &mut Idfoza4Ws,
+    ws: &mut IdfozaWs<[f64; 4]>,
     x: &[f64],
     j0: usize,
     out: &mut [f64],
@@ -466,10 +488,38 @@ fn idfoza_block_impl<V: Lane4>(
     let n = model.nv;
     assert!(out.len() == 4 * n * n && j0 < n && x.len() == n * n);
     // Lanes past nv read no column and come out zero.
-    idfoza4_core::<V>(model, data, ws, x, n, j0, 4.min(n - j0), |i, k, z| {
+    idfoza_lanes_core::<V>(model, data, ws, x, n, j0, 4.min(n - j0), |i, k, z| {
         debug_assert!(i < n && k < n);
         // SAFETY: i, k < n, so 4 i + 4 n k + 3 < 4 n² = out.len().
         unsafe { *out.as_mut_ptr().add(4 * i + 4 * n * k).cast::<[f64; 4]>() = *z };
+    });
+}
+
+/// Two blocks of four right-hand sides as one pass of eight AVX-512 lanes (see
+/// [`idfoza_blocks`]).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn idfoza_pair_avx512(
+    model: &Model,
+    data: &Data,
+    ws: &mut IdfozaWs<[f64; 8]>,
+    x: &[f64],
+    j0: usize,
+    out: &mut [f64],
+) {
+    let n = model.nv;
+    assert!(out.len() == 8 * n * n && j0 < n && x.len() == n * n);
+    let (lo, hi) = out.split_at_mut(4 * n * n);
+    // SAFETY: AVX-512F is enabled here, as `Avx8` needs. Lanes past nv read no column and come
+    // out zero.
+    idfoza_lanes_core::<Avx8>(model, data, ws, x, n, j0, 8.min(n - j0), |i, k, z| {
+        debug_assert!(i < n && k < n);
+        let o = 4 * i + 4 * n * k;
+        // SAFETY: i, k < n, so o + 3 < 4 n² = lo.len() = hi.len().
+        unsafe {
+            *lo.as_mut_ptr().add(o).cast::<[f64; 4]>() = [z[0], z[1], z[2], z[3]];
+            *hi.as_mut_ptr().add(o).cast::<[f64; 4]>() = [z[4], z[5], z[6], z[7]];
+        }
     });
 }
 
@@ -571,7 +621,7 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
         rhs: &mut fso.rhs,
     };
     let s = &mut fso.s[..];
-    assert!(s.len() == 4 * n2 * n.div_ceil(4) && fso.s4.len() == 4 * n2);
+    assert!(s.len() == 4 * n2 * n.div_ceil(4) && fso.s4.len() == 8 * n2);
     let dof_joint = &model.dof_joint;
     // DoFs of different joints commute (product of the joints' configuration spaces).
     let commute = |j: usize, k: usize| dof_joint[j] != dof_joint[k];
@@ -583,8 +633,9 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     // ∂²q̈/∂q²: −M⁻¹(ID_qq + A + A^R) with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k], held in
     // S by blocks of four j. Columns j ≤ k (and the non-commuting j > k of k's joint), four j
     // at a time; rows related to one of the j or to k.
-    for (b, blk) in s.chunks_exact_mut(4 * n2).enumerate() {
-        idfoza_block(model, data, &mut fso.ws4, data.dqdd_dq.as_slice(), 4 * b, blk);
+    let mut ws = IdfozaWss { ws4: &mut fso.ws4, ws8: &mut fso.ws8 };
+    for (b, blks) in s.chunks_mut(8 * n2).enumerate() {
+        idfoza_blocks(model, data, &mut ws, data.dqdd_dq.as_slice(), 8 * b, blks);
     }
     {
         let idt = fso.id.d2tau_dq2().as_slice();
@@ -623,57 +674,71 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
         }
     }
     // ∂²q̈/∂q∂q̇: −M⁻¹(ID_qv + B) with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j]; columns
-    // (j, k0..k0 + 4) for every j, by k0: IDFOZA of the four columns k0.. is computed into the
-    // cache-resident block `s4` (at u + 4 i + 4 n j) just before it is used. Rows related to j.
+    // (j, k0..k0 + 4) for every j, by k0: IDFOZA of the eight columns k8.. is computed into the
+    // cache-resident blocks `s4` (at u + 4 i + 4 n j + 4 n² h for k = k8 + 4 h + u) just before
+    // they are used. Rows related to j.
     {
         let idt = fso.id.d2tau_dqdv().as_slice();
-        for k0 in (0..n).step_by(4) {
-            idfoza_block(model, data, &mut fso.ws4, data.dqdd_dv.as_slice(), k0, &mut fso.s4);
-            let s4 = &fso.s4[..];
-            let w = 4.min(n - k0);
-            let kl = lanes(k0, w);
-            for j in 0..n {
-                pr.build_set(pr.related(j), pr.related(j), false);
-                let out = std::array::from_fn(|u| {
-                    if u < w { col(&mut fso.d2qdd_dqdv, j, k0 + u) } else { std::ptr::null_mut() }
-                });
-                let val = |l| {
-                    // SAFETY: l, j and the lanes' k < n; idt holds n³ values, s4 4 n².
-                    unsafe {
-                        let b = ld4(s4.as_ptr().add(4 * l + 4 * n * j));
-                        let id = idt.as_ptr().add(l + n * j);
-                        std::array::from_fn(|u| *id.add(n2 * kl[u]) + b[u])
-                    }
-                };
-                // SAFETY: as above (s4 has 4 n² values; its lanes past nv are zero).
-                unsafe { pr.solve_group(n, val, out, none) };
+        for k8 in (0..n).step_by(8) {
+            let nb = if k8 + 4 < n { 2 } else { 1 };
+            let blks = &mut fso.s4[..4 * n2 * nb];
+            idfoza_blocks(model, data, &mut ws, data.dqdd_dv.as_slice(), k8, blks);
+            for (h, s4) in fso.s4[..4 * n2 * nb].chunks_exact(4 * n2).enumerate() {
+                let k0 = k8 + 4 * h;
+                let w = 4.min(n - k0);
+                let kl = lanes(k0, w);
+                for j in 0..n {
+                    pr.build_set(pr.related(j), pr.related(j), false);
+                    let out = std::array::from_fn(|u| {
+                        if u < w {
+                            col(&mut fso.d2qdd_dqdv, j, k0 + u)
+                        } else {
+                            std::ptr::null_mut()
+                        }
+                    });
+                    let val = |l| {
+                        // SAFETY: l, j and the lanes' k < n; idt holds n³ values, s4 4 n².
+                        unsafe {
+                            let b = ld4(s4.as_ptr().add(4 * l + 4 * n * j));
+                            let id = idt.as_ptr().add(l + n * j);
+                            std::array::from_fn(|u| *id.add(n2 * kl[u]) + b[u])
+                        }
+                    };
+                    // SAFETY: as above (s4 has 4 n² values; its lanes past nv are zero).
+                    unsafe { pr.solve_group(n, val, out, none) };
+                }
             }
         }
     }
     // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k]: rows i ≤ j of the columns
-    // (j0..j0 + 4, k), by j0, with IDFOZA of the columns j0.. into `s4` (at u + 4 i + 4 n k);
-    // rows of C related to k. The strict lower triangles come from the symmetry of the pages.
+    // (j0..j0 + 4, k), by j0, with IDFOZA of the columns j8..j8 + 8 into `s4` (at
+    // u + 4 i + 4 n k + 4 n² h for j = j8 + 4 h + u); rows of C related to k. The strict lower
+    // triangles come from the symmetry of the pages.
     {
-        for j0 in (0..n).step_by(4) {
-            idfoza_block(model, data, &mut fso.ws4, data.minv.as_slice(), j0, &mut fso.s4);
-            let s4 = &fso.s4[..];
-            let w = 4.min(n - j0);
-            for k in 0..n {
-                pr.build_set(pr.related(k), pr.related(k), false);
-                let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dtaudq, j0 + u, k));
-                let b = s4[4 * n * k..].as_ptr();
-                // SAFETY: the rows l < n of page k of s4 (4 n² values) at b + u + 4 l; the
-                // outputs are distinct columns of d2qdd_dtaudq.
-                unsafe {
-                    pr.solve_group_in_place(
-                        j0 + w,
-                        [b, b.add(1), b.add(2), b.add(3)],
-                        4,
-                        true,
-                        out,
-                        none,
-                    )
-                };
+        for j8 in (0..n).step_by(8) {
+            let nb = if j8 + 4 < n { 2 } else { 1 };
+            let blks = &mut fso.s4[..4 * n2 * nb];
+            idfoza_blocks(model, data, &mut ws, data.minv.as_slice(), j8, blks);
+            for (h, s4) in fso.s4[..4 * n2 * nb].chunks_exact(4 * n2).enumerate() {
+                let j0 = j8 + 4 * h;
+                let w = 4.min(n - j0);
+                for k in 0..n {
+                    pr.build_set(pr.related(k), pr.related(k), false);
+                    let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dtaudq, j0 + u, k));
+                    let b = s4[4 * n * k..].as_ptr();
+                    // SAFETY: the rows l < n of page k of s4 (4 n² values) at b + u + 4 l; the
+                    // outputs are distinct columns of d2qdd_dtaudq.
+                    unsafe {
+                        pr.solve_group_in_place(
+                            j0 + w,
+                            [b, b.add(1), b.add(2), b.add(3)],
+                            4,
+                            true,
+                            out,
+                            none,
+                        )
+                    };
+                }
             }
         }
         symmetrise_pages(n, fso.d2qdd_dtaudq.as_mut_slice());

@@ -147,33 +147,34 @@ pub fn idsoza<'a>(
     Ok(so.d2tau_dq2())
 }
 
-/// Four right-hand sides side by side: component `m` (`[ang; lin]`) of lane `l` at `[m][l]`.
-pub(crate) type Lanes6 = [[f64; 4]; 6];
-
-/// Workspace of [`idfoza4_core`] (joint accelerations, `Ψ̈` per DoF, composite forces).
+/// Workspace of [`idfoza_lanes_core`] for right-hand sides in lanes `A` (`[f64; 4]` or
+/// `[f64; 8]`): joint accelerations, `Ψ̈` per DoF and composite forces, component `m`
+/// (`[ang; lin]`) of lane `l` at `[m][l]`.
 #[derive(Clone, Debug)]
-pub(crate) struct Idfoza4Ws {
-    a: Vec<Lanes6>,
-    psidd: Vec<Lanes6>,
-    fc: Vec<Lanes6>,
+pub(crate) struct IdfozaWs<A> {
+    a: Vec<[A; 6]>,
+    psidd: Vec<[A; 6]>,
+    fc: Vec<[A; 6]>,
 }
 
-impl Idfoza4Ws {
+impl<A: Copy + Default> IdfozaWs<A> {
     pub(crate) fn new(model: &Model) -> Self {
-        let z = [[0.0; 4]; 6];
+        let z = [A::default(); 6];
         Self { a: vec![z; model.njoints()], psidd: vec![z; model.nv], fc: vec![z; model.njoints()] }
     }
 }
 
-/// Four `f64` lanes (one per right-hand side) with the arithmetic of [`idfoza4_core`]: the
-/// portable `[f64; 4]`, or an AVX2 register ([`Avx4`]).
-pub(crate) trait Lane4: Copy {
-    /// `[x; 4]`.
+/// `N` `f64` lanes (one per right-hand side) with the arithmetic of [`idfoza_lanes_core`]: the
+/// portable `[f64; 4]`, an AVX2 register ([`Avx4`]) or an AVX-512 register ([`Avx8`]).
+pub(crate) trait Lanes: Copy {
+    /// The lanes as an array, `[f64; N]`.
+    type Arr: Copy + Default + AsRef<[f64]> + AsMut<[f64]>;
+    /// `[x; N]`.
     fn splat(x: f64) -> Self;
     /// From an array.
-    fn load(a: &[f64; 4]) -> Self;
+    fn load(a: &Self::Arr) -> Self;
     /// To an array.
-    fn store(self) -> [f64; 4];
+    fn store(self) -> Self::Arr;
     /// Lane-wise `self + b`.
     fn add(self, b: Self) -> Self;
     /// Lane-wise `self − b`.
@@ -184,17 +185,18 @@ pub(crate) trait Lane4: Copy {
     fn mul_add(self, b: Self, c: Self) -> Self;
 }
 
-impl Lane4 for [f64; 4] {
+impl Lanes for [f64; 4] {
+    type Arr = [f64; 4];
     #[inline(always)]
     fn splat(x: f64) -> Self {
         [x; 4]
     }
     #[inline(always)]
-    fn load(a: &[f64; 4]) -> Self {
+    fn load(a: &Self::Arr) -> Self {
         *a
     }
     #[inline(always)]
-    fn store(self) -> [f64; 4] {
+    fn store(self) -> Self::Arr {
         self
     }
     #[inline(always)]
@@ -223,20 +225,21 @@ impl Lane4 for [f64; 4] {
 pub(crate) struct Avx4(std::arch::x86_64::__m256d);
 
 #[cfg(target_arch = "x86_64")]
-impl Lane4 for Avx4 {
+impl Lanes for Avx4 {
+    type Arr = [f64; 4];
     #[inline(always)]
     fn splat(x: f64) -> Self {
         // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant).
         unsafe { Avx4(std::arch::x86_64::_mm256_set1_pd(x)) }
     }
     #[inline(always)]
-    fn load(a: &[f64; 4]) -> Self {
+    fn load(a: &Self::Arr) -> Self {
         // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant); `a`
         // holds the four values read.
         unsafe { Avx4(std::arch::x86_64::_mm256_loadu_pd(a.as_ptr())) }
     }
     #[inline(always)]
-    fn store(self) -> [f64; 4] {
+    fn store(self) -> Self::Arr {
         let mut a = [0.0; 4];
         // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant); `a`
         // holds the four values written.
@@ -265,24 +268,75 @@ impl Lane4 for Avx4 {
     }
 }
 
+/// Eight lanes in an AVX-512 register. Only created inside functions compiled with
+/// `#[target_feature(enable = "avx512f,avx2,fma")]` behind the run-time check
+/// [`crate::simd::avx512f`], where its methods (always inlined) execute.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+pub(crate) struct Avx8(std::arch::x86_64::__m512d);
+
+#[cfg(target_arch = "x86_64")]
+impl Lanes for Avx8 {
+    type Arr = [f64; 8];
+    #[inline(always)]
+    fn splat(x: f64) -> Self {
+        // SAFETY: AVX-512F is available wherever an `Avx8` is used (type invariant).
+        unsafe { Avx8(std::arch::x86_64::_mm512_set1_pd(x)) }
+    }
+    #[inline(always)]
+    fn load(a: &Self::Arr) -> Self {
+        // SAFETY: AVX-512F is available wherever an `Avx8` is used (type invariant); `a` holds
+        // the eight values read.
+        unsafe { Avx8(std::arch::x86_64::_mm512_loadu_pd(a.as_ptr())) }
+    }
+    #[inline(always)]
+    fn store(self) -> Self::Arr {
+        let mut a = [0.0; 8];
+        // SAFETY: AVX-512F is available wherever an `Avx8` is used (type invariant); `a` holds
+        // the eight values written.
+        unsafe { std::arch::x86_64::_mm512_storeu_pd(a.as_mut_ptr(), self.0) };
+        a
+    }
+    #[inline(always)]
+    fn add(self, b: Self) -> Self {
+        // SAFETY: AVX-512F is available wherever an `Avx8` is used (type invariant).
+        unsafe { Avx8(std::arch::x86_64::_mm512_add_pd(self.0, b.0)) }
+    }
+    #[inline(always)]
+    fn sub(self, b: Self) -> Self {
+        // SAFETY: AVX-512F is available wherever an `Avx8` is used (type invariant).
+        unsafe { Avx8(std::arch::x86_64::_mm512_sub_pd(self.0, b.0)) }
+    }
+    #[inline(always)]
+    fn mul(self, b: Self) -> Self {
+        // SAFETY: AVX-512F is available wherever an `Avx8` is used (type invariant).
+        unsafe { Avx8(std::arch::x86_64::_mm512_mul_pd(self.0, b.0)) }
+    }
+    #[inline(always)]
+    fn mul_add(self, b: Self, c: Self) -> Self {
+        // SAFETY: AVX-512F is available wherever an `Avx8` is used (type invariant).
+        unsafe { Avx8(std::arch::x86_64::_mm512_fmadd_pd(self.0, b.0, c.0)) }
+    }
+}
+
 #[inline(always)]
 fn v6(ang: &nalgebra::Vector3<f64>, lin: &nalgebra::Vector3<f64>) -> [f64; 6] {
     [ang.x, ang.y, ang.z, lin.x, lin.y, lin.z]
 }
 
 #[inline(always)]
-fn ld6<V: Lane4>(a: &Lanes6) -> [V; 6] {
+fn ld6<V: Lanes>(a: &[V::Arr; 6]) -> [V; 6] {
     std::array::from_fn(|m| V::load(&a[m]))
 }
 
 #[inline(always)]
-fn st6<V: Lane4>(a: &[V; 6]) -> Lanes6 {
+fn st6<V: Lanes>(a: &[V; 6]) -> [V::Arr; 6] {
     std::array::from_fn(|m| a[m].store())
 }
 
 /// `a × b` for lane 3-vectors `a` and a plain `b`.
 #[inline(always)]
-fn cross_lp<V: Lane4>(a: &[V], b: &[f64]) -> [V; 3] {
+fn cross_lp<V: Lanes>(a: &[V], b: &[f64]) -> [V; 3] {
     let s = |i: usize| V::splat(b[i]);
     [
         a[1].mul(s(2)).sub(a[2].mul(s(1))),
@@ -293,7 +347,7 @@ fn cross_lp<V: Lane4>(a: &[V], b: &[f64]) -> [V; 3] {
 
 /// `a × b` for a plain `a` and lane 3-vectors `b`.
 #[inline(always)]
-fn cross_pl<V: Lane4>(a: &[f64], b: &[V]) -> [V; 3] {
+fn cross_pl<V: Lanes>(a: &[f64], b: &[V]) -> [V; 3] {
     let s = |i: usize| V::splat(a[i]);
     [
         s(1).mul(b[2]).sub(s(2).mul(b[1])),
@@ -303,7 +357,7 @@ fn cross_pl<V: Lane4>(a: &[f64], b: &[V]) -> [V; 3] {
 }
 
 #[inline(always)]
-fn add3<V: Lane4>(a: &mut [V], b: [V; 3]) {
+fn add3<V: Lanes>(a: &mut [V], b: [V; 3]) {
     for (a, b) in a.iter_mut().zip(b) {
         *a = a.add(b);
     }
@@ -311,7 +365,7 @@ fn add3<V: Lane4>(a: &mut [V], b: [V; 3]) {
 
 /// `I v` (eq. of [`crate::spatial::Inertia::mul_motion`]) on lanes.
 #[inline(always)]
-fn inertia_mul_l<V: Lane4>(inr: &crate::spatial::Inertia, v: &[V; 6]) -> [V; 6] {
+fn inertia_mul_l<V: Lanes>(inr: &crate::spatial::Inertia, v: &[V; 6]) -> [V; 6] {
     let h = [inr.h.x, inr.h.y, inr.h.z];
     let r = |m: usize, c: usize| V::splat(inr.rot[(m, c)]);
     let hl = cross_pl(&h, &v[3..6]); // h × v.lin
@@ -324,7 +378,7 @@ fn inertia_mul_l<V: Lane4>(inr: &crate::spatial::Inertia, v: &[V; 6]) -> [V; 6] 
 
 /// Lane-wise pairing `Σ_m p[m] v[m]`.
 #[inline(always)]
-fn dot_pl<V: Lane4>(p: &[f64; 6], v: &[V; 6]) -> [f64; 4] {
+fn dot_pl<V: Lanes>(p: &[f64; 6], v: &[V; 6]) -> V::Arr {
     let s = |m: usize| V::splat(p[m]);
     let a = s(0).mul_add(v[0], s(1).mul(v[1]));
     let b = s(2).mul_add(v[2], s(3).mul(v[3]));
@@ -332,34 +386,36 @@ fn dot_pl<V: Lane4>(p: &[f64; 6], v: &[V; 6]) -> [f64; 4] {
     a.add(b).add(c).store()
 }
 
-/// IDFOZA ([`idfoza_core_with`]) for four right-hand sides at once, vectorised across them:
-/// lane `l` uses `x[c + ldx (j0 + l)]` for `l < nl` (zero otherwise) and `put(i, k, z)` receives
-/// `z[l] = ∂(M x_l)_i/∂q_k`. Needs the same `data` fields as [`idfoza_core`] (read only).
-/// The lanes are `V`: `[f64; 4]` anywhere, [`Avx4`] only inside functions compiled with AVX2
-/// and FMA (behind the run-time check).
+/// IDFOZA ([`idfoza_core_with`]) for `N` right-hand sides at once (the lanes of `V`),
+/// vectorised across them: lane `l` uses `x[c + ldx (j0 + l)]` for `l < nl` (zero otherwise) and
+/// `put(i, k, z)` receives `z[l] = ∂(M x_l)_i/∂q_k`. Needs the same `data` fields as
+/// [`idfoza_core`] (read only). The lanes are `V`: `[f64; 4]` anywhere, [`Avx4`] only inside
+/// functions compiled with AVX2 and FMA, [`Avx8`] only inside functions compiled with
+/// AVX-512F (behind the run-time checks).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn idfoza4_core<V: Lane4>(
+pub(crate) fn idfoza_lanes_core<V: Lanes>(
     model: &Model,
     data: &Data,
-    ws: &mut Idfoza4Ws,
+    ws: &mut IdfozaWs<V::Arr>,
     x: &[f64],
     ldx: usize,
     j0: usize,
     nl: usize,
-    mut put: impl FnMut(usize, usize, &[f64; 4]),
+    mut put: impl FnMut(usize, usize, &V::Arr),
 ) {
     let n = model.njoints();
     let nv = model.nv;
+    let lanes = V::Arr::default().as_ref().len();
     assert!(
-        nl <= 4
+        nl <= lanes
             && (nl == 0 || ldx * (j0 + nl - 1) + nv <= x.len())
             && ws.a.len() == n
             && ws.psidd.len() == nv
             && data.s_world.len() == nv,
-        "idfoza4_core: dimension mismatch"
+        "idfoza_lanes_core: dimension mismatch"
     );
-    ws.a[0] = [[0.0; 4]; 6];
+    ws.a[0] = [V::Arr::default(); 6];
     for i in 1..n {
         let ap: [V; 6] = ld6(&ws.a[model.parents[i]]);
         let mut ai = ap;
@@ -372,8 +428,8 @@ pub(crate) fn idfoza4_core<V: Lane4>(
             let mut pl = cross_lp(&ap[0..3], &sv[3..6]);
             add3(&mut pl, cross_lp(&ap[3..6], &sv[0..3]));
             ws.psidd[c] = st6(&[pa[0], pa[1], pa[2], pl[0], pl[1], pl[2]]);
-            let mut xl = [0.0; 4];
-            for (l, v) in xl.iter_mut().enumerate().take(nl) {
+            let mut xl = V::Arr::default();
+            for (l, v) in xl.as_mut().iter_mut().enumerate().take(nl) {
                 *v = x[c + ldx * (j0 + l)];
             }
             let xl = V::load(&xl);
