@@ -632,7 +632,9 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     let none = [std::ptr::null_mut(); 4];
     // ∂²q̈/∂q²: −M⁻¹(ID_qq + A + A^R) with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k], held in
     // S by blocks of four j. Columns j ≤ k (and the non-commuting j > k of k's joint), four j
-    // at a time; rows related to one of the j or to k.
+    // at a time; rows related to one of the j or to k. The k run in blocks of four inside the
+    // loop over j0, so that the A^R entries of a group (block k / 4 of S, pages j0..j0 + 4) are
+    // read by the four k of the block while they are in L1.
     let mut ws = IdfozaWss { ws4: &mut fso.ws4, ws8: &mut fso.ws8 };
     for (b, blks) in s.chunks_mut(8 * n2).enumerate() {
         idfoza_blocks(model, data, &mut ws, data.dqdd_dq.as_slice(), 8 * b, blks);
@@ -640,9 +642,18 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     {
         let idt = fso.id.d2tau_dq2().as_slice();
         let s = &*s;
-        for (k, &jt) in dof_joint.iter().enumerate() {
-            let jend = (k + 1).max(model.idx_v[jt] + model.nvs[jt]);
-            for j0 in (0..jend).step_by(4) {
+        // Columns j < jend(k) of page k.
+        let jend = |k: usize| {
+            let jt = dof_joint[k];
+            (k + 1).max(model.idx_v[jt] + model.nvs[jt])
+        };
+        for k4 in (0..n).step_by(4) {
+            let ks = k4..(k4 + 4).min(n);
+            let jmax = ks.clone().map(jend).max().unwrap_or(0);
+            for (j0, k) in (0..jmax).step_by(4).flat_map(|j0| ks.clone().map(move |k| (j0, k))) {
+                if j0 >= jend(k) {
+                    continue;
+                }
                 let w = 4.min(n - j0);
                 pr.build_set(pr.related4(j0), pr.related(k), false);
                 let jl = lanes(j0, w);
