@@ -139,10 +139,51 @@ fn check_matrices(what: &str, out: &[DMatrix<f64>], n: usize) -> Result<()> {
     Ok(())
 }
 
-/// `dst ← src` for matrices of equal shape (checked beforehand), as one `memcpy`.
+/// `dst ← src` for matrices of equal shape (checked beforehand). The destination is the
+/// caller's output for one state, not read again by the batch: with AVX it is written by
+/// non-temporal (streaming) stores, which skip reading its cache lines before writing them and
+/// leave the caches to the workspace ([`drive`] fences them before its chunk ends).
 #[inline]
 fn copy(dst: &mut DMatrix<f64>, src: &DMatrix<f64>) {
-    dst.as_mut_slice().copy_from_slice(src.as_slice());
+    let (dst, src) = (dst.as_mut_slice(), src.as_slice());
+    assert_eq!(dst.len(), src.len());
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: the CPU supports AVX; the lengths are equal (asserted).
+        unsafe { stream_copy_avx(dst, src) };
+        return;
+    }
+    dst.copy_from_slice(src);
+}
+
+/// `dst ← src` (equal lengths) with streaming stores for the 32-byte aligned part of `dst`.
+///
+/// # Safety
+/// AVX available; `dst.len() == src.len()`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn stream_copy_avx(dst: &mut [f64], src: &[f64]) {
+    use std::arch::x86_64::{_mm256_loadu_pd, _mm256_stream_pd};
+    let n = dst.len();
+    // Elements before the first 32-byte boundary of `dst` (f64 is 8-byte aligned, so ≤ 3).
+    let head = dst.as_ptr().align_offset(32).min(n);
+    let body = head + (n - head) / 4 * 4;
+    dst[..head].copy_from_slice(&src[..head]);
+    for i in (head..body).step_by(4) {
+        // SAFETY: i + 4 ≤ body ≤ n for both slices; dst + i is 32-byte aligned.
+        unsafe { _mm256_stream_pd(dst.as_mut_ptr().add(i), _mm256_loadu_pd(src.as_ptr().add(i))) };
+    }
+    dst[body..].copy_from_slice(&src[body..]);
+}
+
+/// Orders the streaming stores of [`copy`] before what follows (the end of a chunk).
+#[inline]
+fn fence_streams() {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: SSE is part of x86_64.
+    unsafe {
+        std::arch::x86_64::_mm_sfence()
+    };
 }
 
 /// Number of states per chunk: about four chunks per worker thread of the current pool.
@@ -170,12 +211,15 @@ where
         .map_init(init, |w, (ci, mut o)| {
             let start = ci * chunk;
             let len = chunk.min(n - start);
+            let mut err = None;
             for r in 0..len {
                 if let Err(e) = f(w, start + r, r, &mut o) {
-                    return Some(at_state(e, start + r));
+                    err = Some(at_state(e, start + r));
+                    break;
                 }
             }
-            None
+            fence_streams();
+            err
         })
         .find_map_first(|e| e);
     first_error.map_or(Ok(()), Err)
@@ -280,8 +324,8 @@ pub fn id_derivatives_batch(
         || Data::new(model),
         |data, k, r, (dq, dv)| {
             id_derivatives(model, data, &qs[k], &vs[k], &as_[k], None)?;
-            dq[r].copy_from(&data.dtau_dq);
-            dv[r].copy_from(&data.dtau_dv);
+            copy(&mut dq[r], &data.dtau_dq);
+            copy(&mut dv[r], &data.dtau_dv);
             Ok(())
         },
     )
@@ -314,8 +358,8 @@ pub fn fd_derivatives_batch(
         || Data::new(model),
         |data, k, r, (dq, dv)| {
             fd_derivatives(model, data, &qs[k], &vs[k], &taus[k], None)?;
-            dq[r].copy_from(&data.dqdd_dq);
-            dv[r].copy_from(&data.dqdd_dv);
+            copy(&mut dq[r], &data.dqdd_dq);
+            copy(&mut dv[r], &data.dqdd_dv);
             Ok(())
         },
     )
