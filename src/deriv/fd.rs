@@ -457,7 +457,7 @@ fn idfoza_blocks(
             unsafe { idfoza_block_avx2(model, data, ws.ws4, x, j0 + 4 * h, blk) };
             continue;
         }
-        idfoza_block_impl::<[f64; 4]>(model, data, ws.ws4, x, j0 + 4 * h, blk)
+        idfoza_blocks_impl::<[f64; 4]>(model, data, ws.ws4, x, j0 + 4 * h, blk)
     }
 }
 
@@ -472,26 +472,33 @@ unsafe fn idfoza_block_avx2(
     out: &mut [f64],
 ) {
     // SAFETY: AVX2 and FMA are enabled here, as `Avx4` needs.
-    idfoza_block_impl::<Avx4>(model, data, ws, x, j0, out)
+    idfoza_blocks_impl::<Avx4>(model, data, ws, x, j0, out)
 }
 
-/// One block of four right-hand sides (see [`idfoza_blocks`]).
+/// The blocks of four right-hand sides in `out` (`4 n²` values each, as many as `V` has lanes
+/// / 4) in one pass of `V`'s lanes (see [`idfoza_blocks`]).
 #[inline(always)]
-fn idfoza_block_impl<V: Lanes<Arr = [f64; 4]>>(
+fn idfoza_blocks_impl<V: Lanes>(
     model: &Model,
     data: &Data,
-    ws: &mut IdfozaWs<[f64; 4]>,
+    ws: &mut IdfozaWs<V::Arr>,
     x: &[f64],
     j0: usize,
     out: &mut [f64],
 ) {
     let n = model.nv;
-    assert!(out.len() == 4 * n * n && j0 < n && x.len() == n * n);
+    let lanes = V::Arr::default().as_ref().len();
+    assert!(out.len() == lanes * n * n && j0 < n && x.len() == n * n);
+    let o = out.as_mut_ptr();
     // Lanes past nv read no column and come out zero.
-    idfoza_lanes_core::<V>(model, data, ws, x, n, j0, 4.min(n - j0), |i, k, z| {
+    idfoza_lanes_core::<V>(model, data, ws, x, n, j0, lanes.min(n - j0), |i, k, z| {
         debug_assert!(i < n && k < n);
-        // SAFETY: i, k < n, so 4 i + 4 n k + 3 < 4 n² = out.len().
-        unsafe { *out.as_mut_ptr().add(4 * i + 4 * n * k).cast::<[f64; 4]>() = *z };
+        for (h, q) in z.as_ref().chunks_exact(4).enumerate() {
+            // SAFETY: i, k < n and h < lanes / 4, so 4 n² h + 4 i + 4 n k + 3 < out.len().
+            unsafe {
+                std::ptr::copy_nonoverlapping(q.as_ptr(), o.add(4 * n * (n * h + k) + 4 * i), 4)
+            };
+        }
     });
 }
 
@@ -507,20 +514,8 @@ unsafe fn idfoza_pair_avx512(
     j0: usize,
     out: &mut [f64],
 ) {
-    let n = model.nv;
-    assert!(out.len() == 8 * n * n && j0 < n && x.len() == n * n);
-    let (lo, hi) = out.split_at_mut(4 * n * n);
-    // SAFETY: AVX-512F is enabled here, as `Avx8` needs. Lanes past nv read no column and come
-    // out zero.
-    idfoza_lanes_core::<Avx8>(model, data, ws, x, n, j0, 8.min(n - j0), |i, k, z| {
-        debug_assert!(i < n && k < n);
-        let o = 4 * i + 4 * n * k;
-        // SAFETY: i, k < n, so o + 3 < 4 n² = lo.len() = hi.len().
-        unsafe {
-            *lo.as_mut_ptr().add(o).cast::<[f64; 4]>() = [z[0], z[1], z[2], z[3]];
-            *hi.as_mut_ptr().add(o).cast::<[f64; 4]>() = [z[4], z[5], z[6], z[7]];
-        }
-    });
+    // SAFETY: AVX-512F is enabled here, as `Avx8` needs.
+    idfoza_blocks_impl::<Avx8>(model, data, ws, x, j0, out)
 }
 
 /// Second-order derivatives of forward dynamics at `q̈ = FD(q, q̇, τ)` (eq. eqn_FD_SO_43):

@@ -217,6 +217,54 @@ impl Lanes for [f64; 4] {
     }
 }
 
+/// Implements [`Lanes`] for a one-register newtype `$t` of `$n` lanes with the given
+/// intrinsics (`_mm256_*` for AVX2, `_mm512_*` for AVX-512F).
+#[cfg(target_arch = "x86_64")]
+macro_rules! simd_lanes {
+    ($t:ident, $n:literal, $set1:ident, $loadu:ident, $storeu:ident, $add:ident, $sub:ident, $mul:ident, $fmadd:ident) => {
+        impl Lanes for $t {
+            type Arr = [f64; $n];
+            #[inline(always)]
+            fn splat(x: f64) -> Self {
+                // SAFETY: the features are available wherever the type is used (its invariant).
+                unsafe { $t(std::arch::x86_64::$set1(x)) }
+            }
+            #[inline(always)]
+            fn load(a: &Self::Arr) -> Self {
+                // SAFETY: as for `splat`; `a` holds the values read.
+                unsafe { $t(std::arch::x86_64::$loadu(a.as_ptr())) }
+            }
+            #[inline(always)]
+            fn store(self) -> Self::Arr {
+                let mut a = [0.0; $n];
+                // SAFETY: as for `splat`; `a` holds the values written.
+                unsafe { std::arch::x86_64::$storeu(a.as_mut_ptr(), self.0) };
+                a
+            }
+            #[inline(always)]
+            fn add(self, b: Self) -> Self {
+                // SAFETY: as for `splat`.
+                unsafe { $t(std::arch::x86_64::$add(self.0, b.0)) }
+            }
+            #[inline(always)]
+            fn sub(self, b: Self) -> Self {
+                // SAFETY: as for `splat`.
+                unsafe { $t(std::arch::x86_64::$sub(self.0, b.0)) }
+            }
+            #[inline(always)]
+            fn mul(self, b: Self) -> Self {
+                // SAFETY: as for `splat`.
+                unsafe { $t(std::arch::x86_64::$mul(self.0, b.0)) }
+            }
+            #[inline(always)]
+            fn mul_add(self, b: Self, c: Self) -> Self {
+                // SAFETY: as for `splat`.
+                unsafe { $t(std::arch::x86_64::$fmadd(self.0, b.0, c.0)) }
+            }
+        }
+    };
+}
+
 /// Four lanes in an AVX2 register. Only created inside functions compiled with
 /// `#[target_feature(enable = "avx2,fma")]` behind the run-time check [`crate::simd::avx2_fma`],
 /// where its methods (always inlined) execute.
@@ -225,48 +273,17 @@ impl Lanes for [f64; 4] {
 pub(crate) struct Avx4(std::arch::x86_64::__m256d);
 
 #[cfg(target_arch = "x86_64")]
-impl Lanes for Avx4 {
-    type Arr = [f64; 4];
-    #[inline(always)]
-    fn splat(x: f64) -> Self {
-        // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant).
-        unsafe { Avx4(std::arch::x86_64::_mm256_set1_pd(x)) }
-    }
-    #[inline(always)]
-    fn load(a: &Self::Arr) -> Self {
-        // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant); `a`
-        // holds the four values read.
-        unsafe { Avx4(std::arch::x86_64::_mm256_loadu_pd(a.as_ptr())) }
-    }
-    #[inline(always)]
-    fn store(self) -> Self::Arr {
-        let mut a = [0.0; 4];
-        // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant); `a`
-        // holds the four values written.
-        unsafe { std::arch::x86_64::_mm256_storeu_pd(a.as_mut_ptr(), self.0) };
-        a
-    }
-    #[inline(always)]
-    fn add(self, b: Self) -> Self {
-        // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant).
-        unsafe { Avx4(std::arch::x86_64::_mm256_add_pd(self.0, b.0)) }
-    }
-    #[inline(always)]
-    fn sub(self, b: Self) -> Self {
-        // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant).
-        unsafe { Avx4(std::arch::x86_64::_mm256_sub_pd(self.0, b.0)) }
-    }
-    #[inline(always)]
-    fn mul(self, b: Self) -> Self {
-        // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant).
-        unsafe { Avx4(std::arch::x86_64::_mm256_mul_pd(self.0, b.0)) }
-    }
-    #[inline(always)]
-    fn mul_add(self, b: Self, c: Self) -> Self {
-        // SAFETY: AVX2 and FMA are available wherever an `Avx4` is used (type invariant).
-        unsafe { Avx4(std::arch::x86_64::_mm256_fmadd_pd(self.0, b.0, c.0)) }
-    }
-}
+simd_lanes!(
+    Avx4,
+    4,
+    _mm256_set1_pd,
+    _mm256_loadu_pd,
+    _mm256_storeu_pd,
+    _mm256_add_pd,
+    _mm256_sub_pd,
+    _mm256_mul_pd,
+    _mm256_fmadd_pd
+);
 
 /// Eight lanes in an AVX-512 register. Only created inside functions compiled with
 /// `#[target_feature(enable = "avx512f,avx2,fma")]` behind the run-time check
@@ -276,48 +293,17 @@ impl Lanes for Avx4 {
 pub(crate) struct Avx8(std::arch::x86_64::__m512d);
 
 #[cfg(target_arch = "x86_64")]
-impl Lanes for Avx8 {
-    type Arr = [f64; 8];
-    #[inline(always)]
-    fn splat(x: f64) -> Self {
-        // SAFETY: AVX-512F is available wherever an `Avx8` is used (type invariant).
-        unsafe { Avx8(std::arch::x86_64::_mm512_set1_pd(x)) }
-    }
-    #[inline(always)]
-    fn load(a: &Self::Arr) -> Self {
-        // SAFETY: AVX-512F is available wherever an `Avx8` is used (type invariant); `a` holds
-        // the eight values read.
-        unsafe { Avx8(std::arch::x86_64::_mm512_loadu_pd(a.as_ptr())) }
-    }
-    #[inline(always)]
-    fn store(self) -> Self::Arr {
-        let mut a = [0.0; 8];
-        // SAFETY: AVX-512F is available wherever an `Avx8` is used (type invariant); `a` holds
-        // the eight values written.
-        unsafe { std::arch::x86_64::_mm512_storeu_pd(a.as_mut_ptr(), self.0) };
-        a
-    }
-    #[inline(always)]
-    fn add(self, b: Self) -> Self {
-        // SAFETY: AVX-512F is available wherever an `Avx8` is used (type invariant).
-        unsafe { Avx8(std::arch::x86_64::_mm512_add_pd(self.0, b.0)) }
-    }
-    #[inline(always)]
-    fn sub(self, b: Self) -> Self {
-        // SAFETY: AVX-512F is available wherever an `Avx8` is used (type invariant).
-        unsafe { Avx8(std::arch::x86_64::_mm512_sub_pd(self.0, b.0)) }
-    }
-    #[inline(always)]
-    fn mul(self, b: Self) -> Self {
-        // SAFETY: AVX-512F is available wherever an `Avx8` is used (type invariant).
-        unsafe { Avx8(std::arch::x86_64::_mm512_mul_pd(self.0, b.0)) }
-    }
-    #[inline(always)]
-    fn mul_add(self, b: Self, c: Self) -> Self {
-        // SAFETY: AVX-512F is available wherever an `Avx8` is used (type invariant).
-        unsafe { Avx8(std::arch::x86_64::_mm512_fmadd_pd(self.0, b.0, c.0)) }
-    }
-}
+simd_lanes!(
+    Avx8,
+    8,
+    _mm512_set1_pd,
+    _mm512_loadu_pd,
+    _mm512_storeu_pd,
+    _mm512_add_pd,
+    _mm512_sub_pd,
+    _mm512_mul_pd,
+    _mm512_fmadd_pd
+);
 
 #[inline(always)]
 fn v6(ang: &nalgebra::Vector3<f64>, lin: &nalgebra::Vector3<f64>) -> [f64; 6] {
