@@ -605,27 +605,32 @@ unsafe fn spd_inverse_avx2_regs<const V: usize>(a: &mut [f64], m: usize, tol: f6
     true
 }
 
-/// Hints the caches to fetch the `len` values at `p` into L2 (no effect on results): used for
-/// output columns well before they are stored, so that the stores then find their lines in L2
-/// instead of waiting on read-for-ownership misses.
+/// Cache level hint of [`prefetch`]: into L1 (and L2).
+pub(crate) const TO_L1: i32 = 3;
+/// Cache level hint of [`prefetch`]: into L2 (not L1).
+pub(crate) const TO_L2: i32 = 2;
+
+/// Hints the caches to fetch the `len` values at `p` (one hint per 64-byte line) into L1 or L2
+/// (`LEVEL` = [`TO_L1`] or [`TO_L2`]); no effect on results. Used ahead of the loads of inputs
+/// and the stores of outputs that would otherwise wait on misses.
 #[inline]
-pub(crate) fn prefetch_l2(p: *const f64, len: usize) {
+pub(crate) fn prefetch<const LEVEL: i32>(p: *const f64, len: usize) {
     #[cfg(target_arch = "x86_64")]
     {
-        use std::arch::x86_64::{_MM_HINT_T1, _mm_prefetch};
+        use std::arch::x86_64::_mm_prefetch;
         if len == 0 {
             return;
         }
-        // One hint per 64-byte line, the last value's line included.
         let mut off = 0;
         while off < len {
             // SAFETY: prefetching is a hint that never faults, whatever the address; the
             // addresses are formed with wrapping arithmetic.
-            unsafe { _mm_prefetch::<_MM_HINT_T1>(p.wrapping_add(off).cast::<i8>()) };
+            unsafe { _mm_prefetch::<LEVEL>(p.wrapping_add(off).cast::<i8>()) };
             off += 8;
         }
+        // The last value's line (when `p` is not line-aligned).
         // SAFETY: as above.
-        unsafe { _mm_prefetch::<_MM_HINT_T1>(p.wrapping_add(len - 1).cast::<i8>()) };
+        unsafe { _mm_prefetch::<LEVEL>(p.wrapping_add(len - 1).cast::<i8>()) };
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = (p, len);
@@ -676,18 +681,23 @@ impl Gemm4<'_> {
 /// # Safety
 /// Every non-null `out[u]` and `mirror[u]` is valid for writing `rows` values and does not overlap
 /// `g.a` or what `g.b` addresses; `B[idx[t], u]` (see [`Gemm4`]) is readable for every `t`,
-/// `u < 4`.
+/// `u < 4`; every `idx[t] < g.a.len() / g.lda` (a column of `A`; checked in debug builds only,
+/// as this is called once per group of four columns in the hot loops of FD-SO).
 pub(crate) unsafe fn neg_gemm4_sparse(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror: &[*mut f64; 4]) {
     let padded = g.rows.div_ceil(8) * 8;
+    // With whole columns of `lda ≥ padded` values, column `l < a.len() / lda` is readable up to
+    // the padded rows.
     assert!(
-        g.rows <= g.lda && g.idx.iter().all(|&l| (l as usize) * g.lda + padded <= g.a.len()),
+        g.lda > 0 && padded <= g.lda && g.a.len().is_multiple_of(g.lda),
         "neg_gemm4_sparse: dimension mismatch"
     );
+    debug_assert!(g.idx.iter().all(|&l| (l as usize) < g.a.len() / g.lda));
     if g.rows == 0 {
         return;
     }
     // SAFETY: every column `idx[t]` of `a` is readable up to `padded ≥` the vector-rounded
-    // rows (asserted); `b` and the outputs are the caller's contract.
+    // rows (asserted, and `idx` by the caller's contract); `b` and the outputs are the caller's
+    // contract.
     unsafe {
         #[cfg(target_arch = "x86_64")]
         if crate::simd::avx512f() {

@@ -9,7 +9,7 @@ use super::zero::{IdfozaWs, Lanes, idfoza_lanes_core};
 use crate::algo::Data;
 use crate::algo::internal::{aba_unchecked, check_fext, ltl_in_place, ltl_solve_fd};
 use crate::error::Result;
-use crate::linalg::{Gemm4, neg_gemm4_sparse, prefetch_l2, transpose_strided};
+use crate::linalg::{Gemm4, TO_L1, TO_L2, neg_gemm4_sparse, prefetch, transpose_strided};
 use crate::model::{Model, check_vec};
 use crate::spatial::Force;
 use crate::tensor::Tensor3;
@@ -176,6 +176,18 @@ pub struct FdSoData {
     related: Vec<u64>,
     /// `related4[words g..]`: the union of the related sets of the DoFs `4 g..4 g + 4`.
     related4: Vec<u64>,
+    /// `root[j]`: DoF `j` belongs to a joint attached to the world. Moving such a joint moves
+    /// its whole subtree rigidly, and every joint type has a constant body-frame motion
+    /// subspace, so `∂M/∂q_j = 0`; and `τ` depends on `q_j` only through gravity and the
+    /// external forces, neither of which depends on `q̇`, so `∂²τ/∂q_j∂q̇ = 0`. Hence the columns
+    /// `(j, ·)` of `∂²q̈/∂q∂q̇` and the page `j` of `∂(M⁻¹)/∂q` vanish: they are never written
+    /// (zero since [`FdSoData::new`]).
+    root: Vec<bool>,
+    /// The groups `(j0, k)` of `∂²q̈/∂q²` in the order they are computed (see
+    /// [`so_products`]).
+    qq_groups: Vec<[u32; 2]>,
+    /// The groups `(j0, k)` of `∂²q̈/∂q̇²` with a structurally non-zero column, in order.
+    vv_groups: Vec<[u32; 2]>,
     /// One group's row set (scratch, `words` values).
     set: Vec<u64>,
     /// One group's non-zero right-hand-side rows (`nv` values) and their values (4 per row).
@@ -206,6 +218,32 @@ impl FdSoData {
             }
         }
         let ld = n.div_ceil(8) * 8;
+        // ∂²q̈/∂q²: columns j < jend(k) of page k (j ≤ k, and the j > k of k's joint), four j
+        // at a time; four k (a block k4) per j0.
+        let jend = |k: usize| {
+            let jt = model.dof_joint[k];
+            (k + 1).max(model.idx_v[jt] + model.nvs[jt])
+        };
+        let mut qq_groups = Vec::new();
+        for k4 in (0..n).step_by(4) {
+            let ks = k4..(k4 + 4).min(n);
+            let jmax = ks.clone().map(jend).max().unwrap_or(0);
+            for j0 in (0..jmax).step_by(4) {
+                for k in ks.clone().filter(|&k| j0 < jend(k)) {
+                    qq_groups.push([j0 as u32, k as u32]);
+                }
+            }
+        }
+        // ∂²q̈/∂q̇²: columns j ≤ k, four j at a time, the groups where some (j, k) is related.
+        let mut vv_groups = Vec::new();
+        for k in 0..n {
+            for j0 in (0..k + 1).step_by(4) {
+                let rk = &related[words * k..words * (k + 1)];
+                if (j0..(j0 + 4).min(n)).any(|j| rk[j / 64] >> (j % 64) & 1 != 0) {
+                    vv_groups.push([j0 as u32, k as u32]);
+                }
+            }
+        }
         Self {
             id: SoData::without_dm_dq(model),
             d2qdd_dq2: Tensor3::zeros(n, n, n),
@@ -221,6 +259,9 @@ impl FdSoData {
             words,
             related,
             related4,
+            root: (0..n).map(|j| model.parents[model.dof_joint[j]] == 0).collect(),
+            qq_groups,
+            vv_groups,
             set: vec![0; words],
             idx: vec![0; n],
             rhs: vec![0.0; 4 * n],
@@ -378,13 +419,6 @@ impl<'a> Products<'a> {
         out: [*mut f64; 4],
         mirror: [*mut f64; 4],
     ) {
-        // The output columns into L2 while the product runs (their stores then find their lines
-        // there instead of waiting on read-for-ownership misses).
-        for p in out.into_iter().chain(mirror) {
-            if !p.is_null() {
-                prefetch_l2(p, rows);
-            }
-        }
         if cnt == 0 {
             for p in out.into_iter().chain(mirror) {
                 if !p.is_null() {
@@ -397,7 +431,8 @@ impl<'a> Products<'a> {
         let g = Gemm4 { a: self.minv, lda: self.ld, rows, idx: &self.idx[..cnt], b, bs, by_row };
         debug_assert!(rows <= self.n);
         // SAFETY: the caller's contract on `b` and the outputs; `minv` has `ld ≥` rows rounded
-        // up to 8 values per column (zero padded) for every DoF index of `set`.
+        // up to 8 values per column (zero padded) for each of its `n` columns, and the indices
+        // in `idx` are DoFs of `set` (< n).
         unsafe { neg_gemm4_sparse(&g, &out, &mirror) };
     }
 }
@@ -628,8 +663,9 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     // ∂²q̈/∂q²: −M⁻¹(ID_qq + A + A^R) with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k], held in
     // S by blocks of four j. Columns j ≤ k (and the non-commuting j > k of k's joint), four j
     // at a time; rows related to one of the j or to k. The k run in blocks of four inside the
-    // loop over j0, so that the A^R entries of a group (block k / 4 of S, pages j0..j0 + 4) are
-    // read by the four k of the block while they are in L1.
+    // loop over j0 (`FdSoData::qq_groups`), so that the A^R entries of a group (block k / 4 of
+    // S, pages j0..j0 + 4) are read by the four k of the block while they are in L1. Each
+    // group prefetches the next one's inputs and output columns.
     let mut ws = IdfozaWss { ws4: &mut fso.ws4, ws8: &mut fso.ws8 };
     for (b, blks) in s.chunks_mut(8 * n2).enumerate() {
         idfoza_blocks(model, data, &mut ws, data.dqdd_dq.as_slice(), 8 * b, blks);
@@ -637,50 +673,59 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     {
         let idt = fso.id.d2tau_dq2().as_slice();
         let s = &*s;
-        // Columns j < jend(k) of page k.
-        let jend = |k: usize| {
-            let jt = dof_joint[k];
-            (k + 1).max(model.idx_v[jt] + model.nvs[jt])
-        };
-        for k4 in (0..n).step_by(4) {
-            let ks = k4..(k4 + 4).min(n);
-            let jmax = ks.clone().map(jend).max().unwrap_or(0);
-            for (j0, k) in (0..jmax).step_by(4).flat_map(|j0| ks.clone().map(move |k| (j0, k))) {
-                if j0 >= jend(k) {
-                    continue;
+        let groups = &fso.qq_groups[..];
+        for (g, &[j0, k]) in groups.iter().enumerate() {
+            let (j0, k) = (j0 as usize, k as usize);
+            // The next group's inputs into L1 and its outputs into L2 while this one runs.
+            if let Some(&[nj, nk]) = groups.get(g + 1) {
+                let (nj, nk) = (nj as usize, nk as usize);
+                let nw = 4.min(n - nj);
+                prefetch::<TO_L1>(idt.as_ptr().wrapping_add(n * (nj + n * nk)), nw * n);
+                prefetch::<TO_L1>(s.as_ptr().wrapping_add(4 * n2 * (nj / 4) + 4 * n * nk), 4 * n);
+                if nj != j0 || nk / 4 != k / 4 {
+                    for u in 0..nw {
+                        let p = s.as_ptr().wrapping_add(4 * n2 * (nk / 4) + 4 * n * (nj + u));
+                        prefetch::<TO_L1>(p, 4 * n);
+                    }
                 }
-                let w = 4.min(n - j0);
-                pr.build_set(pr.related4(j0), pr.related(k), false);
-                let jl = lanes(j0, w);
-                let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dq2, j0 + u, k));
-                let mirror = std::array::from_fn(|u| {
-                    let j = j0 + u;
-                    if u < w && j < k && commute(j, k) {
-                        col(&mut fso.d2qdd_dq2, k, j)
-                    } else {
-                        std::ptr::null_mut()
-                    }
-                });
-                let val = |l| {
-                    // SAFETY: l, k and the lanes' j < n: the block entries are within
-                    // s (4 n² per block of 4 DoFs), the ID entries within n³.
-                    unsafe {
-                        // A: IDFOZA(∂q̈/∂q[:, j0 + u])[l][k], the lanes of one block.
-                        let a = ld4(s.as_ptr().add(4 * n2 * (j0 / 4) + 4 * l + 4 * n * k));
-                        // A^R: IDFOZA(∂q̈/∂q[:, k])[l][j0 + u].
-                        let ar = s.as_ptr().add(4 * n2 * (k / 4) + k % 4 + 4 * l);
-                        let id = idt.as_ptr().add(l + n2 * k);
-                        std::array::from_fn(|u| *id.add(n * jl[u]) + a[u] + *ar.add(4 * n * jl[u]))
-                    }
-                };
-                // SAFETY: rows l < n and lanes j < n index the n³ tensors; the outputs are
-                // distinct columns of d2qdd_dq2.
-                unsafe { pr.solve_group(n, val, out, mirror) };
+                let t = fso.d2qdd_dq2.as_slice().as_ptr();
+                prefetch::<TO_L2>(t.wrapping_add(n * (nj + n * nk)), nw * n);
+                for j in (nj..nj + nw).filter(|&j| j < nk && commute(j, nk)) {
+                    prefetch::<TO_L2>(t.wrapping_add(n * (nk + n * j)), n);
+                }
             }
+            let w = 4.min(n - j0);
+            pr.build_set(pr.related4(j0), pr.related(k), false);
+            let jl = lanes(j0, w);
+            let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dq2, j0 + u, k));
+            let mirror = std::array::from_fn(|u| {
+                let j = j0 + u;
+                if u < w && j < k && commute(j, k) {
+                    col(&mut fso.d2qdd_dq2, k, j)
+                } else {
+                    std::ptr::null_mut()
+                }
+            });
+            let val = |l| {
+                // SAFETY: l, k and the lanes' j < n: the block entries are within s (4 n² per
+                // block of 4 DoFs), the ID entries within n³.
+                unsafe {
+                    // A: IDFOZA(∂q̈/∂q[:, j0 + u])[l][k], the lanes of one block.
+                    let a = ld4(s.as_ptr().add(4 * n2 * (j0 / 4) + 4 * l + 4 * n * k));
+                    // A^R: IDFOZA(∂q̈/∂q[:, k])[l][j0 + u].
+                    let ar = s.as_ptr().add(4 * n2 * (k / 4) + k % 4 + 4 * l);
+                    let id = idt.as_ptr().add(l + n2 * k);
+                    std::array::from_fn(|u| *id.add(n * jl[u]) + a[u] + *ar.add(4 * n * jl[u]))
+                }
+            };
+            // SAFETY: rows l < n and lanes j < n index the n³ tensors; the outputs are distinct
+            // columns of d2qdd_dq2.
+            unsafe { pr.solve_group(n, val, out, mirror) };
         }
     }
     // ∂²q̈/∂q∂q̇: −M⁻¹(ID_qv + B) with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j]; columns
-    // (j, k0..k0 + 4) for every j, by k0: IDFOZA of the eight columns k8.. is computed into the
+    // (j, k0..k0 + 4) for every j but the DoFs of root joints (zero columns, see
+    // `FdSoData::root`), by k0: IDFOZA of the eight columns k8.. is computed into the
     // cache-resident blocks `s4` (at u + 4 i + 4 n j + 4 n² h for k = k8 + 4 h + u) just before
     // they are used. Rows related to j.
     {
@@ -693,7 +738,15 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
                 let k0 = k8 + 4 * h;
                 let w = 4.min(n - k0);
                 let kl = lanes(k0, w);
-                for j in 0..n {
+                for j in (0..n).filter(|&j| !fso.root[j]) {
+                    // The next group's ID columns into L1 and its outputs into L2.
+                    if j + 1 < n {
+                        let t = fso.d2qdd_dqdv.as_slice().as_ptr();
+                        for k in k0..k0 + w {
+                            prefetch::<TO_L1>(idt.as_ptr().wrapping_add(n * (j + 1 + n * k)), n);
+                            prefetch::<TO_L2>(t.wrapping_add(n * (j + 1 + n * k)), n);
+                        }
+                    }
                     pr.build_set(pr.related(j), pr.related(j), false);
                     let out = std::array::from_fn(|u| {
                         if u < w {
@@ -718,8 +771,9 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     }
     // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k]: rows i ≤ j of the columns
     // (j0..j0 + 4, k), by j0, with IDFOZA of the columns j8..j8 + 8 into `s4` (at
-    // u + 4 i + 4 n k + 4 n² h for j = j8 + 4 h + u); rows of C related to k. The strict lower
-    // triangles come from the symmetry of the pages.
+    // u + 4 i + 4 n k + 4 n² h for j = j8 + 4 h + u); rows of C related to k. The pages k of
+    // the DoFs of root joints vanish (see `FdSoData::root`). The strict lower triangles come
+    // from the symmetry of the pages.
     {
         for j8 in (0..n).step_by(8) {
             let nb = if j8 + 4 < n { 2 } else { 1 };
@@ -728,7 +782,12 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             for (h, s4) in fso.s4[..4 * n2 * nb].chunks_exact(4 * n2).enumerate() {
                 let j0 = j8 + 4 * h;
                 let w = 4.min(n - j0);
-                for k in 0..n {
+                for k in (0..n).filter(|&k| !fso.root[k]) {
+                    // The next group's outputs (rows < j0 + w of columns j0..j0 + w) into L2.
+                    if k + 1 < n {
+                        let t = fso.d2qdd_dtaudq.as_slice().as_ptr();
+                        prefetch::<TO_L2>(t.wrapping_add(n * (j0 + n * (k + 1))), w * n);
+                    }
                     pr.build_set(pr.related(k), pr.related(k), false);
                     let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dtaudq, j0 + u, k));
                     let b = s4[4 * n * k..].as_ptr();
@@ -755,28 +814,35 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     // related to k and to one of the j.
     {
         let idt = fso.id.d2tau_dv2().as_slice();
-        for k in 0..n {
-            for j0 in (0..k + 1).step_by(4) {
-                let w = 4.min(n - j0);
-                let rk = pr.related(k);
-                if !(j0..j0 + w).any(|j| rk[j / 64] >> (j % 64) & 1 != 0) {
-                    continue;
+        let groups = &fso.vv_groups[..];
+        for (g, &[j0, k]) in groups.iter().enumerate() {
+            let (j0, k) = (j0 as usize, k as usize);
+            // The next group's ID columns into L1 and its outputs into L2.
+            if let Some(&[nj, nk]) = groups.get(g + 1) {
+                let (nj, nk) = (nj as usize, nk as usize);
+                let nw = 4.min(n - nj);
+                prefetch::<TO_L1>(idt.as_ptr().wrapping_add(n * (nj + n * nk)), nw * n);
+                let t = fso.d2qdd_dv2.as_slice().as_ptr();
+                prefetch::<TO_L2>(t.wrapping_add(n * (nj + n * nk)), nw * n);
+                for j in (nj..nj + nw).filter(|&j| j < nk) {
+                    prefetch::<TO_L2>(t.wrapping_add(n * (nk + n * j)), n);
                 }
-                pr.build_set(pr.related4(j0), pr.related(k), true);
-                let jl = lanes(j0, w);
-                let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dv2, j0 + u, k));
-                let mirror = std::array::from_fn(|u| {
-                    if u < w && j0 + u < k {
-                        col(&mut fso.d2qdd_dv2, k, j0 + u)
-                    } else {
-                        std::ptr::null_mut()
-                    }
-                });
-                let b = jl.map(|j| idt[n * (j + n * k)..].as_ptr());
-                // SAFETY: the columns (j, k) of ID_vv (n values each, rows l < n); the outputs
-                // are distinct columns of d2qdd_dv2.
-                unsafe { pr.solve_group_in_place(n, b, 1, false, out, mirror) };
             }
+            let w = 4.min(n - j0);
+            pr.build_set(pr.related4(j0), pr.related(k), true);
+            let jl = lanes(j0, w);
+            let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dv2, j0 + u, k));
+            let mirror = std::array::from_fn(|u| {
+                if u < w && j0 + u < k {
+                    col(&mut fso.d2qdd_dv2, k, j0 + u)
+                } else {
+                    std::ptr::null_mut()
+                }
+            });
+            let b = jl.map(|j| idt[n * (j + n * k)..].as_ptr());
+            // SAFETY: the columns (j, k) of ID_vv (n values each, rows l < n); the outputs are
+            // distinct columns of d2qdd_dv2.
+            unsafe { pr.solve_group_in_place(n, b, 1, false, out, mirror) };
         }
     }
 }
@@ -786,6 +852,76 @@ mod tests {
     use super::*;
     use crate::model::builtin::random_tree;
     use crate::rng::Rng;
+
+    /// The structural zeros that `fd_so_derivatives` never computes (see `FdSoData::root`): for
+    /// every DoF `j` of a joint attached to the world, the columns `(j, ·)` of `∂²q̈/∂q∂q̇` and
+    /// the page `j` of `∂(M⁻¹)/∂q` vanish. Checked on trees with several world-attached joints
+    /// of every kind (and with a free-flyer): exactly against the hyper-dual oracle, and with
+    /// external forces (body frames) against central differences of the first-order
+    /// derivatives, where a structural non-zero would be of the size of the other entries.
+    #[test]
+    fn root_joint_columns_vanish() {
+        let mut rng = Rng::new(21);
+        let mut roots = 0;
+        for seed in 1..12 {
+            let m = random_tree(7, seed, seed % 4 == 0);
+            let n = m.nv;
+            let q = m.random_configuration(&mut rng);
+            let v = DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
+            let tau = DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
+            let root = FdSoData::new(&m).root;
+            roots += root.iter().filter(|r| **r).count();
+            let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
+            let (tq, tt) = (
+                crate::reference::d2_aba_dqdv(&m, qs, vs, ts),
+                crate::reference::d2_aba_dtaudq(&m, qs, vs, ts),
+            );
+            let amax = |x: &[f64]| x.iter().fold(0.0, |a: f64, x| a.max(x.abs()));
+            let scale = 1.0 + amax(tq.as_slice()) + amax(tt.as_slice());
+            for (i, j, k) in (0..n * n * n).map(|x| (x % n, x / n % n, x / (n * n))) {
+                if root[j] {
+                    assert!(tq[(i, j, k)].abs() < 1e-13 * scale, "∂²q̈/∂q∂q̇ {i} {j} {k}");
+                }
+                if root[k] {
+                    assert!(tt[(i, j, k)].abs() < 1e-13 * scale, "∂(M⁻¹)/∂q {i} {j} {k}");
+                }
+            }
+            // With external forces: against central differences of the first-order results.
+            let fext: Vec<Force> = (0..m.njoints())
+                .map(|_| Force::from_vec6(&nalgebra::Vector6::from_fn(|_, _| rng.range(-1.0, 1.0))))
+                .collect();
+            let fe = Some(&fext[..]);
+            let mut d = Data::new(&m);
+            let mut fso = FdSoData::new(&m);
+            fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &tau, fe).unwrap();
+            let h = 1e-5;
+            let (mut dp, mut dm) = (Data::new(&m), Data::new(&m));
+            for k in 0..n {
+                let mut e = DVector::zeros(n);
+                e[k] = h;
+                // Page k of ∂(M⁻¹)/∂q and of ∂²q̈/∂q∂q̇.
+                fd_derivatives(&m, &mut dp, &m.integrate(&q, &e).unwrap(), &v, &tau, fe).unwrap();
+                fd_derivatives(&m, &mut dm, &m.integrate(&q, &-&e).unwrap(), &v, &tau, fe).unwrap();
+                let tt = (&dp.minv - &dm.minv) / (2.0 * h);
+                fd_derivatives(&m, &mut dp, &q, &(&v + &e), &tau, fe).unwrap();
+                fd_derivatives(&m, &mut dm, &q, &(&v - &e), &tau, fe).unwrap();
+                let tq = (&dp.dqdd_dq - &dm.dqdd_dq) / (2.0 * h);
+                let scale = 1.0 + tt.amax() + tq.amax();
+                for (i, j) in (0..n * n).map(|x| (x % n, x / n)) {
+                    let (a, b) = (fso.d2qdd_dqdv()[(i, j, k)], fso.d2qdd_dtaudq()[(i, j, k)]);
+                    assert!((a - tq[(i, j)]).abs() < 1e-4 * scale, "∂²q̈/∂q∂q̇ {i} {j} {k}");
+                    assert!((b - tt[(i, j)]).abs() < 1e-4 * scale, "∂(M⁻¹)/∂q {i} {j} {k}");
+                    if root[j] {
+                        assert!(tq[(i, j)].abs() < 1e-4 * scale, "∂²q̈/∂q∂q̇ {i} {j} {k}");
+                    }
+                }
+                if root[k] {
+                    assert!(tt.amax() < 1e-4 * scale, "page {k} of ∂(M⁻¹)/∂q");
+                }
+            }
+        }
+        assert!(roots > 20, "too few DoFs of root joints: {roots}");
+    }
 
     /// A workspace made for a model with the same `nv` but another tree is refused, and the
     /// caller's data is left as it was.
