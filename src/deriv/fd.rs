@@ -437,12 +437,12 @@ impl<'a> Products<'a> {
     }
 }
 
-/// Fills the strict lower triangle of every page of the `n×n×n` tensor `t` from its upper one,
-/// by strips of four columns: the block below a strip's diagonal tile is the transposed block
-/// right of it (only the lower triangle is written).
-fn symmetrise_pages(n: usize, t: &mut [f64]) {
-    assert!(t.len() == n * n * n);
-    for page in t.chunks_exact_mut(n * n) {
+/// Fills the strict lower triangle of every page `k` of the `n×n×n` tensor `t` but those with
+/// `skip[k]` from its upper one, by strips of four columns: the block below a strip's diagonal
+/// tile is the transposed block right of it (only the lower triangle is written).
+fn symmetrise_pages(n: usize, t: &mut [f64], skip: &[bool]) {
+    assert!(t.len() == n * n * n && skip.len() == n);
+    for (page, _) in t.chunks_exact_mut(n * n).zip(skip).filter(|(_, s)| !**s) {
         for c0 in (0..n).step_by(4) {
             let c1 = (c0 + 4).min(n);
             // The diagonal tile's lower triangle.
@@ -806,7 +806,7 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
                 }
             }
         }
-        symmetrise_pages(n, fso.d2qdd_dtaudq.as_mut_slice());
+        symmetrise_pages(n, fso.d2qdd_dtaudq.as_mut_slice(), &fso.root);
     }
     // ∂²q̈/∂q̇²: −M⁻¹ ID_vv (M does not depend on q̇), symmetric in (j, k). Its column (j, k)
     // vanishes unless j and k are related (every velocity product in a body's bias force is of
