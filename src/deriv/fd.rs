@@ -468,7 +468,8 @@ struct IdfozaWss<'a> {
 }
 
 /// `out[u + 4 i + 4 n k + 4 n² h] ← IDFOZA(x[:, j0 + 4 h + u])[i][k]` for the structurally
-/// non-zero `(i, k)` (zero in the lanes past `nv`), for the one or two blocks `h` of four
+/// non-zero `(i, k)` (zero in the lanes past `nv`; the entries of the DoFs `k` of root joints,
+/// zero, are never written, see [`idfoza_lanes_core`]), for the one or two blocks `h` of four
 /// right-hand sides in `out` (`4 n²` values each). Two blocks are one pass of eight lanes with
 /// AVX-512F, else two passes of four lanes (AVX2 when available).
 fn idfoza_blocks(

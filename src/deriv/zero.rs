@@ -155,12 +155,19 @@ pub(crate) struct IdfozaWs<A> {
     a: Vec<[A; 6]>,
     psidd: Vec<[A; 6]>,
     fc: Vec<[A; 6]>,
+    /// `root[c]`: DoF `c` belongs to a joint attached to the world (its `Ψ̈` vanishes).
+    root: Vec<bool>,
 }
 
 impl<A: Copy + Default> IdfozaWs<A> {
     pub(crate) fn new(model: &Model) -> Self {
         let z = [A::default(); 6];
-        Self { a: vec![z; model.njoints()], psidd: vec![z; model.nv], fc: vec![z; model.njoints()] }
+        Self {
+            a: vec![z; model.njoints()],
+            psidd: vec![z; model.nv],
+            fc: vec![z; model.njoints()],
+            root: (0..model.nv).map(|c| model.parents[model.dof_joint[c]] == 0).collect(),
+        }
     }
 }
 
@@ -374,7 +381,9 @@ fn dot_pl<V: Lanes>(p: &[f64; 6], v: &[V; 6]) -> V::Arr {
 
 /// IDFOZA ([`idfoza_core_with`]) for `N` right-hand sides at once (the lanes of `V`),
 /// vectorised across them: lane `l` uses `x[c + ldx (j0 + l)]` for `l < nl` (zero otherwise) and
-/// `put(i, k, z)` receives `z[l] = ∂(M x_l)_i/∂q_k`. Needs the same `data` fields as
+/// `put(i, k, z)` receives `z[l] = ∂(M x_l)_i/∂q_k`, for the structurally non-zero `(i, k)` but
+/// those where `k` is a DoF of a joint attached to the world: `∂M/∂q_k = 0` there (its `Ψ̈ = a₀ ×
+/// s = 0` at `q̇ = 0`), so they are left to the caller's zeros. Needs the same `data` fields as
 /// [`idfoza_core`] (read only). The lanes are `V`: `[f64; 4]` anywhere, [`Avx4`] only inside
 /// functions compiled with AVX2 and FMA, [`Avx8`] only inside functions compiled with
 /// AVX-512F (behind the run-time checks).
@@ -426,17 +435,20 @@ pub(crate) fn idfoza_lanes_core<V: Lanes>(
         ws.a[i] = st6(&ai);
         ws.fc[i] = st6(&inertia_mul_l(&data.oinertia[i], &ai));
     }
+    assert!(ws.root.len() == nv, "idfoza_lanes_core: dimension mismatch");
     for i in (1..n).rev() {
         let ic = &data.ic_world[i];
         let fc: [V; 6] = ld6(&ws.fc[i]);
         let iv = model.idx_v[i];
         let ive = iv + model.nvs[i];
+        // A joint attached to the world: Ψ̈ = 0 for its DoFs.
+        let at_root = model.parents[i] == 0;
         for c in iv..ive {
             let s = &data.s_world[c];
             let t1f = ic.mul_motion(s);
             let t1 = v6(&t1f.ang, &t1f.lin);
             // dtau_dq_1 with B = 0, Ψ̇ = 0: the DoFs of joint i itself...
-            for r in iv..ive {
+            for r in (iv..ive).filter(|_| !at_root) {
                 put(c, r, &dot_pl::<V>(&t1, &ld6(&ws.psidd[r])));
             }
             // dtau_dq_2 with B = 0, Ψ̇ = 0: t3 = Ic Ψ̈_c + s ×* f_c
@@ -449,10 +461,18 @@ pub(crate) fn idfoza_lanes_core<V: Lanes>(
             // ... and of the strict ancestor joints (ancestor DoFs below `iv`), both terms.
             for &r in model.ancestors_of_dof(c) {
                 if r < iv {
-                    // SAFETY: ancestor DoFs are < c < nv = psidd.len() = s_world.len() (asserted).
-                    let (pr, sr) =
-                        unsafe { (ws.psidd.get_unchecked(r), data.s_world.get_unchecked(r)) };
-                    put(c, r, &dot_pl::<V>(&t1, &ld6(pr)));
+                    // SAFETY: ancestor DoFs are < c < nv = psidd.len() = s_world.len() =
+                    // root.len() (asserted).
+                    let (pr, sr, root) = unsafe {
+                        (
+                            ws.psidd.get_unchecked(r),
+                            data.s_world.get_unchecked(r),
+                            *ws.root.get_unchecked(r),
+                        )
+                    };
+                    if !root {
+                        put(c, r, &dot_pl::<V>(&t1, &ld6(pr)));
+                    }
                     put(r, c, &dot_pl(&v6(&sr.ang, &sr.lin), &t3));
                 }
             }
