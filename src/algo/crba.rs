@@ -54,7 +54,7 @@ fn crba_avx2(model: &Model, data: &mut Data, q: &DVector<f64>) {
 trait Kern {
     /// Four `(sin, cos)` pairs.
     type SinCos: Copy;
-    /// `(sin, cos)` (the same bits as `trig::sin_cos`) of the angles `q[rev_q[r..r + 4]]` of
+    /// `(sin, cos)` (within 1 ulp of `f64::sin_cos`, see `trig`) of the angles `q[rev_q[r..r + 4]]` of
     /// the next four revolute joints about `±eₖ` (see [`next_angles`]).
     fn angles(model: &Model, q: &[f64], r: usize) -> Self::SinCos;
     /// A world placement as the kernel holds it.
@@ -520,6 +520,14 @@ pub(super) mod avx {
             // masked off (not accessed) and set to zero.
             return unsafe { _mm256_maskload_pd(q.as_ptr().add(a), mask) };
         }
+        scattered_angles(model, q, r)
+    }
+
+    /// [`load_angles`] for angles that are not contiguous in `q` (out of line, so that the
+    /// contiguous case inlines into the forward passes).
+    #[target_feature(enable = "avx2,fma")]
+    #[inline(never)]
+    fn scattered_angles(model: &Model, q: &[f64], r: usize) -> __m256d {
         let x = next_angles(model, q, r);
         _mm256_setr_pd(x[0], x[1], x[2], x[3])
     }
