@@ -26,6 +26,9 @@ pub struct Data {
     pub s_world: Vec<Motion>,
     /// Composite rigid-body inertias `I^C_i` in the world frame.
     pub ic_world: Vec<Inertia>,
+    /// Composite rigid-body inertias `I^C_i` in the body frames (the local-frame CRBA of small
+    /// trees, see [`crba`](super::crba)).
+    pub ic_local: Vec<Inertia>,
     /// Joint-space mass matrix (full symmetric).
     pub m: DMatrix<f64>,
     /// Tree-sparse `LᵀDL` factor of `M` (unit `L` below the diagonal, `D` on it).
@@ -116,6 +119,7 @@ impl Data {
             nle: DVector::zeros(nv),
             s_world: vec![Motion::zero(); nv],
             ic_world: vec![Inertia::zero(); n],
+            ic_local: vec![Inertia::zero(); n],
             m: DMatrix::zeros(nv, nv),
             ltl: DMatrix::zeros(nv, nv),
             ia: vec![Matrix6::zeros(); n],
