@@ -791,16 +791,7 @@ pub(super) mod avx {
     pub(super) fn crba_local(model: &Model, data: &mut super::Data, q: &[f64]) {
         let n = model.njoints();
         let nv = model.nv;
-        assert!(
-            data.li_m_i.len() == n
-                && data.ic_local.len() == n
-                && data.m.nrows() == nv
-                && data.m.ncols() == nv
-                && model.kin.len() == n
-                && model.placements.len() == n
-                && model.inertias.len() == n
-                && model.subspace.len() == nv
-        );
+        assert!(super::sizes_match(model, data) && data.ic_local.len() == n);
         let (li, icl) = (&mut data.li_m_i[..], &mut data.ic_local[..]);
         let (mut rank, mut sc) = (0, None);
         for i in 1..n {
@@ -853,22 +844,31 @@ pub(super) mod avx {
     }
 }
 
+/// The sizes that both CRBA kernels index without checks (besides their own outputs):
+/// placements `li_m_i` and the model's per-joint arrays of `njoints`, `M` of `nv × nv`, and
+/// `nv` subspace columns.
+#[inline(always)]
+fn sizes_match(model: &Model, data: &Data) -> bool {
+    let (n, nv) = (model.njoints(), model.nv);
+    data.li_m_i.len() == n
+        && data.m.nrows() == nv
+        && data.m.ncols() == nv
+        && model.kin.len() == n
+        && model.placements.len() == n
+        && model.inertias.len() == n
+        && model.subspace.len() == nv
+}
+
 #[inline(always)]
 fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
     let n = model.njoints();
     let nv = model.nv;
     let q = q.as_slice();
     assert!(
-        data.li_m_i.len() == n
+        sizes_match(model, data)
             && data.o_m_i.len() == n
             && data.ic_world.len() == n
             && data.s_world.len() == nv
-            && data.m.nrows() == nv
-            && data.m.ncols() == nv
-            && model.kin.len() == n
-            && model.placements.len() == n
-            && model.inertias.len() == n
-            && model.subspace.len() == nv
     );
     let (li_m_i, o_m_i) = (&mut data.li_m_i[..], &mut data.o_m_i[..]);
     let (ic_world, sw) = (&mut data.ic_world[..], &mut data.s_world[..]);
