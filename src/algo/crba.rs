@@ -986,8 +986,8 @@ mod tests {
     use crate::model::builtin::{humanoid, pendulum, random_tree, serial_chain};
     use crate::rng::Rng;
 
-    /// On small trees `crba` takes the local-frame kernel (AVX2/FMA): its `M` and placements
-    /// agree with the world-frame CRBA on random trees of up to four DoFs with every joint kind
+    /// On small trees `crba` takes the local-frame kernel (AVX2/FMA): its `M` agrees with the
+    /// reference (oracle) mass matrix, and `M` and the placements with the world-frame CRBA on random trees of up to four DoFs with every joint kind
     /// (spherical and planar joints included), serial chains and pendulums, and it is the
     /// kernel taken there.
     #[test]
@@ -1030,6 +1030,10 @@ mod tests {
                 crba_unchecked(m, &mut d2, &q);
                 let scale = d2.m.amax().max(1.0);
                 assert!((&mm - &d2.m).amax() <= 1e-12 * scale, "{}: {mm} vs {}", m.name, d2.m);
+                // And against the reference (AD oracle) mass matrix.
+                let r = crate::reference::mass_matrix::<f64>(m, q.as_slice());
+                let r = DMatrix::from_fn(m.nv, m.nv, |i, j| r[i][j]);
+                assert!((&mm - &r).amax() <= 1e-12 * scale, "{}: {mm} vs reference {r}", m.name);
                 for (a, b) in d1.li_m_i.iter().zip(&d2.li_m_i) {
                     assert!((a.rot - b.rot).amax() <= 1e-14 && (a.trans - b.trans).amax() <= 1e-14);
                 }

@@ -624,6 +624,27 @@ unsafe fn ld4(p: *const f64) -> [f64; 4] {
     unsafe { p.cast::<[f64; 4]>().read_unaligned() }
 }
 
+/// Prefetches for the product group `(nj..nj + 4, nk)` of an `n×n×n` output at `t` whose
+/// right-hand sides are the same columns of the ID tensor `idt`: those columns into L1, the
+/// output columns into L2, and the mirrored output columns `(nk, j)` for the `j` with
+/// `mirror(j)` into L2 (hints only: no effect on results).
+#[inline(always)]
+fn prefetch_group(
+    n: usize,
+    idt: &[f64],
+    t: *const f64,
+    nj: usize,
+    nk: usize,
+    mirror: impl Fn(usize) -> bool,
+) {
+    let nw = 4.min(n - nj);
+    prefetch::<TO_L1>(idt.as_ptr().wrapping_add(n * (nj + n * nk)), nw * n);
+    prefetch::<TO_L2>(t.wrapping_add(n * (nj + n * nk)), nw * n);
+    for j in (nj..nj + nw).filter(|&j| mirror(j)) {
+        prefetch::<TO_L2>(t.wrapping_add(n * (nk + n * j)), n);
+    }
+}
+
 /// The indices `c0 + u` of a group's lanes `u < 4`, those past its width `w` repeating its last.
 #[inline(always)]
 fn lanes(c0: usize, w: usize) -> [usize; 4] {
@@ -680,19 +701,14 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             // The next group's inputs into L1 and its outputs into L2 while this one runs.
             if let Some(&[nj, nk]) = groups.get(g + 1) {
                 let (nj, nk) = (nj as usize, nk as usize);
-                let nw = 4.min(n - nj);
-                prefetch::<TO_L1>(idt.as_ptr().wrapping_add(n * (nj + n * nk)), nw * n);
+                let t = fso.d2qdd_dq2.as_slice().as_ptr();
+                prefetch_group(n, idt, t, nj, nk, |j| j < nk && commute(j, nk));
                 prefetch::<TO_L1>(s.as_ptr().wrapping_add(4 * n2 * (nj / 4) + 4 * n * nk), 4 * n);
                 if nj != j0 || nk / 4 != k / 4 {
-                    for u in 0..nw {
+                    for u in 0..4.min(n - nj) {
                         let p = s.as_ptr().wrapping_add(4 * n2 * (nk / 4) + 4 * n * (nj + u));
                         prefetch::<TO_L1>(p, 4 * n);
                     }
-                }
-                let t = fso.d2qdd_dq2.as_slice().as_ptr();
-                prefetch::<TO_L2>(t.wrapping_add(n * (nj + n * nk)), nw * n);
-                for j in (nj..nj + nw).filter(|&j| j < nk && commute(j, nk)) {
-                    prefetch::<TO_L2>(t.wrapping_add(n * (nk + n * j)), n);
                 }
             }
             let w = 4.min(n - j0);
@@ -821,13 +837,8 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             // The next group's ID columns into L1 and its outputs into L2.
             if let Some(&[nj, nk]) = groups.get(g + 1) {
                 let (nj, nk) = (nj as usize, nk as usize);
-                let nw = 4.min(n - nj);
-                prefetch::<TO_L1>(idt.as_ptr().wrapping_add(n * (nj + n * nk)), nw * n);
                 let t = fso.d2qdd_dv2.as_slice().as_ptr();
-                prefetch::<TO_L2>(t.wrapping_add(n * (nj + n * nk)), nw * n);
-                for j in (nj..nj + nw).filter(|&j| j < nk) {
-                    prefetch::<TO_L2>(t.wrapping_add(n * (nk + n * j)), n);
-                }
+                prefetch_group(n, idt, t, nj, nk, |j| j < nk);
             }
             let w = 4.min(n - j0);
             pr.build_set(pr.related4(j0), pr.related(k), true);
