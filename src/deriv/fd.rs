@@ -437,30 +437,6 @@ impl<'a> Products<'a> {
     }
 }
 
-/// Fills the strict lower triangle of every page `k` of the `n×n×n` tensor `t` but those with
-/// `skip[k]` from its upper one, by strips of four columns: the block below a strip's diagonal
-/// tile is the transposed block right of it (only the lower triangle is written).
-fn symmetrise_pages(n: usize, t: &mut [f64], skip: &[bool]) {
-    assert!(t.len() == n * n * n && skip.len() == n);
-    for (page, _) in t.chunks_exact_mut(n * n).zip(skip).filter(|(_, s)| !**s) {
-        for c0 in (0..n).step_by(4) {
-            let c1 = (c0 + 4).min(n);
-            // The diagonal tile's lower triangle.
-            for c in c0..c1 {
-                for r in c + 1..c1 {
-                    page[r + n * c] = page[c + n * r];
-                }
-            }
-            if c1 < n {
-                // Rows c1.. of the columns c0..c1 end before index n c1 ≤ c0 + n c1, where
-                // the rows c0..c1 of the columns c1.. start.
-                let (lower, upper) = page.split_at_mut(n * c1);
-                transpose_strided(&upper[c0..], n, c1 - c0, n - c1, &mut lower[c1 + n * c0..], n);
-            }
-        }
-    }
-}
-
 /// IDFOZA workspaces of four and eight lanes.
 struct IdfozaWss<'a> {
     ws4: &'a mut IdfozaWs<[f64; 4]>,
@@ -790,7 +766,8 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     // (j0..j0 + 4, k), by j0, with IDFOZA of the columns j8..j8 + 8 into `s4` (at
     // u + 4 i + 4 n k + 4 n² h for j = j8 + 4 h + u); rows of C related to k. The pages k of
     // the DoFs of root joints vanish (see `FdSoData::root`). The strict lower triangles come
-    // from the symmetry of the pages.
+    // from the symmetry of the pages: each group's columns, just computed and in L1, are copied
+    // transposed into the rows j0..j0 + 4 of the columns before j0.
     {
         for j8 in (0..n).step_by(8) {
             let nb = if j8 + 4 < n { 2 } else { 1 };
@@ -819,11 +796,15 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
                             out,
                             none,
                         )
-                    };
+                    }; // The strict lower triangle of the page from the columns just computed (in L1):
+                    // rows j0..j0 + w of the columns i < j0 are rows i of the columns j0..j0 + w.
+                    let page = &mut fso.d2qdd_dtaudq.as_mut_slice()[n2 * k..n2 * (k + 1)];
+                    let (lower, upper) = page.split_at_mut(n * j0);
+                    let off = j0.min(lower.len());
+                    transpose_strided(upper, n, j0, w, &mut lower[off..], n);
                 }
             }
         }
-        symmetrise_pages(n, fso.d2qdd_dtaudq.as_mut_slice(), &fso.root);
     }
     // ∂²q̈/∂q̇²: −M⁻¹ ID_vv (M does not depend on q̇), symmetric in (j, k). Its column (j, k)
     // vanishes unless j and k are related (every velocity product in a body's bias force is of
