@@ -183,8 +183,23 @@ pub struct FdSoData {
     /// `(j, ·)` of `∂²q̈/∂q∂q̇` and the page `j` of `∂(M⁻¹)/∂q` vanish: they are never written
     /// (zero since [`FdSoData::new`]).
     root: Vec<bool>,
-    /// The groups `(j0, k)` of `∂²q̈/∂q²` in the order they are computed (see
-    /// [`so_products`]).
+    /// The DoFs `j` whose column of `∂q̈/∂q` is not structurally zero, in increasing order: all
+    /// but the translations of joints attached to the world (a prismatic joint, the linear
+    /// DoFs of a free-flyer or of a planar joint). Translating a subtree attached to the world
+    /// changes nothing in its dynamics (gravity is uniform and the external forces are held in
+    /// the body frames), so `∂q̈/∂q_j = 0` at every configuration, and the columns `(j, ·)` and
+    /// pages `j` of `∂²q̈/∂q²` vanish: they are never written. The `∂²q̈/∂q²` groups take their
+    /// four `j` from this list (the qq blocks, see [`so_products`]).
+    qj: Vec<u32>,
+    /// `qq_rel[words b..]`: the union of the related sets of the DoFs of qq block `b`.
+    qq_rel: Vec<u64>,
+    /// `qj_pos[k]`: the position of DoF `k` in `qj` (`u32::MAX` for the translations).
+    qj_pos: Vec<u32>,
+    /// The columns of `∂q̈/∂q` listed in `qj`, packed (`nv×nv`, the columns past `qj.len()`
+    /// zero).
+    xq: Vec<f64>,
+    /// The groups `(b, k)` of `∂²q̈/∂q²` (qq block `b`, page `k`) in the order they are
+    /// computed (see [`so_products`]).
     qq_groups: Vec<[u32; 2]>,
     /// The groups `(j0, k)` of `∂²q̈/∂q̇²` with a structurally non-zero column, in order.
     vv_groups: Vec<[u32; 2]>,
@@ -218,19 +233,36 @@ impl FdSoData {
             }
         }
         let ld = n.div_ceil(8) * 8;
-        // ∂²q̈/∂q²: columns j < jend(k) of page k (j ≤ k, and the j > k of k's joint), four j
-        // at a time; four k (a block k4) per j0.
+        // Translations of joints attached to the world (see `FdSoData::qj`).
+        let translation = |k: usize| {
+            let jt = model.dof_joint[k];
+            let s = model.joints[jt].subspace_column(k - model.idx_v[jt]);
+            model.parents[jt] == 0 && s.ang == nalgebra::Vector3::zeros()
+        };
+        let qj: Vec<u32> = (0..n).filter(|&k| !translation(k)).map(|k| k as u32).collect();
+        let mut qj_pos = vec![u32::MAX; n];
+        for (p, &j) in qj.iter().enumerate() {
+            qj_pos[j as usize] = p as u32;
+        }
+        let mut qq_rel = vec![0u64; qj.len().div_ceil(4) * words];
+        for (p, &j) in qj.iter().enumerate() {
+            for w in 0..words {
+                qq_rel[words * (p / 4) + w] |= related[words * j as usize + w];
+            }
+        }
+        // ∂²q̈/∂q²: columns j < jend(k) of page k (j ≤ k, and the j > k of k's joint), for the
+        // j and k of `qj`, by qq blocks of four j; four k (a block k4) per qq block.
         let jend = |k: usize| {
             let jt = model.dof_joint[k];
             (k + 1).max(model.idx_v[jt] + model.nvs[jt])
         };
         let mut qq_groups = Vec::new();
         for k4 in (0..n).step_by(4) {
-            let ks = k4..(k4 + 4).min(n);
+            let ks = (k4..(k4 + 4).min(n)).filter(|&k| qj_pos[k] != u32::MAX);
             let jmax = ks.clone().map(jend).max().unwrap_or(0);
-            for j0 in (0..jmax).step_by(4) {
-                for k in ks.clone().filter(|&k| j0 < jend(k)) {
-                    qq_groups.push([j0 as u32, k as u32]);
+            for (b, blk) in qj.chunks(4).enumerate().take_while(|(_, c)| (c[0] as usize) < jmax) {
+                for k in ks.clone().filter(|&k| (blk[0] as usize) < jend(k)) {
+                    qq_groups.push([b as u32, k as u32]);
                 }
             }
         }
@@ -260,6 +292,10 @@ impl FdSoData {
             related,
             related4,
             root: (0..n).map(|j| model.parents[model.dof_joint[j]] == 0).collect(),
+            qj,
+            qq_rel,
+            qj_pos,
+            xq: vec![0.0; n * n],
             qq_groups,
             vv_groups,
             set: vec![0; words],
@@ -609,14 +645,16 @@ fn prefetch_group(
     n: usize,
     idt: &[f64],
     t: *const f64,
-    nj: usize,
+    js: &[usize],
     nk: usize,
     mirror: impl Fn(usize) -> bool,
 ) {
-    let nw = 4.min(n - nj);
-    prefetch::<TO_L1>(idt.as_ptr().wrapping_add(n * (nj + n * nk)), nw * n);
-    prefetch::<TO_L2>(t.wrapping_add(n * (nj + n * nk)), nw * n);
-    for j in (nj..nj + nw).filter(|&j| mirror(j)) {
+    // The columns js[0]..=js[last] (consecutive but for the first qq block).
+    let (first, last) = (js[0], js[js.len() - 1]);
+    let len = n * (last + 1 - first);
+    prefetch::<TO_L1>(idt.as_ptr().wrapping_add(n * (first + n * nk)), len);
+    prefetch::<TO_L2>(t.wrapping_add(n * (first + n * nk)), len);
+    for &j in js.iter().filter(|&&j| mirror(j)) {
         prefetch::<TO_L2>(t.wrapping_add(n * (nk + n * j)), n);
     }
 }
@@ -658,41 +696,57 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
         if j < n { t.as_mut_slice()[n * (j + n * k)..].as_mut_ptr() } else { std::ptr::null_mut() }
     };
     let none = [std::ptr::null_mut(); 4];
-    // ∂²q̈/∂q²: −M⁻¹(ID_qq + A + A^R) with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k], held in
-    // S by blocks of four j. Columns j ≤ k (and the non-commuting j > k of k's joint), four j
-    // at a time; rows related to one of the j or to k. The k run in blocks of four inside the
-    // loop over j0 (`FdSoData::qq_groups`), so that the A^R entries of a group (block k / 4 of
-    // S, pages j0..j0 + 4) are read by the four k of the block while they are in L1. Each
-    // group prefetches the next one's inputs and output columns.
+    // ∂²q̈/∂q²: −M⁻¹(ID_qq + A + A^R) with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k] for the j of
+    // `FdSoData::qj` (A vanishes for the others), held in S by qq blocks of four of them
+    // (packed into `xq` first). Columns j ≤ k (and the non-commuting j > k of k's joint), the
+    // four j of a qq block at a time; rows related to one of the j or to k. The k run in
+    // blocks of four inside the loop over the qq blocks (`FdSoData::qq_groups`), so that the
+    // A^R entries of a group (qq block of k in S, pages j) are read by the four k of the block
+    // while they are in L1. Each group prefetches the next one's inputs and output columns.
+    let (qj, qj_pos) = (&fso.qj[..], &fso.qj_pos[..]);
+    let nqb = qj.len().div_ceil(4);
+    for (c, &j) in qj.iter().enumerate() {
+        let j = j as usize;
+        fso.xq[n * c..n * (c + 1)].copy_from_slice(&data.dqdd_dq.as_slice()[n * j..n * (j + 1)]);
+    }
     let mut ws = IdfozaWss { ws4: &mut fso.ws4, ws8: &mut fso.ws8 };
-    for (b, blks) in s.chunks_mut(8 * n2).enumerate() {
-        idfoza_blocks(model, data, &mut ws, data.dqdd_dq.as_slice(), 8 * b, blks);
+    for (b, blks) in s[..4 * n2 * nqb].chunks_mut(8 * n2).enumerate() {
+        idfoza_blocks(model, data, &mut ws, &fso.xq, 8 * b, blks);
     }
     {
         let idt = fso.id.d2tau_dq2().as_slice();
         let s = &*s;
         let groups = &fso.qq_groups[..];
-        for (g, &[j0, k]) in groups.iter().enumerate() {
-            let (j0, k) = (j0 as usize, k as usize);
+        // The DoFs of qq block b (the last repeated past the end of `qj`) and their number.
+        let block = |b: usize| -> ([usize; 4], usize) {
+            let w = 4.min(qj.len() - 4 * b);
+            (std::array::from_fn(|u| qj[4 * b + u.min(w - 1)] as usize), w)
+        };
+        for (g, &[b, k]) in groups.iter().enumerate() {
+            let (b, k) = (b as usize, k as usize);
+            let kp = qj_pos[k] as usize;
             // The next group's inputs into L1 and its outputs into L2 while this one runs.
-            if let Some(&[nj, nk]) = groups.get(g + 1) {
-                let (nj, nk) = (nj as usize, nk as usize);
+            if let Some(&[nb, nk]) = groups.get(g + 1) {
+                let (nb, nk) = (nb as usize, nk as usize);
+                let (njl, nw) = block(nb);
                 let t = fso.d2qdd_dq2.as_slice().as_ptr();
-                prefetch_group(n, idt, t, nj, nk, |j| j < nk && commute(j, nk));
-                prefetch::<TO_L1>(s.as_ptr().wrapping_add(4 * n2 * (nj / 4) + 4 * n * nk), 4 * n);
-                if nj != j0 || nk / 4 != k / 4 {
-                    for u in 0..4.min(n - nj) {
-                        let p = s.as_ptr().wrapping_add(4 * n2 * (nk / 4) + 4 * n * (nj + u));
+                prefetch_group(n, idt, t, &njl[..nw], nk, |j| j < nk && commute(j, nk));
+                prefetch::<TO_L1>(s.as_ptr().wrapping_add(4 * n2 * nb + 4 * n * nk), 4 * n);
+                let nkp = qj_pos[nk] as usize;
+                if nb != b || nkp / 4 != kp / 4 {
+                    for &j in &njl[..nw] {
+                        let p = s.as_ptr().wrapping_add(4 * n2 * (nkp / 4) + 4 * n * j);
                         prefetch::<TO_L1>(p, 4 * n);
                     }
                 }
             }
-            let w = 4.min(n - j0);
-            pr.build_set(pr.related4(j0), pr.related(k), false);
-            let jl = lanes(j0, w);
-            let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dq2, j0 + u, k));
+            let (jl, w) = block(b);
+            pr.build_set(&fso.qq_rel[fso.words * b..fso.words * (b + 1)], pr.related(k), false);
+            let out = std::array::from_fn(|u| {
+                if u < w { col(&mut fso.d2qdd_dq2, jl[u], k) } else { std::ptr::null_mut() }
+            });
             let mirror = std::array::from_fn(|u| {
-                let j = j0 + u;
+                let j = jl[u];
                 if u < w && j < k && commute(j, k) {
                     col(&mut fso.d2qdd_dq2, k, j)
                 } else {
@@ -700,13 +754,13 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
                 }
             });
             let val = |l| {
-                // SAFETY: l, k and the lanes' j < n: the block entries are within s (4 n² per
-                // block of 4 DoFs), the ID entries within n³.
+                // SAFETY: l, k and the lanes' j < n, b and kp / 4 < nqb: the block entries are
+                // within s (4 n² per qq block), the ID entries within n³.
                 unsafe {
-                    // A: IDFOZA(∂q̈/∂q[:, j0 + u])[l][k], the lanes of one block.
-                    let a = ld4(s.as_ptr().add(4 * n2 * (j0 / 4) + 4 * l + 4 * n * k));
-                    // A^R: IDFOZA(∂q̈/∂q[:, k])[l][j0 + u].
-                    let ar = s.as_ptr().add(4 * n2 * (k / 4) + k % 4 + 4 * l);
+                    // A: IDFOZA(∂q̈/∂q[:, jl[u]])[l][k], the lanes of one qq block.
+                    let a = ld4(s.as_ptr().add(4 * n2 * b + 4 * l + 4 * n * k));
+                    // A^R: IDFOZA(∂q̈/∂q[:, k])[l][jl[u]].
+                    let ar = s.as_ptr().add(4 * n2 * (kp / 4) + kp % 4 + 4 * l);
                     let id = idt.as_ptr().add(l + n2 * k);
                     std::array::from_fn(|u| *id.add(n * jl[u]) + a[u] + *ar.add(4 * n * jl[u]))
                 }
@@ -819,7 +873,8 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             if let Some(&[nj, nk]) = groups.get(g + 1) {
                 let (nj, nk) = (nj as usize, nk as usize);
                 let t = fso.d2qdd_dv2.as_slice().as_ptr();
-                prefetch_group(n, idt, t, nj, nk, |j| j < nk);
+                let js = lanes(nj, 4.min(n - nj));
+                prefetch_group(n, idt, t, &js[..4.min(n - nj)], nk, |j| j < nk);
             }
             let w = 4.min(n - j0);
             pr.build_set(pr.related4(j0), pr.related(k), true);
@@ -846,37 +901,47 @@ mod tests {
     use crate::model::builtin::random_tree;
     use crate::rng::Rng;
 
-    /// The structural zeros that `fd_so_derivatives` never computes (see `FdSoData::root`): for
-    /// every DoF `j` of a joint attached to the world, the columns `(j, ·)` of `∂²q̈/∂q∂q̇` and
-    /// the page `j` of `∂(M⁻¹)/∂q` vanish. Checked on trees with several world-attached joints
+    /// The structural zeros that `fd_so_derivatives` never computes (see `FdSoData::root` and
+    /// `FdSoData::qj`): for every DoF `j` of a joint attached to the world, the columns `(j, ·)`
+    /// of `∂²q̈/∂q∂q̇` and the page `j` of `∂(M⁻¹)/∂q` vanish, and for the translations among
+    /// them the columns `(j, ·)` and pages `j` of `∂²q̈/∂q²`. Checked on trees with several world-attached joints
     /// of every kind (and with a free-flyer): exactly against the hyper-dual oracle, and with
     /// external forces (body frames) against central differences of the first-order
     /// derivatives, where a structural non-zero would be of the size of the other entries.
     #[test]
     fn root_joint_columns_vanish() {
         let mut rng = Rng::new(21);
-        let mut roots = 0;
+        let (mut roots, mut translations) = (0, 0);
         for seed in 1..12 {
             let m = random_tree(7, seed, seed % 4 == 0);
             let n = m.nv;
             let q = m.random_configuration(&mut rng);
             let v = DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
             let tau = DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
-            let root = FdSoData::new(&m).root;
+            let FdSoData { root, qj_pos, .. } = FdSoData::new(&m);
+            let trans: Vec<bool> = qj_pos.iter().map(|&p| p == u32::MAX).collect();
             roots += root.iter().filter(|r| **r).count();
+            translations += trans.iter().filter(|t| **t).count();
+            for j in (0..n).filter(|&j| trans[j]) {
+                assert!(root[j], "translation {j} not of a root joint");
+            }
             let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
-            let (tq, tt) = (
+            let (tq, tt, tqq) = (
                 crate::reference::d2_aba_dqdv(&m, qs, vs, ts),
                 crate::reference::d2_aba_dtaudq(&m, qs, vs, ts),
+                crate::reference::d2_aba_dq2(&m, qs, vs, ts),
             );
             let amax = |x: &[f64]| x.iter().fold(0.0, |a: f64, x| a.max(x.abs()));
-            let scale = 1.0 + amax(tq.as_slice()) + amax(tt.as_slice());
+            let scale = 1.0 + amax(tq.as_slice()) + amax(tt.as_slice()) + amax(tqq.as_slice());
             for (i, j, k) in (0..n * n * n).map(|x| (x % n, x / n % n, x / (n * n))) {
                 if root[j] {
                     assert!(tq[(i, j, k)].abs() < 1e-13 * scale, "∂²q̈/∂q∂q̇ {i} {j} {k}");
                 }
                 if root[k] {
                     assert!(tt[(i, j, k)].abs() < 1e-13 * scale, "∂(M⁻¹)/∂q {i} {j} {k}");
+                }
+                if trans[j] || trans[k] {
+                    assert!(tqq[(i, j, k)].abs() < 1e-13 * scale, "∂²q̈/∂q² {i} {j} {k}");
                 }
             }
             // With external forces: against central differences of the first-order results.
@@ -896,16 +961,23 @@ mod tests {
                 fd_derivatives(&m, &mut dp, &m.integrate(&q, &e).unwrap(), &v, &tau, fe).unwrap();
                 fd_derivatives(&m, &mut dm, &m.integrate(&q, &-&e).unwrap(), &v, &tau, fe).unwrap();
                 let tt = (&dp.minv - &dm.minv) / (2.0 * h);
+                let tqq = (&dp.dqdd_dq - &dm.dqdd_dq) / (2.0 * h);
                 fd_derivatives(&m, &mut dp, &q, &(&v + &e), &tau, fe).unwrap();
                 fd_derivatives(&m, &mut dm, &q, &(&v - &e), &tau, fe).unwrap();
                 let tq = (&dp.dqdd_dq - &dm.dqdd_dq) / (2.0 * h);
-                let scale = 1.0 + tt.amax() + tq.amax();
+                let scale = 1.0 + tt.amax() + tq.amax() + tqq.amax();
                 for (i, j) in (0..n * n).map(|x| (x % n, x / n)) {
                     let (a, b) = (fso.d2qdd_dqdv()[(i, j, k)], fso.d2qdd_dtaudq()[(i, j, k)]);
                     assert!((a - tq[(i, j)]).abs() < 1e-4 * scale, "∂²q̈/∂q∂q̇ {i} {j} {k}");
                     assert!((b - tt[(i, j)]).abs() < 1e-4 * scale, "∂(M⁻¹)/∂q {i} {j} {k}");
+                    let c = fso.d2qdd_dq2()[(i, j, k)];
+                    assert!((c - tqq[(i, j)]).abs() < 1e-4 * scale, "∂²q̈/∂q² {i} {j} {k}");
                     if root[j] {
                         assert!(tq[(i, j)].abs() < 1e-4 * scale, "∂²q̈/∂q∂q̇ {i} {j} {k}");
+                    }
+                    if trans[j] || trans[k] {
+                        assert!(tqq[(i, j)].abs() < 1e-4 * scale, "∂²q̈/∂q² {i} {j} {k}");
+                        assert!(c == 0.0, "∂²q̈/∂q² {i} {j} {k} written");
                     }
                 }
                 if root[k] {
@@ -914,6 +986,7 @@ mod tests {
             }
         }
         assert!(roots > 20, "too few DoFs of root joints: {roots}");
+        assert!(translations > 8, "too few translations of root joints: {translations}");
     }
 
     /// A workspace made for a model with the same `nv` but another tree is refused, and the
