@@ -24,8 +24,9 @@
 #   PNG         chart of the ratios to write (default: none; needs matplotlib in PEER_VENV)
 #   COMPARE     0 skips the comparison (default 1)
 #   SCALING     1 also measures the 1 -> 2 thread scaling of the batched API (sodyn only,
-#               not pinned, ROUNDS interleaved rounds of threads=1 / threads=2 on
-#               SCALING_MODELS, default "solo12 talos_full_v2"); table in scaling.md
+#               not pinned, ROUNDS runs on SCALING_MODELS, default "solo12 talos_full_v2",
+#               each alternating 1- and 2-thread batched calls: --paired-threads 2); table
+#               in scaling.md
 set -euo pipefail
 
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -147,13 +148,13 @@ if [ "${SCALING:-0}" = 1 ]; then
     for name in ${SCALING_MODELS:-solo12 talos_full_v2}; do
       base="$(grep "^$name|" <<< "$MODEL_TABLE" | cut -d'|' -f2)"
       fb=(); [ "$base" = ff ] && fb=(--floating-base)
-      for t in 1 2; do
-        echo "[compare] scaling round $r/$ROUNDS $name threads=$t" >&2
-        echo "# loadavg=$(cut -d' ' -f1 /proc/loadavg)" >> "$F"
-        "$SODYN" bench --model "$MODELS_DIR/$name.urdf" "${fb[@]}" --name "$name" --threads "$t" \
-          --algos rnea,id_fo,fd_fo,batch_rnea,batch_id_fo,batch_fd_fo --max-seconds "$MAXSEC" \
-          --seed "$SEED" >> "$F"
-      done
+      # The batched calls on 1 and 2 threads alternate within one run (--paired-threads), so
+      # each pair of consecutive calls sees the same machine state.
+      echo "[compare] scaling round $r/$ROUNDS $name threads=1,2 paired" >&2
+      echo "# loadavg=$(cut -d' ' -f1 /proc/loadavg)" >> "$F"
+      "$SODYN" bench --model "$MODELS_DIR/$name.urdf" "${fb[@]}" --name "$name" \
+        --paired-threads 2 --algos rnea,id_fo,fd_fo,batch_rnea,batch_id_fo,batch_fd_fo \
+        --max-seconds "$MAXSEC" --seed "$SEED" >> "$F"
     done
   done
   python3 "$HERE/compare_pinocchio_table.py" --scaling "$OUT" | tee "$OUT/scaling.md"

@@ -150,7 +150,7 @@ def scaling(out_dir):
     files = sorted(glob.glob(os.path.join(out_dir, "scaling-round*.txt")))
     if not files:
         sys.exit(f"no scaling-round*.txt in {out_dir}")
-    batch = {}  # (model, algo) -> {round: {threads: (us, cpu_util)}}
+    batch = {}  # (model, algo) -> {round: {threads: (us, cpu_util, paired speed-up)}}
     single = {}  # (model, algo) -> {round: [us]}
     for r, path in enumerate(files):
         with open(path) as f:
@@ -162,17 +162,20 @@ def scaling(out_dir):
                 us = float(kv["median_us"])
                 if kv["algo"].startswith("batch_"):
                     util = float(kv.get("cpu_util", "nan"))
-                    batch.setdefault(key, {}).setdefault(r, {})[kv["threads"]] = (us, util)
+                    sp = float(kv.get("speedup", "nan"))
+                    batch.setdefault(key, {}).setdefault(r, {})[kv["threads"]] = (us, util, sp)
                 else:
                     single.setdefault(key, {}).setdefault(r, []).append(us)
     med = statistics.median
     print(f"Rounds: {len(files)}. Batched calls over 1000 states, µs per state (median of each "
-          "run); speed-up = (1 thread) / (2 threads) within each round; CPUs used = process CPU "
-          "time / wall time during the timed calls.\n")
+          "run); speed-up = (1 thread) / (2 threads) within each round (ratio of the medians); "
+          "paired speed-up (runs with --paired-threads 2: 1- and 2-thread calls alternating) = "
+          "median over the pairs of consecutive calls of their time ratio, per round; CPUs used = "
+          "process CPU time / wall time during the timed calls.\n")
     print("| model | algo | 1 thread µs/state | 2 threads µs/state | speed-up 1→2 [min–max] "
-          "| CPUs used (1 / 2 threads) | CPU µs per state (1 / 2 threads) | single call µs "
-          "| batch (1 thread) / single |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "| paired speed-up [min–max] | CPUs used (1 / 2 threads) "
+          "| CPU µs per state (1 / 2 threads) | single call µs | batch (1 thread) / single |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for (m, a), rounds in batch.items():
         rs = [v for v in rounds.values() if "1" in v and "2" in v]
         if not rs:
@@ -180,6 +183,8 @@ def scaling(out_dir):
         t1 = [v["1"][0] for v in rs]
         t2 = [v["2"][0] for v in rs]
         sp = [v["1"][0] / v["2"][0] for v in rs]
+        ps = [v["2"][2] for v in rs if v["2"][2] == v["2"][2]]
+        pstr = f"{med(ps):.2f} [{min(ps):.2f}–{max(ps):.2f}]" if ps else "-"
         u1 = [v["1"][1] for v in rs]
         u2 = [v["2"][1] for v in rs]
         c1 = [v["1"][0] * v["1"][1] for v in rs]
@@ -188,7 +193,7 @@ def scaling(out_dir):
         s_all = [x for v in sr.values() for x in v]
         ov = [rounds[r]["1"][0] / med(sr[r]) for r in rounds if r in sr and "1" in rounds[r]]
         print(f"| {m} | {a} | {fmt_us(med(t1))} | {fmt_us(med(t2))} | {med(sp):.2f} "
-              f"[{min(sp):.2f}–{max(sp):.2f}] | {med(u1):.2f} / {med(u2):.2f} "
+              f"[{min(sp):.2f}–{max(sp):.2f}] | {pstr} | {med(u1):.2f} / {med(u2):.2f} "
               f"| {fmt_us(med(c1))} / {fmt_us(med(c2))} "
               f"| {fmt_us(med(s_all)) if s_all else '-'} | {f'{med(ov):.2f}' if ov else '-'} |")
 

@@ -258,6 +258,18 @@ fn bench_options_are_validated() {
         assert!(out.contains(&format!("algo={a} ")), "{a} missing:\n{out}");
     }
 
+    // --paired-threads: two lines per batched algorithm (1 and T threads, the second with the
+    // paired speed-up), one for the others.
+    let o = with(&["--paired-threads", "2", "--algos", "rnea,batch_rnea"]);
+    assert_ok(&o, "bench --paired-threads");
+    let out = stdout(&o);
+    assert!(out.contains("threads=1,2(paired)"), "{out}");
+    let batch: Vec<&str> = out.lines().filter(|l| l.contains("algo=batch_rnea ")).collect();
+    assert_eq!(batch.len(), 2, "{out}");
+    assert!(batch[0].contains(" threads=1 ") && !batch[0].contains("speedup="), "{out}");
+    assert!(batch[1].contains(" threads=2 ") && batch[1].contains(" speedup="), "{out}");
+    assert_eq!(out.lines().filter(|l| l.contains("algo=rnea ")).count(), 1, "{out}");
+    assert_clean_failure(&with(&["--paired-threads", "1"]), "one paired thread");
     assert_clean_failure(&with(&["--threads", "0"]), "zero threads");
     assert_clean_failure(&with(&["--states", "many"]), "bad --states");
     assert_clean_failure(&sodyn(&["bench", "--smoke"]), "missing --model");

@@ -9,7 +9,10 @@
 //! `max(200, iters/K)` batches). The `batch_*` algorithms time one batched call over all the
 //! states ([`crate::batch`]) and report the time per state, with at least 20 samples, and
 //! `cpu_util` = process CPU time / wall time over the timed calls (about the number of threads
-//! when the cores are free).
+//! when the cores are free). With `--paired-threads T` they are timed on one and on `T` worker
+//! threads in alternation (1, T, T, 1, 1, T, ...: each pair of consecutive calls sees the same
+//! machine conditions), and the `T`-thread line adds `speedup` = the median over the pairs of
+//! (1-thread time) / (T-thread time).
 
 use super::load_model;
 use crate::algo::{Contact, Data, aba, crba, rnea};
@@ -31,12 +34,14 @@ use std::time::Instant;
 pub(crate) const USAGE: &str = "\
 sodyn bench --model M [--floating-base] [--contacts F1,F2,...] [--algos a,b,...]
             [--states N] [--seed S] [--max-seconds X] [--iters N] [--threads N]
-            [--name NAME] [--smoke] [--calls N]
+            [--paired-threads T] [--name NAME] [--smoke] [--calls N]
 Prints one line per algorithm:
   model=<name> nq=<> nv=<> algo=<algo> median_us=<> p10_us=<> p90_us=<> batch=<K> samples=<n>
 Defaults: all algorithms, --states 1000 (8 with --smoke), --seed 42, --max-seconds 4,
 --iters 20000, --threads 1 (worker threads of the batch_* algorithms), --name = the URDF file
-stem or the built-in model's name. --smoke runs every algorithm a few times only.
+stem or the built-in model's name. --paired-threads T times the batch_* algorithms on 1 and
+on T threads in alternation (two lines each, the second with speedup = median over the pairs
+of the 1-thread / T-thread time). --smoke runs every algorithm a few times only.
 --calls N makes exactly N untimed calls per algorithm (for instruction counts under
 `valgrind --tool=callgrind`: cost per call = difference of two runs / difference of N).";
 
@@ -75,6 +80,7 @@ struct BenchOptions {
     max_seconds: f64,
     iters: usize,
     threads: usize,
+    paired_threads: Option<usize>,
     name: Option<String>,
     smoke: bool,
     calls: Option<usize>,
@@ -95,6 +101,7 @@ fn parse(args: &[String]) -> Result<BenchOptions> {
         max_seconds: 4.0,
         iters: 20000,
         threads: 1,
+        paired_threads: None,
         name: None,
         smoke: false,
         calls: None,
@@ -137,6 +144,13 @@ fn parse(args: &[String]) -> Result<BenchOptions> {
                 if o.threads == 0 {
                     return Err(Error::Io("--threads: must be at least 1".into()));
                 }
+            }
+            "--paired-threads" => {
+                let t: usize = parse_number(opt, &value()?, "a positive integer")?;
+                if t < 2 {
+                    return Err(Error::Io("--paired-threads: must be at least 2".into()));
+                }
+                o.paired_threads = Some(t);
             }
             "--name" => o.name = Some(value()?),
             "--smoke" => o.smoke = true,
@@ -354,6 +368,59 @@ fn measure(plan: &Plan, mut f: impl FnMut(usize) -> Result<()>) -> Result<Stats>
     Ok(Stats { cpu_util: cpu, ..summarize(samples, k * plan.per_call) })
 }
 
+/// Times `f(side)` for the sides 0 and 1 in alternation (0 1, 1 0, 0 1, ...; one call per
+/// sample, as the batched calls of [`measure`]): the statistics of each side and the median over
+/// the pairs of consecutive calls of (side-0 time) / (side-1 time).
+fn measure_paired(
+    plan: &Plan,
+    mut f: impl FnMut(usize) -> Result<()>,
+) -> Result<(Stats, Stats, f64)> {
+    if plan.smoke || plan.calls.is_some() {
+        let (a, b) = (measure(plan, |_| f(0))?, measure(plan, |_| f(1))?);
+        return Ok((a, b, f64::NAN));
+    }
+    // Warm-up: both sides, 50 ms and at least 2 calls each (2 s at most).
+    let w0 = Instant::now();
+    let mut nwarm = 0;
+    while nwarm < 4 || (ns_since(w0) < 5e7 && ns_since(w0) < 2e9) {
+        f(nwarm % 2)?;
+        nwarm += 1;
+    }
+    let per = plan.per_call as f64;
+    let (mut t, mut cpu, mut wall) = ([vec![], vec![]], [0.0; 2], [0.0; 2]);
+    let mut ratios = vec![];
+    let start = Instant::now();
+    for p in 0.. {
+        let mut pair = [0.0; 2];
+        for side in if p % 2 == 0 { [0, 1] } else { [1, 0] } {
+            let c0 = process_cpu_seconds();
+            let t0 = Instant::now();
+            f(side)?;
+            let ns = ns_since(t0);
+            if let (Some(c1), Some(c0)) = (process_cpu_seconds(), c0) {
+                cpu[side] += c1 - c0;
+            }
+            wall[side] += ns * 1e-9;
+            pair[side] = ns;
+            t[side].push(ns / per);
+        }
+        ratios.push(pair[0] / pair[1]);
+        if ratios.len() >= plan.min_samples && start.elapsed().as_secs_f64() > plan.max_seconds {
+            break;
+        }
+    }
+    ratios.sort_by(f64::total_cmp);
+    let speedup = quantile(&ratios, 0.5);
+    let [t0, t1] = t;
+    let linux = process_cpu_seconds().is_some();
+    let util = |s: usize| if linux { Some(cpu[s] / wall[s]) } else { None };
+    Ok((
+        Stats { cpu_util: util(0), ..summarize(t0, plan.per_call) },
+        Stats { cpu_util: util(1), ..summarize(t1, plan.per_call) },
+        speedup,
+    ))
+}
+
 /// CPU time (user + system, all threads) of this process in seconds, from `/proc/self/stat`
 /// (clock ticks of 1/100 s); `None` where unavailable.
 fn process_cpu_seconds() -> Option<f64> {
@@ -396,14 +463,25 @@ fn time_algo(
     m: &Model,
     st: &States,
     ws: &mut Workspaces,
-    pool: &BatchPool,
+    pools: &[BatchPool],
     plan: &Plan,
-) -> Result<Stats> {
+) -> Result<Timed> {
     let (q, v, a, tau) = (&st.q, &st.v, &st.a, &st.tau);
     let batch_plan = Plan { per_call: st.q.len(), min_samples: plan.min_samples.min(20), ..*plan };
+    // A batched algorithm on the pool `pools[side]`: timed alone, or paired with the second pool.
+    let batched = |f: &mut dyn FnMut(&BatchPool) -> Result<()>| -> Result<Timed> {
+        if let [p1, p2] = pools {
+            let (s1, s2, speedup) =
+                measure_paired(&batch_plan, |side| f(if side == 0 { p1 } else { p2 }))?;
+            Ok(Timed { stats: s1, paired: Some((s2, speedup)) })
+        } else {
+            Ok(Timed { stats: measure(&batch_plan, |_| f(&pools[0]))?, paired: None })
+        }
+    };
+    let single = |s: Result<Stats>| s.map(|stats| Timed { stats, paired: None });
     let Workspaces { data: d, so, fso, out_vec, out_m1, out_m2, kkt, impact } = ws;
     let no_contacts = || Error::Io(format!("{algo} needs --contacts"));
-    match algo {
+    single(match algo {
         "rnea" => measure(plan, |i| {
             black_box(rnea(m, d, &q[i], &v[i], &a[i], None)?);
             Ok(())
@@ -436,26 +514,34 @@ fn time_algo(
             black_box(&*fso);
             Ok(())
         }),
-        "batch_rnea" => measure(&batch_plan, |_| {
-            pool.install(|| rnea_batch(m, q, v, a, out_vec))?;
-            black_box(&*out_vec);
-            Ok(())
-        }),
-        "batch_aba" => measure(&batch_plan, |_| {
-            pool.install(|| aba_batch(m, q, v, tau, out_vec))?;
-            black_box(&*out_vec);
-            Ok(())
-        }),
-        "batch_id_fo" => measure(&batch_plan, |_| {
-            pool.install(|| id_derivatives_batch(m, q, v, a, out_m1, out_m2))?;
-            black_box(&*out_m1);
-            Ok(())
-        }),
-        "batch_fd_fo" => measure(&batch_plan, |_| {
-            pool.install(|| fd_derivatives_batch(m, q, v, tau, out_m1, out_m2))?;
-            black_box(&*out_m1);
-            Ok(())
-        }),
+        "batch_rnea" => {
+            return batched(&mut |pool| {
+                pool.install(|| rnea_batch(m, q, v, a, out_vec))?;
+                black_box(&*out_vec);
+                Ok(())
+            });
+        }
+        "batch_aba" => {
+            return batched(&mut |pool| {
+                pool.install(|| aba_batch(m, q, v, tau, out_vec))?;
+                black_box(&*out_vec);
+                Ok(())
+            });
+        }
+        "batch_id_fo" => {
+            return batched(&mut |pool| {
+                pool.install(|| id_derivatives_batch(m, q, v, a, out_m1, out_m2))?;
+                black_box(&*out_m1);
+                Ok(())
+            });
+        }
+        "batch_fd_fo" => {
+            return batched(&mut |pool| {
+                pool.install(|| fd_derivatives_batch(m, q, v, tau, out_m1, out_m2))?;
+                black_box(&*out_m1);
+                Ok(())
+            });
+        }
         "kkt_fo" => {
             let kd = kkt.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
@@ -489,7 +575,14 @@ fn time_algo(
             })
         }
         other => Err(Error::Io(format!("internal: no timing code for \"{other}\""))),
-    }
+    })
+}
+
+/// The timing of one algorithm, and for a batched one timed with `--paired-threads`, the
+/// timing on the second pool and the paired speed-up.
+struct Timed {
+    stats: Stats,
+    paired: Option<(Stats, f64)>,
 }
 
 /// Default `--name`: the URDF file stem, or the built-in model's name.
@@ -525,7 +618,11 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
     let name = o.name.clone().unwrap_or_else(|| default_name(spec));
     let nstates = o.states.unwrap_or(if o.smoke { 8 } else { 1000 });
     let st = States::new(&model, nstates, o.seed);
-    let pool = BatchPool::new(o.threads)?;
+    // One pool of --threads workers, or with --paired-threads T, pools of one and T workers.
+    let pools = match o.paired_threads {
+        Some(t) => vec![BatchPool::new(1)?, BatchPool::new(t)?],
+        None => vec![BatchPool::new(o.threads)?],
+    };
     let nv = model.nv;
     let needs = |p: &str| algos.iter().any(|a| a.starts_with(p));
     let mut ws = Workspaces {
@@ -571,23 +668,34 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
         o.seed,
         timer_overhead_ns(),
         if o.contacts.is_empty() { "none".to_string() } else { o.contacts.join(",") },
-        o.threads,
+        match o.paired_threads {
+            Some(t) => format!("1,{t}(paired)"),
+            None => o.threads.to_string(),
+        },
         o.smoke as u8,
     );
     for algo in algos {
-        let s = time_algo(algo, &model, &st, &mut ws, &pool, &plan)
+        let t = time_algo(algo, &model, &st, &mut ws, &pools, &plan)
             .map_err(|e| Error::Io(format!("bench {algo} on {name}: {e}")))?;
-        let extra = if algo.starts_with("batch_") {
-            let util = s.cpu_util.map(|u| format!(" cpu_util={u:.2}")).unwrap_or_default();
-            format!(" threads={} per=state{util}", o.threads)
-        } else {
-            String::new()
-        };
-        println!(
-            "model={name} nq={} nv={} algo={algo} median_us={:.4} p10_us={:.4} p90_us={:.4} \
-             batch={} samples={}{extra}",
-            model.nq, model.nv, s.med, s.p10, s.p90, s.batch, s.samples
-        );
+        let batched = algo.starts_with("batch_");
+        let mut lines = vec![(t.stats, pools[0].threads(), None)];
+        if let Some((s2, speedup)) = t.paired {
+            lines.push((s2, pools[1].threads(), Some(speedup)));
+        }
+        for (s, threads, speedup) in lines {
+            let extra = if batched {
+                let util = s.cpu_util.map(|u| format!(" cpu_util={u:.2}")).unwrap_or_default();
+                let sp = speedup.map(|x| format!(" speedup={x:.3}")).unwrap_or_default();
+                format!(" threads={threads} per=state{util}{sp}")
+            } else {
+                String::new()
+            };
+            println!(
+                "model={name} nq={} nv={} algo={algo} median_us={:.4} p10_us={:.4} \
+                 p90_us={:.4} batch={} samples={}{extra}",
+                model.nq, model.nv, s.med, s.p10, s.p90, s.batch, s.samples
+            );
+        }
         use std::io::Write;
         let _ = std::io::stdout().flush();
     }
