@@ -233,13 +233,8 @@ impl FdSoData {
             }
         }
         let ld = n.div_ceil(8) * 8;
-        // Translations of joints attached to the world (see `FdSoData::qj`).
-        let translation = |k: usize| {
-            let jt = model.dof_joint[k];
-            let s = model.joints[jt].subspace_column(k - model.idx_v[jt]);
-            model.parents[jt] == 0 && s.ang == nalgebra::Vector3::zeros()
-        };
-        let qj: Vec<u32> = (0..n).filter(|&k| !translation(k)).map(|k| k as u32).collect();
+        let qj: Vec<u32> =
+            (0..n).filter(|&k| !root_translation(model, k)).map(|k| k as u32).collect();
         let mut qj_pos = vec![u32::MAX; n];
         for (p, &j) in qj.iter().enumerate() {
             qj_pos[j as usize] = p as u32;
@@ -319,6 +314,13 @@ impl FdSoData {
     pub fn d2qdd_dtaudq(&self) -> &Tensor3 {
         &self.d2qdd_dtaudq
     }
+}
+
+/// Whether DoF `k` is a translation of a joint attached to the world (see `FdSoData::qj`).
+fn root_translation(model: &Model, k: usize) -> bool {
+    let jt = model.dof_joint[k];
+    model.parents[jt] == 0
+        && model.joints[jt].subspace_column(k - model.idx_v[jt]).ang == nalgebra::Vector3::zeros()
 }
 
 /// Calls `f(l)` for the elements `l` of a bit set (bit `l % 64` of word `l / 64`), in
@@ -600,6 +602,20 @@ pub fn fd_so_derivatives(
             got: fso.d2qdd_dq2.dims().0,
         });
     }
+    // The same tree (checked above) with other joint kinds at the root would leave columns of
+    // ∂²q̈/∂q² out that are not zero (see `FdSoData::qj`).
+    if let Some(k) =
+        (0..model.nv).find(|&k| root_translation(model, k) != (fso.qj_pos[k] == u32::MAX))
+    {
+        return Err(crate::error::Error::Build(format!(
+            "FdSoData (workspace built for another model): DoF {k} is{} a translation of a \
+             joint attached to the world in model \"{}\" but is{} in the model of the \
+             workspace; make it with FdSoData::new for this model",
+            if root_translation(model, k) { "" } else { " not" },
+            model.name,
+            if root_translation(model, k) { " not" } else { "" },
+        )));
+    }
     let n = model.nv;
     aba_unchecked(model, data, q, v, tau, fext)?;
     let qdd = std::mem::replace(&mut data.qdd, DVector::zeros(0));
@@ -873,8 +889,8 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             if let Some(&[nj, nk]) = groups.get(g + 1) {
                 let (nj, nk) = (nj as usize, nk as usize);
                 let t = fso.d2qdd_dv2.as_slice().as_ptr();
-                let js = lanes(nj, 4.min(n - nj));
-                prefetch_group(n, idt, t, &js[..4.min(n - nj)], nk, |j| j < nk);
+                let nw = 4.min(n - nj);
+                prefetch_group(n, idt, t, &lanes(nj, nw)[..nw], nk, |j| j < nk);
             }
             let w = 4.min(n - j0);
             pr.build_set(pr.related4(j0), pr.related(k), true);
@@ -944,6 +960,12 @@ mod tests {
                     assert!(tqq[(i, j, k)].abs() < 1e-13 * scale, "∂²q̈/∂q² {i} {j} {k}");
                 }
             }
+            // Without external forces, ∂²q̈/∂q² (its translation entries left out) against the
+            // hyper-dual oracle.
+            let (mut d, mut fso) = (Data::new(&m), FdSoData::new(&m));
+            fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &tau, None).unwrap();
+            let err = fso.d2qdd_dq2().max_abs_diff(&tqq);
+            assert!(err < 1e-11 * scale, "∂²q̈/∂q² against the oracle: {err:e}");
             // With external forces: against central differences of the first-order results.
             let fext: Vec<Force> = (0..m.njoints())
                 .map(|_| Force::from_vec6(&nalgebra::Vector6::from_fn(|_, _| rng.range(-1.0, 1.0))))
@@ -1009,5 +1031,39 @@ mod tests {
         assert!(fso.d2qdd_dv2().as_slice().iter().all(|x| *x == 0.0));
         let mut fso = FdSoData::new(&a);
         fd_so_derivatives(&a, &mut d, &mut fso, &q, &v, &v, None).unwrap();
+    }
+
+    /// A workspace made for the same tree with a translation at the root (whose ∂²q̈/∂q²
+    /// columns it leaves out) is refused for a model with a rotation there, and the other way
+    /// round; the caller's data is left as it was.
+    #[test]
+    fn fd_so_workspace_of_other_root_joints_is_refused() {
+        use crate::model::{JointType, ModelBuilder};
+        use crate::spatial::{Inertia, Transform};
+        use nalgebra::{Matrix3, Vector3};
+        let make = |root: JointType| {
+            let mut b = ModelBuilder::new("two");
+            let inertia = Inertia::from_com(1.5, Vector3::new(0.1, 0.2, 0.3), Matrix3::identity());
+            let x = Transform::identity();
+            b.add_body(0, "j1", root, x, "b1", inertia).unwrap();
+            let axis = Vector3::new(0.0, 1.0, 0.0);
+            b.add_body(1, "j2", JointType::Revolute { axis }, x, "b2", inertia).unwrap();
+            b.build()
+        };
+        let axis = Vector3::new(1.0, 0.0, 0.0);
+        let (p, r) = (make(JointType::Prismatic { axis }), make(JointType::Revolute { axis }));
+        let mut rng = Rng::new(4);
+        for (m, other) in [(&r, &p), (&p, &r)] {
+            let q = m.random_configuration(&mut rng);
+            let v = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
+            let mut d = Data::new(m);
+            let mut fso = FdSoData::new(other);
+            let e = fd_so_derivatives(m, &mut d, &mut fso, &q, &v, &v, None).unwrap_err();
+            let e = e.to_string();
+            assert!(e.contains("another model") && e.contains("DoF 0"), "{e}");
+            assert!(fso.d2qdd_dq2().as_slice().iter().all(|x| *x == 0.0));
+            let mut fso = FdSoData::new(m);
+            fd_so_derivatives(m, &mut d, &mut fso, &q, &v, &v, None).unwrap();
+        }
     }
 }
