@@ -148,9 +148,11 @@ pub fn fd_derivatives(
 /// Second-order forward-dynamics derivatives (`nv×nv×nv` each) and their workspace.
 #[derive(Clone, Debug)]
 pub struct FdSoData {
-    /// The inverse-dynamics second-order derivatives at `(q, q̇, FD(q, q̇, τ))` (the three
-    /// `∂²τ` tensors; its `dm_dq` is empty, the `∂M/∂q` products being done by IDFOZA).
-    pub id: SoData,
+    /// The inverse-dynamics second-order derivatives at `(q, q̇, FD(q, q̇, τ))`: the three
+    /// `∂²τ` tensors, of which `∂²τ/∂q²` and `∂²τ/∂q̇²` only in the columns the products read
+    /// (see [`SoData::upper_halves`]); its `dm_dq` is empty, the `∂M/∂q` products being done
+    /// by IDFOZA.
+    pub(crate) id: SoData,
     d2qdd_dq2: Tensor3,
     d2qdd_dv2: Tensor3,
     d2qdd_dqdv: Tensor3,
@@ -261,18 +263,19 @@ impl FdSoData {
                 }
             }
         }
-        // ∂²q̈/∂q̇²: columns j ≤ k, four j at a time, the groups where some (j, k) is related.
+        // ∂²q̈/∂q̇²: columns j ≤ k, four j at a time, the groups where some (j ≤ k, k) is
+        // related.
         let mut vv_groups = Vec::new();
         for k in 0..n {
             for j0 in (0..k + 1).step_by(4) {
                 let rk = &related[words * k..words * (k + 1)];
-                if (j0..(j0 + 4).min(n)).any(|j| rk[j / 64] >> (j % 64) & 1 != 0) {
+                if (j0..(j0 + 4).min(k + 1)).any(|j| rk[j / 64] >> (j % 64) & 1 != 0) {
                     vv_groups.push([j0 as u32, k as u32]);
                 }
             }
         }
         Self {
-            id: SoData::without_dm_dq(model),
+            id: SoData::upper_halves(model),
             d2qdd_dq2: Tensor3::zeros(n, n, n),
             d2qdd_dv2: Tensor3::zeros(n, n, n),
             d2qdd_dqdv: Tensor3::zeros(n, n, n),
@@ -571,8 +574,7 @@ unsafe fn idfoza_pair_avx512(
 /// Second-order derivatives of forward dynamics at `q̈ = FD(q, q̇, τ)` (eq. eqn_FD_SO_43):
 /// `∂²q̈/∂u∂w = −M⁻¹(∂²ID/∂u∂w + ∂M/∂w · ∂FD/∂u + (∂M/∂u · ∂FD/∂w)^R)`, with the `∂M/∂q`
 /// products by IDFOZA (`O(N d)` per column) instead of tensor products. Also fills the
-/// first-order results in `data` (as [`fd_derivatives`]) and the ID second-order tensors in
-/// `fso.id`.
+/// first-order results in `data` (as [`fd_derivatives`]).
 ///
 /// Each column `−M⁻¹ b` is a product with the dense `M⁻¹` (from the `LᵀDL` factors) over the
 /// rows where `b` can be non-zero only: row `l` of `∂²τ/∂q_j∂·` and of `∂M/∂q_j · x` vanishes
@@ -682,7 +684,8 @@ fn lanes(c0: usize, w: usize) -> [usize; 4] {
 }
 
 /// The four second-order tensors of [`fd_so_derivatives`] from its first-order results in
-/// `data` and the ID second-order tensors in `fso.id` (`nv > 0`).
+/// `data` and the ID second-order tensors in `fso.id` (`nv > 0`), of which `∂²τ/∂q²` and
+/// `∂²τ/∂q̇²` are read in their upper halves only (see [`SoData::upper_halves`]).
 #[inline(always)]
 fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     let n = model.nv;
@@ -758,8 +761,15 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             }
             let (jl, w) = block(b);
             pr.build_set(&fso.qq_rel[fso.words * b..fso.words * (b + 1)], pr.related(k), false);
+            // Lanes j > k of other joints are not stored: their ID column is in the lower half
+            // (not computed), and the column comes from group (·, j) as the mirror of (k, j).
             let out = std::array::from_fn(|u| {
-                if u < w { col(&mut fso.d2qdd_dq2, jl[u], k) } else { std::ptr::null_mut() }
+                let j = jl[u];
+                if u < w && (j <= k || !commute(j, k)) {
+                    col(&mut fso.d2qdd_dq2, j, k)
+                } else {
+                    std::ptr::null_mut()
+                }
             });
             let mirror = std::array::from_fn(|u| {
                 let j = jl[u];
@@ -879,7 +889,8 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     // ∂²q̈/∂q̇²: −M⁻¹ ID_vv (M does not depend on q̇), symmetric in (j, k). Its column (j, k)
     // vanishes unless j and k are related (every velocity product in a body's bias force is of
     // two of its ancestors): groups without such a column are skipped (never written); rows
-    // related to k and to one of the j.
+    // related to k and to one of the j. The lanes j ≤ k only (the upper half of ID_vv); the
+    // columns j > k are the mirrors.
     {
         let idt = fso.id.d2tau_dv2().as_slice();
         let groups = &fso.vv_groups[..];
@@ -889,13 +900,16 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             if let Some(&[nj, nk]) = groups.get(g + 1) {
                 let (nj, nk) = (nj as usize, nk as usize);
                 let t = fso.d2qdd_dv2.as_slice().as_ptr();
-                let nw = 4.min(n - nj);
+                let nw = 4.min(nk + 1 - nj);
                 prefetch_group(n, idt, t, &lanes(nj, nw)[..nw], nk, |j| j < nk);
             }
-            let w = 4.min(n - j0);
+            // j0 ≤ k (see `FdSoData::vv_groups`), so w ≥ 1.
+            let w = 4.min(k + 1 - j0);
             pr.build_set(pr.related4(j0), pr.related(k), true);
             let jl = lanes(j0, w);
-            let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dv2, j0 + u, k));
+            let out = std::array::from_fn(|u| {
+                if u < w { col(&mut fso.d2qdd_dv2, j0 + u, k) } else { std::ptr::null_mut() }
+            });
             let mirror = std::array::from_fn(|u| {
                 if u < w && j0 + u < k {
                     col(&mut fso.d2qdd_dv2, k, j0 + u)

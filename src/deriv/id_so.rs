@@ -26,6 +26,10 @@ pub struct SoData {
     d2tau_dqdv: Tensor3,
     /// `n×n×n`, or `0×0×0` in the workspaces of [`SoData::without_dm_dq`].
     dm_dq: Tensor3,
+    /// Upper halves only (the workspaces of [`SoData::upper_halves`]): the entries `(i, j, k)`
+    /// with `j > k` of `∂²τ/∂q̇²`, and those of `∂²τ/∂q²` whose DoFs `j` and `k` belong to
+    /// different joints, are never written (they stay zero).
+    upper: bool,
     /// Per DoF, contiguous: `[S, Ψ̇, Ψ̈, Ψ̇ + Ṡ]` (ground frame), refreshed on every call.
     dof: Vec<[V6; 4]>,
     /// DoFs of the strict ancestor joints of joint `j`: `anc_dofs[anc_start[j]..anc_start[j + 1]]`.
@@ -39,15 +43,24 @@ pub struct SoData {
 impl SoData {
     /// Workspace for `model`.
     pub fn new(model: &Model) -> Self {
-        Self::build(model, true)
+        Self::build(model, true, false)
     }
     /// Workspace for `model` that does not compute `∂M/∂q` (its [`SoData::dm_dq`] is an empty
     /// `0×0×0` tensor): for the callers that only need the three `∂²τ` tensors (forward,
     /// contact and impact second-order derivatives), sparing the `nv³` writes of `∂M/∂q`.
     pub(crate) fn without_dm_dq(model: &Model) -> Self {
-        Self::build(model, false)
+        Self::build(model, false, false)
     }
-    fn build(model: &Model, with_dm_dq: bool) -> Self {
+    /// As [`SoData::without_dm_dq`], and IDSVA-SO writes only the upper halves of the two
+    /// tensors that are symmetric in `(j, k)`: the entries `(i, j, k)` with `j ≤ k` of
+    /// `∂²τ/∂q̇²`, and those of `∂²τ/∂q²` with `j ≤ k` or `j` and `k` DoFs of one joint (which
+    /// need not commute); the others stay zero. For the forward-dynamics derivatives, whose
+    /// products read only those columns: IDSVA-SO's scattered mirror writes are a large part of
+    /// its memory traffic once its tensors no longer fit in the cache.
+    pub(crate) fn upper_halves(model: &Model) -> Self {
+        Self::build(model, false, true)
+    }
+    fn build(model: &Model, with_dm_dq: bool, upper: bool) -> Self {
         let n = model.nv;
         let nd = if with_dm_dq { n } else { 0 };
         let mut anc_dofs = vec![];
@@ -67,6 +80,7 @@ impl SoData {
             d2tau_dv2: Tensor3::zeros(n, n, n),
             d2tau_dqdv: Tensor3::zeros(n, n, n),
             dm_dq: Tensor3::zeros(nd, nd, nd),
+            upper,
             dof: vec![[[0.0; 6]; 4]; n],
             anc_dofs,
             anc_start,
@@ -516,8 +530,13 @@ fn at(n: usize, i: usize, j: usize, k: usize) -> usize {
 /// The backward step compiled for AVX2/FMA (the 6-vector kernels vectorise 4 wide).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn backward_step_so_avx2<const DM: bool>(model: &Model, data: &Data, so: &mut SoData, i: usize) {
-    backward_step_so_body::<Avx2, DM>(model, data, so, i)
+fn backward_step_so_avx2<const DM: bool, const UP: bool>(
+    model: &Model,
+    data: &Data,
+    so: &mut SoData,
+    i: usize,
+) {
+    backward_step_so_body::<Avx2, DM, UP>(model, data, so, i)
 }
 
 fn backward_step_so(model: &Model, data: &Data, so: &mut SoData, i: usize) {
@@ -526,24 +545,26 @@ fn backward_step_so(model: &Model, data: &Data, so: &mut SoData, i: usize) {
     if crate::simd::avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
         return unsafe {
-            if dm {
-                backward_step_so_avx2::<true>(model, data, so, i)
-            } else {
-                backward_step_so_avx2::<false>(model, data, so, i)
+            match (dm, so.upper) {
+                // (Upper-half workspaces have no ∂M/∂q.)
+                (true, _) => backward_step_so_avx2::<true, false>(model, data, so, i),
+                (false, false) => backward_step_so_avx2::<false, false>(model, data, so, i),
+                (false, true) => backward_step_so_avx2::<false, true>(model, data, so, i),
             }
         };
     }
-    if dm {
-        backward_step_so_body::<Portable, true>(model, data, so, i)
-    } else {
-        backward_step_so_body::<Portable, false>(model, data, so, i)
+    match (dm, so.upper) {
+        (true, _) => backward_step_so_body::<Portable, true, false>(model, data, so, i),
+        (false, false) => backward_step_so_body::<Portable, false, false>(model, data, so, i),
+        (false, true) => backward_step_so_body::<Portable, false, true>(model, data, so, i),
     }
 }
 
 /// One backward step of IDSVA-SO for body `i`; `DM`: also write `∂M/∂q` (else `so.dm_dq` is
-/// empty and untouched).
+/// empty and untouched); `UP`: skip the lower-half writes of `∂²τ/∂q²` and `∂²τ/∂q̇²` (see
+/// [`SoData::upper_halves`]; DoFs are numbered depth-first, so an ancestor's are smaller).
 #[inline(always)]
-fn backward_step_so_body<K: Kern, const DM: bool>(
+fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
     model: &Model,
     data: &Data,
     so: &mut SoData,
@@ -615,17 +636,23 @@ fn backward_step_so_body<K: Kern, const DM: bool>(
                     let dp = K::matvec(&rd, psidk);
                     let ddd = K::matvec(&rz, psiddk);
                     set(qq, at(n, ip, jt, kr), dp[0] + ddd[0]); // 1A
-                    set(vv, at(n, ip, jt, kr), -ds[8]); // B: −S_jᵀ C S_k
+                    if !UP || jt <= kr {
+                        set(vv, at(n, ip, jt, kr), -ds[8]); // B: −S_jᵀ C S_k
+                    }
                     let val = dp[1]; // cross 1A
                     set(qv, at(n, ip, kr, jt), val);
                     if !j_is_i {
                         let dpk = K::matvec(&rz, psk);
                         let v1c = dp[2] + ddd[1]; // q–q 1C/2C
                         set(qq, at(n, jt, kr, ip), v1c);
-                        set(qq, at(n, jt, ip, kr), v1c);
+                        if !UP {
+                            set(qq, at(n, jt, ip, kr), v1c); // column ip > kr, other joints
+                        }
                         let v1e = -ds[1]; // v–v 1E/2E
                         set(vv, at(n, jt, kr, ip), v1e);
-                        set(vv, at(n, jt, ip, kr), v1e);
+                        if !UP {
+                            set(vv, at(n, jt, ip, kr), v1e);
+                        }
                         set(qv, at(n, jt, kr, ip), -val); // cross 2A
                         set(qv, at(n, jt, ip, kr), ds[6] + dpk[1]); // cross 1C
                         if DM {
@@ -650,12 +677,18 @@ fn backward_step_so_body<K: Kern, const DM: bool>(
                     // ∂²τ/∂q²: 1A + 2A mirror, 1B (+ 2B mirror if j ≺ i)
                     let val = dp[0] + ddd[0];
                     set(qq, o_ij + nk, val); // (ip, kr, jt)
-                    set(qq, ip + n * jt + nnk, val); // (ip, jt, kr)
+                    if !UP {
+                        set(qq, ip + n * jt + nnk, val); // (ip, jt, kr)
+                    }
                     let wval = ds[0];
-                    set(qq, kr + n * ip + n * n * jt, wval); // (kr, ip, jt)
+                    if !UP || j_is_i {
+                        set(qq, kr + n * ip + n * n * jt, wval); // (kr, ip, jt)
+                    }
                     // ∂²τ/∂q̇²: 1A + 2A mirror
                     let uval = ds[1];
-                    set(vv, o_i_j + nnk, uval); // (ip, jt, kr)
+                    if !UP {
+                        set(vv, o_i_j + nnk, uval); // (ip, jt, kr)
+                    }
                     set(vv, o_ij + nk, uval); // (ip, kr, jt)
                     // cross: 1A, 1B, 2B
                     let cval = dp[1];
@@ -669,16 +702,24 @@ fn backward_step_so_body<K: Kern, const DM: bool>(
                     }
                     if j_is_i {
                         // v–v D (k ≺ j = i)
-                        set(vv, kr + n * ip + n * n * jt, ds[5]); // (kr, ip, jt)
+                        if !UP || ip <= jt {
+                            set(vv, kr + n * ip + n * n * jt, ds[5]); // (kr, ip, jt)
+                        }
                     } else {
                         set(qq, kr + o_ji + n * n * ip, wval); // 1B mirror (2B): (kr, jt, ip)
                         let v1c = dp[2] + ddd[1]; // q–q 1C/2C
                         set(qq, jt + nk + n * n * ip, v1c); // (jt, kr, ip)
-                        set(qq, jt + n * ip + nnk, v1c); // (jt, ip, kr)
-                        set(vv, kr + n * ip + n * n * jt, ds[5]); // v–v 1C/2C: (kr, ip, jt)
+                        if !UP {
+                            set(qq, jt + n * ip + nnk, v1c); // (jt, ip, kr)
+                        }
+                        if !UP {
+                            set(vv, kr + n * ip + n * n * jt, ds[5]); // v–v 1C/2C: (kr, ip, jt)
+                        }
                         set(vv, kr + o_ji + n * n * ip, ds[5]); // (kr, jt, ip)
                         set(vv, jt + nk + n * n * ip, -uval); // v–v 1E/2E: (jt, kr, ip)
-                        set(vv, jt + n * ip + nnk, -uval); // (jt, ip, kr)
+                        if !UP {
+                            set(vv, jt + n * ip + nnk, -uval); // (jt, ip, kr)
+                        }
                         set(qv, jt + nk + n * n * ip, -cval); // cross 2A: (jt, kr, ip)
                         set(qv, jt + n * ip + nnk, ds[6] + dpk[1]); // cross 1C: (jt, ip, kr)
                         set(qv, kr + n * ip + n * n * jt, ds[7]); // cross 2C: (kr, ip, jt)
@@ -691,5 +732,53 @@ fn backward_step_so_body<K: Kern, const DM: bool>(
             }
             j = model.parents[j];
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::builtin::random_tree;
+    use crate::rng::Rng;
+
+    /// The upper-half workspace (`SoData::upper_halves`) writes exactly the entries of the full
+    /// one in its upper halves (bit for bit, same code), and nothing else: on random trees with
+    /// joints of every kind (multi-DoF ones included, whose `∂²τ/∂q²` blocks are not
+    /// symmetric) and a free-flyer, the other entries stay zero although they are not
+    /// structurally zero (checked: each tree has some).
+    #[test]
+    fn upper_halves_write_exactly_the_upper_entries() {
+        let mut rng = Rng::new(5);
+        let mut total_joint_lower = 0;
+        for seed in 1..9 {
+            let m = random_tree(8, seed, seed % 2 == 0);
+            let n = m.nv;
+            let q = m.random_configuration(&mut rng);
+            let v = DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
+            let a = DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
+            let (mut d, mut full, mut up) =
+                (Data::new(&m), SoData::new(&m), SoData::upper_halves(&m));
+            id_so_derivatives(&m, &mut d, &mut full, &q, &v, &a, None).unwrap();
+            id_so_derivatives(&m, &mut d, &mut up, &q, &v, &a, None).unwrap();
+            let joint = |j: usize| m.dof_joint[j];
+            let (mut lower_nonzero, mut joint_lower) = (0, 0);
+            for (i, j, k) in (0..n * n * n).map(|x| (x % n, x / n % n, x / (n * n))) {
+                let keep_qq = j <= k || joint(j) == joint(k);
+                let (fq, uq) = (full.d2tau_dq2()[(i, j, k)], up.d2tau_dq2()[(i, j, k)]);
+                assert_eq!(uq, if keep_qq { fq } else { 0.0 }, "∂²τ/∂q² {i} {j} {k}");
+                let (fv, uv) = (full.d2tau_dv2()[(i, j, k)], up.d2tau_dv2()[(i, j, k)]);
+                assert_eq!(uv, if j <= k { fv } else { 0.0 }, "∂²τ/∂q̇² {i} {j} {k}");
+                let (fx, ux) = (full.d2tau_dqdv()[(i, j, k)], up.d2tau_dqdv()[(i, j, k)]);
+                assert_eq!(ux, fx, "∂²τ/∂q∂q̇ {i} {j} {k}");
+                lower_nonzero +=
+                    usize::from(!keep_qq && fq != 0.0) + usize::from(j > k && fv != 0.0);
+                joint_lower += usize::from(j > k && joint(j) == joint(k) && fq != 0.0);
+            }
+            assert!(lower_nonzero > 0, "tree {seed}: no non-zero lower-half entry");
+            total_joint_lower += joint_lower;
+            assert_eq!(up.dm_dq().dims(), (0, 0, 0));
+        }
+        // Some multi-DoF joint blocks below the diagonal (kept) were exercised.
+        assert!(total_joint_lower > 0);
     }
 }
