@@ -715,6 +715,44 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
         if j < n { t.as_mut_slice()[n * (j + n * k)..].as_mut_ptr() } else { std::ptr::null_mut() }
     };
     let none = [std::ptr::null_mut(); 4];
+    // ∂²q̈/∂q̇² first, while the ID_vv entries just written by IDSVA-SO may still be cached:
+    // −M⁻¹ ID_vv (M does not depend on q̇), symmetric in (j, k). Its column (j, k)
+    // vanishes unless j and k are related (every velocity product in a body's bias force is of
+    // two of its ancestors): groups without such a column are skipped (never written); rows
+    // related to k and to one of the j. The lanes j ≤ k only (the upper half of ID_vv); the
+    // columns j > k are the mirrors.
+    {
+        let idt = fso.id.d2tau_dv2().as_slice();
+        let groups = &fso.vv_groups[..];
+        for (g, &[j0, k]) in groups.iter().enumerate() {
+            let (j0, k) = (j0 as usize, k as usize);
+            // The next group's ID columns into L1 and its outputs into L2.
+            if let Some(&[nj, nk]) = groups.get(g + 1) {
+                let (nj, nk) = (nj as usize, nk as usize);
+                let t = fso.d2qdd_dv2.as_slice().as_ptr();
+                let nw = 4.min(nk + 1 - nj);
+                prefetch_group(n, idt, t, &lanes(nj, nw)[..nw], nk, |j| j < nk);
+            }
+            // j0 ≤ k (see `FdSoData::vv_groups`), so w ≥ 1.
+            let w = 4.min(k + 1 - j0);
+            pr.build_set(pr.related4(j0), pr.related(k), true);
+            let jl = lanes(j0, w);
+            let out = std::array::from_fn(|u| {
+                if u < w { col(&mut fso.d2qdd_dv2, j0 + u, k) } else { std::ptr::null_mut() }
+            });
+            let mirror = std::array::from_fn(|u| {
+                if u < w && j0 + u < k {
+                    col(&mut fso.d2qdd_dv2, k, j0 + u)
+                } else {
+                    std::ptr::null_mut()
+                }
+            });
+            let b = jl.map(|j| idt[n * (j + n * k)..].as_ptr());
+            // SAFETY: the columns (j, k) of ID_vv (n values each, rows l < n); the outputs are
+            // distinct columns of d2qdd_dv2.
+            unsafe { pr.solve_group_in_place(n, b, 1, false, out, mirror) };
+        }
+    }
     // ∂²q̈/∂q²: −M⁻¹(ID_qq + A + A^R) with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k] for the j of
     // `FdSoData::qj` (A vanishes for the others), held in S by qq blocks of four of them
     // (packed into `xq` first). Columns j ≤ k (and the non-commuting j > k of k's joint), the
@@ -884,43 +922,6 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
                     transpose_strided(upper, n, j0, w, &mut lower[off..], n);
                 }
             }
-        }
-    }
-    // ∂²q̈/∂q̇²: −M⁻¹ ID_vv (M does not depend on q̇), symmetric in (j, k). Its column (j, k)
-    // vanishes unless j and k are related (every velocity product in a body's bias force is of
-    // two of its ancestors): groups without such a column are skipped (never written); rows
-    // related to k and to one of the j. The lanes j ≤ k only (the upper half of ID_vv); the
-    // columns j > k are the mirrors.
-    {
-        let idt = fso.id.d2tau_dv2().as_slice();
-        let groups = &fso.vv_groups[..];
-        for (g, &[j0, k]) in groups.iter().enumerate() {
-            let (j0, k) = (j0 as usize, k as usize);
-            // The next group's ID columns into L1 and its outputs into L2.
-            if let Some(&[nj, nk]) = groups.get(g + 1) {
-                let (nj, nk) = (nj as usize, nk as usize);
-                let t = fso.d2qdd_dv2.as_slice().as_ptr();
-                let nw = 4.min(nk + 1 - nj);
-                prefetch_group(n, idt, t, &lanes(nj, nw)[..nw], nk, |j| j < nk);
-            }
-            // j0 ≤ k (see `FdSoData::vv_groups`), so w ≥ 1.
-            let w = 4.min(k + 1 - j0);
-            pr.build_set(pr.related4(j0), pr.related(k), true);
-            let jl = lanes(j0, w);
-            let out = std::array::from_fn(|u| {
-                if u < w { col(&mut fso.d2qdd_dv2, j0 + u, k) } else { std::ptr::null_mut() }
-            });
-            let mirror = std::array::from_fn(|u| {
-                if u < w && j0 + u < k {
-                    col(&mut fso.d2qdd_dv2, k, j0 + u)
-                } else {
-                    std::ptr::null_mut()
-                }
-            });
-            let b = jl.map(|j| idt[n * (j + n * k)..].as_ptr());
-            // SAFETY: the columns (j, k) of ID_vv (n values each, rows l < n); the outputs are
-            // distinct columns of d2qdd_dv2.
-            unsafe { pr.solve_group_in_place(n, b, 1, false, out, mirror) };
         }
     }
 }
