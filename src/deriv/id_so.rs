@@ -27,9 +27,12 @@ pub struct SoData {
     /// `n×n×n`, or `0×0×0` in the workspaces of [`SoData::without_dm_dq`].
     dm_dq: Tensor3,
     /// Upper halves only (the workspaces of [`SoData::upper_halves`]): the entries `(i, j, k)`
-    /// with `j > k` of `∂²τ/∂q̇²`, and those of `∂²τ/∂q²` whose DoFs `j` and `k` belong to
-    /// different joints, are never written (they stay zero).
+    /// with `j > k` of `∂²τ/∂q̇²`, those of `∂²τ/∂q²` with `j > k` whose DoFs `j` and `k` belong
+    /// to different joints, and those of `∂²τ/∂q∂q̇` with `root[j]`, are never written (they
+    /// stay zero).
     upper: bool,
+    /// `root[j]`: DoF `j` belongs to a joint attached to the world.
+    root: Vec<bool>,
     /// Per DoF, contiguous: `[S, Ψ̇, Ψ̈, Ψ̇ + Ṡ]` (ground frame), refreshed on every call.
     dof: Vec<[V6; 4]>,
     /// DoFs of the strict ancestor joints of joint `j`: `anc_dofs[anc_start[j]..anc_start[j + 1]]`.
@@ -54,9 +57,12 @@ impl SoData {
     /// As [`SoData::without_dm_dq`], and IDSVA-SO writes only the upper halves of the two
     /// tensors that are symmetric in `(j, k)`: the entries `(i, j, k)` with `j ≤ k` of
     /// `∂²τ/∂q̇²`, and those of `∂²τ/∂q²` with `j ≤ k` or `j` and `k` DoFs of one joint (which
-    /// need not commute); the others stay zero. For the forward-dynamics derivatives, whose
-    /// products read only those columns: IDSVA-SO's scattered mirror writes are a large part of
-    /// its memory traffic once its tensors no longer fit in the cache.
+    /// need not commute); and the columns `j` of `∂²τ/∂q∂q̇` but those of the DoFs of joints
+    /// attached to the world (which vanish: `τ` depends on such a `q_j` only through gravity
+    /// and the external forces, neither of which depends on `q̇`). The others stay zero. For
+    /// the forward-dynamics derivatives, whose products read only those columns: IDSVA-SO's
+    /// scattered writes are a large part of its memory traffic once its tensors no longer fit
+    /// in the cache.
     pub(crate) fn upper_halves(model: &Model) -> Self {
         Self::build(model, false, true)
     }
@@ -81,6 +87,7 @@ impl SoData {
             d2tau_dqdv: Tensor3::zeros(n, n, n),
             dm_dq: Tensor3::zeros(nd, nd, nd),
             upper,
+            root: (0..n).map(|k| model.parents[model.dof_joint[k]] == 0).collect(),
             dof: vec![[[0.0; 6]; 4]; n],
             anc_dofs,
             anc_start,
@@ -571,7 +578,7 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
     i: usize,
 ) {
     let n = model.nv;
-    let SoData { d2tau_dq2, d2tau_dv2, d2tau_dqdv, dm_dq, dof, anc_dofs, anc_start, .. } = so;
+    let SoData { d2tau_dq2, d2tau_dv2, d2tau_dqdv, dm_dq, dof, anc_dofs, anc_start, root, .. } = so;
     let dof: &[[V6; 4]] = dof;
     let qq = d2tau_dq2.as_mut_slice();
     let vv = d2tau_dv2.as_mut_slice();
@@ -588,6 +595,8 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
         let mut j = i;
         while j > 0 {
             let j_is_i = j == i;
+            // Upper halves: the ∂²τ/∂q∂q̇ columns of root DoFs (here those of joint j) are left out.
+            let skip_j = UP && model.parents[j] == 0;
             for jt in dofs(j) {
                 let [sj, psidj, psiddj, psj] = &dof[jt];
                 // B(I^C_i, S_i) = ½(C + R) and B(I^C_i, S_i)ᵀ = ½(C − R), with R x = x ×* (I^C_i S_i)
@@ -640,7 +649,9 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
                         set(vv, at(n, ip, jt, kr), -ds[8]); // B: −S_jᵀ C S_k
                     }
                     let val = dp[1]; // cross 1A
-                    set(qv, at(n, ip, kr, jt), val);
+                    if !skip_j {
+                        set(qv, at(n, ip, kr, jt), val);
+                    }
                     if !j_is_i {
                         let dpk = K::matvec(&rz, psk);
                         let v1c = dp[2] + ddd[1]; // q–q 1C/2C
@@ -653,7 +664,9 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
                         if !UP {
                             set(vv, at(n, jt, ip, kr), v1e);
                         }
-                        set(qv, at(n, jt, kr, ip), -val); // cross 2A
+                        if !skip_j {
+                            set(qv, at(n, jt, kr, ip), -val); // cross 2A
+                        }
                         set(qv, at(n, jt, ip, kr), ds[6] + dpk[1]); // cross 1C
                         if DM {
                             let vm = ds[8]; // ∂M 1C/2C
@@ -692,7 +705,12 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
                     set(vv, o_ij + nk, uval); // (ip, kr, jt)
                     // cross: 1A, 1B, 2B
                     let cval = dp[1];
-                    set(qv, o_ij + nk, cval); // (ip, kr, jt)
+                    // Upper halves: the ∂²τ/∂q∂q̇ columns of root DoFs are left out.
+                    // SAFETY: kr < nv = root.len() (as for `dof` above).
+                    let skip_k = UP && unsafe { *root.get_unchecked(kr) };
+                    if !skip_k {
+                        set(qv, o_ij + nk, cval); // (ip, kr, jt)
+                    }
                     set(qv, o_i_j + nnk, ds[2] + dpk[0]); // (ip, jt, kr)
                     set(qv, kr + o_ji + n * n * ip, ds[3]); // (kr, jt, ip)
                     if DM {
@@ -720,7 +738,9 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
                         if !UP {
                             set(vv, jt + n * ip + nnk, -uval); // (jt, ip, kr)
                         }
-                        set(qv, jt + nk + n * n * ip, -cval); // cross 2A: (jt, kr, ip)
+                        if !skip_k {
+                            set(qv, jt + nk + n * n * ip, -cval); // cross 2A: (jt, kr, ip)
+                        }
                         set(qv, jt + n * ip + nnk, ds[6] + dpk[1]); // cross 1C: (jt, ip, kr)
                         set(qv, kr + n * ip + n * n * jt, ds[7]); // cross 2C: (kr, ip, jt)
                         if DM {
@@ -749,7 +769,7 @@ mod tests {
     #[test]
     fn upper_halves_write_exactly_the_upper_entries() {
         let mut rng = Rng::new(5);
-        let mut total_joint_lower = 0;
+        let (mut total_joint_lower, mut root_qv) = (0, 0);
         for seed in 1..9 {
             let m = random_tree(8, seed, seed % 2 == 0);
             let n = m.nv;
@@ -769,7 +789,23 @@ mod tests {
                 let (fv, uv) = (full.d2tau_dv2()[(i, j, k)], up.d2tau_dv2()[(i, j, k)]);
                 assert_eq!(uv, if j <= k { fv } else { 0.0 }, "∂²τ/∂q̇² {i} {j} {k}");
                 let (fx, ux) = (full.d2tau_dqdv()[(i, j, k)], up.d2tau_dqdv()[(i, j, k)]);
-                assert_eq!(ux, fx, "∂²τ/∂q∂q̇ {i} {j} {k}");
+                let root = m.parents[joint(j)] == 0;
+                assert_eq!(ux, if root { 0.0 } else { fx }, "∂²τ/∂q∂q̇ {i} {j} {k}");
+                // The left-out columns vanish (up to rounding).
+                if root {
+                    assert!(
+                        fx.abs()
+                            < 1e-12
+                                * (1.0
+                                    + full
+                                        .d2tau_dqdv()
+                                        .as_slice()
+                                        .iter()
+                                        .fold(0.0f64, |a, x| a.max(x.abs()))),
+                        "{i} {j} {k}"
+                    );
+                    root_qv += 1;
+                }
                 lower_nonzero +=
                     usize::from(!keep_qq && fq != 0.0) + usize::from(j > k && fv != 0.0);
                 joint_lower += usize::from(j > k && joint(j) == joint(k) && fq != 0.0);
@@ -779,6 +815,6 @@ mod tests {
             assert_eq!(up.dm_dq().dims(), (0, 0, 0));
         }
         // Some multi-DoF joint blocks below the diagonal (kept) were exercised.
-        assert!(total_joint_lower > 0);
+        assert!(total_joint_lower > 0 && root_qv > 0);
     }
 }
