@@ -987,9 +987,9 @@ mod tests {
     use crate::rng::Rng;
 
     /// On small trees `crba` takes the local-frame kernel (AVX2/FMA): its `M` agrees with the
-    /// reference (oracle) mass matrix, and `M` and the placements with the world-frame CRBA on random trees of up to four DoFs with every joint kind
-    /// (spherical and planar joints included), serial chains and pendulums, and it is the
-    /// kernel taken there.
+    /// reference (oracle) mass matrix, and `M` and the placements with the world-frame CRBA, on
+    /// random trees of up to four DoFs with every joint kind (spherical and planar joints
+    /// included), serial chains and pendulums; and it is the kernel taken there.
     #[test]
     fn local_frame_kernel_matches_world_frame() {
         let mut rng = Rng::new(17);

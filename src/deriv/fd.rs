@@ -914,8 +914,10 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
                             out,
                             none,
                         )
-                    }; // The strict lower triangle of the page from the columns just computed (in L1):
-                    // rows j0..j0 + w of the columns i < j0 are rows i of the columns j0..j0 + w.
+                    };
+                    // The strict lower triangle of the page from the columns just computed (in
+                    // L1): rows j0..j0 + w of the columns i < j0 are rows i of the columns
+                    // j0..j0 + w.
                     let page = &mut fso.d2qdd_dtaudq.as_mut_slice()[n2 * k..n2 * (k + 1)];
                     let (lower, upper) = page.split_at_mut(n * j0);
                     let off = j0.min(lower.len());
@@ -935,10 +937,11 @@ mod tests {
     /// The structural zeros that `fd_so_derivatives` never computes (see `FdSoData::root` and
     /// `FdSoData::qj`): for every DoF `j` of a joint attached to the world, the columns `(j, ·)`
     /// of `∂²q̈/∂q∂q̇` and the page `j` of `∂(M⁻¹)/∂q` vanish, and for the translations among
-    /// them the columns `(j, ·)` and pages `j` of `∂²q̈/∂q²`. Checked on trees with several world-attached joints
-    /// of every kind (and with a free-flyer): exactly against the hyper-dual oracle, and with
-    /// external forces (body frames) against central differences of the first-order
-    /// derivatives, where a structural non-zero would be of the size of the other entries.
+    /// them the columns `(j, ·)` and pages `j` of `∂²q̈/∂q²`. Checked on trees with several
+    /// world-attached joints of every kind (and with a free-flyer): exactly against the
+    /// hyper-dual oracle, and with external forces (body frames) against central differences of
+    /// the first-order derivatives, where a structural non-zero would be of the size of the
+    /// other entries.
     #[test]
     fn root_joint_columns_vanish() {
         let mut rng = Rng::new(21);
