@@ -1,29 +1,33 @@
-//! Batched evaluation of the dynamics over many states, in parallel with [rayon].
+//! Batched evaluation of the dynamics over many states, in parallel.
 //!
 //! Every function evaluates one algorithm at the states `k = 0..n` given by the `k`-th entries
 //! of its input slices and writes result `k` into entry `k` of the caller's output slices, which
 //! must already have the right shapes (`vec![DMatrix::zeros(nv, nv); n]`, `vec![SoData::new(&model);
-//! n]`, ...); nothing is allocated per state.
+//! n]`, ...). As the single-state algorithms take a [`Data`], the batched ones take a
+//! [`BatchData`]: one [`Data`] per thread and the [`BatchPool`] whose threads it runs on, kept
+//! by the caller between calls (MuJoCo binds a thread pool to its `mjData` the same way).
 //!
-//! The states are split into contiguous chunks (about four per worker thread). Each chunk gets
-//! its own workspace ([`Data`], and [`SoData`] etc. where needed), allocated once per chunk, so
-//! the hot path neither allocates nor takes a lock; the workers share only the model and the
-//! read-only inputs and write disjoint output entries. Each state is computed by the same code
-//! as the sequential call on its own workspace, so the results are bit-for-bit those of the
-//! sequential calls.
-//!
-//! The work runs in the current rayon pool: rayon's global pool (one thread per core) by
-//! default, or the pool of a [`BatchPool`] inside [`BatchPool::install`], which fixes the number
-//! of threads (e.g. to measure the 1 → 2 thread scaling).
+//! A [`BatchPool`] of `T` threads is the calling thread plus `T − 1` [rayon] helper threads:
+//! the caller starts on the states at once and the helpers join as soon as they are awake, so
+//! the time a sleeping helper takes to wake is shared instead of added (on a virtual machine
+//! this is tens of microseconds), and a 1-thread pool runs the states on the caller with no
+//! thread hand-off at all. The threads claim runs of consecutive states from one atomic
+//! counter, large runs first and single states at the end (guided scheduling), so a late or
+//! slowed thread leaves no idle tail to the others. Each thread works on its own [`Data`] and
+//! writes only the outputs of the states it claimed: the hot path neither allocates nor takes a
+//! lock (a call hands rayon one small job per helper thread). Each state is computed by the
+//! same code as the sequential call, so the results are bit-for-bit those of the sequential
+//! calls, whatever the number of threads.
 //!
 //! Errors: if some states fail, the error of the first failing state in index order is
 //! returned, with its variant kept and the state index added to its message (e.g.
-//! ``invalid configuration of joint "root_joint": ... (state 7)``). Inconsistent slice lengths
-//! or output shapes are reported before anything is computed.
+//! ``invalid configuration of joint "root_joint": ... (state 7)``). Inconsistent slice lengths,
+//! output shapes or workspaces are reported before anything is computed.
 //!
 //! ```
 //! use nalgebra::{DMatrix, DVector};
-//! use sodyn::{batch::{BatchPool, id_derivatives_batch}, model::builtin, rng::Rng};
+//! use sodyn::{batch::{BatchData, BatchPool, id_derivatives_batch}, model::builtin, rng::Rng};
+//! use std::sync::Arc;
 //! let model = builtin::quadruped();
 //! let mut rng = Rng::new(1);
 //! let n = 16;
@@ -32,9 +36,11 @@
 //! let as_ = vec![DVector::zeros(model.nv); n];
 //! let mut dq = vec![DMatrix::zeros(model.nv, model.nv); n];
 //! let mut dv = dq.clone();
-//! id_derivatives_batch(&model, &qs, &vs, &as_, &mut dq, &mut dv)?; // global pool
-//! let pool = BatchPool::new(2)?; // exactly two worker threads
-//! pool.install(|| id_derivatives_batch(&model, &qs, &vs, &as_, &mut dq, &mut dv))?;
+//! let mut bd = BatchData::new(&model); // the shared default pool: one thread per core
+//! id_derivatives_batch(&model, &mut bd, &qs, &vs, &as_, &mut dq, &mut dv)?;
+//! let pool = Arc::new(BatchPool::new(2)?); // exactly two threads: the caller and one helper
+//! let mut bd2 = BatchData::with_pool(&model, pool);
+//! id_derivatives_batch(&model, &mut bd2, &qs, &vs, &as_, &mut dq, &mut dv)?;
 //! # Ok::<(), sodyn::Error>(())
 //! ```
 
@@ -45,34 +51,85 @@ use crate::deriv::{
 use crate::error::{Error, Result};
 use crate::model::Model;
 use nalgebra::{DMatrix, DVector};
-use rayon::prelude::*;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, OnceLock};
 
-/// A rayon thread pool with a fixed number of worker threads for the batched functions.
+/// The threads a [`BatchData`] runs on: the calling thread plus `threads − 1` rayon helper
+/// threads, started once.
 #[derive(Debug)]
 pub struct BatchPool {
-    pool: rayon::ThreadPool,
+    helpers: Option<rayon::ThreadPool>,
+    threads: usize,
 }
 
 impl BatchPool {
-    /// A pool of `threads` worker threads (`threads ≥ 1`).
+    /// A pool of `threads` threads (`threads ≥ 1`): the caller of each batched function and
+    /// `threads − 1` helper threads.
     pub fn new(threads: usize) -> Result<Self> {
         if threads == 0 {
             return Err(Error::Io("the number of threads must be at least 1".into()));
         }
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .thread_name(|i| format!("sodyn-batch-{i}"))
-            .build()
-            .map_err(|e| Error::Io(format!("cannot start a pool of {threads} threads: {e}")))?;
-        Ok(Self { pool })
+        let helpers = if threads == 1 {
+            None
+        } else {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads - 1)
+                .thread_name(|i| format!("sodyn-batch-{}", i + 1))
+                .build()
+                .map_err(|e| {
+                    Error::Io(format!("cannot start {} helper threads: {e}", threads - 1))
+                })?;
+            Some(pool)
+        };
+        Ok(Self { helpers, threads })
     }
-    /// Number of worker threads.
+    /// The pool shared by [`BatchData::new`]: one thread per core
+    /// ([`std::thread::available_parallelism`]), started on first use.
+    pub fn shared() -> Arc<BatchPool> {
+        static SHARED: OnceLock<Arc<BatchPool>> = OnceLock::new();
+        SHARED
+            .get_or_init(|| {
+                let t = std::thread::available_parallelism().map_or(1, |n| n.get());
+                // Falls back to the caller alone if the helpers cannot be started.
+                Arc::new(BatchPool::new(t).unwrap_or(BatchPool { helpers: None, threads: 1 }))
+            })
+            .clone()
+    }
+    /// Number of threads, the caller included.
     pub fn threads(&self) -> usize {
-        self.pool.current_num_threads()
+        self.threads
     }
-    /// Runs `f` in this pool: the batched functions called inside `f` use its threads.
-    pub fn install<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
-        self.pool.install(f)
+}
+
+/// Workspaces of the batched functions, kept between calls as [`Data`] is for single calls:
+/// one [`Data`] per thread of its [`BatchPool`]. A call allocates nothing.
+#[derive(Clone, Debug)]
+pub struct BatchData {
+    pool: Arc<BatchPool>,
+    data: Vec<Data>,
+}
+
+impl BatchData {
+    /// Workspaces for batched calls on `model`, run on the shared pool
+    /// ([`BatchPool::shared`], one thread per core).
+    pub fn new(model: &Model) -> Self {
+        Self::with_pool(model, BatchPool::shared())
+    }
+    /// Workspaces for batched calls on `model`, run on `pool`.
+    pub fn with_pool(model: &Model, pool: Arc<BatchPool>) -> Self {
+        Self { data: vec![Data::new(model); pool.threads()], pool }
+    }
+    /// The pool the batched calls run on.
+    pub fn pool(&self) -> &Arc<BatchPool> {
+        &self.pool
+    }
+    /// Number of threads the batched calls run on (the caller included).
+    pub fn threads(&self) -> usize {
+        self.pool.threads()
+    }
+    /// Checks that these workspaces were made for `model`.
+    fn check(&self, model: &Model) -> Result<()> {
+        self.data.iter().try_for_each(|d| d.check(model))
     }
 }
 
@@ -186,49 +243,115 @@ fn fence_streams() {
     };
 }
 
-/// Number of states per chunk: about four chunks per worker thread of the current pool.
-fn chunk_len(n: usize) -> usize {
-    n.div_ceil(4 * rayon::current_num_threads().max(1)).max(1)
+/// The caller's output slice, shared by the threads of [`drive`], each of which writes only
+/// the entries of the states it claimed from the atomic counter (so no entry is reached twice).
+struct Outputs<T>(*mut T);
+
+// SAFETY: the threads write disjoint entries (see `get`) of a slice of `Send` values.
+unsafe impl<T: Send> Sync for Outputs<T> {}
+
+impl<T> Outputs<T> {
+    /// Entry `k` of the slice.
+    ///
+    /// # Safety
+    /// `k` is below the slice's length, and no other reference to entry `k` is alive.
+    #[allow(clippy::mut_from_ref)]
+    unsafe fn get(&self, k: usize) -> &mut T {
+        // SAFETY: in bounds and unaliased (the caller's contract).
+        unsafe { &mut *self.0.add(k) }
+    }
 }
 
-/// Runs `f(workspace, k, r, out_chunk)` for every state `k`, where `out_chunk` is the chunk of
-/// outputs holding state `k` at position `r`; one workspace per chunk. Returns the error of the
-/// first failing state in index order.
-fn drive<O, W, I, F>(
-    n: usize,
-    chunk: usize,
-    outs: impl IndexedParallelIterator<Item = O>,
-    init: I,
-    f: F,
-) -> Result<()>
+/// Claims the next run of states `start..end` from the counter `next` (guided scheduling: a
+/// `1 / (2 · threads)` share of the states left, at least one), or `None` when all are taken.
+fn claim(next: &AtomicUsize, n: usize, threads: usize) -> Option<(usize, usize)> {
+    let mut start = next.load(Ordering::Relaxed);
+    loop {
+        if start >= n {
+            return None;
+        }
+        let end = start + ((n - start) / (2 * threads)).max(1);
+        match next.compare_exchange_weak(start, end, Ordering::Relaxed, Ordering::Relaxed) {
+            Ok(_) => return Some((start, end)),
+            Err(now) => start = now,
+        }
+    }
+}
+
+/// Runs `f(workspace, k, out[k], out2[k])` for every state `k < n` on the threads of `bd`'s
+/// pool, each thread with its own workspace; `out` and `out2` have one entry per state (a
+/// function with one output passes `&mut vec![(); n]` as `out2`, which allocates nothing).
+/// Returns the error of the first failing state in index order (states after a failure may be
+/// left unevaluated).
+fn drive<O, P, F>(bd: &mut BatchData, n: usize, out: &mut [O], out2: &mut [P], f: F) -> Result<()>
 where
     O: Send,
-    I: Fn() -> W + Sync + Send,
-    F: Fn(&mut W, usize, usize, &mut O) -> Result<()> + Sync + Send,
+    P: Send,
+    F: Fn(&mut Data, usize, &mut O, &mut P) -> Result<()> + Sync,
 {
-    let first_error = outs
-        .enumerate()
-        .map_init(init, |w, (ci, mut o)| {
-            let start = ci * chunk;
-            let len = chunk.min(n - start);
-            let mut err = None;
-            for r in 0..len {
-                if let Err(e) = f(w, start + r, r, &mut o) {
-                    err = Some(at_state(e, start + r));
+    assert!(out.len() == n && out2.len() == n);
+    let threads = bd.pool.threads();
+    let next = AtomicUsize::new(0);
+    // Lowest failing state so far: runs starting after it are not evaluated.
+    let failed_at = AtomicUsize::new(usize::MAX);
+    let (out, out2) = (Outputs(out.as_mut_ptr()), Outputs(out2.as_mut_ptr()));
+    // One thread's share: claims runs of states until none are left; returns its first error.
+    let work = |w: &mut Data| -> Option<(usize, Error)> {
+        let mut err = None;
+        while let Some((start, end)) = claim(&next, n, threads) {
+            if start > failed_at.load(Ordering::Relaxed) {
+                continue;
+            }
+            for k in start..end {
+                // SAFETY: k < n, the length of both slices, and state k was claimed by this
+                // thread alone.
+                if let Err(e) = f(w, k, unsafe { out.get(k) }, unsafe { out2.get(k) }) {
+                    failed_at.fetch_min(k, Ordering::Relaxed);
+                    if err.is_none() {
+                        err = Some((k, e));
+                    }
                     break;
                 }
             }
-            fence_streams();
-            err
-        })
-        .find_map_first(|e| e);
-    first_error.map_or(Ok(()), Err)
+        }
+        fence_streams();
+        err
+    };
+    let (own, others) = bd.data.split_first_mut().expect("a pool has at least one thread");
+    let mut errors: [Option<(usize, Error)>; 2] = [None, None];
+    match &bd.pool.helpers {
+        None => errors[0] = work(own),
+        Some(helpers) => {
+            let helper_errors = Mutex::new(None::<(usize, Error)>);
+            helpers.in_place_scope(|s| {
+                for w in others.iter_mut() {
+                    let (work, helper_errors) = (&work, &helper_errors);
+                    s.spawn(move |_| {
+                        if let Some((k, e)) = work(w) {
+                            // Only on failure: keep the lowest failing state of the helpers.
+                            let mut g = helper_errors.lock().unwrap_or_else(|p| p.into_inner());
+                            if g.as_ref().is_none_or(|(k0, _)| k < *k0) {
+                                *g = Some((k, e));
+                            }
+                        }
+                    });
+                }
+                errors[0] = work(own);
+            });
+            errors[1] = helper_errors.into_inner().unwrap_or_else(|p| p.into_inner());
+        }
+    }
+    match errors.into_iter().flatten().min_by_key(|(k, _)| *k) {
+        Some((k, e)) => Err(at_state(e, k)),
+        None => Ok(()),
+    }
 }
 
 /// Inverse dynamics ([`rnea()`](crate::algo::rnea), no external forces) at every state:
 /// `out_tau[k] = ID(qs[k], vs[k], as_[k])` (length `nv` each).
 pub fn rnea_batch(
     model: &Model,
+    bd: &mut BatchData,
     qs: &[DVector<f64>],
     vs: &[DVector<f64>],
     as_: &[DVector<f64>],
@@ -239,42 +362,36 @@ pub fn rnea_batch(
     check_count("as_", as_.len(), n)?;
     check_count("out_tau", out_tau.len(), n)?;
     check_vectors("out_tau", out_tau, model.nv)?;
-    let c = chunk_len(n);
-    drive(
-        n,
-        c,
-        out_tau.par_chunks_mut(c),
-        || Data::new(model),
-        |data, k, r, out| {
-            out[r].copy_from(rnea(model, data, &qs[k], &vs[k], &as_[k], None)?);
-            Ok(())
-        },
-    )
+    bd.check(model)?;
+    drive(bd, n, out_tau, &mut vec![(); n], |data, k, out, _| {
+        out.copy_from(rnea(model, data, &qs[k], &vs[k], &as_[k], None)?);
+        Ok(())
+    })
 }
 
 /// Mass matrix ([`crba()`](crate::algo::crba), full symmetric) at every configuration:
 /// `out_m[k] = M(qs[k])` (`nv×nv` each).
-pub fn crba_batch(model: &Model, qs: &[DVector<f64>], out_m: &mut [DMatrix<f64>]) -> Result<()> {
+pub fn crba_batch(
+    model: &Model,
+    bd: &mut BatchData,
+    qs: &[DVector<f64>],
+    out_m: &mut [DMatrix<f64>],
+) -> Result<()> {
     let n = qs.len();
     check_count("out_m", out_m.len(), n)?;
     check_matrices("out_m", out_m, model.nv)?;
-    let c = chunk_len(n);
-    drive(
-        n,
-        c,
-        out_m.par_chunks_mut(c),
-        || Data::new(model),
-        |data, k, r, out| {
-            copy(&mut out[r], crba(model, data, &qs[k])?);
-            Ok(())
-        },
-    )
+    bd.check(model)?;
+    drive(bd, n, out_m, &mut vec![(); n], |data, k, out, _| {
+        copy(&mut *out, crba(model, data, &qs[k])?);
+        Ok(())
+    })
 }
 
 /// Forward dynamics ([`aba()`](crate::algo::aba), no external forces) at every state:
 /// `out_qdd[k] = FD(qs[k], vs[k], taus[k])` (length `nv` each).
 pub fn aba_batch(
     model: &Model,
+    bd: &mut BatchData,
     qs: &[DVector<f64>],
     vs: &[DVector<f64>],
     taus: &[DVector<f64>],
@@ -285,23 +402,18 @@ pub fn aba_batch(
     check_count("taus", taus.len(), n)?;
     check_count("out_qdd", out_qdd.len(), n)?;
     check_vectors("out_qdd", out_qdd, model.nv)?;
-    let c = chunk_len(n);
-    drive(
-        n,
-        c,
-        out_qdd.par_chunks_mut(c),
-        || Data::new(model),
-        |data, k, r, out| {
-            out[r].copy_from(aba(model, data, &qs[k], &vs[k], &taus[k], None)?);
-            Ok(())
-        },
-    )
+    bd.check(model)?;
+    drive(bd, n, out_qdd, &mut vec![(); n], |data, k, out, _| {
+        out.copy_from(aba(model, data, &qs[k], &vs[k], &taus[k], None)?);
+        Ok(())
+    })
 }
 
 /// First-order inverse-dynamics derivatives ([`id_derivatives`], no external forces) at every
 /// state: `out_dq[k] = ∂τ/∂q`, `out_dv[k] = ∂τ/∂q̇` at `(qs[k], vs[k], as_[k])` (`nv×nv` each).
 pub fn id_derivatives_batch(
     model: &Model,
+    bd: &mut BatchData,
     qs: &[DVector<f64>],
     vs: &[DVector<f64>],
     as_: &[DVector<f64>],
@@ -315,20 +427,13 @@ pub fn id_derivatives_batch(
     check_count("out_dv", out_dv.len(), n)?;
     check_matrices("out_dq", out_dq, model.nv)?;
     check_matrices("out_dv", out_dv, model.nv)?;
-    let c = chunk_len(n);
-    let outs = out_dq.par_chunks_mut(c).zip(out_dv.par_chunks_mut(c));
-    drive(
-        n,
-        c,
-        outs,
-        || Data::new(model),
-        |data, k, r, (dq, dv)| {
-            id_derivatives(model, data, &qs[k], &vs[k], &as_[k], None)?;
-            copy(&mut dq[r], &data.dtau_dq);
-            copy(&mut dv[r], &data.dtau_dv);
-            Ok(())
-        },
-    )
+    bd.check(model)?;
+    drive(bd, n, out_dq, out_dv, |data, k, dq, dv| {
+        id_derivatives(model, data, &qs[k], &vs[k], &as_[k], None)?;
+        copy(dq, &data.dtau_dq);
+        copy(dv, &data.dtau_dv);
+        Ok(())
+    })
 }
 
 /// First-order forward-dynamics derivatives ([`fd_derivatives`], no external forces) at every
@@ -336,6 +441,7 @@ pub fn id_derivatives_batch(
 /// each).
 pub fn fd_derivatives_batch(
     model: &Model,
+    bd: &mut BatchData,
     qs: &[DVector<f64>],
     vs: &[DVector<f64>],
     taus: &[DVector<f64>],
@@ -349,20 +455,13 @@ pub fn fd_derivatives_batch(
     check_count("out_dv", out_dv.len(), n)?;
     check_matrices("out_dq", out_dq, model.nv)?;
     check_matrices("out_dv", out_dv, model.nv)?;
-    let c = chunk_len(n);
-    let outs = out_dq.par_chunks_mut(c).zip(out_dv.par_chunks_mut(c));
-    drive(
-        n,
-        c,
-        outs,
-        || Data::new(model),
-        |data, k, r, (dq, dv)| {
-            fd_derivatives(model, data, &qs[k], &vs[k], &taus[k], None)?;
-            copy(&mut dq[r], &data.dqdd_dq);
-            copy(&mut dv[r], &data.dqdd_dv);
-            Ok(())
-        },
-    )
+    bd.check(model)?;
+    drive(bd, n, out_dq, out_dv, |data, k, dq, dv| {
+        fd_derivatives(model, data, &qs[k], &vs[k], &taus[k], None)?;
+        copy(dq, &data.dqdd_dq);
+        copy(dv, &data.dqdd_dv);
+        Ok(())
+    })
 }
 
 /// Checks that a tensor workspace was made for a model with `nv` degrees of freedom.
@@ -381,6 +480,7 @@ fn check_tensor_dims(what: &str, k: usize, dims: (usize, usize, usize), nv: usiz
 /// every state, written directly into `out[k]` (each made by `SoData::new(model)`).
 pub fn id_so_derivatives_batch(
     model: &Model,
+    bd: &mut BatchData,
     qs: &[DVector<f64>],
     vs: &[DVector<f64>],
     as_: &[DVector<f64>],
@@ -393,22 +493,17 @@ pub fn id_so_derivatives_batch(
     for (k, so) in out.iter().enumerate() {
         check_tensor_dims("out", k, so.d2tau_dq2().dims(), model.nv)?;
     }
-    let c = chunk_len(n);
-    drive(
-        n,
-        c,
-        out.par_chunks_mut(c),
-        || Data::new(model),
-        |data, k, r, out| {
-            id_so_derivatives(model, data, &mut out[r], &qs[k], &vs[k], &as_[k], None)
-        },
-    )
+    bd.check(model)?;
+    drive(bd, n, out, &mut vec![(); n], |data, k, out, _| {
+        id_so_derivatives(model, data, &mut *out, &qs[k], &vs[k], &as_[k], None)
+    })
 }
 
 /// Second-order forward-dynamics derivatives ([`fd_so_derivatives`], no external forces) at
 /// every state, written directly into `out[k]` (each made by `FdSoData::new(model)`).
 pub fn fd_so_derivatives_batch(
     model: &Model,
+    bd: &mut BatchData,
     qs: &[DVector<f64>],
     vs: &[DVector<f64>],
     taus: &[DVector<f64>],
@@ -422,14 +517,39 @@ pub fn fd_so_derivatives_batch(
         check_tensor_dims("out", k, f.d2qdd_dq2().dims(), model.nv)?;
         check_tensor_dims("out", k, f.id.d2tau_dq2().dims(), model.nv)?;
     }
-    let c = chunk_len(n);
-    drive(
-        n,
-        c,
-        out.par_chunks_mut(c),
-        || Data::new(model),
-        |data, k, r, out| {
-            fd_so_derivatives(model, data, &mut out[r], &qs[k], &vs[k], &taus[k], None)
-        },
-    )
+    bd.check(model)?;
+    drive(bd, n, out, &mut vec![(); n], |data, k, out, _| {
+        fd_so_derivatives(model, data, &mut *out, &qs[k], &vs[k], &taus[k], None)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The claimed runs tile `0..n` in order, without gaps or overlaps, whatever the number of
+    /// threads; the first run is a `1 / (2 · threads)` share and the last ones single states.
+    #[test]
+    fn claims_tile_the_states() {
+        for threads in 1..5 {
+            for n in [0, 1, 2, 7, 100, 1000] {
+                let next = AtomicUsize::new(0);
+                let mut runs = vec![];
+                while let Some(r) = claim(&next, n, threads) {
+                    runs.push(r);
+                }
+                let mut expect = 0;
+                for &(a, b) in &runs {
+                    assert_eq!(a, expect, "{threads} threads, {n} states: {runs:?}");
+                    assert!(b > a);
+                    expect = b;
+                }
+                assert_eq!(expect, n);
+                if n >= 2 * threads {
+                    assert_eq!(runs[0], (0, n / (2 * threads)));
+                    assert_eq!(runs.last().unwrap().1 - runs.last().unwrap().0, 1);
+                }
+            }
+        }
+    }
 }

@@ -10,6 +10,7 @@ use sodyn::deriv::{
 };
 use sodyn::model::{Model, builtin};
 use sodyn::rng::Rng;
+use std::sync::Arc;
 
 struct States {
     q: Vec<DVector<f64>>,
@@ -48,21 +49,21 @@ fn mats(m: &Model, n: usize) -> Vec<DMatrix<f64>> {
     vec![DMatrix::zeros(m.nv, m.nv); n]
 }
 
-/// Runs every batched function (in the current pool) and compares with sequential calls.
-fn check_identical(m: &Model, s: &States, label: &str) {
+/// Runs every batched function (on `bd`'s pool) and compares with sequential calls.
+fn check_identical(m: &Model, s: &States, mut bd: BatchData, label: &str) {
     let n = s.q.len();
     let mut d = Data::new(m);
 
     let mut tau = vecs(m, n);
-    rnea_batch(m, &s.q, &s.v, &s.a, &mut tau).unwrap();
+    rnea_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut tau).unwrap();
     let mut mm = mats(m, n);
-    crba_batch(m, &s.q, &mut mm).unwrap();
+    crba_batch(m, &mut bd, &s.q, &mut mm).unwrap();
     let mut qdd = vecs(m, n);
-    aba_batch(m, &s.q, &s.v, &s.tau, &mut qdd).unwrap();
+    aba_batch(m, &mut bd, &s.q, &s.v, &s.tau, &mut qdd).unwrap();
     let (mut idq, mut idv) = (mats(m, n), mats(m, n));
-    id_derivatives_batch(m, &s.q, &s.v, &s.a, &mut idq, &mut idv).unwrap();
+    id_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut idq, &mut idv).unwrap();
     let (mut fdq, mut fdv) = (mats(m, n), mats(m, n));
-    fd_derivatives_batch(m, &s.q, &s.v, &s.tau, &mut fdq, &mut fdv).unwrap();
+    fd_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.tau, &mut fdq, &mut fdv).unwrap();
 
     for k in 0..n {
         let at = format!("{label}: model {} state {k}", m.name);
@@ -79,13 +80,13 @@ fn check_identical(m: &Model, s: &States, label: &str) {
 }
 
 /// Second-order batched functions against sequential calls (small models: nv³ tensors).
-fn check_identical_so(m: &Model, s: &States, label: &str) {
+fn check_identical_so(m: &Model, s: &States, mut bd: BatchData, label: &str) {
     let n = s.q.len();
     let mut d = Data::new(m);
     let mut so = vec![SoData::new(m); n];
-    id_so_derivatives_batch(m, &s.q, &s.v, &s.a, &mut so).unwrap();
+    id_so_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut so).unwrap();
     let mut fso = vec![FdSoData::new(m); n];
-    fd_so_derivatives_batch(m, &s.q, &s.v, &s.tau, &mut fso).unwrap();
+    fd_so_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.tau, &mut fso).unwrap();
     let mut so1 = SoData::new(m);
     let mut fso1 = FdSoData::new(m);
     for k in 0..n {
@@ -108,42 +109,48 @@ fn check_identical_so(m: &Model, s: &States, label: &str) {
 }
 
 #[test]
-fn batch_equals_sequential_global_pool() {
+fn batch_equals_sequential_shared_pool() {
     for (i, m) in models().iter().enumerate() {
-        // 37 states: chunks of unequal length.
-        check_identical(m, &states(m, 37, 10 + i as u64), "global pool");
+        check_identical(m, &states(m, 37, 10 + i as u64), BatchData::new(m), "shared pool");
     }
 }
 
+/// 1, 2 and 3 threads (3 on a 2-core machine: more threads than cores), with batch sizes
+/// below, at and far above the number of threads.
 #[test]
-fn batch_equals_sequential_one_and_two_threads() {
-    for threads in [1, 2] {
-        let pool = BatchPool::new(threads).unwrap();
+fn batch_equals_sequential_one_two_and_three_threads() {
+    for threads in [1, 2, 3] {
+        let pool = Arc::new(BatchPool::new(threads).unwrap());
         assert_eq!(pool.threads(), threads);
         for (i, m) in models().iter().enumerate() {
-            let s = states(m, 23, 20 + i as u64);
-            pool.install(|| check_identical(m, &s, &format!("{threads} threads")));
+            for n in [1, 2, 3, 23, 301] {
+                let s = states(m, n, 20 + i as u64);
+                let bd = BatchData::with_pool(m, pool.clone());
+                assert_eq!(bd.threads(), threads);
+                check_identical(m, &s, bd, &format!("{threads} threads, {n} states"));
+            }
         }
     }
 }
 
 #[test]
 fn batch_second_order_equals_sequential() {
-    let pool = BatchPool::new(2).unwrap();
+    let pool = Arc::new(BatchPool::new(2).unwrap());
     for m in [builtin::quadruped(), builtin::random_tree(8, 7, true)] {
         let s = states(&m, 9, 30);
-        check_identical_so(&m, &s, "global pool");
-        pool.install(|| check_identical_so(&m, &s, "2 threads"));
+        check_identical_so(&m, &s, BatchData::new(&m), "shared pool");
+        check_identical_so(&m, &s, BatchData::with_pool(&m, pool.clone()), "2 threads");
     }
 }
 
 #[test]
 fn empty_batch_is_ok() {
     let m = builtin::quadruped();
+    let mut bd = BatchData::new(&m);
     let mut out: Vec<DVector<f64>> = vec![];
-    rnea_batch(&m, &[], &[], &[], &mut out).unwrap();
+    rnea_batch(&m, &mut bd, &[], &[], &[], &mut out).unwrap();
     let (mut a, mut b): (Vec<DMatrix<f64>>, Vec<DMatrix<f64>>) = (vec![], vec![]);
-    id_derivatives_batch(&m, &[], &[], &[], &mut a, &mut b).unwrap();
+    id_derivatives_batch(&m, &mut bd, &[], &[], &[], &mut a, &mut b).unwrap();
 }
 
 /// The quadruped has a free-flyer root: a non-unit quaternion in state `k` must be reported
@@ -162,21 +169,21 @@ fn invalid_configuration_names_the_state() {
         let msg = e.to_string();
         assert!(msg.contains(&format!("state {k}")), "message names state {k}: {msg}");
     };
-    let pool = BatchPool::new(2).unwrap();
+    let mut bd = BatchData::with_pool(&m, Arc::new(BatchPool::new(2).unwrap()));
     check(
-        id_derivatives_batch(&m, &s.q, &s.v, &s.a, &mut mats(&m, n), &mut mats(&m, n)).unwrap_err(),
+        id_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut mats(&m, n), &mut mats(&m, n))
+            .unwrap_err(),
     );
     check(
-        pool.install(|| {
-            fd_derivatives_batch(&m, &s.q, &s.v, &s.tau, &mut mats(&m, n), &mut mats(&m, n))
-        })
-        .unwrap_err(),
+        fd_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.tau, &mut mats(&m, n), &mut mats(&m, n))
+            .unwrap_err(),
     );
-    check(rnea_batch(&m, &s.q, &s.v, &s.a, &mut vecs(&m, n)).unwrap_err());
-    check(aba_batch(&m, &s.q, &s.v, &s.tau, &mut vecs(&m, n)).unwrap_err());
-    check(crba_batch(&m, &s.q, &mut mats(&m, n)).unwrap_err());
+    check(rnea_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut vecs(&m, n)).unwrap_err());
+    check(aba_batch(&m, &mut bd, &s.q, &s.v, &s.tau, &mut vecs(&m, n)).unwrap_err());
+    check(crba_batch(&m, &mut bd, &s.q, &mut mats(&m, n)).unwrap_err());
     check(
-        id_so_derivatives_batch(&m, &s.q, &s.v, &s.a, &mut vec![SoData::new(&m); n]).unwrap_err(),
+        id_so_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut vec![SoData::new(&m); n])
+            .unwrap_err(),
     );
 }
 
@@ -190,19 +197,30 @@ fn first_failing_state_is_reported() {
     s.v[31] = DVector::zeros(m.nv + 1);
     s.a[12][0] = f64::NAN;
     s.a[44][0] = f64::INFINITY;
-    for threads in [1, 2] {
-        let pool = BatchPool::new(threads).unwrap();
-        let e = pool
-            .install(|| {
-                id_derivatives_batch(&m, &s.q, &s.v, &s.a, &mut mats(&m, n), &mut mats(&m, n))
-            })
-            .unwrap_err();
-        assert!(matches!(e, Error::NotFinite { .. }), "{e:?}");
-        assert!(e.to_string().contains("state 12"), "{e}");
+    // Repeated, as the threads race for the states.
+    for threads in [1, 2, 3] {
+        let mut bd = BatchData::with_pool(&m, Arc::new(BatchPool::new(threads).unwrap()));
+        for _ in 0..20 {
+            let (mut dq, mut dv) = (mats(&m, n), mats(&m, n));
+            let e =
+                id_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut dq, &mut dv).unwrap_err();
+            assert!(matches!(e, Error::NotFinite { .. }), "{threads} threads: {e:?}");
+            assert!(e.to_string().contains("state 12"), "{threads} threads: {e}");
+        }
+    }
+    // A failure late in a long batch, after states that all succeed.
+    let mut long = states(&m, 2000, 8);
+    long.a[1999][3] = f64::NAN;
+    long.a[1703][2] = f64::NAN;
+    let mut bd = BatchData::with_pool(&m, Arc::new(BatchPool::new(2).unwrap()));
+    for _ in 0..5 {
+        let e =
+            rnea_batch(&m, &mut bd, &long.q, &long.v, &long.a, &mut vecs(&m, 2000)).unwrap_err();
+        assert!(e.to_string().contains("state 1703"), "{e}");
     }
     s.a[12][0] = 0.0;
     s.a[44][0] = 0.0;
-    let e = rnea_batch(&m, &s.q, &s.v, &s.a, &mut vecs(&m, n)).unwrap_err();
+    let e = rnea_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut vecs(&m, n)).unwrap_err();
     assert!(
         matches!(e, Error::Dimension { expected, got, .. } if expected == m.nv && got == m.nv + 1)
     );
@@ -213,22 +231,52 @@ fn first_failing_state_is_reported() {
 fn inconsistent_lengths_and_shapes_are_errors() {
     let m = builtin::quadruped();
     let s = states(&m, 5, 6);
+    let mut bd = BatchData::new(&m);
     // One velocity too few.
-    let e = rnea_batch(&m, &s.q, &s.v[..4], &s.a, &mut vecs(&m, 5)).unwrap_err();
+    let e = rnea_batch(&m, &mut bd, &s.q, &s.v[..4], &s.a, &mut vecs(&m, 5)).unwrap_err();
     assert!(e.to_string().contains("vs"), "{e}");
     // One output too few.
-    let e =
-        id_derivatives_batch(&m, &s.q, &s.v, &s.a, &mut mats(&m, 4), &mut mats(&m, 5)).unwrap_err();
+    let e = id_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut mats(&m, 4), &mut mats(&m, 5))
+        .unwrap_err();
     assert!(e.to_string().contains("out_dq"), "{e}");
     // A wrongly sized output matrix.
     let mut dv = mats(&m, 5);
     dv[3] = DMatrix::zeros(m.nv, m.nv - 1);
-    let e = id_derivatives_batch(&m, &s.q, &s.v, &s.a, &mut mats(&m, 5), &mut dv).unwrap_err();
+    let e =
+        id_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut mats(&m, 5), &mut dv).unwrap_err();
     assert!(e.to_string().contains("out_dv[3]"), "{e}");
     // Tensor workspaces made for another model.
     let other = builtin::humanoid();
-    let e = id_so_derivatives_batch(&m, &s.q, &s.v, &s.a, &mut vec![SoData::new(&other); 5])
-        .unwrap_err();
+    let e =
+        id_so_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut vec![SoData::new(&other); 5])
+            .unwrap_err();
     assert!(e.to_string().contains("out[0]"), "{e}");
     assert!(BatchPool::new(0).is_err());
+}
+
+/// One `BatchData` serves many calls with results bit for bit those of the sequential calls;
+/// a `BatchData` made for another model is an error that names it, and leaves the outputs
+/// untouched.
+#[test]
+fn batch_data_is_reused_and_checked() {
+    let m = builtin::humanoid();
+    let mut bd = BatchData::with_pool(&m, Arc::new(BatchPool::new(2).unwrap()));
+    let mut d = Data::new(&m);
+    for seed in 0..3 {
+        let s = states(&m, 24, 40 + seed);
+        let (mut dq, mut dv) = (mats(&m, 24), mats(&m, 24));
+        fd_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.tau, &mut dq, &mut dv).unwrap();
+        for k in 0..24 {
+            fd_derivatives(&m, &mut d, &s.q[k], &s.v[k], &s.tau[k], None).unwrap();
+            assert_eq!(dq[k], d.dqdd_dq, "seed {seed} state {k}");
+            assert_eq!(dv[k], d.dqdd_dv, "seed {seed} state {k}");
+        }
+    }
+    let other = builtin::quadruped();
+    let s = states(&other, 6, 7);
+    let mut out = vec![DVector::from_element(other.nv, 3.0); 6];
+    let e = rnea_batch(&other, &mut bd, &s.q, &s.v, &s.a, &mut out).unwrap_err();
+    assert!(matches!(e, Error::Dimension { .. }), "{e:?}");
+    assert!(e.to_string().contains("Data (workspace built for another model)"), "{e}");
+    assert!(out.iter().all(|x| x.iter().all(|&y| y == 3.0)), "outputs untouched");
 }

@@ -9,14 +9,16 @@
 //! `max(200, iters/K)` batches). The `batch_*` algorithms time one batched call over all the
 //! states ([`crate::batch`]) and report the time per state, with at least 20 samples, and
 //! `cpu_util` = process CPU time / wall time over the timed calls (about the number of threads
-//! when the cores are free). With `--paired-threads T` they are timed on one and on `T` worker
+//! when the cores are free). With `--paired-threads T` they are timed on one and on `T`
 //! threads in alternation (1, T, T, 1, 1, T, ...: each pair of consecutive calls sees the same
 //! machine conditions), and the `T`-thread line adds `speedup` = the median over the pairs of
 //! (1-thread time) / (T-thread time).
 
 use super::load_model;
 use crate::algo::{Contact, Data, aba, crba, rnea};
-use crate::batch::{BatchPool, aba_batch, fd_derivatives_batch, id_derivatives_batch, rnea_batch};
+use crate::batch::{
+    BatchData, BatchPool, aba_batch, fd_derivatives_batch, id_derivatives_batch, rnea_batch,
+};
 use crate::deriv::{
     ContactData, FdSoData, ImpactData, KktData, SoData, fd_derivatives, fd_so_derivatives,
     id_derivatives, id_so_derivatives, impact_derivatives, impact_so_derivatives, kkt_derivatives,
@@ -28,6 +30,7 @@ use crate::rng::Rng;
 use nalgebra::{DMatrix, DVector, Vector3};
 use std::hint::black_box;
 use std::path::Path;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// The usage text of `sodyn bench`.
@@ -38,8 +41,8 @@ sodyn bench --model M [--floating-base] [--contacts F1,F2,...] [--algos a,b,...]
 Prints one line per algorithm:
   model=<name> nq=<> nv=<> algo=<algo> median_us=<> p10_us=<> p90_us=<> batch=<K> samples=<n>
 Defaults: all algorithms, --states 1000 (8 with --smoke), --seed 42, --max-seconds 4,
---iters 20000, --threads 1 (worker threads of the batch_* algorithms), --name = the URDF file
-stem or the built-in model's name. --paired-threads T times the batch_* algorithms on 1 and
+--iters 20000, --threads 1 (threads of the batch_* algorithms, the caller included),
+--name = the URDF file stem or the built-in model's name. --paired-threads T times the batch_* algorithms on 1 and
 on T threads in alternation (two lines each, the second with speedup = median over the pairs
 of the 1-thread / T-thread time). --smoke runs every algorithm a few times only.
 --calls N makes exactly N untimed calls per algorithm (for instruction counts under
@@ -455,6 +458,9 @@ struct Workspaces {
     out_m2: Vec<DMatrix<f64>>,
     kkt: Option<KktData>,
     impact: Option<ImpactData>,
+    /// Batched workspaces: one pool of `--threads`, or with `--paired-threads T`, pools of one
+    /// and of `T` threads.
+    batch: Vec<BatchData>,
 }
 
 /// Times one algorithm.
@@ -463,23 +469,23 @@ fn time_algo(
     m: &Model,
     st: &States,
     ws: &mut Workspaces,
-    pools: &[BatchPool],
     plan: &Plan,
 ) -> Result<Timed> {
     let (q, v, a, tau) = (&st.q, &st.v, &st.a, &st.tau);
     let batch_plan = Plan { per_call: st.q.len(), min_samples: plan.min_samples.min(20), ..*plan };
-    // A batched algorithm on the pool `pools[side]`: timed alone, or paired with the second pool.
-    let batched = |f: &mut dyn FnMut(&BatchPool) -> Result<()>| -> Result<Timed> {
-        if let [p1, p2] = pools {
+    let Workspaces { data: d, so, fso, out_vec, out_m1, out_m2, kkt, impact, batch } = ws;
+    // A batched algorithm on the workspaces `batch[side]`: timed alone, or paired with the
+    // second pool.
+    let mut batched = |f: &mut dyn FnMut(&mut BatchData) -> Result<()>| -> Result<Timed> {
+        if let [b1, b2] = &mut batch[..] {
             let (s1, s2, speedup) =
-                measure_paired(&batch_plan, |side| f(if side == 0 { p1 } else { p2 }))?;
+                measure_paired(&batch_plan, |side| f(if side == 0 { &mut *b1 } else { &mut *b2 }))?;
             Ok(Timed { stats: s1, paired: Some((s2, speedup)) })
         } else {
-            Ok(Timed { stats: measure(&batch_plan, |_| f(&pools[0]))?, paired: None })
+            Ok(Timed { stats: measure(&batch_plan, |_| f(&mut batch[0]))?, paired: None })
         }
     };
     let single = |s: Result<Stats>| s.map(|stats| Timed { stats, paired: None });
-    let Workspaces { data: d, so, fso, out_vec, out_m1, out_m2, kkt, impact } = ws;
     let no_contacts = || Error::Io(format!("{algo} needs --contacts"));
     single(match algo {
         "rnea" => measure(plan, |i| {
@@ -515,29 +521,29 @@ fn time_algo(
             Ok(())
         }),
         "batch_rnea" => {
-            return batched(&mut |pool| {
-                pool.install(|| rnea_batch(m, q, v, a, out_vec))?;
+            return batched(&mut |bd| {
+                rnea_batch(m, bd, q, v, a, out_vec)?;
                 black_box(&*out_vec);
                 Ok(())
             });
         }
         "batch_aba" => {
-            return batched(&mut |pool| {
-                pool.install(|| aba_batch(m, q, v, tau, out_vec))?;
+            return batched(&mut |bd| {
+                aba_batch(m, bd, q, v, tau, out_vec)?;
                 black_box(&*out_vec);
                 Ok(())
             });
         }
         "batch_id_fo" => {
-            return batched(&mut |pool| {
-                pool.install(|| id_derivatives_batch(m, q, v, a, out_m1, out_m2))?;
+            return batched(&mut |bd| {
+                id_derivatives_batch(m, bd, q, v, a, out_m1, out_m2)?;
                 black_box(&*out_m1);
                 Ok(())
             });
         }
         "batch_fd_fo" => {
-            return batched(&mut |pool| {
-                pool.install(|| fd_derivatives_batch(m, q, v, tau, out_m1, out_m2))?;
+            return batched(&mut |bd| {
+                fd_derivatives_batch(m, bd, q, v, tau, out_m1, out_m2)?;
                 black_box(&*out_m1);
                 Ok(())
             });
@@ -618,11 +624,12 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
     let name = o.name.clone().unwrap_or_else(|| default_name(spec));
     let nstates = o.states.unwrap_or(if o.smoke { 8 } else { 1000 });
     let st = States::new(&model, nstates, o.seed);
-    // One pool of --threads workers, or with --paired-threads T, pools of one and T workers.
+    // One pool of --threads threads, or with --paired-threads T, pools of one and T threads.
     let pools = match o.paired_threads {
         Some(t) => vec![BatchPool::new(1)?, BatchPool::new(t)?],
         None => vec![BatchPool::new(o.threads)?],
     };
+    let pool_threads: Vec<usize> = pools.iter().map(BatchPool::threads).collect();
     let nv = model.nv;
     let needs = |p: &str| algos.iter().any(|a| a.starts_with(p));
     let mut ws = Workspaces {
@@ -634,6 +641,7 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
         out_m2: if needs("batch_") { vec![DMatrix::zeros(nv, nv); nstates] } else { vec![] },
         kkt: None,
         impact: None,
+        batch: pools.into_iter().map(|p| BatchData::with_pool(&model, Arc::new(p))).collect(),
     };
     if !o.contacts.is_empty() {
         let contacts = o
@@ -675,12 +683,12 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
         o.smoke as u8,
     );
     for algo in algos {
-        let t = time_algo(algo, &model, &st, &mut ws, &pools, &plan)
+        let t = time_algo(algo, &model, &st, &mut ws, &plan)
             .map_err(|e| Error::Io(format!("bench {algo} on {name}: {e}")))?;
         let batched = algo.starts_with("batch_");
-        let mut lines = vec![(t.stats, pools[0].threads(), None)];
+        let mut lines = vec![(t.stats, pool_threads[0], None)];
         if let Some((s2, speedup)) = t.paired {
-            lines.push((s2, pools[1].threads(), Some(speedup)));
+            lines.push((s2, pool_threads[1], Some(speedup)));
         }
         for (s, threads, speedup) in lines {
             let extra = if batched {
