@@ -21,12 +21,13 @@
 #   PEER_VENV   Pinocchio venv (default /tmp/peer/venv)
 #   PEER_BUILD  where pin_bench_native is (default /tmp/peer/build)
 #   OUT         directory for raw outputs and the table (default /tmp/sodyn-compare-<date>)
-#   PNG         chart of the ratios to write (default: none; needs matplotlib in PEER_VENV)
+#   PNG         chart of the ratios to write (default: none; matplotlib is installed into
+#               PEER_VENV if missing)
 #   COMPARE     0 skips the comparison (default 1)
 #   SCALING     1 also measures the 1 -> 2 thread scaling of the batched API (sodyn only,
-#               not pinned, ROUNDS runs on SCALING_MODELS, default "solo12 talos_full_v2",
-#               each alternating 1- and 2-thread batched calls: --paired-threads 2); table
-#               in scaling.md
+#               not pinned, SCALING_ROUNDS runs (default ROUNDS) on SCALING_MODELS, default
+#               "solo12 talos_full_v2", each alternating 1- and 2-thread batched calls:
+#               --paired-threads 2); table in scaling.md
 set -euo pipefail
 
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -142,7 +143,7 @@ echo "# loadavg at end: $(cut -d' ' -f1-3 /proc/loadavg)" >> "$META"
 
 # 3. Optional: thread scaling of the batched API (both cores, so not pinned).
 if [ "${SCALING:-0}" = 1 ]; then
-  for r in $(seq 1 "$ROUNDS"); do
+  for r in $(seq 1 "${SCALING_ROUNDS:-$ROUNDS}"); do
     F="$OUT/scaling-round$r.txt"
     : > "$F"
     for name in ${SCALING_MODELS:-solo12 talos_full_v2}; do
@@ -150,7 +151,7 @@ if [ "${SCALING:-0}" = 1 ]; then
       fb=(); [ "$base" = ff ] && fb=(--floating-base)
       # The batched calls on 1 and 2 threads alternate within one run (--paired-threads), so
       # each pair of consecutive calls sees the same machine state.
-      echo "[compare] scaling round $r/$ROUNDS $name threads=1,2 paired" >&2
+      echo "[compare] scaling round $r/${SCALING_ROUNDS:-$ROUNDS} $name threads=1,2 paired" >&2
       echo "# loadavg=$(cut -d' ' -f1 /proc/loadavg)" >> "$F"
       "$SODYN" bench --model "$MODELS_DIR/$name.urdf" "${fb[@]}" --name "$name" \
         --paired-threads 2 --algos rnea,id_fo,fd_fo,batch_rnea,batch_id_fo,batch_fd_fo \
@@ -164,6 +165,10 @@ fi
 # 4. Table (and chart).
 PY=python3
 TABLE_ARGS=("$OUT")
-if [ -n "${PNG:-}" ]; then PY="$PEER_VENV/bin/python"; TABLE_ARGS+=(--png "$PNG"); fi
+if [ -n "${PNG:-}" ]; then
+  PY="$PEER_VENV/bin/python"
+  TABLE_ARGS+=(--png "$PNG")
+  "$PY" -c "import matplotlib" 2>/dev/null || "$PEER_VENV/bin/pip" install --quiet matplotlib
+fi
 "$PY" "$HERE/compare_pinocchio_table.py" "${TABLE_ARGS[@]}" | tee "$OUT/table.md"
 echo "[compare] raw outputs and table.md in $OUT" >&2
