@@ -102,7 +102,9 @@ impl BatchPool {
 }
 
 /// Workspaces of the batched functions, kept between calls as [`Data`] is for single calls:
-/// one [`Data`] per thread of its [`BatchPool`]. A call allocates nothing.
+/// one [`Data`] per thread of its [`BatchPool`]. A call allocates no workspace (only rayon's
+/// small job per helper thread). Clones share the pool and may be used from several threads
+/// at once.
 #[derive(Clone, Debug)]
 pub struct BatchData {
     pool: Arc<BatchPool>,

@@ -280,3 +280,31 @@ fn batch_data_is_reused_and_checked() {
     assert!(e.to_string().contains("Data (workspace built for another model)"), "{e}");
     assert!(out.iter().all(|x| x.iter().all(|&y| y == 3.0)), "outputs untouched");
 }
+
+/// Clones of a `BatchData` share its pool; two of them used at once from two threads give the
+/// sequential results.
+#[test]
+fn clones_share_the_pool_from_several_threads() {
+    let m = builtin::humanoid();
+    let bd = BatchData::with_pool(&m, Arc::new(BatchPool::new(2).unwrap()));
+    let (s1, s2) = (states(&m, 150, 50), states(&m, 150, 51));
+    let run = |mut bd: BatchData, s: &States| {
+        let mut tau = vecs(&m, 150);
+        for _ in 0..20 {
+            rnea_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut tau).unwrap();
+        }
+        tau
+    };
+    let (t1, t2) = std::thread::scope(|sc| {
+        let (b1, b2) = (bd.clone(), bd.clone());
+        let h1 = sc.spawn(|| run(b1, &s1));
+        let h2 = sc.spawn(|| run(b2, &s2));
+        (h1.join().unwrap(), h2.join().unwrap())
+    });
+    assert!(Arc::ptr_eq(bd.pool(), bd.clone().pool()));
+    let mut d = Data::new(&m);
+    for k in 0..150 {
+        assert_eq!(t1[k], *rnea(&m, &mut d, &s1.q[k], &s1.v[k], &s1.a[k], None).unwrap());
+        assert_eq!(t2[k], *rnea(&m, &mut d, &s2.q[k], &s2.v[k], &s2.a[k], None).unwrap());
+    }
+}
