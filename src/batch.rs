@@ -6,6 +6,8 @@
 //! n]`, ...). As the single-state algorithms take a [`Data`], the batched ones take a
 //! [`BatchData`]: one [`Data`] per thread and the [`BatchPool`] whose threads it runs on, kept
 //! by the caller between calls (MuJoCo binds a thread pool to its `mjData` the same way).
+//! [`map_states`] batches any other per-state computation (the contact dynamics, say) on
+//! per-thread workspaces of any type, with the same scheduling and error reporting.
 //!
 //! A [`BatchPool`] of `T` threads is the calling thread plus `T − 1` [rayon] helper threads:
 //! the caller starts on the states at once and the helpers join as soon as they are awake, so
@@ -102,16 +104,16 @@ impl BatchPool {
 }
 
 /// Workspaces of the batched functions, kept between calls as [`Data`] is for single calls:
-/// one [`Data`] per thread of its [`BatchPool`]. A call allocates no workspace (only rayon's
-/// small job per helper thread). Clones share the pool and may be used from several threads
-/// at once.
+/// one workspace per thread of its [`BatchPool`] (a [`Data`] for the functions of this module;
+/// any type for [`map_states`]). A call allocates no workspace (only rayon's small job per
+/// helper thread). Clones share the pool and may be used from several threads at once.
 #[derive(Clone, Debug)]
-pub struct BatchData {
+pub struct BatchData<W = Data> {
     pool: Arc<BatchPool>,
-    data: Vec<Data>,
+    data: Vec<W>,
 }
 
-impl BatchData {
+impl BatchData<Data> {
     /// Workspaces for batched calls on `model`, run on the shared pool
     /// ([`BatchPool::shared`], one thread per core).
     pub fn new(model: &Model) -> Self {
@@ -119,8 +121,23 @@ impl BatchData {
     }
     /// Workspaces for batched calls on `model`, run on `pool`.
     pub fn with_pool(model: &Model, pool: Arc<BatchPool>) -> Self {
-        Self { data: vec![Data::new(model); pool.threads()], pool }
+        Self::from_workspace(pool, Data::new(model))
     }
+    /// Checks that these workspaces were made for `model`.
+    fn check(&self, model: &Model) -> Result<()> {
+        self.data.iter().try_for_each(|d| d.check(model))
+    }
+}
+
+impl<W: Clone> BatchData<W> {
+    /// One clone of `workspace` per thread of `pool`, for [`map_states`] (e.g. a `(Data,
+    /// KktData)` pair for the contact dynamics).
+    pub fn from_workspace(pool: Arc<BatchPool>, workspace: W) -> Self {
+        Self { data: vec![workspace; pool.threads()], pool }
+    }
+}
+
+impl<W> BatchData<W> {
     /// The pool the batched calls run on.
     pub fn pool(&self) -> &Arc<BatchPool> {
         &self.pool
@@ -129,10 +146,50 @@ impl BatchData {
     pub fn threads(&self) -> usize {
         self.pool.threads()
     }
-    /// Checks that these workspaces were made for `model`.
-    fn check(&self, model: &Model) -> Result<()> {
-        self.data.iter().try_for_each(|d| d.check(model))
-    }
+}
+
+/// Any per-state computation over a batch: `f(workspace, k, &mut out[k])` for every state
+/// `k < out.len()`, on the threads of `bd`'s pool, each thread with its own workspace of `bd`
+/// (the states are claimed as described in the [module documentation](self)). `f` must
+/// compute state `k` from its own inputs only: then the results do not depend on which thread
+/// ran which state. Returns the error of the first failing state in index order, with
+/// "(state k)" added to its message.
+///
+/// This is how the algorithms without a dedicated batched function are batched, e.g. the
+/// contact dynamics:
+///
+/// ```
+/// use nalgebra::{DMatrix, DVector, Vector3};
+/// use sodyn::algo::{Contact, Data};
+/// use sodyn::batch::{BatchData, BatchPool, map_states};
+/// use sodyn::deriv::{ContactData, KktData, kkt_derivatives};
+/// use sodyn::{model::builtin, rng::Rng};
+/// use std::sync::Arc;
+/// let m = builtin::quadruped();
+/// let feet = ["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"];
+/// let contacts: Vec<Contact> =
+///     feet.iter().map(|f| Contact::new(&m, f, Vector3::zeros())).collect::<Result<_, _>>()?;
+/// let kd = KktData::new(&m, ContactData::new(&m, &contacts)?);
+/// let mut bd = BatchData::from_workspace(Arc::new(BatchPool::new(2)?), (Data::new(&m), kd));
+/// let mut rng = Rng::new(3);
+/// let qs: Vec<_> = (0..8).map(|_| m.random_configuration(&mut rng)).collect();
+/// let (v, tau) = (DVector::zeros(m.nv), DVector::zeros(m.nv));
+/// let mut dqdd_dq = vec![DMatrix::zeros(m.nv, m.nv); 8];
+/// map_states(&mut bd, &mut dqdd_dq, |(d, kd), k, out| {
+///     kkt_derivatives(&m, d, kd, &qs[k], &v, &tau)?;
+///     out.copy_from(&kd.dqdd_dq);
+///     Ok(())
+/// })?;
+/// # Ok::<(), sodyn::Error>(())
+/// ```
+pub fn map_states<W, O, F>(bd: &mut BatchData<W>, out: &mut [O], f: F) -> Result<()>
+where
+    W: Send,
+    O: Send,
+    F: Fn(&mut W, usize, &mut O) -> Result<()> + Sync,
+{
+    let n = out.len();
+    drive(bd, n, out, &mut vec![(); n], |w, k, o, _| f(w, k, o))
 }
 
 /// Adds "state `k`" to an error, keeping its variant.
@@ -285,11 +342,18 @@ fn claim(next: &AtomicUsize, n: usize, threads: usize) -> Option<(usize, usize)>
 /// function with one output passes `&mut vec![(); n]` as `out2`, which allocates nothing).
 /// Returns the error of the first failing state in index order (states after a failure may be
 /// left unevaluated).
-fn drive<O, P, F>(bd: &mut BatchData, n: usize, out: &mut [O], out2: &mut [P], f: F) -> Result<()>
+fn drive<W, O, P, F>(
+    bd: &mut BatchData<W>,
+    n: usize,
+    out: &mut [O],
+    out2: &mut [P],
+    f: F,
+) -> Result<()>
 where
+    W: Send,
     O: Send,
     P: Send,
-    F: Fn(&mut Data, usize, &mut O, &mut P) -> Result<()> + Sync,
+    F: Fn(&mut W, usize, &mut O, &mut P) -> Result<()> + Sync,
 {
     assert!(out.len() == n && out2.len() == n);
     let threads = bd.pool.threads();
@@ -298,7 +362,7 @@ where
     let failed_at = AtomicUsize::new(usize::MAX);
     let (out, out2) = (Outputs(out.as_mut_ptr()), Outputs(out2.as_mut_ptr()));
     // One thread's share: claims runs of states until none are left; returns its first error.
-    let work = |w: &mut Data| -> Option<(usize, Error)> {
+    let work = |w: &mut W| -> Option<(usize, Error)> {
         let mut err = None;
         while let Some((start, end)) = claim(&next, n, threads) {
             if start > failed_at.load(Ordering::Relaxed) {

@@ -308,3 +308,77 @@ fn clones_share_the_pool_from_several_threads() {
         assert_eq!(t2[k], *rnea(&m, &mut d, &s2.q[k], &s2.v[k], &s2.a[k], None).unwrap());
     }
 }
+
+/// `map_states` batches the contact dynamics (KKT and impact, first and second order) on
+/// per-thread `(Data, KktData)` / `(Data, ImpactData)` workspaces: bit for bit the sequential
+/// results on 1, 2 and 3 threads, and the first failing state named.
+#[test]
+fn map_states_batches_the_contact_dynamics() {
+    use nalgebra::Vector3;
+    use sodyn::algo::Contact;
+    use sodyn::deriv::{
+        ContactData, ImpactData, KktData, impact_derivatives, impact_so_derivatives,
+        kkt_derivatives, kkt_so_derivatives,
+    };
+    let m = builtin::quadruped();
+    let feet = ["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"];
+    let contacts: Vec<Contact> =
+        feet.iter().map(|f| Contact::new(&m, f, Vector3::new(0.01, 0.0, -0.02)).unwrap()).collect();
+    let cd = ContactData::new(&m, &contacts).unwrap();
+    let kd = KktData::new(&m, cd.clone()).with_second_order(&m);
+    let im = ImpactData::new(&m, cd).with_second_order(&m);
+    let n = 29;
+    let mut s = states(&m, n, 60);
+    let (mut d, mut kd1, mut im1) = (Data::new(&m), kd.clone(), im.clone());
+    for threads in [1, 2, 3] {
+        let pool = Arc::new(BatchPool::new(threads).unwrap());
+        let mut bk = BatchData::from_workspace(pool.clone(), (Data::new(&m), kd.clone()));
+        let mut bi = BatchData::from_workspace(pool, (Data::new(&m), im.clone()));
+        assert_eq!(bk.threads(), threads);
+        let mut kout = vec![(DMatrix::zeros(0, 0), DMatrix::zeros(0, 0), vec![]); n];
+        map_states(&mut bk, &mut kout, |(d, kd), k, o| {
+            kkt_derivatives(&m, d, kd, &s.q[k], &s.v[k], &s.tau[k])?;
+            kkt_so_derivatives(&m, d, kd, &s.q[k], &s.v[k], &s.tau[k])?;
+            *o = (
+                kd.dqdd_dq.clone(),
+                kd.dlambda_dq.clone(),
+                kd.so.as_ref().unwrap().d2qdd_dq2.as_slice().to_vec(),
+            );
+            Ok(())
+        })
+        .unwrap();
+        let mut iout = vec![(DMatrix::zeros(0, 0), DMatrix::zeros(0, 0), vec![]); n];
+        map_states(&mut bi, &mut iout, |(d, im), k, o| {
+            impact_derivatives(&m, d, im, &s.q[k], &s.v[k])?;
+            impact_so_derivatives(&m, d, im, &s.q[k], &s.v[k])?;
+            *o = (
+                im.dvplus_dq.clone(),
+                im.dimpulse_dq.clone(),
+                im.so.as_ref().unwrap().d2vplus_dq2.as_slice().to_vec(),
+            );
+            Ok(())
+        })
+        .unwrap();
+        for k in 0..n {
+            kkt_derivatives(&m, &mut d, &mut kd1, &s.q[k], &s.v[k], &s.tau[k]).unwrap();
+            kkt_so_derivatives(&m, &mut d, &mut kd1, &s.q[k], &s.v[k], &s.tau[k]).unwrap();
+            assert_eq!(kout[k].0, kd1.dqdd_dq, "{threads} threads, state {k}");
+            assert_eq!(kout[k].1, kd1.dlambda_dq, "{threads} threads, state {k}");
+            assert_eq!(kout[k].2, kd1.so.as_ref().unwrap().d2qdd_dq2.as_slice(), "state {k}");
+            impact_derivatives(&m, &mut d, &mut im1, &s.q[k], &s.v[k]).unwrap();
+            impact_so_derivatives(&m, &mut d, &mut im1, &s.q[k], &s.v[k]).unwrap();
+            assert_eq!(iout[k].0, im1.dvplus_dq, "{threads} threads, state {k}");
+            assert_eq!(iout[k].1, im1.dimpulse_dq, "{threads} threads, state {k}");
+            assert_eq!(iout[k].2, im1.so.as_ref().unwrap().d2vplus_dq2.as_slice(), "state {k}");
+        }
+    }
+    // A non-finite torque in state 17: the error names it.
+    s.tau[17][2] = f64::NAN;
+    let mut bk = BatchData::from_workspace(Arc::new(BatchPool::new(2).unwrap()), (d, kd));
+    let e = map_states(&mut bk, &mut vec![(); n], |(d, kd), k, _| {
+        kkt_derivatives(&m, d, kd, &s.q[k], &s.v[k], &s.tau[k])
+    })
+    .unwrap_err();
+    assert!(matches!(e, Error::NotFinite { .. }), "{e:?}");
+    assert!(e.to_string().contains("state 17"), "{e}");
+}
