@@ -258,7 +258,7 @@ fn check_matrices(what: &str, out: &[DMatrix<f64>], n: usize) -> Result<()> {
 /// `dst ← src` for matrices of equal shape (checked beforehand). The destination is the
 /// caller's output for one state, not read again by the batch: with AVX it is written by
 /// non-temporal (streaming) stores, which skip reading its cache lines before writing them and
-/// leave the caches to the workspace ([`drive`] fences them before its chunk ends).
+/// leave the caches to the workspace ([`drive`] fences them when a thread's share ends).
 #[inline]
 fn copy(dst: &mut DMatrix<f64>, src: &DMatrix<f64>) {
     let (dst, src) = (dst.as_mut_slice(), src.as_slice());
@@ -292,7 +292,7 @@ unsafe fn stream_copy_avx(dst: &mut [f64], src: &[f64]) {
     dst[body..].copy_from_slice(&src[body..]);
 }
 
-/// Orders the streaming stores of [`copy`] before what follows (the end of a chunk).
+/// Orders the streaming stores of [`copy`] before what follows (the end of a thread's share).
 #[inline]
 fn fence_streams() {
     #[cfg(target_arch = "x86_64")]

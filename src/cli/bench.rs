@@ -42,11 +42,12 @@ Prints one line per algorithm:
   model=<name> nq=<> nv=<> algo=<algo> median_us=<> p10_us=<> p90_us=<> batch=<K> samples=<n>
 Defaults: all algorithms, --states 1000 (8 with --smoke), --seed 42, --max-seconds 4,
 --iters 20000, --threads 1 (threads of the batch_* algorithms, the caller included),
---name = the URDF file stem or the built-in model's name. --paired-threads T times the batch_* algorithms on 1 and
-on T threads in alternation (two lines each, the second with speedup = median over the pairs
-of the 1-thread / T-thread time). --smoke runs every algorithm a few times only.
---calls N makes exactly N untimed calls per algorithm (for instruction counts under
-`valgrind --tool=callgrind`: cost per call = difference of two runs / difference of N).";
+--name = the URDF file stem or the built-in model's name. --paired-threads T times the
+batch_* algorithms on 1 and on T threads in alternation (two lines each, the second with
+speedup = median over the pairs of the 1-thread / T-thread time). --smoke runs every
+algorithm a few times only. --calls N makes exactly N untimed calls per algorithm (for
+instruction counts under `valgrind --tool=callgrind`: cost per call = difference of two runs /
+difference of N).";
 
 /// Algorithms that can be timed, in output order.
 const ALGOS: &[&str] = &[
