@@ -163,19 +163,29 @@ def scaling(out_dir):
                 if kv["algo"].startswith("batch_"):
                     util = float(kv.get("cpu_util", "nan"))
                     sp = float(kv.get("speedup", "nan"))
-                    batch.setdefault(key, {}).setdefault(r, {})[kv["threads"]] = (us, util, sp)
+                    spc = float(kv.get("speedup_cpus", "nan"))
+                    percpu = {}
+                    for item in kv.get("one_us_per_cpu", "none").split(","):
+                        if ":" in item:
+                            c, t = item.split(":")
+                            percpu[c] = float(t)
+                    batch.setdefault(key, {}).setdefault(r, {})[kv["threads"]] = (
+                        us, util, sp, spc, percpu)
                 else:
                     single.setdefault(key, {}).setdefault(r, []).append(us)
     med = statistics.median
     print(f"Rounds: {len(files)}. Batched calls over 1000 states, µs per state (median of each "
           "run); speed-up = (1 thread) / (2 threads) within each round (ratio of the medians); "
           "paired speed-up (runs with --paired-threads 2: 1- and 2-thread calls alternating) = "
-          "median over the pairs of consecutive calls of their time ratio, per round; CPUs used = "
-          "process CPU time / wall time during the timed calls.\n")
+          "median over the pairs of consecutive calls of their time ratio, per round; over the "
+          "CPUs' mean = 2-thread throughput / mean of the 1-thread throughputs with the caller "
+          "pinned to each CPU in turn (same runs; µs per state of those pinned calls per CPU); "
+          "CPUs used = process CPU time / wall time during the timed calls.\n")
     print("| model | algo | 1 thread µs/state | 2 threads µs/state | speed-up 1→2 [min–max] "
-          "| paired speed-up [min–max] | CPUs used (1 / 2 threads) "
+          "| paired speed-up [min–max] | over the CPUs' mean [min–max] | 1 thread pinned µs per CPU "
+          "| CPUs used (1 / 2 threads) "
           "| CPU µs per state (1 / 2 threads) | single call µs | batch (1 thread) / single |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for (m, a), rounds in batch.items():
         rs = [v for v in rounds.values() if "1" in v and "2" in v]
         if not rs:
@@ -185,6 +195,12 @@ def scaling(out_dir):
         sp = [v["1"][0] / v["2"][0] for v in rs]
         ps = [v["2"][2] for v in rs if v["2"][2] == v["2"][2]]
         pstr = f"{med(ps):.2f} [{min(ps):.2f}–{max(ps):.2f}]" if ps else "-"
+        pc = [v["2"][3] for v in rs if v["2"][3] == v["2"][3]]
+        pcstr = f"{med(pc):.2f} [{min(pc):.2f}–{max(pc):.2f}]" if pc else "-"
+        cpus = sorted({c for v in rs for c in v["2"][4]})
+        percpu = " / ".join(
+            f"{c}: {fmt_us(med([v['2'][4][c] for v in rs if c in v['2'][4]]))}" for c in cpus
+        ) or "-"
         u1 = [v["1"][1] for v in rs]
         u2 = [v["2"][1] for v in rs]
         c1 = [v["1"][0] * v["1"][1] for v in rs]
@@ -193,7 +209,8 @@ def scaling(out_dir):
         s_all = [x for v in sr.values() for x in v]
         ov = [rounds[r]["1"][0] / med(sr[r]) for r in rounds if r in sr and "1" in rounds[r]]
         print(f"| {m} | {a} | {fmt_us(med(t1))} | {fmt_us(med(t2))} | {med(sp):.2f} "
-              f"[{min(sp):.2f}–{max(sp):.2f}] | {pstr} | {med(u1):.2f} / {med(u2):.2f} "
+              f"[{min(sp):.2f}–{max(sp):.2f}] | {pstr} | {pcstr} | {percpu} "
+              f"| {med(u1):.2f} / {med(u2):.2f} "
               f"| {fmt_us(med(c1))} / {fmt_us(med(c2))} "
               f"| {fmt_us(med(s_all)) if s_all else '-'} | {f'{med(ov):.2f}' if ov else '-'} |")
 

@@ -9,17 +9,24 @@
 //! [`map_states`] batches any other per-state computation (the contact dynamics, say) on
 //! per-thread workspaces of any type, with the same scheduling and error reporting.
 //!
-//! A [`BatchPool`] of `T` threads is the calling thread plus `T − 1` [rayon] helper threads:
-//! the caller starts on the states at once and the helpers join as soon as they are awake, so
-//! the time a sleeping helper takes to wake is shared instead of added (on a virtual machine
-//! this is tens of microseconds), and a 1-thread pool runs the states on the caller with no
-//! thread hand-off at all. The threads claim runs of consecutive states from one atomic
-//! counter, large runs first and single states at the end (guided scheduling), so a late or
-//! slowed thread leaves no idle tail to the others. Each thread works on its own [`Data`] and
-//! writes only the outputs of the states it claimed: the hot path neither allocates nor takes a
-//! lock (a call hands rayon one small job per helper thread). Each state is computed by the
-//! same code as the sequential call, so the results are bit-for-bit those of the sequential
-//! calls, whatever the number of threads.
+//! A [`BatchPool`] of `T` threads is the calling thread plus `T − 1` helper threads: the caller
+//! starts on the states at once and the helpers join as soon as they are awake, and a 1-thread
+//! pool runs the states on the caller with no thread hand-off at all. The threads claim runs of
+//! consecutive states from one atomic counter, large runs first and single states at the end
+//! (guided scheduling), so a late or slowed thread leaves no idle tail to the others. Each
+//! thread works on its own [`Data`] and writes only the outputs of the states it claimed: the
+//! hot path neither allocates nor takes a lock. Each state is computed by the same code as the
+//! sequential call, so the results are bit-for-bit those of the sequential calls, whatever the
+//! number of threads.
+//!
+//! Waking a sleeping thread costs tens of microseconds on a virtual machine (30–90 µs
+//! measured on ours), so the helpers of [`BatchPool::new`] poll for the next call for
+//! [`BatchPool::DEFAULT_SPIN`] after each call before they sleep (set by
+//! [`BatchPool::with_spin`]; the OpenMP runtimes do the same), and the caller polls while the
+//! helpers finish their last states instead of sleeping. A helper that arrives after the caller
+//! has run out of states does not join the call at all. [`BatchPool::with_rayon`] runs the
+//! helpers on a [rayon] pool instead (one job per helper and call), the design measured against
+//! in `docs/performance.md`.
 //!
 //! Errors: if some states fail, the error of the first failing state in index order is
 //! returned, with its variant kept and the state index added to its message (e.g.
@@ -55,35 +62,63 @@ use crate::model::Model;
 use nalgebra::{DMatrix, DVector};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
+use std::time::Duration;
 
-/// The threads a [`BatchData`] runs on: the calling thread plus `threads − 1` rayon helper
-/// threads, started once.
+mod pool;
+use pool::{Helpers, Spinning};
+
+/// The threads a [`BatchData`] runs on: the calling thread plus `threads − 1` helper threads,
+/// started once (see the [module documentation](self)).
 #[derive(Debug)]
 pub struct BatchPool {
-    helpers: Option<rayon::ThreadPool>,
+    helpers: Helpers,
     threads: usize,
 }
 
 impl BatchPool {
+    /// How long an idle helper of [`BatchPool::new`] polls for the next call before it sleeps.
+    pub const DEFAULT_SPIN: Duration = Duration::from_micros(200);
+
     /// A pool of `threads` threads (`threads ≥ 1`): the caller of each batched function and
-    /// `threads − 1` helper threads.
+    /// `threads − 1` helper threads, which poll for the next call for
+    /// [`DEFAULT_SPIN`](Self::DEFAULT_SPIN) after each call before they sleep.
     pub fn new(threads: usize) -> Result<Self> {
+        Self::with_spin(threads, Self::DEFAULT_SPIN)
+    }
+    /// As [`new`](Self::new), with idle helpers polling for `spin` before they sleep
+    /// (`Duration::ZERO`: they sleep at once, and each call pays for waking them).
+    pub fn with_spin(threads: usize, spin: Duration) -> Result<Self> {
+        let helpers = match Self::helpers_of(threads)? {
+            0 => Helpers::None,
+            h => Helpers::Spinning(
+                Spinning::new(h, spin)
+                    .map_err(|e| Error::Io(format!("cannot start {h} helper threads: {e}")))?,
+            ),
+        };
+        Ok(Self { helpers, threads })
+    }
+    /// A pool of `threads` threads whose helpers are a rayon thread pool (each call hands
+    /// rayon one job per helper and waits in `in_place_scope`): the design the default pool is
+    /// measured against (`sodyn bench --pool rayon`).
+    pub fn with_rayon(threads: usize) -> Result<Self> {
+        let helpers = match Self::helpers_of(threads)? {
+            0 => Helpers::None,
+            h => Helpers::Rayon(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(h)
+                    .thread_name(|i| format!("sodyn-batch-{}", i + 1))
+                    .build()
+                    .map_err(|e| Error::Io(format!("cannot start {h} helper threads: {e}")))?,
+            ),
+        };
+        Ok(Self { helpers, threads })
+    }
+    /// Number of helper threads for a pool of `threads`.
+    fn helpers_of(threads: usize) -> Result<usize> {
         if threads == 0 {
             return Err(Error::Io("the number of threads must be at least 1".into()));
         }
-        let helpers = if threads == 1 {
-            None
-        } else {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads - 1)
-                .thread_name(|i| format!("sodyn-batch-{}", i + 1))
-                .build()
-                .map_err(|e| {
-                    Error::Io(format!("cannot start {} helper threads: {e}", threads - 1))
-                })?;
-            Some(pool)
-        };
-        Ok(Self { helpers, threads })
+        Ok(threads - 1)
     }
     /// The pool shared by [`BatchData::new`]: one thread per core
     /// ([`std::thread::available_parallelism`]), started on first use.
@@ -93,7 +128,9 @@ impl BatchPool {
             .get_or_init(|| {
                 let t = std::thread::available_parallelism().map_or(1, |n| n.get());
                 // Falls back to the caller alone if the helpers cannot be started.
-                Arc::new(BatchPool::new(t).unwrap_or(BatchPool { helpers: None, threads: 1 }))
+                Arc::new(
+                    BatchPool::new(t).unwrap_or(BatchPool { helpers: Helpers::None, threads: 1 }),
+                )
             })
             .clone()
     }
@@ -105,8 +142,11 @@ impl BatchPool {
 
 /// Workspaces of the batched functions, kept between calls as [`Data`] is for single calls:
 /// one workspace per thread of its [`BatchPool`] (a [`Data`] for the functions of this module;
-/// any type for [`map_states`]). A call allocates no workspace (only rayon's small job per
-/// helper thread). Clones share the pool and may be used from several threads at once.
+/// any type for [`map_states`]). A call allocates nothing (with [`BatchPool::with_rayon`]:
+/// rayon's small job per helper thread). Clones share the pool and may be used from several
+/// threads at once: with the spinning helpers of [`BatchPool::new`], a call made while another
+/// runs on the same pool (from another thread, or from inside a [`map_states`] closure) runs
+/// on its caller alone.
 #[derive(Clone, Debug)]
 pub struct BatchData<W = Data> {
     pool: Arc<BatchPool>,
@@ -145,6 +185,15 @@ impl<W> BatchData<W> {
     /// Number of threads the batched calls run on (the caller included).
     pub fn threads(&self) -> usize {
         self.pool.threads()
+    }
+    /// The per-thread workspaces (entry 0 is the caller's), e.g. to read per-thread totals
+    /// accumulated by a [`map_states`] closure.
+    pub fn workspaces(&self) -> &[W] {
+        &self.data
+    }
+    /// The per-thread workspaces, mutably (their number is fixed by the pool).
+    pub fn workspaces_mut(&mut self) -> &mut [W] {
+        &mut self.data
     }
 }
 
@@ -383,31 +432,21 @@ where
         fence_streams();
         err
     };
-    let (own, others) = bd.data.split_first_mut().expect("a pool has at least one thread");
-    let mut errors: [Option<(usize, Error)>; 2] = [None, None];
-    match &bd.pool.helpers {
-        None => errors[0] = work(own),
-        Some(helpers) => {
-            let helper_errors = Mutex::new(None::<(usize, Error)>);
-            helpers.in_place_scope(|s| {
-                for w in others.iter_mut() {
-                    let (work, helper_errors) = (&work, &helper_errors);
-                    s.spawn(move |_| {
-                        if let Some((k, e)) = work(w) {
-                            // Only on failure: keep the lowest failing state of the helpers.
-                            let mut g = helper_errors.lock().unwrap_or_else(|p| p.into_inner());
-                            if g.as_ref().is_none_or(|(k0, _)| k < *k0) {
-                                *g = Some((k, e));
-                            }
-                        }
-                    });
-                }
-                errors[0] = work(own);
-            });
-            errors[1] = helper_errors.into_inner().unwrap_or_else(|p| p.into_inner());
+    assert_eq!(bd.data.len(), threads, "one workspace per thread");
+    let workspaces = Outputs(bd.data.as_mut_ptr());
+    // The lowest failing state of all threads and its error (locked only on failure).
+    let first_error = Mutex::new(None::<(usize, Error)>);
+    bd.pool.helpers.run(threads, &|i| {
+        // SAFETY: i < threads, the number of workspaces, and each thread index runs at most
+        // once per call, so workspace i is used by this thread alone.
+        if let Some((k, e)) = work(unsafe { workspaces.get(i) }) {
+            let mut g = first_error.lock().unwrap_or_else(|p| p.into_inner());
+            if g.as_ref().is_none_or(|(k0, _)| k < *k0) {
+                *g = Some((k, e));
+            }
         }
-    }
-    match errors.into_iter().flatten().min_by_key(|(k, _)| *k) {
+    });
+    match first_error.into_inner().unwrap_or_else(|p| p.into_inner()) {
         Some((k, e)) => Err(at_state(e, k)),
         None => Ok(()),
     }

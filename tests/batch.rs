@@ -11,6 +11,7 @@ use sodyn::deriv::{
 use sodyn::model::{Model, builtin};
 use sodyn::rng::Rng;
 use std::sync::Arc;
+use std::time::Duration;
 
 struct States {
     q: Vec<DVector<f64>>,
@@ -116,18 +117,25 @@ fn batch_equals_sequential_shared_pool() {
 }
 
 /// 1, 2 and 3 threads (3 on a 2-core machine: more threads than cores), with batch sizes
-/// below, at and far above the number of threads.
+/// below, at and far above the number of threads; spinning helpers (default spin time and
+/// none) and rayon helpers.
 #[test]
 fn batch_equals_sequential_one_two_and_three_threads() {
-    for threads in [1, 2, 3] {
-        let pool = Arc::new(BatchPool::new(threads).unwrap());
-        assert_eq!(pool.threads(), threads);
+    type MakePool = fn(usize) -> sodyn::Result<BatchPool>;
+    let kinds: [(&str, MakePool); 3] = [
+        ("spinning", BatchPool::new),
+        ("no spin", |t| BatchPool::with_spin(t, Duration::ZERO)),
+        ("rayon", BatchPool::with_rayon),
+    ];
+    for (threads, (kind, make)) in [1, 2, 3].into_iter().flat_map(|t| kinds.map(|k| (t, k))) {
+        let pool = Arc::new(make(threads).unwrap());
+        assert_eq!(pool.threads(), threads, "{kind}");
         for (i, m) in models().iter().enumerate() {
             for n in [1, 2, 3, 23, 301] {
                 let s = states(m, n, 20 + i as u64);
                 let bd = BatchData::with_pool(m, pool.clone());
                 assert_eq!(bd.threads(), threads);
-                check_identical(m, &s, bd, &format!("{threads} threads, {n} states"));
+                check_identical(m, &s, bd, &format!("{kind}: {threads} threads, {n} states"));
             }
         }
     }
@@ -381,4 +389,73 @@ fn map_states_batches_the_contact_dynamics() {
     .unwrap_err();
     assert!(matches!(e, Error::NotFinite { .. }), "{e:?}");
     assert!(e.to_string().contains("state 17"), "{e}");
+}
+
+/// A panic of the per-state closure reaches the caller, whether the caller's own thread or a
+/// helper thread panicked, and the pool keeps working afterwards (both kinds of helpers).
+#[test]
+fn a_panic_reaches_the_caller_and_the_pool_survives() {
+    for pool in [BatchPool::new(2).unwrap(), BatchPool::with_rayon(2).unwrap()] {
+        let mut bd = BatchData::from_workspace(Arc::new(pool), 0usize);
+        for (round, on_helper) in [(0, true), (1, false), (2, true), (3, false)] {
+            let mut out = vec![0usize; 400];
+            let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                map_states(&mut bd, &mut out, |_, k, o| {
+                    // 20 ms or more in all: the helper joins long before the states run out.
+                    std::thread::sleep(Duration::from_micros(50));
+                    let name = std::thread::current().name().map(str::to_owned);
+                    let helper = name.is_some_and(|n| n.starts_with("sodyn-batch"));
+                    assert!(helper != on_helper, "round {round}: state {k} panics");
+                    *o = k;
+                    Ok(())
+                })
+            }));
+            let msg = r.expect_err("the panic is resumed on the caller");
+            let msg = msg.downcast_ref::<String>().expect("a formatted panic message");
+            assert!(msg.contains(&format!("round {round}: state")), "{msg}");
+            map_states(&mut bd, &mut out, |_, k, o| {
+                *o = 2 * k;
+                Ok(())
+            })
+            .unwrap();
+            assert!(out.iter().enumerate().all(|(k, &o)| o == 2 * k));
+        }
+    }
+}
+
+/// A batched call made from inside a batched call on the same pool runs on its caller alone
+/// (no deadlock) and gives the same results.
+#[test]
+fn nested_batched_calls_on_one_pool() {
+    let pool = Arc::new(BatchPool::new(2).unwrap());
+    let mut outer = BatchData::from_workspace(pool.clone(), BatchData::from_workspace(pool, 0u8));
+    let mut out = vec![0usize; 12];
+    map_states(&mut outer, &mut out, |inner, k, o| {
+        let mut v = vec![0usize; 5];
+        map_states(inner, &mut v, |_, j, x| {
+            *x = k * 10 + j;
+            Ok(())
+        })?;
+        *o = v.iter().sum();
+        Ok(())
+    })
+    .unwrap();
+    assert!(out.iter().enumerate().all(|(k, &o)| o == 50 * k + 10), "{out:?}");
+}
+
+/// Per-thread workspaces are reachable: every state is counted once over the threads.
+#[test]
+fn per_thread_workspaces_count_every_state_once() {
+    let mut bd = BatchData::from_workspace(Arc::new(BatchPool::new(2).unwrap()), 0usize);
+    assert_eq!(bd.workspaces().len(), 2);
+    let mut out = vec![(); 400];
+    map_states(&mut bd, &mut out, |count, _, _| {
+        std::thread::sleep(Duration::from_micros(20));
+        *count += 1;
+        Ok(())
+    })
+    .unwrap();
+    assert_eq!(bd.workspaces().iter().sum::<usize>(), 400);
+    bd.workspaces_mut().fill(0);
+    assert_eq!(bd.workspaces(), &[0, 0]);
 }

@@ -37,14 +37,17 @@ use std::time::Instant;
 pub(crate) const USAGE: &str = "\
 sodyn bench --model M [--floating-base] [--contacts F1,F2,...] [--algos a,b,...]
             [--states N] [--seed S] [--max-seconds X] [--iters N] [--threads N]
-            [--paired-threads T] [--name NAME] [--smoke] [--calls N]
+            [--paired-threads T] [--pool spin|rayon] [--spin-us U] [--name NAME]
+            [--smoke] [--calls N]
 Prints one line per algorithm:
   model=<name> nq=<> nv=<> algo=<algo> median_us=<> p10_us=<> p90_us=<> batch=<K> samples=<n>
 Defaults: all algorithms, --states 1000 (8 with --smoke), --seed 42, --max-seconds 4,
 --iters 20000, --threads 1 (threads of the batch_* algorithms, the caller included),
 --name = the URDF file stem or the built-in model's name. --paired-threads T times the
 batch_* algorithms on 1 and on T threads in alternation (two lines each, the second with
-speedup = median over the pairs of the 1-thread / T-thread time). --smoke runs every
+speedup = median over the pairs of the 1-thread / T-thread time). --pool picks the helper
+threads of the batch_* algorithms: spin (default; idle helpers poll for --spin-us
+microseconds, default 200, before they sleep) or rayon. --smoke runs every
 algorithm a few times only. --calls N makes exactly N untimed calls per algorithm (for
 instruction counts under `valgrind --tool=callgrind`: cost per call = difference of two runs /
 difference of N).";
@@ -85,6 +88,10 @@ struct BenchOptions {
     iters: usize,
     threads: usize,
     paired_threads: Option<usize>,
+    /// `--pool rayon`: rayon helpers instead of the spinning ones.
+    rayon: bool,
+    /// `--spin-us`: spin time of the spinning helpers.
+    spin: std::time::Duration,
     name: Option<String>,
     smoke: bool,
     calls: Option<usize>,
@@ -106,6 +113,8 @@ fn parse(args: &[String]) -> Result<BenchOptions> {
         iters: 20000,
         threads: 1,
         paired_threads: None,
+        rayon: false,
+        spin: BatchPool::DEFAULT_SPIN,
         name: None,
         smoke: false,
         calls: None,
@@ -155,6 +164,24 @@ fn parse(args: &[String]) -> Result<BenchOptions> {
                     return Err(Error::Io("--paired-threads: must be at least 2".into()));
                 }
                 o.paired_threads = Some(t);
+            }
+            "--pool" => {
+                o.rayon = match value()?.as_str() {
+                    "spin" => false,
+                    "rayon" => true,
+                    other => {
+                        return Err(Error::Io(format!(
+                            "--pool: \"{other}\" is not a pool (spin or rayon)"
+                        )));
+                    }
+                }
+            }
+            "--spin-us" => {
+                let us: f64 = parse_number(opt, &value()?, "a number of microseconds")?;
+                if !(us.is_finite() && us >= 0.0) {
+                    return Err(Error::Io(format!("--spin-us: {us} must be ≥ 0")));
+                }
+                o.spin = std::time::Duration::from_secs_f64(us * 1e-6);
             }
             "--name" => o.name = Some(value()?),
             "--smoke" => o.smoke = true,
@@ -372,16 +399,37 @@ fn measure(plan: &Plan, mut f: impl FnMut(usize) -> Result<()>) -> Result<Stats>
     Ok(Stats { cpu_util: cpu, ..summarize(samples, k * plan.per_call) })
 }
 
+/// The result of [`measure_paired`].
+struct Paired {
+    /// Side 0 (the 1-thread pool, the calling thread left where the scheduler puts it).
+    one: Stats,
+    /// Side 1 (the `T`-thread pool).
+    many: Stats,
+    /// Median over the pairs of consecutive calls of (side-0 time) / (side-1 time).
+    speedup: f64,
+    /// Median per-state time (µs) of side 0 with the calling thread pinned to each CPU it may
+    /// run on, in CPU order (empty where threads cannot be pinned).
+    one_per_cpu: Vec<(usize, f64)>,
+    /// Side-1 throughput over the mean side-0 throughput of those CPUs.
+    speedup_cpus: f64,
+}
+
 /// Times `f(side)` for the sides 0 and 1 in alternation (0 1, 1 0, 0 1, ...; one call per
-/// sample, as the batched calls of [`measure`]): the statistics of each side and the median over
-/// the pairs of consecutive calls of (side-0 time) / (side-1 time).
-fn measure_paired(
-    plan: &Plan,
-    mut f: impl FnMut(usize) -> Result<()>,
-) -> Result<(Stats, Stats, f64)> {
+/// sample, as the batched calls of [`measure`]). On Linux each pair also times side 0 with the
+/// calling thread pinned to one CPU, the CPUs taken in turn (after an untimed call on that CPU,
+/// so its caches are warm): a speed-up over the mean of the CPUs' single-thread throughputs
+/// does not depend on which CPU the scheduler gave the 1-thread calls, which matters where the
+/// CPUs run at different speeds (as the two virtual CPUs of our benchmark machine do at times).
+fn measure_paired(plan: &Plan, mut f: impl FnMut(usize) -> Result<()>) -> Result<Paired> {
     if plan.smoke || plan.calls.is_some() {
-        let (a, b) = (measure(plan, |_| f(0))?, measure(plan, |_| f(1))?);
-        return Ok((a, b, f64::NAN));
+        let (one, many) = (measure(plan, |_| f(0))?, measure(plan, |_| f(1))?);
+        return Ok(Paired {
+            one,
+            many,
+            speedup: f64::NAN,
+            one_per_cpu: vec![],
+            speedup_cpus: f64::NAN,
+        });
     }
     // Warm-up: both sides, at least 2 calls each and 50 ms.
     let w0 = Instant::now();
@@ -391,6 +439,9 @@ fn measure_paired(
         nwarm += 1;
     }
     let per = plan.per_call as f64;
+    let affinity = affinity::Affinity::of_this_thread();
+    let cpus = affinity.as_ref().map_or(vec![], affinity::Affinity::cpus);
+    let mut pinned: Vec<Vec<f64>> = vec![vec![]; cpus.len()];
     let (mut t, mut cpu, mut wall) = ([vec![], vec![]], [0.0; 2], [0.0; 2]);
     let mut ratios = vec![];
     let start = Instant::now();
@@ -409,6 +460,16 @@ fn measure_paired(
             t[side].push(ns / per);
         }
         ratios.push(pair[0] / pair[1]);
+        if let Some(aff) = &affinity {
+            let c = p % cpus.len();
+            if aff.pin_to(cpus[c]) {
+                f(0)?;
+                let t0 = Instant::now();
+                f(0)?;
+                pinned[c].push(ns_since(t0) / per);
+            }
+            aff.restore();
+        }
         if ratios.len() >= plan.min_samples && start.elapsed().as_secs_f64() > plan.max_seconds {
             break;
         }
@@ -418,11 +479,87 @@ fn measure_paired(
     let [t0, t1] = t;
     let linux = process_cpu_seconds().is_some();
     let util = |s: usize| if linux { Some(cpu[s] / wall[s]) } else { None };
-    Ok((
-        Stats { cpu_util: util(0), ..summarize(t0, plan.per_call) },
-        Stats { cpu_util: util(1), ..summarize(t1, plan.per_call) },
+    let many = Stats { cpu_util: util(1), ..summarize(t1, plan.per_call) };
+    let one_per_cpu: Vec<(usize, f64)> = cpus
+        .iter()
+        .zip(pinned)
+        .filter(|(_, v)| !v.is_empty())
+        .map(|(&c, v)| (c, summarize(v, plan.per_call).med))
+        .collect();
+    let speedup_cpus = if one_per_cpu.is_empty() {
+        f64::NAN
+    } else {
+        // Throughputs (states per µs) averaged over the CPUs, against the T-thread one.
+        let mean = one_per_cpu.iter().map(|(_, t)| 1.0 / t).sum::<f64>() / one_per_cpu.len() as f64;
+        (1.0 / many.med) / mean
+    };
+    Ok(Paired {
+        one: Stats { cpu_util: util(0), ..summarize(t0, plan.per_call) },
+        many,
         speedup,
-    ))
+        one_per_cpu,
+        speedup_cpus,
+    })
+}
+
+/// Pinning the calling thread to one CPU (Linux; elsewhere nothing is pinned).
+mod affinity {
+    /// The CPU set the calling thread had when [`Affinity::of_this_thread`] was called.
+    pub(super) struct Affinity {
+        #[cfg(target_os = "linux")]
+        set: libc::cpu_set_t,
+    }
+
+    impl Affinity {
+        /// The calling thread's CPU set, if it can be read and pinned.
+        #[cfg(target_os = "linux")]
+        pub(super) fn of_this_thread() -> Option<Self> {
+            // SAFETY: a zeroed cpu_set_t is a valid empty set; the call writes at most its size.
+            let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
+            let size = std::mem::size_of::<libc::cpu_set_t>();
+            // SAFETY: pid 0 is the calling thread; `set` is valid for `size` bytes.
+            (unsafe { libc::sched_getaffinity(0, size, &mut set) } == 0).then_some(Self { set })
+        }
+        #[cfg(not(target_os = "linux"))]
+        pub(super) fn of_this_thread() -> Option<Self> {
+            None
+        }
+        /// The CPUs of the set, in increasing order.
+        #[cfg(target_os = "linux")]
+        pub(super) fn cpus(&self) -> Vec<usize> {
+            // SAFETY: CPU_ISSET reads the set within its size (c < CPU_SETSIZE).
+            (0..libc::CPU_SETSIZE as usize)
+                .filter(|&c| unsafe { libc::CPU_ISSET(c, &self.set) })
+                .collect()
+        }
+        #[cfg(not(target_os = "linux"))]
+        pub(super) fn cpus(&self) -> Vec<usize> {
+            vec![]
+        }
+        /// Pins the calling thread to `cpu`; false if that failed.
+        #[cfg(target_os = "linux")]
+        pub(super) fn pin_to(&self, cpu: usize) -> bool {
+            // SAFETY: as in `of_this_thread`; CPU_SET writes within the set (cpu < CPU_SETSIZE).
+            unsafe {
+                let mut one: libc::cpu_set_t = std::mem::zeroed();
+                libc::CPU_SET(cpu, &mut one);
+                libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &one) == 0
+            }
+        }
+        #[cfg(not(target_os = "linux"))]
+        pub(super) fn pin_to(&self, _cpu: usize) -> bool {
+            false
+        }
+        /// Gives the calling thread its original CPU set back.
+        pub(super) fn restore(&self) {
+            #[cfg(target_os = "linux")]
+            // SAFETY: `set` is a valid CPU set of the right size. A failure leaves the thread
+            // pinned, which only affects where the next calls run.
+            unsafe {
+                libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &self.set);
+            }
+        }
+    }
 }
 
 /// CPU time (user + system, all threads) of this process in seconds, from `/proc/self/stat`
@@ -479,9 +616,9 @@ fn time_algo(
     // second pool.
     let mut batched = |f: &mut dyn FnMut(&mut BatchData) -> Result<()>| -> Result<Timed> {
         if let [b1, b2] = &mut batch[..] {
-            let (s1, s2, speedup) =
+            let p =
                 measure_paired(&batch_plan, |side| f(if side == 0 { &mut *b1 } else { &mut *b2 }))?;
-            Ok(Timed { stats: s1, paired: Some((s2, speedup)) })
+            Ok(Timed { stats: p.one, paired: Some(p) })
         } else {
             Ok(Timed { stats: measure(&batch_plan, |_| f(&mut batch[0]))?, paired: None })
         }
@@ -589,7 +726,7 @@ fn time_algo(
 /// timing on the second pool and the paired speed-up.
 struct Timed {
     stats: Stats,
-    paired: Option<(Stats, f64)>,
+    paired: Option<Paired>,
 }
 
 /// Default `--name`: the URDF file stem, or the built-in model's name.
@@ -626,9 +763,12 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
     let nstates = o.states.unwrap_or(if o.smoke { 8 } else { 1000 });
     let st = States::new(&model, nstates, o.seed);
     // One pool of --threads threads, or with --paired-threads T, pools of one and T threads.
+    let pool = |t| {
+        if o.rayon { BatchPool::with_rayon(t) } else { BatchPool::with_spin(t, o.spin) }
+    };
     let pools = match o.paired_threads {
-        Some(t) => vec![BatchPool::new(1)?, BatchPool::new(t)?],
-        None => vec![BatchPool::new(o.threads)?],
+        Some(t) => vec![pool(1)?, pool(t)?],
+        None => vec![pool(o.threads)?],
     };
     let pool_threads: Vec<usize> = pools.iter().map(BatchPool::threads).collect();
     let nv = model.nv;
@@ -669,7 +809,7 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
     };
     println!(
         "# model={name} source={spec} base={} nq={} nv={} njoints={} nstates={nstates} seed={} \
-         timer_overhead_ns={:.1} contacts={} threads={} smoke={}",
+         timer_overhead_ns={:.1} contacts={} threads={} pool={} smoke={}",
         if o.floating_base { "ff" } else { "fixed" },
         model.nq,
         model.nv,
@@ -681,6 +821,7 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
             Some(t) => format!("1,{t}(paired)"),
             None => o.threads.to_string(),
         },
+        if o.rayon { "rayon".to_string() } else { format!("spin({}us)", o.spin.as_micros()) },
         o.smoke as u8,
     );
     for algo in algos {
@@ -688,13 +829,21 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
             .map_err(|e| Error::Io(format!("bench {algo} on {name}: {e}")))?;
         let batched = algo.starts_with("batch_");
         let mut lines = vec![(t.stats, pool_threads[0], None)];
-        if let Some((s2, speedup)) = t.paired {
-            lines.push((s2, pool_threads[1], Some(speedup)));
+        if let Some(p) = t.paired {
+            let per_cpu: Vec<String> =
+                p.one_per_cpu.iter().map(|(c, t)| format!("{c}:{t:.4}")).collect();
+            let sp = format!(
+                " speedup={:.3} speedup_cpus={:.3} one_us_per_cpu={}",
+                p.speedup,
+                p.speedup_cpus,
+                if per_cpu.is_empty() { "none".into() } else { per_cpu.join(",") }
+            );
+            lines.push((p.many, pool_threads[1], Some(sp)));
         }
-        for (s, threads, speedup) in lines {
+        for (s, threads, sp) in lines {
             let extra = if batched {
                 let util = s.cpu_util.map(|u| format!(" cpu_util={u:.2}")).unwrap_or_default();
-                let sp = speedup.map(|x| format!(" speedup={x:.3}")).unwrap_or_default();
+                let sp = sp.unwrap_or_default();
                 format!(" threads={threads} per=state{util}{sp}")
             } else {
                 String::new()
