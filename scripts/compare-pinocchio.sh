@@ -27,7 +27,10 @@
 #   SCALING     1 also measures the 1 -> 2 thread scaling of the batched API (sodyn only,
 #               not pinned, SCALING_ROUNDS runs (default ROUNDS) on SCALING_MODELS, default
 #               "solo12 talos_full_v2", each alternating 1- and 2-thread batched calls:
-#               --paired-threads 2); table in scaling.md
+#               --paired-threads 2); table in scaling.md. Each round also measures the
+#               machine's own 1 -> 2 CPU ceiling: the 1-thread batched calls run alone on CPU 0,
+#               then as two independent processes at once (one on each CPU), then alone on CPU
+#               1; ceiling = (sum of the two concurrent throughputs) / (mean of the lone ones)
 set -euo pipefail
 
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -156,6 +159,19 @@ if [ "${SCALING:-0}" = 1 ]; then
       "$SODYN" bench --model "$MODELS_DIR/$name.urdf" "${fb[@]}" --name "$name" \
         --paired-threads 2 --algos rnea,id_fo,fd_fo,batch_rnea,batch_id_fo,batch_fd_fo \
         --max-seconds "$MAXSEC" --seed "$SEED" >> "$F"
+      # The ceiling: two independent single-threaded processes, one per CPU.
+      if command -v taskset >/dev/null; then
+        C="$OUT/ceiling-round$r.txt"
+        one=("$SODYN" bench --model "$MODELS_DIR/$name.urdf" "${fb[@]}" --name "$name" \
+          --threads 1 --algos batch_rnea,batch_id_fo,batch_fd_fo --max-seconds "$MAXSEC" \
+          --seed "$SEED")
+        taskset -c 0 "${one[@]}" | sed 's/^model=/run=alone0 model=/' >> "$C"
+        taskset -c 0 "${one[@]}" > "$OUT/.t0" & taskset -c 1 "${one[@]}" > "$OUT/.t1"; wait
+        sed 's/^model=/run=together0 model=/' "$OUT/.t0" >> "$C"
+        sed 's/^model=/run=together1 model=/' "$OUT/.t1" >> "$C"
+        taskset -c 1 "${one[@]}" | sed 's/^model=/run=alone1 model=/' >> "$C"
+        rm -f "$OUT/.t0" "$OUT/.t1"
+      fi
     done
   done
   python3 "$HERE/compare_pinocchio_table.py" --scaling "$OUT" | tee "$OUT/scaling.md"

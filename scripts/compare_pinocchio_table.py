@@ -173,6 +173,26 @@ def scaling(out_dir):
                         us, util, sp, spc, percpu)
                 else:
                     single.setdefault(key, {}).setdefault(r, []).append(us)
+    # The machine's ceiling per (model, algo) and round, from ceiling-round*.txt.
+    ceiling = {}
+    for path in sorted(glob.glob(os.path.join(out_dir, "ceiling-round*.txt"))):
+        runs = {}
+        with open(path) as f:
+            for line in f:
+                if not line.startswith("run="):
+                    continue
+                kv = dict(tok.split("=", 1) for tok in line.split() if "=" in tok)
+                runs[(kv["run"], kv["model"], kv["algo"])] = float(kv["median_us"])
+        for (run, m, a), us in runs.items():
+            if run != "alone0":
+                continue
+            try:
+                lone = [runs[("alone0", m, a)], runs[("alone1", m, a)]]
+                both = [runs[("together0", m, a)], runs[("together1", m, a)]]
+            except KeyError:
+                continue
+            c = sum(1 / t for t in both) / (sum(1 / t for t in lone) / 2)
+            ceiling.setdefault((m, a), []).append(c)
     med = statistics.median
     print(f"Rounds: {len(files)}. Batched calls over 1000 states, µs per state (median of each "
           "run); speed-up = (1 thread) / (2 threads) within each round (ratio of the medians); "
@@ -180,12 +200,16 @@ def scaling(out_dir):
           "median over the pairs of consecutive calls of their time ratio, per round; over the "
           "CPUs' mean = 2-thread throughput / mean of the 1-thread throughputs with the caller "
           "pinned to each CPU in turn (same runs; µs per state of those pinned calls per CPU); "
+          "machine ceiling (two processes) = throughput of two independent 1-thread processes "
+          "running at once, one per CPU, over the mean throughput of one alone on each CPU "
+          "(measured in each round right after the paired run); "
           "CPUs used = process CPU time / wall time during the timed calls.\n")
     print("| model | algo | 1 thread µs/state | 2 threads µs/state | speed-up 1→2 [min–max] "
-          "| paired speed-up [min–max] | over the CPUs' mean [min–max] | 1 thread pinned µs per CPU "
+          "| paired speed-up [min–max] | over the CPUs' mean [min–max] "
+          "| machine ceiling (two processes) [min–max] | 1 thread pinned µs per CPU "
           "| CPUs used (1 / 2 threads) "
           "| CPU µs per state (1 / 2 threads) | single call µs | batch (1 thread) / single |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for (m, a), rounds in batch.items():
         rs = [v for v in rounds.values() if "1" in v and "2" in v]
         if not rs:
@@ -197,6 +221,8 @@ def scaling(out_dir):
         pstr = f"{med(ps):.2f} [{min(ps):.2f}–{max(ps):.2f}]" if ps else "-"
         pc = [v["2"][3] for v in rs if v["2"][3] == v["2"][3]]
         pcstr = f"{med(pc):.2f} [{min(pc):.2f}–{max(pc):.2f}]" if pc else "-"
+        ce = ceiling.get((m, a), [])
+        cestr = f"{med(ce):.2f} [{min(ce):.2f}–{max(ce):.2f}]" if ce else "-"
         cpus = sorted({c for v in rs for c in v["2"][4]})
         percpu = " / ".join(
             f"{c}: {fmt_us(med([v['2'][4][c] for v in rs if c in v['2'][4]]))}" for c in cpus
@@ -209,7 +235,7 @@ def scaling(out_dir):
         s_all = [x for v in sr.values() for x in v]
         ov = [rounds[r]["1"][0] / med(sr[r]) for r in rounds if r in sr and "1" in rounds[r]]
         print(f"| {m} | {a} | {fmt_us(med(t1))} | {fmt_us(med(t2))} | {med(sp):.2f} "
-              f"[{min(sp):.2f}–{max(sp):.2f}] | {pstr} | {pcstr} | {percpu} "
+              f"[{min(sp):.2f}–{max(sp):.2f}] | {pstr} | {pcstr} | {cestr} | {percpu} "
               f"| {med(u1):.2f} / {med(u2):.2f} "
               f"| {fmt_us(med(c1))} / {fmt_us(med(c2))} "
               f"| {fmt_us(med(s_all)) if s_all else '-'} | {f'{med(ov):.2f}' if ov else '-'} |")
