@@ -6,7 +6,7 @@
 #   ROUNDS=3 MAXSEC=0.5 MODELS="panda solo12" scripts/compare-pinocchio.sh
 #
 # For each round, for each model, for each algorithm pair: `sodyn bench` then
-# `pin_bench_native` (A B A B ...), both with `taskset -c $CPU`, the same options (--name,
+# `pin_bench_native` (A B A B ...; in even rounds Pinocchio first), both with `taskset -c $CPU`, the same options (--name,
 # --nstates 1000, --seed, --max-seconds, ITERS) and the same timing method. The ratio sodyn/Pinocchio is computed within each round,
 # then summarised as the median over rounds with its min-max spread
 # (scripts/compare_pinocchio_table.py), so slow drifts of the shared machine's load cancel.
@@ -104,6 +104,18 @@ META="$OUT/meta.txt"
 } > "$META"
 cat "$META" >&2
 
+# One algorithm pair of round $r: sodyn first in odd rounds, Pinocchio first in even ones, so
+# that whatever favours the first (or second) run of a pair falls on both programs equally.
+run_pair() {
+  if [ $((r % 2)) = 1 ]; then
+    "${PIN[@]}" "$SODYN" "${sargs[@]}" --algos "$1" >> "$S"
+    "${PIN[@]}" "$PIN_BIN" "${pargs[@]}" --algos "$2" >> "$P"
+  else
+    "${PIN[@]}" "$PIN_BIN" "${pargs[@]}" --algos "$2" >> "$P"
+    "${PIN[@]}" "$SODYN" "${sargs[@]}" --algos "$1" >> "$S"
+  fi
+}
+
 for r in $(seq 1 "$ROUNDS"); do
   [ "${COMPARE:-1}" = 0 ] && break
   S="$OUT/sodyn-round$r.txt"
@@ -125,15 +137,13 @@ for r in $(seq 1 "$ROUNDS"); do
     for pair in $PAIRS; do
       sa="${pair%%:*}"; pa="${pair#*:}"
       echo "[compare] round $r/$ROUNDS $name: sodyn $sa, pinocchio $pa" >&2
-      "${PIN[@]}" "$SODYN" "${sargs[@]}" --algos "$sa" >> "$S"
-      "${PIN[@]}" "$PIN_BIN" "${pargs[@]}" --algos "$pa" >> "$P"
+      run_pair "$sa" "$pa"
     done
     if [ -n "$contacts" ]; then
       for pair in $CONTACT_PAIRS; do
         sa="${pair%%:*}"; pa="${pair#*:}"
         echo "[compare] round $r/$ROUNDS $name: sodyn $sa, pinocchio $pa" >&2
-        "${PIN[@]}" "$SODYN" "${sargs[@]}" --algos "$sa" >> "$S"
-        "${PIN[@]}" "$PIN_BIN" "${pargs[@]}" --algos "$pa" >> "$P"
+        run_pair "$sa" "$pa"
       done
     fi
     only="$SODYN_ONLY"
