@@ -77,8 +77,10 @@ struct Shared {
     shutdown: AtomicBool,
     /// How long an idle helper polls before it sleeps.
     spin: Duration,
-    /// The first panic of a helper in the current call.
+    /// The first panic of a helper in the current call, and whether there is one (checked
+    /// after each call without taking the lock).
     panic: Mutex<Option<Box<dyn Any + Send>>>,
+    panicked: AtomicBool,
 }
 
 // SAFETY: `job` is accessed under the protocol of `state` described above (one writer while no
@@ -120,6 +122,7 @@ impl Spinning {
             shutdown: AtomicBool::new(false),
             spin,
             panic: Mutex::new(None),
+            panicked: AtomicBool::new(false),
         });
         let mut pool = Spinning { shared, threads: Vec::new(), busy: AtomicBool::new(false) };
         for i in 1..=helpers {
@@ -173,16 +176,23 @@ impl Spinning {
                         std::thread::yield_now();
                     }
                 }
+                // The caller's own panic wins: a helper's panic of this call is dropped, so
+                // that it cannot surface in a later call.
+                let helper_panic = s
+                    .panicked
+                    .swap(false, Ordering::Acquire)
+                    .then(|| s.panic.lock().unwrap_or_else(PoisonError::into_inner).take());
                 self.0.busy.store(false, Ordering::Release);
+                if !std::thread::panicking() {
+                    if let Some(Some(p)) = helper_panic {
+                        resume_unwind(p);
+                    }
+                }
             }
         }
         let close = Close(self);
         f(0);
         drop(close);
-        let panic = s.panic.lock().unwrap_or_else(PoisonError::into_inner).take();
-        if let Some(p) = panic {
-            resume_unwind(p);
-        }
     }
 }
 
@@ -232,6 +242,7 @@ fn helper_loop(s: &Shared, i: usize) {
         if let Err(p) = result {
             let mut g = s.panic.lock().unwrap_or_else(PoisonError::into_inner);
             g.get_or_insert(p);
+            s.panicked.store(true, Ordering::Release);
         }
         s.state.fetch_sub(1, Ordering::Release);
     }
