@@ -183,10 +183,8 @@ impl Spinning {
                     .swap(false, Ordering::Acquire)
                     .then(|| s.panic.lock().unwrap_or_else(PoisonError::into_inner).take());
                 self.0.busy.store(false, Ordering::Release);
-                if !std::thread::panicking() {
-                    if let Some(Some(p)) = helper_panic {
-                        resume_unwind(p);
-                    }
+                if let (false, Some(Some(p))) = (std::thread::panicking(), helper_panic) {
+                    resume_unwind(p);
                 }
             }
         }
