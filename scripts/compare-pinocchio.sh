@@ -170,7 +170,7 @@ if [ "${SCALING:-0}" = 1 ]; then
         --paired-threads 2 --algos rnea,id_fo,fd_fo,batch_rnea,batch_id_fo,batch_fd_fo \
         --max-seconds "$MAXSEC" --seed "$SEED" >> "$F"
       # The ceiling: two independent single-threaded processes, one per CPU.
-      if command -v taskset >/dev/null; then
+      if command -v taskset >/dev/null && [ "$(nproc)" -ge 2 ]; then
         C="$OUT/ceiling-round$r.txt"
         one=("$SODYN" bench --model "$MODELS_DIR/$name.urdf" "${fb[@]}" --name "$name" \
           --threads 1 --algos batch_rnea,batch_id_fo,batch_fd_fo --max-seconds "$MAXSEC" \

@@ -30,19 +30,23 @@ PAIRS = [
 ]
 
 
+def records(path, prefix="model="):
+    """The key=value fields of each line of a file that starts with `prefix`, as dicts."""
+    with open(path) as f:
+        for line in f:
+            if line.startswith(prefix):
+                yield dict(tok.split("=", 1) for tok in line.split() if "=" in tok)
+
+
 def parse(path):
     """({(model, algo): median_us}, {(model, algo): p10_us}, {model: (nq, nv)}) of a file."""
     out = {}
     p10 = {}
     nv = {}
-    with open(path) as f:
-        for line in f:
-            if not line.startswith("model="):
-                continue
-            kv = dict(tok.split("=", 1) for tok in line.split() if "=" in tok)
-            out[(kv["model"], kv["algo"])] = float(kv["median_us"])
-            p10[(kv["model"], kv["algo"])] = float(kv["p10_us"])
-            nv[kv["model"]] = (int(kv["nq"]), int(kv["nv"]))
+    for kv in records(path):
+        out[(kv["model"], kv["algo"])] = float(kv["median_us"])
+        p10[(kv["model"], kv["algo"])] = float(kv["p10_us"])
+        nv[kv["model"]] = (int(kv["nq"]), int(kv["nv"]))
     return out, p10, nv
 
 
@@ -153,39 +157,28 @@ def scaling(out_dir):
     batch = {}  # (model, algo) -> {round: {threads: (us, cpu_util, paired speed-up)}}
     single = {}  # (model, algo) -> {round: [us]}
     for r, path in enumerate(files):
-        with open(path) as f:
-            for line in f:
-                if not line.startswith("model="):
-                    continue
-                kv = dict(tok.split("=", 1) for tok in line.split() if "=" in tok)
-                key = (kv["model"], kv["algo"])
-                us = float(kv["median_us"])
-                if kv["algo"].startswith("batch_"):
-                    util = float(kv.get("cpu_util", "nan"))
-                    sp = float(kv.get("speedup", "nan"))
-                    spc = float(kv.get("speedup_cpus", "nan"))
-                    percpu = {}
-                    for item in kv.get("one_us_per_cpu", "none").split(","):
-                        if ":" in item:
-                            c, t = item.split(":")
-                            percpu[c] = float(t)
-                    batch.setdefault(key, {}).setdefault(r, {})[kv["threads"]] = (
-                        us, util, sp, spc, percpu)
-                else:
-                    single.setdefault(key, {}).setdefault(r, []).append(us)
+        for kv in records(path):
+            key = (kv["model"], kv["algo"])
+            us = float(kv["median_us"])
+            if kv["algo"].startswith("batch_"):
+                util = float(kv.get("cpu_util", "nan"))
+                sp = float(kv.get("speedup", "nan"))
+                spc = float(kv.get("speedup_cpus", "nan"))
+                percpu = {}
+                for item in kv.get("one_us_per_cpu", "none").split(","):
+                    if ":" in item:
+                        c, t = item.split(":")
+                        percpu[c] = float(t)
+                batch.setdefault(key, {}).setdefault(r, {})[kv["threads"]] = (
+                    us, util, sp, spc, percpu)
+            else:
+                single.setdefault(key, {}).setdefault(r, []).append(us)
     # The machine's ceiling per (model, algo) and round, from ceiling-round*.txt.
     ceiling = {}
     for path in sorted(glob.glob(os.path.join(out_dir, "ceiling-round*.txt"))):
-        runs = {}
-        with open(path) as f:
-            for line in f:
-                if not line.startswith("run="):
-                    continue
-                kv = dict(tok.split("=", 1) for tok in line.split() if "=" in tok)
-                runs[(kv["run"], kv["model"], kv["algo"])] = float(kv["median_us"])
-        for (run, m, a), us in runs.items():
-            if run != "alone0":
-                continue
+        runs = {(kv["run"], kv["model"], kv["algo"]): float(kv["median_us"])
+                for kv in records(path, "run=")}
+        for (m, a) in {(m, a) for (run, m, a) in runs if run == "alone0"}:
             try:
                 lone = [runs[("alone0", m, a)], runs[("alone1", m, a)]]
                 both = [runs[("together0", m, a)], runs[("together1", m, a)]]

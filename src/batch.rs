@@ -351,14 +351,15 @@ fn fence_streams() {
     };
 }
 
-/// The caller's output slice, shared by the threads of [`drive`], each of which writes only
-/// the entries of the states it claimed from the atomic counter (so no entry is reached twice).
-struct Outputs<T>(*mut T);
+/// A slice shared by the threads of [`drive`], each of which uses only its own entries: the
+/// outputs of the states it claimed from the atomic counter, or its own workspace (so no entry
+/// is reached by two threads).
+struct Disjoint<T>(*mut T);
 
-// SAFETY: the threads write disjoint entries (see `get`) of a slice of `Send` values.
-unsafe impl<T: Send> Sync for Outputs<T> {}
+// SAFETY: the threads use disjoint entries (see `get`) of a slice of `Send` values.
+unsafe impl<T: Send> Sync for Disjoint<T> {}
 
-impl<T> Outputs<T> {
+impl<T> Disjoint<T> {
     /// Entry `k` of the slice.
     ///
     /// # Safety
@@ -409,7 +410,7 @@ where
     let next = AtomicUsize::new(0);
     // Lowest failing state so far: runs starting after it are not evaluated.
     let failed_at = AtomicUsize::new(usize::MAX);
-    let (out, out2) = (Outputs(out.as_mut_ptr()), Outputs(out2.as_mut_ptr()));
+    let (out, out2) = (Disjoint(out.as_mut_ptr()), Disjoint(out2.as_mut_ptr()));
     // One thread's share: claims runs of states until none are left; returns its first error.
     let work = |w: &mut W| -> Option<(usize, Error)> {
         let mut err = None;
@@ -433,7 +434,7 @@ where
         err
     };
     assert_eq!(bd.data.len(), threads, "one workspace per thread");
-    let workspaces = Outputs(bd.data.as_mut_ptr());
+    let workspaces = Disjoint(bd.data.as_mut_ptr());
     // The lowest failing state of all threads and its error (locked only on failure).
     let first_error = Mutex::new(None::<(usize, Error)>);
     bd.pool.helpers.run(threads, &|i| {

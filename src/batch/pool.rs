@@ -168,7 +168,7 @@ impl Spinning {
                 s.state.fetch_or(CLOSED, Ordering::AcqRel);
                 let mut polls = 0u32;
                 while s.state.load(Ordering::Acquire) & INSIDE != 0 {
-                    polls += 1;
+                    polls = polls.saturating_add(1);
                     if polls < 1 << 16 {
                         std::hint::spin_loop();
                     } else {
