@@ -26,8 +26,9 @@
 #   COMPARE     0 skips the comparison (default 1)
 #   SCALING     1 also measures the 1 -> 2 thread scaling of the batched API (sodyn only,
 #               not pinned, SCALING_ROUNDS runs (default ROUNDS) on SCALING_MODELS, default
-#               "solo12 talos_full_v2", each alternating 1- and 2-thread batched calls:
-#               --paired-threads 2); table in scaling.md. Each round also measures the
+#               "solo12 talos_full_v2", each alternating blocks of about 5 ms of
+#               back-to-back 1- and 2-thread batched calls: --paired-threads 2); table in
+#               scaling.md. Each round also measures the
 #               machine's own 1 -> 2 CPU ceiling: the 1-thread batched calls run alone on CPU 0,
 #               then as two independent processes at once (one on each CPU), then alone on CPU
 #               1; ceiling = (sum of the two concurrent throughputs) / (mean of the lone ones)

@@ -164,13 +164,14 @@ def scaling(out_dir):
                 util = float(kv.get("cpu_util", "nan"))
                 sp = float(kv.get("speedup", "nan"))
                 spc = float(kv.get("speedup_cpus", "nan"))
+                spf = float(kv.get("speedup_first", "nan"))
                 percpu = {}
                 for item in kv.get("one_us_per_cpu", "none").split(","):
                     if ":" in item:
                         c, t = item.split(":")
                         percpu[c] = float(t)
                 batch.setdefault(key, {}).setdefault(r, {})[kv["threads"]] = (
-                    us, util, sp, spc, percpu)
+                    us, util, sp, spc, percpu, spf)
             else:
                 single.setdefault(key, {}).setdefault(r, []).append(us)
     # The machine's ceiling per (model, algo) and round, from ceiling-round*.txt.
@@ -189,8 +190,11 @@ def scaling(out_dir):
     med = statistics.median
     print(f"Rounds: {len(files)}. Batched calls over 1000 states, µs per state (median of each "
           "run); speed-up = (1 thread) / (2 threads) within each round (ratio of the medians); "
-          "paired speed-up (runs with --paired-threads 2: 1- and 2-thread calls alternating) = "
-          "median over the pairs of consecutive calls of their time ratio, per round; over the "
+          "paired speed-up (runs with --paired-threads 2: blocks of back-to-back 1- and 2-thread "
+          "calls alternating, a block lasting about 5 ms) = median over the pairs of consecutive "
+          "blocks of their time ratio, per round; first call of a block = the same with the "
+          "first 2-thread call of each block alone (its helper idle since the 1-thread calls "
+          "before it); over the "
           "CPUs' mean = 2-thread throughput / mean of the 1-thread throughputs with the caller "
           "pinned to each CPU in turn (same runs; µs per state of those pinned calls per CPU); "
           "machine ceiling (two processes) = throughput of two independent 1-thread processes "
@@ -198,11 +202,12 @@ def scaling(out_dir):
           "(measured in each round right after the paired run); "
           "CPUs used = process CPU time / wall time during the timed calls.\n")
     print("| model | algo | 1 thread µs/state | 2 threads µs/state | speed-up 1→2 [min–max] "
-          "| paired speed-up [min–max] | over the CPUs' mean [min–max] "
+          "| paired speed-up [min–max] | first call of a block [min–max] "
+          "| over the CPUs' mean [min–max] "
           "| machine ceiling (two processes) [min–max] | 1 thread pinned µs per CPU "
           "| CPUs used (1 / 2 threads) "
           "| CPU µs per state (1 / 2 threads) | single call µs | batch (1 thread) / single |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for (m, a), rounds in batch.items():
         rs = [v for v in rounds.values() if "1" in v and "2" in v]
         if not rs:
@@ -212,6 +217,8 @@ def scaling(out_dir):
         sp = [v["1"][0] / v["2"][0] for v in rs]
         ps = [v["2"][2] for v in rs if v["2"][2] == v["2"][2]]
         pstr = f"{med(ps):.2f} [{min(ps):.2f}–{max(ps):.2f}]" if ps else "-"
+        pf = [v["2"][5] for v in rs if v["2"][5] == v["2"][5]]
+        pfstr = f"{med(pf):.2f} [{min(pf):.2f}–{max(pf):.2f}]" if pf else "-"
         pc = [v["2"][3] for v in rs if v["2"][3] == v["2"][3]]
         pcstr = f"{med(pc):.2f} [{min(pc):.2f}–{max(pc):.2f}]" if pc else "-"
         ce = ceiling.get((m, a), [])
@@ -228,7 +235,7 @@ def scaling(out_dir):
         s_all = [x for v in sr.values() for x in v]
         ov = [rounds[r]["1"][0] / med(sr[r]) for r in rounds if r in sr and "1" in rounds[r]]
         print(f"| {m} | {a} | {fmt_us(med(t1))} | {fmt_us(med(t2))} | {med(sp):.2f} "
-              f"[{min(sp):.2f}–{max(sp):.2f}] | {pstr} | {pcstr} | {cestr} | {percpu} "
+              f"[{min(sp):.2f}–{max(sp):.2f}] | {pstr} | {pfstr} | {pcstr} | {cestr} | {percpu} "
               f"| {med(u1):.2f} / {med(u2):.2f} "
               f"| {fmt_us(med(c1))} / {fmt_us(med(c2))} "
               f"| {fmt_us(med(s_all)) if s_all else '-'} | {f'{med(ov):.2f}' if ov else '-'} |")

@@ -269,6 +269,33 @@ fn bench_options_are_validated() {
     assert!(batch[0].contains(" threads=1 ") && !batch[0].contains("speedup="), "{out}");
     assert!(batch[1].contains(" threads=2 ") && batch[1].contains(" speedup="), "{out}");
     assert_eq!(out.lines().filter(|l| l.contains("algo=rnea ")).count(), 1, "{out}");
+    // Timed (not --smoke): the paired blocks and their speed-ups are measured and printed.
+    let o = sodyn(&[
+        "bench",
+        "--model",
+        "builtin:quadruped",
+        "--states",
+        "16",
+        "--max-seconds",
+        "0.01",
+        "--paired-threads",
+        "2",
+        "--algos",
+        "batch_rnea",
+    ]);
+    assert_ok(&o, "timed bench --paired-threads");
+    let out = stdout(&o);
+    let line = out.lines().find(|l| l.contains(" threads=2 ")).expect("2-thread line");
+    let field = |k: &str| -> f64 {
+        let v = line.split_whitespace().find_map(|w| w.strip_prefix(k)).expect(k);
+        v.parse().unwrap_or_else(|_| panic!("{k}{v} in {line}"))
+    };
+    for k in ["speedup=", "speedup_first="] {
+        let x = field(k);
+        assert!(x.is_finite() && x > 0.0, "{k}{x} in {line}");
+    }
+    let block = field("block=");
+    assert!((1.0..=16.0).contains(&block), "{line}");
     assert_clean_failure(&with(&["--paired-threads", "1"]), "one paired thread");
     assert_clean_failure(&with(&["--threads", "0"]), "zero threads");
     assert_clean_failure(&with(&["--states", "many"]), "bad --states");

@@ -10,9 +10,11 @@
 //! states ([`crate::batch`]) and report the time per state, with at least 20 samples, and
 //! `cpu_util` = process CPU time / wall time over the timed calls (about the number of threads
 //! when the cores are free). With `--paired-threads T` they are timed on one and on `T`
-//! threads in alternation (1, T, T, 1, 1, T, ...: each pair of consecutive calls sees the same
-//! machine conditions), and the `T`-thread line adds `speedup` = the median over the pairs of
-//! (1-thread time) / (T-thread time).
+//! threads in alternating blocks of back-to-back calls (blocks 1, T, T, 1, 1, T, ..., each
+//! lasting about 5 ms: each pair of consecutive blocks sees the same machine conditions), and
+//! the `T`-thread line adds `speedup` = the median over the pairs of (1-thread time) /
+//! (T-thread time), i.e. the throughput speed-up, and `speedup_first` = the same for the first
+//! `T`-thread call of each block alone (its helper threads idle since the 1-thread calls).
 
 use super::load_model;
 use crate::algo::{Contact, Data, aba, crba, rnea};
@@ -44,8 +46,10 @@ Prints one line per algorithm:
 Defaults: all algorithms, --states 1000 (8 with --smoke), --seed 42, --max-seconds 4,
 --iters 20000, --threads 1 (threads of the batch_* algorithms, the caller included),
 --name = the URDF file stem or the built-in model's name. --paired-threads T times the
-batch_* algorithms on 1 and on T threads in alternation (two lines each, the second with
-speedup = median over the pairs of the 1-thread / T-thread time). --pool picks the helper
+batch_* algorithms on 1 and on T threads in alternating blocks of back-to-back calls (about
+5 ms each; two lines each, the second with speedup = median over the pairs of blocks of the
+1-thread / T-thread time, and speedup_first = the same for the first call of each T-thread
+block). --pool picks the helper
 threads of the batch_* algorithms: spin (default; idle helpers poll for --spin-us
 microseconds, default 200, before they sleep) or rayon. --smoke runs every
 algorithm a few times only. --calls N makes exactly N untimed calls per algorithm (for
@@ -405,8 +409,15 @@ struct Paired {
     one: Stats,
     /// Side 1 (the `T`-thread pool).
     many: Stats,
-    /// Median over the pairs of consecutive calls of (side-0 time) / (side-1 time).
+    /// Calls per block (the same on both sides).
+    block: usize,
+    /// Median over the pairs of consecutive blocks of (side-0 time) / (side-1 time): the
+    /// throughput speed-up of back-to-back calls.
     speedup: f64,
+    /// Median over the pairs of (side-0 time per call) / (time of the first call of the side-1
+    /// block), where that block follows 1-thread calls: the speed-up of a call whose helpers
+    /// were idle (asleep once the calls before it outlast the spin time).
+    speedup_first: f64,
     /// Median per-state time (µs) of side 0 with the calling thread pinned to each CPU it may
     /// run on, in CPU order (empty where threads cannot be pinned).
     one_per_cpu: Vec<(usize, f64)>,
@@ -414,52 +425,78 @@ struct Paired {
     speedup_cpus: f64,
 }
 
-/// Times `f(side)` for the sides 0 and 1 in alternation (0 1, 1 0, 0 1, ...; one call per
-/// sample, as the batched calls of [`measure`]). On Linux each pair also times side 0 with the
-/// calling thread pinned to one CPU, the CPUs taken in turn (after an untimed call on that CPU,
-/// so its caches are warm): a speed-up over the mean of the CPUs' single-thread throughputs
-/// does not depend on which CPU the scheduler gave the 1-thread calls, which matters where the
-/// CPUs run at different speeds (as the two virtual CPUs of our benchmark machine do at times).
+/// Wall time a block of consecutive calls of one side of [`measure_paired`] aims at.
+const PAIRED_BLOCK_NS: f64 = 5e6;
+
+/// Times `f(side)` for the sides 0 and 1 in alternating blocks of `B` consecutive calls each
+/// (blocks 0 1, 1 0, 0 1, ...), `B` chosen so that a side-1 block lasts about 5 ms (1 to 16
+/// calls): the throughput of back-to-back calls, each pair of blocks under the same machine
+/// conditions. The first call of a side-1 block that follows 1-thread calls is also recorded
+/// alone (`speedup_first`). On Linux each pair also times side 0 with the calling thread
+/// pinned to one CPU, the CPUs taken in turn (one call, after an untimed call on that CPU, so
+/// its caches are warm): a speed-up over the mean of the CPUs' single-thread throughputs does
+/// not depend on which CPU the scheduler gave the 1-thread calls, which matters where the CPUs
+/// run at different speeds (as the two virtual CPUs of our benchmark machine do at times).
 fn measure_paired(plan: &Plan, mut f: impl FnMut(usize) -> Result<()>) -> Result<Paired> {
     if plan.smoke || plan.calls.is_some() {
         let (one, many) = (measure(plan, |_| f(0))?, measure(plan, |_| f(1))?);
         return Ok(Paired {
             one,
             many,
+            block: 1,
             speedup: f64::NAN,
+            speedup_first: f64::NAN,
             one_per_cpu: vec![],
             speedup_cpus: f64::NAN,
         });
     }
-    // Warm-up: both sides, at least 2 calls each and 50 ms.
+    // Warm-up: both sides, at least 2 calls each and 50 ms; the fastest side-1 call sets the
+    // block size.
     let w0 = Instant::now();
     let mut nwarm = 0;
+    let mut fastest1 = f64::INFINITY;
     while nwarm < 4 || ns_since(w0) < 5e7 {
+        let t0 = Instant::now();
         f(nwarm % 2)?;
+        if nwarm % 2 == 1 {
+            fastest1 = fastest1.min(ns_since(t0));
+        }
         nwarm += 1;
     }
+    let block = ((PAIRED_BLOCK_NS / fastest1).ceil() as usize).clamp(1, 16);
     let per = plan.per_call as f64;
     let affinity = affinity::Affinity::of_this_thread();
     let cpus = affinity.as_ref().map_or(vec![], affinity::Affinity::cpus);
     let mut pinned: Vec<Vec<f64>> = vec![vec![]; cpus.len()];
     let (mut t, mut cpu, mut wall) = ([vec![], vec![]], [0.0; 2], [0.0; 2]);
-    let mut ratios = vec![];
+    let (mut ratios, mut ratios_first) = (vec![], vec![]);
+    // The side of the last call made (a side-1 block after side-1 calls starts warm).
+    let mut last = 0;
     let start = Instant::now();
     for p in 0.. {
-        let mut pair = [0.0; 2];
+        let (mut block_ns, mut first1) = ([0.0; 2], None);
         for side in if p % 2 == 0 { [0, 1] } else { [1, 0] } {
             let c0 = process_cpu_seconds();
-            let t0 = Instant::now();
-            f(side)?;
-            let ns = ns_since(t0);
+            for b in 0..block {
+                let t0 = Instant::now();
+                f(side)?;
+                let ns = ns_since(t0);
+                block_ns[side] += ns;
+                t[side].push(ns / per);
+                if side == 1 && b == 0 && last == 0 {
+                    first1 = Some(ns);
+                }
+                last = side;
+            }
             if let (Some(c1), Some(c0)) = (process_cpu_seconds(), c0) {
                 cpu[side] += c1 - c0;
             }
-            wall[side] += ns * 1e-9;
-            pair[side] = ns;
-            t[side].push(ns / per);
+            wall[side] += block_ns[side] * 1e-9;
         }
-        ratios.push(pair[0] / pair[1]);
+        ratios.push(block_ns[0] / block_ns[1]);
+        if let Some(ns) = first1 {
+            ratios_first.push(block_ns[0] / block as f64 / ns);
+        }
         if let Some(aff) = &affinity {
             let c = p % cpus.len();
             if aff.pin_to(cpus[c]) {
@@ -467,15 +504,22 @@ fn measure_paired(plan: &Plan, mut f: impl FnMut(usize) -> Result<()>) -> Result
                 let t0 = Instant::now();
                 f(0)?;
                 pinned[c].push(ns_since(t0) / per);
+                last = 0;
             }
             aff.restore();
         }
-        if ratios.len() >= plan.min_samples && start.elapsed().as_secs_f64() > plan.max_seconds {
+        if ratios.len() * block >= plan.min_samples
+            && ratios.len() >= 10
+            && start.elapsed().as_secs_f64() > plan.max_seconds
+        {
             break;
         }
     }
-    ratios.sort_by(f64::total_cmp);
-    let speedup = quantile(&ratios, 0.5);
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        if v.is_empty() { f64::NAN } else { quantile(&v, 0.5) }
+    };
+    let (speedup, speedup_first) = (median(ratios), median(ratios_first));
     let [t0, t1] = t;
     let linux = process_cpu_seconds().is_some();
     let util = |s: usize| if linux { Some(cpu[s] / wall[s]) } else { None };
@@ -496,7 +540,9 @@ fn measure_paired(plan: &Plan, mut f: impl FnMut(usize) -> Result<()>) -> Result
     Ok(Paired {
         one: Stats { cpu_util: util(0), ..summarize(t0, plan.per_call) },
         many,
+        block,
         speedup,
+        speedup_first,
         one_per_cpu,
         speedup_cpus,
     })
@@ -833,8 +879,11 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
             let per_cpu: Vec<String> =
                 p.one_per_cpu.iter().map(|(c, t)| format!("{c}:{t:.4}")).collect();
             let sp = format!(
-                " speedup={:.3} speedup_cpus={:.3} one_us_per_cpu={}",
+                " speedup={:.3} speedup_first={:.3} block={} speedup_cpus={:.3} \
+                 one_us_per_cpu={}",
                 p.speedup,
+                p.speedup_first,
+                p.block,
                 p.speedup_cpus,
                 if per_cpu.is_empty() { "none".into() } else { per_cpu.join(",") }
             );
