@@ -596,19 +596,26 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
         let mut j = i;
         while j > 0 {
             let j_is_i = j == i;
+            // A joint attached to the world has Ψ̇ = v_λ × S = 0 (eq. psidot_psidotdot_defn,
+            // v_0 = 0): the products with its Ψ̇ are skipped.
+            let j_root = model.parents[j] == 0;
             // Upper halves: no ∂²τ/∂q∂q̇ columns of root DoFs (here those of joint j).
-            let skip_j = UP && model.parents[j] == 0;
+            let skip_j = UP && j_root;
             for jt in dofs(j) {
                 let [sj, psidj, psiddj, psj] = &dof[jt];
                 // B(I^C_i, S_i) = ½(C + R) and B(I^C_i, S_i)ᵀ = ½(C − R), with R x = x ×* (I^C_i S_i)
                 // antisymmetric (eq. crff_oper): every B(I^C_i, S_i) product is C x ± x ×* t1.
-                let (c_s, c_d, c_dd, c_p) =
-                    (K::mv(&o.c, sj), K::mv(&o.c, psidj), K::mv(&o.c, psiddj), K::mv(&o.c, psj));
-                let (a_d, a_s) = (K::mv(&o.a, psidj), K::mv(&o.a, sj));
+                let z = [0.0; 6];
+                let (c_s, c_dd, c_p) = (K::mv(&o.c, sj), K::mv(&o.c, psiddj), K::mv(&o.c, psj));
+                let a_s = K::mv(&o.a, sj);
+                let (c_d, a_d, d_t1) = if j_root {
+                    (z, z, z)
+                } else {
+                    (K::mv(&o.c, psidj), K::mv(&o.a, psidj), crf(psidj, &o.t1))
+                };
                 // q–q 1A/2A terms: z1 · Ψ̇_k + z2 · Ψ̈_k
                 let z2 = crf(sj, &o.t1);
                 let x_t2 = crf(sj, &o.t2);
-                let d_t1 = crf(psidj, &o.t1);
                 // z1 = −2B(I^C_i,S_i)ᵀΨ̇_j + 2 S_j×*(B^Cᵀ_i S_i); the cross-1B vector
                 // h1 = −2B(I^C_i,S_i)Ψ̇_j + 2Ψ̇_j×*(I^C_i S_i) + 2 S_j×*(B^Cᵀ_i S_i) is the same vector.
                 let z1: V6 = std::array::from_fn(|r| d_t1[r] - c_d[r] + 2.0 * x_t2[r]);
@@ -623,7 +630,6 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
                 // C is symmetric: Cᵀ S_j = C S_j.
                 let csj = c_s;
                 // Per-(j, t) vectors for the cases with j ≺ i (or the D case at j = i).
-                let z = [0.0; 6];
                 let (y1, x, f2c) = if j_is_i {
                     // D S_j = S_i×*(I^C_i S_j) + S_j ×* (I^C_i S_i)
                     let ics = K::mv(&ic, sj);
@@ -643,7 +649,8 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
                 for kr in dofs(j) {
                     let [sk, psidk, psiddk, psk] = &dof[kr];
                     let ds = K::matvec(&rs, sk);
-                    let dp = K::matvec(&rd, psidk);
+                    // Ψ̇_k = 0 on a root joint (above).
+                    let dp = if j_root { [0.0; 3] } else { K::matvec(&rd, psidk) };
                     let ddd = K::matvec(&rz, psiddk);
                     set(qq, at(n, ip, jt, kr), dp[0] + ddd[0]); // 1A
                     if !UP || jt <= kr {
@@ -683,8 +690,11 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
                     // SAFETY: the ancestor lists hold DoF indices < nv (`SoData::new`, checked
                     // against the model by `SoData::check`).
                     let [sk, psidk, psiddk, psk] = unsafe { dof.get_unchecked(kr) };
+                    // SAFETY: kr < nv = root.len() (as for `dof` above).
+                    let k_root = unsafe { *root.get_unchecked(kr) };
                     let ds = K::matvec(&rs, sk);
-                    let dp = K::matvec(&rd, psidk);
+                    // Ψ̇_k = 0 on a root joint (above).
+                    let dp = if k_root { [0.0; 3] } else { K::matvec(&rd, psidk) };
                     let ddd = K::matvec(&rz, psiddk);
                     let dpk = K::matvec(&rz, psk);
                     let (nk, nnk) = (n * kr, n * n * kr);
@@ -707,8 +717,7 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
                     // cross: 1A, 1B, 2B
                     let cval = dp[1];
                     // Upper halves: no ∂²τ/∂q∂q̇ columns of root DoFs.
-                    // SAFETY: kr < nv = root.len() (as for `dof` above).
-                    let skip_k = UP && unsafe { *root.get_unchecked(kr) };
+                    let skip_k = UP && k_root;
                     if !skip_k {
                         set(qv, o_ij + nk, cval); // (ip, kr, jt)
                     }
