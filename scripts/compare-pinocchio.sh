@@ -32,6 +32,8 @@
 #               machine's own 1 -> 2 CPU ceiling: the 1-thread batched calls run alone on CPU 0,
 #               then as two independent processes at once (one on each CPU), then alone on CPU
 #               1; ceiling = (sum of the two concurrent throughputs) / (mean of the lone ones)
+#   SCALING_PIN 1 (default, with two or more CPUs) also runs each scaling round with the
+#               threads pinned (--pin-cpus 0,1: BatchPool::with_cpus); second table
 set -euo pipefail
 
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -159,7 +161,9 @@ echo "# loadavg at end: $(cut -d' ' -f1-3 /proc/loadavg)" >> "$META"
 if [ "${SCALING:-0}" = 1 ]; then
   for r in $(seq 1 "${SCALING_ROUNDS:-$ROUNDS}"); do
     F="$OUT/scaling-round$r.txt"
+    FP="$OUT/scaling-pinned-round$r.txt"
     : > "$F"
+    if [ "$(nproc)" -ge 2 ] && [ "${SCALING_PIN:-1}" = 1 ]; then : > "$FP"; fi
     for name in ${SCALING_MODELS:-solo12 talos_full_v2}; do
       base="$(grep "^$name|" <<< "$MODEL_TABLE" | cut -d'|' -f2)"
       fb=(); [ "$base" = ff ] && fb=(--floating-base)
@@ -170,6 +174,13 @@ if [ "${SCALING:-0}" = 1 ]; then
       "$SODYN" bench --model "$MODELS_DIR/$name.urdf" "${fb[@]}" --name "$name" \
         --paired-threads 2 --algos rnea,id_fo,fd_fo,batch_rnea,batch_id_fo,batch_fd_fo \
         --max-seconds "$MAXSEC" --seed "$SEED" >> "$F"
+      # The same with the threads pinned: the caller to CPU 0, the helper to CPU 1.
+      if [ "$(nproc)" -ge 2 ] && [ "${SCALING_PIN:-1}" = 1 ]; then
+        echo "[compare] scaling round $r/${SCALING_ROUNDS:-$ROUNDS} $name threads=1,2 paired, pinned" >&2
+        "$SODYN" bench --model "$MODELS_DIR/$name.urdf" "${fb[@]}" --name "$name" \
+          --paired-threads 2 --pin-cpus 0,1 --algos rnea,id_fo,fd_fo,batch_rnea,batch_id_fo,batch_fd_fo \
+          --max-seconds "$MAXSEC" --seed "$SEED" >> "$FP"
+      fi
       # The ceiling: two independent single-threaded processes, one per CPU.
       if command -v taskset >/dev/null && [ "$(nproc)" -ge 2 ]; then
         C="$OUT/ceiling-round$r.txt"

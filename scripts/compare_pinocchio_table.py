@@ -75,7 +75,12 @@ def main():
     ap.add_argument("--scaling", action="store_true", help="thread-scaling table instead")
     args = ap.parse_args()
     if args.scaling:
-        scaling(args.out_dir)
+        scaling(args.out_dir, "scaling-round")
+        if glob.glob(os.path.join(args.out_dir, "scaling-pinned-round*.txt")):
+            print("\nThe same with the threads pinned (`--pin-cpus 0,1`: the caller on CPU 0, "
+                  "the helper on CPU 1; the 1-thread calls on CPU 0), in the same rounds right "
+                  "after the unpinned run:\n")
+            scaling(args.out_dir, "scaling-pinned-round")
         return
 
     sod = rounds(args.out_dir, "sodyn")
@@ -149,9 +154,9 @@ def main():
         plot(args.png, models, dims, ratio, n)
 
 
-def scaling(out_dir):
-    """Table of the 1 -> 2 thread scaling of the batch_* algorithms."""
-    files = sorted(glob.glob(os.path.join(out_dir, "scaling-round*.txt")))
+def scaling(out_dir, prefix):
+    """Table of the 1 -> 2 thread scaling of the batch_* algorithms (files PREFIX*.txt)."""
+    files = sorted(glob.glob(os.path.join(out_dir, prefix + "*.txt")))
     if not files:
         sys.exit(f"no scaling-round*.txt in {out_dir}")
     batch = {}  # (model, algo) -> {round: {threads: (us, cpu_util, paired speed-up)}}

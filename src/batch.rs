@@ -67,6 +67,13 @@ use std::time::Duration;
 mod pool;
 use pool::{Helpers, Spinning};
 
+/// Pins the calling thread to CPU `cpu` (Linux only; an error elsewhere, or if the CPU does
+/// not exist or is not allowed to this process), e.g. the caller of a
+/// [`BatchPool::with_cpus`] pool to its `cpus[0]`.
+pub fn pin_current_thread(cpu: usize) -> Result<()> {
+    pool::pin_current_thread(cpu).map_err(|e| Error::Io(e.to_string()))
+}
+
 /// The threads a [`BatchData`] runs on: the calling thread plus `threads − 1` helper threads,
 /// started once (see the [module documentation](self)).
 #[derive(Debug)]
@@ -88,10 +95,24 @@ impl BatchPool {
     /// As [`new`](Self::new), with idle helpers polling for `spin` before they sleep
     /// (`Duration::ZERO`: they sleep at once, and each call pays for waking them).
     pub fn with_spin(threads: usize, spin: Duration) -> Result<Self> {
+        Self::spinning(threads, spin, None)
+    }
+    /// A pool of `cpus.len()` threads whose helper `i` (`1 ≤ i < cpus.len()`) is pinned to
+    /// CPU `cpus[i]` and polls for `spin` after each call ([`BatchPool::DEFAULT_SPIN`] as
+    /// with [`new`](Self::new)), as `OMP_PROC_BIND` pins OpenMP threads (Linux only; an error elsewhere or
+    /// if a CPU cannot be used). Pinned helpers cannot be placed on the caller's CPU by the
+    /// kernel, which on our 2-vCPU virtual machine happens at times when a helper wakes (the
+    /// two threads then share one CPU; see `docs/performance.md`). The calling thread is left
+    /// where it is: pin it to `cpus[0]` with [`pin_current_thread`] (and not to a helper's
+    /// CPU), or a helper and the caller may share a CPU.
+    pub fn with_cpus(cpus: &[usize], spin: Duration) -> Result<Self> {
+        Self::spinning(cpus.len(), spin, Some(cpus))
+    }
+    fn spinning(threads: usize, spin: Duration, cpus: Option<&[usize]>) -> Result<Self> {
         let helpers = match Self::helpers_of(threads)? {
             0 => Helpers::None,
             h => Helpers::Spinning(
-                Spinning::new(h, spin)
+                Spinning::new(h, spin, cpus)
                     .map_err(|e| Error::Io(format!("cannot start {h} helper threads: {e}")))?,
             ),
         };

@@ -463,3 +463,74 @@ fn per_thread_workspaces_count_every_state_once() {
     bd.workspaces_mut().fill(0);
     assert_eq!(bd.workspaces(), &[0, 0]);
 }
+
+/// `BatchPool::with_cpus`: each helper computes its states on its own CPU, the results are bit
+/// for bit those of the sequential calls, and a CPU that cannot be used is an error naming it.
+#[cfg(target_os = "linux")]
+#[test]
+fn pinned_pool_runs_each_helper_on_its_cpu() {
+    // The CPUs this process may run on.
+    // SAFETY: a zeroed cpu_set_t is a valid empty set; pid 0 is the calling thread.
+    let allowed: Vec<usize> = unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        assert_eq!(libc::sched_getaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &mut set), 0);
+        (0..libc::CPU_SETSIZE as usize).filter(|&c| libc::CPU_ISSET(c, &set)).collect()
+    };
+    for bad in [5000, 1023] {
+        let err = BatchPool::with_cpus(&[allowed[0], bad], BatchPool::DEFAULT_SPIN).unwrap_err();
+        assert!(err.to_string().contains(&format!("CPU {bad}")), "{err}");
+    }
+    assert!(BatchPool::with_cpus(&[], BatchPool::DEFAULT_SPIN).is_err());
+    let cpus: Vec<usize> = allowed.iter().copied().take(3).collect();
+    check_pinned(cpus.clone());
+    // The helper pinned to the caller's CPU: an unpinned helper would mostly run on another.
+    if allowed.len() >= 2 {
+        check_pinned(vec![allowed[1], allowed[1]]);
+    }
+}
+
+/// Pins a new thread to `cpus[0]`, runs batched calls from it on `BatchPool::with_cpus(cpus)`
+/// and checks where the states ran.
+#[cfg(target_os = "linux")]
+fn check_pinned(cpus: Vec<usize>) {
+    // Runs on a thread of its own: the test harness's thread keeps its CPU set.
+    std::thread::spawn(move || {
+        pin_current_thread(cpus[0]).unwrap();
+        let pool = Arc::new(BatchPool::with_cpus(&cpus, Duration::ZERO).unwrap());
+        assert_eq!(pool.threads(), cpus.len());
+        let m = builtin::quadruped();
+        let s = states(&m, 40, 11);
+        check_identical(&m, &s, BatchData::with_pool(&m, pool.clone()), "pinned pool");
+        let caller = std::thread::current().id();
+        let mut bd = BatchData::from_workspace(pool, ());
+        // Per state: computed by the caller, and on which CPU.
+        let mut out = vec![(false, usize::MAX); 400];
+        let mut by_helpers = 0;
+        for _ in 0..20 {
+            map_states(&mut bd, &mut out, |_, _, o| {
+                // Some work per state, so that the helpers join.
+                let mut x = 1.0f64;
+                for i in 0..2000 {
+                    x = std::hint::black_box(x * 1.000001 + i as f64 * 1e-9);
+                }
+                // SAFETY: sched_getcpu has no preconditions.
+                let cpu = unsafe { libc::sched_getcpu() };
+                *o = (std::thread::current().id() == caller, usize::try_from(cpu).unwrap());
+                Ok(())
+            })
+            .unwrap();
+            for &(by_caller, cpu) in &out {
+                if by_caller {
+                    assert_eq!(cpu, cpus[0]);
+                } else {
+                    assert!(cpus[1..].contains(&cpu), "a helper ran on CPU {cpu}, not {cpus:?}");
+                    by_helpers += 1;
+                }
+            }
+        }
+        // The helpers took part (the states take milliseconds per call, waking takes less).
+        assert!(cpus.len() == 1 || by_helpers > 0, "no state ran on a helper");
+    })
+    .join()
+    .unwrap();
+}

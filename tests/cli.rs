@@ -296,6 +296,17 @@ fn bench_options_are_validated() {
     }
     let block = field("block=");
     assert!((1.0..=16.0).contains(&block), "{line}");
+    let err = assert_clean_failure(&with(&["--pin-cpus", "0,0"]), "repeated CPU");
+    assert!(err.contains("--pin-cpus") && err.contains("repeated"), "{err}");
+    let err = assert_clean_failure(
+        &with(&["--pin-cpus", "0", "--paired-threads", "2"]),
+        "fewer CPUs than threads",
+    );
+    assert!(err.contains("1 CPUs given for 2 threads"), "{err}");
+    let err = assert_clean_failure(&with(&["--pin-cpus", "zero"]), "bad CPU list");
+    assert!(err.contains("--pin-cpus") && err.contains("zero"), "{err}");
+    let err = assert_clean_failure(&with(&["--pin-cpus", "5000"]), "CPU out of range");
+    assert!(err.contains("CPU 5000"), "{err}");
     assert_clean_failure(&with(&["--paired-threads", "1"]), "one paired thread");
     assert_clean_failure(&with(&["--threads", "0"]), "zero threads");
     assert_clean_failure(&with(&["--states", "many"]), "bad --states");

@@ -110,8 +110,14 @@ impl std::fmt::Debug for Spinning {
 }
 
 impl Spinning {
-    /// Starts `helpers` threads that poll for `spin` after each call before they sleep.
-    pub(crate) fn new(helpers: usize, spin: Duration) -> std::io::Result<Self> {
+    /// Starts `helpers` threads that poll for `spin` after each call before they sleep; with
+    /// `cpus`, helper `i` is pinned to CPU `cpus[i]` (`cpus.len() > helpers`), and an error is
+    /// returned if that fails.
+    pub(crate) fn new(
+        helpers: usize,
+        spin: Duration,
+        cpus: Option<&[usize]>,
+    ) -> std::io::Result<Self> {
         let shared = Arc::new(Shared {
             epoch: AtomicU64::new(0),
             state: AtomicU64::new(CLOSED),
@@ -125,13 +131,28 @@ impl Spinning {
             panicked: AtomicBool::new(false),
         });
         let mut pool = Spinning { shared, threads: Vec::new(), busy: AtomicBool::new(false) };
+        // Each helper reports whether it could pin itself before it starts waiting for calls.
+        let (tx, rx) = std::sync::mpsc::channel();
         for i in 1..=helpers {
             let shared = pool.shared.clone();
-            let handle = std::thread::Builder::new()
-                .name(format!("sodyn-batch-{i}"))
-                .spawn(move || helper_loop(&shared, i))?;
+            let cpu = cpus.map(|c| c[i]);
+            let tx = tx.clone();
+            let handle =
+                std::thread::Builder::new().name(format!("sodyn-batch-{i}")).spawn(move || {
+                    let pinned = cpu.map_or(Ok(()), pin_current_thread);
+                    let ok = pinned.is_ok();
+                    // The receiver outlives the constructor's loop below.
+                    let _ = tx.send(pinned);
+                    if ok {
+                        helper_loop(&shared, i);
+                    }
+                })?;
             // On an error, dropping `pool` stops the helpers started so far.
             pool.threads.push(handle);
+        }
+        drop(tx);
+        for _ in 0..helpers {
+            rx.recv().map_err(|_| std::io::Error::other("a helper thread exited at start"))??;
         }
         Ok(pool)
     }
@@ -269,4 +290,35 @@ fn wait_for_call(s: &Shared, seen: u64) -> u64 {
     }
     s.sleepers.fetch_sub(1, Ordering::SeqCst);
     s.epoch.load(Ordering::Acquire)
+}
+
+/// Pins the calling thread to CPU `cpu` (Linux; an error elsewhere, or if the CPU does not
+/// exist or is not allowed to this process).
+pub(crate) fn pin_current_thread(cpu: usize) -> std::io::Result<()> {
+    #[cfg(target_os = "linux")]
+    {
+        if cpu >= libc::CPU_SETSIZE as usize {
+            return Err(std::io::Error::other(format!("CPU {cpu} is out of range")));
+        }
+        // SAFETY: a zeroed cpu_set_t is a valid empty set; CPU_SET writes within it (checked
+        // above); pid 0 is the calling thread and `set` is valid for its size.
+        let r = unsafe {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            libc::CPU_SET(cpu, &mut set);
+            libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set)
+        };
+        if r == 0 {
+            Ok(())
+        } else {
+            let e = std::io::Error::last_os_error();
+            Err(std::io::Error::new(e.kind(), format!("cannot pin a thread to CPU {cpu}: {e}")))
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        Err(std::io::Error::new(
+            std::io::ErrorKind::Unsupported,
+            format!("cannot pin a thread to CPU {cpu}: thread affinity is only supported on Linux"),
+        ))
+    }
 }

@@ -39,7 +39,8 @@ use std::time::Instant;
 pub(crate) const USAGE: &str = "\
 sodyn bench --model M [--floating-base] [--contacts F1,F2,...] [--algos a,b,...]
             [--states N] [--seed S] [--max-seconds X] [--iters N] [--threads N]
-            [--paired-threads T] [--pool spin|rayon] [--spin-us U] [--name NAME]
+            [--paired-threads T] [--pool spin|rayon] [--spin-us U] [--pin-cpus C0,C1,...]
+            [--name NAME]
             [--smoke] [--calls N]
 Prints one line per algorithm:
   model=<name> nq=<> nv=<> algo=<algo> median_us=<> p10_us=<> p90_us=<> batch=<K> samples=<n>
@@ -51,7 +52,9 @@ batch_* algorithms on 1 and on T threads in alternating blocks of back-to-back c
 1-thread / T-thread time, and speedup_first = the same for the first call of each T-thread
 block). --pool picks the helper
 threads of the batch_* algorithms: spin (default; idle helpers poll for --spin-us
-microseconds, default 200, before they sleep) or rayon. --smoke runs every
+microseconds, default 200, before they sleep) or rayon. --pin-cpus pins the calling thread
+to C0 and helper i of each pool to Ci (BatchPool::with_cpus; the per-CPU baseline of
+--paired-threads then uses those CPUs). --smoke runs every
 algorithm a few times only. --calls N makes exactly N untimed calls per algorithm (for
 instruction counts under `valgrind --tool=callgrind`: cost per call = difference of two runs /
 difference of N).";
@@ -96,6 +99,9 @@ struct BenchOptions {
     rayon: bool,
     /// `--spin-us`: spin time of the spinning helpers.
     spin: std::time::Duration,
+    /// `--pin-cpus`: the calling thread pinned to the first, helper `i` of each pool to the
+    /// `i`-th.
+    pin_cpus: Option<Vec<usize>>,
     name: Option<String>,
     smoke: bool,
     calls: Option<usize>,
@@ -119,6 +125,7 @@ fn parse(args: &[String]) -> Result<BenchOptions> {
         paired_threads: None,
         rayon: false,
         spin: BatchPool::DEFAULT_SPIN,
+        pin_cpus: None,
         name: None,
         smoke: false,
         calls: None,
@@ -186,6 +193,19 @@ fn parse(args: &[String]) -> Result<BenchOptions> {
                     return Err(Error::Io(format!("--spin-us: {us} must be ≥ 0")));
                 }
                 o.spin = std::time::Duration::from_secs_f64(us * 1e-6);
+            }
+            "--pin-cpus" => {
+                let cpus = value()?
+                    .split(',')
+                    .map(|c| parse_number(opt, c.trim(), "a list of CPU numbers"))
+                    .collect::<Result<Vec<usize>>>()?;
+                let mut sorted = cpus.clone();
+                sorted.sort_unstable();
+                sorted.dedup();
+                if sorted.len() != cpus.len() {
+                    return Err(Error::Io(format!("--pin-cpus: a CPU is repeated in {cpus:?}")));
+                }
+                o.pin_cpus = Some(cpus);
             }
             "--name" => o.name = Some(value()?),
             "--smoke" => o.smoke = true,
@@ -437,7 +457,11 @@ const PAIRED_BLOCK_NS: f64 = 5e6;
 /// its caches are warm): a speed-up over the mean of the CPUs' single-thread throughputs does
 /// not depend on which CPU the scheduler gave the 1-thread calls, which matters where the CPUs
 /// run at different speeds (as the two virtual CPUs of our benchmark machine do at times).
-fn measure_paired(plan: &Plan, mut f: impl FnMut(usize) -> Result<()>) -> Result<Paired> {
+fn measure_paired(
+    plan: &Plan,
+    baseline_cpus: Option<&[usize]>,
+    mut f: impl FnMut(usize) -> Result<()>,
+) -> Result<Paired> {
     if plan.smoke || plan.calls.is_some() {
         let (one, many) = (measure(plan, |_| f(0))?, measure(plan, |_| f(1))?);
         return Ok(Paired {
@@ -466,7 +490,10 @@ fn measure_paired(plan: &Plan, mut f: impl FnMut(usize) -> Result<()>) -> Result
     let block = ((PAIRED_BLOCK_NS / fastest1).ceil() as usize).clamp(1, 16);
     let per = plan.per_call as f64;
     let affinity = affinity::Affinity::of_this_thread();
-    let cpus = affinity.as_ref().map_or(vec![], affinity::Affinity::cpus);
+    let cpus = match baseline_cpus {
+        Some(c) => c.to_vec(),
+        None => affinity.as_ref().map_or(vec![], affinity::Affinity::cpus),
+    };
     let mut pinned: Vec<Vec<f64>> = vec![vec![]; cpus.len()];
     let (mut t, mut cpu, mut wall) = ([vec![], vec![]], [0.0; 2], [0.0; 2]);
     let (mut ratios, mut ratios_first) = (vec![], vec![]);
@@ -645,6 +672,9 @@ struct Workspaces {
     /// Batched workspaces: one pool of `--threads`, or with `--paired-threads T`, pools of one
     /// and of `T` threads.
     batch: Vec<BatchData>,
+    /// The CPUs of the per-CPU 1-thread baseline of `--paired-threads` (with `--pin-cpus`, the
+    /// first `T` of its list; else those the calling thread may run on).
+    baseline_cpus: Option<Vec<usize>>,
 }
 
 /// Times one algorithm.
@@ -657,13 +687,15 @@ fn time_algo(
 ) -> Result<Timed> {
     let (q, v, a, tau) = (&st.q, &st.v, &st.a, &st.tau);
     let batch_plan = Plan { per_call: st.q.len(), min_samples: plan.min_samples.min(20), ..*plan };
-    let Workspaces { data: d, so, fso, out_vec, out_m1, out_m2, kkt, impact, batch } = ws;
+    let Workspaces { data: d, so, fso, out_vec, out_m1, out_m2, kkt, impact, batch, baseline_cpus } =
+        ws;
     // A batched algorithm on the workspaces `batch[side]`: timed alone, or paired with the
     // second pool.
     let mut batched = |f: &mut dyn FnMut(&mut BatchData) -> Result<()>| -> Result<Timed> {
         if let [b1, b2] = &mut batch[..] {
-            let p =
-                measure_paired(&batch_plan, |side| f(if side == 0 { &mut *b1 } else { &mut *b2 }))?;
+            let p = measure_paired(&batch_plan, baseline_cpus.as_deref(), |side| {
+                f(if side == 0 { &mut *b1 } else { &mut *b2 })
+            })?;
             Ok(Timed { stats: p.one, paired: Some(p) })
         } else {
             Ok(Timed { stats: measure(&batch_plan, |_| f(&mut batch[0]))?, paired: None })
@@ -809,8 +841,28 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
     let nstates = o.states.unwrap_or(if o.smoke { 8 } else { 1000 });
     let st = States::new(&model, nstates, o.seed);
     // One pool of --threads threads, or with --paired-threads T, pools of one and T threads.
-    let pool = |t| {
-        if o.rayon { BatchPool::with_rayon(t) } else { BatchPool::with_spin(t, o.spin) }
+    // With --pin-cpus the calling thread runs on the first CPU of the list, and helper i of a
+    // pool on the i-th.
+    let max_threads = o.paired_threads.unwrap_or(o.threads);
+    if let Some(cpus) = &o.pin_cpus {
+        if o.rayon {
+            return Err(Error::Io(
+                "--pin-cpus applies to the spinning pool, not --pool rayon".into(),
+            ));
+        }
+        if cpus.len() < max_threads {
+            return Err(Error::Io(format!(
+                "--pin-cpus: {} CPUs given for {max_threads} threads",
+                cpus.len()
+            )));
+        }
+        crate::batch::pin_current_thread(cpus[0])
+            .map_err(|e| Error::Io(format!("--pin-cpus: {e}")))?;
+    }
+    let pool = |t: usize| match (&o.pin_cpus, o.rayon) {
+        (Some(cpus), _) => BatchPool::with_cpus(&cpus[..t], o.spin),
+        (None, true) => BatchPool::with_rayon(t),
+        (None, false) => BatchPool::with_spin(t, o.spin),
     };
     let pools = match o.paired_threads {
         Some(t) => vec![pool(1)?, pool(t)?],
@@ -829,6 +881,7 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
         kkt: None,
         impact: None,
         batch: pools.into_iter().map(|p| BatchData::with_pool(&model, Arc::new(p))).collect(),
+        baseline_cpus: o.pin_cpus.as_ref().map(|c| c[..max_threads].to_vec()),
     };
     if !o.contacts.is_empty() {
         let contacts = o
@@ -867,7 +920,15 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
             Some(t) => format!("1,{t}(paired)"),
             None => o.threads.to_string(),
         },
-        if o.rayon { "rayon".to_string() } else { format!("spin({}us)", o.spin.as_micros()) },
+        match (&o.pin_cpus, o.rayon) {
+            (_, true) => "rayon".to_string(),
+            (None, false) => format!("spin({}us)", o.spin.as_micros()),
+            (Some(c), false) => format!(
+                "spin({}us),pinned:{}",
+                o.spin.as_micros(),
+                c.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(",")
+            ),
+        },
         o.smoke as u8,
     );
     for algo in algos {
