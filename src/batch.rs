@@ -24,7 +24,9 @@
 //! [`BatchPool::DEFAULT_SPIN`] after each call before they sleep (set by
 //! [`BatchPool::with_spin`]; the OpenMP runtimes do the same), and the caller polls while the
 //! helpers finish their last states instead of sleeping. A helper that arrives after the caller
-//! has run out of states does not join the call at all. [`BatchPool::with_rayon`] runs the
+//! has run out of states does not join the call at all. [`BatchPool::with_cpus`] pins each
+//! helper to a CPU of its own (with the caller pinned by [`pin_current_thread`], the kernel can
+//! no longer put a waking helper on the caller's CPU). [`BatchPool::with_rayon`] runs the
 //! helpers on a [rayon] pool instead (one job per helper and call), the design measured against
 //! in `docs/performance.md`.
 //!
