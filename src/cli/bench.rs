@@ -610,18 +610,8 @@ mod affinity {
             vec![]
         }
         /// Pins the calling thread to `cpu`; false if that failed.
-        #[cfg(target_os = "linux")]
         pub(super) fn pin_to(&self, cpu: usize) -> bool {
-            // SAFETY: as in `of_this_thread`; CPU_SET writes within the set (cpu < CPU_SETSIZE).
-            unsafe {
-                let mut one: libc::cpu_set_t = std::mem::zeroed();
-                libc::CPU_SET(cpu, &mut one);
-                libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &one) == 0
-            }
-        }
-        #[cfg(not(target_os = "linux"))]
-        pub(super) fn pin_to(&self, _cpu: usize) -> bool {
-            false
+            crate::batch::pin_current_thread(cpu).is_ok()
         }
         /// Gives the calling thread its original CPU set back.
         pub(super) fn restore(&self) {
