@@ -655,6 +655,9 @@ pub(crate) struct Gemm4<'a> {
     pub bs: usize,
     /// Whether `b` is keyed by the row `idx[t]` (else by `t`).
     pub by_row: bool,
+    /// The lanes `u` (bit `u`) whose output is accumulated: `out[u] ← out[u] − A B[:, u]`
+    /// (its `rows` values read first; the mirror gets the sum).
+    pub accumulate: u8,
 }
 
 impl Gemm4<'_> {
@@ -673,14 +676,16 @@ impl Gemm4<'_> {
     }
 }
 
-/// `out[u][r] ← −Σ_t A[r, idx[t]] · B[idx[t], u]` for `r < rows`, and the same into `mirror[u]`,
-/// for the lanes `u < 4` whose pointer is non-null: a product whose inner dimension is only the
+/// `out[u][r] ← −Σ_t A[r, idx[t]] · B[idx[t], u]` for `r < rows` (or `out[u][r] − Σ …` for the
+/// lanes of `g.accumulate`), and the same into `mirror[u]`, for the lanes `u < 4` whose
+/// pointer is non-null: a product whose inner dimension is only the
 /// (structurally or numerically) non-zero rows of the right-hand sides, vectorised down the
 /// contiguous columns of `A` and of the outputs, four output columns sharing each load of `A`.
 ///
 /// # Safety
-/// Every non-null `out[u]` and `mirror[u]` is valid for writing `rows` values and does not overlap
-/// `g.a` or what `g.b` addresses; `B[idx[t], u]` (see [`Gemm4`]) is readable for every `t`,
+/// Every non-null `out[u]` and `mirror[u]` is valid for writing `rows` values (and `out[u]` for
+/// reading them in the lanes of `g.accumulate`) and does not overlap `g.a`, what `g.b`
+/// addresses or another output (a null `out[u]` has no accumulate bit); `B[idx[t], u]` (see [`Gemm4`]) is readable for every `t`,
 /// `u < 4`; every `idx[t] < g.a.len() / g.lda` (a column of `A`; checked in debug builds only,
 /// as this is called once per group of four columns in the hot loops of FD-SO).
 pub(crate) unsafe fn neg_gemm4_sparse(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror: &[*mut f64; 4]) {
@@ -718,7 +723,10 @@ pub(crate) unsafe fn neg_gemm4_sparse(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror
 unsafe fn gemm4_portable(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror: &[*mut f64; 4]) {
     let mut acc = [0.0; 4];
     for r in 0..g.rows {
-        acc.fill(0.0);
+        for (u, a) in acc.iter_mut().enumerate() {
+            // SAFETY: the caller's contract (r < rows; accumulated lanes are readable).
+            *a = if g.accumulate >> u & 1 != 0 { unsafe { *out[u].add(r) } } else { 0.0 };
+        }
         for (t, &l) in g.idx.iter().enumerate() {
             let x = g.a[r + g.lda * l as usize];
             // SAFETY: the caller's contract.
@@ -783,6 +791,13 @@ unsafe fn chunk_avx2<const V: usize>(
     // outputs writable for `rows` values (the last vector masked to them).
     unsafe {
         let mut acc = [[_mm256_setzero_pd(); V]; 4];
+        for (u, acc_u) in acc.iter_mut().enumerate().filter(|(u, _)| g.accumulate >> u & 1 != 0) {
+            let p = out[u].add(r0);
+            for (v, x) in acc_u[..V - 1].iter_mut().enumerate() {
+                *x = _mm256_loadu_pd(p.add(4 * v));
+            }
+            acc_u[V - 1] = _mm256_maskload_pd(p.add(4 * (V - 1)), mask);
+        }
         let a = g.a.as_ptr().add(r0);
         for (t, &l) in g.idx.iter().enumerate() {
             let col = a.add(g.lda * l as usize);
@@ -864,6 +879,13 @@ unsafe fn chunk_avx512<const V: usize>(
     // outputs writable for `rows` values (the last vector masked to them).
     unsafe {
         let mut acc = [[_mm512_setzero_pd(); V]; 4];
+        for (u, acc_u) in acc.iter_mut().enumerate().filter(|(u, _)| g.accumulate >> u & 1 != 0) {
+            let p = out[u].add(r0);
+            for (v, x) in acc_u[..V - 1].iter_mut().enumerate() {
+                *x = _mm512_loadu_pd(p.add(8 * v));
+            }
+            acc_u[V - 1] = _mm512_maskz_loadu_pd(mask, p.add(8 * (V - 1)));
+        }
         let a = g.a.as_ptr().add(r0);
         for (t, &l) in g.idx.iter().enumerate() {
             let col = a.add(g.lda * l as usize);

@@ -2,7 +2,7 @@
 //! second order (eq. eqn_FD_SO_43), the latter with IDFOZA for the `∂M/∂q` products.
 
 use super::id_fo::id_derivatives_placed;
-use super::id_so::{SoData, id_so_unchecked};
+use super::id_so::{SoData, id_so_unchecked, qv_offset};
 #[cfg(target_arch = "x86_64")]
 use super::zero::{Avx4, Avx8};
 use super::zero::{IdfozaWs, Lanes, idfoza_lanes_core};
@@ -160,12 +160,13 @@ pub struct FdSoData {
     /// IDFOZA workspaces, four and eight right-hand sides.
     ws4: IdfozaWs<[f64; 4]>,
     ws8: IdfozaWs<[f64; 8]>,
-    /// IDFOZA results `S[(i, j, k)] = IDFOZA(X[:, j])[i][k]` by blocks of four `j`: at
-    /// `u + 4 i + 4 n k + 4 n² b` for `j = 4 b + u` (see [`idfoza_blocks`]), zero past `nv`.
+    /// IDFOZA results `S[(i, j, k)] = IDFOZA(X[:, j])[i][k]` by blocks of eight `j`: at
+    /// `u + 8 i + 8 n k + 8 n² b` for `j = 8 b + u` (see [`idfoza_blocks`]), zero past `nv`;
+    /// from the first 64-byte aligned value (8 values to spare).
     s: Vec<f64>,
-    /// IDFOZA of eight right-hand sides `X[:, j0..j0 + 8]`, as two blocks of four: `(u, i, k)`
-    /// of block `h` at `u + 4 i + 4 n k + 4 n² h`.
-    s4: Vec<f64>,
+    /// IDFOZA of eight right-hand sides `X[:, j0..j0 + 8]`: `(u, i, k)` at `u + 8 i + 8 n k`;
+    /// from the first 64-byte aligned value (8 values to spare).
+    s8: Vec<f64>,
     /// `M⁻¹` with its columns padded with zeros to [`Self::ld`] rows (whole vectors of 8).
     minv: Vec<f64>,
     /// Leading dimension of `minv`: `nv` rounded up to a multiple of 8.
@@ -193,16 +194,11 @@ pub struct FdSoData {
     /// pages `j` of `∂²q̈/∂q²` vanish: they are never written. The `∂²q̈/∂q²` groups take their
     /// four `j` from this list (the qq blocks, see [`so_products`]).
     qj: Vec<u32>,
-    /// `qq_rel[words b..]`: the union of the related sets of the DoFs of qq block `b`.
-    qq_rel: Vec<u64>,
     /// `qj_pos[k]`: the position of DoF `k` in `qj` (`u32::MAX` for the translations).
     qj_pos: Vec<u32>,
     /// The columns of `∂q̈/∂q` listed in `qj`, packed (`nv×nv`, the columns past `qj.len()`
     /// zero).
     xq: Vec<f64>,
-    /// The groups `(b, k)` of `∂²q̈/∂q²` (qq block `b`, page `k`) in the order they are
-    /// computed (see [`so_products`]).
-    qq_groups: Vec<[u32; 2]>,
     /// The groups `(j0, k)` of `∂²q̈/∂q̇²` with a structurally non-zero column, in order.
     vv_groups: Vec<[u32; 2]>,
     /// One group's row set (scratch, `words` values).
@@ -241,28 +237,6 @@ impl FdSoData {
         for (p, &j) in qj.iter().enumerate() {
             qj_pos[j as usize] = p as u32;
         }
-        let mut qq_rel = vec![0u64; qj.len().div_ceil(4) * words];
-        for (p, &j) in qj.iter().enumerate() {
-            for w in 0..words {
-                qq_rel[words * (p / 4) + w] |= related[words * j as usize + w];
-            }
-        }
-        // ∂²q̈/∂q²: columns j < jend(k) of page k (j ≤ k, and the j > k of k's joint), for the
-        // j and k of `qj`, by qq blocks of four j; four k (a block k4) per qq block.
-        let jend = |k: usize| {
-            let jt = model.dof_joint[k];
-            (k + 1).max(model.idx_v[jt] + model.nvs[jt])
-        };
-        let mut qq_groups = Vec::new();
-        for k4 in (0..n).step_by(4) {
-            let ks = (k4..(k4 + 4).min(n)).filter(|&k| qj_pos[k] != u32::MAX);
-            let jmax = ks.clone().map(jend).max().unwrap_or(0);
-            for (b, blk) in qj.chunks(4).enumerate().take_while(|(_, c)| (c[0] as usize) < jmax) {
-                for k in ks.clone().filter(|&k| (blk[0] as usize) < jend(k)) {
-                    qq_groups.push([b as u32, k as u32]);
-                }
-            }
-        }
         // ∂²q̈/∂q̇²: columns j ≤ k, four j at a time, the groups where some (j ≤ k, k) is
         // related.
         let mut vv_groups = Vec::new();
@@ -282,8 +256,8 @@ impl FdSoData {
             d2qdd_dtaudq: Tensor3::zeros(n, n, n),
             ws4: IdfozaWs::new(model),
             ws8: IdfozaWs::new(model),
-            s: vec![0.0; 4 * n * n * n.div_ceil(4)],
-            s4: vec![0.0; 8 * n * n],
+            s: vec![0.0; 8 * n * n * n.div_ceil(8) + 8],
+            s8: vec![0.0; 8 * n * n + 8],
             minv: vec![0.0; ld * n],
             ld,
             words,
@@ -291,10 +265,8 @@ impl FdSoData {
             related4,
             root: (0..n).map(|j| model.parents[model.dof_joint[j]] == 0).collect(),
             qj,
-            qq_rel,
             qj_pos,
             xq: vec![0.0; n * n],
-            qq_groups,
             vv_groups,
             set: vec![0; words],
             idx: vec![0; n],
@@ -369,19 +341,22 @@ impl<'a> Products<'a> {
         }
     }
 
-    /// The four columns `out[u] ← −M⁻¹ b_u` (rows `< rows`; also into `mirror[u]`; lanes with a
-    /// null `out[u]` are not stored), with `b_u[l] = val(l)[u]` for the rows `l` of `set` and zero
-    /// elsewhere. Rows whose four values are all zero are left out of the product; if all are,
-    /// the outputs are set to zero.
+    /// The four columns `out[u] ← −M⁻¹ b_u` (rows `< rows`; `out[u] − M⁻¹ b_u` in the lanes of
+    /// `accumulate`, bit `u`; also into `mirror[u]`; lanes with a null `out[u]` are not stored),
+    /// with `b_u[l] = val(l)[u]` for the rows `l` of `set` and zero elsewhere. Rows whose four
+    /// values are all zero are left out of the product; if all are, the outputs are set to zero
+    /// (to `out[u]` when accumulated).
     ///
     /// # Safety
     /// `val(l)` may be called for every row `l` of `set`; every non-null `out[u]` and
-    /// `mirror[u]` is valid for writing `rows ≤ nv` values, and none overlaps this workspace.
+    /// `mirror[u]` is valid for writing `rows ≤ nv` values (the accumulated `out[u]` for
+    /// reading them), and none overlaps this workspace or another output.
     #[inline(always)]
     unsafe fn solve_group(
         &mut self,
         rows: usize,
         val: impl Fn(usize) -> [f64; 4],
+        accumulate: u8,
         out: [*mut f64; 4],
         mirror: [*mut f64; 4],
     ) {
@@ -401,16 +376,19 @@ impl<'a> Products<'a> {
         let r = self.rhs.as_ptr();
         // SAFETY: the caller's contract; rows t < cnt of the compacted copy.
         unsafe {
-            self.product(rows, cnt, [r, r.add(1), r.add(2), r.add(3)], 4, false, out, mirror)
+            let b = [r, r.add(1), r.add(2), r.add(3)];
+            self.product(rows, cnt, b, 4, false, accumulate, out, mirror)
         };
     }
 
-    /// As [`Self::solve_group`] with `b_u[l] = b[u][bs l]` read in place, no rows left out; the
-    /// outputs are set to zero if every value read is zero (when `check`) or `set` is empty.
+    /// As [`Self::solve_group`] with `b_u[l] = b[u][bs l]` read in place, no rows left out, and
+    /// `out[u] ← out[u] − M⁻¹ b_u` in the lanes of `accumulate` (bit `u`; the mirror gets the
+    /// sum); the products are left out (the outputs set to zero, or to `out[u]` when
+    /// accumulated) if every value read is zero (when `check`) or `set` is empty.
     ///
     /// # Safety
     /// `b[u] + bs l` is readable for every row `l` of `set`; the outputs as for
-    /// [`Self::solve_group`].
+    /// [`Self::solve_group`], the accumulated ones also readable.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     unsafe fn solve_group_in_place(
@@ -419,6 +397,7 @@ impl<'a> Products<'a> {
         b: [*const f64; 4],
         bs: usize,
         check: bool,
+        accumulate: u8,
         out: [*mut f64; 4],
         mirror: [*mut f64; 4],
     ) {
@@ -441,10 +420,11 @@ impl<'a> Products<'a> {
         });
         let cnt = if nz { cnt } else { 0 };
         // SAFETY: the caller's contract.
-        unsafe { self.product(rows, cnt, b, bs, true, out, mirror) };
+        unsafe { self.product(rows, cnt, b, bs, true, accumulate, out, mirror) };
     }
 
-    /// `out[u] ← −Σ_{t < cnt} M⁻¹[:, idx[t]] B[idx[t], u]` (see [`Gemm4`]), zero if `cnt = 0`.
+    /// `out[u] ← −Σ_{t < cnt} M⁻¹[:, idx[t]] B[idx[t], u]` (see [`Gemm4`]; `out[u]` plus that in
+    /// the lanes of `accumulate`), zero (or `out[u]`) if `cnt = 0`.
     ///
     /// # Safety
     /// As [`neg_gemm4_sparse`] for the rows `idx[..cnt]`.
@@ -457,19 +437,31 @@ impl<'a> Products<'a> {
         b: [*const f64; 4],
         bs: usize,
         by_row: bool,
+        accumulate: u8,
         out: [*mut f64; 4],
         mirror: [*mut f64; 4],
     ) {
         if cnt == 0 {
-            for p in out.into_iter().chain(mirror) {
-                if !p.is_null() {
-                    // SAFETY: the caller's contract.
-                    unsafe { std::ptr::write_bytes(p, 0, rows) };
+            for u in 0..4 {
+                let (o, m) = (out[u], mirror[u]);
+                // SAFETY: the caller's contract (distinct outputs of `rows` values).
+                unsafe {
+                    if accumulate >> u & 1 != 0 {
+                        if !m.is_null() {
+                            std::ptr::copy_nonoverlapping(o, m, rows);
+                        }
+                        continue;
+                    }
+                    for p in [o, m].into_iter().filter(|p| !p.is_null()) {
+                        std::ptr::write_bytes(p, 0, rows);
+                    }
                 }
             }
             return;
         }
-        let g = Gemm4 { a: self.minv, lda: self.ld, rows, idx: &self.idx[..cnt], b, bs, by_row };
+        let idx = &self.idx[..cnt];
+        let (a, lda) = (self.minv, self.ld);
+        let g = Gemm4 { a, lda, rows, idx, b, bs, by_row, accumulate };
         debug_assert!(rows <= self.n);
         // SAFETY: the caller's contract on `b` and the outputs; `minv` has `ld ≥` rows rounded
         // up to 8 values per column (zero padded) for each of its `n` columns, and the indices
@@ -484,11 +476,11 @@ struct IdfozaWss<'a> {
     ws8: &'a mut IdfozaWs<[f64; 8]>,
 }
 
-/// `out[u + 4 i + 4 n k + 4 n² h] ← IDFOZA(x[:, j0 + 4 h + u])[i][k]` for the structurally
-/// non-zero `(i, k)` (zero in the lanes past `nv`; the entries of the DoFs `k` of root joints,
-/// zero, are never written, see [`idfoza_lanes_core`]), for the one or two blocks `h` of four
-/// right-hand sides in `out` (`4 n²` values each). Two blocks are one pass of eight lanes with
-/// AVX-512F, else two passes of four lanes (AVX2 when available).
+/// `out[u + 8 i + 8 n k] ← IDFOZA(x[:, j0 + u])[i][k]` (`u < 8`, `out` of `8 n²` values) for
+/// the structurally non-zero `(i, k)` (zero in the lanes past `nv`; the entries of the DoFs
+/// `k` of root joints, zero, are never written, see [`idfoza_lanes_core`]): the eight lanes of
+/// an entry are one 64-byte line when `out` is so aligned. One pass of eight lanes with
+/// AVX-512F, else passes of four lanes (AVX2 when available).
 fn idfoza_blocks(
     model: &Model,
     data: &Data,
@@ -498,19 +490,20 @@ fn idfoza_blocks(
     out: &mut [f64],
 ) {
     let n = model.nv;
+    assert!(out.len() == 8 * n * n && j0 < n);
     #[cfg(target_arch = "x86_64")]
-    if out.len() == 8 * n * n && crate::simd::avx512f() {
+    if crate::simd::avx512f() {
         // SAFETY: the CPU supports the enabled features.
         unsafe { return idfoza_pair_avx512(model, data, ws.ws8, x, j0, out) };
     }
-    for (h, blk) in out.chunks_exact_mut(4 * n * n).enumerate() {
+    for lane0 in (0..8).step_by(4).filter(|&l| j0 + l < n) {
         #[cfg(target_arch = "x86_64")]
         if crate::simd::avx2_fma() {
             // SAFETY: the CPU supports the enabled features.
-            unsafe { idfoza_block_avx2(model, data, ws.ws4, x, j0 + 4 * h, blk) };
+            unsafe { idfoza_block_avx2(model, data, ws.ws4, x, j0, lane0, out) };
             continue;
         }
-        idfoza_blocks_impl::<[f64; 4]>(model, data, ws.ws4, x, j0 + 4 * h, blk)
+        idfoza_blocks_impl::<[f64; 4]>(model, data, ws.ws4, x, j0, lane0, out)
     }
 }
 
@@ -522,14 +515,15 @@ unsafe fn idfoza_block_avx2(
     ws: &mut IdfozaWs<[f64; 4]>,
     x: &[f64],
     j0: usize,
+    lane0: usize,
     out: &mut [f64],
 ) {
     // SAFETY: AVX2 and FMA are enabled here, as `Avx4` needs.
-    idfoza_blocks_impl::<Avx4>(model, data, ws, x, j0, out)
+    idfoza_blocks_impl::<Avx4>(model, data, ws, x, j0, lane0, out)
 }
 
-/// The blocks of four right-hand sides in `out` (`4 n²` values each, as many as `V` has lanes
-/// / 4) in one pass of `V`'s lanes (see [`idfoza_blocks`]).
+/// The lanes `lane0..lane0 + L` of [`idfoza_blocks`] in one pass of `V`'s `L` lanes (`lane0 +
+/// L ≤ 8`).
 #[inline(always)]
 fn idfoza_blocks_impl<V: Lanes>(
     model: &Model,
@@ -537,22 +531,34 @@ fn idfoza_blocks_impl<V: Lanes>(
     ws: &mut IdfozaWs<V::Arr>,
     x: &[f64],
     j0: usize,
+    lane0: usize,
     out: &mut [f64],
 ) {
     let n = model.nv;
     let lanes = V::Arr::default().as_ref().len();
-    assert!(out.len() == lanes * n * n && j0 < n && x.len() == n * n);
+    assert!(out.len() == 8 * n * n && lane0 + lanes <= 8 && j0 + lane0 < n && x.len() == n * n);
     let o = out.as_mut_ptr();
     // Lanes past nv read no column and come out zero.
-    idfoza_lanes_core::<V>(model, data, ws, x, n, j0, lanes.min(n - j0), |i, k, z| {
-        debug_assert!(i < n && k < n);
-        for (h, q) in z.as_ref().chunks_exact(4).enumerate() {
-            // SAFETY: i, k < n and h < lanes / 4, so 4 n² h + 4 i + 4 n k + 3 < out.len().
+    idfoza_lanes_core::<V>(
+        model,
+        data,
+        ws,
+        x,
+        n,
+        j0 + lane0,
+        lanes.min(n - j0 - lane0),
+        |i, k, z| {
+            assert!(i < n && k < n);
+            // SAFETY: i, k < n and lane0 + lanes ≤ 8, so lane0 + 8 (i + n k) + lanes ≤ out.len().
             unsafe {
-                std::ptr::copy_nonoverlapping(q.as_ptr(), o.add(4 * n * (n * h + k) + 4 * i), 4)
+                std::ptr::copy_nonoverlapping(
+                    z.as_ref().as_ptr(),
+                    o.add(lane0 + 8 * (i + n * k)),
+                    lanes,
+                )
             };
-        }
-    });
+        },
+    );
 }
 
 /// Two blocks of four right-hand sides as one pass of eight AVX-512 lanes (see
@@ -568,7 +574,130 @@ unsafe fn idfoza_pair_avx512(
     out: &mut [f64],
 ) {
     // SAFETY: AVX-512F is enabled here, as `Avx8` needs.
-    idfoza_blocks_impl::<Avx8>(model, data, ws, x, j0, out)
+    idfoza_blocks_impl::<Avx8>(model, data, ws, x, j0, 0, out)
+}
+
+/// The lanes `k8 + lane0 + l` (`l < 8`) whose DoF is related to both `i` and `j`, as bits
+/// (`related`: the bit sets of `FdSoData::related`, `words` words each).
+#[inline(always)]
+fn lanes_related(related: &[u64], words: usize, i: usize, j: usize, first: usize) -> u8 {
+    let both = |w: usize| related[words * i + w] & related[words * j + w];
+    let (w, sh) = (first / 64, first % 64);
+    let lo = both(w) >> sh;
+    let hi = if sh > 56 && w + 1 < words { both(w + 1) << (64 - sh) } else { 0 };
+    (lo | hi) as u8
+}
+
+/// Adds `B[i][j][k] = IDFOZA(x[:, k])[i][j]` for the `w = blk.len() / n²` columns
+/// `k = k8..k8 + w` of `x` into `blk`, block `k8` of a tensor stored by blocks of eight pages
+/// (entry `(i, j, k)` at `(k − k8) + w (i + n j)`, see [`qv_offset`]), at its structurally
+/// non-zero `(i, j)` (the DoFs `j` of root joints never): onto the entries whose `i`, `j`
+/// and `k` are pairwise related (those IDSVA-SO writes, see [`SoData::upper_halves`]) and over
+/// the others, which nothing else writes. One pass of eight AVX-512 lanes, else passes of four.
+fn idfoza_add_block(
+    model: &Model,
+    data: &Data,
+    ws: &mut IdfozaWss<'_>,
+    x: &[f64],
+    k8: usize,
+    related: (&[u64], usize),
+    blk: &mut [f64],
+) {
+    let n = model.nv;
+    let w = blk.len() / (n * n);
+    assert!((1..=8).contains(&w) && blk.len() == w * n * n && k8 + w <= n && x.len() == n * n);
+    assert!(related.0.len() == n * related.1);
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx512f() {
+        // SAFETY: the CPU supports the enabled features.
+        unsafe { return idfoza_add_avx512(model, data, ws.ws8, x, k8, related, blk) };
+    }
+    for lane0 in (0..w).step_by(4) {
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2_fma() {
+            // SAFETY: the CPU supports the enabled features.
+            unsafe { idfoza_add_avx2(model, data, ws.ws4, x, k8, lane0, related, blk) };
+            continue;
+        }
+        idfoza_add_lanes::<[f64; 4]>(model, data, ws.ws4, x, k8, lane0, related, blk)
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn idfoza_add_avx2(
+    model: &Model,
+    data: &Data,
+    ws: &mut IdfozaWs<[f64; 4]>,
+    x: &[f64],
+    k8: usize,
+    lane0: usize,
+    related: (&[u64], usize),
+    blk: &mut [f64],
+) {
+    // SAFETY: AVX2 and FMA are enabled here, as `Avx4` needs.
+    idfoza_add_lanes::<Avx4>(model, data, ws, x, k8, lane0, related, blk)
+}
+
+/// The lanes `lane0..lane0 + 4` of [`idfoza_add_block`] (those below `w`), one pass of `V`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn idfoza_add_lanes<V: Lanes>(
+    model: &Model,
+    data: &Data,
+    ws: &mut IdfozaWs<V::Arr>,
+    x: &[f64],
+    k8: usize,
+    lane0: usize,
+    (related, words): (&[u64], usize),
+    blk: &mut [f64],
+) {
+    let n = model.nv;
+    let w = blk.len() / (n * n);
+    let nl = 4.min(w - lane0);
+    let o = blk.as_mut_ptr();
+    idfoza_lanes_core::<V>(model, data, ws, x, n, k8 + lane0, nl, |i, j, z| {
+        assert!(i < n && j < n);
+        let add = lanes_related(related, words, i, j, k8 + lane0);
+        // SAFETY: i, j < n and lane0 + l < w: the offsets are below w n² = blk.len().
+        let p = unsafe { o.add(lane0 + w * (i + n * j)) };
+        for (l, &zl) in z.as_ref().iter().enumerate().take(nl) {
+            // SAFETY: as above.
+            unsafe { *p.add(l) = if add >> l & 1 != 0 { *p.add(l) + zl } else { zl } };
+        }
+    });
+}
+
+/// [`idfoza_add_block`] as one pass of eight AVX-512 lanes (masked to the `w` lanes).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn idfoza_add_avx512(
+    model: &Model,
+    data: &Data,
+    ws: &mut IdfozaWs<[f64; 8]>,
+    x: &[f64],
+    k8: usize,
+    (related, words): (&[u64], usize),
+    blk: &mut [f64],
+) {
+    use std::arch::x86_64::*;
+    let n = model.nv;
+    let w = blk.len() / (n * n);
+    let lanes = ((1u16 << w) - 1) as u8;
+    let o = blk.as_mut_ptr();
+    // SAFETY: AVX-512F is enabled here, as `Avx8` needs.
+    idfoza_lanes_core::<Avx8>(model, data, ws, x, n, k8, w, |i, j, z| {
+        assert!(i < n && j < n);
+        let add = lanes_related(related, words, i, j, k8) & lanes;
+        // SAFETY: i, j < n: the w values at o + w (i + n j) are within blk (w n² values); the
+        // loads and stores are masked to them; AVX-512F is enabled in this function.
+        unsafe {
+            let p = o.add(w * (i + n * j));
+            let old = _mm512_maskz_loadu_pd(add, p);
+            _mm512_mask_storeu_pd(p, lanes, _mm512_add_pd(old, _mm512_loadu_pd(z.as_ptr())));
+        }
+    });
 }
 
 /// Second-order derivatives of forward dynamics at `q̈ = FD(q, q̇, τ)` (eq. eqn_FD_SO_43):
@@ -644,16 +773,6 @@ unsafe fn so_products_avx2(model: &Model, data: &Data, fso: &mut FdSoData) {
     so_products(model, data, fso)
 }
 
-/// The four values at `p`.
-///
-/// # Safety
-/// `p` is valid for reading four values.
-#[inline(always)]
-unsafe fn ld4(p: *const f64) -> [f64; 4] {
-    // SAFETY: the caller's contract.
-    unsafe { p.cast::<[f64; 4]>().read_unaligned() }
-}
-
 /// Prefetches for the product group `(nj..nj + 4, nk)` of an `n×n×n` output at `t` whose
 /// right-hand sides are the same columns of the ID tensor `idt`: those columns into L1, the
 /// output columns into L2, and the mirrored output columns `(nk, j)` for the `j` with
@@ -705,8 +824,12 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
         idx: &mut fso.idx,
         rhs: &mut fso.rhs,
     };
-    let s = &mut fso.s[..];
-    assert!(s.len() == 4 * n2 * n.div_ceil(4) && fso.s4.len() == 8 * n2);
+    // S and s8 from their first 64-byte aligned values (each entry's eight lanes one line).
+    let off = fso.s.as_ptr().align_offset(64).min(8);
+    let s = &mut fso.s[off..];
+    let off = fso.s8.as_ptr().align_offset(64).min(8);
+    let s8 = &mut fso.s8[off..off + 8 * n2];
+    assert!(s.len() >= 8 * n2 * n.div_ceil(8));
     let dof_joint = &model.dof_joint;
     // DoFs of different joints commute (product of the joints' configuration spaces).
     let commute = |j: usize, k: usize| dof_joint[j] != dof_joint[k];
@@ -750,149 +873,170 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             let b = jl.map(|j| idt[n * (j + n * k)..].as_ptr());
             // SAFETY: the columns (j, k) of ID_vv (n values each, rows l < n); the outputs are
             // distinct columns of d2qdd_dv2.
-            unsafe { pr.solve_group_in_place(n, b, 1, false, out, mirror) };
+            unsafe { pr.solve_group_in_place(n, b, 1, false, 0, out, mirror) };
         }
     }
-    // ∂²q̈/∂q²: −M⁻¹(ID_qq + A + A^R) with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k] for the j of
-    // `FdSoData::qj` (A vanishes for the others), held in S by qq blocks of four of them
-    // (packed into `xq` first). Columns j ≤ k (and the non-commuting j > k of k's joint), the
-    // four j of a qq block at a time; rows related to one of the j or to k. The k run in
-    // blocks of four inside the loop over the qq blocks (`FdSoData::qq_groups`), so that the
-    // A^R entries of a group (qq block of k in S, pages j) are read by the four k of the block
-    // while they are in L1. Each group prefetches the next one's inputs and output columns.
-    let (qj, qj_pos) = (&fso.qj[..], &fso.qj_pos[..]);
+    // ∂²q̈/∂q² (eq. eqn_FD_SO_43): column (j, k) is −M⁻¹(ID_qq[:, j, k] + A[:, j, k] + A[:, k, j])
+    // with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k] = (∂M/∂q_k · ∂q̈/∂q_j)_i, for the j and k of
+    // `FdSoData::qj` (the others vanish). A is held in S by blocks of eight j (packed into `xq`
+    // first). Each column is taken as T_j[:, k] + T_k[:, j] with T_j[:, k] = −M⁻¹ A'[:, j, k],
+    // A' being A with ID_qq folded in where j ≤ k (`A'[:, j, j] = 2 A[:, j, j] + ID_qq[:, j, j]`),
+    // so that every product reads its right-hand side from S in place: by qq blocks of four j
+    // (ascending) and pages k (descending), T_j[:, k] is stored into the output column (j, k)
+    // where j ≤ k and added into the column (k, j) where j > k (which that order has already
+    // written), the mirror (j, k) getting the sum. Rows related to k: A[:, j, k] and
+    // ID_qq[:, j, k] vanish elsewhere. DoFs of one joint need not commute: for such a pair
+    // j < k the column (k, j) is then (j, k) − M⁻¹(ID_qq[:, k, j] − ID_qq[:, j, k]).
+    let qj = &fso.qj[..];
     let nqb = qj.len().div_ceil(4);
     for (c, &j) in qj.iter().enumerate() {
         let j = j as usize;
         fso.xq[n * c..n * (c + 1)].copy_from_slice(&data.dqdd_dq.as_slice()[n * j..n * (j + 1)]);
     }
     let mut ws = IdfozaWss { ws4: &mut fso.ws4, ws8: &mut fso.ws8 };
-    for (b, blks) in s[..4 * n2 * nqb].chunks_mut(8 * n2).enumerate() {
+    for (b, blks) in s.chunks_exact_mut(8 * n2).take(nqb.div_ceil(2)).enumerate() {
         idfoza_blocks(model, data, &mut ws, &fso.xq, 8 * b, blks);
     }
+    // Offset in S of lane p of entry (l, k) (p a position in `qj`).
+    let s_at = |p: usize, l: usize, k: usize| 8 * n2 * (p / 8) + p % 8 + 8 * (l + n * k);
     {
         let idt = fso.id.d2tau_dq2().as_slice();
+        // The fold, j ≤ k, rows related to both. IDFOZA writes every entry (l, k) of S related
+        // to k but for the k of root joints (∂M/∂q_k = 0), whose entries are only ever set
+        // here.
+        for (pk, &k) in qj.iter().enumerate() {
+            let k = k as usize;
+            for (pj, &j) in qj[..=pk].iter().enumerate() {
+                let j = j as usize;
+                pr.build_set(pr.related(j), pr.related(k), true);
+                let id = &idt[n * j + n2 * k..n * j + n2 * k + n];
+                let (root_k, diag) = (fso.root[k], j == k);
+                for_each_row(pr.set, |l| {
+                    let x = &mut s[s_at(pj, l, k)];
+                    *x = id[l]
+                        + match (root_k, diag) {
+                            (true, _) => 0.0,
+                            (false, true) => 2.0 * *x,
+                            (false, false) => *x,
+                        };
+                });
+            }
+        }
         let s = &*s;
-        let groups = &fso.qq_groups[..];
-        // The DoFs of qq block b (the last repeated past the end of `qj`) and their number.
-        let block = |b: usize| -> ([usize; 4], usize) {
+        // Group (b, k): outputs, mirrors and accumulated lanes (see above).
+        let group = |t: &mut Tensor3, b: usize, k: usize| {
             let w = 4.min(qj.len() - 4 * b);
-            (std::array::from_fn(|u| qj[4 * b + u.min(w - 1)] as usize), w)
-        };
-        for (g, &[b, k]) in groups.iter().enumerate() {
-            let (b, k) = (b as usize, k as usize);
-            let kp = qj_pos[k] as usize;
-            // The next group's inputs into L1 and its outputs into L2 while this one runs.
-            if let Some(&[nb, nk]) = groups.get(g + 1) {
-                let (nb, nk) = (nb as usize, nk as usize);
-                let (njl, nw) = block(nb);
-                let t = fso.d2qdd_dq2.as_slice().as_ptr();
-                prefetch_group(n, idt, t, &njl[..nw], nk, |j| j < nk && commute(j, nk));
-                prefetch::<TO_L1>(s.as_ptr().wrapping_add(4 * n2 * nb + 4 * n * nk), 4 * n);
-                let nkp = qj_pos[nk] as usize;
-                if nb != b || nkp / 4 != kp / 4 {
-                    for &j in &njl[..nw] {
-                        let p = s.as_ptr().wrapping_add(4 * n2 * (nkp / 4) + 4 * n * j);
-                        prefetch::<TO_L1>(p, 4 * n);
+            let (mut out, mut mirror, mut acc) = ([std::ptr::null_mut(); 4], none, 0u8);
+            for (u, &j) in qj[4 * b..4 * b + w].iter().enumerate() {
+                let j = j as usize;
+                if j <= k {
+                    out[u] = col(t, j, k);
+                } else {
+                    (out[u], acc) = (col(t, k, j), acc | 1 << u);
+                    if commute(j, k) {
+                        mirror[u] = col(t, j, k);
                     }
                 }
             }
-            let (jl, w) = block(b);
-            pr.build_set(&fso.qq_rel[fso.words * b..fso.words * (b + 1)], pr.related(k), false);
-            // Lanes j > k of other joints are not stored: their ID column is in the lower half
-            // (not computed), and the column comes from group (·, j) as the mirror of (k, j).
-            let out = std::array::from_fn(|u| {
-                let j = jl[u];
-                if u < w && (j <= k || !commute(j, k)) {
-                    col(&mut fso.d2qdd_dq2, j, k)
-                } else {
-                    std::ptr::null_mut()
+            (out, mirror, acc)
+        };
+        let groups = (0..nqb).flat_map(|b| qj.iter().rev().map(move |&k| (b, k as usize)));
+        let mut next = groups.clone().skip(1);
+        for (b, k) in groups {
+            // The next group's right-hand sides into L1 and its outputs into L2.
+            if let Some((nb, nk)) = next.next() {
+                prefetch::<TO_L1>(s.as_ptr().wrapping_add(s_at(4 * nb, 0, nk)), 8 * n);
+                let (o, m, _) = group(&mut fso.d2qdd_dq2, nb, nk);
+                for p in o.into_iter().chain(m).filter(|p| !p.is_null()) {
+                    prefetch::<TO_L2>(p, n);
                 }
-            });
-            let mirror = std::array::from_fn(|u| {
-                let j = jl[u];
-                if u < w && j < k && commute(j, k) {
-                    col(&mut fso.d2qdd_dq2, k, j)
-                } else {
-                    std::ptr::null_mut()
-                }
-            });
-            let val = |l| {
-                // SAFETY: l, k and the lanes' j < n, b and kp / 4 < nqb: the block entries are
-                // within s (4 n² per qq block), the ID entries within n³.
-                unsafe {
-                    // A: IDFOZA(∂q̈/∂q[:, jl[u]])[l][k], the lanes of one qq block.
-                    let a = ld4(s.as_ptr().add(4 * n2 * b + 4 * l + 4 * n * k));
-                    // A^R: IDFOZA(∂q̈/∂q[:, k])[l][jl[u]].
-                    let ar = s.as_ptr().add(4 * n2 * (kp / 4) + kp % 4 + 4 * l);
-                    let id = idt.as_ptr().add(l + n2 * k);
-                    std::array::from_fn(|u| *id.add(n * jl[u]) + a[u] + *ar.add(4 * n * jl[u]))
-                }
+            }
+            let (out, mirror, acc) = group(&mut fso.d2qdd_dq2, b, k);
+            pr.build_set(pr.related(k), pr.related(k), false);
+            let p = s[s_at(4 * b, 0, k)..].as_ptr();
+            // Only the pages of root joints can be all zero (in the lanes j > k).
+            let check = fso.root[k];
+            // SAFETY: lane u of row l at p + u + 8 l, within S (4 b + u < 8 ⌈nv/8⌉, l < n); the
+            // outputs are distinct columns of d2qdd_dq2 (the accumulated ones written before).
+            unsafe {
+                let b = [p, p.add(1), p.add(2), p.add(3)];
+                pr.solve_group_in_place(n, b, 8, check, acc, out, mirror)
             };
-            // SAFETY: rows l < n and lanes j < n index the n³ tensors; the outputs are distinct
-            // columns of d2qdd_dq2.
-            unsafe { pr.solve_group(n, val, out, mirror) };
+        }
+        // The pairs of DoFs of one joint that need not commute.
+        for (pk, &k) in qj.iter().enumerate() {
+            let k = k as usize;
+            for &j in qj[..pk].iter().filter(|&&j| !commute(j as usize, k)) {
+                let j = j as usize;
+                let (jk, kj) = (col(&mut fso.d2qdd_dq2, j, k), col(&mut fso.d2qdd_dq2, k, j));
+                // SAFETY: two distinct columns of n values.
+                unsafe { std::ptr::copy_nonoverlapping(jk, kj, n) };
+                pr.build_set(pr.related(j), pr.related(k), false);
+                // ID_qq[:, k, j] − ID_qq[:, j, k] in lane 0.
+                let val =
+                    |l: usize| [idt[l + n * k + n2 * j] - idt[l + n * j + n2 * k], 0.0, 0.0, 0.0];
+                let out = [kj, std::ptr::null_mut(), std::ptr::null_mut(), std::ptr::null_mut()];
+                // SAFETY: rows l < n; the output is a column of d2qdd_dq2, accumulated.
+                unsafe { pr.solve_group(n, val, 1, out, none) };
+            }
         }
     }
-    // ∂²q̈/∂q∂q̇: −M⁻¹(ID_qv + B) with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j]; columns
-    // (j, k0..k0 + 4) for every j but the DoFs of root joints (zero columns, see
-    // `FdSoData::root`), by k0: IDFOZA of the eight columns k8.. is computed into the
-    // cache-resident blocks `s4` (at u + 4 i + 4 n j + 4 n² h for k = k8 + 4 h + u) just before
-    // they are used. Rows related to j.
+    // ∂²q̈/∂q∂q̇: −M⁻¹(ID_qv + B) with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j]. IDSVA-SO has
+    // stored ID_qv by blocks of eight pages k (see `qv_offset`); IDFOZA of the columns
+    // k8..k8 + w of ∂q̈/∂q̇ adds B into block k8 in place (see `idfoza_add_block`), and the
+    // products read its columns in place while it is in the cache. Columns (j, k0..k0 + 4)
+    // for every j but the DoFs of root joints (zero columns, see `FdSoData::root`); rows
+    // related to j.
     {
-        let idt = fso.id.d2tau_dqdv().as_slice();
+        let qv = fso.id.d2tau_dqdv_mut().as_mut_slice();
         for k8 in (0..n).step_by(8) {
-            let nb = if k8 + 4 < n { 2 } else { 1 };
-            let blks = &mut fso.s4[..4 * n2 * nb];
-            idfoza_blocks(model, data, &mut ws, data.dqdd_dv.as_slice(), k8, blks);
-            for (h, s4) in fso.s4[..4 * n2 * nb].chunks_exact(4 * n2).enumerate() {
-                let k0 = k8 + 4 * h;
-                let w = 4.min(n - k0);
-                let kl = lanes(k0, w);
-                for j in (0..n).filter(|&j| !fso.root[j]) {
-                    // The next group's ID columns into L1 and its outputs into L2.
+            let w = (n - k8).min(8);
+            let blk = &mut qv[n2 * k8..n2 * (k8 + w)];
+            let rel = (&fso.related[..], fso.words);
+            idfoza_add_block(model, data, &mut ws, data.dqdd_dv.as_slice(), k8, rel, blk);
+            debug_assert_eq!(qv_offset(n, 0, 0, k8), n2 * k8);
+            let blk = blk.as_ptr();
+            for k0 in (k8..k8 + w).step_by(4) {
+                let wl = 4.min(n - k0);
+                let roots = &fso.root;
+                for j in (0..n).filter(|&j| !roots[j]) {
+                    // The next group's outputs into L2.
                     if j + 1 < n {
                         let t = fso.d2qdd_dqdv.as_slice().as_ptr();
-                        for k in k0..k0 + w {
-                            prefetch::<TO_L1>(idt.as_ptr().wrapping_add(n * (j + 1 + n * k)), n);
+                        for k in k0..k0 + wl {
                             prefetch::<TO_L2>(t.wrapping_add(n * (j + 1 + n * k)), n);
                         }
                     }
                     pr.build_set(pr.related(j), pr.related(j), false);
                     let out = std::array::from_fn(|u| {
-                        if u < w {
+                        if u < wl {
                             col(&mut fso.d2qdd_dqdv, j, k0 + u)
                         } else {
                             std::ptr::null_mut()
                         }
                     });
-                    let val = |l| {
-                        // SAFETY: l, j and the lanes' k < n; idt holds n³ values, s4 4 n².
-                        unsafe {
-                            let b = ld4(s4.as_ptr().add(4 * l + 4 * n * j));
-                            let id = idt.as_ptr().add(l + n * j);
-                            std::array::from_fn(|u| *id.add(n2 * kl[u]) + b[u])
-                        }
-                    };
-                    // SAFETY: as above (s4 has 4 n² values; its lanes past nv are zero).
-                    unsafe { pr.solve_group(n, val, out, none) };
+                    // Entry (l, j, k0 + u) at b[u] + w l (lanes past wl repeat the last).
+                    let b = std::array::from_fn(|u| {
+                        blk.wrapping_add(k0 - k8 + u.min(wl - 1) + w * n * j)
+                    });
+                    // SAFETY: rows l < n of the columns (j, k0 + u) of the block (w n² values,
+                    // (k0 − k8 + u) + w (l + n j) < w n²); the outputs are distinct columns of
+                    // d2qdd_dqdv.
+                    unsafe { pr.solve_group_in_place(n, b, w, false, 0, out, none) };
                 }
             }
         }
     }
     // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k]: rows i ≤ j of the columns
-    // (j0..j0 + 4, k), by j0, with IDFOZA of the columns j8..j8 + 8 into `s4` (at
-    // u + 4 i + 4 n k + 4 n² h for j = j8 + 4 h + u); rows of C related to k. The pages k of
+    // (j0..j0 + 4, k), by j0, with IDFOZA of the columns j8..j8 + 8 into `s8` (at
+    // u + 8 i + 8 n k for j = j8 + u); rows of C related to k. The pages k of
     // the DoFs of root joints vanish (see `FdSoData::root`). The strict lower triangles come
     // from the symmetry of the pages: each group's columns, just computed and in L1, are copied
     // transposed into the rows j0..j0 + 4 of the columns before j0.
     {
         for j8 in (0..n).step_by(8) {
-            let nb = if j8 + 4 < n { 2 } else { 1 };
-            let blks = &mut fso.s4[..4 * n2 * nb];
-            idfoza_blocks(model, data, &mut ws, data.minv.as_slice(), j8, blks);
-            for (h, s4) in fso.s4[..4 * n2 * nb].chunks_exact(4 * n2).enumerate() {
-                let j0 = j8 + 4 * h;
+            idfoza_blocks(model, data, &mut ws, data.minv.as_slice(), j8, s8);
+            for j0 in (j8..n.min(j8 + 8)).step_by(4) {
                 let w = 4.min(n - j0);
                 for k in (0..n).filter(|&k| !fso.root[k]) {
                     // The next group's outputs (rows < j0 + w of columns j0..j0 + w) into L2.
@@ -902,15 +1046,16 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
                     }
                     pr.build_set(pr.related(k), pr.related(k), false);
                     let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dtaudq, j0 + u, k));
-                    let b = s4[4 * n * k..].as_ptr();
-                    // SAFETY: the rows l < n of page k of s4 (4 n² values) at b + u + 4 l; the
+                    let b = s8[j0 - j8 + 8 * n * k..].as_ptr();
+                    // SAFETY: the rows l < n of page k of s8 (8 n² values) at b + u + 8 l; the
                     // outputs are distinct columns of d2qdd_dtaudq.
                     unsafe {
                         pr.solve_group_in_place(
                             j0 + w,
                             [b, b.add(1), b.add(2), b.add(3)],
-                            4,
+                            8,
                             true,
+                            0,
                             out,
                             none,
                         )
@@ -1031,6 +1176,50 @@ mod tests {
 
     /// A workspace made for a model with the same `nv` but another tree is refused, and the
     /// caller's data is left as it was.
+    /// A workspace used for many states gives what a fresh one gives at each: no
+    /// call leaves anything behind that the next one reads (the products add into parts of
+    /// the ID tensors in place, see `idfoza_add_block`). On random trees with joints of every
+    /// kind, with and without a free-flyer, and external forces on every other call; also
+    /// with the four- and eight-lane kernels.
+    #[test]
+    fn reused_workspace_matches_a_fresh_one() {
+        use crate::simd::FORCE_AVX2;
+        use std::sync::atomic::Ordering::Relaxed;
+        let mut rng = Rng::new(31);
+        for (seed, avx2) in [(3, false), (4, false), (5, true), (6, true)] {
+            FORCE_AVX2.store(avx2, Relaxed);
+            let m = random_tree(12, seed, seed % 2 == 0);
+            let n = m.nv;
+            let (mut d, mut reused) = (Data::new(&m), FdSoData::new(&m));
+            for call in 0..4 {
+                let q = m.random_configuration(&mut rng);
+                let [v, tau] = [0; 2].map(|_| DVector::from_fn(n, |_, _| rng.range(-2.0, 2.0)));
+                let fext: Vec<Force> = (0..m.njoints())
+                    .map(|_| {
+                        Force::from_vec6(&nalgebra::Vector6::from_fn(|_, _| rng.range(-1.0, 1.0)))
+                    })
+                    .collect();
+                let fext = (call % 2 == 1).then_some(&fext[..]);
+                fd_so_derivatives(&m, &mut d, &mut reused, &q, &v, &tau, fext).unwrap();
+                let mut fresh = FdSoData::new(&m);
+                fd_so_derivatives(&m, &mut Data::new(&m), &mut fresh, &q, &v, &tau, fext).unwrap();
+                for (a, b) in [
+                    (reused.d2qdd_dq2(), fresh.d2qdd_dq2()),
+                    (reused.d2qdd_dv2(), fresh.d2qdd_dv2()),
+                    (reused.d2qdd_dqdv(), fresh.d2qdd_dqdv()),
+                    (reused.d2qdd_dtaudq(), fresh.d2qdd_dtaudq()),
+                ] {
+                    // Equal up to rounding (another test may switch the kernels meanwhile).
+                    let scale = b.as_slice().iter().fold(1.0f64, |s, x| s.max(x.abs()));
+                    let err = a.as_slice().iter().zip(b.as_slice());
+                    let err = err.fold(0.0f64, |e, (x, y)| e.max((x - y).abs()));
+                    assert!(err <= 1e-12 * scale, "tree {seed}, call {call}: {err:e}");
+                }
+            }
+        }
+        FORCE_AVX2.store(false, Relaxed);
+    }
+
     #[test]
     fn fd_so_workspace_of_another_tree_is_refused() {
         let a = random_tree(5, 1, false);

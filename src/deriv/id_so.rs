@@ -29,7 +29,8 @@ pub struct SoData {
     /// Upper halves only (the workspaces of [`SoData::upper_halves`]): the entries `(i, j, k)`
     /// with `j > k` of `∂²τ/∂q̇²`, those of `∂²τ/∂q²` with `j > k` whose DoFs `j` and `k` belong
     /// to different joints, and those of `∂²τ/∂q∂q̇` with `root[j]`, are never written (they
-    /// stay zero).
+    /// stay zero); and `∂²τ/∂q∂q̇` is stored by blocks of eight pages (see [`qv_offset`]), not
+    /// column-major.
     upper: bool,
     /// `root[j]`: DoF `j` belongs to a joint attached to the world.
     root: Vec<bool>,
@@ -62,7 +63,7 @@ impl SoData {
     /// and the external forces, neither of which depends on `q̇`). The others stay zero. For
     /// the forward-dynamics derivatives, whose products read only those columns: IDSVA-SO's
     /// scattered writes are a large part of its memory traffic once its tensors no longer fit
-    /// in the cache.
+    /// in the cache. Its `∂²τ/∂q∂q̇` is stored by blocks of eight pages (see [`qv_offset`]).
     pub(crate) fn upper_halves(model: &Model) -> Self {
         Self::build(model, false, true)
     }
@@ -134,6 +135,9 @@ impl SoData {
     }
     pub(crate) fn d2tau_dq2_mut(&mut self) -> &mut Tensor3 {
         &mut self.d2tau_dq2
+    }
+    pub(crate) fn d2tau_dqdv_mut(&mut self) -> &mut Tensor3 {
+        &mut self.d2tau_dqdv
     }
     /// `T[(i, j, k)] = ∂²τ_i/∂q̇_j∂q̇_k`.
     pub fn d2tau_dv2(&self) -> &Tensor3 {
@@ -534,6 +538,18 @@ fn at(n: usize, i: usize, j: usize, k: usize) -> usize {
     i + n * (j + n * k)
 }
 
+/// Offset of `(i, j, k)` in an `n×n×n` tensor stored by blocks of eight pages `k` (the last
+/// block holding the `w = n − k8 ≤ 8` pages left), the pages of a block interleaved:
+/// `n² k8 + (k − k8) + w (i + n j)` with `k8 = 8 ⌊k/8⌋` and `w = min(8, n − k8)`. The layout of
+/// `∂²τ/∂q∂q̇` in [`SoData::upper_halves`] workspaces: the eight values `(i, j, k8..k8 + w)` are
+/// contiguous, as the products of the forward-dynamics derivatives read them.
+#[inline(always)]
+pub(crate) fn qv_offset(n: usize, i: usize, j: usize, k: usize) -> usize {
+    let k8 = k & !7;
+    let w = (n - k8).min(8);
+    n * n * k8 + (k - k8) + w * (i + n * j)
+}
+
 /// The backward step compiled for AVX2/FMA (the 6-vector kernels vectorise 4 wide).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
@@ -591,6 +607,10 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
     let fc = v6f(&data.ofc[i]);
     let dofs = |j: usize| model.idx_v[j]..model.idx_v[j] + model.nvs[j];
     let anc = |j: usize| &anc_dofs[anc_start[j]..anc_start[j + 1]];
+    // Offset of ∂²τ/∂q∂q̇ entry (a, b, c): column-major, or with `UP` by blocks of 8 pages (see
+    // `qv_offset`).
+    let qvi =
+        |a: usize, b: usize, c: usize| if UP { qv_offset(n, a, b, c) } else { at(n, a, b, c) };
     for ip in dofs(i) {
         let o = i_ops::<K>(&ic, &bc, &bct, &fc, &dof[ip]);
         let mut j = i;
@@ -658,7 +678,7 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
                     }
                     let val = dp[1]; // cross 1A
                     if !skip_j {
-                        set(qv, at(n, ip, kr, jt), val);
+                        set(qv, qvi(ip, kr, jt), val);
                     }
                     if !j_is_i {
                         let dpk = K::matvec(&rz, psk);
@@ -673,9 +693,9 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
                             set(vv, at(n, jt, ip, kr), v1e);
                         }
                         if !skip_j {
-                            set(qv, at(n, jt, kr, ip), -val); // cross 2A
+                            set(qv, qvi(jt, kr, ip), -val); // cross 2A
                         }
-                        set(qv, at(n, jt, ip, kr), ds[6] + dpk[1]); // cross 1C
+                        set(qv, qvi(jt, ip, kr), ds[6] + dpk[1]); // cross 1C
                         if DM {
                             let vm = ds[8]; // ∂M 1C/2C
                             set(dm, at(n, kr, jt, ip), vm);
@@ -719,10 +739,10 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
                     // Upper halves: no ∂²τ/∂q∂q̇ columns of root DoFs.
                     let skip_k = UP && k_root;
                     if !skip_k {
-                        set(qv, o_ij + nk, cval); // (ip, kr, jt)
+                        set(qv, qvi(ip, kr, jt), cval);
                     }
-                    set(qv, o_i_j + nnk, ds[2] + dpk[0]); // (ip, jt, kr)
-                    set(qv, kr + o_ji + n * n * ip, ds[3]); // (kr, jt, ip)
+                    set(qv, qvi(ip, jt, kr), ds[2] + dpk[0]);
+                    set(qv, qvi(kr, jt, ip), ds[3]);
                     if DM {
                         // ∂M/∂q 1B + 2B mirror
                         set(dm, kr + n * ip + n * n * jt, ds[4]); // (kr, ip, jt)
@@ -747,10 +767,10 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
                             set(vv, jt + n * ip + nnk, -uval); // (jt, ip, kr)
                         }
                         if !skip_k {
-                            set(qv, jt + nk + n * n * ip, -cval); // cross 2A: (jt, kr, ip)
+                            set(qv, qvi(jt, kr, ip), -cval); // cross 2A
                         }
-                        set(qv, jt + n * ip + nnk, ds[6] + dpk[1]); // cross 1C: (jt, ip, kr)
-                        set(qv, kr + n * ip + n * n * jt, ds[7]); // cross 2C: (kr, ip, jt)
+                        set(qv, qvi(jt, ip, kr), ds[6] + dpk[1]); // cross 1C
+                        set(qv, qvi(kr, ip, jt), ds[7]); // cross 2C
                         if DM {
                             set(dm, kr + o_ji + n * n * ip, ds[8]); // ∂M 1C/2C: (kr, jt, ip)
                             set(dm, jt + nk + n * n * ip, ds[8]); // (jt, kr, ip)
@@ -797,7 +817,8 @@ mod tests {
                 assert_eq!(uq, if keep_qq { fq } else { 0.0 }, "∂²τ/∂q² {i} {j} {k}");
                 let (fv, uv) = (full.d2tau_dv2()[(i, j, k)], up.d2tau_dv2()[(i, j, k)]);
                 assert_eq!(uv, if j <= k { fv } else { 0.0 }, "∂²τ/∂q̇² {i} {j} {k}");
-                let (fx, ux) = (full.d2tau_dqdv()[(i, j, k)], up.d2tau_dqdv()[(i, j, k)]);
+                let fx = full.d2tau_dqdv()[(i, j, k)];
+                let ux = up.d2tau_dqdv().as_slice()[qv_offset(n, i, j, k)];
                 let root = m.parents[joint(j)] == 0;
                 assert_eq!(ux, if root { 0.0 } else { fx }, "∂²τ/∂q∂q̇ {i} {j} {k}");
                 // The left-out columns vanish (up to rounding).
@@ -815,5 +836,37 @@ mod tests {
         }
         // Some multi-DoF joint blocks below the diagonal (kept) were exercised.
         assert!(total_joint_lower > 0 && root_qv > 0);
+    }
+
+    /// The entries of `∂²τ/∂q∂q̇` that the upper-half workspace writes are exactly the `(i, j, k)`
+    /// with `i`, `j` and `k` pairwise related (on one root path) and `j` not a DoF of a joint
+    /// attached to the world: the forward-dynamics products add their `∂M/∂q` terms to the
+    /// others' lanes and overwrite the rest (see `fd::so_products`), which is right only if no
+    /// other entry is ever written. Checked by filling the tensor with NaN first, on random
+    /// trees with joints of every kind.
+    #[test]
+    fn upper_halves_write_exactly_the_chain_entries_of_the_cross_tensor() {
+        let mut rng = Rng::new(6);
+        for seed in 1..9 {
+            let m = random_tree(8, seed, seed % 2 == 1);
+            let n = m.nv;
+            let related = |a: usize, b: usize| {
+                m.dof_joint[a] == m.dof_joint[b]
+                    || m.ancestors_of_dof(a).contains(&b)
+                    || m.ancestors_of_dof(b).contains(&a)
+            };
+            let q = m.random_configuration(&mut rng);
+            let v = DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
+            let a = DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
+            let (mut d, mut up) = (Data::new(&m), SoData::upper_halves(&m));
+            up.d2tau_dqdv.as_mut_slice().fill(f64::NAN);
+            id_so_derivatives(&m, &mut d, &mut up, &q, &v, &a, None).unwrap();
+            for (i, j, k) in (0..n * n * n).map(|x| (x % n, x / n % n, x / (n * n))) {
+                let chain = related(i, j) && related(i, k) && related(j, k);
+                let root = m.parents[m.dof_joint[j]] == 0;
+                let written = !up.d2tau_dqdv.as_slice()[qv_offset(n, i, j, k)].is_nan();
+                assert_eq!(written, chain && !root, "tree {seed}: entry ({i}, {j}, {k})");
+            }
+        }
     }
 }
