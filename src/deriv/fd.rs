@@ -333,6 +333,20 @@ impl<'a> Products<'a> {
     fn related4(&self, j0: usize) -> &'a [u64] {
         &self.related4[self.words * (j0 / 4)..self.words * (j0 / 4 + 1)]
     }
+    /// `set ←` the union of the related sets of the DoFs `js`, intersected with that of `k`.
+    fn build_set_union(&mut self, js: &[u32], k: usize) {
+        let related = self.related;
+        let rel = |j: usize| &related[self.words * j..self.words * (j + 1)];
+        self.set.fill(0);
+        for &j in js {
+            for (s, x) in self.set.iter_mut().zip(rel(j as usize)) {
+                *s |= x;
+            }
+        }
+        for (s, x) in self.set.iter_mut().zip(rel(k)) {
+            *s &= x;
+        }
+    }
     /// `set ← a ∪ b`, or `a ∩ b` if `and` (each `words` values).
     #[inline(always)]
     fn build_set(&mut self, a: &[u64], b: &[u64], and: bool) {
@@ -894,34 +908,40 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
         fso.xq[n * c..n * (c + 1)].copy_from_slice(&data.dqdd_dq.as_slice()[n * j..n * (j + 1)]);
     }
     let mut ws = IdfozaWss { ws4: &mut fso.ws4, ws8: &mut fso.ws8 };
-    for (b, blks) in s.chunks_exact_mut(8 * n2).take(nqb.div_ceil(2)).enumerate() {
-        idfoza_blocks(model, data, &mut ws, &fso.xq, 8 * b, blks);
+    let idt = fso.id.d2tau_dq2().as_slice();
+    for (b, blk) in s.chunks_exact_mut(8 * n2).take(nqb.div_ceil(2)).enumerate() {
+        idfoza_blocks(model, data, &mut ws, &fso.xq, 8 * b, blk);
+        // The fold into this block (just written, in the cache), by entries (l, k) of eight
+        // lanes: j ≤ k, rows related to j and k. IDFOZA writes every entry (l, k) related to k
+        // but for the k of root joints (∂M/∂q_k = 0), whose entries are only ever set here.
+        let lanes = &qj[8 * b..qj.len().min(8 * b + 8)];
+        for (pk, &k) in qj.iter().enumerate().skip(8 * b) {
+            let k = k as usize;
+            let lanes = &lanes[..lanes.len().min(pk + 1 - 8 * b)];
+            pr.build_set_union(lanes, k);
+            let root_k = fso.root[k];
+            let id = &idt[n2 * k..n2 * (k + 1)];
+            for_each_row(pr.set, |l| {
+                let line = &mut blk[8 * (l + n * k)..8 * (l + n * k) + lanes.len()];
+                for (x, &j) in line.iter_mut().zip(lanes) {
+                    let j = j as usize;
+                    if pr.related(j)[l / 64] >> (l % 64) & 1 != 0 {
+                        let f = if root_k {
+                            0.0
+                        } else if j == k {
+                            2.0
+                        } else {
+                            1.0
+                        };
+                        *x = id[l + n * j] + f * *x;
+                    }
+                }
+            });
+        }
     }
     // Offset in S of lane p of entry (l, k) (p a position in `qj`).
     let s_at = |p: usize, l: usize, k: usize| 8 * n2 * (p / 8) + p % 8 + 8 * (l + n * k);
     {
-        let idt = fso.id.d2tau_dq2().as_slice();
-        // The fold, j ≤ k, rows related to both. IDFOZA writes every entry (l, k) of S related
-        // to k but for the k of root joints (∂M/∂q_k = 0), whose entries are only ever set
-        // here.
-        for (pk, &k) in qj.iter().enumerate() {
-            let k = k as usize;
-            for (pj, &j) in qj[..=pk].iter().enumerate() {
-                let j = j as usize;
-                pr.build_set(pr.related(j), pr.related(k), true);
-                let id = &idt[n * j + n2 * k..n * j + n2 * k + n];
-                let (root_k, diag) = (fso.root[k], j == k);
-                for_each_row(pr.set, |l| {
-                    let x = &mut s[s_at(pj, l, k)];
-                    *x = id[l]
-                        + match (root_k, diag) {
-                            (true, _) => 0.0,
-                            (false, true) => 2.0 * *x,
-                            (false, false) => *x,
-                        };
-                });
-            }
-        }
         let s = &*s;
         // Group (b, k): outputs, mirrors and accumulated lanes (see above).
         let group = |t: &mut Tensor3, b: usize, k: usize| {
