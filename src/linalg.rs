@@ -678,15 +678,15 @@ impl Gemm4<'_> {
 
 /// `out[u][r] ← −Σ_t A[r, idx[t]] · B[idx[t], u]` for `r < rows` (or `out[u][r] − Σ …` for the
 /// lanes of `g.accumulate`), and the same into `mirror[u]`, for the lanes `u < 4` whose
-/// pointer is non-null: a product whose inner dimension is only the
-/// (structurally or numerically) non-zero rows of the right-hand sides, vectorised down the
+/// pointer is non-null: a product whose inner dimension is only the (structurally or
+/// numerically) non-zero rows of the right-hand sides, vectorised down the
 /// contiguous columns of `A` and of the outputs, four output columns sharing each load of `A`.
 ///
 /// # Safety
 /// Every non-null `out[u]` and `mirror[u]` is valid for writing `rows` values (and `out[u]` for
 /// reading them in the lanes of `g.accumulate`) and does not overlap `g.a`, what `g.b`
-/// addresses or another output (a null `out[u]` has no accumulate bit); `B[idx[t], u]` (see [`Gemm4`]) is readable for every `t`,
-/// `u < 4`; every `idx[t] < g.a.len() / g.lda` (a column of `A`; checked in debug builds only,
+/// addresses or another output (a null `out[u]` has no accumulate bit); `B[idx[t], u]` (see
+/// [`Gemm4`]) is readable for every `t`, `u < 4`; every `idx[t] < g.a.len() / g.lda` (a column of `A`; checked in debug builds only,
 /// as this is called once per group of four columns in the hot loops of FD-SO).
 pub(crate) unsafe fn neg_gemm4_sparse(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror: &[*mut f64; 4]) {
     let padded = g.rows.div_ceil(8) * 8;

@@ -491,10 +491,10 @@ struct IdfozaWss<'a> {
 }
 
 /// `out[u + 8 i + 8 n k] ← IDFOZA(x[:, j0 + u])[i][k]` (`u < 8`, `out` of `8 n²` values) for
-/// the structurally non-zero `(i, k)` (zero in the lanes past `nv`; the entries of the DoFs
-/// `k` of root joints, zero, are never written, see [`idfoza_lanes_core`]): the eight lanes of
-/// an entry are one 64-byte line when `out` is so aligned. One pass of eight lanes with
-/// AVX-512F, else passes of four lanes (AVX2 when available).
+/// the structurally non-zero `(i, k)` (the entries of the DoFs `k` of root joints, zero, are
+/// never written, see [`idfoza_lanes_core`]; nor are the lanes past `nv`, which stay zero): the
+/// eight lanes of an entry are one 64-byte line when `out` is so aligned (see
+/// [`idfoza_add_block`]).
 fn idfoza_blocks(
     model: &Model,
     data: &Data,
@@ -505,90 +505,7 @@ fn idfoza_blocks(
 ) {
     let n = model.nv;
     assert!(out.len() == 8 * n * n && j0 < n);
-    #[cfg(target_arch = "x86_64")]
-    if crate::simd::avx512f() {
-        // SAFETY: the CPU supports the enabled features.
-        unsafe { return idfoza_pair_avx512(model, data, ws.ws8, x, j0, out) };
-    }
-    for lane0 in (0..8).step_by(4).filter(|&l| j0 + l < n) {
-        #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2_fma() {
-            // SAFETY: the CPU supports the enabled features.
-            unsafe { idfoza_block_avx2(model, data, ws.ws4, x, j0, lane0, out) };
-            continue;
-        }
-        idfoza_blocks_impl::<[f64; 4]>(model, data, ws.ws4, x, j0, lane0, out)
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn idfoza_block_avx2(
-    model: &Model,
-    data: &Data,
-    ws: &mut IdfozaWs<[f64; 4]>,
-    x: &[f64],
-    j0: usize,
-    lane0: usize,
-    out: &mut [f64],
-) {
-    // SAFETY: AVX2 and FMA are enabled here, as `Avx4` needs.
-    idfoza_blocks_impl::<Avx4>(model, data, ws, x, j0, lane0, out)
-}
-
-/// The lanes `lane0..lane0 + L` of [`idfoza_blocks`] in one pass of `V`'s `L` lanes (`lane0 +
-/// L ≤ 8`).
-#[inline(always)]
-fn idfoza_blocks_impl<V: Lanes>(
-    model: &Model,
-    data: &Data,
-    ws: &mut IdfozaWs<V::Arr>,
-    x: &[f64],
-    j0: usize,
-    lane0: usize,
-    out: &mut [f64],
-) {
-    let n = model.nv;
-    let lanes = V::Arr::default().as_ref().len();
-    assert!(out.len() == 8 * n * n && lane0 + lanes <= 8 && j0 + lane0 < n && x.len() == n * n);
-    let o = out.as_mut_ptr();
-    // Lanes past nv read no column and come out zero.
-    idfoza_lanes_core::<V>(
-        model,
-        data,
-        ws,
-        x,
-        n,
-        j0 + lane0,
-        lanes.min(n - j0 - lane0),
-        |i, k, z| {
-            assert!(i < n && k < n);
-            // SAFETY: i, k < n and lane0 + lanes ≤ 8, so lane0 + 8 (i + n k) + lanes ≤ out.len().
-            unsafe {
-                std::ptr::copy_nonoverlapping(
-                    z.as_ref().as_ptr(),
-                    o.add(lane0 + 8 * (i + n * k)),
-                    lanes,
-                )
-            };
-        },
-    );
-}
-
-/// Two blocks of four right-hand sides as one pass of eight AVX-512 lanes (see
-/// [`idfoza_blocks`]).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2,fma")]
-unsafe fn idfoza_pair_avx512(
-    model: &Model,
-    data: &Data,
-    ws: &mut IdfozaWs<[f64; 8]>,
-    x: &[f64],
-    j0: usize,
-    out: &mut [f64],
-) {
-    // SAFETY: AVX-512F is enabled here, as `Avx8` needs.
-    idfoza_blocks_impl::<Avx8>(model, data, ws, x, j0, 0, out)
+    idfoza_add_block(model, data, ws, x, j0, 8.min(n - j0), AddMask::Over, out)
 }
 
 /// The lanes `k8 + lane0 + l` (`l < 8`) whose DoF is related to both `i` and `j`, as bits
@@ -602,38 +519,63 @@ fn lanes_related(related: &[u64], words: usize, i: usize, j: usize, first: usize
     (lo | hi) as u8
 }
 
-/// Adds `B[i][j][k] = IDFOZA(x[:, k])[i][j]` for the `w = blk.len() / n²` columns
-/// `k = k8..k8 + w` of `x` into `blk`, block `k8` of a tensor stored by blocks of eight pages
-/// (entry `(i, j, k)` at `(k − k8) + w (i + n j)`, see [`qv_offset`]), at its structurally
-/// non-zero `(i, j)` (the DoFs `j` of root joints never): onto the entries whose `i`, `j`
-/// and `k` are pairwise related (those IDSVA-SO writes, see [`SoData::upper_halves`]) and over
-/// the others, which nothing else writes. One pass of eight AVX-512 lanes, else passes of four.
+/// Which lanes of an entry `(i, j)` [`idfoza_add_block`] adds onto (the others it
+/// overwrites), and which it adds twice (none, so far).
+#[derive(Clone, Copy)]
+enum AddMask<'a> {
+    /// The lanes `first + l` whose DoF is related to both `i` and `j` (see [`lanes_related`]);
+    /// none twice.
+    Related { related: &'a [u64], words: usize, first: usize },
+    /// None: every lane is overwritten.
+    Over,
+}
+
+impl AddMask<'_> {
+    /// `(onto, twice)` for the entry `(i, j)`, as bits of the lanes.
+    #[inline(always)]
+    fn at(&self, i: usize, j: usize) -> (u8, u8) {
+        match *self {
+            AddMask::Related { related, words, first } => {
+                (lanes_related(related, words, i, j, first), 0)
+            }
+            AddMask::Over => (0, 0),
+        }
+    }
+}
+
+/// Adds `IDFOZA(x[:, j0 + l])[i][j]` for the lanes `l < w` into `blk` (`stride n²` values), at
+/// `l + stride (i + n j)`, for the structurally non-zero `(i, j)` (the DoFs `j` of root
+/// joints never): onto the lanes of `mask.at(i, j).0` (those IDSVA-SO writes: see
+/// [`SoData::upper_halves`]), twice in those of `.1`, and over the others, which nothing else
+/// writes. One pass of eight AVX-512 lanes, else passes of four.
+#[allow(clippy::too_many_arguments)]
 fn idfoza_add_block(
     model: &Model,
     data: &Data,
     ws: &mut IdfozaWss<'_>,
     x: &[f64],
-    k8: usize,
-    related: (&[u64], usize),
+    j0: usize,
+    w: usize,
+    mask: AddMask<'_>,
     blk: &mut [f64],
 ) {
     let n = model.nv;
-    let w = blk.len() / (n * n);
-    assert!((1..=8).contains(&w) && blk.len() == w * n * n && k8 + w <= n && x.len() == n * n);
-    assert!(related.0.len() == n * related.1);
+    let stride = blk.len() / (n * n);
+    assert!((1..=8).contains(&w) && w <= stride && blk.len() == stride * n * n);
+    assert!(x.len().is_multiple_of(n) && j0 + w <= x.len() / n);
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx512f() {
         // SAFETY: the CPU supports the enabled features.
-        unsafe { return idfoza_add_avx512(model, data, ws.ws8, x, k8, related, blk) };
+        unsafe { return idfoza_add_avx512(model, data, ws.ws8, x, j0, w, mask, blk) };
     }
     for lane0 in (0..w).step_by(4) {
         #[cfg(target_arch = "x86_64")]
         if crate::simd::avx2_fma() {
             // SAFETY: the CPU supports the enabled features.
-            unsafe { idfoza_add_avx2(model, data, ws.ws4, x, k8, lane0, related, blk) };
+            unsafe { idfoza_add_avx2(model, data, ws.ws4, x, j0, w, lane0, mask, blk) };
             continue;
         }
-        idfoza_add_lanes::<[f64; 4]>(model, data, ws.ws4, x, k8, lane0, related, blk)
+        idfoza_add_lanes::<[f64; 4]>(model, data, ws.ws4, x, j0, w, lane0, mask, blk)
     }
 }
 
@@ -645,13 +587,14 @@ unsafe fn idfoza_add_avx2(
     data: &Data,
     ws: &mut IdfozaWs<[f64; 4]>,
     x: &[f64],
-    k8: usize,
+    j0: usize,
+    w: usize,
     lane0: usize,
-    related: (&[u64], usize),
+    mask: AddMask<'_>,
     blk: &mut [f64],
 ) {
     // SAFETY: AVX2 and FMA are enabled here, as `Avx4` needs.
-    idfoza_add_lanes::<Avx4>(model, data, ws, x, k8, lane0, related, blk)
+    idfoza_add_lanes::<Avx4>(model, data, ws, x, j0, w, lane0, mask, blk)
 }
 
 /// The lanes `lane0..lane0 + 4` of [`idfoza_add_block`] (those below `w`), one pass of `V`.
@@ -662,23 +605,26 @@ fn idfoza_add_lanes<V: Lanes>(
     data: &Data,
     ws: &mut IdfozaWs<V::Arr>,
     x: &[f64],
-    k8: usize,
+    j0: usize,
+    w: usize,
     lane0: usize,
-    (related, words): (&[u64], usize),
+    mask: AddMask<'_>,
     blk: &mut [f64],
 ) {
     let n = model.nv;
-    let w = blk.len() / (n * n);
+    let stride = blk.len() / (n * n);
     let nl = 4.min(w - lane0);
     let o = blk.as_mut_ptr();
-    idfoza_lanes_core::<V>(model, data, ws, x, n, k8 + lane0, nl, |i, j, z| {
+    idfoza_lanes_core::<V>(model, data, ws, x, n, j0 + lane0, nl, |i, j, z| {
         assert!(i < n && j < n);
-        let add = lanes_related(related, words, i, j, k8 + lane0);
-        // SAFETY: i, j < n and lane0 + l < w: the offsets are below w n² = blk.len().
-        let p = unsafe { o.add(lane0 + w * (i + n * j)) };
+        let (onto, twice) = mask.at(i, j);
+        // SAFETY: i, j < n and lane0 + l < w ≤ stride: below stride n² = blk.len().
+        let p = unsafe { o.add(lane0 + stride * (i + n * j)) };
         for (l, &zl) in z.as_ref().iter().enumerate().take(nl) {
+            let b = 1u8 << (lane0 + l);
+            let zl = if twice & b != 0 { 2.0 * zl } else { zl };
             // SAFETY: as above.
-            unsafe { *p.add(l) = if add >> l & 1 != 0 { *p.add(l) + zl } else { zl } };
+            unsafe { *p.add(l) = if onto & b != 0 { *p.add(l) + zl } else { zl } };
         }
     });
 }
@@ -686,30 +632,35 @@ fn idfoza_add_lanes<V: Lanes>(
 /// [`idfoza_add_block`] as one pass of eight AVX-512 lanes (masked to the `w` lanes).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx2,fma")]
+#[allow(clippy::too_many_arguments)]
 unsafe fn idfoza_add_avx512(
     model: &Model,
     data: &Data,
     ws: &mut IdfozaWs<[f64; 8]>,
     x: &[f64],
-    k8: usize,
-    (related, words): (&[u64], usize),
+    j0: usize,
+    w: usize,
+    mask: AddMask<'_>,
     blk: &mut [f64],
 ) {
     use std::arch::x86_64::*;
     let n = model.nv;
-    let w = blk.len() / (n * n);
+    let stride = blk.len() / (n * n);
     let lanes = ((1u16 << w) - 1) as u8;
     let o = blk.as_mut_ptr();
     // SAFETY: AVX-512F is enabled here, as `Avx8` needs.
-    idfoza_lanes_core::<Avx8>(model, data, ws, x, n, k8, w, |i, j, z| {
+    idfoza_lanes_core::<Avx8>(model, data, ws, x, n, j0, w, |i, j, z| {
         assert!(i < n && j < n);
-        let add = lanes_related(related, words, i, j, k8) & lanes;
-        // SAFETY: i, j < n: the w values at o + w (i + n j) are within blk (w n² values); the
-        // loads and stores are masked to them; AVX-512F is enabled in this function.
+        let (onto, twice) = mask.at(i, j);
+        // SAFETY: i, j < n: the w ≤ stride values at o + stride (i + n j) are within blk
+        // (stride n² values); the loads and stores are masked to them; AVX-512F is enabled in
+        // this function.
         unsafe {
-            let p = o.add(w * (i + n * j));
-            let old = _mm512_maskz_loadu_pd(add, p);
-            _mm512_mask_storeu_pd(p, lanes, _mm512_add_pd(old, _mm512_loadu_pd(z.as_ptr())));
+            let p = o.add(stride * (i + n * j));
+            let z = _mm512_loadu_pd(z.as_ptr());
+            let z = _mm512_mask_add_pd(z, twice, z, z);
+            let old = _mm512_maskz_loadu_pd(onto & lanes, p);
+            _mm512_mask_storeu_pd(p, lanes, _mm512_add_pd(old, z));
         }
     });
 }
@@ -1012,8 +963,8 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
         for k8 in (0..n).step_by(8) {
             let w = (n - k8).min(8);
             let blk = &mut qv[n2 * k8..n2 * (k8 + w)];
-            let rel = (&fso.related[..], fso.words);
-            idfoza_add_block(model, data, &mut ws, data.dqdd_dv.as_slice(), k8, rel, blk);
+            let mask = AddMask::Related { related: &fso.related, words: fso.words, first: k8 };
+            idfoza_add_block(model, data, &mut ws, data.dqdd_dv.as_slice(), k8, w, mask, blk);
             debug_assert_eq!(qv_offset(n, 0, 0, k8), n2 * k8);
             let blk = blk.as_ptr();
             for k0 in (k8..k8 + w).step_by(4) {
