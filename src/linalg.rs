@@ -636,17 +636,18 @@ pub(crate) fn prefetch<const LEVEL: i32>(p: *const f64, len: usize) {
     let _ = (p, len);
 }
 
-/// Four output columns of `−A B` where only some columns of `A` take part (see
-/// [`neg_gemm4_sparse`]).
-pub(crate) struct Gemm4<'a> {
-    /// `A`, column-major with leading dimension `lda`; every column is readable (and zero, or at
-    /// least finite, past the rows wanted) up to `rows` rounded up to a multiple of 8.
+/// One term `A B` of a [`Gemm4`] product, where only some columns of `A` take part.
+pub(crate) struct Gemm4Term<'a> {
+    /// `A`, column-major with leading dimension `lda`; each of its columns `l < cols` is
+    /// readable (and zero, or at least finite, past the rows wanted) up to the product's rows
+    /// rounded up to a multiple of 8: `lda · (cols − 1) + that ≤ a.len()` (so `lda` may be
+    /// below that when the columns that follow are readable).
     pub a: &'a [f64],
     /// Leading dimension of `a`.
     pub lda: usize,
-    /// Rows of the result.
-    pub rows: usize,
-    /// Columns `idx[t]` of `A` taking part.
+    /// The columns of `A` that `idx` may name.
+    pub cols: usize,
+    /// Columns `idx[t]` of `A` taking part (each `< cols`).
     pub idx: &'a [u32],
     /// Where `B` is read: `B[idx[t], u]` is at `b[u] + bs · key` with `key = idx[t]` if
     /// `by_row`, else `key = t` (a compacted copy).
@@ -655,12 +656,9 @@ pub(crate) struct Gemm4<'a> {
     pub bs: usize,
     /// Whether `b` is keyed by the row `idx[t]` (else by `t`).
     pub by_row: bool,
-    /// The lanes `u` (bit `u`) whose output is accumulated: `out[u] ← out[u] − A B[:, u]`
-    /// (its `rows` values read first; the mirror gets the sum).
-    pub accumulate: u8,
 }
 
-impl Gemm4<'_> {
+impl Gemm4Term<'_> {
     /// `B[idx[t], u]` for the four lanes.
     ///
     /// # Safety
@@ -676,31 +674,45 @@ impl Gemm4<'_> {
     }
 }
 
-/// `out[u][r] ← −Σ_t A[r, idx[t]] · B[idx[t], u]` for `r < rows` (or `out[u][r] − Σ …` for the
-/// lanes of `g.accumulate`), and the same into `mirror[u]`, for the lanes `u < 4` whose
-/// pointer is non-null: a product whose inner dimension is only the (structurally or
-/// numerically) non-zero rows of the right-hand sides, vectorised down the
-/// contiguous columns of `A` and of the outputs, four output columns sharing each load of `A`.
+/// Four output columns of `−Σ A B` over one or more [`Gemm4Term`]s (see [`neg_gemm4_sparse`]).
+pub(crate) struct Gemm4<'a> {
+    /// Rows of the result.
+    pub rows: usize,
+    /// The terms summed.
+    pub terms: &'a [Gemm4Term<'a>],
+    /// The lanes `u` (bit `u`) whose output is accumulated: `out[u] ← out[u] − Σ A B[:, u]`
+    /// (its `rows` values read first; the mirror gets the sum).
+    pub accumulate: u8,
+}
+
+/// `out[u][r] ← −Σ_terms Σ_t A[r, idx[t]] · B[idx[t], u]` for `r < rows` (or `out[u][r] − Σ …`
+/// for the lanes of `g.accumulate`), and the same into `mirror[u]`, for the lanes `u < 4` whose
+/// pointer is non-null: products whose inner dimension is only the (structurally or
+/// numerically) non-zero rows of the right-hand sides, vectorised down the contiguous columns
+/// of each `A` and of the outputs, four output columns sharing each load of `A`, every term
+/// summed in registers before one store.
 ///
 /// # Safety
 /// Every non-null `out[u]` and `mirror[u]` is valid for writing `rows` values (and `out[u]` for
-/// reading them in the lanes of `g.accumulate`) and does not overlap `g.a`, what `g.b`
+/// reading them in the lanes of `g.accumulate`) and does not overlap any `A`, what any `b`
 /// addresses or another output (a null `out[u]` has no accumulate bit); `B[idx[t], u]` (see
-/// [`Gemm4`]) is readable for every `t`, `u < 4`; every `idx[t] < g.a.len() / g.lda` (a column of `A`; checked in debug builds only,
-/// as this is called once per group of four columns in the hot loops of FD-SO).
+/// [`Gemm4Term`]) is readable for every term, `t` and `u < 4`; every `idx[t] <` its term's
+/// `cols` (checked in debug builds only, as this is called once per group of four columns in
+/// the hot loops of FD-SO).
 pub(crate) unsafe fn neg_gemm4_sparse(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror: &[*mut f64; 4]) {
     let padded = g.rows.div_ceil(8) * 8;
-    // With whole columns of `lda ≥ padded` values, column `l < a.len() / lda` is readable up to
-    // the padded rows.
-    assert!(
-        g.lda > 0 && padded <= g.lda && g.a.len().is_multiple_of(g.lda),
-        "neg_gemm4_sparse: dimension mismatch"
-    );
-    debug_assert!(g.idx.iter().all(|&l| (l as usize) < g.a.len() / g.lda));
+    // Column `l < cols` is readable up to the padded rows.
+    for t in g.terms {
+        assert!(
+            t.cols == 0 || t.lda * (t.cols - 1) + padded <= t.a.len(),
+            "neg_gemm4_sparse: dimension mismatch"
+        );
+        debug_assert!(t.idx.iter().all(|&l| (l as usize) < t.cols));
+    }
     if g.rows == 0 {
         return;
     }
-    // SAFETY: every column `idx[t]` of `a` is readable up to `padded ≥` the vector-rounded
+    // SAFETY: every column `idx[t]` of each `a` is readable up to `padded ≥` the vector-rounded
     // rows (asserted, and `idx` by the caller's contract); `b` and the outputs are the caller's
     // contract.
     unsafe {
@@ -727,12 +739,14 @@ unsafe fn gemm4_portable(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror: &[*mut f64;
             // SAFETY: the caller's contract (r < rows; accumulated lanes are readable).
             *a = if g.accumulate >> u & 1 != 0 { unsafe { *out[u].add(r) } } else { 0.0 };
         }
-        for (t, &l) in g.idx.iter().enumerate() {
-            let x = g.a[r + g.lda * l as usize];
-            // SAFETY: the caller's contract.
-            let b = unsafe { g.b_at(t) };
-            for (a, b) in acc.iter_mut().zip(b) {
-                *a -= x * b;
+        for term in g.terms {
+            for (t, &l) in term.idx.iter().enumerate() {
+                let x = term.a[r + term.lda * l as usize];
+                // SAFETY: the caller's contract.
+                let b = unsafe { term.b_at(t) };
+                for (a, b) in acc.iter_mut().zip(b) {
+                    *a -= x * b;
+                }
             }
         }
         for u in 0..4 {
@@ -798,18 +812,20 @@ unsafe fn chunk_avx2<const V: usize>(
             }
             acc_u[V - 1] = _mm256_maskload_pd(p.add(4 * (V - 1)), mask);
         }
-        let a = g.a.as_ptr().add(r0);
-        for (t, &l) in g.idx.iter().enumerate() {
-            let col = a.add(g.lda * l as usize);
-            let b = g.b_at(t);
-            let mut x = [_mm256_setzero_pd(); V];
-            for (v, xv) in x.iter_mut().enumerate() {
-                *xv = _mm256_loadu_pd(col.add(4 * v));
-            }
-            for (u, acc_u) in acc.iter_mut().enumerate() {
-                let s = _mm256_set1_pd(b[u]);
-                for v in 0..V {
-                    acc_u[v] = _mm256_fnmadd_pd(x[v], s, acc_u[v]);
+        for term in g.terms {
+            let a = term.a.as_ptr().add(r0);
+            for (t, &l) in term.idx.iter().enumerate() {
+                let col = a.add(term.lda * l as usize);
+                let b = term.b_at(t);
+                let mut x = [_mm256_setzero_pd(); V];
+                for (v, xv) in x.iter_mut().enumerate() {
+                    *xv = _mm256_loadu_pd(col.add(4 * v));
+                }
+                for (u, acc_u) in acc.iter_mut().enumerate() {
+                    let s = _mm256_set1_pd(b[u]);
+                    for v in 0..V {
+                        acc_u[v] = _mm256_fnmadd_pd(x[v], s, acc_u[v]);
+                    }
                 }
             }
         }
@@ -886,17 +902,19 @@ unsafe fn chunk_avx512<const V: usize>(
             }
             acc_u[V - 1] = _mm512_maskz_loadu_pd(mask, p.add(8 * (V - 1)));
         }
-        let a = g.a.as_ptr().add(r0);
-        for (t, &l) in g.idx.iter().enumerate() {
-            let col = a.add(g.lda * l as usize);
-            let b = g.b_at(t);
-            let s: [__m512d; 4] = std::array::from_fn(|u| _mm512_set1_pd(b[u]));
-            // One vector of the column at a time, into the four lanes' accumulators.
-            #[allow(clippy::needless_range_loop)]
-            for v in 0..V {
-                let x = _mm512_loadu_pd(col.add(8 * v));
-                for u in 0..4 {
-                    acc[u][v] = _mm512_fnmadd_pd(x, s[u], acc[u][v]);
+        for term in g.terms {
+            let a = term.a.as_ptr().add(r0);
+            for (t, &l) in term.idx.iter().enumerate() {
+                let col = a.add(term.lda * l as usize);
+                let b = term.b_at(t);
+                let s: [__m512d; 4] = std::array::from_fn(|u| _mm512_set1_pd(b[u]));
+                // One vector of the column at a time, into the four lanes' accumulators.
+                #[allow(clippy::needless_range_loop)]
+                for v in 0..V {
+                    let x = _mm512_loadu_pd(col.add(8 * v));
+                    for u in 0..4 {
+                        acc[u][v] = _mm512_fnmadd_pd(x, s[u], acc[u][v]);
+                    }
                 }
             }
         }

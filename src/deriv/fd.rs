@@ -9,7 +9,9 @@ use super::zero::{IdfozaWs, Lanes, idfoza_lanes_core};
 use crate::algo::Data;
 use crate::algo::internal::{aba_unchecked, check_fext, ltl_in_place, ltl_solve_fd};
 use crate::error::Result;
-use crate::linalg::{Gemm4, TO_L1, TO_L2, neg_gemm4_sparse, prefetch, transpose_strided};
+use crate::linalg::{
+    Gemm4, Gemm4Term, TO_L1, TO_L2, neg_gemm4_sparse, prefetch, transpose_strided,
+};
 use crate::model::{Model, check_vec};
 use crate::spatial::Force;
 use crate::tensor::Tensor3;
@@ -160,10 +162,6 @@ pub struct FdSoData {
     /// IDFOZA workspaces, four and eight right-hand sides.
     ws4: IdfozaWs<[f64; 4]>,
     ws8: IdfozaWs<[f64; 8]>,
-    /// IDFOZA results `S[(i, j, k)] = IDFOZA(X[:, j])[i][k]` by blocks of eight `j`: at
-    /// `u + 8 i + 8 n k + 8 n² b` for `j = 8 b + u` (see [`idfoza_blocks`]), zero past `nv`;
-    /// from the first 64-byte aligned value (8 values to spare).
-    s: Vec<f64>,
     /// IDFOZA of eight right-hand sides `X[:, j0..j0 + 8]`: `(u, i, k)` at `u + 8 i + 8 n k`;
     /// from the first 64-byte aligned value (8 values to spare).
     s8: Vec<f64>,
@@ -196,15 +194,24 @@ pub struct FdSoData {
     qj: Vec<u32>,
     /// `qj_pos[k]`: the position of DoF `k` in `qj` (`u32::MAX` for the translations).
     qj_pos: Vec<u32>,
-    /// The columns of `∂q̈/∂q` listed in `qj`, packed (`nv×nv`, the columns past `qj.len()`
-    /// zero).
-    xq: Vec<f64>,
+    /// `relq4[words b..]`: the union of the related sets of the DoFs `qj[4 b..4 b + 4]`.
+    relq4: Vec<u64>,
+    /// A page of `∂(M⁻¹)/∂q` with its columns padded to [`Self::ld`] rows (zero): the last
+    /// one, or any when `nv` is small (see [`so_products`]).
+    dlast: Vec<f64>,
+    /// Twice a column of `∂τ/∂q` (`nv` values).
+    diag2: Vec<f64>,
+    /// `nv` zeros.
+    zeros: Vec<f64>,
     /// The groups `(j0, k)` of `∂²q̈/∂q̇²` with a structurally non-zero column, in order.
     vv_groups: Vec<[u32; 2]>,
-    /// One group's row set (scratch, `words` values).
+    /// One group's row set (scratch, `words` values), and a second one.
     set: Vec<u64>,
-    /// One group's non-zero right-hand-side rows (`nv` values) and their values (4 per row).
+    set2: Vec<u64>,
+    /// One group's non-zero right-hand-side rows (`nv` values) and their values (4 per row);
+    /// the rows of `set2`.
     idx: Vec<u32>,
+    idx2: Vec<u32>,
     rhs: Vec<f64>,
 }
 
@@ -234,8 +241,12 @@ impl FdSoData {
         let qj: Vec<u32> =
             (0..n).filter(|&k| !root_translation(model, k)).map(|k| k as u32).collect();
         let mut qj_pos = vec![u32::MAX; n];
+        let mut relq4 = vec![0u64; qj.len().div_ceil(4) * words];
         for (p, &j) in qj.iter().enumerate() {
             qj_pos[j as usize] = p as u32;
+            for w in 0..words {
+                relq4[words * (p / 4) + w] |= related[words * j as usize + w];
+            }
         }
         // ∂²q̈/∂q̇²: columns j ≤ k, four j at a time, the groups where some (j ≤ k, k) is
         // related.
@@ -256,7 +267,6 @@ impl FdSoData {
             d2qdd_dtaudq: Tensor3::zeros(n, n, n),
             ws4: IdfozaWs::new(model),
             ws8: IdfozaWs::new(model),
-            s: vec![0.0; 8 * n * n * n.div_ceil(8) + 8],
             s8: vec![0.0; 8 * n * n + 8],
             minv: vec![0.0; ld * n],
             ld,
@@ -266,10 +276,15 @@ impl FdSoData {
             root: (0..n).map(|j| model.parents[model.dof_joint[j]] == 0).collect(),
             qj,
             qj_pos,
-            xq: vec![0.0; n * n],
+            relq4,
+            dlast: vec![0.0; ld * n],
+            diag2: vec![0.0; n],
+            zeros: vec![0.0; n],
             vv_groups,
             set: vec![0; words],
+            set2: vec![0; words],
             idx: vec![0; n],
+            idx2: vec![0; n],
             rhs: vec![0.0; 4 * n],
         }
     }
@@ -320,7 +335,9 @@ struct Products<'a> {
     related: &'a [u64],
     related4: &'a [u64],
     set: &'a mut [u64],
+    set2: &'a mut [u64],
     idx: &'a mut [u32],
+    idx2: &'a mut [u32],
     rhs: &'a mut [f64],
 }
 
@@ -332,20 +349,6 @@ impl<'a> Products<'a> {
     /// The union of the related sets of the DoFs `j0..j0 + 4` (`j0` a multiple of 4).
     fn related4(&self, j0: usize) -> &'a [u64] {
         &self.related4[self.words * (j0 / 4)..self.words * (j0 / 4 + 1)]
-    }
-    /// `set ←` the union of the related sets of the DoFs `js`, intersected with that of `k`.
-    fn build_set_union(&mut self, js: &[u32], k: usize) {
-        let related = self.related;
-        let rel = |j: usize| &related[self.words * j..self.words * (j + 1)];
-        self.set.fill(0);
-        for &j in js {
-            for (s, x) in self.set.iter_mut().zip(rel(j as usize)) {
-                *s |= x;
-            }
-        }
-        for (s, x) in self.set.iter_mut().zip(rel(k)) {
-            *s &= x;
-        }
     }
     /// `set ← a ∪ b`, or `a ∩ b` if `and` (each `words` values).
     #[inline(always)]
@@ -474,12 +477,71 @@ impl<'a> Products<'a> {
             return;
         }
         let idx = &self.idx[..cnt];
-        let (a, lda) = (self.minv, self.ld);
-        let g = Gemm4 { a, lda, rows, idx, b, bs, by_row, accumulate };
+        let (a, lda, cols) = (self.minv, self.ld, self.n);
+        let term = Gemm4Term { a, lda, cols, idx, b, bs, by_row };
+        let g = Gemm4 { rows, terms: std::slice::from_ref(&term), accumulate };
         debug_assert!(rows <= self.n);
         // SAFETY: the caller's contract on `b` and the outputs; `minv` has `ld ≥` rows rounded
         // up to 8 values per column (zero padded) for each of its `n` columns, and the indices
         // in `idx` are DoFs of `set` (< n).
+        unsafe { neg_gemm4_sparse(&g, &out, &mirror) };
+    }
+
+    /// The four columns `out[u] ← −D b1_u − M⁻¹ b2_u` (rows `< rows`; `out[u]` minus that in
+    /// the lanes of `accumulate`; also into `mirror[u]`; lanes with a null `out[u]` are not
+    /// stored), with `b1_u[l] = b1[u][l]` for the rows `l` of `set` and `b2_u[l] = b2[u][l]`
+    /// for those of `set2`, zero elsewhere, read in place. `D` is column-major with leading
+    /// dimension `ldd`, its `n` columns readable to `rows` rounded up to 8 (see
+    /// [`Gemm4Term`]).
+    ///
+    /// # Safety
+    /// `b1[u] + l` is readable for every row `l` of `set`, `b2[u] + l` for those of `set2`;
+    /// the outputs as for [`Self::solve_group`], the accumulated ones also readable.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn solve_two(
+        &mut self,
+        rows: usize,
+        d: &[f64],
+        ldd: usize,
+        b1: [*const f64; 4],
+        b2: [*const f64; 4],
+        accumulate: u8,
+        out: [*mut f64; 4],
+        mirror: [*mut f64; 4],
+    ) {
+        let mut cnt = [0; 2];
+        for (c, (set, idx)) in
+            cnt.iter_mut().zip([(&*self.set, &mut *self.idx), (&*self.set2, &mut *self.idx2)])
+        {
+            for_each_row(set, |l| {
+                debug_assert!(*c < idx.len());
+                // SAFETY: c < the number of rows of the set ≤ nv = idx.len().
+                unsafe { *idx.get_unchecked_mut(*c) = l as u32 };
+                *c += 1;
+            });
+        }
+        if cnt == [0, 0] {
+            // SAFETY: the caller's contract.
+            return unsafe { self.product(rows, 0, b1, 1, true, accumulate, out, mirror) };
+        }
+        let (n, by_row, bs) = (self.n, true, 1);
+        let terms = [
+            Gemm4Term { a: d, lda: ldd, cols: n, idx: &self.idx[..cnt[0]], b: b1, bs, by_row },
+            Gemm4Term {
+                a: self.minv,
+                lda: self.ld,
+                cols: n,
+                idx: &self.idx2[..cnt[1]],
+                b: b2,
+                bs,
+                by_row,
+            },
+        ];
+        let g = Gemm4 { rows, terms: &terms, accumulate };
+        debug_assert!(rows <= self.n);
+        // SAFETY: the caller's contract on `d`, `b1`, `b2` and the outputs; `minv` as in
+        // `product`; the indices are DoFs of the sets (< n).
         unsafe { neg_gemm4_sparse(&g, &out, &mirror) };
     }
 }
@@ -648,6 +710,19 @@ unsafe fn idfoza_add_avx512(
     let stride = blk.len() / (n * n);
     let lanes = ((1u16 << w) - 1) as u8;
     let o = blk.as_mut_ptr();
+    if let AddMask::Over = mask {
+        // Plain stores: nothing to read.
+        // SAFETY: AVX-512F is enabled here, as `Avx8` needs.
+        idfoza_lanes_core::<Avx8>(model, data, ws, x, n, j0, w, |i, j, z| {
+            assert!(i < n && j < n);
+            // SAFETY: as below.
+            unsafe {
+                let p = o.add(stride * (i + n * j));
+                _mm512_mask_storeu_pd(p, lanes, _mm512_loadu_pd(z.as_ptr()));
+            }
+        });
+        return;
+    }
     // SAFETY: AVX-512F is enabled here, as `Avx8` needs.
     idfoza_lanes_core::<Avx8>(model, data, ws, x, n, j0, w, |i, j, z| {
         assert!(i < n && j < n);
@@ -667,8 +742,9 @@ unsafe fn idfoza_add_avx512(
 
 /// Second-order derivatives of forward dynamics at `q̈ = FD(q, q̇, τ)` (eq. eqn_FD_SO_43):
 /// `∂²q̈/∂u∂w = −M⁻¹(∂²ID/∂u∂w + ∂M/∂w · ∂FD/∂u + (∂M/∂u · ∂FD/∂w)^R)`, with the `∂M/∂q`
-/// products by IDFOZA (`O(N d)` per column) instead of tensor products. Also fills the
-/// first-order results in `data` (as [`fd_derivatives`]).
+/// products by IDFOZA (`O(N d)` per column) instead of tensor products, and in `∂²q̈/∂q²` as
+/// `−M⁻¹ ∂M/∂q_k · ∂q̈/∂q_j = −∂(M⁻¹)/∂q_k · ∂τ/∂q_j` from the `∂(M⁻¹)/∂q` just computed. Also
+/// fills the first-order results in `data` (as [`fd_derivatives`]).
 ///
 /// Each column `−M⁻¹ b` is a product with the dense `M⁻¹` (from the `LᵀDL` factors) over the
 /// rows where `b` can be non-zero only: row `l` of `∂²τ/∂q_j∂·` and of `∂M/∂q_j · x` vanishes
@@ -786,15 +862,15 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
         related: &fso.related,
         related4: &fso.related4,
         set: &mut fso.set,
+        set2: &mut fso.set2,
         idx: &mut fso.idx,
+        idx2: &mut fso.idx2,
         rhs: &mut fso.rhs,
     };
-    // S and s8 from their first 64-byte aligned values (each entry's eight lanes one line).
-    let off = fso.s.as_ptr().align_offset(64).min(8);
-    let s = &mut fso.s[off..];
+    // s8 from its first 64-byte aligned value (each entry's eight lanes one line).
     let off = fso.s8.as_ptr().align_offset(64).min(8);
     let s8 = &mut fso.s8[off..off + 8 * n2];
-    assert!(s.len() >= 8 * n2 * n.div_ceil(8));
+    let mut ws = IdfozaWss { ws4: &mut fso.ws4, ws8: &mut fso.ws8 };
     let dof_joint = &model.dof_joint;
     // DoFs of different joints commute (product of the joints' configuration spaces).
     let commute = |j: usize, k: usize| dof_joint[j] != dof_joint[k];
@@ -841,59 +917,69 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             unsafe { pr.solve_group_in_place(n, b, 1, false, 0, out, mirror) };
         }
     }
+    // ∂(M⁻¹)/∂q (before ∂²q̈/∂q², which reads it) = −M⁻¹ C with
+    // C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k]: rows i ≤ j of the columns (j0..j0 + 4, k), by j0,
+    // with IDFOZA of the columns j8..j8 + 8 into `s8` (at u + 8 i + 8 n k for j = j8 + u); rows
+    // of C related to k. The pages k of the DoFs of root joints vanish (see `FdSoData::root`).
+    // The strict lower triangles come from the symmetry of the pages: each group's columns,
+    // just computed and in L1, are copied transposed into the rows j0..j0 + 4 of the columns
+    // before j0.
+    {
+        for j8 in (0..n).step_by(8) {
+            idfoza_blocks(model, data, &mut ws, data.minv.as_slice(), j8, s8);
+            for j0 in (j8..n.min(j8 + 8)).step_by(4) {
+                let w = 4.min(n - j0);
+                for k in (0..n).filter(|&k| !fso.root[k]) {
+                    // The next group's outputs (rows < j0 + w of columns j0..j0 + w) into L2.
+                    if k + 1 < n {
+                        let t = fso.d2qdd_dtaudq.as_slice().as_ptr();
+                        prefetch::<TO_L2>(t.wrapping_add(n * (j0 + n * (k + 1))), w * n);
+                    }
+                    pr.build_set(pr.related(k), pr.related(k), false);
+                    let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dtaudq, j0 + u, k));
+                    let b = s8[j0 - j8 + 8 * n * k..].as_ptr();
+                    // SAFETY: the rows l < n of page k of s8 (8 n² values) at b + u + 8 l; the
+                    // outputs are distinct columns of d2qdd_dtaudq.
+                    unsafe {
+                        pr.solve_group_in_place(
+                            j0 + w,
+                            [b, b.add(1), b.add(2), b.add(3)],
+                            8,
+                            true,
+                            0,
+                            out,
+                            none,
+                        )
+                    };
+                    // The strict lower triangle of the page from the columns just computed (in
+                    // L1): rows j0..j0 + w of the columns i < j0 are rows i of the columns
+                    // j0..j0 + w.
+                    let page = &mut fso.d2qdd_dtaudq.as_mut_slice()[n2 * k..n2 * (k + 1)];
+                    let (lower, upper) = page.split_at_mut(n * j0);
+                    let off = j0.min(lower.len());
+                    transpose_strided(upper, n, j0, w, &mut lower[off..], n);
+                }
+            }
+        }
+    }
     // ∂²q̈/∂q² (eq. eqn_FD_SO_43): column (j, k) is −M⁻¹(ID_qq[:, j, k] + A[:, j, k] + A[:, k, j])
-    // with A[i][j][k] = IDFOZA(∂q̈/∂q[:, j])[i][k] = (∂M/∂q_k · ∂q̈/∂q_j)_i, for the j and k of
-    // `FdSoData::qj` (the others vanish). A is held in S by blocks of eight j (packed into `xq`
-    // first). Each column is taken as T_j[:, k] + T_k[:, j] with T_j[:, k] = −M⁻¹ A'[:, j, k],
-    // A' being A with ID_qq folded in where j ≤ k (`A'[:, j, j] = 2 A[:, j, j] + ID_qq[:, j, j]`),
-    // so that every product reads its right-hand side from S in place: by qq blocks of four j
-    // (ascending) and pages k (descending), T_j[:, k] is stored into the output column (j, k)
-    // where j ≤ k and added into the column (k, j) where j > k (which that order has already
-    // written), the mirror (j, k) getting the sum. Rows related to k: A[:, j, k] and
-    // ID_qq[:, j, k] vanish elsewhere. DoFs of one joint need not commute: for such a pair
+    // with A[:, j, k] = ∂M/∂q_k · ∂q̈/∂q_j, for the j and k of `FdSoData::qj` (the others
+    // vanish). As ∂q̈/∂q_j = −M⁻¹ ∂τ/∂q_j and ∂(M⁻¹)/∂q_k = −M⁻¹ ∂M/∂q_k M⁻¹ (just computed),
+    // T_j[:, k] = −M⁻¹ A[:, j, k] = −∂(M⁻¹)/∂q_k · ∂τ/∂q_j: a product with the page k of
+    // ∂(M⁻¹)/∂q over the rows of ∂τ/∂q_j (related to j), which needs no IDFOZA of ∂q̈/∂q. Each
+    // column is T_j[:, k] + T_k[:, j] − M⁻¹ ID_qq[:, j, k]: by pages k (descending) and qq
+    // blocks of four j, T_j[:, k] (twice on the diagonal) − M⁻¹ ID_qq[:, j, k] is stored into
+    // the output column (j, k) where j ≤ k, and T_j[:, k] is added into the column (k, j) where
+    // j > k (which that order has already written), the mirror (j, k) getting the sum. The
+    // ID_qq rows: related to j and k. DoFs of one joint need not commute: for such a pair
     // j < k the column (k, j) is then (j, k) − M⁻¹(ID_qq[:, k, j] − ID_qq[:, j, k]).
     let qj = &fso.qj[..];
     let nqb = qj.len().div_ceil(4);
-    for (c, &j) in qj.iter().enumerate() {
-        let j = j as usize;
-        fso.xq[n * c..n * (c + 1)].copy_from_slice(&data.dqdd_dq.as_slice()[n * j..n * (j + 1)]);
-    }
-    let mut ws = IdfozaWss { ws4: &mut fso.ws4, ws8: &mut fso.ws8 };
     let idt = fso.id.d2tau_dq2().as_slice();
-    for (b, blk) in s.chunks_exact_mut(8 * n2).take(nqb.div_ceil(2)).enumerate() {
-        idfoza_blocks(model, data, &mut ws, &fso.xq, 8 * b, blk);
-        // The fold into this block (just written, in the cache), by entries (l, k) of eight
-        // lanes: j ≤ k, rows related to j and k. IDFOZA writes every entry (l, k) related to k
-        // but for the k of root joints (∂M/∂q_k = 0), whose entries are only ever set here.
-        let lanes = &qj[8 * b..qj.len().min(8 * b + 8)];
-        for (pk, &k) in qj.iter().enumerate().skip(8 * b) {
-            let k = k as usize;
-            let lanes = &lanes[..lanes.len().min(pk + 1 - 8 * b)];
-            pr.build_set_union(lanes, k);
-            let root_k = fso.root[k];
-            let id = &idt[n2 * k..n2 * (k + 1)];
-            for_each_row(pr.set, |l| {
-                let line = &mut blk[8 * (l + n * k)..8 * (l + n * k) + lanes.len()];
-                for (x, &j) in line.iter_mut().zip(lanes) {
-                    let j = j as usize;
-                    if pr.related(j)[l / 64] >> (l % 64) & 1 != 0 {
-                        let f = if root_k {
-                            0.0
-                        } else if j == k {
-                            2.0
-                        } else {
-                            1.0
-                        };
-                        *x = id[l + n * j] + f * *x;
-                    }
-                }
-            });
-        }
-    }
-    // Offset in S of lane p of entry (l, k) (p a position in `qj`).
-    let s_at = |p: usize, l: usize, k: usize| 8 * n2 * (p / 8) + p % 8 + 8 * (l + n * k);
+    let dtq = data.dtau_dq.as_slice();
     {
-        let s = &*s;
+        let words = fso.words;
+        let dmi = fso.d2qdd_dtaudq.as_slice();
         // Group (b, k): outputs, mirrors and accumulated lanes (see above).
         let group = |t: &mut Tensor3, b: usize, k: usize| {
             let w = 4.min(qj.len() - 4 * b);
@@ -911,28 +997,78 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             }
             (out, mirror, acc)
         };
-        let groups = (0..nqb).flat_map(|b| qj.iter().rev().map(move |&k| (b, k as usize)));
-        let mut next = groups.clone().skip(1);
-        for (b, k) in groups {
-            // The next group's right-hand sides into L1 and its outputs into L2.
-            if let Some((nb, nk)) = next.next() {
-                prefetch::<TO_L1>(s.as_ptr().wrapping_add(s_at(4 * nb, 0, nk)), 8 * n);
-                let (o, m, _) = group(&mut fso.d2qdd_dq2, nb, nk);
-                for p in o.into_iter().chain(m).filter(|p| !p.is_null()) {
-                    prefetch::<TO_L2>(p, n);
+        for (pk, &k) in qj.iter().enumerate().rev() {
+            let k = k as usize;
+            // The page in place when the padded rows of its last column are readable (in the
+            // next page), else a padded copy.
+            let (d, ldd) = if n2 * k + n * (n - 1) + ld <= dmi.len() {
+                (&dmi[n2 * k..], n)
+            } else {
+                for (dst, src) in
+                    fso.dlast.chunks_exact_mut(ld).zip(dmi[n2 * k..n2 * (k + 1)].chunks_exact(n))
+                {
+                    dst[..n].copy_from_slice(src);
                 }
-            }
-            let (out, mirror, acc) = group(&mut fso.d2qdd_dq2, b, k);
-            pr.build_set(pr.related(k), pr.related(k), false);
-            let p = s[s_at(4 * b, 0, k)..].as_ptr();
-            // Only the pages of root joints can be all zero (in the lanes j > k).
-            let check = fso.root[k];
-            // SAFETY: lane u of row l at p + u + 8 l, within S (4 b + u < 8 ⌈nv/8⌉, l < n); the
-            // outputs are distinct columns of d2qdd_dq2 (the accumulated ones written before).
-            unsafe {
-                let b = [p, p.add(1), p.add(2), p.add(3)];
-                pr.solve_group_in_place(n, b, 8, check, acc, out, mirror)
+                (&fso.dlast[..], ld)
             };
+            for (d2, x) in fso.diag2.iter_mut().zip(&dtq[n * k..n * (k + 1)]) {
+                *d2 = 2.0 * x;
+            }
+            for b in 0..nqb {
+                // The next group's ID_qq columns into L1 and its outputs into L2.
+                let next = if b + 1 < nqb {
+                    Some((b + 1, k))
+                } else {
+                    pk.checked_sub(1).map(|p| (0, qj[p] as usize))
+                };
+                if let Some((nb, nk)) = next {
+                    let (o, m, _) = group(&mut fso.d2qdd_dq2, nb, nk);
+                    for p in o.into_iter().chain(m).filter(|p| !p.is_null()) {
+                        prefetch::<TO_L2>(p, n);
+                    }
+                    let (j0, j1) =
+                        (qj[4 * nb] as usize, qj[(4 * nb + 3).min(qj.len() - 1)] as usize);
+                    if j0 <= nk {
+                        let len = n * (j1.min(nk) + 1 - j0);
+                        prefetch::<TO_L1>(idt.as_ptr().wrapping_add(n * (j0 + n * nk)), len);
+                    }
+                }
+                let w = 4.min(qj.len() - 4 * b);
+                let js = lanes(4 * b, w).map(|p| qj[p] as usize);
+                let (out, mirror, acc) = group(&mut fso.d2qdd_dq2, b, k);
+                // Term 1 over the rows related to one of the j (none on the pages of root
+                // joints, where ∂(M⁻¹)/∂q_k = 0); term 2 over the rows related to k and to one
+                // of the j ≤ k.
+                let rk = pr.related(k);
+                let (set, set2) = (&mut *pr.set, &mut *pr.set2);
+                if fso.root[k] {
+                    set.fill(0);
+                } else {
+                    set.copy_from_slice(&fso.relq4[words * b..words * (b + 1)]);
+                }
+                set2.fill(0);
+                for &j in js[..w].iter().filter(|&&j| j <= k) {
+                    let rj = &fso.related[words * j..words * (j + 1)];
+                    for ((s2, x), y) in set2.iter_mut().zip(rj).zip(rk) {
+                        *s2 |= x & y;
+                    }
+                }
+                let b1 =
+                    js.map(|j| if j == k { fso.diag2.as_ptr() } else { dtq[n * j..].as_ptr() });
+                let b2 = std::array::from_fn(|u| {
+                    let j = js[u];
+                    if u < w && j <= k {
+                        idt[n * (j + n * k)..].as_ptr()
+                    } else {
+                        fso.zeros.as_ptr()
+                    }
+                });
+                // SAFETY: b1: columns of ∂τ/∂q (or `diag2`), b2: columns (j, k) of ID_qq (or
+                // `zeros`), n values each; the page of ∂(M⁻¹)/∂q is followed by at least one
+                // more (n² ≥ the padded rows) or padded (`dlast`); the outputs are distinct
+                // columns of d2qdd_dq2 (the accumulated ones written before).
+                unsafe { pr.solve_two(n, d, ldd, b1, b2, acc, out, mirror) };
+            }
         }
         // The pairs of DoFs of one joint that need not commute.
         for (pk, &k) in qj.iter().enumerate() {
@@ -994,50 +1130,6 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
                     // (k0 − k8 + u) + w (l + n j) < w n²); the outputs are distinct columns of
                     // d2qdd_dqdv.
                     unsafe { pr.solve_group_in_place(n, b, w, false, 0, out, none) };
-                }
-            }
-        }
-    }
-    // ∂(M⁻¹)/∂q = −M⁻¹ C with C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k]: rows i ≤ j of the columns
-    // (j0..j0 + 4, k), by j0, with IDFOZA of the columns j8..j8 + 8 into `s8` (at
-    // u + 8 i + 8 n k for j = j8 + u); rows of C related to k. The pages k of
-    // the DoFs of root joints vanish (see `FdSoData::root`). The strict lower triangles come
-    // from the symmetry of the pages: each group's columns, just computed and in L1, are copied
-    // transposed into the rows j0..j0 + 4 of the columns before j0.
-    {
-        for j8 in (0..n).step_by(8) {
-            idfoza_blocks(model, data, &mut ws, data.minv.as_slice(), j8, s8);
-            for j0 in (j8..n.min(j8 + 8)).step_by(4) {
-                let w = 4.min(n - j0);
-                for k in (0..n).filter(|&k| !fso.root[k]) {
-                    // The next group's outputs (rows < j0 + w of columns j0..j0 + w) into L2.
-                    if k + 1 < n {
-                        let t = fso.d2qdd_dtaudq.as_slice().as_ptr();
-                        prefetch::<TO_L2>(t.wrapping_add(n * (j0 + n * (k + 1))), w * n);
-                    }
-                    pr.build_set(pr.related(k), pr.related(k), false);
-                    let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dtaudq, j0 + u, k));
-                    let b = s8[j0 - j8 + 8 * n * k..].as_ptr();
-                    // SAFETY: the rows l < n of page k of s8 (8 n² values) at b + u + 8 l; the
-                    // outputs are distinct columns of d2qdd_dtaudq.
-                    unsafe {
-                        pr.solve_group_in_place(
-                            j0 + w,
-                            [b, b.add(1), b.add(2), b.add(3)],
-                            8,
-                            true,
-                            0,
-                            out,
-                            none,
-                        )
-                    };
-                    // The strict lower triangle of the page from the columns just computed (in
-                    // L1): rows j0..j0 + w of the columns i < j0 are rows i of the columns
-                    // j0..j0 + w.
-                    let page = &mut fso.d2qdd_dtaudq.as_mut_slice()[n2 * k..n2 * (k + 1)];
-                    let (lower, upper) = page.split_at_mut(n * j0);
-                    let off = j0.min(lower.len());
-                    transpose_strided(upper, n, j0, w, &mut lower[off..], n);
                 }
             }
         }
