@@ -582,34 +582,32 @@ fn lanes_related(related: &[u64], words: usize, i: usize, j: usize, first: usize
 }
 
 /// Which lanes of an entry `(i, j)` [`idfoza_add_block`] adds onto (the others it
-/// overwrites), and which it adds twice (none, so far).
+/// overwrites).
 #[derive(Clone, Copy)]
 enum AddMask<'a> {
-    /// The lanes `first + l` whose DoF is related to both `i` and `j` (see [`lanes_related`]);
-    /// none twice.
+    /// The lanes `first + l` whose DoF is related to both `i` and `j` (see [`lanes_related`]).
     Related { related: &'a [u64], words: usize, first: usize },
     /// None: every lane is overwritten.
     Over,
 }
 
 impl AddMask<'_> {
-    /// `(onto, twice)` for the entry `(i, j)`, as bits of the lanes.
+    /// The lanes added onto for the entry `(i, j)`, as bits.
     #[inline(always)]
-    fn at(&self, i: usize, j: usize) -> (u8, u8) {
+    fn at(&self, i: usize, j: usize) -> u8 {
         match *self {
             AddMask::Related { related, words, first } => {
-                (lanes_related(related, words, i, j, first), 0)
+                lanes_related(related, words, i, j, first)
             }
-            AddMask::Over => (0, 0),
+            AddMask::Over => 0,
         }
     }
 }
 
 /// Adds `IDFOZA(x[:, j0 + l])[i][j]` for the lanes `l < w` into `blk` (`stride n²` values), at
 /// `l + stride (i + n j)`, for the structurally non-zero `(i, j)` (the DoFs `j` of root
-/// joints never): onto the lanes of `mask.at(i, j).0` (those IDSVA-SO writes: see
-/// [`SoData::upper_halves`]), twice in those of `.1`, and over the others, which nothing else
-/// writes. One pass of eight AVX-512 lanes, else passes of four.
+/// joints never): onto the lanes of `mask.at(i, j)` (those IDSVA-SO writes: see
+/// [`SoData::upper_halves`]) and over the others, which nothing else writes. One pass of eight AVX-512 lanes, else passes of four.
 #[allow(clippy::too_many_arguments)]
 fn idfoza_add_block(
     model: &Model,
@@ -679,12 +677,11 @@ fn idfoza_add_lanes<V: Lanes>(
     let o = blk.as_mut_ptr();
     idfoza_lanes_core::<V>(model, data, ws, x, n, j0 + lane0, nl, |i, j, z| {
         assert!(i < n && j < n);
-        let (onto, twice) = mask.at(i, j);
+        let onto = mask.at(i, j);
         // SAFETY: i, j < n and lane0 + l < w ≤ stride: below stride n² = blk.len().
         let p = unsafe { o.add(lane0 + stride * (i + n * j)) };
         for (l, &zl) in z.as_ref().iter().enumerate().take(nl) {
             let b = 1u8 << (lane0 + l);
-            let zl = if twice & b != 0 { 2.0 * zl } else { zl };
             // SAFETY: as above.
             unsafe { *p.add(l) = if onto & b != 0 { *p.add(l) + zl } else { zl } };
         }
@@ -710,32 +707,21 @@ unsafe fn idfoza_add_avx512(
     let stride = blk.len() / (n * n);
     let lanes = ((1u16 << w) - 1) as u8;
     let o = blk.as_mut_ptr();
-    if let AddMask::Over = mask {
-        // Plain stores: nothing to read.
-        // SAFETY: AVX-512F is enabled here, as `Avx8` needs.
-        idfoza_lanes_core::<Avx8>(model, data, ws, x, n, j0, w, |i, j, z| {
-            assert!(i < n && j < n);
-            // SAFETY: as below.
-            unsafe {
-                let p = o.add(stride * (i + n * j));
-                _mm512_mask_storeu_pd(p, lanes, _mm512_loadu_pd(z.as_ptr()));
-            }
-        });
-        return;
-    }
+    // Plain stores when overwriting (no load, not even an empty masked one).
+    let over = matches!(mask, AddMask::Over);
     // SAFETY: AVX-512F is enabled here, as `Avx8` needs.
     idfoza_lanes_core::<Avx8>(model, data, ws, x, n, j0, w, |i, j, z| {
         assert!(i < n && j < n);
-        let (onto, twice) = mask.at(i, j);
         // SAFETY: i, j < n: the w ≤ stride values at o + stride (i + n j) are within blk
         // (stride n² values); the loads and stores are masked to them; AVX-512F is enabled in
         // this function.
         unsafe {
             let p = o.add(stride * (i + n * j));
-            let z = _mm512_loadu_pd(z.as_ptr());
-            let z = _mm512_mask_add_pd(z, twice, z, z);
-            let old = _mm512_maskz_loadu_pd(onto & lanes, p);
-            _mm512_mask_storeu_pd(p, lanes, _mm512_add_pd(old, z));
+            let mut z = _mm512_loadu_pd(z.as_ptr());
+            if !over {
+                z = _mm512_add_pd(_mm512_maskz_loadu_pd(mask.at(i, j) & lanes, p), z);
+            }
+            _mm512_mask_storeu_pd(p, lanes, z);
         }
     });
 }
