@@ -83,7 +83,8 @@ anymal|ff|LF_FOOT,RF_FOOT,LH_FOOT,RH_FOOT
 talos_reduced|ff|left_sole_link,right_sole_link
 talos_full_v2|ff|left_sole_link,right_sole_link
 "
-# sodyn algorithm <-> pin_bench algorithm; fd_so has no Pinocchio counterpart (timed alone).
+# sodyn algorithm <-> pin_bench algorithm; fd_so has no Pinocchio counterpart (timed against
+# our own id_so, in one process: bench --ratio-to id_so).
 PAIRS="rnea:rnea crba:crba aba:aba id_fo:computeRNEADerivatives fd_fo:computeABADerivatives
 id_so:ComputeRNEASecondOrderDerivatives"
 SODYN_ONLY="fd_so"
@@ -149,10 +150,13 @@ for r in $(seq 1 "$ROUNDS"); do
         run_pair "$sa" "$pa"
       done
     fi
-    only="$SODYN_ONLY"
-    if [ -n "$contacts" ]; then only="$only,$CONTACT_SODYN_ONLY"; fi
-    echo "[compare] round $r/$ROUNDS $name: sodyn $only" >&2
-    "${PIN[@]}" "$SODYN" "${sargs[@]}" --algos "$only" >> "$S"
+    # fd_so against id_so in one process, in alternating blocks (the paired fd_so / id_so).
+    echo "[compare] round $r/$ROUNDS $name: sodyn $SODYN_ONLY against id_so" >&2
+    "${PIN[@]}" "$SODYN" "${sargs[@]}" --algos "$SODYN_ONLY" --ratio-to id_so >> "$S"
+    if [ -n "$contacts" ]; then
+      echo "[compare] round $r/$ROUNDS $name: sodyn $CONTACT_SODYN_ONLY" >&2
+      "${PIN[@]}" "$SODYN" "${sargs[@]}" --algos "$CONTACT_SODYN_ONLY" >> "$S"
+    fi
   done <<< "$MODEL_TABLE"
 done
 echo "# loadavg at end: $(cut -d' ' -f1-3 /proc/loadavg)" >> "$META"

@@ -50,6 +50,13 @@ def parse(path):
     return out, p10, nv
 
 
+def paired_ratios(path):
+    """{(model, algo): (ratio, ref_median_us, median_us)} of the lines timed with --ratio-to id_so."""
+    return {(kv["model"], kv["algo"]): (float(kv["ratio"]), float(kv["ref_median_us"]),
+                                        float(kv["median_us"]))
+            for kv in records(path) if kv.get("ratio_to") == "id_so"}
+
+
 def rounds(out_dir, prefix):
     files = glob.glob(os.path.join(out_dir, f"{prefix}-round*.txt"))
     key = lambda p: int(re.search(r"round(\d+)", p).group(1))
@@ -136,10 +143,18 @@ def main():
             cells.append(f"{med} [{spread}]" if med != "-" else "-")
         print(f"| {m} | {dims[m][1]} | " + " | ".join(cells) + " |")
 
-    print("\nsodyn second-order forward dynamics (no Pinocchio counterpart): fd_so time and "
-          "fd_so / id_so within each round.\n")
-    print("| model | nv | id_so µs | fd_so µs | fd_so / id_so (median) | min–max |")
-    print("|---|---|---|---|---|---|")
+    print("\nsodyn second-order forward dynamics (no Pinocchio counterpart). Paired: fd_so "
+          "and id_so timed in one process in alternating blocks of about 5 ms (`bench "
+          "--ratio-to id_so`), the ratio taken within each pair of blocks, its median per "
+          "round, then the median and min–max over the rounds; the times are medians over the "
+          "rounds of that run's. Separate runs: the fd_so time of that run over the id_so time "
+          "of the Pinocchio pair's run, seconds apart in the same round.\n")
+    print("| model | nv | id_so µs (paired) | fd_so µs (paired) | fd_so / id_so, paired "
+          "(median) | min–max | fd_so / id_so, separate runs (median) | min–max |")
+    print("|---|---|---|---|---|---|---|---|")
+    pr = [paired_ratios(p) for p in sorted(
+        glob.glob(os.path.join(args.out_dir, "sodyn-round*.txt")),
+        key=lambda p: int(re.search(r"round(\d+)", p).group(1)))]
     for m in models:
         idt = [s[0].get((m, "id_so")) for s in sod]
         fdt = [s[0].get((m, "fd_so")) for s in sod]
@@ -147,8 +162,14 @@ def main():
         if not rs:
             continue
         med, spread = fmt_ratio(rs)
-        print(f"| {m} | {dims[m][1]} | {fmt_us(statistics.median(x for x in idt if x))} "
-              f"| {fmt_us(statistics.median(x for x in fdt if x))} | {med} | {spread} |")
+        paired = [r[(m, "fd_so")] for r in pr if (m, "fd_so") in r]
+        if paired:
+            pmed, pspread = fmt_ratio([x[0] for x in paired])
+            pid = fmt_us(statistics.median(x[1] for x in paired))
+            pfd = fmt_us(statistics.median(x[2] for x in paired))
+        else:
+            pmed = pspread = pid = pfd = "-"
+        print(f"| {m} | {dims[m][1]} | {pid} | {pfd} | {pmed} | {pspread} | {med} | {spread} |")
 
     if args.png:
         plot(args.png, models, dims, ratio, n)

@@ -308,6 +308,59 @@ fn bench_options_are_validated() {
     let err = assert_clean_failure(&with(&["--pin-cpus", "5000"]), "CPU out of range");
     assert!(err.contains("CPU 5000"), "{err}");
     assert_clean_failure(&with(&["--paired-threads", "1"]), "one paired thread");
+
+    // --ratio-to: each algorithm timed against a reference in alternating blocks, with the
+    // median per-pair ratio and the reference's own times on the algorithm's line.
+    let o = sodyn(&[
+        "bench",
+        "--model",
+        "builtin:quadruped",
+        "--states",
+        "16",
+        "--max-seconds",
+        "0.01",
+        "--algos",
+        "rnea,fd_so",
+        "--ratio-to",
+        "id_so",
+    ]);
+    assert_ok(&o, "timed bench --ratio-to");
+    let out = stdout(&o);
+    let lines: Vec<&str> = out.lines().filter(|l| l.starts_with("model=")).collect();
+    assert_eq!(lines.len(), 2, "{out}");
+    for line in &lines {
+        let f = parse_bench_line(line);
+        let get = |k: &str| -> f64 {
+            let (_, v) =
+                f.iter().find(|(key, _)| key == k).unwrap_or_else(|| panic!("{k}: {line}"));
+            v.parse().unwrap_or_else(|_| panic!("{k}={v} in {line}"))
+        };
+        assert!(line.contains(" ratio_to=id_so "), "{line}");
+        for k in ["ratio", "ref_median_us", "ref_p10_us", "ref_p90_us"] {
+            assert!(get(k).is_finite() && get(k) > 0.0, "{k} in {line}");
+        }
+        assert!(get("ratio_pairs") >= 10.0, "{line}");
+        // The ratio is the median of per-pair ratios, so it lies within the spread of the two
+        // sides' times.
+        let (lo, hi) = (get("p10_us") / get("ref_p90_us"), get("p90_us") / get("ref_p10_us"));
+        assert!(lo * 0.5 <= get("ratio") && get("ratio") <= hi * 2.0, "{line}");
+    }
+    assert!(lines[0].contains("algo=rnea ") && lines[1].contains("algo=fd_so "), "{out}");
+    let err = assert_clean_failure(&with(&["--ratio-to", "warp"]), "unknown reference");
+    assert!(err.contains("--ratio-to") && err.contains("warp"), "{err}");
+    let err = assert_clean_failure(
+        &with(&["--algos", "batch_rnea", "--ratio-to", "rnea"]),
+        "batched algorithm against a reference",
+    );
+    assert!(err.contains("batch_rnea"), "{err}");
+    let err = assert_clean_failure(
+        &with(&["--algos", "id_so", "--ratio-to", "id_so"]),
+        "reference against itself",
+    );
+    assert!(err.contains("id_so"), "{err}");
+    let err =
+        assert_clean_failure(&with(&["--algos", "rnea", "--ratio-to", "kkt_fo"]), "no contacts");
+    assert!(err.contains("kkt_fo") && err.contains("--contacts"), "{err}");
     assert_clean_failure(&with(&["--threads", "0"]), "zero threads");
     assert_clean_failure(&with(&["--states", "many"]), "bad --states");
     assert_clean_failure(&sodyn(&["bench", "--smoke"]), "missing --model");

@@ -40,7 +40,7 @@ pub(crate) const USAGE: &str = "\
 sodyn bench --model M [--floating-base] [--contacts F1,F2,...] [--algos a,b,...]
             [--states N] [--seed S] [--max-seconds X] [--iters N] [--threads N]
             [--paired-threads T] [--pool spin|rayon] [--spin-us U] [--pin-cpus C0,C1,...]
-            [--name NAME]
+            [--name NAME] [--ratio-to R]
             [--smoke] [--calls N]
 Prints one line per algorithm:
   model=<name> nq=<> nv=<> algo=<algo> median_us=<> p10_us=<> p90_us=<> batch=<K> samples=<n>
@@ -54,7 +54,10 @@ block). --pool picks the helper
 threads of the batch_* algorithms: spin (default; idle helpers poll for --spin-us
 microseconds, default 200, before they sleep) or rayon. --pin-cpus pins the calling thread
 to C0 and helper i of each pool to Ci (BatchPool::with_cpus; the per-CPU baseline of
---paired-threads then uses those CPUs). --smoke runs every
+--paired-threads then uses those CPUs). --ratio-to R times each algorithm (single-state
+ones) in alternating blocks of about 5 ms with the single-state algorithm R, and adds
+ratio = median over the pairs of blocks of (time per call) / (R's time per call), with R's
+own times as ref_median_us, ref_p10_us, ref_p90_us. --smoke runs every
 algorithm a few times only. --calls N makes exactly N untimed calls per algorithm (for
 instruction counts under `valgrind --tool=callgrind`: cost per call = difference of two runs /
 difference of N).";
@@ -103,6 +106,8 @@ struct BenchOptions {
     /// `i`-th.
     pin_cpus: Option<Vec<usize>>,
     name: Option<String>,
+    /// `--ratio-to R`: each algorithm timed in alternating blocks with `R`.
+    ratio_to: Option<String>,
     smoke: bool,
     calls: Option<usize>,
 }
@@ -127,6 +132,7 @@ fn parse(args: &[String]) -> Result<BenchOptions> {
         spin: BatchPool::DEFAULT_SPIN,
         pin_cpus: None,
         name: None,
+        ratio_to: None,
         smoke: false,
         calls: None,
     };
@@ -208,6 +214,7 @@ fn parse(args: &[String]) -> Result<BenchOptions> {
                 o.pin_cpus = Some(cpus);
             }
             "--name" => o.name = Some(value()?),
+            "--ratio-to" => o.ratio_to = Some(value()?),
             "--smoke" => o.smoke = true,
             "--calls" => o.calls = Some(parse_number(opt, &value()?, "a non-negative integer")?),
             other => return Err(Error::Io(format!("unknown option \"{other}\"\n\n{USAGE}"))),
@@ -575,6 +582,97 @@ fn measure_paired(
     })
 }
 
+/// The result of [`measure_ratio`].
+struct Ratio {
+    /// Side 0 (the algorithm timed) and side 1 (the reference it is compared with).
+    stats: [Stats; 2],
+    /// Median over the pairs of consecutive blocks of (side-0 time per call) / (side-1 time
+    /// per call).
+    ratio: f64,
+    /// Number of pairs of blocks.
+    pairs: usize,
+}
+
+/// Times `f(side, i)` (side 0: the algorithm, side 1: the reference, each at state `i`) in
+/// alternating blocks (0 1, 1 0, 0 1, ...), each side's block lasting about 5 ms, so that the
+/// two times of a pair see the same machine conditions; the ratio of the per-call times is
+/// taken within each pair, then its median over the pairs. Within a block, calls cheaper than
+/// ~10 µs are timed in batches of consecutive calls as in [`measure`]. Each side runs its own
+/// round robin over the states. Timing stops after `--max-seconds` once each side has
+/// `min_samples` samples and there are at least 10 pairs.
+fn measure_ratio(plan: &Plan, mut f: impl FnMut(usize, usize) -> Result<()>) -> Result<Ratio> {
+    let n = plan.nstates;
+    let mut idx = [0usize; 2];
+    let mut call = |side: usize, f: &mut dyn FnMut(usize, usize) -> Result<()>| -> Result<()> {
+        f(side, idx[side])?;
+        idx[side] = (idx[side] + 1) % n;
+        Ok(())
+    };
+    if plan.smoke || plan.calls.is_some() {
+        let mut stats = [summarize(vec![0.0], 1); 2];
+        for (side, s) in stats.iter_mut().enumerate() {
+            let mut samples = vec![];
+            for _ in 0..plan.calls.unwrap_or(3) {
+                let t0 = Instant::now();
+                call(side, &mut f)?;
+                samples.push(ns_since(t0));
+            }
+            if !samples.is_empty() {
+                *s = summarize(samples, 1);
+            }
+        }
+        return Ok(Ratio { stats, ratio: f64::NAN, pairs: 0 });
+    }
+    // Warm-up: the sides alternating, at least 4 calls each and 50 ms; the fastest call of a
+    // side sets its batch and block sizes.
+    let w0 = Instant::now();
+    let mut fastest = [f64::INFINITY; 2];
+    let mut nwarm = 0;
+    while nwarm < 8 || ns_since(w0) < 5e7 {
+        let side = nwarm % 2;
+        let t0 = Instant::now();
+        call(side, &mut f)?;
+        fastest[side] = fastest[side].min(ns_since(t0));
+        nwarm += 1;
+    }
+    let k = fastest.map(|t| ((1e4 / t.max(1.0)).ceil() as usize).clamp(1, 1000));
+    let block =
+        [0, 1].map(|s| ((PAIRED_BLOCK_NS / (k[s] as f64 * fastest[s])).ceil() as usize).max(1));
+    let mut samples: [Vec<f64>; 2] = [vec![], vec![]];
+    let mut ratios = vec![];
+    let start = Instant::now();
+    for p in 0.. {
+        let mut per_call = [0.0; 2];
+        for side in if p % 2 == 0 { [0, 1] } else { [1, 0] } {
+            let mut ns = 0.0;
+            for _ in 0..block[side] {
+                let t0 = Instant::now();
+                for _ in 0..k[side] {
+                    call(side, &mut f)?;
+                }
+                let t = ns_since(t0);
+                ns += t;
+                samples[side].push(t / k[side] as f64);
+            }
+            per_call[side] = ns / (block[side] * k[side]) as f64;
+        }
+        ratios.push(per_call[0] / per_call[1]);
+        if ratios.len() >= 10
+            && samples.iter().all(|s| s.len() >= plan.min_samples)
+            && start.elapsed().as_secs_f64() > plan.max_seconds
+        {
+            break;
+        }
+    }
+    ratios.sort_by(f64::total_cmp);
+    let [s0, s1] = samples;
+    Ok(Ratio {
+        stats: [summarize(s0, k[0]), summarize(s1, k[1])],
+        ratio: quantile(&ratios, 0.5),
+        pairs: ratios.len(),
+    })
+}
+
 /// Pinning the calling thread to one CPU (Linux; elsewhere nothing is pinned).
 mod affinity {
     /// The CPU set the calling thread had when [`Affinity::of_this_thread`] was called.
@@ -790,6 +888,98 @@ fn time_algo(
     })
 }
 
+/// A single-state algorithm, resolved once from its name (for [`call_single`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Single {
+    Rnea,
+    Crba,
+    Aba,
+    IdFo,
+    FdFo,
+    IdSo,
+    FdSo,
+    KktFo,
+    KktSo,
+    ImpactFo,
+    ImpactSo,
+}
+
+impl Single {
+    /// The single-state algorithm called `name`, if it is one.
+    fn from_name(name: &str) -> Option<Self> {
+        Some(match name {
+            "rnea" => Single::Rnea,
+            "crba" => Single::Crba,
+            "aba" => Single::Aba,
+            "id_fo" => Single::IdFo,
+            "fd_fo" => Single::FdFo,
+            "id_so" => Single::IdSo,
+            "fd_so" => Single::FdSo,
+            "kkt_fo" => Single::KktFo,
+            "kkt_so" => Single::KktSo,
+            "impact_fo" => Single::ImpactFo,
+            "impact_so" => Single::ImpactSo,
+            _ => return None,
+        })
+    }
+}
+
+/// One call of a single-state algorithm at state `i`, writing into the same workspaces as its
+/// timing in [`time_algo`] (used by `--ratio-to`, which alternates two algorithms).
+fn call_single(algo: Single, m: &Model, st: &States, ws: &mut Workspaces, i: usize) -> Result<()> {
+    let (q, v, a, tau) = (&st.q[i], &st.v[i], &st.a[i], &st.tau[i]);
+    let d = &mut ws.data;
+    let no_contacts = || Error::Io(format!("{algo:?} needs --contacts"));
+    match algo {
+        Single::Rnea => {
+            black_box(rnea(m, d, q, v, a, None)?);
+        }
+        Single::Crba => {
+            black_box(crba(m, d, q)?);
+        }
+        Single::Aba => {
+            black_box(aba(m, d, q, v, tau, None)?);
+        }
+        Single::IdFo => {
+            id_derivatives(m, d, q, v, a, None)?;
+            black_box(&d.dtau_dq);
+        }
+        Single::FdFo => {
+            fd_derivatives(m, d, q, v, tau, None)?;
+            black_box(&d.dqdd_dq);
+        }
+        Single::IdSo => {
+            id_so_derivatives(m, d, &mut ws.so, q, v, a, None)?;
+            black_box(&ws.so);
+        }
+        Single::FdSo => {
+            fd_so_derivatives(m, d, &mut ws.fso, q, v, tau, None)?;
+            black_box(&ws.fso);
+        }
+        Single::KktFo | Single::KktSo => {
+            let kd = ws.kkt.as_mut().ok_or_else(no_contacts)?;
+            if algo == Single::KktFo {
+                kkt_derivatives(m, d, kd, q, v, tau)?;
+                black_box(&kd.dqdd_dq);
+            } else {
+                kkt_so_derivatives(m, d, kd, q, v, tau)?;
+                black_box(&kd.so);
+            }
+        }
+        Single::ImpactFo | Single::ImpactSo => {
+            let im = ws.impact.as_mut().ok_or_else(no_contacts)?;
+            if algo == Single::ImpactFo {
+                impact_derivatives(m, d, im, q, v)?;
+                black_box(&im.dvplus_dq);
+            } else {
+                impact_so_derivatives(m, d, im, q, v)?;
+                black_box(&im.so);
+            }
+        }
+    }
+    Ok(())
+}
+
 /// The timing of one algorithm, and for a batched one timed with `--paired-threads`, the
 /// timing on the second pool and the paired speed-up.
 struct Timed {
@@ -827,6 +1017,31 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
             ))
         })?;
     }
+    // --ratio-to R: R and every listed algorithm single-state, R not among them.
+    let ratio_to = match &o.ratio_to {
+        None => None,
+        Some(r) => {
+            let known = Single::from_name(r).ok_or_else(|| {
+                Error::Io(format!(
+                    "--ratio-to: \"{r}\" is not a single-state algorithm (one of rnea, crba, \
+                     aba, id_fo, fd_fo, id_so, fd_so, kkt_fo, kkt_so, impact_fo, impact_so)"
+                ))
+            })?;
+            if CONTACT_ALGOS.contains(&r.as_str()) && o.contacts.is_empty() {
+                return Err(Error::Io(format!("--ratio-to: \"{r}\" needs --contacts")));
+            }
+            if let Some(a) = algos.iter().find(|a| Single::from_name(a).is_none() || *a == r) {
+                return Err(Error::Io(format!(
+                    "--ratio-to {r}: \"{a}\" cannot be timed against it (the algorithms must \
+                     be single-state ones other than {r})"
+                )));
+            }
+            if o.paired_threads.is_some() {
+                return Err(Error::Io("--ratio-to and --paired-threads exclude each other".into()));
+            }
+            Some((r.clone(), known))
+        }
+    };
     let name = o.name.clone().unwrap_or_else(|| default_name(spec));
     let nstates = o.states.unwrap_or(if o.smoke { 8 } else { 1000 });
     let st = States::new(&model, nstates, o.seed);
@@ -860,7 +1075,10 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
     };
     let pool_threads: Vec<usize> = pools.iter().map(BatchPool::threads).collect();
     let nv = model.nv;
-    let needs = |p: &str| algos.iter().any(|a| a.starts_with(p));
+    let needs = |p: &str| {
+        algos.iter().any(|a| a.starts_with(p))
+            || ratio_to.as_ref().is_some_and(|(r, _)| r.starts_with(p))
+    };
     let mut ws = Workspaces {
         data: Data::new(&model),
         so: SoData::new(&model),
@@ -922,6 +1140,34 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
         o.smoke as u8,
     );
     for algo in algos {
+        if let Some((r, reference)) = &ratio_to {
+            let a = Single::from_name(algo).expect("checked above");
+            let t = measure_ratio(&plan, |side, i| {
+                call_single(if side == 0 { a } else { *reference }, &model, &st, &mut ws, i)
+            })
+            .map_err(|e| Error::Io(format!("bench {algo} against {r} on {name}: {e}")))?;
+            let [s, sr] = t.stats;
+            println!(
+                "model={name} nq={} nv={} algo={algo} median_us={:.4} p10_us={:.4} \
+                 p90_us={:.4} batch={} samples={} ratio_to={r} ratio={:.4} ratio_pairs={} \
+                 ref_median_us={:.4} ref_p10_us={:.4} ref_p90_us={:.4}",
+                model.nq,
+                model.nv,
+                s.med,
+                s.p10,
+                s.p90,
+                s.batch,
+                s.samples,
+                t.ratio,
+                t.pairs,
+                sr.med,
+                sr.p10,
+                sr.p90
+            );
+            use std::io::Write;
+            let _ = std::io::stdout().flush();
+            continue;
+        }
         let t = time_algo(algo, &model, &st, &mut ws, &plan)
             .map_err(|e| Error::Io(format!("bench {algo} on {name}: {e}")))?;
         let batched = algo.starts_with("batch_");
