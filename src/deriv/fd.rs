@@ -162,9 +162,13 @@ pub struct FdSoData {
     /// IDFOZA workspaces, four and eight right-hand sides.
     ws4: IdfozaWs<[f64; 4]>,
     ws8: IdfozaWs<[f64; 8]>,
-    /// IDFOZA of eight right-hand sides `X[:, j0..j0 + 8]`: `(u, i, k)` at `u + 8 i + 8 n k`;
-    /// from the first 64-byte aligned value (8 values to spare).
-    s8: Vec<f64>,
+    /// The rank-12 factors of `∂(M⁻¹)/∂q` (see [`dminv_dq`]), six columns of [`Self::ld`] rows
+    /// each: `U_J` and `W_J` per joint `J` (at `6 ld J`), and `V` of one page.
+    lr_u: Vec<f64>,
+    lr_w: Vec<f64>,
+    lr_v: Vec<f64>,
+    /// `−V[c, :]` then `−U[c, :]` for each row `c` of one page (see [`dminv_pages`]).
+    lr_t: Vec<f64>,
     /// `M⁻¹` with its columns padded with zeros to [`Self::ld`] rows (whole vectors of 8).
     minv: Vec<f64>,
     /// Leading dimension of `minv`: `nv` rounded up to a multiple of 8.
@@ -267,7 +271,10 @@ impl FdSoData {
             d2qdd_dtaudq: Tensor3::zeros(n, n, n),
             ws4: IdfozaWs::new(model),
             ws8: IdfozaWs::new(model),
-            s8: vec![0.0; 8 * n * n + 8],
+            lr_u: vec![0.0; 6 * ld * model.njoints()],
+            lr_w: vec![0.0; 6 * ld * model.njoints()],
+            lr_v: vec![0.0; 6 * ld],
+            lr_t: vec![0.0; 12 * n],
             minv: vec![0.0; ld * n],
             ld,
             words,
@@ -552,24 +559,6 @@ struct IdfozaWss<'a> {
     ws8: &'a mut IdfozaWs<[f64; 8]>,
 }
 
-/// `out[u + 8 i + 8 n k] ← IDFOZA(x[:, j0 + u])[i][k]` (`u < 8`, `out` of `8 n²` values) for
-/// the structurally non-zero `(i, k)` (the entries of the DoFs `k` of root joints, zero, are
-/// never written, see [`idfoza_lanes_core`]; nor are the lanes past `nv`, which stay zero): the
-/// eight lanes of an entry are one 64-byte line when `out` is so aligned (see
-/// [`idfoza_add_block`]).
-fn idfoza_blocks(
-    model: &Model,
-    data: &Data,
-    ws: &mut IdfozaWss<'_>,
-    x: &[f64],
-    j0: usize,
-    out: &mut [f64],
-) {
-    let n = model.nv;
-    assert!(out.len() == 8 * n * n && j0 < n);
-    idfoza_add_block(model, data, ws, x, j0, 8.min(n - j0), AddMask::Over, out)
-}
-
 /// The lanes `k8 + lane0 + l` (`l < 8`) whose DoF is related to both `i` and `j`, as bits
 /// (`related`: the bit sets of `FdSoData::related`, `words` words each).
 #[inline(always)]
@@ -587,20 +576,14 @@ fn lanes_related(related: &[u64], words: usize, i: usize, j: usize, first: usize
 enum AddMask<'a> {
     /// The lanes `first + l` whose DoF is related to both `i` and `j` (see [`lanes_related`]).
     Related { related: &'a [u64], words: usize, first: usize },
-    /// None: every lane is overwritten.
-    Over,
 }
 
 impl AddMask<'_> {
     /// The lanes added onto for the entry `(i, j)`, as bits.
     #[inline(always)]
     fn at(&self, i: usize, j: usize) -> u8 {
-        match *self {
-            AddMask::Related { related, words, first } => {
-                lanes_related(related, words, i, j, first)
-            }
-            AddMask::Over => 0,
-        }
+        let AddMask::Related { related, words, first } = *self;
+        lanes_related(related, words, i, j, first)
     }
 }
 
@@ -707,8 +690,6 @@ unsafe fn idfoza_add_avx512(
     let stride = blk.len() / (n * n);
     let lanes = ((1u16 << w) - 1) as u8;
     let o = blk.as_mut_ptr();
-    // Plain stores when overwriting (no load, not even an empty masked one).
-    let over = matches!(mask, AddMask::Over);
     // SAFETY: AVX-512F is enabled here, as `Avx8` needs.
     idfoza_lanes_core::<Avx8>(model, data, ws, x, n, j0, w, |i, j, z| {
         assert!(i < n && j < n);
@@ -717,10 +698,8 @@ unsafe fn idfoza_add_avx512(
         // this function.
         unsafe {
             let p = o.add(stride * (i + n * j));
-            let mut z = _mm512_loadu_pd(z.as_ptr());
-            if !over {
-                z = _mm512_add_pd(_mm512_maskz_loadu_pd(mask.at(i, j) & lanes, p), z);
-            }
+            let z = _mm512_loadu_pd(z.as_ptr());
+            let z = _mm512_add_pd(_mm512_maskz_loadu_pd(mask.at(i, j) & lanes, p), z);
             _mm512_mask_storeu_pd(p, lanes, z);
         }
     });
@@ -729,15 +708,15 @@ unsafe fn idfoza_add_avx512(
 /// Second-order derivatives of forward dynamics at `q̈ = FD(q, q̇, τ)` (eq. eqn_FD_SO_43):
 /// `∂²q̈/∂u∂w = −M⁻¹(∂²ID/∂u∂w + ∂M/∂w · ∂FD/∂u + (∂M/∂u · ∂FD/∂w)^R)`, with the `∂M/∂q`
 /// products by IDFOZA (`O(N d)` per column) instead of tensor products, and in `∂²q̈/∂q²` as
-/// `−M⁻¹ ∂M/∂q_k · ∂q̈/∂q_j = −∂(M⁻¹)/∂q_k · ∂τ/∂q_j` from the `∂(M⁻¹)/∂q` just computed. Also
-/// fills the first-order results in `data` (as [`fd_derivatives`]).
+/// `−M⁻¹ ∂M/∂q_k · ∂q̈/∂q_j = −∂(M⁻¹)/∂q_k · ∂τ/∂q_j` from `∂(M⁻¹)/∂q`, itself computed page
+/// by page from the rank-12 form of `∂M/∂q_k` (see `dminv_dq`). Also fills the first-order
+/// results in `data` (as [`fd_derivatives`]).
 ///
 /// Each column `−M⁻¹ b` is a product with the dense `M⁻¹` (from the `LᵀDL` factors) over the
 /// rows where `b` can be non-zero only: row `l` of `∂²τ/∂q_j∂·` and of `∂M/∂q_j · x` vanishes
 /// unless DoF `l` is `j`, an ancestor or a descendant of it. Symmetries cut the columns:
 /// `∂²q̈/∂q̇²` is symmetric in `(j, k)`, and so is `∂²q̈/∂q²` for DoFs of different joints (the
-/// configuration space is a product over joints); the pages of `∂(M⁻¹)/∂q_k` are symmetric, so
-/// only their upper triangles are computed.
+/// configuration space is a product over joints).
 pub fn fd_so_derivatives(
     model: &Model,
     data: &mut Data,
@@ -829,6 +808,320 @@ fn lanes(c0: usize, w: usize) -> [usize; 4] {
     std::array::from_fn(|u| c0 + u.min(w - 1))
 }
 
+/// `x ← x + m[:, j] · sᵀ` on six columns of `ld` rows (`x[a ld + r] += m[r] s[a]`).
+#[inline(always)]
+fn add_outer(x: &mut [f64], ld: usize, m: &[f64], s: &[f64; 6]) {
+    for (a, col) in x.chunks_exact_mut(ld).enumerate() {
+        for (y, &mr) in col.iter_mut().zip(m) {
+            *y = mr.mul_add(s[a], *y);
+        }
+    }
+}
+
+/// `∂(M⁻¹)/∂q` into `out` (pages `k` of the DoFs of root joints skipped: zero), from the
+/// rank-12 form of `∂M/∂q_k` (docs/notes-corrections.md, "∂(M⁻¹)/∂q in rank-12 form"). For DoF `k` of
+/// joint `J`, with `F` the DoFs of the strict ancestors of `J` and `D` those of `J` and its
+/// descendants, moving `q_k` moves the subtree of `J` rigidly with the twist `s = S_k`, so
+/// `∂M_ij/∂q_k` is `S_iᵀ X S_j` for `i, j ∈ F` (`X = s×* I^C_J − I^C_J s×`, symmetric),
+/// `(s ×* I^C_i S_i)ᵀ S_j` for `i ∈ D`, `j ∈ F` (and its transpose), and zero otherwise:
+/// `∂M/∂q_k = Pᵀ Q + Qᵀ P` with the `6×n` matrices `P` (columns `S_j`, `j ∈ F`) and
+/// `Q = ½ X P + Z` (columns `s ×* I^C_i S_i`, `i ∈ D`). Then
+/// `∂(M⁻¹)/∂q_k = −M⁻¹ ∂M/∂q_k M⁻¹ = −(U Vᵀ + V Uᵀ)` with `U = M⁻¹ Pᵀ = U_J` and
+/// `V = M⁻¹ Qᵀ`, whose row `r` is `s ×* (½ I^C_J u_r + w_r) − ½ I^C_J (s × u_r)` with
+/// `u_r`, `w_r` the rows of `U_J = Σ_{j∈F} M⁻¹[:, j] S_jᵀ` (accumulated down the tree) and
+/// `W_J = Σ_{i∈D} M⁻¹[:, i] (I^C_i S_i)ᵀ` (accumulated up the tree). `minv` is `M⁻¹` with
+/// columns padded with zeros to `ld` rows; `lr_*` hold six columns of `ld` rows per joint
+/// (`lr_v`: one).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn dminv_dq(
+    model: &Model,
+    data: &Data,
+    minv: &[f64],
+    ld: usize,
+    root: &[bool],
+    lr_u: &mut [f64],
+    lr_w: &mut [f64],
+    lr_v: &mut [f64],
+    lr_t: &mut [f64],
+    out: &mut Tensor3,
+) {
+    let n = model.nv;
+    let nj = model.njoints();
+    let b6 = 6 * ld;
+    let s6 = |c: usize| -> [f64; 6] {
+        let s = &data.s_world[c];
+        [s.ang.x, s.ang.y, s.ang.z, s.lin.x, s.lin.y, s.lin.z]
+    };
+    // U_J = U_λ(J) + Σ_{j of λ(J)} M⁻¹[:, j] S_jᵀ (zero for the joints attached to the world).
+    for jt in 1..nj {
+        let p = model.parents[jt];
+        let (before, rest) = lr_u.split_at_mut(b6 * jt);
+        let u = &mut rest[..b6];
+        if p == 0 {
+            u.fill(0.0);
+            continue;
+        }
+        u.copy_from_slice(&before[b6 * p..b6 * (p + 1)]);
+        for j in model.idx_v[p]..model.idx_v[p] + model.nvs[p] {
+            add_outer(u, ld, &minv[ld * j..ld * (j + 1)], &s6(j));
+        }
+    }
+    // W_J = Σ_{i of J} M⁻¹[:, i] (I^C_J S_i)ᵀ + Σ_{children c} W_c.
+    lr_w.fill(0.0);
+    for jt in (1..nj).rev() {
+        let w = &mut lr_w[b6 * jt..b6 * (jt + 1)];
+        for i in model.idx_v[jt]..model.idx_v[jt] + model.nvs[jt] {
+            let f = data.ic_world[jt].mul_motion(&data.s_world[i]);
+            let f6 = [f.ang.x, f.ang.y, f.ang.z, f.lin.x, f.lin.y, f.lin.z];
+            add_outer(w, ld, &minv[ld * i..ld * (i + 1)], &f6);
+        }
+        let p = model.parents[jt];
+        if p > 0 {
+            let (before, rest) = lr_w.split_at_mut(b6 * jt);
+            for (x, y) in before[b6 * p..b6 * (p + 1)].iter_mut().zip(&rest[..b6]) {
+                *x += y;
+            }
+        }
+    }
+    let pages = Pages { n, ld, u: lr_u, w: lr_w };
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx512f() {
+        // SAFETY: the CPU supports the enabled features.
+        return unsafe { dminv_pages_avx512(model, data, &pages, root, lr_v, lr_t, out) };
+    }
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: the CPU supports the enabled features.
+        return unsafe { dminv_pages_avx2(model, data, &pages, root, lr_v, lr_t, out) };
+    }
+    dminv_pages::<[f64; 4], 1>(model, data, &pages, root, lr_v, lr_t, out)
+}
+
+/// The factors `U_J`, `W_J` of [`dminv_dq`] (six columns of `ld` rows per joint).
+struct Pages<'a> {
+    n: usize,
+    ld: usize,
+    u: &'a [f64],
+    w: &'a [f64],
+}
+
+/// [`dminv_pages`] with AVX-512 lanes.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn dminv_pages_avx512(
+    model: &Model,
+    data: &Data,
+    p: &Pages<'_>,
+    root: &[bool],
+    v: &mut [f64],
+    t: &mut [f64],
+    out: &mut Tensor3,
+) {
+    // SAFETY: AVX-512F, AVX2 and FMA are enabled here, as `Avx8` needs.
+    dminv_pages::<Avx8, 2>(model, data, p, root, v, t, out)
+}
+
+/// [`dminv_pages`] with AVX2 lanes.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn dminv_pages_avx2(
+    model: &Model,
+    data: &Data,
+    p: &Pages<'_>,
+    root: &[bool],
+    v: &mut [f64],
+    t: &mut [f64],
+    out: &mut Tensor3,
+) {
+    // SAFETY: AVX2 and FMA are enabled here, as `Avx4` needs.
+    dminv_pages::<Avx4, 1>(model, data, p, root, v, t, out)
+}
+
+/// `x[off..off + N]` as lanes.
+#[inline(always)]
+fn load_lanes<L: Lanes>(x: &[f64], off: usize) -> L {
+    let mut a = L::Arr::default();
+    let a_ref = a.as_mut();
+    let len = a_ref.len();
+    a_ref.copy_from_slice(&x[off..off + len]);
+    L::load(&a)
+}
+
+/// `s × u` (motion cross product) of a plain `s` and lane vectors `u`.
+#[inline(always)]
+fn cross_motion_lanes<L: Lanes>(s: &[f64; 6], u: &[L; 6]) -> [L; 6] {
+    let (w, v) = ([s[0], s[1], s[2]].map(L::splat), [s[3], s[4], s[5]].map(L::splat));
+    let c3 = |a: &[L; 3], b: &[L], acc: Option<[L; 3]>| -> [L; 3] {
+        let z = acc.unwrap_or([L::splat(0.0); 3]);
+        [
+            a[1].mul_add(b[2], z[0]).sub(a[2].mul(b[1])),
+            a[2].mul_add(b[0], z[1]).sub(a[0].mul(b[2])),
+            a[0].mul_add(b[1], z[2]).sub(a[1].mul(b[0])),
+        ]
+    };
+    let ang = c3(&w, &u[..3], None);
+    let lin = c3(&v, &u[..3], Some(c3(&w, &u[3..], None)));
+    [ang[0], ang[1], ang[2], lin[0], lin[1], lin[2]]
+}
+
+/// `s ×* f` (force cross product) of a plain `s` and lane vectors `f`.
+#[inline(always)]
+fn cross_force_lanes<L: Lanes>(s: &[f64; 6], f: &[L; 6]) -> [L; 6] {
+    let (w, v) = ([s[0], s[1], s[2]].map(L::splat), [s[3], s[4], s[5]].map(L::splat));
+    let c3 = |a: &[L; 3], b: &[L], acc: Option<[L; 3]>| -> [L; 3] {
+        let z = acc.unwrap_or([L::splat(0.0); 3]);
+        [
+            a[1].mul_add(b[2], z[0]).sub(a[2].mul(b[1])),
+            a[2].mul_add(b[0], z[1]).sub(a[0].mul(b[2])),
+            a[0].mul_add(b[1], z[2]).sub(a[1].mul(b[0])),
+        ]
+    };
+    let ang = c3(&v, &f[3..], Some(c3(&w, &f[..3], None)));
+    let lin = c3(&w, &f[3..], None);
+    [ang[0], ang[1], ang[2], lin[0], lin[1], lin[2]]
+}
+
+/// The pages `k` of [`dminv_dq`] (but those of root joints) from the factors `U_J`, `W_J`,
+/// `L` rows at a time; `v` is the scratch for `V` (six columns of `ld` rows).
+#[inline(always)]
+fn dminv_pages<L: Lanes, const B: usize>(
+    model: &Model,
+    data: &Data,
+    p: &Pages<'_>,
+    root: &[bool],
+    v: &mut [f64],
+    t: &mut [f64],
+    out: &mut Tensor3,
+) {
+    let (n, ld) = (p.n, p.ld);
+    let nl = L::Arr::default().as_ref().len();
+    let (b6, n2) = (6 * ld, n * n);
+    let o = out.as_mut_slice();
+    // Only a prefetch address (never dereferenced).
+    let base = o.as_ptr();
+    for k in (0..n).filter(|&k| !root[k]) {
+        let jt = model.dof_joint[k];
+        let sw = &data.s_world[k];
+        let s = [sw.ang.x, sw.ang.y, sw.ang.z, sw.lin.x, sw.lin.y, sw.lin.z];
+        let im = data.ic_world[jt].matrix();
+        let (u, w) = (&p.u[b6 * jt..b6 * (jt + 1)], &p.w[b6 * jt..b6 * (jt + 1)]);
+        // V, L rows at a time: row r is s ×* (½ I u_r + w_r) − ½ I (s × u_r).
+        for r0 in (0..ld).step_by(nl) {
+            let ur: [L; 6] = std::array::from_fn(|a| load_lanes(u, a * ld + r0));
+            let su = cross_motion_lanes(&s, &ur);
+            let half = L::splat(0.5);
+            let mut y: [L; 6] = std::array::from_fn(|a| load_lanes(w, a * ld + r0));
+            let mut z = [L::splat(0.0); 6];
+            for a in 0..6 {
+                let (mut iu, mut isu) = (L::splat(0.0), L::splat(0.0));
+                for b in 0..6 {
+                    let m = L::splat(im[(a, b)]);
+                    iu = m.mul_add(ur[b], iu);
+                    isu = m.mul_add(su[b], isu);
+                }
+                y[a] = half.mul_add(iu, y[a]);
+                z[a] = half.mul(isu);
+            }
+            let sy = cross_force_lanes(&s, &y);
+            for a in 0..6 {
+                let x = sy[a].sub(z[a]).store();
+                v[a * ld + r0..a * ld + r0 + nl].copy_from_slice(x.as_ref());
+            }
+        }
+        // Page k: column c is −(U V[c, :]ᵀ + V U[c, :]ᵀ), by groups of `B` blocks of L rows
+        // (held in registers), then columns, whose twelve factors are read from a row-major
+        // copy (`t`: −V[c, :] then −U[c, :]).
+        for c in 0..n {
+            for a in 0..6 {
+                t[12 * c + a] = -v[a * ld + c];
+                t[12 * c + 6 + a] = -u[a * ld + c];
+            }
+        }
+        let page = &mut o[n2 * k..n2 * (k + 1)];
+        let next = (k + 1 < n).then(|| base.wrapping_add(n2 * (k + 1)));
+        page_groups::<L, B>(n, ld, u, v, &t[..12 * n], page, next);
+    }
+}
+
+/// The page `page` (`n` columns of `n` values) of [`dminv_pages`]: `page[r + n c] =
+/// Σ_a U[a][r] t[12 c + a] + V[a][r] t[12 c + 6 + a]` (`U`, `V`: six columns of `ld` rows), by
+/// groups of `B` blocks of `L` rows. `next`, the next page, is prefetched into L2 a line per
+/// block and column.
+#[inline(always)]
+fn page_groups<L: Lanes, const B: usize>(
+    n: usize,
+    ld: usize,
+    u: &[f64],
+    v: &[f64],
+    t: &[f64],
+    page: &mut [f64],
+    next: Option<*const f64>,
+) {
+    let nl = L::Arr::default().as_ref().len();
+    let nlines = if next.is_some() { (n * n).div_ceil(8) } else { 0 };
+    let next = next.unwrap_or(std::ptr::null());
+    let nblocks = n.div_ceil(nl);
+    let mut blk = 0;
+    while blk < nblocks {
+        let g = B.min(nblocks - blk);
+        if g == B {
+            group::<L, B>(n, ld, u, v, t, page, blk, next, nlines);
+        } else {
+            for b in blk..blk + g {
+                group::<L, 1>(n, ld, u, v, t, page, b, next, nlines);
+            }
+        }
+        blk += g;
+    }
+}
+
+/// `G` consecutive row blocks from block `blk` of [`page_groups`].
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn group<L: Lanes, const G: usize>(
+    n: usize,
+    ld: usize,
+    u: &[f64],
+    v: &[f64],
+    t: &[f64],
+    page: &mut [f64],
+    blk: usize,
+    next: *const f64,
+    nlines: usize,
+) {
+    let nl = L::Arr::default().as_ref().len();
+    let r0: [usize; G] = std::array::from_fn(|b| (blk + b) * nl);
+    let ua: [[L; 6]; G] =
+        std::array::from_fn(|b| std::array::from_fn(|a| load_lanes(u, a * ld + r0[b])));
+    let va: [[L; 6]; G] =
+        std::array::from_fn(|b| std::array::from_fn(|a| load_lanes(v, a * ld + r0[b])));
+    let m: [usize; G] = std::array::from_fn(|b| nl.min(n - r0[b]));
+    for (c, tc) in t.chunks_exact(12).enumerate() {
+        for b in 0..G {
+            let line = n * (blk + b) + c;
+            if line < nlines {
+                prefetch::<TO_L2>(next.wrapping_add(8 * line), 1);
+            }
+            // Two chains of six multiply-adds.
+            let (mut x, mut y) = (L::splat(0.0), L::splat(0.0));
+            for a in 0..6 {
+                x = ua[b][a].mul_add(L::splat(tc[a]), x);
+                y = va[b][a].mul_add(L::splat(tc[6 + a]), y);
+            }
+            let r = x.add(y).store();
+            let dst = &mut page[n * c + r0[b]..n * c + r0[b] + m[b]];
+            if m[b] == nl {
+                dst.copy_from_slice(r.as_ref());
+            } else {
+                for (d, x) in dst.iter_mut().zip(r.as_ref()) {
+                    *d = *x;
+                }
+            }
+        }
+    }
+}
+
 /// The four second-order tensors of [`fd_so_derivatives`] from its first-order results in
 /// `data` and the ID second-order tensors in `fso.id` (`nv > 0`), of which `∂²τ/∂q²` and
 /// `∂²τ/∂q̇²` are read in their upper halves only (see [`SoData::upper_halves`]).
@@ -853,9 +1146,6 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
         idx2: &mut fso.idx2,
         rhs: &mut fso.rhs,
     };
-    // s8 from its first 64-byte aligned value (each entry's eight lanes one line).
-    let off = fso.s8.as_ptr().align_offset(64).min(8);
-    let s8 = &mut fso.s8[off..off + 8 * n2];
     let mut ws = IdfozaWss { ws4: &mut fso.ws4, ws8: &mut fso.ws8 };
     let dof_joint = &model.dof_joint;
     // DoFs of different joints commute (product of the joints' configuration spaces).
@@ -903,51 +1193,20 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             unsafe { pr.solve_group_in_place(n, b, 1, false, 0, out, mirror) };
         }
     }
-    // ∂(M⁻¹)/∂q (before ∂²q̈/∂q², which reads it) = −M⁻¹ C with
-    // C[i][j][k] = IDFOZA(M⁻¹[:, j])[i][k]: rows i ≤ j of the columns (j0..j0 + 4, k), by j0,
-    // with IDFOZA of the columns j8..j8 + 8 into `s8` (at u + 8 i + 8 n k for j = j8 + u); rows
-    // of C related to k. The pages k of the DoFs of root joints vanish (see `FdSoData::root`).
-    // The strict lower triangles come from the symmetry of the pages: each group's columns,
-    // just computed and in L1, are copied transposed into the rows j0..j0 + 4 of the columns
-    // before j0.
-    {
-        for j8 in (0..n).step_by(8) {
-            idfoza_blocks(model, data, &mut ws, data.minv.as_slice(), j8, s8);
-            for j0 in (j8..n.min(j8 + 8)).step_by(4) {
-                let w = 4.min(n - j0);
-                for k in (0..n).filter(|&k| !fso.root[k]) {
-                    // The next group's outputs (rows < j0 + w of columns j0..j0 + w) into L2.
-                    if k + 1 < n {
-                        let t = fso.d2qdd_dtaudq.as_slice().as_ptr();
-                        prefetch::<TO_L2>(t.wrapping_add(n * (j0 + n * (k + 1))), w * n);
-                    }
-                    pr.build_set(pr.related(k), pr.related(k), false);
-                    let out = std::array::from_fn(|u| col(&mut fso.d2qdd_dtaudq, j0 + u, k));
-                    let b = s8[j0 - j8 + 8 * n * k..].as_ptr();
-                    // SAFETY: the rows l < n of page k of s8 (8 n² values) at b + u + 8 l; the
-                    // outputs are distinct columns of d2qdd_dtaudq.
-                    unsafe {
-                        pr.solve_group_in_place(
-                            j0 + w,
-                            [b, b.add(1), b.add(2), b.add(3)],
-                            8,
-                            true,
-                            0,
-                            out,
-                            none,
-                        )
-                    };
-                    // The strict lower triangle of the page from the columns just computed (in
-                    // L1): rows j0..j0 + w of the columns i < j0 are rows i of the columns
-                    // j0..j0 + w.
-                    let page = &mut fso.d2qdd_dtaudq.as_mut_slice()[n2 * k..n2 * (k + 1)];
-                    let (lower, upper) = page.split_at_mut(n * j0);
-                    let off = j0.min(lower.len());
-                    transpose_strided(upper, n, j0, w, &mut lower[off..], n);
-                }
-            }
-        }
-    }
+    // ∂(M⁻¹)/∂q (before ∂²q̈/∂q², which reads it), page by page from the rank-12 form of
+    // ∂M/∂q_k (see `dminv_dq`).
+    dminv_dq(
+        model,
+        data,
+        &fso.minv,
+        ld,
+        &fso.root,
+        &mut fso.lr_u,
+        &mut fso.lr_w,
+        &mut fso.lr_v,
+        &mut fso.lr_t,
+        &mut fso.d2qdd_dtaudq,
+    );
     // ∂²q̈/∂q² (eq. eqn_FD_SO_43): column (j, k) is −M⁻¹(ID_qq[:, j, k] + A[:, j, k] + A[:, k, j])
     // with A[:, j, k] = ∂M/∂q_k · ∂q̈/∂q_j, for the j and k of `FdSoData::qj` (the others
     // vanish). As ∂q̈/∂q_j = −M⁻¹ ∂τ/∂q_j and ∂(M⁻¹)/∂q_k = −M⁻¹ ∂M/∂q_k M⁻¹ (just computed),
