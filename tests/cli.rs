@@ -270,19 +270,13 @@ fn bench_options_are_validated() {
     assert!(batch[1].contains(" threads=2 ") && batch[1].contains(" speedup="), "{out}");
     assert_eq!(out.lines().filter(|l| l.contains("algo=rnea ")).count(), 1, "{out}");
     // Timed (not --smoke): the paired blocks and their speed-ups are measured and printed.
-    let o = sodyn(&[
-        "bench",
-        "--model",
-        "builtin:quadruped",
-        "--states",
-        "16",
-        "--max-seconds",
-        "0.01",
-        "--paired-threads",
-        "2",
-        "--algos",
-        "batch_rnea",
-    ]);
+    // Timed (short) runs on 16 states.
+    let timed = |extra: &[&str]| {
+        let base =
+            ["bench", "--model", "builtin:quadruped", "--states", "16", "--max-seconds", "0.01"];
+        sodyn(&[&base[..], extra].concat())
+    };
+    let o = timed(&["--paired-threads", "2", "--algos", "batch_rnea"]);
     assert_ok(&o, "timed bench --paired-threads");
     let out = stdout(&o);
     let line = out.lines().find(|l| l.contains(" threads=2 ")).expect("2-thread line");
@@ -311,19 +305,7 @@ fn bench_options_are_validated() {
 
     // --ratio-to: each algorithm timed against a reference in alternating blocks, with the
     // median per-pair ratio and the reference's own times on the algorithm's line.
-    let o = sodyn(&[
-        "bench",
-        "--model",
-        "builtin:quadruped",
-        "--states",
-        "16",
-        "--max-seconds",
-        "0.01",
-        "--algos",
-        "rnea,fd_so",
-        "--ratio-to",
-        "id_so",
-    ]);
+    let o = timed(&["--algos", "rnea,fd_so", "--ratio-to", "id_so"]);
     assert_ok(&o, "timed bench --ratio-to");
     let out = stdout(&o);
     let lines: Vec<&str> = out.lines().filter(|l| l.starts_with("model=")).collect();

@@ -5,7 +5,7 @@ use super::id_fo::id_derivatives_placed;
 use super::id_so::{SoData, id_so_unchecked, qv_offset};
 #[cfg(target_arch = "x86_64")]
 use super::zero::{Avx4, Avx8};
-use super::zero::{IdfozaWs, Lanes, idfoza_lanes_core};
+use super::zero::{IdfozaWs, Lanes, add3, cross_pl, idfoza_lanes_core, inertia_mul_l, v6};
 use crate::algo::Data;
 use crate::algo::internal::{aba_unchecked, check_fext, ltl_in_place, ltl_solve_fd};
 use crate::error::Result;
@@ -849,10 +849,7 @@ fn dminv_dq(
     let n = model.nv;
     let nj = model.njoints();
     let b6 = 6 * ld;
-    let s6 = |c: usize| -> [f64; 6] {
-        let s = &data.s_world[c];
-        [s.ang.x, s.ang.y, s.ang.z, s.lin.x, s.lin.y, s.lin.z]
-    };
+    let s6 = |c: usize| v6(&data.s_world[c].ang, &data.s_world[c].lin);
     // U_J = U_λ(J) + Σ_{j of λ(J)} M⁻¹[:, j] S_jᵀ (zero for the joints attached to the world).
     for jt in 1..nj {
         let p = model.parents[jt];
@@ -873,8 +870,7 @@ fn dminv_dq(
         let w = &mut lr_w[b6 * jt..b6 * (jt + 1)];
         for i in model.idx_v[jt]..model.idx_v[jt] + model.nvs[jt] {
             let f = data.ic_world[jt].mul_motion(&data.s_world[i]);
-            let f6 = [f.ang.x, f.ang.y, f.ang.z, f.lin.x, f.lin.y, f.lin.z];
-            add_outer(w, ld, &minv[ld * i..ld * (i + 1)], &f6);
+            add_outer(w, ld, &minv[ld * i..ld * (i + 1)], &v6(&f.ang, &f.lin));
         }
         let p = model.parents[jt];
         if p > 0 {
@@ -951,34 +947,18 @@ fn load_lanes<L: Lanes>(x: &[f64], off: usize) -> L {
 /// `s × u` (motion cross product) of a plain `s` and lane vectors `u`.
 #[inline(always)]
 fn cross_motion_lanes<L: Lanes>(s: &[f64; 6], u: &[L; 6]) -> [L; 6] {
-    let (w, v) = ([s[0], s[1], s[2]].map(L::splat), [s[3], s[4], s[5]].map(L::splat));
-    let c3 = |a: &[L; 3], b: &[L], acc: Option<[L; 3]>| -> [L; 3] {
-        let z = acc.unwrap_or([L::splat(0.0); 3]);
-        [
-            a[1].mul_add(b[2], z[0]).sub(a[2].mul(b[1])),
-            a[2].mul_add(b[0], z[1]).sub(a[0].mul(b[2])),
-            a[0].mul_add(b[1], z[2]).sub(a[1].mul(b[0])),
-        ]
-    };
-    let ang = c3(&w, &u[..3], None);
-    let lin = c3(&v, &u[..3], Some(c3(&w, &u[3..], None)));
+    let ang = cross_pl(&s[..3], &u[..3]);
+    let mut lin = cross_pl(&s[..3], &u[3..]);
+    add3(&mut lin, cross_pl(&s[3..], &u[..3]));
     [ang[0], ang[1], ang[2], lin[0], lin[1], lin[2]]
 }
 
 /// `s ×* f` (force cross product) of a plain `s` and lane vectors `f`.
 #[inline(always)]
 fn cross_force_lanes<L: Lanes>(s: &[f64; 6], f: &[L; 6]) -> [L; 6] {
-    let (w, v) = ([s[0], s[1], s[2]].map(L::splat), [s[3], s[4], s[5]].map(L::splat));
-    let c3 = |a: &[L; 3], b: &[L], acc: Option<[L; 3]>| -> [L; 3] {
-        let z = acc.unwrap_or([L::splat(0.0); 3]);
-        [
-            a[1].mul_add(b[2], z[0]).sub(a[2].mul(b[1])),
-            a[2].mul_add(b[0], z[1]).sub(a[0].mul(b[2])),
-            a[0].mul_add(b[1], z[2]).sub(a[1].mul(b[0])),
-        ]
-    };
-    let ang = c3(&v, &f[3..], Some(c3(&w, &f[..3], None)));
-    let lin = c3(&w, &f[3..], None);
+    let mut ang = cross_pl(&s[..3], &f[..3]);
+    add3(&mut ang, cross_pl(&s[3..], &f[3..]));
+    let lin = cross_pl(&s[..3], &f[3..]);
     [ang[0], ang[1], ang[2], lin[0], lin[1], lin[2]]
 }
 
@@ -1002,30 +982,20 @@ fn dminv_pages<L: Lanes, const B: usize>(
     let base = o.as_ptr();
     for k in (0..n).filter(|&k| !root[k]) {
         let jt = model.dof_joint[k];
-        let sw = &data.s_world[k];
-        let s = [sw.ang.x, sw.ang.y, sw.ang.z, sw.lin.x, sw.lin.y, sw.lin.z];
-        let im = data.ic_world[jt].matrix();
+        let s = v6(&data.s_world[k].ang, &data.s_world[k].lin);
+        let ic = &data.ic_world[jt];
         let (u, w) = (&p.u[b6 * jt..b6 * (jt + 1)], &p.w[b6 * jt..b6 * (jt + 1)]);
         // V, L rows at a time: row r is s ×* (½ I u_r + w_r) − ½ I (s × u_r).
         for r0 in (0..ld).step_by(nl) {
             let ur: [L; 6] = std::array::from_fn(|a| load_lanes(u, a * ld + r0));
             let su = cross_motion_lanes(&s, &ur);
             let half = L::splat(0.5);
-            let mut y: [L; 6] = std::array::from_fn(|a| load_lanes(w, a * ld + r0));
-            let mut z = [L::splat(0.0); 6];
-            for a in 0..6 {
-                let (mut iu, mut isu) = (L::splat(0.0), L::splat(0.0));
-                for b in 0..6 {
-                    let m = L::splat(im[(a, b)]);
-                    iu = m.mul_add(ur[b], iu);
-                    isu = m.mul_add(su[b], isu);
-                }
-                y[a] = half.mul_add(iu, y[a]);
-                z[a] = half.mul(isu);
-            }
+            let (iu, isu) = (inertia_mul_l(ic, &ur), inertia_mul_l(ic, &su));
+            let y: [L; 6] =
+                std::array::from_fn(|a| half.mul_add(iu[a], load_lanes(w, a * ld + r0)));
             let sy = cross_force_lanes(&s, &y);
             for a in 0..6 {
-                let x = sy[a].sub(z[a]).store();
+                let x = sy[a].sub(half.mul(isu[a])).store();
                 v[a * ld + r0..a * ld + r0 + nl].copy_from_slice(x.as_ref());
             }
         }

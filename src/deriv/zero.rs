@@ -313,7 +313,7 @@ simd_lanes!(
 );
 
 #[inline(always)]
-fn v6(ang: &nalgebra::Vector3<f64>, lin: &nalgebra::Vector3<f64>) -> [f64; 6] {
+pub(crate) fn v6(ang: &nalgebra::Vector3<f64>, lin: &nalgebra::Vector3<f64>) -> [f64; 6] {
     [ang.x, ang.y, ang.z, lin.x, lin.y, lin.z]
 }
 
@@ -340,7 +340,7 @@ fn cross_lp<V: Lanes>(a: &[V], b: &[f64]) -> [V; 3] {
 
 /// `a × b` for a plain `a` and lane 3-vectors `b`.
 #[inline(always)]
-fn cross_pl<V: Lanes>(a: &[f64], b: &[V]) -> [V; 3] {
+pub(crate) fn cross_pl<V: Lanes>(a: &[f64], b: &[V]) -> [V; 3] {
     let s = |i: usize| V::splat(a[i]);
     [
         s(1).mul(b[2]).sub(s(2).mul(b[1])),
@@ -350,7 +350,7 @@ fn cross_pl<V: Lanes>(a: &[f64], b: &[V]) -> [V; 3] {
 }
 
 #[inline(always)]
-fn add3<V: Lanes>(a: &mut [V], b: [V; 3]) {
+pub(crate) fn add3<V: Lanes>(a: &mut [V], b: [V; 3]) {
     for (a, b) in a.iter_mut().zip(b) {
         *a = a.add(b);
     }
@@ -358,7 +358,7 @@ fn add3<V: Lanes>(a: &mut [V], b: [V; 3]) {
 
 /// `I v` (eq. of [`crate::spatial::Inertia::mul_motion`]) on lanes.
 #[inline(always)]
-fn inertia_mul_l<V: Lanes>(inr: &crate::spatial::Inertia, v: &[V; 6]) -> [V; 6] {
+pub(crate) fn inertia_mul_l<V: Lanes>(inr: &crate::spatial::Inertia, v: &[V; 6]) -> [V; 6] {
     let h = [inr.h.x, inr.h.y, inr.h.z];
     let r = |m: usize, c: usize| V::splat(inr.rot[(m, c)]);
     let hl = cross_pl(&h, &v[3..6]); // h × v.lin
