@@ -32,6 +32,10 @@
 #               machine's own 1 -> 2 CPU ceiling: the 1-thread batched calls run alone on CPU 0,
 #               then as two independent processes at once (one on each CPU), then alone on CPU
 #               1; ceiling = (sum of the two concurrent throughputs) / (mean of the lone ones)
+#   SCALING_MAXSEC  soft cap in seconds per algorithm and run of the scaling and ceiling runs
+#               (default 2: a round's paired speed-up is then a median over about 50-250 pairs
+#               of blocks instead of about 10 with 0.25 s, so a short burst of interference
+#               from the host moves it less)
 #   SCALING_PIN 1 (default, with two or more CPUs) also runs each scaling round with the
 #               threads pinned (--pin-cpus 0,1: BatchPool::with_cpus); second table
 set -euo pipefail
@@ -163,6 +167,8 @@ echo "# loadavg at end: $(cut -d' ' -f1-3 /proc/loadavg)" >> "$META"
 
 # 3. Optional: thread scaling of the batched API (both cores, so not pinned).
 if [ "${SCALING:-0}" = 1 ]; then
+  SMAXSEC="${SCALING_MAXSEC:-2}"
+  echo "# SCALING_ROUNDS=${SCALING_ROUNDS:-$ROUNDS} SCALING_MAXSEC=$SMAXSEC" >> "$META"
   for r in $(seq 1 "${SCALING_ROUNDS:-$ROUNDS}"); do
     F="$OUT/scaling-round$r.txt"
     FP="$OUT/scaling-pinned-round$r.txt"
@@ -177,19 +183,19 @@ if [ "${SCALING:-0}" = 1 ]; then
       echo "# loadavg=$(cut -d' ' -f1 /proc/loadavg)" >> "$F"
       "$SODYN" bench --model "$MODELS_DIR/$name.urdf" "${fb[@]}" --name "$name" \
         --paired-threads 2 --algos rnea,id_fo,fd_fo,batch_rnea,batch_id_fo,batch_fd_fo \
-        --max-seconds "$MAXSEC" --seed "$SEED" >> "$F"
+        --max-seconds "$SMAXSEC" --seed "$SEED" >> "$F"
       # The same with the threads pinned: the caller to CPU 0, the helper to CPU 1.
       if [ "$(nproc)" -ge 2 ] && [ "${SCALING_PIN:-1}" = 1 ]; then
         echo "[compare] scaling round $r/${SCALING_ROUNDS:-$ROUNDS} $name threads=1,2 paired, pinned" >&2
         "$SODYN" bench --model "$MODELS_DIR/$name.urdf" "${fb[@]}" --name "$name" \
           --paired-threads 2 --pin-cpus 0,1 --algos rnea,id_fo,fd_fo,batch_rnea,batch_id_fo,batch_fd_fo \
-          --max-seconds "$MAXSEC" --seed "$SEED" >> "$FP"
+          --max-seconds "$SMAXSEC" --seed "$SEED" >> "$FP"
       fi
       # The ceiling: two independent single-threaded processes, one per CPU.
       if command -v taskset >/dev/null && [ "$(nproc)" -ge 2 ]; then
         C="$OUT/ceiling-round$r.txt"
         one=("$SODYN" bench --model "$MODELS_DIR/$name.urdf" "${fb[@]}" --name "$name" \
-          --threads 1 --algos batch_rnea,batch_id_fo,batch_fd_fo --max-seconds "$MAXSEC" \
+          --threads 1 --algos batch_rnea,batch_id_fo,batch_fd_fo --max-seconds "$SMAXSEC" \
           --seed "$SEED")
         taskset -c 0 "${one[@]}" | sed 's/^model=/run=alone0 model=/' >> "$C"
         taskset -c 0 "${one[@]}" > "$OUT/.t0" & taskset -c 1 "${one[@]}" > "$OUT/.t1"; wait
