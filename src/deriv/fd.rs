@@ -5,7 +5,9 @@ use super::id_fo::id_derivatives_placed;
 use super::id_so::{SoData, id_so_unchecked, qv_offset};
 #[cfg(target_arch = "x86_64")]
 use super::zero::{Avx4, Avx8};
-use super::zero::{IdfozaWs, Lanes, add3, cross_pl, idfoza_lanes_core, inertia_mul_l, v6};
+use super::zero::{
+    IdfozaWs, Lanes, cross_force_lanes, cross_motion_lanes, idfoza_lanes_core, inertia_mul_l, v6,
+};
 use crate::algo::Data;
 use crate::algo::internal::{aba_unchecked, check_fext, ltl_in_place, ltl_solve_fd};
 use crate::error::Result;
@@ -942,24 +944,6 @@ fn load_lanes<L: Lanes>(x: &[f64], off: usize) -> L {
     let len = a_ref.len();
     a_ref.copy_from_slice(&x[off..off + len]);
     L::load(&a)
-}
-
-/// `s × u` (motion cross product) of a plain `s` and lane vectors `u`.
-#[inline(always)]
-fn cross_motion_lanes<L: Lanes>(s: &[f64; 6], u: &[L; 6]) -> [L; 6] {
-    let ang = cross_pl(&s[..3], &u[..3]);
-    let mut lin = cross_pl(&s[..3], &u[3..]);
-    add3(&mut lin, cross_pl(&s[3..], &u[..3]));
-    [ang[0], ang[1], ang[2], lin[0], lin[1], lin[2]]
-}
-
-/// `s ×* f` (force cross product) of a plain `s` and lane vectors `f`.
-#[inline(always)]
-fn cross_force_lanes<L: Lanes>(s: &[f64; 6], f: &[L; 6]) -> [L; 6] {
-    let mut ang = cross_pl(&s[..3], &f[..3]);
-    add3(&mut ang, cross_pl(&s[3..], &f[3..]));
-    let lin = cross_pl(&s[..3], &f[3..]);
-    [ang[0], ang[1], ang[2], lin[0], lin[1], lin[2]]
 }
 
 /// The pages `k` of [`dminv_dq`] (but those of root joints) from the factors `U_J`, `W_J`,

@@ -356,6 +356,24 @@ pub(crate) fn add3<V: Lanes>(a: &mut [V], b: [V; 3]) {
     }
 }
 
+/// `s × u` (motion cross product) of a plain `s` and lane vectors `u`.
+#[inline(always)]
+pub(crate) fn cross_motion_lanes<L: Lanes>(s: &[f64; 6], u: &[L; 6]) -> [L; 6] {
+    let ang = cross_pl(&s[..3], &u[..3]);
+    let mut lin = cross_pl(&s[..3], &u[3..]);
+    add3(&mut lin, cross_pl(&s[3..], &u[..3]));
+    [ang[0], ang[1], ang[2], lin[0], lin[1], lin[2]]
+}
+
+/// `s ×* f` (force cross product) of a plain `s` and lane vectors `f`.
+#[inline(always)]
+pub(crate) fn cross_force_lanes<L: Lanes>(s: &[f64; 6], f: &[L; 6]) -> [L; 6] {
+    let mut ang = cross_pl(&s[..3], &f[..3]);
+    add3(&mut ang, cross_pl(&s[3..], &f[3..]));
+    let lin = cross_pl(&s[..3], &f[3..]);
+    [ang[0], ang[1], ang[2], lin[0], lin[1], lin[2]]
+}
+
 /// `I v` (eq. of [`crate::spatial::Inertia::mul_motion`]) on lanes.
 #[inline(always)]
 pub(crate) fn inertia_mul_l<V: Lanes>(inr: &crate::spatial::Inertia, v: &[V; 6]) -> [V; 6] {
@@ -453,11 +471,10 @@ pub(crate) fn idfoza_lanes_core<V: Lanes>(
             }
             // dtau_dq_2 with B = 0, Ψ̇ = 0: t3 = Ic Ψ̈_c + s ×* f_c
             let mut t3 = inertia_mul_l(ic, &ld6::<V>(&ws.psidd[c]));
-            let sa = [s.ang.x, s.ang.y, s.ang.z];
-            let sl = [s.lin.x, s.lin.y, s.lin.z];
-            add3(&mut t3[0..3], cross_pl(&sa, &fc[0..3]));
-            add3(&mut t3[0..3], cross_pl(&sl, &fc[3..6]));
-            add3(&mut t3[3..6], cross_pl(&sa, &fc[3..6]));
+            let sf = cross_force_lanes(&v6(&s.ang, &s.lin), &fc);
+            for (t, x) in t3.iter_mut().zip(sf) {
+                *t = t.add(x);
+            }
             // ... and of the strict ancestor joints (ancestor DoFs below `iv`), both terms.
             for &r in model.ancestors_of_dof(c) {
                 if r < iv {
