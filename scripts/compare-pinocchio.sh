@@ -36,6 +36,9 @@
 #               (default 2: a round's paired speed-up is then a median over about 50-250 pairs
 #               of blocks instead of about 10 with 0.25 s, so a short burst of interference
 #               from the host moves it less)
+#               Each scaling run is followed by a line "steal model=M pct=P": the steal time
+#               of the machine's CPUs during it (/proc/stat), shown in scaling.md; meta.txt
+#               gets the same for the comparison rounds.
 #   SCALING_PIN 1 (default, with two or more CPUs) also runs each scaling round with the
 #               threads pinned (--pin-cpus 0,1: BatchPool::with_cpus); second table
 set -euo pipefail
@@ -112,6 +115,19 @@ META="$OUT/meta.txt"
 } > "$META"
 cat "$META" >&2
 
+# Steal ticks and all ticks of the machine's CPUs so far (/proc/stat, Linux; "0 0" elsewhere):
+# the time the host ran something else while a virtual CPU had work.
+cpu_ticks() {
+  awk '/^cpu /{t = 0; for (i = 2; i <= NF; i++) t += $i; print $9 + 0, t; found = 1}
+       END {if (!found) print 0, 0}' /proc/stat 2>/dev/null || echo "0 0"
+}
+# Percentage of steal between two cpu_ticks readings "$1" and "$2".
+steal_pct() {
+  awk -v a="$1" -v b="$2" 'BEGIN {split(a, x, " "); split(b, y, " ");
+    d = y[2] - x[2]; if (d > 0) printf "%.2f", 100 * (y[1] - x[1]) / d; else printf "nan"}'
+}
+RUN_T0="$(cpu_ticks)"
+
 # One algorithm pair of round $r: sodyn first in odd rounds, Pinocchio first in even ones, so
 # that whatever favours the first (or second) run of a pair falls on both programs equally.
 run_pair() {
@@ -164,6 +180,7 @@ for r in $(seq 1 "$ROUNDS"); do
   done <<< "$MODEL_TABLE"
 done
 echo "# loadavg at end: $(cut -d' ' -f1-3 /proc/loadavg)" >> "$META"
+echo "# steal during the comparison rounds: $(steal_pct "$RUN_T0" "$(cpu_ticks)") % of the CPUs' time" >> "$META"
 
 # 3. Optional: thread scaling of the batched API (both cores, so not pinned).
 if [ "${SCALING:-0}" = 1 ]; then
@@ -181,15 +198,19 @@ if [ "${SCALING:-0}" = 1 ]; then
       # each pair of consecutive calls sees the same machine state.
       echo "[compare] scaling round $r/${SCALING_ROUNDS:-$ROUNDS} $name threads=1,2 paired" >&2
       echo "# loadavg=$(cut -d' ' -f1 /proc/loadavg)" >> "$F"
+      t0="$(cpu_ticks)"
       "$SODYN" bench --model "$MODELS_DIR/$name.urdf" "${fb[@]}" --name "$name" \
         --paired-threads 2 --algos rnea,id_fo,fd_fo,batch_rnea,batch_id_fo,batch_fd_fo \
         --max-seconds "$SMAXSEC" --seed "$SEED" >> "$F"
+      echo "steal model=$name pct=$(steal_pct "$t0" "$(cpu_ticks)")" >> "$F"
       # The same with the threads pinned: the caller to CPU 0, the helper to CPU 1.
       if [ "$(nproc)" -ge 2 ] && [ "${SCALING_PIN:-1}" = 1 ]; then
         echo "[compare] scaling round $r/${SCALING_ROUNDS:-$ROUNDS} $name threads=1,2 paired, pinned" >&2
+        t0="$(cpu_ticks)"
         "$SODYN" bench --model "$MODELS_DIR/$name.urdf" "${fb[@]}" --name "$name" \
           --paired-threads 2 --pin-cpus 0,1 --algos rnea,id_fo,fd_fo,batch_rnea,batch_id_fo,batch_fd_fo \
           --max-seconds "$SMAXSEC" --seed "$SEED" >> "$FP"
+        echo "steal model=$name pct=$(steal_pct "$t0" "$(cpu_ticks)")" >> "$FP"
       fi
       # The ceiling: two independent single-threaded processes, one per CPU.
       if command -v taskset >/dev/null && [ "$(nproc)" -ge 2 ]; then

@@ -200,6 +200,15 @@ def scaling(out_dir, prefix):
                     us, util, sp, spc, percpu, spf)
             else:
                 single.setdefault(key, {}).setdefault(r, []).append(us)
+    # Steal time of the machine's CPUs during each round's run of a model ("steal model=M
+    # pct=P" lines, written by the script around the run; absent in older outputs).
+    steal = {}
+    for path in files:
+        for kv in records(path, "steal "):
+            try:
+                steal.setdefault(kv["model"], []).append(float(kv["pct"]))
+            except (KeyError, ValueError):
+                pass
     # The machine's ceiling per (model, algo) and round, from ceiling-round*.txt.
     ceiling = {}
     for path in sorted(glob.glob(os.path.join(out_dir, "ceiling-round*.txt"))):
@@ -226,14 +235,17 @@ def scaling(out_dir, prefix):
           "machine ceiling (two processes) = throughput of two independent 1-thread processes "
           "running at once, one per CPU, over the mean throughput of one alone on each CPU "
           "(measured in each round right after the paired run); "
-          "CPUs used = process CPU time / wall time during the timed calls.\n")
+          "CPUs used = process CPU time / wall time during the timed calls; steal = time the "
+          "host ran something else while the machine's CPUs had work, in % of the CPUs' time "
+          "during that model's run (all its algorithms), per round.\n")
     print("| model | algo | 1 thread µs/state | 2 threads µs/state | speed-up 1→2 [min–max] "
           "| paired speed-up [min–max] | first call of a block [min–max] "
           "| over the CPUs' mean [min–max] "
           "| machine ceiling (two processes) [min–max] | 1 thread pinned µs per CPU "
           "| CPUs used (1 / 2 threads) "
-          "| CPU µs per state (1 / 2 threads) | single call µs | batch (1 thread) / single |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "| CPU µs per state (1 / 2 threads) | single call µs | batch (1 thread) / single "
+          "| steal % [min–max] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for (m, a), rounds in batch.items():
         rs = [v for v in rounds.values() if "1" in v and "2" in v]
         if not rs:
@@ -264,7 +276,16 @@ def scaling(out_dir, prefix):
               f"[{min(sp):.2f}–{max(sp):.2f}] | {pstr} | {pfstr} | {pcstr} | {cestr} | {percpu} "
               f"| {med(u1):.2f} / {med(u2):.2f} "
               f"| {fmt_us(med(c1))} / {fmt_us(med(c2))} "
-              f"| {fmt_us(med(s_all)) if s_all else '-'} | {f'{med(ov):.2f}' if ov else '-'} |")
+              f"| {fmt_us(med(s_all)) if s_all else '-'} | {f'{med(ov):.2f}' if ov else '-'} "
+              f"| {fmt_steal(steal.get(m, []))} |")
+
+
+def fmt_steal(v):
+    """Median [min–max] of steal percentages (NaN readings dropped), or '-'."""
+    v = [x for x in v if x == x]
+    if not v:
+        return "-"
+    return f"{statistics.median(v):.1f} [{min(v):.1f}–{max(v):.1f}]"
 
 
 def plot(path, models, dims, ratio, n):
