@@ -54,8 +54,8 @@ impl States {
         let mut s = States { q: vec![], v: vec![], a: vec![], i: 0 };
         for _ in 0..n {
             s.q.push(m.random_configuration(&mut rng));
-            s.v.push(DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0)));
-            s.a.push(DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0)));
+            s.v.push(DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0)));
+            s.a.push(DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0)));
         }
         s
     }

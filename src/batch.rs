@@ -43,9 +43,9 @@
 //! let mut rng = Rng::new(1);
 //! let n = 16;
 //! let qs: Vec<_> = (0..n).map(|_| model.random_configuration(&mut rng)).collect();
-//! let vs = vec![DVector::from_element(model.nv, 0.1); n];
-//! let as_ = vec![DVector::zeros(model.nv); n];
-//! let mut dq = vec![DMatrix::zeros(model.nv, model.nv); n];
+//! let vs = vec![DVector::from_element(model.nv(), 0.1); n];
+//! let as_ = vec![DVector::zeros(model.nv()); n];
+//! let mut dq = vec![DMatrix::zeros(model.nv(), model.nv()); n];
 //! let mut dv = dq.clone();
 //! let mut bd = BatchData::new(&model); // the shared default pool: one thread per core
 //! id_derivatives_batch(&model, &mut bd, &qs, &vs, &as_, &mut dq, &mut dv)?;
@@ -245,11 +245,11 @@ impl<W> BatchData<W> {
 /// let mut bd = BatchData::from_workspace(Arc::new(BatchPool::new(2)?), (Data::new(&m), kd));
 /// let mut rng = Rng::new(3);
 /// let qs: Vec<_> = (0..8).map(|_| m.random_configuration(&mut rng)).collect();
-/// let (v, tau) = (DVector::zeros(m.nv), DVector::zeros(m.nv));
-/// let mut dqdd_dq = vec![DMatrix::zeros(m.nv, m.nv); 8];
+/// let (v, tau) = (DVector::zeros(m.nv()), DVector::zeros(m.nv()));
+/// let mut dqdd_dq = vec![DMatrix::zeros(m.nv(), m.nv()); 8];
 /// map_states(&mut bd, &mut dqdd_dq, |(d, kd), k, out| {
 ///     kkt_derivatives(&m, d, kd, &qs[k], &v, &tau)?;
-///     out.copy_from(&kd.dqdd_dq);
+///     out.copy_from(kd.dqdd_dq());
 ///     Ok(())
 /// })?;
 /// # Ok::<(), sodyn::Error>(())
@@ -271,6 +271,7 @@ fn at_state(e: Error, k: usize) -> Error {
             Error::Model { file, line, element, reason: format!("{reason} (state {k})") }
         }
         Error::Build(s) => Error::Build(format!("state {k}: {s}")),
+        Error::Workspace(s) => Error::Workspace(format!("state {k}: {s}")),
         Error::Dimension { what, expected, got } => {
             Error::Dimension { what: format!("{what} of state {k}"), expected, got }
         }

@@ -55,6 +55,8 @@ pub enum Error {
         /// The name that was asked for.
         name: String,
     },
+    /// A workspace (`Data`, `ContactData`, …) used with a model it was not made for.
+    Workspace(String),
     /// Input/output or parse failure outside the model (state files, JSON).
     Io(String),
 }
@@ -78,6 +80,7 @@ impl fmt::Display for Error {
             }
             Error::Singular { what, detail } => write!(f, "{what} is singular: {detail}"),
             Error::Unknown { kind, name } => write!(f, "unknown {kind} \"{name}\""),
+            Error::Workspace(s) => write!(f, "workspace mismatch: {s}"),
             Error::Io(s) => write!(f, "{s}"),
         }
     }

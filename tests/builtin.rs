@@ -12,16 +12,16 @@ use sodyn::spatial::Transform;
 fn poses(m: &Model, q: &[f64]) -> Vec<Transform> {
     let mut o = vec![Transform::identity(); m.njoints()];
     for i in 1..m.njoints() {
-        let (a, n) = (m.idx_q[i], m.nqs[i]);
-        let xj = m.joints[i].transform(&q[a..a + n]);
-        o[i] = o[m.parents[i]].compose(&m.placements[i]).compose(&xj);
+        let (a, n) = (m.idx_q()[i], m.nqs()[i]);
+        let xj = m.joints()[i].transform(&q[a..a + n]);
+        o[i] = o[m.parents()[i]].compose(&m.placements()[i]).compose(&xj);
     }
     o
 }
 
 /// World pose of frame `name` at configuration `q`.
 fn frame_pose(m: &Model, q: &[f64], name: &str) -> Transform {
-    let f = &m.frames[m.frame_id(name).unwrap()];
+    let f = &m.frames()[m.frame_id(name).unwrap()];
     poses(m, q)[f.joint].compose(&f.placement)
 }
 
@@ -29,11 +29,13 @@ fn frame_pose(m: &Model, q: &[f64], name: &str) -> Transform {
 /// independent, slow oracle that only uses the model description.
 fn mass_matrix(m: &Model, q: &[f64]) -> DMatrix<f64> {
     let o = poses(m, q);
-    let cols: Vec<_> = (0..m.nv).map(|k| o[m.dof_joint[k]].act_motion(&m.subspace[k])).collect();
-    let mut mm = DMatrix::zeros(m.nv, m.nv);
-    for (i, (oi, inertia)) in o.iter().zip(&m.inertias).enumerate().skip(1) {
+    let cols: Vec<_> =
+        (0..m.nv()).map(|k| o[m.dof_joint()[k]].act_motion(&m.subspace()[k])).collect();
+    let mut mm = DMatrix::zeros(m.nv(), m.nv());
+    for (i, (oi, inertia)) in o.iter().zip(m.inertias()).enumerate().skip(1) {
         let iw = oi.act_inertia(inertia);
-        let dofs: Vec<usize> = (0..m.nv).filter(|&k| m.is_ancestor(m.dof_joint[k], i)).collect();
+        let dofs: Vec<usize> =
+            (0..m.nv()).filter(|&k| m.is_ancestor(m.dof_joint()[k], i)).collect();
         for &a in &dofs {
             let f = iw.mul_motion(&cols[a]);
             for &b in &dofs {
@@ -45,37 +47,40 @@ fn mass_matrix(m: &Model, q: &[f64]) -> DMatrix<f64> {
 }
 
 fn total_mass(m: &Model) -> f64 {
-    m.inertias.iter().skip(1).map(|i| i.mass).sum()
+    m.inertias().iter().skip(1).map(|i| i.mass).sum()
 }
 
 /// Every body inertia physical and massive; limits consistent; frames point to real joints.
 fn check_model(m: &Model) {
-    assert_eq!(m.njoints(), m.names.len());
-    assert_eq!(m.nq, m.nqs.iter().sum::<usize>());
-    assert_eq!(m.nv, m.nvs.iter().sum::<usize>());
+    assert_eq!(m.njoints(), m.names().len());
+    assert_eq!(m.nq(), m.nqs().iter().sum::<usize>());
+    assert_eq!(m.nv(), m.nvs().iter().sum::<usize>());
     for i in 1..m.njoints() {
-        assert!(m.parents[i] < i, "{}: parent of joint {i}", m.name);
-        let inertia = &m.inertias[i];
+        assert!(m.parents()[i] < i, "{}: parent of joint {i}", m.name());
+        let inertia = &m.inertias()[i];
         inertia
             .check_physical()
-            .unwrap_or_else(|e| panic!("{}: body {} ({}): {e}", m.name, i, m.names[i]));
-        assert!(inertia.mass > 0.0, "{}: body {} is massless", m.name, m.names[i]);
-        assert_eq!(m.nqs[i], m.joints[i].nq());
-        assert_eq!(m.nvs[i], m.joints[i].nv());
+            .unwrap_or_else(|e| panic!("{}: body {} ({}): {e}", m.name(), i, m.names()[i]));
+        assert!(inertia.mass > 0.0, "{}: body {} is massless", m.name(), m.names()[i]);
+        assert_eq!(m.nqs()[i], m.joints()[i].nq());
+        assert_eq!(m.nvs()[i], m.joints()[i].nv());
     }
-    for k in 0..m.nq {
-        assert!(m.lower[k] <= m.upper[k] || (m.lower[k].is_infinite() && m.upper[k].is_infinite()));
-        if m.lower[k].is_finite() {
-            assert!(m.lower[k] < m.upper[k], "{}: empty limit range at q[{k}]", m.name);
+    for k in 0..m.nq() {
+        assert!(
+            m.lower()[k] <= m.upper()[k]
+                || (m.lower()[k].is_infinite() && m.upper()[k].is_infinite())
+        );
+        if m.lower()[k].is_finite() {
+            assert!(m.lower()[k] < m.upper()[k], "{}: empty limit range at q[{k}]", m.name());
         }
     }
-    for f in &m.frames {
-        assert!(f.joint < m.njoints(), "{}: frame {} on joint {}", m.name, f.name, f.joint);
+    for f in m.frames() {
+        assert!(f.joint < m.njoints(), "{}: frame {} on joint {}", m.name(), f.name, f.joint);
     }
-    let mut names: Vec<&str> = m.frames.iter().map(|f| f.name.as_str()).collect();
+    let mut names: Vec<&str> = m.frames().iter().map(|f| f.name.as_str()).collect();
     names.sort_unstable();
     names.dedup();
-    assert_eq!(names.len(), m.frames.len(), "{}: duplicate frame names", m.name);
+    assert_eq!(names.len(), m.frames().len(), "{}: duplicate frame names", m.name());
 }
 
 /// The mass matrix is symmetric positive definite at a few random configurations.
@@ -85,19 +90,19 @@ fn check_mass_matrix_pd(m: &Model, seed: u64) {
         let q = m.random_configuration(&mut rng);
         let mm = mass_matrix(m, q.as_slice());
         let asym = (&mm - mm.transpose()).amax();
-        assert!(asym <= 1e-9 * mm.amax().max(1.0), "{}: M not symmetric", m.name);
+        assert!(asym <= 1e-9 * mm.amax().max(1.0), "{}: M not symmetric", m.name());
         let ev = mm.symmetric_eigen().eigenvalues;
         assert!(
             ev.min() > 1e-9,
             "{}: M not positive definite (min eigenvalue {})",
-            m.name,
+            m.name(),
             ev.min()
         );
     }
 }
 
 fn count_kind(m: &Model, name: &str) -> usize {
-    m.joints.iter().skip(1).filter(|j| j.name() == name).count()
+    m.joints().iter().skip(1).filter(|j| j.name() == name).count()
 }
 
 fn assert_same(a: &Model, b: &Model) {
@@ -109,10 +114,10 @@ fn serial_chain_dimensions_and_axes() {
     for n in [1, 2, 3, 6, 7, 12, 30] {
         let m = serial_chain(n);
         check_model(&m);
-        assert_eq!((m.nq, m.nv, m.njoints()), (n, n, n + 1));
-        assert!(m.joints.iter().skip(1).all(|j| matches!(j, JointType::Revolute { .. })));
+        assert_eq!((m.nq(), m.nv(), m.njoints()), (n, n, n + 1));
+        assert!(m.joints().iter().skip(1).all(|j| matches!(j, JointType::Revolute { .. })));
         for i in 1..=n {
-            assert_eq!(m.parents[i], i - 1);
+            assert_eq!(m.parents()[i], i - 1);
             assert!(m.frame_id(&format!("link_{i}")).is_ok());
             assert_eq!(m.joint_id(&format!("joint_{i}")).unwrap(), i);
         }
@@ -121,18 +126,18 @@ fn serial_chain_dimensions_and_axes() {
     }
     // Consecutive axes (in their own frames) are not parallel, and inertias are non-diagonal.
     let m = serial_chain(10);
-    let axis = |i: usize| match m.joints[i] {
+    let axis = |i: usize| match m.joints()[i] {
         JointType::Revolute { axis } => axis,
         _ => unreachable!(),
     };
     for i in 1..10 {
         assert!(axis(i).cross(&axis(i + 1)).norm() > 0.1);
-        let ic = m.inertias[i].inertia_about_com();
+        let ic = m.inertias()[i].inertia_about_com();
         assert!(ic[(0, 1)].abs() + ic[(0, 2)].abs() + ic[(1, 2)].abs() > 1e-4);
-        assert!(m.inertias[i].com().norm() > 0.05);
-        assert!(m.placements[i].trans.norm() > 0.05);
+        assert!(m.inertias()[i].com().norm() > 0.05);
+        assert!(m.placements()[i].trans.norm() > 0.05);
     }
-    assert_eq!(serial_chain(0).nv, 0);
+    assert_eq!(serial_chain(0).nv(), 0);
 }
 
 #[test]
@@ -140,7 +145,7 @@ fn pendulum_matches_closed_form_mass_matrix() {
     for n in 1..=5 {
         let m = pendulum(n);
         check_model(&m);
-        assert_eq!((m.nq, m.nv), (n, n));
+        assert_eq!((m.nq(), m.nv()), (n, n));
         assert!((total_mass(&m) - n as f64).abs() < 1e-12);
     }
     // Double pendulum, unit masses and lengths: M = [[3 + 2c₂, 1 + c₂], [1 + c₂, 1]].
@@ -161,13 +166,13 @@ fn pendulum_matches_closed_form_mass_matrix() {
 fn quadruped_structure() {
     let m = quadruped();
     check_model(&m);
-    assert_eq!((m.nq, m.nv, m.njoints()), (19, 18, 14));
-    assert_eq!(m.joints[1], JointType::FreeFlyer);
-    assert_eq!(m.names[1], "root_joint");
+    assert_eq!((m.nq(), m.nv(), m.njoints()), (19, 18, 14));
+    assert_eq!(m.joints()[1], JointType::FreeFlyer);
+    assert_eq!(m.names()[1], "root_joint");
     assert_eq!(count_kind(&m, "revolute"), 12);
     let mass = total_mass(&m);
     assert!((mass - 17.4).abs() < 1e-9, "quadruped mass {mass}");
-    assert!((m.inertias[1].mass - 10.0).abs() < 1e-12);
+    assert!((m.inertias()[1].mass - 10.0).abs() < 1e-12);
     let q0 = m.neutral();
     for (leg, fx, sy) in
         [("LF", 1.0, 1.0), ("RF", 1.0, -1.0), ("LH", -1.0, 1.0), ("RH", -1.0, -1.0)]
@@ -175,18 +180,18 @@ fn quadruped_structure() {
         let haa = m.joint_id(&format!("{leg}_HAA")).unwrap();
         let hfe = m.joint_id(&format!("{leg}_HFE")).unwrap();
         let kfe = m.joint_id(&format!("{leg}_KFE")).unwrap();
-        assert_eq!(m.joints[haa], JointType::Revolute { axis: Vector3::x() });
-        assert_eq!(m.joints[hfe], JointType::Revolute { axis: Vector3::y() });
-        assert_eq!(m.joints[kfe], JointType::Revolute { axis: Vector3::y() });
-        assert_eq!((m.parents[haa], m.parents[hfe], m.parents[kfe]), (1, haa, hfe));
+        assert_eq!(m.joints()[haa], JointType::Revolute { axis: Vector3::x() });
+        assert_eq!(m.joints()[hfe], JointType::Revolute { axis: Vector3::y() });
+        assert_eq!(m.joints()[kfe], JointType::Revolute { axis: Vector3::y() });
+        assert_eq!((m.parents()[haa], m.parents()[hfe], m.parents()[kfe]), (1, haa, hfe));
         for j in [haa, hfe, kfe] {
-            let a = m.idx_q[j];
-            assert!(m.lower[a].is_finite() && m.upper[a].is_finite());
+            let a = m.idx_q()[j];
+            assert!(m.lower()[a].is_finite() && m.upper()[a].is_finite());
         }
         let foot = frame_pose(&m, q0.as_slice(), &format!("{leg}_FOOT")).trans;
         let expected = Vector3::new(0.2 * fx, 0.16 * sy, -0.4);
         assert!((foot - expected).norm() < 1e-12, "{leg}: foot at {foot:?}");
-        assert_eq!(m.frames[m.frame_id(&format!("{leg}_FOOT")).unwrap()].joint, kfe);
+        assert_eq!(m.frames()[m.frame_id(&format!("{leg}_FOOT")).unwrap()].joint, kfe);
     }
     check_mass_matrix_pd(&m, 1);
 }
@@ -195,16 +200,20 @@ fn quadruped_structure() {
 fn humanoid_structure() {
     let m = humanoid();
     check_model(&m);
-    assert_eq!((m.nq, m.nv), (39, 38));
-    assert!((30..=40).contains(&m.nv));
-    assert_eq!(m.joints[1], JointType::FreeFlyer);
-    assert_eq!(m.names[1], "root_joint");
+    assert_eq!((m.nq(), m.nv()), (39, 38));
+    assert!((30..=40).contains(&m.nv()));
+    assert_eq!(m.joints()[1], JointType::FreeFlyer);
+    assert_eq!(m.names()[1], "root_joint");
     // All joints but the root are limited revolute joints.
     for i in 2..m.njoints() {
-        assert!(matches!(m.joints[i], JointType::Revolute { .. }), "{}", m.names[i]);
-        let a = m.idx_q[i];
-        assert!(m.lower[a].is_finite() && m.upper[a].is_finite(), "{} unlimited", m.names[i]);
-        assert!(m.lower[a] <= 0.0 && m.upper[a] >= 0.0, "{}: neutral outside limits", m.names[i]);
+        assert!(matches!(m.joints()[i], JointType::Revolute { .. }), "{}", m.names()[i]);
+        let a = m.idx_q()[i];
+        assert!(m.lower()[a].is_finite() && m.upper()[a].is_finite(), "{} unlimited", m.names()[i]);
+        assert!(
+            m.lower()[a] <= 0.0 && m.upper()[a] >= 0.0,
+            "{}: neutral outside limits",
+            m.names()[i]
+        );
     }
     let mass = total_mass(&m);
     assert!((60.0..=80.0).contains(&mass), "humanoid mass {mass}");
@@ -250,7 +259,10 @@ fn humanoid_structure() {
     assert!(head.z > 0.6);
     // Left/right mass symmetry.
     let side_mass = |side: &str| -> f64 {
-        (1..m.njoints()).filter(|&i| m.names[i].starts_with(side)).map(|i| m.inertias[i].mass).sum()
+        (1..m.njoints())
+            .filter(|&i| m.names()[i].starts_with(side))
+            .map(|i| m.inertias()[i].mass)
+            .sum()
     };
     assert!((side_mass("left_") - side_mass("right_")).abs() < 1e-12);
     check_mass_matrix_pd(&m, 2);
@@ -270,34 +282,38 @@ fn random_tree_mixes_every_joint_type() {
             assert_eq!(count_kind(&m, "free_flyer"), off);
             if floating {
                 assert_eq!(
-                    (m.names[1].as_str(), m.joints[1]),
+                    (m.names()[1].as_str(), m.joints()[1]),
                     ("root_joint", JointType::FreeFlyer)
                 );
                 assert!(
-                    m.parents.iter().skip(2).all(|&p| p >= 1),
+                    m.parents().iter().skip(2).all(|&p| p >= 1),
                     "floating tree hangs off the world"
                 );
             }
             // Fixed bodies: ⌈60/5⌉ frames on moving bodies.
-            let fixed: Vec<_> = m.frames.iter().filter(|f| f.name.starts_with("fixed_")).collect();
+            let fixed: Vec<_> =
+                m.frames().iter().filter(|f| f.name.starts_with("fixed_")).collect();
             assert_eq!(fixed.len(), 12, "seed {seed}");
             assert!(fixed.iter().all(|f| f.joint >= 1));
             // Branching: some body has at least two children.
             let mut children = vec![0usize; m.njoints()];
             for i in 1..m.njoints() {
-                children[m.parents[i]] += 1;
+                children[m.parents()[i]] += 1;
             }
             assert!(children.iter().skip(1).any(|&c| c >= 2), "seed {seed}: no branching");
             // Some limited and some unlimited revolute/prismatic joints.
             let scalar: Vec<usize> = (1..m.njoints())
                 .filter(|&i| {
-                    matches!(m.joints[i], JointType::Revolute { .. } | JointType::Prismatic { .. })
+                    matches!(
+                        m.joints()[i],
+                        JointType::Revolute { .. } | JointType::Prismatic { .. }
+                    )
                 })
                 .collect();
-            assert!(scalar.iter().any(|&i| m.lower[m.idx_q[i]].is_finite()));
-            assert!(scalar.iter().any(|&i| m.lower[m.idx_q[i]].is_infinite()));
+            assert!(scalar.iter().any(|&i| m.lower()[m.idx_q()[i]].is_finite()));
+            assert!(scalar.iter().any(|&i| m.lower()[m.idx_q()[i]].is_infinite()));
             // nv within the documented range.
-            assert!((60 + 6 * off..=180 + 6 * off).contains(&m.nv), "nv {}", m.nv);
+            assert!((60 + 6 * off..=180 + 6 * off).contains(&m.nv()), "nv {}", m.nv());
         }
     }
 }
@@ -309,11 +325,11 @@ fn random_tree_inertias_and_dof_counts() {
         let m = random_tree(20, seed, seed % 2 == 1);
         check_model(&m);
         for i in 1..m.njoints() {
-            let ic = m.inertias[i].inertia_about_com();
+            let ic = m.inertias()[i].inertia_about_com();
             let ev = ic.symmetric_eigen().eigenvalues;
             assert!(ev.min() > 0.0, "seed {seed}: degenerate rotational inertia");
         }
-        for (i, j) in m.joints.iter().enumerate().skip(1) {
+        for (i, j) in m.joints().iter().enumerate().skip(1) {
             if let JointType::Revolute { axis }
             | JointType::Continuous { axis }
             | JointType::Prismatic { axis } = j
@@ -321,7 +337,7 @@ fn random_tree_inertias_and_dof_counts() {
                 assert!((axis.norm() - 1.0).abs() < 1e-12, "joint {i}");
             }
         }
-        nv_sum += m.nv - if seed % 2 == 1 { 6 } else { 0 };
+        nv_sum += m.nv() - if seed % 2 == 1 { 6 } else { 0 };
         if seed < 10 {
             check_mass_matrix_pd(&m, seed);
         }

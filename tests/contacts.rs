@@ -67,33 +67,33 @@ fn kkt_first_and_second_order_match_oracle() {
             KktData::new(&m, ContactData::new(&m, &contacts).unwrap()).with_second_order(&m);
         kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
         let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
-        let at = format!("{} with {} contacts", m.name, contacts.len());
+        let at = format!("{} with {} contacts", m.name(), contacts.len());
         let (qr, lr) = oracle::kkt::<f64>(&m, qs, vs, ts, &contacts);
-        w[0].add(rel_err_vec(&kd.qdd, &DVector::from_vec(qr)), &at);
-        w[1].add(rel_err_vec(&kd.lambda, &DVector::from_vec(lr)), &at);
+        w[0].add(rel_err_vec(kd.qdd(), &DVector::from_vec(qr)), &at);
+        w[1].add(rel_err_vec(kd.lambda(), &DVector::from_vec(lr)), &at);
         let fo = oracle::kkt_fo(&m, qs, vs, ts, &contacts);
         let pairs: [(&DMatrix<f64>, &DMatrix<f64>); 6] = [
-            (&kd.dqdd_dq, &fo.dqdd_dq),
-            (&kd.dqdd_dv, &fo.dqdd_dv),
-            (&kd.dqdd_dtau, &fo.dqdd_dtau),
-            (&kd.dlambda_dq, &fo.dlambda_dq),
-            (&kd.dlambda_dv, &fo.dlambda_dv),
-            (&kd.dlambda_dtau, &fo.dlambda_dtau),
+            (kd.dqdd_dq(), &fo.dqdd_dq),
+            (kd.dqdd_dv(), &fo.dqdd_dv),
+            (kd.dqdd_dtau(), &fo.dqdd_dtau),
+            (kd.dlambda_dq(), &fo.dlambda_dq),
+            (kd.dlambda_dv(), &fo.dlambda_dv),
+            (kd.dlambda_dtau(), &fo.dlambda_dtau),
         ];
         for (i, (a, b)) in pairs.iter().enumerate() {
             w[2 + i].add(rel_err_mat(a, b), &at);
         }
         let so = oracle::kkt_so(&m, qs, vs, ts, &contacts);
-        let k = kd.so.as_ref().unwrap();
+        let k = kd.so().unwrap();
         let tensors: [(&Tensor3, &Tensor3); 8] = [
-            (&k.d2qdd_dq2, &so.d2qdd_dq2),
-            (&k.d2qdd_dv2, &so.d2qdd_dv2),
-            (&k.d2qdd_dqdv, &so.d2qdd_dqdv),
-            (&k.d2qdd_dtaudq, &so.d2qdd_dtaudq),
-            (&k.d2lambda_dq2, &so.d2lambda_dq2),
-            (&k.d2lambda_dv2, &so.d2lambda_dv2),
-            (&k.d2lambda_dqdv, &so.d2lambda_dqdv),
-            (&k.d2lambda_dtaudq, &so.d2lambda_dtaudq),
+            (k.d2qdd_dq2(), &so.d2qdd_dq2),
+            (k.d2qdd_dv2(), &so.d2qdd_dv2),
+            (k.d2qdd_dqdv(), &so.d2qdd_dqdv),
+            (k.d2qdd_dtaudq(), &so.d2qdd_dtaudq),
+            (k.d2lambda_dq2(), &so.d2lambda_dq2),
+            (k.d2lambda_dv2(), &so.d2lambda_dv2),
+            (k.d2lambda_dqdv(), &so.d2lambda_dqdv),
+            (k.d2lambda_dtaudq(), &so.d2lambda_dtaudq),
         ];
         for (i, (a, b)) in tensors.iter().enumerate() {
             w[8 + i].add(rel_err_tensor(a, b), &at);
@@ -127,24 +127,24 @@ fn impact_first_and_second_order_match_oracle() {
             let mut d = Data::new(&m);
             let mut im =
                 ImpactData::new(&m, ContactData::new(&m, &contacts).unwrap()).with_second_order(&m);
-            im.restitution = e;
+            im.set_restitution(e).unwrap();
             impact_so_derivatives(&m, &mut d, &mut im, &q, &vminus).unwrap();
             let (qs, vs) = (q.as_slice(), vminus.as_slice());
-            let at = format!("{} with {} contacts, e = {e}", m.name, contacts.len());
+            let at = format!("{} with {} contacts, e = {e}", m.name(), contacts.len());
             let (vp, imp) = oracle::impact::<f64>(&m, qs, vs, &contacts, e);
-            w[0].add(rel_err_vec(&im.vplus, &DVector::from_vec(vp)), &at);
-            w[1].add(rel_err_vec(&im.impulse, &DVector::from_vec(imp)), &at);
+            w[0].add(rel_err_vec(im.vplus(), &DVector::from_vec(vp)), &at);
+            w[1].add(rel_err_vec(im.impulse(), &DVector::from_vec(imp)), &at);
             let fo = oracle::impact_fo(&m, qs, vs, &contacts, e);
-            w[2].add(rel_err_mat(&im.dvplus_dq, &fo.dvplus_dq), &at);
-            w[3].add(rel_err_mat(&im.dvplus_dvminus, &fo.dvplus_dvminus), &at);
-            w[4].add(rel_err_mat(&im.dimpulse_dq, &fo.dimpulse_dq), &at);
-            w[5].add(rel_err_mat(&im.dimpulse_dvminus, &fo.dimpulse_dvminus), &at);
+            w[2].add(rel_err_mat(im.dvplus_dq(), &fo.dvplus_dq), &at);
+            w[3].add(rel_err_mat(im.dvplus_dvminus(), &fo.dvplus_dvminus), &at);
+            w[4].add(rel_err_mat(im.dimpulse_dq(), &fo.dimpulse_dq), &at);
+            w[5].add(rel_err_mat(im.dimpulse_dvminus(), &fo.dimpulse_dvminus), &at);
             let so = oracle::impact_so(&m, qs, vs, &contacts, e);
-            let k = im.so.as_ref().unwrap();
-            w[6].add(rel_err_tensor(&k.d2vplus_dq2, &so.d2vplus_dq2), &at);
-            w[7].add(rel_err_tensor(&k.d2vplus_dqdvminus, &so.d2vplus_dqdvminus), &at);
-            w[8].add(rel_err_tensor(&k.d2impulse_dq2, &so.d2impulse_dq2), &at);
-            w[9].add(rel_err_tensor(&k.d2impulse_dqdvminus, &so.d2impulse_dqdvminus), &at);
+            let k = im.so().unwrap();
+            w[6].add(rel_err_tensor(k.d2vplus_dq2(), &so.d2vplus_dq2), &at);
+            w[7].add(rel_err_tensor(k.d2vplus_dqdvminus(), &so.d2vplus_dqdvminus), &at);
+            w[8].add(rel_err_tensor(k.d2impulse_dq2(), &so.d2impulse_dq2), &at);
+            w[9].add(rel_err_tensor(k.d2impulse_dqdvminus(), &so.d2impulse_dqdvminus), &at);
         }
     }
     for x in &w {
@@ -170,20 +170,26 @@ fn constrained_id_first_and_second_order_match_oracle() {
         let mut so = SoData::new(&m);
         constrained_id_so_derivatives(&m, &mut d, &mut cd, &mut so, &q, &v, &a, &lam).unwrap();
         let (qs, vs, as_, ls) = (q.as_slice(), v.as_slice(), a.as_slice(), lam.as_slice());
-        let at = format!("{} with {} contacts", m.name, contacts.len());
+        let at = format!("{} with {} contacts", m.name(), contacts.len());
         w[0].add(
             rel_err_vec(
-                &d.tau,
+                d.tau(),
                 &DVector::from_vec(oracle::constrained_rnea::<f64>(&m, qs, vs, as_, &contacts, ls)),
             ),
             &at,
         );
         w[1].add(
-            rel_err_mat(&d.dtau_dq, &oracle::d_constrained_rnea_dq(&m, qs, vs, as_, &contacts, ls)),
+            rel_err_mat(
+                d.dtau_dq(),
+                &oracle::d_constrained_rnea_dq(&m, qs, vs, as_, &contacts, ls),
+            ),
             &at,
         );
         w[2].add(
-            rel_err_mat(&d.dtau_dv, &oracle::d_constrained_rnea_dv(&m, qs, vs, as_, &contacts, ls)),
+            rel_err_mat(
+                d.dtau_dv(),
+                &oracle::d_constrained_rnea_dv(&m, qs, vs, as_, &contacts, ls),
+            ),
             &at,
         );
         w[3].add(
@@ -196,7 +202,7 @@ fn constrained_id_first_and_second_order_match_oracle() {
         // The first-order-only entry point agrees with the second-order one.
         let mut d1 = Data::new(&m);
         constrained_id_derivatives(&m, &mut d1, &mut cd, &q, &v, &a, &lam).unwrap();
-        assert!(rel_err_mat(&d1.dtau_dq, &d.dtau_dq) < 1e-14);
+        assert!(rel_err_mat(d1.dtau_dq(), d.dtau_dq()) < 1e-14);
     }
     for x in &w {
         x.check(1e-9);
@@ -215,7 +221,7 @@ fn kkt_second_order_matches_differences_of_first_order() {
     let mut d = Data::new(&m);
     let mut kd = KktData::new(&m, ContactData::new(&m, &contacts).unwrap()).with_second_order(&m);
     kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
-    let n = m.nv;
+    let n = m.nv();
     let h = 1e-5;
     let mut kp = KktData::new(&m, ContactData::new(&m, &contacts).unwrap());
     let mut km = KktData::new(&m, ContactData::new(&m, &contacts).unwrap());
@@ -225,12 +231,12 @@ fn kkt_second_order_matches_differences_of_first_order() {
         e[k] = h;
         kkt_derivatives(&m, &mut d, &mut kp, &m.integrate(&q, &e).unwrap(), &v, &tau).unwrap();
         kkt_derivatives(&m, &mut d, &mut km, &m.integrate(&q, &-&e).unwrap(), &v, &tau).unwrap();
-        tq.page_mut(k).copy_from(&((&kp.dqdd_dq - &km.dqdd_dq) / (2.0 * h)));
-        tl.page_mut(k).copy_from(&((&kp.dlambda_dq - &km.dlambda_dq) / (2.0 * h)));
+        tq.page_mut(k).copy_from(&((kp.dqdd_dq() - km.dqdd_dq()) / (2.0 * h)));
+        tl.page_mut(k).copy_from(&((kp.dlambda_dq() - km.dlambda_dq()) / (2.0 * h)));
     }
-    let so = kd.so.as_ref().unwrap();
-    w.add(rel_err_tensor(&so.d2qdd_dq2, &tq), "d2qdd_dq2");
-    w.add(rel_err_tensor(&so.d2lambda_dq2, &tl), "d2lambda_dq2");
+    let so = kd.so().unwrap();
+    w.add(rel_err_tensor(so.d2qdd_dq2(), &tq), "d2qdd_dq2");
+    w.add(rel_err_tensor(so.d2lambda_dq2(), &tl), "d2lambda_dq2");
     w.check(1e-6);
 }
 
@@ -266,9 +272,10 @@ fn contact_errors_name_the_problem() {
     let mut im = ImpactData::new(&m, ContactData::new(&m, &contacts).unwrap());
     assert!(impact_derivatives(&m, &mut d, &mut im, &q, &v).is_err());
     // ... unless the caller opts into damping: then the solve is regularised and finite.
-    kd.cd.damping = 1e-6;
+    kd.set_damping(1e-6).unwrap();
+    assert!(kd.set_damping(-1.0).is_err() && kd.set_damping(f64::NAN).is_err());
     kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
-    assert!(kd.qdd.iter().chain(kd.lambda.iter()).all(|x| x.is_finite()));
+    assert!(kd.qdd().iter().chain(kd.lambda().iter()).all(|x| x.is_finite()));
     // wrong lambda length for constrained ID
     let mut cd = ContactData::new(&m, &[lf]).unwrap();
     let r: Result<()> =
@@ -281,13 +288,10 @@ fn contact_errors_name_the_problem() {
     }
     // negative restitution
     let mut im = ImpactData::new(&m, ContactData::new(&m, &contacts[..1]).unwrap());
-    im.restitution = -0.5;
-    assert!(
-        impact_dynamics(&m, &mut d, &mut im, &q, &v)
-            .unwrap_err()
-            .to_string()
-            .contains("restitution")
-    );
+    assert!(im.set_restitution(-0.5).unwrap_err().to_string().contains("restitution"));
+    assert!(im.set_restitution(f64::INFINITY).is_err());
+    assert_eq!(im.restitution(), 0.0);
+    impact_dynamics(&m, &mut d, &mut im, &q, &v).unwrap();
 }
 
 /// Workspaces are reused across calls (and across states): a second call on the same state gives
@@ -314,23 +318,23 @@ fn repeated_calls_on_reused_workspaces_are_identical() {
     let mut fresh_i = ImpactData::new(&m, cd).with_second_order(&m);
     kkt_so_derivatives(&m, &mut fresh_d, &mut fresh_k, &q, &v, &tau).unwrap();
     impact_so_derivatives(&m, &mut fresh_d, &mut fresh_i, &q, &v).unwrap();
-    let (a, b) = (kd.so.as_ref().unwrap(), fresh_k.so.as_ref().unwrap());
+    let (a, b) = (kd.so().unwrap(), fresh_k.so().unwrap());
     for (x, y) in [
-        (&a.d2qdd_dq2, &b.d2qdd_dq2),
-        (&a.d2qdd_dqdv, &b.d2qdd_dqdv),
-        (&a.d2lambda_dq2, &b.d2lambda_dq2),
-        (&a.d2lambda_dtaudq, &b.d2lambda_dtaudq),
+        (a.d2qdd_dq2(), b.d2qdd_dq2()),
+        (a.d2qdd_dqdv(), b.d2qdd_dqdv()),
+        (a.d2lambda_dq2(), b.d2lambda_dq2()),
+        (a.d2lambda_dtaudq(), b.d2lambda_dtaudq()),
     ] {
         assert_eq!(x.max_abs_diff(y), 0.0);
     }
-    let (a, b) = (im.so.as_ref().unwrap(), fresh_i.so.as_ref().unwrap());
+    let (a, b) = (im.so().unwrap(), fresh_i.so().unwrap());
     for (x, y) in [
-        (&a.d2vplus_dq2, &b.d2vplus_dq2),
-        (&a.d2vplus_dqdvminus, &b.d2vplus_dqdvminus),
-        (&a.d2impulse_dq2, &b.d2impulse_dq2),
+        (a.d2vplus_dq2(), b.d2vplus_dq2()),
+        (a.d2vplus_dqdvminus(), b.d2vplus_dqdvminus()),
+        (a.d2impulse_dq2(), b.d2impulse_dq2()),
     ] {
         assert_eq!(x.max_abs_diff(y), 0.0);
     }
-    assert_eq!(kd.dqdd_dq, fresh_k.dqdd_dq);
-    assert_eq!(im.dvplus_dq, fresh_i.dvplus_dq);
+    assert_eq!(kd.dqdd_dq(), fresh_k.dqdd_dq());
+    assert_eq!(im.dvplus_dq(), fresh_i.dvplus_dq());
 }

@@ -46,8 +46,8 @@ fn algorithms_do_not_allocate() {
     ] {
         let mut rng = Rng::new(1);
         let q = m.random_configuration(&mut rng);
-        let v = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
-        let a = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
+        let v = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
+        let a = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
         let mut d = Data::new(&m);
         let mut so = SoData::new(&m);
         let mut fso = FdSoData::new(&m);
@@ -57,7 +57,7 @@ fn algorithms_do_not_allocate() {
         let mut kd = KktData::new(&m, cd.clone()).with_second_order(&m);
         let mut im = ImpactData::new(&m, cd.clone()).with_second_order(&m);
         let lam = DVector::from_element(cd.dim(), 1.0);
-        let mut jac = nalgebra::Matrix3xX::zeros(m.nv);
+        let mut jac = nalgebra::Matrix3xX::zeros(m.nv());
         // Each algorithm twice: the first call may touch lazily initialised state.
         let mut report = vec![];
         let mut check = |name: &str, f: &mut dyn FnMut()| {
@@ -101,7 +101,7 @@ fn algorithms_do_not_allocate() {
         assert!(
             report.is_empty(),
             "{}: heap allocations in hot paths: {}",
-            m.name,
+            m.name(),
             report.join(", ")
         );
     }

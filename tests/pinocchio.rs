@@ -24,7 +24,7 @@
 //! * **Continuous joints.** Pinocchio: nq = 2 (`cos θ, sin θ`); ours: nq = 1 (`θ`, taken from
 //!   the fixture's `continuous_theta`). nv = 1 in both and `∂/∂δ = ∂/∂θ`.
 //! * **Mimic joints** are independent dofs in both (Pinocchio built with `mimic=False`).
-//! * Gravity `[0, 0, −9.81]` in both (checked against the fixture's `model.gravity`).
+//! * Gravity `[0, 0, −9.81]` in both (checked against the fixture's `model.gravity()`).
 //!
 //! Error metric: `max |ours − theirs| / max(1, max |theirs|)` per quantity. Tolerances: 1e-10
 //! for `τ`, `M`, `q̈`; 1e-9 for the first-order derivatives, `M⁻¹` and the tensors.
@@ -153,13 +153,13 @@ fn run(model_name: &str) {
             // must break, so the [lin; ang] ordering of Pinocchio's dq is what the data says.
             let theirs = mat_of(&out["dtau_dq"]);
             let root = model.joint_id("root_joint").expect("root_joint");
-            let iv = model.idx_v[root];
+            let iv = model.idx_v()[root];
             let pin_v = map.perm[iv + 3]; // Pinocchio's first free-flyer dof
-            let unswapped = DMatrix::from_fn(model.nv, model.nv, |i, j| {
+            let unswapped = DMatrix::from_fn(model.nv(), model.nv(), |i, j| {
                 let pj = if (iv..iv + 6).contains(&j) { pin_v + (j - iv) } else { map.perm[j] };
                 theirs[map.perm[i]][pj]
             });
-            let bad = cmp_mat(&data.dtau_dq, &unswapped).err;
+            let bad = cmp_mat(data.dtau_dq(), &unswapped).err;
             assert!(
                 bad > 1e-3,
                 "negative control: unswapped free-flyer dq columns still match ({bad:e})"
@@ -169,13 +169,13 @@ fn run(model_name: &str) {
             "dtau_dq",
             TOL_DERIV,
             s,
-            cmp_mat(&data.dtau_dq, &permute_mat(&map, &mat_of(&out["dtau_dq"]))),
+            cmp_mat(data.dtau_dq(), &permute_mat(&map, &mat_of(&out["dtau_dq"]))),
         );
         report.add(
             "dtau_dv",
             TOL_DERIV,
             s,
-            cmp_mat(&data.dtau_dv, &permute_mat(&map, &mat_of(&out["dtau_dv"]))),
+            cmp_mat(data.dtau_dv(), &permute_mat(&map, &mat_of(&out["dtau_dv"]))),
         );
 
         fd_derivatives(&model, &mut data, &q, &v, &tau, None).expect("fd_derivatives");
@@ -183,19 +183,19 @@ fn run(model_name: &str) {
             "ddq_dq",
             TOL_DERIV,
             s,
-            cmp_mat(&data.dqdd_dq, &permute_mat(&map, &mat_of(&out["ddq_dq"]))),
+            cmp_mat(data.dqdd_dq(), &permute_mat(&map, &mat_of(&out["ddq_dq"]))),
         );
         report.add(
             "ddq_dv",
             TOL_DERIV,
             s,
-            cmp_mat(&data.dqdd_dv, &permute_mat(&map, &mat_of(&out["ddq_dv"]))),
+            cmp_mat(data.dqdd_dv(), &permute_mat(&map, &mat_of(&out["ddq_dv"]))),
         );
         report.add(
             "Minv",
             TOL_DERIV,
             s,
-            cmp_mat(&data.minv, &permute_mat(&map, &mat_of(&out["Minv"]))),
+            cmp_mat(data.minv(), &permute_mat(&map, &mat_of(&out["Minv"]))),
         );
 
         if !out["d2tau_dqdq"].is_null() {
@@ -216,7 +216,7 @@ fn run(model_name: &str) {
                 "dtau_dq (from SO pass)",
                 TOL_DERIV,
                 s,
-                cmp_mat(&data.dtau_dq, &permute_mat(&map, &mat_of(&out["dtau_dq"]))),
+                cmp_mat(data.dtau_dq(), &permute_mat(&map, &mat_of(&out["dtau_dq"]))),
             );
         }
     }
@@ -225,7 +225,7 @@ fn run(model_name: &str) {
     eprintln!(
         "pinocchio {} (nv {}, {}, {moved} dofs renumbered vs Pinocchio): max relative error per quantity",
         report.model,
-        model.nv,
+        model.nv(),
         if floating_base { "free flyer" } else { "fixed base" }
     );
     let mut failures = vec![];

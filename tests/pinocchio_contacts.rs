@@ -186,7 +186,7 @@ fn placement_diff(ours: &sodyn::spatial::Transform, theirs: &Value) -> f64 {
 fn check_frames(model: &Model, fx: &Value) -> usize {
     let pf = fx["model"]["frames"].as_array().expect("model.frames");
     let mut n = 0;
-    for f in &model.frames {
+    for f in model.frames() {
         if f.joint == 0 && f.name == "universe" {
             continue;
         }
@@ -196,7 +196,7 @@ fn check_frames(model: &Model, fx: &Value) -> usize {
             .unwrap_or_else(|| panic!("our frame {:?} has no Pinocchio BODY frame", f.name));
         assert_eq!(
             p["parent_joint_name"].as_str(),
-            Some(model.names[f.joint].as_str()),
+            Some(model.names()[f.joint].as_str()),
             "frame {:?}: parent joint differs",
             f.name
         );
@@ -215,10 +215,10 @@ fn check_contact_frames(model: &Model, fx: &Value) -> Vec<String> {
         let name = c["frame"].as_str().expect("contact frame").to_string();
         assert_eq!(c["type"], "3D");
         assert_eq!(c["reference_frame"], "LOCAL_WORLD_ALIGNED");
-        let f = &model.frames[model.frame_id(&name).expect("contact frame in our model")];
+        let f = &model.frames()[model.frame_id(&name).expect("contact frame in our model")];
         assert_eq!(
             c["parent_joint_name"].as_str(),
-            Some(model.names[f.joint].as_str()),
+            Some(model.names()[f.joint].as_str()),
             "contact {name:?}: parent joint differs"
         );
         let d = placement_diff(&f.placement, &c["placement_in_joint"]);
@@ -267,7 +267,7 @@ fn run(model_name: &str, fixture: &str) {
     let mut im = ImpactData::new(&model, cd);
     let mut data = Data::new(&model);
     let mut report = Report { model: model_name.into(), rows: vec![] };
-    let nv = model.nv;
+    let nv = model.nv();
     let eye = DMatrix::<f64>::identity(nv, nv);
 
     let states = fx["states"].as_array().expect("states");
@@ -284,54 +284,59 @@ fn run(model_name: &str, fixture: &str) {
         let vr = |k: &str| DVector::from_vec(vec_of(&c[k]));
         let md = |k: &str| permute_mat(&map, &mat_of(&c[k]));
         let mr = |k: &str| permute_cols(&map, &mat_of(&c[k]));
-        report.add("kkt qdd", s, VEC_DOF, cmp_vec(&kd.qdd, &vd("ddq")));
-        report.add("kkt lambda", s, VEC_ROW, cmp_vec(&kd.lambda, &vr("lambda_c")));
-        report.add("kkt dqdd_dq", s, DOF_DOF, cmp_mat(&kd.dqdd_dq, &md("ddq_dq")));
-        report.add("kkt dqdd_dv", s, DOF_DOF, cmp_mat(&kd.dqdd_dv, &md("ddq_dv")));
-        report.add("kkt dqdd_dtau", s, DOF_DOF, cmp_mat(&kd.dqdd_dtau, &md("ddq_dtau")));
-        report.add("kkt dlambda_dq", s, ROW_DOF, cmp_mat(&kd.dlambda_dq, &mr("dlambda_dq")));
-        report.add("kkt dlambda_dv", s, ROW_DOF, cmp_mat(&kd.dlambda_dv, &mr("dlambda_dv")));
-        report.add("kkt dlambda_dtau", s, ROW_DOF, cmp_mat(&kd.dlambda_dtau, &mr("dlambda_dtau")));
+        report.add("kkt qdd", s, VEC_DOF, cmp_vec(kd.qdd(), &vd("ddq")));
+        report.add("kkt lambda", s, VEC_ROW, cmp_vec(kd.lambda(), &vr("lambda_c")));
+        report.add("kkt dqdd_dq", s, DOF_DOF, cmp_mat(kd.dqdd_dq(), &md("ddq_dq")));
+        report.add("kkt dqdd_dv", s, DOF_DOF, cmp_mat(kd.dqdd_dv(), &md("ddq_dv")));
+        report.add("kkt dqdd_dtau", s, DOF_DOF, cmp_mat(kd.dqdd_dtau(), &md("ddq_dtau")));
+        report.add("kkt dlambda_dq", s, ROW_DOF, cmp_mat(kd.dlambda_dq(), &mr("dlambda_dq")));
+        report.add("kkt dlambda_dv", s, ROW_DOF, cmp_mat(kd.dlambda_dv(), &mr("dlambda_dv")));
+        report.add("kkt dlambda_dtau", s, ROW_DOF, cmp_mat(kd.dlambda_dtau(), &mr("dlambda_dtau")));
 
         // Impact dynamics, per restitution coefficient.
         let mut vplus_runs: Vec<(f64, DVector<f64>)> = vec![];
         for (e, r) in impulse_runs(out) {
-            im.restitution = e;
+            im.set_restitution(e).unwrap();
             impact_derivatives(&model, &mut data, &mut im, &q, &v).expect("impact_derivatives");
             let vd = |k: &str| permute_vec(&map, &vec_of(&r[k]));
             let vr = |k: &str| DVector::from_vec(vec_of(&r[k]));
             let md = |k: &str| permute_mat(&map, &mat_of(&r[k]));
             let mr = |k: &str| permute_cols(&map, &mat_of(&r[k]));
             let tag = format!("impact(e={e})");
-            report.add(&format!("{tag} vplus"), s, VEC_DOF, cmp_vec(&im.vplus, &vd("v_after")));
-            report.add(&format!("{tag} impulse"), s, VEC_ROW, cmp_vec(&im.impulse, &vr("impulse")));
+            report.add(&format!("{tag} vplus"), s, VEC_DOF, cmp_vec(im.vplus(), &vd("v_after")));
+            report.add(
+                &format!("{tag} impulse"),
+                s,
+                VEC_ROW,
+                cmp_vec(im.impulse(), &vr("impulse")),
+            );
             report.add(
                 &format!("{tag} dvplus_dq"),
                 s,
                 DOF_DOF,
-                cmp_mat(&im.dvplus_dq, &md("dv_after_dq")),
+                cmp_mat(im.dvplus_dq(), &md("dv_after_dq")),
             );
             report.add(
                 &format!("{tag} dvplus_dvminus (pin +I)"),
                 s,
                 DOF_DOF,
-                cmp_mat(&im.dvplus_dvminus, &(md("dv_after_dv_minus_I") + &eye)),
+                cmp_mat(im.dvplus_dvminus(), &(md("dv_after_dv_minus_I") + &eye)),
             );
             // Negative control: Pinocchio's stored matrix really lacks the identity.
-            let bad = cmp_mat(&im.dvplus_dvminus, &md("dv_after_dv_minus_I")).err;
+            let bad = cmp_mat(im.dvplus_dvminus(), &md("dv_after_dv_minus_I")).err;
             assert!(bad > 1e-3, "{tag}: dv_after_dv_minus_I matches without +I ({bad:e})");
-            vplus_runs.push((e, im.vplus.clone()));
+            vplus_runs.push((e, im.vplus().clone()));
             report.add(
                 &format!("{tag} dimpulse_dq"),
                 s,
                 ROW_DOF,
-                cmp_mat(&im.dimpulse_dq, &mr("dimpulse_dq")),
+                cmp_mat(im.dimpulse_dq(), &mr("dimpulse_dq")),
             );
             report.add(
                 &format!("{tag} dimpulse_dvminus"),
                 s,
                 ROW_DOF,
-                cmp_mat(&im.dimpulse_dvminus, &mr("dimpulse_dv")),
+                cmp_mat(im.dimpulse_dvminus(), &mr("dimpulse_dv")),
             );
         }
         // Negative control: the restitution coefficient changes q̇⁺ (so each run tests it).

@@ -146,7 +146,7 @@ fn run(model_name: &str) {
     writeln!(
         out,
         "pinocchio SO {model_name} (nv {}, {}, {moved} dofs renumbered, fixture {size} bytes): max relative error over the sampled entries",
-        model.nv,
+        model.nv(),
         if floating_base { "free flyer" } else { "fixed base" },
     )
     .unwrap();
@@ -188,7 +188,7 @@ fn run(model_name: &str) {
 /// `[v; ω]` ↔ `[ω; v]` swap of Pinocchio's free-flyer dofs, the sampled entries must NOT match.
 fn negative_controls(name: &str, model: &Model, map: &Mapping, so: &SoData, samples: &Value) {
     const MIN_ERR: f64 = 1e-6;
-    let nv = model.nv;
+    let nv = model.nv();
     let inv = &map.inv;
     for (key, t) in [("d2tau_dqdv", so.d2tau_dqdv()), ("d2tau_dadq", so.dm_dq())] {
         let bad = cmp_samples_with(key, nv, &samples[key], |[i, j, k]| t[(inv[i], inv[k], inv[j])]);
@@ -196,7 +196,7 @@ fn negative_controls(name: &str, model: &Model, map: &Mapping, so: &SoData, samp
     }
     if let Ok(root) = model.joint_id("root_joint") {
         // Pinocchio's free-flyer dof c read as our dof idx_v + c (no [lin; ang] swap).
-        let iv = model.idx_v[root];
+        let iv = model.idx_v()[root];
         let pv = map.perm[iv + 3]; // Pinocchio's first free-flyer dof
         let wrong = |p: usize| if (pv..pv + 6).contains(&p) { iv + (p - pv) } else { inv[p] };
         for (key, t) in SO_KEYS.iter().zip([so.d2tau_dq2(), so.d2tau_dv2(), so.d2tau_dqdv()]) {

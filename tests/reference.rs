@@ -76,7 +76,7 @@ fn add(x: &[f64], j: usize, s: f64) -> Vec<f64> {
 }
 
 fn integ(m: &Model, q: &[f64], j: usize, s: f64) -> Vec<f64> {
-    r::integrate(m, q, &unit(m.nv, j, s))
+    r::integrate(m, q, &unit(m.nv(), j, s))
 }
 
 fn rnea64(m: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Vec<f64> {
@@ -131,7 +131,7 @@ fn mixed_model(seed: u64) -> Model {
     let ax = random_axis(&mut rng);
     let j6 = add_random_body(&mut b, &mut rng, j5, "con", JointType::Continuous { axis: ax });
     b.add_frame("tool", j6, random_placement(&mut rng)).unwrap();
-    b.build()
+    b.build().unwrap()
 }
 
 /// A branching revolute/prismatic-only tree (additive integration).
@@ -151,7 +151,7 @@ fn revolute_model(seed: u64) -> Model {
     }
     let ax = random_axis(&mut rng);
     add_random_body(&mut b, &mut rng, 2, "p", JointType::Prismatic { axis: ax });
-    b.build()
+    b.build().unwrap()
 }
 
 fn add_random_body(
@@ -169,9 +169,9 @@ fn add_random_body(
 /// Random `(q, v, a, tau)`.
 fn random_state(m: &Model, rng: &mut Rng) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
     let q = m.random_configuration(rng).as_slice().to_vec();
-    let v = random_vec(rng, m.nv);
-    let a = random_vec(rng, m.nv);
-    let tau = random_vec(rng, m.nv);
+    let v = random_vec(rng, m.nv());
+    let a = random_vec(rng, m.nv());
+    let tau = random_vec(rng, m.nv());
     (q, v, a, tau)
 }
 
@@ -179,7 +179,7 @@ fn single_joint_model(kind: JointType) -> Model {
     let mut rng = Rng::new(7);
     let mut b = ModelBuilder::new("single");
     add_random_body(&mut b, &mut rng, 0, "j", kind);
-    b.build()
+    b.build().unwrap()
 }
 
 fn all_joint_kinds() -> Vec<JointType> {
@@ -228,7 +228,7 @@ fn planar_two_link_pendulum_closed_form() {
         .unwrap();
     b.add_frame("tip", j2, Transform::from_translation(Vector3::new(0.6, 0.0, 0.0))).unwrap();
     b.set_gravity(Vector3::new(0.0, -g, 0.0));
-    let model = b.build();
+    let model = b.build().unwrap();
     let tip = model.frame_id("tip").unwrap();
 
     let mut rng = Rng::new(11);
@@ -305,7 +305,7 @@ fn free_body_matches_newton_euler() {
         .unwrap();
     let g = Vector3::new(0.3, -0.5, -9.81);
     b.set_gravity(g);
-    let model = b.build();
+    let model = b.build().unwrap();
     let (mut e_tau, mut e_ext, mut e_m) = (0.0f64, 0.0f64, 0.0f64);
     for _ in 0..20 {
         let (q, v, a, _) = random_state(&model, &mut rng);
@@ -357,7 +357,7 @@ fn spherical_body_closed_form() {
         Inertia::from_com(mass, com, ic),
     )
     .unwrap();
-    let model = b.build();
+    let model = b.build().unwrap();
     let g = Vector3::new(0.0, 0.0, -9.81);
     let (mut e_tau, mut e_m) = (0.0f64, 0.0f64);
     for _ in 0..20 {
@@ -387,7 +387,7 @@ fn external_forces_equal_minus_point_jacobian_transpose() {
     let mut worst = 0.0f64;
     for body in 1..model.njoints() {
         let (q, v, a, _) = random_state(&model, &mut rng);
-        let frame = model.frames.iter().position(|f| f.joint == body).unwrap();
+        let frame = model.frames().iter().position(|f| f.joint == body).unwrap();
         let pl = [rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)];
         let f = Vector3::from_fn(|_, _| rng.range(-3.0, 3.0));
         let pw = r::point_position::<f64>(&model, &q, frame, &pl);
@@ -399,9 +399,9 @@ fn external_forces_equal_minus_point_jacobian_transpose() {
         let d =
             vdiff(&r::rnea::<f64>(&model, &q, &v, &a, Some(&fext)), &rnea64(&model, &q, &v, &a));
         assert!(d > 1e-6, "the external force has no effect on body {body}");
-        let jac = DMatrix::from_fn(3, model.nv, |i, j| {
+        let jac = DMatrix::from_fn(3, model.nv(), |i, j| {
             let qd = r::integrate(&model, &r::lift::<Dual64>(&q), &{
-                let mut e = vec![Dual64::from(0.0); model.nv];
+                let mut e = vec![Dual64::from(0.0); model.nv()];
                 e[j] = Dual64::new(0.0, 1.0);
                 e
             });
@@ -476,7 +476,7 @@ fn double_pendulum_matches_pinocchio() {
         l2,
     )
     .unwrap();
-    let model = b.build();
+    let model = b.build().unwrap();
 
     let path =
         concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/double_pendulum_continuous.json");
@@ -524,8 +524,8 @@ fn double_pendulum_matches_pinocchio() {
 fn quat_norms_ok(model: &Model, q: &[f64]) -> f64 {
     let mut worst = 0.0f64;
     for i in 1..model.njoints() {
-        let a = model.idx_q[i];
-        let s = match model.joints[i] {
+        let a = model.idx_q()[i];
+        let s = match model.joints()[i] {
             JointType::Spherical => &q[a..a + 4],
             JointType::FreeFlyer => &q[a + 3..a + 7],
             _ => continue,
@@ -545,8 +545,8 @@ fn integrate_properties() {
             let q = model.random_configuration(&mut rng).as_slice().to_vec();
             // Small, medium and large steps (both branches of the series).
             let scale = [1e-9, 1e-3, 0.5, 3.0][trial % 4];
-            let d: Vec<f64> = random_vec(&mut rng, model.nv).iter().map(|x| x * scale).collect();
-            e_zero = e_zero.max(vdiff(&r::integrate(&model, &q, &vec![0.0; model.nv]), &q));
+            let d: Vec<f64> = random_vec(&mut rng, model.nv()).iter().map(|x| x * scale).collect();
+            e_zero = e_zero.max(vdiff(&r::integrate(&model, &q, &vec![0.0; model.nv()]), &q));
             let qd = r::integrate(&model, &q, &d);
             e_norm = e_norm.max(quat_norms_ok(&model, &qd));
             let back = r::integrate(&model, &qd, &d.iter().map(|x| -x).collect::<Vec<_>>());
@@ -560,7 +560,7 @@ fn integrate_properties() {
     // The whole mixed model, too.
     let model = mixed_model(1);
     let q = model.random_configuration(&mut rng).as_slice().to_vec();
-    let d = random_vec(&mut rng, model.nv);
+    let d = random_vec(&mut rng, model.nv());
     let qd = r::integrate(&model, &q, &d);
     e_norm = e_norm.max(quat_norms_ok(&model, &qd));
     e_inv =
@@ -581,7 +581,7 @@ fn integrate_derivatives_match_finite_differences() {
     let (mut e1, mut e2) = (0.0f64, 0.0f64);
     for kind in all_joint_kinds() {
         let model = single_joint_model(kind);
-        let (nq, nv) = (model.nq, model.nv);
+        let (nq, nv) = (model.nq(), model.nv());
         for scale in [0.0, 1e-4, 0.3, 2.5] {
             let q = model.random_configuration(&mut rng).as_slice().to_vec();
             let d: Vec<f64> = random_vec(&mut rng, nv).iter().map(|x| x * scale).collect();
@@ -657,7 +657,7 @@ fn first_derivatives_match_finite_differences() {
         let mut rng = Rng::new(seed);
         for _ in 0..3 {
             let (q, v, a, tau) = random_state(&model, &mut rng);
-            let n = model.nv;
+            let n = model.nv();
             let fd = central(n, n, h, |j, s| rnea64(&model, &integ(&model, &q, j, s), &v, &a));
             worst[0] = worst[0].max(rel_diff(&r::d_rnea_dq(&model, &q, &v, &a), &fd));
             let fd = central(n, n, h, |j, s| rnea64(&model, &q, &add(&v, j, s), &a));
@@ -698,7 +698,7 @@ fn second_derivatives_match_finite_differences_of_first() {
     for (seed, model) in [(3, mixed_model(41)), (4, revolute_model(42))] {
         let mut rng = Rng::new(seed);
         let (q, v, a, tau) = random_state(&model, &mut rng);
-        let n = model.nv;
+        let n = model.nv();
         let t = r::d2_rnea_dq2(&model, &q, &v, &a);
         let fd = central_t(n, h, |k, s| r::d_rnea_dq(&model, &integ(&model, &q, k, s), &v, &a));
         record("d2rnea/dq2", rel_diff_t(&t, &fd));
@@ -770,10 +770,10 @@ fn dq_dq_tensor_symmetry() {
 /// `e_j`: zero across joints and for 1-dof joints, `Sᵀ (S_k × S_j)` (motion cross product)
 /// within a spherical, free-flyer or planar joint (orthonormal subspace columns).
 fn bracket(model: &Model) -> Tensor3 {
-    let n = model.nv;
-    let s = |c: usize| (model.subspace[c].ang, model.subspace[c].lin);
+    let n = model.nv();
+    let s = |c: usize| (model.subspace()[c].ang, model.subspace()[c].lin);
     Tensor3::from_fn(n, n, n, |l, j, k| {
-        let same = |x: usize, y: usize| model.dof_joint[x] == model.dof_joint[y];
+        let same = |x: usize, y: usize| model.dof_joint()[x] == model.dof_joint()[y];
         if !(same(l, j) && same(j, k)) {
             return 0.0;
         }
@@ -792,7 +792,7 @@ fn dq_dq_asymmetry_is_the_lie_bracket() {
     let mut rng = Rng::new(82);
     let (q, v, a, tau) = random_state(&model, &mut rng);
     let c = bracket(&model);
-    let n = model.nv;
+    let n = model.nv();
     let mut worst = 0.0f64;
     let cases = [
         (r::d2_rnea_dq2(&model, &q, &v, &a), r::d_rnea_dq(&model, &q, &v, &a)),
@@ -817,7 +817,7 @@ fn vector_dual_types_agree_with_scalar_duals() {
     let model = mixed_model(61);
     let mut rng = Rng::new(62);
     let (q, v, a, _) = random_state(&model, &mut rng);
-    let n = model.nv;
+    let n = model.nv();
 
     // DualDVec64: the whole tangent Jacobian ∂τ/∂q in one pass.
     let delta: Vec<DualDVec64> =
@@ -907,13 +907,13 @@ fn frame_placement_and_point_jacobian() {
     let e_origin = vdiff(&origin, p.as_slice());
     // Dual point Jacobian vs finite differences.
     let pl = [0.2, -0.1, 0.3];
-    let jac = DMatrix::from_fn(3, model.nv, |i, j| {
-        let mut d = vec![Dual64::from(0.0); model.nv];
+    let jac = DMatrix::from_fn(3, model.nv(), |i, j| {
+        let mut d = vec![Dual64::from(0.0); model.nv()];
         d[j] = Dual64::new(0.0, 1.0);
         let qd = r::integrate(&model, &r::lift::<Dual64>(&q), &d);
         r::point_position(&model, &qd, tool, &pl.map(Dual64::from))[i].eps
     });
-    let fd = central(3, model.nv, 1e-6, |j, s| {
+    let fd = central(3, model.nv(), 1e-6, |j, s| {
         r::point_position::<f64>(&model, &integ(&model, &q, j, s), tool, &pl).to_vec()
     });
     let e_jac = max_diff(&jac, &fd);

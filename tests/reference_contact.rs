@@ -50,7 +50,7 @@ fn mat_vec(m: &DMatrix<f64>, x: &[f64]) -> Vec<f64> {
 
 /// `q ⊕ s e_j` with the crate's (optimised, `f64`) integrator.
 fn integ(model: &Model, q: &[f64], j: usize, s: f64) -> Vec<f64> {
-    let mut d = DVector::zeros(model.nv);
+    let mut d = DVector::zeros(model.nv());
     d[j] = s;
     model.integrate(&DVector::from_column_slice(q), &d).expect("integrate").as_slice().to_vec()
 }
@@ -113,12 +113,12 @@ struct Case {
 
 /// Smallest singular value of the contact Jacobian at `q`.
 fn sigma_min(model: &Model, q: &[f64], contacts: &[Contact]) -> f64 {
-    let j = mat(&rc::contact_jacobian::<f64>(model, q, contacts), model.nv);
+    let j = mat(&rc::contact_jacobian::<f64>(model, q, contacts), model.nv());
     j.singular_values().min()
 }
 
 fn state(model: &Model, contacts: Vec<Contact>, q: Vec<f64>, rng: &mut Rng, name: String) -> Case {
-    let nv = model.nv;
+    let nv = model.nv();
     let mut u = |n: usize, s: f64| (0..n).map(|_| rng.range(-s, s)).collect::<Vec<f64>>();
     let (v, a, tau) = (u(nv, 1.0), u(nv, 1.0), u(nv, 5.0));
     let lambda = u(3 * contacts.len(), 10.0);
@@ -132,24 +132,25 @@ fn random_tree_case(n: usize, seed: u64, ff: bool, max_contacts: usize) -> Case 
     let mut rng = Rng::new(seed ^ 0x5eed);
     let q = model.random_configuration(&mut rng).as_slice().to_vec();
     let mut contacts = Vec::new();
-    let mut frames: Vec<usize> =
-        (0..model.frames.len()).filter(|&f| model.frames[f].name.starts_with("body_")).collect();
+    let mut frames: Vec<usize> = (0..model.frames().len())
+        .filter(|&f| model.frames()[f].name.starts_with("body_"))
+        .collect();
     // Deepest bodies first (most dofs above them).
     let depth = |f: usize| (0..model.njoints()).filter(|&j| model.is_ancestor(j, f)).count();
-    frames.sort_by_key(|&f| std::cmp::Reverse(depth(model.frames[f].joint)));
+    frames.sort_by_key(|&f| std::cmp::Reverse(depth(model.frames()[f].joint)));
     for f in frames {
         if contacts.len() == max_contacts {
             break;
         }
         let p = Vector3::new(rng.range(-0.3, 0.3), rng.range(-0.3, 0.3), rng.range(-0.3, 0.3));
-        let c = Contact::new(&model, &model.frames[f].name, p).expect("contact");
+        let c = Contact::new(&model, &model.frames()[f].name, p).expect("contact");
         contacts.push(c);
         if sigma_min(&model, &q, &contacts) < 0.05 {
             contacts.pop();
         }
     }
-    assert!(!contacts.is_empty(), "no usable contact on {}", model.name);
-    let name = format!("{} ({} contacts, nv {})", model.name, contacts.len(), model.nv);
+    assert!(!contacts.is_empty(), "no usable contact on {}", model.name());
+    let name = format!("{} ({} contacts, nv {})", model.name(), contacts.len(), model.nv());
     state(&model, contacts, q, &mut rng, name)
 }
 
@@ -194,7 +195,7 @@ fn cases() -> Vec<Case> {
 fn jacobian_matches_dual_derivatives_of_point_positions() {
     let mut rep = Report::default();
     for c in cases() {
-        let (m, nv) = (&c.model, c.model.nv);
+        let (m, nv) = (&c.model, c.model.nv());
         let jac = mat(&rc::contact_jacobian::<f64>(m, &c.q, &c.contacts), nv);
         let mut ad = DMatrix::zeros(3 * c.contacts.len(), nv);
         for j in 0..nv {
@@ -242,7 +243,7 @@ fn drift_matches_hyper_dual_second_derivative_along_exponential_curves() {
         println!("{:<45} J̇q̇ vs d²/dt² p(q ⊕ t v): {e:.2e}", c.name);
         rep.add("drift vs hyper-dual d2/dt2", e, 1e-12);
         // And the first derivative is J v.
-        let jv = mat_vec(&mat(&rc::contact_jacobian::<f64>(m, &c.q, &c.contacts), m.nv), &c.v);
+        let jv = mat_vec(&mat(&rc::contact_jacobian::<f64>(m, &c.q, &c.contacts), m.nv()), &c.v);
         rep.add("J v vs d/dt p(q ⊕ t v)", rel_v(&jv, &vel), 1e-12);
     }
     rep.print("Drift");
@@ -259,7 +260,7 @@ fn constrained_rnea_is_rnea_minus_jt_lambda() {
         let m = &c.model;
         let tau = rc::constrained_rnea::<f64>(m, &c.q, &c.v, &c.a, &c.contacts, &c.lambda);
         let id = r::rnea::<f64>(m, &c.q, &c.v, &c.a, None);
-        let jt = mat(&rc::contact_jacobian::<f64>(m, &c.q, &c.contacts), m.nv).transpose();
+        let jt = mat(&rc::contact_jacobian::<f64>(m, &c.q, &c.contacts), m.nv()).transpose();
         let jtl = mat_vec(&jt, &c.lambda);
         let expect: Vec<f64> = id.iter().zip(&jtl).map(|(a, b)| a - b).collect();
         let e = rel_v(&tau, &expect);
@@ -273,7 +274,7 @@ fn constrained_rnea_is_rnea_minus_jt_lambda() {
 fn kkt_solution_satisfies_the_constrained_equations() {
     let mut rep = Report::default();
     for c in cases() {
-        let (m, nv) = (&c.model, c.model.nv);
+        let (m, nv) = (&c.model, c.model.nv());
         let (qdd, lambda) = rc::kkt::<f64>(m, &c.q, &c.v, &c.tau, &c.contacts);
         let mm = mat(&r::mass_matrix::<f64>(m, &c.q), nv);
         let b = r::nle::<f64>(m, &c.q, &c.v);
@@ -312,7 +313,7 @@ fn kkt_solution_satisfies_the_constrained_equations() {
 fn impact_solution_satisfies_restitution_and_momentum_equations() {
     let mut rep = Report::default();
     for c in cases() {
-        let (m, nv) = (&c.model, c.model.nv);
+        let (m, nv) = (&c.model, c.model.nv());
         let mm = mat(&r::mass_matrix::<f64>(m, &c.q), nv);
         let jac = mat(&rc::contact_jacobian::<f64>(m, &c.q, &c.contacts), nv);
         for e in [0.0, 0.4, 1.0] {
@@ -346,7 +347,7 @@ const TOL_FD2: f64 = 1e-6;
 fn first_order_oracles_match_central_differences() {
     let mut rep = Report::default();
     for c in cases() {
-        let (m, nv, nl) = (&c.model, c.model.nv, 3 * c.contacts.len());
+        let (m, nv, nl) = (&c.model, c.model.nv(), 3 * c.contacts.len());
         let (q, v, a, tau, cs) = (&c.q, &c.v, &c.a, &c.tau, &c.contacts);
         // Constrained ID.
         let crnea = |q: &[f64], v: &[f64]| rc::constrained_rnea::<f64>(m, q, v, a, cs, &c.lambda);
@@ -403,7 +404,7 @@ fn first_order_oracles_match_central_differences() {
 fn second_order_oracles_match_differences_of_first_order() {
     let mut rep = Report::default();
     for c in cases() {
-        let (m, nv) = (&c.model, c.model.nv);
+        let (m, nv) = (&c.model, c.model.nv());
         let (q, v, a, tau, cs, l) = (&c.q, &c.v, &c.a, &c.tau, &c.contacts, &c.lambda);
 
         // Constrained ID: outer q derivative of ∂τ/∂q.
@@ -479,7 +480,7 @@ fn impact_is_linear_in_the_pre_impact_velocity() {
     // on q̇⁻.
     let mut worst = 0.0f64;
     for c in cases() {
-        let (m, nv) = (&c.model, c.model.nv);
+        let (m, nv) = (&c.model, c.model.nv());
         let qh = r::lift::<HyperDual64>(&c.q);
         for e in [0.0, 0.5] {
             for j in 0..nv {
@@ -532,27 +533,27 @@ fn pinocchio_solo12_constraint_and_impulse_dynamics() {
         std::fs::read_to_string(PathBuf::from(FIXTURES).join("solo12.json")).expect("fixture");
     let fx: Value = serde_json::from_str(&text).expect("fixture JSON");
     let pj = fx["model"]["joints"].as_array().expect("joints");
-    assert_eq!(model.nv, idx(&fx["model"]["nv"]));
+    assert_eq!(model.nv(), idx(&fx["model"]["nv"]));
 
     // Joint mapping by name: our dof i is Pinocchio's perm[i]; q copied per joint.
-    let mut perm = vec![usize::MAX; model.nv];
+    let mut perm = vec![usize::MAX; model.nv()];
     let mut qmap = Vec::new(); // (our idx_q, pin idx_q, nq)
     for i in 1..model.njoints() {
         let j = pj
             .iter()
-            .find(|j| j["name"].as_str() == Some(model.names[i].as_str()))
-            .unwrap_or_else(|| panic!("joint {} not in the fixture", model.names[i]));
+            .find(|j| j["name"].as_str() == Some(model.names()[i].as_str()))
+            .unwrap_or_else(|| panic!("joint {} not in the fixture", model.names()[i]));
         let (pv, pq) = (idx(&j["idx_v"]), idx(&j["idx_q"]));
-        assert_eq!(idx(&j["nv"]), model.nvs[i]);
-        assert_eq!(idx(&j["nq"]), model.nqs[i]);
-        for c in 0..model.nvs[i] {
-            perm[model.idx_v[i] + c] = match model.joints[i] {
+        assert_eq!(idx(&j["nv"]), model.nvs()[i]);
+        assert_eq!(idx(&j["nq"]), model.nqs()[i]);
+        for c in 0..model.nvs()[i] {
+            perm[model.idx_v()[i] + c] = match model.joints()[i] {
                 JointType::FreeFlyer if c < 3 => pv + 3 + c, // ours [ω; v], Pinocchio [v; ω]
                 JointType::FreeFlyer => pv + c - 3,
                 _ => pv + c,
             };
         }
-        qmap.push((model.idx_q[i], pq, model.nqs[i]));
+        qmap.push((model.idx_q()[i], pq, model.nqs()[i]));
     }
 
     // Contacts: origins of the foot frames, checked against the fixture's placements.
@@ -560,8 +561,8 @@ fn pinocchio_solo12_constraint_and_impulse_dynamics() {
     for c in fx["model"]["contacts"].as_array().expect("contacts") {
         let name = c["frame"].as_str().expect("frame");
         let ct = Contact::new(&model, name, Vector3::zeros()).expect("foot frame");
-        let f = &model.frames[ct.frame];
-        assert_eq!(model.names[f.joint], c["parent_joint_name"].as_str().unwrap());
+        let f = &model.frames()[ct.frame];
+        assert_eq!(model.names()[f.joint], c["parent_joint_name"].as_str().unwrap());
         let t = vec_of(&c["placement_in_joint"]["translation"]);
         let rot = mat_of(&c["placement_in_joint"]["rotation"]);
         for (a, row) in rot.iter().enumerate() {
@@ -573,7 +574,7 @@ fn pinocchio_solo12_constraint_and_impulse_dynamics() {
         contacts.push(ct);
     }
     let nl = 3 * contacts.len();
-    let nv = model.nv;
+    let nv = model.nv();
     let pvec = |x: &[f64]| (0..nv).map(|i| x[perm[i]]).collect::<Vec<f64>>();
     let pmat = |x: &[Vec<f64>]| DMatrix::from_fn(nv, nv, |i, j| x[perm[i]][perm[j]]);
     let pcols = |x: &[Vec<f64>]| DMatrix::from_fn(nl, nv, |i, j| x[i][perm[j]]);
@@ -581,7 +582,7 @@ fn pinocchio_solo12_constraint_and_impulse_dynamics() {
     let mut rep = Report::default();
     for (s, st) in fx["states"].as_array().expect("states").iter().enumerate() {
         let pq = vec_of(&st["q"]);
-        let mut q = vec![0.0; model.nq];
+        let mut q = vec![0.0; model.nq()];
         for &(a, b, n) in &qmap {
             q[a..a + n].copy_from_slice(&pq[b..b + n]);
         }

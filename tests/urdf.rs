@@ -189,9 +189,9 @@ fn model_joint_poses(m: &Model) -> Vec<Transform> {
     let q = m.neutral();
     let mut o = vec![Transform::identity(); m.njoints()];
     for i in 1..m.njoints() {
-        let (a, n) = (m.idx_q[i], m.nqs[i]);
-        let xj = m.joints[i].transform(&q.as_slice()[a..a + n]);
-        o[i] = o[m.parents[i]].compose(&m.placements[i]).compose(&xj);
+        let (a, n) = (m.idx_q()[i], m.nqs()[i]);
+        let xj = m.joints()[i].transform(&q.as_slice()[a..a + n]);
+        o[i] = o[m.parents()[i]].compose(&m.placements()[i]).compose(&xj);
     }
     o
 }
@@ -234,16 +234,16 @@ fn shared_models_dimensions_match_readme() {
     for row in &rows {
         let m = load_shared(&dir, row);
         let expected_nq = if row.ff { row.nv + 1 } else { row.nv };
-        assert_eq!(m.nv, row.nv, "{}: nv", row.file);
-        assert_eq!(m.nq, expected_nq, "{}: nq", row.file);
+        assert_eq!(m.nv(), row.nv, "{}: nv", row.file);
+        assert_eq!(m.nq(), expected_nq, "{}: nq", row.file);
         if row.ff {
-            assert_eq!(m.names[1], "root_joint", "{}", row.file);
-            assert_eq!(m.joints[1], JointType::FreeFlyer, "{}", row.file);
+            assert_eq!(m.names()[1], "root_joint", "{}", row.file);
+            assert_eq!(m.joints()[1], JointType::FreeFlyer, "{}", row.file);
         }
         // Also loadable with the other base option.
         let other =
             load_urdf_file(&dir.join(&row.file), &UrdfOptions { floating_base: !row.ff }).unwrap();
-        assert_eq!(other.nv, if row.ff { row.nv - 6 } else { row.nv + 6 }, "{}", row.file);
+        assert_eq!(other.nv(), if row.ff { row.nv - 6 } else { row.nv + 6 }, "{}", row.file);
     }
 }
 
@@ -254,16 +254,16 @@ fn shared_models_name_and_joint_types() {
         let xml = std::fs::read_to_string(dir.join(&row.file)).unwrap();
         let (name, links, joints) = ref_parse(&xml);
         let m = load_shared(&dir, &row);
-        assert_eq!(m.name, name, "{}", row.file);
+        assert_eq!(m.name(), name, "{}", row.file);
         // Every link is a frame (plus "universe").
-        assert_eq!(m.frames.len(), links.len() + 1, "{}", row.file);
+        assert_eq!(m.frames().len(), links.len() + 1, "{}", row.file);
         for j in joints.iter().filter(|j| j.ty != "fixed") {
             let id = m.joint_id(&j.name).unwrap();
-            let got = m.joints[id].name();
+            let got = m.joints()[id].name();
             assert_eq!(got, j.ty.as_str(), "{}: joint {}", row.file, j.name);
-            assert_eq!(m.mimic[id], j.mimic, "{}: mimic of {}", row.file, j.name);
+            assert_eq!(m.mimic()[id], j.mimic, "{}: mimic of {}", row.file, j.name);
             // The child link sits at the joint frame.
-            let f = &m.frames[m.frame_id(&j.child).unwrap()];
+            let f = &m.frames()[m.frame_id(&j.child).unwrap()];
             assert_eq!(f.joint, id);
             assert_eq!(f.placement, Transform::identity());
         }
@@ -291,7 +291,7 @@ fn shared_models_foot_frames_exist() {
     for (file, names) in feet {
         let m = load_urdf_file(&dir.join(file), &FLOATING).unwrap();
         for n in *names {
-            let f = &m.frames[m.frame_id(n).unwrap_or_else(|_| panic!("{file}: no frame {n}"))];
+            let f = &m.frames()[m.frame_id(n).unwrap_or_else(|_| panic!("{file}: no frame {n}"))];
             // On a leg body, below the free flyer.
             assert!(f.joint > 1, "{file}: frame {n} is on joint {}", f.joint);
             assert!(m.is_ancestor(1, f.joint));
@@ -308,7 +308,7 @@ fn shared_models_total_mass_is_sum_of_link_masses() {
         let urdf_mass: f64 = links.iter().map(|l| l.inertia.mass).sum();
         for opts in [FIXED, FLOATING] {
             let m = load_urdf_file(&dir.join(&row.file), &opts).unwrap();
-            let total: f64 = m.inertias.iter().map(|i| i.mass).sum();
+            let total: f64 = m.inertias().iter().map(|i| i.mass).sum();
             assert!(close(total, urdf_mass, 1e-12), "{}: {total} vs {urdf_mass}", row.file);
         }
     }
@@ -331,7 +331,7 @@ fn shared_models_frames_and_inertias_in_world() {
         for opts in [FIXED, FLOATING] {
             let m = load_urdf_file(&dir.join(&row.file), &opts).unwrap();
             let o = model_joint_poses(&m);
-            for f in &m.frames[1..] {
+            for f in &m.frames()[1..] {
                 let got = o[f.joint].compose(&f.placement);
                 assert_transform_close(
                     &got,
@@ -340,17 +340,17 @@ fn shared_models_frames_and_inertias_in_world() {
                 );
             }
             let mut total = Inertia::zero();
-            for (oi, yi) in o.iter().zip(&m.inertias) {
+            for (oi, yi) in o.iter().zip(m.inertias()) {
                 total += oi.act_inertia(yi);
             }
             assert_inertia_close(&total, &expected, &row.file);
             // Every body inertia is physical.
-            for (i, y) in m.inertias.iter().enumerate() {
+            for (i, y) in m.inertias().iter().enumerate() {
                 assert!(
                     y.check_physical().is_ok(),
                     "{}: body {} inertia {:?}",
                     row.file,
-                    m.names[i],
+                    m.names()[i],
                     y
                 );
             }
@@ -391,7 +391,7 @@ fn joint_order_matches_pinocchio_fixtures_up_to_sibling_order() {
 
         let m = load_urdf_file(&dir.join(&row.file), &UrdfOptions { floating_base: ff }).unwrap();
         let skip = if ff { 2 } else { 1 };
-        let ours: Vec<String> = m.names[skip..].to_vec();
+        let ours: Vec<String> = m.names()[skip..].to_vec();
         let pin_movable: Vec<String> =
             pin_names.iter().filter(|n| *n != "root_joint").cloned().collect();
 
@@ -417,20 +417,20 @@ fn joint_order_matches_pinocchio_fixtures_up_to_sibling_order() {
                 0 => "universe",
                 p => pin_index[&p],
             };
-            assert_eq!(m.names[m.parents[id]], pin_parent, "{stem}: parent of {name}");
-            assert_eq!(m.nvs[id] as i64, j["nv"].as_i64().unwrap(), "{stem}: nv of {name}");
+            assert_eq!(m.names()[m.parents()[id]], pin_parent, "{stem}: parent of {name}");
+            assert_eq!(m.nvs()[id] as i64, j["nv"].as_i64().unwrap(), "{stem}: nv of {name}");
             let pin_nq = j["nq"].as_i64().unwrap();
-            let expect_nq = if matches!(m.joints[id], JointType::Continuous { .. }) {
+            let expect_nq = if matches!(m.joints()[id], JointType::Continuous { .. }) {
                 2
             } else {
-                m.nqs[id] as i64
+                m.nqs()[id] as i64
             };
             assert_eq!(expect_nq, pin_nq, "{stem}: nq of {name} (Pinocchio continuous: nq = 2)");
         }
-        assert_eq!(m.nv as i64, fm["nv"].as_i64().unwrap(), "{stem}: nv");
+        assert_eq!(m.nv() as i64, fm["nv"].as_i64().unwrap(), "{stem}: nv");
         let ncont =
-            m.joints.iter().filter(|t| matches!(t, JointType::Continuous { .. })).count() as i64;
-        assert_eq!(m.nq as i64 + ncont, fm["nq"].as_i64().unwrap(), "{stem}: nq");
+            m.joints().iter().filter(|t| matches!(t, JointType::Continuous { .. })).count() as i64;
+        assert_eq!(m.nq() as i64 + ncont, fm["nq"].as_i64().unwrap(), "{stem}: nq");
         checked += 1;
     }
     eprintln!("checked the joint order of {checked} models against Pinocchio fixtures");
@@ -441,13 +441,13 @@ fn shared_mimic_joints_are_recorded() {
     let Some(dir) = models_dir() else { return };
     let m = load_urdf_file(&dir.join("panda.urdf"), &FIXED).unwrap();
     let id = m.joint_id("panda_finger_joint2").unwrap();
-    assert_eq!(m.mimic[id].as_deref(), Some("panda_finger_joint1"));
-    assert_eq!(m.mimic[m.joint_id("panda_finger_joint1").unwrap()], None);
+    assert_eq!(m.mimic()[id].as_deref(), Some("panda_finger_joint1"));
+    assert_eq!(m.mimic()[m.joint_id("panda_finger_joint1").unwrap()], None);
     let talos = load_urdf_file(&dir.join("talos_full_v2.urdf"), &FLOATING).unwrap();
-    assert_eq!(talos.mimic.iter().filter(|x| x.is_some()).count(), 12);
+    assert_eq!(talos.mimic().iter().filter(|x| x.is_some()).count(), 12);
     // In talos_reduced the mimic joints are fixed, hence merged: nothing recorded.
     let reduced = load_urdf_file(&dir.join("talos_reduced.urdf"), &FLOATING).unwrap();
-    assert!(reduced.mimic.iter().all(|x| x.is_none()));
+    assert!(reduced.mimic().iter().all(|x| x.is_none()));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -511,15 +511,15 @@ const BRANCHY: &str = r#"<?xml version="1.0"?>
 #[test]
 fn depth_first_order_in_document_order() {
     let m = load_urdf_str(BRANCHY, "branchy.urdf", &FIXED).unwrap();
-    assert_eq!(m.name, "branchy");
-    assert_eq!(m.names, ["universe", "z_first", "a_under_z", "y_second", "b_deep"]);
-    assert_eq!(m.parents, [0, 0, 1, 0, 3]);
-    let frames: Vec<&str> = m.frames.iter().map(|f| f.name.as_str()).collect();
+    assert_eq!(m.name(), "branchy");
+    assert_eq!(m.names(), ["universe", "z_first", "a_under_z", "y_second", "b_deep"]);
+    assert_eq!(m.parents(), [0, 0, 1, 0, 3]);
+    let frames: Vec<&str> = m.frames().iter().map(|f| f.name.as_str()).collect();
     assert_eq!(
         frames,
         ["universe", "base", "a", "a_child", "b", "b_fixed", "b_fixed_2", "b_grandchild"]
     );
-    assert_eq!((m.nq, m.nv), (4, 4));
+    assert_eq!((m.nq(), m.nv()), (4, 4));
     assert!(m.frame_id("ignored_gazebo_link").is_err());
 }
 
@@ -527,14 +527,18 @@ fn depth_first_order_in_document_order() {
 fn joint_types_axes_and_limits() {
     let m = load_urdf_str(BRANCHY, "branchy.urdf", &FIXED).unwrap();
     // Axis normalised; default axis x.
-    assert_eq!(m.joints[1], JointType::Revolute { axis: Vector3::z() });
-    assert_eq!(m.joints[2], JointType::Prismatic { axis: Vector3::y() });
-    assert_eq!(m.joints[3], JointType::Continuous { axis: Vector3::x() });
-    assert_eq!(m.joints[4], JointType::Revolute { axis: Vector3::x() });
-    assert_eq!((m.lower[0], m.upper[0]), (-1.5, 2.5));
+    assert_eq!(m.joints()[1], JointType::Revolute { axis: Vector3::z() });
+    assert_eq!(m.joints()[2], JointType::Prismatic { axis: Vector3::y() });
+    assert_eq!(m.joints()[3], JointType::Continuous { axis: Vector3::x() });
+    assert_eq!(m.joints()[4], JointType::Revolute { axis: Vector3::x() });
+    assert_eq!((m.lower()[0], m.upper()[0]), (-1.5, 2.5));
     // Prismatic and revolute without <limit>, continuous: unlimited.
     for k in 1..4 {
-        assert_eq!((m.lower[k], m.upper[k]), (f64::NEG_INFINITY, f64::INFINITY), "coordinate {k}");
+        assert_eq!(
+            (m.lower()[k], m.upper()[k]),
+            (f64::NEG_INFINITY, f64::INFINITY),
+            "coordinate {k}"
+        );
     }
 }
 
@@ -544,17 +548,17 @@ fn fixed_joints_are_merged_with_composed_placements() {
     let b = m.joint_id("y_second").unwrap();
     let weld1 = Transform::from_rpy_xyz([0.0; 3], [0.0, 0.0, 1.0]);
     let weld2 = weld1.compose(&Transform::from_rpy_xyz([0.1, 0.0, 0.0], [0.0, 0.0, 2.0]));
-    let f1 = &m.frames[m.frame_id("b_fixed").unwrap()];
-    let f2 = &m.frames[m.frame_id("b_fixed_2").unwrap()];
+    let f1 = &m.frames()[m.frame_id("b_fixed").unwrap()];
+    let f2 = &m.frames()[m.frame_id("b_fixed_2").unwrap()];
     assert_eq!(f1.joint, b);
     assert_eq!(f2.joint, b);
     assert_transform_close(&f1.placement, &weld1, "b_fixed");
     assert_transform_close(&f2.placement, &weld2, "b_fixed_2");
     // The joint below the welded links is placed through them.
     let deep = m.joint_id("b_deep").unwrap();
-    assert_eq!(m.parents[deep], b);
+    assert_eq!(m.parents()[deep], b);
     assert_transform_close(
-        &m.placements[deep],
+        &m.placements()[deep],
         &weld2.compose(&Transform::from_translation(Vector3::new(0.0, 0.0, 3.0))),
         "b_deep placement",
     );
@@ -562,29 +566,29 @@ fn fixed_joints_are_merged_with_composed_placements() {
     let r = Transform::from_rpy_xyz([0.0, 0.0, std::f64::consts::FRAC_PI_2], [0.0, 0.0, 0.5]);
     let ic = Matrix3::from_diagonal(&Vector3::new(0.1, 0.2, 0.25));
     let in_link = r.act_inertia(&Inertia::from_com(2.0, Vector3::zeros(), ic));
-    assert_inertia_close(&m.inertias[b], &weld2.act_inertia(&in_link), "lumped inertia");
+    assert_inertia_close(&m.inertias()[b], &weld2.act_inertia(&in_link), "lumped inertia");
     // The rotated inertial: about the COM, Ixx and Iyy swap.
     let about_com = in_link.inertia_about_com();
     assert!((about_com[(0, 0)] - 0.2).abs() < 1e-12 && (about_com[(1, 1)] - 0.1).abs() < 1e-12);
     // Root inertia on joint 0 with a fixed base.
-    assert_eq!(m.inertias[0].mass, 3.0);
-    let total: f64 = m.inertias.iter().map(|i| i.mass).sum();
+    assert_eq!(m.inertias()[0].mass, 3.0);
+    let total: f64 = m.inertias().iter().map(|i| i.mass).sum();
     assert_eq!(total, 5.0);
 }
 
 #[test]
 fn floating_base_adds_root_joint() {
     let m = load_urdf_str(BRANCHY, "branchy.urdf", &FLOATING).unwrap();
-    assert_eq!(m.names, ["universe", "root_joint", "z_first", "a_under_z", "y_second", "b_deep"]);
-    assert_eq!(m.joints[1], JointType::FreeFlyer);
-    assert_eq!((m.nq, m.nv), (11, 10));
-    assert_eq!(m.parents, [0, 0, 1, 2, 1, 4]);
-    let base = &m.frames[m.frame_id("base").unwrap()];
+    assert_eq!(m.names(), ["universe", "root_joint", "z_first", "a_under_z", "y_second", "b_deep"]);
+    assert_eq!(m.joints()[1], JointType::FreeFlyer);
+    assert_eq!((m.nq(), m.nv()), (11, 10));
+    assert_eq!(m.parents(), [0, 0, 1, 2, 1, 4]);
+    let base = &m.frames()[m.frame_id("base").unwrap()];
     assert_eq!((base.joint, base.placement), (1, Transform::identity()));
-    assert_eq!(m.inertias[0].mass, 0.0);
-    assert_eq!(m.inertias[1].mass, 3.0);
+    assert_eq!(m.inertias()[0].mass, 0.0);
+    assert_eq!(m.inertias()[1].mass, 3.0);
     // Limits follow the joints (the free flyer's 7 coordinates are unlimited).
-    assert_eq!((m.lower[7], m.upper[7]), (-1.5, 2.5));
+    assert_eq!((m.lower()[7], m.upper()[7]), (-1.5, 2.5));
     // A movable joint named root_joint clashes with the free flyer.
     let clash = BRANCHY.replace("\"z_first\"", "\"root_joint\"");
     let e = load_urdf_str(&clash, "clash.urdf", &FLOATING).unwrap_err().to_string();
@@ -611,12 +615,12 @@ fn floating_and_planar_joints() {
         tiny(&format!(r#"type="{ty}"><parent link="base"/><child link="moved"/>{axis}</joint>"#))
     };
     let m = load_urdf_str(&j("floating", ""), "f.urdf", &FIXED).unwrap();
-    assert_eq!(m.joints[1], JointType::FreeFlyer);
-    assert_eq!((m.nq, m.nv), (7, 6));
+    assert_eq!(m.joints()[1], JointType::FreeFlyer);
+    assert_eq!((m.nq(), m.nv()), (7, 6));
     for axis in ["", r#"<axis xyz="0 0 1"/>"#, r#"<axis xyz="0 0 3"/>"#] {
         let m = load_urdf_str(&j("planar", axis), "p.urdf", &FIXED).unwrap();
-        assert_eq!(m.joints[1], JointType::Planar, "{axis}");
-        assert_eq!((m.nq, m.nv), (3, 3));
+        assert_eq!(m.joints()[1], JointType::Planar, "{axis}");
+        assert_eq!((m.nq(), m.nv()), (3, 3));
     }
     let e = load_urdf_str(&j("planar", r#"<axis xyz="0 0 -1"/>"#), "p.urdf", &FIXED).unwrap_err();
     assert!(e.to_string().contains("unsupported joint type \"planar\""), "{e}");
@@ -635,11 +639,11 @@ fn mimic_joint_is_recorded() {
   </joint>
 </robot>"#;
     let m = load_urdf_str(xml, "gripper.urdf", &FIXED).unwrap();
-    assert_eq!((m.nq, m.nv), (2, 2));
-    assert_eq!(m.mimic[1], None);
-    assert_eq!(m.mimic[2].as_deref(), Some("left_finger"));
-    assert_eq!(m.joints[2], JointType::Prismatic { axis: -Vector3::y() });
-    assert_eq!((m.lower[1], m.upper[1]), (0.0, 0.04));
+    assert_eq!((m.nq(), m.nv()), (2, 2));
+    assert_eq!(m.mimic()[1], None);
+    assert_eq!(m.mimic()[2].as_deref(), Some("left_finger"));
+    assert_eq!(m.joints()[2], JointType::Prismatic { axis: -Vector3::y() });
+    assert_eq!((m.lower()[1], m.upper()[1]), (0.0, 0.04));
 
     let bad = xml.replace("mimic joint=\"left_finger\"", "mimic joint=\"lfet_finger\"");
     let e = load_urdf_str(&bad, "gripper.urdf", &FIXED).unwrap_err().to_string();
@@ -659,12 +663,12 @@ fn massless_links_and_missing_origins_are_valid() {
   <joint name="j" type="revolute"><parent link="base"/><child link="tip"/></joint>
 </robot>"#;
     let m = load_urdf_str(xml, "m.urdf", &FIXED).unwrap();
-    assert!(m.inertias.iter().all(|i| *i == Inertia::zero()));
-    assert_eq!(m.placements[1], Transform::identity());
+    assert!(m.inertias().iter().all(|i| *i == Inertia::zero()));
+    assert_eq!(m.placements()[1], Transform::identity());
     // A single link and no joint: an empty tree.
     let m = load_urdf_str(r#"<robot name="one"><link name="only"/></robot>"#, "one.urdf", &FIXED)
         .unwrap();
-    assert_eq!((m.njoints(), m.nq, m.frames.len()), (1, 0, 2));
+    assert_eq!((m.njoints(), m.nq(), m.frames().len()), (1, 0, 2));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -947,8 +951,8 @@ fn placeholder_inertia_merged_into_physical_body() {
         )
     };
     let m = load_urdf_str(&xml("1.5"), "placeholder.urdf", &FIXED).unwrap();
-    assert!(m.inertias[1].check_physical().is_ok());
-    assert!(close(m.inertias[1].mass, 1.5 + 1e-6, 1e-15));
+    assert!(m.inertias()[1].check_physical().is_ok());
+    assert!(close(m.inertias()[1].mass, 1.5 + 1e-6, 1e-15));
     // A massless, inertia-less shin leaves the placeholder alone in its body: reported.
     let bad = xml("0").replace(
         "ixx=\"0.01\" ixy=\"0\" ixz=\"0\" iyy=\"0.01\" iyz=\"0\" izz=\"0.002\"",

@@ -9,7 +9,7 @@ use nalgebra::Vector3;
 /// A point contact: a point given in the coordinates of a frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Contact {
-    /// Frame index in `model.frames`.
+    /// Frame index in `model.frames()`.
     pub frame: usize,
     /// Point in the frame's coordinates.
     pub point: Vector3<f64>,

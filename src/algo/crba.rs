@@ -1014,7 +1014,7 @@ mod tests {
             let mut b = crate::model::ModelBuilder::new("small_multi_dof");
             let j1 = b.add_body(0, "j1", first, pose(0.2, 0.3), "b1", inertia(1.5)).unwrap();
             b.add_body(j1, "j2", second, pose(-0.3, -0.8), "b2", inertia(0.7)).unwrap();
-            models.push(b.build());
+            models.push(b.build().unwrap());
         }
         let mut kinds = std::collections::BTreeSet::new();
         for m in &models {

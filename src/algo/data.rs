@@ -9,78 +9,78 @@ use nalgebra::{DMatrix, DVector, Matrix6};
 #[derive(Clone, Debug)]
 pub struct Data {
     /// Pose of body `i` in its parent body's frame, `λ(i)M_i = placement_i · X_J(q_i)`.
-    pub li_m_i: Vec<Transform>,
+    pub(crate) li_m_i: Vec<Transform>,
     /// Pose of body `i` in the world.
-    pub o_m_i: Vec<Transform>,
+    pub(crate) o_m_i: Vec<Transform>,
     /// Body spatial velocities, body frame.
-    pub v: Vec<Motion>,
+    pub(crate) v: Vec<Motion>,
     /// Body spatial accelerations, body frame (RNEA: including the gravity offset `−a_g`).
-    pub a: Vec<Motion>,
+    pub(crate) a: Vec<Motion>,
     /// Net body forces (RNEA) / transmitted forces after the backward pass, body frame.
-    pub f: Vec<Force>,
+    pub(crate) f: Vec<Force>,
     /// Joint torques (RNEA output).
-    pub tau: DVector<f64>,
+    pub(crate) tau: DVector<f64>,
     /// Nonlinear effects `b = C q̇ + g`.
-    pub nle: DVector<f64>,
+    pub(crate) nle: DVector<f64>,
     /// Motion-subspace columns in the world frame, one per degree of freedom.
-    pub s_world: Vec<Motion>,
+    pub(crate) s_world: Vec<Motion>,
     /// Composite rigid-body inertias `I^C_i` in the world frame.
-    pub ic_world: Vec<Inertia>,
+    pub(crate) ic_world: Vec<Inertia>,
     /// Composite rigid-body inertias `I^C_i` in the body frames (the local-frame CRBA of small
     /// trees, see [`crba`](super::crba)).
-    pub ic_local: Vec<Inertia>,
+    pub(crate) ic_local: Vec<Inertia>,
     /// Joint-space mass matrix (full symmetric).
-    pub m: DMatrix<f64>,
+    pub(crate) m: DMatrix<f64>,
     /// Tree-sparse `LᵀDL` factor of `M` (unit `L` below the diagonal, `D` on it).
-    pub ltl: DMatrix<f64>,
+    pub(crate) ltl: DMatrix<f64>,
     /// Articulated-body inertias (ABA), body frame.
-    pub ia: Vec<Matrix6<f64>>,
+    pub(crate) ia: Vec<Matrix6<f64>>,
     /// Articulated bias forces (ABA), body frame.
-    pub pa: Vec<Force>,
+    pub(crate) pa: Vec<Force>,
     /// Velocity-product accelerations `v_i × v_J` (ABA), body frame.
-    pub c: Vec<Motion>,
+    pub(crate) c: Vec<Motion>,
     /// `U = I^A S`, one force column per degree of freedom (ABA).
-    pub u_cols: Vec<Force>,
+    pub(crate) u_cols: Vec<Force>,
     /// `D⁻¹ = (Sᵀ U)⁻¹` per joint, in the leading `nv×nv` block (ABA).
-    pub d_inv: Vec<Matrix6<f64>>,
+    pub(crate) d_inv: Vec<Matrix6<f64>>,
     /// `u = τ − Sᵀ p^A` (ABA).
-    pub u: DVector<f64>,
+    pub(crate) u: DVector<f64>,
     /// Joint accelerations (ABA output).
-    pub qdd: DVector<f64>,
+    pub(crate) qdd: DVector<f64>,
     /// Scratch vector of length `nv`.
-    pub tmp_v: DVector<f64>,
+    pub(crate) tmp_v: DVector<f64>,
     /// Body spatial velocities in the world frame (derivative algorithms).
-    pub ov: Vec<Motion>,
+    pub(crate) ov: Vec<Motion>,
     /// Body spatial accelerations in the world frame, including `a_0 = −a_g`.
-    pub oa: Vec<Motion>,
+    pub(crate) oa: Vec<Motion>,
     /// Composite forces `f^C_i = Σ_{k⪰i} f_k`, world frame.
-    pub ofc: Vec<Force>,
+    pub(crate) ofc: Vec<Force>,
     /// Composite body-level Coriolis matrices `B^C_i = Σ_{k⪰i} B(I_k, v_k)`, world frame.
-    pub bc: Vec<Matrix6<f64>>,
+    pub(crate) bc: Vec<Matrix6<f64>>,
     /// `Ψ̇ = v_λ × S` per degree of freedom (eq. psidot_psidotdot_defn), world frame.
-    pub psid: Vec<Motion>,
+    pub(crate) psid: Vec<Motion>,
     /// `Ψ̈ = a_λ × S + v_λ × Ψ̇` per degree of freedom (eq. psidot_psidotdot_defn).
-    pub psidd: Vec<Motion>,
+    pub(crate) psidd: Vec<Motion>,
     /// `Ṡ = v × S` per degree of freedom.
-    pub sdot: Vec<Motion>,
+    pub(crate) sdot: Vec<Motion>,
     /// `∂τ/∂q` (tangent space).
-    pub dtau_dq: DMatrix<f64>,
+    pub(crate) dtau_dq: DMatrix<f64>,
     /// `∂τ/∂q̇`.
-    pub dtau_dv: DMatrix<f64>,
+    pub(crate) dtau_dv: DMatrix<f64>,
     /// `∂q̈/∂q` of forward dynamics.
-    pub dqdd_dq: DMatrix<f64>,
+    pub(crate) dqdd_dq: DMatrix<f64>,
     /// `∂q̈/∂q̇` of forward dynamics.
-    pub dqdd_dv: DMatrix<f64>,
+    pub(crate) dqdd_dv: DMatrix<f64>,
     /// `M⁻¹ = ∂q̈/∂τ`.
-    pub minv: DMatrix<f64>,
+    pub(crate) minv: DMatrix<f64>,
     /// Body inertias in the world frame.
-    pub oinertia: Vec<Inertia>,
+    pub(crate) oinertia: Vec<Inertia>,
     /// IDFOZA workspace: accelerations (world, no gravity).
-    pub z_a: Vec<Motion>,
+    pub(crate) z_a: Vec<Motion>,
     /// IDFOZA workspace: `Ψ̈ = a_λ × S` per degree of freedom.
-    pub z_psidd: Vec<Motion>,
+    pub(crate) z_psidd: Vec<Motion>,
     /// IDFOZA workspace: composite forces.
-    pub z_fc: Vec<Force>,
+    pub(crate) z_fc: Vec<Force>,
     /// `Ψ̇ + Ṡ` per degree of freedom (first-order IDSVA forward pass).
     pub(crate) psid_sdot: Vec<Motion>,
     /// Set by the first-order IDSVA forward pass: the model has a root free-flyer
@@ -88,22 +88,200 @@ pub struct Data {
     pub(crate) ff_root: bool,
     /// Forward-dynamics derivative workspace (model-constant descendant lists, solve buffer).
     pub(crate) fd_ws: super::ltl::FdWs,
+    /// `Model::key` of the model this workspace was made for.
+    pub(crate) model_key: u64,
+    /// Its number of joints and degrees of freedom (for the error message of [`Data::check`]).
+    pub(crate) njoints: usize,
+    pub(crate) nv: usize,
+}
+
+/// The message of a workspace used with another model: what differs.
+pub(crate) fn workspace_mismatch(what: &str, njoints: usize, nv: usize, model: &Model) -> String {
+    let name = model.name();
+    if njoints != model.njoints() {
+        format!(
+            "{what} was made for a model with {njoints} joints, model \"{name}\" has {}; make it \
+             with {what}::new for this model",
+            model.njoints()
+        )
+    } else if nv != model.nv() {
+        format!(
+            "{what} was made for a model with nv = {nv}, model \"{name}\" has nv = {}; make it \
+             with {what}::new for this model",
+            model.nv()
+        )
+    } else {
+        format!(
+            "{what} was made for another model with the same numbers of joints and degrees of \
+             freedom but a different tree; make it with {what}::new for model \"{name}\""
+        )
+    }
 }
 
 impl Data {
-    /// Checks that this workspace was built for a model of `model`'s size.
+    /// Pose of body `i` in its parent body's frame, `λ(i)M_i = placement_i · X_J(q_i)`.
+    pub fn li_m_i(&self) -> &Vec<Transform> {
+        &self.li_m_i
+    }
+    /// Pose of body `i` in the world.
+    pub fn o_m_i(&self) -> &Vec<Transform> {
+        &self.o_m_i
+    }
+    /// Body spatial velocities, body frame.
+    pub fn v(&self) -> &Vec<Motion> {
+        &self.v
+    }
+    /// Body spatial accelerations, body frame (RNEA: including the gravity offset `−a_g`).
+    pub fn a(&self) -> &Vec<Motion> {
+        &self.a
+    }
+    /// Net body forces (RNEA) / transmitted forces after the backward pass, body frame.
+    pub fn f(&self) -> &Vec<Force> {
+        &self.f
+    }
+    /// Joint torques (RNEA output).
+    pub fn tau(&self) -> &DVector<f64> {
+        &self.tau
+    }
+    /// Nonlinear effects `b = C q̇ + g`.
+    pub fn nle(&self) -> &DVector<f64> {
+        &self.nle
+    }
+    /// Motion-subspace columns in the world frame, one per degree of freedom.
+    pub fn s_world(&self) -> &Vec<Motion> {
+        &self.s_world
+    }
+    /// Composite rigid-body inertias `I^C_i` in the world frame.
+    pub fn ic_world(&self) -> &Vec<Inertia> {
+        &self.ic_world
+    }
+    /// Composite rigid-body inertias `I^C_i` in the body frames (the local-frame CRBA of small
+    /// trees, see [`crba`](super::crba)).
+    pub fn ic_local(&self) -> &Vec<Inertia> {
+        &self.ic_local
+    }
+    /// Joint-space mass matrix (full symmetric).
+    pub fn m(&self) -> &DMatrix<f64> {
+        &self.m
+    }
+    /// Tree-sparse `LᵀDL` factor of `M` (unit `L` below the diagonal, `D` on it).
+    pub fn ltl(&self) -> &DMatrix<f64> {
+        &self.ltl
+    }
+    /// Articulated-body inertias (ABA), body frame.
+    pub fn ia(&self) -> &Vec<Matrix6<f64>> {
+        &self.ia
+    }
+    /// Articulated bias forces (ABA), body frame.
+    pub fn pa(&self) -> &Vec<Force> {
+        &self.pa
+    }
+    /// Velocity-product accelerations `v_i × v_J` (ABA), body frame.
+    pub fn c(&self) -> &Vec<Motion> {
+        &self.c
+    }
+    /// `U = I^A S`, one force column per degree of freedom (ABA).
+    pub fn u_cols(&self) -> &Vec<Force> {
+        &self.u_cols
+    }
+    /// `D⁻¹ = (Sᵀ U)⁻¹` per joint, in the leading `nv×nv` block (ABA).
+    pub fn d_inv(&self) -> &Vec<Matrix6<f64>> {
+        &self.d_inv
+    }
+    /// `u = τ − Sᵀ p^A` (ABA).
+    pub fn u(&self) -> &DVector<f64> {
+        &self.u
+    }
+    /// Joint accelerations (ABA output).
+    pub fn qdd(&self) -> &DVector<f64> {
+        &self.qdd
+    }
+    /// Scratch vector of length `nv`.
+    pub fn tmp_v(&self) -> &DVector<f64> {
+        &self.tmp_v
+    }
+    /// Body spatial velocities in the world frame (derivative algorithms).
+    pub fn ov(&self) -> &Vec<Motion> {
+        &self.ov
+    }
+    /// Body spatial accelerations in the world frame, including `a_0 = −a_g`.
+    pub fn oa(&self) -> &Vec<Motion> {
+        &self.oa
+    }
+    /// Composite forces `f^C_i = Σ_{k⪰i} f_k`, world frame.
+    pub fn ofc(&self) -> &Vec<Force> {
+        &self.ofc
+    }
+    /// Composite body-level Coriolis matrices `B^C_i = Σ_{k⪰i} B(I_k, v_k)`, world frame.
+    pub fn bc(&self) -> &Vec<Matrix6<f64>> {
+        &self.bc
+    }
+    /// `Ψ̇ = v_λ × S` per degree of freedom (eq. psidot_psidotdot_defn), world frame.
+    pub fn psid(&self) -> &Vec<Motion> {
+        &self.psid
+    }
+    /// `Ψ̈ = a_λ × S + v_λ × Ψ̇` per degree of freedom (eq. psidot_psidotdot_defn).
+    pub fn psidd(&self) -> &Vec<Motion> {
+        &self.psidd
+    }
+    /// `Ṡ = v × S` per degree of freedom.
+    pub fn sdot(&self) -> &Vec<Motion> {
+        &self.sdot
+    }
+    /// `∂τ/∂q` (tangent space).
+    pub fn dtau_dq(&self) -> &DMatrix<f64> {
+        &self.dtau_dq
+    }
+    /// `∂τ/∂q̇`.
+    pub fn dtau_dv(&self) -> &DMatrix<f64> {
+        &self.dtau_dv
+    }
+    /// `∂q̈/∂q` of forward dynamics.
+    pub fn dqdd_dq(&self) -> &DMatrix<f64> {
+        &self.dqdd_dq
+    }
+    /// `∂q̈/∂q̇` of forward dynamics.
+    pub fn dqdd_dv(&self) -> &DMatrix<f64> {
+        &self.dqdd_dv
+    }
+    /// `M⁻¹ = ∂q̈/∂τ`.
+    pub fn minv(&self) -> &DMatrix<f64> {
+        &self.minv
+    }
+    /// Body inertias in the world frame.
+    pub fn oinertia(&self) -> &Vec<Inertia> {
+        &self.oinertia
+    }
+    /// IDFOZA workspace: accelerations (world, no gravity).
+    pub fn z_a(&self) -> &Vec<Motion> {
+        &self.z_a
+    }
+    /// IDFOZA workspace: `Ψ̈ = a_λ × S` per degree of freedom.
+    pub fn z_psidd(&self) -> &Vec<Motion> {
+        &self.z_psidd
+    }
+    /// IDFOZA workspace: composite forces.
+    pub fn z_fc(&self) -> &Vec<Force> {
+        &self.z_fc
+    }
+}
+
+impl Data {
+    /// Checks that this workspace was made for `model` (by [`Data::new`] on a model with the
+    /// same tree: joints, parents, joint types and dimensions).
+    ///
+    /// # Errors
+    /// [`Error::Workspace`](crate::Error::Workspace) naming what differs.
     pub fn check(&self, model: &Model) -> crate::error::Result<()> {
-        if self.v.len() != model.njoints()
-            || self.tau.len() != model.nv
-            || self.z_psidd.len() != model.nv
-        {
-            return Err(crate::error::Error::Dimension {
-                what: "Data (workspace built for another model): nv".into(),
-                expected: model.nv,
-                got: self.tau.len(),
-            });
+        if self.model_key == model.key {
+            return Ok(());
         }
-        Ok(())
+        Err(crate::error::Error::Workspace(workspace_mismatch(
+            "Data",
+            self.njoints,
+            self.nv,
+            model,
+        )))
     }
     /// A workspace for `model`.
     pub fn new(model: &Model) -> Self {
@@ -149,6 +327,9 @@ impl Data {
             psid_sdot: vec![Motion::zero(); nv],
             ff_root: false,
             fd_ws: super::ltl::FdWs::new(model),
+            model_key: model.key,
+            njoints: model.njoints(),
+            nv: model.nv(),
         }
     }
 }

@@ -3,7 +3,7 @@
 mod aba;
 mod contact;
 mod crba;
-mod data;
+pub(crate) mod data;
 mod jacobian;
 mod kinematics;
 mod ltl;

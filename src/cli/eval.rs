@@ -274,7 +274,7 @@ fn contact_outputs(
     }
     o.insert("kkt".into(), k);
     let mut im = ImpactData::new(model, cd);
-    im.restitution = s.restitution;
+    im.set_restitution(s.restitution)?;
     if order >= 2 {
         im = im.with_second_order(model);
         impact_so_derivatives(model, data, &mut im, &s.q, &s.v)?;

@@ -17,14 +17,14 @@ use nalgebra::{DMatrix, DVector, Vector3};
 #[derive(Clone, Debug)]
 pub struct ContactData {
     /// The contacts.
-    pub contacts: Vec<Contact>,
+    pub(crate) contacts: Vec<Contact>,
     pub(crate) paths: Vec<Path>,
     pub(crate) acc: Vec<Motion>,
     pub(crate) zc: Vec<Motion>,
     /// Contact Jacobian `J_c` (`3 nc × nv`), world-aligned point velocities.
-    pub jac: DMatrix<f64>,
+    pub(crate) jac: DMatrix<f64>,
     /// Drift `J̇_c q̇` (classical point accelerations at `q̈ = 0`), when computed.
-    pub drift: DVector<f64>,
+    pub(crate) drift: DVector<f64>,
     /// `Y = M⁻¹Jᵀ`, rows padded with zeros to a multiple of 8 (`np × 3 nc`).
     pub(crate) y: DMatrix<f64>,
     pub(crate) lam: DMatrix<f64>,
@@ -67,7 +67,32 @@ pub struct ContactData {
     /// Regularisation `μ ≥ 0` added to the Delassus matrix `J M⁻¹ Jᵀ` (default 0: a
     /// rank-deficient contact set is an error). With `μ > 0` the solve is damped:
     /// `(J M⁻¹ Jᵀ + μ I) λ = …`, and all derivatives are those of the damped system.
-    pub damping: f64,
+    pub(crate) damping: f64,
+    /// `Model::key` of the model the contacts were made for, its joints and DoFs.
+    pub(crate) model_key: u64,
+    pub(crate) model_njoints: usize,
+    pub(crate) model_nv: usize,
+}
+
+impl ContactData {
+    /// The contacts.
+    pub fn contacts(&self) -> &Vec<Contact> {
+        &self.contacts
+    }
+    /// Contact Jacobian `J_c` (`3 nc × nv`), world-aligned point velocities.
+    pub fn jac(&self) -> &DMatrix<f64> {
+        &self.jac
+    }
+    /// Drift `J̇_c q̇` (classical point accelerations at `q̈ = 0`), when computed.
+    pub fn drift(&self) -> &DVector<f64> {
+        &self.drift
+    }
+    /// Regularisation `μ ≥ 0` added to the Delassus matrix `J M⁻¹ Jᵀ` (default 0: a
+    /// rank-deficient contact set is an error). With `μ > 0` the solve is damped:
+    /// `(J M⁻¹ Jᵀ + μ I) λ = …`, and all derivatives are those of the damped system.
+    pub fn damping(&self) -> f64 {
+        self.damping
+    }
 }
 
 impl ContactData {
@@ -150,7 +175,42 @@ impl ContactData {
             g: DMatrix::zeros(n + m, n),
             zmat: DMatrix::zeros(n, n),
             damping: 0.0,
+            model_key: model.key,
+            model_njoints: model.njoints(),
+            model_nv: model.nv(),
         })
+    }
+
+    /// Sets the damping `μ ≥ 0` added to the Delassus matrix's diagonal (a regularised solve
+    /// of rank-deficient contact sets; default 0).
+    ///
+    /// # Errors
+    /// [`Error::NotFinite`] or [`Error::Build`] for a NaN, infinite or negative `μ` (unchanged).
+    pub fn set_damping(&mut self, damping: f64) -> Result<()> {
+        if !damping.is_finite() {
+            return Err(Error::NotFinite { what: "damping".into(), index: 0 });
+        }
+        if damping < 0.0 {
+            return Err(Error::Build(format!("damping {damping} must be non-negative")));
+        }
+        self.damping = damping;
+        Ok(())
+    }
+
+    /// Checks that these contacts were made for `model`.
+    ///
+    /// # Errors
+    /// [`Error::Workspace`] naming what differs.
+    pub fn check(&self, model: &Model) -> Result<()> {
+        if self.model_key == model.key {
+            return Ok(());
+        }
+        Err(Error::Workspace(crate::algo::data::workspace_mismatch(
+            "ContactData",
+            self.model_njoints,
+            self.model_nv,
+            model,
+        )))
     }
 
     /// Number of constraint rows `3 nc`.
@@ -358,7 +418,7 @@ pub(crate) fn factor_delassus(
             what: "contact set".into(),
             detail: format!(
                 "the Delassus matrix J M⁻¹ Jᵀ of contacts {} is rank deficient (dependent or \
-                 redundant constraints); set ContactData::damping > 0 for a regularised solve",
+                 redundant constraints); set a damping > 0 (ContactData::set_damping) for a regularised solve",
                 cd.names(model)
             ),
         });

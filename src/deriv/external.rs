@@ -27,6 +27,7 @@ fn check(
     q: &DVector<f64>,
 ) -> Result<()> {
     model.check_q(q)?;
+    cd.check(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("a", a, model.nv)?;
     check_vec("lambda", lambda, cd.dim())?;

@@ -1517,7 +1517,7 @@ mod tests {
             b.add_body(0, "j1", root, x, "b1", inertia).unwrap();
             let axis = Vector3::new(0.0, 1.0, 0.0);
             b.add_body(1, "j2", JointType::Revolute { axis }, x, "b2", inertia).unwrap();
-            b.build()
+            b.build().unwrap()
         };
         let axis = Vector3::new(1.0, 0.0, 0.0);
         let (p, r) = (make(JointType::Prismatic { axis }), make(JointType::Revolute { axis }));

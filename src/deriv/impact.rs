@@ -30,23 +30,23 @@ use nalgebra::{DMatrix, DVector, Vector3};
 #[derive(Clone, Debug)]
 pub struct ImpactData {
     /// Contact workspace.
-    pub cd: ContactData,
+    pub(crate) cd: ContactData,
     /// Coefficient of restitution `e` (default 0): `J_c q̇⁺ = −e J_c q̇⁻`.
-    pub restitution: f64,
+    pub(crate) restitution: f64,
     /// Post-impact velocity `q̇⁺`.
-    pub vplus: DVector<f64>,
+    pub(crate) vplus: DVector<f64>,
     /// Contact impulse `λ̂` (world frame, applied to the robot), `3 nc`.
-    pub impulse: DVector<f64>,
+    pub(crate) impulse: DVector<f64>,
     /// `∂q̇⁺/∂q`.
-    pub dvplus_dq: DMatrix<f64>,
+    pub(crate) dvplus_dq: DMatrix<f64>,
     /// `∂q̇⁺/∂q̇⁻`.
-    pub dvplus_dvminus: DMatrix<f64>,
+    pub(crate) dvplus_dvminus: DMatrix<f64>,
     /// `∂λ̂/∂q`.
-    pub dimpulse_dq: DMatrix<f64>,
+    pub(crate) dimpulse_dq: DMatrix<f64>,
     /// `∂λ̂/∂q̇⁻`.
-    pub dimpulse_dvminus: DMatrix<f64>,
+    pub(crate) dimpulse_dvminus: DMatrix<f64>,
     /// Second-order results (allocated by [`ImpactData::with_second_order`]).
-    pub so: Option<ImpactSo>,
+    pub(crate) so: Option<ImpactSo>,
     rq: DMatrix<f64>,
     cq: DMatrix<f64>,
     /// `∂λ̂/∂q` with rows padded (`mp × nv`).
@@ -64,21 +64,97 @@ pub struct ImpactData {
     zero: DVector<f64>,
 }
 
+impl ImpactData {
+    /// Contact workspace.
+    pub fn cd(&self) -> &ContactData {
+        &self.cd
+    }
+    /// Coefficient of restitution `e` (default 0): `J_c q̇⁺ = −e J_c q̇⁻`.
+    pub fn restitution(&self) -> f64 {
+        self.restitution
+    }
+    /// Sets the damping of the Delassus solve (see [`ContactData::set_damping`]).
+    ///
+    /// # Errors
+    /// As [`ContactData::set_damping`].
+    pub fn set_damping(&mut self, damping: f64) -> Result<()> {
+        self.cd.set_damping(damping)
+    }
+    /// Sets the coefficient of restitution `e ≥ 0`.
+    ///
+    /// # Errors
+    /// [`Error::Build`] for a NaN, infinite or negative `e` (the value is unchanged).
+    pub fn set_restitution(&mut self, e: f64) -> Result<()> {
+        if !e.is_finite() || e < 0.0 {
+            return Err(Error::Build(format!("restitution {e} must be finite and non-negative")));
+        }
+        self.restitution = e;
+        Ok(())
+    }
+    /// Post-impact velocity `q̇⁺`.
+    pub fn vplus(&self) -> &DVector<f64> {
+        &self.vplus
+    }
+    /// Contact impulse `λ̂` (world frame, applied to the robot), `3 nc`.
+    pub fn impulse(&self) -> &DVector<f64> {
+        &self.impulse
+    }
+    /// `∂q̇⁺/∂q`.
+    pub fn dvplus_dq(&self) -> &DMatrix<f64> {
+        &self.dvplus_dq
+    }
+    /// `∂q̇⁺/∂q̇⁻`.
+    pub fn dvplus_dvminus(&self) -> &DMatrix<f64> {
+        &self.dvplus_dvminus
+    }
+    /// `∂λ̂/∂q`.
+    pub fn dimpulse_dq(&self) -> &DMatrix<f64> {
+        &self.dimpulse_dq
+    }
+    /// `∂λ̂/∂q̇⁻`.
+    pub fn dimpulse_dvminus(&self) -> &DMatrix<f64> {
+        &self.dimpulse_dvminus
+    }
+    /// Second-order results (allocated by [`ImpactData::with_second_order`]).
+    pub fn so(&self) -> Option<&ImpactSo> {
+        self.so.as_ref()
+    }
+}
+
 /// Second-order impact derivatives, `T[i][j][k] = ∂/∂x_k (∂y_i/∂u_j)`.
 #[derive(Clone, Debug)]
 pub struct ImpactSo {
     /// `∂/∂q_k (∂q̇⁺_i/∂q_j)`.
-    pub d2vplus_dq2: Tensor3,
+    pub(crate) d2vplus_dq2: Tensor3,
     /// `∂/∂q̇⁻_k (∂q̇⁺_i/∂q_j)`.
-    pub d2vplus_dqdvminus: Tensor3,
+    pub(crate) d2vplus_dqdvminus: Tensor3,
     /// `∂/∂q_k (∂λ̂_i/∂q_j)`.
-    pub d2impulse_dq2: Tensor3,
+    pub(crate) d2impulse_dq2: Tensor3,
     /// `∂/∂q̇⁻_k (∂λ̂_i/∂q_j)`.
-    pub d2impulse_dqdvminus: Tensor3,
+    pub(crate) d2impulse_dqdvminus: Tensor3,
     id: SoData,
     r: [Tensor3; 2],
     ycol: DVector<f64>,
     e: DVector<f64>,
+}
+
+impl ImpactSo {
+    /// `∂/∂q_k (∂q̇⁺_i/∂q_j)`.
+    pub fn d2vplus_dq2(&self) -> &Tensor3 {
+        &self.d2vplus_dq2
+    }
+    /// `∂/∂q̇⁻_k (∂q̇⁺_i/∂q_j)`.
+    pub fn d2vplus_dqdvminus(&self) -> &Tensor3 {
+        &self.d2vplus_dqdvminus
+    }
+    /// `∂/∂q_k (∂λ̂_i/∂q_j)`.
+    pub fn d2impulse_dq2(&self) -> &Tensor3 {
+        &self.d2impulse_dq2
+    }
+    /// `∂/∂q̇⁻_k (∂λ̂_i/∂q_j)`.
+    pub fn d2impulse_dqdvminus(&self) -> &Tensor3 {
+        &self.d2impulse_dqdvminus
+    }
 }
 
 impl ImpactData {
@@ -148,6 +224,7 @@ fn solve(
     model.check_q(q)?;
     data.check(model)?;
     check_vec("vminus", vminus, model.nv)?;
+    im.cd.check(model)?;
     if im.vplus.len() != model.nv || im.cd.jac.ncols() != model.nv {
         return Err(Error::Dimension {
             what: "ImpactData (built for another model): nv".into(),

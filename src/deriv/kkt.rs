@@ -31,25 +31,25 @@ use nalgebra::{DMatrix, DMatrixView, DMatrixViewMut, DVector, Vector3};
 #[derive(Clone, Debug)]
 pub struct KktData {
     /// Contact workspace (Jacobian, Delassus factorisation, damping option).
-    pub cd: ContactData,
+    pub(crate) cd: ContactData,
     /// Constrained joint accelerations.
-    pub qdd: DVector<f64>,
+    pub(crate) qdd: DVector<f64>,
     /// Contact forces (world frame, applied to the robot), `3 nc`.
-    pub lambda: DVector<f64>,
+    pub(crate) lambda: DVector<f64>,
     /// `∂q̈/∂q`.
-    pub dqdd_dq: DMatrix<f64>,
+    pub(crate) dqdd_dq: DMatrix<f64>,
     /// `∂q̈/∂q̇`.
-    pub dqdd_dv: DMatrix<f64>,
+    pub(crate) dqdd_dv: DMatrix<f64>,
     /// `∂q̈/∂τ`.
-    pub dqdd_dtau: DMatrix<f64>,
+    pub(crate) dqdd_dtau: DMatrix<f64>,
     /// `∂λ/∂q`.
-    pub dlambda_dq: DMatrix<f64>,
+    pub(crate) dlambda_dq: DMatrix<f64>,
     /// `∂λ/∂q̇`.
-    pub dlambda_dv: DMatrix<f64>,
+    pub(crate) dlambda_dv: DMatrix<f64>,
     /// `∂λ/∂τ`.
-    pub dlambda_dtau: DMatrix<f64>,
+    pub(crate) dlambda_dtau: DMatrix<f64>,
     /// Second-order results (allocated by [`KktData::with_second_order`]).
-    pub so: Option<KktSo>,
+    pub(crate) so: Option<KktSo>,
     /// `Wᵀ = (J X + C)ᵀ` (`2 nv × 3 nc`) for `X = −M⁻¹ [a_q | a_v]`, `C = [c_q | c_v]`.
     wt: DMatrix<f64>,
     /// `Bᵀ = [∂λ/∂q | ∂λ/∂q̇ | ∂λ/∂τ]ᵀ` (`3 nv × 3 nc`).
@@ -57,31 +57,116 @@ pub struct KktData {
     tmp_v: DVector<f64>,
 }
 
+impl KktData {
+    /// Contact workspace (Jacobian, Delassus factorisation, damping option).
+    pub fn cd(&self) -> &ContactData {
+        &self.cd
+    }
+    /// Constrained joint accelerations.
+    pub fn qdd(&self) -> &DVector<f64> {
+        &self.qdd
+    }
+    /// Contact forces (world frame, applied to the robot), `3 nc`.
+    pub fn lambda(&self) -> &DVector<f64> {
+        &self.lambda
+    }
+    /// `∂q̈/∂q`.
+    pub fn dqdd_dq(&self) -> &DMatrix<f64> {
+        &self.dqdd_dq
+    }
+    /// `∂q̈/∂q̇`.
+    pub fn dqdd_dv(&self) -> &DMatrix<f64> {
+        &self.dqdd_dv
+    }
+    /// `∂q̈/∂τ`.
+    pub fn dqdd_dtau(&self) -> &DMatrix<f64> {
+        &self.dqdd_dtau
+    }
+    /// `∂λ/∂q`.
+    pub fn dlambda_dq(&self) -> &DMatrix<f64> {
+        &self.dlambda_dq
+    }
+    /// `∂λ/∂q̇`.
+    pub fn dlambda_dv(&self) -> &DMatrix<f64> {
+        &self.dlambda_dv
+    }
+    /// `∂λ/∂τ`.
+    pub fn dlambda_dtau(&self) -> &DMatrix<f64> {
+        &self.dlambda_dtau
+    }
+    /// Second-order results (allocated by [`KktData::with_second_order`]).
+    pub fn so(&self) -> Option<&KktSo> {
+        self.so.as_ref()
+    }
+}
+
 /// Second-order KKT derivatives, `T[i][j][k] = ∂/∂x_k (∂y_i/∂u_j)`.
 #[derive(Clone, Debug)]
 pub struct KktSo {
     /// `∂/∂q_k (∂q̈_i/∂q_j)`.
-    pub d2qdd_dq2: Tensor3,
+    pub(crate) d2qdd_dq2: Tensor3,
     /// `∂²q̈_i/∂q̇_j∂q̇_k`.
-    pub d2qdd_dv2: Tensor3,
+    pub(crate) d2qdd_dv2: Tensor3,
     /// `∂/∂q̇_k (∂q̈_i/∂q_j)`.
-    pub d2qdd_dqdv: Tensor3,
+    pub(crate) d2qdd_dqdv: Tensor3,
     /// `∂/∂q_k (∂q̈_i/∂τ_j)`.
-    pub d2qdd_dtaudq: Tensor3,
+    pub(crate) d2qdd_dtaudq: Tensor3,
     /// `∂/∂q_k (∂λ_i/∂q_j)`.
-    pub d2lambda_dq2: Tensor3,
+    pub(crate) d2lambda_dq2: Tensor3,
     /// `∂²λ_i/∂q̇_j∂q̇_k`.
-    pub d2lambda_dv2: Tensor3,
+    pub(crate) d2lambda_dv2: Tensor3,
     /// `∂/∂q̇_k (∂λ_i/∂q_j)`.
-    pub d2lambda_dqdv: Tensor3,
+    pub(crate) d2lambda_dqdv: Tensor3,
     /// `∂/∂q_k (∂λ_i/∂τ_j)`.
-    pub d2lambda_dtaudq: Tensor3,
+    pub(crate) d2lambda_dtaudq: Tensor3,
     pub(crate) id: SoData,
     r: [Tensor3; 4],
     ycol: DVector<f64>,
 }
 
+impl KktSo {
+    /// `∂/∂q_k (∂q̈_i/∂q_j)`.
+    pub fn d2qdd_dq2(&self) -> &Tensor3 {
+        &self.d2qdd_dq2
+    }
+    /// `∂²q̈_i/∂q̇_j∂q̇_k`.
+    pub fn d2qdd_dv2(&self) -> &Tensor3 {
+        &self.d2qdd_dv2
+    }
+    /// `∂/∂q̇_k (∂q̈_i/∂q_j)`.
+    pub fn d2qdd_dqdv(&self) -> &Tensor3 {
+        &self.d2qdd_dqdv
+    }
+    /// `∂/∂q_k (∂q̈_i/∂τ_j)`.
+    pub fn d2qdd_dtaudq(&self) -> &Tensor3 {
+        &self.d2qdd_dtaudq
+    }
+    /// `∂/∂q_k (∂λ_i/∂q_j)`.
+    pub fn d2lambda_dq2(&self) -> &Tensor3 {
+        &self.d2lambda_dq2
+    }
+    /// `∂²λ_i/∂q̇_j∂q̇_k`.
+    pub fn d2lambda_dv2(&self) -> &Tensor3 {
+        &self.d2lambda_dv2
+    }
+    /// `∂/∂q̇_k (∂λ_i/∂q_j)`.
+    pub fn d2lambda_dqdv(&self) -> &Tensor3 {
+        &self.d2lambda_dqdv
+    }
+    /// `∂/∂q_k (∂λ_i/∂τ_j)`.
+    pub fn d2lambda_dtaudq(&self) -> &Tensor3 {
+        &self.d2lambda_dtaudq
+    }
+}
+
 impl KktData {
+    /// Sets the damping of the Delassus solve (see [`ContactData::set_damping`]).
+    ///
+    /// # Errors
+    /// As [`ContactData::set_damping`].
+    pub fn set_damping(&mut self, damping: f64) -> Result<()> {
+        self.cd.set_damping(damping)
+    }
     /// Workspace for `model` with contact workspace `cd` (first order only).
     pub fn new(model: &Model, cd: ContactData) -> Self {
         let (n, m) = (model.nv, cd.dim());
@@ -149,6 +234,7 @@ fn check_inputs(
     data.check(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("tau", tau, model.nv)?;
+    kd.cd.check(model)?;
     if kd.qdd.len() != model.nv || kd.cd.jac.ncols() != model.nv {
         return Err(crate::error::Error::Dimension {
             what: "KktData (built for another model): nv".into(),

@@ -88,7 +88,7 @@ impl Builder {
             .unwrap_or_else(|e| panic!("built-in model: frame {name}: {e}"));
     }
     fn build(self) -> Model {
-        self.0.build()
+        self.0.build().unwrap_or_else(|e| panic!("built-in model: {e}"))
     }
 }
 

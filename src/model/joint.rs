@@ -73,6 +73,9 @@ impl JointType {
         }
     }
     /// Column `c` of the motion subspace `S`, in the child frame.
+    ///
+    /// # Panics
+    /// If `c ≥ nv()`.
     pub fn subspace_column(&self, c: usize) -> Motion {
         let e = |i: usize| Vector3::from_fn(|r, _| if r == i { 1.0 } else { 0.0 });
         let z = Vector3::zeros();
@@ -95,7 +98,9 @@ impl JointType {
         }
     }
     /// Joint transform `X_J(q)`: pose of the child frame in the joint's parent frame.
-    /// `q` must have length `nq()`.
+    ///
+    /// # Panics
+    /// If `q` is shorter than [`Self::nq`], as slice indexing does.
     #[inline]
     pub fn transform(&self, q: &[f64]) -> Transform {
         match *self {
@@ -141,6 +146,9 @@ impl JointType {
     /// Writes `q ⊕ δ` (right, body-frame perturbation) into `out`; `q`, `out` have length
     /// `nq()`, `delta` has length `nv()`. Free-flyer and planar use the SE(3)/SE(2)
     /// exponential, spherical the SO(3) exponential; the result quaternion is unit.
+    ///
+    /// # Panics
+    /// If a slice is shorter than stated, as slice indexing does.
     pub fn integrate(&self, q: &[f64], delta: &[f64], out: &mut [f64]) {
         match *self {
             JointType::Revolute { .. }
@@ -182,7 +190,54 @@ impl JointType {
             }
         }
     }
+    /// Writes `q₁ ⊖ q₀`, the tangent vector `δ` with `q₀ ⊕ δ = q₁` ([`Self::integrate`]'s
+    /// inverse; Pinocchio's `difference`): the SO(3) / SE(3) / SE(2) logarithm of the relative
+    /// placement for spherical, free-flyer and planar joints (the rotation of angle ≤ π),
+    /// `q₁ − q₀` for the others; `q0`, `q1` have length `nq()`, `out` length `nv()`.
+    ///
+    /// # Panics
+    /// If a slice is shorter than stated, as slice indexing does.
+    pub fn difference(&self, q0: &[f64], q1: &[f64], out: &mut [f64]) {
+        match *self {
+            JointType::Revolute { .. }
+            | JointType::Continuous { .. }
+            | JointType::Prismatic { .. } => {
+                out[0] = q1[0] - q0[0];
+            }
+            JointType::Spherical => {
+                let w = log3_quat(&quat_from_slice(&q0[0..4]), &quat_from_slice(&q1[0..4]));
+                out[..3].copy_from_slice(w.as_slice());
+            }
+            JointType::FreeFlyer => {
+                let (r0, r1) = (quat_from_slice(&q0[3..7]), quat_from_slice(&q1[3..7]));
+                let w = log3_quat(&r0, &r1);
+                let dp = r0.inverse() * Vector3::new(q1[0] - q0[0], q1[1] - q0[1], q1[2] - q0[2]);
+                let v = exp6_translation_inverse(&w, &dp);
+                out[..3].copy_from_slice(w.as_slice());
+                out[3..6].copy_from_slice(v.as_slice());
+            }
+            JointType::Planar => {
+                let w = q1[2] - q0[2];
+                let (a, b) = if w.abs() < 1e-8 {
+                    (1.0 - w * w / 6.0, w / 2.0 - w * w * w / 24.0)
+                } else {
+                    (w.sin() / w, (1.0 - w.cos()) / w)
+                };
+                let (s, c) = q0[2].sin_cos();
+                let (px, py) = (q1[0] - q0[0], q1[1] - q0[1]);
+                // d = R(θ₀)ᵀ Δp, then [vx vy] = V(w)⁻¹ d with V = [a −b; b a].
+                let (dx, dy) = (c * px + s * py, -s * px + c * py);
+                let det = a * a + b * b;
+                out[0] = (a * dx + b * dy) / det;
+                out[1] = (-b * dx + a * dy) / det;
+                out[2] = w;
+            }
+        }
+    }
     /// Writes the neutral configuration (zero angles/offsets, identity quaternion).
+    ///
+    /// # Panics
+    /// If a slice is shorter than stated, as slice indexing does.
     pub fn neutral(&self, out: &mut [f64]) {
         out.iter_mut().for_each(|x| *x = 0.0);
         match self {
@@ -194,6 +249,9 @@ impl JointType {
     /// Writes a random configuration: scalar coordinates uniform in `[lower, upper]` where those
     /// are finite (else `[-π, π]` for angles, `[-1, 1]` for translations), uniform random unit
     /// quaternions, free-flyer translation in `[-1, 1]³`.
+    ///
+    /// # Panics
+    /// If a slice is shorter than stated, as slice indexing does.
     pub fn random(&self, rng: &mut Rng, lower: &[f64], upper: &[f64], out: &mut [f64]) {
         let bounded = |rng: &mut Rng, i: usize, default: f64| {
             if lower[i].is_finite() && upper[i].is_finite() && upper[i] > lower[i] {
@@ -239,6 +297,9 @@ impl JointType {
     /// [`Self::check_configuration`] for the general case (kept out of line).
     #[inline(never)]
     fn check_configuration_slow(&self, q: &[f64]) -> Result<(), String> {
+        if q.len() != self.nq() {
+            return Err(format!("{} coordinates given, expected {}", q.len(), self.nq()));
+        }
         if let Some(i) = q.iter().position(|x| !x.is_finite()) {
             return Err(format!("coordinate {i} is not finite"));
         }
@@ -373,6 +434,25 @@ fn exp6_translation(w: &Vector3<f64>, v: &Vector3<f64>) -> Vector3<f64> {
     };
     let wv = w.cross(v);
     v + wv * b + w.cross(&wv) * c
+}
+
+/// `log₃(q₀⁻¹ q₁)`: the rotation vector (angle ≤ π) of the relative rotation.
+fn log3_quat(q0: &UnitQuaternion<f64>, q1: &UnitQuaternion<f64>) -> Vector3<f64> {
+    (q0.inverse() * q1).scaled_axis()
+}
+
+/// `V(ω)⁻¹ d`, the inverse of [`exp6_translation`]:
+/// `V⁻¹ = I − ½[ω]× + (1/θ²)(1 − θ sin θ / (2(1 − cos θ)))[ω]×²`.
+fn exp6_translation_inverse(w: &Vector3<f64>, d: &Vector3<f64>) -> Vector3<f64> {
+    let t2 = w.norm_squared();
+    let c = if t2 < 1e-8 {
+        1.0 / 12.0 + t2 / 720.0
+    } else {
+        let t = t2.sqrt();
+        (1.0 - t * t.sin() / (2.0 * (1.0 - t.cos()))) / t2
+    };
+    let wd = w.cross(d);
+    d - wd * 0.5 + w.cross(&wd) * c
 }
 
 fn random_quat(rng: &mut Rng, out: &mut [f64]) {

@@ -22,54 +22,69 @@ pub struct Frame {
 /// world ("universe", no degrees of freedom), joints `1..njoints` have `parents[i] < i`.
 ///
 /// Body `i` is the body moved by joint `i`; its inertia and frame are the joint's child frame.
+///
+/// A `Model` is made by [`ModelBuilder::build`] (or the URDF loader and the built-in robots),
+/// which checks it and derives the indices the algorithms rely on (their `unsafe` kernels index
+/// without bounds checks within them). Its fields are private so that no safe code can break
+/// those invariants: read them through the accessors. Only gravity can change
+/// ([`Model::set_gravity`]). This does not compile:
+///
+/// ```compile_fail
+/// let mut m = sodyn::model::builtin::serial_chain(3);
+/// m.nv() = 7; // error[E0616]: field `nv` of struct `Model` is private
+/// ```
+/// ```compile_fail
+/// let mut m = sodyn::model::builtin::serial_chain(3);
+/// m.parents()[1] = 5; // error[E0594]: cannot assign through a `&` reference
+/// ```
 #[derive(Clone, Debug)]
 pub struct Model {
     /// Model name.
-    pub name: String,
+    pub(crate) name: String,
     /// Joint names (index 0: `"universe"`).
-    pub names: Vec<String>,
+    pub(crate) names: Vec<String>,
     /// Joint types (index 0 unused: a dummy fixed entry).
-    pub joints: Vec<JointType>,
+    pub(crate) joints: Vec<JointType>,
     /// Parent joint `λ(i)` (index 0 unused).
-    pub parents: Vec<usize>,
+    pub(crate) parents: Vec<usize>,
     /// Pose of joint `i`'s frame (at q = neutral) in its parent joint's child frame.
-    pub placements: Vec<Transform>,
+    pub(crate) placements: Vec<Transform>,
     /// Body inertias in their joint's child frame (fixed bodies merged in).
-    pub inertias: Vec<Inertia>,
+    pub(crate) inertias: Vec<Inertia>,
     /// First configuration coordinate of each joint.
-    pub idx_q: Vec<usize>,
+    pub(crate) idx_q: Vec<usize>,
     /// Configuration dimension of each joint.
-    pub nqs: Vec<usize>,
+    pub(crate) nqs: Vec<usize>,
     /// First velocity coordinate of each joint.
-    pub idx_v: Vec<usize>,
+    pub(crate) idx_v: Vec<usize>,
     /// Velocity dimension of each joint.
-    pub nvs: Vec<usize>,
+    pub(crate) nvs: Vec<usize>,
     /// Total configuration dimension.
-    pub nq: usize,
+    pub(crate) nq: usize,
     /// Total velocity dimension.
-    pub nv: usize,
+    pub(crate) nv: usize,
     /// Joint owning each velocity coordinate.
-    pub dof_joint: Vec<usize>,
+    pub(crate) dof_joint: Vec<usize>,
     /// Previous degree of freedom on the path to the root, `λ(k)` of the LTLᵀ factorisation.
-    pub dof_parent: Vec<Option<usize>>,
+    pub(crate) dof_parent: Vec<Option<usize>>,
     /// Strict ancestor DoFs of each DoF `k`, nearest first:
     /// `dof_ancestors[dof_ancestors_start[k]..dof_ancestors_start[k + 1]]`.
-    pub dof_ancestors: Vec<usize>,
+    pub(crate) dof_ancestors: Vec<usize>,
     /// Offsets into [`Model::dof_ancestors`] (length `nv + 1`).
-    pub dof_ancestors_start: Vec<usize>,
+    pub(crate) dof_ancestors_start: Vec<usize>,
     /// Motion-subspace column of each degree of freedom, in its joint's child frame.
-    pub subspace: Vec<Motion>,
+    pub(crate) subspace: Vec<Motion>,
     /// Gravity as a spatial acceleration in the world frame (default `[0 0 0 0 0 −9.81]`).
-    pub gravity: Motion,
+    pub(crate) gravity: Motion,
     /// Lower configuration limits (−∞ where absent).
-    pub lower: DVector<f64>,
+    pub(crate) lower: DVector<f64>,
     /// Upper configuration limits (+∞ where absent).
-    pub upper: DVector<f64>,
+    pub(crate) upper: DVector<f64>,
     /// For joints loaded from a URDF `<mimic>`: the name of the mimicked joint (loaded as an
     /// independent joint).
-    pub mimic: Vec<Option<String>>,
+    pub(crate) mimic: Vec<Option<String>>,
     /// Frames (URDF links), first one the world.
-    pub frames: Vec<Frame>,
+    pub(crate) frames: Vec<Frame>,
     /// Per joint, its indices and kind packed for the kinematics kernels (see [`JointKin`]);
     /// computed by [`ModelBuilder::build`].
     pub(crate) kin: Vec<JointKin>,
@@ -78,6 +93,10 @@ pub struct Model {
     pub(crate) rev_q: Vec<usize>,
     /// `Some(a)` if `rev_q` is `a, a + 1, …` (the angles are contiguous in `q`).
     pub(crate) rev_q_start: Option<usize>,
+    /// Hash of the tree's structure (parents, joint kinds and dimensions, frames' joints),
+    /// stored by the workspaces made for this model so that a workspace used with another
+    /// model is an error; computed by [`ModelBuilder::build`].
+    pub(crate) key: u64,
 }
 
 /// One joint's entries of [`Model`] used on every call of the kinematics kernels, in one
@@ -101,6 +120,155 @@ pub(crate) struct JointKin {
 }
 
 impl Model {
+    /// Model name (the URDF's robot name).
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+    /// Joint names (index 0: `"universe"`).
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+    /// Joint types (index 0 unused: a dummy fixed entry).
+    pub fn joints(&self) -> &[JointType] {
+        &self.joints
+    }
+    /// Parent joint `λ(i)` of each joint (`parents()[i] < i`; index 0 unused).
+    pub fn parents(&self) -> &[usize] {
+        &self.parents
+    }
+    /// Pose of joint `i`'s frame (at q = neutral) in its parent joint's child frame.
+    pub fn placements(&self) -> &[Transform] {
+        &self.placements
+    }
+    /// Body inertias in their joint's child frame (bodies merged by fixed joints included).
+    pub fn inertias(&self) -> &[Inertia] {
+        &self.inertias
+    }
+    /// First configuration coordinate of each joint.
+    pub fn idx_q(&self) -> &[usize] {
+        &self.idx_q
+    }
+    /// Configuration dimension of each joint.
+    pub fn nqs(&self) -> &[usize] {
+        &self.nqs
+    }
+    /// First velocity coordinate of each joint.
+    pub fn idx_v(&self) -> &[usize] {
+        &self.idx_v
+    }
+    /// Velocity dimension of each joint.
+    pub fn nvs(&self) -> &[usize] {
+        &self.nvs
+    }
+    /// Total configuration dimension.
+    #[inline]
+    pub fn nq(&self) -> usize {
+        self.nq
+    }
+    /// Total velocity dimension (number of degrees of freedom).
+    #[inline]
+    pub fn nv(&self) -> usize {
+        self.nv
+    }
+    /// Joint owning each velocity coordinate.
+    pub fn dof_joint(&self) -> &[usize] {
+        &self.dof_joint
+    }
+    /// Previous degree of freedom on the path to the root, `λ(k)` of the `LᵀDL` factorisation.
+    pub fn dof_parent(&self) -> &[Option<usize>] {
+        &self.dof_parent
+    }
+    /// Motion-subspace column of each degree of freedom, in its joint's child frame.
+    pub fn subspace(&self) -> &[Motion] {
+        &self.subspace
+    }
+    /// Gravity as a spatial acceleration in the world frame (default `[0 0 0 0 0 −9.81]`).
+    pub fn gravity(&self) -> &Motion {
+        &self.gravity
+    }
+    /// Sets gravity (a linear acceleration in the world frame). Gravity is the one part of a
+    /// model that may change after it is built: no invariant depends on it.
+    ///
+    /// # Errors
+    /// [`Error::NotFinite`] if an entry of `g` is NaN or infinite (the model is unchanged).
+    pub fn set_gravity(&mut self, g: Vector3<f64>) -> Result<()> {
+        if let Some(index) = g.iter().position(|x| !x.is_finite()) {
+            return Err(Error::NotFinite { what: "gravity".into(), index });
+        }
+        self.gravity = Motion::new(Vector3::zeros(), g);
+        Ok(())
+    }
+    /// Lower configuration limits (−∞ where absent).
+    pub fn lower(&self) -> &DVector<f64> {
+        &self.lower
+    }
+    /// Upper configuration limits (+∞ where absent).
+    pub fn upper(&self) -> &DVector<f64> {
+        &self.upper
+    }
+    /// For joints loaded from a URDF `<mimic>`: the name of the mimicked joint (the joint is
+    /// loaded as an independent joint).
+    pub fn mimic(&self) -> &[Option<String>] {
+        &self.mimic
+    }
+    /// Frames (URDF links), the first one the world.
+    pub fn frames(&self) -> &[Frame] {
+        &self.frames
+    }
+    /// The checks of [`ModelBuilder::build`].
+    pub(crate) fn validate(&self) -> Result<()> {
+        let bad = |what: String| Err(Error::Build(what));
+        for i in 0..self.njoints() {
+            let who = format!("joint \"{}\" (index {i})", self.names[i]);
+            let inertia = &self.inertias[i];
+            if !inertia.mass.is_finite() || inertia.mass < 0.0 {
+                return bad(format!("{who}: body mass {} is negative or not finite", inertia.mass));
+            }
+            if !inertia.h.iter().chain(inertia.rot.iter()).all(|x| x.is_finite()) {
+                return bad(format!("{who}: body inertia has a non-finite entry"));
+            }
+            // Positive semi-definite spatial inertia: with m > 0, the rotational inertia about
+            // the centre of mass is; with m = 0, h = 0 and the rotational inertia is.
+            if inertia.mass == 0.0 && inertia.h.amax() > 0.0 {
+                return bad(format!("{who}: massless body with a non-zero first moment of mass"));
+            }
+            {
+                let rot_c =
+                    if inertia.mass > 0.0 { inertia.inertia_about_com() } else { inertia.rot };
+                let e = nalgebra::SymmetricEigen::new(rot_c).eigenvalues;
+                let tol = 1e-9 * e.amax().max(1e-300);
+                if e.min() < -tol {
+                    return bad(format!(
+                        "{who}: body rotational inertia is not positive semi-definite \
+                         (principal moment {:e})",
+                        e.min()
+                    ));
+                }
+            }
+            if i > 0 {
+                check_transform(&self.placements[i])
+                    .map_err(|r| Error::Build(format!("{who}: placement {r}")))?;
+            }
+        }
+        for (k, f) in self.frames.iter().enumerate() {
+            check_transform(&f.placement).map_err(|r| {
+                Error::Build(format!("frame \"{}\" (index {k}): placement {r}", f.name))
+            })?;
+        }
+        for a in 0..self.nq {
+            let (lo, hi) = (self.lower[a], self.upper[a]);
+            if lo.is_nan() || hi.is_nan() || lo > hi {
+                return bad(format!(
+                    "configuration limits of q[{a}] (joint \"{}\") are [{lo}, {hi}]",
+                    self.names[self.kin.iter().rposition(|k| k.idx_q <= a).unwrap_or(0)]
+                ));
+            }
+        }
+        if !self.gravity.to_vec6().iter().all(|x| x.is_finite()) {
+            return bad("gravity is not finite".into());
+        }
+        Ok(())
+    }
     /// Number of joints including the world joint 0.
     pub fn njoints(&self) -> usize {
         self.joints.len()
@@ -120,12 +288,19 @@ impl Model {
             .ok_or_else(|| Error::Unknown { kind: "frame".into(), name: name.into() })
     }
     /// Strict ancestor DoFs of DoF `k`, nearest first.
+    ///
+    /// # Panics
+    /// If `k ≥ nv`, as slice indexing does.
     #[inline]
     pub fn ancestors_of_dof(&self, k: usize) -> &[usize] {
         &self.dof_ancestors[self.dof_ancestors_start[k]..self.dof_ancestors_start[k + 1]]
     }
     /// True if joint `j` is `i` or one of its ancestors (`j ⪯ i`).
+    /// False when either index is not a joint of this model.
     pub fn is_ancestor(&self, j: usize, i: usize) -> bool {
+        if i >= self.njoints() || j >= self.njoints() {
+            return false;
+        }
         let mut k = i;
         while k > j {
             k = self.parents[k];
@@ -166,6 +341,30 @@ impl Model {
                 &q.as_slice()[a..a + n],
                 &delta.as_slice()[b..b + m],
                 &mut out.as_mut_slice()[a..a + n],
+            );
+        }
+        Ok(out)
+    }
+    /// `q₁ ⊖ q₀`: the tangent vector `δ` (length `nv`) with `q₀ ⊕ δ = q₁`
+    /// ([`Self::integrate`]'s inverse, joint by joint; see [`JointType::difference`]).
+    ///
+    /// # Errors
+    /// As [`Self::check_q`] for `q0` and `q1`.
+    pub fn difference(&self, q0: &DVector<f64>, q1: &DVector<f64>) -> Result<DVector<f64>> {
+        self.check_q(q0)?;
+        self.check_q(q1).map_err(|e| match e {
+            Error::Dimension { expected, got, .. } => {
+                Error::Dimension { what: "q1".into(), expected, got }
+            }
+            e => e,
+        })?;
+        let mut out = DVector::zeros(self.nv);
+        for i in 1..self.njoints() {
+            let (a, n, b, m) = (self.idx_q[i], self.nqs[i], self.idx_v[i], self.nvs[i]);
+            self.joints[i].difference(
+                &q0.as_slice()[a..a + n],
+                &q1.as_slice()[a..a + n],
+                &mut out.as_mut_slice()[b..b + m],
             );
         }
         Ok(out)
@@ -230,6 +429,18 @@ impl Model {
     pub fn check_v(&self, what: &str, x: &DVector<f64>) -> Result<()> {
         check_vec(what, x, self.nv)
     }
+}
+
+/// `Err(reason)` unless `x` is finite with an orthonormal rotation of determinant 1 (1e-9).
+fn check_transform(x: &Transform) -> std::result::Result<(), String> {
+    if !x.rot.iter().chain(x.trans.iter()).all(|v| v.is_finite()) {
+        return Err("has a non-finite entry".into());
+    }
+    let err = (x.rot.transpose() * x.rot - nalgebra::Matrix3::identity()).amax();
+    if err > 1e-9 || (x.rot.determinant() - 1.0).abs() > 1e-9 {
+        return Err(format!("rotation is not a rotation matrix (‖RᵀR − I‖max = {err:e})"));
+    }
+    Ok(())
 }
 
 /// True if every entry of `qs` is finite.
@@ -301,6 +512,7 @@ impl ModelBuilder {
             kin: vec![],
             rev_q: vec![],
             rev_q_start: None,
+            key: 0,
         };
         Self { m }
     }
@@ -449,8 +661,23 @@ impl ModelBuilder {
         self.m.gravity = Motion::new(Vector3::zeros(), g);
     }
 
-    /// Finishes the model.
-    pub fn build(mut self) -> Model {
+    /// Finishes the model after checking what the algorithms rely on: every body inertia has
+    /// a finite, non-negative mass and finite entries with a positive semi-definite rotational
+    /// inertia about its centre of mass (the URDF loader's checks, without its triangle
+    /// inequality), every joint and frame placement is finite with a rotation matrix
+    /// (orthonormal, determinant 1, within 1e-9), every limit interval is ordered.
+    ///
+    /// # Errors
+    /// [`Error::Build`] naming the joint or frame and the defect.
+    pub fn build(self) -> Result<Model> {
+        let m = self.build_unchecked();
+        m.validate()?;
+        Ok(m)
+    }
+
+    /// [`Self::build`] without the validation (the URDF loader validates with its own,
+    /// line-numbered messages first, then calls [`Model::validate`]).
+    pub(crate) fn build_unchecked(mut self) -> Model {
         let m = &mut self.m;
         m.dof_ancestors.clear();
         m.dof_ancestors_start = vec![0];
@@ -482,6 +709,17 @@ impl ModelBuilder {
                 }
             })
             .collect();
+        m.key = {
+            use std::hash::{Hash, Hasher};
+            let mut h = std::collections::hash_map::DefaultHasher::new();
+            for i in 0..m.joints.len() {
+                (m.parents[i], m.nqs[i], m.nvs[i], m.joints[i].name()).hash(&mut h);
+            }
+            for f in &m.frames {
+                f.joint.hash(&mut h);
+            }
+            h.finish()
+        };
         m.rev_q = m.kin.iter().filter(|k| k.axis < 3).map(|k| k.idx_q).collect();
         m.rev_q_start = match m.rev_q.first() {
             Some(&a) if m.rev_q.iter().enumerate().all(|(r, &b)| b == a + r) => Some(a),

@@ -581,8 +581,14 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
         if let Some(l) = at.iter().position(|a| a.is_none()) {
             return Err(self.cycle_error(&links, &joints, &parent_joint, l));
         }
-        let model = b.build();
+        let model = b.build_unchecked();
         self.check_body_inertias(&model, &links, &at, &order)?;
+        model.validate().map_err(|e| Error::Model {
+            file: self.file.to_string(),
+            line: None,
+            element: format!("robot \"{}\"", model.name),
+            reason: e.to_string(),
+        })?;
         Ok(model)
     }
 

@@ -9,7 +9,7 @@ use crate::model::Model;
 /// Inverse dynamics `τ = M(q) a + C(q, v) v + g(q) − Σ_i J_iᵀ fext_i` by the recursive
 /// Newton–Euler algorithm in body frames, with the model's gravity (`a₀ = −g`).
 ///
-/// `fext`, if given, has one entry per joint (length `model.joints.len()`, entry 0 ignored): the
+/// `fext`, if given, has one entry per joint (length `model.joints().len()`, entry 0 ignored): the
 /// spatial force applied to body `i`, expressed in the **world** frame as
 /// `[moment about the world origin; force]`. It is subtracted from the body's net force:
 /// `f_i = I_i a_i + v_i ×* I_i v_i − ⁱX₀* fext_i`.

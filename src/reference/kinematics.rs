@@ -320,7 +320,7 @@ pub fn forward_kinematics<T: AdScalar>(model: &Model, q: &[T]) -> Vec<Pose<T>> {
     world
 }
 
-/// World placement of frame `frame_id` (index into `model.frames`): `(⁰R_f, ⁰p_f)`.
+/// World placement of frame `frame_id` (index into `model.frames()`): `(⁰R_f, ⁰p_f)`.
 ///
 /// # Panics
 /// If `frame_id` is out of range or `q` has the wrong length.

@@ -96,7 +96,7 @@ pub fn load_model(urdf: &Path, fx: &Value) -> (Model, bool) {
 
 /// Our gravity is `−9.81` along one axis, zero elsewhere.
 pub fn assert_our_gravity(model: &Model) {
-    let g: Vec<f64> = model.gravity.to_vec6().iter().copied().collect();
+    let g: Vec<f64> = model.gravity().to_vec6().iter().copied().collect();
     assert!(
         g.contains(&-9.81) && g.iter().filter(|&&x| x != 0.0).count() == 1,
         "our gravity {g:?}"
@@ -113,7 +113,7 @@ pub struct Mapping {
     pub perm: Vec<usize>,
     /// Inverse of `perm`: Pinocchio's velocity coordinate `p` is our `inv[p]`.
     pub inv: Vec<usize>,
-    /// Pinocchio joint of each of our joints (index into the fixture's `model.joints`), for
+    /// Pinocchio joint of each of our joints (index into the fixture's `model.joints()`), for
     /// building `q`; index 0 unused.
     pub pin_joint: Vec<Option<usize>>,
     /// Joint owning each of our dofs (for reports).
@@ -150,22 +150,22 @@ pub fn types_match(ours: &JointType, pin: &str) -> bool {
     }
 }
 
-/// Matches our joints with the fixture's `model.joints` by name (checking type, nv and parent)
+/// Matches our joints with the fixture's `model.joints()` by name (checking type, nv and parent)
 /// and builds the velocity permutation.
 pub fn build_mapping(model: &Model, fx: &Value) -> Mapping {
-    let pj = fx["model"]["joints"].as_array().expect("model.joints");
-    assert_eq!(model.nv, usize_of(&fx["model"]["nv"]), "nv differs from Pinocchio's");
+    let pj = fx["model"]["joints"].as_array().expect("model.joints()");
+    assert_eq!(model.nv(), usize_of(&fx["model"]["nv"]), "nv differs from Pinocchio's");
     assert_eq!(
         model.njoints(),
         usize_of(&fx["model"]["njoints"]),
         "number of joints differs from Pinocchio's"
     );
-    let mut perm = vec![usize::MAX; model.nv];
+    let mut perm = vec![usize::MAX; model.nv()];
     let mut pin_joint = vec![None]; // joint 0 (universe) has no counterpart
-    let mut dof_desc = vec![String::new(); model.nv];
+    let mut dof_desc = vec![String::new(); model.nv()];
     let mut used = vec![false; pj.len()];
     for i in 1..model.njoints() {
-        let name = &model.names[i];
+        let name = &model.names()[i];
         let k = pj
             .iter()
             .position(|j| j["name"].as_str() == Some(name.as_str()))
@@ -175,12 +175,12 @@ pub fn build_mapping(model: &Model, fx: &Value) -> Mapping {
         let j = &pj[k];
         let ptype = j["type"].as_str().expect("joint type");
         assert!(
-            types_match(&model.joints[i], ptype),
+            types_match(&model.joints()[i], ptype),
             "joint {name:?}: ours {:?}, Pinocchio {ptype}",
-            model.joints[i]
+            model.joints()[i]
         );
         let (pv, pnv) = (usize_of(&j["idx_v"]), usize_of(&j["nv"]));
-        assert_eq!(pnv, model.nvs[i], "joint {name:?}: nv differs");
+        assert_eq!(pnv, model.nvs()[i], "joint {name:?}: nv differs");
         // Parent relation must agree (by name).
         let pin_parent = usize_of(&j["parent"]);
         let pin_parent_name = if pin_parent == 0 {
@@ -190,12 +190,13 @@ pub fn build_mapping(model: &Model, fx: &Value) -> Mapping {
             pp["name"].as_str().unwrap().to_string()
         };
         assert_eq!(
-            model.names[model.parents[i]], pin_parent_name,
+            model.names()[model.parents()[i]],
+            pin_parent_name,
             "joint {name:?}: parent differs"
         );
-        let iv = model.idx_v[i];
+        let iv = model.idx_v()[i];
         for c in 0..pnv {
-            perm[iv + c] = match model.joints[i] {
+            perm[iv + c] = match model.joints()[i] {
                 // Ours [ω; v], Pinocchio [v; ω].
                 JointType::FreeFlyer => {
                     if c < 3 {
@@ -206,14 +207,14 @@ pub fn build_mapping(model: &Model, fx: &Value) -> Mapping {
                 }
                 _ => pv + c,
             };
-            dof_desc[iv + c] = format!("{name} ({}, c{c})", model.joints[i].name());
+            dof_desc[iv + c] = format!("{name} ({}, c{c})", model.joints()[i].name());
         }
         pin_joint.push(Some(k));
     }
     assert!(used.iter().all(|&u| u), "some Pinocchio joints have no counterpart in our model");
-    let mut inv = vec![usize::MAX; model.nv];
+    let mut inv = vec![usize::MAX; model.nv()];
     for (i, &p) in perm.iter().enumerate() {
-        assert!(p < model.nv && inv[p] == usize::MAX, "velocity permutation is not a bijection");
+        assert!(p < model.nv() && inv[p] == usize::MAX, "velocity permutation is not a bijection");
         inv[p] = i;
     }
     Mapping { perm, inv, pin_joint, dof_desc }
@@ -224,14 +225,14 @@ pub fn our_q(model: &Model, map: &Mapping, fx: &Value, state: &Value) -> DVector
     let pj = fx["model"]["joints"].as_array().unwrap();
     let pq = vec_of(&state["q"]);
     let thetas = state["continuous_theta"].as_array().expect("continuous_theta");
-    let mut q = DVector::zeros(model.nq);
+    let mut q = DVector::zeros(model.nq());
     for i in 1..model.njoints() {
         let j = &pj[map.pin_joint[i].unwrap()];
         let pidx = usize_of(&j["idx_q"]);
-        let iq = model.idx_q[i];
-        match model.joints[i] {
+        let iq = model.idx_q()[i];
+        match model.joints()[i] {
             JointType::Continuous { .. } => {
-                let name = model.names[i].as_str();
+                let name = model.names()[i].as_str();
                 let t = thetas
                     .iter()
                     .find(|t| t["joint"].as_str() == Some(name))
@@ -245,7 +246,7 @@ pub fn our_q(model: &Model, map: &Mapping, fx: &Value, state: &Value) -> DVector
                 q[iq] = theta;
             }
             _ => {
-                let n = model.nqs[i];
+                let n = model.nqs()[i];
                 assert_eq!(n, usize_of(&j["nq"]));
                 for c in 0..n {
                     q[iq + c] = pq[pidx + c];

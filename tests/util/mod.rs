@@ -27,8 +27,8 @@ pub fn rel_err_tensor(a: &Tensor3, b: &Tensor3) -> f64 {
 /// A random state (q, v, a-or-tau) for `model`.
 pub fn random_state(model: &Model, rng: &mut Rng) -> (DVector<f64>, DVector<f64>, DVector<f64>) {
     let q = model.random_configuration(rng);
-    let v = DVector::from_fn(model.nv, |_, _| rng.range(-1.0, 1.0));
-    let a = DVector::from_fn(model.nv, |_, _| rng.range(-1.0, 1.0));
+    let v = DVector::from_fn(model.nv(), |_, _| rng.range(-1.0, 1.0));
+    let a = DVector::from_fn(model.nv(), |_, _| rng.range(-1.0, 1.0));
     (q, v, a)
 }
 
@@ -46,7 +46,7 @@ pub fn test_models(max_dof: usize) -> Vec<Model> {
             }
         }
     }
-    out.retain(|m| m.nv <= max_dof);
+    out.retain(|m| m.nv() <= max_dof);
     out
 }
 
