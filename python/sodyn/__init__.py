@@ -1,0 +1,191 @@
+"""sodyn: rigid-body dynamics and its exact first- and second-order derivatives.
+
+A thin layer over the compiled extension ``sodyn._sodyn`` (Rust, PyO3). Functions take
+Pinocchio's argument order (``model, data, q, v, ...``) and return **fresh** numpy float64
+arrays, never views into ``data``: a later call does not change an earlier result.
+Matrices are ``[i, j] = dy_i/dx_j``; tensors have shape ``(nv, nv, nv)`` with
+``T[i, j, k] = d/dx_k (dy_i/du_j)`` (``docs/conventions.md``); both are returned in Fortran
+(column-major) order, sodyn's storage order. Derivatives with respect to ``q`` are
+tangent-space derivatives (perturb with ``model.integrate``).
+
+Every error of the core raises :class:`SodynError`, a subclass of :class:`ValueError`.
+"""
+
+from __future__ import annotations
+
+import copyreg
+from typing import Any, Dict, Optional, Sequence
+
+import numpy as np
+
+from . import _sodyn
+from ._sodyn import (
+    Contact,
+    Data,
+    Joint,
+    Model,
+    SodynError,
+    aba,
+    crba,
+    fd_derivatives,
+    fd_so_derivatives,
+    id_derivatives,
+    id_so_derivatives,
+    idfoza,
+    idsoza,
+    nonlinear_effects,
+    rnea,
+)
+from . import batch
+
+__all__ = [
+    "Contact",
+    "ConstrainedIdResult",
+    "Data",
+    "ImpactResult",
+    "Joint",
+    "KktResult",
+    "Model",
+    "SodynError",
+    "aba",
+    "batch",
+    "constrained_id_derivatives",
+    "crba",
+    "fd_derivatives",
+    "fd_so_derivatives",
+    "id_derivatives",
+    "id_so_derivatives",
+    "idfoza",
+    "idsoza",
+    "impact_derivatives",
+    "kkt_derivatives",
+    "nonlinear_effects",
+    "rnea",
+]
+
+__version__ = "0.1.0"
+
+
+class _Result:
+    """Results of a contact algorithm: one attribute per output key (README names)."""
+
+    _keys: tuple = ()
+
+    def __init__(self, values: Dict[str, np.ndarray]) -> None:
+        for key, value in values.items():
+            setattr(self, "lambda_" if key == "lambda" else key, value)
+
+    def keys(self) -> list:
+        """The output names present (``lambda_`` for the key ``lambda``)."""
+        return [k for k in vars(self)]
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({', '.join(self.keys())})"
+
+
+class ConstrainedIdResult(_Result):
+    """``tau, dtau_dq, dtau_dv`` and, with ``order=2``, ``d2tau_dq2``."""
+
+    tau: np.ndarray
+    dtau_dq: np.ndarray
+    dtau_dv: np.ndarray
+    d2tau_dq2: np.ndarray
+
+
+class KktResult(_Result):
+    """``qdd, lambda_, dqdd_dq, dqdd_dv, dqdd_dtau, dlambda_dq, dlambda_dv, dlambda_dtau`` and,
+    with ``order=2``, ``d2qdd_dq2, d2qdd_dv2, d2qdd_dqdv, d2qdd_dtaudq, d2lambda_dq2,
+    d2lambda_dv2, d2lambda_dqdv, d2lambda_dtaudq``."""
+
+    qdd: np.ndarray
+    lambda_: np.ndarray
+    dqdd_dq: np.ndarray
+    dqdd_dv: np.ndarray
+    dqdd_dtau: np.ndarray
+    dlambda_dq: np.ndarray
+    dlambda_dv: np.ndarray
+    dlambda_dtau: np.ndarray
+    d2qdd_dq2: np.ndarray
+    d2qdd_dv2: np.ndarray
+    d2qdd_dqdv: np.ndarray
+    d2qdd_dtaudq: np.ndarray
+    d2lambda_dq2: np.ndarray
+    d2lambda_dv2: np.ndarray
+    d2lambda_dqdv: np.ndarray
+    d2lambda_dtaudq: np.ndarray
+
+
+class ImpactResult(_Result):
+    """``vplus, impulse, dvplus_dq, dvplus_dvminus, dimpulse_dq, dimpulse_dvminus`` and, with
+    ``order=2``, ``d2vplus_dq2, d2vplus_dqdvminus, d2impulse_dq2, d2impulse_dqdvminus``."""
+
+    vplus: np.ndarray
+    impulse: np.ndarray
+    dvplus_dq: np.ndarray
+    dvplus_dvminus: np.ndarray
+    dimpulse_dq: np.ndarray
+    dimpulse_dvminus: np.ndarray
+    d2vplus_dq2: np.ndarray
+    d2vplus_dqdvminus: np.ndarray
+    d2impulse_dq2: np.ndarray
+    d2impulse_dqdvminus: np.ndarray
+
+
+def constrained_id_derivatives(
+    model: Model,
+    data: Data,
+    q: Any,
+    v: Any,
+    a: Any,
+    contacts: Sequence[Contact],
+    lam: Any,
+    order: int = 1,
+) -> ConstrainedIdResult:
+    """Constrained inverse dynamics ``tau = M a + b - J_c^T lam`` at ``(q, v, a, lam)`` and its
+    derivatives, ``lam`` (length ``3 * len(contacts)``, world-frame forces applied to the
+    robot) held fixed in the world. ``order=2`` adds ``d2tau_dq2``."""
+    return ConstrainedIdResult(
+        _sodyn.constrained_id_derivatives(model, data, q, v, a, list(contacts), lam, order)
+    )
+
+
+def kkt_derivatives(
+    model: Model,
+    data: Data,
+    q: Any,
+    v: Any,
+    tau: Any,
+    contacts: Sequence[Contact],
+    order: int = 1,
+) -> KktResult:
+    """KKT contact dynamics ``[M J_c^T; J_c 0][qdd; -lambda] = [tau - b; -dJ_c v]`` at
+    ``(q, v, tau)`` and its first (``order=1``) or first and second (``order=2``) derivatives.
+    ``lambda_`` holds the world-frame contact forces applied to the robot."""
+    return KktResult(_sodyn.kkt_derivatives(model, data, q, v, tau, list(contacts), order))
+
+
+def impact_derivatives(
+    model: Model,
+    data: Data,
+    q: Any,
+    v_minus: Any,
+    contacts: Sequence[Contact],
+    restitution: float = 0.0,
+    order: int = 1,
+) -> ImpactResult:
+    """Impact dynamics ``[M J_c^T; J_c 0][v+; -impulse] = [M v-; -e J_c v-]`` and its
+    derivatives with respect to ``q`` and ``v_minus``."""
+    return ImpactResult(
+        _sodyn.impact_derivatives(
+            model, data, q, v_minus, list(contacts), float(restitution), order
+        )
+    )
+
+
+def _reduce_model(model: Model):
+    return (_sodyn._model_from_description, (model._description(),))
+
+
+# Pickling, copy.copy and copy.deepcopy of a Model go through a plain description that is
+# rebuilt (and re-validated) by the Rust ModelBuilder.
+copyreg.pickle(Model, _reduce_model)

@@ -1,0 +1,1425 @@
+//! `sodyn._sodyn`: the Python binding of sodyn (PyO3 + numpy), wrapped by the pure-Python
+//! package `sodyn` (`python/sodyn/__init__.py`).
+//!
+//! Every call copies its inputs into buffers kept in the `Data` object (no allocation after the
+//! first call), releases the GIL for the computation and returns fresh numpy arrays (never
+//! views into `Data`). Matrices and tensors are returned in Fortran order, which is sodyn's
+//! storage order: `M[i, j]`, `T[i, j, k]` as in `docs/conventions.md`.
+//!
+//! Errors: every `sodyn::Error` becomes `sodyn.SodynError` (a `ValueError`) with the same
+//! message; an argument that does not convert to a float64 array of the expected shape is a
+//! `ValueError` naming the argument and the shape. No input reaches a panic: the core returns
+//! errors for every invalid input, and this file indexes nothing that it has not checked.
+
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use numpy::{
+    AllowTypeChange, PyArray1, PyArrayDyn, PyArrayLikeDyn, PyArrayMethods, PyUntypedArrayMethods,
+};
+use pyo3::create_exception;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList, PyTuple};
+use sodyn::Error;
+use sodyn::algo::{self, Contact, Data};
+use sodyn::batch::{BatchData, BatchPool, map_states};
+use sodyn::deriv::{
+    self, ContactData, FdSoData, ImpactData, KktData, SoData, constrained_id_derivatives,
+    constrained_id_so_derivatives, fd_derivatives, fd_so_derivatives, id_derivatives,
+    id_so_derivatives, impact_derivatives, impact_so_derivatives, kkt_derivatives,
+    kkt_so_derivatives,
+};
+use sodyn::model::{JointType, Model, ModelBuilder, UrdfOptions, builtin};
+use sodyn::rng::Rng;
+use sodyn::spatial::{Force, Inertia, Transform};
+use sodyn::tensor::Tensor3;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+
+create_exception!(
+    _sodyn,
+    SodynError,
+    PyValueError,
+    "An error of the sodyn core: a model that cannot be loaded, an invalid state, a singular \
+     system, a workspace used with another model. The message names the problem."
+);
+
+/// `sodyn::Error` → `SodynError` with the same message.
+fn core_err(e: Error) -> PyErr {
+    SodynError::new_err(e.to_string())
+}
+
+fn value_err(msg: String) -> PyErr {
+    PyValueError::new_err(msg)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Inputs: anything numpy converts to float64, with the shape checked here.
+// ---------------------------------------------------------------------------------------------
+
+/// `obj` as a float64 array (numpy's conversion rules: lists, ints, other dtypes).
+fn array<'py>(
+    obj: &Bound<'py, PyAny>,
+    name: &str,
+) -> PyResult<PyArrayLikeDyn<'py, f64, AllowTypeChange>> {
+    obj.extract::<PyArrayLikeDyn<'py, f64, AllowTypeChange>>().map_err(|e| {
+        value_err(format!("`{name}` cannot be converted to a float64 array: {}", e.value(obj.py())))
+    })
+}
+
+fn shape_str(s: &[usize]) -> String {
+    match s {
+        [n] => format!("({n},)"),
+        _ => format!("({})", s.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", ")),
+    }
+}
+
+/// Copies a vector argument of length `n` into `out` (resized only if its length differs).
+fn read_vec(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    n: usize,
+    what: &str,
+    out: &mut DVector<f64>,
+) -> PyResult<()> {
+    let a = array(obj, name)?;
+    let shape = a.shape();
+    if shape != [n] {
+        return Err(value_err(format!(
+            "`{name}` must have shape ({n},) ({what}), got shape {}",
+            shape_str(shape)
+        )));
+    }
+    if out.len() != n {
+        *out = DVector::zeros(n);
+    }
+    for (o, x) in out.iter_mut().zip(a.as_array().iter()) {
+        *o = *x;
+    }
+    Ok(())
+}
+
+/// A configuration argument (length nq, with a hint when the length is that of the model with
+/// or without a free-flyer root).
+fn read_q(obj: &Bound<'_, PyAny>, name: &str, m: &Model, out: &mut DVector<f64>) -> PyResult<()> {
+    read_vec(obj, name, m.nq(), "nq", out).map_err(|e| {
+        let len = array(obj, name).ok().map(|a| a.shape().to_vec());
+        match len.as_deref() {
+            Some([l]) if *l == m.nq() + 7 => value_err(format!(
+                "{}; its length is nq + 7: was the model loaded with floating_base=True?",
+                e.value(obj.py())
+            )),
+            Some([l]) if *l + 7 == m.nq() => value_err(format!(
+                "{}; its length is nq − 7: the model has a free-flyer root (floating_base=True)",
+                e.value(obj.py())
+            )),
+            _ => e,
+        }
+    })
+}
+
+/// External forces: `None`, or an `(njoints, 6)` array of body-frame spatial forces
+/// `[torque; force]` (row 0, the world, ignored).
+fn read_fext(obj: Option<&Bound<'_, PyAny>>, m: &Model, out: &mut Vec<Force>) -> PyResult<bool> {
+    let Some(obj) = obj else { return Ok(false) };
+    if obj.is_none() {
+        return Ok(false);
+    }
+    let a = array(obj, "fext")?;
+    let n = m.njoints();
+    if a.shape() != [n, 6] {
+        return Err(value_err(format!(
+            "`fext` must have shape ({n}, 6) (njoints, [torque; force]), got shape {}",
+            shape_str(a.shape())
+        )));
+    }
+    let v = a.as_array();
+    out.clear();
+    for i in 0..n {
+        out.push(Force::new(
+            Vector3::new(v[[i, 0]], v[[i, 1]], v[[i, 2]]),
+            Vector3::new(v[[i, 3]], v[[i, 4]], v[[i, 5]]),
+        ));
+    }
+    Ok(true)
+}
+
+/// A stacked batch argument of shape `(N, n)` as `N` vectors.
+fn read_batch(
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    n: usize,
+    what: &str,
+    count: Option<usize>,
+) -> PyResult<Vec<DVector<f64>>> {
+    let a = array(obj, name)?;
+    let s = a.shape();
+    if s.len() != 2 || s[1] != n || count.is_some_and(|c| c != s[0]) {
+        let rows = count.map_or("N".to_string(), |c| c.to_string());
+        return Err(value_err(format!(
+            "`{name}` must have shape ({rows}, {n}) (states, {what}), got shape {}",
+            shape_str(s)
+        )));
+    }
+    let v = a.as_array();
+    Ok((0..s[0]).map(|k| DVector::from_fn(n, |j, _| v[[k, j]])).collect())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Outputs: fresh arrays in sodyn's (column-major) storage order.
+// ---------------------------------------------------------------------------------------------
+
+fn out_vec<'py>(py: Python<'py>, x: &DVector<f64>) -> Bound<'py, PyAny> {
+    PyArray1::from_slice(py, x.as_slice()).into_any()
+}
+
+/// A fresh Fortran-order array of shape `dims` holding `data` (column-major).
+fn out_fortran<'py>(py: Python<'py>, dims: &[usize], data: &[f64]) -> Bound<'py, PyAny> {
+    let a = PyArrayDyn::<f64>::zeros(py, dims, true);
+    // SAFETY: `a` was just created here and is not yet visible to Python or to any other
+    // reference; a Fortran-order array of `dims` is contiguous with `data.len()` entries.
+    unsafe { a.as_slice_mut() }.expect("fresh contiguous array").copy_from_slice(data);
+    a.into_any()
+}
+
+fn out_mat<'py>(py: Python<'py>, m: &DMatrix<f64>) -> Bound<'py, PyAny> {
+    out_fortran(py, &[m.nrows(), m.ncols()], m.as_slice())
+}
+
+fn out_tensor<'py>(py: Python<'py>, t: &Tensor3) -> Bound<'py, PyAny> {
+    let (a, b, c) = t.dims();
+    out_fortran(py, &[a, b, c], t.as_slice())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Model
+// ---------------------------------------------------------------------------------------------
+
+/// One row of the joint table.
+#[pyclass(name = "Joint", module = "sodyn._sodyn", frozen, get_all)]
+struct PyJoint {
+    name: String,
+    r#type: String,
+    parent: String,
+    idx_q: usize,
+    nq: usize,
+    idx_v: usize,
+    nv: usize,
+}
+
+#[pymethods]
+impl PyJoint {
+    fn __repr__(&self) -> String {
+        format!(
+            "Joint(name={:?}, type={:?}, parent={:?}, idx_q={}, nq={}, idx_v={}, nv={})",
+            self.name, self.r#type, self.parent, self.idx_q, self.nq, self.idx_v, self.nv
+        )
+    }
+}
+
+/// Immutable description of a kinematic tree (Pinocchio's `Model`); only gravity may be set.
+#[pyclass(name = "Model", module = "sodyn._sodyn")]
+struct PyModel {
+    m: Model,
+}
+
+/// Seeds for `random_configuration(seed=None)`: distinct per call.
+fn fresh_seed() -> u64 {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let t = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
+    t ^ COUNTER.fetch_add(0x9e37_79b9_7f4a_7c15, Ordering::Relaxed)
+}
+
+#[pymethods]
+impl PyModel {
+    /// Loads a URDF file; `floating_base=True` adds a free-flyer root joint `root_joint`.
+    #[staticmethod]
+    #[pyo3(signature = (path, floating_base = false))]
+    fn from_urdf(py: Python<'_>, path: std::path::PathBuf, floating_base: bool) -> PyResult<Self> {
+        let opts = UrdfOptions { floating_base };
+        let m = py.detach(|| sodyn::model::load_urdf_file(&path, &opts)).map_err(core_err)?;
+        Ok(Self { m })
+    }
+
+    /// Loads a URDF document given as a string.
+    #[staticmethod]
+    #[pyo3(signature = (xml, floating_base = false))]
+    fn from_urdf_string(xml: &str, floating_base: bool) -> PyResult<Self> {
+        let opts = UrdfOptions { floating_base };
+        let m = sodyn::model::load_urdf_str(xml, "<string>", &opts).map_err(core_err)?;
+        Ok(Self { m })
+    }
+
+    /// A built-in model by name (the command line's `builtin:` names, e.g. `humanoid`,
+    /// `quadruped`, `chain6`, `random_tree20_ff_s7`).
+    #[staticmethod]
+    fn builtin(name: &str) -> PyResult<Self> {
+        match builtin::by_name(name) {
+            Some(m) => Ok(Self { m }),
+            None => Err(core_err(Error::Unknown {
+                kind: format!("built-in model (examples: {})", builtin::names().join(", ")),
+                name: name.into(),
+            })),
+        }
+    }
+
+    /// Example names accepted by `Model.builtin`.
+    #[staticmethod]
+    fn builtin_names() -> Vec<&'static str> {
+        builtin::names().to_vec()
+    }
+
+    #[getter]
+    fn name(&self) -> &str {
+        self.m.name()
+    }
+    #[getter]
+    fn nq(&self) -> usize {
+        self.m.nq()
+    }
+    #[getter]
+    fn nv(&self) -> usize {
+        self.m.nv()
+    }
+    #[getter]
+    fn njoints(&self) -> usize {
+        self.m.njoints()
+    }
+
+    /// Spatial gravity `[0, 0, 0, gx, gy, gz]` (angular first).
+    #[getter]
+    fn gravity<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        PyArray1::from_slice(py, self.m.gravity().to_vec6().as_slice()).into_any()
+    }
+
+    /// Sets gravity from a linear `(3,)` or a spatial `(6,)` vector with zero angular part.
+    #[setter]
+    fn set_gravity(&mut self, g: &Bound<'_, PyAny>) -> PyResult<()> {
+        let a = array(g, "gravity")?;
+        let v: Vec<f64> = a.as_array().iter().copied().collect();
+        let lin = match (a.shape(), v.as_slice()) {
+            ([3], [x, y, z]) => Vector3::new(*x, *y, *z),
+            ([6], [0.0, 0.0, 0.0, x, y, z]) => Vector3::new(*x, *y, *z),
+            ([6], _) => {
+                return Err(value_err(
+                    "`gravity` of shape (6,) must have a zero angular part (its first three \
+                     entries)"
+                        .into(),
+                ));
+            }
+            (s, _) => {
+                return Err(value_err(format!(
+                    "`gravity` must have shape (3,) or (6,), got shape {}",
+                    shape_str(s)
+                )));
+            }
+        };
+        self.m.set_gravity(lin).map_err(core_err)
+    }
+
+    /// The joint table (joints 1..njoints-1; the world, joint 0, excluded).
+    #[getter]
+    fn joints(&self) -> Vec<PyJoint> {
+        let m = &self.m;
+        (1..m.njoints())
+            .map(|i| PyJoint {
+                name: m.names()[i].clone(),
+                r#type: m.joints()[i].name().into(),
+                parent: m.names()[m.parents()[i]].clone(),
+                idx_q: m.idx_q()[i],
+                nq: m.nqs()[i],
+                idx_v: m.idx_v()[i],
+                nv: m.nvs()[i],
+            })
+            .collect()
+    }
+
+    /// Frame names (URDF links, also those merged by fixed joints), the world first.
+    #[getter]
+    fn frames(&self) -> Vec<String> {
+        self.m.frames().iter().map(|f| f.name.clone()).collect()
+    }
+
+    /// Lower configuration limits (−inf where absent).
+    #[getter]
+    fn lower_limits<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        out_vec(py, self.m.lower())
+    }
+
+    /// Upper configuration limits (+inf where absent).
+    #[getter]
+    fn upper_limits<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        out_vec(py, self.m.upper())
+    }
+
+    /// Index of the frame named `name` (a `SodynError` if there is none).
+    fn frame_id(&self, name: &str) -> PyResult<usize> {
+        self.m.frame_id(name).map_err(core_err)
+    }
+
+    /// Index of the joint named `name` (a `SodynError` if there is none).
+    fn joint_id(&self, name: &str) -> PyResult<usize> {
+        self.m.joint_id(name).map_err(core_err)
+    }
+
+    /// The neutral configuration (zero angles, identity quaternions).
+    fn neutral<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        out_vec(py, &self.m.neutral())
+    }
+
+    /// A random configuration within the limits (uniform quaternions; `[-π, π]` or `[-1, 1]`
+    /// where a limit is absent); `seed` makes it reproducible.
+    #[pyo3(signature = (seed = None))]
+    fn random_configuration<'py>(&self, py: Python<'py>, seed: Option<u64>) -> Bound<'py, PyAny> {
+        let mut rng = Rng::new(seed.unwrap_or_else(fresh_seed));
+        out_vec(py, &self.m.random_configuration(&mut rng))
+    }
+
+    /// `q ⊕ dq`: integrates the tangent vector `dq` (length nv) from `q` (joint-local
+    /// exponentials; Pinocchio's `integrate`).
+    fn integrate<'py>(
+        &self,
+        py: Python<'py>,
+        q: &Bound<'py, PyAny>,
+        dq: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (mut qv, mut dv) = (DVector::zeros(0), DVector::zeros(0));
+        read_q(q, "q", &self.m, &mut qv)?;
+        read_vec(dq, "dq", self.m.nv(), "nv", &mut dv)?;
+        Ok(out_vec(py, &self.m.integrate(&qv, &dv).map_err(core_err)?))
+    }
+
+    /// `q1 ⊖ q0`: the tangent vector `dq` with `integrate(q0, dq) = q1` (Pinocchio's
+    /// `difference`).
+    fn difference<'py>(
+        &self,
+        py: Python<'py>,
+        q0: &Bound<'py, PyAny>,
+        q1: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (mut a, mut b) = (DVector::zeros(0), DVector::zeros(0));
+        read_q(q0, "q0", &self.m, &mut a)?;
+        read_q(q1, "q1", &self.m, &mut b)?;
+        Ok(out_vec(py, &self.m.difference(&a, &b).map_err(core_err)?))
+    }
+
+    /// A workspace for this model (same as `Data(model)`).
+    fn create_data(&self) -> PyData {
+        PyData::for_model(&self.m)
+    }
+
+    /// The model as plain Python data (for pickling; `_model_from_description` rebuilds it).
+    fn _description<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        describe(py, &self.m)
+    }
+
+    /// Rebuilds a model from `_description()` through `ModelBuilder` (every check re-run).
+    #[staticmethod]
+    fn _from_description(desc: &Bound<'_, PyDict>) -> PyResult<Self> {
+        Ok(Self { m: rebuild(desc)? })
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Model(name={:?}, nq={}, nv={}, njoints={})",
+            self.m.name(),
+            self.m.nq(),
+            self.m.nv(),
+            self.m.njoints()
+        )
+    }
+}
+
+/// A transform as plain data: rotation (column-major, 9) and translation (3).
+type TransformDesc = (Vec<f64>, Vec<f64>);
+/// A frame as plain data: name, joint, placement.
+type FrameDesc = (String, usize, TransformDesc);
+
+fn transform_tuple(x: &Transform) -> (Vec<f64>, Vec<f64>) {
+    (x.rot.as_slice().to_vec(), x.trans.as_slice().to_vec())
+}
+
+fn describe<'py>(py: Python<'py>, m: &Model) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("name", m.name())?;
+    let g = m.gravity().to_vec6();
+    d.set_item("gravity", vec![g[3], g[4], g[5]])?;
+    let joints = PyList::empty(py);
+    for i in 1..m.njoints() {
+        let kind = m.joints()[i];
+        let axis = match kind {
+            JointType::Revolute { axis }
+            | JointType::Continuous { axis }
+            | JointType::Prismatic { axis } => Some(axis.as_slice().to_vec()),
+            _ => None,
+        };
+        let inertia = &m.inertias()[i];
+        let (a, n) = (m.idx_q()[i], m.nqs()[i]);
+        let j = PyDict::new(py);
+        j.set_item("name", &m.names()[i])?;
+        j.set_item("parent", m.parents()[i])?;
+        j.set_item("type", kind.name())?;
+        j.set_item("axis", axis)?;
+        j.set_item("placement", transform_tuple(&m.placements()[i]))?;
+        j.set_item(
+            "inertia",
+            (inertia.mass, inertia.h.as_slice().to_vec(), inertia.rot.as_slice().to_vec()),
+        )?;
+        j.set_item("lower", m.lower().as_slice()[a..a + n].to_vec())?;
+        j.set_item("upper", m.upper().as_slice()[a..a + n].to_vec())?;
+        j.set_item("mimic", m.mimic()[i].clone())?;
+        joints.append(j)?;
+    }
+    d.set_item("joints", joints)?;
+    // The world's own inertia (links fixed to the world) does not enter the dynamics, but it
+    // is part of the model: keep it.
+    let w = &m.inertias()[0];
+    d.set_item("world_inertia", (w.mass, w.h.as_slice().to_vec(), w.rot.as_slice().to_vec()))?;
+    let frames = PyList::empty(py);
+    for f in &m.frames()[1..] {
+        frames.append((f.name.clone(), f.joint, transform_tuple(&f.placement)))?;
+    }
+    d.set_item("frames", frames)?;
+    Ok(d)
+}
+
+fn item<'py, T: for<'a> FromPyObject<'a, 'py>>(d: &Bound<'py, PyDict>, key: &str) -> PyResult<T>
+where
+    for<'a> <T as FromPyObject<'a, 'py>>::Error: Into<PyErr>,
+{
+    d.get_item(key)?
+        .ok_or_else(|| value_err(format!("model description: missing key {key:?}")))?
+        .extract::<T>()
+        .map_err(Into::into)
+}
+
+fn v3(x: &[f64], what: &str) -> PyResult<Vector3<f64>> {
+    match x {
+        [a, b, c] => Ok(Vector3::new(*a, *b, *c)),
+        _ => Err(value_err(format!("model description: {what} must have 3 entries"))),
+    }
+}
+
+fn m3(x: &[f64], what: &str) -> PyResult<Matrix3<f64>> {
+    if x.len() != 9 {
+        return Err(value_err(format!("model description: {what} must have 9 entries")));
+    }
+    Ok(Matrix3::from_column_slice(x))
+}
+
+fn transform_from(t: TransformDesc, what: &str) -> PyResult<Transform> {
+    Ok(Transform::new(m3(&t.0, what)?, v3(&t.1, what)?))
+}
+
+fn inertia_from(t: (f64, Vec<f64>, Vec<f64>), what: &str) -> PyResult<Inertia> {
+    Ok(Inertia { mass: t.0, h: v3(&t.1, what)?, rot: m3(&t.2, what)? })
+}
+
+fn rebuild(desc: &Bound<'_, PyDict>) -> PyResult<Model> {
+    let name: String = item(desc, "name")?;
+    let mut b = ModelBuilder::new(&name);
+    let joints: Vec<Bound<'_, PyDict>> = item(desc, "joints")?;
+    for j in &joints {
+        let jname: String = item(j, "name")?;
+        let parent: usize = item(j, "parent")?;
+        let kind: String = item(j, "type")?;
+        let axis: Option<Vec<f64>> = item(j, "axis")?;
+        let axis_of = |a: &Option<Vec<f64>>| -> PyResult<Vector3<f64>> {
+            v3(a.as_deref().unwrap_or(&[]), &format!("axis of joint {jname:?}"))
+        };
+        let kind = match kind.as_str() {
+            "revolute" => JointType::Revolute { axis: axis_of(&axis)? },
+            "continuous" => JointType::Continuous { axis: axis_of(&axis)? },
+            "prismatic" => JointType::Prismatic { axis: axis_of(&axis)? },
+            "spherical" => JointType::Spherical,
+            "free_flyer" => JointType::FreeFlyer,
+            "planar" => JointType::Planar,
+            other => {
+                return Err(value_err(format!("model description: unknown joint type {other:?}")));
+            }
+        };
+        let placement = transform_from(item(j, "placement")?, "placement")?;
+        let id = b.add_joint(parent, &jname, kind, placement).map_err(core_err)?;
+        let inertia = inertia_from(item(j, "inertia")?, "inertia")?;
+        b.append_inertia(id, &Transform::identity(), &inertia).map_err(core_err)?;
+        let (lo, hi): (Vec<f64>, Vec<f64>) = (item(j, "lower")?, item(j, "upper")?);
+        if !lo.is_empty() {
+            b.set_limits(id, &lo, &hi).map_err(core_err)?;
+        }
+        if let Some(of) = item::<Option<String>>(j, "mimic")? {
+            b.set_mimic(id, &of);
+        }
+    }
+    let w = inertia_from(item(desc, "world_inertia")?, "world inertia")?;
+    b.append_inertia(0, &Transform::identity(), &w).map_err(core_err)?;
+    let frames: Vec<FrameDesc> = item(desc, "frames")?;
+    for (fname, joint, placement) in frames {
+        b.add_frame(&fname, joint, transform_from(placement, "frame placement")?)
+            .map_err(core_err)?;
+    }
+    let g: Vec<f64> = item(desc, "gravity")?;
+    b.set_gravity(v3(&g, "gravity")?);
+    b.build().map_err(core_err)
+}
+
+/// Rebuilds a pickled model (see `Model._description`).
+#[pyfunction]
+fn _model_from_description(desc: &Bound<'_, PyDict>) -> PyResult<PyModel> {
+    Ok(PyModel { m: rebuild(desc)? })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Data
+// ---------------------------------------------------------------------------------------------
+
+/// A contact set resolved against a model: (frame index, point) per contact.
+type ContactKey = Vec<(usize, [u64; 3])>;
+
+/// Workspace of one model: sodyn's `Data`, the second-order and contact workspaces (made on
+/// first use) and the input buffers. One thread at a time (a second thread using the same
+/// `Data` concurrently gets a `RuntimeError`, "already borrowed").
+#[pyclass(name = "Data", module = "sodyn._sodyn")]
+struct PyData {
+    d: Data,
+    q: DVector<f64>,
+    v: DVector<f64>,
+    a: DVector<f64>,
+    fext: Vec<Force>,
+    lam: DVector<f64>,
+    so: Option<SoData>,
+    fso: Option<FdSoData>,
+    cid: Option<(ContactKey, ContactData)>,
+    kkt: Option<(ContactKey, KktData)>,
+    impact: Option<(ContactKey, ImpactData)>,
+}
+
+impl PyData {
+    fn for_model(m: &Model) -> Self {
+        Self {
+            d: Data::new(m),
+            q: DVector::zeros(m.nq()),
+            v: DVector::zeros(m.nv()),
+            a: DVector::zeros(m.nv()),
+            fext: Vec::new(),
+            lam: DVector::zeros(0),
+            so: None,
+            fso: None,
+            cid: None,
+            kkt: None,
+            impact: None,
+        }
+    }
+}
+
+#[pymethods]
+impl PyData {
+    #[new]
+    fn new(model: PyRef<'_, PyModel>) -> Self {
+        Self::for_model(&model.m)
+    }
+}
+
+/// Reads `(q, v, x)` into the data's buffers (`x` is `a` or `tau`).
+fn read_qvx(
+    m: &Model,
+    d: &mut PyData,
+    q: &Bound<'_, PyAny>,
+    v: &Bound<'_, PyAny>,
+    x: &Bound<'_, PyAny>,
+    xname: &str,
+) -> PyResult<()> {
+    read_q(q, "q", m, &mut d.q)?;
+    read_vec(v, "v", m.nv(), "nv", &mut d.v)?;
+    read_vec(x, xname, m.nv(), "nv", &mut d.a)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Dynamics and derivatives
+// ---------------------------------------------------------------------------------------------
+
+/// Inverse dynamics (RNEA): `tau = M(q) a + C(q, v) v + g(q) − Σ Jᵢᵀ fextᵢ`.
+#[pyfunction]
+#[pyo3(signature = (model, data, q, v, a, fext = None))]
+fn rnea<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    fext: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let d = &mut *data;
+    read_qvx(m, d, q, v, a, "a")?;
+    let has_f = read_fext(fext, m, &mut d.fext)?;
+    let PyData { d, q, v, a, fext, .. } = d;
+    let f = has_f.then_some(fext.as_slice());
+    py.detach(|| algo::rnea(m, d, q, v, a, f).map(|_| ())).map_err(core_err)?;
+    Ok(out_vec(py, d.tau()))
+}
+
+/// Joint-space mass matrix (CRBA), full symmetric.
+#[pyfunction]
+fn crba<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let PyData { d, q: qb, .. } = &mut *data;
+    read_q(q, "q", m, qb)?;
+    py.detach(|| algo::crba(m, d, qb).map(|_| ())).map_err(core_err)?;
+    Ok(out_mat(py, d.m()))
+}
+
+/// Forward dynamics (ABA): `qdd = M⁻¹ (tau − C v − g + Σ Jᵢᵀ fextᵢ)`.
+#[pyfunction]
+#[pyo3(signature = (model, data, q, v, tau, fext = None))]
+fn aba<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    fext: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let d = &mut *data;
+    read_qvx(m, d, q, v, tau, "tau")?;
+    let has_f = read_fext(fext, m, &mut d.fext)?;
+    let PyData { d, q, v, a, fext, .. } = d;
+    let f = has_f.then_some(fext.as_slice());
+    py.detach(|| algo::aba(m, d, q, v, a, f).map(|_| ())).map_err(core_err)?;
+    Ok(out_vec(py, d.qdd()))
+}
+
+/// Nonlinear effects `b = C(q, v) v + g(q)`.
+#[pyfunction]
+fn nonlinear_effects<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let PyData { d, q: qb, v: vb, .. } = &mut *data;
+    read_q(q, "q", m, qb)?;
+    read_vec(v, "v", m.nv(), "nv", vb)?;
+    py.detach(|| algo::nonlinear_effects(m, d, qb, vb).map(|_| ())).map_err(core_err)?;
+    Ok(out_vec(py, d.nle()))
+}
+
+/// First-order inverse-dynamics derivatives (IDSVA): `(dtau_dq, dtau_dv)`; `dtau_da = M`.
+#[pyfunction(name = "id_derivatives")]
+#[pyo3(signature = (model, data, q, v, a, fext = None))]
+fn py_id_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    fext: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let m = &model.m;
+    let d = &mut *data;
+    read_qvx(m, d, q, v, a, "a")?;
+    let has_f = read_fext(fext, m, &mut d.fext)?;
+    let PyData { d, q, v, a, fext, .. } = d;
+    let f = has_f.then_some(fext.as_slice());
+    py.detach(|| id_derivatives(m, d, q, v, a, f)).map_err(core_err)?;
+    PyTuple::new(py, [out_mat(py, d.dtau_dq()), out_mat(py, d.dtau_dv())])
+}
+
+/// First-order forward-dynamics derivatives: `(dqdd_dq, dqdd_dv, Minv)` (`Minv = dqdd_dtau`).
+#[pyfunction(name = "fd_derivatives")]
+#[pyo3(signature = (model, data, q, v, tau, fext = None))]
+fn py_fd_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    fext: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let m = &model.m;
+    let d = &mut *data;
+    read_qvx(m, d, q, v, tau, "tau")?;
+    let has_f = read_fext(fext, m, &mut d.fext)?;
+    let PyData { d, q, v, a, fext, .. } = d;
+    let f = has_f.then_some(fext.as_slice());
+    py.detach(|| fd_derivatives(m, d, q, v, a, f)).map_err(core_err)?;
+    PyTuple::new(py, [out_mat(py, d.dqdd_dq()), out_mat(py, d.dqdd_dv()), out_mat(py, d.minv())])
+}
+
+/// Second-order inverse-dynamics derivatives (IDSVA-SO):
+/// `(d2tau_dq2, d2tau_dv2, d2tau_dqdv, dM_dq)`, each `(nv, nv, nv)`.
+#[pyfunction(name = "id_so_derivatives")]
+fn py_id_so_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let m = &model.m;
+    let d = &mut *data;
+    read_qvx(m, d, q, v, a, "a")?;
+    let PyData { d, q, v, a, so, .. } = d;
+    let so = so.get_or_insert_with(|| SoData::new(m));
+    py.detach(|| id_so_derivatives(m, d, so, q, v, a, None)).map_err(core_err)?;
+    PyTuple::new(
+        py,
+        [
+            out_tensor(py, so.d2tau_dq2()),
+            out_tensor(py, so.d2tau_dv2()),
+            out_tensor(py, so.d2tau_dqdv()),
+            out_tensor(py, so.dm_dq()),
+        ],
+    )
+}
+
+/// Second-order forward-dynamics derivatives:
+/// `(d2qdd_dq2, d2qdd_dv2, d2qdd_dqdv, d2qdd_dtaudq)`, each `(nv, nv, nv)`.
+#[pyfunction(name = "fd_so_derivatives")]
+fn py_fd_so_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let m = &model.m;
+    let d = &mut *data;
+    read_qvx(m, d, q, v, tau, "tau")?;
+    let PyData { d, q, v, a, fso, .. } = d;
+    let fso = fso.get_or_insert_with(|| FdSoData::new(m));
+    py.detach(|| fd_so_derivatives(m, d, fso, q, v, a, None)).map_err(core_err)?;
+    PyTuple::new(
+        py,
+        [
+            out_tensor(py, fso.d2qdd_dq2()),
+            out_tensor(py, fso.d2qdd_dv2()),
+            out_tensor(py, fso.d2qdd_dqdv()),
+            out_tensor(py, fso.d2qdd_dtaudq()),
+        ],
+    )
+}
+
+/// IDFOZA: `∂(M(q) x)/∂q` (nv × nv).
+#[pyfunction]
+fn idfoza<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    x: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let PyData { d, q: qb, a: xb, .. } = &mut *data;
+    read_q(q, "q", m, qb)?;
+    read_vec(x, "x", m.nv(), "nv", xb)?;
+    let mut out = DMatrix::zeros(m.nv(), m.nv());
+    py.detach(|| deriv::idfoza(m, d, qb, xb, &mut out)).map_err(core_err)?;
+    Ok(out_mat(py, &out))
+}
+
+/// IDSOZA: `∂²(M(q) x)/∂q²` (nv × nv × nv, `T[i, j, k] = ∂/∂q_k ∂(M x)_i/∂q_j`).
+#[pyfunction]
+fn idsoza<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    x: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let PyData { d, q: qb, a: xb, so, .. } = &mut *data;
+    read_q(q, "q", m, qb)?;
+    read_vec(x, "x", m.nv(), "nv", xb)?;
+    let so = so.get_or_insert_with(|| SoData::new(m));
+    py.detach(|| deriv::idsoza(m, d, so, qb, xb).map(|_| ())).map_err(core_err)?;
+    Ok(out_tensor(py, so.d2tau_dq2()))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Contacts
+// ---------------------------------------------------------------------------------------------
+
+/// A 3-D point contact: `point` (frame coordinates) of the frame named `frame`.
+#[pyclass(name = "Contact", module = "sodyn._sodyn", frozen)]
+#[derive(Clone)]
+struct PyContact {
+    frame: String,
+    point: [f64; 3],
+}
+
+#[pymethods]
+impl PyContact {
+    #[new]
+    #[pyo3(signature = (frame, point = None))]
+    fn new(frame: String, point: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
+        let mut p = [0.0; 3];
+        if let Some(obj) = point {
+            let mut v = DVector::zeros(3);
+            read_vec(obj, "point", 3, "x, y, z", &mut v)?;
+            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                return Err(core_err(Error::NotFinite {
+                    what: format!("point of contact \"{frame}\""),
+                    index: i,
+                }));
+            }
+            p.copy_from_slice(v.as_slice());
+        }
+        Ok(Self { frame, point: p })
+    }
+    #[getter]
+    fn frame(&self) -> &str {
+        &self.frame
+    }
+    #[getter]
+    fn point<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        PyArray1::from_slice(py, &self.point).into_any()
+    }
+    fn __repr__(&self) -> String {
+        format!(
+            "Contact(frame={:?}, point=({}, {}, {}))",
+            self.frame, self.point[0], self.point[1], self.point[2]
+        )
+    }
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
+        let py = slf.py();
+        let c = slf.get();
+        let args = PyTuple::new(
+            py,
+            [c.frame.clone().into_pyobject(py)?.into_any(), PyTuple::new(py, c.point)?.into_any()],
+        )?;
+        PyTuple::new(py, [slf.get_type().into_any(), args.into_any()])
+    }
+}
+
+/// Resolves the contacts against the model.
+fn resolve(m: &Model, contacts: &[PyRef<'_, PyContact>]) -> PyResult<(Vec<Contact>, ContactKey)> {
+    let mut cs = Vec::with_capacity(contacts.len());
+    let mut key = Vec::with_capacity(contacts.len());
+    for c in contacts {
+        let p = Vector3::new(c.point[0], c.point[1], c.point[2]);
+        let contact = Contact::new(m, &c.frame, p).map_err(core_err)?;
+        key.push((contact.frame, c.point.map(f64::to_bits)));
+        cs.push(contact);
+    }
+    if cs.is_empty() {
+        return Err(value_err("`contacts` is empty: give at least one sodyn.Contact".into()));
+    }
+    Ok((cs, key))
+}
+
+fn check_order(order: u32) -> PyResult<()> {
+    if order == 1 || order == 2 {
+        Ok(())
+    } else {
+        Err(value_err(format!("`order` must be 1 or 2, got {order}")))
+    }
+}
+
+/// Constrained inverse dynamics `tau = M a + b − J_cᵀ λ` at `(q, v, a, λ)` and its
+/// derivatives (λ held fixed in the world): keys `tau, dtau_dq, dtau_dv` (+ `d2tau_dq2`).
+#[pyfunction(name = "constrained_id_derivatives")]
+#[pyo3(signature = (model, data, q, v, a, contacts, lam, order = 1))]
+#[allow(clippy::too_many_arguments)]
+fn py_constrained_id_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    contacts: Vec<PyRef<'py, PyContact>>,
+    lam: &Bound<'py, PyAny>,
+    order: u32,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_order(order)?;
+    let m = &model.m;
+    let d = &mut *data;
+    read_qvx(m, d, q, v, a, "a")?;
+    let (cs, key) = resolve(m, &contacts)?;
+    read_vec(lam, "lam", 3 * cs.len(), "3 × number of contacts", &mut d.lam)?;
+    if d.cid.as_ref().is_none_or(|(k, _)| *k != key) {
+        d.cid = Some((key, ContactData::new(m, &cs).map_err(core_err)?));
+    }
+    let PyData { d, q, v, a, lam, so, cid, .. } = d;
+    let cd = &mut cid.as_mut().expect("set above").1;
+    let out = PyDict::new(py);
+    if order == 2 {
+        let so = so.get_or_insert_with(|| SoData::new(m));
+        py.detach(|| constrained_id_so_derivatives(m, d, cd, so, q, v, a, lam))
+            .map_err(core_err)?;
+        out.set_item("d2tau_dq2", out_tensor(py, so.d2tau_dq2()))?;
+    } else {
+        py.detach(|| constrained_id_derivatives(m, d, cd, q, v, a, lam)).map_err(core_err)?;
+    }
+    out.set_item("tau", out_vec(py, d.tau()))?;
+    out.set_item("dtau_dq", out_mat(py, d.dtau_dq()))?;
+    out.set_item("dtau_dv", out_mat(py, d.dtau_dv()))?;
+    Ok(out)
+}
+
+/// KKT contact dynamics `[M J_cᵀ; J_c 0][qdd; −λ] = [tau − b; −J̇_c v]` and its derivatives.
+#[pyfunction(name = "kkt_derivatives")]
+#[pyo3(signature = (model, data, q, v, tau, contacts, order = 1))]
+#[allow(clippy::too_many_arguments)]
+fn py_kkt_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    contacts: Vec<PyRef<'py, PyContact>>,
+    order: u32,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_order(order)?;
+    let m = &model.m;
+    let d = &mut *data;
+    read_qvx(m, d, q, v, tau, "tau")?;
+    let (cs, key) = resolve(m, &contacts)?;
+    let fits = |k: &KktData, key2: &ContactKey| *key2 == key && (order == 1 || k.so().is_some());
+    if d.kkt.as_ref().is_none_or(|(k2, kd)| !fits(kd, k2)) {
+        let mut kd = KktData::new(m, ContactData::new(m, &cs).map_err(core_err)?);
+        if order == 2 {
+            kd = kd.with_second_order(m);
+        }
+        d.kkt = Some((key, kd));
+    }
+    let PyData { d, q, v, a, kkt, .. } = d;
+    let kd = &mut kkt.as_mut().expect("set above").1;
+    if order == 2 {
+        py.detach(|| kkt_so_derivatives(m, d, kd, q, v, a)).map_err(core_err)?;
+    } else {
+        py.detach(|| kkt_derivatives(m, d, kd, q, v, a)).map_err(core_err)?;
+    }
+    let out = PyDict::new(py);
+    out.set_item("qdd", out_vec(py, kd.qdd()))?;
+    out.set_item("lambda", out_vec(py, kd.lambda()))?;
+    for (k, x) in [
+        ("dqdd_dq", kd.dqdd_dq()),
+        ("dqdd_dv", kd.dqdd_dv()),
+        ("dqdd_dtau", kd.dqdd_dtau()),
+        ("dlambda_dq", kd.dlambda_dq()),
+        ("dlambda_dv", kd.dlambda_dv()),
+        ("dlambda_dtau", kd.dlambda_dtau()),
+    ] {
+        out.set_item(k, out_mat(py, x))?;
+    }
+    if order == 2 {
+        let t = kd.so().expect("second order allocated");
+        for (k, x) in [
+            ("d2qdd_dq2", t.d2qdd_dq2()),
+            ("d2qdd_dv2", t.d2qdd_dv2()),
+            ("d2qdd_dqdv", t.d2qdd_dqdv()),
+            ("d2qdd_dtaudq", t.d2qdd_dtaudq()),
+            ("d2lambda_dq2", t.d2lambda_dq2()),
+            ("d2lambda_dv2", t.d2lambda_dv2()),
+            ("d2lambda_dqdv", t.d2lambda_dqdv()),
+            ("d2lambda_dtaudq", t.d2lambda_dtaudq()),
+        ] {
+            out.set_item(k, out_tensor(py, x))?;
+        }
+    }
+    Ok(out)
+}
+
+/// Impact dynamics `[M J_cᵀ; J_c 0][v⁺; −Λ] = [M v⁻; −e J_c v⁻]` and its derivatives.
+#[pyfunction(name = "impact_derivatives")]
+#[pyo3(signature = (model, data, q, v_minus, contacts, restitution = 0.0, order = 1))]
+#[allow(clippy::too_many_arguments)]
+fn py_impact_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v_minus: &Bound<'py, PyAny>,
+    contacts: Vec<PyRef<'py, PyContact>>,
+    restitution: f64,
+    order: u32,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_order(order)?;
+    let m = &model.m;
+    let d = &mut *data;
+    read_q(q, "q", m, &mut d.q)?;
+    read_vec(v_minus, "v_minus", m.nv(), "nv", &mut d.v)?;
+    let (cs, key) = resolve(m, &contacts)?;
+    let fits = |k: &ImpactData, key2: &ContactKey| *key2 == key && (order == 1 || k.so().is_some());
+    if d.impact.as_ref().is_none_or(|(k2, im)| !fits(im, k2)) {
+        let mut im = ImpactData::new(m, ContactData::new(m, &cs).map_err(core_err)?);
+        if order == 2 {
+            im = im.with_second_order(m);
+        }
+        d.impact = Some((key, im));
+    }
+    let PyData { d, q, v, impact, .. } = d;
+    let im = &mut impact.as_mut().expect("set above").1;
+    im.set_restitution(restitution).map_err(core_err)?;
+    if order == 2 {
+        py.detach(|| impact_so_derivatives(m, d, im, q, v)).map_err(core_err)?;
+    } else {
+        py.detach(|| impact_derivatives(m, d, im, q, v)).map_err(core_err)?;
+    }
+    let out = PyDict::new(py);
+    out.set_item("vplus", out_vec(py, im.vplus()))?;
+    out.set_item("impulse", out_vec(py, im.impulse()))?;
+    for (k, x) in [
+        ("dvplus_dq", im.dvplus_dq()),
+        ("dvplus_dvminus", im.dvplus_dvminus()),
+        ("dimpulse_dq", im.dimpulse_dq()),
+        ("dimpulse_dvminus", im.dimpulse_dvminus()),
+    ] {
+        out.set_item(k, out_mat(py, x))?;
+    }
+    if order == 2 {
+        let t = im.so().expect("second order allocated");
+        for (k, x) in [
+            ("d2vplus_dq2", t.d2vplus_dq2()),
+            ("d2vplus_dqdvminus", t.d2vplus_dqdvminus()),
+            ("d2impulse_dq2", t.d2impulse_dq2()),
+            ("d2impulse_dqdvminus", t.d2impulse_dqdvminus()),
+        ] {
+            out.set_item(k, out_tensor(py, x))?;
+        }
+    }
+    Ok(out)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Batched entry points (sodyn.batch)
+// ---------------------------------------------------------------------------------------------
+
+/// The batch pool of `threads` threads (the caller plus `threads − 1` helpers), started on
+/// first use and kept; `None`: the shared pool, one thread per core.
+fn pool(threads: Option<usize>) -> PyResult<Arc<BatchPool>> {
+    let Some(t) = threads else { return Ok(BatchPool::shared()) };
+    static POOLS: OnceLock<Mutex<HashMap<usize, Arc<BatchPool>>>> = OnceLock::new();
+    if t == 0 || t > 1024 {
+        return Err(value_err(format!("`threads` must be in 1..=1024, got {t}")));
+    }
+    let mut pools = POOLS.get_or_init(Default::default).lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(p) = pools.get(&t) {
+        return Ok(p.clone());
+    }
+    let p = Arc::new(BatchPool::new(t).map_err(core_err)?);
+    pools.insert(t, p.clone());
+    Ok(p)
+}
+
+/// A stacked output: a Fortran-order array of `dims + [N]`, transposed to `[N] + dims`, so
+/// that state `k`'s block is contiguous and column-major like sodyn's matrices. Returns the
+/// array and its buffer.
+fn stacked<'py>(
+    py: Python<'py>,
+    n: usize,
+    dims: &[usize],
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyArrayDyn<f64>>)> {
+    let mut full = dims.to_vec();
+    full.push(n);
+    let a = PyArrayDyn::<f64>::zeros(py, full.as_slice(), true);
+    let mut axes = vec![dims.len()];
+    axes.extend(0..dims.len());
+    let t = a.call_method1("transpose", (PyTuple::new(py, axes)?,))?;
+    Ok((t, a))
+}
+
+/// Runs `f` for every state on the pool with the GIL released; `outs[o]` is split into one
+/// contiguous block of `block[o]` entries per state.
+fn run_batch<W, F>(
+    py: Python<'_>,
+    threads: Option<usize>,
+    workspace: W,
+    n: usize,
+    outs: &[&Bound<'_, PyArrayDyn<f64>>],
+    block: &[usize],
+    f: F,
+) -> PyResult<()>
+where
+    W: Clone + Send,
+    F: Fn(&mut W, usize, &mut [&mut [f64]]) -> sodyn::Result<()> + Sync,
+{
+    let pool = pool(threads)?;
+    let mut bd = BatchData::from_workspace(pool, workspace);
+    // SAFETY: the arrays were created by `stacked` in the caller, are not yet visible to
+    // Python, and are distinct: the slices do not alias anything.
+    let mut bufs: Vec<&mut [f64]> =
+        outs.iter().map(|a| unsafe { a.as_slice_mut() }.expect("fresh contiguous array")).collect();
+    let mut per_state: Vec<Vec<&mut [f64]>> =
+        (0..n).map(|_| Vec::with_capacity(bufs.len())).collect();
+    for (b, &len) in bufs.iter_mut().zip(block) {
+        if len == 0 {
+            continue;
+        }
+        for (k, chunk) in b.chunks_mut(len).enumerate() {
+            per_state[k].push(chunk);
+        }
+    }
+    py.detach(|| map_states(&mut bd, &mut per_state, |w, k, o| f(w, k, o.as_mut_slice())))
+        .map_err(core_err)
+}
+
+macro_rules! batch_inputs {
+    ($m:expr, $q:expr, $v:expr, $x:expr, $xname:expr) => {{
+        let qs = read_batch($q, "q", $m.nq(), "nq", None)?;
+        let n = qs.len();
+        let vs = read_batch($v, "v", $m.nv(), "nv", Some(n))?;
+        let xs = read_batch($x, $xname, $m.nv(), "nv", Some(n))?;
+        (qs, vs, xs, n)
+    }};
+}
+
+/// Batched RNEA: `(N, nv)` torques for `(N, nq)`, `(N, nv)`, `(N, nv)` states.
+#[pyfunction]
+#[pyo3(signature = (model, q, v, a, threads = None))]
+fn batch_rnea<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let (qs, vs, xs, n) = batch_inputs!(m, q, v, a, "a");
+    let nv = m.nv();
+    let (out, buf) = stacked(py, n, &[nv])?;
+    run_batch(py, threads, Data::new(m), n, &[&buf], &[nv], |d, k, o| {
+        o[0].copy_from_slice(algo::rnea(m, d, &qs[k], &vs[k], &xs[k], None)?.as_slice());
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// Batched ABA: `(N, nv)` accelerations.
+#[pyfunction]
+#[pyo3(signature = (model, q, v, tau, threads = None))]
+fn batch_aba<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let (qs, vs, xs, n) = batch_inputs!(m, q, v, tau, "tau");
+    let nv = m.nv();
+    let (out, buf) = stacked(py, n, &[nv])?;
+    run_batch(py, threads, Data::new(m), n, &[&buf], &[nv], |d, k, o| {
+        o[0].copy_from_slice(algo::aba(m, d, &qs[k], &vs[k], &xs[k], None)?.as_slice());
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// Batched nonlinear effects: `(N, nv)`.
+#[pyfunction]
+#[pyo3(signature = (model, q, v, threads = None))]
+fn batch_nonlinear_effects<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let qs = read_batch(q, "q", m.nq(), "nq", None)?;
+    let n = qs.len();
+    let vs = read_batch(v, "v", m.nv(), "nv", Some(n))?;
+    let nv = m.nv();
+    let (out, buf) = stacked(py, n, &[nv])?;
+    run_batch(py, threads, Data::new(m), n, &[&buf], &[nv], |d, k, o| {
+        o[0].copy_from_slice(algo::nonlinear_effects(m, d, &qs[k], &vs[k])?.as_slice());
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// Batched CRBA: `(N, nv, nv)` mass matrices.
+#[pyfunction]
+#[pyo3(signature = (model, q, threads = None))]
+fn batch_crba<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    q: &Bound<'py, PyAny>,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let qs = read_batch(q, "q", m.nq(), "nq", None)?;
+    let (n, nv) = (qs.len(), m.nv());
+    let (out, buf) = stacked(py, n, &[nv, nv])?;
+    run_batch(py, threads, Data::new(m), n, &[&buf], &[nv * nv], |d, k, o| {
+        o[0].copy_from_slice(algo::crba(m, d, &qs[k])?.as_slice());
+        Ok(())
+    })?;
+    Ok(out)
+}
+
+/// Batched IDSVA: `(dtau_dq, dtau_dv)`, each `(N, nv, nv)`.
+#[pyfunction]
+#[pyo3(signature = (model, q, v, a, threads = None))]
+fn batch_id_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let m = &model.m;
+    let (qs, vs, xs, n) = batch_inputs!(m, q, v, a, "a");
+    let nv = m.nv();
+    let (o1, b1) = stacked(py, n, &[nv, nv])?;
+    let (o2, b2) = stacked(py, n, &[nv, nv])?;
+    run_batch(py, threads, Data::new(m), n, &[&b1, &b2], &[nv * nv, nv * nv], |d, k, o| {
+        id_derivatives(m, d, &qs[k], &vs[k], &xs[k], None)?;
+        o[0].copy_from_slice(d.dtau_dq().as_slice());
+        o[1].copy_from_slice(d.dtau_dv().as_slice());
+        Ok(())
+    })?;
+    PyTuple::new(py, [o1, o2])
+}
+
+/// Batched forward-dynamics derivatives: `(dqdd_dq, dqdd_dv, Minv)`, each `(N, nv, nv)`.
+#[pyfunction]
+#[pyo3(signature = (model, q, v, tau, threads = None))]
+fn batch_fd_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let m = &model.m;
+    let (qs, vs, xs, n) = batch_inputs!(m, q, v, tau, "tau");
+    let nv = m.nv();
+    let (o1, b1) = stacked(py, n, &[nv, nv])?;
+    let (o2, b2) = stacked(py, n, &[nv, nv])?;
+    let (o3, b3) = stacked(py, n, &[nv, nv])?;
+    let s = nv * nv;
+    run_batch(py, threads, Data::new(m), n, &[&b1, &b2, &b3], &[s, s, s], |d, k, o| {
+        fd_derivatives(m, d, &qs[k], &vs[k], &xs[k], None)?;
+        o[0].copy_from_slice(d.dqdd_dq().as_slice());
+        o[1].copy_from_slice(d.dqdd_dv().as_slice());
+        o[2].copy_from_slice(d.minv().as_slice());
+        Ok(())
+    })?;
+    PyTuple::new(py, [o1, o2, o3])
+}
+
+/// Batched IDSVA-SO: four `(N, nv, nv, nv)` tensors.
+#[pyfunction]
+#[pyo3(signature = (model, q, v, a, threads = None))]
+fn batch_id_so_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let m = &model.m;
+    let (qs, vs, xs, n) = batch_inputs!(m, q, v, a, "a");
+    let nv = m.nv();
+    let s = nv * nv * nv;
+    let mut outs = Vec::new();
+    let mut bufs = Vec::new();
+    for _ in 0..4 {
+        let (o, b) = stacked(py, n, &[nv, nv, nv])?;
+        outs.push(o);
+        bufs.push(b);
+    }
+    let refs: Vec<_> = bufs.iter().collect();
+    run_batch(py, threads, (Data::new(m), SoData::new(m)), n, &refs, &[s; 4], |(d, so), k, o| {
+        id_so_derivatives(m, d, so, &qs[k], &vs[k], &xs[k], None)?;
+        o[0].copy_from_slice(so.d2tau_dq2().as_slice());
+        o[1].copy_from_slice(so.d2tau_dv2().as_slice());
+        o[2].copy_from_slice(so.d2tau_dqdv().as_slice());
+        o[3].copy_from_slice(so.dm_dq().as_slice());
+        Ok(())
+    })?;
+    PyTuple::new(py, outs)
+}
+
+/// Batched forward-dynamics second order: four `(N, nv, nv, nv)` tensors.
+#[pyfunction]
+#[pyo3(signature = (model, q, v, tau, threads = None))]
+fn batch_fd_so_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let m = &model.m;
+    let (qs, vs, xs, n) = batch_inputs!(m, q, v, tau, "tau");
+    let nv = m.nv();
+    let s = nv * nv * nv;
+    let mut outs = Vec::new();
+    let mut bufs = Vec::new();
+    for _ in 0..4 {
+        let (o, b) = stacked(py, n, &[nv, nv, nv])?;
+        outs.push(o);
+        bufs.push(b);
+    }
+    let refs: Vec<_> = bufs.iter().collect();
+    run_batch(py, threads, (Data::new(m), FdSoData::new(m)), n, &refs, &[s; 4], |(d, f), k, o| {
+        fd_so_derivatives(m, d, f, &qs[k], &vs[k], &xs[k], None)?;
+        o[0].copy_from_slice(f.d2qdd_dq2().as_slice());
+        o[1].copy_from_slice(f.d2qdd_dv2().as_slice());
+        o[2].copy_from_slice(f.d2qdd_dqdv().as_slice());
+        o[3].copy_from_slice(f.d2qdd_dtaudq().as_slice());
+        Ok(())
+    })?;
+    PyTuple::new(py, outs)
+}
+
+/// The compiled module `sodyn._sodyn`.
+#[pymodule]
+fn _sodyn(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("SodynError", py.get_type::<SodynError>())?;
+    m.add_class::<PyModel>()?;
+    m.add_class::<PyData>()?;
+    m.add_class::<PyJoint>()?;
+    m.add_class::<PyContact>()?;
+    m.add_function(wrap_pyfunction!(_model_from_description, m)?)?;
+    m.add_function(wrap_pyfunction!(rnea, m)?)?;
+    m.add_function(wrap_pyfunction!(crba, m)?)?;
+    m.add_function(wrap_pyfunction!(aba, m)?)?;
+    m.add_function(wrap_pyfunction!(nonlinear_effects, m)?)?;
+    m.add_function(wrap_pyfunction!(py_id_derivatives, m)?)?;
+    m.add_function(wrap_pyfunction!(py_fd_derivatives, m)?)?;
+    m.add_function(wrap_pyfunction!(py_id_so_derivatives, m)?)?;
+    m.add_function(wrap_pyfunction!(py_fd_so_derivatives, m)?)?;
+    m.add_function(wrap_pyfunction!(idfoza, m)?)?;
+    m.add_function(wrap_pyfunction!(idsoza, m)?)?;
+    m.add_function(wrap_pyfunction!(py_constrained_id_derivatives, m)?)?;
+    m.add_function(wrap_pyfunction!(py_kkt_derivatives, m)?)?;
+    m.add_function(wrap_pyfunction!(py_impact_derivatives, m)?)?;
+    m.add_function(wrap_pyfunction!(batch_rnea, m)?)?;
+    m.add_function(wrap_pyfunction!(batch_crba, m)?)?;
+    m.add_function(wrap_pyfunction!(batch_aba, m)?)?;
+    m.add_function(wrap_pyfunction!(batch_nonlinear_effects, m)?)?;
+    m.add_function(wrap_pyfunction!(batch_id_derivatives, m)?)?;
+    m.add_function(wrap_pyfunction!(batch_fd_derivatives, m)?)?;
+    m.add_function(wrap_pyfunction!(batch_id_so_derivatives, m)?)?;
+    m.add_function(wrap_pyfunction!(batch_fd_so_derivatives, m)?)?;
+    Ok(())
+}
