@@ -272,6 +272,9 @@ fn at_state(e: Error, k: usize) -> Error {
         }
         Error::Build(s) => Error::Build(format!("state {k}: {s}")),
         Error::Workspace(s) => Error::Workspace(format!("state {k}: {s}")),
+        Error::Argument { name, reason } => {
+            Error::Argument { name, reason: format!("{reason} (state {k})") }
+        }
         Error::Dimension { what, expected, got } => {
             Error::Dimension { what: format!("{what} of state {k}"), expected, got }
         }

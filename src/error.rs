@@ -55,6 +55,13 @@ pub enum Error {
         /// The name that was asked for.
         name: String,
     },
+    /// An argument out of its domain (a negative restitution, a NaN damping, …).
+    Argument {
+        /// The argument.
+        name: String,
+        /// Why.
+        reason: String,
+    },
     /// A workspace (`Data`, `ContactData`, …) used with a model it was not made for.
     Workspace(String),
     /// Input/output or parse failure outside the model (state files, JSON).
@@ -80,6 +87,7 @@ impl fmt::Display for Error {
             }
             Error::Singular { what, detail } => write!(f, "{what} is singular: {detail}"),
             Error::Unknown { kind, name } => write!(f, "unknown {kind} \"{name}\""),
+            Error::Argument { name, reason } => write!(f, "`{name}`: {reason}"),
             Error::Workspace(s) => write!(f, "workspace mismatch: {s}"),
             Error::Io(s) => write!(f, "{s}"),
         }

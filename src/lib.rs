@@ -25,3 +25,10 @@ pub mod tensor;
 mod trig;
 
 pub use error::{Error, Result};
+/// The linear-algebra crate of the public API (vectors and matrices are `nalgebra` types).
+pub use nalgebra;
+
+/// The README's Rust code blocks, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;

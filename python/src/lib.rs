@@ -372,9 +372,20 @@ impl PyModel {
     /// A random configuration within the limits (uniform quaternions; `[-π, π]` or `[-1, 1]`
     /// where a limit is absent); `seed` makes it reproducible.
     #[pyo3(signature = (seed = None))]
-    fn random_configuration<'py>(&self, py: Python<'py>, seed: Option<u64>) -> Bound<'py, PyAny> {
-        let mut rng = Rng::new(seed.unwrap_or_else(fresh_seed));
-        out_vec(py, &self.m.random_configuration(&mut rng))
+    fn random_configuration<'py>(
+        &self,
+        py: Python<'py>,
+        seed: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let seed = match seed {
+            None => fresh_seed(),
+            Some(s) if s.is_none() => fresh_seed(),
+            Some(s) => s.extract::<u64>().map_err(|_| {
+                value_err(format!("`seed` must be an integer in [0, 2**64), got {s}"))
+            })?,
+        };
+        let mut rng = Rng::new(seed);
+        Ok(out_vec(py, &self.m.random_configuration(&mut rng)))
     }
 
     /// `q ⊕ dq`: integrates the tangent vector `dq` (length nv) from `q` (joint-local
@@ -923,7 +934,7 @@ fn resolve(m: &Model, contacts: &[PyRef<'_, PyContact>]) -> PyResult<(Vec<Contac
     Ok((cs, key))
 }
 
-fn check_order(order: u32) -> PyResult<()> {
+fn check_order(order: i64) -> PyResult<()> {
     if order == 1 || order == 2 {
         Ok(())
     } else {
@@ -945,7 +956,7 @@ fn py_constrained_id_derivatives<'py>(
     a: &Bound<'py, PyAny>,
     contacts: Vec<PyRef<'py, PyContact>>,
     lam: &Bound<'py, PyAny>,
-    order: u32,
+    order: i64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
     let m = &model.m;
@@ -953,6 +964,9 @@ fn py_constrained_id_derivatives<'py>(
     read_qvx(m, d, q, v, a, "a")?;
     let (cs, key) = resolve(m, &contacts)?;
     read_vec(lam, "lam", 3 * cs.len(), "3 × number of contacts", &mut d.lam)?;
+    if let Some(index) = d.lam.iter().position(|x| !x.is_finite()) {
+        return Err(core_err(Error::NotFinite { what: "lam".into(), index }));
+    }
     if d.cid.as_ref().is_none_or(|(k, _)| *k != key) {
         d.cid = Some((key, ContactData::new(m, &cs).map_err(core_err)?));
     }
@@ -985,7 +999,7 @@ fn py_kkt_derivatives<'py>(
     v: &Bound<'py, PyAny>,
     tau: &Bound<'py, PyAny>,
     contacts: Vec<PyRef<'py, PyContact>>,
-    order: u32,
+    order: i64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
     let m = &model.m;
@@ -1050,7 +1064,7 @@ fn py_impact_derivatives<'py>(
     v_minus: &Bound<'py, PyAny>,
     contacts: Vec<PyRef<'py, PyContact>>,
     restitution: f64,
-    order: u32,
+    order: i64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
     let m = &model.m;
@@ -1105,12 +1119,13 @@ fn py_impact_derivatives<'py>(
 
 /// The batch pool of `threads` threads (the caller plus `threads − 1` helpers), started on
 /// first use and kept; `None`: the shared pool, one thread per core.
-fn pool(threads: Option<usize>) -> PyResult<Arc<BatchPool>> {
+fn pool(threads: Option<i64>) -> PyResult<Arc<BatchPool>> {
     let Some(t) = threads else { return Ok(BatchPool::shared()) };
     static POOLS: OnceLock<Mutex<HashMap<usize, Arc<BatchPool>>>> = OnceLock::new();
-    if t == 0 || t > 1024 {
+    if !(1..=1024).contains(&t) {
         return Err(value_err(format!("`threads` must be in 1..=1024, got {t}")));
     }
+    let t = t as usize;
     let mut pools = POOLS.get_or_init(Default::default).lock().unwrap_or_else(|e| e.into_inner());
     if let Some(p) = pools.get(&t) {
         return Ok(p.clone());
@@ -1141,7 +1156,7 @@ fn stacked<'py>(
 /// contiguous block of `block[o]` entries per state.
 fn run_batch<W, F>(
     py: Python<'_>,
-    threads: Option<usize>,
+    threads: Option<i64>,
     workspace: W,
     n: usize,
     outs: &[&Bound<'_, PyArrayDyn<f64>>],
@@ -1191,7 +1206,7 @@ fn batch_rnea<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
     a: &Bound<'py, PyAny>,
-    threads: Option<usize>,
+    threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
     let (qs, vs, xs, n) = batch_inputs!(m, q, v, a, "a");
@@ -1213,7 +1228,7 @@ fn batch_aba<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
     tau: &Bound<'py, PyAny>,
-    threads: Option<usize>,
+    threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
     let (qs, vs, xs, n) = batch_inputs!(m, q, v, tau, "tau");
@@ -1234,7 +1249,7 @@ fn batch_nonlinear_effects<'py>(
     model: PyRef<'py, PyModel>,
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
-    threads: Option<usize>,
+    threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
     let qs = read_batch(q, "q", m.nq(), "nq", None)?;
@@ -1256,7 +1271,7 @@ fn batch_crba<'py>(
     py: Python<'py>,
     model: PyRef<'py, PyModel>,
     q: &Bound<'py, PyAny>,
-    threads: Option<usize>,
+    threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
     let qs = read_batch(q, "q", m.nq(), "nq", None)?;
@@ -1278,7 +1293,7 @@ fn batch_id_derivatives<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
     a: &Bound<'py, PyAny>,
-    threads: Option<usize>,
+    threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let m = &model.m;
     let (qs, vs, xs, n) = batch_inputs!(m, q, v, a, "a");
@@ -1303,7 +1318,7 @@ fn batch_fd_derivatives<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
     tau: &Bound<'py, PyAny>,
-    threads: Option<usize>,
+    threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let m = &model.m;
     let (qs, vs, xs, n) = batch_inputs!(m, q, v, tau, "tau");
@@ -1331,7 +1346,7 @@ fn batch_id_so_derivatives<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
     a: &Bound<'py, PyAny>,
-    threads: Option<usize>,
+    threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let m = &model.m;
     let (qs, vs, xs, n) = batch_inputs!(m, q, v, a, "a");
@@ -1365,7 +1380,7 @@ fn batch_fd_so_derivatives<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
     tau: &Bound<'py, PyAny>,
-    threads: Option<usize>,
+    threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let m = &model.m;
     let (qs, vs, xs, n) = batch_inputs!(m, q, v, tau, "tau");

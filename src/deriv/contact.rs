@@ -185,13 +185,13 @@ impl ContactData {
     /// of rank-deficient contact sets; default 0).
     ///
     /// # Errors
-    /// [`Error::NotFinite`] or [`Error::Build`] for a NaN, infinite or negative `μ` (unchanged).
+    /// [`Error::Argument`] for a NaN, infinite or negative `μ` (the value is unchanged).
     pub fn set_damping(&mut self, damping: f64) -> Result<()> {
-        if !damping.is_finite() {
-            return Err(Error::NotFinite { what: "damping".into(), index: 0 });
-        }
-        if damping < 0.0 {
-            return Err(Error::Build(format!("damping {damping} must be non-negative")));
+        if !damping.is_finite() || damping < 0.0 {
+            return Err(Error::Argument {
+                name: "damping".into(),
+                reason: format!("{damping} must be finite and non-negative"),
+            });
         }
         self.damping = damping;
         Ok(())

@@ -83,10 +83,13 @@ impl ImpactData {
     /// Sets the coefficient of restitution `e ≥ 0`.
     ///
     /// # Errors
-    /// [`Error::Build`] for a NaN, infinite or negative `e` (the value is unchanged).
+    /// [`Error::Argument`] for a NaN, infinite or negative `e` (the value is unchanged).
     pub fn set_restitution(&mut self, e: f64) -> Result<()> {
         if !e.is_finite() || e < 0.0 {
-            return Err(Error::Build(format!("restitution {e} must be finite and non-negative")));
+            return Err(Error::Argument {
+                name: "restitution".into(),
+                reason: format!("{e} must be finite and non-negative"),
+            });
         }
         self.restitution = e;
         Ok(())
