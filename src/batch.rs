@@ -28,7 +28,8 @@
 //! helper to a CPU of its own (with the caller pinned by [`pin_current_thread`], the kernel can
 //! no longer put a waking helper on the caller's CPU). [`BatchPool::with_rayon`] runs the
 //! helpers on a [rayon] pool instead (one job per helper and call), the design measured against
-//! in `docs/performance.md`.
+//! in `docs/performance.md`, section "Optimisations that mattered", paragraph "Batched API:
+//! spinning helper threads".
 //!
 //! Errors: if some states fail, the error of the first failing state in index order is
 //! returned, with its variant kept and the state index added to its message (e.g.
@@ -104,7 +105,8 @@ impl BatchPool {
     /// with [`new`](Self::new)), as `OMP_PROC_BIND` pins OpenMP threads (Linux only; an error elsewhere or
     /// if a CPU cannot be used). Pinned helpers cannot be placed on the caller's CPU by the
     /// kernel, which on our 2-vCPU virtual machine happens at times when a helper wakes (the
-    /// two threads then share one CPU; see `docs/performance.md`). The calling thread is left
+    /// two threads then share one CPU; see `docs/performance.md`, section "Optimisations that
+    /// mattered", paragraph "Batched API: pinned helpers"). The calling thread is left
     /// where it is: pin it to `cpus[0]` with [`pin_current_thread`] (and not to a helper's
     /// CPU), or a helper and the caller may share a CPU.
     pub fn with_cpus(cpus: &[usize], spin: Duration) -> Result<Self> {

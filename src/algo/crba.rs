@@ -20,7 +20,8 @@ use nalgebra::{DMatrix, DVector};
 ///   leaves `o_m_i`, `s_world` and `ic_world` (composite) in `data`.
 ///
 /// The first takes fewer instructions on chains of up to four joints, the second from five on
-/// (measured, see `docs/performance.md`).
+/// (callgrind counts in `docs/performance.md`, section "Optimisations that mattered", paragraph
+/// "CRBA: two kernels").
 pub fn crba<'a>(model: &Model, data: &'a mut Data, q: &DVector<f64>) -> Result<&'a DMatrix<f64>> {
     model.check_q(q)?;
     data.check(model)?;

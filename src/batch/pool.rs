@@ -6,7 +6,8 @@
 //!   poll for the next one for a set time (the *spin time*) before they sleep on a condition
 //!   variable, and a caller that polls (never sleeps) while the helpers finish their share. On
 //!   a virtual machine, waking a sleeping thread whose virtual CPU has halted takes tens of
-//!   microseconds (30–90 µs measured here, see `docs/performance.md`): paid at the start of a
+//!   microseconds (30–90 µs measured here, see `docs/performance.md`, section "Optimisations
+//!   that mattered", paragraph "Batched API: spinning helper threads"): paid at the start of a
 //!   call by a sleeping helper and, with rayon's blocking scope, once more at its end by the
 //!   caller. Polling removes both for calls that follow each other within the spin time, as
 //!   the OpenMP runtimes do (`OMP_WAIT_POLICY`, `KMP_BLOCKTIME`).

@@ -67,6 +67,27 @@ impl SoData {
     pub(crate) fn upper_halves(model: &Model) -> Self {
         Self::build(model, false, true)
     }
+    /// The per-DoF workspace only, with empty tensors: for the contracted pass
+    /// ([`id_so_contract_unchecked`]), which writes no tensor. [`SoData::check`] rejects it.
+    pub(crate) fn workspace_only(model: &Model) -> Self {
+        let mut so = Self::build(model, false, false);
+        so.d2tau_dq2 = Tensor3::zeros(0, 0, 0);
+        so.d2tau_dv2 = Tensor3::zeros(0, 0, 0);
+        so.d2tau_dqdv = Tensor3::zeros(0, 0, 0);
+        so
+    }
+    /// Checks that the per-DoF workspace (not the tensors) was built for `model`.
+    pub(crate) fn check_workspace(&self, model: &Model, what: &str) -> Result<()> {
+        if self.parents != model.parents || self.nvs != model.nvs || self.dof.len() != model.nv {
+            return Err(crate::error::Error::Workspace(crate::algo::data::workspace_mismatch(
+                what,
+                self.parents.len(),
+                self.dof.len(),
+                model,
+            )));
+        }
+        Ok(())
+    }
     fn build(model: &Model, with_dm_dq: bool, upper: bool) -> Self {
         let n = model.nv;
         let nd = if with_dm_dq { n } else { 0 };
@@ -188,15 +209,87 @@ pub(crate) fn id_so_unchecked(
     a0: Motion,
 ) {
     forward_pass_world(model, data, q, v, a, fext, a0);
+    fill_dof(data, so);
+    let n = model.nv;
+    let SoData {
+        d2tau_dq2,
+        d2tau_dv2,
+        d2tau_dqdv,
+        dm_dq,
+        upper,
+        root,
+        dof,
+        anc_dofs,
+        anc_start,
+        ..
+    } = so;
+    let (qq, vv, qv, dm) = (
+        d2tau_dq2.as_mut_slice(),
+        d2tau_dv2.as_mut_slice(),
+        d2tau_dqdv.as_mut_slice(),
+        dm_dq.as_mut_slice(),
+    );
+    let with_dm = dm.len() == n * n * n;
+    let ws = SoWs { dof, anc_dofs, anc_start, root };
+    match (with_dm, *upper) {
+        // (Upper-half workspaces have no ∂M/∂q.)
+        (true, _) => {
+            backward_pass(model, data, &ws, &mut Store::<true, false> { n, qq, vv, qv, dm })
+        }
+        (false, false) => {
+            backward_pass(model, data, &ws, &mut Store::<false, false> { n, qq, vv, qv, dm })
+        }
+        (false, true) => {
+            backward_pass(model, data, &ws, &mut Store::<false, true> { n, qq, vv, qv, dm })
+        }
+    }
+}
+
+/// The per-DoF vectors `[S, Ψ̇, Ψ̈, Ψ̇ + Ṡ]` of the forward pass, for the backward pass.
+fn fill_dof(data: &Data, so: &mut SoData) {
     for (c, d) in so.dof.iter_mut().enumerate() {
         let ps = data.psid[c] + data.sdot[c];
         *d = [v6m(&data.s_world[c]), v6m(&data.psid[c]), v6m(&data.psidd[c]), v6m(&ps)];
     }
+}
+
+/// The backward pass of IDSVA-SO (second order into `sink`, first order into `data`).
+fn backward_pass<S: Sink>(model: &Model, data: &mut Data, ws: &SoWs<'_>, sink: &mut S) {
     for i in (1..model.njoints()).rev() {
-        backward_step_so(model, data, so, i);
+        backward_step_so(model, data, ws, sink, i);
         backward_step_fo(model, data, i);
         accumulate_to_parent(model, data, i);
     }
+}
+
+/// IDSVA-SO contracted with `w` over the output index as its entries are produced, without
+/// forming a tensor: `C[j + n k] = Σ_i w_i T[(i, j, k)]` for `∂²τ/∂q²` (`cqq`), `∂²τ/∂q̇²`
+/// (`cvv`) and `∂²τ/∂q∂q̇` (`cqv`), at `(q, q̇, q̈)` with base acceleration `−a_g`; also the
+/// first-order derivatives into `data`. `so` supplies only its per-DoF workspace (its tensors
+/// may be empty). The caller checks the inputs, `w.len() = nv` and `c*.len() = nv²`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn id_so_contract_unchecked(
+    model: &Model,
+    data: &mut Data,
+    so: &mut SoData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    w: &[f64],
+    cqq: &mut [f64],
+    cvv: &mut [f64],
+    cqv: &mut [f64],
+) {
+    let n = model.nv;
+    assert!(w.len() == n && cqq.len() == n * n && cvv.len() == n * n && cqv.len() == n * n);
+    forward_pass_world(model, data, q, v, a, None, -model.gravity);
+    fill_dof(data, so);
+    cqq.fill(0.0);
+    cvv.fill(0.0);
+    cqv.fill(0.0);
+    let SoData { root, dof, anc_dofs, anc_start, .. } = so;
+    let ws = SoWs { dof, anc_dofs, anc_start, root };
+    backward_pass(model, data, &ws, &mut Contract { n, w, qq: cqq, vv: cvv, qv: cqv });
 }
 
 /// A spatial vector as plain components `[ang; lin]` (motion or force).
@@ -553,64 +646,143 @@ pub(crate) fn qv_offset(n: usize, i: usize, j: usize, k: usize) -> usize {
 /// The backward step compiled for AVX2/FMA (the 6-vector kernels vectorise 4 wide).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn backward_step_so_avx2<const DM: bool, const UP: bool>(
+fn backward_step_so_avx2<S: Sink>(
     model: &Model,
     data: &Data,
-    so: &mut SoData,
+    ws: &SoWs<'_>,
+    sink: &mut S,
     i: usize,
 ) {
-    backward_step_so_body::<Avx2, DM, UP>(model, data, so, i)
+    backward_step_so_body::<Avx2, S>(model, data, ws, sink, i)
 }
 
-fn backward_step_so(model: &Model, data: &Data, so: &mut SoData, i: usize) {
-    let dm = so.dm_dq.dims().0 == model.nv;
+/// One backward step of IDSVA-SO into `sink`, with the AVX2/FMA kernels where the CPU has them.
+fn backward_step_so<S: Sink>(model: &Model, data: &Data, ws: &SoWs<'_>, sink: &mut S, i: usize) {
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
-        return unsafe {
-            match (dm, so.upper) {
-                // (Upper-half workspaces have no ∂M/∂q.)
-                (true, _) => backward_step_so_avx2::<true, false>(model, data, so, i),
-                (false, false) => backward_step_so_avx2::<false, false>(model, data, so, i),
-                (false, true) => backward_step_so_avx2::<false, true>(model, data, so, i),
-            }
-        };
+        return unsafe { backward_step_so_avx2(model, data, ws, sink, i) };
     }
-    match (dm, so.upper) {
-        (true, _) => backward_step_so_body::<Portable, true, false>(model, data, so, i),
-        (false, false) => backward_step_so_body::<Portable, false, false>(model, data, so, i),
-        (false, true) => backward_step_so_body::<Portable, false, true>(model, data, so, i),
+    backward_step_so_body::<Portable, S>(model, data, ws, sink, i)
+}
+
+/// The model-constant and per-DoF vectors of IDSVA-SO's backward pass (from a [`SoData`]).
+#[derive(Clone, Copy)]
+struct SoWs<'a> {
+    dof: &'a [[V6; 4]],
+    anc_dofs: &'a [usize],
+    anc_start: &'a [usize],
+    root: &'a [bool],
+}
+
+/// Where IDSVA-SO's entries `(i, j, k)` go as they are produced: stored in the tensors
+/// ([`Store`]) or contracted with a weight vector over `i` ([`Contract`]). Every entry that
+/// is not structurally zero reaches the sink exactly once (the contraction sums them).
+trait Sink {
+    /// Also produce `∂M/∂q`.
+    const DM: bool;
+    /// Upper halves only (see [`SoData::upper_halves`]).
+    const UP: bool;
+    /// `∂/∂q_k (∂τ_i/∂q_j) = x`.
+    fn qq(&mut self, i: usize, j: usize, k: usize, x: f64);
+    /// `∂²τ_i/∂q̇_j∂q̇_k = x`.
+    fn vv(&mut self, i: usize, j: usize, k: usize, x: f64);
+    /// `∂/∂q̇_k (∂τ_i/∂q_j) = x`.
+    fn qv(&mut self, i: usize, j: usize, k: usize, x: f64);
+    /// `∂M_ij/∂q_k = x`.
+    fn dm(&mut self, i: usize, j: usize, k: usize, x: f64);
+}
+
+/// Stores into the `n×n×n` tensors (`∂²τ/∂q∂q̇` by blocks of eight pages with `UP`).
+struct Store<'a, const DM: bool, const UP: bool> {
+    n: usize,
+    qq: &'a mut [f64],
+    vv: &'a mut [f64],
+    qv: &'a mut [f64],
+    dm: &'a mut [f64],
+}
+
+impl<const DM: bool, const UP: bool> Sink for Store<'_, DM, UP> {
+    const DM: bool = DM;
+    const UP: bool = UP;
+    #[inline(always)]
+    fn qq(&mut self, i: usize, j: usize, k: usize, x: f64) {
+        set(self.qq, at(self.n, i, j, k), x)
+    }
+    #[inline(always)]
+    fn vv(&mut self, i: usize, j: usize, k: usize, x: f64) {
+        set(self.vv, at(self.n, i, j, k), x)
+    }
+    #[inline(always)]
+    fn qv(&mut self, i: usize, j: usize, k: usize, x: f64) {
+        let o = if UP { qv_offset(self.n, i, j, k) } else { at(self.n, i, j, k) };
+        set(self.qv, o, x)
+    }
+    #[inline(always)]
+    fn dm(&mut self, i: usize, j: usize, k: usize, x: f64) {
+        set(self.dm, at(self.n, i, j, k), x)
     }
 }
 
-/// One backward step of IDSVA-SO for body `i`; `DM`: also write `∂M/∂q` (else `so.dm_dq` is
-/// empty and untouched); `UP`: skip the lower-half writes of `∂²τ/∂q²` and `∂²τ/∂q̇²` and the
-/// `∂²τ/∂q∂q̇` columns of root DoFs (see [`SoData::upper_halves`]; DoFs are numbered
-/// depth-first, so an ancestor's are smaller).
+/// Contracts over the output index: `C[j + n k] += w_i x` for `∂²τ/∂q²`, `∂²τ/∂q̇²` and
+/// `∂²τ/∂q∂q̇` (no `∂M/∂q`: its contraction `∂(M w)/∂q` is IDFOZA's).
+pub(crate) struct Contract<'a> {
+    pub(crate) n: usize,
+    pub(crate) w: &'a [f64],
+    pub(crate) qq: &'a mut [f64],
+    pub(crate) vv: &'a mut [f64],
+    pub(crate) qv: &'a mut [f64],
+}
+
+impl Contract<'_> {
+    #[inline(always)]
+    fn add(c: &mut [f64], w: &[f64], n: usize, i: usize, j: usize, k: usize, x: f64) {
+        debug_assert!(i < w.len() && j + n * k < c.len());
+        // SAFETY: i, j, k are DoF indices < n (as for `set`), `w.len() = n` and
+        // `c.len() = n²` (checked by `id_so_contract_unchecked`'s callers).
+        unsafe { *c.get_unchecked_mut(j + n * k) += *w.get_unchecked(i) * x }
+    }
+}
+
+impl Sink for Contract<'_> {
+    const DM: bool = false;
+    const UP: bool = false;
+    #[inline(always)]
+    fn qq(&mut self, i: usize, j: usize, k: usize, x: f64) {
+        Self::add(self.qq, self.w, self.n, i, j, k, x)
+    }
+    #[inline(always)]
+    fn vv(&mut self, i: usize, j: usize, k: usize, x: f64) {
+        Self::add(self.vv, self.w, self.n, i, j, k, x)
+    }
+    #[inline(always)]
+    fn qv(&mut self, i: usize, j: usize, k: usize, x: f64) {
+        Self::add(self.qv, self.w, self.n, i, j, k, x)
+    }
+    #[inline(always)]
+    fn dm(&mut self, _i: usize, _j: usize, _k: usize, _x: f64) {}
+}
+
+/// One backward step of IDSVA-SO for body `i`: every entry `(i, j, k)` of the four tensors goes
+/// to `sink` once, as it is produced (stored, or contracted with a weight vector). With
+/// `S::DM`, also `∂M/∂q`; with `S::UP`, the lower-half entries of `∂²τ/∂q²` and `∂²τ/∂q̇²` and
+/// the `∂²τ/∂q∂q̇` columns of root DoFs are skipped (see [`SoData::upper_halves`]; DoFs are
+/// numbered depth-first, so an ancestor's are smaller).
 #[inline(always)]
-fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
+fn backward_step_so_body<K: Kern, S: Sink>(
     model: &Model,
     data: &Data,
-    so: &mut SoData,
+    ws: &SoWs<'_>,
+    sink: &mut S,
     i: usize,
 ) {
-    let n = model.nv;
-    let SoData { d2tau_dq2, d2tau_dv2, d2tau_dqdv, dm_dq, dof, anc_dofs, anc_start, root, .. } = so;
-    let dof: &[[V6; 4]] = dof;
-    let qq = d2tau_dq2.as_mut_slice();
-    let vv = d2tau_dv2.as_mut_slice();
-    let qv = d2tau_dqdv.as_mut_slice();
-    let dm = dm_dq.as_mut_slice();
+    let SoWs { dof, anc_dofs, anc_start, root } = *ws;
     let ic = m6(&data.ic_world[i].matrix());
     let bc = m6(&data.bc[i]);
     let bct = transpose(&bc);
     let fc = v6f(&data.ofc[i]);
     let dofs = |j: usize| model.idx_v[j]..model.idx_v[j] + model.nvs[j];
     let anc = |j: usize| &anc_dofs[anc_start[j]..anc_start[j + 1]];
-    // Offset of ∂²τ/∂q∂q̇ entry (a, b, c): column-major, or with `UP` by blocks of 8 pages (see
-    // `qv_offset`).
-    let qvi =
-        |a: usize, b: usize, c: usize| if UP { qv_offset(n, a, b, c) } else { at(n, a, b, c) };
     for ip in dofs(i) {
         let o = i_ops::<K>(&ic, &bc, &bct, &fc, &dof[ip]);
         let mut j = i;
@@ -620,7 +792,7 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
             // v_0 = 0): the products with its Ψ̇ are skipped.
             let j_root = model.parents[j] == 0;
             // Upper halves: no ∂²τ/∂q∂q̇ columns of root DoFs (here those of joint j).
-            let skip_j = UP && j_root;
+            let skip_j = S::UP && j_root;
             for jt in dofs(j) {
                 let [sj, psidj, psiddj, psj] = &dof[jt];
                 // B(I^C_i, S_i) = ½(C + R) and B(I^C_i, S_i)ᵀ = ½(C − R), with R x = x ×* (I^C_i S_i)
@@ -672,39 +844,38 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
                     // Ψ̇_k = 0 on a root joint (above).
                     let dp = if j_root { [0.0; 3] } else { K::matvec(&rd, psidk) };
                     let ddd = K::matvec(&rz, psiddk);
-                    set(qq, at(n, ip, jt, kr), dp[0] + ddd[0]); // 1A
-                    if !UP || jt <= kr {
-                        set(vv, at(n, ip, jt, kr), -ds[8]); // B: −S_jᵀ C S_k
+                    sink.qq(ip, jt, kr, dp[0] + ddd[0]); // 1A
+                    if !S::UP || jt <= kr {
+                        sink.vv(ip, jt, kr, -ds[8]); // B: −S_jᵀ C S_k
                     }
                     let val = dp[1]; // cross 1A
                     if !skip_j {
-                        set(qv, qvi(ip, kr, jt), val);
+                        sink.qv(ip, kr, jt, val);
                     }
                     if !j_is_i {
                         let dpk = K::matvec(&rz, psk);
                         let v1c = dp[2] + ddd[1]; // q–q 1C/2C
-                        set(qq, at(n, jt, kr, ip), v1c);
-                        if !UP {
-                            set(qq, at(n, jt, ip, kr), v1c); // column ip > kr, other joints
+                        sink.qq(jt, kr, ip, v1c);
+                        if !S::UP {
+                            sink.qq(jt, ip, kr, v1c); // column ip > kr, other joints
                         }
                         let v1e = -ds[1]; // v–v 1E/2E
-                        set(vv, at(n, jt, kr, ip), v1e);
-                        if !UP {
-                            set(vv, at(n, jt, ip, kr), v1e);
+                        sink.vv(jt, kr, ip, v1e);
+                        if !S::UP {
+                            sink.vv(jt, ip, kr, v1e);
                         }
                         if !skip_j {
-                            set(qv, qvi(jt, kr, ip), -val); // cross 2A
+                            sink.qv(jt, kr, ip, -val); // cross 2A
                         }
-                        set(qv, qvi(jt, ip, kr), ds[6] + dpk[1]); // cross 1C
-                        if DM {
+                        sink.qv(jt, ip, kr, ds[6] + dpk[1]); // cross 1C
+                        if S::DM {
                             let vm = ds[8]; // ∂M 1C/2C
-                            set(dm, at(n, kr, jt, ip), vm);
-                            set(dm, at(n, jt, kr, ip), vm);
+                            sink.dm(kr, jt, ip, vm);
+                            sink.dm(jt, kr, ip, vm);
                         }
                     }
                 }
                 // Strict ancestors k ≺ j.
-                let (o_ij, o_i_j, o_ji) = (ip + n * n * jt, ip + n * jt, jt * n);
                 for &kr in anc(j) {
                     debug_assert!(kr < dof.len());
                     // SAFETY: the ancestor lists hold DoF indices < nv (`SoData::new`, checked
@@ -717,63 +888,62 @@ fn backward_step_so_body<K: Kern, const DM: bool, const UP: bool>(
                     let dp = if k_root { [0.0; 3] } else { K::matvec(&rd, psidk) };
                     let ddd = K::matvec(&rz, psiddk);
                     let dpk = K::matvec(&rz, psk);
-                    let (nk, nnk) = (n * kr, n * n * kr);
                     // ∂²τ/∂q²: 1A + 2A mirror, 1B (+ 2B mirror if j ≺ i)
                     let val = dp[0] + ddd[0];
-                    set(qq, o_ij + nk, val); // (ip, kr, jt)
-                    if !UP {
-                        set(qq, ip + n * jt + nnk, val); // (ip, jt, kr)
+                    sink.qq(ip, kr, jt, val); // (ip, kr, jt)
+                    if !S::UP {
+                        sink.qq(ip, jt, kr, val); // (ip, jt, kr)
                     }
                     let wval = ds[0];
-                    if !UP || j_is_i {
-                        set(qq, kr + n * ip + n * n * jt, wval); // (kr, ip, jt)
+                    if !S::UP || j_is_i {
+                        sink.qq(kr, ip, jt, wval); // (kr, ip, jt)
                     }
                     // ∂²τ/∂q̇²: 1A + 2A mirror
                     let uval = ds[1];
-                    if !UP {
-                        set(vv, o_i_j + nnk, uval); // (ip, jt, kr)
+                    if !S::UP {
+                        sink.vv(ip, jt, kr, uval); // (ip, jt, kr)
                     }
-                    set(vv, o_ij + nk, uval); // (ip, kr, jt)
+                    sink.vv(ip, kr, jt, uval); // (ip, kr, jt)
                     // cross: 1A, 1B, 2B
                     let cval = dp[1];
                     // Upper halves: no ∂²τ/∂q∂q̇ columns of root DoFs.
-                    let skip_k = UP && k_root;
+                    let skip_k = S::UP && k_root;
                     if !skip_k {
-                        set(qv, qvi(ip, kr, jt), cval);
+                        sink.qv(ip, kr, jt, cval);
                     }
-                    set(qv, qvi(ip, jt, kr), ds[2] + dpk[0]);
-                    set(qv, qvi(kr, jt, ip), ds[3]);
-                    if DM {
+                    sink.qv(ip, jt, kr, ds[2] + dpk[0]);
+                    sink.qv(kr, jt, ip, ds[3]);
+                    if S::DM {
                         // ∂M/∂q 1B + 2B mirror
-                        set(dm, kr + n * ip + n * n * jt, ds[4]); // (kr, ip, jt)
-                        set(dm, o_ij + nk, ds[4]); // (ip, kr, jt)
+                        sink.dm(kr, ip, jt, ds[4]); // (kr, ip, jt)
+                        sink.dm(ip, kr, jt, ds[4]); // (ip, kr, jt)
                     }
                     if j_is_i {
                         // v–v D (k ≺ j = i)
-                        if !UP || ip <= jt {
-                            set(vv, kr + n * ip + n * n * jt, ds[5]); // (kr, ip, jt)
+                        if !S::UP || ip <= jt {
+                            sink.vv(kr, ip, jt, ds[5]); // (kr, ip, jt)
                         }
                     } else {
-                        set(qq, kr + o_ji + n * n * ip, wval); // 1B mirror (2B): (kr, jt, ip)
+                        sink.qq(kr, jt, ip, wval); // 1B mirror (2B): (kr, jt, ip)
                         let v1c = dp[2] + ddd[1]; // q–q 1C/2C
-                        set(qq, jt + nk + n * n * ip, v1c); // (jt, kr, ip)
-                        if !UP {
-                            set(qq, jt + n * ip + nnk, v1c); // (jt, ip, kr)
-                            set(vv, kr + n * ip + n * n * jt, ds[5]); // v–v 1C/2C: (kr, ip, jt)
+                        sink.qq(jt, kr, ip, v1c); // (jt, kr, ip)
+                        if !S::UP {
+                            sink.qq(jt, ip, kr, v1c); // (jt, ip, kr)
+                            sink.vv(kr, ip, jt, ds[5]); // v–v 1C/2C: (kr, ip, jt)
                         }
-                        set(vv, kr + o_ji + n * n * ip, ds[5]); // (kr, jt, ip)
-                        set(vv, jt + nk + n * n * ip, -uval); // v–v 1E/2E: (jt, kr, ip)
-                        if !UP {
-                            set(vv, jt + n * ip + nnk, -uval); // (jt, ip, kr)
+                        sink.vv(kr, jt, ip, ds[5]); // (kr, jt, ip)
+                        sink.vv(jt, kr, ip, -uval); // v–v 1E/2E: (jt, kr, ip)
+                        if !S::UP {
+                            sink.vv(jt, ip, kr, -uval); // (jt, ip, kr)
                         }
                         if !skip_k {
-                            set(qv, qvi(jt, kr, ip), -cval); // cross 2A
+                            sink.qv(jt, kr, ip, -cval); // cross 2A
                         }
-                        set(qv, qvi(jt, ip, kr), ds[6] + dpk[1]); // cross 1C
-                        set(qv, qvi(kr, ip, jt), ds[7]); // cross 2C
-                        if DM {
-                            set(dm, kr + o_ji + n * n * ip, ds[8]); // ∂M 1C/2C: (kr, jt, ip)
-                            set(dm, jt + nk + n * n * ip, ds[8]); // (jt, kr, ip)
+                        sink.qv(jt, ip, kr, ds[6] + dpk[1]); // cross 1C
+                        sink.qv(kr, ip, jt, ds[7]); // cross 2C
+                        if S::DM {
+                            sink.dm(kr, jt, ip, ds[8]); // ∂M 1C/2C: (kr, jt, ip)
+                            sink.dm(jt, kr, ip, ds[8]); // (jt, kr, ip)
                         }
                     }
                 }

@@ -3,9 +3,11 @@
 //! * [`id_fo`]: IDSVA, first-order ID derivatives;
 //! * [`id_so`]: IDSVA-SO, second-order ID derivatives and `∂M/∂q`;
 //! * [`zero`]: IDFOZA / IDSOZA zero-velocity shortcuts;
-//! * [`fd`]: first- and second-order forward-dynamics derivatives.
+//! * [`fd`]: first- and second-order forward-dynamics derivatives;
+//! * [`contracted`]: the second-order derivatives contracted with a weight vector (DDP).
 
 pub mod contact;
+pub mod contracted;
 pub mod external;
 pub mod fd;
 pub mod id_fo;
@@ -15,6 +17,7 @@ pub mod kkt;
 pub mod zero;
 
 pub use contact::ContactData;
+pub use contracted::{ContractedData, fd_so_contracted, id_so_contracted};
 pub use external::{constrained_id_derivatives, constrained_id_so_derivatives};
 pub use fd::{FdSoData, fd_derivatives, fd_so_derivatives};
 pub use id_fo::id_derivatives;

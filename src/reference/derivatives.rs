@@ -213,3 +213,78 @@ pub fn d2_aba_dtaudq(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor
         aba(model, &qh, &v, &seeded(tau, j, eps1()), None)
     })
 }
+
+// ---------------------------------------------------------------------------------------------
+// Contracted second order: Hessians of the scalars wᵀτ and wᵀq̈
+// ---------------------------------------------------------------------------------------------
+
+/// `C[(j, k)] = Σ_i w_i (ε₁ε₂ part of f(j, k)[i])`: the Hessian of the scalar `wᵀ f`.
+fn contracted(
+    w: &[f64],
+    n2: usize,
+    n3: usize,
+    f: impl Fn(usize, usize) -> Vec<HyperDual64>,
+) -> DMatrix<f64> {
+    DMatrix::from_fn(n2, n3, |j, k| f(j, k).iter().zip(w).map(|(y, wi)| wi * y.eps1eps2).sum())
+}
+
+/// The Hessians of `wᵀτ(q, v, a)` of [`rnea`], `[C_qq, C_vv, C_qv]` with
+/// `C_qq[(j, k)] = ∂/∂q_k (∂(wᵀτ)/∂q_j)` (nested tangent perturbations as in
+/// [`d2_rnea_dq2`]), `C_vv[(j, k)] = ∂²(wᵀτ)/∂v_j∂v_k`, `C_qv[(j, k)] = ∂/∂v_k (∂(wᵀτ)/∂q_j)`;
+/// and `C_Mq[(j, k)] = ∂(M w)_j/∂q_k` of [`mass_matrix`] as a fourth entry.
+pub fn contracted_rnea_hessians(
+    model: &Model,
+    w: &[f64],
+    q: &[f64],
+    v: &[f64],
+    a: &[f64],
+) -> [DMatrix<f64>; 4] {
+    let n = model.nv;
+    let (vh, ah) = (lift::<HyperDual64>(v), lift::<HyperDual64>(a));
+    let qq = contracted(w, n, n, |j, k| rnea(model, &nested_q(model, q, j, k), &vh, &ah, None));
+    let qh = lift::<HyperDual64>(q);
+    let vv = contracted(w, n, n, |j, k| {
+        let mut vj = seeded(v, j, eps1());
+        vj[k] += eps2();
+        rnea(model, &qh, &vj, &ah, None)
+    });
+    let qv = contracted(w, n, n, |j, k| {
+        let qj = perturb_q(model, &lift::<HyperDual64>(q), j, eps1());
+        rnea(model, &qj, &seeded(v, k, eps2()), &ah, None)
+    });
+    let mw = jacobian(n, n, |k| {
+        let qd = perturb_q(model, &lift::<Dual64>(q), k, eps());
+        let m = mass_matrix(model, &qd);
+        m.iter().map(|row| row.iter().zip(w).map(|(x, wi)| *x * *wi).sum()).collect()
+    });
+    [qq, vv, qv, mw]
+}
+
+/// The Hessians of `wᵀq̈(q, v, τ)` of [`aba`], `[C_qq, C_vv, C_qv, C_τq]` with
+/// `C_τq[(j, k)] = ∂/∂q_k (∂(wᵀq̈)/∂τ_j)`; layouts as in [`contracted_rnea_hessians`].
+pub fn contracted_aba_hessians(
+    model: &Model,
+    w: &[f64],
+    q: &[f64],
+    v: &[f64],
+    tau: &[f64],
+) -> [DMatrix<f64>; 4] {
+    let n = model.nv;
+    let (vh, th) = (lift::<HyperDual64>(v), lift::<HyperDual64>(tau));
+    let qq = contracted(w, n, n, |j, k| aba(model, &nested_q(model, q, j, k), &vh, &th, None));
+    let qh = lift::<HyperDual64>(q);
+    let vv = contracted(w, n, n, |j, k| {
+        let mut vj = seeded(v, j, eps1());
+        vj[k] += eps2();
+        aba(model, &qh, &vj, &th, None)
+    });
+    let qv = contracted(w, n, n, |j, k| {
+        let qj = perturb_q(model, &lift::<HyperDual64>(q), j, eps1());
+        aba(model, &qj, &seeded(v, k, eps2()), &th, None)
+    });
+    let tq = contracted(w, n, n, |j, k| {
+        let qk = perturb_q(model, &lift::<HyperDual64>(q), k, eps2());
+        aba(model, &qk, &vh, &seeded(tau, j, eps1()), None)
+    });
+    [qq, vv, qv, tq]
+}

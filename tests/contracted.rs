@@ -1,0 +1,128 @@
+//! Contracted second order (`Σ_i w_i T[(i, j, k)]` without an `nv³` tensor) against two
+//! oracles: the contraction of our dense tensors (IDSVA-SO, FD-SO) and hyper-dual AD of the
+//! scalars `wᵀτ` and `wᵀq̈` through the reference RNEA and ABA; random trees with every joint
+//! type, fixed and floating base, and the built-in robots.
+
+mod util;
+
+use nalgebra::{DMatrix, DVector};
+use sodyn::algo::Data;
+use sodyn::deriv::*;
+use sodyn::model::{Model, builtin};
+use sodyn::reference;
+use sodyn::rng::Rng;
+use sodyn::tensor::Tensor3;
+use util::*;
+
+/// `C[(j, k)] = Σ_i w_i T[(i, j, k)]`.
+fn contract(t: &Tensor3, w: &DVector<f64>) -> DMatrix<f64> {
+    let (n1, n2, n3) = t.dims();
+    DMatrix::from_fn(n2, n3, |j, k| (0..n1).map(|i| w[i] * t[(i, j, k)]).sum())
+}
+
+fn weight(n: usize, rng: &mut Rng) -> DVector<f64> {
+    DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0))
+}
+
+#[test]
+fn contracted_id_matches_dense_tensors_and_ad() {
+    let names = ["C_qq", "C_vv", "C_qv", "C_Mq"];
+    let mut dense = names.map(Worst::new);
+    let mut ad = names.map(Worst::new);
+    let mut rng = Rng::new(21);
+    let models: Vec<Model> = test_models(40);
+    for (mi, m) in models.iter().enumerate() {
+        let (mut d, mut so, mut cd) = (Data::new(m), SoData::new(m), ContractedData::new(m));
+        let (q, v, a) = random_state(m, &mut rng);
+        let w = weight(m.nv(), &mut rng);
+        id_so_contracted(m, &mut d, &mut cd, &q, &v, &a, &w).unwrap();
+        let got = [cd.c_qq().clone(), cd.c_vv().clone(), cd.c_qv().clone(), cd.c_mq().clone()];
+        let (dq, dv) = (d.dtau_dq().clone(), d.dtau_dv().clone());
+        id_so_derivatives(m, &mut d, &mut so, &q, &v, &a, None).unwrap();
+        // The first-order results of the contracted call are IDSVA's.
+        assert!(rel_err_mat(&dq, d.dtau_dq()) < 1e-13 && rel_err_mat(&dv, d.dtau_dv()) < 1e-13);
+        let at = format!("{} nv={}", m.name(), m.nv());
+        let tensors = [so.d2tau_dq2(), so.d2tau_dv2(), so.d2tau_dqdv(), so.dm_dq()];
+        for ((wst, t), g) in dense.iter_mut().zip(tensors).zip(&got) {
+            wst.add(rel_err_mat(g, &contract(t, &w)), &at);
+        }
+        if m.nv() <= 20 || mi % 4 == 0 {
+            let r = reference::contracted_rnea_hessians(
+                m,
+                w.as_slice(),
+                q.as_slice(),
+                v.as_slice(),
+                a.as_slice(),
+            );
+            for ((wst, r), g) in ad.iter_mut().zip(&r).zip(&got) {
+                wst.add(rel_err_mat(g, r), &at);
+            }
+        }
+    }
+    for x in dense.iter().chain(&ad) {
+        x.check(1e-12);
+    }
+}
+
+#[test]
+fn contracted_fd_matches_dense_tensors_and_ad() {
+    let names = ["C_qq", "C_vv", "C_qv", "C_tauq"];
+    let mut dense = names.map(Worst::new);
+    let mut ad = names.map(Worst::new);
+    let mut rng = Rng::new(22);
+    let models: Vec<Model> = test_models(40);
+    for m in &models {
+        let (mut d, mut fso, mut cd) = (Data::new(m), FdSoData::new(m), ContractedData::new(m));
+        let (q, v, tau) = random_state(m, &mut rng);
+        let w = weight(m.nv(), &mut rng);
+        fd_so_contracted(m, &mut d, &mut cd, &q, &v, &tau, &w).unwrap();
+        let got = [cd.c_qq().clone(), cd.c_vv().clone(), cd.c_qv().clone(), cd.c_tauq().clone()];
+        let fo = [d.dqdd_dq().clone(), d.dqdd_dv().clone(), d.minv().clone()];
+        fd_so_derivatives(m, &mut d, &mut fso, &q, &v, &tau, None).unwrap();
+        // `data` holds the first-order forward-dynamics results after the contracted call.
+        for (x, y) in fo.iter().zip([d.dqdd_dq(), d.dqdd_dv(), d.minv()]) {
+            assert!(rel_err_mat(x, y) < 1e-13, "{}", m.name());
+        }
+        let at = format!("{} nv={}", m.name(), m.nv());
+        let tensors = [fso.d2qdd_dq2(), fso.d2qdd_dv2(), fso.d2qdd_dqdv(), fso.d2qdd_dtaudq()];
+        for ((wst, t), g) in dense.iter_mut().zip(tensors).zip(&got) {
+            wst.add(rel_err_mat(g, &contract(t, &w)), &at);
+        }
+        if m.nv() <= 40 {
+            let r = reference::contracted_aba_hessians(
+                m,
+                w.as_slice(),
+                q.as_slice(),
+                v.as_slice(),
+                tau.as_slice(),
+            );
+            for ((wst, r), g) in ad.iter_mut().zip(&r).zip(&got) {
+                wst.add(rel_err_mat(g, r), &at);
+            }
+        }
+    }
+    for x in dense.iter().chain(&ad) {
+        x.check(1e-9);
+    }
+}
+
+#[test]
+fn contracted_inputs_are_checked() {
+    let m = builtin::quadruped();
+    let other = builtin::serial_chain(4);
+    let mut rng = Rng::new(3);
+    let (q, v, a) = random_state(&m, &mut rng);
+    let mut d = Data::new(&m);
+    let mut cd = ContractedData::new(&m);
+    let e = id_so_contracted(&m, &mut d, &mut cd, &q, &v, &a, &DVector::zeros(3)).unwrap_err();
+    assert!(e.to_string().contains("`w`"), "{e}");
+    let mut w = weight(m.nv(), &mut rng);
+    w[2] = f64::NAN;
+    assert!(fd_so_contracted(&m, &mut d, &mut cd, &q, &v, &a, &w).is_err());
+    let mut cd_other = ContractedData::new(&other);
+    let w = weight(m.nv(), &mut rng);
+    let e = id_so_contracted(&m, &mut d, &mut cd_other, &q, &v, &a, &w).unwrap_err();
+    assert!(matches!(e, sodyn::Error::Workspace(_)), "{e}");
+    let e = fd_so_contracted(&m, &mut d, &mut cd_other, &q, &v, &a, &w).unwrap_err();
+    assert!(matches!(e, sodyn::Error::Workspace(_)), "{e}");
+}
