@@ -92,10 +92,23 @@ def id_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike, a: Arra
                    fext: Optional[ArrayLike] = None) -> Tuple[Matrix, Matrix]: ...
 def fd_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike, tau: ArrayLike,
                    fext: Optional[ArrayLike] = None) -> Tuple[Matrix, Matrix, Matrix]: ...
-def id_so_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike, a: ArrayLike
-                      ) -> Tuple[Tensor, Tensor, Tensor, Tensor]: ...
-def fd_so_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike, tau: ArrayLike
-                      ) -> Tuple[Tensor, Tensor, Tensor, Tensor]: ...
+def id_so_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike, a: ArrayLike,
+                      out: Optional[Tuple[Tensor, Tensor, Tensor, Tensor]] = None
+                      ) -> Tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Second-order inverse-dynamics derivatives ``(d2tau_dq2, d2tau_dv2, d2tau_dqdv, dM_dq)``;
+    with ``out`` they are written into those arrays (see ``fd_so_derivatives``)."""
+def fd_so_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike, tau: ArrayLike,
+                      out: Optional[Tuple[Tensor, Tensor, Tensor, Tensor]] = None
+                      ) -> Tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Second-order forward-dynamics derivatives ``(d2qdd_dq2, d2qdd_dv2, d2qdd_dqdv,
+    d2qdd_dtaudq)``; with ``out`` (four Fortran-order ``(nv, nv, nv)`` float64 arrays, e.g. a
+    previous result) they are written there and ``out`` is returned."""
+def id_so_contracted(model: Model, data: Data, q: ArrayLike, v: ArrayLike, a: ArrayLike,
+                     w: ArrayLike) -> Tuple[Matrix, Matrix, Matrix, Matrix]:
+    """Hessians of ``w @ tau(q, v, a)``: ``(C_qq, C_vv, C_qv, C_Mq)``, ``C[j, k] = sum_i w[i] T[i, j, k]``."""
+def fd_so_contracted(model: Model, data: Data, q: ArrayLike, v: ArrayLike, tau: ArrayLike,
+                     w: ArrayLike) -> Tuple[Matrix, Matrix, Matrix, Matrix]:
+    """Hessians of ``w @ qdd(q, v, tau)``: ``(C_qq, C_vv, C_qv, C_tauq)``."""
 def idfoza(model: Model, data: Data, q: ArrayLike, x: ArrayLike) -> Matrix: ...
 def idsoza(model: Model, data: Data, q: ArrayLike, x: ArrayLike) -> Tensor: ...
 def constrained_id_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike,

@@ -23,9 +23,9 @@ use sodyn::Error;
 use sodyn::algo::{self, Contact, Data};
 use sodyn::batch::{BatchData, BatchPool, map_states};
 use sodyn::deriv::{
-    self, ContactData, FdSoData, ImpactData, KktData, SoData, constrained_id_derivatives,
-    constrained_id_so_derivatives, fd_derivatives, fd_so_derivatives, id_derivatives,
-    id_so_derivatives, impact_derivatives, impact_so_derivatives, kkt_derivatives,
+    self, ContactData, ContractedData, FdSoData, ImpactData, KktData, SoData,
+    constrained_id_derivatives, constrained_id_so_derivatives, fd_derivatives, fd_so_derivatives,
+    id_derivatives, id_so_derivatives, impact_derivatives, impact_so_derivatives, kkt_derivatives,
     kkt_so_derivatives,
 };
 use sodyn::model::{JointType, Model, ModelBuilder, UrdfOptions, builtin};
@@ -81,6 +81,21 @@ fn read_vec(
     what: &str,
     out: &mut DVector<f64>,
 ) -> PyResult<()> {
+    // Fast path: a float64 vector of the right length, contiguous, copied at once while the
+    // GIL is held (no borrow bookkeeping: this is every call's cost on small models).
+    if let Ok(arr) = obj.cast::<PyArray1<f64>>()
+        && arr.len() == n
+    {
+        // SAFETY: the GIL is held and the data are copied before it is released; sodyn writes
+        // only to arrays it has just created and not yet returned to Python.
+        if let Ok(src) = unsafe { arr.as_slice() } {
+            if out.len() != n {
+                *out = DVector::zeros(n);
+            }
+            out.as_mut_slice().copy_from_slice(src);
+            return Ok(());
+        }
+    }
     let a = array(obj, name)?;
     let shape = a.shape();
     if shape != [n] {
@@ -174,9 +189,10 @@ fn out_vec<'py>(py: Python<'py>, x: &DVector<f64>) -> Bound<'py, PyAny> {
 
 /// A fresh Fortran-order array of shape `dims` holding `data` (column-major).
 fn out_fortran<'py>(py: Python<'py>, dims: &[usize], data: &[f64]) -> Bound<'py, PyAny> {
-    let a = PyArrayDyn::<f64>::zeros(py, dims, true);
-    // SAFETY: `a` was just created here and is not yet visible to Python or to any other
-    // reference; a Fortran-order array of `dims` is contiguous with `data.len()` entries.
+    // SAFETY (both blocks): `a` was just created here, uninitialised, and is not yet visible
+    // to Python or to any other reference; a Fortran-order array of `dims` is contiguous with
+    // `data.len()` entries, every one of which the copy writes before `a` is returned.
+    let a = unsafe { PyArrayDyn::<f64>::new(py, dims, true) };
     unsafe { a.as_slice_mut() }.expect("fresh contiguous array").copy_from_slice(data);
     a.into_any()
 }
@@ -188,6 +204,49 @@ fn out_mat<'py>(py: Python<'py>, m: &DMatrix<f64>) -> Bound<'py, PyAny> {
 fn out_tensor<'py>(py: Python<'py>, t: &Tensor3) -> Bound<'py, PyAny> {
     let (a, b, c) = t.dims();
     out_fortran(py, &[a, b, c], t.as_slice())
+}
+
+/// Checks an `out` argument: a tuple of four float64 arrays of shape `(nv, nv, nv)`,
+/// Fortran-contiguous (as the second-order functions return them) and writable.
+fn check_out<'py>(out: &Bound<'py, PyAny>, nv: usize) -> PyResult<Bound<'py, PyTuple>> {
+    let bad = |what: String| {
+        value_err(format!(
+            "`out` must be a tuple of 4 writable float64 arrays of shape ({nv}, {nv}, {nv}) in \
+             Fortran order (e.g. a previous call's result): {what}"
+        ))
+    };
+    let tup = out.cast::<PyTuple>().map_err(|_| bad("not a tuple".into()))?;
+    if tup.len() != 4 {
+        return Err(bad(format!("{} entries", tup.len())));
+    }
+    for (k, item) in tup.iter().enumerate() {
+        let arr = item
+            .cast::<PyArrayDyn<f64>>()
+            .map_err(|_| bad(format!("`out[{k}]` is not a float64 numpy array")))?;
+        if arr.shape() != [nv, nv, nv] || !arr.is_fortran_contiguous() {
+            return Err(bad(format!(
+                "`out[{k}]` has shape {} ({})",
+                shape_str(arr.shape()),
+                if arr.is_fortran_contiguous() { "Fortran order" } else { "not Fortran order" }
+            )));
+        }
+        if arr.try_readwrite().is_err() {
+            return Err(bad(format!("`out[{k}]` is not writable")));
+        }
+    }
+    Ok(tup.clone())
+}
+
+/// Copies the four tensors into the arrays of `out` (checked by [`check_out`]) and returns it.
+fn write_out<'py>(out: Bound<'py, PyTuple>, ts: [&Tensor3; 4]) -> PyResult<Bound<'py, PyTuple>> {
+    for (item, t) in out.iter().zip(ts) {
+        let arr = item.cast::<PyArrayDyn<f64>>().map_err(|e| value_err(e.to_string()))?;
+        let mut rw = arr.try_readwrite().map_err(|e| value_err(format!("`out`: {e}")))?;
+        rw.as_slice_mut()
+            .map_err(|e| value_err(format!("`out`: {e}")))?
+            .copy_from_slice(t.as_slice());
+    }
+    Ok(out)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -601,6 +660,8 @@ struct PyData {
     lam: DVector<f64>,
     so: Option<SoData>,
     fso: Option<FdSoData>,
+    con: Option<ContractedData>,
+    w: DVector<f64>,
     cid: Option<(ContactKey, ContactData)>,
     kkt: Option<(ContactKey, KktData)>,
     impact: Option<(ContactKey, ImpactData)>,
@@ -617,6 +678,8 @@ impl PyData {
             lam: DVector::zeros(0),
             so: None,
             fso: None,
+            con: None,
+            w: DVector::zeros(m.nv()),
             cid: None,
             kkt: None,
             impact: None,
@@ -773,6 +836,7 @@ fn py_fd_derivatives<'py>(
 /// Second-order inverse-dynamics derivatives (IDSVA-SO):
 /// `(d2tau_dq2, d2tau_dv2, d2tau_dqdv, dM_dq)`, each `(nv, nv, nv)`.
 #[pyfunction(name = "id_so_derivatives")]
+#[pyo3(signature = (model, data, q, v, a, out = None))]
 fn py_id_so_derivatives<'py>(
     py: Python<'py>,
     model: PyRef<'py, PyModel>,
@@ -780,13 +844,18 @@ fn py_id_so_derivatives<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
     a: &Bound<'py, PyAny>,
+    out: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let m = &model.m;
+    let out = out.filter(|o| !o.is_none()).map(|o| check_out(o, m.nv())).transpose()?;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
     let PyData { d, q, v, a, so, .. } = d;
     let so = so.get_or_insert_with(|| SoData::new(m));
     py.detach(|| id_so_derivatives(m, d, so, q, v, a, None)).map_err(core_err)?;
+    if let Some(out) = out {
+        return write_out(out, [so.d2tau_dq2(), so.d2tau_dv2(), so.d2tau_dqdv(), so.dm_dq()]);
+    }
     PyTuple::new(
         py,
         [
@@ -801,6 +870,7 @@ fn py_id_so_derivatives<'py>(
 /// Second-order forward-dynamics derivatives:
 /// `(d2qdd_dq2, d2qdd_dv2, d2qdd_dqdv, d2qdd_dtaudq)`, each `(nv, nv, nv)`.
 #[pyfunction(name = "fd_so_derivatives")]
+#[pyo3(signature = (model, data, q, v, tau, out = None))]
 fn py_fd_so_derivatives<'py>(
     py: Python<'py>,
     model: PyRef<'py, PyModel>,
@@ -808,13 +878,21 @@ fn py_fd_so_derivatives<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
     tau: &Bound<'py, PyAny>,
+    out: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let m = &model.m;
+    let out = out.filter(|o| !o.is_none()).map(|o| check_out(o, m.nv())).transpose()?;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
     let PyData { d, q, v, a, fso, .. } = d;
     let fso = fso.get_or_insert_with(|| FdSoData::new(m));
     py.detach(|| fd_so_derivatives(m, d, fso, q, v, a, None)).map_err(core_err)?;
+    if let Some(out) = out {
+        return write_out(
+            out,
+            [fso.d2qdd_dq2(), fso.d2qdd_dv2(), fso.d2qdd_dqdv(), fso.d2qdd_dtaudq()],
+        );
+    }
     PyTuple::new(
         py,
         [
@@ -822,6 +900,67 @@ fn py_fd_so_derivatives<'py>(
             out_tensor(py, fso.d2qdd_dv2()),
             out_tensor(py, fso.d2qdd_dqdv()),
             out_tensor(py, fso.d2qdd_dtaudq()),
+        ],
+    )
+}
+
+/// Contracted second-order inverse dynamics: the Hessians of `wᵀτ(q, v, a)`,
+/// `(C_qq, C_vv, C_qv, C_Mq)` with `C[j, k] = Σ_i w_i T[i, j, k]` of `d2tau_dq2`, `d2tau_dv2`,
+/// `d2tau_dqdv`, `dM_dq`, without forming any `(nv, nv, nv)` tensor.
+#[pyfunction]
+fn id_so_contracted<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    w: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let m = &model.m;
+    let d = &mut *data;
+    read_qvx(m, d, q, v, a, "a")?;
+    read_vec(w, "w", m.nv(), "nv", &mut d.w)?;
+    let PyData { d, q, v, a, w, con, .. } = d;
+    let c = con.get_or_insert_with(|| ContractedData::new(m));
+    py.detach(|| deriv::id_so_contracted(m, d, c, q, v, a, w)).map_err(core_err)?;
+    PyTuple::new(
+        py,
+        [
+            out_mat(py, c.c_qq()),
+            out_mat(py, c.c_vv()),
+            out_mat(py, c.c_qv()),
+            out_mat(py, c.c_mq()),
+        ],
+    )
+}
+
+/// Contracted second-order forward dynamics: the Hessians of `wᵀqdd(q, v, tau)`,
+/// `(C_qq, C_vv, C_qv, C_tauq)` of `d2qdd_dq2`, `d2qdd_dv2`, `d2qdd_dqdv`, `d2qdd_dtaudq`.
+#[pyfunction]
+fn fd_so_contracted<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    w: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let m = &model.m;
+    let d = &mut *data;
+    read_qvx(m, d, q, v, tau, "tau")?;
+    read_vec(w, "w", m.nv(), "nv", &mut d.w)?;
+    let PyData { d, q, v, a, w, con, .. } = d;
+    let c = con.get_or_insert_with(|| ContractedData::new(m));
+    py.detach(|| deriv::fd_so_contracted(m, d, c, q, v, a, w)).map_err(core_err)?;
+    PyTuple::new(
+        py,
+        [
+            out_mat(py, c.c_qq()),
+            out_mat(py, c.c_vv()),
+            out_mat(py, c.c_qv()),
+            out_mat(py, c.c_tauq()),
         ],
     )
 }
@@ -1424,6 +1563,8 @@ fn _sodyn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(py_id_so_derivatives, m)?)?;
     m.add_function(wrap_pyfunction!(py_fd_so_derivatives, m)?)?;
     m.add_function(wrap_pyfunction!(idfoza, m)?)?;
+    m.add_function(wrap_pyfunction!(id_so_contracted, m)?)?;
+    m.add_function(wrap_pyfunction!(fd_so_contracted, m)?)?;
     m.add_function(wrap_pyfunction!(idsoza, m)?)?;
     m.add_function(wrap_pyfunction!(py_constrained_id_derivatives, m)?)?;
     m.add_function(wrap_pyfunction!(py_kkt_derivatives, m)?)?;

@@ -22,9 +22,9 @@ use crate::batch::{
     BatchData, BatchPool, aba_batch, fd_derivatives_batch, id_derivatives_batch, rnea_batch,
 };
 use crate::deriv::{
-    ContactData, FdSoData, ImpactData, KktData, SoData, fd_derivatives, fd_so_derivatives,
-    id_derivatives, id_so_derivatives, impact_derivatives, impact_so_derivatives, kkt_derivatives,
-    kkt_so_derivatives,
+    ContactData, ContractedData, FdSoData, ImpactData, KktData, SoData, fd_derivatives,
+    fd_so_contracted, fd_so_derivatives, id_derivatives, id_so_contracted, id_so_derivatives,
+    impact_derivatives, impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
 };
 use crate::error::{Error, Result};
 use crate::model::{JointType, Model};
@@ -71,6 +71,8 @@ const ALGOS: &[&str] = &[
     "fd_fo",
     "id_so",
     "fd_so",
+    "id_soc",
+    "fd_soc",
     "batch_rnea",
     "batch_aba",
     "batch_id_fo",
@@ -752,6 +754,9 @@ struct Workspaces {
     data: Data,
     so: SoData,
     fso: FdSoData,
+    /// Contracted second order (`id_soc`, `fd_soc`) and its weight vector.
+    con: ContractedData,
+    w: DVector<f64>,
     out_vec: Vec<DVector<f64>>,
     out_m1: Vec<DMatrix<f64>>,
     out_m2: Vec<DMatrix<f64>>,
@@ -775,8 +780,20 @@ fn time_algo(
 ) -> Result<Timed> {
     let (q, v, a, tau) = (&st.q, &st.v, &st.a, &st.tau);
     let batch_plan = Plan { per_call: st.q.len(), min_samples: plan.min_samples.min(20), ..*plan };
-    let Workspaces { data: d, so, fso, out_vec, out_m1, out_m2, kkt, impact, batch, baseline_cpus } =
-        ws;
+    let Workspaces {
+        data: d,
+        so,
+        fso,
+        con,
+        w,
+        out_vec,
+        out_m1,
+        out_m2,
+        kkt,
+        impact,
+        batch,
+        baseline_cpus,
+    } = ws;
     // A batched algorithm on the workspaces `batch[side]`: timed alone, or paired with the
     // second pool.
     let mut batched = |f: &mut dyn FnMut(&mut BatchData) -> Result<()>| -> Result<Timed> {
@@ -822,6 +839,16 @@ fn time_algo(
         "fd_so" => measure(plan, |i| {
             fd_so_derivatives(m, d, fso, &q[i], &v[i], &tau[i], None)?;
             black_box(&*fso);
+            Ok(())
+        }),
+        "id_soc" => measure(plan, |i| {
+            id_so_contracted(m, d, con, &q[i], &v[i], &a[i], w)?;
+            black_box(&*con);
+            Ok(())
+        }),
+        "fd_soc" => measure(plan, |i| {
+            fd_so_contracted(m, d, con, &q[i], &v[i], &tau[i], w)?;
+            black_box(&*con);
             Ok(())
         }),
         "batch_rnea" => {
@@ -898,6 +925,8 @@ enum Single {
     FdFo,
     IdSo,
     FdSo,
+    IdSoc,
+    FdSoc,
     KktFo,
     KktSo,
     ImpactFo,
@@ -915,6 +944,8 @@ impl Single {
             "fd_fo" => Single::FdFo,
             "id_so" => Single::IdSo,
             "fd_so" => Single::FdSo,
+            "id_soc" => Single::IdSoc,
+            "fd_soc" => Single::FdSoc,
             "kkt_fo" => Single::KktFo,
             "kkt_so" => Single::KktSo,
             "impact_fo" => Single::ImpactFo,
@@ -955,6 +986,14 @@ fn call_single(algo: Single, m: &Model, st: &States, ws: &mut Workspaces, i: usi
         Single::FdSo => {
             fd_so_derivatives(m, d, &mut ws.fso, q, v, tau, None)?;
             black_box(&ws.fso);
+        }
+        Single::IdSoc => {
+            id_so_contracted(m, d, &mut ws.con, q, v, a, &ws.w)?;
+            black_box(&ws.con);
+        }
+        Single::FdSoc => {
+            fd_so_contracted(m, d, &mut ws.con, q, v, tau, &ws.w)?;
+            black_box(&ws.con);
         }
         Single::KktFo | Single::KktSo => {
             let kd = ws.kkt.as_mut().ok_or_else(no_contacts)?;
@@ -1024,7 +1063,7 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
             let known = Single::from_name(r).ok_or_else(|| {
                 Error::Io(format!(
                     "--ratio-to: \"{r}\" is not a single-state algorithm (one of rnea, crba, \
-                     aba, id_fo, fd_fo, id_so, fd_so, kkt_fo, kkt_so, impact_fo, impact_so)"
+                     aba, id_fo, fd_fo, id_so, fd_so, id_soc, fd_soc, kkt_fo, kkt_so, impact_fo, impact_so)"
                 ))
             })?;
             if CONTACT_ALGOS.contains(&r.as_str()) && o.contacts.is_empty() {
@@ -1083,6 +1122,8 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
         data: Data::new(&model),
         so: SoData::new(&model),
         fso: FdSoData::new(&model),
+        con: ContractedData::new(&model),
+        w: DVector::from_fn(nv, |i, _| 1.0 / (1.0 + i as f64)),
         out_vec: if needs("batch_") { vec![DVector::zeros(nv); nstates] } else { vec![] },
         out_m1: if needs("batch_") { vec![DMatrix::zeros(nv, nv); nstates] } else { vec![] },
         out_m2: if needs("batch_") { vec![DMatrix::zeros(nv, nv); nstates] } else { vec![] },

@@ -683,14 +683,15 @@ trait Sink {
     const DM: bool;
     /// Upper halves only (see [`SoData::upper_halves`]).
     const UP: bool;
-    /// `∂/∂q_k (∂τ_i/∂q_j) = x`.
-    fn qq(&mut self, i: usize, j: usize, k: usize, x: f64);
-    /// `∂²τ_i/∂q̇_j∂q̇_k = x`.
-    fn vv(&mut self, i: usize, j: usize, k: usize, x: f64);
+    /// `∂/∂q_k (∂τ_i/∂q_j) = x`, given as `i`, `jk = j + n k` and the offset `i + n jk` (each
+    /// sink uses what it needs; the call sites compute them from loop invariants).
+    fn qq(&mut self, i: usize, jk: usize, at: usize, x: f64);
+    /// `∂²τ_i/∂q̇_j∂q̇_k = x` (arguments as for `qq`).
+    fn vv(&mut self, i: usize, jk: usize, at: usize, x: f64);
     /// `∂/∂q̇_k (∂τ_i/∂q_j) = x`.
     fn qv(&mut self, i: usize, j: usize, k: usize, x: f64);
-    /// `∂M_ij/∂q_k = x`.
-    fn dm(&mut self, i: usize, j: usize, k: usize, x: f64);
+    /// `∂M_ij/∂q_k = x` (arguments as for `qq`).
+    fn dm(&mut self, i: usize, jk: usize, at: usize, x: f64);
 }
 
 /// Stores into the `n×n×n` tensors (`∂²τ/∂q∂q̇` by blocks of eight pages with `UP`).
@@ -706,12 +707,12 @@ impl<const DM: bool, const UP: bool> Sink for Store<'_, DM, UP> {
     const DM: bool = DM;
     const UP: bool = UP;
     #[inline(always)]
-    fn qq(&mut self, i: usize, j: usize, k: usize, x: f64) {
-        set(self.qq, at(self.n, i, j, k), x)
+    fn qq(&mut self, _i: usize, _jk: usize, at: usize, x: f64) {
+        set(self.qq, at, x)
     }
     #[inline(always)]
-    fn vv(&mut self, i: usize, j: usize, k: usize, x: f64) {
-        set(self.vv, at(self.n, i, j, k), x)
+    fn vv(&mut self, _i: usize, _jk: usize, at: usize, x: f64) {
+        set(self.vv, at, x)
     }
     #[inline(always)]
     fn qv(&mut self, i: usize, j: usize, k: usize, x: f64) {
@@ -719,8 +720,8 @@ impl<const DM: bool, const UP: bool> Sink for Store<'_, DM, UP> {
         set(self.qv, o, x)
     }
     #[inline(always)]
-    fn dm(&mut self, i: usize, j: usize, k: usize, x: f64) {
-        set(self.dm, at(self.n, i, j, k), x)
+    fn dm(&mut self, _i: usize, _jk: usize, at: usize, x: f64) {
+        set(self.dm, at, x)
     }
 }
 
@@ -736,11 +737,11 @@ pub(crate) struct Contract<'a> {
 
 impl Contract<'_> {
     #[inline(always)]
-    fn add(c: &mut [f64], w: &[f64], n: usize, i: usize, j: usize, k: usize, x: f64) {
-        debug_assert!(i < w.len() && j + n * k < c.len());
-        // SAFETY: i, j, k are DoF indices < n (as for `set`), `w.len() = n` and
-        // `c.len() = n²` (checked by `id_so_contract_unchecked`'s callers).
-        unsafe { *c.get_unchecked_mut(j + n * k) += *w.get_unchecked(i) * x }
+    fn add(c: &mut [f64], w: &[f64], i: usize, jk: usize, x: f64) {
+        debug_assert!(i < w.len() && jk < c.len());
+        // SAFETY: jk = j + n k and i with i, j, k DoF indices < n (as for `set`), `w.len() = n`
+        // and `c.len() = n²` (asserted by `id_so_contract_unchecked`).
+        unsafe { *c.get_unchecked_mut(jk) += *w.get_unchecked(i) * x }
     }
 }
 
@@ -748,19 +749,19 @@ impl Sink for Contract<'_> {
     const DM: bool = false;
     const UP: bool = false;
     #[inline(always)]
-    fn qq(&mut self, i: usize, j: usize, k: usize, x: f64) {
-        Self::add(self.qq, self.w, self.n, i, j, k, x)
+    fn qq(&mut self, i: usize, jk: usize, _at: usize, x: f64) {
+        Self::add(self.qq, self.w, i, jk, x)
     }
     #[inline(always)]
-    fn vv(&mut self, i: usize, j: usize, k: usize, x: f64) {
-        Self::add(self.vv, self.w, self.n, i, j, k, x)
+    fn vv(&mut self, i: usize, jk: usize, _at: usize, x: f64) {
+        Self::add(self.vv, self.w, i, jk, x)
     }
     #[inline(always)]
     fn qv(&mut self, i: usize, j: usize, k: usize, x: f64) {
-        Self::add(self.qv, self.w, self.n, i, j, k, x)
+        Self::add(self.qv, self.w, i, j + self.n * k, x)
     }
     #[inline(always)]
-    fn dm(&mut self, _i: usize, _j: usize, _k: usize, _x: f64) {}
+    fn dm(&mut self, _i: usize, _jk: usize, _at: usize, _x: f64) {}
 }
 
 /// One backward step of IDSVA-SO for body `i`: every entry `(i, j, k)` of the four tensors goes
@@ -776,6 +777,7 @@ fn backward_step_so_body<K: Kern, S: Sink>(
     sink: &mut S,
     i: usize,
 ) {
+    let n = model.nv;
     let SoWs { dof, anc_dofs, anc_start, root } = *ws;
     let ic = m6(&data.ic_world[i].matrix());
     let bc = m6(&data.bc[i]);
@@ -844,9 +846,9 @@ fn backward_step_so_body<K: Kern, S: Sink>(
                     // Ψ̇_k = 0 on a root joint (above).
                     let dp = if j_root { [0.0; 3] } else { K::matvec(&rd, psidk) };
                     let ddd = K::matvec(&rz, psiddk);
-                    sink.qq(ip, jt, kr, dp[0] + ddd[0]); // 1A
+                    sink.qq(ip, jt + n * kr, at(n, ip, jt, kr), dp[0] + ddd[0]); // 1A
                     if !S::UP || jt <= kr {
-                        sink.vv(ip, jt, kr, -ds[8]); // B: −S_jᵀ C S_k
+                        sink.vv(ip, jt + n * kr, at(n, ip, jt, kr), -ds[8]); // B: −S_jᵀ C S_k
                     }
                     let val = dp[1]; // cross 1A
                     if !skip_j {
@@ -855,14 +857,14 @@ fn backward_step_so_body<K: Kern, S: Sink>(
                     if !j_is_i {
                         let dpk = K::matvec(&rz, psk);
                         let v1c = dp[2] + ddd[1]; // q–q 1C/2C
-                        sink.qq(jt, kr, ip, v1c);
+                        sink.qq(jt, kr + n * ip, at(n, jt, kr, ip), v1c);
                         if !S::UP {
-                            sink.qq(jt, ip, kr, v1c); // column ip > kr, other joints
+                            sink.qq(jt, ip + n * kr, at(n, jt, ip, kr), v1c); // column ip > kr, other joints
                         }
                         let v1e = -ds[1]; // v–v 1E/2E
-                        sink.vv(jt, kr, ip, v1e);
+                        sink.vv(jt, kr + n * ip, at(n, jt, kr, ip), v1e);
                         if !S::UP {
-                            sink.vv(jt, ip, kr, v1e);
+                            sink.vv(jt, ip + n * kr, at(n, jt, ip, kr), v1e);
                         }
                         if !skip_j {
                             sink.qv(jt, kr, ip, -val); // cross 2A
@@ -870,12 +872,14 @@ fn backward_step_so_body<K: Kern, S: Sink>(
                         sink.qv(jt, ip, kr, ds[6] + dpk[1]); // cross 1C
                         if S::DM {
                             let vm = ds[8]; // ∂M 1C/2C
-                            sink.dm(kr, jt, ip, vm);
-                            sink.dm(jt, kr, ip, vm);
+                            sink.dm(kr, jt + n * ip, at(n, kr, jt, ip), vm);
+                            sink.dm(jt, kr + n * ip, at(n, jt, kr, ip), vm);
                         }
                     }
                 }
                 // Strict ancestors k ≺ j.
+                let (o_ij, o_i_j, o_ji) = (ip + n * n * jt, ip + n * jt, jt * n);
+                let (njt, nip) = (n * jt, n * ip);
                 for &kr in anc(j) {
                     debug_assert!(kr < dof.len());
                     // SAFETY: the ancestor lists hold DoF indices < nv (`SoData::new`, checked
@@ -888,22 +892,23 @@ fn backward_step_so_body<K: Kern, S: Sink>(
                     let dp = if k_root { [0.0; 3] } else { K::matvec(&rd, psidk) };
                     let ddd = K::matvec(&rz, psiddk);
                     let dpk = K::matvec(&rz, psk);
+                    let (nk, nnk) = (n * kr, n * n * kr);
                     // ∂²τ/∂q²: 1A + 2A mirror, 1B (+ 2B mirror if j ≺ i)
                     let val = dp[0] + ddd[0];
-                    sink.qq(ip, kr, jt, val); // (ip, kr, jt)
+                    sink.qq(ip, kr + njt, o_ij + nk, val); // (ip, kr, jt)
                     if !S::UP {
-                        sink.qq(ip, jt, kr, val); // (ip, jt, kr)
+                        sink.qq(ip, jt + nk, ip + n * jt + nnk, val); // (ip, jt, kr)
                     }
                     let wval = ds[0];
                     if !S::UP || j_is_i {
-                        sink.qq(kr, ip, jt, wval); // (kr, ip, jt)
+                        sink.qq(kr, ip + njt, kr + n * ip + n * n * jt, wval); // (kr, ip, jt)
                     }
                     // ∂²τ/∂q̇²: 1A + 2A mirror
                     let uval = ds[1];
                     if !S::UP {
-                        sink.vv(ip, jt, kr, uval); // (ip, jt, kr)
+                        sink.vv(ip, jt + nk, o_i_j + nnk, uval); // (ip, jt, kr)
                     }
-                    sink.vv(ip, kr, jt, uval); // (ip, kr, jt)
+                    sink.vv(ip, kr + njt, o_ij + nk, uval); // (ip, kr, jt)
                     // cross: 1A, 1B, 2B
                     let cval = dp[1];
                     // Upper halves: no ∂²τ/∂q∂q̇ columns of root DoFs.
@@ -915,26 +920,26 @@ fn backward_step_so_body<K: Kern, S: Sink>(
                     sink.qv(kr, jt, ip, ds[3]);
                     if S::DM {
                         // ∂M/∂q 1B + 2B mirror
-                        sink.dm(kr, ip, jt, ds[4]); // (kr, ip, jt)
-                        sink.dm(ip, kr, jt, ds[4]); // (ip, kr, jt)
+                        sink.dm(kr, ip + njt, kr + n * ip + n * n * jt, ds[4]); // (kr, ip, jt)
+                        sink.dm(ip, kr + njt, o_ij + nk, ds[4]); // (ip, kr, jt)
                     }
                     if j_is_i {
                         // v–v D (k ≺ j = i)
                         if !S::UP || ip <= jt {
-                            sink.vv(kr, ip, jt, ds[5]); // (kr, ip, jt)
+                            sink.vv(kr, ip + njt, kr + n * ip + n * n * jt, ds[5]); // (kr, ip, jt)
                         }
                     } else {
-                        sink.qq(kr, jt, ip, wval); // 1B mirror (2B): (kr, jt, ip)
+                        sink.qq(kr, jt + nip, kr + o_ji + n * n * ip, wval); // 1B mirror (2B): (kr, jt, ip)
                         let v1c = dp[2] + ddd[1]; // q–q 1C/2C
-                        sink.qq(jt, kr, ip, v1c); // (jt, kr, ip)
+                        sink.qq(jt, kr + nip, jt + nk + n * n * ip, v1c); // (jt, kr, ip)
                         if !S::UP {
-                            sink.qq(jt, ip, kr, v1c); // (jt, ip, kr)
-                            sink.vv(kr, ip, jt, ds[5]); // v–v 1C/2C: (kr, ip, jt)
+                            sink.qq(jt, ip + nk, jt + n * ip + nnk, v1c); // (jt, ip, kr)
+                            sink.vv(kr, ip + njt, kr + n * ip + n * n * jt, ds[5]); // v–v 1C/2C: (kr, ip, jt)
                         }
-                        sink.vv(kr, jt, ip, ds[5]); // (kr, jt, ip)
-                        sink.vv(jt, kr, ip, -uval); // v–v 1E/2E: (jt, kr, ip)
+                        sink.vv(kr, jt + nip, kr + o_ji + n * n * ip, ds[5]); // (kr, jt, ip)
+                        sink.vv(jt, kr + nip, jt + nk + n * n * ip, -uval); // v–v 1E/2E: (jt, kr, ip)
                         if !S::UP {
-                            sink.vv(jt, ip, kr, -uval); // (jt, ip, kr)
+                            sink.vv(jt, ip + nk, jt + n * ip + nnk, -uval); // (jt, ip, kr)
                         }
                         if !skip_k {
                             sink.qv(jt, kr, ip, -cval); // cross 2A
@@ -942,8 +947,8 @@ fn backward_step_so_body<K: Kern, S: Sink>(
                         sink.qv(jt, ip, kr, ds[6] + dpk[1]); // cross 1C
                         sink.qv(kr, ip, jt, ds[7]); // cross 2C
                         if S::DM {
-                            sink.dm(kr, jt, ip, ds[8]); // ∂M 1C/2C: (kr, jt, ip)
-                            sink.dm(jt, kr, ip, ds[8]); // (jt, kr, ip)
+                            sink.dm(kr, jt + nip, kr + o_ji + n * n * ip, ds[8]); // ∂M 1C/2C: (kr, jt, ip)
+                            sink.dm(jt, kr + nip, jt + nk + n * n * ip, ds[8]); // (jt, kr, ip)
                         }
                     }
                 }
