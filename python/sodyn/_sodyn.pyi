@@ -120,6 +120,11 @@ def impact_derivatives(model: Model, data: Data, q: ArrayLike, v_minus: ArrayLik
                        contacts: Sequence[Contact], restitution: float = 0.0,
                        order: int = 1) -> dict[str, Vector]: ...
 
+def clear_buffer_pool() -> int:
+    """Frees the recycled output memory kept for reuse (at most 512 MiB; large results are
+    returned over buffers that come back to this pool when the arrays are freed, so that later
+    calls do not fault in fresh pages). Returns the number of bytes freed."""
+
 # Batched entry points (wrapped by ``sodyn.batch``).
 def batch_rnea(model: Model, q: ArrayLike, v: ArrayLike, a: ArrayLike,
                threads: Optional[int] = None) -> Matrix: ...

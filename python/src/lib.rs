@@ -165,7 +165,7 @@ fn read_batch(
     n: usize,
     what: &str,
     count: Option<usize>,
-) -> PyResult<Vec<DVector<f64>>> {
+) -> PyResult<Rows> {
     let a = array(obj, name)?;
     let s = a.shape();
     if s.len() != 2 || s[1] != n || count.is_some_and(|c| c != s[0]) {
@@ -176,7 +176,33 @@ fn read_batch(
         )));
     }
     let v = a.as_array();
-    Ok((0..s[0]).map(|k| DVector::from_fn(n, |j, _| v[[k, j]])).collect())
+    // A pooled buffer (see `BufferPool`): large inputs would otherwise fault in fresh pages on
+    // every call.
+    let mut data = buffer_pool().take(v.len());
+    match v.as_slice() {
+        Some(flat) => data.copy_from_slice(flat),
+        None => data.iter_mut().zip(v.iter()).for_each(|(d, x)| *d = *x),
+    }
+    Ok(Rows { data, len: n, count: s[0] })
+}
+
+/// A stacked batch input: `count` rows of `len` entries, row-major.
+struct Rows {
+    data: Vec<f64>,
+    len: usize,
+    count: usize,
+}
+
+impl Drop for Rows {
+    fn drop(&mut self) {
+        buffer_pool().give(std::mem::take(&mut self.data));
+    }
+}
+
+impl Rows {
+    fn row(&self, k: usize) -> &[f64] {
+        &self.data[k * self.len..(k + 1) * self.len]
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -187,8 +213,119 @@ fn out_vec<'py>(py: Python<'py>, x: &DVector<f64>) -> Bound<'py, PyAny> {
     PyArray1::from_slice(py, x.as_slice()).into_any()
 }
 
+/// Output buffers of at least this many entries (64 KiB) come from [`BufferPool`].
+const POOL_MIN_LEN: usize = 8192;
+/// At most this many bytes wait in [`BufferPool`] for reuse.
+const POOL_MAX_BYTES: usize = 512 << 20;
+
+/// Recycled memory for large outputs. A large result is returned as a numpy array over a
+/// buffer owned by a [`PooledBuffer`]; when Python frees the array, the buffer comes back here
+/// and the next call of the same size reuses it. Memory the kernel has already mapped is
+/// reused, instead of a fresh allocation whose every page faults on first write (glibc hands
+/// freed multi-megabyte blocks back to the kernel: a call returning four 1 MB tensors took
+/// about 1,000 page faults, 20× the computation). Every returned array still owns its buffer
+/// alone: a buffer is reused only after its array (and every view of it) is gone.
+struct BufferPool {
+    /// Free buffers by length, and their total size in bytes.
+    free: Mutex<FreeLists>,
+}
+
+/// Free buffers by length, and their total size in bytes.
+type FreeLists = (HashMap<usize, Vec<Vec<f64>>>, usize);
+
+fn buffer_pool() -> &'static BufferPool {
+    static POOL: OnceLock<BufferPool> = OnceLock::new();
+    POOL.get_or_init(|| BufferPool { free: Mutex::new((HashMap::new(), 0)) })
+}
+
+impl BufferPool {
+    /// A buffer of `len` entries (previous contents, or zeros when newly allocated).
+    fn take(&self, len: usize) -> Vec<f64> {
+        let mut g = self.free.lock().unwrap_or_else(|e| e.into_inner());
+        let (map, bytes) = &mut *g;
+        if let Some(b) = map.get_mut(&len).and_then(Vec::pop) {
+            *bytes -= 8 * len;
+            return b;
+        }
+        drop(g);
+        vec![0.0; len]
+    }
+    /// Keeps `buf` for reuse (or frees it when the pool is full).
+    fn give(&self, buf: Vec<f64>) {
+        let len = buf.len();
+        let mut g = self.free.lock().unwrap_or_else(|e| e.into_inner());
+        let (map, bytes) = &mut *g;
+        if len >= POOL_MIN_LEN && *bytes + 8 * len <= POOL_MAX_BYTES {
+            *bytes += 8 * len;
+            map.entry(len).or_default().push(buf);
+        }
+    }
+}
+
+/// Frees the buffers waiting in the pool of recycled output memory (up to 512 MiB is kept
+/// for reuse by later calls) and returns the number of bytes freed.
+#[pyfunction]
+fn clear_buffer_pool() -> usize {
+    let mut g = buffer_pool().free.lock().unwrap_or_else(|e| e.into_inner());
+    let freed = g.1;
+    *g = (HashMap::new(), 0);
+    freed
+}
+
+/// The owner of a pooled output buffer: the base object of the numpy array over it.
+#[pyclass(module = "sodyn._sodyn", frozen)]
+struct PooledBuffer {
+    buf: Mutex<Vec<f64>>,
+}
+
+impl Drop for PooledBuffer {
+    fn drop(&mut self) {
+        let buf = std::mem::take(self.buf.get_mut().unwrap_or_else(|e| e.into_inner()));
+        buffer_pool().give(buf);
+    }
+}
+
+/// Column-major strides (in entries) of an array of shape `dims`.
+fn fortran_strides(dims: &[usize]) -> Vec<usize> {
+    let mut s = Vec::with_capacity(dims.len());
+    let mut acc = 1;
+    for &d in dims {
+        s.push(acc);
+        acc *= d;
+    }
+    s
+}
+
+/// A numpy array of shape `shape` and strides `strides` (entries) over `buf`, which the array
+/// owns (through a [`PooledBuffer`]).
+fn array_over<'py>(
+    py: Python<'py>,
+    buf: Vec<f64>,
+    shape: &[usize],
+    strides: &[usize],
+) -> PyResult<Bound<'py, PyAny>> {
+    use numpy::ndarray::{ArrayViewD, IxDyn, ShapeBuilder};
+    let owner = Bound::new(py, PooledBuffer { buf: Mutex::new(buf) })?;
+    let guard = owner.get().buf.lock().unwrap_or_else(|e| e.into_inner());
+    let view = ArrayViewD::from_shape(IxDyn(shape).strides(IxDyn(strides)), guard.as_slice())
+        .map_err(|e| value_err(format!("internal: output layout: {e}")))?;
+    // SAFETY: `owner` becomes the array's base object and owns the buffer; the buffer is
+    // neither moved nor reallocated until `owner` is dropped, which happens only after the
+    // array (its last reference) is freed; Rust touches it again only in `Drop`.
+    let arr = unsafe { PyArrayDyn::<f64>::borrow_from_array(&view, owner.clone().into_any()) };
+    drop(guard);
+    Ok(arr.into_any())
+}
+
 /// A fresh Fortran-order array of shape `dims` holding `data` (column-major).
 fn out_fortran<'py>(py: Python<'py>, dims: &[usize], data: &[f64]) -> Bound<'py, PyAny> {
+    if data.len() >= POOL_MIN_LEN {
+        let mut buf = buffer_pool().take(data.len());
+        buf.copy_from_slice(data);
+        if let Ok(a) = array_over(py, buf, dims, &fortran_strides(dims)) {
+            return a;
+        }
+    }
     // SAFETY (both blocks): `a` was just created here, uninitialised, and is not yet visible
     // to Python or to any other reference; a Fortran-order array of `dims` is contiguous with
     // `data.len()` entries, every one of which the copy writes before `a` is returned.
@@ -1274,62 +1411,82 @@ fn pool(threads: Option<i64>) -> PyResult<Arc<BatchPool>> {
     Ok(p)
 }
 
-/// A stacked output: a Fortran-order array of `dims + [N]`, transposed to `[N] + dims`, so
-/// that state `k`'s block is contiguous and column-major like sodyn's matrices. Returns the
-/// array and its buffer.
-fn stacked<'py>(
-    py: Python<'py>,
+/// A stacked output of `n` states of shape `dims` each, in one (pooled) buffer: state `k`'s
+/// block is contiguous and column-major like sodyn's matrices; returned as an array of shape
+/// `[n] + dims`.
+struct Stacked {
+    buf: Vec<f64>,
     n: usize,
-    dims: &[usize],
-) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyArrayDyn<f64>>)> {
-    let mut full = dims.to_vec();
-    full.push(n);
-    let a = PyArrayDyn::<f64>::zeros(py, full.as_slice(), true);
-    let mut axes = vec![dims.len()];
-    axes.extend(0..dims.len());
-    let t = a.call_method1("transpose", (PyTuple::new(py, axes)?,))?;
-    Ok((t, a))
+    dims: Vec<usize>,
 }
 
-/// Runs `f` for every state on the pool with the GIL released; `outs[o]` is split into one
-/// contiguous block of `block[o]` entries per state.
+fn stacked(n: usize, dims: &[usize]) -> Stacked {
+    let block: usize = dims.iter().product();
+    Stacked { buf: buffer_pool().take(n * block), n, dims: dims.to_vec() }
+}
+
+impl Stacked {
+    fn block(&self) -> usize {
+        self.dims.iter().product()
+    }
+    fn into_array(self, py: Python<'_>) -> PyResult<Bound<'_, PyAny>> {
+        let mut shape = vec![self.n];
+        shape.extend(&self.dims);
+        if self.buf.is_empty() {
+            // No entries (no state, or a zero-sized model): nothing to lay out.
+            return Ok(PyArrayDyn::<f64>::zeros(py, shape.as_slice(), false).into_any());
+        }
+        let mut strides = vec![self.block()];
+        strides.extend(fortran_strides(&self.dims));
+        array_over(py, self.buf, &shape, &strides)
+    }
+}
+
+/// Runs `f` for every state on the pool with the GIL released. Each thread copies state `k`'s
+/// rows of `inputs` into its own vectors (the second argument of `f`); each output of `outs`
+/// is split into one contiguous block per state.
 fn run_batch<W, F>(
     py: Python<'_>,
     threads: Option<i64>,
     workspace: W,
-    n: usize,
-    outs: &[&Bound<'_, PyArrayDyn<f64>>],
-    block: &[usize],
+    inputs: &[&Rows],
+    outs: &mut [&mut Stacked],
     f: F,
 ) -> PyResult<()>
 where
     W: Clone + Send,
-    F: Fn(&mut W, usize, &mut [&mut [f64]]) -> sodyn::Result<()> + Sync,
+    F: Fn(&mut W, &[DVector<f64>], &mut [&mut [f64]]) -> sodyn::Result<()> + Sync,
 {
+    let n = inputs.first().map_or(0, |r| r.count);
     let pool = pool(threads)?;
-    let mut bd = BatchData::from_workspace(pool, workspace);
-    // SAFETY: the arrays were created by `stacked` in the caller, are not yet visible to
-    // Python, and are distinct: the slices do not alias anything.
-    let mut bufs: Vec<&mut [f64]> =
-        outs.iter().map(|a| unsafe { a.as_slice_mut() }.expect("fresh contiguous array")).collect();
+    let state: Vec<DVector<f64>> = inputs.iter().map(|r| DVector::zeros(r.len)).collect();
+    let mut bd = BatchData::from_workspace(pool, (workspace, state));
     let mut per_state: Vec<Vec<&mut [f64]>> =
-        (0..n).map(|_| Vec::with_capacity(bufs.len())).collect();
-    for (b, &len) in bufs.iter_mut().zip(block) {
+        (0..n).map(|_| Vec::with_capacity(outs.len())).collect();
+    for o in outs.iter_mut() {
+        let len = o.block();
         if len == 0 {
             continue;
         }
-        for (k, chunk) in b.chunks_mut(len).enumerate() {
+        for (k, chunk) in o.buf.chunks_mut(len).enumerate() {
             per_state[k].push(chunk);
         }
     }
-    py.detach(|| map_states(&mut bd, &mut per_state, |w, k, o| f(w, k, o.as_mut_slice())))
-        .map_err(core_err)
+    py.detach(|| {
+        map_states(&mut bd, &mut per_state, |(w, st), k, o| {
+            for (x, r) in st.iter_mut().zip(inputs) {
+                x.as_mut_slice().copy_from_slice(r.row(k));
+            }
+            f(w, st, o.as_mut_slice())
+        })
+    })
+    .map_err(core_err)
 }
 
 macro_rules! batch_inputs {
     ($m:expr, $q:expr, $v:expr, $x:expr, $xname:expr) => {{
         let qs = read_batch($q, "q", $m.nq(), "nq", None)?;
-        let n = qs.len();
+        let n = qs.count;
         let vs = read_batch($v, "v", $m.nv(), "nv", Some(n))?;
         let xs = read_batch($x, $xname, $m.nv(), "nv", Some(n))?;
         (qs, vs, xs, n)
@@ -1350,12 +1507,12 @@ fn batch_rnea<'py>(
     let m = &model.m;
     let (qs, vs, xs, n) = batch_inputs!(m, q, v, a, "a");
     let nv = m.nv();
-    let (out, buf) = stacked(py, n, &[nv])?;
-    run_batch(py, threads, Data::new(m), n, &[&buf], &[nv], |d, k, o| {
-        o[0].copy_from_slice(algo::rnea(m, d, &qs[k], &vs[k], &xs[k], None)?.as_slice());
+    let mut buf = stacked(n, &[nv]);
+    run_batch(py, threads, Data::new(m), &[&qs, &vs, &xs], &mut [&mut buf], |d, st, o| {
+        o[0].copy_from_slice(algo::rnea(m, d, &st[0], &st[1], &st[2], None)?.as_slice());
         Ok(())
     })?;
-    Ok(out)
+    buf.into_array(py)
 }
 
 /// Batched ABA: `(N, nv)` accelerations.
@@ -1372,12 +1529,12 @@ fn batch_aba<'py>(
     let m = &model.m;
     let (qs, vs, xs, n) = batch_inputs!(m, q, v, tau, "tau");
     let nv = m.nv();
-    let (out, buf) = stacked(py, n, &[nv])?;
-    run_batch(py, threads, Data::new(m), n, &[&buf], &[nv], |d, k, o| {
-        o[0].copy_from_slice(algo::aba(m, d, &qs[k], &vs[k], &xs[k], None)?.as_slice());
+    let mut buf = stacked(n, &[nv]);
+    run_batch(py, threads, Data::new(m), &[&qs, &vs, &xs], &mut [&mut buf], |d, st, o| {
+        o[0].copy_from_slice(algo::aba(m, d, &st[0], &st[1], &st[2], None)?.as_slice());
         Ok(())
     })?;
-    Ok(out)
+    buf.into_array(py)
 }
 
 /// Batched nonlinear effects: `(N, nv)`.
@@ -1392,15 +1549,15 @@ fn batch_nonlinear_effects<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
     let qs = read_batch(q, "q", m.nq(), "nq", None)?;
-    let n = qs.len();
+    let n = qs.count;
     let vs = read_batch(v, "v", m.nv(), "nv", Some(n))?;
     let nv = m.nv();
-    let (out, buf) = stacked(py, n, &[nv])?;
-    run_batch(py, threads, Data::new(m), n, &[&buf], &[nv], |d, k, o| {
-        o[0].copy_from_slice(algo::nonlinear_effects(m, d, &qs[k], &vs[k])?.as_slice());
+    let mut buf = stacked(n, &[nv]);
+    run_batch(py, threads, Data::new(m), &[&qs, &vs], &mut [&mut buf], |d, st, o| {
+        o[0].copy_from_slice(algo::nonlinear_effects(m, d, &st[0], &st[1])?.as_slice());
         Ok(())
     })?;
-    Ok(out)
+    buf.into_array(py)
 }
 
 /// Batched CRBA: `(N, nv, nv)` mass matrices.
@@ -1414,13 +1571,13 @@ fn batch_crba<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
     let qs = read_batch(q, "q", m.nq(), "nq", None)?;
-    let (n, nv) = (qs.len(), m.nv());
-    let (out, buf) = stacked(py, n, &[nv, nv])?;
-    run_batch(py, threads, Data::new(m), n, &[&buf], &[nv * nv], |d, k, o| {
-        o[0].copy_from_slice(algo::crba(m, d, &qs[k])?.as_slice());
+    let (n, nv) = (qs.count, m.nv());
+    let mut buf = stacked(n, &[nv, nv]);
+    run_batch(py, threads, Data::new(m), &[&qs], &mut [&mut buf], |d, st, o| {
+        o[0].copy_from_slice(algo::crba(m, d, &st[0])?.as_slice());
         Ok(())
     })?;
-    Ok(out)
+    buf.into_array(py)
 }
 
 /// Batched IDSVA: `(dtau_dq, dtau_dv)`, each `(N, nv, nv)`.
@@ -1437,15 +1594,15 @@ fn batch_id_derivatives<'py>(
     let m = &model.m;
     let (qs, vs, xs, n) = batch_inputs!(m, q, v, a, "a");
     let nv = m.nv();
-    let (o1, b1) = stacked(py, n, &[nv, nv])?;
-    let (o2, b2) = stacked(py, n, &[nv, nv])?;
-    run_batch(py, threads, Data::new(m), n, &[&b1, &b2], &[nv * nv, nv * nv], |d, k, o| {
-        id_derivatives(m, d, &qs[k], &vs[k], &xs[k], None)?;
+    let mut b1 = stacked(n, &[nv, nv]);
+    let mut b2 = stacked(n, &[nv, nv]);
+    run_batch(py, threads, Data::new(m), &[&qs, &vs, &xs], &mut [&mut b1, &mut b2], |d, st, o| {
+        id_derivatives(m, d, &st[0], &st[1], &st[2], None)?;
         o[0].copy_from_slice(d.dtau_dq().as_slice());
         o[1].copy_from_slice(d.dtau_dv().as_slice());
         Ok(())
     })?;
-    PyTuple::new(py, [o1, o2])
+    PyTuple::new(py, [b1.into_array(py)?, b2.into_array(py)?])
 }
 
 /// Batched forward-dynamics derivatives: `(dqdd_dq, dqdd_dv, Minv)`, each `(N, nv, nv)`.
@@ -1462,18 +1619,24 @@ fn batch_fd_derivatives<'py>(
     let m = &model.m;
     let (qs, vs, xs, n) = batch_inputs!(m, q, v, tau, "tau");
     let nv = m.nv();
-    let (o1, b1) = stacked(py, n, &[nv, nv])?;
-    let (o2, b2) = stacked(py, n, &[nv, nv])?;
-    let (o3, b3) = stacked(py, n, &[nv, nv])?;
-    let s = nv * nv;
-    run_batch(py, threads, Data::new(m), n, &[&b1, &b2, &b3], &[s, s, s], |d, k, o| {
-        fd_derivatives(m, d, &qs[k], &vs[k], &xs[k], None)?;
-        o[0].copy_from_slice(d.dqdd_dq().as_slice());
-        o[1].copy_from_slice(d.dqdd_dv().as_slice());
-        o[2].copy_from_slice(d.minv().as_slice());
-        Ok(())
-    })?;
-    PyTuple::new(py, [o1, o2, o3])
+    let mut b1 = stacked(n, &[nv, nv]);
+    let mut b2 = stacked(n, &[nv, nv]);
+    let mut b3 = stacked(n, &[nv, nv]);
+    run_batch(
+        py,
+        threads,
+        Data::new(m),
+        &[&qs, &vs, &xs],
+        &mut [&mut b1, &mut b2, &mut b3],
+        |d, st, o| {
+            fd_derivatives(m, d, &st[0], &st[1], &st[2], None)?;
+            o[0].copy_from_slice(d.dqdd_dq().as_slice());
+            o[1].copy_from_slice(d.dqdd_dv().as_slice());
+            o[2].copy_from_slice(d.minv().as_slice());
+            Ok(())
+        },
+    )?;
+    PyTuple::new(py, [b1.into_array(py)?, b2.into_array(py)?, b3.into_array(py)?])
 }
 
 /// Batched IDSVA-SO: four `(N, nv, nv, nv)` tensors.
@@ -1490,24 +1653,25 @@ fn batch_id_so_derivatives<'py>(
     let m = &model.m;
     let (qs, vs, xs, n) = batch_inputs!(m, q, v, a, "a");
     let nv = m.nv();
-    let s = nv * nv * nv;
-    let mut outs = Vec::new();
-    let mut bufs = Vec::new();
-    for _ in 0..4 {
-        let (o, b) = stacked(py, n, &[nv, nv, nv])?;
-        outs.push(o);
-        bufs.push(b);
-    }
-    let refs: Vec<_> = bufs.iter().collect();
-    run_batch(py, threads, (Data::new(m), SoData::new(m)), n, &refs, &[s; 4], |(d, so), k, o| {
-        id_so_derivatives(m, d, so, &qs[k], &vs[k], &xs[k], None)?;
-        o[0].copy_from_slice(so.d2tau_dq2().as_slice());
-        o[1].copy_from_slice(so.d2tau_dv2().as_slice());
-        o[2].copy_from_slice(so.d2tau_dqdv().as_slice());
-        o[3].copy_from_slice(so.dm_dq().as_slice());
-        Ok(())
-    })?;
-    PyTuple::new(py, outs)
+    let mut bufs: Vec<Stacked> = (0..4).map(|_| stacked(n, &[nv, nv, nv])).collect();
+    let mut refs: Vec<&mut Stacked> = bufs.iter_mut().collect();
+    run_batch(
+        py,
+        threads,
+        (Data::new(m), SoData::new(m)),
+        &[&qs, &vs, &xs],
+        &mut refs,
+        |(d, so), st, o| {
+            id_so_derivatives(m, d, so, &st[0], &st[1], &st[2], None)?;
+            o[0].copy_from_slice(so.d2tau_dq2().as_slice());
+            o[1].copy_from_slice(so.d2tau_dv2().as_slice());
+            o[2].copy_from_slice(so.d2tau_dqdv().as_slice());
+            o[3].copy_from_slice(so.dm_dq().as_slice());
+            Ok(())
+        },
+    )?;
+    let arrays = bufs.into_iter().map(|b| b.into_array(py)).collect::<PyResult<Vec<_>>>()?;
+    PyTuple::new(py, arrays)
 }
 
 /// Batched forward-dynamics second order: four `(N, nv, nv, nv)` tensors.
@@ -1524,24 +1688,25 @@ fn batch_fd_so_derivatives<'py>(
     let m = &model.m;
     let (qs, vs, xs, n) = batch_inputs!(m, q, v, tau, "tau");
     let nv = m.nv();
-    let s = nv * nv * nv;
-    let mut outs = Vec::new();
-    let mut bufs = Vec::new();
-    for _ in 0..4 {
-        let (o, b) = stacked(py, n, &[nv, nv, nv])?;
-        outs.push(o);
-        bufs.push(b);
-    }
-    let refs: Vec<_> = bufs.iter().collect();
-    run_batch(py, threads, (Data::new(m), FdSoData::new(m)), n, &refs, &[s; 4], |(d, f), k, o| {
-        fd_so_derivatives(m, d, f, &qs[k], &vs[k], &xs[k], None)?;
-        o[0].copy_from_slice(f.d2qdd_dq2().as_slice());
-        o[1].copy_from_slice(f.d2qdd_dv2().as_slice());
-        o[2].copy_from_slice(f.d2qdd_dqdv().as_slice());
-        o[3].copy_from_slice(f.d2qdd_dtaudq().as_slice());
-        Ok(())
-    })?;
-    PyTuple::new(py, outs)
+    let mut bufs: Vec<Stacked> = (0..4).map(|_| stacked(n, &[nv, nv, nv])).collect();
+    let mut refs: Vec<&mut Stacked> = bufs.iter_mut().collect();
+    run_batch(
+        py,
+        threads,
+        (Data::new(m), FdSoData::new(m)),
+        &[&qs, &vs, &xs],
+        &mut refs,
+        |(d, f), st, o| {
+            fd_so_derivatives(m, d, f, &st[0], &st[1], &st[2], None)?;
+            o[0].copy_from_slice(f.d2qdd_dq2().as_slice());
+            o[1].copy_from_slice(f.d2qdd_dv2().as_slice());
+            o[2].copy_from_slice(f.d2qdd_dqdv().as_slice());
+            o[3].copy_from_slice(f.d2qdd_dtaudq().as_slice());
+            Ok(())
+        },
+    )?;
+    let arrays = bufs.into_iter().map(|b| b.into_array(py)).collect::<PyResult<Vec<_>>>()?;
+    PyTuple::new(py, arrays)
 }
 
 /// The compiled module `sodyn._sodyn`.
@@ -1554,6 +1719,7 @@ fn _sodyn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyJoint>()?;
     m.add_class::<PyContact>()?;
     m.add_function(wrap_pyfunction!(_model_from_description, m)?)?;
+    m.add_function(wrap_pyfunction!(clear_buffer_pool, m)?)?;
     m.add_function(wrap_pyfunction!(rnea, m)?)?;
     m.add_function(wrap_pyfunction!(crba, m)?)?;
     m.add_function(wrap_pyfunction!(aba, m)?)?;

@@ -117,3 +117,22 @@ def test_bad_out_is_a_value_error(fn):
     for out, msg in cases:
         with pytest.raises(ValueError, match=msg):
             fn(model, data, q, v, x, out=out)
+
+
+def test_pooled_outputs_are_not_reused_while_alive():
+    """Large results come from recycled buffers: a result stays intact while it (or a view of
+    it) is alive, however many calls follow, and the pool can be emptied."""
+    model = sodyn.Model.builtin("random_tree20_ff_s7")
+    data = model.create_data()
+    q, v, a, _ = _state(model, 8)
+    first = sodyn.id_so_derivatives(model, data, q, v, a)
+    keep = [t.copy() for t in first]
+    view = first[0][:, :, 1]
+    del first
+    for seed in range(9, 15):
+        q2, v2, a2, _ = _state(model, seed)
+        for _ in range(3):
+            sodyn.id_so_derivatives(model, data, q2, v2, a2)
+    np.testing.assert_array_equal(view, keep[0][:, :, 1])
+    assert sodyn.clear_buffer_pool() >= 0
+    assert sodyn.clear_buffer_pool() == 0
