@@ -126,3 +126,75 @@ fn contracted_inputs_are_checked() {
     let e = fd_so_contracted(&m, &mut d, &mut cd_other, &q, &v, &a, &w).unwrap_err();
     assert!(matches!(e, sodyn::Error::Workspace(_)), "{e}");
 }
+
+/// (model, contact frames): fixed and floating base, 1–4 contacts (as tests/contacts.rs).
+fn contact_cases() -> Vec<(Model, Vec<&'static str>)> {
+    vec![
+        (builtin::quadruped(), vec!["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"]),
+        (builtin::quadruped(), vec!["LF_FOOT", "RH_FOOT"]),
+        (builtin::serial_chain(6), vec!["ee"]),
+        (builtin::random_tree(8, 3, true), vec!["body_5", "body_7", "body_2"]),
+        (builtin::random_tree(10, 21, false), vec!["body_9", "body_4"]),
+    ]
+}
+
+fn contacts_of(m: &Model, frames: &[&str], rng: &mut Rng) -> Vec<sodyn::algo::Contact> {
+    frames
+        .iter()
+        .map(|f| {
+            let p = nalgebra::Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.05;
+            sodyn::algo::Contact::new(m, f, p).unwrap()
+        })
+        .collect()
+}
+
+/// `w_q̈ᵀ ∂²q̈ + w_λᵀ ∂²λ` of the KKT dynamics against the contraction of our dense tensors and
+/// of the hyper-dual oracle's (`reference::contact::kkt_so`).
+#[test]
+fn contracted_kkt_matches_dense_tensors_and_ad() {
+    use sodyn::reference::contact as oracle;
+    let names = ["C_qq", "C_vv", "C_qv", "C_tauq"];
+    let mut dense = names.map(Worst::new);
+    let mut ad = names.map(Worst::new);
+    let mut rng = Rng::new(41);
+    for (m, frames) in contact_cases() {
+        let contacts = contacts_of(&m, &frames, &mut rng);
+        let (q, v, tau) = random_state(&m, &mut rng);
+        let nc3 = 3 * contacts.len();
+        let (wq, wl) = (weight(m.nv(), &mut rng), weight(nc3, &mut rng));
+        let mut d = Data::new(&m);
+        let cd = ContactData::new(&m, &contacts).unwrap();
+        let mut kd = KktData::new(&m, cd.clone());
+        let mut kc = KktContracted::new(&m, &kd);
+        kkt_so_contracted(&m, &mut d, &mut kd, &mut kc, &q, &v, &tau, &wq, &wl).unwrap();
+        let got = [kc.c_qq().clone(), kc.c_vv().clone(), kc.c_qv().clone(), kc.c_tauq().clone()];
+        let fo = kd.dqdd_dq().clone();
+        let mut full = KktData::new(&m, cd).with_second_order(&m);
+        kkt_so_derivatives(&m, &mut d, &mut full, &q, &v, &tau).unwrap();
+        assert!(rel_err_mat(&fo, full.dqdd_dq()) < 1e-13, "first order in kd");
+        let t = full.so().unwrap();
+        let ours = [
+            (t.d2qdd_dq2(), t.d2lambda_dq2()),
+            (t.d2qdd_dv2(), t.d2lambda_dv2()),
+            (t.d2qdd_dqdv(), t.d2lambda_dqdv()),
+            (t.d2qdd_dtaudq(), t.d2lambda_dtaudq()),
+        ];
+        let at = format!("{} with {} contacts", m.name(), contacts.len());
+        for ((wst, (tq, tl)), g) in dense.iter_mut().zip(ours).zip(&got) {
+            wst.add(rel_err_mat(g, &(contract(tq, &wq) + contract(tl, &wl))), &at);
+        }
+        let r = oracle::kkt_so(&m, q.as_slice(), v.as_slice(), tau.as_slice(), &contacts);
+        let refs = [
+            (&r.d2qdd_dq2, &r.d2lambda_dq2),
+            (&r.d2qdd_dv2, &r.d2lambda_dv2),
+            (&r.d2qdd_dqdv, &r.d2lambda_dqdv),
+            (&r.d2qdd_dtaudq, &r.d2lambda_dtaudq),
+        ];
+        for ((wst, (tq, tl)), g) in ad.iter_mut().zip(refs).zip(&got) {
+            wst.add(rel_err_mat(g, &(contract(tq, &wq) + contract(tl, &wl))), &at);
+        }
+    }
+    for x in dense.iter().chain(&ad) {
+        x.check(1e-11);
+    }
+}

@@ -12,11 +12,11 @@
 
 use super::contact::{
     ContactData, accel_derivatives_t, add_qdd_to_path_acc, base, factor_delassus, factor_kkt,
-    fill_rinv, g_matrix, path_kinematics, sub_djtl_dq_strided, update_points,
+    fill_rinv, g_matrix, g_matrix_split, path_kinematics, sub_djtl_dq_strided, update_points,
 };
 use super::contact_kin::{Dir, dap_dq, dap_dv, djtl_dq};
 use super::id_fo::id_derivatives_unchecked;
-use super::id_so::{SoData, id_so_unchecked};
+use super::id_so::{SoData, id_so_contract_unchecked, id_so_unchecked};
 use crate::algo::Data;
 use crate::algo::internal::{
     crba_unchecked, ltl_in_place, ltl_solve_fd, ltl_solve_rows_desc, rnea_unchecked,
@@ -532,4 +532,171 @@ pub(crate) fn premultiply<S>(
     let (on, _, _) = out.dims();
     let mut ov = nalgebra::DMatrixViewMut::from_slice(out.as_mut_slice(), on, n2 * n3);
     gemm(-1.0, a, &view, 0.0, &mut ov);
+}
+
+/// Results and workspace of [`kkt_so_contracted`] for one model and contact set (`O(nv²)`,
+/// allocated once).
+#[derive(Clone, Debug)]
+pub struct KktContracted {
+    so: SoData,
+    qq: DMatrix<f64>,
+    vv: DMatrix<f64>,
+    qv: DMatrix<f64>,
+    tq: DMatrix<f64>,
+    /// `ω = (w_q̈, w_λ)` and the adjoint `ζ = R_y⁻ᵀ ω`.
+    omega: DVector<f64>,
+    zeta: DVector<f64>,
+    /// `A = [G_top(ζ)ᵀ | −G_bottom(ζ)ᵀ]` (`nv × (nv + 3 nc)`), with `ζᵀ G(z) = (A z)ᵀ`.
+    a: DMatrix<f64>,
+    /// `A Y` for one of `Y_q`, `Y_v`, `Y_τ`.
+    h: DMatrix<f64>,
+}
+
+impl KktContracted {
+    /// Workspace for `model` and the contacts of `kd`.
+    pub fn new(model: &Model, kd: &KktData) -> Self {
+        let (n, m) = (model.nv, kd.cd.dim());
+        let z = || DMatrix::zeros(n, n);
+        Self {
+            so: SoData::workspace_only(model),
+            qq: z(),
+            vv: z(),
+            qv: z(),
+            tq: z(),
+            omega: DVector::zeros(n + m),
+            zeta: DVector::zeros(n + m),
+            a: DMatrix::zeros(n, n + m),
+            h: z(),
+        }
+    }
+    /// `C_qq[(j, k)] = ∂/∂q_k (∂(ωᵀy)/∂q_j)` with `ωᵀy = w_q̈ᵀ q̈ + w_λᵀ λ`.
+    pub fn c_qq(&self) -> &DMatrix<f64> {
+        &self.qq
+    }
+    /// `C_vv[(j, k)] = ∂²(ωᵀy)/∂q̇_j∂q̇_k`.
+    pub fn c_vv(&self) -> &DMatrix<f64> {
+        &self.vv
+    }
+    /// `C_qv[(j, k)] = ∂/∂q̇_k (∂(ωᵀy)/∂q_j)`.
+    pub fn c_qv(&self) -> &DMatrix<f64> {
+        &self.qv
+    }
+    /// `C_τq[(j, k)] = ∂/∂q_k (∂(ωᵀy)/∂τ_j)`.
+    pub fn c_tauq(&self) -> &DMatrix<f64> {
+        &self.tq
+    }
+}
+
+/// The Hessians of `ωᵀy = w_q̈ᵀ q̈ + w_λᵀ λ` of the KKT dynamics at `(q, q̇, τ)`, without an
+/// `nv³` tensor; also the first-order derivatives into `kd` (as [`kkt_derivatives`]).
+///
+/// Inputs: the state, `w_qdd` (length `nv`), `w_lambda` (length `3 nc`). Outputs: `kc.c_qq()`,
+/// `kc.c_vv()`, `kc.c_qv()`, `kc.c_tauq()`. Contracting `∂²y/∂u∂w = −R_y⁻¹ (R_uw + G(∂y/∂w)[·, u]
+/// + G(∂y/∂u)[·, w])` (module documentation) with `ω`:
+/// 1. first order (`Y_q, Y_v, Y_τ` = `[∂q̈/∂x; ∂λ/∂x]`) and `R_y⁻¹`;
+/// 2. the adjoint `ζ = R_y⁻ᵀ ω`;
+/// 3. `ζᵀ R_uw`: IDSVA-SO at `(q, q̇, q̈)` contracted with `ζ₁` as it is produced, minus
+///    `ζ₁ᵀ ∂²(J_cᵀλ)/∂q²`, plus `ζ₂ᵀ` times the contact-point acceleration Hessians;
+/// 4. `ζᵀ G(z) = (A z)ᵀ` with `A = [(∂(Mζ₁)/∂q + ∂(J_cᵀζ₂)/∂q)ᵀ | −(∂(J_c ζ₁)/∂q)ᵀ]`
+///    (`M` symmetric; one `G` evaluation);
+/// 5. `C_qq = −(ζᵀR_qq + A Y_q + (A Y_q)ᵀ)`, `C_vv = −ζᵀR_vv`, `C_qv = −(ζᵀR_qv + A Y_v)`,
+///    `C_τq = −(A Y_τ)ᵀ`.
+///
+/// # Errors
+/// As [`kkt_derivatives`]; weights of the wrong length or not finite; `kc` made for another
+/// model or contact count.
+#[allow(clippy::too_many_arguments)]
+pub fn kkt_so_contracted(
+    model: &Model,
+    data: &mut Data,
+    kd: &mut KktData,
+    kc: &mut KktContracted,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+    w_qdd: &DVector<f64>,
+    w_lambda: &DVector<f64>,
+) -> Result<()> {
+    check_inputs(model, data, kd, q, v, tau)?;
+    let (n, m) = (model.nv, kd.cd.dim());
+    check_vec("w_qdd", w_qdd, n)?;
+    check_vec("w_lambda", w_lambda, m)?;
+    kc.so.check_workspace(model, "KktContracted")?;
+    if kc.omega.len() != n + m {
+        return Err(crate::error::Error::Workspace(format!(
+            "KktContracted was made for nv + 3 nc = {} rows, this KktData has {}; make it with \
+             KktContracted::new for this KktData",
+            kc.omega.len(),
+            n + m
+        )));
+    }
+    // 1. First order, with the blocks of R⁻¹.
+    solve_unchecked(model, data, kd, q, v, tau, true)?;
+    let qdd = std::mem::replace(&mut kd.qdd, DVector::zeros(0));
+    id_derivatives_unchecked(model, data, q, v, &qdd, None);
+    kd.qdd = qdd;
+    first_order_by_solve(model, data, kd);
+    update_points(model, data, &mut kd.cd, -model.gravity);
+    fill_rinv(&mut kd.cd);
+    // 2. ζ = R⁻ᵀ ω.
+    kc.omega.rows_mut(0, n).copy_from(w_qdd);
+    kc.omega.rows_mut(n, m).copy_from(w_lambda);
+    kc.zeta.gemv_tr(1.0, &kd.cd.rinv, &kc.omega, 0.0);
+    // 3. ζᵀ R_uw: the ID part, contracted as IDSVA-SO produces it (at q̈; the pass also
+    //    refreshes the world-frame quantities of `data` at the same state) ...
+    let KktContracted { so, qq, vv, qv, tq, zeta, a, h, .. } = kc;
+    {
+        let z1 = &zeta.as_slice()[..n];
+        let (sq, sv, sx) = (qq.as_mut_slice(), vv.as_mut_slice(), qv.as_mut_slice());
+        id_so_contract_unchecked(model, data, so, q, v, &kd.qdd, z1, sq, sv, sx);
+    }
+    // ... minus ζ₁ᵀ ∂²(J_cᵀλ)/∂q², plus ζ₂ᵀ times the contact-point acceleration Hessians.
+    {
+        let b = base(model, data, &kd.cd);
+        for (c, path) in kd.cd.paths.iter().enumerate() {
+            let body = *path.joints.last().expect("path");
+            let lam = Vector3::new(kd.lambda[3 * c], kd.lambda[3 * c + 1], kd.lambda[3 * c + 2]);
+            let z2 = Vector3::new(zeta[n + 3 * c], zeta[n + 3 * c + 1], zeta[n + 3 * c + 2]);
+            for &k in &path.dofs {
+                for &l in &path.dofs {
+                    let mut x_sum = 0.0;
+                    for &x in &path.dofs {
+                        x_sum += zeta[x] * djtl_dq(&b, &path.p, &lam, x, l, Dir::Q(k)).1;
+                    }
+                    let aqq = dap_dq(&b, body, &path.p, l, Dir::Q(k)).d;
+                    let avv = dap_dv(&b, body, &path.p, l, Dir::V(k)).d;
+                    let aqv = dap_dq(&b, body, &path.p, l, Dir::V(k)).d;
+                    qq[(l, k)] += z2.dot(&Vector3::from(aqq)) - x_sum;
+                    vv[(l, k)] += z2.dot(&Vector3::from(avv));
+                    qv[(l, k)] += z2.dot(&Vector3::from(aqv));
+                }
+            }
+        }
+    }
+    // 4. A from one G evaluation: G(ζ₁; −ζ₂) = [∂(Mζ₁)/∂q + ∂(J_cᵀζ₂)/∂q ; ∂(J_c ζ₁)/∂q].
+    {
+        let (z1, z2) = zeta.as_slice().split_at(n);
+        let neg_z2: Vec<f64> = z2.iter().map(|x| -x).collect();
+        g_matrix_split(model, data, &mut kd.cd, z1, &neg_z2, z1);
+        let g = &kd.cd.g;
+        a.columns_mut(0, n).copy_from(&g.rows(0, n).transpose());
+        a.columns_mut(n, m).copy_from(&(-g.rows(n, m).transpose()));
+    }
+    // 5. The product terms and the signs.
+    let y = |top: &DMatrix<f64>, bottom: &DMatrix<f64>, h: &mut DMatrix<f64>| {
+        h.gemm(1.0, &a.columns(0, n), top, 0.0);
+        h.gemm(1.0, &a.columns(n, m), bottom, 1.0);
+    };
+    y(&kd.dqdd_dq, &kd.dlambda_dq, h);
+    *qq += &*h;
+    qq.gemm_tr(1.0, &*h, &DMatrix::<f64>::identity(n, n), 1.0);
+    qq.neg_mut();
+    vv.neg_mut();
+    y(&kd.dqdd_dv, &kd.dlambda_dv, h);
+    *qv += &*h;
+    qv.neg_mut();
+    y(&kd.dqdd_dtau, &kd.dlambda_dtau, h);
+    tq.copy_from(&h.transpose());
+    tq.neg_mut();
+    Ok(())
 }

@@ -25,6 +25,9 @@ pub use id_so::{SoData, id_so_derivatives};
 pub use impact::{
     ImpactData, ImpactSo, impact_derivatives, impact_dynamics, impact_so_derivatives,
 };
-pub use kkt::{KktData, KktSo, kkt_derivatives, kkt_dynamics, kkt_so_derivatives};
+pub use kkt::{
+    KktContracted, KktData, KktSo, kkt_derivatives, kkt_dynamics, kkt_so_contracted,
+    kkt_so_derivatives,
+};
 pub use zero::{idfoza, idsoza};
 pub(crate) mod contact_kin;
