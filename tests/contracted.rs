@@ -198,3 +198,53 @@ fn contracted_kkt_matches_dense_tensors_and_ad() {
         x.check(1e-11);
     }
 }
+
+/// `w_v⁺ᵀ ∂²q̇⁺ + w_Λᵀ ∂²λ̂` of the impact dynamics (restitution 0 and 0.4) against the
+/// contraction of our dense tensors and of the hyper-dual oracle's.
+#[test]
+fn contracted_impact_matches_dense_tensors_and_ad() {
+    use sodyn::reference::contact as oracle;
+    let names = ["C_qq", "C_qvminus"];
+    let mut dense = names.map(Worst::new);
+    let mut ad = names.map(Worst::new);
+    let mut rng = Rng::new(43);
+    for (m, frames) in contact_cases() {
+        for e in [0.0, 0.4] {
+            let contacts = contacts_of(&m, &frames, &mut rng);
+            let (q, v, _) = random_state(&m, &mut rng);
+            let nc3 = 3 * contacts.len();
+            let (wv, wl) = (weight(m.nv(), &mut rng), weight(nc3, &mut rng));
+            let mut d = Data::new(&m);
+            let cd = ContactData::new(&m, &contacts).unwrap();
+            let mut im = ImpactData::new(&m, cd.clone());
+            im.set_restitution(e).unwrap();
+            let mut ic = ImpactContracted::new(&m, &im);
+            impact_so_contracted(&m, &mut d, &mut im, &mut ic, &q, &v, &wv, &wl).unwrap();
+            let got = [ic.c_qq().clone(), ic.c_qvminus().clone()];
+            let mut full = ImpactData::new(&m, cd).with_second_order(&m);
+            full.set_restitution(e).unwrap();
+            impact_so_derivatives(&m, &mut d, &mut full, &q, &v).unwrap();
+            assert!(rel_err_mat(im.dvplus_dq(), full.dvplus_dq()) < 1e-13, "first order in im");
+            let t = full.so().unwrap();
+            let ours = [
+                (t.d2vplus_dq2(), t.d2impulse_dq2()),
+                (t.d2vplus_dqdvminus(), t.d2impulse_dqdvminus()),
+            ];
+            let at = format!("{} with {} contacts, e = {e}", m.name(), contacts.len());
+            for ((wst, (tv, tl)), g) in dense.iter_mut().zip(ours).zip(&got) {
+                wst.add(rel_err_mat(g, &(contract(tv, &wv) + contract(tl, &wl))), &at);
+            }
+            let r = oracle::impact_so(&m, q.as_slice(), v.as_slice(), &contacts, e);
+            let refs = [
+                (&r.d2vplus_dq2, &r.d2impulse_dq2),
+                (&r.d2vplus_dqdvminus, &r.d2impulse_dqdvminus),
+            ];
+            for ((wst, (tv, tl)), g) in ad.iter_mut().zip(refs).zip(&got) {
+                wst.add(rel_err_mat(g, &(contract(tv, &wv) + contract(tl, &wl))), &at);
+            }
+        }
+    }
+    for x in dense.iter().chain(&ad) {
+        x.check(1e-11);
+    }
+}

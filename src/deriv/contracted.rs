@@ -120,7 +120,7 @@ pub fn id_so_contracted(
     cd.check(model)?;
     let ContractedData { so, qq, vv, qv, mq, .. } = cd;
     let (qq, vv, qv) = (qq.as_mut_slice(), vv.as_mut_slice(), qv.as_mut_slice());
-    id_so_contract_unchecked(model, data, so, q, v, a, w.as_slice(), qq, vv, qv);
+    id_so_contract_unchecked(model, data, so, q, v, a, -model.gravity, w.as_slice(), qq, vv, qv);
     // C_Mq = ∂(M w)/∂q.
     idfoza(model, data, q, w, mq)
 }
@@ -152,7 +152,7 @@ pub fn fd_so_contracted(
     mu.gemv(1.0, minv, w, 0.0);
     // 2. The ID contractions at (q, q̇, q̈) with the weight μ.
     let (sq, sv, sx) = (qq.as_mut_slice(), vv.as_mut_slice(), qv.as_mut_slice());
-    id_so_contract_unchecked(model, data, so, q, v, qdd, mu.as_slice(), sq, sv, sx);
+    id_so_contract_unchecked(model, data, so, q, v, qdd, -model.gravity, mu.as_slice(), sq, sv, sx);
     // 3. D = ∂(M μ)/∂q (into `tq`, overwritten in step 4).
     idfoza(model, data, q, mu, tq)?;
     // 4. C_qq = −(C^ID_qq + Dᵀ X_q + X_qᵀ D), C_vv = −C^ID_vv, C_qv = −(C^ID_qv + Dᵀ X_v),

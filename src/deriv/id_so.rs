@@ -264,7 +264,8 @@ fn backward_pass<S: Sink>(model: &Model, data: &mut Data, ws: &SoWs<'_>, sink: &
 
 /// IDSVA-SO contracted with `w` over the output index as its entries are produced, without
 /// forming a tensor: `C[j + n k] = Σ_i w_i T[(i, j, k)]` for `∂²τ/∂q²` (`cqq`), `∂²τ/∂q̇²`
-/// (`cvv`) and `∂²τ/∂q∂q̇` (`cqv`), at `(q, q̇, q̈)` with base acceleration `−a_g`; also the
+/// (`cvv`) and `∂²τ/∂q∂q̇` (`cqv`), at `(q, q̇, q̈)` with base acceleration `a0` (`−a_g`, or
+/// zero for IDSOZA); also the
 /// first-order derivatives into `data`. `so` supplies only its per-DoF workspace (its tensors
 /// may be empty). The caller checks the inputs, `w.len() = nv` and `c*.len() = nv²`.
 #[allow(clippy::too_many_arguments)]
@@ -275,6 +276,7 @@ pub(crate) fn id_so_contract_unchecked(
     q: &DVector<f64>,
     v: &DVector<f64>,
     a: &DVector<f64>,
+    a0: Motion,
     w: &[f64],
     cqq: &mut [f64],
     cvv: &mut [f64],
@@ -282,7 +284,7 @@ pub(crate) fn id_so_contract_unchecked(
 ) {
     let n = model.nv;
     assert!(w.len() == n && cqq.len() == n * n && cvv.len() == n * n && cqv.len() == n * n);
-    forward_pass_world(model, data, q, v, a, None, -model.gravity);
+    forward_pass_world(model, data, q, v, a, None, a0);
     fill_dof(data, so);
     cqq.fill(0.0);
     cvv.fill(0.0);

@@ -14,7 +14,7 @@ use super::contact::{
     g_matrix_split, padded_rows, path_kinematics, sub_djtl_dq_tree, transpose_into, update_points,
 };
 use super::contact_kin::{Dir, djtl_dq, djz_dq};
-use super::id_so::{SoData, id_so_unchecked};
+use super::id_so::{SoData, id_so_contract_unchecked, id_so_unchecked};
 use super::kkt::{copy_rows_zero_rest, premultiply};
 use super::zero::idfoza_core;
 use crate::algo::Data;
@@ -438,5 +438,181 @@ fn so_inner(
     premultiply(&ri.rows(n, m), rqq, &mut so.d2impulse_dq2);
     premultiply(&ri.rows(0, n), rqv, &mut so.d2vplus_dqdvminus);
     premultiply(&ri.rows(n, m), rqv, &mut so.d2impulse_dqdvminus);
+    Ok(())
+}
+
+/// Results and workspace of [`impact_so_contracted`] for one model and contact set (`O(nv²)`,
+/// allocated once).
+#[derive(Clone, Debug)]
+pub struct ImpactContracted {
+    so: SoData,
+    qq: DMatrix<f64>,
+    qv: DMatrix<f64>,
+    /// Scratch for the contracted IDSOZA's unused `q̇` blocks.
+    scratch: [DMatrix<f64>; 2],
+    omega: DVector<f64>,
+    zeta: DVector<f64>,
+    /// `D = ∂(M ζ₁)/∂q`, `K = ∂(J_cᵀ ζ₂)/∂q` (`nv × nv`), `E = ∂(J_c ζ₁)/∂q` (`3 nc × nv`).
+    d: DMatrix<f64>,
+    k: DMatrix<f64>,
+    e: DMatrix<f64>,
+    /// `Y_v − I` and `Y_v + e I` (the `z_M` and `z_J` of the `q̇⁻` product terms).
+    zm: DMatrix<f64>,
+    zj: DMatrix<f64>,
+    h: DMatrix<f64>,
+}
+
+impl ImpactContracted {
+    /// Workspace for `model` and the contacts of `im`.
+    pub fn new(model: &Model, im: &ImpactData) -> Self {
+        let (n, m) = (model.nv, im.cd.dim());
+        let z = || DMatrix::zeros(n, n);
+        Self {
+            so: SoData::workspace_only(model),
+            qq: z(),
+            qv: z(),
+            scratch: [z(), z()],
+            omega: DVector::zeros(n + m),
+            zeta: DVector::zeros(n + m),
+            d: z(),
+            k: z(),
+            e: DMatrix::zeros(m, n),
+            zm: z(),
+            zj: z(),
+            h: z(),
+        }
+    }
+    /// `C_qq[(j, k)] = ∂/∂q_k (∂(ωᵀy)/∂q_j)` with `ωᵀy = w_v⁺ᵀ q̇⁺ + w_Λᵀ λ̂`.
+    pub fn c_qq(&self) -> &DMatrix<f64> {
+        &self.qq
+    }
+    /// `C_qv[(j, k)] = ∂/∂q̇⁻_k (∂(ωᵀy)/∂q_j)` (`y` is linear in `q̇⁻`: no `q̇⁻q̇⁻` block).
+    pub fn c_qvminus(&self) -> &DMatrix<f64> {
+        &self.qv
+    }
+}
+
+/// The Hessians of `ωᵀy = w_v⁺ᵀ q̇⁺ + w_Λᵀ λ̂` of the impact dynamics at `(q, q̇⁻)`, without an
+/// `nv³` tensor; also the first-order derivatives into `im` (as [`impact_derivatives`]).
+///
+/// With `ζ = R_y⁻ᵀ ω` (the module's residual `R`) and `G(z_M, z₂, z_J) = [∂(M z_M)/∂q −
+/// ∂(J_cᵀ z₂)/∂q ; ∂(J_c z_J)/∂q]`, `ζᵀ G(z_M, z₂, z_J) = z_Mᵀ D + z_Jᵀ K − z₂ᵀ E` (row) with
+/// `D = ∂(Mζ₁)/∂q`, `K = ∂(J_cᵀζ₂)/∂q`, `E = ∂(J_c ζ₁)/∂q` (`M` symmetric):
+/// 1. first order and `R_y⁻¹`; `ζ = R_y⁻ᵀ ω`;
+/// 2. `ζᵀ R_qq`: IDSOZA of `Δv = q̇⁺ − q̇⁻` contracted with `ζ₁`, minus `ζ₁ᵀ ∂²(J_cᵀλ̂)/∂q²`,
+///    plus `ζ₂ᵀ ∂²(J_c w)/∂q²` (`w = q̇⁺ + e q̇⁻`);
+/// 3. `H_q = (D + K)ᵀ Y_q − Eᵀ Y_Λq` (`Y_q = ∂q̇⁺/∂q`, `Y_Λq = ∂λ̂/∂q`);
+/// 4. `C_qq = −(ζᵀR_qq + H_q + H_qᵀ)`, `C_qv = −(Dᵀ (Y_v − I) + Kᵀ (Y_v + e I) − Eᵀ Y_Λv)`.
+///
+/// # Errors
+/// As [`impact_derivatives`]; weights of the wrong length or not finite; `ic` made for another
+/// model or contact count.
+#[allow(clippy::too_many_arguments)]
+pub fn impact_so_contracted(
+    model: &Model,
+    data: &mut Data,
+    im: &mut ImpactData,
+    ic: &mut ImpactContracted,
+    q: &DVector<f64>,
+    vminus: &DVector<f64>,
+    w_vplus: &DVector<f64>,
+    w_impulse: &DVector<f64>,
+) -> Result<()> {
+    let (n, m) = (model.nv, im.cd.dim());
+    check_vec("w_vplus", w_vplus, n)?;
+    check_vec("w_impulse", w_impulse, m)?;
+    ic.so.check_workspace(model, "ImpactContracted")?;
+    if ic.omega.len() != n + m {
+        return Err(Error::Workspace(format!(
+            "ImpactContracted was made for nv + 3 nc = {} rows, this ImpactData has {}; make it \
+             with ImpactContracted::new for this ImpactData",
+            ic.omega.len(),
+            n + m
+        )));
+    }
+    // 1. First order, R⁻¹, ζ.
+    solve(model, data, im, q, vminus, true)?;
+    first_order(model, data, im);
+    update_points(model, data, &mut im.cd, Motion::zero());
+    fill_rinv(&mut im.cd);
+    ic.omega.rows_mut(0, n).copy_from(w_vplus);
+    ic.omega.rows_mut(n, m).copy_from(w_impulse);
+    ic.zeta.gemv_tr(1.0, &im.cd.rinv, &ic.omega, 0.0);
+    let ImpactContracted { so, qq, qv, scratch, zeta, d, k, e, zm, zj, h, .. } = ic;
+    let (z1, z2) = zeta.as_slice().split_at(n);
+    // 2. IDSOZA(Δv) contracted with ζ₁ (q̇ = 0, no gravity) ...
+    {
+        let [s1, s2] = scratch;
+        let (sq, s1, s2) = (qq.as_mut_slice(), s1.as_mut_slice(), s2.as_mut_slice());
+        id_so_contract_unchecked(
+            model,
+            data,
+            so,
+            q,
+            &im.zero,
+            &im.dv,
+            Motion::zero(),
+            z1,
+            sq,
+            s1,
+            s2,
+        );
+    }
+    // ... minus ζ₁ᵀ ∂²(J_cᵀλ̂)/∂q², plus ζ₂ᵀ ∂²(J_c w)/∂q².
+    let mut zc = std::mem::take(&mut im.cd.zc);
+    {
+        let b = base(model, data, &im.cd);
+        for (c, path) in im.cd.paths.iter().enumerate() {
+            let body = *path.joints.last().expect("path");
+            let lam = Vector3::new(im.impulse[3 * c], im.impulse[3 * c + 1], im.impulse[3 * c + 2]);
+            let zc2 = Vector3::new(z2[3 * c], z2[3 * c + 1], z2[3 * c + 2]);
+            for &j in &path.joints {
+                let parent = model.parents[j];
+                let mut zjm = if parent == 0 { Motion::zero() } else { zc[parent] };
+                let iv = model.idx_v[j];
+                for x in iv..iv + model.nvs[j] {
+                    zjm += data.s_world[x] * im.w[x];
+                }
+                zc[j] = zjm;
+            }
+            for &kk in &path.dofs {
+                for &l in &path.dofs {
+                    let mut x_sum = 0.0;
+                    for &x in &path.dofs {
+                        x_sum += z1[x] * djtl_dq(&b, &path.p, &lam, x, l, Dir::Q(kk)).1;
+                    }
+                    let dd = djz_dq(&b, &zc, body, &path.p, l, Dir::Q(kk)).d;
+                    qq[(l, kk)] += zc2.dot(&Vector3::from(dd)) - x_sum;
+                }
+            }
+        }
+    }
+    im.cd.zc = zc;
+    // D and E from one G evaluation with z₂ = 0, K from one with z_M = z_J = 0, z₂ = −ζ₂.
+    let zeros_m = vec![0.0; m];
+    g_matrix_split(model, data, &mut im.cd, z1, &zeros_m, z1);
+    d.copy_from(&im.cd.g.rows(0, n));
+    e.copy_from(&im.cd.g.rows(n, m));
+    let neg_z2: Vec<f64> = z2.iter().map(|x| -x).collect();
+    let zeros_n = vec![0.0; n];
+    g_matrix_split(model, data, &mut im.cd, &zeros_n, &neg_z2, &zeros_n);
+    k.copy_from(&im.cd.g.rows(0, n));
+    // 3.–4. The product terms and the signs.
+    h.gemm_tr(1.0, &*d, &im.dvplus_dq, 0.0);
+    h.gemm_tr(1.0, &*k, &im.dvplus_dq, 1.0);
+    h.gemm_tr(-1.0, &*e, &im.dimpulse_dq, 1.0);
+    *qq += &*h;
+    *qq += &h.transpose();
+    qq.neg_mut();
+    zm.copy_from(&im.dvplus_dvminus);
+    zj.copy_from(&im.dvplus_dvminus);
+    for i in 0..n {
+        zm[(i, i)] -= 1.0;
+        zj[(i, i)] += im.restitution;
+    }
+    qv.gemm_tr(1.0, &*d, &*zm, 0.0);
+    qv.gemm_tr(1.0, &*k, &*zj, 1.0);
+    qv.gemm_tr(-1.0, &*e, &im.dimpulse_dvminus, 1.0);
+    qv.neg_mut();
     Ok(())
 }

@@ -648,7 +648,7 @@ pub fn kkt_so_contracted(
     {
         let z1 = &zeta.as_slice()[..n];
         let (sq, sv, sx) = (qq.as_mut_slice(), vv.as_mut_slice(), qv.as_mut_slice());
-        id_so_contract_unchecked(model, data, so, q, v, &kd.qdd, z1, sq, sv, sx);
+        id_so_contract_unchecked(model, data, so, q, v, &kd.qdd, -model.gravity, z1, sq, sv, sx);
     }
     // ... minus ζ₁ᵀ ∂²(J_cᵀλ)/∂q², plus ζ₂ᵀ times the contact-point acceleration Hessians.
     {

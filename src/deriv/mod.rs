@@ -23,7 +23,8 @@ pub use fd::{FdSoData, fd_derivatives, fd_so_derivatives};
 pub use id_fo::id_derivatives;
 pub use id_so::{SoData, id_so_derivatives};
 pub use impact::{
-    ImpactData, ImpactSo, impact_derivatives, impact_dynamics, impact_so_derivatives,
+    ImpactContracted, ImpactData, ImpactSo, impact_derivatives, impact_dynamics,
+    impact_so_contracted, impact_so_derivatives,
 };
 pub use kkt::{
     KktContracted, KktData, KktSo, kkt_derivatives, kkt_dynamics, kkt_so_contracted,
