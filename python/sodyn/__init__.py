@@ -41,6 +41,40 @@ from ._sodyn import (
 )
 from . import batch
 
+
+def kkt_so_contracted(
+    model: Model,
+    data: Data,
+    q: Any,
+    v: Any,
+    tau: Any,
+    contacts: Sequence[Contact],
+    w_qdd: Any,
+    w_lambda: Any,
+):
+    """Hessians of ``w_qdd @ qdd + w_lambda @ lambda_`` of the KKT contact dynamics at
+    ``(q, v, tau)``: ``(C_qq, C_vv, C_qv, C_tauq)`` (each ``(nv, nv)``, layouts as
+    :func:`fd_so_contracted`), computed by the adjoint of the KKT system without any
+    ``(nv, nv, nv)`` tensor."""
+    return _sodyn.kkt_so_contracted(model, data, q, v, tau, list(contacts), w_qdd, w_lambda)
+
+
+def impact_so_contracted(
+    model: Model,
+    data: Data,
+    q: Any,
+    v_minus: Any,
+    contacts: Sequence[Contact],
+    w_vplus: Any,
+    w_impulse: Any,
+    restitution: float = 0.0,
+):
+    """Hessians of ``w_vplus @ vplus + w_impulse @ impulse`` of the impact dynamics:
+    ``(C_qq, C_qvminus)`` with ``C_qvminus[j, k] = d/dv_minus_k (d(w @ y)/dq_j)``."""
+    return _sodyn.impact_so_contracted(
+        model, data, q, v_minus, list(contacts), w_vplus, w_impulse, float(restitution)
+    )
+
 __all__ = [
     "Contact",
     "ConstrainedIdResult",
@@ -64,7 +98,9 @@ __all__ = [
     "idfoza",
     "idsoza",
     "impact_derivatives",
+    "impact_so_contracted",
     "kkt_derivatives",
+    "kkt_so_contracted",
     "nonlinear_effects",
     "rnea",
 ]

@@ -120,6 +120,16 @@ def impact_derivatives(model: Model, data: Data, q: ArrayLike, v_minus: ArrayLik
                        contacts: Sequence[Contact], restitution: float = 0.0,
                        order: int = 1) -> dict[str, Vector]: ...
 
+def kkt_so_contracted(model: Model, data: Data, q: ArrayLike, v: ArrayLike, tau: ArrayLike,
+                      contacts: Sequence[Contact], w_qdd: ArrayLike, w_lambda: ArrayLike
+                      ) -> Tuple[Matrix, Matrix, Matrix, Matrix]:
+    """Hessians of ``w_qdd @ qdd + w_lambda @ lambda`` of the KKT dynamics:
+    ``(C_qq, C_vv, C_qv, C_tauq)``."""
+def impact_so_contracted(model: Model, data: Data, q: ArrayLike, v_minus: ArrayLike,
+                         contacts: Sequence[Contact], w_vplus: ArrayLike, w_impulse: ArrayLike,
+                         restitution: float = 0.0) -> Tuple[Matrix, Matrix]:
+    """Hessians of ``w_vplus @ vplus + w_impulse @ impulse`` of the impact dynamics:
+    ``(C_qq, C_qvminus)``."""
 def clear_buffer_pool() -> int:
     """Frees the recycled output memory kept for reuse (at most 512 MiB; large results are
     returned over buffers that come back to this pool when the arrays are freed, so that later

@@ -23,10 +23,10 @@ use sodyn::Error;
 use sodyn::algo::{self, Contact, Data};
 use sodyn::batch::{BatchData, BatchPool, map_states};
 use sodyn::deriv::{
-    self, ContactData, ContractedData, FdSoData, ImpactData, KktData, SoData,
-    constrained_id_derivatives, constrained_id_so_derivatives, fd_derivatives, fd_so_derivatives,
-    id_derivatives, id_so_derivatives, impact_derivatives, impact_so_derivatives, kkt_derivatives,
-    kkt_so_derivatives,
+    self, ContactData, ContractedData, FdSoData, ImpactContracted, ImpactData, KktContracted,
+    KktData, SoData, constrained_id_derivatives, constrained_id_so_derivatives, fd_derivatives,
+    fd_so_derivatives, id_derivatives, id_so_derivatives, impact_derivatives,
+    impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
 };
 use sodyn::model::{JointType, Model, ModelBuilder, UrdfOptions, builtin};
 use sodyn::rng::Rng;
@@ -802,6 +802,9 @@ struct PyData {
     cid: Option<(ContactKey, ContactData)>,
     kkt: Option<(ContactKey, KktData)>,
     impact: Option<(ContactKey, ImpactData)>,
+    kktc: Option<(ContactKey, KktData, KktContracted)>,
+    impc: Option<(ContactKey, ImpactData, ImpactContracted)>,
+    wl: DVector<f64>,
 }
 
 impl PyData {
@@ -820,6 +823,9 @@ impl PyData {
             cid: None,
             kkt: None,
             impact: None,
+            kktc: None,
+            impc: None,
+            wl: DVector::zeros(0),
         }
     }
 }
@@ -1389,6 +1395,81 @@ fn py_impact_derivatives<'py>(
     Ok(out)
 }
 
+/// Contracted second order of the KKT dynamics: the Hessians of
+/// `w_qdd @ qdd + w_lambda @ lambda`, `(C_qq, C_vv, C_qv, C_tauq)`, without any tensor.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn kkt_so_contracted<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    contacts: Vec<PyRef<'py, PyContact>>,
+    w_qdd: &Bound<'py, PyAny>,
+    w_lambda: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let m = &model.m;
+    let d = &mut *data;
+    read_qvx(m, d, q, v, tau, "tau")?;
+    let (cs, key) = resolve(m, &contacts)?;
+    read_vec(w_qdd, "w_qdd", m.nv(), "nv", &mut d.w)?;
+    read_vec(w_lambda, "w_lambda", 3 * cs.len(), "3 × number of contacts", &mut d.wl)?;
+    if d.kktc.as_ref().is_none_or(|(k, _, _)| *k != key) {
+        let kd = KktData::new(m, ContactData::new(m, &cs).map_err(core_err)?);
+        let kc = KktContracted::new(m, &kd);
+        d.kktc = Some((key, kd, kc));
+    }
+    let PyData { d, q, v, a, w, wl, kktc, .. } = d;
+    let (_, kd, kc) = kktc.as_mut().expect("set above");
+    py.detach(|| deriv::kkt_so_contracted(m, d, kd, kc, q, v, a, w, wl)).map_err(core_err)?;
+    PyTuple::new(
+        py,
+        [
+            out_mat(py, kc.c_qq()),
+            out_mat(py, kc.c_vv()),
+            out_mat(py, kc.c_qv()),
+            out_mat(py, kc.c_tauq()),
+        ],
+    )
+}
+
+/// Contracted second order of the impact dynamics: the Hessians of
+/// `w_vplus @ vplus + w_impulse @ impulse`, `(C_qq, C_qvminus)`, without any tensor.
+#[pyfunction]
+#[pyo3(signature = (model, data, q, v_minus, contacts, w_vplus, w_impulse, restitution = 0.0))]
+#[allow(clippy::too_many_arguments)]
+fn impact_so_contracted<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v_minus: &Bound<'py, PyAny>,
+    contacts: Vec<PyRef<'py, PyContact>>,
+    w_vplus: &Bound<'py, PyAny>,
+    w_impulse: &Bound<'py, PyAny>,
+    restitution: f64,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let m = &model.m;
+    let d = &mut *data;
+    read_q(q, "q", m, &mut d.q)?;
+    read_vec(v_minus, "v_minus", m.nv(), "nv", &mut d.v)?;
+    let (cs, key) = resolve(m, &contacts)?;
+    read_vec(w_vplus, "w_vplus", m.nv(), "nv", &mut d.w)?;
+    read_vec(w_impulse, "w_impulse", 3 * cs.len(), "3 × number of contacts", &mut d.wl)?;
+    if d.impc.as_ref().is_none_or(|(k, _, _)| *k != key) {
+        let im = ImpactData::new(m, ContactData::new(m, &cs).map_err(core_err)?);
+        let ic = ImpactContracted::new(m, &im);
+        d.impc = Some((key, im, ic));
+    }
+    let PyData { d, q, v, w, wl, impc, .. } = d;
+    let (_, im, ic) = impc.as_mut().expect("set above");
+    im.set_restitution(restitution).map_err(core_err)?;
+    py.detach(|| deriv::impact_so_contracted(m, d, im, ic, q, v, w, wl)).map_err(core_err)?;
+    PyTuple::new(py, [out_mat(py, ic.c_qq()), out_mat(py, ic.c_qvminus())])
+}
+
 // ---------------------------------------------------------------------------------------------
 // Batched entry points (sodyn.batch)
 // ---------------------------------------------------------------------------------------------
@@ -1731,6 +1812,8 @@ fn _sodyn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(idfoza, m)?)?;
     m.add_function(wrap_pyfunction!(id_so_contracted, m)?)?;
     m.add_function(wrap_pyfunction!(fd_so_contracted, m)?)?;
+    m.add_function(wrap_pyfunction!(kkt_so_contracted, m)?)?;
+    m.add_function(wrap_pyfunction!(impact_so_contracted, m)?)?;
     m.add_function(wrap_pyfunction!(idsoza, m)?)?;
     m.add_function(wrap_pyfunction!(py_constrained_id_derivatives, m)?)?;
     m.add_function(wrap_pyfunction!(py_kkt_derivatives, m)?)?;

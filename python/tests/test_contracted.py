@@ -136,3 +136,53 @@ def test_pooled_outputs_are_not_reused_while_alive():
     np.testing.assert_array_equal(view, keep[0][:, :, 1])
     assert sodyn.clear_buffer_pool() >= 0
     assert sodyn.clear_buffer_pool() == 0
+
+
+FEET = ["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"]
+
+
+def test_kkt_so_contracted_equals_dense_contraction():
+    model = sodyn.Model.builtin("quadruped")
+    data = model.create_data()
+    q, v, tau, w = _state(model, 21)
+    contacts = [sodyn.Contact(f, point=(0.01 * i, 0.0, -0.02)) for i, f in enumerate(FEET)]
+    wl = np.random.default_rng(5).uniform(-1, 1, 3 * len(contacts))
+    got = sodyn.kkt_so_contracted(model, data, q, v, tau, contacts, w, wl)
+    r = sodyn.kkt_derivatives(model, data, q, v, tau, contacts, order=2)
+    dense = [
+        (r.d2qdd_dq2, r.d2lambda_dq2),
+        (r.d2qdd_dv2, r.d2lambda_dv2),
+        (r.d2qdd_dqdv, r.d2lambda_dqdv),
+        (r.d2qdd_dtaudq, r.d2lambda_dtaudq),
+    ]
+    for g, (tq, tl) in zip(got, dense):
+        ref = _contract(tq, w) + _contract(tl, wl)
+        assert np.abs(g - ref).max() <= 1e-11 * max(1.0, np.abs(ref).max())
+
+
+@pytest.mark.parametrize("e", [0.0, 0.5])
+def test_impact_so_contracted_equals_dense_contraction(e):
+    model = sodyn.Model.builtin("quadruped")
+    data = model.create_data()
+    q, v, _, w = _state(model, 22)
+    contacts = [sodyn.Contact(f) for f in FEET[:3]]
+    wl = np.random.default_rng(6).uniform(-1, 1, 3 * len(contacts))
+    got = sodyn.impact_so_contracted(model, data, q, v, contacts, w, wl, restitution=e)
+    r = sodyn.impact_derivatives(model, data, q, v, contacts, restitution=e, order=2)
+    dense = [(r.d2vplus_dq2, r.d2impulse_dq2), (r.d2vplus_dqdvminus, r.d2impulse_dqdvminus)]
+    for g, (tv, tl) in zip(got, dense):
+        ref = _contract(tv, w) + _contract(tl, wl)
+        assert np.abs(g - ref).max() <= 1e-11 * max(1.0, np.abs(ref).max())
+
+
+def test_contact_contracted_bad_weights():
+    model = sodyn.Model.builtin("quadruped")
+    data = model.create_data()
+    q, v, tau, w = _state(model, 23)
+    contacts = [sodyn.Contact(f) for f in FEET]
+    with pytest.raises(ValueError, match="`w_lambda` must have shape \\(12,\\)"):
+        sodyn.kkt_so_contracted(model, data, q, v, tau, contacts, w, np.zeros(3))
+    with pytest.raises(ValueError, match="`w_impulse`"):
+        sodyn.impact_so_contracted(model, data, q, v, contacts, w, np.full(12, np.inf))
+    with pytest.raises(ValueError, match="restitution"):
+        sodyn.impact_so_contracted(model, data, q, v, contacts, w, np.zeros(12), restitution=-1)
