@@ -98,6 +98,25 @@ fn algorithms_do_not_allocate() {
         check("kkt_so", &mut || kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &a).unwrap());
         check("impact_fo", &mut || impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap());
         check("impact_so", &mut || impact_so_derivatives(&m, &mut d, &mut im, &q, &v).unwrap());
+        let mut con = ContractedData::new(&m);
+        let w = DVector::from_fn(m.nv(), |i, _| 1.0 / (1.0 + i as f64));
+        let wl = DVector::from_element(cd.dim(), 0.5);
+        check("id_so_contracted", &mut || {
+            id_so_contracted(&m, &mut d, &mut con, &q, &v, &a, &w).unwrap()
+        });
+        check("fd_so_contracted", &mut || {
+            fd_so_contracted(&m, &mut d, &mut con, &q, &v, &a, &w).unwrap()
+        });
+        let mut kd1 = KktData::new(&m, cd.clone());
+        let mut kc = KktContracted::new(&m, &kd1);
+        check("kkt_so_contracted", &mut || {
+            kkt_so_contracted(&m, &mut d, &mut kd1, &mut kc, &q, &v, &a, &w, &wl).unwrap()
+        });
+        let mut im1 = ImpactData::new(&m, cd.clone());
+        let mut ic = ImpactContracted::new(&m, &im1);
+        check("impact_so_contracted", &mut || {
+            impact_so_contracted(&m, &mut d, &mut im1, &mut ic, &q, &v, &w, &wl).unwrap()
+        });
         assert!(
             report.is_empty(),
             "{}: heap allocations in hot paths: {}",

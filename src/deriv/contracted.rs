@@ -31,6 +31,7 @@ use super::id_so::{SoData, id_so_contract_unchecked};
 use super::zero::idfoza;
 use crate::algo::Data;
 use crate::error::Result;
+use crate::linalg::{gemm, transpose_strided};
 use crate::model::{Model, check_vec};
 use nalgebra::{DMatrix, DVector};
 
@@ -50,6 +51,8 @@ pub struct ContractedData {
     minv: DMatrix<f64>,
     qdd: DVector<f64>,
     tmp: DMatrix<f64>,
+    /// `Dᵀ`.
+    dt: DMatrix<f64>,
 }
 
 impl ContractedData {
@@ -70,6 +73,7 @@ impl ContractedData {
             minv: z(),
             qdd: DVector::zeros(n),
             tmp: z(),
+            dt: z(),
         }
     }
     /// `C_qq[(j, k)] = Σ_i w_i ∂/∂q_k (∂y_i/∂q_j)` (`y = τ` or `q̈`, of the last call).
@@ -143,7 +147,8 @@ pub fn fd_so_contracted(
     check_vec("w", w, model.nv)?;
     cd.check(model)?;
     fd_derivatives(model, data, q, v, tau, None)?;
-    let ContractedData { so, qq, vv, qv, tq, mu, xq, xv, minv, qdd, tmp, .. } = cd;
+    let n = model.nv;
+    let ContractedData { so, qq, vv, qv, tq, mu, xq, xv, minv, qdd, tmp, dt, .. } = cd;
     // 1. μ = M⁻¹ w; the first-order results, kept (the ID pass below rewrites `data`).
     xq.copy_from(data.dqdd_dq());
     xv.copy_from(data.dqdd_dv());
@@ -157,14 +162,16 @@ pub fn fd_so_contracted(
     idfoza(model, data, q, mu, tq)?;
     // 4. C_qq = −(C^ID_qq + Dᵀ X_q + X_qᵀ D), C_vv = −C^ID_vv, C_qv = −(C^ID_qv + Dᵀ X_v),
     //    C_τq = −M⁻¹ D.
-    tmp.gemm_tr(1.0, tq, xq, 0.0);
-    *qq += &*tmp;
-    qq.gemm_tr(1.0, xq, tq, 1.0);
-    qq.neg_mut();
+    transpose_strided(tq.as_slice(), n, n, n, dt.as_mut_slice(), n);
+    gemm(1.0, &*dt, &*xq, 0.0, tmp);
+    for j in 0..n {
+        for k in 0..n {
+            qq[(j, k)] = -(qq[(j, k)] + tmp[(j, k)] + tmp[(k, j)]);
+        }
+    }
     vv.neg_mut();
-    qv.gemm_tr(1.0, tq, xv, 1.0);
-    qv.neg_mut();
-    tmp.gemm(-1.0, minv, tq, 0.0);
+    gemm(-1.0, &*dt, &*xv, -1.0, qv);
+    gemm(-1.0, &*minv, &*tq, 0.0, tmp);
     std::mem::swap(tq, tmp);
     Ok(())
 }

@@ -20,7 +20,7 @@ use super::zero::idfoza_core;
 use crate::algo::Data;
 use crate::algo::internal::{crba_unchecked, ltl_in_place, ltl_solve_rows_desc};
 use crate::error::{Error, Result};
-use crate::linalg::gemm;
+use crate::linalg::{gemm, transpose_strided};
 use crate::model::{Model, check_vec};
 use crate::spatial::Motion;
 use crate::tensor::Tensor3;
@@ -452,14 +452,19 @@ pub struct ImpactContracted {
     scratch: [DMatrix<f64>; 2],
     omega: DVector<f64>,
     zeta: DVector<f64>,
-    /// `D = ∂(M ζ₁)/∂q`, `K = ∂(J_cᵀ ζ₂)/∂q` (`nv × nv`), `E = ∂(J_c ζ₁)/∂q` (`3 nc × nv`).
-    d: DMatrix<f64>,
-    k: DMatrix<f64>,
-    e: DMatrix<f64>,
+    /// `Dᵀ`, `Kᵀ` (`nv × nv`) and `Eᵀ` (`nv × 3 nc`) of `D = ∂(M ζ₁)/∂q`,
+    /// `K = ∂(J_cᵀ ζ₂)/∂q`, `E = ∂(J_c ζ₁)/∂q`.
+    dt: DMatrix<f64>,
+    kt: DMatrix<f64>,
+    et: DMatrix<f64>,
     /// `Y_v − I` and `Y_v + e I` (the `z_M` and `z_J` of the `q̇⁻` product terms).
     zm: DMatrix<f64>,
     zj: DMatrix<f64>,
     h: DMatrix<f64>,
+    /// `−ζ₂` and zero vectors of lengths `3 nc` and `nv` (the `G` evaluations' arguments).
+    neg_z2: DVector<f64>,
+    zeros_m: DVector<f64>,
+    zeros_n: DVector<f64>,
 }
 
 impl ImpactContracted {
@@ -474,12 +479,15 @@ impl ImpactContracted {
             scratch: [z(), z()],
             omega: DVector::zeros(n + m),
             zeta: DVector::zeros(n + m),
-            d: z(),
-            k: z(),
-            e: DMatrix::zeros(m, n),
+            dt: z(),
+            kt: z(),
+            et: DMatrix::zeros(n, m),
             zm: z(),
             zj: z(),
             h: z(),
+            neg_z2: DVector::zeros(m),
+            zeros_m: DVector::zeros(m),
+            zeros_n: DVector::zeros(n),
         }
     }
     /// `C_qq[(j, k)] = ∂/∂q_k (∂(ωᵀy)/∂q_j)` with `ωᵀy = w_v⁺ᵀ q̇⁺ + w_Λᵀ λ̂`.
@@ -538,7 +546,23 @@ pub fn impact_so_contracted(
     ic.omega.rows_mut(0, n).copy_from(w_vplus);
     ic.omega.rows_mut(n, m).copy_from(w_impulse);
     ic.zeta.gemv_tr(1.0, &im.cd.rinv, &ic.omega, 0.0);
-    let ImpactContracted { so, qq, qv, scratch, zeta, d, k, e, zm, zj, h, .. } = ic;
+    let ImpactContracted {
+        so,
+        qq,
+        qv,
+        scratch,
+        zeta,
+        dt,
+        kt,
+        et,
+        zm,
+        zj,
+        h,
+        neg_z2,
+        zeros_m,
+        zeros_n,
+        ..
+    } = ic;
     let (z1, z2) = zeta.as_slice().split_at(n);
     // 2. IDSOZA(Δv) contracted with ζ₁ (q̇ = 0, no gravity) ...
     {
@@ -589,30 +613,36 @@ pub fn impact_so_contracted(
     }
     im.cd.zc = zc;
     // D and E from one G evaluation with z₂ = 0, K from one with z_M = z_J = 0, z₂ = −ζ₂.
-    let zeros_m = vec![0.0; m];
-    g_matrix_split(model, data, &mut im.cd, z1, &zeros_m, z1);
-    d.copy_from(&im.cd.g.rows(0, n));
-    e.copy_from(&im.cd.g.rows(n, m));
-    let neg_z2: Vec<f64> = z2.iter().map(|x| -x).collect();
-    let zeros_n = vec![0.0; n];
-    g_matrix_split(model, data, &mut im.cd, &zeros_n, &neg_z2, &zeros_n);
-    k.copy_from(&im.cd.g.rows(0, n));
+    g_matrix_split(model, data, &mut im.cd, z1, zeros_m.as_slice(), z1);
+    {
+        let g = im.cd.g.as_slice();
+        let gr = im.cd.g.nrows();
+        transpose_strided(g, gr, n, n, dt.as_mut_slice(), n);
+        transpose_strided(&g[n..], gr, m, n, et.as_mut_slice(), n);
+    }
+    for (o, x) in neg_z2.iter_mut().zip(z2) {
+        *o = -x;
+    }
+    let (zn, nz2) = (zeros_n.as_slice(), neg_z2.as_slice());
+    g_matrix_split(model, data, &mut im.cd, zn, nz2, zn);
+    transpose_strided(im.cd.g.as_slice(), im.cd.g.nrows(), n, n, kt.as_mut_slice(), n);
     // 3.–4. The product terms and the signs.
-    h.gemm_tr(1.0, &*d, &im.dvplus_dq, 0.0);
-    h.gemm_tr(1.0, &*k, &im.dvplus_dq, 1.0);
-    h.gemm_tr(-1.0, &*e, &im.dimpulse_dq, 1.0);
-    *qq += &*h;
-    *qq += &h.transpose();
-    qq.neg_mut();
+    gemm(1.0, &*dt, &im.dvplus_dq, 0.0, h);
+    gemm(1.0, &*kt, &im.dvplus_dq, 1.0, h);
+    gemm(-1.0, &*et, &im.dimpulse_dq, 1.0, h);
+    for j in 0..n {
+        for kk in 0..n {
+            qq[(j, kk)] = -(qq[(j, kk)] + h[(j, kk)] + h[(kk, j)]);
+        }
+    }
     zm.copy_from(&im.dvplus_dvminus);
     zj.copy_from(&im.dvplus_dvminus);
     for i in 0..n {
         zm[(i, i)] -= 1.0;
         zj[(i, i)] += im.restitution;
     }
-    qv.gemm_tr(1.0, &*d, &*zm, 0.0);
-    qv.gemm_tr(1.0, &*k, &*zj, 1.0);
-    qv.gemm_tr(-1.0, &*e, &im.dimpulse_dvminus, 1.0);
-    qv.neg_mut();
+    gemm(-1.0, &*dt, &*zm, 0.0, qv);
+    gemm(-1.0, &*kt, &*zj, 1.0, qv);
+    gemm(1.0, &*et, &im.dimpulse_dvminus, 1.0, qv);
     Ok(())
 }

@@ -550,6 +550,8 @@ pub struct KktContracted {
     a: DMatrix<f64>,
     /// `A Y` for one of `Y_q`, `Y_v`, `Y_τ`.
     h: DMatrix<f64>,
+    /// `−ζ₂`.
+    neg_z2: DVector<f64>,
 }
 
 impl KktContracted {
@@ -567,6 +569,7 @@ impl KktContracted {
             zeta: DVector::zeros(n + m),
             a: DMatrix::zeros(n, n + m),
             h: z(),
+            neg_z2: DVector::zeros(m),
         }
     }
     /// `C_qq[(j, k)] = ∂/∂q_k (∂(ωᵀy)/∂q_j)` with `ωᵀy = w_q̈ᵀ q̈ + w_λᵀ λ`.
@@ -644,7 +647,7 @@ pub fn kkt_so_contracted(
     kc.zeta.gemv_tr(1.0, &kd.cd.rinv, &kc.omega, 0.0);
     // 3. ζᵀ R_uw: the ID part, contracted as IDSVA-SO produces it (at q̈; the pass also
     //    refreshes the world-frame quantities of `data` at the same state) ...
-    let KktContracted { so, qq, vv, qv, tq, zeta, a, h, .. } = kc;
+    let KktContracted { so, qq, vv, qv, tq, zeta, a, h, neg_z2, .. } = kc;
     {
         let z1 = &zeta.as_slice()[..n];
         let (sq, sv, sx) = (qq.as_mut_slice(), vv.as_mut_slice(), qv.as_mut_slice());
@@ -676,27 +679,42 @@ pub fn kkt_so_contracted(
     // 4. A from one G evaluation: G(ζ₁; −ζ₂) = [∂(Mζ₁)/∂q + ∂(J_cᵀζ₂)/∂q ; ∂(J_c ζ₁)/∂q].
     {
         let (z1, z2) = zeta.as_slice().split_at(n);
-        let neg_z2: Vec<f64> = z2.iter().map(|x| -x).collect();
-        g_matrix_split(model, data, &mut kd.cd, z1, &neg_z2, z1);
+        for (o, x) in neg_z2.iter_mut().zip(z2) {
+            *o = -x;
+        }
+        g_matrix_split(model, data, &mut kd.cd, z1, neg_z2.as_slice(), z1);
         let g = &kd.cd.g;
-        a.columns_mut(0, n).copy_from(&g.rows(0, n).transpose());
-        a.columns_mut(n, m).copy_from(&(-g.rows(n, m).transpose()));
+        for j in 0..n {
+            for l in 0..n {
+                a[(j, l)] = g[(l, j)];
+            }
+            for r in 0..m {
+                a[(j, n + r)] = -g[(n + r, j)];
+            }
+        }
     }
     // 5. The product terms and the signs.
     let y = |top: &DMatrix<f64>, bottom: &DMatrix<f64>, h: &mut DMatrix<f64>| {
-        h.gemm(1.0, &a.columns(0, n), top, 0.0);
-        h.gemm(1.0, &a.columns(n, m), bottom, 1.0);
+        gemm(1.0, &a.columns(0, n), top, 0.0, h);
+        gemm(1.0, &a.columns(n, m), bottom, 1.0, h);
     };
     y(&kd.dqdd_dq, &kd.dlambda_dq, h);
     *qq += &*h;
-    qq.gemm_tr(1.0, &*h, &DMatrix::<f64>::identity(n, n), 1.0);
+    for j in 0..n {
+        for k in 0..n {
+            qq[(j, k)] += h[(k, j)];
+        }
+    }
     qq.neg_mut();
     vv.neg_mut();
     y(&kd.dqdd_dv, &kd.dlambda_dv, h);
     *qv += &*h;
     qv.neg_mut();
     y(&kd.dqdd_dtau, &kd.dlambda_dtau, h);
-    tq.copy_from(&h.transpose());
-    tq.neg_mut();
+    for j in 0..n {
+        for k in 0..n {
+            tq[(j, k)] = -h[(k, j)];
+        }
+    }
     Ok(())
 }
