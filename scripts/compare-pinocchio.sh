@@ -76,7 +76,8 @@ cp "$SODYN" "$OUT/sodyn"
 SODYN="$OUT/sodyn"
 
 # name | base | contact frames (3D point contacts, for the contact algorithms later;
-# ../shared/models/README.md). Our --name is the URDF stem; pin_bench gets the same --name.
+# ../shared/models/README.md). Both programs get --name = the URDF stem (sodyn bench would
+# default to the robot name, e.g. "solo" for solo12.urdf), which the table is keyed by.
 MODEL_TABLE="
 double_pendulum_continuous|fixed|
 ur5_robot|fixed|

@@ -11,8 +11,6 @@
 
 pub mod algo;
 pub mod batch;
-pub mod cli;
-pub mod demo;
 pub mod deriv;
 pub mod error;
 mod linalg;

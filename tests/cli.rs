@@ -1,5 +1,6 @@
-//! The `sodyn` binary: `info`, `random-state` + `eval` round trip (README schema), error exits,
-//! and `bench --smoke`'s line format.
+//! The `sodyn` binary: `info`, `random-state` + `eval` round trip (README schema), error exits
+//! (1 for errors found while running, 2 for clap's usage errors), the generated `--help` and the
+//! README's copy of it, and `bench --smoke`'s line format.
 
 use nalgebra::{DMatrix, DVector};
 use serde_json::Value;
@@ -10,6 +11,8 @@ fn sodyn(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_sodyn"))
         .args(args)
         .env("RUST_BACKTRACE", "1")
+        // The help is wrapped to the terminal's width, at most 100 columns.
+        .env("COLUMNS", "100")
         .output()
         .expect("run the sodyn binary")
 }
@@ -40,6 +43,16 @@ fn assert_clean_failure(o: &Output, what: &str) -> String {
     assert!(err.contains("error"), "{what}: {err}");
     assert!(!err.contains("panicked"), "{what} panicked: {err}");
     assert!(!err.contains("backtrace"), "{what} printed a backtrace: {err}");
+    err
+}
+
+/// Exit code 2 and clap's usage error (the message, a pointer to `--help`), no panic.
+fn assert_usage_error(o: &Output, what: &str) -> String {
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(2), "{what}: exit code; stderr: {err}");
+    assert!(err.starts_with("error: ") && err.contains("try '--help'"), "{what}: {err}");
+    assert!(!err.contains("panicked"), "{what} panicked: {err}");
+    assert!(stdout(o).is_empty(), "{what}: {}", stdout(o));
     err
 }
 
@@ -290,18 +303,18 @@ fn bench_options_are_validated() {
     }
     let block = field("block=");
     assert!((1.0..=16.0).contains(&block), "{line}");
-    let err = assert_clean_failure(&with(&["--pin-cpus", "0,0"]), "repeated CPU");
+    let err = assert_usage_error(&with(&["--pin-cpus", "0,0"]), "repeated CPU");
     assert!(err.contains("--pin-cpus") && err.contains("repeated"), "{err}");
     let err = assert_clean_failure(
         &with(&["--pin-cpus", "0", "--paired-threads", "2"]),
         "fewer CPUs than threads",
     );
     assert!(err.contains("1 CPUs given for 2 threads"), "{err}");
-    let err = assert_clean_failure(&with(&["--pin-cpus", "zero"]), "bad CPU list");
+    let err = assert_usage_error(&with(&["--pin-cpus", "zero"]), "bad CPU list");
     assert!(err.contains("--pin-cpus") && err.contains("zero"), "{err}");
     let err = assert_clean_failure(&with(&["--pin-cpus", "5000"]), "CPU out of range");
     assert!(err.contains("CPU 5000"), "{err}");
-    assert_clean_failure(&with(&["--paired-threads", "1"]), "one paired thread");
+    assert_usage_error(&with(&["--paired-threads", "1"]), "one paired thread");
 
     // --ratio-to: each algorithm timed against a reference in alternating blocks, with the
     // median per-pair ratio and the reference's own times on the algorithm's line.
@@ -343,7 +356,203 @@ fn bench_options_are_validated() {
     let err =
         assert_clean_failure(&with(&["--algos", "rnea", "--ratio-to", "kkt_fo"]), "no contacts");
     assert!(err.contains("kkt_fo") && err.contains("--contacts"), "{err}");
-    assert_clean_failure(&with(&["--threads", "0"]), "zero threads");
-    assert_clean_failure(&with(&["--states", "many"]), "bad --states");
-    assert_clean_failure(&sodyn(&["bench", "--smoke"]), "missing --model");
+    let err = assert_usage_error(&with(&["--threads", "0"]), "zero threads");
+    assert!(err.contains("--threads") && err.contains("at least 1"), "{err}");
+    let err = assert_usage_error(&with(&["--states", "many"]), "bad --states");
+    assert!(err.contains("--states") && err.contains("many"), "{err}");
+    let err = assert_usage_error(&sodyn(&["bench", "--smoke"]), "missing --model");
+    assert!(err.contains("--model"), "{err}");
+    let err = assert_usage_error(
+        &with(&["--paired-threads", "2", "--ratio-to", "id_so"]),
+        "--ratio-to with --paired-threads",
+    );
+    assert!(err.contains("--ratio-to") && err.contains("--paired-threads"), "{err}");
+    let err = assert_usage_error(&with(&["--pool", "threads"]), "unknown pool");
+    assert!(err.contains("spin") && err.contains("rayon"), "{err}");
+}
+
+#[test]
+fn every_command_has_a_generated_help() {
+    let commands: [(&str, &[&str]); 5] = [
+        ("demo", &["--model <M>", "--seed <S>", "[default: builtin:humanoid]"]),
+        ("info", &["--model <M>", "--floating-base"]),
+        ("random-state", &["--model <M>", "--floating-base", "--seed <S>", "-o, --output <FILE>"]),
+        (
+            "eval",
+            &["--model <M>", "--floating-base", "--state <FILE>", "--order <1|2>", "--output"],
+        ),
+        (
+            "bench",
+            &[
+                "--model <M>",
+                "--floating-base",
+                "--contacts",
+                "--algos",
+                "--states <N>",
+                "--seed <S>",
+                "--max-seconds <X>",
+                "--iters <N>",
+                "--threads <N>",
+                "--paired-threads <T>",
+                "--pool",
+                "--spin-us <U>",
+                "--pin-cpus",
+                "--name <NAME>",
+                "--ratio-to <R>",
+                "--smoke",
+                "--calls <N>",
+            ],
+        ),
+    ];
+    for (cmd, options) in commands {
+        for help in [vec![cmd, "--help"], vec![cmd, "-h"], vec!["help", cmd]] {
+            let o = sodyn(&help);
+            assert_ok(&o, &help.join(" "));
+            let out = stdout(&o);
+            assert!(out.contains(&format!("Usage: sodyn {cmd} ")), "{help:?}: {out}");
+            for opt in options {
+                assert!(out.contains(opt), "{help:?} does not list {opt}: {out}");
+            }
+        }
+    }
+    // Without a command: the help (every command listed), exit status 0.
+    for args in [&[][..], &["--help"], &["help"]] {
+        let o = sodyn(args);
+        assert_ok(&o, "sodyn --help");
+        let out = stdout(&o);
+        for (cmd, _) in commands {
+            assert!(out.contains(&format!("\n  {cmd} ")), "{args:?}: {cmd} missing: {out}");
+        }
+    }
+}
+
+#[test]
+fn unknown_options_and_commands_are_usage_errors() {
+    let state = tmp("neutral.json");
+    std::fs::write(&state, "{}").unwrap();
+    let s = state.to_str().unwrap();
+    // `info` and `eval` used to ignore options of the other commands.
+    for (args, bad) in [
+        (&["info", "--model", "builtin:quadruped", "--seed", "3"][..], "--seed"),
+        (&["info", "--model", "builtin:quadruped", "--state", s], "--state"),
+        (&["eval", "--model", "builtin:quadruped", "--state", s, "--bogus"], "--bogus"),
+        (&["random-state", "--model", "builtin:quadruped", "--order", "2"], "--order"),
+        (&["demo", "--floating-base"], "--floating-base"),
+        (&["bench", "--model", "builtin:quadruped", "--smoke", "--output", "x"], "--output"),
+    ] {
+        let err = assert_usage_error(&sodyn(args), &args.join(" "));
+        assert!(err.contains(&format!("unexpected argument '{bad}'")), "{args:?}: {err}");
+    }
+    let err = assert_usage_error(&sodyn(&["evaluate"]), "unknown command");
+    assert!(err.contains("'evaluate'"), "{err}");
+    let err =
+        assert_usage_error(&sodyn(&["eval", "--model", "builtin:quadruped"]), "missing --state");
+    assert!(err.contains("--state <FILE>"), "{err}");
+    let o = sodyn(&["eval", "--model", "builtin:quadruped", "--state", s, "--order", "3"]);
+    let err = assert_usage_error(&o, "--order 3");
+    assert!(err.contains("--order"), "{err}");
+    // A valid command line still works, options in any order.
+    let o = sodyn(&["eval", "--state", s, "--order", "2", "--model", "builtin:pendulum2"]);
+    assert_ok(&o, "eval");
+}
+
+/// A two-link URDF (one revolute joint, nq = 1; with --floating-base nq = 8).
+const TWO_LINKS: &str = r#"<robot name="two_links">
+  <link name="base"><inertial><mass value="1"/><inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="arm"><inertial><mass value="1"/><inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="elbow" type="revolute">
+    <parent link="base"/><child link="arm"/><origin xyz="0 0 0.5"/><axis xyz="0 1 0"/>
+    <limit lower="-2" upper="2" effort="10" velocity="10"/>
+  </joint>
+</robot>
+"#;
+
+#[test]
+fn q_of_the_other_base_hints_at_floating_base() {
+    let urdf = tmp("two_links.urdf");
+    std::fs::write(&urdf, TWO_LINKS).unwrap();
+    let u = urdf.to_str().unwrap();
+    let fixed = tmp("two_links_fixed.json");
+    std::fs::write(&fixed, r#"{"q": [0.3]}"#).unwrap();
+    let floating = tmp("two_links_ff.json");
+    std::fs::write(&floating, r#"{"q": [0, 0, 0, 0, 0, 0, 1, 0.3]}"#).unwrap();
+    let (f, ff) = (fixed.to_str().unwrap(), floating.to_str().unwrap());
+    for (state, fb) in [(f, false), (ff, true)] {
+        let mut args = vec!["eval", "--model", u, "--state", state];
+        if fb {
+            args.push("--floating-base");
+        }
+        let o = sodyn(&args);
+        assert_ok(&o, &args.join(" "));
+        let out: Value = serde_json::from_str(&stdout(&o)).unwrap();
+        // `model` is the URDF's robot name, not the file name.
+        assert_eq!(out["model"], "two_links");
+    }
+    let o = sodyn(&["eval", "--model", u, "--state", ff]);
+    let err = assert_clean_failure(&o, "free-flyer q without --floating-base");
+    assert!(
+        err.contains("has length 8, expected 1") && err.contains("add --floating-base"),
+        "{err}"
+    );
+    let o = sodyn(&["eval", "--model", u, "--floating-base", "--state", f]);
+    let err = assert_clean_failure(&o, "fixed-base q with --floating-base");
+    assert!(
+        err.contains("has length 1, expected 8") && err.contains("leave out --floating-base"),
+        "{err}"
+    );
+    // Any other wrong length, or a built-in model (no --floating-base), gets no hint.
+    let short = tmp("two_links_short.json");
+    std::fs::write(&short, r#"{"q": [0.3, 0.1]}"#).unwrap();
+    let o = sodyn(&["eval", "--model", u, "--state", short.to_str().unwrap()]);
+    let err = assert_clean_failure(&o, "q of length 2");
+    assert!(err.contains("has length 2, expected 1") && !err.contains("floating-base"), "{err}");
+    let o = sodyn(&["eval", "--model", "builtin:chain1", "--state", ff]);
+    let err = assert_clean_failure(&o, "built-in model");
+    assert!(err.contains("has length 8, expected 1") && !err.contains("floating-base"), "{err}");
+}
+
+#[test]
+fn model_is_the_robot_name_in_every_output() {
+    let urdf = tmp("file_stem_is_not_the_name.urdf");
+    std::fs::write(&urdf, TWO_LINKS).unwrap();
+    let u = urdf.to_str().unwrap();
+    let o = sodyn(&["info", "--model", u]);
+    assert_ok(&o, "info");
+    assert!(stdout(&o).starts_with("model \"two_links\": nq = 1"), "{}", stdout(&o));
+    let o = sodyn(&["bench", "--model", u, "--smoke", "--algos", "rnea"]);
+    assert_ok(&o, "bench");
+    let out = stdout(&o);
+    let lines: Vec<&str> = out.lines().collect();
+    assert!(lines[0].starts_with("# model=two_links source="), "{out}");
+    assert_eq!(parse_bench_line(lines[1])[0].1, "two_links", "{out}");
+    let o = sodyn(&["bench", "--model", "builtin:chain3", "--smoke", "--algos", "rnea"]);
+    assert_ok(&o, "bench on a built-in model");
+    assert!(stdout(&o).contains("\nmodel=serial_chain3 "), "{}", stdout(&o));
+    // --name still overrides it.
+    let o = sodyn(&["bench", "--model", u, "--smoke", "--algos", "rnea", "--name", "arm"]);
+    assert_ok(&o, "bench --name");
+    assert!(stdout(&o).contains("\nmodel=arm nq=1 nv=1 algo=rnea "), "{}", stdout(&o));
+}
+
+/// The ```text blocks of the README's "Command line" section that start with `$ sodyn ...` are
+/// that command's output, as printed.
+#[test]
+fn readme_shows_the_generated_help() {
+    let readme =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
+    let start = readme.find("\n## Command line\n").expect("a Command line section");
+    let section = &readme[start + 1..];
+    let section = &section[..section.find("\n## ").unwrap_or(section.len())];
+    let mut checked = 0;
+    for block in section.split("```text\n").skip(1) {
+        let block = &block[..block.find("```").expect("closed block")];
+        let Some((command, expected)) = block.split_once('\n') else { continue };
+        let Some(command) = command.strip_prefix("$ sodyn") else { continue };
+        let args: Vec<&str> = command.split_whitespace().collect();
+        let o = sodyn(&args);
+        assert_ok(&o, command);
+        assert_eq!(stdout(&o), expected, "README.md's copy of `sodyn{command}` is out of date");
+        checked += 1;
+    }
+    assert!(checked >= 2, "README.md shows `sodyn --help` and `sodyn eval --help`");
 }

@@ -16,11 +16,11 @@
 //! ABA evaluation itself builds the mass matrix (`nv` RNEA passes) and solves densely.
 
 use super::dynamics::{aba, mass_matrix, rnea};
-use super::kinematics::integrate;
+use super::kinematics::{integrate, point_position};
 use super::{AdScalar, lift};
 use crate::model::Model;
 use crate::tensor::Tensor3;
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, Matrix3xX};
 use num_dual::{Dual64, HyperDual64};
 
 /// `x` lifted, plus `e_j · d` (`d`: the derivative seed).
@@ -124,6 +124,30 @@ pub fn d_aba_dv(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64
 pub fn d_aba_dtau(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64> {
     let (qd, v) = (lift::<Dual64>(q), lift::<Dual64>(v));
     jacobian(model.nv, model.nv, |j| aba(model, &qd, &v, &seeded(tau, j, eps()), None))
+}
+
+/// `∂p/∂q` (`3 × nv`, tangent): the Jacobian of the world position `p` of the point with
+/// coordinates `point` in frame `frame_id` ([`point_position`]); column `j` is
+/// `d/dε p(q ⊕ ε e_j)` at `ε = 0`. The oracle of [`crate::algo::point_jacobian`].
+///
+/// # Panics
+/// If `frame_id` is out of range or `q` has the wrong length.
+pub fn d_point_position_dq(
+    model: &Model,
+    q: &[f64],
+    frame_id: usize,
+    point: &[f64; 3],
+) -> Matrix3xX<f64> {
+    let pt = point.map(Dual64::from);
+    let mut jac = Matrix3xX::zeros(model.nv);
+    for j in 0..model.nv {
+        let qd = perturb_q(model, &lift::<Dual64>(q), j, eps());
+        let p = point_position(model, &qd, frame_id, &pt);
+        for (r, x) in p.iter().enumerate() {
+            jac[(r, j)] = x.eps;
+        }
+    }
+    jac
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -43,9 +43,9 @@ pub use contact::{
     impact_fo, impact_so, kkt, kkt_fo, kkt_so,
 };
 pub use derivatives::{
-    contracted_aba_hessians, contracted_rnea_hessians, d_aba_dq, d_aba_dtau, d_aba_dv, d_rnea_dq,
-    d_rnea_dv, d2_aba_dq2, d2_aba_dqdv, d2_aba_dtaudq, d2_aba_dv2, d2_rnea_dq2, d2_rnea_dqdv,
-    d2_rnea_dv2, dM_dq,
+    contracted_aba_hessians, contracted_rnea_hessians, d_aba_dq, d_aba_dtau, d_aba_dv,
+    d_point_position_dq, d_rnea_dq, d_rnea_dv, d2_aba_dq2, d2_aba_dqdv, d2_aba_dtaudq, d2_aba_dv2,
+    d2_rnea_dq2, d2_rnea_dqdv, d2_rnea_dv2, dM_dq,
 };
 pub use dynamics::{aba, mass_matrix, nle, rnea, rnea_with_gravity, solve};
 pub use kinematics::{

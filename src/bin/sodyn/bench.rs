@@ -7,7 +7,7 @@
 //! batch time / K); the median and the 10 % / 90 % quantiles are taken over the batches. At least
 //! 200 batches are timed, and timing stops once `--max-seconds` have passed after that (or after
 //! `max(200, iters/K)` batches). The `batch_*` algorithms time one batched call over all the
-//! states ([`crate::batch`]) and report the time per state, with at least 20 samples, and
+//! states ([`sodyn::batch`]) and report the time per state, with at least 20 samples, and
 //! `cpu_util` = process CPU time / wall time over the timed calls (about the number of threads
 //! when the cores are free). With `--paired-threads T` they are timed on one and on `T`
 //! threads in alternating blocks of back-to-back calls (blocks 1, T, T, 1, 1, T, ..., each
@@ -16,51 +16,42 @@
 //! (T-thread time), i.e. the throughput speed-up, and `speedup_first` = the same for the first
 //! `T`-thread call of each block alone (its helper threads idle since the 1-thread calls).
 
-use super::load_model;
-use crate::algo::{Contact, Data, aba, crba, rnea};
-use crate::batch::{
+use super::{ModelArgs, load_model};
+use clap::{Args, ValueEnum};
+use nalgebra::{DMatrix, DVector, Vector3};
+use sodyn::algo::{Contact, Data, aba, crba, rnea};
+use sodyn::batch::{
     BatchData, BatchPool, aba_batch, fd_derivatives_batch, id_derivatives_batch, rnea_batch,
 };
-use crate::deriv::{
+use sodyn::deriv::{
     ContactData, ContractedData, FdSoData, ImpactData, KktData, SoData, fd_derivatives,
     fd_so_contracted, fd_so_derivatives, id_derivatives, id_so_contracted, id_so_derivatives,
     impact_derivatives, impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
 };
-use crate::error::{Error, Result};
-use crate::model::{JointType, Model};
-use crate::rng::Rng;
-use nalgebra::{DMatrix, DVector, Vector3};
+use sodyn::error::{Error, Result};
+use sodyn::model::{JointType, Model};
+use sodyn::rng::Rng;
 use std::hint::black_box;
-use std::path::Path;
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
-/// The usage text of `sodyn bench`.
-pub(crate) const USAGE: &str = "\
-sodyn bench --model M [--floating-base] [--contacts F1,F2,...] [--algos a,b,...]
-            [--states N] [--seed S] [--max-seconds X] [--iters N] [--threads N]
-            [--paired-threads T] [--pool spin|rayon] [--spin-us U] [--pin-cpus C0,C1,...]
-            [--name NAME] [--ratio-to R]
-            [--smoke] [--calls N]
-Prints one line per algorithm:
+/// The description of `sodyn bench --help`.
+pub(crate) const LONG_ABOUT: &str = "\
+Time the algorithms per call, one line per algorithm
+
+Times the algorithms as ../shared/peer/pin_bench.cpp times Pinocchio (random states generated \
+once and used round robin, a warm-up, batches of consecutive calls for short ones, the median \
+and the 10th and 90th percentiles per call) and prints its line format:
+
   model=<name> nq=<> nv=<> algo=<algo> median_us=<> p10_us=<> p90_us=<> batch=<K> samples=<n>
-Defaults: all algorithms, --states 1000 (8 with --smoke), --seed 42, --max-seconds 4,
---iters 20000, --threads 1 (threads of the batch_* algorithms, the caller included),
---name = the URDF file stem or the built-in model's name. --paired-threads T times the
-batch_* algorithms on 1 and on T threads in alternating blocks of back-to-back calls (about
-5 ms each; two lines each, the second with speedup = median over the pairs of blocks of the
-1-thread / T-thread time, and speedup_first = the same for the first call of each T-thread
-block). --pool picks the helper
-threads of the batch_* algorithms: spin (default; idle helpers poll for --spin-us
-microseconds, default 200, before they sleep) or rayon. --pin-cpus pins the calling thread
-to C0 and helper i of each pool to Ci (BatchPool::with_cpus; the per-CPU baseline of
---paired-threads then uses those CPUs). --ratio-to R times each algorithm (single-state
-ones) in alternating blocks of about 5 ms with the single-state algorithm R, and adds
-ratio = median over the pairs of blocks of (time per call) / (R's time per call), with R's
-own times as ref_median_us, ref_p10_us, ref_p90_us. --smoke runs every
-algorithm a few times only. --calls N makes exactly N untimed calls per algorithm (for
-instruction counts under `valgrind --tool=callgrind`: cost per call = difference of two runs /
-difference of N).";
+
+The batch_* lines add threads=, per=state and cpu_util= (process CPU time / wall time); \
+--paired-threads and --ratio-to add the fields their help names. A first line starting with # \
+records the model, the options and the timer's overhead.
+
+Algorithms: rnea, crba, aba, id_fo, fd_fo, id_so, fd_so, id_soc, fd_soc (the contracted \
+second order), batch_rnea, batch_aba, batch_id_fo, batch_fd_fo (the batched entry points, time \
+per state) and, with --contacts, kkt_fo, kkt_so, impact_fo, impact_so.";
 
 /// Algorithms that can be timed, in output order.
 const ALGOS: &[&str] = &[
@@ -88,142 +79,124 @@ const ALGOS: &[&str] = &[
 const CONTACT_ALGOS: &[&str] = &["kkt_fo", "kkt_so", "impact_fo", "impact_so"];
 
 /// Options of `sodyn bench`.
-#[derive(Clone, Debug)]
-struct BenchOptions {
-    model: Option<String>,
-    floating_base: bool,
-    contacts: Vec<String>,
-    algos: Option<Vec<String>>,
+#[derive(Clone, Debug, Args)]
+pub(crate) struct BenchArgs {
+    #[command(flatten)]
+    model: ModelArgs,
+    /// Point contacts (3-D) at the origins of these frames; needed by kkt_*, impact_*
+    #[arg(long, value_name = "F1,F2,...", value_parser = parse_list)]
+    contacts: Option<List>,
+    /// The algorithms to time [default: all; the contact ones only with --contacts]
+    #[arg(long, value_name = "a,b,...", value_parser = parse_list)]
+    algos: Option<List>,
+    /// Random states, generated once and used round robin [default: 1000, 8 with --smoke]
+    #[arg(long, value_name = "N", value_parser = at_least::<1>)]
     states: Option<usize>,
+    /// Seed of the random states
+    #[arg(long, value_name = "S", default_value_t = 42)]
     seed: u64,
+    /// Seconds of timing per algorithm, once the minimum number of samples is reached
+    #[arg(long, value_name = "X", default_value_t = 4.0, value_parser = non_negative)]
     max_seconds: f64,
+    /// Timed calls wanted per algorithm (fewer once --max-seconds have passed)
+    #[arg(long, value_name = "N", default_value_t = 20000)]
     iters: usize,
+    /// Threads of the batch_* algorithms, the caller included
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = at_least::<1>)]
     threads: usize,
+    /// Time the batch_* algorithms on 1 and on T threads in alternating blocks
+    ///
+    /// Blocks of back-to-back calls of about 5 ms each; two lines per batched algorithm, the
+    /// second with speedup = the median over the pairs of blocks of the 1-thread / T-thread
+    /// time, speedup_first = the same for the first call of each T-thread block, block=, and
+    /// speedup_cpus= / one_us_per_cpu= against the 1-thread time with the caller pinned to each
+    /// CPU in turn.
+    #[arg(long, value_name = "T", value_parser = at_least::<2>, conflicts_with = "ratio_to")]
     paired_threads: Option<usize>,
-    /// `--pool rayon`: rayon helpers instead of the spinning ones.
-    rayon: bool,
-    /// `--spin-us`: spin time of the spinning helpers.
-    spin: std::time::Duration,
-    /// `--pin-cpus`: the calling thread pinned to the first, helper `i` of each pool to the
-    /// `i`-th.
-    pin_cpus: Option<Vec<usize>>,
+    /// The helper threads of the batch_* algorithms
+    #[arg(long, value_enum, default_value_t = Pool::Spin)]
+    pool: Pool,
+    /// Microseconds the idle spinning helpers poll before they sleep
+    #[arg(long, value_name = "U", value_parser = non_negative,
+          default_value_t = BatchPool::DEFAULT_SPIN.as_secs_f64() * 1e6)]
+    spin_us: f64,
+    /// Pin the calling thread to C0 and helper i of each pool to Ci
+    ///
+    /// (BatchPool::with_cpus; the per-CPU baseline of --paired-threads then uses those CPUs.)
+    #[arg(long, value_name = "C0,C1,...", value_parser = parse_cpus)]
+    pin_cpus: Option<Cpus>,
+    /// The model's name in the output lines [default: the model's name, as info prints it]
+    #[arg(long, value_name = "NAME")]
     name: Option<String>,
-    /// `--ratio-to R`: each algorithm timed in alternating blocks with `R`.
+    /// Time each algorithm against the single-state algorithm R in alternating blocks
+    ///
+    /// Blocks of about 5 ms; adds ratio = the median over the pairs of blocks of (time per
+    /// call) / (R's time per call), ratio_pairs=, and R's own times as ref_median_us,
+    /// ref_p10_us, ref_p90_us. The algorithms timed must be single-state ones other than R.
+    #[arg(long, value_name = "R")]
     ratio_to: Option<String>,
+    /// Run every algorithm a few times only (a smoke test, not a timing)
+    #[arg(long)]
     smoke: bool,
+    /// Make exactly N untimed calls per algorithm
+    ///
+    /// For instruction counts under `valgrind --tool=callgrind`: the cost per call is the
+    /// difference of two runs over the difference of N (scripts/instr-per-call.sh).
+    #[arg(long, value_name = "N")]
     calls: Option<usize>,
 }
 
-fn parse_number<T: std::str::FromStr>(opt: &str, s: &str, what: &str) -> Result<T> {
-    s.parse().map_err(|_| Error::Io(format!("{opt}: \"{s}\" is not {what}")))
+/// The helper threads of the batched algorithms (`--pool`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum Pool {
+    /// Idle helpers poll for --spin-us before they sleep (BatchPool::with_spin)
+    Spin,
+    /// A rayon thread pool (BatchPool::with_rayon)
+    Rayon,
 }
 
-fn parse(args: &[String]) -> Result<BenchOptions> {
-    let mut o = BenchOptions {
-        model: None,
-        floating_base: false,
-        contacts: vec![],
-        algos: None,
-        states: None,
-        seed: 42,
-        max_seconds: 4.0,
-        iters: 20000,
-        threads: 1,
-        paired_threads: None,
-        rayon: false,
-        spin: BatchPool::DEFAULT_SPIN,
-        pin_cpus: None,
-        name: None,
-        ratio_to: None,
-        smoke: false,
-        calls: None,
-    };
-    let mut i = 0;
-    while i < args.len() {
-        let opt = args[i].as_str();
-        let mut value = || -> Result<String> {
-            i += 1;
-            args.get(i)
-                .cloned()
-                .ok_or_else(|| Error::Io(format!("option {opt} needs a value\n\n{USAGE}")))
-        };
-        let list = |s: String| -> Vec<String> {
-            s.split(',').map(str::trim).filter(|x| !x.is_empty()).map(String::from).collect()
-        };
-        match opt {
-            "--model" => o.model = Some(value()?),
-            "--floating-base" => o.floating_base = true,
-            "--contacts" => o.contacts = list(value()?),
-            "--algos" => o.algos = Some(list(value()?)),
-            "--states" => {
-                let n: usize = parse_number(opt, &value()?, "a positive integer")?;
-                if n == 0 {
-                    return Err(Error::Io("--states: must be at least 1".into()));
-                }
-                o.states = Some(n);
-            }
-            "--seed" => o.seed = parse_number(opt, &value()?, "a non-negative integer")?,
-            "--max-seconds" => {
-                let s = value()?;
-                o.max_seconds = parse_number(opt, &s, "a number of seconds")?;
-                if !(o.max_seconds.is_finite() && o.max_seconds >= 0.0) {
-                    return Err(Error::Io(format!("--max-seconds: \"{s}\" must be ≥ 0")));
-                }
-            }
-            "--iters" => o.iters = parse_number(opt, &value()?, "a non-negative integer")?,
-            "--threads" => {
-                o.threads = parse_number(opt, &value()?, "a positive integer")?;
-                if o.threads == 0 {
-                    return Err(Error::Io("--threads: must be at least 1".into()));
-                }
-            }
-            "--paired-threads" => {
-                let t: usize = parse_number(opt, &value()?, "a positive integer")?;
-                if t < 2 {
-                    return Err(Error::Io("--paired-threads: must be at least 2".into()));
-                }
-                o.paired_threads = Some(t);
-            }
-            "--pool" => {
-                o.rayon = match value()?.as_str() {
-                    "spin" => false,
-                    "rayon" => true,
-                    other => {
-                        return Err(Error::Io(format!(
-                            "--pool: \"{other}\" is not a pool (spin or rayon)"
-                        )));
-                    }
-                }
-            }
-            "--spin-us" => {
-                let us: f64 = parse_number(opt, &value()?, "a number of microseconds")?;
-                if !(us.is_finite() && us >= 0.0) {
-                    return Err(Error::Io(format!("--spin-us: {us} must be ≥ 0")));
-                }
-                o.spin = std::time::Duration::from_secs_f64(us * 1e-6);
-            }
-            "--pin-cpus" => {
-                let cpus = value()?
-                    .split(',')
-                    .map(|c| parse_number(opt, c.trim(), "a list of CPU numbers"))
-                    .collect::<Result<Vec<usize>>>()?;
-                let mut sorted = cpus.clone();
-                sorted.sort_unstable();
-                sorted.dedup();
-                if sorted.len() != cpus.len() {
-                    return Err(Error::Io(format!("--pin-cpus: a CPU is repeated in {cpus:?}")));
-                }
-                o.pin_cpus = Some(cpus);
-            }
-            "--name" => o.name = Some(value()?),
-            "--ratio-to" => o.ratio_to = Some(value()?),
-            "--smoke" => o.smoke = true,
-            "--calls" => o.calls = Some(parse_number(opt, &value()?, "a non-negative integer")?),
-            other => return Err(Error::Io(format!("unknown option \"{other}\"\n\n{USAGE}"))),
-        }
-        i += 1;
+/// A comma-separated list (blanks around the items and empty items dropped).
+#[derive(Clone, Debug)]
+struct List(Vec<String>);
+
+fn parse_list(s: &str) -> std::result::Result<List, String> {
+    Ok(List(s.split(',').map(str::trim).filter(|x| !x.is_empty()).map(String::from).collect()))
+}
+
+/// A comma-separated list of distinct CPU numbers.
+#[derive(Clone, Debug)]
+struct Cpus(Vec<usize>);
+
+fn parse_cpus(s: &str) -> std::result::Result<Cpus, String> {
+    let cpus = s
+        .split(',')
+        .map(|c| c.trim().parse().map_err(|_| format!("\"{}\" is not a CPU number", c.trim())))
+        .collect::<std::result::Result<Vec<usize>, String>>()?;
+    let mut sorted = cpus.clone();
+    sorted.sort_unstable();
+    sorted.dedup();
+    if sorted.len() != cpus.len() {
+        return Err(format!("a CPU is repeated in {cpus:?}"));
     }
-    Ok(o)
+    Ok(Cpus(cpus))
+}
+
+/// An integer of at least `MIN`.
+fn at_least<const MIN: usize>(s: &str) -> std::result::Result<usize, String> {
+    let n: usize = s.parse().map_err(|_| format!("\"{s}\" is not a non-negative integer"))?;
+    if n < MIN {
+        return Err(format!("must be at least {MIN}"));
+    }
+    Ok(n)
+}
+
+/// A finite number ≥ 0.
+fn non_negative(s: &str) -> std::result::Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if x.is_finite() && x >= 0.0 => Ok(x),
+        Ok(_) => Err("must be a finite number ≥ 0".into()),
+        Err(_) => Err(format!("\"{s}\" is not a number")),
+    }
 }
 
 /// Checks the `--algos` list; returns the algorithms to run, in [`ALGOS`] order. Without
@@ -259,8 +232,8 @@ fn select_algos(requested: Option<&[String]>, has_contacts: bool) -> Result<Vec<
 /// ±1000 and non-degenerate, else ±π; free-flyer translations in [-1, 1]. Quaternion
 /// coordinates ignore them (uniform random unit quaternion).
 fn sampling_bounds(model: &Model) -> (DVector<f64>, DVector<f64>) {
-    let (mut lo, mut hi) = (model.lower.clone(), model.upper.clone());
-    for i in 0..model.nq {
+    let (mut lo, mut hi) = (model.lower().clone(), model.upper().clone());
+    for i in 0..model.nq() {
         let bad = !lo[i].is_finite()
             || !hi[i].is_finite()
             || lo[i] < -1e3
@@ -272,8 +245,8 @@ fn sampling_bounds(model: &Model) -> (DVector<f64>, DVector<f64>) {
         }
     }
     for j in 1..model.njoints() {
-        if matches!(model.joints[j], JointType::FreeFlyer) {
-            for c in model.idx_q[j]..model.idx_q[j] + 3 {
+        if matches!(model.joints()[j], JointType::FreeFlyer) {
+            for c in model.idx_q()[j]..model.idx_q()[j] + 3 {
                 lo[c] = -1.0;
                 hi[c] = 1.0;
             }
@@ -297,10 +270,10 @@ impl States {
         let mut rng = Rng::new(seed);
         let mut s = States { q: vec![], v: vec![], a: vec![], tau: vec![] };
         for _ in 0..n {
-            let mut q = DVector::zeros(model.nq);
+            let mut q = DVector::zeros(model.nq());
             for j in 1..model.njoints() {
-                let (a, m) = (model.idx_q[j], model.nqs[j]);
-                model.joints[j].random(
+                let (a, m) = (model.idx_q()[j], model.nqs()[j]);
+                model.joints()[j].random(
                     &mut rng,
                     &lo.as_slice()[a..a + m],
                     &hi.as_slice()[a..a + m],
@@ -308,7 +281,7 @@ impl States {
                 );
             }
             s.q.push(q);
-            let mut r = || DVector::from_fn(model.nv, |_, _| rng.range(-1.0, 1.0));
+            let mut r = || DVector::from_fn(model.nv(), |_, _| rng.range(-1.0, 1.0));
             s.v.push(r());
             s.a.push(r());
             s.tau.push(r());
@@ -711,7 +684,7 @@ mod affinity {
         }
         /// Pins the calling thread to `cpu`; false if that failed.
         pub(super) fn pin_to(&self, cpu: usize) -> bool {
-            crate::batch::pin_current_thread(cpu).is_ok()
+            sodyn::batch::pin_current_thread(cpu).is_ok()
         }
         /// Gives the calling thread its original CPU set back.
         pub(super) fn restore(&self) {
@@ -823,12 +796,12 @@ fn time_algo(
         }),
         "id_fo" => measure(plan, |i| {
             id_derivatives(m, d, &q[i], &v[i], &a[i], None)?;
-            black_box(&d.dtau_dq);
+            black_box(d.dtau_dq());
             Ok(())
         }),
         "fd_fo" => measure(plan, |i| {
             fd_derivatives(m, d, &q[i], &v[i], &tau[i], None)?;
-            black_box(&d.dqdd_dq);
+            black_box(d.dqdd_dq());
             Ok(())
         }),
         "id_so" => measure(plan, |i| {
@@ -883,7 +856,7 @@ fn time_algo(
             let kd = kkt.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
                 kkt_derivatives(m, d, kd, &q[i], &v[i], &tau[i])?;
-                black_box(&kd.dqdd_dq);
+                black_box(kd.dqdd_dq());
                 Ok(())
             })
         }
@@ -891,7 +864,7 @@ fn time_algo(
             let kd = kkt.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
                 kkt_so_derivatives(m, d, kd, &q[i], &v[i], &tau[i])?;
-                black_box(&kd.so);
+                black_box(kd.so());
                 Ok(())
             })
         }
@@ -899,7 +872,7 @@ fn time_algo(
             let im = impact.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
                 impact_derivatives(m, d, im, &q[i], &v[i])?;
-                black_box(&im.dvplus_dq);
+                black_box(im.dvplus_dq());
                 Ok(())
             })
         }
@@ -907,7 +880,7 @@ fn time_algo(
             let im = impact.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
                 impact_so_derivatives(m, d, im, &q[i], &v[i])?;
-                black_box(&im.so);
+                black_box(im.so());
                 Ok(())
             })
         }
@@ -973,11 +946,11 @@ fn call_single(algo: Single, m: &Model, st: &States, ws: &mut Workspaces, i: usi
         }
         Single::IdFo => {
             id_derivatives(m, d, q, v, a, None)?;
-            black_box(&d.dtau_dq);
+            black_box(d.dtau_dq());
         }
         Single::FdFo => {
             fd_derivatives(m, d, q, v, tau, None)?;
-            black_box(&d.dqdd_dq);
+            black_box(d.dqdd_dq());
         }
         Single::IdSo => {
             id_so_derivatives(m, d, &mut ws.so, q, v, a, None)?;
@@ -999,20 +972,20 @@ fn call_single(algo: Single, m: &Model, st: &States, ws: &mut Workspaces, i: usi
             let kd = ws.kkt.as_mut().ok_or_else(no_contacts)?;
             if algo == Single::KktFo {
                 kkt_derivatives(m, d, kd, q, v, tau)?;
-                black_box(&kd.dqdd_dq);
+                black_box(kd.dqdd_dq());
             } else {
                 kkt_so_derivatives(m, d, kd, q, v, tau)?;
-                black_box(&kd.so);
+                black_box(kd.so());
             }
         }
         Single::ImpactFo | Single::ImpactSo => {
             let im = ws.impact.as_mut().ok_or_else(no_contacts)?;
             if algo == Single::ImpactFo {
                 impact_derivatives(m, d, im, q, v)?;
-                black_box(&im.dvplus_dq);
+                black_box(im.dvplus_dq());
             } else {
                 impact_so_derivatives(m, d, im, q, v)?;
-                black_box(&im.so);
+                black_box(im.so());
             }
         }
     }
@@ -1026,37 +999,25 @@ struct Timed {
     paired: Option<Paired>,
 }
 
-/// Default `--name`: the URDF file stem, or the built-in model's name.
-fn default_name(spec: &str) -> String {
-    match spec.strip_prefix("builtin:") {
-        Some(n) => n.to_string(),
-        None => Path::new(spec)
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| spec.to_string()),
-    }
-}
-
-/// Runs `sodyn bench` with its arguments (after the subcommand name).
-pub(crate) fn run(args: &[String]) -> Result<()> {
-    if args.iter().any(|a| a == "--help" || a == "-h") {
-        println!("{USAGE}");
-        return Ok(());
-    }
-    let o = parse(args)?;
-    let spec =
-        o.model.as_deref().ok_or_else(|| Error::Io(format!("--model is required\n\n{USAGE}")))?;
-    let algos = select_algos(o.algos.as_deref(), !o.contacts.is_empty())?;
-    let model = load_model(spec, o.floating_base)?;
-    for c in &o.contacts {
+/// Runs `sodyn bench`.
+pub(crate) fn run(o: &BenchArgs) -> Result<()> {
+    let (spec, floating_base) = (o.model.model.as_str(), o.model.floating_base);
+    let contacts: &[String] = o.contacts.as_ref().map_or(&[], |l| &l.0);
+    let algos = select_algos(o.algos.as_ref().map(|l| l.0.as_slice()), !contacts.is_empty())?;
+    let pin_cpus = o.pin_cpus.as_ref().map(|c| c.0.as_slice());
+    let rayon = o.pool == Pool::Rayon;
+    let spin = Duration::from_nanos((o.spin_us * 1e3).round() as u64);
+    let model = load_model(&o.model)?;
+    for c in contacts {
         model.frame_id(c).map_err(|_| {
             Error::Io(format!(
                 "--contacts: unknown frame \"{c}\" in model \"{}\" ({spec})",
-                model.name
+                model.name()
             ))
         })?;
     }
-    // --ratio-to R: R and every listed algorithm single-state, R not among them.
+    // --ratio-to R: R and every listed algorithm single-state, R not among them (clap rejects
+    // --ratio-to with --paired-threads).
     let ratio_to = match &o.ratio_to {
         None => None,
         Some(r) => {
@@ -1066,7 +1027,7 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
                      aba, id_fo, fd_fo, id_so, fd_so, id_soc, fd_soc, kkt_fo, kkt_so, impact_fo, impact_so)"
                 ))
             })?;
-            if CONTACT_ALGOS.contains(&r.as_str()) && o.contacts.is_empty() {
+            if CONTACT_ALGOS.contains(&r.as_str()) && contacts.is_empty() {
                 return Err(Error::Io(format!("--ratio-to: \"{r}\" needs --contacts")));
             }
             if let Some(a) = algos.iter().find(|a| Single::from_name(a).is_none() || *a == r) {
@@ -1075,21 +1036,19 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
                      be single-state ones other than {r})"
                 )));
             }
-            if o.paired_threads.is_some() {
-                return Err(Error::Io("--ratio-to and --paired-threads exclude each other".into()));
-            }
             Some((r.clone(), known))
         }
     };
-    let name = o.name.clone().unwrap_or_else(|| default_name(spec));
+    // The model's name as `info` and `eval` give it (blanks replaced: one field of the line).
+    let name = o.name.clone().unwrap_or_else(|| model.name().replace(char::is_whitespace, "_"));
     let nstates = o.states.unwrap_or(if o.smoke { 8 } else { 1000 });
     let st = States::new(&model, nstates, o.seed);
     // One pool of --threads threads, or with --paired-threads T, pools of one and T threads.
     // With --pin-cpus the calling thread runs on the first CPU of the list, and helper i of a
     // pool on the i-th.
     let max_threads = o.paired_threads.unwrap_or(o.threads);
-    if let Some(cpus) = &o.pin_cpus {
-        if o.rayon {
+    if let Some(cpus) = pin_cpus {
+        if rayon {
             return Err(Error::Io(
                 "--pin-cpus applies to the spinning pool, not --pool rayon".into(),
             ));
@@ -1100,20 +1059,20 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
                 cpus.len()
             )));
         }
-        crate::batch::pin_current_thread(cpus[0])
+        sodyn::batch::pin_current_thread(cpus[0])
             .map_err(|e| Error::Io(format!("--pin-cpus: {e}")))?;
     }
-    let pool = |t: usize| match (&o.pin_cpus, o.rayon) {
-        (Some(cpus), _) => BatchPool::with_cpus(&cpus[..t], o.spin),
+    let pool = |t: usize| match (pin_cpus, rayon) {
+        (Some(cpus), _) => BatchPool::with_cpus(&cpus[..t], spin),
         (None, true) => BatchPool::with_rayon(t),
-        (None, false) => BatchPool::with_spin(t, o.spin),
+        (None, false) => BatchPool::with_spin(t, spin),
     };
     let pools = match o.paired_threads {
         Some(t) => vec![pool(1)?, pool(t)?],
         None => vec![pool(o.threads)?],
     };
     let pool_threads: Vec<usize> = pools.iter().map(BatchPool::threads).collect();
-    let nv = model.nv;
+    let nv = model.nv();
     let needs = |p: &str| {
         algos.iter().any(|a| a.starts_with(p))
             || ratio_to.as_ref().is_some_and(|(r, _)| r.starts_with(p))
@@ -1130,11 +1089,10 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
         kkt: None,
         impact: None,
         batch: pools.into_iter().map(|p| BatchData::with_pool(&model, Arc::new(p))).collect(),
-        baseline_cpus: o.pin_cpus.as_ref().map(|c| c[..max_threads].to_vec()),
+        baseline_cpus: pin_cpus.map(|c| c[..max_threads].to_vec()),
     };
-    if !o.contacts.is_empty() {
-        let contacts = o
-            .contacts
+    if !contacts.is_empty() {
+        let contacts = contacts
             .iter()
             .map(|f| Contact::new(&model, f, Vector3::zeros()))
             .collect::<Result<Vec<_>>>()?;
@@ -1158,23 +1116,23 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
     println!(
         "# model={name} source={spec} base={} nq={} nv={} njoints={} nstates={nstates} seed={} \
          timer_overhead_ns={:.1} contacts={} threads={} pool={} smoke={}",
-        if o.floating_base { "ff" } else { "fixed" },
-        model.nq,
-        model.nv,
+        if floating_base { "ff" } else { "fixed" },
+        model.nq(),
+        model.nv(),
         model.njoints(),
         o.seed,
         timer_overhead_ns(),
-        if o.contacts.is_empty() { "none".to_string() } else { o.contacts.join(",") },
+        if contacts.is_empty() { "none".to_string() } else { contacts.join(",") },
         match o.paired_threads {
             Some(t) => format!("1,{t}(paired)"),
             None => o.threads.to_string(),
         },
-        match (&o.pin_cpus, o.rayon) {
+        match (pin_cpus, rayon) {
             (_, true) => "rayon".to_string(),
-            (None, false) => format!("spin({}us)", o.spin.as_micros()),
+            (None, false) => format!("spin({}us)", spin.as_micros()),
             (Some(c), false) => format!(
                 "spin({}us),pinned:{}",
-                o.spin.as_micros(),
+                spin.as_micros(),
                 c.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(",")
             ),
         },
@@ -1192,8 +1150,8 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
                 "model={name} nq={} nv={} algo={algo} median_us={:.4} p10_us={:.4} \
                  p90_us={:.4} batch={} samples={} ratio_to={r} ratio={:.4} ratio_pairs={} \
                  ref_median_us={:.4} ref_p10_us={:.4} ref_p90_us={:.4}",
-                model.nq,
-                model.nv,
+                model.nq(),
+                model.nv(),
                 s.med,
                 s.p10,
                 s.p90,
@@ -1238,11 +1196,31 @@ pub(crate) fn run(args: &[String]) -> Result<()> {
             println!(
                 "model={name} nq={} nv={} algo={algo} median_us={:.4} p10_us={:.4} \
                  p90_us={:.4} batch={} samples={}{extra}",
-                model.nq, model.nv, s.med, s.p10, s.p90, s.batch, s.samples
+                model.nq(),
+                model.nv(),
+                s.med,
+                s.p10,
+                s.p90,
+                s.batch,
+                s.samples
             );
         }
         use std::io::Write;
         let _ = std::io::stdout().flush();
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{ALGOS, LONG_ABOUT};
+
+    #[test]
+    fn the_help_names_every_algorithm() {
+        let words: Vec<&str> =
+            LONG_ABOUT.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_')).collect();
+        for a in ALGOS {
+            assert!(words.contains(a), "{a} is missing from the help of bench");
+        }
+    }
 }

@@ -1,16 +1,16 @@
-//! `sodyn demo`: every algorithm on a built-in model at a random state, with timings and the
-//! maximum error against the automatic-differentiation oracle of [`crate::reference`].
+//! `sodyn demo`: every algorithm on a model at a random state, with timings and the maximum
+//! error against the automatic-differentiation oracle of [`sodyn::reference`].
 
-use crate::algo::{Data, aba, crba, factorize_ltl, point_jacobian, rnea, solve_ltl};
-use crate::cli::load_model;
-use crate::deriv::{
+use super::load_model_spec;
+use nalgebra::{DMatrix, DVector, Matrix3xX, Vector3};
+use sodyn::algo::{Data, aba, crba, factorize_ltl, point_jacobian, rnea, solve_ltl};
+use sodyn::deriv::{
     FdSoData, SoData, fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives,
 };
-use crate::error::Result;
-use crate::reference;
-use crate::rng::Rng;
-use crate::tensor::Tensor3;
-use nalgebra::{DMatrix, DVector, Matrix3xX, Vector3};
+use sodyn::error::Result;
+use sodyn::reference;
+use sodyn::rng::Rng;
+use sodyn::tensor::Tensor3;
 use std::time::Instant;
 
 /// Median wall time of `f` in microseconds over enough repetitions (about 0.2 s, at most 2000).
@@ -44,42 +44,20 @@ fn rel_v(a: &DVector<f64>, b: &[f64]) -> f64 {
     (a - &b).amax() / b.amax().max(1.0)
 }
 
-/// Dual-number Jacobian of a point position: column `c` is `d/dε p(q ⊕ ε e_c)`.
-pub fn point_jacobian_oracle(
-    m: &crate::model::Model,
-    q: &[f64],
-    frame: usize,
-    point: &[f64; 3],
-) -> Matrix3xX<f64> {
-    use num_dual::Dual64;
-    let mut jac = Matrix3xX::zeros(m.nv);
-    let qd: Vec<Dual64> = q.iter().map(|&x| Dual64::from(x)).collect();
-    let pt = point.map(Dual64::from);
-    for c in 0..m.nv {
-        let mut delta = vec![Dual64::from(0.0); m.nv];
-        delta[c] = Dual64::new(0.0, 1.0);
-        let p = reference::point_position(m, &reference::integrate(m, &qd, &delta), frame, &pt);
-        for r in 0..3 {
-            jac[(r, c)] = p[r].eps;
-        }
-    }
-    jac
-}
-
 /// Runs the demo on `spec` (`builtin:NAME` or a URDF path) with random state `seed`.
 pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
-    let m = load_model(spec, false)?;
+    let m = load_model_spec(spec, false)?;
     let mut rng = Rng::new(seed);
     let q = m.random_configuration(&mut rng);
-    let v = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
-    let a = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
-    let tau = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
+    let v = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
+    let a = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
+    let tau = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
     let (qs, vs, as_, ts) = (q.as_slice(), v.as_slice(), a.as_slice(), tau.as_slice());
     println!(
         "sodyn demo: model \"{}\" ({spec}), nq = {}, nv = {}, {} bodies, seed {seed}",
-        m.name,
-        m.nq,
-        m.nv,
+        m.name(),
+        m.nq(),
+        m.nv(),
         m.njoints() - 1
     );
     println!(
@@ -110,7 +88,7 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
     });
     let mm = crba(&m, &mut d, &q)?.clone();
     let mref = reference::mass_matrix::<f64>(&m, qs);
-    row("crba (mass matrix)", t, rel(&mm, &DMatrix::from_fn(m.nv, m.nv, |i, j| mref[i][j])));
+    row("crba (mass matrix)", t, rel(&mm, &DMatrix::from_fn(m.nv(), m.nv(), |i, j| mref[i][j])));
 
     let t = time_us(|| {
         aba(&m, &mut d, &q, &v, &tau, None).unwrap();
@@ -128,15 +106,15 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
     solve_ltl(&m, &d, &mut x)?;
     row("LᵀDL factorisation + solve", t, rel_v(&x, &qdd_ref));
 
-    let frame = m.frames.len() - 1;
-    let mut jac = Matrix3xX::zeros(m.nv);
+    let frame = m.frames().len() - 1;
+    let mut jac = Matrix3xX::zeros(m.nv());
     let point = Vector3::new(0.05, -0.02, 0.1);
     let t = time_us(|| {
         point_jacobian(&m, &mut d, &q, frame, &point, &mut jac).unwrap();
     });
-    let jref = point_jacobian_oracle(&m, qs, frame, &[point.x, point.y, point.z]);
+    let jref = reference::d_point_position_dq(&m, qs, frame, &[point.x, point.y, point.z]);
     row(
-        &format!("point Jacobian ({})", m.frames[frame].name),
+        &format!("point Jacobian ({})", m.frames()[frame].name),
         t,
         (&jac - &jref).amax() / jref.amax().max(1.0),
     );
@@ -145,16 +123,16 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
         id_derivatives(&m, &mut d, &q, &v, &a, None).unwrap();
     });
     id_derivatives(&m, &mut d, &q, &v, &a, None)?;
-    row("id_fo (IDSVA) dtau/dq", t, rel(&d.dtau_dq, &reference::d_rnea_dq(&m, qs, vs, as_)));
-    row("      dtau/dv", t, rel(&d.dtau_dv, &reference::d_rnea_dv(&m, qs, vs, as_)));
+    row("id_fo (IDSVA) dtau/dq", t, rel(d.dtau_dq(), &reference::d_rnea_dq(&m, qs, vs, as_)));
+    row("      dtau/dv", t, rel(d.dtau_dv(), &reference::d_rnea_dv(&m, qs, vs, as_)));
 
     let t = time_us(|| {
         fd_derivatives(&m, &mut d, &q, &v, &tau, None).unwrap();
     });
     fd_derivatives(&m, &mut d, &q, &v, &tau, None)?;
-    row("fd_fo dqdd/dq", t, rel(&d.dqdd_dq, &reference::d_aba_dq(&m, qs, vs, ts)));
-    row("      dqdd/dv", t, rel(&d.dqdd_dv, &reference::d_aba_dv(&m, qs, vs, ts)));
-    row("      dqdd/dtau = M⁻¹", t, rel(&d.minv, &reference::d_aba_dtau(&m, qs, vs, ts)));
+    row("fd_fo dqdd/dq", t, rel(d.dqdd_dq(), &reference::d_aba_dq(&m, qs, vs, ts)));
+    row("      dqdd/dv", t, rel(d.dqdd_dv(), &reference::d_aba_dv(&m, qs, vs, ts)));
+    row("      dqdd/dtau = M⁻¹", t, rel(d.minv(), &reference::d_aba_dtau(&m, qs, vs, ts)));
 
     let t = time_us(|| {
         id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None).unwrap();
@@ -173,7 +151,7 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
         fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &tau, None).unwrap();
     });
     fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &tau, None)?;
-    let big = m.nv > 40;
+    let big = m.nv() > 40;
     if big {
         row("fd_so (timing only; oracle > 40 DoF)", t, 0.0);
     } else {
@@ -198,12 +176,12 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
         .filter(|f| m.frame_id(f).is_ok())
         .collect();
     if !frames.is_empty() {
-        use crate::algo::Contact;
-        use crate::deriv::{
+        use sodyn::algo::Contact;
+        use sodyn::deriv::{
             ContactData, ImpactData, KktData, constrained_id_so_derivatives, impact_so_derivatives,
             kkt_so_derivatives,
         };
-        use crate::reference::contact as oracle;
+        use sodyn::reference::contact as oracle;
         let contacts: Vec<Contact> =
             frames.iter().map(|f| Contact::new(&m, f, Vector3::zeros())).collect::<Result<_>>()?;
         println!("\ncontacts on {} (oracle for second order only up to 20 DoF)", frames.join(", "));
@@ -218,7 +196,7 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
         row(
             "constrained ID (IDSVA(-SO)c) dtau/dq",
             t,
-            rel(&d.dtau_dq, &oracle::d_constrained_rnea_dq(&m, qs, vs, as_, &contacts, ls)),
+            rel(d.dtau_dq(), &oracle::d_constrained_rnea_dq(&m, qs, vs, as_, &contacts, ls)),
         );
         row(
             "      d2tau/dq2",
@@ -231,18 +209,18 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
         });
         kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau)?;
         let fo = oracle::kkt_fo(&m, qs, vs, ts, &contacts);
-        row("kkt FO+SO dqdd/dq", t, rel(&kd.dqdd_dq, &fo.dqdd_dq));
-        row("      dlambda/dq", t, rel(&kd.dlambda_dq, &fo.dlambda_dq));
+        row("kkt FO+SO dqdd/dq", t, rel(kd.dqdd_dq(), &fo.dqdd_dq));
+        row("      dlambda/dq", t, rel(kd.dlambda_dq(), &fo.dlambda_dq));
         row(
             "      dqdd/dv, dlambda/dv",
             t,
-            rel(&kd.dqdd_dv, &fo.dqdd_dv).max(rel(&kd.dlambda_dv, &fo.dlambda_dv)),
+            rel(kd.dqdd_dv(), &fo.dqdd_dv).max(rel(kd.dlambda_dv(), &fo.dlambda_dv)),
         );
-        if m.nv <= 20 {
+        if m.nv() <= 20 {
             let so_ref = oracle::kkt_so(&m, qs, vs, ts, &contacts);
-            let k = kd.so.as_ref().expect("allocated");
-            row("      d2qdd/dq2", t, rel_t(&k.d2qdd_dq2, &so_ref.d2qdd_dq2));
-            row("      d2lambda/dq2", t, rel_t(&k.d2lambda_dq2, &so_ref.d2lambda_dq2));
+            let k = kd.so().expect("allocated");
+            row("      d2qdd/dq2", t, rel_t(k.d2qdd_dq2(), &so_ref.d2qdd_dq2));
+            row("      d2lambda/dq2", t, rel_t(k.d2lambda_dq2(), &so_ref.d2lambda_dq2));
         }
         let mut im = ImpactData::new(&m, cd).with_second_order(&m);
         let t = time_us(|| {
@@ -250,12 +228,12 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
         });
         impact_so_derivatives(&m, &mut d, &mut im, &q, &v)?;
         let fo = oracle::impact_fo(&m, qs, vs, &contacts, 0.0);
-        row("impact FO+SO dvplus/dq", t, rel(&im.dvplus_dq, &fo.dvplus_dq));
-        row("      dimpulse/dq", t, rel(&im.dimpulse_dq, &fo.dimpulse_dq));
-        if m.nv <= 20 {
+        row("impact FO+SO dvplus/dq", t, rel(im.dvplus_dq(), &fo.dvplus_dq));
+        row("      dimpulse/dq", t, rel(im.dimpulse_dq(), &fo.dimpulse_dq));
+        if m.nv() <= 20 {
             let so_ref = oracle::impact_so(&m, qs, vs, &contacts, 0.0);
-            let k = im.so.as_ref().expect("allocated");
-            row("      d2vplus/dq2", t, rel_t(&k.d2vplus_dq2, &so_ref.d2vplus_dq2));
+            let k = im.so().expect("allocated");
+            row("      d2vplus/dq2", t, rel_t(k.d2vplus_dq2(), &so_ref.d2vplus_dq2));
         }
     }
     println!("\nmaximum relative error against the oracle: {worst:.2e}");

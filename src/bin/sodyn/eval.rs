@@ -1,20 +1,21 @@
-//! State files and the `eval` output object.
+//! State files (JSON input) and the `eval` output object (README.md, "Command line").
+//!
+//! Self-contained (it uses only `sodyn`, `nalgebra` and `serde_json`, nothing else of the
+//! binary), so that a test or a fuzz target can include it with `#[path = ".../eval.rs"] mod
+//! eval;`.
 
-use crate::algo::{Contact, Data, aba, crba, nonlinear_effects, rnea};
-use crate::deriv::{
-    ContactData, ImpactData, KktData, SoData, constrained_id_so_derivatives, impact_derivatives,
+use nalgebra::{DMatrix, DVector, Vector3};
+use serde_json::{Map, Value, json};
+use sodyn::algo::{Contact, Data, aba, crba, nonlinear_effects, rnea};
+use sodyn::deriv::{
+    ContactData, FdSoData, ImpactData, KktData, SoData, constrained_id_so_derivatives,
+    fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives, impact_derivatives,
     impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
 };
-use crate::deriv::{
-    FdSoData, fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives,
-};
-use crate::error::{Error, Result};
-use crate::model::Model;
-use crate::rng::Rng;
-use crate::tensor::Tensor3;
-use nalgebra::Vector3;
-use nalgebra::{DMatrix, DVector};
-use serde_json::{Map, Value, json};
+use sodyn::error::{Error, Result};
+use sodyn::model::Model;
+use sodyn::rng::Rng;
+use sodyn::tensor::Tensor3;
 
 /// A robot state: configuration, velocity, acceleration, torque.
 #[derive(Clone, Debug)]
@@ -40,9 +41,9 @@ impl State {
     pub fn random(model: &Model, rng: &mut Rng) -> State {
         let q = model.random_configuration(rng);
         let mut r = |n: usize| DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
-        let v = r(model.nv);
-        let a = r(model.nv);
-        let tau = r(model.nv);
+        let v = r(model.nv());
+        let a = r(model.nv());
+        let tau = r(model.nv());
         State { q, v, a, tau, contacts: vec![], lambda: DVector::zeros(0), restitution: 0.0 }
     }
 }
@@ -79,15 +80,37 @@ fn read_vec(
 
 /// Parses a state JSON object (`q`, `v`, `a`, `tau`; missing `q` is the neutral configuration,
 /// other missing keys are zeros). Checks lengths and the configuration.
-pub fn load_state(model: &Model, text: &str, file: &str) -> Result<State> {
+///
+/// `floating_base` is `Some(--floating-base)` for a model loaded from a URDF, `None` for a
+/// built-in one: a `q` whose length is that of the same URDF with the other base (`nq ± 7`, a
+/// free-flyer root added or not) is reported with a hint at `--floating-base`.
+pub fn load_state(
+    model: &Model,
+    text: &str,
+    file: &str,
+    floating_base: Option<bool>,
+) -> Result<State> {
     let val: Value =
         serde_json::from_str(text).map_err(|e| Error::Io(format!("{file}: invalid JSON: {e}")))?;
     let obj = val
         .as_object()
         .ok_or_else(|| Error::Io(format!("{file}: the state must be a JSON object")))?;
-    let q = read_vec(obj, "q", model.nq, file)?.unwrap_or_else(|| model.neutral());
+    let nq = model.nq();
+    let q_len = obj.get("q").and_then(Value::as_array).map(Vec::len);
+    let q = read_vec(obj, "q", nq, file)
+        .map_err(|e| match (q_len, floating_base) {
+            (Some(n), Some(false)) if n == nq + 7 => Error::Io(format!(
+                "{e} ({n} is nq of this URDF with a free-flyer root: add --floating-base)"
+            )),
+            (Some(n), Some(true)) if n + 7 == nq => Error::Io(format!(
+                "{e} ({n} is nq of this URDF without the free-flyer root: leave out \
+                 --floating-base)"
+            )),
+            _ => e,
+        })?
+        .unwrap_or_else(|| model.neutral());
     model.check_q(&q)?;
-    let z = || DVector::zeros(model.nv);
+    let z = || DVector::zeros(model.nv());
     let mut contacts = vec![];
     if let Some(list) = obj.get("contacts") {
         let list = list.as_array().ok_or_else(|| {
@@ -134,9 +157,9 @@ pub fn load_state(model: &Model, text: &str, file: &str) -> Result<State> {
     };
     Ok(State {
         q,
-        v: read_vec(obj, "v", model.nv, file)?.unwrap_or_else(z),
-        a: read_vec(obj, "a", model.nv, file)?.unwrap_or_else(z),
-        tau: read_vec(obj, "tau", model.nv, file)?.unwrap_or_else(z),
+        v: read_vec(obj, "v", model.nv(), file)?.unwrap_or_else(z),
+        a: read_vec(obj, "a", model.nv(), file)?.unwrap_or_else(z),
+        tau: read_vec(obj, "tau", model.nv(), file)?.unwrap_or_else(z),
         contacts,
         lambda,
         restitution,
@@ -168,24 +191,24 @@ pub fn eval_json(model: &Model, s: &State, order: u32) -> Result<Value> {
     let joints: Vec<Value> = (1..model.njoints())
         .map(|i| {
             json!({
-                "name": model.names[i],
-                "type": model.joints[i].name(),
-                "parent": model.names[model.parents[i]],
-                "idx_q": model.idx_q[i],
-                "nq": model.nqs[i],
-                "idx_v": model.idx_v[i],
-                "nv": model.nvs[i],
+                "name": model.names()[i],
+                "type": model.joints()[i].name(),
+                "parent": model.names()[model.parents()[i]],
+                "idx_q": model.idx_q()[i],
+                "nq": model.nqs()[i],
+                "idx_v": model.idx_v()[i],
+                "nv": model.nvs()[i],
             })
         })
         .collect();
-    let g = model.gravity.to_vec6();
+    let g = model.gravity().to_vec6();
     id_derivatives(model, &mut data, &s.q, &s.v, &s.a, None)?;
-    let (dtau_dq, dtau_dv) = (mat_json(&data.dtau_dq), mat_json(&data.dtau_dv));
+    let (dtau_dq, dtau_dv) = (mat_json(data.dtau_dq()), mat_json(data.dtau_dv()));
     fd_derivatives(model, &mut data, &s.q, &s.v, &s.tau, None)?;
     let mut out = json!({
-        "model": model.name,
-        "nq": model.nq,
-        "nv": model.nv,
+        "model": model.name(),
+        "nq": model.nq(),
+        "nv": model.nv(),
         "gravity": g.as_slice(),
         "joints": joints,
         "tau": tau.as_slice(),
@@ -194,13 +217,13 @@ pub fn eval_json(model: &Model, s: &State, order: u32) -> Result<Value> {
         "qdd": qdd.as_slice(),
         "dtau_dq": dtau_dq,
         "dtau_dv": dtau_dv,
-        "dqdd_dq": mat_json(&data.dqdd_dq),
-        "dqdd_dv": mat_json(&data.dqdd_dv),
-        "Minv": mat_json(&data.minv),
+        "dqdd_dq": mat_json(data.dqdd_dq()),
+        "dqdd_dv": mat_json(data.dqdd_dv()),
+        "Minv": mat_json(data.minv()),
     });
     if order >= 2 {
         let o = out.as_object_mut().expect("object");
-        let mut so = crate::deriv::SoData::new(model);
+        let mut so = SoData::new(model);
         id_so_derivatives(model, &mut data, &mut so, &s.q, &s.v, &s.a, None)?;
         o.insert("d2tau_dq2".into(), tensor_json(so.d2tau_dq2()));
         o.insert("d2tau_dv2".into(), tensor_json(so.d2tau_dv2()));
@@ -234,9 +257,9 @@ fn contact_outputs(
     o.insert(
         "constrained_id".into(),
         json!({
-            "tau": data.tau.as_slice(),
-            "dtau_dq": mat_json(&data.dtau_dq),
-            "dtau_dv": mat_json(&data.dtau_dv),
+            "tau": data.tau().as_slice(),
+            "dtau_dq": mat_json(data.dtau_dq()),
+            "dtau_dv": mat_json(data.dtau_dv()),
             "d2tau_dq2": tensor_json(so.d2tau_dq2()),
         }),
     );
@@ -248,26 +271,26 @@ fn contact_outputs(
         kkt_derivatives(model, data, &mut kd, &s.q, &s.v, &s.tau)?;
     }
     let mut k = json!({
-        "qdd": kd.qdd.as_slice(),
-        "lambda": kd.lambda.as_slice(),
-        "dqdd_dq": mat_json(&kd.dqdd_dq),
-        "dqdd_dv": mat_json(&kd.dqdd_dv),
-        "dqdd_dtau": mat_json(&kd.dqdd_dtau),
-        "dlambda_dq": mat_json(&kd.dlambda_dq),
-        "dlambda_dv": mat_json(&kd.dlambda_dv),
-        "dlambda_dtau": mat_json(&kd.dlambda_dtau),
+        "qdd": kd.qdd().as_slice(),
+        "lambda": kd.lambda().as_slice(),
+        "dqdd_dq": mat_json(kd.dqdd_dq()),
+        "dqdd_dv": mat_json(kd.dqdd_dv()),
+        "dqdd_dtau": mat_json(kd.dqdd_dtau()),
+        "dlambda_dq": mat_json(kd.dlambda_dq()),
+        "dlambda_dv": mat_json(kd.dlambda_dv()),
+        "dlambda_dtau": mat_json(kd.dlambda_dtau()),
     });
-    if let Some(t) = &kd.so {
+    if let Some(t) = kd.so() {
         let ko = k.as_object_mut().expect("object");
         for (name, x) in [
-            ("d2qdd_dq2", &t.d2qdd_dq2),
-            ("d2qdd_dv2", &t.d2qdd_dv2),
-            ("d2qdd_dqdv", &t.d2qdd_dqdv),
-            ("d2qdd_dtaudq", &t.d2qdd_dtaudq),
-            ("d2lambda_dq2", &t.d2lambda_dq2),
-            ("d2lambda_dv2", &t.d2lambda_dv2),
-            ("d2lambda_dqdv", &t.d2lambda_dqdv),
-            ("d2lambda_dtaudq", &t.d2lambda_dtaudq),
+            ("d2qdd_dq2", &t.d2qdd_dq2()),
+            ("d2qdd_dv2", &t.d2qdd_dv2()),
+            ("d2qdd_dqdv", &t.d2qdd_dqdv()),
+            ("d2qdd_dtaudq", &t.d2qdd_dtaudq()),
+            ("d2lambda_dq2", &t.d2lambda_dq2()),
+            ("d2lambda_dv2", &t.d2lambda_dv2()),
+            ("d2lambda_dqdv", &t.d2lambda_dqdv()),
+            ("d2lambda_dtaudq", &t.d2lambda_dtaudq()),
         ] {
             ko.insert(name.into(), tensor_json(x));
         }
@@ -282,20 +305,20 @@ fn contact_outputs(
         impact_derivatives(model, data, &mut im, &s.q, &s.v)?;
     }
     let mut i = json!({
-        "vplus": im.vplus.as_slice(),
-        "impulse": im.impulse.as_slice(),
-        "dvplus_dq": mat_json(&im.dvplus_dq),
-        "dvplus_dvminus": mat_json(&im.dvplus_dvminus),
-        "dimpulse_dq": mat_json(&im.dimpulse_dq),
-        "dimpulse_dvminus": mat_json(&im.dimpulse_dvminus),
+        "vplus": im.vplus().as_slice(),
+        "impulse": im.impulse().as_slice(),
+        "dvplus_dq": mat_json(im.dvplus_dq()),
+        "dvplus_dvminus": mat_json(im.dvplus_dvminus()),
+        "dimpulse_dq": mat_json(im.dimpulse_dq()),
+        "dimpulse_dvminus": mat_json(im.dimpulse_dvminus()),
     });
-    if let Some(t) = &im.so {
+    if let Some(t) = im.so() {
         let io = i.as_object_mut().expect("object");
         for (name, x) in [
-            ("d2vplus_dq2", &t.d2vplus_dq2),
-            ("d2vplus_dqdvminus", &t.d2vplus_dqdvminus),
-            ("d2impulse_dq2", &t.d2impulse_dq2),
-            ("d2impulse_dqdvminus", &t.d2impulse_dqdvminus),
+            ("d2vplus_dq2", &t.d2vplus_dq2()),
+            ("d2vplus_dqdvminus", &t.d2vplus_dqdvminus()),
+            ("d2impulse_dq2", &t.d2impulse_dq2()),
+            ("d2impulse_dqdvminus", &t.d2impulse_dqdvminus()),
         ] {
             io.insert(name.into(), tensor_json(x));
         }

@@ -1,0 +1,233 @@
+//! The `sodyn` command-line tool: `demo`, `info`, `random-state`, `eval`, `bench`.
+//!
+//! Everything of the command line lives in this binary, not in the library: argument parsing
+//! (clap), the JSON state files and `eval` output ([`eval`]), the timings of `demo` and `bench`.
+//! Exit status: 0 on success, 1 on an error found while running (the message, prefixed with
+//! `sodyn: error:`, on standard error), 2 on a usage error reported by clap (unknown option,
+//! missing or malformed value).
+
+mod bench;
+mod demo;
+mod eval;
+
+use clap::{Args, CommandFactory, Parser, Subcommand};
+use serde_json::Value;
+use sodyn::error::{Error, Result};
+use sodyn::model::Model;
+use std::path::Path;
+use std::process::ExitCode;
+
+/// Shown under every command's `--help`.
+const AFTER_HELP: &str = "\
+M is a URDF path or builtin:NAME (humanoid, quadruped, chain<N>, pendulum<N>,
+random_tree<N>[_ff][_s<SEED>]). Exit status: 0 on success, 1 on an error (the message on
+standard error), 2 on a usage error. README.md has the JSON schemas.";
+
+/// sodyn: rigid-body dynamics and its exact first- and second-order derivatives
+#[derive(Debug, Parser)]
+#[command(name = "sodyn", version, after_help = AFTER_HELP, args_override_self = true)]
+#[command(max_term_width = 100)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Every algorithm at a random state: timings and errors against the AD oracle
+    #[command(after_help = AFTER_HELP)]
+    Demo(DemoArgs),
+    /// Print the joint table of a model
+    #[command(after_help = AFTER_HELP)]
+    Info(InfoArgs),
+    /// Write a random state (q, v, a, tau) as JSON
+    #[command(after_help = AFTER_HELP)]
+    RandomState(RandomStateArgs),
+    /// Values and derivatives at a state: a JSON state file in, one JSON object out
+    #[command(after_help = AFTER_HELP)]
+    Eval(EvalArgs),
+    /// Time the algorithms per call, one line per algorithm
+    #[command(long_about = bench::LONG_ABOUT, after_help = AFTER_HELP)]
+    Bench(bench::BenchArgs),
+}
+
+/// `--model` and `--floating-base`.
+#[derive(Clone, Debug, Args)]
+struct ModelArgs {
+    /// The model: a URDF path or builtin:NAME
+    #[arg(long, value_name = "M")]
+    model: String,
+    /// Add a free-flyer root joint in front of the URDF's root link
+    #[arg(long)]
+    floating_base: bool,
+}
+
+#[derive(Debug, Args)]
+struct DemoArgs {
+    /// The model: a URDF path or builtin:NAME
+    #[arg(long, value_name = "M", default_value = "builtin:humanoid")]
+    model: String,
+    /// Seed of the random state
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+}
+
+#[derive(Debug, Args)]
+struct InfoArgs {
+    #[command(flatten)]
+    model: ModelArgs,
+}
+
+#[derive(Debug, Args)]
+struct RandomStateArgs {
+    #[command(flatten)]
+    model: ModelArgs,
+    /// Seed of the random state
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+    /// Write the JSON to FILE instead of standard output
+    #[arg(short, long, value_name = "FILE")]
+    output: Option<String>,
+}
+
+#[derive(Debug, Args)]
+struct EvalArgs {
+    #[command(flatten)]
+    model: ModelArgs,
+    /// The state: a JSON file with q, v, a, tau (and optionally contacts, lambda, restitution)
+    #[arg(long, value_name = "FILE")]
+    state: String,
+    /// 1: values and first-order derivatives; 2: also the second-order tensors
+    #[arg(long, value_name = "1|2", default_value_t = 1,
+          value_parser = clap::value_parser!(u32).range(1..=2))]
+    order: u32,
+    /// Write the JSON to FILE instead of standard output
+    #[arg(short, long, value_name = "FILE")]
+    output: Option<String>,
+}
+
+fn main() -> ExitCode {
+    // Usage errors, `--help` and `--version` exit here (status 2, 0, 0).
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("sodyn: error: {e}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    let Some(command) = cli.command else {
+        // No command: the help, as `sodyn --help` prints it.
+        return Cli::command().print_help().map_err(|e| Error::Io(e.to_string()));
+    };
+    match command {
+        Command::Demo(o) => demo::run_demo(&o.model, o.seed),
+        Command::Info(o) => {
+            let m = load_model(&o.model)?;
+            print!("{}", joint_table(&m));
+            Ok(())
+        }
+        Command::RandomState(o) => {
+            let m = load_model(&o.model)?;
+            let mut rng = sodyn::rng::Rng::new(o.seed);
+            let st = eval::State::random(&m, &mut rng);
+            write_output(o.output.as_deref(), &eval::state_json(&st))
+        }
+        Command::Eval(o) => {
+            let m = load_model(&o.model)?;
+            let path = &o.state;
+            let text =
+                std::fs::read_to_string(path).map_err(|e| Error::Io(format!("{path}: {e}")))?;
+            let base = (!o.model.model.starts_with("builtin:")).then_some(o.model.floating_base);
+            let st = eval::load_state(&m, &text, path, base)?;
+            let out = eval::eval_json(&m, &st, o.order)?;
+            write_output(o.output.as_deref(), &out)
+        }
+        Command::Bench(o) => bench::run(&o),
+    }
+}
+
+/// Loads a model from `builtin:NAME` or a URDF path.
+fn load_model(o: &ModelArgs) -> Result<Model> {
+    load_model_spec(&o.model, o.floating_base)
+}
+
+/// Loads a model from `spec` (`builtin:NAME` or a URDF path).
+fn load_model_spec(spec: &str, floating_base: bool) -> Result<Model> {
+    if let Some(name) = spec.strip_prefix("builtin:") {
+        if floating_base {
+            return Err(Error::Io(format!(
+                "--floating-base applies to URDF files; built-in model \"{name}\" defines its own base"
+            )));
+        }
+        sodyn::model::builtin::by_name(name)
+            .ok_or_else(|| Error::Unknown { kind: "built-in model".into(), name: name.into() })
+    } else {
+        let opts = sodyn::model::urdf::UrdfOptions { floating_base };
+        sodyn::model::urdf::load_urdf_file(Path::new(spec), &opts)
+    }
+}
+
+/// Prints `v` as one line of JSON to `path`, or to standard output.
+fn write_output(path: Option<&str>, v: &Value) -> Result<()> {
+    let text = serde_json::to_string(v).map_err(|e| Error::Io(e.to_string()))?;
+    match path {
+        Some(path) => {
+            std::fs::write(path, text + "\n").map_err(|e| Error::Io(format!("{path}: {e}")))
+        }
+        None => {
+            println!("{text}");
+            Ok(())
+        }
+    }
+}
+
+/// The joint table of a model as printed by `sodyn info`.
+fn joint_table(model: &Model) -> String {
+    let mut s = format!(
+        "model \"{}\": nq = {}, nv = {}, {} joints, {} frames\n",
+        model.name(),
+        model.nq(),
+        model.nv(),
+        model.njoints() - 1,
+        model.frames().len()
+    );
+    s += &format!(
+        "{:>4}  {:<32} {:<11} {:<28} {:>5} {:>3} {:>5} {:>3}  {:>9}  mimic\n",
+        "id", "name", "type", "parent", "idx_q", "nq", "idx_v", "nv", "mass"
+    );
+    for i in 1..model.njoints() {
+        let p = model.parents()[i];
+        s += &format!(
+            "{:>4}  {:<32} {:<11} {:<28} {:>5} {:>3} {:>5} {:>3}  {:>9.4}  {}\n",
+            i,
+            model.names()[i],
+            model.joints()[i].name(),
+            model.names()[p],
+            model.idx_q()[i],
+            model.nqs()[i],
+            model.idx_v()[i],
+            model.nvs()[i],
+            model.inertias()[i].mass,
+            model.mimic()[i]
+                .as_ref()
+                .map(|m| format!("mimics \"{m}\" (loaded independent)"))
+                .unwrap_or_default()
+        );
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Cli;
+    use clap::CommandFactory;
+
+    #[test]
+    fn the_command_line_is_consistent() {
+        Cli::command().debug_assert();
+    }
+}
