@@ -24,9 +24,10 @@ use sodyn::batch::{
     BatchData, BatchPool, aba_batch, fd_derivatives_batch, id_derivatives_batch, rnea_batch,
 };
 use sodyn::deriv::{
-    ContactData, ContractedData, FdSoData, ImpactData, KktData, SoData, fd_derivatives,
-    fd_so_contracted, fd_so_derivatives, id_derivatives, id_so_contracted, id_so_derivatives,
-    impact_derivatives, impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
+    ContactData, ContractedData, FdSoData, ImpactContracted, ImpactData, KktContracted, KktData,
+    SoData, fd_derivatives, fd_so_contracted, fd_so_derivatives, id_derivatives, id_so_contracted,
+    id_so_derivatives, impact_derivatives, impact_so_contracted, impact_so_derivatives,
+    kkt_derivatives, kkt_so_contracted, kkt_so_derivatives,
 };
 use sodyn::error::{Error, Result};
 use sodyn::model::{JointType, Model};
@@ -49,9 +50,10 @@ The batch_* lines add threads=, per=state and cpu_util= (process CPU time / wall
 --paired-threads and --ratio-to add the fields their help names. A first line starting with # \
 records the model, the options and the timer's overhead.
 
-Algorithms: rnea, crba, aba, id_fo, fd_fo, id_so, fd_so, id_soc, fd_soc (the contracted \
-second order), batch_rnea, batch_aba, batch_id_fo, batch_fd_fo (the batched entry points, time \
-per state) and, with --contacts, kkt_fo, kkt_so, impact_fo, impact_so.";
+Algorithms: rnea, crba, aba, id_fo, fd_fo, id_so, fd_so, id_so_c, fd_so_c (the contracted \
+second order, random weights), batch_rnea, batch_aba, batch_id_fo, batch_fd_fo (the batched \
+entry points, time per state) and, with --contacts, kkt_fo, kkt_so, kkt_so_c, impact_fo, \
+impact_so, impact_so_c.";
 
 /// Algorithms that can be timed, in output order.
 const ALGOS: &[&str] = &[
@@ -62,21 +64,24 @@ const ALGOS: &[&str] = &[
     "fd_fo",
     "id_so",
     "fd_so",
-    "id_soc",
-    "fd_soc",
+    "id_so_c",
+    "fd_so_c",
     "batch_rnea",
     "batch_aba",
     "batch_id_fo",
     "batch_fd_fo",
     "kkt_fo",
     "kkt_so",
+    "kkt_so_c",
     "impact_fo",
     "impact_so",
+    "impact_so_c",
 ];
 
 /// Contact algorithms: they need `--contacts` (3-D point contacts at the frame origins; the
 /// derivative timings include the forward solve).
-const CONTACT_ALGOS: &[&str] = &["kkt_fo", "kkt_so", "impact_fo", "impact_so"];
+const CONTACT_ALGOS: &[&str] =
+    &["kkt_fo", "kkt_so", "kkt_so_c", "impact_fo", "impact_so", "impact_so_c"];
 
 /// Options of `sodyn bench`.
 #[derive(Clone, Debug, Args)]
@@ -727,9 +732,12 @@ struct Workspaces {
     data: Data,
     so: SoData,
     fso: FdSoData,
-    /// Contracted second order (`id_soc`, `fd_soc`) and its weight vector.
+    /// Contracted second order (`*_so_c`) and its weight vectors (random, fixed per run).
     con: ContractedData,
     w: DVector<f64>,
+    wl: DVector<f64>,
+    kktc: Option<(KktData, KktContracted)>,
+    impc: Option<(ImpactData, ImpactContracted)>,
     out_vec: Vec<DVector<f64>>,
     out_m1: Vec<DMatrix<f64>>,
     out_m2: Vec<DMatrix<f64>>,
@@ -759,6 +767,9 @@ fn time_algo(
         fso,
         con,
         w,
+        wl,
+        kktc,
+        impc,
         out_vec,
         out_m1,
         out_m2,
@@ -814,12 +825,12 @@ fn time_algo(
             black_box(&*fso);
             Ok(())
         }),
-        "id_soc" => measure(plan, |i| {
+        "id_so_c" => measure(plan, |i| {
             id_so_contracted(m, d, con, &q[i], &v[i], &a[i], w)?;
             black_box(&*con);
             Ok(())
         }),
-        "fd_soc" => measure(plan, |i| {
+        "fd_so_c" => measure(plan, |i| {
             fd_so_contracted(m, d, con, &q[i], &v[i], &tau[i], w)?;
             black_box(&*con);
             Ok(())
@@ -884,6 +895,22 @@ fn time_algo(
                 Ok(())
             })
         }
+        "kkt_so_c" => {
+            let (kd, kc) = kktc.as_mut().ok_or_else(no_contacts)?;
+            measure(plan, |i| {
+                kkt_so_contracted(m, d, kd, kc, &q[i], &v[i], &tau[i], w, wl)?;
+                black_box(&*kc);
+                Ok(())
+            })
+        }
+        "impact_so_c" => {
+            let (im, ic) = impc.as_mut().ok_or_else(no_contacts)?;
+            measure(plan, |i| {
+                impact_so_contracted(m, d, im, ic, &q[i], &v[i], w, wl)?;
+                black_box(&*ic);
+                Ok(())
+            })
+        }
         other => Err(Error::Io(format!("internal: no timing code for \"{other}\""))),
     })
 }
@@ -900,6 +927,8 @@ enum Single {
     FdSo,
     IdSoc,
     FdSoc,
+    KktSoc,
+    ImpactSoc,
     KktFo,
     KktSo,
     ImpactFo,
@@ -917,8 +946,10 @@ impl Single {
             "fd_fo" => Single::FdFo,
             "id_so" => Single::IdSo,
             "fd_so" => Single::FdSo,
-            "id_soc" => Single::IdSoc,
-            "fd_soc" => Single::FdSoc,
+            "id_so_c" => Single::IdSoc,
+            "fd_so_c" => Single::FdSoc,
+            "kkt_so_c" => Single::KktSoc,
+            "impact_so_c" => Single::ImpactSoc,
             "kkt_fo" => Single::KktFo,
             "kkt_so" => Single::KktSo,
             "impact_fo" => Single::ImpactFo,
@@ -967,6 +998,16 @@ fn call_single(algo: Single, m: &Model, st: &States, ws: &mut Workspaces, i: usi
         Single::FdSoc => {
             fd_so_contracted(m, d, &mut ws.con, q, v, tau, &ws.w)?;
             black_box(&ws.con);
+        }
+        Single::KktSoc => {
+            let (kd, kc) = ws.kktc.as_mut().ok_or_else(no_contacts)?;
+            kkt_so_contracted(m, d, kd, kc, q, v, tau, &ws.w, &ws.wl)?;
+            black_box(&*kc);
+        }
+        Single::ImpactSoc => {
+            let (im, ic) = ws.impc.as_mut().ok_or_else(no_contacts)?;
+            impact_so_contracted(m, d, im, ic, q, v, &ws.w, &ws.wl)?;
+            black_box(&*ic);
         }
         Single::KktFo | Single::KktSo => {
             let kd = ws.kkt.as_mut().ok_or_else(no_contacts)?;
@@ -1024,7 +1065,7 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
             let known = Single::from_name(r).ok_or_else(|| {
                 Error::Io(format!(
                     "--ratio-to: \"{r}\" is not a single-state algorithm (one of rnea, crba, \
-                     aba, id_fo, fd_fo, id_so, fd_so, id_soc, fd_soc, kkt_fo, kkt_so, impact_fo, impact_so)"
+                     aba, id_fo, fd_fo, id_so, fd_so, id_so_c, fd_so_c, kkt_fo, kkt_so, kkt_so_c, impact_fo, impact_so, impact_so_c)"
                 ))
             })?;
             if CONTACT_ALGOS.contains(&r.as_str()) && contacts.is_empty() {
@@ -1082,7 +1123,13 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
         so: SoData::new(&model),
         fso: FdSoData::new(&model),
         con: ContractedData::new(&model),
-        w: DVector::from_fn(nv, |i, _| 1.0 / (1.0 + i as f64)),
+        w: {
+            let mut rng = Rng::new(o.seed ^ 0xc0de);
+            DVector::from_fn(nv, |_, _| rng.range(-1.0, 1.0))
+        },
+        wl: DVector::zeros(0),
+        kktc: None,
+        impc: None,
         out_vec: if needs("batch_") { vec![DVector::zeros(nv); nstates] } else { vec![] },
         out_m1: if needs("batch_") { vec![DMatrix::zeros(nv, nv); nstates] } else { vec![] },
         out_m2: if needs("batch_") { vec![DMatrix::zeros(nv, nv); nstates] } else { vec![] },
@@ -1101,8 +1148,20 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
             ws.kkt = Some(KktData::new(&model, cd.clone()).with_second_order(&model));
         }
         if needs("impact_") {
-            ws.impact = Some(ImpactData::new(&model, cd).with_second_order(&model));
+            ws.impact = Some(ImpactData::new(&model, cd.clone()).with_second_order(&model));
         }
+        if needs("kkt_so_c") {
+            let kd = KktData::new(&model, cd.clone());
+            let kc = KktContracted::new(&model, &kd);
+            ws.kktc = Some((kd, kc));
+        }
+        if needs("impact_so_c") {
+            let im = ImpactData::new(&model, cd.clone());
+            let ic = ImpactContracted::new(&model, &im);
+            ws.impc = Some((im, ic));
+        }
+        let mut rng = Rng::new(o.seed ^ 0x5eed);
+        ws.wl = DVector::from_fn(cd.dim(), |_, _| rng.range(-1.0, 1.0));
     }
     let plan = Plan {
         nstates,
