@@ -556,3 +556,90 @@ fn readme_shows_the_generated_help() {
     }
     assert!(checked >= 2, "README.md shows `sodyn --help` and `sodyn eval --help`");
 }
+
+/// `"weights"` in the state file: `eval` writes `"contracted"` with the dense key names, each
+/// the contraction of the `--order 2` tensor of that key with its weight; a weight of the wrong
+/// length is an error naming it.
+#[test]
+fn eval_writes_contracted_second_order_for_the_weights_given() {
+    let nv = 18; // builtin:quadruped
+    let feet = r#"[{"frame": "LF_FOOT"}, {"frame": "RH_FOOT", "point": [0.01, 0, 0]}]"#;
+    let w = |n: usize, s: f64| {
+        let v: Vec<String> =
+            (0..n).map(|i| format!("{}", s * (i as f64 + 1.0) / n as f64)).collect();
+        format!("[{}]", v.join(", "))
+    };
+    let state = tmp("weights.json");
+    let body = format!(
+        r#"{{"v": {v}, "a": {a}, "tau": {t}, "contacts": {feet}, "restitution": 0.3,
+            "weights": {{"tau": {w1}, "qdd": {w2}, "kkt_qdd": {w3}, "kkt_lambda": {w4},
+                         "impact_vplus": {w5}, "impact_impulse": {w6}}}}}"#,
+        v = w(nv, 0.3),
+        a = w(nv, -0.2),
+        t = w(nv, 0.5),
+        w1 = w(nv, 1.0),
+        w2 = w(nv, -1.0),
+        w3 = w(nv, 0.7),
+        w4 = w(6, 0.4),
+        w5 = w(nv, -0.6),
+        w6 = w(6, 0.9),
+    );
+    std::fs::write(&state, &body).unwrap();
+    let st = state.to_str().unwrap();
+    let o = sodyn(&["eval", "--model", "builtin:quadruped", "--state", st, "--order", "2"]);
+    assert_ok(&o, "eval with weights");
+    let out: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let weights: Value = serde_json::from_str(&body).unwrap();
+    let c = &out["contracted"];
+    let check = |obj: &Value, key: &str, tensor: &Value, weight: &Value| {
+        let t = tensor.as_array().unwrap();
+        let w: Vec<f64> = weight.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+        let got = obj[key].as_array().unwrap_or_else(|| panic!("contracted key {key}"));
+        let (n2, n3) = (got.len(), got[0].as_array().unwrap().len());
+        let mut err: f64 = 0.0;
+        let mut scale: f64 = 1.0;
+        for j in 0..n2 {
+            for k in 0..n3 {
+                let r: f64 = (0..t.len()).map(|i| w[i] * t[i][j][k].as_f64().unwrap()).sum();
+                err = err.max((got[j][k].as_f64().unwrap() - r).abs());
+                scale = scale.max(r.abs());
+            }
+        }
+        assert!(err / scale < 1e-10, "{key}: relative error {}", err / scale);
+    };
+    let wt = &weights["weights"];
+    for k in ["d2tau_dq2", "d2tau_dv2", "d2tau_dqdv", "dM_dq"] {
+        check(&c["id"], k, &out[k], &wt["tau"]);
+    }
+    for k in ["d2qdd_dq2", "d2qdd_dv2", "d2qdd_dqdv", "d2qdd_dtaudq"] {
+        check(&c["fd"], k, &out[k], &wt["qdd"]);
+        check(&c["kkt"], k, &out["kkt"][k], &wt["kkt_qdd"]);
+    }
+    for k in ["d2lambda_dq2", "d2lambda_dv2", "d2lambda_dqdv", "d2lambda_dtaudq"] {
+        check(&c["kkt"], k, &out["kkt"][k], &wt["kkt_lambda"]);
+    }
+    for k in ["d2vplus_dq2", "d2vplus_dqdvminus"] {
+        check(&c["impact"], k, &out["impact"][k], &wt["impact_vplus"]);
+    }
+    for k in ["d2impulse_dq2", "d2impulse_dqdvminus"] {
+        check(&c["impact"], k, &out["impact"][k], &wt["impact_impulse"]);
+    }
+    // Only the weights given; order 1 writes them too.
+    std::fs::write(&state, format!(r#"{{"weights": {{"qdd": {}}}}}"#, w(nv, 1.0))).unwrap();
+    let o = sodyn(&["eval", "--model", "builtin:quadruped", "--state", st]);
+    assert_ok(&o, "eval with one weight");
+    let out: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let keys: Vec<&String> = out["contracted"].as_object().unwrap().keys().collect();
+    assert_eq!(keys, ["fd"]);
+    // Errors: wrong length, unknown key, contact weights without contacts.
+    for (body, needle) in [
+        (format!(r#"{{"weights": {{"tau": {}}}}}"#, w(3, 1.0)), "weights.tau\" has length 3"),
+        (r#"{"weights": {"torque": [1]}}"#.to_string(), "unknown key \"weights.torque\""),
+        (format!(r#"{{"weights": {{"kkt_qdd": {}}}}}"#, w(nv, 1.0)), "need \"contacts\""),
+    ] {
+        std::fs::write(&state, body).unwrap();
+        let o = sodyn(&["eval", "--model", "builtin:quadruped", "--state", st]);
+        let err = assert_clean_failure(&o, "bad weights");
+        assert!(err.contains(needle), "{err}");
+    }
+}

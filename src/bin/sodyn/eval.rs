@@ -8,9 +8,10 @@ use nalgebra::{DMatrix, DVector, Vector3};
 use serde_json::{Map, Value, json};
 use sodyn::algo::{Contact, Data, aba, crba, nonlinear_effects, rnea};
 use sodyn::deriv::{
-    ContactData, FdSoData, ImpactData, KktData, SoData, constrained_id_so_derivatives,
-    fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives, impact_derivatives,
-    impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
+    ContactData, ContractedData, FdSoData, ImpactContracted, ImpactData, KktContracted, KktData,
+    SoData, constrained_id_so_derivatives, fd_derivatives, fd_so_contracted, fd_so_derivatives,
+    id_derivatives, id_so_contracted, id_so_derivatives, impact_derivatives, impact_so_contracted,
+    impact_so_derivatives, kkt_derivatives, kkt_so_contracted, kkt_so_derivatives,
 };
 use sodyn::error::{Error, Result};
 use sodyn::model::Model;
@@ -34,6 +35,35 @@ pub struct State {
     pub lambda: DVector<f64>,
     /// Coefficient of restitution of the impact.
     pub restitution: f64,
+    /// Weights of the contracted second-order outputs (the state file's `"weights"`).
+    pub weights: Weights,
+}
+
+/// The weight vectors of the state file's `"weights"` object, each optional: `eval` writes
+/// the `"contracted"` object for the weights given.
+#[derive(Clone, Debug, Default)]
+pub struct Weights {
+    /// Inverse dynamics, `wᵀτ` (length nv).
+    pub tau: Option<DVector<f64>>,
+    /// Forward dynamics, `wᵀq̈` (length nv).
+    pub qdd: Option<DVector<f64>>,
+    /// KKT dynamics, `wᵀq̈` (length nv).
+    pub kkt_qdd: Option<DVector<f64>>,
+    /// KKT dynamics, `wᵀλ` (length `3 nc`).
+    pub kkt_lambda: Option<DVector<f64>>,
+    /// Impact dynamics, `wᵀq̇⁺` (length nv).
+    pub impact_vplus: Option<DVector<f64>>,
+    /// Impact dynamics, `wᵀλ̂` (length `3 nc`).
+    pub impact_impulse: Option<DVector<f64>>,
+}
+
+impl Weights {
+    fn any(&self) -> bool {
+        [&self.tau, &self.qdd, &self.kkt_qdd, &self.kkt_lambda, &self.impact_vplus]
+            .iter()
+            .any(|w| w.is_some())
+            || self.impact_impulse.is_some()
+    }
 }
 
 impl State {
@@ -44,7 +74,16 @@ impl State {
         let v = r(model.nv());
         let a = r(model.nv());
         let tau = r(model.nv());
-        State { q, v, a, tau, contacts: vec![], lambda: DVector::zeros(0), restitution: 0.0 }
+        State {
+            q,
+            v,
+            a,
+            tau,
+            contacts: vec![],
+            lambda: DVector::zeros(0),
+            restitution: 0.0,
+            weights: Weights::default(),
+        }
     }
 }
 
@@ -155,7 +194,48 @@ pub fn load_state(
             Error::Io(format!("{file}: key \"restitution\" must be a non-negative number"))
         })?,
     };
+    let weights = match obj.get("weights") {
+        None => Weights::default(),
+        Some(w) => {
+            let w = w.as_object().ok_or_else(|| {
+                Error::Io(format!("{file}: key \"weights\" must be an object of number lists"))
+            })?;
+            let known = ["tau", "qdd", "kkt_qdd", "kkt_lambda", "impact_vplus", "impact_impulse"];
+            if let Some(k) = w.keys().find(|k| !known.contains(&k.as_str())) {
+                return Err(Error::Io(format!(
+                    "{file}: unknown key \"weights.{k}\" (known: {})",
+                    known.join(", ")
+                )));
+            }
+            let (nv, nc3) = (model.nv(), 3 * contacts.len());
+            let get = |key: &str, n: usize| {
+                read_vec(w, key, n, file).map_err(|e| match e {
+                    Error::Io(m) => Error::Io(m.replace("key \"", "key \"weights.")),
+                    e => e,
+                })
+            };
+            let weights = Weights {
+                tau: get("tau", nv)?,
+                qdd: get("qdd", nv)?,
+                kkt_qdd: get("kkt_qdd", nv)?,
+                kkt_lambda: get("kkt_lambda", nc3)?,
+                impact_vplus: get("impact_vplus", nv)?,
+                impact_impulse: get("impact_impulse", nc3)?,
+            };
+            let contact_weight = weights.kkt_qdd.is_some()
+                || weights.kkt_lambda.is_some()
+                || weights.impact_vplus.is_some()
+                || weights.impact_impulse.is_some();
+            if contact_weight && contacts.is_empty() {
+                return Err(Error::Io(format!(
+                    "{file}: the weights kkt_* and impact_* need \"contacts\""
+                )));
+            }
+            weights
+        }
+    };
     Ok(State {
+        weights,
         q,
         v: read_vec(obj, "v", model.nv(), file)?.unwrap_or_else(z),
         a: read_vec(obj, "a", model.nv(), file)?.unwrap_or_else(z),
@@ -240,7 +320,82 @@ pub fn eval_json(model: &Model, s: &State, order: u32) -> Result<Value> {
         let o = out.as_object_mut().expect("object");
         contact_outputs(model, s, order, &mut data, o)?;
     }
+    if s.weights.any() {
+        let c = contracted_outputs(model, s, &mut data)?;
+        out.as_object_mut().expect("object").insert("contracted".into(), c);
+    }
     Ok(out)
+}
+
+/// The `"contracted"` object: for each weight given, the dense second-order keys of its
+/// object, each an nv×nv matrix `C[j][k] = Σ_i w_i T[i][j][k]`.
+fn contracted_outputs(model: &Model, s: &State, data: &mut Data) -> Result<Value> {
+    let w = &s.weights;
+    let mut out = Map::new();
+    let mut con = ContractedData::new(model);
+    if let Some(wt) = &w.tau {
+        id_so_contracted(model, data, &mut con, &s.q, &s.v, &s.a, wt)?;
+        out.insert(
+            "id".into(),
+            json!({
+                "d2tau_dq2": mat_json(con.c_qq()),
+                "d2tau_dv2": mat_json(con.c_vv()),
+                "d2tau_dqdv": mat_json(con.c_qv()),
+                "dM_dq": mat_json(con.c_mq()),
+            }),
+        );
+    }
+    if let Some(wq) = &w.qdd {
+        fd_so_contracted(model, data, &mut con, &s.q, &s.v, &s.tau, wq)?;
+        out.insert(
+            "fd".into(),
+            json!({
+                "d2qdd_dq2": mat_json(con.c_qq()),
+                "d2qdd_dv2": mat_json(con.c_vv()),
+                "d2qdd_dqdv": mat_json(con.c_qv()),
+                "d2qdd_dtaudq": mat_json(con.c_tauq()),
+            }),
+        );
+    }
+    let (nv, nc3) = (model.nv(), 3 * s.contacts.len());
+    if w.kkt_qdd.is_some() || w.kkt_lambda.is_some() {
+        let mut kd = KktData::new(model, ContactData::new(model, &s.contacts)?);
+        let mut kc = KktContracted::new(model, &kd);
+        let mut o = Map::new();
+        for (weight, prefix) in [(&w.kkt_qdd, "d2qdd"), (&w.kkt_lambda, "d2lambda")] {
+            let Some(x) = weight else { continue };
+            let (wq, wl) = if prefix == "d2qdd" {
+                (x.clone(), DVector::zeros(nc3))
+            } else {
+                (DVector::zeros(nv), x.clone())
+            };
+            kkt_so_contracted(model, data, &mut kd, &mut kc, &s.q, &s.v, &s.tau, &wq, &wl)?;
+            o.insert(format!("{prefix}_dq2"), mat_json(kc.c_qq()));
+            o.insert(format!("{prefix}_dv2"), mat_json(kc.c_vv()));
+            o.insert(format!("{prefix}_dqdv"), mat_json(kc.c_qv()));
+            o.insert(format!("{prefix}_dtaudq"), mat_json(kc.c_tauq()));
+        }
+        out.insert("kkt".into(), Value::Object(o));
+    }
+    if w.impact_vplus.is_some() || w.impact_impulse.is_some() {
+        let mut im = ImpactData::new(model, ContactData::new(model, &s.contacts)?);
+        im.set_restitution(s.restitution)?;
+        let mut ic = ImpactContracted::new(model, &im);
+        let mut o = Map::new();
+        for (weight, prefix) in [(&w.impact_vplus, "d2vplus"), (&w.impact_impulse, "d2impulse")] {
+            let Some(x) = weight else { continue };
+            let (wv, wl) = if prefix == "d2vplus" {
+                (x.clone(), DVector::zeros(nc3))
+            } else {
+                (DVector::zeros(nv), x.clone())
+            };
+            impact_so_contracted(model, data, &mut im, &mut ic, &s.q, &s.v, &wv, &wl)?;
+            o.insert(format!("{prefix}_dq2"), mat_json(ic.c_qq()));
+            o.insert(format!("{prefix}_dqdvminus"), mat_json(ic.c_qvminus()));
+        }
+        out.insert("impact".into(), Value::Object(o));
+    }
+    Ok(Value::Object(out))
 }
 
 /// The `constrained_id`, `kkt` and `impact` objects.
