@@ -1564,14 +1564,46 @@ where
     .map_err(core_err)
 }
 
-macro_rules! batch_inputs {
-    ($m:expr, $q:expr, $v:expr, $x:expr, $xname:expr) => {{
-        let qs = read_batch($q, "q", $m.nq(), "nq", None)?;
-        let n = qs.count;
-        let vs = read_batch($v, "v", $m.nv(), "nv", Some(n))?;
-        let xs = read_batch($x, $xname, $m.nv(), "nv", Some(n))?;
-        (qs, vs, xs, n)
-    }};
+/// The three stacked inputs `(q, v, x)` of a batched call (`x` is `a` or `tau`).
+fn batch_qvx(
+    m: &Model,
+    q: &Bound<'_, PyAny>,
+    v: &Bound<'_, PyAny>,
+    x: &Bound<'_, PyAny>,
+    xname: &str,
+) -> PyResult<[Rows; 3]> {
+    let qs = read_batch(q, "q", m.nq(), "nq", None)?;
+    let n = qs.count;
+    let vs = read_batch(v, "v", m.nv(), "nv", Some(n))?;
+    let xs = read_batch(x, xname, m.nv(), "nv", Some(n))?;
+    Ok([qs, vs, xs])
+}
+
+/// A batched call: `outputs` stacked arrays of per-state shape `dims`, filled by `f` on the
+/// pool (see [`run_batch`]), returned as a tuple (or the single array).
+fn batch_call<'py, W, F>(
+    py: Python<'py>,
+    threads: Option<i64>,
+    workspace: W,
+    inputs: &[Rows],
+    outputs: usize,
+    dims: &[usize],
+    f: F,
+) -> PyResult<Bound<'py, PyAny>>
+where
+    W: Clone + Send,
+    F: Fn(&mut W, &[DVector<f64>], &mut [&mut [f64]]) -> sodyn::Result<()> + Sync,
+{
+    let n = inputs.first().map_or(0, |r| r.count);
+    let mut bufs: Vec<Stacked> = (0..outputs).map(|_| stacked(n, dims)).collect();
+    let mut refs: Vec<&mut Stacked> = bufs.iter_mut().collect();
+    let rows: Vec<&Rows> = inputs.iter().collect();
+    run_batch(py, threads, workspace, &rows, &mut refs, f)?;
+    let mut arrays = bufs.into_iter().map(|b| b.into_array(py)).collect::<PyResult<Vec<_>>>()?;
+    if outputs == 1 {
+        return Ok(arrays.remove(0));
+    }
+    Ok(PyTuple::new(py, arrays)?.into_any())
 }
 
 /// Batched RNEA: `(N, nv)` torques for `(N, nq)`, `(N, nv)`, `(N, nv)` states.
@@ -1586,14 +1618,11 @@ fn batch_rnea<'py>(
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
-    let (qs, vs, xs, n) = batch_inputs!(m, q, v, a, "a");
-    let nv = m.nv();
-    let mut buf = stacked(n, &[nv]);
-    run_batch(py, threads, Data::new(m), &[&qs, &vs, &xs], &mut [&mut buf], |d, st, o| {
+    let ins = batch_qvx(m, q, v, a, "a")?;
+    batch_call(py, threads, Data::new(m), &ins, 1, &[m.nv()], |d, st, o| {
         o[0].copy_from_slice(algo::rnea(m, d, &st[0], &st[1], &st[2], None)?.as_slice());
         Ok(())
-    })?;
-    buf.into_array(py)
+    })
 }
 
 /// Batched ABA: `(N, nv)` accelerations.
@@ -1608,14 +1637,11 @@ fn batch_aba<'py>(
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
-    let (qs, vs, xs, n) = batch_inputs!(m, q, v, tau, "tau");
-    let nv = m.nv();
-    let mut buf = stacked(n, &[nv]);
-    run_batch(py, threads, Data::new(m), &[&qs, &vs, &xs], &mut [&mut buf], |d, st, o| {
+    let ins = batch_qvx(m, q, v, tau, "tau")?;
+    batch_call(py, threads, Data::new(m), &ins, 1, &[m.nv()], |d, st, o| {
         o[0].copy_from_slice(algo::aba(m, d, &st[0], &st[1], &st[2], None)?.as_slice());
         Ok(())
-    })?;
-    buf.into_array(py)
+    })
 }
 
 /// Batched nonlinear effects: `(N, nv)`.
@@ -1630,15 +1656,11 @@ fn batch_nonlinear_effects<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
     let qs = read_batch(q, "q", m.nq(), "nq", None)?;
-    let n = qs.count;
-    let vs = read_batch(v, "v", m.nv(), "nv", Some(n))?;
-    let nv = m.nv();
-    let mut buf = stacked(n, &[nv]);
-    run_batch(py, threads, Data::new(m), &[&qs, &vs], &mut [&mut buf], |d, st, o| {
+    let vs = read_batch(v, "v", m.nv(), "nv", Some(qs.count))?;
+    batch_call(py, threads, Data::new(m), &[qs, vs], 1, &[m.nv()], |d, st, o| {
         o[0].copy_from_slice(algo::nonlinear_effects(m, d, &st[0], &st[1])?.as_slice());
         Ok(())
-    })?;
-    buf.into_array(py)
+    })
 }
 
 /// Batched CRBA: `(N, nv, nv)` mass matrices.
@@ -1652,13 +1674,10 @@ fn batch_crba<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
     let qs = read_batch(q, "q", m.nq(), "nq", None)?;
-    let (n, nv) = (qs.count, m.nv());
-    let mut buf = stacked(n, &[nv, nv]);
-    run_batch(py, threads, Data::new(m), &[&qs], &mut [&mut buf], |d, st, o| {
+    batch_call(py, threads, Data::new(m), &[qs], 1, &[m.nv(), m.nv()], |d, st, o| {
         o[0].copy_from_slice(algo::crba(m, d, &st[0])?.as_slice());
         Ok(())
-    })?;
-    buf.into_array(py)
+    })
 }
 
 /// Batched IDSVA: `(dtau_dq, dtau_dv)`, each `(N, nv, nv)`.
@@ -1671,19 +1690,15 @@ fn batch_id_derivatives<'py>(
     v: &Bound<'py, PyAny>,
     a: &Bound<'py, PyAny>,
     threads: Option<i64>,
-) -> PyResult<Bound<'py, PyTuple>> {
+) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
-    let (qs, vs, xs, n) = batch_inputs!(m, q, v, a, "a");
-    let nv = m.nv();
-    let mut b1 = stacked(n, &[nv, nv]);
-    let mut b2 = stacked(n, &[nv, nv]);
-    run_batch(py, threads, Data::new(m), &[&qs, &vs, &xs], &mut [&mut b1, &mut b2], |d, st, o| {
+    let ins = batch_qvx(m, q, v, a, "a")?;
+    batch_call(py, threads, Data::new(m), &ins, 2, &[m.nv(), m.nv()], |d, st, o| {
         id_derivatives(m, d, &st[0], &st[1], &st[2], None)?;
         o[0].copy_from_slice(d.dtau_dq().as_slice());
         o[1].copy_from_slice(d.dtau_dv().as_slice());
         Ok(())
-    })?;
-    PyTuple::new(py, [b1.into_array(py)?, b2.into_array(py)?])
+    })
 }
 
 /// Batched forward-dynamics derivatives: `(dqdd_dq, dqdd_dv, Minv)`, each `(N, nv, nv)`.
@@ -1696,28 +1711,16 @@ fn batch_fd_derivatives<'py>(
     v: &Bound<'py, PyAny>,
     tau: &Bound<'py, PyAny>,
     threads: Option<i64>,
-) -> PyResult<Bound<'py, PyTuple>> {
+) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
-    let (qs, vs, xs, n) = batch_inputs!(m, q, v, tau, "tau");
-    let nv = m.nv();
-    let mut b1 = stacked(n, &[nv, nv]);
-    let mut b2 = stacked(n, &[nv, nv]);
-    let mut b3 = stacked(n, &[nv, nv]);
-    run_batch(
-        py,
-        threads,
-        Data::new(m),
-        &[&qs, &vs, &xs],
-        &mut [&mut b1, &mut b2, &mut b3],
-        |d, st, o| {
-            fd_derivatives(m, d, &st[0], &st[1], &st[2], None)?;
-            o[0].copy_from_slice(d.dqdd_dq().as_slice());
-            o[1].copy_from_slice(d.dqdd_dv().as_slice());
-            o[2].copy_from_slice(d.minv().as_slice());
-            Ok(())
-        },
-    )?;
-    PyTuple::new(py, [b1.into_array(py)?, b2.into_array(py)?, b3.into_array(py)?])
+    let ins = batch_qvx(m, q, v, tau, "tau")?;
+    batch_call(py, threads, Data::new(m), &ins, 3, &[m.nv(), m.nv()], |d, st, o| {
+        fd_derivatives(m, d, &st[0], &st[1], &st[2], None)?;
+        for (dst, src) in o.iter_mut().zip([d.dqdd_dq(), d.dqdd_dv(), d.minv()]) {
+            dst.copy_from_slice(src.as_slice());
+        }
+        Ok(())
+    })
 }
 
 /// Batched IDSVA-SO: four `(N, nv, nv, nv)` tensors.
@@ -1730,29 +1733,18 @@ fn batch_id_so_derivatives<'py>(
     v: &Bound<'py, PyAny>,
     a: &Bound<'py, PyAny>,
     threads: Option<i64>,
-) -> PyResult<Bound<'py, PyTuple>> {
+) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
-    let (qs, vs, xs, n) = batch_inputs!(m, q, v, a, "a");
-    let nv = m.nv();
-    let mut bufs: Vec<Stacked> = (0..4).map(|_| stacked(n, &[nv, nv, nv])).collect();
-    let mut refs: Vec<&mut Stacked> = bufs.iter_mut().collect();
-    run_batch(
-        py,
-        threads,
-        (Data::new(m), SoData::new(m)),
-        &[&qs, &vs, &xs],
-        &mut refs,
-        |(d, so), st, o| {
-            id_so_derivatives(m, d, so, &st[0], &st[1], &st[2], None)?;
-            o[0].copy_from_slice(so.d2tau_dq2().as_slice());
-            o[1].copy_from_slice(so.d2tau_dv2().as_slice());
-            o[2].copy_from_slice(so.d2tau_dqdv().as_slice());
-            o[3].copy_from_slice(so.dm_dq().as_slice());
-            Ok(())
-        },
-    )?;
-    let arrays = bufs.into_iter().map(|b| b.into_array(py)).collect::<PyResult<Vec<_>>>()?;
-    PyTuple::new(py, arrays)
+    let ins = batch_qvx(m, q, v, a, "a")?;
+    let (nv, ws) = (m.nv(), (Data::new(m), SoData::new(m)));
+    batch_call(py, threads, ws, &ins, 4, &[nv, nv, nv], |(d, so), st, o| {
+        id_so_derivatives(m, d, so, &st[0], &st[1], &st[2], None)?;
+        let ts = [so.d2tau_dq2(), so.d2tau_dv2(), so.d2tau_dqdv(), so.dm_dq()];
+        for (dst, src) in o.iter_mut().zip(ts) {
+            dst.copy_from_slice(src.as_slice());
+        }
+        Ok(())
+    })
 }
 
 /// Batched forward-dynamics second order: four `(N, nv, nv, nv)` tensors.
@@ -1765,29 +1757,18 @@ fn batch_fd_so_derivatives<'py>(
     v: &Bound<'py, PyAny>,
     tau: &Bound<'py, PyAny>,
     threads: Option<i64>,
-) -> PyResult<Bound<'py, PyTuple>> {
+) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
-    let (qs, vs, xs, n) = batch_inputs!(m, q, v, tau, "tau");
-    let nv = m.nv();
-    let mut bufs: Vec<Stacked> = (0..4).map(|_| stacked(n, &[nv, nv, nv])).collect();
-    let mut refs: Vec<&mut Stacked> = bufs.iter_mut().collect();
-    run_batch(
-        py,
-        threads,
-        (Data::new(m), FdSoData::new(m)),
-        &[&qs, &vs, &xs],
-        &mut refs,
-        |(d, f), st, o| {
-            fd_so_derivatives(m, d, f, &st[0], &st[1], &st[2], None)?;
-            o[0].copy_from_slice(f.d2qdd_dq2().as_slice());
-            o[1].copy_from_slice(f.d2qdd_dv2().as_slice());
-            o[2].copy_from_slice(f.d2qdd_dqdv().as_slice());
-            o[3].copy_from_slice(f.d2qdd_dtaudq().as_slice());
-            Ok(())
-        },
-    )?;
-    let arrays = bufs.into_iter().map(|b| b.into_array(py)).collect::<PyResult<Vec<_>>>()?;
-    PyTuple::new(py, arrays)
+    let ins = batch_qvx(m, q, v, tau, "tau")?;
+    let (nv, ws) = (m.nv(), (Data::new(m), FdSoData::new(m)));
+    batch_call(py, threads, ws, &ins, 4, &[nv, nv, nv], |(d, f), st, o| {
+        fd_so_derivatives(m, d, f, &st[0], &st[1], &st[2], None)?;
+        let ts = [f.d2qdd_dq2(), f.d2qdd_dv2(), f.d2qdd_dqdv(), f.d2qdd_dtaudq()];
+        for (dst, src) in o.iter_mut().zip(ts) {
+            dst.copy_from_slice(src.as_slice());
+        }
+        Ok(())
+    })
 }
 
 /// The compiled module `sodyn._sodyn`.
