@@ -7,33 +7,12 @@ mod util;
 use nalgebra::{DMatrix, DVector, Vector3};
 use sodyn::algo::{Contact, Data};
 use sodyn::deriv::*;
-use sodyn::model::{Model, builtin};
+use sodyn::model::builtin;
 use sodyn::reference::contact as oracle;
 use sodyn::rng::Rng;
 use sodyn::tensor::Tensor3;
 use sodyn::{Error, Result};
 use util::*;
-
-/// (model, contact frames) cases: fixed and floating base, 1–4 contacts.
-fn cases() -> Vec<(Model, Vec<&'static str>)> {
-    vec![
-        (builtin::quadruped(), vec!["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"]),
-        (builtin::quadruped(), vec!["LF_FOOT", "RH_FOOT"]),
-        (builtin::serial_chain(6), vec!["ee"]),
-        (builtin::random_tree(8, 3, true), vec!["body_5", "body_7", "body_2"]),
-        (builtin::random_tree(10, 21, false), vec!["body_9", "body_4"]),
-    ]
-}
-
-fn contacts_of(m: &Model, frames: &[&str], rng: &mut Rng) -> Vec<Contact> {
-    frames
-        .iter()
-        .map(|f| {
-            Contact::new(m, f, Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.05)
-                .unwrap()
-        })
-        .collect()
-}
 
 #[test]
 fn kkt_first_and_second_order_match_oracle() {
@@ -59,7 +38,7 @@ fn kkt_first_and_second_order_match_oracle() {
     ];
     let mut w: Vec<Worst> = names.iter().chain(so_names.iter()).map(|n| Worst::new(n)).collect();
     let mut rng = Rng::new(31);
-    for (m, frames) in cases() {
+    for (m, frames) in contact_cases() {
         let contacts = contacts_of(&m, &frames, &mut rng);
         let (q, v, tau) = random_state(&m, &mut rng);
         let mut d = Data::new(&m);
@@ -120,7 +99,7 @@ fn impact_first_and_second_order_match_oracle() {
     ];
     let mut w: Vec<Worst> = names.iter().map(|n| Worst::new(n)).collect();
     let mut rng = Rng::new(32);
-    for (m, frames) in cases() {
+    for (m, frames) in contact_cases() {
         for e in [0.0, 0.5] {
             let contacts = contacts_of(&m, &frames, &mut rng);
             let (q, vminus, _) = random_state(&m, &mut rng);
@@ -161,7 +140,7 @@ fn constrained_id_first_and_second_order_match_oracle() {
         Worst::new("constrained d2tau_dq2"),
     ];
     let mut rng = Rng::new(33);
-    for (m, frames) in cases() {
+    for (m, frames) in contact_cases() {
         let contacts = contacts_of(&m, &frames, &mut rng);
         let (q, v, a) = random_state(&m, &mut rng);
         let lam = DVector::from_fn(3 * contacts.len(), |_, _| rng.range(-20.0, 20.0));

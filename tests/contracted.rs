@@ -127,27 +127,6 @@ fn contracted_inputs_are_checked() {
     assert!(matches!(e, sodyn::Error::Workspace(_)), "{e}");
 }
 
-/// (model, contact frames): fixed and floating base, 1–4 contacts (as tests/contacts.rs).
-fn contact_cases() -> Vec<(Model, Vec<&'static str>)> {
-    vec![
-        (builtin::quadruped(), vec!["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"]),
-        (builtin::quadruped(), vec!["LF_FOOT", "RH_FOOT"]),
-        (builtin::serial_chain(6), vec!["ee"]),
-        (builtin::random_tree(8, 3, true), vec!["body_5", "body_7", "body_2"]),
-        (builtin::random_tree(10, 21, false), vec!["body_9", "body_4"]),
-    ]
-}
-
-fn contacts_of(m: &Model, frames: &[&str], rng: &mut Rng) -> Vec<sodyn::algo::Contact> {
-    frames
-        .iter()
-        .map(|f| {
-            let p = nalgebra::Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.05;
-            sodyn::algo::Contact::new(m, f, p).unwrap()
-        })
-        .collect()
-}
-
 /// `w_q̈ᵀ ∂²q̈ + w_λᵀ ∂²λ` of the KKT dynamics against the contraction of our dense tensors and
 /// of the hyper-dual oracle's (`reference::contact::kkt_so`).
 #[test]

@@ -84,3 +84,29 @@ impl Worst {
         );
     }
 }
+
+/// (model, contact frames) cases: fixed and floating base, 1–4 contacts.
+pub fn contact_cases() -> Vec<(Model, Vec<&'static str>)> {
+    vec![
+        (builtin::quadruped(), vec!["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"]),
+        (builtin::quadruped(), vec!["LF_FOOT", "RH_FOOT"]),
+        (builtin::serial_chain(6), vec!["ee"]),
+        (builtin::random_tree(8, 3, true), vec!["body_5", "body_7", "body_2"]),
+        (builtin::random_tree(10, 21, false), vec!["body_9", "body_4"]),
+    ]
+}
+
+/// Contacts on `frames`, each at a random point within about 5 cm of the frame origin.
+pub fn contacts_of(m: &Model, frames: &[&str], rng: &mut Rng) -> Vec<sodyn::algo::Contact> {
+    frames
+        .iter()
+        .map(|f| {
+            sodyn::algo::Contact::new(
+                m,
+                f,
+                nalgebra::Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.05,
+            )
+            .unwrap()
+        })
+        .collect()
+}
