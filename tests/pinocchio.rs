@@ -1,7 +1,7 @@
 //! Cross-check against Pinocchio 4.1.0: RNEA, CRBA, ABA, first-order ID/FD derivatives, `M⁻¹`
 //! and (panda, solo12, talos_reduced) the second-order ID tensors, on the URDFs of
-//! `../shared/models`, against the raw Pinocchio outputs in `tests/fixtures/<model>.json`
-//! (schema and conventions: `tests/fixtures/README.md`).
+//! `../shared/models` (or their copy in `tests/data/models`), against the raw Pinocchio outputs
+//! in `tests/fixtures/<model>.json` (schema and conventions: `tests/fixtures/README.md`).
 //!
 //! Convention mapping (ours ← Pinocchio), all done in the tests (helpers in `tests/pin_map`),
 //! nothing in the fixtures is converted:
@@ -33,8 +33,8 @@ mod pin_map;
 
 use nalgebra::{DMatrix, DVector};
 use pin_map::{
-    assert_our_gravity, build_mapping, load_model, mat_of, our_q, permute_mat, permute_tensor,
-    permute_vec, read_fixture, rel_err, tensor_of, urdf_or_skip, vec_of,
+    assert_our_gravity, build_mapping, load_model, mat_of, model_urdf, our_q, permute_mat,
+    permute_tensor, permute_vec, read_fixture, rel_err, tensor_of, vec_of,
 };
 use sodyn::algo::{Data, aba, crba, rnea};
 use sodyn::deriv::{SoData, fd_derivatives, id_derivatives, id_so_derivatives};
@@ -110,7 +110,7 @@ impl Report {
 }
 
 fn run(model_name: &str) {
-    let Some(urdf) = urdf_or_skip(model_name) else { return };
+    let urdf = model_urdf(model_name);
     let fx = read_fixture(&format!("{model_name}.json"), &["sodyn-pinocchio-fixture/1"]);
     let (model, floating_base) = load_model(&urdf, &fx);
     assert_our_gravity(&model);

@@ -30,8 +30,8 @@ mod pin_map;
 
 use nalgebra::{DMatrix, DVector, Vector3};
 use pin_map::{
-    Mapping, assert_our_gravity, build_mapping, f64_of, load_model, mat_of, our_q, permute_cols,
-    permute_mat, permute_vec, read_fixture, rel_err, urdf_or_skip, vec_of,
+    Mapping, assert_our_gravity, build_mapping, f64_of, load_model, mat_of, model_urdf, our_q,
+    permute_cols, permute_mat, permute_vec, read_fixture, rel_err, vec_of,
 };
 use serde_json::Value;
 use sodyn::algo::{Contact, Data};
@@ -243,11 +243,7 @@ fn impulse_runs(out: &Value) -> Vec<(f64, &Value)> {
 }
 
 fn run(model_name: &str, fixture: &str) {
-    let Some(urdf) = urdf_or_skip(model_name) else { return };
-    if !urdf.is_file() {
-        eprintln!("{model_name}: skipped: {} not found", urdf.display());
-        return;
-    }
+    let urdf = model_urdf(model_name);
     let fx =
         read_fixture(fixture, &["sodyn-pinocchio-fixture/1", "sodyn-pinocchio-contact-fixture/1"]);
     assert!(!fx["model"]["root_joint"].is_null(), "contact fixtures have a free flyer");

@@ -1,7 +1,8 @@
 //! Cross-check of the second-order inverse-dynamics derivatives against Pinocchio 4.1.0's
-//! `ComputeRNEASecondOrderDerivatives` on EVERY model of `../shared/models`, from the sampled
-//! tensor entries of `tests/fixtures/so_samples_<model>.json` (schema: `tests/fixtures/README.md`,
-//! "Second-order samples"): per model one state (= state 0 of `<model>.json`) and, per tensor,
+//! `ComputeRNEASecondOrderDerivatives` on EVERY model of `../shared/models` (or of its copy in
+//! `tests/data/models`), from the sampled tensor entries of
+//! `tests/fixtures/so_samples_<model>.json` (schema: `tests/fixtures/README.md`, "Second-order
+//! samples"): per model one state (= state 0 of `<model>.json`) and, per tensor,
 //! the 300 entries of largest magnitude plus 700 distinct uniformly random entries (all entries
 //! when `nv³ ≤ 1000`), as `[i, j, k, value]` in **Pinocchio's** index order.
 //!
@@ -27,8 +28,8 @@
 mod pin_map;
 
 use pin_map::{
-    Mapping, build_mapping, f64_of, fixture_path, load_model, our_q, permute_vec, read_fixture,
-    rel_err, urdf_or_skip, usize_of, vec_of,
+    Mapping, build_mapping, f64_of, fixture_path, load_model, model_urdf, our_q, permute_vec,
+    read_fixture, rel_err, usize_of, vec_of,
 };
 use serde_json::Value;
 use sodyn::algo::{Data, rnea};
@@ -103,7 +104,7 @@ fn cmp_samples_with(
 }
 
 fn run(model_name: &str) {
-    let Some(urdf) = urdf_or_skip(model_name) else { return };
+    let urdf = model_urdf(model_name);
     let file = format!("so_samples_{model_name}.json");
     let fx = read_fixture(&file, &["sodyn-pinocchio-so-samples/1"]);
     let (model, floating_base) = load_model(&urdf, &fx);

@@ -1,6 +1,6 @@
-//! URDF loader tests: the shared robot models (dimensions, frames, masses, placements, joint
-//! order against Pinocchio's fixtures), the depth-first numbering, and one test per malformed
-//! input.
+//! URDF loader tests: the shared robot models (`../shared/models`, or their copy in
+//! `tests/data/models`: dimensions, frames, masses, placements, joint order against Pinocchio's
+//! fixtures), the depth-first numbering, and one test per malformed input.
 
 use nalgebra::{Matrix3, Vector3};
 use sodyn::Error;
@@ -9,22 +9,19 @@ use sodyn::spatial::{Inertia, Transform};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-const MODELS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/models");
+const SHARED_MODELS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/models");
+const COMMITTED_MODELS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/models");
 const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/urdf");
 const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures");
 
 const FIXED: UrdfOptions = UrdfOptions { floating_base: false };
 const FLOATING: UrdfOptions = UrdfOptions { floating_base: true };
 
-/// The shared models directory, or `None` (with a notice) on a machine without it.
-fn models_dir() -> Option<PathBuf> {
-    let p = PathBuf::from(MODELS);
-    if p.is_dir() {
-        Some(p)
-    } else {
-        eprintln!("notice: {MODELS} is absent; skipping the shared-model URDF checks");
-        None
-    }
+/// The robot models: `../shared/models` when it exists, otherwise the copy committed in
+/// `tests/data/models` (so that these tests never skip).
+fn models_dir() -> PathBuf {
+    let shared = PathBuf::from(SHARED_MODELS);
+    if shared.is_dir() { shared } else { PathBuf::from(COMMITTED_MODELS) }
 }
 
 /// One row of the models README table: file, floating base, nv.
@@ -222,7 +219,7 @@ fn assert_inertia_close(a: &Inertia, b: &Inertia, what: &str) {
 
 #[test]
 fn shared_models_dimensions_match_readme() {
-    let Some(dir) = models_dir() else { return };
+    let dir = models_dir();
     let rows = readme_table(&dir);
     // Every URDF in the directory is in the table.
     for e in std::fs::read_dir(&dir).unwrap() {
@@ -249,7 +246,7 @@ fn shared_models_dimensions_match_readme() {
 
 #[test]
 fn shared_models_name_and_joint_types() {
-    let Some(dir) = models_dir() else { return };
+    let dir = models_dir();
     for row in readme_table(&dir) {
         let xml = std::fs::read_to_string(dir.join(&row.file)).unwrap();
         let (name, links, joints) = ref_parse(&xml);
@@ -280,7 +277,7 @@ fn shared_models_name_and_joint_types() {
 
 #[test]
 fn shared_models_foot_frames_exist() {
-    let Some(dir) = models_dir() else { return };
+    let dir = models_dir();
     let feet: &[(&str, &[&str])] = &[
         ("solo12.urdf", &["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]),
         ("hyq_no_sensors.urdf", &["lf_foot", "rf_foot", "lh_foot", "rh_foot"]),
@@ -301,7 +298,7 @@ fn shared_models_foot_frames_exist() {
 
 #[test]
 fn shared_models_total_mass_is_sum_of_link_masses() {
-    let Some(dir) = models_dir() else { return };
+    let dir = models_dir();
     for row in readme_table(&dir) {
         let xml = std::fs::read_to_string(dir.join(&row.file)).unwrap();
         let (_, links, _) = ref_parse(&xml);
@@ -319,7 +316,7 @@ fn shared_models_total_mass_is_sum_of_link_masses() {
 /// body inertias in the world frame equals the sum of link inertias.
 #[test]
 fn shared_models_frames_and_inertias_in_world() {
-    let Some(dir) = models_dir() else { return };
+    let dir = models_dir();
     for row in readme_table(&dir) {
         let xml = std::fs::read_to_string(dir.join(&row.file)).unwrap();
         let (_, links, joints) = ref_parse(&xml);
@@ -363,20 +360,15 @@ fn shared_models_frames_and_inertias_in_world() {
 /// trees are the same (same joints, same parents, same dimensions).
 #[test]
 fn joint_order_matches_pinocchio_fixtures_up_to_sibling_order() {
-    let Some(dir) = models_dir() else { return };
+    let dir = models_dir();
     let fixtures = Path::new(FIXTURES);
-    if !fixtures.is_dir() {
-        eprintln!("notice: {FIXTURES} is absent; skipping the Pinocchio joint-order check");
-        return;
-    }
     let mut checked = 0;
-    for row in readme_table(&dir) {
+    let rows = readme_table(&dir);
+    for row in &rows {
         let stem = row.file.trim_end_matches(".urdf");
         let path = fixtures.join(format!("{stem}.json"));
-        let Ok(text) = std::fs::read_to_string(&path) else {
-            eprintln!("notice: no fixture {}; skipped", path.display());
-            continue;
-        };
+        let text = std::fs::read_to_string(&path)
+            .unwrap_or_else(|e| panic!("fixture {}: {e}", path.display()));
         let fx: serde_json::Value = serde_json::from_str(&text).unwrap();
         let fm = &fx["model"];
         let ff = !fm["root_joint"].is_null();
@@ -433,12 +425,13 @@ fn joint_order_matches_pinocchio_fixtures_up_to_sibling_order() {
         assert_eq!(m.nq() as i64 + ncont, fm["nq"].as_i64().unwrap(), "{stem}: nq");
         checked += 1;
     }
+    assert_eq!(checked, rows.len());
     eprintln!("checked the joint order of {checked} models against Pinocchio fixtures");
 }
 
 #[test]
 fn shared_mimic_joints_are_recorded() {
-    let Some(dir) = models_dir() else { return };
+    let dir = models_dir();
     let m = load_urdf_file(&dir.join("panda.urdf"), &FIXED).unwrap();
     let id = m.joint_id("panda_finger_joint2").unwrap();
     assert_eq!(m.mimic()[id].as_deref(), Some("panda_finger_joint1"));

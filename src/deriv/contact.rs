@@ -13,6 +13,14 @@ use crate::model::Model;
 use crate::spatial::Motion;
 use nalgebra::{DMatrix, DVector, Vector3};
 
+/// The largest number of point contacts [`ContactData::new`] accepts (`3 nc` constraint rows).
+/// The contact workspaces hold several `(nv + 3 nc)²` matrices and the KKT and impact solves
+/// take `O(nc²·nv)` time, so without a limit a contact list read from a file could make them
+/// allocate gigabytes: 3,000 contacts on the quadruped (a 63 KB state file for the command
+/// line's `eval`) took 7 GB and 19 s before failing. Real contact sets have a few dozen points
+/// (eight per foot of a humanoid); at the limit the workspaces take tens of megabytes.
+pub const MAX_CONTACTS: usize = 256;
+
 /// Workspace for a fixed set of point contacts on one model (allocated once).
 #[derive(Clone, Debug)]
 pub struct ContactData {
@@ -97,7 +105,20 @@ impl ContactData {
 
 impl ContactData {
     /// Workspace for `contacts` on `model`. A contact on the fixed world is an error.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] for more than [`MAX_CONTACTS`] contacts; [`Error::Unknown`] for a
+    /// contact whose frame is not in `model`; [`Error::Singular`] for a contact on the world.
     pub fn new(model: &Model, contacts: &[Contact]) -> Result<Self> {
+        if contacts.len() > MAX_CONTACTS {
+            return Err(Error::Argument {
+                name: "contacts".into(),
+                reason: format!(
+                    "{} contacts: at most {MAX_CONTACTS} (MAX_CONTACTS) are supported",
+                    contacts.len()
+                ),
+            });
+        }
         let n = model.nv;
         let m = 3 * contacts.len();
         let mut paths = Vec::with_capacity(contacts.len());

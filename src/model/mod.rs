@@ -8,4 +8,4 @@ pub mod urdf;
 pub use joint::JointType;
 pub(crate) use tree::JointKin;
 pub use tree::{Frame, Model, ModelBuilder, check_vec};
-pub use urdf::{ROOT_JOINT_NAME, UrdfOptions, load_urdf_file, load_urdf_str};
+pub use urdf::{MAX_URDF_DOFS, ROOT_JOINT_NAME, UrdfOptions, load_urdf_file, load_urdf_str};

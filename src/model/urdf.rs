@@ -27,6 +27,11 @@
 //! * `<visual>`, `<collision>`, `<transmission>`, `<gazebo>`, `<material>` and every other unknown
 //!   element are ignored; `<link>` and `<joint>` are read only as direct children of `<robot>`.
 //!
+//! * At most [`MAX_URDF_DOFS`] degrees of freedom (free-flyer root included): the model and its
+//!   workspaces take `O(nv²)` memory, so without a limit a file of a few hundred kilobytes (a
+//!   chain of `floating` joints) could ask for gigabytes. Larger trees can be made with
+//!   [`ModelBuilder`].
+//!
 //! Every failure is an [`Error::Model`] naming the file, the 1-based line, the element (e.g.
 //! `joint "knee"`) and the reason.
 
@@ -49,6 +54,14 @@ pub struct UrdfOptions {
 
 /// Name of the free-flyer joint added by [`UrdfOptions::floating_base`] (Pinocchio's name).
 pub const ROOT_JOINT_NAME: &str = "root_joint";
+
+/// The largest number of degrees of freedom (`nv`, the root free-flyer's 6 included) that the
+/// URDF loader accepts; a file with more is an [`Error::Model`] naming the joint that passes the
+/// limit. The model's DoF-ancestor lists and every workspace ([`Data`](crate::algo::Data)) take
+/// `O(nv²)` memory (a chain of `floating` joints costs 15 to 20 bytes of URDF per DoF), so the
+/// limit bounds what a file can make the loader and the algorithms allocate: about 90 MB for
+/// `Data` at the limit. Real robots have at most a few hundred DoFs (Talos: 50).
+pub const MAX_URDF_DOFS: usize = 1024;
 
 /// Loads a URDF file. Errors name the file (as given), line, element and reason.
 pub fn load_urdf_file(path: &Path, opts: &UrdfOptions) -> Result<Model> {
@@ -373,6 +386,8 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
         // Joints.
         let mut joints: Vec<Joint> = Vec::new();
         let mut joint_index: HashMap<String, usize> = HashMap::new();
+        // Degrees of freedom so far, checked against MAX_URDF_DOFS joint by joint.
+        let mut nv = if opts.floating_base { JointType::FreeFlyer.nv() } else { 0 };
         for node in robot.children().filter(|c| c.is_element() && c.tag_name().name() == "joint") {
             let name = self.name(node)?;
             let element = format!("joint \"{name}\"");
@@ -388,6 +403,24 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
                 ));
             }
             let kind = self.joint_kind(node, &element)?;
+            if let Kind::Movable(t) = kind {
+                nv += t.nv();
+                if nv > MAX_URDF_DOFS {
+                    return Err(self.err(
+                        pos,
+                        &element,
+                        format!(
+                            "the model has more than {MAX_URDF_DOFS} degrees of freedom (the \
+                             loader's limit, MAX_URDF_DOFS{}): {nv} up to this joint",
+                            if opts.floating_base {
+                                ", the floating base's 6 included"
+                            } else {
+                                ""
+                            }
+                        ),
+                    ));
+                }
+            }
             if let Kind::Movable(_) = kind
                 && (name == "universe" || (opts.floating_base && name == ROOT_JOINT_NAME))
             {

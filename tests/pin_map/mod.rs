@@ -1,8 +1,9 @@
 //! Shared helpers of the Pinocchio cross-checks (`tests/pinocchio.rs`,
 //! `tests/pinocchio_contacts.rs`, `tests/pinocchio_so.rs`): fixture JSON access, loading the
-//! URDF (or skipping when `../shared/models` is absent), the joint mapping ours ↔ Pinocchio
-//! (joints matched by name, free-flyer `[ω; v]` ↔ `[v; ω]`, continuous joints by `θ`) and the
-//! relative-error metric. The conventions are described in `tests/pinocchio.rs`.
+//! URDF (from `../shared/models`, or the copy in `tests/data/models` without it), the joint
+//! mapping ours ↔ Pinocchio (joints matched by name, free-flyer `[ω; v]` ↔ `[v; ω]`, continuous
+//! joints by `θ`) and the relative-error metric. The conventions are described in
+//! `tests/pinocchio.rs`.
 #![allow(dead_code)]
 
 use nalgebra::{DMatrix, DVector};
@@ -11,7 +12,10 @@ use sodyn::model::{JointType, Model, UrdfOptions, load_urdf_file};
 use sodyn::tensor::Tensor3;
 use std::path::{Path, PathBuf};
 
-pub const MODELS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/models");
+/// The project's shared robot models, used when present.
+pub const SHARED_MODELS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/models");
+/// The copy committed in the repository, used otherwise.
+pub const COMMITTED_MODELS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/models");
 pub const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures");
 
 // ---------------------------------------------------------------------------------------------
@@ -51,14 +55,12 @@ pub fn rel_err(diff_max: f64, ref_max: f64) -> f64 {
 // Loading
 // ---------------------------------------------------------------------------------------------
 
-/// `../shared/models/<model_name>.urdf`, or `None` (after printing that the test is skipped)
-/// when `../shared/models` is absent.
-pub fn urdf_or_skip(model_name: &str) -> Option<PathBuf> {
-    if !PathBuf::from(MODELS).is_dir() {
-        eprintln!("{model_name}: skipped: ../shared/models not found");
-        return None;
-    }
-    Some(PathBuf::from(MODELS).join(format!("{model_name}.urdf")))
+/// `<models>/<model_name>.urdf`, `<models>` being `../shared/models` when it exists and the
+/// copy committed in `tests/data/models` otherwise (so that the comparisons never skip).
+pub fn model_urdf(model_name: &str) -> PathBuf {
+    let shared = PathBuf::from(SHARED_MODELS);
+    let dir = if shared.is_dir() { shared } else { PathBuf::from(COMMITTED_MODELS) };
+    dir.join(format!("{model_name}.urdf"))
 }
 
 /// `tests/fixtures/<file>`.
