@@ -333,6 +333,24 @@ fn check_matrices(what: &str, out: &[DMatrix<f64>], n: usize) -> Result<()> {
     Ok(())
 }
 
+/// `dst ← src` for one state's output inside [`map_states`]: with AVX, the 32-byte aligned part
+/// of `dst` is written by non-temporal (streaming) stores, which skip reading its cache lines
+/// before writing them and leave the caches to the workspace (each thread's share ends with a
+/// store fence). For outputs the batch does not read again.
+///
+/// # Panics
+/// If the lengths differ.
+pub fn copy_output(dst: &mut [f64], src: &[f64]) {
+    assert_eq!(dst.len(), src.len(), "copy_output: lengths differ");
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: the CPU supports AVX; the lengths are equal (asserted).
+        unsafe { stream_copy_avx(dst, src) };
+        return;
+    }
+    dst.copy_from_slice(src);
+}
+
 /// `dst ← src` for matrices of equal shape (checked beforehand). The destination is the
 /// caller's output for one state, not read again by the batch: with AVX it is written by
 /// non-temporal (streaming) stores, which skip reading its cache lines before writing them and

@@ -21,7 +21,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
 use sodyn::Error;
 use sodyn::algo::{self, Contact, Data};
-use sodyn::batch::{BatchData, BatchPool, map_states};
+use sodyn::batch::{BatchData, BatchPool, copy_output, map_states};
 use sodyn::deriv::{
     self, ContactData, ContractedData, FdSoData, ImpactContracted, ImpactData, KktContracted,
     KktData, SoData, constrained_id_derivatives, constrained_id_so_derivatives, fd_derivatives,
@@ -1620,7 +1620,7 @@ fn batch_rnea<'py>(
     let m = &model.m;
     let ins = batch_qvx(m, q, v, a, "a")?;
     batch_call(py, threads, Data::new(m), &ins, 1, &[m.nv()], |d, st, o| {
-        o[0].copy_from_slice(algo::rnea(m, d, &st[0], &st[1], &st[2], None)?.as_slice());
+        copy_output(o[0], algo::rnea(m, d, &st[0], &st[1], &st[2], None)?.as_slice());
         Ok(())
     })
 }
@@ -1639,7 +1639,7 @@ fn batch_aba<'py>(
     let m = &model.m;
     let ins = batch_qvx(m, q, v, tau, "tau")?;
     batch_call(py, threads, Data::new(m), &ins, 1, &[m.nv()], |d, st, o| {
-        o[0].copy_from_slice(algo::aba(m, d, &st[0], &st[1], &st[2], None)?.as_slice());
+        copy_output(o[0], algo::aba(m, d, &st[0], &st[1], &st[2], None)?.as_slice());
         Ok(())
     })
 }
@@ -1658,7 +1658,7 @@ fn batch_nonlinear_effects<'py>(
     let qs = read_batch(q, "q", m.nq(), "nq", None)?;
     let vs = read_batch(v, "v", m.nv(), "nv", Some(qs.count))?;
     batch_call(py, threads, Data::new(m), &[qs, vs], 1, &[m.nv()], |d, st, o| {
-        o[0].copy_from_slice(algo::nonlinear_effects(m, d, &st[0], &st[1])?.as_slice());
+        copy_output(o[0], algo::nonlinear_effects(m, d, &st[0], &st[1])?.as_slice());
         Ok(())
     })
 }
@@ -1675,7 +1675,7 @@ fn batch_crba<'py>(
     let m = &model.m;
     let qs = read_batch(q, "q", m.nq(), "nq", None)?;
     batch_call(py, threads, Data::new(m), &[qs], 1, &[m.nv(), m.nv()], |d, st, o| {
-        o[0].copy_from_slice(algo::crba(m, d, &st[0])?.as_slice());
+        copy_output(o[0], algo::crba(m, d, &st[0])?.as_slice());
         Ok(())
     })
 }
@@ -1695,8 +1695,8 @@ fn batch_id_derivatives<'py>(
     let ins = batch_qvx(m, q, v, a, "a")?;
     batch_call(py, threads, Data::new(m), &ins, 2, &[m.nv(), m.nv()], |d, st, o| {
         id_derivatives(m, d, &st[0], &st[1], &st[2], None)?;
-        o[0].copy_from_slice(d.dtau_dq().as_slice());
-        o[1].copy_from_slice(d.dtau_dv().as_slice());
+        copy_output(o[0], d.dtau_dq().as_slice());
+        copy_output(o[1], d.dtau_dv().as_slice());
         Ok(())
     })
 }
@@ -1717,7 +1717,7 @@ fn batch_fd_derivatives<'py>(
     batch_call(py, threads, Data::new(m), &ins, 3, &[m.nv(), m.nv()], |d, st, o| {
         fd_derivatives(m, d, &st[0], &st[1], &st[2], None)?;
         for (dst, src) in o.iter_mut().zip([d.dqdd_dq(), d.dqdd_dv(), d.minv()]) {
-            dst.copy_from_slice(src.as_slice());
+            copy_output(dst, src.as_slice());
         }
         Ok(())
     })
@@ -1741,7 +1741,7 @@ fn batch_id_so_derivatives<'py>(
         id_so_derivatives(m, d, so, &st[0], &st[1], &st[2], None)?;
         let ts = [so.d2tau_dq2(), so.d2tau_dv2(), so.d2tau_dqdv(), so.dm_dq()];
         for (dst, src) in o.iter_mut().zip(ts) {
-            dst.copy_from_slice(src.as_slice());
+            copy_output(dst, src.as_slice());
         }
         Ok(())
     })
@@ -1765,7 +1765,7 @@ fn batch_fd_so_derivatives<'py>(
         fd_so_derivatives(m, d, f, &st[0], &st[1], &st[2], None)?;
         let ts = [f.d2qdd_dq2(), f.d2qdd_dv2(), f.d2qdd_dqdv(), f.d2qdd_dtaudq()];
         for (dst, src) in o.iter_mut().zip(ts) {
-            dst.copy_from_slice(src.as_slice());
+            copy_output(dst, src.as_slice());
         }
         Ok(())
     })
