@@ -1,6 +1,6 @@
 //! Workspace reuse (issue 32, item 6): every public algorithm, called in several orders and at
 //! several states on ONE set of workspaces (`Data`, `SoData`, `FdSoData`, `ContractedData`,
-//! `ContactData`, `KktData`, `ImpactData`), gives bit for bit what it gives on fresh
+//! `ContactData`, `KktData`, `ImpactData`, `KktContracted`, `ImpactContracted`), gives bit for bit what it gives on fresh
 //! workspaces. A difference means state leaking from one call into the next. Also: the model
 //! and the workspaces are `Send + Sync` (checked at compile time), and threads that share one
 //! `&Model`, each with its own workspaces, reproduce the same bits.
@@ -11,10 +11,11 @@
 use nalgebra::{DMatrix, DVector, Vector3};
 use sodyn::algo::{Contact, Data, aba, crba, forward_kinematics, nonlinear_effects, rnea};
 use sodyn::deriv::{
-    ContactData, ContractedData, FdSoData, ImpactData, KktData, SoData, constrained_id_derivatives,
-    constrained_id_so_derivatives, fd_derivatives, fd_so_contracted, fd_so_derivatives,
-    id_derivatives, id_so_contracted, id_so_derivatives, idfoza, idsoza, impact_derivatives,
-    impact_dynamics, impact_so_derivatives, kkt_derivatives, kkt_dynamics, kkt_so_derivatives,
+    ContactData, ContractedData, FdSoData, ImpactContracted, ImpactData, KktContracted, KktData,
+    SoData, constrained_id_derivatives, constrained_id_so_derivatives, fd_derivatives,
+    fd_so_contracted, fd_so_derivatives, id_derivatives, id_so_contracted, id_so_derivatives,
+    idfoza, idsoza, impact_derivatives, impact_dynamics, impact_so_contracted,
+    impact_so_derivatives, kkt_derivatives, kkt_dynamics, kkt_so_contracted, kkt_so_derivatives,
 };
 use sodyn::model::{Model, builtin};
 use sodyn::rng::Rng;
@@ -32,6 +33,8 @@ const _: fn() = || {
     assert::<ContactData>();
     assert::<KktData>();
     assert::<ImpactData>();
+    assert::<KktContracted>();
+    assert::<ImpactContracted>();
     assert::<Contact>();
     assert::<Tensor3>();
 };
@@ -48,6 +51,8 @@ struct State {
     x: DVector<f64>,
     /// Contact forces of constrained inverse dynamics (length `3 nc`).
     lambda: DVector<f64>,
+    /// Weights of the contracted contact Hessians (length `3 nc`).
+    w_c: DVector<f64>,
 }
 
 fn state(model: &Model, nc: usize, seed: u64) -> State {
@@ -63,6 +68,7 @@ fn state(model: &Model, nc: usize, seed: u64) -> State {
         w: r(nv, 1.0),
         x: r(nv, 1.0),
         lambda: r(3 * nc, 20.0),
+        w_c: r(3 * nc, 1.0),
     }
 }
 
@@ -90,6 +96,8 @@ enum Algo {
     ImpDyn,
     Imp,
     ImpSo,
+    KktSoC,
+    ImpSoC,
 }
 
 const NO_CONTACT: [Algo; 13] = [
@@ -108,7 +116,7 @@ const NO_CONTACT: [Algo; 13] = [
     Algo::FdSoC,
 ];
 
-const CONTACT: [Algo; 8] = [
+const CONTACT: [Algo; 10] = [
     Algo::CidFo,
     Algo::CidSo,
     Algo::KktDyn,
@@ -117,6 +125,8 @@ const CONTACT: [Algo; 8] = [
     Algo::ImpDyn,
     Algo::Imp,
     Algo::ImpSo,
+    Algo::KktSoC,
+    Algo::ImpSoC,
 ];
 
 /// One set of workspaces.
@@ -131,6 +141,8 @@ struct Ws {
     cd: Option<ContactData>,
     kkt: Option<KktData>,
     imp: Option<ImpactData>,
+    kc: Option<KktContracted>,
+    ic: Option<ImpactContracted>,
 }
 
 const RESTITUTION: f64 = 0.4;
@@ -140,8 +152,8 @@ impl Ws {
     /// with the second-order tensors.
     fn new(model: &Model, contacts: &[Contact], kkt_so: bool, imp_so: bool) -> Ws {
         let nv = model.nv();
-        let (cd, kkt, imp) = if contacts.is_empty() {
-            (None, None, None)
+        let (cd, kkt, imp, kc, ic) = if contacts.is_empty() {
+            (None, None, None, None, None)
         } else {
             let cd = ContactData::new(model, contacts).unwrap();
             let mut kkt = KktData::new(model, cd.clone());
@@ -153,7 +165,9 @@ impl Ws {
                 imp = imp.with_second_order(model);
             }
             imp.set_restitution(RESTITUTION).unwrap();
-            (Some(cd), Some(kkt), Some(imp))
+            let kc = KktContracted::new(model, &kkt);
+            let ic = ImpactContracted::new(model, &imp);
+            (Some(cd), Some(kkt), Some(imp), Some(kc), Some(ic))
         };
         Ws {
             data: Data::new(model),
@@ -164,6 +178,8 @@ impl Ws {
             cd,
             kkt,
             imp,
+            kc,
+            ic,
         }
     }
 
@@ -187,7 +203,7 @@ fn t3(t: &Tensor3) -> Vec<u64> {
 /// Runs `algo` at `s` on `ws` and collects everything it documents as its output.
 fn run(algo: Algo, model: &Model, ws: &mut Ws, s: &State) -> Outputs {
     let e = |e: sodyn::Error| e.to_string();
-    let Ws { data, so, fso, con, out, cd, kkt, imp } = ws;
+    let Ws { data, so, fso, con, out, cd, kkt, imp, kc, ic } = ws;
     let mut o: Vec<(&'static str, Vec<u64>)> = Vec::new();
     // The first-order ID outputs in `data` (id_derivatives and the algorithms that also fill
     // them).
@@ -321,10 +337,18 @@ fn run(algo: Algo, model: &Model, ws: &mut Ws, s: &State) -> Outputs {
             kkt_fo(kd, &mut o);
             o.push(("data.minv", bits(data.minv().as_slice())));
         }
-        Algo::Kkt | Algo::KktSo => {
+        Algo::Kkt | Algo::KktSo | Algo::KktSoC => {
             let kd = kkt.as_mut().unwrap();
             if algo == Algo::Kkt {
                 kkt_derivatives(model, data, kd, &s.q, &s.v, &s.tau).map_err(e)?;
+            } else if algo == Algo::KktSoC {
+                let kc = kc.as_mut().unwrap();
+                kkt_so_contracted(model, data, kd, kc, &s.q, &s.v, &s.tau, &s.w, &s.w_c)
+                    .map_err(e)?;
+                o.push(("kc.c_qq", bits(kc.c_qq().as_slice())));
+                o.push(("kc.c_vv", bits(kc.c_vv().as_slice())));
+                o.push(("kc.c_qv", bits(kc.c_qv().as_slice())));
+                o.push(("kc.c_tauq", bits(kc.c_tauq().as_slice())));
             } else {
                 kkt_so_derivatives(model, data, kd, &s.q, &s.v, &s.tau).map_err(e)?;
             }
@@ -352,10 +376,15 @@ fn run(algo: Algo, model: &Model, ws: &mut Ws, s: &State) -> Outputs {
             impact_dynamics(model, data, im, &s.q, &s.v).map_err(e)?;
             imp_fo(im, &mut o);
         }
-        Algo::Imp | Algo::ImpSo => {
+        Algo::Imp | Algo::ImpSo | Algo::ImpSoC => {
             let im = imp.as_mut().unwrap();
             if algo == Algo::Imp {
                 impact_derivatives(model, data, im, &s.q, &s.v).map_err(e)?;
+            } else if algo == Algo::ImpSoC {
+                let ic = ic.as_mut().unwrap();
+                impact_so_contracted(model, data, im, ic, &s.q, &s.v, &s.w, &s.w_c).map_err(e)?;
+                o.push(("ic.c_qq", bits(ic.c_qq().as_slice())));
+                o.push(("ic.c_qvminus", bits(ic.c_qvminus().as_slice())));
             } else {
                 impact_so_derivatives(model, data, im, &s.q, &s.v).map_err(e)?;
             }
