@@ -222,8 +222,8 @@ const POOL_MAX_BYTES: usize = 512 << 20;
 /// buffer owned by a [`PooledBuffer`]; when Python frees the array, the buffer comes back here
 /// and the next call of the same size reuses it. Memory the kernel has already mapped is
 /// reused, instead of a fresh allocation whose every page faults on first write (glibc hands
-/// freed multi-megabyte blocks back to the kernel: a call returning four 1 MB tensors took
-/// about 1,000 page faults, 20× the computation). Every returned array still owns its buffer
+/// freed multi-megabyte blocks back to the kernel, so four fresh 1 MB tensors cost about 1,000
+/// page faults, several times the computation). Every returned array still owns its buffer
 /// alone: a buffer is reused only after its array (and every view of it) is gone.
 struct BufferPool {
     /// Free buffers by length, and their total size in bytes.
