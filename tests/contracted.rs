@@ -37,10 +37,7 @@ fn contracted_id_matches_dense_tensors_and_ad() {
         let w = weight(m.nv(), &mut rng);
         id_so_contracted(m, &mut d, &mut cd, &q, &v, &a, &w).unwrap();
         let got = [cd.c_qq().clone(), cd.c_vv().clone(), cd.c_qv().clone(), cd.c_mq().clone()];
-        let (dq, dv) = (d.dtau_dq().clone(), d.dtau_dv().clone());
         id_so_derivatives(m, &mut d, &mut so, &q, &v, &a, None).unwrap();
-        // The first-order results of the contracted call are IDSVA's.
-        assert!(rel_err_mat(&dq, d.dtau_dq()) < 1e-13 && rel_err_mat(&dv, d.dtau_dv()) < 1e-13);
         let at = format!("{} nv={}", m.name(), m.nv());
         let tensors = [so.d2tau_dq2(), so.d2tau_dv2(), so.d2tau_dqdv(), so.dm_dq()];
         for ((wst, t), g) in dense.iter_mut().zip(tensors).zip(&got) {

@@ -305,9 +305,6 @@ fn run(algo: Algo, model: &Model, ws: &mut Ws, s: &State) -> Outputs {
             o.push(("con.c_vv", bits(con.c_vv().as_slice())));
             o.push(("con.c_qv", bits(con.c_qv().as_slice())));
             o.push(("con.c_mq", bits(con.c_mq().as_slice())));
-            o.push(("data.tau", bits(data.tau().as_slice())));
-            o.push(("data.dtau_dq", bits(data.dtau_dq().as_slice())));
-            o.push(("data.dtau_dv", bits(data.dtau_dv().as_slice())));
         }
         Algo::FdSoC => {
             fd_so_contracted(model, data, con, &s.q, &s.v, &s.tau, &s.w).map_err(e)?;

@@ -67,27 +67,6 @@ impl SoData {
     pub(crate) fn upper_halves(model: &Model) -> Self {
         Self::build(model, false, true)
     }
-    /// The per-DoF workspace only, with empty tensors: for the contracted pass
-    /// ([`id_so_contract_unchecked`]), which writes no tensor. [`SoData::check`] rejects it.
-    pub(crate) fn workspace_only(model: &Model) -> Self {
-        let mut so = Self::build(model, false, false);
-        so.d2tau_dq2 = Tensor3::zeros(0, 0, 0);
-        so.d2tau_dv2 = Tensor3::zeros(0, 0, 0);
-        so.d2tau_dqdv = Tensor3::zeros(0, 0, 0);
-        so
-    }
-    /// Checks that the per-DoF workspace (not the tensors) was built for `model`.
-    pub(crate) fn check_workspace(&self, model: &Model, what: &str) -> Result<()> {
-        if self.parents != model.parents || self.nvs != model.nvs || self.dof.len() != model.nv {
-            return Err(crate::error::Error::Workspace(crate::algo::data::workspace_mismatch(
-                what,
-                self.parents.len(),
-                self.dof.len(),
-                model,
-            )));
-        }
-        Ok(())
-    }
     fn build(model: &Model, with_dm_dq: bool, upper: bool) -> Self {
         let n = model.nv;
         let nd = if with_dm_dq { n } else { 0 };
@@ -260,38 +239,6 @@ fn backward_pass<S: Sink>(model: &Model, data: &mut Data, ws: &SoWs<'_>, sink: &
         backward_step_fo(model, data, i);
         accumulate_to_parent(model, data, i);
     }
-}
-
-/// IDSVA-SO contracted with `w` over the output index as its entries are produced, without
-/// forming a tensor: `C[j + n k] = Σ_i w_i T[(i, j, k)]` for `∂²τ/∂q²` (`cqq`), `∂²τ/∂q̇²`
-/// (`cvv`) and `∂²τ/∂q∂q̇` (`cqv`), at `(q, q̇, q̈)` with base acceleration `a0` (`−a_g`, or
-/// zero for IDSOZA); also the
-/// first-order derivatives into `data`. `so` supplies only its per-DoF workspace (its tensors
-/// may be empty). The caller checks the inputs, `w.len() = nv` and `c*.len() = nv²`.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn id_so_contract_unchecked(
-    model: &Model,
-    data: &mut Data,
-    so: &mut SoData,
-    q: &DVector<f64>,
-    v: &DVector<f64>,
-    a: &DVector<f64>,
-    a0: Motion,
-    w: &[f64],
-    cqq: &mut [f64],
-    cvv: &mut [f64],
-    cqv: &mut [f64],
-) {
-    let n = model.nv;
-    assert!(w.len() == n && cqq.len() == n * n && cvv.len() == n * n && cqv.len() == n * n);
-    forward_pass_world(model, data, q, v, a, None, a0);
-    fill_dof(data, so);
-    cqq.fill(0.0);
-    cvv.fill(0.0);
-    cqv.fill(0.0);
-    let SoData { root, dof, anc_dofs, anc_start, .. } = so;
-    let ws = SoWs { dof, anc_dofs, anc_start, root };
-    backward_pass(model, data, &ws, &mut Contract { n, w, qq: cqq, vv: cvv, qv: cqv });
 }
 
 /// A spatial vector as plain components `[ang; lin]` (motion or force).
@@ -677,9 +624,9 @@ struct SoWs<'a> {
     root: &'a [bool],
 }
 
-/// Where IDSVA-SO's entries `(i, j, k)` go as they are produced: stored in the tensors
-/// ([`Store`]) or contracted with a weight vector over `i` ([`Contract`]). Every entry that
-/// is not structurally zero reaches the sink exactly once (the contraction sums them).
+/// Where IDSVA-SO's entries `(i, j, k)` go as they are produced ([`Store`]: into the tensors,
+/// full or upper halves, with or without `∂M/∂q`). Every entry that is not structurally zero
+/// reaches the sink exactly once.
 trait Sink {
     /// Also produce `∂M/∂q`.
     const DM: bool;
@@ -727,47 +674,8 @@ impl<const DM: bool, const UP: bool> Sink for Store<'_, DM, UP> {
     }
 }
 
-/// Contracts over the output index: `C[j + n k] += w_i x` for `∂²τ/∂q²`, `∂²τ/∂q̇²` and
-/// `∂²τ/∂q∂q̇` (no `∂M/∂q`: its contraction `∂(M w)/∂q` is IDFOZA's).
-pub(crate) struct Contract<'a> {
-    pub(crate) n: usize,
-    pub(crate) w: &'a [f64],
-    pub(crate) qq: &'a mut [f64],
-    pub(crate) vv: &'a mut [f64],
-    pub(crate) qv: &'a mut [f64],
-}
-
-impl Contract<'_> {
-    #[inline(always)]
-    fn add(c: &mut [f64], w: &[f64], i: usize, jk: usize, x: f64) {
-        debug_assert!(i < w.len() && jk < c.len());
-        // SAFETY: jk = j + n k and i with i, j, k DoF indices < n (as for `set`), `w.len() = n`
-        // and `c.len() = n²` (asserted by `id_so_contract_unchecked`).
-        unsafe { *c.get_unchecked_mut(jk) += *w.get_unchecked(i) * x }
-    }
-}
-
-impl Sink for Contract<'_> {
-    const DM: bool = false;
-    const UP: bool = false;
-    #[inline(always)]
-    fn qq(&mut self, i: usize, jk: usize, _at: usize, x: f64) {
-        Self::add(self.qq, self.w, i, jk, x)
-    }
-    #[inline(always)]
-    fn vv(&mut self, i: usize, jk: usize, _at: usize, x: f64) {
-        Self::add(self.vv, self.w, i, jk, x)
-    }
-    #[inline(always)]
-    fn qv(&mut self, i: usize, j: usize, k: usize, x: f64) {
-        Self::add(self.qv, self.w, i, j + self.n * k, x)
-    }
-    #[inline(always)]
-    fn dm(&mut self, _i: usize, _jk: usize, _at: usize, _x: f64) {}
-}
-
 /// One backward step of IDSVA-SO for body `i`: every entry `(i, j, k)` of the four tensors goes
-/// to `sink` once, as it is produced (stored, or contracted with a weight vector). With
+/// to `sink` once, as it is produced. With
 /// `S::DM`, also `∂M/∂q`; with `S::UP`, the lower-half entries of `∂²τ/∂q²` and `∂²τ/∂q̇²` and
 /// the `∂²τ/∂q∂q̇` columns of root DoFs are skipped (see [`SoData::upper_halves`]; DoFs are
 /// numbered depth-first, so an ancestor's are smaller).

@@ -14,7 +14,8 @@ use super::contact::{
     g_matrix_split, padded_rows, path_kinematics, sub_djtl_dq_tree, transpose_into, update_points,
 };
 use super::contact_kin::{Dir, djtl_dq, djz_dq};
-use super::id_so::{SoData, id_so_contract_unchecked, id_so_unchecked};
+use super::contracted::{IdContractWs, id_contract_unchecked};
+use super::id_so::{SoData, id_so_unchecked};
 use super::kkt::{copy_rows_zero_rest, premultiply};
 use super::zero::idfoza_core;
 use crate::algo::Data;
@@ -445,11 +446,11 @@ fn so_inner(
 /// allocated once).
 #[derive(Clone, Debug)]
 pub struct ImpactContracted {
-    so: SoData,
+    ws: IdContractWs,
     qq: DMatrix<f64>,
     qv: DMatrix<f64>,
-    /// Scratch for the contracted IDSOZA's unused `q̇` blocks.
-    scratch: [DMatrix<f64>; 2],
+    /// Scratch for the contracted IDSOZA's unused `q̇` and `∂M/∂q` blocks.
+    scratch: [DMatrix<f64>; 3],
     omega: DVector<f64>,
     zeta: DVector<f64>,
     /// `Dᵀ`, `Kᵀ` (`nv × nv`) and `Eᵀ` (`nv × 3 nc`) of `D = ∂(M ζ₁)/∂q`,
@@ -473,10 +474,10 @@ impl ImpactContracted {
         let (n, m) = (model.nv, im.cd.dim());
         let z = || DMatrix::zeros(n, n);
         Self {
-            so: SoData::workspace_only(model),
+            ws: IdContractWs::new(model),
             qq: z(),
             qv: z(),
-            scratch: [z(), z()],
+            scratch: [z(), z(), z()],
             omega: DVector::zeros(n + m),
             zeta: DVector::zeros(n + m),
             dt: z(),
@@ -529,7 +530,7 @@ pub fn impact_so_contracted(
     let (n, m) = (model.nv, im.cd.dim());
     check_vec("w_vplus", w_vplus, n)?;
     check_vec("w_impulse", w_impulse, m)?;
-    ic.so.check_workspace(model, "ImpactContracted")?;
+    ic.ws.check(model, "ImpactContracted")?;
     if ic.omega.len() != n + m {
         return Err(Error::Workspace(format!(
             "ImpactContracted was made for nv + 3 nc = {} rows, this ImpactData has {}; make it \
@@ -547,7 +548,7 @@ pub fn impact_so_contracted(
     ic.omega.rows_mut(n, m).copy_from(w_impulse);
     ic.zeta.gemv_tr(1.0, &im.cd.rinv, &ic.omega, 0.0);
     let ImpactContracted {
-        so,
+        ws,
         qq,
         qv,
         scratch,
@@ -566,21 +567,11 @@ pub fn impact_so_contracted(
     let (z1, z2) = zeta.as_slice().split_at(n);
     // 2. IDSOZA(Δv) contracted with ζ₁ (q̇ = 0, no gravity) ...
     {
-        let [s1, s2] = scratch;
-        let (sq, s1, s2) = (qq.as_mut_slice(), s1.as_mut_slice(), s2.as_mut_slice());
-        id_so_contract_unchecked(
-            model,
-            data,
-            so,
-            q,
-            &im.zero,
-            &im.dv,
-            Motion::zero(),
-            z1,
-            sq,
-            s1,
-            s2,
-        );
+        let [s1, s2, s3] = scratch;
+        let (sq, s1, s2, s3) =
+            (qq.as_mut_slice(), s1.as_mut_slice(), s2.as_mut_slice(), s3.as_mut_slice());
+        let (zero, dv) = (&im.zero, &im.dv);
+        id_contract_unchecked(model, data, ws, q, zero, dv, Motion::zero(), z1, sq, s1, s2, s3);
     }
     // ... minus ζ₁ᵀ ∂²(J_cᵀλ̂)/∂q², plus ζ₂ᵀ ∂²(J_c w)/∂q².
     let mut zc = std::mem::take(&mut im.cd.zc);

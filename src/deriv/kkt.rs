@@ -15,8 +15,9 @@ use super::contact::{
     fill_rinv, g_matrix, g_matrix_split, path_kinematics, sub_djtl_dq_strided, update_points,
 };
 use super::contact_kin::{Dir, dap_dq, dap_dv, djtl_dq};
+use super::contracted::{IdContractWs, id_contract_unchecked};
 use super::id_fo::id_derivatives_unchecked;
-use super::id_so::{SoData, id_so_contract_unchecked, id_so_unchecked};
+use super::id_so::{SoData, id_so_unchecked};
 use crate::algo::Data;
 use crate::algo::internal::{
     crba_unchecked, ltl_in_place, ltl_solve_fd, ltl_solve_rows_desc, rnea_unchecked,
@@ -538,7 +539,9 @@ pub(crate) fn premultiply<S>(
 /// allocated once).
 #[derive(Clone, Debug)]
 pub struct KktContracted {
-    so: SoData,
+    ws: IdContractWs,
+    /// `∂(M ζ₁)/∂q` of the reverse-mode pass (scratch).
+    mq: DMatrix<f64>,
     qq: DMatrix<f64>,
     vv: DMatrix<f64>,
     qv: DMatrix<f64>,
@@ -560,7 +563,8 @@ impl KktContracted {
         let (n, m) = (model.nv, kd.cd.dim());
         let z = || DMatrix::zeros(n, n);
         Self {
-            so: SoData::workspace_only(model),
+            ws: IdContractWs::new(model),
+            mq: z(),
             qq: z(),
             vv: z(),
             qv: z(),
@@ -624,7 +628,7 @@ pub fn kkt_so_contracted(
     let (n, m) = (model.nv, kd.cd.dim());
     check_vec("w_qdd", w_qdd, n)?;
     check_vec("w_lambda", w_lambda, m)?;
-    kc.so.check_workspace(model, "KktContracted")?;
+    kc.ws.check(model, "KktContracted")?;
     if kc.omega.len() != n + m {
         return Err(crate::error::Error::Workspace(format!(
             "KktContracted was made for nv + 3 nc = {} rows, this KktData has {}; make it with \
@@ -647,11 +651,13 @@ pub fn kkt_so_contracted(
     kc.zeta.gemv_tr(1.0, &kd.cd.rinv, &kc.omega, 0.0);
     // 3. ζᵀ R_uw: the ID part, contracted as IDSVA-SO produces it (at q̈; the pass also
     //    refreshes the world-frame quantities of `data` at the same state) ...
-    let KktContracted { so, qq, vv, qv, tq, zeta, a, h, neg_z2, .. } = kc;
+    let KktContracted { ws, mq, qq, vv, qv, tq, zeta, a, h, neg_z2, .. } = kc;
     {
         let z1 = &zeta.as_slice()[..n];
-        let (sq, sv, sx) = (qq.as_mut_slice(), vv.as_mut_slice(), qv.as_mut_slice());
-        id_so_contract_unchecked(model, data, so, q, v, &kd.qdd, -model.gravity, z1, sq, sv, sx);
+        let (sq, sv, sx, sm) =
+            (qq.as_mut_slice(), vv.as_mut_slice(), qv.as_mut_slice(), mq.as_mut_slice());
+        let g = -model.gravity;
+        id_contract_unchecked(model, data, ws, q, v, &kd.qdd, g, z1, sq, sv, sx, sm);
     }
     // ... minus ζ₁ᵀ ∂²(J_cᵀλ)/∂q², plus ζ₂ᵀ times the contact-point acceleration Hessians.
     {
