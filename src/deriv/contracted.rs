@@ -26,15 +26,20 @@
 //!
 //! The derivation is in `docs/notes-corrections.md` ("Contracted second order").
 
+use super::contact_kin::Path;
 use super::fd::fd_derivatives;
 use super::id_fo::{accumulate_to_parent, forward_pass_world};
+#[cfg(target_arch = "x86_64")]
+use super::zero::Avx4;
+use super::zero::Lanes;
 use crate::algo::Data;
 use crate::algo::data::workspace_mismatch;
+use crate::algo::internal::root_free_flyer;
 use crate::error::{Error, Result};
 use crate::linalg::{gemm, transpose_strided};
 use crate::model::{Model, check_vec};
-use crate::spatial::{Force, Motion, coriolis_b_write};
-use nalgebra::{DMatrix, DVector, Matrix6, Vector3};
+use crate::spatial::{Force, Inertia, Motion, coriolis_b_left};
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
 /// Results and workspace of [`id_so_contracted`] and [`fd_so_contracted`] for one model.
 /// Allocated once (`O(nv²)`); the calls allocate nothing.
@@ -54,6 +59,9 @@ pub struct ContractedData {
     tmp: DMatrix<f64>,
     /// `Dᵀ`.
     dt: DMatrix<f64>,
+    /// `qq`, `vv`, `qv`, `mq` are zero where DoFs are on no common root path (the entries
+    /// the reverse-mode pass does not write); false after [`fd_so_contracted`].
+    clean: bool,
 }
 
 impl ContractedData {
@@ -75,6 +83,7 @@ impl ContractedData {
             qdd: DVector::zeros(n),
             tmp: z(),
             dt: z(),
+            clean: true,
         }
     }
     /// `C_qq[(j, k)] = Σ_i w_i ∂/∂q_k (∂y_i/∂q_j)` (`y = τ` or `q̈`, of the last call).
@@ -123,6 +132,12 @@ pub fn id_so_contracted(
     check_vec("a", a, model.nv)?;
     check_vec("w", w, model.nv)?;
     cd.check(model)?;
+    if !cd.clean {
+        for c in [&mut cd.qq, &mut cd.vv, &mut cd.qv, &mut cd.mq] {
+            c.fill(0.0);
+        }
+        cd.clean = true;
+    }
     let ContractedData { ws, qq, vv, qv, mq, .. } = cd;
     let (qq, vv, qv, mq) =
         (qq.as_mut_slice(), vv.as_mut_slice(), qv.as_mut_slice(), mq.as_mut_slice());
@@ -149,7 +164,11 @@ pub fn fd_so_contracted(
     cd.check(model)?;
     fd_derivatives(model, data, q, v, tau, None)?;
     let n = model.nv;
+    cd.clean = false;
     let ContractedData { ws, qq, vv, qv, tq, mu, xq, xv, minv, qdd, tmp, dt, .. } = cd;
+    for c in [&mut *qq, &mut *vv, &mut *qv, &mut *tq] {
+        c.fill(0.0);
+    }
     // 1. μ = M⁻¹ w; the first-order results, kept (the ID pass below rewrites `data`).
     xq.copy_from(data.dqdd_dq());
     xv.copy_from(data.dqdd_dv());
@@ -196,10 +215,24 @@ pub fn fd_so_contracted(
 #[derive(Clone, Debug)]
 pub(crate) struct IdContractWs {
     psi: Vec<Motion>,
-    bp: Vec<Matrix6<f64>>,
+    /// `B^ψ`, its left 6×3 block column (column-major; the right one is zero).
+    bp: Vec<[f64; 18]>,
     rc: Vec<Force>,
     pc: Vec<Force>,
     psiw: Vec<Motion>,
+    /// The per-DoF path vectors `[S, Ψ̇, Ψ̈, Ψ̇ + Ṡ, Ψ̇^w]` (ground frame) by component:
+    /// component `c` of DoF `a` at `path[c * stride + a]`, `stride = nv + LANES` (the padding
+    /// is read by the last lanes of a run and never used).
+    path: Vec<f64>,
+    stride: usize,
+    /// The strict ancestor DoFs of joint `i` as runs of consecutive DoFs:
+    /// `runs[run_start[i]..run_start[i + 1]]`, each `(first, count)`.
+    runs: Vec<(usize, usize)>,
+    run_start: Vec<usize>,
+    /// `ff_anc[i]`: joint 1 is a free flyer with the identity subspace
+    /// ([`root_free_flyer`]) and a strict ancestor of joint `i`; its six DoFs are then not in
+    /// `runs` (their entries come from one force transform each, see [`contract_step`]).
+    ff_anc: Vec<bool>,
     key: u64,
     njoints: usize,
     nv: usize,
@@ -208,12 +241,36 @@ pub(crate) struct IdContractWs {
 impl IdContractWs {
     pub(crate) fn new(model: &Model) -> Self {
         let (nj, nv) = (model.njoints(), model.nv);
+        let (mut runs, mut run_start) = (vec![], vec![0, 0]);
+        let ff = root_free_flyer(model);
+        let mut ff_anc = vec![false; nj];
+        for i in 1..nj {
+            let mut anc: Vec<usize> = model.ancestors_of_dof(model.idx_v[i]).to_vec();
+            if ff && anc.contains(&0) {
+                ff_anc[i] = true;
+                anc.retain(|&a| a >= 6);
+            }
+            anc.sort_unstable();
+            for a in anc {
+                let own = runs.len() > run_start[i];
+                match runs.last_mut() {
+                    Some((f, c)) if own && *f + *c == a => *c += 1,
+                    _ => runs.push((a, 1)),
+                }
+            }
+            run_start.push(runs.len());
+        }
         Self {
             psi: vec![Motion::zero(); nj],
-            bp: vec![Matrix6::zeros(); nj],
+            bp: vec![[0.0; 18]; nj],
             rc: vec![Force::zero(); nj],
             pc: vec![Force::zero(); nj],
             psiw: vec![Motion::zero(); nv],
+            path: vec![0.0; 30 * (nv + LANES)],
+            stride: nv + LANES,
+            runs,
+            run_start,
+            ff_anc,
             key: model.key,
             njoints: nj,
             nv,
@@ -228,10 +285,10 @@ impl IdContractWs {
     }
 }
 
-/// `B x` for a Coriolis-type matrix whose right block column is zero ([`coriolis_b`]).
+/// `B x` for a Coriolis-type matrix whose right block column is zero
+/// ([`crate::spatial::coriolis_b`]), from its left block column `b` (column-major).
 #[inline(always)]
-fn mul_b(b: &Matrix6<f64>, x: &Motion) -> Force {
-    let b = b.as_slice();
+fn mul_b(b: &[f64], x: &Motion) -> Force {
     let (x0, x1, x2) = (x.ang.x, x.ang.y, x.ang.z);
     let y = |r: usize| b[r] * x0 + b[r + 6] * x1 + b[r + 12] * x2;
     Force::new(Vector3::new(y(0), y(1), y(2)), Vector3::new(y(3), y(4), y(5)))
@@ -239,8 +296,7 @@ fn mul_b(b: &Matrix6<f64>, x: &Motion) -> Force {
 
 /// `Bᵀ x` for the same structure (its linear part is zero).
 #[inline(always)]
-fn mul_bt(b: &Matrix6<f64>, x: &Motion) -> Force {
-    let b = b.as_slice();
+fn mul_bt(b: &[f64], x: &Motion) -> Force {
     let col = |c: usize| {
         b[c] * x.ang.x
             + b[c + 1] * x.ang.y
@@ -256,7 +312,8 @@ fn mul_bt(b: &Matrix6<f64>, x: &Motion) -> Force {
 /// per-entry sum over the output index.
 ///
 /// Inputs: model, state `(q, q̇, q̈)`, base acceleration `a0` (`−a_g`, or zero), weight `w`.
-/// Outputs (`nv × nv`, column-major, all entries written): `cqq = ∂²φ/∂q∂q` (outer `k`
+/// Outputs (`nv × nv`, column-major; the entries of DoFs on no common root path are not
+/// written, the caller zeroes them): `cqq = ∂²φ/∂q∂q` (outer `k`
 /// first, as `d2tau_dq2`), `cvv = ∂²φ/∂q̇²`, `cqv[j + n k] = ∂²φ/∂q_j∂q̇_k`,
 /// `cmq[j + n k] = ∂(M w)_j/∂q_k`. `data` keeps the ground-frame kinematics of the state.
 ///
@@ -302,24 +359,53 @@ pub(crate) fn id_contract_unchecked(
     let nj = model.njoints();
     assert!(
         w.len() == n
-            && cqq.len() == n * n
-            && cvv.len() == n * n
-            && cqv.len() == n * n
-            && cmq.len() == n * n
+            && [cqq.len(), cvv.len(), cqv.len(), cmq.len()] == [n * n; 4]
             && ws.psiw.len() == n
+            && ws.path.len() == 30 * ws.stride
+            && ws.stride == n + LANES
+            && ws.run_start.len() == nj + 1
+            && ws.ff_anc.len() == nj
             && ws.psi.len() == nj
     );
     forward_pass_world(model, data, q, v, a, None, a0);
-    // Virtual velocities ψ and the per-body terms of the ψ composites.
+    contract_passes(model, data, ws, w, [cqq, cvv, cqv, cmq]);
+}
+
+/// [`contract_step`] compiled for AVX2/FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn contract_step_avx2(
+    model: &Model,
+    data: &Data,
+    ws: &IdContractWs,
+    i: usize,
+    out: [&mut [f64]; 4],
+) {
+    contract_step::<Avx4>(model, data, ws, i, out);
+}
+
+/// The ψ pass and the backward pass of [`id_contract_unchecked`] (after the ground-frame
+/// forward pass of the state).
+fn contract_passes(
+    model: &Model,
+    data: &mut Data,
+    ws: &mut IdContractWs,
+    w: &[f64],
+    [qq, vv, qv, mq]: [&mut [f64]; 4],
+) {
+    let nj = model.njoints();
+    // Virtual velocities ψ, the per-body terms of the ψ composites, and the per-DoF path
+    // vectors [S, Ψ̇, Ψ̈, Ψ̇ + Ṡ, Ψ̇^w].
     ws.psi[0] = Motion::zero();
     for i in 1..nj {
         let p = model.parents[i];
         let psip = ws.psi[p];
         let mut psi = psip;
-        for c in model.idx_v[i]..model.idx_v[i] + model.nvs[i] {
+        let iv = model.idx_v[i];
+        for (c, wc) in (iv..).zip(&w[iv..iv + model.nvs[i]]) {
             let s = data.s_world[c];
             ws.psiw[c] = psip.cross(&s);
-            psi += s * w[c];
+            psi += s * *wc;
         }
         ws.psi[i] = psi;
         let (inertia, vi) = (data.oinertia[i], data.ov[i]);
@@ -327,21 +413,44 @@ pub(crate) fn id_contract_unchecked(
         ws.pc[i] = ipsi;
         ws.rc[i] = inertia.mul_motion(&psi.cross(&vi)) - psi.cross_force(&inertia.mul_motion(&vi))
             + vi.cross_force(&ipsi);
-        coriolis_b_write(&inertia, &psi, &mut ws.bp[i]);
+        ws.bp[i] = coriolis_b_left(&inertia, &psi);
     }
-    for c in [&mut *cqq, &mut *cvv, &mut *cqv, &mut *cmq] {
-        c.fill(0.0);
+    // The path vectors by component (see `IdContractWs::path`).
+    let st = ws.stride;
+    for c in 0..model.nv {
+        let mut col = [0.0; 30];
+        let ms = [data.s_world[c], data.psid[c], data.psidd[c], data.psid_sdot[c], ws.psiw[c]];
+        for (b, m) in ms.iter().enumerate() {
+            col[6 * b..6 * b + 3].copy_from_slice(m.ang.as_slice());
+            col[6 * b + 3..6 * b + 6].copy_from_slice(m.lin.as_slice());
+        }
+        for (r, x) in col.iter().enumerate() {
+            ws.path[r * st + c] = *x;
+        }
     }
+    #[cfg(target_arch = "x86_64")]
+    let simd = crate::simd::avx2_fma();
     for i in (1..nj).rev() {
-        contract_step(model, data, ws, i, [&mut *cqq, &mut *cvv, &mut *cqv, &mut *cmq]);
+        let out = [&mut *qq, &mut *vv, &mut *qv, &mut *mq];
+        #[cfg(target_arch = "x86_64")]
+        if simd {
+            // SAFETY: the CPU has AVX2 and FMA (checked before the loop).
+            unsafe { contract_step_avx2(model, data, ws, i, out) };
+        } else {
+            contract_step::<[f64; LANES]>(model, data, ws, i, out);
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        contract_step::<[f64; LANES]>(model, data, ws, i, out);
         let p = model.parents[i];
         if p > 0 {
             accumulate_to_parent(model, data, i);
             let (rc, pc) = (ws.rc[i], ws.pc[i]);
             ws.rc[p] += rc;
             ws.pc[p] += pc;
-            let (lo, hi) = ws.bp.split_at_mut(i);
-            lo[p] += &hi[0];
+            let bpi = ws.bp[i];
+            for (x, y) in ws.bp[p].iter_mut().zip(&bpi) {
+                *x += y;
+            }
         }
     }
 }
@@ -357,8 +466,30 @@ struct SideD {
     is: Force,
 }
 
+/// Lanes of step 2 of [`id_contract_unchecked`]: ancestor DoFs handled at once.
+const LANES: usize = 4;
+
+/// `acc + Σ_c p_c x[c]` over the six components of a block of path vectors, for [`LANES`]
+/// consecutive DoFs (`p` starts at the first component's lanes; `st` is the component stride).
+#[inline(always)]
+fn lanes_dot<V: Lanes<Arr = [f64; LANES]>>(p: &[f64], st: usize, x: &[f64; 6], acc: V) -> V {
+    let mut acc = acc;
+    for (c, xc) in x.iter().enumerate() {
+        let row: &[f64; LANES] = p[c * st..c * st + LANES].try_into().expect("LANES");
+        acc = V::load(row).mul_add(V::splat(*xc), acc);
+    }
+    acc
+}
+
+/// A force as six components `[ang; lin]`.
+#[inline(always)]
+fn f6(f: &Force) -> [f64; 6] {
+    [f.ang.x, f.ang.y, f.ang.z, f.lin.x, f.lin.y, f.lin.z]
+}
+
 /// Steps 1–3 of [`id_contract_unchecked`] for joint `i` (its composites complete).
-fn contract_step(
+#[inline(always)]
+fn contract_step<V: Lanes<Arr = [f64; LANES]>>(
     model: &Model,
     data: &Data,
     ws: &IdContractWs,
@@ -368,7 +499,7 @@ fn contract_step(
     let n = model.nv;
     let (iv, nvi) = (model.idx_v[i], model.nvs[i]);
     let ic = &data.ic_world[i];
-    let (bc, bp) = (&data.bc[i], &ws.bp[i]);
+    let (bc, bp) = (&data.bc[i].as_slice()[..18], &ws.bp[i][..]);
     let (fc, rc, pc) = (data.ofc[i], ws.rc[i], ws.pc[i]);
     let mut side = [SideD {
         uf: Force::zero(),
@@ -378,10 +509,12 @@ fn contract_step(
         y: Force::zero(),
         is: Force::zero(),
     }; 6];
+    let runs = &ws.runs[ws.run_start[i]..ws.run_start[i + 1]];
+    let st = ws.stride;
     for (t, d) in (iv..iv + nvi).enumerate() {
         let s = data.s_world[d];
         let (pd, pdd, pss, pw) = (data.psid[d], data.psidd[d], data.psid_sdot[d], ws.psiw[d]);
-        side[t] = SideD {
+        let x = SideD {
             uf: s.cross_force(&fc) + ic.mul_motion(&pdd) + mul_b(bc, &pd) * 2.0,
             upsi: s.cross_force(&pc) + ic.mul_motion(&pw),
             ur: s.cross_force(&rc) + (mul_bt(bc, &pw) - mul_bt(bp, &pd)) * 2.0,
@@ -389,27 +522,73 @@ fn contract_step(
             y: ic.mul_motion(&pss) + mul_b(bc, &s) * 2.0,
             is: ic.mul_motion(&s),
         };
-    }
-    // Step 2: strict ancestors.
-    for &a in model.ancestors_of_dof(iv) {
-        let (sa, pda, pdda, pssa, pwa) =
-            (data.s_world[a], data.psid[a], data.psidd[a], data.psid_sdot[a], ws.psiw[a]);
-        for (t, d) in (iv..iv + nvi).enumerate() {
-            let x = &side[t];
-            let (ad, da) = (a + n * d, d + n * a);
-            let h = pwa.dot(&x.uf) + pda.dot(&x.ur) + pdda.dot(&x.upsi);
-            qq[ad] = h;
-            qq[da] = h;
-            let z = -2.0 * sa.dot(&x.z);
-            vv[ad] = z;
-            vv[da] = z;
-            qv[ad] = pwa.dot(&x.y) - 2.0 * pda.dot(&x.z);
-            qv[da] = sa.dot(&x.ur) + pssa.dot(&x.upsi);
-            mq[ad] = sa.dot(&x.upsi);
-            mq[da] = pwa.dot(&x.is);
+        side[t] = x;
+        // Step 2, LANES ancestor DoFs a at once, from a's path vectors
+        // [S, Ψ̇, Ψ̈, Ψ̇ + Ṡ, Ψ̇^w] (blocks 0–4 of `path`).
+        let (uf, upsi, ur, y, is) = (f6(&x.uf), f6(&x.upsi), f6(&x.ur), f6(&x.y), f6(&x.is));
+        let z2 = f6(&(x.z * -2.0));
+        let blk = |b: usize, a0: usize| &ws.path[6 * b * st + a0..];
+        if ws.ff_anc[i] {
+            // The root free flyer's DoFs a (S_a = X₁ e_a, Ψ̇^w = Ψ̇ = 0, Ψ̈ = a₀ × S_a,
+            // Ψ̇ + Ṡ = v₁ × S_a): each column is S_aᵀ f = (X₁ᵀ f)_a for one force f.
+            let (x1, a0, v1) = (&data.o_m_i[1], data.oa[0], data.ov[1]);
+            let qqr = f6(&x1.inv_act_force(&-a0.cross_force(&x.upsi)));
+            let vvr = f6(&x1.inv_act_force(&(x.z * -2.0)));
+            let qvr = f6(&x1.inv_act_force(&(x.ur - v1.cross_force(&x.upsi))));
+            let mqr = f6(&x1.inv_act_force(&x.upsi));
+            for a in 0..6 {
+                let (ad, da) = (a + n * d, d + n * a);
+                qq[ad] = qqr[a];
+                qq[da] = qqr[a];
+                vv[ad] = vvr[a];
+                vv[da] = vvr[a];
+                qv[da] = qvr[a];
+                mq[ad] = mqr[a];
+            }
+        }
+        for &(first, count) in runs {
+            let mut a0 = first;
+            while a0 < first + count {
+                let zero = V::splat(0.0);
+                // C_qq = Ψ̇^w·U^F + Ψ̇·U^R + Ψ̈·U^Ψ; C_vv = S·(−2Z);
+                // C_qv[a,d] = Ψ̇^w·Y + Ψ̇·(−2Z); C_qv[d,a] = S·U^R + (Ψ̇ + Ṡ)·U^Ψ;
+                // C_Mq[a,d] = S·U^Ψ; C_Mq[d,a] = Ψ̇^w·I^C S.
+                let o0 = lanes_dot(blk(4, a0), st, &uf, zero);
+                let o0 = lanes_dot(blk(1, a0), st, &ur, o0);
+                let o0 = lanes_dot(blk(2, a0), st, &upsi, o0).store();
+                let o1 = lanes_dot(blk(0, a0), st, &z2, zero).store();
+                let o2 = lanes_dot(blk(4, a0), st, &y, zero);
+                let o2 = lanes_dot(blk(1, a0), st, &z2, o2).store();
+                let o3 = lanes_dot(blk(0, a0), st, &ur, zero);
+                let o3 = lanes_dot(blk(3, a0), st, &upsi, o3).store();
+                let o4 = lanes_dot(blk(0, a0), st, &upsi, zero).store();
+                let o5 = lanes_dot(blk(4, a0), st, &is, zero).store();
+                let m = LANES.min(first + count - a0);
+                for (l, a) in (a0..a0 + m).enumerate() {
+                    let (ad, da) = (a + n * d, d + n * a);
+                    qq[ad] = o0[l];
+                    qq[da] = o0[l];
+                    vv[ad] = o1[l];
+                    vv[da] = o1[l];
+                    qv[ad] = o2[l];
+                    qv[da] = o3[l];
+                    mq[ad] = o4[l];
+                    mq[da] = o5[l];
+                }
+                a0 += LANES;
+            }
         }
     }
-    // Step 3: the joint's own DoFs.
+    // Step 3: the joint's own DoFs (one DoF: the turn terms vanish, S·(S ×* f) = 0).
+    if nvi == 1 {
+        let (x, s) = (&side[0], data.s_world[iv]);
+        let jj = iv + n * iv;
+        qq[jj] = ws.psiw[iv].dot(&x.uf) + data.psid[iv].dot(&x.ur) + data.psidd[iv].dot(&x.upsi);
+        vv[jj] = -2.0 * s.dot(&mul_b(bp, &s));
+        qv[jj] = s.dot(&x.ur) + data.psid_sdot[iv].dot(&x.upsi);
+        mq[jj] = s.dot(&x.upsi);
+        return;
+    }
     let p = model.parents[i];
     let (psil, vl, al, vi) = (ws.psi[p], data.ov[p], data.oa[p], data.ov[i]);
     let g =
@@ -428,6 +607,159 @@ fn contract_step(
             qv[jk] =
                 sk.dot(&xj.ur) + data.psid_sdot[k].dot(&xj.upsi) - skj.dot(&rc) - dbeta.dot(&pc);
             mq[jk] = sj.dot(&xk.upsi) + skj.dot(&pc);
+        }
+    }
+}
+
+/// Per-DoF and per-joint state of [`point_hessians`] along one contact path.
+#[derive(Clone, Debug)]
+pub(crate) struct PointWs {
+    /// Per DoF: `Ψ̇ = v_λ × S`, `Ψ̈ = a_λ × S + v_λ × Ψ̇`, `Ψ̇ + Ṡ = (v_λ + v) × S`.
+    psid: Vec<Motion>,
+    psidd: Vec<Motion>,
+    pss: Vec<Motion>,
+    /// Per joint: velocity and acceleration (no gravity).
+    vel: Vec<Motion>,
+    acc: Vec<Motion>,
+}
+
+impl PointWs {
+    pub(crate) fn new(model: &Model) -> Self {
+        let (nj, nv) = (model.njoints(), model.nv);
+        let z = Motion::zero();
+        Self {
+            psid: vec![z; nv],
+            psidd: vec![z; nv],
+            pss: vec![z; nv],
+            vel: vec![z; nj],
+            acc: vec![z; nj],
+        }
+    }
+
+    /// The state of `data` (its ground-frame forward pass with base acceleration `a0`), with
+    /// `a0` removed from the accelerations, along `path`.
+    pub(crate) fn load_state(&mut self, model: &Model, data: &Data, path: &Path, a0: Motion) {
+        for &j in &path.joints {
+            self.vel[j] = data.ov[j];
+            self.acc[j] = data.oa[j] - a0;
+            for d in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
+                let s = data.s_world[d];
+                self.psid[d] = data.psid[d];
+                self.psidd[d] = data.psidd[d] - a0.cross(&s);
+                self.pss[d] = data.psid_sdot[d];
+            }
+        }
+    }
+
+    /// Zero velocity and joint accelerations `x` along `path` (the state at which `ζ·a_p` is
+    /// `ζ·(J_c x)`).
+    pub(crate) fn at_rest(&mut self, model: &Model, data: &Data, path: &Path, x: &[f64]) {
+        let z = Motion::zero();
+        for &j in &path.joints {
+            let p = model.parents[j];
+            let ap = if p == 0 { z } else { self.acc[p] };
+            let mut a = ap;
+            let iv = model.idx_v[j];
+            for (d, xd) in (iv..).zip(&x[iv..iv + model.nvs[j]]) {
+                let s = data.s_world[d];
+                self.psid[d] = z;
+                self.pss[d] = z;
+                self.psidd[d] = ap.cross(&s);
+                a += s * *xd;
+            }
+            self.vel[j] = z;
+            self.acc[j] = a;
+        }
+    }
+}
+
+/// Adds `scale ×` the Hessian blocks of `ζ·a_p` to `qq` (and `vv`, `qv`): `a_p` is the
+/// world-aligned classical acceleration of the point `p` (world coordinates) fixed in the last
+/// joint's body of `path`, at the state of `pw` ([`PointWs::load_state`] or
+/// [`PointWs::at_rest`]); layouts as [`id_contract_unchecked`]'s.
+///
+/// The net force on a unit point mass at `p` is `f = [p × a_p; a_p]`, so `ζ·a_p = ψ_c·f` with
+/// the constant virtual velocity `ψ_c = [0; ζ]`: the reverse-mode formulas of
+/// [`id_contract_unchecked`] for one body (inertia `I_p` of the point mass) whose virtual
+/// velocity is fixed in the world (`ψ_λ = ψ_c` for every DoF, so `Ψ̇^w = ψ_c × S`). Every
+/// composite along the path is the point mass's own term.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn point_hessians(
+    model: &Model,
+    data: &Data,
+    pw: &PointWs,
+    path: &Path,
+    zeta: &Vector3<f64>,
+    scale: f64,
+    qq: &mut DMatrix<f64>,
+    mut vq: Option<(&mut DMatrix<f64>, &mut DMatrix<f64>)>,
+) {
+    let body = *path.joints.last().expect("a contact path has a joint");
+    let ip = Inertia::from_com(1.0, path.p, Matrix3::zeros());
+    let psic = Motion::new(Vector3::zeros(), *zeta);
+    let (vb, ab) = (pw.vel[body], pw.acc[body]);
+    // Composites: the point mass's terms.
+    let ivb = ip.mul_motion(&vb);
+    let fc = ip.mul_motion(&ab) + vb.cross_force(&ivb);
+    let pc = ip.mul_motion(&psic);
+    let rc = ip.mul_motion(&psic.cross(&vb)) - psic.cross_force(&ivb) + vb.cross_force(&pc);
+    let (bc, bp) = (coriolis_b_left(&ip, &vb), coriolis_b_left(&ip, &psic));
+    let side = |d: usize| {
+        let s = data.s_world[d];
+        let (pd, pdd, pss, pwd) = (pw.psid[d], pw.psidd[d], pw.pss[d], psic.cross(&s));
+        SideD {
+            uf: s.cross_force(&fc) + ip.mul_motion(&pdd) + mul_b(&bc, &pd) * 2.0,
+            upsi: s.cross_force(&pc) + ip.mul_motion(&pwd),
+            ur: s.cross_force(&rc) + (mul_bt(&bc, &pwd) - mul_bt(&bp, &pd)) * 2.0,
+            z: mul_b(&bp, &s) - s.cross_force(&pc),
+            y: ip.mul_motion(&pss) + mul_b(&bc, &s) * 2.0,
+            is: ip.mul_motion(&s),
+        }
+    };
+    for (td, &d) in path.dofs.iter().enumerate() {
+        let x = side(d);
+        let jd = path.dof_joint[td];
+        // Step 2: DoFs of strict ancestor joints.
+        for (ta, &a) in path.dofs.iter().enumerate() {
+            if path.dof_joint[ta] >= jd {
+                break;
+            }
+            let (sa, pda, pdda, pssa) = (data.s_world[a], pw.psid[a], pw.psidd[a], pw.pss[a]);
+            let pwa = psic.cross(&sa);
+            let h = scale * (pwa.dot(&x.uf) + pda.dot(&x.ur) + pdda.dot(&x.upsi));
+            qq[(a, d)] += h;
+            qq[(d, a)] += h;
+            if let Some((vv, qv)) = vq.as_mut() {
+                let z = -2.0 * scale * sa.dot(&x.z);
+                vv[(a, d)] += z;
+                vv[(d, a)] += z;
+                qv[(a, d)] += scale * (pwa.dot(&x.y) - 2.0 * pda.dot(&x.z));
+                qv[(d, a)] += scale * (sa.dot(&x.ur) + pssa.dot(&x.upsi));
+            }
+        }
+        // Step 3: the DoFs of d's own joint.
+        let p = model.parents[jd];
+        let (vl, al, vi) = (pw.vel[p], pw.acc[p], pw.vel[jd]);
+        let (vl, al) = if p == 0 { (Motion::zero(), Motion::zero()) } else { (vl, al) };
+        let g = psic.cross_force(&fc)
+            + vl.cross_force(&(rc - vl.cross_force(&pc)))
+            + al.cross_force(&pc);
+        for &j in &path.dofs[..] {
+            if model.dof_joint[j] != jd {
+                continue;
+            }
+            let xj = side(j);
+            let (sj, sd) = (data.s_world[j], data.s_world[d]);
+            let pwj = psic.cross(&sj);
+            let skj = sd.cross(&sj);
+            qq[(j, d)] += scale
+                * (pwj.dot(&x.uf) + pw.psid[j].dot(&x.ur) + pw.psidd[j].dot(&x.upsi) - skj.dot(&g));
+            if let Some((vv, qv)) = vq.as_mut() {
+                vv[(j, d)] -= scale * sj.dot(&(mul_b(&bp, &sd) * 2.0 - sd.cross_force(&pc)));
+                let dbeta = (-skj).cross(&(vl + vi)) + sd.cross(&sj.cross(&(vi - vl)));
+                qv[(j, d)] += scale
+                    * (sd.dot(&xj.ur) + pw.pss[d].dot(&xj.upsi) - skj.dot(&rc) - dbeta.dot(&pc));
+            }
         }
     }
 }

@@ -14,7 +14,7 @@ use super::contact::{
     g_matrix_split, padded_rows, path_kinematics, sub_djtl_dq_tree, transpose_into, update_points,
 };
 use super::contact_kin::{Dir, djtl_dq, djz_dq};
-use super::contracted::{IdContractWs, id_contract_unchecked};
+use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_so::{SoData, id_so_unchecked};
 use super::kkt::{copy_rows_zero_rest, premultiply};
 use super::zero::idfoza_core;
@@ -447,6 +447,7 @@ fn so_inner(
 #[derive(Clone, Debug)]
 pub struct ImpactContracted {
     ws: IdContractWs,
+    pw: PointWs,
     qq: DMatrix<f64>,
     qv: DMatrix<f64>,
     /// Scratch for the contracted IDSOZA's unused `q̇` and `∂M/∂q` blocks.
@@ -475,6 +476,7 @@ impl ImpactContracted {
         let z = || DMatrix::zeros(n, n);
         Self {
             ws: IdContractWs::new(model),
+            pw: PointWs::new(model),
             qq: z(),
             qv: z(),
             scratch: [z(), z(), z()],
@@ -549,6 +551,7 @@ pub fn impact_so_contracted(
     ic.zeta.gemv_tr(1.0, &im.cd.rinv, &ic.omega, 0.0);
     let ImpactContracted {
         ws,
+        pw,
         qq,
         qv,
         scratch,
@@ -571,38 +574,21 @@ pub fn impact_so_contracted(
         let (sq, s1, s2, s3) =
             (qq.as_mut_slice(), s1.as_mut_slice(), s2.as_mut_slice(), s3.as_mut_slice());
         let (zero, dv) = (&im.zero, &im.dv);
+        for c in [&mut *sq, &mut *s1, &mut *s2, &mut *s3] {
+            c.fill(0.0);
+        }
         id_contract_unchecked(model, data, ws, q, zero, dv, Motion::zero(), z1, sq, s1, s2, s3);
     }
-    // ... minus ζ₁ᵀ ∂²(J_cᵀλ̂)/∂q², plus ζ₂ᵀ ∂²(J_c w)/∂q².
-    let mut zc = std::mem::take(&mut im.cd.zc);
-    {
-        let b = base(model, data, &im.cd);
-        for (c, path) in im.cd.paths.iter().enumerate() {
-            let body = *path.joints.last().expect("path");
-            let lam = Vector3::new(im.impulse[3 * c], im.impulse[3 * c + 1], im.impulse[3 * c + 2]);
-            let zc2 = Vector3::new(z2[3 * c], z2[3 * c + 1], z2[3 * c + 2]);
-            for &j in &path.joints {
-                let parent = model.parents[j];
-                let mut zjm = if parent == 0 { Motion::zero() } else { zc[parent] };
-                let iv = model.idx_v[j];
-                for x in iv..iv + model.nvs[j] {
-                    zjm += data.s_world[x] * im.w[x];
-                }
-                zc[j] = zjm;
-            }
-            for &kk in &path.dofs {
-                for &l in &path.dofs {
-                    let mut x_sum = 0.0;
-                    for &x in &path.dofs {
-                        x_sum += z1[x] * djtl_dq(&b, &path.p, &lam, x, l, Dir::Q(kk)).1;
-                    }
-                    let dd = djz_dq(&b, &zc, body, &path.p, l, Dir::Q(kk)).d;
-                    qq[(l, kk)] += zc2.dot(&Vector3::from(dd)) - x_sum;
-                }
-            }
-        }
+    // ... minus ζ₁ᵀ ∂²(J_cᵀλ̂)/∂q², plus ζ₂ᵀ ∂²(J_c w)/∂q²: the q-Hessians of λ̂·(J_c ζ₁) and
+    //     ζ₂·(J_c w), point accelerations at rest (`point_hessians`).
+    for (c, path) in im.cd.paths.iter().enumerate() {
+        let lam = Vector3::new(im.impulse[3 * c], im.impulse[3 * c + 1], im.impulse[3 * c + 2]);
+        let zc2 = Vector3::new(z2[3 * c], z2[3 * c + 1], z2[3 * c + 2]);
+        pw.at_rest(model, data, path, im.w.as_slice());
+        point_hessians(model, data, pw, path, &zc2, 1.0, qq, None);
+        pw.at_rest(model, data, path, z1);
+        point_hessians(model, data, pw, path, &lam, -1.0, qq, None);
     }
-    im.cd.zc = zc;
     // D and E from one G evaluation with z₂ = 0, K from one with z_M = z_J = 0, z₂ = −ζ₂.
     g_matrix_split(model, data, &mut im.cd, z1, zeros_m.as_slice(), z1);
     {

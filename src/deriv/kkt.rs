@@ -15,7 +15,7 @@ use super::contact::{
     fill_rinv, g_matrix, g_matrix_split, path_kinematics, sub_djtl_dq_strided, update_points,
 };
 use super::contact_kin::{Dir, dap_dq, dap_dv, djtl_dq};
-use super::contracted::{IdContractWs, id_contract_unchecked};
+use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_fo::id_derivatives_unchecked;
 use super::id_so::{SoData, id_so_unchecked};
 use crate::algo::Data;
@@ -540,6 +540,7 @@ pub(crate) fn premultiply<S>(
 #[derive(Clone, Debug)]
 pub struct KktContracted {
     ws: IdContractWs,
+    pw: PointWs,
     /// `∂(M ζ₁)/∂q` of the reverse-mode pass (scratch).
     mq: DMatrix<f64>,
     qq: DMatrix<f64>,
@@ -564,6 +565,7 @@ impl KktContracted {
         let z = || DMatrix::zeros(n, n);
         Self {
             ws: IdContractWs::new(model),
+            pw: PointWs::new(model),
             mq: z(),
             qq: z(),
             vv: z(),
@@ -651,36 +653,26 @@ pub fn kkt_so_contracted(
     kc.zeta.gemv_tr(1.0, &kd.cd.rinv, &kc.omega, 0.0);
     // 3. ζᵀ R_uw: the ID part, contracted as IDSVA-SO produces it (at q̈; the pass also
     //    refreshes the world-frame quantities of `data` at the same state) ...
-    let KktContracted { ws, mq, qq, vv, qv, tq, zeta, a, h, neg_z2, .. } = kc;
+    let KktContracted { ws, pw, mq, qq, vv, qv, tq, zeta, a, h, neg_z2, .. } = kc;
     {
         let z1 = &zeta.as_slice()[..n];
         let (sq, sv, sx, sm) =
             (qq.as_mut_slice(), vv.as_mut_slice(), qv.as_mut_slice(), mq.as_mut_slice());
         let g = -model.gravity;
+        for c in [&mut *sq, &mut *sv, &mut *sx, &mut *sm] {
+            c.fill(0.0);
+        }
         id_contract_unchecked(model, data, ws, q, v, &kd.qdd, g, z1, sq, sv, sx, sm);
     }
-    // ... minus ζ₁ᵀ ∂²(J_cᵀλ)/∂q², plus ζ₂ᵀ times the contact-point acceleration Hessians.
-    {
-        let b = base(model, data, &kd.cd);
-        for (c, path) in kd.cd.paths.iter().enumerate() {
-            let body = *path.joints.last().expect("path");
-            let lam = Vector3::new(kd.lambda[3 * c], kd.lambda[3 * c + 1], kd.lambda[3 * c + 2]);
-            let z2 = Vector3::new(zeta[n + 3 * c], zeta[n + 3 * c + 1], zeta[n + 3 * c + 2]);
-            for &k in &path.dofs {
-                for &l in &path.dofs {
-                    let mut x_sum = 0.0;
-                    for &x in &path.dofs {
-                        x_sum += zeta[x] * djtl_dq(&b, &path.p, &lam, x, l, Dir::Q(k)).1;
-                    }
-                    let aqq = dap_dq(&b, body, &path.p, l, Dir::Q(k)).d;
-                    let avv = dap_dv(&b, body, &path.p, l, Dir::V(k)).d;
-                    let aqv = dap_dq(&b, body, &path.p, l, Dir::V(k)).d;
-                    qq[(l, k)] += z2.dot(&Vector3::from(aqq)) - x_sum;
-                    vv[(l, k)] += z2.dot(&Vector3::from(avv));
-                    qv[(l, k)] += z2.dot(&Vector3::from(aqv));
-                }
-            }
-        }
+    // ... minus ζ₁ᵀ ∂²(J_cᵀλ)/∂q² = the q-Hessian of λ·(J_c ζ₁), plus the Hessians of ζ₂·a_p
+    //     (both from the point-mass form of the reverse-mode pass, `point_hessians`).
+    for (c, path) in kd.cd.paths.iter().enumerate() {
+        let lam = Vector3::new(kd.lambda[3 * c], kd.lambda[3 * c + 1], kd.lambda[3 * c + 2]);
+        let z2 = Vector3::new(zeta[n + 3 * c], zeta[n + 3 * c + 1], zeta[n + 3 * c + 2]);
+        pw.load_state(model, data, path, -model.gravity);
+        point_hessians(model, data, pw, path, &z2, 1.0, qq, Some((&mut *vv, &mut *qv)));
+        pw.at_rest(model, data, path, &zeta.as_slice()[..n]);
+        point_hessians(model, data, pw, path, &lam, -1.0, qq, None);
     }
     // 4. A from one G evaluation: G(ζ₁; −ζ₂) = [∂(Mζ₁)/∂q + ∂(J_cᵀζ₂)/∂q ; ∂(J_c ζ₁)/∂q].
     {

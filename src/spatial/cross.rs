@@ -32,6 +32,15 @@ pub fn coriolis_b(i: &Inertia, m: &Motion) -> Matrix6<f64> {
 /// [`coriolis_b`] written into `out` (all 36 entries).
 #[inline]
 pub(crate) fn coriolis_b_write(i: &Inertia, m: &Motion, out: &mut Matrix6<f64>) {
+    let left = coriolis_b_left(i, m);
+    let o = out.as_mut_slice();
+    o[..18].copy_from_slice(&left);
+    o[18..].fill(0.0);
+}
+
+/// The left 6×3 block column of [`coriolis_b`], column-major (the right one is zero).
+#[inline]
+pub(crate) fn coriolis_b_left(i: &Inertia, m: &Motion) -> [f64; 18] {
     let (w, u, h) = (&m.ang, &m.lin, &i.h);
     let f = i.mul_motion(m);
     let (n, g) = (f.ang, f.lin);
@@ -58,11 +67,8 @@ pub(crate) fn coriolis_b_write(i: &Inertia, m: &Motion, out: &mut Matrix6<f64>) 
         s[0][0], s[1][0] - nh.z, s[2][0] + nh.y, 0.0, -gz, gy,
         s[0][1] + nh.z, s[1][1], s[2][1] - nh.x, gz, 0.0, -gx,
         s[0][2] - nh.y, s[1][2] + nh.x, s[2][2], -gy, gx, 0.0,
-        0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-        0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-        0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
     ];
-    out.as_mut_slice().copy_from_slice(&b);
+    b
 }
 
 /// `B(I, m) w` without forming the matrix (eq. bkm_term_defn applied to `w`).

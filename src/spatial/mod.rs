@@ -10,9 +10,9 @@ mod matrix;
 mod motion;
 mod transform;
 
-#[allow(unused_imports)]
-pub(crate) use cross::coriolis_b_write;
 pub use cross::{coriolis_b, coriolis_b_mul, crff, cross_f, cross_m};
+#[allow(unused_imports)]
+pub(crate) use cross::{coriolis_b_left, coriolis_b_write};
 pub use force::Force;
 pub use inertia::{Inertia, InertiaDefect};
 pub use matrix::*;
