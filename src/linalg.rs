@@ -932,6 +932,14 @@ unsafe fn chunk_avx512<const V: usize>(
     }
 }
 
+/// `a ← −a` over the contiguous storage (nalgebra's `neg_mut` walks general strides).
+#[inline]
+pub(crate) fn neg(a: &mut nalgebra::DMatrix<f64>) {
+    for x in a.as_mut_slice() {
+        *x = -*x;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::spd_inverse_in_place;

@@ -36,7 +36,7 @@ use crate::algo::Data;
 use crate::algo::data::workspace_mismatch;
 use crate::algo::internal::root_free_flyer;
 use crate::error::{Error, Result};
-use crate::linalg::{gemm, transpose_strided};
+use crate::linalg::{gemm, neg, transpose_strided};
 use crate::model::{Model, check_vec};
 use crate::spatial::{Force, Inertia, Motion, coriolis_b_left};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
@@ -52,9 +52,6 @@ pub struct ContractedData {
     mq: DMatrix<f64>,
     tq: DMatrix<f64>,
     mu: DVector<f64>,
-    xq: DMatrix<f64>,
-    xv: DMatrix<f64>,
-    minv: DMatrix<f64>,
     qdd: DVector<f64>,
     tmp: DMatrix<f64>,
     /// `Dᵀ`.
@@ -77,9 +74,6 @@ impl ContractedData {
             mq: z(),
             tq: z(),
             mu: DVector::zeros(n),
-            xq: z(),
-            xv: z(),
-            minv: z(),
             qdd: DVector::zeros(n),
             tmp: z(),
             dt: z(),
@@ -134,7 +128,7 @@ pub fn id_so_contracted(
     cd.check(model)?;
     if !cd.clean {
         for c in [&mut cd.qq, &mut cd.vv, &mut cd.qv, &mut cd.mq] {
-            c.fill(0.0);
+            c.as_mut_slice().fill(0.0);
         }
         cd.clean = true;
     }
@@ -165,46 +159,34 @@ pub fn fd_so_contracted(
     fd_derivatives(model, data, q, v, tau, None)?;
     let n = model.nv;
     cd.clean = false;
-    let ContractedData { ws, qq, vv, qv, tq, mu, xq, xv, minv, qdd, tmp, dt, .. } = cd;
+    let ContractedData { ws, qq, vv, qv, tq, mu, qdd, tmp, dt, .. } = cd;
     for c in [&mut *qq, &mut *vv, &mut *qv, &mut *tq] {
-        c.fill(0.0);
+        c.as_mut_slice().fill(0.0);
     }
-    // 1. μ = M⁻¹ w; the first-order results, kept (the ID pass below rewrites `data`).
-    xq.copy_from(data.dqdd_dq());
-    xv.copy_from(data.dqdd_dv());
-    minv.copy_from(data.minv());
+    // 1. μ = M⁻¹ w (the reverse-mode pass below leaves `data`'s first-order results alone).
     qdd.copy_from(data.qdd());
-    mu.gemv(1.0, minv, w, 0.0);
+    mu.gemv(1.0, data.minv(), w, 0.0);
     // 2–3. The ID contractions at (q, q̇, q̈) with the weight μ, and D = ∂(M μ)/∂q (into `tq`,
     //      overwritten in step 4).
     let (sq, sv, sx, sd) =
         (qq.as_mut_slice(), vv.as_mut_slice(), qv.as_mut_slice(), tq.as_mut_slice());
-    id_contract_unchecked(
-        model,
-        data,
-        ws,
-        q,
-        v,
-        qdd,
-        -model.gravity,
-        mu.as_slice(),
-        sq,
-        sv,
-        sx,
-        sd,
-    );
+    let (g, mu) = (-model.gravity, mu.as_slice());
+    id_contract_unchecked(model, data, ws, q, v, qdd, g, mu, sq, sv, sx, sd);
     // 4. C_qq = −(C^ID_qq + Dᵀ X_q + X_qᵀ D), C_vv = −C^ID_vv, C_qv = −(C^ID_qv + Dᵀ X_v),
     //    C_τq = −M⁻¹ D.
     transpose_strided(tq.as_slice(), n, n, n, dt.as_mut_slice(), n);
-    gemm(1.0, &*dt, &*xq, 0.0, tmp);
-    for j in 0..n {
-        for k in 0..n {
-            qq[(j, k)] = -(qq[(j, k)] + tmp[(j, k)] + tmp[(k, j)]);
+    gemm(1.0, &*dt, data.dqdd_dq(), 0.0, tmp);
+    {
+        // dt is free again: (Dᵀ X_q)ᵀ into it.
+        transpose_strided(tmp.as_slice(), n, n, n, dt.as_mut_slice(), n);
+        for ((c, a), b) in qq.as_mut_slice().iter_mut().zip(tmp.as_slice()).zip(dt.as_slice()) {
+            *c = -(*c + a + b);
         }
+        transpose_strided(tq.as_slice(), n, n, n, dt.as_mut_slice(), n);
     }
-    vv.neg_mut();
-    gemm(-1.0, &*dt, &*xv, -1.0, qv);
-    gemm(-1.0, &*minv, &*tq, 0.0, tmp);
+    neg(vv);
+    gemm(-1.0, &*dt, data.dqdd_dv(), -1.0, qv);
+    gemm(-1.0, data.minv(), &*tq, 0.0, tmp);
     std::mem::swap(tq, tmp);
     Ok(())
 }
@@ -456,7 +438,7 @@ fn contract_passes(
 }
 
 /// The per-DoF vectors of step 1 of [`id_contract_unchecked`].
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 struct SideD {
     uf: Force,
     upsi: Force,
@@ -464,6 +446,17 @@ struct SideD {
     z: Force,
     y: Force,
     is: Force,
+}
+
+impl SideD {
+    const ZERO: SideD = SideD {
+        uf: Force::ZERO,
+        upsi: Force::ZERO,
+        ur: Force::ZERO,
+        z: Force::ZERO,
+        y: Force::ZERO,
+        is: Force::ZERO,
+    };
 }
 
 /// Lanes of step 2 of [`id_contract_unchecked`]: ancestor DoFs handled at once.
@@ -501,14 +494,7 @@ fn contract_step<V: Lanes<Arr = [f64; LANES]>>(
     let ic = &data.ic_world[i];
     let (bc, bp) = (&data.bc[i].as_slice()[..18], &ws.bp[i][..]);
     let (fc, rc, pc) = (data.ofc[i], ws.rc[i], ws.pc[i]);
-    let mut side = [SideD {
-        uf: Force::zero(),
-        upsi: Force::zero(),
-        ur: Force::zero(),
-        z: Force::zero(),
-        y: Force::zero(),
-        is: Force::zero(),
-    }; 6];
+    let mut side = [SideD::ZERO; 6];
     let runs = &ws.runs[ws.run_start[i]..ws.run_start[i + 1]];
     let st = ws.stride;
     for (t, d) in (iv..iv + nvi).enumerate() {
@@ -621,6 +607,8 @@ pub(crate) struct PointWs {
     /// Per joint: velocity and acceleration (no gravity).
     vel: Vec<Motion>,
     acc: Vec<Motion>,
+    /// Per path position: the step-1 vectors and `Ψ̇^w = ψ_c × S`.
+    side: Vec<(SideD, Motion)>,
 }
 
 impl PointWs {
@@ -633,6 +621,7 @@ impl PointWs {
             pss: vec![z; nv],
             vel: vec![z; nj],
             acc: vec![z; nj],
+            side: vec![(SideD::ZERO, z); nv],
         }
     }
 
@@ -687,7 +676,7 @@ impl PointWs {
 pub(crate) fn point_hessians(
     model: &Model,
     data: &Data,
-    pw: &PointWs,
+    pw: &mut PointWs,
     path: &Path,
     zeta: &Vector3<f64>,
     scale: f64,
@@ -695,6 +684,7 @@ pub(crate) fn point_hessians(
     mut vq: Option<(&mut DMatrix<f64>, &mut DMatrix<f64>)>,
 ) {
     let body = *path.joints.last().expect("a contact path has a joint");
+    let n = model.nv;
     let ip = Inertia::from_com(1.0, path.p, Matrix3::zeros());
     let psic = Motion::new(Vector3::zeros(), *zeta);
     let (vb, ab) = (pw.vel[body], pw.acc[body]);
@@ -704,62 +694,73 @@ pub(crate) fn point_hessians(
     let pc = ip.mul_motion(&psic);
     let rc = ip.mul_motion(&psic.cross(&vb)) - psic.cross_force(&ivb) + vb.cross_force(&pc);
     let (bc, bp) = (coriolis_b_left(&ip, &vb), coriolis_b_left(&ip, &psic));
-    let side = |d: usize| {
+    // Step 1 for every DoF of the path.
+    for (t, &d) in path.dofs.iter().enumerate() {
         let s = data.s_world[d];
         let (pd, pdd, pss, pwd) = (pw.psid[d], pw.psidd[d], pw.pss[d], psic.cross(&s));
-        SideD {
+        let x = SideD {
             uf: s.cross_force(&fc) + ip.mul_motion(&pdd) + mul_b(&bc, &pd) * 2.0,
             upsi: s.cross_force(&pc) + ip.mul_motion(&pwd),
             ur: s.cross_force(&rc) + (mul_bt(&bc, &pwd) - mul_bt(&bp, &pd)) * 2.0,
             z: mul_b(&bp, &s) - s.cross_force(&pc),
             y: ip.mul_motion(&pss) + mul_b(&bc, &s) * 2.0,
             is: ip.mul_motion(&s),
-        }
-    };
-    for (td, &d) in path.dofs.iter().enumerate() {
-        let x = side(d);
-        let jd = path.dof_joint[td];
-        // Step 2: DoFs of strict ancestor joints.
-        for (ta, &a) in path.dofs.iter().enumerate() {
-            if path.dof_joint[ta] >= jd {
-                break;
+        };
+        pw.side[t] = (x, pwd);
+    }
+    let (qq, side) = (qq.as_mut_slice(), &pw.side[..path.dofs.len()]);
+    let mut vq = vq.as_mut().map(|(v, q)| (v.as_mut_slice(), q.as_mut_slice()));
+    let mut t0 = 0;
+    while t0 < path.dofs.len() {
+        // The DoFs t0..t1 of one joint jd; the path positions before t0 are its ancestors'.
+        let jd = path.dof_joint[t0];
+        let t1 = t0 + model.nvs[jd];
+        for td in t0..t1 {
+            let (d, x) = (path.dofs[td], &side[td].0);
+            // Step 2: DoFs of strict ancestor joints.
+            for (ta, &a) in path.dofs[..t0].iter().enumerate() {
+                let (sa, pda, pdda, pssa, pwa) =
+                    (data.s_world[a], pw.psid[a], pw.psidd[a], pw.pss[a], side[ta].1);
+                let (ad, da) = (a + n * d, d + n * a);
+                let h = scale * (pwa.dot(&x.uf) + pda.dot(&x.ur) + pdda.dot(&x.upsi));
+                qq[ad] += h;
+                qq[da] += h;
+                if let Some((vv, qv)) = vq.as_mut() {
+                    let z = -2.0 * scale * sa.dot(&x.z);
+                    vv[ad] += z;
+                    vv[da] += z;
+                    qv[ad] += scale * (pwa.dot(&x.y) - 2.0 * pda.dot(&x.z));
+                    qv[da] += scale * (sa.dot(&x.ur) + pssa.dot(&x.upsi));
+                }
             }
-            let (sa, pda, pdda, pssa) = (data.s_world[a], pw.psid[a], pw.psidd[a], pw.pss[a]);
-            let pwa = psic.cross(&sa);
-            let h = scale * (pwa.dot(&x.uf) + pda.dot(&x.ur) + pdda.dot(&x.upsi));
-            qq[(a, d)] += h;
-            qq[(d, a)] += h;
-            if let Some((vv, qv)) = vq.as_mut() {
-                let z = -2.0 * scale * sa.dot(&x.z);
-                vv[(a, d)] += z;
-                vv[(d, a)] += z;
-                qv[(a, d)] += scale * (pwa.dot(&x.y) - 2.0 * pda.dot(&x.z));
-                qv[(d, a)] += scale * (sa.dot(&x.ur) + pssa.dot(&x.upsi));
-            }
         }
-        // Step 3: the DoFs of d's own joint.
+        // Step 3: the DoFs of the joint among themselves.
         let p = model.parents[jd];
-        let (vl, al, vi) = (pw.vel[p], pw.acc[p], pw.vel[jd]);
-        let (vl, al) = if p == 0 { (Motion::zero(), Motion::zero()) } else { (vl, al) };
+        let (vl, al) =
+            if p == 0 { (Motion::zero(), Motion::zero()) } else { (pw.vel[p], pw.acc[p]) };
+        let vi = pw.vel[jd];
         let g = psic.cross_force(&fc)
             + vl.cross_force(&(rc - vl.cross_force(&pc)))
             + al.cross_force(&pc);
-        for &j in &path.dofs[..] {
-            if model.dof_joint[j] != jd {
-                continue;
-            }
-            let xj = side(j);
-            let (sj, sd) = (data.s_world[j], data.s_world[d]);
-            let pwj = psic.cross(&sj);
-            let skj = sd.cross(&sj);
-            qq[(j, d)] += scale
-                * (pwj.dot(&x.uf) + pw.psid[j].dot(&x.ur) + pw.psidd[j].dot(&x.upsi) - skj.dot(&g));
-            if let Some((vv, qv)) = vq.as_mut() {
-                vv[(j, d)] -= scale * sj.dot(&(mul_b(&bp, &sd) * 2.0 - sd.cross_force(&pc)));
-                let dbeta = (-skj).cross(&(vl + vi)) + sd.cross(&sj.cross(&(vi - vl)));
-                qv[(j, d)] += scale
-                    * (sd.dot(&xj.ur) + pw.pss[d].dot(&xj.upsi) - skj.dot(&rc) - dbeta.dot(&pc));
+        for td in t0..t1 {
+            let (d, x, sd) = (path.dofs[td], &side[td].0, data.s_world[path.dofs[td]]);
+            for (&j, (xj, pwj)) in path.dofs[t0..t1].iter().zip(&side[t0..t1]) {
+                let sj = data.s_world[j];
+                let skj = sd.cross(&sj);
+                let jd_ = j + n * d;
+                qq[jd_] += scale
+                    * (pwj.dot(&x.uf) + pw.psid[j].dot(&x.ur) + pw.psidd[j].dot(&x.upsi)
+                        - skj.dot(&g));
+                if let Some((vv, qv)) = vq.as_mut() {
+                    vv[jd_] -= scale * sj.dot(&(mul_b(&bp, &sd) * 2.0 - sd.cross_force(&pc)));
+                    let dbeta = (-skj).cross(&(vl + vi)) + sd.cross(&sj.cross(&(vi - vl)));
+                    qv[jd_] += scale
+                        * (sd.dot(&xj.ur) + pw.pss[d].dot(&xj.upsi)
+                            - skj.dot(&rc)
+                            - dbeta.dot(&pc));
+                }
             }
         }
+        t0 = t1;
     }
 }

@@ -603,23 +603,22 @@ pub fn impact_so_contracted(
     let (zn, nz2) = (zeros_n.as_slice(), neg_z2.as_slice());
     g_matrix_split(model, data, &mut im.cd, zn, nz2, zn);
     transpose_strided(im.cd.g.as_slice(), im.cd.g.nrows(), n, n, kt.as_mut_slice(), n);
-    // 3.–4. The product terms and the signs.
-    gemm(1.0, &*dt, &im.dvplus_dq, 0.0, h);
-    gemm(1.0, &*kt, &im.dvplus_dq, 1.0, h);
+    // 3.–4. The product terms and the signs, with S = Dᵀ + Kᵀ: H_q = S Y_q − Eᵀ Y_Λq and
+    //    Dᵀ(Y_v − I) + Kᵀ(Y_v + e I) = S Y_v − Dᵀ + e Kᵀ.
+    for ((o, d), k) in zm.as_mut_slice().iter_mut().zip(dt.as_slice()).zip(kt.as_slice()) {
+        *o = d + k;
+    }
+    gemm(1.0, &*zm, &im.dvplus_dq, 0.0, h);
     gemm(-1.0, &*et, &im.dimpulse_dq, 1.0, h);
-    for j in 0..n {
-        for kk in 0..n {
-            qq[(j, kk)] = -(qq[(j, kk)] + h[(j, kk)] + h[(kk, j)]);
-        }
+    transpose_strided(h.as_slice(), n, n, n, zj.as_mut_slice(), n);
+    for ((c, a), b) in qq.as_mut_slice().iter_mut().zip(h.as_slice()).zip(zj.as_slice()) {
+        *c = -(*c + a + b);
     }
-    zm.copy_from(&im.dvplus_dvminus);
-    zj.copy_from(&im.dvplus_dvminus);
-    for i in 0..n {
-        zm[(i, i)] -= 1.0;
-        zj[(i, i)] += im.restitution;
+    let e = im.restitution;
+    for ((o, d), k) in qv.as_mut_slice().iter_mut().zip(dt.as_slice()).zip(kt.as_slice()) {
+        *o = d - e * k;
     }
-    gemm(-1.0, &*dt, &*zm, 0.0, qv);
-    gemm(-1.0, &*kt, &*zj, 1.0, qv);
+    gemm(-1.0, &*zm, &im.dvplus_dvminus, 1.0, qv);
     gemm(1.0, &*et, &im.dimpulse_dvminus, 1.0, qv);
     Ok(())
 }

@@ -23,7 +23,7 @@ use crate::algo::internal::{
     crba_unchecked, ltl_in_place, ltl_solve_fd, ltl_solve_rows_desc, rnea_unchecked,
 };
 use crate::error::Result;
-use crate::linalg::{gemm, gemm_masked, transpose_strided};
+use crate::linalg::{gemm, gemm_masked, neg, transpose_strided};
 use crate::model::{Model, check_vec};
 use crate::tensor::Tensor3;
 use nalgebra::{DMatrix, DMatrixView, DMatrixViewMut, DVector, Vector3};
@@ -446,7 +446,7 @@ fn kkt_so_inner(
         // add to all of them).
         copy_rows_zero_rest(t, src, n);
     }
-    rtq.fill(0.0);
+    rtq.as_mut_slice().fill(0.0);
     // ... minus ∂²(J_cᵀλ)/∂q² (IDSVA-SOc), and the contact-point kinematics rows.
     let b = base(model, data, &kd.cd);
     for (c, path) in kd.cd.paths.iter().enumerate() {
@@ -703,11 +703,11 @@ pub fn kkt_so_contracted(
             qq[(j, k)] += h[(k, j)];
         }
     }
-    qq.neg_mut();
-    vv.neg_mut();
+    neg(qq);
+    neg(vv);
     y(&kd.dqdd_dv, &kd.dlambda_dv, h);
     *qv += &*h;
-    qv.neg_mut();
+    neg(qv);
     y(&kd.dqdd_dtau, &kd.dlambda_dtau, h);
     for j in 0..n {
         for k in 0..n {

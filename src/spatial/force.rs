@@ -15,6 +15,9 @@ pub struct Force {
 
 impl Force {
     /// The zero force.
+    pub const ZERO: Force =
+        Force { ang: Vector3::new(0.0, 0.0, 0.0), lin: Vector3::new(0.0, 0.0, 0.0) };
+    /// The zero force.
     #[inline]
     pub fn zero() -> Self {
         Self { ang: Vector3::zeros(), lin: Vector3::zeros() }
