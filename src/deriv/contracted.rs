@@ -10,8 +10,9 @@
 //! * forward dynamics: `C_qq`, `C_vv`, `C_qv`, `C_τq` of `∂²q̈/∂q²`, `∂²q̈/∂q̇²`, `∂²q̈/∂q∂q̇`,
 //!   `∂²q̈/∂τ∂q`.
 //!
-//! Inverse dynamics: the Hessian of the scalar `φ = wᵀτ` by reverse mode
-//! ([`id_contract_unchecked`]): `O(N d)` like first order, nothing of size `nv³`.
+//! Inverse dynamics: the Hessian of the scalar `φ = wᵀτ` by reverse mode (derivation:
+//! `docs/notes-corrections.md`, "Contracted second order"): `O(N d)` like first order, nothing
+//! of size `nv³`.
 //!
 //! Forward dynamics, from the second-order relation between ID and FD (the notes' section of
 //! that name) contracted with `w`: differentiating `ID(q, q̇, FD(q, q̇, τ)) = τ` twice gives

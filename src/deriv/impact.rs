@@ -510,8 +510,9 @@ impl ImpactContracted {
 /// ∂(J_cᵀ z₂)/∂q ; ∂(J_c z_J)/∂q]`, `ζᵀ G(z_M, z₂, z_J) = z_Mᵀ D + z_Jᵀ K − z₂ᵀ E` (row) with
 /// `D = ∂(Mζ₁)/∂q`, `K = ∂(J_cᵀζ₂)/∂q`, `E = ∂(J_c ζ₁)/∂q` (`M` symmetric):
 /// 1. first order and `R_y⁻¹`; `ζ = R_y⁻ᵀ ω`;
-/// 2. `ζᵀ R_qq`: IDSOZA of `Δv = q̇⁺ − q̇⁻` contracted with `ζ₁`, minus `ζ₁ᵀ ∂²(J_cᵀλ̂)/∂q²`,
-///    plus `ζ₂ᵀ ∂²(J_c w)/∂q²` (`w = q̇⁺ + e q̇⁻`);
+/// 2. `ζᵀ R_qq`: the `q`-Hessian of `ζ₁ᵀ M(q) Δv` (`Δv = q̇⁺ − q̇⁻`; the reverse-mode ID pass at
+///    `q̇ = 0`, `q̈ = Δv`, no gravity), minus that of `λ̂·(J_c ζ₁)`, plus that of `ζ₂·(J_c w)`
+///    (`w = q̇⁺ + e q̇⁻`; the point-mass form in `docs/notes-corrections.md` at rest);
 /// 3. `H_q = (D + K)ᵀ Y_q − Eᵀ Y_Λq` (`Y_q = ∂q̇⁺/∂q`, `Y_Λq = ∂λ̂/∂q`);
 /// 4. `C_qq = −(ζᵀR_qq + H_q + H_qᵀ)`, `C_qv = −(Dᵀ (Y_v − I) + Kᵀ (Y_v + e I) − Eᵀ Y_Λv)`.
 ///
@@ -568,7 +569,7 @@ pub fn impact_so_contracted(
         ..
     } = ic;
     let (z1, z2) = zeta.as_slice().split_at(n);
-    // 2. IDSOZA(Δv) contracted with ζ₁ (q̇ = 0, no gravity) ...
+    // 2. The Hessian of ζ₁ᵀ M Δv (reverse mode at q̇ = 0, q̈ = Δv, no gravity) ...
     {
         let [s1, s2, s3] = scratch;
         let (sq, s1, s2, s3) =

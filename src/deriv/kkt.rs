@@ -604,8 +604,9 @@ impl KktContracted {
 /// + G(∂y/∂u)[·, w])` (module documentation) with `ω`:
 /// 1. first order (`Y_q, Y_v, Y_τ` = `[∂q̈/∂x; ∂λ/∂x]`) and `R_y⁻¹`;
 /// 2. the adjoint `ζ = R_y⁻ᵀ ω`;
-/// 3. `ζᵀ R_uw`: IDSVA-SO at `(q, q̇, q̈)` contracted with `ζ₁` as it is produced, minus
-///    `ζ₁ᵀ ∂²(J_cᵀλ)/∂q²`, plus `ζ₂ᵀ` times the contact-point acceleration Hessians;
+/// 3. `ζᵀ R_uw`: the Hessians of `ζ₁ᵀτ` at `(q, q̇, q̈)` by reverse mode (`O(N d)`, no tensor),
+///    minus the `q`-Hessian of `λ·(J_c ζ₁)`, plus those of `ζ₂·a_p` per contact (`O(d²)` each,
+///    the point-mass form in `docs/notes-corrections.md`);
 /// 4. `ζᵀ G(z) = (A z)ᵀ` with `A = [(∂(Mζ₁)/∂q + ∂(J_cᵀζ₂)/∂q)ᵀ | −(∂(J_c ζ₁)/∂q)ᵀ]`
 ///    (`M` symmetric; one `G` evaluation);
 /// 5. `C_qq = −(ζᵀR_qq + A Y_q + (A Y_q)ᵀ)`, `C_vv = −ζᵀR_vv`, `C_qv = −(ζᵀR_qv + A Y_v)`,
@@ -651,8 +652,8 @@ pub fn kkt_so_contracted(
     kc.omega.rows_mut(0, n).copy_from(w_qdd);
     kc.omega.rows_mut(n, m).copy_from(w_lambda);
     kc.zeta.gemv_tr(1.0, &kd.cd.rinv, &kc.omega, 0.0);
-    // 3. ζᵀ R_uw: the ID part, contracted as IDSVA-SO produces it (at q̈; the pass also
-    //    refreshes the world-frame quantities of `data` at the same state) ...
+    // 3. ζᵀ R_uw: the ID part by reverse mode (at q̈; the pass also refreshes the world-frame
+    //    quantities of `data` at the same state) ...
     let KktContracted { ws, pw, mq, qq, vv, qv, tq, zeta, a, h, neg_z2, .. } = kc;
     {
         let z1 = &zeta.as_slice()[..n];
