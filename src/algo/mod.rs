@@ -1,7 +1,6 @@
 //! Algorithms: kinematics, RNEA, CRBA, ABA, the tree-sparse `LᵀDL` factorisation, Jacobians.
 
 mod aba;
-mod contact;
 mod crba;
 pub(crate) mod data;
 mod jacobian;
@@ -10,7 +9,8 @@ mod ltl;
 mod rnea;
 
 pub use aba::aba;
-pub use contact::Contact;
+/// Re-export of [`crate::model::Contact`] (the contact description is a model-level type).
+pub use crate::model::Contact;
 pub use crba::crba;
 pub use data::Data;
 pub use jacobian::{point_drift, point_jacobian, point_position};

@@ -1,10 +1,12 @@
 //! Kinematic trees: joints, the Model/builder, URDF loading and built-in robots.
 
 pub mod builtin;
+mod contact;
 pub mod joint;
 pub mod tree;
 pub mod urdf;
 
+pub use contact::Contact;
 pub use joint::JointType;
 pub(crate) use tree::JointKin;
 pub use tree::{Frame, Model, ModelBuilder, check_vec};

@@ -27,7 +27,7 @@ use super::dynamics::{mass_matrix, nle, rnea, solve};
 use super::kinematics::{forward_kinematics, parent_poses, subspace_column, subspace_mul};
 use super::spatial::{Pose, Sv, lift_v3};
 use super::{AdScalar, lift};
-use crate::algo::Contact;
+use crate::model::Contact;
 use crate::model::Model;
 use crate::tensor::Tensor3;
 use nalgebra::{DMatrix, Vector3};
