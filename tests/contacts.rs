@@ -38,15 +38,33 @@ fn kkt_first_and_second_order_match_oracle() {
     ];
     let mut w: Vec<Worst> = names.iter().chain(so_names.iter()).map(|n| Worst::new(n)).collect();
     let mut rng = Rng::new(31);
-    for (m, frames) in contact_cases() {
-        let contacts = contacts_of(&m, &frames, &mut rng);
+    // Without and with Baumgarte gains (the oracle holds the reference point fixed at q).
+    for (gains, (m, frames)) in
+        [false, true].into_iter().flat_map(|g| contact_cases().into_iter().map(move |c| (g, c)))
+    {
+        let mut contacts = contacts_of(&m, &frames, &mut rng);
+        if gains {
+            for c in &mut contacts {
+                *c = c.clone().with_baumgarte(rng.range(0.0, 50.0), rng.range(0.0, 10.0)).unwrap();
+            }
+        }
         let (q, v, tau) = random_state(&m, &mut rng);
         let mut d = Data::new(&m);
         let mut kd =
             KktData::new(&m, ContactData::new(&m, &contacts).unwrap()).with_second_order(&m);
         kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+        if gains {
+            // The gains change the dynamics (so the comparisons below see them).
+            let plain: Vec<Contact> =
+                contacts.iter().map(|c| Contact { kp: 0.0, kd: 0.0, ..c.clone() }).collect();
+            let mut k0 = KktData::new(&m, ContactData::new(&m, &plain).unwrap());
+            kkt_derivatives(&m, &mut d, &mut k0, &q, &v, &tau).unwrap();
+            assert!(rel_err_vec(kd.qdd(), k0.qdd()) > 1e-6);
+            assert!(rel_err_mat(kd.dqdd_dq(), k0.dqdd_dq()) > 1e-6);
+            assert!(rel_err_mat(kd.dqdd_dv(), k0.dqdd_dv()) > 1e-6);
+        }
         let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
-        let at = format!("{} with {} contacts", m.name(), contacts.len());
+        let at = format!("{} with {} contacts, gains {gains}", m.name(), contacts.len());
         let (qr, lr) = oracle::kkt::<f64>(&m, qs, vs, ts, &contacts);
         w[0].add(rel_err_vec(kd.qdd(), &DVector::from_vec(qr)), &at);
         w[1].add(rel_err_vec(kd.lambda(), &DVector::from_vec(lr)), &at);
@@ -316,4 +334,19 @@ fn repeated_calls_on_reused_workspaces_are_identical() {
     }
     assert_eq!(kd.dqdd_dq(), fresh_k.dqdd_dq());
     assert_eq!(im.dvplus_dq(), fresh_i.dvplus_dq());
+}
+
+#[test]
+fn baumgarte_gains_are_checked() {
+    let m = builtin::quadruped();
+    let c = Contact::new(&m, "LF_FOOT", Vector3::zeros()).unwrap();
+    for (kp, kd) in [(-1.0, 0.0), (0.0, f64::NAN), (f64::INFINITY, 1.0)] {
+        let e = c.clone().with_baumgarte(kp, kd).unwrap_err().to_string();
+        assert!(e.contains("Baumgarte gain"), "{e}");
+        // Set directly, the workspace refuses it, naming the contact's frame.
+        let bad = Contact { kp, kd, ..c.clone() };
+        let e = ContactData::new(&m, &[bad]).unwrap_err().to_string();
+        assert!(e.contains("LF_FOOT") && e.contains("Baumgarte gain"), "{e}");
+    }
+    assert!(c.with_baumgarte(10.0, 2.0).unwrap().has_baumgarte());
 }

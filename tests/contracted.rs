@@ -133,8 +133,15 @@ fn contracted_kkt_matches_dense_tensors_and_ad() {
     let mut dense = names.map(Worst::new);
     let mut ad = names.map(Worst::new);
     let mut rng = Rng::new(41);
-    for (m, frames) in contact_cases() {
-        let contacts = contacts_of(&m, &frames, &mut rng);
+    for (gains, (m, frames)) in
+        [false, true].into_iter().flat_map(|g| contact_cases().into_iter().map(move |c| (g, c)))
+    {
+        let mut contacts = contacts_of(&m, &frames, &mut rng);
+        if gains {
+            for c in &mut contacts {
+                *c = c.clone().with_baumgarte(rng.range(0.0, 50.0), rng.range(0.0, 10.0)).unwrap();
+            }
+        }
         let (q, v, tau) = random_state(&m, &mut rng);
         let nc3 = 3 * contacts.len();
         let (wq, wl) = (weight(m.nv(), &mut rng), weight(nc3, &mut rng));
@@ -155,7 +162,7 @@ fn contracted_kkt_matches_dense_tensors_and_ad() {
             (t.d2qdd_dqdv(), t.d2lambda_dqdv()),
             (t.d2qdd_dtaudq(), t.d2lambda_dtaudq()),
         ];
-        let at = format!("{} with {} contacts", m.name(), contacts.len());
+        let at = format!("{} with {} contacts, gains {gains}", m.name(), contacts.len());
         for ((wst, (tq, tl)), g) in dense.iter_mut().zip(ours).zip(&got) {
             wst.add(rel_err_mat(g, &(contract(tq, &wq) + contract(tl, &wl))), &at);
         }

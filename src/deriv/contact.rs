@@ -107,8 +107,8 @@ impl ContactData {
     /// Workspace for `contacts` on `model`. A contact on the fixed world is an error.
     ///
     /// # Errors
-    /// [`Error::Argument`] for more than [`MAX_CONTACTS`] contacts; [`Error::Unknown`] for a
-    /// contact whose frame is not in `model`; [`Error::Singular`] for a contact on the world.
+    /// [`Error::Argument`] for more than [`MAX_CONTACTS`] contacts or a Baumgarte gain that is
+    /// negative or not finite; [`Error::Unknown`] for a contact whose frame is not in `model`; [`Error::Singular`] for a contact on the world.
     pub fn new(model: &Model, contacts: &[Contact]) -> Result<Self> {
         if contacts.len() > MAX_CONTACTS {
             return Err(Error::Argument {
@@ -129,6 +129,13 @@ impl ContactData {
                     name: c.frame.to_string(),
                 });
             }
+            c.check_gains().map_err(|e| match e {
+                Error::Argument { name, reason } => Error::Argument {
+                    name: format!("{name} of the contact on \"{}\"", model.frames[c.frame].name),
+                    reason,
+                },
+                e => e,
+            })?;
             let (body, _) = c.body_point(model);
             if body == 0 {
                 return Err(Error::Singular {
@@ -749,4 +756,32 @@ pub(crate) fn g_matrix_split(
     }
     cd.zc = zc;
     cd.g = g;
+}
+
+/// `K[j][k] = ζ·∂u_j/∂q_k` for the DoFs `j, k` of contact `c`'s path, passed to `f(j, k, K)`:
+/// the Hessian of `ζ·p` (`p` the contact point, `u_j` its Jacobian column `S_j.lin + S_j.ang ×
+/// p`). A perturbation of `q_k` turns `u_j` rigidly when `k`'s joint is `j`'s or an ancestor
+/// (`∂u_j/∂q_k = w_k × u_j`, J1 with `∂p/∂q_k = u_k`) and otherwise only moves the point
+/// (`w_j × u_k`), `w = S.ang`. Uses `cd.s` and the points of the last [`path_kinematics`].
+pub(crate) fn point_jacobian_dq(
+    cd: &ContactData,
+    c: usize,
+    zeta: &Vector3<f64>,
+    mut f: impl FnMut(usize, usize, f64),
+) {
+    let path = &cd.paths[c];
+    let p = path.p;
+    for (tj, &j) in path.dofs.iter().enumerate() {
+        let sj = cd.s[j];
+        let uj = sj.lin + sj.ang.cross(&p);
+        for (tk, &k) in path.dofs.iter().enumerate() {
+            let sk = cd.s[k];
+            let x = if path.dof_joint[tk] <= path.dof_joint[tj] {
+                sk.ang.cross(&uj)
+            } else {
+                sj.ang.cross(&(sk.lin + sk.ang.cross(&p)))
+            };
+            f(j, k, zeta.dot(&x));
+        }
+    }
 }

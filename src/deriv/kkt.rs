@@ -11,10 +11,11 @@
 //! an SPD inverse of the Delassus matrix (no dense inverse of the KKT matrix).
 
 use super::contact::{
-    ContactData, accel_derivatives_t, add_qdd_to_path_acc, base, factor_delassus, factor_kkt,
-    fill_rinv, g_matrix, g_matrix_split, path_kinematics, sub_djtl_dq_strided, update_points,
+    ContactData, accel_derivatives_t, add_qdd_to_path_acc, base, djw_dq, factor_delassus,
+    factor_kkt, fill_rinv, g_matrix, g_matrix_split, path_kinematics, point_jacobian_dq,
+    sub_djtl_dq_strided, update_points,
 };
-use super::contact_kin::{Dir, dap_dq, dap_dv, djtl_dq};
+use super::contact_kin::{Dir, dap_dq, dap_dv, djtl_dq, djz_dq};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_fo::id_derivatives_unchecked;
 use super::id_so::{SoData, id_so_unchecked};
@@ -56,6 +57,8 @@ pub struct KktData {
     /// `Bᵀ = [∂λ/∂q | ∂λ/∂q̇ | ∂λ/∂τ]ᵀ` (`3 nv × 3 nc`).
     bt: DMatrix<f64>,
     tmp_v: DVector<f64>,
+    /// `∂(J_c q̇)/∂q` (`3 nc × nv`) for the Baumgarte terms.
+    bg: DMatrix<f64>,
 }
 
 impl KktData {
@@ -184,6 +187,7 @@ impl KktData {
             wt: DMatrix::zeros(2 * n, m),
             bt: DMatrix::zeros(3 * n, m),
             tmp_v: DVector::zeros(n),
+            bg: DMatrix::zeros(m, n),
             cd,
         }
     }
@@ -289,6 +293,15 @@ fn solve_unchecked(
     }
     cd.sol.rows_mut(0, m).copy_from(&cd.drift);
     cd.sol.rows_mut(0, m).gemv(1.0, &cd.jac, &kd.qdd, 1.0);
+    // Baumgarte: + kd J q̇ (the position error is zero at this q).
+    for (c, contact) in cd.contacts.iter().enumerate() {
+        if contact.kd != 0.0 {
+            for r in 3 * c..3 * c + 3 {
+                let jv: f64 = cd.paths[c].dofs.iter().map(|&k| cd.jac[(r, k)] * v[k]).sum();
+                cd.sol[r] += contact.kd * jv;
+            }
+        }
+    }
     kd.lambda.gemv(-1.0, &cd.lam, &cd.sol.rows(0, m), 0.0);
     kd.qdd.gemv(1.0, &cd.y.rows(0, n), &kd.lambda, 1.0);
     Ok(())
@@ -308,7 +321,7 @@ pub fn kkt_derivatives(
     let qdd = std::mem::replace(&mut kd.qdd, DVector::zeros(0));
     id_derivatives_unchecked(model, data, q, v, &qdd, None);
     kd.qdd = qdd;
-    first_order_by_solve(model, data, kd);
+    first_order_by_solve(model, data, kd, v.as_slice());
     Ok(())
 }
 
@@ -320,6 +333,7 @@ fn residual_derivatives(
     model: &Model,
     (dtau_dq, dtau_dv): (&DMatrix<f64>, &DMatrix<f64>),
     kd: &mut KktData,
+    v: &[f64],
     x: &mut [f64],
 ) {
     let n = model.nv;
@@ -333,6 +347,20 @@ fn residual_derivatives(
     cd.s = s;
     kd.wt.fill(0.0);
     accel_derivatives_t(cd, &mut kd.wt);
+    // Baumgarte: ∂(kd J q̇ + kp e)/∂q = kd ∂(J q̇)/∂q + kp J, ∂/∂q̇ = kd J.
+    if cd.contacts.iter().any(|c| c.has_baumgarte()) {
+        djw_dq(model, cd, v, &mut kd.bg);
+        for (c, contact) in cd.contacts.iter().enumerate() {
+            let (kp, kdg) = (contact.kp, contact.kd);
+            for row in 3 * c..3 * c + 3 {
+                for &k in &cd.paths[c].dofs {
+                    let j = cd.jac[(row, k)];
+                    kd.wt[(k, row)] += kdg * kd.bg[(row, k)] + kp * j;
+                    kd.wt[(n + k, row)] += kdg * j;
+                }
+            }
+        }
+    }
 }
 
 /// The first-order derivatives `∂y/∂x = −R⁻¹ R_x` without `M⁻¹`-sized dense products (after
@@ -341,14 +369,14 @@ fn residual_derivatives(
 /// `C = [c_q | c_v | 0]`, `P = M⁻¹ − YQᵀ`, `Qᵀ = ΛJM⁻¹` give
 /// `B = [∂λ/∂q | ∂λ/∂q̇ | ∂λ/∂τ] = −Λ(J X + C)` and `[∂q̈/∂q | ∂q̈/∂q̇ | ∂q̈/∂τ] = X + Y B`
 /// (eqs. FO_general_eqn, ID_FO_q_eqn1, ID_FO_v_eqn1, ID_FO_tau_eqn).
-fn first_order_by_solve(model: &Model, data: &mut Data, kd: &mut KktData) {
+fn first_order_by_solve(model: &Model, data: &mut Data, kd: &mut KktData, v: &[f64]) {
     let n = model.nv;
     let m = kd.cd.dim();
     let (w, ld) = (2 * n, 3 * n);
     {
         // Rows of [a_q | a_v] and the upper triangle of the identity.
         let x = &mut data.fd_ws.x[..];
-        residual_derivatives(model, (&data.dtau_dq, &data.dtau_dv), kd, x);
+        residual_derivatives(model, (&data.dtau_dq, &data.dtau_dv), kd, v, x);
         for i in 0..n {
             let row = &mut x[ld * i + w + i..ld * (i + 1)];
             row.fill(0.0);
@@ -432,7 +460,7 @@ fn kkt_so_inner(
     let qdd = std::mem::replace(&mut kd.qdd, DVector::zeros(0));
     id_so_unchecked(model, data, &mut so.id, q, v, &qdd, None, -model.gravity);
     kd.qdd = qdd;
-    first_order_by_solve(model, data, kd);
+    first_order_by_solve(model, data, kd, v.as_slice());
     update_points(model, data, &mut kd.cd, -model.gravity);
     fill_rinv(&mut kd.cd);
     let [rqq, rvv, rqv, rtq] = &mut so.r;
@@ -466,6 +494,33 @@ fn kkt_so_inner(
                     rqv[(n + 3 * c + r, l, k)] = aqv[r];
                 }
             }
+        }
+    }
+    // Baumgarte rows: + kd ∂²(J q̇)/∂q² + kp ∂²p/∂q² (q, q), + kd ∂u_k/∂q_l (q, q̇); the
+    // body velocities data.ov are the path sums Σ S q̇ that djz_dq differentiates.
+    for (c, path) in kd.cd.paths.iter().enumerate() {
+        let contact = &kd.cd.contacts[c];
+        if !contact.has_baumgarte() {
+            continue;
+        }
+        let body = *path.joints.last().expect("path");
+        let (kp, kdg) = (contact.kp, contact.kd);
+        if kdg != 0.0 {
+            for &k in &path.dofs {
+                for &l in &path.dofs {
+                    let d = djz_dq(&b, &data.ov, body, &path.p, l, Dir::Q(k)).d;
+                    for r in 0..3 {
+                        rqq[(n + 3 * c + r, l, k)] += kdg * d[r];
+                    }
+                }
+            }
+        }
+        for r in 0..3 {
+            let i = n + 3 * c + r;
+            point_jacobian_dq(&kd.cd, c, &Vector3::ith(r, 1.0), |j, k, x| {
+                rqq[(i, j, k)] += kp * x;
+                rqv[(i, k, j)] += kdg * x;
+            });
         }
     }
     // Product terms G(∂y/∂·) (IDFOZA and contact products).
@@ -645,7 +700,7 @@ pub fn kkt_so_contracted(
     let qdd = std::mem::replace(&mut kd.qdd, DVector::zeros(0));
     id_derivatives_unchecked(model, data, q, v, &qdd, None);
     kd.qdd = qdd;
-    first_order_by_solve(model, data, kd);
+    first_order_by_solve(model, data, kd, v.as_slice());
     update_points(model, data, &mut kd.cd, -model.gravity);
     fill_rinv(&mut kd.cd);
     // 2. ζ = R⁻ᵀ ω.
@@ -674,6 +729,20 @@ pub fn kkt_so_contracted(
         point_hessians(model, data, pw, path, &z2, 1.0, qq, Some((&mut *vv, &mut *qv)));
         pw.at_rest(model, data, path, &zeta.as_slice()[..n]);
         point_hessians(model, data, pw, path, &lam, -1.0, qq, None);
+        // Baumgarte: ζ₂·(kd J q̇ + kp e): kd times the Hessian of ζ₂·(J q̇) at rest with q̈ = q̇,
+        // kp times that of ζ₂·p, and kd ∂(ζ₂·u_k)/∂q_j in C_qv.
+        let contact = &kd.cd.contacts[c];
+        if contact.kd != 0.0 {
+            pw.at_rest(model, data, path, v.as_slice());
+            point_hessians(model, data, pw, path, &z2, contact.kd, qq, None);
+        }
+        if contact.has_baumgarte() {
+            let (kp, kdg) = (contact.kp, contact.kd);
+            point_jacobian_dq(&kd.cd, c, &z2, |j, k, x| {
+                qq[(j, k)] += kp * x;
+                qv[(k, j)] += kdg * x;
+            });
+        }
     }
     // 4. A from one G evaluation: G(ζ₁; −ζ₂) = [∂(Mζ₁)/∂q + ∂(J_cᵀζ₂)/∂q ; ∂(J_c ζ₁)/∂q].
     {

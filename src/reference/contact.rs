@@ -26,7 +26,7 @@ use super::derivatives::{eps, eps1, eps2, hessian, jacobian, nested_q, perturb_q
 use super::dynamics::{mass_matrix, nle, rnea, solve};
 use super::kinematics::{forward_kinematics, parent_poses, subspace_column, subspace_mul};
 use super::spatial::{Pose, Sv, lift_v3};
-use super::{AdScalar, lift};
+use super::{AdScalar, lift, real};
 use crate::model::Contact;
 use crate::model::Model;
 use crate::tensor::Tensor3;
@@ -221,11 +221,41 @@ pub fn kkt<T: AdScalar>(
     let xs = parent_poses(model, q);
     let world = forward_kinematics(model, q);
     let jac = jacobian_from_poses(model, &world, contacts);
-    let drift = drift_from_poses(model, &xs, &world, v, contacts);
+    let mut drift = drift_from_poses(model, &xs, &world, v, contacts);
+    baumgarte(model, q, v, contacts, &world, &jac, &mut drift);
     let b = nle(model, q, v);
     let mut rhs: Vec<T> = tau.iter().zip(b).map(|(t, b)| t.clone() - b).collect();
     rhs.extend(drift.into_iter().map(|x| -x));
     split_solution(solve(kkt_matrix(mass_matrix(model, q), &jac), rhs), model.nv)
+}
+
+/// Adds the Baumgarte terms `kd J q̇ + kp (p(q) − p_ref)` to the contact rows `rows`, with the
+/// reference point `p_ref` the point's position at the real part of `q` (fixed).
+fn baumgarte<T: AdScalar>(
+    model: &Model,
+    q: &[T],
+    v: &[T],
+    contacts: &[Contact],
+    world: &[Pose<T>],
+    jac: &[Vec<T>],
+    rows: &mut [T],
+) {
+    if !contacts.iter().any(|c| c.kp != 0.0 || c.kd != 0.0) {
+        return;
+    }
+    let world_ref = forward_kinematics(model, &real(q));
+    for (c, contact) in contacts.iter().enumerate() {
+        let (body, r) = body_point::<T>(model, contact);
+        let p = world[body].act_point(&r);
+        let (_, r0) = body_point::<f64>(model, contact);
+        let p0 = world_ref[body].act_point(&r0);
+        for k in 0..3 {
+            let jv =
+                jac[3 * c + k].iter().zip(v).fold(T::zero(), |s, (j, x)| s + j.clone() * x.clone());
+            let e = p[k].clone() - p0[k];
+            rows[3 * c + k] = rows[3 * c + k].clone() + jv * contact.kd + e * contact.kp;
+        }
+    }
 }
 
 /// Impact dynamics with restitution coefficient `e`: solves
