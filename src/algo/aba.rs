@@ -2,15 +2,26 @@
 
 use super::Data;
 use super::kinematics::{joint_motion, placements};
+use super::ltl::{Pivots, pivot_error, pivot_ok};
 use super::rnea::check_fext;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::model::{Model, check_vec};
 use crate::spatial::{Force, Motion, Transform};
 use nalgebra::{DVector, Matrix6, Vector3, Vector6};
 
 /// Forward dynamics `q̈ = M⁻¹(τ − b + Σ Jᵢᵀ fextᵢ)` by the articulated-body algorithm.
-/// `fext` as in [`super::rnea()`] (body frames). Returns `data.qdd`. A singular articulated
-/// inertia `D = Sᵀ I^A S` (massless subtree) is reported as [`Error::Singular`].
+/// `fext` as in [`super::rnea()`] (body frames). Returns `data.qdd`.
+///
+/// # Singular mass matrices
+/// The criterion is the one of [`super::factorize_ltl`], so that `aba`, the `LᵀDL`
+/// factorisation and [`crate::deriv::fd_derivatives`] fail or succeed together: the pivots are
+/// those of the articulated inertias `D_i = S_iᵀ I^A_i S_i` (the scalar `D_i` of a one-DoF
+/// joint; for a multi-DoF joint, those of its `Lᵀ D L` factorisation from its last DoF to its
+/// first), in exact arithmetic the pivots of `M = Lᵀ D L`. `M` is reported singular
+/// ([`crate::Error::Singular`], naming the pivot, its velocity index and its joint) when a
+/// pivot is not positive and finite, or when the smallest pivot is at most `1e-14` times the
+/// largest one (`min_k d_k ≤ 1e-14 · max_k d_k`), e.g. for a massless leaf body or a massless
+/// link between two joints whose motions then coincide.
 pub fn aba<'a>(
     model: &Model,
     data: &'a mut Data,
@@ -156,7 +167,8 @@ mod avx {
     /// See `super::aba_backward_1dof` (same steps on 4-lane vectors): the column `j` of the
     /// 6×6 `I^A` is held as rows 0..4 (`top`) and rows 3..6 (`bot`, lanes `[3, 4, 5, 2]`), so
     /// that `U = I^A S`, `I^a = I^A − U D⁻¹ Uᵀ` and `I^a c` are column combinations.
-    /// `Err(D)` (nothing written) if `D = Sᵀ U` is singular.
+    /// Returns the pivot `D = Sᵀ U`; `Err(D)` (nothing written) if it fails
+    /// [`super::pivot_ok`].
     ///
     /// # Safety
     /// The CPU has AVX2 and FMA.
@@ -166,7 +178,7 @@ mod avx {
         data: &mut Data,
         i: usize,
         tau_k: f64,
-    ) -> Result<(), f64> {
+    ) -> Result<f64, f64> {
         let k = model.idx_v[i];
         let s = model.subspace[k];
         let sv = [s.ang.x, s.ang.y, s.ang.z, s.lin.x, s.lin.y, s.lin.z];
@@ -198,7 +210,7 @@ mod avx {
             store3(uc.as_mut_ptr().add(3), ub);
         }
         let d = sv.iter().zip(&uc).map(|(a, b)| a * b).sum::<f64>();
-        if super::singular_pivot(d) {
+        if !super::pivot_ok(d) {
             return Err(d);
         }
         let dinv = 1.0 / d;
@@ -210,7 +222,7 @@ mod avx {
         data.d_inv[i][(0, 0)] = dinv;
         let p = model.parents[i];
         if p == 0 {
-            return Ok(());
+            return Ok(d);
         }
         // Ia = IA − U D⁻¹ Uᵀ ;  pa = pA + Ia c + U D⁻¹ u
         let mut buf = [0.0; 36];
@@ -255,7 +267,7 @@ mod avx {
             add3(fp.ang.as_mut_ptr(), rn);
             add3(fp.lin.as_mut_ptr(), rf);
         }
-        Ok(())
+        Ok(d)
     }
 
     /// `out += Xᵀ A X` for the motion transform `X = ⁱX_λ` of `x = λM_i` and a column-major
@@ -362,10 +374,13 @@ pub(crate) fn aba_unchecked(
         }
         data.pa[i] = pa;
     }
+    // The pivots of the articulated inertias, for the singularity test of `LᵀDL`.
+    let mut piv = Pivots::new();
     for i in (1..n).rev() {
         let (iv, nv) = (model.idx_v[i], model.nvs[i]);
         if nv == 1 {
-            aba_backward_1dof(model, data, i, tau[iv])?;
+            let d = aba_backward_1dof(model, data, i, tau[iv])?;
+            piv.record(iv, d);
             continue;
         }
         let ia = data.ia[i];
@@ -380,13 +395,8 @@ pub(crate) fn aba_unchecked(
                 d[(r, c)] = m6(&model.subspace[iv + r]).dot(&uc);
             }
         }
-        let dinv = invert_small(&d, nv).ok_or_else(|| Error::Singular {
-            what: "articulated-body inertia".into(),
-            detail: format!(
-                "D = SᵀIᴬS of joint \"{}\" is singular (massless subtree?)",
-                model.names[i]
-            ),
-        })?;
+        let dinv = invert_small(&d, nv, iv, &mut piv)
+            .map_err(|(r, p)| pivot_error(model, iv + r, p, None))?;
         data.d_inv[i] = dinv;
         let p = model.parents[i];
         if p > 0 {
@@ -411,6 +421,7 @@ pub(crate) fn aba_unchecked(
             data.pa[p] += fp;
         }
     }
+    piv.finish(model)?;
     data.a[0] = -model.gravity;
     for i in 1..n {
         let (iv, nv) = (model.idx_v[i], model.nvs[i]);
@@ -441,16 +452,15 @@ pub(crate) fn aba_unchecked(
     Ok(())
 }
 
-/// Backward step of ABA for a single-DoF joint `i` (DoF `k`, torque `tau_k`): scalar `D`.
+/// Backward step of ABA for a single-DoF joint `i` (DoF `k`, torque `tau_k`): scalar `D`,
+/// returned (the pivot of DoF `k`); an error if it fails [`pivot_ok`].
 #[inline]
-fn aba_backward_1dof(model: &Model, data: &mut Data, i: usize, tau_k: f64) -> Result<()> {
+fn aba_backward_1dof(model: &Model, data: &mut Data, i: usize, tau_k: f64) -> Result<f64> {
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2_fma() {
         // SAFETY: the CPU has AVX2 and FMA (checked just above).
-        return match unsafe { avx::backward_1dof(model, data, i, tau_k) } {
-            Ok(()) => Ok(()),
-            Err(_) => Err(singular_1dof(model, i)),
-        };
+        return unsafe { avx::backward_1dof(model, data, i, tau_k) }
+            .map_err(|d| pivot_error(model, model.idx_v[i], d, None));
     }
     let k = model.idx_v[i];
     let s = model.subspace[k];
@@ -461,8 +471,8 @@ fn aba_backward_1dof(model: &Model, data: &mut Data, i: usize, tau_k: f64) -> Re
     let uf = Force::new(Vector3::new(uc[0], uc[1], uc[2]), Vector3::new(uc[3], uc[4], uc[5]));
     data.u_cols[k] = uf;
     let d = s.dot(&uf);
-    if singular_pivot(d) {
-        return Err(singular_1dof(model, i));
+    if !pivot_ok(d) {
+        return Err(pivot_error(model, k, d, None));
     }
     let dinv = 1.0 / d;
     let u = tau_k - s.dot(&pa);
@@ -497,77 +507,61 @@ fn aba_backward_1dof(model: &Model, data: &mut Data, i: usize, tau_k: f64) -> Re
         let fp = x.act_force(&pa_a);
         data.pa[p] += fp;
     }
-    Ok(())
+    Ok(d)
 }
 
-/// True if the scalar articulated inertia `D = SᵀIᴬS` cannot be inverted.
-#[inline(always)]
-fn singular_pivot(d: f64) -> bool {
-    d.is_nan() || d <= 1e-14 * d.abs().max(f64::MIN_POSITIVE) || !d.is_finite()
-}
-
-/// The error for a singular `D` of the single-DoF joint `i`.
-#[cold]
-fn singular_1dof(model: &Model, i: usize) -> Error {
-    Error::Singular {
-        what: "articulated-body inertia".into(),
-        detail: format!(
-            "D = SᵀIᴬS of joint \"{}\" is singular (massless subtree?)",
-            model.names[i]
-        ),
+/// Inverse of the leading `n×n` block of the symmetric `d` (the articulated inertia
+/// `D = SᵀIᴬS` of a multi-DoF joint whose first DoF is `k0`) by its `Lᵀ Δ L` factorisation,
+/// eliminating the last index first as [`super::factorize_ltl`] does with the joint's DoFs, so
+/// that the pivots are those of `M` at these DoFs (in exact arithmetic). Each pivot is checked
+/// by [`pivot_ok`] and recorded in `piv` (DoF `k0 + r`); `Err((r, pivot))` at the first that
+/// fails.
+fn invert_small(
+    d: &Matrix6<f64>,
+    n: usize,
+    k0: usize,
+    piv: &mut Pivots,
+) -> std::result::Result<Matrix6<f64>, (usize, f64)> {
+    // The factor in the upper triangle, as in `ltl_in_place`: L(k, i) at (i, k), Δ(k) at (k, k).
+    let mut h = *d;
+    for k in (0..n).rev() {
+        let p = h[(k, k)];
+        if !pivot_ok(p) {
+            return Err((k, p));
+        }
+        piv.record(k0 + k, p);
+        let rk = 1.0 / p;
+        // From the nearest index down, so that H(j, k), j ≤ i, is read before it is scaled.
+        for i in (0..k).rev() {
+            let a = h[(i, k)] * rk;
+            for j in 0..=i {
+                h[(j, i)] -= a * h[(j, k)];
+            }
+            h[(i, k)] = a;
+        }
     }
-}
-
-/// Inverse of the leading `n×n` block of `d` (symmetric positive definite expected), by an
-/// allocation-free Cholesky factorisation. `None` if not positive definite.
-fn invert_small(d: &Matrix6<f64>, n: usize) -> Option<Matrix6<f64>> {
-    let scale = (0..n).map(|k| d[(k, k)].abs()).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
+    // Solve Lᵀ Δ L X = I column by column (as `ltl_solve_in_place`).
     let mut out = Matrix6::zeros();
-    if n == 1 {
-        let x = d[(0, 0)];
-        if x.is_nan() || x <= 1e-14 * scale || !x.is_finite() {
-            return None;
-        }
-        out[(0, 0)] = 1.0 / x;
-        return Some(out);
-    }
-    // d = L Lᵀ
-    let mut l = Matrix6::<f64>::zeros();
-    for j in 0..n {
-        let mut s = d[(j, j)];
-        for k in 0..j {
-            s -= l[(j, k)] * l[(j, k)];
-        }
-        if s.is_nan() || s <= 1e-14 * scale || !s.is_finite() {
-            return None;
-        }
-        let ljj = s.sqrt();
-        l[(j, j)] = ljj;
-        for i in j + 1..n {
-            let mut s = d[(i, j)];
-            for k in 0..j {
-                s -= l[(i, k)] * l[(j, k)];
-            }
-            l[(i, j)] = s / ljj;
-        }
-    }
-    // Solve L Lᵀ X = I column by column.
     for c in 0..n {
-        let mut y = [0.0; 6];
-        for i in 0..n {
-            let mut s = if i == c { 1.0 } else { 0.0 };
-            for k in 0..i {
-                s -= l[(i, k)] * y[k];
-            }
-            y[i] = s / l[(i, i)];
-        }
+        let mut x = [0.0; 6];
+        x[c] = 1.0;
         for i in (0..n).rev() {
-            let mut s = y[i];
-            for k in i + 1..n {
-                s -= l[(k, i)] * out[(k, c)];
+            let xi = x[i];
+            for j in 0..i {
+                x[j] -= h[(j, i)] * xi;
             }
-            out[(i, c)] = s / l[(i, i)];
+        }
+        for i in 0..n {
+            x[i] /= h[(i, i)];
+        }
+        for i in 0..n {
+            let mut acc = x[i];
+            for j in 0..i {
+                acc -= h[(j, i)] * x[j];
+            }
+            x[i] = acc;
+            out[(i, c)] = acc;
         }
     }
-    Some(out)
+    Ok(out)
 }

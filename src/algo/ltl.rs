@@ -11,31 +11,102 @@ use nalgebra::{DMatrix, DVector};
 use std::mem::MaybeUninit;
 
 /// Factorises `data.m` (from [`super::crba`]) as `M = Lᵀ D L` into `data.ltl`, exploiting the
-/// branch-induced sparsity: cost `O(n d²)` for a tree of depth `d`. A non-positive pivot is
-/// reported as [`Error::Singular`] naming the degree of freedom and its joint.
+/// branch-induced sparsity: cost `O(n d²)` for a tree of depth `d`.
+///
+/// # Singular mass matrices
+/// The pivots `d_k` (the diagonal of `D`, eliminated from the last DoF to the first) are tested
+/// as in [`super::aba()`], whose articulated inertias `D_i = S_iᵀ I^A_i S_i` have the same pivots
+/// in exact arithmetic: `M` is reported singular ([`Error::Singular`], naming the pivot, its
+/// velocity index and its joint) when a pivot is not positive and finite, or when the smallest
+/// pivot is at most `1e-14` times the largest one (`min_k d_k ≤ 1e-14 · max_k d_k`), e.g. for a
+/// massless leaf body or a massless link between two joints whose motions then coincide.
 pub fn factorize_ltl(model: &Model, data: &mut Data) -> Result<()> {
     data.check(model)?;
     data.ltl.copy_from(&data.m);
     ltl_in_place(model, &mut data.ltl)
 }
 
+/// Relative tolerance of the singularity test on the pivots of `M = Lᵀ D L`, shared by
+/// [`factorize_ltl`] (and every algorithm that factorises `M`) and [`super::aba()`]: `M` is
+/// singular when `min_k d_k ≤ PIVOT_RTOL · max_k d_k` (see [`Pivots`]).
+pub(crate) const PIVOT_RTOL: f64 = 1e-14;
+
+/// `true` if the pivot `d` can be inverted and the factorisation go on: `0 < d < ∞` (not NaN).
+#[inline(always)]
+pub(crate) fn pivot_ok(d: f64) -> bool {
+    d > 0.0 && d < f64::INFINITY
+}
+
+/// The smallest and largest pivots of one factorisation of `M`, for the relative test that
+/// [`ltl_in_place`] and ABA share: each pivot is first checked by [`pivot_ok`] (a failure is an
+/// error at once, [`pivot_error`]), then [`Pivots::record`]ed; [`Pivots::finish`] applies
+/// `min_k d_k ≤ PIVOT_RTOL · max_k d_k` once all are known.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Pivots {
+    min: f64,
+    min_dof: usize,
+    max: f64,
+}
+
+impl Pivots {
+    /// No pivot yet (an empty factorisation passes).
+    #[inline(always)]
+    pub(crate) fn new() -> Self {
+        Self { min: f64::INFINITY, min_dof: 0, max: 0.0 }
+    }
+    /// Records the pivot `d` (already checked by [`pivot_ok`]) of velocity index `k`.
+    #[inline(always)]
+    pub(crate) fn record(&mut self, k: usize, d: f64) {
+        if d < self.min {
+            self.min = d;
+            self.min_dof = k;
+        }
+        if d > self.max {
+            self.max = d;
+        }
+    }
+    /// The relative test: an error naming the smallest pivot's DoF and joint if
+    /// `min_k d_k ≤ PIVOT_RTOL · max_k d_k`.
+    #[inline]
+    pub(crate) fn finish(&self, model: &Model) -> Result<()> {
+        if self.min <= PIVOT_RTOL * self.max {
+            return Err(pivot_error(model, self.min_dof, self.min, Some(self.max)));
+        }
+        Ok(())
+    }
+}
+
+/// The error for the pivot `d` of velocity index `k`: not positive and finite (`max = None`),
+/// or at most [`PIVOT_RTOL`] times the largest pivot `max`.
+#[cold]
+pub(crate) fn pivot_error(model: &Model, k: usize, d: f64, max: Option<f64>) -> Error {
+    let why = match max {
+        None => "is not positive and finite".to_string(),
+        Some(m) => format!("is at most {PIVOT_RTOL:e} times the largest pivot {m:e}"),
+    };
+    Error::Singular {
+        what: "mass matrix".into(),
+        detail: format!(
+            "pivot {d:e} at velocity index {k} (joint \"{}\") {why}; a massless subtree, or a \
+             massless link between joints whose motions coincide?",
+            model.names[model.dof_joint[k]]
+        ),
+    }
+}
+
+/// `h ← ` its `Lᵀ D L` factor in place (layout of [`factorize_ltl`]), with the singularity
+/// test of [`Pivots`].
 pub(crate) fn ltl_in_place(model: &Model, h: &mut DMatrix<f64>) -> Result<()> {
     let n = model.nv;
     let h = h.as_mut_slice();
     assert!(h.len() == n * n);
-    let scale = (0..n).map(|k| h[k + n * k].abs()).fold(0.0, f64::max);
+    let mut piv = Pivots::new();
     for k in (0..n).rev() {
         let hkk = h[k + n * k];
-        if hkk.is_nan() || hkk <= 1e-14 * scale.max(f64::MIN_POSITIVE) || !hkk.is_finite() {
-            let j = model.dof_joint[k];
-            return Err(Error::Singular {
-                what: "mass matrix".into(),
-                detail: format!(
-                    "pivot {hkk:e} at velocity index {k} (joint \"{}\"); a massless subtree?",
-                    model.names[j]
-                ),
-            });
+        if !pivot_ok(hkk) {
+            return Err(pivot_error(model, k, hkk, None));
         }
+        piv.record(k, hkk);
         let anc = model.ancestors_of_dof(k);
         let rk = 1.0 / hkk;
         let hp = h.as_mut_ptr();
@@ -56,7 +127,7 @@ pub(crate) fn ltl_in_place(model: &Model, h: &mut DMatrix<f64>) -> Result<()> {
             }
         }
     }
-    Ok(())
+    piv.finish(model)
 }
 
 /// Solves `M x = b` in place with the factor in `data.ltl` (see [`factorize_ltl`]).
