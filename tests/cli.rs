@@ -193,6 +193,42 @@ fn malformed_urdf_is_a_clean_error() {
     assert!(err.contains("broken_robot.urdf"), "names the file: {err}");
 }
 
+/// The URDF loader's warnings go to standard error (`sodyn: warning: FILE:LINE: ...`), the
+/// command goes on and its output on standard output is untouched; `--strict-inertia` makes the
+/// inertia warning an error (exit status 1).
+#[test]
+fn urdf_warnings_go_to_standard_error() {
+    let triangle = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/urdf/triangle.urdf");
+    let o = sodyn(&["info", "--model", triangle]);
+    assert_ok(&o, "info on triangle.urdf");
+    let err = stderr(&o);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.starts_with(&format!("sodyn: warning: {triangle}:7: link \"shin\": "))
+            && err.contains("triangle inequality"),
+        "{err}"
+    );
+    assert!(stdout(&o).starts_with("model \"triangle\": nq = 1"), "{}", stdout(&o));
+    assert!(!stdout(&o).contains("warning"), "{}", stdout(&o));
+    // random-state: standard output is JSON only.
+    let o = sodyn(&["random-state", "--model", triangle]);
+    assert_ok(&o, "random-state on triangle.urdf");
+    serde_json::from_str::<Value>(&stdout(&o)).expect("JSON on standard output");
+    assert!(stderr(&o).contains("sodyn: warning: "), "{}", stderr(&o));
+    for cmd in ["info", "random-state"] {
+        let o = sodyn(&[cmd, "--model", triangle, "--strict-inertia"]);
+        let err = assert_clean_failure(&o, "--strict-inertia");
+        assert!(
+            err.contains("triangle.urdf:7: link \"shin\"") && !err.contains("warning"),
+            "{err}"
+        );
+    }
+    // A clean model: nothing on standard error.
+    let o = sodyn(&["info", "--model", "builtin:quadruped"]);
+    assert_ok(&o, "info");
+    assert!(stderr(&o).is_empty(), "{}", stderr(&o));
+}
+
 /// Parses `key=value` fields of a bench line, checking the fixed leading fields.
 fn parse_bench_line(line: &str) -> Vec<(String, String)> {
     let fields: Vec<(String, String)> = line

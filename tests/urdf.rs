@@ -14,8 +14,9 @@ const COMMITTED_MODELS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/
 const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/urdf");
 const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures");
 
-const FIXED: UrdfOptions = UrdfOptions { floating_base: false };
-const FLOATING: UrdfOptions = UrdfOptions { floating_base: true };
+const FIXED: UrdfOptions = UrdfOptions { floating_base: false, strict_inertia: false };
+const FLOATING: UrdfOptions = UrdfOptions { floating_base: true, strict_inertia: false };
+const STRICT: UrdfOptions = UrdfOptions { floating_base: false, strict_inertia: true };
 
 /// The robot models: `../shared/models` when it exists, otherwise the copy committed in
 /// `tests/data/models` (so that these tests never skip).
@@ -51,9 +52,11 @@ fn readme_table(dir: &Path) -> Vec<Row> {
 }
 
 fn load_shared(dir: &Path, row: &Row) -> Model {
-    let opts = UrdfOptions { floating_base: row.ff };
-    load_urdf_file(&dir.join(&row.file), &opts)
-        .unwrap_or_else(|e| panic!("{} failed to load: {e}", row.file))
+    let opts = UrdfOptions { floating_base: row.ff, strict_inertia: false };
+    let m = load_urdf_file(&dir.join(&row.file), &opts)
+        .unwrap_or_else(|e| panic!("{} failed to load: {e}", row.file));
+    assert!(m.warnings().is_empty(), "{}: {:?}", row.file, m.warnings());
+    m
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -238,8 +241,11 @@ fn shared_models_dimensions_match_readme() {
             assert_eq!(m.joints()[1], JointType::FreeFlyer, "{}", row.file);
         }
         // Also loadable with the other base option.
-        let other =
-            load_urdf_file(&dir.join(&row.file), &UrdfOptions { floating_base: !row.ff }).unwrap();
+        let other = load_urdf_file(
+            &dir.join(&row.file),
+            &UrdfOptions { floating_base: !row.ff, strict_inertia: false },
+        )
+        .unwrap();
         assert_eq!(other.nv(), if row.ff { row.nv - 6 } else { row.nv + 6 }, "{}", row.file);
     }
 }
@@ -381,7 +387,11 @@ fn joint_order_matches_pinocchio_fixtures_up_to_sibling_order() {
             .map(|j| (j["index"].as_i64().unwrap(), j["name"].as_str().unwrap()))
             .collect();
 
-        let m = load_urdf_file(&dir.join(&row.file), &UrdfOptions { floating_base: ff }).unwrap();
+        let m = load_urdf_file(
+            &dir.join(&row.file),
+            &UrdfOptions { floating_base: ff, strict_inertia: false },
+        )
+        .unwrap();
         let skip = if ff { 2 } else { 1 };
         let ours: Vec<String> = m.names()[skip..].to_vec();
         let pin_movable: Vec<String> =
@@ -638,14 +648,33 @@ fn mimic_joint_is_recorded() {
     assert_eq!(m.joints()[2], JointType::Prismatic { axis: -Vector3::y() });
     assert_eq!((m.lower()[1], m.upper()[1]), (0.0, 0.04));
 
-    let bad = xml.replace("mimic joint=\"left_finger\"", "mimic joint=\"lfet_finger\"");
+    assert!(m.warnings().is_empty(), "{:?}", m.warnings());
+
+    // A <mimic> naming an unknown joint (alex_psyonic_hands of example-robot-data) or the joint
+    // itself: loads (the joint is independent anyway) with a warning naming file, line and
+    // joint; nothing is recorded. Also with strict_inertia, which is about inertias only.
+    for (target, what) in
+        [("lfet_finger", "the unknown joint \"lfet_finger\""), ("right_finger", "the joint itself")]
+    {
+        let bad = xml.replace("mimic joint=\"left_finger\"", &format!("mimic joint=\"{target}\""));
+        for opts in [FIXED, STRICT] {
+            let m = load_urdf_str(&bad, "gripper.urdf", &opts).unwrap();
+            assert_eq!((m.nq(), m.nv()), (2, 2));
+            assert_eq!(m.mimic()[2], None);
+            assert_eq!(m.warnings().len(), 1, "{:?}", m.warnings());
+            let w = &m.warnings()[0];
+            assert!(
+                w.starts_with("gripper.urdf:8: joint \"right_finger\": <mimic> refers to ")
+                    && w.contains(what)
+                    && w.contains("loaded as independent"),
+                "{w}"
+            );
+        }
+    }
+    // A <mimic> without a joint attribute stays an error (urdfdom refuses it too).
+    let bad = xml.replace("mimic joint=\"left_finger\"", "mimic");
     let e = load_urdf_str(&bad, "gripper.urdf", &FIXED).unwrap_err().to_string();
-    assert!(
-        e.contains("gripper.urdf:8:")
-            && e.contains("joint \"right_finger\"")
-            && e.contains("\"lfet_finger\""),
-        "{e}"
-    );
+    assert!(e.contains("gripper.urdf:8:") && e.contains("<mimic> has no joint attribute"), "{e}");
 }
 
 #[test]
@@ -667,10 +696,15 @@ fn massless_links_and_missing_origins_are_valid() {
 // ---------------------------------------------------------------------------------------------
 // Malformed inputs: one test per error, each checking file, line, element and reason.
 
+/// `file` of `tests/data/urdf` is refused with `strict_inertia` (every one of them is; only
+/// `triangle.urdf` loads without it, with a warning).
 #[track_caller]
 fn expect_file_error(file: &str, line: u32, element: &str, reason: &str) {
     let path = Path::new(DATA).join(file);
-    let e = load_urdf_file(&path, &FIXED).expect_err(file);
+    if file != "triangle.urdf" {
+        load_urdf_file(&path, &FIXED).expect_err(file);
+    }
+    let e = load_urdf_file(&path, &STRICT).expect_err(file);
     let msg = e.to_string();
     assert!(msg.contains(file), "message lacks the file name: {msg}");
     assert!(msg.contains(&format!("{file}:{line}: ")), "message lacks line {line}: {msg}");
@@ -863,9 +897,101 @@ fn error_inertia_not_positive_semi_definite() {
     expect_file_error("not_psd.urdf", 7, "link \"thigh\"", "not positive semi-definite");
 }
 
+/// A positive semi-definite inertia that violates the triangle inequality: an error with
+/// `strict_inertia`, otherwise a warning naming file, line and link (romeo_small of
+/// example-robot-data), the inertia loaded as written.
 #[test]
 fn error_inertia_triangle_inequality() {
     expect_file_error("triangle.urdf", 7, "link \"shin\"", "violate the triangle inequality");
+    let path = Path::new(DATA).join("triangle.urdf");
+    let m = load_urdf_file(&path, &FIXED).unwrap();
+    assert_eq!(m.warnings().len(), 1, "{:?}", m.warnings());
+    let w = &m.warnings()[0];
+    assert!(
+        w.starts_with(&format!("{}:7: link \"shin\": ", path.display()))
+            && w.contains("violate the triangle inequality")
+            && w.contains("positive semi-definite")
+            && w.contains("strict_inertia"),
+        "{w}"
+    );
+    assert_eq!(m.inertias()[1].rot, Matrix3::from_diagonal(&Vector3::new(0.1, 0.1, 0.5)));
+}
+
+/// Principal moments negative by round-off (below `1e-12` of the largest or `1e-15` kg m², as
+/// icub's `ixx="-5.42101e-20"` of example-robot-data) are taken as zero, also with
+/// `strict_inertia`; larger negative moments stay errors, with or without it.
+#[test]
+fn inertia_round_off_is_zero() {
+    let xml = |ixx: &str, iyy: &str, izz: &str| {
+        format!(
+            r#"<robot name="r">
+  <link name="base"/>
+  <link name="hip">
+    <inertial><origin xyz="0 0 0.03045"/><mass value="0.526"/>
+      <inertia ixx="{ixx}" ixy="0" ixz="0" iyy="{iyy}" iyz="0" izz="{izz}"/></inertial>
+  </link>
+  <joint name="j" type="revolute"><parent link="base"/><child link="hip"/></joint>
+</robot>"#
+        )
+    };
+    // icub's r_hip_2: every moment within 1e-15 of zero: a point mass.
+    for opts in [FIXED, STRICT] {
+        let m = load_urdf_str(&xml("-5.42101e-20", "-5.42101e-20", "0"), "r.urdf", &opts).unwrap();
+        assert!(m.warnings().is_empty(), "{:?}", m.warnings());
+        let i = &m.inertias()[1];
+        assert_eq!(i.mass, 0.526);
+        assert!(i.inertia_about_com().amax() < 1e-18, "{}", i.inertia_about_com());
+        // Relative: -1e-14 against a largest moment of 0.1 (1e-13 of it) is zero.
+        let m = load_urdf_str(&xml("-1e-14", "0.1", "0.1"), "r.urdf", &opts).unwrap();
+        let ic = m.inertias()[1].inertia_about_com();
+        assert!(ic[(0, 0)] == 0.0 || ic[(0, 0)].abs() < 1e-17, "{ic}");
+        assert!(close(ic[(1, 1)], 0.1, 1e-14) && close(ic[(2, 2)], 0.1, 1e-14), "{ic}");
+        // Not round-off: -1e-14 alone (above 1e-15), -1e-9 against 0.1 (1e-8 of it).
+        for bad in [xml("-1e-14", "0", "0"), xml("-1e-9", "0.1", "0.1")] {
+            let e = load_urdf_str(&bad, "r.urdf", &opts).unwrap_err().to_string();
+            assert!(
+                e.starts_with("r.urdf:5: link \"hip\": ")
+                    && e.contains("not positive semi-definite"),
+                "{e}"
+            );
+        }
+    }
+    // A moment that is not negative is never changed.
+    let m = load_urdf_str(&xml("0.01", "0.02", "0.025"), "r.urdf", &FIXED).unwrap();
+    assert_eq!(m.inertias()[1].inertia_about_com().diagonal(), Vector3::new(0.01, 0.02, 0.025));
+}
+
+/// A point mass off the joint axis, alone in its body: `Ī_c = Ī_o + m [c]×²` computes to
+/// principal moments of ±1e-19 instead of 0, which the model's check took for a
+/// non-positive-semi-definite body (the tolerance now includes the rounding of the shift).
+#[test]
+fn point_mass_off_the_origin_loads() {
+    for com in ["0.0123 -0.0456 0.0789", "0.031 0.0721 0.0113", "1.3 -2.7 0.9"] {
+        let xml = format!(
+            r#"<robot name="pm">
+  <link name="base"/>
+  <link name="a"><inertial><origin xyz="{com}" rpy="0.3 0.2 0.1"/><mass value="0.731"/>
+    <inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial></link>
+  <joint name="j" type="revolute"><parent link="base"/><child link="a"/><origin rpy="0.1 0.2 0.3"/></joint>
+</robot>"#
+        );
+        for opts in [FIXED, STRICT] {
+            let m = load_urdf_str(&xml, "pm.urdf", &opts).unwrap_or_else(|e| panic!("{com}: {e}"));
+            assert!(m.warnings().is_empty());
+            assert_eq!(m.inertias()[1].mass, 0.731);
+        }
+    }
+}
+
+/// A link that is not positive semi-definite is an error with or without `strict_inertia`
+/// (Pinocchio loads romeo_laas_small of example-robot-data, whose "body", "LHipPitch_link"
+/// and "RHipPitch_link" have principal moments down to -2.1e-2: we do not).
+#[test]
+fn not_positive_semi_definite_is_always_an_error() {
+    for opts in [FIXED, STRICT, FLOATING] {
+        let e = load_urdf_file(&Path::new(DATA).join("not_psd.urdf"), &opts).unwrap_err();
+        assert!(e.to_string().contains("not positive semi-definite"), "{e}");
+    }
 }
 
 #[test]
@@ -951,10 +1077,14 @@ fn placeholder_inertia_merged_into_physical_body() {
         "ixx=\"0.01\" ixy=\"0\" ixz=\"0\" iyy=\"0.01\" iyz=\"0\" izz=\"0.002\"",
         "ixx=\"0\" ixy=\"0\" ixz=\"0\" iyy=\"0\" iyz=\"0\" izz=\"0\"",
     );
-    expect_str_error(
-        &bad,
-        7,
-        "link \"foot\"",
-        "violate the triangle inequality; the body of joint \"knee\" (links \"shin\", \"foot\" merged) is not physical either",
-    );
+    let reason = "violate the triangle inequality; the body of joint \"knee\" (links \"shin\", \"foot\" merged) is not physical either";
+    let e = load_urdf_str(&bad, "inline.urdf", &STRICT).unwrap_err().to_string();
+    assert!(e.starts_with("inline.urdf:7: link \"foot\": ") && e.contains(reason), "{e}");
+    // Without strict_inertia: the body is positive semi-definite, a warning.
+    let m = load_urdf_str(&bad, "inline.urdf", &FIXED).unwrap();
+    assert_eq!(m.warnings().len(), 1);
+    let w = &m.warnings()[0];
+    assert!(w.starts_with("inline.urdf:7: link \"foot\": ") && w.contains(reason), "{w}");
+    // A heavy shin: no warning.
+    assert!(load_urdf_str(&xml("1.5"), "p.urdf", &STRICT).unwrap().warnings().is_empty());
 }

@@ -28,7 +28,7 @@ pub fn urdf(bytes: &[u8]) -> usize {
     let xml = String::from_utf8_lossy(bytes);
     let mut loaded = 0;
     for floating_base in [false, true] {
-        let opts = UrdfOptions { floating_base };
+        let opts = UrdfOptions { floating_base, strict_inertia: false };
         let Ok(model) = load_urdf_str(&xml, "<fuzz>", &opts) else { continue };
         loaded += 1;
         assert!(model.nv() <= MAX_URDF_DOFS, "nv = {} above the loader's limit", model.nv());
@@ -119,7 +119,12 @@ fn state_models() -> &'static [StateModel] {
     static MODELS: OnceLock<Vec<StateModel>> = OnceLock::new();
     MODELS.get_or_init(|| {
         let urdf = |xml: &str, ff: bool| {
-            load_urdf_str(xml, "<built in>", &UrdfOptions { floating_base: ff }).unwrap()
+            load_urdf_str(
+                xml,
+                "<built in>",
+                &UrdfOptions { floating_base: ff, strict_inertia: false },
+            )
+            .unwrap()
         };
         let b = |name, model| StateModel { name, model, floating_base: None };
         vec![

@@ -29,9 +29,16 @@ class Model:
     """Immutable kinematic tree (Pinocchio's ``Model``); gravity may be set."""
 
     @staticmethod
-    def from_urdf(path: Union[str, os.PathLike[str]], floating_base: bool = False) -> "Model": ...
+    def from_urdf(path: Union[str, os.PathLike[str]], floating_base: bool = False,
+                  strict_inertia: bool = False) -> "Model":
+        """Loads a URDF file. ``floating_base=True`` adds a free-flyer root joint
+        ``root_joint``. A link inertia that is not physical but harmless (a positive
+        semi-definite one that violates the triangle inequality, or one welded to a fixed base)
+        loads with a message in ``warnings``; ``strict_inertia=True`` refuses it instead."""
     @staticmethod
-    def from_urdf_string(xml: str, floating_base: bool = False) -> "Model": ...
+    def from_urdf_string(xml: str, floating_base: bool = False,
+                         strict_inertia: bool = False) -> "Model":
+        """Loads a URDF document given as a string (options as ``from_urdf``)."""
     @staticmethod
     def builtin(name: str) -> "Model": ...
     @staticmethod
@@ -44,6 +51,11 @@ class Model:
     def nv(self) -> int: ...
     @property
     def njoints(self) -> int: ...
+    @property
+    def warnings(self) -> list[str]:
+        """What the URDF loader accepted with a reservation, one ``"FILE:LINE: ELEMENT:
+        REASON"`` string each: a non-physical but harmless link inertia, a ``<mimic>`` naming an
+        unknown joint (see docs/conventions.md). Empty for built-in models; nothing is printed."""
     @property
     def gravity(self) -> Vector:
         """Spatial gravity ``[0, 0, 0, gx, gy, gz]`` (angular first), a fresh array."""

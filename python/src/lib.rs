@@ -430,20 +430,27 @@ fn fresh_seed() -> u64 {
 
 #[pymethods]
 impl PyModel {
-    /// Loads a URDF file; `floating_base=True` adds a free-flyer root joint `root_joint`.
+    /// Loads a URDF file; `floating_base=True` adds a free-flyer root joint `root_joint`;
+    /// `strict_inertia=True` refuses the non-physical but harmless link inertias that otherwise
+    /// load with a warning (`Model.warnings`).
     #[staticmethod]
-    #[pyo3(signature = (path, floating_base = false))]
-    fn from_urdf(py: Python<'_>, path: std::path::PathBuf, floating_base: bool) -> PyResult<Self> {
-        let opts = UrdfOptions { floating_base };
+    #[pyo3(signature = (path, floating_base = false, strict_inertia = false))]
+    fn from_urdf(
+        py: Python<'_>,
+        path: std::path::PathBuf,
+        floating_base: bool,
+        strict_inertia: bool,
+    ) -> PyResult<Self> {
+        let opts = UrdfOptions { floating_base, strict_inertia };
         let m = py.detach(|| sodyn::model::load_urdf_file(&path, &opts)).map_err(core_err)?;
         Ok(Self { m })
     }
 
     /// Loads a URDF document given as a string.
     #[staticmethod]
-    #[pyo3(signature = (xml, floating_base = false))]
-    fn from_urdf_string(xml: &str, floating_base: bool) -> PyResult<Self> {
-        let opts = UrdfOptions { floating_base };
+    #[pyo3(signature = (xml, floating_base = false, strict_inertia = false))]
+    fn from_urdf_string(xml: &str, floating_base: bool, strict_inertia: bool) -> PyResult<Self> {
+        let opts = UrdfOptions { floating_base, strict_inertia };
         let m = sodyn::model::load_urdf_str(xml, "<string>", &opts).map_err(core_err)?;
         Ok(Self { m })
     }
@@ -482,6 +489,13 @@ impl PyModel {
     #[getter]
     fn njoints(&self) -> usize {
         self.m.njoints()
+    }
+
+    /// What the URDF loader accepted with a reservation, one `FILE:LINE: ELEMENT: REASON`
+    /// string each (a fresh list; empty for built-in models). Nothing is printed.
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.m.warnings().to_vec()
     }
 
     /// Spatial gravity `[0, 0, 0, gx, gy, gz]` (angular first).

@@ -1,9 +1,10 @@
 //! The kinematic tree: Model (immutable description) and its builder.
 
 use super::joint::{JointType, unit_axis};
+use super::urdf::INERTIA_ROUNDOFF_ABS;
 use crate::error::{Error, Result};
 use crate::rng::Rng;
-use crate::spatial::{Inertia, Motion, Transform};
+use crate::spatial::{Inertia, InertiaDefect, Motion, Transform};
 use nalgebra::{DVector, Vector3};
 
 /// A named frame rigidly attached to a joint's body: every URDF link is one (also the links
@@ -83,6 +84,8 @@ pub struct Model {
     /// For joints loaded from a URDF `<mimic>`: the name of the mimicked joint (loaded as an
     /// independent joint).
     pub(crate) mimic: Vec<Option<String>>,
+    /// What the loader accepted with a reservation (see [`Model::warnings`]).
+    pub(crate) warnings: Vec<String>,
     /// Frames (URDF links), first one the world.
     pub(crate) frames: Vec<Frame>,
     /// Per joint, its indices and kind packed for the kinematics kernels (see [`JointKin`]);
@@ -211,6 +214,14 @@ impl Model {
     pub fn mimic(&self) -> &[Option<String>] {
         &self.mimic
     }
+    /// What the URDF loader accepted with a reservation, one message per item in the format
+    /// of its errors (`FILE:LINE: ELEMENT: REASON`): a link inertia that is not physical but
+    /// harmless, a `<mimic>` naming an unknown joint (see [`crate::model::urdf`]). Empty for a
+    /// model made with [`ModelBuilder`]. The library prints nothing; the command-line tool
+    /// prints these on standard error.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
+    }
     /// Frames (URDF links), the first one the world.
     pub fn frames(&self) -> &[Frame] {
         &self.frames
@@ -228,22 +239,16 @@ impl Model {
                 return bad(format!("{who}: body inertia has a non-finite entry"));
             }
             // Positive semi-definite spatial inertia: with m > 0, the rotational inertia about
-            // the centre of mass is; with m = 0, h = 0 and the rotational inertia is.
+            // the centre of mass is; with m = 0, h = 0 and the rotational inertia is (within
+            // round-off, see `inertia_defect`).
             if inertia.mass == 0.0 && inertia.h.amax() > 0.0 {
                 return bad(format!("{who}: massless body with a non-zero first moment of mass"));
             }
-            {
-                let rot_c =
-                    if inertia.mass > 0.0 { inertia.inertia_about_com() } else { inertia.rot };
-                let e = nalgebra::SymmetricEigen::new(rot_c).eigenvalues;
-                let tol = 1e-9 * e.amax().max(1e-300);
-                if e.min() < -tol {
-                    return bad(format!(
-                        "{who}: body rotational inertia is not positive semi-definite \
-                         (principal moment {:e})",
-                        e.min()
-                    ));
-                }
+            if let Some(InertiaDefect::NotPositiveSemiDefinite(e)) = inertia_defect(inertia) {
+                return bad(format!(
+                    "{who}: body rotational inertia is not positive semi-definite \
+                     (principal moment {e:e})"
+                ));
             }
             if i > 0 {
                 check_transform(&self.placements[i])
@@ -482,6 +487,35 @@ pub struct ModelBuilder {
     frame_names: std::collections::HashSet<String>,
 }
 
+/// Why an inertia is not that of a rigid body, with the model's round-off tolerances, or `None`:
+/// a mass that is negative or not finite, a non-finite entry, a negative principal moment of
+/// the rotational inertia about the centre of mass (about the origin when massless), or
+/// principal moments `λ₁ ≤ λ₂ ≤ λ₃` with `λ₁ + λ₂ < λ₃`. The tolerance of the last two is the
+/// largest of `1e-9 max|λ|`, `1e-12 max|Ī_o|` (the rounding of the parallel-axis shift from
+/// the frame origin, `Ī_c = Ī_o + m [c]×²`: a point mass off the origin computes to moments of
+/// ±1e-19 rather than 0) and [`INERTIA_ROUNDOFF_ABS`].
+/// ([`Inertia::check_physical`] has only the first.)
+pub(crate) fn inertia_defect(inertia: &Inertia) -> Option<InertiaDefect> {
+    if !inertia.mass.is_finite() || inertia.mass < 0.0 {
+        return Some(InertiaDefect::NegativeMass(inertia.mass));
+    }
+    if !inertia.h.iter().chain(inertia.rot.iter()).all(|x| x.is_finite()) {
+        return Some(InertiaDefect::NotFinite);
+    }
+    let rot_c = if inertia.mass > 0.0 { inertia.inertia_about_com() } else { inertia.rot };
+    let e = nalgebra::SymmetricEigen::new(rot_c).eigenvalues;
+    let mut ev = [e[0], e[1], e[2]];
+    ev.sort_by(f64::total_cmp);
+    let tol = (1e-9 * e.amax()).max(1e-12 * inertia.rot.amax()).max(INERTIA_ROUNDOFF_ABS);
+    if ev[0] < -tol {
+        return Some(InertiaDefect::NotPositiveSemiDefinite(ev[0]));
+    }
+    if ev[0] + ev[1] < ev[2] - tol {
+        return Some(InertiaDefect::TriangleInequality(ev));
+    }
+    None
+}
+
 impl ModelBuilder {
     /// An empty tree with only the world (joint 0, frame `"universe"`).
     pub fn new(name: &str) -> Self {
@@ -507,6 +541,7 @@ impl ModelBuilder {
             lower: DVector::zeros(0),
             upper: DVector::zeros(0),
             mimic: vec![None],
+            warnings: vec![],
             frames: vec![Frame {
                 name: "universe".into(),
                 joint: 0,

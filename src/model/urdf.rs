@@ -16,14 +16,32 @@
 //! * With [`UrdfOptions::floating_base`], a free-flyer joint named `"root_joint"` is added in
 //!   front of the root link; otherwise the root link is welded to the world (joint 0) and its
 //!   inertia is stored in joint 0's slot, which the dynamics ignores.
-//! * A link's `<inertial>` must have a finite, non-negative mass and a rotational inertia that is
-//!   positive semi-definite and satisfies the triangle inequality
-//!   ([`Inertia::check_physical`]). One exception: a link that fails only the rotational check
-//!   is accepted when the body it is merged into by fixed joints is physical. Real URDFs (hyq,
-//!   anymal, tiago) put such placeholder inertials (mass 1e-6 kg, every entry 1e-6 kg m²) on
-//!   dummy links, and those only ever reach the dynamics summed into a heavier body.
+//! * A link's `<inertial>` must have a finite, non-negative mass. Its rotational inertia about
+//!   the centre of mass, principal moments `λ₁ ≤ λ₂ ≤ λ₃`, is read as follows:
+//!   - **Round-off.** A principal moment that is negative by at most
+//!     `max(INERTIA_ROUNDOFF_REL · λ₃, INERTIA_ROUNDOFF_ABS)` ([`INERTIA_ROUNDOFF_REL`] = `1e-12`
+//!     of the largest moment, or [`INERTIA_ROUNDOFF_ABS`] = `1e-15` kg m²: CAD exports write
+//!     `ixx="-5.42101e-20"` for zero) is taken as zero, the inertia being rebuilt from its
+//!     principal axes. Silent, also with [`UrdfOptions::strict_inertia`].
+//!   - The result must then be physical: positive semi-definite, and the triangle inequality
+//!     `λ₁ + λ₂ ≥ λ₃`, both within round-off (the larger of `1e-9 max|λ|`, `1e-12` of the
+//!     largest entry of the inertia about the frame origin, and `INERTIA_ROUNDOFF_ABS`). A link
+//!     that is not is accepted silently when the body it is merged into by fixed joints is
+//!     physical: real URDFs (hyq, anymal, tiago) put placeholder inertials (mass 1e-6 kg,
+//!     every entry 1e-6 kg m²) on dummy links, and those only ever reach the dynamics summed
+//!     into a heavier body.
+//!   - Otherwise the body is not physical either. A body that is positive semi-definite but
+//!     violates the triangle inequality (not a rigid body, but its contribution to the mass
+//!     matrix is positive semi-definite; Pinocchio loads it) loads with a warning in
+//!     [`Model::warnings`] naming the file, line and link (an error with
+//!     [`UrdfOptions::strict_inertia`]). A body that is not positive semi-definite is an error
+//!     (Pinocchio loads it, but its mass matrix may be indefinite).
 //! * `<mimic>` joints are loaded as independent joints and recorded with
-//!   [`ModelBuilder::set_mimic`].
+//!   [`ModelBuilder::set_mimic`]. A `<mimic>` naming an unknown joint (or the joint itself) is
+//!   a warning, not an error: the joint loads as independent all the same, and nothing is
+//!   recorded.
+//! * Nothing is printed: warnings are returned in [`Model::warnings`] (the command-line tool
+//!   prints them on standard error).
 //! * `<visual>`, `<collision>`, `<transmission>`, `<gazebo>`, `<material>` and every other unknown
 //!   element are ignored; `<link>` and `<joint>` are read only as direct children of `<robot>`.
 //!
@@ -36,10 +54,11 @@
 //! `joint "knee"`) and the reason.
 
 use super::joint::JointType;
-use super::tree::{Model, ModelBuilder};
+use super::tree::{Model, ModelBuilder, inertia_defect};
 use crate::error::{Error, Result};
+use crate::spatial::InertiaDefect;
 use crate::spatial::{Inertia, Transform};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use roxmltree::{Document, Node};
 use std::collections::HashMap;
 use std::path::Path;
@@ -50,6 +69,42 @@ pub struct UrdfOptions {
     /// Add a free-flyer joint named `"root_joint"` between the world and the root link
     /// (Pinocchio's `buildModelFromUrdf(path, JointModelFreeFlyer())`).
     pub floating_base: bool,
+    /// Refuse a body inertia that violates the triangle inequality (see the module
+    /// documentation): an error instead of a warning in [`Model::warnings`]. Moments negative
+    /// by round-off are set to zero either way.
+    pub strict_inertia: bool,
+}
+
+/// Relative round-off tolerance of the URDF loader: a principal moment of a link's rotational
+/// inertia that is negative by at most this fraction of the largest principal moment (or by
+/// at most [`INERTIA_ROUNDOFF_ABS`]) is taken as zero.
+pub const INERTIA_ROUNDOFF_REL: f64 = 1e-12;
+
+/// Absolute round-off tolerance of the URDF loader (kg m²): a principal moment negative by at
+/// most this much is taken as zero, whatever the other moments (e.g. the all-zero inertia
+/// written `ixx="-5.42101e-20" iyy="-5.42101e-20"` by a CAD export).
+pub const INERTIA_ROUNDOFF_ABS: f64 = 1e-15;
+
+/// `i_com` with its principal moments that are negative by round-off (see
+/// [`INERTIA_ROUNDOFF_REL`], [`INERTIA_ROUNDOFF_ABS`]) set to zero, rebuilt from its principal
+/// axes; `i_com` itself, bit for bit, when it has no such moment.
+fn clear_roundoff(i_com: Matrix3<f64>) -> Matrix3<f64> {
+    if !i_com.iter().all(|x| x.is_finite()) {
+        return i_com;
+    }
+    let mut eig = SymmetricEigen::new(i_com);
+    let tol = (INERTIA_ROUNDOFF_REL * eig.eigenvalues.max()).max(INERTIA_ROUNDOFF_ABS);
+    let roundoff = |l: f64| l < 0.0 && l >= -tol;
+    if !eig.eigenvalues.iter().any(|&l| roundoff(l)) {
+        return i_com;
+    }
+    eig.eigenvalues.apply(|l| {
+        if roundoff(*l) {
+            *l = 0.0;
+        }
+    });
+    let r = eig.recompose();
+    (r + r.transpose()) * 0.5
 }
 
 /// Name of the free-flyer joint added by [`UrdfOptions::floating_base`] (Pinocchio's name).
@@ -63,7 +118,8 @@ pub const ROOT_JOINT_NAME: &str = "root_joint";
 /// `Data` at the limit. Real robots have at most a few hundred DoFs (Talos: 50).
 pub const MAX_URDF_DOFS: usize = 1024;
 
-/// Loads a URDF file. Errors name the file (as given), line, element and reason.
+/// Loads a URDF file. Errors name the file (as given), line, element and reason; what loads
+/// with a reservation (see the module documentation) is listed in [`Model::warnings`].
 pub fn load_urdf_file(path: &Path, opts: &UrdfOptions) -> Result<Model> {
     let file = path.display().to_string();
     let xml = std::fs::read_to_string(path).map_err(|e| Error::Model {
@@ -83,7 +139,7 @@ pub fn load_urdf_str(xml: &str, source_name: &str, opts: &UrdfOptions) -> Result
         element: "XML".into(),
         reason: format!("malformed XML: {e}"),
     })?;
-    let p = Parser { doc: &doc, file: source_name };
+    let p = Parser { doc: &doc, file: source_name, warnings: Default::default() };
     p.load(opts)
 }
 
@@ -122,6 +178,8 @@ struct Joint<'a, 'i> {
 struct Parser<'d, 'a, 'i> {
     doc: &'d Document<'i>,
     file: &'a str,
+    /// Warnings so far, in the format of [`Error::Model`]'s message.
+    warnings: std::cell::RefCell<Vec<String>>,
 }
 
 fn child_elem<'a, 'i>(node: Node<'a, 'i>, tag: &str) -> Option<Node<'a, 'i>> {
@@ -141,6 +199,12 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
             element: element.into(),
             reason: reason.into(),
         }
+    }
+
+    /// Records a warning at byte position `pos` (`FILE:LINE: ELEMENT: REASON`).
+    fn warn(&self, pos: usize, element: &str, reason: impl std::fmt::Display) {
+        let line = self.line(pos);
+        self.warnings.borrow_mut().push(format!("{}:{line}: {element}: {reason}", self.file));
     }
 
     fn line(&self, pos: usize) -> u32 {
@@ -267,8 +331,8 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
             c[k] = self.scalar(inn, name, element)?;
         }
         let [ixx, ixy, ixz, iyy, iyz, izz] = c;
-        let i_com = Matrix3::new(ixx, ixy, ixz, ixy, iyy, iyz, ixz, iyz, izz);
-        let defect = Inertia::from_com(mass, Vector3::zeros(), i_com).check_physical().err().map(|d| {
+        let i_com = clear_roundoff(Matrix3::new(ixx, ixy, ixz, ixy, iyy, iyz, ixz, iyz, izz));
+        let defect = inertia_defect(&Inertia::from_com(mass, Vector3::zeros(), i_com)).map(|d| {
             (
                 inn.range().start,
                 format!("invalid inertial (ixx={ixx} ixy={ixy} ixz={ixz} iyy={iyy} iyz={iyz} izz={izz}): {d}"),
@@ -511,23 +575,23 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
             parent_joint[j.child] = Some(ji);
             children[j.parent].push(ji);
         }
-        for (ji, j) in joints.iter().enumerate() {
-            if let Some((of, pos)) = &j.mimic {
-                if !joint_index.contains_key(of) {
-                    return Err(self.err(
-                        *pos,
-                        &format!("joint \"{}\"", j.name),
-                        format!("<mimic> refers to the unknown joint \"{of}\""),
-                    ));
-                }
-                if of == &joints[ji].name {
-                    return Err(self.err(
-                        *pos,
-                        &format!("joint \"{}\"", j.name),
-                        "<mimic> refers to the joint itself",
-                    ));
-                }
-            }
+        // A <mimic> naming an unknown joint or the joint itself: a warning, and not recorded
+        // (the joint is independent either way).
+        for j in joints.iter_mut() {
+            let Some((of, pos)) = &j.mimic else { continue };
+            let what = if !joint_index.contains_key(of) {
+                format!("the unknown joint \"{of}\"")
+            } else if of == &j.name {
+                "the joint itself".to_string()
+            } else {
+                continue;
+            };
+            self.warn(
+                *pos,
+                &format!("joint \"{}\"", j.name),
+                format!("<mimic> refers to {what}: ignored, the joint is loaded as independent"),
+            );
+            j.mimic = None;
         }
         let roots: Vec<usize> = (0..links.len()).filter(|&l| parent_joint[l].is_none()).collect();
         if roots.len() > 1 {
@@ -614,14 +678,15 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
         if let Some(l) = at.iter().position(|a| a.is_none()) {
             return Err(self.cycle_error(&links, &joints, &parent_joint, l));
         }
-        let model = b.build_unchecked();
-        self.check_body_inertias(&model, &links, &at, &order)?;
+        let mut model = b.build_unchecked();
+        self.check_body_inertias(&model, &links, &at, &order, opts.strict_inertia)?;
         model.validate().map_err(|e| Error::Model {
             file: self.file.to_string(),
             line: None,
             element: format!("robot \"{}\"", model.name),
             reason: e.to_string(),
         })?;
+        model.warnings = self.warnings.take();
         Ok(model)
     }
 
@@ -630,20 +695,22 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
     /// links (e.g. mass 1e-6 kg with all six entries 1e-6 kg m²) that only ever reach the
     /// dynamics summed into a heavier body. A body that is not physical always contains such a
     /// link (physical inertias are closed under rigid placement and addition); the first one in
-    /// depth-first order is reported.
+    /// depth-first order is reported. Unless `strict`, a body that only violates the triangle
+    /// inequality (it is positive semi-definite) gives a warning for each such link instead.
     fn check_body_inertias(
         &self,
         model: &Model,
         links: &[Link],
         at: &[Option<(usize, Transform)>],
         order: &[usize],
+        strict: bool,
     ) -> Result<()> {
         for &l in order {
             let Some((pos, reason)) = &links[l].defect else {
                 continue;
             };
             let body = at[l].map_or(0, |a| a.0);
-            if let Err(d) = model.inertias[body].check_physical() {
+            if let Some(d) = inertia_defect(&model.inertias[body]) {
                 let merged: Vec<String> = order
                     .iter()
                     .filter(|&&k| at[k].map(|a| a.0) == Some(body))
@@ -658,11 +725,18 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
                 } else {
                     String::new()
                 };
-                return Err(self.err(
+                let element = format!("link \"{}\"", links[l].name);
+                if strict || !matches!(d, InertiaDefect::TriangleInequality(_)) {
+                    return Err(self.err(*pos, &element, format!("{reason}{body_desc}")));
+                }
+                self.warn(
                     *pos,
-                    &format!("link \"{}\"", links[l].name),
-                    format!("{reason}{body_desc}"),
-                ));
+                    &element,
+                    format!(
+                        "{reason}{body_desc}; loaded all the same, as the body's inertia is \
+                         positive semi-definite (strict_inertia makes this an error)"
+                    ),
+                );
             }
         }
         Ok(())

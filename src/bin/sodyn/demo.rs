@@ -46,7 +46,7 @@ fn rel_v(a: &DVector<f64>, b: &[f64]) -> f64 {
 
 /// Runs the demo on `spec` (`builtin:NAME` or a URDF path) with random state `seed`.
 pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
-    let m = load_model_spec(spec, false)?;
+    let m = load_model_spec(spec, &Default::default())?;
     let mut rng = Rng::new(seed);
     let q = m.random_configuration(&mut rng);
     let v = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));

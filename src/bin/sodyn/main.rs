@@ -13,7 +13,7 @@ mod eval;
 use clap::{Args, CommandFactory, Parser, Subcommand};
 use serde_json::Value;
 use sodyn::error::{Error, Result};
-use sodyn::model::Model;
+use sodyn::model::{Model, UrdfOptions};
 use std::path::Path;
 use std::process::ExitCode;
 
@@ -60,6 +60,10 @@ struct ModelArgs {
     /// Add a free-flyer root joint in front of the URDF's root link
     #[arg(long)]
     floating_base: bool,
+    /// Refuse a URDF link inertia that violates the triangle inequality instead of loading it
+    /// with a warning
+    #[arg(long)]
+    strict_inertia: bool,
 }
 
 #[derive(Debug, Args)]
@@ -152,23 +156,28 @@ fn run(cli: Cli) -> Result<()> {
 
 /// Loads a model from `builtin:NAME` or a URDF path.
 fn load_model(o: &ModelArgs) -> Result<Model> {
-    load_model_spec(&o.model, o.floating_base)
+    let opts = UrdfOptions { floating_base: o.floating_base, strict_inertia: o.strict_inertia };
+    load_model_spec(&o.model, &opts)
 }
 
-/// Loads a model from `spec` (`builtin:NAME` or a URDF path).
-fn load_model_spec(spec: &str, floating_base: bool) -> Result<Model> {
-    if let Some(name) = spec.strip_prefix("builtin:") {
-        if floating_base {
+/// Loads a model from `spec` (`builtin:NAME` or a URDF path) and prints the loader's warnings
+/// ([`Model::warnings`]) on standard error, one `sodyn: warning: ...` line each.
+fn load_model_spec(spec: &str, opts: &UrdfOptions) -> Result<Model> {
+    let model = if let Some(name) = spec.strip_prefix("builtin:") {
+        if opts.floating_base {
             return Err(Error::Io(format!(
                 "--floating-base applies to URDF files; built-in model \"{name}\" defines its own base"
             )));
         }
         sodyn::model::builtin::by_name(name)
-            .ok_or_else(|| Error::Unknown { kind: "built-in model".into(), name: name.into() })
+            .ok_or_else(|| Error::Unknown { kind: "built-in model".into(), name: name.into() })?
     } else {
-        let opts = sodyn::model::urdf::UrdfOptions { floating_base };
-        sodyn::model::urdf::load_urdf_file(Path::new(spec), &opts)
+        sodyn::model::urdf::load_urdf_file(Path::new(spec), opts)?
+    };
+    for w in model.warnings() {
+        eprintln!("sodyn: warning: {w}");
     }
+    Ok(model)
 }
 
 /// Prints `v` as one line of JSON to `path`, or to standard output.
