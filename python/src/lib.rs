@@ -796,7 +796,7 @@ fn _model_from_description(desc: &Bound<'_, PyDict>) -> PyResult<PyModel> {
 // ---------------------------------------------------------------------------------------------
 
 /// A contact set resolved against a model: (frame index, point) per contact.
-type ContactKey = Vec<(usize, [u64; 3])>;
+type ContactKey = Vec<(usize, [u64; 5])>;
 
 /// Workspace of one model: sodyn's `Data`, the second-order and contact workspaces (made on
 /// first use) and the input buffers. One thread at a time (a second thread using the same
@@ -1162,19 +1162,22 @@ fn idsoza<'py>(
 // Contacts
 // ---------------------------------------------------------------------------------------------
 
-/// A 3-D point contact: `point` (frame coordinates) of the frame named `frame`.
+/// A 3-D point contact: `point` (frame coordinates) of the frame named `frame`, with optional
+/// Baumgarte gains `kp`, `kd` (used by the KKT dynamics).
 #[pyclass(name = "Contact", module = "sodyn._sodyn", frozen)]
 #[derive(Clone)]
 struct PyContact {
     frame: String,
     point: [f64; 3],
+    kp: f64,
+    kd: f64,
 }
 
 #[pymethods]
 impl PyContact {
     #[new]
-    #[pyo3(signature = (frame, point = None))]
-    fn new(frame: String, point: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
+    #[pyo3(signature = (frame, point = None, kp = 0.0, kd = 0.0))]
+    fn new(frame: String, point: Option<&Bound<'_, PyAny>>, kp: f64, kd: f64) -> PyResult<Self> {
         let mut p = [0.0; 3];
         if let Some(obj) = point {
             let mut v = DVector::zeros(3);
@@ -1187,7 +1190,14 @@ impl PyContact {
             }
             p.copy_from_slice(v.as_slice());
         }
-        Ok(Self { frame, point: p })
+        for (name, g) in [("kp", kp), ("kd", kd)] {
+            if !(g.is_finite() && g >= 0.0) {
+                return Err(value_err(format!(
+                    "`{name}` of contact \"{frame}\" is {g}: a Baumgarte gain must be finite and >= 0"
+                )));
+            }
+        }
+        Ok(Self { frame, point: p, kp, kd })
     }
     #[getter]
     fn frame(&self) -> &str {
@@ -1197,9 +1207,22 @@ impl PyContact {
     fn point<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
         PyArray1::from_slice(py, &self.point).into_any()
     }
+    #[getter]
+    fn kp(&self) -> f64 {
+        self.kp
+    }
+    #[getter]
+    fn kd(&self) -> f64 {
+        self.kd
+    }
     fn __repr__(&self) -> String {
+        let gains = if self.kp != 0.0 || self.kd != 0.0 {
+            format!(", kp={}, kd={}", self.kp, self.kd)
+        } else {
+            String::new()
+        };
         format!(
-            "Contact(frame={:?}, point=({}, {}, {}))",
+            "Contact(frame={:?}, point=({}, {}, {}){gains})",
             self.frame, self.point[0], self.point[1], self.point[2]
         )
     }
@@ -1208,7 +1231,12 @@ impl PyContact {
         let c = slf.get();
         let args = PyTuple::new(
             py,
-            [c.frame.clone().into_pyobject(py)?.into_any(), PyTuple::new(py, c.point)?.into_any()],
+            [
+                c.frame.clone().into_pyobject(py)?.into_any(),
+                PyTuple::new(py, c.point)?.into_any(),
+                c.kp.into_pyobject(py)?.into_any(),
+                c.kd.into_pyobject(py)?.into_any(),
+            ],
         )?;
         PyTuple::new(py, [slf.get_type().into_any(), args.into_any()])
     }
@@ -1220,8 +1248,11 @@ fn resolve(m: &Model, contacts: &[PyRef<'_, PyContact>]) -> PyResult<(Vec<Contac
     let mut key = Vec::with_capacity(contacts.len());
     for c in contacts {
         let p = Vector3::new(c.point[0], c.point[1], c.point[2]);
-        let contact = Contact::new(m, &c.frame, p).map_err(core_err)?;
-        key.push((contact.frame, c.point.map(f64::to_bits)));
+        let contact = Contact::new(m, &c.frame, p)
+            .and_then(|x| x.with_baumgarte(c.kp, c.kd))
+            .map_err(core_err)?;
+        let [x, y, z] = c.point.map(f64::to_bits);
+        key.push((contact.frame, [x, y, z, c.kp.to_bits(), c.kd.to_bits()]));
         cs.push(contact);
     }
     if cs.is_empty() {

@@ -299,3 +299,55 @@ def test_contact_first_order_fd(so_setup):
                      TOL_FD, dv)
         assert_close(getattr(r, dt), cdiff_vec(lambda tt: getattr(call(q, v, tt), y), tau),
                      TOL_FD, dt)
+
+
+def pin_contacts_baumgarte(pin, pmodel, contacts, q):
+    """The contacts of ``pin_contacts`` with Baumgarte gains (Pinocchio's corrector) and the
+    reference frame, ``joint2_placement`` on the universe, at the contact frame's placement for
+    ``q`` (our reference point: the position error is zero at ``q``)."""
+    cms = pin_contacts(pin, pmodel, contacts)
+    d = pin.Data(pmodel)
+    pin.forwardKinematics(pmodel, d, q)
+    for cm, c in zip(cms, contacts):
+        p = cm.m_baumgarte_parameters
+        p.Kp = c.kp
+        p.Kd = c.kd
+        cm.setBaumgarteCorrectorParameters(p)
+        cm.joint2_placement = d.oMi[cm.joint1_id] * cm.joint1_placement
+    return cms
+
+
+@pytest.mark.parametrize("name", [n for n in ("solo12", "talos_full_v2", "fallback_ff")
+                                  if n in CONTACT_CASES])
+def test_kkt_baumgarte_vs_pinocchio(pin, name):
+    model, pmodel, pmap = pin_pair(name)
+    data = model.create_data()
+    frames = CONTACT_CASES[name]
+    for s in (0, 1):
+        contacts = [sodyn.Contact(f, point=POINTS["offset"](i), kp=10.0 + 5 * i, kd=2.0 + i)
+                    for i, f in enumerate(frames)]
+        q, v, _, tau = random_state(model, s)
+        r = sodyn.kkt_derivatives(model, data, q, v, tau, contacts)
+        plain = sodyn.kkt_derivatives(model, data, q, v, tau, contacts_of(frames, "offset"))
+        assert np.abs(r.dqdd_dq - plain.dqdd_dq).max() > 1e-6  # the gains matter
+        pq = pmap.pin_q(q)
+        cms = pin_contacts_baumgarte(pin, pmodel, contacts, pq)
+        p = pin_constraint(pin, pmodel, cms, pq, pmap.pin_v(v), pmap.pin_v(tau))
+        tag = f"{name} state {s} kkt with gains"
+        assert_close(r.qdd, pmap.vec(p["ddq"]), TOL, f"{tag} qdd")
+        assert_close(r.lambda_, p["lambda_c"], TOL, f"{tag} lambda")
+        assert_close(r.dqdd_dq, pmap.mat(p["ddq_dq"]), TOL, f"{tag} dqdd_dq")
+        assert_close(r.dqdd_dv, pmap.mat(p["ddq_dv"]), TOL, f"{tag} dqdd_dv")
+        assert_close(r.dlambda_dq, pmap.cols(p["dlambda_dq"]), TOL, f"{tag} dlambda_dq")
+        assert_close(r.dlambda_dv, pmap.cols(p["dlambda_dv"]), TOL, f"{tag} dlambda_dv")
+
+
+def test_contact_gains_api():
+    c = sodyn.Contact("toe", point=(0.0, 0.0, 0.1), kp=4.0, kd=1.5)
+    assert (c.kp, c.kd) == (4.0, 1.5) and "kp=4" in repr(c)
+    import pickle
+    c2 = pickle.loads(pickle.dumps(c))
+    assert (c2.frame, c2.kp, c2.kd) == ("toe", 4.0, 1.5)
+    for bad in ({"kp": -1.0}, {"kd": float("nan")}, {"kp": float("inf")}):
+        with pytest.raises(ValueError, match="Baumgarte gain"):
+            sodyn.Contact("toe", **bad)
