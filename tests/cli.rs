@@ -116,6 +116,7 @@ fn random_state_eval_round_trip() {
         let o = sodyn(&["eval", "--model", "builtin:quadruped", "--state", s, "--order", order]);
         assert_ok(&o, "eval");
         let out: Value = serde_json::from_str(&stdout(&o)).expect("eval prints one JSON object");
+        assert!(out.get("errors").is_none(), "no \"errors\" when every output is defined");
         assert_eq!(out["model"], "quadruped");
         assert_eq!(out["nq"], nq);
         assert_eq!(out["nv"], nv);
@@ -156,6 +157,113 @@ fn random_state_eval_round_trip() {
             }
         }
     }
+}
+
+/// A mass matrix that is singular at the state (`tests/data/massless_subtree.urdf`: a massless
+/// link whose child joint moves a massless link): `eval` writes every output that does not need
+/// `M⁻¹` (the same values as for a regular model: τ = M a + b, contacts' `constrained_id`,
+/// the contracted `id`), leaves out the others, names each in `"errors"` with the reason, and
+/// exits with status 3; also with `-o FILE`.
+#[test]
+fn eval_writes_partial_results_when_the_mass_matrix_is_singular() {
+    let urdf = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/massless_subtree.urdf");
+    for (base, nv) in [(None, 3), (Some("--floating-base"), 9)] {
+        // `sodyn` with the base option of this round.
+        let run = |args: &[&str]| {
+            let mut a = args.to_vec();
+            a.extend(base);
+            sodyn(&a)
+        };
+        let state = tmp(&format!("massless-{nv}.json"));
+        let s = state.to_str().unwrap();
+        let o = run(&["random-state", "--model", urdf, "--seed", "5", "-o", s]);
+        assert_ok(&o, "random-state");
+        let mut st: Value =
+            serde_json::from_str(&std::fs::read_to_string(&state).unwrap()).unwrap();
+        let a = vector(&st, "a", nv);
+        st["contacts"] = serde_json::json!([{"frame": "arm", "point": [0.0, 0.0, 0.3]}]);
+        st["weights"] = serde_json::json!({
+            "tau": vec![1.0; nv], "qdd": vec![1.0; nv], "kkt_qdd": vec![1.0; nv],
+            "impact_vplus": vec![1.0; nv]
+        });
+        let contacts = tmp(&format!("massless-contacts-{nv}.json"));
+        std::fs::write(&contacts, st.to_string()).unwrap();
+        let c = contacts.to_str().unwrap();
+
+        let defined =
+            ["model", "nq", "nv", "gravity", "joints", "tau", "M", "b", "dtau_dq", "dtau_dv"];
+        let fd = ["qdd", "dqdd_dq", "dqdd_dv", "Minv"];
+        let so = ["d2tau_dq2", "d2tau_dv2", "d2tau_dqdv", "dM_dq"];
+        let fd_so = ["d2qdd_dq2", "d2qdd_dv2", "d2qdd_dqdv", "d2qdd_dtaudq"];
+        let cases: [(&str, &str, Vec<&str>, Vec<&str>); 3] = [
+            (s, "1", defined.to_vec(), fd.to_vec()),
+            (s, "2", [&defined[..], &so].concat(), [&fd[..], &fd_so].concat()),
+            (
+                c,
+                "1",
+                [&defined[..], &["constrained_id", "contracted"]].concat(),
+                [
+                    &fd[..],
+                    &["kkt", "impact", "contracted.fd", "contracted.kkt", "contracted.impact"],
+                ]
+                .concat(),
+            ),
+        ];
+        for (file, order, present, missing) in cases {
+            let what = format!("eval {file} --order {order} {base:?}");
+            let o = run(&["eval", "--model", urdf, "--state", file, "--order", order]);
+            assert_eq!(o.status.code(), Some(3), "{what}: exit status; stderr: {}", stderr(&o));
+            let out: Value = serde_json::from_str(&stdout(&o)).expect("one JSON object");
+            let obj = out.as_object().unwrap();
+            let mut keys: Vec<&str> = obj.keys().map(String::as_str).collect();
+            let mut expected = present.clone();
+            expected.push("errors");
+            keys.sort_unstable();
+            expected.sort_unstable();
+            assert_eq!(keys, expected, "{what}: keys");
+            let errors = out["errors"].as_object().expect("errors object");
+            let mut err_keys: Vec<&str> = errors.keys().map(String::as_str).collect();
+            let mut missing = missing.clone();
+            err_keys.sort_unstable();
+            missing.sort_unstable();
+            assert_eq!(err_keys, missing, "{what}: errors keys");
+            for (k, reason) in errors {
+                let r = reason.as_str().expect("reason is a string");
+                assert!(r.contains("singular") && r.contains("\"knuckle\""), "{what}: {k}: {r}");
+            }
+            if file == c {
+                assert_eq!(
+                    out["contracted"].as_object().unwrap().keys().collect::<Vec<_>>(),
+                    ["id"]
+                );
+            }
+            // The defined outputs are those of a regular evaluation: τ = M a + b.
+            let (tau, m, b) =
+                (vector(&out, "tau", nv), matrix(&out, "M", nv), vector(&out, "b", nv));
+            assert!((&m * &a + &b - &tau).amax() < 1e-9, "{what}: tau = M a + b");
+            let err = stderr(&o);
+            assert!(
+                err.starts_with("sodyn: error: ") && missing.iter().all(|k| err.contains(k)),
+                "{what}: {err}"
+            );
+            assert!(!err.contains("panicked"), "{err}");
+        }
+        // -o FILE: the same object in the file, the same status.
+        let out_file = tmp(&format!("massless-out-{nv}.json"));
+        let of = out_file.to_str().unwrap();
+        let o = run(&["eval", "--model", urdf, "--state", s, "-o", of]);
+        assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+        assert!(stdout(&o).is_empty());
+        let out: Value =
+            serde_json::from_str(&std::fs::read_to_string(&out_file).unwrap()).unwrap();
+        assert!(out["errors"]["qdd"].is_string() && out.get("qdd").is_none(), "{out}");
+    }
+    // Other failures keep status 1 (a state of the wrong length), a regular model has no
+    // "errors" (random_state_eval_round_trip reads every key).
+    let short = tmp("massless-short.json");
+    std::fs::write(&short, "{\"v\": [0.0]}").unwrap();
+    let o = sodyn(&["eval", "--model", urdf, "--state", short.to_str().unwrap()]);
+    assert_clean_failure(&o, "wrong length");
 }
 
 #[test]

@@ -645,6 +645,53 @@ def test_committed_bad_urdfs(fname):
             assert isinstance(e, sodyn.SodynError)
 
 
+def test_singular_mass_matrix_raises_only_where_needed():
+    """A mass matrix singular at the state (tests/data/massless_subtree.urdf): only the calls
+    that need M^-1 raise a SodynError naming the joint; the others return finite results (the
+    same as on a fresh Data, also after the errors)."""
+    path = REPO / "tests" / "data" / "massless_subtree.urdf"
+    for fb in (False, True):
+        model = sodyn.Model.from_urdf(str(path), floating_base=fb)
+        data = model.create_data()
+        q, v, a, tau = random_state(model, 3)
+        nv = model.nv
+        w = np.ones(nv)
+        contacts = [sodyn.Contact("arm", (0.0, 0.0, 0.3))]
+        defined = {
+            "rnea": lambda: sodyn.rnea(model, data, q, v, a),
+            "crba": lambda: sodyn.crba(model, data, q),
+            "nonlinear_effects": lambda: sodyn.nonlinear_effects(model, data, q, v),
+            "id_derivatives": lambda: sodyn.id_derivatives(model, data, q, v, a),
+            "id_so_derivatives": lambda: sodyn.id_so_derivatives(model, data, q, v, a),
+            "id_so_contracted": lambda: sodyn.id_so_contracted(model, data, q, v, a, w),
+            "constrained_id_derivatives": lambda: (lambda r: (r.tau, r.dtau_dq, r.d2tau_dq2))(
+                sodyn.constrained_id_derivatives(model, data, q, v, a, contacts, np.zeros(3),
+                                                 order=2)),
+        }
+        undefined = {
+            "aba": lambda: sodyn.aba(model, data, q, v, tau),
+            "fd_derivatives": lambda: sodyn.fd_derivatives(model, data, q, v, tau),
+            "fd_so_derivatives": lambda: sodyn.fd_so_derivatives(model, data, q, v, tau),
+            "fd_so_contracted": lambda: sodyn.fd_so_contracted(model, data, q, v, tau, w),
+            "kkt_derivatives": lambda: sodyn.kkt_derivatives(model, data, q, v, tau, contacts),
+            "impact_derivatives": lambda: sodyn.impact_derivatives(model, data, q, v, contacts),
+        }
+        for name, call in undefined.items():
+            e = expect_value_error(call, "singular", '"knuckle"', what=f"{name} ff={fb}")
+            assert isinstance(e, sodyn.SodynError)
+        fresh = model.create_data()
+        for name, call in defined.items():
+            out = call()
+            arrays = out if isinstance(out, tuple) else (out,)
+            assert all(np.all(np.isfinite(np.asarray(x))) for x in arrays), name
+        np.testing.assert_array_equal(sodyn.rnea(model, data, q, v, a),
+                                      sodyn.rnea(model, fresh, q, v, a))
+        M = sodyn.crba(model, data, q)
+        assert_close(M @ a + sodyn.nonlinear_effects(model, data, q, v),
+                     sodyn.rnea(model, data, q, v, a), 1e-12, "tau = M a + b")
+        assert np.linalg.eigvalsh(M)[0] < 1e-12 * np.linalg.eigvalsh(M)[-1], "M is singular"
+
+
 def test_urdf_warnings():
     """What loads with a reservation is listed in ``Model.warnings`` (``FILE:LINE: ELEMENT:
     REASON`` strings, a fresh list), nothing is printed; a clean model has none."""

@@ -260,14 +260,44 @@ pub fn tensor_json(t: &Tensor3) -> Value {
     json!(t.to_nested())
 }
 
+/// True if `e` means that an output is undefined at this state (a singular mass matrix or
+/// articulated-body inertia: a massless subtree, coinciding joint motions), as opposed to an
+/// invalid input (a contact set on the world or rank deficient is one, as before).
+fn undefined_output(e: &Error) -> bool {
+    matches!(e, Error::Singular { what, .. } if what != "contact set")
+}
+
+/// The outputs that need what `r` computes: `Some` of its value, or, if `r` failed because they
+/// are undefined at this state ([`undefined_output`]), `None` with the reason recorded for each
+/// of `keys` in `errors`; any other error is returned.
+fn defined<T>(r: Result<T>, keys: &[&str], errors: &mut Map<String, Value>) -> Result<Option<T>> {
+    match r {
+        Ok(x) => Ok(Some(x)),
+        Err(e) if undefined_output(&e) => {
+            for k in keys {
+                errors.insert((*k).into(), Value::String(e.to_string()));
+            }
+            Ok(None)
+        }
+        Err(e) => Err(e),
+    }
+}
+
 /// The `eval` output object (see the README for the schema). `order` is 1 (values and
 /// first-order derivatives) or 2 (adds the second-order tensors).
+///
+/// Partial results: an output that is undefined at this state (singular mass matrix, e.g. a
+/// massless subtree) is left out, and the object's `"errors"` maps its key (`"qdd"`, `"kkt"`,
+/// `"contracted.fd"`, ...) to the reason; every output that does not need it is written. Any
+/// other failure is an `Err`.
 pub fn eval_json(model: &Model, s: &State, order: u32) -> Result<Value> {
+    let mut errors = Map::new();
     let mut data = Data::new(model);
     let tau = rnea(model, &mut data, &s.q, &s.v, &s.a, None)?.clone();
     let b = nonlinear_effects(model, &mut data, &s.q, &s.v)?.clone();
     let m = crba(model, &mut data, &s.q)?.clone();
-    let qdd = aba(model, &mut data, &s.q, &s.v, &s.tau, None)?.clone();
+    let qdd =
+        defined(aba(model, &mut data, &s.q, &s.v, &s.tau, None).cloned(), &["qdd"], &mut errors)?;
     let joints: Vec<Value> = (1..model.njoints())
         .map(|i| {
             json!({
@@ -284,7 +314,9 @@ pub fn eval_json(model: &Model, s: &State, order: u32) -> Result<Value> {
     let g = model.gravity().to_vec6();
     id_derivatives(model, &mut data, &s.q, &s.v, &s.a, None)?;
     let (dtau_dq, dtau_dv) = (mat_json(data.dtau_dq()), mat_json(data.dtau_dv()));
-    fd_derivatives(model, &mut data, &s.q, &s.v, &s.tau, None)?;
+    let fd_keys = ["dqdd_dq", "dqdd_dv", "Minv"];
+    let fd =
+        defined(fd_derivatives(model, &mut data, &s.q, &s.v, &s.tau, None), &fd_keys, &mut errors)?;
     let mut out = json!({
         "model": model.name(),
         "nq": model.nq(),
@@ -294,15 +326,19 @@ pub fn eval_json(model: &Model, s: &State, order: u32) -> Result<Value> {
         "tau": tau.as_slice(),
         "M": mat_json(&m),
         "b": b.as_slice(),
-        "qdd": qdd.as_slice(),
         "dtau_dq": dtau_dq,
         "dtau_dv": dtau_dv,
-        "dqdd_dq": mat_json(data.dqdd_dq()),
-        "dqdd_dv": mat_json(data.dqdd_dv()),
-        "Minv": mat_json(data.minv()),
     });
+    let o = out.as_object_mut().expect("object");
+    if let Some(qdd) = qdd {
+        o.insert("qdd".into(), json!(qdd.as_slice()));
+    }
+    if fd.is_some() {
+        for (k, x) in fd_keys.iter().zip([data.dqdd_dq(), data.dqdd_dv(), data.minv()]) {
+            o.insert((*k).into(), mat_json(x));
+        }
+    }
     if order >= 2 {
-        let o = out.as_object_mut().expect("object");
         let mut so = SoData::new(model);
         id_so_derivatives(model, &mut data, &mut so, &s.q, &s.v, &s.a, None)?;
         o.insert("d2tau_dq2".into(), tensor_json(so.d2tau_dq2()));
@@ -310,26 +346,36 @@ pub fn eval_json(model: &Model, s: &State, order: u32) -> Result<Value> {
         o.insert("d2tau_dqdv".into(), tensor_json(so.d2tau_dqdv()));
         o.insert("dM_dq".into(), tensor_json(so.dm_dq()));
         let mut f = FdSoData::new(model);
-        fd_so_derivatives(model, &mut data, &mut f, &s.q, &s.v, &s.tau, None)?;
-        o.insert("d2qdd_dq2".into(), tensor_json(f.d2qdd_dq2()));
-        o.insert("d2qdd_dv2".into(), tensor_json(f.d2qdd_dv2()));
-        o.insert("d2qdd_dqdv".into(), tensor_json(f.d2qdd_dqdv()));
-        o.insert("d2qdd_dtaudq".into(), tensor_json(f.d2qdd_dtaudq()));
+        let keys = ["d2qdd_dq2", "d2qdd_dv2", "d2qdd_dqdv", "d2qdd_dtaudq"];
+        let r = fd_so_derivatives(model, &mut data, &mut f, &s.q, &s.v, &s.tau, None);
+        if defined(r, &keys, &mut errors)?.is_some() {
+            let t = [f.d2qdd_dq2(), f.d2qdd_dv2(), f.d2qdd_dqdv(), f.d2qdd_dtaudq()];
+            for (k, x) in keys.iter().zip(t) {
+                o.insert((*k).into(), tensor_json(x));
+            }
+        }
     }
     if !s.contacts.is_empty() {
-        let o = out.as_object_mut().expect("object");
-        contact_outputs(model, s, order, &mut data, o)?;
+        contact_outputs(model, s, order, &mut data, o, &mut errors)?;
     }
     if s.weights.any() {
-        let c = contracted_outputs(model, s, &mut data)?;
-        out.as_object_mut().expect("object").insert("contracted".into(), c);
+        let c = contracted_outputs(model, s, &mut data, &mut errors)?;
+        o.insert("contracted".into(), c);
+    }
+    if !errors.is_empty() {
+        o.insert("errors".into(), Value::Object(errors));
     }
     Ok(out)
 }
 
 /// The `"contracted"` object: for each weight given, the dense second-order keys of its
 /// object, each an nv×nv matrix `C[j][k] = Σ_i w_i T[i][j][k]`.
-fn contracted_outputs(model: &Model, s: &State, data: &mut Data) -> Result<Value> {
+fn contracted_outputs(
+    model: &Model,
+    s: &State,
+    data: &mut Data,
+    errors: &mut Map<String, Value>,
+) -> Result<Value> {
     let w = &s.weights;
     let mut out = Map::new();
     let mut con = ContractedData::new(model);
@@ -345,8 +391,14 @@ fn contracted_outputs(model: &Model, s: &State, data: &mut Data) -> Result<Value
             }),
         );
     }
-    if let Some(wq) = &w.qdd {
-        fd_so_contracted(model, data, &mut con, &s.q, &s.v, &s.tau, wq)?;
+    if let Some(wq) = &w.qdd
+        && defined(
+            fd_so_contracted(model, data, &mut con, &s.q, &s.v, &s.tau, wq),
+            &["contracted.fd"],
+            errors,
+        )?
+        .is_some()
+    {
         out.insert(
             "fd".into(),
             json!({
@@ -362,6 +414,7 @@ fn contracted_outputs(model: &Model, s: &State, data: &mut Data) -> Result<Value
         let mut kd = KktData::new(model, ContactData::new(model, &s.contacts)?);
         let mut kc = KktContracted::new(model, &kd);
         let mut o = Map::new();
+        let mut ok = true;
         for (weight, prefix) in [(&w.kkt_qdd, "d2qdd"), (&w.kkt_lambda, "d2lambda")] {
             let Some(x) = weight else { continue };
             let (wq, wl) = if prefix == "d2qdd" {
@@ -369,19 +422,26 @@ fn contracted_outputs(model: &Model, s: &State, data: &mut Data) -> Result<Value
             } else {
                 (DVector::zeros(nv), x.clone())
             };
-            kkt_so_contracted(model, data, &mut kd, &mut kc, &s.q, &s.v, &s.tau, &wq, &wl)?;
+            let r = kkt_so_contracted(model, data, &mut kd, &mut kc, &s.q, &s.v, &s.tau, &wq, &wl);
+            if defined(r, &["contracted.kkt"], errors)?.is_none() {
+                ok = false;
+                break;
+            }
             o.insert(format!("{prefix}_dq2"), mat_json(kc.c_qq()));
             o.insert(format!("{prefix}_dv2"), mat_json(kc.c_vv()));
             o.insert(format!("{prefix}_dqdv"), mat_json(kc.c_qv()));
             o.insert(format!("{prefix}_dtaudq"), mat_json(kc.c_tauq()));
         }
-        out.insert("kkt".into(), Value::Object(o));
+        if ok {
+            out.insert("kkt".into(), Value::Object(o));
+        }
     }
     if w.impact_vplus.is_some() || w.impact_impulse.is_some() {
         let mut im = ImpactData::new(model, ContactData::new(model, &s.contacts)?);
         im.set_restitution(s.restitution)?;
         let mut ic = ImpactContracted::new(model, &im);
         let mut o = Map::new();
+        let mut ok = true;
         for (weight, prefix) in [(&w.impact_vplus, "d2vplus"), (&w.impact_impulse, "d2impulse")] {
             let Some(x) = weight else { continue };
             let (wv, wl) = if prefix == "d2vplus" {
@@ -389,22 +449,30 @@ fn contracted_outputs(model: &Model, s: &State, data: &mut Data) -> Result<Value
             } else {
                 (DVector::zeros(nv), x.clone())
             };
-            impact_so_contracted(model, data, &mut im, &mut ic, &s.q, &s.v, &wv, &wl)?;
+            let r = impact_so_contracted(model, data, &mut im, &mut ic, &s.q, &s.v, &wv, &wl);
+            if defined(r, &["contracted.impact"], errors)?.is_none() {
+                ok = false;
+                break;
+            }
             o.insert(format!("{prefix}_dq2"), mat_json(ic.c_qq()));
             o.insert(format!("{prefix}_dqdvminus"), mat_json(ic.c_qvminus()));
         }
-        out.insert("impact".into(), Value::Object(o));
+        if ok {
+            out.insert("impact".into(), Value::Object(o));
+        }
     }
     Ok(Value::Object(out))
 }
 
-/// The `constrained_id`, `kkt` and `impact` objects.
+/// The `constrained_id`, `kkt` and `impact` objects (`kkt` and `impact` need `M⁻¹`: when it is
+/// undefined, their reasons go to `errors`).
 fn contact_outputs(
     model: &Model,
     s: &State,
     order: u32,
     data: &mut Data,
     o: &mut Map<String, Value>,
+    errors: &mut Map<String, Value>,
 ) -> Result<()> {
     let mut cd = ContactData::new(model, &s.contacts)?;
     let mut so = SoData::new(model);
@@ -419,12 +487,31 @@ fn contact_outputs(
         }),
     );
     let mut kd = KktData::new(model, cd.clone());
-    if order >= 2 {
+    let r = if order >= 2 {
         kd = kd.with_second_order(model);
-        kkt_so_derivatives(model, data, &mut kd, &s.q, &s.v, &s.tau)?;
+        kkt_so_derivatives(model, data, &mut kd, &s.q, &s.v, &s.tau)
     } else {
-        kkt_derivatives(model, data, &mut kd, &s.q, &s.v, &s.tau)?;
+        kkt_derivatives(model, data, &mut kd, &s.q, &s.v, &s.tau)
+    };
+    if defined(r, &["kkt"], errors)?.is_some() {
+        o.insert("kkt".into(), kkt_json(&kd));
     }
+    let mut im = ImpactData::new(model, cd);
+    im.set_restitution(s.restitution)?;
+    let r = if order >= 2 {
+        im = im.with_second_order(model);
+        impact_so_derivatives(model, data, &mut im, &s.q, &s.v)
+    } else {
+        impact_derivatives(model, data, &mut im, &s.q, &s.v)
+    };
+    if defined(r, &["impact"], errors)?.is_some() {
+        o.insert("impact".into(), impact_json(&im));
+    }
+    Ok(())
+}
+
+/// The `kkt` object of computed KKT derivatives.
+fn kkt_json(kd: &KktData) -> Value {
     let mut k = json!({
         "qdd": kd.qdd().as_slice(),
         "lambda": kd.lambda().as_slice(),
@@ -450,15 +537,11 @@ fn contact_outputs(
             ko.insert(name.into(), tensor_json(x));
         }
     }
-    o.insert("kkt".into(), k);
-    let mut im = ImpactData::new(model, cd);
-    im.set_restitution(s.restitution)?;
-    if order >= 2 {
-        im = im.with_second_order(model);
-        impact_so_derivatives(model, data, &mut im, &s.q, &s.v)?;
-    } else {
-        impact_derivatives(model, data, &mut im, &s.q, &s.v)?;
-    }
+    k
+}
+
+/// The `impact` object of computed impact derivatives.
+fn impact_json(im: &ImpactData) -> Value {
     let mut i = json!({
         "vplus": im.vplus().as_slice(),
         "impulse": im.impulse().as_slice(),
@@ -478,6 +561,5 @@ fn contact_outputs(
             io.insert(name.into(), tensor_json(x));
         }
     }
-    o.insert("impact".into(), i);
-    Ok(())
+    i
 }

@@ -4,7 +4,8 @@
 //! (clap), the JSON state files and `eval` output ([`eval`]), the timings of `demo` and `bench`.
 //! Exit status: 0 on success, 1 on an error found while running (the message, prefixed with
 //! `sodyn: error:`, on standard error), 2 on a usage error reported by clap (unknown option,
-//! missing or malformed value).
+//! missing or malformed value), 3 when `eval` wrote partial results (outputs undefined at the
+//! state, e.g. a singular mass matrix, left out and named in the output's `"errors"` object).
 
 mod bench;
 mod demo;
@@ -21,7 +22,8 @@ use std::process::ExitCode;
 const AFTER_HELP: &str = "\
 M is a URDF path or builtin:NAME (humanoid, quadruped, chain<N>, pendulum<N>,
 random_tree<N>[_ff][_s<SEED>]). Exit status: 0 on success, 1 on an error (the message on
-standard error), 2 on a usage error. README.md has the JSON schemas.";
+standard error), 2 on a usage error, 3 when eval left out undefined outputs (its \"errors\"
+object names them). README.md has the JSON schemas.";
 
 /// sodyn: rigid-body dynamics and its exact first- and second-order derivatives
 #[derive(Debug, Parser)]
@@ -114,7 +116,8 @@ fn main() -> ExitCode {
     // Usage errors, `--help` and `--version` exit here (status 2, 0, 0).
     let cli = Cli::parse();
     match run(cli) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(Outcome::Done) => ExitCode::SUCCESS,
+        Ok(Outcome::Partial) => ExitCode::from(PARTIAL_EXIT),
         Err(e) => {
             eprintln!("sodyn: error: {e}");
             ExitCode::from(1)
@@ -122,10 +125,22 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(cli: Cli) -> Result<()> {
+/// Exit status of `eval` when it wrote partial results.
+const PARTIAL_EXIT: u8 = 3;
+
+/// How a command that did not fail ended.
+enum Outcome {
+    /// Every output written.
+    Done,
+    /// `eval` wrote the outputs that are defined and an `"errors"` object for the others.
+    Partial,
+}
+
+fn run(cli: Cli) -> Result<Outcome> {
     let Some(command) = cli.command else {
         // No command: the help, as `sodyn --help` prints it.
-        return Cli::command().print_help().map_err(|e| Error::Io(e.to_string()));
+        Cli::command().print_help().map_err(|e| Error::Io(e.to_string()))?;
+        return Ok(Outcome::Done);
     };
     match command {
         Command::Demo(o) => demo::run_demo(&o.model, o.seed),
@@ -140,17 +155,34 @@ fn run(cli: Cli) -> Result<()> {
             let st = eval::State::random(&m, &mut rng);
             write_output(o.output.as_deref(), &eval::state_json(&st))
         }
-        Command::Eval(o) => {
-            let m = load_model(&o.model)?;
-            let path = &o.state;
-            let text =
-                std::fs::read_to_string(path).map_err(|e| Error::Io(format!("{path}: {e}")))?;
-            let base = (!o.model.model.starts_with("builtin:")).then_some(o.model.floating_base);
-            let st = eval::load_state(&m, &text, path, base)?;
-            let out = eval::eval_json(&m, &st, o.order)?;
-            write_output(o.output.as_deref(), &out)
-        }
+        Command::Eval(o) => return run_eval(&o),
         Command::Bench(o) => bench::run(&o),
+    }
+    .map(|()| Outcome::Done)
+}
+
+/// `sodyn eval`: the output object, written also when some outputs are undefined at the state
+/// (then `Outcome::Partial`, and a message on standard error listing them).
+fn run_eval(o: &EvalArgs) -> Result<Outcome> {
+    let m = load_model(&o.model)?;
+    let path = &o.state;
+    let text = std::fs::read_to_string(path).map_err(|e| Error::Io(format!("{path}: {e}")))?;
+    let base = (!o.model.model.starts_with("builtin:")).then_some(o.model.floating_base);
+    let st = eval::load_state(&m, &text, path, base)?;
+    let out = eval::eval_json(&m, &st, o.order)?;
+    write_output(o.output.as_deref(), &out)?;
+    match out.get("errors").and_then(Value::as_object) {
+        Some(errors) => {
+            let keys: Vec<&str> = errors.keys().map(String::as_str).collect();
+            eprintln!(
+                "sodyn: error: {} undefined at this state, left out of the output (its \"errors\" \
+                 object has the reasons): {}",
+                if keys.len() == 1 { "an output is" } else { "outputs are" },
+                keys.join(", ")
+            );
+            Ok(Outcome::Partial)
+        }
+        None => Ok(Outcome::Done),
     }
 }
 
