@@ -265,7 +265,7 @@ class PinMap:
                     perm[j.idx_v + c] = pj.idx_v + c
             self.pin_joint.append(k)
         assert sorted(perm) == list(range(nv)), "velocity permutation is not a bijection"
-        self.perm = np.array(perm)
+        self.perm = np.array(perm, dtype=int)
         self.inv = np.argsort(self.perm)
         # our joint index (1-based, in model.joints order) -> Pinocchio joint index
         assert len(used) == pmodel.njoints - 1
