@@ -321,6 +321,10 @@ impl Tensor3 {
     }
 }
 
+/// `t[(i, j, k)]`: element `(i, j, k)`.
+///
+/// # Panics
+/// If an index is out of bounds (`i ≥ n1`, `j ≥ n2` or `k ≥ n3`), as slice indexing does.
 impl Index<(usize, usize, usize)> for Tensor3 {
     type Output = f64;
     #[inline]
@@ -329,6 +333,10 @@ impl Index<(usize, usize, usize)> for Tensor3 {
     }
 }
 
+/// `t[(i, j, k)] = x`.
+///
+/// # Panics
+/// If an index is out of bounds, as for [`Index`].
 impl IndexMut<(usize, usize, usize)> for Tensor3 {
     #[inline]
     fn index_mut(&mut self, (i, j, k): (usize, usize, usize)) -> &mut f64 {

@@ -787,3 +787,14 @@ fn eval_writes_contracted_second_order_for_the_weights_given() {
         assert!(err.contains(needle), "{err}");
     }
 }
+
+/// `demo` on a model whose mass matrix is singular (`tests/data/massless_subtree.urdf`) stops at
+/// the first algorithm that needs `M⁻¹` with the library's error (exit 1), not a panic of its
+/// timing loop.
+#[test]
+fn demo_on_a_singular_mass_matrix_is_a_clean_error() {
+    let urdf = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/massless_subtree.urdf");
+    let o = sodyn(&["demo", "--model", urdf]);
+    let err = assert_clean_failure(&o, "demo on a singular model");
+    assert!(err.contains("mass matrix is singular") && err.contains("\"knuckle\""), "{err}");
+}

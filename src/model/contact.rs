@@ -65,6 +65,10 @@ impl Contact {
         self.kp != 0.0 || self.kd != 0.0
     }
     /// The joint whose body carries the contact, and the point in that joint's frame.
+    ///
+    /// # Panics
+    /// If [`Contact::frame`] is not a frame index of `model` (a contact made for another model;
+    /// [`crate::deriv::ContactData::new`] checks it and returns an error instead).
     pub fn body_point(&self, model: &Model) -> (usize, Vector3<f64>) {
         let f = &model.frames[self.frame];
         (f.joint, f.placement.act_point(&self.point))

@@ -77,6 +77,12 @@ impl JointType {
     /// # Panics
     /// If `c ≥ nv()`.
     pub fn subspace_column(&self, c: usize) -> Motion {
+        assert!(
+            c < self.nv(),
+            "subspace_column: column {c} of a {} joint (nv {})",
+            self.name(),
+            self.nv()
+        );
         let e = |i: usize| Vector3::from_fn(|r, _| if r == i { 1.0 } else { 0.0 });
         let z = Vector3::zeros();
         match *self {

@@ -688,7 +688,8 @@ impl ModelBuilder {
         Ok(())
     }
 
-    /// Marks joint `joint` as a URDF mimic of `of` (kept as an independent joint).
+    /// Marks joint `joint` as a URDF mimic of `of` (kept as an independent joint). An index
+    /// that is not a joint of the builder is ignored (no panic).
     pub fn set_mimic(&mut self, joint: usize, of: &str) {
         if joint < self.m.mimic.len() {
             self.m.mimic[joint] = Some(of.into());

@@ -300,6 +300,9 @@ fn tensor_rows(t: &Tensor3, from: usize, n: usize) -> Tensor3 {
 }
 
 /// `∂τ/∂q` (`nv × nv`, tangent) of [`constrained_rnea`], `λ` fixed in the world frame.
+///
+/// # Panics
+/// As [`constrained_rnea`].
 pub fn d_constrained_rnea_dq(
     model: &Model,
     q: &[f64],
@@ -316,6 +319,9 @@ pub fn d_constrained_rnea_dq(
 }
 
 /// `∂τ/∂v` (`nv × nv`) of [`constrained_rnea`] (equal to that of [`rnea`]).
+///
+/// # Panics
+/// As [`constrained_rnea`].
 pub fn d_constrained_rnea_dv(
     model: &Model,
     q: &[f64],
@@ -332,6 +338,9 @@ pub fn d_constrained_rnea_dv(
 
 /// `T[(i, j, k)] = ∂/∂q_k (∂τ_i/∂q_j)` of [`constrained_rnea`] at `(q ⊕ δ_k) ⊕ ε_j` (tangent,
 /// nested), `λ` fixed in the world frame.
+///
+/// # Panics
+/// As [`constrained_rnea`].
 pub fn d2_constrained_rnea_dq2(
     model: &Model,
     q: &[f64],

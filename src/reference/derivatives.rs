@@ -91,6 +91,9 @@ pub(crate) fn nested_q(model: &Model, q: &[f64], j: usize, k: usize) -> Vec<Hype
 // ---------------------------------------------------------------------------------------------
 
 /// `∂τ/∂q` (`nv × nv`, tangent) of [`rnea`] (no external forces).
+///
+/// # Panics
+/// If a slice length does not match the model (`q`: `nq`; `v`, `a`: `nv`).
 pub fn d_rnea_dq(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> DMatrix<f64> {
     let (v, a) = (lift::<Dual64>(v), lift::<Dual64>(a));
     jacobian(model.nv, model.nv, |j| {
@@ -100,12 +103,19 @@ pub fn d_rnea_dq(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> DMatrix<f64>
 }
 
 /// `∂τ/∂v` (`nv × nv`) of [`rnea`].
+///
+/// # Panics
+/// If a slice length does not match the model (`q`: `nq`; `v`, `a`: `nv`).
 pub fn d_rnea_dv(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> DMatrix<f64> {
     let (qd, a) = (lift::<Dual64>(q), lift::<Dual64>(a));
     jacobian(model.nv, model.nv, |j| rnea(model, &qd, &seeded(v, j, eps()), &a, None))
 }
 
 /// `∂q̈/∂q` (`nv × nv`, tangent) of forward dynamics [`aba`].
+///
+/// # Panics
+/// If a slice length does not match the model (`q`: `nq`; `v`, `tau`: `nv`), or `M(q)`
+/// is exactly singular (see [`super::dynamics::solve`]).
 pub fn d_aba_dq(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64> {
     let (v, tau) = (lift::<Dual64>(v), lift::<Dual64>(tau));
     jacobian(model.nv, model.nv, |j| {
@@ -115,12 +125,20 @@ pub fn d_aba_dq(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64
 }
 
 /// `∂q̈/∂v` (`nv × nv`) of [`aba`].
+///
+/// # Panics
+/// If a slice length does not match the model (`q`: `nq`; `v`, `tau`: `nv`), or `M(q)`
+/// is exactly singular (see [`super::dynamics::solve`]).
 pub fn d_aba_dv(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64> {
     let (qd, tau) = (lift::<Dual64>(q), lift::<Dual64>(tau));
     jacobian(model.nv, model.nv, |j| aba(model, &qd, &seeded(v, j, eps()), &tau, None))
 }
 
 /// `∂q̈/∂τ = M⁻¹` (`nv × nv`) of [`aba`] (independent of `v`, computed through the same path).
+///
+/// # Panics
+/// If a slice length does not match the model (`q`: `nq`; `v`, `tau`: `nv`), or `M(q)`
+/// is exactly singular (see [`super::dynamics::solve`]).
 pub fn d_aba_dtau(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64> {
     let (qd, v) = (lift::<Dual64>(q), lift::<Dual64>(v));
     jacobian(model.nv, model.nv, |j| aba(model, &qd, &v, &seeded(tau, j, eps()), None))
@@ -156,6 +174,9 @@ pub fn d_point_position_dq(
 
 /// `T[(i, j, k)] = ∂/∂q_k (∂τ_i/∂q_j)` of [`rnea`] at `(q ⊕ δ_k) ⊕ ε_j` (tangent, nested; not
 /// symmetric in `(j, k)` in general).
+///
+/// # Panics
+/// If a slice length does not match the model (`q`: `nq`; `v`, `a`: `nv`).
 pub fn d2_rnea_dq2(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
     let n = model.nv;
     let (v, a) = (lift::<HyperDual64>(v), lift::<HyperDual64>(a));
@@ -163,6 +184,9 @@ pub fn d2_rnea_dq2(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
 }
 
 /// `T[(i, j, k)] = ∂²τ_i/∂v_j∂v_k` of [`rnea`] (symmetric in `(j, k)`).
+///
+/// # Panics
+/// If a slice length does not match the model (`q`: `nq`; `v`, `a`: `nv`).
 pub fn d2_rnea_dv2(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
     let n = model.nv;
     let (qh, a) = (lift::<HyperDual64>(q), lift::<HyperDual64>(a));
@@ -174,6 +198,9 @@ pub fn d2_rnea_dv2(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
 }
 
 /// `T[(i, j, k)] = ∂/∂v_k (∂τ_i/∂q_j)` of [`rnea`] (tangent in `q`).
+///
+/// # Panics
+/// If a slice length does not match the model (`q`: `nq`; `v`, `a`: `nv`).
 pub fn d2_rnea_dqdv(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
     let n = model.nv;
     let a = lift::<HyperDual64>(a);
@@ -184,6 +211,9 @@ pub fn d2_rnea_dqdv(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
 }
 
 /// `T[(i, j, k)] = ∂M_ij/∂q_k` (tangent in `q`) of [`mass_matrix`]; also `∂/∂q_k (∂τ_i/∂a_j)`.
+///
+/// # Panics
+/// If `q.len() != nq`.
 #[allow(non_snake_case)]
 pub fn dM_dq(model: &Model, q: &[f64]) -> Tensor3 {
     let n = model.nv;
@@ -201,6 +231,10 @@ pub fn dM_dq(model: &Model, q: &[f64]) -> Tensor3 {
 }
 
 /// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂q_j)` of [`aba`] at `(q ⊕ δ_k) ⊕ ε_j` (tangent, nested).
+///
+/// # Panics
+/// If a slice length does not match the model (`q`: `nq`; `v`, `tau`: `nv`), or `M(q)`
+/// is exactly singular (see [`super::dynamics::solve`]).
 pub fn d2_aba_dq2(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
     let n = model.nv;
     let (v, tau) = (lift::<HyperDual64>(v), lift::<HyperDual64>(tau));
@@ -208,6 +242,10 @@ pub fn d2_aba_dq2(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
 }
 
 /// `T[(i, j, k)] = ∂²q̈_i/∂v_j∂v_k` of [`aba`] (symmetric in `(j, k)`).
+///
+/// # Panics
+/// If a slice length does not match the model (`q`: `nq`; `v`, `tau`: `nv`), or `M(q)`
+/// is exactly singular (see [`super::dynamics::solve`]).
 pub fn d2_aba_dv2(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
     let n = model.nv;
     let (qh, tau) = (lift::<HyperDual64>(q), lift::<HyperDual64>(tau));
@@ -219,6 +257,10 @@ pub fn d2_aba_dv2(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
 }
 
 /// `T[(i, j, k)] = ∂/∂v_k (∂q̈_i/∂q_j)` of [`aba`] (tangent in `q`).
+///
+/// # Panics
+/// If a slice length does not match the model (`q`: `nq`; `v`, `tau`: `nv`), or `M(q)`
+/// is exactly singular (see [`super::dynamics::solve`]).
 pub fn d2_aba_dqdv(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
     let n = model.nv;
     let tau = lift::<HyperDual64>(tau);
@@ -229,6 +271,10 @@ pub fn d2_aba_dqdv(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 
 }
 
 /// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂τ_j)` = `∂(M⁻¹)_ij/∂q_k` (tangent in `q`) of [`aba`].
+///
+/// # Panics
+/// If a slice length does not match the model (`q`: `nq`; `v`, `tau`: `nv`), or `M(q)`
+/// is exactly singular (see [`super::dynamics::solve`]).
 pub fn d2_aba_dtaudq(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
     let n = model.nv;
     let v = lift::<HyperDual64>(v);
@@ -256,6 +302,9 @@ fn contracted(
 /// `C_qq[(j, k)] = ∂/∂q_k (∂(wᵀτ)/∂q_j)` (nested tangent perturbations as in
 /// [`d2_rnea_dq2`]), `C_vv[(j, k)] = ∂²(wᵀτ)/∂v_j∂v_k`, `C_qv[(j, k)] = ∂/∂v_k (∂(wᵀτ)/∂q_j)`;
 /// and `C_Mq[(j, k)] = ∂(M w)_j/∂q_k` of [`mass_matrix`] as a fourth entry.
+///
+/// # Panics
+/// If a slice length does not match the model (`q`: `nq`; `v`, `a`: `nv`).
 pub fn contracted_rnea_hessians(
     model: &Model,
     w: &[f64],
@@ -286,6 +335,10 @@ pub fn contracted_rnea_hessians(
 
 /// The Hessians of `wᵀq̈(q, v, τ)` of [`aba`], `[C_qq, C_vv, C_qv, C_τq]` with
 /// `C_τq[(j, k)] = ∂/∂q_k (∂(wᵀq̈)/∂τ_j)`; layouts as in [`contracted_rnea_hessians`].
+///
+/// # Panics
+/// If a slice length does not match the model (`q`: `nq`; `v`, `tau`: `nv`), or `M(q)`
+/// is exactly singular (see [`super::dynamics::solve`]).
 pub fn contracted_aba_hessians(
     model: &Model,
     w: &[f64],

@@ -110,6 +110,9 @@ fn newton_euler<T: AdScalar>(
 
 /// Joint-space mass matrix `M(q)` (`nv × nv`, rows of a `Vec`), column `j` being the RNEA with
 /// zero velocity, zero gravity and the unit acceleration `e_j`.
+///
+/// # Panics
+/// If `q.len() != nq`.
 pub fn mass_matrix<T: AdScalar>(model: &Model, q: &[T]) -> Vec<Vec<T>> {
     let nv = model.nv;
     let xs = parent_poses(model, q);
@@ -128,6 +131,9 @@ pub fn mass_matrix<T: AdScalar>(model: &Model, q: &[T]) -> Vec<Vec<T>> {
 
 /// Nonlinear effects `b(q, v) = C(q, v) v + g(q)` = RNEA with zero acceleration (no external
 /// forces).
+///
+/// # Panics
+/// If the slice lengths do not match the model (as [`rnea`]).
 pub fn nle<T: AdScalar>(model: &Model, q: &[T], v: &[T]) -> Vec<T> {
     let zero = vec![T::zero(); model.nv];
     rnea(model, q, v, &zero, None)
@@ -135,6 +141,10 @@ pub fn nle<T: AdScalar>(model: &Model, q: &[T], v: &[T]) -> Vec<T> {
 
 /// Forward dynamics `q̈ = M(q)⁻¹ (τ − b(q, v, fext))`, where `b` is [`rnea`] with zero
 /// acceleration (including the external forces, same convention), solved by [`solve`].
+///
+/// # Panics
+/// If the slice lengths do not match the model (as [`rnea`]), or `M(q)` is exactly singular
+/// (as [`solve`]).
 pub fn aba<T: AdScalar>(
     model: &Model,
     q: &[T],

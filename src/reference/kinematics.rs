@@ -93,7 +93,10 @@ pub fn quat_mul<T: AdScalar>(a: &[T; 4], b: &[T; 4]) -> [T; 4] {
     [v[0].clone(), v[1].clone(), v[2].clone(), w]
 }
 
-/// `q / ‖q‖` for a quaternion `[x y z w]`.
+/// `q / ‖q‖` for a quaternion `[x y z w]` (the first four entries of `q`).
+///
+/// # Panics
+/// If `q` has fewer than four entries.
 pub fn quat_normalize<T: AdScalar>(q: &[T]) -> [T; 4] {
     let n =
         (q[0].clone() * &q[0] + q[1].clone() * &q[1] + q[2].clone() * &q[2] + q[3].clone() * &q[3])
@@ -141,6 +144,9 @@ pub fn se3_translation<T: AdScalar>(w: &Vector3<T>, v: &Vector3<T>) -> Vector3<T
 
 /// Joint transform `X_J(q)`: pose of the joint's child frame in its joint frame. `q` has the
 /// joint's `nq` entries.
+///
+/// # Panics
+/// If `q` is shorter than the joint's `nq`, as slice indexing does.
 pub fn joint_transform<T: AdScalar>(joint: &JointType, q: &[T]) -> Pose<T> {
     match *joint {
         JointType::Revolute { axis } | JointType::Continuous { axis } => {
@@ -176,7 +182,15 @@ pub fn joint_transform<T: AdScalar>(joint: &JointType, q: &[T]) -> Pose<T> {
 }
 
 /// Column `c` of the joint's motion subspace `S` in its child frame, as `([ω], [v])`.
+///
+/// # Panics
+/// If `c ≥ joint.nv()`.
 pub fn subspace_column(joint: &JointType, c: usize) -> ([f64; 3], [f64; 3]) {
+    assert!(
+        c < joint.nv(),
+        "reference::subspace_column: column {c} of a joint with nv {}",
+        joint.nv()
+    );
     let e = |i: usize| {
         let mut x = [0.0; 3];
         x[i] = 1.0;
@@ -205,6 +219,9 @@ pub fn subspace_column(joint: &JointType, c: usize) -> ([f64; 3], [f64; 3]) {
 }
 
 /// `S x` for a joint-velocity-sized `x` (length `nv` of the joint), in the child frame.
+///
+/// # Panics
+/// If `x` is longer than the joint's `nv` ([`subspace_column`]).
 pub fn subspace_mul<T: AdScalar>(joint: &JointType, x: &[T]) -> Sv<T> {
     let mut out = Sv::zero();
     for (c, xc) in x.iter().enumerate() {
@@ -236,6 +253,9 @@ pub fn subspace_tr_mul<T: AdScalar>(joint: &JointType, f: &Sv<T>) -> Vec<T> {
 }
 
 /// `q ⊕ δ` for one joint (`q`: its `nq` coordinates, `delta`: its `nv`).
+///
+/// # Panics
+/// If `q` or `delta` is shorter than stated, as slice indexing does.
 pub fn integrate_joint<T: AdScalar>(joint: &JointType, q: &[T], delta: &[T]) -> Vec<T> {
     match *joint {
         JointType::Revolute { .. } | JointType::Continuous { .. } | JointType::Prismatic { .. } => {
@@ -297,6 +317,9 @@ pub fn integrate<T: AdScalar>(model: &Model, q: &[T], delta: &[T]) -> Vec<T> {
 
 /// Pose of each joint's child frame relative to its parent's child frame,
 /// `ᵖM_i = placement_i · X_J(q_i)` (index 0: identity).
+///
+/// # Panics
+/// If `q.len() != nq`.
 pub fn parent_poses<T: AdScalar>(model: &Model, q: &[T]) -> Vec<Pose<T>> {
     assert_eq!(q.len(), model.nq, "reference: q has the wrong length");
     let mut out = vec![Pose::identity()];
@@ -309,6 +332,9 @@ pub fn parent_poses<T: AdScalar>(model: &Model, q: &[T]) -> Vec<Pose<T>> {
 }
 
 /// World pose `⁰M_i` of every joint's child frame (index 0: the world, identity).
+///
+/// # Panics
+/// If `q.len() != nq`.
 pub fn forward_kinematics<T: AdScalar>(model: &Model, q: &[T]) -> Vec<Pose<T>> {
     let local = parent_poses(model, q);
     let mut world: Vec<Pose<T>> = Vec::with_capacity(local.len());

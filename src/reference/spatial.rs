@@ -77,6 +77,9 @@ impl<T: AdScalar> Sv<T> {
         ]
     }
     /// Component `k` of `[ang; lin]`.
+    ///
+    /// # Panics
+    /// If `k ≥ 6`.
     pub fn get(&self, k: usize) -> T {
         if k < 3 { self.ang[k].clone() } else { self.lin[k - 3].clone() }
     }

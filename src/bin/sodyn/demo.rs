@@ -13,22 +13,22 @@ use sodyn::rng::Rng;
 use sodyn::tensor::Tensor3;
 use std::time::Instant;
 
-/// Median wall time of `f` in microseconds over enough repetitions (about 0.2 s, at most 2000).
-fn time_us(mut f: impl FnMut()) -> f64 {
-    f();
+/// Median wall time of `f` in microseconds over enough repetitions (about 0.2 s, at most 2000);
+/// the first error of `f` (e.g. a singular mass matrix of a URDF) is returned, not a panic.
+fn time_us(mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+    f()?;
     let t0 = Instant::now();
-    f();
+    f()?;
     let once = t0.elapsed().as_secs_f64().max(1e-9);
     let reps = ((0.2 / once) as usize).clamp(3, 2000);
-    let mut samples: Vec<f64> = (0..reps)
-        .map(|_| {
-            let t = Instant::now();
-            f();
-            t.elapsed().as_secs_f64() * 1e6
-        })
-        .collect();
+    let mut samples = Vec::with_capacity(reps);
+    for _ in 0..reps {
+        let t = Instant::now();
+        f()?;
+        samples.push(t.elapsed().as_secs_f64() * 1e6);
+    }
     samples.sort_by(|a, b| a.total_cmp(b));
-    samples[reps / 2]
+    Ok(samples[reps / 2])
 }
 
 fn rel(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
@@ -74,8 +74,9 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
     };
 
     let t = time_us(|| {
-        rnea(&m, &mut d, &q, &v, &a, None).unwrap();
-    });
+        rnea(&m, &mut d, &q, &v, &a, None)?;
+        Ok(())
+    })?;
     let tau_id = rnea(&m, &mut d, &q, &v, &a, None)?.clone();
     row(
         "rnea (inverse dynamics)",
@@ -84,23 +85,26 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
     );
 
     let t = time_us(|| {
-        crba(&m, &mut d, &q).unwrap();
-    });
+        crba(&m, &mut d, &q)?;
+        Ok(())
+    })?;
     let mm = crba(&m, &mut d, &q)?.clone();
     let mref = reference::mass_matrix::<f64>(&m, qs);
     row("crba (mass matrix)", t, rel(&mm, &DMatrix::from_fn(m.nv(), m.nv(), |i, j| mref[i][j])));
 
     let t = time_us(|| {
-        aba(&m, &mut d, &q, &v, &tau, None).unwrap();
-    });
+        aba(&m, &mut d, &q, &v, &tau, None)?;
+        Ok(())
+    })?;
     let qdd = aba(&m, &mut d, &q, &v, &tau, None)?.clone();
     let qdd_ref = reference::aba::<f64>(&m, qs, vs, ts, None);
     row("aba (forward dynamics)", t, rel_v(&qdd, &qdd_ref));
 
     crba(&m, &mut d, &q)?;
     let t = time_us(|| {
-        factorize_ltl(&m, &mut d).unwrap();
-    });
+        factorize_ltl(&m, &mut d)?;
+        Ok(())
+    })?;
     let b = reference::nle::<f64>(&m, qs, vs);
     let mut x = &tau - DVector::from_vec(b);
     solve_ltl(&m, &d, &mut x)?;
@@ -110,8 +114,9 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
     let mut jac = Matrix3xX::zeros(m.nv());
     let point = Vector3::new(0.05, -0.02, 0.1);
     let t = time_us(|| {
-        point_jacobian(&m, &mut d, &q, frame, &point, &mut jac).unwrap();
-    });
+        point_jacobian(&m, &mut d, &q, frame, &point, &mut jac)?;
+        Ok(())
+    })?;
     let jref = reference::d_point_position_dq(&m, qs, frame, &[point.x, point.y, point.z]);
     row(
         &format!("point Jacobian ({})", m.frames()[frame].name),
@@ -120,23 +125,26 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
     );
 
     let t = time_us(|| {
-        id_derivatives(&m, &mut d, &q, &v, &a, None).unwrap();
-    });
+        id_derivatives(&m, &mut d, &q, &v, &a, None)?;
+        Ok(())
+    })?;
     id_derivatives(&m, &mut d, &q, &v, &a, None)?;
     row("id_fo (IDSVA) dtau/dq", t, rel(d.dtau_dq(), &reference::d_rnea_dq(&m, qs, vs, as_)));
     row("      dtau/dv", t, rel(d.dtau_dv(), &reference::d_rnea_dv(&m, qs, vs, as_)));
 
     let t = time_us(|| {
-        fd_derivatives(&m, &mut d, &q, &v, &tau, None).unwrap();
-    });
+        fd_derivatives(&m, &mut d, &q, &v, &tau, None)?;
+        Ok(())
+    })?;
     fd_derivatives(&m, &mut d, &q, &v, &tau, None)?;
     row("fd_fo dqdd/dq", t, rel(d.dqdd_dq(), &reference::d_aba_dq(&m, qs, vs, ts)));
     row("      dqdd/dv", t, rel(d.dqdd_dv(), &reference::d_aba_dv(&m, qs, vs, ts)));
     row("      dqdd/dtau = M⁻¹", t, rel(d.minv(), &reference::d_aba_dtau(&m, qs, vs, ts)));
 
     let t = time_us(|| {
-        id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None).unwrap();
-    });
+        id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None)?;
+        Ok(())
+    })?;
     id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None)?;
     row(
         "id_so (IDSVA-SO) d2tau/dq2",
@@ -148,8 +156,9 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
     row("      dM/dq", t, rel_t(so.dm_dq(), &reference::dM_dq(&m, qs)));
 
     let t = time_us(|| {
-        fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &tau, None).unwrap();
-    });
+        fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &tau, None)?;
+        Ok(())
+    })?;
     fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &tau, None)?;
     let big = m.nv() > 40;
     if big {
@@ -189,8 +198,9 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
         let lam = DVector::from_fn(cd.dim(), |i, _| if i % 3 == 2 { 50.0 } else { 5.0 });
         let mut cd1 = cd.clone();
         let t = time_us(|| {
-            constrained_id_so_derivatives(&m, &mut d, &mut cd1, &mut so, &q, &v, &a, &lam).unwrap();
-        });
+            constrained_id_so_derivatives(&m, &mut d, &mut cd1, &mut so, &q, &v, &a, &lam)?;
+            Ok(())
+        })?;
         constrained_id_so_derivatives(&m, &mut d, &mut cd1, &mut so, &q, &v, &a, &lam)?;
         let ls = lam.as_slice();
         row(
@@ -205,8 +215,9 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
         );
         let mut kd = KktData::new(&m, cd.clone()).with_second_order(&m);
         let t = time_us(|| {
-            kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
-        });
+            kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau)?;
+            Ok(())
+        })?;
         kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau)?;
         let fo = oracle::kkt_fo(&m, qs, vs, ts, &contacts);
         row("kkt FO+SO dqdd/dq", t, rel(kd.dqdd_dq(), &fo.dqdd_dq));
@@ -224,8 +235,9 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
         }
         let mut im = ImpactData::new(&m, cd).with_second_order(&m);
         let t = time_us(|| {
-            impact_so_derivatives(&m, &mut d, &mut im, &q, &v).unwrap();
-        });
+            impact_so_derivatives(&m, &mut d, &mut im, &q, &v)?;
+            Ok(())
+        })?;
         impact_so_derivatives(&m, &mut d, &mut im, &q, &v)?;
         let fo = oracle::impact_fo(&m, qs, vs, &contacts, 0.0);
         row("impact FO+SO dvplus/dq", t, rel(im.dvplus_dq(), &fo.dvplus_dq));
