@@ -3,11 +3,13 @@
 pub mod builtin;
 mod contact;
 pub mod joint;
+pub mod lie;
 pub mod tree;
 pub mod urdf;
 
 pub use contact::Contact;
 pub use joint::JointType;
+pub use lie::{Arg, exp6, jlog6, log6};
 pub(crate) use tree::JointKin;
 pub use tree::{Frame, Model, ModelBuilder, check_vec};
 pub use urdf::{MAX_URDF_DOFS, ROOT_JOINT_NAME, UrdfOptions, load_urdf_file, load_urdf_str};
