@@ -1,4 +1,26 @@
-//! Articulated-body algorithm (forward dynamics), body frames.
+//! Articulated-body algorithm (forward dynamics), body (joint child) frames.
+//!
+//! Inputs: model, state `(q, q̇, τ)`, optional external forces `fext_i` (body frames, as in
+//! [`super::rnea()`]). Outputs: `q̈ = M⁻¹(τ − b + Σ Jᵢᵀ fextᵢ)` (`data.qdd`); also left in
+//! `data`: the placements `li_m_i`, `o_m_i`, body velocities `v`, accelerations `a` (gravity
+//! included), the bias accelerations `c`, articulated inertias `ia` and bias forces `pa`, and
+//! per joint `U = I^A S` (`u_cols`), `u` and `D⁻¹` (`d_inv`).
+//!
+//! With `ⁱX_λ` the motion transform from the parent `λ = λ(i)` to body `i`, `S_i` the motion
+//! subspace of joint `i` (constant in its child frame) and `I_i` the body inertia:
+//! 1. placements `λM_i`, `⁰M_i`;
+//! 2. forward pass, `i = 1..N`: `v_i = ⁱX_λ v_λ + S_i q̇_i`, `c_i = v_i × S_i q̇_i`,
+//!    `I^A_i = I_i`, `p^A_i = v_i ×* I_i v_i − fext_i`;
+//! 3. backward pass, `i = N..1`: `U_i = I^A_i S_i`, `D_i = S_iᵀ U_i` (its pivots checked, see
+//!    [`aba`]: "Singular mass matrices"), `u_i = τ_i − S_iᵀ p^A_i`; if `λ ≠ 0`,
+//!    `I^a_i = I^A_i − U_i D_i⁻¹ U_iᵀ`, `p^a_i = p^A_i + I^a_i c_i + U_i D_i⁻¹ u_i`,
+//!    `I^A_λ += λX_i^* I^a_i ⁱX_λ`, `p^A_λ += λX_i^* p^a_i`;
+//! 4. the relative pivot test `min d_k ≤ 1e-14 · max d_k` over all joints;
+//! 5. forward pass, `i = 1..N`, from `a_0 = −a_g`: `a′_i = ⁱX_λ a_λ + c_i`,
+//!    `q̈_i = D_i⁻¹(u_i − U_iᵀ a′_i)`, `a_i = a′_i + S_i q̈_i`.
+//!
+//! For a multi-DoF joint `D_i⁻¹` comes from the `Lᵀ Δ L` factorisation of `D_i`; a one-DoF
+//! joint has a scalar `D_i`.
 
 use super::Data;
 use super::kinematics::{joint_motion, placements};

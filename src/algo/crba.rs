@@ -1,4 +1,25 @@
 //! Composite-rigid-body algorithm for the joint-space mass matrix, in the world frame.
+//!
+//! Inputs: model, configuration `q`. Outputs: `M(q)` (`data.m`, `nv × nv`, full symmetric;
+//! entries of DoFs on different branches are structural zeros, never written); also left in
+//! `data`: the placements `li_m_i`, and with the world-frame kernel `o_m_i`, the world subspaces
+//! `s_world` and the composite world inertias `ic_world` (the local-frame kernel leaves the
+//! composite body-frame inertias `ic_local` instead; see [`crba`] for which runs).
+//!
+//! World-frame kernel (`S_c`, `I_i` moved to the ground frame):
+//! 1. forward pass, `i = 1..N`: `λM_i = placement_i · X_J(q_i)`, `⁰M_i = ⁰M_λ λM_i`, the world
+//!    subspace `⁰S_c = ⁰X_i S_c` of each DoF `c` of joint `i` and the world body inertia
+//!    `⁰I_i = ⁰X_i^* I_i ⁱX_0`;
+//! 2. backward pass, `i = N..1`, with `I^C_i = Σ_{k ⪰ i} ⁰I_k` (children added before their
+//!    parent): for each DoF `c` of joint `i`, `F = I^C_i ⁰S_c`, `M_cc = ⁰S_cᵀ F` and
+//!    `M_rc = M_cr = ⁰S_rᵀ F` for the other DoFs `r` of joint `i` before `c` and the DoFs of
+//!    its ancestors (eq. M_eqn, `M_ji = S_jᵀ I^C_i S_i` for `j ⪯ i`); then
+//!    `I^C_λ += I^C_i` (a plain sum: one frame). With a root free flyer (identity subspace),
+//!    its six rows of column `c` come from one force transform of `F`.
+//!
+//! Local-frame kernel (up to four DoFs, AVX2/FMA): the same sums in the body frames,
+//! `I^C_λ += λX_i^* I^C_i ⁱX_λ`, and each column `F = I^C_i S_c` carried to the ancestors by
+//! `F ← λX_j^* F` before `M_ac = M_ca = S_aᵀ F`.
 
 use super::Data;
 use super::kinematics::{next_angles, root_free_flyer};

@@ -3,6 +3,24 @@
 //! The factor is kept in the **upper** triangle of a column-major `nv×nv` matrix: `L(k, i)`
 //! (`i` a strict ancestor DoF of `k`) is stored at `(i, k)`, `D(k)` at `(k, k)`, so each step
 //! walks one contiguous column.
+//!
+//! [`factorize_ltl`]: inputs `M` (`data.m`, from [`super::crba()`]); output the factor
+//! `M = Lᵀ D L` in `data.ltl` (`L` unit lower triangular with the sparsity of the tree:
+//! `L(k, i) ≠ 0` only for ancestor DoFs `i` of `k`). With `H = M` and `anc(k)` the strict
+//! ancestor DoFs of `k`, nearest first:
+//! 1. for `k = nv − 1` down to `0`: the pivot `d_k = H(k, k)` (not positive and finite: an
+//!    error); for each `i ∈ anc(k)`: `a = H(i, k) / d_k`, `H(i, i) −= a H(i, k)`,
+//!    `H(j, i) −= a H(j, k)` for the `j ∈ anc(i)` (the tail of `anc(k)` after `i`), then
+//!    `L(k, i) = a` (stored in place of `H(i, k)`);
+//! 2. the relative test `min_k d_k ≤ 1e-14 · max_k d_k` (see [`factorize_ltl`]).
+//!
+//! [`solve_ltl`] (`M x = b`, in place): inputs the factor and `b`; output `x`:
+//! 1. `Lᵀ y = b`: for `i = nv − 1` down to `0`, `y_j −= L(i, j) y_i` for `j ∈ anc(i)`;
+//! 2. `z = D⁻¹ y`;
+//! 3. `L x = z`: for `i = 0..nv`, `x_i = z_i − Σ_{j ∈ anc(i)} L(i, j) x_j`.
+//!
+//! Cost `O(nv d)` per solve, `O(nv d²)` for the factorisation (`d` the depth of the tree in
+//! DoFs). [`solve_ltl_matrix`] solves column by column.
 
 use super::Data;
 use crate::error::{Error, Result};
@@ -10,7 +28,7 @@ use crate::model::{Model, check_vec};
 use nalgebra::{DMatrix, DVector};
 use std::mem::MaybeUninit;
 
-/// Factorises `data.m` (from [`super::crba`]) as `M = Lᵀ D L` into `data.ltl`, exploiting the
+/// Factorises `data.m` (from [`super::crba()`]) as `M = Lᵀ D L` into `data.ltl`, exploiting the
 /// branch-induced sparsity: cost `O(n d²)` for a tree of depth `d`.
 ///
 /// # Singular mass matrices

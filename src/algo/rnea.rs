@@ -1,4 +1,21 @@
-//! Recursive Newton–Euler inverse dynamics.
+//! Recursive Newton–Euler inverse dynamics, body (joint child) frames.
+//!
+//! Inputs: model, state `(q, q̇, q̈)`, optional external forces `fext_i` (one per joint, in the
+//! body frame of joint `i`). Outputs: `τ` (`data.tau`, length `nv`); also left in `data`: the
+//! placements `li_m_i` (`λM_i`) and `o_m_i` (`⁰M_i`), the body velocities `v`, the body
+//! accelerations `a` (gravity included as the base acceleration) and the forces `f` (after the
+//! backward pass, the composite forces `f^C_i`). [`nonlinear_effects`] is the same with
+//! `q̈ = 0` and no `fext`, its `b(q, q̇)` copied to `data.nle`.
+//!
+//! With `ⁱX_λ` the motion transform from the parent `λ = λ(i)` to body `i`, `S_i` the motion
+//! subspace of joint `i` (constant in its child frame) and `I_i` the body inertia:
+//! 1. placements `λM_i = placement_i · X_J(q_i)`, `⁰M_i = ⁰M_λ λM_i`;
+//! 2. forward pass, `i = 1..N`, from `v_0 = 0`, `a_0 = −a_g` (gravity as a fictitious base
+//!    acceleration): `v_i = ⁱX_λ v_λ + S_i q̇_i`;
+//!    `a_i = ⁱX_λ a_λ + S_i q̈_i + v_i × S_i q̇_i`;
+//!    `f_i = I_i a_i + v_i ×* I_i v_i − fext_i` (eq. sp_eqn_of_motion, in the body frame);
+//! 3. backward pass, `i = N..1`: `τ_i = S_iᵀ f_i`, then `f_λ += λX_i^* f_i`, so that `f_i` is
+//!    the composite force `f^C_i = Σ_{k ⪰ i} f_k` when joint `i` is reached (`τ_i = S_iᵀ f^C_i`).
 
 use super::Data;
 use super::kinematics::{joint_motion, placements};

@@ -2,6 +2,38 @@
 //! Delassus factorisation and the block inverse of the KKT matrix
 //! `R = [[M, −J_cᵀ], [J_c, 0]]` (unknowns `(q̈, λ)` or `(q̇⁺, λ̂)`), and the product terms
 //! `G(z)` of the second-order implicit-function formulas.
+//!
+//! [`ContactData::new`]: inputs model, contacts `(frame, point)`. Outputs the workspace: per
+//! contact its path (the joints and DoFs from the root to its body), the point in that body's
+//! frame, and buffers sized for `nc` contacts; an error for more than [`MAX_CONTACTS`]
+//! contacts, a bad gain, an unknown frame or a contact on the world.
+//!
+//! KKT factorisation (used by the KKT and impact algorithms): inputs the `LᵀDL` factor of `M`
+//! (`data.ltl`), the contact points `p_c` and world subspaces `S_x`, the damping `μ ≥ 0`.
+//! Outputs `J_c`, `Y = M⁻¹J_cᵀ`, `Λ = (J_c M⁻¹ J_cᵀ + μI)⁻¹`, `Q = YΛ`, the dense `M⁻¹`
+//! (`data.minv`) and `P = M⁻¹ − YΛYᵀ`, i.e. `R⁻¹ = [[P, Q], [−Qᵀ, Λ]]` for
+//! `R = [[M, −J_cᵀ], [J_c, μI]]`:
+//! 1. `J_c`: rows `3c..3c + 3`, column `x` on contact `c`'s path, `u_x = S_x.lin + S_x.ang × p_c`
+//!    (the world-aligned velocity of the point for a unit `q̇_x`; zero off the path);
+//! 2. `Yᵀ = J_c M⁻¹` by one multi-right-hand-side tree-sparse `LᵀDL` solve;
+//! 3. the Delassus matrix `J_c Y + μI` and its SPD inverse `Λ` (a pivot below `1e-11` times its
+//!    largest diagonal entry: a rank-deficient contact set, an error naming the contacts);
+//! 4. `Qᵀ = ΛYᵀ`;
+//! 5. `M⁻¹ = L⁻¹ D⁻¹ L⁻ᵀ`, the rows of `L⁻¹` by `(L⁻¹)_i = e_i − Σ_{k ≺ i} L_ik (L⁻¹)_k`, then one
+//!    dense product; `P = M⁻¹ − Y Qᵀ`.
+//!
+//! `G(z)` (`(nv + 3 nc) × nv`, `z = (z₁, z₂)` of length `nv + 3 nc`): inputs the composite
+//! inertias and world subspaces of the current `q`, the contact paths and `J_c`. Output
+//! `G(z) = [∂(M z₁)/∂q − ∂(J_cᵀ z₂)/∂q; ∂(J_c z₁)/∂q]`:
+//! 1. rows `0..nv`: `∂(M z₁)/∂q` by IDFOZA ([`super::idfoza`]);
+//! 2. minus `∂(J_cᵀ z₂)/∂q`: with `w_x = S_x.ang` and `T_x = Σ_c u_x^c × z₂_c` (the contacts
+//!    whose path holds `x`), entry `w_a·T_d` at `(d, a)` and `(a, d)` for a DoF `a` of a strict
+//!    ancestor joint of DoF `d` (within one joint `w_a·T_d` at `(d, a)`, `w_d·T_a` at `(a, d)`),
+//!    from `∂u_x/∂q_l = w_l × u_x` when `l`'s joint is `x`'s or an ancestor (eq. J1 with
+//!    `∂p/∂q_l = u_l`) and `w_x × u_l` otherwise;
+//! 3. rows `nv + 3c..nv + 3c + 3`: `∂(Z_m.lin + Z_m.ang × p_c)/∂q_l` for the DoFs `l` on contact
+//!    `c`'s path (`m` its body), with `Z_j = Σ_{x ⪯ j} S_x z₁_x`,
+//!    `∂Z_m/∂q_l = S_l × (Z_m − Z_λ)` (`λ` the parent of `l`'s joint) and `∂p_c/∂q_l = u_l`.
 
 use super::contact_kin::{Base, Dir, Path, djz_dq};
 use super::zero::idfoza_core;

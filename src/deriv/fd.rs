@@ -1,5 +1,38 @@
 //! Forward-dynamics derivatives: first order (`∂q̈/∂u = −M⁻¹ ∂ID/∂u`, eq. jain_FO_eqn) and
 //! second order (eq. eqn_FD_SO_43), the latter with IDFOZA for the `∂M/∂q` products.
+//!
+//! [`fd_derivatives`]: inputs model, state `(q, q̇, τ)`, optional `fext` (body frames). Outputs
+//! `q̈` (`data.qdd`), `∂q̈/∂q` (`data.dqdd_dq`, tangent space), `∂q̈/∂q̇` (`data.dqdd_dv`),
+//! `∂q̈/∂τ = M⁻¹` (`data.minv`), and the ID derivatives at `(q, q̇, q̈)` in `data`:
+//! 1. `q̈ = ABA(q, q̇, τ)` ([`crate::algo::aba()`], its singularity test);
+//! 2. IDSVA at `(q, q̇, q̈)` ([`super::id_fo`]): `∂τ/∂q`, `∂τ/∂q̇`, `M`;
+//! 3. `M = Lᵀ D L` ([`crate::algo::factorize_ltl`], its singularity test);
+//! 4. `∂q̈/∂q = −M⁻¹ ∂τ/∂q`, `∂q̈/∂q̇ = −M⁻¹ ∂τ/∂q̇`, `∂q̈/∂τ = M⁻¹` (eq. jain_FO_eqn), by
+//!    tree-sparse `LᵀDL` solves of the three right-hand sides at once.
+//!
+//! [`fd_so_derivatives`]: inputs as above and an [`FdSoData`]. Outputs the first-order results
+//! above and the tensors `∂²q̈/∂q²`, `∂²q̈/∂q̇²`, `∂²q̈/∂q∂q̇`, `∂²q̈/∂τ∂q = ∂(M⁻¹)/∂q` (layout
+//! `T[(i, j, k)] = ∂/∂x_k (∂q̈_i/∂u_j)`). With `ID_uw` the second derivatives of `τ` at
+//! `(q, q̇, q̈)` and `X_q = ∂q̈/∂q`, `X_v = ∂q̈/∂q̇`:
+//! 1. `q̈ = ABA(q, q̇, τ)`;
+//! 2. IDSVA-SO at `(q, q̇, q̈)` ([`super::id_so`]): `ID_qq`, `ID_vv`, `ID_qv` and the first
+//!    order;
+//! 3. steps 3–4 of [`fd_derivatives`], and the dense `M⁻¹`;
+//! 4. `∂²q̈/∂q̇²[:, j, k] = −M⁻¹ ID_vv[:, j, k]` (eq. eqn_FD_SO_43: `M` does not depend on `q̇`);
+//! 5. `∂(M⁻¹)/∂q_k = −M⁻¹ ∂M/∂q_k M⁻¹ = −(U Vᵀ + V Uᵀ)` from the rank-12 form
+//!    `∂M/∂q_k = Pᵀ Q + Qᵀ P` (see `dminv_dq`; zero for the DoFs of joints attached to the
+//!    world);
+//! 6. `∂²q̈/∂q²[:, j, k] = −M⁻¹(ID_qq[:, j, k] + ∂M/∂q_k X_q[:, j] + ∂M/∂q_j X_q[:, k])`
+//!    (eq. eqn_FD_SO_43), computed as
+//!    `−M⁻¹ ID_qq[:, j, k] − ∂(M⁻¹)/∂q_k ∂τ/∂q_j − ∂(M⁻¹)/∂q_j ∂τ/∂q_k` (as
+//!    `X_q = −M⁻¹ ∂τ/∂q`); for two DoFs `j < k` of one joint (which need not commute)
+//!    the column `(k, j)` is `(j, k) − M⁻¹(ID_qq[:, k, j] − ID_qq[:, j, k])`;
+//! 7. `∂²q̈/∂q∂q̇[:, j, k] = −M⁻¹(ID_qv[:, j, k] + ∂M/∂q_j X_v[:, k])` (eq. eqn_FD_SO_43), the
+//!    products `∂M/∂q · X_v[:, k]` by IDFOZA ([`super::idfoza`]) of the columns of `X_v`.
+//!
+//! Every `−M⁻¹ b` is a product with the dense `M⁻¹` over the rows where `b` can be non-zero
+//! (DoFs related to `j` or `k`); columns that vanish structurally (DoFs of joints attached to
+//! the world, translations of those joints in `∂²q̈/∂q²`) are never written.
 
 use super::id_fo::id_derivatives_placed;
 use super::id_so::{SoData, id_so_unchecked, qv_offset};

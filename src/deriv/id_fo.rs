@@ -1,5 +1,32 @@
 //! IDSVA: first-order partial derivatives of inverse dynamics (eqs. dtau_dq_1, dtau_dq_2,
 //! dtau_dqd_1, dtau_dqd_2), all quantities in the ground frame. Cost `O(N d)`.
+//!
+//! Inputs: model, state `(q, q̇, q̈)`, optional external forces `fext_i` (body frames, held fixed
+//! in them). Outputs: `∂τ/∂q` (`data.dtau_dq`, tangent space), `∂τ/∂q̇` (`data.dtau_dv`),
+//! `M = ∂τ/∂q̈` (`data.m`, full symmetric) and `τ` (`data.tau`); entries of DoFs on different
+//! branches are structural zeros, never written.
+//!
+//! With `S_c` the world motion subspace of DoF `c`, `λ = λ(i)`, and every quantity in the
+//! ground frame:
+//! 1. placements `⁰M_i`;
+//! 2. forward pass, `i = 1..N`, from `v_0 = 0`, `a_0 = −a_g`: for each DoF `c` of joint `i`,
+//!    `S_c = ⁰X_i S_c^i`, `Ψ̇_c = v_λ × S_c`, `Ψ̈_c = a_λ × S_c + v_λ × Ψ̇_c`
+//!    (eq. psidot_psidotdot_defn); `v_i = v_λ + Σ_c S_c q̇_c`, `Ṡ_c = v_i × S_c`;
+//!    `a_i = a_λ + Σ_c S_c q̈_c + v_i × Σ_c S_c q̇_c`; `I_i = ⁰X_i^* I_i^i ⁱX_0`;
+//!    `f_i = I_i a_i + v_i ×* I_i v_i − ⁰X_i^* fext_i` (eq. sp_eqn_of_motion);
+//!    `B_i = B(I_i, v_i)` (eq. bl_term_defn);
+//! 3. backward pass, `i = N..1`, with the composites `I^C_i`, `f^C_i`, `B^C_i` (sums over the
+//!    subtree) complete: for each DoF `c` of joint `i`, `τ_c = S_cᵀ f^C_i` and
+//!    `t₁ = I^C_i S_c`, `t₂ = 2 B^C_iᵀ S_c`, `t₃ = 2 B^C_i Ψ̇_c + I^C_i Ψ̈_c + f^C_i ×̄* S_c`,
+//!    `t₄ = 2 B^C_i S_c + I^C_i (Ψ̇_c + Ṡ_c)`; then for the DoFs `r` of joint `i` and of its
+//!    ancestors: `∂τ_c/∂q_r = t₂·Ψ̇_r + t₁·Ψ̈_r` (eq. dtau_dq_1),
+//!    `∂τ_c/∂q̇_r = t₂·S_r + t₁·(Ψ̇_r + Ṡ_r)` (eq. dtau_dqd_1), `M_cr = M_rc = t₁·S_r`
+//!    (eq. M_eqn); and for the DoFs `r` of the strict ancestors: `∂τ_r/∂q_c = S_r·t₃`
+//!    (eq. dtau_dq_2), `∂τ_r/∂q̇_c = S_r·t₄` (eq. dtau_dqd_2);
+//! 4. `I^C_λ += I^C_i`, `f^C_λ += f^C_i`, `B^C_λ += B^C_i`.
+//!
+//! With a root free flyer (identity subspace), its six rows and columns of every other DoF come
+//! from one force transform each, using `Ψ̇ = 0`, `Ψ̈ = a_0 × S`, `Ψ̇ + Ṡ = v_1 × S` for its DoFs.
 
 use crate::algo::Data;
 use crate::algo::internal::{check_fext, placements, root_free_flyer};

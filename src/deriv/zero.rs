@@ -2,6 +2,25 @@
 //! no gravity, `q̈ = x`; `O(N d)`) and IDSOZA (`∂²M/∂q² · x` from IDSVA-SO at `q̇ = 0`, no gravity,
 //! `q̈ = x`; eq. eqn_IDSOZAc without contact forces). They replace `O(N⁴)` tensor products in the
 //! forward-dynamics, KKT and impact second-order derivatives.
+//!
+//! [`idfoza`]: inputs model, configuration `q`, vector `x` (length `nv`). Output
+//! `out[(i, k)] = ∂(M(q) x)_i/∂q_k` (`nv × nv`, tangent space; entries of DoFs on different
+//! branches zero). IDSVA (see [`super::id_fo`]) at `q̇ = 0`, `a_0 = 0`, `q̈ = x`, where
+//! `τ = M x`, `v = 0`, `Ψ̇ = 0`, `Ṡ = 0` and `B = 0`; ground frame:
+//! 1. placements `⁰M_i`, world subspaces `S_c = ⁰X_i S_c^i`, world body inertias
+//!    `I_i = ⁰X_i^* I_i^i ⁱX_0`, composites `I^C_i = Σ_{k ⪰ i} I_k`;
+//! 2. forward pass, `i = 1..N`, from `a_0 = 0`: `Ψ̈_c = a_λ × S_c` for the DoFs `c` of joint `i`
+//!    (eq. psidot_psidotdot_defn at `v = 0`), `a_i = a_λ + Σ_c S_c x_c`, `f_i = I_i a_i`;
+//! 3. backward pass, `i = N..1`, with `f^C_i = Σ_{k ⪰ i} f_k`: for each DoF `c` of joint `i`,
+//!    `t₁ = I^C_i S_c`, `t₃ = I^C_i Ψ̈_c + f^C_i ×̄* S_c`; `out[(c, r)] = t₁·Ψ̈_r` for the DoFs
+//!    `r` of joint `i` and of its ancestors (eq. dtau_dq_1 with `B = 0`, `Ψ̇ = 0`),
+//!    `out[(r, c)] = S_r·t₃` for the DoFs `r` of its strict ancestors (eq. dtau_dq_2 with
+//!    `B = 0`, `Ψ̇ = 0`); then `f^C_λ += f^C_i`.
+//!
+//! [`idsoza`]: inputs model, `q`, `x`, an [`SoData`] as workspace. Output
+//! `∂²(M(q) x)/∂q²` (`T[(i, j, k)] = ∂/∂q_k ∂(M x)_i/∂q_j`, the `d2tau_dq2` tensor of the
+//! workspace): IDSVA-SO ([`super::id_so`]) at `(q, q̇ = 0, q̈ = x)` with no gravity (`a_0 = 0`)
+//! and no external forces, which gives `∂²τ/∂q² = ∂²(M x)/∂q²` (eq. eqn_IDSOZAc with `λ = 0`).
 
 use super::id_so::{SoData, id_so_unchecked};
 use crate::algo::Data;
