@@ -798,3 +798,41 @@ fn demo_on_a_singular_mass_matrix_is_a_clean_error() {
     let err = assert_clean_failure(&o, "demo on a singular model");
     assert!(err.contains("mass matrix is singular") && err.contains("\"knuckle\""), "{err}");
 }
+
+#[test]
+fn eval_takes_baumgarte_gains_per_contact() {
+    use sodyn::algo::{Contact, Data};
+    use sodyn::deriv::{ContactData, KktData, kkt_derivatives};
+    let m = sodyn::model::builtin::quadruped();
+    let nv = m.nv();
+    let vals = |s: f64| -> Vec<f64> { (0..nv).map(|i| s * (i as f64 + 1.0) / nv as f64).collect() };
+    let (v, tau) = (vals(0.4), vals(0.5));
+    let run = |feet: &str, name: &str| {
+        let state = tmp(name);
+        let body = format!(r#"{{"v": {v:?}, "tau": {tau:?}, "contacts": {feet}}}"#);
+        std::fs::write(&state, body).unwrap();
+        sodyn(&["eval", "--model", "builtin:quadruped", "--state", state.to_str().unwrap()])
+    };
+    let o = run(r#"[{"frame": "LF_FOOT", "kp": 30, "kd": 4}, {"frame": "RH_FOOT"}]"#, "gains.json");
+    assert_ok(&o, "eval with gains");
+    let out: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    // The library with the same contacts gives the same KKT results.
+    let contacts = vec![
+        Contact::new(&m, "LF_FOOT", nalgebra::Vector3::zeros())
+            .unwrap()
+            .with_baumgarte(30.0, 4.0)
+            .unwrap(),
+        Contact::new(&m, "RH_FOOT", nalgebra::Vector3::zeros()).unwrap(),
+    ];
+    let mut kd = KktData::new(&m, ContactData::new(&m, &contacts).unwrap());
+    let (q, v, tau) = (m.neutral(), DVector::from_vec(v.clone()), DVector::from_vec(tau.clone()));
+    kkt_derivatives(&m, &mut Data::new(&m), &mut kd, &q, &v, &tau).unwrap();
+    let qdd = vector(&out["kkt"], "qdd", nv);
+    assert!((&qdd - kd.qdd()).amax() < 1e-12 * (1.0 + kd.qdd().amax()));
+    let dq = matrix(&out["kkt"], "dqdd_dq", nv);
+    assert!((&dq - kd.dqdd_dq()).amax() < 1e-12 * (1.0 + kd.dqdd_dq().amax()));
+    // A bad gain names the contact and the key.
+    let o = run(r#"[{"frame": "LF_FOOT", "kp": -1}]"#, "bad_gain.json");
+    let e = assert_clean_failure(&o, "negative gain");
+    assert!(e.contains("contacts[0].kp"), "{e}");
+}

@@ -180,8 +180,21 @@ pub fn load_state(
                     x
                 }
             };
+            let gain = |key: &str| -> Result<f64> {
+                match c.get(key) {
+                    None => Ok(0.0),
+                    Some(g) => g.as_f64().filter(|v| v.is_finite() && *v >= 0.0).ok_or_else(|| {
+                        Error::Io(format!(
+                            "{file}: contacts[{i}].{key} (a Baumgarte gain) must be a finite \
+                             number >= 0"
+                        ))
+                    }),
+                }
+            };
+            let (kp, kd) = (gain("kp")?, gain("kd")?);
             contacts.push(
                 Contact::new(model, frame, point)
+                    .and_then(|c| c.with_baumgarte(kp, kd))
                     .map_err(|e| Error::Io(format!("{file}: contacts[{i}]: {e}")))?,
             );
         }
