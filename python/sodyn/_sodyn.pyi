@@ -76,6 +76,12 @@ class Model:
     def random_configuration(self, seed: Optional[int] = None) -> Vector: ...
     def integrate(self, q: ArrayLike, dq: ArrayLike) -> Vector: ...
     def difference(self, q0: ArrayLike, q1: ArrayLike) -> Vector: ...
+    def d_integrate(self, q: ArrayLike, dq: ArrayLike, arg: int) -> Matrix:
+        """``d(q ⊕ dq)/dq`` (``arg=0``) or ``d(q ⊕ dq)/d dq`` (``arg=1``), ``(nv, nv)``:
+        Pinocchio's ``dIntegrate`` with ``ARG0`` / ``ARG1``."""
+    def d_difference(self, q0: ArrayLike, q1: ArrayLike, arg: int) -> Matrix:
+        """``d(q1 ⊖ q0)/dq0`` (``arg=0``) or ``d(q1 ⊖ q0)/dq1`` (``arg=1``), ``(nv, nv)``:
+        Pinocchio's ``dDifference`` with ``ARG0`` / ``ARG1``."""
     def create_data(self) -> "Data": ...
     def __copy__(self) -> "Model": ...
     def __deepcopy__(self, memo: object) -> "Model": ...
@@ -150,6 +156,13 @@ def impact_so_contracted(model: Model, data: Data, q: ArrayLike, v_minus: ArrayL
                          restitution: float = 0.0) -> Tuple[Matrix, Matrix]:
     """Hessians of ``w_vplus @ vplus + w_impulse @ impulse`` of the impact dynamics:
     ``(C_qq, C_qvminus)``."""
+def exp6(xi: ArrayLike) -> Matrix:
+    """SE(3) exponential of ``xi = [w; v]`` as a (4, 4) homogeneous matrix (Pinocchio's ``exp6``
+    takes ``[v; w]``)."""
+def log6(M: ArrayLike) -> Vector:
+    """SE(3) logarithm ``[w; v]`` of a (4, 4) homogeneous matrix (rotation angle <= pi)."""
+def jlog6(M: ArrayLike) -> Matrix:
+    """``Jlog6(M)`` (6, 6) in ``[w; v]`` order: ``log6(M exp6(e)) = log6(M) + Jlog6(M) e + O(e^2)``."""
 def clear_buffer_pool() -> int:
     """Frees the recycled output memory kept for reuse (at most 512 MiB; large results are
     returned over buffers that come back to this pool when the arrays are freed, so that later

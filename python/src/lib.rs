@@ -626,6 +626,40 @@ impl PyModel {
         Ok(out_vec(py, &self.m.difference(&a, &b).map_err(core_err)?))
     }
 
+    /// `∂(q ⊕ dq)/∂q` (`arg = 0`) or `∂(q ⊕ dq)/∂dq` (`arg = 1`), `(nv, nv)`: Pinocchio's
+    /// `dIntegrate` with `ARG0` / `ARG1` (tangent spaces as in docs/conventions.md).
+    #[pyo3(signature = (q, dq, arg))]
+    fn d_integrate<'py>(
+        &self,
+        py: Python<'py>,
+        q: &Bound<'py, PyAny>,
+        dq: &Bound<'py, PyAny>,
+        arg: i64,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let arg = lie_arg(arg)?;
+        let (mut qv, mut dv) = (DVector::zeros(0), DVector::zeros(0));
+        read_q(q, "q", &self.m, &mut qv)?;
+        read_vec(dq, "dq", self.m.nv(), "nv", &mut dv)?;
+        Ok(out_mat(py, &self.m.d_integrate(&qv, &dv, arg).map_err(core_err)?))
+    }
+
+    /// `∂(q1 ⊖ q0)/∂q0` (`arg = 0`) or `∂(q1 ⊖ q0)/∂q1` (`arg = 1`), `(nv, nv)`: Pinocchio's
+    /// `dDifference` with `ARG0` / `ARG1`.
+    #[pyo3(signature = (q0, q1, arg))]
+    fn d_difference<'py>(
+        &self,
+        py: Python<'py>,
+        q0: &Bound<'py, PyAny>,
+        q1: &Bound<'py, PyAny>,
+        arg: i64,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let arg = lie_arg(arg)?;
+        let (mut a, mut b) = (DVector::zeros(0), DVector::zeros(0));
+        read_q(q0, "q0", &self.m, &mut a)?;
+        read_q(q1, "q1", &self.m, &mut b)?;
+        Ok(out_mat(py, &self.m.d_difference(&a, &b, arg).map_err(core_err)?))
+    }
+
     /// A workspace for this model (same as `Data(model)`).
     fn create_data(&self) -> PyData {
         PyData::for_model(&self.m)
@@ -1242,6 +1276,74 @@ impl PyContact {
     }
 }
 
+/// `0` / `1` as [`sodyn::model::Arg`].
+fn lie_arg(arg: i64) -> PyResult<sodyn::model::Arg> {
+    match arg {
+        0 => Ok(sodyn::model::Arg::First),
+        1 => Ok(sodyn::model::Arg::Second),
+        _ => Err(value_err(format!("`arg` must be 0 (ARG0) or 1 (ARG1), got {arg}"))),
+    }
+}
+
+/// A placement `(R, p)` from a `(4, 4)` homogeneous matrix.
+fn read_placement(m: &Bound<'_, PyAny>) -> PyResult<sodyn::spatial::Transform> {
+    let a: numpy::PyReadonlyArray2<'_, f64> = m
+        .extract()
+        .map_err(|_| value_err("`M` must be a (4, 4) float64 homogeneous matrix".into()))?;
+    let a = a.as_array();
+    if a.shape() != [4, 4] {
+        return Err(value_err(format!("`M` must have shape (4, 4), got {:?}", a.shape())));
+    }
+    if a.iter().any(|x| !x.is_finite()) {
+        return Err(value_err("`M` has a non-finite entry".into()));
+    }
+    let r = nalgebra::Matrix3::from_fn(|i, j| a[[i, j]]);
+    let orth = (r.transpose() * r - nalgebra::Matrix3::identity()).amax();
+    if orth > 1e-6 || r.determinant() < 0.0 {
+        return Err(value_err(format!(
+            "`M`'s rotation block is not a rotation (|RᵀR − I| = {orth:.1e})"
+        )));
+    }
+    Ok(sodyn::spatial::Transform::new(r, Vector3::new(a[[0, 3]], a[[1, 3]], a[[2, 3]])))
+}
+
+/// The SE(3) exponential of `xi = [ω; v]` (6,), as a `(4, 4)` homogeneous matrix (Pinocchio's
+/// `exp6`, whose motion vectors are `[v; ω]`).
+#[pyfunction]
+fn exp6<'py>(py: Python<'py>, xi: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    let mut x = DVector::zeros(6);
+    read_vec(xi, "xi", 6, "6", &mut x)?;
+    let t = sodyn::model::exp6(&sodyn::spatial::Motion::new(
+        Vector3::new(x[0], x[1], x[2]),
+        Vector3::new(x[3], x[4], x[5]),
+    ));
+    let mut h = DMatrix::identity(4, 4);
+    h.view_mut((0, 0), (3, 3)).copy_from(&t.rot);
+    h.view_mut((0, 3), (3, 1)).copy_from(&t.trans);
+    Ok(out_mat(py, &h))
+}
+
+/// The SE(3) logarithm `[ω; v]` (6,) of a `(4, 4)` homogeneous matrix (rotation angle ≤ π;
+/// Pinocchio's `log6`, reordered).
+#[pyfunction]
+#[pyo3(name = "log6")]
+fn log6_py<'py>(py: Python<'py>, m: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    let xi = sodyn::model::log6(&read_placement(m)?);
+    Ok(out_vec(
+        py,
+        &DVector::from_vec(vec![xi.ang.x, xi.ang.y, xi.ang.z, xi.lin.x, xi.lin.y, xi.lin.z]),
+    ))
+}
+
+/// `Jlog6(M)` (6, 6): `log6(M exp6(ε)) ≈ log6(M) + Jlog6(M) ε` (Pinocchio's `Jlog6`,
+/// reordered to `[ω; v]`).
+#[pyfunction]
+#[pyo3(name = "jlog6")]
+fn jlog6_py<'py>(py: Python<'py>, m: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    let j = sodyn::model::jlog6(&read_placement(m)?);
+    Ok(out_mat(py, &DMatrix::from_column_slice(6, 6, j.as_slice())))
+}
+
 /// Resolves the contacts against the model.
 fn resolve(m: &Model, contacts: &[PyRef<'_, PyContact>]) -> PyResult<(Vec<Contact>, ContactKey)> {
     let mut cs = Vec::with_capacity(contacts.len());
@@ -1825,6 +1927,9 @@ fn _sodyn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyData>()?;
     m.add_class::<PyJoint>()?;
     m.add_class::<PyContact>()?;
+    m.add_function(wrap_pyfunction!(exp6, m)?)?;
+    m.add_function(wrap_pyfunction!(log6_py, m)?)?;
+    m.add_function(wrap_pyfunction!(jlog6_py, m)?)?;
     m.add_function(wrap_pyfunction!(_model_from_description, m)?)?;
     m.add_function(wrap_pyfunction!(clear_buffer_pool, m)?)?;
     m.add_function(wrap_pyfunction!(rnea, m)?)?;
