@@ -8,9 +8,9 @@ mod kinematics;
 mod ltl;
 mod rnea;
 
-pub use aba::aba;
 /// Re-export of [`crate::model::Contact`] (the contact description is a model-level type).
 pub use crate::model::Contact;
+pub use aba::aba;
 pub use crba::crba;
 pub use data::Data;
 pub use jacobian::{point_drift, point_jacobian, point_position};
