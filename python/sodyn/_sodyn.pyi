@@ -156,6 +156,23 @@ def impact_so_contracted(model: Model, data: Data, q: ArrayLike, v_minus: ArrayL
                          restitution: float = 0.0) -> Tuple[Matrix, Matrix]:
     """Hessians of ``w_vplus @ vplus + w_impulse @ impulse`` of the impact dynamics:
     ``(C_qq, C_qvminus)``."""
+def frame_placement(model: Model, data: Data, q: ArrayLike, frame: Union[str, int]) -> Matrix:
+    """World placement of a frame (a URDF link, merged ones included) as a (4, 4) homogeneous
+    matrix (Pinocchio's ``data.oMf``)."""
+def frame_jacobian(model: Model, data: Data, q: ArrayLike, frame: Union[str, int],
+                   reference: str = "local") -> Matrix:
+    """``(6, nv)`` Jacobian of a frame, rows ``[w; v]``; ``reference`` is ``"local"``,
+    ``"world"`` or ``"local_world_aligned"`` (Pinocchio's ``getFrameJacobian``, rows ``[v; w]``
+    there)."""
+def frame_velocity(model: Model, data: Data, q: ArrayLike, v: ArrayLike, frame: Union[str, int],
+                   reference: str = "local") -> Vector:
+    """Spatial velocity ``[w; v]`` of a frame in ``reference`` (``getFrameVelocity``)."""
+def frame_acceleration(model: Model, data: Data, q: ArrayLike, v: ArrayLike, a: ArrayLike,
+                       frame: Union[str, int], reference: str = "local",
+                       classical: bool = False) -> Vector:
+    """Spatial acceleration ``[dw; dv]`` of a frame in ``reference`` without gravity
+    (``getFrameAcceleration``); with ``classical=True`` the linear part is the classical
+    acceleration (``getFrameClassicalAcceleration``)."""
 def exp6(xi: ArrayLike) -> Matrix:
     """SE(3) exponential of ``xi = [w; v]`` as a (4, 4) homogeneous matrix (Pinocchio's ``exp6``
     takes ``[v; w]``)."""

@@ -1276,6 +1276,120 @@ impl PyContact {
     }
 }
 
+/// A frame given by name (`str`) or index (`int`).
+fn frame_arg(m: &Model, frame: &Bound<'_, PyAny>) -> PyResult<usize> {
+    if let Ok(name) = frame.extract::<String>() {
+        return m.frame_id(&name).map_err(core_err);
+    }
+    let i = frame
+        .extract::<usize>()
+        .map_err(|_| value_err(format!("`frame` must be a frame name or index, got {frame}")))?;
+    if i >= m.frames().len() {
+        return Err(value_err(format!(
+            "`frame` index {i} is out of range: the model has {} frames",
+            m.frames().len()
+        )));
+    }
+    Ok(i)
+}
+
+/// A spatial vector `[ang; lin]` as a `(6,)` array.
+fn out_motion<'py>(py: Python<'py>, x: &sodyn::spatial::Motion) -> Bound<'py, PyAny> {
+    out_vec(py, &DVector::from_vec(vec![x.ang.x, x.ang.y, x.ang.z, x.lin.x, x.lin.y, x.lin.z]))
+}
+
+/// World placement of a frame as a `(4, 4)` homogeneous matrix (Pinocchio's
+/// `updateFramePlacement` / `data.oMf`).
+#[pyfunction]
+fn frame_placement<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    frame: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let f = frame_arg(m, frame)?;
+    let PyData { d, q: qb, .. } = &mut *data;
+    read_q(q, "q", m, qb)?;
+    let t = algo::frame_placement(m, d, qb, f).map_err(core_err)?;
+    let mut h = DMatrix::identity(4, 4);
+    h.view_mut((0, 0), (3, 3)).copy_from(&t.rot);
+    h.view_mut((0, 3), (3, 1)).copy_from(&t.trans);
+    Ok(out_mat(py, &h))
+}
+
+/// The `(6, nv)` Jacobian of a frame in `reference` (`"local"`, `"world"` or
+/// `"local_world_aligned"`; Pinocchio's `getFrameJacobian`, rows `[ang; lin]` here).
+#[pyfunction]
+#[pyo3(signature = (model, data, q, frame, reference = "local"))]
+fn frame_jacobian<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    frame: &Bound<'py, PyAny>,
+    reference: &str,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let PyData { d, q: qb, .. } = &mut *data;
+    read_q(q, "q", m, qb)?;
+    let mut jac = nalgebra::Matrix6xX::zeros(m.nv());
+    algo::frame_jacobian(m, d, qb, f, rf, &mut jac).map_err(core_err)?;
+    Ok(out_mat(py, &DMatrix::from_column_slice(6, m.nv(), jac.as_slice())))
+}
+
+/// Spatial velocity `[w; v]` of a frame in `reference` (Pinocchio's `getFrameVelocity`).
+#[pyfunction]
+#[pyo3(signature = (model, data, q, v, frame, reference = "local"))]
+fn frame_velocity<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    frame: &Bound<'py, PyAny>,
+    reference: &str,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let PyData { d, q: qb, v: vb, .. } = &mut *data;
+    read_q(q, "q", m, qb)?;
+    read_vec(v, "v", m.nv(), "nv", vb)?;
+    Ok(out_motion(py, &algo::frame_velocity(m, d, qb, vb, f, rf).map_err(core_err)?))
+}
+
+/// Spatial acceleration `[dw; dv]` (no gravity) of a frame in `reference` (Pinocchio's
+/// `getFrameAcceleration`); with `classical=True`, `[dw; a]` with `a` the classical
+/// acceleration (`getFrameClassicalAcceleration`).
+#[pyfunction]
+#[pyo3(signature = (model, data, q, v, a, frame, reference = "local", classical = false))]
+#[allow(clippy::too_many_arguments)]
+fn frame_acceleration<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    frame: &Bound<'py, PyAny>,
+    reference: &str,
+    classical: bool,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let d = &mut *data;
+    read_qvx(m, d, q, v, a, "a")?;
+    let PyData { d, q, v, a, .. } = d;
+    let r = if classical {
+        algo::frame_classical_acceleration(m, d, q, v, a, f, rf)
+    } else {
+        algo::frame_acceleration(m, d, q, v, a, f, rf)
+    };
+    Ok(out_motion(py, &r.map_err(core_err)?))
+}
+
 /// `0` / `1` as [`sodyn::model::Arg`].
 fn lie_arg(arg: i64) -> PyResult<sodyn::model::Arg> {
     match arg {
@@ -1928,6 +2042,10 @@ fn _sodyn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyJoint>()?;
     m.add_class::<PyContact>()?;
     m.add_function(wrap_pyfunction!(exp6, m)?)?;
+    m.add_function(wrap_pyfunction!(frame_placement, m)?)?;
+    m.add_function(wrap_pyfunction!(frame_jacobian, m)?)?;
+    m.add_function(wrap_pyfunction!(frame_velocity, m)?)?;
+    m.add_function(wrap_pyfunction!(frame_acceleration, m)?)?;
     m.add_function(wrap_pyfunction!(log6_py, m)?)?;
     m.add_function(wrap_pyfunction!(jlog6_py, m)?)?;
     m.add_function(wrap_pyfunction!(_model_from_description, m)?)?;

@@ -3,6 +3,7 @@
 mod aba;
 mod crba;
 pub(crate) mod data;
+mod frames;
 mod jacobian;
 mod kinematics;
 mod ltl;
@@ -13,6 +14,10 @@ pub use crate::model::Contact;
 pub use aba::aba;
 pub use crba::crba;
 pub use data::Data;
+pub use frames::{
+    ReferenceFrame, frame_acceleration, frame_classical_acceleration, frame_jacobian,
+    frame_placement, frame_velocity,
+};
 pub use jacobian::{point_drift, point_jacobian, point_position};
 pub use kinematics::forward_kinematics;
 pub use ltl::{factorize_ltl, solve_ltl, solve_ltl_matrix};

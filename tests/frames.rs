@@ -1,0 +1,137 @@
+//! Frame kinematics (`frame_placement`, `frame_jacobian`, `frame_velocity`,
+//! `frame_acceleration`, `frame_classical_acceleration`) in the three reference frames against
+//! dual / hyper-dual differentiation of the reference placement along `q(t) = q ⊕ (t q̇ + ½t² q̈)`
+//! and along each tangent direction; every joint type, every frame (merged ones included).
+
+mod util;
+
+use nalgebra::{DVector, Matrix3, Matrix6xX, Vector3};
+use num_dual::{Dual64, HyperDual64};
+use sodyn::algo::{
+    Data, ReferenceFrame, frame_acceleration, frame_classical_acceleration, frame_jacobian,
+    frame_placement, frame_velocity,
+};
+use sodyn::model::Model;
+use sodyn::reference::kinematics::{frame_placement as ref_placement, integrate};
+use sodyn::rng::Rng;
+use sodyn::spatial::{Motion, Transform};
+use util::*;
+
+const RFS: [ReferenceFrame; 3] =
+    [ReferenceFrame::Local, ReferenceFrame::World, ReferenceFrame::LocalWorldAligned];
+
+fn vee(m: &Matrix3<f64>) -> Vector3<f64> {
+    Vector3::new(m[(2, 1)], m[(0, 2)], m[(1, 0)])
+}
+
+/// World twist and acceleration (at the world origin) from `R, Ṙ, R̈, p, ṗ, p̈`.
+#[allow(clippy::too_many_arguments)]
+fn world_motion(
+    r: &Matrix3<f64>,
+    rd: &Matrix3<f64>,
+    rdd: &Matrix3<f64>,
+    p: &Vector3<f64>,
+    pd: &Vector3<f64>,
+    pdd: &Vector3<f64>,
+) -> (Motion, Motion) {
+    let w = vee(&(rd * r.transpose()));
+    let wd = vee(&(rdd * r.transpose() + rd * rd.transpose()));
+    (Motion::new(w, pd - w.cross(p)), Motion::new(wd, pdd - wd.cross(p) - w.cross(pd)))
+}
+
+fn express(m: &Motion, omf: &Transform, rf: ReferenceFrame) -> Motion {
+    match rf {
+        ReferenceFrame::World => *m,
+        ReferenceFrame::Local => omf.inv_act_motion(m),
+        ReferenceFrame::LocalWorldAligned => Motion::new(m.ang, m.lin + m.ang.cross(&omf.trans)),
+    }
+}
+
+fn err(a: &Motion, b: &Motion) -> f64 {
+    ((a.ang - b.ang).amax().max((a.lin - b.lin).amax())) / (1.0 + b.ang.amax().max(b.lin.amax()))
+}
+
+#[test]
+fn frames_match_dual_numbers() {
+    let mut w = [
+        Worst::new("placement"),
+        Worst::new("jacobian"),
+        Worst::new("velocity"),
+        Worst::new("acceleration"),
+        Worst::new("classical acceleration"),
+    ];
+    let mut rng = Rng::new(81);
+    let models: Vec<Model> = test_models(30);
+    for m in &models {
+        let mut d = Data::new(m);
+        let (q, v, a) = random_state(m, &mut rng);
+        let n = m.nv();
+        // q(t) = q ⊕ (t v + ½ t² a) with t = ε₁ + ε₂: first derivative in ε₁, second in ε₁ε₂.
+        let qh: Vec<HyperDual64> = q.iter().map(|&x| HyperDual64::from_re(x)).collect();
+        let dh: Vec<HyperDual64> =
+            (0..n).map(|k| HyperDual64::new(0.0, v[k], v[k], a[k])).collect();
+        let qt = integrate(m, &qh, &dh);
+        for f in 0..m.frames().len() {
+            let at = format!("{} frame {}", m.name(), m.frames()[f].name);
+            let (rh, ph) = ref_placement(m, &qt, f);
+            let part = |g: fn(&HyperDual64) -> f64| {
+                (Matrix3::from_fn(|i, j| g(&rh[(i, j)])), Vector3::from_fn(|i, _| g(&ph[i])))
+            };
+            let (r, p) = part(|x| x.re);
+            let (rd, pd) = part(|x| x.eps1);
+            let (rdd, pdd) = part(|x| x.eps1eps2);
+            let (tw, aw) = world_motion(&r, &rd, &rdd, &p, &pd, &pdd);
+            let omf = frame_placement(m, &mut d, &q, f).unwrap();
+            w[0].add((omf.rot - r).amax().max((omf.trans - p).amax()), &at);
+            for rf in RFS {
+                let at = format!("{at} {rf:?}");
+                let vel = frame_velocity(m, &mut d, &q, &v, f, rf).unwrap();
+                w[2].add(err(&vel, &express(&tw, &omf, rf)), &at);
+                let acc = frame_acceleration(m, &mut d, &q, &v, &a, f, rf).unwrap();
+                let ae = express(&aw, &omf, rf);
+                w[3].add(err(&acc, &ae), &at);
+                let ve = express(&tw, &omf, rf);
+                let cl = frame_classical_acceleration(m, &mut d, &q, &v, &a, f, rf).unwrap();
+                w[4].add(err(&cl, &Motion::new(ae.ang, ae.lin + ve.ang.cross(&ve.lin))), &at);
+                // Jacobian columns: the twists of q ⊕ ε e_c, in rf.
+                let mut jac = Matrix6xX::zeros(n);
+                frame_jacobian(m, &mut d, &q, f, rf, &mut jac).unwrap();
+                for c in 0..n {
+                    let qd: Vec<Dual64> = q.iter().map(|&x| Dual64::from_re(x)).collect();
+                    let e: Vec<Dual64> =
+                        (0..n).map(|k| Dual64::new(0.0, if k == c { 1.0 } else { 0.0 })).collect();
+                    let (rc, pc) = ref_placement(m, &integrate(m, &qd, &e), f);
+                    let rd = Matrix3::from_fn(|i, j| rc[(i, j)].eps);
+                    let pd = Vector3::from_fn(|i, _| pc[i].eps);
+                    let (t, _) =
+                        world_motion(&r, &rd, &Matrix3::zeros(), &p, &pd, &Vector3::zeros());
+                    let col = express(&t, &omf, rf);
+                    let got = Motion::new(
+                        Vector3::new(jac[(0, c)], jac[(1, c)], jac[(2, c)]),
+                        Vector3::new(jac[(3, c)], jac[(4, c)], jac[(5, c)]),
+                    );
+                    w[1].add(err(&got, &col), &at);
+                }
+            }
+        }
+    }
+    for x in &w {
+        x.check(1e-12);
+    }
+}
+
+#[test]
+fn frame_inputs_are_checked() {
+    let m = sodyn::model::builtin::quadruped();
+    let mut d = Data::new(&m);
+    let q = m.neutral();
+    let nf = m.frames().len();
+    let e = frame_placement(&m, &mut d, &q, nf).unwrap_err().to_string();
+    assert!(e.contains("frame"), "{e}");
+    let mut jac = Matrix6xX::zeros(3);
+    assert!(frame_jacobian(&m, &mut d, &q, 0, ReferenceFrame::World, &mut jac).is_err());
+    let e = ReferenceFrame::parse("global").unwrap_err().to_string();
+    assert!(e.contains("local_world_aligned"), "{e}");
+    let v = DVector::zeros(2);
+    assert!(frame_velocity(&m, &mut d, &q, &v, 0, ReferenceFrame::Local).is_err());
+}
