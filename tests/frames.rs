@@ -135,3 +135,134 @@ fn frame_inputs_are_checked() {
     let v = DVector::zeros(2);
     assert!(frame_velocity(&m, &mut d, &q, &v, 0, ReferenceFrame::Local).is_err());
 }
+
+type D = Dual64;
+
+fn vee_d(m: &Matrix3<D>) -> Vector3<D> {
+    Vector3::new(m[(2, 1)], m[(0, 2)], m[(1, 0)])
+}
+
+/// `(ω, v)` pairs in `D` (value, ∂/∂ε).
+fn express_d(
+    (w, v): (Vector3<D>, Vector3<D>),
+    r: &Matrix3<D>,
+    p: &Vector3<D>,
+    rf: ReferenceFrame,
+) -> (Vector3<D>, Vector3<D>) {
+    match rf {
+        ReferenceFrame::World => (w, v),
+        ReferenceFrame::Local => {
+            let rt = r.transpose();
+            (rt * w, rt * (v + w.cross(p)))
+        }
+        ReferenceFrame::LocalWorldAligned => (w, v + w.cross(p)),
+    }
+}
+
+#[test]
+fn frame_derivatives_match_dual_numbers() {
+    use num_dual::HyperHyperDual64 as H;
+    let mut w = [
+        Worst::new("dv/dq"),
+        Worst::new("dv/dv"),
+        Worst::new("da/dq"),
+        Worst::new("da/dv"),
+        Worst::new("da/da = J"),
+    ];
+    let mut rng = Rng::new(82);
+    for m in &test_models(20) {
+        let mut d = Data::new(m);
+        let (q, v, a) = random_state(m, &mut rng);
+        let n = m.nv();
+        for f in 0..m.frames().len() {
+            for rf in RFS {
+                let at = format!("{} frame {} {rf:?}", m.name(), m.frames()[f].name);
+                let mut dvq = Matrix6xX::zeros(n);
+                let mut dvv = Matrix6xX::zeros(n);
+                sodyn::algo::frame_velocity_derivatives(
+                    m, &mut d, &q, &v, f, rf, &mut dvq, &mut dvv,
+                )
+                .unwrap();
+                let (mut daq, mut dav, mut daa) =
+                    (Matrix6xX::zeros(n), Matrix6xX::zeros(n), Matrix6xX::zeros(n));
+                sodyn::algo::frame_acceleration_derivatives(
+                    m, &mut d, &q, &v, &a, f, rf, &mut daq, &mut dav, &mut daa,
+                )
+                .unwrap();
+                let mut jac = Matrix6xX::zeros(n);
+                frame_jacobian(m, &mut d, &q, f, rf, &mut jac).unwrap();
+                w[1].add(rel_err_mat6(&dvv, &jac), &at);
+                w[4].add(rel_err_mat6(&daa, &jac), &at);
+                // ∂/∂q_k: q(t, ε) = (q ⊕ ε e_k) ⊕ (t q̇ + ½t² q̈), t = ε₁ + ε₂, ε = ε₃.
+                let mut want_vq = Matrix6xX::zeros(n);
+                let mut want_aq = Matrix6xX::zeros(n);
+                for k in 0..n {
+                    let qh: Vec<H> = q.iter().map(|&x| H::from_re(x)).collect();
+                    let ek: Vec<H> = (0..n)
+                        .map(|j| {
+                            H::new(
+                                0.0,
+                                0.0,
+                                0.0,
+                                if j == k { 1.0 } else { 0.0 },
+                                0.0,
+                                0.0,
+                                0.0,
+                                0.0,
+                            )
+                        })
+                        .collect();
+                    let tv: Vec<H> =
+                        (0..n).map(|j| H::new(0.0, v[j], v[j], 0.0, a[j], 0.0, 0.0, 0.0)).collect();
+                    let qt = integrate(m, &integrate(m, &qh, &ek), &tv);
+                    let (rh, ph) = ref_placement(m, &qt, f);
+                    let dm = |g: fn(&H) -> f64, h: fn(&H) -> f64| {
+                        (
+                            Matrix3::from_fn(|i, j| D::new(g(&rh[(i, j)]), h(&rh[(i, j)]))),
+                            Vector3::from_fn(|i, _| D::new(g(&ph[i]), h(&ph[i]))),
+                        )
+                    };
+                    let (r, p) = dm(|x| x.re, |x| x.eps3);
+                    let (rd, pd) = dm(|x| x.eps1, |x| x.eps1eps3);
+                    let (rdd, pdd) = dm(|x| x.eps1eps2, |x| x.eps1eps2eps3);
+                    let om = vee_d(&(rd * r.transpose()));
+                    let omd = vee_d(&(rdd * r.transpose() + rd * rd.transpose()));
+                    let tw = (om, pd - om.cross(&p));
+                    let ac = (omd, pdd - omd.cross(&p) - om.cross(&pd));
+                    let (tw, ac) = (express_d(tw, &r, &p, rf), express_d(ac, &r, &p, rf));
+                    for i in 0..3 {
+                        want_vq[(i, k)] = tw.0[i].eps;
+                        want_vq[(3 + i, k)] = tw.1[i].eps;
+                        want_aq[(i, k)] = ac.0[i].eps;
+                        want_aq[(3 + i, k)] = ac.1[i].eps;
+                    }
+                }
+                w[0].add(rel_err_mat6(&dvq, &want_vq), &at);
+                w[2].add(rel_err_mat6(&daq, &want_aq), &at);
+                // ∂/∂q̇: the acceleration is quadratic in q̇, so central differences are exact
+                // up to rounding.
+                let h = 1e-3;
+                let mut want_av = Matrix6xX::zeros(n);
+                for k in 0..n {
+                    let mut vp = v.clone();
+                    vp[k] += h;
+                    let ap = frame_acceleration(m, &mut d, &q, &vp, &a, f, rf).unwrap();
+                    vp[k] -= 2.0 * h;
+                    let am = frame_acceleration(m, &mut d, &q, &vp, &a, f, rf).unwrap();
+                    for i in 0..3 {
+                        want_av[(i, k)] = (ap.ang[i] - am.ang[i]) / (2.0 * h);
+                        want_av[(3 + i, k)] = (ap.lin[i] - am.lin[i]) / (2.0 * h);
+                    }
+                }
+                w[3].add(rel_err_mat6(&dav, &want_av), &at);
+            }
+        }
+    }
+    for x in &w {
+        x.check(1e-10);
+    }
+}
+
+fn rel_err_mat6(a: &Matrix6xX<f64>, b: &Matrix6xX<f64>) -> f64 {
+    (a - b).amax() / (1.0 + b.amax())
+}

@@ -173,6 +173,16 @@ def frame_acceleration(model: Model, data: Data, q: ArrayLike, v: ArrayLike, a: 
     """Spatial acceleration ``[dw; dv]`` of a frame in ``reference`` without gravity
     (``getFrameAcceleration``); with ``classical=True`` the linear part is the classical
     acceleration (``getFrameClassicalAcceleration``)."""
+def frame_velocity_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike,
+                               frame: Union[str, int], reference: str = "local"
+                               ) -> Tuple[Matrix, Matrix]:
+    """``(dv_dq, dv_dv)``, each ``(6, nv)``: derivatives of ``frame_velocity``
+    (``getFrameVelocityDerivatives``)."""
+def frame_acceleration_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike,
+                                   a: ArrayLike, frame: Union[str, int],
+                                   reference: str = "local") -> Tuple[Matrix, Matrix, Matrix]:
+    """``(da_dq, da_dv, da_da)``, each ``(6, nv)``: derivatives of ``frame_acceleration``
+    (``getFrameAccelerationDerivatives``)."""
 def exp6(xi: ArrayLike) -> Matrix:
     """SE(3) exponential of ``xi = [w; v]`` as a (4, 4) homogeneous matrix (Pinocchio's ``exp6``
     takes ``[v; w]``)."""

@@ -1390,6 +1390,62 @@ fn frame_acceleration<'py>(
     Ok(out_motion(py, &r.map_err(core_err)?))
 }
 
+/// `(dv_dq, dv_dv)`, each `(6, nv)`: derivatives of a frame's spatial velocity in `reference`
+/// (Pinocchio's `getFrameVelocityDerivatives`, rows `[w; v]` here).
+#[pyfunction]
+#[pyo3(signature = (model, data, q, v, frame, reference = "local"))]
+fn frame_velocity_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    frame: &Bound<'py, PyAny>,
+    reference: &str,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let m = &model.m;
+    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let PyData { d, q: qb, v: vb, .. } = &mut *data;
+    read_q(q, "q", m, qb)?;
+    read_vec(v, "v", m.nv(), "nv", vb)?;
+    let n = m.nv();
+    let (mut x, mut y) = (nalgebra::Matrix6xX::zeros(n), nalgebra::Matrix6xX::zeros(n));
+    algo::frame_velocity_derivatives(m, d, qb, vb, f, rf, &mut x, &mut y).map_err(core_err)?;
+    let o =
+        |z: &nalgebra::Matrix6xX<f64>| out_mat(py, &DMatrix::from_column_slice(6, n, z.as_slice()));
+    PyTuple::new(py, [o(&x), o(&y)])
+}
+
+/// `(da_dq, da_dv, da_da)`, each `(6, nv)`: derivatives of a frame's spatial acceleration (no
+/// gravity) in `reference` (Pinocchio's `getFrameAccelerationDerivatives`, rows `[w; v]` here).
+#[pyfunction]
+#[pyo3(signature = (model, data, q, v, a, frame, reference = "local"))]
+#[allow(clippy::too_many_arguments)]
+fn frame_acceleration_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    frame: &Bound<'py, PyAny>,
+    reference: &str,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let m = &model.m;
+    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let d = &mut *data;
+    read_qvx(m, d, q, v, a, "a")?;
+    let PyData { d, q, v, a, .. } = d;
+    let n = m.nv();
+    let z = || nalgebra::Matrix6xX::zeros(n);
+    let (mut x, mut y, mut w) = (z(), z(), z());
+    algo::frame_acceleration_derivatives(m, d, q, v, a, f, rf, &mut x, &mut y, &mut w)
+        .map_err(core_err)?;
+    let o =
+        |z: &nalgebra::Matrix6xX<f64>| out_mat(py, &DMatrix::from_column_slice(6, n, z.as_slice()));
+    PyTuple::new(py, [o(&x), o(&y), o(&w)])
+}
+
 /// `0` / `1` as [`sodyn::model::Arg`].
 fn lie_arg(arg: i64) -> PyResult<sodyn::model::Arg> {
     match arg {
@@ -2046,6 +2102,8 @@ fn _sodyn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(frame_jacobian, m)?)?;
     m.add_function(wrap_pyfunction!(frame_velocity, m)?)?;
     m.add_function(wrap_pyfunction!(frame_acceleration, m)?)?;
+    m.add_function(wrap_pyfunction!(frame_velocity_derivatives, m)?)?;
+    m.add_function(wrap_pyfunction!(frame_acceleration_derivatives, m)?)?;
     m.add_function(wrap_pyfunction!(log6_py, m)?)?;
     m.add_function(wrap_pyfunction!(jlog6_py, m)?)?;
     m.add_function(wrap_pyfunction!(_model_from_description, m)?)?;

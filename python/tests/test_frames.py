@@ -1,4 +1,4 @@
-"""Frame kinematics against Pinocchio 4.1 on every case model (fixed and free flyer), every
+"""Frame kinematics and their derivatives against Pinocchio 4.1 on every case model (fixed and free flyer), every
 link frame: ``frame_placement`` ↔ ``data.oMf``, ``frame_jacobian`` ↔ ``getFrameJacobian``,
 ``frame_velocity`` ↔ ``getFrameVelocity``, ``frame_acceleration`` ↔ ``getFrameAcceleration`` and
 ``getFrameClassicalAcceleration``, in LOCAL, WORLD and LOCAL_WORLD_ALIGNED (Pinocchio's motion
@@ -63,3 +63,42 @@ def test_frame_bad_inputs():
         sodyn.frame_placement(model, data, q, 10**6)
     with pytest.raises(ValueError, match="v"):
         sodyn.frame_velocity(model, data, q, np.zeros(2), "LF_FOOT")
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_frame_derivatives_vs_pinocchio(pin, name):
+    model, pmodel, pmap = pin_pair(name)
+    data = model.create_data()
+    pdata = pin.Data(pmodel)
+    q, v, a, _ = random_state(model, 1)
+    pq, pv, pa = pmap.pin_q(q), pmap.pin_v(v), pmap.pin_v(a)
+    pin.computeForwardKinematicsDerivatives(pmodel, pdata, pq, pv, pa)
+    frames = [f for f in range(len(pmodel.frames))
+              if pmodel.frames[f].type == pin.FrameType.BODY]
+    for fid in frames:
+        fname = pmodel.frames[fid].name
+        for ours, theirs in REFS.items():
+            rf = getattr(pin.ReferenceFrame, theirs)
+            tag = f"{name} {fname} {ours}"
+            conv = lambda x: pmap.cols(np.asarray(x))[SWAP]
+            # LOCAL_WORLD_ALIGNED: ours is the derivative of the LWA quantity [w; v + w × p],
+            # whose origin p moves with q; Pinocchio's holds p fixed, so it lacks w × dp/dq
+            # (dp/dq: the linear rows of the LWA Jacobian).
+            def moving_origin(motion):
+                out = np.zeros((6, model.nv))
+                if ours == "local_world_aligned":
+                    jl = sodyn.frame_jacobian(model, data, q, fname, ours)[3:, :]
+                    out[3:, :] = np.cross(np.tile(motion[:3], (model.nv, 1)), jl.T).T
+                return out
+            pv_dq, pv_dv = pin.getFrameVelocityDerivatives(pmodel, pdata, fid, rf)
+            dv_dq, dv_dv = sodyn.frame_velocity_derivatives(model, data, q, v, fname, ours)
+            vel = sodyn.frame_velocity(model, data, q, v, fname, ours)
+            assert_close(dv_dq, conv(pv_dq) + moving_origin(vel), TOL, f"{tag} dv_dq")
+            assert_close(dv_dv, conv(pv_dv), TOL, f"{tag} dv_dv")
+            _, pa_dq, pa_dv, pa_da = pin.getFrameAccelerationDerivatives(pmodel, pdata, fid, rf)
+            da_dq, da_dv, da_da = sodyn.frame_acceleration_derivatives(
+                model, data, q, v, a, fname, ours)
+            acc = sodyn.frame_acceleration(model, data, q, v, a, fname, ours)
+            assert_close(da_dq, conv(pa_dq) + moving_origin(acc), TOL, f"{tag} da_dq")
+            assert_close(da_dv, conv(pa_dv), TOL, f"{tag} da_dv")
+            assert_close(da_da, conv(pa_da), TOL, f"{tag} da_da")

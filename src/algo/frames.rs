@@ -200,3 +200,158 @@ pub fn frame_classical_acceleration(
     let vf = express(&model.frames[frame].placement.inv_act_motion(&data.v[i]), &omf, rf);
     Ok(Motion::new(acc.ang, acc.lin + vf.ang.cross(&vf.lin)))
 }
+
+/// The quantity of [`frame_motion_derivatives`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Which {
+    Velocity,
+    Acceleration,
+}
+
+fn put_col(m: &mut Matrix6xX<f64>, c: usize, x: &Motion) {
+    for r in 0..3 {
+        m[(r, c)] = x.ang[r];
+        m[(3 + r, c)] = x.lin[r];
+    }
+}
+
+/// Derivatives of a frame's spatial velocity or acceleration, in `rf`. With `V_j`, `A_j` the
+/// world (origin) velocities and accelerations of the bodies and, for a DoF `k` of joint
+/// `K ⪯ i` (`i` the frame's joint, `λ` the parent body of `K`):
+/// * `∂V_i/∂q_k = S_k × (V_i − V_λ)`, `∂V_i/∂q̇_k = S_k`;
+/// * `∂A_i/∂q_k = S_k × (A_i − A_λ) − (S_k × V_λ) × (V_i − V_λ)`,
+///   `∂A_i/∂q̇_k = S_k × V_i − S_k × (V_λ + V_K)`, `∂A_i/∂q̈_k = S_k`;
+/// * local: `∂(X⁻¹ m)/∂q_k = X⁻¹ (∂m/∂q_k − S_k × m)` (`X = ⁰M_f`, which `q_k` turns about `S_k`);
+/// * local world aligned: `[ω; v + ω × p]` of `m = [ω; v]`, with `∂p/∂q_k = S_k.lin + S_k.ang × p`.
+#[allow(clippy::too_many_arguments)]
+fn frame_motion_derivatives(
+    model: &Model,
+    data: &Data,
+    frame: usize,
+    rf: ReferenceFrame,
+    which: Which,
+    dq: &mut Matrix6xX<f64>,
+    dv: &mut Matrix6xX<f64>,
+    mut da: Option<&mut Matrix6xX<f64>>,
+) {
+    let (i, omf) = placed(model, data, frame);
+    let world =
+        |j: usize, m: &Motion| if j == 0 { Motion::zero() } else { data.o_m_i[j].act_motion(m) };
+    let (vi, ai) = (world(i, &data.v[i]), world(i, &data.a[i]));
+    let m = if which == Which::Velocity { vi } else { ai };
+    let p = omf.trans;
+    let express = |dm: &Motion, dp: Option<&nalgebra::Vector3<f64>>| match rf {
+        ReferenceFrame::World => *dm,
+        ReferenceFrame::Local => omf.inv_act_motion(dm),
+        ReferenceFrame::LocalWorldAligned => {
+            let mut lin = dm.lin + dm.ang.cross(&p);
+            if let Some(dp) = dp {
+                lin += m.ang.cross(dp);
+            }
+            Motion::new(dm.ang, lin)
+        }
+    };
+    dq.fill(0.0);
+    dv.fill(0.0);
+    if let Some(da) = da.as_mut() {
+        da.fill(0.0);
+    }
+    let mut k_joint = i;
+    while k_joint > 0 {
+        let lam = model.parents[k_joint];
+        let (vl, al) = (world(lam, &data.v[lam]), world(lam, &data.a[lam]));
+        let vk = world(k_joint, &data.v[k_joint]);
+        let x = data.o_m_i[k_joint];
+        for c in model.idx_v[k_joint]..model.idx_v[k_joint] + model.nvs[k_joint] {
+            let s = x.act_motion(&model.subspace[c]);
+            let mut d_q = match which {
+                Which::Velocity => s.cross(&(vi - vl)),
+                Which::Acceleration => s.cross(&(ai - al)) - s.cross(&vl).cross(&(vi - vl)),
+            };
+            let d_v = match which {
+                Which::Velocity => s,
+                Which::Acceleration => s.cross(&vi) - s.cross(&(vl + vk)),
+            };
+            if rf == ReferenceFrame::Local {
+                d_q -= s.cross(&m);
+            }
+            let dp = s.lin + s.ang.cross(&p);
+            put_col(dq, c, &express(&d_q, Some(&dp)));
+            put_col(dv, c, &express(&d_v, None));
+            if let Some(da) = da.as_mut() {
+                put_col(da, c, &express(&s, None));
+            }
+        }
+        k_joint = lam;
+    }
+}
+
+fn check_cols(model: &Model, ms: &[&Matrix6xX<f64>]) -> Result<()> {
+    for m in ms {
+        if m.ncols() != model.nv {
+            return Err(Error::Dimension {
+                what: "derivative columns".into(),
+                expected: model.nv,
+                got: m.ncols(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// `∂v_f/∂q` (tangent space) and `∂v_f/∂q̇` (`6 × nv` each) of frame `frame`'s spatial velocity
+/// in `rf` at `(q, q̇)` (Pinocchio's `getFrameVelocityDerivatives`).
+///
+/// # Errors
+/// As [`frame_velocity`]; outputs without `nv` columns.
+#[allow(clippy::too_many_arguments)]
+pub fn frame_velocity_derivatives(
+    model: &Model,
+    data: &mut Data,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+    dv_dq: &mut Matrix6xX<f64>,
+    dv_dv: &mut Matrix6xX<f64>,
+) -> Result<()> {
+    check_frame(model, frame)?;
+    check_cols(model, &[dv_dq, dv_dv])?;
+    forward_kinematics(model, data, q, Some(v), None)?;
+    frame_motion_derivatives(model, data, frame, rf, Which::Velocity, dv_dq, dv_dv, None);
+    Ok(())
+}
+
+/// `∂a_f/∂q`, `∂a_f/∂q̇`, `∂a_f/∂q̈` (`6 × nv` each) of frame `frame`'s spatial acceleration
+/// (no gravity) in `rf` at `(q, q̇, q̈)` (Pinocchio's `getFrameAccelerationDerivatives`).
+///
+/// # Errors
+/// As [`frame_acceleration`]; outputs without `nv` columns.
+#[allow(clippy::too_many_arguments)]
+pub fn frame_acceleration_derivatives(
+    model: &Model,
+    data: &mut Data,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+    da_dq: &mut Matrix6xX<f64>,
+    da_dv: &mut Matrix6xX<f64>,
+    da_da: &mut Matrix6xX<f64>,
+) -> Result<()> {
+    check_frame(model, frame)?;
+    check_cols(model, &[da_dq, da_dv, da_da])?;
+    forward_kinematics(model, data, q, Some(v), Some(a))?;
+    frame_motion_derivatives(
+        model,
+        data,
+        frame,
+        rf,
+        Which::Acceleration,
+        da_dq,
+        da_dv,
+        Some(da_da),
+    );
+    Ok(())
+}

@@ -15,8 +15,9 @@ pub use aba::aba;
 pub use crba::crba;
 pub use data::Data;
 pub use frames::{
-    ReferenceFrame, frame_acceleration, frame_classical_acceleration, frame_jacobian,
-    frame_placement, frame_velocity,
+    ReferenceFrame, frame_acceleration, frame_acceleration_derivatives,
+    frame_classical_acceleration, frame_jacobian, frame_placement, frame_velocity,
+    frame_velocity_derivatives,
 };
 pub use jacobian::{point_drift, point_jacobian, point_position};
 pub use kinematics::forward_kinematics;
