@@ -183,6 +183,16 @@ def frame_acceleration_derivatives(model: Model, data: Data, q: ArrayLike, v: Ar
                                    reference: str = "local") -> Tuple[Matrix, Matrix, Matrix]:
     """``(da_dq, da_dv, da_da)``, each ``(6, nv)``: derivatives of ``frame_acceleration``
     (``getFrameAccelerationDerivatives``)."""
+def center_of_mass(model: Model, data: Data, q: ArrayLike) -> Vector:
+    """Centre of mass ``(3,)``, world frame (``centerOfMass``)."""
+def center_of_mass_motion(model: Model, data: Data, q: ArrayLike, v: ArrayLike,
+                          a: Optional[ArrayLike] = None) -> Tuple[Vector, Vector, Vector]:
+    """``(com, vcom, acom)``, world frame; ``acom`` without gravity, zeros without ``a``."""
+def center_of_mass_jacobian(model: Model, data: Data, q: ArrayLike) -> Matrix:
+    """``(3, nv)`` centre-of-mass Jacobian (``jacobianCenterOfMass``)."""
+def center_of_mass_velocity_derivatives(model: Model, data: Data, q: ArrayLike,
+                                        v: ArrayLike) -> Matrix:
+    """``d vcom / dq``, ``(3, nv)`` (``getCenterOfMassVelocityDerivatives``)."""
 def exp6(xi: ArrayLike) -> Matrix:
     """SE(3) exponential of ``xi = [w; v]`` as a (4, 4) homogeneous matrix (Pinocchio's ``exp6``
     takes ``[v; w]``)."""

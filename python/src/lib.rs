@@ -1446,6 +1446,81 @@ fn frame_acceleration_derivatives<'py>(
     PyTuple::new(py, [o(&x), o(&y), o(&w)])
 }
 
+/// Centre of mass `(3,)` at `q`, world frame (Pinocchio's `centerOfMass`).
+#[pyfunction]
+fn center_of_mass<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let PyData { d, q: qb, .. } = &mut *data;
+    read_q(q, "q", m, qb)?;
+    let c = algo::center_of_mass(m, d, qb).map_err(core_err)?;
+    Ok(out_vec(py, &DVector::from_column_slice(c.as_slice())))
+}
+
+/// `(com, vcom, acom)`, each `(3,)`, world frame, acceleration without gravity (zeros when
+/// `a` is not given); Pinocchio's `centerOfMass(model, data, q, v, a)` and `data.vcom`,
+/// `data.acom`.
+#[pyfunction]
+#[pyo3(signature = (model, data, q, v, a = None))]
+fn center_of_mass_motion<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let m = &model.m;
+    let PyData { d, q: qb, v: vb, a: ab, .. } = &mut *data;
+    read_q(q, "q", m, qb)?;
+    read_vec(v, "v", m.nv(), "nv", vb)?;
+    if let Some(a) = a {
+        read_vec(a, "a", m.nv(), "nv", ab)?;
+    }
+    let (c, vc, ac) =
+        algo::center_of_mass_motion(m, d, qb, vb, a.map(|_| &*ab)).map_err(core_err)?;
+    let o = |x: &Vector3<f64>| out_vec(py, &DVector::from_column_slice(x.as_slice()));
+    PyTuple::new(py, [o(&c), o(&vc), o(&ac)])
+}
+
+/// The `(3, nv)` centre-of-mass Jacobian (Pinocchio's `jacobianCenterOfMass`).
+#[pyfunction]
+fn center_of_mass_jacobian<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let PyData { d, q: qb, .. } = &mut *data;
+    read_q(q, "q", m, qb)?;
+    let mut j = nalgebra::Matrix3xX::zeros(m.nv());
+    algo::center_of_mass_jacobian(m, d, qb, &mut j).map_err(core_err)?;
+    Ok(out_mat(py, &DMatrix::from_column_slice(3, m.nv(), j.as_slice())))
+}
+
+/// `d vcom / dq`, `(3, nv)` (Pinocchio's `getCenterOfMassVelocityDerivatives`).
+#[pyfunction]
+fn center_of_mass_velocity_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let PyData { d, q: qb, v: vb, .. } = &mut *data;
+    read_q(q, "q", m, qb)?;
+    read_vec(v, "v", m.nv(), "nv", vb)?;
+    let mut j = nalgebra::Matrix3xX::zeros(m.nv());
+    algo::center_of_mass_velocity_derivatives(m, d, qb, vb, &mut j).map_err(core_err)?;
+    Ok(out_mat(py, &DMatrix::from_column_slice(3, m.nv(), j.as_slice())))
+}
+
 /// `0` / `1` as [`sodyn::model::Arg`].
 fn lie_arg(arg: i64) -> PyResult<sodyn::model::Arg> {
     match arg {
@@ -2098,6 +2173,10 @@ fn _sodyn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyJoint>()?;
     m.add_class::<PyContact>()?;
     m.add_function(wrap_pyfunction!(exp6, m)?)?;
+    m.add_function(wrap_pyfunction!(center_of_mass, m)?)?;
+    m.add_function(wrap_pyfunction!(center_of_mass_motion, m)?)?;
+    m.add_function(wrap_pyfunction!(center_of_mass_jacobian, m)?)?;
+    m.add_function(wrap_pyfunction!(center_of_mass_velocity_derivatives, m)?)?;
     m.add_function(wrap_pyfunction!(frame_placement, m)?)?;
     m.add_function(wrap_pyfunction!(frame_jacobian, m)?)?;
     m.add_function(wrap_pyfunction!(frame_velocity, m)?)?;

@@ -102,3 +102,25 @@ def test_frame_derivatives_vs_pinocchio(pin, name):
             assert_close(da_dq, conv(pa_dq) + moving_origin(acc), TOL, f"{tag} da_dq")
             assert_close(da_dv, conv(pa_dv), TOL, f"{tag} da_dv")
             assert_close(da_da, conv(pa_da), TOL, f"{tag} da_da")
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_center_of_mass_vs_pinocchio(pin, name):
+    model, pmodel, pmap = pin_pair(name)
+    data = model.create_data()
+    pdata = pin.Data(pmodel)
+    q, v, a, _ = random_state(model, 2)
+    pq, pv, pa = pmap.pin_q(q), pmap.pin_v(v), pmap.pin_v(a)
+    pcom = pin.centerOfMass(pmodel, pdata, pq, pv, pa)
+    c, vc, ac = sodyn.center_of_mass_motion(model, data, q, v, a)
+    assert_close(c, pcom, TOL, f"{name} com")
+    assert_close(sodyn.center_of_mass(model, data, q), pcom, TOL, f"{name} com (q only)")
+    assert_close(vc, pdata.vcom[0], TOL, f"{name} vcom")
+    assert_close(ac, pdata.acom[0], TOL, f"{name} acom")
+    assert_close(sodyn.center_of_mass_jacobian(model, data, q),
+                 pmap.cols(pin.jacobianCenterOfMass(pmodel, pdata, pq)), TOL, f"{name} Jcom")
+    pin.centerOfMass(pmodel, pdata, pq, pv)
+    pin.computeForwardKinematicsDerivatives(pmodel, pdata, pq, pv, pa)
+    assert_close(sodyn.center_of_mass_velocity_derivatives(model, data, q, v),
+                 pmap.cols(pin.getCenterOfMassVelocityDerivatives(pmodel, pdata)), TOL,
+                 f"{name} dvcom_dq")
