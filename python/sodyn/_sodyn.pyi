@@ -193,6 +193,11 @@ def center_of_mass_jacobian(model: Model, data: Data, q: ArrayLike) -> Matrix:
 def center_of_mass_velocity_derivatives(model: Model, data: Data, q: ArrayLike,
                                         v: ArrayLike) -> Matrix:
     """``d vcom / dq``, ``(3, nv)`` (``getCenterOfMassVelocityDerivatives``)."""
+def centroidal_dynamics_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike,
+                                    a: ArrayLike) -> dict[str, Union[Vector, Matrix]]:
+    """Centroidal momentum about the centre of mass (world axes, rows ``[angular; linear]``):
+    ``h``, ``hdot`` (no gravity), ``Ag`` (``h = Ag v``, ``dhdot/da``), ``dh_dq``, ``dhdot_dq``,
+    ``dhdot_dv`` (``computeCentroidalDynamicsDerivatives``, rows ``[linear; angular]`` there)."""
 def exp6(xi: ArrayLike) -> Matrix:
     """SE(3) exponential of ``xi = [w; v]`` as a (4, 4) homogeneous matrix (Pinocchio's ``exp6``
     takes ``[v; w]``)."""

@@ -1521,6 +1521,35 @@ fn center_of_mass_velocity_derivatives<'py>(
     Ok(out_mat(py, &DMatrix::from_column_slice(3, m.nv(), j.as_slice())))
 }
 
+/// Centroidal dynamics at `(q, v, a)`: a dict with `h` (6,), `hdot` (6,), `Ag`, `dh_dq`,
+/// `dhdot_dq`, `dhdot_dv` (each `(6, nv)`; `dhdot_da = Ag`), all about the centre of mass with
+/// world axes, rows `[angular; linear]` (Pinocchio's `ccrba`, `computeCentroidalMomentumTimeVariation`,
+/// `computeCentroidalDynamicsDerivatives`, rows `[linear; angular]` there).
+#[pyfunction]
+fn centroidal_dynamics_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let m = &model.m;
+    let d = &mut *data;
+    read_qvx(m, d, q, v, a, "a")?;
+    let PyData { d, q, v, a, .. } = d;
+    let mut c = algo::Centroidal::new(m);
+    algo::centroidal_dynamics_derivatives(m, d, &mut c, q, v, a).map_err(core_err)?;
+    let out = PyDict::new(py);
+    out.set_item("h", out_vec(py, &DVector::from_column_slice(c.h())))?;
+    out.set_item("hdot", out_vec(py, &DVector::from_column_slice(c.hdot())))?;
+    out.set_item("Ag", out_mat(py, c.ag()))?;
+    out.set_item("dh_dq", out_mat(py, c.dh_dq()))?;
+    out.set_item("dhdot_dq", out_mat(py, c.dhdot_dq()))?;
+    out.set_item("dhdot_dv", out_mat(py, c.dhdot_dv()))?;
+    Ok(out)
+}
+
 /// `0` / `1` as [`sodyn::model::Arg`].
 fn lie_arg(arg: i64) -> PyResult<sodyn::model::Arg> {
     match arg {
@@ -2173,6 +2202,7 @@ fn _sodyn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyJoint>()?;
     m.add_class::<PyContact>()?;
     m.add_function(wrap_pyfunction!(exp6, m)?)?;
+    m.add_function(wrap_pyfunction!(centroidal_dynamics_derivatives, m)?)?;
     m.add_function(wrap_pyfunction!(center_of_mass, m)?)?;
     m.add_function(wrap_pyfunction!(center_of_mass_motion, m)?)?;
     m.add_function(wrap_pyfunction!(center_of_mass_jacobian, m)?)?;

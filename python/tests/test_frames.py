@@ -124,3 +124,24 @@ def test_center_of_mass_vs_pinocchio(pin, name):
     assert_close(sodyn.center_of_mass_velocity_derivatives(model, data, q, v),
                  pmap.cols(pin.getCenterOfMassVelocityDerivatives(pmodel, pdata)), TOL,
                  f"{name} dvcom_dq")
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_centroidal_vs_pinocchio(pin, name):
+    model, pmodel, pmap = pin_pair(name)
+    data = model.create_data()
+    pdata = pin.Data(pmodel)
+    q, v, a, _ = random_state(model, 3)
+    pq, pv, pa = pmap.pin_q(q), pmap.pin_v(v), pmap.pin_v(a)
+    r = sodyn.centroidal_dynamics_derivatives(model, data, q, v, a)
+    ag = pin.ccrba(pmodel, pdata, pq, pv)
+    assert_close(r["Ag"], pmap.cols(ag)[SWAP], TOL, f"{name} Ag")
+    pin.computeCentroidalMomentumTimeVariation(pmodel, pdata, pq, pv, pa)
+    assert_close(r["h"], pdata.hg.vector[SWAP], TOL, f"{name} h")
+    assert_close(r["hdot"], pdata.dhg.vector[SWAP], TOL, f"{name} hdot")
+    dh_dq, dhdot_dq, dhdot_dv, dhdot_da = pin.computeCentroidalDynamicsDerivatives(
+        pmodel, pdata, pq, pv, pa)
+    assert_close(r["dh_dq"], pmap.cols(dh_dq)[SWAP], TOL, f"{name} dh_dq")
+    assert_close(r["dhdot_dq"], pmap.cols(dhdot_dq)[SWAP], TOL, f"{name} dhdot_dq")
+    assert_close(r["dhdot_dv"], pmap.cols(dhdot_dv)[SWAP], TOL, f"{name} dhdot_dv")
+    assert_close(r["Ag"], pmap.cols(dhdot_da)[SWAP], TOL, f"{name} dhdot_da")

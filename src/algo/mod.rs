@@ -1,6 +1,7 @@
 //! Algorithms: kinematics, RNEA, CRBA, ABA, the tree-sparse `LᵀDL` factorisation, Jacobians.
 
 mod aba;
+mod centroidal;
 mod com;
 mod crba;
 pub(crate) mod data;
@@ -13,6 +14,7 @@ mod rnea;
 /// Re-export of [`crate::model::Contact`] (the contact description is a model-level type).
 pub use crate::model::Contact;
 pub use aba::aba;
+pub use centroidal::{Centroidal, centroidal_dynamics_derivatives};
 pub use com::{
     center_of_mass, center_of_mass_jacobian, center_of_mass_motion,
     center_of_mass_velocity_derivatives,
