@@ -117,6 +117,47 @@ fn algorithms_do_not_allocate() {
         check("impact_so_contracted", &mut || {
             impact_so_contracted(&m, &mut d, &mut im1, &mut ic, &q, &v, &w, &wl).unwrap()
         });
+        // Kinematics for costs: frames, centre of mass, centroidal momentum, configuration space.
+        let f = m.frame_id(frames[0]).unwrap();
+        let mut j6 = nalgebra::Matrix6xX::zeros(m.nv());
+        let (mut j6b, mut j6c) = (j6.clone(), j6.clone());
+        for rf in [ReferenceFrame::Local, ReferenceFrame::World, ReferenceFrame::LocalWorldAligned]
+        {
+            check("frame_placement", &mut || {
+                frame_placement(&m, &mut d, &q, f).unwrap();
+            });
+            check("frame_jacobian", &mut || {
+                frame_jacobian(&m, &mut d, &q, f, rf, &mut j6).unwrap()
+            });
+            check("frame_velocity", &mut || {
+                frame_velocity(&m, &mut d, &q, &v, f, rf).unwrap();
+            });
+            check("frame_classical_acceleration", &mut || {
+                frame_classical_acceleration(&m, &mut d, &q, &v, &a, f, rf).unwrap();
+            });
+            check("frame_velocity_derivatives", &mut || {
+                frame_velocity_derivatives(&m, &mut d, &q, &v, f, rf, &mut j6, &mut j6b).unwrap()
+            });
+            check("frame_acceleration_derivatives", &mut || {
+                frame_acceleration_derivatives(
+                    &m, &mut d, &q, &v, &a, f, rf, &mut j6, &mut j6b, &mut j6c,
+                )
+                .unwrap()
+            });
+        }
+        check("center_of_mass_motion", &mut || {
+            center_of_mass_motion(&m, &mut d, &q, &v, Some(&a)).unwrap();
+        });
+        check("center_of_mass_jacobian", &mut || {
+            center_of_mass_jacobian(&m, &mut d, &q, &mut jac).unwrap()
+        });
+        check("center_of_mass_velocity_derivatives", &mut || {
+            center_of_mass_velocity_derivatives(&m, &mut d, &q, &v, &mut jac).unwrap()
+        });
+        let mut cen = Centroidal::new(&m);
+        check("centroidal_dynamics_derivatives", &mut || {
+            centroidal_dynamics_derivatives(&m, &mut d, &mut cen, &q, &v, &a).unwrap()
+        });
         assert!(
             report.is_empty(),
             "{}: heap allocations in hot paths: {}",
