@@ -266,3 +266,56 @@ fn frame_derivatives_match_dual_numbers() {
 fn rel_err_mat6(a: &Matrix6xX<f64>, b: &Matrix6xX<f64>) -> f64 {
     (a - b).amax() / (1.0 + b.amax())
 }
+
+#[test]
+fn frame_jacobian_derivative_matches_dual_numbers() {
+    let mut w = Worst::new("dJ/dq");
+    let mut rng = Rng::new(83);
+    for m in &test_models(15) {
+        let mut d = Data::new(m);
+        let (q, _, _) = random_state(m, &mut rng);
+        let n = m.nv();
+        for f in 0..m.frames().len() {
+            for rf in RFS {
+                let at = format!("{} frame {} {rf:?}", m.name(), m.frames()[f].name);
+                let mut t = sodyn::tensor::Tensor3::zeros(6, n, n);
+                sodyn::algo::frame_jacobian_derivative(m, &mut d, &q, f, rf, &mut t).unwrap();
+                let mut worst: f64 = 0.0;
+                let mut scale: f64 = 1.0;
+                for k in 0..n {
+                    for c in 0..n {
+                        // (q ⊕ ε₂ e_k) ⊕ ε₁ e_c: column c at the perturbed q, then ∂/∂ε₂.
+                        let qh: Vec<HyperDual64> =
+                            q.iter().map(|&x| HyperDual64::from_re(x)).collect();
+                        let ek: Vec<HyperDual64> = (0..n)
+                            .map(|j| {
+                                HyperDual64::new(0.0, 0.0, if j == k { 1.0 } else { 0.0 }, 0.0)
+                            })
+                            .collect();
+                        let ec: Vec<HyperDual64> = (0..n)
+                            .map(|j| {
+                                HyperDual64::new(0.0, if j == c { 1.0 } else { 0.0 }, 0.0, 0.0)
+                            })
+                            .collect();
+                        let qt = integrate(m, &integrate(m, &qh, &ek), &ec);
+                        let (rh, ph) = ref_placement(m, &qt, f);
+                        let r = Matrix3::from_fn(|i, j| D::new(rh[(i, j)].re, rh[(i, j)].eps2));
+                        let rd =
+                            Matrix3::from_fn(|i, j| D::new(rh[(i, j)].eps1, rh[(i, j)].eps1eps2));
+                        let p = Vector3::from_fn(|i, _| D::new(ph[i].re, ph[i].eps2));
+                        let pd = Vector3::from_fn(|i, _| D::new(ph[i].eps1, ph[i].eps1eps2));
+                        let om = vee_d(&(rd * r.transpose()));
+                        let col = express_d((om, pd - om.cross(&p)), &r, &p, rf);
+                        for i in 0..3 {
+                            worst = worst.max((t[(i, c, k)] - col.0[i].eps).abs());
+                            worst = worst.max((t[(3 + i, c, k)] - col.1[i].eps).abs());
+                            scale = scale.max(col.0[i].eps.abs()).max(col.1[i].eps.abs());
+                        }
+                    }
+                }
+                w.add(worst / scale, &at);
+            }
+        }
+    }
+    w.check(1e-12);
+}

@@ -198,6 +198,10 @@ def centroidal_dynamics_derivatives(model: Model, data: Data, q: ArrayLike, v: A
     """Centroidal momentum about the centre of mass (world axes, rows ``[angular; linear]``):
     ``h``, ``hdot`` (no gravity), ``Ag`` (``h = Ag v``, ``dhdot/da``), ``dh_dq``, ``dhdot_dq``,
     ``dhdot_dv`` (``computeCentroidalDynamicsDerivatives``, rows ``[linear; angular]`` there)."""
+def frame_jacobian_derivative(model: Model, data: Data, q: ArrayLike, frame: Union[str, int],
+                              reference: str = "local") -> Tensor:
+    """``(6, nv, nv)``: ``T[r, c, k] = dJ[r, c]/dq_k`` of ``frame_jacobian`` (the kinematic
+    Hessian; Pinocchio's ``getJointKinematicHessian`` for joint frames)."""
 def exp6(xi: ArrayLike) -> Matrix:
     """SE(3) exponential of ``xi = [w; v]`` as a (4, 4) homogeneous matrix (Pinocchio's ``exp6``
     takes ``[v; w]``)."""

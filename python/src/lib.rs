@@ -1550,6 +1550,27 @@ fn centroidal_dynamics_derivatives<'py>(
     Ok(out)
 }
 
+/// `dJ/dq` of a frame's Jacobian in `reference`, `(6, nv, nv)`: `T[r, c, k] = dJ[r, c]/dq_k`
+/// (rows `[w; v]`).
+#[pyfunction]
+#[pyo3(signature = (model, data, q, frame, reference = "local"))]
+fn frame_jacobian_derivative<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    frame: &Bound<'py, PyAny>,
+    reference: &str,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let PyData { d, q: qb, .. } = &mut *data;
+    read_q(q, "q", m, qb)?;
+    let mut t = Tensor3::zeros(6, m.nv(), m.nv());
+    algo::frame_jacobian_derivative(m, d, qb, f, rf, &mut t).map_err(core_err)?;
+    Ok(out_tensor(py, &t))
+}
+
 /// `0` / `1` as [`sodyn::model::Arg`].
 fn lie_arg(arg: i64) -> PyResult<sodyn::model::Arg> {
     match arg {
@@ -2202,6 +2223,7 @@ fn _sodyn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyJoint>()?;
     m.add_class::<PyContact>()?;
     m.add_function(wrap_pyfunction!(exp6, m)?)?;
+    m.add_function(wrap_pyfunction!(frame_jacobian_derivative, m)?)?;
     m.add_function(wrap_pyfunction!(centroidal_dynamics_derivatives, m)?)?;
     m.add_function(wrap_pyfunction!(center_of_mass, m)?)?;
     m.add_function(wrap_pyfunction!(center_of_mass_motion, m)?)?;

@@ -145,3 +145,38 @@ def test_centroidal_vs_pinocchio(pin, name):
     assert_close(r["dhdot_dq"], pmap.cols(dhdot_dq)[SWAP], TOL, f"{name} dhdot_dq")
     assert_close(r["dhdot_dv"], pmap.cols(dhdot_dv)[SWAP], TOL, f"{name} dhdot_dv")
     assert_close(r["Ag"], pmap.cols(dhdot_da)[SWAP], TOL, f"{name} dhdot_da")
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_frame_jacobian_derivative_vs_pinocchio_differences(pin, name):
+    """``frame_jacobian_derivative`` against central differences of Pinocchio's
+    ``getFrameJacobian`` along ``pin.integrate`` (Pinocchio's own ``getJointKinematicHessian``
+    does not equal the derivative of ``getJointJacobian`` — checked by central differences — so
+    it is not compared)."""
+    model, pmodel, pmap = pin_pair(name)
+    data = model.create_data()
+    q, _, _, _ = random_state(model, 4)
+    pq = pmap.pin_q(q)
+    n, h = model.nv, 1e-6
+    frames = [f for f in range(len(pmodel.frames))
+              if pmodel.frames[f].type == pin.FrameType.BODY][-3:]
+
+    def pin_jac(qq, fid, rf):
+        d = pin.Data(pmodel)
+        pin.computeJointJacobians(pmodel, d, qq)
+        pin.updateFramePlacements(pmodel, d)
+        return pin.getFrameJacobian(pmodel, d, fid, rf)
+
+    for fid in frames:
+        fname = pmodel.frames[fid].name
+        for ours, theirs in REFS.items():
+            rf = getattr(pin.ReferenceFrame, theirs)
+            t = sodyn.frame_jacobian_derivative(model, data, q, fname, ours)
+            fd = np.zeros((6, n, n))
+            for k in range(n):
+                e = np.zeros(n)
+                e[pmap.perm[k]] = h  # our DoF k in Pinocchio's order
+                jp = pin_jac(pin.integrate(pmodel, pq, e), fid, rf)
+                jm = pin_jac(pin.integrate(pmodel, pq, -e), fid, rf)
+                fd[:, :, k] = pmap.cols((jp - jm) / (2 * h))[SWAP]
+            assert_close(t, fd, 1e-6, f"{name} {fname} {ours} dJ/dq")

@@ -355,3 +355,65 @@ pub fn frame_acceleration_derivatives(
     );
     Ok(())
 }
+
+/// `∂J/∂q` of frame `frame`'s Jacobian in `rf`: `out[(r, c, k)] = ∂J[r][c]/∂q_k` (`6 × nv × nv`,
+/// the outer perturbation `q_k` applied first, as docs/conventions.md says; zero unless both
+/// DoFs move the frame). With `S_c` the world columns and `K`, `C` the joints of DoFs `k`, `c`
+/// on the frame's path (`K ⪯ C` when `K` is `C` or an ancestor):
+/// * world: `∂S_c/∂q_k = S_k × S_c` if `K ⪯ C`, else 0 (J1);
+/// * local: `∂(X⁻¹ S_c)/∂q_k = X⁻¹ (∂S_c/∂q_k − S_k × S_c)`: 0 if `K ⪯ C`, else `−X⁻¹(S_k × S_c)`;
+/// * local world aligned: `∂[ω; v + ω × p] = [∂ω; ∂v + ∂ω × p + ω × ∂p]`,
+///   `∂p/∂q_k = S_k.lin + S_k.ang × p`.
+///
+/// # Errors
+/// As [`frame_placement`]; `out` not `6 × nv × nv`.
+pub fn frame_jacobian_derivative(
+    model: &Model,
+    data: &mut Data,
+    q: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+    out: &mut crate::tensor::Tensor3,
+) -> Result<()> {
+    let n = model.nv;
+    if out.dims() != (6, n, n) {
+        let (a, b, c) = out.dims();
+        return Err(Error::Argument {
+            name: "out".into(),
+            reason: format!("a 6×{n}×{n} tensor is needed, got {a}×{b}×{c}"),
+        });
+    }
+    let omf = frame_placement(model, data, q, frame)?;
+    let p = omf.trans;
+    out.as_mut_slice().fill(0.0);
+    let mut jc = model.frames[frame].joint;
+    while jc > 0 {
+        let xc = data.o_m_i[jc];
+        let mut jk = model.frames[frame].joint;
+        while jk > 0 {
+            let xk = data.o_m_i[jk];
+            for c in model.idx_v[jc]..model.idx_v[jc] + model.nvs[jc] {
+                let sc = xc.act_motion(&model.subspace[c]);
+                for k in model.idx_v[jk]..model.idx_v[jk] + model.nvs[jk] {
+                    let sk = xk.act_motion(&model.subspace[k]);
+                    let ds = if jk <= jc { sk.cross(&sc) } else { Motion::zero() };
+                    let d = match rf {
+                        ReferenceFrame::World => ds,
+                        ReferenceFrame::Local => omf.inv_act_motion(&(ds - sk.cross(&sc))),
+                        ReferenceFrame::LocalWorldAligned => {
+                            let dp = sk.lin + sk.ang.cross(&p);
+                            Motion::new(ds.ang, ds.lin + ds.ang.cross(&p) + sc.ang.cross(&dp))
+                        }
+                    };
+                    for r in 0..3 {
+                        out[(r, c, k)] = d.ang[r];
+                        out[(3 + r, c, k)] = d.lin[r];
+                    }
+                }
+            }
+            jk = model.parents[jk];
+        }
+        jc = model.parents[jc];
+    }
+    Ok(())
+}

@@ -23,8 +23,8 @@ pub use crba::crba;
 pub use data::Data;
 pub use frames::{
     ReferenceFrame, frame_acceleration, frame_acceleration_derivatives,
-    frame_classical_acceleration, frame_jacobian, frame_placement, frame_velocity,
-    frame_velocity_derivatives,
+    frame_classical_acceleration, frame_jacobian, frame_jacobian_derivative, frame_placement,
+    frame_velocity, frame_velocity_derivatives,
 };
 pub use jacobian::{point_drift, point_jacobian, point_position};
 pub use kinematics::forward_kinematics;
