@@ -190,8 +190,20 @@ fn eval_writes_partial_results_when_the_mass_matrix_is_singular() {
         std::fs::write(&contacts, st.to_string()).unwrap();
         let c = contacts.to_str().unwrap();
 
-        let defined =
-            ["model", "nq", "nv", "gravity", "joints", "tau", "M", "b", "dtau_dq", "dtau_dv"];
+        let defined = [
+            "model",
+            "nq",
+            "nv",
+            "gravity",
+            "joints",
+            "tau",
+            "M",
+            "b",
+            "dtau_dq",
+            "dtau_dv",
+            "com",
+            "centroidal",
+        ];
         let fd = ["qdd", "dqdd_dq", "dqdd_dv", "Minv"];
         let so = ["d2tau_dq2", "d2tau_dv2", "d2tau_dqdv", "dM_dq"];
         let fd_so = ["d2qdd_dq2", "d2qdd_dv2", "d2qdd_dqdv", "d2qdd_dtaudq"];
@@ -835,4 +847,60 @@ fn eval_takes_baumgarte_gains_per_contact() {
     let o = run(r#"[{"frame": "LF_FOOT", "kp": -1}]"#, "bad_gain.json");
     let e = assert_clean_failure(&o, "negative gain");
     assert!(e.contains("contacts[0].kp"), "{e}");
+}
+
+#[test]
+fn eval_writes_frames_com_and_centroidal() {
+    use sodyn::algo::{Data, ReferenceFrame, center_of_mass_motion, frame_jacobian};
+    let m = sodyn::model::builtin::quadruped();
+    let nv = m.nv();
+    let vals = |s: f64| -> Vec<f64> { (0..nv).map(|i| s * (i as f64 + 1.0) / nv as f64).collect() };
+    let (v, a) = (vals(0.4), vals(-0.3));
+    let state = tmp("frames.json");
+    std::fs::write(
+        &state,
+        format!(r#"{{"v": {v:?}, "a": {a:?}, "frames": ["LF_FOOT", "trunk"]}}"#),
+    )
+    .unwrap();
+    let st = state.to_str().unwrap();
+    let o = sodyn(&["eval", "--model", "builtin:quadruped", "--state", st, "--order", "2"]);
+    assert_ok(&o, "eval with frames");
+    let out: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let f = &out["frames"]["LF_FOOT"];
+    for key in [
+        "placement",
+        "jacobian",
+        "velocity",
+        "acceleration",
+        "classical_acceleration",
+        "dvelocity_dq",
+        "dvelocity_dv",
+        "dacceleration_dq",
+        "dacceleration_dv",
+        "dacceleration_da",
+        "djacobian_dq",
+    ] {
+        assert!(!f[key].is_null(), "frames.LF_FOOT.{key} missing");
+    }
+    assert!(!out["frames"]["trunk"].is_null());
+    // The world Jacobian is the library's.
+    let mut d = Data::new(&m);
+    let mut jac = nalgebra::Matrix6xX::zeros(nv);
+    let fid = m.frame_id("LF_FOOT").unwrap();
+    frame_jacobian(&m, &mut d, &m.neutral(), fid, ReferenceFrame::World, &mut jac).unwrap();
+    let rows = f["jacobian"]["world"].as_array().unwrap();
+    assert_eq!(rows.len(), 6);
+    let got = DMatrix::from_fn(6, nv, |i, j| rows[i][j].as_f64().unwrap());
+    assert!((got - DMatrix::from_column_slice(6, nv, jac.as_slice())).amax() < 1e-12);
+    let (vv, av) = (DVector::from_vec(v.clone()), DVector::from_vec(a.clone()));
+    let (c, _, ac) = center_of_mass_motion(&m, &mut d, &m.neutral(), &vv, Some(&av)).unwrap();
+    let com = vector(&out["com"], "position", 3);
+    assert!((com - c).amax() < 1e-12);
+    assert!((vector(&out["com"], "acceleration", 3) - ac).amax() < 1e-12);
+    assert_eq!(out["centroidal"]["Ag"].as_array().unwrap().len(), 6);
+    // An unknown frame is an error naming it.
+    std::fs::write(&state, r#"{"frames": ["no_such_link"]}"#).unwrap();
+    let o = sodyn(&["eval", "--model", "builtin:quadruped", "--state", st]);
+    let e = assert_clean_failure(&o, "unknown frame");
+    assert!(e.contains("frames[0]") && e.contains("no_such_link"), "{e}");
 }

@@ -4,9 +4,15 @@
 //! binary), so that a test or a fuzz target can include it with `#[path = ".../eval.rs"] mod
 //! eval;`.
 
-use nalgebra::{DMatrix, DVector, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3xX, Matrix6xX, Vector3};
 use serde_json::{Map, Value, json};
-use sodyn::algo::{Contact, Data, aba, crba, nonlinear_effects, rnea};
+use sodyn::algo::{
+    Centroidal, Contact, Data, ReferenceFrame, aba, center_of_mass_jacobian, center_of_mass_motion,
+    center_of_mass_velocity_derivatives, centroidal_dynamics_derivatives, crba, frame_acceleration,
+    frame_acceleration_derivatives, frame_classical_acceleration, frame_jacobian,
+    frame_jacobian_derivative, frame_placement, frame_velocity, frame_velocity_derivatives,
+    nonlinear_effects, rnea,
+};
 use sodyn::deriv::{
     ContactData, ContractedData, FdSoData, ImpactContracted, ImpactData, KktContracted, KktData,
     SoData, constrained_id_so_derivatives, fd_derivatives, fd_so_contracted, fd_so_derivatives,
@@ -37,6 +43,8 @@ pub struct State {
     pub restitution: f64,
     /// Weights of the contracted second-order outputs (the state file's `"weights"`).
     pub weights: Weights,
+    /// Frames whose kinematics `eval` writes (the state file's `"frames"`, indices).
+    pub frames: Vec<usize>,
 }
 
 /// The weight vectors of the state file's `"weights"` object, each optional: `eval` writes
@@ -83,6 +91,7 @@ impl State {
             lambda: DVector::zeros(0),
             restitution: 0.0,
             weights: Weights::default(),
+            frames: vec![],
         }
     }
 }
@@ -247,8 +256,29 @@ pub fn load_state(
             weights
         }
     };
+    let frames = match obj.get("frames") {
+        None => vec![],
+        Some(list) => {
+            let list = list.as_array().ok_or_else(|| {
+                Error::Io(format!("{file}: key \"frames\" must be a list of frame names"))
+            })?;
+            let mut ids = Vec::with_capacity(list.len());
+            for (i, f) in list.iter().enumerate() {
+                let name = f.as_str().ok_or_else(|| {
+                    Error::Io(format!("{file}: frames[{i}] must be a frame name (a string)"))
+                })?;
+                ids.push(
+                    model
+                        .frame_id(name)
+                        .map_err(|e| Error::Io(format!("{file}: frames[{i}]: {e}")))?,
+                );
+            }
+            ids
+        }
+    };
     Ok(State {
         weights,
+        frames,
         q,
         v: read_vec(obj, "v", model.nv(), file)?.unwrap_or_else(z),
         a: read_vec(obj, "a", model.nv(), file)?.unwrap_or_else(z),
@@ -375,10 +405,120 @@ pub fn eval_json(model: &Model, s: &State, order: u32) -> Result<Value> {
         let c = contracted_outputs(model, s, &mut data, &mut errors)?;
         o.insert("contracted".into(), c);
     }
+    kinematics_outputs(model, s, order, &mut data, o, &mut errors)?;
     if !errors.is_empty() {
         o.insert("errors".into(), Value::Object(errors));
     }
     Ok(out)
+}
+
+/// `[ang; lin]` of a motion.
+fn motion_json(m: &sodyn::spatial::Motion) -> Value {
+    json!([m.ang.x, m.ang.y, m.ang.z, m.lin.x, m.lin.y, m.lin.z])
+}
+
+fn m6_json(m: &Matrix6xX<f64>) -> Value {
+    mat_json(&DMatrix::from_column_slice(6, m.ncols(), m.as_slice()))
+}
+
+/// The `"frames"` object (the state's frames, keyed by name), `"com"` and `"centroidal"`.
+fn kinematics_outputs(
+    model: &Model,
+    s: &State,
+    order: u32,
+    data: &mut Data,
+    o: &mut Map<String, Value>,
+    errors: &mut Map<String, Value>,
+) -> Result<()> {
+    let n = model.nv();
+    let refs = [
+        ("local", ReferenceFrame::Local),
+        ("world", ReferenceFrame::World),
+        ("local_world_aligned", ReferenceFrame::LocalWorldAligned),
+    ];
+    if !s.frames.is_empty() {
+        let mut frames = Map::new();
+        for &f in &s.frames {
+            let mut fo = Map::new();
+            let t = frame_placement(model, data, &s.q, f)?;
+            let rot: Vec<Value> =
+                (0..3).map(|i| json!([t.rot[(i, 0)], t.rot[(i, 1)], t.rot[(i, 2)]])).collect();
+            fo.insert(
+                "placement".into(),
+                json!({"rotation": rot, "translation": t.trans.as_slice()}),
+            );
+            let keys = [
+                "jacobian",
+                "velocity",
+                "acceleration",
+                "classical_acceleration",
+                "dvelocity_dq",
+                "dvelocity_dv",
+                "dacceleration_dq",
+                "dacceleration_dv",
+                "dacceleration_da",
+                "djacobian_dq",
+            ];
+            let mut per: Vec<Map<String, Value>> = keys.iter().map(|_| Map::new()).collect();
+            let z = || Matrix6xX::zeros(n);
+            let (mut j, mut x, mut y, mut w) = (z(), z(), z(), z());
+            for (name, rf) in refs {
+                let name = name.to_string();
+                frame_jacobian(model, data, &s.q, f, rf, &mut j)?;
+                per[0].insert(name.clone(), m6_json(&j));
+                let vel = frame_velocity(model, data, &s.q, &s.v, f, rf)?;
+                per[1].insert(name.clone(), motion_json(&vel));
+                let acc = frame_acceleration(model, data, &s.q, &s.v, &s.a, f, rf)?;
+                per[2].insert(name.clone(), motion_json(&acc));
+                let cl = frame_classical_acceleration(model, data, &s.q, &s.v, &s.a, f, rf)?;
+                per[3].insert(name.clone(), motion_json(&cl));
+                frame_velocity_derivatives(model, data, &s.q, &s.v, f, rf, &mut x, &mut y)?;
+                per[4].insert(name.clone(), m6_json(&x));
+                per[5].insert(name.clone(), m6_json(&y));
+                frame_acceleration_derivatives(
+                    model, data, &s.q, &s.v, &s.a, f, rf, &mut x, &mut y, &mut w,
+                )?;
+                per[6].insert(name.clone(), m6_json(&x));
+                per[7].insert(name.clone(), m6_json(&y));
+                per[8].insert(name.clone(), m6_json(&w));
+                if order >= 2 {
+                    let mut t = Tensor3::zeros(6, n, n);
+                    frame_jacobian_derivative(model, data, &s.q, f, rf, &mut t)?;
+                    per[9].insert(name, tensor_json(&t));
+                }
+            }
+            for (k, m) in keys.iter().zip(per) {
+                if !m.is_empty() {
+                    fo.insert((*k).into(), Value::Object(m));
+                }
+            }
+            frames.insert(model.frames()[f].name.clone(), Value::Object(fo));
+        }
+        o.insert("frames".into(), Value::Object(frames));
+    }
+    // Centre of mass and centroidal momentum (undefined for a massless model).
+    let com = center_of_mass_motion(model, data, &s.q, &s.v, Some(&s.a));
+    if let Some((c, vc, ac)) = defined(com, &["com", "centroidal"], errors)? {
+        let mut j = Matrix3xX::zeros(n);
+        center_of_mass_jacobian(model, data, &s.q, &mut j)?;
+        let jm = mat_json(&DMatrix::from_column_slice(3, n, j.as_slice()));
+        center_of_mass_velocity_derivatives(model, data, &s.q, &s.v, &mut j)?;
+        let dm = mat_json(&DMatrix::from_column_slice(3, n, j.as_slice()));
+        o.insert(
+            "com".into(),
+            json!({"position": c.as_slice(), "velocity": vc.as_slice(),
+                   "acceleration": ac.as_slice(), "jacobian": jm, "dvelocity_dq": dm}),
+        );
+        let mut cen = Centroidal::new(model);
+        centroidal_dynamics_derivatives(model, data, &mut cen, &s.q, &s.v, &s.a)?;
+        o.insert(
+            "centroidal".into(),
+            json!({"h": cen.h().as_slice(), "hdot": cen.hdot().as_slice(), "Ag": mat_json(cen.ag()),
+                   "dh_dq": mat_json(cen.dh_dq()), "dhdot_dq": mat_json(cen.dhdot_dq()),
+                   "dhdot_dv": mat_json(cen.dhdot_dv())}),
+        );
+    }
+    Ok(())
 }
 
 /// The `"contracted"` object: for each weight given, the dense second-order keys of its

@@ -100,7 +100,8 @@ struct RandomStateArgs {
 struct EvalArgs {
     #[command(flatten)]
     model: ModelArgs,
-    /// The state: a JSON file with q, v, a, tau (and optionally contacts, lambda, restitution)
+    /// The state: a JSON file with q, v, a, tau (and optionally contacts, lambda, restitution,
+    /// weights, frames)
     #[arg(long, value_name = "FILE")]
     state: String,
     /// 1: values and first-order derivatives; 2: also the second-order tensors
