@@ -319,3 +319,45 @@ fn frame_jacobian_derivative_matches_dual_numbers() {
     }
     w.check(1e-12);
 }
+
+#[test]
+fn frame_placement_hessian_matches_dual_numbers() {
+    let mut w = Worst::new("placement Hessian");
+    let mut rng = Rng::new(84);
+    for m in &test_models(15) {
+        let mut d = Data::new(m);
+        let (q, _, _) = random_state(m, &mut rng);
+        let n = m.nv();
+        for f in 0..m.frames().len() {
+            let at = format!("{} frame {}", m.name(), m.frames()[f].name);
+            let (mut t, mut work) =
+                (sodyn::tensor::Tensor3::zeros(6, n, n), sodyn::tensor::Tensor3::zeros(6, n, n));
+            sodyn::algo::frame_placement_hessian(m, &mut d, &q, f, &mut t, &mut work).unwrap();
+            let r0 = frame_placement(m, &mut d, &q, f).unwrap().rot;
+            let r0h = Matrix3::from_fn(|i, j| HyperDual64::from_re(r0[(i, j)]));
+            let (mut worst, mut scale): (f64, f64) = (0.0, 1.0);
+            for k in 0..n {
+                for j in 0..n {
+                    let qh: Vec<HyperDual64> = q.iter().map(|&x| HyperDual64::from_re(x)).collect();
+                    let ek: Vec<HyperDual64> = (0..n)
+                        .map(|i| HyperDual64::new(0.0, 0.0, if i == k { 1.0 } else { 0.0 }, 0.0))
+                        .collect();
+                    let ej: Vec<HyperDual64> = (0..n)
+                        .map(|i| HyperDual64::new(0.0, if i == j { 1.0 } else { 0.0 }, 0.0, 0.0))
+                        .collect();
+                    let (r, p) = ref_placement(m, &integrate(m, &integrate(m, &qh, &ek), &ej), f);
+                    // log₃ of a rotation near I is ½ vee(R − Rᵀ) up to third order.
+                    let rel = r0h.transpose() * r;
+                    let e = (rel - rel.transpose()) * HyperDual64::from_re(0.5);
+                    let y = [e[(2, 1)], e[(0, 2)], e[(1, 0)], p[0], p[1], p[2]];
+                    for (i, yi) in y.iter().enumerate() {
+                        worst = worst.max((t[(i, j, k)] - yi.eps1eps2).abs());
+                        scale = scale.max(yi.eps1eps2.abs());
+                    }
+                }
+            }
+            w.add(worst / scale, &at);
+        }
+    }
+    w.check(1e-12);
+}

@@ -202,6 +202,10 @@ def frame_jacobian_derivative(model: Model, data: Data, q: ArrayLike, frame: Uni
                               reference: str = "local") -> Tensor:
     """``(6, nv, nv)``: ``T[r, c, k] = dJ[r, c]/dq_k`` of ``frame_jacobian`` (the kinematic
     Hessian; Pinocchio's ``getJointKinematicHessian`` for joint frames)."""
+def frame_placement_hessian(model: Model, data: Data, q: ArrayLike,
+                            frame: Union[str, int]) -> Tensor:
+    """``(6, nv, nv)`` Hessian of ``y = [log3(R(q)^T R(q')); p(q')]`` at ``q' = q``:
+    ``T[r, j, k] = d/dq_k (dy_r/dq_j)`` (no Pinocchio counterpart)."""
 def exp6(xi: ArrayLike) -> Matrix:
     """SE(3) exponential of ``xi = [w; v]`` as a (4, 4) homogeneous matrix (Pinocchio's ``exp6``
     takes ``[v; w]``)."""

@@ -1571,6 +1571,25 @@ fn frame_jacobian_derivative<'py>(
     Ok(out_tensor(py, &t))
 }
 
+/// Hessian `(6, nv, nv)` of a frame's placement at `q`: `T[r, j, k] = d/dq_k (dy_r/dq_j)` of
+/// `y = [log3(R(q)^T R(q')); p(q')]` at `q' = q` (rotation-vector error, then world position).
+#[pyfunction]
+fn frame_placement_hessian<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    frame: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let m = &model.m;
+    let f = frame_arg(m, frame)?;
+    let PyData { d, q: qb, .. } = &mut *data;
+    read_q(q, "q", m, qb)?;
+    let (mut t, mut w) = (Tensor3::zeros(6, m.nv(), m.nv()), Tensor3::zeros(6, m.nv(), m.nv()));
+    algo::frame_placement_hessian(m, d, qb, f, &mut t, &mut w).map_err(core_err)?;
+    Ok(out_tensor(py, &t))
+}
+
 /// `0` / `1` as [`sodyn::model::Arg`].
 fn lie_arg(arg: i64) -> PyResult<sodyn::model::Arg> {
     match arg {
@@ -2223,6 +2242,7 @@ fn _sodyn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyJoint>()?;
     m.add_class::<PyContact>()?;
     m.add_function(wrap_pyfunction!(exp6, m)?)?;
+    m.add_function(wrap_pyfunction!(frame_placement_hessian, m)?)?;
     m.add_function(wrap_pyfunction!(frame_jacobian_derivative, m)?)?;
     m.add_function(wrap_pyfunction!(centroidal_dynamics_derivatives, m)?)?;
     m.add_function(wrap_pyfunction!(center_of_mass, m)?)?;

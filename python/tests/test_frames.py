@@ -180,3 +180,26 @@ def test_frame_jacobian_derivative_vs_pinocchio_differences(pin, name):
                 jm = pin_jac(pin.integrate(pmodel, pq, -e), fid, rf)
                 fd[:, :, k] = pmap.cols((jp - jm) / (2 * h))[SWAP]
             assert_close(t, fd, 1e-6, f"{name} {fname} {ours} dJ/dq")
+
+
+def test_frame_placement_hessian_vs_differences():
+    """Against central differences of the position and the orientation error from Python."""
+    model = sodyn.Model.builtin("quadruped")
+    data = model.create_data()
+    q = model.random_configuration(seed=3)
+    n, h = model.nv, 1e-5
+    t = sodyn.frame_placement_hessian(model, data, q, "LF_FOOT")
+    m0 = sodyn.frame_placement(model, data, q, "LF_FOOT")
+
+    def y(qq):
+        m = sodyn.frame_placement(model, data, qq, "LF_FOOT")
+        rel = np.block([[m0[:3, :3].T @ m[:3, :3], np.zeros((3, 1))], [np.zeros((1, 3)), 1.0]])
+        return np.concatenate([sodyn.log6(rel)[:3], m[:3, 3]])
+
+    for j in range(n):
+        for k in range(n):
+            ej, ek = np.zeros(n), np.zeros(n)
+            ej[j], ek[k] = h, h
+            f = lambda a, b: y(model.integrate(model.integrate(q, a * ek), b * ej))
+            fd = (f(1, 1) - f(1, -1) - f(-1, 1) + f(-1, -1)) / (4 * h * h)
+            assert np.abs(t[:, j, k] - fd).max() < 1e-5 * (1 + np.abs(fd).max()), (j, k)

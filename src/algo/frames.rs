@@ -417,3 +417,59 @@ pub fn frame_jacobian_derivative(
     }
     Ok(())
 }
+
+/// The `6 × nv × nv` Hessian of frame `frame`'s placement at `q`: `out[(r, j, k)] =
+/// ∂/∂q_k (∂y_r/∂q_j)` of `y(q') = [log₃(R_f(q)ᵀ R_f(q')); p_f(q')]` (rotation vector of the
+/// orientation error from the placement at `q`, then the world position of the frame origin) at
+/// `q' = q`, the outer perturbation `q_k` first. With `J^L` the local Jacobian's angular rows
+/// and `J^A` the local-world-aligned one's linear rows: `∂y/∂q_j = [J^L_j; J^A_j]`, and, from
+/// `log₃(R₀ᵀR) = J_r⁻¹(e) ω^L = (I + ½[e]× + …) ω^L`:
+/// * rotation: `∂J^L_j/∂q_k + ½ J^L_k × J^L_j`;
+/// * position: `∂J^A_j/∂q_k` ([`frame_jacobian_derivative`]).
+///
+/// # Errors
+/// As [`frame_jacobian_derivative`].
+pub fn frame_placement_hessian(
+    model: &Model,
+    data: &mut Data,
+    q: &DVector<f64>,
+    frame: usize,
+    out: &mut crate::tensor::Tensor3,
+    work: &mut crate::tensor::Tensor3,
+) -> Result<()> {
+    let n = model.nv;
+    if work.dims() != (6, n, n) {
+        let (a, b, c) = work.dims();
+        return Err(Error::Argument {
+            name: "work".into(),
+            reason: format!("a 6×{n}×{n} tensor is needed, got {a}×{b}×{c}"),
+        });
+    }
+    frame_jacobian_derivative(model, data, q, frame, ReferenceFrame::LocalWorldAligned, work)?;
+    frame_jacobian_derivative(model, data, q, frame, ReferenceFrame::Local, out)?;
+    // Position rows from the local-world-aligned derivative.
+    for k in 0..n {
+        for j in 0..n {
+            for r in 3..6 {
+                out[(r, j, k)] = work[(r, j, k)];
+            }
+        }
+    }
+    // ½ J^L_k × J^L_j on the rotation rows; J^L from the current placements.
+    let omf = placed(model, data, frame).1;
+    let ang = |c: usize| -> nalgebra::Vector3<f64> {
+        let j = model.dof_joint[c];
+        omf.rot.transpose() * (data.o_m_i[j].rot * model.subspace[c].ang)
+    };
+    let path = |c: usize| model.is_ancestor(model.dof_joint[c], model.frames[frame].joint);
+    for k in (0..n).filter(|&k| path(k)) {
+        let wk = ang(k);
+        for j in (0..n).filter(|&j| path(j)) {
+            let x = wk.cross(&ang(j)) * 0.5;
+            for r in 0..3 {
+                out[(r, j, k)] += x[r];
+            }
+        }
+    }
+    Ok(())
+}

@@ -24,7 +24,7 @@ pub use data::Data;
 pub use frames::{
     ReferenceFrame, frame_acceleration, frame_acceleration_derivatives,
     frame_classical_acceleration, frame_jacobian, frame_jacobian_derivative, frame_placement,
-    frame_velocity, frame_velocity_derivatives,
+    frame_placement_hessian, frame_velocity, frame_velocity_derivatives,
 };
 pub use jacobian::{point_drift, point_jacobian, point_position};
 pub use kinematics::forward_kinematics;
