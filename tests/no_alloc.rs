@@ -154,6 +154,12 @@ fn algorithms_do_not_allocate() {
         check("center_of_mass_velocity_derivatives", &mut || {
             center_of_mass_velocity_derivatives(&m, &mut d, &q, &v, &mut jac).unwrap()
         });
+        let mut jd = nalgebra::DMatrix::zeros(m.nv(), m.nv());
+        let q1 = m.integrate(&q, &v).unwrap();
+        for arg in [sodyn::model::Arg::First, sodyn::model::Arg::Second] {
+            check("d_integrate_into", &mut || m.d_integrate_into(&q, &v, arg, &mut jd).unwrap());
+            check("d_difference_into", &mut || m.d_difference_into(&q, &q1, arg, &mut jd).unwrap());
+        }
         let mut cen = Centroidal::new(&m);
         check("centroidal_dynamics_derivatives", &mut || {
             centroidal_dynamics_derivatives(&m, &mut d, &mut cen, &q, &v, &a).unwrap()

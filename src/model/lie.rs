@@ -325,7 +325,8 @@ impl JointType {
 
 impl Model {
     /// `∂(q ⊕ δ)/∂q` or `∂(q ⊕ δ)/∂δ` (`nv × nv`, block diagonal by joint; Pinocchio's
-    /// `dIntegrate` with `ARG0` / `ARG1`).
+    /// `dIntegrate` with `ARG0` / `ARG1`). [`Model::d_integrate_into`] writes into a given
+    /// matrix without allocating.
     ///
     /// # Errors
     /// As [`Model::check_q`] for `q`; `delta` of the wrong length or not finite.
@@ -335,9 +336,26 @@ impl Model {
         delta: &DVector<f64>,
         arg: Arg,
     ) -> Result<DMatrix<f64>> {
+        let mut out = DMatrix::zeros(self.nv, self.nv);
+        self.d_integrate_into(q, delta, arg, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`Model::d_integrate`] into `out` (`nv × nv`; every entry written).
+    ///
+    /// # Errors
+    /// As [`Model::d_integrate`]; `out` not `nv × nv`.
+    pub fn d_integrate_into(
+        &self,
+        q: &DVector<f64>,
+        delta: &DVector<f64>,
+        arg: Arg,
+        out: &mut DMatrix<f64>,
+    ) -> Result<()> {
         self.check_q(q)?;
         self.check_v("delta", delta)?;
-        let mut out = DMatrix::zeros(self.nv, self.nv);
+        self.check_square(out)?;
+        out.as_mut_slice().fill(0.0);
         let mut blk = [0.0; 36];
         for i in 1..self.njoints() {
             let (a, n, b, m) = (self.idx_q[i], self.nqs[i], self.idx_v[i], self.nvs[i]);
@@ -349,11 +367,12 @@ impl Model {
             );
             out.view_mut((b, b), (m, m)).copy_from_slice(&blk[..m * m]);
         }
-        Ok(out)
+        Ok(())
     }
 
     /// `∂(q₁ ⊖ q₀)/∂q₀` or `∂(q₁ ⊖ q₀)/∂q₁` (`nv × nv`, block diagonal by joint; Pinocchio's
-    /// `dDifference` with `ARG0` / `ARG1`).
+    /// `dDifference` with `ARG0` / `ARG1`). [`Model::d_difference_into`] writes into a given
+    /// matrix without allocating.
     ///
     /// # Errors
     /// As [`Model::check_q`] for `q0` and `q1`.
@@ -363,8 +382,31 @@ impl Model {
         q1: &DVector<f64>,
         arg: Arg,
     ) -> Result<DMatrix<f64>> {
-        self.difference(q0, q1)?;
         let mut out = DMatrix::zeros(self.nv, self.nv);
+        self.d_difference_into(q0, q1, arg, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`Model::d_difference`] into `out` (`nv × nv`; every entry written).
+    ///
+    /// # Errors
+    /// As [`Model::d_difference`]; `out` not `nv × nv`.
+    pub fn d_difference_into(
+        &self,
+        q0: &DVector<f64>,
+        q1: &DVector<f64>,
+        arg: Arg,
+        out: &mut DMatrix<f64>,
+    ) -> Result<()> {
+        self.check_q(q0)?;
+        self.check_q(q1).map_err(|e| match e {
+            crate::error::Error::Dimension { expected, got, .. } => {
+                crate::error::Error::Dimension { what: "q1".into(), expected, got }
+            }
+            e => e,
+        })?;
+        self.check_square(out)?;
+        out.as_mut_slice().fill(0.0);
         let mut blk = [0.0; 36];
         for i in 1..self.njoints() {
             let (a, n, b, m) = (self.idx_q[i], self.nqs[i], self.idx_v[i], self.nvs[i]);
@@ -376,6 +418,17 @@ impl Model {
             );
             out.view_mut((b, b), (m, m)).copy_from_slice(&blk[..m * m]);
         }
-        Ok(out)
+        Ok(())
+    }
+
+    fn check_square(&self, out: &DMatrix<f64>) -> Result<()> {
+        if out.shape() != (self.nv, self.nv) {
+            return Err(crate::error::Error::Dimension {
+                what: "out (nv × nv) rows × cols".into(),
+                expected: self.nv * self.nv,
+                got: out.nrows() * out.ncols(),
+            });
+        }
+        Ok(())
     }
 }
