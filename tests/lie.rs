@@ -184,3 +184,13 @@ fn configuration_jacobians_check_inputs() {
     bad[3] = f64::NAN;
     assert!(m.d_integrate(&bad, &DVector::zeros(m.nv()), Arg::First).is_err());
 }
+
+#[test]
+fn log6_of_a_bad_rotation_returns() {
+    // Not a rotation, and not finite: a value comes back (meaningless), no hang or panic.
+    for rot in [nalgebra::Matrix3::from_element(f64::NAN), nalgebra::Matrix3::identity() * 2.0] {
+        let t = Transform::new(rot, nalgebra::Vector3::zeros());
+        let _ = log6(&t);
+        let _ = jlog6(&t);
+    }
+}

@@ -29,7 +29,7 @@
 
 use super::contact_kin::Path;
 use super::fd::fd_derivatives;
-use super::id_fo::{accumulate_to_parent, forward_pass_world};
+use super::id_fo::{accumulate_to_parent, forward_pass_world, mul_b, mul_b_tr_ang};
 #[cfg(target_arch = "x86_64")]
 use super::zero::Avx4;
 use super::zero::Lanes;
@@ -268,27 +268,10 @@ impl IdContractWs {
     }
 }
 
-/// `B x` for a Coriolis-type matrix whose right block column is zero
-/// ([`crate::spatial::coriolis_b`]), from its left block column `b` (column-major).
-#[inline(always)]
-fn mul_b(b: &[f64], x: &Motion) -> Force {
-    let (x0, x1, x2) = (x.ang.x, x.ang.y, x.ang.z);
-    let y = |r: usize| b[r] * x0 + b[r + 6] * x1 + b[r + 12] * x2;
-    Force::new(Vector3::new(y(0), y(1), y(2)), Vector3::new(y(3), y(4), y(5)))
-}
-
-/// `Bᵀ x` for the same structure (its linear part is zero).
+/// `Bᵀ x` for a Coriolis-type matrix from its left block column `b` (its linear part is zero).
 #[inline(always)]
 fn mul_bt(b: &[f64], x: &Motion) -> Force {
-    let col = |c: usize| {
-        b[c] * x.ang.x
-            + b[c + 1] * x.ang.y
-            + b[c + 2] * x.ang.z
-            + b[c + 3] * x.lin.x
-            + b[c + 4] * x.lin.y
-            + b[c + 5] * x.lin.z
-    };
-    Force::new(Vector3::new(col(0), col(6), col(12)), Vector3::zeros())
+    Force::new(mul_b_tr_ang(b, x), Vector3::zeros())
 }
 
 /// The Hessian blocks of `φ = wᵀτ(q, q̇, q̈)` by reverse mode, in `O(N d)`: no tensor, no
@@ -458,6 +441,60 @@ impl SideD {
         y: Force::ZERO,
         is: Force::ZERO,
     };
+
+    /// Step 1 for a DoF with path vectors `p` of a joint whose subtree has the composites `c`.
+    #[inline(always)]
+    fn new(c: &Comp, p: &PathV) -> SideD {
+        let (s, ic) = (p.s, c.ic);
+        SideD {
+            uf: s.cross_force(&c.fc) + ic.mul_motion(&p.pdd) + mul_b(c.bc, &p.pd) * 2.0,
+            upsi: s.cross_force(&c.pc) + ic.mul_motion(&p.pw),
+            ur: s.cross_force(&c.rc) + (mul_bt(c.bc, &p.pw) - mul_bt(c.bp, &p.pd)) * 2.0,
+            z: mul_b(c.bp, &s) - s.cross_force(&c.pc),
+            y: ic.mul_motion(&p.pss) + mul_b(c.bc, &s) * 2.0,
+            is: ic.mul_motion(&s),
+        }
+    }
+}
+
+/// The composites of one subtree used by steps 1 and 3 of [`id_contract_unchecked`]: `I^C`,
+/// the left halves of `B^C`, `B^ψ`, and `F`, `R`, `Ψ`.
+struct Comp<'a> {
+    ic: &'a Inertia,
+    bc: &'a [f64],
+    bp: &'a [f64],
+    fc: Force,
+    rc: Force,
+    pc: Force,
+}
+
+/// A DoF's path vectors `S`, `Ψ̇`, `Ψ̈`, `Ψ̇ + Ṡ`, `Ψ̇^w`.
+#[derive(Clone, Copy)]
+struct PathV {
+    s: Motion,
+    pd: Motion,
+    pdd: Motion,
+    pss: Motion,
+    pw: Motion,
+}
+
+/// Step 3 of [`id_contract_unchecked`] for DoFs `j`, `k` of one joint (path vectors and step-1
+/// vectors of each; `g`, `v_λ`, `v` of the joint): `[C_qq, C_vv, C_qv, C_Mq]` at `(j, k)`.
+#[inline(always)]
+fn own_joint_entries(
+    c: &Comp,
+    (g, vl, vi): (&Force, &Motion, &Motion),
+    (pj, xj): (&PathV, &SideD),
+    (pk, xk): (&PathV, &SideD),
+) -> [f64; 4] {
+    let (sj, sk) = (pj.s, pk.s);
+    let skj = sk.cross(&sj);
+    let qq = pj.pw.dot(&xk.uf) + pj.pd.dot(&xk.ur) + pj.pdd.dot(&xk.upsi) - skj.dot(g);
+    let vv = -sj.dot(&(mul_b(c.bp, &sk) * 2.0 - sk.cross_force(&c.pc)));
+    let dbeta = (-skj).cross(&(*vl + *vi)) + sk.cross(&sj.cross(&(*vi - *vl)));
+    let qv = sk.dot(&xj.ur) + pk.pss.dot(&xj.upsi) - skj.dot(&c.rc) - dbeta.dot(&c.pc);
+    let mq = sj.dot(&xk.upsi) + skj.dot(&c.pc);
+    [qq, vv, qv, mq]
 }
 
 /// Lanes of step 2 of [`id_contract_unchecked`]: ancestor DoFs handled at once.
@@ -492,23 +529,26 @@ fn contract_step<V: Lanes<Arr = [f64; LANES]>>(
 ) {
     let n = model.nv;
     let (iv, nvi) = (model.idx_v[i], model.nvs[i]);
-    let ic = &data.ic_world[i];
-    let (bc, bp) = (&data.bc[i].as_slice()[..18], &ws.bp[i][..]);
-    let (fc, rc, pc) = (data.ofc[i], ws.rc[i], ws.pc[i]);
+    let c = Comp {
+        ic: &data.ic_world[i],
+        bc: &data.bc[i].as_slice()[..18],
+        bp: &ws.bp[i][..],
+        fc: data.ofc[i],
+        rc: ws.rc[i],
+        pc: ws.pc[i],
+    };
+    let pv = |d: usize| PathV {
+        s: data.s_world[d],
+        pd: data.psid[d],
+        pdd: data.psidd[d],
+        pss: data.psid_sdot[d],
+        pw: ws.psiw[d],
+    };
     let mut side = [SideD::ZERO; 6];
     let runs = &ws.runs[ws.run_start[i]..ws.run_start[i + 1]];
     let st = ws.stride;
     for (t, d) in (iv..iv + nvi).enumerate() {
-        let s = data.s_world[d];
-        let (pd, pdd, pss, pw) = (data.psid[d], data.psidd[d], data.psid_sdot[d], ws.psiw[d]);
-        let x = SideD {
-            uf: s.cross_force(&fc) + ic.mul_motion(&pdd) + mul_b(bc, &pd) * 2.0,
-            upsi: s.cross_force(&pc) + ic.mul_motion(&pw),
-            ur: s.cross_force(&rc) + (mul_bt(bc, &pw) - mul_bt(bp, &pd)) * 2.0,
-            z: mul_b(bp, &s) - s.cross_force(&pc),
-            y: ic.mul_motion(&pss) + mul_b(bc, &s) * 2.0,
-            is: ic.mul_motion(&s),
-        };
+        let x = SideD::new(&c, &pv(d));
         side[t] = x;
         // Step 2, LANES ancestor DoFs a at once, from a's path vectors
         // [S, Ψ̇, Ψ̈, Ψ̇ + Ṡ, Ψ̇^w] (blocks 0–4 of `path`).
@@ -571,29 +611,22 @@ fn contract_step<V: Lanes<Arr = [f64; LANES]>>(
         let (x, s) = (&side[0], data.s_world[iv]);
         let jj = iv + n * iv;
         qq[jj] = ws.psiw[iv].dot(&x.uf) + data.psid[iv].dot(&x.ur) + data.psidd[iv].dot(&x.upsi);
-        vv[jj] = -2.0 * s.dot(&mul_b(bp, &s));
+        vv[jj] = -2.0 * s.dot(&mul_b(c.bp, &s));
         qv[jj] = s.dot(&x.ur) + data.psid_sdot[iv].dot(&x.upsi);
         mq[jj] = s.dot(&x.upsi);
         return;
     }
     let p = model.parents[i];
     let (psil, vl, al, vi) = (ws.psi[p], data.ov[p], data.oa[p], data.ov[i]);
+    let (fc, rc, pc) = (c.fc, c.rc, c.pc);
     let g =
         psil.cross_force(&fc) + vl.cross_force(&(rc - vl.cross_force(&pc))) + al.cross_force(&pc);
     for (tj, j) in (iv..iv + nvi).enumerate() {
-        let sj = data.s_world[j];
-        let (pdj, pddj, pwj) = (data.psid[j], data.psidd[j], ws.psiw[j]);
+        let pj = pv(j);
         for (tk, k) in (iv..iv + nvi).enumerate() {
-            let sk = data.s_world[k];
-            let (xj, xk) = (&side[tj], &side[tk]);
             let jk = j + n * k;
-            let skj = sk.cross(&sj);
-            qq[jk] = pwj.dot(&xk.uf) + pdj.dot(&xk.ur) + pddj.dot(&xk.upsi) - skj.dot(&g);
-            vv[jk] = -sj.dot(&(mul_b(bp, &sk) * 2.0 - sk.cross_force(&pc)));
-            let dbeta = (-skj).cross(&(vl + vi)) + sk.cross(&sj.cross(&(vi - vl)));
-            qv[jk] =
-                sk.dot(&xj.ur) + data.psid_sdot[k].dot(&xj.upsi) - skj.dot(&rc) - dbeta.dot(&pc);
-            mq[jk] = sj.dot(&xk.upsi) + skj.dot(&pc);
+            let e = own_joint_entries(&c, (&g, &vl, &vi), (&pj, &side[tj]), (&pv(k), &side[tk]));
+            [qq[jk], vv[jk], qv[jk], mq[jk]] = e;
         }
     }
 }
@@ -695,19 +728,15 @@ pub(crate) fn point_hessians(
     let pc = ip.mul_motion(&psic);
     let rc = ip.mul_motion(&psic.cross(&vb)) - psic.cross_force(&ivb) + vb.cross_force(&pc);
     let (bc, bp) = (coriolis_b_left(&ip, &vb), coriolis_b_left(&ip, &psic));
+    let c = Comp { ic: &ip, bc: &bc, bp: &bp, fc, rc, pc };
+    let pv = |pw: &PointWs, d: usize| {
+        let s = data.s_world[d];
+        PathV { s, pd: pw.psid[d], pdd: pw.psidd[d], pss: pw.pss[d], pw: psic.cross(&s) }
+    };
     // Step 1 for every DoF of the path.
     for (t, &d) in path.dofs.iter().enumerate() {
-        let s = data.s_world[d];
-        let (pd, pdd, pss, pwd) = (pw.psid[d], pw.psidd[d], pw.pss[d], psic.cross(&s));
-        let x = SideD {
-            uf: s.cross_force(&fc) + ip.mul_motion(&pdd) + mul_b(&bc, &pd) * 2.0,
-            upsi: s.cross_force(&pc) + ip.mul_motion(&pwd),
-            ur: s.cross_force(&rc) + (mul_bt(&bc, &pwd) - mul_bt(&bp, &pd)) * 2.0,
-            z: mul_b(&bp, &s) - s.cross_force(&pc),
-            y: ip.mul_motion(&pss) + mul_b(&bc, &s) * 2.0,
-            is: ip.mul_motion(&s),
-        };
-        pw.side[t] = (x, pwd);
+        let p = pv(pw, d);
+        pw.side[t] = (SideD::new(&c, &p), p.pw);
     }
     let (qq, side) = (qq.as_mut_slice(), &pw.side[..path.dofs.len()]);
     let mut vq = vq.as_mut().map(|(v, q)| (v.as_mut_slice(), q.as_mut_slice()));
@@ -744,21 +773,16 @@ pub(crate) fn point_hessians(
             + vl.cross_force(&(rc - vl.cross_force(&pc)))
             + al.cross_force(&pc);
         for td in t0..t1 {
-            let (d, x, sd) = (path.dofs[td], &side[td].0, data.s_world[path.dofs[td]]);
-            for (&j, (xj, pwj)) in path.dofs[t0..t1].iter().zip(&side[t0..t1]) {
-                let sj = data.s_world[j];
-                let skj = sd.cross(&sj);
+            let (d, x) = (path.dofs[td], &side[td].0);
+            let pd = pv(pw, d);
+            for (&j, (xj, _)) in path.dofs[t0..t1].iter().zip(&side[t0..t1]) {
                 let jd_ = j + n * d;
-                qq[jd_] += scale
-                    * (pwj.dot(&x.uf) + pw.psid[j].dot(&x.ur) + pw.psidd[j].dot(&x.upsi)
-                        - skj.dot(&g));
+                let [eqq, evv, eqv, _] =
+                    own_joint_entries(&c, (&g, &vl, &vi), (&pv(pw, j), xj), (&pd, x));
+                qq[jd_] += scale * eqq;
                 if let Some((vv, qv)) = vq.as_mut() {
-                    vv[jd_] -= scale * sj.dot(&(mul_b(&bp, &sd) * 2.0 - sd.cross_force(&pc)));
-                    let dbeta = (-skj).cross(&(vl + vi)) + sd.cross(&sj.cross(&(vi - vl)));
-                    qv[jd_] += scale
-                        * (sd.dot(&xj.ur) + pw.pss[d].dot(&xj.upsi)
-                            - skj.dot(&rc)
-                            - dbeta.dot(&pc));
+                    vv[jd_] += scale * evv;
+                    qv[jd_] += scale * eqv;
                 }
             }
         }

@@ -36,10 +36,10 @@ use crate::spatial::{Force, Inertia, Motion, Transform, coriolis_b_write, dot6};
 use nalgebra::{DVector, Matrix6, Vector3};
 
 /// `B x` for a body-level Coriolis matrix with the block structure `[[B₁₁, 0], [B₂₁, 0]]` of
-/// [`crate::spatial::coriolis_b`] (kept by the composite sums), from its left 6×3 half.
+/// [`crate::spatial::coriolis_b`] (kept by the composite sums), from its left 6×3 half `b`
+/// (column-major, at least 18 entries).
 #[inline(always)]
-fn mul_b(b: &Matrix6<f64>, x: &Motion) -> Force {
-    let b = b.as_slice(); // column-major
+pub(crate) fn mul_b(b: &[f64], x: &Motion) -> Force {
     let (x0, x1, x2) = (x.ang.x, x.ang.y, x.ang.z);
     let y = |r: usize| b[r] * x0 + b[r + 6] * x1 + b[r + 12] * x2;
     Force::new(Vector3::new(y(0), y(1), y(2)), Vector3::new(y(3), y(4), y(5)))
@@ -47,8 +47,7 @@ fn mul_b(b: &Matrix6<f64>, x: &Motion) -> Force {
 
 /// Angular part of `Bᵀ x` (its linear part is zero for the structure of [`mul_b`]).
 #[inline(always)]
-fn mul_b_tr_ang(b: &Matrix6<f64>, x: &Motion) -> Vector3<f64> {
-    let b = b.as_slice();
+pub(crate) fn mul_b_tr_ang(b: &[f64], x: &Motion) -> Vector3<f64> {
     Vector3::new(
         dot6(b[0], b[1], b[2], b[3], b[4], b[5], &Force::new(x.ang, x.lin)),
         dot6(b[6], b[7], b[8], b[9], b[10], b[11], &Force::new(x.ang, x.lin)),
@@ -325,9 +324,9 @@ fn dof_terms(
     DofTerms {
         tau: s.dot(fc),
         t1: ic.mul_motion(s),
-        t2: mul_b_tr_ang(bc, s) * 2.0,
-        t3: mul_b(bc, psid) * 2.0 + ic.mul_motion(psidd) + fc.crff(s),
-        t4: mul_b(bc, s) * 2.0 + ic.mul_motion(pss),
+        t2: mul_b_tr_ang(bc.as_slice(), s) * 2.0,
+        t3: mul_b(bc.as_slice(), psid) * 2.0 + ic.mul_motion(psidd) + fc.crff(s),
+        t4: mul_b(bc.as_slice(), s) * 2.0 + ic.mul_motion(pss),
     }
 }
 

@@ -21,7 +21,7 @@ use super::joint::JointType;
 use super::tree::Model;
 use crate::error::Result;
 use crate::spatial::{Motion, Transform, skew};
-use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Rotation3, UnitQuaternion, Vector3};
 
 /// The argument a configuration-space Jacobian is taken with respect to (Pinocchio's
 /// `ARG0`, `ARG1`).
@@ -148,9 +148,13 @@ pub fn exp6(xi: &Motion) -> Transform {
 }
 
 /// The SE(3) logarithm `[ω; v]` of a placement (rotation angle ≤ π; Pinocchio's `log6`, our
-/// ordering): `ω = log(R)`, `v = V(ω)⁻¹ p`.
+/// ordering): `ω = log(R)`, `v = V(ω)⁻¹ p`. The rotation block is taken as a rotation
+/// (`Transform`'s invariant); a block that is not one gives a meaningless result, not a panic.
 pub fn log6(m: &Transform) -> Motion {
-    let w = UnitQuaternion::from_matrix(&m.rot).scaled_axis();
+    // Closed-form quaternion of the rotation block (Shepperd's method; no iteration, so a
+    // block that is not a rotation, or not finite, cannot make this loop).
+    let w = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m.rot))
+        .scaled_axis();
     Motion::new(w, jr3_inv(&-w) * m.trans)
 }
 
