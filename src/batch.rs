@@ -345,7 +345,7 @@ pub fn copy_output(dst: &mut [f64], src: &[f64]) {
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2_fma() {
         // SAFETY: the CPU supports AVX; the lengths are equal (asserted).
-        unsafe { stream_copy_avx(dst, src) };
+        unsafe { crate::simd::avx2::copy(dst, src) };
         return;
     }
     dst.copy_from_slice(src);
@@ -362,40 +362,17 @@ fn copy(dst: &mut DMatrix<f64>, src: &DMatrix<f64>) {
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2_fma() {
         // SAFETY: the CPU supports AVX; the lengths are equal (asserted).
-        unsafe { stream_copy_avx(dst, src) };
+        unsafe { crate::simd::avx2::copy(dst, src) };
         return;
     }
     dst.copy_from_slice(src);
-}
-
-/// `dst ← src` (equal lengths) with streaming stores for the 32-byte aligned part of `dst`.
-///
-/// # Safety
-/// AVX available; `dst.len() == src.len()`.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-unsafe fn stream_copy_avx(dst: &mut [f64], src: &[f64]) {
-    use std::arch::x86_64::{_mm256_loadu_pd, _mm256_stream_pd};
-    let n = dst.len();
-    // Elements before the first 32-byte boundary of `dst` (f64 is 8-byte aligned, so ≤ 3).
-    let head = dst.as_ptr().align_offset(32).min(n);
-    let body = head + (n - head) / 4 * 4;
-    dst[..head].copy_from_slice(&src[..head]);
-    for i in (head..body).step_by(4) {
-        // SAFETY: i + 4 ≤ body ≤ n for both slices; dst + i is 32-byte aligned.
-        unsafe { _mm256_stream_pd(dst.as_mut_ptr().add(i), _mm256_loadu_pd(src.as_ptr().add(i))) };
-    }
-    dst[body..].copy_from_slice(&src[body..]);
 }
 
 /// Orders the streaming stores of [`copy`] before what follows (the end of a thread's share).
 #[inline]
 fn fence_streams() {
     #[cfg(target_arch = "x86_64")]
-    // SAFETY: SSE is part of x86_64.
-    unsafe {
-        std::arch::x86_64::_mm_sfence()
-    };
+    crate::simd::avx2::fence_streams();
 }
 
 /// A slice shared by the threads of [`drive`], each of which uses only its own entries: the

@@ -17,7 +17,7 @@ mod linalg;
 pub mod model;
 pub mod reference;
 pub mod rng;
-mod simd;
+pub mod simd;
 pub mod spatial;
 pub mod tensor;
 mod trig;

@@ -16,20 +16,20 @@
 //! as [`sin_cos`].
 
 /// `2/π`.
-const FRAC_2_PI: f64 = std::f64::consts::FRAC_2_PI;
+pub(crate) const FRAC_2_PI: f64 = std::f64::consts::FRAC_2_PI;
 /// π/2 = P1 + P2 + P3 (+ ~10⁻³⁷): P1 and P2 have 33 significant bits.
-const P1: f64 = 1.5707963267341256;
-const P2: f64 = 6.077100506303966e-11;
-const P3: f64 = 2.0222662487959506e-21;
+pub(crate) const P1: f64 = 1.5707963267341256;
+pub(crate) const P2: f64 = 6.077100506303966e-11;
+pub(crate) const P3: f64 = 2.0222662487959506e-21;
 /// `1/6`.
-const SIXTH: f64 = 1.0 / 6.0;
+pub(crate) const SIXTH: f64 = 1.0 / 6.0;
 /// `1.5 · 2⁵²`: adding it rounds a value of magnitude below 2⁵¹ to an integer, which is then
 /// the low bits of the sum's mantissa.
-const ROUND: f64 = 6755399441055744.0;
+pub(crate) const ROUND: f64 = 6755399441055744.0;
 /// Largest `|x|` taking the fast path (`|k| ≤ 2¹⁷`, far within the exact range of the split).
-const MAX_FAST: f64 = 1.0e5;
+pub(crate) const MAX_FAST: f64 = 1.0e5;
 /// `sin r = r + r³ (S0 + S1 s + … + S5 s⁵)`, `s = r²`, on `|r| ≤ π/4`.
-const S: [f64; 6] = [
+pub(crate) const S: [f64; 6] = [
     -0.16666666666666666,
     0.008333333333330948,
     -0.00019841269836758574,
@@ -38,7 +38,7 @@ const S: [f64; 6] = [
     1.5918129294866608e-10,
 ];
 /// `cos r = 1 − s/2 + s² (C0 + C1 s + … + C5 s⁵)`, `s = r²`, on `|r| ≤ π/4`.
-const C: [f64; 6] = [
+pub(crate) const C: [f64; 6] = [
     0.041666666666666664,
     -0.0013888888888887398,
     2.480158729876569e-05,
@@ -90,74 +90,7 @@ fn sin_cos_fast(x: f64) -> (f64, f64) {
     (sin, cos)
 }
 
-/// [`sin_cos`] of the four lanes of `x`, in registers, with FMA: the steps of
-/// `sin_cos_fast` with each product-and-sum fused, which shortens the dependency chain from
-/// the angle to the result by about a fifth (the crba of a two-joint pendulum spends a third
-/// of its time here). The results are within 1 ulp of `f64::sin_cos` like [`sin_cos`]'s, but
-/// not always the same bits. If any `|xₗ| > 10⁵` or is NaN, every lane goes through
-/// [`sin_cos`].
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-pub(crate) fn sin_cos4_v(
-    xv: std::arch::x86_64::__m256d,
-) -> (std::arch::x86_64::__m256d, std::arch::x86_64::__m256d) {
-    use std::arch::x86_64::*;
-    let ax = _mm256_andnot_pd(_mm256_set1_pd(-0.0), xv);
-    // Ordered comparison: false for NaN.
-    let fast = _mm256_cmp_pd::<_CMP_LE_OQ>(ax, _mm256_set1_pd(MAX_FAST));
-    if _mm256_movemask_pd(fast) != 0b1111 {
-        let mut x = [0.0; 4];
-        // SAFETY: `x` is four contiguous f64.
-        unsafe { _mm256_storeu_pd(x.as_mut_ptr(), xv) };
-        let (s, c) = sin_cos4_lanes(&x);
-        // SAFETY: as above.
-        return unsafe { (_mm256_loadu_pd(s.as_ptr()), _mm256_loadu_pd(c.as_ptr())) };
-    }
-    let set = _mm256_set1_pd;
-    let (add, sub, mul) =
-        (|a, b| _mm256_add_pd(a, b), |a, b| _mm256_sub_pd(a, b), |a, b| _mm256_mul_pd(a, b));
-    // a·b + c and c − a·b, rounded once.
-    let (fma, fnma) = (|a, b, c| _mm256_fmadd_pd(a, b, c), |a, b, c| _mm256_fnmadd_pd(a, b, c));
-    let t = fma(xv, set(FRAC_2_PI), set(ROUND));
-    let k = sub(t, set(ROUND));
-    let quadrant = _mm256_castpd_si256(t);
-    // x − k P1 is exact; r = x − k (P1 + P2) rounded once, d its rounding error less k P3
-    // (r1 − r is exact by Sterbenz' lemma; d only enters to first order).
-    let r1 = fnma(k, set(P1), xv);
-    let r = fnma(k, set(P2), r1);
-    let d = fnma(k, set(P3), fnma(k, set(P2), sub(r1, r)));
-    let s = mul(r, r);
-    let s2 = mul(s, s);
-    // Estrin's scheme: (c0 + c1 s) + s² ((c2 + c3 s) + s² (c4 + c5 s)).
-    let poly = |c: &[f64; 6]| {
-        let (a, b, e) = (
-            fma(s, set(c[1]), set(c[0])),
-            fma(s, set(c[3]), set(c[2])),
-            fma(s, set(c[5]), set(c[4])),
-        );
-        fma(s2, fma(s2, e, b), a)
-    };
-    let (ps, pc) = (poly(&S), poly(&C));
-    let (hs, rs) = (mul(set(0.5), s), mul(r, s));
-    let zero = _mm256_cmp_pd::<_CMP_EQ_OQ>(xv, _mm256_setzero_pd());
-    // sin r = r + ((d − d s/2) + r s P(s)); x = ±0 keeps its sign.
-    let sr = _mm256_blendv_pd(add(r, fma(rs, ps, fnma(d, hs, d))), xv, zero);
-    // cos r = w + (((1 − w) − s/2) − d (r − r s/6) + s² Q(s)), w = 1 − s/2 rounded.
-    let w = sub(set(1.0), hs);
-    let lo = fnma(d, fnma(rs, set(SIXTH), r), sub(sub(set(1.0), w), hs));
-    let cr = add(w, fma(s2, pc, lo));
-    // Swap where k is odd, then flip the sign bits (as in `sin_cos_fast`).
-    let one = _mm256_set1_epi64x(1);
-    let two = _mm256_set1_epi64x(2);
-    let odd = _mm256_castsi256_pd(_mm256_cmpeq_epi64(_mm256_and_si256(quadrant, one), one));
-    let (a, b) = (_mm256_blendv_pd(sr, cr, odd), _mm256_blendv_pd(cr, sr, odd));
-    let fs = _mm256_slli_epi64::<62>(_mm256_and_si256(quadrant, two));
-    let fc = _mm256_slli_epi64::<62>(_mm256_and_si256(_mm256_add_epi64(quadrant, one), two));
-    (_mm256_xor_pd(a, _mm256_castsi256_pd(fs)), _mm256_xor_pd(b, _mm256_castsi256_pd(fc)))
-}
-
-/// [`sin_cos`] lane by lane (the portable [`sin_cos4_v`], and its fallback).
+/// [`sin_cos`] lane by lane (the portable four-lane `sin_cos`, and the AVX2 one's fallback).
 #[inline(never)]
 pub(crate) fn sin_cos4_lanes(x: &[f64; 4]) -> ([f64; 4], [f64; 4]) {
     let (mut s, mut c) = ([0.0; 4], [0.0; 4]);
@@ -304,15 +237,8 @@ mod tests {
             if std::arch::is_x86_feature_detected!("avx2")
                 && std::arch::is_x86_feature_detected!("fma")
             {
-                use std::arch::x86_64::*;
-                let (mut s4, mut c4) = ([0.0; 4], [0.0; 4]);
-                // SAFETY: the CPU has AVX2 and FMA (checked just above); the arrays are four
-                // contiguous f64.
-                unsafe {
-                    let (s, c) = super::sin_cos4_v(_mm256_loadu_pd(x.as_ptr()));
-                    _mm256_storeu_pd(s4.as_mut_ptr(), s);
-                    _mm256_storeu_pd(c4.as_mut_ptr(), c);
-                }
+                // SAFETY: the CPU has AVX2 and FMA (checked just above).
+                let (s4, c4) = unsafe { crate::simd::avx2::sin_cos_arrays(&x) };
                 // A huge or NaN lane sends the whole chunk through `sin_cos`.
                 let lanewise = x.iter().any(|v| v.is_nan() || v.abs() > 1.0e5);
                 for l in 0..4 {
@@ -328,7 +254,7 @@ mod tests {
                 paths = 2;
             }
         }
-        eprintln!("sin_cos4_v: worst {worst} ulp against f64::sin_cos ({paths} paths)");
+        eprintln!("four-lane sin_cos: worst {worst} ulp against f64::sin_cos ({paths} paths)");
         assert!(paths >= 1);
     }
 }

@@ -29,7 +29,7 @@ use super::rnea::check_fext;
 use crate::error::Result;
 use crate::model::{Model, check_vec};
 use crate::spatial::{Force, Motion, Transform};
-use nalgebra::{DVector, Matrix6, Vector3, Vector6};
+use nalgebra::{DVector, Matrix6, Vector6};
 
 /// Forward dynamics `q̈ = M⁻¹(τ − b + Σ Jᵢᵀ fextᵢ)` by the articulated-body algorithm.
 /// `fext` as in [`super::rnea()`] (body frames). Returns `data.qdd`.
@@ -61,141 +61,65 @@ pub fn aba<'a>(
     Ok(&data.qdd)
 }
 
-type M3 = [[f64; 3]; 3];
-
-/// Row-major copy of the 3×3 block at `(r0, c0)` of a column-major 6×6 array.
-#[inline(always)]
-fn block(a: &[f64], r0: usize, c0: usize) -> M3 {
-    let mut m = [[0.0; 3]; 3];
-    for (r, row) in m.iter_mut().enumerate() {
-        for (c, x) in row.iter_mut().enumerate() {
-            *x = a[r0 + r + 6 * (c0 + c)];
-        }
-    }
-    m
-}
-
-/// `R A` for 3×3 row-major arrays.
-#[inline(always)]
-fn mul3(r: &M3, a: &M3) -> M3 {
-    let mut t = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for k in 0..3 {
-            t[i][k] = r[i][0] * a[0][k] + r[i][1] * a[1][k] + r[i][2] * a[2][k];
-        }
-    }
-    t
-}
-
-/// `T Rᵀ`; with `sym` only the upper triangle is computed and mirrored (`T Rᵀ` symmetric).
-#[inline(always)]
-fn mul3_tr(t: &M3, r: &M3, sym: bool) -> M3 {
-    let mut s = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            if sym && j < i {
-                s[i][j] = s[j][i];
-            } else {
-                s[i][j] = t[i][0] * r[j][0] + t[i][1] * r[j][1] + t[i][2] * r[j][2];
-            }
-        }
-    }
-    s
-}
-
-/// `p × x`.
-#[inline(always)]
-fn cross3(p: &[f64; 3], x: [f64; 3]) -> [f64; 3] {
-    [p[1] * x[2] - p[2] * x[1], p[2] * x[0] - p[0] * x[2], p[0] * x[1] - p[1] * x[0]]
-}
-
-/// `Xᵀ A X` for the 6×6 motion transform `X = ⁱX_λ` of `x` (`λ M_i`): maps a body-frame
-/// articulated inertia (symmetric) to the parent frame.
-#[inline]
-fn congruence_to_parent(x: &Transform, a: &Matrix6<f64>) -> Matrix6<f64> {
-    // Rotate the blocks, then translate: with P = [p]×,
-    // [[A, B], [Bᵀ, C]] ↦ [[A − B P + P Bᵀ − P C P, B + P C], [·ᵀ, C]],
-    // computed as Y = B + P C and A + (P Bᵀ)ᵀ + P Yᵀ (C symmetric, Pᵀ = −P).
-    let rs = x.rot.as_slice();
-    let r: M3 = [[rs[0], rs[3], rs[6]], [rs[1], rs[4], rs[7]], [rs[2], rs[5], rs[8]]];
-    let a = a.as_slice();
-    let aa = mul3_tr(&mul3(&r, &block(a, 0, 0)), &r, true);
-    let b = mul3_tr(&mul3(&r, &block(a, 0, 3)), &r, false);
-    let c = mul3_tr(&mul3(&r, &block(a, 3, 3)), &r, true);
-    let p = [x.trans.x, x.trans.y, x.trans.z];
-    // Y = B + P C (column j of P C is p × C_j; C symmetric so C_j is row j).
-    let mut y = b;
-    for j in 0..3 {
-        let e = cross3(&p, c[j]);
-        for i in 0..3 {
-            y[i][j] += e[i];
-        }
-    }
-    let mut out = [0.0; 36];
-    for j in 0..3 {
-        // column j of P Bᵀ is p × (row j of B); column j of P Yᵀ is p × (row j of Y).
-        let z = cross3(&p, b[j]);
-        let w = cross3(&p, y[j]);
-        for i in 0..3 {
-            // X_ij = A_ij + (P Bᵀ)_ji + (P Yᵀ)_ij
-            out[i + 6 * j] += aa[i][j] + w[i];
-            out[j + 6 * i] += z[i];
-            out[i + 6 * (j + 3)] = y[i][j];
-            out[j + 3 + 6 * i] = y[i][j];
-            out[i + 3 + 6 * (j + 3)] = c[i][j];
-        }
-    }
-    Matrix6::from_column_slice(&out)
-}
-
-/// `out += Xᵀ A X` (see [`congruence_to_parent`]) for a column-major 6×6 array `a`.
+/// `out += Xᵀ A X` for the motion transform `X = ⁱX_λ` of `x = λM_i` (body-frame articulated
+/// inertia to the parent frame) and a column-major 6×6 array `a` (symmetric).
 #[inline]
 fn congruence_add_to_parent(x: &Transform, a: &[f64], out: &mut Matrix6<f64>) {
     assert!(a.len() == 36);
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2_fma() {
-        // SAFETY: the CPU has AVX2 and FMA (checked just above); `a` has 36 entries.
-        unsafe { avx::congruence_add(x, a, out) };
+        // SAFETY: the CPU has AVX2 and FMA (checked just above).
+        unsafe { congruence_add_avx2(x, a, out) };
         return;
     }
-    *out += congruence_to_parent(x, &Matrix6::from_column_slice(a));
+    lanes::congruence_add::<[f64; 4]>(x, a, out);
 }
 
+/// [`lanes::congruence_add`] compiled for AVX2/FMA.
 #[cfg(target_arch = "x86_64")]
-mod avx {
+#[target_feature(enable = "avx2,fma")]
+fn congruence_add_avx2(x: &Transform, a: &[f64], out: &mut Matrix6<f64>) {
+    lanes::congruence_add::<crate::simd::Avx4>(x, a, out)
+}
+
+/// [`lanes::backward_1dof`] compiled for AVX2/FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn backward_1dof_avx2(
+    model: &Model,
+    data: &mut Data,
+    i: usize,
+    tau_k: f64,
+) -> std::result::Result<f64, f64> {
+    lanes::backward_1dof::<crate::simd::Avx4>(model, data, i, tau_k)
+}
+
+/// The kernels of the single-DoF backward step and the congruence, generic over the lanes.
+mod lanes {
     use super::Data;
     use crate::model::Model;
-    use crate::spatial::avx::{columns, comb, cross, store3};
+    use crate::simd::F64x4;
+    use crate::spatial::lanes::{columns, comb, cross};
     use crate::spatial::{Force, Transform};
     use nalgebra::{Matrix6, Vector3};
-    use std::arch::x86_64::*;
 
     /// Lanes 0..3 of `v` added to `p[0..3]`.
     ///
     /// # Safety
     /// `p` valid for reads and writes of three entries.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    unsafe fn add3(p: *mut f64, v: __m256d) {
+    #[inline(always)]
+    unsafe fn add3<V: F64x4>(p: *mut f64, v: V) {
         // SAFETY: see the function's contract.
-        unsafe {
-            let lo = _mm_add_pd(_mm_loadu_pd(p), _mm256_castpd256_pd128(v));
-            let hi = _mm_add_sd(_mm_load_sd(p.add(2)), _mm256_extractf128_pd(v, 1));
-            _mm_storeu_pd(p, lo);
-            _mm_store_sd(p.add(2), hi);
-        }
+        unsafe { V::load3(p).add(v).store3(p) }
     }
 
-    /// See `super::aba_backward_1dof` (same steps on 4-lane vectors): the column `j` of the
+    /// See `super::aba_backward_1dof` (its steps on 4-lane vectors): the column `j` of the
     /// 6×6 `I^A` is held as rows 0..4 (`top`) and rows 3..6 (`bot`, lanes `[3, 4, 5, 2]`), so
     /// that `U = I^A S`, `I^a = I^A − U D⁻¹ Uᵀ` and `I^a c` are column combinations.
     /// Returns the pivot `D = Sᵀ U`; `Err(D)` (nothing written) if it fails
     /// [`super::pivot_ok`].
-    ///
-    /// # Safety
-    /// The CPU has AVX2 and FMA.
-    #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn backward_1dof(
+    #[inline(always)]
+    pub(super) fn backward_1dof<V: F64x4>(
         model: &Model,
         data: &mut Data,
         i: usize,
@@ -206,20 +130,20 @@ mod avx {
         let sv = [s.ang.x, s.ang.y, s.ang.z, s.lin.x, s.lin.y, s.lin.z];
         let ia = data.ia[i].as_slice();
         assert!(ia.len() == 36);
-        let mut top = [_mm256_setzero_pd(); 6];
-        let mut bot = [_mm256_setzero_pd(); 6];
+        let mut top = [V::zero(); 6];
+        let mut bot = [V::zero(); 6];
         for j in 0..6 {
             // SAFETY: 6j + 6 <= 36: the loads read ia[6j..6j + 4] and ia[6j + 2..6j + 6].
             unsafe {
                 let c = ia.as_ptr().add(6 * j);
-                top[j] = _mm256_loadu_pd(c);
-                bot[j] = _mm256_permute4x64_pd(_mm256_loadu_pd(c.add(2)), 0b00_11_10_01);
+                top[j] = V::loadu(c);
+                bot[j] = V::loadu(c.add(2)).permute::<0b00_11_10_01>();
             }
         }
-        let comb6 = |m: &[__m256d; 6], x: &[f64; 6]| {
-            let mut a = _mm256_mul_pd(m[0], _mm256_set1_pd(x[0]));
+        let comb6 = |m: &[V; 6], x: &[f64; 6]| {
+            let mut a = m[0].mul(V::splat(x[0]));
             for j in 1..6 {
-                a = _mm256_fmadd_pd(m[j], _mm256_set1_pd(x[j]), a);
+                a = m[j].mul_add(V::splat(x[j]), a);
             }
             a
         };
@@ -228,8 +152,8 @@ mod avx {
         let mut uc = [0.0; 6];
         // SAFETY: `uc` has six entries.
         unsafe {
-            store3(uc.as_mut_ptr(), ut);
-            store3(uc.as_mut_ptr().add(3), ub);
+            ut.store3(uc.as_mut_ptr());
+            ub.store3(uc.as_mut_ptr().add(3));
         }
         let d = sv.iter().zip(&uc).map(|(a, b)| a * b).sum::<f64>();
         if !super::pivot_ok(d) {
@@ -249,40 +173,36 @@ mod avx {
         // Ia = IA − U D⁻¹ Uᵀ ;  pa = pA + Ia c + U D⁻¹ u
         let mut buf = [0.0; 36];
         for j in 0..6 {
-            let w = _mm256_set1_pd(uc[j] * dinv);
-            top[j] = _mm256_fnmadd_pd(ut, w, top[j]);
-            bot[j] = _mm256_fnmadd_pd(ub, w, bot[j]);
+            let w = V::splat(uc[j] * dinv);
+            top[j] = ut.neg_mul_add(w, top[j]);
+            bot[j] = ub.neg_mul_add(w, bot[j]);
             // SAFETY: `buf` has 36 entries: the stores write buf[6j..6j + 4], then
             // buf[6j + 3..6j + 6] (rows 3..6, lanes 0..3 of `bot`).
             unsafe {
-                _mm256_storeu_pd(buf.as_mut_ptr().add(6 * j), top[j]);
-                store3(buf.as_mut_ptr().add(6 * j + 3), bot[j]);
+                top[j].storeu(buf.as_mut_ptr().add(6 * j));
+                bot[j].store3(buf.as_mut_ptr().add(6 * j + 3));
             }
         }
         let c = &data.c[i];
         let cv = [c.ang.x, c.ang.y, c.ang.z, c.lin.x, c.lin.y, c.lin.z];
-        let su = _mm256_set1_pd(u * dinv);
-        let pn = _mm256_setr_pd(pa.ang.x, pa.ang.y, pa.ang.z, 0.0);
-        let pf = _mm256_setr_pd(pa.lin.x, pa.lin.y, pa.lin.z, 0.0);
-        let pa_n = _mm256_fmadd_pd(ut, su, _mm256_add_pd(pn, comb6(&top, &cv)));
-        let pa_f = _mm256_fmadd_pd(ub, su, _mm256_add_pd(pf, comb6(&bot, &cv)));
+        let su = V::splat(u * dinv);
+        let pn = V::setr(pa.ang.x, pa.ang.y, pa.ang.z, 0.0);
+        let pf = V::setr(pa.lin.x, pa.lin.y, pa.lin.z, 0.0);
+        let pa_n = ut.mul_add(su, pn.add(comb6(&top, &cv)));
+        let pa_f = ub.mul_add(su, pf.add(comb6(&bot, &cv)));
         let x = data.li_m_i[i];
-        // SAFETY: the CPU has AVX2 and FMA; `buf` has 36 entries.
-        unsafe { congruence_add(&x, &buf, &mut data.ia[p]) };
+        congruence_add::<V>(&x, &buf, &mut data.ia[p]);
         // λX_i^* pa: [R n + p × R f; R f].
         let mut pav = [0.0; 6];
         // SAFETY: `pav` has six entries.
         unsafe {
-            store3(pav.as_mut_ptr(), pa_n);
-            store3(pav.as_mut_ptr().add(3), pa_f);
+            pa_n.store3(pav.as_mut_ptr());
+            pa_f.store3(pav.as_mut_ptr().add(3));
         }
-        let rc = columns(&x.rot);
+        let rc = columns::<V>(&x.rot);
         let t = &x.trans;
         let rf = comb(&rc, pav[3], pav[4], pav[5]);
-        let rn = _mm256_add_pd(
-            comb(&rc, pav[0], pav[1], pav[2]),
-            cross(_mm256_setr_pd(t.x, t.y, t.z, 0.0), rf),
-        );
+        let rn = comb(&rc, pav[0], pav[1], pav[2]).add(cross(V::setr(t.x, t.y, t.z, 0.0), rf));
         let fp = &mut data.pa[p];
         // SAFETY: each target has three entries.
         unsafe {
@@ -297,29 +217,26 @@ mod avx {
     /// `Xᵀ = λX_i^*`: `[n; f] ↦ [R n + p × R f; R f]`), then `G X` (column `j` of `G X` is
     /// `Σ_k G_k X_kj` with `X = [[Rᵀ, 0], [Rᵀ [p]×ᵀ, Rᵀ]]`).
     ///
-    /// # Safety
-    /// The CPU has AVX2 and FMA; `a` has 36 entries.
-    #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn congruence_add(x: &Transform, a: &[f64], out: &mut Matrix6<f64>) {
+    /// # Panics
+    /// If `a` does not have 36 entries.
+    #[inline(always)]
+    pub(super) fn congruence_add<V: F64x4>(x: &Transform, a: &[f64], out: &mut Matrix6<f64>) {
+        assert!(a.len() == 36);
         let rs = x.rot.as_slice(); // column-major: R_ij = rs[i + 3j]
         // SAFETY: `rs` has 9 entries; the loads read rs[0..4], rs[3..7] and rs[5..9].
         let rc = unsafe {
             let p = rs.as_ptr();
-            [
-                _mm256_loadu_pd(p),
-                _mm256_loadu_pd(p.add(3)),
-                _mm256_permute4x64_pd(_mm256_loadu_pd(p.add(5)), 0b00_11_10_01),
-            ]
+            [V::loadu(p), V::loadu(p.add(3)), V::loadu(p.add(5)).permute::<0b00_11_10_01>()]
         };
         let t = &x.trans;
-        let pv = _mm256_setr_pd(t.x, t.y, t.z, 0.0);
+        let pv = V::setr(t.x, t.y, t.z, 0.0);
         // G = Xᵀ A, column k as top (rows 0..3) and bottom (rows 3..6).
-        let mut gt = [_mm256_setzero_pd(); 6];
-        let mut gb = [_mm256_setzero_pd(); 6];
+        let mut gt = [V::zero(); 6];
+        let mut gb = [V::zero(); 6];
         for k in 0..6 {
             let c = &a[6 * k..6 * k + 6];
             let rf = comb(&rc, c[3], c[4], c[5]);
-            gt[k] = _mm256_add_pd(comb(&rc, c[0], c[1], c[2]), cross(pv, rf));
+            gt[k] = comb(&rc, c[0], c[1], c[2]).add(cross(pv, rf));
             gb[k] = rf;
         }
         // Rᵀ[p]×ᵀ = Rᵀ[−p]×: column j is Rᵀ(e_j × p); entry (r, j) = R_·r · (e_j × p).
@@ -332,14 +249,18 @@ mod avx {
             // Rᵀ_kj = R_jk = rs[j + 3k].
             let rr = [rs[j], rs[j + 3], rs[j + 6]];
             let ll = [l(0, j), l(1, j), l(2, j)];
-            let top = _mm256_add_pd(
-                comb(&[gt[0], gt[1], gt[2]], rr[0], rr[1], rr[2]),
-                comb(&[gt[3], gt[4], gt[5]], ll[0], ll[1], ll[2]),
-            );
-            let bot = _mm256_add_pd(
-                comb(&[gb[0], gb[1], gb[2]], rr[0], rr[1], rr[2]),
-                comb(&[gb[3], gb[4], gb[5]], ll[0], ll[1], ll[2]),
-            );
+            let top = comb(&[gt[0], gt[1], gt[2]], rr[0], rr[1], rr[2]).add(comb(
+                &[gt[3], gt[4], gt[5]],
+                ll[0],
+                ll[1],
+                ll[2],
+            ));
+            let bot = comb(&[gb[0], gb[1], gb[2]], rr[0], rr[1], rr[2]).add(comb(
+                &[gb[3], gb[4], gb[5]],
+                ll[0],
+                ll[1],
+                ll[2],
+            ));
             let ut = comb(&[gt[3], gt[4], gt[5]], rr[0], rr[1], rr[2]);
             let ub = comb(&[gb[3], gb[4], gb[5]], rr[0], rr[1], rr[2]);
             // SAFETY: `out` has 36 entries: columns j and j + 3 (j < 3), rows 0..6.
@@ -351,19 +272,6 @@ mod avx {
             }
         }
     }
-}
-
-/// `A x` for a column-major 6×6 array and a motion.
-#[inline(always)]
-fn mat6_mul(a: &[f64], x: &Motion) -> [f64; 6] {
-    let xs = [x.ang.x, x.ang.y, x.ang.z, x.lin.x, x.lin.y, x.lin.z];
-    let mut y = [0.0; 6];
-    for (k, xk) in xs.iter().enumerate() {
-        for (r, yr) in y.iter_mut().enumerate() {
-            *yr += a[r + 6 * k] * xk;
-        }
-    }
-    y
 }
 
 #[inline]
@@ -481,55 +389,11 @@ fn aba_backward_1dof(model: &Model, data: &mut Data, i: usize, tau_k: f64) -> Re
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2_fma() {
         // SAFETY: the CPU has AVX2 and FMA (checked just above).
-        return unsafe { avx::backward_1dof(model, data, i, tau_k) }
+        return unsafe { backward_1dof_avx2(model, data, i, tau_k) }
             .map_err(|d| pivot_error(model, model.idx_v[i], d, None));
     }
-    let k = model.idx_v[i];
-    let s = model.subspace[k];
-    let ia = data.ia[i];
-    let pa = data.pa[i];
-    let ias = ia.as_slice();
-    let uc = mat6_mul(ias, &s); // U = I^A S
-    let uf = Force::new(Vector3::new(uc[0], uc[1], uc[2]), Vector3::new(uc[3], uc[4], uc[5]));
-    data.u_cols[k] = uf;
-    let d = s.dot(&uf);
-    if !pivot_ok(d) {
-        return Err(pivot_error(model, k, d, None));
-    }
-    let dinv = 1.0 / d;
-    let u = tau_k - s.dot(&pa);
-    data.u[k] = u;
-    data.d_inv[i][(0, 0)] = dinv;
-    let p = model.parents[i];
-    if p > 0 {
-        // Ia = IA − U D⁻¹ Uᵀ ;  pa = pA + Ia c + U D⁻¹ u
-        let mut ia_a = [0.0; 36];
-        for c in 0..6 {
-            let w = uc[c] * dinv;
-            for r in 0..6 {
-                ia_a[r + 6 * c] = ias[r + 6 * c] - uc[r] * w;
-            }
-        }
-        let iac = mat6_mul(&ia_a, &data.c[i]);
-        let su = u * dinv;
-        let pa_a = Force::new(
-            Vector3::new(
-                pa.ang.x + iac[0] + uc[0] * su,
-                pa.ang.y + iac[1] + uc[1] * su,
-                pa.ang.z + iac[2] + uc[2] * su,
-            ),
-            Vector3::new(
-                pa.lin.x + iac[3] + uc[3] * su,
-                pa.lin.y + iac[4] + uc[4] * su,
-                pa.lin.z + iac[5] + uc[5] * su,
-            ),
-        );
-        let x = data.li_m_i[i];
-        congruence_add_to_parent(&x, &ia_a, &mut data.ia[p]);
-        let fp = x.act_force(&pa_a);
-        data.pa[p] += fp;
-    }
-    Ok(d)
+    lanes::backward_1dof::<[f64; 4]>(model, data, i, tau_k)
+        .map_err(|d| pivot_error(model, model.idx_v[i], d, None))
 }
 
 /// Inverse of the leading `n×n` block of the symmetric `d` (the articulated inertia

@@ -22,12 +22,10 @@
 //! `F ← λX_j^* F` before `M_ac = M_ca = S_aᵀ F`.
 
 use super::Data;
-use super::kinematics::{next_angles, root_free_flyer};
+use super::kinematics::root_free_flyer;
 use crate::error::Result;
-use crate::model::joint::rotate_columns;
 use crate::model::{JointKin, Model};
-use crate::spatial::{Inertia, Motion, Transform};
-use crate::trig::sin_cos4_lanes;
+use crate::simd::F64x4;
 use nalgebra::{DMatrix, DVector};
 
 /// Joint-space mass matrix `M(q)` (full symmetric), by the composite-rigid-body algorithm.
@@ -49,7 +47,7 @@ pub fn crba<'a>(model: &Model, data: &'a mut Data, q: &DVector<f64>) -> Result<&
     #[cfg(target_arch = "x86_64")]
     if model.nv <= LOCAL_CRBA_MAX_NV && crate::simd::avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
-        unsafe { avx::crba_local(model, data, q.as_slice()) };
+        unsafe { crba_local_avx2(model, data, q.as_slice()) };
         return Ok(&data.m);
     }
     crba_unchecked(model, data, q);
@@ -75,390 +73,124 @@ pub(crate) fn crba_unchecked(model: &Model, data: &mut Data, q: &DVector<f64>) {
     crba_portable(model, data, q);
 }
 
-/// [`crba_body`] with the portable kernel (out of line, so that the dispatch inlines).
+/// [`crba_body`] with the portable lanes (out of line, so that the dispatch inlines).
 #[inline(never)]
 fn crba_portable(model: &Model, data: &mut Data, q: &DVector<f64>) {
-    crba_body::<Portable>(model, data, q)
+    crba_body::<[f64; 4]>(model, data, q)
 }
 
 /// [`crba_body`] compiled for AVX2/FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn crba_avx2(model: &Model, data: &mut Data, q: &DVector<f64>) {
-    crba_body::<Avx2>(model, data, q)
+    crba_body::<crate::simd::Avx4>(model, data, q)
 }
 
-/// The per-body kernel of the forward pass (portable, and AVX2/FMA with explicit intrinsics):
-/// world placement `x = ᵒM_p ᵖM_i` (`x = ᵖM_i` for a child of the world, `xp = None`), world
-/// inertia `X I` and world subspace columns `X S`, written in place. The parent placement
-/// comes as a [`Kern::X`] (in registers for AVX2): the one just returned for the previous
-/// joint when that is the parent (chains), else loaded from `o_m_i`.
-trait Kern {
-    /// Four `(sin, cos)` pairs.
-    type SinCos: Copy;
-    /// `(sin, cos)` (within 1 ulp of `f64::sin_cos`, see `trig`) of the angles `q[rev_q[r..r + 4]]` of
-    /// the next four revolute joints about `±eₖ` (see [`next_angles`]).
-    fn angles(model: &Model, q: &[f64], r: usize) -> Self::SinCos;
-    /// A world placement as the kernel holds it.
-    type X: Copy;
-    /// Loads a world placement.
-    fn load(x: &Transform) -> Self::X;
-    /// A (composite) world inertia as the kernel holds it.
-    type Ic: Copy;
-    /// Loads a world inertia.
-    fn load_ic(ic: &Inertia) -> Self::Ic;
-    /// `a + b`.
-    fn add_ic(a: Self::Ic, b: Self::Ic) -> Self::Ic;
-    /// Writes a world inertia.
-    fn store_ic(a: Self::Ic, ic: &mut Inertia);
-    /// Returns the world placement and inertia also written to `x` and `ic`.
-    fn body(
-        xp: Option<Self::X>,
-        li: &Transform,
-        inertia: &Inertia,
-        sub: &[Motion],
-        x: &mut Transform,
-        ic: &mut Inertia,
-        sw: &mut [Motion],
-    ) -> (Self::X, Self::Ic);
-    /// [`Kern::body`] for a revolute joint about `sign · e_k` (`k < 3`, `sign = ±1`) with its
-    /// angle in lane `l` of `sc`: the joint placement `li = placement · Rot(e_k, ±θ)` is also
-    /// written to `li`, and the subspace `sub` is `[sign · e_k; 0]`.
-    #[allow(clippy::too_many_arguments)]
-    fn body_revolute(
-        xp: Option<Self::X>,
-        placement: &Transform,
-        k: usize,
-        sign: f64,
-        sc: &Self::SinCos,
-        l: usize,
-        inertia: &Inertia,
-        sub: &[Motion],
-        li: &mut Transform,
-        x: &mut Transform,
-        ic: &mut Inertia,
-        sw: &mut [Motion],
-    ) -> (Self::X, Self::Ic);
-    /// Per-call data for the block of the root free-flyer DoFs `0..6` (see [`Kern::column`]).
-    type Root;
-    /// Prepares the root block from the root placement `x_root` and the world subspace
-    /// `sw[0..6]` of the root free-flyer (its identity subspace moved to the world frame).
-    fn root(x_root: &Transform, sw: &[Motion]) -> Self::Root;
-    /// Column `c` of `M`: `f = I^C S_c`, `M_cc = S_cᵀ f`, `M_rc = M_cr = S_rᵀ f` for the
-    /// ancestor DoFs `r` in `anc` and, with `root`, for the root DoFs `r < 6` (not in `anc`).
-    ///
-    /// # Safety
-    /// Every `r` in `anc` is `< c`, `c < nv = sw.len()`, `m.len() == nv * nv`, and with `root`
-    /// `6 <= c`.
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn column(
-        ic: &Self::Ic,
-        sw: &[Motion],
-        c: usize,
-        anc: &[usize],
-        root: Option<&Self::Root>,
-        m: &mut [f64],
-        nv: usize,
-    );
-}
-
-/// Portable kernel.
-struct Portable;
-
-impl Kern for Portable {
-    type SinCos = ([f64; 4], [f64; 4]);
-    #[inline(always)]
-    fn angles(model: &Model, q: &[f64], r: usize) -> Self::SinCos {
-        sin_cos4_lanes(&next_angles(model, q, r))
-    }
-    type X = Transform;
-    #[inline(always)]
-    fn load(x: &Transform) -> Transform {
-        *x
-    }
-    type Ic = Inertia;
-    #[inline(always)]
-    fn load_ic(ic: &Inertia) -> Inertia {
-        *ic
-    }
-    #[inline(always)]
-    fn add_ic(a: Inertia, b: Inertia) -> Inertia {
-        a + b
-    }
-    #[inline(always)]
-    fn store_ic(a: Inertia, ic: &mut Inertia) {
-        *ic = a;
-    }
-    #[inline(always)]
-    fn body(
-        xp: Option<Transform>,
-        li: &Transform,
-        inertia: &Inertia,
-        sub: &[Motion],
-        x: &mut Transform,
-        ic: &mut Inertia,
-        sw: &mut [Motion],
-    ) -> (Transform, Inertia) {
-        *x = match xp {
-            Some(xp) => xp.compose(li),
-            None => *li,
-        };
-        *ic = x.act_inertia_inline(inertia);
-        for (o, s) in sw.iter_mut().zip(sub) {
-            *o = x.act_motion(s);
-        }
-        (*x, *ic)
-    }
-    #[inline(always)]
-    fn body_revolute(
-        xp: Option<Transform>,
-        placement: &Transform,
-        k: usize,
-        sign: f64,
-        sc: &Self::SinCos,
-        l: usize,
-        inertia: &Inertia,
-        sub: &[Motion],
-        li: &mut Transform,
-        x: &mut Transform,
-        ic: &mut Inertia,
-        sw: &mut [Motion],
-    ) -> (Transform, Inertia) {
-        let (s, c) = (sign * sc.0[l], sc.1[l]);
-        *li = Transform::new(rotate_columns(&placement.rot, k, s, c), placement.trans);
-        Self::body(xp, li, inertia, sub, x, ic, sw)
-    }
-    type Root = Transform;
-    #[inline(always)]
-    fn root(x_root: &Transform, _sw: &[Motion]) -> Transform {
-        *x_root
-    }
-    #[inline(always)]
-    unsafe fn column(
-        ic: &Inertia,
-        sw: &[Motion],
-        c: usize,
-        anc: &[usize],
-        root: Option<&Transform>,
-        m: &mut [f64],
-        nv: usize,
-    ) {
-        // SAFETY: c < nv = sw.len() and m is nv×nv (see the trait).
-        let sc = unsafe { sw.get_unchecked(c) };
-        let f = ic.mul_motion(sc);
-        // SAFETY: as above.
-        unsafe { *m.get_unchecked_mut(c + c * nv) = sc.dot(&f) };
-        if let Some(x_root) = root {
-            // The root's identity subspace: its block of column c is S_rootᵀ f = Xᵀ f, the
-            // force f expressed in the root body frame.
-            let fl = x_root.inv_act_force(&f);
-            let col = [fl.ang.x, fl.ang.y, fl.ang.z, fl.lin.x, fl.lin.y, fl.lin.z];
-            for (r, x) in col.into_iter().enumerate() {
-                // SAFETY: r < 6 <= c < nv.
-                unsafe {
-                    *m.get_unchecked_mut(r + c * nv) = x;
-                    *m.get_unchecked_mut(c + r * nv) = x;
-                }
-            }
-        }
-        for &r in anc {
-            debug_assert!(r < c);
-            // SAFETY: see the trait.
-            unsafe {
-                let mrc = sw.get_unchecked(r).dot(&f);
-                *m.get_unchecked_mut(r + c * nv) = mrc;
-                *m.get_unchecked_mut(c + r * nv) = mrc;
-            }
-        }
-    }
-}
-
-/// AVX2/FMA kernel; only used after `crate::simd::avx2_fma()` returned true.
+/// The local-frame kernel compiled for AVX2/FMA.
 #[cfg(target_arch = "x86_64")]
-struct Avx2;
-
-#[cfg(target_arch = "x86_64")]
-impl Kern for Avx2 {
-    type SinCos = avx::SinCos4;
-    #[inline(always)]
-    fn angles(model: &Model, q: &[f64], r: usize) -> avx::SinCos4 {
-        // SAFETY: `Avx2` kernels run only on CPUs with AVX2 and FMA (see `crba_unchecked`).
-        unsafe { avx::angles(model, q, r) }
-    }
-    type X = avx::X;
-    #[inline(always)]
-    fn load(x: &Transform) -> avx::X {
-        // SAFETY: as in `angles`.
-        unsafe { avx::load(x) }
-    }
-    type Ic = avx::Ic;
-    #[inline(always)]
-    fn load_ic(ic: &Inertia) -> avx::Ic {
-        // SAFETY: as in `angles`.
-        unsafe { avx::load_ic(ic) }
-    }
-    #[inline(always)]
-    fn add_ic(a: avx::Ic, b: avx::Ic) -> avx::Ic {
-        // SAFETY: as in `angles`.
-        unsafe { avx::add_ic(a, b) }
-    }
-    #[inline(always)]
-    fn store_ic(a: avx::Ic, ic: &mut Inertia) {
-        // SAFETY: as in `angles`.
-        unsafe { avx::store_ic(a, ic) }
-    }
-    #[inline(always)]
-    fn body(
-        xp: Option<avx::X>,
-        li: &Transform,
-        inertia: &Inertia,
-        sub: &[Motion],
-        x: &mut Transform,
-        ic: &mut Inertia,
-        sw: &mut [Motion],
-    ) -> (avx::X, avx::Ic) {
-        // SAFETY: as in `angles`.
-        unsafe { avx::body(xp, li, inertia, sub, x, ic, sw) }
-    }
-    #[inline(always)]
-    fn body_revolute(
-        xp: Option<avx::X>,
-        placement: &Transform,
-        k: usize,
-        sign: f64,
-        sc: &avx::SinCos4,
-        l: usize,
-        inertia: &Inertia,
-        sub: &[Motion],
-        li: &mut Transform,
-        x: &mut Transform,
-        ic: &mut Inertia,
-        sw: &mut [Motion],
-    ) -> (avx::X, avx::Ic) {
-        // SAFETY: as in `angles`.
-        unsafe { avx::body_revolute(xp, placement, k, sign, sc, l, inertia, sub, li, x, ic, sw) }
-    }
-    type Root = avx::Root;
-    #[inline(always)]
-    fn root(_x_root: &Transform, sw: &[Motion]) -> avx::Root {
-        // SAFETY: as in `angles`.
-        unsafe { avx::root(sw) }
-    }
-    #[inline(always)]
-    unsafe fn column(
-        ic: &avx::Ic,
-        sw: &[Motion],
-        c: usize,
-        anc: &[usize],
-        root: Option<&avx::Root>,
-        m: &mut [f64],
-        nv: usize,
-    ) {
-        // SAFETY: the CPU has AVX2 and FMA (as above); the index bounds are the caller's.
-        unsafe { avx::column(ic, sw, c, anc, root, m, nv) }
-    }
+#[target_feature(enable = "avx2,fma")]
+fn crba_local_avx2(model: &Model, data: &mut Data, q: &[f64]) {
+    lanes::crba_local::<crate::simd::Avx4>(model, data, q)
 }
 
-#[cfg(target_arch = "x86_64")]
-pub(super) mod avx {
-    use super::next_angles;
+/// The kernels of both CRBA variants, generic over the lane type.
+mod lanes {
+    use crate::algo::kinematics::load_angles;
     use crate::model::Model;
-    pub(in crate::algo) use crate::spatial::avx::{
-        columns, comb, compose, cross, store_matrix, store_vec3, v3,
+    use crate::simd::F64x4;
+    use crate::spatial::lanes::{
+        columns, comb, compose, cross, lane, rotate, store_matrix, store_vec3, v3,
     };
     use crate::spatial::{Inertia, Motion, Transform};
-    use std::arch::x86_64::*;
 
     /// The root block of [`column`]: the transposed world subspace of the root DoFs 0..6,
     /// `lo[j] = [S_0j S_1j S_2j S_3j]` and `hi[j] = [S_4j S_5j]` (`S_rj`: entry `j` of
     /// `sw[r]`), so that `S_rootᵀ f = Σ_j [lo[j]; hi[j]] f_j`.
     #[derive(Clone, Copy)]
-    pub(super) struct Root {
-        lo: [__m256d; 6],
-        hi: [__m128d; 6],
+    pub(super) struct Root<V> {
+        lo: [V; 6],
+        hi: [V; 6],
     }
 
-    /// See `Kern::root` (`sw` has at least six entries).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(super) fn root(sw: &[Motion]) -> Root {
+    /// The root block from the world subspace `sw[0..6]` of the root free-flyer (its identity
+    /// subspace moved to the world frame).
+    #[inline(always)]
+    pub(super) fn root<V: F64x4>(sw: &[Motion]) -> Root<V> {
         let e = |r: usize, j: usize| {
             let m = &sw[r];
             [m.ang.x, m.ang.y, m.ang.z, m.lin.x, m.lin.y, m.lin.z][j]
         };
         Root {
-            lo: std::array::from_fn(|j| _mm256_setr_pd(e(0, j), e(1, j), e(2, j), e(3, j))),
-            hi: std::array::from_fn(|j| _mm_setr_pd(e(4, j), e(5, j))),
+            lo: std::array::from_fn(|j| V::setr(e(0, j), e(1, j), e(2, j), e(3, j))),
+            hi: std::array::from_fn(|j| V::setr(e(4, j), e(5, j), 0.0, 0.0)),
         }
     }
 
     /// A world inertia in registers: the columns of `Ī` (lane 3 unspecified), `h` (lane 3
     /// zero) and the mass on every lane.
     #[derive(Clone, Copy)]
-    pub(super) struct Ic {
-        rot: [__m256d; 3],
-        h: __m256d,
-        m: __m256d,
+    pub(super) struct Ic<V> {
+        rot: [V; 3],
+        h: V,
+        m: V,
     }
 
-    /// See `Kern::load_ic`.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(super) fn load_ic(ic: &Inertia) -> Ic {
-        Ic { rot: columns(&ic.rot), h: v3(&ic.h), m: _mm256_set1_pd(ic.mass) }
+    /// Loads a world inertia.
+    #[inline(always)]
+    pub(super) fn load_ic<V: F64x4>(ic: &Inertia) -> Ic<V> {
+        Ic { rot: columns(&ic.rot), h: v3(&ic.h), m: V::splat(ic.mass) }
     }
 
-    /// See `Kern::add_ic` (entry by entry, as `Inertia + Inertia`).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(super) fn add_ic(a: Ic, b: Ic) -> Ic {
+    /// `a + b` (entry by entry, as `Inertia + Inertia`).
+    #[inline(always)]
+    pub(super) fn add_ic<V: F64x4>(a: Ic<V>, b: Ic<V>) -> Ic<V> {
         Ic {
-            rot: std::array::from_fn(|k| _mm256_add_pd(a.rot[k], b.rot[k])),
-            h: _mm256_add_pd(a.h, b.h),
-            m: _mm256_add_pd(a.m, b.m),
+            rot: std::array::from_fn(|k| a.rot[k].add(b.rot[k])),
+            h: a.h.add(b.h),
+            m: a.m.add(b.m),
         }
     }
 
-    /// See `Kern::store_ic`.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(super) fn store_ic(a: Ic, ic: &mut Inertia) {
+    /// Writes a world inertia.
+    #[inline(always)]
+    pub(super) fn store_ic<V: F64x4>(a: Ic<V>, ic: &mut Inertia) {
         store_matrix(a.rot, &mut ic.rot);
         store_vec3(a.h, &mut ic.h);
-        ic.mass = _mm256_cvtsd_f64(a.m);
+        ic.mass = a.m.first();
     }
 
     /// Writes the world subspace column `[ang; lin]` as one 4-lane store of
     /// `[ang_x ang_y ang_z lin_x]` and one 2-lane store of `[lin_y lin_z]`, the two loads of
     /// [`column`] (so that they are forwarded from these stores).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn store_motion(ang: __m256d, lin: __m256d, o: &mut Motion) {
-        let lo = _mm256_blend_pd(ang, _mm256_permute4x64_pd(lin, 0b00_00_00_00), 0b1000);
-        let hi = _mm256_castpd256_pd128(_mm256_permute4x64_pd(lin, 0b11_11_10_01));
+    #[inline(always)]
+    fn store_motion<V: F64x4>(ang: V, lin: V, o: &mut Motion) {
+        let lo = ang.blend::<0b1000>(lin.permute::<0b00_00_00_00>());
+        let hi = lin.permute::<0b11_11_10_01>();
         let p = o as *mut Motion as *mut f64;
         // SAFETY: a `Motion` is six contiguous f64 (`repr(C)`).
         unsafe {
-            _mm256_storeu_pd(p, lo);
-            _mm_storeu_pd(p.add(4), hi);
+            lo.storeu(p);
+            hi.store2(p.add(4));
         }
     }
 
-    /// See `Kern::column`. `f = [Ī ω + h × v; m v − h × ω]` for `S_c = [ω; v]`; each
+    /// Column `c` of `M`: `f = I^C S_c`, `M_cc = S_cᵀ f`, `M_rc = M_cr = S_rᵀ f` for the
+    /// ancestor DoFs `r` in `anc` and, with `root`, for the root DoFs `r < 6` (not in `anc`).
+    /// `f = [Ī ω + h × v; m v − h × ω]` for `S_c = [ω; v]`; each
     /// `S_rᵀ f` is one 4-lane product of `[ω_x ω_y ω_z v_x]` with `[f_0 f_1 f_2 f_3]` and one
     /// 2-lane product of `[v_y v_z]` with `[f_4 f_5]`, `Motion` being `repr(C)`.
     ///
     /// # Safety
-    /// As `Kern::column`.
+    /// Every `r` in `anc` is `< c`, `c < nv = sw.len()`, `m.len() == nv * nv`, and with `root`
+    /// `6 <= c`.
     #[allow(clippy::too_many_arguments)]
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(super) unsafe fn column(
-        ic: &Ic,
+    #[inline(always)]
+    pub(super) unsafe fn column<V: F64x4>(
+        ic: &Ic<V>,
         sw: &[Motion],
         c: usize,
         anc: &[usize],
-        root: Option<&Root>,
+        root: Option<&Root<V>>,
         m: &mut [f64],
         nv: usize,
     ) {
@@ -469,55 +201,49 @@ pub(super) mod avx {
         // (`repr(C)`).
         let load = |r: usize| unsafe {
             let p = sp.add(6 * r);
-            (_mm256_loadu_pd(p), _mm256_zextpd128_pd256(_mm_loadu_pd(p.add(4))))
+            (V::loadu(p), V::load2(p.add(4)))
         };
         let (w, s2) = load(c);
         // [v_x v_y v_z 0]
-        let v = _mm256_permute4x64_pd(_mm256_blend_pd(s2, w, 0b1000), 0b10_01_00_11);
+        let v = (s2.blend::<0b1000>(w)).permute::<0b10_01_00_11>();
         let sc = &sw[c];
-        let ang = _mm256_add_pd(comb(&ic.rot, sc.ang.x, sc.ang.y, sc.ang.z), cross(ic.h, v));
-        let lin = _mm256_fmsub_pd(v, ic.m, cross(ic.h, w));
+        let ang = comb(&ic.rot, sc.ang.x, sc.ang.y, sc.ang.z).add(cross(ic.h, v));
+        let lin = v.mul_sub(ic.m, cross(ic.h, w));
         // [f_0 f_1 f_2 f_3] and [f_4 f_5 0 0].
-        let flo = _mm256_blend_pd(ang, _mm256_permute4x64_pd(lin, 0b00_00_00_00), 0b1000);
-        let fhi =
-            _mm256_blend_pd(_mm256_setzero_pd(), _mm256_permute4x64_pd(lin, 0b11_11_10_01), 0b0011);
-        let dot = |a: __m256d, b: __m256d| {
-            let p = _mm256_fmadd_pd(b, fhi, _mm256_mul_pd(a, flo));
-            let q = _mm_add_pd(_mm256_castpd256_pd128(p), _mm256_extractf128_pd(p, 1));
-            _mm_add_sd(q, _mm_unpackhi_pd(q, q))
+        let flo = ang.blend::<0b1000>(lin.permute::<0b00_00_00_00>());
+        let fhi = V::zero().blend::<0b0011>(lin.permute::<0b11_11_10_01>());
+        let dot = |a: V, b: V| {
+            let p = b.mul_add(fhi, a.mul(flo));
+            p.hsum()
         };
         // SAFETY: c < nv, so the store is within nv×nv.
-        unsafe { _mm_store_sd(mp.add(c + c * nv), dot(w, s2)) };
+        unsafe { *mp.add(c + c * nv) = dot(w, s2) };
         if let Some(rt) = root {
             debug_assert!(c >= 6);
-            let b = |x: __m256d, l: i32| match l {
-                0 => _mm256_permute4x64_pd(x, 0b00_00_00_00),
-                1 => _mm256_permute4x64_pd(x, 0b01_01_01_01),
-                2 => _mm256_permute4x64_pd(x, 0b10_10_10_10),
-                _ => _mm256_permute4x64_pd(x, 0b11_11_11_11),
+            let b = |x: V, l: i32| match l {
+                0 => x.permute::<0b00_00_00_00>(),
+                1 => x.permute::<0b01_01_01_01>(),
+                2 => x.permute::<0b10_10_10_10>(),
+                _ => x.permute::<0b11_11_11_11>(),
             };
             let fj = [b(flo, 0), b(flo, 1), b(flo, 2), b(flo, 3), b(fhi, 0), b(fhi, 1)];
-            let mut lo = _mm256_mul_pd(rt.lo[0], fj[0]);
-            let mut hi = _mm_mul_pd(rt.hi[0], _mm256_castpd256_pd128(fj[0]));
+            let mut lo = rt.lo[0].mul(fj[0]);
+            let mut hi = rt.hi[0].mul(fj[0]);
             for ((&l, &h), &f) in rt.lo.iter().zip(&rt.hi).zip(&fj).skip(1) {
-                lo = _mm256_fmadd_pd(l, f, lo);
-                hi = _mm_fmadd_pd(h, _mm256_castpd256_pd128(f), hi);
+                lo = l.mul_add(f, lo);
+                hi = h.mul_add(f, hi);
             }
-            let lo2 = _mm256_extractf128_pd(lo, 1);
-            let lo1 = _mm256_castpd256_pd128(lo);
+            let (la, ha) = (lo.store(), hi.store());
             // SAFETY: 6 <= c < nv: rows 0..6 of column c and columns 0..6 of row c are within
             // nv×nv (column-major).
             unsafe {
                 let col = mp.add(c * nv);
-                _mm256_storeu_pd(col, lo);
-                _mm_storeu_pd(col.add(4), hi);
+                lo.storeu(col);
+                hi.store2(col.add(4));
                 let row = mp.add(c);
-                _mm_store_sd(row, lo1);
-                _mm_storeh_pd(row.add(nv), lo1);
-                _mm_store_sd(row.add(2 * nv), lo2);
-                _mm_storeh_pd(row.add(3 * nv), lo2);
-                _mm_store_sd(row.add(4 * nv), hi);
-                _mm_storeh_pd(row.add(5 * nv), hi);
+                for (k, x) in la.into_iter().chain(ha.into_iter().take(2)).enumerate() {
+                    *row.add(k * nv) = x;
+                }
             }
         }
         for &r in anc {
@@ -526,96 +252,57 @@ pub(super) mod avx {
             let mrc = dot(a, b);
             // SAFETY: `r < c < nv`: the stores are within nv×nv.
             unsafe {
-                _mm_store_sd(mp.add(r + c * nv), mrc);
-                _mm_store_sd(mp.add(c + r * nv), mrc);
+                *mp.add(r + c * nv) = mrc;
+                *mp.add(c + r * nv) = mrc;
             }
         }
     }
 
-    /// Four `(sin, cos)` pairs in registers (see `Kern::SinCos`).
+    /// Four `(sin, cos)` pairs in lanes.
     #[derive(Clone, Copy)]
-    pub(super) struct SinCos4 {
-        s: __m256d,
-        c: __m256d,
+    pub(super) struct SinCos4<V> {
+        s: V,
+        c: V,
     }
 
-    /// See `Kern::angles`.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(super) fn angles(model: &Model, q: &[f64], r: usize) -> SinCos4 {
-        let (s, c) = crate::trig::sin_cos4_v(load_angles(model, q, r));
+    /// `(sin, cos)` (within 1 ulp of `f64::sin_cos`, see `trig`) of the angles
+    /// `q[rev_q[r..r + 4]]` of the next four revolute joints about `±eₖ` (see
+    /// [`crate::algo::kinematics::next_angles`]).
+    #[inline(always)]
+    pub(super) fn angles<V: F64x4>(model: &Model, q: &[f64], r: usize) -> SinCos4<V> {
+        let (s, c) = load_angles::<V>(model, q, r).sin_cos();
         SinCos4 { s, c }
-    }
-
-    /// [`next_angles`] in a register: contiguous angles by one masked load (no round trip
-    /// through memory).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(in crate::algo) fn load_angles(model: &Model, q: &[f64], r: usize) -> __m256d {
-        if let Some(a) = model.rev_q_start {
-            let (a, m) = (a + r, model.rev_q.len().saturating_sub(r).min(4));
-            assert!(a + m <= q.len());
-            // Lanes l < m.
-            let mask =
-                _mm256_cmpgt_epi64(_mm256_set1_epi64x(m as i64), _mm256_setr_epi64x(0, 1, 2, 3));
-            // SAFETY: the lanes read, a..a + m, are within `q` (asserted); the others are
-            // masked off (not accessed) and set to zero.
-            return unsafe { _mm256_maskload_pd(q.as_ptr().add(a), mask) };
-        }
-        scattered_angles(model, q, r)
-    }
-
-    /// [`load_angles`] for angles that are not contiguous in `q` (out of line, so that the
-    /// contiguous case inlines into the forward passes).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline(never)]
-    fn scattered_angles(model: &Model, q: &[f64], r: usize) -> __m256d {
-        let x = next_angles(model, q, r);
-        _mm256_setr_pd(x[0], x[1], x[2], x[3])
-    }
-
-    /// `(sign · sin, cos)` of lane `l < 4` of `(s, c)`, each broadcast to four lanes
-    /// (`sign = ±1`: the product is its sign bit applied).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(in crate::algo) fn lane(s: __m256d, c: __m256d, l: usize, sign: f64) -> (__m256d, __m256d) {
-        // 32-bit lanes 2l, 2l + 1 repeated.
-        let idx = _mm256_set1_epi64x((((2 * l + 1) << 32) | (2 * l)) as i64);
-        let pick =
-            |v: __m256d| _mm256_castps_pd(_mm256_permutevar8x32_ps(_mm256_castpd_ps(v), idx));
-        let flip = _mm256_and_pd(_mm256_set1_pd(sign), _mm256_set1_pd(-0.0));
-        (_mm256_xor_pd(pick(s), flip), pick(c))
     }
 
     /// A world placement in registers: rotation columns `r` (lane 3 unspecified) and
     /// translation `t` (lane 3 unspecified).
     #[derive(Clone, Copy)]
-    pub(super) struct X {
-        r: [__m256d; 3],
-        t: __m256d,
+    pub(super) struct X<V> {
+        r: [V; 3],
+        t: V,
     }
 
-    /// See `Kern::load`.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(super) fn load(x: &Transform) -> X {
+    /// Loads a world placement.
+    #[inline(always)]
+    pub(super) fn load<V: F64x4>(x: &Transform) -> X<V> {
         X { r: columns(&x.rot), t: v3(&x.trans) }
     }
 
-    /// See `Kern::body`. Placement: rotation columns `Σ_l R_l (R')_lk`, translation
+    /// The per-body step of the forward pass: world placement `x = ᵒM_p ᵖM_i` (`x = ᵖM_i`
+    /// for a child of the world, `xp = None`), world inertia `X I` and world subspace columns
+    /// `X S`, written in place; returns the placement and inertia in lanes. Placement: rotation columns `Σ_l R_l (R')_lk`, translation
     /// `p + R p'`. Inertia: Ī' = R Ī Rᵀ − p h'ᵀ − Rh pᵀ + (2 Rh·p + m p·p) 1 with h' = Rh + m p
     /// (as [`Transform::act_inertia`]). Subspace: `[R a; R l + p × R a]`.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(super) fn body(
-        xp: Option<X>,
+    #[inline(always)]
+    pub(super) fn body<V: F64x4>(
+        xp: Option<X<V>>,
         li: &Transform,
         inertia: &Inertia,
         sub: &[Motion],
         x: &mut Transform,
         ic: &mut Inertia,
         sw: &mut [Motion],
-    ) -> (X, Ic) {
+    ) -> (X<V>, Ic<V>) {
         let xw = match xp {
             None => load(li),
             Some(X { r: rp, t: tp }) => {
@@ -626,57 +313,24 @@ pub(super) mod avx {
         let (pv, icw) = finish(xw, inertia, x, ic);
         for (o, sc) in sw.iter_mut().zip(sub) {
             let ang = comb(&xw.r, sc.ang.x, sc.ang.y, sc.ang.z);
-            let lin = _mm256_add_pd(comb(&xw.r, sc.lin.x, sc.lin.y, sc.lin.z), cross(pv, ang));
+            let lin = comb(&xw.r, sc.lin.x, sc.lin.y, sc.lin.z).add(cross(pv, ang));
             store_motion(ang, lin, o);
         }
         (xw, icw)
     }
 
-    /// `[c a + s b, c b − s a]`.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn rot2(a: __m256d, b: __m256d, s: __m256d, c: __m256d) -> (__m256d, __m256d) {
-        (_mm256_fmadd_pd(b, s, _mm256_mul_pd(a, c)), _mm256_fnmadd_pd(a, s, _mm256_mul_pd(b, c)))
-    }
-
-    /// `R · Rot(e_k, θ)` on columns: with `(i, j) = (k+1, k+2) mod 3`, column `i` becomes
-    /// `c Rᵢ + s Rⱼ` and column `j` becomes `c Rⱼ − s Rᵢ` (as `joint::rotate_columns`).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(in crate::algo) fn rotate(
-        r: [__m256d; 3],
-        k: usize,
-        s: __m256d,
-        c: __m256d,
-    ) -> [__m256d; 3] {
-        match k {
-            0 => {
-                let (a, b) = rot2(r[1], r[2], s, c);
-                [r[0], a, b]
-            }
-            1 => {
-                let (a, b) = rot2(r[2], r[0], s, c);
-                [b, r[1], a]
-            }
-            _ => {
-                let (a, b) = rot2(r[0], r[1], s, c);
-                [a, b, r[2]]
-            }
-        }
-    }
-
-    /// See `Kern::body_revolute`: `x.rot = (ᵒR_p P) Rot(e_k, θ)` (the column rotation applied
+    /// [`body`] for a revolute joint about `sign · e_k` (`k < 3`, `sign = ±1`) with its
+    /// angle in lane `l` of `sc`: `x.rot = (ᵒR_p P) Rot(e_k, θ)` (the column rotation applied
     /// after the product), `x.trans = ᵒp_p + ᵒR_p p_P`, `li = [P Rot(e_k, θ), p_P]` (and
     /// `x = li` for a child of the world); world subspace `±[R e_k; p × R e_k]`.
     #[allow(clippy::too_many_arguments)]
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(super) fn body_revolute(
-        xp: Option<X>,
+    #[inline(always)]
+    pub(super) fn body_revolute<V: F64x4>(
+        xp: Option<X<V>>,
         placement: &Transform,
         k: usize,
         sign: f64,
-        sc: &SinCos4,
+        sc: &SinCos4<V>,
         l: usize,
         inertia: &Inertia,
         sub: &[Motion],
@@ -684,7 +338,7 @@ pub(super) mod avx {
         x: &mut Transform,
         ic: &mut Inertia,
         sw: &mut [Motion],
-    ) -> (X, Ic) {
+    ) -> (X<V>, Ic<V>) {
         debug_assert!(sub.len() == 1 && sw.len() == 1);
         debug_assert!(sub[0].lin == nalgebra::Vector3::zeros() && sub[0].ang[k] == sign);
         let (sv, cv) = lane(sc.s, sc.c, l, sign);
@@ -705,7 +359,7 @@ pub(super) mod avx {
             1 => xw.r[1],
             _ => xw.r[2],
         };
-        let ang = _mm256_mul_pd(rk, _mm256_set1_pd(sign));
+        let ang = rk.mul(V::splat(sign));
         if let Some(o) = sw.first_mut() {
             store_motion(ang, cross(pv, ang), o);
         }
@@ -714,9 +368,13 @@ pub(super) mod avx {
 
     /// The world placement `xw` and inertia written to `x` and `ic`; returns the translation
     /// with lane 3 zero and the world inertia.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn finish(xw: X, inertia: &Inertia, x: &mut Transform, ic: &mut Inertia) -> (__m256d, Ic) {
+    #[inline(always)]
+    fn finish<V: F64x4>(
+        xw: X<V>,
+        inertia: &Inertia,
+        x: &mut Transform,
+        ic: &mut Inertia,
+    ) -> (V, Ic<V>) {
         store_matrix(xw.r, &mut x.rot);
         store_vec3(xw.t, &mut x.trans);
         let (pv, icw) = act_inertia(xw, x, inertia);
@@ -727,12 +385,11 @@ pub(super) mod avx {
     /// `X I` for the placement `xw`, held in registers and as `xm` (the same values, read as
     /// scalars): `Ī' = R Ī Rᵀ − p h'ᵀ − Rh pᵀ + (2 Rh·p + m p·p) 1` with `h' = Rh + m p` (as
     /// [`Transform::act_inertia`]). Returns the translation with lane 3 zero and `X I`.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn act_inertia(xw: X, xm: &Transform, inertia: &Inertia) -> (__m256d, Ic) {
+    #[inline(always)]
+    fn act_inertia<V: F64x4>(xw: X<V>, xm: &Transform, inertia: &Inertia) -> (V, Ic<V>) {
         let X { r, t } = xw;
         // Lane 3 of the translation set to zero (it enters a dot product below).
-        let pv = _mm256_blend_pd(t, _mm256_setzero_pd(), 0b1000);
+        let pv = t.blend::<0b1000>(V::zero());
         let ra = xm.rot.as_slice();
         let pa = [xm.trans.x, xm.trans.y, xm.trans.z];
         let ib = inertia.rot.as_slice();
@@ -745,72 +402,63 @@ pub(super) mod avx {
             comb(&r, ib[6], ib[7], ib[8]),
         ];
         let rh = comb(&r, h.x, h.y, h.z);
-        let hn = _mm256_fmadd_pd(pv, _mm256_set1_pd(m), rh);
+        let hn = pv.mul_add(V::splat(m), rh);
         let mut ha = [0.0; 4];
         // SAFETY: `ha` is four contiguous f64.
-        unsafe { _mm256_storeu_pd(ha.as_mut_ptr(), hn) };
+        unsafe { hn.storeu(ha.as_mut_ptr()) };
         // 2 Rh·p + m p·p = p·(Rh + h') (lane 3 of p is zero).
-        let d = _mm256_mul_pd(pv, _mm256_add_pd(rh, hn));
-        let d = _mm_add_pd(_mm256_castpd256_pd128(d), _mm256_extractf128_pd(d, 1));
-        let dv = _mm256_set1_pd(_mm_cvtsd_f64(_mm_add_sd(d, _mm_unpackhi_pd(d, d))));
-        let e = [
-            _mm256_setr_pd(1.0, 0.0, 0.0, 0.0),
-            _mm256_setr_pd(0.0, 1.0, 0.0, 0.0),
-            _mm256_setr_pd(0.0, 0.0, 1.0, 0.0),
-        ];
+        let d = pv.mul(rh.add(hn));
+        let dv = V::splat(d.hsum());
+        let e =
+            [V::setr(1.0, 0.0, 0.0, 0.0), V::setr(0.0, 1.0, 0.0, 0.0), V::setr(0.0, 0.0, 1.0, 0.0)];
         let col = |b: usize| {
             // Column b of T Rᵀ: Σ_k T_k R_bk.
             let c = comb(&tt, ra[b], ra[b + 3], ra[b + 6]);
-            let c = _mm256_fnmadd_pd(pv, _mm256_set1_pd(ha[b]), c);
-            let c = _mm256_fnmadd_pd(rh, _mm256_set1_pd(pa[b]), c);
-            _mm256_fmadd_pd(e[b], dv, c)
+            let c = pv.neg_mul_add(V::splat(ha[b]), c);
+            let c = rh.neg_mul_add(V::splat(pa[b]), c);
+            e[b].mul_add(dv, c)
         };
         let rot = [col(0), col(1), col(2)];
-        let h = _mm256_blend_pd(hn, _mm256_setzero_pd(), 0b1000);
-        (pv, Ic { rot, h, m: _mm256_set1_pd(m) })
+        let h = hn.blend::<0b1000>(V::zero());
+        (pv, Ic { rot, h, m: V::splat(m) })
     }
 
     /// `f = I S` for `S = [ω; v]` (`I` in registers): `[Ī ω + h × v; m v − h × ω]`.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn inertia_mul(ic: &Ic, s: &Motion) -> (__m256d, __m256d) {
+    #[inline(always)]
+    fn inertia_mul<V: F64x4>(ic: &Ic<V>, s: &Motion) -> (V, V) {
         let (w, v) = (v3(&s.ang), v3(&s.lin));
-        let ang = _mm256_add_pd(comb(&ic.rot, s.ang.x, s.ang.y, s.ang.z), cross(ic.h, v));
-        (ang, _mm256_fmsub_pd(v, ic.m, cross(ic.h, w)))
+        let ang = comb(&ic.rot, s.ang.x, s.ang.y, s.ang.z).add(cross(ic.h, v));
+        (ang, v.mul_sub(ic.m, cross(ic.h, w)))
     }
 
     /// `λX* f`: the force `f = [n; f]` of a body frame in its parent's frame, `[R n + p × R f;
     /// R f]` (as [`Transform::act_force`]).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn act_force(x: &X, n: __m256d, f: __m256d) -> (__m256d, __m256d) {
-        let rv = |u: __m256d| {
-            let b0 = _mm256_permute4x64_pd(u, 0b00_00_00_00);
-            let b1 = _mm256_permute4x64_pd(u, 0b01_01_01_01);
-            let b2 = _mm256_permute4x64_pd(u, 0b10_10_10_10);
-            _mm256_fmadd_pd(x.r[2], b2, _mm256_fmadd_pd(x.r[1], b1, _mm256_mul_pd(x.r[0], b0)))
+    #[inline(always)]
+    fn act_force<V: F64x4>(x: &X<V>, n: V, f: V) -> (V, V) {
+        let rv = |u: V| {
+            let b0 = u.permute::<0b00_00_00_00>();
+            let b1 = u.permute::<0b01_01_01_01>();
+            let b2 = u.permute::<0b10_10_10_10>();
+            x.r[2].mul_add(b2, x.r[1].mul_add(b1, x.r[0].mul(b0)))
         };
         let rf = rv(f);
-        (_mm256_add_pd(rv(n), cross(x.t, rf)), rf)
+        (rv(n).add(cross(x.t, rf)), rf)
     }
 
     /// `Sᵀ f` for a motion `S` and a force `[n; f]` (lanes 0..3; lane 3 ignored).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn dot_force(s: &Motion, n: __m256d, f: __m256d) -> f64 {
-        let p = _mm256_fmadd_pd(v3(&s.lin), f, _mm256_mul_pd(v3(&s.ang), n));
-        let p = _mm256_blend_pd(p, _mm256_setzero_pd(), 0b1000);
-        let q = _mm_add_pd(_mm256_castpd256_pd128(p), _mm256_extractf128_pd(p, 1));
-        _mm_cvtsd_f64(_mm_add_sd(q, _mm_unpackhi_pd(q, q)))
+    #[inline(always)]
+    fn dot_force<V: F64x4>(s: &Motion, n: V, f: V) -> f64 {
+        let p = v3::<V>(&s.lin).mul_add(f, v3::<V>(&s.ang).mul(n));
+        let p = p.blend::<0b1000>(V::zero());
+        p.hsum()
     }
 
-    /// The local-frame CRBA of [`super::crba_local`] with AVX2/FMA: placements `λ(i)M_i` (the
+    /// The local-frame CRBA of [`super::crba_local`]: placements `λ(i)M_i` (the
     /// angles of revolute joints about `±eₖ` four at a time), composite inertias `I^C_i` in the
     /// body frames (`I^C_λ(i) += λ(i)X_i* I^C_i X_i⁻¹`), and for each DoF `c` of joint `i` the
     /// column `F = I^C_i S_c`, carried up the ancestors `j` by `F ← λ(j)X_j* F`, with
     /// `M_ac = M_ca = S_aᵀ F` for the DoFs `a` of `i` (`a ≤ c`) and of each ancestor.
-    #[target_feature(enable = "avx2,fma")]
-    pub(super) fn crba_local(model: &Model, data: &mut super::Data, q: &[f64]) {
+    pub(super) fn crba_local<V: F64x4>(model: &Model, data: &mut super::Data, q: &[f64]) {
         let n = model.njoints();
         let nv = model.nv;
         assert!(super::sizes_match(model, data) && data.ic_local.len() == n);
@@ -823,7 +471,7 @@ pub(super) mod avx {
                 let l = rank % 4;
                 let sc = match sc {
                     Some(v) if l > 0 => v,
-                    _ => *sc.insert(angles(model, q, rank)),
+                    _ => *sc.insert(angles::<V>(model, q, rank)),
                 };
                 rank += 1;
                 let (sv, cv) = lane(sc.s, sc.c, l, sign);
@@ -839,10 +487,10 @@ pub(super) mod avx {
             let super::JointKin { parent: p, idx_v: b, nv: k, .. } = model.kin[i];
             debug_assert!(p < i && b + k <= nv);
             if p > 0 {
-                let (_, t) = act_inertia(load(&li[i]), &li[i], &icl[i]);
+                let (_, t) = act_inertia(load::<V>(&li[i]), &li[i], &icl[i]);
                 store_ic(add_ic(load_ic(&icl[p]), t), &mut icl[p]);
             }
-            let ic = load_ic(&icl[i]);
+            let ic = load_ic::<V>(&icl[i]);
             for c in b..b + k {
                 let (mut fn_, mut ff) = inertia_mul(&ic, &model.subspace[c]);
                 for c2 in b..=c {
@@ -882,7 +530,7 @@ fn sizes_match(model: &Model, data: &Data) -> bool {
 }
 
 #[inline(always)]
-fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
+fn crba_body<V: F64x4>(model: &Model, data: &mut Data, q: &DVector<f64>) {
     let n = model.njoints();
     let nv = model.nv;
     let q = q.as_slice();
@@ -912,7 +560,7 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
             _ if p + 1 == i => prev,
             // SAFETY: `parents[i] < i` (built in `ModelBuilder::build`, copied to `kin`), so
             // `p` indexes `head`.
-            _ => Some(K::load(unsafe { head.get_unchecked(p) })),
+            _ => Some(lanes::load::<V>(unsafe { head.get_unchecked(p) })),
         };
         // SAFETY: `idx_v[i] + nvs[i] <= nv = s_world.len() = subspace.len()` (built in
         // `ModelBuilder::build`, copied to `kin`; lengths asserted).
@@ -924,11 +572,11 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
             let l = rank % 4;
             let sc = match sc {
                 Some(v) if l > 0 => v,
-                _ => *sc.insert(K::angles(model, q, rank)),
+                _ => *sc.insert(lanes::angles::<V>(model, q, rank)),
             };
             debug_assert!(model.rev_q[rank] == a);
             rank += 1;
-            K::body_revolute(
+            lanes::body_revolute(
                 xp,
                 placement,
                 axis,
@@ -945,14 +593,14 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
         } else {
             let li = model.joints[i].placed_transform(placement, &q[a..a + nq]);
             li_m_i[i] = li;
-            K::body(xp, &li, inertia, sub, x, ic, swi)
+            lanes::body(xp, &li, inertia, sub, x, ic, swi)
         };
         prev = Some(xw);
         last_ic = Some(icw);
     }
     // Root free-flyer with the identity subspace: the last six ancestors of every other DoF
     // are the root's DoFs 5, 4, …, 0, handled as one block.
-    let root = if root_free_flyer(model) { Some(K::root(&o_m_i[1], sw)) } else { None };
+    let root = if root_free_flyer(model) { Some(lanes::root::<V>(sw)) } else { None };
     let m = data.m.as_mut_slice();
     let sw = &*sw;
     // Backward pass: composite inertias and the columns of M. The children of a joint are
@@ -966,11 +614,11 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
         let ic = match (carry.take(), last_ic.filter(|_| i + 1 == n)) {
             (_, Some(v)) => v,
             (Some(ch), None) => {
-                let v = K::add_ic(K::load_ic(&tail[0]), ch);
-                K::store_ic(v, &mut tail[0]);
+                let v = lanes::add_ic(lanes::load_ic::<V>(&tail[0]), ch);
+                lanes::store_ic(v, &mut tail[0]);
                 v
             }
-            (None, None) => K::load_ic(&tail[0]),
+            (None, None) => lanes::load_ic::<V>(&tail[0]),
         };
         for c in b..b + k {
             let mut anc = model.ancestors_of_dof(c);
@@ -985,7 +633,7 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
             // SAFETY: ancestor DoFs satisfy r < c < nv (built in `ModelBuilder::build`), `m`
             // is nv×nv (column-major) and `sw` has nv entries (asserted above); `rt` only for
             // c >= 6.
-            unsafe { K::column(&ic, sw, c, anc, rt, m, nv) };
+            unsafe { lanes::column(&ic, sw, c, anc, rt, m, nv) };
         }
         if p + 1 == i {
             carry = Some(ic);
@@ -994,7 +642,7 @@ fn crba_body<K: Kern>(model: &Model, data: &mut Data, q: &DVector<f64>) {
             // SAFETY: `parents[i] < i` (built in `ModelBuilder::build`, copied to `kin`), so `p`
             // indexes `head`.
             let icp = unsafe { head.get_unchecked_mut(p) };
-            K::store_ic(K::add_ic(K::load_ic(icp), ic), icp);
+            lanes::store_ic(lanes::add_ic(lanes::load_ic::<V>(icp), ic), icp);
         }
     }
     // Entries between dofs on different branches are structurally zero: they are zero from
@@ -1007,6 +655,7 @@ mod tests {
     use crate::model::JointType;
     use crate::model::builtin::{humanoid, pendulum, random_tree, serial_chain};
     use crate::rng::Rng;
+    use crate::spatial::{Inertia, Transform};
 
     /// On small trees `crba` takes the local-frame kernel (AVX2/FMA): its `M` agrees with the
     /// reference (oracle) mass matrix, and `M` and the placements with the world-frame CRBA, on
@@ -1090,7 +739,7 @@ mod tests {
             let q = m.random_configuration(&mut rng);
             let (mut d1, mut d2) = (Data::new(&m), Data::new(&m));
             crba_unchecked(&m, &mut d1, &q);
-            crba_body::<Portable>(&m, &mut d2, &q);
+            crba_body::<[f64; 4]>(&m, &mut d2, &q);
             let scale = d1.m.amax().max(1.0);
             assert!((&d1.m - &d2.m).amax() <= 1e-12 * scale);
             for (a, b) in d1.ic_world.iter().zip(&d2.ic_world) {

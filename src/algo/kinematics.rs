@@ -2,10 +2,10 @@
 
 use super::Data;
 use crate::error::Result;
-use crate::model::joint::rotate_columns;
 use crate::model::{JointKin, JointType, Model, check_vec};
-use crate::spatial::{Motion, Transform};
-use crate::trig::sin_cos;
+use crate::simd::F64x4;
+use crate::spatial::Motion;
+use crate::spatial::lanes::{columns, compose, lane, rotate, store_matrix, store_vec3, v3};
 use nalgebra::DVector;
 
 /// Joint motion `S_i x_i` of joint `i` (child frame) for the coordinates `x` (length nv).
@@ -67,6 +67,27 @@ pub(crate) fn next_angles(model: &Model, q: &[f64], r: usize) -> [f64; 4] {
     x
 }
 
+/// The angles of [`next_angles`] as lanes: contiguous angles by one masked load (no round
+/// trip through memory).
+#[inline(always)]
+pub(crate) fn load_angles<V: F64x4>(model: &Model, q: &[f64], r: usize) -> V {
+    if let Some(a) = model.rev_q_start {
+        let (a, m) = (a + r, model.rev_q.len().saturating_sub(r).min(4));
+        assert!(a + m <= q.len());
+        // SAFETY: the lanes read, a..a + m, are within `q` (asserted); the others are masked
+        // off (not accessed) and set to zero.
+        return unsafe { V::maskload(q.as_ptr().add(a), V::mask(m)) };
+    }
+    scattered_angles(model, q, r)
+}
+
+/// [`load_angles`] for angles that are not contiguous in `q` (out of line, so that the
+/// contiguous case inlines into the forward passes).
+#[inline(never)]
+fn scattered_angles<V: F64x4>(model: &Model, q: &[f64], r: usize) -> V {
+    V::load(&next_angles(model, q, r))
+}
+
 /// Joint placements only: fills `li_m_i` and `o_m_i` (unchecked `q`).
 #[inline]
 pub(crate) fn placements(model: &Model, data: &mut Data, q: &DVector<f64>) {
@@ -76,42 +97,24 @@ pub(crate) fn placements(model: &Model, data: &mut Data, q: &DVector<f64>) {
         unsafe { placements_avx2(model, data, q) };
         return;
     }
-    placements_portable(model, data, q);
+    placements_lanes::<[f64; 4]>(model, data, q);
 }
 
-/// Portable [`placements`].
-fn placements_portable(model: &Model, data: &mut Data, q: &DVector<f64>) {
-    let q = q.as_slice();
-    for i in 1..model.njoints() {
-        let JointKin { parent: p, idx_q: a, nq, axis, sign, .. } = model.kin[i];
-        let placement = &model.placements[i];
-        let li = if axis < 3 {
-            let (s, c) = sin_cos(q[a]);
-            Transform::new(rotate_columns(&placement.rot, axis, sign * s, c), placement.trans)
-        } else {
-            model.joints[i].placed_transform(placement, &q[a..a + nq])
-        };
-        data.li_m_i[i] = li;
-        data.o_m_i[i] = if p == 0 { li } else { data.o_m_i[p].compose(&li) };
-    }
-}
-
-/// [`placements`] with the 3×3 products on 4-lane vectors (the CRBA kernels' helpers): for a
-/// revolute joint about `±e_k`, `λM_i = [P Rot(e_k, θ), p_P]` and
-/// `ᵒM_i = [(ᵒR_λ P) Rot(e_k, θ), ᵒp_λ + ᵒR_λ p_P]` (a child of the world: `ᵒM_i = λM_i`);
-/// other joints `ᵒM_i = ᵒM_λ λM_i` from [`JointType::placed_transform`]. The angles are
-/// evaluated four at a time (`trig::sin_cos4_v`) and the placement of joint `i − 1` is handed
-/// on in registers when it is the parent.
-///
-/// # Safety
-/// The CPU has AVX2 and FMA.
+/// [`placements_lanes`] compiled for AVX2/FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn placements_avx2(model: &Model, data: &mut Data, q: &DVector<f64>) {
-    use super::crba::avx::{
-        columns, compose, lane, load_angles, rotate, store_matrix, store_vec3, v3,
-    };
-    use crate::trig::sin_cos4_v;
+fn placements_avx2(model: &Model, data: &mut Data, q: &DVector<f64>) {
+    placements_lanes::<crate::simd::Avx4>(model, data, q)
+}
+
+/// [`placements`] with the 3×3 products on 4-lane vectors: for a revolute joint about `±e_k`,
+/// `λM_i = [P Rot(e_k, θ), p_P]` and `ᵒM_i = [(ᵒR_λ P) Rot(e_k, θ), ᵒp_λ + ᵒR_λ p_P]` (a
+/// child of the world: `ᵒM_i = λM_i`); other joints `ᵒM_i = ᵒM_λ λM_i` from
+/// [`JointType::placed_transform`]. The angles are evaluated four at a time
+/// ([`F64x4::sin_cos`]) and the placement of joint `i − 1` is handed on in lanes when it is
+/// the parent.
+#[inline(always)]
+fn placements_lanes<V: F64x4>(model: &Model, data: &mut Data, q: &DVector<f64>) {
     let q = q.as_slice();
     let n = model.njoints();
     assert!(data.li_m_i.len() == n && data.o_m_i.len() == n);
@@ -126,13 +129,13 @@ unsafe fn placements_avx2(model: &Model, data: &mut Data, q: &DVector<f64>) {
         let xp = match p {
             0 => None,
             _ if p + 1 == i => prev,
-            _ => Some((columns(&head[p].rot), v3(&head[p].trans))),
+            _ => Some((columns::<V>(&head[p].rot), v3::<V>(&head[p].trans))),
         };
         let (r, t) = if axis < 3 {
             let l = rank % 4;
             let (s4, c4) = match sc {
                 Some(v) if l > 0 => v,
-                _ => *sc.insert(sin_cos4_v(load_angles(model, q, rank))),
+                _ => *sc.insert(load_angles::<V>(model, q, rank).sin_cos()),
             };
             rank += 1;
             let (sv, cv) = lane(s4, c4, l, sign);

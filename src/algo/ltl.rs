@@ -25,6 +25,7 @@
 use super::Data;
 use crate::error::{Error, Result};
 use crate::model::{Model, check_vec};
+use crate::simd::F64x4;
 use nalgebra::{DMatrix, DVector};
 use std::mem::MaybeUninit;
 
@@ -197,17 +198,15 @@ pub fn solve_ltl_matrix(model: &Model, data: &Data, b: &mut DMatrix<f64>) -> Res
     Ok(())
 }
 
-/// Row `i ← scale·row i − Σ_{j ∈ others} coef(j) row j` (AVX2), by chunks of 8, 4, 2, 1
+/// Row `i ← scale·row i − Σ_{j ∈ others} coef(j) row j` on lanes, by chunks of 8, 4, 2, 1
 /// vectors kept in registers and a masked ragged end.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
+#[inline(always)]
 #[allow(clippy::too_many_arguments)]
-unsafe fn pull_row(
+unsafe fn pull_row<V: F64x4>(
     x: *mut f64,
     ld: usize,
     len: usize,
-    mask: std::arch::x86_64::__m256i,
+    mask: V::Mask,
     i: usize,
     others: &[usize],
     coef: impl Fn(usize) -> f64 + Copy,
@@ -219,65 +218,61 @@ unsafe fn pull_row(
     unsafe {
         let mut g = 0;
         while g + 8 <= nfull {
-            pull_chunk::<8, false>(x, ld, mask, i, 4 * g, others, coef, scale);
+            pull_chunk::<V, 8, false>(x, ld, mask, i, 4 * g, others, coef, scale);
             g += 8;
         }
         if g + 4 <= nfull {
-            pull_chunk::<4, false>(x, ld, mask, i, 4 * g, others, coef, scale);
+            pull_chunk::<V, 4, false>(x, ld, mask, i, 4 * g, others, coef, scale);
             g += 4;
         }
         if g + 2 <= nfull {
-            pull_chunk::<2, false>(x, ld, mask, i, 4 * g, others, coef, scale);
+            pull_chunk::<V, 2, false>(x, ld, mask, i, 4 * g, others, coef, scale);
             g += 2;
         }
         if g < nfull {
-            pull_chunk::<1, false>(x, ld, mask, i, 4 * g, others, coef, scale);
+            pull_chunk::<V, 1, false>(x, ld, mask, i, 4 * g, others, coef, scale);
         }
         if !len.is_multiple_of(4) {
-            pull_chunk::<1, true>(x, ld, mask, i, 4 * nfull, others, coef, scale);
+            pull_chunk::<V, 1, true>(x, ld, mask, i, 4 * nfull, others, coef, scale);
         }
     }
 }
 
 /// `K` vectors of row `i` from column `t` (the last one masked if `MASKED`), see [`pull_row`].
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
+#[inline(always)]
 #[allow(clippy::too_many_arguments)]
-unsafe fn pull_chunk<const K: usize, const MASKED: bool>(
+unsafe fn pull_chunk<V: F64x4, const K: usize, const MASKED: bool>(
     x: *mut f64,
     ld: usize,
-    mask: std::arch::x86_64::__m256i,
+    mask: V::Mask,
     i: usize,
     t: usize,
     others: &[usize],
     coef: impl Fn(usize) -> f64,
     scale: f64,
 ) {
-    use std::arch::x86_64::*;
     // SAFETY: the caller upholds this function's contract: `x` is valid for the rows < nv (stride
     // `ld`) and columns used, and every index from the model's ancestor / descendant lists is < nv.
     unsafe {
-        let ld4 =
-            |p: *const f64| if MASKED { _mm256_maskload_pd(p, mask) } else { _mm256_loadu_pd(p) };
-        let sc = _mm256_set1_pd(scale);
+        let ld4 = |p: *const f64| if MASKED { V::maskload(p, mask) } else { V::loadu(p) };
+        let sc = V::splat(scale);
         let xi = x.add(i * ld + t);
-        let mut acc = [_mm256_setzero_pd(); K];
+        let mut acc = [V::zero(); K];
         for (u, a) in acc.iter_mut().enumerate() {
-            *a = _mm256_mul_pd(sc, ld4(xi.add(4 * u)));
+            *a = sc.mul(ld4(xi.add(4 * u)));
         }
         for &j in others {
-            let l = _mm256_set1_pd(coef(j));
+            let l = V::splat(coef(j));
             let xj = x.add(j * ld + t);
             for (u, a) in acc.iter_mut().enumerate() {
-                *a = _mm256_fnmadd_pd(l, ld4(xj.add(4 * u)), *a);
+                *a = l.neg_mul_add(ld4(xj.add(4 * u)), *a);
             }
         }
         for (u, a) in acc.iter().enumerate() {
             if MASKED {
-                _mm256_maskstore_pd(xi.add(4 * u), mask, *a);
+                (*a).maskstore(xi.add(4 * u), mask);
             } else {
-                _mm256_storeu_pd(xi.add(4 * u), *a);
+                (*a).storeu(xi.add(4 * u));
             }
         }
     }
@@ -375,97 +370,15 @@ pub(crate) fn ltl_solve_rows_desc(
         hs.len() == n * n && len <= ld && (n == 0 || (n - 1) * ld + len <= x.len()) && desc.nv == n,
         "ltl_solve_rows_desc: dimension mismatch"
     );
-    #[cfg(target_arch = "x86_64")]
-    if crate::simd::avx2_fma() {
-        // SAFETY: as in `ltl_solve_rows`; descendant indices are < desc.nv = n (by construction).
-        unsafe { return solve_rows_head_avx2(model, hs, desc, x.as_mut_ptr(), ld, len, alpha, n) };
-    }
-    solve_rows_impl::<false>(model, hs, x, ld, len, alpha, n)
-}
-
-/// `d − l s`, fused when the caller is compiled with FMA.
-#[inline(always)]
-fn fnma<const FMA: bool>(l: f64, s: f64, d: f64) -> f64 {
-    if FMA { (-l).mul_add(s, d) } else { d - l * s }
-}
-
-/// Row chunk kept in registers across the ancestor loops.
-const CH: usize = 16;
-
-#[inline(always)]
-fn solve_rows_impl<const FMA: bool>(
-    model: &Model,
-    h: &[f64],
-    x: &mut [f64],
-    ld: usize,
-    len: usize,
-    alpha: f64,
-    rows_end: usize,
-) {
-    let n = model.nv;
-    // Lᵀ y = b: row i (final once all its descendants are done) is pushed to its ancestors.
-    for i in (1..n).rev() {
-        let anc = model.ancestors_of_dof(i);
-        if anc.is_empty() {
-            continue;
+    // SAFETY: `x` holds rows 0..n of stride `ld` and length `len` (asserted above); ancestor
+    // indices are < n (`ModelBuilder::build`) and descendant indices < desc.nv = n (by
+    // construction); the CPU has AVX2 and FMA where `solve_rows_head_avx2` runs.
+    unsafe {
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2_fma() {
+            return solve_rows_head_avx2(model, hs, desc, x.as_mut_ptr(), ld, len, alpha, n);
         }
-        let (lo, hi) = x.split_at_mut(i * ld);
-        let xi = &hi[..len];
-        let mut t = 0;
-        while t + CH <= len {
-            let s: [f64; CH] = xi[t..t + CH].try_into().unwrap();
-            for &j in anc {
-                let l = h[j + n * i];
-                let d: &mut [f64; CH] = (&mut lo[j * ld + t..j * ld + t + CH]).try_into().unwrap();
-                for u in 0..CH {
-                    d[u] = fnma::<FMA>(l, s[u], d[u]);
-                }
-            }
-            t += CH;
-        }
-        if t < len {
-            for &j in anc {
-                let l = h[j + n * i];
-                let d = &mut lo[j * ld + t..j * ld + len];
-                for (d, s) in d.iter_mut().zip(&xi[t..]) {
-                    *d = fnma::<FMA>(l, *s, *d);
-                }
-            }
-        }
-    }
-    // z = α D⁻¹ y, then L x = z on rows 0..rows_end: row i pulls its (already final) ancestors.
-    for i in 0..rows_end {
-        let anc = model.ancestors_of_dof(i);
-        let dinv = alpha / h[i + n * i];
-        let (lo, hi) = x.split_at_mut(i * ld);
-        let xi = &mut hi[..len];
-        let mut t = 0;
-        while t + CH <= len {
-            let d: &mut [f64; CH] = (&mut xi[t..t + CH]).try_into().unwrap();
-            let mut acc = [0.0; CH];
-            for u in 0..CH {
-                acc[u] = d[u] * dinv;
-            }
-            for &j in anc {
-                let l = h[j + n * i];
-                let s: &[f64; CH] = lo[j * ld + t..j * ld + t + CH].try_into().unwrap();
-                for u in 0..CH {
-                    acc[u] = fnma::<FMA>(l, s[u], acc[u]);
-                }
-            }
-            *d = acc;
-            t += CH;
-        }
-        if t < len {
-            let d = &mut xi[t..];
-            d.iter_mut().for_each(|v| *v *= dinv);
-            for &j in anc {
-                let l = h[j + n * i];
-                for (d, s) in d.iter_mut().zip(&lo[j * ld + t..j * ld + len]) {
-                    *d = fnma::<FMA>(l, *s, *d);
-                }
-            }
-        }
+        solve_rows_head::<[f64; 4]>(model, hs, desc, x.as_mut_ptr(), ld, len, alpha, n)
     }
 }
 
@@ -508,26 +421,22 @@ pub(crate) fn ltl_solve_fd(model: &Model, h: &DMatrix<f64>, ws: &mut FdWs) {
         hs.len() == n * n && ws.x.len() == 3 * n * n && v.nv == n && ws.sub_end.len() == n,
         "ltl_solve_fd: dimension mismatch"
     );
-    #[cfg(target_arch = "x86_64")]
-    if crate::simd::avx2_fma() {
-        // SAFETY: the CPU supports the enabled features; every row segment addressed below
-        // lies in row i of `x` (columns < 3n), ancestor/descendant indices are < n, and
-        // `sub_end[i] ≤ n` (built from descendant indices < n).
-        unsafe { return solve_fd_avx2(model, hs, v, &ws.sub_end, ws.x.as_mut_ptr()) };
+    // SAFETY: every row segment addressed lies in row i of `x` (columns < 3n, asserted
+    // above), ancestor/descendant indices are < n, and `sub_end[i] ≤ n` (built from descendant
+    // indices < n); the CPU has AVX2 and FMA where `solve_fd_avx2` runs.
+    unsafe {
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2_fma() {
+            return solve_fd_avx2(model, hs, v, &ws.sub_end, ws.x.as_mut_ptr());
+        }
+        solve_fd::<[f64; 4]>(model, hs, v, &ws.sub_end, ws.x.as_mut_ptr())
     }
-    solve_fd_scalar(model, hs, v, &ws.sub_end, &mut ws.x);
 }
 
-#[cfg(target_arch = "x86_64")]
-#[inline]
-fn tail_mask(len: usize) -> std::arch::x86_64::__m256i {
-    let rem = len % 4;
-    let m = |k: usize| if rem > k { -1i64 } else { 0 };
-    // SAFETY: plain register construction (SSE2/AVX baseline on x86_64 with AVX enabled at
-    // the call sites).
-    unsafe { std::arch::x86_64::_mm256_setr_epi64x(m(0), m(1), m(2), 0) }
-}
-
+/// [`solve_fd`] compiled for AVX2/FMA.
+///
+/// # Safety
+/// As [`solve_fd`]; the CPU has AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn solve_fd_avx2(
@@ -537,98 +446,14 @@ unsafe fn solve_fd_avx2(
     sub_end: &[usize],
     x: *mut f64,
 ) {
-    use std::arch::x86_64::*;
-    let n = model.nv;
-    let ld = 3 * n;
-    let w = 2 * n;
-    let h = h.as_ptr();
-    let mask_w = tail_mask(w);
-    let starts = &model.dof_ancestors_start;
-    let all_anc = &model.dof_ancestors;
-    // SAFETY: the caller upholds this function's contract: `x` is valid for the rows < nv (stride
-    // `ld`) and columns used, and every index from the model's ancestor / descendant lists is < nv.
-    unsafe {
-        let xi0 = x.add(w);
-        for j in (0..n).rev() {
-            // Lᵀ y = b, general part: row j pulls its (final) descendants, L_ij at (j, i).
-            let d = desc
-                .list
-                .get_unchecked(*desc.starts.get_unchecked(j)..*desc.starts.get_unchecked(j + 1));
-            if !d.is_empty() {
-                let hj = h.add(j);
-                pull_row(x, ld, w, mask_w, j, d, |i| *hj.add(n * i), 1.0);
-            }
-            // Identity part: the final row j pushes its columns j..sub_end[j] to its ancestors.
-            let anc = all_anc.get_unchecked(*starts.get_unchecked(j)..*starts.get_unchecked(j + 1));
-            if anc.is_empty() {
-                continue;
-            }
-            let len = *sub_end.get_unchecked(j) - j;
-            let nfull = len / 4;
-            let mask = tail_mask(len);
-            let src = xi0.add(j * ld + j);
-            let hj = h.add(n * j);
-            for &a in anc {
-                let l = _mm256_broadcast_sd(&*hj.add(a));
-                let dst = xi0.add(a * ld + j);
-                for u in 0..nfull {
-                    let p = dst.add(4 * u);
-                    let s = _mm256_loadu_pd(src.add(4 * u));
-                    _mm256_storeu_pd(p, _mm256_fnmadd_pd(l, s, _mm256_loadu_pd(p)));
-                }
-                if len % 4 != 0 {
-                    let p = dst.add(4 * nfull);
-                    let s = _mm256_maskload_pd(src.add(4 * nfull), mask);
-                    let dv = _mm256_maskload_pd(p, mask);
-                    _mm256_maskstore_pd(p, mask, _mm256_fnmadd_pd(l, s, dv));
-                }
-            }
-        }
-        // z = D⁻¹ y (times −1 on the general part), then L x = z: row i pulls its ancestors;
-        // on the identity part only columns i..n.
-        for i in 0..n {
-            let anc = all_anc.get_unchecked(*starts.get_unchecked(i)..*starts.get_unchecked(i + 1));
-            let hi = h.add(n * i);
-            let dinv = 1.0 / *hi.add(i);
-            pull_row(x, ld, w, mask_w, i, anc, |j| *hi.add(j), -dinv);
-            let len = n - i;
-            pull_row(xi0.add(i), ld, len, tail_mask(len), i, anc, |j| *hi.add(j), dinv);
-        }
-    }
+    // SAFETY: the caller's contract.
+    unsafe { solve_fd::<crate::simd::Avx4>(model, h, desc, sub_end, x) }
 }
 
-/// Portable version of [`solve_fd_avx2`] (same sweeps, scalar).
-fn solve_fd_scalar(model: &Model, h: &[f64], desc: DescView<'_>, sub_end: &[usize], x: &mut [f64]) {
-    let n = model.nv;
-    let ld = 3 * n;
-    let w = 2 * n;
-    for j in (0..n).rev() {
-        for &i in &desc.list[desc.starts[j]..desc.starts[j + 1]] {
-            let l = h[j + n * i];
-            for c in 0..w {
-                x[j * ld + c] -= l * x[i * ld + c];
-            }
-        }
-        for &a in model.ancestors_of_dof(j) {
-            let l = h[a + n * j];
-            for c in w + j..w + sub_end[j] {
-                x[a * ld + c] -= l * x[j * ld + c];
-            }
-        }
-    }
-    for i in 0..n {
-        let dinv = 1.0 / h[i + n * i];
-        let anc = model.ancestors_of_dof(i);
-        for (c, s) in (0..w).map(|c| (c, -dinv)).chain((w + i..ld).map(|c| (c, dinv))) {
-            let mut acc = s * x[i * ld + c];
-            for &j in anc {
-                acc -= h[j + n * i] * x[j * ld + c];
-            }
-            x[i * ld + c] = acc;
-        }
-    }
-}
-
+/// [`solve_rows_head`] compiled for AVX2/FMA.
+///
+/// # Safety
+/// As [`solve_rows_head`]; the CPU has AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[allow(clippy::too_many_arguments)]
@@ -642,9 +467,103 @@ unsafe fn solve_rows_head_avx2(
     alpha: f64,
     rows_end: usize,
 ) {
+    // SAFETY: the caller's contract.
+    unsafe { solve_rows_head::<crate::simd::Avx4>(model, h, desc, x, ld, len, alpha, rows_end) }
+}
+
+/// The three solves of [`ltl_solve_fd`] on lanes.
+///
+/// # Safety
+/// `x` valid for `nv` rows of stride `3 nv`; ancestor and descendant indices `< nv`;
+/// `sub_end[j] ≤ nv`.
+#[inline(always)]
+unsafe fn solve_fd<V: F64x4>(
+    model: &Model,
+    h: &[f64],
+    desc: DescView<'_>,
+    sub_end: &[usize],
+    x: *mut f64,
+) {
+    let n = model.nv;
+    let ld = 3 * n;
+    let w = 2 * n;
+    let h = h.as_ptr();
+    let mask_w = V::mask(w % 4);
+    let starts = &model.dof_ancestors_start;
+    let all_anc = &model.dof_ancestors;
+    // SAFETY: the caller upholds this function's contract: `x` is valid for the rows < nv (stride
+    // `ld`) and columns used, and every index from the model's ancestor / descendant lists is < nv.
+    unsafe {
+        let xi0 = x.add(w);
+        for j in (0..n).rev() {
+            // Lᵀ y = b, general part: row j pulls its (final) descendants, L_ij at (j, i).
+            let d = desc
+                .list
+                .get_unchecked(*desc.starts.get_unchecked(j)..*desc.starts.get_unchecked(j + 1));
+            if !d.is_empty() {
+                let hj = h.add(j);
+                pull_row::<V>(x, ld, w, mask_w, j, d, |i| *hj.add(n * i), 1.0);
+            }
+            // Identity part: the final row j pushes its columns j..sub_end[j] to its ancestors.
+            let anc = all_anc.get_unchecked(*starts.get_unchecked(j)..*starts.get_unchecked(j + 1));
+            if anc.is_empty() {
+                continue;
+            }
+            let len = *sub_end.get_unchecked(j) - j;
+            let nfull = len / 4;
+            let mask = V::mask(len % 4);
+            let src = xi0.add(j * ld + j);
+            let hj = h.add(n * j);
+            for &a in anc {
+                let l = V::splat(*hj.add(a));
+                let dst = xi0.add(a * ld + j);
+                for u in 0..nfull {
+                    let p = dst.add(4 * u);
+                    let s = V::loadu(src.add(4 * u));
+                    (l.neg_mul_add(s, V::loadu(p))).storeu(p);
+                }
+                if len % 4 != 0 {
+                    let p = dst.add(4 * nfull);
+                    let s = V::maskload(src.add(4 * nfull), mask);
+                    let dv = V::maskload(p, mask);
+                    l.neg_mul_add(s, dv).maskstore(p, mask);
+                }
+            }
+        }
+        // z = D⁻¹ y (times −1 on the general part), then L x = z: row i pulls its ancestors;
+        // on the identity part only columns i..n.
+        for i in 0..n {
+            let anc = all_anc.get_unchecked(*starts.get_unchecked(i)..*starts.get_unchecked(i + 1));
+            let hi = h.add(n * i);
+            let dinv = 1.0 / *hi.add(i);
+            pull_row::<V>(x, ld, w, mask_w, i, anc, |j| *hi.add(j), -dinv);
+            let len = n - i;
+            pull_row::<V>(xi0.add(i), ld, len, V::mask(len % 4), i, anc, |j| *hi.add(j), dinv);
+        }
+    }
+}
+
+/// Portable version of [`solve_fd_avx2`] (same sweeps, scalar).
+/// The two sweeps of [`ltl_solve_rows_desc`] on lanes.
+///
+/// # Safety
+/// `x` valid for `nv` rows of stride `ld` and length `len`; ancestor and descendant indices
+/// `< nv`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+unsafe fn solve_rows_head<V: F64x4>(
+    model: &Model,
+    h: &[f64],
+    desc: DescView<'_>,
+    x: *mut f64,
+    ld: usize,
+    len: usize,
+    alpha: f64,
+    rows_end: usize,
+) {
     let n = model.nv;
     let h = h.as_ptr();
-    let mask = tail_mask(len);
+    let mask = V::mask(len % 4);
     let starts = &model.dof_ancestors_start;
     let all_anc = &model.dof_ancestors;
     // SAFETY: the caller upholds this function's contract: `x` is valid for the rows < nv (stride
@@ -657,7 +576,7 @@ unsafe fn solve_rows_head_avx2(
                 .get_unchecked(*desc.starts.get_unchecked(j)..*desc.starts.get_unchecked(j + 1));
             if !d.is_empty() {
                 let hj = h.add(j);
-                pull_row(x, ld, len, mask, j, d, |i| *hj.add(n * i), 1.0);
+                pull_row::<V>(x, ld, len, mask, j, d, |i| *hj.add(n * i), 1.0);
             }
         }
         // z = α D⁻¹ y, then L x = z on rows 0..rows_end.
@@ -665,7 +584,7 @@ unsafe fn solve_rows_head_avx2(
             let anc = all_anc.get_unchecked(*starts.get_unchecked(i)..*starts.get_unchecked(i + 1));
             let hi = h.add(n * i);
             let dinv = alpha / *hi.add(i);
-            pull_row(x, ld, len, mask, i, anc, |j| *hi.add(j), dinv);
+            pull_row::<V>(x, ld, len, mask, i, anc, |j| *hi.add(j), dinv);
         }
     }
 }

@@ -32,7 +32,7 @@ use crate::algo::Data;
 use crate::algo::internal::{check_fext, placements, root_free_flyer};
 use crate::error::Result;
 use crate::model::{Model, check_vec};
-use crate::spatial::{Force, Inertia, Motion, Transform, coriolis_b_write, dot6};
+use crate::spatial::{Force, Inertia, Motion, Transform, dot6};
 use nalgebra::{DVector, Matrix6, Vector3};
 
 /// `B x` for a body-level Coriolis matrix with the block structure `[[B₁₁, 0], [B₂₁, 0]]` of
@@ -132,51 +132,28 @@ fn forward_pass_world_placed(
     a0: Motion,
 ) {
     data.ff_root = root_free_flyer(model);
-    let n = model.njoints();
     data.ov[0] = Motion::zero();
     data.oa[0] = a0;
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2_fma() {
         // SAFETY: the CPU has AVX2 and FMA (checked just above).
-        unsafe { avx::forward_pass(model, data, v, a, fext) };
+        unsafe { forward_pass_avx2(model, data, v, a, fext) };
         return;
     }
-    // Forward pass, ground frame.
-    for i in 1..n {
-        let p = model.parents[i];
-        let x = data.o_m_i[i];
-        let (vp, ap) = (data.ov[p], data.oa[p]);
-        let (iv, nvi) = (model.idx_v[i], model.nvs[i]);
-        let mut vj = Motion::zero();
-        let mut aj = Motion::zero();
-        for c in iv..iv + nvi {
-            let s = x.act_motion(&model.subspace[c]);
-            data.s_world[c] = s;
-            let psid = vp.cross(&s);
-            data.psid[c] = psid;
-            data.psidd[c] = ap.cross(&s) + vp.cross(&psid);
-            vj += s * v[c];
-            aj += s * a[c];
-        }
-        let vi = vp + vj;
-        for c in iv..iv + nvi {
-            let sd = vi.cross(&data.s_world[c]);
-            data.sdot[c] = sd;
-            data.psid_sdot[c] = data.psid[c] + sd;
-        }
-        let ai = ap + aj + vi.cross(&vj);
-        data.ov[i] = vi;
-        data.oa[i] = ai;
-        let inertia = x.act_inertia(&model.inertias[i]);
-        data.ic_world[i] = inertia;
-        data.oinertia[i] = inertia;
-        let mut f = inertia.mul_motion(&ai) + vi.cross_force(&inertia.mul_motion(&vi));
-        if let Some(fe) = fext {
-            f -= x.act_force(&fe[i]);
-        }
-        data.ofc[i] = f;
-        coriolis_b_write(&inertia, &vi, &mut data.bc[i]);
-    }
+    lanes::forward_pass::<[f64; 4]>(model, data, v, a, fext);
+}
+
+/// [`lanes::forward_pass`] compiled for AVX2/FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn forward_pass_avx2(
+    model: &Model,
+    data: &mut Data,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    fext: Option<&[Force]>,
+) {
+    lanes::forward_pass::<crate::simd::Avx4>(model, data, v, a, fext)
 }
 
 /// Adds the composite quantities of body `i` to its parent.
@@ -236,58 +213,55 @@ pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
             let t = RootTerms { t1: &terms.t1, t2: &terms.t2, t3: &terms.t3, t4: &terms.t4 };
             root_block(x, a0, v1, &t, c, nv, [&mut *dq, &mut *dv, &mut *mm]);
         }
-        #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2_fma() {
-            debug_assert!(anc.iter().all(|&r| r < iv) && iv + nvi <= nv && c < nv);
-            // SAFETY: the CPU has AVX2 and FMA (checked just above); joint i's DoFs and its
-            // ancestor DoFs are < nv (`ModelBuilder::build`), c < nv, the per-DoF arrays have
-            // nv entries and the matrices are nv×nv (asserted above).
-            unsafe {
-                avx::rows(
-                    &terms,
-                    c,
-                    nv,
-                    iv..iv + nvi,
-                    anc,
-                    [sw, psid, psidd, pss],
-                    [dq.as_mut_ptr(), dv.as_mut_ptr(), mm.as_mut_ptr()],
-                )
-            };
-            continue;
-        }
-        let DofTerms { t1, t2, t3, t4, .. } = terms;
-        // ∂τ_i/∂q_j = S_iᵀ(2B^C_i Ψ̇_j + I^C_i Ψ̈_j)   (dtau_dq_1)
-        // ∂τ_i/∂q̇_j = S_iᵀ(2B^C_i S_j + I^C_i(Ψ̇_j + Ṡ_j))   (dtau_dqd_1)
-        let row = |mr: &Motion, pr: &Motion, ppr: &Motion, sr: &Motion| {
-            (mr.ang.dot(&t2) + pr.dot(&t1), sr.ang.dot(&t2) + ppr.dot(&t1), sr.dot(&t1))
-        };
-        // Joint i's own DoFs (eqs. dtau_dq_1, dtau_dqd_1, M).
-        for r in iv..iv + nvi {
-            let (q1, v1, m1) = row(&psid[r], &psidd[r], &pss[r], &sw[r]);
-            dq[c + r * nv] = q1;
-            dv[c + r * nv] = v1;
-            mm[c + r * nv] = m1;
-            mm[r + c * nv] = m1;
-        }
-        // Strict ancestors j ≺ i: eqs. dtau_dq_1, dtau_dqd_1, M in row c and
-        // dtau_dq_2, dtau_dqd_2 in column c.
-        for &r in anc {
-            debug_assert!(r < iv);
-            // SAFETY: ancestor DoFs satisfy r < iv <= c < nv (`ModelBuilder::build`); the
-            // matrices are nv×nv and the per-DoF arrays have nv entries (asserted above).
-            unsafe {
-                let sr = sw.get_unchecked(r);
-                let (q1, v1, m1) =
-                    row(psid.get_unchecked(r), psidd.get_unchecked(r), pss.get_unchecked(r), sr);
-                *dq.get_unchecked_mut(c + r * nv) = q1;
-                *dv.get_unchecked_mut(c + r * nv) = v1;
-                *mm.get_unchecked_mut(c + r * nv) = m1;
-                *mm.get_unchecked_mut(r + c * nv) = m1;
-                *dq.get_unchecked_mut(r + c * nv) = sr.dot(&t3);
-                *dv.get_unchecked_mut(r + c * nv) = sr.dot(&t4);
+        debug_assert!(anc.iter().all(|&r| r < iv) && iv + nvi <= nv && c < nv);
+        let args = (
+            &terms,
+            c,
+            nv,
+            iv..iv + nvi,
+            anc,
+            [sw, psid, psidd, pss],
+            [dq.as_mut_ptr(), dv.as_mut_ptr(), mm.as_mut_ptr()],
+        );
+        // ∂τ_c/∂q_r, ∂τ_c/∂q̇_r and M_rc for the DoFs r of joint i and of its ancestors
+        // (eqs. dtau_dq_1, dtau_dqd_1, M), ∂τ_r/∂q_c and ∂τ_r/∂q̇_c for its strict ancestors
+        // (eqs. dtau_dq_2, dtau_dqd_2).
+        // SAFETY: joint i's DoFs and its ancestor DoFs are < nv (`ModelBuilder::build`;
+        // `Model`'s fields are private), c < nv, the per-DoF arrays have nv entries and the
+        // matrices are nv×nv (asserted above); the CPU has AVX2 and FMA where `rows_avx2`
+        // runs (checked by `avx2_fma`).
+        unsafe {
+            #[cfg(target_arch = "x86_64")]
+            if crate::simd::avx2_fma() {
+                rows_avx2(args);
+                continue;
             }
+            let (t, c, nv, own, anc, m, p) = args;
+            lanes::rows::<[f64; 4]>(t, c, nv, own, anc, m, p);
         }
     }
+}
+
+/// The arguments of [`lanes::rows`].
+type RowsArgs<'a> = (
+    &'a DofTerms,
+    usize,
+    usize,
+    std::ops::Range<usize>,
+    &'a [usize],
+    [&'a [Motion]; 4],
+    [*mut f64; 3],
+);
+
+/// [`lanes::rows`] compiled for AVX2/FMA.
+///
+/// # Safety
+/// As [`lanes::rows`]; the CPU has AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn rows_avx2((t, c, nv, own, anc, m, p): RowsArgs<'_>) {
+    // SAFETY: the caller's contract.
+    unsafe { lanes::rows::<crate::simd::Avx4>(t, c, nv, own, anc, m, p) }
 }
 
 /// The per-DoF terms of [`backward_step_fo`] for DoF `c` of body `i`.
@@ -319,15 +293,24 @@ fn dof_terms(
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2_fma() {
         // SAFETY: the CPU has AVX2 and FMA (checked just above).
-        return unsafe { avx::dof_terms(ic, bc, fc, s, psid, psidd, pss) };
+        return unsafe { dof_terms_avx2(ic, bc, fc, s, psid, psidd, pss) };
     }
-    DofTerms {
-        tau: s.dot(fc),
-        t1: ic.mul_motion(s),
-        t2: mul_b_tr_ang(bc.as_slice(), s) * 2.0,
-        t3: mul_b(bc.as_slice(), psid) * 2.0 + ic.mul_motion(psidd) + fc.crff(s),
-        t4: mul_b(bc.as_slice(), s) * 2.0 + ic.mul_motion(pss),
-    }
+    lanes::dof_terms::<[f64; 4]>(ic, bc, fc, s, psid, psidd, pss)
+}
+
+/// [`lanes::dof_terms`] compiled for AVX2/FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn dof_terms_avx2(
+    ic: &Inertia,
+    bc: &Matrix6<f64>,
+    fc: &Force,
+    s: &Motion,
+    psid: &Motion,
+    psidd: &Motion,
+    pss: &Motion,
+) -> DofTerms {
+    lanes::dof_terms::<crate::simd::Avx4>(ic, bc, fc, s, psid, psidd, pss)
 }
 
 /// The per-DoF forces of [`backward_step_fo`] that enter the root free-flyer block:
@@ -355,104 +338,70 @@ fn root_block(
     mats: [&mut [f64]; 3],
 ) {
     assert!(6 <= c && c < nv && mats.iter().all(|m| m.len() == nv * nv));
-    #[cfg(target_arch = "x86_64")]
-    if crate::simd::avx2_fma() {
-        let [dq, dv, mm] = mats;
-        // SAFETY: the CPU has AVX2 and FMA (checked just above); 6 <= c < nv and the matrices
-        // are nv×nv (asserted above).
-        unsafe {
-            avx::root_block(
-                x,
-                a0,
-                v1,
-                t,
-                c,
-                nv,
-                [dq.as_mut_ptr(), dv.as_mut_ptr(), mm.as_mut_ptr()],
-            )
-        };
-        return;
+    let [dq, dv, mm] = mats;
+    let p = [dq.as_mut_ptr(), dv.as_mut_ptr(), mm.as_mut_ptr()];
+    // SAFETY: 6 <= c < nv and the matrices are nv×nv (asserted above); the CPU has AVX2 and
+    // FMA where `root_block_avx2` runs (checked by `avx2_fma`).
+    unsafe {
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2_fma() {
+            return root_block_avx2(x, a0, v1, t, c, nv, p);
+        }
+        lanes::root_block::<[f64; 4]>(x, a0, v1, t, c, nv, p)
     }
-    root_block_portable(x, a0, v1, t, c, nv, mats);
 }
 
-/// Portable [`root_block`].
-#[inline]
-fn root_block_portable(
+/// [`lanes::root_block`] compiled for AVX2/FMA.
+///
+/// # Safety
+/// As [`lanes::root_block`]; the CPU has AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn root_block_avx2(
     x: &Transform,
     a0: &Motion,
     v1: &Motion,
     t: &RootTerms,
     c: usize,
     nv: usize,
-    [dq, dv, mm]: [&mut [f64]; 3],
+    p: [*mut f64; 3],
 ) {
-    let arr = |f: Force| [f.ang.x, f.ang.y, f.ang.z, f.lin.x, f.lin.y, f.lin.z];
-    let m1 = arr(x.inv_act_force(t.t1));
-    let q1 = arr(x.inv_act_force(&a0.cross_force(t.t1)));
-    let v1 = arr(x.inv_act_force(&(Force::new(*t.t2, Vector3::zeros()) - v1.cross_force(t.t1))));
-    let q2 = arr(x.inv_act_force(t.t3));
-    let v2 = arr(x.inv_act_force(t.t4));
-    for r in 0..6 {
-        dq[c + r * nv] = -q1[r];
-        dv[c + r * nv] = v1[r];
-        mm[c + r * nv] = m1[r];
-        mm[r + c * nv] = m1[r];
-        dq[r + c * nv] = q2[r];
-        dv[r + c * nv] = v2[r];
-    }
+    // SAFETY: the caller's contract.
+    unsafe { lanes::root_block::<crate::simd::Avx4>(x, a0, v1, t, c, nv, p) }
 }
 
-#[cfg(target_arch = "x86_64")]
-mod avx {
+/// The kernels of the forward pass and of the backward step, generic over the lanes.
+mod lanes {
     use super::{DofTerms, RootTerms};
     use crate::algo::Data;
     use crate::model::Model;
-    use crate::spatial::avx::{columns, comb, cross, store3, v3};
+    use crate::simd::F64x4;
+    use crate::spatial::lanes::{columns, comb, cross, v3};
     use crate::spatial::{Force, Inertia, Motion, Transform, coriolis_b_write};
     use nalgebra::{DVector, Matrix6, Vector3};
-    use std::arch::x86_64::*;
 
     /// `Rᵀ v = Σ_l v_l (row l of R)`, given the rows of `R`.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn rt(rows: &[__m256d; 3], v: __m256d) -> __m256d {
-        let x = _mm256_mul_pd(rows[0], _mm256_permute4x64_pd(v, 0b00_00_00_00));
-        let x = _mm256_fmadd_pd(rows[1], _mm256_permute4x64_pd(v, 0b01_01_01_01), x);
-        _mm256_fmadd_pd(rows[2], _mm256_permute4x64_pd(v, 0b10_10_10_10), x)
-    }
-
-    /// Stores lanes 0..3 at `p[0], p[s], p[2s]`.
-    ///
-    /// # Safety
-    /// `p` valid for writes at those offsets.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    unsafe fn store3_strided(p: *mut f64, s: usize, v: __m256d) {
-        let lo = _mm256_castpd256_pd128(v);
-        // SAFETY: see the function's contract.
-        unsafe {
-            _mm_store_sd(p, lo);
-            _mm_storeh_pd(p.add(s), lo);
-            _mm_store_sd(p.add(2 * s), _mm256_extractf128_pd(v, 1));
-        }
+    #[inline(always)]
+    fn rt<V: F64x4>(rows: &[V; 3], v: V) -> V {
+        let x = rows[0].mul(v.permute::<0b00_00_00_00>());
+        let x = rows[1].mul_add(v.permute::<0b01_01_01_01>(), x);
+        rows[2].mul_add(v.permute::<0b10_10_10_10>(), x)
     }
 
     /// Lanes 0..3 into a 3-vector.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn vec3(v: __m256d) -> Vector3<f64> {
+    #[inline(always)]
+    fn vec3<V: F64x4>(v: V) -> Vector3<f64> {
         let mut o = [0.0; 4];
         // SAFETY: `o` has four entries.
-        unsafe { _mm256_storeu_pd(o.as_mut_ptr(), v) };
+        unsafe { v.storeu(o.as_mut_ptr()) };
         Vector3::new(o[0], o[1], o[2])
     }
 
     /// See `super::dof_terms`. `I m = [Ī ω + h × v; m v − h × ω]` for `m = [ω; v]`; `B x` from
     /// the left 6×3 half of `B` (column `k` loaded as rows 0..4 and rows 3..7, the lanes beyond
     /// row 2 and row 5 unused); `Bᵀ s` as three 6-term dot products summed across lanes.
-    #[target_feature(enable = "avx2,fma")]
-    pub(super) fn dof_terms(
+    #[inline(always)]
+    pub(super) fn dof_terms<V: F64x4>(
         ic: &Inertia,
         bc: &Matrix6<f64>,
         fc: &Force,
@@ -465,19 +414,15 @@ mod avx {
         // SAFETY: `ir` has nine entries: the loads read ir[0..4], ir[3..7] and ir[5..9].
         let icol = unsafe {
             let p = ir.as_ptr();
-            [
-                _mm256_loadu_pd(p),
-                _mm256_loadu_pd(p.add(3)),
-                _mm256_permute4x64_pd(_mm256_loadu_pd(p.add(5)), 0b00_11_10_01),
-            ]
+            [V::loadu(p), V::loadu(p.add(3)), V::loadu(p.add(5)).permute::<0b00_11_10_01>()]
         };
         let h = v3(&ic.h);
-        let mass = _mm256_set1_pd(ic.mass);
+        let mass = V::splat(ic.mass);
         let imul = |m: &Motion| {
             let v = v3(&m.lin);
             let w = v3(&m.ang);
-            let ang = _mm256_add_pd(comb(&icol, m.ang.x, m.ang.y, m.ang.z), cross(h, v));
-            let lin = _mm256_fmsub_pd(v, mass, cross(h, w));
+            let ang = comb(&icol, m.ang.x, m.ang.y, m.ang.z).add(cross(h, v));
+            let lin = v.mul_sub(mass, cross(h, w));
             (ang, lin)
         };
         let b = bc.as_slice();
@@ -486,102 +431,80 @@ mod avx {
         let (ba, bl) = unsafe {
             let p = b.as_ptr();
             (
-                [_mm256_loadu_pd(p), _mm256_loadu_pd(p.add(6)), _mm256_loadu_pd(p.add(12))],
-                [_mm256_loadu_pd(p.add(3)), _mm256_loadu_pd(p.add(9)), _mm256_loadu_pd(p.add(15))],
+                [V::loadu(p), V::loadu(p.add(6)), V::loadu(p.add(12))],
+                [V::loadu(p.add(3)), V::loadu(p.add(9)), V::loadu(p.add(15))],
             )
         };
-        let two = _mm256_set1_pd(2.0);
+        let two = V::splat(2.0);
         // 2 B x.
         let bmul2 = |x: &Motion| {
             let a = comb(&ba, x.ang.x, x.ang.y, x.ang.z);
             let l = comb(&bl, x.ang.x, x.ang.y, x.ang.z);
-            (_mm256_mul_pd(a, two), _mm256_mul_pd(l, two))
+            (a.mul(two), l.mul(two))
         };
-        let (sw, sv) = (v3(&s.ang), v3(&s.lin));
+        let (sw, sv) = (v3::<V>(&s.ang), v3::<V>(&s.lin));
         let (fn_, ff) = (v3(&fc.ang), v3(&fc.lin));
         // τ = s · f^C (lane 3 zero).
         let tau = {
-            let p = _mm256_fmadd_pd(sv, ff, _mm256_mul_pd(sw, fn_));
-            let q = _mm_add_pd(_mm256_castpd256_pd128(p), _mm256_extractf128_pd(p, 1));
-            _mm_cvtsd_f64(_mm_add_sd(q, _mm_unpackhi_pd(q, q)))
+            let p = sv.mul_add(ff, sw.mul(fn_));
+            p.hsum()
         };
         let t1 = imul(s);
         // 2 Bᵀ s: lane 3 of sw, sv is zero, so rows 3 and 6 of the loads drop out.
         let t2 = {
-            let p = |k: usize| _mm256_fmadd_pd(bl[k], sv, _mm256_mul_pd(ba[k], sw));
-            let t = _mm256_hadd_pd(p(0), p(1));
-            let u = _mm256_hadd_pd(p(2), _mm256_setzero_pd());
-            let lo = _mm256_permute2f128_pd(t, u, 0x20);
-            let hi = _mm256_permute2f128_pd(t, u, 0x31);
-            _mm256_mul_pd(_mm256_add_pd(lo, hi), two)
+            let p = |k: usize| bl[k].mul_add(sv, ba[k].mul(sw));
+            V::hsum4(p(0), p(1), p(2), V::zero()).mul(two)
         };
         // f^C ×̄* s = s ×* f^C = [ω × n + v × f; ω × f].
-        let (xa, xl) = (_mm256_add_pd(cross(sw, fn_), cross(sv, ff)), cross(sw, ff));
+        let (xa, xl) = (cross(sw, fn_).add(cross(sv, ff)), cross(sw, ff));
         let (b3a, b3l) = bmul2(psid);
         let (i3a, i3l) = imul(psidd);
-        let t3 = (
-            _mm256_add_pd(_mm256_add_pd(b3a, i3a), xa),
-            _mm256_add_pd(_mm256_add_pd(b3l, i3l), xl),
-        );
+        let t3 = (b3a.add(i3a).add(xa), b3l.add(i3l).add(xl));
         let (b4a, b4l) = bmul2(s);
         let (i4a, i4l) = imul(pss);
-        let t4 = (_mm256_add_pd(b4a, i4a), _mm256_add_pd(b4l, i4l));
-        let force = |(a, l): (__m256d, __m256d)| Force::new(vec3(a), vec3(l));
+        let t4 = (b4a.add(i4a), b4l.add(i4l));
+        let force = |(a, l): (V, V)| Force::new(vec3(a), vec3(l));
         DofTerms { tau, t1: force(t1), t2: vec3(t2), t3: force(t3), t4: force(t4) }
     }
 
     /// A motion (or force) as two 3-vectors in lanes 0..3 (lane 3 zero).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn ld(a: &Vector3<f64>, l: &Vector3<f64>) -> (__m256d, __m256d) {
+    #[inline(always)]
+    fn ld<V: F64x4>(a: &Vector3<f64>, l: &Vector3<f64>) -> (V, V) {
         (v3(a), v3(l))
     }
 
     /// Stores a pair of 3-vectors into a motion.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn stm(v: (__m256d, __m256d), m: &mut Motion) {
+    #[inline(always)]
+    fn stm<V: F64x4>(v: (V, V), m: &mut Motion) {
         // SAFETY: each target has three entries.
         unsafe {
-            store3(m.ang.as_mut_ptr(), v.0);
-            store3(m.lin.as_mut_ptr(), v.1);
+            v.0.store3(m.ang.as_mut_ptr());
+            v.1.store3(m.lin.as_mut_ptr());
         }
     }
 
     /// `m1 × m2 = [ω₁ × ω₂; ω₁ × v₂ + v₁ × ω₂]`.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn mcross(m1: (__m256d, __m256d), m2: (__m256d, __m256d)) -> (__m256d, __m256d) {
-        (cross(m1.0, m2.0), _mm256_add_pd(cross(m1.0, m2.1), cross(m1.1, m2.0)))
+    #[inline(always)]
+    fn mcross<V: F64x4>(m1: (V, V), m2: (V, V)) -> (V, V) {
+        (cross(m1.0, m2.0), cross(m1.0, m2.1).add(cross(m1.1, m2.0)))
     }
 
     /// `m ×* f = [ω × n + v × f; ω × f]`.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn fcross(m: (__m256d, __m256d), f: (__m256d, __m256d)) -> (__m256d, __m256d) {
-        (_mm256_add_pd(cross(m.0, f.0), cross(m.1, f.1)), cross(m.0, f.1))
+    #[inline(always)]
+    fn fcross<V: F64x4>(m: (V, V), f: (V, V)) -> (V, V) {
+        (cross(m.0, f.0).add(cross(m.1, f.1)), cross(m.0, f.1))
     }
 
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn add2(a: (__m256d, __m256d), b: (__m256d, __m256d)) -> (__m256d, __m256d) {
-        (_mm256_add_pd(a.0, b.0), _mm256_add_pd(a.1, b.1))
+    #[inline(always)]
+    fn add2<V: F64x4>(a: (V, V), b: (V, V)) -> (V, V) {
+        (a.0.add(b.0), a.1.add(b.1))
     }
 
     /// `a + x b` with a broadcast scalar.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn axpy2(a: (__m256d, __m256d), x: f64, b: (__m256d, __m256d)) -> (__m256d, __m256d) {
-        let x = _mm256_set1_pd(x);
-        (_mm256_fmadd_pd(b.0, x, a.0), _mm256_fmadd_pd(b.1, x, a.1))
-    }
-
-    /// Sum of lanes 0..3 and 3 (a full horizontal sum).
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn hsum(p: __m256d) -> f64 {
-        let q = _mm_add_pd(_mm256_castpd256_pd128(p), _mm256_extractf128_pd(p, 1));
-        _mm_cvtsd_f64(_mm_add_sd(q, _mm_unpackhi_pd(q, q)))
+    #[inline(always)]
+    fn axpy2<V: F64x4>(a: (V, V), x: f64, b: (V, V)) -> (V, V) {
+        let x = V::splat(x);
+        (b.0.mul_add(x, a.0), b.1.mul_add(x, a.1))
     }
 
     /// The ground-frame forward pass of `super::forward_pass_world_placed` (from body 1 on;
@@ -589,10 +512,8 @@ mod avx {
     /// the spatial cross products, `X I` as `Transform::act_inertia` and
     /// `f = I a + v ×* (I v)` with `I m = [Ī ω + h × v; m v − h × ω]`.
     ///
-    /// # Safety
-    /// The CPU has AVX2 and FMA.
-    #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn forward_pass(
+    #[inline(always)]
+    pub(super) fn forward_pass<V: F64x4>(
         model: &Model,
         data: &mut Data,
         v: &DVector<f64>,
@@ -619,28 +540,25 @@ mod avx {
                 && v.len() == nv
                 && a.len() == nv
         );
-        let e = [
-            _mm256_setr_pd(1.0, 0.0, 0.0, 0.0),
-            _mm256_setr_pd(0.0, 1.0, 0.0, 0.0),
-            _mm256_setr_pd(0.0, 0.0, 1.0, 0.0),
-        ];
+        let e =
+            [V::setr(1.0, 0.0, 0.0, 0.0), V::setr(0.0, 1.0, 0.0, 0.0), V::setr(0.0, 0.0, 1.0, 0.0)];
         for i in 1..n {
             let p = model.parents[i];
             let x = &data.o_m_i[i];
-            let r = columns(&x.rot);
+            let r = columns::<V>(&x.rot);
             let pv = v3(&x.trans);
             let vp = ld(&data.ov[p].ang, &data.ov[p].lin);
             let ap = ld(&data.oa[p].ang, &data.oa[p].lin);
             let (iv, nvi) = (model.idx_v[i], model.nvs[i]);
             assert!(iv + nvi <= nv);
-            let z = _mm256_setzero_pd();
+            let z = V::zero();
             let (mut vj, mut aj) = ((z, z), (z, z));
             for c in iv..iv + nvi {
                 let sl = &model.subspace[c];
                 let ang = comb(&r, sl.ang.x, sl.ang.y, sl.ang.z);
-                let lin = _mm256_add_pd(comb(&r, sl.lin.x, sl.lin.y, sl.lin.z), cross(pv, ang));
+                let lin = comb(&r, sl.lin.x, sl.lin.y, sl.lin.z).add(cross(pv, ang));
                 // Lane 3 of the rotation columns is unspecified: cleared here.
-                let sc = (_mm256_blend_pd(ang, z, 0b1000), _mm256_blend_pd(lin, z, 0b1000));
+                let sc = (ang.blend::<0b1000>(z), lin.blend::<0b1000>(z));
                 stm(sc, &mut data.s_world[c]);
                 let psid = mcross(vp, sc);
                 stm(psid, &mut data.psid[c]);
@@ -672,21 +590,21 @@ mod avx {
                 comb(&r, ib[6], ib[7], ib[8]),
             ];
             let rh = comb(&r, inr.h.x, inr.h.y, inr.h.z);
-            let hn = _mm256_blend_pd(_mm256_fmadd_pd(pv, _mm256_set1_pd(m), rh), z, 0b1000);
-            let dv = _mm256_set1_pd(hsum(_mm256_mul_pd(pv, _mm256_add_pd(rh, hn))));
+            let hn = (pv.mul_add(V::splat(m), rh)).blend::<0b1000>(z);
+            let dv = V::splat(pv.mul(rh.add(hn)).hsum());
             let xs = x.rot.as_slice();
             let (pa, ha) = ([x.trans.x, x.trans.y, x.trans.z], {
                 let mut o = [0.0; 4];
                 // SAFETY: `o` has four entries.
-                unsafe { _mm256_storeu_pd(o.as_mut_ptr(), hn) };
+                unsafe { hn.storeu(o.as_mut_ptr()) };
                 o
             });
             let col = |b: usize| {
                 // Column b of T Rᵀ: Σ_k T_k R_bk.
                 let c = comb(&tt, xs[b], xs[b + 3], xs[b + 6]);
-                let c = _mm256_fnmadd_pd(pv, _mm256_set1_pd(ha[b]), c);
-                let c = _mm256_fnmadd_pd(rh, _mm256_set1_pd(pa[b]), c);
-                _mm256_blend_pd(_mm256_fmadd_pd(e[b], dv, c), z, 0b1000)
+                let c = pv.neg_mul_add(V::splat(ha[b]), c);
+                let c = rh.neg_mul_add(V::splat(pa[b]), c);
+                (e[b].mul_add(dv, c)).blend::<0b1000>(z)
             };
             let icol = [col(0), col(1), col(2)];
             let mut inertia = Inertia::zero();
@@ -695,31 +613,31 @@ mod avx {
             // o[0..4], o[3..7] (in this order), o[6..8] and o[8].
             unsafe {
                 let o = inertia.rot.as_mut_slice().as_mut_ptr();
-                _mm256_storeu_pd(o, icol[0]);
-                _mm256_storeu_pd(o.add(3), icol[1]);
-                store3(o.add(6), icol[2]);
-                store3(inertia.h.as_mut_ptr(), hn);
+                icol[0].storeu(o);
+                icol[1].storeu(o.add(3));
+                icol[2].store3(o.add(6));
+                hn.store3(inertia.h.as_mut_ptr());
             }
             data.ic_world[i] = inertia;
             data.oinertia[i] = inertia;
             // f = I a + v ×* (I v).
-            let mass = _mm256_set1_pd(m);
-            let imul = |(w, u): (__m256d, __m256d)| {
+            let mass = V::splat(m);
+            let imul = |(w, u): (V, V)| {
                 let wv = {
                     let mut o = [0.0; 4];
                     // SAFETY: `o` has four entries.
-                    unsafe { _mm256_storeu_pd(o.as_mut_ptr(), w) };
+                    unsafe { w.storeu(o.as_mut_ptr()) };
                     o
                 };
-                let ang = _mm256_add_pd(comb(&icol, wv[0], wv[1], wv[2]), cross(hn, u));
-                (ang, _mm256_fmsub_pd(u, mass, cross(hn, w)))
+                let ang = comb(&icol, wv[0], wv[1], wv[2]).add(cross(hn, u));
+                (ang, u.mul_sub(mass, cross(hn, w)))
             };
             let f = add2(imul(ai), fcross(vi, imul(vi)));
             let fo = &mut data.ofc[i];
             // SAFETY: each target has three entries.
             unsafe {
-                store3(fo.ang.as_mut_ptr(), f.0);
-                store3(fo.lin.as_mut_ptr(), f.1);
+                f.0.store3(fo.ang.as_mut_ptr());
+                f.1.store3(fo.lin.as_mut_ptr());
             }
             if let Some(fe) = fext {
                 *fo -= x.act_force(&fe[i]);
@@ -736,11 +654,11 @@ mod avx {
     /// summed across lanes at once.
     ///
     /// # Safety
-    /// The CPU has AVX2 and FMA; `c < nv`, `own.end <= nv`, every `r` in `anc` is `< nv`; the
+    /// `c < nv`, `own.end <= nv`, every `r` in `anc` is `< nv`; the
     /// four motion slices have `nv` entries and the pointers address `nv×nv` matrices.
     #[allow(clippy::too_many_arguments)]
-    #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn rows(
+    #[inline(always)]
+    pub(super) unsafe fn rows<V: F64x4>(
         t: &DofTerms,
         c: usize,
         nv: usize,
@@ -753,12 +671,12 @@ mod avx {
         let t2 = v3(&t.t2);
         let (t3a, t3l) = (v3(&t.t3.ang), v3(&t.t3.lin));
         let (t4a, t4l) = (v3(&t.t4.ang), v3(&t.t4.lin));
-        let mask = _mm256_setr_epi64x(-1, -1, -1, 0);
+        let mask = V::mask(3);
         // [ang; lin] of a motion, lane 3 zero (`Motion` is `repr(C)`: six contiguous f64).
         let ldm = |m: &Motion| {
             let p = (m as *const Motion).cast::<f64>();
             // SAFETY: `p` addresses six f64; the masked loads read p[0..3] and p[3..6].
-            unsafe { (_mm256_maskload_pd(p, mask), _mm256_maskload_pd(p.add(3), mask)) }
+            unsafe { (V::maskload(p, mask), V::maskload(p.add(3), mask)) }
         };
         // [∂τ_c/∂q_r, ∂τ_c/∂q̇_r, M_rc, S_rᵀ t3] and the lanes of S_rᵀ t4.
         let dots = |r: usize| {
@@ -775,20 +693,15 @@ mod avx {
             let (ma, _) = ldm(mr);
             let (pa, pl) = ldm(pr);
             let (qa, ql) = ldm(ppr);
-            let p1 = _mm256_fmadd_pd(pl, t1l, _mm256_fmadd_pd(pa, t1a, _mm256_mul_pd(ma, t2)));
-            let p2 = _mm256_fmadd_pd(ql, t1l, _mm256_fmadd_pd(qa, t1a, _mm256_mul_pd(sa, t2)));
-            let p3 = _mm256_fmadd_pd(sl, t1l, _mm256_mul_pd(sa, t1a));
-            let p4 = _mm256_fmadd_pd(sl, t3l, _mm256_mul_pd(sa, t3a));
-            let p5 = _mm256_fmadd_pd(sl, t4l, _mm256_mul_pd(sa, t4a));
-            let h0 = _mm256_hadd_pd(p1, p2);
-            let h1 = _mm256_hadd_pd(p3, p4);
-            let sum = _mm256_add_pd(
-                _mm256_permute2f128_pd(h0, h1, 0x20),
-                _mm256_permute2f128_pd(h0, h1, 0x31),
-            );
+            let p1 = pl.mul_add(t1l, pa.mul_add(t1a, ma.mul(t2)));
+            let p2 = ql.mul_add(t1l, qa.mul_add(t1a, sa.mul(t2)));
+            let p3 = sl.mul_add(t1l, sa.mul(t1a));
+            let p4 = sl.mul_add(t3l, sa.mul(t3a));
+            let p5 = sl.mul_add(t4l, sa.mul(t4a));
+            let sum = V::hsum4(p1, p2, p3, p4);
             let mut o = [0.0; 4];
             // SAFETY: `o` has four entries.
-            unsafe { _mm256_storeu_pd(o.as_mut_ptr(), sum) };
+            unsafe { sum.storeu(o.as_mut_ptr()) };
             (o, p5)
         };
         for r in own {
@@ -810,7 +723,7 @@ mod avx {
                 *mm.add(c + r * nv) = o[2];
                 *mm.add(r + c * nv) = o[2];
                 *dq.add(r + c * nv) = o[3];
-                *dv.add(r + c * nv) = hsum(p5);
+                *dv.add(r + c * nv) = p5.hsum();
             }
         }
     }
@@ -819,10 +732,10 @@ mod avx {
     /// `m ×* [n; f] = [ω × n + v × f; ω × f]` for `m = [ω; v]`, on 4-lane vectors.
     ///
     /// # Safety
-    /// The CPU has AVX2 and FMA; `6 <= c < nv`; each pointer of `mats` is valid for an `nv×nv`
+    /// `6 <= c < nv`; each pointer of `mats` is valid for an `nv×nv`
     /// column-major matrix.
-    #[target_feature(enable = "avx2,fma")]
-    pub(super) unsafe fn root_block(
+    #[inline(always)]
+    pub(super) unsafe fn root_block<V: F64x4>(
         x: &Transform,
         a0: &Motion,
         v1: &Motion,
@@ -833,21 +746,21 @@ mod avx {
     ) {
         let r = x.rot.as_slice(); // column-major: R_lk = r[l + 3k]
         let rows = [
-            _mm256_setr_pd(r[0], r[3], r[6], 0.0),
-            _mm256_setr_pd(r[1], r[4], r[7], 0.0),
-            _mm256_setr_pd(r[2], r[5], r[8], 0.0),
+            V::setr(r[0], r[3], r[6], 0.0),
+            V::setr(r[1], r[4], r[7], 0.0),
+            V::setr(r[2], r[5], r[8], 0.0),
         ];
         let p = v3(&x.trans);
-        let inv = |n: __m256d, f: __m256d| (rt(&rows, _mm256_sub_pd(n, cross(p, f))), rt(&rows, f));
-        let ld = |f: &Force| (v3(&f.ang), v3(&f.lin));
+        let inv = |n: V, f: V| (rt(&rows, n.sub(cross(p, f))), rt(&rows, f));
+        let ld = |f: &Force| (v3::<V>(&f.ang), v3::<V>(&f.lin));
         let (n1, f1) = ld(t.t1);
         let (aw, av) = (v3(&a0.ang), v3(&a0.lin));
         let (vw, vv) = (v3(&v1.ang), v3(&v1.lin));
         // a₀ ×* t1, and t2 − v₁ ×* t1 (t2 has no linear part).
-        let qa = _mm256_add_pd(cross(aw, n1), cross(av, f1));
+        let qa = cross(aw, n1).add(cross(av, f1));
         let ql = cross(aw, f1);
-        let va = _mm256_sub_pd(v3(t.t2), _mm256_add_pd(cross(vw, n1), cross(vv, f1)));
-        let vl = _mm256_sub_pd(_mm256_setzero_pd(), cross(vw, f1));
+        let va = v3::<V>(t.t2).sub(cross(vw, n1).add(cross(vv, f1)));
+        let vl = V::zero().sub(cross(vw, f1));
         let m1 = inv(n1, f1);
         let q1 = inv(qa, ql);
         let v1o = inv(va, vl);
@@ -855,23 +768,22 @@ mod avx {
         let q2 = inv(n3, f3);
         let (n4, f4) = ld(t.t4);
         let v2 = inv(n4, f4);
-        let neg = _mm256_set1_pd(-0.0);
         // SAFETY: 6 <= c < nv: column c rows 0..6 (at c·nv..c·nv + 6) and row c columns 0..6
         // (at c + r·nv, r < 6) lie within nv×nv.
         unsafe {
             let col = c * nv;
-            store3(dq.add(col), q2.0);
-            store3(dq.add(col + 3), q2.1);
-            store3(dv.add(col), v2.0);
-            store3(dv.add(col + 3), v2.1);
-            store3(mm.add(col), m1.0);
-            store3(mm.add(col + 3), m1.1);
-            store3_strided(dq.add(c), nv, _mm256_xor_pd(q1.0, neg));
-            store3_strided(dq.add(c + 3 * nv), nv, _mm256_xor_pd(q1.1, neg));
-            store3_strided(dv.add(c), nv, v1o.0);
-            store3_strided(dv.add(c + 3 * nv), nv, v1o.1);
-            store3_strided(mm.add(c), nv, m1.0);
-            store3_strided(mm.add(c + 3 * nv), nv, m1.1);
+            q2.0.store3(dq.add(col));
+            q2.1.store3(dq.add(col + 3));
+            v2.0.store3(dv.add(col));
+            v2.1.store3(dv.add(col + 3));
+            m1.0.store3(mm.add(col));
+            m1.1.store3(mm.add(col + 3));
+            q1.0.flip_sign(-1.0).store3_strided(dq.add(c), nv);
+            q1.1.flip_sign(-1.0).store3_strided(dq.add(c + 3 * nv), nv);
+            v1o.0.store3_strided(dv.add(c), nv);
+            v1o.1.store3_strided(dv.add(c + 3 * nv), nv);
+            m1.0.store3_strided(mm.add(c), nv);
+            m1.1.store3_strided(mm.add(c + 3 * nv), nv);
         }
     }
 }

@@ -11,6 +11,7 @@ use crate::algo::Data;
 use crate::algo::internal::check_fext;
 use crate::error::Result;
 use crate::model::{Model, check_vec};
+use crate::simd::F64x4;
 use crate::spatial::{Force, Motion};
 use crate::tensor::Tensor3;
 use nalgebra::{DVector, Matrix6, Vector3};
@@ -256,11 +257,6 @@ fn v6f(f: &Force) -> V6 {
     [f.ang.x, f.ang.y, f.ang.z, f.lin.x, f.lin.y, f.lin.z]
 }
 
-#[inline(always)]
-fn dot(a: &V6, b: &V6) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5]
-}
-
 /// `α a + β b`.
 #[inline(always)]
 fn lin2(alpha: f64, a: &V6, beta: f64, b: &V6) -> V6 {
@@ -297,26 +293,39 @@ fn crf(m: &V6, f: &V6) -> V6 {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2], c[0], c[1], c[2]]
 }
 
-/// `M x`.
+/// `M x` (columns `m[c]`), on lanes: rows `0..4` and `4..6`.
 #[inline(always)]
-fn mv_portable(m: &M6, x: &V6) -> V6 {
-    let mut o = [0.0; 6];
+fn mv<V: F64x4>(m: &M6, x: &V6) -> V6 {
+    let (mut lo, mut hi) = (V::zero(), V::zero());
     for c in 0..6 {
-        for r in 0..6 {
-            o[r] += m[c][r] * x[c];
-        }
+        // SAFETY: m[c] has 6 entries: [0..4] and [4..6] are in bounds.
+        let (a, b) = unsafe { (V::loadu(m[c].as_ptr()), V::load2(m[c].as_ptr().add(4))) };
+        let xc = V::splat(x[c]);
+        lo = a.mul_add(xc, lo);
+        hi = b.mul_add(xc, hi);
+    }
+    let mut o = [0.0; 6];
+    // SAFETY: o has 6 entries.
+    unsafe {
+        lo.storeu(o.as_mut_ptr());
+        hi.store2(o.as_mut_ptr().add(4));
     }
     o
 }
 
-/// `Mᵀ x`.
+/// `Mᵀ x` (columns `m[r]`): one 6-term dot product per row, on lanes.
 #[inline(always)]
-fn mtv_portable(m: &M6, x: &V6) -> V6 {
-    let mut o = [0.0; 6];
-    for r in 0..6 {
-        o[r] = dot(&m[r], x);
+fn mtv<V: F64x4>(m: &M6, x: &V6) -> V6 {
+    // SAFETY: x and every m[r] have 6 entries.
+    unsafe {
+        let (xl, xh) = (V::loadu(x.as_ptr()), V::load2(x.as_ptr().add(4)));
+        let mut o = [0.0; 6];
+        for r in 0..6 {
+            let a = V::loadu(m[r].as_ptr()).mul(xl);
+            o[r] = V::load2(m[r].as_ptr().add(4)).mul_add(xh, a).hsum();
+        }
+        o
     }
-    o
 }
 
 #[inline(always)]
@@ -378,15 +387,15 @@ struct IOps {
 /// `C = S×* I − I S× = P + Pᵀ`, and `2B(I, m) = m×* I − I m× + (I m)×̄*` (eq. bkm_term_defn);
 /// likewise `−B S× = (S×* Bᵀ)ᵀ`. No 6×6 products.
 #[inline(always)]
-fn i_ops<K: Kern>(ic: &M6, bc: &M6, bct: &M6, fc: &V6, dof: &[V6; 4]) -> IOps {
+fn i_ops<V: F64x4>(ic: &M6, bc: &M6, bct: &M6, fc: &V6, dof: &[V6; 4]) -> IOps {
     let [s, psid, psidd, ps] = dof;
-    let t1 = K::mv(ic, s);
+    let t1 = mv::<V>(ic, s);
     let p = crf_cols(s, ic);
     let pt = transpose(&p);
     let c = lin3m(1.0, &p, 1.0, &pt, 0.0, &p);
     let pp = crf_cols(psid, ic);
     let ppt = transpose(&pp);
-    let ip = K::mv(ic, psid);
+    let ip = mv::<V>(ic, psid);
     let rp = m6(&Force::new(Vector3::new(ip[0], ip[1], ip[2]), Vector3::new(ip[3], ip[4], ip[5]))
         .crff_matrix());
     let sb = crf_cols(s, bc);
@@ -394,10 +403,10 @@ fn i_ops<K: Kern>(ic: &M6, bc: &M6, bct: &M6, fc: &V6, dof: &[V6; 4]) -> IOps {
     // 2B(I, Ψ̇) = P' + P'ᵀ + (IΨ̇)×̄*
     let b2 = lin3m(1.0, &pp, 1.0, &ppt, 1.0, &rp);
     let a = lin3m(1.0, &b2, 2.0, &sb, 2.0, &qbt);
-    let bpsid = K::mv(bc, psid);
-    let g = add(&lin2(2.0, &bpsid, 1.0, &K::mv(ic, psidd)), &crf(s, fc));
-    let t4 = lin2(2.0, &K::mv(bc, s), 1.0, &K::mv(ic, ps));
-    IOps { s: *s, t1, t2: K::mtv(bc, s), a, c, g, t4 }
+    let bpsid = mv::<V>(bc, psid);
+    let g = add(&lin2(2.0, &bpsid, 1.0, &mv::<V>(ic, psidd)), &crf(s, fc));
+    let t4 = lin2(2.0, &mv::<V>(bc, s), 1.0, &mv::<V>(ic, ps));
+    IOps { s: *s, t1, t2: mtv::<V>(bc, s), a, c, g, t4 }
 }
 
 /// `t[idx] = x` without a bounds check in release builds: every index written by IDSVA-SO is
@@ -421,157 +430,42 @@ fn rows6<const R: usize>(fs: [&V6; R]) -> [[f64; R]; 6] {
     o
 }
 
-/// `Σ_c rows[c][r] x[c]` for every row `r`.
+/// `Σ_c rows[c][r] x[c]` for every row `r`, four rows at a time on lanes (then two, then
+/// one).
 #[inline(always)]
-fn matvec_portable<const R: usize>(rows: &[[f64; R]; 6], x: &V6) -> [f64; R] {
+fn matvec<V: F64x4, const R: usize>(rows: &[[f64; R]; 6], x: &V6) -> [f64; R] {
     let mut out = [0.0; R];
-    for c in 0..6 {
-        for r in 0..R {
-            out[r] += rows[c][r] * x[c];
+    let mut r = 0;
+    while r + 4 <= R {
+        let mut acc = V::zero();
+        for c in 0..6 {
+            // SAFETY: r + 4 <= R.
+            let a = unsafe { V::loadu(rows[c].as_ptr().add(r)) };
+            acc = a.mul_add(V::splat(x[c]), acc);
         }
+        // SAFETY: r + 4 <= R.
+        unsafe { acc.storeu(out.as_mut_ptr().add(r)) };
+        r += 4;
+    }
+    if r + 2 <= R {
+        let mut acc = V::zero();
+        for c in 0..6 {
+            // SAFETY: r + 2 <= R.
+            let a = unsafe { V::load2(rows[c].as_ptr().add(r)) };
+            acc = a.mul_add(V::splat(x[c]), acc);
+        }
+        // SAFETY: r + 2 <= R.
+        unsafe { acc.store2(out.as_mut_ptr().add(r)) };
+        r += 2;
+    }
+    if r < R {
+        let mut acc = 0.0;
+        for c in 0..6 {
+            acc = rows[c][r].mul_add(x[c], acc);
+        }
+        out[r] = acc;
     }
     out
-}
-
-/// The small dense kernels of the backward step: a portable version and an AVX2/FMA one
-/// (explicit intrinsics: inside the large backward step the compiler does not vectorise the
-/// portable loops by itself).
-trait Kern {
-    /// `M x`.
-    fn mv(m: &M6, x: &V6) -> V6;
-    /// `Mᵀ x`.
-    fn mtv(m: &M6, x: &V6) -> V6;
-    /// `Σ_c rows[c][r] x[c]` for every row `r`.
-    fn matvec<const R: usize>(rows: &[[f64; R]; 6], x: &V6) -> [f64; R];
-}
-
-/// Portable kernels.
-struct Portable;
-
-impl Kern for Portable {
-    #[inline(always)]
-    fn mv(m: &M6, x: &V6) -> V6 {
-        mv_portable(m, x)
-    }
-    #[inline(always)]
-    fn mtv(m: &M6, x: &V6) -> V6 {
-        mtv_portable(m, x)
-    }
-    #[inline(always)]
-    fn matvec<const R: usize>(rows: &[[f64; R]; 6], x: &V6) -> [f64; R] {
-        matvec_portable(rows, x)
-    }
-}
-
-/// AVX2/FMA kernels; only used after `crate::simd::avx2_fma()` returned true.
-#[cfg(target_arch = "x86_64")]
-struct Avx2;
-
-#[cfg(target_arch = "x86_64")]
-impl Kern for Avx2 {
-    #[inline(always)]
-    fn mv(m: &M6, x: &V6) -> V6 {
-        // SAFETY: `Avx2` kernels run only on CPUs with AVX2 and FMA (see `backward_step_so`).
-        unsafe { avx::mv(m, x) }
-    }
-    #[inline(always)]
-    fn mtv(m: &M6, x: &V6) -> V6 {
-        // SAFETY: as above.
-        unsafe { avx::mtv(m, x) }
-    }
-    #[inline(always)]
-    fn matvec<const R: usize>(rows: &[[f64; R]; 6], x: &V6) -> [f64; R] {
-        // SAFETY: as above.
-        unsafe { avx::matvec(rows, x) }
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-mod avx {
-    use super::{M6, V6};
-    use std::arch::x86_64::*;
-
-    /// Sum of the four lanes of `a` and the two of `b`.
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn hsum(a: __m256d, b: __m128d) -> f64 {
-        let s = _mm_add_pd(_mm_add_pd(_mm256_castpd256_pd128(a), _mm256_extractf128_pd(a, 1)), b);
-        _mm_cvtsd_f64(_mm_add_sd(s, _mm_unpackhi_pd(s, s)))
-    }
-
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(super) fn mv(m: &M6, x: &V6) -> V6 {
-        let mut lo = _mm256_setzero_pd();
-        let mut hi = _mm_setzero_pd();
-        for c in 0..6 {
-            // SAFETY: m[c] has 6 elements: [0..4] and [4..6] are in bounds.
-            let (a, b) =
-                unsafe { (_mm256_loadu_pd(m[c].as_ptr()), _mm_loadu_pd(m[c].as_ptr().add(4))) };
-            lo = _mm256_fmadd_pd(a, _mm256_set1_pd(x[c]), lo);
-            hi = _mm_fmadd_pd(b, _mm_set1_pd(x[c]), hi);
-        }
-        let mut o = [0.0; 6];
-        // SAFETY: o has 6 elements.
-        unsafe {
-            _mm256_storeu_pd(o.as_mut_ptr(), lo);
-            _mm_storeu_pd(o.as_mut_ptr().add(4), hi);
-        }
-        o
-    }
-
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(super) fn mtv(m: &M6, x: &V6) -> V6 {
-        // SAFETY: x and every m[r] have 6 elements.
-        unsafe {
-            let (xl, xh) = (_mm256_loadu_pd(x.as_ptr()), _mm_loadu_pd(x.as_ptr().add(4)));
-            let mut o = [0.0; 6];
-            for r in 0..6 {
-                let a = _mm256_mul_pd(_mm256_loadu_pd(m[r].as_ptr()), xl);
-                let b = _mm_mul_pd(_mm_loadu_pd(m[r].as_ptr().add(4)), xh);
-                o[r] = hsum(a, b);
-            }
-            o
-        }
-    }
-
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    pub(super) fn matvec<const R: usize>(rows: &[[f64; R]; 6], x: &V6) -> [f64; R] {
-        let mut out = [0.0; R];
-        let mut r = 0;
-        while r + 4 <= R {
-            let mut acc = _mm256_setzero_pd();
-            for c in 0..6 {
-                // SAFETY: r + 4 <= R.
-                let a = unsafe { _mm256_loadu_pd(rows[c].as_ptr().add(r)) };
-                acc = _mm256_fmadd_pd(a, _mm256_set1_pd(x[c]), acc);
-            }
-            // SAFETY: r + 4 <= R.
-            unsafe { _mm256_storeu_pd(out.as_mut_ptr().add(r), acc) };
-            r += 4;
-        }
-        if r + 2 <= R {
-            let mut acc = _mm_setzero_pd();
-            for c in 0..6 {
-                // SAFETY: r + 2 <= R.
-                let a = unsafe { _mm_loadu_pd(rows[c].as_ptr().add(r)) };
-                acc = _mm_fmadd_pd(a, _mm_set1_pd(x[c]), acc);
-            }
-            // SAFETY: r + 2 <= R.
-            unsafe { _mm_storeu_pd(out.as_mut_ptr().add(r), acc) };
-            r += 2;
-        }
-        if r < R {
-            let mut acc = 0.0;
-            for c in 0..6 {
-                acc = rows[c][r].mul_add(x[c], acc);
-            }
-            out[r] = acc;
-        }
-        out
-    }
 }
 
 /// Flat offset of `(i, j, k)` in an `n×n×n` column-major tensor.
@@ -602,7 +496,7 @@ fn backward_step_so_avx2<S: Sink>(
     sink: &mut S,
     i: usize,
 ) {
-    backward_step_so_body::<Avx2, S>(model, data, ws, sink, i)
+    backward_step_so_body::<crate::simd::Avx4, S>(model, data, ws, sink, i)
 }
 
 /// One backward step of IDSVA-SO into `sink`, with the AVX2/FMA kernels where the CPU has them.
@@ -612,7 +506,7 @@ fn backward_step_so<S: Sink>(model: &Model, data: &Data, ws: &SoWs<'_>, sink: &m
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
         return unsafe { backward_step_so_avx2(model, data, ws, sink, i) };
     }
-    backward_step_so_body::<Portable, S>(model, data, ws, sink, i)
+    backward_step_so_body::<[f64; 4], S>(model, data, ws, sink, i)
 }
 
 /// The model-constant and per-DoF vectors of IDSVA-SO's backward pass (from a [`SoData`]).
@@ -680,7 +574,7 @@ impl<const DM: bool, const UP: bool> Sink for Store<'_, DM, UP> {
 /// the `∂²τ/∂q∂q̇` columns of root DoFs are skipped (see [`SoData::upper_halves`]; DoFs are
 /// numbered depth-first, so an ancestor's are smaller).
 #[inline(always)]
-fn backward_step_so_body<K: Kern, S: Sink>(
+fn backward_step_so_body<V: F64x4, S: Sink>(
     model: &Model,
     data: &Data,
     ws: &SoWs<'_>,
@@ -696,7 +590,7 @@ fn backward_step_so_body<K: Kern, S: Sink>(
     let dofs = |j: usize| model.idx_v[j]..model.idx_v[j] + model.nvs[j];
     let anc = |j: usize| &anc_dofs[anc_start[j]..anc_start[j + 1]];
     for ip in dofs(i) {
-        let o = i_ops::<K>(&ic, &bc, &bct, &fc, &dof[ip]);
+        let o = i_ops::<V>(&ic, &bc, &bct, &fc, &dof[ip]);
         let mut j = i;
         while j > 0 {
             let j_is_i = j == i;
@@ -710,12 +604,13 @@ fn backward_step_so_body<K: Kern, S: Sink>(
                 // B(I^C_i, S_i) = ½(C + R) and B(I^C_i, S_i)ᵀ = ½(C − R), with R x = x ×* (I^C_i S_i)
                 // antisymmetric (eq. crff_oper): every B(I^C_i, S_i) product is C x ± x ×* t1.
                 let z = [0.0; 6];
-                let (c_s, c_dd, c_p) = (K::mv(&o.c, sj), K::mv(&o.c, psiddj), K::mv(&o.c, psj));
-                let a_s = K::mv(&o.a, sj);
+                let (c_s, c_dd, c_p) =
+                    (mv::<V>(&o.c, sj), mv::<V>(&o.c, psiddj), mv::<V>(&o.c, psj));
+                let a_s = mv::<V>(&o.a, sj);
                 let (c_d, a_d, d_t1) = if j_root {
                     (z, z, z)
                 } else {
-                    (K::mv(&o.c, psidj), K::mv(&o.a, psidj), crf(psidj, &o.t1))
+                    (mv::<V>(&o.c, psidj), mv::<V>(&o.a, psidj), crf(psidj, &o.t1))
                 };
                 // q–q 1A/2A terms: z1 · Ψ̇_k + z2 · Ψ̈_k
                 let z2 = crf(sj, &o.t1);
@@ -736,11 +631,11 @@ fn backward_step_so_body<K: Kern, S: Sink>(
                 // Per-(j, t) vectors for the cases with j ≺ i (or the D case at j = i).
                 let (y1, x, f2c) = if j_is_i {
                     // D S_j = S_i×*(I^C_i S_j) + S_j ×* (I^C_i S_i)
-                    let ics = K::mv(&ic, sj);
+                    let ics = mv::<V>(&ic, sj);
                     (z, add(&crf(&o.s, &ics), &z2), z)
                 } else {
                     // 2B(I^C_i,S_i) S_j = C S_j + S_j ×* t1
-                    (K::mtv(&o.a, sj), add(&c_s, &z2), add(&a_s, &c_p))
+                    (mtv::<V>(&o.a, sj), add(&c_s, &z2), add(&a_s, &c_p))
                 };
                 let y2 = csj;
                 // All dot products with one k as small matrix–vector products (rows below),
@@ -752,10 +647,10 @@ fn backward_step_so_body<K: Kern, S: Sink>(
                 // j = k block (same joint): 1A only, B (v–v) and 1A cross; j ≺ i adds 1C/1E/2A/2C.
                 for kr in dofs(j) {
                     let [sk, psidk, psiddk, psk] = &dof[kr];
-                    let ds = K::matvec(&rs, sk);
+                    let ds = matvec::<V, _>(&rs, sk);
                     // Ψ̇_k = 0 on a root joint (above).
-                    let dp = if j_root { [0.0; 3] } else { K::matvec(&rd, psidk) };
-                    let ddd = K::matvec(&rz, psiddk);
+                    let dp = if j_root { [0.0; 3] } else { matvec::<V, _>(&rd, psidk) };
+                    let ddd = matvec::<V, _>(&rz, psiddk);
                     sink.qq(ip, jt + n * kr, at(n, ip, jt, kr), dp[0] + ddd[0]); // 1A
                     if !S::UP || jt <= kr {
                         sink.vv(ip, jt + n * kr, at(n, ip, jt, kr), -ds[8]); // B: −S_jᵀ C S_k
@@ -765,7 +660,7 @@ fn backward_step_so_body<K: Kern, S: Sink>(
                         sink.qv(ip, kr, jt, val);
                     }
                     if !j_is_i {
-                        let dpk = K::matvec(&rz, psk);
+                        let dpk = matvec::<V, _>(&rz, psk);
                         let v1c = dp[2] + ddd[1]; // q–q 1C/2C
                         sink.qq(jt, kr + n * ip, at(n, jt, kr, ip), v1c);
                         if !S::UP {
@@ -797,11 +692,11 @@ fn backward_step_so_body<K: Kern, S: Sink>(
                     let [sk, psidk, psiddk, psk] = unsafe { dof.get_unchecked(kr) };
                     // SAFETY: kr < nv = root.len() (as for `dof` above).
                     let k_root = unsafe { *root.get_unchecked(kr) };
-                    let ds = K::matvec(&rs, sk);
+                    let ds = matvec::<V, _>(&rs, sk);
                     // Ψ̇_k = 0 on a root joint (above).
-                    let dp = if k_root { [0.0; 3] } else { K::matvec(&rd, psidk) };
-                    let ddd = K::matvec(&rz, psiddk);
-                    let dpk = K::matvec(&rz, psk);
+                    let dp = if k_root { [0.0; 3] } else { matvec::<V, _>(&rd, psidk) };
+                    let ddd = matvec::<V, _>(&rz, psiddk);
+                    let dpk = matvec::<V, _>(&rz, psk);
                     let (nk, nnk) = (n * kr, n * n * kr);
                     // ∂²τ/∂q²: 1A + 2A mirror, 1B (+ 2B mirror if j ≺ i)
                     let val = dp[0] + ddd[0];

@@ -31,6 +31,10 @@ use crate::spatial::Motion;
 use crate::tensor::Tensor3;
 use nalgebra::{DMatrix, DVector};
 
+pub(crate) use crate::simd::Lanes;
+#[cfg(target_arch = "x86_64")]
+pub(crate) use crate::simd::{Avx4, Avx8};
+
 /// IDFOZA: writes `out[(i, k)] = Σ_l ∂M_il/∂q_k x_l = ∂(M(q) x)_i/∂q_k` (tangent space).
 /// `out` must be `nv×nv`.
 pub fn idfoza(
@@ -189,147 +193,6 @@ impl<A: Copy + Default> IdfozaWs<A> {
         }
     }
 }
-
-/// `N` `f64` lanes (one per right-hand side) with the arithmetic of [`idfoza_lanes_core`]: the
-/// portable `[f64; 4]`, an AVX2 register ([`Avx4`]) or an AVX-512 register ([`Avx8`]).
-pub(crate) trait Lanes: Copy {
-    /// The lanes as an array, `[f64; N]`.
-    type Arr: Copy + Default + AsRef<[f64]> + AsMut<[f64]>;
-    /// `[x; N]`.
-    fn splat(x: f64) -> Self;
-    /// From an array.
-    fn load(a: &Self::Arr) -> Self;
-    /// To an array.
-    fn store(self) -> Self::Arr;
-    /// Lane-wise `self + b`.
-    fn add(self, b: Self) -> Self;
-    /// Lane-wise `self − b`.
-    fn sub(self, b: Self) -> Self;
-    /// Lane-wise `self · b`.
-    fn mul(self, b: Self) -> Self;
-    /// Lane-wise `self · b + c` (fused where the hardware has it).
-    fn mul_add(self, b: Self, c: Self) -> Self;
-}
-
-impl Lanes for [f64; 4] {
-    type Arr = [f64; 4];
-    #[inline(always)]
-    fn splat(x: f64) -> Self {
-        [x; 4]
-    }
-    #[inline(always)]
-    fn load(a: &Self::Arr) -> Self {
-        *a
-    }
-    #[inline(always)]
-    fn store(self) -> Self::Arr {
-        self
-    }
-    #[inline(always)]
-    fn add(self, b: Self) -> Self {
-        std::array::from_fn(|l| self[l] + b[l])
-    }
-    #[inline(always)]
-    fn sub(self, b: Self) -> Self {
-        std::array::from_fn(|l| self[l] - b[l])
-    }
-    #[inline(always)]
-    fn mul(self, b: Self) -> Self {
-        std::array::from_fn(|l| self[l] * b[l])
-    }
-    #[inline(always)]
-    fn mul_add(self, b: Self, c: Self) -> Self {
-        std::array::from_fn(|l| self[l] * b[l] + c[l])
-    }
-}
-
-/// Implements [`Lanes`] for a one-register newtype `$t` of `$n` lanes with the given
-/// intrinsics (`_mm256_*` for AVX2, `_mm512_*` for AVX-512F).
-#[cfg(target_arch = "x86_64")]
-macro_rules! simd_lanes {
-    ($t:ident, $n:literal, $set1:ident, $loadu:ident, $storeu:ident, $add:ident, $sub:ident, $mul:ident, $fmadd:ident) => {
-        impl Lanes for $t {
-            type Arr = [f64; $n];
-            #[inline(always)]
-            fn splat(x: f64) -> Self {
-                // SAFETY: the features are available wherever the type is used (its invariant).
-                unsafe { $t(std::arch::x86_64::$set1(x)) }
-            }
-            #[inline(always)]
-            fn load(a: &Self::Arr) -> Self {
-                // SAFETY: as for `splat`; `a` holds the values read.
-                unsafe { $t(std::arch::x86_64::$loadu(a.as_ptr())) }
-            }
-            #[inline(always)]
-            fn store(self) -> Self::Arr {
-                let mut a = [0.0; $n];
-                // SAFETY: as for `splat`; `a` holds the values written.
-                unsafe { std::arch::x86_64::$storeu(a.as_mut_ptr(), self.0) };
-                a
-            }
-            #[inline(always)]
-            fn add(self, b: Self) -> Self {
-                // SAFETY: as for `splat`.
-                unsafe { $t(std::arch::x86_64::$add(self.0, b.0)) }
-            }
-            #[inline(always)]
-            fn sub(self, b: Self) -> Self {
-                // SAFETY: as for `splat`.
-                unsafe { $t(std::arch::x86_64::$sub(self.0, b.0)) }
-            }
-            #[inline(always)]
-            fn mul(self, b: Self) -> Self {
-                // SAFETY: as for `splat`.
-                unsafe { $t(std::arch::x86_64::$mul(self.0, b.0)) }
-            }
-            #[inline(always)]
-            fn mul_add(self, b: Self, c: Self) -> Self {
-                // SAFETY: as for `splat`.
-                unsafe { $t(std::arch::x86_64::$fmadd(self.0, b.0, c.0)) }
-            }
-        }
-    };
-}
-
-/// Four lanes in an AVX2 register. Only created inside functions compiled with
-/// `#[target_feature(enable = "avx2,fma")]` behind the run-time check [`crate::simd::avx2_fma`],
-/// where its methods (always inlined) execute.
-#[cfg(target_arch = "x86_64")]
-#[derive(Clone, Copy)]
-pub(crate) struct Avx4(std::arch::x86_64::__m256d);
-
-#[cfg(target_arch = "x86_64")]
-simd_lanes!(
-    Avx4,
-    4,
-    _mm256_set1_pd,
-    _mm256_loadu_pd,
-    _mm256_storeu_pd,
-    _mm256_add_pd,
-    _mm256_sub_pd,
-    _mm256_mul_pd,
-    _mm256_fmadd_pd
-);
-
-/// Eight lanes in an AVX-512 register. Only created inside functions compiled with
-/// `#[target_feature(enable = "avx512f,avx2,fma")]` behind the run-time check
-/// [`crate::simd::avx512f`], where its methods (always inlined) execute.
-#[cfg(target_arch = "x86_64")]
-#[derive(Clone, Copy)]
-pub(crate) struct Avx8(std::arch::x86_64::__m512d);
-
-#[cfg(target_arch = "x86_64")]
-simd_lanes!(
-    Avx8,
-    8,
-    _mm512_set1_pd,
-    _mm512_loadu_pd,
-    _mm512_storeu_pd,
-    _mm512_add_pd,
-    _mm512_sub_pd,
-    _mm512_mul_pd,
-    _mm512_fmadd_pd
-);
 
 #[inline(always)]
 pub(crate) fn v6(ang: &nalgebra::Vector3<f64>, lin: &nalgebra::Vector3<f64>) -> [f64; 6] {

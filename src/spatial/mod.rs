@@ -1,11 +1,11 @@
 //! Spatial vector algebra (Featherstone), shaped like the notes' section
 //! "Spatial Vector Algebra Identities and Properties". Spatial vectors are `[angular; linear]`.
 
-#[cfg(target_arch = "x86_64")]
-pub(crate) mod avx;
 mod cross;
 mod force;
 mod inertia;
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod lanes;
 mod matrix;
 mod motion;
 mod transform;

@@ -149,6 +149,19 @@ pub(crate) struct BenchArgs {
     /// difference of two runs over the difference of N (scripts/instr-per-call.sh).
     #[arg(long, value_name = "N")]
     calls: Option<usize>,
+    /// Cap the instruction set of the kernels: portable, avx2 or avx512 (default: the widest
+    /// the CPU has)
+    ///
+    /// Applies to the calling thread (every single-state algorithm); the helper threads of the
+    /// batched algorithms keep the widest. The header line's simd= names the level that ran.
+    #[arg(long, value_name = "LEVEL", value_parser = parse_simd)]
+    simd: Option<sodyn::simd::Level>,
+}
+
+/// Parses `--simd`.
+fn parse_simd(s: &str) -> std::result::Result<sodyn::simd::Level, String> {
+    sodyn::simd::Level::from_name(s)
+        .ok_or_else(|| format!("unknown level \"{s}\" (portable, avx2 or avx512)"))
 }
 
 /// The helper threads of the batched algorithms (`--pool`).
@@ -1049,6 +1062,7 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
     let rayon = o.pool == Pool::Rayon;
     let spin = Duration::from_nanos((o.spin_us * 1e3).round() as u64);
     let model = load_model(&o.model)?;
+    sodyn::simd::set_thread_level(o.simd);
     for c in contacts {
         model.frame_id(c).map_err(|_| {
             Error::Io(format!(
@@ -1174,7 +1188,7 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
     };
     println!(
         "# model={name} source={spec} base={} nq={} nv={} njoints={} nstates={nstates} seed={} \
-         timer_overhead_ns={:.1} contacts={} threads={} pool={} smoke={}",
+         timer_overhead_ns={:.1} contacts={} threads={} pool={} smoke={} simd={}",
         if floating_base { "ff" } else { "fixed" },
         model.nq(),
         model.nv(),
@@ -1196,6 +1210,7 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
             ),
         },
         o.smoke as u8,
+        sodyn::simd::level().name(),
     );
     for algo in algos {
         if let Some((r, reference)) = &ratio_to {
