@@ -20,6 +20,8 @@
 #   SHARED      the shared directory (default: ../shared next to the repository)
 #   PEER_VENV   Pinocchio venv (default /tmp/peer/venv)
 #   PEER_BUILD  where pin_bench_native is (default /tmp/peer/build)
+#   SODYN       the sodyn binary to time (default: target/release/sodyn, built first); given,
+#               nothing is built (to compare two builds one right after the other)
 #   OUT         directory for raw outputs and the table (default /tmp/sodyn-compare-<date>)
 #   PNG         chart of the ratios to write (default: none; matplotlib is installed into
 #               PEER_VENV if missing)
@@ -55,7 +57,8 @@ export PEER_VENV="${PEER_VENV:-/tmp/peer/venv}"
 export PEER_BUILD="${PEER_BUILD:-/tmp/peer/build}"
 OUT="${OUT:-/tmp/sodyn-compare-$(date +%F)}"
 PIN_BIN="$PEER_BUILD/pin_bench_native"
-SODYN="$REPO/target/release/sodyn"
+SODYN_GIVEN="${SODYN:-}"
+SODYN="${SODYN:-$REPO/target/release/sodyn}"
 MODELS_DIR="$SHARED/models"
 
 [ -d "$MODELS_DIR" ] || { echo "models not found: $MODELS_DIR (set SHARED)" >&2; exit 1; }
@@ -68,8 +71,10 @@ if [ ! -x "$PIN_BIN" ]; then
 fi
 
 # 2. sodyn, release build.
-echo "[compare] cargo build --release" >&2
-(cd "$REPO" && cargo build --release --quiet)
+if [ -z "$SODYN_GIVEN" ]; then
+  echo "[compare] cargo build --release" >&2
+  (cd "$REPO" && cargo build --release --quiet)
+fi
 mkdir -p "$OUT"
 # Run a private copy: a rebuild in the work tree during the run must not change the binary.
 cp "$SODYN" "$OUT/sodyn"

@@ -140,13 +140,6 @@ mod lanes {
                 bot[j] = V::loadu(c.add(2)).permute::<0b00_11_10_01>();
             }
         }
-        let comb6 = |m: &[V; 6], x: &[f64; 6]| {
-            let mut a = m[0].mul(V::splat(x[0]));
-            for j in 1..6 {
-                a = m[j].mul_add(V::splat(x[j]), a);
-            }
-            a
-        };
         // U = I^A S: rows 0..4 and rows [3, 4, 5, 2].
         let (ut, ub) = (comb6(&top, &sv), comb6(&bot, &sv));
         let mut uc = [0.0; 6];
@@ -210,6 +203,16 @@ mod lanes {
             add3(fp.lin.as_mut_ptr(), rf);
         }
         Ok(d)
+    }
+
+    /// `Σ_j m_j x_j`, six columns in lanes.
+    #[inline(always)]
+    fn comb6<V: F64x4>(m: &[V; 6], x: &[f64; 6]) -> V {
+        let mut a = m[0].mul(V::splat(x[0]));
+        for j in 1..6 {
+            a = m[j].mul_add(V::splat(x[j]), a);
+        }
+        a
     }
 
     /// `out += Xᵀ A X` for the motion transform `X = ⁱX_λ` of `x = λM_i` and a column-major

@@ -99,7 +99,7 @@ mod lanes {
     use crate::model::Model;
     use crate::simd::F64x4;
     use crate::spatial::lanes::{
-        columns, comb, compose, cross, lane, rotate, store_matrix, store_vec3, v3,
+        columns, comb, compose, cross, lane, mat_vec, rotate, store_matrix, store_vec3, v3,
     };
     use crate::spatial::{Inertia, Motion, Transform};
 
@@ -116,14 +116,17 @@ mod lanes {
     /// subspace moved to the world frame).
     #[inline(always)]
     pub(super) fn root<V: F64x4>(sw: &[Motion]) -> Root<V> {
-        let e = |r: usize, j: usize| {
+        // Lane operations only outside closures (see `crate::simd`).
+        let e: [[f64; 6]; 6] = std::array::from_fn(|r| {
             let m = &sw[r];
-            [m.ang.x, m.ang.y, m.ang.z, m.lin.x, m.lin.y, m.lin.z][j]
-        };
-        Root {
-            lo: std::array::from_fn(|j| V::setr(e(0, j), e(1, j), e(2, j), e(3, j))),
-            hi: std::array::from_fn(|j| V::setr(e(4, j), e(5, j), 0.0, 0.0)),
+            [m.ang.x, m.ang.y, m.ang.z, m.lin.x, m.lin.y, m.lin.z]
+        });
+        let mut root = Root { lo: [V::zero(); 6], hi: [V::zero(); 6] };
+        for (j, (lo, hi)) in root.lo.iter_mut().zip(&mut root.hi).enumerate() {
+            *lo = V::setr(e[0][j], e[1][j], e[2][j], e[3][j]);
+            *hi = V::setr(e[4][j], e[5][j], 0.0, 0.0);
         }
+        root
     }
 
     /// A world inertia in registers: the columns of `Ī` (lane 3 unspecified), `h` (lane 3
@@ -145,7 +148,7 @@ mod lanes {
     #[inline(always)]
     pub(super) fn add_ic<V: F64x4>(a: Ic<V>, b: Ic<V>) -> Ic<V> {
         Ic {
-            rot: std::array::from_fn(|k| a.rot[k].add(b.rot[k])),
+            rot: [a.rot[0].add(b.rot[0]), a.rot[1].add(b.rot[1]), a.rot[2].add(b.rot[2])],
             h: a.h.add(b.h),
             m: a.m.add(b.m),
         }
@@ -199,11 +202,9 @@ mod lanes {
         // Entries 0..4 and (zero-extended) 4..6 of `sw[r]`.
         // SAFETY (for the callers): `r < sw.len()` and a `Motion` is six contiguous f64
         // (`repr(C)`).
-        let load = |r: usize| unsafe {
-            let p = sp.add(6 * r);
-            (V::loadu(p), V::load2(p.add(4)))
-        };
-        let (w, s2) = load(c);
+        // SAFETY (for the calls below): `r < sw.len()` and a `Motion` is six contiguous f64
+        // (`repr(C)`).
+        let (w, s2) = unsafe { (V::loadu(sp.add(6 * c)), V::load2(sp.add(6 * c + 4))) };
         // [v_x v_y v_z 0]
         let v = (s2.blend::<0b1000>(w)).permute::<0b10_01_00_11>();
         let sc = &sw[c];
@@ -212,28 +213,26 @@ mod lanes {
         // [f_0 f_1 f_2 f_3] and [f_4 f_5 0 0].
         let flo = ang.blend::<0b1000>(lin.permute::<0b00_00_00_00>());
         let fhi = V::zero().blend::<0b0011>(lin.permute::<0b11_11_10_01>());
-        let dot = |a: V, b: V| {
-            let p = b.mul_add(fhi, a.mul(flo));
-            p.hsum()
-        };
         // SAFETY: c < nv, so the store is within nv×nv.
-        unsafe { *mp.add(c + c * nv) = dot(w, s2) };
+        unsafe { *mp.add(c + c * nv) = s2.mul_add(fhi, w.mul(flo)).hsum() };
         if let Some(rt) = root {
             debug_assert!(c >= 6);
-            let b = |x: V, l: i32| match l {
-                0 => x.permute::<0b00_00_00_00>(),
-                1 => x.permute::<0b01_01_01_01>(),
-                2 => x.permute::<0b10_10_10_10>(),
-                _ => x.permute::<0b11_11_11_11>(),
-            };
-            let fj = [b(flo, 0), b(flo, 1), b(flo, 2), b(flo, 3), b(fhi, 0), b(fhi, 1)];
+            let fj = [
+                flo.permute::<0b00_00_00_00>(),
+                flo.permute::<0b01_01_01_01>(),
+                flo.permute::<0b10_10_10_10>(),
+                flo.permute::<0b11_11_11_11>(),
+                fhi.permute::<0b00_00_00_00>(),
+                fhi.permute::<0b01_01_01_01>(),
+            ];
             let mut lo = rt.lo[0].mul(fj[0]);
             let mut hi = rt.hi[0].mul(fj[0]);
             for ((&l, &h), &f) in rt.lo.iter().zip(&rt.hi).zip(&fj).skip(1) {
                 lo = l.mul_add(f, lo);
                 hi = h.mul_add(f, hi);
             }
-            let (la, ha) = (lo.store(), hi.store());
+            // Entries 3..6 of the column: [lo₃ hi₀ hi₁ ·].
+            let mid = hi.permute::<0b10_01_00_00>().blend::<0b0001>(lo.permute::<0b11_11_11_11>());
             // SAFETY: 6 <= c < nv: rows 0..6 of column c and columns 0..6 of row c are within
             // nv×nv (column-major).
             unsafe {
@@ -241,15 +240,15 @@ mod lanes {
                 lo.storeu(col);
                 hi.store2(col.add(4));
                 let row = mp.add(c);
-                for (k, x) in la.into_iter().chain(ha.into_iter().take(2)).enumerate() {
-                    *row.add(k * nv) = x;
-                }
+                lo.store3_strided(row, nv);
+                mid.store3_strided(row.add(3 * nv), nv);
             }
         }
         for &r in anc {
             debug_assert!(r < c);
-            let (a, b) = load(r);
-            let mrc = dot(a, b);
+            // SAFETY: r < c < sw.len().
+            let (a, b) = unsafe { (V::loadu(sp.add(6 * r)), V::load2(sp.add(6 * r + 4))) };
+            let mrc = b.mul_add(fhi, a.mul(flo)).hsum();
             // SAFETY: `r < c < nv`: the stores are within nv×nv.
             unsafe {
                 *mp.add(r + c * nv) = mrc;
@@ -411,14 +410,14 @@ mod lanes {
         let dv = V::splat(d.hsum());
         let e =
             [V::setr(1.0, 0.0, 0.0, 0.0), V::setr(0.0, 1.0, 0.0, 0.0), V::setr(0.0, 0.0, 1.0, 0.0)];
-        let col = |b: usize| {
+        let mut rot = [V::zero(); 3];
+        for b in 0..3 {
             // Column b of T Rᵀ: Σ_k T_k R_bk.
             let c = comb(&tt, ra[b], ra[b + 3], ra[b + 6]);
             let c = pv.neg_mul_add(V::splat(ha[b]), c);
             let c = rh.neg_mul_add(V::splat(pa[b]), c);
-            e[b].mul_add(dv, c)
-        };
-        let rot = [col(0), col(1), col(2)];
+            rot[b] = e[b].mul_add(dv, c);
+        }
         let h = hn.blend::<0b1000>(V::zero());
         (pv, Ic { rot, h, m: V::splat(m) })
     }
@@ -435,14 +434,8 @@ mod lanes {
     /// R f]` (as [`Transform::act_force`]).
     #[inline(always)]
     fn act_force<V: F64x4>(x: &X<V>, n: V, f: V) -> (V, V) {
-        let rv = |u: V| {
-            let b0 = u.permute::<0b00_00_00_00>();
-            let b1 = u.permute::<0b01_01_01_01>();
-            let b2 = u.permute::<0b10_10_10_10>();
-            x.r[2].mul_add(b2, x.r[1].mul_add(b1, x.r[0].mul(b0)))
-        };
-        let rf = rv(f);
-        (rv(n).add(cross(x.t, rf)), rf)
+        let rf = mat_vec(&x.r, f);
+        (mat_vec(&x.r, n).add(cross(x.t, rf)), rf)
     }
 
     /// `Sᵀ f` for a motion `S` and a force `[n; f]` (lanes 0..3; lane 3 ignored).

@@ -254,18 +254,17 @@ unsafe fn pull_chunk<V: F64x4, const K: usize, const MASKED: bool>(
     // SAFETY: the caller upholds this function's contract: `x` is valid for the rows < nv (stride
     // `ld`) and columns used, and every index from the model's ancestor / descendant lists is < nv.
     unsafe {
-        let ld4 = |p: *const f64| if MASKED { V::maskload(p, mask) } else { V::loadu(p) };
         let sc = V::splat(scale);
         let xi = x.add(i * ld + t);
         let mut acc = [V::zero(); K];
         for (u, a) in acc.iter_mut().enumerate() {
-            *a = sc.mul(ld4(xi.add(4 * u)));
+            *a = sc.mul(ld4::<V, MASKED>(xi.add(4 * u), mask));
         }
         for &j in others {
             let l = V::splat(coef(j));
             let xj = x.add(j * ld + t);
             for (u, a) in acc.iter_mut().enumerate() {
-                *a = l.neg_mul_add(ld4(xj.add(4 * u)), *a);
+                *a = l.neg_mul_add(ld4::<V, MASKED>(xj.add(4 * u), mask), *a);
             }
         }
         for (u, a) in acc.iter().enumerate() {
@@ -276,6 +275,16 @@ unsafe fn pull_chunk<V: F64x4, const K: usize, const MASKED: bool>(
             }
         }
     }
+}
+
+/// Four lanes from `p`, the ones of `mask` only if `MASKED`.
+///
+/// # Safety
+/// `p` valid for reading those lanes.
+#[inline(always)]
+unsafe fn ld4<V: F64x4, const MASKED: bool>(p: *const f64, mask: V::Mask) -> V {
+    // SAFETY: the function's contract.
+    unsafe { if MASKED { V::maskload(p, mask) } else { V::loadu(p) } }
 }
 
 /// Strict descendant DoFs of every DoF (the transpose of [`Model::dof_ancestors`]), owned.

@@ -388,6 +388,20 @@ mod lanes {
         rows[2].mul_add(v.permute::<0b10_10_10_10>(), x)
     }
 
+    /// `Xᵀ [n; f] = [Rᵀ(n − p × f); Rᵀ f]` given the rows of `R` and `p`.
+    #[inline(always)]
+    fn inv_force<V: F64x4>(rows: &[V; 3], p: V, n: V, f: V) -> (V, V) {
+        (rt(rows, n.sub(cross(p, f))), rt(rows, f))
+    }
+
+    /// `I m = [Ī ω + h × v; m v − h × ω]` for `m = (ω, v)` in lanes.
+    #[inline(always)]
+    fn imul_lanes<V: F64x4>(icol: &[V; 3], h: V, mass: V, (w, u): (V, V)) -> (V, V) {
+        let wv = w.store();
+        let ang = comb(icol, wv[0], wv[1], wv[2]).add(cross(h, u));
+        (ang, u.mul_sub(mass, cross(h, w)))
+    }
+
     /// Lanes 0..3 into a 3-vector.
     #[inline(always)]
     fn vec3<V: F64x4>(v: V) -> Vector3<f64> {
@@ -418,13 +432,6 @@ mod lanes {
         };
         let h = v3(&ic.h);
         let mass = V::splat(ic.mass);
-        let imul = |m: &Motion| {
-            let v = v3(&m.lin);
-            let w = v3(&m.ang);
-            let ang = comb(&icol, m.ang.x, m.ang.y, m.ang.z).add(cross(h, v));
-            let lin = v.mul_sub(mass, cross(h, w));
-            (ang, lin)
-        };
         let b = bc.as_slice();
         // SAFETY: `b` has 36 entries; the loads read b[6k..6k + 4] and b[6k + 3..6k + 7] for
         // k < 3, all below 19.
@@ -436,12 +443,6 @@ mod lanes {
             )
         };
         let two = V::splat(2.0);
-        // 2 B x.
-        let bmul2 = |x: &Motion| {
-            let a = comb(&ba, x.ang.x, x.ang.y, x.ang.z);
-            let l = comb(&bl, x.ang.x, x.ang.y, x.ang.z);
-            (a.mul(two), l.mul(two))
-        };
         let (sw, sv) = (v3::<V>(&s.ang), v3::<V>(&s.lin));
         let (fn_, ff) = (v3(&fc.ang), v3(&fc.lin));
         // τ = s · f^C (lane 3 zero).
@@ -449,22 +450,47 @@ mod lanes {
             let p = sv.mul_add(ff, sw.mul(fn_));
             p.hsum()
         };
-        let t1 = imul(s);
+        let t1 = imul(&icol, h, mass, s);
         // 2 Bᵀ s: lane 3 of sw, sv is zero, so rows 3 and 6 of the loads drop out.
         let t2 = {
-            let p = |k: usize| bl[k].mul_add(sv, ba[k].mul(sw));
-            V::hsum4(p(0), p(1), p(2), V::zero()).mul(two)
+            let p0 = bl[0].mul_add(sv, ba[0].mul(sw));
+            let p1 = bl[1].mul_add(sv, ba[1].mul(sw));
+            let p2 = bl[2].mul_add(sv, ba[2].mul(sw));
+            V::hsum4(p0, p1, p2, V::zero()).mul(two)
         };
         // f^C ×̄* s = s ×* f^C = [ω × n + v × f; ω × f].
         let (xa, xl) = (cross(sw, fn_).add(cross(sv, ff)), cross(sw, ff));
-        let (b3a, b3l) = bmul2(psid);
-        let (i3a, i3l) = imul(psidd);
+        let (b3a, b3l) = bmul2(&ba, &bl, two, psid);
+        let (i3a, i3l) = imul(&icol, h, mass, psidd);
         let t3 = (b3a.add(i3a).add(xa), b3l.add(i3l).add(xl));
-        let (b4a, b4l) = bmul2(s);
-        let (i4a, i4l) = imul(pss);
+        let (b4a, b4l) = bmul2(&ba, &bl, two, s);
+        let (i4a, i4l) = imul(&icol, h, mass, pss);
         let t4 = (b4a.add(i4a), b4l.add(i4l));
-        let force = |(a, l): (V, V)| Force::new(vec3(a), vec3(l));
         DofTerms { tau, t1: force(t1), t2: vec3(t2), t3: force(t3), t4: force(t4) }
+    }
+
+    /// `I m = [Ī ω + h × v; m v − h × ω]` for `m = [ω; v]`, with the columns of `Ī`, `h` and
+    /// the mass in lanes.
+    #[inline(always)]
+    fn imul<V: F64x4>(icol: &[V; 3], h: V, mass: V, m: &Motion) -> (V, V) {
+        let v = v3(&m.lin);
+        let w = v3(&m.ang);
+        let ang = comb(icol, m.ang.x, m.ang.y, m.ang.z).add(cross(h, v));
+        (ang, v.mul_sub(mass, cross(h, w)))
+    }
+
+    /// `2 B x` from the left 6×3 half of `B` (rows 0..3 in `ba`, rows 3..6 in `bl`).
+    #[inline(always)]
+    fn bmul2<V: F64x4>(ba: &[V; 3], bl: &[V; 3], two: V, x: &Motion) -> (V, V) {
+        let a = comb(ba, x.ang.x, x.ang.y, x.ang.z);
+        let l = comb(bl, x.ang.x, x.ang.y, x.ang.z);
+        (a.mul(two), l.mul(two))
+    }
+
+    /// A pair of 3-vectors in lanes as a force.
+    #[inline(always)]
+    fn force<V: F64x4>((a, l): (V, V)) -> Force {
+        Force::new(vec3(a), vec3(l))
     }
 
     /// A motion (or force) as two 3-vectors in lanes 0..3 (lane 3 zero).
@@ -599,14 +625,14 @@ mod lanes {
                 unsafe { hn.storeu(o.as_mut_ptr()) };
                 o
             });
-            let col = |b: usize| {
+            let mut icol = [z; 3];
+            for b in 0..3 {
                 // Column b of T Rᵀ: Σ_k T_k R_bk.
                 let c = comb(&tt, xs[b], xs[b + 3], xs[b + 6]);
                 let c = pv.neg_mul_add(V::splat(ha[b]), c);
                 let c = rh.neg_mul_add(V::splat(pa[b]), c);
-                (e[b].mul_add(dv, c)).blend::<0b1000>(z)
-            };
-            let icol = [col(0), col(1), col(2)];
+                icol[b] = (e[b].mul_add(dv, c)).blend::<0b1000>(z);
+            }
             let mut inertia = Inertia::zero();
             inertia.mass = m;
             // SAFETY: `inertia.rot` has nine entries, `inertia.h` three; the stores write
@@ -622,17 +648,8 @@ mod lanes {
             data.oinertia[i] = inertia;
             // f = I a + v ×* (I v).
             let mass = V::splat(m);
-            let imul = |(w, u): (V, V)| {
-                let wv = {
-                    let mut o = [0.0; 4];
-                    // SAFETY: `o` has four entries.
-                    unsafe { w.storeu(o.as_mut_ptr()) };
-                    o
-                };
-                let ang = comb(&icol, wv[0], wv[1], wv[2]).add(cross(hn, u));
-                (ang, u.mul_sub(mass, cross(hn, w)))
-            };
-            let f = add2(imul(ai), fcross(vi, imul(vi)));
+            let f =
+                add2(imul_lanes(&icol, hn, mass, ai), fcross(vi, imul_lanes(&icol, hn, mass, vi)));
             let fo = &mut data.ofc[i];
             // SAFETY: each target has three entries.
             unsafe {
@@ -668,44 +685,15 @@ mod lanes {
         [dq, dv, mm]: [*mut f64; 3],
     ) {
         let (t1a, t1l) = (v3(&t.t1.ang), v3(&t.t1.lin));
-        let t2 = v3(&t.t2);
+        let t2 = v3::<V>(&t.t2);
         let (t3a, t3l) = (v3(&t.t3.ang), v3(&t.t3.lin));
         let (t4a, t4l) = (v3(&t.t4.ang), v3(&t.t4.lin));
         let mask = V::mask(3);
-        // [ang; lin] of a motion, lane 3 zero (`Motion` is `repr(C)`: six contiguous f64).
-        let ldm = |m: &Motion| {
-            let p = (m as *const Motion).cast::<f64>();
-            // SAFETY: `p` addresses six f64; the masked loads read p[0..3] and p[3..6].
-            unsafe { (V::maskload(p, mask), V::maskload(p.add(3), mask)) }
-        };
-        // [∂τ_c/∂q_r, ∂τ_c/∂q̇_r, M_rc, S_rᵀ t3] and the lanes of S_rᵀ t4.
-        let dots = |r: usize| {
-            // SAFETY: r < nv = the length of the four slices (the function's contract).
-            let (sr, mr, pr, ppr) = unsafe {
-                (
-                    sw.get_unchecked(r),
-                    psid.get_unchecked(r),
-                    psidd.get_unchecked(r),
-                    pss.get_unchecked(r),
-                )
-            };
-            let (sa, sl) = ldm(sr);
-            let (ma, _) = ldm(mr);
-            let (pa, pl) = ldm(pr);
-            let (qa, ql) = ldm(ppr);
-            let p1 = pl.mul_add(t1l, pa.mul_add(t1a, ma.mul(t2)));
-            let p2 = ql.mul_add(t1l, qa.mul_add(t1a, sa.mul(t2)));
-            let p3 = sl.mul_add(t1l, sa.mul(t1a));
-            let p4 = sl.mul_add(t3l, sa.mul(t3a));
-            let p5 = sl.mul_add(t4l, sa.mul(t4a));
-            let sum = V::hsum4(p1, p2, p3, p4);
-            let mut o = [0.0; 4];
-            // SAFETY: `o` has four entries.
-            unsafe { sum.storeu(o.as_mut_ptr()) };
-            (o, p5)
-        };
+        let t = Dots { t1a, t1l, t2, t3a, t3l, t4a, t4l, mask };
+        let m4 = [sw, psid, psidd, pss];
         for r in own {
-            let (o, _) = dots(r);
+            // SAFETY: r < nv = the length of the four slices (the function's contract).
+            let (o, _) = unsafe { dots(&t, m4, r) };
             // SAFETY: r, c < nv, so every index is < nv².
             unsafe {
                 *dq.add(c + r * nv) = o[0];
@@ -715,7 +703,8 @@ mod lanes {
             }
         }
         for &r in anc {
-            let (o, p5) = dots(r);
+            // SAFETY: as above.
+            let (o, p5) = unsafe { dots(&t, m4, r) };
             // SAFETY: r, c < nv, so every index is < nv².
             unsafe {
                 *dq.add(c + r * nv) = o[0];
@@ -726,6 +715,47 @@ mod lanes {
                 *dv.add(r + c * nv) = p5.hsum();
             }
         }
+    }
+
+    /// The per-DoF vectors of [`rows`] in lanes.
+    struct Dots<V: F64x4> {
+        t1a: V,
+        t1l: V,
+        t2: V,
+        t3a: V,
+        t3l: V,
+        t4a: V,
+        t4l: V,
+        mask: V::Mask,
+    }
+
+    /// `[ang; lin]` of a motion, lane 3 zero (`Motion` is `repr(C)`: six contiguous f64).
+    #[inline(always)]
+    fn ldm<V: F64x4>(m: &Motion, mask: V::Mask) -> (V, V) {
+        let p = (m as *const Motion).cast::<f64>();
+        // SAFETY: `p` addresses six f64; the masked loads read p[0..3] and p[3..6].
+        unsafe { (V::maskload(p, mask), V::maskload(p.add(3), mask)) }
+    }
+
+    /// `[∂τ_c/∂q_r, ∂τ_c/∂q̇_r, M_rc, S_rᵀ t3]` and the lanes of `S_rᵀ t4` for DoF `r`, from
+    /// `[S, Ψ̇, Ψ̈, Ψ̇ + Ṡ]`.
+    ///
+    /// # Safety
+    /// `r` is below the length of the four slices.
+    #[inline(always)]
+    unsafe fn dots<V: F64x4>(t: &Dots<V>, m4: [&[Motion]; 4], r: usize) -> ([f64; 4], V) {
+        // SAFETY: the function's contract.
+        let [sr, mr, pr, ppr] = unsafe { m4.map(|m| m.get_unchecked(r)) };
+        let (sa, sl) = ldm::<V>(sr, t.mask);
+        let (ma, _) = ldm::<V>(mr, t.mask);
+        let (pa, pl) = ldm::<V>(pr, t.mask);
+        let (qa, ql) = ldm::<V>(ppr, t.mask);
+        let p1 = pl.mul_add(t.t1l, pa.mul_add(t.t1a, ma.mul(t.t2)));
+        let p2 = ql.mul_add(t.t1l, qa.mul_add(t.t1a, sa.mul(t.t2)));
+        let p3 = sl.mul_add(t.t1l, sa.mul(t.t1a));
+        let p4 = sl.mul_add(t.t3l, sa.mul(t.t3a));
+        let p5 = sl.mul_add(t.t4l, sa.mul(t.t4a));
+        (V::hsum4(p1, p2, p3, p4).store(), p5)
     }
 
     /// See `super::root_block`: `Xᵀ [n; f] = [Rᵀ(n − p × f); Rᵀ f]` and
@@ -751,9 +781,7 @@ mod lanes {
             V::setr(r[2], r[5], r[8], 0.0),
         ];
         let p = v3(&x.trans);
-        let inv = |n: V, f: V| (rt(&rows, n.sub(cross(p, f))), rt(&rows, f));
-        let ld = |f: &Force| (v3::<V>(&f.ang), v3::<V>(&f.lin));
-        let (n1, f1) = ld(t.t1);
+        let (n1, f1) = ld::<V>(&t.t1.ang, &t.t1.lin);
         let (aw, av) = (v3(&a0.ang), v3(&a0.lin));
         let (vw, vv) = (v3(&v1.ang), v3(&v1.lin));
         // a₀ ×* t1, and t2 − v₁ ×* t1 (t2 has no linear part).
@@ -761,13 +789,13 @@ mod lanes {
         let ql = cross(aw, f1);
         let va = v3::<V>(t.t2).sub(cross(vw, n1).add(cross(vv, f1)));
         let vl = V::zero().sub(cross(vw, f1));
-        let m1 = inv(n1, f1);
-        let q1 = inv(qa, ql);
-        let v1o = inv(va, vl);
-        let (n3, f3) = ld(t.t3);
-        let q2 = inv(n3, f3);
-        let (n4, f4) = ld(t.t4);
-        let v2 = inv(n4, f4);
+        let m1 = inv_force(&rows, p, n1, f1);
+        let q1 = inv_force(&rows, p, qa, ql);
+        let v1o = inv_force(&rows, p, va, vl);
+        let (n3, f3) = ld::<V>(&t.t3.ang, &t.t3.lin);
+        let q2 = inv_force(&rows, p, n3, f3);
+        let (n4, f4) = ld::<V>(&t.t4.ang, &t.t4.lin);
+        let v2 = inv_force(&rows, p, n4, f4);
         // SAFETY: 6 <= c < nv: column c rows 0..6 (at c·nv..c·nv + 6) and row c columns 0..6
         // (at c + r·nv, r < 6) lie within nv×nv.
         unsafe {

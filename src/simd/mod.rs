@@ -16,6 +16,12 @@
 //! `transpose`, `spd_inverse`, ...). An algorithm picks the instruction set per call with
 //! [`level`]; [`set_thread_level`] lowers it for the calling thread (tests compare the three;
 //! `sodyn bench --simd avx2` measures the AVX2 path on an AVX-512 CPU).
+//!
+//! A lane kernel is an `#[inline(always)]` generic function instantiated inside a
+//! `#[target_feature]` one; the lane operations become instructions only where they are
+//! inlined into that function. A closure is compiled on its own, without the instruction set,
+//! so no lane operation may be written inside a closure (it would be a call per operation:
+//! `id_fo` ran 15× slower that way); lane kernels use small `#[inline(always)]` functions.
 
 pub(crate) mod avx2;
 pub(crate) mod avx512;

@@ -1,6 +1,11 @@
 //! 3-vectors and 3×3 matrices on four lanes (lane 3 spare), generic over the lane type
 //! ([`F64x4`]: portable arrays or AVX2 registers), shared by the kernels of CRBA, ABA, the
 //! placements and IDSVA.
+//!
+//! Like every lane kernel, these contain no closure: a closure is compiled without the
+//! instruction set of the function it is written in (`#[target_feature]` is not inherited
+//! through an `#[inline(always)]` generic function), so the lane operations in its body would
+//! be calls instead of instructions.
 
 use crate::simd::F64x4;
 use nalgebra::{Matrix3, Vector3};
@@ -28,6 +33,15 @@ pub(crate) fn comb<V: F64x4>(c: &[V; 3], a: f64, b: f64, d: f64) -> V {
     let x = c[0].mul(V::splat(a));
     let x = c[1].mul_add(V::splat(b), x);
     c[2].mul_add(V::splat(d), x)
+}
+
+/// `R u` for the columns `r` of `R` and `u` in lanes 0..3 (each broadcast in turn).
+#[inline(always)]
+pub(crate) fn mat_vec<V: F64x4>(r: &[V; 3], u: V) -> V {
+    let b0 = u.permute::<0b00_00_00_00>();
+    let b1 = u.permute::<0b01_01_01_01>();
+    let b2 = u.permute::<0b10_10_10_10>();
+    r[2].mul_add(b2, r[1].mul_add(b1, r[0].mul(b0)))
 }
 
 /// The placement `ᵒM_p · M` from the parent's world rotation columns `rp` and translation `tp`:
