@@ -72,7 +72,13 @@ fn congruence_add_to_parent(x: &Transform, a: &[f64], out: &mut Matrix6<f64>) {
         unsafe { congruence_add_avx2(x, a, out) };
         return;
     }
-    lanes::congruence_add::<[f64; 4]>(x, a, out);
+    congruence_add_portable(x, a, out);
+}
+
+/// [`lanes::congruence_add`] with the portable lanes (out of line).
+#[inline(never)]
+fn congruence_add_portable(x: &Transform, a: &[f64], out: &mut Matrix6<f64>) {
+    lanes::congruence_add::<[f64; 4]>(x, a, out)
 }
 
 /// [`lanes::congruence_add`] compiled for AVX2/FMA.
@@ -80,6 +86,17 @@ fn congruence_add_to_parent(x: &Transform, a: &[f64], out: &mut Matrix6<f64>) {
 #[target_feature(enable = "avx2,fma")]
 fn congruence_add_avx2(x: &Transform, a: &[f64], out: &mut Matrix6<f64>) {
     lanes::congruence_add::<crate::simd::Avx4>(x, a, out)
+}
+
+/// [`lanes::backward_1dof`] with the portable lanes (out of line).
+#[inline(never)]
+fn backward_1dof_portable(
+    model: &Model,
+    data: &mut Data,
+    i: usize,
+    tau_k: f64,
+) -> std::result::Result<f64, f64> {
+    lanes::backward_1dof::<[f64; 4]>(model, data, i, tau_k)
 }
 
 /// [`lanes::backward_1dof`] compiled for AVX2/FMA.
@@ -395,7 +412,7 @@ fn aba_backward_1dof(model: &Model, data: &mut Data, i: usize, tau_k: f64) -> Re
         return unsafe { backward_1dof_avx2(model, data, i, tau_k) }
             .map_err(|d| pivot_error(model, model.idx_v[i], d, None));
     }
-    lanes::backward_1dof::<[f64; 4]>(model, data, i, tau_k)
+    backward_1dof_portable(model, data, i, tau_k)
         .map_err(|d| pivot_error(model, model.idx_v[i], d, None))
 }
 

@@ -451,6 +451,7 @@ mod lanes {
     /// body frames (`I^C_λ(i) += λ(i)X_i* I^C_i X_i⁻¹`), and for each DoF `c` of joint `i` the
     /// column `F = I^C_i S_c`, carried up the ancestors `j` by `F ← λ(j)X_j* F`, with
     /// `M_ac = M_ca = S_aᵀ F` for the DoFs `a` of `i` (`a ≤ c`) and of each ancestor.
+    #[inline(always)]
     pub(super) fn crba_local<V: F64x4>(model: &Model, data: &mut super::Data, q: &[f64]) {
         let n = model.njoints();
         let nv = model.nv;

@@ -78,14 +78,14 @@ pub(crate) fn load_angles<V: F64x4>(model: &Model, q: &[f64], r: usize) -> V {
         // off (not accessed) and set to zero.
         return unsafe { V::maskload(q.as_ptr().add(a), V::mask(m)) };
     }
-    scattered_angles(model, q, r)
+    V::load(&scattered_angles(model, q, r))
 }
 
-/// [`load_angles`] for angles that are not contiguous in `q` (out of line, so that the
-/// contiguous case inlines into the forward passes).
+/// [`next_angles`] out of line, for angles that are not contiguous in `q` (so that the
+/// contiguous case of [`load_angles`] inlines into the forward passes).
 #[inline(never)]
-fn scattered_angles<V: F64x4>(model: &Model, q: &[f64], r: usize) -> V {
-    V::load(&next_angles(model, q, r))
+fn scattered_angles(model: &Model, q: &[f64], r: usize) -> [f64; 4] {
+    next_angles(model, q, r)
 }
 
 /// Joint placements only: fills `li_m_i` and `o_m_i` (unchecked `q`).
@@ -97,7 +97,13 @@ pub(crate) fn placements(model: &Model, data: &mut Data, q: &DVector<f64>) {
         unsafe { placements_avx2(model, data, q) };
         return;
     }
-    placements_lanes::<[f64; 4]>(model, data, q);
+    placements_portable(model, data, q);
+}
+
+/// [`placements_lanes`] with the portable lanes (out of line).
+#[inline(never)]
+fn placements_portable(model: &Model, data: &mut Data, q: &DVector<f64>) {
+    placements_lanes::<[f64; 4]>(model, data, q)
 }
 
 /// [`placements_lanes`] compiled for AVX2/FMA.

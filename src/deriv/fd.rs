@@ -671,8 +671,22 @@ unsafe fn idfoza_add_avx2(
     mask: AddMask<'_>,
     blk: &mut [f64],
 ) {
-    // SAFETY: AVX2 and FMA are enabled here, as `Avx4` needs.
-    idfoza_add_lanes::<Avx4>(model, data, ws, x, j0, w, lane0, mask, blk)
+    let n = model.nv;
+    let stride = blk.len() / (n * n);
+    let nl = 4.min(w - lane0);
+    let lanes = (1u8 << nl) - 1;
+    let o = blk.as_mut_ptr();
+    // The closure is written here, in a function compiled for AVX2 and FMA, as its lane
+    // operations need (see `crate::simd`).
+    idfoza_lanes_core::<Avx4>(model, data, ws, x, n, j0 + lane0, nl, |i, j, z| {
+        assert!(i < n && j < n);
+        // SAFETY: i, j < n and lane0 + l < w ≤ stride for the lanes l < nl written: below
+        // stride n² = blk.len(); AVX2 is enabled in this function.
+        unsafe {
+            let p = o.add(lane0 + stride * (i + n * j));
+            crate::simd::avx2::store_or_add(p, z, mask.at(i, j) >> lane0, lanes)
+        }
+    });
 }
 
 /// The lanes `lane0..lane0 + 4` of [`idfoza_add_block`] (those below `w`), one pass of `V`.
@@ -1000,12 +1014,17 @@ fn dminv_pages<L: Lanes, const B: usize>(
         let (u, w) = (&p.u[b6 * jt..b6 * (jt + 1)], &p.w[b6 * jt..b6 * (jt + 1)]);
         // V, L rows at a time: row r is s ×* (½ I u_r + w_r) − ½ I (s × u_r).
         for r0 in (0..ld).step_by(nl) {
-            let ur: [L; 6] = std::array::from_fn(|a| load_lanes(u, a * ld + r0));
-            let su = cross_motion_lanes(&s, &ur);
             let half = L::splat(0.5);
+            let mut ur = [half; 6];
+            for (a, x) in ur.iter_mut().enumerate() {
+                *x = load_lanes(u, a * ld + r0);
+            }
+            let su = cross_motion_lanes(&s, &ur);
             let (iu, isu) = (inertia_mul_l(ic, &ur), inertia_mul_l(ic, &su));
-            let y: [L; 6] =
-                std::array::from_fn(|a| half.mul_add(iu[a], load_lanes(w, a * ld + r0)));
+            let mut y = iu;
+            for (a, x) in y.iter_mut().enumerate() {
+                *x = half.mul_add(*x, load_lanes(w, a * ld + r0));
+            }
             let sy = cross_force_lanes(&s, &y);
             for a in 0..6 {
                 let x = sy[a].sub(half.mul(isu[a])).store();
@@ -1075,10 +1094,14 @@ fn group<L: Lanes, const G: usize>(
 ) {
     let nl = L::Arr::default().as_ref().len();
     let r0: [usize; G] = std::array::from_fn(|b| (blk + b) * nl);
-    let ua: [[L; 6]; G] =
-        std::array::from_fn(|b| std::array::from_fn(|a| load_lanes(u, a * ld + r0[b])));
-    let va: [[L; 6]; G] =
-        std::array::from_fn(|b| std::array::from_fn(|a| load_lanes(v, a * ld + r0[b])));
+    let mut ua = [[L::splat(0.0); 6]; G];
+    let mut va = ua;
+    for b in 0..G {
+        for a in 0..6 {
+            ua[b][a] = load_lanes(u, a * ld + r0[b]);
+            va[b][a] = load_lanes(v, a * ld + r0[b]);
+        }
+    }
     let m: [usize; G] = std::array::from_fn(|b| nl.min(n - r0[b]));
     for (c, tc) in t.chunks_exact(12).enumerate() {
         for b in 0..G {

@@ -140,7 +140,7 @@ fn forward_pass_world_placed(
         unsafe { forward_pass_avx2(model, data, v, a, fext) };
         return;
     }
-    lanes::forward_pass::<[f64; 4]>(model, data, v, a, fext);
+    portable::forward_pass(model, data, v, a, fext);
 }
 
 /// [`lanes::forward_pass`] compiled for AVX2/FMA.
@@ -173,6 +173,8 @@ pub(crate) fn accumulate_to_parent(model: &Model, data: &mut Data, i: usize) {
 /// The first-order IDSVA backward step of body `i` (composites of `i` complete).
 #[inline]
 pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
+    // The kernels: AVX2/FMA or portable lanes, chosen once per body.
+    let avx2 = cfg!(target_arch = "x86_64") && crate::simd::avx2_fma();
     let nv = model.nv;
     let (iv, nvi) = (model.idx_v[i], model.nvs[i]);
     let ic = data.ic_world[i];
@@ -207,22 +209,15 @@ pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
     };
     for c in iv..iv + nvi {
         let s = sw[c];
-        let terms = dof_terms(&ic, bc, &fc, &s, &psid[c], &psidd[c], &pss[c]);
+        let terms = dof_terms(avx2, &ic, bc, &fc, &s, &psid[c], &psidd[c], &pss[c]);
         data.tau[c] = terms.tau;
         if let Some((x, a0, v1)) = &root {
             let t = RootTerms { t1: &terms.t1, t2: &terms.t2, t3: &terms.t3, t4: &terms.t4 };
-            root_block(x, a0, v1, &t, c, nv, [&mut *dq, &mut *dv, &mut *mm]);
+            root_block(avx2, x, a0, v1, &t, c, nv, [&mut *dq, &mut *dv, &mut *mm]);
         }
         debug_assert!(anc.iter().all(|&r| r < iv) && iv + nvi <= nv && c < nv);
-        let args = (
-            &terms,
-            c,
-            nv,
-            iv..iv + nvi,
-            anc,
-            [sw, psid, psidd, pss],
-            [dq.as_mut_ptr(), dv.as_mut_ptr(), mm.as_mut_ptr()],
-        );
+        let m4 = [sw, psid, psidd, pss];
+        let mats = [dq.as_mut_ptr(), dv.as_mut_ptr(), mm.as_mut_ptr()];
         // ∂τ_c/∂q_r, ∂τ_c/∂q̇_r and M_rc for the DoFs r of joint i and of its ancestors
         // (eqs. dtau_dq_1, dtau_dqd_1, M), ∂τ_r/∂q_c and ∂τ_r/∂q̇_c for its strict ancestors
         // (eqs. dtau_dq_2, dtau_dqd_2).
@@ -232,26 +227,14 @@ pub(crate) fn backward_step_fo(model: &Model, data: &mut Data, i: usize) {
         // runs (checked by `avx2_fma`).
         unsafe {
             #[cfg(target_arch = "x86_64")]
-            if crate::simd::avx2_fma() {
-                rows_avx2(args);
+            if avx2 {
+                rows_avx2(&terms, c, nv, iv..iv + nvi, anc, m4, mats);
                 continue;
             }
-            let (t, c, nv, own, anc, m, p) = args;
-            lanes::rows::<[f64; 4]>(t, c, nv, own, anc, m, p);
+            portable::rows(&terms, c, nv, iv..iv + nvi, anc, m4, mats);
         }
     }
 }
-
-/// The arguments of [`lanes::rows`].
-type RowsArgs<'a> = (
-    &'a DofTerms,
-    usize,
-    usize,
-    std::ops::Range<usize>,
-    &'a [usize],
-    [&'a [Motion]; 4],
-    [*mut f64; 3],
-);
 
 /// [`lanes::rows`] compiled for AVX2/FMA.
 ///
@@ -259,9 +242,17 @@ type RowsArgs<'a> = (
 /// As [`lanes::rows`]; the CPU has AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn rows_avx2((t, c, nv, own, anc, m, p): RowsArgs<'_>) {
+unsafe fn rows_avx2(
+    t: &DofTerms,
+    c: usize,
+    nv: usize,
+    own: std::ops::Range<usize>,
+    anc: &[usize],
+    m4: [&[Motion]; 4],
+    mats: [*mut f64; 3],
+) {
     // SAFETY: the caller's contract.
-    unsafe { lanes::rows::<crate::simd::Avx4>(t, c, nv, own, anc, m, p) }
+    unsafe { lanes::rows::<crate::simd::Avx4>(t, c, nv, own, anc, m4, mats) }
 }
 
 /// The per-DoF terms of [`backward_step_fo`] for DoF `c` of body `i`.
@@ -281,7 +272,9 @@ struct DofTerms {
 /// [`DofTerms`] from the composites `ic`, `bc`, `fc` of the body and `S_c`, `Ψ̇_c`, `Ψ̈_c`,
 /// `Ψ̇_c + Ṡ_c`.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn dof_terms(
+    avx2: bool,
     ic: &Inertia,
     bc: &Matrix6<f64>,
     fc: &Force,
@@ -291,11 +284,11 @@ fn dof_terms(
     pss: &Motion,
 ) -> DofTerms {
     #[cfg(target_arch = "x86_64")]
-    if crate::simd::avx2_fma() {
+    if avx2 {
         // SAFETY: the CPU has AVX2 and FMA (checked just above).
         return unsafe { dof_terms_avx2(ic, bc, fc, s, psid, psidd, pss) };
     }
-    lanes::dof_terms::<[f64; 4]>(ic, bc, fc, s, psid, psidd, pss)
+    portable::dof_terms(ic, bc, fc, s, psid, psidd, pss)
 }
 
 /// [`lanes::dof_terms`] compiled for AVX2/FMA.
@@ -328,7 +321,9 @@ struct RootTerms<'a> {
 /// (eqs. dtau_dq_1, dtau_dqd_1, dtau_dq_2, dtau_dqd_2). `mats = [∂τ/∂q, ∂τ/∂q̇, M]`, each
 /// `nv×nv` column-major.
 #[inline]
+#[allow(clippy::too_many_arguments)]
 fn root_block(
+    avx2: bool,
     x: &Transform,
     a0: &Motion,
     v1: &Motion,
@@ -344,10 +339,10 @@ fn root_block(
     // FMA where `root_block_avx2` runs (checked by `avx2_fma`).
     unsafe {
         #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2_fma() {
+        if avx2 {
             return root_block_avx2(x, a0, v1, t, c, nv, p);
         }
-        lanes::root_block::<[f64; 4]>(x, a0, v1, t, c, nv, p)
+        portable::root_block(x, a0, v1, t, c, nv, p)
     }
 }
 
@@ -368,6 +363,72 @@ unsafe fn root_block_avx2(
 ) {
     // SAFETY: the caller's contract.
     unsafe { lanes::root_block::<crate::simd::Avx4>(x, a0, v1, t, c, nv, p) }
+}
+
+/// The kernels with the portable lanes, out of line (so that the dispatching functions stay
+/// small on the SIMD path).
+mod portable {
+    use super::{DofTerms, RootTerms, lanes};
+    use crate::algo::Data;
+    use crate::model::Model;
+    use crate::spatial::{Force, Inertia, Motion, Transform};
+    use nalgebra::{DVector, Matrix6};
+
+    #[inline(never)]
+    pub(super) fn forward_pass(
+        model: &Model,
+        data: &mut Data,
+        v: &DVector<f64>,
+        a: &DVector<f64>,
+        fext: Option<&[Force]>,
+    ) {
+        lanes::forward_pass::<[f64; 4]>(model, data, v, a, fext)
+    }
+
+    #[inline(never)]
+    pub(super) fn dof_terms(
+        ic: &Inertia,
+        bc: &Matrix6<f64>,
+        fc: &Force,
+        s: &Motion,
+        psid: &Motion,
+        psidd: &Motion,
+        pss: &Motion,
+    ) -> DofTerms {
+        lanes::dof_terms::<[f64; 4]>(ic, bc, fc, s, psid, psidd, pss)
+    }
+
+    /// # Safety
+    /// As [`lanes::rows`].
+    #[inline(never)]
+    pub(super) unsafe fn rows(
+        t: &DofTerms,
+        c: usize,
+        nv: usize,
+        own: std::ops::Range<usize>,
+        anc: &[usize],
+        m4: [&[Motion]; 4],
+        mats: [*mut f64; 3],
+    ) {
+        // SAFETY: the caller's contract.
+        unsafe { lanes::rows::<[f64; 4]>(t, c, nv, own, anc, m4, mats) }
+    }
+
+    /// # Safety
+    /// As [`lanes::root_block`].
+    #[inline(never)]
+    pub(super) unsafe fn root_block(
+        x: &Transform,
+        a0: &Motion,
+        v1: &Motion,
+        t: &RootTerms,
+        c: usize,
+        nv: usize,
+        mats: [*mut f64; 3],
+    ) {
+        // SAFETY: the caller's contract.
+        unsafe { lanes::root_block::<[f64; 4]>(x, a0, v1, t, c, nv, mats) }
+    }
 }
 
 /// The kernels of the forward pass and of the backward step, generic over the lanes.
@@ -745,7 +806,15 @@ mod lanes {
     #[inline(always)]
     unsafe fn dots<V: F64x4>(t: &Dots<V>, m4: [&[Motion]; 4], r: usize) -> ([f64; 4], V) {
         // SAFETY: the function's contract.
-        let [sr, mr, pr, ppr] = unsafe { m4.map(|m| m.get_unchecked(r)) };
+        let [sw, psid, psidd, pss] = m4;
+        let (sr, mr, pr, ppr) = unsafe {
+            (
+                sw.get_unchecked(r),
+                psid.get_unchecked(r),
+                psidd.get_unchecked(r),
+                pss.get_unchecked(r),
+            )
+        };
         let (sa, sl) = ldm::<V>(sr, t.mask);
         let (ma, _) = ldm::<V>(mr, t.mask);
         let (pa, pl) = ldm::<V>(pr, t.mask);

@@ -293,39 +293,16 @@ fn crf(m: &V6, f: &V6) -> V6 {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2], c[0], c[1], c[2]]
 }
 
-/// `M x` (columns `m[c]`), on lanes: rows `0..4` and `4..6`.
+/// `M x` (columns `m[c]`).
 #[inline(always)]
 fn mv<V: F64x4>(m: &M6, x: &V6) -> V6 {
-    let (mut lo, mut hi) = (V::zero(), V::zero());
-    for c in 0..6 {
-        // SAFETY: m[c] has 6 entries: [0..4] and [4..6] are in bounds.
-        let (a, b) = unsafe { (V::loadu(m[c].as_ptr()), V::load2(m[c].as_ptr().add(4))) };
-        let xc = V::splat(x[c]);
-        lo = a.mul_add(xc, lo);
-        hi = b.mul_add(xc, hi);
-    }
-    let mut o = [0.0; 6];
-    // SAFETY: o has 6 entries.
-    unsafe {
-        lo.storeu(o.as_mut_ptr());
-        hi.store2(o.as_mut_ptr().add(4));
-    }
-    o
+    V::mat6_vec(m, x)
 }
 
-/// `Mᵀ x` (columns `m[r]`): one 6-term dot product per row, on lanes.
+/// `Mᵀ x` (columns `m[r]`).
 #[inline(always)]
 fn mtv<V: F64x4>(m: &M6, x: &V6) -> V6 {
-    // SAFETY: x and every m[r] have 6 entries.
-    unsafe {
-        let (xl, xh) = (V::loadu(x.as_ptr()), V::load2(x.as_ptr().add(4)));
-        let mut o = [0.0; 6];
-        for r in 0..6 {
-            let a = V::loadu(m[r].as_ptr()).mul(xl);
-            o[r] = V::load2(m[r].as_ptr().add(4)).mul_add(xh, a).hsum();
-        }
-        o
-    }
+    V::mat6_tr_vec(m, x)
 }
 
 #[inline(always)]
@@ -430,42 +407,10 @@ fn rows6<const R: usize>(fs: [&V6; R]) -> [[f64; R]; 6] {
     o
 }
 
-/// `Σ_c rows[c][r] x[c]` for every row `r`, four rows at a time on lanes (then two, then
-/// one).
+/// `Σ_c rows[c][r] x[c]` for every row `r`.
 #[inline(always)]
 fn matvec<V: F64x4, const R: usize>(rows: &[[f64; R]; 6], x: &V6) -> [f64; R] {
-    let mut out = [0.0; R];
-    let mut r = 0;
-    while r + 4 <= R {
-        let mut acc = V::zero();
-        for c in 0..6 {
-            // SAFETY: r + 4 <= R.
-            let a = unsafe { V::loadu(rows[c].as_ptr().add(r)) };
-            acc = a.mul_add(V::splat(x[c]), acc);
-        }
-        // SAFETY: r + 4 <= R.
-        unsafe { acc.storeu(out.as_mut_ptr().add(r)) };
-        r += 4;
-    }
-    if r + 2 <= R {
-        let mut acc = V::zero();
-        for c in 0..6 {
-            // SAFETY: r + 2 <= R.
-            let a = unsafe { V::load2(rows[c].as_ptr().add(r)) };
-            acc = a.mul_add(V::splat(x[c]), acc);
-        }
-        // SAFETY: r + 2 <= R.
-        unsafe { acc.store2(out.as_mut_ptr().add(r)) };
-        r += 2;
-    }
-    if r < R {
-        let mut acc = 0.0;
-        for c in 0..6 {
-            acc = rows[c][r].mul_add(x[c], acc);
-        }
-        out[r] = acc;
-    }
-    out
+    V::rows6_vec(rows, x)
 }
 
 /// Flat offset of `(i, j, k)` in an `n×n×n` column-major tensor.
@@ -506,6 +451,18 @@ fn backward_step_so<S: Sink>(model: &Model, data: &Data, ws: &SoWs<'_>, sink: &m
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
         return unsafe { backward_step_so_avx2(model, data, ws, sink, i) };
     }
+    backward_step_so_portable(model, data, ws, sink, i)
+}
+
+/// The backward step with the portable lanes (out of line).
+#[inline(never)]
+fn backward_step_so_portable<S: Sink>(
+    model: &Model,
+    data: &Data,
+    ws: &SoWs<'_>,
+    sink: &mut S,
+    i: usize,
+) {
     backward_step_so_body::<[f64; 4], S>(model, data, ws, sink, i)
 }
 

@@ -201,33 +201,33 @@ pub(crate) fn v6(ang: &nalgebra::Vector3<f64>, lin: &nalgebra::Vector3<f64>) -> 
 
 #[inline(always)]
 fn ld6<V: Lanes>(a: &[V::Arr; 6]) -> [V; 6] {
-    std::array::from_fn(|m| V::load(&a[m]))
+    [V::load(&a[0]), V::load(&a[1]), V::load(&a[2]), V::load(&a[3]), V::load(&a[4]), V::load(&a[5])]
 }
 
 #[inline(always)]
 fn st6<V: Lanes>(a: &[V; 6]) -> [V::Arr; 6] {
-    std::array::from_fn(|m| a[m].store())
+    [a[0].store(), a[1].store(), a[2].store(), a[3].store(), a[4].store(), a[5].store()]
 }
 
 /// `a × b` for lane 3-vectors `a` and a plain `b`.
 #[inline(always)]
 fn cross_lp<V: Lanes>(a: &[V], b: &[f64]) -> [V; 3] {
-    let s = |i: usize| V::splat(b[i]);
+    let s = [V::splat(b[0]), V::splat(b[1]), V::splat(b[2])];
     [
-        a[1].mul(s(2)).sub(a[2].mul(s(1))),
-        a[2].mul(s(0)).sub(a[0].mul(s(2))),
-        a[0].mul(s(1)).sub(a[1].mul(s(0))),
+        a[1].mul(s[2]).sub(a[2].mul(s[1])),
+        a[2].mul(s[0]).sub(a[0].mul(s[2])),
+        a[0].mul(s[1]).sub(a[1].mul(s[0])),
     ]
 }
 
 /// `a × b` for a plain `a` and lane 3-vectors `b`.
 #[inline(always)]
 pub(crate) fn cross_pl<V: Lanes>(a: &[f64], b: &[V]) -> [V; 3] {
-    let s = |i: usize| V::splat(a[i]);
+    let s = [V::splat(a[0]), V::splat(a[1]), V::splat(a[2])];
     [
-        s(1).mul(b[2]).sub(s(2).mul(b[1])),
-        s(2).mul(b[0]).sub(s(0).mul(b[2])),
-        s(0).mul(b[1]).sub(s(1).mul(b[0])),
+        s[1].mul(b[2]).sub(s[2].mul(b[1])),
+        s[2].mul(b[0]).sub(s[0].mul(b[2])),
+        s[0].mul(b[1]).sub(s[1].mul(b[0])),
     ]
 }
 
@@ -260,22 +260,33 @@ pub(crate) fn cross_force_lanes<L: Lanes>(s: &[f64; 6], f: &[L; 6]) -> [L; 6] {
 #[inline(always)]
 pub(crate) fn inertia_mul_l<V: Lanes>(inr: &crate::spatial::Inertia, v: &[V; 6]) -> [V; 6] {
     let h = [inr.h.x, inr.h.y, inr.h.z];
-    let r = |m: usize, c: usize| V::splat(inr.rot[(m, c)]);
     let hl = cross_pl(&h, &v[3..6]); // h × v.lin
     let ha = cross_pl(&h, &v[0..3]); // h × v.ang
     let mass = V::splat(inr.mass);
-    let ang = |m: usize| r(m, 0).mul_add(v[0], r(m, 1).mul_add(v[1], r(m, 2).mul_add(v[2], hl[m])));
-    let lin = |m: usize| v[3 + m].mul(mass).sub(ha[m]);
-    [ang(0), ang(1), ang(2), lin(0), lin(1), lin(2)]
+    let mut out = [mass; 6];
+    for m in 0..3 {
+        let (r0, r1, r2) =
+            (V::splat(inr.rot[(m, 0)]), V::splat(inr.rot[(m, 1)]), V::splat(inr.rot[(m, 2)]));
+        out[m] = r0.mul_add(v[0], r1.mul_add(v[1], r2.mul_add(v[2], hl[m])));
+        out[3 + m] = v[3 + m].mul(mass).sub(ha[m]);
+    }
+    out
 }
 
 /// Lane-wise pairing `Σ_m p[m] v[m]`.
 #[inline(always)]
 fn dot_pl<V: Lanes>(p: &[f64; 6], v: &[V; 6]) -> V::Arr {
-    let s = |m: usize| V::splat(p[m]);
-    let a = s(0).mul_add(v[0], s(1).mul(v[1]));
-    let b = s(2).mul_add(v[2], s(3).mul(v[3]));
-    let c = s(4).mul_add(v[4], s(5).mul(v[5]));
+    let s = [
+        V::splat(p[0]),
+        V::splat(p[1]),
+        V::splat(p[2]),
+        V::splat(p[3]),
+        V::splat(p[4]),
+        V::splat(p[5]),
+    ];
+    let a = s[0].mul_add(v[0], s[1].mul(v[1]));
+    let b = s[2].mul_add(v[2], s[3].mul(v[3]));
+    let c = s[4].mul_add(v[4], s[5].mul(v[5]));
     a.add(b).add(c).store()
 }
 
@@ -378,8 +389,11 @@ pub(crate) fn idfoza_lanes_core<V: Lanes>(
         }
         let p = model.parents[i];
         if p > 0 {
-            let fp: [V; 6] = ld6(&ws.fc[p]);
-            ws.fc[p] = st6(&std::array::from_fn(|m| fp[m].add(fc[m])));
+            let mut fp: [V; 6] = ld6(&ws.fc[p]);
+            for (a, b) in fp.iter_mut().zip(&fc) {
+                *a = a.add(*b);
+            }
+            ws.fc[p] = st6(&fp);
         }
     }
 }

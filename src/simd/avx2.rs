@@ -195,6 +195,21 @@ impl F64x4 for Avx4 {
         }
     }
     #[inline(always)]
+    fn mat6_vec(m: &[[f64; 6]; 6], x: &[f64; 6]) -> [f64; 6] {
+        // SAFETY: the type's invariant.
+        unsafe { mat6_vec(m, x) }
+    }
+    #[inline(always)]
+    fn mat6_tr_vec(m: &[[f64; 6]; 6], x: &[f64; 6]) -> [f64; 6] {
+        // SAFETY: the type's invariant.
+        unsafe { mat6_tr_vec(m, x) }
+    }
+    #[inline(always)]
+    fn rows6_vec<const R: usize>(rows: &[[f64; R]; 6], x: &[f64; 6]) -> [f64; R] {
+        // SAFETY: the type's invariant.
+        unsafe { rows6_vec(rows, x) }
+    }
+    #[inline(always)]
     fn sin_cos(self) -> (Self, Self) {
         // SAFETY: the type's invariant.
         let (s, c) = unsafe { sin_cos(self.0) };
@@ -752,4 +767,107 @@ pub(crate) unsafe fn copy(dst: &mut [f64], src: &[f64]) {
 pub(crate) fn fence_streams() {
     // SAFETY: SSE is part of x86_64.
     unsafe { _mm_sfence() };
+}
+
+/// `p[l] ← z[l]` for the lanes `l` of `lanes` (bits `0..4`), plus the old `p[l]` for those also
+/// in `onto` (the other lanes of `p` are not accessed).
+///
+/// # Safety
+/// AVX2 available; `p` valid for reads and writes of the lanes of `lanes`.
+#[inline(always)]
+pub(crate) unsafe fn store_or_add(p: *mut f64, z: &[f64; 4], onto: u8, lanes: u8) {
+    // SAFETY: the caller's contract.
+    unsafe {
+        let bits = _mm256_setr_epi64x(1, 2, 4, 8);
+        let add = _mm256_set1_epi64x((onto & lanes) as i64);
+        let add = _mm256_cmpeq_epi64(_mm256_and_si256(add, bits), bits);
+        let put =
+            _mm256_cmpeq_epi64(_mm256_and_si256(_mm256_set1_epi64x(lanes as i64), bits), bits);
+        let z = _mm256_add_pd(_mm256_maskload_pd(p, add), _mm256_loadu_pd(z.as_ptr()));
+        _mm256_maskstore_pd(p, put, z);
+    }
+}
+
+// The 6×6 products of IDSVA-SO (128-bit halves for rows 4..6).
+
+/// Sum of the four lanes of `a` and the two of `b`.
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+fn hsum6(a: __m256d, b: __m128d) -> f64 {
+    let s = _mm_add_pd(_mm_add_pd(_mm256_castpd256_pd128(a), _mm256_extractf128_pd(a, 1)), b);
+    _mm_cvtsd_f64(_mm_add_sd(s, _mm_unpackhi_pd(s, s)))
+}
+
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+pub(crate) fn mat6_vec(m: &[[f64; 6]; 6], x: &[f64; 6]) -> [f64; 6] {
+    let mut lo = _mm256_setzero_pd();
+    let mut hi = _mm_setzero_pd();
+    for c in 0..6 {
+        // SAFETY: m[c] has 6 elements: [0..4] and [4..6] are in bounds.
+        let (a, b) =
+            unsafe { (_mm256_loadu_pd(m[c].as_ptr()), _mm_loadu_pd(m[c].as_ptr().add(4))) };
+        lo = _mm256_fmadd_pd(a, _mm256_set1_pd(x[c]), lo);
+        hi = _mm_fmadd_pd(b, _mm_set1_pd(x[c]), hi);
+    }
+    let mut o = [0.0; 6];
+    // SAFETY: o has 6 elements.
+    unsafe {
+        _mm256_storeu_pd(o.as_mut_ptr(), lo);
+        _mm_storeu_pd(o.as_mut_ptr().add(4), hi);
+    }
+    o
+}
+
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+pub(crate) fn mat6_tr_vec(m: &[[f64; 6]; 6], x: &[f64; 6]) -> [f64; 6] {
+    // SAFETY: x and every m[r] have 6 elements.
+    unsafe {
+        let (xl, xh) = (_mm256_loadu_pd(x.as_ptr()), _mm_loadu_pd(x.as_ptr().add(4)));
+        let mut o = [0.0; 6];
+        for r in 0..6 {
+            let a = _mm256_mul_pd(_mm256_loadu_pd(m[r].as_ptr()), xl);
+            let b = _mm_mul_pd(_mm_loadu_pd(m[r].as_ptr().add(4)), xh);
+            o[r] = hsum6(a, b);
+        }
+        o
+    }
+}
+
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+pub(crate) fn rows6_vec<const R: usize>(rows: &[[f64; R]; 6], x: &[f64; 6]) -> [f64; R] {
+    let mut out = [0.0; R];
+    let mut r = 0;
+    while r + 4 <= R {
+        let mut acc = _mm256_setzero_pd();
+        for c in 0..6 {
+            // SAFETY: r + 4 <= R.
+            let a = unsafe { _mm256_loadu_pd(rows[c].as_ptr().add(r)) };
+            acc = _mm256_fmadd_pd(a, _mm256_set1_pd(x[c]), acc);
+        }
+        // SAFETY: r + 4 <= R.
+        unsafe { _mm256_storeu_pd(out.as_mut_ptr().add(r), acc) };
+        r += 4;
+    }
+    if r + 2 <= R {
+        let mut acc = _mm_setzero_pd();
+        for c in 0..6 {
+            // SAFETY: r + 2 <= R.
+            let a = unsafe { _mm_loadu_pd(rows[c].as_ptr().add(r)) };
+            acc = _mm_fmadd_pd(a, _mm_set1_pd(x[c]), acc);
+        }
+        // SAFETY: r + 2 <= R.
+        unsafe { _mm_storeu_pd(out.as_mut_ptr().add(r), acc) };
+        r += 2;
+    }
+    if r < R {
+        let mut acc = 0.0;
+        for c in 0..6 {
+            acc = rows[c][r].mul_add(x[c], acc);
+        }
+        out[r] = acc;
+    }
+    out
 }

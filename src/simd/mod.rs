@@ -2,7 +2,7 @@
 //!
 //! The kernels of the algorithms (CRBA, ABA, the placements, IDSVA and IDSVA-SO, the
 //! multi-right-hand-side `LᵀDL` solves, IDFOZA and the `M⁻¹` products of FD-SO) are written
-//! once, generic over a lane type: [`Lanes`] (`N` lanes of `f64`) and [`F64x4`] (four lanes,
+//! once, generic over a lane type: `Lanes` (`N` lanes of `f64`) and `F64x4` (four lanes,
 //! with the shuffles of 3-vectors held in four lanes). Each is instantiated three ways:
 //!
 //! | file | lane type | instruction set |
@@ -12,7 +12,7 @@
 //! | `avx512.rs` | `Avx8` (`__m512d`) | AVX-512F (+ AVX2, FMA) |
 //!
 //! Every intrinsic of the crate is in `avx2.rs` and `avx512.rs`, behind functions named like
-//! their portable counterparts (the dense kernels of [`crate::linalg`] likewise: `gemm`,
+//! their portable counterparts (the dense kernels of `linalg.rs` likewise: `gemm`,
 //! `transpose`, `spd_inverse`, ...). An algorithm picks the instruction set per call with
 //! [`level`]; [`set_thread_level`] lowers it for the calling thread (tests compare the three;
 //! `sodyn bench --simd avx2` measures the AVX2 path on an AVX-512 CPU).
@@ -33,6 +33,8 @@ pub(crate) use avx2::Avx4;
 pub(crate) use avx512::Avx8;
 
 use std::cell::Cell;
+use std::sync::atomic::Ordering::Relaxed;
+use std::sync::atomic::{AtomicBool, AtomicU8};
 
 /// An instruction set the kernels can run with, from the most portable to the widest.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -62,16 +64,37 @@ impl Level {
     }
 }
 
-/// The widest level this CPU supports (cached by the standard library's feature detection).
+/// [`detected`], once known (`u8::MAX` before the first call).
+static DETECTED: AtomicU8 = AtomicU8::new(u8::MAX);
+
+/// Whether any thread ever called [`set_thread_level`] (until then [`level`] skips the
+/// thread-local cap: the dispatch runs in the hot loops of the derivatives).
+static CAPPED: AtomicBool = AtomicBool::new(false);
+
+/// The widest level this CPU supports (detected once, then one relaxed load).
+#[inline]
 pub fn detected() -> Level {
+    match DETECTED.load(Relaxed) {
+        0 => Level::Portable,
+        1 => Level::Avx2,
+        2 => Level::Avx512,
+        _ => detect(),
+    }
+}
+
+/// Detects and caches the level (see [`detected`]).
+#[cold]
+fn detect() -> Level {
+    let mut level = Level::Portable;
     #[cfg(target_arch = "x86_64")]
     {
         use std::arch::is_x86_feature_detected as has;
         if has!("avx2") && has!("fma") {
-            return if has!("avx512f") { Level::Avx512 } else { Level::Avx2 };
+            level = if has!("avx512f") { Level::Avx512 } else { Level::Avx2 };
         }
     }
-    Level::Portable
+    DETECTED.store(level as u8, Relaxed);
+    level
 }
 
 thread_local! {
@@ -83,6 +106,7 @@ thread_local! {
 /// with `min(cap, detected())`. Other threads (including the workers of
 /// [`crate::batch::BatchPool`]) are not affected. Results agree across levels to rounding.
 pub fn set_thread_level(cap: Option<Level>) {
+    CAPPED.store(true, Relaxed);
     CAP.with(|c| c.set(cap));
 }
 
@@ -91,6 +115,9 @@ pub fn set_thread_level(cap: Option<Level>) {
 #[inline]
 pub fn level() -> Level {
     let d = detected();
+    if !CAPPED.load(Relaxed) {
+        return d;
+    }
     match CAP.with(|c| c.get()) {
         Some(cap) if cap < d => cap,
         _ => d,
@@ -210,6 +237,12 @@ pub(crate) trait F64x4: Lanes<Arr = [f64; 4]> {
     fn hsum(self) -> f64;
     /// `self` with the sign bits flipped where `sign` is negative (`sign = ±1`: `sign · self`).
     fn flip_sign(self, sign: f64) -> Self;
+    /// `M x` for a 6×6 matrix given by its columns `m[c]`.
+    fn mat6_vec(m: &[[f64; 6]; 6], x: &[f64; 6]) -> [f64; 6];
+    /// `Mᵀ x` for a 6×6 matrix given by its columns `m[r]` (one 6-term dot product per row).
+    fn mat6_tr_vec(m: &[[f64; 6]; 6], x: &[f64; 6]) -> [f64; 6];
+    /// `Σ_c rows[c][r] x[c]` for every row `r < R`.
+    fn rows6_vec<const R: usize>(rows: &[[f64; R]; 6], x: &[f64; 6]) -> [f64; R];
     /// `(sin, cos)` of each lane within 1 ulp of `f64::sin_cos` ([`crate::trig::sin_cos`]).
     fn sin_cos(self) -> (Self, Self);
 }

@@ -143,6 +143,34 @@ impl F64x4 for [f64; 4] {
         self.map(|x| f64::from_bits(x.to_bits() ^ f))
     }
     #[inline(always)]
+    fn mat6_vec(m: &[[f64; 6]; 6], x: &[f64; 6]) -> [f64; 6] {
+        let mut o = [0.0; 6];
+        for c in 0..6 {
+            for r in 0..6 {
+                o[r] += m[c][r] * x[c];
+            }
+        }
+        o
+    }
+    #[inline(always)]
+    fn mat6_tr_vec(m: &[[f64; 6]; 6], x: &[f64; 6]) -> [f64; 6] {
+        let mut o = [0.0; 6];
+        for r in 0..6 {
+            o[r] = (0..6).map(|c| m[r][c] * x[c]).sum();
+        }
+        o
+    }
+    #[inline(always)]
+    fn rows6_vec<const R: usize>(rows: &[[f64; R]; 6], x: &[f64; 6]) -> [f64; R] {
+        let mut out = [0.0; R];
+        for c in 0..6 {
+            for r in 0..R {
+                out[r] += rows[c][r] * x[c];
+            }
+        }
+        out
+    }
+    #[inline(always)]
     fn sin_cos(self) -> (Self, Self) {
         crate::trig::sin_cos4_lanes(&self)
     }
