@@ -282,54 +282,7 @@ pub(crate) fn prefetch<const LEVEL: i32>(p: *const f64, len: usize) {
     let _ = (p, len);
 }
 
-/// One term `A B` of a [`Gemm4`] product, where only some columns of `A` take part.
-pub(crate) struct Gemm4Term<'a> {
-    /// `A`, column-major with leading dimension `lda`; each of its columns `l < cols` is
-    /// readable (and zero, or at least finite, past the rows wanted) up to the product's rows
-    /// rounded up to a multiple of 8: `lda · (cols − 1) + that ≤ a.len()` (so `lda` may be
-    /// below that when the columns that follow are readable).
-    pub a: &'a [f64],
-    /// Leading dimension of `a`.
-    pub lda: usize,
-    /// The columns of `A` that `idx` may name.
-    pub cols: usize,
-    /// Columns `idx[t]` of `A` taking part (each `< cols`).
-    pub idx: &'a [u32],
-    /// Where `B` is read: `B[idx[t], u]` is at `b[u] + bs · key` with `key = idx[t]` if
-    /// `by_row`, else `key = t` (a compacted copy).
-    pub b: [*const f64; 4],
-    /// Stride of `b` per key.
-    pub bs: usize,
-    /// Whether `b` is keyed by the row `idx[t]` (else by `t`).
-    pub by_row: bool,
-}
-
-impl Gemm4Term<'_> {
-    /// `B[idx[t], u]` for the four lanes.
-    ///
-    /// # Safety
-    /// `t < idx.len()` and the values addressed are readable (the contract of
-    /// [`neg_gemm4_sparse`]).
-    #[inline(always)]
-    pub(crate) unsafe fn b_at(&self, t: usize) -> [f64; 4] {
-        // SAFETY: the caller's contract.
-        unsafe {
-            let key = if self.by_row { *self.idx.get_unchecked(t) as usize } else { t };
-            std::array::from_fn(|u| *self.b[u].add(self.bs * key))
-        }
-    }
-}
-
-/// Four output columns of `−Σ A B` over one or more [`Gemm4Term`]s (see [`neg_gemm4_sparse`]).
-pub(crate) struct Gemm4<'a> {
-    /// Rows of the result.
-    pub rows: usize,
-    /// The terms summed.
-    pub terms: &'a [Gemm4Term<'a>],
-    /// The lanes `u` (bit `u`) whose output is accumulated: `out[u] ← out[u] − Σ A B[:, u]`
-    /// (its `rows` values read first; the mirror gets the sum).
-    pub accumulate: u8,
-}
+pub(crate) use crate::simd::{Gemm4, Gemm4Term};
 
 /// `out[u][r] ← −Σ_terms Σ_t A[r, idx[t]] · B[idx[t], u]` for `r < rows` (or `out[u][r] − Σ …`
 /// for the lanes of `g.accumulate`), and the same into `mirror[u]`, for the lanes `u < 4` whose

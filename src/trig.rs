@@ -11,9 +11,9 @@
 //! arguments, including the quadrant boundaries). Arguments with `|x| > 10⁵` (and non-finite
 //! ones) go to `f64::sin_cos`.
 //!
-//! [`sin_cos4_v`] evaluates four angles at once on AVX2 lanes with the same steps, each
-//! product-and-sum fused (FMA): also within 1 ulp of `f64::sin_cos`, not always the same bits
-//! as [`sin_cos`].
+//! The four-lane `sin_cos` of the AVX2 lanes (`src/simd/avx2.rs`) evaluates four angles at once on AVX2 lanes
+//! with the same steps, each product-and-sum fused (FMA): also within 1 ulp of `f64::sin_cos`,
+//! not always the same bits as [`sin_cos`]; [`sin_cos4_lanes`] is its portable counterpart.
 
 /// `2/π`.
 pub(crate) const FRAC_2_PI: f64 = std::f64::consts::FRAC_2_PI;
@@ -108,21 +108,22 @@ fn sin_cos_std(x: f64) -> (f64, f64) {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::sin_cos;
-    use crate::rng::Rng;
-
-    /// `|a − b|` in units in the last place of the larger of the two.
-    fn ulps(a: f64, b: f64) -> f64 {
-        if a == b {
-            return 0.0;
-        }
-        let ulp = |x: f64| {
-            let x = x.abs();
-            f64::from_bits(x.to_bits() + 1) - x
-        };
-        (a - b).abs() / ulp(a).max(ulp(b))
+/// `|a − b|` in units in the last place of the larger of the two.
+pub(crate) fn ulps(a: f64, b: f64) -> f64 {
+    if a == b {
+        return 0.0;
     }
+    let ulp = |x: f64| {
+        let x = x.abs();
+        f64::from_bits(x.to_bits() + 1) - x
+    };
+    (a - b).abs() / ulp(a).max(ulp(b))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{sin_cos, ulps};
+    use crate::rng::Rng;
 
     /// Checks `sin_cos(x)` against `f64::sin_cos(x)` and records the worst error in ulp.
     fn check(x: f64, worst: &mut f64) {
@@ -179,82 +180,5 @@ mod tests {
             let (s, c) = sin_cos(x);
             assert!(s.is_nan() && c.is_nan());
         }
-    }
-
-    /// `sin_cos4_lanes` returns the same bits as `sin_cos` lane by lane, and `sin_cos4_v`
-    /// (AVX2/FMA where available) is within 1 ulp of `f64::sin_cos` (and the same bits on the
-    /// lane-wise path): random arguments, quadrant boundaries, ±0 (sign kept), and chunks with
-    /// a huge or non-finite lane (which take the lane-wise path).
-    #[test]
-    fn four_lanes_match_scalar() {
-        let mut rng = Rng::new(5);
-        let mut args: Vec<f64> = (0..40_000).map(|_| rng.range(-7.0, 7.0)).collect();
-        args.extend((0..4_000).map(|_| rng.range(-1.0e5, 1.0e5)));
-        for k in -64i32..=64 {
-            let x0 = f64::from(k) * std::f64::consts::FRAC_PI_4;
-            for d in -2i64..=2 {
-                let x = f64::from_bits(x0.to_bits().wrapping_add_signed(d));
-                args.extend([x, -x]);
-            }
-        }
-        for e in -60..17 {
-            args.extend([2f64.powi(e), -(2f64.powi(e)) * 1.37]);
-        }
-        let specials = [
-            0.0,
-            -0.0,
-            1.0e5,
-            -1.0e5,
-            1.0e5 + 1.0,
-            -3.0e300,
-            5e-324,
-            f64::NAN,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-        ];
-        args.extend(specials);
-        // Also every special argument in every lane of otherwise ordinary chunks.
-        for (j, &x) in specials.iter().enumerate() {
-            for l in 0..4 {
-                let mut c = [0.3, -2.0, 5.5, 0.0];
-                c[l] = x;
-                c[(l + 1) % 4] = specials[(j + 1) % specials.len()];
-                args.extend(c);
-            }
-        }
-        let same = |a: f64, b: f64| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
-        let mut paths = 0;
-        let mut worst = 0.0f64;
-        for chunk in args.chunks_exact(4) {
-            let x: [f64; 4] = chunk.try_into().unwrap();
-            let (s4, c4) = super::sin_cos4_lanes(&x);
-            for l in 0..4 {
-                let (s, c) = sin_cos(x[l]);
-                assert!(same(s4[l], s) && same(c4[l], c), "x = {:e}: lane {l}", x[l]);
-            }
-            paths = 1;
-            #[cfg(target_arch = "x86_64")]
-            if std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("fma")
-            {
-                // SAFETY: the CPU has AVX2 and FMA (checked just above).
-                let (s4, c4) = unsafe { crate::simd::avx2::sin_cos_arrays(&x) };
-                // A huge or NaN lane sends the whole chunk through `sin_cos`.
-                let lanewise = x.iter().any(|v| v.is_nan() || v.abs() > 1.0e5);
-                for l in 0..4 {
-                    let (s, c) = if lanewise { sin_cos(x[l]) } else { x[l].sin_cos() };
-                    if lanewise || x[l] == 0.0 {
-                        assert!(same(s4[l], s) && same(c4[l], c), "x = {:e}: lane {l}", x[l]);
-                    } else {
-                        let e = ulps(s4[l], s).max(ulps(c4[l], c));
-                        assert!(e <= 1.0, "x = {:e}: lane {l}: {e} ulp", x[l]);
-                        worst = worst.max(e);
-                    }
-                }
-                paths = 2;
-            }
-        }
-        eprintln!("four-lane sin_cos: worst {worst} ulp against f64::sin_cos ({paths} paths)");
-        assert!(paths >= 1);
     }
 }

@@ -6,8 +6,8 @@
 //! reached behind [`crate::simd::avx2_fma`].
 #![cfg(target_arch = "x86_64")]
 
+use super::Gemm4;
 use super::{F64x4, Lanes};
-use crate::linalg::Gemm4;
 use std::arch::x86_64::*;
 
 /// Four lanes in an AVX2 register. Only created inside functions compiled with
@@ -725,7 +725,7 @@ unsafe fn chunk<const V: usize>(
     }
 }
 
-/// See [`crate::linalg::prefetch`]: one `prefetch` hint per 64-byte line (SSE, part of
+/// `linalg::prefetch`: one `prefetch` hint per 64-byte line (SSE, part of
 /// x86-64).
 #[inline]
 pub(crate) fn prefetch<const LEVEL: i32>(p: *const f64, len: usize) {
@@ -744,7 +744,7 @@ pub(crate) fn prefetch<const LEVEL: i32>(p: *const f64, len: usize) {
     unsafe { _mm_prefetch::<LEVEL>(p.wrapping_add(len - 1).cast::<i8>()) };
 }
 
-/// [`crate::batch::copy_output`]: `dst ← src` (equal lengths) with streaming stores for the 32-byte aligned part of `dst`.
+/// `batch::copy_output`: `dst ← src` (equal lengths) with streaming stores for the 32-byte aligned part of `dst`.
 ///
 /// # Safety
 /// AVX available; `dst.len() == src.len()`.

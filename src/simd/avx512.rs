@@ -6,8 +6,8 @@
 //! and only reached behind [`crate::simd::avx512f`].
 #![cfg(target_arch = "x86_64")]
 
+use super::Gemm4;
 use super::Lanes;
-use crate::linalg::Gemm4;
 use std::arch::x86_64::*;
 
 /// Eight lanes in an AVX-512 register. Only created inside functions compiled with

@@ -104,7 +104,7 @@ thread_local! {
 
 /// Caps the level the calling thread's kernels use (`None` removes the cap): the kernels run
 /// with `min(cap, detected())`. Other threads (including the workers of
-/// [`crate::batch::BatchPool`]) are not affected. Results agree across levels to rounding.
+/// the batch pool) are not affected. Results agree across levels to rounding.
 pub fn set_thread_level(cap: Option<Level>) {
     CAPPED.store(true, Relaxed);
     CAP.with(|c| c.set(cap));
@@ -243,122 +243,138 @@ pub(crate) trait F64x4: Lanes<Arr = [f64; 4]> {
     fn mat6_tr_vec(m: &[[f64; 6]; 6], x: &[f64; 6]) -> [f64; 6];
     /// `Σ_c rows[c][r] x[c]` for every row `r < R`.
     fn rows6_vec<const R: usize>(rows: &[[f64; R]; 6], x: &[f64; 6]) -> [f64; R];
-    /// `(sin, cos)` of each lane within 1 ulp of `f64::sin_cos` ([`crate::trig::sin_cos`]).
+    /// `(sin, cos)` of each lane within 1 ulp of `f64::sin_cos` (the crate's `trig::sin_cos`).
     fn sin_cos(self) -> (Self, Self);
+}
+
+/// One term `A B` of a [`Gemm4`] product, where only some columns of `A` take part.
+pub(crate) struct Gemm4Term<'a> {
+    /// `A`, column-major with leading dimension `lda`; each of its columns `l < cols` is
+    /// readable (and zero, or at least finite, past the rows wanted) up to the product's rows
+    /// rounded up to a multiple of 8: `lda · (cols − 1) + that ≤ a.len()` (so `lda` may be
+    /// below that when the columns that follow are readable).
+    pub a: &'a [f64],
+    /// Leading dimension of `a`.
+    pub lda: usize,
+    /// The columns of `A` that `idx` may name.
+    pub cols: usize,
+    /// Columns `idx[t]` of `A` taking part (each `< cols`).
+    pub idx: &'a [u32],
+    /// Where `B` is read: `B[idx[t], u]` is at `b[u] + bs · key` with `key = idx[t]` if
+    /// `by_row`, else `key = t` (a compacted copy).
+    pub b: [*const f64; 4],
+    /// Stride of `b` per key.
+    pub bs: usize,
+    /// Whether `b` is keyed by the row `idx[t]` (else by `t`).
+    pub by_row: bool,
+}
+
+impl Gemm4Term<'_> {
+    /// `B[idx[t], u]` for the four lanes.
+    ///
+    /// # Safety
+    /// `t < idx.len()` and the values addressed are readable (the contract of
+    /// `linalg::neg_gemm4_sparse`).
+    #[inline(always)]
+    pub(crate) unsafe fn b_at(&self, t: usize) -> [f64; 4] {
+        // SAFETY: the caller's contract.
+        unsafe {
+            let key = if self.by_row { *self.idx.get_unchecked(t) as usize } else { t };
+            std::array::from_fn(|u| *self.b[u].add(self.bs * key))
+        }
+    }
+}
+
+/// Four output columns of `−Σ A B` over one or more [`Gemm4Term`]s (the sparse product `linalg::neg_gemm4_sparse` and its SIMD versions).
+pub(crate) struct Gemm4<'a> {
+    /// Rows of the result.
+    pub rows: usize,
+    /// The terms summed.
+    pub terms: &'a [Gemm4Term<'a>],
+    /// The lanes `u` (bit `u`) whose output is accumulated: `out[u] ← out[u] − Σ A B[:, u]`
+    /// (its `rows` values read first; the mirror gets the sum).
+    pub accumulate: u8,
 }
 
 #[cfg(test)]
 mod tests {
-    use super::{Level, set_thread_level};
-    use crate::algo::{Contact, Data};
-    use crate::deriv::{
-        ContactData, FdSoData, ImpactData, KktData, SoData, fd_derivatives, fd_so_derivatives,
-        id_derivatives, id_so_derivatives, impact_derivatives, kkt_derivatives,
-    };
-    use crate::model::Model;
-    use crate::model::builtin::{pendulum, quadruped, random_tree, serial_chain};
     use crate::rng::Rng;
-    use crate::tensor::Tensor3;
-    use nalgebra::{DMatrix, DVector, Vector3};
+    use crate::trig::{sin_cos, sin_cos4_lanes, ulps};
 
-    /// Every output of the algorithms with AVX2/FMA kernels, as one list of flat vectors.
-    fn outputs(
-        m: &Model,
-        feet: &[&str],
-        q: &DVector<f64>,
-        v: &DVector<f64>,
-        u: &DVector<f64>,
-    ) -> Vec<Vec<f64>> {
-        let mat = |x: &DMatrix<f64>| x.as_slice().to_vec();
-        let ten = |x: &Tensor3| x.as_slice().to_vec();
-        let mut out = vec![];
-        let mut d = Data::new(m);
-        out.push(mat(crate::algo::crba(m, &mut d, q).unwrap()));
-        out.push(crate::algo::aba(m, &mut d, q, v, u, None).unwrap().as_slice().to_vec());
-        id_derivatives(m, &mut d, q, v, u, None).unwrap();
-        out.extend([mat(&d.dtau_dq), mat(&d.dtau_dv), mat(&d.m)]);
-        let mut so = SoData::new(m);
-        id_so_derivatives(m, &mut d, &mut so, q, v, u, None).unwrap();
-        out.extend([
-            ten(so.d2tau_dq2()),
-            ten(so.d2tau_dv2()),
-            ten(so.d2tau_dqdv()),
-            ten(so.dm_dq()),
-        ]);
-        fd_derivatives(m, &mut d, q, v, u, None).unwrap();
-        out.extend([mat(&d.dqdd_dq), mat(&d.dqdd_dv), mat(&d.minv)]);
-        let mut fso = FdSoData::new(m);
-        fd_so_derivatives(m, &mut d, &mut fso, q, v, u, None).unwrap();
-        out.extend([
-            ten(fso.d2qdd_dq2()),
-            ten(fso.d2qdd_dv2()),
-            ten(fso.d2qdd_dqdv()),
-            ten(fso.d2qdd_dtaudq()),
-        ]);
-        if !feet.is_empty() {
-            let cs: Vec<Contact> =
-                feet.iter().map(|f| Contact::new(m, f, Vector3::zeros()).unwrap()).collect();
-            let cd = ContactData::new(m, &cs).unwrap();
-            let mut kd = KktData::new(m, cd.clone());
-            kkt_derivatives(m, &mut d, &mut kd, q, v, u).unwrap();
-            out.extend([
-                mat(&kd.dqdd_dq),
-                mat(&kd.dqdd_dv),
-                mat(&kd.dlambda_dq),
-                mat(&kd.dqdd_dtau),
-                mat(&kd.dlambda_dv),
-                mat(&kd.dlambda_dtau),
-            ]);
-            let mut im = ImpactData::new(m, cd);
-            impact_derivatives(m, &mut d, &mut im, q, v).unwrap();
-            out.extend([
-                mat(&im.dvplus_dq),
-                mat(&im.dvplus_dvminus),
-                mat(&im.dimpulse_dq),
-                mat(&im.dimpulse_dvminus),
-                im.vplus.as_slice().to_vec(),
-            ]);
-        }
-        out
-    }
-
-    /// The portable kernels and the AVX2/FMA ones give the same results (to rounding).
+    /// `sin_cos4_lanes` returns the same bits as `sin_cos` lane by lane, and the four-lane AVX2
+    /// `sin_cos` (where available) is within 1 ulp of `f64::sin_cos` (and the same bits on the
+    /// lane-wise path): random arguments, quadrant boundaries, ±0 (sign kept), and chunks with
+    /// a huge or non-finite lane (which take the lane-wise path).
     #[test]
-    fn portable_and_simd_kernels_agree() {
+    fn four_lanes_match_scalar() {
         let mut rng = Rng::new(5);
-        let quad = quadruped();
-        let cases: Vec<(Model, Vec<&str>)> = vec![
-            (random_tree(6, 83, false), vec![]),
-            (random_tree(14, 91, true), vec![]),
-            // nv > 48: the FD-SO products split the rows of M⁻¹ into several chunks.
-            (random_tree(53, 17, true), vec![]),
-            // Revolute joints about ±eₖ: angles not contiguous in q (two chunks of the 4-lane
-            // sin/cos), and contiguous with a partial chunk.
-            (serial_chain(7), vec![]),
-            (pendulum(3), vec![]),
-            (quad, vec!["LF_FOOT", "RF_FOOT", "LH_FOOT"]),
-        ];
-        for (m, feet) in &cases {
-            let q = m.random_configuration(&mut rng);
-            let v = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
-            let u = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
-            let simd = outputs(m, feet, &q, &v, &u);
-            set_thread_level(Some(Level::Avx2));
-            let avx2 = outputs(m, feet, &q, &v, &u);
-            set_thread_level(Some(Level::Portable));
-            let portable = outputs(m, feet, &q, &v, &u);
-            set_thread_level(None);
-            for (what, fast) in [("SIMD", &simd), ("AVX2", &avx2)] {
-                for (k, (a, b)) in fast.iter().zip(&portable).enumerate() {
-                    let scale = a.iter().fold(1.0f64, |s, x| s.max(x.abs()));
-                    let err = a.iter().zip(b).fold(0.0f64, |e, (x, y)| e.max((x - y).abs()));
-                    assert!(
-                        err <= 1e-10 * scale,
-                        "{}: {what} output {k} differs by {err:e}",
-                        m.name
-                    );
-                }
+        let mut args: Vec<f64> = (0..40_000).map(|_| rng.range(-7.0, 7.0)).collect();
+        args.extend((0..4_000).map(|_| rng.range(-1.0e5, 1.0e5)));
+        for k in -64i32..=64 {
+            let x0 = f64::from(k) * std::f64::consts::FRAC_PI_4;
+            for d in -2i64..=2 {
+                let x = f64::from_bits(x0.to_bits().wrapping_add_signed(d));
+                args.extend([x, -x]);
             }
         }
+        for e in -60..17 {
+            args.extend([2f64.powi(e), -(2f64.powi(e)) * 1.37]);
+        }
+        let specials = [
+            0.0,
+            -0.0,
+            1.0e5,
+            -1.0e5,
+            1.0e5 + 1.0,
+            -3.0e300,
+            5e-324,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        args.extend(specials);
+        // Also every special argument in every lane of otherwise ordinary chunks.
+        for (j, &x) in specials.iter().enumerate() {
+            for l in 0..4 {
+                let mut c = [0.3, -2.0, 5.5, 0.0];
+                c[l] = x;
+                c[(l + 1) % 4] = specials[(j + 1) % specials.len()];
+                args.extend(c);
+            }
+        }
+        let same = |a: f64, b: f64| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+        let mut paths = 0;
+        let mut worst = 0.0f64;
+        for chunk in args.chunks_exact(4) {
+            let x: [f64; 4] = chunk.try_into().unwrap();
+            let (s4, c4) = sin_cos4_lanes(&x);
+            for l in 0..4 {
+                let (s, c) = sin_cos(x[l]);
+                assert!(same(s4[l], s) && same(c4[l], c), "x = {:e}: lane {l}", x[l]);
+            }
+            paths = 1;
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                // SAFETY: the CPU has AVX2 and FMA (checked just above).
+                let (s4, c4) = unsafe { super::avx2::sin_cos_arrays(&x) };
+                // A huge or NaN lane sends the whole chunk through `sin_cos`.
+                let lanewise = x.iter().any(|v| v.is_nan() || v.abs() > 1.0e5);
+                for l in 0..4 {
+                    let (s, c) = if lanewise { sin_cos(x[l]) } else { x[l].sin_cos() };
+                    if lanewise || x[l] == 0.0 {
+                        assert!(same(s4[l], s) && same(c4[l], c), "x = {:e}: lane {l}", x[l]);
+                    } else {
+                        let e = ulps(s4[l], s).max(ulps(c4[l], c));
+                        assert!(e <= 1.0, "x = {:e}: lane {l}: {e} ulp", x[l]);
+                        worst = worst.max(e);
+                    }
+                }
+                paths = 2;
+            }
+        }
+        eprintln!("four-lane sin_cos: worst {worst} ulp against f64::sin_cos ({paths} paths)");
+        assert!(paths >= 1);
     }
 }
