@@ -1,9 +1,9 @@
 """MJCF loading against MuJoCo (the ``mujoco`` wheel from PyPI) as the oracle.
 
-Models: the test models of ``tests/data/mjcf`` (every feature of the loader), and the
-``dm_control`` suite's models when ``dm_control`` is installed (``.ci/run`` installs it); a suite
-model that sodyn refuses must be refused for a listed reason (``SUITE_REFUSED``), and one that
-loads must match.
+Models: the test models of ``tests/data/mjcf`` (every feature of the loader), the models shipped
+in the ``mujoco`` wheel (``mujoco/testdata``) and ``dm_control``'s suite (``.ci/run`` installs
+both from python/tests/requirements.txt); a corpus model that sodyn refuses must be refused for
+the reason listed in ``CORPUS_REFUSED``, and every other one must match.
 
 Coordinates (docs/conventions.md, section MJCF): joints and dofs are in MuJoCo's order. A ball
 joint's quaternion is ``[w x y z]`` for MuJoCo and ``[x y z w]`` for sodyn. A free joint's
@@ -29,18 +29,22 @@ DATA = REPO / "tests" / "data" / "mjcf"
 OWN_MODELS = ["features", "radian", "mass_rules"]
 TOL = 1e-9
 
+# The MJCF models shipped in the mujoco wheel (its testdata) and in dm_control's suite.
+CORPUS = {f"mujoco/{p.stem}": p for p in sorted((Path(mujoco.__file__).parent / "testdata").glob("*.xml"))}
 try:
-    import dm_control  # noqa: F401
+    import dm_control
 
-    SUITE_DIR = Path(dm_control.__file__).parent / "suite"
-    SUITE = sorted(p.stem for p in SUITE_DIR.glob("*.xml"))
+    CORPUS.update({f"dm_control/{p.stem}": p
+                   for p in sorted((Path(dm_control.__file__).parent / "suite").glob("*.xml"))})
+    HAVE_DM_CONTROL = True
 except ImportError:  # pragma: no cover - CI installs dm_control
-    SUITE_DIR, SUITE = None, []
+    HAVE_DM_CONTROL = False
 
-# Suite models that sodyn refuses, with the reason (the test checks the error message).
-SUITE_REFUSED = {
-    # Its bodies take their inertia from mesh geoms (no <inertial>).
-    "dog": r"body \"L_1\": the body.s inertia would come from a mesh geom",
+# Corpus models that sodyn refuses, with the reason (the test checks the error message).
+CORPUS_REFUSED = {
+    # Bodies without <inertial> whose inertia would come from mesh geoms.
+    "dm_control/dog": r"body \"L_1\": the body.s inertia would come from a mesh geom",
+    "mujoco/model": r"model.xml:91: unnamed body: the body.s inertia would come from a mesh geom",
 }
 
 
@@ -223,16 +227,16 @@ def test_own_models_match_mujoco(name, record_property):
     print(f"{name}: nq={ours.nq} nv={ours.nv} worst {worst}")
 
 
-@pytest.mark.skipif(not SUITE, reason="dm_control is not installed (.ci/run installs it)")
-@pytest.mark.parametrize("name", SUITE)
-def test_dm_control_suite_matches_mujoco(name):
-    path = SUITE_DIR / f"{name}.xml"
-    try:
-        mujoco.MjModel.from_xml_path(str(path))
-    except Exception as e:  # noqa: BLE001 - a suite file that is not a model by itself
-        pytest.skip(f"MuJoCo itself does not load {name}.xml: {e}")
-    if name in SUITE_REFUSED:
-        with pytest.raises(sodyn.SodynError, match=SUITE_REFUSED[name]):
+def test_dm_control_is_installed():
+    """The corpus includes dm_control's suite: fail rather than skip it silently."""
+    assert HAVE_DM_CONTROL, "pip install -r python/tests/requirements.txt (dm_control)"
+
+
+@pytest.mark.parametrize("name", sorted(CORPUS))
+def test_corpus_matches_mujoco(name):
+    path = CORPUS[name]
+    if name in CORPUS_REFUSED:
+        with pytest.raises(sodyn.SodynError, match=CORPUS_REFUSED[name]):
             sodyn.Model.from_mjcf(path)
         return
     ours, worst = compare(path)
