@@ -187,7 +187,7 @@ fn include_relative_to_base_dir_and_floating_base() {
 /// The dynamics of a loaded model run (the values are checked against MuJoCo in Python).
 #[test]
 fn dynamics_run_on_every_test_model() {
-    for name in ["features", "radian", "mass_rules"] {
+    for name in ["features", "radian", "mass_rules", "chains"] {
         let m = Model::from_mjcf(data_dir().join(format!("{name}.xml"))).unwrap();
         let mut d = Data::new(&m);
         let q = m.neutral();
@@ -331,6 +331,19 @@ fn errors_name_file_line_and_element() {
             "defined twice",
         ),
         (
+            "<mujoco><worldbody><body name=\"a\"><joint/>\n<inertial pos=\"0 0 0\" mass=\"1\" \
+             fullinertia=\"1 1 1 0 0 0\" quat=\"1 0 0 0\"/></body></worldbody></mujoco>",
+            2,
+            "body \"a\"",
+            "both fullinertia and quat",
+        ),
+        (
+            "<mujoco><worldbody><body name=\"a\"><joint/>\n<geom size=\".1\" shellinertia=\"true\"/></body></worldbody></mujoco>",
+            2,
+            "geom of body \"a\"",
+            "shellinertia",
+        ),
+        (
             "<mujoco><compiler angle=\"grad\"/></mujoco>",
             1,
             "<compiler>",
@@ -369,7 +382,7 @@ fn include_errors_name_the_included_file() {
 /// a panic.
 #[test]
 fn truncated_and_edited_files_never_panic() {
-    for name in ["features.xml", "radian.xml", "mass_rules.xml"] {
+    for name in ["features.xml", "radian.xml", "mass_rules.xml", "chains.xml"] {
         let xml = std::fs::read_to_string(data_dir().join(name)).unwrap();
         let bytes = xml.as_bytes();
         for cut in (0..bytes.len()).step_by(7) {

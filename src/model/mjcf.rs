@@ -1258,6 +1258,20 @@ impl Loader {
         let Some(pos) = self.vec3(el, &empty, "pos", belem)? else {
             return Err(err_at(el, belem, "<inertial> has no pos attribute"));
         };
+        if el.attr("fullinertia").is_some()
+            && let Some(a) = el.attrs.iter().find(|a| ORIENT.contains(&a.name.as_str()))
+        {
+            return Err(model_err(
+                &el.file,
+                a.line,
+                belem,
+                format!(
+                    "<inertial> has both fullinertia and {} (the orientation of a full inertia \
+                     is its own; MuJoCo refuses both too)",
+                    a.name
+                ),
+            ));
+        }
         let q = self.orientation(el, None, belem)?;
         let Some(mass) = self.scalar(el, &empty, "mass", belem)? else {
             return Err(err_at(el, belem, "<inertial> has no mass attribute"));
@@ -1336,6 +1350,13 @@ impl Loader {
             let group = int("group", 0)?;
             if group < self.comp.group_range.0 || group > self.comp.group_range.1 {
                 continue;
+            }
+            if self.word(g, class, "shellinertia") == Some("true") {
+                return Err(err_at(
+                    g,
+                    &gelem,
+                    "shellinertia=\"true\" is not supported (give the body an <inertial>)",
+                ));
             }
             let has_mesh = self.get(g, class, "mesh").is_some();
             let ty =
