@@ -398,3 +398,23 @@ fn truncated_and_edited_files_never_panic() {
         }
     }
 }
+
+/// A chain of bodies nested up to the degree-of-freedom limit loads (the loader recurses per
+/// level); deeper nesting and more degrees of freedom are errors, not a stack overflow.
+#[test]
+fn deep_nesting_is_bounded() {
+    let chain = |n: usize, joint: &str| {
+        let mut s = String::from("<mujoco><worldbody>\n");
+        for _ in 0..n {
+            s += &format!("<body pos=\"0 0 0.1\">{joint}<geom size=\"0.01\"/>");
+        }
+        s += &"</body>".repeat(n);
+        s + "\n</worldbody></mujoco>"
+    };
+    let m = load_str(&chain(sodyn::model::MAX_URDF_DOFS, "<joint/>")).unwrap();
+    assert_eq!(m.nv(), sodyn::model::MAX_URDF_DOFS);
+    let e = load_str(&chain(sodyn::model::MAX_URDF_DOFS + 1, "<joint/>")).unwrap_err();
+    assert!(e.to_string().contains("more than 1024 degrees of freedom"), "{e}");
+    let e = load_str(&chain(100_000, "")).unwrap_err();
+    assert!(e.to_string().contains("nested more than"), "{e}");
+}

@@ -39,9 +39,8 @@
 //! * Inertias follow MuJoCo: `<inertial>` if the body has one (with `inertiafromgeom="auto"`,
 //!   the default), otherwise the sum of its geoms' (`sphere`, `capsule`, `ellipsoid`,
 //!   `cylinder`, `box`; `mass` or `density` (default 1000); `fromto`; geoms outside
-//!   `inertiagrouprange` are left out). A mesh, height
-//!   field or SDF geom that would contribute is an error naming the body (give it an
-//!   `<inertial>`). Then `boundmass`, `boundinertia`, `balanceinertia`, and `settotalmass`. A
+//!   `inertiagrouprange` are left out). A mesh, height field or SDF geom that would
+//!   contribute is an error naming the body (give it an `<inertial>`). Then `boundmass`, `boundinertia`, `balanceinertia`, and `settotalmass`. A
 //!   moving body (one with joints) must have positive mass and principal moments (MuJoCo's
 //!   rule); negative masses, densities or sizes, a non-physical `<inertial>`, and a plane in a
 //!   moving body are errors.
@@ -55,7 +54,7 @@
 //!
 //! Every failure is an [`Error::Model`] naming the file (the included file for an element read
 //! from one), the 1-based line, the element and the reason. At most [`MAX_URDF_DOFS`] degrees
-//! of freedom.
+//! of freedom, and elements nested at most a hundred levels deeper than that.
 
 use super::joint::JointType;
 use super::tree::{Model, ModelBuilder, inertia_defect};
@@ -79,6 +78,10 @@ pub struct MjcfOptions {
 
 /// Nesting limit of `<include>` (an include cycle is reported before it).
 const MAX_INCLUDE_DEPTH: usize = 32;
+
+/// Nesting limit of elements (bodies in bodies): the loader is recursive, and a chain of
+/// [`MAX_URDF_DOFS`] bodies with a joint each needs a little more than that.
+const MAX_NESTING: usize = MAX_URDF_DOFS + 100;
 
 /// Loads an MJCF file. `<include>` paths are relative to the file's directory.
 pub fn load_mjcf_file(path: &Path, opts: &MjcfOptions) -> Result<Model> {
@@ -166,6 +169,22 @@ struct Reader<'a> {
     base_dir: &'a Path,
     /// Canonical paths of the files being included (cycle detection).
     stack: Vec<PathBuf>,
+    /// Element nesting depth so far (included files' elements count at their `<include>`).
+    level: usize,
+}
+
+/// Byte offsets of the line starts of a text: the line of a position in `O(log n)`
+/// (`roxmltree`'s `text_pos_at` scans the text, which made loading quadratic in its size).
+struct Lines(Vec<usize>);
+
+impl Lines {
+    fn new(text: &str) -> Self {
+        Lines(std::iter::once(0).chain(text.match_indices('\n').map(|(i, _)| i + 1)).collect())
+    }
+    /// The 1-based line of byte position `pos`.
+    fn line(&self, pos: usize) -> u32 {
+        u32::try_from(self.0.partition_point(|&s| s <= pos)).unwrap_or(u32::MAX)
+    }
 }
 
 impl Reader<'_> {
@@ -178,42 +197,53 @@ impl Reader<'_> {
             reason: format!("malformed XML: {e}"),
         })?;
         let file: Rc<str> = file.into();
+        let lines = Lines::new(xml);
         let root = doc.root_element();
         let mut children = Vec::new();
-        self.convert_children(&doc, root, &file, depth, &mut children)?;
+        self.convert_children(&lines, root, &file, depth, &mut children)?;
         Ok(El {
             tag: root.tag_name().name().to_string(),
-            attrs: attrs_of(&doc, root),
+            attrs: attrs_of(&lines, root),
             children,
-            line: doc.text_pos_at(root.range().start).row,
+            line: lines.line(root.range().start),
             file,
         })
     }
 
     fn convert_children(
         &mut self,
-        doc: &roxmltree::Document,
+        lines: &Lines,
         node: roxmltree::Node,
         file: &Rc<str>,
         depth: usize,
         out: &mut Vec<El>,
     ) -> Result<()> {
+        self.level += 1;
         for c in node.children().filter(|c| c.is_element()) {
-            let line = doc.text_pos_at(c.range().start).row;
+            let line = lines.line(c.range().start);
+            if self.level > MAX_NESTING {
+                return Err(model_err(
+                    file,
+                    line,
+                    &format!("<{}>", c.tag_name().name()),
+                    format!("elements nested more than {MAX_NESTING} deep"),
+                ));
+            }
             if c.tag_name().name() == "include" {
                 self.include(c, file, line, depth, out)?;
                 continue;
             }
             let mut children = Vec::new();
-            self.convert_children(doc, c, file, depth, &mut children)?;
+            self.convert_children(lines, c, file, depth, &mut children)?;
             out.push(El {
                 tag: c.tag_name().name().to_string(),
-                attrs: attrs_of(doc, c),
+                attrs: attrs_of(lines, c),
                 children,
                 file: file.clone(),
                 line,
             });
         }
+        self.level -= 1;
         Ok(())
     }
 
@@ -263,12 +293,12 @@ impl Reader<'_> {
     }
 }
 
-fn attrs_of(doc: &roxmltree::Document, node: roxmltree::Node) -> Vec<Attr> {
+fn attrs_of(lines: &Lines, node: roxmltree::Node) -> Vec<Attr> {
     node.attributes()
         .map(|a| Attr {
             name: a.name().to_string(),
             value: a.value().to_string(),
-            line: doc.text_pos_at(a.range().start).row,
+            line: lines.line(a.range().start),
         })
         .collect()
 }
@@ -280,7 +310,7 @@ fn load(
     canon: Option<PathBuf>,
     opts: &MjcfOptions,
 ) -> Result<Model> {
-    let mut reader = Reader { base_dir, stack: canon.into_iter().collect() };
+    let mut reader = Reader { base_dir, stack: canon.into_iter().collect(), level: 0 };
     let root = reader.parse(xml, file, 0)?;
     if root.tag != "mujoco" {
         return Err(model_err(
@@ -797,7 +827,7 @@ impl Loader {
         // Read the tree.
         let root_class = self.root_class.clone();
         for wb in root.elems("worldbody") {
-            self.children(wb, None, Transform::identity(), &root_class)?;
+            self.tree(wb, &root_class)?;
         }
         self.mass_rules()?;
 
@@ -989,59 +1019,43 @@ impl Loader {
         Ok(model)
     }
 
-    /// Reads the children of `<worldbody>`, a `<body>` or a `<frame>` of body `parent`, placed
-    /// at `frame` in that body's frame.
-    fn children(
-        &mut self,
-        el: &El,
-        parent: Option<usize>,
-        frame: Transform,
-        childclass: &str,
-    ) -> Result<()> {
-        for c in &el.children {
-            match c.tag.as_str() {
-                "body" => self.body(c, parent, &frame, childclass)?,
-                "frame" => {
-                    let cc =
-                        c.attr("childclass").map_or(childclass, |a| a.value.as_str()).to_string();
-                    if !self.classes.contains_key(&cc) {
-                        return Err(err_at(
-                            c,
-                            "<frame>",
-                            format!("unknown default class \"{cc}\""),
-                        ));
-                    }
-                    let q = self.orientation(c, None, "<frame>")?;
-                    let p = self.vec3(c, &Class::default(), "pos", "<frame>")?.unwrap_or_default();
-                    let f = frame.compose(&unit_transform(&q, p));
-                    if c.elems("joint").next().is_some() || c.elems("freejoint").next().is_some() {
-                        return Err(err_at(c, "<frame>", "a <frame> cannot hold joints"));
-                    }
-                    self.children(c, parent, f, &cc)?;
+    /// Reads the bodies of a `<worldbody>` depth-first in document order (MuJoCo's order),
+    /// with an explicit stack: a chain of [`MAX_URDF_DOFS`] nested bodies does not recurse.
+    fn tree<'e>(&mut self, worldbody: &'e El, childclass: &str) -> Result<()> {
+        let mut stack: Vec<Item<'e>> = Vec::new();
+        push_children(&mut stack, worldbody, None, Transform::identity(), childclass)?;
+        while let Some(item) = stack.pop() {
+            let Item { el, parent, frame, class } = item;
+            if el.tag == "body" {
+                let (index, cc) = self.body(el, parent, &frame, &class)?;
+                push_children(&mut stack, el, Some(index), Transform::identity(), &cc)?;
+            } else {
+                let cc = el.attr("childclass").map_or(class.as_str(), |a| a.value.as_str());
+                if !self.classes.contains_key(cc) {
+                    return Err(err_at(el, "<frame>", format!("unknown default class \"{cc}\"")));
                 }
-                "composite" | "flexcomp" | "replicate" | "attach" | "plugin" | "flex" => {
-                    return Err(err_at(
-                        c,
-                        &format!("<{}>", c.tag),
-                        format!(
-                            "<{}> is not supported (it adds bodies or degrees of freedom)",
-                            c.tag
-                        ),
-                    ));
+                let q = self.orientation(el, None, "<frame>")?;
+                let p = self.vec3(el, &Class::default(), "pos", "<frame>")?.unwrap_or_default();
+                let f = frame.compose(&unit_transform(&q, p));
+                if el.elems("joint").next().is_some() || el.elems("freejoint").next().is_some() {
+                    return Err(err_at(el, "<frame>", "a <frame> cannot hold joints"));
                 }
-                _ => {}
+                let cc = cc.to_string();
+                push_children(&mut stack, el, parent, f, &cc)?;
             }
         }
         Ok(())
     }
 
+    /// Reads a `<body>` (not its child bodies) placed at `frame` in body `parent`; returns its
+    /// index and the class of its children.
     fn body(
         &mut self,
         el: &El,
         parent: Option<usize>,
         frame: &Transform,
         childclass: &str,
-    ) -> Result<()> {
+    ) -> Result<(usize, String)> {
         let name = el.attr("name").map(|a| a.value.clone());
         let belem = match &name {
             Some(n) => format!("body \"{n}\""),
@@ -1099,7 +1113,7 @@ impl Loader {
             inertia,
             sites,
         });
-        self.children(el, Some(index), Transform::identity(), &cc)
+        Ok((index, cc))
     }
 
     fn moving(&self, mut b: usize) -> bool {
@@ -1538,6 +1552,41 @@ impl Loader {
         }
         Ok(())
     }
+}
+
+/// A `<body>` or `<frame>` to read, with its parent body, the placement of its parent element
+/// in that body, and the class it inherits.
+struct Item<'e> {
+    el: &'e El,
+    parent: Option<usize>,
+    frame: Transform,
+    class: String,
+}
+
+/// Pushes the `<body>` and `<frame>` children of `el` onto `stack`, the first one on top; an
+/// element that would add bodies sodyn cannot read is an error.
+fn push_children<'e>(
+    stack: &mut Vec<Item<'e>>,
+    el: &'e El,
+    parent: Option<usize>,
+    frame: Transform,
+    class: &str,
+) -> Result<()> {
+    for c in &el.children {
+        if let "composite" | "flexcomp" | "replicate" | "attach" | "plugin" | "flex" =
+            c.tag.as_str()
+        {
+            return Err(err_at(
+                c,
+                &format!("<{}>", c.tag),
+                format!("<{}> is not supported (it adds bodies or degrees of freedom)", c.tag),
+            ));
+        }
+    }
+    for c in el.children.iter().rev().filter(|c| c.tag == "body" || c.tag == "frame") {
+        stack.push(Item { el: c, parent, frame, class: class.to_string() });
+    }
+    Ok(())
 }
 
 const ORIENT: [&str; 5] = ["quat", "axisangle", "euler", "xyaxes", "zaxis"];
