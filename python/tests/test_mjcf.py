@@ -1,8 +1,8 @@
 """MJCF loading against MuJoCo (the ``mujoco`` wheel from PyPI) as the oracle.
 
 Models: the test models of ``tests/data/mjcf`` (every feature of the loader), the models shipped
-in the ``mujoco`` wheel (``mujoco/testdata``) and ``dm_control``'s suite (``.ci/run`` installs
-both from python/tests/requirements.txt); a corpus model that sodyn refuses must be refused for
+in the ``mujoco`` wheel (``mujoco/testdata``), ``dm_control``'s suite and ``gymnasium``'s MuJoCo
+environments (``.ci/run`` installs them from python/tests/requirements.txt); a corpus model that sodyn refuses must be refused for
 the reason listed in ``CORPUS_REFUSED``, and every other one must match.
 
 Coordinates (docs/conventions.md, section MJCF): joints and dofs are in MuJoCo's order. A ball
@@ -39,6 +39,14 @@ try:
     HAVE_DM_CONTROL = True
 except ImportError:  # pragma: no cover - CI installs dm_control
     HAVE_DM_CONTROL = False
+try:
+    import gymnasium
+
+    CORPUS.update({f"gymnasium/{p.stem}": p for p in sorted(
+        (Path(gymnasium.__file__).parent / "envs" / "mujoco" / "assets").glob("*.xml"))})
+    HAVE_GYMNASIUM = True
+except ImportError:  # pragma: no cover - CI installs gymnasium
+    HAVE_GYMNASIUM = False
 
 # Corpus models that sodyn refuses, with the reason (the test checks the error message).
 CORPUS_REFUSED = {
@@ -62,6 +70,9 @@ def mj_load(path):
     m.opt.density = 0
     m.opt.viscosity = 0
     m.opt.wind[:] = 0
+    # Recompute the constants derived from the armature: MuJoCo keeps the mass matrix of the
+    # dofs of translation-only trees (gymnasium's pusher) in dof_M0, computed at compile time.
+    mujoco.mj_setConst(m, mujoco.MjData(m))
     return m
 
 
@@ -227,9 +238,10 @@ def test_own_models_match_mujoco(name, record_property):
     print(f"{name}: nq={ours.nq} nv={ours.nv} worst {worst}")
 
 
-def test_dm_control_is_installed():
-    """The corpus includes dm_control's suite: fail rather than skip it silently."""
+def test_corpus_packages_are_installed():
+    """The corpus includes dm_control's and gymnasium's models: fail rather than skip them."""
     assert HAVE_DM_CONTROL, "pip install -r python/tests/requirements.txt (dm_control)"
+    assert HAVE_GYMNASIUM, "pip install -r python/tests/requirements.txt (gymnasium)"
 
 
 @pytest.mark.parametrize("name", sorted(CORPUS))
