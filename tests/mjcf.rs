@@ -344,6 +344,12 @@ fn errors_name_file_line_and_element() {
             "shellinertia",
         ),
         (
+            "<mujoco><worldbody><body name=\"a\"><joint/>\n<geom mesh=\"m\" size=\".1\"/></body></worldbody></mujoco>",
+            1,
+            "body \"a\"",
+            "sphere geom sized from a mesh (line 2)",
+        ),
+        (
             "<mujoco><compiler angle=\"grad\"/></mujoco>",
             1,
             "<compiler>",
@@ -417,4 +423,21 @@ fn deep_nesting_is_bounded() {
     assert!(e.to_string().contains("more than 1024 degrees of freedom"), "{e}");
     let e = load_str(&chain(100_000, "")).unwrap_err();
     assert!(e.to_string().contains("nested more than"), "{e}");
+}
+
+/// A static body's mesh geoms do not matter (its inertia never reaches the dynamics), nor do
+/// massless mesh geoms of a moving one; equality constraints load with a warning.
+#[test]
+fn static_meshes_and_equality_constraints() {
+    let m = load_str(&wrap(
+        r#"<body name="table"><geom type="mesh" mesh="t"/><geom mesh="t"/></body>
+           <body name="a"><joint/><geom size=".1"/><geom type="mesh" mesh="m" density="0"/>
+             <geom type="mesh" mesh="m" mass="0"/></body>"#,
+    ))
+    .unwrap();
+    assert_eq!(m.nv(), 1);
+    assert!(m.warnings().is_empty());
+    let m = Model::from_mjcf(data_dir().join("chains.xml")).unwrap();
+    assert_eq!(m.warnings().len(), 1, "{:?}", m.warnings());
+    assert!(m.warnings()[0].contains("<connect> \"loop\": equality constraint ignored"));
 }

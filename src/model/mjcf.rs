@@ -50,7 +50,8 @@
 //!   a warning in [`Model::warnings`]. Limits (`range` of limited hinge and slide joints) are
 //!   recorded as data.
 //! * Elements that would add bodies or degrees of freedom that sodyn cannot represent
-//!   (`<composite>`, `<flexcomp>`, `<replicate>`, `<attach>`, `<plugin>` in a body) are errors.
+//!   (`<composite>`, `<flexcomp>`, `<replicate>`, `<attach>`) are errors. `<equality>`
+//!   constraints are ignored with a warning (the model is the kinematic tree).
 //!
 //! Every failure is an [`Error::Model`] naming the file (the included file for an element read
 //! from one), the 1-based line, the element and the reason. At most [`MAX_URDF_DOFS`] degrees
@@ -800,6 +801,17 @@ impl Loader {
 
     fn build(&mut self, root: &El, opts: &MjcfOptions) -> Result<Model> {
         let model_name = root.attr("model").map_or("MuJoCo Model".to_string(), |a| a.value.clone());
+        for eq in root.elems("equality") {
+            for c in &eq.children {
+                let name = c.attr("name").map_or(String::new(), |a| format!(" \"{}\"", a.value));
+                self.warn(
+                    &c.file.clone(),
+                    c.line,
+                    &format!("<{}>{name}", c.tag),
+                    "equality constraint ignored (the model is the kinematic tree)",
+                );
+            }
+        }
         // Gravity.
         let empty = Class::default();
         let mut gravity = Vector3::new(0.0, 0.0, -9.81);
@@ -1372,54 +1384,48 @@ impl Loader {
                     "shellinertia=\"true\" is not supported (give the body an <inertial>)",
                 ));
             }
+            // A primitive with a mesh attribute is sized from the mesh (MuJoCo's default type
+            // is sphere also then).
             let has_mesh = self.get(g, class, "mesh").is_some();
-            let ty =
-                self.word(g, class, "type").unwrap_or(if has_mesh { "mesh" } else { "sphere" });
+            let ty = self.word(g, class, "type").unwrap_or("sphere");
             let mass = self.scalar(g, class, "mass", &gelem)?;
             let density = self.scalar(g, class, "density", &gelem)?.unwrap_or(1000.0);
             if mass.is_some_and(|m| m < 0.0) || density < 0.0 {
                 return Err(err_at(g, &gelem, "negative mass or density"));
             }
-            match ty {
-                "sphere" | "capsule" | "ellipsoid" | "cylinder" | "box" => {}
-                "plane" => {
-                    if moving {
-                        return Err(err_at(
-                            g,
-                            &gelem,
-                            "a plane geom is only allowed in a static body (MuJoCo's rule)",
-                        ));
-                    }
-                    continue;
+            let massless = mass == Some(0.0) || (mass.is_none() && density == 0.0);
+            let what = match ty {
+                "sphere" | "capsule" | "ellipsoid" | "cylinder" | "box" if has_mesh => {
+                    format!("{ty} geom sized from a mesh")
                 }
-                "mesh" | "hfield" | "sdf" => {
-                    if mass == Some(0.0) || (mass.is_none() && density == 0.0) {
-                        continue;
-                    }
-                    if !moving && self.comp.settotalmass <= 0.0 {
-                        return Ok(None);
-                    }
+                "sphere" | "capsule" | "ellipsoid" | "cylinder" | "box" => String::new(),
+                "plane" if moving => {
                     return Err(err_at(
-                        body,
-                        belem,
-                        format!(
-                            "the body's inertia would come from a {ty} geom (line {}), which sodyn \
-                             cannot compute: give the body an <inertial> element",
-                            g.line
-                        ),
+                        g,
+                        &gelem,
+                        "a plane geom is only allowed in a static body (MuJoCo's rule)",
                     ));
                 }
+                "plane" => continue,
+                "mesh" | "hfield" | "sdf" => format!("{ty} geom"),
                 other => {
                     return Err(err_at(g, &gelem, format!("unknown geom type \"{other}\"")));
                 }
-            }
-            if has_mesh {
+            };
+            if !what.is_empty() {
+                if massless {
+                    continue;
+                }
+                // A static body's inertia only matters for settotalmass.
+                if !moving && self.comp.settotalmass <= 0.0 {
+                    return Ok(None);
+                }
                 return Err(err_at(
                     body,
                     belem,
                     format!(
-                        "the body's inertia would come from a {ty} geom sized from a mesh (line {}), \
-                         which sodyn cannot compute: give the body an <inertial> element",
+                        "the body's inertia would come from a {what} (line {}), which sodyn \
+                         cannot compute: give the body an <inertial> element",
                         g.line
                     ),
                 ));
@@ -1573,9 +1579,7 @@ fn push_children<'e>(
     class: &str,
 ) -> Result<()> {
     for c in &el.children {
-        if let "composite" | "flexcomp" | "replicate" | "attach" | "plugin" | "flex" =
-            c.tag.as_str()
-        {
+        if let "composite" | "flexcomp" | "replicate" | "attach" | "flex" = c.tag.as_str() {
             return Err(err_at(
                 c,
                 &format!("<{}>", c.tag),
