@@ -39,8 +39,10 @@
 //! * Inertias follow MuJoCo: `<inertial>` if the body has one (with `inertiafromgeom="auto"`,
 //!   the default), otherwise the sum of its geoms' (`sphere`, `capsule`, `ellipsoid`,
 //!   `cylinder`, `box`; `mass` or `density` (default 1000); `fromto`; geoms outside
-//!   `inertiagrouprange` are left out). A mesh, height field or SDF geom that would
-//!   contribute is an error naming the body (give it an `<inertial>`). Then `boundmass`, `boundinertia`, `balanceinertia`, and `settotalmass`. A
+//!   `inertiagrouprange` are left out). A mesh, height field or SDF geom (or a primitive
+//!   sized from a mesh) that would contribute to a moving body's inertia is an error naming
+//!   the body (give it an `<inertial>`); in a static body it does not matter. Then
+//!   `boundmass`, `boundinertia`, `balanceinertia`, and `settotalmass`. A
 //!   moving body (one with joints) must have positive mass and principal moments (MuJoCo's
 //!   rule); negative masses, densities or sizes, a non-physical `<inertial>`, and a plane in a
 //!   moving body are errors.
