@@ -379,6 +379,10 @@ fn include_errors_name_the_included_file() {
     assert!(e.contains("b.xml:3") && e.contains("include cycle"), "{e}");
     let e = Model::from_mjcf(dir.join("main.xml")).unwrap_err().to_string();
     assert!(e.contains("c.xml:3") && e.contains("unknown joint type \"spiral\""), "{e}");
+    // Only regular files are included (not a directory, /dev/zero or a FIFO).
+    std::fs::write(dir.join("d.xml"), "<mujoco>\n<include file=\".\"/>\n</mujoco>").unwrap();
+    let e = Model::from_mjcf(dir.join("d.xml")).unwrap_err().to_string();
+    assert!(e.contains("d.xml:2") && e.contains("is not a regular file"), "{e}");
     let e = Model::from_mjcf(dir.join("missing.xml")).unwrap_err().to_string();
     assert!(e.contains("missing.xml") && e.contains("cannot read the file"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();

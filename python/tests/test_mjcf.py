@@ -56,6 +56,13 @@ CORPUS_REFUSED = {
 }
 
 
+@pytest.fixture(autouse=True)
+def _in_tmp_dir(tmp_path, monkeypatch):
+    """MuJoCo appends its warnings (e.g. that settotalmass is deprecated) to MUJOCO_LOG.TXT in
+    the working directory: keep them out of the repository."""
+    monkeypatch.chdir(tmp_path)
+
+
 def mj_load(path):
     m = mujoco.MjModel.from_xml_path(str(path))
     dis = mujoco.mjtDisableBit

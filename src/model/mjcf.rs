@@ -82,6 +82,9 @@ pub struct MjcfOptions {
 /// Nesting limit of `<include>` (an include cycle is reported before it).
 const MAX_INCLUDE_DEPTH: usize = 32;
 
+/// Size limit of an included file (bytes).
+const MAX_INCLUDE_BYTES: u64 = 256 << 20;
+
 /// Nesting limit of elements (bodies in bodies): the loader is recursive, and a chain of
 /// [`MAX_URDF_DOFS`] bodies with a joint each needs a little more than that.
 const MAX_NESTING: usize = MAX_URDF_DOFS + 100;
@@ -271,6 +274,31 @@ impl Reader<'_> {
             ));
         }
         let path = self.base_dir.join(name);
+        // Only regular files of a bounded size (not /dev/zero, a FIFO or a directory).
+        match std::fs::metadata(&path) {
+            Ok(md) if !md.is_file() => {
+                return Err(model_err(
+                    file,
+                    line,
+                    &element,
+                    format!("the included path {} is not a regular file", path.display()),
+                ));
+            }
+            Ok(md) if md.len() > MAX_INCLUDE_BYTES => {
+                return Err(model_err(
+                    file,
+                    line,
+                    &element,
+                    format!(
+                        "the included file {} has {} bytes, more than the loader's limit of {}",
+                        path.display(),
+                        md.len(),
+                        MAX_INCLUDE_BYTES
+                    ),
+                ));
+            }
+            _ => {}
+        }
         let xml = std::fs::read_to_string(&path).map_err(|e| {
             model_err(
                 file,
