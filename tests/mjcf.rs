@@ -256,7 +256,8 @@ fn errors_name_file_line_and_element() {
             "<mujoco><worldbody>\n<body name=\"a\"><joint/><geom size=\".1\"/>\n<body name=\"b\"><freejoint name=\"f\"/><geom size=\".1\"/></body></body></worldbody></mujoco>",
             3,
             "joint \"f\"",
-            "a free joint must be the only joint of a body in <worldbody>",
+            "a free joint must be the only joint of a body directly in <worldbody>; body \"b\" is \
+             nested in another body",
         ),
         (
             "<mujoco><worldbody>\n<body name=\"a\"><joint class=\"nope\"/><geom size=\".1\"/></body></worldbody></mujoco>",
@@ -425,6 +426,10 @@ fn deep_nesting_is_bounded() {
     assert_eq!(m.nv(), sodyn::model::MAX_URDF_DOFS);
     let e = load_str(&chain(sodyn::model::MAX_URDF_DOFS + 1, "<joint/>")).unwrap_err();
     assert!(e.to_string().contains("more than 1024 degrees of freedom"), "{e}");
+    // Free bodies count too.
+    let free = wrap(&"<body><freejoint/><geom size=\"0.1\"/></body>".repeat(171));
+    let e = load_str(&free).unwrap_err();
+    assert!(e.to_string().contains("1026 up to this joint"), "{e}");
     let e = load_str(&chain(100_000, "")).unwrap_err();
     assert!(e.to_string().contains("nested more than"), "{e}");
 }

@@ -968,18 +968,32 @@ impl Loader {
                     Error::Build(s) => model_err(&j.file, j.line, &jelem, s),
                     other => other,
                 };
+                let limit = |nv: usize| {
+                    if nv > MAX_URDF_DOFS {
+                        return Err(jerr(format!(
+                            "the model has more than {MAX_URDF_DOFS} degrees of freedom (the \
+                             loader's limit, MAX_URDF_DOFS): {nv} up to this joint"
+                        )));
+                    }
+                    Ok(())
+                };
                 if j.kind == JKind::Free {
                     if body.parent.is_some() || body.joints.len() > 1 {
                         return Err(jerr(format!(
-                            "a free joint must be the only joint of a body in <worldbody> (its \
-                             body {belem} {})",
-                            if body.parent.is_some() { "is not" } else { "has other joints" }
+                            "a free joint must be the only joint of a body directly in \
+                             <worldbody>; {belem} {}",
+                            if body.parent.is_some() {
+                                "is nested in another body"
+                            } else {
+                                "has other joints"
+                            }
                         )));
                     }
+                    nv += 6;
+                    limit(nv)?;
                     let id = b
                         .add_joint(0, &name, JointType::FreeFlyer, Transform::identity())
                         .map_err(jwrap)?;
-                    nv += 6;
                     cur = (id, Transform::identity());
                     continue;
                 }
@@ -1014,12 +1028,7 @@ impl Loader {
                 let placement = if k == 0 { cur.1.compose(&off) } else { off };
                 let parent = cur.0;
                 nv += kind.nv();
-                if nv > MAX_URDF_DOFS {
-                    return Err(jerr(format!(
-                        "the model has more than {MAX_URDF_DOFS} degrees of freedom (the loader's \
-                         limit, MAX_URDF_DOFS): {nv} up to this joint"
-                    )));
-                }
+                limit(nv)?;
                 let id = b.add_joint(parent, &name, kind, placement).map_err(jwrap)?;
                 if let Some((lo, hi)) = j.range {
                     b.set_limits(id, &[lo], &[hi]).map_err(jwrap)?;
