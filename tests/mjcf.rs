@@ -447,6 +447,13 @@ fn static_meshes_and_equality_constraints() {
     assert_eq!(m.nv(), 1);
     assert!(m.warnings().is_empty());
     let m = Model::from_mjcf(data_dir().join("chains.xml")).unwrap();
+    // The world's sites are frames on the world.
+    let f = &m.frames()[m.frame_id("world_frame_site").unwrap()];
+    assert_eq!(f.joint, 0);
+    // euler="0 0 30" with eulerseq="XzY": 30° about y.
+    let (s, c) = 30f64.to_radians().sin_cos();
+    let x = Vector3::new(0.5 * c, 0.0, 1.0 - 0.5 * s);
+    assert!((f.placement.trans - x).norm() < 1e-15);
     assert_eq!(m.warnings().len(), 1, "{:?}", m.warnings());
     assert!(m.warnings()[0].contains("<connect> \"loop\": equality constraint ignored"));
 }

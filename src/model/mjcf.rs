@@ -412,9 +412,12 @@ struct Body {
     joints: Vec<Jnt>,
     /// Inertia in the body frame (`None`: unknown, a static body with a mesh geom).
     inertia: Option<Inertia>,
-    /// Named sites: (name, pose in the body frame, line).
-    sites: Vec<(String, Transform, u32)>,
+    /// Named sites, posed in the body frame.
+    sites: Vec<Site>,
 }
+
+/// A named site: name, pose (in its body's frame), line and file.
+type Site = (String, Transform, u32, Rc<str>);
 
 #[derive(Clone, Copy, PartialEq)]
 enum JKind {
@@ -1047,16 +1050,32 @@ impl Loader {
             }
             at.push(cur);
         }
-        // Sites (after every body, so that a site named like a body is the one skipped).
-        for (i, body) in self.bodies.iter().enumerate() {
-            for (name, pose, line) in &body.sites {
-                let (j, place) = at[i];
-                if b.add_frame(name, j, place.compose(pose)).is_err() {
-                    self.warnings.push(format!(
-                        "{}:{line}: site \"{name}\": a frame of this name exists (a body's): the site is not a frame",
-                        body.file
-                    ));
-                }
+        // Sites (after every body, so that a site named like a body is the one skipped): the
+        // world's, then the bodies'.
+        let mut world_sites = Vec::new();
+        for wb in root.elems("worldbody") {
+            self.collect(
+                wb,
+                Transform::identity(),
+                &root_class,
+                &mut Vec::new(),
+                &mut world_sites,
+            )?;
+        }
+        let world_sites = world_sites.into_iter().map(|(n, p, l, f)| (n, (0, p), l, f));
+        let body_sites = self.bodies.iter().enumerate().flat_map(|(i, body)| {
+            let (j, place) = at[i];
+            body.sites
+                .iter()
+                .map(move |(n, p, l, f)| (n.clone(), (j, place.compose(p)), *l, f.clone()))
+        });
+        let sites: Vec<_> = world_sites.chain(body_sites).collect();
+        for (name, (j, place), line, file) in sites {
+            if b.add_frame(&name, j, place).is_err() {
+                self.warnings.push(format!(
+                    "{file}:{line}: site \"{name}\": a frame of this name exists (a body's): the \
+                     site is not a frame"
+                ));
             }
         }
         let mut model = b.build_unchecked();
@@ -1187,7 +1206,7 @@ impl Loader {
         frame: Transform,
         cc: &str,
         geoms: &mut Vec<(&'e El, Transform, String)>,
-        sites: &mut Vec<(String, Transform, u32)>,
+        sites: &mut Vec<Site>,
     ) -> Result<()> {
         for c in &el.children {
             match c.tag.as_str() {
@@ -1197,7 +1216,7 @@ impl Loader {
                         let selem = format!("site \"{}\"", n.value);
                         let class = self.class_of(c, cc, &selem)?;
                         let (pose, _) = self.pose(c, class, &selem)?;
-                        sites.push((n.value.clone(), frame.compose(&pose), c.line));
+                        sites.push((n.value.clone(), frame.compose(&pose), c.line, c.file.clone()));
                     }
                 }
                 "frame" => {
