@@ -682,7 +682,8 @@ impl Loader {
                 el,
                 element,
                 format!(
-                    "several orientations given ({}); give one of quat, axisangle, euler, xyaxes, zaxis",
+                    "several orientations given ({}); give one of quat, axisangle, euler, \
+                     xyaxes, zaxis",
                     own.iter().map(|a| a.name.as_str()).collect::<Vec<_>>().join(", ")
                 ),
             ));
@@ -899,7 +900,8 @@ impl Loader {
                     &body.file,
                     body.line,
                     &body_elem(body),
-                    "the floating-base option adds a free joint to this body, which has joints of its own",
+                    "the floating-base option adds a free joint to this body, which has joints \
+                     of its own",
                 ));
             }
         }
@@ -1142,7 +1144,11 @@ impl Loader {
         if let Some(g) = self.scalar(el, &empty, "gravcomp", &belem)?
             && g != 0.0
         {
-            self.warn(&el.file.clone(), el.line, &belem, format!("gravcomp=\"{g}\" ignored (gravity compensation is not part of the rigid-body dynamics)"));
+            let reason = format!(
+                "gravcomp=\"{g}\" ignored (gravity compensation is not part of the rigid-body \
+                 dynamics)"
+            );
+            self.warn(&el.file.clone(), el.line, &belem, reason);
         }
 
         // Joints, in document order.
