@@ -3,8 +3,8 @@
 //! Rigid-body dynamics and its exact first- and second-order derivatives, following the notes
 //! "Details of Partial Derivatives of Rigid-Body Inverse Dynamics" (Singh, Russell, Wensing).
 //!
-//! Layout: [`spatial`] (spatial vector algebra), [`model`] (joints, kinematic trees, URDF,
-//! built-in robots), [`algo`] (kinematics, RNEA, CRBA, ABA, LTLᵀ, Jacobians), [`reference`](mod@reference)
+//! Layout: [`spatial`] (spatial vector algebra), [`model`] (joints, kinematic trees, URDF and
+//! MJCF loading, built-in robots), [`algo`] (kinematics, RNEA, CRBA, ABA, LTLᵀ, Jacobians), [`reference`](mod@reference)
 //! (scalar-generic algorithms used as the automatic-differentiation oracle).
 //! Conventions are in `docs/conventions.md`.
 #![deny(missing_docs)]

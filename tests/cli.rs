@@ -904,3 +904,39 @@ fn eval_writes_frames_com_and_centroidal() {
     let e = assert_clean_failure(&o, "unknown frame");
     assert!(e.contains("frames[0]") && e.contains("no_such_link"), "{e}");
 }
+
+/// `--model file.xml` loads MJCF: `info` prints MuJoCo's joints in order, the loader's warning
+/// goes to standard error, `eval` runs, and MJCF errors exit cleanly naming the file and line.
+#[test]
+fn mjcf_models_load_by_extension() {
+    let xml = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/mjcf/features.xml");
+    let o = sodyn(&["info", "--model", xml]);
+    assert_ok(&o, "info on an MJCF file");
+    let out = stdout(&o);
+    assert!(out.starts_with("model \"features\": nq = 22, nv = 20, 13 joints"), "{out}");
+    assert!(out.contains("root") && out.contains("free_flyer") && out.contains("neck"), "{out}");
+    assert!(stderr(&o).contains("sodyn: warning:") && stderr(&o).contains("armature"));
+    let s = tmp("mjcf-state.json");
+    let s = s.to_str().unwrap();
+    assert_ok(&sodyn(&["random-state", "--model", xml, "--seed", "2", "-o", s]), "random-state");
+    let o = sodyn(&["eval", "--model", xml, "--state", s]);
+    assert_ok(&o, "eval on an MJCF file");
+    let v: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(vector(&v, "tau", 20).len(), 20);
+    // --floating-base on the only body of radian.xml.
+    let radian = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/mjcf/radian.xml");
+    let o = sodyn(&["info", "--model", radian, "--floating-base"]);
+    assert_ok(&o, "info --floating-base on MJCF");
+    assert!(stdout(&o).contains("root_joint"));
+    let o = sodyn(&["info", "--model", radian, "--strict-inertia"]);
+    let err = assert_clean_failure(&o, "--strict-inertia on MJCF");
+    assert!(err.contains("--strict-inertia applies to URDF files"), "{err}");
+    let bad = tmp("bad.xml");
+    std::fs::write(
+        &bad,
+        "<mujoco>\n<worldbody>\n<body><joint type=\"x\"/></body>\n</worldbody>\n</mujoco>",
+    )
+    .unwrap();
+    let err = assert_clean_failure(&sodyn(&["info", "--model", bad.to_str().unwrap()]), "bad MJCF");
+    assert!(err.contains("bad.xml:3") && err.contains("unknown joint type \"x\""), "{err}");
+}

@@ -45,6 +45,32 @@ fn urdf_reproducers_and_seeds() {
 }
 
 #[test]
+fn mjcf_reproducers_and_seeds() {
+    replay("mjcf", |b| {
+        checks::mjcf(b);
+    });
+    // The seeds are the test models, which load.
+    for f in files(&Path::new(ROOT).join("fuzz/corpus/mjcf")) {
+        if f.file_name().unwrap().to_string_lossy().starts_with("features") {
+            continue; // it includes features_defaults.xml, not found from the fuzz directory
+        }
+        assert!(checks::mjcf(&std::fs::read(&f).unwrap()) > 0, "seed {}", f.display());
+    }
+}
+
+/// Finding (review of the MJCF loader): `<include>` read any path, and `/dev/zero` never ends.
+/// Only regular files of at most 256 MB are included now.
+#[test]
+fn mjcf_include_of_a_device_is_an_error() {
+    let f = Path::new(ROOT).join("tests/data/fuzz/mjcf/include_dev_zero.xml");
+    let xml = std::fs::read_to_string(f).unwrap();
+    let e = sodyn::model::load_mjcf_str(&xml, "x.xml", Path::new("."), &Default::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("/dev/zero is not a regular file"), "{e}");
+}
+
+#[test]
 fn state_reproducers_and_seeds() {
     replay("state", |b| {
         checks::state(b);

@@ -1,4 +1,4 @@
-//! What the fuzz targets check, in one place: the targets (`urdf.rs`, `state.rs`) call these
+//! What the fuzz targets check, in one place: the targets (`urdf.rs`, `mjcf.rs`, `state.rs`) call these
 //! functions on the fuzzer's bytes, and `tests/fuzz_regressions.rs` includes this file (with
 //! `#[path]`) to replay the reproducers of `tests/data/fuzz/` through the same checks in a
 //! normal `cargo test`. A check fails by panicking; every library call must return `Ok` or
@@ -7,7 +7,9 @@
 use nalgebra::DVector;
 use sodyn::algo::{Data, aba, crba, nonlinear_effects, rnea};
 use sodyn::deriv::{fd_derivatives, id_derivatives};
-use sodyn::model::{MAX_URDF_DOFS, Model, UrdfOptions, builtin, load_urdf_str};
+use sodyn::model::{
+    MAX_URDF_DOFS, MjcfOptions, Model, UrdfOptions, builtin, load_mjcf_str, load_urdf_str,
+};
 use sodyn::rng::Rng;
 use std::sync::OnceLock;
 
@@ -30,6 +32,26 @@ pub fn urdf(bytes: &[u8]) -> usize {
     for floating_base in [false, true] {
         let opts = UrdfOptions { floating_base, strict_inertia: false };
         let Ok(model) = load_urdf_str(&xml, "<fuzz>", &opts) else { continue };
+        loaded += 1;
+        assert!(model.nv() <= MAX_URDF_DOFS, "nv = {} above the loader's limit", model.nv());
+        if model.nv() <= MAX_NV_DYNAMICS {
+            dynamics(&model, seed_of(bytes));
+        }
+    }
+    loaded
+}
+
+/// The `mjcf` target: `bytes` (read as UTF-8, invalid sequences replaced) loaded as MJCF with
+/// and without the floating-base option (`<include>` paths relative to a directory that does
+/// not exist); a model that loads respects [`MAX_URDF_DOFS`] and, if `nv ≤ MAX_NV_DYNAMICS`,
+/// goes through [`dynamics`]. Returns the number of models loaded.
+pub fn mjcf(bytes: &[u8]) -> usize {
+    let xml = String::from_utf8_lossy(bytes);
+    let dir = std::path::Path::new("/nonexistent/sodyn-fuzz");
+    let mut loaded = 0;
+    for floating_base in [false, true] {
+        let opts = MjcfOptions { floating_base };
+        let Ok(model) = load_mjcf_str(&xml, "<fuzz>", dir, &opts) else { continue };
         loaded += 1;
         assert!(model.nv() <= MAX_URDF_DOFS, "nv = {} above the loader's limit", model.nv());
         if model.nv() <= MAX_NV_DYNAMICS {

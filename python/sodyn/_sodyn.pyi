@@ -40,6 +40,22 @@ class Model:
                          strict_inertia: bool = False) -> "Model":
         """Loads a URDF document given as a string (options as ``from_urdf``)."""
     @staticmethod
+    def from_mjcf(path: Union[str, os.PathLike[str]], floating_base: bool = False) -> "Model":
+        """Loads an MJCF (MuJoCo XML) file: ``<worldbody>`` bodies with hinge, slide, ball and
+        free joints (several per body), ``<default>`` classes, ``<include>``, ``<compiler>``
+        (``angle``, ``eulerseq``, ``autolimits``, ``inertiafromgeom``, mass bounds),
+        ``<inertial>`` and inertias from primitive geoms (a mesh geom needs an ``<inertial>``).
+        Joints and coordinates are MuJoCo's, in its order, except that quaternions are
+        ``[x, y, z, w]`` and a free joint's velocity is ``[ω_body, v_body]`` (MuJoCo:
+        ``[v_world, ω_body]``); see docs/conventions.md. A nonzero ``armature`` is ignored with a
+        message in ``warnings``. ``floating_base=True`` adds a free-flyer ``root_joint`` in
+        front of the ``<worldbody>``'s only body."""
+    @staticmethod
+    def from_mjcf_string(xml: str, base_dir: Optional[Union[str, os.PathLike[str]]] = None,
+                         floating_base: bool = False) -> "Model":
+        """Loads an MJCF document given as a string; ``<include>`` paths are relative to
+        ``base_dir`` (default: the current directory)."""
+    @staticmethod
     def builtin(name: str) -> "Model": ...
     @staticmethod
     def builtin_names() -> list[str]: ...
@@ -53,7 +69,7 @@ class Model:
     def njoints(self) -> int: ...
     @property
     def warnings(self) -> list[str]:
-        """What the URDF loader accepted with a reservation, one ``"FILE:LINE: ELEMENT:
+        """What the URDF or MJCF loader accepted with a reservation, one ``"FILE:LINE: ELEMENT:
         REASON"`` string each: a non-physical but harmless link inertia, a ``<mimic>`` naming an
         unknown joint (see docs/conventions.md). Empty for built-in models; nothing is printed."""
     @property

@@ -28,7 +28,7 @@ use sodyn::deriv::{
     fd_so_derivatives, id_derivatives, id_so_derivatives, impact_derivatives,
     impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
 };
-use sodyn::model::{JointType, Model, ModelBuilder, UrdfOptions, builtin};
+use sodyn::model::{JointType, MjcfOptions, Model, ModelBuilder, UrdfOptions, builtin};
 use sodyn::rng::Rng;
 use sodyn::spatial::{Force, Inertia, Transform};
 use sodyn::tensor::Tensor3;
@@ -452,6 +452,34 @@ impl PyModel {
     fn from_urdf_string(xml: &str, floating_base: bool, strict_inertia: bool) -> PyResult<Self> {
         let opts = UrdfOptions { floating_base, strict_inertia };
         let m = sodyn::model::load_urdf_str(xml, "<string>", &opts).map_err(core_err)?;
+        Ok(Self { m })
+    }
+
+    /// Loads an MJCF (MuJoCo XML) file: bodies, hinge/slide/ball/free joints, default classes,
+    /// `<include>`, `<compiler>` settings, `<inertial>` and inertias from primitive geoms (see
+    /// docs/conventions.md, section MJCF, for the mapping of MuJoCo's coordinates).
+    /// `floating_base=True` adds a free-flyer root joint `root_joint` in front of the
+    /// `<worldbody>`'s only body (an MJCF `<freejoint>` needs no option).
+    #[staticmethod]
+    #[pyo3(signature = (path, floating_base = false))]
+    fn from_mjcf(py: Python<'_>, path: std::path::PathBuf, floating_base: bool) -> PyResult<Self> {
+        let opts = MjcfOptions { floating_base };
+        let m = py.detach(|| sodyn::model::load_mjcf_file(&path, &opts)).map_err(core_err)?;
+        Ok(Self { m })
+    }
+
+    /// Loads an MJCF document given as a string; `<include>` paths are relative to `base_dir`
+    /// (the current directory by default).
+    #[staticmethod]
+    #[pyo3(signature = (xml, base_dir = None, floating_base = false))]
+    fn from_mjcf_string(
+        xml: &str,
+        base_dir: Option<std::path::PathBuf>,
+        floating_base: bool,
+    ) -> PyResult<Self> {
+        let opts = MjcfOptions { floating_base };
+        let dir = base_dir.unwrap_or_default();
+        let m = sodyn::model::load_mjcf_str(xml, "<string>", &dir, &opts).map_err(core_err)?;
         Ok(Self { m })
     }
 

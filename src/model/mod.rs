@@ -1,15 +1,17 @@
-//! Kinematic trees: joints, the Model/builder, URDF loading and built-in robots.
+//! Kinematic trees: joints, the Model/builder, URDF and MJCF loading and built-in robots.
 
 pub mod builtin;
 mod contact;
 pub mod joint;
 pub mod lie;
+pub mod mjcf;
 pub mod tree;
 pub mod urdf;
 
 pub use contact::Contact;
 pub use joint::JointType;
 pub use lie::{Arg, exp6, jlog6, log6};
+pub use mjcf::{MjcfOptions, load_mjcf_file, load_mjcf_str};
 pub(crate) use tree::JointKin;
 pub use tree::{Frame, Model, ModelBuilder, check_vec};
 pub use urdf::{MAX_URDF_DOFS, ROOT_JOINT_NAME, UrdfOptions, load_urdf_file, load_urdf_str};

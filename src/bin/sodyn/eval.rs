@@ -129,8 +129,8 @@ fn read_vec(
 /// Parses a state JSON object (`q`, `v`, `a`, `tau`; missing `q` is the neutral configuration,
 /// other missing keys are zeros). Checks lengths and the configuration.
 ///
-/// `floating_base` is `Some(--floating-base)` for a model loaded from a URDF, `None` for a
-/// built-in one: a `q` whose length is that of the same URDF with the other base (`nq ± 7`, a
+/// `floating_base` is `Some(--floating-base)` for a model loaded from a file, `None` for a
+/// built-in one: a `q` whose length is that of the same file with the other base (`nq ± 7`, a
 /// free-flyer root added or not) is reported with a hint at `--floating-base`.
 pub fn load_state(
     model: &Model,
@@ -148,10 +148,10 @@ pub fn load_state(
     let q = read_vec(obj, "q", nq, file)
         .map_err(|e| match (q_len, floating_base) {
             (Some(n), Some(false)) if n == nq + 7 => Error::Io(format!(
-                "{e} ({n} is nq of this URDF with a free-flyer root: add --floating-base)"
+                "{e} ({n} is nq of this model file with a free-flyer root: add --floating-base)"
             )),
             (Some(n), Some(true)) if n + 7 == nq => Error::Io(format!(
-                "{e} ({n} is nq of this URDF without the free-flyer root: leave out \
+                "{e} ({n} is nq of this model file without the free-flyer root: leave out \
                  --floating-base)"
             )),
             _ => e,

@@ -14,16 +14,16 @@ mod eval;
 use clap::{Args, CommandFactory, Parser, Subcommand};
 use serde_json::Value;
 use sodyn::error::{Error, Result};
-use sodyn::model::{Model, UrdfOptions};
+use sodyn::model::{MjcfOptions, Model, UrdfOptions};
 use std::path::Path;
 use std::process::ExitCode;
 
 /// Shown under every command's `--help`.
 const AFTER_HELP: &str = "\
-M is a URDF path or builtin:NAME (humanoid, quadruped, chain<N>, pendulum<N>,
-random_tree<N>[_ff][_s<SEED>]). Exit status: 0 on success, 1 on an error (the message on
-standard error), 2 on a usage error, 3 when eval left out undefined outputs (its \"errors\"
-object names them). README.md has the JSON schemas.";
+M is a URDF path, an MJCF (MuJoCo XML) path ending in .xml, or builtin:NAME (humanoid,
+quadruped, chain<N>, pendulum<N>, random_tree<N>[_ff][_s<SEED>]). Exit status: 0 on success,
+1 on an error (the message on standard error), 2 on a usage error, 3 when eval left out
+undefined outputs (its \"errors\" object names them). README.md has the JSON schemas.";
 
 /// sodyn: rigid-body dynamics and its exact first- and second-order derivatives
 #[derive(Debug, Parser)]
@@ -56,10 +56,11 @@ enum Command {
 /// `--model` and `--floating-base`.
 #[derive(Clone, Debug, Args)]
 struct ModelArgs {
-    /// The model: a URDF path or builtin:NAME
+    /// The model: a URDF or MJCF (.xml) path, or builtin:NAME
     #[arg(long, value_name = "M")]
     model: String,
-    /// Add a free-flyer root joint in front of the URDF's root link
+    /// Add a free-flyer root joint in front of the URDF's root link (MJCF: of the worldbody's
+    /// only body)
     #[arg(long)]
     floating_base: bool,
     /// Refuse a URDF link inertia that violates the triangle inequality instead of loading it
@@ -70,7 +71,7 @@ struct ModelArgs {
 
 #[derive(Debug, Args)]
 struct DemoArgs {
-    /// The model: a URDF path or builtin:NAME
+    /// The model: a URDF or MJCF (.xml) file or builtin:NAME
     #[arg(long, value_name = "M", default_value = "builtin:humanoid")]
     model: String,
     /// Seed of the random state
@@ -187,13 +188,14 @@ fn run_eval(o: &EvalArgs) -> Result<Outcome> {
     }
 }
 
-/// Loads a model from `builtin:NAME` or a URDF path.
+/// Loads a model from `builtin:NAME`, an MJCF path (`.xml`) or a URDF path.
 fn load_model(o: &ModelArgs) -> Result<Model> {
     let opts = UrdfOptions { floating_base: o.floating_base, strict_inertia: o.strict_inertia };
     load_model_spec(&o.model, &opts)
 }
 
-/// Loads a model from `spec` (`builtin:NAME` or a URDF path) and prints the loader's warnings
+/// Loads a model from `spec` (`builtin:NAME`, a path ending in `.xml` for MJCF, otherwise a
+/// URDF path) and prints the loader's warnings
 /// ([`Model::warnings`]) on standard error, one `sodyn: warning: ...` line each.
 fn load_model_spec(spec: &str, opts: &UrdfOptions) -> Result<Model> {
     let model = if let Some(name) = spec.strip_prefix("builtin:") {
@@ -204,6 +206,15 @@ fn load_model_spec(spec: &str, opts: &UrdfOptions) -> Result<Model> {
         }
         sodyn::model::builtin::by_name(name)
             .ok_or_else(|| Error::Unknown { kind: "built-in model".into(), name: name.into() })?
+    } else if is_mjcf(spec) {
+        if opts.strict_inertia {
+            return Err(Error::Io(format!(
+                "--strict-inertia applies to URDF files; the MJCF loader refuses every \
+                 non-physical inertia ({spec})"
+            )));
+        }
+        let mo = MjcfOptions { floating_base: opts.floating_base };
+        sodyn::model::mjcf::load_mjcf_file(Path::new(spec), &mo)?
     } else {
         sodyn::model::urdf::load_urdf_file(Path::new(spec), opts)?
     };
@@ -211,6 +222,11 @@ fn load_model_spec(spec: &str, opts: &UrdfOptions) -> Result<Model> {
         eprintln!("sodyn: warning: {w}");
     }
     Ok(model)
+}
+
+/// Whether a model path names an MJCF file (extension `.xml`, any case).
+fn is_mjcf(spec: &str) -> bool {
+    Path::new(spec).extension().is_some_and(|e| e.eq_ignore_ascii_case("xml"))
 }
 
 /// Prints `v` as one line of JSON to `path`, or to standard output.

@@ -1,0 +1,1714 @@
+//! MJCF (MuJoCo XML) loading: the subset of MJCF that defines a kinematic tree and its masses.
+//!
+//! Read (MuJoCo's XML reference is the specification; MuJoCo 4.0 is the oracle of the tests):
+//!
+//! * `<mujoco model>` (the model name; `"MuJoCo Model"` without it), every `<worldbody>`, and
+//!   `<include file>` anywhere (the included file's top-level element is dropped and its
+//!   children take the place of the `<include>`; the path is relative to the directory of the
+//!   main file, or to the `base_dir` given with a string).
+//! * `<compiler>`: `angle` (`degree`, MuJoCo's default, or `radian`), `eulerseq`, `autolimits`,
+//!   `inertiafromgeom` (`true`, `false`, `auto`), `inertiagrouprange`, `boundmass`,
+//!   `boundinertia`, `balanceinertia`, `settotalmass`; `coordinate="global"`
+//!   (removed from MuJoCo in 2.3.3) is an error; `alignfree="true"` is an error (unsupported).
+//! * `<option gravity>` and `<option><flag gravity="disable"/></option>`.
+//! * `<default>` classes, nested, with `class` and `childclass` (on `<body>` and `<frame>`).
+//! * `<body pos quat|axisangle|euler|xyaxes|zaxis>`, `<frame>` (a placement of its children),
+//!   `<inertial pos orientation mass diaginertia|fullinertia>`, `<joint>` of type `hinge`,
+//!   `slide`, `ball` and `free`, `<freejoint>`, `<geom>` (for inertias) and named `<site>`s (as
+//!   frames).
+//!
+//! Conventions (see also `docs/conventions.md`, section MJCF):
+//!
+//! * Joints are numbered in MuJoCo's order (bodies depth-first in document order, the joints
+//!   of a body in document order), so sodyn's velocity coordinates are MuJoCo's `dof`s in the
+//!   same order, and its configuration coordinates MuJoCo's `qpos` in the same order.
+//! * A hinge or slide joint's coordinate is MuJoCo's `qpos` (its `ref` is folded into the
+//!   joint placement). A hinge or ball joint with `pos` rotates about that point: its sodyn
+//!   frame sits at `pos`, and what follows it is placed back by `−pos`. Several joints in one
+//!   body are chained in document order as MuJoCo composes them.
+//! * A ball joint is [`JointType::Spherical`]: MuJoCo's `qpos` `[w x y z]` is sodyn's
+//!   `[x y z w]`; the velocity (angular velocity in the body frame) is the same.
+//! * A free joint is [`JointType::FreeFlyer`] on the world, at the identity: sodyn's
+//!   `q = [p; x y z w]` is MuJoCo's `qpos = [p; w x y z]` reordered; sodyn's `v = [ω; Rᵀṗ]`
+//!   (body frame) where MuJoCo's `qvel = [ṗ; ω]` (world-frame linear velocity first); forces
+//!   map likewise, `τ = [τ_ω; Rᵀ τ_p]`.
+//! * Bodies without a joint are welded to their parent: their inertia is merged into the
+//!   moving body they are welded to, and each named body and named site is a
+//!   [`Frame`](super::Frame). Unnamed joints are named `joint<i>` (`i` is MuJoCo's joint
+//!   index; `_` appended while the name is taken).
+//! * Inertias follow MuJoCo: `<inertial>` if the body has one (with `inertiafromgeom="auto"`,
+//!   the default), otherwise the sum of its geoms' (`sphere`, `capsule`, `ellipsoid`,
+//!   `cylinder`, `box`; `mass` or `density` (default 1000); `fromto`; geoms outside
+//!   `inertiagrouprange` are left out). A mesh, height field or SDF geom (or a primitive
+//!   sized from a mesh) that would contribute to a moving body's inertia is an error naming
+//!   the body (give it an `<inertial>`); in a static body it does not matter. Then
+//!   `boundmass`, `boundinertia`, `balanceinertia`, and `settotalmass`. A
+//!   moving body (one with joints) must have positive mass and principal moments (MuJoCo's
+//!   rule); negative masses, densities or sizes, a non-physical `<inertial>`, and a plane in a
+//!   moving body are errors.
+//! * Joint `damping`, `stiffness`, `frictionloss`, actuators, tendons, contacts, equality
+//!   constraints, sensors and every element irrelevant to the rigid-body dynamics are ignored;
+//!   a nonzero `armature` (not yet in the model) and a nonzero body `gravcomp` are ignored with
+//!   a warning in [`Model::warnings`]. Limits (`range` of limited hinge and slide joints) are
+//!   recorded as data.
+//! * Elements that would add bodies or degrees of freedom that sodyn cannot represent
+//!   (`<composite>`, `<flexcomp>`, `<replicate>`, `<attach>`) are errors. `<equality>`
+//!   constraints are ignored with a warning (the model is the kinematic tree).
+//!
+//! Every failure is an [`Error::Model`] naming the file (the included file for an element read
+//! from one), the 1-based line, the element and the reason. At most [`MAX_URDF_DOFS`] degrees
+//! of freedom, and elements nested at most a hundred levels deeper than that.
+
+use super::joint::JointType;
+use super::tree::{Model, ModelBuilder, inertia_defect};
+use super::urdf::{MAX_URDF_DOFS, ROOT_JOINT_NAME};
+use crate::error::{Error, Result};
+use crate::spatial::{Inertia, Transform};
+use nalgebra::{Matrix3, SymmetricEigen, UnitQuaternion, Vector3};
+use std::collections::{HashMap, HashSet};
+use std::path::{Path, PathBuf};
+use std::rc::Rc;
+
+/// Options of the MJCF loader.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MjcfOptions {
+    /// Add a free-flyer joint named `"root_joint"` in front of the `<worldbody>`'s only body
+    /// (which must have no joint of its own); the body is placed at the joint's frame, as a
+    /// MuJoCo `<freejoint>` would place it. An MJCF `<freejoint>` (or `<joint type="free">`)
+    /// is a free-flyer itself and needs no option.
+    pub floating_base: bool,
+}
+
+/// Nesting limit of `<include>` (an include cycle is reported before it).
+const MAX_INCLUDE_DEPTH: usize = 32;
+
+/// Size limit of an included file (bytes).
+const MAX_INCLUDE_BYTES: u64 = 256 << 20;
+
+/// Nesting limit of elements (bodies in bodies): the loader is recursive, and a chain of
+/// [`MAX_URDF_DOFS`] bodies with a joint each needs a little more than that.
+const MAX_NESTING: usize = MAX_URDF_DOFS + 100;
+
+/// Loads an MJCF file. `<include>` paths are relative to the file's directory.
+pub fn load_mjcf_file(path: &Path, opts: &MjcfOptions) -> Result<Model> {
+    let file = path.display().to_string();
+    let xml = std::fs::read_to_string(path).map_err(|e| Error::Model {
+        file: file.clone(),
+        line: None,
+        element: "file".into(),
+        reason: format!("cannot read the file: {e}"),
+    })?;
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let canon = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
+    load(&xml, &file, &dir, Some(canon), opts)
+}
+
+/// Loads an MJCF document from a string; `source_name` is used as the file name in messages
+/// and `<include>` paths are relative to `base_dir`.
+pub fn load_mjcf_str(
+    xml: &str,
+    source_name: &str,
+    base_dir: &Path,
+    opts: &MjcfOptions,
+) -> Result<Model> {
+    load(xml, source_name, base_dir, None, opts)
+}
+
+impl Model {
+    /// Loads an MJCF (MuJoCo XML) file with the default [`MjcfOptions`]; see the
+    /// [`mjcf`](super::mjcf) module for what is read.
+    ///
+    /// # Errors
+    /// [`Error::Model`] naming the file, line, element and reason.
+    pub fn from_mjcf(path: impl AsRef<Path>) -> Result<Model> {
+        load_mjcf_file(path.as_ref(), &MjcfOptions::default())
+    }
+
+    /// Loads an MJCF document from a string (`<include>` paths relative to `base_dir`; the
+    /// file name in messages is `<string>`), with the default [`MjcfOptions`].
+    ///
+    /// # Errors
+    /// [`Error::Model`] naming the line, element and reason.
+    pub fn from_mjcf_str(xml: &str, base_dir: impl AsRef<Path>) -> Result<Model> {
+        load_mjcf_str(xml, "<string>", base_dir.as_ref(), &MjcfOptions::default())
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// An owned element tree with `<include>` expanded and every position resolved to file:line.
+
+#[derive(Debug)]
+struct Attr {
+    name: String,
+    value: String,
+    line: u32,
+}
+
+#[derive(Debug)]
+struct El {
+    tag: String,
+    attrs: Vec<Attr>,
+    children: Vec<El>,
+    file: Rc<str>,
+    line: u32,
+}
+
+impl El {
+    fn attr(&self, name: &str) -> Option<&Attr> {
+        self.attrs.iter().find(|a| a.name == name)
+    }
+    fn elems<'s>(&'s self, tag: &'s str) -> impl Iterator<Item = &'s El> + 's {
+        self.children.iter().filter(move |c| c.tag == tag)
+    }
+}
+
+fn model_err(file: &str, line: u32, element: &str, reason: impl Into<String>) -> Error {
+    Error::Model {
+        file: file.into(),
+        line: Some(line),
+        element: element.into(),
+        reason: reason.into(),
+    }
+}
+
+struct Reader<'a> {
+    base_dir: &'a Path,
+    /// Canonical paths of the files being included (cycle detection).
+    stack: Vec<PathBuf>,
+    /// Element nesting depth so far (included files' elements count at their `<include>`).
+    level: usize,
+}
+
+/// Byte offsets of the line starts of a text: the line of a position in `O(log n)`
+/// (`roxmltree`'s `text_pos_at` scans the text, which made loading quadratic in its size).
+struct Lines(Vec<usize>);
+
+impl Lines {
+    fn new(text: &str) -> Self {
+        Lines(std::iter::once(0).chain(text.match_indices('\n').map(|(i, _)| i + 1)).collect())
+    }
+    /// The 1-based line of byte position `pos`.
+    fn line(&self, pos: usize) -> u32 {
+        u32::try_from(self.0.partition_point(|&s| s <= pos)).unwrap_or(u32::MAX)
+    }
+}
+
+impl Reader<'_> {
+    /// Parses `xml` (named `file`) into an owned tree, expanding `<include>`.
+    fn parse(&mut self, xml: &str, file: &str, depth: usize) -> Result<El> {
+        let doc = roxmltree::Document::parse(xml).map_err(|e| Error::Model {
+            file: file.into(),
+            line: Some(e.pos().row),
+            element: "XML".into(),
+            reason: format!("malformed XML: {e}"),
+        })?;
+        let file: Rc<str> = file.into();
+        let lines = Lines::new(xml);
+        let root = doc.root_element();
+        let mut children = Vec::new();
+        self.convert_children(&lines, root, &file, depth, &mut children)?;
+        Ok(El {
+            tag: root.tag_name().name().to_string(),
+            attrs: attrs_of(&lines, root),
+            children,
+            line: lines.line(root.range().start),
+            file,
+        })
+    }
+
+    fn convert_children(
+        &mut self,
+        lines: &Lines,
+        node: roxmltree::Node,
+        file: &Rc<str>,
+        depth: usize,
+        out: &mut Vec<El>,
+    ) -> Result<()> {
+        self.level += 1;
+        for c in node.children().filter(|c| c.is_element()) {
+            let line = lines.line(c.range().start);
+            if self.level > MAX_NESTING {
+                return Err(model_err(
+                    file,
+                    line,
+                    &format!("<{}>", c.tag_name().name()),
+                    format!("elements nested more than {MAX_NESTING} deep"),
+                ));
+            }
+            if c.tag_name().name() == "include" {
+                self.include(c, file, line, depth, out)?;
+                continue;
+            }
+            let mut children = Vec::new();
+            self.convert_children(lines, c, file, depth, &mut children)?;
+            out.push(El {
+                tag: c.tag_name().name().to_string(),
+                attrs: attrs_of(lines, c),
+                children,
+                file: file.clone(),
+                line,
+            });
+        }
+        self.level -= 1;
+        Ok(())
+    }
+
+    fn include(
+        &mut self,
+        node: roxmltree::Node,
+        file: &Rc<str>,
+        line: u32,
+        depth: usize,
+        out: &mut Vec<El>,
+    ) -> Result<()> {
+        let Some(name) = node.attribute("file") else {
+            return Err(model_err(file, line, "<include>", "missing file attribute"));
+        };
+        let element = format!("<include file=\"{name}\">");
+        if depth >= MAX_INCLUDE_DEPTH {
+            return Err(model_err(
+                file,
+                line,
+                &element,
+                format!("<include> nested more than {MAX_INCLUDE_DEPTH} deep"),
+            ));
+        }
+        let path = self.base_dir.join(name);
+        // Only regular files of a bounded size (not /dev/zero, a FIFO or a directory).
+        match std::fs::metadata(&path) {
+            Ok(md) if !md.is_file() => {
+                return Err(model_err(
+                    file,
+                    line,
+                    &element,
+                    format!("the included path {} is not a regular file", path.display()),
+                ));
+            }
+            Ok(md) if md.len() > MAX_INCLUDE_BYTES => {
+                return Err(model_err(
+                    file,
+                    line,
+                    &element,
+                    format!(
+                        "the included file {} has {} bytes, more than the loader's limit of {}",
+                        path.display(),
+                        md.len(),
+                        MAX_INCLUDE_BYTES
+                    ),
+                ));
+            }
+            _ => {}
+        }
+        let xml = std::fs::read_to_string(&path).map_err(|e| {
+            model_err(
+                file,
+                line,
+                &element,
+                format!("cannot read the included file {}: {e}", path.display()),
+            )
+        })?;
+        let canon = std::fs::canonicalize(&path).unwrap_or_else(|_| path.clone());
+        if self.stack.contains(&canon) {
+            return Err(model_err(
+                file,
+                line,
+                &element,
+                format!("include cycle: {} includes itself", path.display()),
+            ));
+        }
+        self.stack.push(canon);
+        let root = self.parse(&xml, &path.display().to_string(), depth + 1)?;
+        self.stack.pop();
+        out.extend(root.children);
+        Ok(())
+    }
+}
+
+fn attrs_of(lines: &Lines, node: roxmltree::Node) -> Vec<Attr> {
+    node.attributes()
+        .map(|a| Attr {
+            name: a.name().to_string(),
+            value: a.value().to_string(),
+            line: lines.line(a.range().start),
+        })
+        .collect()
+}
+
+fn load(
+    xml: &str,
+    file: &str,
+    base_dir: &Path,
+    canon: Option<PathBuf>,
+    opts: &MjcfOptions,
+) -> Result<Model> {
+    let mut reader = Reader { base_dir, stack: canon.into_iter().collect(), level: 0 };
+    let root = reader.parse(xml, file, 0)?;
+    if root.tag != "mujoco" {
+        return Err(model_err(
+            &root.file,
+            root.line,
+            &format!("<{}>", root.tag),
+            format!("the root element is <{}>, expected <mujoco>", root.tag),
+        ));
+    }
+    let mut p = Loader::new(&root)?;
+    p.build(&root, opts)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Compiler settings and default classes.
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum FromGeom {
+    True,
+    False,
+    Auto,
+}
+
+struct Compiler {
+    degree: bool,
+    /// Axis (0..3) and intrinsic (lower case) flag of each Euler rotation.
+    eulerseq: [(usize, bool); 3],
+    autolimits: bool,
+    inertiafromgeom: FromGeom,
+    group_range: (i64, i64),
+    boundmass: f64,
+    boundinertia: f64,
+    balanceinertia: bool,
+    settotalmass: f64,
+}
+
+impl Default for Compiler {
+    fn default() -> Self {
+        Self {
+            degree: true,
+            eulerseq: [(0, true), (1, true), (2, true)],
+            autolimits: true,
+            inertiafromgeom: FromGeom::Auto,
+            group_range: (0, 5),
+            boundmass: 0.0,
+            boundinertia: 0.0,
+            balanceinertia: false,
+            settotalmass: -1.0,
+        }
+    }
+}
+
+/// A default class: per element tag, its attributes (inherited ones included).
+#[derive(Clone, Default)]
+struct Class {
+    attrs: HashMap<String, Vec<Rc<Attr>>>,
+}
+
+/// One body of the tree, as read (before merging).
+struct Body {
+    name: Option<String>,
+    file: Rc<str>,
+    line: u32,
+    /// Index of the parent body in `bodies` (`None`: the world).
+    parent: Option<usize>,
+    /// Pose in the parent body's frame.
+    pose: Transform,
+    joints: Vec<Jnt>,
+    /// Inertia in the body frame (`None`: unknown, a static body with a mesh geom).
+    inertia: Option<Inertia>,
+    /// Named sites, posed in the body frame.
+    sites: Vec<Site>,
+}
+
+/// A named site: name, pose (in its body's frame), line and file.
+type Site = (String, Transform, u32, Rc<str>);
+
+#[derive(Clone, Copy, PartialEq)]
+enum JKind {
+    Hinge,
+    Slide,
+    Ball,
+    Free,
+}
+
+struct Jnt {
+    name: Option<String>,
+    kind: JKind,
+    pos: Vector3<f64>,
+    axis: Vector3<f64>,
+    refpos: f64,
+    range: Option<(f64, f64)>,
+    file: Rc<str>,
+    line: u32,
+}
+
+struct Loader {
+    comp: Compiler,
+    classes: HashMap<String, Class>,
+    root_class: String,
+    warnings: Vec<String>,
+    bodies: Vec<Body>,
+}
+
+/// `"FILE:LINE"`-located helpers.
+fn err_at(el: &El, element: &str, reason: impl Into<String>) -> Error {
+    model_err(&el.file, el.line, element, reason)
+}
+
+fn parse_numbers(el: &El, a: &Attr, element: &str, min: usize, max: usize) -> Result<Vec<f64>> {
+    let mut out = Vec::with_capacity(max);
+    let bad = |what: String| {
+        model_err(
+            &el.file,
+            a.line,
+            element,
+            format!("<{}> attribute {}=\"{}\": {what}", el.tag, a.name, a.value),
+        )
+    };
+    for tok in a.value.split_whitespace() {
+        let x: f64 = tok.parse().map_err(|_| bad(format!("\"{tok}\" is not a number")))?;
+        if !x.is_finite() {
+            return Err(bad(format!("\"{tok}\" is not finite")));
+        }
+        out.push(x);
+    }
+    if out.len() < min || out.len() > max {
+        let what = if min == max {
+            if min == 1 { "1 number".to_string() } else { format!("{min} numbers") }
+        } else {
+            format!("{min} to {max} numbers")
+        };
+        return Err(bad(format!("expected {what}, found {}", out.len())));
+    }
+    Ok(out)
+}
+
+fn quat_wxyz(w: f64, x: f64, y: f64, z: f64) -> Option<UnitQuaternion<f64>> {
+    let q = nalgebra::Quaternion::new(w, x, y, z);
+    let n = q.norm();
+    (n > 1e-12 && n.is_finite()).then(|| UnitQuaternion::from_quaternion(q))
+}
+
+/// The rotation taking `e_z` to the unit vector along `v` by the shortest arc (a half turn
+/// about `e_x` when `v` points along `−e_z`, as MuJoCo does).
+fn z_to(v: &Vector3<f64>) -> UnitQuaternion<f64> {
+    let v = v.normalize();
+    let c = Vector3::z().cross(&v);
+    let s = c.norm();
+    if s < 1e-14 {
+        return if v.z > 0.0 {
+            UnitQuaternion::identity()
+        } else {
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+        };
+    }
+    let angle = s.atan2(v.z);
+    UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_unchecked(c / s), angle)
+}
+
+fn unit_transform(q: &UnitQuaternion<f64>, p: Vector3<f64>) -> Transform {
+    Transform::new(*q.to_rotation_matrix().matrix(), p)
+}
+
+fn parse_bool(el: &El, a: &Attr, element: &str) -> Result<bool> {
+    match a.value.as_str() {
+        "true" => Ok(true),
+        "false" => Ok(false),
+        v => Err(model_err(
+            &el.file,
+            a.line,
+            element,
+            format!("<{}> attribute {}=\"{v}\": expected true or false", el.tag, a.name),
+        )),
+    }
+}
+
+impl Loader {
+    fn new(root: &El) -> Result<Self> {
+        let mut l = Loader {
+            comp: Compiler::default(),
+            classes: HashMap::new(),
+            root_class: "main".into(),
+            warnings: Vec::new(),
+            bodies: Vec::new(),
+        };
+        for c in root.elems("compiler") {
+            l.compiler(c)?;
+        }
+        let mut first = true;
+        for d in root.elems("default") {
+            let name = d.attr("class").map_or("main".to_string(), |a| a.value.clone());
+            if first {
+                l.root_class = name.clone();
+                first = false;
+            }
+            l.default_class(d, name, None)?;
+        }
+        if first {
+            l.classes.insert("main".into(), Class::default());
+        }
+        Ok(l)
+    }
+
+    fn compiler(&mut self, c: &El) -> Result<()> {
+        let e = "<compiler>";
+        for a in &c.attrs {
+            let bad = |what: &str| {
+                model_err(
+                    &c.file,
+                    a.line,
+                    e,
+                    format!("attribute {}=\"{}\": {what}", a.name, a.value),
+                )
+            };
+            let num = || -> Result<f64> { Ok(parse_numbers(c, a, e, 1, 1)?[0]) };
+            match a.name.as_str() {
+                "angle" => {
+                    self.comp.degree = match a.value.as_str() {
+                        "degree" => true,
+                        "radian" => false,
+                        _ => return Err(bad("expected degree or radian")),
+                    }
+                }
+                "eulerseq" => {
+                    let chars: Vec<char> = a.value.chars().collect();
+                    if chars.len() != 3 {
+                        return Err(bad("expected 3 characters from xyzXYZ"));
+                    }
+                    for (k, ch) in chars.iter().enumerate() {
+                        let axis = match ch.to_ascii_lowercase() {
+                            'x' => 0,
+                            'y' => 1,
+                            'z' => 2,
+                            _ => return Err(bad("expected 3 characters from xyzXYZ")),
+                        };
+                        self.comp.eulerseq[k] = (axis, ch.is_ascii_lowercase());
+                    }
+                }
+                "autolimits" => self.comp.autolimits = parse_bool(c, a, e)?,
+                "inertiafromgeom" => {
+                    self.comp.inertiafromgeom = match a.value.as_str() {
+                        "true" => FromGeom::True,
+                        "false" => FromGeom::False,
+                        "auto" => FromGeom::Auto,
+                        _ => return Err(bad("expected true, false or auto")),
+                    }
+                }
+                "inertiagrouprange" => {
+                    let v = parse_numbers(c, a, e, 2, 2)?;
+                    if v.iter().any(|x| x.fract() != 0.0) {
+                        return Err(bad("expected 2 integers"));
+                    }
+                    self.comp.group_range = (v[0] as i64, v[1] as i64);
+                }
+                "boundmass" => self.comp.boundmass = num()?,
+                "boundinertia" => self.comp.boundinertia = num()?,
+                "settotalmass" => self.comp.settotalmass = num()?,
+                "balanceinertia" => self.comp.balanceinertia = parse_bool(c, a, e)?,
+                "coordinate" => match a.value.as_str() {
+                    "local" => {}
+                    "global" => {
+                        return Err(bad(
+                            "global coordinates are not supported (MuJoCo dropped them in \
+                             2.3.3; convert the model to local coordinates)",
+                        ));
+                    }
+                    _ => return Err(bad("expected local")),
+                },
+                "alignfree" if parse_bool(c, a, e)? => {
+                    return Err(bad(
+                        "aligning free joints with the inertial frame is not supported",
+                    ));
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    fn default_class(&mut self, d: &El, name: String, parent: Option<&str>) -> Result<()> {
+        let element = format!("<default class=\"{name}\">");
+        if self.classes.contains_key(&name) {
+            return Err(err_at(d, &element, format!("default class \"{name}\" is defined twice")));
+        }
+        let mut class = parent.map_or_else(Class::default, |p| self.classes[p].clone());
+        for c in d.children.iter().filter(|c| c.tag != "default") {
+            let entry = class.attrs.entry(c.tag.clone()).or_default();
+            for a in &c.attrs {
+                let a =
+                    Rc::new(Attr { name: a.name.clone(), value: a.value.clone(), line: a.line });
+                // An orientation given here replaces the inherited one of another form.
+                if ORIENT.contains(&a.name.as_str()) {
+                    entry.retain(|b| !ORIENT.contains(&b.name.as_str()));
+                }
+                entry.retain(|b| b.name != a.name);
+                entry.push(a);
+            }
+        }
+        self.classes.insert(name.clone(), class);
+        for c in d.elems("default") {
+            let Some(cn) = c.attr("class") else {
+                return Err(err_at(c, "<default>", "a nested <default> needs a class attribute"));
+            };
+            self.default_class(c, cn.value.clone(), Some(&name))?;
+        }
+        Ok(())
+    }
+
+    /// The class of element `el`: its `class` attribute, else the inherited `childclass`.
+    fn class_of<'s>(&'s self, el: &El, childclass: &'s str, element: &str) -> Result<&'s Class> {
+        let name = el.attr("class").map_or(childclass, |a| a.value.as_str());
+        self.classes
+            .get(name)
+            .ok_or_else(|| err_at(el, element, format!("unknown default class \"{name}\"")))
+    }
+
+    fn warn(&mut self, file: &str, line: u32, element: &str, reason: impl std::fmt::Display) {
+        self.warnings.push(format!("{file}:{line}: {element}: {reason}"));
+    }
+
+    fn angle(&self, x: f64) -> f64 {
+        if self.comp.degree { x.to_radians() } else { x }
+    }
+
+    /// The orientation of `el` from its own attributes, else from those of its class
+    /// (`class`), identity if none.
+    fn orientation(
+        &self,
+        el: &El,
+        class: Option<&Class>,
+        element: &str,
+    ) -> Result<UnitQuaternion<f64>> {
+        let own: Vec<&Attr> =
+            el.attrs.iter().filter(|a| ORIENT.contains(&a.name.as_str())).collect();
+        if own.len() > 1 {
+            return Err(err_at(
+                el,
+                element,
+                format!(
+                    "several orientations given ({}); give one of quat, axisangle, euler, \
+                     xyaxes, zaxis",
+                    own.iter().map(|a| a.name.as_str()).collect::<Vec<_>>().join(", ")
+                ),
+            ));
+        }
+        let a: &Attr = match own.first() {
+            Some(a) => a,
+            None => match class
+                .and_then(|c| c.attrs.get(&el.tag))
+                .and_then(|v| v.iter().find(|b| ORIENT.contains(&b.name.as_str())))
+            {
+                Some(a) => a,
+                None => return Ok(UnitQuaternion::identity()),
+            },
+        };
+        let zero = |what: &str| {
+            model_err(
+                &el.file,
+                a.line,
+                element,
+                format!("<{}> attribute {}=\"{}\": {what}", el.tag, a.name, a.value),
+            )
+        };
+        Ok(match a.name.as_str() {
+            "quat" => {
+                let v = parse_numbers(el, a, element, 4, 4)?;
+                quat_wxyz(v[0], v[1], v[2], v[3]).ok_or_else(|| zero("zero quaternion"))?
+            }
+            "axisangle" => {
+                let v = parse_numbers(el, a, element, 4, 4)?;
+                let axis = Vector3::new(v[0], v[1], v[2]);
+                if axis.norm() < 1e-12 {
+                    return Err(zero("zero axis"));
+                }
+                UnitQuaternion::from_axis_angle(
+                    &nalgebra::Unit::new_normalize(axis),
+                    self.angle(v[3]),
+                )
+            }
+            "euler" => {
+                let v = parse_numbers(el, a, element, 3, 3)?;
+                let mut q = UnitQuaternion::identity();
+                for (k, &(axis, intrinsic)) in self.comp.eulerseq.iter().enumerate() {
+                    let r = UnitQuaternion::from_axis_angle(
+                        &nalgebra::Unit::new_unchecked(Vector3::from_fn(|i, _| {
+                            if i == axis { 1.0 } else { 0.0 }
+                        })),
+                        self.angle(v[k]),
+                    );
+                    q = if intrinsic { q * r } else { r * q };
+                }
+                q
+            }
+            "xyaxes" => {
+                let v = parse_numbers(el, a, element, 6, 6)?;
+                let x = Vector3::new(v[0], v[1], v[2]);
+                let y = Vector3::new(v[3], v[4], v[5]);
+                if x.norm() < 1e-12 {
+                    return Err(zero("zero x axis"));
+                }
+                let x = x.normalize();
+                let y = y - x * x.dot(&y);
+                if y.norm() < 1e-12 {
+                    return Err(zero("y axis parallel to the x axis"));
+                }
+                let y = y.normalize();
+                let z = x.cross(&y);
+                UnitQuaternion::from_matrix(&Matrix3::from_columns(&[x, y, z]))
+            }
+            "zaxis" => {
+                let v = parse_numbers(el, a, element, 3, 3)?;
+                let z = Vector3::new(v[0], v[1], v[2]);
+                if z.norm() < 1e-12 {
+                    return Err(zero("zero axis"));
+                }
+                z_to(&z)
+            }
+            _ => unreachable!("ORIENT lists the orientation attributes"),
+        })
+    }
+
+    /// The placement of a geom or site in its body (or frame): from `fromto` (the midpoint,
+    /// `z` along `from − to` as MuJoCo does; with the half length) when given by the element,
+    /// or by its class and the element gives no `pos` or orientation; else `pos` and the
+    /// orientation.
+    fn pose(&self, el: &El, class: &Class, element: &str) -> Result<(Transform, Option<f64>)> {
+        let fromto = self.nums(el, class, "fromto", 6, element)?;
+        let own_fromto = el.attr("fromto").is_some();
+        let own_pose =
+            el.attr("pos").is_some() || el.attrs.iter().any(|a| ORIENT.contains(&a.name.as_str()));
+        match fromto {
+            Some(f) if own_fromto || !own_pose => {
+                let (a, b) = (Vector3::new(f[0], f[1], f[2]), Vector3::new(f[3], f[4], f[5]));
+                let len = (b - a).norm();
+                if len < 1e-12 {
+                    return Err(err_at(el, element, "fromto has zero length"));
+                }
+                Ok((unit_transform(&z_to(&(a - b)), (a + b) / 2.0), Some(len / 2.0)))
+            }
+            _ => {
+                let q = self.orientation(el, Some(class), element)?;
+                let p = self.vec3(el, class, "pos", element)?.unwrap_or_default();
+                Ok((unit_transform(&q, p), None))
+            }
+        }
+    }
+
+    /// Attribute `name` of `el`, else of its class.
+    fn get<'s>(&self, el: &'s El, class: &'s Class, name: &str) -> Option<&'s Attr> {
+        el.attr(name).or_else(|| {
+            class.attrs.get(&el.tag).and_then(|v| v.iter().find(|a| a.name == name)).map(|a| &**a)
+        })
+    }
+
+    /// `n` numbers of attribute `name` (own or class), `None` if absent.
+    fn nums(
+        &self,
+        el: &El,
+        class: &Class,
+        name: &str,
+        n: usize,
+        element: &str,
+    ) -> Result<Option<Vec<f64>>> {
+        match self.get(el, class, name) {
+            Some(a) => Ok(Some(parse_numbers(el, a, element, n, n)?)),
+            None => Ok(None),
+        }
+    }
+
+    fn vec3(
+        &self,
+        el: &El,
+        class: &Class,
+        name: &str,
+        element: &str,
+    ) -> Result<Option<Vector3<f64>>> {
+        Ok(self.nums(el, class, name, 3, element)?.map(|v| Vector3::new(v[0], v[1], v[2])))
+    }
+
+    fn scalar(&self, el: &El, class: &Class, name: &str, element: &str) -> Result<Option<f64>> {
+        Ok(self.nums(el, class, name, 1, element)?.map(|v| v[0]))
+    }
+
+    fn word<'s>(&self, el: &'s El, class: &'s Class, name: &str) -> Option<&'s str> {
+        self.get(el, class, name).map(|a| a.value.as_str())
+    }
+
+    // -----------------------------------------------------------------------------------------
+    // The body tree.
+
+    fn build(&mut self, root: &El, opts: &MjcfOptions) -> Result<Model> {
+        let model_name = root.attr("model").map_or("MuJoCo Model".to_string(), |a| a.value.clone());
+        for eq in root.elems("equality") {
+            for c in &eq.children {
+                let name = c.attr("name").map_or(String::new(), |a| format!(" \"{}\"", a.value));
+                self.warn(
+                    &c.file.clone(),
+                    c.line,
+                    &format!("<{}>{name}", c.tag),
+                    "equality constraint ignored (the model is the kinematic tree)",
+                );
+            }
+        }
+        // Gravity.
+        let empty = Class::default();
+        let mut gravity = Vector3::new(0.0, 0.0, -9.81);
+        for o in root.elems("option") {
+            if let Some(g) = self.vec3(o, &empty, "gravity", "<option>")? {
+                gravity = g;
+            }
+            for f in o.elems("flag") {
+                if let Some(a) = f.attr("gravity") {
+                    match a.value.as_str() {
+                        "disable" => gravity = Vector3::zeros(),
+                        "enable" => {}
+                        v => {
+                            return Err(model_err(
+                                &f.file,
+                                a.line,
+                                "<flag>",
+                                format!("attribute gravity=\"{v}\": expected enable or disable"),
+                            ));
+                        }
+                    }
+                }
+            }
+        }
+        // Read the tree.
+        let root_class = self.root_class.clone();
+        for wb in root.elems("worldbody") {
+            self.tree(wb, &root_class)?;
+        }
+        self.mass_rules()?;
+
+        // Free joints on top-level bodies only; the floating-base option.
+        let mut b = ModelBuilder::new(&model_name);
+        b.set_gravity(gravity);
+        if opts.floating_base {
+            let top: Vec<usize> =
+                (0..self.bodies.len()).filter(|&i| self.bodies[i].parent.is_none()).collect();
+            if top.len() != 1 {
+                return Err(model_err(
+                    &root.file,
+                    root.line,
+                    "<worldbody>",
+                    format!(
+                        "the floating-base option needs exactly one body in <worldbody>, found {}",
+                        top.len()
+                    ),
+                ));
+            }
+            let body = &self.bodies[top[0]];
+            if !body.joints.is_empty() {
+                return Err(model_err(
+                    &body.file,
+                    body.line,
+                    &body_elem(body),
+                    "the floating-base option adds a free joint to this body, which has joints \
+                     of its own",
+                ));
+            }
+        }
+        // Joint names: explicit ones are reserved before unnamed joints are named.
+        let mut taken: HashSet<String> = self
+            .bodies
+            .iter()
+            .flat_map(|b| b.joints.iter().filter_map(|j| j.name.clone()))
+            .collect();
+        taken.insert("universe".into());
+        if opts.floating_base && taken.contains(ROOT_JOINT_NAME) {
+            let j = self
+                .bodies
+                .iter()
+                .flat_map(|b| b.joints.iter())
+                .find(|j| j.name.as_deref() == Some(ROOT_JOINT_NAME))
+                .expect("the name is taken by a joint");
+            return Err(model_err(
+                &j.file,
+                j.line,
+                &format!("joint \"{ROOT_JOINT_NAME}\""),
+                "the joint name \"root_joint\" is reserved for the floating-base option",
+            ));
+        }
+
+        // (sodyn joint, placement of the body frame in that joint's frame) per body.
+        let mut at: Vec<(usize, Transform)> = Vec::with_capacity(self.bodies.len());
+        let mut jid = 0usize;
+        let mut nv = 0usize;
+        for i in 0..self.bodies.len() {
+            let body = &self.bodies[i];
+            let belem = body_elem(body);
+            let wrap = |e: Error| match e {
+                Error::Build(s) => model_err(&body.file, body.line, &belem, s),
+                other => other,
+            };
+            let (pj, pplace) = match body.parent {
+                Some(p) => at[p],
+                None => (0, Transform::identity()),
+            };
+            let place = pplace.compose(&body.pose);
+            let mut cur = (pj, place);
+            if opts.floating_base && body.parent.is_none() {
+                let id = b
+                    .add_joint(0, ROOT_JOINT_NAME, JointType::FreeFlyer, Transform::identity())
+                    .map_err(wrap)?;
+                nv += 6;
+                cur = (id, Transform::identity());
+            }
+            // Anchor of the previous joint in the body frame (the chain's offset).
+            let mut anchor = Vector3::zeros();
+            let mut seen_ball = false;
+            for (k, j) in body.joints.iter().enumerate() {
+                let name = match &j.name {
+                    Some(n) => n.clone(),
+                    None => {
+                        let mut n = format!("joint{jid}");
+                        while taken.contains(&n) {
+                            n.push('_');
+                        }
+                        taken.insert(n.clone());
+                        n
+                    }
+                };
+                jid += 1;
+                let jelem = format!("joint \"{name}\"");
+                let jerr = |reason: String| model_err(&j.file, j.line, &jelem, reason);
+                let jwrap = |e: Error| match e {
+                    Error::Build(s) => model_err(&j.file, j.line, &jelem, s),
+                    other => other,
+                };
+                let limit = |nv: usize| {
+                    if nv > MAX_URDF_DOFS {
+                        return Err(jerr(format!(
+                            "the model has more than {MAX_URDF_DOFS} degrees of freedom (the \
+                             loader's limit, MAX_URDF_DOFS): {nv} up to this joint"
+                        )));
+                    }
+                    Ok(())
+                };
+                if j.kind == JKind::Free {
+                    if body.parent.is_some() || body.joints.len() > 1 {
+                        return Err(jerr(format!(
+                            "a free joint must be the only joint of a body directly in \
+                             <worldbody>; {belem} {}",
+                            if body.parent.is_some() {
+                                "is nested in another body"
+                            } else {
+                                "has other joints"
+                            }
+                        )));
+                    }
+                    nv += 6;
+                    limit(nv)?;
+                    let id = b
+                        .add_joint(0, &name, JointType::FreeFlyer, Transform::identity())
+                        .map_err(jwrap)?;
+                    cur = (id, Transform::identity());
+                    continue;
+                }
+                if seen_ball && matches!(j.kind, JKind::Hinge | JKind::Ball) {
+                    return Err(jerr(format!(
+                        "a rotation follows a ball joint in body {belem} (MuJoCo refuses it too)"
+                    )));
+                }
+                let (kind, off, c) = match j.kind {
+                    JKind::Hinge => {
+                        let r = UnitQuaternion::from_axis_angle(
+                            &nalgebra::Unit::new_unchecked(j.axis),
+                            -j.refpos,
+                        );
+                        (
+                            JointType::Revolute { axis: j.axis },
+                            unit_transform(&r, j.pos - anchor),
+                            j.pos,
+                        )
+                    }
+                    JKind::Slide => (
+                        JointType::Prismatic { axis: j.axis },
+                        Transform::from_translation(-j.axis * j.refpos - anchor),
+                        Vector3::zeros(),
+                    ),
+                    JKind::Ball => {
+                        seen_ball = true;
+                        (JointType::Spherical, Transform::from_translation(j.pos - anchor), j.pos)
+                    }
+                    JKind::Free => unreachable!("handled above"),
+                };
+                let placement = if k == 0 { cur.1.compose(&off) } else { off };
+                let parent = cur.0;
+                nv += kind.nv();
+                limit(nv)?;
+                let id = b.add_joint(parent, &name, kind, placement).map_err(jwrap)?;
+                if let Some((lo, hi)) = j.range {
+                    b.set_limits(id, &[lo], &[hi]).map_err(jwrap)?;
+                }
+                anchor = c;
+                cur = (id, Transform::identity());
+            }
+            if body.joints.iter().any(|j| j.kind != JKind::Free) {
+                cur.1 = Transform::from_translation(-anchor);
+            }
+            if let Some(n) = &body.name {
+                b.add_frame(n, cur.0, cur.1).map_err(wrap)?;
+            }
+            if let Some(inertia) = &body.inertia {
+                b.append_inertia(cur.0, &cur.1, inertia).map_err(wrap)?;
+            }
+            at.push(cur);
+        }
+        // Sites (after every body, so that a site named like a body is the one skipped): the
+        // world's, then the bodies'.
+        let mut world_sites = Vec::new();
+        for wb in root.elems("worldbody") {
+            self.collect(
+                wb,
+                Transform::identity(),
+                &root_class,
+                &mut Vec::new(),
+                &mut world_sites,
+            )?;
+        }
+        let world_sites = world_sites.into_iter().map(|(n, p, l, f)| (n, (0, p), l, f));
+        let body_sites = self.bodies.iter().enumerate().flat_map(|(i, body)| {
+            let (j, place) = at[i];
+            body.sites
+                .iter()
+                .map(move |(n, p, l, f)| (n.clone(), (j, place.compose(p)), *l, f.clone()))
+        });
+        let sites: Vec<_> = world_sites.chain(body_sites).collect();
+        for (name, (j, place), line, file) in sites {
+            if b.add_frame(&name, j, place).is_err() {
+                self.warnings.push(format!(
+                    "{file}:{line}: site \"{name}\": a frame of this name exists (a body's): the \
+                     site is not a frame"
+                ));
+            }
+        }
+        let mut model = b.build_unchecked();
+        model.validate().map_err(|e| Error::Model {
+            file: root.file.to_string(),
+            line: None,
+            element: format!("model \"{}\"", model.name),
+            reason: e.to_string(),
+        })?;
+        model.warnings = std::mem::take(&mut self.warnings);
+        Ok(model)
+    }
+
+    /// Reads the bodies of a `<worldbody>` depth-first in document order (MuJoCo's order),
+    /// with an explicit stack: a chain of [`MAX_URDF_DOFS`] nested bodies does not recurse.
+    fn tree<'e>(&mut self, worldbody: &'e El, childclass: &str) -> Result<()> {
+        let mut stack: Vec<Item<'e>> = Vec::new();
+        push_children(&mut stack, worldbody, None, Transform::identity(), childclass)?;
+        while let Some(item) = stack.pop() {
+            let Item { el, parent, frame, class } = item;
+            if el.tag == "body" {
+                let (index, cc) = self.body(el, parent, &frame, &class)?;
+                push_children(&mut stack, el, Some(index), Transform::identity(), &cc)?;
+            } else {
+                let cc = el.attr("childclass").map_or(class.as_str(), |a| a.value.as_str());
+                if !self.classes.contains_key(cc) {
+                    return Err(err_at(el, "<frame>", format!("unknown default class \"{cc}\"")));
+                }
+                let q = self.orientation(el, None, "<frame>")?;
+                let p = self.vec3(el, &Class::default(), "pos", "<frame>")?.unwrap_or_default();
+                let f = frame.compose(&unit_transform(&q, p));
+                if el.elems("joint").next().is_some() || el.elems("freejoint").next().is_some() {
+                    return Err(err_at(el, "<frame>", "a <frame> cannot hold joints"));
+                }
+                let cc = cc.to_string();
+                push_children(&mut stack, el, parent, f, &cc)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Reads a `<body>` (not its child bodies) placed at `frame` in body `parent`; returns its
+    /// index and the class of its children.
+    fn body(
+        &mut self,
+        el: &El,
+        parent: Option<usize>,
+        frame: &Transform,
+        childclass: &str,
+    ) -> Result<(usize, String)> {
+        let name = el.attr("name").map(|a| a.value.clone());
+        let belem = match &name {
+            Some(n) => format!("body \"{n}\""),
+            None => "unnamed body".to_string(),
+        };
+        let cc = el.attr("childclass").map_or(childclass, |a| a.value.as_str()).to_string();
+        if !self.classes.contains_key(&cc) {
+            return Err(err_at(el, &belem, format!("unknown default class \"{cc}\"")));
+        }
+        let empty = Class::default();
+        let q = self.orientation(el, None, &belem)?;
+        let p = self.vec3(el, &empty, "pos", &belem)?.unwrap_or_default();
+        let pose = frame.compose(&unit_transform(&q, p));
+        if let Some(g) = self.scalar(el, &empty, "gravcomp", &belem)?
+            && g != 0.0
+        {
+            let reason = format!(
+                "gravcomp=\"{g}\" ignored (gravity compensation is not part of the rigid-body \
+                 dynamics)"
+            );
+            self.warn(&el.file.clone(), el.line, &belem, reason);
+        }
+
+        // Joints, in document order.
+        let mut joints = Vec::new();
+        for j in el.children.iter().filter(|c| c.tag == "joint" || c.tag == "freejoint") {
+            joints.push(self.joint(j, &cc, &belem)?);
+        }
+        let index = self.bodies.len();
+        // Geoms and sites, with the frames that hold them.
+        let mut geoms: Vec<(&El, Transform, String)> = Vec::new();
+        let mut sites = Vec::new();
+        self.collect(el, Transform::identity(), &cc, &mut geoms, &mut sites)?;
+        let inertial: Vec<&El> = el.elems("inertial").collect();
+        if inertial.len() > 1 {
+            return Err(err_at(inertial[1], &belem, "several <inertial> elements"));
+        }
+        // Does the body move (has joints, or is welded to a moving body)?
+        let moving = !joints.is_empty() || parent.is_some_and(|p| self.moving(p));
+        let use_geoms = match self.comp.inertiafromgeom {
+            FromGeom::True => true,
+            FromGeom::False => false,
+            FromGeom::Auto => inertial.is_empty(),
+        };
+        let inertia = if use_geoms {
+            self.geom_inertia(&geoms, &belem, el, moving)?
+        } else if let Some(i) = inertial.first() {
+            Some(self.inertial(i, &belem)?)
+        } else {
+            Some(Inertia::zero())
+        };
+        self.bodies.push(Body {
+            name,
+            file: el.file.clone(),
+            line: el.line,
+            parent,
+            pose,
+            joints,
+            inertia,
+            sites,
+        });
+        Ok((index, cc))
+    }
+
+    fn moving(&self, mut b: usize) -> bool {
+        loop {
+            if !self.bodies[b].joints.is_empty() {
+                return true;
+            }
+            match self.bodies[b].parent {
+                Some(p) => b = p,
+                None => return false,
+            }
+        }
+    }
+
+    /// The geoms and named sites of a body (its own and those in its `<frame>`s), with their
+    /// frame's placement and class name.
+    fn collect<'e>(
+        &self,
+        el: &'e El,
+        frame: Transform,
+        cc: &str,
+        geoms: &mut Vec<(&'e El, Transform, String)>,
+        sites: &mut Vec<Site>,
+    ) -> Result<()> {
+        for c in &el.children {
+            match c.tag.as_str() {
+                "geom" => geoms.push((c, frame, cc.to_string())),
+                "site" => {
+                    if let Some(n) = c.attr("name") {
+                        let selem = format!("site \"{}\"", n.value);
+                        let class = self.class_of(c, cc, &selem)?;
+                        let (pose, _) = self.pose(c, class, &selem)?;
+                        sites.push((n.value.clone(), frame.compose(&pose), c.line, c.file.clone()));
+                    }
+                }
+                "frame" => {
+                    let ncc = c.attr("childclass").map_or(cc, |a| a.value.as_str());
+                    let q = self.orientation(c, None, "<frame>")?;
+                    let p = self.vec3(c, &Class::default(), "pos", "<frame>")?.unwrap_or_default();
+                    self.collect(c, frame.compose(&unit_transform(&q, p)), ncc, geoms, sites)?;
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    fn joint(&mut self, el: &El, cc: &str, belem: &str) -> Result<Jnt> {
+        let name = el.attr("name").map(|a| a.value.clone());
+        let jelem = match &name {
+            Some(n) => format!("joint \"{n}\""),
+            None => format!("unnamed joint of {belem}"),
+        };
+        if el.tag == "freejoint" {
+            if let Some(a) = el.attr("align")
+                && a.value == "true"
+            {
+                return Err(model_err(&el.file, a.line, &jelem, "align=\"true\" is not supported"));
+            }
+            return Ok(Jnt {
+                name,
+                kind: JKind::Free,
+                pos: Vector3::zeros(),
+                axis: Vector3::z(),
+                refpos: 0.0,
+                range: None,
+                file: el.file.clone(),
+                line: el.line,
+            });
+        }
+        let class = self.class_of(el, cc, &jelem)?.clone();
+        let kind = match self.word(el, &class, "type").unwrap_or("hinge") {
+            "hinge" => JKind::Hinge,
+            "slide" => JKind::Slide,
+            "ball" => JKind::Ball,
+            "free" => JKind::Free,
+            other => {
+                let line = self.get(el, &class, "type").map_or(el.line, |a| a.line);
+                return Err(model_err(
+                    &el.file,
+                    line,
+                    &jelem,
+                    format!("unknown joint type \"{other}\" (expected hinge, slide, ball or free)"),
+                ));
+            }
+        };
+        let pos = self.vec3(el, &class, "pos", &jelem)?.unwrap_or_default();
+        let axis_raw = self.vec3(el, &class, "axis", &jelem)?.unwrap_or_else(Vector3::z);
+        let axis = if matches!(kind, JKind::Hinge | JKind::Slide) {
+            let n = axis_raw.norm();
+            if n < 1e-12 {
+                return Err(err_at(
+                    el,
+                    &jelem,
+                    format!("zero axis [{} {} {}]", axis_raw.x, axis_raw.y, axis_raw.z),
+                ));
+            }
+            axis_raw / n
+        } else {
+            axis_raw
+        };
+        let is_angle = kind == JKind::Hinge;
+        let conv = |x: f64| if is_angle { self.angle(x) } else { x };
+        let refpos = match kind {
+            JKind::Hinge | JKind::Slide => {
+                conv(self.scalar(el, &class, "ref", &jelem)?.unwrap_or(0.0))
+            }
+            _ => 0.0,
+        };
+        let range = self.nums(el, &class, "range", 2, &jelem)?;
+        let limited = match self.word(el, &class, "limited").unwrap_or("auto") {
+            "true" => true,
+            "false" => false,
+            "auto" => self.comp.autolimits && range.is_some(),
+            other => {
+                return Err(err_at(
+                    el,
+                    &jelem,
+                    format!("limited=\"{other}\": expected true, false or auto"),
+                ));
+            }
+        };
+        let range = match (kind, limited, range) {
+            (JKind::Hinge | JKind::Slide, true, Some(r)) => {
+                let (lo, hi) = (conv(r[0]), conv(r[1]));
+                if lo >= hi {
+                    let line = self.get(el, &class, "range").map_or(el.line, |a| a.line);
+                    return Err(model_err(
+                        &el.file,
+                        line,
+                        &jelem,
+                        format!("range [{} {}] is empty", r[0], r[1]),
+                    ));
+                }
+                Some((lo, hi))
+            }
+            _ => None,
+        };
+        if let Some(a) = self.scalar(el, &class, "armature", &jelem)?
+            && a != 0.0
+        {
+            let file = el.file.clone();
+            self.warn(
+                &file,
+                el.line,
+                &jelem,
+                format!("armature=\"{a}\" ignored (armature is not yet part of sodyn's model)"),
+            );
+        }
+        Ok(Jnt { name, kind, pos, axis, refpos, range, file: el.file.clone(), line: el.line })
+    }
+
+    /// The body inertia of an `<inertial>`, in the body frame.
+    fn inertial(&self, el: &El, belem: &str) -> Result<Inertia> {
+        let empty = Class::default();
+        let Some(pos) = self.vec3(el, &empty, "pos", belem)? else {
+            return Err(err_at(el, belem, "<inertial> has no pos attribute"));
+        };
+        if el.attr("fullinertia").is_some()
+            && let Some(a) = el.attrs.iter().find(|a| ORIENT.contains(&a.name.as_str()))
+        {
+            return Err(model_err(
+                &el.file,
+                a.line,
+                belem,
+                format!(
+                    "<inertial> has both fullinertia and {} (the orientation of a full inertia \
+                     is its own; MuJoCo refuses both too)",
+                    a.name
+                ),
+            ));
+        }
+        let q = self.orientation(el, None, belem)?;
+        let Some(mass) = self.scalar(el, &empty, "mass", belem)? else {
+            return Err(err_at(el, belem, "<inertial> has no mass attribute"));
+        };
+        if mass < 0.0 {
+            return Err(err_at(el, belem, format!("<inertial> has a negative mass {mass}")));
+        }
+        let diag = self.vec3(el, &empty, "diaginertia", belem)?;
+        let full = self.nums(el, &empty, "fullinertia", 6, belem)?;
+        let i_local = match (diag, full) {
+            (Some(_), Some(_)) => {
+                return Err(err_at(el, belem, "<inertial> has both diaginertia and fullinertia"));
+            }
+            (None, None) => {
+                return Err(err_at(
+                    el,
+                    belem,
+                    "<inertial> has neither diaginertia nor fullinertia",
+                ));
+            }
+            (Some(d), None) => {
+                if d.iter().any(|&x| x < 0.0) {
+                    return Err(err_at(
+                        el,
+                        belem,
+                        format!(
+                            "<inertial> diaginertia=\"{} {} {}\" has a negative moment",
+                            d.x, d.y, d.z
+                        ),
+                    ));
+                }
+                Matrix3::from_diagonal(&d)
+            }
+            (None, Some(f)) => Matrix3::new(f[0], f[3], f[4], f[3], f[1], f[5], f[4], f[5], f[2]),
+        };
+        let r = q.to_rotation_matrix();
+        let r = r.matrix();
+        let i_com = r * i_local * r.transpose();
+        let inertia = Inertia::from_com(mass, pos, i_com);
+        if let Some(d) = inertia_defect(&inertia)
+            && !(self.comp.balanceinertia
+                && matches!(d, crate::spatial::InertiaDefect::TriangleInequality(_)))
+        {
+            return Err(err_at(
+                el,
+                belem,
+                format!("invalid <inertial>: {d} (MuJoCo refuses it too)"),
+            ));
+        }
+        Ok(inertia)
+    }
+
+    /// The inertia of a body from its geoms (`None`: a static body with a geom whose inertia
+    /// is not computed, e.g. a mesh).
+    fn geom_inertia(
+        &self,
+        geoms: &[(&El, Transform, String)],
+        belem: &str,
+        body: &El,
+        moving: bool,
+    ) -> Result<Option<Inertia>> {
+        let mut total = Inertia::zero();
+        for (g, frame, cc) in geoms {
+            let gelem = match g.attr("name") {
+                Some(n) => format!("geom \"{}\" of {belem}", n.value),
+                None => format!("geom of {belem}"),
+            };
+            let class = self.class_of(g, cc, &gelem)?;
+            let int = |name: &str, default: i64| -> Result<i64> {
+                match self.scalar(g, class, name, &gelem)? {
+                    Some(x) if x.fract() == 0.0 => Ok(x as i64),
+                    Some(x) => Err(err_at(g, &gelem, format!("{name}=\"{x}\" is not an integer"))),
+                    None => Ok(default),
+                }
+            };
+            let group = int("group", 0)?;
+            if group < self.comp.group_range.0 || group > self.comp.group_range.1 {
+                continue;
+            }
+            if self.word(g, class, "shellinertia") == Some("true") {
+                return Err(err_at(
+                    g,
+                    &gelem,
+                    "shellinertia=\"true\" is not supported (give the body an <inertial>)",
+                ));
+            }
+            // A primitive with a mesh attribute is sized from the mesh (MuJoCo's default type
+            // is sphere also then).
+            let has_mesh = self.get(g, class, "mesh").is_some();
+            let ty = self.word(g, class, "type").unwrap_or("sphere");
+            let mass = self.scalar(g, class, "mass", &gelem)?;
+            let density = self.scalar(g, class, "density", &gelem)?.unwrap_or(1000.0);
+            if mass.is_some_and(|m| m < 0.0) || density < 0.0 {
+                return Err(err_at(g, &gelem, "negative mass or density"));
+            }
+            let massless = mass == Some(0.0) || (mass.is_none() && density == 0.0);
+            let what = match ty {
+                "sphere" | "capsule" | "ellipsoid" | "cylinder" | "box" if has_mesh => {
+                    format!("{ty} geom sized from a mesh")
+                }
+                "sphere" | "capsule" | "ellipsoid" | "cylinder" | "box" => String::new(),
+                "plane" if moving => {
+                    return Err(err_at(
+                        g,
+                        &gelem,
+                        "a plane geom is only allowed in a static body (MuJoCo's rule)",
+                    ));
+                }
+                "plane" => continue,
+                "mesh" | "hfield" | "sdf" => format!("{ty} geom"),
+                other => {
+                    return Err(err_at(g, &gelem, format!("unknown geom type \"{other}\"")));
+                }
+            };
+            if !what.is_empty() {
+                if massless {
+                    continue;
+                }
+                // A static body's inertia only matters for settotalmass.
+                if !moving && self.comp.settotalmass <= 0.0 {
+                    return Ok(None);
+                }
+                return Err(err_at(
+                    body,
+                    belem,
+                    format!(
+                        "the body's inertia would come from a {what} (line {}), which sodyn \
+                         cannot compute: give the body an <inertial> element",
+                        g.line
+                    ),
+                ));
+            }
+            let mut size = [0.0; 3];
+            if let Some(a) = g.attr("size") {
+                // A partial size on the element keeps the class's (or the default's) other entries.
+                if let Some(ca) =
+                    class.attrs.get("geom").and_then(|v| v.iter().find(|b| b.name == "size"))
+                {
+                    for (k, x) in parse_numbers(g, ca, &gelem, 1, 3)?.into_iter().enumerate() {
+                        size[k] = x;
+                    }
+                }
+                for (k, x) in parse_numbers(g, a, &gelem, 1, 3)?.into_iter().enumerate() {
+                    size[k] = x;
+                }
+            } else if let Some(a) = self.get(g, class, "size") {
+                for (k, x) in parse_numbers(g, a, &gelem, 1, 3)?.into_iter().enumerate() {
+                    size[k] = x;
+                }
+            }
+            let (pose, half) = self.pose(g, class, &gelem)?;
+            if let Some(h) = half {
+                match ty {
+                    "capsule" | "cylinder" => size[1] = h,
+                    "box" | "ellipsoid" => {
+                        size[1] = size[0];
+                        size[2] = h;
+                    }
+                    _ => {
+                        return Err(err_at(
+                            g,
+                            &gelem,
+                            "fromto requires a capsule, cylinder, box or ellipsoid",
+                        ));
+                    }
+                }
+            }
+            let n = match ty {
+                "sphere" => 1,
+                "capsule" | "cylinder" => 2,
+                _ => 3,
+            };
+            if size[..n].iter().any(|&s| s < 0.0) {
+                return Err(err_at(g, &gelem, format!("negative size {:?}", &size[..n])));
+            }
+            let (vol, unit) = primitive(ty, &size);
+            let m = match mass {
+                Some(m) => m,
+                None => density * vol,
+            };
+            let i = if vol > 0.0 { unit * m } else { Matrix3::zeros() };
+            let gi = Inertia::from_com(m, Vector3::zeros(), i);
+            total += frame.compose(&pose).act_inertia(&gi);
+        }
+        Ok(Some(total))
+    }
+
+    /// MuJoCo's per-body rules after the inertias are known: `boundmass`, `boundinertia`,
+    /// `balanceinertia`, positive mass and moments of moving bodies, `settotalmass`.
+    fn mass_rules(&mut self) -> Result<()> {
+        let (bm, bi, bal) = (self.comp.boundmass, self.comp.boundinertia, self.comp.balanceinertia);
+        for i in 0..self.bodies.len() {
+            let moving = self.moving(i);
+            let body = &mut self.bodies[i];
+            let Some(inertia) = &mut body.inertia else { continue };
+            let mass = inertia.mass;
+            let com = if mass > 0.0 { inertia.com() } else { Vector3::zeros() };
+            let ic = if mass > 0.0 { inertia.inertia_about_com() } else { inertia.rot };
+            let eig = SymmetricEigen::new(ic);
+            let mut ev = eig.eigenvalues;
+            let mut changed = false;
+            if mass < bm {
+                changed = true;
+            }
+            for x in ev.iter_mut() {
+                if *x < bi {
+                    *x = bi;
+                    changed = true;
+                }
+            }
+            if bal {
+                let s = ev.sum();
+                if (0..3).any(|k| ev[k] > s - ev[k]) {
+                    ev = Vector3::repeat(s / 3.0);
+                    changed = true;
+                }
+            }
+            if changed {
+                let m = mass.max(bm);
+                let r = eig.eigenvectors;
+                let ic = r * Matrix3::from_diagonal(&ev) * r.transpose();
+                *inertia = Inertia::from_com(m, com, (ic + ic.transpose()) * 0.5);
+            }
+            let body = &self.bodies[i];
+            let inertia = body.inertia.as_ref().expect("known");
+            if moving && !body.joints.is_empty() {
+                let ev = if inertia.mass > 0.0 {
+                    SymmetricEigen::new(inertia.inertia_about_com()).eigenvalues
+                } else {
+                    Vector3::zeros()
+                };
+                if inertia.mass.is_nan() || inertia.mass <= 1e-15 || ev.min() < 1e-15 {
+                    return Err(model_err(
+                        &body.file,
+                        body.line,
+                        &body_elem(body),
+                        format!(
+                            "a moving body needs a positive mass and positive principal moments \
+                             (MuJoCo's rule; mass {}, moments [{:e} {:e} {:e}])",
+                            inertia.mass, ev[0], ev[1], ev[2]
+                        ),
+                    ));
+                }
+            }
+        }
+        if self.comp.settotalmass > 0.0 {
+            let total: f64 = self.bodies.iter().map(|b| b.inertia.map_or(0.0, |i| i.mass)).sum();
+            if total > 0.0 {
+                let s = self.comp.settotalmass / total;
+                for b in &mut self.bodies {
+                    if let Some(i) = &mut b.inertia {
+                        i.mass *= s;
+                        i.h *= s;
+                        i.rot *= s;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A `<body>` or `<frame>` to read, with its parent body, the placement of its parent element
+/// in that body, and the class it inherits.
+struct Item<'e> {
+    el: &'e El,
+    parent: Option<usize>,
+    frame: Transform,
+    class: String,
+}
+
+/// Pushes the `<body>` and `<frame>` children of `el` onto `stack`, the first one on top; an
+/// element that would add bodies sodyn cannot read is an error.
+fn push_children<'e>(
+    stack: &mut Vec<Item<'e>>,
+    el: &'e El,
+    parent: Option<usize>,
+    frame: Transform,
+    class: &str,
+) -> Result<()> {
+    for c in &el.children {
+        if let "composite" | "flexcomp" | "replicate" | "attach" | "flex" = c.tag.as_str() {
+            return Err(err_at(
+                c,
+                &format!("<{}>", c.tag),
+                format!("<{}> is not supported (it adds bodies or degrees of freedom)", c.tag),
+            ));
+        }
+    }
+    for c in el.children.iter().rev().filter(|c| c.tag == "body" || c.tag == "frame") {
+        stack.push(Item { el: c, parent, frame, class: class.to_string() });
+    }
+    Ok(())
+}
+
+const ORIENT: [&str; 5] = ["quat", "axisangle", "euler", "xyaxes", "zaxis"];
+
+fn body_elem(b: &Body) -> String {
+    match &b.name {
+        Some(n) => format!("body \"{n}\""),
+        None => "unnamed body".to_string(),
+    }
+}
+
+/// Volume and rotational inertia per unit mass (about the centre, in the geom frame) of a
+/// primitive geom with MuJoCo's `size`.
+fn primitive(ty: &str, s: &[f64; 3]) -> (f64, Matrix3<f64>) {
+    use std::f64::consts::PI;
+    let d = |a: f64, b: f64, c: f64| Matrix3::from_diagonal(&Vector3::new(a, b, c));
+    match ty {
+        "sphere" => {
+            let r = s[0];
+            (4.0 / 3.0 * PI * r * r * r, d(0.4 * r * r, 0.4 * r * r, 0.4 * r * r))
+        }
+        "capsule" => {
+            let (r, h) = (s[0], 2.0 * s[1]);
+            let vs = 4.0 / 3.0 * PI * r * r * r;
+            let vc = PI * r * r * h;
+            let v = vs + vc;
+            if v <= 0.0 {
+                return (0.0, Matrix3::zeros());
+            }
+            let (fs, fc) = (vs / v, vc / v);
+            let t = fc * (3.0 * r * r + h * h) / 12.0
+                + fs * (0.4 * r * r + h * h / 4.0 + 3.0 * h * r / 8.0);
+            let a = fc * r * r / 2.0 + fs * 0.4 * r * r;
+            (v, d(t, t, a))
+        }
+        "cylinder" => {
+            let (r, h) = (s[0], 2.0 * s[1]);
+            let t = (3.0 * r * r + h * h) / 12.0;
+            (PI * r * r * h, d(t, t, r * r / 2.0))
+        }
+        "ellipsoid" => {
+            let (a, b, c) = (s[0], s[1], s[2]);
+            (
+                4.0 / 3.0 * PI * a * b * c,
+                d((b * b + c * c) / 5.0, (a * a + c * c) / 5.0, (a * a + b * b) / 5.0),
+            )
+        }
+        _ => {
+            // box, half sizes
+            let (a, b, c) = (s[0], s[1], s[2]);
+            (
+                8.0 * a * b * c,
+                d((b * b + c * c) / 3.0, (a * a + c * c) / 3.0, (a * a + b * b) / 3.0),
+            )
+        }
+    }
+}
