@@ -35,7 +35,10 @@
 //!    `c`'s path (`m` its body), with `Z_j = Σ_{x ⪯ j} S_x z₁_x`,
 //!    `∂Z_m/∂q_l = S_l × (Z_m − Z_λ)` (`λ` the parent of `l`'s joint) and `∂p_c/∂q_l = u_l`.
 
-use super::contact_kin::{Base, Dir, Path, djz_dq};
+use super::contact_kin::{
+    Base, Dir, Geo, Path, acc_rows, dacc_dq, dacc_dv, djac_col_dq, djz_dq, djz_dq_rows, jac_col,
+    put_rows, rows_dot,
+};
 use super::zero::idfoza_core;
 use crate::algo::internal::ltl_solve_rows_desc;
 use crate::algo::{Contact, Data};
@@ -43,6 +46,7 @@ use crate::error::{Error, Result};
 use crate::linalg::{gemm, spd_inverse_in_place, transpose_strided};
 use crate::model::Model;
 use crate::spatial::Motion;
+use crate::spatial::Transform;
 use nalgebra::{DMatrix, DVector, Vector3};
 
 /// The largest number of point contacts [`ContactData::new`] accepts (`3 nc` constraint rows).
@@ -92,8 +96,18 @@ pub struct ContactData {
     gd: DMatrix<f64>,
     /// Joints on any contact path (ascending).
     union_joints: Vec<usize>,
-    /// Contact body and point in its joint frame, per contact.
-    local: Vec<(usize, Vector3<f64>)>,
+    /// Contact body and the contact frame's placement in its joint frame, per contact.
+    local: Vec<(usize, Transform)>,
+    /// First constraint row of each contact (3 rows per 3-D contact, 6 per 6-D contact).
+    pub(crate) row0: Vec<usize>,
+    /// Shape of each contact's rows.
+    pub(crate) geo: Vec<Geo>,
+    /// Number of constraint rows.
+    m: usize,
+    /// Copies of the model's DoF → joint and joint → parent tables (for the base quantities
+    /// where the model is not passed).
+    dof_joint: Vec<usize>,
+    parents: Vec<usize>,
     /// World motion subspaces of the DoFs on the contact paths (other entries unused).
     pub(crate) s: Vec<Motion>,
     /// World body velocities of the path joints (index 0: zero).
@@ -108,6 +122,9 @@ pub struct ContactData {
     /// rank-deficient contact set is an error). With `μ > 0` the solve is damped:
     /// `(J M⁻¹ Jᵀ + μ I) λ = …`, and all derivatives are those of the damped system.
     pub(crate) damping: f64,
+    /// A structurally redundant set (a 6-D-held body carrying another contact): the message
+    /// naming the contacts, an error of the undamped factorisation.
+    redundant: Option<String>,
     /// `Model::key` of the model the contacts were made for, its joints and DoFs.
     pub(crate) model_key: u64,
     pub(crate) model_njoints: usize,
@@ -152,7 +169,7 @@ impl ContactData {
             });
         }
         let n = model.nv;
-        let m = 3 * contacts.len();
+        let m: usize = contacts.iter().map(|c| c.dim()).sum();
         let mut paths = Vec::with_capacity(contacts.len());
         for c in contacts {
             if c.frame >= model.frames.len() {
@@ -202,7 +219,16 @@ impl ContactData {
             }
         }
         let union_joints: Vec<usize> = (1..model.njoints()).filter(|&j| on_path[j]).collect();
-        let local = contacts.iter().map(|c| c.body_point(model)).collect();
+        let local = contacts.iter().map(|c| c.body_placement(model)).collect();
+        let geo: Vec<Geo> = contacts.iter().map(Geo::of).collect();
+        let row0 = geo
+            .iter()
+            .scan(0, |r, g| {
+                let r0 = *r;
+                *r += g.dim();
+                Some(r0)
+            })
+            .collect();
         let maxd = paths.iter().map(|p| p.dofs.len()).max().unwrap_or(0);
         Ok(Self {
             r1: DMatrix::zeros(padded_rows(n + m), n),
@@ -215,6 +241,11 @@ impl ContactData {
             gd: DMatrix::zeros(n, n),
             union_joints,
             local,
+            row0,
+            geo,
+            m,
+            dof_joint: model.dof_joint.clone(),
+            parents: model.parents.clone(),
             s: vec![Motion::zero(); n],
             kvel: vec![Motion::zero(); model.njoints()],
             kacc: vec![Motion::zero(); model.njoints()],
@@ -235,6 +266,7 @@ impl ContactData {
             g: DMatrix::zeros(n + m, n),
             zmat: DMatrix::zeros(n, n),
             damping: 0.0,
+            redundant: crate::model::redundancy(model, contacts),
             model_key: model.key,
             model_njoints: model.njoints(),
             model_nv: model.nv(),
@@ -273,9 +305,9 @@ impl ContactData {
         )))
     }
 
-    /// Number of constraint rows `3 nc`.
+    /// Number of constraint rows (3 per 3-D contact, 6 per 6-D contact).
     pub fn dim(&self) -> usize {
-        3 * self.contacts.len()
+        self.m
     }
 
     /// Contact body of contact `c`.
@@ -327,15 +359,27 @@ pub(crate) fn update_points(model: &Model, data: &Data, cd: &mut ContactData, a0
         cd.acc[j] = if j == 0 { Motion::zero() } else { data.oa[j] - a0 };
     }
     cd.jac.fill(0.0);
-    for (c, contact) in cd.contacts.iter().enumerate() {
-        let (body, local) = contact.body_point(model);
-        let p = data.o_m_i[body].act_point(&local);
-        cd.paths[c].p = p;
+    for c in 0..cd.contacts.len() {
+        let (body, local) = &cd.local[c];
+        let pose = data.o_m_i[*body].compose(local);
+        cd.paths[c].p = pose.trans;
+        cd.paths[c].rot = pose.rot;
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
         for &x in &cd.paths[c].dofs {
             let s = data.s_world[x];
-            let u = s.lin + s.ang.cross(&p);
-            for r in 0..3 {
-                cd.jac[(3 * c + r, x)] = u[r];
+            if geo.is_point() {
+                let u = s.lin + s.ang.cross(&pose.trans);
+                for r in 0..3 {
+                    cd.jac[(r0 + r, x)] = u[r];
+                }
+            } else {
+                let b = base(model, data, cd);
+                let rows = jac_col(&b, geo, &pose.rot, &pose.trans, x, Dir::None);
+                let mut col = [0.0; 6];
+                put_rows(geo, &rows, false, &mut col);
+                for (r, v) in col[..geo.dim()].iter().enumerate() {
+                    cd.jac[(r0 + r, x)] = *v;
+                }
             }
         }
     }
@@ -363,15 +407,23 @@ pub(crate) fn path_kinematics(model: &Model, data: &Data, cd: &mut ContactData, 
             cd.kacc[j] = ap + vi.cross(&vj);
         }
     }
-    for (c, &(body, local)) in cd.local.iter().enumerate() {
-        let p = data.o_m_i[body].act_point(&local);
+    for c in 0..cd.local.len() {
+        let (body, local) = cd.local[c];
+        let pose = data.o_m_i[body].compose(&local);
+        let p = pose.trans;
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
         let path = &mut cd.paths[c];
         path.p = p;
+        path.rot = pose.rot;
+        if !geo.is_point() {
+            generic_rows(model, cd, c, v.is_some());
+            continue;
+        }
         for &x in &path.dofs {
             let s = cd.s[x];
             let u = s.lin + s.ang.cross(&p);
             for r in 0..3 {
-                cd.jac[(3 * c + r, x)] = u[r];
+                cd.jac[(r0 + r, x)] = u[r];
             }
         }
         if v.is_some() {
@@ -379,10 +431,46 @@ pub(crate) fn path_kinematics(model: &Model, data: &Data, cd: &mut ContactData, 
             let pdot = vb.lin + vb.ang.cross(&p);
             let acc = ab.lin + ab.ang.cross(&p) + vb.ang.cross(&pdot);
             for r in 0..3 {
-                cd.drift[3 * c + r] = acc[r];
+                cd.drift[r0 + r] = acc[r];
             }
         }
     }
+}
+
+/// The base quantities of the path kinematics (`cd.s`, `cd.kvel`, `cd.kacc`).
+fn path_base<'a>(model: &'a Model, cd: &'a ContactData) -> Base<'a> {
+    Base {
+        s: &cd.s,
+        vel: &cd.kvel,
+        acc: &cd.kacc,
+        dof_joint: &model.dof_joint,
+        parents: &model.parents,
+    }
+}
+
+/// Jacobian rows (and with `drift`, the acceleration rows at the current `cd.kacc`) of the
+/// generic contact `c` (6-D or local) from the path kinematics.
+fn generic_rows(model: &Model, cd: &mut ContactData, c: usize, drift: bool) {
+    let (geo, r0) = (cd.geo[c], cd.row0[c]);
+    let d = geo.dim();
+    let mut jac = std::mem::replace(&mut cd.jac, DMatrix::zeros(0, 0));
+    {
+        let b = path_base(model, cd);
+        let path = &cd.paths[c];
+        let mut col = [0.0; 6];
+        for &x in &path.dofs {
+            put_rows(geo, &jac_col(&b, geo, &path.rot, &path.p, x, Dir::None), false, &mut col);
+            for (r, v) in col[..d].iter().enumerate() {
+                jac[(r0 + r, x)] = *v;
+            }
+        }
+        if drift {
+            let body = *path.joints.last().expect("path");
+            put_rows(geo, &acc_rows(&b, geo, &path.rot, body, &path.p, Dir::None), false, &mut col);
+            cd.drift.as_mut_slice()[r0..r0 + d].copy_from_slice(&col[..d]);
+        }
+    }
+    cd.jac = jac;
 }
 
 /// Adds `Σ_{x ⪯ j} S_x q̈_x` to the path accelerations `cd.kacc` (after [`path_kinematics`]).
@@ -455,6 +543,16 @@ pub(crate) fn factor_delassus(
 ) -> Result<()> {
     let n = model.nv;
     let m = cd.dim();
+    if cd.damping == 0.0
+        && let Some(msg) = &cd.redundant
+    {
+        return Err(Error::Singular {
+            what: "contact set".into(),
+            detail: format!(
+                "{msg}; set a damping > 0 (ContactData::set_damping) for a regularised solve"
+            ),
+        });
+    }
     let (mp, np) = (cd.yt.nrows(), cd.y.nrows());
     {
         let (jac, yt) = (cd.jac.as_slice(), cd.yt.as_mut_slice());
@@ -564,6 +662,28 @@ pub(crate) fn accel_derivatives_t(cd: &ContactData, cxt: &mut DMatrix<f64>) {
     let n = cd.s.len();
     for (c, path) in cd.paths.iter().enumerate() {
         let body = *path.joints.last().expect("path");
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        if !geo.is_point() {
+            let b = Base {
+                s: &cd.s,
+                vel: &cd.kvel,
+                acc: &cd.kacc,
+                dof_joint: &cd.dof_joint,
+                parents: &cd.parents,
+            };
+            let (mut rq, mut rv) = ([0.0; 6], [0.0; 6]);
+            for &l in &path.dofs {
+                let q_rows = dacc_dq(&b, geo, &path.rot, body, &path.p, l, Dir::None);
+                let v_rows = dacc_dv(&b, geo, &path.rot, body, &path.p, l, Dir::None);
+                put_rows(geo, &q_rows, false, &mut rq);
+                put_rows(geo, &v_rows, false, &mut rv);
+                for r in 0..geo.dim() {
+                    cxt[(l, r0 + r)] = rq[r];
+                    cxt[(n + l, r0 + r)] = rv[r];
+                }
+            }
+            continue;
+        }
         let p = path.p;
         let (vm, am) = (cd.kvel[body], cd.kacc[body]);
         let w = vm.ang;
@@ -587,8 +707,8 @@ pub(crate) fn accel_derivatives_t(cd: &ContactData, cxt: &mut DMatrix<f64>) {
             let dav = (vl + cd.kvel[jl] - vm).cross(&s);
             let rv = dav.lin + dav.ang.cross(&p) + s.ang.cross(&pd) + w.cross(&u);
             for r in 0..3 {
-                cxt[(l, 3 * c + r)] = rq[r];
-                cxt[(n + l, 3 * c + r)] = rv[r];
+                cxt[(l, r0 + r)] = rq[r];
+                cxt[(n + l, r0 + r)] = rv[r];
             }
         }
     }
@@ -608,6 +728,25 @@ pub(crate) fn djw_dq(model: &Model, cd: &mut ContactData, w: &[f64], out: &mut D
     }
     for (c, path) in cd.paths.iter().enumerate() {
         let body = *path.joints.last().expect("path");
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        if !geo.is_point() {
+            let b = Base {
+                s: &cd.s,
+                vel: &cd.kvel,
+                acc: &cd.kacc,
+                dof_joint: &cd.dof_joint,
+                parents: &cd.parents,
+            };
+            let mut col = [0.0; 6];
+            for &l in &path.dofs {
+                let rows = djz_dq_rows(&b, geo, &path.rot, &cd.zc, body, &path.p, l, Dir::None);
+                put_rows(geo, &rows, false, &mut col);
+                for k in 0..geo.dim() {
+                    out[(r0 + k, l)] = col[k];
+                }
+            }
+            continue;
+        }
         let p = path.p;
         let zm = cd.zc[body];
         for (i, &l) in path.dofs.iter().enumerate() {
@@ -616,7 +755,7 @@ pub(crate) fn djw_dq(model: &Model, cd: &mut ContactData, w: &[f64], out: &mut D
             let dz = s.cross(&(zm - cd.zc[path.dof_parent[i]]));
             let r = dz.lin + dz.ang.cross(&p) + zm.ang.cross(&u);
             for k in 0..3 {
-                out[(3 * c + k, l)] = r[k];
+                out[(r0 + k, l)] = r[k];
             }
         }
     }
@@ -637,13 +776,16 @@ pub(crate) fn sub_djtl_dq(
     let ld = out.nrows();
     let o = out.as_mut_slice();
     for (c, path) in cd.paths.iter().enumerate() {
-        let lam = Vector3::new(lambda[3 * c], lambda[3 * c + 1], lambda[3 * c + 2]);
+        let r0 = cd.row0[c];
+        if !cd.geo[c].is_point() {
+            continue;
+        }
+        let lam = Vector3::new(lambda[r0], lambda[r0 + 1], lambda[r0 + 2]);
         if lam == Vector3::zeros() {
             continue;
         }
         for (i, &x) in path.dofs.iter().enumerate() {
-            let u =
-                Vector3::new(cd.jac[(3 * c, x)], cd.jac[(3 * c + 1, x)], cd.jac[(3 * c + 2, x)]);
+            let u = Vector3::new(cd.jac[(r0, x)], cd.jac[(r0 + 1, x)], cd.jac[(r0 + 2, x)]);
             t[i] = u.cross(&lam);
         }
         let d = path.dofs.len();
@@ -671,6 +813,34 @@ pub(crate) fn sub_djtl_dq(
         }
     }
     cd.t3 = t;
+    sub_djtl_dq_generic(s, cd, lambda, out.as_mut_slice(), 1, ld);
+}
+
+/// The generic contacts' (6-D or local) part of [`sub_djtl_dq`]: entry `(x, l)` (at
+/// `o[rs x + cs l]`) minus `λ_c · ∂(J_c column x)/∂q_l` for the DoFs `x`, `l` of each path.
+fn sub_djtl_dq_generic(
+    s: &[Motion],
+    cd: &ContactData,
+    lambda: &[f64],
+    o: &mut [f64],
+    rs: usize,
+    cs: usize,
+) {
+    let b =
+        Base { s, vel: &cd.kvel, acc: &cd.kacc, dof_joint: &cd.dof_joint, parents: &cd.parents };
+    for (c, path) in cd.paths.iter().enumerate() {
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        let lam = &lambda[r0..r0 + geo.dim()];
+        if geo.is_point() || lam.iter().all(|x| *x == 0.0) {
+            continue;
+        }
+        for &l in &path.dofs {
+            for &x in &path.dofs {
+                let d = djac_col_dq(&b, geo, &path.rot, &path.p, x, l, Dir::None);
+                o[rs * x + cs * l] -= rows_dot(geo, &d, lam).0;
+            }
+        }
+    }
 }
 
 /// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `3 nc` world forces) from `out` (`nv×nv`, `[x][l]`), with `s`
@@ -711,13 +881,16 @@ pub(crate) fn sub_djtl_dq_strided(
         t[iv..iv + model.nvs[j]].fill(Vector3::zeros());
     }
     for (c, path) in cd.paths.iter().enumerate() {
-        let lam = Vector3::new(lambda[3 * c], lambda[3 * c + 1], lambda[3 * c + 2]);
+        let r0 = cd.row0[c];
+        if !cd.geo[c].is_point() {
+            continue;
+        }
+        let lam = Vector3::new(lambda[r0], lambda[r0 + 1], lambda[r0 + 2]);
         if lam == Vector3::zeros() {
             continue;
         }
         for &x in &path.dofs {
-            let u =
-                Vector3::new(cd.jac[(3 * c, x)], cd.jac[(3 * c + 1, x)], cd.jac[(3 * c + 2, x)]);
+            let u = Vector3::new(cd.jac[(r0, x)], cd.jac[(r0 + 1, x)], cd.jac[(r0 + 2, x)]);
             t[x] += u.cross(&lam);
         }
     }
@@ -740,6 +913,7 @@ pub(crate) fn sub_djtl_dq_strided(
             }
         }
     }
+    sub_djtl_dq_generic(s, cd, lambda, o, rs, cs);
 }
 
 /// `G(z)` (columns `l`): `[IDFOZA(z₁) − ∂(Jᵀz₂)/∂q ; ∂(J z₁)/∂q]`, `z = (z₁, z₂)` of length
@@ -779,10 +953,22 @@ pub(crate) fn g_matrix_split(
         zc[0] = Motion::zero();
         let b = base(model, data, cd);
         let m = cd.body(c);
-        for &l in &path.dofs {
-            let r = djz_dq(&b, &zc, m, &path.p, l, Dir::None).v;
-            for k in 0..3 {
-                g[(n + 3 * c + k, l)] = r[k];
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        if geo.is_point() {
+            for &l in &path.dofs {
+                let r = djz_dq(&b, &zc, m, &path.p, l, Dir::None).v;
+                for k in 0..3 {
+                    g[(n + r0 + k, l)] = r[k];
+                }
+            }
+        } else {
+            let mut col = [0.0; 6];
+            for &l in &path.dofs {
+                let rows = djz_dq_rows(&b, geo, &path.rot, &zc, m, &path.p, l, Dir::None);
+                put_rows(geo, &rows, false, &mut col);
+                for k in 0..geo.dim() {
+                    g[(n + r0 + k, l)] = col[k];
+                }
             }
         }
     }

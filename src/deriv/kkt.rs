@@ -296,7 +296,7 @@ fn solve_unchecked(
     // Baumgarte: + kd J q̇ (the position error is zero at this q).
     for (c, contact) in cd.contacts.iter().enumerate() {
         if contact.kd != 0.0 {
-            for r in 3 * c..3 * c + 3 {
+            for r in cd.row0[c]..cd.row0[c] + contact.dim() {
                 let jv: f64 = cd.paths[c].dofs.iter().map(|&k| cd.jac[(r, k)] * v[k]).sum();
                 cd.sol[r] += contact.kd * jv;
             }
@@ -352,7 +352,7 @@ fn residual_derivatives(
         djw_dq(model, cd, v, &mut kd.bg);
         for (c, contact) in cd.contacts.iter().enumerate() {
             let (kp, kdg) = (contact.kp, contact.kd);
-            for row in 3 * c..3 * c + 3 {
+            for row in cd.row0[c]..cd.row0[c] + contact.dim() {
                 for &k in &cd.paths[c].dofs {
                     let j = cd.jac[(row, k)];
                     kd.wt[(k, row)] += kdg * kd.bg[(row, k)] + kp * j;
