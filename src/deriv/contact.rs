@@ -1003,3 +1003,63 @@ pub(crate) fn point_jacobian_dq(
         }
     }
 }
+
+/// For contact `c` and weights `zeta` (its 3 or 6 rows), passes `f(j, k, x_j, x_e)` for the
+/// DoFs `j, k` of its path: `x_j = ζ·∂J_j/∂q_k` (`J_j` the Jacobian column of `j`) and
+/// `x_e = ζ·∂²e/∂q_j∂q_k` at `e = 0` (`T[i][j][k] = ∂/∂q_k (∂e_i/∂q_j)`, `e` the Baumgarte
+/// error of `crate::model::Contact`). With `w = S.ang`, `u` the point velocity columns and `R`
+/// the contact rotation:
+/// * 3-D world-aligned: `x_e = x_j` ([`point_jacobian_dq`]);
+/// * 3-D local: `e = Rᵀ(p − p_ref)`, `∂²e = ∂(Rᵀu_j)/∂q_k − Rᵀ(w_j × u_k)`;
+/// * 6-D local: `e = log6(M_ref⁻¹M)`, `∂_j e = Jr⁻¹(e) J_j` with `Jr⁻¹ = I + ½ ad(e) + …`, so
+///   `∂²e = ∂J_j/∂q_k + ½ J_k × J_j` (motion cross product);
+/// * 6-D world-aligned: `e = diag(R, R) e_local`, `∂²e = ∂J_j/∂q_k + w_j × J_k + ½ J_k × J_j`
+///   (`w_j ×` on both halves).
+pub(crate) fn contact_hessians(
+    cd: &ContactData,
+    c: usize,
+    zeta: &[f64],
+    mut f: impl FnMut(usize, usize, f64, f64),
+) {
+    let geo = cd.geo[c];
+    if geo.is_point() {
+        let z = Vector3::new(zeta[0], zeta[1], zeta[2]);
+        point_jacobian_dq(cd, c, &z, |j, k, x| f(j, k, x, x));
+        return;
+    }
+    let b = Base {
+        s: &cd.s,
+        vel: &cd.kvel,
+        acc: &cd.kacc,
+        dof_joint: &cd.dof_joint,
+        parents: &cd.parents,
+    };
+    let path = &cd.paths[c];
+    let (r, p) = (&path.rot, &path.p);
+    let part = |o: usize| Vector3::new(zeta[o], zeta[o + 1], zeta[o + 2]);
+    let (za, zl) = if geo.six { (part(0), part(3)) } else { (Vector3::zeros(), part(0)) };
+    for &j in &path.dofs {
+        let jj = jac_col(&b, geo, r, p, j, Dir::None);
+        let wj = cd.s[j].ang;
+        for &k in &path.dofs {
+            let xj = rows_dot(geo, &djac_col_dq(&b, geo, r, p, j, k, Dir::None), zeta).0;
+            let extra = if !geo.six {
+                // −Rᵀ(w_j × u_k)
+                let uk = cd.s[k].lin + cd.s[k].ang.cross(p);
+                -zl.dot(&r.tr_mul(&wj.cross(&uk)))
+            } else {
+                let jk = jac_col(&b, geo, r, p, k, Dir::None);
+                let (ka, kl, ja, jl) = (jk.0.v, jk.1.v, jj.0.v, jj.1.v);
+                // ½ J_k × J_j = ½ [k_a × j_a; k_a × j_l + k_l × j_a]
+                let half =
+                    0.5 * (za.dot(&ka.cross(&ja)) + zl.dot(&(ka.cross(&jl) + kl.cross(&ja))));
+                if geo.local {
+                    half
+                } else {
+                    half + za.dot(&wj.cross(&ka)) + zl.dot(&wj.cross(&kl))
+                }
+            };
+            f(j, k, xj, xj + extra);
+        }
+    }
+}

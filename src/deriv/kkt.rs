@@ -11,11 +11,13 @@
 //! an SPD inverse of the Delassus matrix (no dense inverse of the KKT matrix).
 
 use super::contact::{
-    ContactData, accel_derivatives_t, add_qdd_to_path_acc, base, djw_dq, factor_delassus,
-    factor_kkt, fill_rinv, g_matrix, g_matrix_split, path_kinematics, point_jacobian_dq,
-    sub_djtl_dq_strided, update_points,
+    ContactData, accel_derivatives_t, add_qdd_to_path_acc, base, contact_hessians, djw_dq,
+    factor_delassus, factor_kkt, fill_rinv, g_matrix, g_matrix_split, path_kinematics,
+    point_jacobian_dq, sub_djtl_dq_strided, update_points,
 };
-use super::contact_kin::{Dir, dap_dq, dap_dv, djtl_dq, djz_dq};
+use super::contact_kin::{
+    Dir, dacc_dq, dacc_dv, dap_dq, dap_dv, djac_col_dq, djtl_dq, djz_dq_rows, put_rows, rows_dot,
+};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_fo::id_derivatives_unchecked;
 use super::id_so::{SoData, id_so_unchecked};
@@ -479,7 +481,32 @@ fn kkt_so_inner(
     let b = base(model, data, &kd.cd);
     for (c, path) in kd.cd.paths.iter().enumerate() {
         let body = *path.joints.last().expect("path");
-        let lam = Vector3::new(kd.lambda[3 * c], kd.lambda[3 * c + 1], kd.lambda[3 * c + 2]);
+        let (geo, r0) = (kd.cd.geo[c], kd.cd.row0[c]);
+        if !geo.is_point() {
+            let lam = &kd.lambda.as_slice()[r0..r0 + geo.dim()];
+            let (rot, p) = (&path.rot, &path.p);
+            let mut col = [0.0; 6];
+            for &k in &path.dofs {
+                for &l in &path.dofs {
+                    for &x in &path.dofs {
+                        let d = djac_col_dq(&b, geo, rot, p, x, l, Dir::Q(k));
+                        rqq[(x, l, k)] -= rows_dot(geo, &d, lam).1;
+                    }
+                    for (t, rows) in [
+                        (&mut *rqq, dacc_dq(&b, geo, rot, body, p, l, Dir::Q(k))),
+                        (&mut *rvv, dacc_dv(&b, geo, rot, body, p, l, Dir::V(k))),
+                        (&mut *rqv, dacc_dq(&b, geo, rot, body, p, l, Dir::V(k))),
+                    ] {
+                        put_rows(geo, &rows, true, &mut col);
+                        for (r, x) in col[..geo.dim()].iter().enumerate() {
+                            t[(n + r0 + r, l, k)] = *x;
+                        }
+                    }
+                }
+            }
+            continue;
+        }
+        let lam = Vector3::new(kd.lambda[r0], kd.lambda[r0 + 1], kd.lambda[r0 + 2]);
         for &k in &path.dofs {
             for &l in &path.dofs {
                 for &x in &path.dofs {
@@ -489,14 +516,14 @@ fn kkt_so_inner(
                 let avv = dap_dv(&b, body, &path.p, l, Dir::V(k)).d;
                 let aqv = dap_dq(&b, body, &path.p, l, Dir::V(k)).d;
                 for r in 0..3 {
-                    rqq[(n + 3 * c + r, l, k)] = aqq[r];
-                    rvv[(n + 3 * c + r, l, k)] = avv[r];
-                    rqv[(n + 3 * c + r, l, k)] = aqv[r];
+                    rqq[(n + r0 + r, l, k)] = aqq[r];
+                    rvv[(n + r0 + r, l, k)] = avv[r];
+                    rqv[(n + r0 + r, l, k)] = aqv[r];
                 }
             }
         }
     }
-    // Baumgarte rows: + kd ∂²(J q̇)/∂q² + kp ∂²p/∂q² (q, q), + kd ∂u_k/∂q_l (q, q̇); the
+    // Baumgarte rows: + kd ∂²(J q̇)/∂q² + kp ∂²e/∂q² (q, q), + kd ∂J_k/∂q_l (q, q̇); the
     // body velocities data.ov are the path sums Σ S q̇ that djz_dq differentiates.
     for (c, path) in kd.cd.paths.iter().enumerate() {
         let contact = &kd.cd.contacts[c];
@@ -504,22 +531,29 @@ fn kkt_so_inner(
             continue;
         }
         let body = *path.joints.last().expect("path");
+        let (geo, r0) = (kd.cd.geo[c], kd.cd.row0[c]);
         let (kp, kdg) = (contact.kp, contact.kd);
         if kdg != 0.0 {
+            let mut col = [0.0; 6];
             for &k in &path.dofs {
                 for &l in &path.dofs {
-                    let d = djz_dq(&b, &data.ov, body, &path.p, l, Dir::Q(k)).d;
-                    for r in 0..3 {
-                        rqq[(n + 3 * c + r, l, k)] += kdg * d[r];
+                    let rows =
+                        djz_dq_rows(&b, geo, &path.rot, &data.ov, body, &path.p, l, Dir::Q(k));
+                    put_rows(geo, &rows, true, &mut col);
+                    for (r, x) in col[..geo.dim()].iter().enumerate() {
+                        rqq[(n + r0 + r, l, k)] += kdg * x;
                     }
                 }
             }
         }
-        for r in 0..3 {
-            let i = n + 3 * c + r;
-            point_jacobian_dq(&kd.cd, c, &Vector3::ith(r, 1.0), |j, k, x| {
-                rqq[(i, j, k)] += kp * x;
-                rqv[(i, k, j)] += kdg * x;
+        let mut e_r = [0.0; 6];
+        for r in 0..geo.dim() {
+            let i = n + r0 + r;
+            e_r.fill(0.0);
+            e_r[r] = 1.0;
+            contact_hessians(&kd.cd, c, &e_r[..geo.dim()], |j, k, xj, xe| {
+                rqq[(i, j, k)] += kp * xe;
+                rqv[(i, k, j)] += kdg * xj;
             });
         }
     }

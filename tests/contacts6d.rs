@@ -1,0 +1,148 @@
+//! 6-D contacts and the local reference (issue 31) against the dual / hyper-dual oracle of
+//! `reference::contact`: KKT dynamics (with and without Baumgarte gains), impact dynamics and
+//! constrained inverse dynamics, first and second order, on mixed contact sets (3-D and 6-D,
+//! world-aligned and local, contact frames placed at random in their link frames); the error
+//! cases of the contact model.
+
+mod util;
+
+use nalgebra::{DMatrix, DVector, Vector3};
+use sodyn::algo::{Contact, ContactReference, ContactType, Data};
+use sodyn::deriv::*;
+use sodyn::model::{Model, builtin, exp6};
+use sodyn::reference::contact as oracle;
+use sodyn::rng::Rng;
+use sodyn::spatial::Motion;
+use sodyn::tensor::Tensor3;
+use util::*;
+
+use ContactReference::{Local, LocalWorldAligned as Lwa};
+use ContactType::{D3, D6};
+
+/// (model, [(frame, type, reference)]) cases with generic contacts.
+fn cases() -> Vec<(Model, Vec<(&'static str, ContactType, ContactReference)>)> {
+    vec![
+        (
+            builtin::quadruped(),
+            vec![("LF_FOOT", D3, Local), ("RF_FOOT", D3, Lwa), ("RH_FOOT", D3, Local)],
+        ),
+        (
+            builtin::quadruped(),
+            vec![("LF_FOOT", D6, Lwa), ("RF_FOOT", D3, Local), ("RH_FOOT", D3, Local)],
+        ),
+        (builtin::quadruped(), vec![("RH_FOOT", D6, Local), ("LF_FOOT", D3, Lwa)]),
+        (builtin::serial_chain(9), vec![("ee", D6, Lwa)]),
+        (builtin::serial_chain(8), vec![("ee", D6, Local)]),
+        (builtin::random_tree(8, 3, true), vec![("body_5", D6, Local), ("body_2", D3, Local)]),
+        (builtin::random_tree(10, 21, false), vec![("body_9", D3, Local), ("body_4", D3, Lwa)]),
+    ]
+}
+
+/// The contacts of a case, each frame placed at a random point within about 5 cm and a random
+/// rotation of its link frame.
+fn contacts(
+    m: &Model,
+    spec: &[(&str, ContactType, ContactReference)],
+    rng: &mut Rng,
+) -> Vec<Contact> {
+    spec.iter()
+        .map(|&(f, kind, reference)| {
+            let xi = Motion::new(
+                Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.7,
+                Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.05,
+            );
+            let mut c = Contact::new(m, f, Vector3::zeros())
+                .unwrap()
+                .with_placement(m, &exp6(&xi))
+                .unwrap()
+                .with_reference(reference);
+            c.kind = kind;
+            c
+        })
+        .collect()
+}
+
+fn with_gains(contacts: &[Contact], rng: &mut Rng) -> Vec<Contact> {
+    contacts
+        .iter()
+        .map(|c| c.clone().with_baumgarte(rng.range(0.0, 50.0), rng.range(0.0, 10.0)).unwrap())
+        .collect()
+}
+
+#[test]
+fn kkt_first_and_second_order_match_oracle() {
+    let names = [
+        "qdd",
+        "lambda",
+        "dqdd_dq",
+        "dqdd_dv",
+        "dqdd_dtau",
+        "dlambda_dq",
+        "dlambda_dv",
+        "dlambda_dtau",
+        "d2qdd_dq2",
+        "d2qdd_dv2",
+        "d2qdd_dqdv",
+        "d2qdd_dtaudq",
+        "d2lambda_dq2",
+        "d2lambda_dv2",
+        "d2lambda_dqdv",
+        "d2lambda_dtaudq",
+        "dqdd_dq (first order only)",
+        "dlambda_dq (first order only)",
+    ];
+    let mut w: Vec<Worst> = names.iter().map(|n| Worst::new(n)).collect();
+    let mut rng = Rng::new(61);
+    for gains in [false, true] {
+        for (m, spec) in cases() {
+            let mut cs = contacts(&m, &spec, &mut rng);
+            if gains {
+                cs = with_gains(&cs, &mut rng);
+            }
+            let (q, v, tau) = random_state(&m, &mut rng);
+            let mut d = Data::new(&m);
+            let mut kd = KktData::new(&m, ContactData::new(&m, &cs).unwrap()).with_second_order(&m);
+            kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+            let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
+            let at = format!("{} {:?} gains {gains}", m.name(), spec);
+            let (qr, lr) = oracle::kkt::<f64>(&m, qs, vs, ts, &cs);
+            w[0].add(rel_err_vec(kd.qdd(), &DVector::from_vec(qr)), &at);
+            w[1].add(rel_err_vec(kd.lambda(), &DVector::from_vec(lr)), &at);
+            let fo = oracle::kkt_fo(&m, qs, vs, ts, &cs);
+            let pairs: [(&DMatrix<f64>, &DMatrix<f64>); 6] = [
+                (kd.dqdd_dq(), &fo.dqdd_dq),
+                (kd.dqdd_dv(), &fo.dqdd_dv),
+                (kd.dqdd_dtau(), &fo.dqdd_dtau),
+                (kd.dlambda_dq(), &fo.dlambda_dq),
+                (kd.dlambda_dv(), &fo.dlambda_dv),
+                (kd.dlambda_dtau(), &fo.dlambda_dtau),
+            ];
+            for (i, (a, b)) in pairs.iter().enumerate() {
+                w[2 + i].add(rel_err_mat(a, b), &at);
+            }
+            // The first order without the second-order workspace agrees.
+            let mut k1 = KktData::new(&m, ContactData::new(&m, &cs).unwrap());
+            kkt_derivatives(&m, &mut d, &mut k1, &q, &v, &tau).unwrap();
+            w[16].add(rel_err_mat(k1.dqdd_dq(), &fo.dqdd_dq), &at);
+            w[17].add(rel_err_mat(k1.dlambda_dq(), &fo.dlambda_dq), &at);
+            let so = oracle::kkt_so(&m, qs, vs, ts, &cs);
+            let k = kd.so().unwrap();
+            let tensors: [(&Tensor3, &Tensor3); 8] = [
+                (k.d2qdd_dq2(), &so.d2qdd_dq2),
+                (k.d2qdd_dv2(), &so.d2qdd_dv2),
+                (k.d2qdd_dqdv(), &so.d2qdd_dqdv),
+                (k.d2qdd_dtaudq(), &so.d2qdd_dtaudq),
+                (k.d2lambda_dq2(), &so.d2lambda_dq2),
+                (k.d2lambda_dv2(), &so.d2lambda_dv2),
+                (k.d2lambda_dqdv(), &so.d2lambda_dqdv),
+                (k.d2lambda_dtaudq(), &so.d2lambda_dtaudq),
+            ];
+            for (i, (a, b)) in tensors.iter().enumerate() {
+                w[8 + i].add(rel_err_tensor(a, b), &at);
+            }
+        }
+    }
+    for x in &w {
+        x.check(1e-10);
+    }
+}
