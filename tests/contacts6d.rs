@@ -146,3 +146,88 @@ fn kkt_first_and_second_order_match_oracle() {
         x.check(1e-10);
     }
 }
+
+#[test]
+fn impact_first_and_second_order_match_oracle() {
+    let names = [
+        "vplus",
+        "impulse",
+        "dvplus_dq",
+        "dvplus_dvminus",
+        "dimpulse_dq",
+        "dimpulse_dvminus",
+        "d2vplus_dq2",
+        "d2vplus_dqdvminus",
+        "d2impulse_dq2",
+        "d2impulse_dqdvminus",
+    ];
+    let mut w: Vec<Worst> = names.iter().map(|n| Worst::new(n)).collect();
+    let mut rng = Rng::new(62);
+    for (m, spec) in cases() {
+        for e in [0.0, 0.4] {
+            let cs = contacts(&m, &spec, &mut rng);
+            let (q, vminus, _) = random_state(&m, &mut rng);
+            let mut d = Data::new(&m);
+            let mut im =
+                ImpactData::new(&m, ContactData::new(&m, &cs).unwrap()).with_second_order(&m);
+            im.set_restitution(e).unwrap();
+            impact_so_derivatives(&m, &mut d, &mut im, &q, &vminus).unwrap();
+            let (qs, vs) = (q.as_slice(), vminus.as_slice());
+            let at = format!("{} {:?} e = {e}", m.name(), spec);
+            let (vp, imp) = oracle::impact::<f64>(&m, qs, vs, &cs, e);
+            w[0].add(rel_err_vec(im.vplus(), &DVector::from_vec(vp)), &at);
+            w[1].add(rel_err_vec(im.impulse(), &DVector::from_vec(imp)), &at);
+            let fo = oracle::impact_fo(&m, qs, vs, &cs, e);
+            w[2].add(rel_err_mat(im.dvplus_dq(), &fo.dvplus_dq), &at);
+            w[3].add(rel_err_mat(im.dvplus_dvminus(), &fo.dvplus_dvminus), &at);
+            w[4].add(rel_err_mat(im.dimpulse_dq(), &fo.dimpulse_dq), &at);
+            w[5].add(rel_err_mat(im.dimpulse_dvminus(), &fo.dimpulse_dvminus), &at);
+            let so = oracle::impact_so(&m, qs, vs, &cs, e);
+            let k = im.so().unwrap();
+            w[6].add(rel_err_tensor(k.d2vplus_dq2(), &so.d2vplus_dq2), &at);
+            w[7].add(rel_err_tensor(k.d2vplus_dqdvminus(), &so.d2vplus_dqdvminus), &at);
+            w[8].add(rel_err_tensor(k.d2impulse_dq2(), &so.d2impulse_dq2), &at);
+            w[9].add(rel_err_tensor(k.d2impulse_dqdvminus(), &so.d2impulse_dqdvminus), &at);
+        }
+    }
+    for x in &w {
+        x.check(1e-10);
+    }
+}
+
+#[test]
+fn constrained_id_first_and_second_order_match_oracle() {
+    let mut w = [
+        Worst::new("constrained tau"),
+        Worst::new("constrained dtau_dq"),
+        Worst::new("constrained dtau_dv"),
+        Worst::new("constrained d2tau_dq2"),
+    ];
+    let mut rng = Rng::new(63);
+    for (m, spec) in cases() {
+        let cs = contacts(&m, &spec, &mut rng);
+        let (q, v, a) = random_state(&m, &mut rng);
+        let nrows: usize = cs.iter().map(|c| c.dim()).sum();
+        let lam = DVector::from_fn(nrows, |_, _| rng.range(-20.0, 20.0));
+        let mut d = Data::new(&m);
+        let mut cd = ContactData::new(&m, &cs).unwrap();
+        let mut so = SoData::new(&m);
+        constrained_id_so_derivatives(&m, &mut d, &mut cd, &mut so, &q, &v, &a, &lam).unwrap();
+        let (qs, vs, as_, ls) = (q.as_slice(), v.as_slice(), a.as_slice(), lam.as_slice());
+        let at = format!("{} {:?}", m.name(), spec);
+        let tau = oracle::constrained_rnea::<f64>(&m, qs, vs, as_, &cs, ls);
+        w[0].add(rel_err_vec(d.tau(), &DVector::from_vec(tau)), &at);
+        let dq = oracle::d_constrained_rnea_dq(&m, qs, vs, as_, &cs, ls);
+        w[1].add(rel_err_mat(d.dtau_dq(), &dq), &at);
+        let dv = oracle::d_constrained_rnea_dv(&m, qs, vs, as_, &cs, ls);
+        w[2].add(rel_err_mat(d.dtau_dv(), &dv), &at);
+        let t = oracle::d2_constrained_rnea_dq2(&m, qs, vs, as_, &cs, ls);
+        w[3].add(rel_err_tensor(so.d2tau_dq2(), &t), &at);
+        let mut d1 = Data::new(&m);
+        constrained_id_derivatives(&m, &mut d1, &mut cd, &q, &v, &a, &lam).unwrap();
+        assert!(rel_err_mat(d1.dtau_dq(), d.dtau_dq()) < 1e-14);
+    }
+    for x in &w {
+        x.check(1e-10);
+    }
+}

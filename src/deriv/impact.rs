@@ -13,7 +13,7 @@ use super::contact::{
     ContactData, base, copy_block, djw_dq, factor_delassus, factor_kkt, fill_rinv, g_matrix,
     g_matrix_split, padded_rows, path_kinematics, sub_djtl_dq_tree, transpose_into, update_points,
 };
-use super::contact_kin::{Dir, djtl_dq, djz_dq};
+use super::contact_kin::{Dir, djac_col_dq, djtl_dq, djz_dq, djz_dq_rows, put_rows, rows_dot};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_so::{SoData, id_so_unchecked};
 use super::kkt::{copy_rows_zero_rest, premultiply};
@@ -386,7 +386,7 @@ fn so_inner(
         let b = base(model, data, &im.cd);
         for (c, path) in im.cd.paths.iter().enumerate() {
             let body = *path.joints.last().expect("path");
-            let lam = Vector3::new(im.impulse[3 * c], im.impulse[3 * c + 1], im.impulse[3 * c + 2]);
+            let (geo, r0) = (im.cd.geo[c], im.cd.row0[c]);
             for &j in &path.joints {
                 let parent = model.parents[j];
                 let mut zj = if parent == 0 { Motion::zero() } else { zc[parent] };
@@ -396,6 +396,26 @@ fn so_inner(
                 }
                 zc[j] = zj;
             }
+            if !geo.is_point() {
+                let lam = &im.impulse.as_slice()[r0..r0 + geo.dim()];
+                let (rot, p) = (&path.rot, &path.p);
+                let mut col = [0.0; 6];
+                for &k in &path.dofs {
+                    for &l in &path.dofs {
+                        for &x in &path.dofs {
+                            let d = djac_col_dq(&b, geo, rot, p, x, l, Dir::Q(k));
+                            rqq[(x, l, k)] -= rows_dot(geo, &d, lam).1;
+                        }
+                        let rows = djz_dq_rows(&b, geo, rot, &zc, body, p, l, Dir::Q(k));
+                        put_rows(geo, &rows, true, &mut col);
+                        for (r, x) in col[..geo.dim()].iter().enumerate() {
+                            rqq[(n + r0 + r, l, k)] = *x;
+                        }
+                    }
+                }
+                continue;
+            }
+            let lam = Vector3::new(im.impulse[r0], im.impulse[r0 + 1], im.impulse[r0 + 2]);
             for &k in &path.dofs {
                 for &l in &path.dofs {
                     for &x in &path.dofs {
@@ -403,7 +423,7 @@ fn so_inner(
                     }
                     let d = djz_dq(&b, &zc, body, &path.p, l, Dir::Q(k)).d;
                     for r in 0..3 {
-                        rqq[(n + 3 * c + r, l, k)] = d[r];
+                        rqq[(n + r0 + r, l, k)] = d[r];
                     }
                 }
             }
