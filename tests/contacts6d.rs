@@ -231,3 +231,82 @@ fn constrained_id_first_and_second_order_match_oracle() {
         x.check(1e-10);
     }
 }
+
+/// `C[(j, k)] = Σ_i w_i T[(i, j, k)]`.
+fn contract(t: &Tensor3, w: &DVector<f64>) -> DMatrix<f64> {
+    let (n1, n2, n3) = t.dims();
+    DMatrix::from_fn(n2, n3, |j, k| (0..n1).map(|i| w[i] * t[(i, j, k)]).sum())
+}
+
+fn weight(n: usize, rng: &mut Rng) -> DVector<f64> {
+    DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0))
+}
+
+/// The contracted KKT second order against the contraction of the hyper-dual oracle's tensors.
+#[test]
+fn contracted_kkt_matches_ad() {
+    let mut w = ["C_qq", "C_vv", "C_qv", "C_tauq"].map(Worst::new);
+    let mut rng = Rng::new(64);
+    for gains in [false, true] {
+        for (m, spec) in cases() {
+            let mut cs = contacts(&m, &spec, &mut rng);
+            if gains {
+                cs = with_gains(&cs, &mut rng);
+            }
+            let (q, v, tau) = random_state(&m, &mut rng);
+            let nrows: usize = cs.iter().map(|c| c.dim()).sum();
+            let (wq, wl) = (weight(m.nv(), &mut rng), weight(nrows, &mut rng));
+            let mut d = Data::new(&m);
+            let mut kd = KktData::new(&m, ContactData::new(&m, &cs).unwrap());
+            let mut kc = KktContracted::new(&m, &kd);
+            kkt_so_contracted(&m, &mut d, &mut kd, &mut kc, &q, &v, &tau, &wq, &wl).unwrap();
+            let got = [kc.c_qq(), kc.c_vv(), kc.c_qv(), kc.c_tauq()];
+            let r = oracle::kkt_so(&m, q.as_slice(), v.as_slice(), tau.as_slice(), &cs);
+            let refs = [
+                (&r.d2qdd_dq2, &r.d2lambda_dq2),
+                (&r.d2qdd_dv2, &r.d2lambda_dv2),
+                (&r.d2qdd_dqdv, &r.d2lambda_dqdv),
+                (&r.d2qdd_dtaudq, &r.d2lambda_dtaudq),
+            ];
+            let at = format!("{} {:?} gains {gains}", m.name(), spec);
+            for ((wst, (tq, tl)), g) in w.iter_mut().zip(refs).zip(got) {
+                wst.add(rel_err_mat(g, &(contract(tq, &wq) + contract(tl, &wl))), &at);
+            }
+        }
+    }
+    for x in &w {
+        x.check(1e-10);
+    }
+}
+
+/// The contracted impact second order against the contraction of the oracle's tensors.
+#[test]
+fn contracted_impact_matches_ad() {
+    let mut w = ["C_qq", "C_qvminus"].map(Worst::new);
+    let mut rng = Rng::new(65);
+    for (m, spec) in cases() {
+        for e in [0.0, 0.4] {
+            let cs = contacts(&m, &spec, &mut rng);
+            let (q, v, _) = random_state(&m, &mut rng);
+            let nrows: usize = cs.iter().map(|c| c.dim()).sum();
+            let (wv, wl) = (weight(m.nv(), &mut rng), weight(nrows, &mut rng));
+            let mut d = Data::new(&m);
+            let mut im = ImpactData::new(&m, ContactData::new(&m, &cs).unwrap());
+            im.set_restitution(e).unwrap();
+            let mut ic = ImpactContracted::new(&m, &im);
+            impact_so_contracted(&m, &mut d, &mut im, &mut ic, &q, &v, &wv, &wl).unwrap();
+            let r = oracle::impact_so(&m, q.as_slice(), v.as_slice(), &cs, e);
+            let refs = [
+                (&r.d2vplus_dq2, &r.d2impulse_dq2),
+                (&r.d2vplus_dqdvminus, &r.d2impulse_dqdvminus),
+            ];
+            let at = format!("{} {:?} e = {e}", m.name(), spec);
+            for ((wst, (tv, tl)), g) in w.iter_mut().zip(refs).zip([ic.c_qq(), ic.c_qvminus()]) {
+                wst.add(rel_err_mat(g, &(contract(tv, &wv) + contract(tl, &wl))), &at);
+            }
+        }
+    }
+    for x in &w {
+        x.check(1e-10);
+    }
+}

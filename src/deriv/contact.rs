@@ -1063,3 +1063,68 @@ pub(crate) fn contact_hessians(
         }
     }
 }
+
+/// `zc[j] = Σ_{x ⪯ j} S_x z_x` (world subspaces of `data`) for the joints of contact `c`'s path.
+fn path_sums(model: &Model, data: &Data, cd: &ContactData, c: usize, z: &[f64], zc: &mut [Motion]) {
+    zc[0] = Motion::zero();
+    for &j in &cd.paths[c].joints {
+        let mut zj = zc[model.parents[j]];
+        let iv = model.idx_v[j];
+        for x in iv..iv + model.nvs[j] {
+            zj += data.s_world[x] * z[x];
+        }
+        zc[j] = zj;
+    }
+}
+
+/// For the generic contact `c` (6-D or local): `h[(l, k)] += scale · wts · ∂²(J_c z)/∂q_l∂q_k`
+/// (inner `l`, outer `k`) for the DoFs `l, k` of its path (`O(d²)` dual evaluations of
+/// `djz_dq_rows`); `zc` is scratch of one motion per joint. Needs the base quantities of the
+/// current state (as for [`base`]).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn add_jz_hessian(
+    model: &Model,
+    data: &Data,
+    cd: &ContactData,
+    c: usize,
+    z: &[f64],
+    wts: &[f64],
+    scale: f64,
+    zc: &mut [Motion],
+    h: &mut DMatrix<f64>,
+) {
+    path_sums(model, data, cd, c, z, zc);
+    let b = base(model, data, cd);
+    let (path, geo) = (&cd.paths[c], cd.geo[c]);
+    let body = *path.joints.last().expect("path");
+    for &k in &path.dofs {
+        for &l in &path.dofs {
+            let rows = djz_dq_rows(&b, geo, &path.rot, zc, body, &path.p, l, Dir::Q(k));
+            h[(l, k)] += scale * rows_dot(geo, &rows, wts).1;
+        }
+    }
+}
+
+/// For the generic contact `c`: the Hessians of `ζ·a_c` (`a_c` its acceleration rows at the
+/// current state): `qq[(l, k)] += ζ·∂²a_c/∂q_l∂q_k`, `vv[(l, k)] += ζ·∂²a_c/∂q̇_l∂q̇_k`,
+/// `qv[(l, k)] += ζ·∂²a_c/∂q_l∂q̇_k`.
+pub(crate) fn add_acc_hessians(
+    model: &Model,
+    data: &Data,
+    cd: &ContactData,
+    c: usize,
+    zeta: &[f64],
+    (qq, vv, qv): (&mut DMatrix<f64>, &mut DMatrix<f64>, &mut DMatrix<f64>),
+) {
+    let b = base(model, data, cd);
+    let (path, geo) = (&cd.paths[c], cd.geo[c]);
+    let body = *path.joints.last().expect("path");
+    let (r, p) = (&path.rot, &path.p);
+    for &k in &path.dofs {
+        for &l in &path.dofs {
+            qq[(l, k)] += rows_dot(geo, &dacc_dq(&b, geo, r, body, p, l, Dir::Q(k)), zeta).1;
+            vv[(l, k)] += rows_dot(geo, &dacc_dv(&b, geo, r, body, p, l, Dir::V(k)), zeta).1;
+            qv[(l, k)] += rows_dot(geo, &dacc_dq(&b, geo, r, body, p, l, Dir::V(k)), zeta).1;
+        }
+    }
+}

@@ -10,8 +10,9 @@
 //! `q̇⁻`, so `∂²y/∂q̇⁻²` = 0.
 
 use super::contact::{
-    ContactData, base, copy_block, djw_dq, factor_delassus, factor_kkt, fill_rinv, g_matrix,
-    g_matrix_split, padded_rows, path_kinematics, sub_djtl_dq_tree, transpose_into, update_points,
+    ContactData, add_jz_hessian, base, copy_block, djw_dq, factor_delassus, factor_kkt, fill_rinv,
+    g_matrix, g_matrix_split, padded_rows, path_kinematics, sub_djtl_dq_tree, transpose_into,
+    update_points,
 };
 use super::contact_kin::{Dir, djac_col_dq, djtl_dq, djz_dq, djz_dq_rows, put_rows, rows_dot};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
@@ -602,14 +603,24 @@ pub fn impact_so_contracted(
     }
     // ... minus ζ₁ᵀ ∂²(J_cᵀλ̂)/∂q², plus ζ₂ᵀ ∂²(J_c w)/∂q²: the q-Hessians of λ̂·(J_c ζ₁) and
     //     ζ₂·(J_c w), point accelerations at rest (`point_hessians`).
+    let mut zc = std::mem::take(&mut im.cd.zc);
     for (c, path) in im.cd.paths.iter().enumerate() {
-        let lam = Vector3::new(im.impulse[3 * c], im.impulse[3 * c + 1], im.impulse[3 * c + 2]);
-        let zc2 = Vector3::new(z2[3 * c], z2[3 * c + 1], z2[3 * c + 2]);
+        let (geo, r0) = (im.cd.geo[c], im.cd.row0[c]);
+        if !geo.is_point() {
+            // Generic contacts (6-D or local): dual-base row kinematics, O(d²) per contact.
+            let (zr, lam) = (&z2[r0..r0 + geo.dim()], &im.impulse.as_slice()[r0..r0 + geo.dim()]);
+            add_jz_hessian(model, data, &im.cd, c, im.w.as_slice(), zr, 1.0, &mut zc, qq);
+            add_jz_hessian(model, data, &im.cd, c, z1, lam, -1.0, &mut zc, qq);
+            continue;
+        }
+        let lam = Vector3::new(im.impulse[r0], im.impulse[r0 + 1], im.impulse[r0 + 2]);
+        let zc2 = Vector3::new(z2[r0], z2[r0 + 1], z2[r0 + 2]);
         pw.at_rest(model, data, path, im.w.as_slice());
         point_hessians(model, data, pw, path, &zc2, 1.0, qq, None);
         pw.at_rest(model, data, path, z1);
         point_hessians(model, data, pw, path, &lam, -1.0, qq, None);
     }
+    im.cd.zc = zc;
     // D and E from one G evaluation with z₂ = 0, K from one with z_M = z_J = 0, z₂ = −ζ₂.
     g_matrix_split(model, data, &mut im.cd, z1, zeros_m.as_slice(), z1);
     {

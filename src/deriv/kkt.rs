@@ -11,9 +11,9 @@
 //! an SPD inverse of the Delassus matrix (no dense inverse of the KKT matrix).
 
 use super::contact::{
-    ContactData, accel_derivatives_t, add_qdd_to_path_acc, base, contact_hessians, djw_dq,
-    factor_delassus, factor_kkt, fill_rinv, g_matrix, g_matrix_split, path_kinematics,
-    point_jacobian_dq, sub_djtl_dq_strided, update_points,
+    ContactData, accel_derivatives_t, add_acc_hessians, add_jz_hessian, add_qdd_to_path_acc, base,
+    contact_hessians, djw_dq, factor_delassus, factor_kkt, fill_rinv, g_matrix, g_matrix_split,
+    path_kinematics, point_jacobian_dq, sub_djtl_dq_strided, update_points,
 };
 use super::contact_kin::{
     Dir, dacc_dq, dacc_dv, dap_dq, dap_dv, djac_col_dq, djtl_dq, djz_dq_rows, put_rows, rows_dot,
@@ -756,28 +756,51 @@ pub fn kkt_so_contracted(
     }
     // ... minus ζ₁ᵀ ∂²(J_cᵀλ)/∂q² = the q-Hessian of λ·(J_c ζ₁), plus the Hessians of ζ₂·a_p
     //     (both from the point-mass form of the reverse-mode pass, `point_hessians`).
+    let mut zc = std::mem::take(&mut kd.cd.zc);
     for (c, path) in kd.cd.paths.iter().enumerate() {
-        let lam = Vector3::new(kd.lambda[3 * c], kd.lambda[3 * c + 1], kd.lambda[3 * c + 2]);
-        let z2 = Vector3::new(zeta[n + 3 * c], zeta[n + 3 * c + 1], zeta[n + 3 * c + 2]);
+        let (geo, r0) = (kd.cd.geo[c], kd.cd.row0[c]);
+        let contact = &kd.cd.contacts[c];
+        let (kp, kdg) = (contact.kp, contact.kd);
+        if !geo.is_point() {
+            // Generic contacts (6-D or local): the same Hessians from the dual-base row
+            // kinematics, O(d²) per contact.
+            let z2 = &zeta.as_slice()[n + r0..n + r0 + geo.dim()];
+            let lam = &kd.lambda.as_slice()[r0..r0 + geo.dim()];
+            let cd = &kd.cd;
+            add_acc_hessians(model, data, cd, c, z2, (&mut *qq, &mut *vv, &mut *qv));
+            let z1 = &zeta.as_slice()[..n];
+            add_jz_hessian(model, data, cd, c, z1, lam, -1.0, &mut zc, qq);
+            if kdg != 0.0 {
+                add_jz_hessian(model, data, cd, c, v.as_slice(), z2, kdg, &mut zc, qq);
+            }
+            if contact.has_baumgarte() {
+                contact_hessians(cd, c, z2, |j, k, xj, xe| {
+                    qq[(j, k)] += kp * xe;
+                    qv[(k, j)] += kdg * xj;
+                });
+            }
+            continue;
+        }
+        let lam = Vector3::new(kd.lambda[r0], kd.lambda[r0 + 1], kd.lambda[r0 + 2]);
+        let z2 = Vector3::new(zeta[n + r0], zeta[n + r0 + 1], zeta[n + r0 + 2]);
         pw.load_state(model, data, path, -model.gravity);
         point_hessians(model, data, pw, path, &z2, 1.0, qq, Some((&mut *vv, &mut *qv)));
         pw.at_rest(model, data, path, &zeta.as_slice()[..n]);
         point_hessians(model, data, pw, path, &lam, -1.0, qq, None);
         // Baumgarte: ζ₂·(kd J q̇ + kp e): kd times the Hessian of ζ₂·(J q̇) at rest with q̈ = q̇,
         // kp times that of ζ₂·p, and kd ∂(ζ₂·u_k)/∂q_j in C_qv.
-        let contact = &kd.cd.contacts[c];
-        if contact.kd != 0.0 {
+        if kdg != 0.0 {
             pw.at_rest(model, data, path, v.as_slice());
-            point_hessians(model, data, pw, path, &z2, contact.kd, qq, None);
+            point_hessians(model, data, pw, path, &z2, kdg, qq, None);
         }
         if contact.has_baumgarte() {
-            let (kp, kdg) = (contact.kp, contact.kd);
             point_jacobian_dq(&kd.cd, c, &z2, |j, k, x| {
                 qq[(j, k)] += kp * x;
                 qv[(k, j)] += kdg * x;
             });
         }
     }
+    kd.cd.zc = zc;
     // 4. A from one G evaluation: G(ζ₁; −ζ₂) = [∂(Mζ₁)/∂q + ∂(J_cᵀζ₂)/∂q ; ∂(J_c ζ₁)/∂q].
     {
         let (z1, z2) = zeta.as_slice().split_at(n);
