@@ -310,3 +310,119 @@ fn contracted_impact_matches_ad() {
         x.check(1e-10);
     }
 }
+
+/// Central differences (h = 1e-5) of the first-order KKT and impact derivatives along `q` and
+/// `q̇` as a second opinion on the second-order ones, for 6-D and local contacts (`kd` only:
+/// a position gain's reference moves with the differenced `q`).
+#[test]
+fn second_order_matches_differences_of_first_order() {
+    let mut w = Worst::new("SO vs central FD of FO");
+    let mut rng = Rng::new(66);
+    let m = builtin::quadruped();
+    let spec = [("LF_FOOT", D6, Local), ("RF_FOOT", D3, Local), ("RH_FOOT", D6, Lwa)];
+    let cs: Vec<Contact> = contacts(&m, &spec[..2], &mut rng)
+        .into_iter()
+        .map(|c| c.with_baumgarte(0.0, 3.0).unwrap())
+        .collect();
+    let (q, v, tau) = random_state(&m, &mut rng);
+    let n = m.nv();
+    let nr: usize = cs.iter().map(|c| c.dim()).sum();
+    let mut d = Data::new(&m);
+    let mk = || KktData::new(&m, ContactData::new(&m, &cs).unwrap());
+    let mut kd = mk().with_second_order(&m);
+    kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+    let (mut kp, mut km) = (mk(), mk());
+    let h = 1e-5;
+    let mut t = [Tensor3::zeros(n, n, n), Tensor3::zeros(nr, n, n), Tensor3::zeros(n, n, n)];
+    for k in 0..n {
+        let mut e = DVector::zeros(n);
+        e[k] = h;
+        kkt_derivatives(&m, &mut d, &mut kp, &m.integrate(&q, &e).unwrap(), &v, &tau).unwrap();
+        kkt_derivatives(&m, &mut d, &mut km, &m.integrate(&q, &-&e).unwrap(), &v, &tau).unwrap();
+        t[0].page_mut(k).copy_from(&((kp.dqdd_dq() - km.dqdd_dq()) / (2.0 * h)));
+        t[1].page_mut(k).copy_from(&((kp.dlambda_dq() - km.dlambda_dq()) / (2.0 * h)));
+        kkt_derivatives(&m, &mut d, &mut kp, &q, &(&v + &e), &tau).unwrap();
+        kkt_derivatives(&m, &mut d, &mut km, &q, &(&v - &e), &tau).unwrap();
+        t[2].page_mut(k).copy_from(&((kp.dqdd_dq() - km.dqdd_dq()) / (2.0 * h)));
+    }
+    let so = kd.so().unwrap();
+    w.add(rel_err_tensor(so.d2qdd_dq2(), &t[0]), "kkt d2qdd_dq2");
+    w.add(rel_err_tensor(so.d2lambda_dq2(), &t[1]), "kkt d2lambda_dq2");
+    w.add(rel_err_tensor(so.d2qdd_dqdv(), &t[2]), "kkt d2qdd_dqdv");
+    // Impact, with the 6-D world-aligned contact.
+    let cs = contacts(&m, &spec[1..], &mut rng);
+    let nr: usize = cs.iter().map(|c| c.dim()).sum();
+    let mk = || {
+        let mut im = ImpactData::new(&m, ContactData::new(&m, &cs).unwrap());
+        im.set_restitution(0.3).unwrap();
+        im
+    };
+    let mut im = mk().with_second_order(&m);
+    impact_so_derivatives(&m, &mut d, &mut im, &q, &v).unwrap();
+    let (mut ip, mut imm) = (mk(), mk());
+    let (mut tv, mut ti) = (Tensor3::zeros(n, n, n), Tensor3::zeros(nr, n, n));
+    for k in 0..n {
+        let mut e = DVector::zeros(n);
+        e[k] = h;
+        impact_derivatives(&m, &mut d, &mut ip, &m.integrate(&q, &e).unwrap(), &v).unwrap();
+        impact_derivatives(&m, &mut d, &mut imm, &m.integrate(&q, &-&e).unwrap(), &v).unwrap();
+        tv.page_mut(k).copy_from(&((ip.dvplus_dq() - imm.dvplus_dq()) / (2.0 * h)));
+        ti.page_mut(k).copy_from(&((ip.dimpulse_dq() - imm.dimpulse_dq()) / (2.0 * h)));
+    }
+    let so = im.so().unwrap();
+    w.add(rel_err_tensor(so.d2vplus_dq2(), &tv), "impact d2vplus_dq2");
+    w.add(rel_err_tensor(so.d2impulse_dq2(), &ti), "impact d2impulse_dq2");
+    w.check(1e-6);
+}
+
+#[test]
+fn contact_model_errors_name_the_contacts() {
+    let m = builtin::quadruped();
+    let mut rng = Rng::new(67);
+    let (q, v, tau) = random_state(&m, &mut rng);
+    let mut d = Data::new(&m);
+    let six = |f: &str| Contact::new_6d(&m, f, None).unwrap();
+    let three = |f: &str| Contact::new(&m, f, Vector3::new(0.01, 0.0, 0.0)).unwrap();
+    // Redundant sets: two 6-D contacts on one body; a 3-D contact on a 6-D-held body. The
+    // error names both contacts; with damping the solve is regularised.
+    for (set, names) in [
+        (vec![three("RF_FOOT"), six("LF_FOOT"), six("LF_FOOT")], ["contacts[1]", "contacts[2]"]),
+        (vec![three("LF_FOOT"), six("LF_FOOT")], ["contacts[0]", "contacts[1]"]),
+    ] {
+        let mut kd = KktData::new(&m, ContactData::new(&m, &set).unwrap());
+        let e = kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap_err().to_string();
+        assert!(
+            names.iter().all(|n| e.contains(n)) && e.contains("LF_FOOT") && e.contains("redundant"),
+            "{e}"
+        );
+        let mut im = ImpactData::new(&m, ContactData::new(&m, &set).unwrap());
+        let e = impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap_err().to_string();
+        assert!(names.iter().all(|n| e.contains(n)), "{e}");
+        kd.set_damping(1e-6).unwrap();
+        kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+        assert!(kd.qdd().iter().chain(kd.lambda().iter()).all(|x| x.is_finite()));
+        assert_eq!(kd.lambda().len(), set.iter().map(|c| c.dim()).sum::<usize>());
+    }
+    // A 6-D contact on a link fixed to the world.
+    let fixed = builtin::serial_chain(3);
+    let root = fixed.frames().iter().find(|f| f.joint == 0).unwrap().name.clone();
+    let c = Contact::new_6d(&fixed, &root, None).unwrap();
+    let e = ContactData::new(&fixed, &[c]).unwrap_err().to_string();
+    assert!(e.contains("contacts[0]") && e.contains("6d") && e.contains("fixed world"), "{e}");
+    // Unknown type and reference strings list the allowed values.
+    let e = ContactType::parse("4d").unwrap_err().to_string();
+    assert!(e.contains("\"3d\"") && e.contains("\"6d\"") && e.contains("4d"), "{e}");
+    let e = ContactReference::parse("world").unwrap_err().to_string();
+    assert!(e.contains("\"local_world_aligned\"") && e.contains("\"local\""), "{e}");
+    assert_eq!(ContactType::parse("6d").unwrap(), D6);
+    assert_eq!(ContactReference::parse("local").unwrap(), Local);
+    // A 6-D contact without a placement is the link frame; a placement must be a rotation.
+    let c = six("LF_FOOT");
+    assert_eq!((c.point, c.rotation), (Vector3::zeros(), nalgebra::Matrix3::identity()));
+    let mut bad = exp6(&Motion::new(Vector3::new(0.1, 0.2, 0.3), Vector3::zeros()));
+    bad.rot[(0, 0)] += 1e-3;
+    let e = c.clone().with_placement(&m, &bad).unwrap_err().to_string();
+    assert!(e.contains("LF_FOOT") && e.contains("rotation"), "{e}");
+    bad.trans[1] = f64::NAN;
+    assert!(c.with_placement(&m, &bad).is_err());
+}

@@ -44,7 +44,7 @@ use crate::algo::internal::ltl_solve_rows_desc;
 use crate::algo::{Contact, Data};
 use crate::error::{Error, Result};
 use crate::linalg::{gemm, spd_inverse_in_place, transpose_strided};
-use crate::model::Model;
+use crate::model::{Model, contact_label};
 use crate::spatial::Motion;
 use crate::spatial::Transform;
 use nalgebra::{DMatrix, DVector, Vector3};
@@ -171,16 +171,16 @@ impl ContactData {
         let n = model.nv;
         let m: usize = contacts.iter().map(|c| c.dim()).sum();
         let mut paths = Vec::with_capacity(contacts.len());
-        for c in contacts {
+        for (i, c) in contacts.iter().enumerate() {
             if c.frame >= model.frames.len() {
                 return Err(Error::Unknown {
                     kind: "frame index".into(),
-                    name: c.frame.to_string(),
+                    name: format!("{} (contacts[{i}])", c.frame),
                 });
             }
             c.check_gains().map_err(|e| match e {
                 Error::Argument { name, reason } => Error::Argument {
-                    name: format!("{name} of the contact on \"{}\"", model.frames[c.frame].name),
+                    name: format!("{name} of {}", contact_label(model, contacts, i)),
                     reason,
                 },
                 e => e,
@@ -190,7 +190,8 @@ impl ContactData {
                 return Err(Error::Singular {
                     what: "contact set".into(),
                     detail: format!(
-                        "contact on frame \"{}\" is attached to the fixed world: it constrains nothing",
+                        "{} on frame \"{}\" is attached to the fixed world: it constrains nothing",
+                        contact_label(model, contacts, i),
                         model.frames[c.frame].name
                     ),
                 });

@@ -264,7 +264,7 @@ impl Contact {
 }
 
 /// A description of contact `i` for messages: `contacts[i] ("frame", 6d)`.
-fn contact_label(model: &Model, contacts: &[Contact], i: usize) -> String {
+pub(crate) fn contact_label(model: &Model, contacts: &[Contact], i: usize) -> String {
     let c = &contacts[i];
     let name = model.frames.get(c.frame).map_or("?", |f| f.name.as_str());
     format!("contacts[{i}] (\"{name}\", {})", c.kind.name())

@@ -7,8 +7,8 @@ pub mod lie;
 pub mod tree;
 pub mod urdf;
 
-pub(crate) use contact::redundancy;
 pub use contact::{Contact, ContactReference, ContactType};
+pub(crate) use contact::{contact_label, redundancy};
 pub use joint::JointType;
 pub use lie::{Arg, exp6, jlog6, log6};
 pub(crate) use tree::JointKin;
