@@ -19,8 +19,11 @@ use util::*;
 use ContactReference::{Local, LocalWorldAligned as Lwa};
 use ContactType::{D3, D6};
 
-/// (model, [(frame, type, reference)]) cases with generic contacts.
-fn cases() -> Vec<(Model, Vec<(&'static str, ContactType, ContactReference)>)> {
+/// A contact's frame, type and reference.
+type Spec = (&'static str, ContactType, ContactReference);
+
+/// (model, contacts) cases with generic contacts.
+fn cases() -> Vec<(Model, Vec<Spec>)> {
     vec![
         (
             builtin::quadruped(),

@@ -1071,8 +1071,9 @@ fn path_sums(model: &Model, data: &Data, cd: &ContactData, c: usize, z: &[f64], 
     for &j in &cd.paths[c].joints {
         let mut zj = zc[model.parents[j]];
         let iv = model.idx_v[j];
-        for x in iv..iv + model.nvs[j] {
-            zj += data.s_world[x] * z[x];
+        let nj = model.nvs[j];
+        for (s, zx) in data.s_world[iv..iv + nj].iter().zip(&z[iv..iv + nj]) {
+            zj += *s * *zx;
         }
         zc[j] = zj;
     }
