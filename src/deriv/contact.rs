@@ -3,10 +3,20 @@
 //! `R = [[M, −J_cᵀ], [J_c, 0]]` (unknowns `(q̈, λ)` or `(q̇⁺, λ̂)`), and the product terms
 //! `G(z)` of the second-order implicit-function formulas.
 //!
-//! [`ContactData::new`]: inputs model, contacts `(frame, point)`. Outputs the workspace: per
-//! contact its path (the joints and DoFs from the root to its body), the point in that body's
-//! frame, and buffers sized for `nc` contacts; an error for more than [`MAX_CONTACTS`]
-//! contacts, a bad gain, an unknown frame or a contact on the world.
+//! [`ContactData::new`]: inputs model, contacts (`crate::model::Contact`: frame, placement,
+//! type, reference, gains). Outputs the workspace: per contact its path (the joints and DoFs
+//! from the root to its body), the contact frame's placement in that body's frame, its first
+//! row, and buffers sized for `m` constraint rows (3 per 3-D contact, 6 per 6-D contact); an
+//! error for more than [`MAX_CONTACTS`] contacts, a bad gain, an unknown frame or a contact on
+//! the world. A redundant set (a 6-D-held body with another contact) is an error of the
+//! undamped factorisation.
+//!
+//! The formulas below are those of 3-D world-aligned point contacts (rows `3c..3c + 3` stand
+//! for contact `c`'s rows `r0..r0 + 3`). The other contacts (6-D, or local axes) take the same
+//! steps with their rows from `contact_kin`'s generic row kinematics (`jac_col`, `acc_rows`,
+//! `dacc_dq`, `dacc_dv`, `djac_col_dq`, `djz_dq_rows`; docs/notes-corrections.md, "6-D
+//! contacts and the local reference"), entry by entry along each path instead of the
+//! tree-summed `T_x` of step 2 of `G(z)`.
 //!
 //! KKT factorisation (used by the KKT and impact algorithms): inputs the `LᵀDL` factor of `M`
 //! (`data.ltl`), the contact points `p_c` and world subspaces `S_x`, the damping `μ ≥ 0`.
@@ -22,7 +32,7 @@
 //! 5. `M⁻¹ = L⁻¹ D⁻¹ L⁻ᵀ`, the rows of `L⁻¹` by `(L⁻¹)_i = e_i − Σ_{k ≺ i} L_ik (L⁻¹)_k`, then one
 //!    dense product; `P = M⁻¹ − Y Qᵀ`.
 //!
-//! `G(z)` (`(nv + 3 nc) × nv`, `z = (z₁, z₂)` of length `nv + 3 nc`): inputs the composite
+//! `G(z)` (`(nv + m) × nv`, `z = (z₁, z₂)` of length `nv + m`): inputs the composite
 //! inertias and world subspaces of the current `q`, the contact paths and `J_c`. Output
 //! `G(z) = [∂(M z₁)/∂q − ∂(J_cᵀ z₂)/∂q; ∂(J_c z₁)/∂q]`:
 //! 1. rows `0..nv`: `∂(M z₁)/∂q` by IDFOZA ([`super::idfoza`]);
@@ -49,8 +59,8 @@ use crate::spatial::Motion;
 use crate::spatial::Transform;
 use nalgebra::{DMatrix, DVector, Vector3};
 
-/// The largest number of point contacts [`ContactData::new`] accepts (`3 nc` constraint rows).
-/// The contact workspaces hold several `(nv + 3 nc)²` matrices and the KKT and impact solves
+/// The largest number of point contacts [`ContactData::new`] accepts (`m` constraint rows).
+/// The contact workspaces hold several `(nv + m)²` matrices and the KKT and impact solves
 /// take `O(nc²·nv)` time, so without a limit a contact list read from a file could make them
 /// allocate gigabytes: 3,000 contacts on the quadruped (a 63 KB state file for the command
 /// line's `eval`) took 7 GB and 19 s before failing. Real contact sets have a few dozen points
@@ -65,11 +75,12 @@ pub struct ContactData {
     pub(crate) paths: Vec<Path>,
     pub(crate) acc: Vec<Motion>,
     pub(crate) zc: Vec<Motion>,
-    /// Contact Jacobian `J_c` (`3 nc × nv`), world-aligned point velocities.
+    /// Contact Jacobian `J_c` (`m × nv`, `m` the constraint rows: 3 per 3-D contact, 6 per 6-D
+    /// contact), the contacts' velocity rows (`crate::model::Contact`).
     pub(crate) jac: DMatrix<f64>,
     /// Drift `J̇_c q̇` (classical point accelerations at `q̈ = 0`), when computed.
     pub(crate) drift: DVector<f64>,
-    /// `Y = M⁻¹Jᵀ`, rows padded with zeros to a multiple of 8 (`np × 3 nc`).
+    /// `Y = M⁻¹Jᵀ`, rows padded with zeros to a multiple of 8 (`np × m`).
     pub(crate) y: DMatrix<f64>,
     pub(crate) lam: DMatrix<f64>,
     pub(crate) del: DMatrix<f64>,
@@ -80,17 +91,17 @@ pub struct ContactData {
     /// First `nv` columns of `R⁻¹`, `[P; −Qᵀ]` with `P = M⁻¹ − YΛYᵀ`, `Q = YΛ`, rows padded
     /// with zeros to a multiple of 8 (`rp × nv`).
     pub(crate) r1: DMatrix<f64>,
-    /// Last `3 nc` columns of `R⁻¹`, `[Q; Λ]`, rows padded like `r1` (`rp × 3 nc`).
+    /// Last `m` columns of `R⁻¹`, `[Q; Λ]`, rows padded like `r1` (`rp × m`).
     pub(crate) r2: DMatrix<f64>,
     /// `L⁻ᵀ` of the `LᵀDL` factor (column `i` holds row `i` of `L⁻¹`; zero off the tree pattern).
     gt: DMatrix<f64>,
     /// `Yᵀ = J M⁻¹`, rows padded (`mp × nv`).
     pub(crate) yt: DMatrix<f64>,
-    /// `Jᵀ` (`nv × 3 nc`).
+    /// `Jᵀ` (`nv × m`).
     pub(crate) jt: DMatrix<f64>,
-    /// Padded `3 nc`-row work matrix (`mp × 3 nc`): the Delassus matrix, then `Λ`.
+    /// Padded `m`-row work matrix (`mp × m`): the Delassus matrix, then `Λ`.
     pub(crate) delp: DMatrix<f64>,
-    /// `[Qᵀ, −Λ]`, rows padded with zeros to a multiple of 8 (`mp × (nv + 3 nc)`).
+    /// `[Qᵀ, −Λ]`, rows padded with zeros to a multiple of 8 (`mp × (nv + m)`).
     pub(crate) wq: DMatrix<f64>,
     /// `L⁻¹ D⁻¹` (column-major; zero off the tree pattern).
     gd: DMatrix<f64>,
@@ -136,7 +147,8 @@ impl ContactData {
     pub fn contacts(&self) -> &Vec<Contact> {
         &self.contacts
     }
-    /// Contact Jacobian `J_c` (`3 nc × nv`), world-aligned point velocities.
+    /// Contact Jacobian `J_c` (`m × nv`, `m` the constraint rows: 3 per 3-D contact, 6 per 6-D
+    /// contact), the contacts' velocity rows (`crate::model::Contact`).
     pub fn jac(&self) -> &DMatrix<f64> {
         &self.jac
     }
@@ -653,12 +665,12 @@ pub(crate) fn fill_rinv(cd: &mut ContactData) {
     cd.rinv.columns_mut(n, m).copy_from(&cd.r2.rows(0, n + m));
 }
 
-/// Rows `∂a_p/∂q` and `∂a_p/∂q̇` (`3 nc × nv` each, only path columns written), transposed, of
+/// Rows `∂a_p/∂q` and `∂a_p/∂q̇` (`m × nv` each, only path columns written), transposed, of
 /// the classical contact-point accelerations at fixed `q̈`, from `cd.s`, `cd.kvel`, `cd.kacc`
 /// (with `q̈`) and the points: along `q_l`, `D V_m = S_l × (V_m − V_λ)` (J2),
 /// `D A_m = (A_λ − A_m) × S_l + (V_λ − V_m) × Ψ̇_l` (J6, J7), `D p = u_l`; along `q̇_l`,
 /// `D V_m = S_l` (J8), `D A_m = (V_λ + V_l − V_m) × S_l` (J9).
-/// `(∂a_p/∂q)ᵀ` is stored in rows `0..nv` of `cxt` (`2nv × 3nc`), `(∂a_p/∂q̇)ᵀ` in rows `nv..2nv`.
+/// `(∂a_p/∂q)ᵀ` is stored in rows `0..nv` of `cxt` (`2nv × m`), `(∂a_p/∂q̇)ᵀ` in rows `nv..2nv`.
 pub(crate) fn accel_derivatives_t(cd: &ContactData, cxt: &mut DMatrix<f64>) {
     let n = cd.s.len();
     for (c, path) in cd.paths.iter().enumerate() {
@@ -715,7 +727,7 @@ pub(crate) fn accel_derivatives_t(cd: &ContactData, cxt: &mut DMatrix<f64>) {
     }
 }
 
-/// Rows `∂(J_c w)/∂q` at fixed `w` into `out` (`3 nc × nv`, only path columns written):
+/// Rows `∂(J_c w)/∂q` at fixed `w` into `out` (`m × nv`, only path columns written):
 /// with `Z_j = Σ_{x ⪯ j} S_x w_x`, `D Z_m = S_l × (Z_m − Z_λ)` and `D p = u_l`.
 pub(crate) fn djw_dq(model: &Model, cd: &mut ContactData, w: &[f64], out: &mut DMatrix<f64>) {
     cd.zc[0] = Motion::zero();
@@ -762,7 +774,7 @@ pub(crate) fn djw_dq(model: &Model, cd: &mut ContactData, w: &[f64], out: &mut D
     }
 }
 
-/// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `3 nc` world forces) from `out` (`nv×nv`, `[x][l]`), with `s`
+/// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `m` world forces) from `out` (`nv×nv`, `[x][l]`), with `s`
 /// the world subspaces of the path DoFs and `cd.jac` current. With `u_x` the Jacobian column
 /// (point velocity of `S_x`) and `w = S.ang`: a perturbation of `q_l` rotates `u_x` rigidly if
 /// `l ⪯ x` (J1 and `∂p/∂q_l = u_l` give `D u_x = w_l × u_x`) and otherwise only moves the point
@@ -844,7 +856,7 @@ fn sub_djtl_dq_generic(
     }
 }
 
-/// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `3 nc` world forces) from `out` (`nv×nv`, `[x][l]`), with `s`
+/// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `m` world forces) from `out` (`nv×nv`, `[x][l]`), with `s`
 /// the world subspaces of the path DoFs and `cd.jac` current. With `u_x` the Jacobian column
 /// (point velocity of `S_x`) and `w = S.ang`: a perturbation of `q_l` rotates `u_x` rigidly if
 /// `l ⪯ x` (J1 and `∂p/∂q_l = u_l` give `D u_x = w_l × u_x`) and otherwise only moves the point
@@ -918,7 +930,7 @@ pub(crate) fn sub_djtl_dq_strided(
 }
 
 /// `G(z)` (columns `l`): `[IDFOZA(z₁) − ∂(Jᵀz₂)/∂q ; ∂(J z₁)/∂q]`, `z = (z₁, z₂)` of length
-/// `nv + 3 nc`. Needs the composite inertias of the current `q` in `data`. Writes `cd.g`.
+/// `nv + m`. Needs the composite inertias of the current `q` in `data`. Writes `cd.g`.
 pub(crate) fn g_matrix(model: &Model, data: &mut Data, cd: &mut ContactData, z: &[f64]) {
     let n = model.nv;
     g_matrix_split(model, data, cd, &z[..n], &z[n..], &z[..n]);

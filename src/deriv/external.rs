@@ -7,7 +7,10 @@
 //! derivative are evaluated per contact along its root path (`O(d²)` and `O(d³)` entries), with
 //! `∂u_x/∂q_l` (`u_x` the velocity of the contact point per unit `q̇_x`) from identities J1 and
 //! `∂p/∂q_l = J_c(:, l)` (eqs. eqn_fic_ext_FO_1, eqn_fic_ext_FO_2); the second derivative is the
-//! same expression evaluated with dual base quantities (see `contact_kin`).
+//! same expression evaluated with dual base quantities (see `contact_kin`). For 6-D contacts and
+//! the local reference, `λ` has 3 or 6 rows per contact in the contact's axes (held fixed in
+//! those axes when differentiating) and the entry is `λ · ∂(J_c column x)/∂q_l` from the
+//! generic row kinematics (`djac_col_dq`).
 
 use super::contact::{ContactData, base, sub_djtl_dq, update_points};
 use super::contact_kin::{Dir, djac_col_dq, djtl_dq, rows_dot};

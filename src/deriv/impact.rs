@@ -37,7 +37,8 @@ pub struct ImpactData {
     pub(crate) restitution: f64,
     /// Post-impact velocity `q̇⁺`.
     pub(crate) vplus: DVector<f64>,
-    /// Contact impulse `λ̂` (world frame, applied to the robot), `3 nc`.
+    /// Contact impulses applied to the robot, `m` rows (3 per 3-D contact, 6 per 6-D contact,
+    /// in each contact's axes).
     pub(crate) impulse: DVector<f64>,
     /// `∂q̇⁺/∂q`.
     pub(crate) dvplus_dq: DMatrix<f64>,
@@ -55,7 +56,7 @@ pub struct ImpactData {
     bp: DMatrix<f64>,
     /// `Yᵀa − c`, then `∂λ̂/∂q̇⁻`, rows padded (`mp × nv`).
     wp: DMatrix<f64>,
-    /// `(∂λ̂/∂q)ᵀ` with rows padded (`np × 3 nc`).
+    /// `(∂λ̂/∂q)ᵀ` with rows padded (`np × m`).
     bt: DMatrix<f64>,
     /// Right-hand sides stored by rows for the tree-sparse solve (`np × nv`, transposed).
     zrows: DMatrix<f64>,
@@ -100,7 +101,8 @@ impl ImpactData {
     pub fn vplus(&self) -> &DVector<f64> {
         &self.vplus
     }
-    /// Contact impulse `λ̂` (world frame, applied to the robot), `3 nc`.
+    /// Contact impulses applied to the robot, `m` rows (3 per 3-D contact, 6 per 6-D contact,
+    /// in each contact's axes).
     pub fn impulse(&self) -> &DVector<f64> {
         &self.impulse
     }
@@ -475,7 +477,7 @@ pub struct ImpactContracted {
     scratch: [DMatrix<f64>; 3],
     omega: DVector<f64>,
     zeta: DVector<f64>,
-    /// `Dᵀ`, `Kᵀ` (`nv × nv`) and `Eᵀ` (`nv × 3 nc`) of `D = ∂(M ζ₁)/∂q`,
+    /// `Dᵀ`, `Kᵀ` (`nv × nv`) and `Eᵀ` (`nv × m`) of `D = ∂(M ζ₁)/∂q`,
     /// `K = ∂(J_cᵀ ζ₂)/∂q`, `E = ∂(J_c ζ₁)/∂q`.
     dt: DMatrix<f64>,
     kt: DMatrix<f64>,
@@ -484,7 +486,7 @@ pub struct ImpactContracted {
     zm: DMatrix<f64>,
     zj: DMatrix<f64>,
     h: DMatrix<f64>,
-    /// `−ζ₂` and zero vectors of lengths `3 nc` and `nv` (the `G` evaluations' arguments).
+    /// `−ζ₂` and zero vectors of lengths `m` and `nv` (the `G` evaluations' arguments).
     neg_z2: DVector<f64>,
     zeros_m: DVector<f64>,
     zeros_n: DVector<f64>,
@@ -557,7 +559,7 @@ pub fn impact_so_contracted(
     ic.ws.check(model, "ImpactContracted")?;
     if ic.omega.len() != n + m {
         return Err(Error::Workspace(format!(
-            "ImpactContracted was made for nv + 3 nc = {} rows, this ImpactData has {}; make it \
+            "ImpactContracted was made for nv + m = {} rows (m: contact rows), this ImpactData has {}; make it \
              with ImpactContracted::new for this ImpactData",
             ic.omega.len(),
             n + m

@@ -38,7 +38,8 @@ pub struct KktData {
     pub(crate) cd: ContactData,
     /// Constrained joint accelerations.
     pub(crate) qdd: DVector<f64>,
-    /// Contact forces (world frame, applied to the robot), `3 nc`.
+    /// Contact forces applied to the robot, `m` rows (3 per 3-D contact, 6 per 6-D contact, in
+    /// each contact's axes).
     pub(crate) lambda: DVector<f64>,
     /// `∂q̈/∂q`.
     pub(crate) dqdd_dq: DMatrix<f64>,
@@ -54,12 +55,12 @@ pub struct KktData {
     pub(crate) dlambda_dtau: DMatrix<f64>,
     /// Second-order results (allocated by [`KktData::with_second_order`]).
     pub(crate) so: Option<KktSo>,
-    /// `Wᵀ = (J X + C)ᵀ` (`2 nv × 3 nc`) for `X = −M⁻¹ [a_q | a_v]`, `C = [c_q | c_v]`.
+    /// `Wᵀ = (J X + C)ᵀ` (`2 nv × m`) for `X = −M⁻¹ [a_q | a_v]`, `C = [c_q | c_v]`.
     wt: DMatrix<f64>,
-    /// `Bᵀ = [∂λ/∂q | ∂λ/∂q̇ | ∂λ/∂τ]ᵀ` (`3 nv × 3 nc`).
+    /// `Bᵀ = [∂λ/∂q | ∂λ/∂q̇ | ∂λ/∂τ]ᵀ` (`3 nv × m`).
     bt: DMatrix<f64>,
     tmp_v: DVector<f64>,
-    /// `∂(J_c q̇)/∂q` (`3 nc × nv`) for the Baumgarte terms.
+    /// `∂(J_c q̇)/∂q` (`m × nv`) for the Baumgarte terms.
     bg: DMatrix<f64>,
 }
 
@@ -72,7 +73,8 @@ impl KktData {
     pub fn qdd(&self) -> &DVector<f64> {
         &self.qdd
     }
-    /// Contact forces (world frame, applied to the robot), `3 nc`.
+    /// Contact forces applied to the robot, `m` rows (3 per 3-D contact, 6 per 6-D contact, in
+    /// each contact's axes).
     pub fn lambda(&self) -> &DVector<f64> {
         &self.lambda
     }
@@ -639,7 +641,7 @@ pub struct KktContracted {
     /// `ω = (w_q̈, w_λ)` and the adjoint `ζ = R_y⁻ᵀ ω`.
     omega: DVector<f64>,
     zeta: DVector<f64>,
-    /// `A = [G_top(ζ)ᵀ | −G_bottom(ζ)ᵀ]` (`nv × (nv + 3 nc)`), with `ζᵀ G(z) = (A z)ᵀ`.
+    /// `A = [G_top(ζ)ᵀ | −G_bottom(ζ)ᵀ]` (`nv × (nv + m)`), with `ζᵀ G(z) = (A z)ᵀ`.
     a: DMatrix<f64>,
     /// `A Y` for one of `Y_q`, `Y_v`, `Y_τ`.
     h: DMatrix<f64>,
@@ -688,7 +690,7 @@ impl KktContracted {
 /// The Hessians of `ωᵀy = w_q̈ᵀ q̈ + w_λᵀ λ` of the KKT dynamics at `(q, q̇, τ)`, without an
 /// `nv³` tensor; also the first-order derivatives into `kd` (as [`kkt_derivatives`]).
 ///
-/// Inputs: the state, `w_qdd` (length `nv`), `w_lambda` (length `3 nc`). Outputs: `kc.c_qq()`,
+/// Inputs: the state, `w_qdd` (length `nv`), `w_lambda` (length `m`). Outputs: `kc.c_qq()`,
 /// `kc.c_vv()`, `kc.c_qv()`, `kc.c_tauq()`. Contracting `∂²y/∂u∂w = −R_y⁻¹ (R_uw + G(∂y/∂w)[·, u]
 /// + G(∂y/∂u)[·, w])` (module documentation) with `ω`:
 /// 1. first order (`Y_q, Y_v, Y_τ` = `[∂q̈/∂x; ∂λ/∂x]`) and `R_y⁻¹`;
@@ -723,7 +725,7 @@ pub fn kkt_so_contracted(
     kc.ws.check(model, "KktContracted")?;
     if kc.omega.len() != n + m {
         return Err(crate::error::Error::Workspace(format!(
-            "KktContracted was made for nv + 3 nc = {} rows, this KktData has {}; make it with \
+            "KktContracted was made for nv + m = {} rows (m: contact rows), this KktData has {}; make it with \
              KktContracted::new for this KktData",
             kc.omega.len(),
             n + m
