@@ -831,6 +831,13 @@ pub(crate) fn sub_djtl_dq(
 
 /// The generic contacts' (6-D or local) part of [`sub_djtl_dq`]: entry `(x, l)` (at
 /// `o[rs x + cs l]`) minus `λ_c · ∂(J_c column x)/∂q_l` for the DoFs `x`, `l` of each path.
+/// With `(n, f)` the contact's moment and force in world axes at `p` (`R λ` for `local`) and
+/// `F = [n + p × f; f]` the spatial force about the world origin, `(J_cᵀλ)_x = S_x · F`, and
+/// along `q_l` (`l` on the path): `D S_x = [l ⪯ x] S_l × S_x` (J1); `F` turns with the body for
+/// `local` (`D F = S_l ×* F`, so the entry is `−[not l ⪯ x] (S_l × S_x)·F`) and only moves
+/// with the point for world axes (`D F = [u_l × f; 0]`, entry
+/// `[l ⪯ x] (S_l × S_x)·F + w_x·(u_l × f)`). The dual-base form `djac_col_dq` is the same
+/// derivative (used by the second order).
 fn sub_djtl_dq_generic(
     s: &[Motion],
     cd: &ContactData,
@@ -839,18 +846,40 @@ fn sub_djtl_dq_generic(
     rs: usize,
     cs: usize,
 ) {
-    let b =
-        Base { s, vel: &cd.kvel, acc: &cd.kacc, dof_joint: &cd.dof_joint, parents: &cd.parents };
     for (c, path) in cd.paths.iter().enumerate() {
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
         let lam = &lambda[r0..r0 + geo.dim()];
         if geo.is_point() || lam.iter().all(|x| *x == 0.0) {
             continue;
         }
-        for &l in &path.dofs {
-            for &x in &path.dofs {
-                let d = djac_col_dq(&b, geo, &path.rot, &path.p, x, l, Dir::None);
-                o[rs * x + cs * l] -= rows_dot(geo, &d, lam).0;
+        let part = |i: usize| Vector3::new(lam[i], lam[i + 1], lam[i + 2]);
+        let (n, f) = if geo.six { (part(0), part(3)) } else { (Vector3::zeros(), part(0)) };
+        let (n, f) = if geo.local { (path.rot * n, path.rot * f) } else { (n, f) };
+        let p = path.p;
+        let (fa, fl) = (n + p.cross(&f), f);
+        for (il, &l) in path.dofs.iter().enumerate() {
+            let (sl, jl) = (s[l], path.dof_joint[il]);
+            let ul = sl.lin + sl.ang.cross(&p);
+            let ulf = ul.cross(&f);
+            for (ix, &x) in path.dofs.iter().enumerate() {
+                let sx = s[x];
+                let anc = jl <= path.dof_joint[ix];
+                let e = if geo.local {
+                    if anc {
+                        continue;
+                    }
+                    let c = sl.cross(&sx);
+                    -(c.ang.dot(&fa) + c.lin.dot(&fl))
+                } else {
+                    let t = sx.ang.dot(&ulf);
+                    if anc {
+                        let c = sl.cross(&sx);
+                        t + c.ang.dot(&fa) + c.lin.dot(&fl)
+                    } else {
+                        t
+                    }
+                };
+                o[rs * x + cs * l] -= e;
             }
         }
     }
