@@ -93,11 +93,13 @@ pub(crate) struct BenchArgs {
     #[arg(long, value_name = "F1,F2,...", value_parser = parse_list)]
     contacts: Option<List>,
     /// Type of the --contacts: 3d (points) or 6d (the whole frames)
-    #[arg(long, value_name = "3d|6d", default_value = "3d")]
-    contact_type: String,
+    #[arg(long, value_name = "3d|6d", default_value = "3d",
+          value_parser = |s: &str| ContactType::parse(s).map_err(|e| e.to_string()))]
+    contact_type: ContactType,
     /// Axes of the --contacts' rows: local_world_aligned or local
-    #[arg(long, value_name = "local_world_aligned|local", default_value = "local_world_aligned")]
-    contact_reference: String,
+    #[arg(long, value_name = "local_world_aligned|local", default_value = "local_world_aligned",
+          value_parser = |s: &str| ContactReference::parse(s).map_err(|e| e.to_string()))]
+    contact_reference: ContactReference,
     /// The algorithms to time [default: all; the contact ones only with --contacts]
     #[arg(long, value_name = "a,b,...", value_parser = parse_list)]
     algos: Option<List>,
@@ -1146,10 +1148,7 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
         baseline_cpus: pin_cpus.map(|c| c[..max_threads].to_vec()),
     };
     if !contacts.is_empty() {
-        let kind = ContactType::parse(&o.contact_type)
-            .map_err(|e| Error::Io(format!("--contact-type: {e}")))?;
-        let reference = ContactReference::parse(&o.contact_reference)
-            .map_err(|e| Error::Io(format!("--contact-reference: {e}")))?;
+        let (kind, reference) = (o.contact_type, o.contact_reference);
         let contacts = contacts
             .iter()
             .map(|f| {
