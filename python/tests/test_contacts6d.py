@@ -170,3 +170,37 @@ def test_redundant_set_and_rows():
         sodyn.constrained_id_derivatives(model, data, q, v, tau, [six], np.zeros(3))
     r = sodyn.constrained_id_derivatives(model, data, q, v, tau, [six], np.ones(6))
     assert r.dtau_dq.shape == (model.nv, model.nv)
+
+
+def _contract(t, w):
+    return np.einsum("i,ijk->jk", w, t)
+
+
+@pytest.mark.parametrize("ref", ["local_world_aligned", "local"])
+def test_contracted_equal_dense_contraction(ref):
+    """``kkt_so_contracted`` / ``impact_so_contracted`` with a 6-D and a 3-D contact equal the
+    contraction of the order-2 tensors."""
+    model = sodyn.Model.builtin("quadruped")
+    data = model.create_data()
+    q, v, _, tau = random_state(model, 3)
+    contacts = [sodyn.Contact("LF_FOOT", type="6d", reference=ref, placement=placement(0),
+                              kp=5.0, kd=1.0),
+                sodyn.Contact("RH_FOOT", reference=ref, placement=placement(1))]
+    rng = np.random.default_rng(9)
+    w, wl = rng.uniform(-1, 1, model.nv), rng.uniform(-1, 1, 9)
+    got = sodyn.kkt_so_contracted(model, data, q, v, tau, contacts, w, wl)
+    r = sodyn.kkt_derivatives(model, data, q, v, tau, contacts, order=2)
+    assert r.lambda_.shape == (9,)
+    dense = [(r.d2qdd_dq2, r.d2lambda_dq2), (r.d2qdd_dv2, r.d2lambda_dv2),
+             (r.d2qdd_dqdv, r.d2lambda_dqdv), (r.d2qdd_dtaudq, r.d2lambda_dtaudq)]
+    for g, (tq, tl) in zip(got, dense):
+        want = _contract(tq, w) + _contract(tl, wl)
+        assert np.abs(g - want).max() <= 1e-10 * max(1.0, np.abs(want).max())
+    got = sodyn.impact_so_contracted(model, data, q, v, contacts, w, wl, restitution=0.3)
+    r = sodyn.impact_derivatives(model, data, q, v, contacts, restitution=0.3, order=2)
+    dense = [(r.d2vplus_dq2, r.d2impulse_dq2), (r.d2vplus_dqdvminus, r.d2impulse_dqdvminus)]
+    for g, (tv, tl) in zip(got, dense):
+        want = _contract(tv, w) + _contract(tl, wl)
+        assert np.abs(g - want).max() <= 1e-10 * max(1.0, np.abs(want).max())
+    with pytest.raises(ValueError, match="w_lambda"):
+        sodyn.kkt_so_contracted(model, data, q, v, tau, contacts, w, np.zeros(6))
