@@ -204,3 +204,38 @@ def test_contracted_equal_dense_contraction(ref):
         assert np.abs(g - want).max() <= 1e-10 * max(1.0, np.abs(want).max())
     with pytest.raises(ValueError, match="w_lambda"):
         sodyn.kkt_so_contracted(model, data, q, v, tau, contacts, w, np.zeros(6))
+
+
+@pytest.mark.parametrize("name,kind,ref", PARAMS)
+def test_kkt_baumgarte_vs_pinocchio(pin, name, kind, ref):
+    """With Baumgarte gains: Pinocchio's corrector with ``joint2_placement`` (on the universe) at
+    the contact frame's placement for ``q`` (our reference placement)."""
+    model, pmodel, pmap = pin_pair(name)
+    frames = CASES[name][0]
+    contacts = [sodyn.Contact(f, type=kind, reference=ref, placement=placement(i),
+                              kp=10.0 + 5 * i, kd=2.0 + i) for i, f in enumerate(frames)]
+    plain = contacts_of(frames, kind, ref)
+    data = model.create_data()
+    rp = row_perm(contacts)
+    q, v, _, tau = random_state(model, 1)
+    r = sodyn.kkt_derivatives(model, data, q, v, tau, contacts)
+    r0 = sodyn.kkt_derivatives(model, data, q, v, tau, plain)
+    assert np.abs(r.dqdd_dq - r0.dqdd_dq).max() > 1e-6  # the gains matter
+    pq = pmap.pin_q(q)
+    cms = pin_contacts(pin, pmodel, contacts)
+    d = pin.Data(pmodel)
+    pin.forwardKinematics(pmodel, d, pq)
+    for cm, c in zip(cms, contacts):
+        p = cm.m_baumgarte_parameters
+        p.Kp = c.kp
+        p.Kd = c.kd
+        cm.setBaumgarteCorrectorParameters(p)
+        cm.joint2_placement = d.oMi[cm.joint1_id] * cm.joint1_placement
+    p = pin_constraint(pin, pmodel, cms, pq, pmap.pin_v(v), pmap.pin_v(tau))
+    tag = f"{name} {kind} {ref} kkt with gains"
+    assert_close(r.qdd, pmap.vec(p["ddq"]), TOL, f"{tag} qdd")
+    assert_close(r.lambda_, p["lambda_c"][rp], TOL, f"{tag} lambda")
+    assert_close(r.dqdd_dq, pmap.mat(p["ddq_dq"]), TOL, f"{tag} dqdd_dq")
+    assert_close(r.dqdd_dv, pmap.mat(p["ddq_dv"]), TOL, f"{tag} dqdd_dv")
+    assert_close(r.dlambda_dq, pmap.cols(p["dlambda_dq"])[rp], TOL, f"{tag} dlambda_dq")
+    assert_close(r.dlambda_dv, pmap.cols(p["dlambda_dv"])[rp], TOL, f"{tag} dlambda_dv")
