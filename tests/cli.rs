@@ -850,6 +850,95 @@ fn eval_takes_baumgarte_gains_per_contact() {
 }
 
 #[test]
+fn eval_takes_6d_and_local_contacts() {
+    use sodyn::algo::{Contact, ContactReference, ContactType, Data};
+    use sodyn::deriv::{ContactData, ImpactData, KktData, impact_derivatives, kkt_derivatives};
+    use sodyn::spatial::Transform;
+    let m = sodyn::model::builtin::quadruped();
+    let nv = m.nv();
+    let vals = |s: f64| -> Vec<f64> { (0..nv).map(|i| s * (i as f64 + 1.0) / nv as f64).collect() };
+    let (v, tau) = (vals(0.4), vals(0.5));
+    let run = |feet: &str, extra: &str, name: &str| {
+        let state = tmp(name);
+        let body = format!(r#"{{"v": {v:?}, "tau": {tau:?}, "contacts": {feet}{extra}}}"#);
+        std::fs::write(&state, body).unwrap();
+        sodyn(&["eval", "--model", "builtin:quadruped", "--state", state.to_str().unwrap()])
+    };
+    let feet = r#"[{"frame": "LF_FOOT", "type": "6d", "reference": "local",
+        "placement": {"xyz": [0.01, 0, -0.02], "rpy": [0.1, -0.2, 0.3]}, "kd": 2},
+        {"frame": "RH_FOOT", "reference": "local", "point": [0, 0.01, 0]}]"#;
+    let lambda: Vec<f64> = (0..9).map(|i| i as f64 - 4.0).collect();
+    let o = run(feet, &format!(r#", "lambda": {lambda:?}, "restitution": 0.2"#), "c6d.json");
+    assert_ok(&o, "eval with 6-D and local contacts");
+    let out: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    // The library with the same contacts gives the same results.
+    let lf = Contact::new(&m, "LF_FOOT", nalgebra::Vector3::zeros())
+        .unwrap()
+        .with_placement(&m, &Transform::from_rpy_xyz([0.1, -0.2, 0.3], [0.01, 0.0, -0.02]))
+        .unwrap()
+        .with_reference(ContactReference::Local)
+        .with_baumgarte(0.0, 2.0)
+        .unwrap();
+    let contacts = vec![
+        Contact { kind: ContactType::D6, ..lf },
+        Contact::new(&m, "RH_FOOT", nalgebra::Vector3::new(0.0, 0.01, 0.0))
+            .unwrap()
+            .with_reference(ContactReference::Local),
+    ];
+    let cd = ContactData::new(&m, &contacts).unwrap();
+    let mut kd = KktData::new(&m, cd.clone());
+    let (q, v, tau) = (m.neutral(), DVector::from_vec(v.clone()), DVector::from_vec(tau.clone()));
+    let mut d = Data::new(&m);
+    kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+    let close = |a: &DMatrix<f64>, b: &DMatrix<f64>| (a - b).amax() < 1e-12 * (1.0 + b.amax());
+    let lam = vector(&out["kkt"], "lambda", 9);
+    assert!((&lam - kd.lambda()).amax() < 1e-12 * (1.0 + kd.lambda().amax()));
+    let dl = DMatrix::from_fn(9, nv, |i, j| out["kkt"]["dlambda_dq"][i][j].as_f64().unwrap());
+    assert!(close(&dl, kd.dlambda_dq()));
+    let mut im = ImpactData::new(&m, cd);
+    im.set_restitution(0.2).unwrap();
+    impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap();
+    let imp = vector(&out["impact"], "impulse", 9);
+    assert!((&imp - im.impulse()).amax() < 1e-12 * (1.0 + im.impulse().amax()));
+    assert_eq!(out["constrained_id"]["tau"].as_array().unwrap().len(), nv);
+    // Bad input names the contact, the key and the allowed values.
+    for (feet, extra, needles) in [
+        (r#"[{"frame": "LF_FOOT", "type": "4d"}]"#, "", vec!["contacts[0]", "\"3d\"", "\"6d\""]),
+        (r#"[{"frame": "LF_FOOT", "reference": "world"}]"#, "", vec!["contacts[0]", "\"local\""]),
+        (
+            r#"[{"frame": "LF_FOOT", "point": [0, 0, 0], "placement": {}}]"#,
+            "",
+            vec!["contacts[0]", "both"],
+        ),
+        (
+            r#"[{"frame": "LF_FOOT", "placement": {"xyz": [0, 0]}}]"#,
+            "",
+            vec!["contacts[0].placement.xyz"],
+        ),
+        (
+            r#"[{"frame": "LF_FOOT", "placement": {"rot": [0, 0, 0]}}]"#,
+            "",
+            vec!["contacts[0].placement.rot"],
+        ),
+        (r#"[{"frame": "LF_FOOT", "typo": 1}]"#, "", vec!["contacts[0].typo"]),
+        (
+            r#"[{"frame": "LF_FOOT", "type": "6d"}]"#,
+            r#", "lambda": [1, 2, 3]"#,
+            vec!["lambda", "6"],
+        ),
+        (
+            r#"[{"frame": "LF_FOOT", "type": "6d"}, {"frame": "LF_FOOT"}]"#,
+            "",
+            vec!["contacts[0]", "contacts[1]", "redundant"],
+        ),
+    ] {
+        let o = run(feet, extra, "bad_c6d.json");
+        let e = assert_clean_failure(&o, feet);
+        assert!(needles.iter().all(|n| e.contains(n)), "{feet}: {e}");
+    }
+}
+
+#[test]
 fn eval_writes_frames_com_and_centroidal() {
     use sodyn::algo::{Data, ReferenceFrame, center_of_mass_motion, frame_jacobian};
     let m = sodyn::model::builtin::quadruped();

@@ -40,9 +40,17 @@ fn allocations(f: impl FnOnce()) -> usize {
 
 #[test]
 fn algorithms_do_not_allocate() {
-    for (m, frames) in [
-        (builtin::humanoid(), vec!["left_sole", "right_sole"]),
-        (builtin::quadruped(), vec!["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"]),
+    use ContactReference::{Local, LocalWorldAligned as Lwa};
+    use ContactType::{D3, D6};
+    let feet = || vec!["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"];
+    // (model, frames, type, reference, Baumgarte gains): 3-D world-aligned points, and the
+    // generic rows of 6-D and local contacts with gains.
+    for (m, frames, kind, reference, gains) in [
+        (builtin::humanoid(), vec!["left_sole", "right_sole"], D3, Lwa, 0.0),
+        (builtin::quadruped(), feet(), D3, Lwa, 0.0),
+        (builtin::humanoid(), vec!["left_sole", "right_sole"], D6, Local, 2.0),
+        (builtin::humanoid(), vec!["left_sole", "right_sole"], D6, Lwa, 2.0),
+        (builtin::quadruped(), feet(), D3, Local, 2.0),
     ] {
         let mut rng = Rng::new(1);
         let q = m.random_configuration(&mut rng);
@@ -51,8 +59,13 @@ fn algorithms_do_not_allocate() {
         let mut d = Data::new(&m);
         let mut so = SoData::new(&m);
         let mut fso = FdSoData::new(&m);
-        let contacts: Vec<Contact> =
-            frames.iter().map(|f| Contact::new(&m, f, Vector3::zeros()).unwrap()).collect();
+        let contacts: Vec<Contact> = frames
+            .iter()
+            .map(|f| {
+                let c = Contact::new(&m, f, Vector3::zeros()).unwrap().with_reference(reference);
+                Contact { kind, ..c.with_baumgarte(gains, gains).unwrap() }
+            })
+            .collect();
         let mut cd = ContactData::new(&m, &contacts).unwrap();
         let mut kd = KktData::new(&m, cd.clone()).with_second_order(&m);
         let mut im = ImpactData::new(&m, cd.clone()).with_second_order(&m);

@@ -216,8 +216,9 @@ def constrained_id_derivatives(
     order: int = 1,
 ) -> ConstrainedIdResult:
     """Constrained inverse dynamics ``tau = M a + b - J_c^T lam`` at ``(q, v, a, lam)`` and its
-    derivatives, ``lam`` (length ``3 * len(contacts)``, world-frame forces applied to the
-    robot) held fixed in the world. ``order=2`` adds ``d2tau_dq2``."""
+    derivatives, ``lam`` (3 rows per 3-D contact, 6 ``[moment; force]`` per 6-D contact: the
+    forces applied to the robot in each contact's axes) held fixed in those axes. ``order=2``
+    adds ``d2tau_dq2``."""
     return ConstrainedIdResult(
         _sodyn.constrained_id_derivatives(model, data, q, v, a, list(contacts), lam, order)
     )
@@ -234,7 +235,8 @@ def kkt_derivatives(
 ) -> KktResult:
     """KKT contact dynamics ``[M J_c^T; J_c 0][qdd; -lambda] = [tau - b; -dJ_c v]`` at
     ``(q, v, tau)`` and its first (``order=1``) or first and second (``order=2``) derivatives.
-    ``lambda_`` holds the world-frame contact forces applied to the robot."""
+    ``lambda_`` holds the contact forces applied to the robot, 3 rows per 3-D contact and 6
+    (``[moment; force]``) per 6-D contact, in each contact's axes (``Contact.reference``)."""
     return KktResult(_sodyn.kkt_derivatives(model, data, q, v, tau, list(contacts), order))
 
 

@@ -108,17 +108,39 @@ class Data:
     def __init__(self, model: Model) -> None: ...
 
 class Contact:
-    """A 3-D point contact: a point (frame coordinates) of a frame (a URDF link), with
-    Baumgarte gains ``kp``, ``kd`` >= 0 (default 0; Pinocchio's ``corrector``): the KKT
-    dynamics then hold ``a_c + kd v_c + kp e_c = 0`` with the reference point fixed where the
-    contact point is at the ``q`` of the call (docs/conventions.md). Impacts ignore the gains."""
+    """A contact (Pinocchio's ``RigidConstraintModel``): a contact frame fixed on a frame (a
+    URDF link), given by ``point`` (a 3-D contact's point, frame coordinates) or ``placement``
+    (a ``(4, 4)`` homogeneous matrix in the frame's coordinates; default the frame itself, not
+    both). ``type`` is ``"3d"`` (a point, 3 rows, ``CONTACT_3D``) or ``"6d"`` (the whole frame,
+    6 rows ``[angular; linear]``, ``CONTACT_6D`` whose rows are ``[linear; angular]``);
+    ``reference`` is ``"local_world_aligned"`` (world axes at the contact point) or ``"local"``
+    (the contact frame's axes); other strings raise ``ValueError`` listing the allowed values.
+    A 3-D contact holds the classical acceleration of its point, a 6-D contact the spatial
+    acceleration of its frame; forces ``lambda_`` are applied to the robot in each contact's
+    axes (docs/conventions.md, "Contacts"). Baumgarte gains ``kp``, ``kd`` >= 0 (default 0;
+    Pinocchio's ``corrector``): the KKT dynamics then hold ``a_c + kd v_c + kp e_c = 0`` with
+    the reference placement fixed where the contact frame is at the ``q`` of the call
+    (``e_c``: the position error for 3-D, ``log6`` of the placement error for 6-D). Impacts
+    ignore the gains. A body held by a 6-D contact that carries another contact is a redundant
+    set: an error naming the contacts."""
 
-    def __init__(self, frame: str, point: ArrayLike = (0.0, 0.0, 0.0), kp: float = 0.0,
-                 kd: float = 0.0) -> None: ...
+    def __init__(self, frame: str, point: Optional[ArrayLike] = None, kp: float = 0.0,
+                 kd: float = 0.0, type: str = "3d", reference: str = "local_world_aligned",
+                 placement: Optional[ArrayLike] = None) -> None: ...
     @property
     def frame(self) -> str: ...
     @property
-    def point(self) -> Vector: ...
+    def point(self) -> Vector:
+        """Origin of the contact frame in the frame's coordinates ``(3,)``."""
+    @property
+    def placement(self) -> Matrix:
+        """The contact frame in the frame's coordinates, ``(4, 4)`` homogeneous matrix."""
+    @property
+    def type(self) -> str:
+        """``"3d"`` or ``"6d"``."""
+    @property
+    def reference(self) -> str:
+        """``"local_world_aligned"`` or ``"local"``."""
     @property
     def kp(self) -> float: ...
     @property
@@ -155,7 +177,9 @@ def idfoza(model: Model, data: Data, q: ArrayLike, x: ArrayLike) -> Matrix: ...
 def idsoza(model: Model, data: Data, q: ArrayLike, x: ArrayLike) -> Tensor: ...
 def constrained_id_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike,
                                a: ArrayLike, contacts: Sequence[Contact], lam: ArrayLike,
-                               order: int = 1) -> dict[str, Vector]: ...
+                               order: int = 1) -> dict[str, Vector]:
+    """``tau = M a + b - J_c^T lam`` and its derivatives, ``lam`` with 3 or 6 rows per contact
+    (held fixed in each contact's axes)."""
 def kkt_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike, tau: ArrayLike,
                     contacts: Sequence[Contact], order: int = 1) -> dict[str, Vector]: ...
 def impact_derivatives(model: Model, data: Data, q: ArrayLike, v_minus: ArrayLike,
@@ -166,12 +190,12 @@ def kkt_so_contracted(model: Model, data: Data, q: ArrayLike, v: ArrayLike, tau:
                       contacts: Sequence[Contact], w_qdd: ArrayLike, w_lambda: ArrayLike
                       ) -> Tuple[Matrix, Matrix, Matrix, Matrix]:
     """Hessians of ``w_qdd @ qdd + w_lambda @ lambda`` of the KKT dynamics:
-    ``(C_qq, C_vv, C_qv, C_tauq)``."""
+    ``(C_qq, C_vv, C_qv, C_tauq)``; ``w_lambda`` has 3 or 6 rows per contact."""
 def impact_so_contracted(model: Model, data: Data, q: ArrayLike, v_minus: ArrayLike,
                          contacts: Sequence[Contact], w_vplus: ArrayLike, w_impulse: ArrayLike,
                          restitution: float = 0.0) -> Tuple[Matrix, Matrix]:
     """Hessians of ``w_vplus @ vplus + w_impulse @ impulse`` of the impact dynamics:
-    ``(C_qq, C_qvminus)``."""
+    ``(C_qq, C_qvminus)``; ``w_impulse`` has 3 or 6 rows per contact."""
 def frame_placement(model: Model, data: Data, q: ArrayLike, frame: Union[str, int]) -> Matrix:
     """World placement of a frame (a URDF link, merged ones included) as a (4, 4) homogeneous
     matrix (Pinocchio's ``data.oMf``)."""

@@ -28,7 +28,10 @@ use sodyn::deriv::{
     fd_so_derivatives, id_derivatives, id_so_derivatives, impact_derivatives,
     impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
 };
-use sodyn::model::{JointType, MjcfOptions, Model, ModelBuilder, UrdfOptions, builtin};
+use sodyn::model::{
+    ContactReference, ContactType, JointType, MjcfOptions, Model, ModelBuilder, UrdfOptions,
+    builtin,
+};
 use sodyn::rng::Rng;
 use sodyn::spatial::{Force, Inertia, Transform};
 use sodyn::tensor::Tensor3;
@@ -858,7 +861,7 @@ fn _model_from_description(desc: &Bound<'_, PyDict>) -> PyResult<PyModel> {
 // ---------------------------------------------------------------------------------------------
 
 /// A contact set resolved against a model: (frame index, point) per contact.
-type ContactKey = Vec<(usize, [u64; 5])>;
+type ContactKey = Vec<(usize, [u64; 16])>;
 
 /// Workspace of one model: sodyn's `Data`, the second-order and contact workspaces (made on
 /// first use) and the input buffers. One thread at a time (a second thread using the same
@@ -1224,33 +1227,82 @@ fn idsoza<'py>(
 // Contacts
 // ---------------------------------------------------------------------------------------------
 
-/// A 3-D point contact: `point` (frame coordinates) of the frame named `frame`, with optional
-/// Baumgarte gains `kp`, `kd` (used by the KKT dynamics).
+/// A contact (Pinocchio's `RigidConstraintModel`): the contact frame at `point` (a 3-D
+/// contact's point) or `placement` (a `(4, 4)` homogeneous matrix) in the frame named `frame`,
+/// of type `"3d"` or `"6d"`, with rows in the `"local_world_aligned"` or `"local"` reference,
+/// with optional Baumgarte gains `kp`, `kd` (used by the KKT dynamics).
 #[pyclass(name = "Contact", module = "sodyn._sodyn", frozen)]
 #[derive(Clone)]
 struct PyContact {
     frame: String,
     point: [f64; 3],
+    /// Rotation of the contact frame in the link frame, row-major.
+    rot: [f64; 9],
+    kind: ContactType,
+    reference: ContactReference,
     kp: f64,
     kd: f64,
 }
 
+const IDENTITY9: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+
 #[pymethods]
 impl PyContact {
     #[new]
-    #[pyo3(signature = (frame, point = None, kp = 0.0, kd = 0.0))]
-    fn new(frame: String, point: Option<&Bound<'_, PyAny>>, kp: f64, kd: f64) -> PyResult<Self> {
+    #[pyo3(signature = (frame, point = None, kp = 0.0, kd = 0.0, r#type = "3d",
+                        reference = "local_world_aligned", placement = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        frame: String,
+        point: Option<&Bound<'_, PyAny>>,
+        kp: f64,
+        kd: f64,
+        r#type: &str,
+        reference: &str,
+        placement: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let what = |e: Error| value_err(format!("contact \"{frame}\": {e}"));
+        let kind = ContactType::parse(r#type).map_err(what)?;
+        let reference = ContactReference::parse(reference).map_err(what)?;
         let mut p = [0.0; 3];
-        if let Some(obj) = point {
-            let mut v = DVector::zeros(3);
-            read_vec(obj, "point", 3, "x, y, z", &mut v)?;
-            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-                return Err(core_err(Error::NotFinite {
-                    what: format!("point of contact \"{frame}\""),
-                    index: i,
-                }));
+        let mut rot = IDENTITY9;
+        match (point, placement) {
+            (Some(_), Some(_)) => {
+                return Err(value_err(format!(
+                    "contact \"{frame}\": give `point` or `placement`, not both"
+                )));
             }
-            p.copy_from_slice(v.as_slice());
+            (Some(obj), None) => {
+                let mut v = DVector::zeros(3);
+                read_vec(obj, "point", 3, "x, y, z", &mut v)?;
+                if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                    return Err(core_err(Error::NotFinite {
+                        what: format!("point of contact \"{frame}\""),
+                        index: i,
+                    }));
+                }
+                p.copy_from_slice(v.as_slice());
+            }
+            (None, Some(obj)) => {
+                let t = read_placement(obj)
+                    .map_err(|e| value_err(format!("`placement` of contact \"{frame}\": {e}")))?;
+                let r = &t.rot;
+                if (r.transpose() * r - nalgebra::Matrix3::identity()).amax() > 1e-9
+                    || (r.determinant() - 1.0).abs() > 1e-9
+                {
+                    return Err(value_err(format!(
+                        "`placement` of contact \"{frame}\": the rotation block is not a \
+                         rotation matrix (to 1e-9)"
+                    )));
+                }
+                p.copy_from_slice(t.trans.as_slice());
+                for i in 0..3 {
+                    for j in 0..3 {
+                        rot[3 * i + j] = r[(i, j)];
+                    }
+                }
+            }
+            (None, None) => {}
         }
         for (name, g) in [("kp", kp), ("kd", kd)] {
             if !(g.is_finite() && g >= 0.0) {
@@ -1259,7 +1311,7 @@ impl PyContact {
                 )));
             }
         }
-        Ok(Self { frame, point: p, kp, kd })
+        Ok(Self { frame, point: p, rot, kind, reference, kp, kd })
     }
     #[getter]
     fn frame(&self) -> &str {
@@ -1268,6 +1320,19 @@ impl PyContact {
     #[getter]
     fn point<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
         PyArray1::from_slice(py, &self.point).into_any()
+    }
+    /// The contact frame's placement in the link frame, a `(4, 4)` homogeneous matrix.
+    #[getter]
+    fn placement<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        out_mat(py, &self.placement_matrix())
+    }
+    #[getter]
+    fn r#type(&self) -> &'static str {
+        self.kind.name()
+    }
+    #[getter]
+    fn reference(&self) -> &'static str {
+        self.reference.name()
     }
     #[getter]
     fn kp(&self) -> f64 {
@@ -1278,13 +1343,21 @@ impl PyContact {
         self.kd
     }
     fn __repr__(&self) -> String {
-        let gains = if self.kp != 0.0 || self.kd != 0.0 {
-            format!(", kp={}, kd={}", self.kp, self.kd)
-        } else {
-            String::new()
-        };
+        let mut extra = String::new();
+        if self.kind != ContactType::D3 {
+            extra += &format!(", type={:?}", self.kind.name());
+        }
+        if self.reference != ContactReference::LocalWorldAligned {
+            extra += &format!(", reference={:?}", self.reference.name());
+        }
+        if self.rot != IDENTITY9 {
+            extra += &format!(", rotation={:?}", self.rot);
+        }
+        if self.kp != 0.0 || self.kd != 0.0 {
+            extra += &format!(", kp={}, kd={}", self.kp, self.kd);
+        }
         format!(
-            "Contact(frame={:?}, point=({}, {}, {}){gains})",
+            "Contact(frame={:?}, point=({}, {}, {}){extra})",
             self.frame, self.point[0], self.point[1], self.point[2]
         )
     }
@@ -1295,12 +1368,32 @@ impl PyContact {
             py,
             [
                 c.frame.clone().into_pyobject(py)?.into_any(),
-                PyTuple::new(py, c.point)?.into_any(),
+                py.None().into_bound(py),
                 c.kp.into_pyobject(py)?.into_any(),
                 c.kd.into_pyobject(py)?.into_any(),
+                c.kind.name().into_pyobject(py)?.into_any(),
+                c.reference.name().into_pyobject(py)?.into_any(),
+                out_mat(py, &c.placement_matrix()),
             ],
         )?;
         PyTuple::new(py, [slf.get_type().into_any(), args.into_any()])
+    }
+}
+
+impl PyContact {
+    fn placement_matrix(&self) -> DMatrix<f64> {
+        DMatrix::from_fn(4, 4, |i, j| match (i, j) {
+            (3, 3) => 1.0,
+            (3, _) => 0.0,
+            (_, 3) => self.point[i],
+            _ => self.rot[3 * i + j],
+        })
+    }
+    fn transform(&self) -> sodyn::spatial::Transform {
+        sodyn::spatial::Transform::new(
+            nalgebra::Matrix3::from_row_slice(&self.rot),
+            Vector3::new(self.point[0], self.point[1], self.point[2]),
+        )
     }
 }
 
@@ -1691,18 +1784,30 @@ fn resolve(m: &Model, contacts: &[PyRef<'_, PyContact>]) -> PyResult<(Vec<Contac
     let mut cs = Vec::with_capacity(contacts.len());
     let mut key = Vec::with_capacity(contacts.len());
     for c in contacts {
-        let p = Vector3::new(c.point[0], c.point[1], c.point[2]);
-        let contact = Contact::new(m, &c.frame, p)
+        let contact = Contact::new(m, &c.frame, Vector3::zeros())
+            .and_then(|x| x.with_placement(m, &c.transform()))
             .and_then(|x| x.with_baumgarte(c.kp, c.kd))
-            .map_err(core_err)?;
-        let [x, y, z] = c.point.map(f64::to_bits);
-        key.push((contact.frame, [x, y, z, c.kp.to_bits(), c.kd.to_bits()]));
+            .map_err(core_err)?
+            .with_reference(c.reference);
+        let contact = Contact { kind: c.kind, ..contact };
+        let mut k = [0u64; 16];
+        for (o, x) in k.iter_mut().zip(c.point.iter().chain(&c.rot).chain([&c.kp, &c.kd])) {
+            *o = x.to_bits();
+        }
+        k[14] = c.kind.dim() as u64;
+        k[15] = (c.reference == ContactReference::Local) as u64;
+        key.push((contact.frame, k));
         cs.push(contact);
     }
     if cs.is_empty() {
         return Err(value_err("`contacts` is empty: give at least one sodyn.Contact".into()));
     }
     Ok((cs, key))
+}
+
+/// Number of constraint rows of a contact list (3 per 3-D contact, 6 per 6-D contact).
+fn rows_of(cs: &[Contact]) -> usize {
+    cs.iter().map(|c| c.dim()).sum()
 }
 
 fn check_order(order: i64) -> PyResult<()> {
@@ -1714,7 +1819,8 @@ fn check_order(order: i64) -> PyResult<()> {
 }
 
 /// Constrained inverse dynamics `tau = M a + b − J_cᵀ λ` at `(q, v, a, λ)` and its
-/// derivatives (λ held fixed in the world): keys `tau, dtau_dq, dtau_dv` (+ `d2tau_dq2`).
+/// derivatives (λ, 3 or 6 rows per contact, held fixed in each contact's axes): keys `tau,
+/// dtau_dq, dtau_dv` (+ `d2tau_dq2`).
 #[pyfunction(name = "constrained_id_derivatives")]
 #[pyo3(signature = (model, data, q, v, a, contacts, lam, order = 1))]
 #[allow(clippy::too_many_arguments)]
@@ -1734,7 +1840,7 @@ fn py_constrained_id_derivatives<'py>(
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
     let (cs, key) = resolve(m, &contacts)?;
-    read_vec(lam, "lam", 3 * cs.len(), "3 × number of contacts", &mut d.lam)?;
+    read_vec(lam, "lam", rows_of(&cs), "3 or 6 rows per contact", &mut d.lam)?;
     if let Some(index) = d.lam.iter().position(|x| !x.is_finite()) {
         return Err(core_err(Error::NotFinite { what: "lam".into(), index }));
     }
@@ -1904,7 +2010,7 @@ fn kkt_so_contracted<'py>(
     read_qvx(m, d, q, v, tau, "tau")?;
     let (cs, key) = resolve(m, &contacts)?;
     read_vec(w_qdd, "w_qdd", m.nv(), "nv", &mut d.w)?;
-    read_vec(w_lambda, "w_lambda", 3 * cs.len(), "3 × number of contacts", &mut d.wl)?;
+    read_vec(w_lambda, "w_lambda", rows_of(&cs), "3 or 6 rows per contact", &mut d.wl)?;
     if d.kktc.as_ref().is_none_or(|(k, _, _)| *k != key) {
         let kd = KktData::new(m, ContactData::new(m, &cs).map_err(core_err)?);
         let kc = KktContracted::new(m, &kd);
@@ -1946,7 +2052,7 @@ fn impact_so_contracted<'py>(
     read_vec(v_minus, "v_minus", m.nv(), "nv", &mut d.v)?;
     let (cs, key) = resolve(m, &contacts)?;
     read_vec(w_vplus, "w_vplus", m.nv(), "nv", &mut d.w)?;
-    read_vec(w_impulse, "w_impulse", 3 * cs.len(), "3 × number of contacts", &mut d.wl)?;
+    read_vec(w_impulse, "w_impulse", rows_of(&cs), "3 or 6 rows per contact", &mut d.wl)?;
     if d.impc.as_ref().is_none_or(|(k, _, _)| *k != key) {
         let im = ImpactData::new(m, ContactData::new(m, &cs).map_err(core_err)?);
         let ic = ImpactContracted::new(m, &im);

@@ -12,7 +12,7 @@ mod ltl;
 mod rnea;
 
 /// Re-export of [`crate::model::Contact`] (the contact description is a model-level type).
-pub use crate::model::Contact;
+pub use crate::model::{Contact, ContactReference, ContactType};
 pub use aba::aba;
 pub use centroidal::{Centroidal, centroidal_dynamics_derivatives};
 pub use com::{

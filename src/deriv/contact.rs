@@ -3,10 +3,20 @@
 //! `R = [[M, −J_cᵀ], [J_c, 0]]` (unknowns `(q̈, λ)` or `(q̇⁺, λ̂)`), and the product terms
 //! `G(z)` of the second-order implicit-function formulas.
 //!
-//! [`ContactData::new`]: inputs model, contacts `(frame, point)`. Outputs the workspace: per
-//! contact its path (the joints and DoFs from the root to its body), the point in that body's
-//! frame, and buffers sized for `nc` contacts; an error for more than [`MAX_CONTACTS`]
-//! contacts, a bad gain, an unknown frame or a contact on the world.
+//! [`ContactData::new`]: inputs model, contacts (`crate::model::Contact`: frame, placement,
+//! type, reference, gains). Outputs the workspace: per contact its path (the joints and DoFs
+//! from the root to its body), the contact frame's placement in that body's frame, its first
+//! row, and buffers sized for `m` constraint rows (3 per 3-D contact, 6 per 6-D contact); an
+//! error for more than [`MAX_CONTACTS`] contacts, a bad gain, an unknown frame or a contact on
+//! the world. A redundant set (a 6-D-held body with another contact) is an error of the
+//! undamped factorisation.
+//!
+//! The formulas below are those of 3-D world-aligned point contacts (rows `3c..3c + 3` stand
+//! for contact `c`'s rows `r0..r0 + 3`). The other contacts (6-D, or local axes) take the same
+//! steps with their rows from `contact_kin`'s generic row kinematics (`jac_col`, `acc_rows`,
+//! `dacc_dq`, `dacc_dv`, `djac_col_dq`, `djz_dq_rows`; docs/notes-corrections.md, "6-D
+//! contacts and the local reference"), entry by entry along each path instead of the
+//! tree-summed `T_x` of step 2 of `G(z)`.
 //!
 //! KKT factorisation (used by the KKT and impact algorithms): inputs the `LᵀDL` factor of `M`
 //! (`data.ltl`), the contact points `p_c` and world subspaces `S_x`, the damping `μ ≥ 0`.
@@ -22,7 +32,7 @@
 //! 5. `M⁻¹ = L⁻¹ D⁻¹ L⁻ᵀ`, the rows of `L⁻¹` by `(L⁻¹)_i = e_i − Σ_{k ≺ i} L_ik (L⁻¹)_k`, then one
 //!    dense product; `P = M⁻¹ − Y Qᵀ`.
 //!
-//! `G(z)` (`(nv + 3 nc) × nv`, `z = (z₁, z₂)` of length `nv + 3 nc`): inputs the composite
+//! `G(z)` (`(nv + m) × nv`, `z = (z₁, z₂)` of length `nv + m`): inputs the composite
 //! inertias and world subspaces of the current `q`, the contact paths and `J_c`. Output
 //! `G(z) = [∂(M z₁)/∂q − ∂(J_cᵀ z₂)/∂q; ∂(J_c z₁)/∂q]`:
 //! 1. rows `0..nv`: `∂(M z₁)/∂q` by IDFOZA ([`super::idfoza`]);
@@ -35,18 +45,22 @@
 //!    `c`'s path (`m` its body), with `Z_j = Σ_{x ⪯ j} S_x z₁_x`,
 //!    `∂Z_m/∂q_l = S_l × (Z_m − Z_λ)` (`λ` the parent of `l`'s joint) and `∂p_c/∂q_l = u_l`.
 
-use super::contact_kin::{Base, Dir, Path, djz_dq};
+use super::contact_kin::{
+    Base, Dir, Geo, Path, acc_rows, dacc_dq, dacc_dv, djac_col_dq, djz_dq, djz_dq_rows, jac_col,
+    put_rows, rows_dot,
+};
 use super::zero::idfoza_core;
 use crate::algo::internal::ltl_solve_rows_desc;
 use crate::algo::{Contact, Data};
 use crate::error::{Error, Result};
 use crate::linalg::{gemm, spd_inverse_in_place, transpose_strided};
-use crate::model::Model;
+use crate::model::{Model, contact_label};
 use crate::spatial::Motion;
+use crate::spatial::Transform;
 use nalgebra::{DMatrix, DVector, Vector3};
 
-/// The largest number of point contacts [`ContactData::new`] accepts (`3 nc` constraint rows).
-/// The contact workspaces hold several `(nv + 3 nc)²` matrices and the KKT and impact solves
+/// The largest number of point contacts [`ContactData::new`] accepts (`m` constraint rows).
+/// The contact workspaces hold several `(nv + m)²` matrices and the KKT and impact solves
 /// take `O(nc²·nv)` time, so without a limit a contact list read from a file could make them
 /// allocate gigabytes: 3,000 contacts on the quadruped (a 63 KB state file for the command
 /// line's `eval`) took 7 GB and 19 s before failing. Real contact sets have a few dozen points
@@ -61,11 +75,12 @@ pub struct ContactData {
     pub(crate) paths: Vec<Path>,
     pub(crate) acc: Vec<Motion>,
     pub(crate) zc: Vec<Motion>,
-    /// Contact Jacobian `J_c` (`3 nc × nv`), world-aligned point velocities.
+    /// Contact Jacobian `J_c` (`m × nv`, `m` the constraint rows: 3 per 3-D contact, 6 per 6-D
+    /// contact), the contacts' velocity rows (`crate::model::Contact`).
     pub(crate) jac: DMatrix<f64>,
     /// Drift `J̇_c q̇` (classical point accelerations at `q̈ = 0`), when computed.
     pub(crate) drift: DVector<f64>,
-    /// `Y = M⁻¹Jᵀ`, rows padded with zeros to a multiple of 8 (`np × 3 nc`).
+    /// `Y = M⁻¹Jᵀ`, rows padded with zeros to a multiple of 8 (`np × m`).
     pub(crate) y: DMatrix<f64>,
     pub(crate) lam: DMatrix<f64>,
     pub(crate) del: DMatrix<f64>,
@@ -76,24 +91,34 @@ pub struct ContactData {
     /// First `nv` columns of `R⁻¹`, `[P; −Qᵀ]` with `P = M⁻¹ − YΛYᵀ`, `Q = YΛ`, rows padded
     /// with zeros to a multiple of 8 (`rp × nv`).
     pub(crate) r1: DMatrix<f64>,
-    /// Last `3 nc` columns of `R⁻¹`, `[Q; Λ]`, rows padded like `r1` (`rp × 3 nc`).
+    /// Last `m` columns of `R⁻¹`, `[Q; Λ]`, rows padded like `r1` (`rp × m`).
     pub(crate) r2: DMatrix<f64>,
     /// `L⁻ᵀ` of the `LᵀDL` factor (column `i` holds row `i` of `L⁻¹`; zero off the tree pattern).
     gt: DMatrix<f64>,
     /// `Yᵀ = J M⁻¹`, rows padded (`mp × nv`).
     pub(crate) yt: DMatrix<f64>,
-    /// `Jᵀ` (`nv × 3 nc`).
+    /// `Jᵀ` (`nv × m`).
     pub(crate) jt: DMatrix<f64>,
-    /// Padded `3 nc`-row work matrix (`mp × 3 nc`): the Delassus matrix, then `Λ`.
+    /// Padded `m`-row work matrix (`mp × m`): the Delassus matrix, then `Λ`.
     pub(crate) delp: DMatrix<f64>,
-    /// `[Qᵀ, −Λ]`, rows padded with zeros to a multiple of 8 (`mp × (nv + 3 nc)`).
+    /// `[Qᵀ, −Λ]`, rows padded with zeros to a multiple of 8 (`mp × (nv + m)`).
     pub(crate) wq: DMatrix<f64>,
     /// `L⁻¹ D⁻¹` (column-major; zero off the tree pattern).
     gd: DMatrix<f64>,
     /// Joints on any contact path (ascending).
     union_joints: Vec<usize>,
-    /// Contact body and point in its joint frame, per contact.
-    local: Vec<(usize, Vector3<f64>)>,
+    /// Contact body and the contact frame's placement in its joint frame, per contact.
+    local: Vec<(usize, Transform)>,
+    /// First constraint row of each contact (3 rows per 3-D contact, 6 per 6-D contact).
+    pub(crate) row0: Vec<usize>,
+    /// Shape of each contact's rows.
+    pub(crate) geo: Vec<Geo>,
+    /// Number of constraint rows.
+    m: usize,
+    /// Copies of the model's DoF → joint and joint → parent tables (for the base quantities
+    /// where the model is not passed).
+    dof_joint: Vec<usize>,
+    parents: Vec<usize>,
     /// World motion subspaces of the DoFs on the contact paths (other entries unused).
     pub(crate) s: Vec<Motion>,
     /// World body velocities of the path joints (index 0: zero).
@@ -108,6 +133,9 @@ pub struct ContactData {
     /// rank-deficient contact set is an error). With `μ > 0` the solve is damped:
     /// `(J M⁻¹ Jᵀ + μ I) λ = …`, and all derivatives are those of the damped system.
     pub(crate) damping: f64,
+    /// A structurally redundant set (a 6-D-held body carrying another contact): the message
+    /// naming the contacts, an error of the undamped factorisation.
+    redundant: Option<String>,
     /// `Model::key` of the model the contacts were made for, its joints and DoFs.
     pub(crate) model_key: u64,
     pub(crate) model_njoints: usize,
@@ -119,7 +147,8 @@ impl ContactData {
     pub fn contacts(&self) -> &Vec<Contact> {
         &self.contacts
     }
-    /// Contact Jacobian `J_c` (`3 nc × nv`), world-aligned point velocities.
+    /// Contact Jacobian `J_c` (`m × nv`, `m` the constraint rows: 3 per 3-D contact, 6 per 6-D
+    /// contact), the contacts' velocity rows (`crate::model::Contact`).
     pub fn jac(&self) -> &DMatrix<f64> {
         &self.jac
     }
@@ -152,18 +181,18 @@ impl ContactData {
             });
         }
         let n = model.nv;
-        let m = 3 * contacts.len();
+        let m: usize = contacts.iter().map(|c| c.dim()).sum();
         let mut paths = Vec::with_capacity(contacts.len());
-        for c in contacts {
+        for (i, c) in contacts.iter().enumerate() {
             if c.frame >= model.frames.len() {
                 return Err(Error::Unknown {
                     kind: "frame index".into(),
-                    name: c.frame.to_string(),
+                    name: format!("{} (contacts[{i}])", c.frame),
                 });
             }
             c.check_gains().map_err(|e| match e {
                 Error::Argument { name, reason } => Error::Argument {
-                    name: format!("{name} of the contact on \"{}\"", model.frames[c.frame].name),
+                    name: format!("{name} of {}", contact_label(model, contacts, i)),
                     reason,
                 },
                 e => e,
@@ -173,7 +202,8 @@ impl ContactData {
                 return Err(Error::Singular {
                     what: "contact set".into(),
                     detail: format!(
-                        "contact on frame \"{}\" is attached to the fixed world: it constrains nothing",
+                        "{} on frame \"{}\" is attached to the fixed world: it constrains nothing",
+                        contact_label(model, contacts, i),
                         model.frames[c.frame].name
                     ),
                 });
@@ -202,7 +232,16 @@ impl ContactData {
             }
         }
         let union_joints: Vec<usize> = (1..model.njoints()).filter(|&j| on_path[j]).collect();
-        let local = contacts.iter().map(|c| c.body_point(model)).collect();
+        let local = contacts.iter().map(|c| c.body_placement(model)).collect();
+        let geo: Vec<Geo> = contacts.iter().map(Geo::of).collect();
+        let row0 = geo
+            .iter()
+            .scan(0, |r, g| {
+                let r0 = *r;
+                *r += g.dim();
+                Some(r0)
+            })
+            .collect();
         let maxd = paths.iter().map(|p| p.dofs.len()).max().unwrap_or(0);
         Ok(Self {
             r1: DMatrix::zeros(padded_rows(n + m), n),
@@ -215,6 +254,11 @@ impl ContactData {
             gd: DMatrix::zeros(n, n),
             union_joints,
             local,
+            row0,
+            geo,
+            m,
+            dof_joint: model.dof_joint.clone(),
+            parents: model.parents.clone(),
             s: vec![Motion::zero(); n],
             kvel: vec![Motion::zero(); model.njoints()],
             kacc: vec![Motion::zero(); model.njoints()],
@@ -235,6 +279,7 @@ impl ContactData {
             g: DMatrix::zeros(n + m, n),
             zmat: DMatrix::zeros(n, n),
             damping: 0.0,
+            redundant: crate::model::redundancy(model, contacts),
             model_key: model.key,
             model_njoints: model.njoints(),
             model_nv: model.nv(),
@@ -273,9 +318,9 @@ impl ContactData {
         )))
     }
 
-    /// Number of constraint rows `3 nc`.
+    /// Number of constraint rows (3 per 3-D contact, 6 per 6-D contact).
     pub fn dim(&self) -> usize {
-        3 * self.contacts.len()
+        self.m
     }
 
     /// Contact body of contact `c`.
@@ -327,15 +372,27 @@ pub(crate) fn update_points(model: &Model, data: &Data, cd: &mut ContactData, a0
         cd.acc[j] = if j == 0 { Motion::zero() } else { data.oa[j] - a0 };
     }
     cd.jac.fill(0.0);
-    for (c, contact) in cd.contacts.iter().enumerate() {
-        let (body, local) = contact.body_point(model);
-        let p = data.o_m_i[body].act_point(&local);
-        cd.paths[c].p = p;
+    for c in 0..cd.contacts.len() {
+        let (body, local) = &cd.local[c];
+        let pose = data.o_m_i[*body].compose(local);
+        cd.paths[c].p = pose.trans;
+        cd.paths[c].rot = pose.rot;
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
         for &x in &cd.paths[c].dofs {
             let s = data.s_world[x];
-            let u = s.lin + s.ang.cross(&p);
-            for r in 0..3 {
-                cd.jac[(3 * c + r, x)] = u[r];
+            if geo.is_point() {
+                let u = s.lin + s.ang.cross(&pose.trans);
+                for r in 0..3 {
+                    cd.jac[(r0 + r, x)] = u[r];
+                }
+            } else {
+                let b = base(model, data, cd);
+                let rows = jac_col(&b, geo, &pose.rot, &pose.trans, x, Dir::None);
+                let mut col = [0.0; 6];
+                put_rows(geo, &rows, false, &mut col);
+                for (r, v) in col[..geo.dim()].iter().enumerate() {
+                    cd.jac[(r0 + r, x)] = *v;
+                }
             }
         }
     }
@@ -363,15 +420,23 @@ pub(crate) fn path_kinematics(model: &Model, data: &Data, cd: &mut ContactData, 
             cd.kacc[j] = ap + vi.cross(&vj);
         }
     }
-    for (c, &(body, local)) in cd.local.iter().enumerate() {
-        let p = data.o_m_i[body].act_point(&local);
+    for c in 0..cd.local.len() {
+        let (body, local) = cd.local[c];
+        let pose = data.o_m_i[body].compose(&local);
+        let p = pose.trans;
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
         let path = &mut cd.paths[c];
         path.p = p;
+        path.rot = pose.rot;
+        if !geo.is_point() {
+            generic_rows(model, cd, c, v.is_some());
+            continue;
+        }
         for &x in &path.dofs {
             let s = cd.s[x];
             let u = s.lin + s.ang.cross(&p);
             for r in 0..3 {
-                cd.jac[(3 * c + r, x)] = u[r];
+                cd.jac[(r0 + r, x)] = u[r];
             }
         }
         if v.is_some() {
@@ -379,10 +444,46 @@ pub(crate) fn path_kinematics(model: &Model, data: &Data, cd: &mut ContactData, 
             let pdot = vb.lin + vb.ang.cross(&p);
             let acc = ab.lin + ab.ang.cross(&p) + vb.ang.cross(&pdot);
             for r in 0..3 {
-                cd.drift[3 * c + r] = acc[r];
+                cd.drift[r0 + r] = acc[r];
             }
         }
     }
+}
+
+/// The base quantities of the path kinematics (`cd.s`, `cd.kvel`, `cd.kacc`).
+fn path_base<'a>(model: &'a Model, cd: &'a ContactData) -> Base<'a> {
+    Base {
+        s: &cd.s,
+        vel: &cd.kvel,
+        acc: &cd.kacc,
+        dof_joint: &model.dof_joint,
+        parents: &model.parents,
+    }
+}
+
+/// Jacobian rows (and with `drift`, the acceleration rows at the current `cd.kacc`) of the
+/// generic contact `c` (6-D or local) from the path kinematics.
+fn generic_rows(model: &Model, cd: &mut ContactData, c: usize, drift: bool) {
+    let (geo, r0) = (cd.geo[c], cd.row0[c]);
+    let d = geo.dim();
+    let mut jac = std::mem::replace(&mut cd.jac, DMatrix::zeros(0, 0));
+    {
+        let b = path_base(model, cd);
+        let path = &cd.paths[c];
+        let mut col = [0.0; 6];
+        for &x in &path.dofs {
+            put_rows(geo, &jac_col(&b, geo, &path.rot, &path.p, x, Dir::None), false, &mut col);
+            for (r, v) in col[..d].iter().enumerate() {
+                jac[(r0 + r, x)] = *v;
+            }
+        }
+        if drift {
+            let body = *path.joints.last().expect("path");
+            put_rows(geo, &acc_rows(&b, geo, &path.rot, body, &path.p, Dir::None), false, &mut col);
+            cd.drift.as_mut_slice()[r0..r0 + d].copy_from_slice(&col[..d]);
+        }
+    }
+    cd.jac = jac;
 }
 
 /// Adds `Σ_{x ⪯ j} S_x q̈_x` to the path accelerations `cd.kacc` (after [`path_kinematics`]).
@@ -455,6 +556,16 @@ pub(crate) fn factor_delassus(
 ) -> Result<()> {
     let n = model.nv;
     let m = cd.dim();
+    if cd.damping == 0.0
+        && let Some(msg) = &cd.redundant
+    {
+        return Err(Error::Singular {
+            what: "contact set".into(),
+            detail: format!(
+                "{msg}; set a damping > 0 (ContactData::set_damping) for a regularised solve"
+            ),
+        });
+    }
     let (mp, np) = (cd.yt.nrows(), cd.y.nrows());
     {
         let (jac, yt) = (cd.jac.as_slice(), cd.yt.as_mut_slice());
@@ -554,16 +665,38 @@ pub(crate) fn fill_rinv(cd: &mut ContactData) {
     cd.rinv.columns_mut(n, m).copy_from(&cd.r2.rows(0, n + m));
 }
 
-/// Rows `∂a_p/∂q` and `∂a_p/∂q̇` (`3 nc × nv` each, only path columns written), transposed, of
+/// Rows `∂a_p/∂q` and `∂a_p/∂q̇` (`m × nv` each, only path columns written), transposed, of
 /// the classical contact-point accelerations at fixed `q̈`, from `cd.s`, `cd.kvel`, `cd.kacc`
 /// (with `q̈`) and the points: along `q_l`, `D V_m = S_l × (V_m − V_λ)` (J2),
 /// `D A_m = (A_λ − A_m) × S_l + (V_λ − V_m) × Ψ̇_l` (J6, J7), `D p = u_l`; along `q̇_l`,
 /// `D V_m = S_l` (J8), `D A_m = (V_λ + V_l − V_m) × S_l` (J9).
-/// `(∂a_p/∂q)ᵀ` is stored in rows `0..nv` of `cxt` (`2nv × 3nc`), `(∂a_p/∂q̇)ᵀ` in rows `nv..2nv`.
+/// `(∂a_p/∂q)ᵀ` is stored in rows `0..nv` of `cxt` (`2nv × m`), `(∂a_p/∂q̇)ᵀ` in rows `nv..2nv`.
 pub(crate) fn accel_derivatives_t(cd: &ContactData, cxt: &mut DMatrix<f64>) {
     let n = cd.s.len();
     for (c, path) in cd.paths.iter().enumerate() {
         let body = *path.joints.last().expect("path");
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        if !geo.is_point() {
+            let b = Base {
+                s: &cd.s,
+                vel: &cd.kvel,
+                acc: &cd.kacc,
+                dof_joint: &cd.dof_joint,
+                parents: &cd.parents,
+            };
+            let (mut rq, mut rv) = ([0.0; 6], [0.0; 6]);
+            for &l in &path.dofs {
+                let q_rows = dacc_dq(&b, geo, &path.rot, body, &path.p, l, Dir::None);
+                let v_rows = dacc_dv(&b, geo, &path.rot, body, &path.p, l, Dir::None);
+                put_rows(geo, &q_rows, false, &mut rq);
+                put_rows(geo, &v_rows, false, &mut rv);
+                for r in 0..geo.dim() {
+                    cxt[(l, r0 + r)] = rq[r];
+                    cxt[(n + l, r0 + r)] = rv[r];
+                }
+            }
+            continue;
+        }
         let p = path.p;
         let (vm, am) = (cd.kvel[body], cd.kacc[body]);
         let w = vm.ang;
@@ -587,14 +720,14 @@ pub(crate) fn accel_derivatives_t(cd: &ContactData, cxt: &mut DMatrix<f64>) {
             let dav = (vl + cd.kvel[jl] - vm).cross(&s);
             let rv = dav.lin + dav.ang.cross(&p) + s.ang.cross(&pd) + w.cross(&u);
             for r in 0..3 {
-                cxt[(l, 3 * c + r)] = rq[r];
-                cxt[(n + l, 3 * c + r)] = rv[r];
+                cxt[(l, r0 + r)] = rq[r];
+                cxt[(n + l, r0 + r)] = rv[r];
             }
         }
     }
 }
 
-/// Rows `∂(J_c w)/∂q` at fixed `w` into `out` (`3 nc × nv`, only path columns written):
+/// Rows `∂(J_c w)/∂q` at fixed `w` into `out` (`m × nv`, only path columns written):
 /// with `Z_j = Σ_{x ⪯ j} S_x w_x`, `D Z_m = S_l × (Z_m − Z_λ)` and `D p = u_l`.
 pub(crate) fn djw_dq(model: &Model, cd: &mut ContactData, w: &[f64], out: &mut DMatrix<f64>) {
     cd.zc[0] = Motion::zero();
@@ -608,6 +741,25 @@ pub(crate) fn djw_dq(model: &Model, cd: &mut ContactData, w: &[f64], out: &mut D
     }
     for (c, path) in cd.paths.iter().enumerate() {
         let body = *path.joints.last().expect("path");
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        if !geo.is_point() {
+            let b = Base {
+                s: &cd.s,
+                vel: &cd.kvel,
+                acc: &cd.kacc,
+                dof_joint: &cd.dof_joint,
+                parents: &cd.parents,
+            };
+            let mut col = [0.0; 6];
+            for &l in &path.dofs {
+                let rows = djz_dq_rows(&b, geo, &path.rot, &cd.zc, body, &path.p, l, Dir::None);
+                put_rows(geo, &rows, false, &mut col);
+                for k in 0..geo.dim() {
+                    out[(r0 + k, l)] = col[k];
+                }
+            }
+            continue;
+        }
         let p = path.p;
         let zm = cd.zc[body];
         for (i, &l) in path.dofs.iter().enumerate() {
@@ -616,13 +768,13 @@ pub(crate) fn djw_dq(model: &Model, cd: &mut ContactData, w: &[f64], out: &mut D
             let dz = s.cross(&(zm - cd.zc[path.dof_parent[i]]));
             let r = dz.lin + dz.ang.cross(&p) + zm.ang.cross(&u);
             for k in 0..3 {
-                out[(3 * c + k, l)] = r[k];
+                out[(r0 + k, l)] = r[k];
             }
         }
     }
 }
 
-/// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `3 nc` world forces) from `out` (`nv×nv`, `[x][l]`), with `s`
+/// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `m` world forces) from `out` (`nv×nv`, `[x][l]`), with `s`
 /// the world subspaces of the path DoFs and `cd.jac` current. With `u_x` the Jacobian column
 /// (point velocity of `S_x`) and `w = S.ang`: a perturbation of `q_l` rotates `u_x` rigidly if
 /// `l ⪯ x` (J1 and `∂p/∂q_l = u_l` give `D u_x = w_l × u_x`) and otherwise only moves the point
@@ -637,13 +789,16 @@ pub(crate) fn sub_djtl_dq(
     let ld = out.nrows();
     let o = out.as_mut_slice();
     for (c, path) in cd.paths.iter().enumerate() {
-        let lam = Vector3::new(lambda[3 * c], lambda[3 * c + 1], lambda[3 * c + 2]);
+        let r0 = cd.row0[c];
+        if !cd.geo[c].is_point() {
+            continue;
+        }
+        let lam = Vector3::new(lambda[r0], lambda[r0 + 1], lambda[r0 + 2]);
         if lam == Vector3::zeros() {
             continue;
         }
         for (i, &x) in path.dofs.iter().enumerate() {
-            let u =
-                Vector3::new(cd.jac[(3 * c, x)], cd.jac[(3 * c + 1, x)], cd.jac[(3 * c + 2, x)]);
+            let u = Vector3::new(cd.jac[(r0, x)], cd.jac[(r0 + 1, x)], cd.jac[(r0 + 2, x)]);
             t[i] = u.cross(&lam);
         }
         let d = path.dofs.len();
@@ -671,9 +826,66 @@ pub(crate) fn sub_djtl_dq(
         }
     }
     cd.t3 = t;
+    sub_djtl_dq_generic(s, cd, lambda, out.as_mut_slice(), 1, ld);
 }
 
-/// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `3 nc` world forces) from `out` (`nv×nv`, `[x][l]`), with `s`
+/// The generic contacts' (6-D or local) part of [`sub_djtl_dq`]: entry `(x, l)` (at
+/// `o[rs x + cs l]`) minus `λ_c · ∂(J_c column x)/∂q_l` for the DoFs `x`, `l` of each path.
+/// With `(n, f)` the contact's moment and force in world axes at `p` (`R λ` for `local`) and
+/// `F = [n + p × f; f]` the spatial force about the world origin, `(J_cᵀλ)_x = S_x · F`, and
+/// along `q_l` (`l` on the path): `D S_x = [l ⪯ x] S_l × S_x` (J1); `F` turns with the body for
+/// `local` (`D F = S_l ×* F`, so the entry is `−[not l ⪯ x] (S_l × S_x)·F`) and only moves
+/// with the point for world axes (`D F = [u_l × f; 0]`, entry
+/// `[l ⪯ x] (S_l × S_x)·F + w_x·(u_l × f)`). The dual-base form `djac_col_dq` is the same
+/// derivative (used by the second order).
+fn sub_djtl_dq_generic(
+    s: &[Motion],
+    cd: &ContactData,
+    lambda: &[f64],
+    o: &mut [f64],
+    rs: usize,
+    cs: usize,
+) {
+    for (c, path) in cd.paths.iter().enumerate() {
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        let lam = &lambda[r0..r0 + geo.dim()];
+        if geo.is_point() || lam.iter().all(|x| *x == 0.0) {
+            continue;
+        }
+        let part = |i: usize| Vector3::new(lam[i], lam[i + 1], lam[i + 2]);
+        let (n, f) = if geo.six { (part(0), part(3)) } else { (Vector3::zeros(), part(0)) };
+        let (n, f) = if geo.local { (path.rot * n, path.rot * f) } else { (n, f) };
+        let p = path.p;
+        let (fa, fl) = (n + p.cross(&f), f);
+        for (il, &l) in path.dofs.iter().enumerate() {
+            let (sl, jl) = (s[l], path.dof_joint[il]);
+            let ul = sl.lin + sl.ang.cross(&p);
+            let ulf = ul.cross(&f);
+            for (ix, &x) in path.dofs.iter().enumerate() {
+                let sx = s[x];
+                let anc = jl <= path.dof_joint[ix];
+                let e = if geo.local {
+                    if anc {
+                        continue;
+                    }
+                    let c = sl.cross(&sx);
+                    -(c.ang.dot(&fa) + c.lin.dot(&fl))
+                } else {
+                    let t = sx.ang.dot(&ulf);
+                    if anc {
+                        let c = sl.cross(&sx);
+                        t + c.ang.dot(&fa) + c.lin.dot(&fl)
+                    } else {
+                        t
+                    }
+                };
+                o[rs * x + cs * l] -= e;
+            }
+        }
+    }
+}
+
+/// Subtracts `∂(J_cᵀ λ)/∂q` (λ: `m` world forces) from `out` (`nv×nv`, `[x][l]`), with `s`
 /// the world subspaces of the path DoFs and `cd.jac` current. With `u_x` the Jacobian column
 /// (point velocity of `S_x`) and `w = S.ang`: a perturbation of `q_l` rotates `u_x` rigidly if
 /// `l ⪯ x` (J1 and `∂p/∂q_l = u_l` give `D u_x = w_l × u_x`) and otherwise only moves the point
@@ -711,13 +923,16 @@ pub(crate) fn sub_djtl_dq_strided(
         t[iv..iv + model.nvs[j]].fill(Vector3::zeros());
     }
     for (c, path) in cd.paths.iter().enumerate() {
-        let lam = Vector3::new(lambda[3 * c], lambda[3 * c + 1], lambda[3 * c + 2]);
+        let r0 = cd.row0[c];
+        if !cd.geo[c].is_point() {
+            continue;
+        }
+        let lam = Vector3::new(lambda[r0], lambda[r0 + 1], lambda[r0 + 2]);
         if lam == Vector3::zeros() {
             continue;
         }
         for &x in &path.dofs {
-            let u =
-                Vector3::new(cd.jac[(3 * c, x)], cd.jac[(3 * c + 1, x)], cd.jac[(3 * c + 2, x)]);
+            let u = Vector3::new(cd.jac[(r0, x)], cd.jac[(r0 + 1, x)], cd.jac[(r0 + 2, x)]);
             t[x] += u.cross(&lam);
         }
     }
@@ -740,10 +955,11 @@ pub(crate) fn sub_djtl_dq_strided(
             }
         }
     }
+    sub_djtl_dq_generic(s, cd, lambda, o, rs, cs);
 }
 
 /// `G(z)` (columns `l`): `[IDFOZA(z₁) − ∂(Jᵀz₂)/∂q ; ∂(J z₁)/∂q]`, `z = (z₁, z₂)` of length
-/// `nv + 3 nc`. Needs the composite inertias of the current `q` in `data`. Writes `cd.g`.
+/// `nv + m`. Needs the composite inertias of the current `q` in `data`. Writes `cd.g`.
 pub(crate) fn g_matrix(model: &Model, data: &mut Data, cd: &mut ContactData, z: &[f64]) {
     let n = model.nv;
     g_matrix_split(model, data, cd, &z[..n], &z[n..], &z[..n]);
@@ -779,10 +995,22 @@ pub(crate) fn g_matrix_split(
         zc[0] = Motion::zero();
         let b = base(model, data, cd);
         let m = cd.body(c);
-        for &l in &path.dofs {
-            let r = djz_dq(&b, &zc, m, &path.p, l, Dir::None).v;
-            for k in 0..3 {
-                g[(n + 3 * c + k, l)] = r[k];
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        if geo.is_point() {
+            for &l in &path.dofs {
+                let r = djz_dq(&b, &zc, m, &path.p, l, Dir::None).v;
+                for k in 0..3 {
+                    g[(n + r0 + k, l)] = r[k];
+                }
+            }
+        } else {
+            let mut col = [0.0; 6];
+            for &l in &path.dofs {
+                let rows = djz_dq_rows(&b, geo, &path.rot, &zc, m, &path.p, l, Dir::None);
+                put_rows(geo, &rows, false, &mut col);
+                for k in 0..geo.dim() {
+                    g[(n + r0 + k, l)] = col[k];
+                }
             }
         }
     }
@@ -814,6 +1042,132 @@ pub(crate) fn point_jacobian_dq(
                 sj.ang.cross(&(sk.lin + sk.ang.cross(&p)))
             };
             f(j, k, zeta.dot(&x));
+        }
+    }
+}
+
+/// For contact `c` and weights `zeta` (its 3 or 6 rows), passes `f(j, k, x_j, x_e)` for the
+/// DoFs `j, k` of its path: `x_j = ζ·∂J_j/∂q_k` (`J_j` the Jacobian column of `j`) and
+/// `x_e = ζ·∂²e/∂q_j∂q_k` at `e = 0` (`T[i][j][k] = ∂/∂q_k (∂e_i/∂q_j)`, `e` the Baumgarte
+/// error of `crate::model::Contact`). With `w = S.ang`, `u` the point velocity columns and `R`
+/// the contact rotation:
+/// * 3-D world-aligned: `x_e = x_j` ([`point_jacobian_dq`]);
+/// * 3-D local: `e = Rᵀ(p − p_ref)`, `∂²e = ∂(Rᵀu_j)/∂q_k − Rᵀ(w_j × u_k)`;
+/// * 6-D local: `e = log6(M_ref⁻¹M)`, `∂_j e = Jr⁻¹(e) J_j` with `Jr⁻¹ = I + ½ ad(e) + …`, so
+///   `∂²e = ∂J_j/∂q_k + ½ J_k × J_j` (motion cross product);
+/// * 6-D world-aligned: `e = diag(R, R) e_local`, `∂²e = ∂J_j/∂q_k + w_j × J_k + ½ J_k × J_j`
+///   (`w_j ×` on both halves).
+pub(crate) fn contact_hessians(
+    cd: &ContactData,
+    c: usize,
+    zeta: &[f64],
+    mut f: impl FnMut(usize, usize, f64, f64),
+) {
+    let geo = cd.geo[c];
+    if geo.is_point() {
+        let z = Vector3::new(zeta[0], zeta[1], zeta[2]);
+        point_jacobian_dq(cd, c, &z, |j, k, x| f(j, k, x, x));
+        return;
+    }
+    let b = Base {
+        s: &cd.s,
+        vel: &cd.kvel,
+        acc: &cd.kacc,
+        dof_joint: &cd.dof_joint,
+        parents: &cd.parents,
+    };
+    let path = &cd.paths[c];
+    let (r, p) = (&path.rot, &path.p);
+    let part = |o: usize| Vector3::new(zeta[o], zeta[o + 1], zeta[o + 2]);
+    let (za, zl) = if geo.six { (part(0), part(3)) } else { (Vector3::zeros(), part(0)) };
+    for &j in &path.dofs {
+        let jj = jac_col(&b, geo, r, p, j, Dir::None);
+        let wj = cd.s[j].ang;
+        for &k in &path.dofs {
+            let xj = rows_dot(geo, &djac_col_dq(&b, geo, r, p, j, k, Dir::None), zeta).0;
+            let extra = if !geo.six {
+                // −Rᵀ(w_j × u_k)
+                let uk = cd.s[k].lin + cd.s[k].ang.cross(p);
+                -zl.dot(&r.tr_mul(&wj.cross(&uk)))
+            } else {
+                let jk = jac_col(&b, geo, r, p, k, Dir::None);
+                let (ka, kl, ja, jl) = (jk.0.v, jk.1.v, jj.0.v, jj.1.v);
+                // ½ J_k × J_j = ½ [k_a × j_a; k_a × j_l + k_l × j_a]
+                let half =
+                    0.5 * (za.dot(&ka.cross(&ja)) + zl.dot(&(ka.cross(&jl) + kl.cross(&ja))));
+                if geo.local {
+                    half
+                } else {
+                    half + za.dot(&wj.cross(&ka)) + zl.dot(&wj.cross(&kl))
+                }
+            };
+            f(j, k, xj, xj + extra);
+        }
+    }
+}
+
+/// `zc[j] = Σ_{x ⪯ j} S_x z_x` (world subspaces of `data`) for the joints of contact `c`'s path.
+fn path_sums(model: &Model, data: &Data, cd: &ContactData, c: usize, z: &[f64], zc: &mut [Motion]) {
+    zc[0] = Motion::zero();
+    for &j in &cd.paths[c].joints {
+        let mut zj = zc[model.parents[j]];
+        let iv = model.idx_v[j];
+        let nj = model.nvs[j];
+        for (s, zx) in data.s_world[iv..iv + nj].iter().zip(&z[iv..iv + nj]) {
+            zj += *s * *zx;
+        }
+        zc[j] = zj;
+    }
+}
+
+/// For the generic contact `c` (6-D or local): `h[(l, k)] += scale · wts · ∂²(J_c z)/∂q_l∂q_k`
+/// (inner `l`, outer `k`) for the DoFs `l, k` of its path (`O(d²)` dual evaluations of
+/// `djz_dq_rows`); `zc` is scratch of one motion per joint. Needs the base quantities of the
+/// current state (as for [`base`]).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn add_jz_hessian(
+    model: &Model,
+    data: &Data,
+    cd: &ContactData,
+    c: usize,
+    z: &[f64],
+    wts: &[f64],
+    scale: f64,
+    zc: &mut [Motion],
+    h: &mut DMatrix<f64>,
+) {
+    path_sums(model, data, cd, c, z, zc);
+    let b = base(model, data, cd);
+    let (path, geo) = (&cd.paths[c], cd.geo[c]);
+    let body = *path.joints.last().expect("path");
+    for &k in &path.dofs {
+        for &l in &path.dofs {
+            let rows = djz_dq_rows(&b, geo, &path.rot, zc, body, &path.p, l, Dir::Q(k));
+            h[(l, k)] += scale * rows_dot(geo, &rows, wts).1;
+        }
+    }
+}
+
+/// For the generic contact `c`: the Hessians of `ζ·a_c` (`a_c` its acceleration rows at the
+/// current state): `qq[(l, k)] += ζ·∂²a_c/∂q_l∂q_k`, `vv[(l, k)] += ζ·∂²a_c/∂q̇_l∂q̇_k`,
+/// `qv[(l, k)] += ζ·∂²a_c/∂q_l∂q̇_k`.
+pub(crate) fn add_acc_hessians(
+    model: &Model,
+    data: &Data,
+    cd: &ContactData,
+    c: usize,
+    zeta: &[f64],
+    (qq, vv, qv): (&mut DMatrix<f64>, &mut DMatrix<f64>, &mut DMatrix<f64>),
+) {
+    let b = base(model, data, cd);
+    let (path, geo) = (&cd.paths[c], cd.geo[c]);
+    let body = *path.joints.last().expect("path");
+    let (r, p) = (&path.rot, &path.p);
+    for &k in &path.dofs {
+        for &l in &path.dofs {
+            qq[(l, k)] += rows_dot(geo, &dacc_dq(&b, geo, r, body, p, l, Dir::Q(k)), zeta).1;
+            vv[(l, k)] += rows_dot(geo, &dacc_dv(&b, geo, r, body, p, l, Dir::V(k)), zeta).1;
+            qv[(l, k)] += rows_dot(geo, &dacc_dq(&b, geo, r, body, p, l, Dir::V(k)), zeta).1;
         }
     }
 }

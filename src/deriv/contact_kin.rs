@@ -18,7 +18,7 @@
 //! `T[i][j][k] = ∂/∂x_k (∂y_i/∂u_j)` with the inner derivative first, as everywhere else.
 
 use crate::spatial::Motion;
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 use std::ops::{Add, Mul, Neg, Sub};
 
 /// A 3-vector with a tangent.
@@ -120,6 +120,8 @@ pub(crate) struct Path {
     pub dof_parent: Vec<usize>,
     /// World contact point.
     pub p: Vector3<f64>,
+    /// World rotation of the contact frame.
+    pub rot: Matrix3<f64>,
 }
 
 /// Access to the base quantities of the current state (world frame).
@@ -298,4 +300,263 @@ pub(crate) fn djz_dq(
     let pp = b.p(p, dir);
     let dz = sl.cross(&(zm - zl));
     at_point(&dz, &pp) + zm.ang().cross(&at_point(&sl, &pp))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Generic contacts: 6-D contacts and the local reference (module documentation of
+// `crate::model::Contact`). A contact's rows are formed from world-aligned angular and linear
+// parts at the contact point, rotated into the contact axes (`Rᵀ`) for `local`; `R` turns with
+// the body: `D R = [w_l]× R` along `q_l` (`w_l = S_l.ang`, `l` on the path), so
+// `D(Rᵀ y) = Rᵀ (D y − w_l × y)`. As above, first derivatives are written as expressions in
+// dual base quantities, whose tangents give the second derivatives.
+// ---------------------------------------------------------------------------------------------
+
+/// A 3×3 matrix with a tangent (the contact frame's world rotation).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct D33 {
+    pub v: Matrix3<f64>,
+    pub d: Matrix3<f64>,
+}
+
+impl D33 {
+    /// `Rᵀ y` with its tangent.
+    #[inline]
+    fn tr_mul(&self, y: &D3) -> D3 {
+        D3 { v: self.v.tr_mul(&y.v), d: self.d.tr_mul(&y.v) + self.v.tr_mul(&y.d) }
+    }
+}
+
+/// Shape of a contact's rows.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Geo {
+    /// Six rows `[angular; linear]` (otherwise three linear rows).
+    pub six: bool,
+    /// Contact axes (otherwise world axes).
+    pub local: bool,
+}
+
+impl Geo {
+    /// The shape of `c`'s rows.
+    pub fn of(c: &crate::model::Contact) -> Geo {
+        Geo {
+            six: c.kind == crate::model::ContactType::D6,
+            local: c.reference == crate::model::ContactReference::Local,
+        }
+    }
+    /// A 3-D world-aligned point (the specialised code paths).
+    #[inline]
+    pub fn is_point(self) -> bool {
+        !self.six && !self.local
+    }
+    /// Number of rows.
+    #[inline]
+    pub fn dim(self) -> usize {
+        if self.six { 6 } else { 3 }
+    }
+}
+
+/// A contact's rows `(angular, linear)` (the angular part unused for 3-D contacts).
+pub(crate) type Rows = (D3, D3);
+
+impl Base<'_> {
+    /// The contact frame's world rotation `R` with its tangent.
+    #[inline]
+    pub fn rot(&self, r: &Matrix3<f64>, dir: Dir) -> D33 {
+        let d = match dir {
+            Dir::Q(k) => {
+                let w = self.s[k].ang;
+                Matrix3::new(0.0, -w.z, w.y, w.z, 0.0, -w.x, -w.y, w.x, 0.0) * r
+            }
+            _ => Matrix3::zeros(),
+        };
+        D33 { v: *r, d }
+    }
+}
+
+/// Rows from world-aligned parts.
+#[inline]
+pub(crate) fn rows(geo: Geo, r: &D33, ang: D3, lin: D3) -> Rows {
+    if geo.local { (r.tr_mul(&ang), r.tr_mul(&lin)) } else { (ang, lin) }
+}
+
+/// Inner derivative along `q_l` of the rows of world-aligned parts `(ang, lin)` with inner
+/// derivatives `(dang, dlin)`; `wl` = `S_l.ang` (dual).
+#[inline]
+fn d_rows(geo: Geo, r: &D33, (ang, lin): Rows, (dang, dlin): Rows, wl: &D3) -> Rows {
+    if geo.local {
+        (r.tr_mul(&(dang - wl.cross(&ang))), r.tr_mul(&(dlin - wl.cross(&lin))))
+    } else {
+        (dang, dlin)
+    }
+}
+
+/// `y · (ang, lin)` for the contact's force `lam` (`[n; f]` for 6-D, `f` for 3-D).
+#[inline]
+pub(crate) fn rows_dot(geo: Geo, (ang, lin): &Rows, lam: &[f64]) -> (f64, f64) {
+    if geo.six {
+        let (n, f) = (Vector3::new(lam[0], lam[1], lam[2]), Vector3::new(lam[3], lam[4], lam[5]));
+        let (a, b) = (ang.dot(&n), lin.dot(&f));
+        (a.0 + b.0, a.1 + b.1)
+    } else {
+        lin.dot(&Vector3::new(lam[0], lam[1], lam[2]))
+    }
+}
+
+/// Writes the rows (value or tangent) into `out[0..dim]`.
+#[inline]
+pub(crate) fn put_rows(geo: Geo, (ang, lin): &Rows, tangent: bool, out: &mut [f64]) {
+    let (a, l) = if tangent { (&ang.d, &lin.d) } else { (&ang.v, &lin.v) };
+    if geo.six {
+        out[..3].copy_from_slice(a.as_slice());
+        out[3..6].copy_from_slice(l.as_slice());
+    } else {
+        out[..3].copy_from_slice(l.as_slice());
+    }
+}
+
+/// Jacobian column of DoF `x`: rows of `(S_x.ang, S_x.lin + S_x.ang × p)`.
+pub(crate) fn jac_col(
+    b: &Base,
+    geo: Geo,
+    r: &Matrix3<f64>,
+    p: &Vector3<f64>,
+    x: usize,
+    dir: Dir,
+) -> Rows {
+    let sx = b.s(x, dir);
+    let pp = b.p(p, dir);
+    rows(geo, &b.rot(r, dir), sx.ang(), at_point(&sx, &pp))
+}
+
+/// `∂/∂q_l` of the Jacobian column of DoF `x` (path DoFs `x`, `l`): `D S_x = [l ⪯ x] S_l × S_x`
+/// (J1), `D p = u_l`.
+pub(crate) fn djac_col_dq(
+    b: &Base,
+    geo: Geo,
+    r: &Matrix3<f64>,
+    p: &Vector3<f64>,
+    x: usize,
+    l: usize,
+    dir: Dir,
+) -> Rows {
+    let sx = b.s(x, dir);
+    let sl = b.s(l, dir);
+    let pp = b.p(p, dir);
+    let dsx = if b.dof_joint[l] <= b.dof_joint[x] { sl.cross(&sx) } else { Dm::default() };
+    let ul = at_point(&sl, &pp);
+    let base = (sx.ang(), at_point(&sx, &pp));
+    let d = (dsx.ang(), at_point(&dsx, &pp) + sx.ang().cross(&ul));
+    d_rows(geo, &b.rot(r, dir), base, d, &sl.ang())
+}
+
+/// World-aligned acceleration parts of body `m`'s contact frame: `(α, a_s)` for 6-D (spatial),
+/// `(α, a_p)` for 3-D (classical), from `V_m`, `A_m`, `p` (and the inner derivatives given
+/// `D V`, `D A`, `D p`).
+#[inline]
+fn acc_parts(geo: Geo, vm: &Dm, am: &Dm, pp: &D3) -> Rows {
+    let a_s = at_point(am, pp);
+    if geo.six {
+        (am.ang(), a_s)
+    } else {
+        let w = vm.ang();
+        (am.ang(), a_s + w.cross(&at_point(vm, pp)))
+    }
+}
+
+#[inline]
+#[allow(clippy::too_many_arguments)]
+fn d_acc_parts(geo: Geo, vm: &Dm, am: &Dm, pp: &D3, dv: &Dm, da: &Dm, dp: &D3) -> Rows {
+    let da_s = at_point(da, pp) + am.ang().cross(dp);
+    if geo.six {
+        (da.ang(), da_s)
+    } else {
+        let w = vm.ang();
+        let vp = at_point(vm, pp);
+        let dvp = at_point(dv, pp) + w.cross(dp);
+        (da.ang(), da_s + dv.ang().cross(&vp) + w.cross(&dvp))
+    }
+}
+
+/// The contact acceleration rows of body `m`'s contact (current `A_m`, i.e. with the `q̈` of
+/// the base quantities).
+pub(crate) fn acc_rows(
+    b: &Base,
+    geo: Geo,
+    r: &Matrix3<f64>,
+    m: usize,
+    p: &Vector3<f64>,
+    dir: Dir,
+) -> Rows {
+    let (vm, am, pp) = (b.vel(m, dir), b.acc(m, dir), b.p(p, dir));
+    let (ang, lin) = acc_parts(geo, &vm, &am, &pp);
+    rows(geo, &b.rot(r, dir), ang, lin)
+}
+
+/// `∂a_c/∂q_l` of the contact acceleration rows (J2, J6, J7; `D p = u_l`, `D R = [w_l]× R`).
+pub(crate) fn dacc_dq(
+    b: &Base,
+    geo: Geo,
+    r: &Matrix3<f64>,
+    m: usize,
+    p: &Vector3<f64>,
+    l: usize,
+    dir: Dir,
+) -> Rows {
+    let jl = b.dof_joint[l];
+    let ll = b.parents[jl];
+    let sl = b.s(l, dir);
+    let (vm, am, pp) = (b.vel(m, dir), b.acc(m, dir), b.p(p, dir));
+    let (vl, al) = (b.vel(ll, dir), b.acc(ll, dir));
+    let psid = vl.cross(&sl);
+    let dv = sl.cross(&(vm - vl));
+    let da = (al - am).cross(&sl) + (vl - vm).cross(&psid);
+    let dp = at_point(&sl, &pp);
+    let base = acc_parts(geo, &vm, &am, &pp);
+    let d = d_acc_parts(geo, &vm, &am, &pp, &dv, &da, &dp);
+    d_rows(geo, &b.rot(r, dir), base, d, &sl.ang())
+}
+
+/// `∂a_c/∂q̇_l` of the contact acceleration rows (J8, J9).
+pub(crate) fn dacc_dv(
+    b: &Base,
+    geo: Geo,
+    r: &Matrix3<f64>,
+    m: usize,
+    p: &Vector3<f64>,
+    l: usize,
+    dir: Dir,
+) -> Rows {
+    let jl = b.dof_joint[l];
+    let ll = b.parents[jl];
+    let sl = b.s(l, dir);
+    let (vm, am, pp) = (b.vel(m, dir), b.acc(m, dir), b.p(p, dir));
+    let (vl, vj) = (b.vel(ll, dir), b.vel(jl, dir));
+    let da = vl.cross(&sl) + vj.cross(&sl) - vm.cross(&sl);
+    let d = d_acc_parts(geo, &vm, &am, &pp, &sl, &da, &D3::default());
+    let rr = b.rot(r, dir);
+    if geo.local { (rr.tr_mul(&d.0), rr.tr_mul(&d.1)) } else { d }
+}
+
+/// `∂(J_c z)/∂q_l` of a contact's rows, `zc` the cumulative sums `Z_j = Σ_{x ⪯ j} S_x z_x`:
+/// `D Z_m = S_l × (Z_m − Z_λ)`, `D p = u_l`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn djz_dq_rows(
+    b: &Base,
+    geo: Geo,
+    r: &Matrix3<f64>,
+    zc: &[Motion],
+    m: usize,
+    p: &Vector3<f64>,
+    l: usize,
+    dir: Dir,
+) -> Rows {
+    let jl = b.dof_joint[l];
+    let sl = b.s(l, dir);
+    let zm = b.cum(zc, m, dir, false);
+    let zl = b.cum(zc, b.parents[jl], dir, false);
+    let pp = b.p(p, dir);
+    let dz = sl.cross(&(zm - zl));
+    let base = (zm.ang(), at_point(&zm, &pp));
+    let d = (dz.ang(), at_point(&dz, &pp) + zm.ang().cross(&at_point(&sl, &pp)));
+    d_rows(geo, &b.rot(r, dir), base, d, &sl.ang())
 }

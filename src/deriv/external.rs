@@ -7,10 +7,13 @@
 //! derivative are evaluated per contact along its root path (`O(d²)` and `O(d³)` entries), with
 //! `∂u_x/∂q_l` (`u_x` the velocity of the contact point per unit `q̇_x`) from identities J1 and
 //! `∂p/∂q_l = J_c(:, l)` (eqs. eqn_fic_ext_FO_1, eqn_fic_ext_FO_2); the second derivative is the
-//! same expression evaluated with dual base quantities (see `contact_kin`).
+//! same expression evaluated with dual base quantities (see `contact_kin`). For 6-D contacts and
+//! the local reference, `λ` has 3 or 6 rows per contact in the contact's axes (held fixed in
+//! those axes when differentiating) and the entry is `λ · ∂(J_c column x)/∂q_l` from the
+//! generic row kinematics (`djac_col_dq`).
 
 use super::contact::{ContactData, base, sub_djtl_dq, update_points};
-use super::contact_kin::{Dir, djtl_dq};
+use super::contact_kin::{Dir, djac_col_dq, djtl_dq, rows_dot};
 use super::id_fo::id_derivatives_unchecked;
 use super::id_so::{SoData, id_so_unchecked};
 use crate::algo::Data;
@@ -87,7 +90,20 @@ pub fn constrained_id_so_derivatives(
     let b = base(model, data, cd);
     let t = so.d2tau_dq2_mut();
     for (c, path) in cd.paths.iter().enumerate() {
-        let lam = Vector3::new(lambda[3 * c], lambda[3 * c + 1], lambda[3 * c + 2]);
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        if !geo.is_point() {
+            let lam = &lambda.as_slice()[r0..r0 + geo.dim()];
+            for &k in &path.dofs {
+                for &l in &path.dofs {
+                    for &x in &path.dofs {
+                        let d = djac_col_dq(&b, geo, &path.rot, &path.p, x, l, Dir::Q(k));
+                        t[(x, l, k)] -= rows_dot(geo, &d, lam).1;
+                    }
+                }
+            }
+            continue;
+        }
+        let lam = Vector3::new(lambda[r0], lambda[r0 + 1], lambda[r0 + 2]);
         for &k in &path.dofs {
             for &l in &path.dofs {
                 for &x in &path.dofs {

@@ -10,10 +10,11 @@
 //! `q̇⁻`, so `∂²y/∂q̇⁻²` = 0.
 
 use super::contact::{
-    ContactData, base, copy_block, djw_dq, factor_delassus, factor_kkt, fill_rinv, g_matrix,
-    g_matrix_split, padded_rows, path_kinematics, sub_djtl_dq_tree, transpose_into, update_points,
+    ContactData, add_jz_hessian, base, copy_block, djw_dq, factor_delassus, factor_kkt, fill_rinv,
+    g_matrix, g_matrix_split, padded_rows, path_kinematics, sub_djtl_dq_tree, transpose_into,
+    update_points,
 };
-use super::contact_kin::{Dir, djtl_dq, djz_dq};
+use super::contact_kin::{Dir, djac_col_dq, djtl_dq, djz_dq, djz_dq_rows, put_rows, rows_dot};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_so::{SoData, id_so_unchecked};
 use super::kkt::{copy_rows_zero_rest, premultiply};
@@ -36,7 +37,8 @@ pub struct ImpactData {
     pub(crate) restitution: f64,
     /// Post-impact velocity `q̇⁺`.
     pub(crate) vplus: DVector<f64>,
-    /// Contact impulse `λ̂` (world frame, applied to the robot), `3 nc`.
+    /// Contact impulses applied to the robot, `m` rows (3 per 3-D contact, 6 per 6-D contact,
+    /// in each contact's axes).
     pub(crate) impulse: DVector<f64>,
     /// `∂q̇⁺/∂q`.
     pub(crate) dvplus_dq: DMatrix<f64>,
@@ -54,7 +56,7 @@ pub struct ImpactData {
     bp: DMatrix<f64>,
     /// `Yᵀa − c`, then `∂λ̂/∂q̇⁻`, rows padded (`mp × nv`).
     wp: DMatrix<f64>,
-    /// `(∂λ̂/∂q)ᵀ` with rows padded (`np × 3 nc`).
+    /// `(∂λ̂/∂q)ᵀ` with rows padded (`np × m`).
     bt: DMatrix<f64>,
     /// Right-hand sides stored by rows for the tree-sparse solve (`np × nv`, transposed).
     zrows: DMatrix<f64>,
@@ -99,7 +101,8 @@ impl ImpactData {
     pub fn vplus(&self) -> &DVector<f64> {
         &self.vplus
     }
-    /// Contact impulse `λ̂` (world frame, applied to the robot), `3 nc`.
+    /// Contact impulses applied to the robot, `m` rows (3 per 3-D contact, 6 per 6-D contact,
+    /// in each contact's axes).
     pub fn impulse(&self) -> &DVector<f64> {
         &self.impulse
     }
@@ -386,7 +389,7 @@ fn so_inner(
         let b = base(model, data, &im.cd);
         for (c, path) in im.cd.paths.iter().enumerate() {
             let body = *path.joints.last().expect("path");
-            let lam = Vector3::new(im.impulse[3 * c], im.impulse[3 * c + 1], im.impulse[3 * c + 2]);
+            let (geo, r0) = (im.cd.geo[c], im.cd.row0[c]);
             for &j in &path.joints {
                 let parent = model.parents[j];
                 let mut zj = if parent == 0 { Motion::zero() } else { zc[parent] };
@@ -396,6 +399,26 @@ fn so_inner(
                 }
                 zc[j] = zj;
             }
+            if !geo.is_point() {
+                let lam = &im.impulse.as_slice()[r0..r0 + geo.dim()];
+                let (rot, p) = (&path.rot, &path.p);
+                let mut col = [0.0; 6];
+                for &k in &path.dofs {
+                    for &l in &path.dofs {
+                        for &x in &path.dofs {
+                            let d = djac_col_dq(&b, geo, rot, p, x, l, Dir::Q(k));
+                            rqq[(x, l, k)] -= rows_dot(geo, &d, lam).1;
+                        }
+                        let rows = djz_dq_rows(&b, geo, rot, &zc, body, p, l, Dir::Q(k));
+                        put_rows(geo, &rows, true, &mut col);
+                        for (r, x) in col[..geo.dim()].iter().enumerate() {
+                            rqq[(n + r0 + r, l, k)] = *x;
+                        }
+                    }
+                }
+                continue;
+            }
+            let lam = Vector3::new(im.impulse[r0], im.impulse[r0 + 1], im.impulse[r0 + 2]);
             for &k in &path.dofs {
                 for &l in &path.dofs {
                     for &x in &path.dofs {
@@ -403,7 +426,7 @@ fn so_inner(
                     }
                     let d = djz_dq(&b, &zc, body, &path.p, l, Dir::Q(k)).d;
                     for r in 0..3 {
-                        rqq[(n + 3 * c + r, l, k)] = d[r];
+                        rqq[(n + r0 + r, l, k)] = d[r];
                     }
                 }
             }
@@ -454,7 +477,7 @@ pub struct ImpactContracted {
     scratch: [DMatrix<f64>; 3],
     omega: DVector<f64>,
     zeta: DVector<f64>,
-    /// `Dᵀ`, `Kᵀ` (`nv × nv`) and `Eᵀ` (`nv × 3 nc`) of `D = ∂(M ζ₁)/∂q`,
+    /// `Dᵀ`, `Kᵀ` (`nv × nv`) and `Eᵀ` (`nv × m`) of `D = ∂(M ζ₁)/∂q`,
     /// `K = ∂(J_cᵀ ζ₂)/∂q`, `E = ∂(J_c ζ₁)/∂q`.
     dt: DMatrix<f64>,
     kt: DMatrix<f64>,
@@ -463,7 +486,7 @@ pub struct ImpactContracted {
     zm: DMatrix<f64>,
     zj: DMatrix<f64>,
     h: DMatrix<f64>,
-    /// `−ζ₂` and zero vectors of lengths `3 nc` and `nv` (the `G` evaluations' arguments).
+    /// `−ζ₂` and zero vectors of lengths `m` and `nv` (the `G` evaluations' arguments).
     neg_z2: DVector<f64>,
     zeros_m: DVector<f64>,
     zeros_n: DVector<f64>,
@@ -536,7 +559,7 @@ pub fn impact_so_contracted(
     ic.ws.check(model, "ImpactContracted")?;
     if ic.omega.len() != n + m {
         return Err(Error::Workspace(format!(
-            "ImpactContracted was made for nv + 3 nc = {} rows, this ImpactData has {}; make it \
+            "ImpactContracted was made for nv + m = {} rows (m: contact rows), this ImpactData has {}; make it \
              with ImpactContracted::new for this ImpactData",
             ic.omega.len(),
             n + m
@@ -582,14 +605,24 @@ pub fn impact_so_contracted(
     }
     // ... minus ζ₁ᵀ ∂²(J_cᵀλ̂)/∂q², plus ζ₂ᵀ ∂²(J_c w)/∂q²: the q-Hessians of λ̂·(J_c ζ₁) and
     //     ζ₂·(J_c w), point accelerations at rest (`point_hessians`).
+    let mut zc = std::mem::take(&mut im.cd.zc);
     for (c, path) in im.cd.paths.iter().enumerate() {
-        let lam = Vector3::new(im.impulse[3 * c], im.impulse[3 * c + 1], im.impulse[3 * c + 2]);
-        let zc2 = Vector3::new(z2[3 * c], z2[3 * c + 1], z2[3 * c + 2]);
+        let (geo, r0) = (im.cd.geo[c], im.cd.row0[c]);
+        if !geo.is_point() {
+            // Generic contacts (6-D or local): dual-base row kinematics, O(d²) per contact.
+            let (zr, lam) = (&z2[r0..r0 + geo.dim()], &im.impulse.as_slice()[r0..r0 + geo.dim()]);
+            add_jz_hessian(model, data, &im.cd, c, im.w.as_slice(), zr, 1.0, &mut zc, qq);
+            add_jz_hessian(model, data, &im.cd, c, z1, lam, -1.0, &mut zc, qq);
+            continue;
+        }
+        let lam = Vector3::new(im.impulse[r0], im.impulse[r0 + 1], im.impulse[r0 + 2]);
+        let zc2 = Vector3::new(z2[r0], z2[r0 + 1], z2[r0 + 2]);
         pw.at_rest(model, data, path, im.w.as_slice());
         point_hessians(model, data, pw, path, &zc2, 1.0, qq, None);
         pw.at_rest(model, data, path, z1);
         point_hessians(model, data, pw, path, &lam, -1.0, qq, None);
     }
+    im.cd.zc = zc;
     // D and E from one G evaluation with z₂ = 0, K from one with z_M = z_J = 0, z₂ = −ζ₂.
     g_matrix_split(model, data, &mut im.cd, z1, zeros_m.as_slice(), z1);
     {

@@ -11,11 +11,13 @@
 //! an SPD inverse of the Delassus matrix (no dense inverse of the KKT matrix).
 
 use super::contact::{
-    ContactData, accel_derivatives_t, add_qdd_to_path_acc, base, djw_dq, factor_delassus,
-    factor_kkt, fill_rinv, g_matrix, g_matrix_split, path_kinematics, point_jacobian_dq,
-    sub_djtl_dq_strided, update_points,
+    ContactData, accel_derivatives_t, add_acc_hessians, add_jz_hessian, add_qdd_to_path_acc, base,
+    contact_hessians, djw_dq, factor_delassus, factor_kkt, fill_rinv, g_matrix, g_matrix_split,
+    path_kinematics, point_jacobian_dq, sub_djtl_dq_strided, update_points,
 };
-use super::contact_kin::{Dir, dap_dq, dap_dv, djtl_dq, djz_dq};
+use super::contact_kin::{
+    Dir, dacc_dq, dacc_dv, dap_dq, dap_dv, djac_col_dq, djtl_dq, djz_dq_rows, put_rows, rows_dot,
+};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_fo::id_derivatives_unchecked;
 use super::id_so::{SoData, id_so_unchecked};
@@ -36,7 +38,8 @@ pub struct KktData {
     pub(crate) cd: ContactData,
     /// Constrained joint accelerations.
     pub(crate) qdd: DVector<f64>,
-    /// Contact forces (world frame, applied to the robot), `3 nc`.
+    /// Contact forces applied to the robot, `m` rows (3 per 3-D contact, 6 per 6-D contact, in
+    /// each contact's axes).
     pub(crate) lambda: DVector<f64>,
     /// `∂q̈/∂q`.
     pub(crate) dqdd_dq: DMatrix<f64>,
@@ -52,12 +55,12 @@ pub struct KktData {
     pub(crate) dlambda_dtau: DMatrix<f64>,
     /// Second-order results (allocated by [`KktData::with_second_order`]).
     pub(crate) so: Option<KktSo>,
-    /// `Wᵀ = (J X + C)ᵀ` (`2 nv × 3 nc`) for `X = −M⁻¹ [a_q | a_v]`, `C = [c_q | c_v]`.
+    /// `Wᵀ = (J X + C)ᵀ` (`2 nv × m`) for `X = −M⁻¹ [a_q | a_v]`, `C = [c_q | c_v]`.
     wt: DMatrix<f64>,
-    /// `Bᵀ = [∂λ/∂q | ∂λ/∂q̇ | ∂λ/∂τ]ᵀ` (`3 nv × 3 nc`).
+    /// `Bᵀ = [∂λ/∂q | ∂λ/∂q̇ | ∂λ/∂τ]ᵀ` (`3 nv × m`).
     bt: DMatrix<f64>,
     tmp_v: DVector<f64>,
-    /// `∂(J_c q̇)/∂q` (`3 nc × nv`) for the Baumgarte terms.
+    /// `∂(J_c q̇)/∂q` (`m × nv`) for the Baumgarte terms.
     bg: DMatrix<f64>,
 }
 
@@ -70,7 +73,8 @@ impl KktData {
     pub fn qdd(&self) -> &DVector<f64> {
         &self.qdd
     }
-    /// Contact forces (world frame, applied to the robot), `3 nc`.
+    /// Contact forces applied to the robot, `m` rows (3 per 3-D contact, 6 per 6-D contact, in
+    /// each contact's axes).
     pub fn lambda(&self) -> &DVector<f64> {
         &self.lambda
     }
@@ -296,7 +300,7 @@ fn solve_unchecked(
     // Baumgarte: + kd J q̇ (the position error is zero at this q).
     for (c, contact) in cd.contacts.iter().enumerate() {
         if contact.kd != 0.0 {
-            for r in 3 * c..3 * c + 3 {
+            for r in cd.row0[c]..cd.row0[c] + contact.dim() {
                 let jv: f64 = cd.paths[c].dofs.iter().map(|&k| cd.jac[(r, k)] * v[k]).sum();
                 cd.sol[r] += contact.kd * jv;
             }
@@ -352,7 +356,7 @@ fn residual_derivatives(
         djw_dq(model, cd, v, &mut kd.bg);
         for (c, contact) in cd.contacts.iter().enumerate() {
             let (kp, kdg) = (contact.kp, contact.kd);
-            for row in 3 * c..3 * c + 3 {
+            for row in cd.row0[c]..cd.row0[c] + contact.dim() {
                 for &k in &cd.paths[c].dofs {
                     let j = cd.jac[(row, k)];
                     kd.wt[(k, row)] += kdg * kd.bg[(row, k)] + kp * j;
@@ -479,7 +483,32 @@ fn kkt_so_inner(
     let b = base(model, data, &kd.cd);
     for (c, path) in kd.cd.paths.iter().enumerate() {
         let body = *path.joints.last().expect("path");
-        let lam = Vector3::new(kd.lambda[3 * c], kd.lambda[3 * c + 1], kd.lambda[3 * c + 2]);
+        let (geo, r0) = (kd.cd.geo[c], kd.cd.row0[c]);
+        if !geo.is_point() {
+            let lam = &kd.lambda.as_slice()[r0..r0 + geo.dim()];
+            let (rot, p) = (&path.rot, &path.p);
+            let mut col = [0.0; 6];
+            for &k in &path.dofs {
+                for &l in &path.dofs {
+                    for &x in &path.dofs {
+                        let d = djac_col_dq(&b, geo, rot, p, x, l, Dir::Q(k));
+                        rqq[(x, l, k)] -= rows_dot(geo, &d, lam).1;
+                    }
+                    for (t, rows) in [
+                        (&mut *rqq, dacc_dq(&b, geo, rot, body, p, l, Dir::Q(k))),
+                        (&mut *rvv, dacc_dv(&b, geo, rot, body, p, l, Dir::V(k))),
+                        (&mut *rqv, dacc_dq(&b, geo, rot, body, p, l, Dir::V(k))),
+                    ] {
+                        put_rows(geo, &rows, true, &mut col);
+                        for (r, x) in col[..geo.dim()].iter().enumerate() {
+                            t[(n + r0 + r, l, k)] = *x;
+                        }
+                    }
+                }
+            }
+            continue;
+        }
+        let lam = Vector3::new(kd.lambda[r0], kd.lambda[r0 + 1], kd.lambda[r0 + 2]);
         for &k in &path.dofs {
             for &l in &path.dofs {
                 for &x in &path.dofs {
@@ -489,14 +518,14 @@ fn kkt_so_inner(
                 let avv = dap_dv(&b, body, &path.p, l, Dir::V(k)).d;
                 let aqv = dap_dq(&b, body, &path.p, l, Dir::V(k)).d;
                 for r in 0..3 {
-                    rqq[(n + 3 * c + r, l, k)] = aqq[r];
-                    rvv[(n + 3 * c + r, l, k)] = avv[r];
-                    rqv[(n + 3 * c + r, l, k)] = aqv[r];
+                    rqq[(n + r0 + r, l, k)] = aqq[r];
+                    rvv[(n + r0 + r, l, k)] = avv[r];
+                    rqv[(n + r0 + r, l, k)] = aqv[r];
                 }
             }
         }
     }
-    // Baumgarte rows: + kd ∂²(J q̇)/∂q² + kp ∂²p/∂q² (q, q), + kd ∂u_k/∂q_l (q, q̇); the
+    // Baumgarte rows: + kd ∂²(J q̇)/∂q² + kp ∂²e/∂q² (q, q), + kd ∂J_k/∂q_l (q, q̇); the
     // body velocities data.ov are the path sums Σ S q̇ that djz_dq differentiates.
     for (c, path) in kd.cd.paths.iter().enumerate() {
         let contact = &kd.cd.contacts[c];
@@ -504,22 +533,29 @@ fn kkt_so_inner(
             continue;
         }
         let body = *path.joints.last().expect("path");
+        let (geo, r0) = (kd.cd.geo[c], kd.cd.row0[c]);
         let (kp, kdg) = (contact.kp, contact.kd);
         if kdg != 0.0 {
+            let mut col = [0.0; 6];
             for &k in &path.dofs {
                 for &l in &path.dofs {
-                    let d = djz_dq(&b, &data.ov, body, &path.p, l, Dir::Q(k)).d;
-                    for r in 0..3 {
-                        rqq[(n + 3 * c + r, l, k)] += kdg * d[r];
+                    let rows =
+                        djz_dq_rows(&b, geo, &path.rot, &data.ov, body, &path.p, l, Dir::Q(k));
+                    put_rows(geo, &rows, true, &mut col);
+                    for (r, x) in col[..geo.dim()].iter().enumerate() {
+                        rqq[(n + r0 + r, l, k)] += kdg * x;
                     }
                 }
             }
         }
-        for r in 0..3 {
-            let i = n + 3 * c + r;
-            point_jacobian_dq(&kd.cd, c, &Vector3::ith(r, 1.0), |j, k, x| {
-                rqq[(i, j, k)] += kp * x;
-                rqv[(i, k, j)] += kdg * x;
+        let mut e_r = [0.0; 6];
+        for r in 0..geo.dim() {
+            let i = n + r0 + r;
+            e_r.fill(0.0);
+            e_r[r] = 1.0;
+            contact_hessians(&kd.cd, c, &e_r[..geo.dim()], |j, k, xj, xe| {
+                rqq[(i, j, k)] += kp * xe;
+                rqv[(i, k, j)] += kdg * xj;
             });
         }
     }
@@ -605,7 +641,7 @@ pub struct KktContracted {
     /// `ω = (w_q̈, w_λ)` and the adjoint `ζ = R_y⁻ᵀ ω`.
     omega: DVector<f64>,
     zeta: DVector<f64>,
-    /// `A = [G_top(ζ)ᵀ | −G_bottom(ζ)ᵀ]` (`nv × (nv + 3 nc)`), with `ζᵀ G(z) = (A z)ᵀ`.
+    /// `A = [G_top(ζ)ᵀ | −G_bottom(ζ)ᵀ]` (`nv × (nv + m)`), with `ζᵀ G(z) = (A z)ᵀ`.
     a: DMatrix<f64>,
     /// `A Y` for one of `Y_q`, `Y_v`, `Y_τ`.
     h: DMatrix<f64>,
@@ -654,7 +690,7 @@ impl KktContracted {
 /// The Hessians of `ωᵀy = w_q̈ᵀ q̈ + w_λᵀ λ` of the KKT dynamics at `(q, q̇, τ)`, without an
 /// `nv³` tensor; also the first-order derivatives into `kd` (as [`kkt_derivatives`]).
 ///
-/// Inputs: the state, `w_qdd` (length `nv`), `w_lambda` (length `3 nc`). Outputs: `kc.c_qq()`,
+/// Inputs: the state, `w_qdd` (length `nv`), `w_lambda` (length `m`). Outputs: `kc.c_qq()`,
 /// `kc.c_vv()`, `kc.c_qv()`, `kc.c_tauq()`. Contracting `∂²y/∂u∂w = −R_y⁻¹ (R_uw + G(∂y/∂w)[·, u]
 /// + G(∂y/∂u)[·, w])` (module documentation) with `ω`:
 /// 1. first order (`Y_q, Y_v, Y_τ` = `[∂q̈/∂x; ∂λ/∂x]`) and `R_y⁻¹`;
@@ -689,7 +725,7 @@ pub fn kkt_so_contracted(
     kc.ws.check(model, "KktContracted")?;
     if kc.omega.len() != n + m {
         return Err(crate::error::Error::Workspace(format!(
-            "KktContracted was made for nv + 3 nc = {} rows, this KktData has {}; make it with \
+            "KktContracted was made for nv + m = {} rows (m: contact rows), this KktData has {}; make it with \
              KktContracted::new for this KktData",
             kc.omega.len(),
             n + m
@@ -722,28 +758,51 @@ pub fn kkt_so_contracted(
     }
     // ... minus ζ₁ᵀ ∂²(J_cᵀλ)/∂q² = the q-Hessian of λ·(J_c ζ₁), plus the Hessians of ζ₂·a_p
     //     (both from the point-mass form of the reverse-mode pass, `point_hessians`).
+    let mut zc = std::mem::take(&mut kd.cd.zc);
     for (c, path) in kd.cd.paths.iter().enumerate() {
-        let lam = Vector3::new(kd.lambda[3 * c], kd.lambda[3 * c + 1], kd.lambda[3 * c + 2]);
-        let z2 = Vector3::new(zeta[n + 3 * c], zeta[n + 3 * c + 1], zeta[n + 3 * c + 2]);
+        let (geo, r0) = (kd.cd.geo[c], kd.cd.row0[c]);
+        let contact = &kd.cd.contacts[c];
+        let (kp, kdg) = (contact.kp, contact.kd);
+        if !geo.is_point() {
+            // Generic contacts (6-D or local): the same Hessians from the dual-base row
+            // kinematics, O(d²) per contact.
+            let z2 = &zeta.as_slice()[n + r0..n + r0 + geo.dim()];
+            let lam = &kd.lambda.as_slice()[r0..r0 + geo.dim()];
+            let cd = &kd.cd;
+            add_acc_hessians(model, data, cd, c, z2, (&mut *qq, &mut *vv, &mut *qv));
+            let z1 = &zeta.as_slice()[..n];
+            add_jz_hessian(model, data, cd, c, z1, lam, -1.0, &mut zc, qq);
+            if kdg != 0.0 {
+                add_jz_hessian(model, data, cd, c, v.as_slice(), z2, kdg, &mut zc, qq);
+            }
+            if contact.has_baumgarte() {
+                contact_hessians(cd, c, z2, |j, k, xj, xe| {
+                    qq[(j, k)] += kp * xe;
+                    qv[(k, j)] += kdg * xj;
+                });
+            }
+            continue;
+        }
+        let lam = Vector3::new(kd.lambda[r0], kd.lambda[r0 + 1], kd.lambda[r0 + 2]);
+        let z2 = Vector3::new(zeta[n + r0], zeta[n + r0 + 1], zeta[n + r0 + 2]);
         pw.load_state(model, data, path, -model.gravity);
         point_hessians(model, data, pw, path, &z2, 1.0, qq, Some((&mut *vv, &mut *qv)));
         pw.at_rest(model, data, path, &zeta.as_slice()[..n]);
         point_hessians(model, data, pw, path, &lam, -1.0, qq, None);
         // Baumgarte: ζ₂·(kd J q̇ + kp e): kd times the Hessian of ζ₂·(J q̇) at rest with q̈ = q̇,
         // kp times that of ζ₂·p, and kd ∂(ζ₂·u_k)/∂q_j in C_qv.
-        let contact = &kd.cd.contacts[c];
-        if contact.kd != 0.0 {
+        if kdg != 0.0 {
             pw.at_rest(model, data, path, v.as_slice());
-            point_hessians(model, data, pw, path, &z2, contact.kd, qq, None);
+            point_hessians(model, data, pw, path, &z2, kdg, qq, None);
         }
         if contact.has_baumgarte() {
-            let (kp, kdg) = (contact.kp, contact.kd);
             point_jacobian_dq(&kd.cd, c, &z2, |j, k, x| {
                 qq[(j, k)] += kp * x;
                 qv[(k, j)] += kdg * x;
             });
         }
     }
+    kd.cd.zc = zc;
     // 4. A from one G evaluation: G(ζ₁; −ζ₂) = [∂(Mζ₁)/∂q + ∂(J_cᵀζ₂)/∂q ; ∂(J_c ζ₁)/∂q].
     {
         let (z1, z2) = zeta.as_slice().split_at(n);

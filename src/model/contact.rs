@@ -1,25 +1,134 @@
-//! Point contacts: a point fixed in a frame (a URDF link, possibly merged by a fixed joint).
-//! The contact Jacobian stacks, per contact `c`, the world-aligned linear velocity of the point
-//! (rows `3c..3c+3`); `λ` stacks the world-frame contact forces applied to the robot.
+//! Rigid contacts (Pinocchio's `RigidConstraintModel`): a contact frame fixed on a link, of type
+//! [`ContactType::D3`] (a point: three translation rows) or [`ContactType::D6`] (the whole frame:
+//! six rows `[angular; linear]`), expressed in a [`ContactReference`].
+//!
+//! Per contact `c`, with `ᵒM_c = (R, p)` the contact frame's world placement (`p` the point),
+//! `ω`, `v_p` the angular velocity and the velocity of the body point at `p` (world axes), `α`
+//! the angular acceleration, `a_p` the classical acceleration of that point and
+//! `a_s = a_p − ω × v_p` its spatial (linear) acceleration, the constraint rows are
+//!
+//! | type | reference | velocity rows `J_c q̇` | acceleration rows `a_c = J_c q̈ + J̇_c q̇` (KKT) |
+//! |---|---|---|---|
+//! | `3d` | `local_world_aligned` | `v_p` | `a_p` |
+//! | `3d` | `local` | `Rᵀ v_p` | `Rᵀ a_p` (the classical acceleration in contact axes) |
+//! | `6d` | `local_world_aligned` | `[ω; v_p]` | `[α; a_s]` |
+//! | `6d` | `local` | `Rᵀ[ω; v_p]` | `Rᵀ[α; a_s]` (the spatial acceleration of the frame) |
+//!
+//! A 6-D contact holds the spatial acceleration of the frame in both references (the
+//! world-aligned rows are the local ones rotated by `R`, which is not the time derivative of the
+//! world-aligned velocity rows `[ω; v_p]`: that would be `[α; a_p]`); a 3-D contact holds the
+//! classical acceleration of the point. Pinocchio 4.1 does the same (checked by the generator
+//! of the `contacts6d_*` fixtures).
+//!
+//! (Pinocchio's `CONTACT_3D` / `CONTACT_6D` in `LOCAL_WORLD_ALIGNED` / `LOCAL`; Pinocchio orders
+//! the six rows `[linear; angular]`.) The contact force `λ_c` (3 or 6 rows, the same axes and
+//! order) is applied **to the robot** at `p`: `τ + J_cᵀλ` is the joint force it adds.
 //!
 //! Baumgarte correction (Pinocchio's `corrector`): with gains `kp`, `kd` the KKT dynamics hold
-//! `a_c + kd v_c + kp e_c = 0` instead of `a_c = 0`, `a_c`, `v_c` the point's world-aligned
-//! classical acceleration and velocity, `e_c = p_c(q) − p_ref` its position error from a
-//! reference point fixed in the world, taken as the point's position at the `q` of the call
-//! (so `e_c = 0` there, and derivatives hold `p_ref` fixed). Impulses and constrained inverse
-//! dynamics do not use the gains.
+//! `a_c + kd v_c + kp e_c = 0` instead of `a_c = 0`, `v_c = J_c q̇`, `e_c` the error of the contact
+//! frame from a reference placement `ᵒM_ref = (R_ref, p_ref)` fixed in the world, taken as the
+//! contact frame's placement at the `q` of the call (so `e_c = 0` there, and derivatives hold
+//! `ᵒM_ref` fixed): `3d` `local_world_aligned`: `e = p − p_ref`; `3d` `local`: `Rᵀ(p − p_ref)`;
+//! `6d` `local`: `e = log6(ᵒM_ref⁻¹ ᵒM_c)`; `6d` `local_world_aligned`: `e = diag(R, R) log6(ᵒM_ref⁻¹ ᵒM_c)`.
+//! Impulses and constrained inverse dynamics do not use the gains.
 
 use crate::error::{Error, Result};
 use crate::model::Model;
-use nalgebra::Vector3;
+use crate::spatial::Transform;
+use nalgebra::{Matrix3, Vector3};
 
-/// A point contact: a point given in the coordinates of a frame.
+/// What a contact holds: a point (`3d`) or a whole frame (`6d`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum ContactType {
+    /// A point: three translation rows (Pinocchio's `CONTACT_3D`).
+    #[default]
+    D3,
+    /// A frame: six rows `[angular; linear]` (Pinocchio's `CONTACT_6D`).
+    D6,
+}
+
+impl ContactType {
+    /// Parses `"3d"` or `"6d"`.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] listing the allowed values.
+    pub fn parse(name: &str) -> Result<ContactType> {
+        match name {
+            "3d" | "3D" => Ok(ContactType::D3),
+            "6d" | "6D" => Ok(ContactType::D6),
+            _ => Err(Error::Argument {
+                name: "type".into(),
+                reason: format!("unknown contact type \"{name}\": use \"3d\" or \"6d\""),
+            }),
+        }
+    }
+    /// `"3d"` or `"6d"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ContactType::D3 => "3d",
+            ContactType::D6 => "6d",
+        }
+    }
+    /// Rows of a contact of this type (3 or 6).
+    pub fn dim(self) -> usize {
+        match self {
+            ContactType::D3 => 3,
+            ContactType::D6 => 6,
+        }
+    }
+}
+
+/// The axes of a contact's rows (Pinocchio's `ReferenceFrame` for contacts).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum ContactReference {
+    /// The contact point, the world's axes (Pinocchio's `LOCAL_WORLD_ALIGNED`; the default).
+    #[default]
+    LocalWorldAligned,
+    /// The contact frame's own origin and axes (Pinocchio's `LOCAL`).
+    Local,
+}
+
+impl ContactReference {
+    /// Parses `"local_world_aligned"` or `"local"`.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] listing the allowed values.
+    pub fn parse(name: &str) -> Result<ContactReference> {
+        match name {
+            "local_world_aligned" => Ok(ContactReference::LocalWorldAligned),
+            "local" => Ok(ContactReference::Local),
+            _ => Err(Error::Argument {
+                name: "reference".into(),
+                reason: format!(
+                    "unknown contact reference \"{name}\": use \"local_world_aligned\" or \"local\""
+                ),
+            }),
+        }
+    }
+    /// `"local_world_aligned"` or `"local"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ContactReference::LocalWorldAligned => "local_world_aligned",
+            ContactReference::Local => "local",
+        }
+    }
+}
+
+/// A rigid contact: a contact frame (`rotation`, `point`) given in the coordinates of a model
+/// frame, its type, reference and Baumgarte gains (module documentation).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Contact {
     /// Frame index in `model.frames()`.
     pub frame: usize,
-    /// Point in the frame's coordinates.
+    /// Origin of the contact frame (the contact point) in the frame's coordinates.
     pub point: Vector3<f64>,
+    /// Orientation of the contact frame in the frame's coordinates (identity by default; it
+    /// matters for the `local` reference and for `6d` contacts).
+    pub rotation: Matrix3<f64>,
+    /// `3d` (a point) or `6d` (the whole frame).
+    pub kind: ContactType,
+    /// Axes of the rows: `local_world_aligned` (default) or `local`.
+    pub reference: ContactReference,
     /// Baumgarte position gain `kp ≥ 0` (default 0).
     pub kp: f64,
     /// Baumgarte velocity gain `kd ≥ 0` (default 0).
@@ -27,13 +136,70 @@ pub struct Contact {
 }
 
 impl Contact {
-    /// A contact at `point` (frame coordinates) of the frame named `frame`.
+    /// A 3-D point contact at `point` (frame coordinates) of the frame named `frame`, in the
+    /// `local_world_aligned` reference.
+    ///
+    /// # Errors
+    /// [`Error::Unknown`] for an unknown frame, [`Error::NotFinite`] for a non-finite point.
     pub fn new(model: &Model, frame: &str, point: Vector3<f64>) -> Result<Contact> {
         let id = model.frame_id(frame)?;
         if let Some(index) = point.iter().position(|x| !x.is_finite()) {
             return Err(Error::NotFinite { what: format!("point of contact \"{frame}\""), index });
         }
-        Ok(Contact { frame: id, point, kp: 0.0, kd: 0.0 })
+        Ok(Contact {
+            frame: id,
+            point,
+            rotation: Matrix3::identity(),
+            kind: ContactType::D3,
+            reference: ContactReference::LocalWorldAligned,
+            kp: 0.0,
+            kd: 0.0,
+        })
+    }
+    /// A 6-D contact holding the frame named `frame` at `placement` (in the frame's coordinates;
+    /// `None`: the frame itself), in the `local_world_aligned` reference.
+    ///
+    /// # Errors
+    /// [`Error::Unknown`] for an unknown frame, [`Error::NotFinite`] for a non-finite placement.
+    pub fn new_6d(model: &Model, frame: &str, placement: Option<&Transform>) -> Result<Contact> {
+        let c = Contact::new(model, frame, Vector3::zeros())?;
+        let c = Contact { kind: ContactType::D6, ..c };
+        match placement {
+            Some(p) => c.with_placement(model, p),
+            None => Ok(c),
+        }
+    }
+    /// The same contact with the contact frame at `placement` in the model frame's coordinates.
+    ///
+    /// # Errors
+    /// [`Error::NotFinite`] for a non-finite entry; [`Error::Argument`] for a rotation block
+    /// that is not a rotation (`RᵀR ≠ I` or `det R ≠ 1` beyond `1e-9`).
+    pub fn with_placement(mut self, model: &Model, placement: &Transform) -> Result<Contact> {
+        let name = &model.frames[self.frame.min(model.frames.len().saturating_sub(1))].name;
+        let what = format!("placement of contact \"{name}\"");
+        if let Some(index) = placement.trans.iter().position(|x| !x.is_finite()) {
+            return Err(Error::NotFinite { what, index });
+        }
+        if let Some(index) = placement.rot.iter().position(|x| !x.is_finite()) {
+            return Err(Error::NotFinite { what, index: 3 + index });
+        }
+        let r = &placement.rot;
+        if (r.transpose() * r - Matrix3::identity()).amax() > 1e-9
+            || (r.determinant() - 1.0).abs() > 1e-9
+        {
+            return Err(Error::Argument {
+                name: what,
+                reason: "the rotation block is not a rotation matrix".into(),
+            });
+        }
+        self.point = placement.trans;
+        self.rotation = placement.rot;
+        Ok(self)
+    }
+    /// The same contact with rows in `reference`.
+    pub fn with_reference(mut self, reference: ContactReference) -> Contact {
+        self.reference = reference;
+        self
     }
     /// The same contact with Baumgarte gains `kp`, `kd` (module documentation).
     ///
@@ -64,6 +230,19 @@ impl Contact {
     pub fn has_baumgarte(&self) -> bool {
         self.kp != 0.0 || self.kd != 0.0
     }
+    /// Number of constraint rows: 3 or 6.
+    pub fn dim(&self) -> usize {
+        self.kind.dim()
+    }
+    /// Whether this is a 3-D contact in the `local_world_aligned` reference (a world-aligned
+    /// point: the specialised code paths of the contact algorithms).
+    pub fn is_point_lwa(&self) -> bool {
+        self.kind == ContactType::D3 && self.reference == ContactReference::LocalWorldAligned
+    }
+    /// The contact frame's placement in the model frame's coordinates.
+    pub fn placement(&self) -> Transform {
+        Transform::new(self.rotation, self.point)
+    }
     /// The joint whose body carries the contact, and the point in that joint's frame.
     ///
     /// # Panics
@@ -73,4 +252,46 @@ impl Contact {
         let f = &model.frames[self.frame];
         (f.joint, f.placement.act_point(&self.point))
     }
+    /// The joint whose body carries the contact, and the contact frame's placement in that
+    /// joint's frame.
+    ///
+    /// # Panics
+    /// As [`Contact::body_point`].
+    pub fn body_placement(&self, model: &Model) -> (usize, Transform) {
+        let f = &model.frames[self.frame];
+        (f.joint, f.placement.compose(&self.placement()))
+    }
+}
+
+/// A description of contact `i` for messages: `contacts[i] ("frame", 6d)`.
+pub(crate) fn contact_label(model: &Model, contacts: &[Contact], i: usize) -> String {
+    let c = &contacts[i];
+    let name = model.frames.get(c.frame).map_or("?", |f| f.name.as_str());
+    format!("contacts[{i}] (\"{name}\", {})", c.kind.name())
+}
+
+/// A structurally redundant contact set: a body held by a 6-D contact that carries another
+/// contact (two 6-D contacts on one body, or a 3-D contact on a 6-D-held body). Returns the
+/// message naming the first such pair, `None` for a set without such a pair. (Bodies merged by
+/// fixed joints are one body.)
+pub(crate) fn redundancy(model: &Model, contacts: &[Contact]) -> Option<String> {
+    let body = |c: &Contact| model.frames[c.frame].joint;
+    for (i, ci) in contacts.iter().enumerate() {
+        if ci.kind != ContactType::D6 {
+            continue;
+        }
+        for (j, cj) in contacts.iter().enumerate() {
+            if j != i && body(cj) == body(ci) {
+                let (a, b) = (i.min(j), i.max(j));
+                return Some(format!(
+                    "{} and {} are on the same body \"{}\", which the 6-D contact already holds: \
+                     the set is redundant",
+                    contact_label(model, contacts, a),
+                    contact_label(model, contacts, b),
+                    model.names.get(body(ci)).map_or("?", |s| s.as_str())
+                ));
+            }
+        }
+    }
+    None
 }

@@ -8,7 +8,8 @@ pub mod mjcf;
 pub mod tree;
 pub mod urdf;
 
-pub use contact::Contact;
+pub use contact::{Contact, ContactReference, ContactType};
+pub(crate) use contact::{contact_label, redundancy};
 pub use joint::JointType;
 pub use lie::{Arg, exp6, jlog6, log6};
 pub use mjcf::{MjcfOptions, load_mjcf_file, load_mjcf_str};

@@ -25,22 +25,51 @@
 use super::derivatives::{eps, eps1, eps2, hessian, jacobian, nested_q, perturb_q, seeded};
 use super::dynamics::{mass_matrix, nle, rnea, solve};
 use super::kinematics::{forward_kinematics, parent_poses, subspace_column, subspace_mul};
-use super::spatial::{Pose, Sv, lift_v3};
+use super::spatial::{Pose, Sv, cst, lift_m3, lift_v3};
 use super::{AdScalar, lift, real};
-use crate::model::Contact;
 use crate::model::Model;
+use crate::model::{Contact, ContactReference, ContactType};
 use crate::tensor::Tensor3;
-use nalgebra::{DMatrix, Vector3};
+use nalgebra::{DMatrix, Matrix3, Vector3};
 use num_dual::{Dual64, HyperDual64};
 
 // ---------------------------------------------------------------------------------------------
 // Kinematics of the contact points
 // ---------------------------------------------------------------------------------------------
 
-/// The joint whose body carries the contact and the point in that joint's (child) frame.
-fn body_point<T: AdScalar>(model: &Model, contact: &Contact) -> (usize, Vector3<T>) {
+/// The joint whose body carries the contact and the contact frame's placement in that joint's
+/// (child) frame (frame placement composed with the contact's rotation and point).
+fn body_pose<T: AdScalar>(model: &Model, contact: &Contact) -> (usize, Pose<T>) {
     let f = &model.frames[contact.frame];
-    (f.joint, Pose::<T>::lift(&f.placement).act_point(&lift_v3(&contact.point)))
+    let local = Pose::new(lift_m3(&contact.rotation), lift_v3(&contact.point));
+    (f.joint, Pose::<T>::lift(&f.placement).compose(&local))
+}
+
+/// Total number of constraint rows (3 per 3-D contact, 6 per 6-D contact).
+fn dim(contacts: &[Contact]) -> usize {
+    contacts.iter().map(|c| c.kind.dim()).sum()
+}
+
+/// Appends a contact's rows given the world-aligned angular and linear parts at the contact
+/// point: `lin` (3-D) or `[ang; lin]` (6-D), rotated into the contact axes (`Rᵀ`) for `local`.
+fn push_rows<T: AdScalar>(
+    contact: &Contact,
+    rc: &Matrix3<T>,
+    ang: Vector3<T>,
+    lin: Vector3<T>,
+    out: &mut Vec<T>,
+) {
+    let (ang, lin) = match contact.reference {
+        ContactReference::LocalWorldAligned => (ang, lin),
+        ContactReference::Local => {
+            let rt = rc.transpose();
+            (&rt * ang, &rt * lin)
+        }
+    };
+    if contact.kind == ContactType::D6 {
+        out.extend(ang.iter().cloned());
+    }
+    out.extend(lin.iter().cloned());
 }
 
 /// Column `c` of joint `joint`'s motion subspace, in its child frame.
@@ -49,16 +78,18 @@ fn subspace_sv<T: AdScalar>(model: &Model, joint: usize, c: usize) -> Sv<T> {
     Sv::new(lift_v3(&Vector3::from(a)), lift_v3(&Vector3::from(l)))
 }
 
-/// Contact Jacobian given the world poses of the bodies.
+/// Contact Jacobian given the world poses of the bodies (rows as in the module documentation).
 fn jacobian_from_poses<T: AdScalar>(
     model: &Model,
     world: &[Pose<T>],
     contacts: &[Contact],
 ) -> Vec<Vec<T>> {
-    let mut jac = vec![vec![T::zero(); model.nv]; 3 * contacts.len()];
-    for (c, contact) in contacts.iter().enumerate() {
-        let (body, r) = body_point::<T>(model, contact);
-        let p = world[body].act_point(&r);
+    let mut jac = vec![vec![T::zero(); model.nv]; dim(contacts)];
+    let mut row0 = 0;
+    for contact in contacts {
+        let (body, local) = body_pose::<T>(model, contact);
+        let pose = world[body].compose(&local);
+        let p = pose.trans.clone();
         let mut j = body;
         while j > 0 {
             for col in 0..model.nvs[j] {
@@ -66,12 +97,15 @@ fn jacobian_from_poses<T: AdScalar>(
                 // velocity of the point p: v_O + ω × p.
                 let s = world[j].act_motion(&subspace_sv::<T>(model, j, col));
                 let vp = &s.lin + s.ang.cross(&p);
-                for (r, x) in vp.iter().enumerate() {
-                    jac[3 * c + r][model.idx_v[j] + col] = x.clone();
+                let mut rows = Vec::with_capacity(6);
+                push_rows(contact, &pose.rot, s.ang, vp, &mut rows);
+                for (r, x) in rows.into_iter().enumerate() {
+                    jac[row0 + r][model.idx_v[j] + col] = x;
                 }
             }
             j = model.parents[j];
         }
+        row0 += contact.kind.dim();
     }
     jac
 }
@@ -95,15 +129,20 @@ fn drift_from_poses<T: AdScalar>(
         // q̈ = 0: a_i = X a_p + v_i × S q̇_i (S is constant in the child frame).
         acc[i] = xs[i].inv_act_motion(&acc[p]).add(&vel[i].cross_motion(&vj));
     }
-    let mut out = Vec::with_capacity(3 * contacts.len());
+    let mut out = Vec::with_capacity(dim(contacts));
     for contact in contacts {
-        let (body, r) = body_point::<T>(model, contact);
+        let (body, local) = body_pose::<T>(model, contact);
+        let r = local.trans.clone();
         let (vb, ab) = (&vel[body], &acc[body]);
         let w = &vb.ang;
-        // Classical acceleration of the body-fixed point r, in body coordinates.
-        let a_body = &ab.lin + ab.ang.cross(&r) + w.cross(&(&vb.lin + w.cross(&r)));
-        let a_world = &world[body].rot * a_body;
-        out.extend(a_world.iter().cloned());
+        // Spatial and classical accelerations of the body-fixed point r, body coordinates.
+        let a_s = &ab.lin + ab.ang.cross(&r);
+        let a_p = &a_s + w.cross(&(&vb.lin + w.cross(&r)));
+        // 6-D rows hold the spatial acceleration of the frame, 3-D rows the classical one of
+        // the point (Pinocchio's constraint accelerations).
+        let rb = &world[body].rot;
+        let lin = rb * if contact.kind == ContactType::D6 { a_s } else { a_p };
+        push_rows(contact, &(rb * &local.rot), rb * &ab.ang, lin, &mut out);
     }
     out
 }
@@ -162,19 +201,31 @@ pub fn constrained_rnea<T: AdScalar>(
     lambda: &[T],
 ) -> Vec<T> {
     check_lengths(model, q.len(), &[("v", v.len()), ("a", a.len())]);
-    assert_eq!(lambda.len(), 3 * contacts.len(), "reference::contact: lambda needs 3·nc entries");
+    assert_eq!(lambda.len(), dim(contacts), "reference::contact: lambda needs one entry per row");
     let world = forward_kinematics(model, q);
     let mut fext: Vec<[T; 6]> = vec![std::array::from_fn(|_| T::zero()); model.joints.len()];
-    for (c, contact) in contacts.iter().enumerate() {
-        let (body, r) = body_point::<T>(model, contact);
-        let p = world[body].act_point(&r);
-        let l = Vector3::new(
-            lambda[3 * c].clone(),
-            lambda[3 * c + 1].clone(),
-            lambda[3 * c + 2].clone(),
-        );
-        let f = Sv::new(p.cross(&l), l);
-        fext[body] = Sv::from_array(&fext[body]).add(&f).to_array();
+    let mut row0 = 0;
+    for contact in contacts {
+        let (body, local) = body_pose::<T>(model, contact);
+        let pose = world[body].compose(&local);
+        let p = pose.trans.clone();
+        let d = contact.kind.dim();
+        let part = |o: usize| {
+            Vector3::new(
+                lambda[row0 + o].clone(),
+                lambda[row0 + o + 1].clone(),
+                lambda[row0 + o + 2].clone(),
+            )
+        };
+        let (n, f) = if d == 6 { (part(0), part(3)) } else { (Vector3::zeros(), part(0)) };
+        // World-aligned moment and force at p, then the spatial force about the world origin.
+        let (n, f) = match contact.reference {
+            ContactReference::LocalWorldAligned => (n, f),
+            ContactReference::Local => (&pose.rot * n, &pose.rot * f),
+        };
+        let fw = Sv::new(n + p.cross(&f), f);
+        fext[body] = Sv::from_array(&fext[body]).add(&fw).to_array();
+        row0 += d;
     }
     rnea(model, q, v, a, Some(&fext))
 }
@@ -229,8 +280,9 @@ pub fn kkt<T: AdScalar>(
     split_solution(solve(kkt_matrix(mass_matrix(model, q), &jac), rhs), model.nv)
 }
 
-/// Adds the Baumgarte terms `kd J q̇ + kp (p(q) − p_ref)` to the contact rows `rows`, with the
-/// reference point `p_ref` the point's position at the real part of `q` (fixed).
+/// Adds the Baumgarte terms `kd J q̇ + kp e` to the contact rows `rows`, with the reference
+/// placement the contact frame's placement at the real part of `q` (fixed); `e` as in the
+/// documentation of [`crate::model::Contact`]'s module.
 fn baumgarte<T: AdScalar>(
     model: &Model,
     q: &[T],
@@ -244,18 +296,71 @@ fn baumgarte<T: AdScalar>(
         return;
     }
     let world_ref = forward_kinematics(model, &real(q));
-    for (c, contact) in contacts.iter().enumerate() {
-        let (body, r) = body_point::<T>(model, contact);
-        let p = world[body].act_point(&r);
-        let (_, r0) = body_point::<f64>(model, contact);
-        let p0 = world_ref[body].act_point(&r0);
-        for k in 0..3 {
-            let jv =
-                jac[3 * c + k].iter().zip(v).fold(T::zero(), |s, (j, x)| s + j.clone() * x.clone());
-            let e = p[k].clone() - p0[k];
-            rows[3 * c + k] = rows[3 * c + k].clone() + jv * contact.kd + e * contact.kp;
+    let mut row0 = 0;
+    for contact in contacts {
+        let (body, local) = body_pose::<T>(model, contact);
+        let pose = world[body].compose(&local);
+        let (_, local0) = body_pose::<f64>(model, contact);
+        let pose0 = world_ref[body].compose(&local0);
+        let (rc, p) = (&pose.rot, &pose.trans);
+        let dp = p - lift_v3(&pose0.trans);
+        let mut e = Vec::with_capacity(6);
+        match contact.kind {
+            ContactType::D3 => {
+                let e3 = match contact.reference {
+                    ContactReference::LocalWorldAligned => dp,
+                    ContactReference::Local => rc.transpose() * dp,
+                };
+                e.extend(e3.iter().cloned());
+            }
+            ContactType::D6 => {
+                let r0t = lift_m3(&pose0.rot.transpose());
+                let (phi, rho) = log6_near_identity(&(&r0t * rc), &(r0t * dp));
+                let (phi, rho) = match contact.reference {
+                    ContactReference::Local => (phi, rho),
+                    ContactReference::LocalWorldAligned => (rc * phi, rc * rho),
+                };
+                e.extend(phi.iter().cloned());
+                e.extend(rho.iter().cloned());
+            }
         }
+        for (k, ek) in e.into_iter().enumerate() {
+            let r = row0 + k;
+            let jv = jac[r].iter().zip(v).fold(T::zero(), |s, (j, x)| s + j.clone() * x.clone());
+            rows[r] = rows[r].clone() + jv * contact.kd + ek * contact.kp;
+        }
+        row0 += contact.kind.dim();
     }
+}
+
+/// `log6` of a placement `(R, t)` whose real part is the identity (the Baumgarte error at its
+/// reference): `φ = 2 atan2(|v|, w) v/|v|` from the quaternion `(w, v)` of `R`, and
+/// `ρ = (I − ½[φ]× + c(θ)[φ]×²) t` with `c = (1 − θ sin θ / (2(1 − cos θ)))/θ²`; `atan(x)/x` and
+/// `c` by their series in `x²`, `θ²` (no square root of a zero real part), exact to rounding for
+/// the first and second derivatives at the identity.
+fn log6_near_identity<T: AdScalar>(r: &Matrix3<T>, t: &Vector3<T>) -> (Vector3<T>, Vector3<T>) {
+    let tr = r[(0, 0)].clone() + r[(1, 1)].clone() + r[(2, 2)].clone();
+    let w = (tr + cst::<T>(1.0)).sqrt() * cst::<T>(0.5);
+    let four_w = w.clone() * cst::<T>(4.0);
+    let v = Vector3::new(
+        (r[(2, 1)].clone() - r[(1, 2)].clone()) / four_w.clone(),
+        (r[(0, 2)].clone() - r[(2, 0)].clone()) / four_w.clone(),
+        (r[(1, 0)].clone() - r[(0, 1)].clone()) / four_w,
+    );
+    let x2 = v.dot(&v) / (w.clone() * w.clone());
+    // atan(x)/x = 1 − x²/3 + x⁴/5 − x⁶/7 + x⁸/9.
+    let mut atan_over = cst::<T>(1.0 / 9.0);
+    for c in [-1.0 / 7.0, 1.0 / 5.0, -1.0 / 3.0, 1.0] {
+        atan_over = atan_over * x2.clone() + cst::<T>(c);
+    }
+    let phi = v * (atan_over * cst::<T>(2.0) / w);
+    let th2 = phi.dot(&phi);
+    let c = cst::<T>(1.0 / 12.0)
+        + th2.clone() * cst::<T>(1.0 / 720.0)
+        + th2.clone() * th2 * cst::<T>(1.0 / 30240.0);
+    let pt = phi.cross(t);
+    let rho = t - pt.clone() * cst::<T>(0.5) + phi.cross(&pt) * c;
+    (phi, rho)
 }
 
 /// Impact dynamics with restitution coefficient `e`: solves
@@ -415,7 +520,7 @@ fn kkt_stacked<T: AdScalar>(
 /// # Panics
 /// As [`kkt`].
 pub fn kkt_fo(model: &Model, q: &[f64], v: &[f64], tau: &[f64], contacts: &[Contact]) -> KktFo {
-    let (nv, nout) = (model.nv, model.nv + 3 * contacts.len());
+    let (nv, nout) = (model.nv, model.nv + dim(contacts));
     let (qd, vd, taud) = (lift::<Dual64>(q), lift::<Dual64>(v), lift::<Dual64>(tau));
     let dq = jacobian(nout, nv, |j| {
         kkt_stacked(model, &perturb_q(model, &qd, j, eps()), &vd, &taud, contacts)
@@ -439,7 +544,7 @@ pub fn kkt_fo(model: &Model, q: &[f64], v: &[f64], tau: &[f64], contacts: &[Cont
 /// # Panics
 /// As [`kkt`].
 pub fn kkt_so(model: &Model, q: &[f64], v: &[f64], tau: &[f64], contacts: &[Contact]) -> KktSo {
-    let (n, nout) = (model.nv, model.nv + 3 * contacts.len());
+    let (n, nout) = (model.nv, model.nv + dim(contacts));
     let (qh, vh, tauh) = (lift::<HyperDual64>(q), lift::<HyperDual64>(v), lift::<HyperDual64>(tau));
     let dq2 = hessian(nout, n, n, |j, k| {
         kkt_stacked(model, &nested_q(model, q, j, k), &vh, &tauh, contacts)
@@ -523,7 +628,7 @@ pub fn impact_fo(
     contacts: &[Contact],
     e: f64,
 ) -> ImpactFo {
-    let (nv, nout) = (model.nv, model.nv + 3 * contacts.len());
+    let (nv, nout) = (model.nv, model.nv + dim(contacts));
     let (qd, vd) = (lift::<Dual64>(q), lift::<Dual64>(vminus));
     let dq = jacobian(nout, nv, |j| {
         impact_stacked(model, &perturb_q(model, &qd, j, eps()), &vd, contacts, e)
@@ -550,7 +655,7 @@ pub fn impact_so(
     contacts: &[Contact],
     e: f64,
 ) -> ImpactSo {
-    let (n, nout) = (model.nv, model.nv + 3 * contacts.len());
+    let (n, nout) = (model.nv, model.nv + dim(contacts));
     let (qh, vh) = (lift::<HyperDual64>(q), lift::<HyperDual64>(vminus));
     let dq2 = hessian(nout, n, n, |j, k| {
         impact_stacked(model, &nested_q(model, q, j, k), &vh, contacts, e)

@@ -19,7 +19,7 @@
 use super::{ModelArgs, load_model};
 use clap::{Args, ValueEnum};
 use nalgebra::{DMatrix, DVector, Vector3};
-use sodyn::algo::{Contact, Data, aba, crba, rnea};
+use sodyn::algo::{Contact, ContactReference, ContactType, Data, aba, crba, rnea};
 use sodyn::batch::{
     BatchData, BatchPool, aba_batch, fd_derivatives_batch, id_derivatives_batch, rnea_batch,
 };
@@ -78,8 +78,8 @@ const ALGOS: &[&str] = &[
     "impact_so_c",
 ];
 
-/// Contact algorithms: they need `--contacts` (3-D point contacts at the frame origins; the
-/// derivative timings include the forward solve).
+/// Contact algorithms: they need `--contacts` (contacts at the frame origins, 3-D points by
+/// default; the derivative timings include the forward solve).
 const CONTACT_ALGOS: &[&str] =
     &["kkt_fo", "kkt_so", "kkt_so_c", "impact_fo", "impact_so", "impact_so_c"];
 
@@ -88,9 +88,18 @@ const CONTACT_ALGOS: &[&str] =
 pub(crate) struct BenchArgs {
     #[command(flatten)]
     model: ModelArgs,
-    /// Point contacts (3-D) at the origins of these frames; needed by kkt_*, impact_*
+    /// Contacts at the origins of these frames (of --contact-type, in --contact-reference);
+    /// needed by kkt_*, impact_*
     #[arg(long, value_name = "F1,F2,...", value_parser = parse_list)]
     contacts: Option<List>,
+    /// Type of the --contacts: 3d (points) or 6d (the whole frames)
+    #[arg(long, value_name = "3d|6d", default_value = "3d",
+          value_parser = |s: &str| ContactType::parse(s).map_err(|e| e.to_string()))]
+    contact_type: ContactType,
+    /// Axes of the --contacts' rows: local_world_aligned or local
+    #[arg(long, value_name = "local_world_aligned|local", default_value = "local_world_aligned",
+          value_parser = |s: &str| ContactReference::parse(s).map_err(|e| e.to_string()))]
+    contact_reference: ContactReference,
     /// The algorithms to time [default: all; the contact ones only with --contacts]
     #[arg(long, value_name = "a,b,...", value_parser = parse_list)]
     algos: Option<List>,
@@ -1153,9 +1162,13 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
         baseline_cpus: pin_cpus.map(|c| c[..max_threads].to_vec()),
     };
     if !contacts.is_empty() {
+        let (kind, reference) = (o.contact_type, o.contact_reference);
         let contacts = contacts
             .iter()
-            .map(|f| Contact::new(&model, f, Vector3::zeros()))
+            .map(|f| {
+                Contact::new(&model, f, Vector3::zeros())
+                    .map(|c| Contact { kind, ..c.with_reference(reference) })
+            })
             .collect::<Result<Vec<_>>>()?;
         let cd = ContactData::new(&model, &contacts)?;
         if needs("kkt_") {

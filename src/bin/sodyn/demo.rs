@@ -247,6 +247,44 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
             let k = im.so().expect("allocated");
             row("      d2vplus/dq2", t, rel_t(k.d2vplus_dq2(), &so_ref.d2vplus_dq2));
         }
+        // 6-D contacts holding the soles, rows in the soles' axes, with Baumgarte gains.
+        let soles: Vec<&str> = frames.iter().copied().filter(|f| f.ends_with("_sole")).collect();
+        if !soles.is_empty() {
+            use sodyn::model::{ContactReference, ContactType};
+            let contacts: Vec<Contact> = soles
+                .iter()
+                .map(|f| {
+                    let c = Contact::new_6d(&m, f, None)?
+                        .with_reference(ContactReference::Local)
+                        .with_baumgarte(10.0, 2.0)?;
+                    Ok(Contact { kind: ContactType::D6, ..c })
+                })
+                .collect::<Result<_>>()?;
+            println!(
+                "
+6-D contacts (local axes, kp 10, kd 2) on {}",
+                soles.join(", ")
+            );
+            let cd = ContactData::new(&m, &contacts)?;
+            let mut kd = KktData::new(&m, cd.clone()).with_second_order(&m);
+            let t = time_us(|| {
+                kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau)?;
+                Ok(())
+            })?;
+            kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau)?;
+            let fo = oracle::kkt_fo(&m, qs, vs, ts, &contacts);
+            row("kkt FO+SO dqdd/dq", t, rel(kd.dqdd_dq(), &fo.dqdd_dq));
+            row("      dlambda/dq", t, rel(kd.dlambda_dq(), &fo.dlambda_dq));
+            let mut im = ImpactData::new(&m, cd).with_second_order(&m);
+            let t = time_us(|| {
+                impact_so_derivatives(&m, &mut d, &mut im, &q, &v)?;
+                Ok(())
+            })?;
+            impact_so_derivatives(&m, &mut d, &mut im, &q, &v)?;
+            let fo = oracle::impact_fo(&m, qs, vs, &contacts, 0.0);
+            row("impact FO+SO dvplus/dq", t, rel(im.dvplus_dq(), &fo.dvplus_dq));
+            row("      dimpulse/dq", t, rel(im.dimpulse_dq(), &fo.dimpulse_dq));
+        }
     }
     println!("\nmaximum relative error against the oracle: {worst:.2e}");
     Ok(())

@@ -20,8 +20,9 @@ use sodyn::deriv::{
     impact_so_derivatives, kkt_derivatives, kkt_so_contracted, kkt_so_derivatives,
 };
 use sodyn::error::{Error, Result};
-use sodyn::model::Model;
+use sodyn::model::{ContactReference, ContactType, Model};
 use sodyn::rng::Rng;
+use sodyn::spatial::Transform;
 use sodyn::tensor::Tensor3;
 
 /// A robot state: configuration, velocity, acceleration, torque.
@@ -37,7 +38,7 @@ pub struct State {
     pub tau: DVector<f64>,
     /// Point contacts (empty: no contact outputs).
     pub contacts: Vec<Contact>,
-    /// Contact forces for constrained inverse dynamics (length `3 nc`).
+    /// Contact forces for constrained inverse dynamics (3 or 6 rows per contact).
     pub lambda: DVector<f64>,
     /// Coefficient of restitution of the impact.
     pub restitution: f64,
@@ -57,11 +58,11 @@ pub struct Weights {
     pub qdd: Option<DVector<f64>>,
     /// KKT dynamics, `wᵀq̈` (length nv).
     pub kkt_qdd: Option<DVector<f64>>,
-    /// KKT dynamics, `wᵀλ` (length `3 nc`).
+    /// KKT dynamics, `wᵀλ` (3 or 6 rows per contact).
     pub kkt_lambda: Option<DVector<f64>>,
     /// Impact dynamics, `wᵀq̇⁺` (length nv).
     pub impact_vplus: Option<DVector<f64>>,
-    /// Impact dynamics, `wᵀλ̂` (length `3 nc`).
+    /// Impact dynamics, `wᵀλ̂` (3 or 6 rows per contact).
     pub impact_impulse: Option<DVector<f64>>,
 }
 
@@ -167,27 +168,73 @@ pub fn load_state(
             ))
         })?;
         for (i, c) in list.iter().enumerate() {
+            let obj_c = c.as_object().ok_or_else(|| {
+                Error::Io(format!("{file}: contacts[{i}] must be an object with a \"frame\""))
+            })?;
+            let known = ["frame", "type", "reference", "point", "placement", "kp", "kd"];
+            if let Some(k) = obj_c.keys().find(|k| !known.contains(&k.as_str())) {
+                return Err(Error::Io(format!(
+                    "{file}: unknown key \"contacts[{i}].{k}\" (known: {})",
+                    known.join(", ")
+                )));
+            }
             let frame = c.get("frame").and_then(|f| f.as_str()).ok_or_else(|| {
                 Error::Io(format!("{file}: contacts[{i}] needs a string \"frame\""))
             })?;
-            let point = match c.get("point") {
-                None => Vector3::zeros(),
-                Some(p) => {
-                    let arr = p.as_array().filter(|a| a.len() == 3).ok_or_else(|| {
+            let string = |key: &str, default: &'static str| -> Result<String> {
+                match c.get(key) {
+                    None => Ok(default.to_string()),
+                    Some(x) => x.as_str().map(str::to_string).ok_or_else(|| {
+                        Error::Io(format!("{file}: contacts[{i}].{key} must be a string"))
+                    }),
+                }
+            };
+            let at = |e: Error| Error::Io(format!("{file}: contacts[{i}]: {e}"));
+            let kind = ContactType::parse(&string("type", "3d")?).map_err(at)?;
+            let reference = ContactReference::parse(&string("reference", "local_world_aligned")?)
+                .map_err(at)?;
+            let vec3 = |x: &Value, what: &str| -> Result<Vector3<f64>> {
+                let arr = x.as_array().filter(|a| a.len() == 3).ok_or_else(|| {
+                    Error::Io(format!("{file}: contacts[{i}].{what} must be a list of 3 numbers"))
+                })?;
+                let mut v = Vector3::zeros();
+                for (r, val) in arr.iter().enumerate() {
+                    v[r] = val.as_f64().filter(|v| v.is_finite()).ok_or_else(|| {
                         Error::Io(format!(
-                            "{file}: contacts[{i}].point must be a list of 3 numbers"
+                            "{file}: contacts[{i}].{what}[{r}] is not a finite number"
                         ))
                     })?;
-                    let mut x = Vector3::zeros();
-                    for (r, val) in arr.iter().enumerate() {
-                        x[r] = val.as_f64().filter(|v| v.is_finite()).ok_or_else(|| {
-                            Error::Io(format!(
-                                "{file}: contacts[{i}].point[{r}] is not a finite number"
-                            ))
-                        })?;
-                    }
-                    x
                 }
+                Ok(v)
+            };
+            // The contact frame in the link frame: "point" (a 3-D contact's point) or
+            // "placement": {"xyz", "rpy"} (URDF convention; either may be left out).
+            let placement = match (c.get("point"), c.get("placement")) {
+                (Some(_), Some(_)) => {
+                    return Err(Error::Io(format!(
+                        "{file}: contacts[{i}] has both \"point\" and \"placement\": give one"
+                    )));
+                }
+                (Some(p), None) => Transform::from_translation(vec3(p, "point")?),
+                (None, Some(pl)) => {
+                    let o = pl.as_object().ok_or_else(|| {
+                        Error::Io(format!(
+                            "{file}: contacts[{i}].placement must be an object {{\"xyz\", \"rpy\"}}"
+                        ))
+                    })?;
+                    if let Some(k) = o.keys().find(|k| !["xyz", "rpy"].contains(&k.as_str())) {
+                        return Err(Error::Io(format!(
+                            "{file}: unknown key \"contacts[{i}].placement.{k}\" (known: xyz, rpy)"
+                        )));
+                    }
+                    let get = |k: &str| match o.get(k) {
+                        None => Ok(Vector3::zeros()),
+                        Some(x) => vec3(x, &format!("placement.{k}")),
+                    };
+                    let (xyz, rpy) = (get("xyz")?, get("rpy")?);
+                    Transform::from_rpy_xyz([rpy.x, rpy.y, rpy.z], [xyz.x, xyz.y, xyz.z])
+                }
+                (None, None) => Transform::identity(),
             };
             let gain = |key: &str| -> Result<f64> {
                 match c.get(key) {
@@ -201,15 +248,15 @@ pub fn load_state(
                 }
             };
             let (kp, kd) = (gain("kp")?, gain("kd")?);
-            contacts.push(
-                Contact::new(model, frame, point)
-                    .and_then(|c| c.with_baumgarte(kp, kd))
-                    .map_err(|e| Error::Io(format!("{file}: contacts[{i}]: {e}")))?,
-            );
+            let contact = Contact::new(model, frame, Vector3::zeros())
+                .and_then(|c| c.with_placement(model, &placement))
+                .and_then(|c| c.with_baumgarte(kp, kd))
+                .map_err(at)?;
+            contacts.push(Contact { kind, ..contact.with_reference(reference) });
         }
     }
-    let lambda = read_vec(obj, "lambda", 3 * contacts.len(), file)?
-        .unwrap_or_else(|| DVector::zeros(3 * contacts.len()));
+    let nrows: usize = contacts.iter().map(|c| c.dim()).sum();
+    let lambda = read_vec(obj, "lambda", nrows, file)?.unwrap_or_else(|| DVector::zeros(nrows));
     let restitution = match obj.get("restitution") {
         None => 0.0,
         Some(r) => r.as_f64().filter(|e| e.is_finite() && *e >= 0.0).ok_or_else(|| {
@@ -229,7 +276,7 @@ pub fn load_state(
                     known.join(", ")
                 )));
             }
-            let (nv, nc3) = (model.nv(), 3 * contacts.len());
+            let (nv, nc3) = (model.nv(), nrows);
             let get = |key: &str, n: usize| {
                 read_vec(w, key, n, file).map_err(|e| match e {
                     Error::Io(m) => Error::Io(m.replace("key \"", "key \"weights.")),
@@ -562,7 +609,7 @@ fn contracted_outputs(
             }),
         );
     }
-    let (nv, nc3) = (model.nv(), 3 * s.contacts.len());
+    let (nv, nc3) = (model.nv(), s.contacts.iter().map(|c| c.dim()).sum::<usize>());
     if w.kkt_qdd.is_some() || w.kkt_lambda.is_some() {
         let mut kd = KktData::new(model, ContactData::new(model, &s.contacts)?);
         let mut kc = KktContracted::new(model, &kd);
