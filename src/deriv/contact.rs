@@ -49,12 +49,14 @@ use super::contact_kin::{
     Base, Dir, Geo, Path, acc_rows, dacc_dq, dacc_dv, djac_col_dq, djz_dq, djz_dq_rows, jac_col,
     put_rows, rows_dot,
 };
-use super::zero::idfoza_core;
+use super::zero::{IdfozaWs, idfoza_core, idfoza_lanes_core};
 use crate::algo::internal::ltl_solve_rows_desc;
 use crate::algo::{Contact, Data};
 use crate::error::{Error, Result};
 use crate::linalg::{gemm, spd_inverse_in_place, transpose_strided};
 use crate::model::{Model, contact_label};
+#[cfg(target_arch = "x86_64")]
+use crate::simd::{Avx4, Avx8};
 use crate::spatial::Motion;
 use crate::spatial::Transform;
 use nalgebra::{DMatrix, DVector, Vector3};
@@ -958,14 +960,9 @@ pub(crate) fn sub_djtl_dq_strided(
     sub_djtl_dq_generic(s, cd, lambda, o, rs, cs);
 }
 
-/// `G(z)` (columns `l`): `[IDFOZA(z₁) − ∂(Jᵀz₂)/∂q ; ∂(J z₁)/∂q]`, `z = (z₁, z₂)` of length
-/// `nv + m`. Needs the composite inertias of the current `q` in `data`. Writes `cd.g`.
-pub(crate) fn g_matrix(model: &Model, data: &mut Data, cd: &mut ContactData, z: &[f64]) {
-    let n = model.nv;
-    g_matrix_split(model, data, cd, &z[..n], &z[n..], &z[..n]);
-}
-
-/// `G` with separate vectors: `[IDFOZA(z_m) − ∂(Jᵀz₂)/∂q ; ∂(J z_j)/∂q]`.
+/// `G` (columns `l`) with separate vectors: `[IDFOZA(z_m) − ∂(Jᵀz₂)/∂q ; ∂(J z_j)/∂q]` (for
+/// `z = (z₁, z₂)` of length `nv + m`: `z_m = z_j = z₁`). Needs the composite inertias of the
+/// current `q` in `data`. Writes `cd.g`.
 pub(crate) fn g_matrix_split(
     model: &Model,
     data: &mut Data,
@@ -974,9 +971,146 @@ pub(crate) fn g_matrix_split(
     z2: &[f64],
     z: &[f64],
 ) {
+    let mut zmat = std::mem::replace(&mut cd.zmat, DMatrix::zeros(0, 0));
+    idfoza_core(model, data, z_m, &mut zmat);
+    g_matrix_with(model, data, cd, &zmat, z2, z);
+    cd.zmat = zmat;
+}
+
+/// Up to eight IDFOZA products `∂(M x_l)/∂q` at once, on lanes (for the `G` products of the
+/// contact second order, [`g_matrix_with`]): the workspaces and the `nv × nv` results.
+#[derive(Clone, Debug)]
+pub(crate) struct IdfozaBatch {
+    ws4: IdfozaWs<[f64; 4]>,
+    ws8: IdfozaWs<[f64; 8]>,
+    /// `out[l] = ∂(M x_l)/∂q` after [`idfoza_batch`] (entries that are structurally zero, or
+    /// whose column is a DoF of a joint attached to the world, stay zero).
+    pub(crate) out: Vec<DMatrix<f64>>,
+}
+
+impl IdfozaBatch {
+    pub(crate) fn new(model: &Model) -> Self {
+        let n = model.nv;
+        Self {
+            ws4: IdfozaWs::new(model),
+            ws8: IdfozaWs::new(model),
+            out: (0..8).map(|_| DMatrix::zeros(n, n)).collect(),
+        }
+    }
+}
+
+/// `b.out[l] = ∂(M x_l)/∂q` for the `count ≤ 8` vectors `x_l = x[ldx (j0 + l)..][..nv]`, eight
+/// (AVX-512) or four lanes at a time. Needs `data` as [`idfoza_core`] does.
+pub(crate) fn idfoza_batch(
+    model: &Model,
+    data: &Data,
+    b: &mut IdfozaBatch,
+    x: &[f64],
+    ldx: usize,
+    j0: usize,
+    count: usize,
+) {
     let n = model.nv;
-    idfoza_core(model, data, z_m, &mut cd.zmat);
-    cd.g.view_mut((0, 0), (n, n)).copy_from(&cd.zmat);
+    assert!(
+        count <= 8
+            && b.out.len() == 8
+            && b.out.iter().all(|o| o.shape() == (n, n))
+            && (count == 0 || ldx * (j0 + count - 1) + n <= x.len()),
+        "idfoza_batch: dimension mismatch"
+    );
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx512f() {
+        // SAFETY: the CPU supports the enabled features.
+        unsafe { idfoza_batch_avx512(model, data, &mut b.ws8, &mut b.out, x, ldx, j0, count) };
+        return;
+    }
+    for l0 in (0..count).step_by(4) {
+        let nl = 4.min(count - l0);
+        let out = &mut b.out[l0..l0 + nl];
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2_fma() {
+            // SAFETY: the CPU supports the enabled features.
+            unsafe { idfoza_batch_avx2(model, data, &mut b.ws4, out, x, ldx, j0 + l0, nl) };
+            continue;
+        }
+        idfoza_batch_portable(model, data, &mut b.ws4, out, x, ldx, j0 + l0, nl);
+    }
+}
+
+/// [`idfoza_batch`] on portable lanes (out of line).
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn idfoza_batch_portable(
+    model: &Model,
+    data: &Data,
+    ws: &mut IdfozaWs<[f64; 4]>,
+    out: &mut [DMatrix<f64>],
+    x: &[f64],
+    ldx: usize,
+    j0: usize,
+    nl: usize,
+) {
+    idfoza_lanes_core::<[f64; 4]>(model, data, ws, x, ldx, j0, nl, |i, k, z| {
+        for (o, &zl) in out.iter_mut().zip(z) {
+            o[(i, k)] = zl;
+        }
+    });
+}
+
+/// [`idfoza_batch`] with AVX2 lanes (the closure is written here, compiled for AVX2 and FMA).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn idfoza_batch_avx2(
+    model: &Model,
+    data: &Data,
+    ws: &mut IdfozaWs<[f64; 4]>,
+    out: &mut [DMatrix<f64>],
+    x: &[f64],
+    ldx: usize,
+    j0: usize,
+    nl: usize,
+) {
+    idfoza_lanes_core::<Avx4>(model, data, ws, x, ldx, j0, nl, |i, k, z| {
+        for (o, &zl) in out.iter_mut().zip(z) {
+            o[(i, k)] = zl;
+        }
+    });
+}
+
+/// [`idfoza_batch`] with AVX-512 lanes.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn idfoza_batch_avx512(
+    model: &Model,
+    data: &Data,
+    ws: &mut IdfozaWs<[f64; 8]>,
+    out: &mut [DMatrix<f64>],
+    x: &[f64],
+    ldx: usize,
+    j0: usize,
+    nl: usize,
+) {
+    let out = &mut out[..nl];
+    idfoza_lanes_core::<Avx8>(model, data, ws, x, ldx, j0, nl, |i, k, z| {
+        for (o, &zl) in out.iter_mut().zip(z) {
+            o[(i, k)] = zl;
+        }
+    });
+}
+
+/// [`g_matrix_split`] with `IDFOZA(z_m)` given as `zmat`.
+pub(crate) fn g_matrix_with(
+    model: &Model,
+    data: &mut Data,
+    cd: &mut ContactData,
+    zmat: &DMatrix<f64>,
+    z2: &[f64],
+    z: &[f64],
+) {
+    let n = model.nv;
+    cd.g.view_mut((0, 0), (n, n)).copy_from(zmat);
     let mut g = std::mem::replace(&mut cd.g, DMatrix::zeros(0, 0));
     sub_djtl_dq_tree(model, &data.s_world, cd, z2, &mut g);
     // ∂(J z₁)/∂q rows: cumulative Z_j = Σ_{x ⪯ j} S_x z_x along the path.

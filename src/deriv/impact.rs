@@ -10,9 +10,9 @@
 //! `q̇⁻`, so `∂²y/∂q̇⁻²` = 0.
 
 use super::contact::{
-    ContactData, add_jz_hessian, base, copy_block, djw_dq, factor_delassus, factor_kkt, fill_rinv,
-    g_matrix, g_matrix_split, padded_rows, path_kinematics, sub_djtl_dq_tree, transpose_into,
-    update_points,
+    ContactData, IdfozaBatch, add_jz_hessian, base, copy_block, djw_dq, factor_delassus,
+    factor_kkt, fill_rinv, g_matrix_split, g_matrix_with, idfoza_batch, padded_rows,
+    path_kinematics, sub_djtl_dq_tree, transpose_into, update_points,
 };
 use super::contact_kin::{Dir, djac_col_dq, djtl_dq, djz_dq, djz_dq_rows, put_rows, rows_dot};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
@@ -142,7 +142,10 @@ pub struct ImpactSo {
     id: SoData,
     r: [Tensor3; 2],
     ycol: DVector<f64>,
-    e: DVector<f64>,
+    /// `∂q̇⁺/∂q̇⁻ − 1`, the IDFOZA arguments of the `(q, q̇⁻)` `G` terms.
+    dv_minus_one: DMatrix<f64>,
+    /// The IDFOZA products of the `G` terms, eight or four columns at a time.
+    batch: IdfozaBatch,
 }
 
 impl ImpactSo {
@@ -202,7 +205,8 @@ impl ImpactData {
             id: SoData::without_dm_dq(model),
             r: [t(n + m), t(n + m)],
             ycol: DVector::zeros(n + m),
-            e: DVector::zeros(n),
+            dv_minus_one: DMatrix::zeros(n, n),
+            batch: IdfozaBatch::new(model),
         });
         self
     }
@@ -433,29 +437,41 @@ fn so_inner(
         }
     }
     im.cd.zc = zc;
-    // G terms.
+    // G terms, the IDFOZA parts of eight (or four) columns k at a time.
+    so.dv_minus_one.copy_from(&im.dvplus_dvminus);
     for k in 0..n {
-        so.ycol.rows_mut(0, n).copy_from(&im.dvplus_dq.column(k));
-        so.ycol.rows_mut(n, m).copy_from(&im.dimpulse_dq.column(k));
-        g_matrix(model, data, &mut im.cd, so.ycol.as_slice());
-        let g = &im.cd.g;
-        for j in 0..n {
-            for i in 0..n + m {
-                let x = g[(i, j)];
-                rqq[(i, j, k)] += x;
-                rqq[(i, k, j)] += x;
+        so.dv_minus_one[(k, k)] -= 1.0;
+    }
+    let batch = &mut so.batch;
+    let lanes = if crate::simd::avx512f() { 8 } else { 4 };
+    for k0 in (0..n).step_by(lanes) {
+        let cnt = lanes.min(n - k0);
+        idfoza_batch(model, data, batch, im.dvplus_dq.as_slice(), n, k0, cnt);
+        for (t, k) in (k0..k0 + cnt).enumerate() {
+            so.ycol.rows_mut(0, n).copy_from(&im.dvplus_dq.column(k));
+            so.ycol.rows_mut(n, m).copy_from(&im.dimpulse_dq.column(k));
+            let y = so.ycol.as_slice();
+            g_matrix_with(model, data, &mut im.cd, &batch.out[t], &y[n..], &y[..n]);
+            let g = &im.cd.g;
+            for j in 0..n {
+                for i in 0..n + m {
+                    let x = g[(i, j)];
+                    rqq[(i, j, k)] += x;
+                    rqq[(i, k, j)] += x;
+                }
             }
         }
         // (q inner, q̇⁻_k outer): G with z_m = ∂q̇⁺/∂q̇⁻_k − e_k, z_J = ∂q̇⁺/∂q̇⁻_k + e e_k.
-        so.e.copy_from(&im.dvplus_dvminus.column(k));
-        so.e[k] -= 1.0;
-        so.ycol.rows_mut(0, n).copy_from(&im.dvplus_dvminus.column(k));
-        so.ycol[k] += im.restitution;
-        so.ycol.rows_mut(n, m).copy_from(&im.dimpulse_dvminus.column(k));
-        let (zj, z2) = so.ycol.as_slice().split_at(n);
-        g_matrix_split(model, data, &mut im.cd, so.e.as_slice(), z2, zj);
-        let mut page = rqv.page_mut(k);
-        page.copy_from(&im.cd.g);
+        idfoza_batch(model, data, batch, so.dv_minus_one.as_slice(), n, k0, cnt);
+        for (t, k) in (k0..k0 + cnt).enumerate() {
+            so.ycol.rows_mut(0, n).copy_from(&im.dvplus_dvminus.column(k));
+            so.ycol[k] += im.restitution;
+            so.ycol.rows_mut(n, m).copy_from(&im.dimpulse_dvminus.column(k));
+            let (zj, z2) = so.ycol.as_slice().split_at(n);
+            g_matrix_with(model, data, &mut im.cd, &batch.out[t], z2, zj);
+            let mut page = rqv.page_mut(k);
+            page.copy_from(&im.cd.g);
+        }
     }
     let ri = &im.cd.rinv;
     premultiply(&ri.rows(0, n), rqq, &mut so.d2vplus_dq2);

@@ -11,9 +11,10 @@
 //! an SPD inverse of the Delassus matrix (no dense inverse of the KKT matrix).
 
 use super::contact::{
-    ContactData, accel_derivatives_t, add_acc_hessians, add_jz_hessian, add_qdd_to_path_acc, base,
-    contact_hessians, djw_dq, factor_delassus, factor_kkt, fill_rinv, g_matrix, g_matrix_split,
-    path_kinematics, point_jacobian_dq, sub_djtl_dq_strided, update_points,
+    ContactData, IdfozaBatch, accel_derivatives_t, add_acc_hessians, add_jz_hessian,
+    add_qdd_to_path_acc, base, contact_hessians, djw_dq, factor_delassus, factor_kkt, fill_rinv,
+    g_matrix_split, g_matrix_with, idfoza_batch, path_kinematics, point_jacobian_dq,
+    sub_djtl_dq_strided, update_points,
 };
 use super::contact_kin::{
     Dir, dacc_dq, dacc_dv, dap_dq, dap_dv, djac_col_dq, djtl_dq, djz_dq_rows, put_rows, rows_dot,
@@ -130,6 +131,8 @@ pub struct KktSo {
     pub(crate) id: SoData,
     r: [Tensor3; 4],
     ycol: DVector<f64>,
+    /// The IDFOZA products of the `G` terms, eight or four columns at a time.
+    batch: IdfozaBatch,
 }
 
 impl KktSo {
@@ -211,6 +214,7 @@ impl KktData {
             id: SoData::without_dm_dq(model),
             r: [t(n + m), t(n + m), t(n + m), t(n + m)],
             ycol: DVector::zeros(n + m),
+            batch: IdfozaBatch::new(model),
         });
         self
     }
@@ -559,31 +563,47 @@ fn kkt_so_inner(
             });
         }
     }
-    // Product terms G(∂y/∂·) (IDFOZA and contact products).
-    for k in 0..n {
-        so.ycol.rows_mut(0, n).copy_from(&kd.dqdd_dq.column(k));
-        so.ycol.rows_mut(n, m).copy_from(&kd.dlambda_dq.column(k));
-        g_matrix(model, data, &mut kd.cd, so.ycol.as_slice());
-        let g = &kd.cd.g;
-        for j in 0..n {
-            for i in 0..n + m {
-                let x = g[(i, j)];
-                rqq[(i, j, k)] += x;
-                rqq[(i, k, j)] += x;
+    // Product terms G(∂y/∂·) (IDFOZA and contact products), the IDFOZA parts of eight (or
+    // four) columns k at a time.
+    let batch = &mut so.batch;
+    let lanes = if crate::simd::avx512f() { 8 } else { 4 };
+    for k0 in (0..n).step_by(lanes) {
+        let cnt = lanes.min(n - k0);
+        idfoza_batch(model, data, batch, kd.dqdd_dq.as_slice(), n, k0, cnt);
+        for (t, k) in (k0..k0 + cnt).enumerate() {
+            so.ycol.rows_mut(0, n).copy_from(&kd.dqdd_dq.column(k));
+            so.ycol.rows_mut(n, m).copy_from(&kd.dlambda_dq.column(k));
+            let y = so.ycol.as_slice();
+            g_matrix_with(model, data, &mut kd.cd, &batch.out[t], &y[n..], &y[..n]);
+            let g = &kd.cd.g;
+            for j in 0..n {
+                for i in 0..n + m {
+                    let x = g[(i, j)];
+                    rqq[(i, j, k)] += x;
+                    rqq[(i, k, j)] += x;
+                }
             }
         }
-        so.ycol.rows_mut(0, n).copy_from(&kd.dqdd_dv.column(k));
-        so.ycol.rows_mut(n, m).copy_from(&kd.dlambda_dv.column(k));
-        g_matrix(model, data, &mut kd.cd, so.ycol.as_slice());
-        let mut page = rqv.page_mut(k);
-        page += &kd.cd.g;
-        so.ycol.rows_mut(0, n).copy_from(&kd.dqdd_dtau.column(k));
-        so.ycol.rows_mut(n, m).copy_from(&kd.dlambda_dtau.column(k));
-        g_matrix(model, data, &mut kd.cd, so.ycol.as_slice());
-        let g = &kd.cd.g;
-        for kk in 0..n {
-            for i in 0..n + m {
-                rtq[(i, k, kk)] = g[(i, kk)];
+        idfoza_batch(model, data, batch, kd.dqdd_dv.as_slice(), n, k0, cnt);
+        for (t, k) in (k0..k0 + cnt).enumerate() {
+            so.ycol.rows_mut(0, n).copy_from(&kd.dqdd_dv.column(k));
+            so.ycol.rows_mut(n, m).copy_from(&kd.dlambda_dv.column(k));
+            let y = so.ycol.as_slice();
+            g_matrix_with(model, data, &mut kd.cd, &batch.out[t], &y[n..], &y[..n]);
+            let mut page = rqv.page_mut(k);
+            page += &kd.cd.g;
+        }
+        idfoza_batch(model, data, batch, kd.dqdd_dtau.as_slice(), n, k0, cnt);
+        for (t, k) in (k0..k0 + cnt).enumerate() {
+            so.ycol.rows_mut(0, n).copy_from(&kd.dqdd_dtau.column(k));
+            so.ycol.rows_mut(n, m).copy_from(&kd.dlambda_dtau.column(k));
+            let y = so.ycol.as_slice();
+            g_matrix_with(model, data, &mut kd.cd, &batch.out[t], &y[n..], &y[..n]);
+            let g = &kd.cd.g;
+            for kk in 0..n {
+                for i in 0..n + m {
+                    rtq[(i, k, kk)] = g[(i, kk)];
+                }
             }
         }
     }
