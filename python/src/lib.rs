@@ -780,6 +780,8 @@ fn describe<'py>(py: Python<'py>, m: &Model) -> PyResult<Bound<'py, PyDict>> {
         j.set_item("lower", m.lower().as_slice()[a..a + n].to_vec())?;
         j.set_item("upper", m.upper().as_slice()[a..a + n].to_vec())?;
         j.set_item("mimic", m.mimic()[i].clone())?;
+        let (b, k) = (m.idx_v()[i], m.nvs()[i]);
+        j.set_item("armature", m.armature()[b..b + k].to_vec())?;
         joints.append(j)?;
     }
     d.set_item("joints", joints)?;
@@ -860,6 +862,13 @@ fn rebuild(desc: &Bound<'_, PyDict>) -> PyResult<Model> {
         }
         if let Some(of) = item::<Option<String>>(j, "mimic")? {
             b.set_mimic(id, &of);
+        }
+        // (Absent from the descriptions of models pickled before the armature: zeros.)
+        if j.contains("armature")? {
+            let arm: Vec<f64> = item(j, "armature")?;
+            if !arm.is_empty() {
+                b.set_armature(id, &arm).map_err(core_err)?;
+            }
         }
     }
     let w = inertia_from(item(desc, "world_inertia")?, "world inertia")?;
