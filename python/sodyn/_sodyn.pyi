@@ -71,7 +71,8 @@ class Model:
     def warnings(self) -> list[str]:
         """What the URDF or MJCF loader accepted with a reservation, one ``"FILE:LINE: ELEMENT:
         REASON"`` string each: a non-physical but harmless link inertia, a ``<mimic>`` naming an
-        unknown joint (see docs/conventions.md). Empty for built-in models; nothing is printed."""
+        unknown joint, an ignored MJCF ``gravcomp`` or ``<equality>``, the armature of an MJCF
+        free joint (see docs/conventions.md). Empty for built-in models; nothing is printed."""
     @property
     def armature(self) -> Vector:
         """Armature (rotor inertia) of each velocity coordinate, shape ``(nv,)``, a fresh array

@@ -296,7 +296,7 @@ impl Model {
     /// What the URDF or MJCF loader accepted with a reservation, one message per item in the
     /// format of its errors (`FILE:LINE: ELEMENT: REASON`): a link inertia that is not physical
     /// but harmless, a `<mimic>` naming an unknown joint (see [`crate::model::urdf`]); an
-    /// ignored armature, gravity compensation or equality constraint (see
+    /// ignored gravity compensation or equality constraint, the armature of a free joint (see
     /// [`crate::model::mjcf`]). Empty for a
     /// model made with [`ModelBuilder`]. The library prints nothing; the command-line tool
     /// prints these on standard error.
