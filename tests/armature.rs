@@ -258,3 +258,156 @@ fn mjcf_armature() {
     let e = Model::from_mjcf_str(bad, ".").unwrap_err().to_string();
     assert!(e.contains(":2:") && e.contains("armature=\"-1\" is negative"), "{e}");
 }
+
+/// Models with armature only, against the dual / hyper-dual oracle (whose RNEA has the
+/// armature): first and second order of inverse and forward dynamics, the contracted forms,
+/// and KKT and impact dynamics with 3-D and 6-D contacts, first and second order.
+#[test]
+fn armature_models_match_the_ad_oracle() {
+    use sodyn::algo::{Contact, ContactType};
+    use sodyn::reference::contact as oracle;
+    let mut w: Vec<Worst> = [
+        "ID FO (dtau_dq, dtau_dv, M)",
+        "ID SO (3 tensors, dM_dq)",
+        "FD FO (dqdd_dq, dqdd_dv, Minv)",
+        "FD SO (4 tensors)",
+        "contracted ID/FD",
+        "KKT FO (qdd..dlambda_dtau)",
+        "KKT SO (8 tensors)",
+        "impact FO",
+        "impact SO",
+    ]
+    .into_iter()
+    .map(Worst::new)
+    .collect();
+    let mut rng = Rng::new(23);
+    let models: Vec<Model> = pairs().into_iter().map(|p| p.1).filter(|m| m.nv() <= 20).collect();
+    for m in &models {
+        let (q, v, a) = random_state(m, &mut rng);
+        let tau = a.clone();
+        let (qs, vs, as_) = (q.as_slice(), v.as_slice(), a.as_slice());
+        let at = format!("{} nv={}", m.name(), m.nv());
+        let mut d = Data::new(m);
+        id_derivatives(m, &mut d, &q, &v, &a, None).unwrap();
+        let mref = reference::mass_matrix::<f64>(m, qs);
+        let mref = DMatrix::from_fn(m.nv(), m.nv(), |i, j| mref[i][j]);
+        let e = rel_err_mat(d.dtau_dq(), &reference::d_rnea_dq(m, qs, vs, as_))
+            .max(rel_err_mat(d.dtau_dv(), &reference::d_rnea_dv(m, qs, vs, as_)))
+            .max(rel_err_mat(d.m(), &mref));
+        w[0].add(e, &at);
+        let mut so = SoData::new(m);
+        id_so_derivatives(m, &mut d, &mut so, &q, &v, &a, None).unwrap();
+        let e = rel_err_tensor(so.d2tau_dq2(), &reference::d2_rnea_dq2(m, qs, vs, as_))
+            .max(rel_err_tensor(so.d2tau_dv2(), &reference::d2_rnea_dv2(m, qs, vs, as_)))
+            .max(rel_err_tensor(so.d2tau_dqdv(), &reference::d2_rnea_dqdv(m, qs, vs, as_)))
+            .max(rel_err_tensor(so.dm_dq(), &reference::dM_dq(m, qs)));
+        w[1].add(e, &at);
+        let ts = tau.as_slice();
+        fd_derivatives(m, &mut d, &q, &v, &tau, None).unwrap();
+        let e = rel_err_mat(d.dqdd_dq(), &reference::d_aba_dq(m, qs, vs, ts))
+            .max(rel_err_mat(d.dqdd_dv(), &reference::d_aba_dv(m, qs, vs, ts)))
+            .max(rel_err_mat(d.minv(), &reference::d_aba_dtau(m, qs, vs, ts)));
+        w[2].add(e, &at);
+        let mut f = FdSoData::new(m);
+        fd_so_derivatives(m, &mut d, &mut f, &q, &v, &tau, None).unwrap();
+        let e = rel_err_tensor(f.d2qdd_dq2(), &reference::d2_aba_dq2(m, qs, vs, ts))
+            .max(rel_err_tensor(f.d2qdd_dv2(), &reference::d2_aba_dv2(m, qs, vs, ts)))
+            .max(rel_err_tensor(f.d2qdd_dqdv(), &reference::d2_aba_dqdv(m, qs, vs, ts)))
+            .max(rel_err_tensor(f.d2qdd_dtaudq(), &reference::d2_aba_dtaudq(m, qs, vs, ts)));
+        w[3].add(e, &at);
+        let wt = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
+        let mut cd = ContractedData::new(m);
+        id_so_contracted(m, &mut d, &mut cd, &q, &v, &a, &wt).unwrap();
+        let r = reference::contracted_rnea_hessians(m, wt.as_slice(), qs, vs, as_);
+        let mut e = [cd.c_qq(), cd.c_vv(), cd.c_qv(), cd.c_mq()]
+            .iter()
+            .zip(&r)
+            .map(|(x, y)| rel_err_mat(x, y))
+            .fold(0.0, f64::max);
+        fd_so_contracted(m, &mut d, &mut cd, &q, &v, &tau, &wt).unwrap();
+        let r = reference::contracted_aba_hessians(m, wt.as_slice(), qs, vs, ts);
+        e = [cd.c_qq(), cd.c_vv(), cd.c_qv(), cd.c_tauq()]
+            .iter()
+            .zip(&r)
+            .map(|(x, y)| rel_err_mat(x, y))
+            .fold(e, f64::max);
+        w[4].add(e, &at);
+    }
+    // Contacts: 3-D and 6-D, on armature models (the free flyer's DoFs too).
+    let quad = with_random_armature(&builtin::quadruped(), 77, true);
+    let chain = with_random_armature(&builtin::serial_chain(8), 78, false);
+    let cases: Vec<(&Model, Vec<(&str, ContactType)>)> = vec![
+        (&quad, vec![("LF_FOOT", ContactType::D3), ("RH_FOOT", ContactType::D3)]),
+        (&quad, vec![("RF_FOOT", ContactType::D6), ("LH_FOOT", ContactType::D3)]),
+        (&chain, vec![("ee", ContactType::D6)]),
+    ];
+    for (m, spec) in cases {
+        let contacts: Vec<Contact> = spec
+            .iter()
+            .map(|&(f, kind)| Contact {
+                kind,
+                ..Contact::new(m, f, nalgebra::Vector3::new(0.01, -0.02, 0.03)).unwrap()
+            })
+            .collect();
+        let (q, v, tau) = random_state(m, &mut rng);
+        let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
+        let at = format!("{} {spec:?}", m.name());
+        let mut d = Data::new(m);
+        let mut kd = KktData::new(m, ContactData::new(m, &contacts).unwrap()).with_second_order(m);
+        kkt_so_derivatives(m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+        let (qr, lr) = oracle::kkt::<f64>(m, qs, vs, ts, &contacts);
+        let fo = oracle::kkt_fo(m, qs, vs, ts, &contacts);
+        let e = [
+            rel_err_vec(kd.qdd(), &DVector::from_vec(qr)),
+            rel_err_vec(kd.lambda(), &DVector::from_vec(lr)),
+            rel_err_mat(kd.dqdd_dq(), &fo.dqdd_dq),
+            rel_err_mat(kd.dqdd_dv(), &fo.dqdd_dv),
+            rel_err_mat(kd.dqdd_dtau(), &fo.dqdd_dtau),
+            rel_err_mat(kd.dlambda_dq(), &fo.dlambda_dq),
+            rel_err_mat(kd.dlambda_dv(), &fo.dlambda_dv),
+            rel_err_mat(kd.dlambda_dtau(), &fo.dlambda_dtau),
+        ];
+        w[5].add(e.into_iter().fold(0.0, f64::max), &at);
+        let so = oracle::kkt_so(m, qs, vs, ts, &contacts);
+        let k = kd.so().unwrap();
+        let e = [
+            rel_err_tensor(k.d2qdd_dq2(), &so.d2qdd_dq2),
+            rel_err_tensor(k.d2qdd_dv2(), &so.d2qdd_dv2),
+            rel_err_tensor(k.d2qdd_dqdv(), &so.d2qdd_dqdv),
+            rel_err_tensor(k.d2qdd_dtaudq(), &so.d2qdd_dtaudq),
+            rel_err_tensor(k.d2lambda_dq2(), &so.d2lambda_dq2),
+            rel_err_tensor(k.d2lambda_dv2(), &so.d2lambda_dv2),
+            rel_err_tensor(k.d2lambda_dqdv(), &so.d2lambda_dqdv),
+            rel_err_tensor(k.d2lambda_dtaudq(), &so.d2lambda_dtaudq),
+        ];
+        w[6].add(e.into_iter().fold(0.0, f64::max), &at);
+        let e = 0.3;
+        let mut im =
+            ImpactData::new(m, ContactData::new(m, &contacts).unwrap()).with_second_order(m);
+        im.set_restitution(e).unwrap();
+        impact_so_derivatives(m, &mut d, &mut im, &q, &v).unwrap();
+        let (vp, imp) = oracle::impact::<f64>(m, qs, vs, &contacts, e);
+        let fo = oracle::impact_fo(m, qs, vs, &contacts, e);
+        let err = [
+            rel_err_vec(im.vplus(), &DVector::from_vec(vp)),
+            rel_err_vec(im.impulse(), &DVector::from_vec(imp)),
+            rel_err_mat(im.dvplus_dq(), &fo.dvplus_dq),
+            rel_err_mat(im.dvplus_dvminus(), &fo.dvplus_dvminus),
+            rel_err_mat(im.dimpulse_dq(), &fo.dimpulse_dq),
+            rel_err_mat(im.dimpulse_dvminus(), &fo.dimpulse_dvminus),
+        ];
+        w[7].add(err.into_iter().fold(0.0, f64::max), &at);
+        let so = oracle::impact_so(m, qs, vs, &contacts, e);
+        let k = im.so().unwrap();
+        let err = [
+            rel_err_tensor(k.d2vplus_dq2(), &so.d2vplus_dq2),
+            rel_err_tensor(k.d2vplus_dqdvminus(), &so.d2vplus_dqdvminus),
+            rel_err_tensor(k.d2impulse_dq2(), &so.d2impulse_dq2),
+            rel_err_tensor(k.d2impulse_dqdvminus(), &so.d2impulse_dqdvminus),
+        ];
+        w[8].add(err.into_iter().fold(0.0, f64::max), &at);
+    }
+    for x in &w {
+        x.check(1e-9);
+    }
+}
