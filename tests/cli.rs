@@ -1029,3 +1029,48 @@ fn mjcf_models_load_by_extension() {
     let err = assert_clean_failure(&sodyn(&["info", "--model", bad.to_str().unwrap()]), "bad MJCF");
     assert!(err.contains("bad.xml:3") && err.contains("unknown joint type \"x\""), "{err}");
 }
+
+/// `--armature`: one value for every DoF or nv values; `info` lists it; `eval`'s M, tau and
+/// qdd include it (against the library with `Model::with_armature`); bad values are clean
+/// errors.
+#[test]
+fn armature_option() {
+    let o = sodyn(&["info", "--model", "builtin:chain3", "--armature", "0.25"]);
+    assert_ok(&o, "info --armature");
+    assert!(stdout(&o).contains("armature (per velocity coordinate): [0.25, 0.25, 0.25]"));
+    let o = sodyn(&["info", "--model", "builtin:chain3"]);
+    assert!(!stdout(&o).contains("armature"), "no armature line without one");
+    let st = tmp("armature-state.json");
+    let st = st.to_str().unwrap();
+    assert_ok(
+        &sodyn(&["random-state", "--model", "builtin:chain3", "--seed", "4", "-o", st]),
+        "random-state",
+    );
+    let o = sodyn(&["eval", "--model", "builtin:chain3", "--armature", "0.1,0,0.3", "--state", st]);
+    assert_ok(&o, "eval --armature");
+    let out: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let state: Value = serde_json::from_str(&std::fs::read_to_string(st).unwrap()).unwrap();
+    let m = sodyn::model::builtin::serial_chain(3).with_armature(&[0.1, 0.0, 0.3]).unwrap();
+    let (q, v, a, tau) = (
+        vector(&state, "q", 3),
+        vector(&state, "v", 3),
+        vector(&state, "a", 3),
+        vector(&state, "tau", 3),
+    );
+    let mut d = sodyn::algo::Data::new(&m);
+    let mm = sodyn::algo::crba(&m, &mut d, &q).unwrap().clone();
+    assert!((matrix(&out, "M", 3) - mm).amax() < 1e-12);
+    let t = sodyn::algo::rnea(&m, &mut d, &q, &v, &a, None).unwrap().clone();
+    assert!((vector(&out, "tau", 3) - t).amax() < 1e-12);
+    let qdd = sodyn::algo::aba(&m, &mut d, &q, &v, &tau, None).unwrap().clone();
+    assert!((vector(&out, "qdd", 3) - qdd).amax() < 1e-12);
+    let o = sodyn(&["info", "--model", "builtin:chain3", "--armature", "0.1,0.2"]);
+    let e = assert_clean_failure(&o, "--armature with 2 values");
+    assert!(e.contains("2 values") && e.contains("nv = 3"), "{e}");
+    let o = sodyn(&["info", "--model", "builtin:chain3", "--armature", "0.1,-2,0"]);
+    let e = assert_clean_failure(&o, "--armature negative");
+    assert!(e.contains("joint \"joint_2\"") && e.contains("-2"), "{e}");
+    let o = sodyn(&["info", "--model", "builtin:chain3", "--armature", "x"]);
+    let e = assert_clean_failure(&o, "--armature not a number");
+    assert!(e.contains("\"x\" is not a number"), "{e}");
+}

@@ -33,11 +33,17 @@ fn cases() -> Vec<(Model, Vec<Spec>)> {
             builtin::quadruped(),
             vec![("LF_FOOT", D6, Lwa), ("RF_FOOT", D3, Local), ("RH_FOOT", D3, Local)],
         ),
-        (builtin::quadruped(), vec![("RH_FOOT", D6, Local), ("LF_FOOT", D3, Lwa)]),
-        (builtin::serial_chain(9), vec![("ee", D6, Lwa)]),
+        (
+            with_random_armature(&builtin::quadruped(), 4, true),
+            vec![("RH_FOOT", D6, Local), ("LF_FOOT", D3, Lwa)],
+        ),
+        (with_random_armature(&builtin::serial_chain(9), 5, false), vec![("ee", D6, Lwa)]),
         (builtin::serial_chain(8), vec![("ee", D6, Local)]),
         (builtin::random_tree(8, 3, true), vec![("body_5", D6, Local), ("body_2", D3, Local)]),
-        (builtin::random_tree(10, 21, false), vec![("body_9", D3, Local), ("body_4", D3, Lwa)]),
+        (
+            with_random_armature(&builtin::random_tree(10, 21, false), 6, false),
+            vec![("body_9", D3, Local), ("body_4", D3, Lwa)],
+        ),
     ]
 }
 

@@ -82,10 +82,24 @@ fn features_model_structure() {
     }
     // The hand is welded to the forearm (joint "elbow").
     assert_eq!(m.frames()[m.frame_id("hand").unwrap()].joint, 4);
-    // Armature warning, naming the joint and line; damping and stiffness are silent.
+    // The armature of a free joint warns, naming the joint and line; damping and stiffness
+    // are silent.
     assert_eq!(m.warnings().len(), 1, "{:?}", m.warnings());
     assert!(m.warnings()[0].contains("features.xml:"));
-    assert!(m.warnings()[0].contains("joint \"swing\": armature=\"0.01\" ignored"));
+    assert!(m.warnings()[0].contains("joint \"root\": armature=\"0.03\" on a free joint"));
+    // Armature: explicit, from the class defaults (limb 0.02, elbow 0, the main class 0.005),
+    // on every DoF of the joint.
+    let arm = |j: &str| {
+        let i = m.joint_id(j).unwrap();
+        m.armature()[m.idx_v()[i]..m.idx_v()[i] + m.nvs()[i]].to_vec()
+    };
+    assert_eq!(arm("root"), vec![0.03; 6]);
+    assert_eq!(arm("shoulder_y"), vec![0.02]);
+    assert_eq!(arm("elbow"), vec![0.0]);
+    assert_eq!(arm("neck"), vec![0.02; 3]);
+    assert_eq!(arm("hip_x"), vec![0.005]);
+    assert_eq!(arm("swing"), vec![0.01]);
+    assert!(m.has_armature());
     // Gravity from <option>.
     assert_eq!(m.gravity().lin, Vector3::new(0.5, -0.3, -9.7));
 }

@@ -51,6 +51,8 @@ fn algorithms_do_not_allocate() {
         (builtin::humanoid(), vec!["left_sole", "right_sole"], D6, Local, 2.0),
         (builtin::humanoid(), vec!["left_sole", "right_sole"], D6, Lwa, 2.0),
         (builtin::quadruped(), feet(), D3, Local, 2.0),
+        // With an armature (on the free flyer too).
+        (builtin::quadruped().with_armature(&[0.1; 18]).unwrap(), feet(), D3, Local, 2.0),
     ] {
         let mut rng = Rng::new(1);
         let q = m.random_configuration(&mut rng);

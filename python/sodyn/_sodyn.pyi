@@ -47,9 +47,9 @@ class Model:
         ``<inertial>`` and inertias from primitive geoms (a mesh geom needs an ``<inertial>``).
         Joints and coordinates are MuJoCo's, in its order, except that quaternions are
         ``[x, y, z, w]`` and a free joint's velocity is ``[ω_body, v_body]`` (MuJoCo:
-        ``[v_world, ω_body]``); see docs/conventions.md. A nonzero ``armature`` is ignored with a
-        message in ``warnings``. ``floating_base=True`` adds a free-flyer ``root_joint`` in
-        front of the ``<worldbody>``'s only body."""
+        ``[v_world, ω_body]``); see docs/conventions.md. The joints' ``armature`` (with its
+        defaults) is the model's ``armature``. ``floating_base=True`` adds a free-flyer
+        ``root_joint`` in front of the ``<worldbody>``'s only body."""
     @staticmethod
     def from_mjcf_string(xml: str, base_dir: Optional[Union[str, os.PathLike[str]]] = None,
                          floating_base: bool = False) -> "Model":
@@ -71,7 +71,19 @@ class Model:
     def warnings(self) -> list[str]:
         """What the URDF or MJCF loader accepted with a reservation, one ``"FILE:LINE: ELEMENT:
         REASON"`` string each: a non-physical but harmless link inertia, a ``<mimic>`` naming an
-        unknown joint (see docs/conventions.md). Empty for built-in models; nothing is printed."""
+        unknown joint, an ignored MJCF ``gravcomp`` or ``<equality>``, the armature of an MJCF
+        free joint (see docs/conventions.md). Empty for built-in models; nothing is printed."""
+    @property
+    def armature(self) -> Vector:
+        """Armature (rotor inertia) of each velocity coordinate, shape ``(nv,)``, a fresh array
+        (zeros unless set by ``with_armature`` or an MJCF ``armature``). Every algorithm uses
+        the mass matrix ``M(q) + diag(armature)`` and inverse dynamics
+        ``τ = M(q) q̈ + b(q, q̇) + diag(armature) q̈`` (Pinocchio's ``model.armature``, MuJoCo's
+        ``dof_armature``)."""
+    def with_armature(self, a: ArrayLike) -> "Model":
+        """A copy of the model with the armature ``a`` (shape ``(nv,)``, finite, non-negative;
+        otherwise ``ValueError`` or ``SodynError`` naming the joint). A ``Data`` made for this
+        model serves the copy too."""
     @property
     def gravity(self) -> Vector:
         """Spatial gravity ``[0, 0, 0, gx, gy, gz]`` (angular first), a fresh array."""

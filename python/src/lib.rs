@@ -529,6 +529,30 @@ impl PyModel {
         self.m.warnings().to_vec()
     }
 
+    /// Armature (rotor inertia) of each velocity coordinate, shape `(nv,)` (a fresh array;
+    /// zeros unless set by `with_armature` or an MJCF `armature`): the mass matrix is
+    /// `M(q) + diag(armature)` and inverse dynamics `τ = M(q) q̈ + b(q, q̇) + diag(armature) q̈`
+    /// in every algorithm (Pinocchio's `model.armature`, MuJoCo's `dof_armature`).
+    #[getter]
+    fn armature<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        PyArray1::from_slice(py, self.m.armature()).into_any()
+    }
+
+    /// A copy of the model with the armature `a` (shape `(nv,)`, finite, non-negative); a
+    /// `Data` or workspace made for this model serves the copy too.
+    fn with_armature(&self, a: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let arr = array(a, "armature")?;
+        if arr.shape() != [self.m.nv()] {
+            return Err(value_err(format!(
+                "`armature` must have shape ({},), got shape {}",
+                self.m.nv(),
+                shape_str(arr.shape())
+            )));
+        }
+        let v: Vec<f64> = arr.as_array().iter().copied().collect();
+        Ok(Self { m: self.m.with_armature(&v).map_err(core_err)? })
+    }
+
     /// Spatial gravity `[0, 0, 0, gx, gy, gz]` (angular first).
     #[getter]
     fn gravity<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
@@ -756,6 +780,8 @@ fn describe<'py>(py: Python<'py>, m: &Model) -> PyResult<Bound<'py, PyDict>> {
         j.set_item("lower", m.lower().as_slice()[a..a + n].to_vec())?;
         j.set_item("upper", m.upper().as_slice()[a..a + n].to_vec())?;
         j.set_item("mimic", m.mimic()[i].clone())?;
+        let (b, k) = (m.idx_v()[i], m.nvs()[i]);
+        j.set_item("armature", m.armature()[b..b + k].to_vec())?;
         joints.append(j)?;
     }
     d.set_item("joints", joints)?;
@@ -836,6 +862,13 @@ fn rebuild(desc: &Bound<'_, PyDict>) -> PyResult<Model> {
         }
         if let Some(of) = item::<Option<String>>(j, "mimic")? {
             b.set_mimic(id, &of);
+        }
+        // (Absent from the descriptions of models pickled before the armature: zeros.)
+        if j.contains("armature")? {
+            let arm: Vec<f64> = item(j, "armature")?;
+            if !arm.is_empty() {
+                b.set_armature(id, &arm).map_err(core_err)?;
+            }
         }
     }
     let w = inertia_from(item(desc, "world_inertia")?, "world inertia")?;

@@ -800,7 +800,8 @@ def test_errors_leave_data_usable(ff):
 def model_signature(m):
     return (m.name, m.nq, m.nv, m.njoints,
             [(j.name, j.type, j.parent, j.idx_q, j.nq, j.idx_v, j.nv) for j in m.joints],
-            list(m.frames), m.gravity.tolist(), m.lower_limits.tolist(), m.upper_limits.tolist())
+            list(m.frames), m.gravity.tolist(), m.lower_limits.tolist(), m.upper_limits.tolist(),
+            m.armature.tolist())
 
 
 def model_outputs(m, contacts):
@@ -822,7 +823,9 @@ def pickle_models():
               ("quadruped_gravity", lambda: g, []),
               ("random_tree12_ff_s3", lambda: builtin("random_tree12_ff_s3"), []),
               (ff_case().name, lambda: load_model(ff_case().name), ff_feet()),
-              ("from_string", lambda: sodyn.Model.from_urdf_string(FALLBACK_URDF, True), ["toe"])]
+              ("from_string", lambda: sodyn.Model.from_urdf_string(FALLBACK_URDF, True), ["toe"]),
+              ("armature", lambda: builtin("quadruped").with_armature(np.linspace(0.0, 0.4, 18)),
+               ["LF_FOOT"])]
     return models
 
 

@@ -10,8 +10,12 @@ joint's quaternion is ``[w x y z]`` for MuJoCo and ``[x y z w]`` for sodyn. A fr
 ``qpos = [p; w x y z]`` is sodyn's ``[p; x y z w]``; its velocity is MuJoCo's
 ``qvel = [ṗ (world); ω (body)]`` and sodyn's ``v = [ω; Rᵀṗ]``, so ``qvel = P v`` with
 ``P = [[0, R], [I, 0]]``, ``qacc = P a + [R (ω × Rᵀṗ); 0]``, ``τ = Pᵀ qfrc`` and ``M = Pᵀ M_mj P``.
-MuJoCo runs with every passive and constraint force off (damping, stiffness, armature and
-friction loss zeroed, contacts and constraints, fluid forces and gravity compensation disabled).
+MuJoCo runs with every passive and constraint force off (damping, stiffness and friction loss
+zeroed, contacts and constraints, fluid forces and gravity compensation disabled); the armature
+is left in: ``mj_fullM`` includes it, and so does sodyn's M. On a free joint MuJoCo's armature
+multiplies its own ``qacc`` (``[p̈; ω̇]``), sodyn's (Pinocchio's) the body-frame ``[ω̇; v̇]``:
+``Pᵀ (armature · qacc)`` has the extra ``armature · (ω × v)`` in the translation rows, which
+``free_armature_term`` removes from MuJoCo's τ (a warning of the loader says so).
 """
 
 import os
@@ -71,14 +75,13 @@ def mj_load(path):
         m.opt.disableflags |= int(getattr(dis, flag))
     m.dof_damping[:] = 0
     m.jnt_stiffness[:] = 0
-    m.dof_armature[:] = 0
     m.dof_frictionloss[:] = 0
     m.body_gravcomp[:] = 0
     m.opt.density = 0
     m.opt.viscosity = 0
     m.opt.wind[:] = 0
-    # Recompute the constants derived from the armature: MuJoCo keeps the mass matrix of the
-    # dofs of translation-only trees (gymnasium's pusher) in dof_M0, computed at compile time.
+    # Recompute the constants derived from the model (MuJoCo keeps the mass matrix of the dofs
+    # of translation-only trees, gymnasium's pusher, in dof_M0, computed at compile time).
     mujoco.mj_setConst(m, mujoco.MjData(m))
     return m
 
@@ -141,6 +144,16 @@ class Mapping:
         return acc
 
 
+def free_armature_term(m, mp, v):
+    """``armature · [0; ω × v]`` on each free joint's dofs (sodyn's coordinates): what MuJoCo's
+    armature adds to ``Pᵀ qfrc_inverse`` beyond sodyn's ``armature · a``."""
+    out = np.zeros(m.nv)
+    for t, va in zip(mp.types, mp.vadr):
+        if t == mujoco.mjtJoint.mjJNT_FREE:
+            out[va + 3:va + 6] = m.dof_armature[va] * np.cross(v[va:va + 3], v[va + 3:va + 6])
+    return out
+
+
 def compare(path, seeds=(0, 1, 2)):
     """Loads ``path`` in both, checks masses, body placements, M and tau; returns the worst
     relative errors."""
@@ -180,6 +193,9 @@ def compare(path, seeds=(0, 1, 2)):
     world_mass = desc["world_inertia"][0]
     assert abs(world_mass + our_mass.sum() - m.body_mass.sum()) <= TOL * max(1, m.body_mass.sum()) or \
         world_mass == 0  # static bodies with a mesh geom have no known mass in sodyn
+    # Armature: MuJoCo's per dof (a joint's on each of its dofs, so the free joint's dof order
+    # does not matter).
+    assert_close(ours.armature, m.dof_armature, 0.0, f"{path.name}: armature")
     data = ours.create_data()
     worst = {"M": 0.0, "tau": 0.0, "placement": 0.0}
     for seed in seeds:
@@ -199,7 +215,7 @@ def compare(path, seeds=(0, 1, 2)):
         mujoco.mj_fullM(m, full, d.qM) if hasattr(d, "qM") else mujoco.mj_fullM(m, d, full)
         p = mp.p_matrix(qpos)
         m_ref = p.T @ full @ p
-        tau_ref = p.T @ d.qfrc_inverse
+        tau_ref = p.T @ d.qfrc_inverse - free_armature_term(m, mp, v)
         m_ours = sodyn.crba(ours, data, q)
         tau_ours = sodyn.rnea(ours, data, q, v, a)
         e_m = rel_err_scalar(m_ours, m_ref)
@@ -264,14 +280,14 @@ def test_corpus_matches_mujoco(name):
 
 def mj_tau(m, d, mp, q, v, a):
     """MuJoCo's inverse dynamics in sodyn's coordinates: ``Pᵀ qfrc_inverse`` at the mapped
-    state."""
+    state, less ``free_armature_term``."""
     qpos = mp.qpos(q)
     p = mp.p_matrix(qpos)
     d.qpos[:] = qpos
     d.qvel[:] = p @ v
     d.qacc[:] = mp.qacc(qpos, v, a)
     mujoco.mj_inverse(m, d)
-    return p.T @ d.qfrc_inverse
+    return p.T @ d.qfrc_inverse - free_armature_term(m, mp, v)
 
 
 # Models with free and ball joints (tangent-space perturbations of the quaternions), several
@@ -313,7 +329,12 @@ def test_features_model_details():
     ours = sodyn.Model.from_mjcf(DATA / "features.xml")
     assert ours.name == "features"
     w = "\n".join(ours.warnings)
-    assert "joint \"swing\"" in w and "armature" in w
+    assert len(ours.warnings) == 1 and "joint \"root\"" in w and "armature" in w and "free joint" in w
+    # The armature, from the joints and the class defaults (features_defaults.xml).
+    arm = dict(zip(names := [j.name for j in ours.joints],
+                   (ours.armature[j.idx_v] for j in ours.joints)))
+    assert (arm["root"], arm["shoulder_y"], arm["elbow"], arm["hip_x"], arm["swing"]) == \
+        (0.03, 0.02, 0.0, 0.005, 0.01)
     names = [j.name for j in ours.joints]
     assert names[0] == "root"
     # MuJoCo's joint index of the unnamed hinge and slide of the torso's last child body.

@@ -11,7 +11,8 @@
 //! 1. placements `λM_i`, `⁰M_i`;
 //! 2. forward pass, `i = 1..N`: `v_i = ⁱX_λ v_λ + S_i q̇_i`, `c_i = v_i × S_i q̇_i`,
 //!    `I^A_i = I_i`, `p^A_i = v_i ×* I_i v_i − fext_i`;
-//! 3. backward pass, `i = N..1`: `U_i = I^A_i S_i`, `D_i = S_iᵀ U_i` (its pivots checked, see
+//! 3. backward pass, `i = N..1`: `U_i = I^A_i S_i`, `D_i = S_iᵀ U_i + diag(a_i)` (`a_i` the
+//!    joint's armature; its pivots checked, see
 //!    [`aba`]: "Singular mass matrices"), `u_i = τ_i − S_iᵀ p^A_i`; if `λ ≠ 0`,
 //!    `I^a_i = I^A_i − U_i D_i⁻¹ U_iᵀ`, `p^a_i = p^A_i + I^a_i c_i + U_i D_i⁻¹ u_i`,
 //!    `I^A_λ += λX_i^* I^a_i ⁱX_λ`, `p^A_λ += λX_i^* p^a_i`;
@@ -165,7 +166,8 @@ mod lanes {
             ut.store3(uc.as_mut_ptr());
             ub.store3(uc.as_mut_ptr().add(3));
         }
-        let d = sv.iter().zip(&uc).map(|(a, b)| a * b).sum::<f64>();
+        // D = Sᵀ U + armature.
+        let d = sv.iter().zip(&uc).map(|(a, b)| a * b).sum::<f64>() + model.armature[k];
         if !super::pivot_ok(d) {
             return Err(d);
         }
@@ -344,6 +346,7 @@ pub(crate) fn aba_unchecked(
             for r in 0..nv {
                 d[(r, c)] = m6(&model.subspace[iv + r]).dot(&uc);
             }
+            d[(c, c)] += model.armature[iv + c];
         }
         let dinv = invert_small(&d, nv, iv, &mut piv)
             .map_err(|(r, p)| pivot_error(model, iv + r, p, None))?;

@@ -28,7 +28,8 @@ use crate::model::{JointKin, Model};
 use crate::simd::F64x4;
 use nalgebra::{DMatrix, DVector};
 
-/// Joint-space mass matrix `M(q)` (full symmetric), by the composite-rigid-body algorithm.
+/// Joint-space mass matrix `M(q)` (full symmetric, the model's armature on its diagonal), by
+/// the composite-rigid-body algorithm.
 /// Returns `data.m` and leaves the joint placements `li_m_i` in `data`.
 ///
 /// Two kernels, chosen from the model size:
@@ -48,6 +49,7 @@ pub fn crba<'a>(model: &Model, data: &'a mut Data, q: &DVector<f64>) -> Result<&
     if model.nv <= LOCAL_CRBA_MAX_NV && crate::simd::avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
         unsafe { crba_local_avx2(model, data, q.as_slice()) };
+        model.add_armature_diag(&mut data.m);
         return Ok(&data.m);
     }
     crba_unchecked(model, data, q);
@@ -68,9 +70,10 @@ pub(crate) fn crba_unchecked(model: &Model, data: &mut Data, q: &DVector<f64>) {
     if crate::simd::avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).
         unsafe { crba_avx2(model, data, q) };
-        return;
+    } else {
+        crba_portable(model, data, q);
     }
-    crba_portable(model, data, q);
+    model.add_armature_diag(&mut data.m);
 }
 
 /// [`crba_body`] with the portable lanes (out of line, so that the dispatch inlines).

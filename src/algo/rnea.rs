@@ -43,7 +43,8 @@ pub(crate) fn check_fext(model: &Model, fext: Option<&[Force]>) -> Result<()> {
     Ok(())
 }
 
-/// Inverse dynamics `τ = M(q) q̈ + C(q, q̇) q̇ + g(q) − Σ Jᵢᵀ fextᵢ` (RNEA, body frames).
+/// Inverse dynamics `τ = M(q) q̈ + C(q, q̇) q̇ + g(q) − Σ Jᵢᵀ fextᵢ` (RNEA, body frames;
+/// `M` includes the model's armature, [`Model::armature`]).
 ///
 /// `fext`, when given, holds one spatial force per joint (index 0 ignored) acting on that
 /// joint's body, expressed in the body (joint child) frame, as Pinocchio's `fext` overloads.
@@ -116,6 +117,7 @@ pub(crate) fn rnea_unchecked(
             data.f[p] += fp;
         }
     }
+    model.add_armature_tau(data.tau.as_mut_slice(), a.as_slice());
 }
 
 /// Nonlinear effects `b(q, q̇) = C(q, q̇) q̇ + g(q)` (RNEA with `q̈ = 0`). Returns `data.nle`.

@@ -102,6 +102,15 @@ pub(crate) fn id_derivatives_placed(
         backward_step_fo(model, data, i);
         accumulate_to_parent(model, data, i);
     }
+    add_armature(model, data, a);
+}
+
+/// The armature terms of first-order inverse dynamics (constant in `q`, `q̇`, linear in `q̈`):
+/// `τ += diag(a) q̈` and `M = ∂τ/∂q̈ += diag(a)`.
+#[inline]
+pub(crate) fn add_armature(model: &Model, data: &mut Data, a: &DVector<f64>) {
+    model.add_armature_tau(data.tau.as_mut_slice(), a.as_slice());
+    model.add_armature_diag(&mut data.m);
 }
 
 /// Ground-frame forward pass shared by the derivative algorithms: `s_world`, `Ψ̇`, `Ψ̈`, `Ṡ`,

@@ -6,7 +6,7 @@
 //! `i`; `j` up the ancestor chain of `i` (`j ⪯ i`), `t` over its DoFs; `k` up the chain of `j`
 //! (`k ⪯ j`), `r` over its DoFs. Index names below follow the notes.
 
-use super::id_fo::{accumulate_to_parent, backward_step_fo, forward_pass_world};
+use super::id_fo::{accumulate_to_parent, add_armature, backward_step_fo, forward_pass_world};
 use crate::algo::Data;
 use crate::algo::internal::check_fext;
 use crate::error::Result;
@@ -223,6 +223,8 @@ pub(crate) fn id_so_unchecked(
             backward_pass(model, data, &ws, &mut Store::<false, true> { n, qq, vv, qv, dm })
         }
     }
+    // The armature: τ and M only (its second derivatives are zero).
+    add_armature(model, data, a);
 }
 
 /// The per-DoF vectors `[S, Ψ̇, Ψ̈, Ψ̇ + Ṡ]` of the forward pass, for the backward pass.

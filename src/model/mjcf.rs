@@ -48,8 +48,12 @@
 //!   moving body are errors.
 //! * Joint `damping`, `stiffness`, `frictionloss`, actuators, tendons, contacts, equality
 //!   constraints, sensors and every element irrelevant to the rigid-body dynamics are ignored;
-//!   a nonzero `armature` (not yet in the model) and a nonzero body `gravcomp` are ignored with
-//!   a warning in [`Model::warnings`]. Limits (`range` of limited hinge and slide joints) are
+//!   a nonzero body `gravcomp` is ignored with a warning in [`Model::warnings`]. A joint's
+//!   `armature` (with the class defaults; none for a `<freejoint>`, as in MuJoCo) is the
+//!   armature of each of its DoFs ([`Model::armature`]); a negative one is an error. On a
+//!   `<joint type="free">` it loads with a warning: MuJoCo's armature acts on its own
+//!   free-joint coordinates `[ṗ_world; ω]`, sodyn's on `[ω; v_body]`, so `M` agrees but `τ`
+//!   differs by `armature · (ω × v)` in the translation rows. Limits (`range` of limited hinge and slide joints) are
 //!   recorded as data.
 //! * Elements that would add bodies or degrees of freedom that sodyn cannot represent
 //!   (`<composite>`, `<flexcomp>`, `<replicate>`, `<attach>`) are errors. `<equality>`
@@ -434,6 +438,8 @@ struct Jnt {
     axis: Vector3<f64>,
     refpos: f64,
     range: Option<(f64, f64)>,
+    /// `armature` (with the class defaults; 0 for a `<freejoint>`), on each of its DoFs.
+    armature: f64,
     file: Rc<str>,
     line: u32,
 }
@@ -999,6 +1005,7 @@ impl Loader {
                     let id = b
                         .add_joint(0, &name, JointType::FreeFlyer, Transform::identity())
                         .map_err(jwrap)?;
+                    b.set_armature(id, &[j.armature; 6]).map_err(jwrap)?;
                     cur = (id, Transform::identity());
                     continue;
                 }
@@ -1038,6 +1045,7 @@ impl Loader {
                 if let Some((lo, hi)) = j.range {
                     b.set_limits(id, &[lo], &[hi]).map_err(jwrap)?;
                 }
+                b.set_armature(id, &vec![j.armature; kind.nv()]).map_err(jwrap)?;
                 anchor = c;
                 cur = (id, Transform::identity());
             }
@@ -1256,6 +1264,7 @@ impl Loader {
                 axis: Vector3::z(),
                 refpos: 0.0,
                 range: None,
+                armature: 0.0,
                 file: el.file.clone(),
                 line: el.line,
             });
@@ -1328,18 +1337,40 @@ impl Loader {
             }
             _ => None,
         };
-        if let Some(a) = self.scalar(el, &class, "armature", &jelem)?
-            && a != 0.0
-        {
+        let armature = self.scalar(el, &class, "armature", &jelem)?.unwrap_or(0.0);
+        if !armature.is_finite() || armature < 0.0 {
+            let line = self.get(el, &class, "armature").map_or(el.line, |a| a.line);
+            return Err(model_err(
+                &el.file,
+                line,
+                &jelem,
+                format!("armature=\"{armature}\" is negative or not finite"),
+            ));
+        }
+        if kind == JKind::Free && armature != 0.0 {
             let file = el.file.clone();
             self.warn(
                 &file,
                 el.line,
                 &jelem,
-                format!("armature=\"{a}\" ignored (armature is not yet part of sodyn's model)"),
+                format!(
+                    "armature=\"{armature}\" on a free joint acts on sodyn's (Pinocchio's) \
+                     body-frame velocity [ω; v]; MuJoCo's acts on [ṗ_world; ω]: M agrees, τ \
+                     differs by armature·(ω × v) in the translation rows"
+                ),
             );
         }
-        Ok(Jnt { name, kind, pos, axis, refpos, range, file: el.file.clone(), line: el.line })
+        Ok(Jnt {
+            name,
+            kind,
+            pos,
+            axis,
+            refpos,
+            range,
+            armature,
+            file: el.file.clone(),
+            line: el.line,
+        })
     }
 
     /// The body inertia of an `<inertial>`, in the body frame.

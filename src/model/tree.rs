@@ -5,7 +5,7 @@ use super::urdf::INERTIA_ROUNDOFF_ABS;
 use crate::error::{Error, Result};
 use crate::rng::Rng;
 use crate::spatial::{Inertia, InertiaDefect, Motion, Transform};
-use nalgebra::{DVector, Vector3};
+use nalgebra::{DMatrix, DVector, Vector3};
 
 /// A named frame rigidly attached to a joint's body: every URDF link is one (also the links
 /// merged into their parent body by fixed joints).
@@ -75,6 +75,11 @@ pub struct Model {
     pub(crate) dof_ancestors_start: Vec<usize>,
     /// Motion-subspace column of each degree of freedom, in its joint's child frame.
     pub(crate) subspace: Vec<Motion>,
+    /// Armature (rotor inertia) of each degree of freedom, added to the diagonal of `M`:
+    /// `τ = M(q) q̈ + b(q, q̇) + diag(armature) q̈` (length `nv`, finite, `≥ 0`).
+    pub(crate) armature: Vec<f64>,
+    /// Whether an entry of `armature` is nonzero (the algorithms skip the adds otherwise).
+    pub(crate) has_armature: bool,
     /// Gravity as a spatial acceleration in the world frame (default `[0 0 0 0 0 −9.81]`).
     pub(crate) gravity: Motion,
     /// Lower configuration limits (−∞ where absent).
@@ -185,6 +190,80 @@ impl Model {
     pub fn subspace(&self) -> &[Motion] {
         &self.subspace
     }
+    /// Armature (rotor inertia) of each degree of freedom (length `nv`, default zeros; zeros
+    /// for a URDF model, the joints' `armature` for an MJCF one). It enters the mass matrix
+    /// and inverse dynamics as `M_a(q) = M(q) + diag(armature)`,
+    /// `τ = M(q) q̈ + b(q, q̇) + diag(armature) q̈`, hence every forward, contact and impact
+    /// algorithm and derivative (as Pinocchio's `model.armature` and MuJoCo's
+    /// `dof_armature`). Set it with [`ModelBuilder::set_armature`] or [`Model::with_armature`].
+    pub fn armature(&self) -> &[f64] {
+        &self.armature
+    }
+    /// Whether an armature entry is nonzero.
+    #[inline]
+    pub fn has_armature(&self) -> bool {
+        self.has_armature
+    }
+    /// A copy of the model with the armature `a` (one entry per velocity coordinate, as
+    /// [`Model::armature`]); the rest of the model is unchanged, and workspaces made for this
+    /// model serve the new one.
+    ///
+    /// # Errors
+    /// [`Error::Dimension`] if `a.len() != nv`; [`Error::Build`] naming the degree of freedom,
+    /// its joint and the value if an entry is negative or not finite.
+    pub fn with_armature(&self, a: &[f64]) -> Result<Model> {
+        if a.len() != self.nv {
+            return Err(Error::Dimension {
+                what: "armature".into(),
+                expected: self.nv,
+                got: a.len(),
+            });
+        }
+        let mut m = self.clone();
+        m.armature.copy_from_slice(a);
+        m.has_armature = a.iter().any(|&x| x != 0.0);
+        m.check_armature()?;
+        Ok(m)
+    }
+    /// `tau += diag(armature) qdd` when the model has an armature (both of length `nv`).
+    #[inline]
+    pub(crate) fn add_armature_tau(&self, tau: &mut [f64], qdd: &[f64]) {
+        if self.has_armature {
+            for ((t, &a), &x) in tau.iter_mut().zip(&self.armature).zip(qdd) {
+                *t += a * x;
+            }
+        }
+    }
+    /// `m += diag(armature)` for an `nv × nv` matrix, when the model has an armature.
+    #[inline]
+    pub(crate) fn add_armature_diag(&self, m: &mut DMatrix<f64>) {
+        if self.has_armature {
+            for (k, &a) in self.armature.iter().enumerate() {
+                m[(k, k)] += a;
+            }
+        }
+    }
+    /// Checks the armature: finite and non-negative, per degree of freedom.
+    fn check_armature(&self) -> Result<()> {
+        if self.armature.len() != self.nv {
+            return Err(Error::Build(format!(
+                "armature has {} entries, expected nv = {}",
+                self.armature.len(),
+                self.nv
+            )));
+        }
+        for (k, &a) in self.armature.iter().enumerate() {
+            if !a.is_finite() || a < 0.0 {
+                let j = self.dof_joint[k];
+                return Err(Error::Build(format!(
+                    "joint \"{}\" (index {j}): armature {a} of velocity coordinate {k} is \
+                     negative or not finite",
+                    self.names[j]
+                )));
+            }
+        }
+        Ok(())
+    }
     /// Gravity as a spatial acceleration in the world frame (default `[0 0 0 0 0 −9.81]`).
     pub fn gravity(&self) -> &Motion {
         &self.gravity
@@ -217,7 +296,7 @@ impl Model {
     /// What the URDF or MJCF loader accepted with a reservation, one message per item in the
     /// format of its errors (`FILE:LINE: ELEMENT: REASON`): a link inertia that is not physical
     /// but harmless, a `<mimic>` naming an unknown joint (see [`crate::model::urdf`]); an
-    /// ignored armature, gravity compensation or equality constraint (see
+    /// ignored gravity compensation or equality constraint, the armature of a free joint (see
     /// [`crate::model::mjcf`]). Empty for a
     /// model made with [`ModelBuilder`]. The library prints nothing; the command-line tool
     /// prints these on standard error.
@@ -274,7 +353,7 @@ impl Model {
         if !self.gravity.to_vec6().iter().all(|x| x.is_finite()) {
             return bad("gravity is not finite".into());
         }
-        Ok(())
+        self.check_armature()
     }
     /// Number of joints including the world joint 0.
     pub fn njoints(&self) -> usize {
@@ -539,6 +618,8 @@ impl ModelBuilder {
             dof_ancestors: vec![],
             dof_ancestors_start: vec![0],
             subspace: vec![],
+            armature: vec![],
+            has_armature: false,
             gravity: Motion::new(Vector3::zeros(), Vector3::new(0.0, 0.0, -9.81)),
             lower: DVector::zeros(0),
             upper: DVector::zeros(0),
@@ -604,6 +685,7 @@ impl ModelBuilder {
             m.dof_parent.push(prev);
             prev = Some(m.nv + c);
             m.subspace.push(kind.subspace_column(c));
+            m.armature.push(0.0);
         }
         m.names.push(name.into());
         m.joints.push(kind);
@@ -698,6 +780,25 @@ impl ModelBuilder {
         }
     }
 
+    /// Sets the armature (rotor inertia, see [`Model::armature`]) of joint `joint`'s degrees
+    /// of freedom, one entry per velocity coordinate of the joint (checked to be finite and
+    /// non-negative by [`Self::build`]).
+    ///
+    /// # Errors
+    /// [`Error::Build`] if `joint` is not a joint of the builder or `a` does not have the
+    /// joint's velocity dimension.
+    pub fn set_armature(&mut self, joint: usize, a: &[f64]) -> Result<()> {
+        if joint == 0 || joint >= self.m.joints.len() || a.len() != self.m.nvs[joint] {
+            return Err(Error::Build(format!(
+                "set_armature: bad joint {joint} or armature length {}",
+                a.len()
+            )));
+        }
+        let b = self.m.idx_v[joint];
+        self.m.armature[b..b + a.len()].copy_from_slice(a);
+        Ok(())
+    }
+
     /// Sets gravity (a linear acceleration in the world frame).
     pub fn set_gravity(&mut self, g: Vector3<f64>) {
         self.m.gravity = Motion::new(Vector3::zeros(), g);
@@ -762,6 +863,7 @@ impl ModelBuilder {
             }
             h.finish()
         };
+        m.has_armature = m.armature.iter().any(|&x| x != 0.0);
         m.rev_q = m.kin.iter().filter(|k| k.axis < 3).map(|k| k.idx_q).collect();
         m.rev_q_start = match m.rev_q.first() {
             Some(&a) if m.rev_q.iter().enumerate().all(|(r, &b)| b == a + r) => Some(a),

@@ -3,11 +3,12 @@
 
 use super::AdScalar;
 use super::kinematics::{forward_kinematics, parent_poses, subspace_mul, subspace_tr_mul};
-use super::spatial::{Pose, SpInertia, Sv, lift_v3};
+use super::spatial::{Pose, SpInertia, Sv, cst, lift_v3};
 use crate::model::Model;
 
 /// Inverse dynamics `τ = M(q) a + C(q, v) v + g(q) − Σ_i J_iᵀ fext_i` by the recursive
-/// Newton–Euler algorithm in body frames, with the model's gravity (`a₀ = −g`).
+/// Newton–Euler algorithm in body frames, with the model's gravity (`a₀ = −g`); `M` includes
+/// the model's armature (`+ diag(armature) a`), as in every function of this module.
 ///
 /// `fext`, if given, has one entry per joint (length `model.joints().len()`, entry 0 ignored): the
 /// spatial force applied to body `i`, expressed in the **world** frame as
@@ -103,6 +104,13 @@ fn newton_euler<T: AdScalar>(
         if p > 0 {
             let fp = xs[i].act_force(&f[i]);
             f[p] = f[p].add(&fp);
+        }
+    }
+    // The armature (rotor inertia): diag(armature) q̈.
+    for (k, t) in tau.iter_mut().enumerate() {
+        let arm = model.armature[k];
+        if arm != 0.0 {
+            *t += cst::<T>(arm) * &a[k];
         }
     }
     tau

@@ -38,16 +38,39 @@ pub fn test_models(max_dof: usize) -> Vec<Model> {
     let mut out = vec![builtin::serial_chain(1), builtin::serial_chain(7), builtin::pendulum(2)];
     out.push(builtin::quadruped());
     out.push(builtin::humanoid());
+    out.push(with_random_armature(&builtin::quadruped(), 1, true));
     for seed in 0..6u64 {
         for &n in &[3usize, 8, 15, 24, 35] {
             for &ff in &[false, true] {
                 let m = builtin::random_tree(n, seed * 31 + n as u64, ff);
+                // Half of the random trees with an armature (seeds 1, 3, 5), on the free
+                // flyer's DoFs too for seed 3.
+                let m = if seed % 2 == 1 {
+                    with_random_armature(&m, seed + n as u64, seed == 3)
+                } else {
+                    m
+                };
                 out.push(m);
             }
         }
     }
     out.retain(|m| m.nv() <= max_dof);
     out
+}
+
+/// `m` with a random armature in `[0, 0.5)` on each DoF (except a root free flyer's six unless
+/// `root`), about one DoF in five left at zero.
+pub fn with_random_armature(m: &Model, seed: u64, root: bool) -> Model {
+    let mut rng = Rng::new(1000 + seed);
+    let ff = matches!(m.joints().get(1), Some(sodyn::model::JointType::FreeFlyer));
+    let a: Vec<f64> = (0..m.nv())
+        .map(|k| {
+            let x = rng.range(0.0, 0.5);
+            let y = rng.range(0.0, 1.0);
+            if (ff && k < 6 && !root) || y < 0.2 { 0.0 } else { x }
+        })
+        .collect();
+    m.with_armature(&a).unwrap()
 }
 
 /// Tracks and reports the worst relative error of a quantity.
@@ -89,9 +112,12 @@ impl Worst {
 pub fn contact_cases() -> Vec<(Model, Vec<&'static str>)> {
     vec![
         (builtin::quadruped(), vec!["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"]),
-        (builtin::quadruped(), vec!["LF_FOOT", "RH_FOOT"]),
+        (with_random_armature(&builtin::quadruped(), 2, true), vec!["LF_FOOT", "RH_FOOT"]),
         (builtin::serial_chain(6), vec!["ee"]),
-        (builtin::random_tree(8, 3, true), vec!["body_5", "body_7", "body_2"]),
+        (
+            with_random_armature(&builtin::random_tree(8, 3, true), 3, false),
+            vec!["body_5", "body_7", "body_2"],
+        ),
         (builtin::random_tree(10, 21, false), vec!["body_9", "body_4"]),
     ]
 }

@@ -67,6 +67,11 @@ struct ModelArgs {
     /// with a warning
     #[arg(long)]
     strict_inertia: bool,
+    /// Armature (rotor inertia added to the mass matrix's diagonal) of the degrees of freedom:
+    /// one value for every DoF, or nv comma-separated values in velocity order; replaces the
+    /// model's own (zeros for URDF and built-in models, the joints' armature for MJCF)
+    #[arg(long, value_name = "A", allow_hyphen_values = true)]
+    armature: Option<String>,
 }
 
 #[derive(Debug, Args)]
@@ -191,7 +196,37 @@ fn run_eval(o: &EvalArgs) -> Result<Outcome> {
 /// Loads a model from `builtin:NAME`, an MJCF path (`.xml`) or a URDF path.
 fn load_model(o: &ModelArgs) -> Result<Model> {
     let opts = UrdfOptions { floating_base: o.floating_base, strict_inertia: o.strict_inertia };
-    load_model_spec(&o.model, &opts)
+    let model = load_model_spec(&o.model, &opts)?;
+    match &o.armature {
+        Some(a) => with_armature_arg(&model, a),
+        None => Ok(model),
+    }
+}
+
+/// The model with the armature of `--armature`: one number for every DoF, or `nv`
+/// comma-separated numbers.
+fn with_armature_arg(model: &Model, arg: &str) -> Result<Model> {
+    let vals = arg
+        .split(',')
+        .map(|x| {
+            x.trim().parse::<f64>().map_err(|e| {
+                Error::Io(format!("--armature: \"{}\" is not a number ({e})", x.trim()))
+            })
+        })
+        .collect::<Result<Vec<f64>>>()?;
+    let a = match vals.as_slice() {
+        [x] => vec![*x; model.nv()],
+        _ if vals.len() == model.nv() => vals,
+        _ => {
+            return Err(Error::Io(format!(
+                "--armature: {} values for a model with nv = {} (give one value, or nv values \
+                 in velocity order)",
+                vals.len(),
+                model.nv()
+            )));
+        }
+    };
+    model.with_armature(&a)
 }
 
 /// Loads a model from `spec` (`builtin:NAME`, a path ending in `.xml` for MJCF, otherwise a
@@ -275,6 +310,10 @@ fn joint_table(model: &Model) -> String {
                 .map(|m| format!("mimics \"{m}\" (loaded independent)"))
                 .unwrap_or_default()
         );
+    }
+    if model.has_armature() {
+        let a: Vec<String> = model.armature().iter().map(|x| format!("{x}")).collect();
+        s += &format!("armature (per velocity coordinate): [{}]\n", a.join(", "));
     }
     s
 }
