@@ -4,7 +4,8 @@
 //! buffers on every call. The hot paths call [`gemm`], which is `faer`'s `matmul` (no
 //! allocation per call), and the hand-written kernels below where an interleaved benchmark
 //! (`examples/linalg_vs_faer.rs`) measured them more than 5 % faster than `faer`: the AVX2
-//! product on CPUs without AVX-512, the SPD inverse, the transposition and the sparse 4-column
+//! products on CPUs without AVX-512 and the smallest and shallow ones (see `hand_written`), the
+//! SPD inverse at most sizes (see `spd_by_faer`), the transposition, and the sparse 4-column
 //! product of FD-SO (no `faer` equivalent). Their portable versions are here, the AVX2/FMA and
 //! AVX-512 ones under the same names in `crate::simd::avx2` and `crate::simd::avx512`,
 //! dispatched at run time.
@@ -16,7 +17,8 @@ use nalgebra::{Dim, Matrix, RawStorage, RawStorageMut};
 /// `faer`'s `matmul` (sequential; no allocation per call: its packing buffer is allocated once
 /// per thread, on the first call), except where the hand-written `crate::simd::avx2::gemm`
 /// measured faster (see `hand_written`): on a CPU with AVX2 but not AVX-512 (or under
-/// [`crate::simd::set_thread_level`]`(Some(Level::Avx2))`) and for the smallest products.
+/// [`crate::simd::set_thread_level`]`(Some(Level::Avx2))`), for the smallest products and
+/// those with an inner dimension below 16.
 pub(crate) fn gemm<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
     alpha: f64,
     a: &Matrix<f64, R1, C1, S1>,
@@ -41,15 +43,30 @@ pub(crate) fn gemm<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
     gemm_faer(alpha, a, b, beta, c)
 }
 
-/// Whether an `m×k` by `k×n` product runs the hand-written AVX2/FMA kernels rather than
-/// faer's: on a CPU with AVX2 but not AVX-512 (faer's AVX2 back end measured 0.89–1.71× their
-/// time over the products of the algorithms, above 1.05× on 8 of 17), and on AVX-512 for
-/// products of at most 16³ multiply-adds (faer's `nano-gemm` range: 1.73× at 8×6 by 50×6, the
-/// Delassus product of two point contacts), interleaved, one run, 2026-11-26, AMD EPYC with
-/// AVX-512, `examples/linalg_vs_faer.rs`. Elsewhere faer took 0.53–0.90× their time.
+/// Whether an `m×k` by `k×n` [`gemm`] runs the hand-written AVX2/FMA kernel rather than
+/// faer's. Measured (faer 0.24.4, AMD EPYC with AVX-512, 2026-11-26; interleaved, one run,
+/// `examples/linalg_vs_faer.rs`; faer time / hand-written time): with faer's AVX2 back end
+/// 0.84–1.69× over the 23 products benchmarked, above 1.05× on 14, so AVX2-only CPUs keep the
+/// kernel; with AVX-512 0.53–0.96×, except the products of at most 16³ multiply-adds (faer's
+/// `nano-gemm` range: 1.72× at 8×50 by 50×6, the Delassus product of two point contacts).
+/// Products with a shallow inner dimension (`k < 16`: `k` = 3 × contacts) took 0.69–0.96×
+/// alone, but with faer `sodyn bench` impact_fo on talos_full_v2 went from 14.5–14.9 to 16.5 µs
+/// with two contacts and impact_so_c from 74 to 84 µs with four (binaries alternated, one run),
+/// so they stay hand-written too.
 #[cfg(target_arch = "x86_64")]
 #[inline]
 fn hand_written(m: usize, n: usize, k: usize) -> bool {
+    crate::simd::avx2_fma() && (!crate::simd::avx512f() || k < 16 || m * n * k <= 16 * 16 * 16)
+}
+
+/// Whether [`gemm_masked`] runs the hand-written AVX2/FMA kernels rather than faer's: on
+/// AVX2-only CPUs and for products of at most 16³ multiply-adds (faer 1.32× at 100×6 by 6×6,
+/// 0.59–0.84× above, shallow ones included: KKT-FO, its caller, took 29–31 µs with them by
+/// faer against 32.4–32.5 µs hand-written, talos_full_v2 with four contacts; setup as
+/// [`hand_written`]).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn hand_written_masked(m: usize, n: usize, k: usize) -> bool {
     crate::simd::avx2_fma() && (!crate::simd::avx512f() || m * n * k <= 16 * 16 * 16)
 }
 
@@ -166,6 +183,8 @@ pub(crate) fn gemm_avx2<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
 
 /// `dst[j + ldd·i] ← src[i + lds·j]` for `i < m`, `j < n`: the transposition of an `m×n`
 /// column-major block with leading dimension `lds` into one with leading dimension `ldd`.
+/// Hand-written: faer 0.24.4's `copy_from(src.transpose())` took 1.68–1.82× its time (50×50,
+/// 50×12, 12×50; interleaved, one run, 2026-11-26, AMD EPYC with AVX-512).
 pub(crate) fn transpose_strided(
     src: &[f64],
     lds: usize,
@@ -225,10 +244,10 @@ unsafe fn transpose_tiles(
 
 /// Whether [`spd_inverse`] of an `m×m` matrix uses faer's Cholesky factorisation and inverse:
 /// where the hand-written Gauss–Jordan [`spd_inverse_in_place`] was not faster by more than
-/// 5 %. faer's time over it (`LLᵀ` + inverse, interleaved, one run, 2026-11-26, AMD EPYC with
-/// AVX-512, `examples/linalg_vs_faer.rs`): m = 6, 12, 18, 24: 2.57, 5.32, 1.18, 2.62×; m = 36:
-/// 2.30×; m = 30, 42, 50: 0.82, 0.85, 0.87× (the hand-written kernel's masked tail loads are
-/// slow beyond its register-resident sizes m ≤ 16 when m is not a multiple of 4).
+/// 5 %. faer 0.24.4's time over it (`LLᵀ` + inverse, interleaved, one run, 2026-11-26, AMD EPYC
+/// with AVX-512, `examples/linalg_vs_faer.rs`): m = 6, 12, 18, 24: 2.48, 5.76, 1.23, 2.17×;
+/// m = 36: 2.07×; m = 30, 42, 50: 0.84, 0.78, 0.75× (the hand-written kernel's masked tail
+/// loads are slow beyond its register-resident sizes m ≤ 16 when m is not a multiple of 4).
 #[inline]
 fn spd_by_faer(m: usize) -> bool {
     m > 24 && !m.is_multiple_of(4)
@@ -366,9 +385,9 @@ pub(crate) fn spd_inverse_in_place(a: &mut [f64], m: usize, tol: f64) -> bool {
     true
 }
 
-/// [`gemm`]; where that is the hand-written AVX2 kernel, the rows beyond the last multiple of
-/// 8 are computed by a masked AVX2/FMA kernel (4-row vectors, the last one masked) instead of
-/// its scalar loops: the same result to rounding.
+/// [`gemm`] (faer's or, see `hand_written_masked`, the hand-written AVX2 kernel, whose rows
+/// beyond the last multiple of 8 are computed by a masked AVX2/FMA kernel, 4-row vectors, the
+/// last one masked, instead of its scalar loops: the same result to rounding).
 pub(crate) fn gemm_masked<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
     alpha: f64,
     a: &Matrix<f64, R1, C1, S1>,
@@ -387,7 +406,7 @@ pub(crate) fn gemm_masked<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
     S3: RawStorageMut<f64, R3, C3>,
 {
     #[cfg(target_arch = "x86_64")]
-    if hand_written(a.nrows(), b.ncols(), a.ncols()) {
+    if hand_written_masked(a.nrows(), b.ncols(), a.ncols()) {
         return gemm_masked_avx2(alpha, a, b, beta, c);
     }
     gemm_faer(alpha, a, b, beta, c)
@@ -522,7 +541,7 @@ pub(crate) struct Gemm4<'a> {
 /// addresses or another output (a null `out[u]` has no accumulate bit); `B[idx[t], u]` (see
 /// [`Gemm4Term`]) is readable for every term, `t` and `u < 4`; every `idx[t] <` its term's
 /// `cols` (checked in debug builds only, as this is called once per group of four columns in
-/// the hot loops of FD-SO).
+/// the hot loops of FD-SO). Hand-written: faer has no product over a list of columns.
 pub(crate) unsafe fn neg_gemm4_sparse(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror: &[*mut f64; 4]) {
     let padded = g.rows.div_ceil(8) * 8;
     // Column `l < cols` is readable up to the padded rows.
