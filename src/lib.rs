@@ -11,6 +11,11 @@
 
 pub mod algo;
 pub mod batch;
+/// Thin wrappers of the crate-private dense kernels for the `linalg_vs_faer` example (feature
+/// `bench-internals`); not part of the API.
+#[cfg(feature = "bench-internals")]
+#[doc(hidden)]
+pub mod bench_internals;
 pub mod deriv;
 pub mod error;
 mod linalg;

@@ -1,13 +1,24 @@
 //! Allocation-free dense matrix products for the derivative algorithms.
 //!
 //! `nalgebra`'s `gemm` forwards large products to `matrixmultiply`, which allocates its packing
-//! buffers on every call; the hot paths use these column-major kernels instead: the portable
-//! versions here, the AVX2/FMA and AVX-512 ones under the same names in `crate::simd::avx2` and
-//! `crate::simd::avx512`, dispatched at run time.
+//! buffers on every call. The hot paths call [`gemm`], which is `faer`'s `matmul` (no
+//! allocation per call), and the hand-written kernels below where an interleaved benchmark
+//! (`examples/linalg_vs_faer.rs`) measured them more than 5 % faster than `faer`: the AVX2
+//! products on CPUs without AVX-512 and the smallest and shallow ones (see `hand_written`), the
+//! SPD inverse at most sizes (see `spd_by_faer`), the transposition, and the sparse 4-column
+//! product of FD-SO (no `faer` equivalent). Their portable versions are here, the AVX2/FMA and
+//! AVX-512 ones under the same names in `crate::simd::avx2` and `crate::simd::avx512`,
+//! dispatched at run time.
 
 use nalgebra::{Dim, Matrix, RawStorage, RawStorageMut};
 
 /// `C ← β C + α A B` for column-major matrices with unit row stride (views allowed).
+///
+/// `faer`'s `matmul` (sequential; no allocation per call: its packing buffer is allocated once
+/// per thread, on the first call), except where the hand-written `crate::simd::avx2::gemm`
+/// measured faster (see `hand_written`): on a CPU with AVX2 but not AVX-512 (or under
+/// [`crate::simd::set_thread_level`]`(Some(Level::Avx2))`), for the smallest products and
+/// those with an inner dimension below 16.
 pub(crate) fn gemm<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
     alpha: f64,
     a: &Matrix<f64, R1, C1, S1>,
@@ -25,6 +36,58 @@ pub(crate) fn gemm<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
     C3: Dim,
     S3: RawStorageMut<f64, R3, C3>,
 {
+    #[cfg(target_arch = "x86_64")]
+    if hand_written(a.nrows(), b.ncols(), a.ncols()) {
+        return gemm_avx2(alpha, a, b, beta, c);
+    }
+    gemm_faer(alpha, a, b, beta, c)
+}
+
+/// Whether an `m×k` by `k×n` [`gemm`] runs the hand-written AVX2/FMA kernel rather than
+/// faer's. Measured (faer 0.24.4, AMD EPYC with AVX-512, 2026-11-26; interleaved, one run,
+/// `examples/linalg_vs_faer.rs`; faer time / hand-written time): with faer's AVX2 back end
+/// 0.84–1.69× over the 23 products benchmarked, above 1.05× on 14, so AVX2-only CPUs keep the
+/// kernel; with AVX-512 0.53–0.96×, except the products of at most 16³ multiply-adds (faer's
+/// `nano-gemm` range: 1.72× at 8×50 by 50×6, the Delassus product of two point contacts).
+/// Products with a shallow inner dimension (`k < 16`: `k` = 3 × contacts) took 0.69–0.96×
+/// alone, but with faer `sodyn bench` impact_fo on talos_full_v2 went from 14.5–14.9 to 16.5 µs
+/// with two contacts and impact_so_c from 74 to 84 µs with four (binaries alternated, one run),
+/// so they stay hand-written too.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn hand_written(m: usize, n: usize, k: usize) -> bool {
+    crate::simd::avx2_fma() && (!crate::simd::avx512f() || k < 16 || m * n * k <= 16 * 16 * 16)
+}
+
+/// Whether [`gemm_masked`] runs the hand-written AVX2/FMA kernels rather than faer's: on
+/// AVX2-only CPUs and for products of at most 16³ multiply-adds (faer 1.32× at 100×6 by 6×6,
+/// 0.59–0.84× above, shallow ones included: KKT-FO, its caller, took 29–31 µs with them by
+/// faer against 32.4–32.5 µs hand-written, talos_full_v2 with four contacts; setup as
+/// [`hand_written`]).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn hand_written_masked(m: usize, n: usize, k: usize) -> bool {
+    crate::simd::avx2_fma() && (!crate::simd::avx512f() || m * n * k <= 16 * 16 * 16)
+}
+
+/// Checked shapes and unit row strides of a product `C (m×n) ← A (m×k) B (k×n)`: `(m, n, k)`
+/// and the leading dimensions of `A`, `B`, `C`.
+fn gemm_dims<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
+    a: &Matrix<f64, R1, C1, S1>,
+    b: &Matrix<f64, R2, C2, S2>,
+    c: &Matrix<f64, R3, C3, S3>,
+) -> ([usize; 3], [usize; 3])
+where
+    R1: Dim,
+    C1: Dim,
+    S1: RawStorage<f64, R1, C1>,
+    R2: Dim,
+    C2: Dim,
+    S2: RawStorage<f64, R2, C2>,
+    R3: Dim,
+    C3: Dim,
+    S3: RawStorage<f64, R3, C3>,
+{
     let (m, k) = a.shape();
     let (k2, n) = b.shape();
     assert!(k == k2 && c.shape() == (m, n), "gemm: dimension mismatch");
@@ -32,82 +95,96 @@ pub(crate) fn gemm<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
     let (rb, ldb) = b.strides();
     let (rc, ldc) = c.strides();
     assert!(ra == 1 && rb == 1 && rc == 1, "gemm: unit row stride required");
+    ([m, n, k], [lda, ldb, ldc])
+}
+
+/// [`gemm`] by `faer::linalg::matmul::matmul` (`Par::Seq`): `β = 0` replaces `C`, `β = 1` adds
+/// to it, another `β` scales `C` first.
+fn gemm_faer<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
+    alpha: f64,
+    a: &Matrix<f64, R1, C1, S1>,
+    b: &Matrix<f64, R2, C2, S2>,
+    beta: f64,
+    c: &mut Matrix<f64, R3, C3, S3>,
+) where
+    R1: Dim,
+    C1: Dim,
+    S1: RawStorage<f64, R1, C1>,
+    R2: Dim,
+    C2: Dim,
+    S2: RawStorage<f64, R2, C2>,
+    R3: Dim,
+    C3: Dim,
+    S3: RawStorageMut<f64, R3, C3>,
+{
+    let ([m, n, k], [lda, ldb, ldc]) = gemm_dims(a, b, c);
     if m == 0 || n == 0 {
         return;
     }
-    let pa = a.as_ptr();
-    let pb = b.as_ptr();
-    let pc = c.as_mut_ptr();
-    // SAFETY: the pointers and strides come from live nalgebra matrices of the asserted shapes;
-    // every access below stays within (rows < m, cols < k or n) of its matrix.
-    unsafe {
-        #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2_fma() {
-            return crate::simd::avx2::gemm(alpha, pa, lda, pb, ldb, beta, pc, ldc, m, n, k);
+    let accum = if beta == 0.0 {
+        faer::Accum::Replace
+    } else {
+        if beta != 1.0 {
+            for j in 0..n {
+                // SAFETY: column j of `c` holds m values from `j ldc` (shape and strides asserted).
+                let col = unsafe { std::slice::from_raw_parts_mut(c.as_mut_ptr().add(j * ldc), m) };
+                col.iter_mut().for_each(|x| *x *= beta);
+            }
         }
-        gemm_generic(alpha, pa, lda, pb, ldb, beta, pc, ldc, m, n, k)
-    }
+        faer::Accum::Add
+    };
+    // SAFETY: the pointers, shapes and (unit row, `ld` column) strides are those of live
+    // nalgebra matrices of the asserted shapes; `c` is borrowed mutably, so it overlaps
+    // neither `a` nor `b`.
+    let (fa, fb, fc) = unsafe {
+        (
+            faer::MatRef::from_raw_parts(a.as_ptr(), m, k, 1, lda as isize),
+            faer::MatRef::from_raw_parts(b.as_ptr(), k, n, 1, ldb as isize),
+            faer::MatMut::from_raw_parts_mut(c.as_mut_ptr(), m, n, 1, ldc as isize),
+        )
+    };
+    faer::linalg::matmul::matmul(fc, accum, fa, fb, alpha, faer::Par::Seq);
 }
 
-/// Column `j` of `C` is updated with four columns of `A` at a time (register blocking), the
-/// inner loop running down contiguous columns so that it vectorises.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-unsafe fn gemm_generic(
+/// [`gemm`] by the hand-written AVX2/FMA kernel (`crate::simd::avx2::gemm`), whatever the
+/// thread's SIMD level.
+///
+/// # Panics
+/// If the CPU lacks AVX2 or FMA, or on a dimension mismatch.
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn gemm_avx2<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
     alpha: f64,
-    a: *const f64,
-    lda: usize,
-    b: *const f64,
-    ldb: usize,
+    a: &Matrix<f64, R1, C1, S1>,
+    b: &Matrix<f64, R2, C2, S2>,
     beta: f64,
-    c: *mut f64,
-    ldc: usize,
-    m: usize,
-    n: usize,
-    k: usize,
-) {
-    // SAFETY: the caller upholds this function's contract: `a`, `b`, `c` are valid for their m×k,
-    // k×n and m×n blocks with the given leading dimensions.
-    unsafe {
-        for j in 0..n {
-            let cj = std::slice::from_raw_parts_mut(c.add(j * ldc), m);
-            if beta == 0.0 {
-                cj.fill(0.0);
-            } else if beta != 1.0 {
-                cj.iter_mut().for_each(|x| *x *= beta);
-            }
-            let bj = b.add(j * ldb);
-            let mut l = 0;
-            while l + 4 <= k {
-                let (b0, b1, b2, b3) = (
-                    alpha * *bj.add(l),
-                    alpha * *bj.add(l + 1),
-                    alpha * *bj.add(l + 2),
-                    alpha * *bj.add(l + 3),
-                );
-                let a0 = std::slice::from_raw_parts(a.add(l * lda), m);
-                let a1 = std::slice::from_raw_parts(a.add((l + 1) * lda), m);
-                let a2 = std::slice::from_raw_parts(a.add((l + 2) * lda), m);
-                let a3 = std::slice::from_raw_parts(a.add((l + 3) * lda), m);
-                for i in 0..m {
-                    cj[i] += a0[i] * b0 + a1[i] * b1 + a2[i] * b2 + a3[i] * b3;
-                }
-                l += 4;
-            }
-            while l < k {
-                let bl = alpha * *bj.add(l);
-                let al = std::slice::from_raw_parts(a.add(l * lda), m);
-                for i in 0..m {
-                    cj[i] += al[i] * bl;
-                }
-                l += 1;
-            }
-        }
+    c: &mut Matrix<f64, R3, C3, S3>,
+) where
+    R1: Dim,
+    C1: Dim,
+    S1: RawStorage<f64, R1, C1>,
+    R2: Dim,
+    C2: Dim,
+    S2: RawStorage<f64, R2, C2>,
+    R3: Dim,
+    C3: Dim,
+    S3: RawStorageMut<f64, R3, C3>,
+{
+    let ([m, n, k], [lda, ldb, ldc]) = gemm_dims(a, b, c);
+    assert!(crate::simd::detected() >= crate::simd::Level::Avx2, "gemm_avx2: no AVX2/FMA");
+    if m == 0 || n == 0 {
+        return;
     }
+    let (pa, pb, pc) = (a.as_ptr(), b.as_ptr(), c.as_mut_ptr());
+    // SAFETY: AVX2 and FMA are available (asserted); the pointers and strides come from live
+    // nalgebra matrices of the asserted shapes; every access stays within (rows < m, cols < k
+    // or n) of its matrix.
+    unsafe { crate::simd::avx2::gemm(alpha, pa, lda, pb, ldb, beta, pc, ldc, m, n, k) }
 }
 
 /// `dst[j + ldd·i] ← src[i + lds·j]` for `i < m`, `j < n`: the transposition of an `m×n`
 /// column-major block with leading dimension `lds` into one with leading dimension `ldd`.
+/// Hand-written: faer 0.24.4's `copy_from(src.transpose())` took 1.68–1.82× its time (50×50,
+/// 50×12, 12×50; interleaved, one run, 2026-11-26, AMD EPYC with AVX-512).
 pub(crate) fn transpose_strided(
     src: &[f64],
     lds: usize,
@@ -165,13 +242,110 @@ unsafe fn transpose_tiles(
     }
 }
 
+/// Whether [`spd_inverse`] of an `m×m` matrix uses faer's Cholesky factorisation and inverse:
+/// where the hand-written Gauss–Jordan [`spd_inverse_in_place`] was not faster by more than
+/// 5 %. faer 0.24.4's time over it (`LLᵀ` + inverse, interleaved, one run, 2026-11-26, AMD EPYC
+/// with AVX-512, `examples/linalg_vs_faer.rs`): m = 6, 12, 18, 24: 2.48, 5.76, 1.23, 2.17×;
+/// m = 36: 2.07×; m = 30, 42, 50: 0.84, 0.78, 0.75× (the hand-written kernel's masked tail
+/// loads are slow beyond its register-resident sizes m ≤ 16 when m is not a multiple of 4).
+#[inline]
+fn spd_by_faer(m: usize) -> bool {
+    m > 24 && !m.is_multiple_of(4)
+}
+
+/// Workspace of [`spd_inverse`] for `m×m` matrices: faer's stack where [`spd_by_faer`], empty
+/// otherwise (allocated once).
+pub(crate) struct SpdWork {
+    m: usize,
+    stack: faer::dyn_stack::MemBuffer,
+}
+
+impl SpdWork {
+    /// The workspace of [`spd_inverse`] for `m×m` matrices.
+    pub(crate) fn new(m: usize) -> Self {
+        use faer::linalg::cholesky::llt;
+        let req = if spd_by_faer(m) {
+            let par = faer::Par::Seq;
+            llt::factor::cholesky_in_place_scratch::<f64>(m, par, Default::default())
+                .or(llt::inverse::inverse_scratch::<f64>(m, par))
+        } else {
+            faer::dyn_stack::StackReq::EMPTY
+        };
+        Self { m, stack: faer::dyn_stack::MemBuffer::new(req) }
+    }
+}
+
+impl Clone for SpdWork {
+    fn clone(&self) -> Self {
+        Self::new(self.m)
+    }
+}
+
+impl std::fmt::Debug for SpdWork {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SpdWork").field("m", &self.m).finish_non_exhaustive()
+    }
+}
+
+/// `inv ← a⁻¹` for a symmetric positive-definite `m×m` matrix `a` (column-major, full
+/// storage), `a` being overwritten (by its Cholesky factor when [`spd_by_faer`]): faer's `LLᵀ`
+/// factorisation and inverse, or the hand-written [`spd_inverse_in_place`] (see
+/// [`spd_by_faer`]). `false`, with `inv` partly overwritten, if a pivot of the successive Schur
+/// complements (the squared Cholesky diagonal) is not above `tol` (or is NaN).
+///
+/// # Panics
+/// If the lengths are not `m²` or `work` was made for another size.
+pub(crate) fn spd_inverse(
+    a: &mut [f64],
+    inv: &mut [f64],
+    m: usize,
+    tol: f64,
+    work: &mut SpdWork,
+) -> bool {
+    assert!(
+        a.len() == m * m && inv.len() == m * m && work.m == m,
+        "spd_inverse: dimension mismatch"
+    );
+    if !spd_by_faer(m) {
+        inv.copy_from_slice(a);
+        return spd_inverse_in_place(inv, m, tol);
+    }
+    use faer::linalg::cholesky::llt;
+    let stack = faer::dyn_stack::MemStack::new(&mut work.stack);
+    let mut l = faer::MatMut::from_column_major_slice_mut(a, m, m);
+    let par = faer::Par::Seq;
+    let reg = Default::default();
+    if llt::factor::cholesky_in_place(l.as_mut(), reg, par, stack, Default::default()).is_err()
+        || (0..m).any(|k| {
+            let d = l[(k, k)] * l[(k, k)];
+            d.is_nan() || d <= tol
+        })
+    {
+        return false;
+    }
+    llt::inverse::inverse(
+        faer::MatMut::from_column_major_slice_mut(inv, m, m),
+        l.as_ref(),
+        par,
+        stack,
+    );
+    // faer writes the lower triangle; mirror it.
+    for j in 1..m {
+        for i in 0..j {
+            inv[i + m * j] = inv[j + m * i];
+        }
+    }
+    true
+}
+
 /// In-place inverse of a symmetric positive-definite `m×m` matrix `a` (column-major, full
 /// storage) by Gauss–Jordan elimination without pivoting: pivot `k` maps
 /// `a_ij ← a_ij − a_ik a_kj / d`, `a_kj ← a_kj / d`, `a_ik ← −a_ik / d`, `a_kk ← 1/d` with
 /// `d = a_kk`; after all pivots `a` holds `a⁻¹`. The pivots are the diagonal entries of the
 /// successive Schur complements (the squared Cholesky diagonal), so `false` is returned, with
 /// `a` partly overwritten, as soon as one is not above `tol` (or is NaN). Whole columns are
-/// updated per pivot (rank-one updates), which vectorises.
+/// updated per pivot (rank-one updates), which vectorises. Used by [`spd_inverse`] where it
+/// measured faster than faer (see [`spd_by_faer`]).
 pub(crate) fn spd_inverse_in_place(a: &mut [f64], m: usize, tol: f64) -> bool {
     assert!(a.len() == m * m, "spd_inverse_in_place: dimension mismatch");
     #[cfg(target_arch = "x86_64")]
@@ -211,8 +385,9 @@ pub(crate) fn spd_inverse_in_place(a: &mut [f64], m: usize, tol: f64) -> bool {
     true
 }
 
-/// [`gemm`] whose rows beyond the last multiple of 8 are computed by a masked AVX2/FMA kernel
-/// (4-row vectors, the last one masked) instead of scalar loops; the same result to rounding.
+/// [`gemm`] (faer's or, see `hand_written_masked`, the hand-written AVX2 kernel, whose rows
+/// beyond the last multiple of 8 are computed by a masked AVX2/FMA kernel, 4-row vectors, the
+/// last one masked, instead of its scalar loops: the same result to rounding).
 pub(crate) fn gemm_masked<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
     alpha: f64,
     a: &Matrix<f64, R1, C1, S1>,
@@ -230,40 +405,62 @@ pub(crate) fn gemm_masked<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
     C3: Dim,
     S3: RawStorageMut<f64, R3, C3>,
 {
-    let (m, k) = a.shape();
-    let (k2, n) = b.shape();
-    assert!(k == k2 && c.shape() == (m, n), "gemm_masked: dimension mismatch");
-    let m8 = m - m % 8;
     #[cfg(target_arch = "x86_64")]
-    if m8 < m && n > 0 && crate::simd::avx2_fma() {
-        let (ra, lda) = a.strides();
-        let (rb, ldb) = b.strides();
-        let (rc, ldc) = c.strides();
-        assert!(ra == 1 && rb == 1 && rc == 1, "gemm_masked: unit row stride required");
-        if m8 > 0 {
-            gemm(alpha, &a.rows(0, m8), b, beta, &mut c.rows_mut(0, m8));
-        }
-        // SAFETY: AVX2 and FMA are available; the tail kernel reads rows m8..m of `a` (k
-        // columns), the k × n block of `b` and writes rows m8..m of the n columns of `c`, all
-        // inside the live matrices of the asserted shapes and strides.
-        unsafe {
-            crate::simd::avx2::gemm_tail(
-                alpha,
-                a.as_ptr().add(m8),
-                lda,
-                b.as_ptr(),
-                ldb,
-                beta,
-                c.as_mut_ptr().add(m8),
-                ldc,
-                m - m8,
-                n,
-                k,
-            )
-        };
-        return;
+    if hand_written_masked(a.nrows(), b.ncols(), a.ncols()) {
+        return gemm_masked_avx2(alpha, a, b, beta, c);
     }
-    gemm(alpha, a, b, beta, c);
+    gemm_faer(alpha, a, b, beta, c)
+}
+
+/// [`gemm_masked`] by the hand-written AVX2/FMA kernels, whatever the thread's SIMD level.
+///
+/// # Panics
+/// If the CPU lacks AVX2 or FMA, or on a dimension mismatch.
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn gemm_masked_avx2<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
+    alpha: f64,
+    a: &Matrix<f64, R1, C1, S1>,
+    b: &Matrix<f64, R2, C2, S2>,
+    beta: f64,
+    c: &mut Matrix<f64, R3, C3, S3>,
+) where
+    R1: Dim,
+    C1: Dim,
+    S1: RawStorage<f64, R1, C1>,
+    R2: Dim,
+    C2: Dim,
+    S2: RawStorage<f64, R2, C2>,
+    R3: Dim,
+    C3: Dim,
+    S3: RawStorageMut<f64, R3, C3>,
+{
+    let ([m, n, k], [lda, ldb, ldc]) = gemm_dims(a, b, c);
+    let m8 = m - m % 8;
+    if m8 == m || n == 0 {
+        return gemm_avx2(alpha, a, b, beta, c);
+    }
+    if m8 > 0 {
+        gemm_avx2(alpha, &a.rows(0, m8), b, beta, &mut c.rows_mut(0, m8));
+    }
+    assert!(crate::simd::detected() >= crate::simd::Level::Avx2, "gemm_masked: no AVX2/FMA");
+    // SAFETY: AVX2 and FMA are available (asserted); the tail kernel reads rows m8..m of `a`
+    // (k columns), the k × n block of `b` and writes rows m8..m of the n columns of `c`, all
+    // inside the live matrices of the asserted shapes and strides.
+    unsafe {
+        crate::simd::avx2::gemm_tail(
+            alpha,
+            a.as_ptr().add(m8),
+            lda,
+            b.as_ptr(),
+            ldb,
+            beta,
+            c.as_mut_ptr().add(m8),
+            ldc,
+            m - m8,
+            n,
+            k,
+        )
+    };
 }
 
 /// Cache level hint of [`prefetch`]: into L1 (and L2).
@@ -297,7 +494,7 @@ pub(crate) use crate::simd::{Gemm4, Gemm4Term};
 /// addresses or another output (a null `out[u]` has no accumulate bit); `B[idx[t], u]` (see
 /// [`Gemm4Term`]) is readable for every term, `t` and `u < 4`; every `idx[t] <` its term's
 /// `cols` (checked in debug builds only, as this is called once per group of four columns in
-/// the hot loops of FD-SO).
+/// the hot loops of FD-SO). Hand-written: faer has no product over a list of columns.
 pub(crate) unsafe fn neg_gemm4_sparse(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror: &[*mut f64; 4]) {
     let padded = g.rows.div_ceil(8) * 8;
     // Column `l < cols` is readable up to the padded rows.
@@ -369,27 +566,55 @@ pub(crate) fn neg(a: &mut nalgebra::DMatrix<f64>) {
 
 #[cfg(test)]
 mod tests {
-    use super::{gemm, spd_inverse_in_place};
+    use super::{SpdWork, gemm, gemm_masked, spd_inverse, spd_inverse_in_place};
     use crate::rng::Rng;
     use nalgebra::DMatrix;
 
-    /// `α A B + β C` against nalgebra's product, for shapes with every row tail (`m mod 8`) and
-    /// column tail (`n mod 6`) of the register-blocked kernels, and for β = 0, 1 and −0.5.
+    /// `α A B + β C` by [`gemm`] and [`gemm_masked`] against nalgebra's product, at every SIMD
+    /// level of this CPU (faer's product, and the hand-written AVX2 kernels), for shapes with
+    /// every row tail (`m mod 8`) and column tail (`n mod 6`) of the register-blocked kernels,
+    /// above and below faer's small-product threshold, and for β = 0, 1 and −0.5.
     #[test]
     fn gemm_matches_nalgebra() {
+        use crate::simd::{Level, detected, set_thread_level};
         let mut rng = Rng::new(12);
-        for (m, n, k) in [(1, 1, 1), (7, 5, 3), (8, 6, 4), (13, 11, 9), (50, 50, 50), (51, 47, 6)] {
-            let a = DMatrix::from_fn(m, k, |_, _| rng.range(-1.0, 1.0));
-            let b = DMatrix::from_fn(k, n, |_, _| rng.range(-1.0, 1.0));
-            let c0 = DMatrix::from_fn(m, n, |_, _| rng.range(-1.0, 1.0));
-            for (alpha, beta) in [(1.0, 0.0), (-2.0, 1.0), (0.7, -0.5)] {
-                let mut c = c0.clone();
-                gemm(alpha, &a, &b, beta, &mut c);
-                let want = &a * &b * alpha + &c0 * beta;
-                let err = (&c - &want).abs().max();
-                assert!(err < 1e-12, "m, n, k = {m}, {n}, {k}, β = {beta}: error {err:e}");
+        for level in [Level::Portable, Level::Avx2, Level::Avx512] {
+            if level > detected() {
+                continue;
+            }
+            set_thread_level(Some(level));
+            for (m, n, k) in [
+                (1, 1, 1),
+                (7, 5, 3),
+                (8, 6, 4),
+                (13, 11, 9),
+                (50, 50, 50),
+                (51, 47, 6),
+                (100, 12, 50),
+            ] {
+                let a = DMatrix::from_fn(m, k, |_, _| rng.range(-1.0, 1.0));
+                let b = DMatrix::from_fn(k, n, |_, _| rng.range(-1.0, 1.0));
+                let c0 = DMatrix::from_fn(m, n, |_, _| rng.range(-1.0, 1.0));
+                for (alpha, beta) in [(1.0, 0.0), (-2.0, 1.0), (0.7, -0.5)] {
+                    let want = &a * &b * alpha + &c0 * beta;
+                    for masked in [false, true] {
+                        let mut c = c0.clone();
+                        if masked {
+                            gemm_masked(alpha, &a, &b, beta, &mut c);
+                        } else {
+                            gemm(alpha, &a, &b, beta, &mut c);
+                        }
+                        let err = (&c - &want).abs().max();
+                        assert!(
+                            err < 1e-12,
+                            "{level:?}, masked {masked}, m, n, k = {m}, {n}, {k}, β = {beta}: \
+                             error {err:e}"
+                        );
+                    }
+                }
             }
         }
+        set_thread_level(None);
     }
 
     /// The Gauss–Jordan inverse of random SPD matrices (sizes with and without a ragged
@@ -406,6 +631,22 @@ mod tests {
             assert!(err < 1e-10, "m = {m}: |A A⁻¹ − I| = {err:e}");
             let asym = (&inv - inv.transpose()).abs().max();
             assert!(asym < 1e-10, "m = {m}: inverse not symmetric ({asym:e})");
+        }
+        // spd_inverse: the hand-written kernel and faer's Cholesky inverse (m > 24, m mod 4 ≠ 0).
+        for m in [12, 25, 30, 36, 50] {
+            let b = DMatrix::from_fn(m, m, |_, _| rng.range(-1.0, 1.0));
+            let a = &b * b.transpose() + DMatrix::identity(m, m) * 0.1;
+            let (mut f, mut inv) = (a.clone(), DMatrix::zeros(m, m));
+            let mut work = SpdWork::new(m).clone();
+            assert!(spd_inverse(f.as_mut_slice(), inv.as_mut_slice(), m, 1e-12, &mut work));
+            let err = (&a * &inv - DMatrix::identity(m, m)).abs().max();
+            assert!(err < 1e-9, "m = {m}: |A A⁻¹ − I| = {err:e}");
+            let asym = (&inv - inv.transpose()).abs().max();
+            assert!(asym < 1e-10, "m = {m}: inverse not symmetric ({asym:e})");
+            // Rank m − 1: rejected.
+            let c = b.columns(0, m - 1);
+            let mut s = c * c.transpose();
+            assert!(!spd_inverse(s.as_mut_slice(), inv.as_mut_slice(), m, 1e-12, &mut work));
         }
         // Rank 2 in 3 dimensions: the third pivot vanishes.
         let b = DMatrix::from_row_slice(3, 2, &[1.0, 0.0, 0.0, 1.0, 1.0, 1.0]);

@@ -53,7 +53,7 @@ use super::zero::{IdfozaWs, idfoza_core, idfoza_lanes_core};
 use crate::algo::internal::ltl_solve_rows_desc;
 use crate::algo::{Contact, Data};
 use crate::error::{Error, Result};
-use crate::linalg::{gemm, spd_inverse_in_place, transpose_strided};
+use crate::linalg::{SpdWork, gemm, spd_inverse, transpose_strided};
 use crate::model::{Model, contact_label};
 #[cfg(target_arch = "x86_64")]
 use crate::simd::{Avx4, Avx8};
@@ -85,7 +85,10 @@ pub struct ContactData {
     /// `Y = M⁻¹Jᵀ`, rows padded with zeros to a multiple of 8 (`np × m`).
     pub(crate) y: DMatrix<f64>,
     pub(crate) lam: DMatrix<f64>,
+    /// The (damped) Delassus matrix, overwritten by the inverse's factorisation.
     pub(crate) del: DMatrix<f64>,
+    /// Workspace of the Delassus inverse (`m × m`).
+    spd: SpdWork,
     pub(crate) sol: DVector<f64>,
     pub(crate) rinv: DMatrix<f64>,
     pub(crate) g: DMatrix<f64>,
@@ -276,6 +279,7 @@ impl ContactData {
             y: DMatrix::zeros(padded_rows(n), m),
             lam: DMatrix::zeros(m, m),
             del: DMatrix::zeros(m, m),
+            spd: SpdWork::new(m),
             sol: DVector::zeros(n + m),
             rinv: DMatrix::zeros(n + m, n + m),
             g: DMatrix::zeros(n + m, n),
@@ -585,8 +589,7 @@ pub(crate) fn factor_delassus(
         cd.del[(c, c)] += cd.damping;
     }
     let scale = (0..m).map(|i| cd.del[(i, i)].abs()).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
-    cd.lam.copy_from(&cd.del);
-    if !spd_inverse_in_place(cd.lam.as_mut_slice(), m, 1e-11 * scale) {
+    if !spd_inverse(cd.del.as_mut_slice(), cd.lam.as_mut_slice(), m, 1e-11 * scale, &mut cd.spd) {
         return Err(Error::Singular {
             what: "contact set".into(),
             detail: format!(
