@@ -425,6 +425,41 @@ impl Model {
         Ok(())
     }
 
+    /// `q₁ ⊖ q₀` ([`Model::difference`]) into `out` (length `nv`) without allocating.
+    ///
+    /// # Errors
+    /// As [`Model::difference`]; `out` not of length `nv`.
+    pub fn difference_into(
+        &self,
+        q0: &DVector<f64>,
+        q1: &DVector<f64>,
+        out: &mut DVector<f64>,
+    ) -> Result<()> {
+        self.check_q(q0)?;
+        self.check_q(q1).map_err(|e| match e {
+            crate::error::Error::Dimension { expected, got, .. } => {
+                crate::error::Error::Dimension { what: "q1".into(), expected, got }
+            }
+            e => e,
+        })?;
+        if out.len() != self.nv {
+            return Err(crate::error::Error::Dimension {
+                what: "out".into(),
+                expected: self.nv,
+                got: out.len(),
+            });
+        }
+        for i in 1..self.njoints() {
+            let (a, n, b, m) = (self.idx_q[i], self.nqs[i], self.idx_v[i], self.nvs[i]);
+            self.joints[i].difference(
+                &q0.as_slice()[a..a + n],
+                &q1.as_slice()[a..a + n],
+                &mut out.as_mut_slice()[b..b + m],
+            );
+        }
+        Ok(())
+    }
+
     fn check_square(&self, out: &DMatrix<f64>) -> Result<()> {
         if out.shape() != (self.nv, self.nv) {
             return Err(crate::error::Error::Dimension {
