@@ -174,12 +174,19 @@ pub fn frame_jacobian(
     }
     let omf = frame_placement(model, data, q, frame)?;
     let joint = model.frames[frame].joint;
-    jac.fill(0.0);
+    let out = jac.as_mut_slice();
+    out.fill(0.0);
     let mut j = joint;
     while j > 0 {
-        let x = data.o_m_i[j];
-        for c in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
-            let s0 = x.act_motion(&model.subspace[c]);
+        let (x, kin) = (&data.o_m_i[j], &model.kin[j]);
+        for c in kin.idx_v..kin.idx_v + kin.nv {
+            // A revolute joint about ±e_k: S = [±e_k; 0], in the world [±R e_k; p × ±R e_k].
+            let s0 = if kin.axis < 3 {
+                let w = x.rot.column(kin.axis) * kin.sign;
+                Motion::new(w, x.trans.cross(&w))
+            } else {
+                x.act_motion(&model.subspace[c])
+            };
             let col = match rf {
                 ReferenceFrame::World => s0,
                 ReferenceFrame::Local => omf.inv_act_motion(&s0),
@@ -187,12 +194,11 @@ pub fn frame_jacobian(
                     Motion::new(s0.ang, s0.lin + s0.ang.cross(&omf.trans))
                 }
             };
-            for r in 0..3 {
-                jac[(r, c)] = col.ang[r];
-                jac[(3 + r, c)] = col.lin[r];
-            }
+            let dst = &mut out[6 * c..6 * c + 6];
+            dst[..3].copy_from_slice(col.ang.as_slice());
+            dst[3..].copy_from_slice(col.lin.as_slice());
         }
-        j = model.parents[j];
+        j = kin.parent;
     }
     Ok(())
 }

@@ -18,7 +18,7 @@
 //! differentiation of the reference integrator, central differences and Pinocchio.
 
 use super::joint::JointType;
-use super::tree::Model;
+use super::tree::{JointKin, Model};
 use crate::error::Result;
 use crate::spatial::{Motion, Transform, skew};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Rotation3, UnitQuaternion, Vector3};
@@ -278,14 +278,20 @@ impl JointType {
     /// # Panics
     /// If `q0` or `q1` is shorter than `nq()` or `out` than `nv()²`.
     pub fn d_difference(&self, q0: &[f64], q1: &[f64], arg: Arg, out: &mut [f64]) {
+        let _ = (&q0[..self.nq()], &q1[..self.nq()]);
+        if let JointType::Revolute { .. }
+        | JointType::Continuous { .. }
+        | JointType::Prismatic { .. } = *self
+        {
+            out[0] = if arg == Arg::First { -1.0 } else { 1.0 };
+            return;
+        }
         let mut d = [0.0; 6];
         self.difference(q0, q1, &mut d[..self.nv()]);
         match *self {
             JointType::Revolute { .. }
             | JointType::Continuous { .. }
-            | JointType::Prismatic { .. } => {
-                out[0] = if arg == Arg::First { -1.0 } else { 1.0 };
-            }
+            | JointType::Prismatic { .. } => unreachable!("handled above"),
             JointType::Spherical => {
                 let w = Vector3::new(d[0], d[1], d[2]);
                 let ji = jr3_inv(&w);
@@ -300,8 +306,25 @@ impl JointType {
                 let ji = jr6_inv(&w, &v);
                 let m = match arg {
                     Arg::First => {
-                        let t = exp6(&Motion::new(w, v));
-                        -ji * ad_inv(&t.rot, &t.trans)
+                        // exp6(d) = M₀⁻¹ M₁ = (R₀ᵀ R₁, R₀ᵀ (p₁ − p₀)), taken from q directly;
+                        // ji = [[A, 0], [B, A]], Ad⁻¹ = [[Rᵀ, 0], [C, Rᵀ]]: the product by
+                        // blocks.
+                        let (r0, r1) = (quat(&q0[3..7]), quat(&q1[3..7]));
+                        let rt = (r0.inverse() * r1).to_rotation_matrix().into_inner().transpose();
+                        let p = r0.inverse_transform_vector(&Vector3::new(
+                            q1[0] - q0[0],
+                            q1[1] - q0[1],
+                            q1[2] - q0[2],
+                        ));
+                        let a = ji.fixed_view::<3, 3>(0, 0).into_owned();
+                        let b = ji.fixed_view::<3, 3>(3, 0).into_owned();
+                        let c = -rt * skew(&p);
+                        let (art, low) = (a * rt, b * rt + a * c);
+                        let mut m = Matrix6::zeros();
+                        m.fixed_view_mut::<3, 3>(0, 0).copy_from(&-art);
+                        m.fixed_view_mut::<3, 3>(3, 3).copy_from(&-art);
+                        m.fixed_view_mut::<3, 3>(3, 0).copy_from(&-low);
+                        m
                     }
                     Arg::Second => ji,
                 };
@@ -323,6 +346,24 @@ impl JointType {
                     Arg::Second => put_rows(out, 3, &ji, 1.0),
                 }
             }
+        }
+    }
+}
+
+/// The unit quaternion of `[x, y, z, w]` (normalised).
+fn quat(s: &[f64]) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(s[3], s[0], s[1], s[2]))
+}
+
+/// The `m × m` column-major block `blk` at rows and columns `b..b + m` of `out`.
+#[inline]
+fn put_block(out: &mut DMatrix<f64>, b: usize, m: usize, blk: &[f64; 36]) {
+    let n = out.nrows();
+    let o = out.as_mut_slice();
+    for c in 0..m {
+        let col = &mut o[(b + c) * n + b..(b + c) * n + b + m];
+        for (x, y) in col.iter_mut().zip(&blk[c * m..c * m + m]) {
+            *x = *y;
         }
     }
 }
@@ -356,20 +397,43 @@ impl Model {
         arg: Arg,
         out: &mut DMatrix<f64>,
     ) -> Result<()> {
+        self.check_square(out)?;
+        out.as_mut_slice().fill(0.0);
+        self.d_integrate_blocks_into(q, delta, arg, out)
+    }
+
+    /// [`Model::d_integrate_into`] without zeroing `out`: writes its diagonal blocks (one per
+    /// joint) only and leaves the other entries as they are, as Pinocchio's `dIntegrate` does
+    /// (zero `out` once, then call this on every state).
+    ///
+    /// # Errors
+    /// As [`Model::d_integrate_into`].
+    pub fn d_integrate_blocks_into(
+        &self,
+        q: &DVector<f64>,
+        delta: &DVector<f64>,
+        arg: Arg,
+        out: &mut DMatrix<f64>,
+    ) -> Result<()> {
         self.check_q(q)?;
         self.check_v("delta", delta)?;
         self.check_square(out)?;
-        out.as_mut_slice().fill(0.0);
         let mut blk = [0.0; 36];
+        let nv = self.nv;
         for i in 1..self.njoints() {
-            let (a, n, b, m) = (self.idx_q[i], self.nqs[i], self.idx_v[i], self.nvs[i]);
+            let JointKin { idx_q: a, nq: n, idx_v: b, nv: m, .. } = self.kin[i];
+            if m == 1 {
+                // Revolute, continuous, prismatic: 1.
+                out.as_mut_slice()[b * nv + b] = 1.0;
+                continue;
+            }
             self.joints[i].d_integrate(
                 &q.as_slice()[a..a + n],
                 &delta.as_slice()[b..b + m],
                 arg,
                 &mut blk,
             );
-            out.view_mut((b, b), (m, m)).copy_from_slice(&blk[..m * m]);
+            put_block(out, b, m, &blk);
         }
         Ok(())
     }
@@ -411,16 +475,46 @@ impl Model {
         })?;
         self.check_square(out)?;
         out.as_mut_slice().fill(0.0);
+        self.d_difference_blocks_into(q0, q1, arg, out)
+    }
+
+    /// [`Model::d_difference_into`] without zeroing `out`: writes its diagonal blocks (one per
+    /// joint) only and leaves the other entries as they are, as Pinocchio's `dDifference` does
+    /// (zero `out` once, then call this on every state).
+    ///
+    /// # Errors
+    /// As [`Model::d_difference_into`].
+    pub fn d_difference_blocks_into(
+        &self,
+        q0: &DVector<f64>,
+        q1: &DVector<f64>,
+        arg: Arg,
+        out: &mut DMatrix<f64>,
+    ) -> Result<()> {
+        self.check_q(q0)?;
+        self.check_q(q1).map_err(|e| match e {
+            crate::error::Error::Dimension { expected, got, .. } => {
+                crate::error::Error::Dimension { what: "q1".into(), expected, got }
+            }
+            e => e,
+        })?;
+        self.check_square(out)?;
         let mut blk = [0.0; 36];
+        let (nv, one) = (self.nv, if arg == Arg::First { -1.0 } else { 1.0 });
         for i in 1..self.njoints() {
-            let (a, n, b, m) = (self.idx_q[i], self.nqs[i], self.idx_v[i], self.nvs[i]);
+            let JointKin { idx_q: a, nq: n, idx_v: b, nv: m, .. } = self.kin[i];
+            if m == 1 {
+                // Revolute, continuous, prismatic: ∓1.
+                out.as_mut_slice()[b * nv + b] = one;
+                continue;
+            }
             self.joints[i].d_difference(
                 &q0.as_slice()[a..a + n],
                 &q1.as_slice()[a..a + n],
                 arg,
                 &mut blk,
             );
-            out.view_mut((b, b), (m, m)).copy_from_slice(&blk[..m * m]);
+            put_block(out, b, m, &blk);
         }
         Ok(())
     }

@@ -66,7 +66,9 @@ frame_jacobian_derivative (local), frame_placement_hessian), com, com_jacobian, 
 com_velocity_derivatives, centroidal_momentum, centroidal_dynamics_derivatives, difference, \
 d_integrate_q, d_integrate_v, d_difference_q0, d_difference_q1 (the q1 of difference and \
 d_difference_* is the next state's q; the _q/_v/_q0/_q1 suffix names the argument, Pinocchio's \
-ARG0/ARG1), batch_rnea, batch_aba, batch_id_fo, batch_fd_fo (the batched \
+ARG0/ARG1; d_integrate_* and d_difference_* time Model::d_integrate_blocks_into and \
+d_difference_blocks_into, which write the diagonal blocks only, as Pinocchio's dIntegrate and \
+dDifference do), batch_rnea, batch_aba, batch_id_fo, batch_fd_fo (the batched \
 entry points, time per state) and, with --contacts, kkt_fo, kkt_so, kkt_so_c, impact_fo, \
 impact_so, impact_so_c.";
 
@@ -978,7 +980,7 @@ fn time_kin(
         "d_integrate_q" | "d_integrate_v" => {
             let arg = if algo == "d_integrate_q" { Arg::First } else { Arg::Second };
             measure(plan, |i| {
-                m.d_integrate_into(&q[i], &v[i], arg, nn)?;
+                m.d_integrate_blocks_into(&q[i], &v[i], arg, nn)?;
                 black_box(&*nn);
                 Ok(())
             })
@@ -986,7 +988,7 @@ fn time_kin(
         "d_difference_q0" | "d_difference_q1" => {
             let arg = if algo == "d_difference_q0" { Arg::First } else { Arg::Second };
             measure(plan, |i| {
-                m.d_difference_into(&q[i], &q[(i + 1) % n], arg, nn)?;
+                m.d_difference_blocks_into(&q[i], &q[(i + 1) % n], arg, nn)?;
                 black_box(&*nn);
                 Ok(())
             })
