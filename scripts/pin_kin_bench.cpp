@@ -21,7 +21,9 @@
 //                                getFrameVelocityDerivatives(frame, LOCAL|WORLD)
 //   frame_acceleration_derivatives[_world]
 //                                computeForwardKinematicsDerivatives(q, v, a) +
-//                                getFrameAccelerationDerivatives(frame, LOCAL|WORLD)
+//                                getFrameAccelerationDerivatives(frame, LOCAL|WORLD); LOCAL
+//                                needs v_partial_dq and a_partial_dq zeroed first (the root
+//                                joint's columns are otherwise stale and transformed again)
 //   com                          centerOfMass(q, computeSubtreeComs = false)
 //   com_jacobian                 jacobianCenterOfMass(q, computeSubtreeComs = false)
 //   com_velocity_derivatives     centerOfMass(q, v) + getCenterOfMassVelocityDerivatives
@@ -442,6 +444,14 @@ int main(int argc, char ** argv)
     run(std::string("frame_acceleration_derivatives") + r.first,
         [&](size_t i) {
           computeForwardKinematicsDerivatives(model, data, qs[i], vs[i], as[i]);
+          if (rf == LOCAL)
+          {
+            // In LOCAL, the columns of the root joint (parent 0) of v_partial_dq and
+            // a_partial_dq are not written by the joint pass but transformed in place by the
+            // frame pass: without zeroing they accumulate garbage from call to call.
+            d1.setZero();
+            d2.setZero();
+          }
           getFrameAccelerationDerivatives(model, data, fid, rf, d1, d2, d3, d4);
         },
         [&] { return cs(d2) + cs(d3) + cs(d4); });

@@ -49,11 +49,22 @@ const C: [f64; 5] = [1.0 / 6.0, -1.0 / 120.0, 1.0 / 5040.0, -1.0 / 362880.0, 1.0
 
 /// `(1 − cos θ)/θ²` and `(θ − sin θ)/θ³` of `t2 = θ²`.
 fn bc(t2: f64) -> (f64, f64) {
-    if t2 < SERIES {
-        (ser(t2, B), ser(t2, C))
-    } else {
-        let t = t2.sqrt();
-        ((1.0 - t.cos()) / t2, (t - t.sin()) / (t2 * t))
+    bc_sc(t2, sin_cos_of(t2))
+}
+
+/// `(sin θ, cos θ)` of `t2 = θ²` where the closed forms are used (`None` below [`SERIES`]).
+fn sin_cos_of(t2: f64) -> Option<(f64, f64)> {
+    (t2 >= SERIES).then(|| t2.sqrt().sin_cos())
+}
+
+/// [`bc`] with the sine and cosine of [`sin_cos_of`].
+fn bc_sc(t2: f64, sc: Option<(f64, f64)>) -> (f64, f64) {
+    match sc {
+        None => (ser(t2, B), ser(t2, C)),
+        Some((sn, cs)) => {
+            let t = t2.sqrt();
+            ((1.0 - cs) / t2, (t - sn) / (t2 * t))
+        }
     }
 }
 
@@ -76,7 +87,8 @@ fn jr3_inv(w: &Vector3<f64>) -> Matrix3<f64> {
         ser(t2, [1.0 / 12.0, 1.0 / 720.0, 1.0 / 30240.0, 1.0 / 1209600.0, 1.0 / 47900160.0])
     } else {
         let t = t2.sqrt();
-        1.0 / t2 - (1.0 + t.cos()) / (2.0 * t * t.sin())
+        let (sn, cs) = t.sin_cos();
+        1.0 / t2 - (1.0 + cs) / (2.0 * t * sn)
     };
     let k = skew(w);
     Matrix3::identity() + k * 0.5 + k * k * e
@@ -85,23 +97,33 @@ fn jr3_inv(w: &Vector3<f64>) -> Matrix3<f64> {
 /// Barfoot's `Q(ρ, φ)`, the lower-left block of the SE(3) left Jacobian of `[φ; ρ]`.
 fn se3_q(rho: &Vector3<f64>, phi: &Vector3<f64>) -> Matrix3<f64> {
     let t2 = phi.norm_squared();
-    let (c1, c2, c3) = if t2 < SERIES {
-        (
+    se3_q_sc(rho, phi, t2, sin_cos_of(t2))
+}
+
+/// [`se3_q`] with `t2 = |φ|²` and its [`sin_cos_of`].
+fn se3_q_sc(
+    rho: &Vector3<f64>,
+    phi: &Vector3<f64>,
+    t2: f64,
+    sc: Option<(f64, f64)>,
+) -> Matrix3<f64> {
+    let (c1, c2, c3) = match sc {
+        None => (
             ser(t2, C),
             ser(t2, [1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0, -1.0 / 3628800.0, 1.0 / 479001600.0]),
             ser(
                 t2,
                 [1.0 / 120.0, -1.0 / 2520.0, 1.0 / 120960.0, -1.0 / 9979200.0, 1.0 / 1245404160.0],
             ),
-        )
-    } else {
-        let t = t2.sqrt();
-        let (s, c) = t.sin_cos();
-        (
-            (t - s) / (t2 * t),
-            (t2 + 2.0 * c - 2.0) / (2.0 * t2 * t2),
-            (2.0 * t - 3.0 * s + t * c) / (2.0 * t2 * t2 * t),
-        )
+        ),
+        Some((s, c)) => {
+            let t = t2.sqrt();
+            (
+                (t - s) / (t2 * t),
+                (t2 + 2.0 * c - 2.0) / (2.0 * t2 * t2),
+                (2.0 * t - 3.0 * s + t * c) / (2.0 * t2 * t2 * t),
+            )
+        }
     };
     let (r, p) = (skew(rho), skew(phi));
     let (pr, rp, prp) = (p * r, r * p, p * r * p);
@@ -110,8 +132,13 @@ fn se3_q(rho: &Vector3<f64>, phi: &Vector3<f64>) -> Matrix3<f64> {
 
 /// SE(3) right Jacobian of `[ω; v]`.
 fn jr6(w: &Vector3<f64>, v: &Vector3<f64>) -> Matrix6<f64> {
-    let a = jr3(w);
-    let q = se3_q(&-v, &-w);
+    // One sine and cosine for both blocks (θ = |ω|).
+    let t2 = w.norm_squared();
+    let sc = sin_cos_of(t2);
+    let (b, c) = bc_sc(t2, sc);
+    let k = skew(w);
+    let a = Matrix3::identity() - k * b + k * k * c;
+    let q = se3_q_sc(&-v, &-w, t2, sc);
     let mut j = Matrix6::zeros();
     j.fixed_view_mut::<3, 3>(0, 0).copy_from(&a);
     j.fixed_view_mut::<3, 3>(3, 3).copy_from(&a);
@@ -144,7 +171,25 @@ fn ad_inv(r: &Matrix3<f64>, p: &Vector3<f64>) -> Matrix6<f64> {
 /// `V = J_r(−ω)` (Pinocchio's `exp6`, our ordering).
 pub fn exp6(xi: &Motion) -> Transform {
     let (w, v) = (xi.ang, xi.lin);
-    Transform::new(exp3(&w), jr3(&-w) * v)
+    // One sine and cosine for both: R = I + a K + b K², V = J_r(−ω) = I + b K + c K²
+    // (K = [ω]×, a = sin θ / θ, b = (1 − cos θ)/θ², c = (θ − sin θ)/θ³).
+    let t2 = w.norm_squared();
+    let (a, b, c) = if t2 < SERIES {
+        (
+            ser(t2, [1.0, -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362880.0]),
+            ser(t2, B),
+            ser(t2, C),
+        )
+    } else {
+        let t = t2.sqrt();
+        let (sn, cs) = t.sin_cos();
+        (sn / t, (1.0 - cs) / t2, (t - sn) / (t2 * t))
+    };
+    let k = skew(&w);
+    let k2 = k * k;
+    let rot = Matrix3::identity() + k * a + k2 * b;
+    let wv = w.cross(&v);
+    Transform::new(rot, v + wv * b + w.cross(&wv) * c)
 }
 
 /// The SE(3) logarithm `[ω; v]` of a placement (rotation angle ≤ π; Pinocchio's `log6`, our
@@ -543,13 +588,15 @@ impl Model {
                 got: out.len(),
             });
         }
+        let (q0s, q1s, o) = (q0.as_slice(), q1.as_slice(), out.as_mut_slice());
         for i in 1..self.njoints() {
-            let (a, n, b, m) = (self.idx_q[i], self.nqs[i], self.idx_v[i], self.nvs[i]);
-            self.joints[i].difference(
-                &q0.as_slice()[a..a + n],
-                &q1.as_slice()[a..a + n],
-                &mut out.as_mut_slice()[b..b + m],
-            );
+            let JointKin { idx_q: a, nq: n, idx_v: b, nv: m, .. } = self.kin[i];
+            if m == 1 {
+                // Revolute, continuous, prismatic: q₁ − q₀.
+                o[b] = q1s[a] - q0s[a];
+                continue;
+            }
+            self.joints[i].difference(&q0s[a..a + n], &q1s[a..a + n], &mut o[b..b + m]);
         }
         Ok(())
     }
