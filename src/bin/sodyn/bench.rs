@@ -61,7 +61,8 @@ Algorithms: rnea, crba, aba, id_fo, fd_fo, id_so, fd_so, id_so_c, fd_so_c (the c
 second order, random weights), the kinematics of --frame (frame_placement, \
 frame_jacobian_local, frame_jacobian_world, frame_jacobian_lwa, frame_velocity, \
 frame_acceleration, frame_classical_acceleration (these three in the frame's local axes), \
-frame_velocity_derivatives, frame_acceleration_derivatives (local; _world: world), \
+frame_velocity_derivatives, frame_acceleration_derivatives (local axes), \
+frame_velocity_derivatives_world, frame_acceleration_derivatives_world, \
 frame_jacobian_derivative (local), frame_placement_hessian), com, com_jacobian, \
 com_velocity_derivatives, centroidal_momentum, centroidal_dynamics_derivatives, difference, \
 d_integrate_q, d_integrate_v, d_difference_q0, d_difference_q1 (the q1 of difference and \
