@@ -143,3 +143,26 @@ fn centroidal_matches_dual_numbers() {
     }
     w[5].check(1e-9);
 }
+
+/// `centroidal_momentum` (one forward pass) gives the `h` of
+/// `centroidal_dynamics_derivatives`, and `Model::difference_into` gives `Model::difference`.
+#[test]
+fn centroidal_momentum_and_difference_into_agree() {
+    let mut rng = Rng::new(7);
+    for m in test_models(40) {
+        let mut data = Data::new(&m);
+        let (q, v, a) = random_state(&m, &mut rng);
+        let (q1, _, _) = random_state(&m, &mut rng);
+        let mut out = Centroidal::new(&m);
+        centroidal_dynamics_derivatives(&m, &mut data, &mut out, &q, &v, &a).unwrap();
+        let h = sodyn::algo::centroidal_momentum(&m, &mut data, &q, &v).unwrap();
+        let scale = out.h().iter().fold(1.0f64, |s, x| s.max(x.abs()));
+        for (r, (x, y)) in h.iter().zip(out.h()).enumerate() {
+            assert!((x - y).abs() <= 1e-12 * scale, "{}: h[{r}]", m.name());
+        }
+        let d = m.difference(&q, &q1).unwrap();
+        let mut di = nalgebra::DVector::from_element(m.nv(), f64::NAN);
+        m.difference_into(&q, &q1, &mut di).unwrap();
+        assert_eq!(d, di, "{}", m.name());
+    }
+}

@@ -194,3 +194,22 @@ fn log6_of_a_bad_rotation_returns() {
         let _ = jlog6(&t);
     }
 }
+
+/// `d_integrate_blocks_into` / `d_difference_blocks_into` on a zeroed matrix give the full
+/// `d_integrate` / `d_difference`, and leave the off-diagonal blocks as they were.
+#[test]
+fn blocks_into_write_the_diagonal_blocks() {
+    let mut rng = Rng::new(73);
+    for m in test_models(30) {
+        let (q0, v, _) = random_state(&m, &mut rng);
+        let (q1, _, _) = random_state(&m, &mut rng);
+        for arg in [Arg::First, Arg::Second] {
+            let mut out = DMatrix::zeros(m.nv(), m.nv());
+            m.d_integrate_blocks_into(&q0, &v, arg, &mut out).unwrap();
+            assert_eq!(out, m.d_integrate(&q0, &v, arg).unwrap(), "{}", m.name());
+            let mut out = DMatrix::zeros(m.nv(), m.nv());
+            m.d_difference_blocks_into(&q0, &q1, arg, &mut out).unwrap();
+            assert_eq!(out, m.d_difference(&q0, &q1, arg).unwrap(), "{}", m.name());
+        }
+    }
+}

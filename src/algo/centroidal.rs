@@ -19,7 +19,7 @@
 //!    `∂c/∂q_k` the centre-of-mass Jacobian column.
 
 use super::Data;
-use super::kinematics::{joint_motion, placements};
+use super::kinematics::{forward_kinematics, joint_motion, placements};
 use crate::error::{Error, Result};
 use crate::model::{Model, check_vec};
 use crate::spatial::{Force, Inertia, Motion, coriolis_b};
@@ -78,6 +78,35 @@ fn put(m: &mut DMatrix<f64>, col: usize, x: &[f64; 6]) {
     for (r, v) in x.iter().enumerate() {
         m[(r, col)] = *v;
     }
+}
+
+/// Centroidal momentum `h_G = [k; l]` at `(q, q̇)` (about the centre of mass, world axes;
+/// Pinocchio's `computeCentroidalMomentum`, whose `hg` is `[l; k]`): the body momenta
+/// `I_i v_i` taken to the world frame and summed, then shifted to the centre of mass.
+///
+/// # Errors
+/// As [`Model::check_q`]; `v` of the wrong length or not finite; a model without mass.
+pub fn centroidal_momentum(
+    model: &Model,
+    data: &mut Data,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+) -> Result<[f64; 6]> {
+    forward_kinematics(model, data, q, Some(v), None)?;
+    let (mut h, mut mass, mut mc) = (Force::zero(), 0.0, Vector3::zeros());
+    for i in 1..model.njoints() {
+        let (x, inertia) = (&data.o_m_i[i], &model.inertias[i]);
+        h += x.act_force(&inertia.mul_motion(&data.v[i]));
+        mass += inertia.mass;
+        mc += x.rot * inertia.h + x.trans * inertia.mass;
+    }
+    if !(mass > 0.0 && mass.is_finite()) {
+        return Err(Error::Singular {
+            what: "centroidal momentum".into(),
+            detail: format!("the model's total mass is {mass}: it has no centre of mass"),
+        });
+    }
+    Ok(shift(&h, &(mc / mass)))
 }
 
 /// Centroidal momentum, its time derivative, the centroidal momentum matrix and their

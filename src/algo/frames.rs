@@ -5,8 +5,8 @@
 //!
 //! Inputs: model, `q` (and `q̇`, `q̈`), a frame index, a [`ReferenceFrame`]. With `⁰M_f = ⁰M_i ⁱM_f`
 //! the frame's placement (`i` its joint, `ⁱM_f` its placement on that body):
-//! 1. `⁰M_i` by the placement pass; the body-frame velocity and acceleration (no gravity)
-//!    `v_i`, `a_i` by the forward recursion of [`super::forward_kinematics`];
+//! 1. `⁰M_i`, the body-frame velocity and acceleration (no gravity) `v_i`, `a_i` by the forward
+//!    recursion of [`super::forward_kinematics`], along the path from the root to `i` only;
 //! 2. local: `v_f = ⁱM_f⁻¹ v_i`, `a_f = ⁱM_f⁻¹ a_i` (motions at the frame origin, frame axes);
 //!    Jacobian column of a DoF `c` with `c ⪯ i`: `⁰M_f⁻¹ S_c^0`, `S_c^0 = ⁰M_{j(c)} S_c`;
 //! 3. world: `⁰M_f v_f`, `⁰M_f a_f` (at the world origin, world axes), columns `S_c^0`;
@@ -19,9 +19,9 @@
 //! Spatial vectors are `[angular; linear]` (Pinocchio: `[linear; angular]`).
 
 use super::Data;
-use super::kinematics::{forward_kinematics, placements};
+use super::kinematics::joint_motion;
 use crate::error::{Error, Result};
-use crate::model::Model;
+use crate::model::{Model, check_vec};
 use crate::spatial::{Motion, Transform};
 use nalgebra::{DVector, Matrix6xX};
 
@@ -65,6 +65,64 @@ fn check_frame(model: &Model, frame: usize) -> Result<()> {
     Ok(())
 }
 
+/// Forward kinematics along the path from the root to `frame`'s joint only (Pinocchio's
+/// `computeFrameJacobian` walks the joint's support the same way): `li_m_i`, `o_m_i` and, with
+/// `v` (and `a`), the body velocities `v` (and accelerations `a`, no gravity) of the joints on
+/// the path, as [`super::forward_kinematics`] computes them for every joint. Entries of the
+/// other joints are left as they were.
+fn path_kinematics(
+    model: &Model,
+    data: &mut Data,
+    q: &DVector<f64>,
+    v: Option<&DVector<f64>>,
+    a: Option<&DVector<f64>>,
+    frame: usize,
+) -> Result<()> {
+    model.check_q(q)?;
+    data.check(model)?;
+    check_frame(model, frame)?;
+    if let Some(v) = v {
+        check_vec("v", v, model.nv)?;
+    }
+    if let Some(a) = a {
+        check_vec("a", a, model.nv)?;
+    }
+    if v.is_some() {
+        data.v[0] = Motion::zero();
+        data.a[0] = Motion::zero();
+    }
+    path_step(model, data, q, v, a, model.frames[frame].joint);
+    Ok(())
+}
+
+/// [`path_kinematics`] of joint `j` after its ancestors.
+fn path_step(
+    model: &Model,
+    data: &mut Data,
+    q: &DVector<f64>,
+    v: Option<&DVector<f64>>,
+    a: Option<&DVector<f64>>,
+    j: usize,
+) {
+    if j == 0 {
+        return;
+    }
+    let p = model.parents[j];
+    path_step(model, data, q, v, a, p);
+    let (iq, nq) = (model.idx_q[j], model.nqs[j]);
+    let li = model.joints[j].placed_transform(&model.placements[j], &q.as_slice()[iq..iq + nq]);
+    data.o_m_i[j] = if p == 0 { li } else { data.o_m_i[p].compose(&li) };
+    data.li_m_i[j] = li;
+    if let Some(v) = v {
+        let vj = joint_motion(model, j, v);
+        data.v[j] = li.inv_act_motion(&data.v[p]) + vj;
+        if let Some(acc) = a {
+            data.a[j] =
+                li.inv_act_motion(&data.a[p]) + joint_motion(model, j, acc) + data.v[j].cross(&vj);
+        }
+    }
+}
+
 /// `⁰M_f` from the current placements.
 fn placed(model: &Model, data: &Data, frame: usize) -> (usize, Transform) {
     let f = &model.frames[frame];
@@ -90,10 +148,7 @@ pub fn frame_placement(
     q: &DVector<f64>,
     frame: usize,
 ) -> Result<Transform> {
-    model.check_q(q)?;
-    data.check(model)?;
-    check_frame(model, frame)?;
-    placements(model, data, q);
+    path_kinematics(model, data, q, None, None, frame)?;
     Ok(placed(model, data, frame).1)
 }
 
@@ -119,12 +174,19 @@ pub fn frame_jacobian(
     }
     let omf = frame_placement(model, data, q, frame)?;
     let joint = model.frames[frame].joint;
-    jac.fill(0.0);
+    let out = jac.as_mut_slice();
+    out.fill(0.0);
     let mut j = joint;
     while j > 0 {
-        let x = data.o_m_i[j];
-        for c in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
-            let s0 = x.act_motion(&model.subspace[c]);
+        let (x, kin) = (&data.o_m_i[j], &model.kin[j]);
+        for c in kin.idx_v..kin.idx_v + kin.nv {
+            // A revolute joint about ±e_k: S = [±e_k; 0], in the world [±R e_k; p × ±R e_k].
+            let s0 = if kin.axis < 3 {
+                let w = x.rot.column(kin.axis) * kin.sign;
+                Motion::new(w, x.trans.cross(&w))
+            } else {
+                x.act_motion(&model.subspace[c])
+            };
             let col = match rf {
                 ReferenceFrame::World => s0,
                 ReferenceFrame::Local => omf.inv_act_motion(&s0),
@@ -132,12 +194,11 @@ pub fn frame_jacobian(
                     Motion::new(s0.ang, s0.lin + s0.ang.cross(&omf.trans))
                 }
             };
-            for r in 0..3 {
-                jac[(r, c)] = col.ang[r];
-                jac[(3 + r, c)] = col.lin[r];
-            }
+            let dst = &mut out[6 * c..6 * c + 6];
+            dst[..3].copy_from_slice(col.ang.as_slice());
+            dst[3..].copy_from_slice(col.lin.as_slice());
         }
-        j = model.parents[j];
+        j = kin.parent;
     }
     Ok(())
 }
@@ -154,8 +215,7 @@ pub fn frame_velocity(
     frame: usize,
     rf: ReferenceFrame,
 ) -> Result<Motion> {
-    check_frame(model, frame)?;
-    forward_kinematics(model, data, q, Some(v), None)?;
+    path_kinematics(model, data, q, Some(v), None, frame)?;
     let (i, omf) = placed(model, data, frame);
     let vf = model.frames[frame].placement.inv_act_motion(&data.v[i]);
     Ok(express(&vf, &omf, rf))
@@ -174,8 +234,7 @@ pub fn frame_acceleration(
     frame: usize,
     rf: ReferenceFrame,
 ) -> Result<Motion> {
-    check_frame(model, frame)?;
-    forward_kinematics(model, data, q, Some(v), Some(a))?;
+    path_kinematics(model, data, q, Some(v), Some(a), frame)?;
     let (i, omf) = placed(model, data, frame);
     let af = model.frames[frame].placement.inv_act_motion(&data.a[i]);
     Ok(express(&af, &omf, rf))
@@ -317,7 +376,7 @@ pub fn frame_velocity_derivatives(
 ) -> Result<()> {
     check_frame(model, frame)?;
     check_cols(model, &[dv_dq, dv_dv])?;
-    forward_kinematics(model, data, q, Some(v), None)?;
+    path_kinematics(model, data, q, Some(v), None, frame)?;
     frame_motion_derivatives(model, data, frame, rf, Which::Velocity, dv_dq, dv_dv, None);
     Ok(())
 }
@@ -342,7 +401,7 @@ pub fn frame_acceleration_derivatives(
 ) -> Result<()> {
     check_frame(model, frame)?;
     check_cols(model, &[da_dq, da_dv, da_da])?;
-    forward_kinematics(model, data, q, Some(v), Some(a))?;
+    path_kinematics(model, data, q, Some(v), Some(a), frame)?;
     frame_motion_derivatives(
         model,
         data,

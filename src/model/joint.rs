@@ -455,7 +455,8 @@ fn exp6_translation_inverse(w: &Vector3<f64>, d: &Vector3<f64>) -> Vector3<f64> 
         1.0 / 12.0 + t2 / 720.0
     } else {
         let t = t2.sqrt();
-        (1.0 - t * t.sin() / (2.0 * (1.0 - t.cos()))) / t2
+        let (sn, cs) = t.sin_cos();
+        (1.0 - t * sn / (2.0 * (1.0 - cs))) / t2
     };
     let wd = w.cross(d);
     d - wd * 0.5 + w.cross(&wd) * c

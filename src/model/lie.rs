@@ -18,7 +18,7 @@
 //! differentiation of the reference integrator, central differences and Pinocchio.
 
 use super::joint::JointType;
-use super::tree::Model;
+use super::tree::{JointKin, Model};
 use crate::error::Result;
 use crate::spatial::{Motion, Transform, skew};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix6, Rotation3, UnitQuaternion, Vector3};
@@ -49,11 +49,22 @@ const C: [f64; 5] = [1.0 / 6.0, -1.0 / 120.0, 1.0 / 5040.0, -1.0 / 362880.0, 1.0
 
 /// `(1 − cos θ)/θ²` and `(θ − sin θ)/θ³` of `t2 = θ²`.
 fn bc(t2: f64) -> (f64, f64) {
-    if t2 < SERIES {
-        (ser(t2, B), ser(t2, C))
-    } else {
-        let t = t2.sqrt();
-        ((1.0 - t.cos()) / t2, (t - t.sin()) / (t2 * t))
+    bc_sc(t2, sin_cos_of(t2))
+}
+
+/// `(sin θ, cos θ)` of `t2 = θ²` where the closed forms are used (`None` below [`SERIES`]).
+fn sin_cos_of(t2: f64) -> Option<(f64, f64)> {
+    (t2 >= SERIES).then(|| t2.sqrt().sin_cos())
+}
+
+/// [`bc`] with the sine and cosine of [`sin_cos_of`].
+fn bc_sc(t2: f64, sc: Option<(f64, f64)>) -> (f64, f64) {
+    match sc {
+        None => (ser(t2, B), ser(t2, C)),
+        Some((sn, cs)) => {
+            let t = t2.sqrt();
+            ((1.0 - cs) / t2, (t - sn) / (t2 * t))
+        }
     }
 }
 
@@ -76,7 +87,8 @@ fn jr3_inv(w: &Vector3<f64>) -> Matrix3<f64> {
         ser(t2, [1.0 / 12.0, 1.0 / 720.0, 1.0 / 30240.0, 1.0 / 1209600.0, 1.0 / 47900160.0])
     } else {
         let t = t2.sqrt();
-        1.0 / t2 - (1.0 + t.cos()) / (2.0 * t * t.sin())
+        let (sn, cs) = t.sin_cos();
+        1.0 / t2 - (1.0 + cs) / (2.0 * t * sn)
     };
     let k = skew(w);
     Matrix3::identity() + k * 0.5 + k * k * e
@@ -85,23 +97,33 @@ fn jr3_inv(w: &Vector3<f64>) -> Matrix3<f64> {
 /// Barfoot's `Q(ρ, φ)`, the lower-left block of the SE(3) left Jacobian of `[φ; ρ]`.
 fn se3_q(rho: &Vector3<f64>, phi: &Vector3<f64>) -> Matrix3<f64> {
     let t2 = phi.norm_squared();
-    let (c1, c2, c3) = if t2 < SERIES {
-        (
+    se3_q_sc(rho, phi, t2, sin_cos_of(t2))
+}
+
+/// [`se3_q`] with `t2 = |φ|²` and its [`sin_cos_of`].
+fn se3_q_sc(
+    rho: &Vector3<f64>,
+    phi: &Vector3<f64>,
+    t2: f64,
+    sc: Option<(f64, f64)>,
+) -> Matrix3<f64> {
+    let (c1, c2, c3) = match sc {
+        None => (
             ser(t2, C),
             ser(t2, [1.0 / 24.0, -1.0 / 720.0, 1.0 / 40320.0, -1.0 / 3628800.0, 1.0 / 479001600.0]),
             ser(
                 t2,
                 [1.0 / 120.0, -1.0 / 2520.0, 1.0 / 120960.0, -1.0 / 9979200.0, 1.0 / 1245404160.0],
             ),
-        )
-    } else {
-        let t = t2.sqrt();
-        let (s, c) = t.sin_cos();
-        (
-            (t - s) / (t2 * t),
-            (t2 + 2.0 * c - 2.0) / (2.0 * t2 * t2),
-            (2.0 * t - 3.0 * s + t * c) / (2.0 * t2 * t2 * t),
-        )
+        ),
+        Some((s, c)) => {
+            let t = t2.sqrt();
+            (
+                (t - s) / (t2 * t),
+                (t2 + 2.0 * c - 2.0) / (2.0 * t2 * t2),
+                (2.0 * t - 3.0 * s + t * c) / (2.0 * t2 * t2 * t),
+            )
+        }
     };
     let (r, p) = (skew(rho), skew(phi));
     let (pr, rp, prp) = (p * r, r * p, p * r * p);
@@ -110,8 +132,13 @@ fn se3_q(rho: &Vector3<f64>, phi: &Vector3<f64>) -> Matrix3<f64> {
 
 /// SE(3) right Jacobian of `[ω; v]`.
 fn jr6(w: &Vector3<f64>, v: &Vector3<f64>) -> Matrix6<f64> {
-    let a = jr3(w);
-    let q = se3_q(&-v, &-w);
+    // One sine and cosine for both blocks (θ = |ω|).
+    let t2 = w.norm_squared();
+    let sc = sin_cos_of(t2);
+    let (b, c) = bc_sc(t2, sc);
+    let k = skew(w);
+    let a = Matrix3::identity() - k * b + k * k * c;
+    let q = se3_q_sc(&-v, &-w, t2, sc);
     let mut j = Matrix6::zeros();
     j.fixed_view_mut::<3, 3>(0, 0).copy_from(&a);
     j.fixed_view_mut::<3, 3>(3, 3).copy_from(&a);
@@ -144,7 +171,25 @@ fn ad_inv(r: &Matrix3<f64>, p: &Vector3<f64>) -> Matrix6<f64> {
 /// `V = J_r(−ω)` (Pinocchio's `exp6`, our ordering).
 pub fn exp6(xi: &Motion) -> Transform {
     let (w, v) = (xi.ang, xi.lin);
-    Transform::new(exp3(&w), jr3(&-w) * v)
+    // One sine and cosine for both: R = I + a K + b K², V = J_r(−ω) = I + b K + c K²
+    // (K = [ω]×, a = sin θ / θ, b = (1 − cos θ)/θ², c = (θ − sin θ)/θ³).
+    let t2 = w.norm_squared();
+    let (a, b, c) = if t2 < SERIES {
+        (
+            ser(t2, [1.0, -1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362880.0]),
+            ser(t2, B),
+            ser(t2, C),
+        )
+    } else {
+        let t = t2.sqrt();
+        let (sn, cs) = t.sin_cos();
+        (sn / t, (1.0 - cs) / t2, (t - sn) / (t2 * t))
+    };
+    let k = skew(&w);
+    let k2 = k * k;
+    let rot = Matrix3::identity() + k * a + k2 * b;
+    let wv = w.cross(&v);
+    Transform::new(rot, v + wv * b + w.cross(&wv) * c)
 }
 
 /// The SE(3) logarithm `[ω; v]` of a placement (rotation angle ≤ π; Pinocchio's `log6`, our
@@ -278,14 +323,20 @@ impl JointType {
     /// # Panics
     /// If `q0` or `q1` is shorter than `nq()` or `out` than `nv()²`.
     pub fn d_difference(&self, q0: &[f64], q1: &[f64], arg: Arg, out: &mut [f64]) {
+        let _ = (&q0[..self.nq()], &q1[..self.nq()]);
+        if let JointType::Revolute { .. }
+        | JointType::Continuous { .. }
+        | JointType::Prismatic { .. } = *self
+        {
+            out[0] = if arg == Arg::First { -1.0 } else { 1.0 };
+            return;
+        }
         let mut d = [0.0; 6];
         self.difference(q0, q1, &mut d[..self.nv()]);
         match *self {
             JointType::Revolute { .. }
             | JointType::Continuous { .. }
-            | JointType::Prismatic { .. } => {
-                out[0] = if arg == Arg::First { -1.0 } else { 1.0 };
-            }
+            | JointType::Prismatic { .. } => unreachable!("handled above"),
             JointType::Spherical => {
                 let w = Vector3::new(d[0], d[1], d[2]);
                 let ji = jr3_inv(&w);
@@ -300,8 +351,25 @@ impl JointType {
                 let ji = jr6_inv(&w, &v);
                 let m = match arg {
                     Arg::First => {
-                        let t = exp6(&Motion::new(w, v));
-                        -ji * ad_inv(&t.rot, &t.trans)
+                        // exp6(d) = M₀⁻¹ M₁ = (R₀ᵀ R₁, R₀ᵀ (p₁ − p₀)), taken from q directly;
+                        // ji = [[A, 0], [B, A]], Ad⁻¹ = [[Rᵀ, 0], [C, Rᵀ]]: the product by
+                        // blocks.
+                        let (r0, r1) = (quat(&q0[3..7]), quat(&q1[3..7]));
+                        let rt = (r0.inverse() * r1).to_rotation_matrix().into_inner().transpose();
+                        let p = r0.inverse_transform_vector(&Vector3::new(
+                            q1[0] - q0[0],
+                            q1[1] - q0[1],
+                            q1[2] - q0[2],
+                        ));
+                        let a = ji.fixed_view::<3, 3>(0, 0).into_owned();
+                        let b = ji.fixed_view::<3, 3>(3, 0).into_owned();
+                        let c = -rt * skew(&p);
+                        let (art, low) = (a * rt, b * rt + a * c);
+                        let mut m = Matrix6::zeros();
+                        m.fixed_view_mut::<3, 3>(0, 0).copy_from(&-art);
+                        m.fixed_view_mut::<3, 3>(3, 3).copy_from(&-art);
+                        m.fixed_view_mut::<3, 3>(3, 0).copy_from(&-low);
+                        m
                     }
                     Arg::Second => ji,
                 };
@@ -323,6 +391,24 @@ impl JointType {
                     Arg::Second => put_rows(out, 3, &ji, 1.0),
                 }
             }
+        }
+    }
+}
+
+/// The unit quaternion of `[x, y, z, w]` (normalised).
+fn quat(s: &[f64]) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(s[3], s[0], s[1], s[2]))
+}
+
+/// The `m × m` column-major block `blk` at rows and columns `b..b + m` of `out`.
+#[inline]
+fn put_block(out: &mut DMatrix<f64>, b: usize, m: usize, blk: &[f64; 36]) {
+    let n = out.nrows();
+    let o = out.as_mut_slice();
+    for c in 0..m {
+        let col = &mut o[(b + c) * n + b..(b + c) * n + b + m];
+        for (x, y) in col.iter_mut().zip(&blk[c * m..c * m + m]) {
+            *x = *y;
         }
     }
 }
@@ -356,20 +442,43 @@ impl Model {
         arg: Arg,
         out: &mut DMatrix<f64>,
     ) -> Result<()> {
+        self.check_square(out)?;
+        out.as_mut_slice().fill(0.0);
+        self.d_integrate_blocks_into(q, delta, arg, out)
+    }
+
+    /// [`Model::d_integrate_into`] without zeroing `out`: writes its diagonal blocks (one per
+    /// joint) only and leaves the other entries as they are, as Pinocchio's `dIntegrate` does
+    /// (zero `out` once, then call this on every state).
+    ///
+    /// # Errors
+    /// As [`Model::d_integrate_into`].
+    pub fn d_integrate_blocks_into(
+        &self,
+        q: &DVector<f64>,
+        delta: &DVector<f64>,
+        arg: Arg,
+        out: &mut DMatrix<f64>,
+    ) -> Result<()> {
         self.check_q(q)?;
         self.check_v("delta", delta)?;
         self.check_square(out)?;
-        out.as_mut_slice().fill(0.0);
         let mut blk = [0.0; 36];
+        let nv = self.nv;
         for i in 1..self.njoints() {
-            let (a, n, b, m) = (self.idx_q[i], self.nqs[i], self.idx_v[i], self.nvs[i]);
+            let JointKin { idx_q: a, nq: n, idx_v: b, nv: m, .. } = self.kin[i];
+            if m == 1 {
+                // Revolute, continuous, prismatic: 1.
+                out.as_mut_slice()[b * nv + b] = 1.0;
+                continue;
+            }
             self.joints[i].d_integrate(
                 &q.as_slice()[a..a + n],
                 &delta.as_slice()[b..b + m],
                 arg,
                 &mut blk,
             );
-            out.view_mut((b, b), (m, m)).copy_from_slice(&blk[..m * m]);
+            put_block(out, b, m, &blk);
         }
         Ok(())
     }
@@ -411,16 +520,83 @@ impl Model {
         })?;
         self.check_square(out)?;
         out.as_mut_slice().fill(0.0);
+        self.d_difference_blocks_into(q0, q1, arg, out)
+    }
+
+    /// [`Model::d_difference_into`] without zeroing `out`: writes its diagonal blocks (one per
+    /// joint) only and leaves the other entries as they are, as Pinocchio's `dDifference` does
+    /// (zero `out` once, then call this on every state).
+    ///
+    /// # Errors
+    /// As [`Model::d_difference_into`].
+    pub fn d_difference_blocks_into(
+        &self,
+        q0: &DVector<f64>,
+        q1: &DVector<f64>,
+        arg: Arg,
+        out: &mut DMatrix<f64>,
+    ) -> Result<()> {
+        self.check_q(q0)?;
+        self.check_q(q1).map_err(|e| match e {
+            crate::error::Error::Dimension { expected, got, .. } => {
+                crate::error::Error::Dimension { what: "q1".into(), expected, got }
+            }
+            e => e,
+        })?;
+        self.check_square(out)?;
         let mut blk = [0.0; 36];
+        let (nv, one) = (self.nv, if arg == Arg::First { -1.0 } else { 1.0 });
         for i in 1..self.njoints() {
-            let (a, n, b, m) = (self.idx_q[i], self.nqs[i], self.idx_v[i], self.nvs[i]);
+            let JointKin { idx_q: a, nq: n, idx_v: b, nv: m, .. } = self.kin[i];
+            if m == 1 {
+                // Revolute, continuous, prismatic: ∓1.
+                out.as_mut_slice()[b * nv + b] = one;
+                continue;
+            }
             self.joints[i].d_difference(
                 &q0.as_slice()[a..a + n],
                 &q1.as_slice()[a..a + n],
                 arg,
                 &mut blk,
             );
-            out.view_mut((b, b), (m, m)).copy_from_slice(&blk[..m * m]);
+            put_block(out, b, m, &blk);
+        }
+        Ok(())
+    }
+
+    /// `q₁ ⊖ q₀` ([`Model::difference`]) into `out` (length `nv`) without allocating.
+    ///
+    /// # Errors
+    /// As [`Model::difference`]; `out` not of length `nv`.
+    pub fn difference_into(
+        &self,
+        q0: &DVector<f64>,
+        q1: &DVector<f64>,
+        out: &mut DVector<f64>,
+    ) -> Result<()> {
+        self.check_q(q0)?;
+        self.check_q(q1).map_err(|e| match e {
+            crate::error::Error::Dimension { expected, got, .. } => {
+                crate::error::Error::Dimension { what: "q1".into(), expected, got }
+            }
+            e => e,
+        })?;
+        if out.len() != self.nv {
+            return Err(crate::error::Error::Dimension {
+                what: "out".into(),
+                expected: self.nv,
+                got: out.len(),
+            });
+        }
+        let (q0s, q1s, o) = (q0.as_slice(), q1.as_slice(), out.as_mut_slice());
+        for i in 1..self.njoints() {
+            let JointKin { idx_q: a, nq: n, idx_v: b, nv: m, .. } = self.kin[i];
+            if m == 1 {
+                // Revolute, continuous, prismatic: q₁ − q₀.
+                o[b] = q1s[a] - q0s[a];
+                continue;
+            }
+            self.joints[i].difference(&q0s[a..a + n], &q1s[a..a + n], &mut o[b..b + m]);
         }
         Ok(())
     }

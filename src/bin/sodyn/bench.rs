@@ -18,8 +18,14 @@
 
 use super::{ModelArgs, load_model};
 use clap::{Args, ValueEnum};
-use nalgebra::{DMatrix, DVector, Vector3};
-use sodyn::algo::{Contact, ContactReference, ContactType, Data, aba, crba, rnea};
+use nalgebra::{DMatrix, DVector, Matrix3xX, Matrix6xX, Vector3};
+use sodyn::algo::{
+    Centroidal, Contact, ContactReference, ContactType, Data, ReferenceFrame, aba, center_of_mass,
+    center_of_mass_jacobian, center_of_mass_velocity_derivatives, centroidal_dynamics_derivatives,
+    centroidal_momentum, crba, frame_acceleration, frame_acceleration_derivatives,
+    frame_classical_acceleration, frame_jacobian, frame_jacobian_derivative, frame_placement,
+    frame_placement_hessian, frame_velocity, frame_velocity_derivatives, rnea,
+};
 use sodyn::batch::{
     BatchData, BatchPool, aba_batch, fd_derivatives_batch, id_derivatives_batch, rnea_batch,
 };
@@ -30,8 +36,9 @@ use sodyn::deriv::{
     kkt_derivatives, kkt_so_contracted, kkt_so_derivatives,
 };
 use sodyn::error::{Error, Result};
-use sodyn::model::{JointType, Model};
+use sodyn::model::{Arg, JointType, Model};
 use sodyn::rng::Rng;
+use sodyn::tensor::Tensor3;
 use std::hint::black_box;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -51,7 +58,18 @@ The batch_* lines add threads=, per=state and cpu_util= (process CPU time / wall
 records the model, the options and the timer's overhead.
 
 Algorithms: rnea, crba, aba, id_fo, fd_fo, id_so, fd_so, id_so_c, fd_so_c (the contracted \
-second order, random weights), batch_rnea, batch_aba, batch_id_fo, batch_fd_fo (the batched \
+second order, random weights), the kinematics of --frame (frame_placement, \
+frame_jacobian_local, frame_jacobian_world, frame_jacobian_lwa, frame_velocity, \
+frame_acceleration, frame_classical_acceleration (these three in the frame's local axes), \
+frame_velocity_derivatives, frame_acceleration_derivatives (local axes), \
+frame_velocity_derivatives_world, frame_acceleration_derivatives_world, \
+frame_jacobian_derivative (local), frame_placement_hessian), com, com_jacobian, \
+com_velocity_derivatives, centroidal_momentum, centroidal_dynamics_derivatives, difference, \
+d_integrate_q, d_integrate_v, d_difference_q0, d_difference_q1 (the q1 of difference and \
+d_difference_* is the next state's q; the _q/_v/_q0/_q1 suffix names the argument, Pinocchio's \
+ARG0/ARG1; d_integrate_* and d_difference_* time Model::d_integrate_blocks_into and \
+d_difference_blocks_into, which write the diagonal blocks only, as Pinocchio's dIntegrate and \
+dDifference do), batch_rnea, batch_aba, batch_id_fo, batch_fd_fo (the batched \
 entry points, time per state) and, with --contacts, kkt_fo, kkt_so, kkt_so_c, impact_fo, \
 impact_so, impact_so_c.";
 
@@ -66,6 +84,29 @@ const ALGOS: &[&str] = &[
     "fd_so",
     "id_so_c",
     "fd_so_c",
+    "frame_placement",
+    "frame_jacobian_local",
+    "frame_jacobian_world",
+    "frame_jacobian_lwa",
+    "frame_velocity",
+    "frame_acceleration",
+    "frame_classical_acceleration",
+    "frame_velocity_derivatives",
+    "frame_velocity_derivatives_world",
+    "frame_acceleration_derivatives",
+    "frame_acceleration_derivatives_world",
+    "frame_jacobian_derivative",
+    "frame_placement_hessian",
+    "com",
+    "com_jacobian",
+    "com_velocity_derivatives",
+    "centroidal_momentum",
+    "centroidal_dynamics_derivatives",
+    "difference",
+    "d_integrate_q",
+    "d_integrate_v",
+    "d_difference_q0",
+    "d_difference_q1",
     "batch_rnea",
     "batch_aba",
     "batch_id_fo",
@@ -139,6 +180,10 @@ pub(crate) struct BenchArgs {
     /// (BatchPool::with_cpus; the per-CPU baseline of --paired-threads then uses those CPUs.)
     #[arg(long, value_name = "C0,C1,...", value_parser = parse_cpus)]
     pin_cpus: Option<Cpus>,
+    /// The frame of the frame_* algorithms [default: the frame deepest in the tree, the last
+    /// such one in the model's order]
+    #[arg(long, value_name = "NAME")]
+    frame: Option<String>,
     /// The model's name in the output lines [default: the model's name, as info prints it]
     #[arg(long, value_name = "NAME")]
     name: Option<String>,
@@ -765,12 +810,192 @@ struct Workspaces {
     out_m2: Vec<DMatrix<f64>>,
     kkt: Option<KktData>,
     impact: Option<ImpactData>,
+    /// The kinematics algorithms' frame, outputs and workspaces (allocated once).
+    kin: Kin,
     /// Batched workspaces: one pool of `--threads`, or with `--paired-threads T`, pools of one
     /// and of `T` threads.
     batch: Vec<BatchData>,
     /// The CPUs of the per-CPU 1-thread baseline of `--paired-threads` (with `--pin-cpus`, the
     /// first `T` of its list; else those the calling thread may run on).
     baseline_cpus: Option<Vec<usize>>,
+}
+
+/// Frame, outputs and workspaces of the kinematics algorithms.
+struct Kin {
+    frame: usize,
+    j6: [Matrix6xX<f64>; 3],
+    j3: Matrix3xX<f64>,
+    cen: Centroidal,
+    nn: DMatrix<f64>,
+    vec: DVector<f64>,
+    t3: [Tensor3; 2],
+}
+
+impl Kin {
+    fn new(model: &Model, frame: usize, tensors: bool) -> Self {
+        let nv = model.nv();
+        let t = || if tensors { Tensor3::zeros(6, nv, nv) } else { Tensor3::zeros(0, 0, 0) };
+        Kin {
+            frame,
+            j6: std::array::from_fn(|_| Matrix6xX::zeros(nv)),
+            j3: Matrix3xX::zeros(nv),
+            cen: Centroidal::new(model),
+            nn: DMatrix::zeros(nv, nv),
+            vec: DVector::zeros(nv),
+            t3: [t(), t()],
+        }
+    }
+}
+
+/// The default `--frame`: the frame deepest in the tree (most joints between it and the
+/// root), the last such one in the model's order.
+fn default_frame(model: &Model) -> usize {
+    let depth = |mut j: usize| {
+        let mut d = 0;
+        while j > 0 {
+            j = model.parents()[j];
+            d += 1;
+        }
+        d
+    };
+    let mut best = (0, 0);
+    for (f, fr) in model.frames().iter().enumerate() {
+        let d = depth(fr.joint);
+        if d >= best.1 {
+            best = (f, d);
+        }
+    }
+    best.0
+}
+
+/// Times one kinematics algorithm, if `algo` is one.
+fn time_kin(
+    algo: &str,
+    m: &Model,
+    st: &States,
+    d: &mut Data,
+    k: &mut Kin,
+    plan: &Plan,
+) -> Option<Result<Stats>> {
+    let (q, v, a) = (&st.q, &st.v, &st.a);
+    let n = st.q.len();
+    let f = k.frame;
+    let Kin { j6, j3, cen, nn, vec, t3, .. } = k;
+    let [j1, j2, jx] = j6;
+    let (local, world) = (ReferenceFrame::Local, ReferenceFrame::World);
+    let jac = |rf| {
+        move |d: &mut Data, j1: &mut Matrix6xX<f64>, i: usize| {
+            frame_jacobian(m, d, &q[i], f, rf, j1)
+        }
+    };
+    Some(match algo {
+        "frame_placement" => measure(plan, |i| {
+            black_box(frame_placement(m, d, &q[i], f)?);
+            Ok(())
+        }),
+        "frame_jacobian_local" | "frame_jacobian_world" | "frame_jacobian_lwa" => {
+            let rf = match algo {
+                "frame_jacobian_local" => local,
+                "frame_jacobian_world" => world,
+                _ => ReferenceFrame::LocalWorldAligned,
+            };
+            let g = jac(rf);
+            measure(plan, |i| {
+                g(d, j1, i)?;
+                black_box(&*j1);
+                Ok(())
+            })
+        }
+        "frame_velocity" => measure(plan, |i| {
+            black_box(frame_velocity(m, d, &q[i], &v[i], f, local)?);
+            Ok(())
+        }),
+        "frame_acceleration" => measure(plan, |i| {
+            black_box(frame_acceleration(m, d, &q[i], &v[i], &a[i], f, local)?);
+            Ok(())
+        }),
+        "frame_classical_acceleration" => measure(plan, |i| {
+            black_box(frame_classical_acceleration(m, d, &q[i], &v[i], &a[i], f, local)?);
+            Ok(())
+        }),
+        "frame_velocity_derivatives" | "frame_velocity_derivatives_world" => {
+            let rf = if algo.ends_with("_world") { world } else { local };
+            measure(plan, |i| {
+                frame_velocity_derivatives(m, d, &q[i], &v[i], f, rf, j1, j2)?;
+                black_box((&*j1, &*j2));
+                Ok(())
+            })
+        }
+        "frame_acceleration_derivatives" | "frame_acceleration_derivatives_world" => {
+            let rf = if algo.ends_with("_world") { world } else { local };
+            measure(plan, |i| {
+                frame_acceleration_derivatives(m, d, &q[i], &v[i], &a[i], f, rf, j1, j2, jx)?;
+                black_box((&*j1, &*j2, &*jx));
+                Ok(())
+            })
+        }
+        "frame_jacobian_derivative" => {
+            let [t, _] = t3;
+            measure(plan, |i| {
+                frame_jacobian_derivative(m, d, &q[i], f, local, t)?;
+                black_box(&*t);
+                Ok(())
+            })
+        }
+        "frame_placement_hessian" => {
+            let [t, w] = t3;
+            measure(plan, |i| {
+                frame_placement_hessian(m, d, &q[i], f, t, w)?;
+                black_box(&*t);
+                Ok(())
+            })
+        }
+        "com" => measure(plan, |i| {
+            black_box(center_of_mass(m, d, &q[i])?);
+            Ok(())
+        }),
+        "com_jacobian" => measure(plan, |i| {
+            center_of_mass_jacobian(m, d, &q[i], j3)?;
+            black_box(&*j3);
+            Ok(())
+        }),
+        "com_velocity_derivatives" => measure(plan, |i| {
+            center_of_mass_velocity_derivatives(m, d, &q[i], &v[i], j3)?;
+            black_box(&*j3);
+            Ok(())
+        }),
+        "centroidal_momentum" => measure(plan, |i| {
+            black_box(centroidal_momentum(m, d, &q[i], &v[i])?);
+            Ok(())
+        }),
+        "centroidal_dynamics_derivatives" => measure(plan, |i| {
+            centroidal_dynamics_derivatives(m, d, cen, &q[i], &v[i], &a[i])?;
+            black_box(&*cen);
+            Ok(())
+        }),
+        "difference" => measure(plan, |i| {
+            m.difference_into(&q[i], &q[(i + 1) % n], vec)?;
+            black_box(&*vec);
+            Ok(())
+        }),
+        "d_integrate_q" | "d_integrate_v" => {
+            let arg = if algo == "d_integrate_q" { Arg::First } else { Arg::Second };
+            measure(plan, |i| {
+                m.d_integrate_blocks_into(&q[i], &v[i], arg, nn)?;
+                black_box(&*nn);
+                Ok(())
+            })
+        }
+        "d_difference_q0" | "d_difference_q1" => {
+            let arg = if algo == "d_difference_q0" { Arg::First } else { Arg::Second };
+            measure(plan, |i| {
+                m.d_difference_blocks_into(&q[i], &q[(i + 1) % n], arg, nn)?;
+                black_box(&*nn);
+                Ok(())
+            })
+        }
+        _ => return None,
+    })
 }
 
 /// Times one algorithm.
@@ -797,9 +1022,13 @@ fn time_algo(
         out_m2,
         kkt,
         impact,
+        kin,
         batch,
         baseline_cpus,
     } = ws;
+    if let Some(s) = time_kin(algo, m, st, d, kin, plan) {
+        return s.map(|stats| Timed { stats, paired: None });
+    }
     // A batched algorithm on the workspaces `batch[side]`: timed alone, or paired with the
     // second pool.
     let mut batched = |f: &mut dyn FnMut(&mut BatchData) -> Result<()>| -> Result<Timed> {
@@ -1080,6 +1309,15 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
             ))
         })?;
     }
+    let frame = match &o.frame {
+        Some(f) => model.frame_id(f).map_err(|_| {
+            Error::Io(format!(
+                "--frame: unknown frame \"{f}\" in model \"{}\" ({spec})",
+                model.name()
+            ))
+        })?,
+        None => default_frame(&model),
+    };
     // --ratio-to R: R and every listed algorithm single-state, R not among them (clap rejects
     // --ratio-to with --paired-threads).
     let ratio_to = match &o.ratio_to {
@@ -1158,6 +1396,11 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
         out_m2: if needs("batch_") { vec![DMatrix::zeros(nv, nv); nstates] } else { vec![] },
         kkt: None,
         impact: None,
+        kin: Kin::new(
+            &model,
+            frame,
+            needs("frame_jacobian_derivative") || needs("frame_placement_hessian"),
+        ),
         batch: pools.into_iter().map(|p| BatchData::with_pool(&model, Arc::new(p))).collect(),
         baseline_cpus: pin_cpus.map(|c| c[..max_threads].to_vec()),
     };
@@ -1201,7 +1444,7 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
     };
     println!(
         "# model={name} source={spec} base={} nq={} nv={} njoints={} nstates={nstates} seed={} \
-         timer_overhead_ns={:.1} contacts={} threads={} pool={} smoke={} simd={}",
+         timer_overhead_ns={:.1} contacts={} frame={} threads={} pool={} smoke={} simd={}",
         if floating_base { "ff" } else { "fixed" },
         model.nq(),
         model.nv(),
@@ -1209,6 +1452,7 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
         o.seed,
         timer_overhead_ns(),
         if contacts.is_empty() { "none".to_string() } else { contacts.join(",") },
+        model.frames()[frame].name,
         match o.paired_threads {
             Some(t) => format!("1,{t}(paired)"),
             None => o.threads.to_string(),
