@@ -5,7 +5,8 @@
 use sodyn::algo::{Contact, Data};
 use sodyn::deriv::{
     ContactData, FdSoData, ImpactData, KktData, SoData, fd_derivatives, fd_so_derivatives,
-    id_derivatives, id_so_derivatives, impact_derivatives, kkt_derivatives,
+    id_derivatives, id_so_derivatives, impact_derivatives, impact_so_derivatives, kkt_derivatives,
+    kkt_so_derivatives,
 };
 use sodyn::model::Model;
 use sodyn::model::builtin::{pendulum, quadruped, random_tree, serial_chain};
@@ -57,7 +58,7 @@ fn outputs(
             mat(kd.dlambda_dv()),
             mat(kd.dlambda_dtau()),
         ]);
-        let mut im = ImpactData::new(m, cd);
+        let mut im = ImpactData::new(m, cd.clone());
         impact_derivatives(m, &mut d, &mut im, q, v).unwrap();
         out.extend([
             mat(im.dvplus_dq()),
@@ -65,6 +66,28 @@ fn outputs(
             mat(im.dimpulse_dq()),
             mat(im.dimpulse_dvminus()),
             im.vplus().as_slice().to_vec(),
+        ]);
+        // Second order: the IDFOZA parts of the G products run eight, four or one-by-four
+        // columns at a time by level.
+        let mut kd = KktData::new(m, cd.clone()).with_second_order(m);
+        kkt_so_derivatives(m, &mut d, &mut kd, q, v, u).unwrap();
+        let k = kd.so().unwrap();
+        out.extend([
+            ten(k.d2qdd_dq2()),
+            ten(k.d2qdd_dv2()),
+            ten(k.d2qdd_dqdv()),
+            ten(k.d2qdd_dtaudq()),
+            ten(k.d2lambda_dq2()),
+            ten(k.d2lambda_dtaudq()),
+        ]);
+        let mut im = ImpactData::new(m, cd).with_second_order(m);
+        impact_so_derivatives(m, &mut d, &mut im, q, v).unwrap();
+        let s = im.so().unwrap();
+        out.extend([
+            ten(s.d2vplus_dq2()),
+            ten(s.d2vplus_dqdvminus()),
+            ten(s.d2impulse_dq2()),
+            ten(s.d2impulse_dqdvminus()),
         ]);
     }
     out

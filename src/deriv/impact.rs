@@ -17,7 +17,7 @@ use super::contact::{
 use super::contact_kin::{Dir, djac_col_dq, djtl_dq, djz_dq, djz_dq_rows, put_rows, rows_dot};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_so::{SoData, id_so_unchecked};
-use super::kkt::{copy_rows_zero_rest, premultiply};
+use super::kkt::{add_symmetric, copy_rows_zero_rest, premultiply};
 use super::zero::idfoza_core;
 use crate::algo::Data;
 use crate::algo::internal::{crba_unchecked, ltl_in_place, ltl_solve_rows_desc};
@@ -452,14 +452,7 @@ fn so_inner(
             so.ycol.rows_mut(n, m).copy_from(&im.dimpulse_dq.column(k));
             let y = so.ycol.as_slice();
             g_matrix_with(model, data, &mut im.cd, &batch.out[t], &y[n..], &y[..n]);
-            let g = &im.cd.g;
-            for j in 0..n {
-                for i in 0..n + m {
-                    let x = g[(i, j)];
-                    rqq[(i, j, k)] += x;
-                    rqq[(i, k, j)] += x;
-                }
-            }
+            add_symmetric(rqq, &im.cd.g, k);
         }
         // (q inner, q̇⁻_k outer): G with z_m = ∂q̇⁺/∂q̇⁻_k − e_k, z_J = ∂q̇⁺/∂q̇⁻_k + e e_k.
         idfoza_batch(model, data, batch, so.dv_minus_one.as_slice(), n, k0, cnt);

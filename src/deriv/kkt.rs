@@ -575,14 +575,7 @@ fn kkt_so_inner(
             so.ycol.rows_mut(n, m).copy_from(&kd.dlambda_dq.column(k));
             let y = so.ycol.as_slice();
             g_matrix_with(model, data, &mut kd.cd, &batch.out[t], &y[n..], &y[..n]);
-            let g = &kd.cd.g;
-            for j in 0..n {
-                for i in 0..n + m {
-                    let x = g[(i, j)];
-                    rqq[(i, j, k)] += x;
-                    rqq[(i, k, j)] += x;
-                }
-            }
+            add_symmetric(rqq, &kd.cd.g, k);
         }
         idfoza_batch(model, data, batch, kd.dqdd_dv.as_slice(), n, k0, cnt);
         for (t, k) in (k0..k0 + cnt).enumerate() {
@@ -619,6 +612,19 @@ fn kkt_so_inner(
         premultiply(&ri.rows(n, m), r, tl);
     }
     Ok(())
+}
+
+/// `r[(i, j, k)] += g[(i, j)]` and `r[(i, k, j)] += g[(i, j)]` for every row `i` and column
+/// `j` of `g`: the two `G` terms of a `(q, q)` second derivative, `G(∂y/∂q_k)[·, j]` and its
+/// swap.
+pub(crate) fn add_symmetric(r: &mut Tensor3, g: &DMatrix<f64>, k: usize) {
+    for j in 0..g.ncols() {
+        for i in 0..g.nrows() {
+            let x = g[(i, j)];
+            r[(i, j, k)] += x;
+            r[(i, k, j)] += x;
+        }
+    }
 }
 
 /// `t[0..n, :, :] = src`, `t[n.., :, :] = 0` (every entry written).

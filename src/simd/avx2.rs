@@ -6,8 +6,8 @@
 //! reached behind [`crate::simd::avx2_fma`].
 #![cfg(target_arch = "x86_64")]
 
+use super::F64x4;
 use super::Gemm4;
-use super::{F64x4, Lanes};
 use std::arch::x86_64::*;
 
 /// Four lanes in an AVX2 register. Only created inside functions compiled with
@@ -16,48 +16,17 @@ use std::arch::x86_64::*;
 #[derive(Clone, Copy)]
 pub(crate) struct Avx4(pub(crate) __m256d);
 
-// SAFETY (for every `unsafe` block below without its own comment): the CPU has AVX2 and FMA
-// wherever an `Avx4` exists (the type's invariant).
-impl Lanes for Avx4 {
-    type Arr = [f64; 4];
-    #[inline(always)]
-    fn splat(x: f64) -> Self {
-        // SAFETY: the type's invariant.
-        unsafe { Avx4(_mm256_set1_pd(x)) }
-    }
-    #[inline(always)]
-    fn load(a: &[f64; 4]) -> Self {
-        // SAFETY: the type's invariant; `a` holds the values read.
-        unsafe { Avx4(_mm256_loadu_pd(a.as_ptr())) }
-    }
-    #[inline(always)]
-    fn store(self) -> [f64; 4] {
-        let mut a = [0.0; 4];
-        // SAFETY: the type's invariant; `a` holds the values written.
-        unsafe { _mm256_storeu_pd(a.as_mut_ptr(), self.0) };
-        a
-    }
-    #[inline(always)]
-    fn add(self, b: Self) -> Self {
-        // SAFETY: the type's invariant.
-        unsafe { Avx4(_mm256_add_pd(self.0, b.0)) }
-    }
-    #[inline(always)]
-    fn sub(self, b: Self) -> Self {
-        // SAFETY: the type's invariant.
-        unsafe { Avx4(_mm256_sub_pd(self.0, b.0)) }
-    }
-    #[inline(always)]
-    fn mul(self, b: Self) -> Self {
-        // SAFETY: the type's invariant.
-        unsafe { Avx4(_mm256_mul_pd(self.0, b.0)) }
-    }
-    #[inline(always)]
-    fn mul_add(self, b: Self, c: Self) -> Self {
-        // SAFETY: the type's invariant.
-        unsafe { Avx4(_mm256_fmadd_pd(self.0, b.0, c.0)) }
-    }
-}
+register_lanes!(
+    Avx4,
+    4,
+    _mm256_set1_pd,
+    _mm256_loadu_pd,
+    _mm256_storeu_pd,
+    _mm256_add_pd,
+    _mm256_sub_pd,
+    _mm256_mul_pd,
+    _mm256_fmadd_pd
+);
 
 impl F64x4 for Avx4 {
     type Mask = __m256i;
@@ -285,6 +254,7 @@ pub(crate) fn sin_cos(xv: __m256d) -> (__m256d, __m256d) {
 #[cfg(test)]
 #[target_feature(enable = "avx2,fma")]
 pub(crate) fn sin_cos_arrays(x: &[f64; 4]) -> ([f64; 4], [f64; 4]) {
+    use super::Lanes;
     let (s, c) = Avx4::load(x).sin_cos();
     (s.store(), c.store())
 }

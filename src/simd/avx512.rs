@@ -7,7 +7,6 @@
 #![cfg(target_arch = "x86_64")]
 
 use super::Gemm4;
-use super::Lanes;
 use std::arch::x86_64::*;
 
 /// Eight lanes in an AVX-512 register. Only created inside functions compiled with
@@ -16,46 +15,17 @@ use std::arch::x86_64::*;
 #[derive(Clone, Copy)]
 pub(crate) struct Avx8(pub(crate) __m512d);
 
-impl Lanes for Avx8 {
-    type Arr = [f64; 8];
-    #[inline(always)]
-    fn splat(x: f64) -> Self {
-        // SAFETY: the type's invariant.
-        unsafe { Avx8(_mm512_set1_pd(x)) }
-    }
-    #[inline(always)]
-    fn load(a: &[f64; 8]) -> Self {
-        // SAFETY: the type's invariant; `a` holds the values read.
-        unsafe { Avx8(_mm512_loadu_pd(a.as_ptr())) }
-    }
-    #[inline(always)]
-    fn store(self) -> [f64; 8] {
-        let mut a = [0.0; 8];
-        // SAFETY: the type's invariant; `a` holds the values written.
-        unsafe { _mm512_storeu_pd(a.as_mut_ptr(), self.0) };
-        a
-    }
-    #[inline(always)]
-    fn add(self, b: Self) -> Self {
-        // SAFETY: the type's invariant.
-        unsafe { Avx8(_mm512_add_pd(self.0, b.0)) }
-    }
-    #[inline(always)]
-    fn sub(self, b: Self) -> Self {
-        // SAFETY: the type's invariant.
-        unsafe { Avx8(_mm512_sub_pd(self.0, b.0)) }
-    }
-    #[inline(always)]
-    fn mul(self, b: Self) -> Self {
-        // SAFETY: the type's invariant.
-        unsafe { Avx8(_mm512_mul_pd(self.0, b.0)) }
-    }
-    #[inline(always)]
-    fn mul_add(self, b: Self, c: Self) -> Self {
-        // SAFETY: the type's invariant.
-        unsafe { Avx8(_mm512_fmadd_pd(self.0, b.0, c.0)) }
-    }
-}
+register_lanes!(
+    Avx8,
+    8,
+    _mm512_set1_pd,
+    _mm512_loadu_pd,
+    _mm512_storeu_pd,
+    _mm512_add_pd,
+    _mm512_sub_pd,
+    _mm512_mul_pd,
+    _mm512_fmadd_pd
+);
 
 /// [`neg_gemm4_sparse`] with AVX-512F: row chunks of up to 6 vectors of 8 (24 accumulators, 4
 /// broadcasts and one column vector: 29 of the 32 registers), the vectors split evenly.

@@ -23,6 +23,55 @@
 //! so no lane operation may be written inside a closure (it would be a call per operation:
 //! `id_fo` ran 15× slower that way); lane kernels use small `#[inline(always)]` functions.
 
+/// Implements [`Lanes`] for a one-register newtype `$t` of `$n` lanes with the given
+/// intrinsics (`_mm256_*` for AVX2, `_mm512_*` for AVX-512F). Every `unsafe` block rests on the
+/// type's invariant: the CPU has the instruction set wherever a value of `$t` exists.
+#[cfg(target_arch = "x86_64")]
+macro_rules! register_lanes {
+    ($t:ident, $n:literal, $set1:ident, $loadu:ident, $storeu:ident, $add:ident, $sub:ident, $mul:ident, $fmadd:ident) => {
+        impl $crate::simd::Lanes for $t {
+            type Arr = [f64; $n];
+            #[inline(always)]
+            fn splat(x: f64) -> Self {
+                // SAFETY: the type's invariant.
+                unsafe { $t($set1(x)) }
+            }
+            #[inline(always)]
+            fn load(a: &[f64; $n]) -> Self {
+                // SAFETY: the type's invariant; `a` holds the values read.
+                unsafe { $t($loadu(a.as_ptr())) }
+            }
+            #[inline(always)]
+            fn store(self) -> [f64; $n] {
+                let mut a = [0.0; $n];
+                // SAFETY: the type's invariant; `a` holds the values written.
+                unsafe { $storeu(a.as_mut_ptr(), self.0) };
+                a
+            }
+            #[inline(always)]
+            fn add(self, b: Self) -> Self {
+                // SAFETY: the type's invariant.
+                unsafe { $t($add(self.0, b.0)) }
+            }
+            #[inline(always)]
+            fn sub(self, b: Self) -> Self {
+                // SAFETY: the type's invariant.
+                unsafe { $t($sub(self.0, b.0)) }
+            }
+            #[inline(always)]
+            fn mul(self, b: Self) -> Self {
+                // SAFETY: the type's invariant.
+                unsafe { $t($mul(self.0, b.0)) }
+            }
+            #[inline(always)]
+            fn mul_add(self, b: Self, c: Self) -> Self {
+                // SAFETY: the type's invariant.
+                unsafe { $t($fmadd(self.0, b.0, c.0)) }
+            }
+        }
+    };
+}
+
 pub(crate) mod avx2;
 pub(crate) mod avx512;
 mod portable;
