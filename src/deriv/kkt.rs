@@ -592,11 +592,12 @@ fn kkt_so_inner(
             so.ycol.rows_mut(n, m).copy_from(&kd.dlambda_dtau.column(k));
             let y = so.ycol.as_slice();
             g_matrix_with(model, data, &mut kd.cd, &batch.out[t], &y[n..], &y[..n]);
-            let g = &kd.cd.g;
-            for kk in 0..n {
-                for i in 0..n + m {
-                    rtq[(i, k, kk)] = g[(i, kk)];
-                }
+            // Column (·, k, kk) of R_τq is column kk of G.
+            let (rn, g) = (n + m, kd.cd.g.as_slice());
+            let dst = rtq.as_mut_slice();
+            for (kk, gc) in g.chunks_exact(rn).enumerate() {
+                let o = rn * (k + n * kk);
+                dst[o..o + rn].copy_from_slice(gc);
             }
         }
     }
@@ -617,12 +618,22 @@ fn kkt_so_inner(
 /// `r[(i, j, k)] += g[(i, j)]` and `r[(i, k, j)] += g[(i, j)]` for every row `i` and column
 /// `j` of `g`: the two `G` terms of a `(q, q)` second derivative, `G(∂y/∂q_k)[·, j]` and its
 /// swap.
+///
+/// # Panics
+/// If `g` has not `r`'s rows, or `k` or a column of `g` is not a page and column of `r`.
 pub(crate) fn add_symmetric(r: &mut Tensor3, g: &DMatrix<f64>, k: usize) {
-    for j in 0..g.ncols() {
-        for i in 0..g.nrows() {
-            let x = g[(i, j)];
-            r[(i, j, k)] += x;
-            r[(i, k, j)] += x;
+    let (rn, n2, n3) = r.dims();
+    assert!(
+        g.nrows() == rn && g.ncols() <= n2.min(n3) && k < n2.min(n3),
+        "add_symmetric: dimension mismatch"
+    );
+    let dst = r.as_mut_slice();
+    // Contiguous columns: (·, j, k) at rn (j + n2 k), (·, k, j) at rn (k + n2 j).
+    for (j, gc) in g.as_slice().chunks_exact(rn).enumerate() {
+        for o in [rn * (j + n2 * k), rn * (k + n2 * j)] {
+            for (x, y) in dst[o..o + rn].iter_mut().zip(gc) {
+                *x += y;
+            }
         }
     }
 }
