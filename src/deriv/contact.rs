@@ -43,11 +43,13 @@
 //!    `∂p/∂q_l = u_l`) and `w_x × u_l` otherwise;
 //! 3. rows `nv + 3c..nv + 3c + 3`: `∂(Z_m.lin + Z_m.ang × p_c)/∂q_l` for the DoFs `l` on contact
 //!    `c`'s path (`m` its body), with `Z_j = Σ_{x ⪯ j} S_x z₁_x`,
-//!    `∂Z_m/∂q_l = S_l × (Z_m − Z_λ)` (`λ` the parent of `l`'s joint) and `∂p_c/∂q_l = u_l`.
+//!    `∂Z_m/∂q_l = S_l × (Z_m − Z_λ)` (`λ` the parent of `l`'s joint) and `∂p_c/∂q_l = u_l`;
+//!    for a 3-D world-aligned point, `w_l × Σ_{x ⪰ l} z₁_x u_x + (Σ_{x ≺ l} z₁_x w_x) × u_l`
+//!    by running sums (`contact_kin::djz_dq_point`).
 
 use super::contact_kin::{
-    Base, Dir, Geo, Path, acc_rows, dacc_dq, dacc_dv, djac_col_dq, djz_dq, djz_dq_rows, jac_col,
-    put_rows, rows_dot,
+    Base, Dir, Geo, Path, PointCol, acc_rows, dacc_dq, dacc_dv, djac_col_dq, djz_dq_point,
+    djz_dq_rows, jac_col, put_rows, rows_dot,
 };
 use super::zero::{IdfozaWs, idfoza_core, idfoza_lanes_core};
 use crate::algo::internal::ltl_solve_rows_desc;
@@ -1134,12 +1136,14 @@ pub(crate) fn g_matrix_with(
         let m = cd.body(c);
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
         if geo.is_point() {
-            for &l in &path.dofs {
-                let r = djz_dq(&b, &zc, m, &path.p, l, Dir::None).v;
+            let p = path.p;
+            let cols = path.dofs.iter().map(|&x| (PointCol::of(&b, x, &p), z[x]));
+            djz_dq_point(cols, |t, r| {
+                let l = path.dofs[t];
                 for k in 0..3 {
                     g[(n + r0 + k, l)] = r[k];
                 }
-            }
+            });
         } else {
             let mut col = [0.0; 6];
             for &l in &path.dofs {

@@ -283,23 +283,58 @@ pub(crate) fn djtl_dq(
     (at_point(&dsx, &pp) + sx.ang().cross(&dp)).dot(lam)
 }
 
-/// `∂(J z)/∂q_l` at one contact, where `zc` holds the cumulative sums `Z_j = Σ_{x ⪯ j} S_x z_x`
-/// per joint; evaluated with tangent `dir`.
-pub(crate) fn djz_dq(
-    b: &Base,
-    zc: &[Motion],
-    m: usize,
-    p: &Vector3<f64>,
-    l: usize,
-    dir: Dir,
-) -> D3 {
-    let jl = b.dof_joint[l];
-    let sl = b.s(l, dir);
-    let zm = b.cum(zc, m, dir, false);
-    let zl = b.cum(zc, b.parents[jl], dir, false);
-    let pp = b.p(p, dir);
-    let dz = sl.cross(&(zm - zl));
-    at_point(&dz, &pp) + zm.ang().cross(&at_point(&sl, &pp))
+/// A DoF `x` of a 3-D world-aligned point contact's path: `w = S_x.ang`, the point velocity
+/// column `u = S_x.lin + S_x.ang × p` and `x`'s joint (path order: ancestors have lower index).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PointCol {
+    pub w: Vector3<f64>,
+    pub u: Vector3<f64>,
+    pub joint: usize,
+}
+
+impl PointCol {
+    /// Column `x` at the contact point `p`.
+    #[inline]
+    pub fn of(b: &Base, x: usize, p: &Vector3<f64>) -> PointCol {
+        let s = &b.s[x];
+        PointCol { w: s.ang, u: s.lin + s.ang.cross(p), joint: b.dof_joint[x] }
+    }
+}
+
+/// `∂/∂q_k (∂u_x/∂q_l)` in closed form for the DoFs `x`, `l`, `k` of one point contact's path.
+/// With `(a, b) = (l, x)` if `l`'s joint is `x`'s or an ancestor, else `(x, l)`,
+/// `∂u_x/∂q_l = w_a × u_b` (eq. J1 with `∂p/∂q_l = u_l`; see `point_jacobian_dq` in
+/// `super::contact`), and along `q_k`: `D w_a = [k ⪯ a] w_k × w_a` (J1) and
+/// `D u_b = w_k × u_b` if `k ⪯ b`, else `w_b × u_k`.
+#[inline]
+pub(crate) fn du_dq2(x: &PointCol, l: &PointCol, k: &PointCol) -> Vector3<f64> {
+    let (a, b) = if l.joint <= x.joint { (l, x) } else { (x, l) };
+    let du_b = if k.joint <= b.joint { k.w.cross(&b.u) } else { b.w.cross(&k.u) };
+    let t = a.w.cross(&du_b);
+    if k.joint <= a.joint { t + k.w.cross(&a.w).cross(&b.u) } else { t }
+}
+
+/// `∂(J z)/∂q_l` for every DoF `l` (position `t` in `cols`, the columns of one point contact's
+/// path in path order), passed to `f(t, ·)`: with the closed form of [`du_dq2`]'s inner
+/// derivative, `Σ_x z_x ∂u_x/∂q_l = w_l × Σ_{x ⪰ l} z_x u_x + (Σ_{x ≺ l} z_x w_x) × u_l`
+/// (`⪰`: `x`'s joint is `l`'s or a descendant), by running sums along the path.
+#[inline]
+pub(crate) fn djz_dq_point(
+    cols: impl Iterator<Item = (PointCol, f64)> + Clone,
+    mut f: impl FnMut(usize, Vector3<f64>),
+) {
+    let mut su: Vector3<f64> = cols.clone().map(|(c, z)| c.u * z).sum();
+    let mut pw = Vector3::zeros();
+    // The DoFs of one joint (consecutive) see the same sums.
+    let (mut su_next, mut pw_next, mut joint) = (su, pw, usize::MAX);
+    for (t, (c, z)) in cols.enumerate() {
+        if c.joint != joint {
+            (su, pw, joint) = (su_next, pw_next, c.joint);
+        }
+        f(t, c.w.cross(&su) + pw.cross(&c.u));
+        su_next -= c.u * z;
+        pw_next += c.w * z;
+    }
 }
 
 // ---------------------------------------------------------------------------------------------

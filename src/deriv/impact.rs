@@ -14,7 +14,7 @@ use super::contact::{
     factor_kkt, fill_rinv, g_matrix_split, g_matrix_with, idfoza_batch, padded_rows,
     path_kinematics, sub_djtl_dq_tree, transpose_into, update_points,
 };
-use super::contact_kin::{Dir, djac_col_dq, djtl_dq, djz_dq, djz_dq_rows, put_rows, rows_dot};
+use super::contact_kin::{Dir, PointCol, djac_col_dq, djz_dq_rows, du_dq2, put_rows, rows_dot};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_so::{SoData, id_so_unchecked};
 use super::kkt::{add_symmetric, copy_rows_zero_rest, premultiply};
@@ -422,13 +422,18 @@ fn so_inner(
                 }
                 continue;
             }
+            // ∂²(J_cᵀλ)/∂q² and ∂²(J_c w)/∂q² from the closed form of ∂²u_x/∂q_l∂q_k.
             let lam = Vector3::new(im.impulse[r0], im.impulse[r0 + 1], im.impulse[r0 + 2]);
             for &k in &path.dofs {
+                let ck = PointCol::of(&b, k, &path.p);
                 for &l in &path.dofs {
+                    let cl = PointCol::of(&b, l, &path.p);
+                    let mut d = Vector3::zeros();
                     for &x in &path.dofs {
-                        rqq[(x, l, k)] -= djtl_dq(&b, &path.p, &lam, x, l, Dir::Q(k)).1;
+                        let t = du_dq2(&PointCol::of(&b, x, &path.p), &cl, &ck);
+                        rqq[(x, l, k)] -= lam.dot(&t);
+                        d += t * im.w[x];
                     }
-                    let d = djz_dq(&b, &zc, body, &path.p, l, Dir::Q(k)).d;
                     for r in 0..3 {
                         rqq[(n + r0 + r, l, k)] = d[r];
                     }

@@ -17,7 +17,8 @@ use super::contact::{
     sub_djtl_dq_strided, update_points,
 };
 use super::contact_kin::{
-    Dir, dacc_dq, dacc_dv, dap_dq, dap_dv, djac_col_dq, djtl_dq, djz_dq_rows, put_rows, rows_dot,
+    Dir, PointCol, dacc_dq, dacc_dv, dap_dq, dap_dv, djac_col_dq, djz_dq_rows, du_dq2, put_rows,
+    rows_dot,
 };
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_fo::id_derivatives_unchecked;
@@ -514,9 +515,12 @@ fn kkt_so_inner(
         }
         let lam = Vector3::new(kd.lambda[r0], kd.lambda[r0 + 1], kd.lambda[r0 + 2]);
         for &k in &path.dofs {
+            let ck = PointCol::of(&b, k, &path.p);
             for &l in &path.dofs {
+                let cl = PointCol::of(&b, l, &path.p);
                 for &x in &path.dofs {
-                    rqq[(x, l, k)] -= djtl_dq(&b, &path.p, &lam, x, l, Dir::Q(k)).1;
+                    let cx = PointCol::of(&b, x, &path.p);
+                    rqq[(x, l, k)] -= lam.dot(&du_dq2(&cx, &cl, &ck));
                 }
                 let aqq = dap_dq(&b, body, &path.p, l, Dir::Q(k)).d;
                 let avv = dap_dv(&b, body, &path.p, l, Dir::V(k)).d;
@@ -530,7 +534,7 @@ fn kkt_so_inner(
         }
     }
     // Baumgarte rows: + kd ∂²(J q̇)/∂q² + kp ∂²e/∂q² (q, q), + kd ∂J_k/∂q_l (q, q̇); the
-    // body velocities data.ov are the path sums Σ S q̇ that djz_dq differentiates.
+    // body velocities data.ov are the path sums Σ S q̇ that djz_dq_rows differentiates.
     for (c, path) in kd.cd.paths.iter().enumerate() {
         let contact = &kd.cd.contacts[c];
         if !contact.has_baumgarte() {
