@@ -222,17 +222,31 @@ pub(crate) fn at_point(m: &Dm, p: &D3) -> D3 {
     m.lin() + m.ang().cross(p)
 }
 
+/// The contact body's velocity `V_m`, acceleration `A_m` and contact point `p` with their
+/// tangents along one direction, shared by [`dap_dq`] and [`dap_dv`] for every `l`.
+pub(crate) struct BodyAt {
+    vm: Dm,
+    am: Dm,
+    pp: D3,
+}
+
+impl BodyAt {
+    /// Body `m`'s quantities at the point `p`, with tangent `dir`.
+    #[inline]
+    pub fn new(b: &Base, m: usize, p: &Vector3<f64>, dir: Dir) -> BodyAt {
+        BodyAt { vm: b.vel(m, dir), am: b.acc(m, dir), pp: b.p(p, dir) }
+    }
+}
+
 /// `∂a_p/∂q_l` (tangent) of the classical acceleration of the contact point of body `m`,
-/// evaluated with tangent `dir` (the outer derivative).
-pub(crate) fn dap_dq(b: &Base, m: usize, p: &Vector3<f64>, l: usize, dir: Dir) -> D3 {
+/// evaluated with tangent `dir` (the outer derivative; `at` made with the same `dir`).
+pub(crate) fn dap_dq(b: &Base, at: &BodyAt, l: usize, dir: Dir) -> D3 {
     let jl = b.dof_joint[l];
     let ll = b.parents[jl];
     let sl = b.s(l, dir);
-    let vm = b.vel(m, dir);
-    let am = b.acc(m, dir);
+    let (vm, am, pp) = (at.vm, at.am, at.pp);
     let vl = b.vel(ll, dir);
     let al = b.acc(ll, dir);
-    let pp = b.p(p, dir);
     let psid = vl.cross(&sl);
     let dv = sl.cross(&(vm - vl)); // J2
     let da = (al - am).cross(&sl) + (vl - vm).cross(&psid); // J6 + J7
@@ -247,15 +261,14 @@ pub(crate) fn dap_dq(b: &Base, m: usize, p: &Vector3<f64>, l: usize, dir: Dir) -
         + vm.ang().cross(&dpdot)
 }
 
-/// `∂a_p/∂q̇_l`, evaluated with tangent `dir`.
-pub(crate) fn dap_dv(b: &Base, m: usize, p: &Vector3<f64>, l: usize, dir: Dir) -> D3 {
+/// `∂a_p/∂q̇_l`, evaluated with tangent `dir` (`at` made with the same `dir`).
+pub(crate) fn dap_dv(b: &Base, at: &BodyAt, l: usize, dir: Dir) -> D3 {
     let jl = b.dof_joint[l];
     let ll = b.parents[jl];
     let sl = b.s(l, dir);
-    let vm = b.vel(m, dir);
+    let (vm, pp) = (at.vm, at.pp);
     let vl = b.vel(ll, dir);
     let vj = b.vel(jl, dir);
-    let pp = b.p(p, dir);
     let dv = sl; // J8
     let da = vl.cross(&sl) + vj.cross(&sl) - vm.cross(&sl); // J9
     let pdot = at_point(&vm, &pp);

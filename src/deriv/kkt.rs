@@ -17,8 +17,8 @@ use super::contact::{
     sub_djtl_dq_strided, update_points,
 };
 use super::contact_kin::{
-    Dir, PointCol, dacc_dq, dacc_dv, dap_dq, dap_dv, djac_col_dq, djz_dq_rows, du_dq2, put_rows,
-    rows_dot,
+    BodyAt, Dir, PointCol, dacc_dq, dacc_dv, dap_dq, dap_dv, djac_col_dq, djz_dq_rows, du_dq2,
+    put_rows, rows_dot,
 };
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_fo::id_derivatives_unchecked;
@@ -516,19 +516,37 @@ fn kkt_so_inner(
         let lam = Vector3::new(kd.lambda[r0], kd.lambda[r0 + 1], kd.lambda[r0 + 2]);
         for &k in &path.dofs {
             let ck = PointCol::of(&b, k, &path.p);
+            let (dq, dv) = (Dir::Q(k), Dir::V(k));
+            let (atq, atv) =
+                (BodyAt::new(&b, body, &path.p, dq), BodyAt::new(&b, body, &path.p, dv));
             for &l in &path.dofs {
                 let cl = PointCol::of(&b, l, &path.p);
                 for &x in &path.dofs {
                     let cx = PointCol::of(&b, x, &path.p);
                     rqq[(x, l, k)] -= lam.dot(&du_dq2(&cx, &cl, &ck));
                 }
-                let aqq = dap_dq(&b, body, &path.p, l, Dir::Q(k)).d;
-                let avv = dap_dv(&b, body, &path.p, l, Dir::V(k)).d;
-                let aqv = dap_dq(&b, body, &path.p, l, Dir::V(k)).d;
+                let aqv = dap_dq(&b, &atv, l, dv).d;
                 for r in 0..3 {
-                    rqq[(n + r0 + r, l, k)] = aqq[r];
-                    rvv[(n + r0 + r, l, k)] = avv[r];
                     rqv[(n + r0 + r, l, k)] = aqv[r];
+                }
+                // ∂²a_p/∂q̇² is symmetric, ∂²a_p/∂q² for DoFs of different joints (which
+                // commute): the pairs l > k are the mirrors of pairs already written.
+                if l <= k {
+                    let avv = dap_dv(&b, &atv, l, dv).d;
+                    for r in 0..3 {
+                        rvv[(n + r0 + r, l, k)] = avv[r];
+                        rvv[(n + r0 + r, k, l)] = avv[r];
+                    }
+                }
+                let same_joint = model.dof_joint[l] == model.dof_joint[k];
+                if l <= k || same_joint {
+                    let aqq = dap_dq(&b, &atq, l, dq).d;
+                    for r in 0..3 {
+                        rqq[(n + r0 + r, l, k)] = aqq[r];
+                        if !same_joint {
+                            rqq[(n + r0 + r, k, l)] = aqq[r];
+                        }
+                    }
                 }
             }
         }
