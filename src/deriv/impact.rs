@@ -427,15 +427,28 @@ fn so_inner(
             for &k in &path.dofs {
                 let ck = PointCol::of(&b, k, &path.p);
                 for &l in &path.dofs {
+                    // Symmetric in (l, k) for DoFs of different joints (which commute): the
+                    // pairs l > k are the mirrors of pairs already written.
+                    let same_joint = model.dof_joint[l] == model.dof_joint[k];
+                    if l > k && !same_joint {
+                        continue;
+                    }
                     let cl = PointCol::of(&b, l, &path.p);
                     let mut d = Vector3::zeros();
                     for &x in &path.dofs {
                         let t = du_dq2(&PointCol::of(&b, x, &path.p), &cl, &ck);
-                        rqq[(x, l, k)] -= lam.dot(&t);
+                        let y = lam.dot(&t);
+                        rqq[(x, l, k)] -= y;
+                        if !same_joint {
+                            rqq[(x, k, l)] -= y;
+                        }
                         d += t * im.w[x];
                     }
                     for r in 0..3 {
                         rqq[(n + r0 + r, l, k)] = d[r];
+                        if !same_joint {
+                            rqq[(n + r0 + r, k, l)] = d[r];
+                        }
                     }
                 }
             }

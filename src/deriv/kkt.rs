@@ -521,9 +521,18 @@ fn kkt_so_inner(
                 (BodyAt::new(&b, body, &path.p, dq), BodyAt::new(&b, body, &path.p, dv));
             for &l in &path.dofs {
                 let cl = PointCol::of(&b, l, &path.p);
-                for &x in &path.dofs {
-                    let cx = PointCol::of(&b, x, &path.p);
-                    rqq[(x, l, k)] -= lam.dot(&du_dq2(&cx, &cl, &ck));
+                // Symmetric in (l, k) for DoFs of different joints (which commute): the pairs
+                // l > k are the mirrors of pairs already written.
+                let same_joint = model.dof_joint[l] == model.dof_joint[k];
+                if l <= k || same_joint {
+                    for &x in &path.dofs {
+                        let cx = PointCol::of(&b, x, &path.p);
+                        let t = lam.dot(&du_dq2(&cx, &cl, &ck));
+                        rqq[(x, l, k)] -= t;
+                        if !same_joint {
+                            rqq[(x, k, l)] -= t;
+                        }
+                    }
                 }
                 let aqv = dap_dq(&b, &atv, l, dv).d;
                 for r in 0..3 {
@@ -538,7 +547,6 @@ fn kkt_so_inner(
                         rvv[(n + r0 + r, k, l)] = avv[r];
                     }
                 }
-                let same_joint = model.dof_joint[l] == model.dof_joint[k];
                 if l <= k || same_joint {
                     let aqq = dap_dq(&b, &atq, l, dq).d;
                     for r in 0..3 {
