@@ -17,7 +17,9 @@ use super::contact::{
 use super::contact_kin::{Dir, PointCol, djac_col_dq, djz_dq_rows, du_dq2, put_rows, rows_dot};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_so::{SoData, id_so_unchecked};
-use super::kkt::{add_symmetric, copy_rows_zero_rest, premultiply};
+use super::kkt::{
+    add_symmetric, copy_rows_zero_rest, premultiply, premultiply_sym, symmetric_ends,
+};
 use super::zero::idfoza_core;
 use crate::algo::Data;
 use crate::algo::internal::{crba_unchecked, ltl_in_place, ltl_solve_rows_desc};
@@ -146,6 +148,8 @@ pub struct ImpactSo {
     dv_minus_one: DMatrix<f64>,
     /// The IDFOZA products of the `G` terms, eight or four columns at a time.
     batch: IdfozaBatch,
+    /// `kkt::symmetric_ends` of `∂²/∂q²`.
+    ends_q: Vec<usize>,
 }
 
 impl ImpactSo {
@@ -207,6 +211,7 @@ impl ImpactData {
             ycol: DVector::zeros(n + m),
             dv_minus_one: DMatrix::zeros(n, n),
             batch: IdfozaBatch::new(model),
+            ends_q: symmetric_ends(model, true),
         });
         self
     }
@@ -485,8 +490,9 @@ fn so_inner(
         }
     }
     let ri = &im.cd.rinv;
-    premultiply(&ri.rows(0, n), rqq, &mut so.d2vplus_dq2);
-    premultiply(&ri.rows(n, m), rqq, &mut so.d2impulse_dq2);
+    // ∂²/∂q² is symmetric in (j, k) for DoFs of different joints.
+    premultiply_sym(&ri.rows(0, n), rqq, &mut so.d2vplus_dq2, &so.ends_q);
+    premultiply_sym(&ri.rows(n, m), rqq, &mut so.d2impulse_dq2, &so.ends_q);
     premultiply(&ri.rows(0, n), rqv, &mut so.d2vplus_dqdvminus);
     premultiply(&ri.rows(n, m), rqv, &mut so.d2impulse_dqdvminus);
     Ok(())

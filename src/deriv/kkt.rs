@@ -134,6 +134,9 @@ pub struct KktSo {
     ycol: DVector<f64>,
     /// The IDFOZA products of the `G` terms, eight or four columns at a time.
     batch: IdfozaBatch,
+    /// [`symmetric_ends`] of `∂²/∂q²` and of `∂²/∂q̇²`.
+    ends_q: Vec<usize>,
+    ends_v: Vec<usize>,
 }
 
 impl KktSo {
@@ -216,6 +219,8 @@ impl KktData {
             r: [t(n + m), t(n + m), t(n + m), t(n + m)],
             ycol: DVector::zeros(n + m),
             batch: IdfozaBatch::new(model),
+            ends_q: symmetric_ends(model, true),
+            ends_v: symmetric_ends(model, false),
         });
         self
     }
@@ -638,9 +643,24 @@ fn kkt_so_inner(
         (&*rqv, &mut so.d2qdd_dqdv, &mut so.d2lambda_dqdv),
         (&*rtq, &mut so.d2qdd_dtaudq, &mut so.d2lambda_dtaudq),
     ];
-    for (r, tq, tl) in outs {
-        premultiply(&ri.rows(0, n), r, tq);
-        premultiply(&ri.rows(n, m), r, tl);
+    // ∂²/∂q² is symmetric in (j, k) for DoFs of different joints, ∂²/∂q̇² in every (j, k).
+    let (ends_q, ends_v) = (&so.ends_q, &so.ends_v);
+    for (t, (r, tq, tl)) in outs.into_iter().enumerate() {
+        let ends = match t {
+            0 => Some(ends_q),
+            1 => Some(ends_v),
+            _ => None,
+        };
+        match ends {
+            Some(e) => {
+                premultiply_sym(&ri.rows(0, n), r, tq, e);
+                premultiply_sym(&ri.rows(n, m), r, tl, e);
+            }
+            None => {
+                premultiply(&ri.rows(0, n), r, tq);
+                premultiply(&ri.rows(n, m), r, tl);
+            }
+        }
     }
     Ok(())
 }
@@ -675,6 +695,69 @@ pub(crate) fn copy_rows_zero_rest(t: &mut Tensor3, src: &Tensor3, n: usize) {
     for (col, s) in dst.chunks_exact_mut(rows).zip(src.as_slice().chunks_exact(n)) {
         col[..n].copy_from_slice(s);
         col[n..].fill(0.0);
+    }
+}
+
+/// The columns `(j, k)` that [`premultiply_sym`] computes in page `k` of a second derivative
+/// that is symmetric in `(j, k)` for DoFs of different joints (`joints`) or for all
+/// (`!joints`): `j < ends[k]`, with `ends[k]` one past the last DoF of `k`'s joint, or `k + 1`.
+pub(crate) fn symmetric_ends(model: &Model, joints: bool) -> Vec<usize> {
+    (0..model.nv)
+        .map(|k| {
+            let jt = model.dof_joint[k];
+            if joints { model.idx_v[jt] + model.nvs[jt] } else { k + 1 }
+        })
+        .collect()
+}
+
+/// Below this `nv`, [`premultiply_sym`] is one [`premultiply`]: its `nv` smaller products per
+/// tensor measured slower than the one whole product on solo12 (`nv` = 18, four feet:
+/// `kkt_so` 151 → 158 µs) and faster on talos_reduced (`nv` = 38, two soles: 511 → 495 µs)
+/// and talos_full_v2 (`nv` = 50: 1251 → 1120 µs) (AMD EPYC with AVX-512, 2026-11-26, the two
+/// binaries alternated in one run).
+const SYM_MIN_NV: usize = 32;
+
+/// [`premultiply`] of a tensor `r` whose column `(j, k)` equals its column `(k, j)` for
+/// `j ≥ ends[k]` (see [`symmetric_ends`]), and so does the result's: the products of the
+/// columns `j < ends[k]` of each page `k`, the others copied from their mirrors (one whole
+/// product below [`SYM_MIN_NV`]).
+///
+/// # Panics
+/// If the dimensions disagree or `ends[k] ∉ k + 1..=nv`.
+pub(crate) fn premultiply_sym<S>(
+    a: &nalgebra::Matrix<f64, nalgebra::Dyn, nalgebra::Dyn, S>,
+    r: &Tensor3,
+    out: &mut Tensor3,
+    ends: &[usize],
+) where
+    S: nalgebra::Storage<f64, nalgebra::Dyn, nalgebra::Dyn>,
+{
+    let (rn, n, _) = r.dims();
+    let (on, _, _) = out.dims();
+    assert!(
+        r.dims() == (rn, n, n)
+            && out.dims() == (on, n, n)
+            && a.shape() == (on, rn)
+            && ends.len() == n
+            && ends.iter().enumerate().all(|(k, &e)| e > k && e <= n),
+        "premultiply_sym: dimension mismatch"
+    );
+    if n < SYM_MIN_NV {
+        return premultiply(a, r, out);
+    }
+    for (k, &e) in ends.iter().enumerate() {
+        let view = DMatrixView::from_slice(&r.as_slice()[rn * n * k..rn * (n * k + e)], rn, e);
+        let o = &mut out.as_mut_slice()[on * n * k..on * (n * k + e)];
+        let mut ov = DMatrixViewMut::from_slice(o, on, e);
+        gemm(-1.0, a, &view, 0.0, &mut ov);
+    }
+    // Column (j, k), j ≥ ends[k] > k, from column (k, j) (k < j < ends[j]: computed).
+    let o = out.as_mut_slice();
+    for (k, &e) in ends.iter().enumerate() {
+        for j in e..n {
+            let (src, dst) = (on * (k + n * j), on * (j + n * k));
+            o.copy_within(src..src + on, dst);
+        }
     }
 }
 
