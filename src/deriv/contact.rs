@@ -45,10 +45,10 @@
 //!    `c`'s path (`m` its body), with `Z_j = Σ_{x ⪯ j} S_x z₁_x`,
 //!    `∂Z_m/∂q_l = S_l × (Z_m − Z_λ)` (`λ` the parent of `l`'s joint) and `∂p_c/∂q_l = u_l`;
 //!    for a 3-D world-aligned point, `w_l × Σ_{x ⪰ l} z₁_x u_x + (Σ_{x ≺ l} z₁_x w_x) × u_l`
-//!    by running sums (`contact_kin::djz_dq_point`).
+//!    by running sums (`contact_kin::djz_dq_parts`).
 
 use super::contact_kin::{
-    Base, Dir, Geo, Path, PointCol, acc_rows, dacc_dq, dacc_dv, djac_col_dq, djz_dq_point,
+    Base, Dir, Geo, Path, PointCol, acc_rows, dacc_dq, dacc_dv, djac_col_dq, djz_dq_parts,
     djz_dq_rows, jac_col, put_rows, rows_dot,
 };
 use super::zero::{IdfozaWs, idfoza_core, idfoza_lanes_core};
@@ -59,8 +59,8 @@ use crate::linalg::{SpdWork, gemm, spd_inverse, transpose_strided};
 use crate::model::{Model, contact_label};
 #[cfg(target_arch = "x86_64")]
 use crate::simd::{Avx4, Avx8};
-use crate::spatial::Motion;
 use crate::spatial::Transform;
+use crate::spatial::{Force, Motion};
 use nalgebra::{DMatrix, DVector, Vector3};
 
 /// The largest number of point contacts [`ContactData::new`] accepts (`m` constraint rows).
@@ -329,11 +329,6 @@ impl ContactData {
     /// Number of constraint rows (3 per 3-D contact, 6 per 6-D contact).
     pub fn dim(&self) -> usize {
         self.m
-    }
-
-    /// Contact body of contact `c`.
-    pub(crate) fn body(&self, c: usize) -> usize {
-        *self.paths[c].joints.last().expect("non-empty path")
     }
 
     /// Contact names for error messages.
@@ -863,11 +858,13 @@ fn sub_djtl_dq_generic(
         let (n, f) = if geo.six { (part(0), part(3)) } else { (Vector3::zeros(), part(0)) };
         let (n, f) = if geo.local { (path.rot * n, path.rot * f) } else { (n, f) };
         let p = path.p;
-        let (fa, fl) = (n + p.cross(&f), f);
+        let force = Force { ang: n + p.cross(&f), lin: f };
         for (il, &l) in path.dofs.iter().enumerate() {
             let (sl, jl) = (s[l], path.dof_joint[il]);
             let ul = sl.lin + sl.ang.cross(&p);
             let ulf = ul.cross(&f);
+            // (S_l × S_x)·F = −S_x·(S_l ×* F): one force cross product per l.
+            let g = sl.cross_force(&force);
             for (ix, &x) in path.dofs.iter().enumerate() {
                 let sx = s[x];
                 let anc = jl <= path.dof_joint[ix];
@@ -875,16 +872,10 @@ fn sub_djtl_dq_generic(
                     if anc {
                         continue;
                     }
-                    let c = sl.cross(&sx);
-                    -(c.ang.dot(&fa) + c.lin.dot(&fl))
+                    sx.dot(&g)
                 } else {
                     let t = sx.ang.dot(&ulf);
-                    if anc {
-                        let c = sl.cross(&sx);
-                        t + c.ang.dot(&fa) + c.lin.dot(&fl)
-                    } else {
-                        t
-                    }
+                    if anc { t - sx.dot(&g) } else { t }
                 };
                 o[rs * x + cs * l] -= e;
             }
@@ -1118,44 +1109,31 @@ pub(crate) fn g_matrix_with(
     cd.g.view_mut((0, 0), (n, n)).copy_from(zmat);
     let mut g = std::mem::replace(&mut cd.g, DMatrix::zeros(0, 0));
     sub_djtl_dq_tree(model, &data.s_world, cd, z2, &mut g);
-    // ∂(J z₁)/∂q rows: cumulative Z_j = Σ_{x ⪯ j} S_x z_x along the path.
-    let mut zc = std::mem::take(&mut cd.zc);
+    // ∂(J z₁)/∂q rows, by running sums along each contact's path.
+    let b = base(model, data, cd);
     for (c, path) in cd.paths.iter().enumerate() {
-        for &j in &path.joints {
-            let parent = model.parents[j];
-            let mut zj = if parent == 0 { Motion::zero() } else { zc[parent] };
-            let iv = model.idx_v[j];
-            for (s, zx) in data.s_world[iv..iv + model.nvs[j]].iter().zip(&z[iv..iv + model.nvs[j]])
-            {
-                zj += *s * *zx;
-            }
-            zc[j] = zj;
-        }
-        zc[0] = Motion::zero();
-        let b = base(model, data, cd);
-        let m = cd.body(c);
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
-        if geo.is_point() {
-            let p = path.p;
-            let cols = path.dofs.iter().map(|&x| (PointCol::of(&b, x, &p), z[x]));
-            djz_dq_point(cols, |t, r| {
-                let l = path.dofs[t];
-                for k in 0..3 {
-                    g[(n + r0 + k, l)] = r[k];
-                }
+        let (p, rot) = (path.p, path.rot);
+        let cols = path.dofs.iter().map(|&x| (PointCol::of(&b, x, &p), z[x]));
+        // The value J z (world-aligned) for the local axes' D(Rᵀ y) = Rᵀ(D y − w_l × y).
+        let (y_ang, y_lin) =
+            cols.clone().fold((Vector3::zeros(), Vector3::zeros()), |(a, l), (c, zx)| {
+                (a + c.w * zx, l + c.u * zx)
             });
-        } else {
-            let mut col = [0.0; 6];
-            for &l in &path.dofs {
-                let rows = djz_dq_rows(&b, geo, &path.rot, &zc, m, &path.p, l, Dir::None);
-                put_rows(geo, &rows, false, &mut col);
-                for k in 0..geo.dim() {
-                    g[(n + r0 + k, l)] = col[k];
-                }
+        djz_dq_parts(cols, |t, ang, lin| {
+            let l = path.dofs[t];
+            let (ang, lin) = if geo.local {
+                let wl = b.s[l].ang;
+                (rot.tr_mul(&(ang - wl.cross(&y_ang))), rot.tr_mul(&(lin - wl.cross(&y_lin))))
+            } else {
+                (ang, lin)
+            };
+            let (top, parts) = if geo.six { (6, [ang, lin]) } else { (3, [lin, lin]) };
+            for (k, x) in parts.iter().flat_map(|v| v.iter()).take(top).enumerate() {
+                g[(n + r0 + k, l)] = *x;
             }
-        }
+        });
     }
-    cd.zc = zc;
     cd.g = g;
 }
 

@@ -327,25 +327,30 @@ pub(crate) fn du_dq2(x: &PointCol, l: &PointCol, k: &PointCol) -> Vector3<f64> {
     if k.joint <= a.joint { t + k.w.cross(&a.w).cross(&b.u) } else { t }
 }
 
-/// `∂(J z)/∂q_l` for every DoF `l` (position `t` in `cols`, the columns of one point contact's
-/// path in path order), passed to `f(t, ·)`: with the closed form of [`du_dq2`]'s inner
-/// derivative, `Σ_x z_x ∂u_x/∂q_l = w_l × Σ_{x ⪰ l} z_x u_x + (Σ_{x ≺ l} z_x w_x) × u_l`
-/// (`⪰`: `x`'s joint is `l`'s or a descendant), by running sums along the path.
+/// `∂(J z)/∂q_l` for every DoF `l` (position `t` in `cols`, the columns of one contact's path
+/// in path order, with `z_x`), world-aligned at the contact point, passed to
+/// `f(t, ang, lin)`: with the closed form of [`du_dq2`]'s inner derivative,
+/// `Σ_x z_x ∂u_x/∂q_l = w_l × Σ_{x ⪰ l} z_x u_x + (Σ_{x ≺ l} z_x w_x) × u_l` and
+/// `Σ_x z_x ∂w_x/∂q_l = w_l × Σ_{x ⪰ l} z_x w_x` (`⪰`: `x`'s joint is `l`'s or a
+/// descendant), by running sums along the path.
 #[inline]
-pub(crate) fn djz_dq_point(
+pub(crate) fn djz_dq_parts(
     cols: impl Iterator<Item = (PointCol, f64)> + Clone,
-    mut f: impl FnMut(usize, Vector3<f64>),
+    mut f: impl FnMut(usize, Vector3<f64>, Vector3<f64>),
 ) {
-    let mut su: Vector3<f64> = cols.clone().map(|(c, z)| c.u * z).sum();
+    let (mut su, mut sw) = cols
+        .clone()
+        .fold((Vector3::zeros(), Vector3::zeros()), |(u, w), (c, z)| (u + c.u * z, w + c.w * z));
     let mut pw = Vector3::zeros();
     // The DoFs of one joint (consecutive) see the same sums.
-    let (mut su_next, mut pw_next, mut joint) = (su, pw, usize::MAX);
+    let (mut su_next, mut sw_next, mut pw_next, mut joint) = (su, sw, pw, usize::MAX);
     for (t, (c, z)) in cols.enumerate() {
         if c.joint != joint {
-            (su, pw, joint) = (su_next, pw_next, c.joint);
+            (su, sw, pw, joint) = (su_next, sw_next, pw_next, c.joint);
         }
-        f(t, c.w.cross(&su) + pw.cross(&c.u));
+        f(t, c.w.cross(&sw), c.w.cross(&su) + pw.cross(&c.u));
         su_next -= c.u * z;
+        sw_next -= c.w * z;
         pw_next += c.w * z;
     }
 }
