@@ -327,6 +327,58 @@ pub(crate) fn du_dq2(x: &PointCol, l: &PointCol, k: &PointCol) -> Vector3<f64> {
     if k.joint <= a.joint { t + k.w.cross(&a.w).cross(&b.u) } else { t }
 }
 
+/// `∂u_x/∂q_l = w_a × u_b` (see [`du_dq2`]).
+#[inline]
+fn du_dq(x: &PointCol, l: &PointCol) -> Vector3<f64> {
+    if l.joint <= x.joint { l.w.cross(&x.u) } else { x.w.cross(&l.u) }
+}
+
+/// `∂w_x/∂q_l = [l ⪯ x] w_l × w_x` (eq. J1).
+#[inline]
+fn dw_dq(x: &PointCol, l: &PointCol) -> Vector3<f64> {
+    if l.joint <= x.joint { l.w.cross(&x.w) } else { Vector3::zeros() }
+}
+
+/// `∂/∂q_k (∂J_x/∂q_l)` in closed form for the DoFs `x`, `l`, `k` of one contact's path, as
+/// world-axis `(angular, linear)` parts `(a, b)`: the contact's rows are `(a, b)` for world
+/// axes and `(Rᵀa, Rᵀb)` for local axes. World axes: `J_x = (w_x, u_x)`, so
+/// `D_k D_l w_x = [l ⪯ x]([k ⪯ l] (w_k × w_l) × w_x + [k ⪯ x] w_l × (w_k × w_x))` and
+/// `D_k D_l u_x` is [`du_dq2`]. Local axes (`D_l Rᵀ = −Rᵀ [w_l]×`): with `y_x = (w_x, u_x)`,
+/// `e = D_l y_x − w_l × y_x`, the parts are `D_k e − w_k × e` with
+/// `D_k e = D_k D_l y_x − (D_k w_l) × y_x − w_l × D_k y_x`.
+#[inline]
+pub(crate) fn djac_dq2(
+    local: bool,
+    x: &PointCol,
+    l: &PointCol,
+    k: &PointCol,
+) -> (Vector3<f64>, Vector3<f64>) {
+    let dd_lin = du_dq2(x, l, k);
+    let dwl = if k.joint <= l.joint { k.w.cross(&l.w) } else { Vector3::zeros() };
+    let dd_ang =
+        if l.joint <= x.joint { dwl.cross(&x.w) + l.w.cross(&dw_dq(x, k)) } else { dwl * 0.0 };
+    if !local {
+        return (dd_ang, dd_lin);
+    }
+    let (e_ang, e_lin) = (dw_dq(x, l) - l.w.cross(&x.w), du_dq(x, l) - l.w.cross(&x.u));
+    let de_ang = dd_ang - dwl.cross(&x.w) - l.w.cross(&dw_dq(x, k));
+    let de_lin = dd_lin - dwl.cross(&x.u) - l.w.cross(&du_dq(x, k));
+    (de_ang - k.w.cross(&e_ang), de_lin - k.w.cross(&e_lin))
+}
+
+/// A contact's weights `λ` (`[n; f]` for 6-D, `f` for 3-D, in the contact's axes) as
+/// world-axis `(n, f)`, so that `λ · rows = n·a + f·b` for [`djac_dq2`]'s parts.
+#[inline]
+pub(crate) fn world_weights(
+    geo: Geo,
+    r: &Matrix3<f64>,
+    lam: &[f64],
+) -> (Vector3<f64>, Vector3<f64>) {
+    let part = |i: usize| Vector3::new(lam[i], lam[i + 1], lam[i + 2]);
+    let (n, f) = if geo.six { (part(0), part(3)) } else { (Vector3::zeros(), part(0)) };
+    if geo.local { (r * n, r * f) } else { (n, f) }
+}
+
 /// `∂(J z)/∂q_l` for every DoF `l` (position `t` in `cols`, the columns of one contact's path
 /// in path order, with `z_x`), world-aligned at the contact point, passed to
 /// `f(t, ang, lin)`: with the closed form of [`du_dq2`]'s inner derivative,

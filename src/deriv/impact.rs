@@ -14,7 +14,7 @@ use super::contact::{
     factor_kkt, fill_rinv, g_matrix_split, g_matrix_with, idfoza_batch, padded_rows,
     path_kinematics, sub_djtl_dq_tree, transpose_into, update_points,
 };
-use super::contact_kin::{Dir, PointCol, djac_col_dq, djz_dq_rows, du_dq2, put_rows, rows_dot};
+use super::contact_kin::{PointCol, djac_dq2, du_dq2, world_weights};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_so::{SoData, id_so_unchecked};
 use super::kkt::{
@@ -393,35 +393,45 @@ fn so_inner(
     // Every entry is rewritten (contact rows zeroed: the G products add to all of them).
     copy_rows_zero_rest(rqq, so.id.d2tau_dq2(), n);
     // − ∂²(Jᵀλ̂)/∂q² and ∂²(J w)/∂q².
-    let mut zc = std::mem::take(&mut im.cd.zc);
     {
         let b = base(model, data, &im.cd);
         for (c, path) in im.cd.paths.iter().enumerate() {
-            let body = *path.joints.last().expect("path");
             let (geo, r0) = (im.cd.geo[c], im.cd.row0[c]);
-            for &j in &path.joints {
-                let parent = model.parents[j];
-                let mut zj = if parent == 0 { Motion::zero() } else { zc[parent] };
-                let iv = model.idx_v[j];
-                for x in iv..iv + model.nvs[j] {
-                    zj += data.s_world[x] * im.w[x];
-                }
-                zc[j] = zj;
-            }
             if !geo.is_point() {
+                // ∂²(J_cᵀλ)/∂q² and ∂²(J_c w)/∂q² from the closed form of ∂²J_x/∂q_l∂q_k,
+                // symmetric in (l, k) for DoFs of different joints (the pairs l > k are the
+                // mirrors of pairs already written).
                 let lam = &im.impulse.as_slice()[r0..r0 + geo.dim()];
                 let (rot, p) = (&path.rot, &path.p);
-                let mut col = [0.0; 6];
+                let (nw, fw) = world_weights(geo, rot, lam);
                 for &k in &path.dofs {
+                    let ck = PointCol::of(&b, k, p);
                     for &l in &path.dofs {
-                        for &x in &path.dofs {
-                            let d = djac_col_dq(&b, geo, rot, p, x, l, Dir::Q(k));
-                            rqq[(x, l, k)] -= rows_dot(geo, &d, lam).1;
+                        let same_joint = model.dof_joint[l] == model.dof_joint[k];
+                        if l > k && !same_joint {
+                            continue;
                         }
-                        let rows = djz_dq_rows(&b, geo, rot, &zc, body, p, l, Dir::Q(k));
-                        put_rows(geo, &rows, true, &mut col);
-                        for (r, x) in col[..geo.dim()].iter().enumerate() {
+                        let cl = PointCol::of(&b, l, p);
+                        let (mut sa, mut sl) = (Vector3::zeros(), Vector3::zeros());
+                        for &x in &path.dofs {
+                            let (a, d) = djac_dq2(geo.local, &PointCol::of(&b, x, p), &cl, &ck);
+                            let t = nw.dot(&a) + fw.dot(&d);
+                            rqq[(x, l, k)] -= t;
+                            if !same_joint {
+                                rqq[(x, k, l)] -= t;
+                            }
+                            sa += a * im.w[x];
+                            sl += d * im.w[x];
+                        }
+                        let (sa, sl) =
+                            if geo.local { (rot.tr_mul(&sa), rot.tr_mul(&sl)) } else { (sa, sl) };
+                        let rows = if geo.six { [sa, sl] } else { [sl, sl] };
+                        for (r, x) in rows.iter().flat_map(|v| v.iter()).take(geo.dim()).enumerate()
+                        {
                             rqq[(n + r0 + r, l, k)] = *x;
+                            if !same_joint {
+                                rqq[(n + r0 + r, k, l)] = *x;
+                            }
                         }
                     }
                 }
@@ -459,7 +469,6 @@ fn so_inner(
             }
         }
     }
-    im.cd.zc = zc;
     // G terms, the IDFOZA parts of eight (or four) columns k at a time.
     so.dv_minus_one.copy_from(&im.dvplus_dvminus);
     for k in 0..n {

@@ -17,8 +17,8 @@ use super::contact::{
     sub_djtl_dq_strided, update_points,
 };
 use super::contact_kin::{
-    BodyAt, Dir, PointCol, dacc_dq, dacc_dv, dap_dq, dap_dv, djac_col_dq, djz_dq_rows, du_dq2,
-    put_rows, rows_dot,
+    BodyAt, Dir, PointCol, dacc_dq, dacc_dv, dap_dq, dap_dv, djac_dq2, djz_dq_rows, du_dq2,
+    put_rows, world_weights,
 };
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_fo::id_derivatives_unchecked;
@@ -497,12 +497,24 @@ fn kkt_so_inner(
         if !geo.is_point() {
             let lam = &kd.lambda.as_slice()[r0..r0 + geo.dim()];
             let (rot, p) = (&path.rot, &path.p);
+            let (nw, fw) = world_weights(geo, rot, lam);
             let mut col = [0.0; 6];
             for &k in &path.dofs {
+                let ck = PointCol::of(&b, k, p);
                 for &l in &path.dofs {
-                    for &x in &path.dofs {
-                        let d = djac_col_dq(&b, geo, rot, p, x, l, Dir::Q(k));
-                        rqq[(x, l, k)] -= rows_dot(geo, &d, lam).1;
+                    // −∂²(J_cᵀλ)/∂q², symmetric in (l, k) for DoFs of different joints: the
+                    // pairs l > k are the mirrors of pairs already written.
+                    let same_joint = model.dof_joint[l] == model.dof_joint[k];
+                    if l <= k || same_joint {
+                        let cl = PointCol::of(&b, l, p);
+                        for &x in &path.dofs {
+                            let (a, d) = djac_dq2(geo.local, &PointCol::of(&b, x, p), &cl, &ck);
+                            let t = nw.dot(&a) + fw.dot(&d);
+                            rqq[(x, l, k)] -= t;
+                            if !same_joint {
+                                rqq[(x, k, l)] -= t;
+                            }
+                        }
                     }
                     for (t, rows) in [
                         (&mut *rqq, dacc_dq(&b, geo, rot, body, p, l, Dir::Q(k))),
