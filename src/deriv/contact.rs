@@ -134,6 +134,9 @@ pub struct ContactData {
     pub(crate) kacc: Vec<Motion>,
     /// `T_x = Σ_c u_x^c × λ_c` per DoF (see [`sub_djtl_dq_tree`]).
     tsum: Vec<Vector3<f64>>,
+    /// Per contact, its path DoFs' `w = S.ang`, point velocity columns `u = S.lin + S.ang × p`
+    /// and joints (see `contact_kin::PointCol`), as of the last [`update_points`].
+    pub(crate) pcols: Vec<Vec<PointCol>>,
     t3: Vec<Vector3<f64>>,
     tn: Vec<f64>,
     /// Regularisation `μ ≥ 0` added to the Delassus matrix `J M⁻¹ Jᵀ` (default 0: a
@@ -270,6 +273,13 @@ impl ContactData {
             kvel: vec![Motion::zero(); model.njoints()],
             kacc: vec![Motion::zero(); model.njoints()],
             tsum: vec![Vector3::zeros(); n],
+            pcols: paths
+                .iter()
+                .map(|p| {
+                    let zero = PointCol { w: Vector3::zeros(), u: Vector3::zeros(), joint: 0 };
+                    vec![zero; p.dofs.len()]
+                })
+                .collect(),
             t3: vec![Vector3::zeros(); maxd],
             tn: vec![0.0; n],
             contacts: contacts.to_vec(),
@@ -381,6 +391,11 @@ pub(crate) fn update_points(model: &Model, data: &Data, cd: &mut ContactData, a0
         cd.paths[c].p = pose.trans;
         cd.paths[c].rot = pose.rot;
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        for (pc, &x) in cd.pcols[c].iter_mut().zip(&cd.paths[c].dofs) {
+            let s = data.s_world[x];
+            let u = s.lin + s.ang.cross(&pose.trans);
+            *pc = PointCol { w: s.ang, u, joint: model.dof_joint[x] };
+        }
         for &x in &cd.paths[c].dofs {
             let s = data.s_world[x];
             if geo.is_point() {
@@ -1110,11 +1125,10 @@ pub(crate) fn g_matrix_with(
     let mut g = std::mem::replace(&mut cd.g, DMatrix::zeros(0, 0));
     sub_djtl_dq_tree(model, &data.s_world, cd, z2, &mut g);
     // ∂(J z₁)/∂q rows, by running sums along each contact's path.
-    let b = base(model, data, cd);
     for (c, path) in cd.paths.iter().enumerate() {
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
-        let (p, rot) = (path.p, path.rot);
-        let cols = path.dofs.iter().map(|&x| (PointCol::of(&b, x, &p), z[x]));
+        let rot = path.rot;
+        let cols = cd.pcols[c].iter().zip(&path.dofs).map(|(pc, &x)| (*pc, z[x]));
         // The value J z (world-aligned) for the local axes' D(Rᵀ y) = Rᵀ(D y − w_l × y).
         let (y_ang, y_lin) =
             cols.clone().fold((Vector3::zeros(), Vector3::zeros()), |(a, l), (c, zx)| {
@@ -1123,7 +1137,7 @@ pub(crate) fn g_matrix_with(
         djz_dq_parts(cols, |t, ang, lin| {
             let l = path.dofs[t];
             let (ang, lin) = if geo.local {
-                let wl = b.s[l].ang;
+                let wl = cd.pcols[c][t].w;
                 (rot.tr_mul(&(ang - wl.cross(&y_ang))), rot.tr_mul(&(lin - wl.cross(&y_lin))))
             } else {
                 (ang, lin)

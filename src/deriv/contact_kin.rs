@@ -305,15 +305,6 @@ pub(crate) struct PointCol {
     pub joint: usize,
 }
 
-impl PointCol {
-    /// Column `x` at the contact point `p`.
-    #[inline]
-    pub fn of(b: &Base, x: usize, p: &Vector3<f64>) -> PointCol {
-        let s = &b.s[x];
-        PointCol { w: s.ang, u: s.lin + s.ang.cross(p), joint: b.dof_joint[x] }
-    }
-}
-
 /// `∂/∂q_k (∂u_x/∂q_l)` in closed form for the DoFs `x`, `l`, `k` of one point contact's path.
 /// With `(a, b) = (l, x)` if `l`'s joint is `x`'s or an ancestor, else `(x, l)`,
 /// `∂u_x/∂q_l = w_a × u_b` (eq. J1 with `∂p/∂q_l = u_l`; see `point_jacobian_dq` in

@@ -10,11 +10,11 @@
 //! `q̇⁻`, so `∂²y/∂q̇⁻²` = 0.
 
 use super::contact::{
-    ContactData, IdfozaBatch, add_jz_hessian, base, copy_block, djw_dq, factor_delassus,
-    factor_kkt, fill_rinv, g_matrix_split, g_matrix_with, idfoza_batch, padded_rows,
-    path_kinematics, sub_djtl_dq_tree, transpose_into, update_points,
+    ContactData, IdfozaBatch, add_jz_hessian, copy_block, djw_dq, factor_delassus, factor_kkt,
+    fill_rinv, g_matrix_split, g_matrix_with, idfoza_batch, padded_rows, path_kinematics,
+    sub_djtl_dq_tree, transpose_into, update_points,
 };
-use super::contact_kin::{PointCol, djac_dq2, du_dq2, world_weights};
+use super::contact_kin::{djac_dq2, du_dq2, world_weights};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_so::{SoData, id_so_unchecked};
 use super::kkt::{
@@ -394,27 +394,25 @@ fn so_inner(
     copy_rows_zero_rest(rqq, so.id.d2tau_dq2(), n);
     // − ∂²(Jᵀλ̂)/∂q² and ∂²(J w)/∂q².
     {
-        let b = base(model, data, &im.cd);
         for (c, path) in im.cd.paths.iter().enumerate() {
             let (geo, r0) = (im.cd.geo[c], im.cd.row0[c]);
+            let cols = &im.cd.pcols[c];
             if !geo.is_point() {
                 // ∂²(J_cᵀλ)/∂q² and ∂²(J_c w)/∂q² from the closed form of ∂²J_x/∂q_l∂q_k,
                 // symmetric in (l, k) for DoFs of different joints (the pairs l > k are the
                 // mirrors of pairs already written).
                 let lam = &im.impulse.as_slice()[r0..r0 + geo.dim()];
-                let (rot, p) = (&path.rot, &path.p);
+                let rot = &path.rot;
                 let (nw, fw) = world_weights(geo, rot, lam);
-                for &k in &path.dofs {
-                    let ck = PointCol::of(&b, k, p);
-                    for &l in &path.dofs {
+                for (&k, ck) in path.dofs.iter().zip(cols) {
+                    for (&l, cl) in path.dofs.iter().zip(cols) {
                         let same_joint = model.dof_joint[l] == model.dof_joint[k];
                         if l > k && !same_joint {
                             continue;
                         }
-                        let cl = PointCol::of(&b, l, p);
                         let (mut sa, mut sl) = (Vector3::zeros(), Vector3::zeros());
-                        for &x in &path.dofs {
-                            let (a, d) = djac_dq2(geo.local, &PointCol::of(&b, x, p), &cl, &ck);
+                        for (&x, cx) in path.dofs.iter().zip(cols) {
+                            let (a, d) = djac_dq2(geo.local, cx, cl, ck);
                             let t = nw.dot(&a) + fw.dot(&d);
                             rqq[(x, l, k)] -= t;
                             if !same_joint {
@@ -439,19 +437,17 @@ fn so_inner(
             }
             // ∂²(J_cᵀλ)/∂q² and ∂²(J_c w)/∂q² from the closed form of ∂²u_x/∂q_l∂q_k.
             let lam = Vector3::new(im.impulse[r0], im.impulse[r0 + 1], im.impulse[r0 + 2]);
-            for &k in &path.dofs {
-                let ck = PointCol::of(&b, k, &path.p);
-                for &l in &path.dofs {
+            for (&k, ck) in path.dofs.iter().zip(cols) {
+                for (&l, cl) in path.dofs.iter().zip(cols) {
                     // Symmetric in (l, k) for DoFs of different joints (which commute): the
                     // pairs l > k are the mirrors of pairs already written.
                     let same_joint = model.dof_joint[l] == model.dof_joint[k];
                     if l > k && !same_joint {
                         continue;
                     }
-                    let cl = PointCol::of(&b, l, &path.p);
                     let mut d = Vector3::zeros();
-                    for &x in &path.dofs {
-                        let t = du_dq2(&PointCol::of(&b, x, &path.p), &cl, &ck);
+                    for (&x, cx) in path.dofs.iter().zip(cols) {
+                        let t = du_dq2(cx, cl, ck);
                         let y = lam.dot(&t);
                         rqq[(x, l, k)] -= y;
                         if !same_joint {

@@ -17,8 +17,8 @@ use super::contact::{
     sub_djtl_dq_strided, update_points,
 };
 use super::contact_kin::{
-    BodyAt, Dir, PointCol, dacc_dq, dacc_dv, dap_dq, dap_dv, djac_dq2, djz_dq_rows, du_dq2,
-    put_rows, world_weights,
+    BodyAt, Dir, dacc_dq, dacc_dv, dap_dq, dap_dv, djac_dq2, djz_dq_rows, du_dq2, put_rows,
+    world_weights,
 };
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_fo::id_derivatives_unchecked;
@@ -492,6 +492,7 @@ fn kkt_so_inner(
     // ... minus ∂²(J_cᵀλ)/∂q² (IDSVA-SOc), and the contact-point kinematics rows.
     let b = base(model, data, &kd.cd);
     for (c, path) in kd.cd.paths.iter().enumerate() {
+        let cols = &kd.cd.pcols[c];
         let body = *path.joints.last().expect("path");
         let (geo, r0) = (kd.cd.geo[c], kd.cd.row0[c]);
         if !geo.is_point() {
@@ -499,16 +500,14 @@ fn kkt_so_inner(
             let (rot, p) = (&path.rot, &path.p);
             let (nw, fw) = world_weights(geo, rot, lam);
             let mut col = [0.0; 6];
-            for &k in &path.dofs {
-                let ck = PointCol::of(&b, k, p);
-                for &l in &path.dofs {
+            for (&k, ck) in path.dofs.iter().zip(cols) {
+                for (&l, cl) in path.dofs.iter().zip(cols) {
                     // −∂²(J_cᵀλ)/∂q², symmetric in (l, k) for DoFs of different joints: the
                     // pairs l > k are the mirrors of pairs already written.
                     let same_joint = model.dof_joint[l] == model.dof_joint[k];
                     if l <= k || same_joint {
-                        let cl = PointCol::of(&b, l, p);
-                        for &x in &path.dofs {
-                            let (a, d) = djac_dq2(geo.local, &PointCol::of(&b, x, p), &cl, &ck);
+                        for (&x, cx) in path.dofs.iter().zip(cols) {
+                            let (a, d) = djac_dq2(geo.local, cx, cl, ck);
                             let t = nw.dot(&a) + fw.dot(&d);
                             rqq[(x, l, k)] -= t;
                             if !same_joint {
@@ -531,20 +530,17 @@ fn kkt_so_inner(
             continue;
         }
         let lam = Vector3::new(kd.lambda[r0], kd.lambda[r0 + 1], kd.lambda[r0 + 2]);
-        for &k in &path.dofs {
-            let ck = PointCol::of(&b, k, &path.p);
+        for (&k, ck) in path.dofs.iter().zip(cols) {
             let (dq, dv) = (Dir::Q(k), Dir::V(k));
             let (atq, atv) =
                 (BodyAt::new(&b, body, &path.p, dq), BodyAt::new(&b, body, &path.p, dv));
-            for &l in &path.dofs {
-                let cl = PointCol::of(&b, l, &path.p);
+            for (&l, cl) in path.dofs.iter().zip(cols) {
                 // Symmetric in (l, k) for DoFs of different joints (which commute): the pairs
                 // l > k are the mirrors of pairs already written.
                 let same_joint = model.dof_joint[l] == model.dof_joint[k];
                 if l <= k || same_joint {
-                    for &x in &path.dofs {
-                        let cx = PointCol::of(&b, x, &path.p);
-                        let t = lam.dot(&du_dq2(&cx, &cl, &ck));
+                    for (&x, cx) in path.dofs.iter().zip(cols) {
+                        let t = lam.dot(&du_dq2(cx, cl, ck));
                         rqq[(x, l, k)] -= t;
                         if !same_joint {
                             rqq[(x, k, l)] -= t;
