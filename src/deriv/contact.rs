@@ -1130,21 +1130,28 @@ pub(crate) fn g_matrix_with(
         let rot = path.rot;
         let cols = cd.pcols[c].iter().zip(&path.dofs).map(|(pc, &x)| (*pc, z[x]));
         // The value J z (world-aligned) for the local axes' D(Rᵀ y) = Rᵀ(D y − w_l × y).
-        let (y_ang, y_lin) =
+        let (y_ang, y_lin) = if geo.local {
             cols.clone().fold((Vector3::zeros(), Vector3::zeros()), |(a, l), (c, zx)| {
                 (a + c.w * zx, l + c.u * zx)
-            });
+            })
+        } else {
+            (Vector3::zeros(), Vector3::zeros())
+        };
+        let pc = &cd.pcols[c];
         djz_dq_parts(cols, |t, ang, lin| {
             let l = path.dofs[t];
             let (ang, lin) = if geo.local {
-                let wl = cd.pcols[c][t].w;
+                let wl = pc[t].w;
                 (rot.tr_mul(&(ang - wl.cross(&y_ang))), rot.tr_mul(&(lin - wl.cross(&y_lin))))
             } else {
                 (ang, lin)
             };
-            let (top, parts) = if geo.six { (6, [ang, lin]) } else { (3, [lin, lin]) };
-            for (k, x) in parts.iter().flat_map(|v| v.iter()).take(top).enumerate() {
-                g[(n + r0 + k, l)] = *x;
+            let mut col = g.column_mut(l);
+            if geo.six {
+                col.fixed_rows_mut::<3>(n + r0).copy_from(&ang);
+                col.fixed_rows_mut::<3>(n + r0 + 3).copy_from(&lin);
+            } else {
+                col.fixed_rows_mut::<3>(n + r0).copy_from(&lin);
             }
         });
     }
