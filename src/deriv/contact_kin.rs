@@ -223,7 +223,7 @@ pub(crate) fn at_point(m: &Dm, p: &D3) -> D3 {
 }
 
 /// The contact body's velocity `V_m`, acceleration `A_m` and contact point `p` with their
-/// tangents along one direction, shared by [`dap_dq`] and [`dap_dv`] for every `l`.
+/// tangents along one direction, shared by [`dap_dq`] for every `l`.
 pub(crate) struct BodyAt {
     vm: Dm,
     am: Dm,
@@ -259,21 +259,6 @@ pub(crate) fn dap_dq(b: &Base, at: &BodyAt, l: usize, dir: Dir) -> D3 {
         + am.ang().cross(&dp)
         + dv.ang().cross(&pdot)
         + vm.ang().cross(&dpdot)
-}
-
-/// `∂a_p/∂q̇_l`, evaluated with tangent `dir` (`at` made with the same `dir`).
-pub(crate) fn dap_dv(b: &Base, at: &BodyAt, l: usize, dir: Dir) -> D3 {
-    let jl = b.dof_joint[l];
-    let ll = b.parents[jl];
-    let sl = b.s(l, dir);
-    let (vm, pp) = (at.vm, at.pp);
-    let vl = b.vel(ll, dir);
-    let vj = b.vel(jl, dir);
-    let dv = sl; // J8
-    let da = vl.cross(&sl) + vj.cross(&sl) - vm.cross(&sl); // J9
-    let pdot = at_point(&vm, &pp);
-    let dpdot = at_point(&dv, &pp);
-    da.lin() + da.ang().cross(&pp) + dv.ang().cross(&pdot) + vm.ang().cross(&dpdot)
 }
 
 /// `∂(λ·u_x)/∂q_l` for one contact force `λ` and path DoF `x`: the `(x, l)` entry of
@@ -320,7 +305,7 @@ pub(crate) fn du_dq2(x: &PointCol, l: &PointCol, k: &PointCol) -> Vector3<f64> {
 
 /// `∂u_x/∂q_l = w_a × u_b` (see [`du_dq2`]).
 #[inline]
-fn du_dq(x: &PointCol, l: &PointCol) -> Vector3<f64> {
+pub(crate) fn du_dq(x: &PointCol, l: &PointCol) -> Vector3<f64> {
     if l.joint <= x.joint { l.w.cross(&x.u) } else { x.w.cross(&l.u) }
 }
 

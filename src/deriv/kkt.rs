@@ -17,7 +17,7 @@ use super::contact::{
     sub_djtl_dq_strided, update_points,
 };
 use super::contact_kin::{
-    BodyAt, Dir, dacc_dq, dacc_dv, dap_dq, dap_dv, djac_dq2, djz_dq_rows, du_dq2, put_rows,
+    BodyAt, Dir, dacc_dq, dacc_dv, dap_dq, djac_dq2, djz_dq_rows, du_dq, du_dq2, put_rows,
     world_weights,
 };
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
@@ -554,7 +554,9 @@ fn kkt_so_inner(
                 // ∂²a_p/∂q̇² is symmetric, ∂²a_p/∂q² for DoFs of different joints (which
                 // commute): the pairs l > k are the mirrors of pairs already written.
                 if l <= k {
-                    let avv = dap_dv(&b, &atv, l, dv).d;
+                    // a_p = J q̈ + Σ_{x,y} q̇_x q̇_y ∂u_x/∂q_y, so ∂²a_p/∂q̇_l∂q̇_k =
+                    // ∂u_l/∂q_k + ∂u_k/∂q_l (J̇_x = Σ_y q̇_y ∂u_x/∂q_y, eq. J1).
+                    let avv = du_dq(cl, ck) + du_dq(ck, cl);
                     for r in 0..3 {
                         rvv[(n + r0 + r, l, k)] = avv[r];
                         rvv[(n + r0 + r, k, l)] = avv[r];
