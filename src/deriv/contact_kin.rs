@@ -355,6 +355,72 @@ pub(crate) fn world_weights(
     if geo.local { (r * n, r * f) } else { (n, f) }
 }
 
+/// Running sums along one point contact's path for [`dap_dqdv`]: with `N` path DoFs at
+/// positions `t` (path order) and `q̇` their velocities, `pw[t] = Σ_{s<t} q̇_s w_s`,
+/// `pu[t] = Σ_{s<t} q̇_s u_s` (`N + 1` each), and the positions `jb[t]..je[t]` of `t`'s joint.
+pub(crate) struct PathSums<'a> {
+    pub cols: &'a [PointCol],
+    pub pw: &'a [Vector3<f64>],
+    pub pu: &'a [Vector3<f64>],
+    pub jb: &'a [usize],
+    pub je: &'a [usize],
+}
+
+/// Fills the sums of [`PathSums`] for `cols` with velocities `qd[t]` (the slices at least
+/// `N + 1`, `N + 1`, `N`, `N` long).
+pub(crate) fn fill_path_sums(
+    cols: &[PointCol],
+    qd: impl Fn(usize) -> f64,
+    pw: &mut [Vector3<f64>],
+    pu: &mut [Vector3<f64>],
+    jb: &mut [usize],
+    je: &mut [usize],
+) {
+    let nt = cols.len();
+    pw[0] = Vector3::zeros();
+    pu[0] = Vector3::zeros();
+    for (t, c) in cols.iter().enumerate() {
+        pw[t + 1] = pw[t] + c.w * qd(t);
+        pu[t + 1] = pu[t] + c.u * qd(t);
+    }
+    let mut t = 0;
+    while t < nt {
+        let mut e = t + 1;
+        while e < nt && cols[e].joint == cols[t].joint {
+            e += 1;
+        }
+        jb[t..e].fill(t);
+        je[t..e].fill(e);
+        t = e;
+    }
+}
+
+/// `∂/∂q_l (∂a_p/∂q̇_k)` of a 3-D world-aligned point contact (positions `tl`, `tk` on its path)
+/// in closed form. With `a_p = J q̈ + Σ_{x,y} q̇_x q̇_y ∂u_x/∂q_y`,
+/// `∂a_p/∂q̇_k = A × u_k + w_k × B` where `A = 2 Σ_{y ≺ k} q̇_y w_y + Σ_{y ~ k} q̇_y w_y` and
+/// `B = 2 Σ_{y ≻ k} q̇_y u_y + Σ_{y ~ k} q̇_y u_y` (`~`: of `k`'s joint), so
+/// `∂/∂q_l = (∂A/∂q_l) × u_k + A × ∂u_k/∂q_l + ∂w_k/∂q_l × B + w_k × ∂B/∂q_l`, each sum's
+/// derivative (eq. J1, [`du_dq2`]) a difference of the running sums: the path is a chain, so
+/// `l ⪯ y` selects the positions from `l`'s joint on.
+pub(crate) fn dap_dqdv(s: &PathSums, tl: usize, tk: usize) -> Vector3<f64> {
+    let n = s.cols.len();
+    let (cl, ck) = (&s.cols[tl], &s.cols[tk]);
+    let (bl, bk, ek) = (s.jb[tl], s.jb[tk], s.je[tk]);
+    let sw = |a: usize, b: usize| if a < b { s.pw[b] - s.pw[a] } else { Vector3::zeros() };
+    let su = |a: usize, b: usize| if a < b { s.pu[b] - s.pu[a] } else { Vector3::zeros() };
+    let a = sw(0, bk) * 2.0 + sw(bk, ek);
+    let b = su(ek, n) * 2.0 + su(bk, ek);
+    let l_anc_k = cl.joint <= ck.joint;
+    // ∂A/∂q_l = w_l × Σ_{l ⪯ y} α_y q̇_y w_y.
+    let da = cl.w.cross(&(sw(bl, bk) * 2.0 + if l_anc_k { sw(bk, ek) } else { Vector3::zeros() }));
+    // ∂B/∂q_l = w_l × Σ_{l ⪯ y} β_y q̇_y u_y + (Σ_{y ≺ l} β_y q̇_y w_y) × u_l.
+    let su_l = su(ek.max(bl), n) * 2.0 + su(bk.max(bl), ek);
+    let sw_l = sw(ek, bl) * 2.0 + sw(bk, ek.min(bl));
+    let db = cl.w.cross(&su_l) + sw_l.cross(&cl.u);
+    let dwk = if l_anc_k { cl.w.cross(&ck.w) } else { Vector3::zeros() };
+    da.cross(&ck.u) + a.cross(&du_dq(ck, cl)) + dwk.cross(&b) + ck.w.cross(&db)
+}
+
 /// `∂(J z)/∂q_l` for every DoF `l` (position `t` in `cols`, the columns of one contact's path
 /// in path order, with `z_x`), world-aligned at the contact point, passed to
 /// `f(t, ang, lin)`: with the closed form of [`du_dq2`]'s inner derivative,

@@ -17,8 +17,8 @@ use super::contact::{
     sub_djtl_dq_strided, update_points,
 };
 use super::contact_kin::{
-    BodyAt, Dir, dacc_dq, dacc_dv, dap_dq, djac_dq2, djz_dq_rows, du_dq, du_dq2, put_rows,
-    world_weights,
+    BodyAt, Dir, PathSums, dacc_dq, dacc_dv, dap_dq, dap_dqdv, djac_dq2, djz_dq_rows, du_dq,
+    du_dq2, fill_path_sums, put_rows, world_weights,
 };
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_fo::id_derivatives_unchecked;
@@ -134,6 +134,11 @@ pub struct KktSo {
     ycol: DVector<f64>,
     /// The IDFOZA products of the `G` terms, eight or four columns at a time.
     batch: IdfozaBatch,
+    /// Running sums along a contact path (`contact_kin::PathSums`; `nv + 1`, `nv`).
+    pw: Vec<Vector3<f64>>,
+    pu: Vec<Vector3<f64>>,
+    jb: Vec<usize>,
+    je: Vec<usize>,
     /// [`symmetric_ends`] of `∂²/∂q²` and of `∂²/∂q̇²`.
     ends_q: Vec<usize>,
     ends_v: Vec<usize>,
@@ -219,6 +224,10 @@ impl KktData {
             r: [t(n + m), t(n + m), t(n + m), t(n + m)],
             ycol: DVector::zeros(n + m),
             batch: IdfozaBatch::new(model),
+            pw: vec![Vector3::zeros(); n + 1],
+            pu: vec![Vector3::zeros(); n + 1],
+            jb: vec![0; n],
+            je: vec![0; n],
             ends_q: symmetric_ends(model, true),
             ends_v: symmetric_ends(model, false),
         });
@@ -530,11 +539,16 @@ fn kkt_so_inner(
             continue;
         }
         let lam = Vector3::new(kd.lambda[r0], kd.lambda[r0 + 1], kd.lambda[r0 + 2]);
-        for (&k, ck) in path.dofs.iter().zip(cols) {
-            let (dq, dv) = (Dir::Q(k), Dir::V(k));
-            let (atq, atv) =
-                (BodyAt::new(&b, body, &path.p, dq), BodyAt::new(&b, body, &path.p, dv));
-            for (&l, cl) in path.dofs.iter().zip(cols) {
+        let nt = path.dofs.len();
+        let qd = |t: usize| v[path.dofs[t]];
+        let (pw, pu) = (&mut so.pw[..=nt], &mut so.pu[..=nt]);
+        let (jb, je) = (&mut so.jb[..nt], &mut so.je[..nt]);
+        fill_path_sums(cols, qd, pw, pu, jb, je);
+        let sums = PathSums { cols, pw, pu, jb, je };
+        for (tk, (&k, ck)) in path.dofs.iter().zip(cols).enumerate() {
+            let dq = Dir::Q(k);
+            let atq = BodyAt::new(&b, body, &path.p, dq);
+            for (tl, (&l, cl)) in path.dofs.iter().zip(cols).enumerate() {
                 // Symmetric in (l, k) for DoFs of different joints (which commute): the pairs
                 // l > k are the mirrors of pairs already written.
                 let same_joint = model.dof_joint[l] == model.dof_joint[k];
@@ -547,7 +561,7 @@ fn kkt_so_inner(
                         }
                     }
                 }
-                let aqv = dap_dq(&b, &atv, l, dv).d;
+                let aqv = dap_dqdv(&sums, tl, tk);
                 for r in 0..3 {
                     rqv[(n + r0 + r, l, k)] = aqv[r];
                 }
