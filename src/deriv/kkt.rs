@@ -524,14 +524,28 @@ fn kkt_so_inner(
                             }
                         }
                     }
-                    for (t, rows) in [
-                        (&mut *rqq, dacc_dq(&b, geo, rot, body, p, l, Dir::Q(k))),
-                        (&mut *rvv, dacc_dv(&b, geo, rot, body, p, l, Dir::V(k))),
-                        (&mut *rqv, dacc_dq(&b, geo, rot, body, p, l, Dir::V(k))),
-                    ] {
+                    // The contact rows: ∂²/∂q∂q̇ for every pair; ∂²/∂q̇² (symmetric) and
+                    // ∂²/∂q² (symmetric for DoFs of different joints) for l ≤ k, mirrored.
+                    let tensors = [
+                        (&mut *rqv, true, false),
+                        (&mut *rvv, l <= k, l < k),
+                        (&mut *rqq, l <= k || same_joint, l < k && !same_joint),
+                    ];
+                    for (i, (t, compute, mirror)) in tensors.into_iter().enumerate() {
+                        if !compute {
+                            continue;
+                        }
+                        let rows = match i {
+                            0 => dacc_dq(&b, geo, rot, body, p, l, Dir::V(k)),
+                            1 => dacc_dv(&b, geo, rot, body, p, l, Dir::V(k)),
+                            _ => dacc_dq(&b, geo, rot, body, p, l, Dir::Q(k)),
+                        };
                         put_rows(geo, &rows, true, &mut col);
                         for (r, x) in col[..geo.dim()].iter().enumerate() {
                             t[(n + r0 + r, l, k)] = *x;
+                            if mirror {
+                                t[(n + r0 + r, k, l)] = *x;
+                            }
                         }
                     }
                 }
