@@ -195,7 +195,11 @@ fn run_eval(o: &EvalArgs) -> Result<Outcome> {
 
 /// Loads a model from `builtin:NAME`, an MJCF path (`.xml`) or a URDF path.
 fn load_model(o: &ModelArgs) -> Result<Model> {
-    let opts = UrdfOptions { floating_base: o.floating_base, strict_inertia: o.strict_inertia };
+    let opts = UrdfOptions {
+        floating_base: o.floating_base,
+        strict_inertia: o.strict_inertia,
+        mimic: false,
+    };
     let model = load_model_spec(&o.model, &opts)?;
     match &o.armature {
         Some(a) => with_armature_arg(&model, a),

@@ -1,0 +1,1017 @@
+//! Mimic joints: the dynamics and its derivatives in the reduced coordinates.
+//!
+//! A mimic joint (URDF `<mimic joint="ref" multiplier="m" offset="c"/>`) follows its reference
+//! joint, `q_mimic = m · q_ref + c`, and has no degree of freedom of its own. A [`MimicModel`]
+//! wraps the full tree (a [`Model`] in which every joint is independent) and the constant map
+//! `G` (`nv_full × nv`) from the reduced velocities to the full ones: row `f` of `G` is the unit
+//! row of the reduced DoF of an independent DoF `f`, and `m` in the column of the reference's
+//! DoF for a mimic DoF. Mimic and reference joints are one-DoF joints of one kind (rotational:
+//! revolute or continuous; or prismatic), so that
+//!
+//! * `q_full = expand(q)` (the independent coordinates copied, `m · q_ref + c` for each mimic
+//!   joint), `v_full = G v`, `a_full = G a`, and `expand(q ⊕ δ) = expand(q) ⊕ G δ`: the tangent
+//!   derivatives of the reduced model are those of the full model times `G` for every `q`, `v`
+//!   or `a` index;
+//! * `τ = Gᵀ τ_full(q_full, G v, G a)` (the generalised forces of the reduced coordinates, by
+//!   virtual work), `M = Gᵀ M_full G`, `∂τ/∂q = Gᵀ (∂τ_full/∂q) G`, `∂τ/∂v = Gᵀ (∂τ_full/∂v) G`;
+//! * the second-order tensors are those of the full model contracted with `G` on each of their
+//!   three indices (`∂M/∂q` too);
+//! * forward dynamics `q̈ = M⁻¹(τ − Gᵀ b_full(q_full, G v))` by a dense `L D Lᵀ` factorisation
+//!   (`M` is not tree-sparse) with the singularity test of the tree-sparse one (a pivot not
+//!   positive and finite, or at most `1e-14` times the largest); its derivatives from the
+//!   reduced inverse-dynamics derivatives at `a_full = G q̈`: `∂q̈/∂u = −M⁻¹ ∂τ/∂u`,
+//!   `∂q̈/∂τ = M⁻¹`, and the second order by eq. eqn_FD_SO_43 with `∂M/∂q` above.
+//!
+//! External forces `fext` are those of the full model (one per joint of the full tree, mimic
+//! joints included). The functions of this module mirror [`crate::algo::rnea()`],
+//! [`crate::algo::crba()`], [`crate::algo::aba()`], [`crate::deriv::id_derivatives`],
+//! [`crate::deriv::fd_derivatives`], [`crate::deriv::id_so_derivatives`] and
+//! [`crate::deriv::fd_so_derivatives`]; their workspaces are [`MimicData`] and [`MimicSoData`],
+//! allocated once. The other algorithms of the crate (kinematics, frames, contacts, impacts,
+//! contracted second order, batches) take the full [`Model`] only.
+
+use crate::algo::Data;
+use crate::deriv::SoData;
+use crate::error::{Error, Result};
+use crate::model::{JointType, Model, UrdfOptions};
+use crate::rng::Rng;
+use crate::spatial::Force;
+use crate::tensor::Tensor3;
+use nalgebra::{DMatrix, DVector};
+use std::path::Path;
+
+/// One mimic constraint `q[joint] = multiplier · q[reference] + offset` between two one-DoF
+/// joints of the full model (indices of [`Model::names`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MimicJoint {
+    /// The mimic joint (it has no degree of freedom in the reduced model).
+    pub joint: usize,
+    /// The joint it follows (an independent joint).
+    pub reference: usize,
+    /// `m` in `q = m · q_ref + c` (URDF default 1).
+    pub multiplier: f64,
+    /// `c` in `q = m · q_ref + c` (URDF default 0).
+    pub offset: f64,
+}
+
+/// A model with mimic joints, in the reduced coordinates (see the [module](self)
+/// documentation): the full tree ([`MimicModel::full`]) and the map `G`.
+#[derive(Clone, Debug)]
+pub struct MimicModel {
+    full: Model,
+    mimics: Vec<MimicJoint>,
+    nq: usize,
+    nv: usize,
+    /// Per full configuration coordinate: `(reduced index, coefficient, offset)`.
+    q_map: Vec<(usize, f64, f64)>,
+    /// Row `f` of `G`: its one non-zero entry `g_coef[f]` is in column `g_col[f]`.
+    g_col: Vec<usize>,
+    g_coef: Vec<f64>,
+    /// The full index of each reduced configuration coordinate / velocity coordinate.
+    q_keep: Vec<usize>,
+    v_keep: Vec<usize>,
+    /// Per joint of the full model: its first reduced configuration and velocity indices, or
+    /// `None` for a mimic joint.
+    reduced_idx: Vec<Option<(usize, usize)>>,
+    /// Identifies the model for the workspaces.
+    key: u64,
+}
+
+/// Whether a joint type can be a mimic or reference joint: `Some(true)` rotational, `Some(false)`
+/// prismatic, `None` otherwise.
+fn one_dof_kind(j: &JointType) -> Option<bool> {
+    match j {
+        JointType::Revolute { .. } | JointType::Continuous { .. } => Some(true),
+        JointType::Prismatic { .. } => Some(false),
+        _ => None,
+    }
+}
+
+impl MimicModel {
+    /// The reduced model of `full` with the constraints `mimics`.
+    ///
+    /// # Errors
+    /// [`Error::Build`] naming the joint if a constraint names a joint index that does not
+    /// exist or the world, a joint mimics itself, a joint is constrained twice, a reference
+    /// joint is itself a mimic joint, either joint is not a one-DoF revolute, continuous or
+    /// prismatic joint, the two are not of one kind (both rotational or both prismatic), or
+    /// the multiplier or offset is not finite.
+    pub fn new(full: Model, mimics: &[MimicJoint]) -> Result<Self> {
+        let nj = full.njoints();
+        let name = |i: usize| full.names()[i].clone();
+        let mut is_mimic = vec![false; nj];
+        for (k, m) in mimics.iter().enumerate() {
+            let bad = |why: String| Err(Error::Build(format!("mimic constraint {k}: {why}")));
+            if m.joint == 0 || m.joint >= nj {
+                return bad(format!("joint index {} is not a moving joint of the model", m.joint));
+            }
+            let who = format!("joint \"{}\" (index {})", name(m.joint), m.joint);
+            if m.reference == 0 || m.reference >= nj {
+                return bad(format!(
+                    "{who}: reference joint index {} is not a moving joint of the model",
+                    m.reference
+                ));
+            }
+            if m.reference == m.joint {
+                return bad(format!("{who} cannot mimic itself"));
+            }
+            if is_mimic[m.joint] {
+                return bad(format!("{who} is constrained twice"));
+            }
+            is_mimic[m.joint] = true;
+            let (kj, kr) =
+                (one_dof_kind(&full.joints()[m.joint]), one_dof_kind(&full.joints()[m.reference]));
+            let rname = name(m.reference);
+            match (kj, kr) {
+                (None, _) => {
+                    return bad(format!(
+                        "{who} is {}: a mimic joint must be revolute, continuous or prismatic",
+                        full.joints()[m.joint].name()
+                    ));
+                }
+                (_, None) => {
+                    return bad(format!(
+                        "{who}: the reference joint \"{rname}\" is {}, not a revolute, \
+                         continuous or prismatic joint",
+                        full.joints()[m.reference].name()
+                    ));
+                }
+                (Some(a), Some(b)) if a != b => {
+                    return bad(format!(
+                        "{who} is {} and its reference joint \"{rname}\" {}: both must be \
+                         rotational (revolute, continuous) or both prismatic",
+                        full.joints()[m.joint].name(),
+                        full.joints()[m.reference].name()
+                    ));
+                }
+                _ => {}
+            }
+            if !m.multiplier.is_finite() || !m.offset.is_finite() {
+                return bad(format!(
+                    "{who}: multiplier {} and offset {} must be finite",
+                    m.multiplier, m.offset
+                ));
+            }
+        }
+        for (k, m) in mimics.iter().enumerate() {
+            if is_mimic[m.reference] {
+                return Err(Error::Build(format!(
+                    "mimic constraint {k}: joint \"{}\" (index {}): the reference joint \"{}\" is \
+                     itself a mimic joint",
+                    name(m.joint),
+                    m.joint,
+                    name(m.reference)
+                )));
+            }
+        }
+        // Reduced indices of the independent joints, in the order of the full model.
+        let mut reduced_idx = vec![None; nj];
+        let (mut nq, mut nv) = (0, 0);
+        let (mut q_keep, mut v_keep) = (Vec::new(), Vec::new());
+        reduced_idx[0] = Some((0, 0));
+        for i in 1..nj {
+            if is_mimic[i] {
+                continue;
+            }
+            reduced_idx[i] = Some((nq, nv));
+            q_keep.extend(full.idx_q()[i]..full.idx_q()[i] + full.nqs()[i]);
+            v_keep.extend(full.idx_v()[i]..full.idx_v()[i] + full.nvs()[i]);
+            nq += full.nqs()[i];
+            nv += full.nvs()[i];
+        }
+        let mut q_map = vec![(0, 1.0, 0.0); full.nq()];
+        let mut g_col = vec![0; full.nv()];
+        let mut g_coef = vec![1.0; full.nv()];
+        for (r, &f) in q_keep.iter().enumerate() {
+            q_map[f] = (r, 1.0, 0.0);
+        }
+        for (r, &f) in v_keep.iter().enumerate() {
+            g_col[f] = r;
+        }
+        for m in mimics {
+            let (rq, rv) = reduced_idx[m.reference].expect("a reference joint is independent");
+            q_map[full.idx_q()[m.joint]] = (rq, m.multiplier, m.offset);
+            g_col[full.idx_v()[m.joint]] = rv;
+            g_coef[full.idx_v()[m.joint]] = m.multiplier;
+        }
+        let key = {
+            use std::hash::{Hash, Hasher};
+            let mut h = std::collections::hash_map::DefaultHasher::new();
+            (full.nq(), full.nv(), full.parents()).hash(&mut h);
+            for m in mimics {
+                (m.joint, m.reference, m.multiplier.to_bits(), m.offset.to_bits()).hash(&mut h);
+            }
+            h.finish()
+        };
+        let mut mimics = mimics.to_vec();
+        mimics.sort_by_key(|m| m.joint);
+        Ok(Self { full, mimics, nq, nv, q_map, g_col, g_coef, q_keep, v_keep, reduced_idx, key })
+    }
+
+    /// The reduced model of `full` with its own constraints ([`Model::mimic_joints`], read by
+    /// the URDF loader with [`UrdfOptions::mimic`]); none for other models.
+    ///
+    /// # Errors
+    /// As [`MimicModel::new`].
+    pub fn from_model(full: Model) -> Result<Self> {
+        let mimics = full.mimic_joints().to_vec();
+        Self::new(full, &mimics)
+    }
+
+    /// Loads a URDF file with its `<mimic>` constraints (the options with
+    /// [`UrdfOptions::mimic`] set; see [`crate::model::urdf`]).
+    ///
+    /// # Errors
+    /// Those of [`crate::model::load_urdf_file`], among them a `<mimic>` whose reference joint
+    /// is unknown, is itself a mimic joint, or is not a one-DoF joint of the mimic joint's kind
+    /// (naming the file, line and joint).
+    pub fn load_urdf_file(path: &Path, opts: &UrdfOptions) -> Result<Self> {
+        let opts = UrdfOptions { mimic: true, ..*opts };
+        Self::from_model(crate::model::load_urdf_file(path, &opts)?)
+    }
+
+    /// As [`MimicModel::load_urdf_file`] from a string (`source_name` names it in errors).
+    ///
+    /// # Errors
+    /// As [`MimicModel::load_urdf_file`].
+    pub fn load_urdf_str(xml: &str, source_name: &str, opts: &UrdfOptions) -> Result<Self> {
+        let opts = UrdfOptions { mimic: true, ..*opts };
+        Self::from_model(crate::model::load_urdf_str(xml, source_name, &opts)?)
+    }
+
+    /// The full tree, every joint independent (its `nq`, `nv` count the mimic joints).
+    pub fn full(&self) -> &Model {
+        &self.full
+    }
+    /// The constraints, by increasing joint index.
+    pub fn mimics(&self) -> &[MimicJoint] {
+        &self.mimics
+    }
+    /// The model name.
+    pub fn name(&self) -> &str {
+        self.full.name()
+    }
+    /// Reduced configuration dimension.
+    pub fn nq(&self) -> usize {
+        self.nq
+    }
+    /// Reduced velocity dimension (degrees of freedom).
+    pub fn nv(&self) -> usize {
+        self.nv
+    }
+    /// Per joint of the full model, its first reduced configuration and velocity indices
+    /// `(idx_q, idx_v)`, or `None` for a mimic joint (index 0, the world: `Some((0, 0))`).
+    pub fn reduced_idx(&self) -> &[Option<(usize, usize)>] {
+        &self.reduced_idx
+    }
+    /// The full velocity index of each reduced velocity coordinate.
+    pub fn v_keep(&self) -> &[usize] {
+        &self.v_keep
+    }
+    /// The full configuration index of each reduced configuration coordinate.
+    pub fn q_keep(&self) -> &[usize] {
+        &self.q_keep
+    }
+    /// The map `G` (`full().nv() × nv()`), `v_full = G v`, as a dense matrix (allocates).
+    pub fn g(&self) -> DMatrix<f64> {
+        let mut g = DMatrix::zeros(self.full.nv(), self.nv);
+        for (f, (&c, &x)) in self.g_col.iter().zip(&self.g_coef).enumerate() {
+            g[(f, c)] = x;
+        }
+        g
+    }
+    /// `q_full = expand(q)` into `out` (length `full().nq()`). Lengths are not checked.
+    pub fn expand_q_into(&self, q: &[f64], out: &mut [f64]) {
+        for (o, &(r, m, c)) in out.iter_mut().zip(&self.q_map) {
+            *o = m * q[r] + c;
+        }
+    }
+    /// `v_full = G v` into `out` (length `full().nv()`). Lengths are not checked.
+    pub fn expand_v_into(&self, v: &[f64], out: &mut [f64]) {
+        for ((o, &r), &m) in out.iter_mut().zip(&self.g_col).zip(&self.g_coef) {
+            *o = m * v[r];
+        }
+    }
+    /// `y = Gᵀ x` (`x` of length `full().nv()`, `y` of length `nv()`). Lengths are not checked.
+    pub fn reduce_force_into(&self, x: &[f64], y: &mut [f64]) {
+        y.fill(0.0);
+        for ((&xf, &r), &m) in x.iter().zip(&self.g_col).zip(&self.g_coef) {
+            y[r] += m * xf;
+        }
+    }
+    /// `expand(q)` (allocates).
+    ///
+    /// # Errors
+    /// As [`MimicModel::check_q`].
+    pub fn expand_q(&self, q: &DVector<f64>) -> Result<DVector<f64>> {
+        self.check_q(q)?;
+        let mut out = DVector::zeros(self.full.nq());
+        self.expand_q_into(q.as_slice(), out.as_mut_slice());
+        Ok(out)
+    }
+    /// The reduced coordinates of a full configuration: its independent coordinates (the mimic
+    /// joints' values are dropped, not checked).
+    ///
+    /// # Errors
+    /// [`Error::Dimension`] if `q_full.len() != full().nq()`.
+    pub fn reduce_q(&self, q_full: &DVector<f64>) -> Result<DVector<f64>> {
+        if q_full.len() != self.full.nq() {
+            return Err(Error::Dimension {
+                what: "q_full".into(),
+                expected: self.full.nq(),
+                got: q_full.len(),
+            });
+        }
+        Ok(DVector::from_iterator(self.nq, self.q_keep.iter().map(|&f| q_full[f])))
+    }
+    /// The neutral configuration (each mimic joint then sits at its offset).
+    pub fn neutral(&self) -> DVector<f64> {
+        self.select_q(&self.full.neutral())
+    }
+    /// A random valid configuration: that of [`Model::random_configuration`] of the full model,
+    /// its independent coordinates.
+    pub fn random_configuration(&self, rng: &mut Rng) -> DVector<f64> {
+        self.select_q(&self.full.random_configuration(rng))
+    }
+    fn select_q(&self, q_full: &DVector<f64>) -> DVector<f64> {
+        DVector::from_iterator(self.nq, self.q_keep.iter().map(|&f| q_full[f]))
+    }
+    fn select_v(&self, v_full: &DVector<f64>) -> DVector<f64> {
+        DVector::from_iterator(self.nv, self.v_keep.iter().map(|&f| v_full[f]))
+    }
+    /// `q ⊕ δ` in the reduced coordinates (joint by joint, as [`Model::integrate`]).
+    ///
+    /// # Errors
+    /// As [`MimicModel::check_q`] and [`MimicModel::check_v`] (`"delta"`).
+    pub fn integrate(&self, q: &DVector<f64>, delta: &DVector<f64>) -> Result<DVector<f64>> {
+        let qf = self.expand_q(q)?;
+        self.check_v("delta", delta)?;
+        let mut df = DVector::zeros(self.full.nv());
+        self.expand_v_into(delta.as_slice(), df.as_mut_slice());
+        Ok(self.select_q(&self.full.integrate(&qf, &df)?))
+    }
+    /// `q₁ ⊖ q₀` in the reduced coordinates (the inverse of [`MimicModel::integrate`]).
+    ///
+    /// # Errors
+    /// As [`MimicModel::check_q`] for `q0` and `q1`.
+    pub fn difference(&self, q0: &DVector<f64>, q1: &DVector<f64>) -> Result<DVector<f64>> {
+        let q0f = self.expand_q(q0)?;
+        let q1f = self.expand_q(q1).map_err(|e| match e {
+            Error::Dimension { expected, got, .. } => {
+                Error::Dimension { what: "q1".into(), expected, got }
+            }
+            Error::NotFinite { index, .. } => Error::NotFinite { what: "q1".into(), index },
+            e => e,
+        })?;
+        Ok(self.select_v(&self.full.difference(&q0f, &q1f)?))
+    }
+    /// Checks a reduced configuration: length `nq`, finite, unit quaternions (the last naming
+    /// the joint).
+    ///
+    /// # Errors
+    /// [`Error::Dimension`], [`Error::NotFinite`] (reduced index) or
+    /// [`Error::InvalidConfiguration`].
+    pub fn check_q(&self, q: &DVector<f64>) -> Result<()> {
+        crate::model::check_vec("q", q, self.nq)?;
+        for i in 1..self.full.njoints() {
+            if let Some((a, _)) = self.reduced_idx[i] {
+                let n = self.full.nqs()[i];
+                self.full.joints()[i].check_configuration(&q.as_slice()[a..a + n]).map_err(
+                    |reason| Error::InvalidConfiguration {
+                        joint: self.full.names()[i].clone(),
+                        reason: format!("{reason} (q indices {a}..{})", a + n),
+                    },
+                )?;
+            }
+        }
+        Ok(())
+    }
+    /// Checks a velocity-sized vector: length `nv`, finite.
+    ///
+    /// # Errors
+    /// [`Error::Dimension`] or [`Error::NotFinite`] naming `what`.
+    pub fn check_v(&self, what: &str, x: &DVector<f64>) -> Result<()> {
+        crate::model::check_vec(what, x, self.nv)
+    }
+    /// `out = Gᵀ x G` (`x`: `full().nv()` square, `out`: `nv()` square).
+    fn reduce_matrix(&self, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+        out.fill(0.0);
+        let nf = self.full.nv();
+        let (xs, n) = (x.as_slice(), self.nv);
+        let os = out.as_mut_slice();
+        for b in 0..nf {
+            let (cb, mb) = (self.g_col[b], self.g_coef[b]);
+            for a in 0..nf {
+                os[self.g_col[a] + n * cb] += self.g_coef[a] * mb * xs[a + nf * b];
+            }
+        }
+    }
+    /// `out[r, s, t] = Σ G[i, r] G[j, s] G[k, t] x[i, j, k]`.
+    fn reduce_tensor(&self, x: &Tensor3, out: &mut Tensor3) {
+        out.fill(0.0);
+        let nf = self.full.nv();
+        let n = self.nv;
+        let xs = x.as_slice();
+        let os = out.as_mut_slice();
+        for k in 0..nf {
+            let (ck, mk) = (self.g_col[k], self.g_coef[k]);
+            for j in 0..nf {
+                let (cj, mj) = (self.g_col[j], self.g_coef[j]);
+                let m = mk * mj;
+                let src = &xs[nf * (j + nf * k)..nf * (j + nf * k + 1)];
+                let dst = n * (cj + n * ck);
+                for ((&xi, &ci), &mi) in src.iter().zip(&self.g_col).zip(&self.g_coef) {
+                    os[dst + ci] += m * mi * xi;
+                }
+            }
+        }
+    }
+}
+
+/// Workspace of the first-order algorithms of a [`MimicModel`] (the full model's [`Data`] and
+/// the reduced results), allocated once by [`MimicData::new`].
+#[derive(Clone, Debug)]
+pub struct MimicData {
+    full: Data,
+    q: DVector<f64>,
+    v: DVector<f64>,
+    a: DVector<f64>,
+    tau: DVector<f64>,
+    qdd: DVector<f64>,
+    m: DMatrix<f64>,
+    ldl: DMatrix<f64>,
+    dtau_dq: DMatrix<f64>,
+    dtau_dv: DMatrix<f64>,
+    dqdd_dq: DMatrix<f64>,
+    dqdd_dv: DMatrix<f64>,
+    minv: DMatrix<f64>,
+    key: u64,
+}
+
+impl MimicData {
+    /// Workspace for `model`.
+    pub fn new(model: &MimicModel) -> Self {
+        let (n, f) = (model.nv, &model.full);
+        let sq = || DMatrix::zeros(n, n);
+        Self {
+            full: Data::new(f),
+            q: DVector::zeros(f.nq()),
+            v: DVector::zeros(f.nv()),
+            a: DVector::zeros(f.nv()),
+            tau: DVector::zeros(n),
+            qdd: DVector::zeros(n),
+            m: sq(),
+            ldl: sq(),
+            dtau_dq: sq(),
+            dtau_dv: sq(),
+            dqdd_dq: sq(),
+            dqdd_dv: sq(),
+            minv: sq(),
+            key: model.key,
+        }
+    }
+    fn check(&self, model: &MimicModel) -> Result<()> {
+        if self.key != model.key || self.tau.len() != model.nv {
+            return Err(Error::Workspace(format!(
+                "MimicData was made for another model; make it with MimicData::new for the \
+                 mimic model \"{}\"",
+                model.name()
+            )));
+        }
+        Ok(())
+    }
+    /// The full model's workspace at the last call (its state is the expanded one).
+    pub fn full(&self) -> &Data {
+        &self.full
+    }
+    /// `expand(q)` of the last call.
+    pub fn q_full(&self) -> &DVector<f64> {
+        &self.q
+    }
+    /// `G v` of the last call.
+    pub fn v_full(&self) -> &DVector<f64> {
+        &self.v
+    }
+    /// `G a` of the last call (`G q̈` for the forward dynamics).
+    pub fn a_full(&self) -> &DVector<f64> {
+        &self.a
+    }
+    /// `τ` (reduced): of [`rnea`], [`id_derivatives`], [`id_so_derivatives`], and of inverse
+    /// dynamics at `q̈` for the forward-dynamics derivatives.
+    pub fn tau(&self) -> &DVector<f64> {
+        &self.tau
+    }
+    /// `q̈` of [`aba`], [`fd_derivatives`], [`fd_so_derivatives`].
+    pub fn qdd(&self) -> &DVector<f64> {
+        &self.qdd
+    }
+    /// `M = Gᵀ M_full G`.
+    pub fn m(&self) -> &DMatrix<f64> {
+        &self.m
+    }
+    /// `∂τ/∂q` (tangent space).
+    pub fn dtau_dq(&self) -> &DMatrix<f64> {
+        &self.dtau_dq
+    }
+    /// `∂τ/∂v`.
+    pub fn dtau_dv(&self) -> &DMatrix<f64> {
+        &self.dtau_dv
+    }
+    /// `∂q̈/∂q` (tangent space).
+    pub fn dqdd_dq(&self) -> &DMatrix<f64> {
+        &self.dqdd_dq
+    }
+    /// `∂q̈/∂v`.
+    pub fn dqdd_dv(&self) -> &DMatrix<f64> {
+        &self.dqdd_dv
+    }
+    /// `∂q̈/∂τ = M⁻¹`.
+    pub fn minv(&self) -> &DMatrix<f64> {
+        &self.minv
+    }
+}
+
+/// Workspace and results of the second-order algorithms of a [`MimicModel`] (layout
+/// `T[(i, j, k)] = ∂/∂x_k (∂y_i/∂u_j)`, `nv × nv × nv`).
+#[derive(Clone, Debug)]
+pub struct MimicSoData {
+    full: SoData,
+    d2tau_dq2: Tensor3,
+    d2tau_dv2: Tensor3,
+    d2tau_dqdv: Tensor3,
+    dm_dq: Tensor3,
+    d2qdd_dq2: Tensor3,
+    d2qdd_dv2: Tensor3,
+    d2qdd_dqdv: Tensor3,
+    d2qdd_dtaudq: Tensor3,
+    /// Scratch: `∂M/∂q_k X[:, j]` at `(·, j, k)`.
+    y: Tensor3,
+    /// Scratch: one `nv × nv` page.
+    page: DMatrix<f64>,
+    key: u64,
+}
+
+impl MimicSoData {
+    /// Workspace for `model`.
+    pub fn new(model: &MimicModel) -> Self {
+        let n = model.nv;
+        let t = || Tensor3::zeros(n, n, n);
+        Self {
+            full: SoData::new(&model.full),
+            d2tau_dq2: t(),
+            d2tau_dv2: t(),
+            d2tau_dqdv: t(),
+            dm_dq: t(),
+            d2qdd_dq2: t(),
+            d2qdd_dv2: t(),
+            d2qdd_dqdv: t(),
+            d2qdd_dtaudq: t(),
+            y: t(),
+            page: DMatrix::zeros(n, n),
+            key: model.key,
+        }
+    }
+    fn check(&self, model: &MimicModel) -> Result<()> {
+        if self.key != model.key || self.page.nrows() != model.nv {
+            return Err(Error::Workspace(format!(
+                "MimicSoData was made for another model; make it with MimicSoData::new for the \
+                 mimic model \"{}\"",
+                model.name()
+            )));
+        }
+        Ok(())
+    }
+    /// `∂²τ/∂q²`: `T[(i, j, k)] = ∂/∂q_k (∂τ_i/∂q_j)`.
+    pub fn d2tau_dq2(&self) -> &Tensor3 {
+        &self.d2tau_dq2
+    }
+    /// `∂²τ/∂v²`.
+    pub fn d2tau_dv2(&self) -> &Tensor3 {
+        &self.d2tau_dv2
+    }
+    /// `T[(i, j, k)] = ∂/∂v_k (∂τ_i/∂q_j)`.
+    pub fn d2tau_dqdv(&self) -> &Tensor3 {
+        &self.d2tau_dqdv
+    }
+    /// `T[(i, j, k)] = ∂M_ij/∂q_k`.
+    pub fn dm_dq(&self) -> &Tensor3 {
+        &self.dm_dq
+    }
+    /// `∂²q̈/∂q²`.
+    pub fn d2qdd_dq2(&self) -> &Tensor3 {
+        &self.d2qdd_dq2
+    }
+    /// `∂²q̈/∂v²`.
+    pub fn d2qdd_dv2(&self) -> &Tensor3 {
+        &self.d2qdd_dv2
+    }
+    /// `T[(i, j, k)] = ∂/∂v_k (∂q̈_i/∂q_j)`.
+    pub fn d2qdd_dqdv(&self) -> &Tensor3 {
+        &self.d2qdd_dqdv
+    }
+    /// `T[(i, j, k)] = ∂(M⁻¹)_ij/∂q_k`.
+    pub fn d2qdd_dtaudq(&self) -> &Tensor3 {
+        &self.d2qdd_dtaudq
+    }
+}
+
+/// Checks `q` and `x` (`v`, `a` or `τ`) and the workspace, and expands `q`, `v` into `data`.
+fn prepare(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: Option<&DVector<f64>>,
+    x: Option<(&str, &DVector<f64>)>,
+) -> Result<()> {
+    data.check(model)?;
+    model.check_q(q)?;
+    if let Some(v) = v {
+        model.check_v("v", v)?;
+    }
+    if let Some((what, x)) = x {
+        model.check_v(what, x)?;
+    }
+    model.expand_q_into(q.as_slice(), data.q.as_mut_slice());
+    match v {
+        Some(v) => model.expand_v_into(v.as_slice(), data.v.as_mut_slice()),
+        None => data.v.fill(0.0),
+    }
+    Ok(())
+}
+
+/// Inverse dynamics `τ = Gᵀ τ_full(expand(q), G v, G a)` (RNEA of the full model). Returns
+/// `data.tau()`.
+///
+/// # Errors
+/// A wrong length, a non-finite entry, a non-unit quaternion (naming the argument or joint),
+/// a workspace of another model, or an error of [`crate::algo::rnea()`] (`fext`).
+pub fn rnea<'a>(
+    model: &MimicModel,
+    data: &'a mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<&'a DVector<f64>> {
+    prepare(model, data, q, Some(v), Some(("a", a)))?;
+    model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+    let t = crate::algo::rnea(&model.full, &mut data.full, &data.q, &data.v, &data.a, fext)?;
+    model.reduce_force_into(t.as_slice(), data.tau.as_mut_slice());
+    Ok(&data.tau)
+}
+
+/// Mass matrix `M = Gᵀ M_full(expand(q)) G` (CRBA of the full model). Returns `data.m()`.
+///
+/// # Errors
+/// As [`rnea`] for `q`.
+pub fn crba<'a>(
+    model: &MimicModel,
+    data: &'a mut MimicData,
+    q: &DVector<f64>,
+) -> Result<&'a DMatrix<f64>> {
+    prepare(model, data, q, None, None)?;
+    let m = crate::algo::crba(&model.full, &mut data.full, &data.q)?;
+    model.reduce_matrix(m, &mut data.m);
+    Ok(&data.m)
+}
+
+/// Forward dynamics `q̈ = M⁻¹(τ − Gᵀ b_full(expand(q), G v))`, `M = Gᵀ M_full G` factorised
+/// densely (`L D Lᵀ`). Returns `data.qdd()`; leaves `M` in `data.m()` and `G q̈` in
+/// `data.a_full()`.
+///
+/// # Errors
+/// As [`rnea`], and [`Error::Singular`] (naming the pivot, its reduced velocity index and
+/// joint) when `M` is singular: a pivot not positive and finite, or the smallest at most
+/// `1e-14` times the largest.
+pub fn aba<'a>(
+    model: &MimicModel,
+    data: &'a mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<&'a DVector<f64>> {
+    prepare(model, data, q, Some(v), Some(("tau", tau)))?;
+    data.a.fill(0.0);
+    let b = crate::algo::rnea(&model.full, &mut data.full, &data.q, &data.v, &data.a, fext)?;
+    model.reduce_force_into(b.as_slice(), data.qdd.as_mut_slice());
+    for (x, &t) in data.qdd.iter_mut().zip(tau.iter()) {
+        *x = t - *x;
+    }
+    let m = crate::algo::crba(&model.full, &mut data.full, &data.q)?;
+    model.reduce_matrix(m, &mut data.m);
+    data.ldl.copy_from(&data.m);
+    ldl_in_place(model, &mut data.ldl)?;
+    ldl_solve(&data.ldl, data.qdd.as_mut_slice());
+    model.expand_v_into(data.qdd.as_slice(), data.a.as_mut_slice());
+    Ok(&data.qdd)
+}
+
+/// First-order inverse-dynamics derivatives at `(q, v, a)`: `data.dtau_dq()`,
+/// `data.dtau_dv()`, `data.m()` (`= ∂τ/∂a`) and `data.tau()`, from
+/// [`crate::deriv::id_derivatives`] of the full model at `(expand(q), G v, G a)`.
+///
+/// # Errors
+/// As [`rnea`].
+pub fn id_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<()> {
+    prepare(model, data, q, Some(v), Some(("a", a)))?;
+    model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+    id_fo_reduced(model, data, fext)
+}
+
+/// The full model's first-order ID derivatives at `data.q, data.v, data.a`, reduced.
+fn id_fo_reduced(model: &MimicModel, data: &mut MimicData, fext: Option<&[Force]>) -> Result<()> {
+    crate::deriv::id_derivatives(&model.full, &mut data.full, &data.q, &data.v, &data.a, fext)?;
+    reduce_fo(model, data);
+    Ok(())
+}
+
+/// `τ`, `M`, `∂τ/∂q`, `∂τ/∂v` of `data.full` reduced.
+fn reduce_fo(model: &MimicModel, data: &mut MimicData) {
+    model.reduce_force_into(data.full.tau().as_slice(), data.tau.as_mut_slice());
+    model.reduce_matrix(data.full.m(), &mut data.m);
+    model.reduce_matrix(data.full.dtau_dq(), &mut data.dtau_dq);
+    model.reduce_matrix(data.full.dtau_dv(), &mut data.dtau_dv);
+}
+
+/// `∂q̈/∂q = −M⁻¹ ∂τ/∂q`, `∂q̈/∂v = −M⁻¹ ∂τ/∂v`, `M⁻¹`, from `data.ldl` (factorised).
+fn fd_fo_from_id(data: &mut MimicData) {
+    let n = data.m.nrows();
+    data.dqdd_dq.copy_from(&data.dtau_dq);
+    data.dqdd_dv.copy_from(&data.dtau_dv);
+    data.minv.fill_with_identity();
+    for c in 0..n {
+        ldl_solve(&data.ldl, data.dqdd_dq.column_mut(c).as_mut_slice());
+        ldl_solve(&data.ldl, data.dqdd_dv.column_mut(c).as_mut_slice());
+        ldl_solve(&data.ldl, data.minv.column_mut(c).as_mut_slice());
+    }
+    data.dqdd_dq.neg_mut();
+    data.dqdd_dv.neg_mut();
+    // Exactly symmetric M⁻¹.
+    for c in 0..n {
+        for r in c + 1..n {
+            let x = 0.5 * (data.minv[(r, c)] + data.minv[(c, r)]);
+            data.minv[(r, c)] = x;
+            data.minv[(c, r)] = x;
+        }
+    }
+}
+
+/// First-order forward-dynamics derivatives at `q̈ = FD(q, v, τ)` ([`aba`]):
+/// `data.qdd()`, `data.dqdd_dq() = −M⁻¹ ∂τ/∂q`, `data.dqdd_dv() = −M⁻¹ ∂τ/∂v`,
+/// `data.minv() = M⁻¹`, and the inverse-dynamics derivatives at `(q, v, q̈)` (`dtau_dq`,
+/// `dtau_dv`, `m`).
+///
+/// # Errors
+/// As [`aba`].
+pub fn fd_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<()> {
+    aba(model, data, q, v, tau, fext)?;
+    id_fo_reduced(model, data, fext)?;
+    fd_fo_from_id(data);
+    Ok(())
+}
+
+/// Second-order inverse-dynamics derivatives at `(q, v, a)` (the full model's
+/// [`crate::deriv::id_so_derivatives`] contracted with `G`): the tensors of `so` and the
+/// first-order results in `data` (as [`id_derivatives`]).
+///
+/// # Errors
+/// As [`rnea`], or an `so` made for another model.
+pub fn id_so_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    so: &mut MimicSoData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<()> {
+    so.check(model)?;
+    prepare(model, data, q, Some(v), Some(("a", a)))?;
+    model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+    id_so_reduced(model, data, so, fext)
+}
+
+fn id_so_reduced(
+    model: &MimicModel,
+    data: &mut MimicData,
+    so: &mut MimicSoData,
+    fext: Option<&[Force]>,
+) -> Result<()> {
+    crate::deriv::id_so_derivatives(
+        &model.full,
+        &mut data.full,
+        &mut so.full,
+        &data.q,
+        &data.v,
+        &data.a,
+        fext,
+    )?;
+    reduce_fo(model, data);
+    model.reduce_tensor(so.full.d2tau_dq2(), &mut so.d2tau_dq2);
+    model.reduce_tensor(so.full.d2tau_dv2(), &mut so.d2tau_dv2);
+    model.reduce_tensor(so.full.d2tau_dqdv(), &mut so.d2tau_dqdv);
+    model.reduce_tensor(so.full.dm_dq(), &mut so.dm_dq);
+    Ok(())
+}
+
+/// Second-order forward-dynamics derivatives at `q̈ = FD(q, v, τ)` (eq. eqn_FD_SO_43, with the
+/// reduced inverse-dynamics tensors at `(q, v, q̈)` and `X_q = ∂q̈/∂q`, `X_v = ∂q̈/∂v`):
+/// * `∂²q̈/∂q²[:, j, k] = −M⁻¹(∂²τ/∂q²[:, j, k] + ∂M/∂q_j X_q[:, k] + ∂M/∂q_k X_q[:, j])`,
+/// * `∂²q̈/∂v²[:, j, k] = −M⁻¹ ∂²τ/∂v²[:, j, k]`,
+/// * `∂²q̈/∂q∂v[:, j, k] = −M⁻¹(∂²τ/∂q∂v[:, j, k] + ∂M/∂q_j X_v[:, k])`,
+/// * `∂²q̈/∂τ∂q[:, j, k] = ∂(M⁻¹)_{:j}/∂q_k = −(M⁻¹ ∂M/∂q_k M⁻¹)[:, j]`,
+///
+/// in `so`; the first-order results of [`fd_derivatives`] in `data`, and the inverse-dynamics
+/// tensors at `(q, v, q̈)` in `so` (`d2tau_*`, `dm_dq`).
+///
+/// # Errors
+/// As [`aba`], or an `so` made for another model.
+pub fn fd_so_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    so: &mut MimicSoData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<()> {
+    so.check(model)?;
+    aba(model, data, q, v, tau, fext)?;
+    id_so_reduced(model, data, so, fext)?;
+    fd_fo_from_id(data);
+    let n = model.nv;
+    let minv = data.minv.as_slice();
+    let xq = data.dqdd_dq.as_slice();
+    let xv = data.dqdd_dv.as_slice();
+    let dm = so.dm_dq.as_slice();
+    // y[:, j, k] = ∂M/∂q_k X_q[:, j].
+    {
+        let y = so.y.as_mut_slice();
+        for k in 0..n {
+            let page = &dm[n * n * k..n * n * (k + 1)];
+            for j in 0..n {
+                let out = &mut y[n * (j + n * k)..n * (j + n * k + 1)];
+                mat_vec(page, &xq[n * j..n * (j + 1)], out);
+            }
+        }
+    }
+    // ∂²q̈/∂q².
+    let rhs = so.page.as_mut_slice();
+    for k in 0..n {
+        for j in 0..n {
+            let (ys, ts) = (so.y.as_slice(), so.d2tau_dq2.as_slice());
+            for i in 0..n {
+                rhs[i + n * j] =
+                    ts[i + n * (j + n * k)] + ys[i + n * (j + n * k)] + ys[i + n * (k + n * j)];
+            }
+        }
+        let out = &mut so.d2qdd_dq2.as_mut_slice()[n * n * k..n * n * (k + 1)];
+        neg_mat_mul(minv, rhs, out, n);
+    }
+    // ∂²q̈/∂v².
+    for k in 0..n {
+        let src = &so.d2tau_dv2.as_slice()[n * n * k..n * n * (k + 1)];
+        let out = &mut so.d2qdd_dv2.as_mut_slice()[n * n * k..n * n * (k + 1)];
+        neg_mat_mul(minv, src, out, n);
+    }
+    // ∂²q̈/∂q∂v: rhs[:, j] = ∂²τ/∂q∂v[:, j, k] + ∂M/∂q_j X_v[:, k].
+    for k in 0..n {
+        let ts = so.d2tau_dqdv.as_slice();
+        for j in 0..n {
+            let col = &mut rhs[n * j..n * (j + 1)];
+            mat_vec(&dm[n * n * j..n * n * (j + 1)], &xv[n * k..n * (k + 1)], col);
+            for (i, c) in col.iter_mut().enumerate() {
+                *c += ts[i + n * (j + n * k)];
+            }
+        }
+        let out = &mut so.d2qdd_dqdv.as_mut_slice()[n * n * k..n * n * (k + 1)];
+        neg_mat_mul(minv, rhs, out, n);
+    }
+    // ∂(M⁻¹)/∂q_k = −M⁻¹ ∂M/∂q_k M⁻¹.
+    for k in 0..n {
+        neg_mat_mul(&dm[n * n * k..n * n * (k + 1)], minv, rhs, n);
+        let out = &mut so.d2qdd_dtaudq.as_mut_slice()[n * n * k..n * n * (k + 1)];
+        mat_mul(minv, rhs, out, n);
+    }
+    Ok(())
+}
+
+/// `out = a x` (`a` column-major `n × n`, `n = x.len()`).
+fn mat_vec(a: &[f64], x: &[f64], out: &mut [f64]) {
+    let n = x.len();
+    out.fill(0.0);
+    for (c, &xc) in x.iter().enumerate() {
+        if xc != 0.0 {
+            for (o, &ac) in out.iter_mut().zip(&a[n * c..n * (c + 1)]) {
+                *o += ac * xc;
+            }
+        }
+    }
+}
+
+/// `out = a b` (column-major `n × n`).
+fn mat_mul(a: &[f64], b: &[f64], out: &mut [f64], n: usize) {
+    for c in 0..n {
+        mat_vec(a, &b[n * c..n * (c + 1)], &mut out[n * c..n * (c + 1)]);
+    }
+}
+
+/// `out = −a b` (column-major `n × n`).
+fn neg_mat_mul(a: &[f64], b: &[f64], out: &mut [f64], n: usize) {
+    mat_mul(a, b, out, n);
+    for o in out.iter_mut() {
+        *o = -*o;
+    }
+}
+
+/// `h ←` its `L D Lᵀ` factorisation (`L` unit lower triangular below the diagonal, `D` on it;
+/// the strict upper triangle is left as is), with the pivot test of the tree-sparse one.
+fn ldl_in_place(model: &MimicModel, h: &mut DMatrix<f64>) -> Result<()> {
+    let n = h.nrows();
+    let mut dmax: f64 = 0.0;
+    for j in 0..n {
+        let mut d = h[(j, j)];
+        for k in 0..j {
+            let l = h[(j, k)];
+            d -= l * l * h[(k, k)];
+        }
+        if !(d > 0.0 && d.is_finite()) {
+            return Err(pivot_error(model, j, d, None));
+        }
+        dmax = dmax.max(d);
+        h[(j, j)] = d;
+        for i in j + 1..n {
+            let mut x = h[(i, j)];
+            for k in 0..j {
+                x -= h[(i, k)] * h[(j, k)] * h[(k, k)];
+            }
+            h[(i, j)] = x / d;
+        }
+    }
+    for j in 0..n {
+        let d = h[(j, j)];
+        if d <= crate::algo::internal::PIVOT_RTOL * dmax {
+            return Err(pivot_error(model, j, d, Some(dmax)));
+        }
+    }
+    Ok(())
+}
+
+/// `x ← M⁻¹ x` with `h` the factor of [`ldl_in_place`].
+fn ldl_solve(h: &DMatrix<f64>, x: &mut [f64]) {
+    let n = h.nrows();
+    for i in 0..n {
+        let mut s = x[i];
+        for k in 0..i {
+            s -= h[(i, k)] * x[k];
+        }
+        x[i] = s;
+    }
+    for i in 0..n {
+        x[i] /= h[(i, i)];
+    }
+    for i in (0..n).rev() {
+        let mut s = x[i];
+        for k in i + 1..n {
+            s -= h[(k, i)] * x[k];
+        }
+        x[i] = s;
+    }
+}
+
+#[cold]
+fn pivot_error(model: &MimicModel, k: usize, d: f64, max: Option<f64>) -> Error {
+    let why = match max {
+        None => "is not positive and finite".to_string(),
+        Some(m) => {
+            format!(
+                "is at most {:e} times the largest pivot {m:e}",
+                crate::algo::internal::PIVOT_RTOL
+            )
+        }
+    };
+    let joint = model.full.dof_joint()[model.v_keep[k]];
+    Error::Singular {
+        what: "mass matrix (reduced coordinates of the mimic joints)".into(),
+        detail: format!(
+            "pivot {d:e} at reduced velocity index {k} (joint \"{}\") {why}; a massless \
+             subtree, or a massless link between joints whose motions coincide?",
+            model.full.names()[joint]
+        ),
+    }
+}

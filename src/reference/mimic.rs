@@ -1,0 +1,279 @@
+//! The oracle of [`crate::mimic`]: the reference dynamics of the full tree composed with the
+//! mimic expansion, in any scalar.
+//!
+//! [`Reduced`] re-derives the reduced coordinates from the list of [`MimicJoint`]s and the
+//! model's index tables alone (not from [`crate::mimic::MimicModel`]): `q_full = expand(q)`
+//! (independent coordinates copied, `m · q_ref + c` for each mimic joint), `v_full = G v`,
+//! `τ = Gᵀ τ_full`. Its `f64` oracles differentiate these compositions with dual and
+//! hyper-dual numbers, `q` in the tangent space of the reduced configuration
+//! (`(q ⊕ δ_k) ⊕ ε_j` for the second order, as [`super::derivatives`]).
+
+use super::derivatives::{eps, eps1, eps2, hessian, jacobian};
+use super::dynamics::{rnea, rnea_with_gravity, solve};
+use super::kinematics::integrate;
+use super::{AdScalar, lift};
+use crate::mimic::MimicJoint;
+use crate::model::Model;
+use crate::tensor::Tensor3;
+use nalgebra::DMatrix;
+use num_dual::{Dual64, HyperDual64};
+
+/// A full model and its mimic constraints, seen in the reduced coordinates.
+#[derive(Clone, Copy, Debug)]
+pub struct Reduced<'a> {
+    /// The full tree (every joint independent).
+    pub full: &'a Model,
+    /// The constraints.
+    pub mimics: &'a [MimicJoint],
+}
+
+impl Reduced<'_> {
+    /// The constraint of joint `i`, if it is a mimic joint.
+    fn mimic_of(&self, i: usize) -> Option<&MimicJoint> {
+        self.mimics.iter().find(|m| m.joint == i)
+    }
+    /// Reduced `(idx_q, idx_v)` of each joint (`None` for a mimic joint), and `(nq, nv)`.
+    fn layout(&self) -> (Vec<Option<(usize, usize)>>, usize, usize) {
+        let m = self.full;
+        let (mut nq, mut nv) = (0, 0);
+        let mut out = vec![None; m.njoints()];
+        for (i, o) in out.iter_mut().enumerate().skip(1) {
+            if self.mimic_of(i).is_none() {
+                *o = Some((nq, nv));
+                nq += m.nqs()[i];
+                nv += m.nvs()[i];
+            }
+        }
+        (out, nq, nv)
+    }
+    /// Reduced configuration dimension.
+    pub fn nq(&self) -> usize {
+        self.layout().1
+    }
+    /// Reduced velocity dimension.
+    pub fn nv(&self) -> usize {
+        self.layout().2
+    }
+    /// `expand(q)`.
+    pub fn expand_q<T: AdScalar>(&self, q: &[T]) -> Vec<T> {
+        let m = self.full;
+        let (lay, ..) = self.layout();
+        let mut out = vec![T::zero(); m.nq()];
+        for i in 1..m.njoints() {
+            let a = m.idx_q()[i];
+            match (lay[i], self.mimic_of(i)) {
+                (Some((r, _)), _) => out[a..a + m.nqs()[i]].clone_from_slice(&q[r..r + m.nqs()[i]]),
+                (None, Some(mm)) => {
+                    let (r, _) = lay[mm.reference].expect("reference joints are independent");
+                    out[a] = q[r].clone() * mm.multiplier + mm.offset;
+                }
+                (None, None) => unreachable!(),
+            }
+        }
+        out
+    }
+    /// `G v`.
+    pub fn expand_v<T: AdScalar>(&self, v: &[T]) -> Vec<T> {
+        let m = self.full;
+        let (lay, ..) = self.layout();
+        let mut out = vec![T::zero(); m.nv()];
+        for i in 1..m.njoints() {
+            let a = m.idx_v()[i];
+            match (lay[i], self.mimic_of(i)) {
+                (Some((_, r)), _) => out[a..a + m.nvs()[i]].clone_from_slice(&v[r..r + m.nvs()[i]]),
+                (None, Some(mm)) => {
+                    let (_, r) = lay[mm.reference].expect("reference joints are independent");
+                    out[a] = v[r].clone() * mm.multiplier;
+                }
+                (None, None) => unreachable!(),
+            }
+        }
+        out
+    }
+    /// `Gᵀ f`.
+    pub fn reduce_force<T: AdScalar>(&self, f: &[T]) -> Vec<T> {
+        let m = self.full;
+        let (lay, _, nv) = self.layout();
+        let mut out = vec![T::zero(); nv];
+        for i in 1..m.njoints() {
+            let a = m.idx_v()[i];
+            match (lay[i], self.mimic_of(i)) {
+                (Some((_, r)), _) => {
+                    for c in 0..m.nvs()[i] {
+                        out[r + c] += f[a + c].clone();
+                    }
+                }
+                (None, Some(mm)) => {
+                    let (_, r) = lay[mm.reference].expect("reference joints are independent");
+                    out[r] += f[a].clone() * mm.multiplier;
+                }
+                (None, None) => unreachable!(),
+            }
+        }
+        out
+    }
+    /// `q ⊕ δ` in the reduced coordinates: the independent coordinates of
+    /// `expand(q) ⊕ G δ`.
+    pub fn integrate<T: AdScalar>(&self, q: &[T], delta: &[T]) -> Vec<T> {
+        let m = self.full;
+        let qf = integrate(m, &self.expand_q(q), &self.expand_v(delta));
+        let (lay, nq, _) = self.layout();
+        let mut out = vec![T::zero(); nq];
+        for i in 1..m.njoints() {
+            if let Some((r, _)) = lay[i] {
+                let a = m.idx_q()[i];
+                out[r..r + m.nqs()[i]].clone_from_slice(&qf[a..a + m.nqs()[i]]);
+            }
+        }
+        out
+    }
+    /// Inverse dynamics `Gᵀ τ_full(expand(q), G v, G a)` (reference RNEA of the full model).
+    pub fn rnea<T: AdScalar>(&self, q: &[T], v: &[T], a: &[T]) -> Vec<T> {
+        let tf = rnea(self.full, &self.expand_q(q), &self.expand_v(v), &self.expand_v(a), None);
+        self.reduce_force(&tf)
+    }
+    /// The reduced mass matrix by unit reduced accelerations (zero velocity and gravity).
+    pub fn mass_matrix<T: AdScalar>(&self, q: &[T]) -> Vec<Vec<T>> {
+        let n = self.nv();
+        let qf = self.expand_q(q);
+        let zero = vec![T::zero(); self.full.nv()];
+        let mut m = vec![vec![T::zero(); n]; n];
+        for j in 0..n {
+            let mut e = vec![T::zero(); n];
+            e[j] = T::one();
+            let col = rnea_with_gravity(self.full, &qf, &zero, &self.expand_v(&e), None, false);
+            for (i, x) in self.reduce_force(&col).into_iter().enumerate() {
+                m[i][j] = x;
+            }
+        }
+        m
+    }
+    /// Forward dynamics `M⁻¹(τ − rnea(q, v, 0))` by a dense solve.
+    pub fn aba<T: AdScalar>(&self, q: &[T], v: &[T], tau: &[T]) -> Vec<T> {
+        let zero = vec![T::zero(); self.nv()];
+        let b = self.rnea(q, v, &zero);
+        let rhs: Vec<T> = tau.iter().zip(b).map(|(t, b)| t.clone() - b).collect();
+        solve(self.mass_matrix(q), rhs)
+    }
+    fn perturb<T: AdScalar>(&self, q: &[T], j: usize, d: T) -> Vec<T> {
+        let mut delta = vec![T::zero(); self.nv()];
+        delta[j] = d;
+        self.integrate(q, &delta)
+    }
+    fn nested(&self, q: &[f64], j: usize, k: usize) -> Vec<HyperDual64> {
+        let q1 = self.perturb(&lift::<HyperDual64>(q), k, eps2());
+        self.perturb(&q1, j, eps1())
+    }
+
+    /// `∂τ/∂q` (tangent).
+    pub fn d_rnea_dq(&self, q: &[f64], v: &[f64], a: &[f64]) -> DMatrix<f64> {
+        let n = self.nv();
+        let (v, a) = (lift::<Dual64>(v), lift::<Dual64>(a));
+        jacobian(n, n, |j| self.rnea(&self.perturb(&lift::<Dual64>(q), j, eps()), &v, &a))
+    }
+    /// `∂τ/∂v`.
+    pub fn d_rnea_dv(&self, q: &[f64], v: &[f64], a: &[f64]) -> DMatrix<f64> {
+        let n = self.nv();
+        let (qd, a) = (lift::<Dual64>(q), lift::<Dual64>(a));
+        jacobian(n, n, |j| self.rnea(&qd, &seeded(v, j, eps()), &a))
+    }
+    /// `∂q̈/∂q` (tangent).
+    pub fn d_aba_dq(&self, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64> {
+        let n = self.nv();
+        let (v, t) = (lift::<Dual64>(v), lift::<Dual64>(tau));
+        jacobian(n, n, |j| self.aba(&self.perturb(&lift::<Dual64>(q), j, eps()), &v, &t))
+    }
+    /// `∂q̈/∂v`.
+    pub fn d_aba_dv(&self, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64> {
+        let n = self.nv();
+        let (qd, t) = (lift::<Dual64>(q), lift::<Dual64>(tau));
+        jacobian(n, n, |j| self.aba(&qd, &seeded(v, j, eps()), &t))
+    }
+    /// `∂q̈/∂τ`.
+    pub fn d_aba_dtau(&self, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64> {
+        let n = self.nv();
+        let (qd, vd) = (lift::<Dual64>(q), lift::<Dual64>(v));
+        jacobian(n, n, |j| self.aba(&qd, &vd, &seeded(tau, j, eps())))
+    }
+    /// `∂²τ/∂q²` (nested tangent).
+    pub fn d2_rnea_dq2(&self, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
+        let n = self.nv();
+        let (v, a) = (lift::<HyperDual64>(v), lift::<HyperDual64>(a));
+        hessian(n, n, n, |j, k| self.rnea(&self.nested(q, j, k), &v, &a))
+    }
+    /// `∂²τ/∂v²`.
+    pub fn d2_rnea_dv2(&self, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
+        let n = self.nv();
+        let (qh, a) = (lift::<HyperDual64>(q), lift::<HyperDual64>(a));
+        hessian(n, n, n, |j, k| {
+            let mut vh = seeded(v, j, eps1());
+            vh[k] += eps2();
+            self.rnea(&qh, &vh, &a)
+        })
+    }
+    /// `∂/∂v_k (∂τ_i/∂q_j)`.
+    pub fn d2_rnea_dqdv(&self, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
+        let n = self.nv();
+        let a = lift::<HyperDual64>(a);
+        hessian(n, n, n, |j, k| {
+            let qh = self.perturb(&lift::<HyperDual64>(q), j, eps1());
+            self.rnea(&qh, &seeded(v, k, eps2()), &a)
+        })
+    }
+    /// `∂M_ij/∂q_k` (tangent).
+    #[allow(non_snake_case)]
+    pub fn dM_dq(&self, q: &[f64]) -> Tensor3 {
+        let n = self.nv();
+        let mut t = Tensor3::zeros(n, n, n);
+        for k in 0..n {
+            let m = self.mass_matrix(&self.perturb(&lift::<Dual64>(q), k, eps()));
+            for (i, row) in m.iter().enumerate() {
+                for (j, x) in row.iter().enumerate() {
+                    t.set(i, j, k, x.eps);
+                }
+            }
+        }
+        t
+    }
+    /// `∂²q̈/∂q²` (nested tangent).
+    pub fn d2_aba_dq2(&self, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
+        let n = self.nv();
+        let (v, t) = (lift::<HyperDual64>(v), lift::<HyperDual64>(tau));
+        hessian(n, n, n, |j, k| self.aba(&self.nested(q, j, k), &v, &t))
+    }
+    /// `∂²q̈/∂v²`.
+    pub fn d2_aba_dv2(&self, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
+        let n = self.nv();
+        let (qh, t) = (lift::<HyperDual64>(q), lift::<HyperDual64>(tau));
+        hessian(n, n, n, |j, k| {
+            let mut vh = seeded(v, j, eps1());
+            vh[k] += eps2();
+            self.aba(&qh, &vh, &t)
+        })
+    }
+    /// `∂/∂v_k (∂q̈_i/∂q_j)`.
+    pub fn d2_aba_dqdv(&self, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
+        let n = self.nv();
+        let t = lift::<HyperDual64>(tau);
+        hessian(n, n, n, |j, k| {
+            let qh = self.perturb(&lift::<HyperDual64>(q), j, eps1());
+            self.aba(&qh, &seeded(v, k, eps2()), &t)
+        })
+    }
+    /// `∂(M⁻¹)_ij/∂q_k`.
+    pub fn d2_aba_dtaudq(&self, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
+        let n = self.nv();
+        let vh = lift::<HyperDual64>(v);
+        hessian(n, n, n, |j, k| {
+            let qh = self.perturb(&lift::<HyperDual64>(q), k, eps2());
+            self.aba(&qh, &vh, &seeded(tau, j, eps1()))
+        })
+    }
+}
+
+/// `x` lifted, plus `e_j · d`.
+fn seeded<T: AdScalar>(x: &[f64], j: usize, d: T) -> Vec<T> {
+    let mut out = lift::<T>(x);
+    out[j] += d;
+    out
+}
