@@ -187,3 +187,48 @@ fn algorithms_do_not_allocate() {
         );
     }
 }
+
+#[test]
+fn mimic_algorithms_do_not_allocate() {
+    use sodyn::mimic::{self, MimicData, MimicModel, MimicSoData};
+    let path =
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_arm.urdf");
+    let opts = sodyn::model::UrdfOptions { floating_base: true, ..Default::default() };
+    let m = MimicModel::load_urdf_file(&path, &opts).unwrap();
+    let mut rng = Rng::new(2);
+    let q = m.random_configuration(&mut rng);
+    let v = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
+    let a = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
+    let mut d = MimicData::new(&m);
+    let mut so = MimicSoData::new(&m);
+    let mut report = vec![];
+    let mut check = |name: &str, f: &mut dyn FnMut()| {
+        f(); // warm-up
+        let n = allocations(f);
+        if n > 0 {
+            report.push(format!("{name}: {n}"));
+        }
+    };
+    check("mimic::rnea", &mut || {
+        mimic::rnea(&m, &mut d, &q, &v, &a, None).unwrap();
+    });
+    check("mimic::crba", &mut || {
+        mimic::crba(&m, &mut d, &q).unwrap();
+    });
+    check("mimic::aba", &mut || {
+        mimic::aba(&m, &mut d, &q, &v, &a, None).unwrap();
+    });
+    check("mimic::id_derivatives", &mut || {
+        mimic::id_derivatives(&m, &mut d, &q, &v, &a, None).unwrap()
+    });
+    check("mimic::fd_derivatives", &mut || {
+        mimic::fd_derivatives(&m, &mut d, &q, &v, &a, None).unwrap()
+    });
+    check("mimic::id_so_derivatives", &mut || {
+        mimic::id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None).unwrap()
+    });
+    check("mimic::fd_so_derivatives", &mut || {
+        mimic::fd_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None).unwrap()
+    });
+    assert!(report.is_empty(), "heap allocations in mimic hot paths: {}", report.join(", "));
+}
