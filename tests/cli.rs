@@ -1074,3 +1074,96 @@ fn armature_option() {
     let e = assert_clean_failure(&o, "--armature not a number");
     assert!(e.contains("\"x\" is not a number"), "{e}");
 }
+
+/// `--mimic`: info, random-state and eval in the reduced coordinates, the outputs equal to the
+/// library's `sodyn::mimic`; unsupported inputs are clean errors.
+#[test]
+fn mimic_commands_use_the_reduced_coordinates() {
+    use sodyn::mimic::{self, MimicData, MimicModel, MimicSoData};
+    let urdf = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_arm.urdf");
+    let u = urdf.to_str().unwrap();
+    let o = sodyn(&["info", "--model", u, "--mimic", "--floating-base"]);
+    assert_ok(&o, "info --mimic");
+    let out = stdout(&o);
+    assert!(out.contains("nq = 14, nv = 13 (reduced coordinates; full tree nq = 17, nv = 16)"));
+    assert!(out.contains("q = -1 * q[\"finger_l_joint\"] + 0.01"), "{out}");
+    let plain = stdout(&sodyn(&["info", "--model", u]));
+    assert!(plain.contains("mimics \"finger_l_joint\" (independent without --mimic)"), "{plain}");
+    let st = tmp("mimic-state.json");
+    let s = st.to_str().unwrap();
+    let o = sodyn(&["random-state", "--model", u, "--mimic", "--floating-base", "-o", s]);
+    assert_ok(&o, "random-state --mimic");
+    let o =
+        sodyn(&["eval", "--model", u, "--mimic", "--floating-base", "--state", s, "--order", "2"]);
+    assert_ok(&o, "eval --mimic");
+    let v: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let (nq, nv) = (14, 13);
+    assert_eq!((v["nq"].as_u64(), v["nv"].as_u64()), (Some(nq), Some(nv)));
+    let state: Value = serde_json::from_str(&std::fs::read_to_string(&st).unwrap()).unwrap();
+    let (q, vel) = (vector(&state, "q", nq as usize), vector(&state, "v", nv as usize));
+    let (a, tau) = (vector(&state, "a", nv as usize), vector(&state, "tau", nv as usize));
+    let opts = sodyn::model::UrdfOptions { floating_base: true, ..Default::default() };
+    let m = MimicModel::load_urdf_file(&urdf, &opts).unwrap();
+    let mut d = MimicData::new(&m);
+    let mut so = MimicSoData::new(&m);
+    let n = nv as usize;
+    let t = mimic::rnea(&m, &mut d, &q, &vel, &a, None).unwrap().clone();
+    assert!((vector(&v, "tau", n) - t).amax() < 1e-12);
+    mimic::fd_so_derivatives(&m, &mut d, &mut so, &q, &vel, &tau, None).unwrap();
+    assert!((vector(&v, "qdd", n) - d.qdd()).amax() < 1e-12);
+    assert!((matrix(&v, "dqdd_dq", n) - d.dqdd_dq()).amax() < 1e-12);
+    assert!((matrix(&v, "Minv", n) - d.minv()).amax() < 1e-12);
+    for k in ["d2tau_dq2", "d2tau_dv2", "d2tau_dqdv", "dM_dq", "d2qdd_dq2", "d2qdd_dtaudq"] {
+        check_tensor_shape(&v, k, n);
+    }
+    let joints = v["joints"].as_array().unwrap();
+    let fr = joints.iter().find(|j| j["name"] == "finger_r_joint").unwrap();
+    assert_eq!(fr["mimic"]["joint"], "finger_l_joint");
+    assert_eq!(fr["nv"], 0);
+    // Unsupported inputs and models.
+    let with_contacts = tmp("mimic-contacts.json");
+    std::fs::write(&with_contacts, r#"{"contacts": [{"frame": "tool"}]}"#).unwrap();
+    let wc = with_contacts.to_str().unwrap();
+    let err = assert_clean_failure(
+        &sodyn(&["eval", "--model", u, "--mimic", "--state", wc]),
+        "eval --mimic with contacts",
+    );
+    assert!(err.contains("\"contacts\" is not supported with --mimic"), "{err}");
+    let err = assert_clean_failure(
+        &sodyn(&["eval", "--model", u, "--mimic", "--state", s]),
+        "eval --mimic, the state of the floating base",
+    );
+    assert!(err.contains("key \"q\" has length 14, expected 7"), "{err}");
+    let err = assert_clean_failure(
+        &sodyn(&["info", "--model", "builtin:humanoid", "--mimic"]),
+        "--mimic on a built-in",
+    );
+    assert!(err.contains("--mimic applies to URDF files"), "{err}");
+    let err = assert_clean_failure(
+        &sodyn(&["bench", "--model", u, "--mimic", "--smoke", "--algos", "kkt_fo"]),
+        "bench --mimic kkt_fo",
+    );
+    assert!(err.contains("not available with --mimic"), "{err}");
+    let o = sodyn(&["bench", "--model", u, "--mimic", "--smoke", "--algos", "rnea,fd_so"]);
+    assert_ok(&o, "bench --mimic");
+    assert_eq!(
+        stdout(&o).lines().filter(|l| l.starts_with("model=mimic_arm nq=7 nv=7")).count(),
+        2
+    );
+    let o = sodyn(&["demo", "--model", u, "--mimic"]);
+    assert_ok(&o, "demo --mimic");
+    // An unknown reference joint is an error with --mimic (a warning without).
+    let bad = tmp("mimic-bad.urdf");
+    std::fs::write(
+        &bad,
+        std::fs::read_to_string(&urdf).unwrap().replace("joint=\"shoulder\"", "joint=\"nope\""),
+    )
+    .unwrap();
+    let b = bad.to_str().unwrap();
+    let err = assert_clean_failure(&sodyn(&["info", "--model", b, "--mimic"]), "unknown reference");
+    assert!(
+        err.contains("joint \"wrist_follower_joint\"") && err.contains("\"nope\" is not a joint"),
+        "{err}"
+    );
+    assert_ok(&sodyn(&["info", "--model", b]), "unknown reference without --mimic");
+}

@@ -1,0 +1,335 @@
+//! `--mimic`: the commands on a [`MimicModel`] (URDF `<mimic>` joints as constraints, the
+//! reduced coordinates; see `sodyn::mimic`).
+
+use super::eval::{mat_json, tensor_json};
+use super::{ModelArgs, load_model_spec, with_armature_arg};
+use nalgebra::DVector;
+use serde_json::{Map, Value, json};
+use sodyn::error::{Error, Result};
+use sodyn::mimic::{self, MimicData, MimicModel, MimicSoData};
+use sodyn::model::UrdfOptions;
+use sodyn::rng::Rng;
+
+/// Loads the URDF of `--model` with its `<mimic>` constraints (`--armature`: of the full
+/// model's DoFs, mimic joints included).
+pub(crate) fn load(o: &ModelArgs) -> Result<MimicModel> {
+    if o.model.starts_with("builtin:") || super::is_mjcf(&o.model) {
+        return Err(Error::Io(format!(
+            "--mimic applies to URDF files (their <mimic> elements); {} has none",
+            o.model
+        )));
+    }
+    let opts = UrdfOptions {
+        floating_base: o.floating_base,
+        strict_inertia: o.strict_inertia,
+        mimic: true,
+    };
+    let full = load_model_spec(&o.model, &opts)?;
+    let full = match &o.armature {
+        Some(a) => with_armature_arg(&full, a)?,
+        None => full,
+    };
+    MimicModel::from_model(full)
+}
+
+/// The joint table of `sodyn info --mimic`: reduced indices, the constraints.
+pub(crate) fn joint_table(mm: &MimicModel) -> String {
+    let model = mm.full();
+    let mut s = format!(
+        "model \"{}\": nq = {}, nv = {} (reduced coordinates; full tree nq = {}, nv = {}), {} \
+         joints ({} mimic), {} frames\n",
+        model.name(),
+        mm.nq(),
+        mm.nv(),
+        model.nq(),
+        model.nv(),
+        model.njoints() - 1,
+        mm.mimics().len(),
+        model.frames().len()
+    );
+    s += &format!(
+        "{:>4}  {:<32} {:<11} {:<28} {:>5} {:>3} {:>5} {:>3}  {:>9}  mimic\n",
+        "id", "name", "type", "parent", "idx_q", "nq", "idx_v", "nv", "mass"
+    );
+    for i in 1..model.njoints() {
+        let p = model.parents()[i];
+        let (iq, nq, iv, nv, mimic) = match mm.reduced_idx()[i] {
+            Some((a, b)) => {
+                (a.to_string(), model.nqs()[i], b.to_string(), model.nvs()[i], String::new())
+            }
+            None => {
+                let c = mm.mimics().iter().find(|c| c.joint == i).expect("a mimic joint");
+                (
+                    "-".into(),
+                    0,
+                    "-".into(),
+                    0,
+                    format!(
+                        "q = {} * q[\"{}\"] + {}",
+                        c.multiplier,
+                        model.names()[c.reference],
+                        c.offset
+                    ),
+                )
+            }
+        };
+        s += &format!(
+            "{:>4}  {:<32} {:<11} {:<28} {:>5} {:>3} {:>5} {:>3}  {:>9.4}  {}\n",
+            i,
+            model.names()[i],
+            model.joints()[i].name(),
+            model.names()[p],
+            iq,
+            nq,
+            iv,
+            nv,
+            model.inertias()[i].mass,
+            mimic
+        );
+    }
+    if model.has_armature() {
+        let a: Vec<String> = model.armature().iter().map(|x| format!("{x}")).collect();
+        s += &format!("armature (per velocity coordinate of the full tree): [{}]\n", a.join(", "));
+    }
+    s
+}
+
+/// A random state in the reduced coordinates, as `random-state` writes it.
+pub(crate) fn random_state_json(mm: &MimicModel, seed: u64) -> Value {
+    let mut rng = Rng::new(seed);
+    let q = mm.random_configuration(&mut rng);
+    let mut r = |n: usize| DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
+    let (v, a, tau) = (r(mm.nv()), r(mm.nv()), r(mm.nv()));
+    json!({ "q": q.as_slice(), "v": v.as_slice(), "a": a.as_slice(), "tau": tau.as_slice() })
+}
+
+/// `q`, `v`, `a`, `tau` of a state file, in the reduced coordinates.
+pub(crate) struct State {
+    q: DVector<f64>,
+    v: DVector<f64>,
+    a: DVector<f64>,
+    tau: DVector<f64>,
+}
+
+/// Parses a state file for a mimic model: `q` (length nq, default neutral), `v`, `a`, `tau`
+/// (length nv, default zeros); any other key is an error (contacts, frames and weights are not
+/// supported with `--mimic`).
+pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<State> {
+    let val: Value =
+        serde_json::from_str(text).map_err(|e| Error::Io(format!("{file}: invalid JSON: {e}")))?;
+    let obj = val
+        .as_object()
+        .ok_or_else(|| Error::Io(format!("{file}: the state must be a JSON object")))?;
+    if let Some(k) = obj.keys().find(|k| !["q", "v", "a", "tau"].contains(&k.as_str())) {
+        return Err(Error::Io(format!(
+            "{file}: key \"{k}\" is not supported with --mimic (a mimic model's state has q, v, a, \
+             tau only: contacts, impacts, frames and contracted weights take models without \
+             --mimic)"
+        )));
+    }
+    let full_hint = |e: Error, key: &str, n: usize, full: usize| match obj.get(key) {
+        Some(Value::Array(x)) if x.len() == full && full != n => Error::Io(format!(
+            "{e} ({full} is the length of the full tree, mimic joints included; with --mimic \
+             the state is in the reduced coordinates)"
+        )),
+        _ => e,
+    };
+    let read = |key: &str, n: usize, full: usize| -> Result<Option<DVector<f64>>> {
+        let Some(val) = obj.get(key) else { return Ok(None) };
+        let arr = val
+            .as_array()
+            .ok_or_else(|| Error::Io(format!("{file}: key \"{key}\" must be a list of numbers")))?;
+        if arr.len() != n {
+            let e =
+                Error::Io(format!("{file}: key \"{key}\" has length {}, expected {n}", arr.len()));
+            return Err(full_hint(e, key, n, full));
+        }
+        let mut out = DVector::zeros(n);
+        for (i, x) in arr.iter().enumerate() {
+            out[i] = x.as_f64().filter(|x| x.is_finite()).ok_or_else(|| {
+                Error::Io(format!("{file}: key \"{key}\"[{i}] is not a finite number"))
+            })?;
+        }
+        Ok(Some(out))
+    };
+    let (nq, nv, fq, fv) = (mm.nq(), mm.nv(), mm.full().nq(), mm.full().nv());
+    let q = read("q", nq, fq)?.unwrap_or_else(|| mm.neutral());
+    mm.check_q(&q)?;
+    let z = || DVector::zeros(nv);
+    Ok(State {
+        q,
+        v: read("v", nv, fv)?.unwrap_or_else(z),
+        a: read("a", nv, fv)?.unwrap_or_else(z),
+        tau: read("tau", nv, fv)?.unwrap_or_else(z),
+    })
+}
+
+/// The `eval --mimic` output: the keys of `eval` for the dynamics (`tau`, `M`, `b`, `qdd`,
+/// `dtau_dq`, `dtau_dv`, `dqdd_dq`, `dqdd_dv`, `Minv`, at order 2 the tensors), in the reduced
+/// coordinates, with an `"errors"` object for the outputs undefined at the state.
+pub(crate) fn eval_json(mm: &MimicModel, s: &State, order: u32) -> Result<Value> {
+    let model = mm.full();
+    let mut errors = Map::new();
+    let mut data = MimicData::new(mm);
+    let tau = mimic::rnea(mm, &mut data, &s.q, &s.v, &s.a, None)?.clone();
+    let zero = DVector::zeros(mm.nv());
+    let b = mimic::rnea(mm, &mut data, &s.q, &s.v, &zero, None)?.clone();
+    let m = mimic::crba(mm, &mut data, &s.q)?.clone();
+    let joints: Vec<Value> = (1..model.njoints())
+        .map(|i| {
+            let mut j = json!({
+                "name": model.names()[i],
+                "type": model.joints()[i].name(),
+                "parent": model.names()[model.parents()[i]],
+            });
+            let o = j.as_object_mut().expect("object");
+            match mm.reduced_idx()[i] {
+                Some((a, b)) => {
+                    o.insert("idx_q".into(), json!(a));
+                    o.insert("nq".into(), json!(model.nqs()[i]));
+                    o.insert("idx_v".into(), json!(b));
+                    o.insert("nv".into(), json!(model.nvs()[i]));
+                }
+                None => {
+                    let c = mm.mimics().iter().find(|c| c.joint == i).expect("a mimic joint");
+                    o.insert("nq".into(), json!(0));
+                    o.insert("nv".into(), json!(0));
+                    o.insert(
+                        "mimic".into(),
+                        json!({
+                            "joint": model.names()[c.reference],
+                            "multiplier": c.multiplier,
+                            "offset": c.offset,
+                        }),
+                    );
+                }
+            }
+            j
+        })
+        .collect();
+    mimic::id_derivatives(mm, &mut data, &s.q, &s.v, &s.a, None)?;
+    let (dtau_dq, dtau_dv) = (mat_json(data.dtau_dq()), mat_json(data.dtau_dv()));
+    let g = model.gravity().to_vec6();
+    let mut out = json!({
+        "model": model.name(),
+        "nq": mm.nq(),
+        "nv": mm.nv(),
+        "gravity": g.as_slice(),
+        "joints": joints,
+        "tau": tau.as_slice(),
+        "M": mat_json(&m),
+        "b": b.as_slice(),
+        "dtau_dq": dtau_dq,
+        "dtau_dv": dtau_dv,
+    });
+    let o = out.as_object_mut().expect("object");
+    let undefined = |e: Error, keys: &[&str], errors: &mut Map<String, Value>| match e {
+        Error::Singular { .. } => {
+            for k in keys {
+                errors.insert((*k).into(), Value::String(e.to_string()));
+            }
+            Ok(())
+        }
+        e => Err(e),
+    };
+    let fd_keys = ["qdd", "dqdd_dq", "dqdd_dv", "Minv"];
+    match mimic::fd_derivatives(mm, &mut data, &s.q, &s.v, &s.tau, None) {
+        Ok(()) => {
+            o.insert("qdd".into(), json!(data.qdd().as_slice()));
+            for (k, x) in fd_keys[1..].iter().zip([data.dqdd_dq(), data.dqdd_dv(), data.minv()]) {
+                o.insert((*k).into(), mat_json(x));
+            }
+        }
+        Err(e) => undefined(e, &fd_keys, &mut errors)?,
+    }
+    if order >= 2 {
+        let mut so = MimicSoData::new(mm);
+        mimic::id_so_derivatives(mm, &mut data, &mut so, &s.q, &s.v, &s.a, None)?;
+        o.insert("d2tau_dq2".into(), tensor_json(so.d2tau_dq2()));
+        o.insert("d2tau_dv2".into(), tensor_json(so.d2tau_dv2()));
+        o.insert("d2tau_dqdv".into(), tensor_json(so.d2tau_dqdv()));
+        o.insert("dM_dq".into(), tensor_json(so.dm_dq()));
+        let keys = ["d2qdd_dq2", "d2qdd_dv2", "d2qdd_dqdv", "d2qdd_dtaudq"];
+        match mimic::fd_so_derivatives(mm, &mut data, &mut so, &s.q, &s.v, &s.tau, None) {
+            Ok(()) => {
+                let t = [so.d2qdd_dq2(), so.d2qdd_dv2(), so.d2qdd_dqdv(), so.d2qdd_dtaudq()];
+                for (k, x) in keys.iter().zip(t) {
+                    o.insert((*k).into(), tensor_json(x));
+                }
+            }
+            Err(e) => undefined(e, &keys, &mut errors)?,
+        }
+    }
+    if !errors.is_empty() {
+        o.insert("errors".into(), Value::Object(errors));
+    }
+    Ok(out)
+}
+
+/// `sodyn demo --mimic`: the algorithms of `sodyn::mimic` at a random state, with timings and
+/// the errors against the AD oracle of `sodyn::reference::mimic`.
+pub(crate) fn run_demo(spec: &str, seed: u64) -> Result<()> {
+    use super::demo::{rel, rel_t, rel_v, time_us};
+    use sodyn::reference::mimic::Reduced;
+    let o = ModelArgs {
+        model: spec.into(),
+        floating_base: false,
+        strict_inertia: false,
+        armature: None,
+        mimic: true,
+    };
+    let m = load(&o)?;
+    let r = Reduced { full: m.full(), mimics: m.mimics() };
+    let mut rng = Rng::new(seed);
+    let q = m.random_configuration(&mut rng);
+    let mut rv = || DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
+    let (v, a, tau) = (rv(), rv(), rv());
+    let (qs, vs, as_, ts) = (q.as_slice(), v.as_slice(), a.as_slice(), tau.as_slice());
+    println!(
+        "sodyn demo --mimic: model \"{}\" ({spec}), reduced nq = {}, nv = {} (full tree nq = {}, \
+         nv = {}, {} mimic joints), seed {seed}",
+        m.name(),
+        m.nq(),
+        m.nv(),
+        m.full().nq(),
+        m.full().nv(),
+        m.mimics().len()
+    );
+    println!(
+        "errors: max |ours − oracle| / max(1, max |oracle|); oracle = reference code composed \
+         with the mimic expansion, f64 / dual / hyper-dual numbers\n"
+    );
+    println!("{:<34} {:>12} {:>14}", "algorithm", "median µs", "max rel err");
+    let mut d = MimicData::new(&m);
+    let mut so = MimicSoData::new(&m);
+    let row = |name: &str, us: f64, err: f64| println!("{name:<34} {us:>12.2} {err:>14.2e}");
+    let t = time_us(|| mimic::rnea(&m, &mut d, &q, &v, &a, None).map(|_| ()))?;
+    row("rnea", t, rel_v(d.tau(), &r.rnea(qs, vs, as_)));
+    let t = time_us(|| mimic::crba(&m, &mut d, &q).map(|_| ()))?;
+    let mref = r.mass_matrix(qs);
+    row("crba", t, rel(d.m(), &nalgebra::DMatrix::from_fn(m.nv(), m.nv(), |i, j| mref[i][j])));
+    let t = time_us(|| mimic::aba(&m, &mut d, &q, &v, &tau, None).map(|_| ()))?;
+    row("aba (dense LDLᵀ)", t, rel_v(d.qdd(), &r.aba(qs, vs, ts)));
+    let t = time_us(|| mimic::id_derivatives(&m, &mut d, &q, &v, &a, None))?;
+    row("id_fo dtau/dq", t, rel(d.dtau_dq(), &r.d_rnea_dq(qs, vs, as_)));
+    row("      dtau/dv", t, rel(d.dtau_dv(), &r.d_rnea_dv(qs, vs, as_)));
+    let t = time_us(|| mimic::fd_derivatives(&m, &mut d, &q, &v, &tau, None))?;
+    row("fd_fo dqdd/dq", t, rel(d.dqdd_dq(), &r.d_aba_dq(qs, vs, ts)));
+    row("      dqdd/dv", t, rel(d.dqdd_dv(), &r.d_aba_dv(qs, vs, ts)));
+    row("      dqdd/dtau = M⁻¹", t, rel(d.minv(), &r.d_aba_dtau(qs, vs, ts)));
+    let t = time_us(|| mimic::id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None))?;
+    row("id_so d2tau/dq2", t, rel_t(so.d2tau_dq2(), &r.d2_rnea_dq2(qs, vs, as_)));
+    row("      d2tau/dv2", t, rel_t(so.d2tau_dv2(), &r.d2_rnea_dv2(qs, vs, as_)));
+    row("      d2tau/dqdv", t, rel_t(so.d2tau_dqdv(), &r.d2_rnea_dqdv(qs, vs, as_)));
+    row("      dM/dq", t, rel_t(so.dm_dq(), &r.dM_dq(qs)));
+    let t = time_us(|| mimic::fd_so_derivatives(&m, &mut d, &mut so, &q, &v, &tau, None))?;
+    if m.nv() > 40 {
+        row("fd_so (timing only; oracle > 40 DoF)", t, 0.0);
+    } else {
+        row("fd_so d2qdd/dq2", t, rel_t(so.d2qdd_dq2(), &r.d2_aba_dq2(qs, vs, ts)));
+        row("      d2qdd/dv2", t, rel_t(so.d2qdd_dv2(), &r.d2_aba_dv2(qs, vs, ts)));
+        row("      d2qdd/dqdv", t, rel_t(so.d2qdd_dqdv(), &r.d2_aba_dqdv(qs, vs, ts)));
+        row("      d2qdd/dtau dq", t, rel_t(so.d2qdd_dtaudq(), &r.d2_aba_dtaudq(qs, vs, ts)));
+    }
+    Ok(())
+}
