@@ -239,6 +239,13 @@ impl MimicModel {
         Self::from_model(crate::model::load_urdf_str(xml, source_name, &opts)?)
     }
 
+    /// Sets gravity (a linear acceleration in the world frame), as [`Model::set_gravity`].
+    ///
+    /// # Errors
+    /// [`Error::NotFinite`] if an entry is not finite (the model is unchanged).
+    pub fn set_gravity(&mut self, g: nalgebra::Vector3<f64>) -> Result<()> {
+        self.full.set_gravity(g)
+    }
     /// The full tree, every joint independent (its `nq`, `nv` count the mimic joints).
     pub fn full(&self) -> &Model {
         &self.full
