@@ -422,3 +422,67 @@ fn singular_reduced_mass_matrix_is_an_error() {
     let e = mimic::aba(&m, &mut d, &DVector::zeros(1), &z, &z, None).unwrap_err();
     assert!(matches!(e, Error::Singular { .. }) && e.to_string().contains("\"ja\""), "{e}");
 }
+
+/// τ and `M` against Pinocchio 4.1's `buildModelFromUrdf(path, mimic=True)` (its RNEA and CRBA
+/// support mimic joints): the fixtures `tests/fixtures/mimic_*.json` of
+/// `scripts/make_mimic_fixtures.py`, joints mapped by name (Pinocchio orders siblings by name;
+/// a continuous joint's `q` is `[cos, sin]` there).
+#[test]
+fn matches_pinocchio_fixtures() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    for name in ["baxter", "panda", "panda_coeffs"] {
+        let text = std::fs::read_to_string(root.join(format!("tests/fixtures/mimic_{name}.json")))
+            .unwrap();
+        let fx: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let m = MimicModel::load_urdf_file(
+            &root.join(fx["urdf"].as_str().unwrap()),
+            &UrdfOptions { mimic: true, ..Default::default() },
+        )
+        .unwrap();
+        assert_eq!(m.nv() as u64, fx["nv"].as_u64().unwrap(), "{name}");
+        let full = m.full();
+        // perm[ours] = Pinocchio's velocity index; q entries likewise (one per joint here).
+        let mut perm = vec![usize::MAX; m.nv()];
+        let mut qmap = vec![];
+        for j in fx["joints"].as_array().unwrap() {
+            let id = full.joint_id(j["name"].as_str().unwrap()).unwrap();
+            let (pv, nv) = (j["idx_v"].as_u64().unwrap() as usize, j["nv"].as_u64().unwrap());
+            match m.reduced_idx()[id] {
+                None => assert_eq!(nv, 0, "{name}: {j} is a mimic joint in sodyn"),
+                Some((rq, rv)) => {
+                    assert_eq!(nv, 1, "{name}: {j}");
+                    perm[rv] = pv;
+                    let pq = j["idx_q"].as_u64().unwrap() as usize;
+                    let rub = j["type"].as_str().unwrap().contains("RUB");
+                    qmap.push((rq, pq, rub));
+                }
+            }
+        }
+        assert!(perm.iter().all(|&p| p < m.nv()), "{name}: {perm:?}");
+        let mut data = MimicData::new(&m);
+        let mut worst = 0.0f64;
+        for st in fx["states"].as_array().unwrap() {
+            let get = |k: &str| -> Vec<f64> {
+                st[k].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()
+            };
+            let (pq, pv, pa, ptau) = (get("q"), get("v"), get("a"), get("tau"));
+            let mut q = DVector::zeros(m.nq());
+            for &(rq, p, rub) in &qmap {
+                q[rq] = if rub { pq[p + 1].atan2(pq[p]) } else { pq[p] };
+            }
+            let v = DVector::from_fn(m.nv(), |r, _| pv[perm[r]]);
+            let a = DVector::from_fn(m.nv(), |r, _| pa[perm[r]]);
+            let tau = mimic::rnea(&m, &mut data, &q, &v, &a, None).unwrap().clone();
+            let expect: Vec<f64> = (0..m.nv()).map(|r| ptau[perm[r]]).collect();
+            worst = worst.max(vec_err(&tau, &expect));
+            let mm = mimic::crba(&m, &mut data, &q).unwrap().clone();
+            let pm = st["M"].as_array().unwrap();
+            let expect = DMatrix::from_fn(m.nv(), m.nv(), |r, c| {
+                pm[perm[r]].as_array().unwrap()[perm[c]].as_f64().unwrap()
+            });
+            worst = worst.max(mat_err(&mm, &expect));
+        }
+        eprintln!("mimic {name} vs Pinocchio 4.1 (tau, M; relative): {worst:.1e}");
+        assert!(worst < 1e-9, "{name}: {worst:e}");
+    }
+}

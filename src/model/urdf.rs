@@ -37,9 +37,17 @@
 //!     [`UrdfOptions::strict_inertia`]). A body that is not positive semi-definite is an error
 //!     (Pinocchio loads it, but its mass matrix may be indefinite).
 //! * `<mimic>` joints are loaded as independent joints and recorded with
-//!   [`ModelBuilder::set_mimic`]. A `<mimic>` naming an unknown joint (or the joint itself) is
-//!   a warning, not an error: the joint loads as independent all the same, and nothing is
-//!   recorded.
+//!   [`ModelBuilder::set_mimic`] ([`Model::mimic`]). Without [`UrdfOptions::mimic`], a
+//!   `<mimic>` naming an unknown joint (or the joint itself) is a warning, not an error: the
+//!   joint loads as independent all the same, and nothing is recorded.
+//! * With [`UrdfOptions::mimic`], each `<mimic joint multiplier offset>` (defaults 1 and 0) is
+//!   checked and recorded as a constraint `q = multiplier · q_ref + offset` in
+//!   [`Model::mimic_joints`]: the reference must be another joint of the file, not itself a
+//!   mimic joint, and both must be one-DoF joints of one kind (`revolute`/`continuous`, or
+//!   `prismatic`); anything else is an error naming the file, line and joint. The returned
+//!   [`Model`] is still the full tree;
+//!   [`MimicModel`](crate::mimic::MimicModel) is the model in the reduced coordinates (the
+//!   mimic joints without degrees of freedom).
 //! * Nothing is printed: warnings are returned in [`Model::warnings`] (the command-line tool
 //!   prints them on standard error).
 //! * `<visual>`, `<collision>`, `<transmission>`, `<gazebo>`, `<material>` and every other unknown
