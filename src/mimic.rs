@@ -31,7 +31,7 @@
 //! contracted second order, batches) take the full [`Model`] only.
 
 use crate::algo::Data;
-use crate::deriv::SoData;
+use crate::deriv::{ContactData, KktData, SoData};
 use crate::error::{Error, Result};
 use crate::model::{JointType, Model, UrdfOptions};
 use crate::rng::Rng;
@@ -1021,4 +1021,381 @@ fn pivot_error(model: &MimicModel, k: usize, d: f64, max: Option<f64>) -> Error 
             model.full.names()[joint]
         ),
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Contacts
+// ---------------------------------------------------------------------------------------------
+
+/// Workspace and results of the contact algorithms of a [`MimicModel`] ([`kkt_derivatives`],
+/// [`constrained_id_derivatives`]): the contacts (frames of the full tree, see
+/// [`crate::model::Contact`]), the full tree's KKT workspace, and the reduced results
+/// (`m` contact rows).
+#[derive(Clone, Debug)]
+pub struct MimicKktData {
+    full: KktData,
+    key: u64,
+    /// `J G` (`m × nv`).
+    jr: DMatrix<f64>,
+    /// `γ`: the contact rows at `q̈ = 0` (drift and Baumgarte terms), `J q̈ + γ = 0`.
+    gamma: DVector<f64>,
+    tau_f: DVector<f64>,
+    x0: DVector<f64>,
+    lm: DVector<f64>,
+    qdd: DVector<f64>,
+    lambda: DVector<f64>,
+    dqdd_dq: DMatrix<f64>,
+    dqdd_dv: DMatrix<f64>,
+    dqdd_dtau: DMatrix<f64>,
+    dlambda_dq: DMatrix<f64>,
+    dlambda_dv: DMatrix<f64>,
+    dlambda_dtau: DMatrix<f64>,
+    /// `M⁻¹ (J G)ᵀ` (`nv × m`) and the Delassus matrix `J G M⁻¹ (J G)ᵀ`, factorised (`m × m`).
+    minv_jt: DMatrix<f64>,
+    del: DMatrix<f64>,
+    /// Residual derivatives of the full tree (`nv_f × nv_f`, `m × nv_f`) and reduced
+    /// (`nv × nv`, `m × nv`).
+    rf_top: DMatrix<f64>,
+    rf_bot: DMatrix<f64>,
+    r_top: DMatrix<f64>,
+    r_bot: DMatrix<f64>,
+    /// Scratch: one column of each block.
+    col_n: DVector<f64>,
+    col_m: DVector<f64>,
+}
+
+impl MimicKktData {
+    /// Workspace for `contacts` on `model` (their frames are frames of the full tree).
+    ///
+    /// # Errors
+    /// Those of [`ContactData::new`] for the full tree (an unknown frame, a contact on the
+    /// world, a redundant set).
+    pub fn new(model: &MimicModel, contacts: &[crate::model::Contact]) -> Result<Self> {
+        let cd = ContactData::new(&model.full, contacts)?;
+        let (n, nf, m) = (model.nv, model.full.nv(), cd.dim());
+        let mat = |r, c| DMatrix::zeros(r, c);
+        Ok(Self {
+            full: KktData::new(&model.full, cd),
+            key: model.key,
+            jr: mat(m, n),
+            gamma: DVector::zeros(m),
+            tau_f: DVector::zeros(nf),
+            x0: DVector::zeros(n),
+            lm: DVector::zeros(m),
+            qdd: DVector::zeros(n),
+            lambda: DVector::zeros(m),
+            dqdd_dq: mat(n, n),
+            dqdd_dv: mat(n, n),
+            dqdd_dtau: mat(n, n),
+            dlambda_dq: mat(m, n),
+            dlambda_dv: mat(m, n),
+            dlambda_dtau: mat(m, n),
+            minv_jt: mat(n, m),
+            del: mat(m, m),
+            rf_top: mat(nf, nf),
+            rf_bot: mat(m, nf),
+            r_top: mat(n, n),
+            r_bot: mat(m, n),
+            col_n: DVector::zeros(n),
+            col_m: DVector::zeros(m),
+        })
+    }
+    fn check(&self, model: &MimicModel) -> Result<()> {
+        if self.key != model.key || self.qdd.len() != model.nv {
+            return Err(Error::Workspace(format!(
+                "MimicKktData was made for another model; make it with MimicKktData::new for \
+                 the mimic model \"{}\"",
+                model.name()
+            )));
+        }
+        Ok(())
+    }
+    /// Number of contact rows `m`.
+    pub fn dim(&self) -> usize {
+        self.lambda.len()
+    }
+    /// The contact Jacobian in the reduced coordinates, `J G` (`m × nv`).
+    pub fn jac(&self) -> &DMatrix<f64> {
+        &self.jr
+    }
+    /// Constrained accelerations `q̈`.
+    pub fn qdd(&self) -> &DVector<f64> {
+        &self.qdd
+    }
+    /// Contact forces `λ` applied to the robot (`m` rows, each contact's axes).
+    pub fn lambda(&self) -> &DVector<f64> {
+        &self.lambda
+    }
+    /// `∂q̈/∂q` (tangent).
+    pub fn dqdd_dq(&self) -> &DMatrix<f64> {
+        &self.dqdd_dq
+    }
+    /// `∂q̈/∂v`.
+    pub fn dqdd_dv(&self) -> &DMatrix<f64> {
+        &self.dqdd_dv
+    }
+    /// `∂q̈/∂τ`.
+    pub fn dqdd_dtau(&self) -> &DMatrix<f64> {
+        &self.dqdd_dtau
+    }
+    /// `∂λ/∂q` (tangent).
+    pub fn dlambda_dq(&self) -> &DMatrix<f64> {
+        &self.dlambda_dq
+    }
+    /// `∂λ/∂v`.
+    pub fn dlambda_dv(&self) -> &DMatrix<f64> {
+        &self.dlambda_dv
+    }
+    /// `∂λ/∂τ`.
+    pub fn dlambda_dtau(&self) -> &DMatrix<f64> {
+        &self.dlambda_dtau
+    }
+}
+
+/// `x ← M⁻¹ J_rᵀ l`-type solve of the reduced KKT system `[M, −J_rᵀ; J_r, 0] [x; l] = [r1; r2]`
+/// (the Jacobian of the residual with respect to `(q̈, λ)`): `l = D⁻¹(r2 − J_r M⁻¹ r1)`,
+/// `x = M⁻¹(r1 + J_rᵀ l)`, with `M` factorised in `ldl`, `D` in `del` and `M⁻¹ J_rᵀ` in
+/// `minv_jt`. `r1` is overwritten by `x`, `r2` by `l`.
+fn kkt_solve(ldl: &DMatrix<f64>, kd: &MimicKktData, r1: &mut [f64], r2: &mut [f64]) {
+    ldl_solve(ldl, r1);
+    // r2 − J_r M⁻¹ r1
+    for (r, x) in r2.iter_mut().enumerate() {
+        let s: f64 = (0..r1.len()).map(|c| kd.jr[(r, c)] * r1[c]).sum();
+        *x -= s;
+    }
+    ldl_solve(&kd.del, r2);
+    // x = M⁻¹ r1 + (M⁻¹ J_rᵀ) l
+    for (i, x) in r1.iter_mut().enumerate() {
+        let s: f64 = (0..r2.len()).map(|r| kd.minv_jt[(i, r)] * r2[r]).sum();
+        *x += s;
+    }
+}
+
+/// KKT contact dynamics in the reduced coordinates and its first-order derivatives at
+/// `(q, v, τ)`: `[M, (J G)ᵀ; J G, 0] [q̈; −λ] = [τ − b; −γ]` (`M`, `b` as in [`aba`]; `J` and
+/// `γ`, the contact rows at `q̈ = 0` with their Baumgarte terms, those of the full tree at
+/// `(expand(q), G v)`), then `∂y/∂x = −R_y⁻¹ R_x` for `y = (q̈, λ)`, `x = (q, v, τ)` with the
+/// reduced residual `R = [Gᵀ(M_f G q̈ + b_f − Jᵀλ) − τ; J G q̈ + γ]`.
+///
+/// `R_x` is the full tree's residual derivative contracted with `G`, obtained from the full
+/// tree's KKT derivatives ([`crate::deriv::kkt_derivatives`]) at the torque
+/// `τ_f = M_f G q̈ + b_f − Jᵀλ`, whose solution is `(G q̈, λ)`: `R_x^f = −R_y^f ∂y^f/∂x`. The
+/// full tree's mass matrix must therefore be regular too (it is unless a massless body moves
+/// with a mimic joint). Results in `kd`; `data.m()` is `M`, `data.qdd()` the constrained `q̈`.
+///
+/// # Errors
+/// As [`aba`]; [`Error::Singular`] if the reduced Delassus matrix `J G M⁻¹ (J G)ᵀ` is singular
+/// (a redundant contact set in the reduced coordinates) or the full tree's KKT system is;
+/// a workspace of another model.
+pub fn kkt_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    kd: &mut MimicKktData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+) -> Result<()> {
+    kd.check(model)?;
+    prepare(model, data, q, Some(v), Some(("tau", tau)))?;
+    let (n, nf, m) = (model.nv, model.full.nv(), kd.dim());
+    let full = &model.full;
+    // b, M (reduced) and M's factor.
+    data.a.fill(0.0);
+    let b = crate::algo::rnea(full, &mut data.full, &data.q, &data.v, &data.a, None)?;
+    model.reduce_force_into(b.as_slice(), kd.x0.as_mut_slice());
+    for (x, &t) in kd.x0.iter_mut().zip(tau.iter()) {
+        *x = t - *x;
+    }
+    // The world-frame CRBA: M_f, and the placements and world subspaces of the path kinematics.
+    crate::algo::internal::crba_unchecked(full, &mut data.full, &data.q);
+    model.reduce_matrix(data.full.m(), &mut data.m);
+    data.ldl.copy_from(&data.m);
+    ldl_in_place(model, &mut data.ldl)?;
+    // J and γ: the drift J̇ v_f and the Baumgarte terms kd J v_f (the position error is zero
+    // at this q), as the full tree's KKT dynamics.
+    let cd = &mut kd.full.cd;
+    crate::deriv::contact::path_kinematics(full, &data.full, cd, Some(data.v.as_slice()));
+    kd.gamma.copy_from(&cd.drift);
+    for (c, contact) in cd.contacts.iter().enumerate() {
+        if contact.kd != 0.0 {
+            for r in cd.row0[c]..cd.row0[c] + contact.dim() {
+                let jv: f64 = (0..nf).map(|k| cd.jac[(r, k)] * data.v[k]).sum();
+                kd.gamma[r] += contact.kd * jv;
+            }
+        }
+    }
+    let jac = &cd.jac;
+    kd.jr.fill(0.0);
+    for f in 0..nf {
+        let (c, g) = (model.g_col[f], model.g_coef[f]);
+        for r in 0..m {
+            kd.jr[(r, c)] += g * jac[(r, f)];
+        }
+    }
+    // M⁻¹ J_rᵀ, the Delassus matrix and its factor.
+    for r in 0..m {
+        let mut col = kd.minv_jt.column_mut(r);
+        for c in 0..n {
+            col[c] = kd.jr[(r, c)];
+        }
+        ldl_solve(&data.ldl, col.as_mut_slice());
+    }
+    crate::linalg::gemm(1.0, &kd.jr, &kd.minv_jt, 0.0, &mut kd.del);
+    delassus_in_place(&mut kd.del)?;
+    // q̈ = x0 + M⁻¹ J_rᵀ λ, λ = −D⁻¹(J_r x0 + γ) with x0 = M⁻¹(τ − b).
+    ldl_solve(&data.ldl, kd.x0.as_mut_slice());
+    kd.lm.copy_from(&kd.gamma);
+    kd.lm.gemv(1.0, &kd.jr, &kd.x0, 1.0);
+    ldl_solve(&kd.del, kd.lm.as_mut_slice());
+    kd.lambda.copy_from(&kd.lm);
+    kd.lambda.neg_mut();
+    kd.qdd.copy_from(&kd.x0);
+    kd.qdd.gemv(1.0, &kd.minv_jt, &kd.lambda, 1.0);
+    data.qdd.copy_from(&kd.qdd);
+    // τ_f = M_f G q̈ + b_f − Jᵀλ, at which the full tree's KKT solution is (G q̈, λ).
+    model.expand_v_into(kd.qdd.as_slice(), data.a.as_mut_slice());
+    let t = crate::algo::rnea(full, &mut data.full, &data.q, &data.v, &data.a, None)?;
+    kd.tau_f.copy_from(t);
+    kd.tau_f.gemv_tr(-1.0, kd.full.cd().jac(), &kd.lambda, 1.0);
+    crate::deriv::kkt_derivatives(full, &mut data.full, &mut kd.full, &data.q, &data.v, &kd.tau_f)?;
+    // ∂y/∂q, ∂y/∂v.
+    for wrt in 0..2 {
+        let (dq, dl) = if wrt == 0 {
+            (kd.full.dqdd_dq(), kd.full.dlambda_dq())
+        } else {
+            (kd.full.dqdd_dv(), kd.full.dlambda_dv())
+        };
+        // R_x^f = −[M_f, −Jᵀ; J, 0] [∂q̈/∂x; ∂λ/∂x].
+        crate::linalg::gemm(-1.0, data.full.m(), dq, 0.0, &mut kd.rf_top);
+        kd.rf_top.gemm_tr(1.0, kd.full.cd().jac(), dl, 1.0);
+        crate::linalg::gemm(-1.0, kd.full.cd().jac(), dq, 0.0, &mut kd.rf_bot);
+        model.reduce_matrix(&kd.rf_top, &mut kd.r_top);
+        kd.r_bot.fill(0.0);
+        for f in 0..nf {
+            let (c, g) = (model.g_col[f], model.g_coef[f]);
+            for r in 0..m {
+                kd.r_bot[(r, c)] += g * kd.rf_bot[(r, f)];
+            }
+        }
+        // ∂y/∂x = −R_y⁻¹ R_x, column by column.
+        for c in 0..n {
+            for i in 0..n {
+                kd.col_n[i] = -kd.r_top[(i, c)];
+            }
+            for r in 0..m {
+                kd.col_m[r] = -kd.r_bot[(r, c)];
+            }
+            let (mut cn, mut cm) = (std::mem::take(&mut kd.col_n), std::mem::take(&mut kd.col_m));
+            kkt_solve(&data.ldl, kd, cn.as_mut_slice(), cm.as_mut_slice());
+            let (oq, ol) = if wrt == 0 {
+                (&mut kd.dqdd_dq, &mut kd.dlambda_dq)
+            } else {
+                (&mut kd.dqdd_dv, &mut kd.dlambda_dv)
+            };
+            oq.column_mut(c).copy_from(&cn);
+            ol.column_mut(c).copy_from(&cm);
+            (kd.col_n, kd.col_m) = (cn, cm);
+        }
+    }
+    // ∂y/∂τ = R_y⁻¹ [I; 0].
+    for c in 0..n {
+        kd.col_n.fill(0.0);
+        kd.col_n[c] = 1.0;
+        kd.col_m.fill(0.0);
+        let (mut cn, mut cm) = (std::mem::take(&mut kd.col_n), std::mem::take(&mut kd.col_m));
+        kkt_solve(&data.ldl, kd, cn.as_mut_slice(), cm.as_mut_slice());
+        kd.dqdd_dtau.column_mut(c).copy_from(&cn);
+        kd.dlambda_dtau.column_mut(c).copy_from(&cm);
+        (kd.col_n, kd.col_m) = (cn, cm);
+    }
+    Ok(())
+}
+
+/// `h ←` its `L D Lᵀ` factor (as [`ldl_in_place`]), for the Delassus matrix: a pivot that is not
+/// positive and finite, or at most `1e-12` of the largest, is a singular (redundant) set.
+fn delassus_in_place(h: &mut DMatrix<f64>) -> Result<()> {
+    let n = h.nrows();
+    let mut dmax: f64 = 0.0;
+    for j in 0..n {
+        let mut d = h[(j, j)];
+        for k in 0..j {
+            d -= h[(j, k)] * h[(j, k)] * h[(k, k)];
+        }
+        if !(d > 0.0 && d.is_finite()) || d <= 1e-12 * dmax {
+            return Err(Error::Singular {
+                what: "contact set".into(),
+                detail: format!(
+                    "the Delassus matrix J G M⁻¹ (J G)ᵀ of the reduced coordinates (mimic \
+                     joints) has the pivot {d:e} at contact row {j}: the contacts are redundant \
+                     or do not move in the reduced coordinates"
+                ),
+            });
+        }
+        dmax = dmax.max(d);
+        h[(j, j)] = d;
+        for i in j + 1..n {
+            let mut x = h[(i, j)];
+            for k in 0..j {
+                x -= h[(i, k)] * h[(j, k)] * h[(k, k)];
+            }
+            h[(i, j)] = x / d;
+        }
+    }
+    Ok(())
+}
+
+/// Constrained inverse dynamics in the reduced coordinates, `τ = Gᵀ(τ_f(expand(q), G v, G a) −
+/// Jᵀλ)`, and its first-order derivatives (the full tree's
+/// [`crate::deriv::constrained_id_derivatives`] contracted with `G`), `λ` held fixed in each
+/// contact's axes: `data.tau()`, `data.dtau_dq()`, `data.dtau_dv()`, `data.m()`; and with `so`,
+/// also the second-order tensors (IDSVA-SOc, `d2tau_dq2` with `−∂²(Jᵀλ)/∂q²`) in `so`.
+///
+/// # Errors
+/// As [`rnea`], and a `lambda` whose length is not the contacts' row count.
+#[allow(clippy::too_many_arguments)]
+pub fn constrained_id_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    kd: &mut MimicKktData,
+    so: Option<&mut MimicSoData>,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    lambda: &DVector<f64>,
+) -> Result<()> {
+    kd.check(model)?;
+    prepare(model, data, q, Some(v), Some(("a", a)))?;
+    crate::model::check_vec("lambda", lambda, kd.dim())?;
+    model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+    let cd = &mut kd.full.cd;
+    match so {
+        None => crate::deriv::constrained_id_derivatives(
+            &model.full,
+            &mut data.full,
+            cd,
+            &data.q,
+            &data.v,
+            &data.a,
+            lambda,
+        )?,
+        Some(so) => {
+            so.check(model)?;
+            crate::deriv::constrained_id_so_derivatives(
+                &model.full,
+                &mut data.full,
+                cd,
+                &mut so.full,
+                &data.q,
+                &data.v,
+                &data.a,
+                lambda,
+            )?;
+            model.reduce_tensor(so.full.d2tau_dq2(), &mut so.d2tau_dq2);
+            model.reduce_tensor(so.full.d2tau_dv2(), &mut so.d2tau_dv2);
+            model.reduce_tensor(so.full.d2tau_dqdv(), &mut so.d2tau_dqdv);
+            model.reduce_tensor(so.full.dm_dq(), &mut so.dm_dq);
+        }
+    }
+    reduce_fo(model, data);
+    Ok(())
 }

@@ -486,3 +486,126 @@ fn matches_pinocchio_fixtures() {
         assert!(worst < 1e-9, "{name}: {worst:e}");
     }
 }
+
+/// Contacts on the arm with a free-flyer root: a 3-D world-aligned point on the tool (below the
+/// joint that mimics the shoulder), a 6-D local contact on the thumb tip (below the mimic thumb
+/// base) with Baumgarte gains, and a 3-D local point on the mimic right finger.
+fn arm_contacts(m: &MimicModel) -> Vec<sodyn::model::Contact> {
+    use sodyn::model::{Contact, ContactReference, ContactType};
+    let full = m.full();
+    let p = nalgebra::Vector3::new(0.01, -0.02, 0.03);
+    vec![
+        Contact::new(full, "tool", p).unwrap(),
+        Contact {
+            kind: ContactType::D6,
+            ..Contact::new(full, "thumb_tip", p)
+                .unwrap()
+                .with_reference(ContactReference::Local)
+                .with_baumgarte(3.0, 0.5)
+                .unwrap()
+        },
+        Contact::new(full, "finger_r", -p).unwrap().with_reference(ContactReference::Local),
+    ]
+}
+
+#[test]
+fn kkt_first_order_matches_dual_oracle() {
+    use sodyn::mimic::MimicKktData;
+    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
+    let contacts = arm_contacts(&m);
+    let r = oracle(&m);
+    let mut data = MimicData::new(&m);
+    let mut kd = MimicKktData::new(&m, &contacts).unwrap();
+    assert_eq!(kd.dim(), 12);
+    let n = m.nv();
+    let mut rng = Rng::new(21);
+    let mut worst = [0.0f64; 8];
+    for _ in 0..3 {
+        let [q, v, tau] = state(&m, &mut rng);
+        let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
+        mimic::kkt_derivatives(&m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        let (qdd, lam) = r.kkt(qs, vs, ts, &contacts);
+        worst[0] = worst[0].max(vec_err(kd.qdd(), &qdd));
+        worst[1] = worst[1].max(vec_err(kd.lambda(), &lam));
+        let [dq, dv, dt] = r.kkt_fo(qs, vs, ts, &contacts);
+        let rows = |x: &DMatrix<f64>, a: usize, b: usize| x.rows(a, b).into_owned();
+        let mm = kd.dim();
+        for (k, (ours, theirs)) in [
+            (kd.dqdd_dq(), rows(&dq, 0, n)),
+            (kd.dqdd_dv(), rows(&dv, 0, n)),
+            (kd.dqdd_dtau(), rows(&dt, 0, n)),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            worst[2 + k] = worst[2 + k].max(mat_err(ours, &theirs));
+        }
+        for (k, (ours, theirs)) in [
+            (kd.dlambda_dq(), rows(&dq, n, mm)),
+            (kd.dlambda_dv(), rows(&dv, n, mm)),
+            (kd.dlambda_dtau(), rows(&dt, n, mm)),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            worst[5 + k] = worst[5 + k].max(mat_err(ours, &theirs));
+        }
+    }
+    eprintln!(
+        "mimic KKT FO vs dual oracle (relative): qdd {:.1e} lambda {:.1e} dqdd_dq {:.1e} \
+         dqdd_dv {:.1e} dqdd_dtau {:.1e} dlambda_dq {:.1e} dlambda_dv {:.1e} dlambda_dtau {:.1e}",
+        worst[0], worst[1], worst[2], worst[3], worst[4], worst[5], worst[6], worst[7]
+    );
+    assert!(worst.iter().all(|&e| e < TOL), "{worst:?}");
+}
+
+#[test]
+fn constrained_id_matches_oracle() {
+    use sodyn::mimic::MimicKktData;
+    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
+    let contacts = arm_contacts(&m);
+    let r = oracle(&m);
+    let mut data = MimicData::new(&m);
+    let mut so = MimicSoData::new(&m);
+    let mut kd = MimicKktData::new(&m, &contacts).unwrap();
+    let mut rng = Rng::new(22);
+    let mut worst = [0.0f64; 4];
+    for _ in 0..2 {
+        let [q, v, a] = state(&m, &mut rng);
+        let lam = DVector::from_fn(kd.dim(), |_, _| rng.range(-5.0, 5.0));
+        let (qs, vs, as_, ls) = (q.as_slice(), v.as_slice(), a.as_slice(), lam.as_slice());
+        mimic::constrained_id_derivatives(&m, &mut data, &mut kd, Some(&mut so), &q, &v, &a, &lam)
+            .unwrap();
+        worst[0] =
+            worst[0].max(vec_err(data.tau(), &r.constrained_rnea(qs, vs, as_, &contacts, ls)));
+        let [dq, dv] = r.d_constrained_rnea(qs, vs, as_, &contacts, ls);
+        worst[1] = worst[1].max(mat_err(data.dtau_dq(), &dq));
+        worst[2] = worst[2].max(mat_err(data.dtau_dv(), &dv));
+        worst[3] = worst[3]
+            .max(ten_err(so.d2tau_dq2(), &r.d2_constrained_rnea_dq2(qs, vs, as_, &contacts, ls)));
+        // Without `so`: the same first order.
+        let t = data.dtau_dq().clone();
+        mimic::constrained_id_derivatives(&m, &mut data, &mut kd, None, &q, &v, &a, &lam).unwrap();
+        assert_eq!(data.dtau_dq(), &t);
+    }
+    eprintln!(
+        "mimic constrained ID vs AD oracle (relative): tau {:.1e} dtau_dq {:.1e} dtau_dv {:.1e} \
+         d2tau_dq2 {:.1e}",
+        worst[0], worst[1], worst[2], worst[3]
+    );
+    assert!(worst.iter().all(|&e| e < TOL), "{worst:?}");
+    // A wrong λ length is an error naming it.
+    let [q, v, a] = state(&m, &mut rng);
+    let e = mimic::constrained_id_derivatives(
+        &m,
+        &mut data,
+        &mut kd,
+        None,
+        &q,
+        &v,
+        &a,
+        &DVector::zeros(3),
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("lambda"), "{e}");
+}

@@ -230,5 +230,20 @@ fn mimic_algorithms_do_not_allocate() {
     check("mimic::fd_so_derivatives", &mut || {
         mimic::fd_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None).unwrap()
     });
+    let full = m.full();
+    let p = nalgebra::Vector3::new(0.0, 0.0, 0.02);
+    let contacts = vec![
+        Contact::new(full, "tool", p).unwrap(),
+        Contact::new(full, "finger_r", p).unwrap().with_baumgarte(1.0, 0.5).unwrap(),
+    ];
+    let mut kd = mimic::MimicKktData::new(&m, &contacts).unwrap();
+    let lam = DVector::from_element(kd.dim(), 0.5);
+    check("mimic::kkt_derivatives", &mut || {
+        mimic::kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &a).unwrap()
+    });
+    check("mimic::constrained_id_derivatives", &mut || {
+        mimic::constrained_id_derivatives(&m, &mut d, &mut kd, Some(&mut so), &q, &v, &a, &lam)
+            .unwrap()
+    });
     assert!(report.is_empty(), "heap allocations in mimic hot paths: {}", report.join(", "));
 }

@@ -8,12 +8,13 @@
 //! hyper-dual numbers, `q` in the tangent space of the reduced configuration
 //! (`(q ⊕ δ_k) ⊕ ε_j` for the second order, as [`super::derivatives`]).
 
+use super::contact::{baumgarte, constrained_rnea, contact_drift, contact_jacobian};
 use super::derivatives::{eps, eps1, eps2, hessian, jacobian};
 use super::dynamics::{rnea, rnea_with_gravity, solve};
-use super::kinematics::integrate;
+use super::kinematics::{forward_kinematics, integrate};
 use super::{AdScalar, lift};
 use crate::mimic::MimicJoint;
-use crate::model::Model;
+use crate::model::{Contact, Model};
 use crate::tensor::Tensor3;
 use nalgebra::DMatrix;
 use num_dual::{Dual64, HyperDual64};
@@ -267,6 +268,125 @@ impl Reduced<'_> {
         hessian(n, n, n, |j, k| {
             let qh = self.perturb(&lift::<HyperDual64>(q), k, eps2());
             self.aba(&qh, &vh, &seeded(tau, j, eps1()))
+        })
+    }
+}
+
+/// Contact dynamics in the reduced coordinates (the oracle of [`crate::mimic::kkt_derivatives`]
+/// and [`crate::mimic::constrained_id_derivatives`]).
+impl Reduced<'_> {
+    /// `J(expand(q)) G` (rows of a `Vec`), the contact Jacobian of the reduced coordinates.
+    pub fn contact_jacobian<T: AdScalar>(&self, q: &[T], contacts: &[Contact]) -> Vec<Vec<T>> {
+        let jf = contact_jacobian(self.full, &self.expand_q(q), contacts);
+        jf.iter().map(|row| self.reduce_force(row)).collect()
+    }
+    /// Constrained inverse dynamics `Gᵀ constrained_rnea(expand(q), G v, G a, λ)`.
+    pub fn constrained_rnea<T: AdScalar>(
+        &self,
+        q: &[T],
+        v: &[T],
+        a: &[T],
+        contacts: &[Contact],
+        lambda: &[T],
+    ) -> Vec<T> {
+        let (qf, vf, af) = (self.expand_q(q), self.expand_v(v), self.expand_v(a));
+        self.reduce_force(&constrained_rnea(self.full, &qf, &vf, &af, contacts, lambda))
+    }
+    /// KKT dynamics `[M Jrᵀ; Jr 0] [q̈; −λ] = [τ − b; −γ]` in the reduced coordinates
+    /// (`Jr = J G`, `γ` the full tree's drift with its Baumgarte terms at `(expand(q), G v)`),
+    /// solved densely; returns `(q̈, λ)`.
+    pub fn kkt<T: AdScalar>(
+        &self,
+        q: &[T],
+        v: &[T],
+        tau: &[T],
+        contacts: &[Contact],
+    ) -> (Vec<T>, Vec<T>) {
+        let (qf, vf) = (self.expand_q(q), self.expand_v(v));
+        let jf = contact_jacobian(self.full, &qf, contacts);
+        let mut gamma = contact_drift(self.full, &qf, &vf, contacts);
+        let world = forward_kinematics(self.full, &qf);
+        baumgarte(self.full, &qf, &vf, contacts, &world, &jf, &mut gamma);
+        let jr: Vec<Vec<T>> = jf.iter().map(|row| self.reduce_force(row)).collect();
+        let n = self.nv();
+        let zero = vec![T::zero(); n];
+        let b = self.rnea(q, v, &zero);
+        let mut k = vec![vec![T::zero(); n + jr.len()]; n + jr.len()];
+        for (i, row) in self.mass_matrix(q).into_iter().enumerate() {
+            k[i][..n].clone_from_slice(&row);
+        }
+        for (r, row) in jr.iter().enumerate() {
+            for (c, x) in row.iter().enumerate() {
+                k[n + r][c] = x.clone();
+                k[c][n + r] = x.clone();
+            }
+        }
+        let mut rhs: Vec<T> = tau.iter().zip(b).map(|(t, b)| t.clone() - b).collect();
+        rhs.extend(gamma.into_iter().map(|x| -x));
+        let mut sol = solve(k, rhs);
+        let lambda = sol.split_off(n).into_iter().map(|x| -x).collect();
+        (sol, lambda)
+    }
+    fn kkt_stacked<T: AdScalar>(&self, q: &[T], v: &[T], tau: &[T], c: &[Contact]) -> Vec<T> {
+        let (mut qdd, lambda) = self.kkt(q, v, tau, c);
+        qdd.extend(lambda);
+        qdd
+    }
+    /// First-order derivatives of [`Reduced::kkt`]: `[∂q̈/∂x; ∂λ/∂x]` (`(nv + m) × nv`) for
+    /// `x` = `q` (tangent), `v`, `τ`.
+    pub fn kkt_fo(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        tau: &[f64],
+        contacts: &[Contact],
+    ) -> [DMatrix<f64>; 3] {
+        let n = self.nv();
+        let nout = n + contacts.iter().map(|c| c.dim()).sum::<usize>();
+        let (qd, vd, td) = (lift::<Dual64>(q), lift::<Dual64>(v), lift::<Dual64>(tau));
+        [
+            jacobian(nout, n, |j| {
+                self.kkt_stacked(&self.perturb(&qd, j, eps()), &vd, &td, contacts)
+            }),
+            jacobian(nout, n, |j| self.kkt_stacked(&qd, &seeded(v, j, eps()), &td, contacts)),
+            jacobian(nout, n, |j| self.kkt_stacked(&qd, &vd, &seeded(tau, j, eps()), contacts)),
+        ]
+    }
+    /// `∂τ/∂q`, `∂τ/∂v` of [`Reduced::constrained_rnea`] (`λ` fixed).
+    pub fn d_constrained_rnea(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        a: &[f64],
+        contacts: &[Contact],
+        lambda: &[f64],
+    ) -> [DMatrix<f64>; 2] {
+        let n = self.nv();
+        let (qd, vd, ad, ld) =
+            (lift::<Dual64>(q), lift::<Dual64>(v), lift::<Dual64>(a), lift::<Dual64>(lambda));
+        [
+            jacobian(n, n, |j| {
+                self.constrained_rnea(&self.perturb(&qd, j, eps()), &vd, &ad, contacts, &ld)
+            }),
+            jacobian(n, n, |j| {
+                self.constrained_rnea(&qd, &seeded(v, j, eps()), &ad, contacts, &ld)
+            }),
+        ]
+    }
+    /// `∂²τ/∂q²` of [`Reduced::constrained_rnea`] (`λ` fixed; nested tangent).
+    pub fn d2_constrained_rnea_dq2(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        a: &[f64],
+        contacts: &[Contact],
+        lambda: &[f64],
+    ) -> Tensor3 {
+        let n = self.nv();
+        let (vh, ah, lh) =
+            (lift::<HyperDual64>(v), lift::<HyperDual64>(a), lift::<HyperDual64>(lambda));
+        hessian(n, n, n, |j, k| {
+            self.constrained_rnea(&self.nested(q, j, k), &vh, &ah, contacts, &lh)
         })
     }
 }
