@@ -1062,9 +1062,101 @@ pub struct MimicKktData {
     /// Scratch: one column of each block.
     col_n: DVector<f64>,
     col_m: DVector<f64>,
+    /// Second-order results and workspace ([`MimicKktData::with_second_order`]).
+    so: Option<Box<MimicKktSo>>,
+}
+
+/// Second-order results of [`kkt_so_derivatives`] (layout `T[(i, j, k)] = ∂/∂x_k (∂y_i/∂u_j)`,
+/// `nv × nv × nv` for `q̈`, `m × nv × nv` for `λ`) and their workspace.
+#[derive(Clone, Debug)]
+pub struct MimicKktSo {
+    d2qdd_dq2: Tensor3,
+    d2qdd_dv2: Tensor3,
+    d2qdd_dqdv: Tensor3,
+    d2qdd_dtaudq: Tensor3,
+    d2lambda_dq2: Tensor3,
+    d2lambda_dv2: Tensor3,
+    d2lambda_dqdv: Tensor3,
+    d2lambda_dtaudq: Tensor3,
+    /// The full tree's tensors contracted with `G` on `(j, k)` (`nv_f × nv × nv`,
+    /// `m × nv × nv`).
+    ta: Tensor3,
+    tl: Tensor3,
+    /// The reduced right-hand sides `R_uw + G(∂y/∂w)[·, u] + G(∂y/∂u)[·, w]`, `q̈` rows
+    /// (`nv × nv × nv`) and contact rows (`m × nv × nv`).
+    sa: Tensor3,
+    sl: Tensor3,
+    /// One `Δ` column (`nv_f + m`).
+    delta: DVector<f64>,
+    /// One reduced `G` product (`(nv + m) × nv`) and a full-length vector.
+    c: DMatrix<f64>,
+    vf: DVector<f64>,
+}
+
+impl MimicKktSo {
+    /// `∂²q̈/∂q²`.
+    pub fn d2qdd_dq2(&self) -> &Tensor3 {
+        &self.d2qdd_dq2
+    }
+    /// `∂²q̈/∂v²`.
+    pub fn d2qdd_dv2(&self) -> &Tensor3 {
+        &self.d2qdd_dv2
+    }
+    /// `T[(i, j, k)] = ∂/∂v_k (∂q̈_i/∂q_j)`.
+    pub fn d2qdd_dqdv(&self) -> &Tensor3 {
+        &self.d2qdd_dqdv
+    }
+    /// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂τ_j)`.
+    pub fn d2qdd_dtaudq(&self) -> &Tensor3 {
+        &self.d2qdd_dtaudq
+    }
+    /// `∂²λ/∂q²`.
+    pub fn d2lambda_dq2(&self) -> &Tensor3 {
+        &self.d2lambda_dq2
+    }
+    /// `∂²λ/∂v²`.
+    pub fn d2lambda_dv2(&self) -> &Tensor3 {
+        &self.d2lambda_dv2
+    }
+    /// `T[(i, j, k)] = ∂/∂v_k (∂λ_i/∂q_j)`.
+    pub fn d2lambda_dqdv(&self) -> &Tensor3 {
+        &self.d2lambda_dqdv
+    }
+    /// `T[(i, j, k)] = ∂/∂q_k (∂λ_i/∂τ_j)`.
+    pub fn d2lambda_dtaudq(&self) -> &Tensor3 {
+        &self.d2lambda_dtaudq
+    }
 }
 
 impl MimicKktData {
+    /// Adds the second-order workspace (for [`kkt_so_derivatives`]).
+    pub fn with_second_order(mut self, model: &MimicModel) -> Self {
+        let (n, nf, m) = (model.nv, model.full.nv(), self.dim());
+        let t = |r| Tensor3::zeros(r, n, n);
+        self.full = self.full.with_second_order(&model.full);
+        self.so = Some(Box::new(MimicKktSo {
+            d2qdd_dq2: t(n),
+            d2qdd_dv2: t(n),
+            d2qdd_dqdv: t(n),
+            d2qdd_dtaudq: t(n),
+            d2lambda_dq2: t(m),
+            d2lambda_dv2: t(m),
+            d2lambda_dqdv: t(m),
+            d2lambda_dtaudq: t(m),
+            ta: t(nf),
+            tl: t(m),
+            sa: t(n),
+            sl: t(m),
+            delta: DVector::zeros(nf + m),
+            c: DMatrix::zeros(n + m, n),
+            vf: DVector::zeros(nf),
+        }));
+        self
+    }
+    /// The second-order results (with [`MimicKktData::with_second_order`]).
+    pub fn so(&self) -> Option<&MimicKktSo> {
+        self.so.as_deref()
+    }
     /// Workspace for `contacts` on `model` (their frames are frames of the full tree).
     ///
     /// # Errors
@@ -1098,6 +1190,7 @@ impl MimicKktData {
             r_bot: mat(m, n),
             col_n: DVector::zeros(n),
             col_m: DVector::zeros(m),
+            so: None,
         })
     }
     fn check(&self, model: &MimicModel) -> Result<()> {
@@ -1195,6 +1288,19 @@ pub fn kkt_derivatives(
     v: &DVector<f64>,
     tau: &DVector<f64>,
 ) -> Result<()> {
+    kkt_inner(model, data, kd, q, v, tau, false)
+}
+
+/// [`kkt_derivatives`], with `so` also the full tree's second order at `τ_f`.
+fn kkt_inner(
+    model: &MimicModel,
+    data: &mut MimicData,
+    kd: &mut MimicKktData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+    so: bool,
+) -> Result<()> {
     kd.check(model)?;
     prepare(model, data, q, Some(v), Some(("tau", tau)))?;
     let (n, nf, m) = (model.nv, model.full.nv(), kd.dim());
@@ -1257,7 +1363,25 @@ pub fn kkt_derivatives(
     let t = crate::algo::rnea(full, &mut data.full, &data.q, &data.v, &data.a, None)?;
     kd.tau_f.copy_from(t);
     kd.tau_f.gemv_tr(-1.0, kd.full.cd().jac(), &kd.lambda, 1.0);
-    crate::deriv::kkt_derivatives(full, &mut data.full, &mut kd.full, &data.q, &data.v, &kd.tau_f)?;
+    if so {
+        crate::deriv::kkt_so_derivatives(
+            full,
+            &mut data.full,
+            &mut kd.full,
+            &data.q,
+            &data.v,
+            &kd.tau_f,
+        )?;
+    } else {
+        crate::deriv::kkt_derivatives(
+            full,
+            &mut data.full,
+            &mut kd.full,
+            &data.q,
+            &data.v,
+            &kd.tau_f,
+        )?;
+    }
     // ∂y/∂q, ∂y/∂v.
     for wrt in 0..2 {
         let (dq, dl) = if wrt == 0 {
@@ -1309,6 +1433,202 @@ pub fn kkt_derivatives(
         (kd.col_n, kd.col_m) = (cn, cm);
     }
     Ok(())
+}
+
+/// Second-order derivatives of the KKT dynamics in the reduced coordinates (and the first
+/// order, as [`kkt_derivatives`]), by eq. SO_general_eqn
+/// `∂²y/∂u∂w = −R_y⁻¹ (R_uw + G(∂y/∂w)[·, u] + G(∂y/∂u)[·, w])` on the reduced residual. With
+/// the full tree's second order `T^f` at `τ_f` (see [`kkt_derivatives`]),
+/// `R^f_uw + G^f(∂y^f/∂w)[·, u] + G^f(∂y^f/∂u)[·, w] = −R^f_y T^f[·, u, w]`, so the reduced
+/// right-hand side is that contracted with `G` (rows by `Gᵀ` for the dynamics, `u`, `w` by `G`)
+/// plus the `G` products, linear in their vector, of `Δ = (G ∂q̈/∂w, ∂λ/∂w) − ∂y^f/∂w^f G`
+/// (the reduced solution's derivative expanded, minus the full tree's along `G`): `G(z)[·, u]`
+/// is `[∂(M z₁)/∂q_u − ∂(Jᵀ z₂)/∂q_u; ∂(J z₁)/∂q_u]` (`q` only; `M` and `J` do not depend on
+/// `v`), and `∂²y/∂τ∂q` is `−R_y⁻¹ G(∂y/∂τ_j)[·, k]` directly. Results in `kd.so()`.
+///
+/// # Errors
+/// As [`kkt_derivatives`], and a workspace without [`MimicKktData::with_second_order`].
+pub fn kkt_so_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    kd: &mut MimicKktData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+) -> Result<()> {
+    let mut so = kd.so.take().ok_or_else(|| {
+        Error::Workspace(
+            "kkt_so_derivatives: MimicKktData was made without with_second_order".into(),
+        )
+    })?;
+    let r = kkt_inner(model, data, kd, q, v, tau, true)
+        .map(|()| kkt_so_reduce(model, data, kd, &mut so));
+    kd.so = Some(so);
+    r
+}
+
+/// The reduced second order from the full tree's (see [`kkt_so_derivatives`]).
+fn kkt_so_reduce(
+    model: &MimicModel,
+    data: &mut MimicData,
+    kd: &mut MimicKktData,
+    so: &mut MimicKktSo,
+) {
+    let (n, nf, m) = (model.nv, model.full.nv(), kd.dim());
+    let (gc, gk) = (&model.g_col, &model.g_coef);
+    // Pairs: (full q̈ tensor, full λ tensor, reduced outputs, which G products).
+    for pair in 0..4 {
+        so.sa.fill(0.0);
+        so.sl.fill(0.0);
+        if pair < 3 {
+            let fso = kd.full.so().expect("made with second order");
+            let (tfa, tfl) = match pair {
+                0 => (fso.d2qdd_dq2(), fso.d2lambda_dq2()),
+                1 => (fso.d2qdd_dv2(), fso.d2lambda_dv2()),
+                _ => (fso.d2qdd_dqdv(), fso.d2lambda_dqdv()),
+            };
+            // T^f contracted with G on (j, k).
+            so.ta.fill(0.0);
+            so.tl.fill(0.0);
+            for k in 0..nf {
+                for j in 0..nf {
+                    let c = gk[j] * gk[k];
+                    let (jr, kr) = (gc[j], gc[k]);
+                    for i in 0..nf {
+                        so.ta[(i, jr, kr)] += c * tfa[(i, j, k)];
+                    }
+                    for i in 0..m {
+                        so.tl[(i, jr, kr)] += c * tfl[(i, j, k)];
+                    }
+                }
+            }
+            // −R^f_y applied: rows −(M_f t_a − Jᵀ t_λ) (then Gᵀ) and −J t_a.
+            let jac = kd.full.cd().jac();
+            let mf = data.full.m();
+            for k in 0..n {
+                for j in 0..n {
+                    let ta = so.ta.fibre(j, k);
+                    let tl = so.tl.fibre(j, k);
+                    so.vf.gemv(-1.0, mf, &ta, 0.0);
+                    so.vf.gemv_tr(1.0, jac, &tl, 1.0);
+                    for f in 0..nf {
+                        so.sa[(gc[f], j, k)] += gk[f] * so.vf[f];
+                    }
+                    for r in 0..m {
+                        let s: f64 = (0..nf).map(|f| jac[(r, f)] * ta[f]).sum();
+                        so.sl[(r, j, k)] = -s;
+                    }
+                }
+            }
+        }
+        // The G products of Δ (q directions only): qq (both orders), qv (the v column), τq.
+        if pair != 1 {
+            for w in 0..n {
+                // Δ = E ∂y/∂w − ∂y^f/∂x^f G[:, w] (τ: E ∂y/∂τ_w alone).
+                let (ya, yl) = match pair {
+                    0 => (&kd.dqdd_dq, &kd.dlambda_dq),
+                    2 => (&kd.dqdd_dv, &kd.dlambda_dv),
+                    _ => (&kd.dqdd_dtau, &kd.dlambda_dtau),
+                };
+                for f in 0..nf {
+                    so.delta[f] = gk[f] * ya[(gc[f], w)];
+                }
+                for r in 0..m {
+                    so.delta[nf + r] = yl[(r, w)];
+                }
+                if pair != 3 {
+                    let (yfa, yfl) = if pair == 0 {
+                        (kd.full.dqdd_dq(), kd.full.dlambda_dq())
+                    } else {
+                        (kd.full.dqdd_dv(), kd.full.dlambda_dv())
+                    };
+                    for f in 0..nf {
+                        if gc[f] == w {
+                            let g = gk[f];
+                            for i in 0..nf {
+                                so.delta[i] -= g * yfa[(i, f)];
+                            }
+                            for r in 0..m {
+                                so.delta[nf + r] -= g * yfl[(r, f)];
+                            }
+                        }
+                    }
+                }
+                let (za, zl) = so.delta.as_slice().split_at(nf);
+                crate::deriv::contact::g_matrix_split(
+                    &model.full,
+                    &mut data.full,
+                    &mut kd.full.cd,
+                    za,
+                    zl,
+                    za,
+                );
+                // C = P g G: rows by Gᵀ (dynamics) and as is (contacts), columns by G.
+                let g = &kd.full.cd.g;
+                so.c.fill(0.0);
+                for u in 0..nf {
+                    let (ur, gu) = (gc[u], gk[u]);
+                    for f in 0..nf {
+                        so.c[(gc[f], ur)] += gk[f] * gu * g[(f, u)];
+                    }
+                    for r in 0..m {
+                        so.c[(n + r, ur)] += gu * g[(nf + r, u)];
+                    }
+                }
+                for u in 0..n {
+                    for i in 0..n {
+                        let x = so.c[(i, u)];
+                        match pair {
+                            0 => {
+                                so.sa[(i, u, w)] += x;
+                                so.sa[(i, w, u)] += x;
+                            }
+                            2 => so.sa[(i, u, w)] += x,
+                            _ => so.sa[(i, w, u)] += x,
+                        }
+                    }
+                    for r in 0..m {
+                        let x = so.c[(n + r, u)];
+                        match pair {
+                            0 => {
+                                so.sl[(r, u, w)] += x;
+                                so.sl[(r, w, u)] += x;
+                            }
+                            2 => so.sl[(r, u, w)] += x,
+                            _ => so.sl[(r, w, u)] += x,
+                        }
+                    }
+                }
+            }
+        }
+        // T = −R_y⁻¹ S, column by column.
+        let (oa, ol) = match pair {
+            0 => (&mut so.d2qdd_dq2, &mut so.d2lambda_dq2),
+            1 => (&mut so.d2qdd_dv2, &mut so.d2lambda_dv2),
+            2 => (&mut so.d2qdd_dqdv, &mut so.d2lambda_dqdv),
+            _ => (&mut so.d2qdd_dtaudq, &mut so.d2lambda_dtaudq),
+        };
+        for k in 0..n {
+            for j in 0..n {
+                for i in 0..n {
+                    kd.col_n[i] = -so.sa[(i, j, k)];
+                }
+                for r in 0..m {
+                    kd.col_m[r] = -so.sl[(r, j, k)];
+                }
+                let (mut cn, mut cm) =
+                    (std::mem::take(&mut kd.col_n), std::mem::take(&mut kd.col_m));
+                kkt_solve(&data.ldl, kd, cn.as_mut_slice(), cm.as_mut_slice());
+                for i in 0..n {
+                    oa[(i, j, k)] = cn[i];
+                }
+                for r in 0..m {
+                    ol[(r, j, k)] = cm[r];
+                }
+                (kd.col_n, kd.col_m) = (cn, cm);
+            }
+        }
+    }
 }
 
 /// `h ←` its `L D Lᵀ` factor (as [`ldl_in_place`]), for the Delassus matrix: a pivot that is not

@@ -488,8 +488,18 @@ fn matches_pinocchio_fixtures() {
 }
 
 /// Contacts on the arm with a free-flyer root: a 3-D world-aligned point on the tool (below the
-/// joint that mimics the shoulder), a 6-D local contact on the thumb tip (below the mimic thumb
-/// base) with Baumgarte gains, and a 3-D local point on the mimic right finger.
+/// joint that mimics the shoulder) and a 6-D local contact on the thumb tip (below the mimic
+/// thumb base) with Baumgarte gains (9 rows for 13 DoFs); with `finger`, also a 3-D local point
+/// on the mimic right finger (12 rows: a stiffer, worse-conditioned system).
+fn arm_contacts_with(m: &MimicModel, finger: bool) -> Vec<sodyn::model::Contact> {
+    let mut c = arm_contacts(m);
+    if !finger {
+        c.pop();
+    }
+    c
+}
+
+/// [`arm_contacts_with`] with the finger.
 fn arm_contacts(m: &MimicModel) -> Vec<sodyn::model::Contact> {
     use sodyn::model::{Contact, ContactReference, ContactType};
     let full = m.full();
@@ -510,13 +520,19 @@ fn arm_contacts(m: &MimicModel) -> Vec<sodyn::model::Contact> {
 
 #[test]
 fn kkt_first_order_matches_dual_oracle() {
+    for finger in [false, true] {
+        kkt_first_order_case(finger);
+    }
+}
+
+fn kkt_first_order_case(finger: bool) {
     use sodyn::mimic::MimicKktData;
     let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
-    let contacts = arm_contacts(&m);
+    let contacts = arm_contacts_with(&m, finger);
     let r = oracle(&m);
     let mut data = MimicData::new(&m);
     let mut kd = MimicKktData::new(&m, &contacts).unwrap();
-    assert_eq!(kd.dim(), 12);
+    assert_eq!(kd.dim(), if finger { 12 } else { 9 });
     let n = m.nv();
     let mut rng = Rng::new(21);
     let mut worst = [0.0f64; 8];
@@ -552,9 +568,18 @@ fn kkt_first_order_matches_dual_oracle() {
         }
     }
     eprintln!(
-        "mimic KKT FO vs dual oracle (relative): qdd {:.1e} lambda {:.1e} dqdd_dq {:.1e} \
-         dqdd_dv {:.1e} dqdd_dtau {:.1e} dlambda_dq {:.1e} dlambda_dv {:.1e} dlambda_dtau {:.1e}",
-        worst[0], worst[1], worst[2], worst[3], worst[4], worst[5], worst[6], worst[7]
+        "mimic KKT FO vs dual oracle ({} rows; relative): qdd {:.1e} lambda {:.1e} dqdd_dq \
+         {:.1e} dqdd_dv {:.1e} dqdd_dtau {:.1e} dlambda_dq {:.1e} dlambda_dv {:.1e} dlambda_dtau \
+         {:.1e}",
+        kd.dim(),
+        worst[0],
+        worst[1],
+        worst[2],
+        worst[3],
+        worst[4],
+        worst[5],
+        worst[6],
+        worst[7]
     );
     assert!(worst.iter().all(|&e| e < TOL), "{worst:?}");
 }
@@ -608,4 +633,51 @@ fn constrained_id_matches_oracle() {
     )
     .unwrap_err();
     assert!(e.to_string().contains("lambda"), "{e}");
+}
+
+#[test]
+fn kkt_second_order_matches_hyper_dual_oracle() {
+    use sodyn::mimic::MimicKktData;
+    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
+    let r = oracle(&m);
+    let mut data = MimicData::new(&m);
+    let contacts = arm_contacts_with(&m, false);
+    let mut kd = MimicKktData::new(&m, &contacts).unwrap().with_second_order(&m);
+    let n = m.nv();
+    let mut rng = Rng::new(23);
+    let mut worst = [0.0f64; 8];
+    let rows =
+        |t: &Tensor3, a: usize, b: usize| Tensor3::from_fn(b, n, n, |i, j, k| t[(a + i, j, k)]);
+    for _ in 0..2 {
+        let [q, v, tau] = state(&m, &mut rng);
+        let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
+        mimic::kkt_so_derivatives(&m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        let so = kd.so().unwrap();
+        let mm = kd.dim();
+        let oracle = r.kkt_so(qs, vs, ts, &contacts);
+        let ours_a = [so.d2qdd_dq2(), so.d2qdd_dv2(), so.d2qdd_dqdv(), so.d2qdd_dtaudq()];
+        let ours_l =
+            [so.d2lambda_dq2(), so.d2lambda_dv2(), so.d2lambda_dqdv(), so.d2lambda_dtaudq()];
+        for p in 0..4 {
+            worst[p] = worst[p].max(ten_err(ours_a[p], &rows(&oracle[p], 0, n)));
+            worst[4 + p] = worst[4 + p].max(ten_err(ours_l[p], &rows(&oracle[p], n, mm)));
+        }
+        // The first order of the same call equals kkt_derivatives'.
+        let d1 = kd.dqdd_dq().clone();
+        mimic::kkt_derivatives(&m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        let e = mat_err(kd.dqdd_dq(), &d1);
+        assert!(e < 1e-11, "{e:e}");
+    }
+    eprintln!(
+        "mimic KKT SO vs hyper-dual oracle (relative): d2qdd_dq2 {:.1e} d2qdd_dv2 {:.1e} \
+         d2qdd_dqdv {:.1e} d2qdd_dtaudq {:.1e} d2lambda_dq2 {:.1e} d2lambda_dv2 {:.1e} \
+         d2lambda_dqdv {:.1e} d2lambda_dtaudq {:.1e}",
+        worst[0], worst[1], worst[2], worst[3], worst[4], worst[5], worst[6], worst[7]
+    );
+    assert!(worst.iter().all(|&e| e < TOL), "{worst:?}");
+    // Without the second-order workspace: an error.
+    let mut kd1 = MimicKktData::new(&m, &contacts).unwrap();
+    let [q, v, tau] = state(&m, &mut rng);
+    let e = mimic::kkt_so_derivatives(&m, &mut data, &mut kd1, &q, &v, &tau).unwrap_err();
+    assert!(e.to_string().contains("with_second_order"), "{e}");
 }

@@ -241,6 +241,10 @@ fn mimic_algorithms_do_not_allocate() {
     check("mimic::kkt_derivatives", &mut || {
         mimic::kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &a).unwrap()
     });
+    let mut kd2 = mimic::MimicKktData::new(&m, &contacts).unwrap().with_second_order(&m);
+    check("mimic::kkt_so_derivatives", &mut || {
+        mimic::kkt_so_derivatives(&m, &mut d, &mut kd2, &q, &v, &a).unwrap()
+    });
     check("mimic::constrained_id_derivatives", &mut || {
         mimic::constrained_id_derivatives(&m, &mut d, &mut kd, Some(&mut so), &q, &v, &a, &lam)
             .unwrap()

@@ -352,6 +352,30 @@ impl Reduced<'_> {
             jacobian(nout, n, |j| self.kkt_stacked(&qd, &vd, &seeded(tau, j, eps()), contacts)),
         ]
     }
+    /// Second-order derivatives of [`Reduced::kkt`]: `[q̈; λ]` rows (`(nv + m) × nv × nv`) of
+    /// `∂²/∂q²` (nested tangent), `∂²/∂v²`, `∂/∂v_k(∂/∂q_j)`, `∂/∂q_k(∂/∂τ_j)`.
+    pub fn kkt_so(&self, q: &[f64], v: &[f64], tau: &[f64], contacts: &[Contact]) -> [Tensor3; 4] {
+        let n = self.nv();
+        let nout = n + contacts.iter().map(|c| c.dim()).sum::<usize>();
+        let (qh, vh, th) =
+            (lift::<HyperDual64>(q), lift::<HyperDual64>(v), lift::<HyperDual64>(tau));
+        [
+            hessian(nout, n, n, |j, k| self.kkt_stacked(&self.nested(q, j, k), &vh, &th, contacts)),
+            hessian(nout, n, n, |j, k| {
+                let mut vjk = seeded(v, j, eps1());
+                vjk[k] += eps2();
+                self.kkt_stacked(&qh, &vjk, &th, contacts)
+            }),
+            hessian(nout, n, n, |j, k| {
+                let qj = self.perturb(&qh, j, eps1());
+                self.kkt_stacked(&qj, &seeded(v, k, eps2()), &th, contacts)
+            }),
+            hessian(nout, n, n, |j, k| {
+                let qk = self.perturb(&qh, k, eps2());
+                self.kkt_stacked(&qk, &vh, &seeded(tau, j, eps1()), contacts)
+            }),
+        ]
+    }
     /// `∂τ/∂q`, `∂τ/∂v` of [`Reduced::constrained_rnea`] (`λ` fixed).
     pub fn d_constrained_rnea(
         &self,
