@@ -1250,16 +1250,28 @@ impl MimicKktData {
 /// `x = M⁻¹(r1 + J_rᵀ l)`, with `M` factorised in `ldl`, `D` in `del` and `M⁻¹ J_rᵀ` in
 /// `minv_jt`. `r1` is overwritten by `x`, `r2` by `l`.
 fn kkt_solve(ldl: &DMatrix<f64>, kd: &MimicKktData, r1: &mut [f64], r2: &mut [f64]) {
+    kkt_solve_with(ldl, &kd.jr, &kd.minv_jt, &kd.del, r1, r2);
+}
+
+/// [`kkt_solve`] with its matrices given.
+fn kkt_solve_with(
+    ldl: &DMatrix<f64>,
+    jr: &DMatrix<f64>,
+    minv_jt: &DMatrix<f64>,
+    del: &DMatrix<f64>,
+    r1: &mut [f64],
+    r2: &mut [f64],
+) {
     ldl_solve(ldl, r1);
     // r2 − J_r M⁻¹ r1
     for (r, x) in r2.iter_mut().enumerate() {
-        let s: f64 = (0..r1.len()).map(|c| kd.jr[(r, c)] * r1[c]).sum();
+        let s: f64 = (0..r1.len()).map(|c| jr[(r, c)] * r1[c]).sum();
         *x -= s;
     }
-    ldl_solve(&kd.del, r2);
+    ldl_solve(del, r2);
     // x = M⁻¹ r1 + (M⁻¹ J_rᵀ) l
     for (i, x) in r1.iter_mut().enumerate() {
-        let s: f64 = (0..r2.len()).map(|r| kd.minv_jt[(i, r)] * r2[r]).sum();
+        let s: f64 = (0..r2.len()).map(|r| minv_jt[(i, r)] * r2[r]).sum();
         *x += s;
     }
 }
@@ -1717,5 +1729,223 @@ pub fn constrained_id_derivatives(
         }
     }
     reduce_fo(model, data);
+    Ok(())
+}
+
+/// Workspace and results of the impact dynamics of a [`MimicModel`] ([`impact_derivatives`]).
+#[derive(Clone, Debug)]
+pub struct MimicImpactData {
+    cd: ContactData,
+    key: u64,
+    restitution: f64,
+    jr: DMatrix<f64>,
+    minv_jt: DMatrix<f64>,
+    del: DMatrix<f64>,
+    vplus: DVector<f64>,
+    impulse: DVector<f64>,
+    dvplus_dq: DMatrix<f64>,
+    dvplus_dvminus: DMatrix<f64>,
+    dimpulse_dq: DMatrix<f64>,
+    dimpulse_dvminus: DMatrix<f64>,
+    /// `G (q̇⁺ − q̇⁻)` and `G (q̇⁺ + e q̇⁻)` (full tree).
+    dvf: DVector<f64>,
+    wf: DVector<f64>,
+    /// `∂(M Δv)/∂q − ∂(Jᵀλ̂)/∂q` (`nv_f × nv_f`), `∂(J w)/∂q` (`m × nv_f`), reduced blocks.
+    rq: DMatrix<f64>,
+    cq: DMatrix<f64>,
+    r_top: DMatrix<f64>,
+    r_bot: DMatrix<f64>,
+    col_n: DVector<f64>,
+    col_m: DVector<f64>,
+}
+
+impl MimicImpactData {
+    /// Workspace for `contacts` on `model` (frames of the full tree), restitution `0`.
+    ///
+    /// # Errors
+    /// As [`MimicKktData::new`].
+    pub fn new(model: &MimicModel, contacts: &[crate::model::Contact]) -> Result<Self> {
+        let cd = ContactData::new(&model.full, contacts)?;
+        let (n, nf, m) = (model.nv, model.full.nv(), cd.dim());
+        let mat = |r, c| DMatrix::zeros(r, c);
+        Ok(Self {
+            cd,
+            key: model.key,
+            restitution: 0.0,
+            jr: mat(m, n),
+            minv_jt: mat(n, m),
+            del: mat(m, m),
+            vplus: DVector::zeros(n),
+            impulse: DVector::zeros(m),
+            dvplus_dq: mat(n, n),
+            dvplus_dvminus: mat(n, n),
+            dimpulse_dq: mat(m, n),
+            dimpulse_dvminus: mat(m, n),
+            dvf: DVector::zeros(nf),
+            wf: DVector::zeros(nf),
+            rq: mat(nf, nf),
+            cq: mat(m, nf),
+            r_top: mat(n, n),
+            r_bot: mat(m, n),
+            col_n: DVector::zeros(n),
+            col_m: DVector::zeros(m),
+        })
+    }
+    /// Sets the coefficient of restitution `e` (`q̇⁺` of the contact rows is `−e` times `q̇⁻`'s).
+    ///
+    /// # Errors
+    /// [`Error::Argument`] if `e` is negative or not finite.
+    pub fn set_restitution(&mut self, e: f64) -> Result<()> {
+        if !e.is_finite() || e < 0.0 {
+            return Err(Error::Argument {
+                name: "restitution".into(),
+                reason: format!("{e} must be finite and non-negative"),
+            });
+        }
+        self.restitution = e;
+        Ok(())
+    }
+    /// Number of contact rows `m`.
+    pub fn dim(&self) -> usize {
+        self.impulse.len()
+    }
+    /// `q̇⁺`.
+    pub fn vplus(&self) -> &DVector<f64> {
+        &self.vplus
+    }
+    /// Contact impulses `λ̂` applied to the robot.
+    pub fn impulse(&self) -> &DVector<f64> {
+        &self.impulse
+    }
+    /// `∂q̇⁺/∂q` (tangent).
+    pub fn dvplus_dq(&self) -> &DMatrix<f64> {
+        &self.dvplus_dq
+    }
+    /// `∂q̇⁺/∂q̇⁻`.
+    pub fn dvplus_dvminus(&self) -> &DMatrix<f64> {
+        &self.dvplus_dvminus
+    }
+    /// `∂λ̂/∂q` (tangent).
+    pub fn dimpulse_dq(&self) -> &DMatrix<f64> {
+        &self.dimpulse_dq
+    }
+    /// `∂λ̂/∂q̇⁻`.
+    pub fn dimpulse_dvminus(&self) -> &DMatrix<f64> {
+        &self.dimpulse_dvminus
+    }
+}
+
+/// Impact dynamics in the reduced coordinates and its first-order derivatives:
+/// `M (q̇⁺ − q̇⁻) = (J G)ᵀ λ̂`, `J G q̇⁺ = −e J G q̇⁻` (`M = Gᵀ M_f G`, `J` the full tree's contact
+/// Jacobian at `expand(q)`), then `∂y/∂x = −R_y⁻¹ R_x` for `y = (q̇⁺, λ̂)`, `x = (q, q̇⁻)` with
+/// `R_q = [Gᵀ(∂(M_f Δ)/∂q − ∂(Jᵀλ̂)/∂q) G; ∂(J w)/∂q G]` (`Δ = G(q̇⁺ − q̇⁻)`,
+/// `w = G(q̇⁺ + e q̇⁻)`, the full tree's IDFOZA and contact products) and
+/// `R_q̇⁻ = [−M; e J G]`.
+///
+/// # Errors
+/// As [`crba`] for `q`, a `vminus` of the wrong length or not finite, [`Error::Singular`] for a
+/// singular `M` or Delassus matrix, a workspace of another model.
+pub fn impact_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    im: &mut MimicImpactData,
+    q: &DVector<f64>,
+    vminus: &DVector<f64>,
+) -> Result<()> {
+    if im.key != model.key || im.vplus.len() != model.nv {
+        return Err(Error::Workspace(format!(
+            "MimicImpactData was made for another model; make it with MimicImpactData::new \
+             for the mimic model \"{}\"",
+            model.name()
+        )));
+    }
+    prepare(model, data, q, None, Some(("vminus", vminus)))?;
+    let (n, nf, m) = (model.nv, model.full.nv(), im.dim());
+    let full = &model.full;
+    let e = im.restitution;
+    // M (with the composite inertias), the body inertias for IDFOZA, J.
+    crate::algo::internal::crba_unchecked(full, &mut data.full, &data.q);
+    for i in 1..full.njoints() {
+        data.full.oinertia[i] = data.full.o_m_i[i].act_inertia(&full.inertias[i]);
+    }
+    crate::deriv::contact::path_kinematics(full, &data.full, &mut im.cd, None);
+    model.reduce_matrix(data.full.m(), &mut data.m);
+    data.ldl.copy_from(&data.m);
+    ldl_in_place(model, &mut data.ldl)?;
+    im.jr.fill(0.0);
+    for f in 0..nf {
+        let (c, g) = (model.g_col[f], model.g_coef[f]);
+        for r in 0..m {
+            im.jr[(r, c)] += g * im.cd.jac[(r, f)];
+        }
+    }
+    for r in 0..m {
+        let mut col = im.minv_jt.column_mut(r);
+        for c in 0..n {
+            col[c] = im.jr[(r, c)];
+        }
+        ldl_solve(&data.ldl, col.as_mut_slice());
+    }
+    crate::linalg::gemm(1.0, &im.jr, &im.minv_jt, 0.0, &mut im.del);
+    delassus_in_place(&mut im.del)?;
+    // λ̂ = −(1 + e) D⁻¹ J_r q̇⁻, q̇⁺ = q̇⁻ + M⁻¹ J_rᵀ λ̂.
+    im.impulse.gemv(-(1.0 + e), &im.jr, vminus, 0.0);
+    ldl_solve(&im.del, im.impulse.as_mut_slice());
+    im.vplus.copy_from(vminus);
+    im.vplus.gemv(1.0, &im.minv_jt, &im.impulse, 1.0);
+    // R_q of the full tree at Δ, λ̂, w, reduced.
+    for f in 0..nf {
+        let (c, g) = (model.g_col[f], model.g_coef[f]);
+        im.dvf[f] = g * (im.vplus[c] - vminus[c]);
+        im.wf[f] = g * (im.vplus[c] + e * vminus[c]);
+    }
+    crate::deriv::zero::idfoza_core(full, &mut data.full, im.dvf.as_slice(), &mut im.rq);
+    let s = std::mem::take(&mut im.cd.s);
+    crate::deriv::contact::sub_djtl_dq_tree(
+        full,
+        &s,
+        &mut im.cd,
+        im.impulse.as_slice(),
+        &mut im.rq,
+    );
+    im.cd.s = s;
+    im.cq.fill(0.0);
+    crate::deriv::contact::djw_dq(full, &mut im.cd, im.wf.as_slice(), &mut im.cq);
+    model.reduce_matrix(&im.rq, &mut im.r_top);
+    im.r_bot.fill(0.0);
+    for f in 0..nf {
+        let (c, g) = (model.g_col[f], model.g_coef[f]);
+        for r in 0..m {
+            im.r_bot[(r, c)] += g * im.cq[(r, f)];
+        }
+    }
+    // ∂y/∂q = −R_y⁻¹ R_q; ∂y/∂q̇⁻ = −R_y⁻¹ [−M; e J_r].
+    for wrt in 0..2 {
+        for c in 0..n {
+            for i in 0..n {
+                im.col_n[i] = if wrt == 0 { -im.r_top[(i, c)] } else { data.m[(i, c)] };
+            }
+            for r in 0..m {
+                im.col_m[r] = if wrt == 0 { -im.r_bot[(r, c)] } else { -e * im.jr[(r, c)] };
+            }
+            let (mut cn, mut cm) = (std::mem::take(&mut im.col_n), std::mem::take(&mut im.col_m));
+            kkt_solve_with(
+                &data.ldl,
+                &im.jr,
+                &im.minv_jt,
+                &im.del,
+                cn.as_mut_slice(),
+                cm.as_mut_slice(),
+            );
+            let (oa, ol) = if wrt == 0 {
+                (&mut im.dvplus_dq, &mut im.dimpulse_dq)
+            } else {
+                (&mut im.dvplus_dvminus, &mut im.dimpulse_dvminus)
+            };
+            oa.column_mut(c).copy_from(&cn);
+            ol.column_mut(c).copy_from(&cm);
+            (im.col_n, im.col_m) = (cn, cm);
+        }
+    }
     Ok(())
 }

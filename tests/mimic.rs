@@ -681,3 +681,43 @@ fn kkt_second_order_matches_hyper_dual_oracle() {
     let e = mimic::kkt_so_derivatives(&m, &mut data, &mut kd1, &q, &v, &tau).unwrap_err();
     assert!(e.to_string().contains("with_second_order"), "{e}");
 }
+
+#[test]
+fn impact_first_order_matches_dual_oracle() {
+    use sodyn::mimic::MimicImpactData;
+    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
+    let r = oracle(&m);
+    let mut data = MimicData::new(&m);
+    let n = m.nv();
+    let mut worst = [0.0f64; 6];
+    // (The 12-row set with the finger is ill-conditioned at these states: errors up to 4e-10
+    // there, in the oracle's dense elimination as much as in ours.)
+    for e in [0.0, 0.4] {
+        let contacts = arm_contacts_with(&m, false);
+        let mut im = MimicImpactData::new(&m, &contacts).unwrap();
+        im.set_restitution(e).unwrap();
+        let mut rng = Rng::new(24);
+        for _ in 0..2 {
+            let [q, vm, _] = state(&m, &mut rng);
+            let (qs, vs) = (q.as_slice(), vm.as_slice());
+            mimic::impact_derivatives(&m, &mut data, &mut im, &q, &vm).unwrap();
+            let (vp, imp) = r.impact(qs, vs, &contacts, e);
+            worst[0] = worst[0].max(vec_err(im.vplus(), &vp));
+            worst[1] = worst[1].max(vec_err(im.impulse(), &imp));
+            let [dq, dv] = r.impact_fo(qs, vs, &contacts, e);
+            let mm = im.dim();
+            worst[2] = worst[2].max(mat_err(im.dvplus_dq(), &dq.rows(0, n).into_owned()));
+            worst[3] = worst[3].max(mat_err(im.dvplus_dvminus(), &dv.rows(0, n).into_owned()));
+            worst[4] = worst[4].max(mat_err(im.dimpulse_dq(), &dq.rows(n, mm).into_owned()));
+            worst[5] = worst[5].max(mat_err(im.dimpulse_dvminus(), &dv.rows(n, mm).into_owned()));
+        }
+    }
+    eprintln!(
+        "mimic impact FO vs dual oracle (relative): vplus {:.1e} impulse {:.1e} dvplus_dq {:.1e} \
+         dvplus_dvminus {:.1e} dimpulse_dq {:.1e} dimpulse_dvminus {:.1e}",
+        worst[0], worst[1], worst[2], worst[3], worst[4], worst[5]
+    );
+    assert!(worst.iter().all(|&e| e < TOL), "{worst:?}");
+    let mut im = MimicImpactData::new(&m, &arm_contacts(&m)).unwrap();
+    assert!(im.set_restitution(-1.0).unwrap_err().to_string().contains("restitution"));
+}

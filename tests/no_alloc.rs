@@ -245,6 +245,11 @@ fn mimic_algorithms_do_not_allocate() {
     check("mimic::kkt_so_derivatives", &mut || {
         mimic::kkt_so_derivatives(&m, &mut d, &mut kd2, &q, &v, &a).unwrap()
     });
+    let mut im = mimic::MimicImpactData::new(&m, &contacts).unwrap();
+    im.set_restitution(0.3).unwrap();
+    check("mimic::impact_derivatives", &mut || {
+        mimic::impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap()
+    });
     check("mimic::constrained_id_derivatives", &mut || {
         mimic::constrained_id_derivatives(&m, &mut d, &mut kd, Some(&mut so), &q, &v, &a, &lam)
             .unwrap()

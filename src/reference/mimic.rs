@@ -376,6 +376,61 @@ impl Reduced<'_> {
             }),
         ]
     }
+    /// Impact dynamics in the reduced coordinates: `[M Jrᵀ; Jr 0] [q̇⁺; −λ̂] = [M q̇⁻; −e Jr q̇⁻]`
+    /// solved densely; returns `(q̇⁺, λ̂)`.
+    pub fn impact<T: AdScalar>(
+        &self,
+        q: &[T],
+        vminus: &[T],
+        contacts: &[Contact],
+        e: f64,
+    ) -> (Vec<T>, Vec<T>) {
+        let n = self.nv();
+        let jr = self.contact_jacobian(q, contacts);
+        let mm = self.mass_matrix(q);
+        let matvec = |a: &[Vec<T>]| -> Vec<T> {
+            a.iter()
+                .map(|row| row.iter().zip(vminus).fold(T::zero(), |s, (x, y)| s + x.clone() * y))
+                .collect()
+        };
+        let mut rhs = matvec(&mm);
+        rhs.extend(matvec(&jr).into_iter().map(|x| x * (-e)));
+        let mut k = vec![vec![T::zero(); n + jr.len()]; n + jr.len()];
+        for (i, row) in mm.into_iter().enumerate() {
+            k[i][..n].clone_from_slice(&row);
+        }
+        for (r, row) in jr.iter().enumerate() {
+            for (c, x) in row.iter().enumerate() {
+                k[n + r][c] = x.clone();
+                k[c][n + r] = x.clone();
+            }
+        }
+        let mut sol = solve(k, rhs);
+        let impulse = sol.split_off(n).into_iter().map(|x| -x).collect();
+        (sol, impulse)
+    }
+    /// First-order derivatives of [`Reduced::impact`]: `[∂q̇⁺/∂x; ∂λ̂/∂x]` for `x` = `q`
+    /// (tangent), `q̇⁻`.
+    pub fn impact_fo(
+        &self,
+        q: &[f64],
+        vminus: &[f64],
+        contacts: &[Contact],
+        e: f64,
+    ) -> [DMatrix<f64>; 2] {
+        let n = self.nv();
+        let nout = n + contacts.iter().map(|c| c.dim()).sum::<usize>();
+        let (qd, vd) = (lift::<Dual64>(q), lift::<Dual64>(vminus));
+        let stacked = |q: &[Dual64], v: &[Dual64]| {
+            let (mut a, b) = self.impact(q, v, contacts, e);
+            a.extend(b);
+            a
+        };
+        [
+            jacobian(nout, n, |j| stacked(&self.perturb(&qd, j, eps()), &vd)),
+            jacobian(nout, n, |j| stacked(&qd, &seeded(vminus, j, eps()))),
+        ]
+    }
     /// `∂τ/∂q`, `∂τ/∂v` of [`Reduced::constrained_rnea`] (`λ` fixed).
     pub fn d_constrained_rnea(
         &self,
