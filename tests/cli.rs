@@ -1120,15 +1120,41 @@ fn mimic_commands_use_the_reduced_coordinates() {
     let fr = joints.iter().find(|j| j["name"] == "finger_r_joint").unwrap();
     assert_eq!(fr["mimic"]["joint"], "finger_l_joint");
     assert_eq!(fr["nv"], 0);
-    // Unsupported inputs and models.
+    // Contacts: constrained ID, KKT (order 2 here) and impact (first order), as the library.
     let with_contacts = tmp("mimic-contacts.json");
-    std::fs::write(&with_contacts, r#"{"contacts": [{"frame": "tool"}]}"#).unwrap();
+    let mut st_c = state.clone();
+    st_c["contacts"] = serde_json::json!([{"frame": "tool"}, {"frame": "thumb_tip", "type": "6d"}]);
+    st_c["restitution"] = serde_json::json!(0.3);
+    std::fs::write(&with_contacts, st_c.to_string()).unwrap();
     let wc = with_contacts.to_str().unwrap();
+    let o =
+        sodyn(&["eval", "--model", u, "--mimic", "--floating-base", "--state", wc, "--order", "2"]);
+    assert_ok(&o, "eval --mimic with contacts");
+    let v2: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let full = m.full();
+    let contacts = vec![
+        sodyn::model::Contact::new(full, "tool", nalgebra::Vector3::zeros()).unwrap(),
+        sodyn::model::Contact::new_6d(full, "thumb_tip", None).unwrap(),
+    ];
+    let mut kd = mimic::MimicKktData::new(&m, &contacts).unwrap().with_second_order(&m);
+    mimic::kkt_so_derivatives(&m, &mut d, &mut kd, &q, &vel, &tau).unwrap();
+    assert!((matrix(&v2["kkt"], "dqdd_dq", n) - kd.dqdd_dq()).amax() < 1e-12);
+    check_tensor_shape(&v2["kkt"], "d2qdd_dq2", n);
+    let mut im = mimic::MimicImpactData::new(&m, &contacts).unwrap();
+    im.set_restitution(0.3).unwrap();
+    mimic::impact_derivatives(&m, &mut d, &mut im, &q, &vel).unwrap();
+    assert!((vector(&v2["impact"], "vplus", n) - im.vplus()).amax() < 1e-12);
+    assert!(v2["impact"].get("d2vplus_dq2").is_none());
+    check_tensor_shape(&v2["constrained_id"], "d2tau_dq2", n);
+    // Unsupported inputs and models.
+    let with_frames = tmp("mimic-frames.json");
+    std::fs::write(&with_frames, r#"{"frames": ["tool"]}"#).unwrap();
+    let wf = with_frames.to_str().unwrap();
     let err = assert_clean_failure(
-        &sodyn(&["eval", "--model", u, "--mimic", "--state", wc]),
-        "eval --mimic with contacts",
+        &sodyn(&["eval", "--model", u, "--mimic", "--state", wf]),
+        "eval --mimic with frames",
     );
-    assert!(err.contains("\"contacts\" is not supported with --mimic"), "{err}");
+    assert!(err.contains("\"frames\" is not supported with --mimic"), "{err}");
     let err = assert_clean_failure(
         &sodyn(&["eval", "--model", u, "--mimic", "--state", s]),
         "eval --mimic, the state of the floating base",

@@ -103,30 +103,43 @@ pub(crate) fn random_state_json(mm: &MimicModel, seed: u64) -> Value {
     json!({ "q": q.as_slice(), "v": v.as_slice(), "a": a.as_slice(), "tau": tau.as_slice() })
 }
 
-/// `q`, `v`, `a`, `tau` of a state file, in the reduced coordinates.
+/// `q`, `v`, `a`, `tau` of a state file, in the reduced coordinates, and its contacts.
 pub(crate) struct State {
     q: DVector<f64>,
     v: DVector<f64>,
     a: DVector<f64>,
     tau: DVector<f64>,
+    contacts: Vec<sodyn::model::Contact>,
+    lambda: DVector<f64>,
+    restitution: f64,
 }
 
 /// Parses a state file for a mimic model: `q` (length nq, default neutral), `v`, `a`, `tau`
-/// (length nv, default zeros); any other key is an error (contacts, frames and weights are not
-/// supported with `--mimic`).
+/// (length nv, default zeros), and `contacts`, `lambda`, `restitution` as without `--mimic`
+/// (frames of the full tree); `frames` and `weights` are errors (not supported with
+/// `--mimic`).
 pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<State> {
     let val: Value =
         serde_json::from_str(text).map_err(|e| Error::Io(format!("{file}: invalid JSON: {e}")))?;
     let obj = val
         .as_object()
         .ok_or_else(|| Error::Io(format!("{file}: the state must be a JSON object")))?;
-    if let Some(k) = obj.keys().find(|k| !["q", "v", "a", "tau"].contains(&k.as_str())) {
+    let known = ["q", "v", "a", "tau", "contacts", "lambda", "restitution"];
+    if let Some(k) = obj.keys().find(|k| !known.contains(&k.as_str())) {
         return Err(Error::Io(format!(
             "{file}: key \"{k}\" is not supported with --mimic (a mimic model's state has q, v, a, \
-             tau only: contacts, impacts, frames and contracted weights take models without \
-             --mimic)"
+             tau, contacts, lambda, restitution: frames and contracted weights take models \
+             without --mimic)"
         )));
     }
+    // The contacts, λ and restitution by the parser of eval (frames of the full tree).
+    let rest: serde_json::Map<String, Value> = obj
+        .iter()
+        .filter(|(k, _)| ["contacts", "lambda", "restitution"].contains(&k.as_str()))
+        .map(|(k, x)| (k.clone(), x.clone()))
+        .collect();
+    let text = serde_json::to_string(&Value::Object(rest)).map_err(|e| Error::Io(e.to_string()))?;
+    let cst = super::eval::load_state(mm.full(), &text, file, None)?;
     let full_hint = |e: Error, key: &str, n: usize, full: usize| match obj.get(key) {
         Some(Value::Array(x)) if x.len() == full && full != n => Error::Io(format!(
             "{e} ({full} is the length of the full tree, mimic joints included; with --mimic \
@@ -161,11 +174,15 @@ pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<Stat
         v: read("v", nv, fv)?.unwrap_or_else(z),
         a: read("a", nv, fv)?.unwrap_or_else(z),
         tau: read("tau", nv, fv)?.unwrap_or_else(z),
+        contacts: cst.contacts,
+        lambda: cst.lambda,
+        restitution: cst.restitution,
     })
 }
 
 /// The `eval --mimic` output: the keys of `eval` for the dynamics (`tau`, `M`, `b`, `qdd`,
-/// `dtau_dq`, `dtau_dv`, `dqdd_dq`, `dqdd_dv`, `Minv`, at order 2 the tensors), in the reduced
+/// `dtau_dq`, `dtau_dv`, `dqdd_dq`, `dqdd_dv`, `Minv`, at order 2 the tensors) and, with
+/// contacts, `constrained_id`, `kkt` and `impact` (first order only), in the reduced
 /// coordinates, with an `"errors"` object for the outputs undefined at the state.
 pub(crate) fn eval_json(mm: &MimicModel, s: &State, order: u32) -> Result<Value> {
     let model = mm.full();
@@ -260,10 +277,108 @@ pub(crate) fn eval_json(mm: &MimicModel, s: &State, order: u32) -> Result<Value>
             Err(e) => undefined(e, &keys, &mut errors)?,
         }
     }
+    if !s.contacts.is_empty() {
+        contact_outputs(mm, s, order, &mut data, o, &mut errors)?;
+    }
     if !errors.is_empty() {
         o.insert("errors".into(), Value::Object(errors));
     }
     Ok(out)
+}
+
+/// `constrained_id`, `kkt` and `impact` of a mimic model (the impact's first order only).
+fn contact_outputs(
+    mm: &MimicModel,
+    s: &State,
+    order: u32,
+    data: &mut MimicData,
+    o: &mut Map<String, Value>,
+    errors: &mut Map<String, Value>,
+) -> Result<()> {
+    let mut kd = mimic::MimicKktData::new(mm, &s.contacts)?;
+    let mut so = MimicSoData::new(mm);
+    mimic::constrained_id_derivatives(
+        mm,
+        data,
+        &mut kd,
+        Some(&mut so),
+        &s.q,
+        &s.v,
+        &s.a,
+        &s.lambda,
+    )?;
+    o.insert(
+        "constrained_id".into(),
+        json!({
+            "tau": data.tau().as_slice(),
+            "dtau_dq": mat_json(data.dtau_dq()),
+            "dtau_dv": mat_json(data.dtau_dv()),
+            "d2tau_dq2": tensor_json(so.d2tau_dq2()),
+        }),
+    );
+    let singular = |e: Error, key: &str, errors: &mut Map<String, Value>| match e {
+        Error::Singular { ref what, .. } if what != "contact set" => {
+            errors.insert(key.into(), Value::String(e.to_string()));
+            Ok(())
+        }
+        e => Err(e),
+    };
+    let r = if order >= 2 {
+        kd = kd.with_second_order(mm);
+        mimic::kkt_so_derivatives(mm, data, &mut kd, &s.q, &s.v, &s.tau)
+    } else {
+        mimic::kkt_derivatives(mm, data, &mut kd, &s.q, &s.v, &s.tau)
+    };
+    match r {
+        Ok(()) => {
+            let mut k = json!({
+                "qdd": kd.qdd().as_slice(),
+                "lambda": kd.lambda().as_slice(),
+                "dqdd_dq": mat_json(kd.dqdd_dq()),
+                "dqdd_dv": mat_json(kd.dqdd_dv()),
+                "dqdd_dtau": mat_json(kd.dqdd_dtau()),
+                "dlambda_dq": mat_json(kd.dlambda_dq()),
+                "dlambda_dv": mat_json(kd.dlambda_dv()),
+                "dlambda_dtau": mat_json(kd.dlambda_dtau()),
+            });
+            if let Some(t) = kd.so() {
+                let ko = k.as_object_mut().expect("object");
+                for (name, x) in [
+                    ("d2qdd_dq2", t.d2qdd_dq2()),
+                    ("d2qdd_dv2", t.d2qdd_dv2()),
+                    ("d2qdd_dqdv", t.d2qdd_dqdv()),
+                    ("d2qdd_dtaudq", t.d2qdd_dtaudq()),
+                    ("d2lambda_dq2", t.d2lambda_dq2()),
+                    ("d2lambda_dv2", t.d2lambda_dv2()),
+                    ("d2lambda_dqdv", t.d2lambda_dqdv()),
+                    ("d2lambda_dtaudq", t.d2lambda_dtaudq()),
+                ] {
+                    ko.insert(name.into(), tensor_json(x));
+                }
+            }
+            o.insert("kkt".into(), k);
+        }
+        Err(e) => singular(e, "kkt", errors)?,
+    }
+    let mut im = mimic::MimicImpactData::new(mm, &s.contacts)?;
+    im.set_restitution(s.restitution)?;
+    match mimic::impact_derivatives(mm, data, &mut im, &s.q, &s.v) {
+        Ok(()) => {
+            o.insert(
+                "impact".into(),
+                json!({
+                    "vplus": im.vplus().as_slice(),
+                    "impulse": im.impulse().as_slice(),
+                    "dvplus_dq": mat_json(im.dvplus_dq()),
+                    "dvplus_dvminus": mat_json(im.dvplus_dvminus()),
+                    "dimpulse_dq": mat_json(im.dimpulse_dq()),
+                    "dimpulse_dvminus": mat_json(im.dimpulse_dvminus()),
+                }),
+            );
+        }
+        Err(e) => singular(e, "impact", errors)?,
+    }
+    Ok(())
 }
 
 /// `sodyn demo --mimic`: the algorithms of `sodyn::mimic` at a random state, with timings and
