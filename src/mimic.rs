@@ -27,8 +27,11 @@
 //! [`crate::algo::crba()`], [`crate::algo::aba()`], [`crate::deriv::id_derivatives`],
 //! [`crate::deriv::fd_derivatives`], [`crate::deriv::id_so_derivatives`] and
 //! [`crate::deriv::fd_so_derivatives`]; their workspaces are [`MimicData`] and [`MimicSoData`],
-//! allocated once. The other algorithms of the crate (kinematics, frames, contacts, impacts,
-//! contracted second order, batches) take the full [`Model`] only.
+//! allocated once. Contacts (frames of the full tree): [`constrained_id_derivatives`] (first and
+//! second order), [`kkt_derivatives`], [`kkt_so_derivatives`] and [`impact_derivatives`]
+//! (first order), with the workspaces [`MimicKktData`] and [`MimicImpactData`]. The other
+//! algorithms of the crate (kinematics, frames, the impact's second order, contracted second
+//! order, batches) take the full [`Model`] only.
 
 use crate::algo::Data;
 use crate::deriv::{ContactData, KktData, SoData};

@@ -28,7 +28,9 @@ use sodyn::deriv::{
     fd_so_derivatives, id_derivatives, id_so_derivatives, impact_derivatives,
     impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
 };
-use sodyn::mimic::{self, MimicData, MimicJoint, MimicModel, MimicSoData};
+use sodyn::mimic::{
+    self, MimicData, MimicImpactData, MimicJoint, MimicKktData, MimicModel, MimicSoData,
+};
 use sodyn::model::{
     ContactReference, ContactType, JointType, MjcfOptions, Model, ModelBuilder, UrdfOptions,
     builtin,
@@ -457,7 +459,9 @@ impl PyModel {
                 reason: format!(
                     "{what} does not support models with mimic joints (loaded with \
                      mimic=True); it supports rnea, crba, aba, nonlinear_effects, \
-                     id_derivatives, fd_derivatives, id_so_derivatives and fd_so_derivatives"
+                     id_derivatives, fd_derivatives, id_so_derivatives, fd_so_derivatives, \
+                     constrained_id_derivatives, kkt_derivatives and impact_derivatives \
+                     (order=1)"
                 ),
             }));
         }
@@ -1097,8 +1101,8 @@ struct PyData {
     kktc: Option<(ContactKey, KktData, KktContracted)>,
     impc: Option<(ContactKey, ImpactData, ImpactContracted)>,
     wl: DVector<f64>,
-    /// The workspaces of a model loaded with `mimic=True` (the second order made on first use).
-    mimic: Option<Box<(MimicData, Option<MimicSoData>)>>,
+    /// The workspaces of a model loaded with `mimic=True` (the others made on first use).
+    mimic: Option<Box<MimicWs>>,
 }
 
 impl PyData {
@@ -1125,7 +1129,9 @@ impl PyData {
     }
     fn for_py_model(m: &PyModel) -> Self {
         let mut d = Self::for_model(&m.m);
-        d.mimic = m.mimic.as_ref().map(|mm| Box::new((MimicData::new(mm), None)));
+        d.mimic = m.mimic.as_ref().map(|mm| {
+            Box::new(MimicWs { d: MimicData::new(mm), so: None, kkt: None, impact: None })
+        });
         d
     }
 }
@@ -1156,8 +1162,16 @@ fn read_qvx(
 // Models with mimic joints (Model.from_urdf(..., mimic=True)): sodyn::mimic
 // ---------------------------------------------------------------------------------------------
 
+/// The workspaces of a model with mimic joints in a `Data`.
+struct MimicWs {
+    d: MimicData,
+    so: Option<MimicSoData>,
+    kkt: Option<(ContactKey, MimicKktData)>,
+    impact: Option<(ContactKey, MimicImpactData)>,
+}
+
 /// The mimic workspaces of `d`, an error if it was made for a model without mimic joints.
-fn mimic_ws(d: &mut PyData) -> PyResult<&mut (MimicData, Option<MimicSoData>)> {
+fn mimic_ws(d: &mut PyData) -> PyResult<&mut MimicWs> {
     d.mimic.as_deref_mut().ok_or_else(|| {
         core_err(Error::Workspace(
             "this Data was made for a model without mimic joints; make it with \
@@ -1200,7 +1214,7 @@ fn mimic_rnea<'py>(
     mimic_ws(d)?;
     let PyData { q, v, a, fext, mimic: Some(ws), .. } = d else { unreachable!() };
     let f = has_f.then_some(fext.as_slice());
-    let md = &mut ws.0;
+    let md = &mut ws.d;
     py.detach(|| mimic::rnea(mm, md, q, v, a, f).map(|_| ())).map_err(core_err)?;
     Ok(out_vec(py, md.tau()))
 }
@@ -1214,7 +1228,7 @@ fn mimic_crba<'py>(
     mimic_read(mm, d, q, None, None)?;
     mimic_ws(d)?;
     let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
-    let md = &mut ws.0;
+    let md = &mut ws.d;
     py.detach(|| mimic::crba(mm, md, q).map(|_| ())).map_err(core_err)?;
     Ok(out_mat(py, md.m()))
 }
@@ -1234,7 +1248,7 @@ fn mimic_aba<'py>(
     mimic_ws(d)?;
     let PyData { q, v, a, fext, mimic: Some(ws), .. } = d else { unreachable!() };
     let f = has_f.then_some(fext.as_slice());
-    let md = &mut ws.0;
+    let md = &mut ws.d;
     py.detach(|| mimic::aba(mm, md, q, v, a, f).map(|_| ())).map_err(core_err)?;
     Ok(out_vec(py, md.qdd()))
 }
@@ -1253,7 +1267,7 @@ fn mimic_nle<'py>(
         *a = DVector::zeros(mm.nv());
     }
     a.fill(0.0);
-    let md = &mut ws.0;
+    let md = &mut ws.d;
     py.detach(|| mimic::rnea(mm, md, q, v, a, None).map(|_| ())).map_err(core_err)?;
     Ok(out_vec(py, md.tau()))
 }
@@ -1273,7 +1287,7 @@ fn mimic_id_fo<'py>(
     mimic_ws(d)?;
     let PyData { q, v, a, fext, mimic: Some(ws), .. } = d else { unreachable!() };
     let f = has_f.then_some(fext.as_slice());
-    let md = &mut ws.0;
+    let md = &mut ws.d;
     py.detach(|| mimic::id_derivatives(mm, md, q, v, a, f)).map_err(core_err)?;
     PyTuple::new(py, [out_mat(py, md.dtau_dq()), out_mat(py, md.dtau_dv())])
 }
@@ -1293,7 +1307,7 @@ fn mimic_fd_fo<'py>(
     mimic_ws(d)?;
     let PyData { q, v, a, fext, mimic: Some(ws), .. } = d else { unreachable!() };
     let f = has_f.then_some(fext.as_slice());
-    let md = &mut ws.0;
+    let md = &mut ws.d;
     py.detach(|| mimic::fd_derivatives(mm, md, q, v, a, f)).map_err(core_err)?;
     PyTuple::new(py, [out_mat(py, md.dqdd_dq()), out_mat(py, md.dqdd_dv()), out_mat(py, md.minv())])
 }
@@ -1314,7 +1328,7 @@ fn mimic_so<'py>(
     mimic_read(mm, d, q, Some(v), Some((x, if fd { "tau" } else { "a" })))?;
     mimic_ws(d)?;
     let PyData { q, v, a, mimic: Some(ws), .. } = d else { unreachable!() };
-    let (md, so) = &mut **ws;
+    let MimicWs { d: md, so, .. } = &mut **ws;
     let so = so.get_or_insert_with(|| MimicSoData::new(mm));
     let ts = if fd {
         py.detach(|| mimic::fd_so_derivatives(mm, md, so, q, v, a, None)).map_err(core_err)?;
@@ -1353,6 +1367,144 @@ fn mimic_fd_so<'py>(
     out: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
     mimic_so(py, mm, d, q, v, tau, out, true)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn mimic_constrained_id<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    full: &Model,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    contacts: &[PyRef<'py, PyContact>],
+    lam: &Bound<'py, PyAny>,
+    order: i64,
+) -> PyResult<Bound<'py, PyDict>> {
+    mimic_read(mm, d, q, Some(v), Some((a, "a")))?;
+    let (cs, key) = resolve(full, contacts)?;
+    read_vec(lam, "lam", rows_of(&cs), "3 or 6 rows per contact", &mut d.lam)?;
+    mimic_ws(d)?;
+    let PyData { q, v, a, lam, mimic: Some(ws), .. } = d else { unreachable!() };
+    let MimicWs { d: md, so, kkt, .. } = &mut **ws;
+    if kkt.as_ref().is_none_or(|(k, _)| *k != key) {
+        *kkt = Some((key, MimicKktData::new(mm, &cs).map_err(core_err)?));
+    }
+    let kd = &mut kkt.as_mut().expect("set above").1;
+    let out = PyDict::new(py);
+    if order == 2 {
+        let so = so.get_or_insert_with(|| MimicSoData::new(mm));
+        py.detach(|| mimic::constrained_id_derivatives(mm, md, kd, Some(so), q, v, a, lam))
+            .map_err(core_err)?;
+        out.set_item("d2tau_dq2", out_tensor(py, so.d2tau_dq2()))?;
+    } else {
+        py.detach(|| mimic::constrained_id_derivatives(mm, md, kd, None, q, v, a, lam))
+            .map_err(core_err)?;
+    }
+    out.set_item("tau", out_vec(py, md.tau()))?;
+    out.set_item("dtau_dq", out_mat(py, md.dtau_dq()))?;
+    out.set_item("dtau_dv", out_mat(py, md.dtau_dv()))?;
+    Ok(out)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn mimic_kkt<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    full: &Model,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    contacts: &[PyRef<'py, PyContact>],
+    order: i64,
+) -> PyResult<Bound<'py, PyDict>> {
+    mimic_read(mm, d, q, Some(v), Some((tau, "tau")))?;
+    let (cs, key) = resolve(full, contacts)?;
+    mimic_ws(d)?;
+    let PyData { q, v, a, mimic: Some(ws), .. } = d else { unreachable!() };
+    let MimicWs { d: md, kkt, .. } = &mut **ws;
+    let fits =
+        |k: &MimicKktData, key2: &ContactKey| *key2 == key && (order == 1 || k.so().is_some());
+    if kkt.as_ref().is_none_or(|(k2, kd)| !fits(kd, k2)) {
+        let mut kd = MimicKktData::new(mm, &cs).map_err(core_err)?;
+        if order == 2 {
+            kd = kd.with_second_order(mm);
+        }
+        *kkt = Some((key, kd));
+    }
+    let kd = &mut kkt.as_mut().expect("set above").1;
+    if order == 2 {
+        py.detach(|| mimic::kkt_so_derivatives(mm, md, kd, q, v, a)).map_err(core_err)?;
+    } else {
+        py.detach(|| mimic::kkt_derivatives(mm, md, kd, q, v, a)).map_err(core_err)?;
+    }
+    let out = PyDict::new(py);
+    out.set_item("qdd", out_vec(py, kd.qdd()))?;
+    out.set_item("lambda", out_vec(py, kd.lambda()))?;
+    for (k, x) in [
+        ("dqdd_dq", kd.dqdd_dq()),
+        ("dqdd_dv", kd.dqdd_dv()),
+        ("dqdd_dtau", kd.dqdd_dtau()),
+        ("dlambda_dq", kd.dlambda_dq()),
+        ("dlambda_dv", kd.dlambda_dv()),
+        ("dlambda_dtau", kd.dlambda_dtau()),
+    ] {
+        out.set_item(k, out_mat(py, x))?;
+    }
+    if order == 2 {
+        let t = kd.so().expect("second order allocated");
+        for (k, x) in [
+            ("d2qdd_dq2", t.d2qdd_dq2()),
+            ("d2qdd_dv2", t.d2qdd_dv2()),
+            ("d2qdd_dqdv", t.d2qdd_dqdv()),
+            ("d2qdd_dtaudq", t.d2qdd_dtaudq()),
+            ("d2lambda_dq2", t.d2lambda_dq2()),
+            ("d2lambda_dv2", t.d2lambda_dv2()),
+            ("d2lambda_dqdv", t.d2lambda_dqdv()),
+            ("d2lambda_dtaudq", t.d2lambda_dtaudq()),
+        ] {
+            out.set_item(k, out_tensor(py, x))?;
+        }
+    }
+    Ok(out)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn mimic_impact<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    full: &Model,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v_minus: &Bound<'py, PyAny>,
+    contacts: &[PyRef<'py, PyContact>],
+    restitution: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    mimic_read(mm, d, q, Some(v_minus), None)?;
+    let (cs, key) = resolve(full, contacts)?;
+    mimic_ws(d)?;
+    let PyData { q, v, mimic: Some(ws), .. } = d else { unreachable!() };
+    let MimicWs { d: md, impact, .. } = &mut **ws;
+    if impact.as_ref().is_none_or(|(k, _)| *k != key) {
+        *impact = Some((key, MimicImpactData::new(mm, &cs).map_err(core_err)?));
+    }
+    let im = &mut impact.as_mut().expect("set above").1;
+    im.set_restitution(restitution).map_err(core_err)?;
+    py.detach(|| mimic::impact_derivatives(mm, md, im, q, v)).map_err(core_err)?;
+    let out = PyDict::new(py);
+    out.set_item("vplus", out_vec(py, im.vplus()))?;
+    out.set_item("impulse", out_vec(py, im.impulse()))?;
+    for (k, x) in [
+        ("dvplus_dq", im.dvplus_dq()),
+        ("dvplus_dvminus", im.dvplus_dvminus()),
+        ("dimpulse_dq", im.dimpulse_dq()),
+        ("dimpulse_dvminus", im.dimpulse_dvminus()),
+    ] {
+        out.set_item(k, out_mat(py, x))?;
+    }
+    Ok(out)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -2284,6 +2436,9 @@ fn py_constrained_id_derivatives<'py>(
     order: i64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_constrained_id(py, &mm, &model.m, &mut data, q, v, a, &contacts, lam, order);
+    }
     let m = model.full_only("constrained_id_derivatives")?;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
@@ -2327,6 +2482,9 @@ fn py_kkt_derivatives<'py>(
     order: i64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_kkt(py, &mm, &model.m, &mut data, q, v, tau, &contacts, order);
+    }
     let m = model.full_only("kkt_derivatives")?;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
@@ -2392,6 +2550,17 @@ fn py_impact_derivatives<'py>(
     order: i64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
+    if let Some(mm) = model.mimic.clone() {
+        if order == 2 {
+            return Err(core_err(Error::Argument {
+                name: "order".into(),
+                reason: "impact_derivatives(order=2) does not support models with mimic joints \
+                         (loaded with mimic=True); order=1 does"
+                    .into(),
+            }));
+        }
+        return mimic_impact(py, &mm, &model.m, &mut data, q, v_minus, &contacts, restitution);
+    }
     let m = model.full_only("impact_derivatives")?;
     let d = &mut *data;
     read_q(q, "q", m, &mut d.q)?;

@@ -271,7 +271,8 @@ def test_unsupported_functions_and_bad_inputs_raise():
     with pytest.raises(sodyn.SodynError, match="frame_jacobian does not support models with mimic"):
         sodyn.frame_jacobian(model, d, q, "tool")
     for f, args in [(sodyn.center_of_mass, (q,)),
-                    (sodyn.kkt_derivatives, (q, np.zeros(7), np.zeros(7), [sodyn.Contact("tool")])),
+                    (sodyn.kkt_so_contracted, (q, np.zeros(7), np.zeros(7), [sodyn.Contact("tool")],
+                                               np.ones(7), np.ones(3))),
                     (sodyn.id_so_contracted, (q, np.zeros(7), np.zeros(7), np.ones(7)))]:
         with pytest.raises(sodyn.SodynError, match="does not support models with mimic"):
             f(model, d, *args)
@@ -287,3 +288,54 @@ def test_unsupported_functions_and_bad_inputs_raise():
     other = sodyn.Model.from_urdf(str(ARM), floating_base=True, mimic=True)
     with pytest.raises(sodyn.SodynError, match="another model"):
         sodyn.crba(other, d, other.neutral())
+
+
+def test_contacts_match_central_differences():
+    """KKT (first and second order), impact and constrained inverse dynamics of a mimic model:
+    central differences of the outputs (the AD oracle is in tests/mimic.rs). No kp: its
+    reference placement is the one at each call's q, so differences across calls miss its term."""
+    model = sodyn.Model.from_urdf(str(ARM), floating_base=True, mimic=True)
+    d = model.create_data()
+    n = model.nv
+    contacts = [sodyn.Contact("tool", point=[0.01, -0.02, 0.03]),
+                sodyn.Contact("thumb_tip", type="6d", reference="local", kd=0.5)]
+    rng = np.random.default_rng(5)
+    q = model.random_configuration(seed=5)
+    v, tau = rng.uniform(-1, 1, n), rng.uniform(-1, 1, n)
+    r1 = sodyn.kkt_derivatives(model, d, q, v, tau, contacts)
+    r2 = sodyn.kkt_derivatives(model, d, q, v, tau, contacts, order=2)
+    np.testing.assert_allclose(r2.dqdd_dq, r1.dqdd_dq, atol=1e-10)
+    h = 1e-6
+
+    def step(k, s):
+        e = np.zeros(n)
+        e[k] = s
+        return model.integrate(q, e)
+
+    num = np.zeros((n, n))
+    num2 = np.zeros((n, n, n))
+    for k in range(n):
+        rp = sodyn.kkt_derivatives(model, d, step(k, h), v, tau, contacts)
+        rm = sodyn.kkt_derivatives(model, d, step(k, -h), v, tau, contacts)
+        num[:, k] = (rp.qdd - rm.qdd) / (2 * h)
+        num2[:, :, k] = (rp.dqdd_dv - rm.dqdd_dv) / (2 * h)
+    assert rel_err(r1.dqdd_dq, num)[0] < 1e-6
+    # d2qdd_dqdv[:, j, k] = d/dv_k (dqdd/dq_j); its transpose in (j, k) is d/dq_k (dqdd/dv_j).
+    assert rel_err(np.transpose(r2.d2qdd_dqdv, (0, 2, 1)), num2)[0] < 1e-6
+    im = sodyn.impact_derivatives(model, d, q, v, contacts, restitution=0.3)
+    num = np.zeros((n, n))
+    for k in range(n):
+        num[:, k] = (sodyn.impact_derivatives(model, d, step(k, h), v, contacts, 0.3).vplus
+                     - sodyn.impact_derivatives(model, d, step(k, -h), v, contacts, 0.3).vplus) / (2 * h)
+    assert rel_err(im.dvplus_dq, num)[0] < 1e-6
+    with pytest.raises(sodyn.SodynError, match="order=2"):
+        sodyn.impact_derivatives(model, d, q, v, contacts, order=2)
+    lam = rng.uniform(-3, 3, 9)
+    a = rng.uniform(-1, 1, n)
+    c2 = sodyn.constrained_id_derivatives(model, d, q, v, a, contacts, lam, order=2)
+    num = np.zeros((n, n))
+    for k in range(n):
+        num[:, k] = (sodyn.constrained_id_derivatives(model, d, step(k, h), v, a, contacts, lam).tau
+                     - sodyn.constrained_id_derivatives(model, d, step(k, -h), v, a, contacts, lam).tau) / (2 * h)
+    assert rel_err(c2.dtau_dq, num)[0] < 1e-6
+    assert c2.d2tau_dq2.shape == (n, n, n)
