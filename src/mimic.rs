@@ -28,10 +28,10 @@
 //! [`crate::deriv::fd_derivatives`], [`crate::deriv::id_so_derivatives`] and
 //! [`crate::deriv::fd_so_derivatives`]; their workspaces are [`MimicData`] and [`MimicSoData`],
 //! allocated once. Contacts (frames of the full tree): [`constrained_id_derivatives`] (first and
-//! second order), [`kkt_derivatives`], [`kkt_so_derivatives`] and [`impact_derivatives`]
-//! (first order), with the workspaces [`MimicKktData`] and [`MimicImpactData`]. The other
-//! algorithms of the crate (kinematics, frames, the impact's second order, contracted second
-//! order, batches) take the full [`Model`] only.
+//! second order), [`kkt_derivatives`], [`kkt_so_derivatives`], [`impact_derivatives`] and
+//! [`impact_so_derivatives`], with the workspaces [`MimicKktData`] and [`MimicImpactData`]. The
+//! other algorithms of the crate (kinematics, frames, contracted second order, batches) take the
+//! full [`Model`] only.
 
 use crate::algo::Data;
 use crate::deriv::{ContactData, KktData, SoData};
@@ -1760,9 +1760,76 @@ pub struct MimicImpactData {
     r_bot: DMatrix<f64>,
     col_n: DVector<f64>,
     col_m: DVector<f64>,
+    so: Option<Box<MimicImpactSo>>,
+}
+
+/// Second-order results of [`impact_so_derivatives`] (`T[(i, j, k)] = ∂/∂x_k (∂y_i/∂q_j)`) and
+/// their workspace.
+#[derive(Clone, Debug)]
+pub struct MimicImpactSo {
+    d2vplus_dq2: Tensor3,
+    d2vplus_dqdvminus: Tensor3,
+    d2impulse_dq2: Tensor3,
+    d2impulse_dqdvminus: Tensor3,
+    /// IDSOZA of the full tree (`∂²(M Δ)/∂q²`).
+    id: SoData,
+    /// The full tree's `R_qq` at fixed `(Δ, λ̂, w)` (`(nv_f + m) × nv_f × nv_f`).
+    rf: Tensor3,
+    /// Reduced right-hand sides (`(nv + m) × nv × nv`), `qq` and `q q̇⁻`.
+    sqq: Tensor3,
+    sqv: Tensor3,
+    /// Scratch: full-tree vectors, one reduced `G` product, zeros.
+    za: DVector<f64>,
+    zj: DVector<f64>,
+    zl: DVector<f64>,
+    c: DMatrix<f64>,
+    zero: DVector<f64>,
+}
+
+impl MimicImpactSo {
+    /// `∂²q̇⁺/∂q²`.
+    pub fn d2vplus_dq2(&self) -> &Tensor3 {
+        &self.d2vplus_dq2
+    }
+    /// `T[(i, j, k)] = ∂/∂q̇⁻_k (∂q̇⁺_i/∂q_j)`.
+    pub fn d2vplus_dqdvminus(&self) -> &Tensor3 {
+        &self.d2vplus_dqdvminus
+    }
+    /// `∂²λ̂/∂q²`.
+    pub fn d2impulse_dq2(&self) -> &Tensor3 {
+        &self.d2impulse_dq2
+    }
+    /// `T[(i, j, k)] = ∂/∂q̇⁻_k (∂λ̂_i/∂q_j)`.
+    pub fn d2impulse_dqdvminus(&self) -> &Tensor3 {
+        &self.d2impulse_dqdvminus
+    }
 }
 
 impl MimicImpactData {
+    /// Adds the second-order workspace (for [`impact_so_derivatives`]).
+    pub fn with_second_order(mut self, model: &MimicModel) -> Self {
+        let (n, nf, m) = (model.nv, model.full.nv(), self.dim());
+        self.so = Some(Box::new(MimicImpactSo {
+            d2vplus_dq2: Tensor3::zeros(n, n, n),
+            d2vplus_dqdvminus: Tensor3::zeros(n, n, n),
+            d2impulse_dq2: Tensor3::zeros(m, n, n),
+            d2impulse_dqdvminus: Tensor3::zeros(m, n, n),
+            id: SoData::without_dm_dq(&model.full),
+            rf: Tensor3::zeros(nf + m, nf, nf),
+            sqq: Tensor3::zeros(n + m, n, n),
+            sqv: Tensor3::zeros(n + m, n, n),
+            za: DVector::zeros(nf),
+            zj: DVector::zeros(nf),
+            zl: DVector::zeros(m),
+            c: DMatrix::zeros(n + m, n),
+            zero: DVector::zeros(nf),
+        }));
+        self
+    }
+    /// The second-order results (with [`MimicImpactData::with_second_order`]).
+    pub fn so(&self) -> Option<&MimicImpactSo> {
+        self.so.as_deref()
+    }
     /// Workspace for `contacts` on `model` (frames of the full tree), restitution `0`.
     ///
     /// # Errors
@@ -1792,6 +1859,7 @@ impl MimicImpactData {
             r_bot: mat(m, n),
             col_n: DVector::zeros(n),
             col_m: DVector::zeros(m),
+            so: None,
         })
     }
     /// Sets the coefficient of restitution `e` (`q̇⁺` of the contact rows is `−e` times `q̇⁻`'s).
@@ -1951,4 +2019,227 @@ pub fn impact_derivatives(
         }
     }
     Ok(())
+}
+
+/// Second-order derivatives of the impact dynamics in the reduced coordinates (and the first
+/// order, as [`impact_derivatives`]): `∂²y/∂u∂w = −R_y⁻¹ (R_uw + G(∂y/∂w)[·, u] +
+/// G(∂y/∂u)[·, w])` on the reduced residual, with `R_qq = P R^f_qq G G` (the full tree's
+/// `∂²(M_f Δ)/∂q² − ∂²(Jᵀλ̂)/∂q²` and `∂²(J w)/∂q²` at `Δ = G(q̇⁺ − q̇⁻)`, `λ̂`,
+/// `w = G(q̇⁺ + e q̇⁻)`: IDSOZA and the contact-point kinematics; rows `P = diag(Gᵀ, I)`,
+/// `q` indices contracted with `G`) and the `G` products of the expanded reduced derivatives
+/// (`∂q̈`-type vectors mapped by `G`). Results in `im.so()`.
+///
+/// # Errors
+/// As [`impact_derivatives`], and a workspace without [`MimicImpactData::with_second_order`].
+pub fn impact_so_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    im: &mut MimicImpactData,
+    q: &DVector<f64>,
+    vminus: &DVector<f64>,
+) -> Result<()> {
+    let mut so = im.so.take().ok_or_else(|| {
+        Error::Workspace(
+            "impact_so_derivatives: MimicImpactData was made without with_second_order".into(),
+        )
+    })?;
+    let r = impact_derivatives(model, data, im, q, vminus)
+        .map(|()| impact_so_reduce(model, data, im, &mut so));
+    im.so = Some(so);
+    r
+}
+
+fn impact_so_reduce(
+    model: &MimicModel,
+    data: &mut MimicData,
+    im: &mut MimicImpactData,
+    so: &mut MimicImpactSo,
+) {
+    use crate::deriv::contact::{base, g_matrix_split, update_points};
+    use crate::deriv::contact_kin::{
+        Dir, djac_col_dq, djtl_dq, djz_dq, djz_dq_rows, put_rows, rows_dot,
+    };
+    use crate::spatial::Motion;
+    let full = &model.full;
+    let (n, nf, m) = (model.nv, full.nv(), im.dim());
+    let (gc, gk) = (&model.g_col, &model.g_coef);
+    let e = im.restitution;
+    // IDSOZA: ∂²(M Δ)/∂q² (zero velocity, no gravity, q̈ = Δ).
+    crate::deriv::id_so::id_so_unchecked(
+        full,
+        &mut data.full,
+        &mut so.id,
+        &data.q,
+        &so.zero,
+        &im.dvf,
+        None,
+        Motion::zero(),
+    );
+    update_points(full, &data.full, &mut im.cd, Motion::zero());
+    let rf = &mut so.rf;
+    rf.fill(0.0);
+    {
+        let t = so.id.d2tau_dq2();
+        for k in 0..nf {
+            for j in 0..nf {
+                for i in 0..nf {
+                    rf[(i, j, k)] = t[(i, j, k)];
+                }
+            }
+        }
+    }
+    // − ∂²(Jᵀλ̂)/∂q² and ∂²(J w)/∂q² (as the full tree's impact second order).
+    let mut zc = std::mem::take(&mut im.cd.zc);
+    {
+        let b = base(full, &data.full, &im.cd);
+        for (c, path) in im.cd.paths.iter().enumerate() {
+            let body = *path.joints.last().expect("path");
+            let (geo, r0) = (im.cd.geo[c], im.cd.row0[c]);
+            for &j in &path.joints {
+                let parent = full.parents()[j];
+                let mut zj = if parent == 0 { Motion::zero() } else { zc[parent] };
+                let iv = full.idx_v()[j];
+                for x in iv..iv + full.nvs()[j] {
+                    zj += data.full.s_world[x] * im.wf[x];
+                }
+                zc[j] = zj;
+            }
+            if !geo.is_point() {
+                let lam = &im.impulse.as_slice()[r0..r0 + geo.dim()];
+                let (rot, p) = (&path.rot, &path.p);
+                let mut col = [0.0; 6];
+                for &k in &path.dofs {
+                    for &l in &path.dofs {
+                        for &x in &path.dofs {
+                            let d = djac_col_dq(&b, geo, rot, p, x, l, Dir::Q(k));
+                            rf[(x, l, k)] -= rows_dot(geo, &d, lam).1;
+                        }
+                        let rows = djz_dq_rows(&b, geo, rot, &zc, body, p, l, Dir::Q(k));
+                        put_rows(geo, &rows, true, &mut col);
+                        for (r, x) in col[..geo.dim()].iter().enumerate() {
+                            rf[(nf + r0 + r, l, k)] = *x;
+                        }
+                    }
+                }
+                continue;
+            }
+            let lam =
+                nalgebra::Vector3::new(im.impulse[r0], im.impulse[r0 + 1], im.impulse[r0 + 2]);
+            for &k in &path.dofs {
+                for &l in &path.dofs {
+                    for &x in &path.dofs {
+                        rf[(x, l, k)] -= djtl_dq(&b, &path.p, &lam, x, l, Dir::Q(k)).1;
+                    }
+                    let d = djz_dq(&b, &zc, body, &path.p, l, Dir::Q(k)).d;
+                    for r in 0..3 {
+                        rf[(nf + r0 + r, l, k)] = d[r];
+                    }
+                }
+            }
+        }
+    }
+    im.cd.zc = zc;
+    // R_qq reduced: rows by P, (j, k) by G.
+    so.sqq.fill(0.0);
+    so.sqv.fill(0.0);
+    for k in 0..nf {
+        for j in 0..nf {
+            let c = gk[j] * gk[k];
+            let (jr, kr) = (gc[j], gc[k]);
+            for i in 0..nf {
+                so.sqq[(gc[i], jr, kr)] += gk[i] * c * rf[(i, j, k)];
+            }
+            for r in 0..m {
+                so.sqq[(n + r, jr, kr)] += c * rf[(nf + r, j, k)];
+            }
+        }
+    }
+    // The G products: (q, q) of the columns of ∂y/∂q, both orders; (q, q̇⁻_k) with
+    // z_m = G(∂q̇⁺/∂q̇⁻_k − e_k), z_J = G(∂q̇⁺/∂q̇⁻_k + e e_k), z₂ = ∂λ̂/∂q̇⁻_k.
+    for pass in 0..2 {
+        for k in 0..n {
+            for f in 0..nf {
+                let (c, g) = (gc[f], gk[f]);
+                if pass == 0 {
+                    so.za[f] = g * im.dvplus_dq[(c, k)];
+                    so.zj[f] = so.za[f];
+                } else {
+                    let x = im.dvplus_dvminus[(c, k)];
+                    let d = if c == k { 1.0 } else { 0.0 };
+                    so.za[f] = g * (x - d);
+                    so.zj[f] = g * (x + e * d);
+                }
+            }
+            for r in 0..m {
+                so.zl[r] =
+                    if pass == 0 { im.dimpulse_dq[(r, k)] } else { im.dimpulse_dvminus[(r, k)] };
+            }
+            g_matrix_split(
+                full,
+                &mut data.full,
+                &mut im.cd,
+                so.za.as_slice(),
+                so.zl.as_slice(),
+                so.zj.as_slice(),
+            );
+            let g = &im.cd.g;
+            so.c.fill(0.0);
+            for u in 0..nf {
+                let (ur, gu) = (gc[u], gk[u]);
+                for f in 0..nf {
+                    so.c[(gc[f], ur)] += gk[f] * gu * g[(f, u)];
+                }
+                for r in 0..m {
+                    so.c[(n + r, ur)] += gu * g[(nf + r, u)];
+                }
+            }
+            for u in 0..n {
+                for i in 0..n + m {
+                    let x = so.c[(i, u)];
+                    if pass == 0 {
+                        so.sqq[(i, u, k)] += x;
+                        so.sqq[(i, k, u)] += x;
+                    } else {
+                        so.sqv[(i, u, k)] += x;
+                    }
+                }
+            }
+        }
+    }
+    // T = −R_y⁻¹ S.
+    for pass in 0..2 {
+        for k in 0..n {
+            for j in 0..n {
+                let src = if pass == 0 { &so.sqq } else { &so.sqv };
+                for i in 0..n {
+                    im.col_n[i] = -src[(i, j, k)];
+                }
+                for r in 0..m {
+                    im.col_m[r] = -src[(n + r, j, k)];
+                }
+                let (mut cn, mut cm) =
+                    (std::mem::take(&mut im.col_n), std::mem::take(&mut im.col_m));
+                kkt_solve_with(
+                    &data.ldl,
+                    &im.jr,
+                    &im.minv_jt,
+                    &im.del,
+                    cn.as_mut_slice(),
+                    cm.as_mut_slice(),
+                );
+                let (oa, ol) = if pass == 0 {
+                    (&mut so.d2vplus_dq2, &mut so.d2impulse_dq2)
+                } else {
+                    (&mut so.d2vplus_dqdvminus, &mut so.d2impulse_dqdvminus)
+                };
+                for i in 0..n {
+                    oa[(i, j, k)] = cn[i];
+                }
+                for r in 0..m {
+                    ol[(r, j, k)] = cm[r];
+                }
+                (im.col_n, im.col_m) = (cn, cm);
+            }
+        }
+    }
 }

@@ -721,3 +721,39 @@ fn impact_first_order_matches_dual_oracle() {
     let mut im = MimicImpactData::new(&m, &arm_contacts(&m)).unwrap();
     assert!(im.set_restitution(-1.0).unwrap_err().to_string().contains("restitution"));
 }
+
+#[test]
+fn impact_second_order_matches_hyper_dual_oracle() {
+    use sodyn::mimic::MimicImpactData;
+    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
+    let r = oracle(&m);
+    let mut data = MimicData::new(&m);
+    let n = m.nv();
+    let contacts = arm_contacts_with(&m, false);
+    let rows =
+        |t: &Tensor3, a: usize, b: usize| Tensor3::from_fn(b, n, n, |i, j, k| t[(a + i, j, k)]);
+    let mut worst = [0.0f64; 4];
+    for e in [0.0, 0.4] {
+        let mut im = MimicImpactData::new(&m, &contacts).unwrap().with_second_order(&m);
+        im.set_restitution(e).unwrap();
+        let mut rng = Rng::new(25);
+        for _ in 0..2 {
+            let [q, vm, _] = state(&m, &mut rng);
+            let (qs, vs) = (q.as_slice(), vm.as_slice());
+            mimic::impact_so_derivatives(&m, &mut data, &mut im, &q, &vm).unwrap();
+            let so = im.so().unwrap();
+            let [dq2, dqdv] = r.impact_so(qs, vs, &contacts, e);
+            let mm = im.dim();
+            worst[0] = worst[0].max(ten_err(so.d2vplus_dq2(), &rows(&dq2, 0, n)));
+            worst[1] = worst[1].max(ten_err(so.d2vplus_dqdvminus(), &rows(&dqdv, 0, n)));
+            worst[2] = worst[2].max(ten_err(so.d2impulse_dq2(), &rows(&dq2, n, mm)));
+            worst[3] = worst[3].max(ten_err(so.d2impulse_dqdvminus(), &rows(&dqdv, n, mm)));
+        }
+    }
+    eprintln!(
+        "mimic impact SO vs hyper-dual oracle (relative): d2vplus_dq2 {:.1e} d2vplus_dqdvminus \
+         {:.1e} d2impulse_dq2 {:.1e} d2impulse_dqdvminus {:.1e}",
+        worst[0], worst[1], worst[2], worst[3]
+    );
+    assert!(worst.iter().all(|&e| e < TOL), "{worst:?}");
+}

@@ -250,6 +250,11 @@ fn mimic_algorithms_do_not_allocate() {
     check("mimic::impact_derivatives", &mut || {
         mimic::impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap()
     });
+    let mut im2 = mimic::MimicImpactData::new(&m, &contacts).unwrap().with_second_order(&m);
+    im2.set_restitution(0.3).unwrap();
+    check("mimic::impact_so_derivatives", &mut || {
+        mimic::impact_so_derivatives(&m, &mut d, &mut im2, &q, &v).unwrap()
+    });
     check("mimic::constrained_id_derivatives", &mut || {
         mimic::constrained_id_derivatives(&m, &mut d, &mut kd, Some(&mut so), &q, &v, &a, &lam)
             .unwrap()

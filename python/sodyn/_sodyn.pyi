@@ -50,8 +50,8 @@ class Model:
         same kind is a ``SodynError``). Such a model supports ``rnea``, ``crba``, ``aba``,
         ``nonlinear_effects``, ``id_derivatives``, ``fd_derivatives``, ``id_so_derivatives``,
         ``fd_so_derivatives``, ``constrained_id_derivatives``, ``kkt_derivatives`` and
-        ``impact_derivatives`` (``order=1``); every other function raises ``SodynError`` naming
-        itself. See docs/python.md."""
+        ``impact_derivatives``; every other function raises ``SodynError`` naming itself. See
+        docs/python.md."""
     @staticmethod
     def from_urdf_string(xml: str, floating_base: bool = False,
                          strict_inertia: bool = False, mimic: bool = False) -> "Model":

@@ -460,8 +460,7 @@ impl PyModel {
                     "{what} does not support models with mimic joints (loaded with \
                      mimic=True); it supports rnea, crba, aba, nonlinear_effects, \
                      id_derivatives, fd_derivatives, id_so_derivatives, fd_so_derivatives, \
-                     constrained_id_derivatives, kkt_derivatives and impact_derivatives \
-                     (order=1)"
+                     constrained_id_derivatives, kkt_derivatives and impact_derivatives"
                 ),
             }));
         }
@@ -1481,18 +1480,29 @@ fn mimic_impact<'py>(
     v_minus: &Bound<'py, PyAny>,
     contacts: &[PyRef<'py, PyContact>],
     restitution: f64,
+    order: i64,
 ) -> PyResult<Bound<'py, PyDict>> {
     mimic_read(mm, d, q, Some(v_minus), None)?;
     let (cs, key) = resolve(full, contacts)?;
     mimic_ws(d)?;
     let PyData { q, v, mimic: Some(ws), .. } = d else { unreachable!() };
     let MimicWs { d: md, impact, .. } = &mut **ws;
-    if impact.as_ref().is_none_or(|(k, _)| *k != key) {
-        *impact = Some((key, MimicImpactData::new(mm, &cs).map_err(core_err)?));
+    let fits =
+        |k: &MimicImpactData, key2: &ContactKey| *key2 == key && (order == 1 || k.so().is_some());
+    if impact.as_ref().is_none_or(|(k2, im)| !fits(im, k2)) {
+        let mut im = MimicImpactData::new(mm, &cs).map_err(core_err)?;
+        if order == 2 {
+            im = im.with_second_order(mm);
+        }
+        *impact = Some((key, im));
     }
     let im = &mut impact.as_mut().expect("set above").1;
     im.set_restitution(restitution).map_err(core_err)?;
-    py.detach(|| mimic::impact_derivatives(mm, md, im, q, v)).map_err(core_err)?;
+    if order == 2 {
+        py.detach(|| mimic::impact_so_derivatives(mm, md, im, q, v)).map_err(core_err)?;
+    } else {
+        py.detach(|| mimic::impact_derivatives(mm, md, im, q, v)).map_err(core_err)?;
+    }
     let out = PyDict::new(py);
     out.set_item("vplus", out_vec(py, im.vplus()))?;
     out.set_item("impulse", out_vec(py, im.impulse()))?;
@@ -1503,6 +1513,16 @@ fn mimic_impact<'py>(
         ("dimpulse_dvminus", im.dimpulse_dvminus()),
     ] {
         out.set_item(k, out_mat(py, x))?;
+    }
+    if let Some(t) = im.so().filter(|_| order == 2) {
+        for (k, x) in [
+            ("d2vplus_dq2", t.d2vplus_dq2()),
+            ("d2vplus_dqdvminus", t.d2vplus_dqdvminus()),
+            ("d2impulse_dq2", t.d2impulse_dq2()),
+            ("d2impulse_dqdvminus", t.d2impulse_dqdvminus()),
+        ] {
+            out.set_item(k, out_tensor(py, x))?;
+        }
     }
     Ok(out)
 }
@@ -2551,15 +2571,17 @@ fn py_impact_derivatives<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
     if let Some(mm) = model.mimic.clone() {
-        if order == 2 {
-            return Err(core_err(Error::Argument {
-                name: "order".into(),
-                reason: "impact_derivatives(order=2) does not support models with mimic joints \
-                         (loaded with mimic=True); order=1 does"
-                    .into(),
-            }));
-        }
-        return mimic_impact(py, &mm, &model.m, &mut data, q, v_minus, &contacts, restitution);
+        return mimic_impact(
+            py,
+            &mm,
+            &model.m,
+            &mut data,
+            q,
+            v_minus,
+            &contacts,
+            restitution,
+            order,
+        );
     }
     let m = model.full_only("impact_derivatives")?;
     let d = &mut *data;

@@ -328,8 +328,14 @@ def test_contacts_match_central_differences():
         num[:, k] = (sodyn.impact_derivatives(model, d, step(k, h), v, contacts, 0.3).vplus
                      - sodyn.impact_derivatives(model, d, step(k, -h), v, contacts, 0.3).vplus) / (2 * h)
     assert rel_err(im.dvplus_dq, num)[0] < 1e-6
-    with pytest.raises(sodyn.SodynError, match="order=2"):
-        sodyn.impact_derivatives(model, d, q, v, contacts, order=2)
+    im2 = sodyn.impact_derivatives(model, d, q, v, contacts, restitution=0.3, order=2)
+    np.testing.assert_allclose(im2.dvplus_dq, im.dvplus_dq, atol=1e-10)
+    num2 = np.zeros((n, n, n))
+    for k in range(n):
+        num2[:, :, k] = (sodyn.impact_derivatives(model, d, step(k, h), v, contacts, 0.3).dvplus_dvminus
+                         - sodyn.impact_derivatives(model, d, step(k, -h), v, contacts, 0.3).dvplus_dvminus) / (2 * h)
+    # d2vplus_dqdvminus[:, j, k] = d/dv_k (dvplus/dq_j) = d/dq_j (dvplus/dv_k) (v enters linearly).
+    assert rel_err(np.transpose(im2.d2vplus_dqdvminus, (0, 2, 1)), num2)[0] < 1e-6
     lam = rng.uniform(-3, 3, 9)
     a = rng.uniform(-1, 1, n)
     c2 = sodyn.constrained_id_derivatives(model, d, q, v, a, contacts, lam, order=2)

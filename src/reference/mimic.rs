@@ -431,6 +431,31 @@ impl Reduced<'_> {
             jacobian(nout, n, |j| stacked(&qd, &seeded(vminus, j, eps()))),
         ]
     }
+    /// Second-order derivatives of [`Reduced::impact`]: `[q̇⁺; λ̂]` rows of `∂²/∂q²` (nested
+    /// tangent) and `∂/∂q̇⁻_k (∂/∂q_j)`.
+    pub fn impact_so(
+        &self,
+        q: &[f64],
+        vminus: &[f64],
+        contacts: &[Contact],
+        e: f64,
+    ) -> [Tensor3; 2] {
+        let n = self.nv();
+        let nout = n + contacts.iter().map(|c| c.dim()).sum::<usize>();
+        let (qh, vh) = (lift::<HyperDual64>(q), lift::<HyperDual64>(vminus));
+        let stacked = |q: &[HyperDual64], v: &[HyperDual64]| {
+            let (mut a, b) = self.impact(q, v, contacts, e);
+            a.extend(b);
+            a
+        };
+        [
+            hessian(nout, n, n, |j, k| stacked(&self.nested(q, j, k), &vh)),
+            hessian(nout, n, n, |j, k| {
+                let qj = self.perturb(&qh, j, eps1());
+                stacked(&qj, &seeded(vminus, k, eps2()))
+            }),
+        ]
+    }
     /// `∂τ/∂q`, `∂τ/∂v` of [`Reduced::constrained_rnea`] (`λ` fixed).
     pub fn d_constrained_rnea(
         &self,

@@ -182,7 +182,7 @@ pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<Stat
 
 /// The `eval --mimic` output: the keys of `eval` for the dynamics (`tau`, `M`, `b`, `qdd`,
 /// `dtau_dq`, `dtau_dv`, `dqdd_dq`, `dqdd_dv`, `Minv`, at order 2 the tensors) and, with
-/// contacts, `constrained_id`, `kkt` and `impact` (first order only), in the reduced
+/// contacts, `constrained_id`, `kkt` and `impact`, in the reduced
 /// coordinates, with an `"errors"` object for the outputs undefined at the state.
 pub(crate) fn eval_json(mm: &MimicModel, s: &State, order: u32) -> Result<Value> {
     let model = mm.full();
@@ -286,7 +286,7 @@ pub(crate) fn eval_json(mm: &MimicModel, s: &State, order: u32) -> Result<Value>
     Ok(out)
 }
 
-/// `constrained_id`, `kkt` and `impact` of a mimic model (the impact's first order only).
+/// `constrained_id`, `kkt` and `impact` of a mimic model.
 fn contact_outputs(
     mm: &MimicModel,
     s: &State,
@@ -362,19 +362,34 @@ fn contact_outputs(
     }
     let mut im = mimic::MimicImpactData::new(mm, &s.contacts)?;
     im.set_restitution(s.restitution)?;
-    match mimic::impact_derivatives(mm, data, &mut im, &s.q, &s.v) {
+    let r = if order >= 2 {
+        im = im.with_second_order(mm);
+        mimic::impact_so_derivatives(mm, data, &mut im, &s.q, &s.v)
+    } else {
+        mimic::impact_derivatives(mm, data, &mut im, &s.q, &s.v)
+    };
+    match r {
         Ok(()) => {
-            o.insert(
-                "impact".into(),
-                json!({
-                    "vplus": im.vplus().as_slice(),
-                    "impulse": im.impulse().as_slice(),
-                    "dvplus_dq": mat_json(im.dvplus_dq()),
-                    "dvplus_dvminus": mat_json(im.dvplus_dvminus()),
-                    "dimpulse_dq": mat_json(im.dimpulse_dq()),
-                    "dimpulse_dvminus": mat_json(im.dimpulse_dvminus()),
-                }),
-            );
+            let mut i = json!({
+                "vplus": im.vplus().as_slice(),
+                "impulse": im.impulse().as_slice(),
+                "dvplus_dq": mat_json(im.dvplus_dq()),
+                "dvplus_dvminus": mat_json(im.dvplus_dvminus()),
+                "dimpulse_dq": mat_json(im.dimpulse_dq()),
+                "dimpulse_dvminus": mat_json(im.dimpulse_dvminus()),
+            });
+            if let Some(t) = im.so() {
+                let io = i.as_object_mut().expect("object");
+                for (name, x) in [
+                    ("d2vplus_dq2", t.d2vplus_dq2()),
+                    ("d2vplus_dqdvminus", t.d2vplus_dqdvminus()),
+                    ("d2impulse_dq2", t.d2impulse_dq2()),
+                    ("d2impulse_dqdvminus", t.d2impulse_dqdvminus()),
+                ] {
+                    io.insert(name.into(), tensor_json(x));
+                }
+            }
+            o.insert("impact".into(), i);
         }
         Err(e) => singular(e, "impact", errors)?,
     }
