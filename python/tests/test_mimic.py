@@ -221,6 +221,9 @@ def test_reduced_model_api():
     dq = rng.uniform(-0.2, 0.2, 13)
     np.testing.assert_allclose(model.difference(q, model.integrate(q, dq)), dq, atol=1e-12)
     assert model.lower_limits.shape == (14,)
+    # From a string too.
+    ms = sodyn.Model.from_urdf_string(ARM.read_text(), floating_base=True, mimic=True)
+    np.testing.assert_array_equal(sodyn.rnea(ms, ms.create_data(), q, v, a), tau)
     # Pickling keeps the constraints.
     import pickle
     m2 = pickle.loads(pickle.dumps(model))
