@@ -757,3 +757,43 @@ fn impact_second_order_matches_hyper_dual_oracle() {
     );
     assert!(worst.iter().all(|&e| e < TOL), "{worst:?}");
 }
+
+/// The contracted second order equals the contraction `Σ_i w_i T[i, j, k]` of the dense
+/// reduced tensors (themselves checked against the hyper-dual oracle above).
+#[test]
+fn contracted_second_order_equals_contracted_tensors() {
+    use sodyn::mimic::MimicContractedData;
+    let contract = |t: &Tensor3, w: &DVector<f64>| {
+        let (n1, n2, n3) = t.dims();
+        DMatrix::from_fn(n2, n3, |j, k| (0..n1).map(|i| w[i] * t[(i, j, k)]).sum())
+    };
+    let mut worst = [0.0f64; 8];
+    for m in models() {
+        let mut data = MimicData::new(&m);
+        let mut so = MimicSoData::new(&m);
+        let mut cd = MimicContractedData::new(&m);
+        let mut rng = Rng::new(31);
+        for _ in 0..2 {
+            let [q, v, x] = state(&m, &mut rng);
+            let w = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
+            mimic::id_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
+            mimic::id_so_contracted(&m, &mut data, &mut cd, &q, &v, &x, &w).unwrap();
+            worst[0] = worst[0].max(mat_err(cd.c_qq(), &contract(so.d2tau_dq2(), &w)));
+            worst[1] = worst[1].max(mat_err(cd.c_vv(), &contract(so.d2tau_dv2(), &w)));
+            worst[2] = worst[2].max(mat_err(cd.c_qv(), &contract(so.d2tau_dqdv(), &w)));
+            worst[3] = worst[3].max(mat_err(cd.c_mq(), &contract(so.dm_dq(), &w)));
+            mimic::fd_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
+            mimic::fd_so_contracted(&m, &mut data, &mut cd, &q, &v, &x, &w).unwrap();
+            worst[4] = worst[4].max(mat_err(cd.c_qq(), &contract(so.d2qdd_dq2(), &w)));
+            worst[5] = worst[5].max(mat_err(cd.c_vv(), &contract(so.d2qdd_dv2(), &w)));
+            worst[6] = worst[6].max(mat_err(cd.c_qv(), &contract(so.d2qdd_dqdv(), &w)));
+            worst[7] = worst[7].max(mat_err(cd.c_tauq(), &contract(so.d2qdd_dtaudq(), &w)));
+        }
+    }
+    eprintln!(
+        "mimic contracted SO vs contracted dense tensors (relative): id qq {:.1e} vv {:.1e} qv \
+         {:.1e} Mq {:.1e}; fd qq {:.1e} vv {:.1e} qv {:.1e} tauq {:.1e}",
+        worst[0], worst[1], worst[2], worst[3], worst[4], worst[5], worst[6], worst[7]
+    );
+    assert!(worst.iter().all(|&e| e < TOL), "{worst:?}");
+}

@@ -255,6 +255,13 @@ fn mimic_algorithms_do_not_allocate() {
     check("mimic::impact_so_derivatives", &mut || {
         mimic::impact_so_derivatives(&m, &mut d, &mut im2, &q, &v).unwrap()
     });
+    let mut cc = mimic::MimicContractedData::new(&m);
+    check("mimic::id_so_contracted", &mut || {
+        mimic::id_so_contracted(&m, &mut d, &mut cc, &q, &v, &a, &v).unwrap()
+    });
+    check("mimic::fd_so_contracted", &mut || {
+        mimic::fd_so_contracted(&m, &mut d, &mut cc, &q, &v, &a, &v).unwrap()
+    });
     check("mimic::constrained_id_derivatives", &mut || {
         mimic::constrained_id_derivatives(&m, &mut d, &mut kd, Some(&mut so), &q, &v, &a, &lam)
             .unwrap()
