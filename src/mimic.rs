@@ -29,9 +29,10 @@
 //! [`crate::deriv::fd_so_derivatives`]; their workspaces are [`MimicData`] and [`MimicSoData`],
 //! allocated once. Contacts (frames of the full tree): [`constrained_id_derivatives`] (first and
 //! second order), [`kkt_derivatives`], [`kkt_so_derivatives`], [`impact_derivatives`] and
-//! [`impact_so_derivatives`], with the workspaces [`MimicKktData`] and [`MimicImpactData`]. The
-//! other algorithms of the crate (kinematics, frames, contracted second order, batches) take the
-//! full [`Model`] only.
+//! [`impact_so_derivatives`], with the workspaces [`MimicKktData`] and [`MimicImpactData`].
+//! Contracted second order: [`id_so_contracted`], [`fd_so_contracted`]
+//! ([`MimicContractedData`]). The other algorithms of the crate (kinematics, frames, the
+//! contracted KKT and impact second order, batches) take the full [`Model`] only.
 
 use crate::algo::Data;
 use crate::deriv::{ContactData, KktData, SoData};

@@ -1125,6 +1125,7 @@ fn mimic_commands_use_the_reduced_coordinates() {
     let mut st_c = state.clone();
     st_c["contacts"] = serde_json::json!([{"frame": "tool"}, {"frame": "thumb_tip", "type": "6d"}]);
     st_c["restitution"] = serde_json::json!(0.3);
+    st_c["weights"] = serde_json::json!({"qdd": vec![0.5; 13]});
     std::fs::write(&with_contacts, st_c.to_string()).unwrap();
     let wc = with_contacts.to_str().unwrap();
     let o =
@@ -1146,6 +1147,10 @@ fn mimic_commands_use_the_reduced_coordinates() {
     assert!((vector(&v2["impact"], "vplus", n) - im.vplus()).amax() < 1e-12);
     check_tensor_shape(&v2["impact"], "d2vplus_dq2", n);
     check_tensor_shape(&v2["constrained_id"], "d2tau_dq2", n);
+    let mut cc = mimic::MimicContractedData::new(&m);
+    mimic::fd_so_contracted(&m, &mut d, &mut cc, &q, &vel, &tau, &DVector::from_element(n, 0.5))
+        .unwrap();
+    assert!((matrix(&v2["contracted"]["fd"], "d2qdd_dq2", n) - cc.c_qq()).amax() < 1e-12);
     // Unsupported inputs and models.
     let with_frames = tmp("mimic-frames.json");
     std::fs::write(&with_frames, r#"{"frames": ["tool"]}"#).unwrap();

@@ -49,9 +49,9 @@ class Model:
         ``<mimic>`` whose reference is unknown, a mimic joint, or not a one-DoF joint of the
         same kind is a ``SodynError``). Such a model supports ``rnea``, ``crba``, ``aba``,
         ``nonlinear_effects``, ``id_derivatives``, ``fd_derivatives``, ``id_so_derivatives``,
-        ``fd_so_derivatives``, ``constrained_id_derivatives``, ``kkt_derivatives`` and
-        ``impact_derivatives``; every other function raises ``SodynError`` naming itself. See
-        docs/python.md."""
+        ``fd_so_derivatives``, ``id_so_contracted``, ``fd_so_contracted``,
+        ``constrained_id_derivatives``, ``kkt_derivatives`` and ``impact_derivatives``; every
+        other function raises ``SodynError`` naming itself. See docs/python.md."""
     @staticmethod
     def from_urdf_string(xml: str, floating_base: bool = False,
                          strict_inertia: bool = False, mimic: bool = False) -> "Model":

@@ -29,7 +29,8 @@ use sodyn::deriv::{
     impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
 };
 use sodyn::mimic::{
-    self, MimicData, MimicImpactData, MimicJoint, MimicKktData, MimicModel, MimicSoData,
+    self, MimicContractedData, MimicData, MimicImpactData, MimicJoint, MimicKktData, MimicModel,
+    MimicSoData,
 };
 use sodyn::model::{
     ContactReference, ContactType, JointType, MjcfOptions, Model, ModelBuilder, UrdfOptions,
@@ -460,7 +461,8 @@ impl PyModel {
                     "{what} does not support models with mimic joints (loaded with \
                      mimic=True); it supports rnea, crba, aba, nonlinear_effects, \
                      id_derivatives, fd_derivatives, id_so_derivatives, fd_so_derivatives, \
-                     constrained_id_derivatives, kkt_derivatives and impact_derivatives"
+                     id_so_contracted, fd_so_contracted, constrained_id_derivatives, \
+                     kkt_derivatives and impact_derivatives"
                 ),
             }));
         }
@@ -1129,7 +1131,13 @@ impl PyData {
     fn for_py_model(m: &PyModel) -> Self {
         let mut d = Self::for_model(&m.m);
         d.mimic = m.mimic.as_ref().map(|mm| {
-            Box::new(MimicWs { d: MimicData::new(mm), so: None, kkt: None, impact: None })
+            Box::new(MimicWs {
+                d: MimicData::new(mm),
+                so: None,
+                con: None,
+                kkt: None,
+                impact: None,
+            })
         });
         d
     }
@@ -1165,6 +1173,7 @@ fn read_qvx(
 struct MimicWs {
     d: MimicData,
     so: Option<MimicSoData>,
+    con: Option<MimicContractedData>,
     kkt: Option<(ContactKey, MimicKktData)>,
     impact: Option<(ContactKey, MimicImpactData)>,
 }
@@ -1527,6 +1536,36 @@ fn mimic_impact<'py>(
     Ok(out)
 }
 
+/// `id_so_contracted` (`fd = false`) or `fd_so_contracted` (`fd = true`) of a mimic model.
+#[allow(clippy::too_many_arguments)]
+fn mimic_contracted<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    x: &Bound<'py, PyAny>,
+    w: &Bound<'py, PyAny>,
+    fd: bool,
+) -> PyResult<Bound<'py, PyTuple>> {
+    mimic_read(mm, d, q, Some(v), Some((x, if fd { "tau" } else { "a" })))?;
+    read_vec(w, "w", mm.nv(), "nv (reduced coordinates)", &mut d.w)?;
+    mimic_ws(d)?;
+    let PyData { q, v, a, w, mimic: Some(ws), .. } = d else { unreachable!() };
+    let MimicWs { d: md, con, .. } = &mut **ws;
+    let c = con.get_or_insert_with(|| MimicContractedData::new(mm));
+    if fd {
+        py.detach(|| mimic::fd_so_contracted(mm, md, c, q, v, a, w)).map_err(core_err)?;
+    } else {
+        py.detach(|| mimic::id_so_contracted(mm, md, c, q, v, a, w)).map_err(core_err)?;
+    }
+    let last = if fd { c.c_tauq() } else { c.c_mq() };
+    PyTuple::new(
+        py,
+        [out_mat(py, c.c_qq()), out_mat(py, c.c_vv()), out_mat(py, c.c_qv()), out_mat(py, last)],
+    )
+}
+
 // ---------------------------------------------------------------------------------------------
 // Dynamics and derivatives
 // ---------------------------------------------------------------------------------------------
@@ -1759,6 +1798,9 @@ fn id_so_contracted<'py>(
     a: &Bound<'py, PyAny>,
     w: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyTuple>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_contracted(py, &mm, &mut data, q, v, a, w, false);
+    }
     let m = model.full_only("id_so_contracted")?;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
@@ -1789,6 +1831,9 @@ fn fd_so_contracted<'py>(
     tau: &Bound<'py, PyAny>,
     w: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyTuple>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_contracted(py, &mm, &mut data, q, v, tau, w, true);
+    }
     let m = model.full_only("fd_so_contracted")?;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;

@@ -276,7 +276,7 @@ def test_unsupported_functions_and_bad_inputs_raise():
     for f, args in [(sodyn.center_of_mass, (q,)),
                     (sodyn.kkt_so_contracted, (q, np.zeros(7), np.zeros(7), [sodyn.Contact("tool")],
                                                np.ones(7), np.ones(3))),
-                    (sodyn.id_so_contracted, (q, np.zeros(7), np.zeros(7), np.ones(7)))]:
+                    (sodyn.idfoza, (q, np.ones(7)))]:
         with pytest.raises(sodyn.SodynError, match="does not support models with mimic"):
             f(model, d, *args)
     with pytest.raises(sodyn.SodynError, match="does not support models with mimic"):
@@ -348,3 +348,18 @@ def test_contacts_match_central_differences():
                      - sodyn.constrained_id_derivatives(model, d, step(k, -h), v, a, contacts, lam).tau) / (2 * h)
     assert rel_err(c2.dtau_dq, num)[0] < 1e-6
     assert c2.d2tau_dq2.shape == (n, n, n)
+
+
+def test_contracted_second_order_equals_contracted_tensors():
+    model = sodyn.Model.from_urdf(str(ARM), floating_base=True, mimic=True)
+    d = model.create_data()
+    rng = np.random.default_rng(9)
+    q = model.random_configuration(seed=9)
+    v, x, w = (rng.uniform(-1, 1, model.nv) for _ in range(3))
+    for fd in (False, True):
+        f, g = ((sodyn.fd_so_contracted, sodyn.fd_so_derivatives) if fd
+                else (sodyn.id_so_contracted, sodyn.id_so_derivatives))
+        cs = f(model, d, q, v, x, w)
+        ts = g(model, d, q, v, x)
+        for c, t in zip(cs, ts):
+            np.testing.assert_allclose(c, np.einsum("i,ijk->jk", w, t), atol=1e-11)

@@ -112,24 +112,40 @@ pub(crate) struct State {
     contacts: Vec<sodyn::model::Contact>,
     lambda: DVector<f64>,
     restitution: f64,
+    /// The weights `tau`, `qdd` of the contracted second order.
+    w_tau: Option<DVector<f64>>,
+    w_qdd: Option<DVector<f64>>,
 }
 
 /// Parses a state file for a mimic model: `q` (length nq, default neutral), `v`, `a`, `tau`
-/// (length nv, default zeros), and `contacts`, `lambda`, `restitution` as without `--mimic`
-/// (frames of the full tree); `frames` and `weights` are errors (not supported with
-/// `--mimic`).
+/// (length nv, default zeros), `contacts`, `lambda`, `restitution` as without `--mimic`
+/// (frames of the full tree) and `weights` `tau`, `qdd` (length nv); `frames` and the contact
+/// weights are errors (not supported with `--mimic`).
 pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<State> {
     let val: Value =
         serde_json::from_str(text).map_err(|e| Error::Io(format!("{file}: invalid JSON: {e}")))?;
     let obj = val
         .as_object()
         .ok_or_else(|| Error::Io(format!("{file}: the state must be a JSON object")))?;
-    let known = ["q", "v", "a", "tau", "contacts", "lambda", "restitution"];
+    let known = ["q", "v", "a", "tau", "contacts", "lambda", "restitution", "weights"];
     if let Some(k) = obj.keys().find(|k| !known.contains(&k.as_str())) {
         return Err(Error::Io(format!(
             "{file}: key \"{k}\" is not supported with --mimic (a mimic model's state has q, v, a, \
-             tau, contacts, lambda, restitution: frames and contracted weights take models \
-             without --mimic)"
+             tau, contacts, lambda, restitution, weights: frames take models without --mimic)"
+        )));
+    }
+    let weights = match obj.get("weights") {
+        None => serde_json::Map::new(),
+        Some(Value::Object(w)) => w.clone(),
+        Some(_) => {
+            return Err(Error::Io(format!(
+                "{file}: key \"weights\" must be an object of number lists"
+            )));
+        }
+    };
+    if let Some(k) = weights.keys().find(|k| !["tau", "qdd"].contains(&k.as_str())) {
+        return Err(Error::Io(format!(
+            "{file}: key \"weights.{k}\" is not supported with --mimic (tau and qdd are)"
         )));
     }
     // The contacts, λ and restitution by the parser of eval (frames of the full tree).
@@ -166,6 +182,19 @@ pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<Stat
         Ok(Some(out))
     };
     let (nq, nv, fq, fv) = (mm.nq(), mm.nv(), mm.full().nq(), mm.full().nv());
+    let weight = |key: &str| -> Result<Option<DVector<f64>>> {
+        let Some(val) = weights.get(key) else { return Ok(None) };
+        let arr = val.as_array().filter(|a| a.len() == nv).ok_or_else(|| {
+            Error::Io(format!("{file}: key \"weights.{key}\" must be a list of {nv} numbers"))
+        })?;
+        let mut out = DVector::zeros(nv);
+        for (i, x) in arr.iter().enumerate() {
+            out[i] = x.as_f64().filter(|x| x.is_finite()).ok_or_else(|| {
+                Error::Io(format!("{file}: key \"weights.{key}\"[{i}] is not a finite number"))
+            })?;
+        }
+        Ok(Some(out))
+    };
     let q = read("q", nq, fq)?.unwrap_or_else(|| mm.neutral());
     mm.check_q(&q)?;
     let z = || DVector::zeros(nv);
@@ -177,12 +206,14 @@ pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<Stat
         contacts: cst.contacts,
         lambda: cst.lambda,
         restitution: cst.restitution,
+        w_tau: weight("tau")?,
+        w_qdd: weight("qdd")?,
     })
 }
 
 /// The `eval --mimic` output: the keys of `eval` for the dynamics (`tau`, `M`, `b`, `qdd`,
-/// `dtau_dq`, `dtau_dv`, `dqdd_dq`, `dqdd_dv`, `Minv`, at order 2 the tensors) and, with
-/// contacts, `constrained_id`, `kkt` and `impact`, in the reduced
+/// `dtau_dq`, `dtau_dv`, `dqdd_dq`, `dqdd_dv`, `Minv`, at order 2 the tensors), with contacts
+/// `constrained_id`, `kkt` and `impact`, with weights `contracted` (`id`, `fd`), in the reduced
 /// coordinates, with an `"errors"` object for the outputs undefined at the state.
 pub(crate) fn eval_json(mm: &MimicModel, s: &State, order: u32) -> Result<Value> {
     let model = mm.full();
@@ -279,6 +310,39 @@ pub(crate) fn eval_json(mm: &MimicModel, s: &State, order: u32) -> Result<Value>
     }
     if !s.contacts.is_empty() {
         contact_outputs(mm, s, order, &mut data, o, &mut errors)?;
+    }
+    if s.w_tau.is_some() || s.w_qdd.is_some() {
+        let mut c = Map::new();
+        let mut con = mimic::MimicContractedData::new(mm);
+        if let Some(w) = &s.w_tau {
+            mimic::id_so_contracted(mm, &mut data, &mut con, &s.q, &s.v, &s.a, w)?;
+            c.insert(
+                "id".into(),
+                json!({
+                    "d2tau_dq2": mat_json(con.c_qq()),
+                    "d2tau_dv2": mat_json(con.c_vv()),
+                    "d2tau_dqdv": mat_json(con.c_qv()),
+                    "dM_dq": mat_json(con.c_mq()),
+                }),
+            );
+        }
+        if let Some(w) = &s.w_qdd {
+            match mimic::fd_so_contracted(mm, &mut data, &mut con, &s.q, &s.v, &s.tau, w) {
+                Ok(()) => {
+                    c.insert(
+                        "fd".into(),
+                        json!({
+                            "d2qdd_dq2": mat_json(con.c_qq()),
+                            "d2qdd_dv2": mat_json(con.c_vv()),
+                            "d2qdd_dqdv": mat_json(con.c_qv()),
+                            "d2qdd_dtaudq": mat_json(con.c_tauq()),
+                        }),
+                    );
+                }
+                Err(e) => undefined(e, &["contracted.fd"], &mut errors)?,
+            }
+        }
+        o.insert("contracted".into(), Value::Object(c));
     }
     if !errors.is_empty() {
         o.insert("errors".into(), Value::Object(errors));
