@@ -34,6 +34,14 @@ fn models() -> Vec<MimicModel> {
     out
 }
 
+/// The floating arm, and the same with an armature on every DoF of the full tree.
+fn ff_models() -> Vec<MimicModel> {
+    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
+    let arm: Vec<f64> = (0..m.full().nv()).map(|k| 0.02 * (k % 3) as f64).collect();
+    let with = MimicModel::new(m.full().with_armature(&arm).unwrap(), m.mimics()).unwrap();
+    vec![m, with]
+}
+
 fn oracle(m: &MimicModel) -> Reduced<'_> {
     Reduced { full: m.full(), mimics: m.mimics() }
 }
@@ -520,26 +528,29 @@ fn arm_contacts(m: &MimicModel) -> Vec<sodyn::model::Contact> {
 
 #[test]
 fn kkt_first_order_matches_dual_oracle() {
-    for finger in [false, true] {
-        kkt_first_order_case(finger);
+    for (k, m) in ff_models().into_iter().enumerate() {
+        for finger in [false, true] {
+            if k == 0 || !finger {
+                kkt_first_order_case(&m, finger);
+            }
+        }
     }
 }
 
-fn kkt_first_order_case(finger: bool) {
+fn kkt_first_order_case(m: &MimicModel, finger: bool) {
     use sodyn::mimic::MimicKktData;
-    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
-    let contacts = arm_contacts_with(&m, finger);
-    let r = oracle(&m);
-    let mut data = MimicData::new(&m);
-    let mut kd = MimicKktData::new(&m, &contacts).unwrap();
+    let contacts = arm_contacts_with(m, finger);
+    let r = oracle(m);
+    let mut data = MimicData::new(m);
+    let mut kd = MimicKktData::new(m, &contacts).unwrap();
     assert_eq!(kd.dim(), if finger { 12 } else { 9 });
     let n = m.nv();
     let mut rng = Rng::new(21);
     let mut worst = [0.0f64; 8];
     for _ in 0..3 {
-        let [q, v, tau] = state(&m, &mut rng);
+        let [q, v, tau] = state(m, &mut rng);
         let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
-        mimic::kkt_derivatives(&m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        mimic::kkt_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
         let (qdd, lam) = r.kkt(qs, vs, ts, &contacts);
         worst[0] = worst[0].max(vec_err(kd.qdd(), &qdd));
         worst[1] = worst[1].max(vec_err(kd.lambda(), &lam));
@@ -637,21 +648,26 @@ fn constrained_id_matches_oracle() {
 
 #[test]
 fn kkt_second_order_matches_hyper_dual_oracle() {
+    for m in ff_models() {
+        kkt_second_order_case(&m);
+    }
+}
+
+fn kkt_second_order_case(m: &MimicModel) {
     use sodyn::mimic::MimicKktData;
-    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
-    let r = oracle(&m);
-    let mut data = MimicData::new(&m);
-    let contacts = arm_contacts_with(&m, false);
-    let mut kd = MimicKktData::new(&m, &contacts).unwrap().with_second_order(&m);
+    let r = oracle(m);
+    let mut data = MimicData::new(m);
+    let contacts = arm_contacts_with(m, false);
+    let mut kd = MimicKktData::new(m, &contacts).unwrap().with_second_order(m);
     let n = m.nv();
     let mut rng = Rng::new(23);
     let mut worst = [0.0f64; 8];
     let rows =
         |t: &Tensor3, a: usize, b: usize| Tensor3::from_fn(b, n, n, |i, j, k| t[(a + i, j, k)]);
     for _ in 0..2 {
-        let [q, v, tau] = state(&m, &mut rng);
+        let [q, v, tau] = state(m, &mut rng);
         let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
-        mimic::kkt_so_derivatives(&m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        mimic::kkt_so_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
         let so = kd.so().unwrap();
         let mm = kd.dim();
         let oracle = r.kkt_so(qs, vs, ts, &contacts);
@@ -664,7 +680,7 @@ fn kkt_second_order_matches_hyper_dual_oracle() {
         }
         // The first order of the same call equals kkt_derivatives'.
         let d1 = kd.dqdd_dq().clone();
-        mimic::kkt_derivatives(&m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        mimic::kkt_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
         let e = mat_err(kd.dqdd_dq(), &d1);
         assert!(e < 1e-11, "{e:e}");
     }
@@ -676,9 +692,9 @@ fn kkt_second_order_matches_hyper_dual_oracle() {
     );
     assert!(worst.iter().all(|&e| e < TOL), "{worst:?}");
     // Without the second-order workspace: an error.
-    let mut kd1 = MimicKktData::new(&m, &contacts).unwrap();
-    let [q, v, tau] = state(&m, &mut rng);
-    let e = mimic::kkt_so_derivatives(&m, &mut data, &mut kd1, &q, &v, &tau).unwrap_err();
+    let mut kd1 = MimicKktData::new(m, &contacts).unwrap();
+    let [q, v, tau] = state(m, &mut rng);
+    let e = mimic::kkt_so_derivatives(m, &mut data, &mut kd1, &q, &v, &tau).unwrap_err();
     assert!(e.to_string().contains("with_second_order"), "{e}");
 }
 
@@ -724,23 +740,28 @@ fn impact_first_order_matches_dual_oracle() {
 
 #[test]
 fn impact_second_order_matches_hyper_dual_oracle() {
+    for m in ff_models() {
+        impact_second_order_case(&m);
+    }
+}
+
+fn impact_second_order_case(m: &MimicModel) {
     use sodyn::mimic::MimicImpactData;
-    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
-    let r = oracle(&m);
-    let mut data = MimicData::new(&m);
+    let r = oracle(m);
+    let mut data = MimicData::new(m);
     let n = m.nv();
-    let contacts = arm_contacts_with(&m, false);
+    let contacts = arm_contacts_with(m, false);
     let rows =
         |t: &Tensor3, a: usize, b: usize| Tensor3::from_fn(b, n, n, |i, j, k| t[(a + i, j, k)]);
     let mut worst = [0.0f64; 4];
     for e in [0.0, 0.4] {
-        let mut im = MimicImpactData::new(&m, &contacts).unwrap().with_second_order(&m);
+        let mut im = MimicImpactData::new(m, &contacts).unwrap().with_second_order(m);
         im.set_restitution(e).unwrap();
         let mut rng = Rng::new(25);
         for _ in 0..2 {
-            let [q, vm, _] = state(&m, &mut rng);
+            let [q, vm, _] = state(m, &mut rng);
             let (qs, vs) = (q.as_slice(), vm.as_slice());
-            mimic::impact_so_derivatives(&m, &mut data, &mut im, &q, &vm).unwrap();
+            mimic::impact_so_derivatives(m, &mut data, &mut im, &q, &vm).unwrap();
             let so = im.so().unwrap();
             let [dq2, dqdv] = r.impact_so(qs, vs, &contacts, e);
             let mm = im.dim();
