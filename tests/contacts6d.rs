@@ -40,6 +40,8 @@ fn cases() -> Vec<(Model, Vec<Spec>)> {
         (with_random_armature(&builtin::serial_chain(9), 5, false), vec![("ee", D6, Lwa)]),
         (builtin::serial_chain(8), vec![("ee", D6, Local)]),
         (builtin::random_tree(8, 3, true), vec![("body_5", D6, Local), ("body_2", D3, Local)]),
+        // nv ≥ 32: the second order's symmetric products (`kkt::SYM_MIN_NV`).
+        (builtin::random_tree(28, 5, true), vec![("body_27", D6, Lwa), ("body_20", D3, Local)]),
         (
             with_random_armature(&builtin::random_tree(10, 21, false), 6, false),
             vec![("body_9", D3, Local), ("body_4", D3, Lwa)],

@@ -43,11 +43,13 @@
 //!    `∂p/∂q_l = u_l`) and `w_x × u_l` otherwise;
 //! 3. rows `nv + 3c..nv + 3c + 3`: `∂(Z_m.lin + Z_m.ang × p_c)/∂q_l` for the DoFs `l` on contact
 //!    `c`'s path (`m` its body), with `Z_j = Σ_{x ⪯ j} S_x z₁_x`,
-//!    `∂Z_m/∂q_l = S_l × (Z_m − Z_λ)` (`λ` the parent of `l`'s joint) and `∂p_c/∂q_l = u_l`.
+//!    `∂Z_m/∂q_l = S_l × (Z_m − Z_λ)` (`λ` the parent of `l`'s joint) and `∂p_c/∂q_l = u_l`;
+//!    for a 3-D world-aligned point, `w_l × Σ_{x ⪰ l} z₁_x u_x + (Σ_{x ≺ l} z₁_x w_x) × u_l`
+//!    by running sums (`contact_kin::djz_dq_parts`).
 
 use super::contact_kin::{
-    Base, Dir, Geo, Path, acc_rows, dacc_dq, dacc_dv, djac_col_dq, djz_dq, djz_dq_rows, jac_col,
-    put_rows, rows_dot,
+    Base, Dir, Geo, Path, PointCol, acc_rows, dacc_dq, dacc_dv, djac_col_dq, djz_dq_parts,
+    djz_dq_rows, jac_col, put_rows, rows_dot,
 };
 use super::zero::{IdfozaWs, idfoza_core, idfoza_lanes_core};
 use crate::algo::internal::ltl_solve_rows_desc;
@@ -57,8 +59,8 @@ use crate::linalg::{SpdWork, gemm, spd_inverse, transpose_strided};
 use crate::model::{Model, contact_label};
 #[cfg(target_arch = "x86_64")]
 use crate::simd::{Avx4, Avx8};
-use crate::spatial::Motion;
 use crate::spatial::Transform;
+use crate::spatial::{Force, Motion};
 use nalgebra::{DMatrix, DVector, Vector3};
 
 /// The largest number of point contacts [`ContactData::new`] accepts (`m` constraint rows).
@@ -132,6 +134,9 @@ pub struct ContactData {
     pub(crate) kacc: Vec<Motion>,
     /// `T_x = Σ_c u_x^c × λ_c` per DoF (see [`sub_djtl_dq_tree`]).
     tsum: Vec<Vector3<f64>>,
+    /// Per contact, its path DoFs' `w = S.ang`, point velocity columns `u = S.lin + S.ang × p`
+    /// and joints (see `contact_kin::PointCol`), as of the last [`update_points`].
+    pub(crate) pcols: Vec<Vec<PointCol>>,
     t3: Vec<Vector3<f64>>,
     tn: Vec<f64>,
     /// Regularisation `μ ≥ 0` added to the Delassus matrix `J M⁻¹ Jᵀ` (default 0: a
@@ -268,6 +273,13 @@ impl ContactData {
             kvel: vec![Motion::zero(); model.njoints()],
             kacc: vec![Motion::zero(); model.njoints()],
             tsum: vec![Vector3::zeros(); n],
+            pcols: paths
+                .iter()
+                .map(|p| {
+                    let zero = PointCol { w: Vector3::zeros(), u: Vector3::zeros(), joint: 0 };
+                    vec![zero; p.dofs.len()]
+                })
+                .collect(),
             t3: vec![Vector3::zeros(); maxd],
             tn: vec![0.0; n],
             contacts: contacts.to_vec(),
@@ -329,11 +341,6 @@ impl ContactData {
         self.m
     }
 
-    /// Contact body of contact `c`.
-    pub(crate) fn body(&self, c: usize) -> usize {
-        *self.paths[c].joints.last().expect("non-empty path")
-    }
-
     /// Contact names for error messages.
     fn names(&self, model: &Model) -> String {
         self.contacts
@@ -384,6 +391,11 @@ pub(crate) fn update_points(model: &Model, data: &Data, cd: &mut ContactData, a0
         cd.paths[c].p = pose.trans;
         cd.paths[c].rot = pose.rot;
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        for (pc, &x) in cd.pcols[c].iter_mut().zip(&cd.paths[c].dofs) {
+            let s = data.s_world[x];
+            let u = s.lin + s.ang.cross(&pose.trans);
+            *pc = PointCol { w: s.ang, u, joint: model.dof_joint[x] };
+        }
         for &x in &cd.paths[c].dofs {
             let s = data.s_world[x];
             if geo.is_point() {
@@ -861,11 +873,13 @@ fn sub_djtl_dq_generic(
         let (n, f) = if geo.six { (part(0), part(3)) } else { (Vector3::zeros(), part(0)) };
         let (n, f) = if geo.local { (path.rot * n, path.rot * f) } else { (n, f) };
         let p = path.p;
-        let (fa, fl) = (n + p.cross(&f), f);
+        let force = Force { ang: n + p.cross(&f), lin: f };
         for (il, &l) in path.dofs.iter().enumerate() {
             let (sl, jl) = (s[l], path.dof_joint[il]);
             let ul = sl.lin + sl.ang.cross(&p);
             let ulf = ul.cross(&f);
+            // (S_l × S_x)·F = −S_x·(S_l ×* F): one force cross product per l.
+            let g = sl.cross_force(&force);
             for (ix, &x) in path.dofs.iter().enumerate() {
                 let sx = s[x];
                 let anc = jl <= path.dof_joint[ix];
@@ -873,16 +887,10 @@ fn sub_djtl_dq_generic(
                     if anc {
                         continue;
                     }
-                    let c = sl.cross(&sx);
-                    -(c.ang.dot(&fa) + c.lin.dot(&fl))
+                    sx.dot(&g)
                 } else {
                     let t = sx.ang.dot(&ulf);
-                    if anc {
-                        let c = sl.cross(&sx);
-                        t + c.ang.dot(&fa) + c.lin.dot(&fl)
-                    } else {
-                        t
-                    }
+                    if anc { t - sx.dot(&g) } else { t }
                 };
                 o[rs * x + cs * l] -= e;
             }
@@ -1116,42 +1124,37 @@ pub(crate) fn g_matrix_with(
     cd.g.view_mut((0, 0), (n, n)).copy_from(zmat);
     let mut g = std::mem::replace(&mut cd.g, DMatrix::zeros(0, 0));
     sub_djtl_dq_tree(model, &data.s_world, cd, z2, &mut g);
-    // ∂(J z₁)/∂q rows: cumulative Z_j = Σ_{x ⪯ j} S_x z_x along the path.
-    let mut zc = std::mem::take(&mut cd.zc);
+    // ∂(J z₁)/∂q rows, by running sums along each contact's path.
     for (c, path) in cd.paths.iter().enumerate() {
-        for &j in &path.joints {
-            let parent = model.parents[j];
-            let mut zj = if parent == 0 { Motion::zero() } else { zc[parent] };
-            let iv = model.idx_v[j];
-            for (s, zx) in data.s_world[iv..iv + model.nvs[j]].iter().zip(&z[iv..iv + model.nvs[j]])
-            {
-                zj += *s * *zx;
-            }
-            zc[j] = zj;
-        }
-        zc[0] = Motion::zero();
-        let b = base(model, data, cd);
-        let m = cd.body(c);
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
-        if geo.is_point() {
-            for &l in &path.dofs {
-                let r = djz_dq(&b, &zc, m, &path.p, l, Dir::None).v;
-                for k in 0..3 {
-                    g[(n + r0 + k, l)] = r[k];
-                }
-            }
+        let rot = path.rot;
+        let cols = cd.pcols[c].iter().zip(&path.dofs).map(|(pc, &x)| (*pc, z[x]));
+        // The value J z (world-aligned) for the local axes' D(Rᵀ y) = Rᵀ(D y − w_l × y).
+        let (y_ang, y_lin) = if geo.local {
+            cols.clone().fold((Vector3::zeros(), Vector3::zeros()), |(a, l), (c, zx)| {
+                (a + c.w * zx, l + c.u * zx)
+            })
         } else {
-            let mut col = [0.0; 6];
-            for &l in &path.dofs {
-                let rows = djz_dq_rows(&b, geo, &path.rot, &zc, m, &path.p, l, Dir::None);
-                put_rows(geo, &rows, false, &mut col);
-                for k in 0..geo.dim() {
-                    g[(n + r0 + k, l)] = col[k];
-                }
+            (Vector3::zeros(), Vector3::zeros())
+        };
+        let pc = &cd.pcols[c];
+        djz_dq_parts(cols, |t, ang, lin| {
+            let l = path.dofs[t];
+            let (ang, lin) = if geo.local {
+                let wl = pc[t].w;
+                (rot.tr_mul(&(ang - wl.cross(&y_ang))), rot.tr_mul(&(lin - wl.cross(&y_lin))))
+            } else {
+                (ang, lin)
+            };
+            let mut col = g.column_mut(l);
+            if geo.six {
+                col.fixed_rows_mut::<3>(n + r0).copy_from(&ang);
+                col.fixed_rows_mut::<3>(n + r0 + 3).copy_from(&lin);
+            } else {
+                col.fixed_rows_mut::<3>(n + r0).copy_from(&lin);
             }
-        }
+        });
     }
-    cd.zc = zc;
     cd.g = g;
 }
 

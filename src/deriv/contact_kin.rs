@@ -222,17 +222,31 @@ pub(crate) fn at_point(m: &Dm, p: &D3) -> D3 {
     m.lin() + m.ang().cross(p)
 }
 
+/// The contact body's velocity `V_m`, acceleration `A_m` and contact point `p` with their
+/// tangents along one direction, shared by [`dap_dq`] for every `l`.
+pub(crate) struct BodyAt {
+    vm: Dm,
+    am: Dm,
+    pp: D3,
+}
+
+impl BodyAt {
+    /// Body `m`'s quantities at the point `p`, with tangent `dir`.
+    #[inline]
+    pub fn new(b: &Base, m: usize, p: &Vector3<f64>, dir: Dir) -> BodyAt {
+        BodyAt { vm: b.vel(m, dir), am: b.acc(m, dir), pp: b.p(p, dir) }
+    }
+}
+
 /// `∂a_p/∂q_l` (tangent) of the classical acceleration of the contact point of body `m`,
-/// evaluated with tangent `dir` (the outer derivative).
-pub(crate) fn dap_dq(b: &Base, m: usize, p: &Vector3<f64>, l: usize, dir: Dir) -> D3 {
+/// evaluated with tangent `dir` (the outer derivative; `at` made with the same `dir`).
+pub(crate) fn dap_dq(b: &Base, at: &BodyAt, l: usize, dir: Dir) -> D3 {
     let jl = b.dof_joint[l];
     let ll = b.parents[jl];
     let sl = b.s(l, dir);
-    let vm = b.vel(m, dir);
-    let am = b.acc(m, dir);
+    let (vm, am, pp) = (at.vm, at.am, at.pp);
     let vl = b.vel(ll, dir);
     let al = b.acc(ll, dir);
-    let pp = b.p(p, dir);
     let psid = vl.cross(&sl);
     let dv = sl.cross(&(vm - vl)); // J2
     let da = (al - am).cross(&sl) + (vl - vm).cross(&psid); // J6 + J7
@@ -245,22 +259,6 @@ pub(crate) fn dap_dq(b: &Base, m: usize, p: &Vector3<f64>, l: usize, dir: Dir) -
         + am.ang().cross(&dp)
         + dv.ang().cross(&pdot)
         + vm.ang().cross(&dpdot)
-}
-
-/// `∂a_p/∂q̇_l`, evaluated with tangent `dir`.
-pub(crate) fn dap_dv(b: &Base, m: usize, p: &Vector3<f64>, l: usize, dir: Dir) -> D3 {
-    let jl = b.dof_joint[l];
-    let ll = b.parents[jl];
-    let sl = b.s(l, dir);
-    let vm = b.vel(m, dir);
-    let vl = b.vel(ll, dir);
-    let vj = b.vel(jl, dir);
-    let pp = b.p(p, dir);
-    let dv = sl; // J8
-    let da = vl.cross(&sl) + vj.cross(&sl) - vm.cross(&sl); // J9
-    let pdot = at_point(&vm, &pp);
-    let dpdot = at_point(&dv, &pp);
-    da.lin() + da.ang().cross(&pp) + dv.ang().cross(&pdot) + vm.ang().cross(&dpdot)
 }
 
 /// `∂(λ·u_x)/∂q_l` for one contact force `λ` and path DoF `x`: the `(x, l)` entry of
@@ -283,23 +281,106 @@ pub(crate) fn djtl_dq(
     (at_point(&dsx, &pp) + sx.ang().cross(&dp)).dot(lam)
 }
 
-/// `∂(J z)/∂q_l` at one contact, where `zc` holds the cumulative sums `Z_j = Σ_{x ⪯ j} S_x z_x`
-/// per joint; evaluated with tangent `dir`.
-pub(crate) fn djz_dq(
-    b: &Base,
-    zc: &[Motion],
-    m: usize,
-    p: &Vector3<f64>,
-    l: usize,
-    dir: Dir,
-) -> D3 {
-    let jl = b.dof_joint[l];
-    let sl = b.s(l, dir);
-    let zm = b.cum(zc, m, dir, false);
-    let zl = b.cum(zc, b.parents[jl], dir, false);
-    let pp = b.p(p, dir);
-    let dz = sl.cross(&(zm - zl));
-    at_point(&dz, &pp) + zm.ang().cross(&at_point(&sl, &pp))
+/// A DoF `x` of a 3-D world-aligned point contact's path: `w = S_x.ang`, the point velocity
+/// column `u = S_x.lin + S_x.ang × p` and `x`'s joint (path order: ancestors have lower index).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PointCol {
+    pub w: Vector3<f64>,
+    pub u: Vector3<f64>,
+    pub joint: usize,
+}
+
+/// `∂/∂q_k (∂u_x/∂q_l)` in closed form for the DoFs `x`, `l`, `k` of one point contact's path.
+/// With `(a, b) = (l, x)` if `l`'s joint is `x`'s or an ancestor, else `(x, l)`,
+/// `∂u_x/∂q_l = w_a × u_b` (eq. J1 with `∂p/∂q_l = u_l`; see `point_jacobian_dq` in
+/// `super::contact`), and along `q_k`: `D w_a = [k ⪯ a] w_k × w_a` (J1) and
+/// `D u_b = w_k × u_b` if `k ⪯ b`, else `w_b × u_k`.
+#[inline]
+pub(crate) fn du_dq2(x: &PointCol, l: &PointCol, k: &PointCol) -> Vector3<f64> {
+    let (a, b) = if l.joint <= x.joint { (l, x) } else { (x, l) };
+    let du_b = if k.joint <= b.joint { k.w.cross(&b.u) } else { b.w.cross(&k.u) };
+    let t = a.w.cross(&du_b);
+    if k.joint <= a.joint { t + k.w.cross(&a.w).cross(&b.u) } else { t }
+}
+
+/// `∂u_x/∂q_l = w_a × u_b` (see [`du_dq2`]).
+#[inline]
+pub(crate) fn du_dq(x: &PointCol, l: &PointCol) -> Vector3<f64> {
+    if l.joint <= x.joint { l.w.cross(&x.u) } else { x.w.cross(&l.u) }
+}
+
+/// `∂w_x/∂q_l = [l ⪯ x] w_l × w_x` (eq. J1).
+#[inline]
+fn dw_dq(x: &PointCol, l: &PointCol) -> Vector3<f64> {
+    if l.joint <= x.joint { l.w.cross(&x.w) } else { Vector3::zeros() }
+}
+
+/// `∂/∂q_k (∂J_x/∂q_l)` in closed form for the DoFs `x`, `l`, `k` of one contact's path, as
+/// world-axis `(angular, linear)` parts `(a, b)`: the contact's rows are `(a, b)` for world
+/// axes and `(Rᵀa, Rᵀb)` for local axes. World axes: `J_x = (w_x, u_x)`, so
+/// `D_k D_l w_x = [l ⪯ x]([k ⪯ l] (w_k × w_l) × w_x + [k ⪯ x] w_l × (w_k × w_x))` and
+/// `D_k D_l u_x` is [`du_dq2`]. Local axes (`D_l Rᵀ = −Rᵀ [w_l]×`): with `y_x = (w_x, u_x)`,
+/// `e = D_l y_x − w_l × y_x`, the parts are `D_k e − w_k × e` with
+/// `D_k e = D_k D_l y_x − (D_k w_l) × y_x − w_l × D_k y_x`.
+#[inline]
+pub(crate) fn djac_dq2(
+    local: bool,
+    x: &PointCol,
+    l: &PointCol,
+    k: &PointCol,
+) -> (Vector3<f64>, Vector3<f64>) {
+    let dd_lin = du_dq2(x, l, k);
+    let dwl = if k.joint <= l.joint { k.w.cross(&l.w) } else { Vector3::zeros() };
+    let dd_ang =
+        if l.joint <= x.joint { dwl.cross(&x.w) + l.w.cross(&dw_dq(x, k)) } else { dwl * 0.0 };
+    if !local {
+        return (dd_ang, dd_lin);
+    }
+    let (e_ang, e_lin) = (dw_dq(x, l) - l.w.cross(&x.w), du_dq(x, l) - l.w.cross(&x.u));
+    let de_ang = dd_ang - dwl.cross(&x.w) - l.w.cross(&dw_dq(x, k));
+    let de_lin = dd_lin - dwl.cross(&x.u) - l.w.cross(&du_dq(x, k));
+    (de_ang - k.w.cross(&e_ang), de_lin - k.w.cross(&e_lin))
+}
+
+/// A contact's weights `λ` (`[n; f]` for 6-D, `f` for 3-D, in the contact's axes) as
+/// world-axis `(n, f)`, so that `λ · rows = n·a + f·b` for [`djac_dq2`]'s parts.
+#[inline]
+pub(crate) fn world_weights(
+    geo: Geo,
+    r: &Matrix3<f64>,
+    lam: &[f64],
+) -> (Vector3<f64>, Vector3<f64>) {
+    let part = |i: usize| Vector3::new(lam[i], lam[i + 1], lam[i + 2]);
+    let (n, f) = if geo.six { (part(0), part(3)) } else { (Vector3::zeros(), part(0)) };
+    if geo.local { (r * n, r * f) } else { (n, f) }
+}
+
+/// `∂(J z)/∂q_l` for every DoF `l` (position `t` in `cols`, the columns of one contact's path
+/// in path order, with `z_x`), world-aligned at the contact point, passed to
+/// `f(t, ang, lin)`: with the closed form of [`du_dq2`]'s inner derivative,
+/// `Σ_x z_x ∂u_x/∂q_l = w_l × Σ_{x ⪰ l} z_x u_x + (Σ_{x ≺ l} z_x w_x) × u_l` and
+/// `Σ_x z_x ∂w_x/∂q_l = w_l × Σ_{x ⪰ l} z_x w_x` (`⪰`: `x`'s joint is `l`'s or a
+/// descendant), by running sums along the path.
+#[inline]
+pub(crate) fn djz_dq_parts(
+    cols: impl Iterator<Item = (PointCol, f64)> + Clone,
+    mut f: impl FnMut(usize, Vector3<f64>, Vector3<f64>),
+) {
+    let (mut su, mut sw) = cols
+        .clone()
+        .fold((Vector3::zeros(), Vector3::zeros()), |(u, w), (c, z)| (u + c.u * z, w + c.w * z));
+    let mut pw = Vector3::zeros();
+    // The DoFs of one joint (consecutive) see the same sums.
+    let (mut su_next, mut sw_next, mut pw_next, mut joint) = (su, sw, pw, usize::MAX);
+    for (t, (c, z)) in cols.enumerate() {
+        if c.joint != joint {
+            (su, sw, pw, joint) = (su_next, sw_next, pw_next, c.joint);
+        }
+        f(t, c.w.cross(&sw), c.w.cross(&su) + pw.cross(&c.u));
+        su_next -= c.u * z;
+        sw_next -= c.w * z;
+        pw_next += c.w * z;
+    }
 }
 
 // ---------------------------------------------------------------------------------------------

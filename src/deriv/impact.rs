@@ -10,14 +10,16 @@
 //! `q̇⁻`, so `∂²y/∂q̇⁻²` = 0.
 
 use super::contact::{
-    ContactData, IdfozaBatch, add_jz_hessian, base, copy_block, djw_dq, factor_delassus,
-    factor_kkt, fill_rinv, g_matrix_split, g_matrix_with, idfoza_batch, padded_rows,
-    path_kinematics, sub_djtl_dq_tree, transpose_into, update_points,
+    ContactData, IdfozaBatch, add_jz_hessian, copy_block, djw_dq, factor_delassus, factor_kkt,
+    fill_rinv, g_matrix_split, g_matrix_with, idfoza_batch, padded_rows, path_kinematics,
+    sub_djtl_dq_tree, transpose_into, update_points,
 };
-use super::contact_kin::{Dir, djac_col_dq, djtl_dq, djz_dq, djz_dq_rows, put_rows, rows_dot};
+use super::contact_kin::{djac_dq2, du_dq2, world_weights};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_so::{SoData, id_so_unchecked};
-use super::kkt::{add_symmetric, copy_rows_zero_rest, premultiply};
+use super::kkt::{
+    add_symmetric, copy_rows_zero_rest, premultiply, premultiply_sym, symmetric_ends,
+};
 use super::zero::idfoza_core;
 use crate::algo::Data;
 use crate::algo::internal::{crba_unchecked, ltl_in_place, ltl_solve_rows_desc};
@@ -146,6 +148,8 @@ pub struct ImpactSo {
     dv_minus_one: DMatrix<f64>,
     /// The IDFOZA products of the `G` terms, eight or four columns at a time.
     batch: IdfozaBatch,
+    /// `kkt::symmetric_ends` of `∂²/∂q²`.
+    ends_q: Vec<usize>,
 }
 
 impl ImpactSo {
@@ -207,6 +211,7 @@ impl ImpactData {
             ycol: DVector::zeros(n + m),
             dv_minus_one: DMatrix::zeros(n, n),
             batch: IdfozaBatch::new(model),
+            ends_q: symmetric_ends(model, true),
         });
         self
     }
@@ -388,55 +393,78 @@ fn so_inner(
     // Every entry is rewritten (contact rows zeroed: the G products add to all of them).
     copy_rows_zero_rest(rqq, so.id.d2tau_dq2(), n);
     // − ∂²(Jᵀλ̂)/∂q² and ∂²(J w)/∂q².
-    let mut zc = std::mem::take(&mut im.cd.zc);
     {
-        let b = base(model, data, &im.cd);
         for (c, path) in im.cd.paths.iter().enumerate() {
-            let body = *path.joints.last().expect("path");
             let (geo, r0) = (im.cd.geo[c], im.cd.row0[c]);
-            for &j in &path.joints {
-                let parent = model.parents[j];
-                let mut zj = if parent == 0 { Motion::zero() } else { zc[parent] };
-                let iv = model.idx_v[j];
-                for x in iv..iv + model.nvs[j] {
-                    zj += data.s_world[x] * im.w[x];
-                }
-                zc[j] = zj;
-            }
+            let cols = &im.cd.pcols[c];
             if !geo.is_point() {
+                // ∂²(J_cᵀλ)/∂q² and ∂²(J_c w)/∂q² from the closed form of ∂²J_x/∂q_l∂q_k,
+                // symmetric in (l, k) for DoFs of different joints (the pairs l > k are the
+                // mirrors of pairs already written).
                 let lam = &im.impulse.as_slice()[r0..r0 + geo.dim()];
-                let (rot, p) = (&path.rot, &path.p);
-                let mut col = [0.0; 6];
-                for &k in &path.dofs {
-                    for &l in &path.dofs {
-                        for &x in &path.dofs {
-                            let d = djac_col_dq(&b, geo, rot, p, x, l, Dir::Q(k));
-                            rqq[(x, l, k)] -= rows_dot(geo, &d, lam).1;
+                let rot = &path.rot;
+                let (nw, fw) = world_weights(geo, rot, lam);
+                for (&k, ck) in path.dofs.iter().zip(cols) {
+                    for (&l, cl) in path.dofs.iter().zip(cols) {
+                        let same_joint = model.dof_joint[l] == model.dof_joint[k];
+                        if l > k && !same_joint {
+                            continue;
                         }
-                        let rows = djz_dq_rows(&b, geo, rot, &zc, body, p, l, Dir::Q(k));
-                        put_rows(geo, &rows, true, &mut col);
-                        for (r, x) in col[..geo.dim()].iter().enumerate() {
+                        let (mut sa, mut sl) = (Vector3::zeros(), Vector3::zeros());
+                        for (&x, cx) in path.dofs.iter().zip(cols) {
+                            let (a, d) = djac_dq2(geo.local, cx, cl, ck);
+                            let t = nw.dot(&a) + fw.dot(&d);
+                            rqq[(x, l, k)] -= t;
+                            if !same_joint {
+                                rqq[(x, k, l)] -= t;
+                            }
+                            sa += a * im.w[x];
+                            sl += d * im.w[x];
+                        }
+                        let (sa, sl) =
+                            if geo.local { (rot.tr_mul(&sa), rot.tr_mul(&sl)) } else { (sa, sl) };
+                        let rows = if geo.six { [sa, sl] } else { [sl, sl] };
+                        for (r, x) in rows.iter().flat_map(|v| v.iter()).take(geo.dim()).enumerate()
+                        {
                             rqq[(n + r0 + r, l, k)] = *x;
+                            if !same_joint {
+                                rqq[(n + r0 + r, k, l)] = *x;
+                            }
                         }
                     }
                 }
                 continue;
             }
+            // ∂²(J_cᵀλ)/∂q² and ∂²(J_c w)/∂q² from the closed form of ∂²u_x/∂q_l∂q_k.
             let lam = Vector3::new(im.impulse[r0], im.impulse[r0 + 1], im.impulse[r0 + 2]);
-            for &k in &path.dofs {
-                for &l in &path.dofs {
-                    for &x in &path.dofs {
-                        rqq[(x, l, k)] -= djtl_dq(&b, &path.p, &lam, x, l, Dir::Q(k)).1;
+            for (&k, ck) in path.dofs.iter().zip(cols) {
+                for (&l, cl) in path.dofs.iter().zip(cols) {
+                    // Symmetric in (l, k) for DoFs of different joints (which commute): the
+                    // pairs l > k are the mirrors of pairs already written.
+                    let same_joint = model.dof_joint[l] == model.dof_joint[k];
+                    if l > k && !same_joint {
+                        continue;
                     }
-                    let d = djz_dq(&b, &zc, body, &path.p, l, Dir::Q(k)).d;
+                    let mut d = Vector3::zeros();
+                    for (&x, cx) in path.dofs.iter().zip(cols) {
+                        let t = du_dq2(cx, cl, ck);
+                        let y = lam.dot(&t);
+                        rqq[(x, l, k)] -= y;
+                        if !same_joint {
+                            rqq[(x, k, l)] -= y;
+                        }
+                        d += t * im.w[x];
+                    }
                     for r in 0..3 {
                         rqq[(n + r0 + r, l, k)] = d[r];
+                        if !same_joint {
+                            rqq[(n + r0 + r, k, l)] = d[r];
+                        }
                     }
                 }
             }
         }
     }
-    im.cd.zc = zc;
     // G terms, the IDFOZA parts of eight (or four) columns k at a time.
     so.dv_minus_one.copy_from(&im.dvplus_dvminus);
     for k in 0..n {
@@ -467,8 +495,9 @@ fn so_inner(
         }
     }
     let ri = &im.cd.rinv;
-    premultiply(&ri.rows(0, n), rqq, &mut so.d2vplus_dq2);
-    premultiply(&ri.rows(n, m), rqq, &mut so.d2impulse_dq2);
+    // ∂²/∂q² is symmetric in (j, k) for DoFs of different joints.
+    premultiply_sym(&ri.rows(0, n), rqq, &mut so.d2vplus_dq2, &so.ends_q);
+    premultiply_sym(&ri.rows(n, m), rqq, &mut so.d2impulse_dq2, &so.ends_q);
     premultiply(&ri.rows(0, n), rqv, &mut so.d2vplus_dqdvminus);
     premultiply(&ri.rows(n, m), rqv, &mut so.d2impulse_dqdvminus);
     Ok(())

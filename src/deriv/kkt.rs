@@ -17,7 +17,8 @@ use super::contact::{
     sub_djtl_dq_strided, update_points,
 };
 use super::contact_kin::{
-    Dir, dacc_dq, dacc_dv, dap_dq, dap_dv, djac_col_dq, djtl_dq, djz_dq_rows, put_rows, rows_dot,
+    BodyAt, Dir, dacc_dq, dacc_dv, dap_dq, djac_dq2, djz_dq_rows, du_dq, du_dq2, put_rows,
+    world_weights,
 };
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_fo::id_derivatives_unchecked;
@@ -133,6 +134,9 @@ pub struct KktSo {
     ycol: DVector<f64>,
     /// The IDFOZA products of the `G` terms, eight or four columns at a time.
     batch: IdfozaBatch,
+    /// [`symmetric_ends`] of `∂²/∂q²` and of `∂²/∂q̇²`.
+    ends_q: Vec<usize>,
+    ends_v: Vec<usize>,
 }
 
 impl KktSo {
@@ -215,6 +219,8 @@ impl KktData {
             r: [t(n + m), t(n + m), t(n + m), t(n + m)],
             ycol: DVector::zeros(n + m),
             batch: IdfozaBatch::new(model),
+            ends_q: symmetric_ends(model, true),
+            ends_v: symmetric_ends(model, false),
         });
         self
     }
@@ -486,17 +492,28 @@ fn kkt_so_inner(
     // ... minus ∂²(J_cᵀλ)/∂q² (IDSVA-SOc), and the contact-point kinematics rows.
     let b = base(model, data, &kd.cd);
     for (c, path) in kd.cd.paths.iter().enumerate() {
+        let cols = &kd.cd.pcols[c];
         let body = *path.joints.last().expect("path");
         let (geo, r0) = (kd.cd.geo[c], kd.cd.row0[c]);
         if !geo.is_point() {
             let lam = &kd.lambda.as_slice()[r0..r0 + geo.dim()];
             let (rot, p) = (&path.rot, &path.p);
+            let (nw, fw) = world_weights(geo, rot, lam);
             let mut col = [0.0; 6];
-            for &k in &path.dofs {
-                for &l in &path.dofs {
-                    for &x in &path.dofs {
-                        let d = djac_col_dq(&b, geo, rot, p, x, l, Dir::Q(k));
-                        rqq[(x, l, k)] -= rows_dot(geo, &d, lam).1;
+            for (&k, ck) in path.dofs.iter().zip(cols) {
+                for (&l, cl) in path.dofs.iter().zip(cols) {
+                    // −∂²(J_cᵀλ)/∂q², symmetric in (l, k) for DoFs of different joints: the
+                    // pairs l > k are the mirrors of pairs already written.
+                    let same_joint = model.dof_joint[l] == model.dof_joint[k];
+                    if l <= k || same_joint {
+                        for (&x, cx) in path.dofs.iter().zip(cols) {
+                            let (a, d) = djac_dq2(geo.local, cx, cl, ck);
+                            let t = nw.dot(&a) + fw.dot(&d);
+                            rqq[(x, l, k)] -= t;
+                            if !same_joint {
+                                rqq[(x, k, l)] -= t;
+                            }
+                        }
                     }
                     for (t, rows) in [
                         (&mut *rqq, dacc_dq(&b, geo, rot, body, p, l, Dir::Q(k))),
@@ -513,24 +530,52 @@ fn kkt_so_inner(
             continue;
         }
         let lam = Vector3::new(kd.lambda[r0], kd.lambda[r0 + 1], kd.lambda[r0 + 2]);
-        for &k in &path.dofs {
-            for &l in &path.dofs {
-                for &x in &path.dofs {
-                    rqq[(x, l, k)] -= djtl_dq(&b, &path.p, &lam, x, l, Dir::Q(k)).1;
+        for (&k, ck) in path.dofs.iter().zip(cols) {
+            let (dq, dv) = (Dir::Q(k), Dir::V(k));
+            let (atq, atv) =
+                (BodyAt::new(&b, body, &path.p, dq), BodyAt::new(&b, body, &path.p, dv));
+            for (&l, cl) in path.dofs.iter().zip(cols) {
+                // Symmetric in (l, k) for DoFs of different joints (which commute): the pairs
+                // l > k are the mirrors of pairs already written.
+                let same_joint = model.dof_joint[l] == model.dof_joint[k];
+                if l <= k || same_joint {
+                    for (&x, cx) in path.dofs.iter().zip(cols) {
+                        let t = lam.dot(&du_dq2(cx, cl, ck));
+                        rqq[(x, l, k)] -= t;
+                        if !same_joint {
+                            rqq[(x, k, l)] -= t;
+                        }
+                    }
                 }
-                let aqq = dap_dq(&b, body, &path.p, l, Dir::Q(k)).d;
-                let avv = dap_dv(&b, body, &path.p, l, Dir::V(k)).d;
-                let aqv = dap_dq(&b, body, &path.p, l, Dir::V(k)).d;
+                let aqv = dap_dq(&b, &atv, l, dv).d;
                 for r in 0..3 {
-                    rqq[(n + r0 + r, l, k)] = aqq[r];
-                    rvv[(n + r0 + r, l, k)] = avv[r];
                     rqv[(n + r0 + r, l, k)] = aqv[r];
+                }
+                // ∂²a_p/∂q̇² is symmetric, ∂²a_p/∂q² for DoFs of different joints (which
+                // commute): the pairs l > k are the mirrors of pairs already written.
+                if l <= k {
+                    // a_p = J q̈ + Σ_{x,y} q̇_x q̇_y ∂u_x/∂q_y, so ∂²a_p/∂q̇_l∂q̇_k =
+                    // ∂u_l/∂q_k + ∂u_k/∂q_l (J̇_x = Σ_y q̇_y ∂u_x/∂q_y, eq. J1).
+                    let avv = du_dq(cl, ck) + du_dq(ck, cl);
+                    for r in 0..3 {
+                        rvv[(n + r0 + r, l, k)] = avv[r];
+                        rvv[(n + r0 + r, k, l)] = avv[r];
+                    }
+                }
+                if l <= k || same_joint {
+                    let aqq = dap_dq(&b, &atq, l, dq).d;
+                    for r in 0..3 {
+                        rqq[(n + r0 + r, l, k)] = aqq[r];
+                        if !same_joint {
+                            rqq[(n + r0 + r, k, l)] = aqq[r];
+                        }
+                    }
                 }
             }
         }
     }
     // Baumgarte rows: + kd ∂²(J q̇)/∂q² + kp ∂²e/∂q² (q, q), + kd ∂J_k/∂q_l (q, q̇); the
-    // body velocities data.ov are the path sums Σ S q̇ that djz_dq differentiates.
+    // body velocities data.ov are the path sums Σ S q̇ that djz_dq_rows differentiates.
     for (c, path) in kd.cd.paths.iter().enumerate() {
         let contact = &kd.cd.contacts[c];
         if !contact.has_baumgarte() {
@@ -592,11 +637,12 @@ fn kkt_so_inner(
             so.ycol.rows_mut(n, m).copy_from(&kd.dlambda_dtau.column(k));
             let y = so.ycol.as_slice();
             g_matrix_with(model, data, &mut kd.cd, &batch.out[t], &y[n..], &y[..n]);
-            let g = &kd.cd.g;
-            for kk in 0..n {
-                for i in 0..n + m {
-                    rtq[(i, k, kk)] = g[(i, kk)];
-                }
+            // Column (·, k, kk) of R_τq is column kk of G.
+            let (rn, g) = (n + m, kd.cd.g.as_slice());
+            let dst = rtq.as_mut_slice();
+            for (kk, gc) in g.chunks_exact(rn).enumerate() {
+                let o = rn * (k + n * kk);
+                dst[o..o + rn].copy_from_slice(gc);
             }
         }
     }
@@ -607,9 +653,24 @@ fn kkt_so_inner(
         (&*rqv, &mut so.d2qdd_dqdv, &mut so.d2lambda_dqdv),
         (&*rtq, &mut so.d2qdd_dtaudq, &mut so.d2lambda_dtaudq),
     ];
-    for (r, tq, tl) in outs {
-        premultiply(&ri.rows(0, n), r, tq);
-        premultiply(&ri.rows(n, m), r, tl);
+    // ∂²/∂q² is symmetric in (j, k) for DoFs of different joints, ∂²/∂q̇² in every (j, k).
+    let (ends_q, ends_v) = (&so.ends_q, &so.ends_v);
+    for (t, (r, tq, tl)) in outs.into_iter().enumerate() {
+        let ends = match t {
+            0 => Some(ends_q),
+            1 => Some(ends_v),
+            _ => None,
+        };
+        match ends {
+            Some(e) => {
+                premultiply_sym(&ri.rows(0, n), r, tq, e);
+                premultiply_sym(&ri.rows(n, m), r, tl, e);
+            }
+            None => {
+                premultiply(&ri.rows(0, n), r, tq);
+                premultiply(&ri.rows(n, m), r, tl);
+            }
+        }
     }
     Ok(())
 }
@@ -617,12 +678,22 @@ fn kkt_so_inner(
 /// `r[(i, j, k)] += g[(i, j)]` and `r[(i, k, j)] += g[(i, j)]` for every row `i` and column
 /// `j` of `g`: the two `G` terms of a `(q, q)` second derivative, `G(∂y/∂q_k)[·, j]` and its
 /// swap.
+///
+/// # Panics
+/// If `g` has not `r`'s rows, or `k` or a column of `g` is not a page and column of `r`.
 pub(crate) fn add_symmetric(r: &mut Tensor3, g: &DMatrix<f64>, k: usize) {
-    for j in 0..g.ncols() {
-        for i in 0..g.nrows() {
-            let x = g[(i, j)];
-            r[(i, j, k)] += x;
-            r[(i, k, j)] += x;
+    let (rn, n2, n3) = r.dims();
+    assert!(
+        g.nrows() == rn && g.ncols() <= n2.min(n3) && k < n2.min(n3),
+        "add_symmetric: dimension mismatch"
+    );
+    let dst = r.as_mut_slice();
+    // Contiguous columns: (·, j, k) at rn (j + n2 k), (·, k, j) at rn (k + n2 j).
+    for (j, gc) in g.as_slice().chunks_exact(rn).enumerate() {
+        for o in [rn * (j + n2 * k), rn * (k + n2 * j)] {
+            for (x, y) in dst[o..o + rn].iter_mut().zip(gc) {
+                *x += y;
+            }
         }
     }
 }
@@ -634,6 +705,69 @@ pub(crate) fn copy_rows_zero_rest(t: &mut Tensor3, src: &Tensor3, n: usize) {
     for (col, s) in dst.chunks_exact_mut(rows).zip(src.as_slice().chunks_exact(n)) {
         col[..n].copy_from_slice(s);
         col[n..].fill(0.0);
+    }
+}
+
+/// The columns `(j, k)` that [`premultiply_sym`] computes in page `k` of a second derivative
+/// that is symmetric in `(j, k)` for DoFs of different joints (`joints`) or for all
+/// (`!joints`): `j < ends[k]`, with `ends[k]` one past the last DoF of `k`'s joint, or `k + 1`.
+pub(crate) fn symmetric_ends(model: &Model, joints: bool) -> Vec<usize> {
+    (0..model.nv)
+        .map(|k| {
+            let jt = model.dof_joint[k];
+            if joints { model.idx_v[jt] + model.nvs[jt] } else { k + 1 }
+        })
+        .collect()
+}
+
+/// Below this `nv`, [`premultiply_sym`] is one [`premultiply`]: its `nv` smaller products per
+/// tensor measured slower than the one whole product on solo12 (`nv` = 18, four feet:
+/// `kkt_so` 151 → 158 µs) and faster on talos_reduced (`nv` = 38, two soles: 511 → 495 µs)
+/// and talos_full_v2 (`nv` = 50: 1251 → 1120 µs) (AMD EPYC with AVX-512, 2026-11-26, the two
+/// binaries alternated in one run).
+const SYM_MIN_NV: usize = 32;
+
+/// [`premultiply`] of a tensor `r` whose column `(j, k)` equals its column `(k, j)` for
+/// `j ≥ ends[k]` (see [`symmetric_ends`]), and so does the result's: the products of the
+/// columns `j < ends[k]` of each page `k`, the others copied from their mirrors (one whole
+/// product below [`SYM_MIN_NV`]).
+///
+/// # Panics
+/// If the dimensions disagree or `ends[k] ∉ k + 1..=nv`.
+pub(crate) fn premultiply_sym<S>(
+    a: &nalgebra::Matrix<f64, nalgebra::Dyn, nalgebra::Dyn, S>,
+    r: &Tensor3,
+    out: &mut Tensor3,
+    ends: &[usize],
+) where
+    S: nalgebra::Storage<f64, nalgebra::Dyn, nalgebra::Dyn>,
+{
+    let (rn, n, _) = r.dims();
+    let (on, _, _) = out.dims();
+    assert!(
+        r.dims() == (rn, n, n)
+            && out.dims() == (on, n, n)
+            && a.shape() == (on, rn)
+            && ends.len() == n
+            && ends.iter().enumerate().all(|(k, &e)| e > k && e <= n),
+        "premultiply_sym: dimension mismatch"
+    );
+    if n < SYM_MIN_NV {
+        return premultiply(a, r, out);
+    }
+    for (k, &e) in ends.iter().enumerate() {
+        let view = DMatrixView::from_slice(&r.as_slice()[rn * n * k..rn * (n * k + e)], rn, e);
+        let o = &mut out.as_mut_slice()[on * n * k..on * (n * k + e)];
+        let mut ov = DMatrixViewMut::from_slice(o, on, e);
+        gemm(-1.0, a, &view, 0.0, &mut ov);
+    }
+    // Column (j, k), j ≥ ends[k] > k, from column (k, j) (k < j < ends[j]: computed).
+    let o = out.as_mut_slice();
+    for (k, &e) in ends.iter().enumerate() {
+        for j in e..n {
+            let (src, dst) = (on * (k + n * j), on * (j + n * k));
+            o.copy_within(src..src + on, dst);
+        }
     }
 }
 

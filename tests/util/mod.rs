@@ -119,6 +119,8 @@ pub fn contact_cases() -> Vec<(Model, Vec<&'static str>)> {
             vec!["body_5", "body_7", "body_2"],
         ),
         (builtin::random_tree(10, 21, false), vec!["body_9", "body_4"]),
+        // nv ≥ 32: the second order's symmetric products (`kkt::SYM_MIN_NV`).
+        (builtin::random_tree(28, 5, true), vec!["body_27", "body_13"]),
     ]
 }
 
