@@ -2056,10 +2056,7 @@ fn impact_so_reduce(
     im: &mut MimicImpactData,
     so: &mut MimicImpactSo,
 ) {
-    use crate::deriv::contact::{base, g_matrix_split, update_points};
-    use crate::deriv::contact_kin::{
-        Dir, djac_col_dq, djtl_dq, djz_dq, djz_dq_rows, put_rows, rows_dot,
-    };
+    use crate::deriv::contact::{g_matrix_split, update_points};
     use crate::spatial::Motion;
     let full = &model.full;
     let (n, nf, m) = (model.nv, full.nv(), im.dim());
@@ -2090,56 +2087,13 @@ fn impact_so_reduce(
         }
     }
     // − ∂²(Jᵀλ̂)/∂q² and ∂²(J w)/∂q² (as the full tree's impact second order).
-    let mut zc = std::mem::take(&mut im.cd.zc);
-    {
-        let b = base(full, &data.full, &im.cd);
-        for (c, path) in im.cd.paths.iter().enumerate() {
-            let body = *path.joints.last().expect("path");
-            let (geo, r0) = (im.cd.geo[c], im.cd.row0[c]);
-            for &j in &path.joints {
-                let parent = full.parents()[j];
-                let mut zj = if parent == 0 { Motion::zero() } else { zc[parent] };
-                let iv = full.idx_v()[j];
-                for x in iv..iv + full.nvs()[j] {
-                    zj += data.full.s_world[x] * im.wf[x];
-                }
-                zc[j] = zj;
-            }
-            if !geo.is_point() {
-                let lam = &im.impulse.as_slice()[r0..r0 + geo.dim()];
-                let (rot, p) = (&path.rot, &path.p);
-                let mut col = [0.0; 6];
-                for &k in &path.dofs {
-                    for &l in &path.dofs {
-                        for &x in &path.dofs {
-                            let d = djac_col_dq(&b, geo, rot, p, x, l, Dir::Q(k));
-                            rf[(x, l, k)] -= rows_dot(geo, &d, lam).1;
-                        }
-                        let rows = djz_dq_rows(&b, geo, rot, &zc, body, p, l, Dir::Q(k));
-                        put_rows(geo, &rows, true, &mut col);
-                        for (r, x) in col[..geo.dim()].iter().enumerate() {
-                            rf[(nf + r0 + r, l, k)] = *x;
-                        }
-                    }
-                }
-                continue;
-            }
-            let lam =
-                nalgebra::Vector3::new(im.impulse[r0], im.impulse[r0 + 1], im.impulse[r0 + 2]);
-            for &k in &path.dofs {
-                for &l in &path.dofs {
-                    for &x in &path.dofs {
-                        rf[(x, l, k)] -= djtl_dq(&b, &path.p, &lam, x, l, Dir::Q(k)).1;
-                    }
-                    let d = djz_dq(&b, &zc, body, &path.p, l, Dir::Q(k)).d;
-                    for r in 0..3 {
-                        rf[(nf + r0 + r, l, k)] = d[r];
-                    }
-                }
-            }
-        }
-    }
-    im.cd.zc = zc;
+    crate::deriv::impact::add_contact_rqq(
+        full,
+        &im.cd,
+        im.impulse.as_slice(),
+        im.wf.as_slice(),
+        rf,
+    );
     // R_qq reduced: rows by P, (j, k) by G.
     so.sqq.fill(0.0);
     so.sqv.fill(0.0);
