@@ -28,7 +28,7 @@ fn models() -> Vec<(String, Model)> {
     let mut out = vec![];
     if dir.is_dir() {
         for (name, ff) in table {
-            let opts = urdf::UrdfOptions { floating_base: ff, strict_inertia: false };
+            let opts = urdf::UrdfOptions { floating_base: ff, strict_inertia: false, mimic: false };
             if let Ok(m) = urdf::load_urdf_file(&dir.join(format!("{name}.urdf")), &opts) {
                 out.push((name.to_string(), m));
             }

@@ -1074,3 +1074,127 @@ fn armature_option() {
     let e = assert_clean_failure(&o, "--armature not a number");
     assert!(e.contains("\"x\" is not a number"), "{e}");
 }
+
+/// `--mimic`: info, random-state and eval in the reduced coordinates, the outputs equal to the
+/// library's `sodyn::mimic`; unsupported inputs are clean errors.
+#[test]
+fn mimic_commands_use_the_reduced_coordinates() {
+    use sodyn::mimic::{self, MimicData, MimicModel, MimicSoData};
+    let urdf = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_arm.urdf");
+    let u = urdf.to_str().unwrap();
+    let o = sodyn(&["info", "--model", u, "--mimic", "--floating-base"]);
+    assert_ok(&o, "info --mimic");
+    let out = stdout(&o);
+    assert!(out.contains("nq = 14, nv = 13 (reduced coordinates; full tree nq = 17, nv = 16)"));
+    assert!(out.contains("q = -1 * q[\"finger_l_joint\"] + 0.01"), "{out}");
+    let plain = stdout(&sodyn(&["info", "--model", u]));
+    assert!(plain.contains("mimics \"finger_l_joint\" (independent without --mimic)"), "{plain}");
+    let st = tmp("mimic-state.json");
+    let s = st.to_str().unwrap();
+    let o = sodyn(&["random-state", "--model", u, "--mimic", "--floating-base", "-o", s]);
+    assert_ok(&o, "random-state --mimic");
+    let o =
+        sodyn(&["eval", "--model", u, "--mimic", "--floating-base", "--state", s, "--order", "2"]);
+    assert_ok(&o, "eval --mimic");
+    let v: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let (nq, nv) = (14, 13);
+    assert_eq!((v["nq"].as_u64(), v["nv"].as_u64()), (Some(nq), Some(nv)));
+    let state: Value = serde_json::from_str(&std::fs::read_to_string(&st).unwrap()).unwrap();
+    let (q, vel) = (vector(&state, "q", nq as usize), vector(&state, "v", nv as usize));
+    let (a, tau) = (vector(&state, "a", nv as usize), vector(&state, "tau", nv as usize));
+    let opts = sodyn::model::UrdfOptions { floating_base: true, ..Default::default() };
+    let m = MimicModel::load_urdf_file(&urdf, &opts).unwrap();
+    let mut d = MimicData::new(&m);
+    let mut so = MimicSoData::new(&m);
+    let n = nv as usize;
+    let t = mimic::rnea(&m, &mut d, &q, &vel, &a, None).unwrap().clone();
+    assert!((vector(&v, "tau", n) - t).amax() < 1e-12);
+    mimic::fd_so_derivatives(&m, &mut d, &mut so, &q, &vel, &tau, None).unwrap();
+    assert!((vector(&v, "qdd", n) - d.qdd()).amax() < 1e-12);
+    assert!((matrix(&v, "dqdd_dq", n) - d.dqdd_dq()).amax() < 1e-12);
+    assert!((matrix(&v, "Minv", n) - d.minv()).amax() < 1e-12);
+    for k in ["d2tau_dq2", "d2tau_dv2", "d2tau_dqdv", "dM_dq", "d2qdd_dq2", "d2qdd_dtaudq"] {
+        check_tensor_shape(&v, k, n);
+    }
+    let joints = v["joints"].as_array().unwrap();
+    let fr = joints.iter().find(|j| j["name"] == "finger_r_joint").unwrap();
+    assert_eq!(fr["mimic"]["joint"], "finger_l_joint");
+    assert_eq!(fr["nv"], 0);
+    // Contacts: constrained ID, KKT and impact (order 2 here), as the library.
+    let with_contacts = tmp("mimic-contacts.json");
+    let mut st_c = state.clone();
+    st_c["contacts"] = serde_json::json!([{"frame": "tool"}, {"frame": "thumb_tip", "type": "6d"}]);
+    st_c["restitution"] = serde_json::json!(0.3);
+    st_c["weights"] = serde_json::json!({"qdd": vec![0.5; 13]});
+    std::fs::write(&with_contacts, st_c.to_string()).unwrap();
+    let wc = with_contacts.to_str().unwrap();
+    let o =
+        sodyn(&["eval", "--model", u, "--mimic", "--floating-base", "--state", wc, "--order", "2"]);
+    assert_ok(&o, "eval --mimic with contacts");
+    let v2: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let full = m.full();
+    let contacts = vec![
+        sodyn::model::Contact::new(full, "tool", nalgebra::Vector3::zeros()).unwrap(),
+        sodyn::model::Contact::new_6d(full, "thumb_tip", None).unwrap(),
+    ];
+    let mut kd = mimic::MimicKktData::new(&m, &contacts).unwrap().with_second_order(&m);
+    mimic::kkt_so_derivatives(&m, &mut d, &mut kd, &q, &vel, &tau).unwrap();
+    assert!((matrix(&v2["kkt"], "dqdd_dq", n) - kd.dqdd_dq()).amax() < 1e-12);
+    check_tensor_shape(&v2["kkt"], "d2qdd_dq2", n);
+    let mut im = mimic::MimicImpactData::new(&m, &contacts).unwrap();
+    im.set_restitution(0.3).unwrap();
+    mimic::impact_derivatives(&m, &mut d, &mut im, &q, &vel).unwrap();
+    assert!((vector(&v2["impact"], "vplus", n) - im.vplus()).amax() < 1e-12);
+    check_tensor_shape(&v2["impact"], "d2vplus_dq2", n);
+    check_tensor_shape(&v2["constrained_id"], "d2tau_dq2", n);
+    let mut cc = mimic::MimicContractedData::new(&m);
+    mimic::fd_so_contracted(&m, &mut d, &mut cc, &q, &vel, &tau, &DVector::from_element(n, 0.5))
+        .unwrap();
+    assert!((matrix(&v2["contracted"]["fd"], "d2qdd_dq2", n) - cc.c_qq()).amax() < 1e-12);
+    // Unsupported inputs and models.
+    let with_frames = tmp("mimic-frames.json");
+    std::fs::write(&with_frames, r#"{"frames": ["tool"]}"#).unwrap();
+    let wf = with_frames.to_str().unwrap();
+    let err = assert_clean_failure(
+        &sodyn(&["eval", "--model", u, "--mimic", "--state", wf]),
+        "eval --mimic with frames",
+    );
+    assert!(err.contains("\"frames\" is not supported with --mimic"), "{err}");
+    let err = assert_clean_failure(
+        &sodyn(&["eval", "--model", u, "--mimic", "--state", s]),
+        "eval --mimic, the state of the floating base",
+    );
+    assert!(err.contains("key \"q\" has length 14, expected 7"), "{err}");
+    let err = assert_clean_failure(
+        &sodyn(&["info", "--model", "builtin:humanoid", "--mimic"]),
+        "--mimic on a built-in",
+    );
+    assert!(err.contains("--mimic applies to URDF files"), "{err}");
+    let err = assert_clean_failure(
+        &sodyn(&["bench", "--model", u, "--mimic", "--smoke", "--algos", "kkt_fo"]),
+        "bench --mimic kkt_fo",
+    );
+    assert!(err.contains("not available with --mimic"), "{err}");
+    let o = sodyn(&["bench", "--model", u, "--mimic", "--smoke", "--algos", "rnea,fd_so"]);
+    assert_ok(&o, "bench --mimic");
+    assert_eq!(
+        stdout(&o).lines().filter(|l| l.starts_with("model=mimic_arm nq=7 nv=7")).count(),
+        2
+    );
+    let o = sodyn(&["demo", "--model", u, "--mimic"]);
+    assert_ok(&o, "demo --mimic");
+    // An unknown reference joint is an error with --mimic (a warning without).
+    let bad = tmp("mimic-bad.urdf");
+    std::fs::write(
+        &bad,
+        std::fs::read_to_string(&urdf).unwrap().replace("joint=\"shoulder\"", "joint=\"nope\""),
+    )
+    .unwrap();
+    let b = bad.to_str().unwrap();
+    let err = assert_clean_failure(&sodyn(&["info", "--model", b, "--mimic"]), "unknown reference");
+    assert!(
+        err.contains("joint \"wrist_follower_joint\"") && err.contains("\"nope\" is not a joint"),
+        "{err}"
+    );
+    assert_ok(&sodyn(&["info", "--model", b]), "unknown reference without --mimic");
+}

@@ -104,8 +104,8 @@ fn floating_chain(n: usize) -> String {
 /// in the loader alone. The loader now stops at `MAX_URDF_DOFS` with an error naming the joint.
 #[test]
 fn urdf_dof_limit() {
-    let fixed = UrdfOptions { floating_base: false, strict_inertia: false };
-    let floating = UrdfOptions { floating_base: true, strict_inertia: false };
+    let fixed = UrdfOptions { floating_base: false, strict_inertia: false, mimic: false };
+    let floating = UrdfOptions { floating_base: true, strict_inertia: false, mimic: false };
     let n_max = MAX_URDF_DOFS / 6;
     // At the limit: loads.
     let m = load_urdf_str(&floating_chain(n_max), "chain", &fixed).unwrap();
@@ -176,7 +176,7 @@ fn urdf_many_fixed_links_load_in_linear_time() {
         }
         s + "</robot>"
     };
-    let opts = UrdfOptions { floating_base: true, strict_inertia: false };
+    let opts = UrdfOptions { floating_base: true, strict_inertia: false, mimic: false };
     let time = |n: usize| {
         let xml = chain(n);
         let t = std::time::Instant::now();

@@ -187,3 +187,84 @@ fn algorithms_do_not_allocate() {
         );
     }
 }
+
+#[test]
+fn mimic_algorithms_do_not_allocate() {
+    use sodyn::mimic::{self, MimicData, MimicModel, MimicSoData};
+    let path =
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_arm.urdf");
+    let opts = sodyn::model::UrdfOptions { floating_base: true, ..Default::default() };
+    let m = MimicModel::load_urdf_file(&path, &opts).unwrap();
+    let mut rng = Rng::new(2);
+    let q = m.random_configuration(&mut rng);
+    let v = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
+    let a = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
+    let mut d = MimicData::new(&m);
+    let mut so = MimicSoData::new(&m);
+    let mut report = vec![];
+    let mut check = |name: &str, f: &mut dyn FnMut()| {
+        f(); // warm-up
+        let n = allocations(f);
+        if n > 0 {
+            report.push(format!("{name}: {n}"));
+        }
+    };
+    check("mimic::rnea", &mut || {
+        mimic::rnea(&m, &mut d, &q, &v, &a, None).unwrap();
+    });
+    check("mimic::crba", &mut || {
+        mimic::crba(&m, &mut d, &q).unwrap();
+    });
+    check("mimic::aba", &mut || {
+        mimic::aba(&m, &mut d, &q, &v, &a, None).unwrap();
+    });
+    check("mimic::id_derivatives", &mut || {
+        mimic::id_derivatives(&m, &mut d, &q, &v, &a, None).unwrap()
+    });
+    check("mimic::fd_derivatives", &mut || {
+        mimic::fd_derivatives(&m, &mut d, &q, &v, &a, None).unwrap()
+    });
+    check("mimic::id_so_derivatives", &mut || {
+        mimic::id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None).unwrap()
+    });
+    check("mimic::fd_so_derivatives", &mut || {
+        mimic::fd_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None).unwrap()
+    });
+    let full = m.full();
+    let p = nalgebra::Vector3::new(0.0, 0.0, 0.02);
+    let contacts = vec![
+        Contact::new(full, "tool", p).unwrap(),
+        Contact::new(full, "finger_r", p).unwrap().with_baumgarte(1.0, 0.5).unwrap(),
+    ];
+    let mut kd = mimic::MimicKktData::new(&m, &contacts).unwrap();
+    let lam = DVector::from_element(kd.dim(), 0.5);
+    check("mimic::kkt_derivatives", &mut || {
+        mimic::kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &a).unwrap()
+    });
+    let mut kd2 = mimic::MimicKktData::new(&m, &contacts).unwrap().with_second_order(&m);
+    check("mimic::kkt_so_derivatives", &mut || {
+        mimic::kkt_so_derivatives(&m, &mut d, &mut kd2, &q, &v, &a).unwrap()
+    });
+    let mut im = mimic::MimicImpactData::new(&m, &contacts).unwrap();
+    im.set_restitution(0.3).unwrap();
+    check("mimic::impact_derivatives", &mut || {
+        mimic::impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap()
+    });
+    let mut im2 = mimic::MimicImpactData::new(&m, &contacts).unwrap().with_second_order(&m);
+    im2.set_restitution(0.3).unwrap();
+    check("mimic::impact_so_derivatives", &mut || {
+        mimic::impact_so_derivatives(&m, &mut d, &mut im2, &q, &v).unwrap()
+    });
+    let mut cc = mimic::MimicContractedData::new(&m);
+    check("mimic::id_so_contracted", &mut || {
+        mimic::id_so_contracted(&m, &mut d, &mut cc, &q, &v, &a, &v).unwrap()
+    });
+    check("mimic::fd_so_contracted", &mut || {
+        mimic::fd_so_contracted(&m, &mut d, &mut cc, &q, &v, &a, &v).unwrap()
+    });
+    check("mimic::constrained_id_derivatives", &mut || {
+        mimic::constrained_id_derivatives(&m, &mut d, &mut kd, Some(&mut so), &q, &v, &a, &lam)
+            .unwrap()
+    });
+    assert!(report.is_empty(), "heap allocations in mimic hot paths: {}", report.join(", "));
+}

@@ -527,8 +527,11 @@ fn pinocchio_solo12_constraint_and_impulse_dynamics() {
     let shared = PathBuf::from(SHARED_MODELS);
     let dir = if shared.is_dir() { shared } else { PathBuf::from(COMMITTED_MODELS) };
     let urdf = dir.join("solo12.urdf");
-    let model = load_urdf_file(&urdf, &UrdfOptions { floating_base: true, strict_inertia: false })
-        .expect("solo12.urdf loads");
+    let model = load_urdf_file(
+        &urdf,
+        &UrdfOptions { floating_base: true, strict_inertia: false, mimic: false },
+    )
+    .expect("solo12.urdf loads");
     let text =
         std::fs::read_to_string(PathBuf::from(FIXTURES).join("solo12.json")).expect("fixture");
     let fx: Value = serde_json::from_str(&text).expect("fixture JSON");

@@ -14,9 +14,12 @@ const COMMITTED_MODELS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/
 const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/urdf");
 const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures");
 
-const FIXED: UrdfOptions = UrdfOptions { floating_base: false, strict_inertia: false };
-const FLOATING: UrdfOptions = UrdfOptions { floating_base: true, strict_inertia: false };
-const STRICT: UrdfOptions = UrdfOptions { floating_base: false, strict_inertia: true };
+const FIXED: UrdfOptions =
+    UrdfOptions { floating_base: false, strict_inertia: false, mimic: false };
+const FLOATING: UrdfOptions =
+    UrdfOptions { floating_base: true, strict_inertia: false, mimic: false };
+const STRICT: UrdfOptions =
+    UrdfOptions { floating_base: false, strict_inertia: true, mimic: false };
 
 /// The robot models: `../shared/models` when it exists, otherwise the copy committed in
 /// `tests/data/models` (so that these tests never skip).
@@ -52,7 +55,7 @@ fn readme_table(dir: &Path) -> Vec<Row> {
 }
 
 fn load_shared(dir: &Path, row: &Row) -> Model {
-    let opts = UrdfOptions { floating_base: row.ff, strict_inertia: false };
+    let opts = UrdfOptions { floating_base: row.ff, strict_inertia: false, mimic: false };
     let m = load_urdf_file(&dir.join(&row.file), &opts)
         .unwrap_or_else(|e| panic!("{} failed to load: {e}", row.file));
     assert!(m.warnings().is_empty(), "{}: {:?}", row.file, m.warnings());
@@ -243,7 +246,7 @@ fn shared_models_dimensions_match_readme() {
         // Also loadable with the other base option.
         let other = load_urdf_file(
             &dir.join(&row.file),
-            &UrdfOptions { floating_base: !row.ff, strict_inertia: false },
+            &UrdfOptions { floating_base: !row.ff, strict_inertia: false, mimic: false },
         )
         .unwrap();
         assert_eq!(other.nv(), if row.ff { row.nv - 6 } else { row.nv + 6 }, "{}", row.file);
@@ -389,7 +392,7 @@ fn joint_order_matches_pinocchio_fixtures_up_to_sibling_order() {
 
         let m = load_urdf_file(
             &dir.join(&row.file),
-            &UrdfOptions { floating_base: ff, strict_inertia: false },
+            &UrdfOptions { floating_base: ff, strict_inertia: false, mimic: false },
         )
         .unwrap();
         let skip = if ff { 2 } else { 1 };

@@ -30,7 +30,7 @@ pub fn urdf(bytes: &[u8]) -> usize {
     let xml = String::from_utf8_lossy(bytes);
     let mut loaded = 0;
     for floating_base in [false, true] {
-        let opts = UrdfOptions { floating_base, strict_inertia: false };
+        let opts = UrdfOptions { floating_base, strict_inertia: false, mimic: false };
         let Ok(model) = load_urdf_str(&xml, "<fuzz>", &opts) else { continue };
         loaded += 1;
         assert!(model.nv() <= MAX_URDF_DOFS, "nv = {} above the loader's limit", model.nv());
@@ -144,7 +144,7 @@ fn state_models() -> &'static [StateModel] {
             load_urdf_str(
                 xml,
                 "<built in>",
-                &UrdfOptions { floating_base: ff, strict_inertia: false },
+                &UrdfOptions { floating_base: ff, strict_inertia: false, mimic: false },
             )
             .unwrap()
         };

@@ -24,20 +24,37 @@ class Joint:
     nq: int
     idx_v: int
     nv: int
+    mimic: Optional[str]
+    """In a model loaded with ``mimic=True``, the reference joint of a mimic joint (whose
+    ``nq``, ``nv`` are 0 and ``idx_q``, ``idx_v`` those of the reference, as Pinocchio's
+    ``JointModelMimic``); ``None`` otherwise."""
+    multiplier: float
+    """``m`` of a mimic joint, ``q = m * q_ref + c`` (1 otherwise)."""
+    offset: float
+    """``c`` of a mimic joint (0 otherwise)."""
 
 class Model:
     """Immutable kinematic tree (Pinocchio's ``Model``); gravity may be set."""
 
     @staticmethod
     def from_urdf(path: Union[str, os.PathLike[str]], floating_base: bool = False,
-                  strict_inertia: bool = False) -> "Model":
+                  strict_inertia: bool = False, mimic: bool = False) -> "Model":
         """Loads a URDF file. ``floating_base=True`` adds a free-flyer root joint
         ``root_joint``. A link inertia that is not physical but harmless (a positive
         semi-definite one that violates the triangle inequality, or one welded to a fixed base)
-        loads with a message in ``warnings``; ``strict_inertia=True`` refuses it instead."""
+        loads with a message in ``warnings``; ``strict_inertia=True`` refuses it instead.
+        ``mimic=True`` reads each ``<mimic joint multiplier offset>`` as the constraint
+        ``q = multiplier * q_ref + offset``: the mimic joints have no degree of freedom, and
+        ``nq``, ``nv``, every state and every output are in the reduced coordinates (a
+        ``<mimic>`` whose reference is unknown, a mimic joint, or not a one-DoF joint of the
+        same kind is a ``SodynError``). Such a model supports ``rnea``, ``crba``, ``aba``,
+        ``nonlinear_effects``, ``id_derivatives``, ``fd_derivatives``, ``id_so_derivatives``,
+        ``fd_so_derivatives``, ``id_so_contracted``, ``fd_so_contracted``,
+        ``constrained_id_derivatives``, ``kkt_derivatives`` and ``impact_derivatives``; every
+        other function raises ``SodynError`` naming itself. See docs/python.md."""
     @staticmethod
     def from_urdf_string(xml: str, floating_base: bool = False,
-                         strict_inertia: bool = False) -> "Model":
+                         strict_inertia: bool = False, mimic: bool = False) -> "Model":
         """Loads a URDF document given as a string (options as ``from_urdf``)."""
     @staticmethod
     def from_mjcf(path: Union[str, os.PathLike[str]], floating_base: bool = False) -> "Model":
@@ -68,6 +85,20 @@ class Model:
     @property
     def njoints(self) -> int: ...
     @property
+    def has_mimic(self) -> bool:
+        """Whether the model was loaded with ``mimic=True``."""
+    @property
+    def full_model(self) -> Optional["Model"]:
+        """For a model loaded with ``mimic=True``: the full tree, every joint independent (as
+        ``mimic=False`` loads it); ``None`` otherwise."""
+    @property
+    def mimic_map(self) -> Optional[Matrix]:
+        """For a model loaded with ``mimic=True``: ``G``, ``(full nv, nv)``, with
+        ``v_full = G v``, ``tau = G.T @ tau_full``, ``M = G.T @ M_full @ G``; ``None``
+        otherwise."""
+    def expand_configuration(self, q: ArrayLike) -> Vector:
+        """The full tree's configuration of a reduced one (``mimic=True`` models only)."""
+    @property
     def warnings(self) -> list[str]:
         """What the URDF or MJCF loader accepted with a reservation, one ``"FILE:LINE: ELEMENT:
         REASON"`` string each: a non-physical but harmless link inertia, a ``<mimic>`` naming an
@@ -83,7 +114,8 @@ class Model:
     def with_armature(self, a: ArrayLike) -> "Model":
         """A copy of the model with the armature ``a`` (shape ``(nv,)``, finite, non-negative;
         otherwise ``ValueError`` or ``SodynError`` naming the joint). A ``Data`` made for this
-        model serves the copy too."""
+        model serves the copy too. With ``mimic=True``, ``armature`` and ``a`` are per DoF of
+        the full tree (``full_model.nv``), mimic joints included."""
     @property
     def gravity(self) -> Vector:
         """Spatial gravity ``[0, 0, 0, gx, gy, gz]`` (angular first), a fresh array."""

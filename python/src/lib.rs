@@ -28,6 +28,10 @@ use sodyn::deriv::{
     fd_so_derivatives, id_derivatives, id_so_derivatives, impact_derivatives,
     impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
 };
+use sodyn::mimic::{
+    self, MimicContractedData, MimicData, MimicImpactData, MimicJoint, MimicKktData, MimicModel,
+    MimicSoData,
+};
 use sodyn::model::{
     ContactReference, ContactType, JointType, MjcfOptions, Model, ModelBuilder, UrdfOptions,
     builtin,
@@ -403,14 +407,29 @@ struct PyJoint {
     nq: usize,
     idx_v: usize,
     nv: usize,
+    /// The reference joint of a mimic joint of a model loaded with `mimic=True`.
+    mimic: Option<String>,
+    multiplier: f64,
+    offset: f64,
 }
 
 #[pymethods]
 impl PyJoint {
     fn __repr__(&self) -> String {
         format!(
-            "Joint(name={:?}, type={:?}, parent={:?}, idx_q={}, nq={}, idx_v={}, nv={})",
-            self.name, self.r#type, self.parent, self.idx_q, self.nq, self.idx_v, self.nv
+            "Joint(name={:?}, type={:?}, parent={:?}, idx_q={}, nq={}, idx_v={}, nv={}{})",
+            self.name,
+            self.r#type,
+            self.parent,
+            self.idx_q,
+            self.nq,
+            self.idx_v,
+            self.nv,
+            match &self.mimic {
+                Some(r) =>
+                    format!(", mimic={r:?}, multiplier={}, offset={}", self.multiplier, self.offset),
+                None => String::new(),
+            }
         )
     }
 }
@@ -418,7 +437,37 @@ impl PyJoint {
 /// Immutable description of a kinematic tree (Pinocchio's `Model`); only gravity may be set.
 #[pyclass(name = "Model", module = "sodyn._sodyn")]
 struct PyModel {
+    /// The model; with mimic joints, the full tree (every joint independent).
     m: Model,
+    /// `Model.from_urdf(..., mimic=True)`: the reduced model, whose coordinates the Python
+    /// model has (`nq`, `nv`, states and outputs).
+    mimic: Option<Arc<MimicModel>>,
+}
+
+impl PyModel {
+    fn plain(m: Model) -> Self {
+        Self { m, mimic: None }
+    }
+    fn with_mimic(mm: MimicModel) -> Self {
+        Self { m: mm.full().clone(), mimic: Some(Arc::new(mm)) }
+    }
+    /// The model for the functions that do not support mimic joints: an error naming `what`
+    /// for a model loaded with `mimic=True`.
+    fn full_only(&self, what: &str) -> PyResult<&Model> {
+        if self.mimic.is_some() {
+            return Err(core_err(Error::Argument {
+                name: "model".into(),
+                reason: format!(
+                    "{what} does not support models with mimic joints (loaded with \
+                     mimic=True); it supports rnea, crba, aba, nonlinear_effects, \
+                     id_derivatives, fd_derivatives, id_so_derivatives, fd_so_derivatives, \
+                     id_so_contracted, fd_so_contracted, constrained_id_derivatives, \
+                     kkt_derivatives and impact_derivatives"
+                ),
+            }));
+        }
+        Ok(&self.m)
+    }
 }
 
 /// Seeds for `random_configuration(seed=None)`: distinct per call.
@@ -431,31 +480,49 @@ fn fresh_seed() -> u64 {
     t ^ COUNTER.fetch_add(0x9e37_79b9_7f4a_7c15, Ordering::Relaxed)
 }
 
+impl PyModel {
+    fn loaded(m: Model, mimic: bool) -> PyResult<Self> {
+        if mimic {
+            Ok(Self::with_mimic(MimicModel::from_model(m).map_err(core_err)?))
+        } else {
+            Ok(Self::plain(m))
+        }
+    }
+}
+
 #[pymethods]
 impl PyModel {
     /// Loads a URDF file; `floating_base=True` adds a free-flyer root joint `root_joint`;
     /// `strict_inertia=True` refuses the non-physical but harmless link inertias that otherwise
-    /// load with a warning (`Model.warnings`).
+    /// load with a warning (`Model.warnings`); `mimic=True` reads the `<mimic>` joints as
+    /// constraints `q = multiplier * q_ref + offset` (no degree of freedom of their own: `nq`,
+    /// `nv`, states and outputs in the reduced coordinates; see docs/python.md).
     #[staticmethod]
-    #[pyo3(signature = (path, floating_base = false, strict_inertia = false))]
+    #[pyo3(signature = (path, floating_base = false, strict_inertia = false, mimic = false))]
     fn from_urdf(
         py: Python<'_>,
         path: std::path::PathBuf,
         floating_base: bool,
         strict_inertia: bool,
+        mimic: bool,
     ) -> PyResult<Self> {
-        let opts = UrdfOptions { floating_base, strict_inertia };
+        let opts = UrdfOptions { floating_base, strict_inertia, mimic };
         let m = py.detach(|| sodyn::model::load_urdf_file(&path, &opts)).map_err(core_err)?;
-        Ok(Self { m })
+        Self::loaded(m, mimic)
     }
 
     /// Loads a URDF document given as a string.
     #[staticmethod]
-    #[pyo3(signature = (xml, floating_base = false, strict_inertia = false))]
-    fn from_urdf_string(xml: &str, floating_base: bool, strict_inertia: bool) -> PyResult<Self> {
-        let opts = UrdfOptions { floating_base, strict_inertia };
+    #[pyo3(signature = (xml, floating_base = false, strict_inertia = false, mimic = false))]
+    fn from_urdf_string(
+        xml: &str,
+        floating_base: bool,
+        strict_inertia: bool,
+        mimic: bool,
+    ) -> PyResult<Self> {
+        let opts = UrdfOptions { floating_base, strict_inertia, mimic };
         let m = sodyn::model::load_urdf_str(xml, "<string>", &opts).map_err(core_err)?;
-        Ok(Self { m })
+        Self::loaded(m, mimic)
     }
 
     /// Loads an MJCF (MuJoCo XML) file: bodies, hinge/slide/ball/free joints, default classes,
@@ -468,7 +535,7 @@ impl PyModel {
     fn from_mjcf(py: Python<'_>, path: std::path::PathBuf, floating_base: bool) -> PyResult<Self> {
         let opts = MjcfOptions { floating_base };
         let m = py.detach(|| sodyn::model::load_mjcf_file(&path, &opts)).map_err(core_err)?;
-        Ok(Self { m })
+        Ok(Self::plain(m))
     }
 
     /// Loads an MJCF document given as a string; `<include>` paths are relative to `base_dir`
@@ -483,7 +550,7 @@ impl PyModel {
         let opts = MjcfOptions { floating_base };
         let dir = base_dir.unwrap_or_default();
         let m = sodyn::model::load_mjcf_str(xml, "<string>", &dir, &opts).map_err(core_err)?;
-        Ok(Self { m })
+        Ok(Self::plain(m))
     }
 
     /// A built-in model by name (the command line's `builtin:` names, e.g. `humanoid`,
@@ -491,7 +558,7 @@ impl PyModel {
     #[staticmethod]
     fn builtin(name: &str) -> PyResult<Self> {
         match builtin::by_name(name) {
-            Some(m) => Ok(Self { m }),
+            Some(m) => Ok(Self::plain(m)),
             None => Err(core_err(Error::Unknown {
                 kind: format!("built-in model (examples: {})", builtin::names().join(", ")),
                 name: name.into(),
@@ -511,11 +578,42 @@ impl PyModel {
     }
     #[getter]
     fn nq(&self) -> usize {
-        self.m.nq()
+        self.mimic.as_ref().map_or(self.m.nq(), |mm| mm.nq())
     }
     #[getter]
     fn nv(&self) -> usize {
-        self.m.nv()
+        self.mimic.as_ref().map_or(self.m.nv(), |mm| mm.nv())
+    }
+    /// Whether the model was loaded with `mimic=True` (its mimic joints then follow their
+    /// reference joints and have no degree of freedom).
+    #[getter]
+    fn has_mimic(&self) -> bool {
+        self.mimic.is_some()
+    }
+    /// The full tree of a model loaded with `mimic=True` (every joint independent, as with
+    /// `mimic=False`); `None` otherwise.
+    #[getter]
+    fn full_model(&self) -> Option<Self> {
+        self.mimic.as_ref().map(|_| Self::plain(self.m.clone()))
+    }
+    /// The constraint map `G` (`(full nv, nv)`, `v_full = G v`) of a model loaded with
+    /// `mimic=True`; `None` otherwise.
+    #[getter]
+    fn mimic_map<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {
+        self.mimic.as_ref().map(|mm| out_mat(py, &mm.g()))
+    }
+    /// `q_full` of a reduced configuration `q` (a model loaded with `mimic=True`).
+    fn expand_configuration<'py>(
+        &self,
+        py: Python<'py>,
+        q: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let mm = self.mimic.as_ref().ok_or_else(|| {
+            value_err("expand_configuration: the model was not loaded with mimic=True".into())
+        })?;
+        let mut qv = DVector::zeros(0);
+        read_vec(q, "q", mm.nq(), "nq", &mut qv)?;
+        Ok(out_vec(py, &mm.expand_q(&qv).map_err(core_err)?))
     }
     #[getter]
     fn njoints(&self) -> usize {
@@ -541,6 +639,7 @@ impl PyModel {
     /// A copy of the model with the armature `a` (shape `(nv,)`, finite, non-negative); a
     /// `Data` or workspace made for this model serves the copy too.
     fn with_armature(&self, a: &Bound<'_, PyAny>) -> PyResult<Self> {
+        // With mimic joints: the full tree's DoFs (mimic joints included).
         let arr = array(a, "armature")?;
         if arr.shape() != [self.m.nv()] {
             return Err(value_err(format!(
@@ -550,7 +649,11 @@ impl PyModel {
             )));
         }
         let v: Vec<f64> = arr.as_array().iter().copied().collect();
-        Ok(Self { m: self.m.with_armature(&v).map_err(core_err)? })
+        let m = self.m.with_armature(&v).map_err(core_err)?;
+        match &self.mimic {
+            None => Ok(Self::plain(m)),
+            Some(mm) => Ok(Self::with_mimic(MimicModel::new(m, mm.mimics()).map_err(core_err)?)),
+        }
     }
 
     /// Spatial gravity `[0, 0, 0, gx, gy, gz]` (angular first).
@@ -581,7 +684,11 @@ impl PyModel {
                 )));
             }
         };
-        self.m.set_gravity(lin).map_err(core_err)
+        self.m.set_gravity(lin).map_err(core_err)?;
+        if let Some(mm) = &mut self.mimic {
+            Arc::make_mut(mm).set_gravity(lin).map_err(core_err)?;
+        }
+        Ok(())
     }
 
     /// The joint table (joints 1..njoints-1; the world, joint 0, excluded).
@@ -589,14 +696,36 @@ impl PyModel {
     fn joints(&self) -> Vec<PyJoint> {
         let m = &self.m;
         (1..m.njoints())
-            .map(|i| PyJoint {
-                name: m.names()[i].clone(),
-                r#type: m.joints()[i].name().into(),
-                parent: m.names()[m.parents()[i]].clone(),
-                idx_q: m.idx_q()[i],
-                nq: m.nqs()[i],
-                idx_v: m.idx_v()[i],
-                nv: m.nvs()[i],
+            .map(|i| {
+                let mut j = PyJoint {
+                    name: m.names()[i].clone(),
+                    r#type: m.joints()[i].name().into(),
+                    parent: m.names()[m.parents()[i]].clone(),
+                    idx_q: m.idx_q()[i],
+                    nq: m.nqs()[i],
+                    idx_v: m.idx_v()[i],
+                    nv: m.nvs()[i],
+                    mimic: None,
+                    multiplier: 1.0,
+                    offset: 0.0,
+                };
+                if let Some(mm) = &self.mimic {
+                    // Reduced indices; a mimic joint has none of its own (nq = nv = 0, the
+                    // indices of its reference joint, as Pinocchio's JointModelMimic).
+                    match mm.reduced_idx()[i] {
+                        Some((a, b)) => (j.idx_q, j.idx_v) = (a, b),
+                        None => {
+                            let c = mm.mimics().iter().find(|c| c.joint == i);
+                            if let Some(c) = c {
+                                let (a, b) = mm.reduced_idx()[c.reference].unwrap_or((0, 0));
+                                (j.idx_q, j.idx_v, j.nq, j.nv) = (a, b, 0, 0);
+                                j.mimic = Some(m.names()[c.reference].clone());
+                                (j.multiplier, j.offset) = (c.multiplier, c.offset);
+                            }
+                        }
+                    }
+                }
+                j
             })
             .collect()
     }
@@ -610,12 +739,18 @@ impl PyModel {
     /// Lower configuration limits (−inf where absent).
     #[getter]
     fn lower_limits<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        if let Some(mm) = &self.mimic {
+            return out_vec(py, &mm.reduce_q(self.m.lower()).expect("full length"));
+        }
         out_vec(py, self.m.lower())
     }
 
     /// Upper configuration limits (+inf where absent).
     #[getter]
     fn upper_limits<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        if let Some(mm) = &self.mimic {
+            return out_vec(py, &mm.reduce_q(self.m.upper()).expect("full length"));
+        }
         out_vec(py, self.m.upper())
     }
 
@@ -631,7 +766,10 @@ impl PyModel {
 
     /// The neutral configuration (zero angles, identity quaternions).
     fn neutral<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
-        out_vec(py, &self.m.neutral())
+        match &self.mimic {
+            Some(mm) => out_vec(py, &mm.neutral()),
+            None => out_vec(py, &self.m.neutral()),
+        }
     }
 
     /// A random configuration within the limits (uniform quaternions; `[-π, π]` or `[-1, 1]`
@@ -650,7 +788,10 @@ impl PyModel {
             })?,
         };
         let mut rng = Rng::new(seed);
-        Ok(out_vec(py, &self.m.random_configuration(&mut rng)))
+        match &self.mimic {
+            Some(mm) => Ok(out_vec(py, &mm.random_configuration(&mut rng))),
+            None => Ok(out_vec(py, &self.m.random_configuration(&mut rng))),
+        }
     }
 
     /// `q ⊕ dq`: integrates the tangent vector `dq` (length nv) from `q` (joint-local
@@ -662,6 +803,11 @@ impl PyModel {
         dq: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let (mut qv, mut dv) = (DVector::zeros(0), DVector::zeros(0));
+        if let Some(mm) = &self.mimic {
+            read_vec(q, "q", mm.nq(), "nq", &mut qv)?;
+            read_vec(dq, "dq", mm.nv(), "nv", &mut dv)?;
+            return Ok(out_vec(py, &mm.integrate(&qv, &dv).map_err(core_err)?));
+        }
         read_q(q, "q", &self.m, &mut qv)?;
         read_vec(dq, "dq", self.m.nv(), "nv", &mut dv)?;
         Ok(out_vec(py, &self.m.integrate(&qv, &dv).map_err(core_err)?))
@@ -676,6 +822,11 @@ impl PyModel {
         q1: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let (mut a, mut b) = (DVector::zeros(0), DVector::zeros(0));
+        if let Some(mm) = &self.mimic {
+            read_vec(q0, "q0", mm.nq(), "nq", &mut a)?;
+            read_vec(q1, "q1", mm.nq(), "nq", &mut b)?;
+            return Ok(out_vec(py, &mm.difference(&a, &b).map_err(core_err)?));
+        }
         read_q(q0, "q0", &self.m, &mut a)?;
         read_q(q1, "q1", &self.m, &mut b)?;
         Ok(out_vec(py, &self.m.difference(&a, &b).map_err(core_err)?))
@@ -692,6 +843,7 @@ impl PyModel {
         arg: i64,
     ) -> PyResult<Bound<'py, PyAny>> {
         let arg = lie_arg(arg)?;
+        self.full_only("d_integrate")?;
         let (mut qv, mut dv) = (DVector::zeros(0), DVector::zeros(0));
         read_q(q, "q", &self.m, &mut qv)?;
         read_vec(dq, "dq", self.m.nv(), "nv", &mut dv)?;
@@ -709,6 +861,7 @@ impl PyModel {
         arg: i64,
     ) -> PyResult<Bound<'py, PyAny>> {
         let arg = lie_arg(arg)?;
+        self.full_only("d_difference")?;
         let (mut a, mut b) = (DVector::zeros(0), DVector::zeros(0));
         read_q(q0, "q0", &self.m, &mut a)?;
         read_q(q1, "q1", &self.m, &mut b)?;
@@ -717,27 +870,40 @@ impl PyModel {
 
     /// A workspace for this model (same as `Data(model)`).
     fn create_data(&self) -> PyData {
-        PyData::for_model(&self.m)
+        PyData::for_py_model(self)
     }
 
     /// The model as plain Python data (for pickling; `_model_from_description` rebuilds it).
     fn _description<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        describe(py, &self.m)
+        let d = describe(py, &self.m)?;
+        if let Some(mm) = &self.mimic {
+            let l: Vec<(usize, usize, f64, f64)> = mm
+                .mimics()
+                .iter()
+                .map(|c| (c.joint, c.reference, c.multiplier, c.offset))
+                .collect();
+            d.set_item("mimic_constraints", l)?;
+        }
+        Ok(d)
     }
 
     /// Rebuilds a model from `_description()` through `ModelBuilder` (every check re-run).
     #[staticmethod]
     fn _from_description(desc: &Bound<'_, PyDict>) -> PyResult<Self> {
-        Ok(Self { m: rebuild(desc)? })
+        rebuild_py(desc)
     }
 
     fn __repr__(&self) -> String {
         format!(
-            "Model(name={:?}, nq={}, nv={}, njoints={})",
+            "Model(name={:?}, nq={}, nv={}, njoints={}{})",
             self.m.name(),
-            self.m.nq(),
-            self.m.nv(),
-            self.m.njoints()
+            self.nq(),
+            self.nv(),
+            self.m.njoints(),
+            match &self.mimic {
+                Some(mm) => format!(", mimic joints={}", mm.mimics().len()),
+                None => String::new(),
+            }
         )
     }
 }
@@ -883,10 +1049,29 @@ fn rebuild(desc: &Bound<'_, PyDict>) -> PyResult<Model> {
     b.build().map_err(core_err)
 }
 
+/// [`rebuild`], with the mimic constraints of a model loaded with `mimic=True`.
+fn rebuild_py(desc: &Bound<'_, PyDict>) -> PyResult<PyModel> {
+    let m = rebuild(desc)?;
+    if !desc.contains("mimic_constraints")? {
+        return Ok(PyModel::plain(m));
+    }
+    let l: Vec<(usize, usize, f64, f64)> = item(desc, "mimic_constraints")?;
+    let c: Vec<MimicJoint> = l
+        .into_iter()
+        .map(|(joint, reference, multiplier, offset)| MimicJoint {
+            joint,
+            reference,
+            multiplier,
+            offset,
+        })
+        .collect();
+    Ok(PyModel::with_mimic(MimicModel::new(m, &c).map_err(core_err)?))
+}
+
 /// Rebuilds a pickled model (see `Model._description`).
 #[pyfunction]
 fn _model_from_description(desc: &Bound<'_, PyDict>) -> PyResult<PyModel> {
-    Ok(PyModel { m: rebuild(desc)? })
+    rebuild_py(desc)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -917,6 +1102,8 @@ struct PyData {
     kktc: Option<(ContactKey, KktData, KktContracted)>,
     impc: Option<(ContactKey, ImpactData, ImpactContracted)>,
     wl: DVector<f64>,
+    /// The workspaces of a model loaded with `mimic=True` (the others made on first use).
+    mimic: Option<Box<MimicWs>>,
 }
 
 impl PyData {
@@ -938,7 +1125,21 @@ impl PyData {
             kktc: None,
             impc: None,
             wl: DVector::zeros(0),
+            mimic: None,
         }
+    }
+    fn for_py_model(m: &PyModel) -> Self {
+        let mut d = Self::for_model(&m.m);
+        d.mimic = m.mimic.as_ref().map(|mm| {
+            Box::new(MimicWs {
+                d: MimicData::new(mm),
+                so: None,
+                con: None,
+                kkt: None,
+                impact: None,
+            })
+        });
+        d
     }
 }
 
@@ -946,7 +1147,7 @@ impl PyData {
 impl PyData {
     #[new]
     fn new(model: PyRef<'_, PyModel>) -> Self {
-        Self::for_model(&model.m)
+        Self::for_py_model(&model)
     }
 }
 
@@ -965,6 +1166,407 @@ fn read_qvx(
 }
 
 // ---------------------------------------------------------------------------------------------
+// Models with mimic joints (Model.from_urdf(..., mimic=True)): sodyn::mimic
+// ---------------------------------------------------------------------------------------------
+
+/// The workspaces of a model with mimic joints in a `Data`.
+struct MimicWs {
+    d: MimicData,
+    so: Option<MimicSoData>,
+    con: Option<MimicContractedData>,
+    kkt: Option<(ContactKey, MimicKktData)>,
+    impact: Option<(ContactKey, MimicImpactData)>,
+}
+
+/// The mimic workspaces of `d`, an error if it was made for a model without mimic joints.
+fn mimic_ws(d: &mut PyData) -> PyResult<&mut MimicWs> {
+    d.mimic.as_deref_mut().ok_or_else(|| {
+        core_err(Error::Workspace(
+            "this Data was made for a model without mimic joints; make it with \
+             model.create_data() of the model loaded with mimic=True"
+                .into(),
+        ))
+    })
+}
+
+/// Reads `q` (reduced nq) and, if given, `v` and `x` (reduced nv) into the data's buffers.
+fn mimic_read(
+    mm: &MimicModel,
+    d: &mut PyData,
+    q: &Bound<'_, PyAny>,
+    v: Option<&Bound<'_, PyAny>>,
+    x: Option<(&Bound<'_, PyAny>, &str)>,
+) -> PyResult<()> {
+    read_vec(q, "q", mm.nq(), "nq (reduced coordinates: mimic joints excluded)", &mut d.q)?;
+    if let Some(v) = v {
+        read_vec(v, "v", mm.nv(), "nv (reduced coordinates)", &mut d.v)?;
+    }
+    if let Some((x, name)) = x {
+        read_vec(x, name, mm.nv(), "nv (reduced coordinates)", &mut d.a)?;
+    }
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn mimic_rnea<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    fext: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    mimic_read(mm, d, q, Some(v), Some((a, "a")))?;
+    let has_f = read_fext(fext, mm.full(), &mut d.fext)?;
+    mimic_ws(d)?;
+    let PyData { q, v, a, fext, mimic: Some(ws), .. } = d else { unreachable!() };
+    let f = has_f.then_some(fext.as_slice());
+    let md = &mut ws.d;
+    py.detach(|| mimic::rnea(mm, md, q, v, a, f).map(|_| ())).map_err(core_err)?;
+    Ok(out_vec(py, md.tau()))
+}
+
+fn mimic_crba<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    mimic_read(mm, d, q, None, None)?;
+    mimic_ws(d)?;
+    let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
+    let md = &mut ws.d;
+    py.detach(|| mimic::crba(mm, md, q).map(|_| ())).map_err(core_err)?;
+    Ok(out_mat(py, md.m()))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn mimic_aba<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    fext: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    mimic_read(mm, d, q, Some(v), Some((tau, "tau")))?;
+    let has_f = read_fext(fext, mm.full(), &mut d.fext)?;
+    mimic_ws(d)?;
+    let PyData { q, v, a, fext, mimic: Some(ws), .. } = d else { unreachable!() };
+    let f = has_f.then_some(fext.as_slice());
+    let md = &mut ws.d;
+    py.detach(|| mimic::aba(mm, md, q, v, a, f).map(|_| ())).map_err(core_err)?;
+    Ok(out_vec(py, md.qdd()))
+}
+
+fn mimic_nle<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    mimic_read(mm, d, q, Some(v), None)?;
+    mimic_ws(d)?;
+    let PyData { q, v, a, mimic: Some(ws), .. } = d else { unreachable!() };
+    if a.len() != mm.nv() {
+        *a = DVector::zeros(mm.nv());
+    }
+    a.fill(0.0);
+    let md = &mut ws.d;
+    py.detach(|| mimic::rnea(mm, md, q, v, a, None).map(|_| ())).map_err(core_err)?;
+    Ok(out_vec(py, md.tau()))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn mimic_id_fo<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    fext: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    mimic_read(mm, d, q, Some(v), Some((a, "a")))?;
+    let has_f = read_fext(fext, mm.full(), &mut d.fext)?;
+    mimic_ws(d)?;
+    let PyData { q, v, a, fext, mimic: Some(ws), .. } = d else { unreachable!() };
+    let f = has_f.then_some(fext.as_slice());
+    let md = &mut ws.d;
+    py.detach(|| mimic::id_derivatives(mm, md, q, v, a, f)).map_err(core_err)?;
+    PyTuple::new(py, [out_mat(py, md.dtau_dq()), out_mat(py, md.dtau_dv())])
+}
+
+#[allow(clippy::too_many_arguments)]
+fn mimic_fd_fo<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    fext: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    mimic_read(mm, d, q, Some(v), Some((tau, "tau")))?;
+    let has_f = read_fext(fext, mm.full(), &mut d.fext)?;
+    mimic_ws(d)?;
+    let PyData { q, v, a, fext, mimic: Some(ws), .. } = d else { unreachable!() };
+    let f = has_f.then_some(fext.as_slice());
+    let md = &mut ws.d;
+    py.detach(|| mimic::fd_derivatives(mm, md, q, v, a, f)).map_err(core_err)?;
+    PyTuple::new(py, [out_mat(py, md.dqdd_dq()), out_mat(py, md.dqdd_dv()), out_mat(py, md.minv())])
+}
+
+/// `id_so_derivatives` (`fd = false`) or `fd_so_derivatives` (`fd = true`) of a mimic model.
+#[allow(clippy::too_many_arguments)]
+fn mimic_so<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    x: &Bound<'py, PyAny>,
+    out: Option<&Bound<'py, PyAny>>,
+    fd: bool,
+) -> PyResult<Bound<'py, PyTuple>> {
+    let out = out.filter(|o| !o.is_none()).map(|o| check_out(o, mm.nv())).transpose()?;
+    mimic_read(mm, d, q, Some(v), Some((x, if fd { "tau" } else { "a" })))?;
+    mimic_ws(d)?;
+    let PyData { q, v, a, mimic: Some(ws), .. } = d else { unreachable!() };
+    let MimicWs { d: md, so, .. } = &mut **ws;
+    let so = so.get_or_insert_with(|| MimicSoData::new(mm));
+    let ts = if fd {
+        py.detach(|| mimic::fd_so_derivatives(mm, md, so, q, v, a, None)).map_err(core_err)?;
+        [so.d2qdd_dq2(), so.d2qdd_dv2(), so.d2qdd_dqdv(), so.d2qdd_dtaudq()]
+    } else {
+        py.detach(|| mimic::id_so_derivatives(mm, md, so, q, v, a, None)).map_err(core_err)?;
+        [so.d2tau_dq2(), so.d2tau_dv2(), so.d2tau_dqdv(), so.dm_dq()]
+    };
+    if let Some(out) = out {
+        return write_out(out, ts);
+    }
+    PyTuple::new(py, ts.map(|t| out_tensor(py, t)))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn mimic_id_so<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    out: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    mimic_so(py, mm, d, q, v, a, out, false)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn mimic_fd_so<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    out: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    mimic_so(py, mm, d, q, v, tau, out, true)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn mimic_constrained_id<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    full: &Model,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    contacts: &[PyRef<'py, PyContact>],
+    lam: &Bound<'py, PyAny>,
+    order: i64,
+) -> PyResult<Bound<'py, PyDict>> {
+    mimic_read(mm, d, q, Some(v), Some((a, "a")))?;
+    let (cs, key) = resolve(full, contacts)?;
+    read_vec(lam, "lam", rows_of(&cs), "3 or 6 rows per contact", &mut d.lam)?;
+    mimic_ws(d)?;
+    let PyData { q, v, a, lam, mimic: Some(ws), .. } = d else { unreachable!() };
+    let MimicWs { d: md, so, kkt, .. } = &mut **ws;
+    if kkt.as_ref().is_none_or(|(k, _)| *k != key) {
+        *kkt = Some((key, MimicKktData::new(mm, &cs).map_err(core_err)?));
+    }
+    let kd = &mut kkt.as_mut().expect("set above").1;
+    let out = PyDict::new(py);
+    if order == 2 {
+        let so = so.get_or_insert_with(|| MimicSoData::new(mm));
+        py.detach(|| mimic::constrained_id_derivatives(mm, md, kd, Some(so), q, v, a, lam))
+            .map_err(core_err)?;
+        out.set_item("d2tau_dq2", out_tensor(py, so.d2tau_dq2()))?;
+    } else {
+        py.detach(|| mimic::constrained_id_derivatives(mm, md, kd, None, q, v, a, lam))
+            .map_err(core_err)?;
+    }
+    out.set_item("tau", out_vec(py, md.tau()))?;
+    out.set_item("dtau_dq", out_mat(py, md.dtau_dq()))?;
+    out.set_item("dtau_dv", out_mat(py, md.dtau_dv()))?;
+    Ok(out)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn mimic_kkt<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    full: &Model,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    contacts: &[PyRef<'py, PyContact>],
+    order: i64,
+) -> PyResult<Bound<'py, PyDict>> {
+    mimic_read(mm, d, q, Some(v), Some((tau, "tau")))?;
+    let (cs, key) = resolve(full, contacts)?;
+    mimic_ws(d)?;
+    let PyData { q, v, a, mimic: Some(ws), .. } = d else { unreachable!() };
+    let MimicWs { d: md, kkt, .. } = &mut **ws;
+    let fits =
+        |k: &MimicKktData, key2: &ContactKey| *key2 == key && (order == 1 || k.so().is_some());
+    if kkt.as_ref().is_none_or(|(k2, kd)| !fits(kd, k2)) {
+        let mut kd = MimicKktData::new(mm, &cs).map_err(core_err)?;
+        if order == 2 {
+            kd = kd.with_second_order(mm);
+        }
+        *kkt = Some((key, kd));
+    }
+    let kd = &mut kkt.as_mut().expect("set above").1;
+    if order == 2 {
+        py.detach(|| mimic::kkt_so_derivatives(mm, md, kd, q, v, a)).map_err(core_err)?;
+    } else {
+        py.detach(|| mimic::kkt_derivatives(mm, md, kd, q, v, a)).map_err(core_err)?;
+    }
+    let out = PyDict::new(py);
+    out.set_item("qdd", out_vec(py, kd.qdd()))?;
+    out.set_item("lambda", out_vec(py, kd.lambda()))?;
+    for (k, x) in [
+        ("dqdd_dq", kd.dqdd_dq()),
+        ("dqdd_dv", kd.dqdd_dv()),
+        ("dqdd_dtau", kd.dqdd_dtau()),
+        ("dlambda_dq", kd.dlambda_dq()),
+        ("dlambda_dv", kd.dlambda_dv()),
+        ("dlambda_dtau", kd.dlambda_dtau()),
+    ] {
+        out.set_item(k, out_mat(py, x))?;
+    }
+    if order == 2 {
+        let t = kd.so().expect("second order allocated");
+        for (k, x) in [
+            ("d2qdd_dq2", t.d2qdd_dq2()),
+            ("d2qdd_dv2", t.d2qdd_dv2()),
+            ("d2qdd_dqdv", t.d2qdd_dqdv()),
+            ("d2qdd_dtaudq", t.d2qdd_dtaudq()),
+            ("d2lambda_dq2", t.d2lambda_dq2()),
+            ("d2lambda_dv2", t.d2lambda_dv2()),
+            ("d2lambda_dqdv", t.d2lambda_dqdv()),
+            ("d2lambda_dtaudq", t.d2lambda_dtaudq()),
+        ] {
+            out.set_item(k, out_tensor(py, x))?;
+        }
+    }
+    Ok(out)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn mimic_impact<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    full: &Model,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v_minus: &Bound<'py, PyAny>,
+    contacts: &[PyRef<'py, PyContact>],
+    restitution: f64,
+    order: i64,
+) -> PyResult<Bound<'py, PyDict>> {
+    mimic_read(mm, d, q, Some(v_minus), None)?;
+    let (cs, key) = resolve(full, contacts)?;
+    mimic_ws(d)?;
+    let PyData { q, v, mimic: Some(ws), .. } = d else { unreachable!() };
+    let MimicWs { d: md, impact, .. } = &mut **ws;
+    let fits =
+        |k: &MimicImpactData, key2: &ContactKey| *key2 == key && (order == 1 || k.so().is_some());
+    if impact.as_ref().is_none_or(|(k2, im)| !fits(im, k2)) {
+        let mut im = MimicImpactData::new(mm, &cs).map_err(core_err)?;
+        if order == 2 {
+            im = im.with_second_order(mm);
+        }
+        *impact = Some((key, im));
+    }
+    let im = &mut impact.as_mut().expect("set above").1;
+    im.set_restitution(restitution).map_err(core_err)?;
+    if order == 2 {
+        py.detach(|| mimic::impact_so_derivatives(mm, md, im, q, v)).map_err(core_err)?;
+    } else {
+        py.detach(|| mimic::impact_derivatives(mm, md, im, q, v)).map_err(core_err)?;
+    }
+    let out = PyDict::new(py);
+    out.set_item("vplus", out_vec(py, im.vplus()))?;
+    out.set_item("impulse", out_vec(py, im.impulse()))?;
+    for (k, x) in [
+        ("dvplus_dq", im.dvplus_dq()),
+        ("dvplus_dvminus", im.dvplus_dvminus()),
+        ("dimpulse_dq", im.dimpulse_dq()),
+        ("dimpulse_dvminus", im.dimpulse_dvminus()),
+    ] {
+        out.set_item(k, out_mat(py, x))?;
+    }
+    if let Some(t) = im.so().filter(|_| order == 2) {
+        for (k, x) in [
+            ("d2vplus_dq2", t.d2vplus_dq2()),
+            ("d2vplus_dqdvminus", t.d2vplus_dqdvminus()),
+            ("d2impulse_dq2", t.d2impulse_dq2()),
+            ("d2impulse_dqdvminus", t.d2impulse_dqdvminus()),
+        ] {
+            out.set_item(k, out_tensor(py, x))?;
+        }
+    }
+    Ok(out)
+}
+
+/// `id_so_contracted` (`fd = false`) or `fd_so_contracted` (`fd = true`) of a mimic model.
+#[allow(clippy::too_many_arguments)]
+fn mimic_contracted<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    x: &Bound<'py, PyAny>,
+    w: &Bound<'py, PyAny>,
+    fd: bool,
+) -> PyResult<Bound<'py, PyTuple>> {
+    mimic_read(mm, d, q, Some(v), Some((x, if fd { "tau" } else { "a" })))?;
+    read_vec(w, "w", mm.nv(), "nv (reduced coordinates)", &mut d.w)?;
+    mimic_ws(d)?;
+    let PyData { q, v, a, w, mimic: Some(ws), .. } = d else { unreachable!() };
+    let MimicWs { d: md, con, .. } = &mut **ws;
+    let c = con.get_or_insert_with(|| MimicContractedData::new(mm));
+    if fd {
+        py.detach(|| mimic::fd_so_contracted(mm, md, c, q, v, a, w)).map_err(core_err)?;
+    } else {
+        py.detach(|| mimic::id_so_contracted(mm, md, c, q, v, a, w)).map_err(core_err)?;
+    }
+    let last = if fd { c.c_tauq() } else { c.c_mq() };
+    PyTuple::new(
+        py,
+        [out_mat(py, c.c_qq()), out_mat(py, c.c_vv()), out_mat(py, c.c_qv()), out_mat(py, last)],
+    )
+}
+
+// ---------------------------------------------------------------------------------------------
 // Dynamics and derivatives
 // ---------------------------------------------------------------------------------------------
 
@@ -980,6 +1582,9 @@ fn rnea<'py>(
     a: &Bound<'py, PyAny>,
     fext: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_rnea(py, &mm, &mut data, q, v, a, fext);
+    }
     let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
@@ -998,6 +1603,9 @@ fn crba<'py>(
     mut data: PyRefMut<'py, PyData>,
     q: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_crba(py, &mm, &mut data, q);
+    }
     let m = &model.m;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
@@ -1017,6 +1625,9 @@ fn aba<'py>(
     tau: &Bound<'py, PyAny>,
     fext: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_aba(py, &mm, &mut data, q, v, tau, fext);
+    }
     let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
@@ -1036,6 +1647,9 @@ fn nonlinear_effects<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_nle(py, &mm, &mut data, q, v);
+    }
     let m = &model.m;
     let PyData { d, q: qb, v: vb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
@@ -1056,6 +1670,9 @@ fn py_id_derivatives<'py>(
     a: &Bound<'py, PyAny>,
     fext: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_id_fo(py, &mm, &mut data, q, v, a, fext);
+    }
     let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
@@ -1078,6 +1695,9 @@ fn py_fd_derivatives<'py>(
     tau: &Bound<'py, PyAny>,
     fext: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_fd_fo(py, &mm, &mut data, q, v, tau, fext);
+    }
     let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
@@ -1101,6 +1721,9 @@ fn py_id_so_derivatives<'py>(
     a: &Bound<'py, PyAny>,
     out: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_id_so(py, &mm, &mut data, q, v, a, out);
+    }
     let m = &model.m;
     let out = out.filter(|o| !o.is_none()).map(|o| check_out(o, m.nv())).transpose()?;
     let d = &mut *data;
@@ -1135,6 +1758,9 @@ fn py_fd_so_derivatives<'py>(
     tau: &Bound<'py, PyAny>,
     out: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_fd_so(py, &mm, &mut data, q, v, tau, out);
+    }
     let m = &model.m;
     let out = out.filter(|o| !o.is_none()).map(|o| check_out(o, m.nv())).transpose()?;
     let d = &mut *data;
@@ -1172,7 +1798,10 @@ fn id_so_contracted<'py>(
     a: &Bound<'py, PyAny>,
     w: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let m = &model.m;
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_contracted(py, &mm, &mut data, q, v, a, w, false);
+    }
+    let m = model.full_only("id_so_contracted")?;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
     read_vec(w, "w", m.nv(), "nv", &mut d.w)?;
@@ -1202,7 +1831,10 @@ fn fd_so_contracted<'py>(
     tau: &Bound<'py, PyAny>,
     w: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let m = &model.m;
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_contracted(py, &mm, &mut data, q, v, tau, w, true);
+    }
+    let m = model.full_only("fd_so_contracted")?;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
     read_vec(w, "w", m.nv(), "nv", &mut d.w)?;
@@ -1229,7 +1861,7 @@ fn idfoza<'py>(
     q: &Bound<'py, PyAny>,
     x: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("idfoza")?;
     let PyData { d, q: qb, a: xb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     read_vec(x, "x", m.nv(), "nv", xb)?;
@@ -1247,7 +1879,7 @@ fn idsoza<'py>(
     q: &Bound<'py, PyAny>,
     x: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("idsoza")?;
     let PyData { d, q: qb, a: xb, so, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     read_vec(x, "x", m.nv(), "nv", xb)?;
@@ -1462,7 +2094,7 @@ fn frame_placement<'py>(
     q: &Bound<'py, PyAny>,
     frame: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("frame_placement")?;
     let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
@@ -1485,7 +2117,7 @@ fn frame_jacobian<'py>(
     frame: &Bound<'py, PyAny>,
     reference: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("frame_jacobian")?;
     let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
@@ -1506,7 +2138,7 @@ fn frame_velocity<'py>(
     frame: &Bound<'py, PyAny>,
     reference: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("frame_velocity")?;
     let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
     let PyData { d, q: qb, v: vb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
@@ -1531,7 +2163,7 @@ fn frame_acceleration<'py>(
     reference: &str,
     classical: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("frame_acceleration")?;
     let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
@@ -1557,7 +2189,7 @@ fn frame_velocity_derivatives<'py>(
     frame: &Bound<'py, PyAny>,
     reference: &str,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let m = &model.m;
+    let m = model.full_only("frame_velocity_derivatives")?;
     let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
     let PyData { d, q: qb, v: vb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
@@ -1585,7 +2217,7 @@ fn frame_acceleration_derivatives<'py>(
     frame: &Bound<'py, PyAny>,
     reference: &str,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let m = &model.m;
+    let m = model.full_only("frame_acceleration_derivatives")?;
     let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
@@ -1608,7 +2240,7 @@ fn center_of_mass<'py>(
     mut data: PyRefMut<'py, PyData>,
     q: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("center_of_mass")?;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     let c = algo::center_of_mass(m, d, qb).map_err(core_err)?;
@@ -1628,7 +2260,7 @@ fn center_of_mass_motion<'py>(
     v: &Bound<'py, PyAny>,
     a: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let m = &model.m;
+    let m = model.full_only("center_of_mass_motion")?;
     let PyData { d, q: qb, v: vb, a: ab, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     read_vec(v, "v", m.nv(), "nv", vb)?;
@@ -1649,7 +2281,7 @@ fn center_of_mass_jacobian<'py>(
     mut data: PyRefMut<'py, PyData>,
     q: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("center_of_mass_jacobian")?;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     let mut j = nalgebra::Matrix3xX::zeros(m.nv());
@@ -1666,7 +2298,7 @@ fn center_of_mass_velocity_derivatives<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("center_of_mass_velocity_derivatives")?;
     let PyData { d, q: qb, v: vb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     read_vec(v, "v", m.nv(), "nv", vb)?;
@@ -1688,7 +2320,7 @@ fn centroidal_dynamics_derivatives<'py>(
     v: &Bound<'py, PyAny>,
     a: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let m = &model.m;
+    let m = model.full_only("centroidal_dynamics_derivatives")?;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
     let PyData { d, q, v, a, .. } = d;
@@ -1716,7 +2348,7 @@ fn frame_jacobian_derivative<'py>(
     frame: &Bound<'py, PyAny>,
     reference: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("frame_jacobian_derivative")?;
     let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
@@ -1735,7 +2367,7 @@ fn frame_placement_hessian<'py>(
     q: &Bound<'py, PyAny>,
     frame: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("frame_placement_hessian")?;
     let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
@@ -1869,7 +2501,10 @@ fn py_constrained_id_derivatives<'py>(
     order: i64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
-    let m = &model.m;
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_constrained_id(py, &mm, &model.m, &mut data, q, v, a, &contacts, lam, order);
+    }
+    let m = model.full_only("constrained_id_derivatives")?;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
     let (cs, key) = resolve(m, &contacts)?;
@@ -1912,7 +2547,10 @@ fn py_kkt_derivatives<'py>(
     order: i64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
-    let m = &model.m;
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_kkt(py, &mm, &model.m, &mut data, q, v, tau, &contacts, order);
+    }
+    let m = model.full_only("kkt_derivatives")?;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
     let (cs, key) = resolve(m, &contacts)?;
@@ -1977,7 +2615,20 @@ fn py_impact_derivatives<'py>(
     order: i64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
-    let m = &model.m;
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_impact(
+            py,
+            &mm,
+            &model.m,
+            &mut data,
+            q,
+            v_minus,
+            &contacts,
+            restitution,
+            order,
+        );
+    }
+    let m = model.full_only("impact_derivatives")?;
     let d = &mut *data;
     read_q(q, "q", m, &mut d.q)?;
     read_vec(v_minus, "v_minus", m.nv(), "nv", &mut d.v)?;
@@ -2038,7 +2689,7 @@ fn kkt_so_contracted<'py>(
     w_qdd: &Bound<'py, PyAny>,
     w_lambda: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let m = &model.m;
+    let m = model.full_only("kkt_so_contracted")?;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
     let (cs, key) = resolve(m, &contacts)?;
@@ -2079,7 +2730,7 @@ fn impact_so_contracted<'py>(
     w_impulse: &Bound<'py, PyAny>,
     restitution: f64,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let m = &model.m;
+    let m = model.full_only("impact_so_contracted")?;
     let d = &mut *data;
     read_q(q, "q", m, &mut d.q)?;
     read_vec(v_minus, "v_minus", m.nv(), "nv", &mut d.v)?;
@@ -2245,7 +2896,7 @@ fn batch_rnea<'py>(
     a: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("batch_rnea")?;
     let ins = batch_qvx(m, q, v, a, "a")?;
     batch_call(py, threads, Data::new(m), &ins, 1, &[m.nv()], |d, st, o| {
         copy_output(o[0], algo::rnea(m, d, &st[0], &st[1], &st[2], None)?.as_slice());
@@ -2264,7 +2915,7 @@ fn batch_aba<'py>(
     tau: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("batch_aba")?;
     let ins = batch_qvx(m, q, v, tau, "tau")?;
     batch_call(py, threads, Data::new(m), &ins, 1, &[m.nv()], |d, st, o| {
         copy_output(o[0], algo::aba(m, d, &st[0], &st[1], &st[2], None)?.as_slice());
@@ -2282,7 +2933,7 @@ fn batch_nonlinear_effects<'py>(
     v: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("batch_nonlinear_effects")?;
     let qs = read_batch(q, "q", m.nq(), "nq", None)?;
     let vs = read_batch(v, "v", m.nv(), "nv", Some(qs.count))?;
     batch_call(py, threads, Data::new(m), &[qs, vs], 1, &[m.nv()], |d, st, o| {
@@ -2300,7 +2951,7 @@ fn batch_crba<'py>(
     q: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("batch_crba")?;
     let qs = read_batch(q, "q", m.nq(), "nq", None)?;
     batch_call(py, threads, Data::new(m), &[qs], 1, &[m.nv(), m.nv()], |d, st, o| {
         copy_output(o[0], algo::crba(m, d, &st[0])?.as_slice());
@@ -2319,7 +2970,7 @@ fn batch_id_derivatives<'py>(
     a: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("batch_id_derivatives")?;
     let ins = batch_qvx(m, q, v, a, "a")?;
     batch_call(py, threads, Data::new(m), &ins, 2, &[m.nv(), m.nv()], |d, st, o| {
         id_derivatives(m, d, &st[0], &st[1], &st[2], None)?;
@@ -2340,7 +2991,7 @@ fn batch_fd_derivatives<'py>(
     tau: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("batch_fd_derivatives")?;
     let ins = batch_qvx(m, q, v, tau, "tau")?;
     batch_call(py, threads, Data::new(m), &ins, 3, &[m.nv(), m.nv()], |d, st, o| {
         fd_derivatives(m, d, &st[0], &st[1], &st[2], None)?;
@@ -2362,7 +3013,7 @@ fn batch_id_so_derivatives<'py>(
     a: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("batch_id_so_derivatives")?;
     let ins = batch_qvx(m, q, v, a, "a")?;
     let (nv, ws) = (m.nv(), (Data::new(m), SoData::new(m)));
     batch_call(py, threads, ws, &ins, 4, &[nv, nv, nv], |(d, so), st, o| {
@@ -2386,7 +3037,7 @@ fn batch_fd_so_derivatives<'py>(
     tau: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = &model.m;
+    let m = model.full_only("batch_fd_so_derivatives")?;
     let ins = batch_qvx(m, q, v, tau, "tau")?;
     let (nv, ws) = (m.nv(), (Data::new(m), FdSoData::new(m)));
     batch_call(py, threads, ws, &ins, 4, &[nv, nv, nv], |(d, f), st, o| {

@@ -36,6 +36,6 @@ pub(crate) mod internal {
     pub(crate) use super::aba::aba_unchecked;
     pub(crate) use super::crba::crba_unchecked;
     pub(crate) use super::kinematics::{placements, root_free_flyer};
-    pub(crate) use super::ltl::{ltl_in_place, ltl_solve_fd, ltl_solve_rows_desc};
+    pub(crate) use super::ltl::{PIVOT_RTOL, ltl_in_place, ltl_solve_fd, ltl_solve_rows_desc};
     pub(crate) use super::rnea::{check_fext, rnea_unchecked};
 }

@@ -393,78 +393,7 @@ fn so_inner(
     // Every entry is rewritten (contact rows zeroed: the G products add to all of them).
     copy_rows_zero_rest(rqq, so.id.d2tau_dq2(), n);
     // − ∂²(Jᵀλ̂)/∂q² and ∂²(J w)/∂q².
-    {
-        for (c, path) in im.cd.paths.iter().enumerate() {
-            let (geo, r0) = (im.cd.geo[c], im.cd.row0[c]);
-            let cols = &im.cd.pcols[c];
-            if !geo.is_point() {
-                // ∂²(J_cᵀλ)/∂q² and ∂²(J_c w)/∂q² from the closed form of ∂²J_x/∂q_l∂q_k,
-                // symmetric in (l, k) for DoFs of different joints (the pairs l > k are the
-                // mirrors of pairs already written).
-                let lam = &im.impulse.as_slice()[r0..r0 + geo.dim()];
-                let rot = &path.rot;
-                let (nw, fw) = world_weights(geo, rot, lam);
-                for (&k, ck) in path.dofs.iter().zip(cols) {
-                    for (&l, cl) in path.dofs.iter().zip(cols) {
-                        let same_joint = model.dof_joint[l] == model.dof_joint[k];
-                        if l > k && !same_joint {
-                            continue;
-                        }
-                        let (mut sa, mut sl) = (Vector3::zeros(), Vector3::zeros());
-                        for (&x, cx) in path.dofs.iter().zip(cols) {
-                            let (a, d) = djac_dq2(geo.local, cx, cl, ck);
-                            let t = nw.dot(&a) + fw.dot(&d);
-                            rqq[(x, l, k)] -= t;
-                            if !same_joint {
-                                rqq[(x, k, l)] -= t;
-                            }
-                            sa += a * im.w[x];
-                            sl += d * im.w[x];
-                        }
-                        let (sa, sl) =
-                            if geo.local { (rot.tr_mul(&sa), rot.tr_mul(&sl)) } else { (sa, sl) };
-                        let rows = if geo.six { [sa, sl] } else { [sl, sl] };
-                        for (r, x) in rows.iter().flat_map(|v| v.iter()).take(geo.dim()).enumerate()
-                        {
-                            rqq[(n + r0 + r, l, k)] = *x;
-                            if !same_joint {
-                                rqq[(n + r0 + r, k, l)] = *x;
-                            }
-                        }
-                    }
-                }
-                continue;
-            }
-            // ∂²(J_cᵀλ)/∂q² and ∂²(J_c w)/∂q² from the closed form of ∂²u_x/∂q_l∂q_k.
-            let lam = Vector3::new(im.impulse[r0], im.impulse[r0 + 1], im.impulse[r0 + 2]);
-            for (&k, ck) in path.dofs.iter().zip(cols) {
-                for (&l, cl) in path.dofs.iter().zip(cols) {
-                    // Symmetric in (l, k) for DoFs of different joints (which commute): the
-                    // pairs l > k are the mirrors of pairs already written.
-                    let same_joint = model.dof_joint[l] == model.dof_joint[k];
-                    if l > k && !same_joint {
-                        continue;
-                    }
-                    let mut d = Vector3::zeros();
-                    for (&x, cx) in path.dofs.iter().zip(cols) {
-                        let t = du_dq2(cx, cl, ck);
-                        let y = lam.dot(&t);
-                        rqq[(x, l, k)] -= y;
-                        if !same_joint {
-                            rqq[(x, k, l)] -= y;
-                        }
-                        d += t * im.w[x];
-                    }
-                    for r in 0..3 {
-                        rqq[(n + r0 + r, l, k)] = d[r];
-                        if !same_joint {
-                            rqq[(n + r0 + r, k, l)] = d[r];
-                        }
-                    }
-                }
-            }
-        }
-    }
+    add_contact_rqq(model, &im.cd, im.impulse.as_slice(), im.w.as_slice(), rqq);
     // G terms, the IDFOZA parts of eight (or four) columns k at a time.
     so.dv_minus_one.copy_from(&im.dvplus_dvminus);
     for k in 0..n {
@@ -693,4 +622,88 @@ pub fn impact_so_contracted(
     gemm(-1.0, &*zm, &im.dvplus_dvminus, 1.0, qv);
     gemm(1.0, &*et, &im.dimpulse_dvminus, 1.0, qv);
     Ok(())
+}
+
+/// `R_qq` of the impact's second order, contact part: subtracts `∂²(J_cᵀλ̂)/∂q²` from the rows
+/// `0..nv` of `rqq` and writes `∂²(J_c w)/∂q²` into its contact rows `nv..nv + m` (every path
+/// pair `(l, k)`), at the contact points of the last [`update_points`]; `impulse` (`m`) and `w`
+/// (`nv`) fixed. Shared by [`impact_so_derivatives`] and the impact of
+/// [`crate::mimic::impact_so_derivatives`].
+pub(crate) fn add_contact_rqq(
+    model: &Model,
+    cd: &ContactData,
+    impulse: &[f64],
+    w: &[f64],
+    rqq: &mut Tensor3,
+) {
+    let n = model.nv;
+    for (c, path) in cd.paths.iter().enumerate() {
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        let cols = &cd.pcols[c];
+        if !geo.is_point() {
+            // ∂²(J_cᵀλ)/∂q² and ∂²(J_c w)/∂q² from the closed form of ∂²J_x/∂q_l∂q_k,
+            // symmetric in (l, k) for DoFs of different joints (the pairs l > k are the
+            // mirrors of pairs already written).
+            let lam = &impulse[r0..r0 + geo.dim()];
+            let rot = &path.rot;
+            let (nw, fw) = world_weights(geo, rot, lam);
+            for (&k, ck) in path.dofs.iter().zip(cols) {
+                for (&l, cl) in path.dofs.iter().zip(cols) {
+                    let same_joint = model.dof_joint[l] == model.dof_joint[k];
+                    if l > k && !same_joint {
+                        continue;
+                    }
+                    let (mut sa, mut sl) = (Vector3::zeros(), Vector3::zeros());
+                    for (&x, cx) in path.dofs.iter().zip(cols) {
+                        let (a, d) = djac_dq2(geo.local, cx, cl, ck);
+                        let t = nw.dot(&a) + fw.dot(&d);
+                        rqq[(x, l, k)] -= t;
+                        if !same_joint {
+                            rqq[(x, k, l)] -= t;
+                        }
+                        sa += a * w[x];
+                        sl += d * w[x];
+                    }
+                    let (sa, sl) =
+                        if geo.local { (rot.tr_mul(&sa), rot.tr_mul(&sl)) } else { (sa, sl) };
+                    let rows = if geo.six { [sa, sl] } else { [sl, sl] };
+                    for (r, x) in rows.iter().flat_map(|v| v.iter()).take(geo.dim()).enumerate() {
+                        rqq[(n + r0 + r, l, k)] = *x;
+                        if !same_joint {
+                            rqq[(n + r0 + r, k, l)] = *x;
+                        }
+                    }
+                }
+            }
+            continue;
+        }
+        // ∂²(J_cᵀλ)/∂q² and ∂²(J_c w)/∂q² from the closed form of ∂²u_x/∂q_l∂q_k.
+        let lam = Vector3::new(impulse[r0], impulse[r0 + 1], impulse[r0 + 2]);
+        for (&k, ck) in path.dofs.iter().zip(cols) {
+            for (&l, cl) in path.dofs.iter().zip(cols) {
+                // Symmetric in (l, k) for DoFs of different joints (which commute): the
+                // pairs l > k are the mirrors of pairs already written.
+                let same_joint = model.dof_joint[l] == model.dof_joint[k];
+                if l > k && !same_joint {
+                    continue;
+                }
+                let mut d = Vector3::zeros();
+                for (&x, cx) in path.dofs.iter().zip(cols) {
+                    let t = du_dq2(cx, cl, ck);
+                    let y = lam.dot(&t);
+                    rqq[(x, l, k)] -= y;
+                    if !same_joint {
+                        rqq[(x, k, l)] -= y;
+                    }
+                    d += t * w[x];
+                }
+                for r in 0..3 {
+                    rqq[(n + r0 + r, l, k)] = d[r];
+                    if !same_joint {
+                        rqq[(n + r0 + r, k, l)] = d[r];
+                    }
+                }
+            }
+        }
+    }
 }

@@ -89,6 +89,9 @@ pub struct Model {
     /// For joints loaded from a URDF `<mimic>`: the name of the mimicked joint (loaded as an
     /// independent joint).
     pub(crate) mimic: Vec<Option<String>>,
+    /// The mimic constraints read with [`UrdfOptions::mimic`](super::UrdfOptions::mimic)
+    /// (checked, by increasing joint index; empty otherwise).
+    pub(crate) mimic_joints: Vec<crate::mimic::MimicJoint>,
     /// What the loader accepted with a reservation (see [`Model::warnings`]).
     pub(crate) warnings: Vec<String>,
     /// Frames (URDF links), first one the world.
@@ -288,10 +291,18 @@ impl Model {
     pub fn upper(&self) -> &DVector<f64> {
         &self.upper
     }
-    /// For joints loaded from a URDF `<mimic>`: the name of the mimicked joint (the joint is
-    /// loaded as an independent joint).
+    /// For joints loaded from a URDF `<mimic>`: the name of the mimicked joint. In this model
+    /// the joint is independent; [`crate::mimic::MimicModel`] is the model in which it follows
+    /// its reference joint.
     pub fn mimic(&self) -> &[Option<String>] {
         &self.mimic
+    }
+    /// The mimic constraints `q_joint = multiplier · q_reference + offset` read by the URDF
+    /// loader with [`UrdfOptions::mimic`](super::UrdfOptions::mimic) (checked; by increasing
+    /// joint index), from which [`crate::mimic::MimicModel::from_model`] makes the reduced
+    /// model. Empty without that option and for models made otherwise.
+    pub fn mimic_joints(&self) -> &[crate::mimic::MimicJoint] {
+        &self.mimic_joints
     }
     /// What the URDF or MJCF loader accepted with a reservation, one message per item in the
     /// format of its errors (`FILE:LINE: ELEMENT: REASON`): a link inertia that is not physical
@@ -624,6 +635,7 @@ impl ModelBuilder {
             lower: DVector::zeros(0),
             upper: DVector::zeros(0),
             mimic: vec![None],
+            mimic_joints: vec![],
             warnings: vec![],
             frames: vec![Frame {
                 name: "universe".into(),

@@ -37,9 +37,17 @@
 //!     [`UrdfOptions::strict_inertia`]). A body that is not positive semi-definite is an error
 //!     (Pinocchio loads it, but its mass matrix may be indefinite).
 //! * `<mimic>` joints are loaded as independent joints and recorded with
-//!   [`ModelBuilder::set_mimic`]. A `<mimic>` naming an unknown joint (or the joint itself) is
-//!   a warning, not an error: the joint loads as independent all the same, and nothing is
-//!   recorded.
+//!   [`ModelBuilder::set_mimic`] ([`Model::mimic`]). Without [`UrdfOptions::mimic`], a
+//!   `<mimic>` naming an unknown joint (or the joint itself) is a warning, not an error: the
+//!   joint loads as independent all the same, and nothing is recorded.
+//! * With [`UrdfOptions::mimic`], each `<mimic joint multiplier offset>` (defaults 1 and 0) is
+//!   checked and recorded as a constraint `q = multiplier · q_ref + offset` in
+//!   [`Model::mimic_joints`]: the reference must be another joint of the file, not itself a
+//!   mimic joint, and both must be one-DoF joints of one kind (`revolute`/`continuous`, or
+//!   `prismatic`); anything else is an error naming the file, line and joint. The returned
+//!   [`Model`] is still the full tree;
+//!   [`MimicModel`](crate::mimic::MimicModel) is the model in the reduced coordinates (the
+//!   mimic joints without degrees of freedom).
 //! * Nothing is printed: warnings are returned in [`Model::warnings`] (the command-line tool
 //!   prints them on standard error).
 //! * `<visual>`, `<collision>`, `<transmission>`, `<gazebo>`, `<material>` and every other unknown
@@ -56,6 +64,7 @@
 use super::joint::JointType;
 use super::tree::{Model, ModelBuilder, inertia_defect};
 use crate::error::{Error, Result};
+use crate::mimic::MimicJoint;
 use crate::spatial::InertiaDefect;
 use crate::spatial::{Inertia, Transform};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
@@ -73,6 +82,14 @@ pub struct UrdfOptions {
     /// documentation): an error instead of a warning in [`Model::warnings`]. Moments negative
     /// by round-off are set to zero either way.
     pub strict_inertia: bool,
+    /// Read `<mimic joint multiplier offset>` as a constraint `q = multiplier · q_ref + offset`
+    /// (see the module documentation): every `<mimic>` is checked (an error otherwise) and
+    /// recorded in [`Model::mimic_joints`]. The [`Model`] returned is still the full tree,
+    /// every joint independent; [`MimicModel`](crate::mimic::MimicModel) (made by
+    /// [`MimicModel::load_urdf_file`](crate::mimic::MimicModel::load_urdf_file), or
+    /// [`MimicModel::from_model`](crate::mimic::MimicModel::from_model) of this model) is the
+    /// model in the reduced coordinates, without the mimic joints' degrees of freedom.
+    pub mimic: bool,
 }
 
 /// Relative round-off tolerance of the URDF loader: a principal moment of a link's rotational
@@ -173,6 +190,9 @@ struct Joint<'a, 'i> {
     limits: Option<(f64, f64)>,
     /// Mimicked joint name and the position of the `<mimic>` element.
     mimic: Option<(String, usize)>,
+    /// `<mimic>`'s `multiplier` and `offset` (defaults 1 and 0), read with
+    /// [`UrdfOptions::mimic`] only.
+    mimic_coeffs: (f64, f64),
 }
 
 struct Parser<'d, 'a, 'i> {
@@ -542,6 +562,13 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
                 },
                 _ => None,
             };
+            let mimic_coeffs = match (opts.mimic, kind, child_elem(node, "mimic")) {
+                (true, Kind::Movable(_), Some(m)) => (
+                    self.scalar_or(m, "multiplier", 1.0, &element)?,
+                    self.scalar_or(m, "offset", 0.0, &element)?,
+                ),
+                _ => (1.0, 0.0),
+            };
             joint_index.insert(name.clone(), joints.len());
             joints.push(Joint {
                 name,
@@ -552,6 +579,7 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
                 child: ends[1],
                 limits,
                 mimic,
+                mimic_coeffs,
             });
         }
 
@@ -574,6 +602,10 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
             }
             parent_joint[j.child] = Some(ji);
             children[j.parent].push(ji);
+        }
+        // With `opts.mimic`, every <mimic> must define a constraint the reduced model can use.
+        if opts.mimic {
+            self.check_mimics(&joints, &joint_index)?;
         }
         // A <mimic> naming an unknown joint or the joint itself: a warning, and not recorded
         // (the joint is independent either way).
@@ -633,6 +665,8 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
         } else {
             0
         };
+        // Model joint index of each movable joint, by name.
+        let mut b_names: HashMap<&str, usize> = HashMap::new();
         // (body joint, placement of the link frame in the body frame), per link.
         let mut at: Vec<Option<(usize, Transform)>> = vec![None; links.len()];
         at[root] = Some((root_body, Transform::identity()));
@@ -655,6 +689,7 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
                 Kind::Movable(t) => {
                     let id =
                         b.add_joint(pbody, &j.name, t, place).map_err(self.wrap(pos, &element))?;
+                    b_names.insert(j.name.as_str(), id);
                     if let Some((lo, hi)) = j.limits {
                         b.set_limits(id, &[lo], &[hi]).map_err(self.wrap(pos, &element))?;
                     }
@@ -678,7 +713,22 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
         if let Some(l) = at.iter().position(|a| a.is_none()) {
             return Err(self.cycle_error(&links, &joints, &parent_joint, l));
         }
+        let mut mimics = Vec::new();
+        if opts.mimic {
+            for j in &joints {
+                let Some((of, _)) = &j.mimic else { continue };
+                let id = |n: &str| b_names.get(n).copied().expect("movable joints are in the tree");
+                mimics.push(MimicJoint {
+                    joint: id(&j.name),
+                    reference: id(of),
+                    multiplier: j.mimic_coeffs.0,
+                    offset: j.mimic_coeffs.1,
+                });
+            }
+            mimics.sort_by_key(|m| m.joint);
+        }
         let mut model = b.build_unchecked();
+        model.mimic_joints = mimics;
         self.check_body_inertias(&model, &links, &at, &order, opts.strict_inertia)?;
         model.validate().map_err(|e| Error::Model {
             file: self.file.to_string(),
@@ -688,6 +738,65 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
         })?;
         model.warnings = self.warnings.take();
         Ok(model)
+    }
+
+    /// The checks of [`UrdfOptions::mimic`]: each `<mimic>` names another joint of the file
+    /// that is not itself a mimic joint, and both are one-DoF joints of one kind (rotational:
+    /// `revolute` or `continuous`; or `prismatic`).
+    fn check_mimics(&self, joints: &[Joint], joint_index: &HashMap<String, usize>) -> Result<()> {
+        let rot = |k: Kind| match k {
+            Kind::Movable(JointType::Revolute { .. } | JointType::Continuous { .. }) => Some(true),
+            Kind::Movable(JointType::Prismatic { .. }) => Some(false),
+            _ => None,
+        };
+        let type_of = |j: &Joint| j.node.attribute("type").unwrap_or("").to_string();
+        for j in joints {
+            let Some((of, pos)) = &j.mimic else { continue };
+            let element = format!("joint \"{}\"", j.name);
+            let fail = |why: String| {
+                Err(self.err(*pos, &element, format!("<mimic joint=\"{of}\">: {why}")))
+            };
+            let Some(&r) = joint_index.get(of) else {
+                return fail(format!("\"{of}\" is not a joint of the file"));
+            };
+            let reference = &joints[r];
+            if reference.name == j.name {
+                return fail("a joint cannot mimic itself".into());
+            }
+            if reference.mimic.is_some() {
+                return fail(format!(
+                    "the reference joint \"{of}\" (line {}) is itself a mimic joint",
+                    self.line(reference.node.range().start)
+                ));
+            }
+            let Some(kj) = rot(j.kind) else {
+                return fail(format!(
+                    "a mimic joint must be revolute, continuous or prismatic, not {}",
+                    type_of(j)
+                ));
+            };
+            match rot(reference.kind) {
+                None => {
+                    return fail(format!(
+                        "the reference joint \"{of}\" (line {}) is {}, not a revolute, continuous \
+                         or prismatic joint",
+                        self.line(reference.node.range().start),
+                        type_of(reference)
+                    ));
+                }
+                Some(kr) if kr != kj => {
+                    return fail(format!(
+                        "a {} joint cannot mimic the {} joint \"{of}\" (line {}): both must be \
+                         rotational (revolute, continuous) or both prismatic",
+                        type_of(j),
+                        type_of(reference),
+                        self.line(reference.node.range().start)
+                    ));
+                }
+                Some(_) => {}
+            }
+        }
+        Ok(())
     }
 
     /// A link whose own rotational inertia is not physical is an error unless the body it is

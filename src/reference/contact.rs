@@ -283,7 +283,7 @@ pub fn kkt<T: AdScalar>(
 /// Adds the Baumgarte terms `kd J q̇ + kp e` to the contact rows `rows`, with the reference
 /// placement the contact frame's placement at the real part of `q` (fixed); `e` as in the
 /// documentation of [`crate::model::Contact`]'s module.
-fn baumgarte<T: AdScalar>(
+pub(crate) fn baumgarte<T: AdScalar>(
     model: &Model,
     q: &[T],
     v: &[T],

@@ -21,6 +21,8 @@
 //!   dense solve ([`aba`]);
 //! * [`contact`]: point-contact Jacobians and drifts, constrained inverse dynamics, KKT and
 //!   impact dynamics, and their first/second-order `f64` oracles;
+//! * [`mimic`]: the dynamics in the reduced coordinates of mimic joints (the reference
+//!   algorithms composed with the mimic expansion) and its derivative oracles;
 //! * [`derivatives`]: `f64`-valued convenience oracles, first order with [`num_dual::Dual64`]
 //!   and second order with [`num_dual::HyperDual64`].
 //!
@@ -36,6 +38,7 @@ pub mod contact;
 pub mod derivatives;
 pub mod dynamics;
 pub mod kinematics;
+pub mod mimic;
 pub mod spatial;
 
 pub use contact::{

@@ -87,8 +87,9 @@ pub fn read_fixture(file: &str, formats: &[&str]) -> Value {
 /// model and whether it has a free flyer.
 pub fn load_model(urdf: &Path, fx: &Value) -> (Model, bool) {
     let floating_base = !fx["model"]["root_joint"].is_null();
-    let model = load_urdf_file(urdf, &UrdfOptions { floating_base, strict_inertia: false })
-        .expect("URDF loads");
+    let model =
+        load_urdf_file(urdf, &UrdfOptions { floating_base, strict_inertia: false, mimic: false })
+            .expect("URDF loads");
     assert_eq!(
         vec_of(&fx["model"]["gravity"]),
         vec![0.0, 0.0, -9.81, 0.0, 0.0, 0.0],

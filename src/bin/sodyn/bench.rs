@@ -1293,6 +1293,9 @@ struct Timed {
 
 /// Runs `sodyn bench`.
 pub(crate) fn run(o: &BenchArgs) -> Result<()> {
+    if o.model.mimic {
+        return run_mimic(o);
+    }
     let (spec, floating_base) = (o.model.model.as_str(), o.model.floating_base);
     let contacts: &[String] = o.contacts.as_ref().map_or(&[], |l| &l.0);
     let algos = select_algos(o.algos.as_ref().map(|l| l.0.as_slice()), !contacts.is_empty())?;
@@ -1536,6 +1539,109 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
                 s.samples
             );
         }
+        use std::io::Write;
+        let _ = std::io::stdout().flush();
+    }
+    Ok(())
+}
+
+/// The algorithms `bench --mimic` times (those of `sodyn::mimic`).
+const MIMIC_ALGOS: &[&str] = &["rnea", "crba", "aba", "id_fo", "fd_fo", "id_so", "fd_so"];
+
+/// `bench --mimic`: the algorithms of `sodyn::mimic` on the reduced model, timed as the others
+/// (states round robin, warm-up, median and p10/p90 per call), one line each.
+fn run_mimic(o: &BenchArgs) -> Result<()> {
+    use sodyn::mimic::{self, MimicData, MimicSoData};
+    let unsupported = [
+        (o.contacts.is_some(), "--contacts"),
+        (o.paired_threads.is_some(), "--paired-threads"),
+        (o.ratio_to.is_some(), "--ratio-to"),
+        (o.frame.is_some(), "--frame"),
+        (o.threads != 1, "--threads"),
+    ];
+    if let Some((_, opt)) = unsupported.iter().find(|(on, _)| *on) {
+        return Err(Error::Io(format!(
+            "{opt} is not supported with --mimic (bench --mimic times {})",
+            MIMIC_ALGOS.join(", ")
+        )));
+    }
+    let algos: Vec<&str> = match o.algos.as_ref().map(|l| l.0.as_slice()) {
+        None => MIMIC_ALGOS.to_vec(),
+        Some(req) => {
+            if let Some(a) = req.iter().find(|a| !MIMIC_ALGOS.contains(&a.as_str())) {
+                return Err(Error::Io(format!(
+                    "algorithm \"{a}\" is not available with --mimic (available: {})",
+                    MIMIC_ALGOS.join(", ")
+                )));
+            }
+            MIMIC_ALGOS.iter().copied().filter(|a| req.iter().any(|r| r == a)).collect()
+        }
+    };
+    let m = super::mimic_cli::load(&o.model)?;
+    sodyn::simd::set_thread_level(o.simd);
+    let name = o.name.clone().unwrap_or_else(|| m.name().to_string());
+    let nstates = o.states.unwrap_or(if o.smoke { 8 } else { 1000 });
+    // pin_bench's configurations of the full tree (its sampling bounds), reduced.
+    let full = States::new(m.full(), nstates, o.seed);
+    let qs: Vec<DVector<f64>> =
+        full.q.iter().map(|q| m.reduce_q(q).expect("a full configuration")).collect();
+    let mut rng = Rng::new(o.seed ^ 0x313);
+    let mut r = |n: usize| DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
+    let vs: Vec<DVector<f64>> = (0..nstates).map(|_| r(m.nv())).collect();
+    let xs: Vec<DVector<f64>> = (0..nstates).map(|_| r(m.nv())).collect();
+    let plan = Plan {
+        nstates,
+        iters: o.iters,
+        max_seconds: o.max_seconds,
+        min_samples: 200,
+        per_call: 1,
+        smoke: o.smoke,
+        calls: o.calls,
+    };
+    println!(
+        "# model={name} source={} base={} nq={} nv={} njoints={} nstates={nstates} seed={} \
+         timer_overhead_ns={:.1} mimic={} full_nq={} full_nv={} threads=1 smoke={} simd={}",
+        o.model.model,
+        if o.model.floating_base { "ff" } else { "fixed" },
+        m.nq(),
+        m.nv(),
+        m.full().njoints(),
+        o.seed,
+        timer_overhead_ns(),
+        m.mimics().len(),
+        m.full().nq(),
+        m.full().nv(),
+        o.smoke as u8,
+        sodyn::simd::level().name(),
+    );
+    let mut d = MimicData::new(&m);
+    let mut so = MimicSoData::new(&m);
+    for algo in algos {
+        let t = measure(&plan, |i| {
+            let (q, v, x) = (&qs[i], &vs[i], &xs[i]);
+            match algo {
+                "rnea" => mimic::rnea(&m, &mut d, q, v, x, None).map(|_| ()),
+                "crba" => mimic::crba(&m, &mut d, q).map(|_| ()),
+                "aba" => mimic::aba(&m, &mut d, q, v, x, None).map(|_| ()),
+                "id_fo" => mimic::id_derivatives(&m, &mut d, q, v, x, None),
+                "fd_fo" => mimic::fd_derivatives(&m, &mut d, q, v, x, None),
+                "id_so" => mimic::id_so_derivatives(&m, &mut d, &mut so, q, v, x, None),
+                _ => mimic::fd_so_derivatives(&m, &mut d, &mut so, q, v, x, None),
+            }
+        })
+        .map_err(|e| Error::Io(format!("bench {algo} --mimic on {name}: {e}")))?;
+        println!(
+            "model={name} nq={} nv={} algo={algo} median_us={:.4} p10_us={:.4} p90_us={:.4} \
+             batch={} samples={} mimic={}",
+            m.nq(),
+            m.nv(),
+            t.med,
+            t.p10,
+            t.p90,
+            t.batch,
+            t.samples,
+            m.mimics().len()
+        );
         use std::io::Write;
         let _ = std::io::stdout().flush();
     }

@@ -15,7 +15,7 @@ use std::time::Instant;
 
 /// Median wall time of `f` in microseconds over enough repetitions (about 0.2 s, at most 2000);
 /// the first error of `f` (e.g. a singular mass matrix of a URDF) is returned, not a panic.
-fn time_us(mut f: impl FnMut() -> Result<()>) -> Result<f64> {
+pub(crate) fn time_us(mut f: impl FnMut() -> Result<()>) -> Result<f64> {
     f()?;
     let t0 = Instant::now();
     f()?;
@@ -31,15 +31,15 @@ fn time_us(mut f: impl FnMut() -> Result<()>) -> Result<f64> {
     Ok(samples[reps / 2])
 }
 
-fn rel(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
+pub(crate) fn rel(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
     (a - b).amax() / b.amax().max(1.0)
 }
 
-fn rel_t(a: &Tensor3, b: &Tensor3) -> f64 {
+pub(crate) fn rel_t(a: &Tensor3, b: &Tensor3) -> f64 {
     a.max_abs_diff(b) / b.max_abs().max(1.0)
 }
 
-fn rel_v(a: &DVector<f64>, b: &[f64]) -> f64 {
+pub(crate) fn rel_v(a: &DVector<f64>, b: &[f64]) -> f64 {
     let b = DVector::from_column_slice(b);
     (a - &b).amax() / b.amax().max(1.0)
 }

@@ -10,6 +10,7 @@
 mod bench;
 mod demo;
 mod eval;
+mod mimic_cli;
 
 use clap::{Args, CommandFactory, Parser, Subcommand};
 use serde_json::Value;
@@ -72,6 +73,11 @@ struct ModelArgs {
     /// model's own (zeros for URDF and built-in models, the joints' armature for MJCF)
     #[arg(long, value_name = "A", allow_hyphen_values = true)]
     armature: Option<String>,
+    /// Read the URDF's <mimic> joints as constraints (q = multiplier * q_ref + offset): they
+    /// have no degree of freedom, and q, v, a, tau and every output are in the reduced
+    /// coordinates (--armature then gives the full tree's DoFs)
+    #[arg(long)]
+    mimic: bool,
 }
 
 #[derive(Debug, Args)]
@@ -82,6 +88,9 @@ struct DemoArgs {
     /// Seed of the random state
     #[arg(long, value_name = "S", default_value_t = 0)]
     seed: u64,
+    /// Read the URDF's <mimic> joints as constraints (see info --help)
+    #[arg(long)]
+    mimic: bool,
 }
 
 #[derive(Debug, Args)]
@@ -150,11 +159,20 @@ fn run(cli: Cli) -> Result<Outcome> {
         return Ok(Outcome::Done);
     };
     match command {
+        Command::Demo(o) if o.mimic => mimic_cli::run_demo(&o.model, o.seed),
         Command::Demo(o) => demo::run_demo(&o.model, o.seed),
+        Command::Info(o) if o.model.mimic => {
+            print!("{}", mimic_cli::joint_table(&mimic_cli::load(&o.model)?));
+            Ok(())
+        }
         Command::Info(o) => {
             let m = load_model(&o.model)?;
             print!("{}", joint_table(&m));
             Ok(())
+        }
+        Command::RandomState(o) if o.model.mimic => {
+            let m = mimic_cli::load(&o.model)?;
+            write_output(o.output.as_deref(), &mimic_cli::random_state_json(&m, o.seed))
         }
         Command::RandomState(o) => {
             let m = load_model(&o.model)?;
@@ -171,12 +189,19 @@ fn run(cli: Cli) -> Result<Outcome> {
 /// `sodyn eval`: the output object, written also when some outputs are undefined at the state
 /// (then `Outcome::Partial`, and a message on standard error listing them).
 fn run_eval(o: &EvalArgs) -> Result<Outcome> {
-    let m = load_model(&o.model)?;
     let path = &o.state;
-    let text = std::fs::read_to_string(path).map_err(|e| Error::Io(format!("{path}: {e}")))?;
-    let base = (!o.model.model.starts_with("builtin:")).then_some(o.model.floating_base);
-    let st = eval::load_state(&m, &text, path, base)?;
-    let out = eval::eval_json(&m, &st, o.order)?;
+    let out = if o.model.mimic {
+        let m = mimic_cli::load(&o.model)?;
+        let text = std::fs::read_to_string(path).map_err(|e| Error::Io(format!("{path}: {e}")))?;
+        let st = mimic_cli::load_state(&m, &text, path)?;
+        mimic_cli::eval_json(&m, &st, o.order)?
+    } else {
+        let m = load_model(&o.model)?;
+        let text = std::fs::read_to_string(path).map_err(|e| Error::Io(format!("{path}: {e}")))?;
+        let base = (!o.model.model.starts_with("builtin:")).then_some(o.model.floating_base);
+        let st = eval::load_state(&m, &text, path, base)?;
+        eval::eval_json(&m, &st, o.order)?
+    };
     write_output(o.output.as_deref(), &out)?;
     match out.get("errors").and_then(Value::as_object) {
         Some(errors) => {
@@ -195,7 +220,11 @@ fn run_eval(o: &EvalArgs) -> Result<Outcome> {
 
 /// Loads a model from `builtin:NAME`, an MJCF path (`.xml`) or a URDF path.
 fn load_model(o: &ModelArgs) -> Result<Model> {
-    let opts = UrdfOptions { floating_base: o.floating_base, strict_inertia: o.strict_inertia };
+    let opts = UrdfOptions {
+        floating_base: o.floating_base,
+        strict_inertia: o.strict_inertia,
+        mimic: false,
+    };
     let model = load_model_spec(&o.model, &opts)?;
     match &o.armature {
         Some(a) => with_armature_arg(&model, a),
@@ -307,7 +336,7 @@ fn joint_table(model: &Model) -> String {
             model.inertias()[i].mass,
             model.mimic()[i]
                 .as_ref()
-                .map(|m| format!("mimics \"{m}\" (loaded independent)"))
+                .map(|m| format!("mimics \"{m}\" (independent without --mimic)"))
                 .unwrap_or_default()
         );
     }

@@ -1,0 +1,2362 @@
+//! Mimic joints: the dynamics and its derivatives in the reduced coordinates.
+//!
+//! A mimic joint (URDF `<mimic joint="ref" multiplier="m" offset="c"/>`) follows its reference
+//! joint, `q_mimic = m · q_ref + c`, and has no degree of freedom of its own. A [`MimicModel`]
+//! wraps the full tree (a [`Model`] in which every joint is independent) and the constant map
+//! `G` (`nv_full × nv`) from the reduced velocities to the full ones: row `f` of `G` is the unit
+//! row of the reduced DoF of an independent DoF `f`, and `m` in the column of the reference's
+//! DoF for a mimic DoF. Mimic and reference joints are one-DoF joints of one kind (rotational:
+//! revolute or continuous; or prismatic), so that
+//!
+//! * `q_full = expand(q)` (the independent coordinates copied, `m · q_ref + c` for each mimic
+//!   joint), `v_full = G v`, `a_full = G a`, and `expand(q ⊕ δ) = expand(q) ⊕ G δ`: the tangent
+//!   derivatives of the reduced model are those of the full model times `G` for every `q`, `v`
+//!   or `a` index;
+//! * `τ = Gᵀ τ_full(q_full, G v, G a)` (the generalised forces of the reduced coordinates, by
+//!   virtual work), `M = Gᵀ M_full G`, `∂τ/∂q = Gᵀ (∂τ_full/∂q) G`, `∂τ/∂v = Gᵀ (∂τ_full/∂v) G`;
+//! * the second-order tensors are those of the full model contracted with `G` on each of their
+//!   three indices (`∂M/∂q` too);
+//! * forward dynamics `q̈ = M⁻¹(τ − Gᵀ b_full(q_full, G v))` by a dense `L D Lᵀ` factorisation
+//!   (`M` is not tree-sparse) with the singularity test of the tree-sparse one (a pivot not
+//!   positive and finite, or at most `1e-14` times the largest); its derivatives from the
+//!   reduced inverse-dynamics derivatives at `a_full = G q̈`: `∂q̈/∂u = −M⁻¹ ∂τ/∂u`,
+//!   `∂q̈/∂τ = M⁻¹`, and the second order by eq. eqn_FD_SO_43 with `∂M/∂q` above.
+//!
+//! External forces `fext` are those of the full model (one per joint of the full tree, mimic
+//! joints included). The functions of this module mirror [`crate::algo::rnea()`],
+//! [`crate::algo::crba()`], [`crate::algo::aba()`], [`crate::deriv::id_derivatives`],
+//! [`crate::deriv::fd_derivatives`], [`crate::deriv::id_so_derivatives`] and
+//! [`crate::deriv::fd_so_derivatives`]; their workspaces are [`MimicData`] and [`MimicSoData`],
+//! allocated once. Contacts (frames of the full tree): [`constrained_id_derivatives`] (first and
+//! second order), [`kkt_derivatives`], [`kkt_so_derivatives`], [`impact_derivatives`] and
+//! [`impact_so_derivatives`], with the workspaces [`MimicKktData`] and [`MimicImpactData`].
+//! Contracted second order: [`id_so_contracted`], [`fd_so_contracted`]
+//! ([`MimicContractedData`]). The other algorithms of the crate (kinematics, frames, the
+//! contracted KKT and impact second order, batches) take the full [`Model`] only.
+
+use crate::algo::Data;
+use crate::deriv::{ContactData, KktData, SoData};
+use crate::error::{Error, Result};
+use crate::model::{JointType, Model, UrdfOptions};
+use crate::rng::Rng;
+use crate::spatial::Force;
+use crate::tensor::Tensor3;
+use nalgebra::{DMatrix, DVector};
+use std::path::Path;
+
+/// One mimic constraint `q[joint] = multiplier · q[reference] + offset` between two one-DoF
+/// joints of the full model (indices of [`Model::names`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MimicJoint {
+    /// The mimic joint (it has no degree of freedom in the reduced model).
+    pub joint: usize,
+    /// The joint it follows (an independent joint).
+    pub reference: usize,
+    /// `m` in `q = m · q_ref + c` (URDF default 1).
+    pub multiplier: f64,
+    /// `c` in `q = m · q_ref + c` (URDF default 0).
+    pub offset: f64,
+}
+
+/// A model with mimic joints, in the reduced coordinates (see the [module](self)
+/// documentation): the full tree ([`MimicModel::full`]) and the map `G`.
+#[derive(Clone, Debug)]
+pub struct MimicModel {
+    full: Model,
+    mimics: Vec<MimicJoint>,
+    nq: usize,
+    nv: usize,
+    /// Per full configuration coordinate: `(reduced index, coefficient, offset)`.
+    q_map: Vec<(usize, f64, f64)>,
+    /// Row `f` of `G`: its one non-zero entry `g_coef[f]` is in column `g_col[f]`.
+    g_col: Vec<usize>,
+    g_coef: Vec<f64>,
+    /// The full index of each reduced configuration coordinate / velocity coordinate.
+    q_keep: Vec<usize>,
+    v_keep: Vec<usize>,
+    /// Per joint of the full model: its first reduced configuration and velocity indices, or
+    /// `None` for a mimic joint.
+    reduced_idx: Vec<Option<(usize, usize)>>,
+    /// Identifies the model for the workspaces.
+    key: u64,
+}
+
+/// Whether a joint type can be a mimic or reference joint: `Some(true)` rotational, `Some(false)`
+/// prismatic, `None` otherwise.
+fn one_dof_kind(j: &JointType) -> Option<bool> {
+    match j {
+        JointType::Revolute { .. } | JointType::Continuous { .. } => Some(true),
+        JointType::Prismatic { .. } => Some(false),
+        _ => None,
+    }
+}
+
+impl MimicModel {
+    /// The reduced model of `full` with the constraints `mimics`.
+    ///
+    /// # Errors
+    /// [`Error::Build`] naming the joint if a constraint names a joint index that does not
+    /// exist or the world, a joint mimics itself, a joint is constrained twice, a reference
+    /// joint is itself a mimic joint, either joint is not a one-DoF revolute, continuous or
+    /// prismatic joint, the two are not of one kind (both rotational or both prismatic), or
+    /// the multiplier or offset is not finite.
+    pub fn new(full: Model, mimics: &[MimicJoint]) -> Result<Self> {
+        let nj = full.njoints();
+        let name = |i: usize| full.names()[i].clone();
+        let mut is_mimic = vec![false; nj];
+        for (k, m) in mimics.iter().enumerate() {
+            let bad = |why: String| Err(Error::Build(format!("mimic constraint {k}: {why}")));
+            if m.joint == 0 || m.joint >= nj {
+                return bad(format!("joint index {} is not a moving joint of the model", m.joint));
+            }
+            let who = format!("joint \"{}\" (index {})", name(m.joint), m.joint);
+            if m.reference == 0 || m.reference >= nj {
+                return bad(format!(
+                    "{who}: reference joint index {} is not a moving joint of the model",
+                    m.reference
+                ));
+            }
+            if m.reference == m.joint {
+                return bad(format!("{who} cannot mimic itself"));
+            }
+            if is_mimic[m.joint] {
+                return bad(format!("{who} is constrained twice"));
+            }
+            is_mimic[m.joint] = true;
+            let (kj, kr) =
+                (one_dof_kind(&full.joints()[m.joint]), one_dof_kind(&full.joints()[m.reference]));
+            let rname = name(m.reference);
+            match (kj, kr) {
+                (None, _) => {
+                    return bad(format!(
+                        "{who} is {}: a mimic joint must be revolute, continuous or prismatic",
+                        full.joints()[m.joint].name()
+                    ));
+                }
+                (_, None) => {
+                    return bad(format!(
+                        "{who}: the reference joint \"{rname}\" is {}, not a revolute, \
+                         continuous or prismatic joint",
+                        full.joints()[m.reference].name()
+                    ));
+                }
+                (Some(a), Some(b)) if a != b => {
+                    return bad(format!(
+                        "{who} is {} and its reference joint \"{rname}\" {}: both must be \
+                         rotational (revolute, continuous) or both prismatic",
+                        full.joints()[m.joint].name(),
+                        full.joints()[m.reference].name()
+                    ));
+                }
+                _ => {}
+            }
+            if !m.multiplier.is_finite() || !m.offset.is_finite() {
+                return bad(format!(
+                    "{who}: multiplier {} and offset {} must be finite",
+                    m.multiplier, m.offset
+                ));
+            }
+        }
+        for (k, m) in mimics.iter().enumerate() {
+            if is_mimic[m.reference] {
+                return Err(Error::Build(format!(
+                    "mimic constraint {k}: joint \"{}\" (index {}): the reference joint \"{}\" is \
+                     itself a mimic joint",
+                    name(m.joint),
+                    m.joint,
+                    name(m.reference)
+                )));
+            }
+        }
+        // Reduced indices of the independent joints, in the order of the full model.
+        let mut reduced_idx = vec![None; nj];
+        let (mut nq, mut nv) = (0, 0);
+        let (mut q_keep, mut v_keep) = (Vec::new(), Vec::new());
+        reduced_idx[0] = Some((0, 0));
+        for i in 1..nj {
+            if is_mimic[i] {
+                continue;
+            }
+            reduced_idx[i] = Some((nq, nv));
+            q_keep.extend(full.idx_q()[i]..full.idx_q()[i] + full.nqs()[i]);
+            v_keep.extend(full.idx_v()[i]..full.idx_v()[i] + full.nvs()[i]);
+            nq += full.nqs()[i];
+            nv += full.nvs()[i];
+        }
+        let mut q_map = vec![(0, 1.0, 0.0); full.nq()];
+        let mut g_col = vec![0; full.nv()];
+        let mut g_coef = vec![1.0; full.nv()];
+        for (r, &f) in q_keep.iter().enumerate() {
+            q_map[f] = (r, 1.0, 0.0);
+        }
+        for (r, &f) in v_keep.iter().enumerate() {
+            g_col[f] = r;
+        }
+        for m in mimics {
+            let (rq, rv) = reduced_idx[m.reference].expect("a reference joint is independent");
+            q_map[full.idx_q()[m.joint]] = (rq, m.multiplier, m.offset);
+            g_col[full.idx_v()[m.joint]] = rv;
+            g_coef[full.idx_v()[m.joint]] = m.multiplier;
+        }
+        let key = {
+            use std::hash::{Hash, Hasher};
+            let mut h = std::collections::hash_map::DefaultHasher::new();
+            (full.nq(), full.nv(), full.parents()).hash(&mut h);
+            for m in mimics {
+                (m.joint, m.reference, m.multiplier.to_bits(), m.offset.to_bits()).hash(&mut h);
+            }
+            h.finish()
+        };
+        let mut mimics = mimics.to_vec();
+        mimics.sort_by_key(|m| m.joint);
+        Ok(Self { full, mimics, nq, nv, q_map, g_col, g_coef, q_keep, v_keep, reduced_idx, key })
+    }
+
+    /// The reduced model of `full` with its own constraints ([`Model::mimic_joints`], read by
+    /// the URDF loader with [`UrdfOptions::mimic`]); none for other models.
+    ///
+    /// # Errors
+    /// As [`MimicModel::new`].
+    pub fn from_model(full: Model) -> Result<Self> {
+        let mimics = full.mimic_joints().to_vec();
+        Self::new(full, &mimics)
+    }
+
+    /// Loads a URDF file with its `<mimic>` constraints (the options with
+    /// [`UrdfOptions::mimic`] set; see [`crate::model::urdf`]).
+    ///
+    /// # Errors
+    /// Those of [`crate::model::load_urdf_file`], among them a `<mimic>` whose reference joint
+    /// is unknown, is itself a mimic joint, or is not a one-DoF joint of the mimic joint's kind
+    /// (naming the file, line and joint).
+    pub fn load_urdf_file(path: &Path, opts: &UrdfOptions) -> Result<Self> {
+        let opts = UrdfOptions { mimic: true, ..*opts };
+        Self::from_model(crate::model::load_urdf_file(path, &opts)?)
+    }
+
+    /// As [`MimicModel::load_urdf_file`] from a string (`source_name` names it in errors).
+    ///
+    /// # Errors
+    /// As [`MimicModel::load_urdf_file`].
+    pub fn load_urdf_str(xml: &str, source_name: &str, opts: &UrdfOptions) -> Result<Self> {
+        let opts = UrdfOptions { mimic: true, ..*opts };
+        Self::from_model(crate::model::load_urdf_str(xml, source_name, &opts)?)
+    }
+
+    /// Sets gravity (a linear acceleration in the world frame), as [`Model::set_gravity`].
+    ///
+    /// # Errors
+    /// [`Error::NotFinite`] if an entry is not finite (the model is unchanged).
+    pub fn set_gravity(&mut self, g: nalgebra::Vector3<f64>) -> Result<()> {
+        self.full.set_gravity(g)
+    }
+    /// The full tree, every joint independent (its `nq`, `nv` count the mimic joints).
+    pub fn full(&self) -> &Model {
+        &self.full
+    }
+    /// The constraints, by increasing joint index.
+    pub fn mimics(&self) -> &[MimicJoint] {
+        &self.mimics
+    }
+    /// The model name.
+    pub fn name(&self) -> &str {
+        self.full.name()
+    }
+    /// Reduced configuration dimension.
+    pub fn nq(&self) -> usize {
+        self.nq
+    }
+    /// Reduced velocity dimension (degrees of freedom).
+    pub fn nv(&self) -> usize {
+        self.nv
+    }
+    /// Per joint of the full model, its first reduced configuration and velocity indices
+    /// `(idx_q, idx_v)`, or `None` for a mimic joint (index 0, the world: `Some((0, 0))`).
+    pub fn reduced_idx(&self) -> &[Option<(usize, usize)>] {
+        &self.reduced_idx
+    }
+    /// The full velocity index of each reduced velocity coordinate.
+    pub fn v_keep(&self) -> &[usize] {
+        &self.v_keep
+    }
+    /// The full configuration index of each reduced configuration coordinate.
+    pub fn q_keep(&self) -> &[usize] {
+        &self.q_keep
+    }
+    /// The map `G` (`full().nv() × nv()`), `v_full = G v`, as a dense matrix (allocates).
+    pub fn g(&self) -> DMatrix<f64> {
+        let mut g = DMatrix::zeros(self.full.nv(), self.nv);
+        for (f, (&c, &x)) in self.g_col.iter().zip(&self.g_coef).enumerate() {
+            g[(f, c)] = x;
+        }
+        g
+    }
+    /// `q_full = expand(q)` into `out` (length `full().nq()`). Lengths are not checked.
+    pub fn expand_q_into(&self, q: &[f64], out: &mut [f64]) {
+        for (o, &(r, m, c)) in out.iter_mut().zip(&self.q_map) {
+            *o = m * q[r] + c;
+        }
+    }
+    /// `v_full = G v` into `out` (length `full().nv()`). Lengths are not checked.
+    pub fn expand_v_into(&self, v: &[f64], out: &mut [f64]) {
+        for ((o, &r), &m) in out.iter_mut().zip(&self.g_col).zip(&self.g_coef) {
+            *o = m * v[r];
+        }
+    }
+    /// `y = Gᵀ x` (`x` of length `full().nv()`, `y` of length `nv()`). Lengths are not checked.
+    pub fn reduce_force_into(&self, x: &[f64], y: &mut [f64]) {
+        y.fill(0.0);
+        for ((&xf, &r), &m) in x.iter().zip(&self.g_col).zip(&self.g_coef) {
+            y[r] += m * xf;
+        }
+    }
+    /// `expand(q)` (allocates).
+    ///
+    /// # Errors
+    /// As [`MimicModel::check_q`].
+    pub fn expand_q(&self, q: &DVector<f64>) -> Result<DVector<f64>> {
+        self.check_q(q)?;
+        let mut out = DVector::zeros(self.full.nq());
+        self.expand_q_into(q.as_slice(), out.as_mut_slice());
+        Ok(out)
+    }
+    /// The reduced coordinates of a full configuration: its independent coordinates (the mimic
+    /// joints' values are dropped, not checked).
+    ///
+    /// # Errors
+    /// [`Error::Dimension`] if `q_full.len() != full().nq()`.
+    pub fn reduce_q(&self, q_full: &DVector<f64>) -> Result<DVector<f64>> {
+        if q_full.len() != self.full.nq() {
+            return Err(Error::Dimension {
+                what: "q_full".into(),
+                expected: self.full.nq(),
+                got: q_full.len(),
+            });
+        }
+        Ok(DVector::from_iterator(self.nq, self.q_keep.iter().map(|&f| q_full[f])))
+    }
+    /// The neutral configuration (each mimic joint then sits at its offset).
+    pub fn neutral(&self) -> DVector<f64> {
+        self.select_q(&self.full.neutral())
+    }
+    /// A random valid configuration: that of [`Model::random_configuration`] of the full model,
+    /// its independent coordinates.
+    pub fn random_configuration(&self, rng: &mut Rng) -> DVector<f64> {
+        self.select_q(&self.full.random_configuration(rng))
+    }
+    fn select_q(&self, q_full: &DVector<f64>) -> DVector<f64> {
+        DVector::from_iterator(self.nq, self.q_keep.iter().map(|&f| q_full[f]))
+    }
+    fn select_v(&self, v_full: &DVector<f64>) -> DVector<f64> {
+        DVector::from_iterator(self.nv, self.v_keep.iter().map(|&f| v_full[f]))
+    }
+    /// `q ⊕ δ` in the reduced coordinates (joint by joint, as [`Model::integrate`]).
+    ///
+    /// # Errors
+    /// As [`MimicModel::check_q`] and [`MimicModel::check_v`] (`"delta"`).
+    pub fn integrate(&self, q: &DVector<f64>, delta: &DVector<f64>) -> Result<DVector<f64>> {
+        let qf = self.expand_q(q)?;
+        self.check_v("delta", delta)?;
+        let mut df = DVector::zeros(self.full.nv());
+        self.expand_v_into(delta.as_slice(), df.as_mut_slice());
+        Ok(self.select_q(&self.full.integrate(&qf, &df)?))
+    }
+    /// `q₁ ⊖ q₀` in the reduced coordinates (the inverse of [`MimicModel::integrate`]).
+    ///
+    /// # Errors
+    /// As [`MimicModel::check_q`] for `q0` and `q1`.
+    pub fn difference(&self, q0: &DVector<f64>, q1: &DVector<f64>) -> Result<DVector<f64>> {
+        let q0f = self.expand_q(q0)?;
+        let q1f = self.expand_q(q1).map_err(|e| match e {
+            Error::Dimension { expected, got, .. } => {
+                Error::Dimension { what: "q1".into(), expected, got }
+            }
+            Error::NotFinite { index, .. } => Error::NotFinite { what: "q1".into(), index },
+            e => e,
+        })?;
+        Ok(self.select_v(&self.full.difference(&q0f, &q1f)?))
+    }
+    /// Checks a reduced configuration: length `nq`, finite, unit quaternions (the last naming
+    /// the joint).
+    ///
+    /// # Errors
+    /// [`Error::Dimension`], [`Error::NotFinite`] (reduced index) or
+    /// [`Error::InvalidConfiguration`].
+    pub fn check_q(&self, q: &DVector<f64>) -> Result<()> {
+        crate::model::check_vec("q", q, self.nq)?;
+        for i in 1..self.full.njoints() {
+            if let Some((a, _)) = self.reduced_idx[i] {
+                let n = self.full.nqs()[i];
+                self.full.joints()[i].check_configuration(&q.as_slice()[a..a + n]).map_err(
+                    |reason| Error::InvalidConfiguration {
+                        joint: self.full.names()[i].clone(),
+                        reason: format!("{reason} (q indices {a}..{})", a + n),
+                    },
+                )?;
+            }
+        }
+        Ok(())
+    }
+    /// Checks a velocity-sized vector: length `nv`, finite.
+    ///
+    /// # Errors
+    /// [`Error::Dimension`] or [`Error::NotFinite`] naming `what`.
+    pub fn check_v(&self, what: &str, x: &DVector<f64>) -> Result<()> {
+        crate::model::check_vec(what, x, self.nv)
+    }
+    /// `out = Gᵀ x G` (`x`: `full().nv()` square, `out`: `nv()` square).
+    fn reduce_matrix(&self, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
+        out.fill(0.0);
+        let nf = self.full.nv();
+        let (xs, n) = (x.as_slice(), self.nv);
+        let os = out.as_mut_slice();
+        for b in 0..nf {
+            let (cb, mb) = (self.g_col[b], self.g_coef[b]);
+            for a in 0..nf {
+                os[self.g_col[a] + n * cb] += self.g_coef[a] * mb * xs[a + nf * b];
+            }
+        }
+    }
+    /// `out[r, s, t] = Σ G[i, r] G[j, s] G[k, t] x[i, j, k]`.
+    fn reduce_tensor(&self, x: &Tensor3, out: &mut Tensor3) {
+        out.fill(0.0);
+        let nf = self.full.nv();
+        let n = self.nv;
+        let xs = x.as_slice();
+        let os = out.as_mut_slice();
+        for k in 0..nf {
+            let (ck, mk) = (self.g_col[k], self.g_coef[k]);
+            for j in 0..nf {
+                let (cj, mj) = (self.g_col[j], self.g_coef[j]);
+                let m = mk * mj;
+                let src = &xs[nf * (j + nf * k)..nf * (j + nf * k + 1)];
+                let dst = n * (cj + n * ck);
+                for ((&xi, &ci), &mi) in src.iter().zip(&self.g_col).zip(&self.g_coef) {
+                    os[dst + ci] += m * mi * xi;
+                }
+            }
+        }
+    }
+}
+
+/// Workspace of the first-order algorithms of a [`MimicModel`] (the full model's [`Data`] and
+/// the reduced results), allocated once by [`MimicData::new`].
+#[derive(Clone, Debug)]
+pub struct MimicData {
+    full: Data,
+    q: DVector<f64>,
+    v: DVector<f64>,
+    a: DVector<f64>,
+    tau: DVector<f64>,
+    qdd: DVector<f64>,
+    m: DMatrix<f64>,
+    ldl: DMatrix<f64>,
+    dtau_dq: DMatrix<f64>,
+    dtau_dv: DMatrix<f64>,
+    dqdd_dq: DMatrix<f64>,
+    dqdd_dv: DMatrix<f64>,
+    minv: DMatrix<f64>,
+    key: u64,
+}
+
+impl MimicData {
+    /// Workspace for `model`.
+    pub fn new(model: &MimicModel) -> Self {
+        let (n, f) = (model.nv, &model.full);
+        let sq = || DMatrix::zeros(n, n);
+        Self {
+            full: Data::new(f),
+            q: DVector::zeros(f.nq()),
+            v: DVector::zeros(f.nv()),
+            a: DVector::zeros(f.nv()),
+            tau: DVector::zeros(n),
+            qdd: DVector::zeros(n),
+            m: sq(),
+            ldl: sq(),
+            dtau_dq: sq(),
+            dtau_dv: sq(),
+            dqdd_dq: sq(),
+            dqdd_dv: sq(),
+            minv: sq(),
+            key: model.key,
+        }
+    }
+    fn check(&self, model: &MimicModel) -> Result<()> {
+        if self.key != model.key || self.tau.len() != model.nv {
+            return Err(Error::Workspace(format!(
+                "MimicData was made for another model; make it with MimicData::new for the \
+                 mimic model \"{}\"",
+                model.name()
+            )));
+        }
+        Ok(())
+    }
+    /// The full model's workspace at the last call (its state is the expanded one).
+    pub fn full(&self) -> &Data {
+        &self.full
+    }
+    /// `expand(q)` of the last call.
+    pub fn q_full(&self) -> &DVector<f64> {
+        &self.q
+    }
+    /// `G v` of the last call.
+    pub fn v_full(&self) -> &DVector<f64> {
+        &self.v
+    }
+    /// `G a` of the last call (`G q̈` for the forward dynamics).
+    pub fn a_full(&self) -> &DVector<f64> {
+        &self.a
+    }
+    /// `τ` (reduced): of [`rnea`], [`id_derivatives`], [`id_so_derivatives`], and of inverse
+    /// dynamics at `q̈` for the forward-dynamics derivatives.
+    pub fn tau(&self) -> &DVector<f64> {
+        &self.tau
+    }
+    /// `q̈` of [`aba`], [`fd_derivatives`], [`fd_so_derivatives`].
+    pub fn qdd(&self) -> &DVector<f64> {
+        &self.qdd
+    }
+    /// `M = Gᵀ M_full G`.
+    pub fn m(&self) -> &DMatrix<f64> {
+        &self.m
+    }
+    /// `∂τ/∂q` (tangent space).
+    pub fn dtau_dq(&self) -> &DMatrix<f64> {
+        &self.dtau_dq
+    }
+    /// `∂τ/∂v`.
+    pub fn dtau_dv(&self) -> &DMatrix<f64> {
+        &self.dtau_dv
+    }
+    /// `∂q̈/∂q` (tangent space).
+    pub fn dqdd_dq(&self) -> &DMatrix<f64> {
+        &self.dqdd_dq
+    }
+    /// `∂q̈/∂v`.
+    pub fn dqdd_dv(&self) -> &DMatrix<f64> {
+        &self.dqdd_dv
+    }
+    /// `∂q̈/∂τ = M⁻¹`.
+    pub fn minv(&self) -> &DMatrix<f64> {
+        &self.minv
+    }
+}
+
+/// Workspace and results of the second-order algorithms of a [`MimicModel`] (layout
+/// `T[(i, j, k)] = ∂/∂x_k (∂y_i/∂u_j)`, `nv × nv × nv`).
+#[derive(Clone, Debug)]
+pub struct MimicSoData {
+    full: SoData,
+    d2tau_dq2: Tensor3,
+    d2tau_dv2: Tensor3,
+    d2tau_dqdv: Tensor3,
+    dm_dq: Tensor3,
+    d2qdd_dq2: Tensor3,
+    d2qdd_dv2: Tensor3,
+    d2qdd_dqdv: Tensor3,
+    d2qdd_dtaudq: Tensor3,
+    /// Scratch: `∂M/∂q_k X[:, j]` at `(·, j, k)`.
+    y: Tensor3,
+    /// Scratch: one `nv × nv` page.
+    page: DMatrix<f64>,
+    key: u64,
+}
+
+impl MimicSoData {
+    /// Workspace for `model`.
+    pub fn new(model: &MimicModel) -> Self {
+        let n = model.nv;
+        let t = || Tensor3::zeros(n, n, n);
+        Self {
+            full: SoData::new(&model.full),
+            d2tau_dq2: t(),
+            d2tau_dv2: t(),
+            d2tau_dqdv: t(),
+            dm_dq: t(),
+            d2qdd_dq2: t(),
+            d2qdd_dv2: t(),
+            d2qdd_dqdv: t(),
+            d2qdd_dtaudq: t(),
+            y: t(),
+            page: DMatrix::zeros(n, n),
+            key: model.key,
+        }
+    }
+    fn check(&self, model: &MimicModel) -> Result<()> {
+        if self.key != model.key || self.page.nrows() != model.nv {
+            return Err(Error::Workspace(format!(
+                "MimicSoData was made for another model; make it with MimicSoData::new for the \
+                 mimic model \"{}\"",
+                model.name()
+            )));
+        }
+        Ok(())
+    }
+    /// `∂²τ/∂q²`: `T[(i, j, k)] = ∂/∂q_k (∂τ_i/∂q_j)`.
+    pub fn d2tau_dq2(&self) -> &Tensor3 {
+        &self.d2tau_dq2
+    }
+    /// `∂²τ/∂v²`.
+    pub fn d2tau_dv2(&self) -> &Tensor3 {
+        &self.d2tau_dv2
+    }
+    /// `T[(i, j, k)] = ∂/∂v_k (∂τ_i/∂q_j)`.
+    pub fn d2tau_dqdv(&self) -> &Tensor3 {
+        &self.d2tau_dqdv
+    }
+    /// `T[(i, j, k)] = ∂M_ij/∂q_k`.
+    pub fn dm_dq(&self) -> &Tensor3 {
+        &self.dm_dq
+    }
+    /// `∂²q̈/∂q²`.
+    pub fn d2qdd_dq2(&self) -> &Tensor3 {
+        &self.d2qdd_dq2
+    }
+    /// `∂²q̈/∂v²`.
+    pub fn d2qdd_dv2(&self) -> &Tensor3 {
+        &self.d2qdd_dv2
+    }
+    /// `T[(i, j, k)] = ∂/∂v_k (∂q̈_i/∂q_j)`.
+    pub fn d2qdd_dqdv(&self) -> &Tensor3 {
+        &self.d2qdd_dqdv
+    }
+    /// `T[(i, j, k)] = ∂(M⁻¹)_ij/∂q_k`.
+    pub fn d2qdd_dtaudq(&self) -> &Tensor3 {
+        &self.d2qdd_dtaudq
+    }
+}
+
+/// Checks `q` and `x` (`v`, `a` or `τ`) and the workspace, and expands `q`, `v` into `data`.
+fn prepare(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: Option<&DVector<f64>>,
+    x: Option<(&str, &DVector<f64>)>,
+) -> Result<()> {
+    data.check(model)?;
+    model.check_q(q)?;
+    if let Some(v) = v {
+        model.check_v("v", v)?;
+    }
+    if let Some((what, x)) = x {
+        model.check_v(what, x)?;
+    }
+    model.expand_q_into(q.as_slice(), data.q.as_mut_slice());
+    match v {
+        Some(v) => model.expand_v_into(v.as_slice(), data.v.as_mut_slice()),
+        None => data.v.fill(0.0),
+    }
+    Ok(())
+}
+
+/// Inverse dynamics `τ = Gᵀ τ_full(expand(q), G v, G a)` (RNEA of the full model). Returns
+/// `data.tau()`.
+///
+/// # Errors
+/// A wrong length, a non-finite entry, a non-unit quaternion (naming the argument or joint),
+/// a workspace of another model, or an error of [`crate::algo::rnea()`] (`fext`).
+pub fn rnea<'a>(
+    model: &MimicModel,
+    data: &'a mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<&'a DVector<f64>> {
+    prepare(model, data, q, Some(v), Some(("a", a)))?;
+    model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+    let t = crate::algo::rnea(&model.full, &mut data.full, &data.q, &data.v, &data.a, fext)?;
+    model.reduce_force_into(t.as_slice(), data.tau.as_mut_slice());
+    Ok(&data.tau)
+}
+
+/// Mass matrix `M = Gᵀ M_full(expand(q)) G` (CRBA of the full model). Returns `data.m()`.
+///
+/// # Errors
+/// As [`rnea`] for `q`.
+pub fn crba<'a>(
+    model: &MimicModel,
+    data: &'a mut MimicData,
+    q: &DVector<f64>,
+) -> Result<&'a DMatrix<f64>> {
+    prepare(model, data, q, None, None)?;
+    let m = crate::algo::crba(&model.full, &mut data.full, &data.q)?;
+    model.reduce_matrix(m, &mut data.m);
+    Ok(&data.m)
+}
+
+/// Forward dynamics `q̈ = M⁻¹(τ − Gᵀ b_full(expand(q), G v))`, `M = Gᵀ M_full G` factorised
+/// densely (`L D Lᵀ`). Returns `data.qdd()`; leaves `M` in `data.m()` and `G q̈` in
+/// `data.a_full()`.
+///
+/// # Errors
+/// As [`rnea`], and [`Error::Singular`] (naming the pivot, its reduced velocity index and
+/// joint) when `M` is singular: a pivot not positive and finite, or the smallest at most
+/// `1e-14` times the largest.
+pub fn aba<'a>(
+    model: &MimicModel,
+    data: &'a mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<&'a DVector<f64>> {
+    prepare(model, data, q, Some(v), Some(("tau", tau)))?;
+    data.a.fill(0.0);
+    let b = crate::algo::rnea(&model.full, &mut data.full, &data.q, &data.v, &data.a, fext)?;
+    model.reduce_force_into(b.as_slice(), data.qdd.as_mut_slice());
+    for (x, &t) in data.qdd.iter_mut().zip(tau.iter()) {
+        *x = t - *x;
+    }
+    let m = crate::algo::crba(&model.full, &mut data.full, &data.q)?;
+    model.reduce_matrix(m, &mut data.m);
+    data.ldl.copy_from(&data.m);
+    ldl_in_place(model, &mut data.ldl)?;
+    ldl_solve(&data.ldl, data.qdd.as_mut_slice());
+    model.expand_v_into(data.qdd.as_slice(), data.a.as_mut_slice());
+    Ok(&data.qdd)
+}
+
+/// First-order inverse-dynamics derivatives at `(q, v, a)`: `data.dtau_dq()`,
+/// `data.dtau_dv()`, `data.m()` (`= ∂τ/∂a`) and `data.tau()`, from
+/// [`crate::deriv::id_derivatives`] of the full model at `(expand(q), G v, G a)`.
+///
+/// # Errors
+/// As [`rnea`].
+pub fn id_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<()> {
+    prepare(model, data, q, Some(v), Some(("a", a)))?;
+    model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+    id_fo_reduced(model, data, fext)
+}
+
+/// The full model's first-order ID derivatives at `data.q, data.v, data.a`, reduced.
+fn id_fo_reduced(model: &MimicModel, data: &mut MimicData, fext: Option<&[Force]>) -> Result<()> {
+    crate::deriv::id_derivatives(&model.full, &mut data.full, &data.q, &data.v, &data.a, fext)?;
+    reduce_fo(model, data);
+    Ok(())
+}
+
+/// `τ`, `M`, `∂τ/∂q`, `∂τ/∂v` of `data.full` reduced.
+fn reduce_fo(model: &MimicModel, data: &mut MimicData) {
+    model.reduce_force_into(data.full.tau().as_slice(), data.tau.as_mut_slice());
+    model.reduce_matrix(data.full.m(), &mut data.m);
+    model.reduce_matrix(data.full.dtau_dq(), &mut data.dtau_dq);
+    model.reduce_matrix(data.full.dtau_dv(), &mut data.dtau_dv);
+}
+
+/// `∂q̈/∂q = −M⁻¹ ∂τ/∂q`, `∂q̈/∂v = −M⁻¹ ∂τ/∂v`, `M⁻¹`, from `data.ldl` (factorised).
+fn fd_fo_from_id(data: &mut MimicData) {
+    let n = data.m.nrows();
+    data.dqdd_dq.copy_from(&data.dtau_dq);
+    data.dqdd_dv.copy_from(&data.dtau_dv);
+    data.minv.fill_with_identity();
+    for c in 0..n {
+        ldl_solve(&data.ldl, data.dqdd_dq.column_mut(c).as_mut_slice());
+        ldl_solve(&data.ldl, data.dqdd_dv.column_mut(c).as_mut_slice());
+        ldl_solve(&data.ldl, data.minv.column_mut(c).as_mut_slice());
+    }
+    data.dqdd_dq.neg_mut();
+    data.dqdd_dv.neg_mut();
+    // Exactly symmetric M⁻¹.
+    for c in 0..n {
+        for r in c + 1..n {
+            let x = 0.5 * (data.minv[(r, c)] + data.minv[(c, r)]);
+            data.minv[(r, c)] = x;
+            data.minv[(c, r)] = x;
+        }
+    }
+}
+
+/// First-order forward-dynamics derivatives at `q̈ = FD(q, v, τ)` ([`aba`]):
+/// `data.qdd()`, `data.dqdd_dq() = −M⁻¹ ∂τ/∂q`, `data.dqdd_dv() = −M⁻¹ ∂τ/∂v`,
+/// `data.minv() = M⁻¹`, and the inverse-dynamics derivatives at `(q, v, q̈)` (`dtau_dq`,
+/// `dtau_dv`, `m`).
+///
+/// # Errors
+/// As [`aba`].
+pub fn fd_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<()> {
+    aba(model, data, q, v, tau, fext)?;
+    id_fo_reduced(model, data, fext)?;
+    fd_fo_from_id(data);
+    Ok(())
+}
+
+/// Second-order inverse-dynamics derivatives at `(q, v, a)` (the full model's
+/// [`crate::deriv::id_so_derivatives`] contracted with `G`): the tensors of `so` and the
+/// first-order results in `data` (as [`id_derivatives`]).
+///
+/// # Errors
+/// As [`rnea`], or an `so` made for another model.
+pub fn id_so_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    so: &mut MimicSoData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<()> {
+    so.check(model)?;
+    prepare(model, data, q, Some(v), Some(("a", a)))?;
+    model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+    id_so_reduced(model, data, so, fext)
+}
+
+fn id_so_reduced(
+    model: &MimicModel,
+    data: &mut MimicData,
+    so: &mut MimicSoData,
+    fext: Option<&[Force]>,
+) -> Result<()> {
+    crate::deriv::id_so_derivatives(
+        &model.full,
+        &mut data.full,
+        &mut so.full,
+        &data.q,
+        &data.v,
+        &data.a,
+        fext,
+    )?;
+    reduce_fo(model, data);
+    model.reduce_tensor(so.full.d2tau_dq2(), &mut so.d2tau_dq2);
+    model.reduce_tensor(so.full.d2tau_dv2(), &mut so.d2tau_dv2);
+    model.reduce_tensor(so.full.d2tau_dqdv(), &mut so.d2tau_dqdv);
+    model.reduce_tensor(so.full.dm_dq(), &mut so.dm_dq);
+    Ok(())
+}
+
+/// Second-order forward-dynamics derivatives at `q̈ = FD(q, v, τ)` (eq. eqn_FD_SO_43, with the
+/// reduced inverse-dynamics tensors at `(q, v, q̈)` and `X_q = ∂q̈/∂q`, `X_v = ∂q̈/∂v`):
+/// * `∂²q̈/∂q²[:, j, k] = −M⁻¹(∂²τ/∂q²[:, j, k] + ∂M/∂q_j X_q[:, k] + ∂M/∂q_k X_q[:, j])`,
+/// * `∂²q̈/∂v²[:, j, k] = −M⁻¹ ∂²τ/∂v²[:, j, k]`,
+/// * `∂²q̈/∂q∂v[:, j, k] = −M⁻¹(∂²τ/∂q∂v[:, j, k] + ∂M/∂q_j X_v[:, k])`,
+/// * `∂²q̈/∂τ∂q[:, j, k] = ∂(M⁻¹)_{:j}/∂q_k = −(M⁻¹ ∂M/∂q_k M⁻¹)[:, j]`,
+///
+/// in `so`; the first-order results of [`fd_derivatives`] in `data`, and the inverse-dynamics
+/// tensors at `(q, v, q̈)` in `so` (`d2tau_*`, `dm_dq`).
+///
+/// # Errors
+/// As [`aba`], or an `so` made for another model.
+pub fn fd_so_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    so: &mut MimicSoData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<()> {
+    so.check(model)?;
+    aba(model, data, q, v, tau, fext)?;
+    id_so_reduced(model, data, so, fext)?;
+    fd_fo_from_id(data);
+    let n = model.nv;
+    let minv = data.minv.as_slice();
+    let xq = data.dqdd_dq.as_slice();
+    let xv = data.dqdd_dv.as_slice();
+    let dm = so.dm_dq.as_slice();
+    // y[:, j, k] = ∂M/∂q_k X_q[:, j].
+    {
+        let y = so.y.as_mut_slice();
+        for k in 0..n {
+            let page = &dm[n * n * k..n * n * (k + 1)];
+            for j in 0..n {
+                let out = &mut y[n * (j + n * k)..n * (j + n * k + 1)];
+                mat_vec(page, &xq[n * j..n * (j + 1)], out);
+            }
+        }
+    }
+    // ∂²q̈/∂q².
+    let rhs = so.page.as_mut_slice();
+    for k in 0..n {
+        for j in 0..n {
+            let (ys, ts) = (so.y.as_slice(), so.d2tau_dq2.as_slice());
+            for i in 0..n {
+                rhs[i + n * j] =
+                    ts[i + n * (j + n * k)] + ys[i + n * (j + n * k)] + ys[i + n * (k + n * j)];
+            }
+        }
+        let out = &mut so.d2qdd_dq2.as_mut_slice()[n * n * k..n * n * (k + 1)];
+        neg_mat_mul(minv, rhs, out, n);
+    }
+    // ∂²q̈/∂v².
+    for k in 0..n {
+        let src = &so.d2tau_dv2.as_slice()[n * n * k..n * n * (k + 1)];
+        let out = &mut so.d2qdd_dv2.as_mut_slice()[n * n * k..n * n * (k + 1)];
+        neg_mat_mul(minv, src, out, n);
+    }
+    // ∂²q̈/∂q∂v: rhs[:, j] = ∂²τ/∂q∂v[:, j, k] + ∂M/∂q_j X_v[:, k].
+    for k in 0..n {
+        let ts = so.d2tau_dqdv.as_slice();
+        for j in 0..n {
+            let col = &mut rhs[n * j..n * (j + 1)];
+            mat_vec(&dm[n * n * j..n * n * (j + 1)], &xv[n * k..n * (k + 1)], col);
+            for (i, c) in col.iter_mut().enumerate() {
+                *c += ts[i + n * (j + n * k)];
+            }
+        }
+        let out = &mut so.d2qdd_dqdv.as_mut_slice()[n * n * k..n * n * (k + 1)];
+        neg_mat_mul(minv, rhs, out, n);
+    }
+    // ∂(M⁻¹)/∂q_k = −M⁻¹ ∂M/∂q_k M⁻¹.
+    for k in 0..n {
+        neg_mat_mul(&dm[n * n * k..n * n * (k + 1)], minv, rhs, n);
+        let out = &mut so.d2qdd_dtaudq.as_mut_slice()[n * n * k..n * n * (k + 1)];
+        mat_mul(minv, rhs, out, n);
+    }
+    Ok(())
+}
+
+/// `out = a x` (`a` column-major `n × n`, `n = x.len()`).
+fn mat_vec(a: &[f64], x: &[f64], out: &mut [f64]) {
+    let n = x.len();
+    out.fill(0.0);
+    for (c, &xc) in x.iter().enumerate() {
+        if xc != 0.0 {
+            for (o, &ac) in out.iter_mut().zip(&a[n * c..n * (c + 1)]) {
+                *o += ac * xc;
+            }
+        }
+    }
+}
+
+/// `out = a b` (column-major `n × n`).
+fn mat_mul(a: &[f64], b: &[f64], out: &mut [f64], n: usize) {
+    for c in 0..n {
+        mat_vec(a, &b[n * c..n * (c + 1)], &mut out[n * c..n * (c + 1)]);
+    }
+}
+
+/// `out = −a b` (column-major `n × n`).
+fn neg_mat_mul(a: &[f64], b: &[f64], out: &mut [f64], n: usize) {
+    mat_mul(a, b, out, n);
+    for o in out.iter_mut() {
+        *o = -*o;
+    }
+}
+
+/// `h ←` its `L D Lᵀ` factorisation (`L` unit lower triangular below the diagonal, `D` on it;
+/// the strict upper triangle is left as is), with the pivot test of the tree-sparse one.
+fn ldl_in_place(model: &MimicModel, h: &mut DMatrix<f64>) -> Result<()> {
+    let n = h.nrows();
+    let mut dmax: f64 = 0.0;
+    for j in 0..n {
+        let mut d = h[(j, j)];
+        for k in 0..j {
+            let l = h[(j, k)];
+            d -= l * l * h[(k, k)];
+        }
+        if !(d > 0.0 && d.is_finite()) {
+            return Err(pivot_error(model, j, d, None));
+        }
+        dmax = dmax.max(d);
+        h[(j, j)] = d;
+        for i in j + 1..n {
+            let mut x = h[(i, j)];
+            for k in 0..j {
+                x -= h[(i, k)] * h[(j, k)] * h[(k, k)];
+            }
+            h[(i, j)] = x / d;
+        }
+    }
+    for j in 0..n {
+        let d = h[(j, j)];
+        if d <= crate::algo::internal::PIVOT_RTOL * dmax {
+            return Err(pivot_error(model, j, d, Some(dmax)));
+        }
+    }
+    Ok(())
+}
+
+/// `x ← M⁻¹ x` with `h` the factor of [`ldl_in_place`].
+fn ldl_solve(h: &DMatrix<f64>, x: &mut [f64]) {
+    let n = h.nrows();
+    for i in 0..n {
+        let mut s = x[i];
+        for k in 0..i {
+            s -= h[(i, k)] * x[k];
+        }
+        x[i] = s;
+    }
+    for i in 0..n {
+        x[i] /= h[(i, i)];
+    }
+    for i in (0..n).rev() {
+        let mut s = x[i];
+        for k in i + 1..n {
+            s -= h[(k, i)] * x[k];
+        }
+        x[i] = s;
+    }
+}
+
+#[cold]
+fn pivot_error(model: &MimicModel, k: usize, d: f64, max: Option<f64>) -> Error {
+    let why = match max {
+        None => "is not positive and finite".to_string(),
+        Some(m) => {
+            format!(
+                "is at most {:e} times the largest pivot {m:e}",
+                crate::algo::internal::PIVOT_RTOL
+            )
+        }
+    };
+    let joint = model.full.dof_joint()[model.v_keep[k]];
+    Error::Singular {
+        what: "mass matrix (reduced coordinates of the mimic joints)".into(),
+        detail: format!(
+            "pivot {d:e} at reduced velocity index {k} (joint \"{}\") {why}; a massless \
+             subtree, or a massless link between joints whose motions coincide?",
+            model.full.names()[joint]
+        ),
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Contacts
+// ---------------------------------------------------------------------------------------------
+
+/// Workspace and results of the contact algorithms of a [`MimicModel`] ([`kkt_derivatives`],
+/// [`constrained_id_derivatives`]): the contacts (frames of the full tree, see
+/// [`crate::model::Contact`]), the full tree's KKT workspace, and the reduced results
+/// (`m` contact rows).
+#[derive(Clone, Debug)]
+pub struct MimicKktData {
+    full: KktData,
+    key: u64,
+    /// `J G` (`m × nv`).
+    jr: DMatrix<f64>,
+    /// `γ`: the contact rows at `q̈ = 0` (drift and Baumgarte terms), `J q̈ + γ = 0`.
+    gamma: DVector<f64>,
+    tau_f: DVector<f64>,
+    x0: DVector<f64>,
+    lm: DVector<f64>,
+    qdd: DVector<f64>,
+    lambda: DVector<f64>,
+    dqdd_dq: DMatrix<f64>,
+    dqdd_dv: DMatrix<f64>,
+    dqdd_dtau: DMatrix<f64>,
+    dlambda_dq: DMatrix<f64>,
+    dlambda_dv: DMatrix<f64>,
+    dlambda_dtau: DMatrix<f64>,
+    /// `M⁻¹ (J G)ᵀ` (`nv × m`) and the Delassus matrix `J G M⁻¹ (J G)ᵀ`, factorised (`m × m`).
+    minv_jt: DMatrix<f64>,
+    del: DMatrix<f64>,
+    /// Residual derivatives of the full tree (`nv_f × nv_f`, `m × nv_f`) and reduced
+    /// (`nv × nv`, `m × nv`).
+    rf_top: DMatrix<f64>,
+    rf_bot: DMatrix<f64>,
+    r_top: DMatrix<f64>,
+    r_bot: DMatrix<f64>,
+    /// Scratch: one column of each block.
+    col_n: DVector<f64>,
+    col_m: DVector<f64>,
+    /// Second-order results and workspace ([`MimicKktData::with_second_order`]).
+    so: Option<Box<MimicKktSo>>,
+}
+
+/// Second-order results of [`kkt_so_derivatives`] (layout `T[(i, j, k)] = ∂/∂x_k (∂y_i/∂u_j)`,
+/// `nv × nv × nv` for `q̈`, `m × nv × nv` for `λ`) and their workspace.
+#[derive(Clone, Debug)]
+pub struct MimicKktSo {
+    d2qdd_dq2: Tensor3,
+    d2qdd_dv2: Tensor3,
+    d2qdd_dqdv: Tensor3,
+    d2qdd_dtaudq: Tensor3,
+    d2lambda_dq2: Tensor3,
+    d2lambda_dv2: Tensor3,
+    d2lambda_dqdv: Tensor3,
+    d2lambda_dtaudq: Tensor3,
+    /// The full tree's tensors contracted with `G` on `(j, k)` (`nv_f × nv × nv`,
+    /// `m × nv × nv`).
+    ta: Tensor3,
+    tl: Tensor3,
+    /// The reduced right-hand sides `R_uw + G(∂y/∂w)[·, u] + G(∂y/∂u)[·, w]`, `q̈` rows
+    /// (`nv × nv × nv`) and contact rows (`m × nv × nv`).
+    sa: Tensor3,
+    sl: Tensor3,
+    /// One `Δ` column (`nv_f + m`).
+    delta: DVector<f64>,
+    /// One reduced `G` product (`(nv + m) × nv`) and a full-length vector.
+    c: DMatrix<f64>,
+    vf: DVector<f64>,
+}
+
+impl MimicKktSo {
+    /// `∂²q̈/∂q²`.
+    pub fn d2qdd_dq2(&self) -> &Tensor3 {
+        &self.d2qdd_dq2
+    }
+    /// `∂²q̈/∂v²`.
+    pub fn d2qdd_dv2(&self) -> &Tensor3 {
+        &self.d2qdd_dv2
+    }
+    /// `T[(i, j, k)] = ∂/∂v_k (∂q̈_i/∂q_j)`.
+    pub fn d2qdd_dqdv(&self) -> &Tensor3 {
+        &self.d2qdd_dqdv
+    }
+    /// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂τ_j)`.
+    pub fn d2qdd_dtaudq(&self) -> &Tensor3 {
+        &self.d2qdd_dtaudq
+    }
+    /// `∂²λ/∂q²`.
+    pub fn d2lambda_dq2(&self) -> &Tensor3 {
+        &self.d2lambda_dq2
+    }
+    /// `∂²λ/∂v²`.
+    pub fn d2lambda_dv2(&self) -> &Tensor3 {
+        &self.d2lambda_dv2
+    }
+    /// `T[(i, j, k)] = ∂/∂v_k (∂λ_i/∂q_j)`.
+    pub fn d2lambda_dqdv(&self) -> &Tensor3 {
+        &self.d2lambda_dqdv
+    }
+    /// `T[(i, j, k)] = ∂/∂q_k (∂λ_i/∂τ_j)`.
+    pub fn d2lambda_dtaudq(&self) -> &Tensor3 {
+        &self.d2lambda_dtaudq
+    }
+}
+
+impl MimicKktData {
+    /// Adds the second-order workspace (for [`kkt_so_derivatives`]).
+    pub fn with_second_order(mut self, model: &MimicModel) -> Self {
+        let (n, nf, m) = (model.nv, model.full.nv(), self.dim());
+        let t = |r| Tensor3::zeros(r, n, n);
+        self.full = self.full.with_second_order(&model.full);
+        self.so = Some(Box::new(MimicKktSo {
+            d2qdd_dq2: t(n),
+            d2qdd_dv2: t(n),
+            d2qdd_dqdv: t(n),
+            d2qdd_dtaudq: t(n),
+            d2lambda_dq2: t(m),
+            d2lambda_dv2: t(m),
+            d2lambda_dqdv: t(m),
+            d2lambda_dtaudq: t(m),
+            ta: t(nf),
+            tl: t(m),
+            sa: t(n),
+            sl: t(m),
+            delta: DVector::zeros(nf + m),
+            c: DMatrix::zeros(n + m, n),
+            vf: DVector::zeros(nf),
+        }));
+        self
+    }
+    /// The second-order results (with [`MimicKktData::with_second_order`]).
+    pub fn so(&self) -> Option<&MimicKktSo> {
+        self.so.as_deref()
+    }
+    /// Workspace for `contacts` on `model` (their frames are frames of the full tree).
+    ///
+    /// # Errors
+    /// Those of [`ContactData::new`] for the full tree (an unknown frame, a contact on the
+    /// world, a redundant set).
+    pub fn new(model: &MimicModel, contacts: &[crate::model::Contact]) -> Result<Self> {
+        let cd = ContactData::new(&model.full, contacts)?;
+        let (n, nf, m) = (model.nv, model.full.nv(), cd.dim());
+        let mat = |r, c| DMatrix::zeros(r, c);
+        Ok(Self {
+            full: KktData::new(&model.full, cd),
+            key: model.key,
+            jr: mat(m, n),
+            gamma: DVector::zeros(m),
+            tau_f: DVector::zeros(nf),
+            x0: DVector::zeros(n),
+            lm: DVector::zeros(m),
+            qdd: DVector::zeros(n),
+            lambda: DVector::zeros(m),
+            dqdd_dq: mat(n, n),
+            dqdd_dv: mat(n, n),
+            dqdd_dtau: mat(n, n),
+            dlambda_dq: mat(m, n),
+            dlambda_dv: mat(m, n),
+            dlambda_dtau: mat(m, n),
+            minv_jt: mat(n, m),
+            del: mat(m, m),
+            rf_top: mat(nf, nf),
+            rf_bot: mat(m, nf),
+            r_top: mat(n, n),
+            r_bot: mat(m, n),
+            col_n: DVector::zeros(n),
+            col_m: DVector::zeros(m),
+            so: None,
+        })
+    }
+    fn check(&self, model: &MimicModel) -> Result<()> {
+        if self.key != model.key || self.qdd.len() != model.nv {
+            return Err(Error::Workspace(format!(
+                "MimicKktData was made for another model; make it with MimicKktData::new for \
+                 the mimic model \"{}\"",
+                model.name()
+            )));
+        }
+        Ok(())
+    }
+    /// Number of contact rows `m`.
+    pub fn dim(&self) -> usize {
+        self.lambda.len()
+    }
+    /// The contact Jacobian in the reduced coordinates, `J G` (`m × nv`).
+    pub fn jac(&self) -> &DMatrix<f64> {
+        &self.jr
+    }
+    /// Constrained accelerations `q̈`.
+    pub fn qdd(&self) -> &DVector<f64> {
+        &self.qdd
+    }
+    /// Contact forces `λ` applied to the robot (`m` rows, each contact's axes).
+    pub fn lambda(&self) -> &DVector<f64> {
+        &self.lambda
+    }
+    /// `∂q̈/∂q` (tangent).
+    pub fn dqdd_dq(&self) -> &DMatrix<f64> {
+        &self.dqdd_dq
+    }
+    /// `∂q̈/∂v`.
+    pub fn dqdd_dv(&self) -> &DMatrix<f64> {
+        &self.dqdd_dv
+    }
+    /// `∂q̈/∂τ`.
+    pub fn dqdd_dtau(&self) -> &DMatrix<f64> {
+        &self.dqdd_dtau
+    }
+    /// `∂λ/∂q` (tangent).
+    pub fn dlambda_dq(&self) -> &DMatrix<f64> {
+        &self.dlambda_dq
+    }
+    /// `∂λ/∂v`.
+    pub fn dlambda_dv(&self) -> &DMatrix<f64> {
+        &self.dlambda_dv
+    }
+    /// `∂λ/∂τ`.
+    pub fn dlambda_dtau(&self) -> &DMatrix<f64> {
+        &self.dlambda_dtau
+    }
+}
+
+/// `x ← M⁻¹ J_rᵀ l`-type solve of the reduced KKT system `[M, −J_rᵀ; J_r, 0] [x; l] = [r1; r2]`
+/// (the Jacobian of the residual with respect to `(q̈, λ)`): `l = D⁻¹(r2 − J_r M⁻¹ r1)`,
+/// `x = M⁻¹(r1 + J_rᵀ l)`, with `M` factorised in `ldl`, `D` in `del` and `M⁻¹ J_rᵀ` in
+/// `minv_jt`. `r1` is overwritten by `x`, `r2` by `l`.
+fn kkt_solve(ldl: &DMatrix<f64>, kd: &MimicKktData, r1: &mut [f64], r2: &mut [f64]) {
+    kkt_solve_with(ldl, &kd.jr, &kd.minv_jt, &kd.del, r1, r2);
+}
+
+/// [`kkt_solve`] with its matrices given.
+fn kkt_solve_with(
+    ldl: &DMatrix<f64>,
+    jr: &DMatrix<f64>,
+    minv_jt: &DMatrix<f64>,
+    del: &DMatrix<f64>,
+    r1: &mut [f64],
+    r2: &mut [f64],
+) {
+    ldl_solve(ldl, r1);
+    // r2 − J_r M⁻¹ r1
+    for (r, x) in r2.iter_mut().enumerate() {
+        let s: f64 = (0..r1.len()).map(|c| jr[(r, c)] * r1[c]).sum();
+        *x -= s;
+    }
+    ldl_solve(del, r2);
+    // x = M⁻¹ r1 + (M⁻¹ J_rᵀ) l
+    for (i, x) in r1.iter_mut().enumerate() {
+        let s: f64 = (0..r2.len()).map(|r| minv_jt[(i, r)] * r2[r]).sum();
+        *x += s;
+    }
+}
+
+/// KKT contact dynamics in the reduced coordinates and its first-order derivatives at
+/// `(q, v, τ)`: `[M, (J G)ᵀ; J G, 0] [q̈; −λ] = [τ − b; −γ]` (`M`, `b` as in [`aba`]; `J` and
+/// `γ`, the contact rows at `q̈ = 0` with their Baumgarte terms, those of the full tree at
+/// `(expand(q), G v)`), then `∂y/∂x = −R_y⁻¹ R_x` for `y = (q̈, λ)`, `x = (q, v, τ)` with the
+/// reduced residual `R = [Gᵀ(M_f G q̈ + b_f − Jᵀλ) − τ; J G q̈ + γ]`.
+///
+/// `R_x` is the full tree's residual derivative contracted with `G`, obtained from the full
+/// tree's KKT derivatives ([`crate::deriv::kkt_derivatives`]) at the torque
+/// `τ_f = M_f G q̈ + b_f − Jᵀλ`, whose solution is `(G q̈, λ)`: `R_x^f = −R_y^f ∂y^f/∂x`. The
+/// full tree's mass matrix must therefore be regular too (it is unless a massless body moves
+/// with a mimic joint). Results in `kd`; `data.m()` is `M`, `data.qdd()` the constrained `q̈`.
+///
+/// # Errors
+/// As [`aba`]; [`Error::Singular`] if the reduced Delassus matrix `J G M⁻¹ (J G)ᵀ` is singular
+/// (a redundant contact set in the reduced coordinates) or the full tree's KKT system is;
+/// a workspace of another model.
+pub fn kkt_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    kd: &mut MimicKktData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+) -> Result<()> {
+    kkt_inner(model, data, kd, q, v, tau, false)
+}
+
+/// [`kkt_derivatives`], with `so` also the full tree's second order at `τ_f`.
+fn kkt_inner(
+    model: &MimicModel,
+    data: &mut MimicData,
+    kd: &mut MimicKktData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+    so: bool,
+) -> Result<()> {
+    kd.check(model)?;
+    prepare(model, data, q, Some(v), Some(("tau", tau)))?;
+    let (n, nf, m) = (model.nv, model.full.nv(), kd.dim());
+    let full = &model.full;
+    // b, M (reduced) and M's factor.
+    data.a.fill(0.0);
+    let b = crate::algo::rnea(full, &mut data.full, &data.q, &data.v, &data.a, None)?;
+    model.reduce_force_into(b.as_slice(), kd.x0.as_mut_slice());
+    for (x, &t) in kd.x0.iter_mut().zip(tau.iter()) {
+        *x = t - *x;
+    }
+    // The world-frame CRBA: M_f, and the placements and world subspaces of the path kinematics.
+    crate::algo::internal::crba_unchecked(full, &mut data.full, &data.q);
+    model.reduce_matrix(data.full.m(), &mut data.m);
+    data.ldl.copy_from(&data.m);
+    ldl_in_place(model, &mut data.ldl)?;
+    // J and γ: the drift J̇ v_f and the Baumgarte terms kd J v_f (the position error is zero
+    // at this q), as the full tree's KKT dynamics.
+    let cd = &mut kd.full.cd;
+    crate::deriv::contact::path_kinematics(full, &data.full, cd, Some(data.v.as_slice()));
+    kd.gamma.copy_from(&cd.drift);
+    for (c, contact) in cd.contacts.iter().enumerate() {
+        if contact.kd != 0.0 {
+            for r in cd.row0[c]..cd.row0[c] + contact.dim() {
+                let jv: f64 = (0..nf).map(|k| cd.jac[(r, k)] * data.v[k]).sum();
+                kd.gamma[r] += contact.kd * jv;
+            }
+        }
+    }
+    let jac = &cd.jac;
+    kd.jr.fill(0.0);
+    for f in 0..nf {
+        let (c, g) = (model.g_col[f], model.g_coef[f]);
+        for r in 0..m {
+            kd.jr[(r, c)] += g * jac[(r, f)];
+        }
+    }
+    // M⁻¹ J_rᵀ, the Delassus matrix and its factor.
+    for r in 0..m {
+        let mut col = kd.minv_jt.column_mut(r);
+        for c in 0..n {
+            col[c] = kd.jr[(r, c)];
+        }
+        ldl_solve(&data.ldl, col.as_mut_slice());
+    }
+    crate::linalg::gemm(1.0, &kd.jr, &kd.minv_jt, 0.0, &mut kd.del);
+    delassus_in_place(&mut kd.del)?;
+    // q̈ = x0 + M⁻¹ J_rᵀ λ, λ = −D⁻¹(J_r x0 + γ) with x0 = M⁻¹(τ − b).
+    ldl_solve(&data.ldl, kd.x0.as_mut_slice());
+    kd.lm.copy_from(&kd.gamma);
+    kd.lm.gemv(1.0, &kd.jr, &kd.x0, 1.0);
+    ldl_solve(&kd.del, kd.lm.as_mut_slice());
+    kd.lambda.copy_from(&kd.lm);
+    kd.lambda.neg_mut();
+    kd.qdd.copy_from(&kd.x0);
+    kd.qdd.gemv(1.0, &kd.minv_jt, &kd.lambda, 1.0);
+    data.qdd.copy_from(&kd.qdd);
+    // τ_f = M_f G q̈ + b_f − Jᵀλ, at which the full tree's KKT solution is (G q̈, λ).
+    model.expand_v_into(kd.qdd.as_slice(), data.a.as_mut_slice());
+    let t = crate::algo::rnea(full, &mut data.full, &data.q, &data.v, &data.a, None)?;
+    kd.tau_f.copy_from(t);
+    kd.tau_f.gemv_tr(-1.0, kd.full.cd().jac(), &kd.lambda, 1.0);
+    if so {
+        crate::deriv::kkt_so_derivatives(
+            full,
+            &mut data.full,
+            &mut kd.full,
+            &data.q,
+            &data.v,
+            &kd.tau_f,
+        )?;
+    } else {
+        crate::deriv::kkt_derivatives(
+            full,
+            &mut data.full,
+            &mut kd.full,
+            &data.q,
+            &data.v,
+            &kd.tau_f,
+        )?;
+    }
+    // ∂y/∂q, ∂y/∂v.
+    for wrt in 0..2 {
+        let (dq, dl) = if wrt == 0 {
+            (kd.full.dqdd_dq(), kd.full.dlambda_dq())
+        } else {
+            (kd.full.dqdd_dv(), kd.full.dlambda_dv())
+        };
+        // R_x^f = −[M_f, −Jᵀ; J, 0] [∂q̈/∂x; ∂λ/∂x].
+        crate::linalg::gemm(-1.0, data.full.m(), dq, 0.0, &mut kd.rf_top);
+        kd.rf_top.gemm_tr(1.0, kd.full.cd().jac(), dl, 1.0);
+        crate::linalg::gemm(-1.0, kd.full.cd().jac(), dq, 0.0, &mut kd.rf_bot);
+        model.reduce_matrix(&kd.rf_top, &mut kd.r_top);
+        kd.r_bot.fill(0.0);
+        for f in 0..nf {
+            let (c, g) = (model.g_col[f], model.g_coef[f]);
+            for r in 0..m {
+                kd.r_bot[(r, c)] += g * kd.rf_bot[(r, f)];
+            }
+        }
+        // ∂y/∂x = −R_y⁻¹ R_x, column by column.
+        for c in 0..n {
+            for i in 0..n {
+                kd.col_n[i] = -kd.r_top[(i, c)];
+            }
+            for r in 0..m {
+                kd.col_m[r] = -kd.r_bot[(r, c)];
+            }
+            let (mut cn, mut cm) = (std::mem::take(&mut kd.col_n), std::mem::take(&mut kd.col_m));
+            kkt_solve(&data.ldl, kd, cn.as_mut_slice(), cm.as_mut_slice());
+            let (oq, ol) = if wrt == 0 {
+                (&mut kd.dqdd_dq, &mut kd.dlambda_dq)
+            } else {
+                (&mut kd.dqdd_dv, &mut kd.dlambda_dv)
+            };
+            oq.column_mut(c).copy_from(&cn);
+            ol.column_mut(c).copy_from(&cm);
+            (kd.col_n, kd.col_m) = (cn, cm);
+        }
+    }
+    // ∂y/∂τ = R_y⁻¹ [I; 0].
+    for c in 0..n {
+        kd.col_n.fill(0.0);
+        kd.col_n[c] = 1.0;
+        kd.col_m.fill(0.0);
+        let (mut cn, mut cm) = (std::mem::take(&mut kd.col_n), std::mem::take(&mut kd.col_m));
+        kkt_solve(&data.ldl, kd, cn.as_mut_slice(), cm.as_mut_slice());
+        kd.dqdd_dtau.column_mut(c).copy_from(&cn);
+        kd.dlambda_dtau.column_mut(c).copy_from(&cm);
+        (kd.col_n, kd.col_m) = (cn, cm);
+    }
+    Ok(())
+}
+
+/// Second-order derivatives of the KKT dynamics in the reduced coordinates (and the first
+/// order, as [`kkt_derivatives`]), by eq. SO_general_eqn
+/// `∂²y/∂u∂w = −R_y⁻¹ (R_uw + G(∂y/∂w)[·, u] + G(∂y/∂u)[·, w])` on the reduced residual. With
+/// the full tree's second order `T^f` at `τ_f` (see [`kkt_derivatives`]),
+/// `R^f_uw + G^f(∂y^f/∂w)[·, u] + G^f(∂y^f/∂u)[·, w] = −R^f_y T^f[·, u, w]`, so the reduced
+/// right-hand side is that contracted with `G` (rows by `Gᵀ` for the dynamics, `u`, `w` by `G`)
+/// plus the `G` products, linear in their vector, of `Δ = (G ∂q̈/∂w, ∂λ/∂w) − ∂y^f/∂w^f G`
+/// (the reduced solution's derivative expanded, minus the full tree's along `G`): `G(z)[·, u]`
+/// is `[∂(M z₁)/∂q_u − ∂(Jᵀ z₂)/∂q_u; ∂(J z₁)/∂q_u]` (`q` only; `M` and `J` do not depend on
+/// `v`), and `∂²y/∂τ∂q` is `−R_y⁻¹ G(∂y/∂τ_j)[·, k]` directly. Results in `kd.so()`.
+///
+/// # Errors
+/// As [`kkt_derivatives`], and a workspace without [`MimicKktData::with_second_order`].
+pub fn kkt_so_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    kd: &mut MimicKktData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+) -> Result<()> {
+    let mut so = kd.so.take().ok_or_else(|| {
+        Error::Workspace(
+            "kkt_so_derivatives: MimicKktData was made without with_second_order".into(),
+        )
+    })?;
+    let r = kkt_inner(model, data, kd, q, v, tau, true)
+        .map(|()| kkt_so_reduce(model, data, kd, &mut so));
+    kd.so = Some(so);
+    r
+}
+
+/// The reduced second order from the full tree's (see [`kkt_so_derivatives`]).
+fn kkt_so_reduce(
+    model: &MimicModel,
+    data: &mut MimicData,
+    kd: &mut MimicKktData,
+    so: &mut MimicKktSo,
+) {
+    let (n, nf, m) = (model.nv, model.full.nv(), kd.dim());
+    let (gc, gk) = (&model.g_col, &model.g_coef);
+    // Pairs: (full q̈ tensor, full λ tensor, reduced outputs, which G products).
+    for pair in 0..4 {
+        so.sa.fill(0.0);
+        so.sl.fill(0.0);
+        if pair < 3 {
+            let fso = kd.full.so().expect("made with second order");
+            let (tfa, tfl) = match pair {
+                0 => (fso.d2qdd_dq2(), fso.d2lambda_dq2()),
+                1 => (fso.d2qdd_dv2(), fso.d2lambda_dv2()),
+                _ => (fso.d2qdd_dqdv(), fso.d2lambda_dqdv()),
+            };
+            // T^f contracted with G on (j, k).
+            so.ta.fill(0.0);
+            so.tl.fill(0.0);
+            for k in 0..nf {
+                for j in 0..nf {
+                    let c = gk[j] * gk[k];
+                    let (jr, kr) = (gc[j], gc[k]);
+                    for i in 0..nf {
+                        so.ta[(i, jr, kr)] += c * tfa[(i, j, k)];
+                    }
+                    for i in 0..m {
+                        so.tl[(i, jr, kr)] += c * tfl[(i, j, k)];
+                    }
+                }
+            }
+            // −R^f_y applied: rows −(M_f t_a − Jᵀ t_λ) (then Gᵀ) and −J t_a.
+            let jac = kd.full.cd().jac();
+            let mf = data.full.m();
+            for k in 0..n {
+                for j in 0..n {
+                    let ta = so.ta.fibre(j, k);
+                    let tl = so.tl.fibre(j, k);
+                    so.vf.gemv(-1.0, mf, &ta, 0.0);
+                    so.vf.gemv_tr(1.0, jac, &tl, 1.0);
+                    for f in 0..nf {
+                        so.sa[(gc[f], j, k)] += gk[f] * so.vf[f];
+                    }
+                    for r in 0..m {
+                        let s: f64 = (0..nf).map(|f| jac[(r, f)] * ta[f]).sum();
+                        so.sl[(r, j, k)] = -s;
+                    }
+                }
+            }
+        }
+        // The G products of Δ (q directions only): qq (both orders), qv (the v column), τq.
+        if pair != 1 {
+            for w in 0..n {
+                // Δ = E ∂y/∂w − ∂y^f/∂x^f G[:, w] (τ: E ∂y/∂τ_w alone).
+                let (ya, yl) = match pair {
+                    0 => (&kd.dqdd_dq, &kd.dlambda_dq),
+                    2 => (&kd.dqdd_dv, &kd.dlambda_dv),
+                    _ => (&kd.dqdd_dtau, &kd.dlambda_dtau),
+                };
+                for f in 0..nf {
+                    so.delta[f] = gk[f] * ya[(gc[f], w)];
+                }
+                for r in 0..m {
+                    so.delta[nf + r] = yl[(r, w)];
+                }
+                if pair != 3 {
+                    let (yfa, yfl) = if pair == 0 {
+                        (kd.full.dqdd_dq(), kd.full.dlambda_dq())
+                    } else {
+                        (kd.full.dqdd_dv(), kd.full.dlambda_dv())
+                    };
+                    for f in 0..nf {
+                        if gc[f] == w {
+                            let g = gk[f];
+                            for i in 0..nf {
+                                so.delta[i] -= g * yfa[(i, f)];
+                            }
+                            for r in 0..m {
+                                so.delta[nf + r] -= g * yfl[(r, f)];
+                            }
+                        }
+                    }
+                }
+                let (za, zl) = so.delta.as_slice().split_at(nf);
+                crate::deriv::contact::g_matrix_split(
+                    &model.full,
+                    &mut data.full,
+                    &mut kd.full.cd,
+                    za,
+                    zl,
+                    za,
+                );
+                // C = P g G: rows by Gᵀ (dynamics) and as is (contacts), columns by G.
+                let g = &kd.full.cd.g;
+                so.c.fill(0.0);
+                for u in 0..nf {
+                    let (ur, gu) = (gc[u], gk[u]);
+                    for f in 0..nf {
+                        so.c[(gc[f], ur)] += gk[f] * gu * g[(f, u)];
+                    }
+                    for r in 0..m {
+                        so.c[(n + r, ur)] += gu * g[(nf + r, u)];
+                    }
+                }
+                for u in 0..n {
+                    for i in 0..n {
+                        let x = so.c[(i, u)];
+                        match pair {
+                            0 => {
+                                so.sa[(i, u, w)] += x;
+                                so.sa[(i, w, u)] += x;
+                            }
+                            2 => so.sa[(i, u, w)] += x,
+                            _ => so.sa[(i, w, u)] += x,
+                        }
+                    }
+                    for r in 0..m {
+                        let x = so.c[(n + r, u)];
+                        match pair {
+                            0 => {
+                                so.sl[(r, u, w)] += x;
+                                so.sl[(r, w, u)] += x;
+                            }
+                            2 => so.sl[(r, u, w)] += x,
+                            _ => so.sl[(r, w, u)] += x,
+                        }
+                    }
+                }
+            }
+        }
+        // T = −R_y⁻¹ S, column by column.
+        let (oa, ol) = match pair {
+            0 => (&mut so.d2qdd_dq2, &mut so.d2lambda_dq2),
+            1 => (&mut so.d2qdd_dv2, &mut so.d2lambda_dv2),
+            2 => (&mut so.d2qdd_dqdv, &mut so.d2lambda_dqdv),
+            _ => (&mut so.d2qdd_dtaudq, &mut so.d2lambda_dtaudq),
+        };
+        for k in 0..n {
+            for j in 0..n {
+                for i in 0..n {
+                    kd.col_n[i] = -so.sa[(i, j, k)];
+                }
+                for r in 0..m {
+                    kd.col_m[r] = -so.sl[(r, j, k)];
+                }
+                let (mut cn, mut cm) =
+                    (std::mem::take(&mut kd.col_n), std::mem::take(&mut kd.col_m));
+                kkt_solve(&data.ldl, kd, cn.as_mut_slice(), cm.as_mut_slice());
+                for i in 0..n {
+                    oa[(i, j, k)] = cn[i];
+                }
+                for r in 0..m {
+                    ol[(r, j, k)] = cm[r];
+                }
+                (kd.col_n, kd.col_m) = (cn, cm);
+            }
+        }
+    }
+}
+
+/// `h ←` its `L D Lᵀ` factor (as [`ldl_in_place`]), for the Delassus matrix: a pivot that is not
+/// positive and finite, or at most `1e-12` of the largest, is a singular (redundant) set.
+fn delassus_in_place(h: &mut DMatrix<f64>) -> Result<()> {
+    let n = h.nrows();
+    let mut dmax: f64 = 0.0;
+    for j in 0..n {
+        let mut d = h[(j, j)];
+        for k in 0..j {
+            d -= h[(j, k)] * h[(j, k)] * h[(k, k)];
+        }
+        if !(d > 0.0 && d.is_finite()) || d <= 1e-12 * dmax {
+            return Err(Error::Singular {
+                what: "contact set".into(),
+                detail: format!(
+                    "the Delassus matrix J G M⁻¹ (J G)ᵀ of the reduced coordinates (mimic \
+                     joints) has the pivot {d:e} at contact row {j}: the contacts are redundant \
+                     or do not move in the reduced coordinates"
+                ),
+            });
+        }
+        dmax = dmax.max(d);
+        h[(j, j)] = d;
+        for i in j + 1..n {
+            let mut x = h[(i, j)];
+            for k in 0..j {
+                x -= h[(i, k)] * h[(j, k)] * h[(k, k)];
+            }
+            h[(i, j)] = x / d;
+        }
+    }
+    Ok(())
+}
+
+/// Constrained inverse dynamics in the reduced coordinates, `τ = Gᵀ(τ_f(expand(q), G v, G a) −
+/// Jᵀλ)`, and its first-order derivatives (the full tree's
+/// [`crate::deriv::constrained_id_derivatives`] contracted with `G`), `λ` held fixed in each
+/// contact's axes: `data.tau()`, `data.dtau_dq()`, `data.dtau_dv()`, `data.m()`; and with `so`,
+/// also the second-order tensors (IDSVA-SOc, `d2tau_dq2` with `−∂²(Jᵀλ)/∂q²`) in `so`.
+///
+/// # Errors
+/// As [`rnea`], and a `lambda` whose length is not the contacts' row count.
+#[allow(clippy::too_many_arguments)]
+pub fn constrained_id_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    kd: &mut MimicKktData,
+    so: Option<&mut MimicSoData>,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    lambda: &DVector<f64>,
+) -> Result<()> {
+    kd.check(model)?;
+    prepare(model, data, q, Some(v), Some(("a", a)))?;
+    crate::model::check_vec("lambda", lambda, kd.dim())?;
+    model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+    let cd = &mut kd.full.cd;
+    match so {
+        None => crate::deriv::constrained_id_derivatives(
+            &model.full,
+            &mut data.full,
+            cd,
+            &data.q,
+            &data.v,
+            &data.a,
+            lambda,
+        )?,
+        Some(so) => {
+            so.check(model)?;
+            crate::deriv::constrained_id_so_derivatives(
+                &model.full,
+                &mut data.full,
+                cd,
+                &mut so.full,
+                &data.q,
+                &data.v,
+                &data.a,
+                lambda,
+            )?;
+            model.reduce_tensor(so.full.d2tau_dq2(), &mut so.d2tau_dq2);
+            model.reduce_tensor(so.full.d2tau_dv2(), &mut so.d2tau_dv2);
+            model.reduce_tensor(so.full.d2tau_dqdv(), &mut so.d2tau_dqdv);
+            model.reduce_tensor(so.full.dm_dq(), &mut so.dm_dq);
+        }
+    }
+    reduce_fo(model, data);
+    Ok(())
+}
+
+/// Workspace and results of the impact dynamics of a [`MimicModel`] ([`impact_derivatives`]).
+#[derive(Clone, Debug)]
+pub struct MimicImpactData {
+    cd: ContactData,
+    key: u64,
+    restitution: f64,
+    jr: DMatrix<f64>,
+    minv_jt: DMatrix<f64>,
+    del: DMatrix<f64>,
+    vplus: DVector<f64>,
+    impulse: DVector<f64>,
+    dvplus_dq: DMatrix<f64>,
+    dvplus_dvminus: DMatrix<f64>,
+    dimpulse_dq: DMatrix<f64>,
+    dimpulse_dvminus: DMatrix<f64>,
+    /// `G (q̇⁺ − q̇⁻)` and `G (q̇⁺ + e q̇⁻)` (full tree).
+    dvf: DVector<f64>,
+    wf: DVector<f64>,
+    /// `∂(M Δv)/∂q − ∂(Jᵀλ̂)/∂q` (`nv_f × nv_f`), `∂(J w)/∂q` (`m × nv_f`), reduced blocks.
+    rq: DMatrix<f64>,
+    cq: DMatrix<f64>,
+    r_top: DMatrix<f64>,
+    r_bot: DMatrix<f64>,
+    col_n: DVector<f64>,
+    col_m: DVector<f64>,
+    so: Option<Box<MimicImpactSo>>,
+}
+
+/// Second-order results of [`impact_so_derivatives`] (`T[(i, j, k)] = ∂/∂x_k (∂y_i/∂q_j)`) and
+/// their workspace.
+#[derive(Clone, Debug)]
+pub struct MimicImpactSo {
+    d2vplus_dq2: Tensor3,
+    d2vplus_dqdvminus: Tensor3,
+    d2impulse_dq2: Tensor3,
+    d2impulse_dqdvminus: Tensor3,
+    /// IDSOZA of the full tree (`∂²(M Δ)/∂q²`).
+    id: SoData,
+    /// The full tree's `R_qq` at fixed `(Δ, λ̂, w)` (`(nv_f + m) × nv_f × nv_f`).
+    rf: Tensor3,
+    /// Reduced right-hand sides (`(nv + m) × nv × nv`), `qq` and `q q̇⁻`.
+    sqq: Tensor3,
+    sqv: Tensor3,
+    /// Scratch: full-tree vectors, one reduced `G` product, zeros.
+    za: DVector<f64>,
+    zj: DVector<f64>,
+    zl: DVector<f64>,
+    c: DMatrix<f64>,
+    zero: DVector<f64>,
+}
+
+impl MimicImpactSo {
+    /// `∂²q̇⁺/∂q²`.
+    pub fn d2vplus_dq2(&self) -> &Tensor3 {
+        &self.d2vplus_dq2
+    }
+    /// `T[(i, j, k)] = ∂/∂q̇⁻_k (∂q̇⁺_i/∂q_j)`.
+    pub fn d2vplus_dqdvminus(&self) -> &Tensor3 {
+        &self.d2vplus_dqdvminus
+    }
+    /// `∂²λ̂/∂q²`.
+    pub fn d2impulse_dq2(&self) -> &Tensor3 {
+        &self.d2impulse_dq2
+    }
+    /// `T[(i, j, k)] = ∂/∂q̇⁻_k (∂λ̂_i/∂q_j)`.
+    pub fn d2impulse_dqdvminus(&self) -> &Tensor3 {
+        &self.d2impulse_dqdvminus
+    }
+}
+
+impl MimicImpactData {
+    /// Adds the second-order workspace (for [`impact_so_derivatives`]).
+    pub fn with_second_order(mut self, model: &MimicModel) -> Self {
+        let (n, nf, m) = (model.nv, model.full.nv(), self.dim());
+        self.so = Some(Box::new(MimicImpactSo {
+            d2vplus_dq2: Tensor3::zeros(n, n, n),
+            d2vplus_dqdvminus: Tensor3::zeros(n, n, n),
+            d2impulse_dq2: Tensor3::zeros(m, n, n),
+            d2impulse_dqdvminus: Tensor3::zeros(m, n, n),
+            id: SoData::without_dm_dq(&model.full),
+            rf: Tensor3::zeros(nf + m, nf, nf),
+            sqq: Tensor3::zeros(n + m, n, n),
+            sqv: Tensor3::zeros(n + m, n, n),
+            za: DVector::zeros(nf),
+            zj: DVector::zeros(nf),
+            zl: DVector::zeros(m),
+            c: DMatrix::zeros(n + m, n),
+            zero: DVector::zeros(nf),
+        }));
+        self
+    }
+    /// The second-order results (with [`MimicImpactData::with_second_order`]).
+    pub fn so(&self) -> Option<&MimicImpactSo> {
+        self.so.as_deref()
+    }
+    /// Workspace for `contacts` on `model` (frames of the full tree), restitution `0`.
+    ///
+    /// # Errors
+    /// As [`MimicKktData::new`].
+    pub fn new(model: &MimicModel, contacts: &[crate::model::Contact]) -> Result<Self> {
+        let cd = ContactData::new(&model.full, contacts)?;
+        let (n, nf, m) = (model.nv, model.full.nv(), cd.dim());
+        let mat = |r, c| DMatrix::zeros(r, c);
+        Ok(Self {
+            cd,
+            key: model.key,
+            restitution: 0.0,
+            jr: mat(m, n),
+            minv_jt: mat(n, m),
+            del: mat(m, m),
+            vplus: DVector::zeros(n),
+            impulse: DVector::zeros(m),
+            dvplus_dq: mat(n, n),
+            dvplus_dvminus: mat(n, n),
+            dimpulse_dq: mat(m, n),
+            dimpulse_dvminus: mat(m, n),
+            dvf: DVector::zeros(nf),
+            wf: DVector::zeros(nf),
+            rq: mat(nf, nf),
+            cq: mat(m, nf),
+            r_top: mat(n, n),
+            r_bot: mat(m, n),
+            col_n: DVector::zeros(n),
+            col_m: DVector::zeros(m),
+            so: None,
+        })
+    }
+    /// Sets the coefficient of restitution `e` (`q̇⁺` of the contact rows is `−e` times `q̇⁻`'s).
+    ///
+    /// # Errors
+    /// [`Error::Argument`] if `e` is negative or not finite.
+    pub fn set_restitution(&mut self, e: f64) -> Result<()> {
+        if !e.is_finite() || e < 0.0 {
+            return Err(Error::Argument {
+                name: "restitution".into(),
+                reason: format!("{e} must be finite and non-negative"),
+            });
+        }
+        self.restitution = e;
+        Ok(())
+    }
+    /// Number of contact rows `m`.
+    pub fn dim(&self) -> usize {
+        self.impulse.len()
+    }
+    /// `q̇⁺`.
+    pub fn vplus(&self) -> &DVector<f64> {
+        &self.vplus
+    }
+    /// Contact impulses `λ̂` applied to the robot.
+    pub fn impulse(&self) -> &DVector<f64> {
+        &self.impulse
+    }
+    /// `∂q̇⁺/∂q` (tangent).
+    pub fn dvplus_dq(&self) -> &DMatrix<f64> {
+        &self.dvplus_dq
+    }
+    /// `∂q̇⁺/∂q̇⁻`.
+    pub fn dvplus_dvminus(&self) -> &DMatrix<f64> {
+        &self.dvplus_dvminus
+    }
+    /// `∂λ̂/∂q` (tangent).
+    pub fn dimpulse_dq(&self) -> &DMatrix<f64> {
+        &self.dimpulse_dq
+    }
+    /// `∂λ̂/∂q̇⁻`.
+    pub fn dimpulse_dvminus(&self) -> &DMatrix<f64> {
+        &self.dimpulse_dvminus
+    }
+}
+
+/// Impact dynamics in the reduced coordinates and its first-order derivatives:
+/// `M (q̇⁺ − q̇⁻) = (J G)ᵀ λ̂`, `J G q̇⁺ = −e J G q̇⁻` (`M = Gᵀ M_f G`, `J` the full tree's contact
+/// Jacobian at `expand(q)`), then `∂y/∂x = −R_y⁻¹ R_x` for `y = (q̇⁺, λ̂)`, `x = (q, q̇⁻)` with
+/// `R_q = [Gᵀ(∂(M_f Δ)/∂q − ∂(Jᵀλ̂)/∂q) G; ∂(J w)/∂q G]` (`Δ = G(q̇⁺ − q̇⁻)`,
+/// `w = G(q̇⁺ + e q̇⁻)`, the full tree's IDFOZA and contact products) and
+/// `R_q̇⁻ = [−M; e J G]`.
+///
+/// # Errors
+/// As [`crba`] for `q`, a `vminus` of the wrong length or not finite, [`Error::Singular`] for a
+/// singular `M` or Delassus matrix, a workspace of another model.
+pub fn impact_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    im: &mut MimicImpactData,
+    q: &DVector<f64>,
+    vminus: &DVector<f64>,
+) -> Result<()> {
+    if im.key != model.key || im.vplus.len() != model.nv {
+        return Err(Error::Workspace(format!(
+            "MimicImpactData was made for another model; make it with MimicImpactData::new \
+             for the mimic model \"{}\"",
+            model.name()
+        )));
+    }
+    prepare(model, data, q, None, Some(("vminus", vminus)))?;
+    let (n, nf, m) = (model.nv, model.full.nv(), im.dim());
+    let full = &model.full;
+    let e = im.restitution;
+    // M (with the composite inertias), the body inertias for IDFOZA, J.
+    crate::algo::internal::crba_unchecked(full, &mut data.full, &data.q);
+    for i in 1..full.njoints() {
+        data.full.oinertia[i] = data.full.o_m_i[i].act_inertia(&full.inertias[i]);
+    }
+    crate::deriv::contact::path_kinematics(full, &data.full, &mut im.cd, None);
+    model.reduce_matrix(data.full.m(), &mut data.m);
+    data.ldl.copy_from(&data.m);
+    ldl_in_place(model, &mut data.ldl)?;
+    im.jr.fill(0.0);
+    for f in 0..nf {
+        let (c, g) = (model.g_col[f], model.g_coef[f]);
+        for r in 0..m {
+            im.jr[(r, c)] += g * im.cd.jac[(r, f)];
+        }
+    }
+    for r in 0..m {
+        let mut col = im.minv_jt.column_mut(r);
+        for c in 0..n {
+            col[c] = im.jr[(r, c)];
+        }
+        ldl_solve(&data.ldl, col.as_mut_slice());
+    }
+    crate::linalg::gemm(1.0, &im.jr, &im.minv_jt, 0.0, &mut im.del);
+    delassus_in_place(&mut im.del)?;
+    // λ̂ = −(1 + e) D⁻¹ J_r q̇⁻, q̇⁺ = q̇⁻ + M⁻¹ J_rᵀ λ̂.
+    im.impulse.gemv(-(1.0 + e), &im.jr, vminus, 0.0);
+    ldl_solve(&im.del, im.impulse.as_mut_slice());
+    im.vplus.copy_from(vminus);
+    im.vplus.gemv(1.0, &im.minv_jt, &im.impulse, 1.0);
+    // R_q of the full tree at Δ, λ̂, w, reduced.
+    for f in 0..nf {
+        let (c, g) = (model.g_col[f], model.g_coef[f]);
+        im.dvf[f] = g * (im.vplus[c] - vminus[c]);
+        im.wf[f] = g * (im.vplus[c] + e * vminus[c]);
+    }
+    crate::deriv::zero::idfoza_core(full, &mut data.full, im.dvf.as_slice(), &mut im.rq);
+    let s = std::mem::take(&mut im.cd.s);
+    crate::deriv::contact::sub_djtl_dq_tree(
+        full,
+        &s,
+        &mut im.cd,
+        im.impulse.as_slice(),
+        &mut im.rq,
+    );
+    im.cd.s = s;
+    im.cq.fill(0.0);
+    crate::deriv::contact::djw_dq(full, &mut im.cd, im.wf.as_slice(), &mut im.cq);
+    model.reduce_matrix(&im.rq, &mut im.r_top);
+    im.r_bot.fill(0.0);
+    for f in 0..nf {
+        let (c, g) = (model.g_col[f], model.g_coef[f]);
+        for r in 0..m {
+            im.r_bot[(r, c)] += g * im.cq[(r, f)];
+        }
+    }
+    // ∂y/∂q = −R_y⁻¹ R_q; ∂y/∂q̇⁻ = −R_y⁻¹ [−M; e J_r].
+    for wrt in 0..2 {
+        for c in 0..n {
+            for i in 0..n {
+                im.col_n[i] = if wrt == 0 { -im.r_top[(i, c)] } else { data.m[(i, c)] };
+            }
+            for r in 0..m {
+                im.col_m[r] = if wrt == 0 { -im.r_bot[(r, c)] } else { -e * im.jr[(r, c)] };
+            }
+            let (mut cn, mut cm) = (std::mem::take(&mut im.col_n), std::mem::take(&mut im.col_m));
+            kkt_solve_with(
+                &data.ldl,
+                &im.jr,
+                &im.minv_jt,
+                &im.del,
+                cn.as_mut_slice(),
+                cm.as_mut_slice(),
+            );
+            let (oa, ol) = if wrt == 0 {
+                (&mut im.dvplus_dq, &mut im.dimpulse_dq)
+            } else {
+                (&mut im.dvplus_dvminus, &mut im.dimpulse_dvminus)
+            };
+            oa.column_mut(c).copy_from(&cn);
+            ol.column_mut(c).copy_from(&cm);
+            (im.col_n, im.col_m) = (cn, cm);
+        }
+    }
+    Ok(())
+}
+
+/// Second-order derivatives of the impact dynamics in the reduced coordinates (and the first
+/// order, as [`impact_derivatives`]): `∂²y/∂u∂w = −R_y⁻¹ (R_uw + G(∂y/∂w)[·, u] +
+/// G(∂y/∂u)[·, w])` on the reduced residual, with `R_qq = P R^f_qq G G` (the full tree's
+/// `∂²(M_f Δ)/∂q² − ∂²(Jᵀλ̂)/∂q²` and `∂²(J w)/∂q²` at `Δ = G(q̇⁺ − q̇⁻)`, `λ̂`,
+/// `w = G(q̇⁺ + e q̇⁻)`: IDSOZA and the contact-point kinematics; rows `P = diag(Gᵀ, I)`,
+/// `q` indices contracted with `G`) and the `G` products of the expanded reduced derivatives
+/// (`∂q̈`-type vectors mapped by `G`). Results in `im.so()`.
+///
+/// # Errors
+/// As [`impact_derivatives`], and a workspace without [`MimicImpactData::with_second_order`].
+pub fn impact_so_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    im: &mut MimicImpactData,
+    q: &DVector<f64>,
+    vminus: &DVector<f64>,
+) -> Result<()> {
+    let mut so = im.so.take().ok_or_else(|| {
+        Error::Workspace(
+            "impact_so_derivatives: MimicImpactData was made without with_second_order".into(),
+        )
+    })?;
+    let r = impact_derivatives(model, data, im, q, vminus)
+        .map(|()| impact_so_reduce(model, data, im, &mut so));
+    im.so = Some(so);
+    r
+}
+
+fn impact_so_reduce(
+    model: &MimicModel,
+    data: &mut MimicData,
+    im: &mut MimicImpactData,
+    so: &mut MimicImpactSo,
+) {
+    use crate::deriv::contact::{g_matrix_split, update_points};
+    use crate::spatial::Motion;
+    let full = &model.full;
+    let (n, nf, m) = (model.nv, full.nv(), im.dim());
+    let (gc, gk) = (&model.g_col, &model.g_coef);
+    let e = im.restitution;
+    // IDSOZA: ∂²(M Δ)/∂q² (zero velocity, no gravity, q̈ = Δ).
+    crate::deriv::id_so::id_so_unchecked(
+        full,
+        &mut data.full,
+        &mut so.id,
+        &data.q,
+        &so.zero,
+        &im.dvf,
+        None,
+        Motion::zero(),
+    );
+    update_points(full, &data.full, &mut im.cd, Motion::zero());
+    let rf = &mut so.rf;
+    rf.fill(0.0);
+    {
+        let t = so.id.d2tau_dq2();
+        for k in 0..nf {
+            for j in 0..nf {
+                for i in 0..nf {
+                    rf[(i, j, k)] = t[(i, j, k)];
+                }
+            }
+        }
+    }
+    // − ∂²(Jᵀλ̂)/∂q² and ∂²(J w)/∂q² (as the full tree's impact second order).
+    crate::deriv::impact::add_contact_rqq(
+        full,
+        &im.cd,
+        im.impulse.as_slice(),
+        im.wf.as_slice(),
+        rf,
+    );
+    // R_qq reduced: rows by P, (j, k) by G.
+    so.sqq.fill(0.0);
+    so.sqv.fill(0.0);
+    for k in 0..nf {
+        for j in 0..nf {
+            let c = gk[j] * gk[k];
+            let (jr, kr) = (gc[j], gc[k]);
+            for i in 0..nf {
+                so.sqq[(gc[i], jr, kr)] += gk[i] * c * rf[(i, j, k)];
+            }
+            for r in 0..m {
+                so.sqq[(n + r, jr, kr)] += c * rf[(nf + r, j, k)];
+            }
+        }
+    }
+    // The G products: (q, q) of the columns of ∂y/∂q, both orders; (q, q̇⁻_k) with
+    // z_m = G(∂q̇⁺/∂q̇⁻_k − e_k), z_J = G(∂q̇⁺/∂q̇⁻_k + e e_k), z₂ = ∂λ̂/∂q̇⁻_k.
+    for pass in 0..2 {
+        for k in 0..n {
+            for f in 0..nf {
+                let (c, g) = (gc[f], gk[f]);
+                if pass == 0 {
+                    so.za[f] = g * im.dvplus_dq[(c, k)];
+                    so.zj[f] = so.za[f];
+                } else {
+                    let x = im.dvplus_dvminus[(c, k)];
+                    let d = if c == k { 1.0 } else { 0.0 };
+                    so.za[f] = g * (x - d);
+                    so.zj[f] = g * (x + e * d);
+                }
+            }
+            for r in 0..m {
+                so.zl[r] =
+                    if pass == 0 { im.dimpulse_dq[(r, k)] } else { im.dimpulse_dvminus[(r, k)] };
+            }
+            g_matrix_split(
+                full,
+                &mut data.full,
+                &mut im.cd,
+                so.za.as_slice(),
+                so.zl.as_slice(),
+                so.zj.as_slice(),
+            );
+            let g = &im.cd.g;
+            so.c.fill(0.0);
+            for u in 0..nf {
+                let (ur, gu) = (gc[u], gk[u]);
+                for f in 0..nf {
+                    so.c[(gc[f], ur)] += gk[f] * gu * g[(f, u)];
+                }
+                for r in 0..m {
+                    so.c[(n + r, ur)] += gu * g[(nf + r, u)];
+                }
+            }
+            for u in 0..n {
+                for i in 0..n + m {
+                    let x = so.c[(i, u)];
+                    if pass == 0 {
+                        so.sqq[(i, u, k)] += x;
+                        so.sqq[(i, k, u)] += x;
+                    } else {
+                        so.sqv[(i, u, k)] += x;
+                    }
+                }
+            }
+        }
+    }
+    // T = −R_y⁻¹ S.
+    for pass in 0..2 {
+        for k in 0..n {
+            for j in 0..n {
+                let src = if pass == 0 { &so.sqq } else { &so.sqv };
+                for i in 0..n {
+                    im.col_n[i] = -src[(i, j, k)];
+                }
+                for r in 0..m {
+                    im.col_m[r] = -src[(n + r, j, k)];
+                }
+                let (mut cn, mut cm) =
+                    (std::mem::take(&mut im.col_n), std::mem::take(&mut im.col_m));
+                kkt_solve_with(
+                    &data.ldl,
+                    &im.jr,
+                    &im.minv_jt,
+                    &im.del,
+                    cn.as_mut_slice(),
+                    cm.as_mut_slice(),
+                );
+                let (oa, ol) = if pass == 0 {
+                    (&mut so.d2vplus_dq2, &mut so.d2impulse_dq2)
+                } else {
+                    (&mut so.d2vplus_dqdvminus, &mut so.d2impulse_dqdvminus)
+                };
+                for i in 0..n {
+                    oa[(i, j, k)] = cn[i];
+                }
+                for r in 0..m {
+                    ol[(r, j, k)] = cm[r];
+                }
+                (im.col_n, im.col_m) = (cn, cm);
+            }
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Contracted second order
+// ---------------------------------------------------------------------------------------------
+
+/// Results and workspace of [`id_so_contracted`] and [`fd_so_contracted`] for a
+/// [`MimicModel`]: `nv × nv` Hessians `C[(j, k)] = Σ_i w_i T[(i, j, k)]` of the reduced tensors.
+#[derive(Clone, Debug)]
+pub struct MimicContractedData {
+    full: crate::deriv::ContractedData,
+    key: u64,
+    wf: DVector<f64>,
+    mu: DVector<f64>,
+    qq: DMatrix<f64>,
+    vv: DMatrix<f64>,
+    qv: DMatrix<f64>,
+    mq: DMatrix<f64>,
+    tauq: DMatrix<f64>,
+    tmp: DMatrix<f64>,
+}
+
+impl MimicContractedData {
+    /// Workspace for `model`.
+    pub fn new(model: &MimicModel) -> Self {
+        let n = model.nv;
+        let z = || DMatrix::zeros(n, n);
+        Self {
+            full: crate::deriv::ContractedData::new(&model.full),
+            key: model.key,
+            wf: DVector::zeros(model.full.nv()),
+            mu: DVector::zeros(n),
+            qq: z(),
+            vv: z(),
+            qv: z(),
+            mq: z(),
+            tauq: z(),
+            tmp: z(),
+        }
+    }
+    fn check(&self, model: &MimicModel) -> Result<()> {
+        if self.key != model.key || self.mu.len() != model.nv {
+            return Err(Error::Workspace(format!(
+                "MimicContractedData was made for another model; make it with \
+                 MimicContractedData::new for the mimic model \"{}\"",
+                model.name()
+            )));
+        }
+        Ok(())
+    }
+    /// `C_qq` (of `∂²τ/∂q²` or `∂²q̈/∂q²`).
+    pub fn c_qq(&self) -> &DMatrix<f64> {
+        &self.qq
+    }
+    /// `C_vv`.
+    pub fn c_vv(&self) -> &DMatrix<f64> {
+        &self.vv
+    }
+    /// `C_qv` (`[(j, k)]`: `q_j` inner, `v_k` outer).
+    pub fn c_qv(&self) -> &DMatrix<f64> {
+        &self.qv
+    }
+    /// `C_Mq` of `∂M/∂q` ([`id_so_contracted`]).
+    pub fn c_mq(&self) -> &DMatrix<f64> {
+        &self.mq
+    }
+    /// `C_τq` of `∂²q̈/∂τ∂q` ([`fd_so_contracted`]).
+    pub fn c_tauq(&self) -> &DMatrix<f64> {
+        &self.tauq
+    }
+}
+
+/// The full tree's contracted ID Hessians at `data.q, data.v, data.a` with the weight `G w`,
+/// reduced: `C = Gᵀ C_f G` (as `Σ_i w_i T_r[i, j, k] = Σ_{b,c} G_bj G_ck Σ_a (G w)_a T_f[a, b, c]`).
+fn id_contracted_reduced(
+    model: &MimicModel,
+    data: &mut MimicData,
+    cd: &mut MimicContractedData,
+    w: &[f64],
+) -> Result<()> {
+    model.expand_v_into(w, cd.wf.as_mut_slice());
+    crate::deriv::id_so_contracted(
+        &model.full,
+        &mut data.full,
+        &mut cd.full,
+        &data.q,
+        &data.v,
+        &data.a,
+        &cd.wf,
+    )?;
+    model.reduce_matrix(cd.full.c_qq(), &mut cd.qq);
+    model.reduce_matrix(cd.full.c_vv(), &mut cd.vv);
+    model.reduce_matrix(cd.full.c_qv(), &mut cd.qv);
+    model.reduce_matrix(cd.full.c_mq(), &mut cd.mq);
+    Ok(())
+}
+
+/// The Hessians of `wᵀτ(q, v, a)` in the reduced coordinates (`C_qq`, `C_vv`, `C_qv`, `C_Mq`):
+/// the full tree's [`crate::deriv::id_so_contracted`] with the weight `G w`, reduced
+/// `Gᵀ C G`.
+///
+/// # Errors
+/// As [`rnea`], a `w` of the wrong length or not finite, a workspace of another model.
+#[allow(clippy::too_many_arguments)]
+pub fn id_so_contracted(
+    model: &MimicModel,
+    data: &mut MimicData,
+    cd: &mut MimicContractedData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    w: &DVector<f64>,
+) -> Result<()> {
+    cd.check(model)?;
+    model.check_v("w", w)?;
+    prepare(model, data, q, Some(v), Some(("a", a)))?;
+    model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+    id_contracted_reduced(model, data, cd, w.as_slice())
+}
+
+/// The Hessians of `wᵀq̈(q, v, τ)` in the reduced coordinates (`C_qq`, `C_vv`, `C_qv`,
+/// `C_τq`), as [`crate::deriv::fd_so_contracted`]: with `μ = M⁻¹ w`, `X_q`, `X_v` of
+/// [`fd_derivatives`] and the reduced contracted ID Hessians `C^ID` and `D = C^ID_Mq` (`= ∂(M μ)/∂q`)
+/// at `(q, v, q̈)` with the weight `μ`: `C_qq = −(C^ID_qq + Dᵀ X_q + X_qᵀ D)`,
+/// `C_vv = −C^ID_vv`, `C_qv = −(C^ID_qv + Dᵀ X_v)`, `C_τq = −M⁻¹ D`. Also leaves the
+/// first-order results of [`fd_derivatives`] in `data`.
+///
+/// # Errors
+/// As [`aba`], a `w` of the wrong length or not finite, a workspace of another model.
+#[allow(clippy::too_many_arguments)]
+pub fn fd_so_contracted(
+    model: &MimicModel,
+    data: &mut MimicData,
+    cd: &mut MimicContractedData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+    w: &DVector<f64>,
+) -> Result<()> {
+    cd.check(model)?;
+    model.check_v("w", w)?;
+    fd_derivatives(model, data, q, v, tau, None)?;
+    // μ = M⁻¹ w; data.a is G q̈ (aba).
+    cd.mu.copy_from(w);
+    ldl_solve(&data.ldl, cd.mu.as_mut_slice());
+    let mu = std::mem::take(&mut cd.mu);
+    let r = id_contracted_reduced(model, data, cd, mu.as_slice());
+    cd.mu = mu;
+    r?;
+    // D = C^ID_Mq (in cd.mq); C_qq = −(C^ID_qq + Dᵀ X_q + X_qᵀ D), …
+    cd.tmp.gemm_tr(1.0, &cd.mq, &data.dqdd_dq, 0.0);
+    for j in 0..model.nv {
+        for k in 0..model.nv {
+            cd.qq[(j, k)] = -(cd.qq[(j, k)] + cd.tmp[(j, k)] + cd.tmp[(k, j)]);
+        }
+    }
+    cd.vv.neg_mut();
+    cd.tmp.gemm_tr(1.0, &cd.mq, &data.dqdd_dv, 0.0);
+    cd.qv += &cd.tmp;
+    cd.qv.neg_mut();
+    crate::linalg::gemm(-1.0, &data.minv, &cd.mq, 0.0, &mut cd.tauq);
+    Ok(())
+}
