@@ -39,8 +39,10 @@ fn kkt_first_and_second_order_match_oracle() {
     let mut w: Vec<Worst> = names.iter().chain(so_names.iter()).map(|n| Worst::new(n)).collect();
     let mut rng = Rng::new(31);
     // Without and with Baumgarte gains (the oracle holds the reference point fixed at q).
-    for (gains, (m, frames)) in
-        [false, true].into_iter().flat_map(|g| contact_cases().into_iter().map(move |c| (g, c)))
+    for (gains, (m, frames)) in [false, true]
+        .into_iter()
+        .flat_map(|g| contact_cases().into_iter().map(move |c| (g, c)))
+        .chain(std::iter::once((false, large_contact_case())))
     {
         let mut contacts = contacts_of(&m, &frames, &mut rng);
         if gains {
@@ -117,8 +119,10 @@ fn impact_first_and_second_order_match_oracle() {
     ];
     let mut w: Vec<Worst> = names.iter().map(|n| Worst::new(n)).collect();
     let mut rng = Rng::new(32);
-    for (m, frames) in contact_cases() {
-        for e in [0.0, 0.5] {
+    let large = large_contact_case();
+    for (m, frames) in contact_cases().into_iter().chain(std::iter::once(large)) {
+        let large = m.nv() >= 32;
+        for e in [0.0, 0.5].into_iter().filter(|&e| !large || e > 0.0) {
             let contacts = contacts_of(&m, &frames, &mut rng);
             let (q, vminus, _) = random_state(&m, &mut rng);
             let mut d = Data::new(&m);
