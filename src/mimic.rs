@@ -31,17 +31,24 @@
 //! second order), [`kkt_derivatives`], [`kkt_so_derivatives`], [`impact_derivatives`] and
 //! [`impact_so_derivatives`], with the workspaces [`MimicKktData`] and [`MimicImpactData`].
 //! Contracted second order: [`id_so_contracted`], [`fd_so_contracted`]
-//! ([`MimicContractedData`]). The other algorithms of the crate (kinematics, frames, the
-//! contracted KKT and impact second order, batches) take the full [`Model`] only.
+//! ([`MimicContractedData`]). Frames and centre of mass (in [`MimicData`]):
+//! [`frame_placement`], [`frame_jacobian`] (`J_full G`), [`frame_velocity`],
+//! [`frame_acceleration`], [`frame_classical_acceleration`] (the full tree's at `expand(q)`,
+//! `G v`, `G a`), [`frame_velocity_derivatives`], [`frame_acceleration_derivatives`] (the full
+//! tree's times `G`), [`center_of_mass`], [`center_of_mass_jacobian`]. Continuous joints have
+//! one coordinate (the angle) here, so `expand` is affine for them too and the chain rule
+//! `∂/∂q = ∂/∂q_full · G` holds for every mimic or reference joint. The other algorithms of
+//! the crate (centroidal, the contracted KKT and impact second order, batches) take the full
+//! [`Model`] only.
 
-use crate::algo::Data;
+use crate::algo::{Data, ReferenceFrame};
 use crate::deriv::{ContactData, KktData, SoData};
 use crate::error::{Error, Result};
 use crate::model::{JointType, Model, UrdfOptions};
 use crate::rng::Rng;
-use crate::spatial::Force;
+use crate::spatial::{Force, Motion, Transform};
 use crate::tensor::Tensor3;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, Matrix3xX, Matrix6xX, Vector3};
 use std::path::Path;
 
 /// One mimic constraint `q[joint] = multiplier · q[reference] + offset` between two one-DoF
@@ -456,6 +463,10 @@ pub struct MimicData {
     dqdd_dq: DMatrix<f64>,
     dqdd_dv: DMatrix<f64>,
     minv: DMatrix<f64>,
+    /// `6 × full().nv()` scratch of the frame Jacobians and derivatives.
+    j6: [Matrix6xX<f64>; 3],
+    /// `3 × full().nv()` scratch of the centre-of-mass Jacobian.
+    j3: Matrix3xX<f64>,
     key: u64,
 }
 
@@ -478,6 +489,8 @@ impl MimicData {
             dqdd_dq: sq(),
             dqdd_dv: sq(),
             minv: sq(),
+            j6: std::array::from_fn(|_| Matrix6xX::zeros(f.nv())),
+            j3: Matrix3xX::zeros(f.nv()),
             key: model.key,
         }
     }
@@ -2358,5 +2371,262 @@ pub fn fd_so_contracted(
     cd.qv += &cd.tmp;
     cd.qv.neg_mut();
     crate::linalg::gemm(-1.0, &data.minv, &cd.mq, 0.0, &mut cd.tauq);
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Frames, kinematics and centre of mass.
+
+impl MimicModel {
+    /// `out = x G` for a `R × full().nv()` matrix `x` (`out`: `R × nv()`).
+    fn reduce_cols<R: nalgebra::Dim, S1, S2>(
+        &self,
+        x: &nalgebra::Matrix<f64, R, nalgebra::Dyn, S1>,
+        out: &mut nalgebra::Matrix<f64, R, nalgebra::Dyn, S2>,
+    ) where
+        S1: nalgebra::storage::Storage<f64, R, nalgebra::Dyn>,
+        S2: nalgebra::storage::StorageMut<f64, R, nalgebra::Dyn>,
+    {
+        out.fill(0.0);
+        for (f, (&c, &m)) in self.g_col.iter().zip(&self.g_coef).enumerate() {
+            for r in 0..x.nrows() {
+                out[(r, c)] += m * x[(r, f)];
+            }
+        }
+    }
+    /// Checks a frame index of the full tree.
+    fn check_frame(&self, frame: usize) -> Result<()> {
+        let n = self.full.frames().len();
+        if frame >= n {
+            return Err(Error::Argument {
+                name: "frame".into(),
+                reason: format!("frame index {frame} out of range (the model has {n} frames)"),
+            });
+        }
+        Ok(())
+    }
+}
+
+fn check_ncols(what: &str, got: usize, expected: usize) -> Result<()> {
+    if got != expected {
+        return Err(Error::Dimension { what: what.into(), expected, got });
+    }
+    Ok(())
+}
+
+/// World placement `⁰M_f` of frame `frame` (a frame of the full tree) at `expand(q)`
+/// ([`crate::algo::frame_placement`]).
+///
+/// # Errors
+/// As [`MimicModel::check_q`]; a frame index out of range; a workspace of another model.
+pub fn frame_placement(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    frame: usize,
+) -> Result<Transform> {
+    model.check_frame(frame)?;
+    prepare(model, data, q, None, None)?;
+    crate::algo::frame_placement(&model.full, &mut data.full, &data.q, frame)
+}
+
+/// Writes into `jac` (`6 × nv`, reduced) the Jacobian `J_full G` of frame `frame` at `q` in
+/// `rf`: the frame's spatial velocity in `rf` is `jac q̇`.
+///
+/// # Errors
+/// As [`frame_placement`]; `jac` without `nv` columns.
+pub fn frame_jacobian(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+    jac: &mut Matrix6xX<f64>,
+) -> Result<()> {
+    check_ncols("jacobian columns", jac.ncols(), model.nv)?;
+    model.check_frame(frame)?;
+    prepare(model, data, q, None, None)?;
+    crate::algo::frame_jacobian(&model.full, &mut data.full, &data.q, frame, rf, &mut data.j6[0])?;
+    model.reduce_cols(&data.j6[0], jac);
+    Ok(())
+}
+
+/// Spatial velocity of frame `frame` at `(q, q̇)` in `rf`: the full tree's at
+/// `(expand(q), G q̇)`.
+///
+/// # Errors
+/// As [`frame_placement`]; `v` of the wrong length or not finite.
+pub fn frame_velocity(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+) -> Result<Motion> {
+    model.check_frame(frame)?;
+    prepare(model, data, q, Some(v), None)?;
+    crate::algo::frame_velocity(&model.full, &mut data.full, &data.q, &data.v, frame, rf)
+}
+
+/// Expands `a` into `data.a` after [`prepare`].
+fn prepare_a(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    frame: usize,
+) -> Result<()> {
+    model.check_frame(frame)?;
+    prepare(model, data, q, Some(v), Some(("a", a)))?;
+    model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+    Ok(())
+}
+
+/// Spatial acceleration (no gravity) of frame `frame` at `(q, q̇, q̈)` in `rf`: the full tree's
+/// at `(expand(q), G q̇, G q̈)`.
+///
+/// # Errors
+/// As [`frame_velocity`]; `a` of the wrong length or not finite.
+pub fn frame_acceleration(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+) -> Result<Motion> {
+    prepare_a(model, data, q, v, a, frame)?;
+    let (f, d) = (&model.full, &mut data.full);
+    crate::algo::frame_acceleration(f, d, &data.q, &data.v, &data.a, frame, rf)
+}
+
+/// Classical acceleration of frame `frame`'s origin at `(q, q̇, q̈)` in `rf`
+/// ([`crate::algo::frame_classical_acceleration`] at `(expand(q), G q̇, G q̈)`).
+///
+/// # Errors
+/// As [`frame_acceleration`].
+pub fn frame_classical_acceleration(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+) -> Result<Motion> {
+    prepare_a(model, data, q, v, a, frame)?;
+    let (f, d) = (&model.full, &mut data.full);
+    crate::algo::frame_classical_acceleration(f, d, &data.q, &data.v, &data.a, frame, rf)
+}
+
+/// `∂v_f/∂q` (tangent space of the reduced configuration) and `∂v_f/∂q̇` (`6 × nv` each) of
+/// frame `frame`'s spatial velocity in `rf`: the full tree's at `(expand(q), G q̇)` times `G`
+/// (`expand(q ⊕ δ) = expand(q) ⊕ G δ`).
+///
+/// # Errors
+/// As [`frame_velocity`]; outputs without `nv` columns.
+#[allow(clippy::too_many_arguments)]
+pub fn frame_velocity_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+    dv_dq: &mut Matrix6xX<f64>,
+    dv_dv: &mut Matrix6xX<f64>,
+) -> Result<()> {
+    check_ncols("derivative columns", dv_dq.ncols(), model.nv)?;
+    check_ncols("derivative columns", dv_dv.ncols(), model.nv)?;
+    model.check_frame(frame)?;
+    prepare(model, data, q, Some(v), None)?;
+    let [j0, j1, _] = &mut data.j6;
+    crate::algo::frame_velocity_derivatives(
+        &model.full,
+        &mut data.full,
+        &data.q,
+        &data.v,
+        frame,
+        rf,
+        j0,
+        j1,
+    )?;
+    model.reduce_cols(j0, dv_dq);
+    model.reduce_cols(j1, dv_dv);
+    Ok(())
+}
+
+/// `∂a_f/∂q` (tangent space), `∂a_f/∂q̇`, `∂a_f/∂q̈` (`6 × nv` each) of frame `frame`'s spatial
+/// acceleration (no gravity) in `rf`: the full tree's at `(expand(q), G q̇, G q̈)` times `G`.
+///
+/// # Errors
+/// As [`frame_acceleration`]; outputs without `nv` columns.
+#[allow(clippy::too_many_arguments)]
+pub fn frame_acceleration_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+    da_dq: &mut Matrix6xX<f64>,
+    da_dv: &mut Matrix6xX<f64>,
+    da_da: &mut Matrix6xX<f64>,
+) -> Result<()> {
+    for m in [&*da_dq, &*da_dv, &*da_da] {
+        check_ncols("derivative columns", m.ncols(), model.nv)?;
+    }
+    prepare_a(model, data, q, v, a, frame)?;
+    let [j0, j1, j2] = &mut data.j6;
+    crate::algo::frame_acceleration_derivatives(
+        &model.full,
+        &mut data.full,
+        &data.q,
+        &data.v,
+        &data.a,
+        frame,
+        rf,
+        j0,
+        j1,
+        j2,
+    )?;
+    model.reduce_cols(j0, da_dq);
+    model.reduce_cols(j1, da_dv);
+    model.reduce_cols(j2, da_da);
+    Ok(())
+}
+
+/// Centre of mass position at `expand(q)` (world frame).
+///
+/// # Errors
+/// As [`MimicModel::check_q`]; a model without mass; a workspace of another model.
+pub fn center_of_mass(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+) -> Result<Vector3<f64>> {
+    prepare(model, data, q, None, None)?;
+    crate::algo::center_of_mass(&model.full, &mut data.full, &data.q)
+}
+
+/// Writes the `3 × nv` centre-of-mass Jacobian `J_com,full G` at `q` into `jac`
+/// (`ċ = jac q̇`, world frame).
+///
+/// # Errors
+/// As [`center_of_mass`]; `jac` without `nv` columns.
+pub fn center_of_mass_jacobian(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    jac: &mut Matrix3xX<f64>,
+) -> Result<()> {
+    check_ncols("jacobian columns", jac.ncols(), model.nv)?;
+    prepare(model, data, q, None, None)?;
+    crate::algo::center_of_mass_jacobian(&model.full, &mut data.full, &data.q, &mut data.j3)?;
+    model.reduce_cols(&data.j3, jac);
     Ok(())
 }

@@ -1,0 +1,348 @@
+//! Frames, kinematics and centre of mass of a mimic model (`sodyn::mimic::frame_*`,
+//! `center_of_mass*`) in the reduced coordinates against hyper-hyper-dual differentiation of
+//! the reference placements composed with the mimic expansion (`reference::mimic::Reduced`):
+//! `q(t, ε) = (q ⊕ ε e_k) ⊕ (t q̇ + ½t² q̈)` in the reduced coordinates, then
+//! `expand`, then the reference forward kinematics of the full tree; and central differences.
+//!
+//! Run with `--nocapture` to see the maximum errors.
+
+mod util;
+
+use nalgebra::{DVector, Matrix3, Matrix3xX, Matrix6xX, Vector3};
+use num_dual::{Dual64 as D, HyperHyperDual64 as H};
+use sodyn::algo::ReferenceFrame;
+use sodyn::mimic::{self, MimicData, MimicModel};
+use sodyn::model::UrdfOptions;
+use sodyn::reference::kinematics::{forward_kinematics, frame_placement as ref_placement};
+use sodyn::reference::mimic::Reduced;
+use sodyn::rng::Rng;
+use sodyn::spatial::Motion;
+use util::Worst;
+
+const RFS: [ReferenceFrame; 3] =
+    [ReferenceFrame::Local, ReferenceFrame::World, ReferenceFrame::LocalWorldAligned];
+
+/// The test arm (a prismatic pair, a continuous joint mimicking a revolute one, a joint
+/// mimicking an ancestor), fixed and floating.
+fn models() -> Vec<MimicModel> {
+    let path =
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_arm.urdf");
+    [false, true]
+        .iter()
+        .map(|&floating_base| {
+            let o = UrdfOptions { floating_base, strict_inertia: false, mimic: true };
+            MimicModel::load_urdf_file(&path, &o).unwrap()
+        })
+        .collect()
+}
+
+fn state(m: &MimicModel, rng: &mut Rng) -> [DVector<f64>; 3] {
+    let q = m.random_configuration(rng);
+    let v = DVector::from_fn(m.nv(), |_, _| rng.range(-2.0, 2.0));
+    let a = DVector::from_fn(m.nv(), |_, _| rng.range(-2.0, 2.0));
+    [q, v, a]
+}
+
+fn vee(m: &Matrix3<D>) -> Vector3<D> {
+    Vector3::new(m[(2, 1)], m[(0, 2)], m[(1, 0)])
+}
+
+/// `(ω, v)` of a world motion (at the world origin) expressed in `rf` at the pose `(r, p)`.
+fn express(
+    (w, v): (Vector3<D>, Vector3<D>),
+    r: &Matrix3<D>,
+    p: &Vector3<D>,
+    rf: ReferenceFrame,
+) -> (Vector3<D>, Vector3<D>) {
+    match rf {
+        ReferenceFrame::World => (w, v),
+        ReferenceFrame::Local => {
+            let rt = r.transpose();
+            (rt * w, rt * (v + w.cross(p)))
+        }
+        ReferenceFrame::LocalWorldAligned => (w, v + w.cross(p)),
+    }
+}
+
+fn col(m: &Motion) -> [f64; 6] {
+    [m.ang[0], m.ang[1], m.ang[2], m.lin[0], m.lin[1], m.lin[2]]
+}
+fn pair(x: &(Vector3<D>, Vector3<D>), g: fn(&D) -> f64) -> [f64; 6] {
+    [g(&x.0[0]), g(&x.0[1]), g(&x.0[2]), g(&x.1[0]), g(&x.1[1]), g(&x.1[2])]
+}
+fn err6(a: &[f64; 6], b: &[f64; 6]) -> f64 {
+    let e = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+    e / (1.0 + b.iter().fold(0.0, |s: f64, y| s.max(y.abs())))
+}
+fn err_mat<M: AsRef<[f64]>>(a: &M, b: &M) -> f64 {
+    let (a, b) = (a.as_ref(), b.as_ref());
+    assert_eq!(a.len(), b.len());
+    let e = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+    e / (1.0 + b.iter().fold(0.0, |s: f64, y| s.max(y.abs())))
+}
+
+/// `ε`-unit direction `e_k` in the third infinitesimal of `H`.
+fn unit(n: usize, k: usize) -> Vec<H> {
+    (0..n)
+        .map(|j| H::new(0.0, 0.0, 0.0, if j == k { 1.0 } else { 0.0 }, 0.0, 0.0, 0.0, 0.0))
+        .collect()
+}
+
+#[test]
+fn mimic_frames_match_hyper_dual_oracle() {
+    let mut w = [
+        Worst::new("placement"),
+        Worst::new("jacobian"),
+        Worst::new("velocity"),
+        Worst::new("acceleration"),
+        Worst::new("classical acceleration"),
+        Worst::new("dv/dq"),
+        Worst::new("dv/dv = J"),
+        Worst::new("da/dq"),
+        Worst::new("da/dv"),
+        Worst::new("da/da = J"),
+    ];
+    let mut rng = Rng::new(301);
+    for m in &models() {
+        let red = Reduced { full: m.full(), mimics: m.mimics() };
+        let mut d = MimicData::new(m);
+        let n = m.nv();
+        for _ in 0..3 {
+            let [q, v, a] = state(m, &mut rng);
+            let qh: Vec<H> = q.iter().map(|&x| H::from_re(x)).collect();
+            let tv: Vec<H> =
+                (0..n).map(|j| H::new(0.0, v[j], v[j], 0.0, a[j], 0.0, 0.0, 0.0)).collect();
+            // Per direction k: the expanded configuration along (q ⊕ ε e_k) ⊕ (t q̇ + ½t² q̈).
+            let qts: Vec<Vec<H>> = (0..n)
+                .map(|k| red.expand_q(&red.integrate(&red.integrate(&qh, &unit(n, k)), &tv)))
+                .collect();
+            for f in 0..m.full().frames().len() {
+                let omf = mimic::frame_placement(m, &mut d, &q, f).unwrap();
+                let mut poses = Vec::with_capacity(n);
+                for qt in &qts {
+                    let (rh, ph) = ref_placement(m.full(), qt, f);
+                    let dm = |g: fn(&H) -> f64, h: fn(&H) -> f64| {
+                        (
+                            Matrix3::from_fn(|i, j| D::new(g(&rh[(i, j)]), h(&rh[(i, j)]))),
+                            Vector3::from_fn(|i, _| D::new(g(&ph[i]), h(&ph[i]))),
+                        )
+                    };
+                    // (R, p) with ∂/∂ε; their t-derivatives; ∂/∂ε of R, p alone (eps3).
+                    let (r, p) = dm(|x| x.re, |x| x.eps3);
+                    let (rd, pd) = dm(|x| x.eps1, |x| x.eps1eps3);
+                    let (rdd, pdd) = dm(|x| x.eps1eps2, |x| x.eps1eps2eps3);
+                    poses.push((r, p, rd, pd, rdd, pdd));
+                }
+                let at = format!("{} frame {}", m.name(), m.full().frames()[f].name);
+                if let Some((r, p, ..)) = poses.first() {
+                    let e = (omf.rot - r.map(|x| x.re))
+                        .amax()
+                        .max((omf.trans - p.map(|x| x.re)).amax());
+                    w[0].add(e, &at);
+                }
+                for rf in RFS {
+                    let at = format!("{at} {rf:?}");
+                    let mut jac = Matrix6xX::zeros(n);
+                    mimic::frame_jacobian(m, &mut d, &q, f, rf, &mut jac).unwrap();
+                    let vel = mimic::frame_velocity(m, &mut d, &q, &v, f, rf).unwrap();
+                    let acc = mimic::frame_acceleration(m, &mut d, &q, &v, &a, f, rf).unwrap();
+                    let cla =
+                        mimic::frame_classical_acceleration(m, &mut d, &q, &v, &a, f, rf).unwrap();
+                    let mut dvq = Matrix6xX::zeros(n);
+                    let mut dvv = Matrix6xX::zeros(n);
+                    mimic::frame_velocity_derivatives(m, &mut d, &q, &v, f, rf, &mut dvq, &mut dvv)
+                        .unwrap();
+                    let (mut daq, mut dav, mut daa) =
+                        (Matrix6xX::zeros(n), Matrix6xX::zeros(n), Matrix6xX::zeros(n));
+                    mimic::frame_acceleration_derivatives(
+                        m, &mut d, &q, &v, &a, f, rf, &mut daq, &mut dav, &mut daa,
+                    )
+                    .unwrap();
+                    let (mut wj, mut wvq, mut waq) =
+                        (Matrix6xX::zeros(n), Matrix6xX::zeros(n), Matrix6xX::zeros(n));
+                    for (k, (r, p, rd, pd, rdd, pdd)) in poses.iter().enumerate() {
+                        let om = vee(&(rd * r.transpose()));
+                        let omd = vee(&(rdd * r.transpose() + rd * rd.transpose()));
+                        let tw = express((om, pd - om.cross(p)), r, p, rf);
+                        let ac = express((omd, pdd - omd.cross(p) - om.cross(pd)), r, p, rf);
+                        if k == 0 {
+                            let (tv, av) = (pair(&tw, |x| x.re), pair(&ac, |x| x.re));
+                            w[2].add(err6(&col(&vel), &tv), &at);
+                            w[3].add(err6(&col(&acc), &av), &at);
+                            let mut want = av;
+                            let cr = Vector3::new(tv[0], tv[1], tv[2])
+                                .cross(&Vector3::new(tv[3], tv[4], tv[5]));
+                            for i in 0..3 {
+                                want[3 + i] += cr[i];
+                            }
+                            w[4].add(err6(&col(&cla), &want), &at);
+                        }
+                        // Jacobian column k: the twist of ε ↦ q ⊕ ε e_k.
+                        let re = |x: &Matrix3<D>| x.map(|y| y.eps);
+                        let (rk, pk) = (r.map(|y| y.re), p.map(|y| y.re));
+                        let omk = vee(&(re(r) * rk.transpose()).map(D::from_re)).map(|y| y.re);
+                        let jk = (
+                            omk.map(D::from_re),
+                            (p.map(|y| y.eps) - omk.cross(&pk)).map(D::from_re),
+                        );
+                        let jk = express(jk, &r.map(|y| D::from_re(y.re)), &pk.map(D::from_re), rf);
+                        let (jc, vq, aq) =
+                            (pair(&jk, |x| x.re), pair(&tw, |x| x.eps), pair(&ac, |x| x.eps));
+                        for i in 0..6 {
+                            wj[(i, k)] = jc[i];
+                            wvq[(i, k)] = vq[i];
+                            waq[(i, k)] = aq[i];
+                        }
+                    }
+                    w[1].add(err_mat(&jac, &wj), &at);
+                    w[5].add(err_mat(&dvq, &wvq), &at);
+                    w[6].add(err_mat(&dvv, &wj), &at);
+                    w[7].add(err_mat(&daq, &waq), &at);
+                    w[9].add(err_mat(&daa, &wj), &at);
+                    // ∂a/∂q̇: quadratic in q̇, central differences exact up to rounding.
+                    let h = 1e-3;
+                    let mut wav = Matrix6xX::zeros(n);
+                    for k in 0..n {
+                        let mut vp = v.clone();
+                        vp[k] += h;
+                        let ap = mimic::frame_acceleration(m, &mut d, &q, &vp, &a, f, rf).unwrap();
+                        vp[k] -= 2.0 * h;
+                        let am = mimic::frame_acceleration(m, &mut d, &q, &vp, &a, f, rf).unwrap();
+                        let (ap, am) = (col(&ap), col(&am));
+                        for i in 0..6 {
+                            wav[(i, k)] = (ap[i] - am[i]) / (2.0 * h);
+                        }
+                    }
+                    w[8].add(err_mat(&dav, &wav), &at);
+                }
+            }
+        }
+    }
+    for (x, tol) in
+        w.iter().zip([1e-12, 1e-12, 1e-12, 1e-12, 1e-12, 1e-12, 1e-12, 1e-12, 1e-9, 1e-12])
+    {
+        x.check(tol);
+    }
+}
+
+/// Central differences along the reduced tangent space (`MimicModel::integrate`) of the frame
+/// velocity and acceleration, against `∂/∂q`.
+#[test]
+fn mimic_frame_derivatives_match_central_differences() {
+    let mut w = [Worst::new("dv/dq (central diff.)"), Worst::new("da/dq (central diff.)")];
+    let mut rng = Rng::new(302);
+    for m in &models() {
+        let mut d = MimicData::new(m);
+        let n = m.nv();
+        let [q, v, a] = state(m, &mut rng);
+        let h = 1e-5;
+        for f in 0..m.full().frames().len() {
+            for rf in RFS {
+                let at = format!("{} frame {} {rf:?}", m.name(), m.full().frames()[f].name);
+                let (mut dvq, mut dvv) = (Matrix6xX::zeros(n), Matrix6xX::zeros(n));
+                mimic::frame_velocity_derivatives(m, &mut d, &q, &v, f, rf, &mut dvq, &mut dvv)
+                    .unwrap();
+                let (mut daq, mut dav, mut daa) =
+                    (Matrix6xX::zeros(n), Matrix6xX::zeros(n), Matrix6xX::zeros(n));
+                mimic::frame_acceleration_derivatives(
+                    m, &mut d, &q, &v, &a, f, rf, &mut daq, &mut dav, &mut daa,
+                )
+                .unwrap();
+                let (mut fv, mut fa) = (Matrix6xX::zeros(n), Matrix6xX::zeros(n));
+                for k in 0..n {
+                    let mut e = DVector::zeros(n);
+                    e[k] = h;
+                    let (qp, qm) = (m.integrate(&q, &e).unwrap(), m.integrate(&q, &-&e).unwrap());
+                    let vp = col(&mimic::frame_velocity(m, &mut d, &qp, &v, f, rf).unwrap());
+                    let vm = col(&mimic::frame_velocity(m, &mut d, &qm, &v, f, rf).unwrap());
+                    let ap =
+                        col(&mimic::frame_acceleration(m, &mut d, &qp, &v, &a, f, rf).unwrap());
+                    let am =
+                        col(&mimic::frame_acceleration(m, &mut d, &qm, &v, &a, f, rf).unwrap());
+                    for i in 0..6 {
+                        fv[(i, k)] = (vp[i] - vm[i]) / (2.0 * h);
+                        fa[(i, k)] = (ap[i] - am[i]) / (2.0 * h);
+                    }
+                }
+                w[0].add(err_mat(&dvq, &fv), &at);
+                w[1].add(err_mat(&daq, &fa), &at);
+            }
+        }
+    }
+    for x in &w {
+        x.check(1e-7);
+    }
+}
+
+/// `c(q)` through the reference kinematics of the full tree.
+fn com_h(red: &Reduced, q: &[H]) -> Vector3<H> {
+    let m = red.full;
+    let world = forward_kinematics(m, &red.expand_q(q));
+    let mut sum = Vector3::from_element(H::from_re(0.0));
+    let mut mass = 0.0;
+    for (i, inertia) in m.inertias().iter().enumerate().skip(1) {
+        let c = inertia.com();
+        let local = Vector3::new(H::from_re(c.x), H::from_re(c.y), H::from_re(c.z));
+        sum += world[i].act_point(&local) * H::from_re(inertia.mass);
+        mass += inertia.mass;
+    }
+    sum / H::from_re(mass)
+}
+
+#[test]
+fn mimic_center_of_mass_matches_hyper_dual_oracle() {
+    let mut w = [Worst::new("com"), Worst::new("com jacobian")];
+    let mut rng = Rng::new(303);
+    for m in &models() {
+        let red = Reduced { full: m.full(), mimics: m.mimics() };
+        let mut d = MimicData::new(m);
+        let n = m.nv();
+        for _ in 0..5 {
+            let [q, ..] = state(m, &mut rng);
+            let qh: Vec<H> = q.iter().map(|&x| H::from_re(x)).collect();
+            let c = mimic::center_of_mass(m, &mut d, &q).unwrap();
+            let want = com_h(&red, &qh).map(|x| x.re);
+            w[0].add((c - want).amax() / (1.0 + want.amax()), m.name());
+            let mut jac = Matrix3xX::zeros(n);
+            mimic::center_of_mass_jacobian(m, &mut d, &q, &mut jac).unwrap();
+            let mut wj = Matrix3xX::zeros(n);
+            for k in 0..n {
+                let ck = com_h(&red, &red.integrate(&qh, &unit(n, k)));
+                wj.set_column(k, &ck.map(|x| x.eps3));
+            }
+            w[1].add(err_mat(&jac, &wj), m.name());
+        }
+    }
+    for x in &w {
+        x.check(1e-12);
+    }
+}
+
+#[test]
+fn mimic_kinematics_inputs_are_errors() {
+    let m = &models()[0];
+    let mut d = MimicData::new(m);
+    let q = m.neutral();
+    let nf = m.full().frames().len();
+    let e = mimic::frame_placement(m, &mut d, &q, nf).unwrap_err().to_string();
+    assert!(e.contains("frame"), "{e}");
+    let mut full_cols = Matrix6xX::zeros(m.full().nv());
+    let e = mimic::frame_jacobian(m, &mut d, &q, 0, ReferenceFrame::World, &mut full_cols)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("columns"), "{e}");
+    let short = DVector::zeros(m.nv() - 1);
+    assert!(mimic::frame_velocity(m, &mut d, &q, &short, 0, ReferenceFrame::Local).is_err());
+    let v = DVector::zeros(m.nv());
+    assert!(
+        mimic::frame_acceleration(m, &mut d, &q, &v, &short, 0, ReferenceFrame::Local).is_err()
+    );
+    let mut nan = q.clone();
+    nan[0] = f64::NAN;
+    assert!(mimic::center_of_mass(m, &mut d, &nan).is_err());
+    let mut j3 = Matrix3xX::zeros(m.nv() + 1);
+    assert!(mimic::center_of_mass_jacobian(m, &mut d, &q, &mut j3).is_err());
+    let other = &models()[1];
+    let mut d2 = MimicData::new(other);
+    assert!(mimic::frame_placement(m, &mut d2, &q, 0).is_err());
+}
