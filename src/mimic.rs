@@ -39,7 +39,8 @@
 //! one coordinate (the angle) here, so `expand` is affine for them too and the chain rule
 //! `∂/∂q = ∂/∂q_full · G` holds for every mimic or reference joint. The other algorithms of
 //! the crate (centroidal, the contracted KKT and impact second order, batches) take the full
-//! [`Model`] only.
+//! [`Model`] only. [`MimicModel::d_integrate`] and [`MimicModel::d_difference`] are block
+//! diagonal by independent joint (the reduced configuration space is the product of their spaces).
 
 use crate::algo::{Data, ReferenceFrame};
 use crate::deriv::{ContactData, KktData, SoData};
@@ -382,6 +383,121 @@ impl MimicModel {
             e => e,
         })?;
         Ok(self.select_v(&self.full.difference(&q0f, &q1f)?))
+    }
+    /// `∂(q ⊕ δ)/∂q` (`arg = First`) or `∂(q ⊕ δ)/∂δ` (`Second`) in the reduced coordinates
+    /// (`nv × nv`): the reduced configuration space is the product of the independent joints'
+    /// spaces, so this is block diagonal by independent joint, each block that of
+    /// [`Model::d_integrate`] (the rows and columns of the independent DoFs of the full
+    /// model's at `expand(q)`, `G δ`). [`MimicModel::d_integrate_into`] does not allocate.
+    ///
+    /// # Errors
+    /// As [`MimicModel::check_q`]; `delta` of the wrong length or not finite.
+    pub fn d_integrate(
+        &self,
+        q: &DVector<f64>,
+        delta: &DVector<f64>,
+        arg: crate::model::Arg,
+    ) -> Result<DMatrix<f64>> {
+        let mut out = DMatrix::zeros(self.nv, self.nv);
+        self.d_integrate_into(q, delta, arg, &mut out)?;
+        Ok(out)
+    }
+    /// [`MimicModel::d_integrate`] into `out` (`nv × nv`; every entry written).
+    ///
+    /// # Errors
+    /// As [`MimicModel::d_integrate`]; `out` not `nv × nv`.
+    pub fn d_integrate_into(
+        &self,
+        q: &DVector<f64>,
+        delta: &DVector<f64>,
+        arg: crate::model::Arg,
+        out: &mut DMatrix<f64>,
+    ) -> Result<()> {
+        self.check_q(q)?;
+        self.check_v("delta", delta)?;
+        self.lie_blocks(out, |j, a, b, blk| {
+            let (n, m) = (self.full.nqs()[j], self.full.nvs()[j]);
+            self.full.joints()[j].d_integrate(
+                &q.as_slice()[a..a + n],
+                &delta.as_slice()[b..b + m],
+                arg,
+                blk,
+            );
+        })
+    }
+    /// `∂(q₁ ⊖ q₀)/∂q₀` (`arg = First`) or `∂(q₁ ⊖ q₀)/∂q₁` (`Second`) in the reduced
+    /// coordinates (`nv × nv`, block diagonal by independent joint, each block that of
+    /// [`Model::d_difference`]). [`MimicModel::d_difference_into`] does not allocate.
+    ///
+    /// # Errors
+    /// As [`MimicModel::check_q`] for `q0` and `q1`.
+    pub fn d_difference(
+        &self,
+        q0: &DVector<f64>,
+        q1: &DVector<f64>,
+        arg: crate::model::Arg,
+    ) -> Result<DMatrix<f64>> {
+        let mut out = DMatrix::zeros(self.nv, self.nv);
+        self.d_difference_into(q0, q1, arg, &mut out)?;
+        Ok(out)
+    }
+    /// [`MimicModel::d_difference`] into `out` (`nv × nv`; every entry written).
+    ///
+    /// # Errors
+    /// As [`MimicModel::d_difference`]; `out` not `nv × nv`.
+    pub fn d_difference_into(
+        &self,
+        q0: &DVector<f64>,
+        q1: &DVector<f64>,
+        arg: crate::model::Arg,
+        out: &mut DMatrix<f64>,
+    ) -> Result<()> {
+        self.check_q(q0)?;
+        self.check_q(q1).map_err(|e| match e {
+            Error::Dimension { expected, got, .. } => {
+                Error::Dimension { what: "q1".into(), expected, got }
+            }
+            Error::NotFinite { index, .. } => Error::NotFinite { what: "q1".into(), index },
+            e => e,
+        })?;
+        self.lie_blocks(out, |j, a, _, blk| {
+            let n = self.full.nqs()[j];
+            self.full.joints()[j].d_difference(
+                &q0.as_slice()[a..a + n],
+                &q1.as_slice()[a..a + n],
+                arg,
+                blk,
+            );
+        })
+    }
+    /// Zeroes `out` (checked `nv × nv`) and writes the diagonal block of each independent joint
+    /// `j` from `block(j, reduced idx_q, reduced idx_v, column-major nv_j × nv_j)`.
+    fn lie_blocks(
+        &self,
+        out: &mut DMatrix<f64>,
+        mut block: impl FnMut(usize, usize, usize, &mut [f64]),
+    ) -> Result<()> {
+        if out.shape() != (self.nv, self.nv) {
+            return Err(Error::Dimension {
+                what: "out (nv × nv) rows × cols".into(),
+                expected: self.nv * self.nv,
+                got: out.nrows() * out.ncols(),
+            });
+        }
+        out.fill(0.0);
+        let mut blk = [0.0; 36];
+        for j in 1..self.full.njoints() {
+            if let Some((a, b)) = self.reduced_idx[j] {
+                let m = self.full.nvs()[j];
+                block(j, a, b, &mut blk);
+                for c in 0..m {
+                    for r in 0..m {
+                        out[(b + r, b + c)] = blk[c * m + r];
+                    }
+                }
+            }
+        }
+        Ok(())
     }
     /// Checks a reduced configuration: length `nq`, finite, unit quaternions (the last naming
     /// the joint).

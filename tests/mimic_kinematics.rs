@@ -1,4 +1,5 @@
-//! Frames, kinematics and centre of mass of a mimic model (`sodyn::mimic::frame_*`,
+//! Frames, kinematics, centre of mass and configuration Jacobians (`d_integrate`,
+//! `d_difference`) of a mimic model (`sodyn::mimic::frame_*`,
 //! `center_of_mass*`) in the reduced coordinates against hyper-hyper-dual differentiation of
 //! the reference placements composed with the mimic expansion (`reference::mimic::Reduced`):
 //! `q(t, ε) = (q ⊕ ε e_k) ⊕ (t q̇ + ½t² q̈)` in the reduced coordinates, then
@@ -345,4 +346,153 @@ fn mimic_kinematics_inputs_are_errors() {
     let other = &models()[1];
     let mut d2 = MimicData::new(other);
     assert!(mimic::frame_placement(m, &mut d2, &q, 0).is_err());
+}
+
+/// `∂ coords(f(ε))/∂ε` at 0 for each of `n` seeds, `f` evaluated with dual numbers.
+fn dcoords(n: usize, f: impl Fn(usize) -> Vec<D>) -> nalgebra::DMatrix<f64> {
+    let cols: Vec<Vec<f64>> = (0..n).map(|k| f(k).iter().map(|x| x.eps).collect()).collect();
+    nalgebra::DMatrix::from_fn(cols[0].len(), n, |r, c| cols[c][r])
+}
+
+fn lift(x: &DVector<f64>) -> Vec<D> {
+    x.iter().map(|&v| D::from_re(v)).collect()
+}
+
+fn unit_d(n: usize, k: usize) -> Vec<D> {
+    (0..n).map(|j| D::new(0.0, if j == k { 1.0 } else { 0.0 })).collect()
+}
+
+fn mat_rel(a: &nalgebra::DMatrix<f64>, b: &nalgebra::DMatrix<f64>) -> f64 {
+    assert_eq!(a.shape(), b.shape());
+    (a - b).amax() / (1.0 + b.amax())
+}
+
+/// `d_integrate` (both arguments) against dual numbers through the oracle's reduced
+/// integrator (`expand`, the reference integrator of the full tree, the independent
+/// coordinates), tangent Jacobians by least squares on the coordinate derivatives; and against
+/// the full model's on the expanded coordinates (rows and columns of the independent DoFs).
+#[test]
+fn mimic_d_integrate_matches_dual_oracle_and_full_model() {
+    use sodyn::model::Arg;
+    let mut w = [
+        Worst::new("dIntegrate/dq (AD)"),
+        Worst::new("dIntegrate/ddelta (AD)"),
+        Worst::new("dIntegrate (full model)"),
+        Worst::new("dDifference (full model)"),
+    ];
+    let mut rng = Rng::new(304);
+    for m in &models() {
+        let red = Reduced { full: m.full(), mimics: m.mimics() };
+        let n = m.nv();
+        let g = m.g();
+        let keep = m.v_keep();
+        let sub = |x: &nalgebra::DMatrix<f64>| {
+            nalgebra::DMatrix::from_fn(n, n, |r, c| x[(keep[r], keep[c])])
+        };
+        for scale in [1e-6, 0.1, 1.0, 2.5] {
+            let [q, ..] = state(m, &mut rng);
+            let d = DVector::from_fn(n, |_, _| scale * rng.range(-1.0, 1.0));
+            let r = m.integrate(&q, &d).unwrap();
+            let at = format!("{} |d| {:.1e}", m.name(), d.norm());
+            let c = dcoords(n, |k| red.integrate(&lift(&r), &unit_d(n, k)));
+            let a0 =
+                dcoords(n, |j| red.integrate(&red.integrate(&lift(&q), &unit_d(n, j)), &lift(&d)));
+            let a1 = dcoords(n, |k| {
+                let mut dk = lift(&d);
+                dk[k].eps = 1.0;
+                red.integrate(&lift(&q), &dk)
+            });
+            let ct = c.transpose();
+            let tangent = |a: &nalgebra::DMatrix<f64>| (&ct * &c).lu().solve(&(&ct * a)).unwrap();
+            let (g0, g1) = (
+                m.d_integrate(&q, &d, Arg::First).unwrap(),
+                m.d_integrate(&q, &d, Arg::Second).unwrap(),
+            );
+            w[0].add(mat_rel(&g0, &tangent(&a0)), &at);
+            w[1].add(mat_rel(&g1, &tangent(&a1)), &at);
+            let (qf, df) = (m.expand_q(&q).unwrap(), &g * &d);
+            let q1f = m.expand_q(&r).unwrap();
+            for arg in [Arg::First, Arg::Second] {
+                let want = sub(&m.full().d_integrate(&qf, &df, arg).unwrap());
+                w[2].add(mat_rel(&m.d_integrate(&q, &d, arg).unwrap(), &want), &at);
+                let want = sub(&m.full().d_difference(&qf, &q1f, arg).unwrap());
+                w[3].add(mat_rel(&m.d_difference(&q, &r, arg).unwrap(), &want), &at);
+            }
+        }
+    }
+    for x in &w[..2] {
+        x.check(1e-12);
+    }
+    for x in &w[2..] {
+        x.check(0.0);
+    }
+}
+
+/// `d_difference` against central differences of `MimicModel::difference` along tangent
+/// perturbations, and the identities with `d_integrate` (`q₁ = q₀ ⊕ d`:
+/// `∂d/∂q₁ = (∂(q₀ ⊕ d)/∂d)⁻¹`, `∂d/∂q₀ = −that · ∂(q₀ ⊕ d)/∂q₀`).
+#[test]
+fn mimic_d_difference_matches_differences_and_integrate() {
+    use sodyn::model::Arg;
+    let mut w = [
+        Worst::new("dDifference/dq0 (FD)"),
+        Worst::new("dDifference/dq1 (FD)"),
+        Worst::new("dDifference/dq0 (identity)"),
+        Worst::new("dDifference/dq1 (identity)"),
+    ];
+    let mut rng = Rng::new(305);
+    for m in &models() {
+        let n = m.nv();
+        for scale in [0.1, 1.0, 2.5] {
+            let [q0, ..] = state(m, &mut rng);
+            let d = DVector::from_fn(n, |_, _| scale * rng.range(-1.0, 1.0));
+            let q1 = m.integrate(&q0, &d).unwrap();
+            let at = format!("{} |d| {:.1e}", m.name(), d.norm());
+            let g0 = m.d_difference(&q0, &q1, Arg::First).unwrap();
+            let g1 = m.d_difference(&q0, &q1, Arg::Second).unwrap();
+            let h = 1e-6;
+            let (mut f0, mut f1) = (nalgebra::DMatrix::zeros(n, n), nalgebra::DMatrix::zeros(n, n));
+            for j in 0..n {
+                let mut e = DVector::zeros(n);
+                e[j] = h;
+                let (p, q) = (m.integrate(&q0, &e).unwrap(), m.integrate(&q0, &-&e).unwrap());
+                let col =
+                    (m.difference(&p, &q1).unwrap() - m.difference(&q, &q1).unwrap()) / (2.0 * h);
+                f0.set_column(j, &col);
+                let (p, q) = (m.integrate(&q1, &e).unwrap(), m.integrate(&q1, &-&e).unwrap());
+                let col =
+                    (m.difference(&q0, &p).unwrap() - m.difference(&q0, &q).unwrap()) / (2.0 * h);
+                f1.set_column(j, &col);
+            }
+            w[0].add(mat_rel(&g0, &f0), &at);
+            w[1].add(mat_rel(&g1, &f1), &at);
+            let dd = m.difference(&q0, &q1).unwrap();
+            let i1 = m.d_integrate(&q0, &dd, Arg::Second).unwrap().try_inverse().unwrap();
+            let i0 = m.d_integrate(&q0, &dd, Arg::First).unwrap();
+            w[2].add(mat_rel(&g0, &(-&i1 * i0)), &at);
+            w[3].add(mat_rel(&g1, &i1), &at);
+        }
+    }
+    for x in &w[..2] {
+        x.check(1e-6);
+    }
+    for x in &w[2..] {
+        x.check(1e-11);
+    }
+}
+
+#[test]
+fn mimic_configuration_jacobians_check_inputs() {
+    use sodyn::model::Arg;
+    let m = &models()[1];
+    let q = m.neutral();
+    let e = m.d_integrate(&q, &DVector::zeros(3), Arg::First).unwrap_err().to_string();
+    assert!(e.contains("delta"), "{e}");
+    let e = m.d_difference(&q, &DVector::zeros(2), Arg::Second).unwrap_err().to_string();
+    assert!(e.contains("q1"), "{e}");
+    let mut bad = q.clone();
+    bad[3] = 2.0; // not a unit quaternion
+    assert!(m.d_integrate(&bad, &DVector::zeros(m.nv()), Arg::First).is_err());
+    let mut out = nalgebra::DMatrix::zeros(m.nv(), m.nv() + 1);
+    assert!(m.d_integrate_into(&q, &DVector::zeros(m.nv()), Arg::First, &mut out).is_err());
 }

@@ -294,5 +294,13 @@ fn mimic_algorithms_do_not_allocate() {
     check("mimic::center_of_mass_jacobian", &mut || {
         mimic::center_of_mass_jacobian(&m, &mut d, &q, &mut j3).unwrap()
     });
+    let mut sq = nalgebra::DMatrix::zeros(m.nv(), m.nv());
+    let q1 = m.random_configuration(&mut Rng::new(3));
+    check("MimicModel::d_integrate_into", &mut || {
+        m.d_integrate_into(&q, &v, sodyn::model::Arg::First, &mut sq).unwrap()
+    });
+    check("MimicModel::d_difference_into", &mut || {
+        m.d_difference_into(&q, &q1, sodyn::model::Arg::Second, &mut sq).unwrap()
+    });
     assert!(report.is_empty(), "heap allocations in mimic hot paths: {}", report.join(", "));
 }
