@@ -462,7 +462,11 @@ impl PyModel {
                      mimic=True); it supports rnea, crba, aba, nonlinear_effects, \
                      id_derivatives, fd_derivatives, id_so_derivatives, fd_so_derivatives, \
                      id_so_contracted, fd_so_contracted, constrained_id_derivatives, \
-                     kkt_derivatives and impact_derivatives"
+                     kkt_derivatives, impact_derivatives, frame_placement, frame_jacobian, \
+                     frame_velocity, frame_acceleration, frame_velocity_derivatives, \
+                     frame_acceleration_derivatives, center_of_mass, \
+                     center_of_mass_jacobian and the Model methods integrate, difference, \
+                     d_integrate, d_difference"
                 ),
             }));
         }
@@ -843,8 +847,12 @@ impl PyModel {
         arg: i64,
     ) -> PyResult<Bound<'py, PyAny>> {
         let arg = lie_arg(arg)?;
-        self.full_only("d_integrate")?;
         let (mut qv, mut dv) = (DVector::zeros(0), DVector::zeros(0));
+        if let Some(mm) = &self.mimic {
+            read_vec(q, "q", mm.nq(), "nq", &mut qv)?;
+            read_vec(dq, "dq", mm.nv(), "nv", &mut dv)?;
+            return Ok(out_mat(py, &mm.d_integrate(&qv, &dv, arg).map_err(core_err)?));
+        }
         read_q(q, "q", &self.m, &mut qv)?;
         read_vec(dq, "dq", self.m.nv(), "nv", &mut dv)?;
         Ok(out_mat(py, &self.m.d_integrate(&qv, &dv, arg).map_err(core_err)?))
@@ -861,8 +869,12 @@ impl PyModel {
         arg: i64,
     ) -> PyResult<Bound<'py, PyAny>> {
         let arg = lie_arg(arg)?;
-        self.full_only("d_difference")?;
         let (mut a, mut b) = (DVector::zeros(0), DVector::zeros(0));
+        if let Some(mm) = &self.mimic {
+            read_vec(q0, "q0", mm.nq(), "nq", &mut a)?;
+            read_vec(q1, "q1", mm.nq(), "nq", &mut b)?;
+            return Ok(out_mat(py, &mm.d_difference(&a, &b, arg).map_err(core_err)?));
+        }
         read_q(q0, "q0", &self.m, &mut a)?;
         read_q(q1, "q1", &self.m, &mut b)?;
         Ok(out_mat(py, &self.m.d_difference(&a, &b, arg).map_err(core_err)?))
@@ -2094,11 +2106,20 @@ fn frame_placement<'py>(
     q: &Bound<'py, PyAny>,
     frame: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("frame_placement")?;
-    let f = frame_arg(m, frame)?;
-    let PyData { d, q: qb, .. } = &mut *data;
-    read_q(q, "q", m, qb)?;
-    let t = algo::frame_placement(m, d, qb, f).map_err(core_err)?;
+    let t = if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, None, None)?;
+        mimic_ws(d)?;
+        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
+        mimic::frame_placement(&mm, &mut ws.d, q, f).map_err(core_err)?
+    } else {
+        let m = &model.m;
+        let f = frame_arg(m, frame)?;
+        let PyData { d, q: qb, .. } = &mut *data;
+        read_q(q, "q", m, qb)?;
+        algo::frame_placement(m, d, qb, f).map_err(core_err)?
+    };
     let mut h = DMatrix::identity(4, 4);
     h.view_mut((0, 0), (3, 3)).copy_from(&t.rot);
     h.view_mut((0, 3), (3, 1)).copy_from(&t.trans);
@@ -2117,8 +2138,19 @@ fn frame_jacobian<'py>(
     frame: &Bound<'py, PyAny>,
     reference: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("frame_jacobian")?;
-    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
+    if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, None, None)?;
+        mimic_ws(d)?;
+        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
+        let mut jac = nalgebra::Matrix6xX::zeros(mm.nv());
+        mimic::frame_jacobian(&mm, &mut ws.d, q, f, rf, &mut jac).map_err(core_err)?;
+        return Ok(out_mat(py, &DMatrix::from_column_slice(6, mm.nv(), jac.as_slice())));
+    }
+    let m = &model.m;
+    let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     let mut jac = nalgebra::Matrix6xX::zeros(m.nv());
@@ -2138,8 +2170,18 @@ fn frame_velocity<'py>(
     frame: &Bound<'py, PyAny>,
     reference: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("frame_velocity")?;
-    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
+    if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, Some(v), None)?;
+        mimic_ws(d)?;
+        let PyData { q, v, mimic: Some(ws), .. } = d else { unreachable!() };
+        let r = mimic::frame_velocity(&mm, &mut ws.d, q, v, f, rf).map_err(core_err)?;
+        return Ok(out_motion(py, &r));
+    }
+    let m = &model.m;
+    let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, v: vb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     read_vec(v, "v", m.nv(), "nv", vb)?;
@@ -2163,8 +2205,22 @@ fn frame_acceleration<'py>(
     reference: &str,
     classical: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("frame_acceleration")?;
-    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
+    if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, Some(v), Some((a, "a")))?;
+        mimic_ws(d)?;
+        let PyData { q, v, a, mimic: Some(ws), .. } = d else { unreachable!() };
+        let r = if classical {
+            mimic::frame_classical_acceleration(&mm, &mut ws.d, q, v, a, f, rf)
+        } else {
+            mimic::frame_acceleration(&mm, &mut ws.d, q, v, a, f, rf)
+        };
+        return Ok(out_motion(py, &r.map_err(core_err)?));
+    }
+    let m = &model.m;
+    let f = frame_arg(m, frame)?;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
     let PyData { d, q, v, a, .. } = d;
@@ -2189,8 +2245,24 @@ fn frame_velocity_derivatives<'py>(
     frame: &Bound<'py, PyAny>,
     reference: &str,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let m = model.full_only("frame_velocity_derivatives")?;
-    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
+    if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, Some(v), None)?;
+        mimic_ws(d)?;
+        let PyData { q, v, mimic: Some(ws), .. } = d else { unreachable!() };
+        let n = mm.nv();
+        let (mut x, mut y) = (nalgebra::Matrix6xX::zeros(n), nalgebra::Matrix6xX::zeros(n));
+        mimic::frame_velocity_derivatives(&mm, &mut ws.d, q, v, f, rf, &mut x, &mut y)
+            .map_err(core_err)?;
+        let o = |z: &nalgebra::Matrix6xX<f64>| {
+            out_mat(py, &DMatrix::from_column_slice(6, n, z.as_slice()))
+        };
+        return PyTuple::new(py, [o(&x), o(&y)]);
+    }
+    let m = &model.m;
+    let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, v: vb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     read_vec(v, "v", m.nv(), "nv", vb)?;
@@ -2217,8 +2289,27 @@ fn frame_acceleration_derivatives<'py>(
     frame: &Bound<'py, PyAny>,
     reference: &str,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let m = model.full_only("frame_acceleration_derivatives")?;
-    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
+    if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, Some(v), Some((a, "a")))?;
+        mimic_ws(d)?;
+        let PyData { q, v, a, mimic: Some(ws), .. } = d else { unreachable!() };
+        let n = mm.nv();
+        let z = || nalgebra::Matrix6xX::zeros(n);
+        let (mut x, mut y, mut w) = (z(), z(), z());
+        mimic::frame_acceleration_derivatives(
+            &mm, &mut ws.d, q, v, a, f, rf, &mut x, &mut y, &mut w,
+        )
+        .map_err(core_err)?;
+        let o = |z: &nalgebra::Matrix6xX<f64>| {
+            out_mat(py, &DMatrix::from_column_slice(6, n, z.as_slice()))
+        };
+        return PyTuple::new(py, [o(&x), o(&y), o(&w)]);
+    }
+    let m = &model.m;
+    let f = frame_arg(m, frame)?;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
     let PyData { d, q, v, a, .. } = d;
@@ -2240,7 +2331,15 @@ fn center_of_mass<'py>(
     mut data: PyRefMut<'py, PyData>,
     q: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("center_of_mass")?;
+    if let Some(mm) = model.mimic.clone() {
+        let d = &mut *data;
+        mimic_read(&mm, d, q, None, None)?;
+        mimic_ws(d)?;
+        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
+        let c = mimic::center_of_mass(&mm, &mut ws.d, q).map_err(core_err)?;
+        return Ok(out_vec(py, &DVector::from_column_slice(c.as_slice())));
+    }
+    let m = &model.m;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     let c = algo::center_of_mass(m, d, qb).map_err(core_err)?;
@@ -2281,7 +2380,16 @@ fn center_of_mass_jacobian<'py>(
     mut data: PyRefMut<'py, PyData>,
     q: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("center_of_mass_jacobian")?;
+    if let Some(mm) = model.mimic.clone() {
+        let d = &mut *data;
+        mimic_read(&mm, d, q, None, None)?;
+        mimic_ws(d)?;
+        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
+        let mut j = nalgebra::Matrix3xX::zeros(mm.nv());
+        mimic::center_of_mass_jacobian(&mm, &mut ws.d, q, &mut j).map_err(core_err)?;
+        return Ok(out_mat(py, &DMatrix::from_column_slice(3, mm.nv(), j.as_slice())));
+    }
+    let m = &model.m;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     let mut j = nalgebra::Matrix3xX::zeros(m.nv());
