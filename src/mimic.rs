@@ -35,10 +35,11 @@
 //! [`frame_placement`], [`frame_jacobian`] (`J_full G`), [`frame_velocity`],
 //! [`frame_acceleration`], [`frame_classical_acceleration`] (the full tree's at `expand(q)`,
 //! `G v`, `G a`), [`frame_velocity_derivatives`], [`frame_acceleration_derivatives`] (the full
-//! tree's times `G`), [`center_of_mass`], [`center_of_mass_jacobian`]. Continuous joints have
+//! tree's times `G`), [`center_of_mass`], [`center_of_mass_jacobian`],
+//! [`centroidal_dynamics_derivatives`] ([`MimicCentroidal`]). Continuous joints have
 //! one coordinate (the angle) here, so `expand` is affine for them too and the chain rule
 //! `∂/∂q = ∂/∂q_full · G` holds for every mimic or reference joint. The other algorithms of
-//! the crate (centroidal, the contracted KKT and impact second order, batches) take the full
+//! the crate (the contracted KKT and impact second order, batches) take the full
 //! [`Model`] only. [`MimicModel::d_integrate`] and [`MimicModel::d_difference`] are block
 //! diagonal by independent joint (the reduced configuration space is the product of their spaces).
 
@@ -2744,5 +2745,96 @@ pub fn center_of_mass_jacobian(
     prepare(model, data, q, None, None)?;
     crate::algo::center_of_mass_jacobian(&model.full, &mut data.full, &data.q, &mut data.j3)?;
     model.reduce_cols(&data.j3, jac);
+    Ok(())
+}
+
+/// Results of [`centroidal_dynamics_derivatives`] for a [`MimicModel`]: the full tree's
+/// [`crate::algo::Centroidal`] and its matrices times `G` (`6 × nv`, reduced), allocated once.
+#[derive(Clone, Debug)]
+pub struct MimicCentroidal {
+    full: crate::algo::Centroidal,
+    ag: DMatrix<f64>,
+    dh_dq: DMatrix<f64>,
+    dhdot_dq: DMatrix<f64>,
+    dhdot_dv: DMatrix<f64>,
+    key: u64,
+}
+
+impl MimicCentroidal {
+    /// Results for `model`.
+    pub fn new(model: &MimicModel) -> Self {
+        let z = || DMatrix::zeros(6, model.nv);
+        Self {
+            full: crate::algo::Centroidal::new(&model.full),
+            ag: z(),
+            dh_dq: z(),
+            dhdot_dq: z(),
+            dhdot_dv: z(),
+            key: model.key,
+        }
+    }
+    /// Centroidal momentum `h_G` (that of the full tree at `expand(q)`, `G q̇`).
+    pub fn h(&self) -> &[f64; 6] {
+        self.full.h()
+    }
+    /// Its time derivative `ḣ_G` (no gravity).
+    pub fn hdot(&self) -> &[f64; 6] {
+        self.full.hdot()
+    }
+    /// Centroidal momentum matrix `A_G = A_G,full G` (`6 × nv`): `h_G = A_G q̇`; also `∂ḣ_G/∂q̈`.
+    pub fn ag(&self) -> &DMatrix<f64> {
+        &self.ag
+    }
+    /// `∂h_G/∂q` (`6 × nv`, tangent space of the reduced configuration).
+    pub fn dh_dq(&self) -> &DMatrix<f64> {
+        &self.dh_dq
+    }
+    /// `∂ḣ_G/∂q` (`6 × nv`).
+    pub fn dhdot_dq(&self) -> &DMatrix<f64> {
+        &self.dhdot_dq
+    }
+    /// `∂ḣ_G/∂q̇` (`6 × nv`).
+    pub fn dhdot_dv(&self) -> &DMatrix<f64> {
+        &self.dhdot_dv
+    }
+}
+
+/// Centroidal momentum, its time derivative, `A_G` and their derivatives at `(q, q̇, q̈)` into
+/// `out`: [`crate::algo::centroidal_dynamics_derivatives`] of the full tree at `expand(q)`,
+/// `G q̇`, `G q̈`, its matrices times `G`. Allocates nothing.
+///
+/// # Errors
+/// As [`MimicModel::check_q`]; `v`, `a` of the wrong length or not finite; workspaces of
+/// another model; a model without mass.
+pub fn centroidal_dynamics_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    out: &mut MimicCentroidal,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+) -> Result<()> {
+    if out.key != model.key || out.ag.ncols() != model.nv {
+        return Err(Error::Workspace(format!(
+            "MimicCentroidal was made for another model; make it with MimicCentroidal::new for \
+             the mimic model \"{}\"",
+            model.name()
+        )));
+    }
+    prepare(model, data, q, Some(v), Some(("a", a)))?;
+    model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+    let c = &mut out.full;
+    crate::algo::centroidal_dynamics_derivatives(
+        &model.full,
+        &mut data.full,
+        c,
+        &data.q,
+        &data.v,
+        &data.a,
+    )?;
+    model.reduce_cols(c.ag(), &mut out.ag);
+    model.reduce_cols(c.dh_dq(), &mut out.dh_dq);
+    model.reduce_cols(c.dhdot_dq(), &mut out.dhdot_dq);
+    model.reduce_cols(c.dhdot_dv(), &mut out.dhdot_dv);
     Ok(())
 }

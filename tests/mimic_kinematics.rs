@@ -1,6 +1,6 @@
 //! Frames, kinematics, centre of mass and configuration Jacobians (`d_integrate`,
 //! `d_difference`) of a mimic model (`sodyn::mimic::frame_*`,
-//! `center_of_mass*`) in the reduced coordinates against hyper-hyper-dual differentiation of
+//! `center_of_mass*`, `centroidal_dynamics_derivatives`) in the reduced coordinates against hyper-hyper-dual differentiation of
 //! the reference placements composed with the mimic expansion (`reference::mimic::Reduced`):
 //! `q(t, ε) = (q ⊕ ε e_k) ⊕ (t q̇ + ½t² q̈)` in the reduced coordinates, then
 //! `expand`, then the reference forward kinematics of the full tree; and central differences.
@@ -9,7 +9,7 @@
 
 mod util;
 
-use nalgebra::{DVector, Matrix3, Matrix3xX, Matrix6xX, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix3xX, Matrix6xX, Vector3};
 use num_dual::{Dual64 as D, HyperHyperDual64 as H};
 use sodyn::algo::ReferenceFrame;
 use sodyn::mimic::{self, MimicData, MimicModel};
@@ -346,6 +346,11 @@ fn mimic_kinematics_inputs_are_errors() {
     let other = &models()[1];
     let mut d2 = MimicData::new(other);
     assert!(mimic::frame_placement(m, &mut d2, &q, 0).is_err());
+    let mut c2 = mimic::MimicCentroidal::new(other);
+    let e = mimic::centroidal_dynamics_derivatives(m, &mut d, &mut c2, &q, &v, &v)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("MimicCentroidal"), "{e}");
 }
 
 /// `∂ coords(f(ε))/∂ε` at 0 for each of `n` seeds, `f` evaluated with dual numbers.
@@ -495,4 +500,136 @@ fn mimic_configuration_jacobians_check_inputs() {
     assert!(m.d_integrate(&bad, &DVector::zeros(m.nv()), Arg::First).is_err());
     let mut out = nalgebra::DMatrix::zeros(m.nv(), m.nv() + 1);
     assert!(m.d_integrate_into(&q, &DVector::zeros(m.nv()), Arg::First, &mut out).is_err());
+}
+
+/// (As `tests/centroidal.rs`, through `expand`.) `[k; l]` about the centre of mass and its `t`-derivative, each with its `ε`-derivative, from
+/// the `H` placements (`t`: `ε₁`, `ε₂`; `ε`: `ε₃`).
+fn momentum(red: &Reduced, q: &[H]) -> [[f64; 4]; 6] {
+    let m = red.full;
+    // Returns for each of the 6 components: [value, ∂/∂t, ∂/∂ε, ∂²/∂t∂ε].
+    let world = forward_kinematics(m, &red.expand_q(q));
+    // Split an H into (f, f_ε) for the value and the t-derivative: value part re/eps3,
+    // t-derivative eps1/eps1eps3, second t-derivative eps1eps2/eps1eps2eps3.
+    let d0 = |x: &H| D::new(x.re, x.eps3);
+    let d1 = |x: &H| D::new(x.eps1, x.eps1eps3);
+    let d2 = |x: &H| D::new(x.eps1eps2, x.eps1eps2eps3);
+    let mut mass = 0.0;
+    let mut mc = [Vector3::<D>::zeros(); 3]; // Σ m c, its 1st and 2nd t-derivatives
+    let mut bodies = vec![];
+    for (i, inertia) in m.inertias().iter().enumerate().skip(1) {
+        let cl = inertia.com();
+        let clh = Vector3::new(H::from_re(cl.x), H::from_re(cl.y), H::from_re(cl.z));
+        let ci = world[i].act_point(&clh);
+        let r = &world[i].rot;
+        let pick = |f: &dyn Fn(&H) -> D| {
+            (Matrix3::from_fn(|a, b| f(&r[(a, b)])), Vector3::from_fn(|a, _| f(&ci[a])))
+        };
+        let (r0, c0) = pick(&d0);
+        let (r1, c1) = pick(&d1);
+        let (r2, c2) = pick(&d2);
+        for (acc, x) in mc.iter_mut().zip([c0, c1, c2]) {
+            *acc += x * D::from(inertia.mass);
+        }
+        mass += inertia.mass;
+        let ibar = inertia.inertia_about_com();
+        let ib = Matrix3::from_fn(|a, b| D::from(ibar[(a, b)]));
+        bodies.push((inertia.mass, ib, r0, r1, r2, c0, c1, c2));
+    }
+    let c = mc[0] / D::from(mass);
+    let cd = mc[1] / D::from(mass);
+    let cdd = mc[2] / D::from(mass);
+    // k = Σ R Ī Rᵀ ω + m (c_i − c) × ċ_i; its t-derivative by the product rule.
+    let (mut k, mut kd) = (Vector3::<D>::zeros(), Vector3::<D>::zeros());
+    for (mi, ib, r0, r1, r2, c0, c1, c2) in bodies {
+        let w = Vector3::new(
+            (r1 * r0.transpose())[(2, 1)],
+            (r1 * r0.transpose())[(0, 2)],
+            (r1 * r0.transpose())[(1, 0)],
+        );
+        let wdm = r2 * r0.transpose() + r1 * r1.transpose();
+        let wd = Vector3::new(wdm[(2, 1)], wdm[(0, 2)], wdm[(1, 0)]);
+        let iw = r0 * ib * r0.transpose();
+        let iwd = r1 * ib * r0.transpose() + r0 * ib * r1.transpose();
+        let m_ = D::from(mi);
+        k += iw * w + (c0 - c).cross(&c1) * m_;
+        kd += iwd * w + iw * wd + ((c1 - cd).cross(&c1) + (c0 - c).cross(&c2)) * m_;
+    }
+    let l = cd * D::from(mass);
+    let ld = cdd * D::from(mass);
+    let mut out = [[0.0; 4]; 6];
+    for j in 0..3 {
+        out[j] = [k[j].re, kd[j].re, k[j].eps, kd[j].eps];
+        out[3 + j] = [l[j].re, ld[j].re, l[j].eps, ld[j].eps];
+    }
+    out
+}
+
+#[test]
+fn mimic_centroidal_matches_hyper_dual_oracle() {
+    let mut w = [
+        Worst::new("centroidal h"),
+        Worst::new("centroidal hdot"),
+        Worst::new("centroidal dh_dq"),
+        Worst::new("centroidal dhdot_dq"),
+        Worst::new("centroidal A_G"),
+        Worst::new("centroidal dhdot_dv (central diff.)"),
+    ];
+    let mut rng = Rng::new(306);
+    for m in &models() {
+        let red = Reduced { full: m.full(), mimics: m.mimics() };
+        let mut d = MimicData::new(m);
+        let mut cd = mimic::MimicCentroidal::new(m);
+        let n = m.nv();
+        for _ in 0..3 {
+            let [q, v, a] = state(m, &mut rng);
+            mimic::centroidal_dynamics_derivatives(m, &mut d, &mut cd, &q, &v, &a).unwrap();
+            let qh: Vec<H> = q.iter().map(|&x| H::from_re(x)).collect();
+            let tv: Vec<H> =
+                (0..n).map(|j| H::new(0.0, v[j], v[j], 0.0, a[j], 0.0, 0.0, 0.0)).collect();
+            let (mut wdh, mut wdhd) = (DMatrix::zeros(6, n), DMatrix::zeros(6, n));
+            let mut h0 = [[0.0; 4]; 6];
+            for k in 0..n {
+                h0 = momentum(&red, &red.integrate(&red.integrate(&qh, &unit(n, k)), &tv));
+                for r in 0..6 {
+                    wdh[(r, k)] = h0[r][2];
+                    wdhd[(r, k)] = h0[r][3];
+                }
+            }
+            let at = m.name();
+            let hv: Vec<f64> = (0..6).map(|r| h0[r][0]).collect();
+            let hd: Vec<f64> = (0..6).map(|r| h0[r][1]).collect();
+            w[0].add(
+                mat_rel(&DMatrix::from_row_slice(6, 1, cd.h()), &DMatrix::from_vec(6, 1, hv)),
+                at,
+            );
+            w[1].add(
+                mat_rel(&DMatrix::from_row_slice(6, 1, cd.hdot()), &DMatrix::from_vec(6, 1, hd)),
+                at,
+            );
+            w[2].add(mat_rel(cd.dh_dq(), &wdh), at);
+            w[3].add(mat_rel(cd.dhdot_dq(), &wdhd), at);
+            let hv = DMatrix::from_row_slice(6, 1, cd.h());
+            let agv = cd.ag() * &v;
+            w[4].add(mat_rel(&DMatrix::from_column_slice(6, 1, agv.as_slice()), &hv), at);
+            // ∂ḣ/∂q̇: quadratic in q̇, central differences exact up to rounding.
+            let (h, mut num) = (1e-3, DMatrix::zeros(6, n));
+            let mut c2 = mimic::MimicCentroidal::new(m);
+            for k in 0..n {
+                let mut vp = v.clone();
+                vp[k] += h;
+                mimic::centroidal_dynamics_derivatives(m, &mut d, &mut c2, &q, &vp, &a).unwrap();
+                let p = *c2.hdot();
+                vp[k] -= 2.0 * h;
+                mimic::centroidal_dynamics_derivatives(m, &mut d, &mut c2, &q, &vp, &a).unwrap();
+                for r in 0..6 {
+                    num[(r, k)] = (p[r] - c2.hdot()[r]) / (2.0 * h);
+                }
+            }
+            w[5].add(mat_rel(cd.dhdot_dv(), &num), at);
+        }
+    }
+    for x in &w[..5] {
+        x.check(1e-12);
+    }
+    w[5].check(1e-9);
 }

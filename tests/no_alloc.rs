@@ -302,5 +302,9 @@ fn mimic_algorithms_do_not_allocate() {
     check("MimicModel::d_difference_into", &mut || {
         m.d_difference_into(&q, &q1, sodyn::model::Arg::Second, &mut sq).unwrap()
     });
+    let mut cen = mimic::MimicCentroidal::new(&m);
+    check("mimic::centroidal_dynamics_derivatives", &mut || {
+        mimic::centroidal_dynamics_derivatives(&m, &mut d, &mut cen, &q, &v, &a).unwrap()
+    });
     assert!(report.is_empty(), "heap allocations in mimic hot paths: {}", report.join(", "));
 }
