@@ -54,7 +54,8 @@ class Model:
         ``frame_placement``, ``frame_jacobian``, ``frame_velocity``, ``frame_acceleration``,
         ``frame_velocity_derivatives``, ``frame_acceleration_derivatives`` (any frame of the
         full tree; Jacobians and derivatives ``(6, nv)`` in the reduced coordinates, the full
-        tree's times ``G``), ``center_of_mass``, ``center_of_mass_jacobian`` and the methods
+        tree's times ``G``), ``center_of_mass``, ``center_of_mass_jacobian``,
+        ``centroidal_dynamics_derivatives`` and the methods
         ``integrate``, ``difference``, ``d_integrate``, ``d_difference``; every other function
         raises ``SodynError`` naming itself. See docs/python.md."""
     @staticmethod
@@ -288,7 +289,9 @@ def centroidal_dynamics_derivatives(model: Model, data: Data, q: ArrayLike, v: A
                                     a: ArrayLike) -> dict[str, Union[Vector, Matrix]]:
     """Centroidal momentum about the centre of mass (world axes, rows ``[angular; linear]``):
     ``h``, ``hdot`` (no gravity), ``Ag`` (``h = Ag v``, ``dhdot/da``), ``dh_dq``, ``dhdot_dq``,
-    ``dhdot_dv`` (``computeCentroidalDynamicsDerivatives``, rows ``[linear; angular]`` there)."""
+    ``dhdot_dv`` (``computeCentroidalDynamicsDerivatives``, rows ``[linear; angular]`` there).
+    With ``mimic=True``, the matrices are ``(6, nv)`` in the reduced coordinates (the full
+    tree's times ``G``)."""
 def frame_jacobian_derivative(model: Model, data: Data, q: ArrayLike, frame: Union[str, int],
                               reference: str = "local") -> Tensor:
     """``(6, nv, nv)``: ``T[r, c, k] = dJ[r, c]/dq_k`` of ``frame_jacobian`` (the kinematic

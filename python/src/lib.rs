@@ -465,8 +465,8 @@ impl PyModel {
                      kkt_derivatives, impact_derivatives, frame_placement, frame_jacobian, \
                      frame_velocity, frame_acceleration, frame_velocity_derivatives, \
                      frame_acceleration_derivatives, center_of_mass, \
-                     center_of_mass_jacobian and the Model methods integrate, difference, \
-                     d_integrate, d_difference"
+                     center_of_mass_jacobian, centroidal_dynamics_derivatives and the Model \
+                     methods integrate, difference, d_integrate, d_difference"
                 ),
             }));
         }
@@ -2428,13 +2428,29 @@ fn centroidal_dynamics_derivatives<'py>(
     v: &Bound<'py, PyAny>,
     a: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let m = model.full_only("centroidal_dynamics_derivatives")?;
+    let out = PyDict::new(py);
+    if let Some(mm) = model.mimic.clone() {
+        let d = &mut *data;
+        mimic_read(&mm, d, q, Some(v), Some((a, "a")))?;
+        mimic_ws(d)?;
+        let PyData { q, v, a, mimic: Some(ws), .. } = d else { unreachable!() };
+        let mut c = mimic::MimicCentroidal::new(&mm);
+        mimic::centroidal_dynamics_derivatives(&mm, &mut ws.d, &mut c, q, v, a)
+            .map_err(core_err)?;
+        out.set_item("h", out_vec(py, &DVector::from_column_slice(c.h())))?;
+        out.set_item("hdot", out_vec(py, &DVector::from_column_slice(c.hdot())))?;
+        out.set_item("Ag", out_mat(py, c.ag()))?;
+        out.set_item("dh_dq", out_mat(py, c.dh_dq()))?;
+        out.set_item("dhdot_dq", out_mat(py, c.dhdot_dq()))?;
+        out.set_item("dhdot_dv", out_mat(py, c.dhdot_dv()))?;
+        return Ok(out);
+    }
+    let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
     let PyData { d, q, v, a, .. } = d;
     let mut c = algo::Centroidal::new(m);
     algo::centroidal_dynamics_derivatives(m, d, &mut c, q, v, a).map_err(core_err)?;
-    let out = PyDict::new(py);
     out.set_item("h", out_vec(py, &DVector::from_column_slice(c.h())))?;
     out.set_item("hdot", out_vec(py, &DVector::from_column_slice(c.hdot())))?;
     out.set_item("Ag", out_mat(py, c.ag()))?;

@@ -237,8 +237,9 @@ def test_reduced_model_api():
 
 
 def test_frames_com_and_configuration_jacobians():
-    """Frames, centre of mass, ``d_integrate``/``d_difference`` of the reduced model against the
-    full tree at ``expand(q)``, ``G v``, ``G a`` (Jacobians ``J G``), and central differences."""
+    """Frames, centre of mass, centroidal, ``d_integrate``/``d_difference`` of the reduced model
+    against the full tree at ``expand(q)``, ``G v``, ``G a`` (Jacobians ``J G``), and central
+    differences."""
     model = sodyn.Model.from_urdf(str(ARM), floating_base=True, mimic=True)
     full, g = model.full_model, model.mimic_map
     d, fd = model.create_data(), full.create_data()
@@ -279,6 +280,13 @@ def test_frames_com_and_configuration_jacobians():
                                sodyn.center_of_mass(full, fd, qf), atol=1e-14)
     np.testing.assert_allclose(sodyn.center_of_mass_jacobian(model, d, q),
                                sodyn.center_of_mass_jacobian(full, fd, qf) @ g, atol=1e-13)
+    cen = sodyn.centroidal_dynamics_derivatives(model, d, q, v, a)
+    cen_f = sodyn.centroidal_dynamics_derivatives(full, fd, qf, g @ v, g @ a)
+    for k in ["h", "hdot"]:
+        np.testing.assert_allclose(cen[k], cen_f[k], atol=1e-13)
+    for k in ["Ag", "dh_dq", "dhdot_dq", "dhdot_dv"]:
+        assert cen[k].shape == (6, 13)
+        np.testing.assert_allclose(cen[k], cen_f[k] @ g, atol=1e-12)
     dq = rng.uniform(-1, 1, 13)
     q1 = model.integrate(q, dq)
     # The full velocity index of each reduced one (the independent joints, by name).
