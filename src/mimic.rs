@@ -35,7 +35,8 @@
 //! [`frame_placement`], [`frame_jacobian`] (`J_full G`), [`frame_velocity`],
 //! [`frame_acceleration`], [`frame_classical_acceleration`] (the full tree's at `expand(q)`,
 //! `G v`, `G a`), [`frame_velocity_derivatives`], [`frame_acceleration_derivatives`] (the full
-//! tree's times `G`), [`center_of_mass`], [`center_of_mass_jacobian`],
+//! tree's times `G`), [`center_of_mass`], [`center_of_mass_motion`],
+//! [`center_of_mass_jacobian`], [`center_of_mass_velocity_derivatives`],
 //! [`centroidal_dynamics_derivatives`] ([`MimicCentroidal`]). Continuous joints have
 //! one coordinate (the angle) here, so `expand` is affine for them too and the chain rule
 //! `∂/∂q = ∂/∂q_full · G` holds for every mimic or reference joint. The other algorithms of
@@ -2745,6 +2746,52 @@ pub fn center_of_mass_jacobian(
     prepare(model, data, q, None, None)?;
     crate::algo::center_of_mass_jacobian(&model.full, &mut data.full, &data.q, &mut data.j3)?;
     model.reduce_cols(&data.j3, jac);
+    Ok(())
+}
+
+/// Centre of mass position, velocity and (with `a`) acceleration without gravity, world frame:
+/// [`crate::algo::center_of_mass_motion`] of the full tree at `expand(q)`, `G q̇`, `G q̈`.
+///
+/// # Errors
+/// As [`center_of_mass`]; `v` or `a` of the wrong length or not finite.
+pub fn center_of_mass_motion(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: Option<&DVector<f64>>,
+) -> Result<(Vector3<f64>, Vector3<f64>, Vector3<f64>)> {
+    prepare(model, data, q, Some(v), a.map(|a| ("a", a)))?;
+    if let Some(a) = a {
+        model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+    }
+    let a_full = a.map(|_| &data.a);
+    crate::algo::center_of_mass_motion(&model.full, &mut data.full, &data.q, &data.v, a_full)
+}
+
+/// `∂ċ/∂q` (`3 × nv`, tangent space of the reduced configuration) of the centre-of-mass
+/// velocity at `(q, q̇)`: the full tree's at `expand(q)`, `G q̇` times `G`; `∂ċ/∂q̇` is
+/// [`center_of_mass_jacobian`].
+///
+/// # Errors
+/// As [`center_of_mass_motion`]; `out` without `nv` columns.
+pub fn center_of_mass_velocity_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    out: &mut Matrix3xX<f64>,
+) -> Result<()> {
+    check_ncols("derivative columns", out.ncols(), model.nv)?;
+    prepare(model, data, q, Some(v), None)?;
+    crate::algo::center_of_mass_velocity_derivatives(
+        &model.full,
+        &mut data.full,
+        &data.q,
+        &data.v,
+        &mut data.j3,
+    )?;
+    model.reduce_cols(&data.j3, out);
     Ok(())
 }
 

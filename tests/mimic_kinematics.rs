@@ -292,7 +292,13 @@ fn com_h(red: &Reduced, q: &[H]) -> Vector3<H> {
 
 #[test]
 fn mimic_center_of_mass_matches_hyper_dual_oracle() {
-    let mut w = [Worst::new("com"), Worst::new("com jacobian")];
+    let mut w = [
+        Worst::new("com"),
+        Worst::new("com jacobian"),
+        Worst::new("vcom"),
+        Worst::new("acom"),
+        Worst::new("dvcom/dq"),
+    ];
     let mut rng = Rng::new(303);
     for m in &models() {
         let red = Reduced { full: m.full(), mimics: m.mimics() };
@@ -312,6 +318,27 @@ fn mimic_center_of_mass_matches_hyper_dual_oracle() {
                 wj.set_column(k, &ck.map(|x| x.eps3));
             }
             w[1].add(err_mat(&jac, &wj), m.name());
+            // Along (q ⊕ ε e_k) ⊕ (t q̇ + ½t² q̈): ċ (ε₁), c̈ (ε₁ε₂), ∂ċ/∂q_k (ε₁ε₃).
+            let v = DVector::from_fn(n, |_, _| rng.range(-2.0, 2.0));
+            let a = DVector::from_fn(n, |_, _| rng.range(-2.0, 2.0));
+            let tv: Vec<H> =
+                (0..n).map(|j| H::new(0.0, v[j], v[j], 0.0, a[j], 0.0, 0.0, 0.0)).collect();
+            let (c1, vc, ac) = mimic::center_of_mass_motion(m, &mut d, &q, &v, Some(&a)).unwrap();
+            let (c2, vc2, ac2) = mimic::center_of_mass_motion(m, &mut d, &q, &v, None).unwrap();
+            assert_eq!((c1, c2, vc2, ac2), (c, c, vc, Vector3::zeros()));
+            let mut dq = Matrix3xX::zeros(n);
+            mimic::center_of_mass_velocity_derivatives(m, &mut d, &q, &v, &mut dq).unwrap();
+            let mut wdq = Matrix3xX::zeros(n);
+            for k in 0..n {
+                let ck = com_h(&red, &red.integrate(&red.integrate(&qh, &unit(n, k)), &tv));
+                wdq.set_column(k, &ck.map(|x| x.eps1eps3));
+                if k == 0 {
+                    let (wv, wa) = (ck.map(|x| x.eps1), ck.map(|x| x.eps1eps2));
+                    w[2].add((vc - wv).amax() / (1.0 + wv.amax()), m.name());
+                    w[3].add((ac - wa).amax() / (1.0 + wa.amax()), m.name());
+                }
+            }
+            w[4].add(err_mat(&dq, &wdq), m.name());
         }
     }
     for x in &w {

@@ -302,6 +302,12 @@ fn mimic_algorithms_do_not_allocate() {
     check("MimicModel::d_difference_into", &mut || {
         m.d_difference_into(&q, &q1, sodyn::model::Arg::Second, &mut sq).unwrap()
     });
+    check("mimic::center_of_mass_motion", &mut || {
+        mimic::center_of_mass_motion(&m, &mut d, &q, &v, Some(&a)).unwrap();
+    });
+    check("mimic::center_of_mass_velocity_derivatives", &mut || {
+        mimic::center_of_mass_velocity_derivatives(&m, &mut d, &q, &v, &mut j3).unwrap()
+    });
     let mut cen = mimic::MimicCentroidal::new(&m);
     check("mimic::centroidal_dynamics_derivatives", &mut || {
         mimic::centroidal_dynamics_derivatives(&m, &mut d, &mut cen, &q, &v, &a).unwrap()
