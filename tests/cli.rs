@@ -1176,6 +1176,15 @@ fn mimic_commands_use_the_reduced_coordinates() {
         }
     }
     assert_eq!(v3["frames"]["tool"]["jacobian"]["local"].as_array().unwrap().len(), 6);
+    let mut cen = mimic::MimicCentroidal::new(&m);
+    mimic::centroidal_dynamics_derivatives(&m, &mut d, &mut cen, &q, &vel, &a).unwrap();
+    let got = &v3["centroidal"]["dhdot_dq"];
+    for r in 0..6 {
+        for c in 0..n {
+            assert!((got[r][c].as_f64().unwrap() - cen.dhdot_dq()[(r, c)]).abs() < 1e-12);
+        }
+    }
+    assert_eq!(v3["com"]["jacobian"].as_array().unwrap().len(), 3);
     // Unsupported inputs and models.
     let with_w = tmp("mimic-kkt-weights.json");
     std::fs::write(&with_w, r#"{"weights": {"kkt_qdd": [1]}}"#).unwrap();

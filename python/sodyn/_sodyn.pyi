@@ -54,7 +54,8 @@ class Model:
         ``frame_placement``, ``frame_jacobian``, ``frame_velocity``, ``frame_acceleration``,
         ``frame_velocity_derivatives``, ``frame_acceleration_derivatives`` (any frame of the
         full tree; Jacobians and derivatives ``(6, nv)`` in the reduced coordinates, the full
-        tree's times ``G``), ``center_of_mass``, ``center_of_mass_jacobian``,
+        tree's times ``G``), ``center_of_mass``, ``center_of_mass_motion``,
+        ``center_of_mass_jacobian``, ``center_of_mass_velocity_derivatives``,
         ``centroidal_dynamics_derivatives`` and the methods
         ``integrate``, ``difference``, ``d_integrate``, ``d_difference``; every other function
         raises ``SodynError`` naming itself. See docs/python.md."""

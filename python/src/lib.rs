@@ -464,9 +464,10 @@ impl PyModel {
                      id_so_contracted, fd_so_contracted, constrained_id_derivatives, \
                      kkt_derivatives, impact_derivatives, frame_placement, frame_jacobian, \
                      frame_velocity, frame_acceleration, frame_velocity_derivatives, \
-                     frame_acceleration_derivatives, center_of_mass, \
-                     center_of_mass_jacobian, centroidal_dynamics_derivatives and the Model \
-                     methods integrate, difference, d_integrate, d_difference"
+                     frame_acceleration_derivatives, center_of_mass, center_of_mass_motion, \
+                     center_of_mass_jacobian, center_of_mass_velocity_derivatives, \
+                     centroidal_dynamics_derivatives and the Model methods integrate, \
+                     difference, d_integrate, d_difference"
                 ),
             }));
         }
@@ -2359,7 +2360,17 @@ fn center_of_mass_motion<'py>(
     v: &Bound<'py, PyAny>,
     a: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let m = model.full_only("center_of_mass_motion")?;
+    let o = |x: &Vector3<f64>| out_vec(py, &DVector::from_column_slice(x.as_slice()));
+    if let Some(mm) = model.mimic.clone() {
+        let d = &mut *data;
+        mimic_read(&mm, d, q, Some(v), a.map(|a| (a, "a")))?;
+        mimic_ws(d)?;
+        let PyData { q, v, a: ab, mimic: Some(ws), .. } = d else { unreachable!() };
+        let (c, vc, ac) = mimic::center_of_mass_motion(&mm, &mut ws.d, q, v, a.map(|_| &*ab))
+            .map_err(core_err)?;
+        return PyTuple::new(py, [o(&c), o(&vc), o(&ac)]);
+    }
+    let m = &model.m;
     let PyData { d, q: qb, v: vb, a: ab, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     read_vec(v, "v", m.nv(), "nv", vb)?;
@@ -2368,7 +2379,6 @@ fn center_of_mass_motion<'py>(
     }
     let (c, vc, ac) =
         algo::center_of_mass_motion(m, d, qb, vb, a.map(|_| &*ab)).map_err(core_err)?;
-    let o = |x: &Vector3<f64>| out_vec(py, &DVector::from_column_slice(x.as_slice()));
     PyTuple::new(py, [o(&c), o(&vc), o(&ac)])
 }
 
@@ -2406,7 +2416,17 @@ fn center_of_mass_velocity_derivatives<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("center_of_mass_velocity_derivatives")?;
+    if let Some(mm) = model.mimic.clone() {
+        let d = &mut *data;
+        mimic_read(&mm, d, q, Some(v), None)?;
+        mimic_ws(d)?;
+        let PyData { q, v, mimic: Some(ws), .. } = d else { unreachable!() };
+        let mut j = nalgebra::Matrix3xX::zeros(mm.nv());
+        mimic::center_of_mass_velocity_derivatives(&mm, &mut ws.d, q, v, &mut j)
+            .map_err(core_err)?;
+        return Ok(out_mat(py, &DMatrix::from_column_slice(3, mm.nv(), j.as_slice())));
+    }
+    let m = &model.m;
     let PyData { d, q: qb, v: vb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     read_vec(v, "v", m.nv(), "nv", vb)?;

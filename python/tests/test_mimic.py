@@ -280,6 +280,12 @@ def test_frames_com_and_configuration_jacobians():
                                sodyn.center_of_mass(full, fd, qf), atol=1e-14)
     np.testing.assert_allclose(sodyn.center_of_mass_jacobian(model, d, q),
                                sodyn.center_of_mass_jacobian(full, fd, qf) @ g, atol=1e-13)
+    for x, y in zip(sodyn.center_of_mass_motion(model, d, q, v, a),
+                    sodyn.center_of_mass_motion(full, fd, qf, g @ v, g @ a)):
+        np.testing.assert_allclose(x, y, atol=1e-13)
+    np.testing.assert_allclose(sodyn.center_of_mass_velocity_derivatives(model, d, q, v),
+                               sodyn.center_of_mass_velocity_derivatives(full, fd, qf, g @ v) @ g,
+                               atol=1e-13)
     cen = sodyn.centroidal_dynamics_derivatives(model, d, q, v, a)
     cen_f = sodyn.centroidal_dynamics_derivatives(full, fd, qf, g @ v, g @ a)
     for k in ["h", "hdot"]:
@@ -343,7 +349,7 @@ def test_unsupported_functions_and_bad_inputs_raise():
     with pytest.raises(sodyn.SodynError,
                        match="frame_jacobian_derivative does not support models with mimic"):
         sodyn.frame_jacobian_derivative(model, d, q, "tool")
-    for f, args in [(sodyn.center_of_mass_motion, (q, np.zeros(7))),
+    for f, args in [(sodyn.frame_placement_hessian, (q, "tool")),
                     (sodyn.kkt_so_contracted, (q, np.zeros(7), np.zeros(7), [sodyn.Contact("tool")],
                                                np.ones(7), np.ones(3))),
                     (sodyn.idfoza, (q, np.ones(7)))]:

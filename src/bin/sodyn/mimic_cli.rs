@@ -316,6 +316,7 @@ pub(crate) fn eval_json(mm: &MimicModel, s: &State, order: u32) -> Result<Value>
     }
     if !s.frames.is_empty() {
         o.insert("frames".into(), frames_json(mm, s, &mut data)?);
+        com_json(mm, s, &mut data, o)?;
     }
     if s.w_tau.is_some() || s.w_qdd.is_some() {
         let mut c = Map::new();
@@ -597,4 +598,35 @@ fn frames_json(mm: &MimicModel, s: &State, data: &mut MimicData) -> Result<Value
         frames.insert(mm.full().frames()[f].name.clone(), Value::Object(fo));
     }
     Ok(Value::Object(frames))
+}
+
+/// The `"com"` and `"centroidal"` objects of `eval --mimic` (with `frames`, as `eval`), in the
+/// reduced coordinates.
+fn com_json(
+    mm: &MimicModel,
+    s: &State,
+    data: &mut MimicData,
+    o: &mut Map<String, Value>,
+) -> Result<()> {
+    let n = mm.nv();
+    let (c, vc, ac) = mimic::center_of_mass_motion(mm, data, &s.q, &s.v, Some(&s.a))?;
+    let mut j = nalgebra::Matrix3xX::zeros(n);
+    mimic::center_of_mass_jacobian(mm, data, &s.q, &mut j)?;
+    let jm = mat_json(&nalgebra::DMatrix::from_column_slice(3, n, j.as_slice()));
+    mimic::center_of_mass_velocity_derivatives(mm, data, &s.q, &s.v, &mut j)?;
+    let dm = mat_json(&nalgebra::DMatrix::from_column_slice(3, n, j.as_slice()));
+    o.insert(
+        "com".into(),
+        json!({"position": c.as_slice(), "velocity": vc.as_slice(),
+               "acceleration": ac.as_slice(), "jacobian": jm, "dvelocity_dq": dm}),
+    );
+    let mut cen = mimic::MimicCentroidal::new(mm);
+    mimic::centroidal_dynamics_derivatives(mm, data, &mut cen, &s.q, &s.v, &s.a)?;
+    o.insert(
+        "centroidal".into(),
+        json!({"h": cen.h().as_slice(), "hdot": cen.hdot().as_slice(), "Ag": mat_json(cen.ag()),
+               "dh_dq": mat_json(cen.dh_dq()), "dhdot_dq": mat_json(cen.dhdot_dq()),
+               "dhdot_dv": mat_json(cen.dhdot_dv())}),
+    );
+    Ok(())
 }
