@@ -35,7 +35,7 @@
 //! [`frame_placement`], [`frame_jacobian`] (`J_full G`), [`frame_velocity`],
 //! [`frame_acceleration`], [`frame_classical_acceleration`] (the full tree's at `expand(q)`,
 //! `G v`, `G a`), [`frame_velocity_derivatives`], [`frame_acceleration_derivatives`] (the full
-//! tree's times `G`), [`center_of_mass`], [`center_of_mass_motion`],
+//! tree's times `G`), [`frame_jacobian_derivative`] (the full tree's contracted with `G` twice), [`center_of_mass`], [`center_of_mass_motion`],
 //! [`center_of_mass_jacobian`], [`center_of_mass_velocity_derivatives`],
 //! [`centroidal_dynamics_derivatives`] ([`MimicCentroidal`]). Continuous joints have
 //! one coordinate (the angle) here, so `expand` is affine for them too and the chain rule
@@ -585,6 +585,8 @@ pub struct MimicData {
     j6: [Matrix6xX<f64>; 3],
     /// `3 × full().nv()` scratch of the centre-of-mass Jacobian.
     j3: Matrix3xX<f64>,
+    /// `6 × full().nv() × full().nv()` scratch of the frame Jacobian derivative.
+    t6: Tensor3,
     key: u64,
 }
 
@@ -609,6 +611,7 @@ impl MimicData {
             minv: sq(),
             j6: std::array::from_fn(|_| Matrix6xX::zeros(f.nv())),
             j3: Matrix3xX::zeros(f.nv()),
+            t6: Tensor3::zeros(6, f.nv(), f.nv()),
             key: model.key,
         }
     }
@@ -2715,6 +2718,47 @@ pub fn frame_acceleration_derivatives(
     model.reduce_cols(j0, da_dq);
     model.reduce_cols(j1, da_dv);
     model.reduce_cols(j2, da_da);
+    Ok(())
+}
+
+/// `∂J/∂q` of frame `frame`'s reduced Jacobian `J G` in `rf`: `out[(r, c, k)] = ∂J[r][c]/∂q_k`
+/// (`6 × nv × nv`, reduced tangent space, the outer perturbation `q_k` applied first): the full
+/// tree's [`crate::algo::frame_jacobian_derivative`] at `expand(q)` contracted with `G` on its
+/// column and derivative indices (`G` is constant and `expand(q ⊕ δ) = expand(q) ⊕ G δ`).
+///
+/// # Errors
+/// As [`frame_placement`]; `out` not `6 × nv × nv`.
+pub fn frame_jacobian_derivative(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+    out: &mut Tensor3,
+) -> Result<()> {
+    let n = model.nv;
+    if out.dims() != (6, n, n) {
+        let (a, b, c) = out.dims();
+        return Err(Error::Argument {
+            name: "out".into(),
+            reason: format!("a 6×{n}×{n} tensor is needed, got {a}×{b}×{c}"),
+        });
+    }
+    model.check_frame(frame)?;
+    prepare(model, data, q, None, None)?;
+    let t = &mut data.t6;
+    crate::algo::frame_jacobian_derivative(&model.full, &mut data.full, &data.q, frame, rf, t)?;
+    out.fill(0.0);
+    let nf = model.full.nv();
+    for g in 0..nf {
+        let (cg, mg) = (model.g_col[g], model.g_coef[g]);
+        for f in 0..nf {
+            let (cf, m) = (model.g_col[f], model.g_coef[f] * mg);
+            for r in 0..6 {
+                out[(r, cf, cg)] += m * t[(r, f, g)];
+            }
+        }
+    }
     Ok(())
 }
 

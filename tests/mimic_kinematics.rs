@@ -660,3 +660,59 @@ fn mimic_centroidal_matches_hyper_dual_oracle() {
     }
     w[5].check(1e-9);
 }
+
+/// `∂J/∂q` against hyper-dual numbers through the oracle: `(q ⊕ ε₂ e_k) ⊕ ε₁ e_c` in the reduced
+/// coordinates, expanded, the reference placement's twist (column `c`), then `∂/∂ε₂`.
+#[test]
+fn mimic_frame_jacobian_derivative_matches_hyper_dual_oracle() {
+    use num_dual::HyperDual64 as HD;
+    let mut w = Worst::new("dJ/dq");
+    let mut rng = Rng::new(307);
+    for m in &models() {
+        let red = Reduced { full: m.full(), mimics: m.mimics() };
+        let mut d = MimicData::new(m);
+        let n = m.nv();
+        let [q, ..] = state(m, &mut rng);
+        let qh: Vec<HD> = q.iter().map(|&x| HD::from_re(x)).collect();
+        let dir = |j: usize, first: bool| -> Vec<HD> {
+            (0..n)
+                .map(|i| {
+                    let e = if i == j { 1.0 } else { 0.0 };
+                    if first { HD::new(0.0, e, 0.0, 0.0) } else { HD::new(0.0, 0.0, e, 0.0) }
+                })
+                .collect()
+        };
+        let mut poses = Vec::new();
+        for k in 0..n {
+            for c in 0..n {
+                let qt = red
+                    .expand_q(&red.integrate(&red.integrate(&qh, &dir(k, false)), &dir(c, true)));
+                poses.push((k, c, qt));
+            }
+        }
+        for f in 0..m.full().frames().len() {
+            for rf in RFS {
+                let at = format!("{} frame {} {rf:?}", m.name(), m.full().frames()[f].name);
+                let mut t = sodyn::tensor::Tensor3::zeros(6, n, n);
+                mimic::frame_jacobian_derivative(m, &mut d, &q, f, rf, &mut t).unwrap();
+                let (mut worst, mut scale): (f64, f64) = (0.0, 1.0);
+                for (k, c, qt) in &poses {
+                    let (rh, ph) = ref_placement(m.full(), qt, f);
+                    let r = Matrix3::from_fn(|i, j| D::new(rh[(i, j)].re, rh[(i, j)].eps2));
+                    let rd = Matrix3::from_fn(|i, j| D::new(rh[(i, j)].eps1, rh[(i, j)].eps1eps2));
+                    let p = Vector3::from_fn(|i, _| D::new(ph[i].re, ph[i].eps2));
+                    let pd = Vector3::from_fn(|i, _| D::new(ph[i].eps1, ph[i].eps1eps2));
+                    let om = vee(&(rd * r.transpose()));
+                    let col = express((om, pd - om.cross(&p)), &r, &p, rf);
+                    for i in 0..3 {
+                        worst = worst.max((t[(i, *c, *k)] - col.0[i].eps).abs());
+                        worst = worst.max((t[(3 + i, *c, *k)] - col.1[i].eps).abs());
+                        scale = scale.max(col.0[i].eps.abs()).max(col.1[i].eps.abs());
+                    }
+                }
+                w.add(worst / scale, &at);
+            }
+        }
+    }
+    w.check(1e-12);
+}

@@ -308,6 +308,10 @@ fn mimic_algorithms_do_not_allocate() {
     check("mimic::center_of_mass_velocity_derivatives", &mut || {
         mimic::center_of_mass_velocity_derivatives(&m, &mut d, &q, &v, &mut j3).unwrap()
     });
+    let mut t6 = sodyn::tensor::Tensor3::zeros(6, m.nv(), m.nv());
+    check("mimic::frame_jacobian_derivative", &mut || {
+        mimic::frame_jacobian_derivative(&m, &mut d, &q, fr, rf, &mut t6).unwrap()
+    });
     let mut cen = mimic::MimicCentroidal::new(&m);
     check("mimic::centroidal_dynamics_derivatives", &mut || {
         mimic::centroidal_dynamics_derivatives(&m, &mut d, &mut cen, &q, &v, &a).unwrap()
