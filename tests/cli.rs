@@ -1157,7 +1157,8 @@ fn mimic_commands_use_the_reduced_coordinates() {
     st_f["frames"] = serde_json::json!(["tool", "finger_r"]);
     std::fs::write(&with_frames, st_f.to_string()).unwrap();
     let wf = with_frames.to_str().unwrap();
-    let o = sodyn(&["eval", "--model", u, "--mimic", "--floating-base", "--state", wf]);
+    let o =
+        sodyn(&["eval", "--model", u, "--mimic", "--floating-base", "--state", wf, "--order", "2"]);
     assert_ok(&o, "eval --mimic with frames");
     let v3: Value = serde_json::from_str(&stdout(&o)).unwrap();
     let rf = sodyn::algo::ReferenceFrame::World;
@@ -1185,6 +1186,10 @@ fn mimic_commands_use_the_reduced_coordinates() {
         }
     }
     assert_eq!(v3["com"]["jacobian"].as_array().unwrap().len(), 3);
+    let mut t = sodyn::tensor::Tensor3::zeros(6, n, n);
+    mimic::frame_jacobian_derivative(&m, &mut d, &q, f, rf, &mut t).unwrap();
+    let got = &v3["frames"]["finger_r"]["djacobian_dq"]["world"];
+    assert!((got[2][3][4].as_f64().unwrap() - t[(2, 3, 4)]).abs() < 1e-12);
     // Unsupported inputs and models.
     let with_w = tmp("mimic-kkt-weights.json");
     std::fs::write(&with_w, r#"{"weights": {"kkt_qdd": [1]}}"#).unwrap();

@@ -464,7 +464,7 @@ impl PyModel {
                      id_so_contracted, fd_so_contracted, constrained_id_derivatives, \
                      kkt_derivatives, impact_derivatives, frame_placement, frame_jacobian, \
                      frame_velocity, frame_acceleration, frame_velocity_derivatives, \
-                     frame_acceleration_derivatives, center_of_mass, center_of_mass_motion, \
+                     frame_acceleration_derivatives, frame_jacobian_derivative, center_of_mass, center_of_mass_motion, \
                      center_of_mass_jacobian, center_of_mass_velocity_derivatives, \
                      centroidal_dynamics_derivatives and the Model methods integrate, \
                      difference, d_integrate, d_difference"
@@ -2492,8 +2492,19 @@ fn frame_jacobian_derivative<'py>(
     frame: &Bound<'py, PyAny>,
     reference: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("frame_jacobian_derivative")?;
-    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
+    if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, None, None)?;
+        mimic_ws(d)?;
+        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
+        let mut t = Tensor3::zeros(6, mm.nv(), mm.nv());
+        mimic::frame_jacobian_derivative(&mm, &mut ws.d, q, f, rf, &mut t).map_err(core_err)?;
+        return Ok(out_tensor(py, &t));
+    }
+    let m = &model.m;
+    let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     let mut t = Tensor3::zeros(6, m.nv(), m.nv());

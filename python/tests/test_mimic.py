@@ -276,6 +276,11 @@ def test_frames_com_and_configuration_jacobians():
                              - sodyn.frame_acceleration(model, d, model.integrate(q, -e), v, a,
                                                         frame, rf)) / (2 * h)
             assert rel_err(daq, num)[0] < 1e-7
+            dj = sodyn.frame_jacobian_derivative(model, d, q, frame, rf)
+            assert dj.shape == (6, 13, 13)
+            dj_full = sodyn.frame_jacobian_derivative(full, fd, qf, frame, rf)
+            np.testing.assert_allclose(dj, np.einsum("rfg,fc,gk->rck", dj_full, g, g),
+                                       atol=1e-12)
     np.testing.assert_allclose(sodyn.center_of_mass(model, d, q),
                                sodyn.center_of_mass(full, fd, qf), atol=1e-14)
     np.testing.assert_allclose(sodyn.center_of_mass_jacobian(model, d, q),
@@ -347,10 +352,9 @@ def test_unsupported_functions_and_bad_inputs_raise():
     d = model.create_data()
     q = model.neutral()
     with pytest.raises(sodyn.SodynError,
-                       match="frame_jacobian_derivative does not support models with mimic"):
-        sodyn.frame_jacobian_derivative(model, d, q, "tool")
-    for f, args in [(sodyn.frame_placement_hessian, (q, "tool")),
-                    (sodyn.kkt_so_contracted, (q, np.zeros(7), np.zeros(7), [sodyn.Contact("tool")],
+                       match="frame_placement_hessian does not support models with mimic"):
+        sodyn.frame_placement_hessian(model, d, q, "tool")
+    for f, args in [(sodyn.kkt_so_contracted, (q, np.zeros(7), np.zeros(7), [sodyn.Contact("tool")],
                                                np.ones(7), np.ones(3))),
                     (sodyn.idfoza, (q, np.ones(7)))]:
         with pytest.raises(sodyn.SodynError, match="does not support models with mimic"):

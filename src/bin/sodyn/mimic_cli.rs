@@ -315,7 +315,7 @@ pub(crate) fn eval_json(mm: &MimicModel, s: &State, order: u32) -> Result<Value>
         contact_outputs(mm, s, order, &mut data, o, &mut errors)?;
     }
     if !s.frames.is_empty() {
-        o.insert("frames".into(), frames_json(mm, s, &mut data)?);
+        o.insert("frames".into(), frames_json(mm, s, order, &mut data)?);
         com_json(mm, s, &mut data, o)?;
     }
     if s.w_tau.is_some() || s.w_qdd.is_some() {
@@ -539,10 +539,10 @@ fn m6_json(m: &nalgebra::Matrix6xX<f64>) -> Value {
     mat_json(&nalgebra::DMatrix::from_column_slice(6, m.ncols(), m.as_slice()))
 }
 
-/// The `"frames"` object of `eval --mimic` (keyed by frame name): the keys of `eval` without
-/// `djacobian_dq`, in the reduced coordinates (the full tree's at `expand(q)`, `G v`, `G a`,
-/// Jacobians and derivatives times `G`).
-fn frames_json(mm: &MimicModel, s: &State, data: &mut MimicData) -> Result<Value> {
+/// The `"frames"` object of `eval --mimic` (keyed by frame name): the keys of `eval`
+/// (`djacobian_dq` at order 2), in the reduced coordinates (the full tree's at `expand(q)`,
+/// `G v`, `G a`, Jacobians and derivatives times `G`).
+fn frames_json(mm: &MimicModel, s: &State, order: u32, data: &mut MimicData) -> Result<Value> {
     use sodyn::algo::ReferenceFrame;
     let n = mm.nv();
     let refs = [
@@ -560,6 +560,7 @@ fn frames_json(mm: &MimicModel, s: &State, data: &mut MimicData) -> Result<Value
         "dacceleration_dq",
         "dacceleration_dv",
         "dacceleration_da",
+        "djacobian_dq",
     ];
     let (q, v, a) = (&s.q, &s.v, &s.a);
     let mut frames = Map::new();
@@ -590,10 +591,17 @@ fn frames_json(mm: &MimicModel, s: &State, data: &mut MimicData) -> Result<Value
             )?;
             per[6].insert(name.clone(), m6_json(&x));
             per[7].insert(name.clone(), m6_json(&y));
-            per[8].insert(name, m6_json(&w));
+            per[8].insert(name.clone(), m6_json(&w));
+            if order >= 2 {
+                let mut t = sodyn::tensor::Tensor3::zeros(6, n, n);
+                mimic::frame_jacobian_derivative(mm, data, q, f, rf, &mut t)?;
+                per[9].insert(name, tensor_json(&t));
+            }
         }
         for (k, m) in keys.iter().zip(per) {
-            fo.insert((*k).into(), Value::Object(m));
+            if !m.is_empty() {
+                fo.insert((*k).into(), Value::Object(m));
+            }
         }
         frames.insert(mm.full().frames()[f].name.clone(), Value::Object(fo));
     }
