@@ -35,7 +35,8 @@
 //! [`frame_placement`], [`frame_jacobian`] (`J_full G`), [`frame_velocity`],
 //! [`frame_acceleration`], [`frame_classical_acceleration`] (the full tree's at `expand(q)`,
 //! `G v`, `G a`), [`frame_velocity_derivatives`], [`frame_acceleration_derivatives`] (the full
-//! tree's times `G`), [`frame_jacobian_derivative`] (the full tree's contracted with `G` twice), [`center_of_mass`], [`center_of_mass_motion`],
+//! tree's times `G`), [`frame_jacobian_derivative`], [`frame_placement_hessian`] (the full
+//! tree's contracted with `G` twice), [`center_of_mass`], [`center_of_mass_motion`],
 //! [`center_of_mass_jacobian`], [`center_of_mass_velocity_derivatives`],
 //! [`centroidal_dynamics_derivatives`] ([`MimicCentroidal`]). Continuous joints have
 //! one coordinate (the angle) here, so `expand` is affine for them too and the chain rule
@@ -585,8 +586,10 @@ pub struct MimicData {
     j6: [Matrix6xX<f64>; 3],
     /// `3 × full().nv()` scratch of the centre-of-mass Jacobian.
     j3: Matrix3xX<f64>,
-    /// `6 × full().nv() × full().nv()` scratch of the frame Jacobian derivative.
+    /// `6 × full().nv() × full().nv()` scratch of the frame Jacobian derivative and placement
+    /// Hessian (two).
     t6: Tensor3,
+    t6b: Tensor3,
     key: u64,
 }
 
@@ -612,6 +615,7 @@ impl MimicData {
             j6: std::array::from_fn(|_| Matrix6xX::zeros(f.nv())),
             j3: Matrix3xX::zeros(f.nv()),
             t6: Tensor3::zeros(6, f.nv(), f.nv()),
+            t6b: Tensor3::zeros(6, f.nv(), f.nv()),
             key: model.key,
         }
     }
@@ -2748,18 +2752,56 @@ pub fn frame_jacobian_derivative(
     prepare(model, data, q, None, None)?;
     let t = &mut data.t6;
     crate::algo::frame_jacobian_derivative(&model.full, &mut data.full, &data.q, frame, rf, t)?;
-    out.fill(0.0);
-    let nf = model.full.nv();
-    for g in 0..nf {
-        let (cg, mg) = (model.g_col[g], model.g_coef[g]);
-        for f in 0..nf {
-            let (cf, m) = (model.g_col[f], model.g_coef[f] * mg);
-            for r in 0..6 {
-                out[(r, cf, cg)] += m * t[(r, f, g)];
+    model.reduce_tensor_cols(t, out);
+    Ok(())
+}
+
+/// The `6 × nv × nv` Hessian of frame `frame`'s placement at `q` in the reduced tangent space
+/// ([`crate::algo::frame_placement_hessian`]: `out[(r, j, k)] = ∂/∂q_k (∂y_r/∂q_j)` of
+/// `y(q') = [log₃(R_f(q)ᵀ R_f(q')); p_f(q')]` at `q' = q`): the full tree's at `expand(q)`
+/// contracted with `G` on its two derivative indices.
+///
+/// # Errors
+/// As [`frame_jacobian_derivative`].
+pub fn frame_placement_hessian(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    frame: usize,
+    out: &mut Tensor3,
+) -> Result<()> {
+    let n = model.nv;
+    if out.dims() != (6, n, n) {
+        let (a, b, c) = out.dims();
+        return Err(Error::Argument {
+            name: "out".into(),
+            reason: format!("a 6×{n}×{n} tensor is needed, got {a}×{b}×{c}"),
+        });
+    }
+    model.check_frame(frame)?;
+    prepare(model, data, q, None, None)?;
+    let (t, w) = (&mut data.t6, &mut data.t6b);
+    crate::algo::frame_placement_hessian(&model.full, &mut data.full, &data.q, frame, t, w)?;
+    model.reduce_tensor_cols(t, out);
+    Ok(())
+}
+
+impl MimicModel {
+    /// `out[r, c, k] = Σ G[f, c] G[g, k] t[r, f, g]` (`t`: `R × nv_full × nv_full`).
+    fn reduce_tensor_cols(&self, t: &Tensor3, out: &mut Tensor3) {
+        out.fill(0.0);
+        let nf = self.full.nv();
+        let rows = t.dims().0;
+        for g in 0..nf {
+            let (cg, mg) = (self.g_col[g], self.g_coef[g]);
+            for f in 0..nf {
+                let (cf, m) = (self.g_col[f], self.g_coef[f] * mg);
+                for r in 0..rows {
+                    out[(r, cf, cg)] += m * t[(r, f, g)];
+                }
             }
         }
     }
-    Ok(())
 }
 
 /// Centre of mass position at `expand(q)` (world frame).

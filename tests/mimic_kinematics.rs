@@ -716,3 +716,50 @@ fn mimic_frame_jacobian_derivative_matches_hyper_dual_oracle() {
     }
     w.check(1e-12);
 }
+
+/// The placement Hessian against hyper-dual numbers through the oracle:
+/// `y = [½ vee(R₀ᵀR − RᵀR₀); p]` along `(q ⊕ ε₂ e_k) ⊕ ε₁ e_j` (reduced, expanded), `∂²/∂ε₁∂ε₂`.
+#[test]
+fn mimic_frame_placement_hessian_matches_hyper_dual_oracle() {
+    use num_dual::HyperDual64 as HD;
+    let mut w = Worst::new("placement Hessian");
+    let mut rng = Rng::new(308);
+    for m in &models() {
+        let red = Reduced { full: m.full(), mimics: m.mimics() };
+        let mut d = MimicData::new(m);
+        let n = m.nv();
+        let [q, ..] = state(m, &mut rng);
+        let qh: Vec<HD> = q.iter().map(|&x| HD::from_re(x)).collect();
+        let dir = |j: usize, first: bool| -> Vec<HD> {
+            (0..n)
+                .map(|i| {
+                    let e = if i == j { 1.0 } else { 0.0 };
+                    if first { HD::new(0.0, e, 0.0, 0.0) } else { HD::new(0.0, 0.0, e, 0.0) }
+                })
+                .collect()
+        };
+        for f in 0..m.full().frames().len() {
+            let at = format!("{} frame {}", m.name(), m.full().frames()[f].name);
+            let mut t = sodyn::tensor::Tensor3::zeros(6, n, n);
+            mimic::frame_placement_hessian(m, &mut d, &q, f, &mut t).unwrap();
+            let r0 = mimic::frame_placement(m, &mut d, &q, f).unwrap().rot;
+            let r0h = Matrix3::from_fn(|i, j| HD::from_re(r0[(i, j)]));
+            let (mut worst, mut scale): (f64, f64) = (0.0, 1.0);
+            for k in 0..n {
+                for j in 0..n {
+                    let qt = red.integrate(&red.integrate(&qh, &dir(k, false)), &dir(j, true));
+                    let (r, p) = ref_placement(m.full(), &red.expand_q(&qt), f);
+                    let rel = r0h.transpose() * r;
+                    let e = (rel - rel.transpose()) * HD::from_re(0.5);
+                    let y = [e[(2, 1)], e[(0, 2)], e[(1, 0)], p[0], p[1], p[2]];
+                    for (i, yi) in y.iter().enumerate() {
+                        worst = worst.max((t[(i, j, k)] - yi.eps1eps2).abs());
+                        scale = scale.max(yi.eps1eps2.abs());
+                    }
+                }
+            }
+            w.add(worst / scale, &at);
+        }
+    }
+    w.check(1e-12);
+}

@@ -312,6 +312,9 @@ fn mimic_algorithms_do_not_allocate() {
     check("mimic::frame_jacobian_derivative", &mut || {
         mimic::frame_jacobian_derivative(&m, &mut d, &q, fr, rf, &mut t6).unwrap()
     });
+    check("mimic::frame_placement_hessian", &mut || {
+        mimic::frame_placement_hessian(&m, &mut d, &q, fr, &mut t6).unwrap()
+    });
     let mut cen = mimic::MimicCentroidal::new(&m);
     check("mimic::centroidal_dynamics_derivatives", &mut || {
         mimic::centroidal_dynamics_derivatives(&m, &mut d, &mut cen, &q, &v, &a).unwrap()

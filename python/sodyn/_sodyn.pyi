@@ -53,7 +53,7 @@ class Model:
         ``constrained_id_derivatives``, ``kkt_derivatives``, ``impact_derivatives``,
         ``frame_placement``, ``frame_jacobian``, ``frame_velocity``, ``frame_acceleration``,
         ``frame_velocity_derivatives``, ``frame_acceleration_derivatives``,
-        ``frame_jacobian_derivative`` (any frame of the
+        ``frame_jacobian_derivative``, ``frame_placement_hessian`` (any frame of the
         full tree; Jacobians and derivatives ``(6, nv)`` in the reduced coordinates, the full
         tree's times ``G``), ``center_of_mass``, ``center_of_mass_motion``,
         ``center_of_mass_jacobian``, ``center_of_mass_velocity_derivatives``,

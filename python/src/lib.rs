@@ -464,7 +464,8 @@ impl PyModel {
                      id_so_contracted, fd_so_contracted, constrained_id_derivatives, \
                      kkt_derivatives, impact_derivatives, frame_placement, frame_jacobian, \
                      frame_velocity, frame_acceleration, frame_velocity_derivatives, \
-                     frame_acceleration_derivatives, frame_jacobian_derivative, center_of_mass, center_of_mass_motion, \
+                     frame_acceleration_derivatives, frame_jacobian_derivative, \
+                     frame_placement_hessian, center_of_mass, center_of_mass_motion, \
                      center_of_mass_jacobian, center_of_mass_velocity_derivatives, \
                      centroidal_dynamics_derivatives and the Model methods integrate, \
                      difference, d_integrate, d_difference"
@@ -2522,7 +2523,17 @@ fn frame_placement_hessian<'py>(
     q: &Bound<'py, PyAny>,
     frame: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("frame_placement_hessian")?;
+    if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, None, None)?;
+        mimic_ws(d)?;
+        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
+        let mut t = Tensor3::zeros(6, mm.nv(), mm.nv());
+        mimic::frame_placement_hessian(&mm, &mut ws.d, q, f, &mut t).map_err(core_err)?;
+        return Ok(out_tensor(py, &t));
+    }
+    let m = &model.m;
     let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;

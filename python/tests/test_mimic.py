@@ -281,6 +281,9 @@ def test_frames_com_and_configuration_jacobians():
             dj_full = sodyn.frame_jacobian_derivative(full, fd, qf, frame, rf)
             np.testing.assert_allclose(dj, np.einsum("rfg,fc,gk->rck", dj_full, g, g),
                                        atol=1e-12)
+        ph = sodyn.frame_placement_hessian(model, d, q, frame)
+        ph_full = sodyn.frame_placement_hessian(full, fd, qf, frame)
+        np.testing.assert_allclose(ph, np.einsum("rfg,fc,gk->rck", ph_full, g, g), atol=1e-12)
     np.testing.assert_allclose(sodyn.center_of_mass(model, d, q),
                                sodyn.center_of_mass(full, fd, qf), atol=1e-14)
     np.testing.assert_allclose(sodyn.center_of_mass_jacobian(model, d, q),
@@ -351,9 +354,6 @@ def test_unsupported_functions_and_bad_inputs_raise():
     model = sodyn.Model.from_urdf(str(ARM), mimic=True)
     d = model.create_data()
     q = model.neutral()
-    with pytest.raises(sodyn.SodynError,
-                       match="frame_placement_hessian does not support models with mimic"):
-        sodyn.frame_placement_hessian(model, d, q, "tool")
     for f, args in [(sodyn.kkt_so_contracted, (q, np.zeros(7), np.zeros(7), [sodyn.Contact("tool")],
                                                np.ones(7), np.ones(3))),
                     (sodyn.idfoza, (q, np.ones(7)))]:
