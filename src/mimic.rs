@@ -31,17 +31,28 @@
 //! second order), [`kkt_derivatives`], [`kkt_so_derivatives`], [`impact_derivatives`] and
 //! [`impact_so_derivatives`], with the workspaces [`MimicKktData`] and [`MimicImpactData`].
 //! Contracted second order: [`id_so_contracted`], [`fd_so_contracted`]
-//! ([`MimicContractedData`]). The other algorithms of the crate (kinematics, frames, the
-//! contracted KKT and impact second order, batches) take the full [`Model`] only.
+//! ([`MimicContractedData`]). Frames and centre of mass (in [`MimicData`]):
+//! [`frame_placement`], [`frame_jacobian`] (`J_full G`), [`frame_velocity`],
+//! [`frame_acceleration`], [`frame_classical_acceleration`] (the full tree's at `expand(q)`,
+//! `G v`, `G a`), [`frame_velocity_derivatives`], [`frame_acceleration_derivatives`] (the full
+//! tree's times `G`), [`frame_jacobian_derivative`], [`frame_placement_hessian`] (the full
+//! tree's contracted with `G` twice), [`center_of_mass`], [`center_of_mass_motion`],
+//! [`center_of_mass_jacobian`], [`center_of_mass_velocity_derivatives`],
+//! [`centroidal_dynamics_derivatives`] ([`MimicCentroidal`]). Continuous joints have
+//! one coordinate (the angle) here, so `expand` is affine for them too and the chain rule
+//! `∂/∂q = ∂/∂q_full · G` holds for every mimic or reference joint. The other algorithms of
+//! the crate (the contracted KKT and impact second order, batches) take the full
+//! [`Model`] only. [`MimicModel::d_integrate`] and [`MimicModel::d_difference`] are block
+//! diagonal by independent joint (the reduced configuration space is the product of their spaces).
 
-use crate::algo::Data;
+use crate::algo::{Data, ReferenceFrame};
 use crate::deriv::{ContactData, KktData, SoData};
 use crate::error::{Error, Result};
 use crate::model::{JointType, Model, UrdfOptions};
 use crate::rng::Rng;
-use crate::spatial::Force;
+use crate::spatial::{Force, Motion, Transform};
 use crate::tensor::Tensor3;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, Matrix3xX, Matrix6xX, Vector3};
 use std::path::Path;
 
 /// One mimic constraint `q[joint] = multiplier · q[reference] + offset` between two one-DoF
@@ -376,6 +387,121 @@ impl MimicModel {
         })?;
         Ok(self.select_v(&self.full.difference(&q0f, &q1f)?))
     }
+    /// `∂(q ⊕ δ)/∂q` (`arg = First`) or `∂(q ⊕ δ)/∂δ` (`Second`) in the reduced coordinates
+    /// (`nv × nv`): the reduced configuration space is the product of the independent joints'
+    /// spaces, so this is block diagonal by independent joint, each block that of
+    /// [`Model::d_integrate`] (the rows and columns of the independent DoFs of the full
+    /// model's at `expand(q)`, `G δ`). [`MimicModel::d_integrate_into`] does not allocate.
+    ///
+    /// # Errors
+    /// As [`MimicModel::check_q`]; `delta` of the wrong length or not finite.
+    pub fn d_integrate(
+        &self,
+        q: &DVector<f64>,
+        delta: &DVector<f64>,
+        arg: crate::model::Arg,
+    ) -> Result<DMatrix<f64>> {
+        let mut out = DMatrix::zeros(self.nv, self.nv);
+        self.d_integrate_into(q, delta, arg, &mut out)?;
+        Ok(out)
+    }
+    /// [`MimicModel::d_integrate`] into `out` (`nv × nv`; every entry written).
+    ///
+    /// # Errors
+    /// As [`MimicModel::d_integrate`]; `out` not `nv × nv`.
+    pub fn d_integrate_into(
+        &self,
+        q: &DVector<f64>,
+        delta: &DVector<f64>,
+        arg: crate::model::Arg,
+        out: &mut DMatrix<f64>,
+    ) -> Result<()> {
+        self.check_q(q)?;
+        self.check_v("delta", delta)?;
+        self.lie_blocks(out, |j, a, b, blk| {
+            let (n, m) = (self.full.nqs()[j], self.full.nvs()[j]);
+            self.full.joints()[j].d_integrate(
+                &q.as_slice()[a..a + n],
+                &delta.as_slice()[b..b + m],
+                arg,
+                blk,
+            );
+        })
+    }
+    /// `∂(q₁ ⊖ q₀)/∂q₀` (`arg = First`) or `∂(q₁ ⊖ q₀)/∂q₁` (`Second`) in the reduced
+    /// coordinates (`nv × nv`, block diagonal by independent joint, each block that of
+    /// [`Model::d_difference`]). [`MimicModel::d_difference_into`] does not allocate.
+    ///
+    /// # Errors
+    /// As [`MimicModel::check_q`] for `q0` and `q1`.
+    pub fn d_difference(
+        &self,
+        q0: &DVector<f64>,
+        q1: &DVector<f64>,
+        arg: crate::model::Arg,
+    ) -> Result<DMatrix<f64>> {
+        let mut out = DMatrix::zeros(self.nv, self.nv);
+        self.d_difference_into(q0, q1, arg, &mut out)?;
+        Ok(out)
+    }
+    /// [`MimicModel::d_difference`] into `out` (`nv × nv`; every entry written).
+    ///
+    /// # Errors
+    /// As [`MimicModel::d_difference`]; `out` not `nv × nv`.
+    pub fn d_difference_into(
+        &self,
+        q0: &DVector<f64>,
+        q1: &DVector<f64>,
+        arg: crate::model::Arg,
+        out: &mut DMatrix<f64>,
+    ) -> Result<()> {
+        self.check_q(q0)?;
+        self.check_q(q1).map_err(|e| match e {
+            Error::Dimension { expected, got, .. } => {
+                Error::Dimension { what: "q1".into(), expected, got }
+            }
+            Error::NotFinite { index, .. } => Error::NotFinite { what: "q1".into(), index },
+            e => e,
+        })?;
+        self.lie_blocks(out, |j, a, _, blk| {
+            let n = self.full.nqs()[j];
+            self.full.joints()[j].d_difference(
+                &q0.as_slice()[a..a + n],
+                &q1.as_slice()[a..a + n],
+                arg,
+                blk,
+            );
+        })
+    }
+    /// Zeroes `out` (checked `nv × nv`) and writes the diagonal block of each independent joint
+    /// `j` from `block(j, reduced idx_q, reduced idx_v, column-major nv_j × nv_j)`.
+    fn lie_blocks(
+        &self,
+        out: &mut DMatrix<f64>,
+        mut block: impl FnMut(usize, usize, usize, &mut [f64]),
+    ) -> Result<()> {
+        if out.shape() != (self.nv, self.nv) {
+            return Err(Error::Dimension {
+                what: "out (nv × nv) rows × cols".into(),
+                expected: self.nv * self.nv,
+                got: out.nrows() * out.ncols(),
+            });
+        }
+        out.fill(0.0);
+        let mut blk = [0.0; 36];
+        for j in 1..self.full.njoints() {
+            if let Some((a, b)) = self.reduced_idx[j] {
+                let m = self.full.nvs()[j];
+                block(j, a, b, &mut blk);
+                for c in 0..m {
+                    for r in 0..m {
+                        out[(b + r, b + c)] = blk[c * m + r];
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
     /// Checks a reduced configuration: length `nq`, finite, unit quaternions (the last naming
     /// the joint).
     ///
@@ -456,6 +582,14 @@ pub struct MimicData {
     dqdd_dq: DMatrix<f64>,
     dqdd_dv: DMatrix<f64>,
     minv: DMatrix<f64>,
+    /// `6 × full().nv()` scratch of the frame Jacobians and derivatives.
+    j6: [Matrix6xX<f64>; 3],
+    /// `3 × full().nv()` scratch of the centre-of-mass Jacobian.
+    j3: Matrix3xX<f64>,
+    /// `6 × full().nv() × full().nv()` scratch of the frame Jacobian derivative and placement
+    /// Hessian (two).
+    t6: Tensor3,
+    t6b: Tensor3,
     key: u64,
 }
 
@@ -478,6 +612,10 @@ impl MimicData {
             dqdd_dq: sq(),
             dqdd_dv: sq(),
             minv: sq(),
+            j6: std::array::from_fn(|_| Matrix6xX::zeros(f.nv())),
+            j3: Matrix3xX::zeros(f.nv()),
+            t6: Tensor3::zeros(6, f.nv(), f.nv()),
+            t6b: Tensor3::zeros(6, f.nv(), f.nv()),
             key: model.key,
         }
     }
@@ -2358,5 +2496,478 @@ pub fn fd_so_contracted(
     cd.qv += &cd.tmp;
     cd.qv.neg_mut();
     crate::linalg::gemm(-1.0, &data.minv, &cd.mq, 0.0, &mut cd.tauq);
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Frames, kinematics and centre of mass.
+
+impl MimicModel {
+    /// `out = x G` for a `R × full().nv()` matrix `x` (`out`: `R × nv()`).
+    fn reduce_cols<R: nalgebra::Dim, S1, S2>(
+        &self,
+        x: &nalgebra::Matrix<f64, R, nalgebra::Dyn, S1>,
+        out: &mut nalgebra::Matrix<f64, R, nalgebra::Dyn, S2>,
+    ) where
+        S1: nalgebra::storage::Storage<f64, R, nalgebra::Dyn>,
+        S2: nalgebra::storage::StorageMut<f64, R, nalgebra::Dyn>,
+    {
+        out.fill(0.0);
+        for (f, (&c, &m)) in self.g_col.iter().zip(&self.g_coef).enumerate() {
+            for r in 0..x.nrows() {
+                out[(r, c)] += m * x[(r, f)];
+            }
+        }
+    }
+    /// Checks a frame index of the full tree.
+    fn check_frame(&self, frame: usize) -> Result<()> {
+        let n = self.full.frames().len();
+        if frame >= n {
+            return Err(Error::Argument {
+                name: "frame".into(),
+                reason: format!("frame index {frame} out of range (the model has {n} frames)"),
+            });
+        }
+        Ok(())
+    }
+}
+
+fn check_ncols(what: &str, got: usize, expected: usize) -> Result<()> {
+    if got != expected {
+        return Err(Error::Dimension { what: what.into(), expected, got });
+    }
+    Ok(())
+}
+
+/// World placement `⁰M_f` of frame `frame` (a frame of the full tree) at `expand(q)`
+/// ([`crate::algo::frame_placement`]).
+///
+/// # Errors
+/// As [`MimicModel::check_q`]; a frame index out of range; a workspace of another model.
+pub fn frame_placement(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    frame: usize,
+) -> Result<Transform> {
+    model.check_frame(frame)?;
+    prepare(model, data, q, None, None)?;
+    crate::algo::frame_placement(&model.full, &mut data.full, &data.q, frame)
+}
+
+/// Writes into `jac` (`6 × nv`, reduced) the Jacobian `J_full G` of frame `frame` at `q` in
+/// `rf`: the frame's spatial velocity in `rf` is `jac q̇`.
+///
+/// # Errors
+/// As [`frame_placement`]; `jac` without `nv` columns.
+pub fn frame_jacobian(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+    jac: &mut Matrix6xX<f64>,
+) -> Result<()> {
+    check_ncols("jacobian columns", jac.ncols(), model.nv)?;
+    model.check_frame(frame)?;
+    prepare(model, data, q, None, None)?;
+    crate::algo::frame_jacobian(&model.full, &mut data.full, &data.q, frame, rf, &mut data.j6[0])?;
+    model.reduce_cols(&data.j6[0], jac);
+    Ok(())
+}
+
+/// Spatial velocity of frame `frame` at `(q, q̇)` in `rf`: the full tree's at
+/// `(expand(q), G q̇)`.
+///
+/// # Errors
+/// As [`frame_placement`]; `v` of the wrong length or not finite.
+pub fn frame_velocity(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+) -> Result<Motion> {
+    model.check_frame(frame)?;
+    prepare(model, data, q, Some(v), None)?;
+    crate::algo::frame_velocity(&model.full, &mut data.full, &data.q, &data.v, frame, rf)
+}
+
+/// Expands `a` into `data.a` after [`prepare`].
+fn prepare_a(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    frame: usize,
+) -> Result<()> {
+    model.check_frame(frame)?;
+    prepare(model, data, q, Some(v), Some(("a", a)))?;
+    model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+    Ok(())
+}
+
+/// Spatial acceleration (no gravity) of frame `frame` at `(q, q̇, q̈)` in `rf`: the full tree's
+/// at `(expand(q), G q̇, G q̈)`.
+///
+/// # Errors
+/// As [`frame_velocity`]; `a` of the wrong length or not finite.
+pub fn frame_acceleration(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+) -> Result<Motion> {
+    prepare_a(model, data, q, v, a, frame)?;
+    let (f, d) = (&model.full, &mut data.full);
+    crate::algo::frame_acceleration(f, d, &data.q, &data.v, &data.a, frame, rf)
+}
+
+/// Classical acceleration of frame `frame`'s origin at `(q, q̇, q̈)` in `rf`
+/// ([`crate::algo::frame_classical_acceleration`] at `(expand(q), G q̇, G q̈)`).
+///
+/// # Errors
+/// As [`frame_acceleration`].
+pub fn frame_classical_acceleration(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+) -> Result<Motion> {
+    prepare_a(model, data, q, v, a, frame)?;
+    let (f, d) = (&model.full, &mut data.full);
+    crate::algo::frame_classical_acceleration(f, d, &data.q, &data.v, &data.a, frame, rf)
+}
+
+/// `∂v_f/∂q` (tangent space of the reduced configuration) and `∂v_f/∂q̇` (`6 × nv` each) of
+/// frame `frame`'s spatial velocity in `rf`: the full tree's at `(expand(q), G q̇)` times `G`
+/// (`expand(q ⊕ δ) = expand(q) ⊕ G δ`).
+///
+/// # Errors
+/// As [`frame_velocity`]; outputs without `nv` columns.
+#[allow(clippy::too_many_arguments)]
+pub fn frame_velocity_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+    dv_dq: &mut Matrix6xX<f64>,
+    dv_dv: &mut Matrix6xX<f64>,
+) -> Result<()> {
+    check_ncols("derivative columns", dv_dq.ncols(), model.nv)?;
+    check_ncols("derivative columns", dv_dv.ncols(), model.nv)?;
+    model.check_frame(frame)?;
+    prepare(model, data, q, Some(v), None)?;
+    let [j0, j1, _] = &mut data.j6;
+    crate::algo::frame_velocity_derivatives(
+        &model.full,
+        &mut data.full,
+        &data.q,
+        &data.v,
+        frame,
+        rf,
+        j0,
+        j1,
+    )?;
+    model.reduce_cols(j0, dv_dq);
+    model.reduce_cols(j1, dv_dv);
+    Ok(())
+}
+
+/// `∂a_f/∂q` (tangent space), `∂a_f/∂q̇`, `∂a_f/∂q̈` (`6 × nv` each) of frame `frame`'s spatial
+/// acceleration (no gravity) in `rf`: the full tree's at `(expand(q), G q̇, G q̈)` times `G`.
+///
+/// # Errors
+/// As [`frame_acceleration`]; outputs without `nv` columns.
+#[allow(clippy::too_many_arguments)]
+pub fn frame_acceleration_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+    da_dq: &mut Matrix6xX<f64>,
+    da_dv: &mut Matrix6xX<f64>,
+    da_da: &mut Matrix6xX<f64>,
+) -> Result<()> {
+    for m in [&*da_dq, &*da_dv, &*da_da] {
+        check_ncols("derivative columns", m.ncols(), model.nv)?;
+    }
+    prepare_a(model, data, q, v, a, frame)?;
+    let [j0, j1, j2] = &mut data.j6;
+    crate::algo::frame_acceleration_derivatives(
+        &model.full,
+        &mut data.full,
+        &data.q,
+        &data.v,
+        &data.a,
+        frame,
+        rf,
+        j0,
+        j1,
+        j2,
+    )?;
+    model.reduce_cols(j0, da_dq);
+    model.reduce_cols(j1, da_dv);
+    model.reduce_cols(j2, da_da);
+    Ok(())
+}
+
+/// `∂J/∂q` of frame `frame`'s reduced Jacobian `J G` in `rf`: `out[(r, c, k)] = ∂J[r][c]/∂q_k`
+/// (`6 × nv × nv`, reduced tangent space, the outer perturbation `q_k` applied first): the full
+/// tree's [`crate::algo::frame_jacobian_derivative`] at `expand(q)` contracted with `G` on its
+/// column and derivative indices (`G` is constant and `expand(q ⊕ δ) = expand(q) ⊕ G δ`).
+///
+/// # Errors
+/// As [`frame_placement`]; `out` not `6 × nv × nv`.
+pub fn frame_jacobian_derivative(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    frame: usize,
+    rf: ReferenceFrame,
+    out: &mut Tensor3,
+) -> Result<()> {
+    let n = model.nv;
+    if out.dims() != (6, n, n) {
+        let (a, b, c) = out.dims();
+        return Err(Error::Argument {
+            name: "out".into(),
+            reason: format!("a 6×{n}×{n} tensor is needed, got {a}×{b}×{c}"),
+        });
+    }
+    model.check_frame(frame)?;
+    prepare(model, data, q, None, None)?;
+    let t = &mut data.t6;
+    crate::algo::frame_jacobian_derivative(&model.full, &mut data.full, &data.q, frame, rf, t)?;
+    model.reduce_tensor_cols(t, out);
+    Ok(())
+}
+
+/// The `6 × nv × nv` Hessian of frame `frame`'s placement at `q` in the reduced tangent space
+/// ([`crate::algo::frame_placement_hessian`]: `out[(r, j, k)] = ∂/∂q_k (∂y_r/∂q_j)` of
+/// `y(q') = [log₃(R_f(q)ᵀ R_f(q')); p_f(q')]` at `q' = q`): the full tree's at `expand(q)`
+/// contracted with `G` on its two derivative indices.
+///
+/// # Errors
+/// As [`frame_jacobian_derivative`].
+pub fn frame_placement_hessian(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    frame: usize,
+    out: &mut Tensor3,
+) -> Result<()> {
+    let n = model.nv;
+    if out.dims() != (6, n, n) {
+        let (a, b, c) = out.dims();
+        return Err(Error::Argument {
+            name: "out".into(),
+            reason: format!("a 6×{n}×{n} tensor is needed, got {a}×{b}×{c}"),
+        });
+    }
+    model.check_frame(frame)?;
+    prepare(model, data, q, None, None)?;
+    let (t, w) = (&mut data.t6, &mut data.t6b);
+    crate::algo::frame_placement_hessian(&model.full, &mut data.full, &data.q, frame, t, w)?;
+    model.reduce_tensor_cols(t, out);
+    Ok(())
+}
+
+impl MimicModel {
+    /// `out[r, c, k] = Σ G[f, c] G[g, k] t[r, f, g]` (`t`: `R × nv_full × nv_full`).
+    fn reduce_tensor_cols(&self, t: &Tensor3, out: &mut Tensor3) {
+        out.fill(0.0);
+        let nf = self.full.nv();
+        let rows = t.dims().0;
+        for g in 0..nf {
+            let (cg, mg) = (self.g_col[g], self.g_coef[g]);
+            for f in 0..nf {
+                let (cf, m) = (self.g_col[f], self.g_coef[f] * mg);
+                for r in 0..rows {
+                    out[(r, cf, cg)] += m * t[(r, f, g)];
+                }
+            }
+        }
+    }
+}
+
+/// Centre of mass position at `expand(q)` (world frame).
+///
+/// # Errors
+/// As [`MimicModel::check_q`]; a model without mass; a workspace of another model.
+pub fn center_of_mass(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+) -> Result<Vector3<f64>> {
+    prepare(model, data, q, None, None)?;
+    crate::algo::center_of_mass(&model.full, &mut data.full, &data.q)
+}
+
+/// Writes the `3 × nv` centre-of-mass Jacobian `J_com,full G` at `q` into `jac`
+/// (`ċ = jac q̇`, world frame).
+///
+/// # Errors
+/// As [`center_of_mass`]; `jac` without `nv` columns.
+pub fn center_of_mass_jacobian(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    jac: &mut Matrix3xX<f64>,
+) -> Result<()> {
+    check_ncols("jacobian columns", jac.ncols(), model.nv)?;
+    prepare(model, data, q, None, None)?;
+    crate::algo::center_of_mass_jacobian(&model.full, &mut data.full, &data.q, &mut data.j3)?;
+    model.reduce_cols(&data.j3, jac);
+    Ok(())
+}
+
+/// Centre of mass position, velocity and (with `a`) acceleration without gravity, world frame:
+/// [`crate::algo::center_of_mass_motion`] of the full tree at `expand(q)`, `G q̇`, `G q̈`.
+///
+/// # Errors
+/// As [`center_of_mass`]; `v` or `a` of the wrong length or not finite.
+pub fn center_of_mass_motion(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: Option<&DVector<f64>>,
+) -> Result<(Vector3<f64>, Vector3<f64>, Vector3<f64>)> {
+    prepare(model, data, q, Some(v), a.map(|a| ("a", a)))?;
+    if let Some(a) = a {
+        model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+    }
+    let a_full = a.map(|_| &data.a);
+    crate::algo::center_of_mass_motion(&model.full, &mut data.full, &data.q, &data.v, a_full)
+}
+
+/// `∂ċ/∂q` (`3 × nv`, tangent space of the reduced configuration) of the centre-of-mass
+/// velocity at `(q, q̇)`: the full tree's at `expand(q)`, `G q̇` times `G`; `∂ċ/∂q̇` is
+/// [`center_of_mass_jacobian`].
+///
+/// # Errors
+/// As [`center_of_mass_motion`]; `out` without `nv` columns.
+pub fn center_of_mass_velocity_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    out: &mut Matrix3xX<f64>,
+) -> Result<()> {
+    check_ncols("derivative columns", out.ncols(), model.nv)?;
+    prepare(model, data, q, Some(v), None)?;
+    crate::algo::center_of_mass_velocity_derivatives(
+        &model.full,
+        &mut data.full,
+        &data.q,
+        &data.v,
+        &mut data.j3,
+    )?;
+    model.reduce_cols(&data.j3, out);
+    Ok(())
+}
+
+/// Results of [`centroidal_dynamics_derivatives`] for a [`MimicModel`]: the full tree's
+/// [`crate::algo::Centroidal`] and its matrices times `G` (`6 × nv`, reduced), allocated once.
+#[derive(Clone, Debug)]
+pub struct MimicCentroidal {
+    full: crate::algo::Centroidal,
+    ag: DMatrix<f64>,
+    dh_dq: DMatrix<f64>,
+    dhdot_dq: DMatrix<f64>,
+    dhdot_dv: DMatrix<f64>,
+    key: u64,
+}
+
+impl MimicCentroidal {
+    /// Results for `model`.
+    pub fn new(model: &MimicModel) -> Self {
+        let z = || DMatrix::zeros(6, model.nv);
+        Self {
+            full: crate::algo::Centroidal::new(&model.full),
+            ag: z(),
+            dh_dq: z(),
+            dhdot_dq: z(),
+            dhdot_dv: z(),
+            key: model.key,
+        }
+    }
+    /// Centroidal momentum `h_G` (that of the full tree at `expand(q)`, `G q̇`).
+    pub fn h(&self) -> &[f64; 6] {
+        self.full.h()
+    }
+    /// Its time derivative `ḣ_G` (no gravity).
+    pub fn hdot(&self) -> &[f64; 6] {
+        self.full.hdot()
+    }
+    /// Centroidal momentum matrix `A_G = A_G,full G` (`6 × nv`): `h_G = A_G q̇`; also `∂ḣ_G/∂q̈`.
+    pub fn ag(&self) -> &DMatrix<f64> {
+        &self.ag
+    }
+    /// `∂h_G/∂q` (`6 × nv`, tangent space of the reduced configuration).
+    pub fn dh_dq(&self) -> &DMatrix<f64> {
+        &self.dh_dq
+    }
+    /// `∂ḣ_G/∂q` (`6 × nv`).
+    pub fn dhdot_dq(&self) -> &DMatrix<f64> {
+        &self.dhdot_dq
+    }
+    /// `∂ḣ_G/∂q̇` (`6 × nv`).
+    pub fn dhdot_dv(&self) -> &DMatrix<f64> {
+        &self.dhdot_dv
+    }
+}
+
+/// Centroidal momentum, its time derivative, `A_G` and their derivatives at `(q, q̇, q̈)` into
+/// `out`: [`crate::algo::centroidal_dynamics_derivatives`] of the full tree at `expand(q)`,
+/// `G q̇`, `G q̈`, its matrices times `G`. Allocates nothing.
+///
+/// # Errors
+/// As [`MimicModel::check_q`]; `v`, `a` of the wrong length or not finite; workspaces of
+/// another model; a model without mass.
+pub fn centroidal_dynamics_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    out: &mut MimicCentroidal,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+) -> Result<()> {
+    if out.key != model.key || out.ag.ncols() != model.nv {
+        return Err(Error::Workspace(format!(
+            "MimicCentroidal was made for another model; make it with MimicCentroidal::new for \
+             the mimic model \"{}\"",
+            model.name()
+        )));
+    }
+    prepare(model, data, q, Some(v), Some(("a", a)))?;
+    model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+    let c = &mut out.full;
+    crate::algo::centroidal_dynamics_derivatives(
+        &model.full,
+        &mut data.full,
+        c,
+        &data.q,
+        &data.v,
+        &data.a,
+    )?;
+    model.reduce_cols(c.ag(), &mut out.ag);
+    model.reduce_cols(c.dh_dq(), &mut out.dh_dq);
+    model.reduce_cols(c.dhdot_dq(), &mut out.dhdot_dq);
+    model.reduce_cols(c.dhdot_dv(), &mut out.dhdot_dv);
     Ok(())
 }

@@ -1151,15 +1151,54 @@ fn mimic_commands_use_the_reduced_coordinates() {
     mimic::fd_so_contracted(&m, &mut d, &mut cc, &q, &vel, &tau, &DVector::from_element(n, 0.5))
         .unwrap();
     assert!((matrix(&v2["contracted"]["fd"], "d2qdd_dq2", n) - cc.c_qq()).amax() < 1e-12);
-    // Unsupported inputs and models.
+    // Frames (of the full tree), in the reduced coordinates, as the library.
     let with_frames = tmp("mimic-frames.json");
-    std::fs::write(&with_frames, r#"{"frames": ["tool"]}"#).unwrap();
+    let mut st_f = state.clone();
+    st_f["frames"] = serde_json::json!(["tool", "finger_r"]);
+    std::fs::write(&with_frames, st_f.to_string()).unwrap();
     let wf = with_frames.to_str().unwrap();
-    let err = assert_clean_failure(
-        &sodyn(&["eval", "--model", u, "--mimic", "--state", wf]),
-        "eval --mimic with frames",
+    let o =
+        sodyn(&["eval", "--model", u, "--mimic", "--floating-base", "--state", wf, "--order", "2"]);
+    assert_ok(&o, "eval --mimic with frames");
+    let v3: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let rf = sodyn::algo::ReferenceFrame::World;
+    let f = m.full().frame_id("finger_r").unwrap();
+    let (mut x, mut y, mut w) = (
+        nalgebra::Matrix6xX::zeros(n),
+        nalgebra::Matrix6xX::zeros(n),
+        nalgebra::Matrix6xX::zeros(n),
     );
-    assert!(err.contains("\"frames\" is not supported with --mimic"), "{err}");
+    mimic::frame_acceleration_derivatives(&m, &mut d, &q, &vel, &a, f, rf, &mut x, &mut y, &mut w)
+        .unwrap();
+    let got = &v3["frames"]["finger_r"]["dacceleration_dq"]["world"];
+    for r in 0..6 {
+        for c in 0..n {
+            assert!((got[r][c].as_f64().unwrap() - x[(r, c)]).abs() < 1e-12);
+        }
+    }
+    assert_eq!(v3["frames"]["tool"]["jacobian"]["local"].as_array().unwrap().len(), 6);
+    let mut cen = mimic::MimicCentroidal::new(&m);
+    mimic::centroidal_dynamics_derivatives(&m, &mut d, &mut cen, &q, &vel, &a).unwrap();
+    let got = &v3["centroidal"]["dhdot_dq"];
+    for r in 0..6 {
+        for c in 0..n {
+            assert!((got[r][c].as_f64().unwrap() - cen.dhdot_dq()[(r, c)]).abs() < 1e-12);
+        }
+    }
+    assert_eq!(v3["com"]["jacobian"].as_array().unwrap().len(), 3);
+    let mut t = sodyn::tensor::Tensor3::zeros(6, n, n);
+    mimic::frame_jacobian_derivative(&m, &mut d, &q, f, rf, &mut t).unwrap();
+    let got = &v3["frames"]["finger_r"]["djacobian_dq"]["world"];
+    assert!((got[2][3][4].as_f64().unwrap() - t[(2, 3, 4)]).abs() < 1e-12);
+    // Unsupported inputs and models.
+    let with_w = tmp("mimic-kkt-weights.json");
+    std::fs::write(&with_w, r#"{"weights": {"kkt_qdd": [1]}}"#).unwrap();
+    let ww = with_w.to_str().unwrap();
+    let err = assert_clean_failure(
+        &sodyn(&["eval", "--model", u, "--mimic", "--state", ww]),
+        "eval --mimic with contact weights",
+    );
+    assert!(err.contains("\"weights.kkt_qdd\" is not supported with --mimic"), "{err}");
     let err = assert_clean_failure(
         &sodyn(&["eval", "--model", u, "--mimic", "--state", s]),
         "eval --mimic, the state of the floating base",

@@ -266,5 +266,58 @@ fn mimic_algorithms_do_not_allocate() {
         mimic::constrained_id_derivatives(&m, &mut d, &mut kd, Some(&mut so), &q, &v, &a, &lam)
             .unwrap()
     });
+    let rf = sodyn::algo::ReferenceFrame::LocalWorldAligned;
+    let fr = m.full().frames().len() - 1;
+    let mut j6 = [
+        nalgebra::Matrix6xX::zeros(m.nv()),
+        nalgebra::Matrix6xX::zeros(m.nv()),
+        nalgebra::Matrix6xX::zeros(m.nv()),
+    ];
+    let mut j3 = nalgebra::Matrix3xX::zeros(m.nv());
+    check("mimic::frame_placement", &mut || {
+        mimic::frame_placement(&m, &mut d, &q, fr).unwrap();
+    });
+    check("mimic::frame_jacobian", &mut || {
+        mimic::frame_jacobian(&m, &mut d, &q, fr, rf, &mut j6[0]).unwrap()
+    });
+    check("mimic::frame_classical_acceleration", &mut || {
+        mimic::frame_classical_acceleration(&m, &mut d, &q, &v, &a, fr, rf).unwrap();
+    });
+    check("mimic::frame_velocity_derivatives", &mut || {
+        let [x, y, _] = &mut j6;
+        mimic::frame_velocity_derivatives(&m, &mut d, &q, &v, fr, rf, x, y).unwrap()
+    });
+    check("mimic::frame_acceleration_derivatives", &mut || {
+        let [x, y, z] = &mut j6;
+        mimic::frame_acceleration_derivatives(&m, &mut d, &q, &v, &a, fr, rf, x, y, z).unwrap()
+    });
+    check("mimic::center_of_mass_jacobian", &mut || {
+        mimic::center_of_mass_jacobian(&m, &mut d, &q, &mut j3).unwrap()
+    });
+    let mut sq = nalgebra::DMatrix::zeros(m.nv(), m.nv());
+    let q1 = m.random_configuration(&mut Rng::new(3));
+    check("MimicModel::d_integrate_into", &mut || {
+        m.d_integrate_into(&q, &v, sodyn::model::Arg::First, &mut sq).unwrap()
+    });
+    check("MimicModel::d_difference_into", &mut || {
+        m.d_difference_into(&q, &q1, sodyn::model::Arg::Second, &mut sq).unwrap()
+    });
+    check("mimic::center_of_mass_motion", &mut || {
+        mimic::center_of_mass_motion(&m, &mut d, &q, &v, Some(&a)).unwrap();
+    });
+    check("mimic::center_of_mass_velocity_derivatives", &mut || {
+        mimic::center_of_mass_velocity_derivatives(&m, &mut d, &q, &v, &mut j3).unwrap()
+    });
+    let mut t6 = sodyn::tensor::Tensor3::zeros(6, m.nv(), m.nv());
+    check("mimic::frame_jacobian_derivative", &mut || {
+        mimic::frame_jacobian_derivative(&m, &mut d, &q, fr, rf, &mut t6).unwrap()
+    });
+    check("mimic::frame_placement_hessian", &mut || {
+        mimic::frame_placement_hessian(&m, &mut d, &q, fr, &mut t6).unwrap()
+    });
+    let mut cen = mimic::MimicCentroidal::new(&m);
+    check("mimic::centroidal_dynamics_derivatives", &mut || {
+        mimic::centroidal_dynamics_derivatives(&m, &mut d, &mut cen, &q, &v, &a).unwrap()
+    });
     assert!(report.is_empty(), "heap allocations in mimic hot paths: {}", report.join(", "));
 }

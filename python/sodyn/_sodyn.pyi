@@ -50,8 +50,16 @@ class Model:
         same kind is a ``SodynError``). Such a model supports ``rnea``, ``crba``, ``aba``,
         ``nonlinear_effects``, ``id_derivatives``, ``fd_derivatives``, ``id_so_derivatives``,
         ``fd_so_derivatives``, ``id_so_contracted``, ``fd_so_contracted``,
-        ``constrained_id_derivatives``, ``kkt_derivatives`` and ``impact_derivatives``; every
-        other function raises ``SodynError`` naming itself. See docs/python.md."""
+        ``constrained_id_derivatives``, ``kkt_derivatives``, ``impact_derivatives``,
+        ``frame_placement``, ``frame_jacobian``, ``frame_velocity``, ``frame_acceleration``,
+        ``frame_velocity_derivatives``, ``frame_acceleration_derivatives``,
+        ``frame_jacobian_derivative``, ``frame_placement_hessian`` (any frame of the
+        full tree; Jacobians and derivatives ``(6, nv)`` in the reduced coordinates, the full
+        tree's times ``G``), ``center_of_mass``, ``center_of_mass_motion``,
+        ``center_of_mass_jacobian``, ``center_of_mass_velocity_derivatives``,
+        ``centroidal_dynamics_derivatives`` and the methods
+        ``integrate``, ``difference``, ``d_integrate``, ``d_difference``; every other function
+        raises ``SodynError`` naming itself. See docs/python.md."""
     @staticmethod
     def from_urdf_string(xml: str, floating_base: bool = False,
                          strict_inertia: bool = False, mimic: bool = False) -> "Model":
@@ -138,10 +146,12 @@ class Model:
     def difference(self, q0: ArrayLike, q1: ArrayLike) -> Vector: ...
     def d_integrate(self, q: ArrayLike, dq: ArrayLike, arg: int) -> Matrix:
         """``d(q ⊕ dq)/dq`` (``arg=0``) or ``d(q ⊕ dq)/d dq`` (``arg=1``), ``(nv, nv)``:
-        Pinocchio's ``dIntegrate`` with ``ARG0`` / ``ARG1``."""
+        Pinocchio's ``dIntegrate`` with ``ARG0`` / ``ARG1``. With ``mimic=True``, in the reduced
+        coordinates (block diagonal by independent joint)."""
     def d_difference(self, q0: ArrayLike, q1: ArrayLike, arg: int) -> Matrix:
         """``d(q1 ⊖ q0)/dq0`` (``arg=0``) or ``d(q1 ⊖ q0)/dq1`` (``arg=1``), ``(nv, nv)``:
-        Pinocchio's ``dDifference`` with ``ARG0`` / ``ARG1``."""
+        Pinocchio's ``dDifference`` with ``ARG0`` / ``ARG1``. With ``mimic=True``, in the
+        reduced coordinates (block diagonal by independent joint)."""
     def create_data(self) -> "Data": ...
     def __copy__(self) -> "Model": ...
     def __deepcopy__(self, memo: object) -> "Model": ...
@@ -247,7 +257,7 @@ def frame_jacobian(model: Model, data: Data, q: ArrayLike, frame: Union[str, int
                    reference: str = "local") -> Matrix:
     """``(6, nv)`` Jacobian of a frame, rows ``[w; v]``; ``reference`` is ``"local"``,
     ``"world"`` or ``"local_world_aligned"`` (Pinocchio's ``getFrameJacobian``, rows ``[v; w]``
-    there)."""
+    there). With ``mimic=True``, ``J_full G`` in the reduced coordinates."""
 def frame_velocity(model: Model, data: Data, q: ArrayLike, v: ArrayLike, frame: Union[str, int],
                    reference: str = "local") -> Vector:
     """Spatial velocity ``[w; v]`` of a frame in ``reference`` (``getFrameVelocity``)."""
@@ -281,7 +291,9 @@ def centroidal_dynamics_derivatives(model: Model, data: Data, q: ArrayLike, v: A
                                     a: ArrayLike) -> dict[str, Union[Vector, Matrix]]:
     """Centroidal momentum about the centre of mass (world axes, rows ``[angular; linear]``):
     ``h``, ``hdot`` (no gravity), ``Ag`` (``h = Ag v``, ``dhdot/da``), ``dh_dq``, ``dhdot_dq``,
-    ``dhdot_dv`` (``computeCentroidalDynamicsDerivatives``, rows ``[linear; angular]`` there)."""
+    ``dhdot_dv`` (``computeCentroidalDynamicsDerivatives``, rows ``[linear; angular]`` there).
+    With ``mimic=True``, the matrices are ``(6, nv)`` in the reduced coordinates (the full
+    tree's times ``G``)."""
 def frame_jacobian_derivative(model: Model, data: Data, q: ArrayLike, frame: Union[str, int],
                               reference: str = "local") -> Tensor:
     """``(6, nv, nv)``: ``T[r, c, k] = dJ[r, c]/dq_k`` of ``frame_jacobian`` (the kinematic

@@ -462,7 +462,13 @@ impl PyModel {
                      mimic=True); it supports rnea, crba, aba, nonlinear_effects, \
                      id_derivatives, fd_derivatives, id_so_derivatives, fd_so_derivatives, \
                      id_so_contracted, fd_so_contracted, constrained_id_derivatives, \
-                     kkt_derivatives and impact_derivatives"
+                     kkt_derivatives, impact_derivatives, frame_placement, frame_jacobian, \
+                     frame_velocity, frame_acceleration, frame_velocity_derivatives, \
+                     frame_acceleration_derivatives, frame_jacobian_derivative, \
+                     frame_placement_hessian, center_of_mass, center_of_mass_motion, \
+                     center_of_mass_jacobian, center_of_mass_velocity_derivatives, \
+                     centroidal_dynamics_derivatives and the Model methods integrate, \
+                     difference, d_integrate, d_difference"
                 ),
             }));
         }
@@ -843,8 +849,12 @@ impl PyModel {
         arg: i64,
     ) -> PyResult<Bound<'py, PyAny>> {
         let arg = lie_arg(arg)?;
-        self.full_only("d_integrate")?;
         let (mut qv, mut dv) = (DVector::zeros(0), DVector::zeros(0));
+        if let Some(mm) = &self.mimic {
+            read_vec(q, "q", mm.nq(), "nq", &mut qv)?;
+            read_vec(dq, "dq", mm.nv(), "nv", &mut dv)?;
+            return Ok(out_mat(py, &mm.d_integrate(&qv, &dv, arg).map_err(core_err)?));
+        }
         read_q(q, "q", &self.m, &mut qv)?;
         read_vec(dq, "dq", self.m.nv(), "nv", &mut dv)?;
         Ok(out_mat(py, &self.m.d_integrate(&qv, &dv, arg).map_err(core_err)?))
@@ -861,8 +871,12 @@ impl PyModel {
         arg: i64,
     ) -> PyResult<Bound<'py, PyAny>> {
         let arg = lie_arg(arg)?;
-        self.full_only("d_difference")?;
         let (mut a, mut b) = (DVector::zeros(0), DVector::zeros(0));
+        if let Some(mm) = &self.mimic {
+            read_vec(q0, "q0", mm.nq(), "nq", &mut a)?;
+            read_vec(q1, "q1", mm.nq(), "nq", &mut b)?;
+            return Ok(out_mat(py, &mm.d_difference(&a, &b, arg).map_err(core_err)?));
+        }
         read_q(q0, "q0", &self.m, &mut a)?;
         read_q(q1, "q1", &self.m, &mut b)?;
         Ok(out_mat(py, &self.m.d_difference(&a, &b, arg).map_err(core_err)?))
@@ -2094,11 +2108,20 @@ fn frame_placement<'py>(
     q: &Bound<'py, PyAny>,
     frame: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("frame_placement")?;
-    let f = frame_arg(m, frame)?;
-    let PyData { d, q: qb, .. } = &mut *data;
-    read_q(q, "q", m, qb)?;
-    let t = algo::frame_placement(m, d, qb, f).map_err(core_err)?;
+    let t = if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, None, None)?;
+        mimic_ws(d)?;
+        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
+        mimic::frame_placement(&mm, &mut ws.d, q, f).map_err(core_err)?
+    } else {
+        let m = &model.m;
+        let f = frame_arg(m, frame)?;
+        let PyData { d, q: qb, .. } = &mut *data;
+        read_q(q, "q", m, qb)?;
+        algo::frame_placement(m, d, qb, f).map_err(core_err)?
+    };
     let mut h = DMatrix::identity(4, 4);
     h.view_mut((0, 0), (3, 3)).copy_from(&t.rot);
     h.view_mut((0, 3), (3, 1)).copy_from(&t.trans);
@@ -2117,8 +2140,19 @@ fn frame_jacobian<'py>(
     frame: &Bound<'py, PyAny>,
     reference: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("frame_jacobian")?;
-    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
+    if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, None, None)?;
+        mimic_ws(d)?;
+        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
+        let mut jac = nalgebra::Matrix6xX::zeros(mm.nv());
+        mimic::frame_jacobian(&mm, &mut ws.d, q, f, rf, &mut jac).map_err(core_err)?;
+        return Ok(out_mat(py, &DMatrix::from_column_slice(6, mm.nv(), jac.as_slice())));
+    }
+    let m = &model.m;
+    let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     let mut jac = nalgebra::Matrix6xX::zeros(m.nv());
@@ -2138,8 +2172,18 @@ fn frame_velocity<'py>(
     frame: &Bound<'py, PyAny>,
     reference: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("frame_velocity")?;
-    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
+    if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, Some(v), None)?;
+        mimic_ws(d)?;
+        let PyData { q, v, mimic: Some(ws), .. } = d else { unreachable!() };
+        let r = mimic::frame_velocity(&mm, &mut ws.d, q, v, f, rf).map_err(core_err)?;
+        return Ok(out_motion(py, &r));
+    }
+    let m = &model.m;
+    let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, v: vb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     read_vec(v, "v", m.nv(), "nv", vb)?;
@@ -2163,8 +2207,22 @@ fn frame_acceleration<'py>(
     reference: &str,
     classical: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("frame_acceleration")?;
-    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
+    if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, Some(v), Some((a, "a")))?;
+        mimic_ws(d)?;
+        let PyData { q, v, a, mimic: Some(ws), .. } = d else { unreachable!() };
+        let r = if classical {
+            mimic::frame_classical_acceleration(&mm, &mut ws.d, q, v, a, f, rf)
+        } else {
+            mimic::frame_acceleration(&mm, &mut ws.d, q, v, a, f, rf)
+        };
+        return Ok(out_motion(py, &r.map_err(core_err)?));
+    }
+    let m = &model.m;
+    let f = frame_arg(m, frame)?;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
     let PyData { d, q, v, a, .. } = d;
@@ -2189,8 +2247,24 @@ fn frame_velocity_derivatives<'py>(
     frame: &Bound<'py, PyAny>,
     reference: &str,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let m = model.full_only("frame_velocity_derivatives")?;
-    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
+    if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, Some(v), None)?;
+        mimic_ws(d)?;
+        let PyData { q, v, mimic: Some(ws), .. } = d else { unreachable!() };
+        let n = mm.nv();
+        let (mut x, mut y) = (nalgebra::Matrix6xX::zeros(n), nalgebra::Matrix6xX::zeros(n));
+        mimic::frame_velocity_derivatives(&mm, &mut ws.d, q, v, f, rf, &mut x, &mut y)
+            .map_err(core_err)?;
+        let o = |z: &nalgebra::Matrix6xX<f64>| {
+            out_mat(py, &DMatrix::from_column_slice(6, n, z.as_slice()))
+        };
+        return PyTuple::new(py, [o(&x), o(&y)]);
+    }
+    let m = &model.m;
+    let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, v: vb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     read_vec(v, "v", m.nv(), "nv", vb)?;
@@ -2217,8 +2291,27 @@ fn frame_acceleration_derivatives<'py>(
     frame: &Bound<'py, PyAny>,
     reference: &str,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let m = model.full_only("frame_acceleration_derivatives")?;
-    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
+    if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, Some(v), Some((a, "a")))?;
+        mimic_ws(d)?;
+        let PyData { q, v, a, mimic: Some(ws), .. } = d else { unreachable!() };
+        let n = mm.nv();
+        let z = || nalgebra::Matrix6xX::zeros(n);
+        let (mut x, mut y, mut w) = (z(), z(), z());
+        mimic::frame_acceleration_derivatives(
+            &mm, &mut ws.d, q, v, a, f, rf, &mut x, &mut y, &mut w,
+        )
+        .map_err(core_err)?;
+        let o = |z: &nalgebra::Matrix6xX<f64>| {
+            out_mat(py, &DMatrix::from_column_slice(6, n, z.as_slice()))
+        };
+        return PyTuple::new(py, [o(&x), o(&y), o(&w)]);
+    }
+    let m = &model.m;
+    let f = frame_arg(m, frame)?;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
     let PyData { d, q, v, a, .. } = d;
@@ -2240,7 +2333,15 @@ fn center_of_mass<'py>(
     mut data: PyRefMut<'py, PyData>,
     q: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("center_of_mass")?;
+    if let Some(mm) = model.mimic.clone() {
+        let d = &mut *data;
+        mimic_read(&mm, d, q, None, None)?;
+        mimic_ws(d)?;
+        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
+        let c = mimic::center_of_mass(&mm, &mut ws.d, q).map_err(core_err)?;
+        return Ok(out_vec(py, &DVector::from_column_slice(c.as_slice())));
+    }
+    let m = &model.m;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     let c = algo::center_of_mass(m, d, qb).map_err(core_err)?;
@@ -2260,7 +2361,17 @@ fn center_of_mass_motion<'py>(
     v: &Bound<'py, PyAny>,
     a: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let m = model.full_only("center_of_mass_motion")?;
+    let o = |x: &Vector3<f64>| out_vec(py, &DVector::from_column_slice(x.as_slice()));
+    if let Some(mm) = model.mimic.clone() {
+        let d = &mut *data;
+        mimic_read(&mm, d, q, Some(v), a.map(|a| (a, "a")))?;
+        mimic_ws(d)?;
+        let PyData { q, v, a: ab, mimic: Some(ws), .. } = d else { unreachable!() };
+        let (c, vc, ac) = mimic::center_of_mass_motion(&mm, &mut ws.d, q, v, a.map(|_| &*ab))
+            .map_err(core_err)?;
+        return PyTuple::new(py, [o(&c), o(&vc), o(&ac)]);
+    }
+    let m = &model.m;
     let PyData { d, q: qb, v: vb, a: ab, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     read_vec(v, "v", m.nv(), "nv", vb)?;
@@ -2269,7 +2380,6 @@ fn center_of_mass_motion<'py>(
     }
     let (c, vc, ac) =
         algo::center_of_mass_motion(m, d, qb, vb, a.map(|_| &*ab)).map_err(core_err)?;
-    let o = |x: &Vector3<f64>| out_vec(py, &DVector::from_column_slice(x.as_slice()));
     PyTuple::new(py, [o(&c), o(&vc), o(&ac)])
 }
 
@@ -2281,7 +2391,16 @@ fn center_of_mass_jacobian<'py>(
     mut data: PyRefMut<'py, PyData>,
     q: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("center_of_mass_jacobian")?;
+    if let Some(mm) = model.mimic.clone() {
+        let d = &mut *data;
+        mimic_read(&mm, d, q, None, None)?;
+        mimic_ws(d)?;
+        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
+        let mut j = nalgebra::Matrix3xX::zeros(mm.nv());
+        mimic::center_of_mass_jacobian(&mm, &mut ws.d, q, &mut j).map_err(core_err)?;
+        return Ok(out_mat(py, &DMatrix::from_column_slice(3, mm.nv(), j.as_slice())));
+    }
+    let m = &model.m;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     let mut j = nalgebra::Matrix3xX::zeros(m.nv());
@@ -2298,7 +2417,17 @@ fn center_of_mass_velocity_derivatives<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("center_of_mass_velocity_derivatives")?;
+    if let Some(mm) = model.mimic.clone() {
+        let d = &mut *data;
+        mimic_read(&mm, d, q, Some(v), None)?;
+        mimic_ws(d)?;
+        let PyData { q, v, mimic: Some(ws), .. } = d else { unreachable!() };
+        let mut j = nalgebra::Matrix3xX::zeros(mm.nv());
+        mimic::center_of_mass_velocity_derivatives(&mm, &mut ws.d, q, v, &mut j)
+            .map_err(core_err)?;
+        return Ok(out_mat(py, &DMatrix::from_column_slice(3, mm.nv(), j.as_slice())));
+    }
+    let m = &model.m;
     let PyData { d, q: qb, v: vb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     read_vec(v, "v", m.nv(), "nv", vb)?;
@@ -2320,13 +2449,29 @@ fn centroidal_dynamics_derivatives<'py>(
     v: &Bound<'py, PyAny>,
     a: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let m = model.full_only("centroidal_dynamics_derivatives")?;
+    let out = PyDict::new(py);
+    if let Some(mm) = model.mimic.clone() {
+        let d = &mut *data;
+        mimic_read(&mm, d, q, Some(v), Some((a, "a")))?;
+        mimic_ws(d)?;
+        let PyData { q, v, a, mimic: Some(ws), .. } = d else { unreachable!() };
+        let mut c = mimic::MimicCentroidal::new(&mm);
+        mimic::centroidal_dynamics_derivatives(&mm, &mut ws.d, &mut c, q, v, a)
+            .map_err(core_err)?;
+        out.set_item("h", out_vec(py, &DVector::from_column_slice(c.h())))?;
+        out.set_item("hdot", out_vec(py, &DVector::from_column_slice(c.hdot())))?;
+        out.set_item("Ag", out_mat(py, c.ag()))?;
+        out.set_item("dh_dq", out_mat(py, c.dh_dq()))?;
+        out.set_item("dhdot_dq", out_mat(py, c.dhdot_dq()))?;
+        out.set_item("dhdot_dv", out_mat(py, c.dhdot_dv()))?;
+        return Ok(out);
+    }
+    let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
     let PyData { d, q, v, a, .. } = d;
     let mut c = algo::Centroidal::new(m);
     algo::centroidal_dynamics_derivatives(m, d, &mut c, q, v, a).map_err(core_err)?;
-    let out = PyDict::new(py);
     out.set_item("h", out_vec(py, &DVector::from_column_slice(c.h())))?;
     out.set_item("hdot", out_vec(py, &DVector::from_column_slice(c.hdot())))?;
     out.set_item("Ag", out_mat(py, c.ag()))?;
@@ -2348,8 +2493,19 @@ fn frame_jacobian_derivative<'py>(
     frame: &Bound<'py, PyAny>,
     reference: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("frame_jacobian_derivative")?;
-    let (f, rf) = (frame_arg(m, frame)?, algo::ReferenceFrame::parse(reference).map_err(core_err)?);
+    let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
+    if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, None, None)?;
+        mimic_ws(d)?;
+        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
+        let mut t = Tensor3::zeros(6, mm.nv(), mm.nv());
+        mimic::frame_jacobian_derivative(&mm, &mut ws.d, q, f, rf, &mut t).map_err(core_err)?;
+        return Ok(out_tensor(py, &t));
+    }
+    let m = &model.m;
+    let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     let mut t = Tensor3::zeros(6, m.nv(), m.nv());
@@ -2367,7 +2523,17 @@ fn frame_placement_hessian<'py>(
     q: &Bound<'py, PyAny>,
     frame: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let m = model.full_only("frame_placement_hessian")?;
+    if let Some(mm) = model.mimic.clone() {
+        let f = frame_arg(mm.full(), frame)?;
+        let d = &mut *data;
+        mimic_read(&mm, d, q, None, None)?;
+        mimic_ws(d)?;
+        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
+        let mut t = Tensor3::zeros(6, mm.nv(), mm.nv());
+        mimic::frame_placement_hessian(&mm, &mut ws.d, q, f, &mut t).map_err(core_err)?;
+        return Ok(out_tensor(py, &t));
+    }
+    let m = &model.m;
     let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;

@@ -236,6 +236,89 @@ def test_reduced_model_api():
                                sodyn.crba(model, d, q) + 0.1 * g.T @ g, atol=1e-12)
 
 
+def test_frames_com_and_configuration_jacobians():
+    """Frames, centre of mass, centroidal, ``d_integrate``/``d_difference`` of the reduced model
+    against the full tree at ``expand(q)``, ``G v``, ``G a`` (Jacobians ``J G``), and central
+    differences."""
+    model = sodyn.Model.from_urdf(str(ARM), floating_base=True, mimic=True)
+    full, g = model.full_model, model.mimic_map
+    d, fd = model.create_data(), full.create_data()
+    rng = np.random.default_rng(5)
+    q = model.random_configuration(seed=5)
+    v, a = rng.uniform(-1, 1, 13), rng.uniform(-1, 1, 13)
+    qf = model.expand_configuration(q)
+    for frame in ["tool", "thumb_tip", "finger_r"]:
+        np.testing.assert_allclose(sodyn.frame_placement(model, d, q, frame),
+                                   sodyn.frame_placement(full, fd, qf, frame), atol=1e-14)
+        for rf in ["local", "world", "local_world_aligned"]:
+            jac = sodyn.frame_jacobian(model, d, q, frame, rf)
+            assert jac.shape == (6, 13)
+            np.testing.assert_allclose(jac, sodyn.frame_jacobian(full, fd, qf, frame, rf) @ g,
+                                       atol=1e-13)
+            np.testing.assert_allclose(sodyn.frame_velocity(model, d, q, v, frame, rf), jac @ v,
+                                       atol=1e-13)
+            for cl in [False, True]:
+                np.testing.assert_allclose(
+                    sodyn.frame_acceleration(model, d, q, v, a, frame, rf, classical=cl),
+                    sodyn.frame_acceleration(full, fd, qf, g @ v, g @ a, frame, rf, classical=cl),
+                    atol=1e-13)
+            dvq, dvv = sodyn.frame_velocity_derivatives(model, d, q, v, frame, rf)
+            daq, dav, daa = sodyn.frame_acceleration_derivatives(model, d, q, v, a, frame, rf)
+            np.testing.assert_allclose(dvv, jac, atol=1e-13)
+            np.testing.assert_allclose(daa, jac, atol=1e-13)
+            h = 1e-6
+            num = np.zeros((6, 13))
+            for k in range(13):
+                e = np.zeros(13)
+                e[k] = h
+                num[:, k] = (sodyn.frame_acceleration(model, d, model.integrate(q, e), v, a,
+                                                      frame, rf)
+                             - sodyn.frame_acceleration(model, d, model.integrate(q, -e), v, a,
+                                                        frame, rf)) / (2 * h)
+            assert rel_err(daq, num)[0] < 1e-7
+            dj = sodyn.frame_jacobian_derivative(model, d, q, frame, rf)
+            assert dj.shape == (6, 13, 13)
+            dj_full = sodyn.frame_jacobian_derivative(full, fd, qf, frame, rf)
+            np.testing.assert_allclose(dj, np.einsum("rfg,fc,gk->rck", dj_full, g, g),
+                                       atol=1e-12)
+        ph = sodyn.frame_placement_hessian(model, d, q, frame)
+        ph_full = sodyn.frame_placement_hessian(full, fd, qf, frame)
+        np.testing.assert_allclose(ph, np.einsum("rfg,fc,gk->rck", ph_full, g, g), atol=1e-12)
+    np.testing.assert_allclose(sodyn.center_of_mass(model, d, q),
+                               sodyn.center_of_mass(full, fd, qf), atol=1e-14)
+    np.testing.assert_allclose(sodyn.center_of_mass_jacobian(model, d, q),
+                               sodyn.center_of_mass_jacobian(full, fd, qf) @ g, atol=1e-13)
+    for x, y in zip(sodyn.center_of_mass_motion(model, d, q, v, a),
+                    sodyn.center_of_mass_motion(full, fd, qf, g @ v, g @ a)):
+        np.testing.assert_allclose(x, y, atol=1e-13)
+    np.testing.assert_allclose(sodyn.center_of_mass_velocity_derivatives(model, d, q, v),
+                               sodyn.center_of_mass_velocity_derivatives(full, fd, qf, g @ v) @ g,
+                               atol=1e-13)
+    cen = sodyn.centroidal_dynamics_derivatives(model, d, q, v, a)
+    cen_f = sodyn.centroidal_dynamics_derivatives(full, fd, qf, g @ v, g @ a)
+    for k in ["h", "hdot"]:
+        np.testing.assert_allclose(cen[k], cen_f[k], atol=1e-13)
+    for k in ["Ag", "dh_dq", "dhdot_dq", "dhdot_dv"]:
+        assert cen[k].shape == (6, 13)
+        np.testing.assert_allclose(cen[k], cen_f[k] @ g, atol=1e-12)
+    dq = rng.uniform(-1, 1, 13)
+    q1 = model.integrate(q, dq)
+    # The full velocity index of each reduced one (the independent joints, by name).
+    fj = {j.name: j for j in full.joints}
+    keep = [0] * 13
+    for j in model.joints:
+        for i in range(j.nv):
+            keep[j.idx_v + i] = fj[j.name].idx_v + i
+    for arg in [0, 1]:
+        di = model.d_integrate(q, dq, arg)
+        dd = model.d_difference(q, q1, arg)
+        assert di.shape == dd.shape == (13, 13)
+        np.testing.assert_array_equal(
+            di, full.d_integrate(qf, g @ dq, arg)[np.ix_(keep, keep)])
+        np.testing.assert_array_equal(
+            dd, full.d_difference(qf, model.expand_configuration(q1), arg)[np.ix_(keep, keep)])
+
+
 def test_derivatives_match_central_differences():
     model = sodyn.Model.from_urdf(str(ARM), floating_base=True, mimic=True)
     d = model.create_data()
@@ -271,10 +354,7 @@ def test_unsupported_functions_and_bad_inputs_raise():
     model = sodyn.Model.from_urdf(str(ARM), mimic=True)
     d = model.create_data()
     q = model.neutral()
-    with pytest.raises(sodyn.SodynError, match="frame_jacobian does not support models with mimic"):
-        sodyn.frame_jacobian(model, d, q, "tool")
-    for f, args in [(sodyn.center_of_mass, (q,)),
-                    (sodyn.kkt_so_contracted, (q, np.zeros(7), np.zeros(7), [sodyn.Contact("tool")],
+    for f, args in [(sodyn.kkt_so_contracted, (q, np.zeros(7), np.zeros(7), [sodyn.Contact("tool")],
                                                np.ones(7), np.ones(3))),
                     (sodyn.idfoza, (q, np.ones(7)))]:
         with pytest.raises(sodyn.SodynError, match="does not support models with mimic"):

@@ -460,7 +460,7 @@ pub fn eval_json(model: &Model, s: &State, order: u32) -> Result<Value> {
 }
 
 /// `[ang; lin]` of a motion.
-fn motion_json(m: &sodyn::spatial::Motion) -> Value {
+pub(crate) fn motion_json(m: &sodyn::spatial::Motion) -> Value {
     json!([m.ang.x, m.ang.y, m.ang.z, m.lin.x, m.lin.y, m.lin.z])
 }
 

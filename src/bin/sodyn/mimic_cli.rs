@@ -1,7 +1,7 @@
 //! `--mimic`: the commands on a [`MimicModel`] (URDF `<mimic>` joints as constraints, the
 //! reduced coordinates; see `sodyn::mimic`).
 
-use super::eval::{mat_json, tensor_json};
+use super::eval::{mat_json, motion_json, tensor_json};
 use super::{ModelArgs, load_model_spec, with_armature_arg};
 use nalgebra::DVector;
 use serde_json::{Map, Value, json};
@@ -115,11 +115,13 @@ pub(crate) struct State {
     /// The weights `tau`, `qdd` of the contracted second order.
     w_tau: Option<DVector<f64>>,
     w_qdd: Option<DVector<f64>>,
+    /// Frames of the full tree whose kinematics `eval` writes.
+    frames: Vec<usize>,
 }
 
 /// Parses a state file for a mimic model: `q` (length nq, default neutral), `v`, `a`, `tau`
-/// (length nv, default zeros), `contacts`, `lambda`, `restitution` as without `--mimic`
-/// (frames of the full tree) and `weights` `tau`, `qdd` (length nv); `frames` and the contact
+/// (length nv, default zeros), `contacts`, `lambda`, `restitution`, `frames` as without
+/// `--mimic` (frames of the full tree) and `weights` `tau`, `qdd` (length nv); the contact
 /// weights are errors (not supported with `--mimic`).
 pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<State> {
     let val: Value =
@@ -127,11 +129,11 @@ pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<Stat
     let obj = val
         .as_object()
         .ok_or_else(|| Error::Io(format!("{file}: the state must be a JSON object")))?;
-    let known = ["q", "v", "a", "tau", "contacts", "lambda", "restitution", "weights"];
+    let known = ["q", "v", "a", "tau", "contacts", "lambda", "restitution", "weights", "frames"];
     if let Some(k) = obj.keys().find(|k| !known.contains(&k.as_str())) {
         return Err(Error::Io(format!(
             "{file}: key \"{k}\" is not supported with --mimic (a mimic model's state has q, v, a, \
-             tau, contacts, lambda, restitution, weights: frames take models without --mimic)"
+             tau, contacts, lambda, restitution, weights, frames)"
         )));
     }
     let weights = match obj.get("weights") {
@@ -151,7 +153,7 @@ pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<Stat
     // The contacts, λ and restitution by the parser of eval (frames of the full tree).
     let rest: serde_json::Map<String, Value> = obj
         .iter()
-        .filter(|(k, _)| ["contacts", "lambda", "restitution"].contains(&k.as_str()))
+        .filter(|(k, _)| ["contacts", "lambda", "restitution", "frames"].contains(&k.as_str()))
         .map(|(k, x)| (k.clone(), x.clone()))
         .collect();
     let text = serde_json::to_string(&Value::Object(rest)).map_err(|e| Error::Io(e.to_string()))?;
@@ -208,6 +210,7 @@ pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<Stat
         restitution: cst.restitution,
         w_tau: weight("tau")?,
         w_qdd: weight("qdd")?,
+        frames: cst.frames,
     })
 }
 
@@ -310,6 +313,10 @@ pub(crate) fn eval_json(mm: &MimicModel, s: &State, order: u32) -> Result<Value>
     }
     if !s.contacts.is_empty() {
         contact_outputs(mm, s, order, &mut data, o, &mut errors)?;
+    }
+    if !s.frames.is_empty() {
+        o.insert("frames".into(), frames_json(mm, s, order, &mut data)?);
+        com_json(mm, s, &mut data, o)?;
     }
     if s.w_tau.is_some() || s.w_qdd.is_some() {
         let mut c = Map::new();
@@ -525,5 +532,109 @@ pub(crate) fn run_demo(spec: &str, seed: u64) -> Result<()> {
         row("      d2qdd/dqdv", t, rel_t(so.d2qdd_dqdv(), &r.d2_aba_dqdv(qs, vs, ts)));
         row("      d2qdd/dtau dq", t, rel_t(so.d2qdd_dtaudq(), &r.d2_aba_dtaudq(qs, vs, ts)));
     }
+    Ok(())
+}
+
+fn m6_json(m: &nalgebra::Matrix6xX<f64>) -> Value {
+    mat_json(&nalgebra::DMatrix::from_column_slice(6, m.ncols(), m.as_slice()))
+}
+
+/// The `"frames"` object of `eval --mimic` (keyed by frame name): the keys of `eval`
+/// (`djacobian_dq` at order 2), in the reduced coordinates (the full tree's at `expand(q)`,
+/// `G v`, `G a`, Jacobians and derivatives times `G`).
+fn frames_json(mm: &MimicModel, s: &State, order: u32, data: &mut MimicData) -> Result<Value> {
+    use sodyn::algo::ReferenceFrame;
+    let n = mm.nv();
+    let refs = [
+        ("local", ReferenceFrame::Local),
+        ("world", ReferenceFrame::World),
+        ("local_world_aligned", ReferenceFrame::LocalWorldAligned),
+    ];
+    let keys = [
+        "jacobian",
+        "velocity",
+        "acceleration",
+        "classical_acceleration",
+        "dvelocity_dq",
+        "dvelocity_dv",
+        "dacceleration_dq",
+        "dacceleration_dv",
+        "dacceleration_da",
+        "djacobian_dq",
+    ];
+    let (q, v, a) = (&s.q, &s.v, &s.a);
+    let mut frames = Map::new();
+    for &f in &s.frames {
+        let mut fo = Map::new();
+        let t = mimic::frame_placement(mm, data, q, f)?;
+        let rot: Vec<Value> =
+            (0..3).map(|i| json!([t.rot[(i, 0)], t.rot[(i, 1)], t.rot[(i, 2)]])).collect();
+        fo.insert("placement".into(), json!({"rotation": rot, "translation": t.trans.as_slice()}));
+        let mut per: Vec<Map<String, Value>> = keys.iter().map(|_| Map::new()).collect();
+        let z = || nalgebra::Matrix6xX::zeros(n);
+        let (mut j, mut x, mut y, mut w) = (z(), z(), z(), z());
+        for (name, rf) in refs {
+            let name = name.to_string();
+            mimic::frame_jacobian(mm, data, q, f, rf, &mut j)?;
+            per[0].insert(name.clone(), m6_json(&j));
+            per[1]
+                .insert(name.clone(), motion_json(&mimic::frame_velocity(mm, data, q, v, f, rf)?));
+            let acc = mimic::frame_acceleration(mm, data, q, v, a, f, rf)?;
+            per[2].insert(name.clone(), motion_json(&acc));
+            let cl = mimic::frame_classical_acceleration(mm, data, q, v, a, f, rf)?;
+            per[3].insert(name.clone(), motion_json(&cl));
+            mimic::frame_velocity_derivatives(mm, data, q, v, f, rf, &mut x, &mut y)?;
+            per[4].insert(name.clone(), m6_json(&x));
+            per[5].insert(name.clone(), m6_json(&y));
+            mimic::frame_acceleration_derivatives(
+                mm, data, q, v, a, f, rf, &mut x, &mut y, &mut w,
+            )?;
+            per[6].insert(name.clone(), m6_json(&x));
+            per[7].insert(name.clone(), m6_json(&y));
+            per[8].insert(name.clone(), m6_json(&w));
+            if order >= 2 {
+                let mut t = sodyn::tensor::Tensor3::zeros(6, n, n);
+                mimic::frame_jacobian_derivative(mm, data, q, f, rf, &mut t)?;
+                per[9].insert(name, tensor_json(&t));
+            }
+        }
+        for (k, m) in keys.iter().zip(per) {
+            if !m.is_empty() {
+                fo.insert((*k).into(), Value::Object(m));
+            }
+        }
+        frames.insert(mm.full().frames()[f].name.clone(), Value::Object(fo));
+    }
+    Ok(Value::Object(frames))
+}
+
+/// The `"com"` and `"centroidal"` objects of `eval --mimic` (with `frames`, as `eval`), in the
+/// reduced coordinates.
+fn com_json(
+    mm: &MimicModel,
+    s: &State,
+    data: &mut MimicData,
+    o: &mut Map<String, Value>,
+) -> Result<()> {
+    let n = mm.nv();
+    let (c, vc, ac) = mimic::center_of_mass_motion(mm, data, &s.q, &s.v, Some(&s.a))?;
+    let mut j = nalgebra::Matrix3xX::zeros(n);
+    mimic::center_of_mass_jacobian(mm, data, &s.q, &mut j)?;
+    let jm = mat_json(&nalgebra::DMatrix::from_column_slice(3, n, j.as_slice()));
+    mimic::center_of_mass_velocity_derivatives(mm, data, &s.q, &s.v, &mut j)?;
+    let dm = mat_json(&nalgebra::DMatrix::from_column_slice(3, n, j.as_slice()));
+    o.insert(
+        "com".into(),
+        json!({"position": c.as_slice(), "velocity": vc.as_slice(),
+               "acceleration": ac.as_slice(), "jacobian": jm, "dvelocity_dq": dm}),
+    );
+    let mut cen = mimic::MimicCentroidal::new(mm);
+    mimic::centroidal_dynamics_derivatives(mm, data, &mut cen, &s.q, &s.v, &s.a)?;
+    o.insert(
+        "centroidal".into(),
+        json!({"h": cen.h().as_slice(), "hdot": cen.hdot().as_slice(), "Ag": mat_json(cen.ag()),
+               "dh_dq": mat_json(cen.dh_dq()), "dhdot_dq": mat_json(cen.dhdot_dq()),
+               "dhdot_dv": mat_json(cen.dhdot_dv())}),
+    );
     Ok(())
 }
