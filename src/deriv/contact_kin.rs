@@ -16,6 +16,12 @@
 //! A first derivative is an expression in base quantities; its second derivative is the same
 //! expression evaluated with *dual* base quantities whose tangents follow these rules. This gives
 //! `T[i][j][k] = ∂/∂x_k (∂y_i/∂u_j)` with the inner derivative first, as everywhere else.
+//!
+//! The second derivatives that the KKT and impact second order evaluate for every DoF pair or
+//! triple are in closed form instead: `∂u_x/∂q_l = w_a × u_b` (`a` the ancestor of `x`, `l`)
+//! differentiated once more ([`du_dq2`], [`djac_dq2`] for every contact type), running sums along
+//! the path for `∂(J z)/∂q` ([`djz_dq_parts`]) and for `∂²a_p/∂q∂q̇` ([`dap_dqdv`]); the dual
+//! evaluations remain for the contact accelerations along `q` ([`dap_dq`], `dacc_dq`).
 
 use crate::spatial::Motion;
 use nalgebra::{Matrix3, Vector3};
