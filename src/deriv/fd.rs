@@ -1,5 +1,6 @@
 //! Forward-dynamics derivatives: first order (`∂q̈/∂u = −M⁻¹ ∂ID/∂u`, eq. jain_FO_eqn) and
-//! second order (eq. eqn_FD_SO_43), the latter with IDFOZA for the `∂M/∂q` products.
+//! second order (eq. eqn_FD_SO_43), the latter with the rank-12 form of `∂M/∂q` for its
+//! products.
 //!
 //! [`fd_derivatives`]: inputs model, state `(q, q̇, τ)`, optional `fext` (body frames). Outputs
 //! `q̈` (`data.qdd`), `∂q̈/∂q` (`data.dqdd_dq`, tangent space), `∂q̈/∂q̇` (`data.dqdd_dv`),
@@ -19,28 +20,28 @@
 //!    order;
 //! 3. steps 3–4 of [`fd_derivatives`], and the dense `M⁻¹`;
 //! 4. `∂²q̈/∂q̇²[:, j, k] = −M⁻¹ ID_vv[:, j, k]` (eq. eqn_FD_SO_43: `M` does not depend on `q̇`);
-//! 5. `∂(M⁻¹)/∂q_k = −M⁻¹ ∂M/∂q_k M⁻¹ = −(U Vᵀ + V Uᵀ)` from the rank-12 form
-//!    `∂M/∂q_k = Pᵀ Q + Qᵀ P` (see `dminv_dq`; zero for the DoFs of joints attached to the
-//!    world);
+//! 5. the rank-12 form `∂M/∂q_k = P_Jᵀ Q_k + Q_kᵀ P_J` (`J` the joint of `k`; zero for the
+//!    DoFs of joints attached to the world; see `dminv_dq`) and its factors
+//!    `U_J = M⁻¹ P_Jᵀ`, `V_k = M⁻¹ Q_kᵀ` (`n × 6` each), from path sums of the columns of
+//!    `M⁻¹` along the tree (`path_sums`, `q_rows`);
 //! 6. `∂²q̈/∂q²[:, j, k] = −M⁻¹(ID_qq[:, j, k] + ∂M/∂q_k X_q[:, j] + ∂M/∂q_j X_q[:, k])`
-//!    (eq. eqn_FD_SO_43), computed as
-//!    `−M⁻¹ ID_qq[:, j, k] − ∂(M⁻¹)/∂q_k ∂τ/∂q_j − ∂(M⁻¹)/∂q_j ∂τ/∂q_k` (as
-//!    `X_q = −M⁻¹ ∂τ/∂q`); for two DoFs `j < k` of one joint (which need not commute)
-//!    the column `(k, j)` is `(j, k) − M⁻¹(ID_qq[:, k, j] − ID_qq[:, j, k])`;
-//! 7. `∂²q̈/∂q∂q̇[:, j, k] = −M⁻¹(ID_qv[:, j, k] + ∂M/∂q_j X_v[:, k])` (eq. eqn_FD_SO_43), the
-//!    products `∂M/∂q · X_v[:, k]` by IDFOZA ([`super::idfoza`]) of the columns of `X_v`.
+//!    (eq. eqn_FD_SO_43), with `−M⁻¹ ∂M/∂q_k X_q[:, j] = −U_J (Q_k X_q[:, j]) − V_k (P_J X_q[:, j])`
+//!    (the six-vectors `P_J X_q` and `Q_k X_q` for every `j` at once from path sums of the rows
+//!    of `X_q`); for two DoFs `j < k` of one joint (which need not commute) the column
+//!    `(k, j)` is `(j, k) − M⁻¹(ID_qq[:, k, j] − ID_qq[:, j, k])`;
+//! 7. `∂²q̈/∂q∂q̇[:, j, k] = −M⁻¹(ID_qv[:, j, k] + ∂M/∂q_j X_v[:, k])` (eq. eqn_FD_SO_43),
+//!    likewise with `−M⁻¹ ∂M/∂q_j X_v[:, k] = −U_J (Q_j X_v[:, k]) − V_j (P_J X_v[:, k])`;
+//! 8. `∂(M⁻¹)/∂q_k = −M⁻¹ ∂M/∂q_k M⁻¹ = −(U_J V_kᵀ + V_k U_Jᵀ)`, a symmetric page.
 //!
 //! Every `−M⁻¹ b` is a product with the dense `M⁻¹` over the rows where `b` can be non-zero
-//! (DoFs related to `j` or `k`); columns that vanish structurally (DoFs of joints attached to
-//! the world, translations of those joints in `∂²q̈/∂q²`) are never written.
+//! (DoFs related to both `j` and `k`); columns that vanish structurally (DoFs of joints
+//! attached to the world, translations of those joints in `∂²q̈/∂q²`) are never written.
 
 use super::id_fo::id_derivatives_placed;
 use super::id_so::{SoData, id_so_unchecked, qv_offset};
 #[cfg(target_arch = "x86_64")]
 use super::zero::{Avx4, Avx8};
-use super::zero::{
-    IdfozaWs, Lanes, cross_force_lanes, cross_motion_lanes, idfoza_lanes_core, inertia_mul_l, v6,
-};
+use super::zero::{Lanes, cross_force_lanes, v6};
 use crate::algo::Data;
 use crate::algo::internal::{aba_unchecked, check_fext, ltl_in_place, ltl_solve_fd};
 use crate::error::Result;
@@ -48,9 +49,9 @@ use crate::linalg::{
     Gemm4, Gemm4Term, TO_L1, TO_L2, neg_gemm4_sparse, prefetch, transpose_strided,
 };
 use crate::model::{Model, check_vec};
-use crate::spatial::Force;
+use crate::spatial::{Force, Motion};
 use crate::tensor::Tensor3;
-use nalgebra::DVector;
+use nalgebra::{DVector, Vector3};
 
 /// FO FD part shared by first and second order: from `data.m`, `data.dtau_dq`, `data.dtau_dv`
 /// (at `q̈ = FD`), factorise `M` and fill `dqdd_dq`, `dqdd_dv`, `minv`.
@@ -188,22 +189,32 @@ pub struct FdSoData {
     /// The inverse-dynamics second-order derivatives at `(q, q̇, FD(q, q̇, τ))`: the three
     /// `∂²τ` tensors, of which `∂²τ/∂q²` and `∂²τ/∂q̇²` only in the columns the products read
     /// (see [`SoData::upper_halves`]); its `dm_dq` is empty, the `∂M/∂q` products being done
-    /// by IDFOZA.
+    /// in rank-12 form.
     pub(crate) id: SoData,
     d2qdd_dq2: Tensor3,
     d2qdd_dv2: Tensor3,
     d2qdd_dqdv: Tensor3,
     d2qdd_dtaudq: Tensor3,
-    /// IDFOZA workspaces, four and eight right-hand sides.
-    ws4: IdfozaWs<[f64; 4]>,
-    ws8: IdfozaWs<[f64; 8]>,
-    /// The rank-12 factors of `∂(M⁻¹)/∂q` (see [`dminv_dq`]), six columns of [`Self::ld`] rows
-    /// each: `U_J` and `W_J` per joint `J` (at `6 ld J`), and `V` of one page.
+    /// The rank-12 factors of `∂(M⁻¹)/∂q` and of the `∂M/∂q` products (see [`dminv_dq`] and
+    /// [`so_products`]), six columns of [`Self::ld`] rows each: `U_J` and `W_J` per joint `J`
+    /// (at `6 ld J`), `V_k` per DoF `k` (at `6 ld k`), `Y_J` and `R_J` per joint (of `∂q̈/∂q`,
+    /// then of `∂q̈/∂q̇`), and `C_k` per DoF `k` (of one DoF for `∂q̈/∂q`).
     lr_u: Vec<f64>,
     lr_w: Vec<f64>,
     lr_v: Vec<f64>,
+    lr_y: Vec<f64>,
+    lr_r: Vec<f64>,
+    lr_c: Vec<f64>,
+    /// `S_k` and `½ X_k` per DoF `k` (see [`half_x`]).
+    xh: Vec<([f64; 6], [[f64; 6]; 6])>,
     /// `−V[c, :]` then `−U[c, :]` for each row `c` of one page (see [`dminv_pages`]).
     lr_t: Vec<f64>,
+    /// `(∂q̈/∂q)ᵀ`, then `(∂q̈/∂q̇)ᵀ`, with columns padded with zeros to [`Self::ld`] rows.
+    xt: Vec<f64>,
+    /// Twice the column `k` of `C` and of `Y_J` at the values `a ld` (`a < 6`), for the
+    /// diagonal columns of `∂²q̈/∂q²` (zero elsewhere).
+    diag_c: Vec<f64>,
+    diag_y: Vec<f64>,
     /// `M⁻¹` with its columns padded with zeros to [`Self::ld`] rows (whole vectors of 8).
     minv: Vec<f64>,
     /// Leading dimension of `minv`: `nv` rounded up to a multiple of 8.
@@ -214,8 +225,6 @@ pub struct FdSoData {
     /// descendant of it, as bits. Row `l` of `∂M/∂q_j` and of `∂τ/∂q_j` vanishes outside it, and
     /// column `(j, k)` of `∂²q̈/∂q̇²` vanishes unless `k` is in it.
     related: Vec<u64>,
-    /// `related4[words g..]`: the union of the related sets of the DoFs `4 g..4 g + 4`.
-    related4: Vec<u64>,
     /// `root[j]`: DoF `j` belongs to a joint attached to the world. Moving such a joint moves
     /// its whole subtree rigidly, and every joint type has a constant body-frame motion
     /// subspace, so `∂M/∂q_j = 0`; and `τ` depends on `q_j` only through gravity and the
@@ -233,13 +242,6 @@ pub struct FdSoData {
     qj: Vec<u32>,
     /// `qj_pos[k]`: the position of DoF `k` in `qj` (`u32::MAX` for the translations).
     qj_pos: Vec<u32>,
-    /// `relq4[words b..]`: the union of the related sets of the DoFs `qj[4 b..4 b + 4]`.
-    relq4: Vec<u64>,
-    /// A page of `∂(M⁻¹)/∂q` with its columns padded to [`Self::ld`] rows (zero): the last
-    /// one, or any when `nv` is small (see [`so_products`]).
-    dlast: Vec<f64>,
-    /// Twice a column of `∂τ/∂q` (`nv` values).
-    diag2: Vec<f64>,
     /// `nv` zeros.
     zeros: Vec<f64>,
     /// The groups `(j0, k)` of `∂²q̈/∂q̇²` with a structurally non-zero column, in order.
@@ -270,22 +272,12 @@ impl FdSoData {
                 }
             }
         }
-        let mut related4 = vec![0u64; n.div_ceil(4) * words];
-        for j in 0..n {
-            for w in 0..words {
-                related4[words * (j / 4) + w] |= related[words * j + w];
-            }
-        }
         let ld = n.div_ceil(8) * 8;
         let qj: Vec<u32> =
             (0..n).filter(|&k| !root_translation(model, k)).map(|k| k as u32).collect();
         let mut qj_pos = vec![u32::MAX; n];
-        let mut relq4 = vec![0u64; qj.len().div_ceil(4) * words];
         for (p, &j) in qj.iter().enumerate() {
             qj_pos[j as usize] = p as u32;
-            for w in 0..words {
-                relq4[words * (p / 4) + w] |= related[words * j as usize + w];
-            }
         }
         // ∂²q̈/∂q̇²: columns j ≤ k, four j at a time, the groups where some (j ≤ k, k) is
         // related.
@@ -304,23 +296,24 @@ impl FdSoData {
             d2qdd_dv2: Tensor3::zeros(n, n, n),
             d2qdd_dqdv: Tensor3::zeros(n, n, n),
             d2qdd_dtaudq: Tensor3::zeros(n, n, n),
-            ws4: IdfozaWs::new(model),
-            ws8: IdfozaWs::new(model),
             lr_u: vec![0.0; 6 * ld * model.njoints()],
             lr_w: vec![0.0; 6 * ld * model.njoints()],
-            lr_v: vec![0.0; 6 * ld],
+            lr_v: vec![0.0; 6 * ld * n],
+            lr_y: vec![0.0; 6 * ld * model.njoints()],
+            lr_r: vec![0.0; 6 * ld * model.njoints()],
+            lr_c: vec![0.0; 6 * ld * n],
             lr_t: vec![0.0; 12 * n],
+            xh: vec![([0.0; 6], [[0.0; 6]; 6]); n],
+            xt: vec![0.0; ld * n],
+            diag_c: vec![0.0; 6 * ld],
+            diag_y: vec![0.0; 6 * ld],
             minv: vec![0.0; ld * n],
             ld,
             words,
             related,
-            related4,
             root: (0..n).map(|j| model.parents[model.dof_joint[j]] == 0).collect(),
             qj,
             qj_pos,
-            relq4,
-            dlast: vec![0.0; ld * n],
-            diag2: vec![0.0; n],
             zeros: vec![0.0; n],
             vv_groups,
             set: vec![0; words],
@@ -355,6 +348,12 @@ fn root_translation(model: &Model, k: usize) -> bool {
         && model.joints[jt].subspace_column(k - model.idx_v[jt]).ang == nalgebra::Vector3::zeros()
 }
 
+/// Whether the bit set `set` holds `l`.
+#[inline(always)]
+fn has(set: &[u64], l: usize) -> bool {
+    set[l / 64] >> (l % 64) & 1 != 0
+}
+
 /// Calls `f(l)` for the elements `l` of a bit set (bit `l % 64` of word `l / 64`), in
 /// increasing order.
 #[inline(always)]
@@ -375,7 +374,6 @@ struct Products<'a> {
     n: usize,
     words: usize,
     related: &'a [u64],
-    related4: &'a [u64],
     set: &'a mut [u64],
     set2: &'a mut [u64],
     idx: &'a mut [u32],
@@ -387,10 +385,6 @@ impl<'a> Products<'a> {
     /// DoF `j`'s related set (see [`FdSoData`]).
     fn related(&self, j: usize) -> &'a [u64] {
         &self.related[self.words * j..self.words * (j + 1)]
-    }
-    /// The union of the related sets of the DoFs `j0..j0 + 4` (`j0` a multiple of 4).
-    fn related4(&self, j0: usize) -> &'a [u64] {
-        &self.related4[self.words * (j0 / 4)..self.words * (j0 / 4 + 1)]
     }
     /// `set ← a ∪ b`, or `a ∩ b` if `and` (each `words` values).
     #[inline(always)]
@@ -419,19 +413,8 @@ impl<'a> Products<'a> {
         out: [*mut f64; 4],
         mirror: [*mut f64; 4],
     ) {
-        let mut cnt = 0;
-        let (idx, rhs) = (&mut *self.idx, self.rhs.as_mut_ptr());
-        for_each_row(self.set, |l| {
-            let b = val(l);
-            // Stored in any case, kept if non-zero (NaN counts as non-zero and propagates).
-            debug_assert!(cnt < idx.len());
-            // SAFETY: cnt < the number of rows of `set` ≤ nv = idx.len() = rhs.len() / 4.
-            unsafe {
-                *idx.get_unchecked_mut(cnt) = l as u32;
-                *rhs.add(4 * cnt).cast::<[f64; 4]>() = b;
-            }
-            cnt += usize::from(b.iter().fold(false, |a, x| a | (*x != 0.0)));
-        });
+        // SAFETY: the caller's contract.
+        let cnt = unsafe { self.compact_rows(val) };
         let r = self.rhs.as_ptr();
         // SAFETY: the caller's contract; rows t < cnt of the compacted copy.
         unsafe {
@@ -482,6 +465,36 @@ impl<'a> Products<'a> {
         unsafe { self.product(rows, cnt, b, bs, true, accumulate, out, mirror) };
     }
 
+    /// The outputs of an empty product: `out[u]` and `mirror[u]` zero (rows `< rows`), or the
+    /// mirror a copy of `out[u]` in the lanes of `accumulate`.
+    ///
+    /// # Safety
+    /// As [`Self::solve_group`] for the outputs.
+    #[inline(always)]
+    unsafe fn zero_or_copy(
+        &self,
+        rows: usize,
+        accumulate: u8,
+        out: [*mut f64; 4],
+        mirror: [*mut f64; 4],
+    ) {
+        for u in 0..4 {
+            let (o, m) = (out[u], mirror[u]);
+            // SAFETY: the caller's contract (distinct outputs of `rows` values).
+            unsafe {
+                if accumulate >> u & 1 != 0 {
+                    if !m.is_null() {
+                        std::ptr::copy_nonoverlapping(o, m, rows);
+                    }
+                    continue;
+                }
+                for p in [o, m].into_iter().filter(|p| !p.is_null()) {
+                    std::ptr::write_bytes(p, 0, rows);
+                }
+            }
+        }
+    }
+
     /// `out[u] ← −Σ_{t < cnt} M⁻¹[:, idx[t]] B[idx[t], u]` (see [`Gemm4`]; `out[u]` plus that in
     /// the lanes of `accumulate`), zero (or `out[u]`) if `cnt = 0`.
     ///
@@ -501,22 +514,8 @@ impl<'a> Products<'a> {
         mirror: [*mut f64; 4],
     ) {
         if cnt == 0 {
-            for u in 0..4 {
-                let (o, m) = (out[u], mirror[u]);
-                // SAFETY: the caller's contract (distinct outputs of `rows` values).
-                unsafe {
-                    if accumulate >> u & 1 != 0 {
-                        if !m.is_null() {
-                            std::ptr::copy_nonoverlapping(o, m, rows);
-                        }
-                        continue;
-                    }
-                    for p in [o, m].into_iter().filter(|p| !p.is_null()) {
-                        std::ptr::write_bytes(p, 0, rows);
-                    }
-                }
-            }
-            return;
+            // SAFETY: the caller's contract.
+            return unsafe { self.zero_or_copy(rows, accumulate, out, mirror) };
         }
         let idx = &self.idx[..cnt];
         let (a, lda, cols) = (self.minv, self.ld, self.n);
@@ -529,237 +528,146 @@ impl<'a> Products<'a> {
         unsafe { neg_gemm4_sparse(&g, &out, &mirror) };
     }
 
-    /// The four columns `out[u] ← −D b1_u − M⁻¹ b2_u` (rows `< rows`; `out[u]` minus that in
-    /// the lanes of `accumulate`; also into `mirror[u]`; lanes with a null `out[u]` are not
-    /// stored), with `b1_u[l] = b1[u][l]` for the rows `l` of `set` and `b2_u[l] = b2[u][l]`
-    /// for those of `set2`, zero elsewhere, read in place. `D` is column-major with leading
-    /// dimension `ldd`, its `n` columns readable to `rows` rounded up to 8 (see
-    /// [`Gemm4Term`]).
+    /// The rows of `set2` into `idx2`; their count.
+    #[inline(always)]
+    fn rows_of_set2(&mut self) -> usize {
+        let mut c = 0;
+        let idx = &mut *self.idx2;
+        for_each_row(self.set2, |l| {
+            debug_assert!(c < idx.len());
+            // SAFETY: c < the number of rows of the set ≤ nv = idx.len().
+            unsafe { *idx.get_unchecked_mut(c) = l as u32 };
+            c += 1;
+        });
+        c
+    }
+
+    /// The rows `l` of `set` whose four values `val(l)` are not all zero into `idx`, the
+    /// values into `rhs` (4 per row, compacted); their count (NaN counts as non-zero).
     ///
     /// # Safety
-    /// `b1[u] + l` is readable for every row `l` of `set`, `b2[u] + l` for those of `set2`;
-    /// the outputs as for [`Self::solve_group`], the accumulated ones also readable.
+    /// `val(l)` may be called for every row `l` of `set`.
+    #[inline(always)]
+    unsafe fn compact_rows(&mut self, val: impl Fn(usize) -> [f64; 4]) -> usize {
+        let mut cnt = 0;
+        let (idx, rhs) = (&mut *self.idx, self.rhs.as_mut_ptr());
+        for_each_row(self.set, |l| {
+            let b = val(l);
+            debug_assert!(cnt < idx.len());
+            // SAFETY: cnt < the number of rows of `set` ≤ nv = idx.len() = rhs.len() / 4.
+            unsafe {
+                *idx.get_unchecked_mut(cnt) = l as u32;
+                *rhs.add(4 * cnt).cast::<[f64; 4]>() = b;
+            }
+            cnt += usize::from(b.iter().fold(false, |a, x| a | (*x != 0.0)));
+        });
+        cnt
+    }
+
+    /// The four columns `out[u] ← −(U c_u + V y_u) − M⁻¹ b_u` (rows `< rows`; `out[u]` minus
+    /// that in the lanes of `accumulate`; also into `mirror[u]`; lanes with a null `out[u]`
+    /// are not stored): the rank-12 term `rank = (U, V, c, y, bs)` if given, with `U` and `V`
+    /// six columns of `ld` rows and `c_u[a] = c[u][bs a]`, `y_u[a] = y[u][bs a]`; and
+    /// `b_u[l]` for the `cnt` rows `l = idx2[t]` of the `M⁻¹` term, read at `b[u] + bs l` if
+    /// `in_place = (b, bs)`, else the compacted values `rhs[4 t + u]` of the rows `idx[t]`.
+    ///
+    /// # Safety
+    /// The `c`, `y` and `b` values addressed are readable; the outputs as for
+    /// [`Self::solve_group`], the accumulated ones also readable.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    unsafe fn solve_two(
-        &mut self,
+    unsafe fn solve_rank(
+        &self,
         rows: usize,
-        d: &[f64],
-        ldd: usize,
-        b1: [*const f64; 4],
-        b2: [*const f64; 4],
+        rank: Option<RankTerm<'_>>,
+        cnt: usize,
+        in_place: Option<([*const f64; 4], usize)>,
         accumulate: u8,
         out: [*mut f64; 4],
         mirror: [*mut f64; 4],
     ) {
-        let mut cnt = [0; 2];
-        for (c, (set, idx)) in
-            cnt.iter_mut().zip([(&*self.set, &mut *self.idx), (&*self.set2, &mut *self.idx2)])
-        {
-            for_each_row(set, |l| {
-                debug_assert!(*c < idx.len());
-                // SAFETY: c < the number of rows of the set ≤ nv = idx.len().
-                unsafe { *idx.get_unchecked_mut(*c) = l as u32 };
-                *c += 1;
-            });
+        const SIX: [u32; 6] = [0, 1, 2, 3, 4, 5];
+        let empty = Gemm4Term {
+            a: &[],
+            lda: 0,
+            cols: 0,
+            idx: &[],
+            b: [std::ptr::null(); 4],
+            bs: 0,
+            by_row: false,
+        };
+        let mut terms = [empty, empty, empty];
+        let mut nt = 0;
+        if let Some(r) = rank {
+            for (a, b) in [(r.u, r.c), (r.v, r.y)] {
+                terms[nt] =
+                    Gemm4Term { a, lda: self.ld, cols: 6, idx: &SIX, b, bs: r.bs, by_row: true };
+                nt += 1;
+            }
         }
-        if cnt == [0, 0] {
+        if cnt > 0 {
+            let r = self.rhs.as_ptr();
+            terms[nt] = match in_place {
+                Some((b, bs)) => Gemm4Term {
+                    a: self.minv,
+                    lda: self.ld,
+                    cols: self.n,
+                    idx: &self.idx2[..cnt],
+                    b,
+                    bs,
+                    by_row: true,
+                },
+                None => Gemm4Term {
+                    a: self.minv,
+                    lda: self.ld,
+                    cols: self.n,
+                    idx: &self.idx[..cnt],
+                    // SAFETY (pointer arithmetic): lanes 1..3 of the first compacted row.
+                    b: unsafe { [r, r.add(1), r.add(2), r.add(3)] },
+                    bs: 4,
+                    by_row: false,
+                },
+            };
+            nt += 1;
+        }
+        if nt == 0 {
             // SAFETY: the caller's contract.
-            return unsafe { self.product(rows, 0, b1, 1, true, accumulate, out, mirror) };
+            return unsafe { self.zero_or_copy(rows, accumulate, out, mirror) };
         }
-        let (n, by_row, bs) = (self.n, true, 1);
-        let terms = [
-            Gemm4Term { a: d, lda: ldd, cols: n, idx: &self.idx[..cnt[0]], b: b1, bs, by_row },
-            Gemm4Term {
-                a: self.minv,
-                lda: self.ld,
-                cols: n,
-                idx: &self.idx2[..cnt[1]],
-                b: b2,
-                bs,
-                by_row,
-            },
-        ];
-        let g = Gemm4 { rows, terms: &terms, accumulate };
+        let g = Gemm4 { rows, terms: &terms[..nt], accumulate };
         debug_assert!(rows <= self.n);
-        // SAFETY: the caller's contract on `d`, `b1`, `b2` and the outputs; `minv` as in
-        // `product`; the indices are DoFs of the sets (< n).
+        // SAFETY: the caller's contract on the values and the outputs; `minv` as in `product`
+        // (the indices are DoFs < n); `U` and `V` are six columns of `ld ≥` rows rounded up to
+        // 8, zero padded.
         unsafe { neg_gemm4_sparse(&g, &out, &mirror) };
     }
 }
 
-/// IDFOZA workspaces of four and eight lanes.
-struct IdfozaWss<'a> {
-    ws4: &'a mut IdfozaWs<[f64; 4]>,
-    ws8: &'a mut IdfozaWs<[f64; 8]>,
-}
-
-/// The lanes `k8 + lane0 + l` (`l < 8`) whose DoF is related to both `i` and `j`, as bits
-/// (`related`: the bit sets of `FdSoData::related`, `words` words each).
-#[inline(always)]
-fn lanes_related(related: &[u64], words: usize, i: usize, j: usize, first: usize) -> u8 {
-    let both = |w: usize| related[words * i + w] & related[words * j + w];
-    let (w, sh) = (first / 64, first % 64);
-    let lo = both(w) >> sh;
-    let hi = if sh > 56 && w + 1 < words { both(w + 1) << (64 - sh) } else { 0 };
-    (lo | hi) as u8
-}
-
-/// Which lanes of an entry `(i, j)` [`idfoza_add_block`] adds onto (the others it
-/// overwrites).
+/// The rank-12 term `−(U c_u + V y_u)` of [`Products::solve_rank`].
 #[derive(Clone, Copy)]
-enum AddMask<'a> {
-    /// The lanes `first + l` whose DoF is related to both `i` and `j` (see [`lanes_related`]).
-    Related { related: &'a [u64], words: usize, first: usize },
-}
-
-impl AddMask<'_> {
-    /// The lanes added onto for the entry `(i, j)`, as bits.
-    #[inline(always)]
-    fn at(&self, i: usize, j: usize) -> u8 {
-        let AddMask::Related { related, words, first } = *self;
-        lanes_related(related, words, i, j, first)
-    }
-}
-
-/// Adds `IDFOZA(x[:, j0 + l])[i][j]` for the lanes `l < w` into `blk` (`stride n²` values), at
-/// `l + stride (i + n j)`, for the structurally non-zero `(i, j)` (the DoFs `j` of root
-/// joints never): onto the lanes of `mask.at(i, j)` (those IDSVA-SO writes: see
-/// [`SoData::upper_halves`]) and over the others, which nothing else writes. One pass of eight AVX-512 lanes, else passes of four.
-#[allow(clippy::too_many_arguments)]
-fn idfoza_add_block(
-    model: &Model,
-    data: &Data,
-    ws: &mut IdfozaWss<'_>,
-    x: &[f64],
-    j0: usize,
-    w: usize,
-    mask: AddMask<'_>,
-    blk: &mut [f64],
-) {
-    let n = model.nv;
-    let stride = blk.len() / (n * n);
-    assert!((1..=8).contains(&w) && w <= stride && blk.len() == stride * n * n);
-    assert!(x.len().is_multiple_of(n) && j0 + w <= x.len() / n);
-    #[cfg(target_arch = "x86_64")]
-    if crate::simd::avx512f() {
-        // SAFETY: the CPU supports the enabled features.
-        unsafe { return idfoza_add_avx512(model, data, ws.ws8, x, j0, w, mask, blk) };
-    }
-    for lane0 in (0..w).step_by(4) {
-        #[cfg(target_arch = "x86_64")]
-        if crate::simd::avx2_fma() {
-            // SAFETY: the CPU supports the enabled features.
-            unsafe { idfoza_add_avx2(model, data, ws.ws4, x, j0, w, lane0, mask, blk) };
-            continue;
-        }
-        idfoza_add_lanes::<[f64; 4]>(model, data, ws.ws4, x, j0, w, lane0, mask, blk)
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[allow(clippy::too_many_arguments)]
-unsafe fn idfoza_add_avx2(
-    model: &Model,
-    data: &Data,
-    ws: &mut IdfozaWs<[f64; 4]>,
-    x: &[f64],
-    j0: usize,
-    w: usize,
-    lane0: usize,
-    mask: AddMask<'_>,
-    blk: &mut [f64],
-) {
-    let n = model.nv;
-    let stride = blk.len() / (n * n);
-    let nl = 4.min(w - lane0);
-    let lanes = (1u8 << nl) - 1;
-    let o = blk.as_mut_ptr();
-    // The closure is written here, in a function compiled for AVX2 and FMA, as its lane
-    // operations need (see `crate::simd`).
-    idfoza_lanes_core::<Avx4>(model, data, ws, x, n, j0 + lane0, nl, |i, j, z| {
-        assert!(i < n && j < n);
-        // SAFETY: i, j < n and lane0 + l < w ≤ stride for the lanes l < nl written: below
-        // stride n² = blk.len(); AVX2 is enabled in this function.
-        unsafe {
-            let p = o.add(lane0 + stride * (i + n * j));
-            crate::simd::avx2::store_or_add(p, z, mask.at(i, j) >> lane0, lanes)
-        }
-    });
-}
-
-/// The lanes `lane0..lane0 + 4` of [`idfoza_add_block`] (those below `w`), one pass of `V`.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn idfoza_add_lanes<V: Lanes>(
-    model: &Model,
-    data: &Data,
-    ws: &mut IdfozaWs<V::Arr>,
-    x: &[f64],
-    j0: usize,
-    w: usize,
-    lane0: usize,
-    mask: AddMask<'_>,
-    blk: &mut [f64],
-) {
-    let n = model.nv;
-    let stride = blk.len() / (n * n);
-    let nl = 4.min(w - lane0);
-    let o = blk.as_mut_ptr();
-    idfoza_lanes_core::<V>(model, data, ws, x, n, j0 + lane0, nl, |i, j, z| {
-        assert!(i < n && j < n);
-        let onto = mask.at(i, j);
-        // SAFETY: i, j < n and lane0 + l < w ≤ stride: below stride n² = blk.len().
-        let p = unsafe { o.add(lane0 + stride * (i + n * j)) };
-        for (l, &zl) in z.as_ref().iter().enumerate().take(nl) {
-            let b = 1u8 << (lane0 + l);
-            // SAFETY: as above.
-            unsafe { *p.add(l) = if onto & b != 0 { *p.add(l) + zl } else { zl } };
-        }
-    });
-}
-
-/// [`idfoza_add_block`] as one pass of eight AVX-512 lanes (masked to the `w` lanes).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx2,fma")]
-#[allow(clippy::too_many_arguments)]
-unsafe fn idfoza_add_avx512(
-    model: &Model,
-    data: &Data,
-    ws: &mut IdfozaWs<[f64; 8]>,
-    x: &[f64],
-    j0: usize,
-    w: usize,
-    mask: AddMask<'_>,
-    blk: &mut [f64],
-) {
-    let n = model.nv;
-    let stride = blk.len() / (n * n);
-    let lanes = ((1u16 << w) - 1) as u8;
-    let o = blk.as_mut_ptr();
-    // SAFETY: AVX-512F is enabled here, as `Avx8` needs.
-    idfoza_lanes_core::<Avx8>(model, data, ws, x, n, j0, w, |i, j, z| {
-        assert!(i < n && j < n);
-        // SAFETY: i, j < n: the w ≤ stride values at o + stride (i + n j) are within blk
-        // (stride n² values); the loads and stores are masked to them; AVX-512F is enabled in
-        // this function.
-        unsafe {
-            crate::simd::avx512::store_or_add(o.add(stride * (i + n * j)), z, mask.at(i, j), lanes)
-        }
-    });
+struct RankTerm<'a> {
+    /// `U`, six columns of `ld` rows (`6 ld` values).
+    u: &'a [f64],
+    /// `V`, likewise.
+    v: &'a [f64],
+    /// `c_u[a]` at `c[u] + bs a`.
+    c: [*const f64; 4],
+    /// `y_u[a]` at `y[u] + bs a`.
+    y: [*const f64; 4],
+    /// Stride of `c` and `y`.
+    bs: usize,
 }
 
 /// Second-order derivatives of forward dynamics at `q̈ = FD(q, q̇, τ)` (eq. eqn_FD_SO_43):
-/// `∂²q̈/∂u∂w = −M⁻¹(∂²ID/∂u∂w + ∂M/∂w · ∂FD/∂u + (∂M/∂u · ∂FD/∂w)^R)`, with the `∂M/∂q`
-/// products by IDFOZA (`O(N d)` per column) instead of tensor products, and in `∂²q̈/∂q²` as
-/// `−M⁻¹ ∂M/∂q_k · ∂q̈/∂q_j = −∂(M⁻¹)/∂q_k · ∂τ/∂q_j` from `∂(M⁻¹)/∂q`, itself computed page
-/// by page from the rank-12 form of `∂M/∂q_k` (see `dminv_dq`). Also fills the first-order
-/// results in `data` (as [`fd_derivatives`]).
+/// `∂²q̈/∂u∂w = −M⁻¹(∂²ID/∂u∂w + ∂M/∂w · ∂FD/∂u + (∂M/∂u · ∂FD/∂w)^R)`, with the products
+/// `−M⁻¹ ∂M/∂q_k x` from the rank-12 form `∂M/∂q_k = Pᵀ Q + Qᵀ P` (see `dminv_dq`) as
+/// `−U (Q x) − V (P x)`: twelve multiply-adds per row instead of a tensor product. Also fills
+/// the first-order results in `data` (as [`fd_derivatives`]).
 ///
 /// Each column `−M⁻¹ b` is a product with the dense `M⁻¹` (from the `LᵀDL` factors) over the
-/// rows where `b` can be non-zero only: row `l` of `∂²τ/∂q_j∂·` and of `∂M/∂q_j · x` vanishes
-/// unless DoF `l` is `j`, an ancestor or a descendant of it. Symmetries cut the columns:
+/// rows where `b` can be non-zero only: column `(j, k)` of `∂²τ/∂q∂·` and `∂²τ/∂q̇²` vanishes
+/// unless `j` and `k` are related (one is the other, an ancestor or a descendant of it), and
+/// then its row `l` unless `l` is related to both. Symmetries cut the columns:
 /// `∂²q̈/∂q̇²` is symmetric in `(j, k)`, and so is `∂²q̈/∂q²` for DoFs of different joints (the
 /// configuration space is a product over joints).
 pub fn fd_so_derivatives(
@@ -853,12 +761,170 @@ fn lanes(c0: usize, w: usize) -> [usize; 4] {
     std::array::from_fn(|u| c0 + u.min(w - 1))
 }
 
+/// `x ← x + y` (equal lengths, a multiple of 4), four values at a time (the plain loop over
+/// the two slices of one buffer stayed scalar).
+#[inline(always)]
+fn add_into(x: &mut [f64], y: &[f64]) {
+    for (x, y) in x.chunks_exact_mut(4).zip(y.chunks_exact(4)) {
+        let (x, y): (&mut [f64; 4], &[f64; 4]) = (x.try_into().unwrap(), y.try_into().unwrap());
+        *x = std::array::from_fn(|i| x[i] + y[i]);
+    }
+}
+
 /// `x ← x + m[:, j] · sᵀ` on six columns of `ld` rows (`x[a ld + r] += m[r] s[a]`).
 #[inline(always)]
 fn add_outer(x: &mut [f64], ld: usize, m: &[f64], s: &[f64; 6]) {
     for (a, col) in x.chunks_exact_mut(ld).enumerate() {
         for (y, &mr) in col.iter_mut().zip(m) {
             *y = mr.mul_add(s[a], *y);
+        }
+    }
+}
+
+/// The path sums of the rank-12 form of `∂M/∂q` (docs/notes-corrections.md, "∂(M⁻¹)/∂q in
+/// rank-12 form") applied to the `n` columns `x_i = cols[ld i..ld (i + 1)]` (an `ld × n`
+/// matrix `Xᵀ`, rows past `n` zero): per joint `J`, six columns of `ld` rows each,
+/// `A_J = Σ_{i∈F} x_i S_iᵀ` over the DoFs `F` of the strict ancestors of `J` (accumulated down
+/// the tree; zero for the joints attached to the world) into `lr_a`, and
+/// `B_J = Σ_{i∈D} x_i (I^C_{J(i)} S_i)ᵀ` over the DoFs `D` of `J` and its descendants
+/// (accumulated up the tree) into `lr_b`. For `x_i = M⁻¹[:, i]` these are `U_J = M⁻¹ P_Jᵀ` and
+/// `W_J` of [`dminv_dq`]; for `x_i` the row `i` of a matrix `X`, `A_Jᵀ = P_J X` and
+/// `B_Jᵀ = Σ_{i∈D} I^C_{J(i)} S_i X[i, :]`. Inlined into the callers compiled with AVX2 and FMA
+/// (its multiply-adds would otherwise be calls to the software `fma`).
+#[inline(always)]
+fn path_sums(
+    model: &Model,
+    data: &Data,
+    cols: &[f64],
+    ld: usize,
+    lr_a: &mut [f64],
+    lr_b: &mut [f64],
+) {
+    let nj = model.njoints();
+    let b6 = 6 * ld;
+    let s6 = |c: usize| v6(&data.s_world[c].ang, &data.s_world[c].lin);
+    // A_J = A_λ(J) + Σ_{j of λ(J)} x_j S_jᵀ (zero for the joints attached to the world).
+    for jt in 1..nj {
+        let p = model.parents[jt];
+        let (before, rest) = lr_a.split_at_mut(b6 * jt);
+        let u = &mut rest[..b6];
+        if p == 0 {
+            u.fill(0.0);
+            continue;
+        }
+        u.copy_from_slice(&before[b6 * p..b6 * (p + 1)]);
+        for j in model.idx_v[p]..model.idx_v[p] + model.nvs[p] {
+            add_outer(u, ld, &cols[ld * j..ld * (j + 1)], &s6(j));
+        }
+    }
+    // B_J = Σ_{i of J} x_i (I^C_J S_i)ᵀ + Σ_{children c} B_c.
+    lr_b[..b6 * nj].fill(0.0);
+    for jt in (1..nj).rev() {
+        let w = &mut lr_b[b6 * jt..b6 * (jt + 1)];
+        for i in model.idx_v[jt]..model.idx_v[jt] + model.nvs[jt] {
+            let f = data.ic_world[jt].mul_motion(&data.s_world[i]);
+            add_outer(w, ld, &cols[ld * i..ld * (i + 1)], &v6(&f.ang, &f.lin));
+        }
+        let p = model.parents[jt];
+        if p > 0 {
+            let (before, rest) = lr_b.split_at_mut(b6 * jt);
+            add_into(&mut before[b6 * p..b6 * (p + 1)], &rest[..b6]);
+        }
+    }
+}
+
+/// `Q_k` applied to path sums (see [`path_sums`]): for DoF `k` (twist `s = S_k`) of joint `J`
+/// (`I = I^C_J`, `X = s×* I − I s×`, `xh = ½ X` by columns from [`half_x`]), six columns of
+/// `ld` rows `out[a ld + r] = (½ X a_r + s ×* b_r)_a` from the rows `a_r`, `b_r` of `A_J`,
+/// `B_J` (six columns of `ld` rows each): with `∂M/∂q_k = P_Jᵀ Q_k + Q_kᵀ P_J`,
+/// `Q_k = ½ X P_J + Z` (see [`dminv_dq`]), row `r` is `Q_k x_r`. For `U_J`, `W_J` this is
+/// `V_k = M⁻¹ Q_kᵀ`; for the path sums of a matrix `X`, `(Q_k X)ᵀ`.
+fn q_rows(s: &[f64; 6], xh: &[[f64; 6]; 6], a: &[f64], b: &[f64], ld: usize, out: &mut [f64]) {
+    assert!(a.len() >= 6 * ld && b.len() >= 6 * ld && out.len() >= 6 * ld);
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx512f() {
+        // SAFETY: the CPU supports the enabled features.
+        return unsafe { q_rows_avx512(s, xh, a, b, ld, out) };
+    }
+    #[cfg(target_arch = "x86_64")]
+    if crate::simd::avx2_fma() {
+        // SAFETY: the CPU supports the enabled features.
+        return unsafe { q_rows_avx2(s, xh, a, b, ld, out) };
+    }
+    q_rows_lanes::<[f64; 4]>(s, xh, a, b, ld, out)
+}
+
+/// `S_k` as six values and `½ X = ½ (s×* I − I s×)` by columns (`s = S_k`, `I = I^C_J` of the
+/// joint `J` of DoF `k`), the factors of [`q_rows`].
+fn half_x(data: &Data, k: usize, jt: usize) -> ([f64; 6], [[f64; 6]; 6]) {
+    let s = &data.s_world[k];
+    let ic = &data.ic_world[jt];
+    let xh = std::array::from_fn(|c| {
+        let mut e = [0.0; 6];
+        e[c] = 1.0;
+        let e = Motion::new(Vector3::new(e[0], e[1], e[2]), Vector3::new(e[3], e[4], e[5]));
+        let x = s.cross_force(&ic.mul_motion(&e));
+        let y = ic.mul_motion(&s.cross(&e));
+        let d = v6(&(x.ang - y.ang), &(x.lin - y.lin));
+        d.map(|z| 0.5 * z)
+    });
+    (v6(&s.ang, &s.lin), xh)
+}
+
+/// [`q_rows_lanes`] with AVX-512 lanes.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn q_rows_avx512(
+    s: &[f64; 6],
+    xh: &[[f64; 6]; 6],
+    a: &[f64],
+    b: &[f64],
+    ld: usize,
+    out: &mut [f64],
+) {
+    // SAFETY: AVX-512F, AVX2 and FMA are enabled here, as `Avx8` needs.
+    q_rows_lanes::<Avx8>(s, xh, a, b, ld, out)
+}
+
+/// [`q_rows_lanes`] with AVX2 lanes.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn q_rows_avx2(
+    s: &[f64; 6],
+    xh: &[[f64; 6]; 6],
+    a: &[f64],
+    b: &[f64],
+    ld: usize,
+    out: &mut [f64],
+) {
+    // SAFETY: AVX2 and FMA are enabled here, as `Avx4` needs.
+    q_rows_lanes::<Avx4>(s, xh, a, b, ld, out)
+}
+
+/// [`q_rows`], `L` rows at a time (`ld` a multiple of the lane count): row `r` is
+/// `½ X a_r + s ×* b_r` (`xh = ½ X` by columns).
+#[inline(always)]
+fn q_rows_lanes<L: Lanes>(
+    s: &[f64; 6],
+    xh: &[[f64; 6]; 6],
+    a: &[f64],
+    b: &[f64],
+    ld: usize,
+    out: &mut [f64],
+) {
+    let nl = L::Arr::default().as_ref().len();
+    for r0 in (0..ld).step_by(nl) {
+        let br: [L; 6] = std::array::from_fn(|c| load_lanes(b, c * ld + r0));
+        let mut y = cross_force_lanes(s, &br);
+        for (c, col) in xh.iter().enumerate() {
+            let ac: L = load_lanes(a, c * ld + r0);
+            for (yr, &x) in y.iter_mut().zip(col) {
+                *yr = ac.mul_add(L::splat(x), *yr);
+            }
+        }
+        for (c, yc) in y.iter().enumerate() {
+            let x = yc.store();
+            out[c * ld + r0..c * ld + r0 + nl].copy_from_slice(x.as_ref());
         }
     }
 }
@@ -872,79 +938,40 @@ fn add_outer(x: &mut [f64], ld: usize, m: &[f64], s: &[f64; 6]) {
 /// `∂M/∂q_k = Pᵀ Q + Qᵀ P` with the `6×n` matrices `P` (columns `S_j`, `j ∈ F`) and
 /// `Q = ½ X P + Z` (columns `s ×* I^C_i S_i`, `i ∈ D`). Then
 /// `∂(M⁻¹)/∂q_k = −M⁻¹ ∂M/∂q_k M⁻¹ = −(U Vᵀ + V Uᵀ)` with `U = M⁻¹ Pᵀ = U_J` and
-/// `V = M⁻¹ Qᵀ`, whose row `r` is `s ×* (½ I^C_J u_r + w_r) − ½ I^C_J (s × u_r)` with
-/// `u_r`, `w_r` the rows of `U_J = Σ_{j∈F} M⁻¹[:, j] S_jᵀ` (accumulated down the tree) and
-/// `W_J = Σ_{i∈D} M⁻¹[:, i] (I^C_i S_i)ᵀ` (accumulated up the tree). `minv` is `M⁻¹` with
-/// columns padded with zeros to `ld` rows; `lr_*` hold six columns of `ld` rows per joint
-/// (`lr_v`: one).
-#[allow(clippy::too_many_arguments)]
-#[inline(always)]
+/// `V = M⁻¹ Qᵀ = V_k`, whose row `r` is `s ×* (½ I^C_J u_r + w_r) − ½ I^C_J (s × u_r)` with
+/// `u_r`, `w_r` the rows of `U_J = Σ_{j∈F} M⁻¹[:, j] S_jᵀ` and
+/// `W_J = Σ_{i∈D} M⁻¹[:, i] (I^C_i S_i)ᵀ` ([`path_sums`] of `M⁻¹`). `lr_u` and `lr_v` hold
+/// `U_J` and `V_k` ([`q_rows`]) already; `lr_t` is scratch.
 fn dminv_dq(
     model: &Model,
-    data: &Data,
-    minv: &[f64],
-    ld: usize,
     root: &[bool],
-    lr_u: &mut [f64],
-    lr_w: &mut [f64],
-    lr_v: &mut [f64],
+    ld: usize,
+    lr_u: &[f64],
+    lr_v: &[f64],
     lr_t: &mut [f64],
     out: &mut Tensor3,
 ) {
-    let n = model.nv;
-    let nj = model.njoints();
-    let b6 = 6 * ld;
-    let s6 = |c: usize| v6(&data.s_world[c].ang, &data.s_world[c].lin);
-    // U_J = U_λ(J) + Σ_{j of λ(J)} M⁻¹[:, j] S_jᵀ (zero for the joints attached to the world).
-    for jt in 1..nj {
-        let p = model.parents[jt];
-        let (before, rest) = lr_u.split_at_mut(b6 * jt);
-        let u = &mut rest[..b6];
-        if p == 0 {
-            u.fill(0.0);
-            continue;
-        }
-        u.copy_from_slice(&before[b6 * p..b6 * (p + 1)]);
-        for j in model.idx_v[p]..model.idx_v[p] + model.nvs[p] {
-            add_outer(u, ld, &minv[ld * j..ld * (j + 1)], &s6(j));
-        }
-    }
-    // W_J = Σ_{i of J} M⁻¹[:, i] (I^C_J S_i)ᵀ + Σ_{children c} W_c.
-    lr_w.fill(0.0);
-    for jt in (1..nj).rev() {
-        let w = &mut lr_w[b6 * jt..b6 * (jt + 1)];
-        for i in model.idx_v[jt]..model.idx_v[jt] + model.nvs[jt] {
-            let f = data.ic_world[jt].mul_motion(&data.s_world[i]);
-            add_outer(w, ld, &minv[ld * i..ld * (i + 1)], &v6(&f.ang, &f.lin));
-        }
-        let p = model.parents[jt];
-        if p > 0 {
-            let (before, rest) = lr_w.split_at_mut(b6 * jt);
-            for (x, y) in before[b6 * p..b6 * (p + 1)].iter_mut().zip(&rest[..b6]) {
-                *x += y;
-            }
-        }
-    }
-    let pages = Pages { n, ld, u: lr_u, w: lr_w };
+    let pages = Pages { n: model.nv, ld, u: lr_u, v: lr_v };
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx512f() {
         // SAFETY: the CPU supports the enabled features.
-        return unsafe { dminv_pages_avx512(model, data, &pages, root, lr_v, lr_t, out) };
+        return unsafe { dminv_pages_avx512(model, &pages, root, lr_t, out) };
     }
     #[cfg(target_arch = "x86_64")]
     if crate::simd::avx2_fma() {
         // SAFETY: the CPU supports the enabled features.
-        return unsafe { dminv_pages_avx2(model, data, &pages, root, lr_v, lr_t, out) };
+        return unsafe { dminv_pages_avx2(model, &pages, root, lr_t, out) };
     }
-    dminv_pages::<[f64; 4], 1>(model, data, &pages, root, lr_v, lr_t, out)
+    dminv_pages::<[f64; 4], 1>(model, &pages, root, lr_t, out)
 }
 
-/// The factors `U_J`, `W_J` of [`dminv_dq`] (six columns of `ld` rows per joint).
+/// The factors `U_J` (per joint) and `V_k` (per DoF) of [`dminv_dq`] (six columns of `ld`
+/// rows each).
 struct Pages<'a> {
     n: usize,
     ld: usize,
     u: &'a [f64],
-    w: &'a [f64],
+    v: &'a [f64],
 }
 
 /// [`dminv_pages`] with AVX-512 lanes.
@@ -952,15 +979,13 @@ struct Pages<'a> {
 #[target_feature(enable = "avx512f,avx2,fma")]
 unsafe fn dminv_pages_avx512(
     model: &Model,
-    data: &Data,
     p: &Pages<'_>,
     root: &[bool],
-    v: &mut [f64],
     t: &mut [f64],
     out: &mut Tensor3,
 ) {
     // SAFETY: AVX-512F, AVX2 and FMA are enabled here, as `Avx8` needs.
-    dminv_pages::<Avx8, 2>(model, data, p, root, v, t, out)
+    dminv_pages::<Avx8, 2>(model, p, root, t, out)
 }
 
 /// [`dminv_pages`] with AVX2 lanes.
@@ -968,15 +993,13 @@ unsafe fn dminv_pages_avx512(
 #[target_feature(enable = "avx2,fma")]
 unsafe fn dminv_pages_avx2(
     model: &Model,
-    data: &Data,
     p: &Pages<'_>,
     root: &[bool],
-    v: &mut [f64],
     t: &mut [f64],
     out: &mut Tensor3,
 ) {
     // SAFETY: AVX2 and FMA are enabled here, as `Avx4` needs.
-    dminv_pages::<Avx4, 1>(model, data, p, root, v, t, out)
+    dminv_pages::<Avx4, 1>(model, p, root, t, out)
 }
 
 /// `x[off..off + N]` as lanes.
@@ -989,48 +1012,23 @@ fn load_lanes<L: Lanes>(x: &[f64], off: usize) -> L {
     L::load(&a)
 }
 
-/// The pages `k` of [`dminv_dq`] (but those of root joints) from the factors `U_J`, `W_J`,
-/// `L` rows at a time; `v` is the scratch for `V` (six columns of `ld` rows).
+/// The pages `k` of [`dminv_dq`] (but those of root joints) from the factors `U_J`, `V_k`.
 #[inline(always)]
 fn dminv_pages<L: Lanes, const B: usize>(
     model: &Model,
-    data: &Data,
     p: &Pages<'_>,
     root: &[bool],
-    v: &mut [f64],
     t: &mut [f64],
     out: &mut Tensor3,
 ) {
     let (n, ld) = (p.n, p.ld);
-    let nl = L::Arr::default().as_ref().len();
     let (b6, n2) = (6 * ld, n * n);
     let o = out.as_mut_slice();
     // Only a prefetch address (never dereferenced).
     let base = o.as_ptr();
     for k in (0..n).filter(|&k| !root[k]) {
         let jt = model.dof_joint[k];
-        let s = v6(&data.s_world[k].ang, &data.s_world[k].lin);
-        let ic = &data.ic_world[jt];
-        let (u, w) = (&p.u[b6 * jt..b6 * (jt + 1)], &p.w[b6 * jt..b6 * (jt + 1)]);
-        // V, L rows at a time: row r is s ×* (½ I u_r + w_r) − ½ I (s × u_r).
-        for r0 in (0..ld).step_by(nl) {
-            let half = L::splat(0.5);
-            let mut ur = [half; 6];
-            for (a, x) in ur.iter_mut().enumerate() {
-                *x = load_lanes(u, a * ld + r0);
-            }
-            let su = cross_motion_lanes(&s, &ur);
-            let (iu, isu) = (inertia_mul_l(ic, &ur), inertia_mul_l(ic, &su));
-            let mut y = iu;
-            for (a, x) in y.iter_mut().enumerate() {
-                *x = half.mul_add(*x, load_lanes(w, a * ld + r0));
-            }
-            let sy = cross_force_lanes(&s, &y);
-            for a in 0..6 {
-                let x = sy[a].sub(half.mul(isu[a])).store();
-                v[a * ld + r0..a * ld + r0 + nl].copy_from_slice(x.as_ref());
-            }
-        }
+        let (u, v) = (&p.u[b6 * jt..b6 * (jt + 1)], &p.v[b6 * k..b6 * (k + 1)]);
         // Page k: column c is −(U V[c, :]ᵀ + V U[c, :]ᵀ), by groups of `B` blocks of L rows
         // (held in registers), then columns, whose twelve factors are read from a row-major
         // copy (`t`: −V[c, :] then −U[c, :]).
@@ -1047,9 +1045,10 @@ fn dminv_pages<L: Lanes, const B: usize>(
 }
 
 /// The page `page` (`n` columns of `n` values) of [`dminv_pages`]: `page[r + n c] =
-/// Σ_a U[a][r] t[12 c + a] + V[a][r] t[12 c + 6 + a]` (`U`, `V`: six columns of `ld` rows), by
-/// groups of `B` blocks of `L` rows. `next`, the next page, is prefetched into L2 a line per
-/// block and column.
+/// Σ_a U[a][r] t[12 c + a] + V[a][r] t[12 c + 6 + a]` (`U`, `V`: six columns of `ld` rows), a
+/// symmetric matrix: by groups of `B` blocks of `L` rows, the columns from the diagonal block
+/// of eight on, then the rest by transposing blocks of eight rows. `next`, the next page, is
+/// prefetched into L2, two lines per block and column computed.
 #[inline(always)]
 fn page_groups<L: Lanes, const B: usize>(
     n: usize,
@@ -1076,9 +1075,17 @@ fn page_groups<L: Lanes, const B: usize>(
         }
         blk += g;
     }
+    // The strictly lower part: rows r0 + 8.. of the columns r0..r0 + 8 from the rows r0..r0 + 8
+    // of the columns r0 + 8.. (computed above: each group wrote the columns from its diagonal
+    // block of eight on).
+    for r0 in (0..n.saturating_sub(8)).step_by(8) {
+        let (left, right) = page.split_at_mut(n * (r0 + 8));
+        transpose_strided(&right[r0..], n, 8, n - r0 - 8, &mut left[r0 + 8 + n * r0..], n);
+    }
 }
 
-/// `G` consecutive row blocks from block `blk` of [`page_groups`].
+/// `G` consecutive row blocks from block `blk` of [`page_groups`], the columns from the first
+/// one of the block of eight rows that holds the group's first row on.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 fn group<L: Lanes, const G: usize>(
@@ -1103,11 +1110,12 @@ fn group<L: Lanes, const G: usize>(
         }
     }
     let m: [usize; G] = std::array::from_fn(|b| nl.min(n - r0[b]));
-    for (c, tc) in t.chunks_exact(12).enumerate() {
+    // From the first column of the diagonal block of eight that holds the group's first row.
+    for (c, tc) in t.chunks_exact(12).enumerate().skip(r0[0] & !7) {
         for b in 0..G {
-            let line = n * (blk + b) + c;
+            let line = 2 * (n * (blk + b) + c);
             if line < nlines {
-                prefetch::<TO_L2>(next.wrapping_add(8 * line), 1);
+                prefetch::<TO_L2>(next.wrapping_add(8 * line), 9);
             }
             // Two chains of six multiply-adds.
             let (mut x, mut y) = (L::splat(0.0), L::splat(0.0));
@@ -1151,14 +1159,12 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
         n,
         words: fso.words,
         related: &fso.related,
-        related4: &fso.related4,
         set: &mut fso.set,
         set2: &mut fso.set2,
         idx: &mut fso.idx,
         idx2: &mut fso.idx2,
         rhs: &mut fso.rhs,
     };
-    let mut ws = IdfozaWss { ws4: &mut fso.ws4, ws8: &mut fso.ws8 };
     let dof_joint = &model.dof_joint;
     // DoFs of different joints commute (product of the joints' configuration spaces).
     let commute = |j: usize, k: usize| dof_joint[j] != dof_joint[k];
@@ -1187,7 +1193,15 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             }
             // j0 ≤ k (see `FdSoData::vv_groups`), so w ≥ 1.
             let w = 4.min(k + 1 - j0);
-            pr.build_set(pr.related4(j0), pr.related(k), true);
+            // Rows related to k and to one of the j related to k.
+            let rk = pr.related(k);
+            pr.set.fill(0);
+            for j in (j0..j0 + w).filter(|&j| has(rk, j)) {
+                let rj = pr.related(j);
+                for ((s, x), y) in pr.set.iter_mut().zip(rj).zip(rk) {
+                    *s |= x & y;
+                }
+            }
             let jl = lanes(j0, w);
             let out = std::array::from_fn(|u| {
                 if u < w { col(&mut fso.d2qdd_dv2, j0 + u, k) } else { std::ptr::null_mut() }
@@ -1205,38 +1219,36 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             unsafe { pr.solve_group_in_place(n, b, 1, false, 0, out, mirror) };
         }
     }
-    // ∂(M⁻¹)/∂q (before ∂²q̈/∂q², which reads it), page by page from the rank-12 form of
-    // ∂M/∂q_k (see `dminv_dq`).
-    dminv_dq(
-        model,
-        data,
-        &fso.minv,
-        ld,
-        &fso.root,
-        &mut fso.lr_u,
-        &mut fso.lr_w,
-        &mut fso.lr_v,
-        &mut fso.lr_t,
-        &mut fso.d2qdd_dtaudq,
-    );
+    // The rank-12 factors of ∂M/∂q (see `dminv_dq`): U_J, W_J (the path sums of M⁻¹) and V_k
+    // for the DoFs of joints not attached to the world (on those, ∂M/∂q_k = 0).
+    let b6 = 6 * ld;
+    path_sums(model, data, &fso.minv, ld, &mut fso.lr_u, &mut fso.lr_w);
+    for k in (0..n).filter(|&k| !fso.root[k]) {
+        let jt = dof_joint[k];
+        let (u, w) = (&fso.lr_u[b6 * jt..], &fso.lr_w[b6 * jt..]);
+        fso.xh[k] = half_x(data, k, jt);
+        let (sk, xh) = &fso.xh[k];
+        q_rows(sk, xh, u, w, ld, &mut fso.lr_v[b6 * k..b6 * (k + 1)]);
+    }
     // ∂²q̈/∂q² (eq. eqn_FD_SO_43): column (j, k) is −M⁻¹(ID_qq[:, j, k] + A[:, j, k] + A[:, k, j])
     // with A[:, j, k] = ∂M/∂q_k · ∂q̈/∂q_j, for the j and k of `FdSoData::qj` (the others
-    // vanish). As ∂q̈/∂q_j = −M⁻¹ ∂τ/∂q_j and ∂(M⁻¹)/∂q_k = −M⁻¹ ∂M/∂q_k M⁻¹ (just computed),
-    // T_j[:, k] = −M⁻¹ A[:, j, k] = −∂(M⁻¹)/∂q_k · ∂τ/∂q_j: a product with the page k of
-    // ∂(M⁻¹)/∂q over the rows of ∂τ/∂q_j (related to j), which needs no IDFOZA of ∂q̈/∂q. Each
-    // column is T_j[:, k] + T_k[:, j] − M⁻¹ ID_qq[:, j, k]: by pages k (descending) and qq
-    // blocks of four j, T_j[:, k] (twice on the diagonal) − M⁻¹ ID_qq[:, j, k] is stored into
-    // the output column (j, k) where j ≤ k, and T_j[:, k] is added into the column (k, j) where
-    // j > k (which that order has already written), the mirror (j, k) getting the sum. The
-    // ID_qq rows: related to j and k. DoFs of one joint need not commute: for such a pair
-    // j < k the column (k, j) is then (j, k) − M⁻¹(ID_qq[:, k, j] − ID_qq[:, j, k]).
+    // vanish). With ∂M/∂q_k = P_Jᵀ Q_k + Q_kᵀ P_J (J the joint of k, see `dminv_dq`),
+    // T_j[:, k] = −M⁻¹ A[:, j, k] = −U_J (Q_k X_q[:, j]) − V_k (P_J X_q[:, j]) with X_q = ∂q̈/∂q:
+    // a product of rank 12 (none on the pages of root joints, where ∂M/∂q_k = 0), whose factors
+    // for every j at once are Y_Jᵀ = P_J X_q and C_kᵀ = Q_k X_q, from the path sums of the rows
+    // of X_q (`path_sums`, `q_rows`). Each column is T_j[:, k] + T_k[:, j] − M⁻¹ ID_qq[:, j, k]:
+    // by pages k (descending) and qq blocks of four j, T_j[:, k] (twice on the diagonal)
+    // − M⁻¹ ID_qq[:, j, k] is stored into the output column (j, k) where j ≤ k, and T_j[:, k]
+    // is added into the column (k, j) where j > k (which that order has already written), the
+    // mirror (j, k) getting the sum. The ID_qq rows: related to j and k. DoFs of one joint need
+    // not commute: for such a pair j < k the column (k, j) is then
+    // (j, k) − M⁻¹(ID_qq[:, k, j] − ID_qq[:, j, k]).
+    transpose_strided(data.dqdd_dq.as_slice(), n, n, n, &mut fso.xt, ld);
+    path_sums(model, data, &fso.xt, ld, &mut fso.lr_y, &mut fso.lr_r);
     let qj = &fso.qj[..];
     let nqb = qj.len().div_ceil(4);
     let idt = fso.id.d2tau_dq2().as_slice();
-    let dtq = data.dtau_dq.as_slice();
     {
-        let words = fso.words;
-        let dmi = fso.d2qdd_dtaudq.as_slice();
         // Group (b, k): outputs, mirrors and accumulated lanes (see above).
         let group = |t: &mut Tensor3, b: usize, k: usize| {
             let w = 4.min(qj.len() - 4 * b);
@@ -1256,20 +1268,16 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
         };
         for (pk, &k) in qj.iter().enumerate().rev() {
             let k = k as usize;
-            // The page in place when the padded rows of its last column are readable (in the
-            // next page), else a padded copy.
-            let (d, ldd) = if n2 * k + n * (n - 1) + ld <= dmi.len() {
-                (&dmi[n2 * k..], n)
-            } else {
-                for (dst, src) in
-                    fso.dlast.chunks_exact_mut(ld).zip(dmi[n2 * k..n2 * (k + 1)].chunks_exact(n))
-                {
-                    dst[..n].copy_from_slice(src);
+            let jt = dof_joint[k];
+            let rank_k = !fso.root[k];
+            if rank_k {
+                let (y, r) = (&fso.lr_y[b6 * jt..], &fso.lr_r[b6 * jt..]);
+                let (sk, xh) = &fso.xh[k];
+                q_rows(sk, xh, y, r, ld, &mut fso.lr_c);
+                for a in 0..6 {
+                    fso.diag_c[a * ld] = 2.0 * fso.lr_c[a * ld + k];
+                    fso.diag_y[a * ld] = 2.0 * fso.lr_y[b6 * jt + a * ld + k];
                 }
-                (&fso.dlast[..], ld)
-            };
-            for (d2, x) in fso.diag2.iter_mut().zip(&dtq[n * k..n * (k + 1)]) {
-                *d2 = 2.0 * x;
             }
             for b in 0..nqb {
                 // The next group's ID_qq columns into L1 and its outputs into L2.
@@ -1293,25 +1301,17 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
                 let w = 4.min(qj.len() - 4 * b);
                 let js = lanes(4 * b, w).map(|p| qj[p] as usize);
                 let (out, mirror, acc) = group(&mut fso.d2qdd_dq2, b, k);
-                // Term 1 over the rows related to one of the j (none on the pages of root
-                // joints, where ∂(M⁻¹)/∂q_k = 0); term 2 over the rows related to k and to one
-                // of the j ≤ k.
+                // The ID_qq rows: related to k and to one of the j ≤ k related to k (the column
+                // (j, k) vanishes unless j and k are related: see `FdSoData::related`).
                 let rk = pr.related(k);
-                let (set, set2) = (&mut *pr.set, &mut *pr.set2);
-                if fso.root[k] {
-                    set.fill(0);
-                } else {
-                    set.copy_from_slice(&fso.relq4[words * b..words * (b + 1)]);
-                }
-                set2.fill(0);
-                for &j in js[..w].iter().filter(|&&j| j <= k) {
-                    let rj = &fso.related[words * j..words * (j + 1)];
-                    for ((s2, x), y) in set2.iter_mut().zip(rj).zip(rk) {
+                pr.set2.fill(0);
+                for &j in js[..w].iter().filter(|&&j| j <= k && has(rk, j)) {
+                    let rj = pr.related(j);
+                    for ((s2, x), y) in pr.set2.iter_mut().zip(rj).zip(rk) {
                         *s2 |= x & y;
                     }
                 }
-                let b1 =
-                    js.map(|j| if j == k { fso.diag2.as_ptr() } else { dtq[n * j..].as_ptr() });
+                let cnt = pr.rows_of_set2();
                 let b2 = std::array::from_fn(|u| {
                     let j = js[u];
                     if u < w && j <= k {
@@ -1320,11 +1320,22 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
                         fso.zeros.as_ptr()
                     }
                 });
-                // SAFETY: b1: columns of ∂τ/∂q (or `diag2`), b2: columns (j, k) of ID_qq (or
-                // `zeros`), n values each; the page of ∂(M⁻¹)/∂q is followed by at least one
-                // more (n² ≥ the padded rows) or padded (`dlast`); the outputs are distinct
-                // columns of d2qdd_dq2 (the accumulated ones written before).
-                unsafe { pr.solve_two(n, d, ldd, b1, b2, acc, out, mirror) };
+                let rank = rank_k.then(|| {
+                    let (c, y) = (fso.lr_c.as_ptr(), fso.lr_y[b6 * jt..].as_ptr());
+                    RankTerm {
+                        u: &fso.lr_u[b6 * jt..b6 * (jt + 1)],
+                        v: &fso.lr_v[b6 * k..b6 * (k + 1)],
+                        c: js.map(|j| if j == k { fso.diag_c.as_ptr() } else { c.wrapping_add(j) }),
+                        y: js.map(|j| if j == k { fso.diag_y.as_ptr() } else { y.wrapping_add(j) }),
+                        bs: ld,
+                    }
+                });
+                // SAFETY: c, y: six values at the stride ld from column j < n of C_k (6 ld
+                // values) or of Y_J (6 ld values from 6 ld J), or from the start of `diag_c`,
+                // `diag_y` (6 ld values); b2: columns (j, k) of ID_qq (or `zeros`), n values
+                // each; the outputs are distinct columns of d2qdd_dq2 (the accumulated ones
+                // written before).
+                unsafe { pr.solve_rank(n, rank, cnt, Some((b2, 1)), acc, out, mirror) };
             }
         }
         // The pairs of DoFs of one joint that need not commute.
@@ -1345,52 +1356,72 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             }
         }
     }
-    // ∂²q̈/∂q∂q̇: −M⁻¹(ID_qv + B) with B[i][j][k] = IDFOZA(∂q̈/∂q̇[:, k])[i][j]. IDSVA-SO has
-    // stored ID_qv by blocks of eight pages k (see `qv_offset`); IDFOZA of the columns
-    // k8..k8 + w of ∂q̈/∂q̇ adds B into block k8 in place (see `idfoza_add_block`), and the
-    // products read its columns in place while it is in the cache. Columns (j, k0..k0 + 4)
-    // for every j but the DoFs of root joints (zero columns, see `FdSoData::root`); rows
-    // related to j.
+    // ∂²q̈/∂q∂q̇ (eq. eqn_FD_SO_43): column (j, k) is −M⁻¹(ID_qv[:, j, k] + ∂M/∂q_j X_v[:, k])
+    // with X_v = ∂q̈/∂q̇, for every j but the DoFs of root joints (zero columns, see
+    // `FdSoData::root`). As for ∂²q̈/∂q², −M⁻¹ ∂M/∂q_j X_v[:, k] = −U_J (Q_j X_v[:, k])
+    // − V_j (P_J X_v[:, k]) (J the joint of j), from the path sums of the rows of X_v. ID_qv
+    // (stored by IDSVA-SO by blocks of eight pages k, see `qv_offset`, and zero where it does
+    // not write) over its rows related to j and to one of the four k with a non-zero value.
+    transpose_strided(data.dqdd_dv.as_slice(), n, n, n, &mut fso.xt, ld);
+    path_sums(model, data, &fso.xt, ld, &mut fso.lr_y, &mut fso.lr_r);
+    for j in (0..n).filter(|&j| !fso.root[j]) {
+        let jt = dof_joint[j];
+        let (y, r) = (&fso.lr_y[b6 * jt..], &fso.lr_r[b6 * jt..]);
+        let (sj, xh) = &fso.xh[j];
+        q_rows(sj, xh, y, r, ld, &mut fso.lr_c[b6 * j..b6 * (j + 1)]);
+    }
     {
-        let qv = fso.id.d2tau_dqdv_mut().as_mut_slice();
-        for k8 in (0..n).step_by(8) {
-            let w = (n - k8).min(8);
-            let blk = &mut qv[n2 * k8..n2 * (k8 + w)];
-            let mask = AddMask::Related { related: &fso.related, words: fso.words, first: k8 };
-            idfoza_add_block(model, data, &mut ws, data.dqdd_dv.as_slice(), k8, w, mask, blk);
-            debug_assert_eq!(qv_offset(n, 0, 0, k8), n2 * k8);
-            let blk = blk.as_ptr();
-            for k0 in (k8..k8 + w).step_by(4) {
-                let wl = 4.min(n - k0);
-                let roots = &fso.root;
-                for j in (0..n).filter(|&j| !roots[j]) {
-                    // The next group's outputs into L2.
-                    if j + 1 < n {
-                        let t = fso.d2qdd_dqdv.as_slice().as_ptr();
-                        for k in k0..k0 + wl {
-                            prefetch::<TO_L2>(t.wrapping_add(n * (j + 1 + n * k)), n);
-                        }
+        let qv = fso.id.d2tau_dqdv().as_slice();
+        // By groups of four pages k (the outputs written along them), then j.
+        for k0 in (0..n).step_by(4) {
+            let wl = 4.min(n - k0);
+            let ks = lanes(k0, wl);
+            let w8 = (n - (k0 & !7)).min(8);
+            for j in (0..n).filter(|&j| !fso.root[j]) {
+                // The next group's outputs into L2.
+                if j + 1 < n {
+                    let t = fso.d2qdd_dqdv.as_slice().as_ptr();
+                    for k in k0..k0 + wl {
+                        prefetch::<TO_L2>(t.wrapping_add(n * (j + 1 + n * k)), n);
                     }
-                    pr.build_set(pr.related(j), pr.related(j), false);
-                    let out = std::array::from_fn(|u| {
-                        if u < wl {
-                            col(&mut fso.d2qdd_dqdv, j, k0 + u)
-                        } else {
-                            std::ptr::null_mut()
-                        }
-                    });
-                    // Entry (l, j, k0 + u) at b[u] + w l (lanes past wl repeat the last).
-                    let b = std::array::from_fn(|u| {
-                        blk.wrapping_add(k0 - k8 + u.min(wl - 1) + w * n * j)
-                    });
-                    // SAFETY: rows l < n of the columns (j, k0 + u) of the block (w n² values,
-                    // (k0 − k8 + u) + w (l + n j) < w n²); the outputs are distinct columns of
-                    // d2qdd_dqdv.
-                    unsafe { pr.solve_group_in_place(n, b, w, false, 0, out, none) };
                 }
+                let jt = dof_joint[j];
+                let out = std::array::from_fn(|u| {
+                    if u < wl { col(&mut fso.d2qdd_dqdv, j, k0 + u) } else { std::ptr::null_mut() }
+                });
+                // The ID_qv rows: related to j and to one of the k related to j (the column
+                // (j, k) vanishes unless j and k are related), read in place: entry (l, j, k)
+                // at base + (k − k0) + w8 l (see `qv_offset`; zero where IDSVA-SO does not
+                // write).
+                let rj = pr.related(j);
+                pr.set2.fill(0);
+                for k in (k0..k0 + wl).filter(|&k| has(rj, k)) {
+                    let rk = pr.related(k);
+                    for ((s, x), y) in pr.set2.iter_mut().zip(rk).zip(rj) {
+                        *s |= x & y;
+                    }
+                }
+                let cnt = pr.rows_of_set2();
+                let base = qv[qv_offset(n, 0, j, k0)..].as_ptr();
+                let b = ks.map(|k| base.wrapping_add(k - k0));
+                let (c, y) = (fso.lr_c[b6 * j..].as_ptr(), fso.lr_y[b6 * jt..].as_ptr());
+                let rank = RankTerm {
+                    u: &fso.lr_u[b6 * jt..b6 * (jt + 1)],
+                    v: &fso.lr_v[b6 * j..b6 * (j + 1)],
+                    c: ks.map(|k| c.wrapping_add(k)),
+                    y: ks.map(|k| y.wrapping_add(k)),
+                    bs: ld,
+                };
+                // SAFETY: c, y: six values at the stride ld from column k < n of C_j or of
+                // Y_J (6 ld values each); b: the entries (l, j, k) of ID_qv for the rows
+                // l < n of set2 (offsets below n² k8 + w8 n (j + 1)); the outputs are distinct
+                // columns of d2qdd_dqdv.
+                unsafe { pr.solve_rank(n, Some(rank), cnt, Some((b, w8)), 0, out, none) };
             }
         }
     }
+    // ∂(M⁻¹)/∂q, page by page from U_J and V_k (see `dminv_dq`).
+    dminv_dq(model, &fso.root, ld, &fso.lr_u, &fso.lr_v, &mut fso.lr_t, &mut fso.d2qdd_dtaudq);
 }
 
 #[cfg(test)]
@@ -1497,8 +1528,8 @@ mod tests {
     /// A workspace made for a model with the same `nv` but another tree is refused, and the
     /// caller's data is left as it was.
     /// A workspace used for many states gives what a fresh one gives at each: no
-    /// call leaves anything behind that the next one reads (the products add into parts of
-    /// the ID tensors in place, see `idfoza_add_block`). On random trees with joints of every
+    /// call leaves anything behind that the next one reads (the products read the ID tensors
+    /// where IDSVA-SO writes them, zero elsewhere). On random trees with joints of every
     /// kind, with and without a free-flyer, and external forces on every other call; also
     /// with the four- and eight-lane kernels.
     #[test]

@@ -137,9 +137,6 @@ impl SoData {
     pub(crate) fn d2tau_dq2_mut(&mut self) -> &mut Tensor3 {
         &mut self.d2tau_dq2
     }
-    pub(crate) fn d2tau_dqdv_mut(&mut self) -> &mut Tensor3 {
-        &mut self.d2tau_dqdv
-    }
     /// `T[(i, j, k)] = ∂²τ_i/∂q̇_j∂q̇_k`.
     pub fn d2tau_dv2(&self) -> &Tensor3 {
         &self.d2tau_dv2

@@ -238,15 +238,6 @@ pub(crate) fn add3<V: Lanes>(a: &mut [V], b: [V; 3]) {
     }
 }
 
-/// `s × u` (motion cross product) of a plain `s` and lane vectors `u`.
-#[inline(always)]
-pub(crate) fn cross_motion_lanes<L: Lanes>(s: &[f64; 6], u: &[L; 6]) -> [L; 6] {
-    let ang = cross_pl(&s[..3], &u[..3]);
-    let mut lin = cross_pl(&s[..3], &u[3..]);
-    add3(&mut lin, cross_pl(&s[3..], &u[..3]));
-    [ang[0], ang[1], ang[2], lin[0], lin[1], lin[2]]
-}
-
 /// `s ×* f` (force cross product) of a plain `s` and lane vectors `f`.
 #[inline(always)]
 pub(crate) fn cross_force_lanes<L: Lanes>(s: &[f64; 6], f: &[L; 6]) -> [L; 6] {

@@ -746,25 +746,6 @@ pub(crate) fn fence_streams() {
     unsafe { _mm_sfence() };
 }
 
-/// `p[l] ← z[l]` for the lanes `l` of `lanes` (bits `0..4`), plus the old `p[l]` for those also
-/// in `onto` (the other lanes of `p` are not accessed).
-///
-/// # Safety
-/// AVX2 available; `p` valid for reads and writes of the lanes of `lanes`.
-#[inline(always)]
-pub(crate) unsafe fn store_or_add(p: *mut f64, z: &[f64; 4], onto: u8, lanes: u8) {
-    // SAFETY: the caller's contract.
-    unsafe {
-        let bits = _mm256_setr_epi64x(1, 2, 4, 8);
-        let add = _mm256_set1_epi64x((onto & lanes) as i64);
-        let add = _mm256_cmpeq_epi64(_mm256_and_si256(add, bits), bits);
-        let put =
-            _mm256_cmpeq_epi64(_mm256_and_si256(_mm256_set1_epi64x(lanes as i64), bits), bits);
-        let z = _mm256_add_pd(_mm256_maskload_pd(p, add), _mm256_loadu_pd(z.as_ptr()));
-        _mm256_maskstore_pd(p, put, z);
-    }
-}
-
 // The 6×6 products of IDSVA-SO (128-bit halves for rows 4..6).
 
 /// Sum of the four lanes of `a` and the two of `b`.

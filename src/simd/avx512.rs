@@ -112,17 +112,3 @@ unsafe fn chunk<const V: usize>(
         }
     }
 }
-
-/// `p[l] ← z[l]` for the lanes `l` of `lanes`, plus the old `p[l]` for those also in `onto`
-/// (the other lanes of `p` are not accessed).
-///
-/// # Safety
-/// AVX-512F available; `p` valid for reads and writes of the lanes of `lanes`.
-#[inline(always)]
-pub(crate) unsafe fn store_or_add(p: *mut f64, z: &[f64; 8], onto: u8, lanes: u8) {
-    // SAFETY: the caller's contract.
-    unsafe {
-        let z = _mm512_add_pd(_mm512_maskz_loadu_pd(onto & lanes, p), _mm512_loadu_pd(z.as_ptr()));
-        _mm512_mask_storeu_pd(p, lanes, z);
-    }
-}

@@ -297,6 +297,7 @@ pub(crate) trait F64x4: Lanes<Arr = [f64; 4]> {
 }
 
 /// One term `A B` of a [`Gemm4`] product, where only some columns of `A` take part.
+#[derive(Clone, Copy)]
 pub(crate) struct Gemm4Term<'a> {
     /// `A`, column-major with leading dimension `lda`; each of its columns `l < cols` is
     /// readable (and zero, or at least finite, past the rows wanted) up to the product's rows
