@@ -7,7 +7,8 @@
 //! [`BatchData`]: one [`Data`] per thread and the [`BatchPool`] whose threads it runs on, kept
 //! by the caller between calls (MuJoCo binds a thread pool to its `mjData` the same way).
 //! [`map_states`] batches any other per-state computation (the contact dynamics, say) on
-//! per-thread workspaces of any type, with the same scheduling and error reporting.
+//! per-thread workspaces of any type, with the same scheduling and error reporting. The
+//! batched functions of a model with mimic joints are in [`crate::mimic::batch`].
 //!
 //! A [`BatchPool`] of `T` threads is the calling thread plus `T − 1` helper threads: the caller
 //! starts on the states at once and the helpers join as soon as they are awake, and a 1-thread
@@ -297,7 +298,7 @@ fn at_state(e: Error, k: usize) -> Error {
 }
 
 /// Checks that a per-state slice has one entry per state.
-fn check_count(what: &str, len: usize, n: usize) -> Result<()> {
+pub(crate) fn check_count(what: &str, len: usize, n: usize) -> Result<()> {
     if len != n {
         return Err(Error::Dimension {
             what: format!("{what} (one entry per state)"),
@@ -309,7 +310,7 @@ fn check_count(what: &str, len: usize, n: usize) -> Result<()> {
 }
 
 /// Checks output vectors of length `len`.
-fn check_vectors(what: &str, out: &[DVector<f64>], len: usize) -> Result<()> {
+pub(crate) fn check_vectors(what: &str, out: &[DVector<f64>], len: usize) -> Result<()> {
     if let Some(k) = out.iter().position(|x| x.len() != len) {
         return Err(Error::Dimension {
             what: format!("{what}[{k}]"),
@@ -321,7 +322,7 @@ fn check_vectors(what: &str, out: &[DVector<f64>], len: usize) -> Result<()> {
 }
 
 /// Checks square output matrices of size `n×n`.
-fn check_matrices(what: &str, out: &[DMatrix<f64>], n: usize) -> Result<()> {
+pub(crate) fn check_matrices(what: &str, out: &[DMatrix<f64>], n: usize) -> Result<()> {
     if let Some(k) = out.iter().position(|m| m.shape() != (n, n)) {
         let (r, c) = out[k].shape();
         return Err(Error::Dimension {
@@ -356,7 +357,7 @@ pub fn copy_output(dst: &mut [f64], src: &[f64]) {
 /// non-temporal (streaming) stores, which skip reading its cache lines before writing them and
 /// leave the caches to the workspace ([`drive`] fences them when a thread's share ends).
 #[inline]
-fn copy(dst: &mut DMatrix<f64>, src: &DMatrix<f64>) {
+pub(crate) fn copy(dst: &mut DMatrix<f64>, src: &DMatrix<f64>) {
     let (dst, src) = (dst.as_mut_slice(), src.as_slice());
     assert_eq!(dst.len(), src.len());
     #[cfg(target_arch = "x86_64")]
@@ -416,7 +417,7 @@ fn claim(next: &AtomicUsize, n: usize, threads: usize) -> Option<(usize, usize)>
 /// function with one output passes `&mut vec![(); n]` as `out2`, which allocates nothing).
 /// Returns the error of the first failing state in index order (states after a failure may be
 /// left unevaluated).
-fn drive<W, O, P, F>(
+pub(crate) fn drive<W, O, P, F>(
     bd: &mut BatchData<W>,
     n: usize,
     out: &mut [O],

@@ -41,9 +41,16 @@
 //! [`centroidal_dynamics_derivatives`] ([`MimicCentroidal`]). Continuous joints have
 //! one coordinate (the angle) here, so `expand` is affine for them too and the chain rule
 //! `∂/∂q = ∂/∂q_full · G` holds for every mimic or reference joint. The other algorithms of
-//! the crate (the contracted KKT and impact second order, batches) take the full
+//! the crate (the contracted KKT and impact second order) take the full
 //! [`Model`] only. [`MimicModel::d_integrate`] and [`MimicModel::d_difference`] are block
 //! diagonal by independent joint (the reduced configuration space is the product of their spaces).
+//!
+//! Batches ([`batch`]): the counterparts of the batched functions of [`crate::batch`] (`rnea`,
+//! `crba`, `aba`, first- and second-order ID/FD derivatives over many states on a
+//! [`crate::batch::BatchPool`], one [`MimicData`] per thread). Kinematics ([`kinematics`],
+//! re-exported here): [`forward_kinematics`], [`point_position`], [`point_jacobian`]
+//! (`J_full G`), [`point_drift`] and [`centroidal_momentum`] (the full tree's at `expand(q)`,
+//! `G v`).
 
 use crate::algo::{Data, ReferenceFrame};
 use crate::deriv::{ContactData, KktData, SoData};
@@ -54,6 +61,12 @@ use crate::spatial::{Force, Motion, Transform};
 use crate::tensor::Tensor3;
 use nalgebra::{DMatrix, DVector, Matrix3xX, Matrix6xX, Vector3};
 use std::path::Path;
+
+pub mod batch;
+pub mod kinematics;
+pub use kinematics::{
+    centroidal_momentum, forward_kinematics, point_drift, point_jacobian, point_position,
+};
 
 /// One mimic constraint `q[joint] = multiplier · q[reference] + offset` between two one-DoF
 /// joints of the full model (indices of [`Model::names`]).

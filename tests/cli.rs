@@ -1237,3 +1237,49 @@ fn mimic_commands_use_the_reduced_coordinates() {
     );
     assert_ok(&sodyn(&["info", "--model", b]), "unknown reference without --mimic");
 }
+
+/// `bench --mimic` times the batched algorithms of `sodyn::mimic::batch` on a pool of
+/// `--threads` (the batch_* lines with threads= and per=state); the options it does not
+/// support are clean errors.
+#[test]
+fn bench_mimic_times_the_batched_algorithms() {
+    let urdf = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_arm.urdf");
+    let u = urdf.to_str().unwrap();
+    let algos = "rnea,batch_rnea,batch_aba,batch_id_fo,batch_fd_fo";
+    for pool in ["spin", "rayon"] {
+        let o = sodyn(&[
+            "bench",
+            "--model",
+            u,
+            "--mimic",
+            "--smoke",
+            "--threads",
+            "2",
+            "--pool",
+            pool,
+            "--algos",
+            algos,
+        ]);
+        assert_ok(&o, "bench --mimic batch_*");
+        let out = stdout(&o);
+        let header = out.lines().next().unwrap();
+        assert!(header.starts_with('#') && header.contains(" threads=2 pool="), "{header}");
+        let lines: Vec<&str> = out.lines().filter(|l| l.starts_with("model=mimic_arm")).collect();
+        assert_eq!(lines.len(), 5, "{out}");
+        for a in ["batch_rnea", "batch_aba", "batch_id_fo", "batch_fd_fo"] {
+            let l = lines.iter().find(|l| l.contains(&format!(" algo={a} "))).expect(a);
+            assert!(l.contains(" batch=8 ") && l.contains(" threads=2 per=state"), "{l}");
+        }
+        assert!(!lines[0].contains("per=state"), "{}", lines[0]);
+    }
+    for (args, needle) in [
+        (&["--paired-threads", "2"][..], "--paired-threads is not supported with --mimic"),
+        (&["--pin-cpus", "0"][..], "--pin-cpus is not supported with --mimic"),
+        (&["--algos", "batch_kkt"][..], "algorithm \"batch_kkt\" is not available with --mimic"),
+    ] {
+        let mut a = vec!["bench", "--model", u, "--mimic", "--smoke"];
+        a.extend_from_slice(args);
+        let err = assert_clean_failure(&sodyn(&a), needle);
+        assert!(err.contains(needle), "{err}");
+    }
+}

@@ -321,3 +321,78 @@ fn mimic_algorithms_do_not_allocate() {
     });
     assert!(report.is_empty(), "heap allocations in mimic hot paths: {}", report.join(", "));
 }
+
+/// The point kinematics and centroidal momentum of a mimic model, and its batched functions on
+/// a one-thread pool (the caller alone: no thread hand-off), allocate nothing.
+#[test]
+fn mimic_kinematics_and_batches_do_not_allocate() {
+    use nalgebra::{DMatrix, Matrix3xX};
+    use sodyn::batch::BatchPool;
+    use sodyn::mimic::{self, MimicData, MimicModel, MimicSoData, batch};
+    use std::sync::Arc;
+    let path =
+        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_arm.urdf");
+    let opts = sodyn::model::UrdfOptions { floating_base: true, ..Default::default() };
+    let m = MimicModel::load_urdf_file(&path, &opts).unwrap();
+    let mut rng = Rng::new(5);
+    let n = 6;
+    let qs: Vec<_> = (0..n).map(|_| m.random_configuration(&mut rng)).collect();
+    let mut r = || DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
+    let vs: Vec<_> = (0..n).map(|_| r()).collect();
+    let xs: Vec<_> = (0..n).map(|_| r()).collect();
+    let (q, v, a) = (&qs[0], &vs[0], &xs[0]);
+    let mut d = MimicData::new(&m);
+    let fr = m.full().frames().len() - 1;
+    let p = Vector3::new(0.01, 0.02, 0.03);
+    let mut j3 = Matrix3xX::zeros(m.nv());
+    let mut bd = batch::batch_data_with_pool(&m, Arc::new(BatchPool::new(1).unwrap()));
+    let mut out_v = vec![DVector::zeros(m.nv()); n];
+    let mut out_m1 = vec![DMatrix::zeros(m.nv(), m.nv()); n];
+    let mut out_m2 = out_m1.clone();
+    let mut out_so = vec![MimicSoData::new(&m); n];
+    let mut report = vec![];
+    let mut check = |name: &str, f: &mut dyn FnMut()| {
+        f(); // warm-up
+        let n = allocations(f);
+        if n > 0 {
+            report.push(format!("{name}: {n}"));
+        }
+    };
+    check("mimic::forward_kinematics", &mut || {
+        mimic::forward_kinematics(&m, &mut d, q, Some(v), Some(a)).unwrap()
+    });
+    check("mimic::point_position", &mut || {
+        mimic::point_position(&m, &mut d, q, fr, &p).unwrap();
+    });
+    check("mimic::point_jacobian", &mut || {
+        mimic::point_jacobian(&m, &mut d, q, fr, &p, &mut j3).unwrap()
+    });
+    check("mimic::point_drift", &mut || {
+        mimic::point_drift(&m, &mut d, q, v, fr, &p).unwrap();
+    });
+    check("mimic::centroidal_momentum", &mut || {
+        mimic::centroidal_momentum(&m, &mut d, q, v).unwrap();
+    });
+    check("mimic::batch::rnea_batch", &mut || {
+        batch::rnea_batch(&m, &mut bd, &qs, &vs, &xs, &mut out_v).unwrap()
+    });
+    check("mimic::batch::crba_batch", &mut || {
+        batch::crba_batch(&m, &mut bd, &qs, &mut out_m1).unwrap()
+    });
+    check("mimic::batch::aba_batch", &mut || {
+        batch::aba_batch(&m, &mut bd, &qs, &vs, &xs, &mut out_v).unwrap()
+    });
+    check("mimic::batch::id_derivatives_batch", &mut || {
+        batch::id_derivatives_batch(&m, &mut bd, &qs, &vs, &xs, &mut out_m1, &mut out_m2).unwrap()
+    });
+    check("mimic::batch::fd_derivatives_batch", &mut || {
+        batch::fd_derivatives_batch(&m, &mut bd, &qs, &vs, &xs, &mut out_m1, &mut out_m2).unwrap()
+    });
+    check("mimic::batch::id_so_derivatives_batch", &mut || {
+        batch::id_so_derivatives_batch(&m, &mut bd, &qs, &vs, &xs, &mut out_so).unwrap()
+    });
+    check("mimic::batch::fd_so_derivatives_batch", &mut || {
+        batch::fd_so_derivatives_batch(&m, &mut bd, &qs, &vs, &xs, &mut out_so).unwrap()
+    });
+    assert!(report.is_empty(), "heap allocations in mimic hot paths: {}", report.join(", "));
+}

@@ -5,6 +5,7 @@
     python examples/python/dask_batch.py                       # 100,000 states, local cluster
     python examples/python/dask_batch.py --scheduler tcp://host:8786 --states 1000000
     python examples/python/dask_batch.py --model builtin:humanoid --states 2000 --chunk 500
+    python examples/python/dask_batch.py --model tests/data/mimic_arm.urdf --mimic --states 2000
 
 Without ``--scheduler`` the script starts a ``LocalCluster(processes=True)`` of ``--workers``
 single-threaded worker processes; with it, it connects to that scheduler (whose workers need
@@ -84,9 +85,10 @@ def default_model_path() -> Optional[Path]:
     return next((p for p in model_candidates() if p.is_file()), None)
 
 
-def load_model(spec: Optional[str], floating_base: bool = True):
+def load_model(spec: Optional[str], floating_base: bool = True, mimic: bool = False):
     """``(model, description)`` from a URDF path or ``builtin:NAME`` (default: talos_full_v2
-    with a free flyer)."""
+    with a free flyer); ``mimic``: the URDF's ``<mimic>`` joints as constraints (the reduced
+    coordinates)."""
     if spec is None:
         path = default_model_path()
         if path is None:
@@ -96,9 +98,12 @@ def load_model(spec: Optional[str], floating_base: bool = True):
                 "pass --model PATH or --model builtin:humanoid")
         spec = str(path)
     if spec.startswith("builtin:"):
+        if mimic:
+            raise SystemExit("--mimic applies to URDF files (their <mimic> elements)")
         return sodyn.Model.builtin(spec[len("builtin:"):]), spec
-    return sodyn.Model.from_urdf(spec, floating_base=floating_base), (
-        f"{spec} ({'floating' if floating_base else 'fixed'} base)")
+    return sodyn.Model.from_urdf(spec, floating_base=floating_base, mimic=mimic), (
+        f"{spec} ({'floating' if floating_base else 'fixed'} base"
+        f"{', mimic joints as constraints' if mimic else ''})")
 
 
 # ------------------------------------------------------------------------------------------
@@ -193,6 +198,9 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
                         "builtin:NAME (default: talos_full_v2.urdf of ../shared/models)")
     p.add_argument("--fixed-base", action="store_true",
                    help="load the URDF without a free flyer")
+    p.add_argument("--mimic", action="store_true",
+                   help="read the URDF's <mimic> joints as constraints (the reduced "
+                        "coordinates: Model.from_urdf(..., mimic=True))")
     p.add_argument("--seed", type=int, default=0, help="seed of every random state (default 0)")
     p.add_argument("--check", type=int, default=64, metavar="K",
                    help="states re-checked in-process (default 64)")
@@ -248,7 +256,8 @@ def main(argv: Optional[Sequence[str]] = None) -> Dict:
     args = parse_args(argv)
     log = (lambda *a, **k: None) if args.quiet else (lambda *a, **k: print(*a, **k, flush=True))
 
-    model, model_desc = load_model(args.model, floating_base=not args.fixed_base)
+    model, model_desc = load_model(args.model, floating_base=not args.fixed_base,
+                                   mimic=args.mimic)
     N, C = args.states, args.chunk
     nchunks = -(-N // C)
     counts = [min(C, N - k * C) for k in range(nchunks)]

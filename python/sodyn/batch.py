@@ -1,7 +1,8 @@
 """Batched evaluation over stacked states on sodyn's thread pool, with the GIL released.
 
-``Q`` has shape ``(N, nq)``; ``V``, ``A`` and ``TAU`` shape ``(N, nv)``. Results are stacked
-along a leading axis of length ``N`` and equal, bit for bit, ``N`` sequential calls.
+``Q`` has shape ``(N, nq)``; ``V``, ``A`` and ``TAU`` shape ``(N, nv)`` (for a model loaded
+with ``mimic=True``, its reduced ``nq`` and ``nv``). Results are stacked along a leading axis of
+length ``N`` and equal, bit for bit, ``N`` sequential calls.
 ``threads=None`` uses one thread per core; ``threads=T`` a pool of ``T`` threads (the caller
 plus ``T - 1`` helpers), started on first use and kept.
 """

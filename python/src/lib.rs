@@ -467,8 +467,8 @@ impl PyModel {
                      frame_acceleration_derivatives, frame_jacobian_derivative, \
                      frame_placement_hessian, center_of_mass, center_of_mass_motion, \
                      center_of_mass_jacobian, center_of_mass_velocity_derivatives, \
-                     centroidal_dynamics_derivatives and the Model methods integrate, \
-                     difference, d_integrate, d_difference"
+                     centroidal_dynamics_derivatives, the batch_* functions (sodyn.batch) and \
+                     the Model methods integrate, difference, d_integrate, d_difference"
                 ),
             }));
         }
@@ -3062,6 +3062,9 @@ fn batch_rnea<'py>(
     a: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_batch(py, &mm, threads, MimicBatch::Rnea, q, Some(v), Some((a, "a")));
+    }
     let m = model.full_only("batch_rnea")?;
     let ins = batch_qvx(m, q, v, a, "a")?;
     batch_call(py, threads, Data::new(m), &ins, 1, &[m.nv()], |d, st, o| {
@@ -3081,6 +3084,9 @@ fn batch_aba<'py>(
     tau: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_batch(py, &mm, threads, MimicBatch::Aba, q, Some(v), Some((tau, "tau")));
+    }
     let m = model.full_only("batch_aba")?;
     let ins = batch_qvx(m, q, v, tau, "tau")?;
     batch_call(py, threads, Data::new(m), &ins, 1, &[m.nv()], |d, st, o| {
@@ -3099,6 +3105,9 @@ fn batch_nonlinear_effects<'py>(
     v: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_batch(py, &mm, threads, MimicBatch::Nle, q, Some(v), None);
+    }
     let m = model.full_only("batch_nonlinear_effects")?;
     let qs = read_batch(q, "q", m.nq(), "nq", None)?;
     let vs = read_batch(v, "v", m.nv(), "nv", Some(qs.count))?;
@@ -3117,6 +3126,9 @@ fn batch_crba<'py>(
     q: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_batch(py, &mm, threads, MimicBatch::Crba, q, None, None);
+    }
     let m = model.full_only("batch_crba")?;
     let qs = read_batch(q, "q", m.nq(), "nq", None)?;
     batch_call(py, threads, Data::new(m), &[qs], 1, &[m.nv(), m.nv()], |d, st, o| {
@@ -3136,6 +3148,9 @@ fn batch_id_derivatives<'py>(
     a: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_batch(py, &mm, threads, MimicBatch::IdFo, q, Some(v), Some((a, "a")));
+    }
     let m = model.full_only("batch_id_derivatives")?;
     let ins = batch_qvx(m, q, v, a, "a")?;
     batch_call(py, threads, Data::new(m), &ins, 2, &[m.nv(), m.nv()], |d, st, o| {
@@ -3157,6 +3172,9 @@ fn batch_fd_derivatives<'py>(
     tau: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_batch(py, &mm, threads, MimicBatch::FdFo, q, Some(v), Some((tau, "tau")));
+    }
     let m = model.full_only("batch_fd_derivatives")?;
     let ins = batch_qvx(m, q, v, tau, "tau")?;
     batch_call(py, threads, Data::new(m), &ins, 3, &[m.nv(), m.nv()], |d, st, o| {
@@ -3179,6 +3197,9 @@ fn batch_id_so_derivatives<'py>(
     a: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_batch(py, &mm, threads, MimicBatch::IdSo, q, Some(v), Some((a, "a")));
+    }
     let m = model.full_only("batch_id_so_derivatives")?;
     let ins = batch_qvx(m, q, v, a, "a")?;
     let (nv, ws) = (m.nv(), (Data::new(m), SoData::new(m)));
@@ -3203,6 +3224,9 @@ fn batch_fd_so_derivatives<'py>(
     tau: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_batch(py, &mm, threads, MimicBatch::FdSo, q, Some(v), Some((tau, "tau")));
+    }
     let m = model.full_only("batch_fd_so_derivatives")?;
     let ins = batch_qvx(m, q, v, tau, "tau")?;
     let (nv, ws) = (m.nv(), (Data::new(m), FdSoData::new(m)));
@@ -3214,6 +3238,97 @@ fn batch_fd_so_derivatives<'py>(
         }
         Ok(())
     })
+}
+
+/// The batched functions of a model loaded with `mimic=True`.
+#[derive(Clone, Copy)]
+enum MimicBatch {
+    Rnea,
+    Aba,
+    Nle,
+    Crba,
+    IdFo,
+    FdFo,
+    IdSo,
+    FdSo,
+}
+
+/// A batched call on a mimic model in the reduced coordinates (`q`: `(N, nq)`; `v` and `x`,
+/// `a` or `tau`: `(N, nv)`): the single-state functions of `sodyn::mimic` on the pool, one
+/// `MimicData` (and `MimicSoData`) per thread, as `sodyn::mimic::batch` runs them.
+#[allow(clippy::too_many_arguments)]
+fn mimic_batch<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    threads: Option<i64>,
+    which: MimicBatch,
+    q: &Bound<'py, PyAny>,
+    v: Option<&Bound<'py, PyAny>>,
+    x: Option<(&Bound<'py, PyAny>, &str)>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let qs = read_batch(q, "q", mm.nq(), "nq (reduced coordinates: mimic joints excluded)", None)?;
+    let n = qs.count;
+    let mut ins = vec![qs];
+    if let Some(v) = v {
+        ins.push(read_batch(v, "v", mm.nv(), "nv (reduced coordinates)", Some(n))?);
+    }
+    if let Some((x, name)) = x {
+        ins.push(read_batch(x, name, mm.nv(), "nv (reduced coordinates)", Some(n))?);
+    }
+    let nv = mm.nv();
+    let (vec_, mat, ten) = (&[nv][..], &[nv, nv][..], &[nv, nv, nv][..]);
+    let so = matches!(which, MimicBatch::IdSo | MimicBatch::FdSo).then(|| MimicSoData::new(mm));
+    // The thread's workspaces and a zero acceleration (the nonlinear effects).
+    let ws = (MimicData::new(mm), so, DVector::zeros(nv));
+    match which {
+        MimicBatch::Rnea => batch_call(py, threads, ws, &ins, 1, vec_, |(d, ..), st, o| {
+            copy_output(o[0], mimic::rnea(mm, d, &st[0], &st[1], &st[2], None)?.as_slice());
+            Ok(())
+        }),
+        MimicBatch::Aba => batch_call(py, threads, ws, &ins, 1, vec_, |(d, ..), st, o| {
+            copy_output(o[0], mimic::aba(mm, d, &st[0], &st[1], &st[2], None)?.as_slice());
+            Ok(())
+        }),
+        MimicBatch::Nle => batch_call(py, threads, ws, &ins, 1, vec_, |(d, _, z), st, o| {
+            copy_output(o[0], mimic::rnea(mm, d, &st[0], &st[1], z, None)?.as_slice());
+            Ok(())
+        }),
+        MimicBatch::Crba => batch_call(py, threads, ws, &ins, 1, mat, |(d, ..), st, o| {
+            copy_output(o[0], mimic::crba(mm, d, &st[0])?.as_slice());
+            Ok(())
+        }),
+        MimicBatch::IdFo => batch_call(py, threads, ws, &ins, 2, mat, |(d, ..), st, o| {
+            mimic::id_derivatives(mm, d, &st[0], &st[1], &st[2], None)?;
+            copy_output(o[0], d.dtau_dq().as_slice());
+            copy_output(o[1], d.dtau_dv().as_slice());
+            Ok(())
+        }),
+        MimicBatch::FdFo => batch_call(py, threads, ws, &ins, 3, mat, |(d, ..), st, o| {
+            mimic::fd_derivatives(mm, d, &st[0], &st[1], &st[2], None)?;
+            for (dst, src) in o.iter_mut().zip([d.dqdd_dq(), d.dqdd_dv(), d.minv()]) {
+                copy_output(dst, src.as_slice());
+            }
+            Ok(())
+        }),
+        MimicBatch::IdSo => batch_call(py, threads, ws, &ins, 4, ten, |(d, so, _), st, o| {
+            let so = so.as_mut().expect("made for the second order");
+            mimic::id_so_derivatives(mm, d, so, &st[0], &st[1], &st[2], None)?;
+            let ts = [so.d2tau_dq2(), so.d2tau_dv2(), so.d2tau_dqdv(), so.dm_dq()];
+            for (dst, src) in o.iter_mut().zip(ts) {
+                copy_output(dst, src.as_slice());
+            }
+            Ok(())
+        }),
+        MimicBatch::FdSo => batch_call(py, threads, ws, &ins, 4, ten, |(d, so, _), st, o| {
+            let so = so.as_mut().expect("made for the second order");
+            mimic::fd_so_derivatives(mm, d, so, &st[0], &st[1], &st[2], None)?;
+            let ts = [so.d2qdd_dq2(), so.d2qdd_dv2(), so.d2qdd_dqdv(), so.d2qdd_dtaudq()];
+            for (dst, src) in o.iter_mut().zip(ts) {
+                copy_output(dst, src.as_slice());
+            }
+            Ok(())
+        }),
+    }
 }
 
 /// The compiled module `sodyn._sodyn`.

@@ -359,8 +359,10 @@ def test_unsupported_functions_and_bad_inputs_raise():
                     (sodyn.idfoza, (q, np.ones(7)))]:
         with pytest.raises(sodyn.SodynError, match="does not support models with mimic"):
             f(model, d, *args)
-    with pytest.raises(sodyn.SodynError, match="does not support models with mimic"):
-        sodyn.batch.rnea(model, q[None, :], np.zeros((1, 7)), np.zeros((1, 7)))
+    # Batches support mimic models (python/tests/test_mimic_batch.py).
+    np.testing.assert_array_equal(
+        sodyn.batch.rnea(model, q[None, :], np.zeros((1, 7)), np.zeros((1, 7)))[0],
+        sodyn.rnea(model, d, q, np.zeros(7), np.zeros(7)))
     with pytest.raises(ValueError, match=r"`q` must have shape \(7,\)"):
         sodyn.rnea(model, d, np.zeros(10), np.zeros(7), np.zeros(7))
     with pytest.raises(sodyn.SodynError, match="`v` has a non-finite entry"):

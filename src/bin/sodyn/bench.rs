@@ -1545,19 +1545,32 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// The algorithms `bench --mimic` times (those of `sodyn::mimic`).
-const MIMIC_ALGOS: &[&str] = &["rnea", "crba", "aba", "id_fo", "fd_fo", "id_so", "fd_so"];
+/// The algorithms `bench --mimic` times (those of `sodyn::mimic` and `sodyn::mimic::batch`).
+const MIMIC_ALGOS: &[&str] = &[
+    "rnea",
+    "crba",
+    "aba",
+    "id_fo",
+    "fd_fo",
+    "id_so",
+    "fd_so",
+    "batch_rnea",
+    "batch_aba",
+    "batch_id_fo",
+    "batch_fd_fo",
+];
 
 /// `bench --mimic`: the algorithms of `sodyn::mimic` on the reduced model, timed as the others
-/// (states round robin, warm-up, median and p10/p90 per call), one line each.
+/// (states round robin, warm-up, median and p10/p90 per call), one line each; the batched ones
+/// (`sodyn::mimic::batch`) on a pool of `--threads` (`--pool`, `--spin-us`), time per state.
 fn run_mimic(o: &BenchArgs) -> Result<()> {
-    use sodyn::mimic::{self, MimicData, MimicSoData};
+    use sodyn::mimic::{self, MimicData, MimicSoData, batch};
     let unsupported = [
         (o.contacts.is_some(), "--contacts"),
         (o.paired_threads.is_some(), "--paired-threads"),
         (o.ratio_to.is_some(), "--ratio-to"),
         (o.frame.is_some(), "--frame"),
-        (o.threads != 1, "--threads"),
+        (o.pin_cpus.is_some(), "--pin-cpus"),
     ];
     if let Some((_, opt)) = unsupported.iter().find(|(on, _)| *on) {
         return Err(Error::Io(format!(
@@ -1598,9 +1611,24 @@ fn run_mimic(o: &BenchArgs) -> Result<()> {
         smoke: o.smoke,
         calls: o.calls,
     };
+    let spin = Duration::from_nanos((o.spin_us * 1e3).round() as u64);
+    let (pool, pool_desc) = match o.pool {
+        Pool::Rayon => (BatchPool::with_rayon(o.threads)?, "rayon".to_string()),
+        Pool::Spin => {
+            (BatchPool::with_spin(o.threads, spin)?, format!("spin({}us)", spin.as_micros()))
+        }
+    };
+    let batched = algos.iter().any(|a| a.starts_with("batch_"));
+    let mut bd = batch::batch_data_with_pool(&m, Arc::new(pool));
+    let nb = if batched { nstates } else { 0 };
+    let mut out_vec = vec![DVector::zeros(m.nv()); nb];
+    let mut out_m1 = vec![DMatrix::zeros(m.nv(), m.nv()); nb];
+    let mut out_m2 = out_m1.clone();
+    let batch_plan = Plan { per_call: nstates, min_samples: plan.min_samples.min(20), ..plan };
     println!(
         "# model={name} source={} base={} nq={} nv={} njoints={} nstates={nstates} seed={} \
-         timer_overhead_ns={:.1} mimic={} full_nq={} full_nv={} threads=1 smoke={} simd={}",
+         timer_overhead_ns={:.1} mimic={} full_nq={} full_nv={} threads={} pool={pool_desc} \
+         smoke={} simd={}",
         o.model.model,
         if o.model.floating_base { "ff" } else { "fixed" },
         m.nq(),
@@ -1611,28 +1639,58 @@ fn run_mimic(o: &BenchArgs) -> Result<()> {
         m.mimics().len(),
         m.full().nq(),
         m.full().nv(),
+        o.threads,
         o.smoke as u8,
         sodyn::simd::level().name(),
     );
     let mut d = MimicData::new(&m);
     let mut so = MimicSoData::new(&m);
     for algo in algos {
-        let t = measure(&plan, |i| {
-            let (q, v, x) = (&qs[i], &vs[i], &xs[i]);
-            match algo {
-                "rnea" => mimic::rnea(&m, &mut d, q, v, x, None).map(|_| ()),
-                "crba" => mimic::crba(&m, &mut d, q).map(|_| ()),
-                "aba" => mimic::aba(&m, &mut d, q, v, x, None).map(|_| ()),
-                "id_fo" => mimic::id_derivatives(&m, &mut d, q, v, x, None),
-                "fd_fo" => mimic::fd_derivatives(&m, &mut d, q, v, x, None),
-                "id_so" => mimic::id_so_derivatives(&m, &mut d, &mut so, q, v, x, None),
-                _ => mimic::fd_so_derivatives(&m, &mut d, &mut so, q, v, x, None),
-            }
-        })
+        let (ov, o1, o2) = (&mut out_vec, &mut out_m1, &mut out_m2);
+        let t = match algo {
+            "batch_rnea" => measure(&batch_plan, |_| {
+                batch::rnea_batch(&m, &mut bd, &qs, &vs, &xs, ov)?;
+                black_box(&*ov);
+                Ok(())
+            }),
+            "batch_aba" => measure(&batch_plan, |_| {
+                batch::aba_batch(&m, &mut bd, &qs, &vs, &xs, ov)?;
+                black_box(&*ov);
+                Ok(())
+            }),
+            "batch_id_fo" => measure(&batch_plan, |_| {
+                batch::id_derivatives_batch(&m, &mut bd, &qs, &vs, &xs, o1, o2)?;
+                black_box(&*o1);
+                Ok(())
+            }),
+            "batch_fd_fo" => measure(&batch_plan, |_| {
+                batch::fd_derivatives_batch(&m, &mut bd, &qs, &vs, &xs, o1, o2)?;
+                black_box(&*o1);
+                Ok(())
+            }),
+            _ => measure(&plan, |i| {
+                let (q, v, x) = (&qs[i], &vs[i], &xs[i]);
+                match algo {
+                    "rnea" => mimic::rnea(&m, &mut d, q, v, x, None).map(|_| ()),
+                    "crba" => mimic::crba(&m, &mut d, q).map(|_| ()),
+                    "aba" => mimic::aba(&m, &mut d, q, v, x, None).map(|_| ()),
+                    "id_fo" => mimic::id_derivatives(&m, &mut d, q, v, x, None),
+                    "fd_fo" => mimic::fd_derivatives(&m, &mut d, q, v, x, None),
+                    "id_so" => mimic::id_so_derivatives(&m, &mut d, &mut so, q, v, x, None),
+                    _ => mimic::fd_so_derivatives(&m, &mut d, &mut so, q, v, x, None),
+                }
+            }),
+        }
         .map_err(|e| Error::Io(format!("bench {algo} --mimic on {name}: {e}")))?;
+        let extra = if algo.starts_with("batch_") {
+            let util = t.cpu_util.map(|u| format!(" cpu_util={u:.2}")).unwrap_or_default();
+            format!(" threads={} per=state{util}", o.threads)
+        } else {
+            String::new()
+        };
         println!(
             "model={name} nq={} nv={} algo={algo} median_us={:.4} p10_us={:.4} p90_us={:.4} \
-             batch={} samples={} mimic={}",
+             batch={} samples={} mimic={}{extra}",
             m.nq(),
             m.nv(),
             t.med,
