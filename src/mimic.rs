@@ -31,7 +31,12 @@
 //! second order), [`kkt_derivatives`], [`kkt_so_derivatives`], [`impact_derivatives`] and
 //! [`impact_so_derivatives`], with the workspaces [`MimicKktData`] and [`MimicImpactData`].
 //! Contracted second order: [`id_so_contracted`], [`fd_so_contracted`]
-//! ([`MimicContractedData`]). Frames and centre of mass (in [`MimicData`]):
+//! ([`MimicContractedData`]), [`kkt_so_contracted`] ([`MimicKktContracted`]) and
+//! [`impact_so_contracted`] ([`MimicImpactContracted`]): the adjoint `ζ` of the reduced
+//! residual, the full tree's contraction at `ζ_f = (G ζ₁, ζ₂)` reduced with `G`, no `nv³`
+//! tensor. Zero-velocity products: [`idfoza`] (`Gᵀ [∂(M_full y)/∂q] G` at `y = G x`) and
+//! [`idsoza`] (the full tree's contracted with `Gᵀ`, `G`, `G`). Frames and centre of mass (in
+//! [`MimicData`]):
 //! [`frame_placement`], [`frame_jacobian`] (`J_full G`), [`frame_velocity`],
 //! [`frame_acceleration`], [`frame_classical_acceleration`] (the full tree's at `expand(q)`,
 //! `G v`, `G a`), [`frame_velocity_derivatives`], [`frame_acceleration_derivatives`] (the full
@@ -41,8 +46,7 @@
 //! [`centroidal_dynamics_derivatives`] ([`MimicCentroidal`]). Continuous joints have
 //! one coordinate (the angle) here, so `expand` is affine for them too and the chain rule
 //! `∂/∂q = ∂/∂q_full · G` holds for every mimic or reference joint. The other algorithms of
-//! the crate (the contracted KKT and impact second order, batches) take the full
-//! [`Model`] only. [`MimicModel::d_integrate`] and [`MimicModel::d_difference`] are block
+//! the crate (the other kinematics functions, batches) take the full [`Model`] only. [`MimicModel::d_integrate`] and [`MimicModel::d_difference`] are block
 //! diagonal by independent joint (the reduced configuration space is the product of their spaces).
 
 use crate::algo::{Data, ReferenceFrame};
