@@ -31,7 +31,12 @@
 //! second order), [`kkt_derivatives`], [`kkt_so_derivatives`], [`impact_derivatives`] and
 //! [`impact_so_derivatives`], with the workspaces [`MimicKktData`] and [`MimicImpactData`].
 //! Contracted second order: [`id_so_contracted`], [`fd_so_contracted`]
-//! ([`MimicContractedData`]). Frames and centre of mass (in [`MimicData`]):
+//! ([`MimicContractedData`]), [`kkt_so_contracted`] ([`MimicKktContracted`]) and
+//! [`impact_so_contracted`] ([`MimicImpactContracted`]): the adjoint `ζ` of the reduced
+//! residual, the full tree's contraction at `ζ_f = (G ζ₁, ζ₂)` reduced with `G`, no `nv³`
+//! tensor. Zero-velocity products: [`idfoza`] (`Gᵀ [∂(M_full y)/∂q] G` at `y = G x`) and
+//! [`idsoza`] (the full tree's contracted with `Gᵀ`, `G`, `G`). Frames and centre of mass (in
+//! [`MimicData`]):
 //! [`frame_placement`], [`frame_jacobian`] (`J_full G`), [`frame_velocity`],
 //! [`frame_acceleration`], [`frame_classical_acceleration`] (the full tree's at `expand(q)`,
 //! `G v`, `G a`), [`frame_velocity_derivatives`], [`frame_acceleration_derivatives`] (the full
@@ -40,10 +45,10 @@
 //! [`center_of_mass_jacobian`], [`center_of_mass_velocity_derivatives`],
 //! [`centroidal_dynamics_derivatives`] ([`MimicCentroidal`]). Continuous joints have
 //! one coordinate (the angle) here, so `expand` is affine for them too and the chain rule
-//! `∂/∂q = ∂/∂q_full · G` holds for every mimic or reference joint. The other algorithms of
-//! the crate (the contracted KKT and impact second order) take the full
-//! [`Model`] only. [`MimicModel::d_integrate`] and [`MimicModel::d_difference`] are block
-//! diagonal by independent joint (the reduced configuration space is the product of their spaces).
+//! `∂/∂q = ∂/∂q_full · G` holds for every mimic or reference joint. Every algorithm of the
+//! crate has its counterpart here. [`MimicModel::d_integrate`] and
+//! [`MimicModel::d_difference`] are block diagonal by independent joint (the reduced
+//! configuration space is the product of their spaces).
 //!
 //! Batches ([`batch`]): the counterparts of the batched functions of [`crate::batch`] (`rnea`,
 //! `crba`, `aba`, first- and second-order ID/FD derivatives over many states on a
@@ -603,6 +608,8 @@ pub struct MimicData {
     /// Hessian (two).
     t6: Tensor3,
     t6b: Tensor3,
+    /// `full().nv()` square scratch of [`idfoza`].
+    mf: DMatrix<f64>,
     key: u64,
 }
 
@@ -629,6 +636,7 @@ impl MimicData {
             j3: Matrix3xX::zeros(f.nv()),
             t6: Tensor3::zeros(6, f.nv(), f.nv()),
             t6b: Tensor3::zeros(6, f.nv(), f.nv()),
+            mf: DMatrix::zeros(f.nv(), f.nv()),
             key: model.key,
         }
     }
@@ -1071,6 +1079,57 @@ pub fn fd_so_derivatives(
         mat_mul(minv, rhs, out, n);
     }
     Ok(())
+}
+
+/// IDFOZA in the reduced coordinates: `out[(i, k)] = ∂(M(q) x)_i/∂q_k` (`nv × nv`, tangent
+/// space), with `M = Gᵀ M_full(expand(q)) G`: `out = Gᵀ [∂(M_full y)/∂q_full] G` at `y = G x`
+/// (the full tree's [`crate::deriv::idfoza`]). Leaves `expand(q)`, zero velocity and `G x` in
+/// `data.q_full()`, `data.v_full()`, `data.a_full()`. Allocates nothing.
+///
+/// # Errors
+/// As [`crba`] for `q`; `x` of the wrong length or not finite; `out` not `nv × nv`.
+pub fn idfoza(
+    model: &MimicModel,
+    data: &mut MimicData,
+    q: &DVector<f64>,
+    x: &DVector<f64>,
+    out: &mut DMatrix<f64>,
+) -> Result<()> {
+    prepare(model, data, q, None, Some(("x", x)))?;
+    if out.shape() != (model.nv, model.nv) {
+        return Err(Error::Dimension {
+            what: "out (rows·cols)".into(),
+            expected: model.nv * model.nv,
+            got: out.len(),
+        });
+    }
+    model.expand_v_into(x.as_slice(), data.a.as_mut_slice());
+    crate::deriv::idfoza(&model.full, &mut data.full, &data.q, &data.a, &mut data.mf)?;
+    model.reduce_matrix(&data.mf, out);
+    Ok(())
+}
+
+/// IDSOZA in the reduced coordinates: `T[(i, j, k)] = ∂/∂q_k ∂(M(q) x)_i/∂q_j` (tangent
+/// space, nested as the other second-order tensors), the full tree's
+/// [`crate::deriv::idsoza`] at `expand(q)`, `y = G x` contracted with `Gᵀ` on `i` and `G` on
+/// `j` and `k`. Writes and returns `so.d2tau_dq2()` (the other tensors of `so` are not
+/// written); the state in `data` as [`idfoza`]. Allocates nothing.
+///
+/// # Errors
+/// As [`idfoza`] for `q` and `x`; an `so` made for another model.
+pub fn idsoza<'a>(
+    model: &MimicModel,
+    data: &mut MimicData,
+    so: &'a mut MimicSoData,
+    q: &DVector<f64>,
+    x: &DVector<f64>,
+) -> Result<&'a Tensor3> {
+    so.check(model)?;
+    prepare(model, data, q, None, Some(("x", x)))?;
+    model.expand_v_into(x.as_slice(), data.a.as_mut_slice());
+    crate::deriv::idsoza(&model.full, &mut data.full, &mut so.full, &data.q, &data.a)?;
+    model.reduce_tensor(so.full.d2tau_dq2(), &mut so.d2tau_dq2);
+    Ok(&so.d2tau_dq2)
 }
 
 /// `out = a x` (`a` column-major `n × n`, `n = x.len()`).
@@ -2509,6 +2568,382 @@ pub fn fd_so_contracted(
     cd.qv += &cd.tmp;
     cd.qv.neg_mut();
     crate::linalg::gemm(-1.0, &data.minv, &cd.mq, 0.0, &mut cd.tauq);
+    Ok(())
+}
+
+/// Results and workspace of [`kkt_so_contracted`] for a [`MimicModel`] and the contacts of a
+/// [`MimicKktData`]: the full tree's [`crate::deriv::KktContracted`] and the reduced
+/// `nv × nv` Hessians (`O(nv² + nv_f²)`, allocated once).
+#[derive(Clone, Debug)]
+pub struct MimicKktContracted {
+    full: crate::deriv::KktContracted,
+    key: u64,
+    /// `ζ = R_y⁻ᵀ ω` (reduced, `nv + m`).
+    zeta: DVector<f64>,
+    /// `G ζ₁` (`nv_f`) and `−ζ₂` (`m`).
+    zf: DVector<f64>,
+    neg_z2: DVector<f64>,
+    /// `A` (`nv × (nv + m)`), with `ζᵀ G(z) = (A z)ᵀ` in the reduced coordinates.
+    a: DMatrix<f64>,
+    h: DMatrix<f64>,
+    qq: DMatrix<f64>,
+    vv: DMatrix<f64>,
+    qv: DMatrix<f64>,
+    tq: DMatrix<f64>,
+}
+
+impl MimicKktContracted {
+    /// Workspace for `model` and the contacts of `kd`.
+    pub fn new(model: &MimicModel, kd: &MimicKktData) -> Self {
+        let (n, nf, m) = (model.nv, model.full.nv(), kd.dim());
+        let z = || DMatrix::zeros(n, n);
+        Self {
+            full: crate::deriv::KktContracted::new(&model.full, &kd.full),
+            key: model.key,
+            zeta: DVector::zeros(n + m),
+            zf: DVector::zeros(nf),
+            neg_z2: DVector::zeros(m),
+            a: DMatrix::zeros(n, n + m),
+            h: z(),
+            qq: z(),
+            vv: z(),
+            qv: z(),
+            tq: z(),
+        }
+    }
+    fn check(&self, model: &MimicModel, m: usize) -> Result<()> {
+        if self.key != model.key || self.zeta.len() != model.nv + m {
+            return Err(Error::Workspace(format!(
+                "MimicKktContracted was made for another model or contact set; make it with \
+                 MimicKktContracted::new for the mimic model \"{}\" and this MimicKktData",
+                model.name()
+            )));
+        }
+        Ok(())
+    }
+    /// `C_qq[(j, k)] = ∂/∂q_k (∂(ωᵀy)/∂q_j)` with `ωᵀy = w_q̈ᵀ q̈ + w_λᵀ λ` (reduced).
+    pub fn c_qq(&self) -> &DMatrix<f64> {
+        &self.qq
+    }
+    /// `C_vv[(j, k)] = ∂²(ωᵀy)/∂v_j∂v_k`.
+    pub fn c_vv(&self) -> &DMatrix<f64> {
+        &self.vv
+    }
+    /// `C_qv[(j, k)] = ∂/∂v_k (∂(ωᵀy)/∂q_j)`.
+    pub fn c_qv(&self) -> &DMatrix<f64> {
+        &self.qv
+    }
+    /// `C_τq[(j, k)] = ∂/∂q_k (∂(ωᵀy)/∂τ_j)`.
+    pub fn c_tauq(&self) -> &DMatrix<f64> {
+        &self.tq
+    }
+}
+
+impl MimicModel {
+    /// `out[(u, c0 + l)] += s Σ_{f, i} G[f, u] G[i, l] g[(i, f)]`: the transpose of
+    /// `Gᵀ g_top G` (`g_top` the first `nv_f` rows of `g`, `nv_f` columns).
+    fn add_top_t(&self, g: &DMatrix<f64>, s: f64, out: &mut DMatrix<f64>, c0: usize) {
+        let nf = self.full.nv();
+        for f in 0..nf {
+            let (u, gu) = (self.g_col[f], s * self.g_coef[f]);
+            for i in 0..nf {
+                out[(u, c0 + self.g_col[i])] += gu * self.g_coef[i] * g[(i, f)];
+            }
+        }
+    }
+    /// `out[(u, c0 + r)] += s Σ_f G[f, u] g[(nf + r, f)]` for `r < m`: the transpose of
+    /// `g_bottom G`.
+    fn add_bottom_t(&self, g: &DMatrix<f64>, m: usize, s: f64, out: &mut DMatrix<f64>, c0: usize) {
+        let nf = self.full.nv();
+        for f in 0..nf {
+            let (u, gu) = (self.g_col[f], s * self.g_coef[f]);
+            for r in 0..m {
+                out[(u, c0 + r)] += gu * g[(nf + r, f)];
+            }
+        }
+    }
+}
+
+/// The Hessians of `ωᵀy = w_q̈ᵀ q̈ + w_λᵀ λ` of the KKT dynamics in the reduced coordinates (as
+/// [`crate::deriv::kkt_so_contracted`]) at `(q, v, τ)`, without an `nv³` tensor; also the
+/// first-order derivatives into `kd` (as [`kkt_derivatives`]).
+///
+/// Contracting eq. SO_general_eqn of the reduced residual (see [`kkt_so_derivatives`]) with
+/// `ω`, and with `P = diag(Gᵀ, I)` its rows from the full tree's:
+/// 1. first order, `M` and the Delassus matrix factorised ([`kkt_derivatives`]);
+/// 2. the adjoint `ζ = R_y⁻ᵀ ω` (reduced `R_y = [M, −(J G)ᵀ; J G, 0]`);
+/// 3. `ζᵀR_uw = Gᵀ (ζ_fᵀ R^f_uw) G` with `ζ_f = Pᵀζ = (G ζ₁, ζ₂)`: the full tree's contraction
+///    (the reverse-mode ID Hessians of `ζ_f₁ᵀτ` at `(expand(q), G v, G q̈)`, the contact
+///    terms at `λ`) reduced;
+/// 4. `ζᵀ P G_f(G z₁, z₂) G = (A z)ᵀ` with `A = Gᵀ A_f diag(G, I)`, `A_f` the full tree's
+///    `[(∂(M ζ_f₁)/∂q + ∂(Jᵀζ₂)/∂q)ᵀ | −(∂(J ζ_f₁)/∂q)ᵀ]` (one `G` evaluation);
+/// 5. `C_qq = −(ζᵀR_qq + A Y_q + (A Y_q)ᵀ)`, `C_vv = −ζᵀR_vv`, `C_qv = −(ζᵀR_qv + A Y_v)`,
+///    `C_τq = −(A Y_τ)ᵀ` (`Y_x = [∂q̈/∂x; ∂λ/∂x]`, reduced).
+///
+/// Allocates nothing.
+///
+/// # Errors
+/// As [`kkt_derivatives`]; `w_qdd` (length `nv`) or `w_lambda` (length `m`) of the wrong
+/// length or not finite; `kc` made for another model or contact set.
+#[allow(clippy::too_many_arguments)]
+pub fn kkt_so_contracted(
+    model: &MimicModel,
+    data: &mut MimicData,
+    kd: &mut MimicKktData,
+    kc: &mut MimicKktContracted,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+    w_qdd: &DVector<f64>,
+    w_lambda: &DVector<f64>,
+) -> Result<()> {
+    kd.check(model)?;
+    let (n, nf, m) = (model.nv, model.full.nv(), kd.dim());
+    kc.check(model, m)?;
+    model.check_v("w_qdd", w_qdd)?;
+    crate::model::check_vec("w_lambda", w_lambda, m)?;
+    // 1. First order.
+    kkt_inner(model, data, kd, q, v, tau, false)?;
+    let full = &model.full;
+    // 2. ζ: R_yᵀ ζ = ω ⇔ R_y (ζ₁, −ζ₂) = (w_q̈, −w_λ).
+    {
+        let (z1, z2) = kc.zeta.as_mut_slice().split_at_mut(n);
+        z1.copy_from_slice(w_qdd.as_slice());
+        for (z, w) in z2.iter_mut().zip(w_lambda.iter()) {
+            *z = -w;
+        }
+        kkt_solve(&data.ldl, kd, z1, z2);
+        for z in z2.iter_mut() {
+            *z = -*z;
+        }
+    }
+    let (z1, z2) = kc.zeta.as_slice().split_at(n);
+    // 3. ζᵀR_uw = Gᵀ(ζ_fᵀR^f_uw)G at the full tree's state of step 1.
+    {
+        let zf = kc.full.zeta_mut();
+        model.expand_v_into(z1, &mut zf.as_mut_slice()[..nf]);
+        zf.as_mut_slice()[nf..].copy_from_slice(z2);
+    }
+    crate::deriv::contact::update_points(full, &data.full, &mut kd.full.cd, -full.gravity);
+    crate::deriv::kkt::zeta_residual_hessians(
+        full,
+        &mut data.full,
+        &mut kd.full,
+        &mut kc.full,
+        &data.q,
+        &data.v,
+    );
+    model.reduce_matrix(kc.full.c_qq(), &mut kc.qq);
+    model.reduce_matrix(kc.full.c_vv(), &mut kc.vv);
+    model.reduce_matrix(kc.full.c_qv(), &mut kc.qv);
+    // 4. A = Gᵀ A_f diag(G, I) from one G evaluation G_f(G ζ₁; −ζ₂).
+    model.expand_v_into(z1, kc.zf.as_mut_slice());
+    for (o, x) in kc.neg_z2.iter_mut().zip(z2) {
+        *o = -x;
+    }
+    let zf = kc.zf.as_slice();
+    crate::deriv::contact::g_matrix_split(
+        full,
+        &mut data.full,
+        &mut kd.full.cd,
+        zf,
+        kc.neg_z2.as_slice(),
+        zf,
+    );
+    kc.a.fill(0.0);
+    model.add_top_t(&kd.full.cd.g, 1.0, &mut kc.a, 0);
+    model.add_bottom_t(&kd.full.cd.g, m, -1.0, &mut kc.a, n);
+    // 5. The product terms and the signs.
+    let MimicKktContracted { a, h, qq, vv, qv, tq, .. } = kc;
+    let y = |top: &DMatrix<f64>, bottom: &DMatrix<f64>, h: &mut DMatrix<f64>| {
+        crate::linalg::gemm(1.0, &a.columns(0, n), top, 0.0, h);
+        crate::linalg::gemm(1.0, &a.columns(n, m), bottom, 1.0, h);
+    };
+    y(&kd.dqdd_dq, &kd.dlambda_dq, h);
+    for j in 0..n {
+        for k in 0..n {
+            qq[(j, k)] = -(qq[(j, k)] + h[(j, k)] + h[(k, j)]);
+        }
+    }
+    vv.neg_mut();
+    y(&kd.dqdd_dv, &kd.dlambda_dv, h);
+    *qv += &*h;
+    qv.neg_mut();
+    y(&kd.dqdd_dtau, &kd.dlambda_dtau, h);
+    for j in 0..n {
+        for k in 0..n {
+            tq[(j, k)] = -h[(k, j)];
+        }
+    }
+    Ok(())
+}
+
+/// Results and workspace of [`impact_so_contracted`] for a [`MimicModel`] and the contacts of
+/// a [`MimicImpactData`] (`O(nv² + nv_f²)`, allocated once).
+#[derive(Clone, Debug)]
+pub struct MimicImpactContracted {
+    full: crate::deriv::ImpactContracted,
+    key: u64,
+    zeta: DVector<f64>,
+    /// `G ζ₁`, `−ζ₂` and zeros (`nv_f`, `m`).
+    zf: DVector<f64>,
+    neg_z2: DVector<f64>,
+    zeros_f: DVector<f64>,
+    zeros_m: DVector<f64>,
+    /// `Dᵀ`, `Kᵀ` (`nv × nv`), `Eᵀ` (`nv × m`) in the reduced coordinates.
+    dt: DMatrix<f64>,
+    kt: DMatrix<f64>,
+    et: DMatrix<f64>,
+    s: DMatrix<f64>,
+    h: DMatrix<f64>,
+    qq: DMatrix<f64>,
+    qv: DMatrix<f64>,
+}
+
+impl MimicImpactContracted {
+    /// Workspace for `model` and the contacts of `im`.
+    pub fn new(model: &MimicModel, im: &MimicImpactData) -> Self {
+        let (n, nf, m) = (model.nv, model.full.nv(), im.dim());
+        let z = || DMatrix::zeros(n, n);
+        Self {
+            full: crate::deriv::ImpactContracted::with_rows(&model.full, m),
+            key: model.key,
+            zeta: DVector::zeros(n + m),
+            zf: DVector::zeros(nf),
+            neg_z2: DVector::zeros(m),
+            zeros_f: DVector::zeros(nf),
+            zeros_m: DVector::zeros(m),
+            dt: z(),
+            kt: z(),
+            et: DMatrix::zeros(n, m),
+            s: z(),
+            h: z(),
+            qq: z(),
+            qv: z(),
+        }
+    }
+    fn check(&self, model: &MimicModel, m: usize) -> Result<()> {
+        if self.key != model.key || self.zeta.len() != model.nv + m {
+            return Err(Error::Workspace(format!(
+                "MimicImpactContracted was made for another model or contact set; make it with \
+                 MimicImpactContracted::new for the mimic model \"{}\" and this MimicImpactData",
+                model.name()
+            )));
+        }
+        Ok(())
+    }
+    /// `C_qq[(j, k)] = ∂/∂q_k (∂(ωᵀy)/∂q_j)` with `ωᵀy = w_v⁺ᵀ q̇⁺ + w_Λᵀ λ̂` (reduced).
+    pub fn c_qq(&self) -> &DMatrix<f64> {
+        &self.qq
+    }
+    /// `C_qv[(j, k)] = ∂/∂q̇⁻_k (∂(ωᵀy)/∂q_j)` (`y` is linear in `q̇⁻`).
+    pub fn c_qvminus(&self) -> &DMatrix<f64> {
+        &self.qv
+    }
+}
+
+/// The Hessians of `ωᵀy = w_v⁺ᵀ q̇⁺ + w_Λᵀ λ̂` of the impact dynamics in the reduced
+/// coordinates (as [`crate::deriv::impact_so_contracted`]) at `(q, q̇⁻)`, without an `nv³`
+/// tensor; also the first-order derivatives into `im` (as [`impact_derivatives`]).
+///
+/// With `ζ = R_y⁻ᵀ ω` (the reduced residual of [`impact_derivatives`]), `ζ_f = (G ζ₁, ζ₂)` and
+/// the full tree's `D_f = ∂(M_f G ζ₁)/∂q`, `K_f = ∂(Jᵀζ₂)/∂q`, `E_f = ∂(J G ζ₁)/∂q`:
+/// 1. first order, `R_y` factorised; `ζ`;
+/// 2. `ζᵀR_qq = Gᵀ(ζ_fᵀR^f_qq)G`: the full tree's `q`-Hessian of `ζ_f₁ᵀ M_f Δ`
+///    (`Δ = G(q̇⁺ − q̇⁻)`, reverse mode) minus that of `λ̂·(J ζ_f₁)` plus that of
+///    `ζ₂·(J w)` (`w = G(q̇⁺ + e q̇⁻)`), reduced;
+/// 3. the reduced `D = Gᵀ D_f G`, `K = Gᵀ K_f G`, `E = E_f G` (two `G` evaluations of the full
+///    tree), `H_q = (D + K)ᵀ Y_q − Eᵀ Y_Λq`;
+/// 4. `C_qq = −(ζᵀR_qq + H_q + H_qᵀ)`, `C_qv = −(Dᵀ (Y_v − I) + Kᵀ (Y_v + e I) − Eᵀ Y_Λv)`.
+///
+/// Allocates nothing.
+///
+/// # Errors
+/// As [`impact_derivatives`]; `w_vplus` (length `nv`) or `w_impulse` (length `m`) of the wrong
+/// length or not finite; `ic` made for another model or contact set.
+#[allow(clippy::too_many_arguments)]
+pub fn impact_so_contracted(
+    model: &MimicModel,
+    data: &mut MimicData,
+    im: &mut MimicImpactData,
+    ic: &mut MimicImpactContracted,
+    q: &DVector<f64>,
+    vminus: &DVector<f64>,
+    w_vplus: &DVector<f64>,
+    w_impulse: &DVector<f64>,
+) -> Result<()> {
+    let (n, nf, m) = (model.nv, model.full.nv(), im.dim());
+    ic.check(model, m)?;
+    model.check_v("w_vplus", w_vplus)?;
+    crate::model::check_vec("w_impulse", w_impulse, m)?;
+    // 1. First order; ζ.
+    impact_derivatives(model, data, im, q, vminus)?;
+    let full = &model.full;
+    {
+        let (z1, z2) = ic.zeta.as_mut_slice().split_at_mut(n);
+        z1.copy_from_slice(w_vplus.as_slice());
+        for (z, w) in z2.iter_mut().zip(w_impulse.iter()) {
+            *z = -w;
+        }
+        kkt_solve_with(&data.ldl, &im.jr, &im.minv_jt, &im.del, z1, z2);
+        for z in z2.iter_mut() {
+            *z = -*z;
+        }
+    }
+    let (z1, z2) = ic.zeta.as_slice().split_at(n);
+    // 2. ζᵀR_qq = Gᵀ(ζ_fᵀR^f_qq)G.
+    {
+        let zf = ic.full.zeta_mut();
+        model.expand_v_into(z1, &mut zf.as_mut_slice()[..nf]);
+        zf.as_mut_slice()[nf..].copy_from_slice(z2);
+    }
+    crate::deriv::contact::update_points(full, &data.full, &mut im.cd, Motion::zero());
+    crate::deriv::impact::zeta_rqq(
+        full,
+        &mut data.full,
+        &mut im.cd,
+        &mut ic.full,
+        &data.q,
+        &im.dvf,
+        &im.wf,
+        &im.impulse,
+    );
+    model.reduce_matrix(ic.full.c_qq(), &mut ic.qq);
+    // 3. D, E from one G evaluation with z₂ = 0, K from one with z_M = z_J = 0, z₂ = −ζ₂.
+    model.expand_v_into(z1, ic.zf.as_mut_slice());
+    let zf = ic.zf.as_slice();
+    let g_split = crate::deriv::contact::g_matrix_split;
+    g_split(full, &mut data.full, &mut im.cd, zf, ic.zeros_m.as_slice(), zf);
+    ic.dt.fill(0.0);
+    model.add_top_t(&im.cd.g, 1.0, &mut ic.dt, 0);
+    ic.et.fill(0.0);
+    model.add_bottom_t(&im.cd.g, m, 1.0, &mut ic.et, 0);
+    for (o, x) in ic.neg_z2.iter_mut().zip(z2) {
+        *o = -x;
+    }
+    let zo = ic.zeros_f.as_slice();
+    g_split(full, &mut data.full, &mut im.cd, zo, ic.neg_z2.as_slice(), zo);
+    ic.kt.fill(0.0);
+    model.add_top_t(&im.cd.g, 1.0, &mut ic.kt, 0);
+    // 4. With S = Dᵀ + Kᵀ: H_q = S Y_q − Eᵀ Y_Λq, and
+    //    Dᵀ(Y_v − I) + Kᵀ(Y_v + e I) = S Y_v − Dᵀ + e Kᵀ.
+    let MimicImpactContracted { dt, kt, et, s, h, qq, qv, .. } = ic;
+    for ((o, d), k) in s.iter_mut().zip(dt.iter()).zip(kt.iter()) {
+        *o = d + k;
+    }
+    crate::linalg::gemm(1.0, &*s, &im.dvplus_dq, 0.0, h);
+    crate::linalg::gemm(-1.0, &*et, &im.dimpulse_dq, 1.0, h);
+    for j in 0..n {
+        for k in 0..n {
+            qq[(j, k)] = -(qq[(j, k)] + h[(j, k)] + h[(k, j)]);
+        }
+    }
+    let e = im.restitution;
+    for ((o, d), k) in qv.iter_mut().zip(dt.iter()).zip(kt.iter()) {
+        *o = d - e * k;
+    }
+    crate::linalg::gemm(-1.0, &*s, &im.dvplus_dvminus, 1.0, qv);
+    crate::linalg::gemm(1.0, &*et, &im.dimpulse_dvminus, 1.0, qv);
     Ok(())
 }
 

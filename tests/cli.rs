@@ -1125,7 +1125,13 @@ fn mimic_commands_use_the_reduced_coordinates() {
     let mut st_c = state.clone();
     st_c["contacts"] = serde_json::json!([{"frame": "tool"}, {"frame": "thumb_tip", "type": "6d"}]);
     st_c["restitution"] = serde_json::json!(0.3);
-    st_c["weights"] = serde_json::json!({"qdd": vec![0.5; 13]});
+    st_c["weights"] = serde_json::json!({
+        "qdd": vec![0.5; 13],
+        "kkt_qdd": vec![0.5; 13],
+        "kkt_lambda": vec![0.25; 9],
+        "impact_vplus": vec![-0.5; 13],
+        "impact_impulse": vec![0.75; 9],
+    });
     std::fs::write(&with_contacts, st_c.to_string()).unwrap();
     let wc = with_contacts.to_str().unwrap();
     let o =
@@ -1151,6 +1157,28 @@ fn mimic_commands_use_the_reduced_coordinates() {
     mimic::fd_so_contracted(&m, &mut d, &mut cc, &q, &vel, &tau, &DVector::from_element(n, 0.5))
         .unwrap();
     assert!((matrix(&v2["contracted"]["fd"], "d2qdd_dq2", n) - cc.c_qq()).amax() < 1e-12);
+    // The contracted KKT and impact second order, one weight at a time, as the library.
+    let (wn, w9) = (|x: f64| DVector::from_element(n, x), |x: f64| DVector::from_element(9, x));
+    let mut kd = mimic::MimicKktData::new(&m, &contacts).unwrap();
+    let mut kc = mimic::MimicKktContracted::new(&m, &kd);
+    mimic::kkt_so_contracted(&m, &mut d, &mut kd, &mut kc, &q, &vel, &tau, &wn(0.0), &w9(0.25))
+        .unwrap();
+    let ck = &v2["contracted"]["kkt"];
+    assert!((matrix(ck, "d2lambda_dq2", n) - kc.c_qq()).amax() < 1e-12);
+    assert!((matrix(ck, "d2lambda_dtaudq", n) - kc.c_tauq()).amax() < 1e-12);
+    mimic::kkt_so_contracted(&m, &mut d, &mut kd, &mut kc, &q, &vel, &tau, &wn(0.5), &w9(0.0))
+        .unwrap();
+    assert!((matrix(ck, "d2qdd_dv2", n) - kc.c_vv()).amax() < 1e-12);
+    let mut im = mimic::MimicImpactData::new(&m, &contacts).unwrap();
+    im.set_restitution(0.3).unwrap();
+    let mut ic = mimic::MimicImpactContracted::new(&m, &im);
+    mimic::impact_so_contracted(&m, &mut d, &mut im, &mut ic, &q, &vel, &wn(-0.5), &w9(0.0))
+        .unwrap();
+    let ci = &v2["contracted"]["impact"];
+    assert!((matrix(ci, "d2vplus_dq2", n) - ic.c_qq()).amax() < 1e-12);
+    mimic::impact_so_contracted(&m, &mut d, &mut im, &mut ic, &q, &vel, &wn(0.0), &w9(0.75))
+        .unwrap();
+    assert!((matrix(ci, "d2impulse_dqdvminus", n) - ic.c_qvminus()).amax() < 1e-12);
     // Frames (of the full tree), in the reduced coordinates, as the library.
     let with_frames = tmp("mimic-frames.json");
     let mut st_f = state.clone();
@@ -1198,7 +1226,7 @@ fn mimic_commands_use_the_reduced_coordinates() {
         &sodyn(&["eval", "--model", u, "--mimic", "--state", ww]),
         "eval --mimic with contact weights",
     );
-    assert!(err.contains("\"weights.kkt_qdd\" is not supported with --mimic"), "{err}");
+    assert!(err.contains("the weights kkt_* and impact_* need \"contacts\""), "{err}");
     let err = assert_clean_failure(
         &sodyn(&["eval", "--model", u, "--mimic", "--state", s]),
         "eval --mimic, the state of the floating base",
@@ -1211,9 +1239,31 @@ fn mimic_commands_use_the_reduced_coordinates() {
     assert!(err.contains("--mimic applies to URDF files"), "{err}");
     let err = assert_clean_failure(
         &sodyn(&["bench", "--model", u, "--mimic", "--smoke", "--algos", "kkt_fo"]),
-        "bench --mimic kkt_fo",
+        "bench --mimic kkt_fo without contacts",
+    );
+    assert!(err.contains("\"kkt_fo\" needs contacts"), "{err}");
+    let err = assert_clean_failure(
+        &sodyn(&["bench", "--model", u, "--mimic", "--smoke", "--algos", "com"]),
+        "bench --mimic com",
     );
     assert!(err.contains("not available with --mimic"), "{err}");
+    let o = sodyn(&[
+        "bench",
+        "--model",
+        u,
+        "--mimic",
+        "--floating-base",
+        "--smoke",
+        "--contacts",
+        "tool,thumb_tip",
+        "--algos",
+        "kkt_so_c,impact_so_c",
+    ]);
+    assert_ok(&o, "bench --mimic with contacts");
+    assert_eq!(
+        stdout(&o).lines().filter(|l| l.starts_with("model=mimic_arm nq=14 nv=13")).count(),
+        2
+    );
     let o = sodyn(&["bench", "--model", u, "--mimic", "--smoke", "--algos", "rnea,fd_so"]);
     assert_ok(&o, "bench --mimic");
     assert_eq!(

@@ -262,6 +262,38 @@ fn mimic_algorithms_do_not_allocate() {
     check("mimic::fd_so_contracted", &mut || {
         mimic::fd_so_contracted(&m, &mut d, &mut cc, &q, &v, &a, &v).unwrap()
     });
+    let mut xo = nalgebra::DMatrix::zeros(m.nv(), m.nv());
+    check("mimic::idfoza", &mut || mimic::idfoza(&m, &mut d, &q, &a, &mut xo).unwrap());
+    check("mimic::idsoza", &mut || {
+        mimic::idsoza(&m, &mut d, &mut so, &q, &a).unwrap();
+    });
+    // The contracted KKT and impact second order, with these contacts (3-D world points, one
+    // with Baumgarte gains) and with a 6-D local contact (the generic path).
+    let six = vec![
+        Contact::new(full, "tool", p).unwrap(),
+        Contact {
+            kind: sodyn::model::ContactType::D6,
+            ..Contact::new(full, "thumb_tip", p)
+                .unwrap()
+                .with_reference(sodyn::model::ContactReference::Local)
+                .with_baumgarte(3.0, 0.5)
+                .unwrap()
+        },
+    ];
+    for (set, cs) in [("3-D", &contacts), ("6-D", &six)] {
+        let mut kd3 = mimic::MimicKktData::new(&m, cs).unwrap();
+        let mut kc = mimic::MimicKktContracted::new(&m, &kd3);
+        let wl = DVector::from_element(kd3.dim(), 0.5);
+        check(&format!("mimic::kkt_so_contracted ({set})"), &mut || {
+            mimic::kkt_so_contracted(&m, &mut d, &mut kd3, &mut kc, &q, &v, &a, &v, &wl).unwrap()
+        });
+        let mut im3 = mimic::MimicImpactData::new(&m, cs).unwrap();
+        im3.set_restitution(0.3).unwrap();
+        let mut ic = mimic::MimicImpactContracted::new(&m, &im3);
+        check(&format!("mimic::impact_so_contracted ({set})"), &mut || {
+            mimic::impact_so_contracted(&m, &mut d, &mut im3, &mut ic, &q, &v, &a, &wl).unwrap()
+        });
+    }
     check("mimic::constrained_id_derivatives", &mut || {
         mimic::constrained_id_derivatives(&m, &mut d, &mut kd, Some(&mut so), &q, &v, &a, &lam)
             .unwrap()

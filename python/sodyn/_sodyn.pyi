@@ -49,8 +49,9 @@ class Model:
         ``<mimic>`` whose reference is unknown, a mimic joint, or not a one-DoF joint of the
         same kind is a ``SodynError``). Such a model supports ``rnea``, ``crba``, ``aba``,
         ``nonlinear_effects``, ``id_derivatives``, ``fd_derivatives``, ``id_so_derivatives``,
-        ``fd_so_derivatives``, ``id_so_contracted``, ``fd_so_contracted``,
-        ``constrained_id_derivatives``, ``kkt_derivatives``, ``impact_derivatives``,
+        ``fd_so_derivatives``, ``id_so_contracted``, ``fd_so_contracted``, ``idfoza``,
+        ``idsoza``, ``constrained_id_derivatives``, ``kkt_derivatives``,
+        ``impact_derivatives``, ``kkt_so_contracted``, ``impact_so_contracted``,
         ``frame_placement``, ``frame_jacobian``, ``frame_velocity``, ``frame_acceleration``,
         ``frame_velocity_derivatives``, ``frame_acceleration_derivatives``,
         ``frame_jacobian_derivative``, ``frame_placement_hessian`` (any frame of the
@@ -227,8 +228,12 @@ def id_so_contracted(model: Model, data: Data, q: ArrayLike, v: ArrayLike, a: Ar
 def fd_so_contracted(model: Model, data: Data, q: ArrayLike, v: ArrayLike, tau: ArrayLike,
                      w: ArrayLike) -> Tuple[Matrix, Matrix, Matrix, Matrix]:
     """Hessians of ``w @ qdd(q, v, tau)``: ``(C_qq, C_vv, C_qv, C_tauq)``."""
-def idfoza(model: Model, data: Data, q: ArrayLike, x: ArrayLike) -> Matrix: ...
-def idsoza(model: Model, data: Data, q: ArrayLike, x: ArrayLike) -> Tensor: ...
+def idfoza(model: Model, data: Data, q: ArrayLike, x: ArrayLike) -> Matrix:
+    """IDFOZA: ``d(M(q) x)/dq``, ``(nv, nv)`` (with ``mimic=True``: ``M = G^T M_full G`` of the
+    reduced coordinates)."""
+def idsoza(model: Model, data: Data, q: ArrayLike, x: ArrayLike) -> Tensor:
+    """IDSOZA: ``d2(M(q) x)/dq2``, ``(nv, nv, nv)``, ``T[i, j, k] = d/dq_k d(M x)_i/dq_j``
+    (with ``mimic=True``: in the reduced coordinates)."""
 def constrained_id_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike,
                                a: ArrayLike, contacts: Sequence[Contact], lam: ArrayLike,
                                order: int = 1) -> dict[str, Vector]:

@@ -29,8 +29,8 @@ use sodyn::deriv::{
     impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
 };
 use sodyn::mimic::{
-    self, MimicContractedData, MimicData, MimicImpactData, MimicJoint, MimicKktData, MimicModel,
-    MimicSoData,
+    self, MimicContractedData, MimicData, MimicImpactContracted, MimicImpactData, MimicJoint,
+    MimicKktContracted, MimicKktData, MimicModel, MimicSoData,
 };
 use sodyn::model::{
     ContactReference, ContactType, JointType, MjcfOptions, Model, ModelBuilder, UrdfOptions,
@@ -459,16 +459,7 @@ impl PyModel {
                 name: "model".into(),
                 reason: format!(
                     "{what} does not support models with mimic joints (loaded with \
-                     mimic=True); it supports rnea, crba, aba, nonlinear_effects, \
-                     id_derivatives, fd_derivatives, id_so_derivatives, fd_so_derivatives, \
-                     id_so_contracted, fd_so_contracted, constrained_id_derivatives, \
-                     kkt_derivatives, impact_derivatives, frame_placement, frame_jacobian, \
-                     frame_velocity, frame_acceleration, frame_velocity_derivatives, \
-                     frame_acceleration_derivatives, frame_jacobian_derivative, \
-                     frame_placement_hessian, center_of_mass, center_of_mass_motion, \
-                     center_of_mass_jacobian, center_of_mass_velocity_derivatives, \
-                     centroidal_dynamics_derivatives, the batch_* functions (sodyn.batch) and \
-                     the Model methods integrate, difference, d_integrate, d_difference"
+                     mimic=True)"
                 ),
             }));
         }
@@ -1151,6 +1142,8 @@ impl PyData {
                 con: None,
                 kkt: None,
                 impact: None,
+                kktc: None,
+                impc: None,
             })
         });
         d
@@ -1190,6 +1183,8 @@ struct MimicWs {
     con: Option<MimicContractedData>,
     kkt: Option<(ContactKey, MimicKktData)>,
     impact: Option<(ContactKey, MimicImpactData)>,
+    kktc: Option<(ContactKey, MimicKktData, MimicKktContracted)>,
+    impc: Option<(ContactKey, MimicImpactData, MimicImpactContracted)>,
 }
 
 /// The mimic workspaces of `d`, an error if it was made for a model without mimic joints.
@@ -1580,6 +1575,111 @@ fn mimic_contracted<'py>(
     )
 }
 
+/// `idfoza` of a mimic model: `∂(M x)/∂q` in the reduced coordinates.
+fn mimic_idfoza<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    x: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    mimic_read(mm, d, q, None, Some((x, "x")))?;
+    mimic_ws(d)?;
+    let PyData { q, a, mimic: Some(ws), .. } = d else { unreachable!() };
+    let md = &mut ws.d;
+    let mut out = DMatrix::zeros(mm.nv(), mm.nv());
+    py.detach(|| mimic::idfoza(mm, md, q, a, &mut out)).map_err(core_err)?;
+    Ok(out_mat(py, &out))
+}
+
+/// `idsoza` of a mimic model: `∂²(M x)/∂q²` in the reduced coordinates.
+fn mimic_idsoza<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    x: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyAny>> {
+    mimic_read(mm, d, q, None, Some((x, "x")))?;
+    mimic_ws(d)?;
+    let PyData { q, a, mimic: Some(ws), .. } = d else { unreachable!() };
+    let MimicWs { d: md, so, .. } = &mut **ws;
+    let so = so.get_or_insert_with(|| MimicSoData::new(mm));
+    py.detach(|| mimic::idsoza(mm, md, so, q, a).map(|_| ())).map_err(core_err)?;
+    Ok(out_tensor(py, so.d2tau_dq2()))
+}
+
+/// `kkt_so_contracted` of a mimic model.
+#[allow(clippy::too_many_arguments)]
+fn mimic_kkt_contracted<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    full: &Model,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    contacts: &[PyRef<'py, PyContact>],
+    w_qdd: &Bound<'py, PyAny>,
+    w_lambda: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    mimic_read(mm, d, q, Some(v), Some((tau, "tau")))?;
+    let (cs, key) = resolve(full, contacts)?;
+    read_vec(w_qdd, "w_qdd", mm.nv(), "nv (reduced coordinates)", &mut d.w)?;
+    read_vec(w_lambda, "w_lambda", rows_of(&cs), "3 or 6 rows per contact", &mut d.wl)?;
+    mimic_ws(d)?;
+    let PyData { q, v, a, w, wl, mimic: Some(ws), .. } = d else { unreachable!() };
+    let MimicWs { d: md, kktc, .. } = &mut **ws;
+    if kktc.as_ref().is_none_or(|(k, _, _)| *k != key) {
+        let kd = MimicKktData::new(mm, &cs).map_err(core_err)?;
+        let kc = MimicKktContracted::new(mm, &kd);
+        *kktc = Some((key, kd, kc));
+    }
+    let (_, kd, kc) = kktc.as_mut().expect("set above");
+    py.detach(|| mimic::kkt_so_contracted(mm, md, kd, kc, q, v, a, w, wl)).map_err(core_err)?;
+    PyTuple::new(
+        py,
+        [
+            out_mat(py, kc.c_qq()),
+            out_mat(py, kc.c_vv()),
+            out_mat(py, kc.c_qv()),
+            out_mat(py, kc.c_tauq()),
+        ],
+    )
+}
+
+/// `impact_so_contracted` of a mimic model.
+#[allow(clippy::too_many_arguments)]
+fn mimic_impact_contracted<'py>(
+    py: Python<'py>,
+    mm: &MimicModel,
+    full: &Model,
+    d: &mut PyData,
+    q: &Bound<'py, PyAny>,
+    v_minus: &Bound<'py, PyAny>,
+    contacts: &[PyRef<'py, PyContact>],
+    w_vplus: &Bound<'py, PyAny>,
+    w_impulse: &Bound<'py, PyAny>,
+    restitution: f64,
+) -> PyResult<Bound<'py, PyTuple>> {
+    mimic_read(mm, d, q, Some(v_minus), None)?;
+    let (cs, key) = resolve(full, contacts)?;
+    read_vec(w_vplus, "w_vplus", mm.nv(), "nv (reduced coordinates)", &mut d.w)?;
+    read_vec(w_impulse, "w_impulse", rows_of(&cs), "3 or 6 rows per contact", &mut d.wl)?;
+    mimic_ws(d)?;
+    let PyData { q, v, w, wl, mimic: Some(ws), .. } = d else { unreachable!() };
+    let MimicWs { d: md, impc, .. } = &mut **ws;
+    if impc.as_ref().is_none_or(|(k, _, _)| *k != key) {
+        let im = MimicImpactData::new(mm, &cs).map_err(core_err)?;
+        let ic = MimicImpactContracted::new(mm, &im);
+        *impc = Some((key, im, ic));
+    }
+    let (_, im, ic) = impc.as_mut().expect("set above");
+    im.set_restitution(restitution).map_err(core_err)?;
+    py.detach(|| mimic::impact_so_contracted(mm, md, im, ic, q, v, w, wl)).map_err(core_err)?;
+    PyTuple::new(py, [out_mat(py, ic.c_qq()), out_mat(py, ic.c_qvminus())])
+}
+
 // ---------------------------------------------------------------------------------------------
 // Dynamics and derivatives
 // ---------------------------------------------------------------------------------------------
@@ -1875,6 +1975,9 @@ fn idfoza<'py>(
     q: &Bound<'py, PyAny>,
     x: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_idfoza(py, &mm, &mut data, q, x);
+    }
     let m = model.full_only("idfoza")?;
     let PyData { d, q: qb, a: xb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
@@ -1893,6 +1996,9 @@ fn idsoza<'py>(
     q: &Bound<'py, PyAny>,
     x: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_idsoza(py, &mm, &mut data, q, x);
+    }
     let m = model.full_only("idsoza")?;
     let PyData { d, q: qb, a: xb, so, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
@@ -2855,6 +2961,11 @@ fn kkt_so_contracted<'py>(
     w_qdd: &Bound<'py, PyAny>,
     w_lambda: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyTuple>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_kkt_contracted(
+            py, &mm, &model.m, &mut data, q, v, tau, &contacts, w_qdd, w_lambda,
+        );
+    }
     let m = model.full_only("kkt_so_contracted")?;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
@@ -2896,6 +3007,20 @@ fn impact_so_contracted<'py>(
     w_impulse: &Bound<'py, PyAny>,
     restitution: f64,
 ) -> PyResult<Bound<'py, PyTuple>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_impact_contracted(
+            py,
+            &mm,
+            &model.m,
+            &mut data,
+            q,
+            v_minus,
+            &contacts,
+            w_vplus,
+            w_impulse,
+            restitution,
+        );
+    }
     let m = model.full_only("impact_so_contracted")?;
     let d = &mut *data;
     read_q(q, "q", m, &mut d.q)?;

@@ -350,15 +350,10 @@ def test_derivatives_match_central_differences():
     assert rel_err(d2[1], num2)[0] < 1e-6
 
 
-def test_unsupported_functions_and_bad_inputs_raise():
+def test_bad_inputs_raise_and_batches_accept_mimic_models():
     model = sodyn.Model.from_urdf(str(ARM), mimic=True)
     d = model.create_data()
     q = model.neutral()
-    for f, args in [(sodyn.kkt_so_contracted, (q, np.zeros(7), np.zeros(7), [sodyn.Contact("tool")],
-                                               np.ones(7), np.ones(3))),
-                    (sodyn.idfoza, (q, np.ones(7)))]:
-        with pytest.raises(sodyn.SodynError, match="does not support models with mimic"):
-            f(model, d, *args)
     # Batches support mimic models (python/tests/test_mimic_batch.py).
     np.testing.assert_array_equal(
         sodyn.batch.rnea(model, q[None, :], np.zeros((1, 7)), np.zeros((1, 7)))[0],
@@ -445,3 +440,65 @@ def test_contracted_second_order_equals_contracted_tensors():
         ts = g(model, d, q, v, x)
         for c, t in zip(cs, ts):
             np.testing.assert_allclose(c, np.einsum("i,ijk->jk", w, t), atol=1e-11)
+
+
+def test_idfoza_idsoza_match_tensors_and_differences():
+    """IDFOZA against dM_dq (of id_so_derivatives, checked against the AD oracle in Rust)
+    contracted with x; IDSOZA against central differences of IDFOZA."""
+    model = sodyn.Model.from_urdf(str(ARM), floating_base=True, mimic=True)
+    d = model.create_data()
+    n = model.nv
+    rng = np.random.default_rng(11)
+    q = model.random_configuration(seed=11)
+    v, x = rng.uniform(-1, 1, n), rng.uniform(-1, 1, n)
+    d1 = sodyn.idfoza(model, d, q, x)
+    dm = sodyn.id_so_derivatives(model, d, q, v, x)[3]
+    np.testing.assert_allclose(d1, np.einsum("ijk,j->ik", dm, x), atol=1e-11)
+    d2 = sodyn.idsoza(model, d, q, x)
+    assert d2.shape == (n, n, n)
+    h = 1e-6
+    num = np.zeros((n, n, n))
+    for k in range(n):
+        e = np.zeros(n)
+        e[k] = h
+        num[:, :, k] = (sodyn.idfoza(model, d, model.integrate(q, e), x)
+                        - sodyn.idfoza(model, d, model.integrate(q, -e), x)) / (2 * h)
+    assert rel_err(d2, num)[0] < 1e-6
+    with pytest.raises(ValueError, match="`x`"):
+        sodyn.idfoza(model, d, q, np.ones(n + 1))
+    with pytest.raises(sodyn.SodynError, match="`x` has a non-finite entry"):
+        sodyn.idsoza(model, d, q, np.full(n, np.nan))
+
+
+def test_contact_contracted_equals_contracted_tensors():
+    """kkt_so_contracted and impact_so_contracted of a mimic model against the contraction of
+    the dense second order of kkt_derivatives and impact_derivatives (order=2; both checked
+    against the AD oracle in tests/mimic.rs and tests/mimic_contracted.rs)."""
+    model = sodyn.Model.from_urdf(str(ARM), floating_base=True, mimic=True)
+    d = model.create_data()
+    n = model.nv
+    contacts = [sodyn.Contact("tool", point=[0.01, -0.02, 0.03]),
+                sodyn.Contact("thumb_tip", type="6d", reference="local", kp=3.0, kd=0.5)]
+    rng = np.random.default_rng(13)
+    q = model.random_configuration(seed=13)
+    v, tau = rng.uniform(-1, 1, n), rng.uniform(-1, 1, n)
+    wa, wl = rng.uniform(-1, 1, n), rng.uniform(-1, 1, 9)
+    cs = sodyn.kkt_so_contracted(model, d, q, v, tau, contacts, wa, wl)
+    r = sodyn.kkt_derivatives(model, d, q, v, tau, contacts, order=2)
+    for c, (ta, tl) in zip(cs, [(r.d2qdd_dq2, r.d2lambda_dq2), (r.d2qdd_dv2, r.d2lambda_dv2),
+                                (r.d2qdd_dqdv, r.d2lambda_dqdv),
+                                (r.d2qdd_dtaudq, r.d2lambda_dtaudq)]):
+        want = np.einsum("i,ijk->jk", wa, ta) + np.einsum("i,ijk->jk", wl, tl)
+        assert c.shape == (n, n)
+        assert rel_err(c, want)[0] < 1e-10
+    for e in (0.0, 0.4):
+        ci = sodyn.impact_so_contracted(model, d, q, v, contacts, wa, wl, restitution=e)
+        ri = sodyn.impact_derivatives(model, d, q, v, contacts, restitution=e, order=2)
+        for c, (ta, tl) in zip(ci, [(ri.d2vplus_dq2, ri.d2impulse_dq2),
+                                    (ri.d2vplus_dqdvminus, ri.d2impulse_dqdvminus)]):
+            want = np.einsum("i,ijk->jk", wa, ta) + np.einsum("i,ijk->jk", wl, tl)
+            assert rel_err(c, want)[0] < 1e-10
+    with pytest.raises(ValueError, match="`w_lambda`"):
+        sodyn.kkt_so_contracted(model, d, q, v, tau, contacts, wa, np.ones(3))
+    with pytest.raises(ValueError, match="`w_vplus`"):
+        sodyn.impact_so_contracted(model, d, q, v, contacts, np.ones(n + 6), wl)

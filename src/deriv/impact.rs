@@ -462,7 +462,11 @@ pub struct ImpactContracted {
 impl ImpactContracted {
     /// Workspace for `model` and the contacts of `im`.
     pub fn new(model: &Model, im: &ImpactData) -> Self {
-        let (n, m) = (model.nv, im.cd.dim());
+        Self::with_rows(model, im.cd.dim())
+    }
+    /// Workspace for `model` and `m` contact rows.
+    pub(crate) fn with_rows(model: &Model, m: usize) -> Self {
+        let n = model.nv;
         let z = || DMatrix::zeros(n, n);
         Self {
             ws: IdContractWs::new(model),
@@ -490,6 +494,24 @@ impl ImpactContracted {
     /// `C_qv[(j, k)] = ∂/∂q̇⁻_k (∂(ωᵀy)/∂q_j)` (`y` is linear in `q̇⁻`: no `q̇⁻q̇⁻` block).
     pub fn c_qvminus(&self) -> &DMatrix<f64> {
         &self.qv
+    }
+    /// The adjoint `ζ` (`nv + m`), set by [`crate::mimic::impact_so_contracted`] before
+    /// [`zeta_rqq`].
+    pub(crate) fn zeta_mut(&mut self) -> &mut DVector<f64> {
+        &mut self.zeta
+    }
+    /// Checks that this workspace was made for `model` and `m` contact rows.
+    pub(crate) fn check(&self, model: &Model, m: usize) -> Result<()> {
+        self.ws.check(model, "ImpactContracted")?;
+        if self.omega.len() != model.nv + m {
+            return Err(Error::Workspace(format!(
+                "ImpactContracted was made for nv + m = {} rows (m: contact rows), this ImpactData has {}; make it \
+                 with ImpactContracted::new for this ImpactData",
+                self.omega.len(),
+                model.nv + m
+            )));
+        }
+        Ok(())
     }
 }
 
@@ -523,15 +545,7 @@ pub fn impact_so_contracted(
     let (n, m) = (model.nv, im.cd.dim());
     check_vec("w_vplus", w_vplus, n)?;
     check_vec("w_impulse", w_impulse, m)?;
-    ic.ws.check(model, "ImpactContracted")?;
-    if ic.omega.len() != n + m {
-        return Err(Error::Workspace(format!(
-            "ImpactContracted was made for nv + m = {} rows (m: contact rows), this ImpactData has {}; make it \
-             with ImpactContracted::new for this ImpactData",
-            ic.omega.len(),
-            n + m
-        )));
-    }
+    ic.check(model, m)?;
     // 1. First order, R⁻¹, ζ.
     solve(model, data, im, q, vminus, true)?;
     first_order(model, data, im);
@@ -540,56 +554,10 @@ pub fn impact_so_contracted(
     ic.omega.rows_mut(0, n).copy_from(w_vplus);
     ic.omega.rows_mut(n, m).copy_from(w_impulse);
     ic.zeta.gemv_tr(1.0, &im.cd.rinv, &ic.omega, 0.0);
-    let ImpactContracted {
-        ws,
-        pw,
-        qq,
-        qv,
-        scratch,
-        zeta,
-        dt,
-        kt,
-        et,
-        zm,
-        zj,
-        h,
-        neg_z2,
-        zeros_m,
-        zeros_n,
-        ..
-    } = ic;
+    // 2. ζᵀ R_qq.
+    zeta_rqq(model, data, &mut im.cd, ic, q, &im.dv, &im.w, &im.impulse);
+    let ImpactContracted { qq, qv, zeta, dt, kt, et, zm, zj, h, neg_z2, zeros_m, zeros_n, .. } = ic;
     let (z1, z2) = zeta.as_slice().split_at(n);
-    // 2. The Hessian of ζ₁ᵀ M Δv (reverse mode at q̇ = 0, q̈ = Δv, no gravity) ...
-    {
-        let [s1, s2, s3] = scratch;
-        let (sq, s1, s2, s3) =
-            (qq.as_mut_slice(), s1.as_mut_slice(), s2.as_mut_slice(), s3.as_mut_slice());
-        let (zero, dv) = (&im.zero, &im.dv);
-        for c in [&mut *sq, &mut *s1, &mut *s2, &mut *s3] {
-            c.fill(0.0);
-        }
-        id_contract_unchecked(model, data, ws, q, zero, dv, Motion::zero(), z1, sq, s1, s2, s3);
-    }
-    // ... minus ζ₁ᵀ ∂²(J_cᵀλ̂)/∂q², plus ζ₂ᵀ ∂²(J_c w)/∂q²: the q-Hessians of λ̂·(J_c ζ₁) and
-    //     ζ₂·(J_c w), point accelerations at rest (`point_hessians`).
-    let mut zc = std::mem::take(&mut im.cd.zc);
-    for (c, path) in im.cd.paths.iter().enumerate() {
-        let (geo, r0) = (im.cd.geo[c], im.cd.row0[c]);
-        if !geo.is_point() {
-            // Generic contacts (6-D or local): dual-base row kinematics, O(d²) per contact.
-            let (zr, lam) = (&z2[r0..r0 + geo.dim()], &im.impulse.as_slice()[r0..r0 + geo.dim()]);
-            add_jz_hessian(model, data, &im.cd, c, im.w.as_slice(), zr, 1.0, &mut zc, qq);
-            add_jz_hessian(model, data, &im.cd, c, z1, lam, -1.0, &mut zc, qq);
-            continue;
-        }
-        let lam = Vector3::new(im.impulse[r0], im.impulse[r0 + 1], im.impulse[r0 + 2]);
-        let zc2 = Vector3::new(z2[r0], z2[r0 + 1], z2[r0 + 2]);
-        pw.at_rest(model, data, path, im.w.as_slice());
-        point_hessians(model, data, pw, path, &zc2, 1.0, qq, None);
-        pw.at_rest(model, data, path, z1);
-        point_hessians(model, data, pw, path, &lam, -1.0, qq, None);
-    }
-    im.cd.zc = zc;
     // D and E from one G evaluation with z₂ = 0, K from one with z_M = z_J = 0, z₂ = −ζ₂.
     g_matrix_split(model, data, &mut im.cd, z1, zeros_m.as_slice(), z1);
     {
@@ -622,6 +590,59 @@ pub fn impact_so_contracted(
     gemm(-1.0, &*zm, &im.dvplus_dvminus, 1.0, qv);
     gemm(1.0, &*et, &im.dimpulse_dvminus, 1.0, qv);
     Ok(())
+}
+
+/// Step 2 of [`impact_so_contracted`]: `ζᵀR_qq` of the impact residual for `ζ = ic.zeta`
+/// (length `nv + m`) into `ic.qq` (`ic.scratch` scratch) at `Δv = dv`, `w`, `λ̂ = impulse`,
+/// with the placements of the last first-order solve in `data` and the contact points of
+/// [`update_points`]: the `q`-Hessian of `ζ₁ᵀ M(q) Δv` (reverse mode at `q̇ = 0`, `q̈ = Δv`, no
+/// gravity), minus that of `λ̂·(J_c ζ₁)`, plus that of `ζ₂·(J_c w)`. Shared with
+/// [`crate::mimic::impact_so_contracted`] (the full tree's at `ζ = (G ζ₁, ζ₂)`).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn zeta_rqq(
+    model: &Model,
+    data: &mut Data,
+    cd: &mut ContactData,
+    ic: &mut ImpactContracted,
+    q: &DVector<f64>,
+    dv: &DVector<f64>,
+    w: &DVector<f64>,
+    impulse: &DVector<f64>,
+) {
+    let n = model.nv;
+    let ImpactContracted { ws, pw, qq, scratch, zeta, zeros_n, .. } = ic;
+    let (z1, z2) = zeta.as_slice().split_at(n);
+    // The Hessian of ζ₁ᵀ M Δv (reverse mode at q̇ = 0, q̈ = Δv, no gravity) ...
+    {
+        let [s1, s2, s3] = scratch;
+        let (sq, s1, s2, s3) =
+            (qq.as_mut_slice(), s1.as_mut_slice(), s2.as_mut_slice(), s3.as_mut_slice());
+        for c in [&mut *sq, &mut *s1, &mut *s2, &mut *s3] {
+            c.fill(0.0);
+        }
+        let zero = &*zeros_n;
+        id_contract_unchecked(model, data, ws, q, zero, dv, Motion::zero(), z1, sq, s1, s2, s3);
+    }
+    // ... minus ζ₁ᵀ ∂²(J_cᵀλ̂)/∂q², plus ζ₂ᵀ ∂²(J_c w)/∂q²: the q-Hessians of λ̂·(J_c ζ₁) and
+    //     ζ₂·(J_c w), point accelerations at rest (`point_hessians`).
+    let mut zc = std::mem::take(&mut cd.zc);
+    for (c, path) in cd.paths.iter().enumerate() {
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        if !geo.is_point() {
+            // Generic contacts (6-D or local): dual-base row kinematics, O(d²) per contact.
+            let (zr, lam) = (&z2[r0..r0 + geo.dim()], &impulse.as_slice()[r0..r0 + geo.dim()]);
+            add_jz_hessian(model, data, cd, c, w.as_slice(), zr, 1.0, &mut zc, qq);
+            add_jz_hessian(model, data, cd, c, z1, lam, -1.0, &mut zc, qq);
+            continue;
+        }
+        let lam = Vector3::new(impulse[r0], impulse[r0 + 1], impulse[r0 + 2]);
+        let zc2 = Vector3::new(z2[r0], z2[r0 + 1], z2[r0 + 2]);
+        pw.at_rest(model, data, path, w.as_slice());
+        point_hessians(model, data, pw, path, &zc2, 1.0, qq, None);
+        pw.at_rest(model, data, path, z1);
+        point_hessians(model, data, pw, path, &lam, -1.0, qq, None);
+    }
+    cd.zc = zc;
 }
 
 /// `R_qq` of the impact's second order, contact part: subtracts `∂²(J_cᵀλ̂)/∂q²` from the rows

@@ -873,6 +873,24 @@ impl KktContracted {
     pub fn c_tauq(&self) -> &DMatrix<f64> {
         &self.tq
     }
+    /// The adjoint `ζ` (`nv + m`), set by [`crate::mimic::kkt_so_contracted`] before
+    /// [`zeta_residual_hessians`].
+    pub(crate) fn zeta_mut(&mut self) -> &mut DVector<f64> {
+        &mut self.zeta
+    }
+    /// Checks that this workspace was made for `model` and `m` contact rows.
+    pub(crate) fn check(&self, model: &Model, m: usize) -> Result<()> {
+        self.ws.check(model, "KktContracted")?;
+        if self.omega.len() != model.nv + m {
+            return Err(crate::error::Error::Workspace(format!(
+                "KktContracted was made for nv + m = {} rows (m: contact rows), this KktData has {}; make it with \
+                 KktContracted::new for this KktData",
+                self.omega.len(),
+                model.nv + m
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// The Hessians of `ωᵀy = w_q̈ᵀ q̈ + w_λᵀ λ` of the KKT dynamics at `(q, q̇, τ)`, without an
@@ -910,15 +928,7 @@ pub fn kkt_so_contracted(
     let (n, m) = (model.nv, kd.cd.dim());
     check_vec("w_qdd", w_qdd, n)?;
     check_vec("w_lambda", w_lambda, m)?;
-    kc.ws.check(model, "KktContracted")?;
-    if kc.omega.len() != n + m {
-        return Err(crate::error::Error::Workspace(format!(
-            "KktContracted was made for nv + m = {} rows (m: contact rows), this KktData has {}; make it with \
-             KktContracted::new for this KktData",
-            kc.omega.len(),
-            n + m
-        )));
-    }
+    kc.check(model, m)?;
     // 1. First order, with the blocks of R⁻¹.
     solve_unchecked(model, data, kd, q, v, tau, true)?;
     let qdd = std::mem::replace(&mut kd.qdd, DVector::zeros(0));
@@ -931,9 +941,71 @@ pub fn kkt_so_contracted(
     kc.omega.rows_mut(0, n).copy_from(w_qdd);
     kc.omega.rows_mut(n, m).copy_from(w_lambda);
     kc.zeta.gemv_tr(1.0, &kd.cd.rinv, &kc.omega, 0.0);
-    // 3. ζᵀ R_uw: the ID part by reverse mode (at q̈; the pass also refreshes the world-frame
-    //    quantities of `data` at the same state) ...
-    let KktContracted { ws, pw, mq, qq, vv, qv, tq, zeta, a, h, neg_z2, .. } = kc;
+    // 3. ζᵀ R_uw.
+    zeta_residual_hessians(model, data, kd, kc, q, v);
+    let KktContracted { qq, vv, qv, tq, zeta, a, h, neg_z2, .. } = kc;
+    // 4. A from one G evaluation: G(ζ₁; −ζ₂) = [∂(Mζ₁)/∂q + ∂(J_cᵀζ₂)/∂q ; ∂(J_c ζ₁)/∂q].
+    {
+        let (z1, z2) = zeta.as_slice().split_at(n);
+        for (o, x) in neg_z2.iter_mut().zip(z2) {
+            *o = -x;
+        }
+        g_matrix_split(model, data, &mut kd.cd, z1, neg_z2.as_slice(), z1);
+        let g = &kd.cd.g;
+        for j in 0..n {
+            for l in 0..n {
+                a[(j, l)] = g[(l, j)];
+            }
+            for r in 0..m {
+                a[(j, n + r)] = -g[(n + r, j)];
+            }
+        }
+    }
+    // 5. The product terms and the signs.
+    let y = |top: &DMatrix<f64>, bottom: &DMatrix<f64>, h: &mut DMatrix<f64>| {
+        gemm(1.0, &a.columns(0, n), top, 0.0, h);
+        gemm(1.0, &a.columns(n, m), bottom, 1.0, h);
+    };
+    y(&kd.dqdd_dq, &kd.dlambda_dq, h);
+    *qq += &*h;
+    for j in 0..n {
+        for k in 0..n {
+            qq[(j, k)] += h[(k, j)];
+        }
+    }
+    neg(qq);
+    neg(vv);
+    y(&kd.dqdd_dv, &kd.dlambda_dv, h);
+    *qv += &*h;
+    neg(qv);
+    y(&kd.dqdd_dtau, &kd.dlambda_dtau, h);
+    for j in 0..n {
+        for k in 0..n {
+            tq[(j, k)] = -h[(k, j)];
+        }
+    }
+    Ok(())
+}
+
+/// Step 3 of [`kkt_so_contracted`]: `ζᵀR_qq`, `ζᵀR_vv`, `ζᵀR_qv` of the KKT residual for
+/// `ζ = kc.zeta` (length `nv + m`) into `kc.qq`, `kc.vv`, `kc.qv` (`kc.mq` scratch), at the
+/// state of the last first-order solve in `data` and `kd` (`kd.qdd`, `kd.lambda`) with the
+/// contact points of [`update_points`] at `−a_g`: the Hessians of `ζ₁ᵀτ` at `(q, q̇, q̈)` by
+/// reverse mode, minus the `q`-Hessian of `λ·(J_c ζ₁)`, plus those of `ζ₂·a_p` (and the
+/// Baumgarte terms) per contact. Shared with [`crate::mimic::kkt_so_contracted`] (the full
+/// tree's at `ζ = (G ζ₁, ζ₂)`).
+pub(crate) fn zeta_residual_hessians(
+    model: &Model,
+    data: &mut Data,
+    kd: &mut KktData,
+    kc: &mut KktContracted,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+) {
+    // The ID part by reverse mode (at q̈; the pass also refreshes the world-frame quantities
+    // of `data` at the same state) ...
+    let n = model.nv;
+    let KktContracted { ws, pw, mq, qq, vv, qv, zeta, .. } = kc;
     {
         let z1 = &zeta.as_slice()[..n];
         let (sq, sv, sx, sm) =
@@ -991,45 +1063,4 @@ pub fn kkt_so_contracted(
         }
     }
     kd.cd.zc = zc;
-    // 4. A from one G evaluation: G(ζ₁; −ζ₂) = [∂(Mζ₁)/∂q + ∂(J_cᵀζ₂)/∂q ; ∂(J_c ζ₁)/∂q].
-    {
-        let (z1, z2) = zeta.as_slice().split_at(n);
-        for (o, x) in neg_z2.iter_mut().zip(z2) {
-            *o = -x;
-        }
-        g_matrix_split(model, data, &mut kd.cd, z1, neg_z2.as_slice(), z1);
-        let g = &kd.cd.g;
-        for j in 0..n {
-            for l in 0..n {
-                a[(j, l)] = g[(l, j)];
-            }
-            for r in 0..m {
-                a[(j, n + r)] = -g[(n + r, j)];
-            }
-        }
-    }
-    // 5. The product terms and the signs.
-    let y = |top: &DMatrix<f64>, bottom: &DMatrix<f64>, h: &mut DMatrix<f64>| {
-        gemm(1.0, &a.columns(0, n), top, 0.0, h);
-        gemm(1.0, &a.columns(n, m), bottom, 1.0, h);
-    };
-    y(&kd.dqdd_dq, &kd.dlambda_dq, h);
-    *qq += &*h;
-    for j in 0..n {
-        for k in 0..n {
-            qq[(j, k)] += h[(k, j)];
-        }
-    }
-    neg(qq);
-    neg(vv);
-    y(&kd.dqdd_dv, &kd.dlambda_dv, h);
-    *qv += &*h;
-    neg(qv);
-    y(&kd.dqdd_dtau, &kd.dlambda_dtau, h);
-    for j in 0..n {
-        for k in 0..n {
-            tq[(j, k)] = -h[(k, j)];
-        }
-    }
-    Ok(())
 }

@@ -236,6 +236,26 @@ impl Reduced<'_> {
         }
         t
     }
+    /// `M(q) x = Gᵀ rnea_full(expand(q), 0, G x)` without gravity (the reduced mass matrix
+    /// times `x`, for IDFOZA and IDSOZA).
+    pub fn mass_times<T: AdScalar>(&self, q: &[T], x: &[T]) -> Vec<T> {
+        let qf = self.expand_q(q);
+        let zero = vec![T::zero(); self.full.nv()];
+        let f = rnea_with_gravity(self.full, &qf, &zero, &self.expand_v(x), None, false);
+        self.reduce_force(&f)
+    }
+    /// `∂(M x)/∂q` (tangent; the oracle of [`crate::mimic::idfoza`]).
+    pub fn d_mass_times_dq(&self, q: &[f64], x: &[f64]) -> DMatrix<f64> {
+        let n = self.nv();
+        let xd = lift::<Dual64>(x);
+        jacobian(n, n, |j| self.mass_times(&self.perturb(&lift::<Dual64>(q), j, eps()), &xd))
+    }
+    /// `∂²(M x)/∂q²` (nested tangent; the oracle of [`crate::mimic::idsoza`]).
+    pub fn d2_mass_times_dq2(&self, q: &[f64], x: &[f64]) -> Tensor3 {
+        let n = self.nv();
+        let xh = lift::<HyperDual64>(x);
+        hessian(n, n, n, |j, k| self.mass_times(&self.nested(q, j, k), &xh))
+    }
     /// `∂²q̈/∂q²` (nested tangent).
     pub fn d2_aba_dq2(&self, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
         let n = self.nv();

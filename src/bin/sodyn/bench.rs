@@ -71,7 +71,10 @@ ARG0/ARG1; d_integrate_* and d_difference_* time Model::d_integrate_blocks_into 
 d_difference_blocks_into, which write the diagonal blocks only, as Pinocchio's dIntegrate and \
 dDifference do), batch_rnea, batch_aba, batch_id_fo, batch_fd_fo (the batched \
 entry points, time per state) and, with --contacts, kkt_fo, kkt_so, kkt_so_c, impact_fo, \
-impact_so, impact_so_c.";
+impact_so, impact_so_c. With --mimic (a URDF's <mimic> joints as constraints, the reduced \
+coordinates): rnea, crba, aba, id_fo, fd_fo, id_so, fd_so, id_so_c, fd_so_c and, with \
+--contacts (frames of the full tree), kkt_fo, kkt_so, kkt_so_c, impact_fo, impact_so, \
+impact_so_c, single-threaded (no --frame, --threads, --paired-threads, --ratio-to).";
 
 /// Algorithms that can be timed, in output order.
 const ALGOS: &[&str] = &[
@@ -1545,7 +1548,8 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// The algorithms `bench --mimic` times (those of `sodyn::mimic` and `sodyn::mimic::batch`).
+/// The algorithms `bench --mimic` times (those of `sodyn::mimic` and `sodyn::mimic::batch`; the
+/// contact ones, those of [`CONTACT_ALGOS`], with `--contacts`).
 const MIMIC_ALGOS: &[&str] = &[
     "rnea",
     "crba",
@@ -1558,15 +1562,25 @@ const MIMIC_ALGOS: &[&str] = &[
     "batch_aba",
     "batch_id_fo",
     "batch_fd_fo",
+    "id_so_c",
+    "fd_so_c",
+    "kkt_fo",
+    "kkt_so",
+    "kkt_so_c",
+    "impact_fo",
+    "impact_so",
+    "impact_so_c",
 ];
 
 /// `bench --mimic`: the algorithms of `sodyn::mimic` on the reduced model, timed as the others
 /// (states round robin, warm-up, median and p10/p90 per call), one line each; the batched ones
 /// (`sodyn::mimic::batch`) on a pool of `--threads` (`--pool`, `--spin-us`), time per state.
 fn run_mimic(o: &BenchArgs) -> Result<()> {
-    use sodyn::mimic::{self, MimicData, MimicSoData, batch};
+    use sodyn::mimic::{
+        self, MimicContractedData, MimicData, MimicImpactContracted, MimicImpactData,
+        MimicKktContracted, MimicKktData, MimicSoData, batch,
+    };
     let unsupported = [
-        (o.contacts.is_some(), "--contacts"),
         (o.paired_threads.is_some(), "--paired-threads"),
         (o.ratio_to.is_some(), "--ratio-to"),
         (o.frame.is_some(), "--frame"),
@@ -1578,13 +1592,26 @@ fn run_mimic(o: &BenchArgs) -> Result<()> {
             MIMIC_ALGOS.join(", ")
         )));
     }
+    let contacts: &[String] = o.contacts.as_ref().map_or(&[], |l| &l.0);
     let algos: Vec<&str> = match o.algos.as_ref().map(|l| l.0.as_slice()) {
-        None => MIMIC_ALGOS.to_vec(),
+        None => MIMIC_ALGOS
+            .iter()
+            .copied()
+            .filter(|a| !contacts.is_empty() || !CONTACT_ALGOS.contains(a))
+            .collect(),
         Some(req) => {
             if let Some(a) = req.iter().find(|a| !MIMIC_ALGOS.contains(&a.as_str())) {
                 return Err(Error::Io(format!(
                     "algorithm \"{a}\" is not available with --mimic (available: {})",
                     MIMIC_ALGOS.join(", ")
+                )));
+            }
+            if let Some(a) = req.iter().find(|a| CONTACT_ALGOS.contains(&a.as_str()))
+                && contacts.is_empty()
+            {
+                return Err(Error::Io(format!(
+                    "algorithm \"{a}\" needs contacts: give --contacts F1,F2,... (frame names \
+                     of the full tree)"
                 )));
             }
             MIMIC_ALGOS.iter().copied().filter(|a| req.iter().any(|r| r == a)).collect()
@@ -1593,6 +1620,21 @@ fn run_mimic(o: &BenchArgs) -> Result<()> {
     let m = super::mimic_cli::load(&o.model)?;
     sodyn::simd::set_thread_level(o.simd);
     let name = o.name.clone().unwrap_or_else(|| m.name().to_string());
+    let (kind, reference) = (o.contact_type, o.contact_reference);
+    let contact_list = contacts
+        .iter()
+        .map(|f| {
+            m.full().frame_id(f).map_err(|_| {
+                Error::Io(format!(
+                    "--contacts: unknown frame \"{f}\" in model \"{}\" ({})",
+                    m.name(),
+                    o.model.model
+                ))
+            })?;
+            Contact::new(m.full(), f, Vector3::zeros())
+                .map(|c| Contact { kind, ..c.with_reference(reference) })
+        })
+        .collect::<Result<Vec<_>>>()?;
     let nstates = o.states.unwrap_or(if o.smoke { 8 } else { 1000 });
     // pin_bench's configurations of the full tree (its sampling bounds), reduced.
     let full = States::new(m.full(), nstates, o.seed);
@@ -1602,6 +1644,8 @@ fn run_mimic(o: &BenchArgs) -> Result<()> {
     let mut r = |n: usize| DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
     let vs: Vec<DVector<f64>> = (0..nstates).map(|_| r(m.nv())).collect();
     let xs: Vec<DVector<f64>> = (0..nstates).map(|_| r(m.nv())).collect();
+    // Random weights of the contracted second order (reduced nv; contact rows).
+    let w = r(m.nv());
     let plan = Plan {
         nstates,
         iters: o.iters,
@@ -1627,8 +1671,8 @@ fn run_mimic(o: &BenchArgs) -> Result<()> {
     let batch_plan = Plan { per_call: nstates, min_samples: plan.min_samples.min(20), ..plan };
     println!(
         "# model={name} source={} base={} nq={} nv={} njoints={} nstates={nstates} seed={} \
-         timer_overhead_ns={:.1} mimic={} full_nq={} full_nv={} threads={} pool={pool_desc} \
-         smoke={} simd={}",
+         timer_overhead_ns={:.1} mimic={} full_nq={} full_nv={} contacts={} threads={} \
+         pool={pool_desc} smoke={} simd={}",
         o.model.model,
         if o.model.floating_base { "ff" } else { "fixed" },
         m.nq(),
@@ -1639,12 +1683,43 @@ fn run_mimic(o: &BenchArgs) -> Result<()> {
         m.mimics().len(),
         m.full().nq(),
         m.full().nv(),
+        if contacts.is_empty() { "none".to_string() } else { contacts.join(",") },
         o.threads,
         o.smoke as u8,
         sodyn::simd::level().name(),
     );
     let mut d = MimicData::new(&m);
     let mut so = MimicSoData::new(&m);
+    let mut con = MimicContractedData::new(&m);
+    // The contact workspaces (made once, with the contacts).
+    let needs = |p: &str| algos.iter().any(|a| a.starts_with(p));
+    let mut kkt = None;
+    let mut impact = None;
+    let mut kktc = None;
+    let mut impc = None;
+    let mut wl = DVector::zeros(0);
+    if !contact_list.is_empty() {
+        if needs("kkt_") {
+            kkt = Some(MimicKktData::new(&m, &contact_list)?.with_second_order(&m));
+        }
+        if needs("impact_") {
+            impact = Some(MimicImpactData::new(&m, &contact_list)?.with_second_order(&m));
+        }
+        if needs("kkt_so_c") {
+            let kd = MimicKktData::new(&m, &contact_list)?;
+            let kc = MimicKktContracted::new(&m, &kd);
+            kktc = Some((kd, kc));
+        }
+        if needs("impact_so_c") {
+            let im = MimicImpactData::new(&m, &contact_list)?;
+            let ic = MimicImpactContracted::new(&m, &im);
+            impc = Some((im, ic));
+        }
+        let rows = contact_list.iter().map(|c| c.dim()).sum::<usize>();
+        let mut rng = Rng::new(o.seed ^ 0x5eed);
+        wl = DVector::from_fn(rows, |_, _| rng.range(-1.0, 1.0));
+    }
+    let no_contacts = |algo: &str| Error::Io(format!("{algo} needs --contacts"));
     for algo in algos {
         let (ov, o1, o2) = (&mut out_vec, &mut out_m1, &mut out_m2);
         let t = match algo {
@@ -1677,7 +1752,33 @@ fn run_mimic(o: &BenchArgs) -> Result<()> {
                     "id_fo" => mimic::id_derivatives(&m, &mut d, q, v, x, None),
                     "fd_fo" => mimic::fd_derivatives(&m, &mut d, q, v, x, None),
                     "id_so" => mimic::id_so_derivatives(&m, &mut d, &mut so, q, v, x, None),
-                    _ => mimic::fd_so_derivatives(&m, &mut d, &mut so, q, v, x, None),
+                    "fd_so" => mimic::fd_so_derivatives(&m, &mut d, &mut so, q, v, x, None),
+                    "id_so_c" => mimic::id_so_contracted(&m, &mut d, &mut con, q, v, x, &w),
+                    "fd_so_c" => mimic::fd_so_contracted(&m, &mut d, &mut con, q, v, x, &w),
+                    "kkt_fo" | "kkt_so" => {
+                        let kd = kkt.as_mut().ok_or_else(|| no_contacts(algo))?;
+                        if algo == "kkt_fo" {
+                            mimic::kkt_derivatives(&m, &mut d, kd, q, v, x)
+                        } else {
+                            mimic::kkt_so_derivatives(&m, &mut d, kd, q, v, x)
+                        }
+                    }
+                    "impact_fo" | "impact_so" => {
+                        let im = impact.as_mut().ok_or_else(|| no_contacts(algo))?;
+                        if algo == "impact_fo" {
+                            mimic::impact_derivatives(&m, &mut d, im, q, v)
+                        } else {
+                            mimic::impact_so_derivatives(&m, &mut d, im, q, v)
+                        }
+                    }
+                    "kkt_so_c" => {
+                        let (kd, kc) = kktc.as_mut().ok_or_else(|| no_contacts(algo))?;
+                        mimic::kkt_so_contracted(&m, &mut d, kd, kc, q, v, x, &w, &wl)
+                    }
+                    _ => {
+                        let (im, ic) = impc.as_mut().ok_or_else(|| no_contacts(algo))?;
+                        mimic::impact_so_contracted(&m, &mut d, im, ic, q, v, &w, &wl)
+                    }
                 }
             }),
         }

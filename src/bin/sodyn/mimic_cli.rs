@@ -112,17 +112,23 @@ pub(crate) struct State {
     contacts: Vec<sodyn::model::Contact>,
     lambda: DVector<f64>,
     restitution: f64,
-    /// The weights `tau`, `qdd` of the contracted second order.
+    /// The weights `tau`, `qdd`, `kkt_qdd`, `kkt_lambda`, `impact_vplus`, `impact_impulse` of
+    /// the contracted second order.
     w_tau: Option<DVector<f64>>,
     w_qdd: Option<DVector<f64>>,
+    w_kkt_qdd: Option<DVector<f64>>,
+    w_kkt_lambda: Option<DVector<f64>>,
+    w_impact_vplus: Option<DVector<f64>>,
+    w_impact_impulse: Option<DVector<f64>>,
     /// Frames of the full tree whose kinematics `eval` writes.
     frames: Vec<usize>,
 }
 
 /// Parses a state file for a mimic model: `q` (length nq, default neutral), `v`, `a`, `tau`
 /// (length nv, default zeros), `contacts`, `lambda`, `restitution`, `frames` as without
-/// `--mimic` (frames of the full tree) and `weights` `tau`, `qdd` (length nv); the contact
-/// weights are errors (not supported with `--mimic`).
+/// `--mimic` (frames of the full tree) and `weights` `tau`, `qdd`, `kkt_qdd`, `impact_vplus`
+/// (length nv), `kkt_lambda`, `impact_impulse` (the contacts' rows; these four need
+/// `contacts`).
 pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<State> {
     let val: Value =
         serde_json::from_str(text).map_err(|e| Error::Io(format!("{file}: invalid JSON: {e}")))?;
@@ -145,9 +151,11 @@ pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<Stat
             )));
         }
     };
-    if let Some(k) = weights.keys().find(|k| !["tau", "qdd"].contains(&k.as_str())) {
+    let known_w = ["tau", "qdd", "kkt_qdd", "kkt_lambda", "impact_vplus", "impact_impulse"];
+    if let Some(k) = weights.keys().find(|k| !known_w.contains(&k.as_str())) {
         return Err(Error::Io(format!(
-            "{file}: key \"weights.{k}\" is not supported with --mimic (tau and qdd are)"
+            "{file}: unknown key \"weights.{k}\" (known: {})",
+            known_w.join(", ")
         )));
     }
     // The contacts, λ and restitution by the parser of eval (frames of the full tree).
@@ -184,7 +192,8 @@ pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<Stat
         Ok(Some(out))
     };
     let (nq, nv, fq, fv) = (mm.nq(), mm.nv(), mm.full().nq(), mm.full().nv());
-    let weight = |key: &str| -> Result<Option<DVector<f64>>> {
+    let rows = cst.contacts.iter().map(|c| c.dim()).sum::<usize>();
+    let weight_n = |key: &str, nv: usize| -> Result<Option<DVector<f64>>> {
         let Some(val) = weights.get(key) else { return Ok(None) };
         let arr = val.as_array().filter(|a| a.len() == nv).ok_or_else(|| {
             Error::Io(format!("{file}: key \"weights.{key}\" must be a list of {nv} numbers"))
@@ -197,6 +206,14 @@ pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<Stat
         }
         Ok(Some(out))
     };
+    let weight = |key: &str| weight_n(key, nv);
+    if cst.contacts.is_empty()
+        && ["kkt_qdd", "kkt_lambda", "impact_vplus", "impact_impulse"]
+            .iter()
+            .any(|k| weights.contains_key(*k))
+    {
+        return Err(Error::Io(format!("{file}: the weights kkt_* and impact_* need \"contacts\"")));
+    }
     let q = read("q", nq, fq)?.unwrap_or_else(|| mm.neutral());
     mm.check_q(&q)?;
     let z = || DVector::zeros(nv);
@@ -210,13 +227,18 @@ pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<Stat
         restitution: cst.restitution,
         w_tau: weight("tau")?,
         w_qdd: weight("qdd")?,
+        w_kkt_qdd: weight("kkt_qdd")?,
+        w_kkt_lambda: weight_n("kkt_lambda", rows)?,
+        w_impact_vplus: weight("impact_vplus")?,
+        w_impact_impulse: weight_n("impact_impulse", rows)?,
         frames: cst.frames,
     })
 }
 
 /// The `eval --mimic` output: the keys of `eval` for the dynamics (`tau`, `M`, `b`, `qdd`,
 /// `dtau_dq`, `dtau_dv`, `dqdd_dq`, `dqdd_dv`, `Minv`, at order 2 the tensors), with contacts
-/// `constrained_id`, `kkt` and `impact`, with weights `contracted` (`id`, `fd`), in the reduced
+/// `constrained_id`, `kkt` and `impact`, with weights `contracted` (`id`, `fd`, `kkt`,
+/// `impact`), in the reduced
 /// coordinates, with an `"errors"` object for the outputs undefined at the state.
 pub(crate) fn eval_json(mm: &MimicModel, s: &State, order: u32) -> Result<Value> {
     let model = mm.full();
@@ -318,7 +340,8 @@ pub(crate) fn eval_json(mm: &MimicModel, s: &State, order: u32) -> Result<Value>
         o.insert("frames".into(), frames_json(mm, s, order, &mut data)?);
         com_json(mm, s, &mut data, o)?;
     }
-    if s.w_tau.is_some() || s.w_qdd.is_some() {
+    let contact_w = [&s.w_kkt_qdd, &s.w_kkt_lambda, &s.w_impact_vplus, &s.w_impact_impulse];
+    if s.w_tau.is_some() || s.w_qdd.is_some() || contact_w.iter().any(|w| w.is_some()) {
         let mut c = Map::new();
         let mut con = mimic::MimicContractedData::new(mm);
         if let Some(w) = &s.w_tau {
@@ -349,12 +372,85 @@ pub(crate) fn eval_json(mm: &MimicModel, s: &State, order: u32) -> Result<Value>
                 Err(e) => undefined(e, &["contracted.fd"], &mut errors)?,
             }
         }
+        contracted_contacts(mm, s, &mut data, &mut c, &mut errors)?;
         o.insert("contracted".into(), Value::Object(c));
     }
     if !errors.is_empty() {
         o.insert("errors".into(), Value::Object(errors));
     }
     Ok(out)
+}
+
+/// The `contracted.kkt` and `contracted.impact` objects of a mimic model (as without `--mimic`:
+/// for each weight given, the dense second-order keys of its object, each an nv×nv matrix
+/// `C[j][k] = Σ_i w_i T[i][j][k]`, the other weight zero); a singular `M` or KKT system of the
+/// full tree goes to `errors`.
+fn contracted_contacts(
+    mm: &MimicModel,
+    s: &State,
+    data: &mut MimicData,
+    c: &mut Map<String, Value>,
+    errors: &mut Map<String, Value>,
+) -> Result<()> {
+    let (nv, rows) = (mm.nv(), s.contacts.iter().map(|c| c.dim()).sum::<usize>());
+    let singular = |e: Error, key: &str, errors: &mut Map<String, Value>| match e {
+        Error::Singular { ref what, .. } if what != "contact set" => {
+            errors.insert(key.into(), Value::String(e.to_string()));
+            Ok(())
+        }
+        e => Err(e),
+    };
+    let split = |x: &DVector<f64>, first: bool| {
+        if first { (x.clone(), DVector::zeros(rows)) } else { (DVector::zeros(nv), x.clone()) }
+    };
+    if s.w_kkt_qdd.is_some() || s.w_kkt_lambda.is_some() {
+        let mut kd = mimic::MimicKktData::new(mm, &s.contacts)?;
+        let mut kc = mimic::MimicKktContracted::new(mm, &kd);
+        let mut o = Map::new();
+        let mut ok = true;
+        for (weight, prefix) in [(&s.w_kkt_qdd, "d2qdd"), (&s.w_kkt_lambda, "d2lambda")] {
+            let Some(x) = weight else { continue };
+            let (wq, wl) = split(x, prefix == "d2qdd");
+            let r =
+                mimic::kkt_so_contracted(mm, data, &mut kd, &mut kc, &s.q, &s.v, &s.tau, &wq, &wl);
+            if let Err(e) = r {
+                singular(e, "contracted.kkt", errors)?;
+                ok = false;
+                break;
+            }
+            o.insert(format!("{prefix}_dq2"), mat_json(kc.c_qq()));
+            o.insert(format!("{prefix}_dv2"), mat_json(kc.c_vv()));
+            o.insert(format!("{prefix}_dqdv"), mat_json(kc.c_qv()));
+            o.insert(format!("{prefix}_dtaudq"), mat_json(kc.c_tauq()));
+        }
+        if ok {
+            c.insert("kkt".into(), Value::Object(o));
+        }
+    }
+    if s.w_impact_vplus.is_some() || s.w_impact_impulse.is_some() {
+        let mut im = mimic::MimicImpactData::new(mm, &s.contacts)?;
+        im.set_restitution(s.restitution)?;
+        let mut ic = mimic::MimicImpactContracted::new(mm, &im);
+        let mut o = Map::new();
+        let mut ok = true;
+        for (weight, prefix) in [(&s.w_impact_vplus, "d2vplus"), (&s.w_impact_impulse, "d2impulse")]
+        {
+            let Some(x) = weight else { continue };
+            let (wv, wl) = split(x, prefix == "d2vplus");
+            let r = mimic::impact_so_contracted(mm, data, &mut im, &mut ic, &s.q, &s.v, &wv, &wl);
+            if let Err(e) = r {
+                singular(e, "contracted.impact", errors)?;
+                ok = false;
+                break;
+            }
+            o.insert(format!("{prefix}_dq2"), mat_json(ic.c_qq()));
+            o.insert(format!("{prefix}_dqdvminus"), mat_json(ic.c_qvminus()));
+        }
+        if ok {
+            c.insert("impact".into(), Value::Object(o));
+        }
+    }
+    Ok(())
 }
 
 /// `constrained_id`, `kkt` and `impact` of a mimic model.
