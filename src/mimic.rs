@@ -24,11 +24,14 @@
 //!
 //! External forces `fext` are those of the full model (one per joint of the full tree, mimic
 //! joints included). The functions of this module mirror [`crate::algo::rnea()`],
+//! [`crate::algo::nonlinear_effects()`] ([`nonlinear_effects`]: `Gᵀ b_full(expand(q), G v)`),
 //! [`crate::algo::crba()`], [`crate::algo::aba()`], [`crate::deriv::id_derivatives`],
 //! [`crate::deriv::fd_derivatives`], [`crate::deriv::id_so_derivatives`] and
 //! [`crate::deriv::fd_so_derivatives`]; their workspaces are [`MimicData`] and [`MimicSoData`],
 //! allocated once. Contacts (frames of the full tree): [`constrained_id_derivatives`] (first and
-//! second order), [`kkt_derivatives`], [`kkt_so_derivatives`], [`impact_derivatives`] and
+//! second order), [`kkt_dynamics`] and [`impact_dynamics`] (the forward solves, without
+//! derivatives: the first part of [`kkt_derivatives`] and [`impact_derivatives`]),
+//! [`kkt_derivatives`], [`kkt_so_derivatives`], [`impact_derivatives`] and
 //! [`impact_so_derivatives`], with the workspaces [`MimicKktData`] and [`MimicImpactData`].
 //! Contracted second order: [`id_so_contracted`], [`fd_so_contracted`]
 //! ([`MimicContractedData`]), [`kkt_so_contracted`] ([`MimicKktContracted`]) and
@@ -667,7 +670,7 @@ impl MimicData {
         &self.a
     }
     /// `τ` (reduced): of [`rnea`], [`id_derivatives`], [`id_so_derivatives`], and of inverse
-    /// dynamics at `q̈` for the forward-dynamics derivatives.
+    /// dynamics at `q̈` for the forward-dynamics derivatives; `b` of [`nonlinear_effects`].
     pub fn tau(&self) -> &DVector<f64> {
         &self.tau
     }
@@ -830,6 +833,41 @@ pub fn rnea<'a>(
     Ok(&data.tau)
 }
 
+/// Nonlinear effects `b = Gᵀ b_full(expand(q), G v)` (`b_full = C_full q̇_full + g_full`, minus
+/// the generalised `fext`: the full model's RNEA at `G q̈ = 0`), i.e. [`rnea`] at `a = 0`.
+/// Returns `data.tau()`; leaves `data.a_full()` zero.
+///
+/// # Errors
+/// As [`rnea`] (`q`, `v`, `fext`).
+pub fn nonlinear_effects<'a>(
+    model: &MimicModel,
+    data: &'a mut MimicData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<&'a DVector<f64>> {
+    prepare(model, data, q, Some(v), None)?;
+    let MimicData { full, q, v, a, tau, .. } = data;
+    bias_into(model, full, q, v, a, fext, tau.as_mut_slice())?;
+    Ok(&data.tau)
+}
+
+/// `out = Gᵀ b_full(q_full, v_full)` (the full model's RNEA with `a_full ← 0`).
+fn bias_into(
+    model: &MimicModel,
+    full: &mut Data,
+    q_full: &DVector<f64>,
+    v_full: &DVector<f64>,
+    a_full: &mut DVector<f64>,
+    fext: Option<&[Force]>,
+    out: &mut [f64],
+) -> Result<()> {
+    a_full.fill(0.0);
+    let b = crate::algo::rnea(&model.full, full, q_full, v_full, a_full, fext)?;
+    model.reduce_force_into(b.as_slice(), out);
+    Ok(())
+}
+
 /// Mass matrix `M = Gᵀ M_full(expand(q)) G` (CRBA of the full model). Returns `data.m()`.
 ///
 /// # Errors
@@ -862,9 +900,10 @@ pub fn aba<'a>(
     fext: Option<&[Force]>,
 ) -> Result<&'a DVector<f64>> {
     prepare(model, data, q, Some(v), Some(("tau", tau)))?;
-    data.a.fill(0.0);
-    let b = crate::algo::rnea(&model.full, &mut data.full, &data.q, &data.v, &data.a, fext)?;
-    model.reduce_force_into(b.as_slice(), data.qdd.as_mut_slice());
+    {
+        let MimicData { full, q, v, a, qdd, .. } = &mut *data;
+        bias_into(model, full, q, v, a, fext, qdd.as_mut_slice())?;
+    }
     for (x, &t) in data.qdd.iter_mut().zip(tau.iter()) {
         *x = t - *x;
     }
@@ -1241,9 +1280,9 @@ fn pivot_error(model: &MimicModel, k: usize, d: f64, max: Option<f64>) -> Error 
 // Contacts
 // ---------------------------------------------------------------------------------------------
 
-/// Workspace and results of the contact algorithms of a [`MimicModel`] ([`kkt_derivatives`],
-/// [`constrained_id_derivatives`]): the contacts (frames of the full tree, see
-/// [`crate::model::Contact`]), the full tree's KKT workspace, and the reduced results
+/// Workspace and results of the contact algorithms of a [`MimicModel`] ([`kkt_dynamics`],
+/// [`kkt_derivatives`], [`constrained_id_derivatives`]): the contacts (frames of the full tree,
+/// see [`crate::model::Contact`]), the full tree's KKT workspace, and the reduced results
 /// (`m` contact rows).
 #[derive(Clone, Debug)]
 pub struct MimicKktData {
@@ -1517,24 +1556,34 @@ pub fn kkt_derivatives(
     kkt_inner(model, data, kd, q, v, tau, false)
 }
 
-/// [`kkt_derivatives`], with `so` also the full tree's second order at `τ_f`.
-fn kkt_inner(
+/// KKT contact dynamics in the reduced coordinates at `(q, v, τ)`, without derivatives:
+/// `[M, (J G)ᵀ; J G, 0] [q̈; −λ] = [τ − b; −γ]` (`M`, `b` as in [`aba`]; `J` and `γ`, the contact
+/// rows at `q̈ = 0` with their Baumgarte terms, those of the full tree at `(expand(q), G v)`),
+/// by block elimination on the dense factors of `M` and of the Delassus matrix
+/// `J G M⁻¹ (J G)ᵀ`. Results: `kd.qdd()`, `kd.lambda()`, `kd.jac()`; `data.m()` is `M`,
+/// `data.qdd()` the constrained `q̈` and `data.a_full()` `G q̈`. The forward part of
+/// [`kkt_derivatives`], whose `q̈`, `λ` are these.
+///
+/// # Errors
+/// As [`aba`]; [`Error::Singular`] if the reduced Delassus matrix is singular (a redundant
+/// contact set in the reduced coordinates); a workspace of another model.
+pub fn kkt_dynamics(
     model: &MimicModel,
     data: &mut MimicData,
     kd: &mut MimicKktData,
     q: &DVector<f64>,
     v: &DVector<f64>,
     tau: &DVector<f64>,
-    so: bool,
 ) -> Result<()> {
     kd.check(model)?;
     prepare(model, data, q, Some(v), Some(("tau", tau)))?;
     let (n, nf, m) = (model.nv, model.full.nv(), kd.dim());
     let full = &model.full;
     // b, M (reduced) and M's factor.
-    data.a.fill(0.0);
-    let b = crate::algo::rnea(full, &mut data.full, &data.q, &data.v, &data.a, None)?;
-    model.reduce_force_into(b.as_slice(), kd.x0.as_mut_slice());
+    {
+        let MimicData { full: fd, q, v, a, .. } = &mut *data;
+        bias_into(model, fd, q, v, a, None, kd.x0.as_mut_slice())?;
+    }
     for (x, &t) in kd.x0.iter_mut().zip(tau.iter()) {
         *x = t - *x;
     }
@@ -1584,8 +1633,24 @@ fn kkt_inner(
     kd.qdd.copy_from(&kd.x0);
     kd.qdd.gemv(1.0, &kd.minv_jt, &kd.lambda, 1.0);
     data.qdd.copy_from(&kd.qdd);
-    // τ_f = M_f G q̈ + b_f − Jᵀλ, at which the full tree's KKT solution is (G q̈, λ).
     model.expand_v_into(kd.qdd.as_slice(), data.a.as_mut_slice());
+    Ok(())
+}
+
+/// [`kkt_derivatives`], with `so` also the full tree's second order at `τ_f`.
+fn kkt_inner(
+    model: &MimicModel,
+    data: &mut MimicData,
+    kd: &mut MimicKktData,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+    so: bool,
+) -> Result<()> {
+    kkt_dynamics(model, data, kd, q, v, tau)?;
+    let (n, nf, m) = (model.nv, model.full.nv(), kd.dim());
+    let full = &model.full;
+    // τ_f = M_f G q̈ + b_f − Jᵀλ, at which the full tree's KKT solution is (G q̈, λ).
     let t = crate::algo::rnea(full, &mut data.full, &data.q, &data.v, &data.a, None)?;
     kd.tau_f.copy_from(t);
     kd.tau_f.gemv_tr(-1.0, kd.full.cd().jac(), &kd.lambda, 1.0);
@@ -1946,7 +2011,8 @@ pub fn constrained_id_derivatives(
     Ok(())
 }
 
-/// Workspace and results of the impact dynamics of a [`MimicModel`] ([`impact_derivatives`]).
+/// Workspace and results of the impact dynamics of a [`MimicModel`] ([`impact_dynamics`],
+/// [`impact_derivatives`]).
 #[derive(Clone, Debug)]
 pub struct MimicImpactData {
     cd: ContactData,
@@ -2117,17 +2183,16 @@ impl MimicImpactData {
     }
 }
 
-/// Impact dynamics in the reduced coordinates and its first-order derivatives:
+/// Impact dynamics in the reduced coordinates at `(q, q̇⁻)`, without derivatives:
 /// `M (q̇⁺ − q̇⁻) = (J G)ᵀ λ̂`, `J G q̇⁺ = −e J G q̇⁻` (`M = Gᵀ M_f G`, `J` the full tree's contact
-/// Jacobian at `expand(q)`), then `∂y/∂x = −R_y⁻¹ R_x` for `y = (q̇⁺, λ̂)`, `x = (q, q̇⁻)` with
-/// `R_q = [Gᵀ(∂(M_f Δ)/∂q − ∂(Jᵀλ̂)/∂q) G; ∂(J w)/∂q G]` (`Δ = G(q̇⁺ − q̇⁻)`,
-/// `w = G(q̇⁺ + e q̇⁻)`, the full tree's IDFOZA and contact products) and
-/// `R_q̇⁻ = [−M; e J G]`.
+/// Jacobian at `expand(q)`, `e` the restitution), by block elimination on the dense factors of
+/// `M` and of the Delassus matrix `J G M⁻¹ (J G)ᵀ`. Results: `im.vplus()`, `im.impulse()`;
+/// `data.m()` is `M`. The forward part of [`impact_derivatives`], whose `q̇⁺`, `λ̂` are these.
 ///
 /// # Errors
 /// As [`crba`] for `q`, a `vminus` of the wrong length or not finite, [`Error::Singular`] for a
 /// singular `M` or Delassus matrix, a workspace of another model.
-pub fn impact_derivatives(
+pub fn impact_dynamics(
     model: &MimicModel,
     data: &mut MimicData,
     im: &mut MimicImpactData,
@@ -2145,11 +2210,8 @@ pub fn impact_derivatives(
     let (n, nf, m) = (model.nv, model.full.nv(), im.dim());
     let full = &model.full;
     let e = im.restitution;
-    // M (with the composite inertias), the body inertias for IDFOZA, J.
+    // M (with the composite inertias), J.
     crate::algo::internal::crba_unchecked(full, &mut data.full, &data.q);
-    for i in 1..full.njoints() {
-        data.full.oinertia[i] = data.full.o_m_i[i].act_inertia(&full.inertias[i]);
-    }
     crate::deriv::contact::path_kinematics(full, &data.full, &mut im.cd, None);
     model.reduce_matrix(data.full.m(), &mut data.m);
     data.ldl.copy_from(&data.m);
@@ -2175,6 +2237,34 @@ pub fn impact_derivatives(
     ldl_solve(&im.del, im.impulse.as_mut_slice());
     im.vplus.copy_from(vminus);
     im.vplus.gemv(1.0, &im.minv_jt, &im.impulse, 1.0);
+    Ok(())
+}
+
+/// Impact dynamics in the reduced coordinates and its first-order derivatives:
+/// `M (q̇⁺ − q̇⁻) = (J G)ᵀ λ̂`, `J G q̇⁺ = −e J G q̇⁻` (`M = Gᵀ M_f G`, `J` the full tree's contact
+/// Jacobian at `expand(q)`), then `∂y/∂x = −R_y⁻¹ R_x` for `y = (q̇⁺, λ̂)`, `x = (q, q̇⁻)` with
+/// `R_q = [Gᵀ(∂(M_f Δ)/∂q − ∂(Jᵀλ̂)/∂q) G; ∂(J w)/∂q G]` (`Δ = G(q̇⁺ − q̇⁻)`,
+/// `w = G(q̇⁺ + e q̇⁻)`, the full tree's IDFOZA and contact products) and
+/// `R_q̇⁻ = [−M; e J G]`.
+///
+/// # Errors
+/// As [`crba`] for `q`, a `vminus` of the wrong length or not finite, [`Error::Singular`] for a
+/// singular `M` or Delassus matrix, a workspace of another model.
+pub fn impact_derivatives(
+    model: &MimicModel,
+    data: &mut MimicData,
+    im: &mut MimicImpactData,
+    q: &DVector<f64>,
+    vminus: &DVector<f64>,
+) -> Result<()> {
+    impact_dynamics(model, data, im, q, vminus)?;
+    let (n, nf, m) = (model.nv, model.full.nv(), im.dim());
+    let full = &model.full;
+    let e = im.restitution;
+    // The body inertias for IDFOZA (the placements are those of impact_dynamics' CRBA).
+    for i in 1..full.njoints() {
+        data.full.oinertia[i] = data.full.o_m_i[i].act_inertia(&full.inertias[i]);
+    }
     // R_q of the full tree at Δ, λ̂, w, reduced.
     for f in 0..nf {
         let (c, g) = (model.g_col[f], model.g_coef[f]);

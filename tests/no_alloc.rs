@@ -212,6 +212,16 @@ fn mimic_algorithms_do_not_allocate() {
     check("mimic::rnea", &mut || {
         mimic::rnea(&m, &mut d, &q, &v, &a, None).unwrap();
     });
+    check("mimic::nonlinear_effects", &mut || {
+        mimic::nonlinear_effects(&m, &mut d, &q, &v, None).unwrap();
+    });
+    let fext = vec![
+        sodyn::spatial::Force::new(Vector3::new(0.1, -0.2, 0.3), Vector3::zeros());
+        m.full().njoints()
+    ];
+    check("mimic::nonlinear_effects (fext)", &mut || {
+        mimic::nonlinear_effects(&m, &mut d, &q, &v, Some(&fext)).unwrap();
+    });
     check("mimic::crba", &mut || {
         mimic::crba(&m, &mut d, &q).unwrap();
     });
@@ -238,6 +248,9 @@ fn mimic_algorithms_do_not_allocate() {
     ];
     let mut kd = mimic::MimicKktData::new(&m, &contacts).unwrap();
     let lam = DVector::from_element(kd.dim(), 0.5);
+    check("mimic::kkt_dynamics", &mut || {
+        mimic::kkt_dynamics(&m, &mut d, &mut kd, &q, &v, &a).unwrap()
+    });
     check("mimic::kkt_derivatives", &mut || {
         mimic::kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &a).unwrap()
     });
@@ -247,6 +260,9 @@ fn mimic_algorithms_do_not_allocate() {
     });
     let mut im = mimic::MimicImpactData::new(&m, &contacts).unwrap();
     im.set_restitution(0.3).unwrap();
+    check("mimic::impact_dynamics", &mut || {
+        mimic::impact_dynamics(&m, &mut d, &mut im, &q, &v).unwrap()
+    });
     check("mimic::impact_derivatives", &mut || {
         mimic::impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap()
     });

@@ -1279,13 +1279,9 @@ fn mimic_nle<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     mimic_read(mm, d, q, Some(v), None)?;
     mimic_ws(d)?;
-    let PyData { q, v, a, mimic: Some(ws), .. } = d else { unreachable!() };
-    if a.len() != mm.nv() {
-        *a = DVector::zeros(mm.nv());
-    }
-    a.fill(0.0);
+    let PyData { q, v, mimic: Some(ws), .. } = d else { unreachable!() };
     let md = &mut ws.d;
-    py.detach(|| mimic::rnea(mm, md, q, v, a, None).map(|_| ())).map_err(core_err)?;
+    py.detach(|| mimic::nonlinear_effects(mm, md, q, v, None).map(|_| ())).map_err(core_err)?;
     Ok(out_vec(py, md.tau()))
 }
 
