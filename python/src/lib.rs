@@ -467,6 +467,63 @@ impl PyModel {
     }
 }
 
+/// The dictionary of `kkt_derivatives` (plain or mimic model): `qdd`, `lambda`, the six
+/// first-order matrices and, at order 2, the eight tensors.
+fn kkt_dict<'py>(
+    py: Python<'py>,
+    qdd: &DVector<f64>,
+    lambda: &DVector<f64>,
+    fo: [&DMatrix<f64>; 6],
+    so: Option<[&Tensor3; 8]>,
+) -> PyResult<Bound<'py, PyDict>> {
+    const FO: [&str; 6] =
+        ["dqdd_dq", "dqdd_dv", "dqdd_dtau", "dlambda_dq", "dlambda_dv", "dlambda_dtau"];
+    const SO: [&str; 8] = [
+        "d2qdd_dq2",
+        "d2qdd_dv2",
+        "d2qdd_dqdv",
+        "d2qdd_dtaudq",
+        "d2lambda_dq2",
+        "d2lambda_dv2",
+        "d2lambda_dqdv",
+        "d2lambda_dtaudq",
+    ];
+    let out = PyDict::new(py);
+    out.set_item("qdd", out_vec(py, qdd))?;
+    out.set_item("lambda", out_vec(py, lambda))?;
+    for (k, x) in FO.into_iter().zip(fo) {
+        out.set_item(k, out_mat(py, x))?;
+    }
+    for (k, x) in so.into_iter().flat_map(|t| SO.into_iter().zip(t)) {
+        out.set_item(k, out_tensor(py, x))?;
+    }
+    Ok(out)
+}
+
+/// The dictionary of `impact_derivatives` (plain or mimic model): `vplus`, `impulse`, the four
+/// first-order matrices and, at order 2, the four tensors.
+fn impact_dict<'py>(
+    py: Python<'py>,
+    vplus: &DVector<f64>,
+    impulse: &DVector<f64>,
+    fo: [&DMatrix<f64>; 4],
+    so: Option<[&Tensor3; 4]>,
+) -> PyResult<Bound<'py, PyDict>> {
+    const FO: [&str; 4] = ["dvplus_dq", "dvplus_dvminus", "dimpulse_dq", "dimpulse_dvminus"];
+    const SO: [&str; 4] =
+        ["d2vplus_dq2", "d2vplus_dqdvminus", "d2impulse_dq2", "d2impulse_dqdvminus"];
+    let out = PyDict::new(py);
+    out.set_item("vplus", out_vec(py, vplus))?;
+    out.set_item("impulse", out_vec(py, impulse))?;
+    for (k, x) in FO.into_iter().zip(fo) {
+        out.set_item(k, out_mat(py, x))?;
+    }
+    for (k, x) in so.into_iter().flat_map(|t| SO.into_iter().zip(t)) {
+        out.set_item(k, out_tensor(py, x))?;
+    }
+    Ok(out)
+}
+
 /// Seeds for `random_configuration(seed=None)`: distinct per call.
 fn fresh_seed() -> u64 {
     use std::sync::atomic::{AtomicU64, Ordering};
@@ -1453,35 +1510,27 @@ fn mimic_kkt<'py>(
     } else {
         py.detach(|| mimic::kkt_derivatives(mm, md, kd, q, v, a)).map_err(core_err)?;
     }
-    let out = PyDict::new(py);
-    out.set_item("qdd", out_vec(py, kd.qdd()))?;
-    out.set_item("lambda", out_vec(py, kd.lambda()))?;
-    for (k, x) in [
-        ("dqdd_dq", kd.dqdd_dq()),
-        ("dqdd_dv", kd.dqdd_dv()),
-        ("dqdd_dtau", kd.dqdd_dtau()),
-        ("dlambda_dq", kd.dlambda_dq()),
-        ("dlambda_dv", kd.dlambda_dv()),
-        ("dlambda_dtau", kd.dlambda_dtau()),
-    ] {
-        out.set_item(k, out_mat(py, x))?;
-    }
-    if order == 2 {
-        let t = kd.so().expect("second order allocated");
-        for (k, x) in [
-            ("d2qdd_dq2", t.d2qdd_dq2()),
-            ("d2qdd_dv2", t.d2qdd_dv2()),
-            ("d2qdd_dqdv", t.d2qdd_dqdv()),
-            ("d2qdd_dtaudq", t.d2qdd_dtaudq()),
-            ("d2lambda_dq2", t.d2lambda_dq2()),
-            ("d2lambda_dv2", t.d2lambda_dv2()),
-            ("d2lambda_dqdv", t.d2lambda_dqdv()),
-            ("d2lambda_dtaudq", t.d2lambda_dtaudq()),
-        ] {
-            out.set_item(k, out_tensor(py, x))?;
-        }
-    }
-    Ok(out)
+    let so = kd.so().filter(|_| order == 2).map(|t| {
+        [
+            t.d2qdd_dq2(),
+            t.d2qdd_dv2(),
+            t.d2qdd_dqdv(),
+            t.d2qdd_dtaudq(),
+            t.d2lambda_dq2(),
+            t.d2lambda_dv2(),
+            t.d2lambda_dqdv(),
+            t.d2lambda_dtaudq(),
+        ]
+    });
+    let fo = [
+        kd.dqdd_dq(),
+        kd.dqdd_dv(),
+        kd.dqdd_dtau(),
+        kd.dlambda_dq(),
+        kd.dlambda_dv(),
+        kd.dlambda_dtau(),
+    ];
+    kkt_dict(py, kd.qdd(), kd.lambda(), fo, so)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -1517,28 +1566,11 @@ fn mimic_impact<'py>(
     } else {
         py.detach(|| mimic::impact_derivatives(mm, md, im, q, v)).map_err(core_err)?;
     }
-    let out = PyDict::new(py);
-    out.set_item("vplus", out_vec(py, im.vplus()))?;
-    out.set_item("impulse", out_vec(py, im.impulse()))?;
-    for (k, x) in [
-        ("dvplus_dq", im.dvplus_dq()),
-        ("dvplus_dvminus", im.dvplus_dvminus()),
-        ("dimpulse_dq", im.dimpulse_dq()),
-        ("dimpulse_dvminus", im.dimpulse_dvminus()),
-    ] {
-        out.set_item(k, out_mat(py, x))?;
-    }
-    if let Some(t) = im.so().filter(|_| order == 2) {
-        for (k, x) in [
-            ("d2vplus_dq2", t.d2vplus_dq2()),
-            ("d2vplus_dqdvminus", t.d2vplus_dqdvminus()),
-            ("d2impulse_dq2", t.d2impulse_dq2()),
-            ("d2impulse_dqdvminus", t.d2impulse_dqdvminus()),
-        ] {
-            out.set_item(k, out_tensor(py, x))?;
-        }
-    }
-    Ok(out)
+    let so = im.so().filter(|_| order == 2).map(|t| {
+        [t.d2vplus_dq2(), t.d2vplus_dqdvminus(), t.d2impulse_dq2(), t.d2impulse_dqdvminus()]
+    });
+    let fo = [im.dvplus_dq(), im.dvplus_dvminus(), im.dimpulse_dq(), im.dimpulse_dvminus()];
+    impact_dict(py, im.vplus(), im.impulse(), fo, so)
 }
 
 /// `id_so_contracted` (`fd = false`) or `fd_so_contracted` (`fd = true`) of a mimic model.
@@ -2837,35 +2869,27 @@ fn py_kkt_derivatives<'py>(
     } else {
         py.detach(|| kkt_derivatives(m, d, kd, q, v, a)).map_err(core_err)?;
     }
-    let out = PyDict::new(py);
-    out.set_item("qdd", out_vec(py, kd.qdd()))?;
-    out.set_item("lambda", out_vec(py, kd.lambda()))?;
-    for (k, x) in [
-        ("dqdd_dq", kd.dqdd_dq()),
-        ("dqdd_dv", kd.dqdd_dv()),
-        ("dqdd_dtau", kd.dqdd_dtau()),
-        ("dlambda_dq", kd.dlambda_dq()),
-        ("dlambda_dv", kd.dlambda_dv()),
-        ("dlambda_dtau", kd.dlambda_dtau()),
-    ] {
-        out.set_item(k, out_mat(py, x))?;
-    }
-    if order == 2 {
-        let t = kd.so().expect("second order allocated");
-        for (k, x) in [
-            ("d2qdd_dq2", t.d2qdd_dq2()),
-            ("d2qdd_dv2", t.d2qdd_dv2()),
-            ("d2qdd_dqdv", t.d2qdd_dqdv()),
-            ("d2qdd_dtaudq", t.d2qdd_dtaudq()),
-            ("d2lambda_dq2", t.d2lambda_dq2()),
-            ("d2lambda_dv2", t.d2lambda_dv2()),
-            ("d2lambda_dqdv", t.d2lambda_dqdv()),
-            ("d2lambda_dtaudq", t.d2lambda_dtaudq()),
-        ] {
-            out.set_item(k, out_tensor(py, x))?;
-        }
-    }
-    Ok(out)
+    let so = kd.so().filter(|_| order == 2).map(|t| {
+        [
+            t.d2qdd_dq2(),
+            t.d2qdd_dv2(),
+            t.d2qdd_dqdv(),
+            t.d2qdd_dtaudq(),
+            t.d2lambda_dq2(),
+            t.d2lambda_dv2(),
+            t.d2lambda_dqdv(),
+            t.d2lambda_dtaudq(),
+        ]
+    });
+    let fo = [
+        kd.dqdd_dq(),
+        kd.dqdd_dv(),
+        kd.dqdd_dtau(),
+        kd.dlambda_dq(),
+        kd.dlambda_dv(),
+        kd.dlambda_dtau(),
+    ];
+    kkt_dict(py, kd.qdd(), kd.lambda(), fo, so)
 }
 
 /// Impact dynamics `[M J_cᵀ; J_c 0][v⁺; −Λ] = [M v⁻; −e J_c v⁻]` and its derivatives.
@@ -2917,29 +2941,11 @@ fn py_impact_derivatives<'py>(
     } else {
         py.detach(|| impact_derivatives(m, d, im, q, v)).map_err(core_err)?;
     }
-    let out = PyDict::new(py);
-    out.set_item("vplus", out_vec(py, im.vplus()))?;
-    out.set_item("impulse", out_vec(py, im.impulse()))?;
-    for (k, x) in [
-        ("dvplus_dq", im.dvplus_dq()),
-        ("dvplus_dvminus", im.dvplus_dvminus()),
-        ("dimpulse_dq", im.dimpulse_dq()),
-        ("dimpulse_dvminus", im.dimpulse_dvminus()),
-    ] {
-        out.set_item(k, out_mat(py, x))?;
-    }
-    if order == 2 {
-        let t = im.so().expect("second order allocated");
-        for (k, x) in [
-            ("d2vplus_dq2", t.d2vplus_dq2()),
-            ("d2vplus_dqdvminus", t.d2vplus_dqdvminus()),
-            ("d2impulse_dq2", t.d2impulse_dq2()),
-            ("d2impulse_dqdvminus", t.d2impulse_dqdvminus()),
-        ] {
-            out.set_item(k, out_tensor(py, x))?;
-        }
-    }
-    Ok(out)
+    let so = im.so().filter(|_| order == 2).map(|t| {
+        [t.d2vplus_dq2(), t.d2vplus_dqdvminus(), t.d2impulse_dq2(), t.d2impulse_dqdvminus()]
+    });
+    let fo = [im.dvplus_dq(), im.dvplus_dvminus(), im.dimpulse_dq(), im.dimpulse_dvminus()];
+    impact_dict(py, im.vplus(), im.impulse(), fo, so)
 }
 
 /// Contracted second order of the KKT dynamics: the Hessians of
