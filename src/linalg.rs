@@ -463,22 +463,6 @@ pub(crate) fn gemm_masked_avx2<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
     };
 }
 
-/// Cache level hint of [`prefetch`]: into L1 (and L2).
-pub(crate) const TO_L1: i32 = 3;
-/// Cache level hint of [`prefetch`]: into L2 (not L1).
-pub(crate) const TO_L2: i32 = 2;
-
-/// Hints the caches to fetch the `len` values at `p` (one hint per 64-byte line) into L1 or L2
-/// (`LEVEL` = [`TO_L1`] or [`TO_L2`]); no effect on results. Used ahead of the loads of inputs
-/// and the stores of outputs that would otherwise wait on misses.
-#[inline]
-pub(crate) fn prefetch<const LEVEL: i32>(p: *const f64, len: usize) {
-    #[cfg(target_arch = "x86_64")]
-    crate::simd::avx2::prefetch::<LEVEL>(p, len);
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (p, len);
-}
-
 pub(crate) use crate::simd::{Gemm4, Gemm4Term};
 
 /// `out[u][r] ← −Σ_terms Σ_t A[r, idx[t]] · B[idx[t], u]` for `r < rows` (or `out[u][r] − Σ …`

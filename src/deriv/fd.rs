@@ -45,9 +45,7 @@ use super::zero::{Lanes, cross_force_lanes, v6};
 use crate::algo::Data;
 use crate::algo::internal::{aba_unchecked, check_fext, ltl_in_place, ltl_solve_fd};
 use crate::error::Result;
-use crate::linalg::{
-    Gemm4, Gemm4Term, TO_L1, TO_L2, neg_gemm4_sparse, prefetch, transpose_strided,
-};
+use crate::linalg::{Gemm4, Gemm4Term, neg_gemm4_sparse, transpose_strided};
 use crate::model::{Model, check_vec};
 use crate::spatial::{Force, Motion};
 use crate::tensor::Tensor3;
@@ -205,6 +203,8 @@ pub struct FdSoData {
     lr_y: Vec<f64>,
     lr_r: Vec<f64>,
     lr_c: Vec<f64>,
+    /// The tree as [`path_sums`] walks it.
+    tree: Tree,
     /// `S_k` and `½ X_k` per DoF `k` (see [`half_x`]).
     xh: Vec<([f64; 6], [[f64; 6]; 6])>,
     /// `−V[c, :]` then `−U[c, :]` for each row `c` of one page (see [`dminv_pages`]).
@@ -303,6 +303,7 @@ impl FdSoData {
             lr_r: vec![0.0; 6 * ld * model.njoints()],
             lr_c: vec![0.0; 6 * ld * n],
             lr_t: vec![0.0; 12 * n],
+            tree: Tree::new(model),
             xh: vec![([0.0; 6], [[0.0; 6]; 6]); n],
             xt: vec![0.0; ld * n],
             diag_c: vec![0.0; 6 * ld],
@@ -732,29 +733,6 @@ unsafe fn so_products_avx2(model: &Model, data: &Data, fso: &mut FdSoData) {
     so_products(model, data, fso)
 }
 
-/// Prefetches for the product group `(nj..nj + 4, nk)` of an `n×n×n` output at `t` whose
-/// right-hand sides are the same columns of the ID tensor `idt`: those columns into L1, the
-/// output columns into L2, and the mirrored output columns `(nk, j)` for the `j` with
-/// `mirror(j)` into L2 (hints only: no effect on results).
-#[inline(always)]
-fn prefetch_group(
-    n: usize,
-    idt: &[f64],
-    t: *const f64,
-    js: &[usize],
-    nk: usize,
-    mirror: impl Fn(usize) -> bool,
-) {
-    // The columns js[0]..=js[last] (consecutive but for the first qq block).
-    let (first, last) = (js[0], js[js.len() - 1]);
-    let len = n * (last + 1 - first);
-    prefetch::<TO_L1>(idt.as_ptr().wrapping_add(n * (first + n * nk)), len);
-    prefetch::<TO_L2>(t.wrapping_add(n * (first + n * nk)), len);
-    for &j in js.iter().filter(|&&j| mirror(j)) {
-        prefetch::<TO_L2>(t.wrapping_add(n * (nk + n * j)), n);
-    }
-}
-
 /// The indices `c0 + u` of a group's lanes `u < 4`, those past its width `w` repeating its last.
 #[inline(always)]
 fn lanes(c0: usize, w: usize) -> [usize; 4] {
@@ -771,12 +749,32 @@ fn add_into(x: &mut [f64], y: &[f64]) {
     }
 }
 
-/// `x ← x + m[:, j] · sᵀ` on six columns of `ld` rows (`x[a ld + r] += m[r] s[a]`).
+/// `x ← x + m sᵀ` on six columns of `ld` rows (`x[a ld + r] += m[r] s[a]`).
 #[inline(always)]
 fn add_outer(x: &mut [f64], ld: usize, m: &[f64], s: &[f64; 6]) {
     for (a, col) in x.chunks_exact_mut(ld).enumerate() {
         for (y, &mr) in col.iter_mut().zip(m) {
             *y = mr.mul_add(s[a], *y);
+        }
+    }
+}
+
+/// `x ← base + m sᵀ` (or `m sᵀ` without a base) on six columns of `ld` rows: [`add_outer`]
+/// onto a copy, in one pass.
+#[inline(always)]
+fn set_outer(x: &mut [f64], ld: usize, base: Option<&[f64]>, m: &[f64], s: &[f64; 6]) {
+    for (a, col) in x.chunks_exact_mut(ld).enumerate() {
+        match base {
+            Some(b) => {
+                for ((y, &mr), &br) in col.iter_mut().zip(m).zip(&b[a * ld..(a + 1) * ld]) {
+                    *y = mr.mul_add(s[a], br);
+                }
+            }
+            None => {
+                for (y, &mr) in col.iter_mut().zip(m) {
+                    *y = mr * s[a];
+                }
+            }
         }
     }
 }
@@ -789,12 +787,16 @@ fn add_outer(x: &mut [f64], ld: usize, m: &[f64], s: &[f64; 6]) {
 /// `B_J = Σ_{i∈D} x_i (I^C_{J(i)} S_i)ᵀ` over the DoFs `D` of `J` and its descendants
 /// (accumulated up the tree) into `lr_b`. For `x_i = M⁻¹[:, i]` these are `U_J = M⁻¹ P_Jᵀ` and
 /// `W_J` of [`dminv_dq`]; for `x_i` the row `i` of a matrix `X`, `A_Jᵀ = P_J X` and
-/// `B_Jᵀ = Σ_{i∈D} I^C_{J(i)} S_i X[i, :]`. Inlined into the callers compiled with AVX2 and FMA
-/// (its multiply-adds would otherwise be calls to the software `fma`).
+/// `B_Jᵀ = Σ_{i∈D} I^C_{J(i)} S_i X[i, :]`. Only the joints not attached to the world are
+/// written (the products read no other; those of `lr_a` stay zero). `tree` tells the children:
+/// see [`Tree`]. Inlined into the callers compiled with AVX2 and FMA (its multiply-adds would
+/// otherwise be calls to the software `fma`).
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn path_sums(
     model: &Model,
     data: &Data,
+    tree: &Tree,
     cols: &[f64],
     ld: usize,
     lr_a: &mut [f64],
@@ -803,33 +805,73 @@ fn path_sums(
     let nj = model.njoints();
     let b6 = 6 * ld;
     let s6 = |c: usize| v6(&data.s_world[c].ang, &data.s_world[c].lin);
-    // A_J = A_λ(J) + Σ_{j of λ(J)} x_j S_jᵀ (zero for the joints attached to the world).
-    for jt in 1..nj {
+    let col = |i: usize| &cols[ld * i..ld * (i + 1)];
+    // A_J = A_λ(J) + Σ_{j of λ(J)} x_j S_jᵀ, with A_λ(J) = 0 for λ(J) attached to the world.
+    for jt in (1..nj).filter(|&jt| !tree.root[jt]) {
         let p = model.parents[jt];
         let (before, rest) = lr_a.split_at_mut(b6 * jt);
         let u = &mut rest[..b6];
-        if p == 0 {
-            u.fill(0.0);
-            continue;
+        let base = (!tree.root[p]).then(|| &before[b6 * p..b6 * (p + 1)]);
+        let dofs = model.idx_v[p]..model.idx_v[p] + model.nvs[p];
+        match dofs.clone().next() {
+            Some(j0) => set_outer(u, ld, base, col(j0), &s6(j0)),
+            None => match base {
+                Some(b) => u.copy_from_slice(b),
+                None => u.fill(0.0),
+            },
         }
-        u.copy_from_slice(&before[b6 * p..b6 * (p + 1)]);
-        for j in model.idx_v[p]..model.idx_v[p] + model.nvs[p] {
-            add_outer(u, ld, &cols[ld * j..ld * (j + 1)], &s6(j));
+        for j in dofs.skip(1) {
+            add_outer(u, ld, col(j), &s6(j));
         }
     }
-    // B_J = Σ_{i of J} x_i (I^C_J S_i)ᵀ + Σ_{children c} B_c.
-    lr_b[..b6 * nj].fill(0.0);
-    for jt in (1..nj).rev() {
-        let w = &mut lr_b[b6 * jt..b6 * (jt + 1)];
+    // B_J = Σ_{i of J} x_i (I^C_J S_i)ᵀ + Σ_{children c} B_c: each child, in decreasing order,
+    // pushes its sum into its parent (the first one by a copy), before the parent adds its own.
+    for jt in (1..nj).rev().filter(|&jt| !tree.root[jt]) {
+        let (before, rest) = lr_b.split_at_mut(b6 * jt);
+        let w = &mut rest[..b6];
+        let mut set = !tree.has_child[jt];
         for i in model.idx_v[jt]..model.idx_v[jt] + model.nvs[jt] {
             let f = data.ic_world[jt].mul_motion(&data.s_world[i]);
-            add_outer(w, ld, &cols[ld * i..ld * (i + 1)], &v6(&f.ang, &f.lin));
+            if set {
+                set_outer(w, ld, None, col(i), &v6(&f.ang, &f.lin));
+                set = false;
+            } else {
+                add_outer(w, ld, col(i), &v6(&f.ang, &f.lin));
+            }
+        }
+        if set {
+            w.fill(0.0);
         }
         let p = model.parents[jt];
-        if p > 0 {
-            let (before, rest) = lr_b.split_at_mut(b6 * jt);
-            add_into(&mut before[b6 * p..b6 * (p + 1)], &rest[..b6]);
+        if !tree.root[p] {
+            let wp = &mut before[b6 * p..b6 * (p + 1)];
+            if tree.first_child[jt] { wp.copy_from_slice(w) } else { add_into(wp, w) }
         }
+    }
+}
+
+/// What [`path_sums`] needs of the tree, per joint: `root[J]`, `J` is the world or attached
+/// to it; `has_child[J]`, some joint not attached to the world has `J` as its parent;
+/// `first_child[J]`, `J` is the child of largest index of its parent (the first one that
+/// `path_sums` visits).
+#[derive(Clone, Debug)]
+struct Tree {
+    root: Vec<bool>,
+    has_child: Vec<bool>,
+    first_child: Vec<bool>,
+}
+
+impl Tree {
+    fn new(model: &Model) -> Self {
+        let nj = model.njoints();
+        let root: Vec<bool> = (0..nj).map(|jt| jt == 0 || model.parents[jt] == 0).collect();
+        let (mut has_child, mut first_child) = (vec![false; nj], vec![false; nj]);
+        for jt in (1..nj).rev().filter(|&jt| !root[jt]) {
+            let p = model.parents[jt];
+            first_child[jt] = !has_child[p];
+            has_child[p] = true;
+        }
+        Self { root, has_child, first_child }
     }
 }
 
@@ -1024,8 +1066,6 @@ fn dminv_pages<L: Lanes, const B: usize>(
     let (n, ld) = (p.n, p.ld);
     let (b6, n2) = (6 * ld, n * n);
     let o = out.as_mut_slice();
-    // Only a prefetch address (never dereferenced).
-    let base = o.as_ptr();
     for k in (0..n).filter(|&k| !root[k]) {
         let jt = model.dof_joint[k];
         let (u, v) = (&p.u[b6 * jt..b6 * (jt + 1)], &p.v[b6 * k..b6 * (k + 1)]);
@@ -1038,17 +1078,14 @@ fn dminv_pages<L: Lanes, const B: usize>(
                 t[12 * c + 6 + a] = -u[a * ld + c];
             }
         }
-        let page = &mut o[n2 * k..n2 * (k + 1)];
-        let next = (k + 1 < n).then(|| base.wrapping_add(n2 * (k + 1)));
-        page_groups::<L, B>(n, ld, u, v, &t[..12 * n], page, next);
+        page_groups::<L, B>(n, ld, u, v, &t[..12 * n], &mut o[n2 * k..n2 * (k + 1)]);
     }
 }
 
 /// The page `page` (`n` columns of `n` values) of [`dminv_pages`]: `page[r + n c] =
 /// Σ_a U[a][r] t[12 c + a] + V[a][r] t[12 c + 6 + a]` (`U`, `V`: six columns of `ld` rows), a
 /// symmetric matrix: by groups of `B` blocks of `L` rows, the columns from the diagonal block
-/// of eight on, then the rest by transposing blocks of eight rows. `next`, the next page, is
-/// prefetched into L2, two lines per block and column computed.
+/// of eight on, then the rest by transposing blocks of eight rows.
 #[inline(always)]
 fn page_groups<L: Lanes, const B: usize>(
     n: usize,
@@ -1057,20 +1094,17 @@ fn page_groups<L: Lanes, const B: usize>(
     v: &[f64],
     t: &[f64],
     page: &mut [f64],
-    next: Option<*const f64>,
 ) {
     let nl = L::Arr::default().as_ref().len();
-    let nlines = if next.is_some() { (n * n).div_ceil(8) } else { 0 };
-    let next = next.unwrap_or(std::ptr::null());
     let nblocks = n.div_ceil(nl);
     let mut blk = 0;
     while blk < nblocks {
         let g = B.min(nblocks - blk);
         if g == B {
-            group::<L, B>(n, ld, u, v, t, page, blk, next, nlines);
+            group::<L, B>(n, ld, u, v, t, page, blk);
         } else {
             for b in blk..blk + g {
-                group::<L, 1>(n, ld, u, v, t, page, b, next, nlines);
+                group::<L, 1>(n, ld, u, v, t, page, b);
             }
         }
         blk += g;
@@ -1096,8 +1130,6 @@ fn group<L: Lanes, const G: usize>(
     t: &[f64],
     page: &mut [f64],
     blk: usize,
-    next: *const f64,
-    nlines: usize,
 ) {
     let nl = L::Arr::default().as_ref().len();
     let r0: [usize; G] = std::array::from_fn(|b| (blk + b) * nl);
@@ -1113,10 +1145,6 @@ fn group<L: Lanes, const G: usize>(
     // From the first column of the diagonal block of eight that holds the group's first row.
     for (c, tc) in t.chunks_exact(12).enumerate().skip(r0[0] & !7) {
         for b in 0..G {
-            let line = 2 * (n * (blk + b) + c);
-            if line < nlines {
-                prefetch::<TO_L2>(next.wrapping_add(8 * line), 9);
-            }
             // Two chains of six multiply-adds.
             let (mut x, mut y) = (L::splat(0.0), L::splat(0.0));
             for a in 0..6 {
@@ -1182,15 +1210,8 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     {
         let idt = fso.id.d2tau_dv2().as_slice();
         let groups = &fso.vv_groups[..];
-        for (g, &[j0, k]) in groups.iter().enumerate() {
+        for &[j0, k] in groups {
             let (j0, k) = (j0 as usize, k as usize);
-            // The next group's ID columns into L1 and its outputs into L2.
-            if let Some(&[nj, nk]) = groups.get(g + 1) {
-                let (nj, nk) = (nj as usize, nk as usize);
-                let t = fso.d2qdd_dv2.as_slice().as_ptr();
-                let nw = 4.min(nk + 1 - nj);
-                prefetch_group(n, idt, t, &lanes(nj, nw)[..nw], nk, |j| j < nk);
-            }
             // j0 ≤ k (see `FdSoData::vv_groups`), so w ≥ 1.
             let w = 4.min(k + 1 - j0);
             // Rows related to k and to one of the j related to k.
@@ -1222,7 +1243,7 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     // The rank-12 factors of ∂M/∂q (see `dminv_dq`): U_J, W_J (the path sums of M⁻¹) and V_k
     // for the DoFs of joints not attached to the world (on those, ∂M/∂q_k = 0).
     let b6 = 6 * ld;
-    path_sums(model, data, &fso.minv, ld, &mut fso.lr_u, &mut fso.lr_w);
+    path_sums(model, data, &fso.tree, &fso.minv, ld, &mut fso.lr_u, &mut fso.lr_w);
     for k in (0..n).filter(|&k| !fso.root[k]) {
         let jt = dof_joint[k];
         let (u, w) = (&fso.lr_u[b6 * jt..], &fso.lr_w[b6 * jt..]);
@@ -1244,7 +1265,7 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     // not commute: for such a pair j < k the column (k, j) is then
     // (j, k) − M⁻¹(ID_qq[:, k, j] − ID_qq[:, j, k]).
     transpose_strided(data.dqdd_dq.as_slice(), n, n, n, &mut fso.xt, ld);
-    path_sums(model, data, &fso.xt, ld, &mut fso.lr_y, &mut fso.lr_r);
+    path_sums(model, data, &fso.tree, &fso.xt, ld, &mut fso.lr_y, &mut fso.lr_r);
     let qj = &fso.qj[..];
     let nqb = qj.len().div_ceil(4);
     let idt = fso.id.d2tau_dq2().as_slice();
@@ -1266,7 +1287,7 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             }
             (out, mirror, acc)
         };
-        for (pk, &k) in qj.iter().enumerate().rev() {
+        for &k in qj.iter().rev() {
             let k = k as usize;
             let jt = dof_joint[k];
             let rank_k = !fso.root[k];
@@ -1280,24 +1301,6 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
                 }
             }
             for b in 0..nqb {
-                // The next group's ID_qq columns into L1 and its outputs into L2.
-                let next = if b + 1 < nqb {
-                    Some((b + 1, k))
-                } else {
-                    pk.checked_sub(1).map(|p| (0, qj[p] as usize))
-                };
-                if let Some((nb, nk)) = next {
-                    let (o, m, _) = group(&mut fso.d2qdd_dq2, nb, nk);
-                    for p in o.into_iter().chain(m).filter(|p| !p.is_null()) {
-                        prefetch::<TO_L2>(p, n);
-                    }
-                    let (j0, j1) =
-                        (qj[4 * nb] as usize, qj[(4 * nb + 3).min(qj.len() - 1)] as usize);
-                    if j0 <= nk {
-                        let len = n * (j1.min(nk) + 1 - j0);
-                        prefetch::<TO_L1>(idt.as_ptr().wrapping_add(n * (j0 + n * nk)), len);
-                    }
-                }
                 let w = 4.min(qj.len() - 4 * b);
                 let js = lanes(4 * b, w).map(|p| qj[p] as usize);
                 let (out, mirror, acc) = group(&mut fso.d2qdd_dq2, b, k);
@@ -1363,7 +1366,7 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     // (stored by IDSVA-SO by blocks of eight pages k, see `qv_offset`, and zero where it does
     // not write) over its rows related to j and to one of the four k with a non-zero value.
     transpose_strided(data.dqdd_dv.as_slice(), n, n, n, &mut fso.xt, ld);
-    path_sums(model, data, &fso.xt, ld, &mut fso.lr_y, &mut fso.lr_r);
+    path_sums(model, data, &fso.tree, &fso.xt, ld, &mut fso.lr_y, &mut fso.lr_r);
     for j in (0..n).filter(|&j| !fso.root[j]) {
         let jt = dof_joint[j];
         let (y, r) = (&fso.lr_y[b6 * jt..], &fso.lr_r[b6 * jt..]);
@@ -1378,13 +1381,6 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             let ks = lanes(k0, wl);
             let w8 = (n - (k0 & !7)).min(8);
             for j in (0..n).filter(|&j| !fso.root[j]) {
-                // The next group's outputs into L2.
-                if j + 1 < n {
-                    let t = fso.d2qdd_dqdv.as_slice().as_ptr();
-                    for k in k0..k0 + wl {
-                        prefetch::<TO_L2>(t.wrapping_add(n * (j + 1 + n * k)), n);
-                    }
-                }
                 let jt = dof_joint[j];
                 let out = std::array::from_fn(|u| {
                     if u < wl { col(&mut fso.d2qdd_dqdv, j, k0 + u) } else { std::ptr::null_mut() }

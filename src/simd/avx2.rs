@@ -632,13 +632,20 @@ pub(crate) unsafe fn gemm4(g: &Gemm4<'_>, out: &[*mut f64; 4], mirror: &[*mut f6
     let mut v0 = 0;
     // SAFETY: the caller's contract.
     unsafe {
+        // Chunks of 3 vectors, but two of 2 for the last 4 (a chunk of 1 broadcasts four
+        // values for four multiply-adds).
         while v0 < nvec {
-            match nvec - v0 {
+            let c = match nvec - v0 {
+                1 => 1,
+                2 | 4 => 2,
+                _ => 3,
+            };
+            match c {
                 1 => chunk::<1>(g, v0, out, mirror),
                 2 => chunk::<2>(g, v0, out, mirror),
                 _ => chunk::<3>(g, v0, out, mirror),
             }
-            v0 += 3;
+            v0 += c;
         }
     }
 }
@@ -700,25 +707,6 @@ unsafe fn chunk<const V: usize>(
             }
         }
     }
-}
-
-/// `linalg::prefetch`: one `prefetch` hint per 64-byte line (SSE, part of
-/// x86-64).
-#[inline]
-pub(crate) fn prefetch<const LEVEL: i32>(p: *const f64, len: usize) {
-    if len == 0 {
-        return;
-    }
-    let mut off = 0;
-    while off < len {
-        // SAFETY: prefetching is a hint that never faults, whatever the address; the
-        // addresses are formed with wrapping arithmetic.
-        unsafe { _mm_prefetch::<LEVEL>(p.wrapping_add(off).cast::<i8>()) };
-        off += 8;
-    }
-    // The last value's line (when `p` is not line-aligned).
-    // SAFETY: as above.
-    unsafe { _mm_prefetch::<LEVEL>(p.wrapping_add(len - 1).cast::<i8>()) };
 }
 
 /// `batch::copy_output`: `dst ← src` (equal lengths) with streaming stores for the 32-byte aligned part of `dst`.
