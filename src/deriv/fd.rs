@@ -246,13 +246,12 @@ pub struct FdSoData {
     zeros: Vec<f64>,
     /// The groups `(j0, k)` of `∂²q̈/∂q̇²` with a structurally non-zero column, in order.
     vv_groups: Vec<[u32; 2]>,
-    /// One group's row set (scratch, `words` values), and a second one.
+    /// The `M⁻¹` rows of each product group (see [`Plans`]).
+    plans: Plans,
+    /// One group's row set (scratch, `words` values).
     set: Vec<u64>,
-    set2: Vec<u64>,
-    /// One group's non-zero right-hand-side rows (`nv` values) and their values (4 per row);
-    /// the rows of `set2`.
+    /// One group's non-zero right-hand-side rows (`nv` values) and their values (4 per row).
     idx: Vec<u32>,
-    idx2: Vec<u32>,
     rhs: Vec<f64>,
 }
 
@@ -273,6 +272,7 @@ impl FdSoData {
             }
         }
         let ld = n.div_ceil(8) * 8;
+        let root: Vec<bool> = (0..n).map(|j| model.parents[model.dof_joint[j]] == 0).collect();
         let qj: Vec<u32> =
             (0..n).filter(|&k| !root_translation(model, k)).map(|k| k as u32).collect();
         let mut qj_pos = vec![u32::MAX; n];
@@ -290,6 +290,7 @@ impl FdSoData {
                 }
             }
         }
+        let plans = Plans::new(n, words, &related, &qj, &vv_groups, &root);
         Self {
             id: SoData::upper_halves(model),
             d2qdd_dq2: Tensor3::zeros(n, n, n),
@@ -304,6 +305,7 @@ impl FdSoData {
             lr_c: vec![0.0; 6 * ld * n],
             lr_t: vec![0.0; 12 * n],
             tree: Tree::new(model),
+            plans,
             xh: vec![([0.0; 6], [[0.0; 6]; 6]); n],
             xt: vec![0.0; ld * n],
             diag_c: vec![0.0; 6 * ld],
@@ -312,15 +314,13 @@ impl FdSoData {
             ld,
             words,
             related,
-            root: (0..n).map(|j| model.parents[model.dof_joint[j]] == 0).collect(),
+            root,
             qj,
             qj_pos,
             zeros: vec![0.0; n],
             vv_groups,
             set: vec![0; words],
-            set2: vec![0; words],
             idx: vec![0; n],
-            idx2: vec![0; n],
             rhs: vec![0.0; 4 * n],
         }
     }
@@ -347,6 +347,75 @@ fn root_translation(model: &Model, k: usize) -> bool {
     let jt = model.dof_joint[k];
     model.parents[jt] == 0
         && model.joints[jt].subspace_column(k - model.idx_v[jt]).ang == nalgebra::Vector3::zeros()
+}
+
+/// The `M⁻¹` rows (DoFs `l`) of each product group of [`so_products`], fixed by the tree: the
+/// rows of group `g` of a kind are `rows[off[g]..off[g + 1]]`, in increasing order.
+#[derive(Clone, Debug)]
+struct Plans {
+    rows: Vec<u32>,
+    /// `∂²q̈/∂q̇²`, group `g` of `FdSoData::vv_groups` (lanes `j0..j0 + 4` up to `k`, page
+    /// `k`): the rows related to `k` and to one of the lanes related to `k`.
+    vv: Vec<u32>,
+    /// `∂²q̈/∂q²`, group `nqb p + b` (page `k = qj[p]`, lanes `qj[4 b..4 b + 4]`, `nqb` blocks
+    /// of four): the rows related to `k` and to one of the lanes `j ≤ k` related to `k`.
+    qq: Vec<u32>,
+    /// `∂²q̈/∂q∂q̇`, group `n (k0 / 4) + j` (column `j` not of a root joint, lanes
+    /// `k0..k0 + 4`): the rows related to `j` and to one of the lanes related to `j`.
+    qv: Vec<u32>,
+}
+
+impl Plans {
+    fn new(
+        n: usize,
+        words: usize,
+        related: &[u64],
+        qj: &[u32],
+        vv_groups: &[[u32; 2]],
+        root: &[bool],
+    ) -> Self {
+        let rel = |j: usize| &related[words * j..words * (j + 1)];
+        // The rows of ∪ (rel(a) ∩ rel(b)) over the lanes `a` related to `b`, appended to
+        // `rows`; the new end offset.
+        let push = |rows: &mut Vec<u32>, lanes: &mut dyn Iterator<Item = usize>, b: usize| {
+            let mut set = vec![0u64; words];
+            for a in lanes.filter(|&a| has(rel(b), a)) {
+                for ((s, x), y) in set.iter_mut().zip(rel(a)).zip(rel(b)) {
+                    *s |= x & y;
+                }
+            }
+            for_each_row(&set, |l| rows.push(l as u32));
+            rows.len() as u32
+        };
+        let mut rows = Vec::new();
+        let mut vv = vec![0];
+        for &[j0, k] in vv_groups {
+            let (j0, k) = (j0 as usize, k as usize);
+            vv.push(push(&mut rows, &mut (j0..(j0 + 4).min(k + 1)), k));
+        }
+        let mut qq = vec![rows.len() as u32];
+        for &k in qj {
+            let k = k as usize;
+            for blk in qj.chunks(4) {
+                let mut lanes = blk.iter().map(|&j| j as usize).filter(|&j| j <= k);
+                qq.push(push(&mut rows, &mut lanes, k));
+            }
+        }
+        let mut qv = vec![rows.len() as u32];
+        for k0 in (0..n).step_by(4) {
+            for (j, &rj) in root.iter().enumerate() {
+                // No group for the columns of root joints (an empty range).
+                let mut lanes = (k0..(k0 + 4).min(n)).filter(|_| !rj);
+                qv.push(push(&mut rows, &mut lanes, j));
+            }
+        }
+        Self { rows, vv, qq, qv }
+    }
+
+    /// The rows of group `g` of a kind (`off` its offsets).
+    fn of<'a>(&'a self, off: &[u32], g: usize) -> &'a [u32] {
+        &self.rows[off[g] as usize..off[g + 1] as usize]
+    }
 }
 
 /// Whether the bit set `set` holds `l`.
@@ -376,9 +445,7 @@ struct Products<'a> {
     words: usize,
     related: &'a [u64],
     set: &'a mut [u64],
-    set2: &'a mut [u64],
     idx: &'a mut [u32],
-    idx2: &'a mut [u32],
     rhs: &'a mut [f64],
 }
 
@@ -422,48 +489,6 @@ impl<'a> Products<'a> {
             let b = [r, r.add(1), r.add(2), r.add(3)];
             self.product(rows, cnt, b, 4, false, accumulate, out, mirror)
         };
-    }
-
-    /// As [`Self::solve_group`] with `b_u[l] = b[u][bs l]` read in place, no rows left out, and
-    /// `out[u] ← out[u] − M⁻¹ b_u` in the lanes of `accumulate` (bit `u`; the mirror gets the
-    /// sum); the products are left out (the outputs set to zero, or to `out[u]` when
-    /// accumulated) if every value read is zero (when `check`) or `set` is empty.
-    ///
-    /// # Safety
-    /// `b[u] + bs l` is readable for every row `l` of `set`; the outputs as for
-    /// [`Self::solve_group`], the accumulated ones also readable.
-    #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn solve_group_in_place(
-        &mut self,
-        rows: usize,
-        b: [*const f64; 4],
-        bs: usize,
-        check: bool,
-        accumulate: u8,
-        out: [*mut f64; 4],
-        mirror: [*mut f64; 4],
-    ) {
-        let mut cnt = 0;
-        let mut nz = !check;
-        let idx = &mut *self.idx;
-        for_each_row(self.set, |l| {
-            debug_assert!(cnt < idx.len());
-            // SAFETY: cnt < the number of rows of `set` ≤ nv = idx.len(); b as the caller's
-            // contract.
-            unsafe {
-                *idx.get_unchecked_mut(cnt) = l as u32;
-                if check {
-                    for p in b {
-                        nz |= *p.add(bs * l) != 0.0;
-                    }
-                }
-            }
-            cnt += 1;
-        });
-        let cnt = if nz { cnt } else { 0 };
-        // SAFETY: the caller's contract.
-        unsafe { self.product(rows, cnt, b, bs, true, accumulate, out, mirror) };
     }
 
     /// The outputs of an empty product: `out[u]` and `mirror[u]` zero (rows `< rows`), or the
@@ -529,20 +554,6 @@ impl<'a> Products<'a> {
         unsafe { neg_gemm4_sparse(&g, &out, &mirror) };
     }
 
-    /// The rows of `set2` into `idx2`; their count.
-    #[inline(always)]
-    fn rows_of_set2(&mut self) -> usize {
-        let mut c = 0;
-        let idx = &mut *self.idx2;
-        for_each_row(self.set2, |l| {
-            debug_assert!(c < idx.len());
-            // SAFETY: c < the number of rows of the set ≤ nv = idx.len().
-            unsafe { *idx.get_unchecked_mut(c) = l as u32 };
-            c += 1;
-        });
-        c
-    }
-
     /// The rows `l` of `set` whose four values `val(l)` are not all zero into `idx`, the
     /// values into `rhs` (4 per row, compacted); their count (NaN counts as non-zero).
     ///
@@ -568,9 +579,9 @@ impl<'a> Products<'a> {
     /// The four columns `out[u] ← −(U c_u + V y_u) − M⁻¹ b_u` (rows `< rows`; `out[u]` minus
     /// that in the lanes of `accumulate`; also into `mirror[u]`; lanes with a null `out[u]`
     /// are not stored): the rank-12 term `rank = (U, V, c, y, bs)` if given, with `U` and `V`
-    /// six columns of `ld` rows and `c_u[a] = c[u][bs a]`, `y_u[a] = y[u][bs a]`; and
-    /// `b_u[l]` for the `cnt` rows `l = idx2[t]` of the `M⁻¹` term, read at `b[u] + bs l` if
-    /// `in_place = (b, bs)`, else the compacted values `rhs[4 t + u]` of the rows `idx[t]`.
+    /// six columns of `ld` rows and `c_u[a] = c[u][bs a]`, `y_u[a] = y[u][bs a]`; and the
+    /// `M⁻¹` term `id = (rows, b, bs)`, if given, with `b_u[l]` read at `b[u] + bs l` for the
+    /// DoFs `l` of `rows` (zero elsewhere).
     ///
     /// # Safety
     /// The `c`, `y` and `b` values addressed are readable; the outputs as for
@@ -581,8 +592,7 @@ impl<'a> Products<'a> {
         &self,
         rows: usize,
         rank: Option<RankTerm<'_>>,
-        cnt: usize,
-        in_place: Option<([*const f64; 4], usize)>,
+        id: Option<(&[u32], [*const f64; 4], usize)>,
         accumulate: u8,
         out: [*mut f64; 4],
         mirror: [*mut f64; 4],
@@ -606,29 +616,9 @@ impl<'a> Products<'a> {
                 nt += 1;
             }
         }
-        if cnt > 0 {
-            let r = self.rhs.as_ptr();
-            terms[nt] = match in_place {
-                Some((b, bs)) => Gemm4Term {
-                    a: self.minv,
-                    lda: self.ld,
-                    cols: self.n,
-                    idx: &self.idx2[..cnt],
-                    b,
-                    bs,
-                    by_row: true,
-                },
-                None => Gemm4Term {
-                    a: self.minv,
-                    lda: self.ld,
-                    cols: self.n,
-                    idx: &self.idx[..cnt],
-                    // SAFETY (pointer arithmetic): lanes 1..3 of the first compacted row.
-                    b: unsafe { [r, r.add(1), r.add(2), r.add(3)] },
-                    bs: 4,
-                    by_row: false,
-                },
-            };
+        if let Some((idx, b, bs)) = id.filter(|(idx, ..)| !idx.is_empty()) {
+            terms[nt] =
+                Gemm4Term { a: self.minv, lda: self.ld, cols: self.n, idx, b, bs, by_row: true };
             nt += 1;
         }
         if nt == 0 {
@@ -1188,18 +1178,14 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
         words: fso.words,
         related: &fso.related,
         set: &mut fso.set,
-        set2: &mut fso.set2,
         idx: &mut fso.idx,
-        idx2: &mut fso.idx2,
         rhs: &mut fso.rhs,
     };
     let dof_joint = &model.dof_joint;
     // DoFs of different joints commute (product of the joints' configuration spaces).
     let commute = |j: usize, k: usize| dof_joint[j] != dof_joint[k];
-    // Column (j, k) of an n×n×n output, or null for the lanes past nv.
-    let col = |t: &mut Tensor3, j: usize, k: usize| -> *mut f64 {
-        if j < n { t.as_mut_slice()[n * (j + n * k)..].as_mut_ptr() } else { std::ptr::null_mut() }
-    };
+    // Column (j, k) of an n×n×n output at t (a pointer only: it is in bounds for j, k < n).
+    let col = |t: *mut f64, j: usize, k: usize| -> *mut f64 { t.wrapping_add(n * (j + n * k)) };
     let none = [std::ptr::null_mut(); 4];
     // ∂²q̈/∂q̇² first, while the ID_vv entries just written by IDSVA-SO may still be cached:
     // −M⁻¹ ID_vv (M does not depend on q̇), symmetric in (j, k). Its column (j, k)
@@ -1209,35 +1195,27 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     // columns j > k are the mirrors.
     {
         let idt = fso.id.d2tau_dv2().as_slice();
-        let groups = &fso.vv_groups[..];
-        for &[j0, k] in groups {
+        let t = fso.d2qdd_dv2.as_mut_slice().as_mut_ptr();
+        for (g, &[j0, k]) in fso.vv_groups.iter().enumerate() {
             let (j0, k) = (j0 as usize, k as usize);
             // j0 ≤ k (see `FdSoData::vv_groups`), so w ≥ 1.
             let w = 4.min(k + 1 - j0);
-            // Rows related to k and to one of the j related to k.
-            let rk = pr.related(k);
-            pr.set.fill(0);
-            for j in (j0..j0 + w).filter(|&j| has(rk, j)) {
-                let rj = pr.related(j);
-                for ((s, x), y) in pr.set.iter_mut().zip(rj).zip(rk) {
-                    *s |= x & y;
-                }
-            }
             let jl = lanes(j0, w);
-            let out = std::array::from_fn(|u| {
-                if u < w { col(&mut fso.d2qdd_dv2, j0 + u, k) } else { std::ptr::null_mut() }
-            });
+            let out =
+                std::array::from_fn(
+                    |u| {
+                        if u < w { col(t, j0 + u, k) } else { std::ptr::null_mut() }
+                    },
+                );
             let mirror = std::array::from_fn(|u| {
-                if u < w && j0 + u < k {
-                    col(&mut fso.d2qdd_dv2, k, j0 + u)
-                } else {
-                    std::ptr::null_mut()
-                }
+                if u < w && j0 + u < k { col(t, k, j0 + u) } else { std::ptr::null_mut() }
             });
+            // Rows related to k and to one of the j related to k.
+            let rows = fso.plans.of(&fso.plans.vv, g);
             let b = jl.map(|j| idt[n * (j + n * k)..].as_ptr());
             // SAFETY: the columns (j, k) of ID_vv (n values each, rows l < n); the outputs are
-            // distinct columns of d2qdd_dv2.
-            unsafe { pr.solve_group_in_place(n, b, 1, false, 0, out, mirror) };
+            // distinct columns of d2qdd_dv2 (j, k < n).
+            unsafe { pr.solve_rank(n, None, Some((rows, b, 1)), 0, out, mirror) };
         }
     }
     // The rank-12 factors of ∂M/∂q (see `dminv_dq`): U_J, W_J (the path sums of M⁻¹) and V_k
@@ -1271,7 +1249,8 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
     let idt = fso.id.d2tau_dq2().as_slice();
     {
         // Group (b, k): outputs, mirrors and accumulated lanes (see above).
-        let group = |t: &mut Tensor3, b: usize, k: usize| {
+        let t = fso.d2qdd_dq2.as_mut_slice().as_mut_ptr();
+        let group = |b: usize, k: usize| {
             let w = 4.min(qj.len() - 4 * b);
             let (mut out, mut mirror, mut acc) = ([std::ptr::null_mut(); 4], none, 0u8);
             for (u, &j) in qj[4 * b..4 * b + w].iter().enumerate() {
@@ -1287,7 +1266,7 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             }
             (out, mirror, acc)
         };
-        for &k in qj.iter().rev() {
+        for (pk, &k) in qj.iter().enumerate().rev() {
             let k = k as usize;
             let jt = dof_joint[k];
             let rank_k = !fso.root[k];
@@ -1303,18 +1282,10 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             for b in 0..nqb {
                 let w = 4.min(qj.len() - 4 * b);
                 let js = lanes(4 * b, w).map(|p| qj[p] as usize);
-                let (out, mirror, acc) = group(&mut fso.d2qdd_dq2, b, k);
+                let (out, mirror, acc) = group(b, k);
                 // The ID_qq rows: related to k and to one of the j ≤ k related to k (the column
                 // (j, k) vanishes unless j and k are related: see `FdSoData::related`).
-                let rk = pr.related(k);
-                pr.set2.fill(0);
-                for &j in js[..w].iter().filter(|&&j| j <= k && has(rk, j)) {
-                    let rj = pr.related(j);
-                    for ((s2, x), y) in pr.set2.iter_mut().zip(rj).zip(rk) {
-                        *s2 |= x & y;
-                    }
-                }
-                let cnt = pr.rows_of_set2();
+                let rows = fso.plans.of(&fso.plans.qq, nqb * pk + b);
                 let b2 = std::array::from_fn(|u| {
                     let j = js[u];
                     if u < w && j <= k {
@@ -1338,7 +1309,7 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
                 // `diag_y` (6 ld values); b2: columns (j, k) of ID_qq (or `zeros`), n values
                 // each; the outputs are distinct columns of d2qdd_dq2 (the accumulated ones
                 // written before).
-                unsafe { pr.solve_rank(n, rank, cnt, Some((b2, 1)), acc, out, mirror) };
+                unsafe { pr.solve_rank(n, rank, Some((rows, b2, 1)), acc, out, mirror) };
             }
         }
         // The pairs of DoFs of one joint that need not commute.
@@ -1346,7 +1317,8 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             let k = k as usize;
             for &j in qj[..pk].iter().filter(|&&j| !commute(j as usize, k)) {
                 let j = j as usize;
-                let (jk, kj) = (col(&mut fso.d2qdd_dq2, j, k), col(&mut fso.d2qdd_dq2, k, j));
+                let t = fso.d2qdd_dq2.as_mut_slice().as_mut_ptr();
+                let (jk, kj) = (col(t, j, k), col(t, k, j));
                 // SAFETY: two distinct columns of n values.
                 unsafe { std::ptr::copy_nonoverlapping(jk, kj, n) };
                 pr.build_set(pr.related(j), pr.related(k), false);
@@ -1380,24 +1352,17 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
             let wl = 4.min(n - k0);
             let ks = lanes(k0, wl);
             let w8 = (n - (k0 & !7)).min(8);
+            let t = fso.d2qdd_dqdv.as_mut_slice().as_mut_ptr();
             for j in (0..n).filter(|&j| !fso.root[j]) {
                 let jt = dof_joint[j];
                 let out = std::array::from_fn(|u| {
-                    if u < wl { col(&mut fso.d2qdd_dqdv, j, k0 + u) } else { std::ptr::null_mut() }
+                    if u < wl { col(t, j, k0 + u) } else { std::ptr::null_mut() }
                 });
                 // The ID_qv rows: related to j and to one of the k related to j (the column
                 // (j, k) vanishes unless j and k are related), read in place: entry (l, j, k)
                 // at base + (k − k0) + w8 l (see `qv_offset`; zero where IDSVA-SO does not
                 // write).
-                let rj = pr.related(j);
-                pr.set2.fill(0);
-                for k in (k0..k0 + wl).filter(|&k| has(rj, k)) {
-                    let rk = pr.related(k);
-                    for ((s, x), y) in pr.set2.iter_mut().zip(rk).zip(rj) {
-                        *s |= x & y;
-                    }
-                }
-                let cnt = pr.rows_of_set2();
+                let rows = fso.plans.of(&fso.plans.qv, n * (k0 / 4) + j);
                 let base = qv[qv_offset(n, 0, j, k0)..].as_ptr();
                 let b = ks.map(|k| base.wrapping_add(k - k0));
                 let (c, y) = (fso.lr_c[b6 * j..].as_ptr(), fso.lr_y[b6 * jt..].as_ptr());
@@ -1412,7 +1377,7 @@ fn so_products(model: &Model, data: &Data, fso: &mut FdSoData) {
                 // Y_J (6 ld values each); b: the entries (l, j, k) of ID_qv for the rows
                 // l < n of set2 (offsets below n² k8 + w8 n (j + 1)); the outputs are distinct
                 // columns of d2qdd_dqdv.
-                unsafe { pr.solve_rank(n, Some(rank), cnt, Some((b, w8)), 0, out, none) };
+                unsafe { pr.solve_rank(n, Some(rank), Some((rows, b, w8)), 0, out, none) };
             }
         }
     }
