@@ -47,7 +47,7 @@ use crate::algo::internal::{aba_unchecked, check_fext, ltl_in_place, ltl_solve_f
 use crate::error::Result;
 use crate::linalg::{Gemm4, Gemm4Term, neg_gemm4_sparse, transpose_strided};
 use crate::model::{Model, check_vec};
-use crate::spatial::{Force, Motion};
+use crate::spatial::Force;
 use crate::tensor::Tensor3;
 use nalgebra::{DVector, Vector3};
 
@@ -887,19 +887,20 @@ fn q_rows(s: &[f64; 6], xh: &[[f64; 6]; 6], a: &[f64], b: &[f64], ld: usize, out
 }
 
 /// `S_k` as six values and `½ X = ½ (s×* I − I s×)` by columns (`s = S_k`, `I = I^C_J` of the
-/// joint `J` of DoF `k`), the factors of [`q_rows`].
+/// joint `J` of DoF `k`), the factors of [`q_rows`]. With `A = s×* I` (column `c` is
+/// `s ×* (I e_c)`), `I s× = −Aᵀ` (`I` symmetric, `(s×)ᵀ = −s×*`), so `X = A + Aᵀ`.
 fn half_x(data: &Data, k: usize, jt: usize) -> ([f64; 6], [[f64; 6]; 6]) {
     let s = &data.s_world[k];
-    let ic = &data.ic_world[jt];
-    let xh = std::array::from_fn(|c| {
-        let mut e = [0.0; 6];
-        e[c] = 1.0;
-        let e = Motion::new(Vector3::new(e[0], e[1], e[2]), Vector3::new(e[3], e[4], e[5]));
-        let x = s.cross_force(&ic.mul_motion(&e));
-        let y = ic.mul_motion(&s.cross(&e));
-        let d = v6(&(x.ang - y.ang), &(x.lin - y.lin));
-        d.map(|z| 0.5 * z)
+    let im = data.ic_world[jt].matrix();
+    let a: [[f64; 6]; 6] = std::array::from_fn(|c| {
+        let f = Force::new(
+            Vector3::new(im[(0, c)], im[(1, c)], im[(2, c)]),
+            Vector3::new(im[(3, c)], im[(4, c)], im[(5, c)]),
+        );
+        let g = s.cross_force(&f);
+        v6(&g.ang, &g.lin)
     });
+    let xh = std::array::from_fn(|c| std::array::from_fn(|r| 0.5 * (a[c][r] + a[r][c])));
     (v6(&s.ang, &s.lin), xh)
 }
 
