@@ -321,6 +321,24 @@ pub(crate) fn check_vectors(what: &str, out: &[DVector<f64>], len: usize) -> Res
     Ok(())
 }
 
+/// Checks the inputs `(name, length)` (one entry per state each) and the two `nv×nv` outputs
+/// `out_dq`, `out_dv` of a first-order batch over `n` states.
+pub(crate) fn check_first_order(
+    inputs: [(&str, usize); 2],
+    out_dq: &[DMatrix<f64>],
+    out_dv: &[DMatrix<f64>],
+    n: usize,
+    nv: usize,
+) -> Result<()> {
+    for (what, len) in inputs {
+        check_count(what, len, n)?;
+    }
+    check_count("out_dq", out_dq.len(), n)?;
+    check_count("out_dv", out_dv.len(), n)?;
+    check_matrices("out_dq", out_dq, nv)?;
+    check_matrices("out_dv", out_dv, nv)
+}
+
 /// Checks square output matrices of size `n×n`.
 pub(crate) fn check_matrices(what: &str, out: &[DMatrix<f64>], n: usize) -> Result<()> {
     if let Some(k) = out.iter().position(|m| m.shape() != (n, n)) {
@@ -552,12 +570,7 @@ pub fn id_derivatives_batch(
     out_dv: &mut [DMatrix<f64>],
 ) -> Result<()> {
     let n = qs.len();
-    check_count("vs", vs.len(), n)?;
-    check_count("as_", as_.len(), n)?;
-    check_count("out_dq", out_dq.len(), n)?;
-    check_count("out_dv", out_dv.len(), n)?;
-    check_matrices("out_dq", out_dq, model.nv)?;
-    check_matrices("out_dv", out_dv, model.nv)?;
+    check_first_order([("vs", vs.len()), ("as_", as_.len())], out_dq, out_dv, n, model.nv)?;
     bd.check(model)?;
     drive(bd, n, out_dq, out_dv, |data, k, dq, dv| {
         id_derivatives(model, data, &qs[k], &vs[k], &as_[k], None)?;
@@ -580,12 +593,7 @@ pub fn fd_derivatives_batch(
     out_dv: &mut [DMatrix<f64>],
 ) -> Result<()> {
     let n = qs.len();
-    check_count("vs", vs.len(), n)?;
-    check_count("taus", taus.len(), n)?;
-    check_count("out_dq", out_dq.len(), n)?;
-    check_count("out_dv", out_dv.len(), n)?;
-    check_matrices("out_dq", out_dq, model.nv)?;
-    check_matrices("out_dv", out_dv, model.nv)?;
+    check_first_order([("vs", vs.len()), ("taus", taus.len())], out_dq, out_dv, n, model.nv)?;
     bd.check(model)?;
     drive(bd, n, out_dq, out_dv, |data, k, dq, dv| {
         fd_derivatives(model, data, &qs[k], &vs[k], &taus[k], None)?;

@@ -8,50 +8,12 @@ use nalgebra::{DMatrix, DVector};
 use sodyn::Error;
 use sodyn::mimic::{self, MimicData, MimicJoint, MimicModel, MimicSoData};
 use sodyn::model::{Model, UrdfOptions, load_urdf_file};
-use sodyn::reference::mimic::Reduced;
 use sodyn::rng::Rng;
 use sodyn::tensor::Tensor3;
 use std::path::PathBuf;
+use util::mimic::{arm_path, ff_models, models, opts, oracle, state};
 
-fn arm_path() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_arm.urdf")
-}
-
-fn opts(floating_base: bool) -> UrdfOptions {
-    UrdfOptions { floating_base, strict_inertia: false, mimic: true }
-}
-
-/// The test arm, fixed and floating, plus a copy with an armature.
-fn models() -> Vec<MimicModel> {
-    let mut out = Vec::new();
-    for ff in [false, true] {
-        out.push(MimicModel::load_urdf_file(&arm_path(), &opts(ff)).unwrap());
-    }
-    let full = out[0].full().clone();
-    let arm: Vec<f64> = (0..full.nv()).map(|k| 0.01 * (k + 1) as f64).collect();
-    let mims = out[0].mimics().to_vec();
-    out.push(MimicModel::new(full.with_armature(&arm).unwrap(), &mims).unwrap());
-    out
-}
-
-/// The floating arm, and the same with an armature on every DoF of the full tree.
-fn ff_models() -> Vec<MimicModel> {
-    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
-    let arm: Vec<f64> = (0..m.full().nv()).map(|k| 0.02 * (k % 3) as f64).collect();
-    let with = MimicModel::new(m.full().with_armature(&arm).unwrap(), m.mimics()).unwrap();
-    vec![m, with]
-}
-
-fn oracle(m: &MimicModel) -> Reduced<'_> {
-    Reduced { full: m.full(), mimics: m.mimics() }
-}
-
-fn state(m: &MimicModel, rng: &mut Rng) -> [DVector<f64>; 3] {
-    let q = m.random_configuration(rng);
-    let v = DVector::from_fn(m.nv(), |_, _| rng.range(-2.0, 2.0));
-    let x = DVector::from_fn(m.nv(), |_, _| rng.range(-2.0, 2.0));
-    [q, v, x]
-}
+mod util;
 
 /// Error relative to the larger of 1 and the reference's largest entry.
 fn rel(err: f64, scale: f64) -> f64 {

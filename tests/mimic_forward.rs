@@ -12,7 +12,9 @@ use sodyn::mimic::{self, MimicData, MimicImpactData, MimicKktData, MimicModel};
 use sodyn::model::{Contact, ContactReference, ContactType, Model, UrdfOptions};
 use sodyn::rng::Rng;
 use sodyn::spatial::Force;
-use std::path::PathBuf;
+
+mod util;
+use util::mimic::{arm_path, opts, state};
 
 /// Equality of two computations of one formula (the same code, or the mimic and plain
 /// algorithms on a model without constraints).
@@ -26,17 +28,8 @@ fn tol_plain_contact(kappa: f64) -> f64 {
     1e-14 + 1e-15 * kappa
 }
 
-fn arm_path() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_arm.urdf")
-}
-
 fn arm(floating_base: bool) -> MimicModel {
-    let path = arm_path();
-    MimicModel::load_urdf_file(
-        &path,
-        &UrdfOptions { floating_base, strict_inertia: false, mimic: true },
-    )
-    .unwrap()
+    MimicModel::load_urdf_file(&arm_path(), &opts(floating_base)).unwrap()
 }
 
 /// The arm, fixed and floating, and the floating arm with an armature on every full DoF (with
@@ -67,13 +60,6 @@ fn contacts(full: &Model, floating: bool) -> Vec<Contact> {
         c.push(Contact::new(full, "finger_r", -p).unwrap().with_reference(ContactReference::Local));
     }
     c
-}
-
-fn state(m: &MimicModel, rng: &mut Rng) -> [DVector<f64>; 3] {
-    let q = m.random_configuration(rng);
-    let v = DVector::from_fn(m.nv(), |_, _| rng.range(-2.0, 2.0));
-    let x = DVector::from_fn(m.nv(), |_, _| rng.range(-2.0, 2.0));
-    [q, v, x]
 }
 
 fn fext(full: &Model, rng: &mut Rng) -> Vec<Force> {

@@ -19,6 +19,7 @@ use sodyn::reference::mimic::Reduced;
 use sodyn::rng::Rng;
 use sodyn::spatial::Motion;
 use util::Worst;
+use util::mimic::state;
 
 const RFS: [ReferenceFrame; 3] =
     [ReferenceFrame::Local, ReferenceFrame::World, ReferenceFrame::LocalWorldAligned];
@@ -35,13 +36,6 @@ fn models() -> Vec<MimicModel> {
             MimicModel::load_urdf_file(&path, &o).unwrap()
         })
         .collect()
-}
-
-fn state(m: &MimicModel, rng: &mut Rng) -> [DVector<f64>; 3] {
-    let q = m.random_configuration(rng);
-    let v = DVector::from_fn(m.nv(), |_, _| rng.range(-2.0, 2.0));
-    let a = DVector::from_fn(m.nv(), |_, _| rng.range(-2.0, 2.0));
-    [q, v, a]
 }
 
 fn vee(m: &Matrix3<D>) -> Vector3<D> {
@@ -605,11 +599,38 @@ fn mimic_centroidal_matches_hyper_dual_oracle() {
     w[5].check(1e-9);
 }
 
+/// The expanded (full-tree) configurations `(q ⊕ ε₂ e_k) ⊕ ε₁ e_j` of the reduced `q`, as
+/// `(k, j, q_full)` for every pair of the `n` reduced DoFs: the second derivatives of a function
+/// of the full configuration in the reduced coordinates are the `ε₁ε₂` parts of its values there.
+fn hyper_dual_configurations(
+    red: &Reduced<'_>,
+    q: &DVector<f64>,
+    n: usize,
+) -> Vec<(usize, usize, Vec<num_dual::HyperDual64>)> {
+    use num_dual::HyperDual64 as HD;
+    let qh: Vec<HD> = q.iter().map(|&x| HD::from_re(x)).collect();
+    let dir = |j: usize, first: bool| -> Vec<HD> {
+        (0..n)
+            .map(|i| {
+                let e = if i == j { 1.0 } else { 0.0 };
+                if first { HD::new(0.0, e, 0.0, 0.0) } else { HD::new(0.0, 0.0, e, 0.0) }
+            })
+            .collect()
+    };
+    let mut out = Vec::with_capacity(n * n);
+    for k in 0..n {
+        for j in 0..n {
+            let qt = red.integrate(&red.integrate(&qh, &dir(k, false)), &dir(j, true));
+            out.push((k, j, red.expand_q(&qt)));
+        }
+    }
+    out
+}
+
 /// `∂J/∂q` against hyper-dual numbers through the oracle: `(q ⊕ ε₂ e_k) ⊕ ε₁ e_c` in the reduced
 /// coordinates, expanded, the reference placement's twist (column `c`), then `∂/∂ε₂`.
 #[test]
 fn mimic_frame_jacobian_derivative_matches_hyper_dual_oracle() {
-    use num_dual::HyperDual64 as HD;
     let mut w = Worst::new("dJ/dq");
     let mut rng = Rng::new(307);
     for m in &models() {
@@ -617,23 +638,7 @@ fn mimic_frame_jacobian_derivative_matches_hyper_dual_oracle() {
         let mut d = MimicData::new(m);
         let n = m.nv();
         let [q, ..] = state(m, &mut rng);
-        let qh: Vec<HD> = q.iter().map(|&x| HD::from_re(x)).collect();
-        let dir = |j: usize, first: bool| -> Vec<HD> {
-            (0..n)
-                .map(|i| {
-                    let e = if i == j { 1.0 } else { 0.0 };
-                    if first { HD::new(0.0, e, 0.0, 0.0) } else { HD::new(0.0, 0.0, e, 0.0) }
-                })
-                .collect()
-        };
-        let mut poses = Vec::new();
-        for k in 0..n {
-            for c in 0..n {
-                let qt = red
-                    .expand_q(&red.integrate(&red.integrate(&qh, &dir(k, false)), &dir(c, true)));
-                poses.push((k, c, qt));
-            }
-        }
+        let poses = hyper_dual_configurations(&red, &q, n);
         for f in 0..m.full().frames().len() {
             for rf in RFS {
                 let at = format!("{} frame {} {rf:?}", m.name(), m.full().frames()[f].name);
@@ -673,15 +678,7 @@ fn mimic_frame_placement_hessian_matches_hyper_dual_oracle() {
         let mut d = MimicData::new(m);
         let n = m.nv();
         let [q, ..] = state(m, &mut rng);
-        let qh: Vec<HD> = q.iter().map(|&x| HD::from_re(x)).collect();
-        let dir = |j: usize, first: bool| -> Vec<HD> {
-            (0..n)
-                .map(|i| {
-                    let e = if i == j { 1.0 } else { 0.0 };
-                    if first { HD::new(0.0, e, 0.0, 0.0) } else { HD::new(0.0, 0.0, e, 0.0) }
-                })
-                .collect()
-        };
+        let poses = hyper_dual_configurations(&red, &q, n);
         for f in 0..m.full().frames().len() {
             let at = format!("{} frame {}", m.name(), m.full().frames()[f].name);
             let mut t = sodyn::tensor::Tensor3::zeros(6, n, n);
@@ -689,17 +686,14 @@ fn mimic_frame_placement_hessian_matches_hyper_dual_oracle() {
             let r0 = mimic::frame_placement(m, &mut d, &q, f).unwrap().rot;
             let r0h = Matrix3::from_fn(|i, j| HD::from_re(r0[(i, j)]));
             let (mut worst, mut scale): (f64, f64) = (0.0, 1.0);
-            for k in 0..n {
-                for j in 0..n {
-                    let qt = red.integrate(&red.integrate(&qh, &dir(k, false)), &dir(j, true));
-                    let (r, p) = ref_placement(m.full(), &red.expand_q(&qt), f);
-                    let rel = r0h.transpose() * r;
-                    let e = (rel - rel.transpose()) * HD::from_re(0.5);
-                    let y = [e[(2, 1)], e[(0, 2)], e[(1, 0)], p[0], p[1], p[2]];
-                    for (i, yi) in y.iter().enumerate() {
-                        worst = worst.max((t[(i, j, k)] - yi.eps1eps2).abs());
-                        scale = scale.max(yi.eps1eps2.abs());
-                    }
+            for &(k, j, ref qt) in &poses {
+                let (r, p) = ref_placement(m.full(), qt, f);
+                let rel = r0h.transpose() * r;
+                let e = (rel - rel.transpose()) * HD::from_re(0.5);
+                let y = [e[(2, 1)], e[(0, 2)], e[(1, 0)], p[0], p[1], p[2]];
+                for (i, yi) in y.iter().enumerate() {
+                    worst = worst.max((t[(i, j, k)] - yi.eps1eps2).abs());
+                    scale = scale.max(yi.eps1eps2.abs());
                 }
             }
             w.add(worst / scale, &at);

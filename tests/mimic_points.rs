@@ -24,6 +24,7 @@ use sodyn::reference::kinematics::{forward_kinematics as ref_fk, point_position 
 use sodyn::reference::mimic::Reduced;
 use sodyn::rng::Rng;
 use util::Worst;
+use util::mimic::state;
 
 fn data(name: &str) -> std::path::PathBuf {
     std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(name)
@@ -38,13 +39,6 @@ fn models() -> Vec<MimicModel> {
         MimicModel::load_urdf_file(&data("mimic_arm.urdf"), &o(true)).unwrap(),
         MimicModel::load_urdf_file(&data("mimic_panda_coeffs.urdf"), &o(true)).unwrap(),
     ]
-}
-
-fn state(m: &MimicModel, rng: &mut Rng) -> [DVector<f64>; 3] {
-    let q = m.random_configuration(rng);
-    let v = DVector::from_fn(m.nv(), |_, _| rng.range(-2.0, 2.0));
-    let a = DVector::from_fn(m.nv(), |_, _| rng.range(-2.0, 2.0));
-    [q, v, a]
 }
 
 fn rel3(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {

@@ -524,6 +524,48 @@ fn impact_dict<'py>(
     Ok(out)
 }
 
+/// [`kkt_dict`] of a KKT workspace `kd` (`KktData` or `MimicKktData`, which have the same
+/// accessors), its tensors at `order == 2`.
+macro_rules! kkt_dict_of {
+    ($py:expr, $kd:expr, $order:expr) => {{
+        let kd = &$kd;
+        let so = kd.so().filter(|_| $order == 2).map(|t| {
+            [
+                t.d2qdd_dq2(),
+                t.d2qdd_dv2(),
+                t.d2qdd_dqdv(),
+                t.d2qdd_dtaudq(),
+                t.d2lambda_dq2(),
+                t.d2lambda_dv2(),
+                t.d2lambda_dqdv(),
+                t.d2lambda_dtaudq(),
+            ]
+        });
+        let fo = [
+            kd.dqdd_dq(),
+            kd.dqdd_dv(),
+            kd.dqdd_dtau(),
+            kd.dlambda_dq(),
+            kd.dlambda_dv(),
+            kd.dlambda_dtau(),
+        ];
+        kkt_dict($py, kd.qdd(), kd.lambda(), fo, so)
+    }};
+}
+
+/// [`impact_dict`] of an impact workspace `im` (`ImpactData` or `MimicImpactData`), its tensors
+/// at `order == 2`.
+macro_rules! impact_dict_of {
+    ($py:expr, $im:expr, $order:expr) => {{
+        let im = &$im;
+        let so = im.so().filter(|_| $order == 2).map(|t| {
+            [t.d2vplus_dq2(), t.d2vplus_dqdvminus(), t.d2impulse_dq2(), t.d2impulse_dqdvminus()]
+        });
+        let fo = [im.dvplus_dq(), im.dvplus_dvminus(), im.dimpulse_dq(), im.dimpulse_dvminus()];
+        impact_dict($py, im.vplus(), im.impulse(), fo, so)
+    }};
+}
+
 /// Seeds for `random_configuration(seed=None)`: distinct per call.
 fn fresh_seed() -> u64 {
     use std::sync::atomic::{AtomicU64, Ordering};
@@ -1510,27 +1552,7 @@ fn mimic_kkt<'py>(
     } else {
         py.detach(|| mimic::kkt_derivatives(mm, md, kd, q, v, a)).map_err(core_err)?;
     }
-    let so = kd.so().filter(|_| order == 2).map(|t| {
-        [
-            t.d2qdd_dq2(),
-            t.d2qdd_dv2(),
-            t.d2qdd_dqdv(),
-            t.d2qdd_dtaudq(),
-            t.d2lambda_dq2(),
-            t.d2lambda_dv2(),
-            t.d2lambda_dqdv(),
-            t.d2lambda_dtaudq(),
-        ]
-    });
-    let fo = [
-        kd.dqdd_dq(),
-        kd.dqdd_dv(),
-        kd.dqdd_dtau(),
-        kd.dlambda_dq(),
-        kd.dlambda_dv(),
-        kd.dlambda_dtau(),
-    ];
-    kkt_dict(py, kd.qdd(), kd.lambda(), fo, so)
+    kkt_dict_of!(py, kd, order)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -1566,11 +1588,7 @@ fn mimic_impact<'py>(
     } else {
         py.detach(|| mimic::impact_derivatives(mm, md, im, q, v)).map_err(core_err)?;
     }
-    let so = im.so().filter(|_| order == 2).map(|t| {
-        [t.d2vplus_dq2(), t.d2vplus_dqdvminus(), t.d2impulse_dq2(), t.d2impulse_dqdvminus()]
-    });
-    let fo = [im.dvplus_dq(), im.dvplus_dvminus(), im.dimpulse_dq(), im.dimpulse_dvminus()];
-    impact_dict(py, im.vplus(), im.impulse(), fo, so)
+    impact_dict_of!(py, im, order)
 }
 
 /// `id_so_contracted` (`fd = false`) or `fd_so_contracted` (`fd = true`) of a mimic model.
@@ -2869,27 +2887,7 @@ fn py_kkt_derivatives<'py>(
     } else {
         py.detach(|| kkt_derivatives(m, d, kd, q, v, a)).map_err(core_err)?;
     }
-    let so = kd.so().filter(|_| order == 2).map(|t| {
-        [
-            t.d2qdd_dq2(),
-            t.d2qdd_dv2(),
-            t.d2qdd_dqdv(),
-            t.d2qdd_dtaudq(),
-            t.d2lambda_dq2(),
-            t.d2lambda_dv2(),
-            t.d2lambda_dqdv(),
-            t.d2lambda_dtaudq(),
-        ]
-    });
-    let fo = [
-        kd.dqdd_dq(),
-        kd.dqdd_dv(),
-        kd.dqdd_dtau(),
-        kd.dlambda_dq(),
-        kd.dlambda_dv(),
-        kd.dlambda_dtau(),
-    ];
-    kkt_dict(py, kd.qdd(), kd.lambda(), fo, so)
+    kkt_dict_of!(py, kd, order)
 }
 
 /// Impact dynamics `[M J_cᵀ; J_c 0][v⁺; −Λ] = [M v⁻; −e J_c v⁻]` and its derivatives.
@@ -2941,11 +2939,7 @@ fn py_impact_derivatives<'py>(
     } else {
         py.detach(|| impact_derivatives(m, d, im, q, v)).map_err(core_err)?;
     }
-    let so = im.so().filter(|_| order == 2).map(|t| {
-        [t.d2vplus_dq2(), t.d2vplus_dqdvminus(), t.d2impulse_dq2(), t.d2impulse_dqdvminus()]
-    });
-    let fo = [im.dvplus_dq(), im.dvplus_dvminus(), im.dimpulse_dq(), im.dimpulse_dvminus()];
-    impact_dict(py, im.vplus(), im.impulse(), fo, so)
+    impact_dict_of!(py, im, order)
 }
 
 /// Contracted second order of the KKT dynamics: the Hessians of

@@ -40,7 +40,10 @@
 //! ```
 
 use super::{MimicData, MimicModel, MimicSoData};
-use crate::batch::{BatchData, BatchPool, check_count, check_matrices, check_vectors, copy, drive};
+use crate::batch::{
+    BatchData, BatchPool, check_count, check_first_order, check_matrices, check_vectors, copy,
+    drive,
+};
 use crate::error::{Error, Result};
 use nalgebra::{DMatrix, DVector};
 use std::sync::Arc;
@@ -159,12 +162,7 @@ pub fn id_derivatives_batch(
     out_dv: &mut [DMatrix<f64>],
 ) -> Result<()> {
     let n = qs.len();
-    check_count("vs", vs.len(), n)?;
-    check_count("as_", as_.len(), n)?;
-    check_count("out_dq", out_dq.len(), n)?;
-    check_count("out_dv", out_dv.len(), n)?;
-    check_matrices("out_dq", out_dq, model.nv)?;
-    check_matrices("out_dv", out_dv, model.nv)?;
+    check_first_order([("vs", vs.len()), ("as_", as_.len())], out_dq, out_dv, n, model.nv)?;
     check_workspaces(model, bd)?;
     drive(bd, n, out_dq, out_dv, |data, k, dq, dv| {
         super::id_derivatives(model, data, &qs[k], &vs[k], &as_[k], None)?;
@@ -190,12 +188,7 @@ pub fn fd_derivatives_batch(
     out_dv: &mut [DMatrix<f64>],
 ) -> Result<()> {
     let n = qs.len();
-    check_count("vs", vs.len(), n)?;
-    check_count("taus", taus.len(), n)?;
-    check_count("out_dq", out_dq.len(), n)?;
-    check_count("out_dv", out_dv.len(), n)?;
-    check_matrices("out_dq", out_dq, model.nv)?;
-    check_matrices("out_dv", out_dv, model.nv)?;
+    check_first_order([("vs", vs.len()), ("taus", taus.len())], out_dq, out_dv, n, model.nv)?;
     check_workspaces(model, bd)?;
     drive(bd, n, out_dq, out_dv, |data, k, dq, dv| {
         super::fd_derivatives(model, data, &qs[k], &vs[k], &taus[k], None)?;

@@ -1,6 +1,8 @@
 //! Shared helpers for the oracle tests.
 #![allow(dead_code)]
 
+pub mod mimic;
+
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use num_dual::{Dual64 as D, HyperHyperDual64 as H};
 use sodyn::model::{Model, builtin};
