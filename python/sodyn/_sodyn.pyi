@@ -1,7 +1,7 @@
 """Type stubs of the compiled extension ``sodyn._sodyn`` (re-exported by ``sodyn``)."""
 
 import os
-from typing import Optional, Sequence, Tuple, Union
+from typing import Any, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -81,6 +81,18 @@ class Model:
                          floating_base: bool = False) -> "Model":
         """Loads an MJCF document given as a string; ``<include>`` paths are relative to
         ``base_dir`` (default: the current directory)."""
+    @staticmethod
+    def from_pinocchio(pin_model: Any) -> "Model":
+        """Reads a ``pinocchio.Model`` (duck-typed; Pinocchio 2 to 4; reduced models of
+        ``pinocchio.buildReducedModel`` too): joints, placements, inertias, armature, position
+        limits (Pinocchio's ``±max double`` as ``±inf``), gravity, name and every frame.
+        Joint ``i`` and frame ``k`` are Pinocchio's joint ``i`` and frame ``k`` (a frame name
+        already taken by an earlier frame becomes ``"{name}#{k}"``). Supported joints:
+        FreeFlyer, RX/RY/RZ, RevoluteUnaligned, RUBX/RUBY/RUBZ and RevoluteUnboundedUnaligned
+        (continuous: one coordinate, the angle), PX/PY/PZ, PrismaticUnaligned, Spherical,
+        Planar (``q = [x, y, θ]``); any other type raises ``SodynError`` naming the joint and
+        the type. ``sodyn.pinocchio_layout`` maps states, velocities and Jacobians (the free
+        flyer's ``v`` is ``[ω; v]`` here, ``[v; ω]`` in Pinocchio)."""
     @staticmethod
     def builtin(name: str) -> "Model": ...
     @staticmethod
