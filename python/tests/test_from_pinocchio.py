@@ -88,6 +88,11 @@ def _pin_model(name):
     return _from_urdf(name)
 
 
+CONTINUOUS_UNALIGNED = """<robot name="u"><link name="a"/><link name="b"/>
+<joint name="j" type="continuous"><parent link="a"/><child link="b"/>
+<axis xyz="0.3 -0.5 0.8"/></joint></robot>"""
+
+
 def synthetic():
     """Every supported joint type (unaligned axes, continuous and planar ones included) on a
     branching tree with random placements and inertias, a random armature and finite
@@ -103,11 +108,10 @@ def synthetic():
         x = np.asarray(x, dtype=float)
         return x / np.linalg.norm(x)
 
-    ru = pin.JointModelRevoluteUnboundedUnaligned()
-    try:
-        ru = pin.JointModelRevoluteUnboundedUnaligned(unit([0.3, -0.5, 0.8]))
-    except Exception:  # Pinocchio 4.1 binds only the default constructor (axis x)
-        pass
+    # A RevoluteUnboundedUnaligned joint on an oblique axis, from a URDF continuous joint
+    # (Pinocchio 4.1 binds only its default constructor, axis x).
+    ru = pin.buildModelFromXML(CONTINUOUS_UNALIGNED).joints[1]
+    assert ru.shortname() == "JointModelRevoluteUnboundedUnaligned"
     kinds = [
         ("ff", 0, pin.JointModelFreeFlyer()),
         ("rx", 1, pin.JointModelRX()),
@@ -302,6 +306,15 @@ def test_unsupported_joint_is_an_error():
         return c
 
     cases.append(("JointModelComposite", composite))
+    # A URDF <mimic> read as a Pinocchio mimic joint (Pinocchio >= 3.4 with mimic=True).
+    try:
+        panda = pin.buildModelFromUrdf(_robots_dir() + URDFS["panda"][0], mimic=True)
+    except TypeError:
+        panda = None
+    if panda is not None and any(j.shortname() == "JointModelMimic" for j in panda.joints):
+        k = [j.shortname() for j in panda.joints].index("JointModelMimic")
+        with pytest.raises(sodyn.SodynError, match=f'joint "{panda.names[k]}" .*JointModelMimic'):
+            sodyn.Model.from_pinocchio(panda)
     for type_name, make in cases:
         m = _bad_model(make())
         with pytest.raises(sodyn.SodynError) as e:
