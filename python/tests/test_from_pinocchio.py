@@ -3,7 +3,8 @@
 Each model is a ``pinocchio.Model`` read by ``Model.from_pinocchio``; RNEA, CRBA, ABA, the
 placement of every frame and frame Jacobians (three reference frames) at random states agree
 with Pinocchio's after the layout mapping (``pinocchio_layout``) to 1e-10 (relative,
-``conftest.rel_err``), and so do ``integrate`` / ``difference``. The robots are those of
+``conftest.rel_err``), and so do ``integrate`` / ``difference`` and their Jacobians and the
+ABA derivatives (``P J P^T``; ``difference``, its Jacobians and the ABA derivatives to 1e-9). The robots are those of
 example-robot-data (the URDFs it ships; with its ``load`` where installed, as in the
 Crocoddyl venv, the models Crocoddyl's examples use, armature from the SRDF included): anymal,
 talos_legs (reduced), kinova, double_pendulum, talos, talos_full, solo12, panda; each also with a
@@ -206,6 +207,19 @@ def check_against_pinocchio(pm, seeds=(1, 2), jac_frames=None):
         assert_close(model.difference(q, q1),
                      pl.v_from_pinocchio(model, pin.difference(pm, qp, q1p)), 1e-9,
                      f"{what}: difference")
+        # Tangent-space Jacobians convert as P J P^T (P = velocity_permutation_matrix).
+        P = pl.velocity_permutation_matrix(model)
+        for arg, parg in ((0, pin.ArgumentPosition.ARG0), (1, pin.ArgumentPosition.ARG1)):
+            assert_close(model.d_integrate(q, dq, arg),
+                         P @ pin.dIntegrate(pm, qp, pl.v_to_pinocchio(model, dq), parg) @ P.T,
+                         TOL, f"{what}: d_integrate arg {arg}")
+            assert_close(model.d_difference(q, q1, arg),
+                         P @ pin.dDifference(pm, qp, q1p, parg) @ P.T, 1e-9,
+                         f"{what}: d_difference arg {arg}")
+        ours = sodyn.fd_derivatives(model, data, q, v, tau)
+        theirs = pin.computeABADerivatives(pm, pdata, qp, vp, taup)
+        for name, o, t in zip(("dqdd_dq", "dqdd_dv", "dqdd_dtau"), ours, theirs):
+            assert_close(o, P @ t @ P.T, 1e-9, f"{what}: {name}")
         x = np.concatenate([q, v])
         xp = pl.x_to_pinocchio(model, x)
         assert_close(xp, np.concatenate([qp, vp]), 1e-15, "x_to_pinocchio")
