@@ -82,6 +82,18 @@ class Model:
         """Loads an MJCF document given as a string; ``<include>`` paths are relative to
         ``base_dir`` (default: the current directory)."""
     @staticmethod
+    def from_pinocchio(pin_model: Any) -> "Model":
+        """Reads a ``pinocchio.Model`` (duck-typed; Pinocchio 2 to 4; reduced models of
+        ``pinocchio.buildReducedModel`` too): joints, placements, inertias, armature, position
+        limits (Pinocchio's ``±max double`` as ``±inf``), gravity, name and every frame.
+        Joint ``i`` and frame ``k`` are Pinocchio's joint ``i`` and frame ``k`` (a frame name
+        already taken by an earlier frame becomes ``"{name}#{k}"``). Supported joints:
+        FreeFlyer, RX/RY/RZ, RevoluteUnaligned, RUBX/RUBY/RUBZ and RevoluteUnboundedUnaligned
+        (continuous: one coordinate, the angle), PX/PY/PZ, PrismaticUnaligned, Spherical,
+        Planar (``q = [x, y, θ]``); any other type raises ``SodynError`` naming the joint and
+        the type. ``sodyn.pinocchio_layout`` maps states, velocities and Jacobians (the free
+        flyer's ``v`` is ``[ω; v]`` here, ``[v; ω]`` in Pinocchio)."""
+    @staticmethod
     def builtin(name: str) -> "Model": ...
     @staticmethod
     def builtin_names() -> list[str]: ...

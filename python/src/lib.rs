@@ -42,6 +42,9 @@ use sodyn::tensor::Tensor3;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
+/// `Model.from_pinocchio` (python/src/pinocchio.rs; pyo3 `multiple-pymethods`).
+mod pinocchio;
+
 create_exception!(
     _sodyn,
     SodynError,
