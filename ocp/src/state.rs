@@ -2,13 +2,15 @@
 //! `StateMultibody`), with `⊕` / `⊖` and their Jacobians.
 //!
 //! - `x ⊕ dx = (q ⊕ dq, v + dv)`, `dx = (dq, dv)` of length `ndx = 2 nv`;
-//! - `x₁ ⊖ x₀ = (q₁ ⊖ q₀, v₁ − v₀)` (`diff(x0, x1)`, Crocoddyl's argument order);
+//! - `x₁ ⊖ x₀ = (q₁ ⊖ q₀, v₁ − v₀)` (`diff(x0, x1)`, Crocoddyl's argument order), where a
+//!   continuous joint's `q₁ ⊖ q₀` is the angle of the relative rotation in `(−π, π]` (its
+//!   configuration space is the circle, as in Pinocchio), not sodyn's `q₁ − q₀`;
 //! - Jacobians are block diagonal: the `q` block is sodyn's `d_integrate` / `d_difference`
 //!   (tangent-space, joint by joint), the `v` block is `±I`.
 
 use nalgebra::{DMatrix, DVector};
-use sodyn::model::Model;
 use sodyn::model::lie::Arg;
+use sodyn::model::{JointType, Model};
 use std::sync::Arc;
 
 use crate::error::{OcpError, Result};
@@ -108,6 +110,13 @@ impl StateMultibody {
         for i in 1..m.njoints() {
             let (qa, n, vb, k) = (m.idx_q()[i], m.nqs()[i], m.idx_v()[i], m.nvs()[i]);
             m.joints()[i].difference(&a[qa..qa + n], &b[qa..qa + n], &mut o[vb..vb + k]);
+            if let JointType::Continuous { .. } = m.joints()[i] {
+                // A continuous joint's configuration space is the circle (Pinocchio's and
+                // Crocoddyl's unbounded revolute joints): the difference is the angle of the
+                // relative rotation, in (−π, π].
+                let d = o[vb];
+                o[vb] = d.sin().atan2(d.cos());
+            }
         }
         for j in 0..nv {
             o[nv + j] = b[nq + j] - a[nq + j];

@@ -375,9 +375,6 @@ impl Solver {
         }
         self.xs_try[0].copy_from(self.problem.x0());
         self.set_candidate(init_xs, init_us, is_feasible)?;
-        if self.kind == SolverKind::BoxFddp {
-            self.clamp_controls();
-        }
         self.preg = init_reg.unwrap_or(self.reg_min);
         self.was_feasible = false;
         self.log.clear();
@@ -505,14 +502,6 @@ impl Solver {
         self.preg = (self.preg / self.reg_factor).max(self.reg_min);
     }
 
-    fn clamp_controls(&mut self) {
-        for (u, m) in self.us.iter_mut().zip(self.problem.running_models()) {
-            for i in 0..u.len() {
-                u[i] = u[i].clamp(m.u_lb[i], m.u_ub[i]);
-            }
-        }
-    }
-
     /// Derivatives at `(xs, us)` and the gaps.
     fn calc_diff(&mut self) -> Result<()> {
         self.cost = self.problem.calc_diff(&self.xs, &self.us)?;
@@ -562,11 +551,12 @@ impl Solver {
                     self.quu[t][(i, i)] += preg;
                 }
                 // Gains.
-                let ok = if self.kind == SolverKind::BoxFddp {
-                    self.box_gains(t)
-                } else {
-                    self.gains(t)
-                };
+                // Box-FDDP solves the box-QP only from a feasible trajectory of a knot with
+                // finite bounds (otherwise the plain gains).
+                let boxed = self.kind == SolverKind::BoxFddp
+                    && self.is_feasible
+                    && m.u_lb.iter().chain(m.u_ub.iter()).all(|b| b.is_finite());
+                let ok = if boxed { self.box_gains(t) } else { self.gains(t) };
                 if !ok {
                     return false;
                 }
@@ -633,6 +623,10 @@ impl Solver {
         self.k[t].copy_from(&qp.x);
         self.k[t].neg_mut();
         qp.free_gains(&self.qxu[t], &mut self.kk[t]);
+        // The clamped directions do not count in the expected improvement.
+        for &i in &qp.clamped {
+            self.qu[t][i] = 0.0;
+        }
         true
     }
 

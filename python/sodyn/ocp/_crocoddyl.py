@@ -1,27 +1,21 @@
 """Conversion of Crocoddyl problems (``crocoddyl.ShootingProblem``) into
 :class:`sodyn.ocp.ShootingProblem`, and the layout map at the boundary.
 
-Layout (Pinocchio/Crocoddyl → sodyn):
-
-- free flyer: ``q`` is the same ``[x y z qx qy qz qw]``; ``v = [v; ω]`` becomes ``[ω; v]``
-  (both in the body frame), and so does every tangent ``dq``;
-- Pinocchio's unbounded revolute joints (``RUB*``, ``nq = 2``: ``cos θ, sin θ``) are sodyn's
-  continuous joints (``nq = 1``: ``θ = atan2(sin θ, cos θ)``); planar joints (``x, y, cos θ,
-  sin θ``) become ``x, y, θ``;
-- spatial residual rows and 6-D contact forces ``[linear; angular]`` become
-  ``[angular; linear]``.
-
-The state tangent ``dx = (dq, dv)`` maps by a permutation ``perm_dx`` (``dx_sodyn =
-dx_pin[perm_dx]``), so a Jacobian maps as ``J_sodyn = J_pin[perm_rows][:, perm_dx]``.
+Layout (Pinocchio/Crocoddyl → sodyn, :mod:`sodyn.pinocchio_layout`): the free-flyer velocity
+``[v; ω]`` becomes ``[ω; v]`` (every tangent ``dq`` too), continuous joints' ``(cos θ, sin θ)``
+become ``θ``, spatial residual rows and 6-D contact forces ``[linear; angular]`` become
+``[angular; linear]``, and frame ids are the same. The state tangent maps by a permutation
+``perm_dx`` (``dx_sodyn = dx_pin[perm_dx]``), so a Jacobian maps as
+``J_sodyn = J_pin[rows][:, perm_dx]``.
 """
 
 from __future__ import annotations
 
-import math
 from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
+from .. import pinocchio_layout as pl
 from . import (
     ActionModelImpulseFwdDynamics,
     ActivationBounds,
@@ -53,7 +47,7 @@ from . import (
     StateMultibody,
 )
 
-SPATIAL = np.array([3, 4, 5, 0, 1, 2])  # [linear; angular] -> [angular; linear]
+SPATIAL = pl.SPATIAL_PERM  # [linear; angular] -> [angular; linear]
 _REF = {"LOCAL": "local", "WORLD": "world", "LOCAL_WORLD_ALIGNED": "local_world_aligned"}
 
 
@@ -62,109 +56,42 @@ def _name(obj: Any) -> str:
 
 
 class CrocoddylLayout:
-    """The map between a Pinocchio model's layout and the sodyn model converted from it."""
+    """The map between Crocoddyl's (Pinocchio's) layout and the sodyn model converted from it by
+    ``Model.from_pinocchio`` (built on :mod:`sodyn.pinocchio_layout`). ``*_in`` map Crocoddyl's
+    vectors to sodyn's, ``*_out`` back."""
 
-    def __init__(self, pin_model: Any, model: Any, actuation: str = "floating_base") -> None:
-        self.pin_model, self.model = pin_model, model
-        self.nq_pin, self.nv = pin_model.nq, pin_model.nv
-        self.nq = model.nq
-        perm_v = np.arange(self.nv)
-        self._q_kinds: List[Tuple[str, int, int, int]] = []  # kind, idx_q_pin, idx_q, nq_pin
-        joints = model.joints
-        for j in range(1, pin_model.njoints):
-            jm = pin_model.joints[j]
-            sn = jm.shortname()
-            ours = joints[j - 1]
-            if ours.name != pin_model.names[j]:
-                raise OcpError(
-                    f"layout: joint {j} is {pin_model.names[j]!r} in Pinocchio and {ours.name!r} in sodyn"
-                )
-            iq, iv = jm.idx_q, jm.idx_v
-            if sn == "JointModelFreeFlyer":
-                perm_v[iv : iv + 6] = iv + SPATIAL
-                self._q_kinds.append(("copy", iq, ours.idx_q, 7))
-            elif sn.startswith("JointModelRUB") or sn == "JointModelRevoluteUnboundedUnaligned":
-                self._q_kinds.append(("rub", iq, ours.idx_q, 2))
-            elif sn == "JointModelPlanar":
-                self._q_kinds.append(("planar", iq, ours.idx_q, 4))
-            else:
-                self._q_kinds.append(("copy", iq, ours.idx_q, jm.nq))
-        self.perm_v = perm_v
-        self.inv_v = np.argsort(perm_v)
-        self.perm_dx = np.concatenate([perm_v, self.nv + perm_v])
+    def __init__(self, model: Any) -> None:
+        self.model = model
+        self.nv = model.nv
+        self.perm_v = pl.velocity_permutation(model)
+        self.inv_v = np.argsort(self.perm_v)
+        self.perm_dx = pl.state_tangent_permutation(model)
         self.inv_dx = np.argsort(self.perm_dx)
-        self.actuation = actuation
 
-    # --- states ---------------------------------------------------------------------------
-    def q_in(self, q_pin: np.ndarray) -> np.ndarray:
-        q_pin = np.asarray(q_pin, float)
-        q = np.empty(self.nq)
-        for kind, a, b, n in self._q_kinds:
-            if kind == "copy":
-                q[b : b + n] = q_pin[a : a + n]
-            elif kind == "rub":
-                q[b] = math.atan2(q_pin[a + 1], q_pin[a])
-            else:
-                q[b : b + 2] = q_pin[a : a + 2]
-                q[b + 2] = math.atan2(q_pin[a + 3], q_pin[a + 2])
-        return q
+    def x_in(self, x_pin: Any) -> np.ndarray:
+        return pl.x_from_pinocchio(self.model, np.asarray(x_pin, float))
 
-    def q_out(self, q: np.ndarray) -> np.ndarray:
-        q = np.asarray(q, float)
-        q_pin = np.empty(self.nq_pin)
-        for kind, a, b, n in self._q_kinds:
-            if kind == "copy":
-                q_pin[a : a + n] = q[b : b + n]
-            elif kind == "rub":
-                q_pin[a], q_pin[a + 1] = math.cos(q[b]), math.sin(q[b])
-            else:
-                q_pin[a : a + 2] = q[b : b + 2]
-                q_pin[a + 2], q_pin[a + 3] = math.cos(q[b + 2]), math.sin(q[b + 2])
-        return q_pin
+    def x_out(self, x: Any) -> np.ndarray:
+        return pl.x_to_pinocchio(self.model, np.asarray(x, float))
 
-    def v_in(self, v_pin: np.ndarray) -> np.ndarray:
-        return np.asarray(v_pin, float)[self.perm_v]
-
-    def v_out(self, v: np.ndarray) -> np.ndarray:
-        return np.asarray(v, float)[self.inv_v]
-
-    def x_in(self, x_pin: np.ndarray) -> np.ndarray:
-        x_pin = np.asarray(x_pin, float).reshape(-1)
-        if x_pin.size != self.nq_pin + self.nv:
-            raise OcpError(f"x: length {x_pin.size} (expected Pinocchio's nx = {self.nq_pin + self.nv})")
-        return np.concatenate([self.q_in(x_pin[: self.nq_pin]), self.v_in(x_pin[self.nq_pin :])])
-
-    def x_out(self, x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x, float)
-        return np.concatenate([self.q_out(x[: self.nq]), self.v_out(x[self.nq :])])
-
-    def dx_in(self, dx_pin: np.ndarray) -> np.ndarray:
+    def dx_in(self, dx_pin: Any) -> np.ndarray:
         return np.asarray(dx_pin, float)[self.perm_dx]
 
-    def dx_out(self, dx: np.ndarray) -> np.ndarray:
+    def dx_out(self, dx: Any) -> np.ndarray:
         return np.asarray(dx, float)[self.inv_dx]
 
-    # --- controls -------------------------------------------------------------------------
     def u_perm(self, nu: int) -> np.ndarray:
-        """Controls: the actuated velocity rows (a permutation only with full actuation of a
-        free flyer)."""
-        if nu == self.nv:
-            return self.perm_v
-        return np.arange(nu)
+        """Controls are actuated velocity rows: a permutation only with full actuation of a
+        free flyer."""
+        return self.perm_v if nu == self.nv else np.arange(nu)
 
-    def u_in(self, t: int, u: np.ndarray) -> np.ndarray:
+    def u_in(self, t: int, u: Any) -> np.ndarray:
         u = np.asarray(u, float).reshape(-1)
         return u[self.u_perm(u.size)]
 
-    def u_out(self, t: int, u: np.ndarray) -> np.ndarray:
+    def u_out(self, t: int, u: Any) -> np.ndarray:
         u = np.asarray(u, float)
         return u[np.argsort(self.u_perm(u.size))]
-
-
-def _frame_name(pin_model: Any, fid: int, what: str) -> str:
-    if not 0 <= fid < len(pin_model.frames):
-        raise OcpError(f"{what}: frame id {fid} out of range")
-    return pin_model.frames[fid].name
 
 
 def _items(container: Any) -> List[Tuple[str, Any]]:
@@ -176,14 +103,10 @@ class _Converter:
     def __init__(self, pin_model: Any, model: Any, layout: CrocoddylLayout) -> None:
         self.pin, self.model, self.lay = pin_model, model, layout
         self.state = StateMultibody(model)
-        names = [f.name for f in pin_model.frames]
-        self.dup = {n for n in names if names.count(n) > 1}
 
-    def frame(self, fid: int, what: str) -> str:
-        name = _frame_name(self.pin, fid, what)
-        if name in self.dup:
-            raise OcpError(f"{what}: Pinocchio frame name {name!r} is not unique")
-        return name
+    def frame(self, fid: int, what: str) -> int:
+        """Pinocchio frame ``fid`` is sodyn frame ``fid`` (``Model.from_pinocchio``)."""
+        return pl.frame_id_from_pinocchio(self.model, int(fid))
 
     def actuation(self, a: Any, what: str):
         n = _name(a)
@@ -346,7 +269,7 @@ def from_crocoddyl(problem: Any, model: Optional[Any] = None) -> ShootingProblem
     pin_model = models[0].state.pinocchio
     if model is None:
         model = Model.from_pinocchio(pin_model)
-    lay = CrocoddylLayout(pin_model, model)
+    lay = CrocoddylLayout(model)
     conv = _Converter(pin_model, model, lay)
     running = [conv.node(m, f"node {t} ({_name(m)})") for t, m in enumerate(models)]
     terminal = conv.node(problem.terminalModel, f"node {len(models)} (terminal, {_name(problem.terminalModel)})")
