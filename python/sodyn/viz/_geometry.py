@@ -250,7 +250,7 @@ def urdf_geometry(text: str, source: str, base_dir: Optional[Path],
                     rgba = named_colors[m.get("name", "")]  # type: ignore
             g = vis.find("geometry")
             if g is None or len(g) == 0:
-                warnings.warn(f"{what}: no <geometry>; drawn as a frame", VizWarning, stacklevel=3)
+                warnings.warn(f"{what}: no <geometry>; drawn as a sphere and capsules", VizWarning, stacklevel=3)
                 complete = False
                 continue
             shape_el = g[0]
@@ -275,21 +275,21 @@ def urdf_geometry(text: str, source: str, base_dir: Optional[Path],
                 if path is None:
                     shown = ", ".join(str(t) for t in tried[:4]) + (" ..." if len(tried) > 4 else "")
                     warnings.warn(f"{gwhat}: mesh file {filename!r} not found (tried {shown}); "
-                                  f"link {name!r} is drawn as a frame and bones", VizWarning,
+                                  f"link {name!r} is drawn as a sphere and capsules", VizWarning,
                                   stacklevel=3)
                     complete = False
                     continue
                 if path.suffix.lower() not in MESH_FORMATS:
                     warnings.warn(f"{gwhat}: mesh file {str(path)!r} has the unsupported format "
                                   f"{path.suffix!r} (STL, DAE, OBJ are drawn); link {name!r} is "
-                                  "drawn as a frame and bones", VizWarning, stacklevel=3)
+                                  "drawn as a sphere and capsules", VizWarning, stacklevel=3)
                     complete = False
                     continue
                 shapes.append(Shape("mesh", (), origin, rgba, mesh_file=str(path),
                                     scale=scale))  # type: ignore[arg-type]
             else:
                 warnings.warn(f"{gwhat}: unsupported geometry; link {name!r} is drawn as a "
-                              "frame and bones", VizWarning, stacklevel=3)
+                              "sphere and capsules", VizWarning, stacklevel=3)
                 complete = False
         if shapes:
             geo.shapes[name] = shapes

@@ -43,6 +43,8 @@ def document(cmds: Iterable[Any], center: Sequence[float], radius: float, durati
         "target": [c[0], c[2], -c[1]],
         "eye": [eye[0], eye[2], -eye[1]],
         "duration": float(duration),
+        "center": [float(x) for x in c],
+        "radius": float(radius),
     }
     js = viewer_js().replace("</script", "<\\/script")
     payload = json.dumps([_b64(cmd) for cmd in cmds])
