@@ -567,3 +567,71 @@ def test_live_viewer_receives_the_scene(arm):
         if v.viewer:
             v.viewer.window.server_proc.kill()
             v.viewer.window.server_proc.wait()
+
+
+# ------------------------------------------------------------------------------------------
+# The screenshot of docs/viz.md: python tests/test_viz.py --docs ../docs/viz-screenshot.png
+# (the renders above: the panda with its meshes, then three frames of a talos_full_v2 motion
+# drawn without meshes).
+# ------------------------------------------------------------------------------------------
+
+def docs_screenshot(out):
+    import tempfile
+
+    from PIL import Image
+
+    assert CHROMIUM is not None, "chromium is not installed"
+    tmp = Path(tempfile.mkdtemp())
+    panels = []
+    share = example_robot_data_share()
+    if share is not None:
+        urdf = share / "example-robot-data" / "robots" / "panda_description" / "urdf" / "panda.urdf"
+        model = sodyn.Model.from_urdf(str(urdf))
+        v = viz.Visualizer(model, urdf, package_dirs=[share], viewer=False)
+        v.display([0, -0.5, 0, -2.0, 0, 1.5, 0.8, 0.02, 0.02])
+        html = v.save_html(tmp / "panda.html")
+        render(html, tmp / "panda.png", size=(360, 360))
+        panels.append(Image.open(tmp / "panda.png").convert("RGB"))
+    urdf = MODELS_DIR / "talos_full_v2.urdf"
+    model = sodyn.Model.from_urdf(str(urdf), floating_base=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", viz.VizWarning)
+        v = viz.Visualizer(model, urdf, viewer=False)
+    v.show_frames(["left_sole_link", "right_sole_link"])
+    q0 = model.neutral()
+    q0[2] = 1.02
+
+    def idx(name):
+        return next(j for j in model.joints if j.name == name).idx_q
+
+    q1 = q0.copy()
+    for name, value in (("arm_left_2_joint", 1.2), ("arm_right_2_joint", -1.2),
+                        ("arm_left_4_joint", -1.0), ("arm_right_4_joint", -1.0),
+                        ("leg_left_3_joint", -0.6), ("leg_right_3_joint", -0.6),
+                        ("leg_left_4_joint", 1.2), ("leg_right_4_joint", 1.2),
+                        ("leg_left_5_joint", -0.6), ("leg_right_5_joint", -0.6)):
+        q1[idx(name)] = value
+    q1[2] = 1.02 - 0.12
+    traj = [q0 + (q1 - q0) * t for t in np.linspace(0, 1, 21)]
+    html = v.save_html(tmp / "talos.html", trajectory=traj, dt=0.05)
+    for k, t in enumerate((0.0, 0.5, 1.0)):
+        png = tmp / f"talos{k}.png"
+        render(html, png, f"#t={t}", size=(300, 360))
+        panels.append(Image.open(png).convert("RGB").crop((0, 24, 300, 360)))
+    width = sum(p.width for p in panels)
+    strip = Image.new("RGB", (width, 336))
+    x = 0
+    for p in panels:
+        strip.paste(p.crop((0, p.height - 336, p.width, p.height)), (x, 0))
+        x += p.width
+    strip = strip.quantize(colors=256)
+    strip.save(out, optimize=True)
+    print(f"wrote {out} ({Path(out).stat().st_size} bytes)")
+
+
+if __name__ == "__main__":
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--docs", required=True, metavar="OUT.png")
+    docs_screenshot(parser.parse_args().docs)

@@ -38,7 +38,7 @@ def document(cmds: Iterable[Any], center: Sequence[float], radius: float, durati
     # y-up world, where the orbit target and (through "/Cameras/default/rotated") the camera
     # position live: world (x, y, z) is three.js (x, z, -y).
     direction = np.array([0.8, 0.5, 0.55])
-    eye = c + 2.0 * radius * direction / np.linalg.norm(direction)
+    eye = c + 1.7 * radius * direction / np.linalg.norm(direction)
     cfg = {
         "target": [c[0], c[2], -c[1]],
         "eye": [eye[0], eye[2], -eye[1]],
