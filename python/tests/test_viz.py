@@ -423,7 +423,7 @@ def _isolated():
     return ["unshare", "-n"] if ok.returncode == 0 else []
 
 
-def render(html_path, png_path, fragment="", size=SIZE):
+def render(html_path, png_path, fragment="", size=SIZE, budget_ms=5000):
     """A screenshot of the document (software WebGL, no network: no interface when
     ``unshare -n`` works, and in any case an unreachable proxy and no host resolution)."""
     from PIL import Image  # a meshcat dependency
@@ -434,7 +434,7 @@ def render(html_path, png_path, fragment="", size=SIZE):
         "--proxy-server=http://127.0.0.1:9", "--proxy-bypass-list=<-loopback>",
         "--host-resolver-rules=MAP * ~NOTFOUND", "--disable-extensions",
         f"--user-data-dir={png_path.parent / ('chrome-' + png_path.stem)}",
-        f"--window-size={size[0]},{size[1]}", "--virtual-time-budget=5000",
+        f"--window-size={size[0]},{size[1]}", f"--virtual-time-budget={budget_ms}",
         f"--screenshot={png_path}", Path(html_path).resolve().as_uri() + fragment,
     ]
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
@@ -493,6 +493,11 @@ def test_browser_talos_fallback_drawing_and_animation(tmp_path):
     assert_robot_drawn(last, bg, "talos t=1")
     moved = (np.abs(first - last).sum(axis=2) > 60).sum()
     assert moved > 500, f"the two animation frames differ in {moved} pixels only"
+    # "#t=1" pauses the animation there: a render 1.25 s (of page time) later is the same
+    # picture (a playing, looping animation would be elsewhere in its 1 s cycle)
+    later = render(html, tmp_path / "talos-t1-later.png", "#t=1", budget_ms=6250)
+    changed = (np.abs(later - last).sum(axis=2) > 60).sum()
+    assert changed < 50, f"the paused frame changed in {changed} pixels"
 
 
 @needs_chromium

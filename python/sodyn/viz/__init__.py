@@ -45,9 +45,8 @@ try:  # meshcat is the optional ``viz`` extra
         warnings.simplefilter("ignore", DeprecationWarning)
         import meshcat  # noqa: F401
     import meshcat.geometry as _mg
-    import umsgpack as _umsgpack
     from meshcat.animation import Animation as _Animation
-    from meshcat.commands import SetAnimation, SetObject, SetProperty, SetTransform
+    from meshcat.commands import SetAnimation, SetObject, SetTransform
     from meshcat.path import Path as _MPath
 
     _IMPORT_ERROR: Optional[ImportError] = None
@@ -299,7 +298,7 @@ class Visualizer:
                         key=lambda f: f)
         for frame in frames:
             base = _ROOT + ("links", _clean(frame))
-            if frame != "world":
+            if frame in self._frame_names:  # MJCF world-body geoms ("world") are static
                 nodes.append(_Node(base, "frame", frame))
             i = 0
             for shape in geo.shapes.get(frame, []):
