@@ -365,6 +365,32 @@ def test_mjcf_geometry_matches_mujoco(tmp_path):
             k += 1
 
 
+def test_obj_mesh_and_mjcf_missing_mesh(tmp_path):
+    obj = tmp_path / "tri.obj"
+    obj.write_text("v 0 0 0\nv 0.2 0 0\nv 0 0.2 0\nf 1 2 3\n")
+    urdf = tmp_path / "one.urdf"
+    urdf.write_text('<robot name="one"><link name="a"><visual><geometry>'
+                    '<mesh filename="tri.obj"/></geometry></visual></link></robot>')
+    model = sodyn.Model.from_urdf(str(urdf))
+    v = viz.Visualizer(model, urdf, viewer=False)
+    objects = {c["path"]: c["object"] for c in decode_commands(v.html())
+               if c["type"] == "set_object"}
+    geom = objects["/meshcat/sodyn/links/a/v0"]["geometries"][0]
+    assert geom["format"] == "obj" and geom["data"] == obj.read_text()
+    pytest.importorskip("mujoco")
+    xml = tmp_path / "nomesh.xml"
+    xml.write_text('<mujoco><asset><mesh name="m" file="absent.stl"/></asset><worldbody>'
+                   '<body name="b"><joint type="hinge"/><inertial pos="0 0 0" mass="1" '
+                   'diaginertia="1 1 1"/><geom type="mesh" mesh="m"/></body>'
+                   '</worldbody></mujoco>')
+    model = sodyn.Model.from_mjcf(str(xml))
+    with pytest.warns(viz.VizWarning, match=r"nomesh\.xml: MuJoCo cannot compile.*absent\.stl"):
+        v = viz.Visualizer(model, xml, viewer=False)
+    assert not v.geometry.shapes
+    tf = transforms(decode_commands(v.html()))
+    assert "/meshcat/sodyn/joints/b" in tf  # the fallback drawing
+
+
 # ------------------------------------------------------------------------------------------
 # The command line
 # ------------------------------------------------------------------------------------------
