@@ -5,9 +5,12 @@ position at the last knot), solved with
       IPOPT's exact Hessian (sodyn's contracted second order),
   (b) the same with IPOPT's limited-memory Hessian,
   (c) adam-robotics' CasADi graphs (``mass_matrix_fun``, ``bias_force_fun``: ``qdd = M^-1 (tau -
-      h)``, its ``aba_fun`` fails on this URDF in adam 0.5.0; ``forward_kinematics_fun``) with
-      CasADi's automatic-differentiation exact Hessian (``--adam``; needs ``pip install
-      adam-robotics liecasadi``).
+      h)`` by ``casadi.solve``, as adam's ``aba_fun`` is the floating-base ABA;
+      ``forward_kinematics_fun``) with CasADi's automatic-differentiation exact Hessian
+      (``--adam``; needs ``pip install adam-robotics liecasadi``).
+
+The finger joints are welded (``type="fixed"``; 7 DoF): adam-robotics 0.5.0 fails to build
+its graphs with the prismatic (mimic) fingers of panda.urdf.
 
     python examples/python/ipopt_trajopt.py [--urdf ../shared/models/panda.urdf] [--knots 20]
         [--adam]
@@ -20,6 +23,7 @@ sodyn.casadi's q derivatives need nq == nv (docs/interop.md).
 from __future__ import annotations
 
 import argparse
+import re
 import time
 from pathlib import Path
 
@@ -38,7 +42,14 @@ def start(model):
     return 0.5 * (model.lower_limits + model.upper_limits)
 
 
-def build(model, urdf, frame, n, dt, target, backend):
+def load(urdf):
+    """panda with the finger joints welded: the model and its URDF text."""
+    xml = Path(urdf).read_text()
+    xml = re.sub(r'(<joint name="panda_finger_joint[12]" type=)"prismatic"', r'\1"fixed"', xml)
+    return sodyn.Model.from_urdf_string(xml), xml
+
+
+def build(model, xml, frame, n, dt, target, backend):
     nv = model.nv
     t0 = time.perf_counter()
     Q = ca.MX.sym("Q", nv, n + 1)
@@ -55,7 +66,7 @@ def build(model, urdf, frame, n, dt, target, backend):
         from adam.casadi import KinDynComputations
 
         kd = KinDynComputations(
-            Path(urdf).read_text(), [j.name for j in model.joints],
+            xml, [j.name for j in model.joints],
             gravity=np.array([0, 0, -9.81, 0, 0, 0.0]),
         )
         Mf, hf, fk = kd.mass_matrix_fun(), kd.bias_force_fun(), kd.forward_kinematics_fun(frame)
@@ -108,7 +119,7 @@ def main():
     ap.add_argument("--dt", type=float, default=0.05)
     ap.add_argument("--adam", action="store_true", help="also solve with adam-robotics' graphs")
     args = ap.parse_args()
-    model = sodyn.Model.from_urdf(args.urdf)
+    model, xml = load(args.urdf)
     data = model.create_data()
     q_goal = start(model) + 0.3
     target = sodyn.frame_placement(model, data, np.clip(q_goal, model.lower_limits, model.upper_limits), args.frame)[:3, 3]
@@ -121,7 +132,7 @@ def main():
     for backend, hess in variants:
         try:
             nlp, bounds, t_build, keep = build(
-                model, args.urdf, args.frame, args.knots, args.dt, target, backend
+                model, xml, args.frame, args.knots, args.dt, target, backend
             )
         except Exception as exc:  # adam-robotics 0.5.0 fails on panda.urdf (docs/interop.md)
             print(f"| {backend}, {hess} Hessian | failed to build: {str(exc).splitlines()[-1]} | | | | | |")
