@@ -66,7 +66,8 @@ def build(model, xml, frame, n, dt, target, backend):
         from adam.casadi import KinDynComputations
 
         kd = KinDynComputations(
-            xml, [j.name for j in model.joints],
+            xml,
+            [j.name for j in model.joints],
             gravity=np.array([0, 0, -9.81, 0, 0, 0.0]),
         )
         Mf, hf, fk = kd.mass_matrix_fun(), kd.bias_force_fun(), kd.forward_kinematics_fun(frame)
@@ -90,8 +91,12 @@ def build(model, xml, frame, n, dt, target, backend):
     nlp = {"x": x, "f": dt * ca.sumsqr(U) + dt * ca.sumsqr(V), "g": g}
     lo, hi = model.lower_limits, model.upper_limits
     tau_max = 80.0
-    lbx = np.concatenate([np.tile(lo, n + 1), np.full(nv * (n + 1), -10.0), np.full(nv * n, -tau_max)])
-    ubx = np.concatenate([np.tile(hi, n + 1), np.full(nv * (n + 1), 10.0), np.full(nv * n, tau_max)])
+    lbx = np.concatenate(
+        [np.tile(lo, n + 1), np.full(nv * (n + 1), -10.0), np.full(nv * n, -tau_max)]
+    )
+    ubx = np.concatenate(
+        [np.tile(hi, n + 1), np.full(nv * (n + 1), 10.0), np.full(nv * n, tau_max)]
+    )
     x0 = np.concatenate([np.tile(q0, n + 1), np.zeros(nv * (n + 1)), np.zeros(nv * n)])
     return nlp, (lbx, ubx, x0), time.perf_counter() - t0, keep
 
@@ -99,10 +104,18 @@ def build(model, xml, frame, n, dt, target, backend):
 def solve(nlp, bounds, hessian):
     lbx, ubx, x0 = bounds
     t0 = time.perf_counter()
-    S = ca.nlpsol("S", "ipopt", nlp, {
-        "ipopt.hessian_approximation": hessian, "ipopt.print_level": 0, "print_time": False,
-        "ipopt.tol": 1e-8, "ipopt.max_iter": 1000,
-    })
+    S = ca.nlpsol(
+        "S",
+        "ipopt",
+        nlp,
+        {
+            "ipopt.hessian_approximation": hessian,
+            "ipopt.print_level": 0,
+            "print_time": False,
+            "ipopt.tol": 1e-8,
+            "ipopt.max_iter": 1000,
+        },
+    )
     t_setup = time.perf_counter() - t0
     t0 = time.perf_counter()
     r = S(x0=x0, lbx=lbx, ubx=ubx, lbg=0, ubg=0)
@@ -122,12 +135,16 @@ def main():
     model, xml = load(args.urdf)
     data = model.create_data()
     q_goal = start(model) + 0.3
-    target = sodyn.frame_placement(model, data, np.clip(q_goal, model.lower_limits, model.upper_limits), args.frame)[:3, 3]
+    target = sodyn.frame_placement(
+        model, data, np.clip(q_goal, model.lower_limits, model.upper_limits), args.frame
+    )[:3, 3]
     variants = [("sodyn", "exact"), ("sodyn", "limited-memory")]
     if args.adam:
         variants.append(("adam", "exact"))
     print(f"{model.name}: nv={model.nv}, {args.knots} knots, target {np.round(target, 4)}")
-    print("| variant | status | iterations | NLP construction (s) | solve total (s) | per iteration (ms) | optimum |")
+    print(
+        "| variant | status | iterations | NLP construction (s) | solve total (s) | per iteration (ms) | optimum |"
+    )
     print("|---|---|---:|---:|---:|---:|---:|")
     for backend, hess in variants:
         try:
@@ -135,12 +152,16 @@ def main():
                 model, xml, args.frame, args.knots, args.dt, target, backend
             )
         except Exception as exc:  # adam-robotics 0.5.0 fails on panda.urdf (docs/interop.md)
-            print(f"| {backend}, {hess} Hessian | failed to build: {str(exc).splitlines()[-1]} | | | | | |")
+            print(
+                f"| {backend}, {hess} Hessian | failed to build: {str(exc).splitlines()[-1]} | | | | | |"
+            )
             continue
         st, fopt, _, t_setup, t_solve = solve(nlp, bounds, hess)
         it = st["iter_count"]
-        print(f"| {backend}, {hess} Hessian | {st['return_status']} | {it} | {t_build + t_setup:.3f} | "
-              f"{t_solve:.3f} | {1e3 * t_solve / max(it, 1):.2f} | {fopt:.10g} |")
+        print(
+            f"| {backend}, {hess} Hessian | {st['return_status']} | {it} | {t_build + t_setup:.3f} | "
+            f"{t_solve:.3f} | {1e3 * t_solve / max(it, 1):.2f} | {fopt:.10g} |"
+        )
         del keep
 
 

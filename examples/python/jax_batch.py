@@ -54,25 +54,35 @@ def main():
     direct = median_time(lambda: sodyn.aba(model, data, q, v, tau), args.repeat, 2000)
     jitted = median_time(lambda: f(qj, vj, tj).block_until_ready(), args.repeat, 2000)
     print(f"model {model.name} nv={nv}")
-    print(f"single call: sodyn.aba {direct * 1e6:.2f} us, jit(sodyn.jax.aba) {jitted * 1e6:.2f} us, "
-          f"overhead {(jitted - direct) * 1e6:.2f} us")
+    print(
+        f"single call: sodyn.aba {direct * 1e6:.2f} us, jit(sodyn.jax.aba) {jitted * 1e6:.2f} us, "
+        f"overhead {(jitted - direct) * 1e6:.2f} us"
+    )
 
     for n in sorted({1000, args.n}):
         Q = np.stack([model.random_configuration(seed=i) for i in range(n)])
         V, T = rng.uniform(-1, 1, (n, nv)), rng.uniform(-1, 1, (n, nv))
         Qj, Vj, Tj = (jax.device_put(x) for x in (Q, V, T))
         fb = jax.jit(jax.vmap(lambda q, v, t: sj.aba(model, q, v, t)))
-        jb = jax.jit(jax.vmap(jax.jacfwd(lambda q, v, t: sj.aba(model, q, v, t), argnums=(0, 1, 2))))
-        np.testing.assert_array_equal(np.asarray(fb(Qj, Vj, Tj)), sodyn.batch.aba(model, Q, V, T, args.threads))
+        jb = jax.jit(
+            jax.vmap(jax.jacfwd(lambda q, v, t: sj.aba(model, q, v, t), argnums=(0, 1, 2)))
+        )
+        np.testing.assert_array_equal(
+            np.asarray(fb(Qj, Vj, Tj)), sodyn.batch.aba(model, Q, V, T, args.threads)
+        )
         jax.block_until_ready(jb(Qj, Vj, Tj))
         inner = max(1, 20000 // n)
         t_b = median_time(lambda: sodyn.batch.aba(model, Q, V, T, args.threads), args.repeat, inner)
         t_j = median_time(lambda: fb(Qj, Vj, Tj).block_until_ready(), args.repeat, inner)
-        t_bd = median_time(lambda: sodyn.batch.fd_derivatives(model, Q, V, T, args.threads), args.repeat, inner)
+        t_bd = median_time(
+            lambda: sodyn.batch.fd_derivatives(model, Q, V, T, args.threads), args.repeat, inner
+        )
         t_jd = median_time(lambda: jax.block_until_ready(jb(Qj, Vj, Tj)), args.repeat, inner)
-        print(f"N={n}: batch.aba {t_b * 1e3:.3f} ms, jit(vmap(aba)) {t_j * 1e3:.3f} ms "
-              f"({(t_j / t_b - 1) * 100:+.1f} %); batch.fd_derivatives {t_bd * 1e3:.3f} ms, "
-              f"jit(vmap(jacfwd(aba))) {t_jd * 1e3:.3f} ms ({(t_jd / t_bd - 1) * 100:+.1f} %)")
+        print(
+            f"N={n}: batch.aba {t_b * 1e3:.3f} ms, jit(vmap(aba)) {t_j * 1e3:.3f} ms "
+            f"({(t_j / t_b - 1) * 100:+.1f} %); batch.fd_derivatives {t_bd * 1e3:.3f} ms, "
+            f"jit(vmap(jacfwd(aba))) {t_jd * 1e3:.3f} ms ({(t_jd / t_bd - 1) * 100:+.1f} %)"
+        )
 
 
 if __name__ == "__main__":

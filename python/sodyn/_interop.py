@@ -299,9 +299,7 @@ class Kkt(Spec):
     outputs = ("qdd", "lambda_")
     jac_blocks = tuple((o, a) for o in range(2) for a in range(3))
     hess_blocks = tuple(
-        (o, a, b)
-        for o in range(2)
-        for (a, b) in ((0, 0), (1, 1), (0, 1), (1, 0), (2, 0), (0, 2))
+        (o, a, b) for o in range(2) for (a, b) in ((0, 0), (1, 1), (0, 1), (1, 0), (2, 0), (0, 2))
     )
 
     def nlambda(self) -> int:
@@ -467,9 +465,7 @@ class FramePlacement(Spec):
         H = np.zeros((4, 4, nv, nv))
         W = _skew(J[:3].T)  # (nv, 3, 3): [w_j]x
         dW = _skew(np.moveaxis(dJ[:3], 0, -1))  # (nv_j, nv_k, 3, 3): [dw_j/dq_k]x
-        H[:3, :3] = np.einsum("jkab,bc->acjk", dW, R) + np.einsum(
-            "jab,kbc,cd->adjk", W, W, R
-        )
+        H[:3, :3] = np.einsum("jkab,bc->acjk", dW, R) + np.einsum("jab,kbc,cd->adjk", W, W, R)
         H[:3, 3] = dJ[3:]
         return {(0, 0, 0): H}
 

@@ -67,7 +67,7 @@ def _colmajor_rows(block: np.ndarray, oshape: Tuple[int, ...]) -> np.ndarray:
     """``(N, *oshape, ...)`` to ``(N, prod(oshape), ...)`` with the output entries in CasADi's
     column-major order."""
     n = block.shape[0]
-    rest = block.shape[1 + len(oshape):]
+    rest = block.shape[1 + len(oshape) :]
     if len(oshape) == 1:
         return block
     axes = (0,) + tuple(range(len(oshape), 0, -1)) + tuple(range(1 + len(oshape), block.ndim))
@@ -238,7 +238,9 @@ class _Jacobian(_Base):
         res = []
         for o, a in self.pairs:
             if (o, a) in self.spec.jac_blocks:
-                res.append(self.patterns[(o, a)].dm(_colmajor_rows(np.asarray(jac[(o, a)]), self.osh[o])))
+                res.append(
+                    self.patterns[(o, a)].dm(_colmajor_rows(np.asarray(jac[(o, a)]), self.osh[o]))
+                )
             else:
                 res.append(_ca.DM(self.patterns[(o, a)].sp, 0.0))
         return res
@@ -335,7 +337,7 @@ class _ReverseJacobian(_Base):
     def __init__(self, name, rev: _Reverse, inames, onames, opts):
         self.rev = rev
         self.inames, self.onames = inames, onames
-        spec, n, nadj = rev.spec, rev.n, rev.nadj
+        spec, n = rev.spec, rev.n
         ni, no = len(spec.inputs), len(spec.outputs)
         self.ni, self.no = ni, no
         self.n_rev_in = ni + 2 * no
@@ -403,9 +405,7 @@ class _ReverseJacobian(_Base):
             ws = [self._unflatten_weights(w, o) for o, w in enumerate(ws)]
             xs_rep = [np.tile(x, (nadj, 1)) for x in xs]
             C = self.spec.contracted_batch(xs_rep, ws)  # (nadj * n, A, B), row d n + k
-        jac = rev._jacobians(xs) if any(
-            i >= self.ni + self.no for (_, i) in self.pairs
-        ) else {}
+        jac = rev._jacobians(xs) if any(i >= self.ni + self.no for (_, i) in self.pairs) else {}
         res = []
         for a, i in self.pairs:
             pat = self.patterns[(a, i)]
@@ -430,12 +430,16 @@ class _ReverseJacobian(_Base):
         sh = self.rev.osh[o]
         if len(sh) == 1:
             return w
-        return np.transpose(w.reshape((w.shape[0],) + sh[::-1]), (0,) + tuple(range(len(sh), 0, -1)))
+        return np.transpose(
+            w.reshape((w.shape[0],) + sh[::-1]), (0,) + tuple(range(len(sh), 0, -1))
+        )
 
 
 def _make(cls, model: Model, n: int, static=(), name: str = "") -> _Function:
     if not isinstance(model, Model):
-        raise TypeError(f"sodyn.casadi.{cls.name}: 'model' must be a sodyn.Model, got {type(model)!r}")
+        raise TypeError(
+            f"sodyn.casadi.{cls.name}: 'model' must be a sodyn.Model, got {type(model)!r}"
+        )
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise ValueError(f"sodyn.casadi.{cls.name}: 'n' must be a positive integer, got {n!r}")
     return _Function(name or f"sodyn_{cls.name}", cls(model, static), int(n), {})

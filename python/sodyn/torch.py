@@ -114,7 +114,6 @@ class _Vjp(torch.autograd.Function):
         else:
             ax1, aw1 = ax, aw
         _, jac = _first(spec, ax, batched)
-        osh = spec.out_shapes()
         adj = [np.zeros((ax1[0].shape[0], d)) for d in spec.tan_dims()]
         for (o, a), J in jac.items():
             n = J.shape[0]
@@ -132,8 +131,10 @@ class _Vjp(torch.autograd.Function):
         xs, ws = saved[:n_in], saved[n_in:]
         ax = [_np(x) for x in xs]
         aw = [_np(w) for w in ws]
-        au = [np.zeros(x.shape[:-1] + (d,)) if u is None else _np(u)
-              for u, x, d in zip(us, ax, spec.tan_dims())]
+        au = [
+            np.zeros(x.shape[:-1] + (d,)) if u is None else _np(u)
+            for u, x, d in zip(us, ax, spec.tan_dims())
+        ]
         if not batched:
             ax, aw, au = [x[None] for x in ax], [w[None] for w in aw], [u[None] for u in au]
         N = ax[0].shape[0]
@@ -155,6 +156,7 @@ class _Vjp(torch.autograd.Function):
 
         def out(g):
             return None if g is None else _t(g if batched else g[0])
+
         return (None, None, None) + tuple(out(g) for g in gx) + tuple(out(g) for g in gw)
 
 

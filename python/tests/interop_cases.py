@@ -170,7 +170,9 @@ class Case:
             J = sodyn.frame_jacobian(m, d, xs[0], s[0], "local_world_aligned")
             dJ = sodyn.frame_jacobian_derivative(m, d, xs[0], s[0], "local_world_aligned")
             W4 = w.reshape(4, 4)
-            sk = lambda u: np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])  # noqa: E731
+            sk = lambda u: np.array(
+                [[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]]
+            )  # noqa: E731
             C = np.zeros((nv, nv))
             for j in range(nv):
                 for k in range(nv):
@@ -179,8 +181,10 @@ class Case:
             return [[C]]
         if self.fn == "center_of_mass":
             C = np.stack(
-                [w @ sodyn.center_of_mass_velocity_derivatives(m, d, xs[0], np.eye(nv)[k])
-                 for k in range(nv)],
+                [
+                    w @ sodyn.center_of_mass_velocity_derivatives(m, d, xs[0], np.eye(nv)[k])
+                    for k in range(nv)
+                ],
                 axis=1,
             )
             return [[C]]

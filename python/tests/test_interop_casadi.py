@@ -74,7 +74,11 @@ def test_value_jacobian_hessian_equal_numpy_api_and_central_differences(case):
             assert close(got, fd2, 1e-6), (case.id, a, b)
 
 
-@pytest.mark.parametrize("case", [c for c in CASES if c.fn in ("aba", "rnea", "kkt_dynamics", "frame_placement")], ids=lambda c: c.id)
+@pytest.mark.parametrize(
+    "case",
+    [c for c in CASES if c.fn in ("aba", "rnea", "kkt_dynamics", "frame_placement")],
+    ids=lambda c: c.id,
+)
 def test_stacked_states_equal_sequential_calls_with_block_sparsity(case):
     n = 4
     f1, fn = _function(case), _function(case, n)
@@ -83,7 +87,10 @@ def test_stacked_states_equal_sequential_calls_with_block_sparsity(case):
     sym = _symbols(case, fn)
     outs = fn.call(sym)
     y = ca.vertcat(*[ca.vec(o) for o in outs])
-    W = [np.random.default_rng(30 + o).uniform(-1, 1, fn.sparsity_out(o).shape) for o in range(fn.n_out())]
+    W = [
+        np.random.default_rng(30 + o).uniform(-1, 1, fn.sparsity_out(o).shape)
+        for o in range(fn.n_out())
+    ]
     L = sum(ca.sum1(ca.sum2(ca.DM(Wo) * o)) for Wo, o in zip(W, outs))
     x = ca.vertcat(*[ca.vec(s) for s in sym])
     J = ca.jacobian(y, x)
@@ -96,15 +103,34 @@ def test_stacked_states_equal_sequential_calls_with_block_sparsity(case):
     y1 = ca.vertcat(*[ca.vec(o) for o in outs1])
     x1 = ca.vertcat(*[ca.vec(s) for s in sym1])
     w1 = ca.MX.sym("w", y1.shape[0])
-    F1 = ca.Function("F1", sym1 + [w1], [y1, ca.jacobian(y1, x1), ca.hessian(ca.dot(w1, y1), x1)[0]])
+    F1 = ca.Function(
+        "F1", sym1 + [w1], [y1, ca.jacobian(y1, x1), ca.hessian(ca.dot(w1, y1), x1)[0]]
+    )
     dims = [fn.sparsity_in(i).size1() for i in range(fn.n_in())]
     osz = [f1.sparsity_out(o).numel() for o in range(fn.n_out())]
     nnz_j = 0
     for k, s in enumerate(states):
-        wk = np.concatenate([np.asarray(Wo).reshape(f1.sparsity_out(o).size1(), -1, n, order="F")[:, :, k].ravel(order="F") for o, Wo in enumerate(W)])
+        wk = np.concatenate(
+            [
+                np.asarray(Wo)
+                .reshape(f1.sparsity_out(o).size1(), -1, n, order="F")[:, :, k]
+                .ravel(order="F")
+                for o, Wo in enumerate(W)
+            ]
+        )
         yk, Jk, Hk = (np.array(r) for r in F1(*s, wk))
-        rows = np.concatenate([o0 + k * osz[o] + np.arange(osz[o]) for o, o0 in enumerate(np.cumsum([0] + [n * z for z in osz])[:-1])])
-        cols = np.concatenate([i0 + k * dims[i] + np.arange(dims[i]) for i, i0 in enumerate(np.cumsum([0] + [n * d for d in dims])[:-1])])
+        rows = np.concatenate(
+            [
+                o0 + k * osz[o] + np.arange(osz[o])
+                for o, o0 in enumerate(np.cumsum([0] + [n * z for z in osz])[:-1])
+            ]
+        )
+        cols = np.concatenate(
+            [
+                i0 + k * dims[i] + np.arange(dims[i])
+                for i, i0 in enumerate(np.cumsum([0] + [n * d for d in dims])[:-1])
+            ]
+        )
         np.testing.assert_array_equal(yv.ravel()[rows], yk.ravel())
         np.testing.assert_array_equal(Jv[np.ix_(rows, cols)], Jk)
         assert close(Hv[np.ix_(cols, cols)], Hk, 1e-12)
@@ -113,8 +139,18 @@ def test_stacked_states_equal_sequential_calls_with_block_sparsity(case):
     Jmask = np.zeros_like(Jv, dtype=bool)
     Hmask = np.zeros_like(Hv, dtype=bool)
     for k in range(n):
-        rows = np.concatenate([o0 + k * osz[o] + np.arange(osz[o]) for o, o0 in enumerate(np.cumsum([0] + [n * z for z in osz])[:-1])])
-        cols = np.concatenate([i0 + k * dims[i] + np.arange(dims[i]) for i, i0 in enumerate(np.cumsum([0] + [n * d for d in dims])[:-1])])
+        rows = np.concatenate(
+            [
+                o0 + k * osz[o] + np.arange(osz[o])
+                for o, o0 in enumerate(np.cumsum([0] + [n * z for z in osz])[:-1])
+            ]
+        )
+        cols = np.concatenate(
+            [
+                i0 + k * dims[i] + np.arange(dims[i])
+                for i, i0 in enumerate(np.cumsum([0] + [n * d for d in dims])[:-1])
+            ]
+        )
         Jmask[np.ix_(rows, cols)] = True
         Hmask[np.ix_(cols, cols)] = True
     assert not np.any(Jv[~Jmask]) and not np.any(Hv[~Hmask])
@@ -142,13 +178,16 @@ def test_hessian_uses_the_contracted_second_order(monkeypatch):
     X = rng.uniform(-1, 1, 6 * model.nv)
     Hv = np.array(H(X))
     data = model.create_data()
-    Q, V, T = (X[i * 2 * model.nv:(i + 1) * 2 * model.nv].reshape(model.nv, 2, order="F") for i in range(3))
+    Q, V, T = (
+        X[i * 2 * model.nv : (i + 1) * 2 * model.nv].reshape(model.nv, 2, order="F")
+        for i in range(3)
+    )
     cqq, _, cqv, ctq = sodyn.fd_so_contracted(model, data, Q[:, 1], V[:, 1], T[:, 1], W[:, 1])
     nv = model.nv
-    assert close(Hv[nv:2 * nv, nv:2 * nv], cqq, 1e-12)
-    assert close(Hv[nv:2 * nv, 3 * nv:4 * nv], cqv, 1e-12)
-    assert close(Hv[2 * nv + nv:2 * nv + 2 * nv, nv:2 * nv], cqv.T, 1e-12)
-    assert close(Hv[4 * nv + nv:4 * nv + 2 * nv, nv:2 * nv], ctq, 1e-12)
+    assert close(Hv[nv : 2 * nv, nv : 2 * nv], cqq, 1e-12)
+    assert close(Hv[nv : 2 * nv, 3 * nv : 4 * nv], cqv, 1e-12)
+    assert close(Hv[2 * nv + nv : 2 * nv + 2 * nv, nv : 2 * nv], cqv.T, 1e-12)
+    assert close(Hv[4 * nv + nv : 4 * nv + 2 * nv, nv : 2 * nv], ctq, 1e-12)
 
 
 def _pendulum_nlp(n_knots=20, dt=0.05):
@@ -176,9 +215,15 @@ def test_ipopt_exact_hessian_converges_in_fewer_iterations_than_limited_memory()
     results = {}
     for hess in ("exact", "limited-memory"):
         S = ca.nlpsol(
-            "S", "ipopt", nlp,
-            {"ipopt.hessian_approximation": hess, "ipopt.print_level": 0, "print_time": False,
-             "ipopt.tol": 1e-10},
+            "S",
+            "ipopt",
+            nlp,
+            {
+                "ipopt.hessian_approximation": hess,
+                "ipopt.print_level": 0,
+                "print_time": False,
+                "ipopt.tol": 1e-10,
+            },
         )
         r = S(x0=0.01, lbg=0, ubg=0)
         st = S.stats()

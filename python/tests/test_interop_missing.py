@@ -25,7 +25,13 @@ def test_missing_framework_names_the_extra(module):
     assert f"pip install 'sodyn[{module}]'" in out.stdout, out.stdout + out.stderr
     # the numpy API does not need any framework
     out = subprocess.run(
-        [sys.executable, "-c", f"import sys; sys.modules[{module!r}] = None; import sodyn; print(sodyn.__version__)"],
-        capture_output=True, text=True, check=True,
+        [
+            sys.executable,
+            "-c",
+            f"import sys; sys.modules[{module!r}] = None; import sodyn; print(sodyn.__version__)",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
     )
     assert out.stdout.strip()

@@ -52,8 +52,10 @@ def test_derivatives_equal_numpy_api_and_central_differences(case):
     g = torch.autograd.grad(L, ts, create_graph=True)
     ref = case.contracted(xs, w)
     for a in range(n_args):
-        H_rows = [torch.autograd.grad(g[a][j], ts, retain_graph=True, allow_unused=True)
-                  for j in range(g[a].numel())]
+        H_rows = [
+            torch.autograd.grad(g[a][j], ts, retain_graph=True, allow_unused=True)
+            for j in range(g[a].numel())
+        ]
         for b in range(n_args):
             H = np.stack([np.zeros(xs[b].size) if r[b] is None else r[b].numpy() for r in H_rows])
             assert close(H, ref[a][b], 1e-10), (case.id, a, b)
@@ -62,7 +64,11 @@ def test_derivatives_equal_numpy_api_and_central_differences(case):
             assert close(H, fd2, 1e-6), (case.id, a, b)
 
 
-@pytest.mark.parametrize("case", [c for c in CASES if c.fn in ("aba", "rnea", "kkt_dynamics", "center_of_mass")], ids=lambda c: c.id)
+@pytest.mark.parametrize(
+    "case",
+    [c for c in CASES if c.fn in ("aba", "rnea", "kkt_dynamics", "center_of_mass")],
+    ids=lambda c: c.id,
+)
 def test_gradcheck_and_gradgradcheck(case):
     f = _tfn(case)
     xs = [torch.tensor(x, requires_grad=True) for x in state_of(case, 5)]
@@ -70,14 +76,24 @@ def test_gradcheck_and_gradgradcheck(case):
     assert torch.autograd.gradgradcheck(f, xs, eps=1e-6, atol=1e-5, rtol=1e-4)
 
 
-@pytest.mark.parametrize("case", [c for c in CASES if c.fn in ("aba", "rnea", "crba", "kkt_dynamics")], ids=lambda c: c.id)
+@pytest.mark.parametrize(
+    "case",
+    [c for c in CASES if c.fn in ("aba", "rnea", "crba", "kkt_dynamics")],
+    ids=lambda c: c.id,
+)
 def test_batch_dimension_equals_sequential_calls_bit_for_bit(case):
     f = _tfn(case)
     states = [state_of(case, 40 + k) for k in range(5)]
-    stacked = [torch.tensor(np.stack([s[a] for s in states]), requires_grad=True) for a in range(len(states[0]))]
+    stacked = [
+        torch.tensor(np.stack([s[a] for s in states]), requires_grad=True)
+        for a in range(len(states[0]))
+    ]
     out = f(*stacked)
     outs = out if isinstance(out, tuple) else (out,)
-    w = [torch.tensor(np.random.default_rng(50 + i).uniform(-1, 1, o.shape)) for i, o in enumerate(outs)]
+    w = [
+        torch.tensor(np.random.default_rng(50 + i).uniform(-1, 1, o.shape))
+        for i, o in enumerate(outs)
+    ]
     gb = torch.autograd.grad(sum((wi * o).sum() for wi, o in zip(w, outs)), stacked)
     for k, s in enumerate(states):
         ts = [torch.tensor(x, requires_grad=True) for x in s]
