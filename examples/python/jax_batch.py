@@ -4,8 +4,11 @@ over N states against ``sodyn.batch.aba`` / ``sodyn.batch.fd_derivatives``.
 
     python examples/python/jax_batch.py [--model panda.urdf] [--n 10000] [--repeat 7]
 
-Prints median times (of ``--repeat`` rounds) in microseconds. adam-robotics and MuJoCo MJX are
-not part of this script (docs/interop.md).
+Prints median times (of ``--repeat`` rounds). ``--adam URDF`` adds adam-robotics' JAX backend
+on that (fixed-base) URDF: ``qdd = solve(M, tau - h)`` from its ``mass_matrix`` and
+``bias_force``, under ``jit(lax.map(...))`` (its arrays fail under ``jax.vmap`` and ``jacfwd``
+with jax 0.10.2), against ``sodyn.jax.aba`` under the same ``lax.map`` and under ``vmap``, on
+the model loaded from the same URDF. MuJoCo MJX is not part of this script (docs/interop.md).
 """
 
 from __future__ import annotations
@@ -40,7 +43,11 @@ def main():
     ap.add_argument("--n", type=int, default=10000, help="states of the batched runs")
     ap.add_argument("--repeat", type=int, default=7)
     ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--adam", default=None, metavar="URDF", help="compare with adam-robotics")
     args = ap.parse_args()
+    if args.adam:
+        compare_adam(args.adam, 1000)
+        return
     model = sodyn.Model.from_urdf(args.model) if args.model else sodyn.Model.builtin("chain6")
     data = model.create_data()
     rng = np.random.default_rng(0)
@@ -83,6 +90,62 @@ def main():
             f"({(t_j / t_b - 1) * 100:+.1f} %); batch.fd_derivatives {t_bd * 1e3:.3f} ms, "
             f"jit(vmap(jacfwd(aba))) {t_jd * 1e3:.3f} ms ({(t_jd / t_bd - 1) * 100:+.1f} %)"
         )
+
+
+def compare_adam(urdf, n):
+    """adam-robotics' JAX backend against sodyn.jax on the same URDF, N states."""
+    from pathlib import Path
+
+    import jax.numpy as jnp
+    from adam.jax import KinDynComputations
+
+    xml = Path(urdf).read_text()
+    model = sodyn.Model.from_urdf_string(xml)
+    nv = model.nv
+    kd = KinDynComputations(
+        xml, [j.name for j in model.joints], gravity=jnp.array([0, 0, -9.81, 0, 0, 0.0])
+    )
+
+    def adam_aba(q, v, t):
+        M = kd.mass_matrix(jnp.eye(4), q)[6:, 6:]
+        h = kd.bias_force(jnp.eye(4), q, jnp.zeros(6), v)[6:]
+        return jnp.linalg.solve(M, t - h)
+
+    def sodyn_aba(q, v, t):
+        return sj.aba(model, q, v, t)
+
+    rng = np.random.default_rng(0)
+    Q = np.stack([model.random_configuration(seed=i) for i in range(n)])
+    V, T = rng.uniform(-1, 1, (n, nv)), rng.uniform(-1, 1, (n, nv))
+
+    def timed(name, f):
+        t0 = time.perf_counter()
+        out = jax.block_until_ready(f(Q, V, T))
+        first = time.perf_counter() - t0
+        t = median_time(lambda: jax.block_until_ready(f(Q, V, T)), 5, 1)
+        print(f"{name}, N={n}: first call (trace + compile) {first:.2f} s, then {t * 1e3:.2f} ms")
+        return out
+
+    def lax_map(fn):
+        return jax.jit(lambda Q, V, T: jax.lax.map(lambda x: fn(*x), (Q, V, T)))
+
+    print(f"model {model.name} nv={nv}")
+    ra = timed("adam jit(lax.map(aba))", lax_map(adam_aba))
+    rs = timed("sodyn.jax jit(lax.map(aba))", lax_map(sodyn_aba))
+    timed("sodyn.jax jit(vmap(aba))", jax.jit(jax.vmap(sodyn_aba)))
+    timed(
+        "sodyn.jax jit(vmap(jacfwd(aba)))",
+        jax.jit(jax.vmap(jax.jacfwd(sodyn_aba, argnums=(0, 1, 2)))),
+    )
+    print(f"max |adam - sodyn| of qdd: {float(jnp.abs(ra - rs).max()):.3g}")
+    for name, f in (
+        ("adam jit(vmap(aba))", jax.jit(jax.vmap(adam_aba))),
+        ("adam jit(lax.map(jacfwd(aba)))", lax_map(jax.jacfwd(adam_aba, argnums=(0, 1, 2)))),
+    ):
+        try:
+            timed(name, f)
+        except Exception as exc:  # adam-robotics 0.5.0 with jax 0.10.2
+            print(f"{name}: fails: {type(exc).__name__}: {str(exc).splitlines()[0]}")
 
 
 if __name__ == "__main__":
