@@ -82,7 +82,7 @@ def test_hessians_equal_contracted_and_central_differences(case):
             got = np.asarray(H[a][b])
             assert close(got, ref[a][b], 1e-10), (case.id, a, b)
             fd = central_jacobian(lambda x: grad_a(*xs[:b], x, *xs[b + 1 :]), xs[b])
-            assert close(got, fd, 1e-6), (case.id, a, b, np.abs(got - fd).max())
+            assert close(got, fd, 1e-5), (case.id, a, b, np.abs(got - fd).max())
     # jvp of the gradient (forward over reverse) and vjp of the jvp (reverse over forward)
     t = [np.random.default_rng(8 + i).uniform(-1, 1, x.shape) for i, x in enumerate(xs)]
     grad = jax.grad(L, argnums=tuple(range(n_args)))
