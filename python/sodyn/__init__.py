@@ -24,6 +24,7 @@ from ._sodyn import (
     Data,
     Joint,
     Model,
+    OcpError,
     SodynError,
     aba,
     center_of_mass,
@@ -93,6 +94,7 @@ def impact_so_contracted(
     )
 
 __all__ = [
+    "OcpError",
     "Contact",
     "ConstrainedIdResult",
     "Data",
