@@ -1429,7 +1429,7 @@ fn a_closed_standard_output_ends_every_command_quietly() {
 /// its own status (0 with warnings, 1 on an error) without a panic (status 101).
 #[test]
 fn a_closed_standard_error_is_ignored() {
-    let urdf = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/urdf/reversed_limits.urdf");
+    let urdf = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/lenient/reversed_limits.urdf");
     for (args, status) in [
         (&["info", "--model", urdf][..], 0),
         (&["info", "--model", "builtin:nonexistent"], 1),
