@@ -1177,7 +1177,8 @@ fn xml_declaration_after_whitespace_loads() {
     }
     // Lines stay those of the file: an error after the moved declaration, and one inside it.
     let text =
-        std::fs::read_to_string(Path::new(LENIENT).join("declaration_after_blank_line.urdf")).unwrap();
+        std::fs::read_to_string(Path::new(LENIENT).join("declaration_after_blank_line.urdf"))
+            .unwrap();
     let bad = text.replace(r#"<axis xyz="0 1 0"/>"#, r#"<axis xyz="0 one 0"/>"#);
     let line = 1 + text[..text.find(r#"<axis xyz="0 1 0"/>"#).unwrap()].matches('\n').count();
     expect_str_error(&bad, line as u32, "joint \"j1\"", "\"one\" is not a number");

@@ -57,11 +57,11 @@ pub(crate) fn run_demo(o: &DemoArgs) -> Result<()> {
     let tau = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
     let (qs, vs, as_, ts) = (q.as_slice(), v.as_slice(), a.as_slice(), tau.as_slice());
     outln!(
-        "sodyn demo: model \"{}\" ({spec}), nq = {}, nv = {}, {} bodies, seed {seed}",
+        "sodyn demo: model \"{}\" ({spec}), nq = {}, nv = {}, njoints = {}, seed {seed}",
         m.name(),
         m.nq(),
         m.nv(),
-        m.njoints() - 1
+        m.njoints()
     );
     outln!(
         "errors: max |ours − oracle| / max(1, max |oracle|); oracle = reference code with f64 / dual / hyper-dual numbers\n"

@@ -2,8 +2,10 @@
 //!
 //! Everything of the command line lives in this binary, not in the library: argument parsing
 //! (clap), the JSON state files and `eval` output ([`eval`]), the timings of `demo` and `bench`.
-//! Exit status: 0 on success, 1 on an error found while running (the message, prefixed with
-//! `sodyn: error:`, on standard error), 2 on a usage error reported by clap (unknown option,
+//! Exit status: 0 on success (also when standard output is closed while a command writes, e.g.
+//! by `| head`: the command ends there, quietly; see [`out`]), 1 on an error found while
+//! running (the message, prefixed with `sodyn: error:`, on standard error; a closed standard
+//! error is ignored), 2 on a usage error reported by clap (unknown option,
 //! missing or malformed value), 3 when `eval` wrote partial results (outputs undefined at the
 //! state, e.g. a singular mass matrix, left out and named in the output's `"errors"` object).
 
@@ -26,9 +28,10 @@ use std::process::ExitCode;
 /// Shown under every command's `--help`.
 const AFTER_HELP: &str = "\
 M is a URDF path, an MJCF (MuJoCo XML) path ending in .xml, or builtin:NAME (humanoid,
-quadruped, chain<N>, pendulum<N>, random_tree<N>[_ff][_s<SEED>]). Exit status: 0 on success,
-1 on an error (the message on standard error), 2 on a usage error, 3 when eval left out
-undefined outputs (its \"errors\" object names them). README.md has the JSON schemas.";
+quadruped, chain<N>, pendulum<N>, random_tree<N>[_ff][_s<SEED>]). Exit status: 0 on success
+(also when standard output is closed early, e.g. by head), 1 on an error (the message on
+standard error), 2 on a usage error, 3 when eval left out undefined outputs (its \"errors\"
+object names them). README.md has the JSON schemas.";
 
 /// sodyn: rigid-body dynamics and its exact first- and second-order derivatives
 #[derive(Debug, Parser)]
@@ -356,11 +359,12 @@ fn write_output(path: Option<&str>, v: &Value) -> Result<()> {
 /// The joint table of a model as printed by `sodyn info`.
 fn joint_table(model: &Model) -> String {
     let mut s = format!(
-        "model \"{}\": nq = {}, nv = {}, {} joints, {} frames\n",
+        "model \"{}\": nq = {}, nv = {}, njoints = {} (the world joint 0 included, as \
+         Pinocchio's njoints), {} frames\n",
         model.name(),
         model.nq(),
         model.nv(),
-        model.njoints() - 1,
+        model.njoints(),
         model.frames().len()
     );
     s += &format!(

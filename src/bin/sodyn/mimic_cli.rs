@@ -36,14 +36,15 @@ pub(crate) fn load(o: &ModelArgs) -> Result<MimicModel> {
 pub(crate) fn joint_table(mm: &MimicModel) -> String {
     let model = mm.full();
     let mut s = format!(
-        "model \"{}\": nq = {}, nv = {} (reduced coordinates; full tree nq = {}, nv = {}), {} \
-         joints ({} mimic), {} frames\n",
+        "model \"{}\": nq = {}, nv = {} (reduced coordinates; full tree nq = {}, nv = {}), \
+         njoints = {} (the world joint 0 included, as Pinocchio's njoints; {} mimic), {} \
+         frames\n",
         model.name(),
         mm.nq(),
         mm.nv(),
         model.nq(),
         model.nv(),
-        model.njoints() - 1,
+        model.njoints(),
         mm.mimics().len(),
         model.frames().len()
     );
