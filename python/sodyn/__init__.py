@@ -56,6 +56,7 @@ from ._sodyn import (
     rnea,
 )
 from . import batch
+from . import pinocchio_layout
 
 
 def kkt_so_contracted(
@@ -134,6 +135,7 @@ __all__ = [
     "kkt_so_contracted",
     "log6",
     "nonlinear_effects",
+    "pinocchio_layout",
     "rnea",
 ]
 
