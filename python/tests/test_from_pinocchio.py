@@ -52,7 +52,7 @@ def _robots_dir():
     try:
         dist = importlib.metadata.distribution("example-robot-data")
     except importlib.metadata.PackageNotFoundError:
-        pytest.skip("example-robot-data is not installed (python/tests/requirements.txt)")
+        pytest.skip("example-robot-data is not installed (python/tests/requirements-extras.txt)")
     for f in dist.files or ():
         p = f.as_posix()
         if ROBOTS in p:
