@@ -7,7 +7,8 @@ Runs in the Crocoddyl venv (``../shared/peer/setup-crocoddyl.sh``, with ``pip in
 Each problem is built by Crocoddyl's example code (``python/tests/crocoddyl_problems.py``; the
 gaits chained as the examples chain them, each from the previous gait's last state), converted
 once with ``sodyn.ocp.from_crocoddyl``, and solved from the example's initial guess by
-Crocoddyl's FDDP (or box-FDDP) and by sodyn's on 1 and 2 threads, interleaved over the rounds.
+Crocoddyl's FDDP (box-FDDP for ``humanoid_taichi.py``, with the examples' ``maxiter`` and
+``init_reg``) and by sodyn's on 1 and 2 threads, interleaved over the rounds.
 Reported per problem: iterations, final cost, solve time and time per iteration (median over
 rounds), and the median of the per-round ratios sodyn/Crocoddyl and 2 threads/1 thread.
 """
@@ -25,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
 import crocoddyl  # noqa: E402
-from crocoddyl_problems import CHAINS, PROBLEMS  # noqa: E402
+from crocoddyl_problems import CHAINS, PROBLEMS, SOLVE  # noqa: E402
 
 from sodyn import ocp  # noqa: E402
 
@@ -41,7 +42,7 @@ def build_all(names):
             cs.solve(xs, us, 100, False)
             x0 = np.array(cs.xs[-1])
             if name in names:
-                out.append((name, p, xs, us, False))
+                out.append((name, p, xs, us, SOLVE.get(name, ("fddp", 100, None))))
     return [o for n in names for o in out if o[0] == n]
 
 
@@ -58,19 +59,21 @@ def main():
     ap.add_argument("--json")
     args = ap.parse_args()
     rows = []
-    for name, p, xs, us, box in build_all(args.problems.split(",")):
+    for name, p, xs, us, (kind, maxiter, reg) in build_all(args.problems.split(",")):
         sp = ocp.from_crocoddyl(p)
+        box = kind == "boxfddp"
         CS, OS = (crocoddyl.SolverBoxFDDP, ocp.SolverBoxFDDP) if box else (crocoddyl.SolverFDDP, ocp.SolverFDDP)
         cs, s1, s2 = CS(p), OS(sp, threads=1), OS(sp, threads=2)
         tc, t1, t2 = [], [], []
         for _ in range(args.rounds):
-            tc.append(timed(lambda: cs.solve(xs, us, 100, False)))
-            t1.append(timed(lambda: s1.solve(xs, us, 100, False)))
-            t2.append(timed(lambda: s2.solve(xs, us, 100, False)))
+            cargs = (xs, us, maxiter, False) if reg is None else (xs, us, maxiter, False, reg)
+            tc.append(timed(lambda: cs.solve(*cargs)))
+            t1.append(timed(lambda: s1.solve(xs, us, maxiter, False, reg)))
+            t2.append(timed(lambda: s2.solve(xs, us, maxiter, False, reg)))
         r1 = statistics.median(a / b for a, b in zip(t1, tc))
         r21 = statistics.median(b / a for a, b in zip(t2, t1))
         it_c, it_s = cs.iter + 1, s1.iter + 1  # iterations run (Crocoddyl's `iter` is the last index)
-        row = dict(problem=name, T=p.T, iter_croc=cs.iter, iter_sodyn=s1.iter, cost_croc=cs.cost,
+        row = dict(problem=name, solver=kind, T=p.T, iter_croc=cs.iter, iter_sodyn=s1.iter, cost_croc=cs.cost,
                    cost_sodyn=s1.cost, ms_croc=1e3 * statistics.median(tc),
                    ms_sodyn_1t=1e3 * statistics.median(t1), ms_sodyn_2t=1e3 * statistics.median(t2),
                    us_per_iter_croc=1e6 * statistics.median(tc) / it_c,

@@ -129,6 +129,22 @@ def kinova_reach():
     return p, [], []
 
 
+def _from_example(filename: str):
+    """The problem of one of Crocoddyl's example scripts: its source up to the solver's
+    construction, run as written (no display, no plot), and its initial guess."""
+    import pathlib
+
+    import crocoddyl
+
+    path = pathlib.Path(crocoddyl.__file__).parent / "examples" / filename
+    src = path.read_text()
+    cut = src.index("solver = crocoddyl.Solver")
+    scope: Dict[str, Any] = {"__name__": "crocoddyl_example", "__file__": str(path)}
+    exec(compile(src[:cut], str(path), "exec"), scope)
+    p = scope["problem"]
+    return (p, *_guess(p))
+
+
 PROBLEMS: Dict[str, Callable[..., Any]] = {
     "anymal_walk": lambda short=False, x0=None: anymal("walk", short, x0),
     "anymal_trot": lambda short=False, x0=None: anymal("trot", short, x0),
@@ -139,6 +155,14 @@ PROBLEMS: Dict[str, Callable[..., Any]] = {
     "talos_legs_jump": lambda short=False, x0=None: talos_legs("jump", short, x0),
     "kinova_reach": lambda short=False, x0=None: kinova_reach(),
     "double_pendulum": lambda short=False, x0=None: double_pendulum(short),
+    "humanoid_manipulation": lambda short=False, x0=None: _from_example("humanoid_manipulation.py"),
+    "humanoid_taichi": lambda short=False, x0=None: _from_example("humanoid_taichi.py"),
+}
+
+# The examples' own solver, maxiter and init_reg where they are not FDDP / 100 / None.
+SOLVE = {
+    "humanoid_manipulation": ("fddp", 500, 0.1),
+    "humanoid_taichi": ("boxfddp", 500, 1e-9),
 }
 
 # The examples solve their gaits in this order, each from the last state of the previous one.
