@@ -295,7 +295,7 @@ fn errors_name_file_line_and_element() {
             "<mujoco><worldbody>\n<body name=\"a\"><joint/></body></worldbody></mujoco>",
             2,
             "body \"a\"",
-            "a moving body needs a positive mass",
+            "a moving body (with the bodies welded to it) needs a positive mass",
         ),
         (
             "<mujoco><worldbody>\n<body name=\"a\"><joint/>\n<geom name=\"g\" fromto=\"0 0 0 1 0 0\" size=\".1\"/></body></worldbody></mujoco>",

@@ -1,7 +1,7 @@
 """Type stubs of the compiled extension ``sodyn._sodyn`` (re-exported by ``sodyn``)."""
 
 import os
-from typing import Optional, Sequence, Tuple, Union
+from typing import Any, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -107,6 +107,13 @@ class Model:
         otherwise."""
     def expand_configuration(self, q: ArrayLike) -> Vector:
         """The full tree's configuration of a reduced one (``mimic=True`` models only)."""
+    @property
+    def tendons(self) -> list[dict[str, Any]]:
+        """The MJCF ``<tendon>``s in document order (data only: they do not enter the
+        dynamics), one dict each: ``name`` (``None`` if unnamed), ``type`` (``"fixed"`` or
+        ``"spatial"``) and ``path``: ``(joint name, coef)`` pairs for a fixed tendon;
+        ``("site", name)``, ``("geom", name, sidesite or None)`` and ``("pulley", divisor)``
+        for a spatial one. Empty for other models."""
     @property
     def warnings(self) -> list[str]:
         """What the URDF or MJCF loader accepted with a reservation, one ``"FILE:LINE: ELEMENT:
