@@ -30,7 +30,7 @@ from conftest import REPO, assert_close
 mujoco = pytest.importorskip("mujoco", reason="the mujoco wheel is the oracle (python/tests/requirements.txt)")
 
 DATA = REPO / "tests" / "data" / "mjcf"
-OWN_MODELS = ["features", "radian", "mass_rules", "chains"]
+OWN_MODELS = ["features", "radian", "mass_rules", "chains", "tendons", "nested_include/main"]
 TOL = 1e-9
 
 # The MJCF models shipped in the mujoco wheel (its testdata) and in dm_control's suite.
