@@ -5,13 +5,22 @@
 //! * `<mujoco model>` (the model name; `"MuJoCo Model"` without it), every `<worldbody>`, and
 //!   `<include file>` anywhere (the included file's top-level element is dropped and its
 //!   children take the place of the `<include>`; the path is relative to the directory of the
-//!   main file, or to the `base_dir` given with a string).
+//!   main file, or to the `base_dir` given with a string; in an included file, a path that
+//!   does not exist there is taken relative to the including file's directory, as MuJoCo does).
 //! * `<compiler>`: `angle` (`degree`, MuJoCo's default, or `radian`), `eulerseq`, `autolimits`,
 //!   `inertiafromgeom` (`true`, `false`, `auto`), `inertiagrouprange`, `boundmass`,
 //!   `boundinertia`, `balanceinertia`, `settotalmass`; `coordinate="global"`
 //!   (removed from MuJoCo in 2.3.3) is an error; `alignfree="true"` is an error (unsupported).
 //! * `<option gravity>` and `<option><flag gravity="disable"/></option>`.
-//! * `<default>` classes, nested, with `class` and `childclass` (on `<body>` and `<frame>`).
+//!   `discardvisual` (a visual geom with mass is an error with `inertiafromgeom="true"`, as in
+//!   MuJoCo; otherwise no effect) and `fusestatic` (no effect: static bodies are merged anyway).
+//! * `<default>` classes as MuJoCo reads them: the root class `main`, which every top-level
+//!   `<default>` (unnamed, `class="main"` or `class=""`) updates; nested classes (a copy of
+//!   their parent when read, names unique in the model), `class` and `childclass` (on `<body>`
+//!   and `<frame>`); what MuJoCo refuses is an error (see `docs/mjcf.md`).
+//! * `<tendon>`: `<fixed>` and `<spatial>` tendons are recorded ([`Model::tendons`], see
+//!   [`Tendon`]), checked as MuJoCo checks them, with one warning that they do not enter the
+//!   dynamics; a nonzero tendon `armature` (which MuJoCo adds to `M`) is an error.
 //! * `<body pos quat|axisangle|euler|xyaxes|zaxis>`, `<frame>` (a placement of its children),
 //!   `<inertial pos orientation mass diaginertia|fullinertia>`, `<joint>` of type `hinge`,
 //!   `slide`, `ball` and `free`, `<freejoint>`, `<geom>` (for inertias) and named `<site>`s (as
@@ -41,12 +50,13 @@
 //!   `cylinder`, `box`; `mass` or `density` (default 1000); `fromto`; geoms outside
 //!   `inertiagrouprange` are left out). A mesh, height field or SDF geom (or a primitive
 //!   sized from a mesh) that would contribute to a moving body's inertia is an error naming
-//!   the body (give it an `<inertial>`); in a static body it does not matter. Then
-//!   `boundmass`, `boundinertia`, `balanceinertia`, and `settotalmass`. A
-//!   moving body (one with joints) must have positive mass and principal moments (MuJoCo's
+//!   the body (give it an `<inertial>`); in a static body it does not matter. A body with
+//!   joints needs, with the bodies welded to it, a positive mass and moments. Then
+//!   `boundmass`, `boundinertia`, `balanceinertia`, and `settotalmass`. A body with joints,
+//!   with the bodies welded to it, must have positive mass and principal moments (MuJoCo's
 //!   rule); negative masses, densities or sizes, a non-physical `<inertial>`, and a plane in a
 //!   moving body are errors.
-//! * Joint `damping`, `stiffness`, `frictionloss`, actuators, tendons, contacts, equality
+//! * Joint `damping`, `stiffness`, `frictionloss`, actuators, contacts, equality
 //!   constraints, sensors and every element irrelevant to the rigid-body dynamics are ignored;
 //!   a nonzero body `gravcomp` is ignored with a warning in [`Model::warnings`]. A joint's
 //!   `armature` (with the class defaults; none for a `<freejoint>`, as in MuJoCo) is the
