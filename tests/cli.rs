@@ -4,8 +4,9 @@
 
 use nalgebra::{DMatrix, DVector};
 use serde_json::Value;
+use std::io::Read;
 use std::path::PathBuf;
-use std::process::{Command, Output};
+use std::process::{Command, Output, Stdio};
 
 fn sodyn(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_sodyn"))
@@ -530,7 +531,20 @@ fn bench_options_are_validated() {
 #[test]
 fn every_command_has_a_generated_help() {
     let commands: [(&str, &[&str]); 5] = [
-        ("demo", &["--model <M>", "--seed <S>", "[default: builtin:humanoid]"]),
+        (
+            "demo",
+            &[
+                "--model <M>",
+                "--seed <S>",
+                "[default: builtin:humanoid]",
+                "--floating-base",
+                "--armature <A>",
+                "--mimic",
+                "--contacts <F1,F2,...>",
+                "--contact-type <3d|6d>",
+                "--contact-reference",
+            ],
+        ),
         ("info", &["--model <M>", "--floating-base"]),
         ("random-state", &["--model <M>", "--floating-base", "--seed <S>", "-o, --output <FILE>"]),
         (
@@ -593,7 +607,7 @@ fn unknown_options_and_commands_are_usage_errors() {
         (&["info", "--model", "builtin:quadruped", "--state", s], "--state"),
         (&["eval", "--model", "builtin:quadruped", "--state", s, "--bogus"], "--bogus"),
         (&["random-state", "--model", "builtin:quadruped", "--order", "2"], "--order"),
-        (&["demo", "--floating-base"], "--floating-base"),
+        (&["demo", "--state", s], "--state"),
         (&["bench", "--model", "builtin:quadruped", "--smoke", "--output", "x"], "--output"),
     ] {
         let err = assert_usage_error(&sodyn(args), &args.join(" "));
@@ -1002,7 +1016,12 @@ fn mjcf_models_load_by_extension() {
     let o = sodyn(&["info", "--model", xml]);
     assert_ok(&o, "info on an MJCF file");
     let out = stdout(&o);
-    assert!(out.starts_with("model \"features\": nq = 22, nv = 20, 13 joints"), "{out}");
+    assert!(
+        out.starts_with(
+            "model \"features\": nq = 22, nv = 20, njoints = 14 (the world joint 0 included"
+        ),
+        "{out}"
+    );
     assert!(out.contains("root") && out.contains("free_flyer") && out.contains("neck"), "{out}");
     assert!(stderr(&o).contains("sodyn: warning:") && stderr(&o).contains("armature"));
     let s = tmp("mjcf-state.json");
@@ -1332,4 +1351,192 @@ fn bench_mimic_times_the_batched_algorithms() {
         let err = assert_clean_failure(&sodyn(&a), needle);
         assert!(err.contains(needle), "{err}");
     }
+}
+
+/// Every unknown key of a state file, at any level, is an error naming it and the known keys
+/// (a typo such as `"vel"` would otherwise evaluate at zero velocity), with and without
+/// `--mimic`.
+#[test]
+fn unknown_state_keys_are_errors_at_every_level() {
+    let state = tmp("typo.json");
+    let st = state.to_str().unwrap();
+    let known = "(known: q, v, a, tau, contacts, lambda, restitution, weights, frames)";
+    let mimic = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/mimic_arm.urdf");
+    for (body, needle) in [
+        (r#"{"vel": [0], "tau_ext": [1]}"#, format!("unknown key \"tau_ext\" {known}")),
+        (r#"{"q": [0, 0], "qd": [1, 2]}"#, format!("unknown key \"qd\" {known}")),
+        (r#"{"Q": []}"#, format!("unknown key \"Q\" {known}")),
+        (
+            r#"{"contacts": [{"frame": "link2", "kp": 1, "gain": 2}]}"#,
+            "unknown key \"contacts[0].gain\" (known: frame, type, reference, point, placement, \
+             kp, kd)"
+                .to_string(),
+        ),
+        (
+            r#"{"contacts": [{"frame": "link2", "placement": {"xyz": [0, 0, 0], "ypr": [0, 0, 0]}}]}"#,
+            "unknown key \"contacts[0].placement.ypr\" (known: xyz, rpy)".to_string(),
+        ),
+        (r#"{"weights": {"qd": [1, 1]}}"#, "unknown key \"weights.qd\" (known: ".to_string()),
+    ] {
+        std::fs::write(&state, body).unwrap();
+        let o = sodyn(&["eval", "--model", "builtin:pendulum2", "--state", st]);
+        let err = assert_clean_failure(&o, body);
+        assert!(err.contains(&format!("{st}: {needle}")), "{body}: {err}");
+        assert!(stdout(&o).is_empty(), "{body}");
+    }
+    std::fs::write(&state, r#"{"v": [], "vel": []}"#).unwrap();
+    let o = sodyn(&["eval", "--model", mimic, "--mimic", "--state", st]);
+    let err = assert_clean_failure(&o, "unknown key with --mimic");
+    assert!(err.contains(&format!("{st}: unknown key \"vel\" {known}")), "{err}");
+}
+
+/// Runs `sodyn args` with its standard output on a pipe, reads the first bytes and closes the
+/// pipe: the command ends quietly (status 0, no panic message on standard error).
+#[track_caller]
+fn assert_quiet_on_closed_stdout(args: &[&str]) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sodyn"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run the sodyn binary");
+    let mut out = child.stdout.take().unwrap();
+    let mut first = [0u8; 16];
+    out.read_exact(&mut first).unwrap_or_else(|e| panic!("{args:?}: no output ({e})"));
+    drop(out);
+    let o = child.wait_with_output().unwrap();
+    let err = stderr(&o);
+    assert!(!err.contains("panicked") && !err.contains("Broken pipe"), "{args:?}: {err}");
+    assert_eq!(o.status.code(), Some(0), "{args:?}: status; stderr: {err}");
+}
+
+/// Every command, its output closed after its first bytes (`sodyn ... | head -c 16`). The
+/// outputs that come at once are larger than a pipe's buffer (64 KiB), so that writing them
+/// meets the closed pipe; `demo` and `bench` write line by line as they time.
+#[test]
+fn a_closed_standard_output_ends_every_command_quietly() {
+    let state = tmp("pipe-state.json");
+    std::fs::write(&state, "{}").unwrap();
+    let st = state.to_str().unwrap();
+    for args in [
+        &["info", "--model", "builtin:random_tree1500"][..],
+        &["random-state", "--model", "builtin:random_tree4000"],
+        &["eval", "--model", "builtin:humanoid", "--state", st, "--order", "2"],
+        &["demo"],
+        &["demo", "--model", "builtin:quadruped", "--contacts", "LF_FOOT", "--contact-type", "6d"],
+        &["bench", "--model", "builtin:humanoid", "--smoke"],
+    ] {
+        assert_quiet_on_closed_stdout(args);
+    }
+}
+
+/// A closed standard error: warnings and error messages are dropped, the command goes on to
+/// its own status (0 with warnings, 1 on an error) without a panic (status 101).
+#[test]
+fn a_closed_standard_error_is_ignored() {
+    let urdf = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/lenient/reversed_limits.urdf");
+    for (args, status) in [
+        (&["info", "--model", urdf][..], 0),
+        (&["info", "--model", "builtin:nonexistent"], 1),
+        (&["eval", "--model", "builtin:pendulum2", "--state", "/nonexistent/state.json"], 1),
+    ] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_sodyn"))
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("run the sodyn binary");
+        drop(child.stderr.take());
+        let o = child.wait_with_output().unwrap();
+        assert_eq!(o.status.code(), Some(status), "{args:?}");
+        if status == 0 {
+            assert!(stdout(&o).contains("x_to_world"), "{args:?}: {}", stdout(&o));
+        }
+    }
+    // The same warnings with standard error open: file, line, joint.
+    let o = sodyn(&["info", "--model", urdf]);
+    assert_ok(&o, "info on reversed limits");
+    let err = stderr(&o);
+    assert!(
+        err.contains(&format!("sodyn: warning: {urdf}:27: joint \"x_to_world\": <limit"))
+            && err.contains(&format!("{urdf}:32: joint \"shoulder\""))
+            && err.contains("loaded without limits"),
+        "{err}"
+    );
+}
+
+/// `demo` takes the model options of `eval` and the contacts of `bench`; its error column stays
+/// at round-off against the oracle. Without options it is unchanged (the humanoid, its soles).
+#[test]
+fn demo_takes_the_model_and_contact_options() {
+    let models = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/models");
+    let solo = models.join("solo12.urdf");
+    let solo = solo.to_str().unwrap();
+    let max_err = |o: &Output| -> f64 {
+        let out = stdout(o);
+        let line = out
+            .lines()
+            .find_map(|l| l.strip_prefix("maximum relative error against the oracle: "))
+            .unwrap_or_else(|| panic!("no error line: {out}"));
+        line.trim().parse().unwrap()
+    };
+    let runs: [(&[&str], &str); 4] = [
+        (
+            &["demo", "--model", solo, "--floating-base", "--contacts", "FL_FOOT,FR_FOOT,HL_FOOT"],
+            "contacts (3d local_world_aligned) on FL_FOOT, FR_FOOT, HL_FOOT",
+        ),
+        (
+            &[
+                "demo",
+                "--model",
+                solo,
+                "--floating-base",
+                "--contacts",
+                "FL_FOOT,HR_FOOT",
+                "--contact-type",
+                "6d",
+                "--contact-reference",
+                "local",
+                "--armature",
+                "0.01",
+            ],
+            "contacts (6d local) on FL_FOOT, HR_FOOT",
+        ),
+        (&["demo", "--model", "builtin:quadruped", "--armature", "0.1"], "contacts on LF_FOOT"),
+        (&["demo", "--model", "builtin:pendulum3"], "nq = 3, nv = 3"),
+    ];
+    for (args, needle) in runs {
+        let o = sodyn(args);
+        assert_ok(&o, &args.join(" "));
+        let out = stdout(&o);
+        assert!(out.contains(needle), "{args:?}: {out}");
+        assert!(max_err(&o) < 1e-8, "{args:?}: {out}");
+        if args.contains(&"--floating-base") {
+            assert!(out.contains("nq = 19, nv = 18"), "{out}");
+        }
+    }
+    let (base, no_armature) = (
+        sodyn(&["demo", "--model", "builtin:quadruped"]),
+        sodyn(&["demo", "--model", "builtin:quadruped", "--armature", "0"]),
+    );
+    assert_ok(&base, "demo quadruped");
+    assert_ok(&no_armature, "demo quadruped --armature 0");
+    // Errors: an unknown contact frame, contacts with --mimic, --contact-type without
+    // --contacts, a floating base on a built-in model.
+    let err = assert_clean_failure(
+        &sodyn(&["demo", "--model", solo, "--contacts", "FL_FOOT,NOSE"]),
+        "unknown contact frame",
+    );
+    assert!(err.contains("--contacts: unknown frame \"NOSE\""), "{err}");
+    let mimic = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/mimic_arm.urdf");
+    let err = assert_clean_failure(
+        &sodyn(&["demo", "--model", mimic, "--mimic", "--contacts", "palm"]),
+        "contacts with --mimic",
+    );
+    assert!(err.contains("--contacts is not supported with demo --mimic"), "{err}");
+    let err = assert_usage_error(&sodyn(&["demo", "--contact-type", "6d"]), "--contact-type alone");
+    assert!(err.contains("--contacts"), "{err}");
+    let err =
+        assert_clean_failure(&sodyn(&["demo", "--floating-base"]), "--floating-base built-in");
+    assert!(err.contains("--floating-base applies to URDF files"), "{err}");
 }

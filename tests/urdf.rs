@@ -12,6 +12,9 @@ use std::path::{Path, PathBuf};
 const SHARED_MODELS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/models");
 const COMMITTED_MODELS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/models");
 const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/urdf");
+/// URDFs that Pinocchio and Bullet load and that need leniency (`tests/data/urdf` holds only
+/// broken ones).
+const LENIENT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/lenient");
 const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures");
 
 const FIXED: UrdfOptions =
@@ -1090,4 +1093,146 @@ fn placeholder_inertia_merged_into_physical_body() {
     assert!(w.starts_with("inline.urdf:7: link \"foot\": ") && w.contains(reason), "{w}");
     // A heavy shin: no warning.
     assert!(load_urdf_str(&xml("1.5"), "p.urdf", &STRICT).unwrap().warnings().is_empty());
+}
+
+// ---------------------------------------------------------------------------------------------
+// What Pinocchio and Bullet load: reversed limits, and an XML declaration after whitespace
+// (python/tests/test_urdf_leniency.py checks the same files against Pinocchio 4.1).
+
+#[test]
+fn reversed_limits_load_as_unlimited_with_a_warning() {
+    let path = Path::new(LENIENT).join("reversed_limits.urdf");
+    let file = path.display().to_string();
+    for opts in [FIXED, STRICT, FLOATING] {
+        let m = load_urdf_file(&path, &opts).unwrap();
+        let q0 = if opts.floating_base { 7 } else { 0 };
+        let names: Vec<&str> = m.names()[1..].iter().map(String::as_str).collect();
+        let skip = usize::from(opts.floating_base);
+        assert_eq!(&names[skip..], ["x_to_world", "shoulder", "elbow", "wrist"]);
+        let lim = |k: usize| (m.lower()[q0 + k], m.upper()[q0 + k]);
+        // Reversed: unlimited. Equal (the absent lower and upper of `elbow`): kept. Ordered: kept.
+        assert_eq!(lim(0), (f64::NEG_INFINITY, f64::INFINITY));
+        assert_eq!(lim(1), (f64::NEG_INFINITY, f64::INFINITY));
+        assert_eq!(lim(2), (0.0, 0.0));
+        assert_eq!(lim(3), (-1.5, 1.5));
+        assert_eq!(
+            m.warnings(),
+            [
+                format!(
+                    "{file}:27: joint \"x_to_world\": <limit lower=\"1\" upper=\"-1\">: lower > \
+                     upper, read as \"not limited\": loaded without limits"
+                ),
+                format!(
+                    "{file}:32: joint \"shoulder\": <limit lower=\"0.5\" upper=\"-0.5\">: lower \
+                     > upper, read as \"not limited\": loaded without limits"
+                ),
+            ]
+        );
+        // Random configurations sample the reversed joints as unlimited ones (prismatic in
+        // [-1, 1], revolute in [-π, π]), like the zero-width `elbow`; `wrist` within its limits.
+        let mut rng = sodyn::rng::Rng::new(3);
+        let (mut lo, mut hi) = ([f64::INFINITY; 4], [f64::NEG_INFINITY; 4]);
+        for _ in 0..2000 {
+            let q = m.random_configuration(&mut rng);
+            for k in 0..4 {
+                lo[k] = lo[k].min(q[q0 + k]);
+                hi[k] = hi[k].max(q[q0 + k]);
+            }
+        }
+        let pi = std::f64::consts::PI;
+        for (k, bound) in [(0, 1.0), (1, pi), (2, pi), (3, 1.5)] {
+            assert!(lo[k] >= -bound && hi[k] <= bound, "q[{k}] in [{}, {}]", lo[k], hi[k]);
+            assert!(
+                lo[k] < -0.9 * bound && hi[k] > 0.9 * bound,
+                "q[{k}] in [{}, {}]",
+                lo[k],
+                hi[k]
+            );
+        }
+    }
+}
+
+/// The files of the whitespace class load as the file without it: same model, no warning.
+#[test]
+fn xml_declaration_after_whitespace_loads() {
+    let plain = |f: &str| {
+        let text = std::fs::read_to_string(Path::new(LENIENT).join(f)).unwrap();
+        let start = text.find("<robot").unwrap();
+        // The same text with nothing before the root element, each line at its place.
+        let lines = text[..start].matches('\n').count();
+        "\n".repeat(lines) + &text[start..]
+    };
+    for (file, name) in [
+        ("declaration_after_blank_line.urdf", "declaration_after_blank_line"),
+        ("declaration_after_bom_and_whitespace.urdf", "declaration_after_bom_and_whitespace"),
+    ] {
+        let m = load_urdf_file(&Path::new(LENIENT).join(file), &FIXED).unwrap();
+        let reference = load_urdf_str(&plain(file), file, &FIXED).unwrap();
+        assert_eq!(m.name(), name);
+        assert_eq!((m.nq(), m.nv(), m.njoints()), (2, 2, 3));
+        assert_eq!(m.names(), reference.names());
+        assert_eq!(m.placements(), reference.placements());
+        assert_eq!(m.inertias(), reference.inertias());
+        assert!(m.warnings().is_empty(), "{:?}", m.warnings());
+    }
+    // Lines stay those of the file: an error after the moved declaration, and one inside it.
+    let text =
+        std::fs::read_to_string(Path::new(LENIENT).join("declaration_after_blank_line.urdf"))
+            .unwrap();
+    let bad = text.replace(r#"<axis xyz="0 1 0"/>"#, r#"<axis xyz="0 one 0"/>"#);
+    let line = 1 + text[..text.find(r#"<axis xyz="0 1 0"/>"#).unwrap()].matches('\n').count();
+    expect_str_error(&bad, line as u32, "joint \"j1\"", "\"one\" is not a number");
+    let bad = text.replace(r#"<?xml version="1.0" ?>"#, r#"<?xml version="1.0" encodin="x"?>"#);
+    let e = load_urdf_str(&bad, "inline.urdf", &FIXED).unwrap_err().to_string();
+    assert!(e.starts_with("inline.urdf:2: XML: malformed XML: ") && e.contains(" at 2:"), "{e}");
+    // A BOM directly before the declaration, and CRLF line ends before it.
+    for prefix in ["\u{FEFF}", "\r\n\r\n", "\u{FEFF}\r\n \t"] {
+        let xml = format!("{prefix}{}", text.trim_start());
+        let m = load_urdf_str(&xml, "inline.urdf", &FIXED).unwrap();
+        assert_eq!(m.nv(), 2, "{prefix:?}");
+    }
+}
+
+/// Anything but whitespace (and a BOM) before the XML declaration stays an error naming the
+/// declaration's line, as in urdfdom.
+#[test]
+fn xml_declaration_after_other_content_is_an_error() {
+    let body = r#"<robot name="r"><link name="a"/></robot>"#;
+    for (prefix, line) in [
+        ("<!-- comment -->\n", 2),
+        ("\n\n<!-- comment -->\n\n", 5),
+        ("x\n", 1),
+        ("<?xml version=\"1.0\"?>\n", 2),
+        ("\n<?xml version=\"1.0\"?>\n", 3),
+    ] {
+        let xml = format!("{prefix}<?xml version=\"1.0\"?>\n{body}");
+        let e = load_urdf_str(&xml, "inline.urdf", &FIXED).unwrap_err();
+        let msg = e.to_string();
+        assert!(msg.starts_with(&format!("inline.urdf:{line}: XML: malformed XML")), "{msg}");
+    }
+}
+
+/// The MJCF loader shares the declaration handling.
+#[test]
+fn mjcf_xml_declaration_after_whitespace_loads() {
+    use sodyn::model::{MjcfOptions, load_mjcf_str};
+    let body = r#"<mujoco model="m">
+  <worldbody>
+    <body name="b"><joint name="h" type="hinge"/><geom type="sphere" size="0.1"/></body>
+  </worldbody>
+</mujoco>"#;
+    let opts = MjcfOptions::default();
+    for prefix in ["", "\n", "\u{FEFF}\n  \n", "\r\n\t"] {
+        let xml = format!("{prefix}<?xml version=\"1.0\" encoding=\"utf-8\"?>\n{body}");
+        let m = load_mjcf_str(&xml, "m.xml", Path::new("."), &opts)
+            .unwrap_or_else(|e| panic!("{prefix:?}: {e}"));
+        assert_eq!(m.nv(), 1, "{prefix:?}");
+    }
+    let xml = format!("<!-- c -->\n<?xml version=\"1.0\"?>\n{body}");
+    let e = load_mjcf_str(&xml, "m.xml", Path::new("."), &opts).unwrap_err().to_string();
+    assert!(e.starts_with("m.xml:2: XML: malformed XML"), "{e}");
+    // Lines after a moved declaration are the file's.
+    let bad = format!("\n\n<?xml version=\"1.0\"?>\n{}", body.replace("hinge", "hinj"));
+    let e = load_mjcf_str(&bad, "m.xml", Path::new("."), &opts).unwrap_err().to_string();
+    assert!(e.starts_with("m.xml:6:"), "{e}");
 }

@@ -183,6 +183,16 @@ pub fn state(bytes: &[u8]) -> bool {
     let order = if key("order").and_then(|o| o.as_u64()) == Some(2) { 2 } else { 1 };
     let models = state_models();
     let m = models.iter().find(|m| m.name == name).unwrap_or(&models[0]);
+    // "model" and "order" choose the model and the order, they are not state keys (an unknown
+    // key is an error): the state is the object without them.
+    let text = match meta {
+        Some(serde_json::Value::Object(mut o)) => {
+            o.remove("model");
+            o.remove("order");
+            serde_json::Value::Object(o).to_string()
+        }
+        _ => text.into_owned(),
+    };
     let Ok(s) = eval::load_state(&m.model, &text, "<fuzz>", m.floating_base) else {
         return false;
     };

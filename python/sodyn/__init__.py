@@ -24,6 +24,7 @@ from ._sodyn import (
     Data,
     Joint,
     Model,
+    OcpError,
     SodynError,
     aba,
     center_of_mass,
@@ -56,6 +57,7 @@ from ._sodyn import (
     rnea,
 )
 from . import batch
+from . import pinocchio_layout
 
 
 def kkt_so_contracted(
@@ -92,6 +94,7 @@ def impact_so_contracted(
     )
 
 __all__ = [
+    "OcpError",
     "Contact",
     "ConstrainedIdResult",
     "Data",
@@ -134,6 +137,7 @@ __all__ = [
     "kkt_so_contracted",
     "log6",
     "nonlinear_effects",
+    "pinocchio_layout",
     "rnea",
 ]
 

@@ -1,7 +1,7 @@
 """Type stubs of the compiled extension ``sodyn._sodyn`` (re-exported by ``sodyn``)."""
 
 import os
-from typing import Any, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -81,6 +81,18 @@ class Model:
                          floating_base: bool = False) -> "Model":
         """Loads an MJCF document given as a string; ``<include>`` paths are relative to
         ``base_dir`` (default: the current directory)."""
+    @staticmethod
+    def from_pinocchio(pin_model: Any) -> "Model":
+        """Reads a ``pinocchio.Model`` (duck-typed; Pinocchio 2 to 4; reduced models of
+        ``pinocchio.buildReducedModel`` too): joints, placements, inertias, armature, position
+        limits (Pinocchio's ``±max double`` as ``±inf``), gravity, name and every frame.
+        Joint ``i`` and frame ``k`` are Pinocchio's joint ``i`` and frame ``k`` (a frame name
+        already taken by an earlier frame becomes ``"{name}#{k}"``). Supported joints:
+        FreeFlyer, RX/RY/RZ, RevoluteUnaligned, RUBX/RUBY/RUBZ and RevoluteUnboundedUnaligned
+        (continuous: one coordinate, the angle), PX/PY/PZ, PrismaticUnaligned, Spherical,
+        Planar (``q = [x, y, θ]``); any other type raises ``SodynError`` naming the joint and
+        the type. ``sodyn.pinocchio_layout`` maps states, velocities and Jacobians (the free
+        flyer's ``v`` is ``[ω; v]`` here, ``[v; ω]`` in Pinocchio)."""
     @staticmethod
     def builtin(name: str) -> "Model": ...
     @staticmethod
@@ -342,3 +354,46 @@ def batch_id_so_derivatives(model: Model, q: ArrayLike, v: ArrayLike, a: ArrayLi
                             threads: Optional[int] = None) -> Tuple[npt.NDArray[np.float64], ...]: ...
 def batch_fd_so_derivatives(model: Model, q: ArrayLike, v: ArrayLike, tau: ArrayLike,
                             threads: Optional[int] = None) -> Tuple[npt.NDArray[np.float64], ...]: ...
+
+# --- sodyn.ocp's Rust side (python/src/ocp.rs); use the classes of sodyn.ocp. ---
+class OcpError(ValueError): ...
+
+class _Solver:
+    def __init__(self, model: Model, problem_json: str, kind: str, threads: int = 1) -> None: ...
+    def solve(
+        self,
+        init_xs: Optional[Sequence[Sequence[float]]] = None,
+        init_us: Optional[Sequence[Sequence[float]]] = None,
+        maxiter: int = 100,
+        is_feasible: bool = False,
+        init_reg: Optional[float] = None,
+    ) -> bool: ...
+    def set_candidate(
+        self,
+        xs: Optional[Sequence[Sequence[float]]] = None,
+        us: Optional[Sequence[Sequence[float]]] = None,
+        is_feasible: bool = False,
+    ) -> None: ...
+    xs: List[np.ndarray]
+    us: List[np.ndarray]
+    k: List[np.ndarray]
+    fs: List[np.ndarray]
+    cost: float
+    stop: float
+    iter: int
+    preg: float
+    steplength: float
+    is_feasible: bool
+    ffeas: float
+    th_stop: float
+    threads: int
+    termination: str
+    log: List[Dict[str, float]]
+    horizon: int
+    nus: List[int]
+    def calc(self, xs: Sequence[Sequence[float]], us: Sequence[Sequence[float]]) -> float: ...
+    def calc_diff(self, xs: Sequence[Sequence[float]], us: Sequence[Sequence[float]]) -> float: ...
+    def node_data(self, t: int) -> Dict[str, Any]: ...
+    def quasi_static(self, xs: Sequence[Sequence[float]]) -> List[np.ndarray]: ...
+    def rollout(self, us: Sequence[Sequence[float]]) -> List[np.ndarray]: ...
+    def set_x0(self, x0: Sequence[float]) -> None: ...

@@ -42,6 +42,9 @@ use sodyn::tensor::Tensor3;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 
+/// `Model.from_pinocchio` (python/src/pinocchio.rs; pyo3 `multiple-pymethods`).
+mod pinocchio;
+
 create_exception!(
     _sodyn,
     SodynError,
@@ -436,7 +439,7 @@ impl PyJoint {
 
 /// Immutable description of a kinematic tree (Pinocchio's `Model`); only gravity may be set.
 #[pyclass(name = "Model", module = "sodyn._sodyn")]
-struct PyModel {
+pub(crate) struct PyModel {
     /// The model; with mimic joints, the full tree (every joint independent).
     m: Model,
     /// `Model.from_urdf(..., mimic=True)`: the reduced model, whose coordinates the Python
@@ -453,7 +456,7 @@ impl PyModel {
     }
     /// The model for the functions that do not support mimic joints: an error naming `what`
     /// for a model loaded with `mimic=True`.
-    fn full_only(&self, what: &str) -> PyResult<&Model> {
+    pub(crate) fn full_only(&self, what: &str) -> PyResult<&Model> {
         if self.mimic.is_some() {
             return Err(core_err(Error::Argument {
                 name: "model".into(),
@@ -3498,9 +3501,12 @@ fn mimic_batch<'py>(
 }
 
 /// The compiled module `sodyn._sodyn`.
+mod ocp;
+
 #[pymodule]
 fn _sodyn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
+    ocp::register(m)?;
     m.add("SodynError", py.get_type::<SodynError>())?;
     m.add_class::<PyModel>()?;
     m.add_class::<PyData>()?;

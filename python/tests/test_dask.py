@@ -13,7 +13,7 @@ import pytest
 import sodyn
 
 pytest.importorskip("dask.distributed", reason="dask.distributed is not installed "
-                    "(pip install 'dask[distributed]'; python/tests/requirements.txt has it)")
+                    "(pip install 'dask[distributed]'; python/tests/requirements-extras.txt has it)")
 
 from conftest import MODELS_DIR, REPO  # noqa: E402
 

@@ -54,7 +54,7 @@ def _robot(name):
     try:
         dist = importlib.metadata.distribution("example-robot-data")
     except importlib.metadata.PackageNotFoundError:
-        pytest.skip("example-robot-data is not installed (python/tests/requirements.txt)")
+        pytest.skip("example-robot-data is not installed (python/tests/requirements-extras.txt)")
     if dist.version != ERD_VERSION:
         pytest.skip(f"example-robot-data {dist.version} is installed; this test knows {ERD_VERSION}")
     for f in dist.files or ():

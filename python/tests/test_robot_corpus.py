@@ -21,7 +21,7 @@ and Crocoddyl's benchmarks; 69 files) against Pinocchio 4.1 (issue 34, item 3).
 * The loader's warnings (``Model.warnings``) are exactly ``EXPECTED_WARNINGS``.
 
 The test skips, saying why, only when example-robot-data 6.0.0 is not installed
-(``pip install -r python/tests/requirements.txt`` installs it). It takes about a second.
+(``pip install -r python/tests/requirements-extras.txt`` installs it). It takes about a second.
 """
 
 import importlib.metadata
@@ -46,10 +46,10 @@ def _corpus():
         dist = importlib.metadata.distribution("example-robot-data")
     except importlib.metadata.PackageNotFoundError:
         return None, ("example-robot-data is not installed (pip install "
-                      f"example-robot-data=={ERD_VERSION}, in python/tests/requirements.txt)")
+                      f"example-robot-data=={ERD_VERSION}, in python/tests/requirements-extras.txt)")
     if dist.version != ERD_VERSION:
         return None, (f"example-robot-data {dist.version} is installed; this test knows "
-                      f"{ERD_VERSION} (python/tests/requirements.txt)")
+                      f"{ERD_VERSION} (python/tests/requirements-extras.txt)")
     files = {}
     for f in dist.files or ():
         p = f.as_posix()

@@ -252,12 +252,9 @@ impl Lines {
 impl Reader<'_> {
     /// Parses `xml` (named `file`) into an owned tree, expanding `<include>`.
     fn parse(&mut self, xml: &str, file: &str, depth: usize) -> Result<El> {
-        let doc = roxmltree::Document::parse(xml).map_err(|e| Error::Model {
-            file: file.into(),
-            line: Some(e.pos().row),
-            element: "XML".into(),
-            reason: format!("malformed XML: {e}"),
-        })?;
+        // Whitespace before the XML declaration: as in URDF (`urdf::XmlText`).
+        let text = super::urdf::XmlText::new(xml);
+        let (doc, xml) = (text.parse(file)?, text.text());
         let file: Rc<str> = file.into();
         let lines = Lines::new(xml);
         let root = doc.root_element();

@@ -13,6 +13,21 @@
 //!   (limits from `<limit lower upper>`), `prismatic` → [`JointType::Prismatic`], `floating` →
 //!   [`JointType::FreeFlyer`], `planar` → [`JointType::Planar`] when its normal axis is `z` (or
 //!   absent); anything else is an error.
+//! * Limits. A revolute or prismatic joint's `<limit lower upper>` (each 0 when absent, as in
+//!   urdfdom) become [`Model::lower`] and [`Model::upper`]; a joint without `<limit>` has
+//!   `−∞`/`+∞`. **Reversed limits** (`lower > upper`) mean "not limited" (Bullet's reading,
+//!   which simulator exports use on purpose): the joint loads with `−∞`/`+∞`, and a warning in
+//!   [`Model::warnings`] names the file, the `<limit>`'s line and the joint. `lower == upper`
+//!   (a zero-width range, e.g. `<limit effort=".." velocity=".."/>` without `lower` and
+//!   `upper`) is kept as given, silently: no algorithm enforces limits, and
+//!   [`Model::random_configuration`] (like `sodyn bench`'s states) samples such a joint as an
+//!   unlimited one (revolute in `[−π, π]`, prismatic in `[−1, 1]`), as it does for reversed or
+//!   absent limits. Limits are read from nothing else (continuous, floating and planar joints
+//!   have none).
+//! * Before the root element, the text may hold a UTF-8 byte-order mark, whitespace and blank
+//!   lines, and an XML declaration `<?xml ...?>` after them (urdfdom and ROS tools accept that;
+//!   so does the MJCF loader). Anything else before a declaration, such as a comment, is an
+//!   error naming its line.
 //! * With [`UrdfOptions::floating_base`], a free-flyer joint named `"root_joint"` is added in
 //!   front of the root link; otherwise the root link is welded to the world (joint 0) and its
 //!   inertia is stored in joint 0's slot, which the dynamics ignores.
@@ -150,14 +165,67 @@ pub fn load_urdf_file(path: &Path, opts: &UrdfOptions) -> Result<Model> {
 
 /// Loads a URDF from a string; `source_name` is used as the file name in error messages.
 pub fn load_urdf_str(xml: &str, source_name: &str, opts: &UrdfOptions) -> Result<Model> {
-    let doc = Document::parse(xml).map_err(|e| Error::Model {
-        file: source_name.into(),
-        line: Some(e.pos().row),
-        element: "XML".into(),
-        reason: format!("malformed XML: {e}"),
-    })?;
+    let text = XmlText::new(xml);
+    let doc = text.parse(source_name)?;
     let p = Parser { doc: &doc, file: source_name, warnings: Default::default() };
     p.load(opts)
+}
+
+/// An XML text ready for `roxmltree`, which accepts an XML declaration only at the very start
+/// (after a byte-order mark): when the declaration follows whitespace or blank lines (accepted
+/// by urdfdom's tinyxml2 and by ROS tools), the declaration is moved in front of that
+/// whitespace. Every byte after the declaration keeps its offset, so the lines of nodes and of
+/// errors are those of the file; an error inside the declaration is reported at its own line.
+/// Anything but whitespace before a declaration is left to `roxmltree`'s error (e.g.
+/// `unexpected XML declaration at 3:1`). Shared by the URDF and MJCF loaders.
+pub(crate) struct XmlText<'a> {
+    text: std::borrow::Cow<'a, str>,
+    /// Lines of the moved declaration (`1 +` its line breaks), 0 if nothing moved.
+    decl_lines: u32,
+    /// Line breaks in the whitespace in front of the moved declaration.
+    shift: u32,
+}
+
+impl<'a> XmlText<'a> {
+    pub(crate) fn new(xml: &'a str) -> Self {
+        let unmoved = XmlText { text: xml.into(), decl_lines: 0, shift: 0 };
+        let body = xml.strip_prefix('\u{FEFF}').unwrap_or(xml);
+        let bom = &xml[..xml.len() - body.len()];
+        let is_space = |c: char| matches!(c, ' ' | '\t' | '\r' | '\n');
+        let rest = body.trim_start_matches(is_space);
+        let ws = &body[..body.len() - rest.len()];
+        let is_decl = rest.strip_prefix("<?xml").is_some_and(|r| r.starts_with(is_space));
+        if ws.is_empty() || !is_decl {
+            return unmoved;
+        }
+        let Some(end) = rest.find("?>") else {
+            return unmoved; // roxmltree reports the unterminated declaration
+        };
+        let (decl, after) = rest.split_at(end + 2);
+        let count = |s: &str| u32::try_from(s.matches('\n').count()).unwrap_or(u32::MAX);
+        XmlText {
+            text: format!("{bom}{decl}{ws}{after}").into(),
+            decl_lines: 1 + count(decl),
+            shift: count(ws),
+        }
+    }
+
+    /// The text to parse (and to take positions in).
+    pub(crate) fn text(&self) -> &str {
+        &self.text
+    }
+
+    /// Parses the text; a malformed one is an [`Error::Model`] naming `file` and the line.
+    pub(crate) fn parse(&self, file: &str) -> Result<Document<'_>> {
+        Document::parse(&self.text).map_err(|e| {
+            let (row, mut reason) = (e.pos().row, format!("malformed XML: {e}"));
+            let line = if row <= self.decl_lines { row + self.shift } else { row };
+            if line != row {
+                reason = reason.replacen(&format!(" at {row}:"), &format!(" at {line}:"), 1);
+            }
+            Error::Model { file: file.into(), line: Some(line), element: "XML".into(), reason }
+        })
+    }
 }
 
 /// A parsed `<link>`.
@@ -540,10 +608,24 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
                 Kind::Movable(JointType::Revolute { .. } | JointType::Prismatic { .. }) => {
                     match child_elem(node, "limit") {
                         // URDF defaults: lower = upper = 0 when the attributes are absent.
-                        Some(l) => Some((
-                            self.scalar_or(l, "lower", 0.0, &element)?,
-                            self.scalar_or(l, "upper", 0.0, &element)?,
-                        )),
+                        Some(l) => {
+                            let lo = self.scalar_or(l, "lower", 0.0, &element)?;
+                            let hi = self.scalar_or(l, "upper", 0.0, &element)?;
+                            if lo > hi {
+                                // Bullet's convention, used on purpose by simulator exports.
+                                self.warn(
+                                    l.range().start,
+                                    &element,
+                                    format!(
+                                        "<limit lower=\"{lo}\" upper=\"{hi}\">: lower > upper, \
+                                         read as \"not limited\": loaded without limits"
+                                    ),
+                                );
+                                None
+                            } else {
+                                Some((lo, hi))
+                            }
+                        }
                         None => None,
                     }
                 }

@@ -232,9 +232,9 @@ enum Pool {
 
 /// A comma-separated list (blanks around the items and empty items dropped).
 #[derive(Clone, Debug)]
-struct List(Vec<String>);
+pub(crate) struct List(pub(crate) Vec<String>);
 
-fn parse_list(s: &str) -> std::result::Result<List, String> {
+pub(crate) fn parse_list(s: &str) -> std::result::Result<List, String> {
     Ok(List(s.split(',').map(str::trim).filter(|x| !x.is_empty()).map(String::from).collect()))
 }
 
@@ -1448,7 +1448,7 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
         smoke: o.smoke,
         calls: o.calls,
     };
-    println!(
+    outln!(
         "# model={name} source={spec} base={} nq={} nv={} njoints={} nstates={nstates} seed={} \
          timer_overhead_ns={:.1} contacts={} frame={} threads={} pool={} smoke={} simd={}",
         if floating_base { "ff" } else { "fixed" },
@@ -1483,7 +1483,7 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
             })
             .map_err(|e| Error::Io(format!("bench {algo} against {r} on {name}: {e}")))?;
             let [s, sr] = t.stats;
-            println!(
+            outln!(
                 "model={name} nq={} nv={} algo={algo} median_us={:.4} p10_us={:.4} \
                  p90_us={:.4} batch={} samples={} ratio_to={r} ratio={:.4} ratio_pairs={} \
                  ref_median_us={:.4} ref_p10_us={:.4} ref_p90_us={:.4}",
@@ -1530,7 +1530,7 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
             } else {
                 String::new()
             };
-            println!(
+            outln!(
                 "model={name} nq={} nv={} algo={algo} median_us={:.4} p10_us={:.4} \
                  p90_us={:.4} batch={} samples={}{extra}",
                 model.nq(),
@@ -1669,7 +1669,7 @@ fn run_mimic(o: &BenchArgs) -> Result<()> {
     let mut out_m1 = vec![DMatrix::zeros(m.nv(), m.nv()); nb];
     let mut out_m2 = out_m1.clone();
     let batch_plan = Plan { per_call: nstates, min_samples: plan.min_samples.min(20), ..plan };
-    println!(
+    outln!(
         "# model={name} source={} base={} nq={} nv={} njoints={} nstates={nstates} seed={} \
          timer_overhead_ns={:.1} mimic={} full_nq={} full_nv={} contacts={} threads={} \
          pool={pool_desc} smoke={} simd={}",
@@ -1789,7 +1789,7 @@ fn run_mimic(o: &BenchArgs) -> Result<()> {
         } else {
             String::new()
         };
-        println!(
+        outln!(
             "model={name} nq={} nv={} algo={algo} median_us={:.4} p10_us={:.4} p90_us={:.4} \
              batch={} samples={} mimic={}{extra}",
             m.nq(),

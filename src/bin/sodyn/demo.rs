@@ -1,13 +1,13 @@
 //! `sodyn demo`: every algorithm on a model at a random state, with timings and the maximum
 //! error against the automatic-differentiation oracle of [`sodyn::reference`].
 
-use super::load_model_spec;
+use super::{DemoArgs, load_model};
 use nalgebra::{DMatrix, DVector, Matrix3xX, Vector3};
 use sodyn::algo::{Data, aba, crba, factorize_ltl, point_jacobian, rnea, solve_ltl};
 use sodyn::deriv::{
     FdSoData, SoData, fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives,
 };
-use sodyn::error::Result;
+use sodyn::error::{Error, Result};
 use sodyn::reference;
 use sodyn::rng::Rng;
 use sodyn::tensor::Tensor3;
@@ -44,33 +44,36 @@ pub(crate) fn rel_v(a: &DVector<f64>, b: &[f64]) -> f64 {
     (a - &b).amax() / b.amax().max(1.0)
 }
 
-/// Runs the demo on `spec` (`builtin:NAME` or a URDF path) with random state `seed`.
-pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
-    let m = load_model_spec(spec, &Default::default())?;
+/// Runs the demo of `o`: its model (`builtin:NAME`, a URDF or an MJCF path, with
+/// `--floating-base`, `--armature`) at the random state of its seed, with its `--contacts` or
+/// the default ones.
+pub(crate) fn run_demo(o: &DemoArgs) -> Result<()> {
+    let (spec, seed) = (o.model.as_str(), o.seed);
+    let m = load_model(&o.model_args())?;
     let mut rng = Rng::new(seed);
     let q = m.random_configuration(&mut rng);
     let v = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
     let a = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
     let tau = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
     let (qs, vs, as_, ts) = (q.as_slice(), v.as_slice(), a.as_slice(), tau.as_slice());
-    println!(
-        "sodyn demo: model \"{}\" ({spec}), nq = {}, nv = {}, {} bodies, seed {seed}",
+    outln!(
+        "sodyn demo: model \"{}\" ({spec}), nq = {}, nv = {}, njoints = {}, seed {seed}",
         m.name(),
         m.nq(),
         m.nv(),
-        m.njoints() - 1
+        m.njoints()
     );
-    println!(
+    outln!(
         "errors: max |ours − oracle| / max(1, max |oracle|); oracle = reference code with f64 / dual / hyper-dual numbers\n"
     );
-    println!("{:<34} {:>12} {:>14}", "algorithm", "median µs", "max rel err");
+    outln!("{:<34} {:>12} {:>14}", "algorithm", "median µs", "max rel err");
     let mut d = Data::new(&m);
     let mut so = SoData::new(&m);
     let mut fso = FdSoData::new(&m);
     let mut worst: f64 = 0.0;
     let mut row = |name: &str, us: f64, err: f64| {
         worst = worst.max(err);
-        println!("{name:<34} {us:>12.2} {err:>14.2e}");
+        outln!("{name:<34} {us:>12.2} {err:>14.2e}");
     };
 
     let t = time_us(|| {
@@ -178,12 +181,26 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
         );
     }
 
-    // Contacts: the two lowest-numbered leaf frames of different bodies for built-ins without
-    // soles; the humanoid's soles, the quadruped's feet.
-    let frames: Vec<&str> = ["left_sole", "right_sole", "LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"]
-        .into_iter()
-        .filter(|f| m.frame_id(f).is_ok())
-        .collect();
+    // Contacts: those of --contacts, or by default the frames of these names that the model
+    // has (the humanoid's soles, the quadruped's feet).
+    let given = o.contacts.as_ref().map(|l| &l.0);
+    let frames: Vec<&str> = match given {
+        Some(list) => {
+            for f in list {
+                m.frame_id(f).map_err(|_| {
+                    Error::Io(format!(
+                        "--contacts: unknown frame \"{f}\" in model \"{}\" ({spec})",
+                        m.name()
+                    ))
+                })?;
+            }
+            list.iter().map(String::as_str).collect()
+        }
+        None => ["left_sole", "right_sole", "LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"]
+            .into_iter()
+            .filter(|f| m.frame_id(f).is_ok())
+            .collect(),
+    };
     if !frames.is_empty() {
         use sodyn::algo::Contact;
         use sodyn::deriv::{
@@ -191,9 +208,22 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
             kkt_so_derivatives,
         };
         use sodyn::reference::contact as oracle;
-        let contacts: Vec<Contact> =
-            frames.iter().map(|f| Contact::new(&m, f, Vector3::zeros())).collect::<Result<_>>()?;
-        println!("\ncontacts on {} (oracle for second order only up to 20 DoF)", frames.join(", "));
+        let (kind, reference) = (o.contact_type, o.contact_reference);
+        let contacts: Vec<Contact> = frames
+            .iter()
+            .map(|f| {
+                Contact::new(&m, f, Vector3::zeros())
+                    .map(|c| Contact { kind, ..c.with_reference(reference) })
+            })
+            .collect::<Result<_>>()?;
+        let what = match given {
+            None => String::new(),
+            Some(_) => format!(" ({} {})", kind.name(), reference.name()),
+        };
+        outln!(
+            "\ncontacts{what} on {} (oracle for second order only up to 20 DoF)",
+            frames.join(", ")
+        );
         let cd = ContactData::new(&m, &contacts)?;
         let lam = DVector::from_fn(cd.dim(), |i, _| if i % 3 == 2 { 50.0 } else { 5.0 });
         let mut cd1 = cd.clone();
@@ -248,7 +278,11 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
             row("      d2vplus/dq2", t, rel_t(k.d2vplus_dq2(), &so_ref.d2vplus_dq2));
         }
         // 6-D contacts holding the soles, rows in the soles' axes, with Baumgarte gains.
-        let soles: Vec<&str> = frames.iter().copied().filter(|f| f.ends_with("_sole")).collect();
+        // (Default contacts only.)
+        let soles: Vec<&str> = match given {
+            None => frames.iter().copied().filter(|f| f.ends_with("_sole")).collect(),
+            Some(_) => vec![],
+        };
         if !soles.is_empty() {
             use sodyn::model::{ContactReference, ContactType};
             let contacts: Vec<Contact> = soles
@@ -260,7 +294,7 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
                     Ok(Contact { kind: ContactType::D6, ..c })
                 })
                 .collect::<Result<_>>()?;
-            println!(
+            outln!(
                 "
 6-D contacts (local axes, kp 10, kd 2) on {}",
                 soles.join(", ")
@@ -286,6 +320,6 @@ pub fn run_demo(spec: &str, seed: u64) -> Result<()> {
             row("      dimpulse/dq", t, rel(im.dimpulse_dq(), &fo.dimpulse_dq));
         }
     }
-    println!("\nmaximum relative error against the oracle: {worst:.2e}");
+    outln!("\nmaximum relative error against the oracle: {worst:.2e}");
     Ok(())
 }

@@ -97,6 +97,22 @@ impl State {
     }
 }
 
+/// The top-level keys of a state file (with or without `--mimic`).
+pub const STATE_KEYS: [&str; 9] =
+    ["q", "v", "a", "tau", "contacts", "lambda", "restitution", "weights", "frames"];
+
+/// An unknown top-level key of a state file is an error naming it and the known ones (a typo
+/// such as `"vel"` would otherwise evaluate at zero velocity).
+pub fn check_state_keys(obj: &Map<String, Value>, file: &str) -> Result<()> {
+    match obj.keys().find(|k| !STATE_KEYS.contains(&k.as_str())) {
+        Some(k) => Err(Error::Io(format!(
+            "{file}: unknown key \"{k}\" (known: {})",
+            STATE_KEYS.join(", ")
+        ))),
+        None => Ok(()),
+    }
+}
+
 /// JSON of a state (`q`, `v`, `a`, `tau`).
 pub fn state_json(s: &State) -> Value {
     json!({ "q": s.q.as_slice(), "v": s.v.as_slice(), "a": s.a.as_slice(), "tau": s.tau.as_slice() })
@@ -144,6 +160,7 @@ pub fn load_state(
     let obj = val
         .as_object()
         .ok_or_else(|| Error::Io(format!("{file}: the state must be a JSON object")))?;
+    check_state_keys(obj, file)?;
     let nq = model.nq();
     let q_len = obj.get("q").and_then(Value::as_array).map(Vec::len);
     let q = read_vec(obj, "q", nq, file)

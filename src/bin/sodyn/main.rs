@@ -2,10 +2,16 @@
 //!
 //! Everything of the command line lives in this binary, not in the library: argument parsing
 //! (clap), the JSON state files and `eval` output ([`eval`]), the timings of `demo` and `bench`.
-//! Exit status: 0 on success, 1 on an error found while running (the message, prefixed with
-//! `sodyn: error:`, on standard error), 2 on a usage error reported by clap (unknown option,
+//! Exit status: 0 on success (also when standard output is closed while a command writes, e.g.
+//! by `| head`: the command ends there, quietly; see [`out`]), 1 on an error found while
+//! running (the message, prefixed with `sodyn: error:`, on standard error; a closed standard
+//! error is ignored), 2 on a usage error reported by clap (unknown option,
 //! missing or malformed value), 3 when `eval` wrote partial results (outputs undefined at the
 //! state, e.g. a singular mass matrix, left out and named in the output's `"errors"` object).
+
+// First: its macros (`outln!`, `out!`, `errln!`) are used by the modules below.
+#[macro_use]
+mod out;
 
 mod bench;
 mod demo;
@@ -15,16 +21,17 @@ mod mimic_cli;
 use clap::{Args, CommandFactory, Parser, Subcommand};
 use serde_json::Value;
 use sodyn::error::{Error, Result};
-use sodyn::model::{MjcfOptions, Model, UrdfOptions};
+use sodyn::model::{ContactReference, ContactType, MjcfOptions, Model, UrdfOptions};
 use std::path::Path;
 use std::process::ExitCode;
 
 /// Shown under every command's `--help`.
 const AFTER_HELP: &str = "\
 M is a URDF path, an MJCF (MuJoCo XML) path ending in .xml, or builtin:NAME (humanoid,
-quadruped, chain<N>, pendulum<N>, random_tree<N>[_ff][_s<SEED>]). Exit status: 0 on success,
-1 on an error (the message on standard error), 2 on a usage error, 3 when eval left out
-undefined outputs (its \"errors\" object names them). README.md has the JSON schemas.";
+quadruped, chain<N>, pendulum<N>, random_tree<N>[_ff][_s<SEED>]). Exit status: 0 on success
+(also when standard output is closed early, e.g. by head), 1 on an error (the message on
+standard error), 2 on a usage error, 3 when eval left out undefined outputs (its \"errors\"
+object names them). README.md has the JSON schemas.";
 
 /// sodyn: rigid-body dynamics and its exact first- and second-order derivatives
 #[derive(Debug, Parser)]
@@ -80,17 +87,59 @@ struct ModelArgs {
     mimic: bool,
 }
 
+/// Options of `sodyn demo`: those of `--model` (`ModelArgs`, with a default model) and the
+/// contacts of `bench`.
 #[derive(Debug, Args)]
 struct DemoArgs {
-    /// The model: a URDF or MJCF (.xml) file or builtin:NAME
+    /// The model: a URDF or MJCF (.xml) path, or builtin:NAME
     #[arg(long, value_name = "M", default_value = "builtin:humanoid")]
     model: String,
+    /// Add a free-flyer root joint in front of the URDF's root link (MJCF: of the worldbody's
+    /// only body)
+    #[arg(long)]
+    floating_base: bool,
+    /// Refuse a URDF link inertia that violates the triangle inequality instead of loading it
+    /// with a warning
+    #[arg(long)]
+    strict_inertia: bool,
+    /// Armature of the degrees of freedom: one value for every DoF, or nv comma-separated
+    /// values in velocity order (see eval --help)
+    #[arg(long, value_name = "A", allow_hyphen_values = true)]
+    armature: Option<String>,
+    /// Read the URDF's <mimic> joints as constraints (see info --help); the demo then has no
+    /// contacts
+    #[arg(long)]
+    mimic: bool,
+    /// Contacts at the origins of these frames (of --contact-type, in --contact-reference)
+    /// instead of the default ones (the soles or feet of a model that has frames named
+    /// left_sole, right_sole, LF_FOOT, RF_FOOT, LH_FOOT, RH_FOOT)
+    #[arg(long, value_name = "F1,F2,...", value_parser = bench::parse_list)]
+    contacts: Option<bench::List>,
+    /// Type of the --contacts: 3d (points) or 6d (the whole frames)
+    #[arg(long, value_name = "3d|6d", default_value = "3d", requires = "contacts",
+          value_parser = |s: &str| ContactType::parse(s).map_err(|e| e.to_string()))]
+    contact_type: ContactType,
+    /// Axes of the --contacts' rows: local_world_aligned or local
+    #[arg(long, value_name = "local_world_aligned|local", default_value = "local_world_aligned",
+          requires = "contacts",
+          value_parser = |s: &str| ContactReference::parse(s).map_err(|e| e.to_string()))]
+    contact_reference: ContactReference,
     /// Seed of the random state
     #[arg(long, value_name = "S", default_value_t = 0)]
     seed: u64,
-    /// Read the URDF's <mimic> joints as constraints (see info --help)
-    #[arg(long)]
-    mimic: bool,
+}
+
+impl DemoArgs {
+    /// The model options.
+    fn model_args(&self) -> ModelArgs {
+        ModelArgs {
+            model: self.model.clone(),
+            floating_base: self.floating_base,
+            strict_inertia: self.strict_inertia,
+            armature: self.armature.clone(),
+            mimic: self.mimic,
+        }
+    }
 }
 
 #[derive(Debug, Args)]
@@ -135,7 +184,7 @@ fn main() -> ExitCode {
         Ok(Outcome::Done) => ExitCode::SUCCESS,
         Ok(Outcome::Partial) => ExitCode::from(PARTIAL_EXIT),
         Err(e) => {
-            eprintln!("sodyn: error: {e}");
+            errln!("sodyn: error: {e}");
             ExitCode::from(1)
         }
     }
@@ -155,19 +204,19 @@ enum Outcome {
 fn run(cli: Cli) -> Result<Outcome> {
     let Some(command) = cli.command else {
         // No command: the help, as `sodyn --help` prints it.
-        Cli::command().print_help().map_err(|e| Error::Io(e.to_string()))?;
+        out!("{}", Cli::command().render_help());
         return Ok(Outcome::Done);
     };
     match command {
-        Command::Demo(o) if o.mimic => mimic_cli::run_demo(&o.model, o.seed),
-        Command::Demo(o) => demo::run_demo(&o.model, o.seed),
+        Command::Demo(o) if o.mimic => mimic_cli::run_demo(&o),
+        Command::Demo(o) => demo::run_demo(&o),
         Command::Info(o) if o.model.mimic => {
-            print!("{}", mimic_cli::joint_table(&mimic_cli::load(&o.model)?));
+            out!("{}", mimic_cli::joint_table(&mimic_cli::load(&o.model)?));
             Ok(())
         }
         Command::Info(o) => {
             let m = load_model(&o.model)?;
-            print!("{}", joint_table(&m));
+            out!("{}", joint_table(&m));
             Ok(())
         }
         Command::RandomState(o) if o.model.mimic => {
@@ -206,7 +255,7 @@ fn run_eval(o: &EvalArgs) -> Result<Outcome> {
     match out.get("errors").and_then(Value::as_object) {
         Some(errors) => {
             let keys: Vec<&str> = errors.keys().map(String::as_str).collect();
-            eprintln!(
+            errln!(
                 "sodyn: error: {} undefined at this state, left out of the output (its \"errors\" \
                  object has the reasons): {}",
                 if keys.len() == 1 { "an output is" } else { "outputs are" },
@@ -283,7 +332,7 @@ fn load_model_spec(spec: &str, opts: &UrdfOptions) -> Result<Model> {
         sodyn::model::urdf::load_urdf_file(Path::new(spec), opts)?
     };
     for w in model.warnings() {
-        eprintln!("sodyn: warning: {w}");
+        errln!("sodyn: warning: {w}");
     }
     Ok(model)
 }
@@ -301,7 +350,7 @@ fn write_output(path: Option<&str>, v: &Value) -> Result<()> {
             std::fs::write(path, text + "\n").map_err(|e| Error::Io(format!("{path}: {e}")))
         }
         None => {
-            println!("{text}");
+            outln!("{text}");
             Ok(())
         }
     }
@@ -310,11 +359,12 @@ fn write_output(path: Option<&str>, v: &Value) -> Result<()> {
 /// The joint table of a model as printed by `sodyn info`.
 fn joint_table(model: &Model) -> String {
     let mut s = format!(
-        "model \"{}\": nq = {}, nv = {}, {} joints, {} frames\n",
+        "model \"{}\": nq = {}, nv = {}, njoints = {} (the world joint 0 included, as \
+         Pinocchio's njoints), {} frames\n",
         model.name(),
         model.nq(),
         model.nv(),
-        model.njoints() - 1,
+        model.njoints(),
         model.frames().len()
     );
     s += &format!(

@@ -36,14 +36,15 @@ pub(crate) fn load(o: &ModelArgs) -> Result<MimicModel> {
 pub(crate) fn joint_table(mm: &MimicModel) -> String {
     let model = mm.full();
     let mut s = format!(
-        "model \"{}\": nq = {}, nv = {} (reduced coordinates; full tree nq = {}, nv = {}), {} \
-         joints ({} mimic), {} frames\n",
+        "model \"{}\": nq = {}, nv = {} (reduced coordinates; full tree nq = {}, nv = {}), \
+         njoints = {} (the world joint 0 included, as Pinocchio's njoints; {} mimic), {} \
+         frames\n",
         model.name(),
         mm.nq(),
         mm.nv(),
         model.nq(),
         model.nv(),
-        model.njoints() - 1,
+        model.njoints(),
         mm.mimics().len(),
         model.frames().len()
     );
@@ -135,13 +136,7 @@ pub(crate) fn load_state(mm: &MimicModel, text: &str, file: &str) -> Result<Stat
     let obj = val
         .as_object()
         .ok_or_else(|| Error::Io(format!("{file}: the state must be a JSON object")))?;
-    let known = ["q", "v", "a", "tau", "contacts", "lambda", "restitution", "weights", "frames"];
-    if let Some(k) = obj.keys().find(|k| !known.contains(&k.as_str())) {
-        return Err(Error::Io(format!(
-            "{file}: key \"{k}\" is not supported with --mimic (a mimic model's state has q, v, a, \
-             tau, contacts, lambda, restitution, weights, frames)"
-        )));
-    }
+    crate::eval::check_state_keys(obj, file)?;
     let weights = match obj.get("weights") {
         None => serde_json::Map::new(),
         Some(Value::Object(w)) => w.clone(),
@@ -565,24 +560,25 @@ fn contact_outputs(
 
 /// `sodyn demo --mimic`: the algorithms of `sodyn::mimic` at a random state, with timings and
 /// the errors against the AD oracle of `sodyn::reference::mimic`.
-pub(crate) fn run_demo(spec: &str, seed: u64) -> Result<()> {
+pub(crate) fn run_demo(args: &super::DemoArgs) -> Result<()> {
     use super::demo::{rel, rel_t, rel_v, time_us};
     use sodyn::reference::mimic::Reduced;
-    let o = ModelArgs {
-        model: spec.into(),
-        floating_base: false,
-        strict_inertia: false,
-        armature: None,
-        mimic: true,
-    };
-    let m = load(&o)?;
+    if args.contacts.is_some() {
+        return Err(Error::Io(
+            "--contacts is not supported with demo --mimic (bench --mimic and eval --mimic \
+             take contacts)"
+                .into(),
+        ));
+    }
+    let (spec, seed) = (args.model.as_str(), args.seed);
+    let m = load(&args.model_args())?;
     let r = Reduced { full: m.full(), mimics: m.mimics() };
     let mut rng = Rng::new(seed);
     let q = m.random_configuration(&mut rng);
     let mut rv = || DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
     let (v, a, tau) = (rv(), rv(), rv());
     let (qs, vs, as_, ts) = (q.as_slice(), v.as_slice(), a.as_slice(), tau.as_slice());
-    println!(
+    outln!(
         "sodyn demo --mimic: model \"{}\" ({spec}), reduced nq = {}, nv = {} (full tree nq = {}, \
          nv = {}, {} mimic joints), seed {seed}",
         m.name(),
@@ -592,14 +588,14 @@ pub(crate) fn run_demo(spec: &str, seed: u64) -> Result<()> {
         m.full().nv(),
         m.mimics().len()
     );
-    println!(
+    outln!(
         "errors: max |ours − oracle| / max(1, max |oracle|); oracle = reference code composed \
          with the mimic expansion, f64 / dual / hyper-dual numbers\n"
     );
-    println!("{:<34} {:>12} {:>14}", "algorithm", "median µs", "max rel err");
+    outln!("{:<34} {:>12} {:>14}", "algorithm", "median µs", "max rel err");
     let mut d = MimicData::new(&m);
     let mut so = MimicSoData::new(&m);
-    let row = |name: &str, us: f64, err: f64| println!("{name:<34} {us:>12.2} {err:>14.2e}");
+    let row = |name: &str, us: f64, err: f64| outln!("{name:<34} {us:>12.2} {err:>14.2e}");
     let t = time_us(|| mimic::rnea(&m, &mut d, &q, &v, &a, None).map(|_| ()))?;
     row("rnea", t, rel_v(d.tau(), &r.rnea(qs, vs, as_)));
     let t = time_us(|| mimic::crba(&m, &mut d, &q).map(|_| ()))?;

@@ -1,0 +1,507 @@
+//! Action models: one knot of a shooting problem (Crocoddyl's `ActionModelAbstract`).
+//!
+//! Inputs: the state `x = (q, v)`, the control `u`. Outputs ([`ActionData`]): the next state
+//! `x′ = f(x, u)`, the cost `ℓ(x, u)`, and with [`ActionModel::calc_diff`] the Jacobians
+//! `F_x`, `F_u` (tangent space) and the Gauss-Newton cost derivatives `ℓ_x, ℓ_u, ℓ_xx, ℓ_xu,
+//! ℓ_uu`.
+//!
+//! Kinds:
+//! 1. [`ActionKind::Euler`]: differential dynamics `a = FD(q, v, τ)` (free: ABA; contact: the
+//!    KKT dynamics of [`sodyn::deriv::kkt_dynamics`]) with `τ` from the actuation, integrated by
+//!    symplectic Euler (Crocoddyl's `IntegratedActionModelEuler`):
+//!    `v′ = v + dt a`, `q′ = q ⊕ dt v′`, `ℓ = dt ℓ_c(x, u)`;
+//!    - `F_x = ∂(x ⊕ δ)/∂x + ∂(x ⊕ δ)/∂δ ∂δ/∂x` with `δ = (dt v + dt² a, dt a)`;
+//!    - a node without control (the terminal node) has no dynamics: `x′ = x`, `ℓ = ℓ_c(x)`.
+//! 2. [`ActionKind::Impulse`]: impulse dynamics at a contact switch (Crocoddyl's
+//!    `ActionModelImpulseFwdDynamics`): `x′ = (q, v⁺)`, `v⁺` from
+//!    [`sodyn::deriv::impact_dynamics`], `ℓ = ℓ_c(x)` with the impulses as contact forces; no
+//!    control.
+
+use nalgebra::{DMatrix, DVector};
+use sodyn::algo::{Data, aba};
+use sodyn::deriv::{
+    ContactData, ImpactData, KktData, fd_derivatives, impact_derivatives, impact_dynamics,
+    kkt_derivatives, kkt_dynamics,
+};
+use sodyn::model::lie::Arg;
+use sodyn::model::{Contact, JointType, Model};
+
+use crate::cost::{CostData, CostDerivs, CostModelSum};
+use crate::error::{OcpError, Result};
+use crate::linalg::gemm_nn;
+use crate::residual::NodeView;
+use crate::state::{StateMultibody, StateScratch};
+
+/// How the control enters the joint torques.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Actuation {
+    /// `τ = u` (`nu = nv`): Crocoddyl's `ActuationModelFull`.
+    Full,
+    /// `τ = (0₆, u)` (`nu = nv − 6`; the root free flyer is unactuated): Crocoddyl's
+    /// `ActuationModelFloatingBase`.
+    FloatingBase,
+}
+
+impl Actuation {
+    /// The control dimension on `model`.
+    pub fn nu(&self, model: &Model) -> usize {
+        match self {
+            Actuation::Full => model.nv(),
+            Actuation::FloatingBase => model.nv() - 6,
+        }
+    }
+    /// The first actuated velocity index.
+    fn offset(&self) -> usize {
+        match self {
+            Actuation::Full => 0,
+            Actuation::FloatingBase => 6,
+        }
+    }
+    /// Checks the actuation against the model.
+    pub fn check(&self, model: &Model) -> Result<()> {
+        if *self == Actuation::FloatingBase
+            && (model.njoints() < 2 || model.joints()[1] != JointType::FreeFlyer)
+        {
+            return Err(OcpError::new(
+                "ActuationModelFloatingBase: the model's first joint is not a free flyer",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A named contact of a contact set; inactive contacts are kept but do not constrain.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NamedContact {
+    /// The name (unique in the set).
+    pub name: String,
+    /// The contact.
+    pub contact: Contact,
+    /// Whether it constrains the dynamics.
+    pub active: bool,
+}
+
+/// The dynamics of a knot.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ActionKind {
+    /// Differential dynamics integrated by symplectic Euler over `dt`.
+    Euler {
+        /// The time step (`0` for a terminal node).
+        dt: f64,
+        /// The contacts (empty: free dynamics, ABA).
+        contacts: Vec<NamedContact>,
+        /// Damping of the Delassus solve (Crocoddyl's `JMinvJt_damping`; 0: exact).
+        damping: f64,
+    },
+    /// Impulse dynamics at a contact switch.
+    Impulse {
+        /// The impulse contacts.
+        contacts: Vec<NamedContact>,
+        /// The coefficient of restitution.
+        restitution: f64,
+        /// Damping of the Delassus solve.
+        damping: f64,
+    },
+}
+
+/// One knot: state, actuation, dynamics, costs, control bounds.
+#[derive(Clone, Debug)]
+pub struct ActionModel {
+    /// The state space.
+    pub state: StateMultibody,
+    /// The actuation.
+    pub actuation: Actuation,
+    /// The dynamics.
+    pub kind: ActionKind,
+    /// The costs.
+    pub costs: CostModelSum,
+    /// Control lower bounds (box-FDDP), length `nu`.
+    pub u_lb: DVector<f64>,
+    /// Control upper bounds.
+    pub u_ub: DVector<f64>,
+}
+
+/// Per-knot results and workspace.
+#[derive(Clone, Debug)]
+pub struct ActionData {
+    /// `x′`.
+    pub xnext: DVector<f64>,
+    /// `ℓ`.
+    pub cost: f64,
+    /// `∂x′/∂x` (`ndx × ndx`).
+    pub fx: DMatrix<f64>,
+    /// `∂x′/∂u` (`ndx × nu`).
+    pub fu: DMatrix<f64>,
+    /// `ℓ_x`.
+    pub lx: DVector<f64>,
+    /// `ℓ_u`.
+    pub lu: DVector<f64>,
+    /// `ℓ_xx`.
+    pub lxx: DMatrix<f64>,
+    /// `ℓ_xu`.
+    pub lxu: DMatrix<f64>,
+    /// `ℓ_uu`.
+    pub luu: DMatrix<f64>,
+    /// The joint accelerations (Euler) or `v⁺` (impulse).
+    pub a: DVector<f64>,
+    /// The stacked contact forces (impulses at an impulse node) of the active contacts.
+    pub lambda: DVector<f64>,
+    /// `∂λ/∂x`.
+    pub dlambda_dx: DMatrix<f64>,
+    /// `∂λ/∂u`.
+    pub dlambda_du: DMatrix<f64>,
+    /// The cost terms' data.
+    pub costs: CostData,
+    q: DVector<f64>,
+    v: DVector<f64>,
+    tau: DVector<f64>,
+    dx: DVector<f64>,
+    da_dx: DMatrix<f64>,
+    da_du: DMatrix<f64>,
+    jq_x: DMatrix<f64>,
+    jq_dx: DMatrix<f64>,
+    data: Data,
+    kkt: Option<KktData>,
+    imp: Option<ImpactData>,
+    sc: StateScratch,
+}
+
+fn active_contacts(contacts: &[NamedContact]) -> Vec<Contact> {
+    contacts.iter().filter(|c| c.active).map(|c| c.contact.clone()).collect()
+}
+
+impl ActionModel {
+    /// The model.
+    pub fn model(&self) -> &Model {
+        self.state.model()
+    }
+    /// The control dimension (0 at an impulse node).
+    pub fn nu(&self) -> usize {
+        match self.kind {
+            ActionKind::Euler { .. } => self.actuation.nu(self.model()),
+            ActionKind::Impulse { .. } => 0,
+        }
+    }
+    /// The contacts of the knot.
+    pub fn contacts(&self) -> &[NamedContact] {
+        match &self.kind {
+            ActionKind::Euler { contacts, .. } | ActionKind::Impulse { contacts, .. } => contacts,
+        }
+    }
+    /// The row offset of contact `name` among the active contacts' stacked forces.
+    pub fn contact_rows(&self, name: &str) -> Option<(Option<usize>, usize)> {
+        let mut off = 0;
+        for c in self.contacts() {
+            if c.name == name {
+                return Some((c.active.then_some(off), c.contact.dim()));
+            }
+            if c.active {
+                off += c.contact.dim();
+            }
+        }
+        None
+    }
+    /// Buffers for this knot.
+    ///
+    /// # Errors
+    /// A rank-deficient or otherwise invalid active contact set.
+    pub fn create_data(&self) -> Result<ActionData> {
+        let m = self.model();
+        let (nv, nu, ndx) = (m.nv(), self.nu(), self.state.ndx());
+        let active = active_contacts(self.contacts());
+        let nc: usize = active.iter().map(|c| c.dim()).sum();
+        let (mut kkt, mut imp) = (None, None);
+        if !active.is_empty() {
+            let cd = ContactData::new(m, &active)?;
+            match &self.kind {
+                ActionKind::Euler { damping, .. } => {
+                    let mut k = KktData::new(m, cd);
+                    if *damping > 0.0 {
+                        k.set_damping(*damping)?;
+                    }
+                    kkt = Some(k);
+                }
+                ActionKind::Impulse { restitution, damping, .. } => {
+                    let mut i = ImpactData::new(m, cd);
+                    i.set_restitution(*restitution)?;
+                    if *damping > 0.0 {
+                        i.set_damping(*damping)?;
+                    }
+                    imp = Some(i);
+                }
+            }
+        }
+        let mut fx = DMatrix::identity(ndx, ndx);
+        fx.fill_diagonal(1.0);
+        Ok(ActionData {
+            xnext: DVector::zeros(self.state.nx()),
+            cost: 0.0,
+            fx,
+            fu: DMatrix::zeros(ndx, nu),
+            lx: DVector::zeros(ndx),
+            lu: DVector::zeros(nu),
+            lxx: DMatrix::zeros(ndx, ndx),
+            lxu: DMatrix::zeros(ndx, nu),
+            luu: DMatrix::zeros(nu, nu),
+            a: DVector::zeros(nv),
+            lambda: DVector::zeros(nc),
+            dlambda_dx: DMatrix::zeros(nc, ndx),
+            dlambda_du: DMatrix::zeros(nc, nu),
+            costs: self.costs.create_data(nv, nu),
+            q: DVector::zeros(m.nq()),
+            v: DVector::zeros(nv),
+            tau: DVector::zeros(nv),
+            dx: DVector::zeros(ndx),
+            da_dx: DMatrix::zeros(nv, ndx),
+            da_du: DMatrix::zeros(nv, nu),
+            jq_x: DMatrix::zeros(nv, nv),
+            jq_dx: DMatrix::zeros(nv, nv),
+            data: Data::new(m),
+            kkt,
+            imp,
+            sc: self.state.scratch(),
+        })
+    }
+
+    /// Next state and cost at `(x, u)`; `u = None` is Crocoddyl's `calc(x)` (the terminal node,
+    /// or a knot without control).
+    ///
+    /// # Errors
+    /// A singular mass matrix or contact set at this state.
+    pub fn calc(
+        &self,
+        d: &mut ActionData,
+        x: &DVector<f64>,
+        u: Option<&DVector<f64>>,
+    ) -> Result<()> {
+        self.eval(d, x, u, false)
+    }
+
+    /// [`ActionModel::calc`] and the derivatives at `(x, u)`.
+    ///
+    /// # Errors
+    /// As [`ActionModel::calc`].
+    pub fn calc_diff(
+        &self,
+        d: &mut ActionData,
+        x: &DVector<f64>,
+        u: Option<&DVector<f64>>,
+    ) -> Result<()> {
+        self.eval(d, x, u, true)
+    }
+
+    fn eval(
+        &self,
+        d: &mut ActionData,
+        x: &DVector<f64>,
+        u: Option<&DVector<f64>>,
+        diff: bool,
+    ) -> Result<()> {
+        let m = self.state.model().clone();
+        let m = &*m;
+        let (nq, nv) = (m.nq(), m.nv());
+        d.q.copy_from(&x.rows(0, nq));
+        d.v.copy_from(&x.rows(nq, nv));
+        let zero_u = DVector::zeros(0);
+        let with_dynamics;
+        let mut cost_scale = 1.0;
+        match &self.kind {
+            ActionKind::Euler { dt, .. } => {
+                let Some(u) = u else {
+                    // No control: no dynamics (Crocoddyl's terminal calc(x)).
+                    d.xnext.copy_from(x);
+                    d.a.fill(0.0);
+                    if diff {
+                        d.fx.fill(0.0);
+                        d.fx.fill_diagonal(1.0);
+                    }
+                    return self.eval_costs(d, x, &zero_u, false, diff, 1.0);
+                };
+                let dt = *dt;
+                cost_scale = dt;
+                let off = self.actuation.offset();
+                d.tau.fill(0.0);
+                d.tau.rows_mut(off, u.len()).copy_from(u);
+                self.forward_dynamics(m, d, diff)?;
+                // δ = (dt v + dt² a, dt a)  (symplectic Euler)
+                for j in 0..nv {
+                    d.dx[j] = dt * d.v[j] + dt * dt * d.a[j];
+                    d.dx[nv + j] = dt * d.a[j];
+                }
+                self.state.integrate(x, &d.dx, &mut d.xnext);
+                if diff {
+                    self.euler_jacobians(d, x, dt);
+                }
+                with_dynamics = true;
+                self.eval_costs(d, x, u, with_dynamics, diff, cost_scale)
+            }
+            ActionKind::Impulse { .. } => {
+                self.impulse_dynamics(m, d, diff)?;
+                d.xnext.rows_mut(0, nq).copy_from(&d.q);
+                d.xnext.rows_mut(nq, nv).copy_from(&d.a);
+                if diff {
+                    // x′ = (q, v⁺): F_x = [I 0; ∂v⁺/∂q ∂v⁺/∂v⁻].
+                    d.fx.fill(0.0);
+                    for j in 0..nv {
+                        d.fx[(j, j)] = 1.0;
+                    }
+                    d.fx.view_mut((nv, 0), (nv, 2 * nv)).copy_from(&d.da_dx);
+                }
+                self.eval_costs(d, x, &zero_u, true, diff, cost_scale)
+            }
+        }
+    }
+
+    /// `a = FD(q, v, τ)` (and `∂a/∂x`, `∂a/∂u`, `λ` and its derivatives with contacts).
+    fn forward_dynamics(&self, m: &Model, d: &mut ActionData, diff: bool) -> Result<()> {
+        let (nv, nu, off) = (m.nv(), self.nu(), self.actuation.offset());
+        match d.kkt.as_mut() {
+            None => {
+                if diff {
+                    fd_derivatives(m, &mut d.data, &d.q, &d.v, &d.tau, None)?;
+                    d.a.copy_from(d.data.qdd());
+                    d.da_dx.view_mut((0, 0), (nv, nv)).copy_from(d.data.dqdd_dq());
+                    d.da_dx.view_mut((0, nv), (nv, nv)).copy_from(d.data.dqdd_dv());
+                    d.da_du.copy_from(&d.data.minv().columns(off, nu));
+                } else {
+                    let a = aba(m, &mut d.data, &d.q, &d.v, &d.tau, None)?;
+                    d.a.copy_from(a);
+                }
+            }
+            Some(k) => {
+                if diff {
+                    kkt_derivatives(m, &mut d.data, k, &d.q, &d.v, &d.tau)?;
+                    d.da_dx.view_mut((0, 0), (nv, nv)).copy_from(k.dqdd_dq());
+                    d.da_dx.view_mut((0, nv), (nv, nv)).copy_from(k.dqdd_dv());
+                    d.da_du.copy_from(&k.dqdd_dtau().columns(off, nu));
+                    let nc = d.lambda.len();
+                    d.dlambda_dx.view_mut((0, 0), (nc, nv)).copy_from(k.dlambda_dq());
+                    d.dlambda_dx.view_mut((0, nv), (nc, nv)).copy_from(k.dlambda_dv());
+                    d.dlambda_du.copy_from(&k.dlambda_dtau().columns(off, nu));
+                } else {
+                    kkt_dynamics(m, &mut d.data, k, &d.q, &d.v, &d.tau)?;
+                }
+                d.a.copy_from(k.qdd());
+                d.lambda.copy_from(k.lambda());
+            }
+        }
+        Ok(())
+    }
+
+    /// `v⁺` into `d.a`, the impulses into `d.lambda` (and their derivatives).
+    fn impulse_dynamics(&self, m: &Model, d: &mut ActionData, diff: bool) -> Result<()> {
+        let nv = m.nv();
+        match d.imp.as_mut() {
+            None => {
+                d.a.copy_from(&d.v);
+                if diff {
+                    d.da_dx.fill(0.0);
+                    for j in 0..nv {
+                        d.da_dx[(j, nv + j)] = 1.0;
+                    }
+                }
+            }
+            Some(im) => {
+                if diff {
+                    impact_derivatives(m, &mut d.data, im, &d.q, &d.v)?;
+                    d.da_dx.view_mut((0, 0), (nv, nv)).copy_from(im.dvplus_dq());
+                    d.da_dx.view_mut((0, nv), (nv, nv)).copy_from(im.dvplus_dvminus());
+                    let nc = d.lambda.len();
+                    d.dlambda_dx.view_mut((0, 0), (nc, nv)).copy_from(im.dimpulse_dq());
+                    d.dlambda_dx.view_mut((0, nv), (nc, nv)).copy_from(im.dimpulse_dvminus());
+                } else {
+                    impact_dynamics(m, &mut d.data, im, &d.q, &d.v)?;
+                }
+                d.a.copy_from(im.vplus());
+                d.lambda.copy_from(im.impulse());
+            }
+        }
+        Ok(())
+    }
+
+    /// `F_x`, `F_u` of symplectic Euler from `∂a/∂x`, `∂a/∂u`:
+    /// - `∂δ/∂x = (dt² a_x + dt [0 I], dt a_x)`, `∂δ/∂u = (dt² a_u, dt a_u)`;
+    /// - `F_x = [J_q^x [I 0] + J_q^δ ∂δ_q/∂x; [0 I] + dt a_x]`, `F_u = [J_q^δ dt² a_u; dt a_u]`,
+    ///   with `J_q^x = ∂(q ⊕ δ_q)/∂q`, `J_q^δ = ∂(q ⊕ δ_q)/∂δ_q`.
+    fn euler_jacobians(&self, d: &mut ActionData, x: &DVector<f64>, dt: f64) {
+        let nv = self.state.nv();
+        self.state.jintegrate_q(&mut d.sc, x, &d.dx, Arg::First);
+        d.jq_x.copy_from(&d.sc.jq);
+        self.state.jintegrate_q(&mut d.sc, x, &d.dx, Arg::Second);
+        d.jq_dx.copy_from(&d.sc.jq);
+        // Bottom rows: [0 I] + dt a_x; dt a_u.
+        {
+            let mut bottom = d.fx.view_mut((nv, 0), (nv, 2 * nv));
+            bottom.copy_from(&d.da_dx);
+            bottom *= dt;
+            for j in 0..nv {
+                bottom[(j, nv + j)] += 1.0;
+            }
+        }
+        {
+            let mut bu = d.fu.view_mut((nv, 0), (nv, d.da_du.ncols()));
+            bu.copy_from(&d.da_du);
+            bu *= dt;
+        }
+        // Top rows: ∂δ_q/∂x = dt × (bottom rows) (= dt² a_x + dt [0 I]).
+        let (top, bottom) = d.fx.rows_range_pair_mut(0..nv, nv..2 * nv);
+        let mut top = top;
+        gemm_nn(&mut top, dt, &d.jq_dx, &bottom, 0.0);
+        let mut tl = top.view_mut((0, 0), (nv, nv));
+        tl += &d.jq_x;
+        let (tu, bu) = d.fu.rows_range_pair_mut(0..nv, nv..2 * nv);
+        let mut tu = tu;
+        gemm_nn(&mut tu, dt, &d.jq_dx, &bu, 0.0);
+    }
+
+    fn eval_costs(
+        &self,
+        d: &mut ActionData,
+        x: &DVector<f64>,
+        u: &DVector<f64>,
+        with_dynamics: bool,
+        diff: bool,
+        scale: f64,
+    ) -> Result<()> {
+        let with_u = with_dynamics && matches!(self.kind, ActionKind::Euler { .. });
+        let forces = with_dynamics.then_some((&d.lambda, &d.dlambda_dx, &d.dlambda_du));
+        let mut view = NodeView {
+            model: self.state.model(),
+            state: &self.state,
+            data: &mut d.data,
+            sc: &mut d.sc,
+            x,
+            q: &d.q,
+            v: &d.v,
+            u,
+            forces,
+        };
+        // Impulse nodes have no control but evaluate every cost at (x, impulses).
+        let eval_all = with_u || with_dynamics;
+        let c = self.costs.calc(&mut d.costs, &mut view, eval_all)?;
+        d.cost = scale * c;
+        if diff {
+            d.lx.fill(0.0);
+            d.lu.fill(0.0);
+            d.lxx.fill(0.0);
+            d.lxu.fill(0.0);
+            d.luu.fill(0.0);
+            let mut derivs = CostDerivs {
+                lx: &mut d.lx,
+                lu: &mut d.lu,
+                lxx: &mut d.lxx,
+                lxu: &mut d.lxu,
+                luu: &mut d.luu,
+            };
+            self.costs.calc_diff(&mut d.costs, &mut view, &mut derivs, eval_all)?;
+            if scale != 1.0 {
+                d.lx *= scale;
+                d.lu *= scale;
+                d.lxx *= scale;
+                d.lxu *= scale;
+                d.luu *= scale;
+            }
+        }
+        Ok(())
+    }
+}

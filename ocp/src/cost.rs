@@ -1,0 +1,179 @@
+//! Weighted sums of activated residuals (Crocoddyl's `CostModelSum` of `CostModelResidual`s):
+//! `ℓ(x, u) = Σ_k w_k a_k(r_k(x, u))` over the active terms, with the Gauss-Newton derivatives
+//!
+//! - `ℓ_x = Σ w_k R_xᵀ A_r`, `ℓ_u = Σ w_k R_uᵀ A_r`;
+//! - `ℓ_xx = Σ w_k R_xᵀ A_rr R_x`, `ℓ_xu = Σ w_k R_xᵀ A_rr R_u`, `ℓ_uu = Σ w_k R_uᵀ A_rr R_u`.
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::activation::Activation;
+use crate::linalg::gemm_nn;
+use crate::residual::{NodeView, Residual, ResidualData};
+
+/// One named term `w a(r(x, u))`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CostItem {
+    /// Its name (unique in the sum).
+    pub name: String,
+    /// The residual.
+    pub residual: Residual,
+    /// The activation.
+    pub activation: Activation,
+    /// The weight `w ≥ 0`.
+    pub weight: f64,
+    /// Whether the term counts.
+    pub active: bool,
+}
+
+/// A sum of cost terms.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CostModelSum {
+    /// The terms, in the order they were added.
+    pub items: Vec<CostItem>,
+}
+
+/// Buffers of a cost sum: one [`ResidualData`] per term, the weighted residual rows.
+#[derive(Clone, Debug)]
+pub struct CostData {
+    pub(crate) residuals: Vec<ResidualData>,
+    ar: Vec<DVector<f64>>,
+    arr: Vec<DVector<f64>>,
+    wrx: Vec<DMatrix<f64>>,
+    wru: Vec<DMatrix<f64>>,
+    rxt: Vec<DMatrix<f64>>,
+    rut: Vec<DMatrix<f64>>,
+    /// The value of each term (weight included).
+    pub costs: Vec<f64>,
+}
+
+/// Where the cost derivatives go.
+pub(crate) struct CostDerivs<'a> {
+    pub lx: &'a mut DVector<f64>,
+    pub lu: &'a mut DVector<f64>,
+    pub lxx: &'a mut DMatrix<f64>,
+    pub lxu: &'a mut DMatrix<f64>,
+    pub luu: &'a mut DMatrix<f64>,
+}
+
+impl CostModelSum {
+    /// Buffers for this sum on a model with `nv` velocities and `nu` controls.
+    pub fn create_data(&self, nv: usize, nu: usize) -> CostData {
+        let rd: Vec<ResidualData> =
+            self.items.iter().map(|c| c.residual.create_data(nv, nu)).collect();
+        CostData {
+            ar: rd.iter().map(|r| DVector::zeros(r.r.len())).collect(),
+            arr: rd.iter().map(|r| DVector::zeros(r.r.len())).collect(),
+            wrx: rd.iter().map(|r| DMatrix::zeros(r.r.len(), 2 * nv)).collect(),
+            wru: rd.iter().map(|r| DMatrix::zeros(r.r.len(), nu)).collect(),
+            rxt: rd.iter().map(|r| DMatrix::zeros(2 * nv, r.r.len())).collect(),
+            rut: rd.iter().map(|r| DMatrix::zeros(nu, r.r.len())).collect(),
+            costs: vec![0.0; rd.len()],
+            residuals: rd,
+        }
+    }
+
+    /// `ℓ`. With `with_u == false` (a node without control, Crocoddyl's `calc(x)`) the terms
+    /// whose residual does not depend on `x` are skipped.
+    pub(crate) fn calc(
+        &self,
+        cd: &mut CostData,
+        n: &mut NodeView<'_>,
+        with_u: bool,
+    ) -> sodyn::Result<f64> {
+        let mut total = 0.0;
+        for (k, c) in self.items.iter().enumerate() {
+            cd.costs[k] = 0.0;
+            if !c.active || (!with_u && !c.residual.depends_on_x()) {
+                continue;
+            }
+            let rd = &mut cd.residuals[k];
+            c.residual.calc(rd, n)?;
+            cd.costs[k] = c.weight * c.activation.value(&rd.r);
+            total += cd.costs[k];
+        }
+        Ok(total)
+    }
+
+    /// The derivatives of `ℓ` (after [`CostModelSum::calc`] at the same point), added to `d`
+    /// (which the caller zeroes).
+    pub(crate) fn calc_diff(
+        &self,
+        cd: &mut CostData,
+        n: &mut NodeView<'_>,
+        d: &mut CostDerivs<'_>,
+        with_u: bool,
+    ) -> sodyn::Result<()> {
+        for (k, c) in self.items.iter().enumerate() {
+            if !c.active || (!with_u && !c.residual.depends_on_x()) {
+                continue;
+            }
+            let rd = &mut cd.residuals[k];
+            c.residual.calc_diff(rd, n)?;
+            let (ar, arr) = (&mut cd.ar[k], &mut cd.arr[k]);
+            c.activation.derivatives(&rd.r, ar, arr);
+            let w = c.weight;
+            let nv = rd.rx.ncols() / 2;
+            if let Residual::State { .. } = c.residual {
+                // R_x = blockdiag(J_q, I): ℓ_x = w (J_qᵀ A_r,q, A_r,v),
+                // ℓ_xx = w blockdiag(J_qᵀ A_rr,q J_q, A_rr,v).
+                let jq = rd.rx.view((0, 0), (nv, nv));
+                let mut lq = d.lx.rows_mut(0, nv);
+                lq.gemv_tr(w, &jq, &ar.rows(0, nv), 1.0);
+                let wrx = &mut cd.wrx[k];
+                let mut wq = wrx.view_mut((0, 0), (nv, nv));
+                wq.copy_from(&jq);
+                for (i, mut row) in wq.row_iter_mut().enumerate() {
+                    row *= w * arr[i];
+                }
+                let mut lqq = d.lxx.view_mut((0, 0), (nv, nv));
+                let jqt = &mut cd.rxt[k];
+                let mut jqt = jqt.view_mut((0, 0), (nv, nv));
+                jqt.tr_copy_from(&jq);
+                gemm_nn(&mut lqq, 1.0, &jqt, &wq, 1.0);
+                for j in 0..nv {
+                    d.lx[nv + j] += w * ar[nv + j];
+                    d.lxx[(nv + j, nv + j)] += w * arr[nv + j];
+                }
+                continue;
+            }
+            if let Residual::Control { .. } | Residual::JointEffort { .. } = c.residual {
+                if with_u {
+                    for j in 0..ar.len() {
+                        d.lu[j] += w * ar[j];
+                        d.luu[(j, j)] += w * arr[j];
+                    }
+                }
+                continue;
+            }
+            let depends_u = with_u && c.residual.depends_on_u();
+            // w A_rr R_x and w A_rr R_u, row by row, over the nonzero columns of R_x.
+            let nx = c.residual.x_cols(nv);
+            let rx = rd.rx.columns(0, nx);
+            {
+                let wrx = &mut cd.wrx[k];
+                let mut wx = wrx.columns_mut(0, nx);
+                wx.copy_from(&rx);
+                for (i, mut row) in wx.row_iter_mut().enumerate() {
+                    row *= w * arr[i];
+                }
+                d.lx.rows_mut(0, nx).gemv_tr(w, &rx, ar, 1.0);
+                let mut rxt = cd.rxt[k].rows_mut(0, nx);
+                rxt.tr_copy_from(&rx);
+                gemm_nn(&mut d.lxx.view_mut((0, 0), (nx, nx)), 1.0, &rxt, &wx, 1.0);
+            }
+            if depends_u {
+                let wru = &mut cd.wru[k];
+                wru.copy_from(&rd.ru);
+                for (i, mut row) in wru.row_iter_mut().enumerate() {
+                    row *= w * arr[i];
+                }
+                d.lu.gemv_tr(w, &rd.ru, ar, 1.0);
+                let rut = &mut cd.rut[k];
+                rut.tr_copy_from(&rd.ru);
+                gemm_nn(d.luu, 1.0, rut, wru, 1.0);
+                gemm_nn(&mut d.lxu.rows_mut(0, nx), 1.0, &cd.rxt[k].rows(0, nx), wru, 1.0);
+            }
+        }
+        Ok(())
+    }
+}

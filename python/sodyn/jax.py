@@ -1,0 +1,308 @@
+"""sodyn inside JAX: functions of arrays that work under ``jax.jit``, ``jax.vmap``, ``jax.grad``,
+``jax.jacfwd``, ``jax.jacrev``, ``jax.hessian`` and jvp-of-vjp (``pip install "sodyn[jax]"``).
+
+Each function takes the numpy API's arguments without ``data`` (the model, contacts, frame and
+restitution are static, the arrays traced) and returns ``jax.Array`` values::
+
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    import sodyn, sodyn.jax as sj
+    model = sodyn.Model.builtin("chain6")
+    qdd = jax.jit(lambda q, v, tau: sj.aba(model, q, v, tau))(q, v, tau)
+
+How it is built: the values and derivatives are sodyn's, called through ``jax.pure_callback``
+(no XLA FFI custom call), wrapped in ``jax.custom_jvp`` rules:
+
+* first order: ``fd_derivatives``, ``id_derivatives``, ``kkt_derivatives``,
+  ``impact_derivatives``, ``frame_jacobian``, ``center_of_mass_jacobian`` (reverse mode is
+  JAX's transpose of the linear tangent map ``J @ t``);
+* second order: the Jacobians are themselves ``custom_jvp`` functions whose tangents are the
+  dense second-order tensors (``fd_so_derivatives``, ``id_so_derivatives``, ``kkt_derivatives``
+  / ``impact_derivatives`` with ``order=2``, ``frame_jacobian_derivative``,
+  ``center_of_mass_velocity_derivatives``, ``idsoza``) contracted with the tangent; the third
+  order raises an error;
+* ``jax.vmap``: the callbacks use ``vmap_method="broadcast_all"`` and receive the stacked
+  states at once; ``rnea``, ``aba``, ``crba``, ``nonlinear_effects`` and their first and
+  second derivatives go to ``sodyn.batch`` (threads, GIL released; bit for bit the sequential
+  calls), the others loop over the states in Python.
+
+Only float64 is accepted: enable it with ``jax.config.update("jax_enable_x64", True)`` (or the
+environment variable ``JAX_ENABLE_X64=1``) before creating arrays. Derivatives with respect to
+``q`` are those with respect to the ``q`` array when ``model.nq == model.nv``; for a model with
+quaternion coordinates (free flyer, spherical, planar joints) differentiating with respect to
+``q`` raises ``ValueError`` (sodyn's ``q`` derivatives are tangent-space, ``nv`` columns) while
+the derivatives with respect to the other arguments work. See docs/interop.md.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Sequence, Tuple
+
+try:
+    import jax
+    import jax.numpy as jnp
+    from jax.custom_derivatives import SymbolicZero
+except ImportError as exc:  # pragma: no cover - exercised by test_interop_missing.py
+    raise ImportError(
+        "sodyn.jax needs JAX, which is not installed: pip install 'sodyn[jax]' "
+        "(or pip install jax)"
+    ) from exc
+
+import numpy as np
+
+from . import _interop
+from ._interop import data_for
+from ._sodyn import Contact, Model
+
+__all__ = [
+    "aba",
+    "center_of_mass",
+    "crba",
+    "frame_placement",
+    "frame_translation",
+    "impact_dynamics",
+    "kkt_dynamics",
+    "nonlinear_effects",
+    "rnea",
+]
+
+X64_HINT = (
+    "sodyn.jax computes in float64 only: enable 64-bit JAX with "
+    "jax.config.update('jax_enable_x64', True) (or JAX_ENABLE_X64=1) before creating arrays"
+)
+
+
+def _run(spec: _interop.Spec, kind: str, xs) -> tuple:
+    """The numpy side of a callback: single state or stacked leading axes."""
+    xs = [np.asarray(x, dtype=np.float64) for x in xs]
+    lead = xs[0].shape[:-1]
+    if lead == ():
+        data = data_for(spec.model)
+        if kind == "primal":
+            res = list(spec.primal(data, xs))
+        elif kind == "first":
+            outs, jac = spec.first(data, xs)
+            res = list(outs) + [jac[k] for k in spec.jac_blocks]
+        else:
+            H = spec.second(data, xs)
+            res = [H[k] for k in spec.hess_blocks]
+        return tuple(np.ascontiguousarray(r, dtype=np.float64) for r in res)
+    n = math.prod(lead)
+    flat = [np.ascontiguousarray(x.reshape((n, x.shape[-1]))) for x in xs]
+    if kind == "primal":
+        res = list(spec.primal_batch(flat))
+    elif kind == "first":
+        outs, jac = spec.first_batch(flat)
+        res = list(outs) + [jac[k] for k in spec.jac_blocks]
+    else:
+        H = spec.second_batch(flat)
+        res = [H[k] for k in spec.hess_blocks]
+    return tuple(np.ascontiguousarray(r.reshape(lead + r.shape[1:]), dtype=np.float64) for r in res)
+
+
+def _is_zero(t) -> bool:
+    return isinstance(t, SymbolicZero)
+
+
+def _build(spec: _interop.Spec):
+    """The JAX function of a spec: value, first and second order as nested custom_jvp."""
+    f64 = jnp.float64
+    tan = spec.tan_dims()
+    osh = spec.out_shapes()
+    nout = len(osh)
+    out_sds = tuple(jax.ShapeDtypeStruct(s, f64) for s in osh)
+    jac_sds = tuple(jax.ShapeDtypeStruct(osh[o] + (tan[a],), f64) for o, a in spec.jac_blocks)
+    hess_sds = tuple(
+        jax.ShapeDtypeStruct(osh[o] + (tan[a], tan[b]), f64) for o, a, b in spec.hess_blocks
+    )
+    q_pos = [i for i, name in enumerate(spec.inputs) if name == "q"]
+    q_is_tangent = spec.model.nq == spec.model.nv
+    fname = f"sodyn.jax.{spec.name}"
+
+    def check_q(tangents) -> None:
+        for i in q_pos:
+            if not q_is_tangent and not _is_zero(tangents[i]):
+                raise ValueError(
+                    f"{fname}: derivatives with respect to 'q' need nq == nv; this model has "
+                    f"nq = {spec.model.nq}, nv = {spec.model.nv} (quaternion coordinates), and "
+                    "sodyn's q derivatives are tangent-space (nv columns): differentiate with "
+                    "respect to v / tau, or parametrise q by a tangent increment (docs/interop.md)"
+                )
+
+    def contract(block, t):
+        return jnp.tensordot(block, t, axes=1)
+
+    def cb(kind):
+        return lambda *xs: _run(spec, kind, xs)
+
+    @jax.custom_jvp
+    def second(*xs):
+        return jax.pure_callback(cb("second"), hess_sds, *xs, vmap_method="broadcast_all")
+
+    @second.defjvp
+    def _second_jvp(primals, tangents):
+        raise NotImplementedError(f"{fname}: derivatives beyond the second order are not available")
+
+    @jax.custom_jvp
+    def first(*xs):
+        return jax.pure_callback(cb("first"), out_sds + jac_sds, *xs, vmap_method="broadcast_all")
+
+    def _first_jvp(primals, tangents):
+        check_q(tangents)
+        res = first(*primals)
+        jacs = dict(zip(spec.jac_blocks, res[nout:]))
+        H = None
+        if any(not _is_zero(t) for t in tangents):
+            H = dict(zip(spec.hess_blocks, second(*primals)))
+        t_out = []
+        for o in range(nout):
+            acc = jnp.zeros(osh[o], f64)
+            for (oo, a), J in jacs.items():
+                if oo == o and not _is_zero(tangents[a]):
+                    acc = acc + contract(J, tangents[a])
+            t_out.append(acc)
+        for o, a in spec.jac_blocks:
+            acc = jnp.zeros(osh[o] + (tan[a],), f64)
+            if H is not None:
+                for (oo, aa, b), h in H.items():
+                    if (oo, aa) == (o, a) and not _is_zero(tangents[b]):
+                        acc = acc + contract(h, tangents[b])
+            t_out.append(acc)
+        return tuple(res), tuple(t_out)
+
+    first.defjvp(_first_jvp, symbolic_zeros=True)
+
+    @jax.custom_jvp
+    def value(*xs):
+        return jax.pure_callback(cb("primal"), out_sds, *xs, vmap_method="broadcast_all")
+
+    def _value_jvp(primals, tangents):
+        check_q(tangents)
+        res = first(*primals)
+        outs, jacs = res[:nout], dict(zip(spec.jac_blocks, res[nout:]))
+        t_out = []
+        for o in range(nout):
+            acc = jnp.zeros(osh[o], f64)
+            for (oo, a), J in jacs.items():
+                if oo == o and not _is_zero(tangents[a]):
+                    acc = acc + contract(J, tangents[a])
+            t_out.append(acc)
+        return tuple(outs), tuple(t_out)
+
+    value.defjvp(_value_jvp, symbolic_zeros=True)
+    return value
+
+
+_CACHE: dict = {}
+
+
+def _static_key(static) -> tuple:
+    return tuple(tuple(id(c) for c in s) if isinstance(s, tuple) else s for s in static)
+
+
+def _function(cls, model: Model, static=()):
+    if not isinstance(model, Model):
+        raise TypeError(f"sodyn.jax.{cls.name}: 'model' must be a sodyn.Model, got {type(model)!r}")
+    key = (cls.name, id(model), _static_key(static))
+    hit = _CACHE.get(key)
+    if hit is not None and hit[0] is model and hit[1] == static:
+        return hit[2]
+    fn = _build(cls(model, static))
+    if len(_CACHE) > 256:
+        _CACHE.clear()
+    _CACHE[key] = (model, static, fn)
+    return fn
+
+
+def _array(name: str, x, n: int, fname: str):
+    if not jax.config.jax_enable_x64:
+        raise TypeError(f"{fname}: {X64_HINT}")
+    dtype = getattr(x, "dtype", None)
+    if dtype is None:
+        x = jnp.asarray(x, dtype=jnp.float64)
+    elif jnp.issubdtype(dtype, jnp.floating):
+        if dtype != jnp.float64:
+            raise TypeError(f"{fname}: argument '{name}' is {dtype}; {X64_HINT}")
+        x = jnp.asarray(x)
+    elif jnp.issubdtype(dtype, jnp.integer) or jnp.issubdtype(dtype, jnp.bool_):
+        x = jnp.asarray(x, dtype=jnp.float64)
+    else:
+        raise TypeError(f"{fname}: argument '{name}' has dtype {dtype}, expected float64")
+    if x.shape != (n,):
+        raise ValueError(
+            f"{fname}: argument '{name}' has shape {tuple(x.shape)}, expected ({n},) "
+            "(use jax.vmap for stacked states)"
+        )
+    return x
+
+
+def _call(cls, model: Model, args: Sequence[Any], static=()):
+    fn = _function(cls, model, static)
+    spec_dims = cls(model, static).in_dims()
+    fname = f"sodyn.jax.{cls.name}"
+    xs = [_array(name, x, n, fname) for name, x, n in zip(cls.inputs, args, spec_dims)]
+    return fn(*xs)
+
+
+def rnea(model: Model, q: Any, v: Any, a: Any) -> jax.Array:
+    """Inverse dynamics ``tau (nv,)``; derivatives ``id_derivatives`` / ``crba`` and
+    ``id_so_derivatives``."""
+    return _call(_interop.Rnea, model, (q, v, a))[0]
+
+
+def aba(model: Model, q: Any, v: Any, tau: Any) -> jax.Array:
+    """Forward dynamics ``qdd (nv,)``; derivatives ``fd_derivatives`` and
+    ``fd_so_derivatives``."""
+    return _call(_interop.Aba, model, (q, v, tau))[0]
+
+
+def crba(model: Model, q: Any) -> jax.Array:
+    """Mass matrix ``M (nv, nv)`` (armature included); ``dM/dq`` from ``id_so_derivatives``,
+    ``d2M/dq2`` from ``idsoza``."""
+    return _call(_interop.Crba, model, (q,))[0]
+
+
+def nonlinear_effects(model: Model, q: Any, v: Any) -> jax.Array:
+    """``b = C(q, v) v + g(q)`` ``(nv,)``."""
+    return _call(_interop.NonlinearEffects, model, (q, v))[0]
+
+
+def kkt_dynamics(
+    model: Model, q: Any, v: Any, tau: Any, contacts: Sequence[Contact]
+) -> Tuple[jax.Array, jax.Array]:
+    """KKT contact dynamics ``(qdd, lambda_)`` (``kkt_derivatives`` of the numpy API)."""
+    contacts = _interop.check_contacts(contacts, "sodyn.jax.kkt_dynamics")
+    qdd, lam = _call(_interop.Kkt, model, (q, v, tau), (contacts,))
+    return qdd, lam
+
+
+def impact_dynamics(
+    model: Model, q: Any, v_minus: Any, contacts: Sequence[Contact], restitution: float = 0.0
+) -> Tuple[jax.Array, jax.Array]:
+    """Impact dynamics ``(vplus, impulse)`` (``impact_derivatives`` of the numpy API)."""
+    contacts = _interop.check_contacts(contacts, "sodyn.jax.impact_dynamics")
+    vplus, impulse = _call(_interop.Impact, model, (q, v_minus), (contacts, float(restitution)))
+    return vplus, impulse
+
+
+def frame_placement(model: Model, q: Any, frame: Any) -> jax.Array:
+    """World placement of a frame, ``(4, 4)`` homogeneous matrix."""
+    return _call(_interop.FramePlacement, model, (q,), (_frame(model, frame),))[0]
+
+
+def frame_translation(model: Model, q: Any, frame: Any) -> jax.Array:
+    """World position of a frame's origin ``(3,)``."""
+    return _call(_interop.FrameTranslation, model, (q,), (_frame(model, frame),))[0]
+
+
+def center_of_mass(model: Model, q: Any) -> jax.Array:
+    """Centre of mass ``(3,)``, world frame."""
+    return _call(_interop.CenterOfMass, model, (q,))[0]
+
+
+def _frame(model: Model, frame: Any) -> int:
+    """A frame name or index as an index (a ``SodynError`` names an unknown frame)."""
+    if isinstance(frame, str):
+        return model.frame_id(frame)
+    return int(frame)

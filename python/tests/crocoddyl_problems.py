@@ -1,0 +1,148 @@
+"""Crocoddyl problems built with Crocoddyl's own example code (``crocoddyl.utils``), shared by
+``test_ocp_crocoddyl.py`` and ``python/bench/compare_crocoddyl.py``. Each builder returns
+``(problem, init_xs, init_us)`` with the initial guess of the example (``x0`` repeated and
+``problem.quasiStatic``)."""
+
+from __future__ import annotations
+
+from typing import Any, Callable, Dict, List, Tuple
+
+import numpy as np
+
+
+def _guess(problem: Any) -> Tuple[List[np.ndarray], List[np.ndarray]]:
+    x0 = problem.x0
+    xs = [x0] * (problem.T + 1)
+    return xs, problem.quasiStatic([x0] * problem.T)
+
+
+def anymal(gait: str, short: bool = False, x0=None):
+    """ANYmal problems of ``quadrupedal_gaits_fwddyn.py`` with its parameters (``short``: fewer
+    knots, for CI; ``x0``: the initial state, default the standing configuration; the example
+    starts each gait at the end of the previous one)."""
+    import example_robot_data
+    from crocoddyl.utils.quadruped import SimpleQuadrupedalGaitProblem
+
+    robot = example_robot_data.load("anymal")
+    model = robot.model
+    if x0 is None:
+        q0 = model.referenceConfigurations["standing"].copy()
+        x0 = np.concatenate([q0, np.zeros(model.nv)])
+    g = SimpleQuadrupedalGaitProblem(model, "LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT")
+    step = 10 if short else 25
+    if gait == "walk":
+        p = g.createWalkingProblem(x0, 0.25, 0.15, 1e-2, step, 2)
+    elif gait == "trot":
+        p = g.createTrottingProblem(x0, 0.15, 0.1, 1e-2, step, 2)
+    elif gait == "pace":
+        p = g.createPacingProblem(x0, 0.15, 0.1, 1e-2, step, 5)
+    elif gait == "bound":
+        p = g.createBoundingProblem(x0, 0.15, 0.1, 1e-2, step, 5)
+    elif gait == "jump":
+        p = g.createJumpingProblem(x0, 0.15, [0.0, 0.3, 0.0], 1e-2, 10, 8 if short else 20)
+    else:
+        raise ValueError(gait)
+    return (p, *_guess(p))
+
+
+def talos_legs(gait: str, short: bool = False, x0=None):
+    """Talos-legs problems of ``bipedal_gaits_fwddyn.py`` with its parameters."""
+    import example_robot_data
+    from crocoddyl.utils.biped import SimpleBipedGaitProblem
+
+    robot = example_robot_data.load("talos_legs")
+    model = robot.model
+    if x0 is None:
+        q0 = model.referenceConfigurations["half_sitting"].copy()
+        x0 = np.concatenate([q0, np.zeros(model.nv)])
+    g = SimpleBipedGaitProblem(model, "right_sole_link", "left_sole_link")
+    if gait == "walk":
+        p = g.createWalkingProblem(x0, 0.6, 0.1, 0.03, 6 if short else 15, 2 if short else 4)
+    elif gait == "jump":
+        p = g.createJumpingProblem(x0, 0.1, [0.0, 0.3, 0.0], 0.03, 9, 6)
+    else:
+        raise ValueError(gait)
+    return (p, *_guess(p))
+
+
+def double_pendulum(short: bool = False):
+    """The swing-up of ``double_pendulum_fwddyn.py`` with Crocoddyl's built-in classes: the
+    example's own Python-defined cost and under-actuation (``crocoddyl.utils.pendulum``) are
+    user classes, which ``from_crocoddyl`` refuses by name, so this variant actuates both
+    joints and puts the goal in a weighted state residual."""
+    import crocoddyl
+    import example_robot_data
+
+    model = example_robot_data.load("double_pendulum").model
+    state = crocoddyl.StateMultibody(model)
+    act = crocoddyl.ActuationModelFull(state)
+    nu = act.nu
+    run, term = crocoddyl.CostModelSum(state, nu), crocoddyl.CostModelSum(state, nu)
+    goal = np.concatenate([[0.0, 0.0], np.zeros(model.nv)])
+    x_goal = crocoddyl.CostModelResidual(
+        state, crocoddyl.ActivationModelWeightedQuad(np.array([1.0, 1.0, 0.1, 0.1])),
+        crocoddyl.ResidualModelState(state, goal, nu))
+    u_reg = crocoddyl.CostModelResidual(state, crocoddyl.ResidualModelControl(state, nu))
+    dt = 1e-2
+    run.addCost("uReg", u_reg, 1e-4 / dt)
+    run.addCost("xGoal", x_goal, 1e-5 / dt)
+    term.addCost("xGoal", x_goal, 100.0)
+    rm = crocoddyl.IntegratedActionModelEuler(
+        crocoddyl.DifferentialActionModelFreeFwdDynamics(state, act, run), dt)
+    tm = crocoddyl.IntegratedActionModelEuler(
+        crocoddyl.DifferentialActionModelFreeFwdDynamics(state, act, term), dt)
+    T = 40 if short else 100
+    x0 = np.array([3.14, 0.0, 0.0, 0.0])
+    p = crocoddyl.ShootingProblem(x0, [rm] * T, tm)
+    return p, [], []
+
+
+def kinova_reach():
+    """The Kinova reach of ``arm_manipulation_fwddyn.py`` (its running and terminal models)."""
+    import crocoddyl
+    import example_robot_data
+    import pinocchio
+
+    kinova = example_robot_data.load("kinova")
+    model = kinova.model
+    state = crocoddyl.StateMultibody(model)
+    act = crocoddyl.ActuationModelFull(state)
+    q0 = model.referenceConfigurations["arm_up"]
+    x0 = np.concatenate([q0, np.zeros(model.nv)])
+    run, term = crocoddyl.CostModelSum(state), crocoddyl.CostModelSum(state)
+    frame = model.getFrameId("j2s6s200_end_effector")
+    goal = crocoddyl.ResidualModelFramePlacement(
+        state, frame, pinocchio.SE3(np.eye(3), np.array([0.6, 0.2, 0.5])))
+    goal_cost = crocoddyl.CostModelResidual(state, goal)
+    x_reg = crocoddyl.CostModelResidual(state, crocoddyl.ResidualModelState(state))
+    u_reg = crocoddyl.CostModelResidual(state, crocoddyl.ResidualModelControl(state))
+    run.addCost("gripperPose", goal_cost, 1)
+    run.addCost("xReg", x_reg, 1e-1)
+    run.addCost("uReg", u_reg, 1e-1)
+    term.addCost("gripperPose", goal_cost, 1)
+    dt = 1e-3
+    rm = crocoddyl.IntegratedActionModelEuler(
+        crocoddyl.DifferentialActionModelFreeFwdDynamics(state, act, run), dt)
+    tm = crocoddyl.IntegratedActionModelEuler(
+        crocoddyl.DifferentialActionModelFreeFwdDynamics(state, act, term), 0.0)
+    p = crocoddyl.ShootingProblem(x0, [rm] * 100, tm)
+    return p, [], []
+
+
+PROBLEMS: Dict[str, Callable[..., Any]] = {
+    "anymal_walk": lambda short=False, x0=None: anymal("walk", short, x0),
+    "anymal_trot": lambda short=False, x0=None: anymal("trot", short, x0),
+    "anymal_pace": lambda short=False, x0=None: anymal("pace", short, x0),
+    "anymal_bound": lambda short=False, x0=None: anymal("bound", short, x0),
+    "anymal_jump": lambda short=False, x0=None: anymal("jump", short, x0),
+    "talos_legs_walk": lambda short=False, x0=None: talos_legs("walk", short, x0),
+    "talos_legs_jump": lambda short=False, x0=None: talos_legs("jump", short, x0),
+    "kinova_reach": lambda short=False, x0=None: kinova_reach(),
+    "double_pendulum": lambda short=False, x0=None: double_pendulum(short),
+}
+
+# The examples solve their gaits in this order, each from the last state of the previous one.
+CHAINS = [
+    ["anymal_walk", "anymal_trot", "anymal_pace", "anymal_bound", "anymal_jump"],
+    ["talos_legs_walk", "talos_legs_jump"],
+]
