@@ -295,7 +295,7 @@ fn errors_name_file_line_and_element() {
             "<mujoco><worldbody>\n<body name=\"a\"><joint/></body></worldbody></mujoco>",
             2,
             "body \"a\"",
-            "a moving body needs a positive mass",
+            "a moving body (with the bodies welded to it) needs a positive mass",
         ),
         (
             "<mujoco><worldbody>\n<body name=\"a\"><joint/>\n<geom name=\"g\" fromto=\"0 0 0 1 0 0\" size=\".1\"/></body></worldbody></mujoco>",
@@ -470,4 +470,334 @@ fn static_meshes_and_equality_constraints() {
     assert!((f.placement.trans - x).norm() < 1e-15);
     assert_eq!(m.warnings().len(), 1, "{:?}", m.warnings());
     assert!(m.warnings()[0].contains("<connect> \"loop\": equality constraint ignored"));
+}
+
+/// MuJoCo's default classes (each accepted case's armature is MuJoCo 4.0's `dof_armature`;
+/// `python/tests/test_mjcf.py` checks these and more against MuJoCo itself).
+#[test]
+fn default_classes_as_mujoco() {
+    let arm = |defaults: &str, j: &str| -> f64 {
+        let xml = format!(
+            "<mujoco>\n{defaults}\n<worldbody><body><joint name=\"j\" {j}/><geom size=\"0.1\"/>\
+             </body></worldbody>\n</mujoco>"
+        );
+        let m = load_str(&xml).unwrap_or_else(|e| panic!("{xml}\n-> {e}"));
+        m.armature()[0]
+    };
+    // The root class "main": implicit, explicit, or an empty name; later top-level defaults
+    // update it; a nested class is a copy of its parent when it is read.
+    assert_eq!(arm("<default><joint armature=\"0.1\"/></default>", ""), 0.1);
+    assert_eq!(arm("<default class=\"main\"><joint armature=\"0.1\"/></default>", ""), 0.1);
+    assert_eq!(
+        arm("<default class=\"\"><joint armature=\"0.1\"/></default>", "class=\"main\""),
+        0.1
+    );
+    let two = "<default class=\"main\"><joint armature=\"0.1\"/><default class=\"a\"/></default>\n\
+               <default><joint armature=\"0.2\"/><default class=\"b\"/></default>";
+    assert_eq!(arm(two, ""), 0.2);
+    assert_eq!(arm(two, "class=\"a\""), 0.1);
+    assert_eq!(arm(two, "class=\"b\""), 0.2);
+    // The class's own elements are read before its nested classes, whatever their order.
+    let order = "<default><default class=\"a\"/><joint armature=\"0.1\"/></default>";
+    assert_eq!(arm(order, "class=\"a\""), 0.1);
+    // childclass, and class="main" from inside another class.
+    let xml = "<mujoco><default><joint armature=\"0.1\"/><default class=\"a\"><joint \
+               armature=\"0.3\"/></default></default><worldbody><body childclass=\"a\"><joint/>\
+               <geom size=\"0.1\"/><body childclass=\"main\"><joint/><geom size=\"0.1\"/></body>\
+               <body><joint class=\"main\"/><geom size=\"0.1\"/></body></body></worldbody>\
+               </mujoco>";
+    assert_eq!(load_str(xml).unwrap().armature(), &[0.3, 0.1, 0.1]);
+    // A nested class's partial size keeps its parent's other entries (MuJoCo's mass 159.17...).
+    let xml = "<mujoco><default><geom type=\"capsule\" size=\"0.1 0.5\"/><default class=\"a\">\
+               <geom size=\"0.2\"/></default></default><worldbody><body><joint/><geom \
+               class=\"a\"/></body></worldbody></mujoco>";
+    let mass = load_str(xml).unwrap().inertias()[1].mass;
+    assert!((mass - 159.174_027_781_882_9).abs() < 1e-9, "{mass}");
+
+    // What MuJoCo refuses, at the line it names.
+    let refused: &[(&str, u32, &str, &str)] = &[
+        (
+            "<default>\n</default>\n<default class=\"top\"/>",
+            4,
+            "<default class=\"top\">",
+            "cannot be renamed",
+        ),
+        (
+            "<default>\n<default class=\"main\"/></default>",
+            3,
+            "<default class=\"main\">",
+            "defined twice",
+        ),
+        (
+            "<default><default class=\"p\"><default class=\"a\"/></default>\n<default \
+             class=\"q\"><default class=\"a\"/></default></default>",
+            3,
+            "<default class=\"a\">",
+            "defined twice",
+        ),
+        (
+            "<default><default class=\"a\"/></default>\n<default><default class=\"a\"/></default>",
+            3,
+            "<default class=\"a\">",
+            "defined twice",
+        ),
+        ("<default>\n<default/></default>", 3, "<default>", "non-empty class"),
+        ("<default>\n<default class=\"\"/></default>", 3, "<default>", "non-empty class"),
+        (
+            "<default>\n<joint/><joint/></default>",
+            2,
+            "<default class=\"main\">",
+            "a second <joint>",
+        ),
+        ("<default>\n<body/></default>", 3, "<body>", "cannot be in a <default>"),
+    ];
+    for &(defaults, line, element, reason) in refused {
+        let xml = format!(
+            "<mujoco>\n{defaults}\n<worldbody><body><joint/><geom size=\"0.1\"/></body>\
+             </worldbody></mujoco>"
+        );
+        let (l, e, r) = error_of(&xml);
+        assert_eq!((l, e.as_str()), (Some(line), element), "{xml}\n-> {r}");
+        assert!(r.contains(reason), "{xml}\n-> {r}\n(expected \"{reason}\")");
+    }
+    let (l, e, r) = error_of("<mujoco>\n<worldbody childclass=\"a\"/></mujoco>");
+    assert_eq!((l, e.as_str()), (Some(2), "<worldbody>"), "{r}");
+    let (l, e, r) =
+        error_of(&wrap("<body name=\"b\" class=\"main\"><joint/><geom size=\"0.1\"/></body>"));
+    assert_eq!((l, e.as_str()), (Some(3), "body \"b\""), "{r}");
+    let (l, e, r) =
+        error_of(&wrap("<body name=\"b\" childclass=\"zz\"><joint/><geom size=\"0.1\"/></body>"));
+    assert_eq!((l, e.as_str()), (Some(3), "body \"b\""), "{r}");
+}
+
+/// A body with joints needs mass and moments with the bodies welded to it, as in MuJoCo: a
+/// massless body with joints loads when a welded child carries the mass.
+#[test]
+fn weld_group_mass_rule() {
+    let m = load_str(&wrap(
+        "<body><joint/><body><body pos=\"0.2 0 0\"><geom size=\"0.1\"/></body></body></body>",
+    ))
+    .unwrap();
+    let mass = 1000.0 * 4.0 / 3.0 * PI * 0.001;
+    assert!((m.inertias()[1].mass - mass).abs() < 1e-12);
+    for body in [
+        "<body name=\"a\"><joint/><body><joint/><geom size=\"0.1\"/></body></body>",
+        "<body name=\"a\"><joint/><inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"0 0 0\"/>\
+         <body pos=\"0.5 0 0\"><inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"0 0 0\"/></body></body>",
+    ] {
+        let (l, e, r) = error_of(&wrap(body));
+        assert_eq!((l, e.as_str()), (Some(3), "body \"a\""), "{r}");
+        assert!(r.contains("with the bodies welded to it"), "{r}");
+    }
+}
+
+/// `discardvisual` and `fusestatic` do not change the dynamics, except that MuJoCo refuses a
+/// visual geom with mass when `inertiafromgeom="true"`.
+#[test]
+fn discardvisual_and_fusestatic() {
+    let body = "<body><joint/><geom size=\"0.1\"/><geom size=\"0.2\" pos=\"0.3 0 0\" contype=\"0\" \
+                conaffinity=\"0\"/><body pos=\"0.5 0 0\"><geom size=\"0.1\"/></body></body>";
+    let with = |compiler: &str| {
+        load_str(&format!("<mujoco><compiler {compiler}/><worldbody>\n{body}</worldbody></mujoco>"))
+    };
+    let plain = with("").unwrap().inertias()[1];
+    for c in [
+        "discardvisual=\"true\"",
+        "fusestatic=\"true\"",
+        "discardvisual=\"false\" fusestatic=\"false\"",
+    ] {
+        assert_eq!(with(c).unwrap().inertias()[1], plain, "{c}");
+    }
+    // MuJoCo's mass of this body: 4/3 π (0.1³ + 0.2³ + 0.1³) · 1000.
+    assert!((plain.mass - 4000.0 / 3.0 * PI * 0.010).abs() < 1e-9);
+    match with("discardvisual=\"true\" inertiafromgeom=\"true\"") {
+        Err(Error::Model { line: Some(2), element, reason, .. }) => {
+            assert_eq!(element, "geom of unnamed body");
+            assert!(reason.contains("discardvisual"), "{reason}");
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+/// Tendons are recorded (fixed: joint indices and coefficients; spatial: the path), warned
+/// about once, and leave M and τ alone (the same model without them agrees exactly).
+#[test]
+fn tendons_are_data() {
+    use sodyn::model::{SpatialWrap, TendonPath};
+    let m = Model::from_mjcf(data_dir().join("tendons.xml")).unwrap();
+    let t = m.tendons();
+    assert_eq!(t.len(), 3);
+    let (f1, f2) = (m.joint_id("f1_base").unwrap(), m.joint_id("f1_tip").unwrap());
+    assert_eq!(t[0].name.as_deref(), Some("coupling"));
+    assert_eq!(t[0].path, TendonPath::Fixed(vec![(f1, 1.0), (f2, -0.5)]));
+    let site = |s: &str| SpatialWrap::Site(s.into());
+    assert_eq!(
+        t[1].path,
+        TendonPath::Spatial(vec![
+            site("palm_site"),
+            site("f1_a"),
+            SpatialWrap::Geom { geom: "f1_knuckle".into(), sidesite: Some("f1_side".into()) },
+            site("f1_b")
+        ])
+    );
+    assert_eq!(
+        t[2].path,
+        TendonPath::Spatial(vec![
+            site("palm_site"),
+            site("f1_a"),
+            SpatialWrap::Pulley { divisor: 2.0 },
+            site("palm_site"),
+            site("thumb_tip")
+        ])
+    );
+    let w: Vec<&String> = m.warnings().iter().filter(|w| w.contains("<tendon>")).collect();
+    assert_eq!(w.len(), 1);
+    assert!(w[0].contains("tendons.xml:49: <tendon>: 3 tendons (1 fixed, 2 spatial)"), "{}", w[0]);
+    assert!(
+        m.warnings().iter().any(|w| w.contains("<joint> \"pair\": equality constraint ignored"))
+    );
+    // Without the tendons: the same M and τ, bit for bit.
+    let text = std::fs::read_to_string(data_dir().join("tendons.xml")).unwrap();
+    let (a, b) = (text.find("<tendon>").unwrap(), text.find("</tendon>").unwrap() + 9);
+    let bare = load_str(&format!("{}{}", &text[..a], &text[b..])).unwrap();
+    assert!(bare.tendons().is_empty());
+    let q = DVector::from_fn(m.nq(), |i, _| 0.1 * i as f64 - 0.4);
+    let mut q = q;
+    let n = q.rows(3, 4).norm();
+    q.rows_mut(3, 4).unscale_mut(n);
+    let n = q.rows(7, 4).norm();
+    q.rows_mut(7, 4).unscale_mut(n);
+    let v = DVector::from_fn(m.nv(), |i, _| (i as f64).sin());
+    let (mut d1, mut d2) = (Data::new(&m), Data::new(&bare));
+    assert_eq!(crba(&m, &mut d1, &q).unwrap(), crba(&bare, &mut d2, &q).unwrap());
+    assert_eq!(
+        rnea(&m, &mut d1, &q, &v, &v, None).unwrap(),
+        rnea(&bare, &mut d2, &q, &v, &v, None).unwrap()
+    );
+}
+
+#[test]
+fn tendon_errors_as_mujoco() {
+    let model = |tendon: &str| {
+        format!(
+            "<mujoco><worldbody><site name=\"w\"/><body><joint name=\"j\"/><joint name=\"k\" \
+             type=\"slide\"/><geom name=\"g\" size=\"0.1\"/><site name=\"s1\"/><site name=\"s2\" \
+             pos=\"0 0 1\"/><body><joint name=\"b\" type=\"ball\"/><geom size=\"0.1\"/></body>\
+             </body></worldbody>\n<tendon>\n{tendon}</tendon></mujoco>"
+        )
+    };
+    load_str(&model(
+        "<fixed><joint joint=\"j\" coef=\"1\"/><joint joint=\"k\" coef=\"0\"/></fixed>",
+    ))
+    .unwrap();
+    load_str(&model("<spatial><site site=\"w\"/><site site=\"s2\"/></spatial>")).unwrap();
+    load_str(&model("<fixed armature=\"0\"><joint joint=\"j\" coef=\"1\"/></fixed>")).unwrap();
+    let cases: &[(&str, u32, &str, &str)] = &[
+        (
+            "<fixed>\n<joint joint=\"zz\" coef=\"1\"/></fixed>",
+            4,
+            "<joint> of unnamed <fixed> tendon",
+            "unknown joint \"zz\"",
+        ),
+        (
+            "<fixed>\n<joint joint=\"j\"/></fixed>",
+            4,
+            "<joint> of unnamed <fixed> tendon",
+            "joint and coef",
+        ),
+        (
+            "<fixed>\n<joint joint=\"b\" coef=\"1\"/></fixed>",
+            4,
+            "<joint> of unnamed <fixed> tendon",
+            "not a hinge or slide",
+        ),
+        (
+            "<fixed><joint joint=\"j\" coef=\"1\"/>\n<joint joint=\"j\" coef=\"2\"/></fixed>",
+            4,
+            "<joint> of unnamed <fixed> tendon",
+            "repeated",
+        ),
+        ("<fixed name=\"t\"/>", 3, "tendon \"t\"", "empty path"),
+        (
+            "<fixed name=\"t\" armature=\"0.1\"><joint joint=\"j\" coef=\"1\"/></fixed>",
+            3,
+            "tendon \"t\"",
+            "tendon armature",
+        ),
+        (
+            "<fixed name=\"t\" armature=\"-1\"><joint joint=\"j\" coef=\"1\"/></fixed>",
+            3,
+            "tendon \"t\"",
+            "negative",
+        ),
+        ("<spatial name=\"t\"><site site=\"s1\"/></spatial>", 3, "tendon \"t\"", "at least two"),
+        (
+            "<spatial name=\"t\"><site site=\"s1\"/>\n<site site=\"zz\"/></spatial>",
+            4,
+            "<site> of tendon \"t\"",
+            "unknown site",
+        ),
+        (
+            "<spatial name=\"t\"><site site=\"s1\"/>\n<geom geom=\"zz\"/><site site=\"s2\"/></spatial>",
+            4,
+            "<geom> of tendon \"t\"",
+            "unknown geom",
+        ),
+        (
+            "<spatial name=\"t\"><site site=\"s1\"/>\n<geom geom=\"g\" sidesite=\"zz\"/><site site=\"s2\"/></spatial>",
+            4,
+            "<geom> of tendon \"t\"",
+            "unknown side site",
+        ),
+        (
+            "<spatial name=\"t\">\n<geom geom=\"g\"/><site site=\"s2\"/></spatial>",
+            4,
+            "tendon \"t\"",
+            "not between two sites",
+        ),
+        (
+            "<spatial name=\"t\"><site site=\"s1\"/><site site=\"s2\"/><pulley divisor=\"2\"/>\n<site site=\"s1\"/></spatial>",
+            4,
+            "tendon \"t\"",
+            "no neighbour",
+        ),
+        (
+            "<spatial name=\"t\"><site site=\"s1\"/><site site=\"s2\"/>\n<pulley/><site site=\"s1\"/><site site=\"s2\"/></spatial>",
+            4,
+            "<pulley> of tendon \"t\"",
+            "missing divisor",
+        ),
+        (
+            "<fixed name=\"t\"><joint joint=\"j\" coef=\"1\"/></fixed>\n<fixed name=\"t\"><joint joint=\"j\" coef=\"1\"/></fixed>",
+            4,
+            "tendon \"t\"",
+            "a second tendon",
+        ),
+        (
+            "<fixed name=\"t\" class=\"zz\"><joint joint=\"j\" coef=\"1\"/></fixed>",
+            3,
+            "tendon \"t\"",
+            "unknown default class",
+        ),
+    ];
+    for &(tendon, line, element, reason) in cases {
+        let xml = model(tendon);
+        let (l, e, r) = error_of(&xml);
+        assert_eq!((l, e.as_str()), (Some(line), element), "{xml}\n-> {r}");
+        assert!(r.contains(reason), "{xml}\n-> {r}\n(expected \"{reason}\")");
+    }
+    // A tendon armature from the class defaults is refused too.
+    let xml = format!(
+        "<mujoco><default><tendon armature=\"0.2\"/></default>{}",
+        &model("<fixed><joint joint=\"j\" coef=\"1\"/></fixed>")["<mujoco>".len()..]
+    );
+    assert!(error_of(&xml).2.contains("tendon armature"));
+}
+
+/// An `<include>` of an included file: relative to the main file's directory, else to the
+/// including file's (MuJoCo's fallback).
+#[test]
+fn nested_include_fallback() {
+    let m = Model::from_mjcf(data_dir().join("nested_include/main.xml")).unwrap();
+    assert_eq!(m.names()[1..], ["shoulder".to_string(), "hip".to_string()]);
 }

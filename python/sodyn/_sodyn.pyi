@@ -120,6 +120,13 @@ class Model:
     def expand_configuration(self, q: ArrayLike) -> Vector:
         """The full tree's configuration of a reduced one (``mimic=True`` models only)."""
     @property
+    def tendons(self) -> list[dict[str, Any]]:
+        """The MJCF ``<tendon>``s in document order (data only: they do not enter the
+        dynamics), one dict each: ``name`` (``None`` if unnamed), ``type`` (``"fixed"`` or
+        ``"spatial"``) and ``path``: ``(joint name, coef)`` pairs for a fixed tendon;
+        ``("site", name)``, ``("geom", name, sidesite or None)`` and ``("pulley", divisor)``
+        for a spatial one. Empty for other models."""
+    @property
     def warnings(self) -> list[str]:
         """What the URDF or MJCF loader accepted with a reservation, one ``"FILE:LINE: ELEMENT:
         REASON"`` string each: a non-physical but harmless link inertia, a ``<mimic>`` naming an

@@ -726,6 +726,51 @@ impl PyModel {
         self.m.warnings().to_vec()
     }
 
+    /// The MJCF `<tendon>`s in document order (data only: they do not enter the dynamics), one
+    /// dict each: `name` (`None` if unnamed), `type` (`"fixed"` or `"spatial"`) and `path`:
+    /// `(joint name, coef)` pairs for a fixed tendon; `("site", name)`,
+    /// `("geom", name, sidesite or None)` and `("pulley", divisor)` for a spatial one.
+    #[getter]
+    fn tendons<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        use sodyn::model::{SpatialWrap, TendonPath};
+        self.m
+            .tendons()
+            .iter()
+            .map(|t| {
+                let d = PyDict::new(py);
+                d.set_item("name", &t.name)?;
+                let (kind, path): (&str, Vec<Bound<'py, PyAny>>) = match &t.path {
+                    TendonPath::Fixed(js) => (
+                        "fixed",
+                        js.iter()
+                            .map(|&(j, c)| (self.m.names()[j].clone(), c).into_pyobject(py))
+                            .map(|r| r.map(|b| b.into_any()))
+                            .collect::<PyResult<_>>()?,
+                    ),
+                    TendonPath::Spatial(ws) => (
+                        "spatial",
+                        ws.iter()
+                            .map(|w| match w {
+                                SpatialWrap::Site(n) => {
+                                    ("site", n).into_pyobject(py).map(|b| b.into_any())
+                                }
+                                SpatialWrap::Geom { geom, sidesite } => {
+                                    ("geom", geom, sidesite).into_pyobject(py).map(|b| b.into_any())
+                                }
+                                SpatialWrap::Pulley { divisor } => {
+                                    ("pulley", *divisor).into_pyobject(py).map(|b| b.into_any())
+                                }
+                            })
+                            .collect::<PyResult<_>>()?,
+                    ),
+                };
+                d.set_item("type", kind)?;
+                d.set_item("path", path)?;
+                Ok(d)
+            })
+            .collect()
+    }
+
     /// Armature (rotor inertia) of each velocity coordinate, shape `(nv,)` (a fresh array;
     /// zeros unless set by `with_armature` or an MJCF `armature`): the mass matrix is
     /// `M(q) + diag(armature)` and inverse dynamics `τ = M(q) q̈ + b(q, q̇) + diag(armature) q̈`

@@ -30,7 +30,7 @@ from conftest import REPO, assert_close
 mujoco = pytest.importorskip("mujoco", reason="the mujoco wheel is the oracle (python/tests/requirements.txt)")
 
 DATA = REPO / "tests" / "data" / "mjcf"
-OWN_MODELS = ["features", "radian", "mass_rules", "chains"]
+OWN_MODELS = ["features", "radian", "mass_rules", "chains", "tendons", "nested_include/main"]
 TOL = 1e-9
 
 # The MJCF models shipped in the mujoco wheel (its testdata) and in dm_control's suite.
@@ -52,8 +52,85 @@ try:
 except ImportError:  # pragma: no cover - CI installs gymnasium
     HAVE_GYMNASIUM = False
 
+# The MJCF files of robot-learning packages on PyPI, from their wheels (pip download --no-deps:
+# metaworld pins mujoco 3.3 and myosuite gymnasium < 1.3, which the environment's mujoco 4.0
+# and gymnasium 1.4 exclude, so they are not installed). myosuite's models include myo_sim's
+# as ``assets/myo_sim`` (the layout of its source tree, a git submodule there): the wheel of
+# myo_sim is unpacked there. The corpus is every file of these that MuJoCo loads as it is.
+WHEELS = ["gymnasium-robotics==1.4.2", "metaworld==3.1.1", "myo-sim==0.2.3", "myosuite==3.0.0"]
+WHEEL_ROOTS = {"gymnasium_robotics": "gymnasium_robotics", "metaworld": "metaworld",
+               "myo_sim": "myo_sim/models", "myosuite": "myosuite/envs/myo/assets"}
+WHEEL_CACHE = Path(os.environ.get("SODYN_MJCF_CORPUS", Path.home() / ".cache" / "sodyn-mjcf-corpus"))
+
+
+def wheel_corpus():
+    """Downloads (once, into ``WHEEL_CACHE``) and unpacks the wheels of ``WHEELS``; returns
+    ``{name: path}`` of every ``.xml`` file in them and the number of files tried."""
+    import subprocess
+    import sys
+    import zipfile
+
+    root = WHEEL_CACHE / "unpacked"
+    done = WHEEL_CACHE / ("done-" + "-".join(WHEELS))
+    if not done.exists():
+        subprocess.run([sys.executable, "-m", "pip", "download", "-q", "--no-deps",
+                        "--disable-pip-version-check", "-d", str(WHEEL_CACHE / "wheels"), *WHEELS],
+                       check=True)
+        for w in sorted((WHEEL_CACHE / "wheels").glob("*.whl")):
+            with zipfile.ZipFile(w) as z:
+                z.extractall(root)
+        link = root / "myosuite" / "envs" / "myo" / "assets" / "myo_sim"
+        if not link.exists():
+            link.symlink_to(root / "myo_sim" / "models", target_is_directory=True)
+        done.touch()
+    files = {}
+    for pkg, sub in WHEEL_ROOTS.items():
+        base = root / sub
+        for p in sorted(base.rglob("*.xml")):
+            if pkg == "myosuite" and "myo_sim" in p.relative_to(base).parts:
+                continue  # myo_sim's own files, listed under myo_sim
+            files[f"{pkg}/{p.relative_to(base).with_suffix('')}"] = p
+    return files
+
+
+def mujoco_loads(path):
+    try:
+        mujoco.MjModel.from_xml_path(str(path))
+        return True
+    except Exception:  # noqa: BLE001 - any refusal of MuJoCo's takes the file out of the corpus
+        return False
+
+
+_cwd = os.getcwd()
+os.chdir(os.environ.get("TMPDIR", "/tmp"))  # MuJoCo's MUJOCO_LOG.TXT stays out of the repository
+try:
+    WHEEL_FILES = wheel_corpus()
+    WHEEL_CORPUS = {k: p for k, p in WHEEL_FILES.items() if mujoco_loads(p)}
+finally:
+    os.chdir(_cwd)
+CORPUS.update(WHEEL_CORPUS)
+
 # Corpus models that sodyn refuses, with the reason (the test checks the error message).
+MESH = r"the body.s inertia would come from a mesh geom"
 CORPUS_REFUSED = {
+    "gymnasium_robotics/envs/assets/kitchen_franka/kitchen_assets/kitchen_env_model":
+        r"chain.xml:9: body \"panda0_link1\": " + MESH,
+    "metaworld/assets/objects/thermos": r"thermos.xml:2: unnamed body: " + MESH,
+    "metaworld/assets/sawyer_xyz/sawyer_stick_obj": r"thermos.xml:2: unnamed body: " + MESH,
+    "myosuite/arm/myoarm": r"myoarm_body.xml:410: body \"lunate\": " + MESH,
+    "myosuite/arm/myoarm_relocate": r"myoarm_r_chain.xml:379: body \"lunate_r\": " + MESH,
+    "myosuite/arm/myoarm_tabletennis": r"myohead_rigid_chain.xml:14: body \"neck\": " + MESH,
+    "myosuite/arm/myotorso_arm_chain_host": r"myohead_rigid_chain.xml:14: body \"neck\": " + MESH,
+    "myosuite/arm/myotorso_tabletennis_isolated":
+        r"myohead_rigid_chain.xml:14: body \"neck\": " + MESH,
+    "myosuite/hand/myohand_baoding": r"myohand_body.xml:134: body \"lunate\": " + MESH,
+    "myosuite/torso/myotorso": r"myohead_rigid_chain.xml:14: body \"neck\": " + MESH,
+    "myosuite/torso/myotorso_exosuit": r"myohead_rigid_chain.xml:14: body \"neck\": " + MESH,
+    # Not well-formed XML, which MuJoCo's parser (TinyXML2) reads anyway.
+    "myo_sim/legacy/elbow/myoelbow_1dof6muscles_1dofSoftexo_sim2":
+        r"myoelbow_1dof6muscles_1dofSoftexo_sim2.xml:52: XML: malformed XML: expected a whitespace",
+    "myo_sim/legacy/osl/myolegs_osl": r"myolegs_osl.xml:26: XML: malformed XML: comment .* contains '--'",
+
     # Bodies without <inertial> whose inertia would come from mesh geoms.
     "dm_control/dog": r"body \"L_1\": the body.s inertia would come from a mesh geom",
     "mujoco/model": r"model.xml:91: unnamed body: the body.s inertia would come from a mesh geom",
@@ -182,17 +259,19 @@ def compare(path, seeds=(0, 1, 2)):
     last_joint_of_body = {}
     for k in range(m.njnt):
         last_joint_of_body[int(m.jnt_bodyid[k])] = k
-    for b in range(1, m.nbody):
-        w = int(m.body_weldid[b])
-        if w != 0:
-            their_mass[last_joint_of_body[w]] += m.body_mass[b]
+    # (A mocap body is its own weld root without a joint: static for sodyn.)
+    moving = [b for b in range(1, m.nbody) if int(m.body_weldid[b]) in last_joint_of_body]
+    for b in moving:
+        their_mass[last_joint_of_body[int(m.body_weldid[b])]] += m.body_mass[b]
     errs = {"mass": rel_err_scalar(our_mass, their_mass)}
     assert_close(our_mass, their_mass, TOL, f"{path.name}: body masses")
-    moving_total = sum(m.body_mass[b] for b in range(1, m.nbody) if m.body_weldid[b] != 0)
+    moving_total = sum(m.body_mass[b] for b in moving)
     assert abs(our_mass.sum() - moving_total) <= TOL * max(1, moving_total)
+    # Static bodies: sodyn sums those whose inertia it knows (not those with mesh geoms).
     world_mass = desc["world_inertia"][0]
-    assert abs(world_mass + our_mass.sum() - m.body_mass.sum()) <= TOL * max(1, m.body_mass.sum()) or \
-        world_mass == 0  # static bodies with a mesh geom have no known mass in sodyn
+    static_total = m.body_mass.sum() - moving_total
+    assert world_mass <= static_total + TOL * max(1, static_total)
+    check_tendons(ours, m)
     # Armature: MuJoCo's per dof (a joint's on each of its dofs, so the free joint's dof order
     # does not matter).
     assert_close(ours.armature, m.dof_armature, 0.0, f"{path.name}: armature")
@@ -245,6 +324,31 @@ def compare(path, seeds=(0, 1, 2)):
         worst["placement"] = max(worst["placement"], e_p)
     worst.update(errs)
     return ours, worst
+
+
+def check_tendons(ours, m):
+    """sodyn's tendon records against MuJoCo's (names, fixed joints and coefficients, spatial
+    paths)."""
+    obj = mujoco.mjtObj
+    wrap = mujoco.mjtWrap
+    assert len(ours.tendons) == m.ntendon
+    for k, t in enumerate(ours.tendons):
+        assert t["name"] == (mujoco.mj_id2name(m, obj.mjOBJ_TENDON, k) or None)
+        adr, num = int(m.tendon_adr[k]), int(m.tendon_num[k])
+        theirs = []
+        for w in range(adr, adr + num):
+            ty, oid, prm = int(m.wrap_type[w]), int(m.wrap_objid[w]), float(m.wrap_prm[w])
+            if ty == wrap.mjWRAP_JOINT:
+                theirs.append((mujoco.mj_id2name(m, obj.mjOBJ_JOINT, oid), prm))
+            elif ty == wrap.mjWRAP_SITE:
+                theirs.append(("site", mujoco.mj_id2name(m, obj.mjOBJ_SITE, oid)))
+            elif ty == wrap.mjWRAP_PULLEY:
+                theirs.append(("pulley", prm))
+            else:  # a wrapping sphere or cylinder geom, prm the side site's id (-1: none)
+                side = mujoco.mj_id2name(m, obj.mjOBJ_SITE, int(prm)) if prm >= 0 else None
+                theirs.append(("geom", mujoco.mj_id2name(m, obj.mjOBJ_GEOM, oid), side))
+        assert t["type"] == ("fixed" if m.wrap_type[adr] == wrap.mjWRAP_JOINT else "spatial")
+        assert [tuple(x) for x in t["path"]] == theirs, f"tendon {k}"
 
 
 def rel_err_scalar(ours, theirs):
@@ -377,3 +481,122 @@ def test_errors_name_the_problem(tmp_path):
                                      '<geom type="mesh" mesh="x"/></body></worldbody></mujoco>')
     with pytest.raises(sodyn.SodynError, match="malformed XML"):
         sodyn.Model.from_mjcf_string("<mujoco><worldbody></mujoco>")
+
+
+def test_wheel_corpus_is_complete():
+    """The files tried and those MuJoCo loads, per package, as docs/mjcf.md's corpus table
+    lists them."""
+    per = {}
+    for k in WHEEL_FILES:
+        per.setdefault(k.split("/")[0], [0, 0])[0] += 1
+    for k in WHEEL_CORPUS:
+        per[k.split("/")[0]][1] += 1
+    assert per == {"gymnasium_robotics": [59, 33], "metaworld": [161, 84], "myo_sim": [51, 13],
+                   "myosuite": [33, 10]}
+    assert all(k in CORPUS for k in CORPUS_REFUSED)
+
+
+# Default classes: sodyn loads what MuJoCo loads (with the same armature and masses) and refuses
+# what it refuses, naming the line MuJoCo names. Each case has one joint, "j", and the geoms
+# take their size from the classes.
+_BODY = '<worldbody>\n<body name="b"><joint name="j" {j}/><geom {g}/></body>\n</worldbody>'
+DEFAULT_CASES = {
+    "implicit main": ('<default><joint armature="0.1"/><geom size="0.2"/></default>', "", ""),
+    "explicit main": ('<default class="main"><joint armature="0.1"/><geom size="0.2"/></default>',
+                      "", ""),
+    "empty class name at the top": ('<default class=""><joint armature="0.1"/>'
+                                    '<geom size="0.2"/></default>', 'class="main"', ""),
+    "two top-level defaults merge": ('<default class="main"><joint armature="0.1"/></default>\n'
+                                     '<default><geom size="0.2"/></default>', "", ""),
+    "a later top-level default overrides": ('<default><joint armature="0.1"/><geom size="0.1"/>'
+                                            '</default>\n<default class="main"><joint '
+                                            'armature="0.2"/></default>', "", ""),
+    "a class copies its parent when read": ('<default><joint armature="0.1"/><geom size="0.1"/>'
+                                            '<default class="a"/></default>\n<default><joint '
+                                            'armature="0.3"/></default>', 'class="a"', 'class="a"'),
+    "nested classes": ('<default><joint armature="0.1"/><geom size="0.1"/><default class="a">'
+                       '<joint armature="0.2"/><default class="b"><geom size="0.3"/></default>'
+                       '</default></default>', 'class="b"', 'class="b"'),
+    "a partial size keeps the inherited entries": (
+        '<default><geom type="capsule" size="0.1 0.5"/><default class="a"><geom size="0.2"/>'
+        '</default></default>', "", 'class="a"'),
+    "class main by name": ('<default><joint armature="0.4"/><geom size="0.1"/>'
+                           '<default class="a"/></default>', 'class="main"', 'class="a"'),
+    "defaults after the worldbody": None,  # built below
+    "a renamed top-level class": ('<default>\n</default>\n<default class="top"><geom size="0.1"/>'
+                                  '</default>', "", ""),
+    "a nested class named main": ('<default><geom size="0.1"/>\n<default class="main"/>'
+                                  '</default>', "", ""),
+    "a class defined twice under one parent": ('<default><geom size="0.1"/><default class="a"/>\n'
+                                               '<default class="a"/></default>', "", ""),
+    "the same class name under different parents": (
+        '<default><geom size="0.1"/><default class="p"><default class="a"/></default>\n'
+        '<default class="q"><default class="a"/></default></default>', "", ""),
+    "a class name repeated across top-level defaults": (
+        '<default><geom size="0.1"/><default class="a"/></default>\n'
+        '<default><default class="a"/></default>', "", ""),
+    "a nested default without a class": ('<default><geom size="0.1"/>\n<default/></default>',
+                                         "", ""),
+    "a nested default with an empty class": ('<default><geom size="0.1"/>\n<default class=""/>'
+                                             '</default>', "", ""),
+    "two joint defaults in one class": ('<default><geom size="0.1"/><joint armature="0.1"/>\n'
+                                        '<joint damping="1"/></default>', "", ""),
+    "an element that has no defaults": ('<default><geom size="0.1"/>\n<body/></default>', "", ""),
+    "an unknown class": ('<default><geom size="0.1"/></default>', 'class="zz"', ""),
+}
+
+
+def _default_case(name):
+    if name == "defaults after the worldbody":
+        return ('<mujoco>\n<worldbody>\n<body name="b"><joint name="j" class="a"/><geom/></body>\n'
+                '</worldbody>\n<default><geom size="0.1"/><default class="a"><joint '
+                'armature="0.3"/></default></default>\n</mujoco>')
+    defaults, j, g = DEFAULT_CASES[name]
+    return f"<mujoco>\n{defaults}\n{_BODY.format(j=j, g=g)}\n</mujoco>"
+
+
+@pytest.mark.parametrize("name", sorted(DEFAULT_CASES))
+def test_default_classes_as_mujoco(name, tmp_path):
+    import re
+
+    xml = _default_case(name)
+    path = tmp_path / "case.xml"
+    path.write_text(xml)
+    try:
+        m = mujoco.MjModel.from_xml_path(str(path))
+    except Exception as e:  # noqa: BLE001 - MuJoCo's refusal: sodyn must refuse at its line
+        line = re.search(r"line (\d+)", str(e)).group(1)
+        with pytest.raises(sodyn.SodynError, match=rf"case.xml:{line}: ") as err:
+            sodyn.Model.from_mjcf(path)
+        print(f"{name}: MuJoCo: {str(e).splitlines()[0]} | sodyn: {err.value}")
+        return
+    ours, _ = compare(path, seeds=(0,))
+    assert_close(ours.armature, m.dof_armature, 0.0, "armature")
+    assert m.body_mass[1] > 0
+
+
+def test_tendons_are_recorded_and_warned():
+    """The Shadow hand's 44 fixed tendons and a myo_sim model's spatial ones (paths of sites
+    and wrapping geoms): recorded as MuJoCo has them (``compare`` checks every tendon of the
+    corpus), with one warning; they do not enter M or tau (the corpus matches)."""
+    hand = sodyn.Model.from_mjcf(CORPUS["gymnasium_robotics/envs/assets/hand/manipulate_block"])
+    assert len(hand.tendons) == 44 and all(t["type"] == "fixed" for t in hand.tendons)
+    t = hand.tendons[0]
+    assert t["name"] and all(isinstance(j, str) and isinstance(c, float) for j, c in t["path"])
+    w = [x for x in hand.warnings if "<tendon>" in x]
+    assert len(w) == 1 and "44 tendons (44 fixed, 0 spatial)" in w[0]
+    assert "limits, springs, damping, friction loss and actuation are not modelled" in w[0]
+    elbow = sodyn.Model.from_mjcf(CORPUS["myo_sim/legacy/elbow/myoelbow_2dof6muscles"])
+    kinds = {x[0] for t in elbow.tendons for x in t["path"]}
+    assert {t["type"] for t in elbow.tendons} == {"spatial"} and {"site", "geom"} <= kinds
+    compare(CORPUS["myo_sim/legacy/elbow/myoelbow_2dof6muscles"], seeds=(0,))
+
+
+def test_tendon_armature_is_refused(tmp_path):
+    """MuJoCo adds a tendon's armature to M through the tendon Jacobian: sodyn refuses it."""
+    xml = ('<mujoco><worldbody><body><joint name="j"/><geom size="0.1"/></body></worldbody>\n'
+           '<tendon>\n<fixed name="t" armature="0.5"><joint joint="j" coef="2"/></fixed>'
+           '</tendon></mujoco>')
+    assert mujoco.MjModel.from_xml_string(xml).tendon_armature[0] == 0.5
+    with pytest.raises(sodyn.SodynError, match=r"<string>:3: tendon \"t\": tendon armature"):
+        sodyn.Model.from_mjcf_string(xml)

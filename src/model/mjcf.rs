@@ -5,13 +5,22 @@
 //! * `<mujoco model>` (the model name; `"MuJoCo Model"` without it), every `<worldbody>`, and
 //!   `<include file>` anywhere (the included file's top-level element is dropped and its
 //!   children take the place of the `<include>`; the path is relative to the directory of the
-//!   main file, or to the `base_dir` given with a string).
+//!   main file, or to the `base_dir` given with a string; in an included file, a path that
+//!   does not exist there is taken relative to the including file's directory, as MuJoCo does).
 //! * `<compiler>`: `angle` (`degree`, MuJoCo's default, or `radian`), `eulerseq`, `autolimits`,
 //!   `inertiafromgeom` (`true`, `false`, `auto`), `inertiagrouprange`, `boundmass`,
 //!   `boundinertia`, `balanceinertia`, `settotalmass`; `coordinate="global"`
 //!   (removed from MuJoCo in 2.3.3) is an error; `alignfree="true"` is an error (unsupported).
 //! * `<option gravity>` and `<option><flag gravity="disable"/></option>`.
-//! * `<default>` classes, nested, with `class` and `childclass` (on `<body>` and `<frame>`).
+//!   `discardvisual` (a visual geom with mass is an error with `inertiafromgeom="true"`, as in
+//!   MuJoCo; otherwise no effect) and `fusestatic` (no effect: static bodies are merged anyway).
+//! * `<default>` classes as MuJoCo reads them: the root class `main`, which every top-level
+//!   `<default>` (unnamed, `class="main"` or `class=""`) updates; nested classes (a copy of
+//!   their parent when read, names unique in the model), `class` and `childclass` (on `<body>`
+//!   and `<frame>`); what MuJoCo refuses is an error (see `docs/mjcf.md`).
+//! * `<tendon>`: `<fixed>` and `<spatial>` tendons are recorded ([`Model::tendons`], see
+//!   [`Tendon`]), checked as MuJoCo checks them, with one warning that they do not enter the
+//!   dynamics; a nonzero tendon `armature` (which MuJoCo adds to `M`) is an error.
 //! * `<body pos quat|axisangle|euler|xyaxes|zaxis>`, `<frame>` (a placement of its children),
 //!   `<inertial pos orientation mass diaginertia|fullinertia>`, `<joint>` of type `hinge`,
 //!   `slide`, `ball` and `free`, `<freejoint>`, `<geom>` (for inertias) and named `<site>`s (as
@@ -41,12 +50,13 @@
 //!   `cylinder`, `box`; `mass` or `density` (default 1000); `fromto`; geoms outside
 //!   `inertiagrouprange` are left out). A mesh, height field or SDF geom (or a primitive
 //!   sized from a mesh) that would contribute to a moving body's inertia is an error naming
-//!   the body (give it an `<inertial>`); in a static body it does not matter. Then
-//!   `boundmass`, `boundinertia`, `balanceinertia`, and `settotalmass`. A
-//!   moving body (one with joints) must have positive mass and principal moments (MuJoCo's
+//!   the body (give it an `<inertial>`); in a static body it does not matter. A body with
+//!   joints needs, with the bodies welded to it, a positive mass and moments. Then
+//!   `boundmass`, `boundinertia`, `balanceinertia`, and `settotalmass`. A body with joints,
+//!   with the bodies welded to it, must have positive mass and principal moments (MuJoCo's
 //!   rule); negative masses, densities or sizes, a non-physical `<inertial>`, and a plane in a
 //!   moving body are errors.
-//! * Joint `damping`, `stiffness`, `frictionloss`, actuators, tendons, contacts, equality
+//! * Joint `damping`, `stiffness`, `frictionloss`, actuators, contacts, equality
 //!   constraints, sensors and every element irrelevant to the rigid-body dynamics are ignored;
 //!   a nonzero body `gravcomp` is ignored with a warning in [`Model::warnings`]. A joint's
 //!   `armature` (with the class defaults; none for a `<freejoint>`, as in MuJoCo) is the
@@ -81,6 +91,48 @@ pub struct MjcfOptions {
     /// MuJoCo `<freejoint>` would place it. An MJCF `<freejoint>` (or `<joint type="free">`)
     /// is a free-flyer itself and needs no option.
     pub floating_base: bool,
+}
+
+/// A `<tendon>` of an MJCF model, as [`Model::tendons`] records it. Tendons do not enter the
+/// mass matrix or the rigid-body dynamics: their limits, springs, damping, friction loss and
+/// the actuators acting on them are not modelled (a warning in [`Model::warnings`] says so),
+/// and a nonzero tendon `armature` is refused.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tendon {
+    /// The `name` attribute (`None` for an unnamed tendon).
+    pub name: Option<String>,
+    /// Its path.
+    pub path: TendonPath,
+}
+
+/// The path of a [`Tendon`].
+#[derive(Clone, Debug, PartialEq)]
+pub enum TendonPath {
+    /// `<fixed>`: the length is `Σ coef · q_joint`; `(joint index, coef)` in document order
+    /// (hinge and slide joints, each once).
+    Fixed(Vec<(usize, f64)>),
+    /// `<spatial>`: the path elements in document order.
+    Spatial(Vec<SpatialWrap>),
+}
+
+/// An element of a spatial tendon's path.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SpatialWrap {
+    /// `<site site>`: a site the tendon passes through (a frame of the model unless a body has
+    /// its name).
+    Site(String),
+    /// `<geom geom sidesite>`: a geom the tendon wraps around, with its optional side site.
+    Geom {
+        /// The geom's name.
+        geom: String,
+        /// The `sidesite` attribute.
+        sidesite: Option<String>,
+    },
+    /// `<pulley divisor>`: starts a branch whose length is divided by `divisor`.
+    Pulley {
+        /// The `divisor` attribute.
+        divisor: f64,
+    },
 }
 
 /// Nesting limit of `<include>` (an include cycle is reported before it).
@@ -274,7 +326,16 @@ impl Reader<'_> {
                 format!("<include> nested more than {MAX_INCLUDE_DEPTH} deep"),
             ));
         }
-        let path = self.base_dir.join(name);
+        // Relative to the main file's directory (MuJoCo's rule), else, in an included file,
+        // relative to that file's directory (MuJoCo's fallback).
+        let mut path = self.base_dir.join(name);
+        if depth > 0
+            && !path.exists()
+            && let Some(dir) = Path::new(&**file).parent()
+            && dir.join(name).exists()
+        {
+            path = dir.join(name);
+        }
         // Only regular files of a bounded size (not /dev/zero, a FIFO or a directory).
         match std::fs::metadata(&path) {
             Ok(md) if !md.is_file() => {
@@ -377,6 +438,7 @@ struct Compiler {
     boundinertia: f64,
     balanceinertia: bool,
     settotalmass: f64,
+    discardvisual: bool,
 }
 
 impl Default for Compiler {
@@ -391,6 +453,7 @@ impl Default for Compiler {
             boundinertia: 0.0,
             balanceinertia: false,
             settotalmass: -1.0,
+            discardvisual: false,
         }
     }
 }
@@ -444,7 +507,6 @@ struct Jnt {
 struct Loader {
     comp: Compiler,
     classes: HashMap<String, Class>,
-    root_class: String,
     warnings: Vec<String>,
     bodies: Vec<Body>,
 }
@@ -527,24 +589,29 @@ impl Loader {
         let mut l = Loader {
             comp: Compiler::default(),
             classes: HashMap::new(),
-            root_class: "main".into(),
             warnings: Vec::new(),
             bodies: Vec::new(),
         };
         for c in root.elems("compiler") {
             l.compiler(c)?;
         }
-        let mut first = true;
+        // MuJoCo's root class is "main": every top-level <default> (unnamed, or named "main"
+        // or "") configures it, the later ones on top of the earlier ones.
+        l.classes.insert("main".into(), Class::default());
         for d in root.elems("default") {
-            let name = d.attr("class").map_or("main".to_string(), |a| a.value.clone());
-            if first {
-                l.root_class = name.clone();
-                first = false;
+            if let Some(a) = d.attr("class")
+                && !a.value.is_empty()
+                && a.value != "main"
+            {
+                return Err(model_err(
+                    &d.file,
+                    a.line,
+                    &format!("<default class=\"{}\">", a.value),
+                    "a top-level <default> configures the root class \"main\", which cannot be \
+                     renamed (MuJoCo refuses it too): give it no class attribute or class=\"main\"",
+                ));
             }
-            l.default_class(d, name, None)?;
-        }
-        if first {
-            l.classes.insert("main".into(), Class::default());
+            l.default_class(d, "main".into(), None)?;
         }
         Ok(l)
     }
@@ -604,6 +671,12 @@ impl Loader {
                 "boundinertia" => self.comp.boundinertia = num()?,
                 "settotalmass" => self.comp.settotalmass = num()?,
                 "balanceinertia" => self.comp.balanceinertia = parse_bool(c, a, e)?,
+                "discardvisual" => self.comp.discardvisual = parse_bool(c, a, e)?,
+                "fusestatic" => {
+                    // Static bodies are merged into their parents anyway; their names stay
+                    // frames.
+                    parse_bool(c, a, e)?;
+                }
                 "coordinate" => match a.value.as_str() {
                     "local" => {}
                     "global" => {
@@ -625,17 +698,72 @@ impl Loader {
         Ok(())
     }
 
+    /// Reads `<default>` element `d` as class `name`, a child of class `parent` (`None`: the
+    /// root class "main", which a top-level `<default>` updates). Class names are unique
+    /// across the whole tree; a class starts as a copy of its parent's at this point.
     fn default_class(&mut self, d: &El, name: String, parent: Option<&str>) -> Result<()> {
         let element = format!("<default class=\"{name}\">");
-        if self.classes.contains_key(&name) {
-            return Err(err_at(d, &element, format!("default class \"{name}\" is defined twice")));
-        }
-        let mut class = parent.map_or_else(Class::default, |p| self.classes[p].clone());
+        let mut class = match parent {
+            None => self.classes.remove(&name).unwrap_or_default(),
+            Some(_) if self.classes.contains_key(&name) => {
+                let line = d.attr("class").map_or(d.line, |a| a.line);
+                return Err(model_err(
+                    &d.file,
+                    line,
+                    &element,
+                    format!(
+                        "default class \"{name}\" is defined twice (class names are unique in \
+                         the whole model, \"main\" is the root class; MuJoCo refuses it too)"
+                    ),
+                ));
+            }
+            Some(p) => self.classes[p].clone(),
+        };
+        let mut seen: HashSet<&str> = HashSet::new();
         for c in d.children.iter().filter(|c| c.tag != "default") {
+            if !DEFAULT_ELEMENTS.contains(&c.tag.as_str()) {
+                return Err(err_at(
+                    c,
+                    &format!("<{}>", c.tag),
+                    format!(
+                        "<{}> cannot be in a <default> (MuJoCo refuses it too; {element} may \
+                         hold {})",
+                        c.tag,
+                        DEFAULT_ELEMENTS.join(", ")
+                    ),
+                ));
+            }
+            if !seen.insert(&c.tag) {
+                return Err(err_at(
+                    d,
+                    &element,
+                    format!(
+                        "a second <{}> (line {}): a class holds one of each element (MuJoCo \
+                         refuses it too)",
+                        c.tag, c.line
+                    ),
+                ));
+            }
             let entry = class.attrs.entry(c.tag.clone()).or_default();
             for a in &c.attrs {
-                let a =
-                    Rc::new(Attr { name: a.name.clone(), value: a.value.clone(), line: a.line });
+                let mut value = a.value.clone();
+                // A partial size keeps the inherited entries after it (MuJoCo reads `size`
+                // into the inherited vector).
+                if a.name == "size"
+                    && let Some(old) = entry.iter().find(|b| b.name == "size")
+                {
+                    let new: Vec<&str> = a.value.split_whitespace().collect();
+                    let inherited: Vec<&str> = old.value.split_whitespace().collect();
+                    if new.len() < inherited.len() {
+                        value = new
+                            .iter()
+                            .chain(&inherited[new.len()..])
+                            .copied()
+                            .collect::<Vec<_>>()
+                            .join(" ");
+                    }
+                }
+                let a = Rc::new(Attr { name: a.name.clone(), value, line: a.line });
                 // An orientation given here replaces the inherited one of another form.
                 if ORIENT.contains(&a.name.as_str()) {
                     entry.retain(|b| !ORIENT.contains(&b.name.as_str()));
@@ -646,10 +774,15 @@ impl Loader {
         }
         self.classes.insert(name.clone(), class);
         for c in d.elems("default") {
-            let Some(cn) = c.attr("class") else {
-                return Err(err_at(c, "<default>", "a nested <default> needs a class attribute"));
-            };
-            self.default_class(c, cn.value.clone(), Some(&name))?;
+            let cn = c.attr("class").map_or("", |a| a.value.as_str());
+            if cn.is_empty() {
+                return Err(err_at(
+                    c,
+                    "<default>",
+                    "a nested <default> needs a non-empty class attribute (MuJoCo refuses it too)",
+                ));
+            }
+            self.default_class(c, cn.to_string(), Some(&name))?;
         }
         Ok(())
     }
@@ -874,8 +1007,20 @@ impl Loader {
             }
         }
         // Read the tree.
-        let root_class = self.root_class.clone();
+        let root_class = "main".to_string();
         for wb in root.elems("worldbody") {
+            if let Some(a) = wb.attrs.first() {
+                return Err(model_err(
+                    &wb.file,
+                    a.line,
+                    "<worldbody>",
+                    format!(
+                        "attribute {}=\"{}\": the world body has no attributes (MuJoCo refuses \
+                         it too; a childclass belongs on a <body> or <frame>)",
+                        a.name, a.value
+                    ),
+                ));
+            }
             self.tree(wb, &root_class)?;
         }
         self.mass_rules()?;
@@ -1092,6 +1237,7 @@ impl Loader {
             element: format!("model \"{}\"", model.name),
             reason: e.to_string(),
         })?;
+        model.tendons = self.tendons(root, &model)?;
         model.warnings = std::mem::take(&mut self.warnings);
         Ok(model)
     }
@@ -1138,6 +1284,18 @@ impl Loader {
             Some(n) => format!("body \"{n}\""),
             None => "unnamed body".to_string(),
         };
+        if let Some(a) = el.attr("class") {
+            return Err(model_err(
+                &el.file,
+                a.line,
+                &belem,
+                format!(
+                    "attribute class=\"{}\": a <body> has no class (MuJoCo refuses it too; \
+                     childclass sets the class of the elements in it)",
+                    a.value
+                ),
+            ));
+        }
         let cc = el.attr("childclass").map_or(childclass, |a| a.value.as_str()).to_string();
         if !self.classes.contains_key(&cc) {
             return Err(err_at(el, &belem, format!("unknown default class \"{cc}\"")));
@@ -1486,6 +1644,21 @@ impl Loader {
                 return Err(err_at(g, &gelem, "negative mass or density"));
             }
             let massless = mass == Some(0.0) || (mass.is_none() && density == 0.0);
+            if self.comp.discardvisual
+                && self.comp.inertiafromgeom == FromGeom::True
+                && !massless
+                && int("contype", 1)? == 0
+                && int("conaffinity", 1)? == 0
+            {
+                return Err(err_at(
+                    g,
+                    &gelem,
+                    "a visual geom (contype and conaffinity 0) with mass, which \
+                     discardvisual=\"true\" would discard from the inertia that \
+                     inertiafromgeom=\"true\" infers from the geoms (MuJoCo refuses it too; \
+                     with inertiafromgeom=\"auto\" the geom counts)",
+                ));
+            }
             let what = match ty {
                 "sphere" | "capsule" | "ellipsoid" | "cylinder" | "box" if has_mesh => {
                     format!("{ty} geom sized from a mesh")
@@ -1577,12 +1750,242 @@ impl Loader {
         Ok(Some(total))
     }
 
+    /// The `<tendon>` elements, checked as MuJoCo checks them (the joints, sites and geoms
+    /// they name exist; a fixed path has distinct hinge or slide joints, a spatial one at
+    /// least two elements, each geom between two sites and each site next to a non-pulley).
+    fn tendons(&mut self, root: &El, model: &Model) -> Result<Vec<Tendon>> {
+        let mut sites = HashSet::new();
+        let mut geoms = HashSet::new();
+        let mut stack: Vec<&El> = root.elems("worldbody").collect();
+        while let Some(el) = stack.pop() {
+            for c in &el.children {
+                match (c.tag.as_str(), c.attr("name")) {
+                    ("site", Some(n)) => {
+                        sites.insert(n.value.as_str());
+                    }
+                    ("geom", Some(n)) => {
+                        geoms.insert(n.value.as_str());
+                    }
+                    ("body" | "frame", _) => stack.push(c),
+                    _ => {}
+                }
+            }
+        }
+        let mut out = Vec::new();
+        let mut names = HashSet::new();
+        let mut first: Option<&El> = None;
+        let (mut nfixed, mut nspatial) = (0usize, 0usize);
+        for sec in root.elems("tendon") {
+            for t in &sec.children {
+                let name = t.attr("name").map(|a| a.value.clone());
+                let telem = match &name {
+                    Some(n) => format!("tendon \"{n}\""),
+                    None => format!("unnamed <{}> tendon", t.tag),
+                };
+                if t.tag != "fixed" && t.tag != "spatial" {
+                    return Err(err_at(
+                        t,
+                        &format!("<{}>", t.tag),
+                        format!("<{}> in <tendon> (expected <fixed> or <spatial>)", t.tag),
+                    ));
+                }
+                if let Some(n) = &name
+                    && !names.insert(n.clone())
+                {
+                    return Err(err_at(t, &telem, "a second tendon of this name"));
+                }
+                first.get_or_insert(t);
+                let cname = t.attr("class").map_or("main", |a| a.value.as_str());
+                let Some(class) = self.classes.get(cname) else {
+                    return Err(err_at(t, &telem, format!("unknown default class \"{cname}\"")));
+                };
+                let armature = t.attr("armature").or_else(|| {
+                    class.attrs.get("tendon")?.iter().find(|a| a.name == "armature").map(|a| &**a)
+                });
+                if let Some(a) = armature {
+                    let x = parse_numbers(t, a, &telem, 1, 1)?[0];
+                    if x < 0.0 {
+                        return Err(model_err(
+                            &t.file,
+                            a.line,
+                            &telem,
+                            format!("armature=\"{x}\" is negative (MuJoCo refuses it too)"),
+                        ));
+                    }
+                    if x > 0.0 {
+                        return Err(model_err(
+                            &t.file,
+                            a.line,
+                            &telem,
+                            format!(
+                                "tendon armature=\"{x}\" is not supported: MuJoCo adds \
+                                 armature · JᵀJ (J the tendon's Jacobian) to the mass matrix, \
+                                 which sodyn does not model (remove it, or move it to the joints)"
+                            ),
+                        ));
+                    }
+                }
+                let path = if t.tag == "fixed" {
+                    nfixed += 1;
+                    let mut joints: Vec<(usize, f64)> = Vec::new();
+                    for c in &t.children {
+                        let celem = format!("<{}> of {telem}", c.tag);
+                        if c.tag != "joint" {
+                            return Err(err_at(c, &celem, "a fixed tendon holds only <joint>s"));
+                        }
+                        let (Some(j), Some(coef)) = (c.attr("joint"), c.attr("coef")) else {
+                            return Err(err_at(
+                                c,
+                                &celem,
+                                "a tendon <joint> needs the joint and coef attributes",
+                            ));
+                        };
+                        let coef = parse_numbers(c, coef, &celem, 1, 1)?[0];
+                        let id = model.joint_id(&j.value).map_err(|_| {
+                            err_at(c, &celem, format!("unknown joint \"{}\"", j.value))
+                        })?;
+                        if !matches!(
+                            model.joints()[id],
+                            JointType::Revolute { .. } | JointType::Prismatic { .. }
+                        ) {
+                            return Err(err_at(
+                                c,
+                                &celem,
+                                format!(
+                                    "joint \"{}\" is not a hinge or slide joint (MuJoCo refuses \
+                                     it too)",
+                                    j.value
+                                ),
+                            ));
+                        }
+                        if joints.iter().any(|&(k, _)| k == id) {
+                            return Err(err_at(
+                                c,
+                                &celem,
+                                format!(
+                                    "joint \"{}\" is repeated (MuJoCo refuses it too)",
+                                    j.value
+                                ),
+                            ));
+                        }
+                        joints.push((id, coef));
+                    }
+                    if joints.is_empty() {
+                        return Err(err_at(t, &telem, "empty path (MuJoCo refuses it too)"));
+                    }
+                    TendonPath::Fixed(joints)
+                } else {
+                    nspatial += 1;
+                    let mut path = Vec::new();
+                    for c in &t.children {
+                        let celem = format!("<{}> of {telem}", c.tag);
+                        let need = |a: &str| {
+                            c.attr(a)
+                                .ok_or_else(|| err_at(c, &celem, format!("missing {a} attribute")))
+                        };
+                        let known = |set: &HashSet<&str>, what: &str, n: &str| {
+                            if set.contains(n) {
+                                Ok(())
+                            } else {
+                                Err(err_at(c, &celem, format!("unknown {what} \"{n}\"")))
+                            }
+                        };
+                        path.push(match c.tag.as_str() {
+                            "site" => {
+                                let n = &need("site")?.value;
+                                known(&sites, "site", n)?;
+                                SpatialWrap::Site(n.clone())
+                            }
+                            "geom" => {
+                                let n = &need("geom")?.value;
+                                known(&geoms, "geom", n)?;
+                                let sidesite = c.attr("sidesite").map(|a| a.value.clone());
+                                if let Some(ss) = &sidesite {
+                                    known(&sites, "side site", ss)?;
+                                }
+                                SpatialWrap::Geom { geom: n.clone(), sidesite }
+                            }
+                            "pulley" => SpatialWrap::Pulley {
+                                divisor: parse_numbers(c, need("divisor")?, &celem, 1, 1)?[0],
+                            },
+                            _ => {
+                                return Err(err_at(
+                                    c,
+                                    &celem,
+                                    "a spatial tendon holds <site>, <geom> and <pulley> elements",
+                                ));
+                            }
+                        });
+                    }
+                    if path.len() < 2 {
+                        return Err(err_at(
+                            t,
+                            &telem,
+                            "a spatial path needs at least two elements (MuJoCo refuses it too)",
+                        ));
+                    }
+                    let site = |k: Option<usize>| {
+                        k.and_then(|k| path.get(k))
+                            .is_some_and(|w| matches!(w, SpatialWrap::Site(_)))
+                    };
+                    let segment = |k: Option<usize>| {
+                        k.and_then(|k| path.get(k))
+                            .is_some_and(|w| !matches!(w, SpatialWrap::Pulley { .. }))
+                    };
+                    for (k, w) in path.iter().enumerate() {
+                        let bad = match w {
+                            SpatialWrap::Geom { .. } => {
+                                !(site(k.checked_sub(1)) && site(Some(k + 1)))
+                            }
+                            SpatialWrap::Site(_) => {
+                                !(segment(k.checked_sub(1)) || segment(Some(k + 1)))
+                            }
+                            SpatialWrap::Pulley { .. } => false,
+                        };
+                        if bad {
+                            let what = match w {
+                                SpatialWrap::Geom { .. } => "is not between two sites",
+                                _ => "has no neighbour that is a site or geom",
+                            };
+                            let c = t.children.get(k).unwrap_or(t);
+                            return Err(err_at(
+                                c,
+                                &telem,
+                                format!(
+                                    "path element {} (<{}>) {what} (MuJoCo refuses it too)",
+                                    k + 1,
+                                    c.tag
+                                ),
+                            ));
+                        }
+                    }
+                    TendonPath::Spatial(path)
+                };
+                out.push(Tendon { name, path });
+            }
+        }
+        if let Some(t) = first {
+            let (file, line) = (t.file.clone(), t.line);
+            self.warn(
+                &file,
+                line,
+                "<tendon>",
+                format!(
+                    "{} tendons ({nfixed} fixed, {nspatial} spatial) are recorded \
+                     (Model::tendons) but do not enter the dynamics: tendon limits, springs, \
+                     damping, friction loss and actuation are not modelled",
+                    out.len()
+                ),
+            );
+        }
+        Ok(out)
+    }
+
     /// MuJoCo's per-body rules after the inertias are known: `boundmass`, `boundinertia`,
     /// `balanceinertia`, positive mass and moments of moving bodies, `settotalmass`.
     fn mass_rules(&mut self) -> Result<()> {
         let (bm, bi, bal) = (self.comp.boundmass, self.comp.boundinertia, self.comp.balanceinertia);
         for i in 0..self.bodies.len() {
-            let moving = self.moving(i);
             let body = &mut self.bodies[i];
             let Some(inertia) = &mut body.inertia else { continue };
             let mass = inertia.mass;
@@ -1613,26 +2016,47 @@ impl Loader {
                 let ic = r * Matrix3::from_diagonal(&ev) * r.transpose();
                 *inertia = Inertia::from_com(m, com, (ic + ic.transpose()) * 0.5);
             }
+        }
+        // MuJoCo's rule on a body with joints: the inertia of the body and the bodies welded
+        // to it (its weld group, one sodyn joint's body) has a positive mass and positive
+        // principal moments.
+        let mut group: Vec<Option<(usize, Transform)>> = Vec::with_capacity(self.bodies.len());
+        let mut composite: Vec<Inertia> = vec![Inertia::zero(); self.bodies.len()];
+        for i in 0..self.bodies.len() {
             let body = &self.bodies[i];
-            let inertia = body.inertia.as_ref().expect("known");
-            if moving && !body.joints.is_empty() {
-                let ev = if inertia.mass > 0.0 {
-                    SymmetricEigen::new(inertia.inertia_about_com()).eigenvalues
-                } else {
-                    Vector3::zeros()
-                };
-                if inertia.mass.is_nan() || inertia.mass <= 1e-15 || ev.min() < 1e-15 {
-                    return Err(model_err(
-                        &body.file,
-                        body.line,
-                        &body_elem(body),
-                        format!(
-                            "a moving body needs a positive mass and positive principal moments \
-                             (MuJoCo's rule; mass {}, moments [{:e} {:e} {:e}])",
-                            inertia.mass, ev[0], ev[1], ev[2]
-                        ),
-                    ));
-                }
+            let g = if body.joints.is_empty() {
+                body.parent
+                    .and_then(|p| group[p])
+                    .map(|(root, place): (usize, Transform)| (root, place.compose(&body.pose)))
+            } else {
+                Some((i, Transform::identity()))
+            };
+            if let (Some((root, place)), Some(inertia)) = (g, &body.inertia) {
+                composite[root] += place.act_inertia(inertia);
+            }
+            group.push(g);
+        }
+        for (body, inertia) in self.bodies.iter().zip(&composite) {
+            if body.joints.is_empty() {
+                continue;
+            }
+            let ev = if inertia.mass > 0.0 {
+                SymmetricEigen::new(inertia.inertia_about_com()).eigenvalues
+            } else {
+                Vector3::zeros()
+            };
+            if inertia.mass.is_nan() || inertia.mass <= 1e-15 || ev.min() < 1e-15 {
+                return Err(model_err(
+                    &body.file,
+                    body.line,
+                    &body_elem(body),
+                    format!(
+                        "a moving body (with the bodies welded to it) needs a positive mass and \
+                         positive principal moments (MuJoCo's rule; mass {}, moments [{:e} {:e} \
+                         {:e}])",
+                        inertia.mass, ev[0], ev[1], ev[2]
+                    ),
+                ));
             }
         }
         if self.comp.settotalmass > 0.0 {
@@ -1684,6 +2108,31 @@ fn push_children<'e>(
     }
     Ok(())
 }
+
+/// The elements a `<default>` may hold (besides nested `<default>`s), as MuJoCo's schema.
+const DEFAULT_ELEMENTS: [&str; 21] = [
+    "mesh",
+    "material",
+    "texture",
+    "joint",
+    "geom",
+    "site",
+    "camera",
+    "light",
+    "pair",
+    "equality",
+    "tendon",
+    "general",
+    "motor",
+    "position",
+    "velocity",
+    "intvelocity",
+    "damper",
+    "cylinder",
+    "muscle",
+    "adhesion",
+    "dcmotor",
+];
 
 const ORIENT: [&str; 5] = ["quat", "axisangle", "euler", "xyaxes", "zaxis"];
 

@@ -12,7 +12,7 @@ pub use contact::{Contact, ContactReference, ContactType};
 pub(crate) use contact::{contact_label, redundancy};
 pub use joint::JointType;
 pub use lie::{Arg, exp6, jlog6, log6};
-pub use mjcf::{MjcfOptions, load_mjcf_file, load_mjcf_str};
+pub use mjcf::{MjcfOptions, SpatialWrap, Tendon, TendonPath, load_mjcf_file, load_mjcf_str};
 pub(crate) use tree::JointKin;
 pub use tree::{Frame, Model, ModelBuilder, check_vec};
 pub use urdf::{MAX_URDF_DOFS, ROOT_JOINT_NAME, UrdfOptions, load_urdf_file, load_urdf_str};

@@ -94,6 +94,8 @@ pub struct Model {
     pub(crate) mimic_joints: Vec<crate::mimic::MimicJoint>,
     /// What the loader accepted with a reservation (see [`Model::warnings`]).
     pub(crate) warnings: Vec<String>,
+    /// The tendons read by the MJCF loader (see [`Model::tendons`]).
+    pub(crate) tendons: Vec<super::mjcf::Tendon>,
     /// Frames (URDF links), first one the world.
     pub(crate) frames: Vec<Frame>,
     /// Per joint, its indices and kind packed for the kinematics kernels (see [`JointKin`]);
@@ -313,6 +315,11 @@ impl Model {
     /// prints these on standard error.
     pub fn warnings(&self) -> &[String] {
         &self.warnings
+    }
+    /// The `<tendon>`s of an MJCF model, in document order (data only: they do not enter the
+    /// dynamics; see [`Tendon`](super::mjcf::Tendon)). Empty for other models.
+    pub fn tendons(&self) -> &[super::mjcf::Tendon] {
+        &self.tendons
     }
     /// Frames (URDF links), the first one the world.
     pub fn frames(&self) -> &[Frame] {
@@ -637,6 +644,7 @@ impl ModelBuilder {
             mimic: vec![None],
             mimic_joints: vec![],
             warnings: vec![],
+            tendons: vec![],
             frames: vec![Frame {
                 name: "universe".into(),
                 joint: 0,
