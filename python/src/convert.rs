@@ -24,9 +24,37 @@ create_exception!(
      system, a workspace used with another model. The message names the problem."
 );
 
-/// `sodyn::Error` → `SodynError` with the same message.
+/// `sodyn::Error` → `SodynError` with the same message, in Python's terms (see
+/// [`python_message`]).
 pub(crate) fn core_err(e: Error) -> PyErr {
-    SodynError::new_err(e.to_string())
+    SodynError::new_err(python_message(e.to_string()))
+}
+
+/// A core message with the Rust API it names (`Type::method`) rewritten for Python: a
+/// workspace constructor (`SoData::new`, `Data::new`, ...) becomes `model.create_data()` (a
+/// Python `Data` holds every workspace), the regularised solve's setter is named as the Rust
+/// API it is, any other `Type::name` becomes `name`.
+pub(crate) fn python_message(s: String) -> String {
+    if !s.contains("::") {
+        return s;
+    }
+    let ident = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    let mut out = String::with_capacity(s.len());
+    let mut rest = s.as_str();
+    while let Some(p) = rest.find("::") {
+        let start = rest[..p].rfind(|c: char| !ident(c)).map_or(0, |i| i + 1);
+        let tail = &rest[p + 2..];
+        let end = tail.find(|c: char| !ident(c)).unwrap_or(tail.len());
+        out.push_str(&rest[..start]);
+        out.push_str(match &tail[..end] {
+            "new" => "model.create_data()",
+            "set_damping" => "damping, in the Rust API",
+            other => other,
+        });
+        rest = &tail[end..];
+    }
+    out.push_str(rest);
+    out
 }
 
 pub(crate) fn value_err(msg: String) -> PyErr {
