@@ -142,7 +142,10 @@ impl BatchPool {
     /// Number of helper threads for a pool of `threads`.
     fn helpers_of(threads: usize) -> Result<usize> {
         if threads == 0 {
-            return Err(Error::Io("the number of threads must be at least 1".into()));
+            return Err(Error::Argument {
+                name: "threads".into(),
+                reason: "the number of threads must be at least 1".into(),
+            });
         }
         Ok(threads - 1)
     }

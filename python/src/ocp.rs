@@ -13,7 +13,7 @@ use sodyn_ocp::{ActionData, Solver, SolverKind, Termination, spec};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::PyModel;
+use crate::model::PyModel;
 
 pyo3::create_exception!(
     _sodyn,

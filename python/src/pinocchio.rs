@@ -15,7 +15,8 @@
 //! coordinate, planar joints (`q = [x, y, cos θ, sin θ]`) have `[x, y, θ]`, and a free flyer's
 //! velocity is `[ω; v]` where Pinocchio's is `[v; ω]` (both in the body frame).
 
-use super::{PyModel, core_err};
+use crate::convert::core_err;
+use crate::model::PyModel;
 use nalgebra::{Matrix3, Vector3};
 use numpy::PyArray1;
 use pyo3::prelude::*;

@@ -903,3 +903,22 @@ def test_two_threads_two_data():
         for i, outs in results[k]:
             for x, y in zip(outs, seq[i]):
                 np.testing.assert_array_equal(x, y, err_msg=f"thread {k} state {i}")
+
+
+def test_error_messages_name_python_api_not_rust_types():
+    """A Data of another model: the message names model.create_data(), and no core message
+    reaching Python names a Rust path (`Type::method`)."""
+    a = sodyn.Model.builtin("chain6")
+    b = sodyn.Model.builtin("humanoid")
+    d = a.create_data()
+    calls = [
+        lambda: sodyn.rnea(b, d, b.neutral(), np.zeros(b.nv), np.zeros(b.nv)),
+        lambda: sodyn.crba(b, d, b.neutral()),
+        lambda: sodyn.id_so_derivatives(b, d, b.neutral(), np.zeros(b.nv), np.zeros(b.nv)),
+        lambda: sodyn.fd_so_derivatives(b, d, b.neutral(), np.zeros(b.nv), np.zeros(b.nv)),
+    ]
+    for call in calls:
+        with pytest.raises(sodyn.SodynError) as e:
+            call()
+        assert "::" not in str(e.value), str(e.value)
+        assert "model.create_data()" in str(e.value), str(e.value)

@@ -252,10 +252,10 @@ fn solve(
         so.id.check(model)?;
     }
     if !im.restitution.is_finite() || im.restitution < 0.0 {
-        return Err(Error::Io(format!(
-            "restitution {} must be finite and non-negative",
-            im.restitution
-        )));
+        return Err(Error::Argument {
+            name: "restitution".into(),
+            reason: format!("{} must be finite and non-negative", im.restitution),
+        });
     }
     let n = model.nv;
     // M (with composite inertias), the body inertias for IDFOZA, J and the blocks of R⁻¹.
@@ -366,7 +366,9 @@ pub fn impact_so_derivatives(
     vminus: &DVector<f64>,
 ) -> Result<()> {
     let mut so = im.so.take().ok_or_else(|| {
-        Error::Io("impact_so_derivatives: ImpactData was created without second order".into())
+        Error::Workspace(
+            "impact_so_derivatives: ImpactData was created without second order".into(),
+        )
     })?;
     let r = so_inner(model, data, im, &mut so, q, vminus);
     im.so = Some(so);

@@ -459,7 +459,7 @@ pub fn kkt_so_derivatives(
     tau: &DVector<f64>,
 ) -> Result<()> {
     let mut so = kd.so.take().ok_or_else(|| {
-        crate::error::Error::Io(
+        crate::error::Error::Workspace(
             "kkt_so_derivatives: KktData was created without second order".into(),
         )
     })?;

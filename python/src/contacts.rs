@@ -1,0 +1,584 @@
+//! Contacts: `Contact`, constrained inverse dynamics, KKT and impact dynamics and their
+//! derivatives.
+
+use crate::convert::{
+    core_err, out_mat, out_tensor, out_vec, read_placement, read_q, read_vec, value_err,
+};
+use crate::data::{ContactKey, PyData, read_qvx};
+use crate::mimic::{
+    mimic_constrained_id, mimic_impact, mimic_impact_contracted, mimic_kkt, mimic_kkt_contracted,
+};
+use crate::model::PyModel;
+use nalgebra::{DMatrix, DVector, Vector3};
+use numpy::PyArray1;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyTuple};
+use sodyn::Error;
+use sodyn::algo::Contact;
+use sodyn::deriv::{
+    self, ContactData, ImpactContracted, ImpactData, KktContracted, KktData, SoData,
+    constrained_id_derivatives, constrained_id_so_derivatives, impact_derivatives,
+    impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
+};
+use sodyn::model::{ContactReference, ContactType, Model};
+use sodyn::tensor::Tensor3;
+
+/// The dictionary of `kkt_derivatives` (plain or mimic model): `qdd`, `lambda`, the six
+/// first-order matrices and, at order 2, the eight tensors.
+pub(crate) fn kkt_dict<'py>(
+    py: Python<'py>,
+    qdd: &DVector<f64>,
+    lambda: &DVector<f64>,
+    fo: [&DMatrix<f64>; 6],
+    so: Option<[&Tensor3; 8]>,
+) -> PyResult<Bound<'py, PyDict>> {
+    const FO: [&str; 6] =
+        ["dqdd_dq", "dqdd_dv", "dqdd_dtau", "dlambda_dq", "dlambda_dv", "dlambda_dtau"];
+    const SO: [&str; 8] = [
+        "d2qdd_dq2",
+        "d2qdd_dv2",
+        "d2qdd_dqdv",
+        "d2qdd_dtaudq",
+        "d2lambda_dq2",
+        "d2lambda_dv2",
+        "d2lambda_dqdv",
+        "d2lambda_dtaudq",
+    ];
+    let out = PyDict::new(py);
+    out.set_item("qdd", out_vec(py, qdd))?;
+    out.set_item("lambda", out_vec(py, lambda))?;
+    for (k, x) in FO.into_iter().zip(fo) {
+        out.set_item(k, out_mat(py, x))?;
+    }
+    for (k, x) in so.into_iter().flat_map(|t| SO.into_iter().zip(t)) {
+        out.set_item(k, out_tensor(py, x))?;
+    }
+    Ok(out)
+}
+
+/// The dictionary of `impact_derivatives` (plain or mimic model): `vplus`, `impulse`, the four
+/// first-order matrices and, at order 2, the four tensors.
+pub(crate) fn impact_dict<'py>(
+    py: Python<'py>,
+    vplus: &DVector<f64>,
+    impulse: &DVector<f64>,
+    fo: [&DMatrix<f64>; 4],
+    so: Option<[&Tensor3; 4]>,
+) -> PyResult<Bound<'py, PyDict>> {
+    const FO: [&str; 4] = ["dvplus_dq", "dvplus_dvminus", "dimpulse_dq", "dimpulse_dvminus"];
+    const SO: [&str; 4] =
+        ["d2vplus_dq2", "d2vplus_dqdvminus", "d2impulse_dq2", "d2impulse_dqdvminus"];
+    let out = PyDict::new(py);
+    out.set_item("vplus", out_vec(py, vplus))?;
+    out.set_item("impulse", out_vec(py, impulse))?;
+    for (k, x) in FO.into_iter().zip(fo) {
+        out.set_item(k, out_mat(py, x))?;
+    }
+    for (k, x) in so.into_iter().flat_map(|t| SO.into_iter().zip(t)) {
+        out.set_item(k, out_tensor(py, x))?;
+    }
+    Ok(out)
+}
+
+/// [`kkt_dict`] of a KKT workspace `kd` (`KktData` or `MimicKktData`, which have the same
+/// accessors), its tensors at `order == 2`.
+macro_rules! kkt_dict_of {
+    ($py:expr, $kd:expr, $order:expr) => {{
+        let kd = &$kd;
+        let so = kd.so().filter(|_| $order == 2).map(|t| {
+            [
+                t.d2qdd_dq2(),
+                t.d2qdd_dv2(),
+                t.d2qdd_dqdv(),
+                t.d2qdd_dtaudq(),
+                t.d2lambda_dq2(),
+                t.d2lambda_dv2(),
+                t.d2lambda_dqdv(),
+                t.d2lambda_dtaudq(),
+            ]
+        });
+        let fo = [
+            kd.dqdd_dq(),
+            kd.dqdd_dv(),
+            kd.dqdd_dtau(),
+            kd.dlambda_dq(),
+            kd.dlambda_dv(),
+            kd.dlambda_dtau(),
+        ];
+        kkt_dict($py, kd.qdd(), kd.lambda(), fo, so)
+    }};
+}
+
+/// [`impact_dict`] of an impact workspace `im` (`ImpactData` or `MimicImpactData`), its tensors
+/// at `order == 2`.
+macro_rules! impact_dict_of {
+    ($py:expr, $im:expr, $order:expr) => {{
+        let im = &$im;
+        let so = im.so().filter(|_| $order == 2).map(|t| {
+            [t.d2vplus_dq2(), t.d2vplus_dqdvminus(), t.d2impulse_dq2(), t.d2impulse_dqdvminus()]
+        });
+        let fo = [im.dvplus_dq(), im.dvplus_dvminus(), im.dimpulse_dq(), im.dimpulse_dvminus()];
+        impact_dict($py, im.vplus(), im.impulse(), fo, so)
+    }};
+}
+
+pub(crate) use impact_dict_of;
+pub(crate) use kkt_dict_of;
+
+/// A contact (Pinocchio's `RigidConstraintModel`): the contact frame at `point` (a 3-D
+/// contact's point) or `placement` (a `(4, 4)` homogeneous matrix) in the frame named `frame`,
+/// of type `"3d"` or `"6d"`, with rows in the `"local_world_aligned"` or `"local"` reference,
+/// with optional Baumgarte gains `kp`, `kd` (used by the KKT dynamics).
+#[pyclass(name = "Contact", module = "sodyn._sodyn", frozen)]
+#[derive(Clone)]
+pub(crate) struct PyContact {
+    pub(crate) frame: String,
+    pub(crate) point: [f64; 3],
+    /// Rotation of the contact frame in the link frame, row-major.
+    pub(crate) rot: [f64; 9],
+    pub(crate) kind: ContactType,
+    pub(crate) reference: ContactReference,
+    pub(crate) kp: f64,
+    pub(crate) kd: f64,
+}
+
+pub(crate) const IDENTITY9: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+
+#[pymethods]
+impl PyContact {
+    #[new]
+    #[pyo3(signature = (frame, point = None, kp = 0.0, kd = 0.0, r#type = "3d",
+                        reference = "local_world_aligned", placement = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        frame: String,
+        point: Option<&Bound<'_, PyAny>>,
+        kp: f64,
+        kd: f64,
+        r#type: &str,
+        reference: &str,
+        placement: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let what = |e: Error| value_err(format!("contact \"{frame}\": {e}"));
+        let kind = ContactType::parse(r#type).map_err(what)?;
+        let reference = ContactReference::parse(reference).map_err(what)?;
+        let mut p = [0.0; 3];
+        let mut rot = IDENTITY9;
+        match (point, placement) {
+            (Some(_), Some(_)) => {
+                return Err(value_err(format!(
+                    "contact \"{frame}\": give `point` or `placement`, not both"
+                )));
+            }
+            (Some(obj), None) => {
+                let mut v = DVector::zeros(3);
+                read_vec(obj, "point", 3, "x, y, z", &mut v)?;
+                if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                    return Err(core_err(Error::NotFinite {
+                        what: format!("point of contact \"{frame}\""),
+                        index: i,
+                    }));
+                }
+                p.copy_from_slice(v.as_slice());
+            }
+            (None, Some(obj)) => {
+                let t = read_placement(obj)
+                    .map_err(|e| value_err(format!("`placement` of contact \"{frame}\": {e}")))?;
+                let r = &t.rot;
+                if (r.transpose() * r - nalgebra::Matrix3::identity()).amax() > 1e-9
+                    || (r.determinant() - 1.0).abs() > 1e-9
+                {
+                    return Err(value_err(format!(
+                        "`placement` of contact \"{frame}\": the rotation block is not a \
+                         rotation matrix (to 1e-9)"
+                    )));
+                }
+                p.copy_from_slice(t.trans.as_slice());
+                for i in 0..3 {
+                    for j in 0..3 {
+                        rot[3 * i + j] = r[(i, j)];
+                    }
+                }
+            }
+            (None, None) => {}
+        }
+        for (name, g) in [("kp", kp), ("kd", kd)] {
+            if !(g.is_finite() && g >= 0.0) {
+                return Err(value_err(format!(
+                    "`{name}` of contact \"{frame}\" is {g}: a Baumgarte gain must be finite and >= 0"
+                )));
+            }
+        }
+        Ok(Self { frame, point: p, rot, kind, reference, kp, kd })
+    }
+    #[getter]
+    fn frame(&self) -> &str {
+        &self.frame
+    }
+    #[getter]
+    fn point<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        PyArray1::from_slice(py, &self.point).into_any()
+    }
+    /// The contact frame's placement in the link frame, a `(4, 4)` homogeneous matrix.
+    #[getter]
+    fn placement<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        out_mat(py, &self.placement_matrix())
+    }
+    #[getter]
+    fn r#type(&self) -> &'static str {
+        self.kind.name()
+    }
+    #[getter]
+    fn reference(&self) -> &'static str {
+        self.reference.name()
+    }
+    #[getter]
+    fn kp(&self) -> f64 {
+        self.kp
+    }
+    #[getter]
+    fn kd(&self) -> f64 {
+        self.kd
+    }
+    fn __repr__(&self) -> String {
+        let mut extra = String::new();
+        if self.kind != ContactType::D3 {
+            extra += &format!(", type={:?}", self.kind.name());
+        }
+        if self.reference != ContactReference::LocalWorldAligned {
+            extra += &format!(", reference={:?}", self.reference.name());
+        }
+        if self.rot != IDENTITY9 {
+            extra += &format!(", rotation={:?}", self.rot);
+        }
+        if self.kp != 0.0 || self.kd != 0.0 {
+            extra += &format!(", kp={}, kd={}", self.kp, self.kd);
+        }
+        format!(
+            "Contact(frame={:?}, point=({}, {}, {}){extra})",
+            self.frame, self.point[0], self.point[1], self.point[2]
+        )
+    }
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyTuple>> {
+        let py = slf.py();
+        let c = slf.get();
+        let args = PyTuple::new(
+            py,
+            [
+                c.frame.clone().into_pyobject(py)?.into_any(),
+                py.None().into_bound(py),
+                c.kp.into_pyobject(py)?.into_any(),
+                c.kd.into_pyobject(py)?.into_any(),
+                c.kind.name().into_pyobject(py)?.into_any(),
+                c.reference.name().into_pyobject(py)?.into_any(),
+                out_mat(py, &c.placement_matrix()),
+            ],
+        )?;
+        PyTuple::new(py, [slf.get_type().into_any(), args.into_any()])
+    }
+}
+
+impl PyContact {
+    pub(crate) fn placement_matrix(&self) -> DMatrix<f64> {
+        DMatrix::from_fn(4, 4, |i, j| match (i, j) {
+            (3, 3) => 1.0,
+            (3, _) => 0.0,
+            (_, 3) => self.point[i],
+            _ => self.rot[3 * i + j],
+        })
+    }
+    pub(crate) fn transform(&self) -> sodyn::spatial::Transform {
+        sodyn::spatial::Transform::new(
+            nalgebra::Matrix3::from_row_slice(&self.rot),
+            Vector3::new(self.point[0], self.point[1], self.point[2]),
+        )
+    }
+}
+
+/// Resolves the contacts against the model.
+pub(crate) fn resolve(
+    m: &Model,
+    contacts: &[PyRef<'_, PyContact>],
+) -> PyResult<(Vec<Contact>, ContactKey)> {
+    let mut cs = Vec::with_capacity(contacts.len());
+    let mut key = Vec::with_capacity(contacts.len());
+    for c in contacts {
+        let contact = Contact::new(m, &c.frame, Vector3::zeros())
+            .and_then(|x| x.with_placement(m, &c.transform()))
+            .and_then(|x| x.with_baumgarte(c.kp, c.kd))
+            .map_err(core_err)?
+            .with_reference(c.reference);
+        let contact = Contact { kind: c.kind, ..contact };
+        let mut k = [0u64; 16];
+        for (o, x) in k.iter_mut().zip(c.point.iter().chain(&c.rot).chain([&c.kp, &c.kd])) {
+            *o = x.to_bits();
+        }
+        k[14] = c.kind.dim() as u64;
+        k[15] = (c.reference == ContactReference::Local) as u64;
+        key.push((contact.frame, k));
+        cs.push(contact);
+    }
+    if cs.is_empty() {
+        return Err(value_err("`contacts` is empty: give at least one sodyn.Contact".into()));
+    }
+    Ok((cs, key))
+}
+
+/// Number of constraint rows of a contact list (3 per 3-D contact, 6 per 6-D contact).
+pub(crate) fn rows_of(cs: &[Contact]) -> usize {
+    cs.iter().map(|c| c.dim()).sum()
+}
+
+pub(crate) fn check_order(order: i64) -> PyResult<()> {
+    if order == 1 || order == 2 {
+        Ok(())
+    } else {
+        Err(value_err(format!("`order` must be 1 or 2, got {order}")))
+    }
+}
+
+/// Constrained inverse dynamics `tau = M a + b − J_cᵀ λ` at `(q, v, a, λ)` and its
+/// derivatives (λ, 3 or 6 rows per contact, held fixed in each contact's axes): keys `tau,
+/// dtau_dq, dtau_dv` (+ `d2tau_dq2`).
+#[pyfunction(name = "constrained_id_derivatives")]
+#[pyo3(signature = (model, data, q, v, a, contacts, lam, order = 1))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn py_constrained_id_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    a: &Bound<'py, PyAny>,
+    contacts: Vec<PyRef<'py, PyContact>>,
+    lam: &Bound<'py, PyAny>,
+    order: i64,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_order(order)?;
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_constrained_id(py, &mm, &model.m, &mut data, q, v, a, &contacts, lam, order);
+    }
+    let m = model.full_only("constrained_id_derivatives")?;
+    let d = &mut *data;
+    read_qvx(m, d, q, v, a, "a")?;
+    let (cs, key) = resolve(m, &contacts)?;
+    read_vec(lam, "lam", rows_of(&cs), "3 or 6 rows per contact", &mut d.lam)?;
+    if let Some(index) = d.lam.iter().position(|x| !x.is_finite()) {
+        return Err(core_err(Error::NotFinite { what: "lam".into(), index }));
+    }
+    if d.cid.as_ref().is_none_or(|(k, _)| *k != key) {
+        d.cid = Some((key, ContactData::new(m, &cs).map_err(core_err)?));
+    }
+    let PyData { d, q, v, a, lam, so, cid, .. } = d;
+    let cd = &mut cid.as_mut().expect("set above").1;
+    let out = PyDict::new(py);
+    if order == 2 {
+        let so = so.get_or_insert_with(|| SoData::new(m));
+        py.detach(|| constrained_id_so_derivatives(m, d, cd, so, q, v, a, lam))
+            .map_err(core_err)?;
+        out.set_item("d2tau_dq2", out_tensor(py, so.d2tau_dq2()))?;
+    } else {
+        py.detach(|| constrained_id_derivatives(m, d, cd, q, v, a, lam)).map_err(core_err)?;
+    }
+    out.set_item("tau", out_vec(py, d.tau()))?;
+    out.set_item("dtau_dq", out_mat(py, d.dtau_dq()))?;
+    out.set_item("dtau_dv", out_mat(py, d.dtau_dv()))?;
+    Ok(out)
+}
+
+/// KKT contact dynamics `[M J_cᵀ; J_c 0][qdd; −λ] = [tau − b; −J̇_c v]` and its derivatives.
+#[pyfunction(name = "kkt_derivatives")]
+#[pyo3(signature = (model, data, q, v, tau, contacts, order = 1))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn py_kkt_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    contacts: Vec<PyRef<'py, PyContact>>,
+    order: i64,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_order(order)?;
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_kkt(py, &mm, &model.m, &mut data, q, v, tau, &contacts, order);
+    }
+    let m = model.full_only("kkt_derivatives")?;
+    let d = &mut *data;
+    read_qvx(m, d, q, v, tau, "tau")?;
+    let (cs, key) = resolve(m, &contacts)?;
+    let fits = |k: &KktData, key2: &ContactKey| *key2 == key && (order == 1 || k.so().is_some());
+    if d.kkt.as_ref().is_none_or(|(k2, kd)| !fits(kd, k2)) {
+        let mut kd = KktData::new(m, ContactData::new(m, &cs).map_err(core_err)?);
+        if order == 2 {
+            kd = kd.with_second_order(m);
+        }
+        d.kkt = Some((key, kd));
+    }
+    let PyData { d, q, v, a, kkt, .. } = d;
+    let kd = &mut kkt.as_mut().expect("set above").1;
+    if order == 2 {
+        py.detach(|| kkt_so_derivatives(m, d, kd, q, v, a)).map_err(core_err)?;
+    } else {
+        py.detach(|| kkt_derivatives(m, d, kd, q, v, a)).map_err(core_err)?;
+    }
+    kkt_dict_of!(py, kd, order)
+}
+
+/// Impact dynamics `[M J_cᵀ; J_c 0][v⁺; −Λ] = [M v⁻; −e J_c v⁻]` and its derivatives.
+#[pyfunction(name = "impact_derivatives")]
+#[pyo3(signature = (model, data, q, v_minus, contacts, restitution = 0.0, order = 1))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn py_impact_derivatives<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v_minus: &Bound<'py, PyAny>,
+    contacts: Vec<PyRef<'py, PyContact>>,
+    restitution: f64,
+    order: i64,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_order(order)?;
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_impact(
+            py,
+            &mm,
+            &model.m,
+            &mut data,
+            q,
+            v_minus,
+            &contacts,
+            restitution,
+            order,
+        );
+    }
+    let m = model.full_only("impact_derivatives")?;
+    let d = &mut *data;
+    read_q(q, "q", m, &mut d.q)?;
+    read_vec(v_minus, "v_minus", m.nv(), "nv", &mut d.v)?;
+    let (cs, key) = resolve(m, &contacts)?;
+    let fits = |k: &ImpactData, key2: &ContactKey| *key2 == key && (order == 1 || k.so().is_some());
+    if d.impact.as_ref().is_none_or(|(k2, im)| !fits(im, k2)) {
+        let mut im = ImpactData::new(m, ContactData::new(m, &cs).map_err(core_err)?);
+        if order == 2 {
+            im = im.with_second_order(m);
+        }
+        d.impact = Some((key, im));
+    }
+    let PyData { d, q, v, impact, .. } = d;
+    let im = &mut impact.as_mut().expect("set above").1;
+    im.set_restitution(restitution).map_err(core_err)?;
+    if order == 2 {
+        py.detach(|| impact_so_derivatives(m, d, im, q, v)).map_err(core_err)?;
+    } else {
+        py.detach(|| impact_derivatives(m, d, im, q, v)).map_err(core_err)?;
+    }
+    impact_dict_of!(py, im, order)
+}
+
+/// Contracted second order of the KKT dynamics: the Hessians of
+/// `w_qdd @ qdd + w_lambda @ lambda`, `(C_qq, C_vv, C_qv, C_tauq)`, without any tensor.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn kkt_so_contracted<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v: &Bound<'py, PyAny>,
+    tau: &Bound<'py, PyAny>,
+    contacts: Vec<PyRef<'py, PyContact>>,
+    w_qdd: &Bound<'py, PyAny>,
+    w_lambda: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyTuple>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_kkt_contracted(
+            py, &mm, &model.m, &mut data, q, v, tau, &contacts, w_qdd, w_lambda,
+        );
+    }
+    let m = model.full_only("kkt_so_contracted")?;
+    let d = &mut *data;
+    read_qvx(m, d, q, v, tau, "tau")?;
+    let (cs, key) = resolve(m, &contacts)?;
+    read_vec(w_qdd, "w_qdd", m.nv(), "nv", &mut d.w)?;
+    read_vec(w_lambda, "w_lambda", rows_of(&cs), "3 or 6 rows per contact", &mut d.wl)?;
+    if d.kktc.as_ref().is_none_or(|(k, _, _)| *k != key) {
+        let kd = KktData::new(m, ContactData::new(m, &cs).map_err(core_err)?);
+        let kc = KktContracted::new(m, &kd);
+        d.kktc = Some((key, kd, kc));
+    }
+    let PyData { d, q, v, a, w, wl, kktc, .. } = d;
+    let (_, kd, kc) = kktc.as_mut().expect("set above");
+    py.detach(|| deriv::kkt_so_contracted(m, d, kd, kc, q, v, a, w, wl)).map_err(core_err)?;
+    PyTuple::new(
+        py,
+        [
+            out_mat(py, kc.c_qq()),
+            out_mat(py, kc.c_vv()),
+            out_mat(py, kc.c_qv()),
+            out_mat(py, kc.c_tauq()),
+        ],
+    )
+}
+
+/// Contracted second order of the impact dynamics: the Hessians of
+/// `w_vplus @ vplus + w_impulse @ impulse`, `(C_qq, C_qvminus)`, without any tensor.
+#[pyfunction]
+#[pyo3(signature = (model, data, q, v_minus, contacts, w_vplus, w_impulse, restitution = 0.0))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn impact_so_contracted<'py>(
+    py: Python<'py>,
+    model: PyRef<'py, PyModel>,
+    mut data: PyRefMut<'py, PyData>,
+    q: &Bound<'py, PyAny>,
+    v_minus: &Bound<'py, PyAny>,
+    contacts: Vec<PyRef<'py, PyContact>>,
+    w_vplus: &Bound<'py, PyAny>,
+    w_impulse: &Bound<'py, PyAny>,
+    restitution: f64,
+) -> PyResult<Bound<'py, PyTuple>> {
+    if let Some(mm) = model.mimic.clone() {
+        return mimic_impact_contracted(
+            py,
+            &mm,
+            &model.m,
+            &mut data,
+            q,
+            v_minus,
+            &contacts,
+            w_vplus,
+            w_impulse,
+            restitution,
+        );
+    }
+    let m = model.full_only("impact_so_contracted")?;
+    let d = &mut *data;
+    read_q(q, "q", m, &mut d.q)?;
+    read_vec(v_minus, "v_minus", m.nv(), "nv", &mut d.v)?;
+    let (cs, key) = resolve(m, &contacts)?;
+    read_vec(w_vplus, "w_vplus", m.nv(), "nv", &mut d.w)?;
+    read_vec(w_impulse, "w_impulse", rows_of(&cs), "3 or 6 rows per contact", &mut d.wl)?;
+    if d.impc.as_ref().is_none_or(|(k, _, _)| *k != key) {
+        let im = ImpactData::new(m, ContactData::new(m, &cs).map_err(core_err)?);
+        let ic = ImpactContracted::new(m, &im);
+        d.impc = Some((key, im, ic));
+    }
+    let PyData { d, q, v, w, wl, impc, .. } = d;
+    let (_, im, ic) = impc.as_mut().expect("set above");
+    im.set_restitution(restitution).map_err(core_err)?;
+    py.detach(|| deriv::impact_so_contracted(m, d, im, ic, q, v, w, wl)).map_err(core_err)?;
+    PyTuple::new(py, [out_mat(py, ic.c_qq()), out_mat(py, ic.c_qvminus())])
+}
+
+/// Adds this family's classes and functions to the module.
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyContact>()?;
+    m.add_function(wrap_pyfunction!(py_constrained_id_derivatives, m)?)?;
+    m.add_function(wrap_pyfunction!(py_kkt_derivatives, m)?)?;
+    m.add_function(wrap_pyfunction!(py_impact_derivatives, m)?)?;
+    m.add_function(wrap_pyfunction!(kkt_so_contracted, m)?)?;
+    m.add_function(wrap_pyfunction!(impact_so_contracted, m)?)?;
+    Ok(())
+}
