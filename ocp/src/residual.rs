@@ -22,7 +22,7 @@ use sodyn::algo::{
     Data, ReferenceFrame, center_of_mass, center_of_mass_jacobian, frame_jacobian, frame_placement,
     frame_velocity, frame_velocity_derivatives,
 };
-use sodyn::model::{Model, jlog6, log6};
+use sodyn::model::{Arg, Model, jlog6, log6};
 use sodyn::spatial::{Motion, Transform};
 
 use crate::linalg::gemm_nn;
@@ -251,7 +251,7 @@ impl Residual {
         let nv = n.model.nv();
         match self {
             Residual::State { xref } => {
-                n.state.jdiff_second(n.sc, xref, n.x, &mut rd.rx);
+                n.state.jdiff(n.sc, xref, n.x, Arg::Second, &mut rd.rx);
             }
             Residual::Control { .. } | Residual::JointEffort { .. } => {
                 rd.ru.fill(0.0);

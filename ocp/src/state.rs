@@ -155,35 +155,21 @@ impl StateMultibody {
             .d_difference_blocks_into(&sc.q0, &sc.q1, arg, &mut sc.jq)
             .expect("d_difference_blocks_into on checked dimensions");
     }
-    /// `∂(x1 ⊖ x0)/∂x1` (`ndx × ndx`) into `out`.
-    pub fn jdiff_second(
+    /// `∂(x1 ⊖ x0)/∂x0` (`arg = Arg::First`) or `∂(x1 ⊖ x0)/∂x1` (`Arg::Second`), `ndx × ndx`,
+    /// into `out`: `blockdiag(∂(q1 ⊖ q0)/∂q, ∓I)`.
+    pub fn jdiff(
         &self,
         sc: &mut StateScratch,
         x0: &DVector<f64>,
         x1: &DVector<f64>,
+        arg: Arg,
         out: &mut DMatrix<f64>,
     ) {
         let nv = self.nv();
-        self.jdiff_q(sc, x0, x1, Arg::Second);
-        out.view_mut((0, 0), (nv, nv)).copy_from(&sc.jq);
-        out.view_mut((0, nv), (nv, nv)).fill(0.0);
-        out.view_mut((nv, 0), (nv, nv)).fill(0.0);
-        out.view_mut((nv, nv), (nv, nv)).fill_diagonal(1.0);
-    }
-    /// `∂(x1 ⊖ x0)/∂x0` (`ndx × ndx`) into `out`.
-    pub fn jdiff_first(
-        &self,
-        sc: &mut StateScratch,
-        x0: &DVector<f64>,
-        x1: &DVector<f64>,
-        out: &mut DMatrix<f64>,
-    ) {
-        let nv = self.nv();
-        self.jdiff_q(sc, x0, x1, Arg::First);
+        self.jdiff_q(sc, x0, x1, arg);
         out.fill(0.0);
         out.view_mut((0, 0), (nv, nv)).copy_from(&sc.jq);
-        for j in 0..nv {
-            out[(nv + j, nv + j)] = -1.0;
-        }
+        let sign = if arg == Arg::First { -1.0 } else { 1.0 };
+        out.view_mut((nv, nv), (nv, nv)).fill_diagonal(sign);
     }
 }
