@@ -168,9 +168,9 @@ fn objective(hx: &mut DVector<f64>, h: &DMatrix<f64>, q: &DVector<f64>, x: &DVec
     0.5 * x.dot(hx) + q.dot(x)
 }
 
-/// The inverse of the leading `n × n` block of `a` (symmetric positive definite) into `inv`,
-/// by an in-place Cholesky factorisation `a = L Lᵀ`; `false` when it is not positive definite.
-fn cholesky_inverse(a: &mut DMatrix<f64>, inv: &mut DMatrix<f64>, n: usize) -> bool {
+/// Factorises the leading `n × n` block of the symmetric `a` in place, `a = L Lᵀ` (`L` in the
+/// lower triangle); `false` when it is not positive definite (`a` is then partly overwritten).
+pub(crate) fn cholesky_in_place(a: &mut DMatrix<f64>, n: usize) -> bool {
     for j in 0..n {
         let mut d = a[(j, j)];
         for k in 0..j {
@@ -188,6 +188,42 @@ fn cholesky_inverse(a: &mut DMatrix<f64>, inv: &mut DMatrix<f64>, n: usize) -> b
             }
             a[(i, j)] = s / d;
         }
+    }
+    true
+}
+
+/// Solves `L Lᵀ x = b` in place for every column of `b`, with `L` from [`cholesky_in_place`].
+pub(crate) fn cholesky_solve<
+    C: nalgebra::Dim,
+    S: nalgebra::RawStorageMut<f64, nalgebra::Dyn, C>,
+>(
+    l: &DMatrix<f64>,
+    b: &mut nalgebra::Matrix<f64, nalgebra::Dyn, C, S>,
+) {
+    let n = l.nrows();
+    for c in 0..b.ncols() {
+        for i in 0..n {
+            let mut s = b[(i, c)];
+            for k in 0..i {
+                s -= l[(i, k)] * b[(k, c)];
+            }
+            b[(i, c)] = s / l[(i, i)];
+        }
+        for i in (0..n).rev() {
+            let mut s = b[(i, c)];
+            for k in i + 1..n {
+                s -= l[(k, i)] * b[(k, c)];
+            }
+            b[(i, c)] = s / l[(i, i)];
+        }
+    }
+}
+
+/// The inverse of the leading `n × n` block of `a` (symmetric positive definite) into `inv`,
+/// by an in-place Cholesky factorisation `a = L Lᵀ`; `false` when it is not positive definite.
+fn cholesky_inverse(a: &mut DMatrix<f64>, inv: &mut DMatrix<f64>, n: usize) -> bool {
+    if !cholesky_in_place(a, n) {
+        return false;
     }
     // inv = L⁻ᵀ L⁻¹, column by column of the identity.
     for c in 0..n {

@@ -22,7 +22,7 @@
 
 mod boxqp;
 
-use nalgebra::{Cholesky, DMatrix, DVector};
+use nalgebra::{DMatrix, DVector};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -587,25 +587,19 @@ impl Solver {
         true
     }
 
-    /// `k = Q_uu⁻¹ Q_u`, `K = Q_uu⁻¹ Q_xuᵀ` by Cholesky in the buffer `llt[t]`.
+    /// `k = Q_uu⁻¹ Q_u`, `K = Q_uu⁻¹ Q_xuᵀ` by Cholesky in the buffer `llt[t]` (in place: a
+    /// failed factorisation allocates nothing either).
     fn gains(&mut self, t: usize) -> bool {
         self.llt[t].copy_from(&self.quu[t]);
-        let buf = std::mem::replace(&mut self.llt[t], DMatrix::zeros(0, 0));
-        let nu = buf.nrows();
-        match Cholesky::new(buf) {
-            Some(ch) => {
-                self.kk[t].tr_copy_from(&self.qxu[t]);
-                ch.solve_mut(&mut self.kk[t]);
-                self.k[t].copy_from(&self.qu[t]);
-                ch.solve_mut(&mut self.k[t]);
-                self.llt[t] = ch.unpack();
-                true
-            }
-            None => {
-                self.llt[t] = DMatrix::zeros(nu, nu);
-                false
-            }
+        let nu = self.llt[t].nrows();
+        if !boxqp::cholesky_in_place(&mut self.llt[t], nu) {
+            return false;
         }
+        self.kk[t].tr_copy_from(&self.qxu[t]);
+        boxqp::cholesky_solve(&self.llt[t], &mut self.kk[t]);
+        self.k[t].copy_from(&self.qu[t]);
+        boxqp::cholesky_solve(&self.llt[t], &mut self.k[t]);
+        true
     }
 
     /// Box-FDDP gains: `k` from the box-QP `min ½ δuᵀ Q_uu δu + Q_uᵀ δu` s.t.
