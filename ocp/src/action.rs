@@ -330,7 +330,7 @@ impl ActionModel {
                 }
                 self.state.integrate(x, &d.dx, &mut d.xnext);
                 if diff {
-                    self.euler_jacobians(d, x, dt);
+                    self.euler_jacobians(d, x, dt)?;
                 }
                 with_dynamics = true;
                 self.eval_costs(d, x, u, with_dynamics, diff, cost_scale)
@@ -423,11 +423,11 @@ impl ActionModel {
     /// - `∂δ/∂x = (dt² a_x + dt [0 I], dt a_x)`, `∂δ/∂u = (dt² a_u, dt a_u)`;
     /// - `F_x = [J_q^x [I 0] + J_q^δ ∂δ_q/∂x; [0 I] + dt a_x]`, `F_u = [J_q^δ dt² a_u; dt a_u]`,
     ///   with `J_q^x = ∂(q ⊕ δ_q)/∂q`, `J_q^δ = ∂(q ⊕ δ_q)/∂δ_q`.
-    fn euler_jacobians(&self, d: &mut ActionData, x: &DVector<f64>, dt: f64) {
+    fn euler_jacobians(&self, d: &mut ActionData, x: &DVector<f64>, dt: f64) -> Result<()> {
         let nv = self.state.nv();
-        self.state.jintegrate_q(&mut d.sc, x, &d.dx, Arg::First);
+        self.state.jintegrate_q(&mut d.sc, x, &d.dx, Arg::First)?;
         d.jq_x.copy_from(&d.sc.jq);
-        self.state.jintegrate_q(&mut d.sc, x, &d.dx, Arg::Second);
+        self.state.jintegrate_q(&mut d.sc, x, &d.dx, Arg::Second)?;
         d.jq_dx.copy_from(&d.sc.jq);
         // Bottom rows: [0 I] + dt a_x; dt a_u.
         {
@@ -452,6 +452,7 @@ impl ActionModel {
         let (tu, bu) = d.fu.rows_range_pair_mut(0..nv, nv..2 * nv);
         let mut tu = tu;
         gemm_nn(&mut tu, dt, &d.jq_dx, &bu, 0.0);
+        Ok(())
     }
 
     fn eval_costs(

@@ -129,15 +129,14 @@ impl StateMultibody {
         x: &DVector<f64>,
         dx: &DVector<f64>,
         arg: Arg,
-    ) {
+    ) -> Result<()> {
         let (nq, nv) = (self.nq(), self.nv());
         sc.q0.copy_from(&x.rows(0, nq));
         sc.dq.copy_from(&dx.rows(0, nv));
-        // The inputs were checked when the state entered the problem (and stay finite: a
-        // non-finite value stops the forward pass first).
+        // An error here is a non-finite increment (dynamics that overflowed).
         self.model
             .d_integrate_blocks_into(&sc.q0, &sc.dq, arg, &mut sc.jq)
-            .expect("d_integrate_blocks_into on checked dimensions");
+            .map_err(|e| OcpError::new(format!("the integrator's increment: {e}")))
     }
     /// The `q` block `∂(q1 ⊖ q0)/∂q0` or `/∂q1` (`arg`) into `sc.jq`.
     pub(crate) fn jdiff_q(
