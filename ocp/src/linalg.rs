@@ -159,6 +159,10 @@ pub(crate) fn gemm_nn<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
 #[cfg(target_arch = "x86_64")]
 fn has_avx2_fma() -> bool {
     use std::sync::OnceLock;
+    #[cfg(test)]
+    if tests::PORTABLE.with(|p| p.get()) {
+        return false;
+    }
     static HAS: OnceLock<bool> = OnceLock::new();
     *HAS.get_or_init(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"))
 }
@@ -256,5 +260,47 @@ unsafe fn gemm_nn_fma(
                 *x = s.mul_add(*y, *x);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DMatrix;
+    use std::cell::Cell;
+
+    thread_local! {
+        /// Forces the portable loops (the AVX2/FMA ones otherwise run on such CPUs).
+        pub(super) static PORTABLE: Cell<bool> = const { Cell::new(false) };
+    }
+
+    fn mat(r: usize, c: usize, seed: f64) -> DMatrix<f64> {
+        DMatrix::from_fn(r, c, |i, j| ((i * 7 + j * 13) as f64 * 0.37 + seed).sin())
+    }
+
+    #[test]
+    fn products_match_nalgebra_on_both_paths() {
+        for portable in [false, true] {
+            PORTABLE.with(|p| p.set(portable));
+            for (m, k, n) in [(36, 36, 36), (5, 3, 36), (12, 36, 7), (1, 1, 1), (3, 0, 4)] {
+                let (a, b, c0) = (mat(m, k, 0.1), mat(k, n, 0.2), mat(m, n, 0.3));
+                let mut c = c0.clone();
+                gemm_nn(&mut c, 0.7, &a, &b, 0.4);
+                let want = &c0 * 0.4 + &a * &b * 0.7;
+                assert!((c - want).amax() < 1e-12, "gemm_nn {m}x{k}x{n} portable={portable}");
+                let at = a.transpose();
+                let mut c = c0.clone();
+                gemm_tn(&mut c, -1.3, &at, &b, 1.0);
+                let want = &c0 - &a * &b * 1.3;
+                assert!((c - want).amax() < 1e-12, "gemm_tn {m}x{k}x{n} portable={portable}");
+                // Views: column ranges of larger matrices.
+                let big = mat(k + 2, m + 3, 0.5);
+                let mut c = c0.clone();
+                gemm_tn(&mut c, 1.0, &big.view((1, 2), (k, m)), &b, 0.0);
+                let want = big.view((1, 2), (k, m)).transpose() * &b;
+                assert!((c - want).amax() < 1e-12, "gemm_tn view portable={portable}");
+            }
+        }
+        PORTABLE.with(|p| p.set(false));
     }
 }
