@@ -17,16 +17,18 @@
 //!    [`sodyn::deriv::impact_dynamics`], `ℓ = ℓ_c(x)` with the impulses as contact forces; no
 //!    control.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, Matrix6};
 use sodyn::algo::{Data, aba};
 use sodyn::deriv::{
-    ContactData, ImpactData, KktData, fd_derivatives, impact_derivatives, impact_dynamics,
-    kkt_derivatives, kkt_dynamics,
+    ContactData, ContractedData, ImpactContracted, ImpactData, KktContracted, KktData,
+    fd_derivatives, fd_so_contracted, impact_derivatives, impact_dynamics, impact_so_contracted,
+    kkt_derivatives, kkt_dynamics, kkt_so_contracted,
 };
 use sodyn::model::lie::Arg;
 use sodyn::model::{Contact, JointType, Model};
 
-use crate::cost::{CostData, CostDerivs, CostModelSum};
+use crate::cost::{CostData, CostDerivs, CostModelSum, CurvatureWork};
+use crate::curvature::{Group, bracket_form, djr_t};
 use crate::error::{OcpError, Result};
 use crate::linalg::gemm_nn;
 use crate::residual::NodeView;
@@ -164,6 +166,47 @@ pub struct ActionData {
     kkt: Option<KktData>,
     imp: Option<ImpactData>,
     sc: StateScratch,
+    /// The second-order term of the last [`ActionModel::second_order`]: the Hessian of
+    /// `V′ₓᵀ (f(x ⊕ δx, u + δu) ⊖ f(x, u))` plus the residual curvature of the costs, in
+    /// `z = (δx, δu)` (`(ndx + nu)²`); the exact Hessian of the knot's term in the Q-function is
+    /// the Gauss-Newton `[ℓ_xx ℓ_xu; ℓ_ux ℓ_uu]` plus this.
+    pub hzz: DMatrix<f64>,
+    /// How many cost terms of the last [`ActionModel::second_order`] kept their Gauss-Newton
+    /// Hessian (`FramePlacement`, `FrameVelocity`, `CoMPosition`).
+    pub gauss_newton_terms: usize,
+    so: SoWork,
+}
+
+/// Buffers of [`ActionModel::second_order`].
+#[derive(Clone, Debug)]
+struct SoWork {
+    fd: ContractedData,
+    kc: Option<KktContracted>,
+    ic: Option<ImpactContracted>,
+    w_a: DVector<f64>,
+    w_lambda: DVector<f64>,
+    groups: Vec<(usize, Group)>,
+    planar: Option<String>,
+    cost: CurvatureWork,
+    e: DMatrix<f64>,
+    ne: DMatrix<f64>,
+    se: DMatrix<f64>,
+    m6: [Matrix6<f64>; 3],
+}
+
+/// The velocity offset and group of every joint whose `⊕` is not affine, and the first planar
+/// joint (whose second order is not implemented), if any.
+fn lie_groups(m: &Model) -> (Vec<(usize, Group)>, Option<String>) {
+    let (mut g, mut planar) = (Vec::new(), None);
+    for i in 1..m.njoints() {
+        match m.joints()[i] {
+            JointType::FreeFlyer => g.push((m.idx_v()[i], Group::Se3)),
+            JointType::Spherical => g.push((m.idx_v()[i], Group::So3)),
+            JointType::Planar => planar = planar.or(Some(m.names()[i].clone())),
+            _ => {}
+        }
+    }
+    (g, planar)
 }
 
 fn active_contacts(contacts: &[NamedContact]) -> Vec<Contact> {
@@ -233,7 +276,26 @@ impl ActionModel {
         }
         let mut fx = DMatrix::identity(ndx, ndx);
         fx.fill_diagonal(1.0);
+        let (groups, planar) = lie_groups(m);
+        let nz = ndx + nu;
+        let so = SoWork {
+            fd: ContractedData::new(m),
+            kc: kkt.as_ref().map(|k| KktContracted::new(m, k)),
+            ic: imp.as_ref().map(|i| ImpactContracted::new(m, i)),
+            w_a: DVector::zeros(nv),
+            w_lambda: DVector::zeros(nc),
+            groups,
+            planar,
+            cost: CurvatureWork::new(nv),
+            e: DMatrix::zeros(6, nz),
+            ne: DMatrix::zeros(6, nz),
+            se: DMatrix::zeros(6, nz),
+            m6: [Matrix6::zeros(); 3],
+        };
         Ok(ActionData {
+            hzz: DMatrix::zeros(nz, nz),
+            gauss_newton_terms: 0,
+            so,
             xnext: DVector::zeros(self.state.nx()),
             cost: 0.0,
             fx,
@@ -350,6 +412,227 @@ impl ActionModel {
                 self.eval_costs(d, x, &zero_u, true, diff, cost_scale)
             }
         }
+    }
+
+    /// The second-order term of the knot into `d.hzz` (see [`ActionData::hzz`]), with `vx_next`
+    /// the gradient `V′ₓ` of the value function at the next node (`ndx`), after
+    /// [`ActionModel::calc_diff`] at the same `(x, u)`.
+    ///
+    /// Inputs: `λ = (λ_q, λ_v) = V′ₓ`, the knot's first-order terms. Outputs (`z = (δq, δv, δu)`):
+    /// 1. Euler, `a = FD(q, v, τ)` or the KKT dynamics, `Δ = dt v′ = dt v + dt² a`:
+    ///    - the weight on `a`: `w_a = dt λ_v + dt² J_Δᵀ λ_q` (`J_Δ = ∂(q ⊕ Δ)/∂Δ`), and on the
+    ///      contact forces the costs' `w_λ` ([`CostModelSum`]);
+    ///    - `C = ∂²(w_aᵀ a + w_λᵀ λ)/∂(q, v, τ)²` contracted, no `nv³` tensor
+    ///      ([`sodyn::deriv::fd_so_contracted`], [`sodyn::deriv::kkt_so_contracted`]): `H_qq +=
+    ///      sym(C_qq)` (the nested tangent derivative's symmetric part is the Hessian),
+    ///      `H_qv += C_qv`, `H_vv += C_vv`, `H_qu += C_τq` (actuated columns);
+    ///    - the integrator's curvature per free-flyer or spherical joint ([`crate::curvature`]):
+    ///      with `E = ∂ε/∂z = dt [∂v′/∂x, ∂v′/∂u]` (the joint's rows), `H += E_qᵀ N E + Eᵀ Nᵀ E_q
+    ///      + Eᵀ sym(K) E`;
+    /// 2. impulse, `x′ = (q, v⁺)`: `C` of `λ_vᵀ v⁺ + w_λᵀ Λ`
+    ///    ([`sodyn::deriv::impact_so_contracted`]): `H_qq += sym(C_qq)`, `H_qv += C_qv⁻`;
+    /// 3. every knot: the costs' residual curvature (times `dt` on an Euler knot).
+    ///
+    /// # Errors
+    /// `vx_next` of the wrong length or not finite; a planar joint; the dynamics' errors.
+    pub fn second_order(
+        &self,
+        d: &mut ActionData,
+        x: &DVector<f64>,
+        u: Option<&DVector<f64>>,
+        vx_next: &DVector<f64>,
+    ) -> Result<()> {
+        let m = self.state.model().clone();
+        let m = &*m;
+        let (nv, ndx) = (m.nv(), self.state.ndx());
+        if vx_next.len() != ndx {
+            return Err(OcpError::new(format!(
+                "second_order: vx_next has length {}, expected ndx = {ndx}",
+                vx_next.len()
+            )));
+        }
+        if let Some(i) = vx_next.iter().position(|v| !v.is_finite()) {
+            return Err(OcpError::new(format!("second_order: vx_next[{i}] is {}", vx_next[i])));
+        }
+        if let Some(j) = &d.so.planar {
+            return Err(OcpError::new(format!(
+                "joint '{j}': the second order of a planar joint's integrator is not implemented"
+            )));
+        }
+        d.hzz.fill(0.0);
+        d.so.w_lambda.fill(0.0);
+        let zero_u = DVector::zeros(0);
+        let (dt, dynamics) = match (&self.kind, u) {
+            (ActionKind::Euler { dt, .. }, Some(_)) => (*dt, true),
+            (ActionKind::Euler { .. }, None) => (1.0, false),
+            (ActionKind::Impulse { .. }, _) => (1.0, true),
+        };
+        // 3. The costs' curvature (and their weight on the forces).
+        {
+            let with_u = dynamics && matches!(self.kind, ActionKind::Euler { .. });
+            let forces = dynamics.then_some((&d.lambda, &d.dlambda_dx, &d.dlambda_du));
+            let mut view = NodeView {
+                model: self.state.model(),
+                state: &self.state,
+                data: &mut d.data,
+                sc: &mut d.sc,
+                x,
+                q: &d.q,
+                v: &d.v,
+                u: u.unwrap_or(&zero_u),
+                forces,
+            };
+            d.gauss_newton_terms = self.costs.curvature(
+                &d.costs,
+                &mut view,
+                &d.so.groups,
+                dt,
+                &mut d.hzz,
+                &mut d.so.w_lambda,
+                &mut d.so.cost,
+                with_u || dynamics,
+            )?;
+        }
+        if !dynamics {
+            return Ok(());
+        }
+        let (lq, lv) = (vx_next.rows(0, nv), vx_next.rows(nv, nv));
+        let so = &mut d.so;
+        let h = &mut d.hzz;
+        match &self.kind {
+            ActionKind::Euler { .. } => {
+                // 1. w_a = dt λ_v + dt² J_Δᵀ λ_q.
+                so.w_a.copy_from(&lv);
+                so.w_a *= dt;
+                so.w_a.gemv_tr(dt * dt, &d.jq_dx, &lq, 1.0);
+                let (off, nu) = (self.actuation.offset(), self.nu());
+                let (cqq, cqv, cvv, ctq) = match (d.kkt.as_mut(), so.kc.as_mut()) {
+                    (Some(k), Some(kc)) => {
+                        kkt_so_contracted(
+                            m,
+                            &mut d.data,
+                            k,
+                            kc,
+                            &d.q,
+                            &d.v,
+                            &d.tau,
+                            &so.w_a,
+                            &so.w_lambda,
+                        )?;
+                        (kc.c_qq(), kc.c_qv(), kc.c_vv(), kc.c_tauq())
+                    }
+                    _ => {
+                        fd_so_contracted(m, &mut d.data, &mut so.fd, &d.q, &d.v, &d.tau, &so.w_a)?;
+                        (so.fd.c_qq(), so.fd.c_qv(), so.fd.c_vv(), so.fd.c_tauq())
+                    }
+                };
+                for j in 0..nv {
+                    for k in 0..nv {
+                        h[(j, k)] += 0.5 * (cqq[(j, k)] + cqq[(k, j)]);
+                        h[(j, nv + k)] += cqv[(j, k)];
+                        h[(nv + k, j)] += cqv[(j, k)];
+                        h[(nv + j, nv + k)] += 0.5 * (cvv[(j, k)] + cvv[(k, j)]);
+                    }
+                }
+                // H_qu: C_τq[(off + i, k)] = ∂/∂q_k (∂(wᵀy)/∂τ_{off+i}).
+                for i in 0..nu {
+                    for k in 0..nv {
+                        let c = ctq[(off + i, k)];
+                        h[(k, ndx + i)] += c;
+                        h[(ndx + i, k)] += c;
+                    }
+                }
+                // The integrator's curvature per Lie joint.
+                let nz = h.nrows();
+                for &(b, g) in &so.groups {
+                    let n = g.dim();
+                    let [a, bl, t] = &mut so.m6;
+                    let mut lam = [0.0; 6];
+                    let mut del = [0.0; 6];
+                    for i in 0..n {
+                        lam[i] = lq[b + i];
+                        del[i] = d.dx[b + i];
+                    }
+                    // N = ½ Adᵀ B_λ J_Δ (into `t`).
+                    a.fill(0.0);
+                    for i in 0..n {
+                        for j in 0..n {
+                            a[(i, j)] = d.jq_x[(b + i, b + j)];
+                        }
+                    }
+                    bracket_form(g, &lam[..n], bl);
+                    let mut jr = Matrix6::zeros();
+                    for i in 0..n {
+                        for j in 0..n {
+                            jr[(i, j)] = d.jq_dx[(b + i, b + j)];
+                        }
+                    }
+                    *t = a.transpose() * *bl * jr * 0.5;
+                    // K: column j = (∂J_Δ/∂Δ_j)ᵀ λ (into `a`; sym below).
+                    djr_t(g, &del[..n], &lam[..n], a);
+                    // E = dt [∂v′/∂x, ∂v′/∂u] (the joint's rows).
+                    for i in 0..n {
+                        for c in 0..ndx {
+                            so.e[(i, c)] = dt * d.fx[(nv + b + i, c)];
+                        }
+                        for c in 0..nu {
+                            so.e[(i, ndx + c)] = dt * d.fu[(nv + b + i, c)];
+                        }
+                    }
+                    // N E and sym(K) E.
+                    for i in 0..n {
+                        for c in 0..nz {
+                            let (mut ne, mut se) = (0.0, 0.0);
+                            for r in 0..n {
+                                ne += t[(i, r)] * so.e[(r, c)];
+                                se += 0.5 * (a[(i, r)] + a[(r, i)]) * so.e[(r, c)];
+                            }
+                            so.ne[(i, c)] = ne;
+                            so.se[(i, c)] = se;
+                        }
+                    }
+                    for i in 0..n {
+                        for c in 0..nz {
+                            h[(b + i, c)] += so.ne[(i, c)];
+                            h[(c, b + i)] += so.ne[(i, c)];
+                        }
+                    }
+                    for r in 0..nz {
+                        for c in 0..nz {
+                            let mut x = 0.0;
+                            for i in 0..n {
+                                x += so.e[(i, r)] * so.se[(i, c)];
+                            }
+                            h[(r, c)] += x;
+                        }
+                    }
+                }
+            }
+            ActionKind::Impulse { .. } => {
+                if let (Some(im), Some(ic)) = (d.imp.as_mut(), so.ic.as_mut()) {
+                    so.w_a.copy_from(&lv);
+                    impact_so_contracted(
+                        m,
+                        &mut d.data,
+                        im,
+                        ic,
+                        &d.q,
+                        &d.v,
+                        &so.w_a,
+                        &so.w_lambda,
+                    )?;
+                    let (cqq, cqv) = (ic.c_qq(), ic.c_qvminus());
+                    for j in 0..nv {
+                        for k in 0..nv {
+                            h[(j, k)] += 0.5 * (cqq[(j, k)] + cqq[(k, j)]);
+                            h[(j, nv + k)] += cqv[(j, k)];
+                            h[(nv + k, j)] += cqv[(j, k)];
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
     }
 
     /// `a = FD(q, v, τ)` (and `∂a/∂x`, `∂a/∂u`, `λ` and its derivatives with contacts).

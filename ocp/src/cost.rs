@@ -6,7 +6,12 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use nalgebra::Matrix6;
+use sodyn::algo::{ReferenceFrame, frame_jacobian_derivative};
+use sodyn::tensor::Tensor3;
+
 use crate::activation::Activation;
+use crate::curvature::{Group, djr_t};
 use crate::linalg::gemm_nn;
 use crate::residual::{NodeView, Residual, ResidualData};
 
@@ -44,6 +49,20 @@ pub struct CostData {
     rut: Vec<DMatrix<f64>>,
     /// The value of each term (weight included).
     pub costs: Vec<f64>,
+}
+
+/// Scratch of [`CostModelSum::curvature`].
+#[derive(Clone, Debug)]
+pub(crate) struct CurvatureWork {
+    /// `∂J_f/∂q` of a frame (`6 × nv × nv`).
+    djac: Tensor3,
+    m6: [Matrix6<f64>; 3],
+}
+
+impl CurvatureWork {
+    pub(crate) fn new(nv: usize) -> Self {
+        CurvatureWork { djac: Tensor3::zeros(6, nv, nv), m6: [Matrix6::zeros(); 3] }
+    }
 }
 
 /// Where the cost derivatives go.
@@ -175,5 +194,108 @@ impl CostModelSum {
             }
         }
         Ok(())
+    }
+
+    /// The residual curvature `Σ_k w_k Σ_i (A_r)_i ∂²r_i/∂z²` of the terms (after
+    /// [`CostModelSum::calc_diff`] at the same point), times `scale`, added to `hzz`
+    /// (`z = (δx, δu)`, `nz × nz`); the contact-force terms instead add their weight on the forces
+    /// (`scale w Aᵀ A_r` on the contact's rows, `A = I` for `ContactForce`) to `w_lambda`, for
+    /// the dynamics' `∂²λ`. Exact for `State` (the manifold's `⊖`, [`crate::curvature`]),
+    /// `FrameTranslation` (`sym(∂J/∂q)`, the frame Jacobian's derivative), the linear residuals
+    /// (`Control`, `JointEffort`) and the force residuals; `FramePlacement`, `FrameVelocity`
+    /// and `CoMPosition` keep their Gauss-Newton Hessian. Returns how many active terms did.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn curvature(
+        &self,
+        cd: &CostData,
+        n: &mut NodeView<'_>,
+        groups: &[(usize, Group)],
+        scale: f64,
+        hzz: &mut DMatrix<f64>,
+        w_lambda: &mut DVector<f64>,
+        ws: &mut CurvatureWork,
+        with_u: bool,
+    ) -> sodyn::Result<usize> {
+        let nv = n.model.nv();
+        let mut gauss_newton = 0;
+        for (k, c) in self.items.iter().enumerate() {
+            if !c.active || (!with_u && !c.residual.depends_on_x()) {
+                continue;
+            }
+            let (rd, ar, w) = (&cd.residuals[k], &cd.ar[k], scale * c.weight);
+            match &c.residual {
+                Residual::State { .. } => {
+                    // sym(−J⁻ᵀ P J⁻¹) per Lie joint, J⁻¹ = ∂(x ⊖ x_ref)/∂x's block.
+                    for &(b, g) in groups {
+                        let d = g.dim();
+                        let [ji, p0, t] = &mut ws.m6;
+                        ji.fill(0.0);
+                        let mut mu = [0.0; 6];
+                        for i in 0..d {
+                            for j in 0..d {
+                                ji[(i, j)] = rd.rx[(b + i, b + j)];
+                            }
+                        }
+                        for (i, m) in mu.iter_mut().enumerate().take(d) {
+                            *m = (0..d).map(|r| ji[(r, i)] * w * ar[b + r]).sum();
+                        }
+                        let mut r = [0.0; 6];
+                        for (i, x) in r.iter_mut().enumerate().take(d) {
+                            *x = rd.r[b + i];
+                        }
+                        djr_t(g, &r[..d], &mu[..d], p0);
+                        *t = ji.transpose() * *p0 * *ji;
+                        for i in 0..d {
+                            for j in 0..d {
+                                hzz[(b + i, b + j)] -= 0.5 * (t[(i, j)] + t[(j, i)]);
+                            }
+                        }
+                    }
+                }
+                Residual::Control { .. } | Residual::JointEffort { .. } => {}
+                Residual::FrameTranslation { frame, .. } => {
+                    frame_jacobian_derivative(
+                        n.model,
+                        n.data,
+                        n.q,
+                        *frame,
+                        ReferenceFrame::LocalWorldAligned,
+                        &mut ws.djac,
+                    )?;
+                    let nu_w = [w * ar[0], w * ar[1], w * ar[2]];
+                    for jj in 0..nv {
+                        for kk in 0..=jj {
+                            let mut h = 0.0;
+                            for (r, wr) in nu_w.iter().enumerate() {
+                                h += wr * (ws.djac[(3 + r, jj, kk)] + ws.djac[(3 + r, kk, jj)]);
+                            }
+                            hzz[(jj, kk)] += 0.5 * h;
+                            if kk != jj {
+                                hzz[(kk, jj)] += 0.5 * h;
+                            }
+                        }
+                    }
+                }
+                Residual::ContactForce { contact, .. } => {
+                    if let (Some(_), Some(o)) = (n.forces, contact.offset) {
+                        for i in 0..contact.dim {
+                            w_lambda[o + i] += w * ar[i];
+                        }
+                    }
+                }
+                Residual::ContactCone { contact, a } => {
+                    if let (Some(_), Some(o)) = (n.forces, contact.offset) {
+                        for i in 0..contact.dim {
+                            w_lambda[o + i] +=
+                                w * (0..a.nrows()).map(|r| a[(r, i)] * ar[r]).sum::<f64>();
+                        }
+                    }
+                }
+                Residual::FramePlacement { .. }
+                | Residual::FrameVelocity { .. }
+                | Residual::CoMPosition { .. } => gauss_newton += 1,
+            }
+        }
+        Ok(gauss_newton)
     }
 }

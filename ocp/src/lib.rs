@@ -15,6 +15,7 @@
 pub mod action;
 pub mod activation;
 pub mod cost;
+mod curvature;
 pub mod error;
 mod linalg;
 pub mod problem;

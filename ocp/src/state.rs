@@ -138,6 +138,26 @@ impl StateMultibody {
             .d_integrate_blocks_into(&sc.q0, &sc.dq, arg, &mut sc.jq)
             .map_err(|e| OcpError::new(format!("the integrator's increment: {e}")))
     }
+    /// `∂(x ⊕ dx)/∂x` (`arg = Arg::First`) or `∂(x ⊕ dx)/∂dx` (`Arg::Second`), `ndx × ndx`,
+    /// into `out`: `blockdiag(∂(q ⊕ dq)/∂·, I)` (Crocoddyl's `Jintegrate`).
+    ///
+    /// # Errors
+    /// A non-finite `dx`.
+    pub fn jintegrate(
+        &self,
+        sc: &mut StateScratch,
+        x: &DVector<f64>,
+        dx: &DVector<f64>,
+        arg: Arg,
+        out: &mut DMatrix<f64>,
+    ) -> Result<()> {
+        let nv = self.nv();
+        self.jintegrate_q(sc, x, dx, arg)?;
+        out.fill(0.0);
+        out.view_mut((0, 0), (nv, nv)).copy_from(&sc.jq);
+        out.view_mut((nv, nv), (nv, nv)).fill_diagonal(1.0);
+        Ok(())
+    }
     /// The `q` block `∂(q1 ⊖ q0)/∂q0` or `/∂q1` (`arg`) into `sc.jq`.
     pub(crate) fn jdiff_q(
         &self,
