@@ -31,5 +31,5 @@ pub use cost::{CostItem, CostModelSum};
 pub use error::{OcpError, Result};
 pub use problem::ShootingProblem;
 pub use residual::Residual;
-pub use solver::{IterationLog, Solver, SolverKind, Termination};
+pub use solver::{HessianStats, IterationLog, SecondOrder, Solver, SolverKind, Termination};
 pub use state::StateMultibody;

@@ -275,3 +275,34 @@ fn bad_problems_are_errors_naming_the_node() {
         .unwrap_err();
     assert!(e.message.contains("us[0]"), "{}", e.message);
 }
+
+#[test]
+fn second_order_variants_reach_the_gauss_newton_solution() {
+    use sodyn_ocp::SecondOrder;
+    let m = model();
+    let doc = problem_json(&m, 10);
+    let mut found = Vec::new();
+    for kind in [SolverKind::Fddp, SolverKind::Ddp] {
+        for so in [SecondOrder::Off, SecondOrder::On, SecondOrder::Auto] {
+            let p = spec::problem_from_json(m.clone(), &doc).expect("problem");
+            let mut s = Solver::new(p, kind);
+            s.second_order = so;
+            let x0 = s.problem.x0().clone();
+            let xs = vec![x0.clone(); 11];
+            let us = s.problem.quasi_static(&xs[..10]).expect("quasi_static");
+            let ok = s.solve(&xs, &us, 200, false, None).expect("solve");
+            let st = *s.hessian_stats();
+            eprintln!("{kind:?} {so:?}: iter {} cost {:.12e} stats {st:?}", s.iter(), s.cost());
+            assert!(ok, "{kind:?} {so:?}: {:?}", s.termination());
+            match so {
+                SecondOrder::Off => assert_eq!(st.exact_passes, 0),
+                SecondOrder::On => assert_eq!(st.gauss_newton_passes, 0),
+                SecondOrder::Auto => assert!(st.exact_passes > 0, "{st:?}"),
+            }
+            found.push(s.cost());
+        }
+    }
+    for c in &found {
+        assert!((c - found[0]).abs() < 1e-6 * found[0], "{found:?}");
+    }
+}

@@ -3,6 +3,7 @@
 Runs in the Crocoddyl venv (``../shared/peer/setup-crocoddyl.sh``, with ``pip install ./python``):
 
     python python/bench/compare_crocoddyl.py [--rounds 5] [--problems anymal_trot,...] [--json out.json]
+    python python/bench/compare_crocoddyl.py --second-order [--th-stop 1e-12] [--maxiter 200]
 
 Each problem is built by Crocoddyl's example code (``python/tests/crocoddyl_problems.py``; the
 gaits chained as the examples chain them, each from the previous gait's last state), converted
@@ -11,6 +12,12 @@ Crocoddyl's FDDP (box-FDDP for ``humanoid_taichi.py``, with the examples' ``maxi
 ``init_reg``) and by sodyn's on 1 and 2 threads, interleaved over the rounds.
 Reported per problem: iterations, final cost, solve time and time per iteration (median over
 rounds), and the median of the per-round ratios sodyn/Crocoddyl and 2 threads/1 thread.
+
+``--second-order`` instead runs, single-threaded and interleaved, Crocoddyl's solver and sodyn's
+with ``second_order=False`` (Gauss-Newton), ``True`` and ``"auto"``, all with the same stopping
+rule (``stop < th_stop`` on a feasible trajectory; ``--th-stop`` overrides the examples'), and
+reports for each its iterations, final cost, median solve time, the median per-round time ratio
+to Gauss-Newton, and the exact passes and their share of the time.
 """
 
 from __future__ import annotations
@@ -52,12 +59,62 @@ def timed(solve):
     return time.perf_counter() - t
 
 
+def second_order_rows(args):
+    rows = []
+    for name, p, xs, us, (kind, maxiter, reg) in build_all(args.problems.split(",")):
+        maxiter = args.maxiter or maxiter
+        sp = ocp.from_crocoddyl(p)
+        box = kind == "boxfddp"
+        CS, OS = (crocoddyl.SolverBoxFDDP, ocp.SolverBoxFDDP) if box else (crocoddyl.SolverFDDP, ocp.SolverFDDP)
+        cs = CS(p)
+        variants = {"gn": OS(sp, second_order=False), "exact": OS(sp, second_order=True),
+                    "auto": OS(sp, second_order="auto")}
+        if args.th_stop:
+            cs.th_stop = args.th_stop
+            for s in variants.values():
+                s.th_stop = args.th_stop
+        times = {k: [] for k in ["croc", *variants]}
+        for _ in range(args.rounds):
+            cargs = (xs, us, maxiter, False) if reg is None else (xs, us, maxiter, False, reg)
+            times["croc"].append(timed(lambda: cs.solve(*cargs)))
+            for k, s in variants.items():
+                times[k].append(timed(lambda: s.solve(xs, us, maxiter, False, reg)))
+        row = dict(problem=name, solver=kind, T=p.T, th_stop=cs.th_stop, maxiter=maxiter,
+                   croc=dict(iter=cs.iter, cost=cs.cost, ms=1e3 * statistics.median(times["croc"]),
+                             converged=bool(cs.isFeasible and cs.stop < cs.th_stop)))
+        for k, s in variants.items():
+            st = s.hessian_stats
+            row[k] = dict(iter=s.iter, cost=s.cost, ms=1e3 * statistics.median(times[k]),
+                          termination=s.termination,
+                          ratio_to_gn=statistics.median(a / b for a, b in zip(times[k], times["gn"])),
+                          exact_passes=st["exact_passes"], exact_failures=st["exact_failures"],
+                          so_share=st["seconds"] / max(times[k][-1], 1e-12),
+                          gauss_newton_terms=st["gauss_newton_terms"])
+        rows.append(row)
+        line = f"{name:20s} T={p.T:3d} croc {cs.iter:3d} it {row['croc']['ms']:7.1f} ms {cs.cost:.9g}"
+        for k in variants:
+            r = row[k]
+            line += (f" | {k} {r['iter']:3d} it {r['ms']:7.1f} ms x{r['ratio_to_gn']:.2f} {r['cost']:.9g}"
+                     f" ({r['termination'][:4]}, {r['exact_passes']} ex)")
+        print(line, flush=True)
+    return rows
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--problems", default=",".join(PROBLEMS))
     ap.add_argument("--json")
+    ap.add_argument("--second-order", action="store_true")
+    ap.add_argument("--th-stop", type=float)
+    ap.add_argument("--maxiter", type=int)
     args = ap.parse_args()
+    if args.second_order:
+        rows = second_order_rows(args)
+        if args.json:
+            with open(args.json, "w") as f:
+                json.dump(rows, f, indent=1)
+        return
     rows = []
     for name, p, xs, us, (kind, maxiter, reg) in build_all(args.problems.split(",")):
         sp = ocp.from_crocoddyl(p)

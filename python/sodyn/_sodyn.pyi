@@ -388,6 +388,8 @@ class _Solver:
     th_stop: float
     threads: int
     termination: str
+    second_order: str
+    hessian_stats: Dict[str, float]
     log: List[Dict[str, float]]
     horizon: int
     nus: List[int]

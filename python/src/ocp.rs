@@ -9,7 +9,7 @@ use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::exceptions::{PyKeyboardInterrupt, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use sodyn_ocp::{ActionData, Solver, SolverKind, Termination, spec};
+use sodyn_ocp::{ActionData, SecondOrder, Solver, SolverKind, Termination, spec};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -204,6 +204,42 @@ impl PySolver {
     #[setter]
     fn set_threads(&mut self, n: usize) -> PyResult<()> {
         self.solver.problem.set_threads(n).map_err(ocp_err)
+    }
+    /// Which Hessian the backward pass uses: "off" (Gauss-Newton), "on" (exact) or "auto".
+    #[getter]
+    fn second_order(&self) -> &'static str {
+        match self.solver.second_order {
+            SecondOrder::Off => "off",
+            SecondOrder::On => "on",
+            SecondOrder::Auto => "auto",
+        }
+    }
+    #[setter]
+    fn set_second_order(&mut self, v: &str) -> PyResult<()> {
+        self.solver.second_order = match v {
+            "off" => SecondOrder::Off,
+            "on" => SecondOrder::On,
+            "auto" => SecondOrder::Auto,
+            _ => {
+                return Err(PyValueError::new_err(format!(
+                    "second_order: {v:?} is not one of \"off\", \"on\", \"auto\""
+                )));
+            }
+        };
+        Ok(())
+    }
+    /// The exact Hessian's statistics over the last solve: exact_passes, gauss_newton_passes,
+    /// exact_failures, seconds, gauss_newton_terms.
+    #[getter]
+    fn hessian_stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let s = self.solver.hessian_stats();
+        let d = PyDict::new(py);
+        d.set_item("exact_passes", s.exact_passes)?;
+        d.set_item("gauss_newton_passes", s.gauss_newton_passes)?;
+        d.set_item("exact_failures", s.exact_failures)?;
+        d.set_item("seconds", s.seconds)?;
+        d.set_item("gauss_newton_terms", s.gauss_newton_terms)?;
+        Ok(d)
     }
     /// Why the last solve ended: "converged", "maxiter", "max_regularization",
     /// "interrupted" or "failed: REASON".

@@ -92,3 +92,32 @@ def test_bad_input_names_the_node_and_part():
     n = ocp.IntegratedActionModelEuler(ocp.DifferentialActionModelFreeFwdDynamics(st, act, costs), 0.01)
     with pytest.raises(ocp.OcpError, match=r"node 0.*no contact named \"nope\""):
         ocp.SolverFDDP(ocp.ShootingProblem(x0, [n], p.terminalModel))
+
+
+@pytest.mark.parametrize("Solver", [ocp.SolverFDDP, ocp.SolverDDP, ocp.SolverBoxFDDP])
+def test_second_order_variants_reach_the_same_solution(Solver):
+    problem, x0 = _problem(T=8)
+    costs = {}
+    for so in [False, True, "auto"]:
+        s = Solver(problem, second_order=so)
+        assert s.second_order == so
+        assert s.solve([x0] * 9, problem.quasiStatic([x0] * 8), 200)
+        st = s.hessian_stats
+        assert st["exact_passes"] == 0 if so is False else st["exact_passes"] > 0
+        if so is True:
+            assert st["gauss_newton_passes"] == 0 and st["seconds"] > 0
+            # The centre-of-mass cost keeps its Gauss-Newton curvature (one term per knot).
+            assert st["gauss_newton_terms"] == 9
+        costs[so] = s.cost
+    assert costs[True] == pytest.approx(costs[False], rel=1e-6)
+    assert costs["auto"] == pytest.approx(costs[False], rel=1e-6)
+
+
+def test_second_order_option_is_checked():
+    problem, _ = _problem(T=2)
+    with pytest.raises(ValueError, match="second_order"):
+        ocp.SolverFDDP(problem, second_order="exact")
+    s = ocp.SolverFDDP(problem)
+    with pytest.raises(ValueError, match="second_order"):
+        s.second_order = 1
+    assert s.second_order is False

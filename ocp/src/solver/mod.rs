@@ -44,6 +44,38 @@ pub enum SolverKind {
     BoxFddp,
 }
 
+/// Which Hessian the backward pass uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum SecondOrder {
+    /// Gauss-Newton: the dynamics' Jacobians and the costs' `R_xᵀ A_rr R_x` (Crocoddyl's).
+    #[default]
+    Off,
+    /// The exact Hessian every iteration: `Q_zz += V′ₓ · f_zz` and the residual curvature
+    /// ([`crate::ActionModel::second_order`]); a `Q_uu` that is not positive definite raises
+    /// the regularisation `μ` as in Gauss-Newton (Levenberg).
+    On,
+    /// Gauss-Newton until an iteration takes the full step on a feasible trajectory, then the
+    /// exact Hessian; an exact backward pass that fails at the current `μ` is redone with
+    /// Gauss-Newton in the same iteration, and the next iteration is Gauss-Newton again.
+    Auto,
+}
+
+/// What the exact Hessian cost and how often it was used, over the last solve.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HessianStats {
+    /// Backward passes with the exact Hessian (failed ones included).
+    pub exact_passes: usize,
+    /// Backward passes with Gauss-Newton.
+    pub gauss_newton_passes: usize,
+    /// Exact backward passes whose `Q_uu` was not positive definite.
+    pub exact_failures: usize,
+    /// Seconds spent in the second-order terms ([`crate::ActionModel::second_order`]).
+    pub seconds: f64,
+    /// Cost terms per evaluation whose residual curvature is Gauss-Newton (at the last exact
+    /// pass: `FramePlacement`, `FrameVelocity`, `CoMPosition`), summed over the knots.
+    pub gauss_newton_terms: usize,
+}
+
 /// One iteration's log entry (Crocoddyl's `CallbackVerbose` columns).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct IterationLog {
@@ -150,6 +182,11 @@ pub struct Solver {
     termination: Termination,
     interrupt: Option<Arc<AtomicBool>>,
     callback: Option<Callback>,
+    /// Which Hessian the backward pass uses (default [`SecondOrder::Off`]).
+    pub second_order: SecondOrder,
+    stats: HessianStats,
+    so_error: Option<String>,
+    vx_zero: DVector<f64>,
 }
 
 /// A per-iteration callback: it sees the iteration's log entry and returns `false` to stop the
@@ -238,6 +275,10 @@ impl Solver {
             termination: Termination::MaxIterations,
             interrupt: None,
             callback: None,
+            second_order: SecondOrder::Off,
+            stats: HessianStats::default(),
+            so_error: None,
+            vx_zero: DVector::zeros(ndx),
         }
     }
     /// The algorithm.
@@ -299,6 +340,10 @@ impl Solver {
     /// The log of the last solve, one entry per iteration.
     pub fn log(&self) -> &[IterationLog] {
         &self.log
+    }
+    /// The exact Hessian's statistics over the last solve.
+    pub fn hessian_stats(&self) -> &HessianStats {
+        &self.stats
     }
     /// Why the last solve ended.
     pub fn termination(&self) -> &Termination {
@@ -382,6 +427,9 @@ impl Solver {
         self.steplength = 1.0;
         let mut recalc = true;
         self.iter = 0;
+        self.stats = HessianStats::default();
+        self.so_error = None;
+        let mut exact_next = self.second_order == SecondOrder::On;
         while self.iter < maxiter {
             if let Some(f) = &self.interrupt
                 && f.load(Ordering::Relaxed)
@@ -389,7 +437,9 @@ impl Solver {
                 self.termination = Termination::Interrupted;
                 return Ok(false);
             }
-            // 1–2. Derivatives and backward pass; a failed factorisation raises μ.
+            // 1–2. Derivatives and backward pass; a failed factorisation raises μ (after, in
+            //      `Auto`, a Gauss-Newton retry of a failed exact pass).
+            let mut exact = exact_next;
             loop {
                 if recalc && let Err(e) = self.calc_diff() {
                     if self.iter == 0 {
@@ -398,10 +448,22 @@ impl Solver {
                     self.termination = Termination::Failed(e.message);
                     return Ok(false);
                 }
-                if self.backward_pass() {
+                let ok = self.backward_pass(exact);
+                if let Some(e) = self.so_error.take() {
+                    self.termination = Termination::Failed(e);
+                    return Ok(false);
+                }
+                if ok {
                     break;
                 }
                 recalc = false;
+                if exact {
+                    self.stats.exact_failures += 1;
+                    if self.second_order == SecondOrder::Auto {
+                        exact = false;
+                        continue;
+                    }
+                }
                 self.increase_regularization();
                 if self.preg >= self.reg_max {
                     self.termination = Termination::MaxRegularization;
@@ -452,7 +514,12 @@ impl Solver {
                     break;
                 }
             }
-            // 5. Regularisation and stopping.
+            // 5. Regularisation, the next iteration's Hessian, and stopping.
+            exact_next = match self.second_order {
+                SecondOrder::Off => false,
+                SecondOrder::On => true,
+                SecondOrder::Auto => recalc && self.steplength == 1.0 && self.is_feasible,
+            };
             if self.steplength > 0.5 {
                 self.decrease_regularization();
             }
@@ -516,11 +583,52 @@ impl Solver {
         Ok(())
     }
 
-    /// The backward pass; `false` when a `Q_uu` is not positive definite or a value is NaN.
-    fn backward_pass(&mut self) -> bool {
+    /// The second-order term of knot `t` (`T`: the terminal node) into its data; the error is
+    /// kept in `so_error`.
+    fn knot_second_order(&mut self, t: usize) -> bool {
         let t_len = self.problem.horizon();
+        let start = std::time::Instant::now();
+        let (models, datas, tm, td) = self.problem.split_mut();
+        let r = if t == t_len {
+            tm.second_order(td, &self.xs[t], None, &self.vx_zero).map(|()| td.gauss_newton_terms)
+        } else {
+            let u = (models[t].nu() > 0).then_some(&self.us[t]);
+            models[t]
+                .second_order(&mut datas[t], &self.xs[t], u, &self.vx[t + 1])
+                .map(|()| datas[t].gauss_newton_terms)
+        };
+        self.stats.seconds += start.elapsed().as_secs_f64();
+        match r {
+            Ok(n) => {
+                self.stats.gauss_newton_terms += n;
+                true
+            }
+            Err(e) => {
+                self.so_error = Some(format!("node {t}: {}", e.message));
+                false
+            }
+        }
+    }
+
+    /// The backward pass (with the exact Hessian if `exact`); `false` when a `Q_uu` is not
+    /// positive definite, a value is NaN, or a second-order term failed (`so_error`).
+    fn backward_pass(&mut self, exact: bool) -> bool {
+        let t_len = self.problem.horizon();
+        if exact {
+            self.stats.exact_passes += 1;
+            self.stats.gauss_newton_terms = 0;
+            if !self.knot_second_order(t_len) {
+                return false;
+            }
+        } else {
+            self.stats.gauss_newton_passes += 1;
+        }
         let (dt_term, preg) = (self.problem.terminal_data(), self.preg);
         self.vxx[t_len].copy_from(&dt_term.lxx);
+        if exact {
+            let ndx = self.vxx_tmp.nrows();
+            self.vxx[t_len] += dt_term.hzz.view((0, 0), (ndx, ndx));
+        }
         self.vx[t_len].copy_from(&dt_term.lx);
         for i in 0..self.vxx_tmp.nrows() {
             self.vxx[t_len][(i, i)] += preg;
@@ -529,23 +637,34 @@ impl Solver {
             self.vx[t_len].gemv(1.0, &self.vxx[t_len], &self.fs[t_len], 1.0);
         }
         for t in (0..t_len).rev() {
+            if exact && !self.knot_second_order(t) {
+                return false;
+            }
             let d = &self.problem.running_datas()[t];
             let m = &self.problem.running_models()[t];
             let nu = m.nu();
+            let ndx = d.fx.nrows();
             let (vx_next, vxx_next) = (&self.vx[t + 1], &self.vxx[t + 1]);
             // Q-function.
             gemm_tn(&mut self.fxt_vxx, 1.0, &d.fx, vxx_next, 0.0);
             self.qx[t].copy_from(&d.lx);
             self.qx[t].gemv_tr(1.0, &d.fx, vx_next, 1.0);
             self.qxx[t].copy_from(&d.lxx);
+            if exact {
+                self.qxx[t] += d.hzz.view((0, 0), (ndx, ndx));
+            }
             gemm_nn(&mut self.qxx[t], 1.0, &self.fxt_vxx, &d.fx, 1.0);
             if nu > 0 {
                 gemm_tn(&mut self.fut_vxx[t], 1.0, &d.fu, vxx_next, 0.0);
                 self.qu[t].copy_from(&d.lu);
                 self.qu[t].gemv_tr(1.0, &d.fu, vx_next, 1.0);
                 self.quu[t].copy_from(&d.luu);
-                gemm_nn(&mut self.quu[t], 1.0, &self.fut_vxx[t], &d.fu, 1.0);
                 self.qxu[t].copy_from(&d.lxu);
+                if exact {
+                    self.quu[t] += d.hzz.view((ndx, ndx), (nu, nu));
+                    self.qxu[t] += d.hzz.view((0, ndx), (ndx, nu));
+                }
+                gemm_nn(&mut self.quu[t], 1.0, &self.fut_vxx[t], &d.fu, 1.0);
                 gemm_nn(&mut self.qxu[t], 1.0, &self.fxt_vxx, &d.fu, 1.0);
                 for i in 0..nu {
                     self.quu[t][(i, i)] += preg;

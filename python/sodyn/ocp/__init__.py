@@ -672,10 +672,37 @@ class CallbackVerbose:
 class _SolverBase:
     _kind = "fddp"
 
-    def __init__(self, problem: ShootingProblem, threads: Optional[int] = None) -> None:
+    def __init__(self, problem: ShootingProblem, threads: Optional[int] = None,
+                 second_order: Union[bool, str] = False) -> None:
         self.problem = problem
         self._s = _sodyn._Solver(problem.model, problem.to_json(), self._kind, int(threads or 1))
         self._callbacks: List[Any] = []
+        self.second_order = second_order
+
+    @property
+    def second_order(self) -> Union[bool, str]:
+        """Which Hessian the backward pass uses: ``False`` Gauss-Newton (Crocoddyl's), ``True``
+        the exact Hessian of dynamics and costs every iteration, ``"auto"`` Gauss-Newton until
+        a full step on a feasible trajectory, then exact (see ``docs/ocp.md``)."""
+        return {"off": False, "on": True, "auto": "auto"}[self._s.second_order]
+
+    @second_order.setter
+    def second_order(self, v: Union[bool, str]) -> None:
+        if v is True or v is False:
+            self._s.second_order = "on" if v else "off"
+        elif v == "auto":
+            self._s.second_order = "auto"
+        else:
+            raise ValueError(f"second_order: {v!r} is not one of False, True, \"auto\"")
+
+    @property
+    def hessian_stats(self) -> Dict[str, float]:
+        """Over the last solve: ``exact_passes``, ``gauss_newton_passes`` (backward passes of
+        each kind), ``exact_failures`` (exact passes whose ``Q_uu`` was not positive definite),
+        ``seconds`` spent in the second-order terms, ``gauss_newton_terms`` (cost terms, summed
+        over the knots, whose residual curvature stays Gauss-Newton: frame placement, frame
+        velocity, centre of mass)."""
+        return self._s.hessian_stats
 
     def setCallbacks(self, callbacks: Sequence[Any]) -> None:
         """Callables run with the solver after each solve (e.g. :class:`CallbackVerbose`)."""
