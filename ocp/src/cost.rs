@@ -51,6 +51,15 @@ pub struct CostData {
     pub costs: Vec<f64>,
 }
 
+/// `J_r(r)⁻¹` of SE(3) at `r = [ω; v]` (sodyn's `Jlog6` at `exp6(r)`).
+fn jr_inv_from(r: &[f64; 6], out: &mut Matrix6<f64>) {
+    let m = sodyn::model::lie::exp6(&sodyn::spatial::Motion::new(
+        nalgebra::Vector3::new(r[0], r[1], r[2]),
+        nalgebra::Vector3::new(r[3], r[4], r[5]),
+    ));
+    *out = sodyn::model::jlog6(&m);
+}
+
 /// Scratch of [`CostModelSum::curvature`].
 #[derive(Clone, Debug)]
 pub(crate) struct CurvatureWork {
@@ -202,8 +211,9 @@ impl CostModelSum {
     /// (`scale w Aᵀ A_r` on the contact's rows, `A = I` for `ContactForce`) to `w_lambda`, for
     /// the dynamics' `∂²λ`. Exact for `State` (the manifold's `⊖`, [`crate::curvature`]),
     /// `FrameTranslation` (`sym(∂J/∂q)`, the frame Jacobian's derivative), the linear residuals
-    /// (`Control`, `JointEffort`) and the force residuals; `FramePlacement`, `FrameVelocity`
-    /// and `CoMPosition` keep their Gauss-Newton Hessian. Returns how many active terms did.
+    /// (`Control`, `JointEffort`), `FramePlacement` (`log6`'s curvature and the local
+    /// Jacobian's derivative) and the force residuals; `FrameVelocity` and `CoMPosition` keep
+    /// their Gauss-Newton Hessian. Returns how many active terms did.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn curvature(
         &self,
@@ -291,9 +301,54 @@ impl CostModelSum {
                         }
                     }
                 }
-                Residual::FramePlacement { .. }
-                | Residual::FrameVelocity { .. }
-                | Residual::CoMPosition { .. } => gauss_newton += 1,
+                Residual::FramePlacement { frame, .. } => {
+                    // r = log6(Z exp6(ξ(δ))), ξ(δ) = log6(M_f⁻¹ M_f(q ⊕ δ)): with J^L the local
+                    // Jacobian (rd.j6a, from calc_diff), J⁻¹ = Jlog6(Z) (R_q = J⁻¹ J^L) and
+                    // μ = J⁻ᵀ λ: H = J^Lᵀ sym(−J⁻ᵀ P J⁻¹) J^L + Σ_r μ_r sym(∂J^L/∂q)_r, where
+                    // ∂ξ/∂δ's nested derivative is the local Jacobian's (its bracket part
+                    // is antisymmetric).
+                    let [ji, p0, t] = &mut ws.m6;
+                    // J⁻¹ from R_q = J⁻¹ J^L is not recoverable; recompute it from r.
+                    let mut r6 = [0.0; 6];
+                    for (i, x) in r6.iter_mut().enumerate() {
+                        *x = rd.r[i];
+                    }
+                    jr_inv_from(&r6, ji);
+                    let mut mu = [0.0; 6];
+                    for (i, m) in mu.iter_mut().enumerate() {
+                        *m = (0..6).map(|r| ji[(r, i)] * w * ar[r]).sum();
+                    }
+                    djr_t(Group::Se3, &r6, &mu, p0);
+                    *t = ji.transpose() * *p0 * *ji;
+                    let kx = -(*t + t.transpose()) * 0.5;
+                    frame_jacobian_derivative(
+                        n.model,
+                        n.data,
+                        n.q,
+                        *frame,
+                        ReferenceFrame::Local,
+                        &mut ws.djac,
+                    )?;
+                    let jl = &rd.j6a;
+                    for jj in 0..nv {
+                        // (K J^L)[:, jj]
+                        let mut kj = [0.0; 6];
+                        for (a, x) in kj.iter_mut().enumerate() {
+                            *x = (0..6).map(|b| kx[(a, b)] * jl[(b, jj)]).sum();
+                        }
+                        for kk in 0..=jj {
+                            let mut h: f64 = (0..6).map(|a| jl[(a, kk)] * kj[a]).sum();
+                            for (r, m) in mu.iter().enumerate() {
+                                h += 0.5 * m * (ws.djac[(r, jj, kk)] + ws.djac[(r, kk, jj)]);
+                            }
+                            hzz[(jj, kk)] += h;
+                            if kk != jj {
+                                hzz[(kk, jj)] += h;
+                            }
+                        }
+                    }
+                }
+                Residual::FrameVelocity { .. } | Residual::CoMPosition { .. } => gauss_newton += 1,
             }
         }
         Ok(gauss_newton)

@@ -212,8 +212,9 @@ impl ShootingProblem {
         Ok(self.total_cost())
     }
 
-    /// The knots and their data, split for the solvers' rollouts.
-    pub(crate) fn split_mut(
+    /// The running knots, their data, the terminal knot and its data, borrowed apart (for
+    /// evaluating one knot in place).
+    pub fn split_mut(
         &mut self,
     ) -> (&[ActionModel], &mut [ActionData], &ActionModel, &mut ActionData) {
         (&self.running, &mut self.running_data, &self.terminal, &mut self.terminal_data)

@@ -124,7 +124,7 @@ pub struct ResidualData {
     pub rx: DMatrix<f64>,
     /// `∂r/∂u`.
     pub ru: DMatrix<f64>,
-    j6a: Matrix6xX<f64>,
+    pub(crate) j6a: Matrix6xX<f64>,
     j6b: Matrix6xX<f64>,
     j3: Matrix3xX<f64>,
 }

@@ -4,7 +4,7 @@
 use nalgebra::DVector;
 use serde_json::json;
 use sodyn::model::builtin;
-use sodyn_ocp::{Solver, SolverKind, StateMultibody, spec};
+use sodyn_ocp::{SecondOrder, Solver, SolverKind, StateMultibody, spec};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -63,8 +63,15 @@ fn problem(m: &Arc<sodyn::model::Model>) -> String {
 fn solver_iterations_allocate_nothing() {
     let m = Arc::new(builtin::quadruped());
     let doc = problem(&m);
-    for kind in [SolverKind::Fddp, SolverKind::Ddp, SolverKind::BoxFddp] {
+    for (kind, so) in [
+        (SolverKind::Fddp, SecondOrder::Off),
+        (SolverKind::Ddp, SecondOrder::Off),
+        (SolverKind::BoxFddp, SecondOrder::Off),
+        (SolverKind::Fddp, SecondOrder::On),
+        (SolverKind::Ddp, SecondOrder::On),
+    ] {
         let mut s = Solver::new(spec::problem_from_json(m.clone(), &doc).unwrap(), kind);
+        s.second_order = so;
         s.th_stop = 1e-300; // run every iteration
         let x0 = s.problem.x0().clone();
         let xs = vec![x0.clone(); 13];
@@ -77,7 +84,7 @@ fn solver_iterations_allocate_nothing() {
         };
         count(&mut s, 8); // warm-up: the log's capacity
         let (a3, a6) = (count(&mut s, 3), count(&mut s, 6));
-        assert_eq!(s.iter(), 6, "{kind:?} stopped early: {:?}", s.termination());
-        assert_eq!(a3, a6, "{kind:?}: {a3} allocations in 3 iterations, {a6} in 6");
+        assert_eq!(s.iter(), 6, "{kind:?} {so:?} stopped early: {:?}", s.termination());
+        assert_eq!(a3, a6, "{kind:?} {so:?}: {a3} allocations in 3 iterations, {a6} in 6");
     }
 }

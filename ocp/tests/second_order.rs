@@ -18,12 +18,14 @@ fn node(m: &Arc<sodyn::model::Model>, v: serde_json::Value) -> ActionModel {
     spec::action_model(m, &v, "node").expect("node")
 }
 
-/// Costs whose residual curvature is exact (state on the manifold, control, frame translation,
-/// contact forces and cones).
+/// Costs whose residual curvature is exact (state on the manifold, control, frame translation
+/// and placement, contact forces and cones).
 fn costs(x0: &DVector<f64>, nu: usize, contacts: &[&str], foot: &str) -> serde_json::Value {
     let mut c = vec![
         json!({"name": "x", "weight": 3.0, "residual": {"type": "state", "xref": x0.as_slice()}}),
         json!({"name": "foot", "weight": 5.0, "residual": {"type": "frame_translation", "frame": foot, "pref": [0.3, 0.2, 0.0]}}),
+        json!({"name": "place", "weight": 4.0, "residual": {"type": "frame_placement", "frame": foot,
+               "rotation": [0.36, 0.48, -0.8, -0.8, 0.6, 0.0, 0.48, 0.64, 0.6], "translation": [-0.3, -0.2, 0.1]}}),
     ];
     if nu > 0 {
         c.push(json!({"name": "u", "weight": 0.1, "residual": {"type": "control", "uref": vec![0.3; nu]}}));

@@ -294,6 +294,41 @@ impl PySolver {
         }
         node_dict(py, if t == n { p.terminal_data() } else { &p.running_datas()[t] })
     }
+    /// The second-order term of knot `t` at `(x, u)` (`u` ignored at the terminal knot and at
+    /// impulse knots) with the next node's value gradient `vx_next`: the `(ndx + nu)²` matrix
+    /// that the exact backward pass adds to the Gauss-Newton `[Lxx Lxu; Lux Luu]`.
+    #[pyo3(signature = (t, x, u, vx_next))]
+    fn node_second_order<'py>(
+        &mut self,
+        py: Python<'py>,
+        t: usize,
+        x: Vec<f64>,
+        u: Vec<f64>,
+        vx_next: Vec<f64>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let p = &mut self.solver.problem;
+        let n = p.horizon();
+        if t > n {
+            return Err(PyValueError::new_err(format!("t: {t} out of range (T = {n})")));
+        }
+        let (x, u, vx) = (DVector::from_vec(x), DVector::from_vec(u), DVector::from_vec(vx_next));
+        let (models, datas, tm, td) = p.split_mut();
+        let (m, d) = if t == n { (tm, td) } else { (&models[t], &mut datas[t]) };
+        m.state.check_x("x", &x).map_err(ocp_err)?;
+        let uo = (t < n && m.nu() > 0).then_some(&u);
+        if let Some(u) = uo
+            && u.len() != m.nu()
+        {
+            return Err(PyValueError::new_err(format!(
+                "u: length {}, expected {}",
+                u.len(),
+                m.nu()
+            )));
+        }
+        m.calc_diff(d, &x, uo).map_err(ocp_err)?;
+        m.second_order(d, &x, uo, &vx).map_err(ocp_err)?;
+        Ok(mat_py(py, &d.hzz))
+    }
     /// `quasi_static(xs)`: controls that hold each of the `T` states at rest.
     fn quasi_static<'py>(
         &mut self,

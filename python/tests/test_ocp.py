@@ -103,7 +103,9 @@ def test_second_order_variants_reach_the_same_solution(Solver):
         assert s.second_order == so
         assert s.solve([x0] * 9, problem.quasiStatic([x0] * 8), 200)
         st = s.hessian_stats
-        assert st["exact_passes"] == 0 if so is False else st["exact_passes"] > 0
+        assert st["exact_passes"] + st["gauss_newton_passes"] > s.iter
+        if so is False:
+            assert st["exact_passes"] == 0
         if so is True:
             assert st["gauss_newton_passes"] == 0 and st["seconds"] > 0
             # The centre-of-mass cost keeps its Gauss-Newton curvature (one term per knot).

@@ -54,9 +54,12 @@ pub enum SecondOrder {
     /// ([`crate::ActionModel::second_order`]); a `Q_uu` that is not positive definite raises
     /// the regularisation `μ` as in Gauss-Newton (Levenberg).
     On,
-    /// Gauss-Newton until an iteration takes the full step on a feasible trajectory, then the
-    /// exact Hessian; an exact backward pass that fails at the current `μ` is redone with
-    /// Gauss-Newton in the same iteration, and the next iteration is Gauss-Newton again.
+    /// Gauss-Newton while it converges fast, the exact Hessian once it converges linearly:
+    /// after an iteration that took the full step on a feasible trajectory and whose cost
+    /// decrease is more than half the previous one's (`½ < ΔJ_k / ΔJ_{k−1} < 1`, the
+    /// signature of a large-residual problem), and from then on while the exact iterations
+    /// keep taking full steps. An exact backward pass that fails at the current `μ` is redone
+    /// with Gauss-Newton in the same iteration, and Gauss-Newton resumes.
     Auto,
 }
 
@@ -187,6 +190,7 @@ pub struct Solver {
     stats: HessianStats,
     so_error: Option<String>,
     vx_zero: DVector<f64>,
+    vx_so: DVector<f64>,
 }
 
 /// A per-iteration callback: it sees the iteration's log entry and returns `false` to stop the
@@ -279,6 +283,7 @@ impl Solver {
             stats: HessianStats::default(),
             so_error: None,
             vx_zero: DVector::zeros(ndx),
+            vx_so: DVector::zeros(ndx),
         }
     }
     /// The algorithm.
@@ -430,6 +435,8 @@ impl Solver {
         self.stats = HessianStats::default();
         self.so_error = None;
         let mut exact_next = self.second_order == SecondOrder::On;
+        // Auto: the previous accepted iteration's cost decrease.
+        let mut prev_decrease = f64::NAN;
         while self.iter < maxiter {
             if let Some(f) = &self.interrupt
                 && f.load(Ordering::Relaxed)
@@ -477,6 +484,7 @@ impl Solver {
             }
             // 4. Line search.
             recalc = false;
+            let cost_before = self.cost;
             for n in 0..self.alphas.len() {
                 let alpha = self.alphas[n];
                 self.steplength = alpha;
@@ -518,7 +526,16 @@ impl Solver {
             exact_next = match self.second_order {
                 SecondOrder::Off => false,
                 SecondOrder::On => true,
-                SecondOrder::Auto => recalc && self.steplength == 1.0 && self.is_feasible,
+                SecondOrder::Auto => {
+                    let full = recalc && self.steplength == 1.0 && self.is_feasible;
+                    let decrease = cost_before - self.cost;
+                    let r = decrease / prev_decrease;
+                    let linear = prev_decrease > 0.0 && r > 0.5 && r < 1.0;
+                    if recalc {
+                        prev_decrease = decrease;
+                    }
+                    full && (exact || linear)
+                }
             };
             if self.steplength > 0.5 {
                 self.decrease_regularization();
@@ -592,9 +609,16 @@ impl Solver {
         let r = if t == t_len {
             tm.second_order(td, &self.xs[t], None, &self.vx_zero).map(|()| td.gauss_newton_terms)
         } else {
+            // The co-state of the gap-closing step without the regularisation's share:
+            // V′ₓ − μ f′ (FDDP's V′ₓ carries (V′ₓₓ + μI) f′ on an infeasible trajectory; with μ in
+            // it, the second-order term would grow with μ and Q_uu never become definite).
+            self.vx_so.copy_from(&self.vx[t + 1]);
+            if !self.is_feasible {
+                self.vx_so.axpy(-self.preg, &self.fs[t + 1], 1.0);
+            }
             let u = (models[t].nu() > 0).then_some(&self.us[t]);
             models[t]
-                .second_order(&mut datas[t], &self.xs[t], u, &self.vx[t + 1])
+                .second_order(&mut datas[t], &self.xs[t], u, &self.vx_so)
                 .map(|()| datas[t].gauss_newton_terms)
         };
         self.stats.seconds += start.elapsed().as_secs_f64();
