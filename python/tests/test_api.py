@@ -14,8 +14,8 @@ import pytest
 
 import sodyn
 
-from conftest import (CASES, FALLBACK_URDF, HAVE_SHARED, REPO, assert_close, builtin,
-                      expect_value_error, load_model, random_fext, random_state)
+from conftest import (CASES, FALLBACK_URDF, HAVE_SHARED, REPO, _pytest_raises, assert_close,
+                      builtin, expect_value_error, load_model, random_fext, random_state)
 
 FUNCS = ["rnea", "crba", "aba", "nonlinear_effects", "id_derivatives", "fd_derivatives",
          "id_so_derivatives", "fd_so_derivatives", "idfoza", "idsoza",
@@ -922,3 +922,30 @@ def test_error_messages_name_python_api_not_rust_types():
             call()
         assert "::" not in str(e.value), str(e.value)
         assert "model.create_data()" in str(e.value), str(e.value)
+
+
+def test_the_bad_input_suite_checks_python_terms():
+    """conftest.py makes every expected exception of the suite fail its test if the message
+    names a Rust path: pytest.raises (both forms) and expect_value_error."""
+    def rust_path():
+        raise ValueError("make it with Data::new for this model")
+
+    with _pytest_raises(AssertionError, match="names a Rust path"):
+        with pytest.raises(ValueError):
+            rust_path()
+    with _pytest_raises(AssertionError, match="names a Rust path"):
+        pytest.raises(ValueError, rust_path)
+    with _pytest_raises(AssertionError, match="names a Rust path"):
+        expect_value_error(rust_path)
+    with pytest.raises(ValueError, match="model.create_data"):
+        raise ValueError("make it with model.create_data()")
+
+
+def test_loader_warnings_name_python_api():
+    """Model.warnings are in Python's terms: the MJCF tendon warning names Model.tendons."""
+    xml = REPO / "tests" / "data" / "mjcf" / "tendons.xml"
+    m = sodyn.Model.from_mjcf(str(xml))
+    w = [x for x in m.warnings if "<tendon>" in x]
+    assert len(w) == 1 and "recorded (Model.tendons)" in w[0], m.warnings
+    assert all("::" not in x for x in m.warnings), m.warnings
+    assert len(m.tendons) == 3
