@@ -949,3 +949,22 @@ def test_loader_warnings_name_python_api():
     assert len(w) == 1 and "recorded (Model.tendons)" in w[0], m.warnings
     assert all("::" not in x for x in m.warnings), m.warnings
     assert len(m.tendons) == 3
+
+
+def test_python_started_in_python_dir_imports_the_installed_package():
+    """The pure-Python sources are in python/python/sodyn/ (maturin's python-source layout):
+    python/ holds no `sodyn` folder to shadow the installed package, and Python started there
+    imports the installed package with its compiled module."""
+    import subprocess
+    import sys
+
+    pydir = REPO / "python"
+    assert not (pydir / "sodyn").exists(), "python/sodyn would shadow the installed package"
+    assert (pydir / "python" / "sodyn" / "__init__.py").is_file()
+    code = ("import sodyn, numpy as np; m = sodyn.Model.builtin('pendulum2'); "
+            "print(sodyn.rnea(m, m.create_data(), m.neutral(), np.zeros(2), np.zeros(2)).shape, "
+            "sodyn._sodyn.__file__)")
+    r = subprocess.run([sys.executable, "-c", code], cwd=pydir, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("(2,) ") and "_sodyn" in r.stdout, r.stdout
