@@ -44,6 +44,7 @@ fn assert_clean_failure(o: &Output, what: &str) -> String {
     assert!(err.contains("error"), "{what}: {err}");
     assert!(!err.contains("panicked"), "{what} panicked: {err}");
     assert!(!err.contains("backtrace"), "{what} printed a backtrace: {err}");
+    assert!(!err.contains("::"), "{what}: the message names a Rust path: {err}");
     err
 }
 
@@ -53,6 +54,7 @@ fn assert_usage_error(o: &Output, what: &str) -> String {
     assert_eq!(o.status.code(), Some(2), "{what}: exit code; stderr: {err}");
     assert!(err.starts_with("error: ") && err.contains("try '--help'"), "{what}: {err}");
     assert!(!err.contains("panicked"), "{what} panicked: {err}");
+    assert!(!err.contains("::"), "{what}: the message names a Rust path: {err}");
     assert!(stdout(o).is_empty(), "{what}: {}", stdout(o));
     err
 }
@@ -312,6 +314,24 @@ fn malformed_urdf_is_a_clean_error() {
     let o = sodyn(&["bench", "--smoke", "--model", path.to_str().unwrap()]);
     let err = assert_clean_failure(&o, "bench on a malformed URDF");
     assert!(err.contains("broken_robot.urdf"), "names the file: {err}");
+}
+
+/// The MJCF loader's tendon warning, in the command line's terms: what the model records, not
+/// the library accessor's Rust path.
+#[test]
+fn mjcf_tendon_warning_names_no_rust_path() {
+    let xml = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/mjcf/tendons.xml");
+    let o = sodyn(&["info", "--model", xml]);
+    assert_ok(&o, "info on tendons.xml");
+    let err = stderr(&o);
+    assert!(
+        err.contains("sodyn: warning: ")
+            && err.contains(
+                "<tendon>: 3 tendons (1 fixed, 2 spatial) are recorded (in the model's tendons)"
+            ),
+        "{err}"
+    );
+    assert!(!err.contains("::"), "{err}");
 }
 
 /// The URDF loader's warnings go to standard error (`sodyn: warning: FILE:LINE: ...`), the
@@ -1360,7 +1380,8 @@ fn bench_mimic_times_the_batched_algorithms() {
 fn unknown_state_keys_are_errors_at_every_level() {
     let state = tmp("typo.json");
     let st = state.to_str().unwrap();
-    let known = "(known: q, v, a, tau, contacts, lambda, restitution, weights, frames)";
+    let known = "(known: q, v, a, tau, contacts, lambda, restitution, damping, weights, frames)";
+    let mimic_known = "(known: q, v, a, tau, contacts, lambda, restitution, weights, frames)";
     let mimic = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/mimic_arm.urdf");
     for (body, needle) in [
         (r#"{"vel": [0], "tau_ext": [1]}"#, format!("unknown key \"tau_ext\" {known}")),
@@ -1384,10 +1405,56 @@ fn unknown_state_keys_are_errors_at_every_level() {
         assert!(err.contains(&format!("{st}: {needle}")), "{body}: {err}");
         assert!(stdout(&o).is_empty(), "{body}");
     }
-    std::fs::write(&state, r#"{"v": [], "vel": []}"#).unwrap();
-    let o = sodyn(&["eval", "--model", mimic, "--mimic", "--state", st]);
-    let err = assert_clean_failure(&o, "unknown key with --mimic");
-    assert!(err.contains(&format!("{st}: unknown key \"vel\" {known}")), "{err}");
+    // With --mimic, "damping" is unknown too: the reduced-coordinate contact solve has no
+    // regularised variant.
+    for body in [r#"{"v": [], "vel": []}"#, r#"{"damping": 1e-6}"#] {
+        std::fs::write(&state, body).unwrap();
+        let o = sodyn(&["eval", "--model", mimic, "--mimic", "--state", st]);
+        let err = assert_clean_failure(&o, "unknown key with --mimic");
+        let key = if body.contains("vel") { "vel" } else { "damping" };
+        assert!(err.contains(&format!("{st}: unknown key \"{key}\" {mimic_known}")), "{err}");
+    }
+}
+
+/// A redundant contact set (the same point twice): an error naming the contacts and the state
+/// file's `"damping"` key, in the command line's terms (no Rust path); with `"damping" > 0`
+/// the KKT and impact outputs are the regularised solve's, finite. A negative or non-numeric
+/// damping is an error naming the key.
+#[test]
+fn redundant_contacts_and_the_damping_key() {
+    let state = tmp("damping.json");
+    let st = state.to_str().unwrap();
+    let contacts = r#""contacts": [{"frame": "LF_FOOT"}, {"frame": "LF_FOOT"}]"#;
+    let eval = |body: &str, order: &str| {
+        std::fs::write(&state, body).unwrap();
+        sodyn(&["eval", "--model", "builtin:quadruped", "--state", st, "--order", order])
+    };
+    let err = assert_clean_failure(&eval(&format!("{{{contacts}}}"), "1"), "redundant set");
+    assert!(
+        err.contains("LF_FOOT")
+            && err.contains("rank deficient")
+            && err.contains("\"damping\" key"),
+        "{err}"
+    );
+    for order in ["1", "2"] {
+        let body = format!(
+            r#"{{{contacts}, "damping": 1e-6, "weights": {{"kkt_qdd": [{w}], "impact_vplus": [{w}]}}}}"#,
+            w = vec!["1"; 18].join(", ")
+        );
+        let o = eval(&body, order);
+        assert_ok(&o, "damped redundant set");
+        let v: Value = serde_json::from_str(&stdout(&o)).unwrap();
+        for (obj, key) in [("kkt", "qdd"), ("kkt", "lambda"), ("impact", "vplus")] {
+            let x = v[obj][key].as_array().unwrap_or_else(|| panic!("{obj}.{key}: {v}"));
+            assert!(!x.is_empty() && x.iter().all(|x| x.as_f64().unwrap().is_finite()), "{x:?}");
+        }
+        assert!(v["contracted"]["kkt"]["d2qdd_dq2"].is_array(), "{}", v["contracted"]);
+    }
+    for bad in ["-1", "\"a\""] {
+        let o = eval(&format!("{{{contacts}, \"damping\": {bad}}}"), "1");
+        let err = assert_clean_failure(&o, bad);
+        assert!(err.contains("key \"damping\" must be a non-negative number"), "{err}");
+    }
 }
 
 /// Runs `sodyn args` with its standard output on a pipe, reads the first bytes and closes the

@@ -337,6 +337,19 @@ pub(crate) fn check_order(order: i64) -> PyResult<()> {
     }
 }
 
+/// The `damping` argument of a KKT or impact function on a model with mimic joints: only 0
+/// (the reduced-coordinate solve has no regularised variant). On other models the core checks
+/// it (finite, `>= 0`) when it is set on the workspace.
+fn mimic_damping(damping: f64, function: &str) -> PyResult<()> {
+    if damping == 0.0 {
+        return Ok(());
+    }
+    Err(value_err(format!(
+        "{function}: `damping` is {damping}, but a model loaded with mimic=True has no \
+         regularised contact solve; give damping=0 (the default)"
+    )))
+}
+
 /// Constrained inverse dynamics `tau = M a + b − J_cᵀ λ` at `(q, v, a, λ)` and its
 /// derivatives (λ, 3 or 6 rows per contact, held fixed in each contact's axes): keys `tau,
 /// dtau_dq, dtau_dv` (+ `d2tau_dq2`).
@@ -386,9 +399,11 @@ pub(crate) fn py_constrained_id_derivatives<'py>(
     Ok(out)
 }
 
-/// KKT contact dynamics `[M J_cᵀ; J_c 0][qdd; −λ] = [tau − b; −J̇_c v]` and its derivatives.
+/// KKT contact dynamics `[M J_cᵀ; J_c −μI][qdd; −λ] = [tau − b; −J̇_c v]` and its
+/// derivatives; the damping `μ = damping` (default 0, the exact solve) regularises a redundant
+/// contact set.
 #[pyfunction(name = "kkt_derivatives")]
-#[pyo3(signature = (model, data, q, v, tau, contacts, order = 1))]
+#[pyo3(signature = (model, data, q, v, tau, contacts, order = 1, damping = 0.0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn py_kkt_derivatives<'py>(
     py: Python<'py>,
@@ -399,9 +414,11 @@ pub(crate) fn py_kkt_derivatives<'py>(
     tau: &Bound<'py, PyAny>,
     contacts: Vec<PyRef<'py, PyContact>>,
     order: i64,
+    damping: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
     if let Some(mm) = model.mimic.clone() {
+        mimic_damping(damping, "kkt_derivatives")?;
         return mimic_kkt(py, &mm, &model.m, &mut data, q, v, tau, &contacts, order);
     }
     let m = model.full_only("kkt_derivatives")?;
@@ -418,6 +435,7 @@ pub(crate) fn py_kkt_derivatives<'py>(
     }
     let PyData { d, q, v, a, kkt, .. } = d;
     let kd = &mut kkt.as_mut().expect("set above").1;
+    kd.set_damping(damping).map_err(core_err)?;
     if order == 2 {
         py.detach(|| kkt_so_derivatives(m, d, kd, q, v, a)).map_err(core_err)?;
     } else {
@@ -426,9 +444,11 @@ pub(crate) fn py_kkt_derivatives<'py>(
     kkt_dict_of!(py, kd, order)
 }
 
-/// Impact dynamics `[M J_cᵀ; J_c 0][v⁺; −Λ] = [M v⁻; −e J_c v⁻]` and its derivatives.
+/// Impact dynamics `[M J_cᵀ; J_c −μI][v⁺; −Λ] = [M v⁻; −e J_c v⁻]` and its derivatives
+/// (`μ = damping`, as for the KKT dynamics).
 #[pyfunction(name = "impact_derivatives")]
-#[pyo3(signature = (model, data, q, v_minus, contacts, restitution = 0.0, order = 1))]
+#[pyo3(signature = (model, data, q, v_minus, contacts, restitution = 0.0, order = 1,
+                    damping = 0.0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn py_impact_derivatives<'py>(
     py: Python<'py>,
@@ -439,9 +459,11 @@ pub(crate) fn py_impact_derivatives<'py>(
     contacts: Vec<PyRef<'py, PyContact>>,
     restitution: f64,
     order: i64,
+    damping: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
     if let Some(mm) = model.mimic.clone() {
+        mimic_damping(damping, "impact_derivatives")?;
         return mimic_impact(
             py,
             &mm,
@@ -470,6 +492,7 @@ pub(crate) fn py_impact_derivatives<'py>(
     let PyData { d, q, v, impact, .. } = d;
     let im = &mut impact.as_mut().expect("set above").1;
     im.set_restitution(restitution).map_err(core_err)?;
+    im.set_damping(damping).map_err(core_err)?;
     if order == 2 {
         py.detach(|| impact_so_derivatives(m, d, im, q, v)).map_err(core_err)?;
     } else {
@@ -481,6 +504,7 @@ pub(crate) fn py_impact_derivatives<'py>(
 /// Contracted second order of the KKT dynamics: the Hessians of
 /// `w_qdd @ qdd + w_lambda @ lambda`, `(C_qq, C_vv, C_qv, C_tauq)`, without any tensor.
 #[pyfunction]
+#[pyo3(signature = (model, data, q, v, tau, contacts, w_qdd, w_lambda, damping = 0.0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn kkt_so_contracted<'py>(
     py: Python<'py>,
@@ -492,8 +516,10 @@ pub(crate) fn kkt_so_contracted<'py>(
     contacts: Vec<PyRef<'py, PyContact>>,
     w_qdd: &Bound<'py, PyAny>,
     w_lambda: &Bound<'py, PyAny>,
+    damping: f64,
 ) -> PyResult<Bound<'py, PyTuple>> {
     if let Some(mm) = model.mimic.clone() {
+        mimic_damping(damping, "kkt_so_contracted")?;
         return mimic_kkt_contracted(
             py, &mm, &model.m, &mut data, q, v, tau, &contacts, w_qdd, w_lambda,
         );
@@ -511,6 +537,7 @@ pub(crate) fn kkt_so_contracted<'py>(
     }
     let PyData { d, q, v, a, w, wl, kktc, .. } = d;
     let (_, kd, kc) = kktc.as_mut().expect("set above");
+    kd.set_damping(damping).map_err(core_err)?;
     py.detach(|| deriv::kkt_so_contracted(m, d, kd, kc, q, v, a, w, wl)).map_err(core_err)?;
     PyTuple::new(
         py,
@@ -526,7 +553,8 @@ pub(crate) fn kkt_so_contracted<'py>(
 /// Contracted second order of the impact dynamics: the Hessians of
 /// `w_vplus @ vplus + w_impulse @ impulse`, `(C_qq, C_qvminus)`, without any tensor.
 #[pyfunction]
-#[pyo3(signature = (model, data, q, v_minus, contacts, w_vplus, w_impulse, restitution = 0.0))]
+#[pyo3(signature = (model, data, q, v_minus, contacts, w_vplus, w_impulse, restitution = 0.0,
+                    damping = 0.0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn impact_so_contracted<'py>(
     py: Python<'py>,
@@ -538,8 +566,10 @@ pub(crate) fn impact_so_contracted<'py>(
     w_vplus: &Bound<'py, PyAny>,
     w_impulse: &Bound<'py, PyAny>,
     restitution: f64,
+    damping: f64,
 ) -> PyResult<Bound<'py, PyTuple>> {
     if let Some(mm) = model.mimic.clone() {
+        mimic_damping(damping, "impact_so_contracted")?;
         return mimic_impact_contracted(
             py,
             &mm,
@@ -568,6 +598,7 @@ pub(crate) fn impact_so_contracted<'py>(
     let PyData { d, q, v, w, wl, impc, .. } = d;
     let (_, im, ic) = impc.as_mut().expect("set above");
     im.set_restitution(restitution).map_err(core_err)?;
+    im.set_damping(damping).map_err(core_err)?;
     py.detach(|| deriv::impact_so_contracted(m, d, im, ic, q, v, w, wl)).map_err(core_err)?;
     PyTuple::new(py, [out_mat(py, ic.c_qq()), out_mat(py, ic.c_qvminus())])
 }

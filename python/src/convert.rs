@@ -32,8 +32,9 @@ pub(crate) fn core_err(e: Error) -> PyErr {
 
 /// A core message with the Rust API it names (`Type::method`) rewritten for Python: a
 /// workspace constructor (`SoData::new`, `Data::new`, ...) becomes `model.create_data()` (a
-/// Python `Data` holds every workspace), the regularised solve's setter is named as the Rust
-/// API it is, any other `Type::name` becomes `name`.
+/// Python `Data` holds every workspace), the regularised solve's setter
+/// (`ContactData::set_damping`) the `damping=` argument of the KKT and impact functions, a
+/// `Model` accessor (`Model::tendons`) the `Model` attribute, any other `Type::name` `name`.
 pub(crate) fn python_message(s: String) -> String {
     if !s.contains("::") {
         return s;
@@ -46,11 +47,15 @@ pub(crate) fn python_message(s: String) -> String {
         let tail = &rest[p + 2..];
         let end = tail.find(|c: char| !ident(c)).unwrap_or(tail.len());
         out.push_str(&rest[..start]);
-        out.push_str(match &tail[..end] {
-            "new" => "model.create_data()",
-            "set_damping" => "damping, in the Rust API",
-            other => other,
-        });
+        match (&rest[start..p], &tail[..end]) {
+            (_, "new") => out.push_str("model.create_data()"),
+            (_, "set_damping") => out.push_str("the `damping=` argument"),
+            ("Model", name) => {
+                out.push_str("Model.");
+                out.push_str(name);
+            }
+            (_, other) => out.push_str(other),
+        }
         rest = &tail[end..];
     }
     out.push_str(rest);

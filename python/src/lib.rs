@@ -1,5 +1,5 @@
 //! `sodyn._sodyn`: the Python binding of sodyn (PyO3 + numpy), wrapped by the pure-Python
-//! package `sodyn` (`python/sodyn/__init__.py`).
+//! package `sodyn` (`python/python/sodyn/__init__.py`).
 //!
 //! Every call copies its inputs into buffers kept in the `Data` object (no allocation after the
 //! first call), releases the GIL for the computation and returns fresh numpy arrays (never

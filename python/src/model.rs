@@ -2,7 +2,8 @@
 //! descriptions rebuilt through `ModelBuilder`).
 
 use crate::convert::{
-    array, core_err, lie_arg, out_mat, out_vec, read_q, read_vec, shape_str, value_err,
+    array, core_err, lie_arg, out_mat, out_vec, python_message, read_q, read_vec, shape_str,
+    value_err,
 };
 use crate::data::PyData;
 use nalgebra::{DVector, Matrix3, Vector3};
@@ -238,10 +239,11 @@ impl PyModel {
     }
 
     /// What the URDF loader accepted with a reservation, one `FILE:LINE: ELEMENT: REASON`
-    /// string each (a fresh list; empty for built-in models). Nothing is printed.
+    /// string each (a fresh list; empty for built-in models), in Python's terms (as
+    /// `SodynError` messages). Nothing is printed.
     #[getter]
     fn warnings(&self) -> Vec<String> {
-        self.m.warnings().to_vec()
+        self.m.warnings().iter().map(|w| python_message(w.clone())).collect()
     }
 
     /// The MJCF `<tendon>`s in document order (data only: they do not enter the dynamics), one

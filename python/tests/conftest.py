@@ -12,6 +12,9 @@
   for Pinocchio; ``fext`` rows are ``[torque; force]`` for us, ``pin.Force`` is
   ``[linear; angular]``.
 * The error metric: ``max |ours − theirs| / max(1, max |theirs|)`` (NaN counts as infinite).
+* Error messages speak Python: every exception a test expects (``pytest.raises``,
+  :func:`expect_value_error`) fails the test if its message names a Rust path (``::``, as in
+  ``Type::method``), so the whole bad-input suite checks it.
 """
 
 import functools
@@ -24,6 +27,51 @@ import pytest
 import sodyn
 
 REPO = Path(__file__).resolve().parents[2]
+
+
+def assert_python_terms(e, what=""):
+    """The message of ``e`` names no Rust path (``Type::method``): a Python user sees Python
+    API (``model.create_data()``, ``damping=``). CasADi wraps an error raised inside a callback
+    in its own C++ call stack, one ``Error in Class::method ... at .../casadi/...`` line per
+    frame: those lines are CasADi's, not sodyn's message, and are not checked."""
+    lines = [x for x in str(e).splitlines()
+             if not (x.lstrip().startswith("Error in ") and "/casadi/" in x)]
+    assert not any("::" in x for x in lines), f"{what}: the message names a Rust path: {e}"
+
+
+class _RaisesInPythonTerms:
+    """``pytest.raises(...)`` as a context manager, and :func:`assert_python_terms` on the
+    exception it caught."""
+
+    def __init__(self, ctx):
+        self._ctx = ctx
+
+    def __enter__(self):
+        self._info = self._ctx.__enter__()
+        return self._info
+
+    def __exit__(self, *exc):
+        caught = self._ctx.__exit__(*exc)
+        if caught:
+            assert_python_terms(self._info.value, "pytest.raises")
+        return caught
+
+    def __getattr__(self, name):
+        return getattr(self._ctx, name)
+
+
+_pytest_raises = pytest.raises
+
+
+def _raises(*args, **kwargs):
+    if len(args) > 1:  # pytest.raises(E, func, *args): the ExceptionInfo at once
+        info = _pytest_raises(*args, **kwargs)
+        assert_python_terms(info.value, "pytest.raises")
+        return info
+    return _RaisesInPythonTerms(_pytest_raises(*args, **kwargs))
+
+
+pytest.raises = _raises
 
 
 def shared_dir():
@@ -211,6 +259,7 @@ def expect_value_error(fn, *needles, what=""):
             f"{what}: expected ValueError, got {type(e).__module__}.{type(e).__name__}: {e}")
         msg = str(e)
         assert msg.strip(), f"{what}: empty error message"
+        assert_python_terms(e, what)
         for n in needles:
             assert re.search(n, msg, re.IGNORECASE), f"{what}: message {msg!r} does not match {n!r}"
         return e

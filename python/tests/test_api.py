@@ -14,8 +14,8 @@ import pytest
 
 import sodyn
 
-from conftest import (CASES, FALLBACK_URDF, HAVE_SHARED, REPO, assert_close, builtin,
-                      expect_value_error, load_model, random_fext, random_state)
+from conftest import (CASES, FALLBACK_URDF, HAVE_SHARED, REPO, _pytest_raises, assert_close,
+                      builtin, expect_value_error, load_model, random_fext, random_state)
 
 FUNCS = ["rnea", "crba", "aba", "nonlinear_effects", "id_derivatives", "fd_derivatives",
          "id_so_derivatives", "fd_so_derivatives", "idfoza", "idsoza",
@@ -922,3 +922,49 @@ def test_error_messages_name_python_api_not_rust_types():
             call()
         assert "::" not in str(e.value), str(e.value)
         assert "model.create_data()" in str(e.value), str(e.value)
+
+
+def test_the_bad_input_suite_checks_python_terms():
+    """conftest.py makes every expected exception of the suite fail its test if the message
+    names a Rust path: pytest.raises (both forms) and expect_value_error."""
+    def rust_path():
+        raise ValueError("make it with Data::new for this model")
+
+    with _pytest_raises(AssertionError, match="names a Rust path"):
+        with pytest.raises(ValueError):
+            rust_path()
+    with _pytest_raises(AssertionError, match="names a Rust path"):
+        pytest.raises(ValueError, rust_path)
+    with _pytest_raises(AssertionError, match="names a Rust path"):
+        expect_value_error(rust_path)
+    with pytest.raises(ValueError, match="model.create_data"):
+        raise ValueError("make it with model.create_data()")
+
+
+def test_loader_warnings_name_python_api():
+    """Model.warnings are in Python's terms: the MJCF tendon warning names Model.tendons."""
+    xml = REPO / "tests" / "data" / "mjcf" / "tendons.xml"
+    m = sodyn.Model.from_mjcf(str(xml))
+    w = [x for x in m.warnings if "<tendon>" in x]
+    assert len(w) == 1 and "recorded (Model.tendons)" in w[0], m.warnings
+    assert all("::" not in x for x in m.warnings), m.warnings
+    assert len(m.tendons) == 3
+
+
+def test_python_started_in_python_dir_imports_the_installed_package():
+    """The pure-Python sources are in python/python/sodyn/ (maturin's python-source layout):
+    python/ holds no `sodyn` folder to shadow the installed package, and Python started there
+    imports the installed package with its compiled module."""
+    import subprocess
+    import sys
+
+    pydir = REPO / "python"
+    assert not (pydir / "sodyn").exists(), "python/sodyn would shadow the installed package"
+    assert (pydir / "python" / "sodyn" / "__init__.py").is_file()
+    code = ("import sodyn, numpy as np; m = sodyn.Model.builtin('pendulum2'); "
+            "print(sodyn.rnea(m, m.create_data(), m.neutral(), np.zeros(2), np.zeros(2)).shape, "
+            "sodyn._sodyn.__file__)")
+    r = subprocess.run([sys.executable, "-c", code], cwd=pydir, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("(2,) ") and "_sodyn" in r.stdout, r.stdout

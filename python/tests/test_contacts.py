@@ -17,7 +17,7 @@ import pytest
 import sodyn
 
 from conftest import (HAVE_SHARED, assert_close, cdiff_q, cdiff_vec, load_model,
-                      pin_pair, random_state)
+                      pin_pair, random_state, rel_err)
 
 TOL = 1e-9  # against Pinocchio
 TOL_FD = 1e-6  # against central differences
@@ -351,3 +351,180 @@ def test_contact_gains_api():
     for bad in ({"kp": -1.0}, {"kd": float("nan")}, {"kp": float("inf")}):
         with pytest.raises(ValueError, match="Baumgarte gain"):
             sodyn.Contact("toe", **bad)
+
+
+# ------------------------------------------------------------------------------------------
+# Damping (the regularised Delassus solve): damping=mu adds mu to J M^-1 J^T's diagonal
+# ------------------------------------------------------------------------------------------
+
+MU = 1e-2  # large enough to move every output far beyond the tolerances
+
+
+def test_damping_vs_pinocchio(pin):
+    """``damping=mu`` is Pinocchio's proximal solve with ``mu`` and one iteration from zero
+    forces, ``(J M^-1 J^T + mu I) lambda = -(gamma + J M^-1 (tau - b))``: the KKT and impact
+    outputs (values) to 1e-9, and they differ from the exact solve's."""
+    model, pmodel, pmap = pin_pair(SO_CASE)
+    contacts = contacts_of(CONTACT_CASES[SO_CASE], "offset")
+    cms = pin_contacts(pin, pmodel, contacts)
+    data = model.create_data()
+    q, v, _, tau = random_state(model, 11)
+    pq, pv = pmap.pin_q(q), pmap.pin_v(v)
+    settings = pin.ProximalSettings(1e-12, 1e-12, MU, 1)
+    d = pin.Data(pmodel)
+    cds = [cm.createData() for cm in cms]
+    pin.initConstraintDynamics(pmodel, d, cms, cds)
+    ddq = np.array(pin.constraintDynamics(pmodel, d, pq, pv, pmap.pin_v(tau), cms, cds, settings))
+    r = sodyn.kkt_derivatives(model, data, q, v, tau, contacts, damping=MU)
+    assert_close(r.qdd, pmap.vec(ddq), TOL, "damped qdd")
+    assert_close(r.lambda_, np.array(d.lambda_c), TOL, "damped lambda")
+    exact = sodyn.kkt_derivatives(model, data, q, v, tau, contacts)
+    assert rel_err(exact.lambda_, r.lambda_)[0] > 1e-4, "damping left lambda unchanged"
+    d = pin.Data(pmodel)
+    cds = [cm.createData() for cm in cms]
+    pin.initConstraintDynamics(pmodel, d, cms, cds)
+    vplus = np.array(pin.impulseDynamics(pmodel, d, pq, pv, cms, cds, 0.3, settings))
+    r = sodyn.impact_derivatives(model, data, q, v, contacts, restitution=0.3, damping=MU)
+    assert_close(r.vplus, pmap.vec(vplus), TOL, "damped vplus")
+    assert_close(r.impulse, np.array(d.impulse_c), TOL, "damped impulse")
+
+
+def test_damping_derivatives_fd(so_setup):
+    """The derivatives with ``damping`` are those of the regularised solve: first and second
+    order of the KKT and impact dynamics against central differences, the contracted Hessians
+    against the tensors contracted with the weights."""
+    model, contacts = so_setup
+    data = model.create_data()
+    q, v, _, tau = random_state(model, 12)
+    nv, m = model.nv, 3 * len(contacts)
+    kkt = lambda q_, v_, t_: sodyn.kkt_derivatives(  # noqa: E731
+        model, data, q_, v_, t_, contacts, damping=MU)
+    r = sodyn.kkt_derivatives(model, data, q, v, tau, contacts, order=2, damping=MU)
+    for y, dq, dv, dt in (("qdd", "dqdd_dq", "dqdd_dv", "dqdd_dtau"),
+                          ("lambda_", "dlambda_dq", "dlambda_dv", "dlambda_dtau")):
+        assert_close(getattr(r, dq), cdiff_q(model, lambda qq: getattr(kkt(qq, v, tau), y), q),
+                     TOL_FD, f"damped {dq}")
+        assert_close(getattr(r, dv), cdiff_vec(lambda vv: getattr(kkt(q, vv, tau), y), v),
+                     TOL_FD, f"damped {dv}")
+        assert_close(getattr(r, dt), cdiff_vec(lambda tt: getattr(kkt(q, v, tt), y), tau),
+                     TOL_FD, f"damped {dt}")
+    fd_q = {k: cdiff_q(model, lambda qq, k=k: getattr(kkt(qq, v, tau), k), q)
+            for k in ("dqdd_dq", "dqdd_dtau", "dlambda_dq", "dlambda_dtau")}
+    fd_v = {k: cdiff_vec(lambda vv, k=k: getattr(kkt(q, vv, tau), k), v)
+            for k in ("dqdd_dq", "dqdd_dv", "dlambda_dq", "dlambda_dv")}
+    for key, (fo, var) in KKT_SO.items():
+        assert_close(getattr(r, key), (fd_q if var == "q" else fd_v)[fo], TOL_FD,
+                     f"damped kkt {key}")
+    rng = np.random.default_rng(3)
+    wq, wl = rng.uniform(-1, 1, nv), rng.uniform(-1, 1, m)
+    c = sodyn.kkt_so_contracted(model, data, q, v, tau, contacts, wq, wl, damping=MU)
+    for got, (tq, tl) in zip(c, [("d2qdd_dq2", "d2lambda_dq2"), ("d2qdd_dv2", "d2lambda_dv2"),
+                                 ("d2qdd_dqdv", "d2lambda_dqdv"),
+                                 ("d2qdd_dtaudq", "d2lambda_dtaudq")]):
+        want = (np.einsum("i,ijk->jk", wq, getattr(r, tq))
+                + np.einsum("i,ijk->jk", wl, getattr(r, tl)))
+        assert_close(got, want, 1e-9, f"damped kkt_so_contracted vs {tq}, {tl}")
+    imp = lambda q_, v_: sodyn.impact_derivatives(  # noqa: E731
+        model, data, q_, v_, contacts, restitution=0.3, damping=MU)
+    r = sodyn.impact_derivatives(model, data, q, v, contacts, restitution=0.3, order=2,
+                                 damping=MU)
+    for y, dq, dv in (("vplus", "dvplus_dq", "dvplus_dvminus"),
+                      ("impulse", "dimpulse_dq", "dimpulse_dvminus")):
+        assert_close(getattr(r, dq), cdiff_q(model, lambda qq: getattr(imp(qq, v), y), q),
+                     TOL_FD, f"damped {dq}")
+        assert_close(getattr(r, dv), cdiff_vec(lambda vv: getattr(imp(q, vv), y), v),
+                     TOL_FD, f"damped {dv}")
+    fd_q = {k: cdiff_q(model, lambda qq, k=k: getattr(imp(qq, v), k), q)
+            for k in ("dvplus_dq", "dimpulse_dq")}
+    fd_v = {k: cdiff_vec(lambda vv, k=k: getattr(imp(q, vv), k), v)
+            for k in ("dvplus_dq", "dimpulse_dq")}
+    for key, (fo, var) in IMPACT_SO.items():
+        assert_close(getattr(r, key), (fd_q if var == "q" else fd_v)[fo], TOL_FD,
+                     f"damped impact {key}")
+    wv, wi = rng.uniform(-1, 1, nv), rng.uniform(-1, 1, m)
+    c = sodyn.impact_so_contracted(model, data, q, v, contacts, wv, wi, restitution=0.3,
+                                   damping=MU)
+    for got, (tv, ti) in zip(c, [("d2vplus_dq2", "d2impulse_dq2"),
+                                 ("d2vplus_dqdvminus", "d2impulse_dqdvminus")]):
+        want = (np.einsum("i,ijk->jk", wv, getattr(r, tv))
+                + np.einsum("i,ijk->jk", wi, getattr(r, ti)))
+        assert_close(got, want, 1e-9, f"damped impact_so_contracted vs {tv}, {ti}")
+
+
+def test_redundant_contacts_need_damping():
+    """The same point twice: without damping an error naming the contacts and the Python
+    option (``damping=``), no Rust path; with ``damping=mu`` the two contacts share the force
+    of one contact damped by ``mu / 2`` (``(2 Delta + mu) lambda = -gamma'``), derivatives
+    and tensors included."""
+    model = sodyn.Model.builtin("quadruped")
+    data = model.create_data()
+    q, v, _, tau = random_state(model, 13)
+    one = [sodyn.Contact("LF_FOOT", point=(0.01, 0.0, -0.02))]
+    two = one + one
+    nv = model.nv
+    w = np.linspace(-1.0, 1.0, nv)
+    calls = {
+        "kkt_derivatives": lambda **k: sodyn.kkt_derivatives(model, data, q, v, tau, two, **k),
+        "impact_derivatives": lambda **k: sodyn.impact_derivatives(model, data, q, v, two, **k),
+        "kkt_so_contracted": lambda **k: sodyn.kkt_so_contracted(
+            model, data, q, v, tau, two, w, np.zeros(6), **k),
+        "impact_so_contracted": lambda **k: sodyn.impact_so_contracted(
+            model, data, q, v, two, w, np.zeros(6), **k),
+    }
+    for name, call in calls.items():
+        with pytest.raises(sodyn.SodynError) as e:
+            call()
+        msg = str(e.value)
+        assert "LF_FOOT" in msg and "`damping=`" in msg, f"{name}: {msg}"
+        assert "::" not in msg, f"{name}: {msg}"
+        call(damping=MU)  # regularised: no error
+    for order in (1, 2):
+        r2 = sodyn.kkt_derivatives(model, data, q, v, tau, two, order=order, damping=MU)
+        r1 = sodyn.kkt_derivatives(model, data, q, v, tau, one, order=order, damping=MU / 2)
+        for k in r1.keys():
+            a, b = getattr(r2, k), getattr(r1, k)
+            if "lambda" in k:  # each contact carries half of the force
+                a = a[:3] + a[3:]
+            assert_close(a, b, 1e-9, f"two contacts (mu) vs one (mu/2): kkt {k}")
+        r2 = sodyn.impact_derivatives(model, data, q, v, two, order=order, damping=MU)
+        r1 = sodyn.impact_derivatives(model, data, q, v, one, order=order, damping=MU / 2)
+        for k in r1.keys():
+            a, b = getattr(r2, k), getattr(r1, k)
+            if "impulse" in k:
+                a = a[:3] + a[3:]
+            assert_close(a, b, 1e-9, f"two contacts (mu) vs one (mu/2): impact {k}")
+    # The workspace is reused across calls: damping back to 0 is the exact solve again.
+    with pytest.raises(sodyn.SodynError, match="rank deficient"):
+        sodyn.kkt_derivatives(model, data, q, v, tau, two)
+
+
+def test_damping_argument_errors():
+    """A negative, NaN or infinite ``damping`` is a SodynError naming it; a mimic model takes
+    only ``damping=0`` (its reduced-coordinate solve has no regularised variant)."""
+    model = sodyn.Model.builtin("quadruped")
+    data = model.create_data()
+    q, v, _, tau = random_state(model, 14)
+    c = [sodyn.Contact("LF_FOOT")]
+    for bad in (-1.0, float("nan"), float("inf")):
+        for call in (lambda: sodyn.kkt_derivatives(model, data, q, v, tau, c, damping=bad),
+                     lambda: sodyn.impact_derivatives(model, data, q, v, c, damping=bad)):
+            with pytest.raises(sodyn.SodynError, match="`damping`.*finite and non-negative"):
+                call()
+    # Positional calls of the earlier signatures still work.
+    sodyn.kkt_derivatives(model, data, q, v, tau, c, 2)
+    sodyn.impact_derivatives(model, data, q, v, c, 0.5, 2)
+    from pathlib import Path
+    arm = Path(__file__).resolve().parents[2] / "tests" / "data" / "mimic_arm.urdf"
+    mm = sodyn.Model.from_urdf(str(arm), floating_base=True, mimic=True)
+    md = mm.create_data()
+    qm, z = mm.neutral(), np.zeros(mm.nv)
+    mc = [sodyn.Contact("tool")]
+    sodyn.kkt_derivatives(mm, md, qm, z, z, mc, damping=0.0)
+    for call in (lambda: sodyn.kkt_derivatives(mm, md, qm, z, z, mc, damping=1e-6),
+                 lambda: sodyn.impact_derivatives(mm, md, qm, z, mc, damping=1e-6),
+                 lambda: sodyn.kkt_so_contracted(mm, md, qm, z, z, mc, z, np.zeros(3),
+                                                 damping=1e-6),
+                 lambda: sodyn.impact_so_contracted(mm, md, qm, z, mc, z, np.zeros(3),
+                                                    damping=1e-6)):
+        with pytest.raises(ValueError, match="mimic=True has no regularised contact solve"):
+            call()

@@ -42,6 +42,9 @@ pub struct State {
     pub lambda: DVector<f64>,
     /// Coefficient of restitution of the impact.
     pub restitution: f64,
+    /// Damping `μ ≥ 0` of the KKT and impact dynamics' Delassus solve (the state file's
+    /// `"damping"`; 0, the exact solve, unless given).
+    pub damping: f64,
     /// Weights of the contracted second-order outputs (the state file's `"weights"`).
     pub weights: Weights,
     /// Frames whose kinematics `eval` writes (the state file's `"frames"`, indices).
@@ -91,24 +94,33 @@ impl State {
             contacts: vec![],
             lambda: DVector::zeros(0),
             restitution: 0.0,
+            damping: 0.0,
             weights: Weights::default(),
             frames: vec![],
         }
     }
 }
 
-/// The top-level keys of a state file (with or without `--mimic`).
+/// The top-level keys of a state file with `--mimic`.
 pub const STATE_KEYS: [&str; 9] =
     ["q", "v", "a", "tau", "contacts", "lambda", "restitution", "weights", "frames"];
 
-/// An unknown top-level key of a state file is an error naming it and the known ones (a typo
-/// such as `"vel"` would otherwise evaluate at zero velocity).
+/// The top-level keys of a state file without `--mimic`: [`STATE_KEYS`] and `"damping"` (the
+/// mimic model's reduced-coordinate contact solve has no regularised variant).
+pub const FULL_STATE_KEYS: [&str; 10] =
+    ["q", "v", "a", "tau", "contacts", "lambda", "restitution", "damping", "weights", "frames"];
+
+/// An unknown top-level key of a state file with `--mimic` is an error naming it and the
+/// known ones (a typo such as `"vel"` would otherwise evaluate at zero velocity).
 pub fn check_state_keys(obj: &Map<String, Value>, file: &str) -> Result<()> {
-    match obj.keys().find(|k| !STATE_KEYS.contains(&k.as_str())) {
-        Some(k) => Err(Error::Io(format!(
-            "{file}: unknown key \"{k}\" (known: {})",
-            STATE_KEYS.join(", ")
-        ))),
+    check_keys(obj, file, &STATE_KEYS)
+}
+
+fn check_keys(obj: &Map<String, Value>, file: &str, known: &[&str]) -> Result<()> {
+    match obj.keys().find(|k| !known.contains(&k.as_str())) {
+        Some(k) => {
+            Err(Error::Io(format!("{file}: unknown key \"{k}\" (known: {})", known.join(", "))))
+        }
         None => Ok(()),
     }
 }
@@ -160,7 +172,7 @@ pub fn load_state(
     let obj = val
         .as_object()
         .ok_or_else(|| Error::Io(format!("{file}: the state must be a JSON object")))?;
-    check_state_keys(obj, file)?;
+    check_keys(obj, file, &FULL_STATE_KEYS)?;
     let nq = model.nq();
     let q_len = obj.get("q").and_then(Value::as_array).map(Vec::len);
     let q = read_vec(obj, "q", nq, file)
@@ -280,6 +292,12 @@ pub fn load_state(
             Error::Io(format!("{file}: key \"restitution\" must be a non-negative number"))
         })?,
     };
+    let damping = match obj.get("damping") {
+        None => 0.0,
+        Some(r) => r.as_f64().filter(|e| e.is_finite() && *e >= 0.0).ok_or_else(|| {
+            Error::Io(format!("{file}: key \"damping\" must be a non-negative number"))
+        })?,
+    };
     let weights = match obj.get("weights") {
         None => Weights::default(),
         Some(w) => {
@@ -350,6 +368,7 @@ pub fn load_state(
         contacts,
         lambda,
         restitution,
+        damping,
     })
 }
 
@@ -629,6 +648,7 @@ fn contracted_outputs(
     let (nv, nc3) = (model.nv(), s.contacts.iter().map(|c| c.dim()).sum::<usize>());
     if w.kkt_qdd.is_some() || w.kkt_lambda.is_some() {
         let mut kd = KktData::new(model, ContactData::new(model, &s.contacts)?);
+        kd.set_damping(s.damping)?;
         let mut kc = KktContracted::new(model, &kd);
         let mut o = Map::new();
         let mut ok = true;
@@ -656,6 +676,7 @@ fn contracted_outputs(
     if w.impact_vplus.is_some() || w.impact_impulse.is_some() {
         let mut im = ImpactData::new(model, ContactData::new(model, &s.contacts)?);
         im.set_restitution(s.restitution)?;
+        im.set_damping(s.damping)?;
         let mut ic = ImpactContracted::new(model, &im);
         let mut o = Map::new();
         let mut ok = true;
@@ -704,6 +725,7 @@ fn contact_outputs(
         }),
     );
     let mut kd = KktData::new(model, cd.clone());
+    kd.set_damping(s.damping)?;
     let r = if order >= 2 {
         kd = kd.with_second_order(model);
         kkt_so_derivatives(model, data, &mut kd, &s.q, &s.v, &s.tau)
@@ -715,6 +737,7 @@ fn contact_outputs(
     }
     let mut im = ImpactData::new(model, cd);
     im.set_restitution(s.restitution)?;
+    im.set_damping(s.damping)?;
     let r = if order >= 2 {
         im = im.with_second_order(model);
         impact_so_derivatives(model, data, &mut im, &s.q, &s.v)

@@ -165,7 +165,7 @@ struct EvalArgs {
     #[command(flatten)]
     model: ModelArgs,
     /// The state: a JSON file with q, v, a, tau (and optionally contacts, lambda, restitution,
-    /// weights, frames)
+    /// damping, weights, frames)
     #[arg(long, value_name = "FILE")]
     state: String,
     /// 1: values and first-order derivatives; 2: also the second-order tensors
@@ -184,7 +184,7 @@ fn main() -> ExitCode {
         Ok(Outcome::Done) => ExitCode::SUCCESS,
         Ok(Outcome::Partial) => ExitCode::from(PARTIAL_EXIT),
         Err(e) => {
-            errln!("sodyn: error: {e}");
+            errln!("sodyn: error: {}", out::cli_message(&e.to_string()));
             ExitCode::from(1)
         }
     }
@@ -332,7 +332,7 @@ fn load_model_spec(spec: &str, opts: &UrdfOptions) -> Result<Model> {
         sodyn::model::urdf::load_urdf_file(Path::new(spec), opts)?
     };
     for w in model.warnings() {
-        errln!("sodyn: warning: {w}");
+        errln!("sodyn: warning: {}", out::cli_message(w));
     }
     Ok(model)
 }

@@ -10,6 +10,36 @@
 
 use std::io::{ErrorKind, Write};
 
+/// A library message (an error or a loader warning) in the command line's terms: the Rust API
+/// it names for library users (`Type::method`) is rewritten. The regularised contact solve
+/// (`ContactData::set_damping`) is the state file's `"damping"` key; a `Model` accessor
+/// (`Model::tendons`) is named as what the model records; any other `Type::name` is `name`.
+pub fn cli_message(s: &str) -> String {
+    if !s.contains("::") {
+        return s.to_owned();
+    }
+    let ident = |c: char| c.is_ascii_alphanumeric() || c == '_';
+    let mut out = String::with_capacity(s.len());
+    let mut rest = s;
+    while let Some(p) = rest.find("::") {
+        let start = rest[..p].rfind(|c: char| !ident(c)).map_or(0, |i| i + 1);
+        let tail = &rest[p + 2..];
+        let end = tail.find(|c: char| !ident(c)).unwrap_or(tail.len());
+        out.push_str(&rest[..start]);
+        match (&rest[start..p], &tail[..end]) {
+            (_, "set_damping") => out.push_str("the state file's \"damping\" key"),
+            ("Model", name) => {
+                out.push_str("in the model's ");
+                out.push_str(name);
+            }
+            (_, other) => out.push_str(other),
+        }
+        rest = &tail[end..];
+    }
+    out.push_str(rest);
+    out
+}
+
 /// Exit status when standard output is closed while a command writes to it.
 pub const CLOSED_EXIT: i32 = 0;
 

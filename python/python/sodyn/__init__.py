@@ -69,12 +69,16 @@ def kkt_so_contracted(
     contacts: Sequence[Contact],
     w_qdd: Any,
     w_lambda: Any,
+    *,
+    damping: float = 0.0,
 ):
     """Hessians of ``w_qdd @ qdd + w_lambda @ lambda_`` of the KKT contact dynamics at
     ``(q, v, tau)``: ``(C_qq, C_vv, C_qv, C_tauq)`` (each ``(nv, nv)``, layouts as
     :func:`fd_so_contracted`), computed by the adjoint of the KKT system without any
-    ``(nv, nv, nv)`` tensor."""
-    return _sodyn.kkt_so_contracted(model, data, q, v, tau, list(contacts), w_qdd, w_lambda)
+    ``(nv, nv, nv)`` tensor. ``damping`` as in :func:`kkt_derivatives`."""
+    return _sodyn.kkt_so_contracted(
+        model, data, q, v, tau, list(contacts), w_qdd, w_lambda, float(damping)
+    )
 
 
 def impact_so_contracted(
@@ -86,11 +90,22 @@ def impact_so_contracted(
     w_vplus: Any,
     w_impulse: Any,
     restitution: float = 0.0,
+    *,
+    damping: float = 0.0,
 ):
     """Hessians of ``w_vplus @ vplus + w_impulse @ impulse`` of the impact dynamics:
-    ``(C_qq, C_qvminus)`` with ``C_qvminus[j, k] = d/dv_minus_k (d(w @ y)/dq_j)``."""
+    ``(C_qq, C_qvminus)`` with ``C_qvminus[j, k] = d/dv_minus_k (d(w @ y)/dq_j)``.
+    ``damping`` as in :func:`impact_derivatives`."""
     return _sodyn.impact_so_contracted(
-        model, data, q, v_minus, list(contacts), w_vplus, w_impulse, float(restitution)
+        model,
+        data,
+        q,
+        v_minus,
+        list(contacts),
+        w_vplus,
+        w_impulse,
+        float(restitution),
+        float(damping),
     )
 
 __all__ = [
@@ -236,12 +251,23 @@ def kkt_derivatives(
     tau: Any,
     contacts: Sequence[Contact],
     order: int = 1,
+    *,
+    damping: float = 0.0,
 ) -> KktResult:
-    """KKT contact dynamics ``[M J_c^T; J_c 0][qdd; -lambda] = [tau - b; -dJ_c v]`` at
+    """KKT contact dynamics ``[M J_c^T; J_c -mu I][qdd; -lambda] = [tau - b; -dJ_c v]`` at
     ``(q, v, tau)`` and its first (``order=1``) or first and second (``order=2``) derivatives.
     ``lambda_`` holds the contact forces applied to the robot, 3 rows per 3-D contact and 6
-    (``[moment; force]``) per 6-D contact, in each contact's axes (``Contact.reference``)."""
-    return KktResult(_sodyn.kkt_derivatives(model, data, q, v, tau, list(contacts), order))
+    (``[moment; force]``) per 6-D contact, in each contact's axes (``Contact.reference``).
+
+    ``damping`` is ``mu >= 0``, added to the diagonal of the Delassus matrix
+    ``J_c M^-1 J_c^T`` (Pinocchio's ``inv_damping``, Crocoddyl's ``JMinvJt_damping``). The
+    default 0 is the exact solve, and a redundant contact set (the same point twice, a 3-D
+    contact on a link held by a 6-D one) is then an error; ``damping > 0`` solves it
+    regularised, and the derivatives are those of the regularised solve. Models loaded with
+    ``mimic=True`` take only ``damping=0``."""
+    return KktResult(
+        _sodyn.kkt_derivatives(model, data, q, v, tau, list(contacts), order, float(damping))
+    )
 
 
 def impact_derivatives(
@@ -252,12 +278,15 @@ def impact_derivatives(
     contacts: Sequence[Contact],
     restitution: float = 0.0,
     order: int = 1,
+    *,
+    damping: float = 0.0,
 ) -> ImpactResult:
-    """Impact dynamics ``[M J_c^T; J_c 0][v+; -impulse] = [M v-; -e J_c v-]`` and its
-    derivatives with respect to ``q`` and ``v_minus``."""
+    """Impact dynamics ``[M J_c^T; J_c -mu I][v+; -impulse] = [M v-; -e J_c v-]`` and its
+    derivatives with respect to ``q`` and ``v_minus``; ``damping`` (``mu``) as in
+    :func:`kkt_derivatives`."""
     return ImpactResult(
         _sodyn.impact_derivatives(
-            model, data, q, v_minus, list(contacts), float(restitution), order
+            model, data, q, v_minus, list(contacts), float(restitution), order, float(damping)
         )
     )
 

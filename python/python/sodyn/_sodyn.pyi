@@ -259,19 +259,25 @@ def constrained_id_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayL
     """``tau = M a + b - J_c^T lam`` and its derivatives, ``lam`` with 3 or 6 rows per contact
     (held fixed in each contact's axes)."""
 def kkt_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike, tau: ArrayLike,
-                    contacts: Sequence[Contact], order: int = 1) -> dict[str, Vector]: ...
+                    contacts: Sequence[Contact], order: int = 1,
+                    damping: float = 0.0) -> dict[str, Vector]:
+    """The KKT contact dynamics and its derivatives (``sodyn.kkt_derivatives``), ``damping``
+    added to the Delassus matrix's diagonal."""
 def impact_derivatives(model: Model, data: Data, q: ArrayLike, v_minus: ArrayLike,
                        contacts: Sequence[Contact], restitution: float = 0.0,
-                       order: int = 1) -> dict[str, Vector]: ...
+                       order: int = 1, damping: float = 0.0) -> dict[str, Vector]:
+    """The impact dynamics and its derivatives (``sodyn.impact_derivatives``), ``damping``
+    added to the Delassus matrix's diagonal."""
 
 def kkt_so_contracted(model: Model, data: Data, q: ArrayLike, v: ArrayLike, tau: ArrayLike,
-                      contacts: Sequence[Contact], w_qdd: ArrayLike, w_lambda: ArrayLike
-                      ) -> Tuple[Matrix, Matrix, Matrix, Matrix]:
+                      contacts: Sequence[Contact], w_qdd: ArrayLike, w_lambda: ArrayLike,
+                      damping: float = 0.0) -> Tuple[Matrix, Matrix, Matrix, Matrix]:
     """Hessians of ``w_qdd @ qdd + w_lambda @ lambda`` of the KKT dynamics:
     ``(C_qq, C_vv, C_qv, C_tauq)``; ``w_lambda`` has 3 or 6 rows per contact."""
 def impact_so_contracted(model: Model, data: Data, q: ArrayLike, v_minus: ArrayLike,
                          contacts: Sequence[Contact], w_vplus: ArrayLike, w_impulse: ArrayLike,
-                         restitution: float = 0.0) -> Tuple[Matrix, Matrix]:
+                         restitution: float = 0.0,
+                         damping: float = 0.0) -> Tuple[Matrix, Matrix]:
     """Hessians of ``w_vplus @ vplus + w_impulse @ impulse`` of the impact dynamics:
     ``(C_qq, C_qvminus)``; ``w_impulse`` has 3 or 6 rows per contact."""
 def frame_placement(model: Model, data: Data, q: ArrayLike, frame: Union[str, int]) -> Matrix:
