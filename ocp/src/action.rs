@@ -172,7 +172,7 @@ pub struct ActionData {
     /// the Gauss-Newton `[ℓ_xx ℓ_xu; ℓ_ux ℓ_uu]` plus this.
     pub hzz: DMatrix<f64>,
     /// How many cost terms of the last [`ActionModel::second_order`] kept their Gauss-Newton
-    /// Hessian (`FramePlacement`, `FrameVelocity`, `CoMPosition`).
+    /// Hessian (`FrameVelocity`).
     pub gauss_newton_terms: usize,
     so: SoWork,
 }
@@ -426,7 +426,7 @@ impl ActionModel {
     ///      ([`sodyn::deriv::fd_so_contracted`], [`sodyn::deriv::kkt_so_contracted`]): `H_qq +=
     ///      sym(C_qq)` (the nested tangent derivative's symmetric part is the Hessian),
     ///      `H_qv += C_qv`, `H_vv += C_vv`, `H_qu += C_τq` (actuated columns);
-    ///    - the integrator's curvature per free-flyer or spherical joint ([`crate::curvature`]):
+    ///    - the integrator's curvature per free-flyer or spherical joint (`ocp/src/curvature.rs`):
     ///      with `E = ∂ε/∂z = dt [∂v′/∂x, ∂v′/∂u]` (the joint's rows), `H += E_qᵀ N E + Eᵀ Nᵀ E_q
     ///      + Eᵀ sym(K) E`;
     /// 2. impulse, `x′ = (q, v⁺)`: `C` of `λ_vᵀ v⁺ + w_λᵀ Λ`

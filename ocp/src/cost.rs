@@ -7,7 +7,8 @@
 use nalgebra::{DMatrix, DVector};
 
 use nalgebra::Matrix6;
-use sodyn::algo::{ReferenceFrame, frame_jacobian_derivative};
+use nalgebra::Vector3;
+use sodyn::algo::{ReferenceFrame, center_of_mass, frame_jacobian_derivative};
 use sodyn::tensor::Tensor3;
 
 use crate::activation::Activation;
@@ -66,11 +67,16 @@ pub(crate) struct CurvatureWork {
     /// `∂J_f/∂q` of a frame (`6 × nv × nv`).
     djac: Tensor3,
     m6: [Matrix6<f64>; 3],
+    tmp: DMatrix<f64>,
 }
 
 impl CurvatureWork {
     pub(crate) fn new(nv: usize) -> Self {
-        CurvatureWork { djac: Tensor3::zeros(6, nv, nv), m6: [Matrix6::zeros(); 3] }
+        CurvatureWork {
+            djac: Tensor3::zeros(6, nv, nv),
+            m6: [Matrix6::zeros(); 3],
+            tmp: DMatrix::zeros(nv, nv),
+        }
     }
 }
 
@@ -209,11 +215,11 @@ impl CostModelSum {
     /// [`CostModelSum::calc_diff`] at the same point), times `scale`, added to `hzz`
     /// (`z = (δx, δu)`, `nz × nz`); the contact-force terms instead add their weight on the forces
     /// (`scale w Aᵀ A_r` on the contact's rows, `A = I` for `ContactForce`) to `w_lambda`, for
-    /// the dynamics' `∂²λ`. Exact for `State` (the manifold's `⊖`, [`crate::curvature`]),
+    /// the dynamics' `∂²λ`. Exact for `State` (the manifold's `⊖`, `ocp/src/curvature.rs`),
     /// `FrameTranslation` (`sym(∂J/∂q)`, the frame Jacobian's derivative), the linear residuals
     /// (`Control`, `JointEffort`), `FramePlacement` (`log6`'s curvature and the local
-    /// Jacobian's derivative) and the force residuals; `FrameVelocity` and `CoMPosition` keep
-    /// their Gauss-Newton Hessian. Returns how many active terms did.
+    /// Jacobian's derivative), `CoMPosition` (the bodies' centres of mass) and the force
+    /// residuals; `FrameVelocity` keeps its Gauss-Newton Hessian. Returns how many active terms did.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn curvature(
         &self,
@@ -348,7 +354,56 @@ impl CostModelSum {
                         }
                     }
                 }
-                Residual::FrameVelocity { .. } | Residual::CoMPosition { .. } => gauss_newton += 1,
+                Residual::CoMPosition { .. } => {
+                    // c = Σ_i (m_i/M) p_i, p_i the world centre of mass of body i. With S_c the
+                    // world columns of the DoFs on body i's path: ∂p/∂q_c = S_c.lin + S_c.ang × p,
+                    // and its nested derivative ∂S_c/∂q_k (= S_k × S_c if K ⪯ C, else 0) plus
+                    // S_c.ang × ∂p/∂q_k; the Hessian is the symmetric part.
+                    center_of_mass(n.model, n.data, n.q)?;
+                    let lam = Vector3::new(w * ar[0], w * ar[1], w * ar[2]);
+                    let m = n.model;
+                    let total: f64 = m.inertias()[1..].iter().map(|i| i.mass).sum();
+                    let t = &mut ws.tmp;
+                    t.fill(0.0);
+                    for i in 1..m.njoints() {
+                        let inertia = &m.inertias()[i];
+                        if inertia.mass <= 0.0 {
+                            continue;
+                        }
+                        let omi = &n.data.o_m_i()[i];
+                        let p = omi.rot * (inertia.h / inertia.mass) + omi.trans;
+                        let f = inertia.mass / total;
+                        let mut jc = i;
+                        while jc > 0 {
+                            let xc = &n.data.o_m_i()[jc];
+                            for c in m.idx_v()[jc]..m.idx_v()[jc] + m.nvs()[jc] {
+                                let sc = xc.act_motion(&m.subspace()[c]);
+                                let mut jk = i;
+                                while jk > 0 {
+                                    let xk = &n.data.o_m_i()[jk];
+                                    for k in m.idx_v()[jk]..m.idx_v()[jk] + m.nvs()[jk] {
+                                        let sk = xk.act_motion(&m.subspace()[k]);
+                                        let dp = sk.lin + sk.ang.cross(&p);
+                                        let mut d = sc.ang.cross(&dp);
+                                        if jk <= jc {
+                                            let ds = sk.cross(&sc);
+                                            d += ds.lin + ds.ang.cross(&p);
+                                        }
+                                        t[(c, k)] += f * lam.dot(&d);
+                                    }
+                                    jk = m.parents()[jk];
+                                }
+                            }
+                            jc = m.parents()[jc];
+                        }
+                    }
+                    for j in 0..nv {
+                        for k in 0..nv {
+                            hzz[(j, k)] += 0.5 * (t[(j, k)] + t[(k, j)]);
+                        }
+                    }
+                }
+                Residual::FrameVelocity { .. } => gauss_newton += 1,
             }
         }
         Ok(gauss_newton)

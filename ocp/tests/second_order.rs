@@ -19,11 +19,12 @@ fn node(m: &Arc<sodyn::model::Model>, v: serde_json::Value) -> ActionModel {
 }
 
 /// Costs whose residual curvature is exact (state on the manifold, control, frame translation
-/// and placement, contact forces and cones).
+/// and placement, centre of mass, contact forces and cones).
 fn costs(x0: &DVector<f64>, nu: usize, contacts: &[&str], foot: &str) -> serde_json::Value {
     let mut c = vec![
         json!({"name": "x", "weight": 3.0, "residual": {"type": "state", "xref": x0.as_slice()}}),
         json!({"name": "foot", "weight": 5.0, "residual": {"type": "frame_translation", "frame": foot, "pref": [0.3, 0.2, 0.0]}}),
+        json!({"name": "com", "weight": 7.0, "residual": {"type": "com_position", "cref": [0.1, -0.2, 0.3]}}),
         json!({"name": "place", "weight": 4.0, "residual": {"type": "frame_placement", "frame": foot,
                "rotation": [0.36, 0.48, -0.8, -0.8, 0.6, 0.0, 0.48, 0.64, 0.6], "translation": [-0.3, -0.2, 0.1]}}),
     ];

@@ -75,7 +75,7 @@ pub struct HessianStats {
     /// Seconds spent in the second-order terms ([`crate::ActionModel::second_order`]).
     pub seconds: f64,
     /// Cost terms per evaluation whose residual curvature is Gauss-Newton (at the last exact
-    /// pass: `FramePlacement`, `FrameVelocity`, `CoMPosition`), summed over the knots.
+    /// pass: `FrameVelocity`), summed over the knots.
     pub gauss_newton_terms: usize,
 }
 

@@ -700,8 +700,7 @@ class _SolverBase:
         """Over the last solve: ``exact_passes``, ``gauss_newton_passes`` (backward passes of
         each kind), ``exact_failures`` (exact passes whose ``Q_uu`` was not positive definite),
         ``seconds`` spent in the second-order terms, ``gauss_newton_terms`` (cost terms, summed
-        over the knots, whose residual curvature stays Gauss-Newton: frame placement, frame
-        velocity, centre of mass)."""
+        over the knots, whose residual curvature stays Gauss-Newton: frame velocity)."""
         return self._s.hessian_stats
 
     def setCallbacks(self, callbacks: Sequence[Any]) -> None:
