@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Cost curves of `cargo run --release --example ddp` (its CSV) as a PNG.
 
-    /tmp/sodyn-venv/bin/python examples/python/plot_ddp.py target/ddp_costs.csv docs/ddp-costs.png
+    python examples/python/plot_ddp.py target/ddp_costs.csv docs/ddp-costs.png
 
 One row per problem, cold start left, warm start (task name ending in ``_warm``) right; the
 y axis is the cost minus the lowest cost any variant reached on that problem (log scale).

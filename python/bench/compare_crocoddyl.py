@@ -9,7 +9,8 @@ Each problem is built by Crocoddyl's example code (``python/tests/crocoddyl_prob
 gaits chained as the examples chain them, each from the previous gait's last state), converted
 once with ``sodyn.ocp.from_crocoddyl``, and solved from the example's initial guess by
 Crocoddyl's FDDP (box-FDDP for ``humanoid_taichi.py``, with the examples' ``maxiter`` and
-``init_reg``) and by sodyn's on 1 and 2 threads, interleaved over the rounds.
+``init_reg``; the reaches of ``examples/ddp.rs``, ``panda_reach`` and ``tiago_reach``, with
+``maxiter = 500``) and by sodyn's on 1 and 2 threads, interleaved over the rounds.
 Reported per problem: iterations, final cost, solve time and time per iteration (median over
 rounds), and the median of the per-round ratios sodyn/Crocoddyl and 2 threads/1 thread.
 
@@ -33,7 +34,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
 import crocoddyl  # noqa: E402
-from crocoddyl_problems import CHAINS, PROBLEMS, SOLVE  # noqa: E402
+from crocoddyl_problems import CHAINS, DDP_EXAMPLE_PROBLEMS, PROBLEMS, SOLVE  # noqa: E402
 
 from sodyn import ocp  # noqa: E402
 
@@ -41,6 +42,10 @@ from sodyn import ocp  # noqa: E402
 def build_all(names):
     """(name, crocoddyl problem, init_xs, init_us, box) for each name, chaining the gaits."""
     out, last = [], {}
+    for name in names:
+        if name in DDP_EXAMPLE_PROBLEMS:
+            p, xs, us = DDP_EXAMPLE_PROBLEMS[name]()
+            out.append((name, p, xs, us, ("fddp", 500, None)))
     for chain in CHAINS + [[n] for n in PROBLEMS if not any(n in c for c in CHAINS)]:
         x0 = None
         for name in chain:
@@ -103,7 +108,7 @@ def second_order_rows(args):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--rounds", type=int, default=5)
-    ap.add_argument("--problems", default=",".join(PROBLEMS))
+    ap.add_argument("--problems", default=",".join(list(PROBLEMS) + list(DDP_EXAMPLE_PROBLEMS)))
     ap.add_argument("--json")
     ap.add_argument("--second-order", action="store_true")
     ap.add_argument("--th-stop", type=float)

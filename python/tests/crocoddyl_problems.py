@@ -129,6 +129,46 @@ def kinova_reach():
     return p, [], []
 
 
+def ddp_example_reach(urdf: str, frame: str, offset, horizon: int, dt: float, q0=None):
+    """A reach of ``examples/ddp.rs`` as a Crocoddyl problem: the frame moves by ``offset`` from
+    its position at the start pose (rest, ``q0`` or the neutral configuration) with the example's
+    costs: running ``dt (½ 1e-2 |q − q0|² + ½ 0.1 |v|² + ½ 1e-3 |u|²)``, terminal
+    ``½ 1e-2 |q − q0|² + ½ 10 |v|² + ½ 1e3 |p − p*|²``; the robot from ``../shared/models``."""
+    import os
+
+    import crocoddyl
+    import pinocchio
+
+    path = os.path.join(os.path.dirname(__file__), "..", "..", "..", "shared", "models", urdf)
+    model = pinocchio.buildModelFromUrdf(path)
+    state = crocoddyl.StateMultibody(model)
+    act = crocoddyl.ActuationModelFull(state)
+    q0 = pinocchio.neutral(model) if q0 is None else np.asarray(q0, float)
+    x0 = np.concatenate([q0, np.zeros(model.nv)])
+    data = model.createData()
+    fid = model.getFrameId(frame)
+    pinocchio.framesForwardKinematics(model, data, q0)
+    target = data.oMf[fid].translation + np.asarray(offset, float)
+
+    def xreg(wq, wv):
+        w = np.concatenate([wq * np.ones(model.nv), wv * np.ones(model.nv)])
+        return crocoddyl.CostModelResidual(state, crocoddyl.ActivationModelWeightedQuad(w),
+                                           crocoddyl.ResidualModelState(state, x0))
+
+    run, term = crocoddyl.CostModelSum(state), crocoddyl.CostModelSum(state)
+    run.addCost("xReg", xreg(1e-2, 0.1), 1.0)
+    run.addCost("uReg", crocoddyl.CostModelResidual(state, crocoddyl.ResidualModelControl(state)), 1e-3)
+    term.addCost("xReg", xreg(1e-2, 10.0), 1.0)
+    term.addCost("reach", crocoddyl.CostModelResidual(
+        state, crocoddyl.ResidualModelFrameTranslation(state, fid, target)), 1e3)
+    rm = crocoddyl.IntegratedActionModelEuler(
+        crocoddyl.DifferentialActionModelFreeFwdDynamics(state, act, run), dt)
+    tm = crocoddyl.IntegratedActionModelEuler(
+        crocoddyl.DifferentialActionModelFreeFwdDynamics(state, act, term), 0.0)
+    p = crocoddyl.ShootingProblem(x0, [rm] * horizon, tm)
+    return (p, *_guess(p))
+
+
 def _from_example(filename: str):
     """The problem of one of Crocoddyl's example scripts: its source up to the solver's
     construction, run as written (no display, no plot), and its initial guess."""
@@ -157,6 +197,15 @@ PROBLEMS: Dict[str, Callable[..., Any]] = {
     "double_pendulum": lambda short=False, x0=None: double_pendulum(short),
     "humanoid_manipulation": lambda short=False, x0=None: _from_example("humanoid_manipulation.py"),
     "humanoid_taichi": lambda short=False, x0=None: _from_example("humanoid_taichi.py"),
+}
+
+# The reaches of examples/ddp.rs (its panda and tiago tasks; the benchmark only).
+DDP_EXAMPLE_PROBLEMS: Dict[str, Callable[..., Any]] = {
+    "panda_reach": lambda short=False, x0=None: ddp_example_reach(
+        "panda.urdf", "panda_hand", [0.1, 0.4, -0.2], 100, 0.01,
+        [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785, 0.02, 0.02]),
+    "tiago_reach": lambda short=False, x0=None: ddp_example_reach(
+        "tiago.urdf", "hand_palm_link", [0.4, 0.3, 0.2], 50, 0.02),
 }
 
 # The examples' own solver, maxiter and init_reg where they are not FDDP / 100 / None.
