@@ -286,7 +286,7 @@ impl ActionModel {
             w_lambda: DVector::zeros(nc),
             groups,
             planar,
-            cost: CurvatureWork::new(nv),
+            cost: CurvatureWork::new(m),
             e: DMatrix::zeros(6, nz),
             ne: DMatrix::zeros(6, nz),
             se: DMatrix::zeros(6, nz),

@@ -68,14 +68,23 @@ pub(crate) struct CurvatureWork {
     djac: Tensor3,
     m6: [Matrix6<f64>; 3],
     tmp: DMatrix<f64>,
+    /// Per joint: the subtree's mass fraction and mass-weighted centre of mass.
+    fsub: Vec<f64>,
+    psub: Vec<Vector3<f64>>,
+    /// Per DoF: the world motion column.
+    sw: Vec<sodyn::spatial::Motion>,
 }
 
 impl CurvatureWork {
-    pub(crate) fn new(nv: usize) -> Self {
+    pub(crate) fn new(model: &sodyn::model::Model) -> Self {
+        let (nv, nj) = (model.nv(), model.njoints());
         CurvatureWork {
             djac: Tensor3::zeros(6, nv, nv),
             m6: [Matrix6::zeros(); 3],
             tmp: DMatrix::zeros(nv, nv),
+            fsub: vec![0.0; nj],
+            psub: vec![Vector3::zeros(); nj],
+            sw: vec![sodyn::spatial::Motion::zero(); nv],
         }
     }
 }
@@ -355,46 +364,59 @@ impl CostModelSum {
                     }
                 }
                 Residual::CoMPosition { .. } => {
-                    // c = Σ_i (m_i/M) p_i, p_i the world centre of mass of body i. With S_c the
-                    // world columns of the DoFs on body i's path: ∂p/∂q_c = S_c.lin + S_c.ang × p,
-                    // and its nested derivative ∂S_c/∂q_k (= S_k × S_c if K ⪯ C, else 0) plus
-                    // S_c.ang × ∂p/∂q_k; the Hessian is the symmetric part.
+                    // c = Σ_i f_i p_i (f_i = m_i/M, p_i the world centre of mass of body i). With
+                    // S_c the world column of DoF c: ∂p_i/∂q_c = S_c.lin + S_c.ang × p_i on
+                    // body i's path, whose nested derivative is S_c.ang × (S_k.lin + S_k.ang ×
+                    // p_i), plus ∂S_c/∂q_k = S_k × S_c (lin + ang × p_i) if K ⪯ C. Linear in p_i,
+                    // so the sum over the bodies below both joints is one term with the subtree
+                    // sums F_d = Σ f_i, P_d = Σ f_i p_i of the deeper joint d; the Hessian is the
+                    // symmetric part.
                     center_of_mass(n.model, n.data, n.q)?;
                     let lam = Vector3::new(w * ar[0], w * ar[1], w * ar[2]);
                     let m = n.model;
                     let total: f64 = m.inertias()[1..].iter().map(|i| i.mass).sum();
-                    let t = &mut ws.tmp;
-                    t.fill(0.0);
-                    for i in 1..m.njoints() {
+                    let (fsub, psub, sw) = (&mut ws.fsub, &mut ws.psub, &mut ws.sw);
+                    fsub.fill(0.0);
+                    psub.fill(Vector3::zeros());
+                    for i in (1..m.njoints()).rev() {
                         let inertia = &m.inertias()[i];
-                        if inertia.mass <= 0.0 {
-                            continue;
+                        if inertia.mass > 0.0 {
+                            let omi = &n.data.o_m_i()[i];
+                            let f = inertia.mass / total;
+                            fsub[i] += f;
+                            psub[i] += (omi.rot * (inertia.h / inertia.mass) + omi.trans) * f;
                         }
-                        let omi = &n.data.o_m_i()[i];
-                        let p = omi.rot * (inertia.h / inertia.mass) + omi.trans;
-                        let f = inertia.mass / total;
-                        let mut jc = i;
-                        while jc > 0 {
-                            let xc = &n.data.o_m_i()[jc];
-                            for c in m.idx_v()[jc]..m.idx_v()[jc] + m.nvs()[jc] {
-                                let sc = xc.act_motion(&m.subspace()[c]);
-                                let mut jk = i;
-                                while jk > 0 {
-                                    let xk = &n.data.o_m_i()[jk];
-                                    for k in m.idx_v()[jk]..m.idx_v()[jk] + m.nvs()[jk] {
-                                        let sk = xk.act_motion(&m.subspace()[k]);
-                                        let dp = sk.lin + sk.ang.cross(&p);
-                                        let mut d = sc.ang.cross(&dp);
-                                        if jk <= jc {
-                                            let ds = sk.cross(&sc);
-                                            d += ds.lin + ds.ang.cross(&p);
-                                        }
-                                        t[(c, k)] += f * lam.dot(&d);
-                                    }
-                                    jk = m.parents()[jk];
-                                }
+                        let pa = m.parents()[i];
+                        if pa > 0 {
+                            let (fi, pi) = (fsub[i], psub[i]);
+                            fsub[pa] += fi;
+                            psub[pa] += pi;
+                        }
+                    }
+                    for (c, s) in sw.iter_mut().enumerate() {
+                        *s = n.data.o_m_i()[m.dof_joint()[c]].act_motion(&m.subspace()[c]);
+                    }
+                    let t = &mut ws.tmp;
+                    for c in 0..nv {
+                        let (jc, sc) = (m.dof_joint()[c], sw[c]);
+                        for k in 0..nv {
+                            let (jk, sk) = (m.dof_joint()[k], sw[k]);
+                            let (d, bracket) = if m.is_ancestor(jk, jc) {
+                                (jc, true)
+                            } else if m.is_ancestor(jc, jk) {
+                                (jk, false)
+                            } else {
+                                t[(c, k)] = 0.0;
+                                continue;
+                            };
+                            let (fd, pd) = (fsub[d], psub[d]);
+                            let mut v =
+                                sc.ang.cross(&sk.lin) * fd + sc.ang.cross(&sk.ang.cross(&pd));
+                            if bracket {
+                                let ds = sk.cross(&sc);
+                                v += ds.lin * fd + ds.ang.cross(&pd);
                             }
-                            jc = m.parents()[jc];
+                            t[(c, k)] = lam.dot(&v);
                         }
                     }
                     for j in 0..nv {
