@@ -91,7 +91,7 @@ pub struct Model {
     pub(crate) mimic: Vec<Option<String>>,
     /// The mimic constraints read with [`UrdfOptions::mimic`](super::UrdfOptions::mimic)
     /// (checked, by increasing joint index; empty otherwise).
-    pub(crate) mimic_joints: Vec<crate::mimic::MimicJoint>,
+    pub(crate) mimic_joints: Vec<super::reduction::MimicJoint>,
     /// What the loader accepted with a reservation (see [`Model::warnings`]).
     pub(crate) warnings: Vec<String>,
     /// The tendons read by the MJCF loader (see [`Model::tendons`]).
@@ -303,7 +303,7 @@ impl Model {
     /// loader with [`UrdfOptions::mimic`](super::UrdfOptions::mimic) (checked; by increasing
     /// joint index), from which [`crate::mimic::MimicModel::from_model`] makes the reduced
     /// model. Empty without that option and for models made otherwise.
-    pub fn mimic_joints(&self) -> &[crate::mimic::MimicJoint] {
+    pub fn mimic_joints(&self) -> &[super::reduction::MimicJoint] {
         &self.mimic_joints
     }
     /// What the URDF or MJCF loader accepted with a reservation, one message per item in the

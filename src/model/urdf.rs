@@ -77,9 +77,9 @@
 //! `joint "knee"`) and the reason.
 
 use super::joint::JointType;
+use super::reduction::MimicJoint;
 use super::tree::{Model, ModelBuilder, inertia_defect};
 use crate::error::{Error, Result};
-use crate::mimic::MimicJoint;
 use crate::spatial::InertiaDefect;
 use crate::spatial::{Inertia, Transform};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
