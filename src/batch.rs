@@ -194,7 +194,7 @@ impl BatchData<Data> {
     }
     /// Checks that these workspaces were made for `model`.
     fn check(&self, model: &Model) -> Result<()> {
-        self.data.iter().try_for_each(|d| d.check(model))
+        self.data.iter().try_for_each(|d| d.check_tree(model))
     }
 }
 

@@ -84,6 +84,8 @@ pub struct MimicData {
     v: DVector<f64>,
     a: DVector<f64>,
     tau: DVector<f64>,
+    /// `b` of [`nonlinear_effects`].
+    nle: DVector<f64>,
     qdd: DVector<f64>,
     m: DMatrix<f64>,
     ldl: DMatrix<f64>,
@@ -116,6 +118,7 @@ impl MimicData {
             v: DVector::zeros(f.nv()),
             a: DVector::zeros(f.nv()),
             tau: DVector::zeros(n),
+            nle: DVector::zeros(n),
             qdd: DVector::zeros(n),
             m: sq(),
             ldl: sq(),
@@ -132,7 +135,7 @@ impl MimicData {
             key: model.key,
         }
     }
-    fn check(&self, model: &MimicModel) -> Result<()> {
+    pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
         if self.key != model.key || self.tau.len() != model.nv {
             return Err(Error::Workspace(format!(
                 "MimicData was made for another model; make it with MimicData::new for the \
@@ -159,9 +162,13 @@ impl MimicData {
         &self.a
     }
     /// `τ` (reduced): of [`rnea`], [`id_derivatives`], [`id_so_derivatives`], and of inverse
-    /// dynamics at `q̈` for the forward-dynamics derivatives; `b` of [`nonlinear_effects`].
+    /// dynamics at `q̈` for the forward-dynamics derivatives.
     pub fn tau(&self) -> &DVector<f64> {
         &self.tau
+    }
+    /// `b` of [`nonlinear_effects`].
+    pub fn nle(&self) -> &DVector<f64> {
+        &self.nle
     }
     /// `q̈` of [`aba`], [`fd_derivatives`], [`fd_so_derivatives`].
     pub fn qdd(&self) -> &DVector<f64> {
@@ -233,7 +240,7 @@ impl MimicSoData {
             key: model.key,
         }
     }
-    fn check(&self, model: &MimicModel) -> Result<()> {
+    pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
         if self.key != model.key || self.page.nrows() != model.nv {
             return Err(Error::Workspace(format!(
                 "MimicSoData was made for another model; make it with MimicSoData::new for the \
@@ -274,6 +281,26 @@ impl MimicSoData {
     /// `T[(i, j, k)] = ∂(M⁻¹)_ij/∂q_k`.
     pub fn d2qdd_dtaudq(&self) -> &Tensor3 {
         &self.d2qdd_dtaudq
+    }
+}
+
+/// The reduced second-order workspace inside a [`crate::deriv::SoData`] or
+/// [`crate::deriv::FdSoData`] (`what`) of a reduced `model`.
+///
+/// # Errors
+/// [`Error::Workspace`] if the workspace was made for a model without mimic joints.
+pub(crate) fn reduced_so<'a>(
+    red: &'a mut Option<Box<MimicSoData>>,
+    what: &str,
+    model: &crate::model::Model,
+) -> Result<&'a mut MimicSoData> {
+    match red {
+        Some(so) => Ok(so),
+        None => Err(Error::Workspace(format!(
+            "{what} was made for a model without mimic joints, model \"{}\" is in reduced \
+             coordinates; make it with {what}::new for this model",
+            model.name()
+        ))),
     }
 }
 
@@ -324,7 +351,7 @@ pub fn rnea<'a>(
 
 /// Nonlinear effects `b = Gᵀ b_full(expand(q), G v)` (`b_full = C_full q̇_full + g_full`, minus
 /// the generalised `fext`: the full model's RNEA at `G q̈ = 0`), i.e. [`rnea`] at `a = 0`.
-/// Returns `data.tau()`; leaves `data.a_full()` zero.
+/// Returns `data.nle()`; leaves `data.a_full()` zero.
 ///
 /// # Errors
 /// As [`rnea`] (`q`, `v`, `fext`).
@@ -336,9 +363,9 @@ pub fn nonlinear_effects<'a>(
     fext: Option<&[Force]>,
 ) -> Result<&'a DVector<f64>> {
     prepare(model, data, q, Some(v), None)?;
-    let MimicData { full, q, v, a, tau, .. } = data;
-    bias_into(model, full, q, v, a, fext, tau.as_mut_slice())?;
-    Ok(&data.tau)
+    let MimicData { full, q, v, a, nle, .. } = data;
+    bias_into(model, full, q, v, a, fext, nle.as_mut_slice())?;
+    Ok(&data.nle)
 }
 
 /// `out = Gᵀ b_full(q_full, v_full)` (the full model's RNEA with `a_full ← 0`).
@@ -935,7 +962,7 @@ impl MimicKktData {
             so: None,
         })
     }
-    fn check(&self, model: &MimicModel) -> Result<()> {
+    pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
         if self.key != model.key || self.qdd.len() != model.nv {
             return Err(Error::Workspace(format!(
                 "MimicKktData was made for another model; make it with MimicKktData::new for \
@@ -2026,7 +2053,7 @@ impl MimicContractedData {
             tmp: z(),
         }
     }
-    fn check(&self, model: &MimicModel) -> Result<()> {
+    pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
         if self.key != model.key || self.mu.len() != model.nv {
             return Err(Error::Workspace(format!(
                 "MimicContractedData was made for another model; make it with \

@@ -124,7 +124,7 @@ pub fn centroidal_dynamics_derivatives(
     a: &DVector<f64>,
 ) -> Result<()> {
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     if out.ag.ncols() != model.nv {
         return Err(Error::Workspace(format!(
             "Centroidal was made for nv = {}, this model has nv = {}; make it with \

@@ -59,7 +59,7 @@ fn world(data: &Data, i: usize, m: &Motion) -> Motion {
 /// As [`Model::check_q`]; a model without mass.
 pub fn center_of_mass(model: &Model, data: &mut Data, q: &DVector<f64>) -> Result<Vector3<f64>> {
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     placements(model, data, q);
     let mass = inertias(model, data)?;
     Ok(data.ic_world[0].h / mass)

@@ -79,7 +79,7 @@ fn path_kinematics(
     frame: usize,
 ) -> Result<()> {
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_frame(model, frame)?;
     if let Some(v) = v {
         check_vec("v", v, model.nv)?;

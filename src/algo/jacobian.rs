@@ -36,7 +36,7 @@ pub fn point_position(
     point: &Vector3<f64>,
 ) -> Result<Vector3<f64>> {
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_frame(model, frame, point)?;
     placements(model, data, q);
     Ok(frame_point_world(model, data, frame, point).2)
@@ -53,7 +53,7 @@ pub fn point_jacobian(
     jac: &mut Matrix3xX<f64>,
 ) -> Result<()> {
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_frame(model, frame, point)?;
     if jac.ncols() != model.nv {
         return Err(Error::Dimension {
@@ -89,7 +89,7 @@ pub fn point_drift(
     point: &Vector3<f64>,
 ) -> Result<Vector3<f64>> {
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("v", v, model.nv)?;
     check_frame(model, frame, point)?;
     data.tmp_v.fill(0.0);

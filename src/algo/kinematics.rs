@@ -178,7 +178,7 @@ pub fn forward_kinematics(
     a: Option<&DVector<f64>>,
 ) -> Result<()> {
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     if let Some(v) = v {
         check_vec("v", v, model.nv)?;
     }

@@ -325,6 +325,13 @@ impl ContactData {
     /// # Errors
     /// [`Error::Workspace`] naming what differs.
     pub fn check(&self, model: &Model) -> Result<()> {
+        if model.reduction.is_some() {
+            return Err(Error::Workspace(format!(
+                "ContactData: model \"{}\" is in reduced coordinates (mimic joints); this \
+                 function takes the full tree (Model::full_tree) and contacts made for it",
+                model.name()
+            )));
+        }
         if self.model_key == model.key {
             return Ok(());
         }

@@ -122,7 +122,7 @@ pub fn id_so_contracted(
     w: &DVector<f64>,
 ) -> Result<()> {
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("a", a, model.nv)?;
     check_vec("w", w, model.nv)?;

@@ -56,7 +56,7 @@ pub fn constrained_id_derivatives(
     lambda: &DVector<f64>,
 ) -> Result<()> {
     check(model, cd, v, a, lambda, q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     id_derivatives_unchecked(model, data, q, v, a, None);
     contact_terms_fo(model, data, cd, lambda);
     Ok(())
@@ -83,8 +83,8 @@ pub fn constrained_id_so_derivatives(
     lambda: &DVector<f64>,
 ) -> Result<()> {
     check(model, cd, v, a, lambda, q)?;
-    data.check(model)?;
-    so.check(model)?;
+    data.check_tree(model)?;
+    so.check_tree(model)?;
     id_so_unchecked(model, data, so, q, v, a, None, -model.gravity);
     contact_terms_fo(model, data, cd, lambda);
     let b = base(model, data, cd);

@@ -238,7 +238,7 @@ fn solve(
     full: bool,
 ) -> Result<()> {
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("vminus", vminus, model.nv)?;
     im.cd.check(model)?;
     if im.vplus.len() != model.nv || im.cd.jac.ncols() != model.nv {
@@ -249,7 +249,7 @@ fn solve(
         });
     }
     if let Some(so) = &im.so {
-        so.id.check(model)?;
+        so.id.check_tree(model)?;
     }
     if !im.restitution.is_finite() || im.restitution < 0.0 {
         return Err(Error::Argument {

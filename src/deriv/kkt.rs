@@ -259,7 +259,7 @@ fn check_inputs(
     tau: &DVector<f64>,
 ) -> Result<()> {
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("tau", tau, model.nv)?;
     kd.cd.check(model)?;
@@ -271,7 +271,7 @@ fn check_inputs(
         });
     }
     if let Some(so) = &kd.so {
-        so.id.check(model)?;
+        so.id.check_tree(model)?;
     }
     Ok(())
 }

@@ -52,6 +52,10 @@ pub struct MimicModel {
     pub(crate) reduced_idx: Vec<Option<(usize, usize)>>,
     /// Identifies the model for the workspaces.
     pub(crate) key: u64,
+    /// The configuration limits of the reduced coordinates (those of the independent
+    /// coordinates of the full tree).
+    pub(crate) lower: DVector<f64>,
+    pub(crate) upper: DVector<f64>,
 }
 
 /// Whether a joint type can be a mimic or reference joint: `Some(true)` rotational, `Some(false)`
@@ -74,6 +78,11 @@ impl MimicModel {
     /// prismatic joint, the two are not of one kind (both rotational or both prismatic), or
     /// the multiplier or offset is not finite.
     pub fn new(full: Model, mimics: &[MimicJoint]) -> Result<Self> {
+        // The constraints name joints of the full tree.
+        let full = match &full.reduction {
+            Some(r) => r.full.clone(),
+            None => full,
+        };
         let nj = full.njoints();
         let name = |i: usize| full.names()[i].clone();
         let mut is_mimic = vec![false; nj];
@@ -182,7 +191,23 @@ impl MimicModel {
         };
         let mut mimics = mimics.to_vec();
         mimics.sort_by_key(|m| m.joint);
-        Ok(Self { full, mimics, nq, nv, q_map, g_col, g_coef, q_keep, v_keep, reduced_idx, key })
+        let lower = DVector::from_iterator(nq, q_keep.iter().map(|&f| full.lower[f]));
+        let upper = DVector::from_iterator(nq, q_keep.iter().map(|&f| full.upper[f]));
+        Ok(Self {
+            full,
+            mimics,
+            nq,
+            nv,
+            q_map,
+            g_col,
+            g_coef,
+            q_keep,
+            v_keep,
+            reduced_idx,
+            key,
+            lower,
+            upper,
+        })
     }
 
     /// The reduced model of `full` with its own constraints ([`Model::mimic_joints`], read by
@@ -191,6 +216,9 @@ impl MimicModel {
     /// # Errors
     /// As [`MimicModel::new`].
     pub fn from_model(full: Model) -> Result<Self> {
+        if let Some(r) = &full.reduction {
+            return Ok((**r).clone());
+        }
         let mimics = full.mimic_joints().to_vec();
         Self::new(full, &mimics)
     }
@@ -434,6 +462,40 @@ impl MimicModel {
                 blk,
             );
         })
+    }
+    /// `q₁ ⊖ q₀` into `out` (length `nv`) without allocating: joint by joint over the
+    /// independent joints (their reduced coordinates are those of the full tree).
+    ///
+    /// # Errors
+    /// As [`MimicModel::difference`]; `out` not of length `nv`.
+    pub(crate) fn difference_into(
+        &self,
+        q0: &DVector<f64>,
+        q1: &DVector<f64>,
+        out: &mut DVector<f64>,
+    ) -> Result<()> {
+        self.check_q(q0)?;
+        self.check_q(q1).map_err(|e| match e {
+            Error::Dimension { expected, got, .. } => {
+                Error::Dimension { what: "q1".into(), expected, got }
+            }
+            Error::NotFinite { index, .. } => Error::NotFinite { what: "q1".into(), index },
+            e => e,
+        })?;
+        if out.len() != self.nv {
+            return Err(Error::Dimension { what: "out".into(), expected: self.nv, got: out.len() });
+        }
+        for j in 1..self.full.njoints() {
+            if let Some((a, b)) = self.reduced_idx[j] {
+                let (n, m) = (self.full.nqs()[j], self.full.nvs()[j]);
+                self.full.joints()[j].difference(
+                    &q0.as_slice()[a..a + n],
+                    &q1.as_slice()[a..a + n],
+                    &mut out.as_mut_slice()[b..b + m],
+                );
+            }
+        }
+        Ok(())
     }
     /// Zeroes `out` (checked `nv × nv`) and writes the diagonal block of each independent joint
     /// `j` from `block(j, reduced idx_q, reduced idx_v, column-major nv_j × nv_j)`.

@@ -819,6 +819,16 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
             reason: e.to_string(),
         })?;
         model.warnings = self.warnings.take();
+        if !model.mimic_joints.is_empty() {
+            let mimics = std::mem::take(&mut model.mimic_joints);
+            let reduced = model.with_mimic_joints(&mimics).map_err(|e| Error::Model {
+                file: self.file.to_string(),
+                line: None,
+                element: format!("robot \"{}\"", model.name),
+                reason: e.to_string(),
+            })?;
+            return Ok(reduced);
+        }
         Ok(model)
     }
 
