@@ -284,16 +284,16 @@ impl MimicSoData {
     }
 }
 
-/// The reduced second-order workspace inside a [`crate::deriv::SoData`] or
-/// [`crate::deriv::FdSoData`] (`what`) of a reduced `model`.
+/// The reduced-coordinate part of a workspace (`what`: [`crate::deriv::SoData`],
+/// [`crate::algo::Centroidal`], …) of a reduced `model`.
 ///
 /// # Errors
 /// [`Error::Workspace`] if the workspace was made for a model without mimic joints.
-pub(crate) fn reduced_so<'a>(
-    red: &'a mut Option<Box<MimicSoData>>,
+pub(crate) fn reduced_ws<'a, T>(
+    red: &'a mut Option<Box<T>>,
     what: &str,
     model: &crate::model::Model,
-) -> Result<&'a mut MimicSoData> {
+) -> Result<&'a mut T> {
     match red {
         Some(so) => Ok(so),
         None => Err(Error::Workspace(format!(
@@ -839,14 +839,8 @@ pub struct MimicKktData {
 /// `nv × nv × nv` for `q̈`, `m × nv × nv` for `λ`) and their workspace.
 #[derive(Clone, Debug)]
 pub struct MimicKktSo {
-    d2qdd_dq2: Tensor3,
-    d2qdd_dv2: Tensor3,
-    d2qdd_dqdv: Tensor3,
-    d2qdd_dtaudq: Tensor3,
-    d2lambda_dq2: Tensor3,
-    d2lambda_dv2: Tensor3,
-    d2lambda_dqdv: Tensor3,
-    d2lambda_dtaudq: Tensor3,
+    /// The result tensors.
+    pub(crate) res: crate::deriv::KktSo,
     /// The full tree's tensors contracted with `G` on `(j, k)` (`nv_f × nv × nv`,
     /// `m × nv × nv`).
     ta: Tensor3,
@@ -865,35 +859,35 @@ pub struct MimicKktSo {
 impl MimicKktSo {
     /// `∂²q̈/∂q²`.
     pub fn d2qdd_dq2(&self) -> &Tensor3 {
-        &self.d2qdd_dq2
+        &self.res.d2qdd_dq2
     }
     /// `∂²q̈/∂v²`.
     pub fn d2qdd_dv2(&self) -> &Tensor3 {
-        &self.d2qdd_dv2
+        &self.res.d2qdd_dv2
     }
     /// `T[(i, j, k)] = ∂/∂v_k (∂q̈_i/∂q_j)`.
     pub fn d2qdd_dqdv(&self) -> &Tensor3 {
-        &self.d2qdd_dqdv
+        &self.res.d2qdd_dqdv
     }
     /// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂τ_j)`.
     pub fn d2qdd_dtaudq(&self) -> &Tensor3 {
-        &self.d2qdd_dtaudq
+        &self.res.d2qdd_dtaudq
     }
     /// `∂²λ/∂q²`.
     pub fn d2lambda_dq2(&self) -> &Tensor3 {
-        &self.d2lambda_dq2
+        &self.res.d2lambda_dq2
     }
     /// `∂²λ/∂v²`.
     pub fn d2lambda_dv2(&self) -> &Tensor3 {
-        &self.d2lambda_dv2
+        &self.res.d2lambda_dv2
     }
     /// `T[(i, j, k)] = ∂/∂v_k (∂λ_i/∂q_j)`.
     pub fn d2lambda_dqdv(&self) -> &Tensor3 {
-        &self.d2lambda_dqdv
+        &self.res.d2lambda_dqdv
     }
     /// `T[(i, j, k)] = ∂/∂q_k (∂λ_i/∂τ_j)`.
     pub fn d2lambda_dtaudq(&self) -> &Tensor3 {
-        &self.d2lambda_dtaudq
+        &self.res.d2lambda_dtaudq
     }
 }
 
@@ -904,14 +898,7 @@ impl MimicKktData {
         let t = |r| Tensor3::zeros(r, n, n);
         self.full = self.full.with_second_order(&model.full);
         self.so = Some(Box::new(MimicKktSo {
-            d2qdd_dq2: t(n),
-            d2qdd_dv2: t(n),
-            d2qdd_dqdv: t(n),
-            d2qdd_dtaudq: t(n),
-            d2lambda_dq2: t(m),
-            d2lambda_dv2: t(m),
-            d2lambda_dqdv: t(m),
-            d2lambda_dtaudq: t(m),
+            res: crate::deriv::KktSo::results(n, m),
             ta: t(nf),
             tl: t(m),
             sa: t(n),
@@ -932,10 +919,14 @@ impl MimicKktData {
     /// Those of [`ContactData::new`] for the full tree (an unknown frame, a contact on the
     /// world, a redundant set).
     pub fn new(model: &MimicModel, contacts: &[crate::model::Contact]) -> Result<Self> {
-        let cd = ContactData::new(&model.full, contacts)?;
+        Ok(Self::from_contacts(model, ContactData::new(&model.full, contacts)?))
+    }
+    /// Workspace for the contacts `cd` (made for the full tree or for the reduced model).
+    pub(crate) fn from_contacts(model: &MimicModel, mut cd: ContactData) -> Self {
+        cd.reduced_key = None;
         let (n, nf, m) = (model.nv, model.full.nv(), cd.dim());
         let mat = |r, c| DMatrix::zeros(r, c);
-        Ok(Self {
+        Self {
             full: KktData::new(&model.full, cd),
             key: model.key,
             jr: mat(m, n),
@@ -960,7 +951,11 @@ impl MimicKktData {
             col_n: DVector::zeros(n),
             col_m: DVector::zeros(m),
             so: None,
-        })
+        }
+    }
+    /// The full tree's KKT workspace (its contacts).
+    pub(crate) fn full_kd(&self) -> &KktData {
+        &self.full
     }
     pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
         if self.key != model.key || self.qdd.len() != model.nv {
@@ -1410,10 +1405,10 @@ fn kkt_so_reduce(
         }
         // T = −R_y⁻¹ S, column by column.
         let (oa, ol) = match pair {
-            0 => (&mut so.d2qdd_dq2, &mut so.d2lambda_dq2),
-            1 => (&mut so.d2qdd_dv2, &mut so.d2lambda_dv2),
-            2 => (&mut so.d2qdd_dqdv, &mut so.d2lambda_dqdv),
-            _ => (&mut so.d2qdd_dtaudq, &mut so.d2lambda_dtaudq),
+            0 => (&mut so.res.d2qdd_dq2, &mut so.res.d2lambda_dq2),
+            1 => (&mut so.res.d2qdd_dv2, &mut so.res.d2lambda_dv2),
+            2 => (&mut so.res.d2qdd_dqdv, &mut so.res.d2lambda_dqdv),
+            _ => (&mut so.res.d2qdd_dtaudq, &mut so.res.d2lambda_dtaudq),
         };
         for k in 0..n {
             for j in 0..n {
@@ -1491,10 +1486,24 @@ pub fn constrained_id_derivatives(
     lambda: &DVector<f64>,
 ) -> Result<()> {
     kd.check(model)?;
+    constrained_id_cd(model, data, &mut kd.full.cd, so, q, v, a, lambda)
+}
+
+/// [`constrained_id_derivatives`] with the full tree's contact workspace `cd`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn constrained_id_cd(
+    model: &MimicModel,
+    data: &mut MimicData,
+    cd: &mut ContactData,
+    so: Option<&mut MimicSoData>,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    lambda: &DVector<f64>,
+) -> Result<()> {
     prepare(model, data, q, Some(v), Some(("a", a)))?;
-    crate::model::check_vec("lambda", lambda, kd.dim())?;
+    crate::model::check_vec("lambda", lambda, cd.dim())?;
     model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
-    let cd = &mut kd.full.cd;
     match so {
         None => crate::deriv::constrained_id_derivatives(
             &model.full,
@@ -1560,10 +1569,8 @@ pub struct MimicImpactData {
 /// their workspace.
 #[derive(Clone, Debug)]
 pub struct MimicImpactSo {
-    d2vplus_dq2: Tensor3,
-    d2vplus_dqdvminus: Tensor3,
-    d2impulse_dq2: Tensor3,
-    d2impulse_dqdvminus: Tensor3,
+    /// The result tensors.
+    pub(crate) res: crate::deriv::ImpactSo,
     /// IDSOZA of the full tree (`∂²(M Δ)/∂q²`).
     id: SoData,
     /// The full tree's `R_qq` at fixed `(Δ, λ̂, w)` (`(nv_f + m) × nv_f × nv_f`).
@@ -1582,19 +1589,19 @@ pub struct MimicImpactSo {
 impl MimicImpactSo {
     /// `∂²q̇⁺/∂q²`.
     pub fn d2vplus_dq2(&self) -> &Tensor3 {
-        &self.d2vplus_dq2
+        &self.res.d2vplus_dq2
     }
     /// `T[(i, j, k)] = ∂/∂q̇⁻_k (∂q̇⁺_i/∂q_j)`.
     pub fn d2vplus_dqdvminus(&self) -> &Tensor3 {
-        &self.d2vplus_dqdvminus
+        &self.res.d2vplus_dqdvminus
     }
     /// `∂²λ̂/∂q²`.
     pub fn d2impulse_dq2(&self) -> &Tensor3 {
-        &self.d2impulse_dq2
+        &self.res.d2impulse_dq2
     }
     /// `T[(i, j, k)] = ∂/∂q̇⁻_k (∂λ̂_i/∂q_j)`.
     pub fn d2impulse_dqdvminus(&self) -> &Tensor3 {
-        &self.d2impulse_dqdvminus
+        &self.res.d2impulse_dqdvminus
     }
 }
 
@@ -1603,10 +1610,7 @@ impl MimicImpactData {
     pub fn with_second_order(mut self, model: &MimicModel) -> Self {
         let (n, nf, m) = (model.nv, model.full.nv(), self.dim());
         self.so = Some(Box::new(MimicImpactSo {
-            d2vplus_dq2: Tensor3::zeros(n, n, n),
-            d2vplus_dqdvminus: Tensor3::zeros(n, n, n),
-            d2impulse_dq2: Tensor3::zeros(m, n, n),
-            d2impulse_dqdvminus: Tensor3::zeros(m, n, n),
+            res: crate::deriv::ImpactSo::results(n, m),
             id: SoData::without_dm_dq(&model.full),
             rf: Tensor3::zeros(nf + m, nf, nf),
             sqq: Tensor3::zeros(n + m, n, n),
@@ -1628,10 +1632,14 @@ impl MimicImpactData {
     /// # Errors
     /// As [`MimicKktData::new`].
     pub fn new(model: &MimicModel, contacts: &[crate::model::Contact]) -> Result<Self> {
-        let cd = ContactData::new(&model.full, contacts)?;
+        Ok(Self::from_contacts(model, ContactData::new(&model.full, contacts)?))
+    }
+    /// Workspace for the contacts `cd` (made for the full tree or for the reduced model).
+    pub(crate) fn from_contacts(model: &MimicModel, mut cd: ContactData) -> Self {
+        cd.reduced_key = None;
         let (n, nf, m) = (model.nv, model.full.nv(), cd.dim());
         let mat = |r, c| DMatrix::zeros(r, c);
-        Ok(Self {
+        Self {
             cd,
             key: model.key,
             restitution: 0.0,
@@ -1653,7 +1661,15 @@ impl MimicImpactData {
             col_n: DVector::zeros(n),
             col_m: DVector::zeros(m),
             so: None,
-        })
+        }
+    }
+    /// The full tree's contact workspace.
+    pub(crate) fn cd(&self) -> &ContactData {
+        &self.cd
+    }
+    /// Coefficient of restitution `e`.
+    pub(crate) fn restitution(&self) -> f64 {
+        self.restitution
     }
     /// Sets the coefficient of restitution `e` (`q̇⁺` of the contact rows is `−e` times `q̇⁻`'s).
     ///
@@ -1999,9 +2015,9 @@ fn impact_so_reduce(
                     cm.as_mut_slice(),
                 );
                 let (oa, ol) = if pass == 0 {
-                    (&mut so.d2vplus_dq2, &mut so.d2impulse_dq2)
+                    (&mut so.res.d2vplus_dq2, &mut so.res.d2impulse_dq2)
                 } else {
-                    (&mut so.d2vplus_dqdvminus, &mut so.d2impulse_dqdvminus)
+                    (&mut so.res.d2vplus_dqdvminus, &mut so.res.d2impulse_dqdvminus)
                 };
                 for i in 0..n {
                     oa[(i, j, k)] = cn[i];

@@ -35,6 +35,9 @@ pub fn point_position(
     frame: usize,
     point: &Vector3<f64>,
 ) -> Result<Vector3<f64>> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::point_position(r, data.reduced(model)?, q, frame, point);
+    }
     model.check_q(q)?;
     data.check_tree(model)?;
     check_frame(model, frame, point)?;
@@ -52,6 +55,9 @@ pub fn point_jacobian(
     point: &Vector3<f64>,
     jac: &mut Matrix3xX<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::point_jacobian(r, data.reduced(model)?, q, frame, point, jac);
+    }
     model.check_q(q)?;
     data.check_tree(model)?;
     check_frame(model, frame, point)?;
@@ -88,6 +94,9 @@ pub fn point_drift(
     frame: usize,
     point: &Vector3<f64>,
 ) -> Result<Vector3<f64>> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::point_drift(r, data.reduced(model)?, q, v, frame, point);
+    }
     model.check_q(q)?;
     data.check_tree(model)?;
     check_vec("v", v, model.nv)?;

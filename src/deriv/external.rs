@@ -55,6 +55,11 @@ pub fn constrained_id_derivatives(
     a: &DVector<f64>,
     lambda: &DVector<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        cd.check(model)?;
+        let md = data.reduced(model)?;
+        return crate::mimic::constrained_id_cd(r, md, cd, None, q, v, a, lambda);
+    }
     check(model, cd, v, a, lambda, q)?;
     data.check_tree(model)?;
     id_derivatives_unchecked(model, data, q, v, a, None);
@@ -82,6 +87,12 @@ pub fn constrained_id_so_derivatives(
     a: &DVector<f64>,
     lambda: &DVector<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        cd.check(model)?;
+        let so = crate::mimic::reduced_ws(&mut so.red, "SoData", model)?;
+        let md = data.reduced(model)?;
+        return crate::mimic::constrained_id_cd(r, md, cd, Some(so), q, v, a, lambda);
+    }
     check(model, cd, v, a, lambda, q)?;
     data.check_tree(model)?;
     so.check_tree(model)?;

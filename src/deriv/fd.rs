@@ -695,7 +695,7 @@ pub fn fd_so_derivatives(
     fext: Option<&[Force]>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        let so = crate::mimic::reduced_so(&mut fso.red, "FdSoData", model)?;
+        let so = crate::mimic::reduced_ws(&mut fso.red, "FdSoData", model)?;
         return crate::mimic::fd_so_derivatives(r, data.reduced(model)?, so, q, v, tau, fext);
     }
     model.check_q(q)?;

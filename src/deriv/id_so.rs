@@ -206,7 +206,7 @@ pub fn id_so_derivatives(
     fext: Option<&[Force]>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        let so = crate::mimic::reduced_so(&mut so.red, "SoData", model)?;
+        let so = crate::mimic::reduced_ws(&mut so.red, "SoData", model)?;
         return crate::mimic::id_so_derivatives(r, data.reduced(model)?, so, q, v, a, fext);
     }
     model.check_q(q)?;

@@ -163,7 +163,7 @@ pub fn idsoza<'a>(
     x: &DVector<f64>,
 ) -> Result<&'a Tensor3> {
     if let Some(r) = &model.reduction {
-        let so = crate::mimic::reduced_so(&mut so.red, "SoData", model)?;
+        let so = crate::mimic::reduced_ws(&mut so.red, "SoData", model)?;
         return crate::mimic::idsoza(r, data.reduced(model)?, so, q, x);
     }
     model.check_q(q)?;
