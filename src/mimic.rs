@@ -1,8 +1,15 @@
 //! Mimic joints: the dynamics and its derivatives in the reduced coordinates.
 //!
+//! A [`Model`](crate::model::Model)(crate::model::Model) in reduced coordinates (a URDF loaded with
+//! [`UrdfOptions::mimic`](crate::model::UrdfOptions::mimic), or
+//! [`Model::with_mimic_joints`](crate::model::Model::with_mimic_joints)) runs every function of
+//! [`crate::algo`], [`crate::deriv`] and [`crate::batch`] with the usual workspaces, which hold
+//! those of this module inside: the plain functions call these. The workspaces and functions of
+//! this module are the implementation of that reduction.
+//!
 //! A mimic joint (URDF `<mimic joint="ref" multiplier="m" offset="c"/>`) follows its reference
 //! joint, `q_mimic = m · q_ref + c`, and has no degree of freedom of its own. A [`MimicModel`]
-//! wraps the full tree (a [`Model`] in which every joint is independent) and the constant map
+//! wraps the full tree (a [`Model`](crate::model::Model) in which every joint is independent) and the constant map
 //! `G` (`nv_full × nv`) from the reduced velocities to the full ones: row `f` of `G` is the unit
 //! row of the reduced DoF of an independent DoF `f`, and `m` in the column of the reference's
 //! DoF for a mimic DoF. Mimic and reference joints are one-DoF joints of one kind (rotational:
@@ -700,7 +707,9 @@ fn mat_vec(a: &[f64], x: &[f64], out: &mut [f64]) {
     }
 }
 
-/// `out = a b` (column-major `n × n`).
+/// `out = a b` (column-major `n × n`). The column loop skips the zero entries of `b`
+/// (block-diagonal `M⁻¹` of robots with several branches): `crate::linalg::gemm` measured
+/// slower on such a model (Baxter, `fd_so`).
 fn mat_mul(a: &[f64], b: &[f64], out: &mut [f64], n: usize) {
     for c in 0..n {
         mat_vec(a, &b[n * c..n * (c + 1)], &mut out[n * c..n * (c + 1)]);

@@ -31,8 +31,8 @@ pub struct MimicJoint {
     pub offset: f64,
 }
 
-/// A model with mimic joints, in the reduced coordinates (see the [module](self)
-/// documentation): the full tree ([`MimicModel::full`]) and the map `G`.
+/// A model with mimic joints, in the reduced coordinates (see the documentation of
+/// [`crate::mimic`]): the full tree ([`MimicModel::full`]) and the map `G`.
 #[derive(Clone, Debug)]
 pub struct MimicModel {
     pub(crate) full: Model,
