@@ -513,7 +513,7 @@ pub fn rnea_batch(
     check_count("vs", vs.len(), n)?;
     check_count("as_", as_.len(), n)?;
     check_count("out_tau", out_tau.len(), n)?;
-    check_vectors("out_tau", out_tau, model.nv)?;
+    check_vectors("out_tau", out_tau, model.nv())?;
     bd.check(model)?;
     drive(bd, n, out_tau, &mut vec![(); n], |data, k, out, _| {
         out.copy_from(rnea(model, data, &qs[k], &vs[k], &as_[k], None)?);
@@ -531,7 +531,7 @@ pub fn crba_batch(
 ) -> Result<()> {
     let n = qs.len();
     check_count("out_m", out_m.len(), n)?;
-    check_matrices("out_m", out_m, model.nv)?;
+    check_matrices("out_m", out_m, model.nv())?;
     bd.check(model)?;
     drive(bd, n, out_m, &mut vec![(); n], |data, k, out, _| {
         copy(&mut *out, crba(model, data, &qs[k])?);
@@ -553,7 +553,7 @@ pub fn aba_batch(
     check_count("vs", vs.len(), n)?;
     check_count("taus", taus.len(), n)?;
     check_count("out_qdd", out_qdd.len(), n)?;
-    check_vectors("out_qdd", out_qdd, model.nv)?;
+    check_vectors("out_qdd", out_qdd, model.nv())?;
     bd.check(model)?;
     drive(bd, n, out_qdd, &mut vec![(); n], |data, k, out, _| {
         out.copy_from(aba(model, data, &qs[k], &vs[k], &taus[k], None)?);
@@ -573,12 +573,12 @@ pub fn id_derivatives_batch(
     out_dv: &mut [DMatrix<f64>],
 ) -> Result<()> {
     let n = qs.len();
-    check_first_order([("vs", vs.len()), ("as_", as_.len())], out_dq, out_dv, n, model.nv)?;
+    check_first_order([("vs", vs.len()), ("as_", as_.len())], out_dq, out_dv, n, model.nv())?;
     bd.check(model)?;
     drive(bd, n, out_dq, out_dv, |data, k, dq, dv| {
         id_derivatives(model, data, &qs[k], &vs[k], &as_[k], None)?;
-        copy(dq, &data.dtau_dq);
-        copy(dv, &data.dtau_dv);
+        copy(dq, data.dtau_dq());
+        copy(dv, data.dtau_dv());
         Ok(())
     })
 }
@@ -596,12 +596,12 @@ pub fn fd_derivatives_batch(
     out_dv: &mut [DMatrix<f64>],
 ) -> Result<()> {
     let n = qs.len();
-    check_first_order([("vs", vs.len()), ("taus", taus.len())], out_dq, out_dv, n, model.nv)?;
+    check_first_order([("vs", vs.len()), ("taus", taus.len())], out_dq, out_dv, n, model.nv())?;
     bd.check(model)?;
     drive(bd, n, out_dq, out_dv, |data, k, dq, dv| {
         fd_derivatives(model, data, &qs[k], &vs[k], &taus[k], None)?;
-        copy(dq, &data.dqdd_dq);
-        copy(dv, &data.dqdd_dv);
+        copy(dq, data.dqdd_dq());
+        copy(dv, data.dqdd_dv());
         Ok(())
     })
 }
@@ -633,7 +633,7 @@ pub fn id_so_derivatives_batch(
     check_count("as_", as_.len(), n)?;
     check_count("out", out.len(), n)?;
     for (k, so) in out.iter().enumerate() {
-        check_tensor_dims("out", k, so.d2tau_dq2().dims(), model.nv)?;
+        check_tensor_dims("out", k, so.d2tau_dq2().dims(), model.nv())?;
     }
     bd.check(model)?;
     drive(bd, n, out, &mut vec![(); n], |data, k, out, _| {
@@ -656,8 +656,10 @@ pub fn fd_so_derivatives_batch(
     check_count("taus", taus.len(), n)?;
     check_count("out", out.len(), n)?;
     for (k, f) in out.iter().enumerate() {
-        check_tensor_dims("out", k, f.d2qdd_dq2().dims(), model.nv)?;
-        check_tensor_dims("out", k, f.id.d2tau_dq2().dims(), model.nv)?;
+        check_tensor_dims("out", k, f.d2qdd_dq2().dims(), model.nv())?;
+        if f.red.is_none() {
+            check_tensor_dims("out", k, f.id.d2tau_dq2().dims(), model.nv())?;
+        }
     }
     bd.check(model)?;
     drive(bd, n, out, &mut vec![(); n], |data, k, out, _| {

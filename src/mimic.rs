@@ -1,8 +1,15 @@
 //! Mimic joints: the dynamics and its derivatives in the reduced coordinates.
 //!
+//! A [`Model`](crate::model::Model)(crate::model::Model) in reduced coordinates (a URDF loaded with
+//! [`UrdfOptions::mimic`](crate::model::UrdfOptions::mimic), or
+//! [`Model::with_mimic_joints`](crate::model::Model::with_mimic_joints)) runs every function of
+//! [`crate::algo`], [`crate::deriv`] and [`crate::batch`] with the usual workspaces, which hold
+//! those of this module inside: the plain functions call these. The workspaces and functions of
+//! this module are the implementation of that reduction.
+//!
 //! A mimic joint (URDF `<mimic joint="ref" multiplier="m" offset="c"/>`) follows its reference
 //! joint, `q_mimic = m · q_ref + c`, and has no degree of freedom of its own. A [`MimicModel`]
-//! wraps the full tree (a [`Model`] in which every joint is independent) and the constant map
+//! wraps the full tree (a [`Model`](crate::model::Model) in which every joint is independent) and the constant map
 //! `G` (`nv_full × nv`) from the reduced velocities to the full ones: row `f` of `G` is the unit
 //! row of the reduced DoF of an independent DoF `f`, and `m` in the column of the reference's
 //! DoF for a mimic DoF. Mimic and reference joints are one-DoF joints of one kind (rotational:
@@ -63,528 +70,17 @@
 use crate::algo::{Data, ReferenceFrame};
 use crate::deriv::{ContactData, KktData, SoData};
 use crate::error::{Error, Result};
-use crate::model::{JointType, Model, UrdfOptions};
-use crate::rng::Rng;
 use crate::spatial::{Force, Motion, Transform};
 use crate::tensor::Tensor3;
 use nalgebra::{DMatrix, DVector, Matrix3xX, Matrix6xX, Vector3};
-use std::path::Path;
 
 pub mod batch;
 pub mod kinematics;
+pub use crate::model::MimicJoint;
+pub use crate::model::reduction::MimicModel;
 pub use kinematics::{
     centroidal_momentum, forward_kinematics, point_drift, point_jacobian, point_position,
 };
-
-/// One mimic constraint `q[joint] = multiplier · q[reference] + offset` between two one-DoF
-/// joints of the full model (indices of [`Model::names`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MimicJoint {
-    /// The mimic joint (it has no degree of freedom in the reduced model).
-    pub joint: usize,
-    /// The joint it follows (an independent joint).
-    pub reference: usize,
-    /// `m` in `q = m · q_ref + c` (URDF default 1).
-    pub multiplier: f64,
-    /// `c` in `q = m · q_ref + c` (URDF default 0).
-    pub offset: f64,
-}
-
-/// A model with mimic joints, in the reduced coordinates (see the [module](self)
-/// documentation): the full tree ([`MimicModel::full`]) and the map `G`.
-#[derive(Clone, Debug)]
-pub struct MimicModel {
-    full: Model,
-    mimics: Vec<MimicJoint>,
-    nq: usize,
-    nv: usize,
-    /// Per full configuration coordinate: `(reduced index, coefficient, offset)`.
-    q_map: Vec<(usize, f64, f64)>,
-    /// Row `f` of `G`: its one non-zero entry `g_coef[f]` is in column `g_col[f]`.
-    g_col: Vec<usize>,
-    g_coef: Vec<f64>,
-    /// The full index of each reduced configuration coordinate / velocity coordinate.
-    q_keep: Vec<usize>,
-    v_keep: Vec<usize>,
-    /// Per joint of the full model: its first reduced configuration and velocity indices, or
-    /// `None` for a mimic joint.
-    reduced_idx: Vec<Option<(usize, usize)>>,
-    /// Identifies the model for the workspaces.
-    key: u64,
-}
-
-/// Whether a joint type can be a mimic or reference joint: `Some(true)` rotational, `Some(false)`
-/// prismatic, `None` otherwise.
-fn one_dof_kind(j: &JointType) -> Option<bool> {
-    match j {
-        JointType::Revolute { .. } | JointType::Continuous { .. } => Some(true),
-        JointType::Prismatic { .. } => Some(false),
-        _ => None,
-    }
-}
-
-impl MimicModel {
-    /// The reduced model of `full` with the constraints `mimics`.
-    ///
-    /// # Errors
-    /// [`Error::Build`] naming the joint if a constraint names a joint index that does not
-    /// exist or the world, a joint mimics itself, a joint is constrained twice, a reference
-    /// joint is itself a mimic joint, either joint is not a one-DoF revolute, continuous or
-    /// prismatic joint, the two are not of one kind (both rotational or both prismatic), or
-    /// the multiplier or offset is not finite.
-    pub fn new(full: Model, mimics: &[MimicJoint]) -> Result<Self> {
-        let nj = full.njoints();
-        let name = |i: usize| full.names()[i].clone();
-        let mut is_mimic = vec![false; nj];
-        for (k, m) in mimics.iter().enumerate() {
-            let bad = |why: String| Err(Error::Build(format!("mimic constraint {k}: {why}")));
-            if m.joint == 0 || m.joint >= nj {
-                return bad(format!("joint index {} is not a moving joint of the model", m.joint));
-            }
-            let who = format!("joint \"{}\" (index {})", name(m.joint), m.joint);
-            if m.reference == 0 || m.reference >= nj {
-                return bad(format!(
-                    "{who}: reference joint index {} is not a moving joint of the model",
-                    m.reference
-                ));
-            }
-            if m.reference == m.joint {
-                return bad(format!("{who} cannot mimic itself"));
-            }
-            if is_mimic[m.joint] {
-                return bad(format!("{who} is constrained twice"));
-            }
-            is_mimic[m.joint] = true;
-            let (kj, kr) =
-                (one_dof_kind(&full.joints()[m.joint]), one_dof_kind(&full.joints()[m.reference]));
-            let rname = name(m.reference);
-            match (kj, kr) {
-                (None, _) => {
-                    return bad(format!(
-                        "{who} is {}: a mimic joint must be revolute, continuous or prismatic",
-                        full.joints()[m.joint].name()
-                    ));
-                }
-                (_, None) => {
-                    return bad(format!(
-                        "{who}: the reference joint \"{rname}\" is {}, not a revolute, \
-                         continuous or prismatic joint",
-                        full.joints()[m.reference].name()
-                    ));
-                }
-                (Some(a), Some(b)) if a != b => {
-                    return bad(format!(
-                        "{who} is {} and its reference joint \"{rname}\" {}: both must be \
-                         rotational (revolute, continuous) or both prismatic",
-                        full.joints()[m.joint].name(),
-                        full.joints()[m.reference].name()
-                    ));
-                }
-                _ => {}
-            }
-            if !m.multiplier.is_finite() || !m.offset.is_finite() {
-                return bad(format!(
-                    "{who}: multiplier {} and offset {} must be finite",
-                    m.multiplier, m.offset
-                ));
-            }
-        }
-        for (k, m) in mimics.iter().enumerate() {
-            if is_mimic[m.reference] {
-                return Err(Error::Build(format!(
-                    "mimic constraint {k}: joint \"{}\" (index {}): the reference joint \"{}\" is \
-                     itself a mimic joint",
-                    name(m.joint),
-                    m.joint,
-                    name(m.reference)
-                )));
-            }
-        }
-        // Reduced indices of the independent joints, in the order of the full model.
-        let mut reduced_idx = vec![None; nj];
-        let (mut nq, mut nv) = (0, 0);
-        let (mut q_keep, mut v_keep) = (Vec::new(), Vec::new());
-        reduced_idx[0] = Some((0, 0));
-        for i in 1..nj {
-            if is_mimic[i] {
-                continue;
-            }
-            reduced_idx[i] = Some((nq, nv));
-            q_keep.extend(full.idx_q()[i]..full.idx_q()[i] + full.nqs()[i]);
-            v_keep.extend(full.idx_v()[i]..full.idx_v()[i] + full.nvs()[i]);
-            nq += full.nqs()[i];
-            nv += full.nvs()[i];
-        }
-        let mut q_map = vec![(0, 1.0, 0.0); full.nq()];
-        let mut g_col = vec![0; full.nv()];
-        let mut g_coef = vec![1.0; full.nv()];
-        for (r, &f) in q_keep.iter().enumerate() {
-            q_map[f] = (r, 1.0, 0.0);
-        }
-        for (r, &f) in v_keep.iter().enumerate() {
-            g_col[f] = r;
-        }
-        for m in mimics {
-            let (rq, rv) = reduced_idx[m.reference].expect("a reference joint is independent");
-            q_map[full.idx_q()[m.joint]] = (rq, m.multiplier, m.offset);
-            g_col[full.idx_v()[m.joint]] = rv;
-            g_coef[full.idx_v()[m.joint]] = m.multiplier;
-        }
-        let key = {
-            use std::hash::{Hash, Hasher};
-            let mut h = std::collections::hash_map::DefaultHasher::new();
-            (full.nq(), full.nv(), full.parents()).hash(&mut h);
-            for m in mimics {
-                (m.joint, m.reference, m.multiplier.to_bits(), m.offset.to_bits()).hash(&mut h);
-            }
-            h.finish()
-        };
-        let mut mimics = mimics.to_vec();
-        mimics.sort_by_key(|m| m.joint);
-        Ok(Self { full, mimics, nq, nv, q_map, g_col, g_coef, q_keep, v_keep, reduced_idx, key })
-    }
-
-    /// The reduced model of `full` with its own constraints ([`Model::mimic_joints`], read by
-    /// the URDF loader with [`UrdfOptions::mimic`]); none for other models.
-    ///
-    /// # Errors
-    /// As [`MimicModel::new`].
-    pub fn from_model(full: Model) -> Result<Self> {
-        let mimics = full.mimic_joints().to_vec();
-        Self::new(full, &mimics)
-    }
-
-    /// Loads a URDF file with its `<mimic>` constraints (the options with
-    /// [`UrdfOptions::mimic`] set; see [`crate::model::urdf`]).
-    ///
-    /// # Errors
-    /// Those of [`crate::model::load_urdf_file`], among them a `<mimic>` whose reference joint
-    /// is unknown, is itself a mimic joint, or is not a one-DoF joint of the mimic joint's kind
-    /// (naming the file, line and joint).
-    pub fn load_urdf_file(path: &Path, opts: &UrdfOptions) -> Result<Self> {
-        let opts = UrdfOptions { mimic: true, ..*opts };
-        Self::from_model(crate::model::load_urdf_file(path, &opts)?)
-    }
-
-    /// As [`MimicModel::load_urdf_file`] from a string (`source_name` names it in errors).
-    ///
-    /// # Errors
-    /// As [`MimicModel::load_urdf_file`].
-    pub fn load_urdf_str(xml: &str, source_name: &str, opts: &UrdfOptions) -> Result<Self> {
-        let opts = UrdfOptions { mimic: true, ..*opts };
-        Self::from_model(crate::model::load_urdf_str(xml, source_name, &opts)?)
-    }
-
-    /// Sets gravity (a linear acceleration in the world frame), as [`Model::set_gravity`].
-    ///
-    /// # Errors
-    /// [`Error::NotFinite`] if an entry is not finite (the model is unchanged).
-    pub fn set_gravity(&mut self, g: nalgebra::Vector3<f64>) -> Result<()> {
-        self.full.set_gravity(g)
-    }
-    /// The full tree, every joint independent (its `nq`, `nv` count the mimic joints).
-    pub fn full(&self) -> &Model {
-        &self.full
-    }
-    /// The constraints, by increasing joint index.
-    pub fn mimics(&self) -> &[MimicJoint] {
-        &self.mimics
-    }
-    /// The model name.
-    pub fn name(&self) -> &str {
-        self.full.name()
-    }
-    /// Reduced configuration dimension.
-    pub fn nq(&self) -> usize {
-        self.nq
-    }
-    /// Reduced velocity dimension (degrees of freedom).
-    pub fn nv(&self) -> usize {
-        self.nv
-    }
-    /// Per joint of the full model, its first reduced configuration and velocity indices
-    /// `(idx_q, idx_v)`, or `None` for a mimic joint (index 0, the world: `Some((0, 0))`).
-    pub fn reduced_idx(&self) -> &[Option<(usize, usize)>] {
-        &self.reduced_idx
-    }
-    /// The full velocity index of each reduced velocity coordinate.
-    pub fn v_keep(&self) -> &[usize] {
-        &self.v_keep
-    }
-    /// The full configuration index of each reduced configuration coordinate.
-    pub fn q_keep(&self) -> &[usize] {
-        &self.q_keep
-    }
-    /// The map `G` (`full().nv() × nv()`), `v_full = G v`, as a dense matrix (allocates).
-    pub fn g(&self) -> DMatrix<f64> {
-        let mut g = DMatrix::zeros(self.full.nv(), self.nv);
-        for (f, (&c, &x)) in self.g_col.iter().zip(&self.g_coef).enumerate() {
-            g[(f, c)] = x;
-        }
-        g
-    }
-    /// `q_full = expand(q)` into `out` (length `full().nq()`). Lengths are not checked.
-    pub fn expand_q_into(&self, q: &[f64], out: &mut [f64]) {
-        for (o, &(r, m, c)) in out.iter_mut().zip(&self.q_map) {
-            *o = m * q[r] + c;
-        }
-    }
-    /// `v_full = G v` into `out` (length `full().nv()`). Lengths are not checked.
-    pub fn expand_v_into(&self, v: &[f64], out: &mut [f64]) {
-        for ((o, &r), &m) in out.iter_mut().zip(&self.g_col).zip(&self.g_coef) {
-            *o = m * v[r];
-        }
-    }
-    /// `y = Gᵀ x` (`x` of length `full().nv()`, `y` of length `nv()`). Lengths are not checked.
-    pub fn reduce_force_into(&self, x: &[f64], y: &mut [f64]) {
-        y.fill(0.0);
-        for ((&xf, &r), &m) in x.iter().zip(&self.g_col).zip(&self.g_coef) {
-            y[r] += m * xf;
-        }
-    }
-    /// `expand(q)` (allocates).
-    ///
-    /// # Errors
-    /// As [`MimicModel::check_q`].
-    pub fn expand_q(&self, q: &DVector<f64>) -> Result<DVector<f64>> {
-        self.check_q(q)?;
-        let mut out = DVector::zeros(self.full.nq());
-        self.expand_q_into(q.as_slice(), out.as_mut_slice());
-        Ok(out)
-    }
-    /// The reduced coordinates of a full configuration: its independent coordinates (the mimic
-    /// joints' values are dropped, not checked).
-    ///
-    /// # Errors
-    /// [`Error::Dimension`] if `q_full.len() != full().nq()`.
-    pub fn reduce_q(&self, q_full: &DVector<f64>) -> Result<DVector<f64>> {
-        if q_full.len() != self.full.nq() {
-            return Err(Error::Dimension {
-                what: "q_full".into(),
-                expected: self.full.nq(),
-                got: q_full.len(),
-            });
-        }
-        Ok(DVector::from_iterator(self.nq, self.q_keep.iter().map(|&f| q_full[f])))
-    }
-    /// The neutral configuration (each mimic joint then sits at its offset).
-    pub fn neutral(&self) -> DVector<f64> {
-        self.select_q(&self.full.neutral())
-    }
-    /// A random valid configuration: that of [`Model::random_configuration`] of the full model,
-    /// its independent coordinates.
-    pub fn random_configuration(&self, rng: &mut Rng) -> DVector<f64> {
-        self.select_q(&self.full.random_configuration(rng))
-    }
-    fn select_q(&self, q_full: &DVector<f64>) -> DVector<f64> {
-        DVector::from_iterator(self.nq, self.q_keep.iter().map(|&f| q_full[f]))
-    }
-    fn select_v(&self, v_full: &DVector<f64>) -> DVector<f64> {
-        DVector::from_iterator(self.nv, self.v_keep.iter().map(|&f| v_full[f]))
-    }
-    /// `q ⊕ δ` in the reduced coordinates (joint by joint, as [`Model::integrate`]).
-    ///
-    /// # Errors
-    /// As [`MimicModel::check_q`] and [`MimicModel::check_v`] (`"delta"`).
-    pub fn integrate(&self, q: &DVector<f64>, delta: &DVector<f64>) -> Result<DVector<f64>> {
-        let qf = self.expand_q(q)?;
-        self.check_v("delta", delta)?;
-        let mut df = DVector::zeros(self.full.nv());
-        self.expand_v_into(delta.as_slice(), df.as_mut_slice());
-        Ok(self.select_q(&self.full.integrate(&qf, &df)?))
-    }
-    /// `q₁ ⊖ q₀` in the reduced coordinates (the inverse of [`MimicModel::integrate`]).
-    ///
-    /// # Errors
-    /// As [`MimicModel::check_q`] for `q0` and `q1`.
-    pub fn difference(&self, q0: &DVector<f64>, q1: &DVector<f64>) -> Result<DVector<f64>> {
-        let q0f = self.expand_q(q0)?;
-        let q1f = self.expand_q(q1).map_err(|e| match e {
-            Error::Dimension { expected, got, .. } => {
-                Error::Dimension { what: "q1".into(), expected, got }
-            }
-            Error::NotFinite { index, .. } => Error::NotFinite { what: "q1".into(), index },
-            e => e,
-        })?;
-        Ok(self.select_v(&self.full.difference(&q0f, &q1f)?))
-    }
-    /// `∂(q ⊕ δ)/∂q` (`arg = First`) or `∂(q ⊕ δ)/∂δ` (`Second`) in the reduced coordinates
-    /// (`nv × nv`): the reduced configuration space is the product of the independent joints'
-    /// spaces, so this is block diagonal by independent joint, each block that of
-    /// [`Model::d_integrate`] (the rows and columns of the independent DoFs of the full
-    /// model's at `expand(q)`, `G δ`). [`MimicModel::d_integrate_into`] does not allocate.
-    ///
-    /// # Errors
-    /// As [`MimicModel::check_q`]; `delta` of the wrong length or not finite.
-    pub fn d_integrate(
-        &self,
-        q: &DVector<f64>,
-        delta: &DVector<f64>,
-        arg: crate::model::Arg,
-    ) -> Result<DMatrix<f64>> {
-        let mut out = DMatrix::zeros(self.nv, self.nv);
-        self.d_integrate_into(q, delta, arg, &mut out)?;
-        Ok(out)
-    }
-    /// [`MimicModel::d_integrate`] into `out` (`nv × nv`; every entry written).
-    ///
-    /// # Errors
-    /// As [`MimicModel::d_integrate`]; `out` not `nv × nv`.
-    pub fn d_integrate_into(
-        &self,
-        q: &DVector<f64>,
-        delta: &DVector<f64>,
-        arg: crate::model::Arg,
-        out: &mut DMatrix<f64>,
-    ) -> Result<()> {
-        self.check_q(q)?;
-        self.check_v("delta", delta)?;
-        self.lie_blocks(out, |j, a, b, blk| {
-            let (n, m) = (self.full.nqs()[j], self.full.nvs()[j]);
-            self.full.joints()[j].d_integrate(
-                &q.as_slice()[a..a + n],
-                &delta.as_slice()[b..b + m],
-                arg,
-                blk,
-            );
-        })
-    }
-    /// `∂(q₁ ⊖ q₀)/∂q₀` (`arg = First`) or `∂(q₁ ⊖ q₀)/∂q₁` (`Second`) in the reduced
-    /// coordinates (`nv × nv`, block diagonal by independent joint, each block that of
-    /// [`Model::d_difference`]). [`MimicModel::d_difference_into`] does not allocate.
-    ///
-    /// # Errors
-    /// As [`MimicModel::check_q`] for `q0` and `q1`.
-    pub fn d_difference(
-        &self,
-        q0: &DVector<f64>,
-        q1: &DVector<f64>,
-        arg: crate::model::Arg,
-    ) -> Result<DMatrix<f64>> {
-        let mut out = DMatrix::zeros(self.nv, self.nv);
-        self.d_difference_into(q0, q1, arg, &mut out)?;
-        Ok(out)
-    }
-    /// [`MimicModel::d_difference`] into `out` (`nv × nv`; every entry written).
-    ///
-    /// # Errors
-    /// As [`MimicModel::d_difference`]; `out` not `nv × nv`.
-    pub fn d_difference_into(
-        &self,
-        q0: &DVector<f64>,
-        q1: &DVector<f64>,
-        arg: crate::model::Arg,
-        out: &mut DMatrix<f64>,
-    ) -> Result<()> {
-        self.check_q(q0)?;
-        self.check_q(q1).map_err(|e| match e {
-            Error::Dimension { expected, got, .. } => {
-                Error::Dimension { what: "q1".into(), expected, got }
-            }
-            Error::NotFinite { index, .. } => Error::NotFinite { what: "q1".into(), index },
-            e => e,
-        })?;
-        self.lie_blocks(out, |j, a, _, blk| {
-            let n = self.full.nqs()[j];
-            self.full.joints()[j].d_difference(
-                &q0.as_slice()[a..a + n],
-                &q1.as_slice()[a..a + n],
-                arg,
-                blk,
-            );
-        })
-    }
-    /// Zeroes `out` (checked `nv × nv`) and writes the diagonal block of each independent joint
-    /// `j` from `block(j, reduced idx_q, reduced idx_v, column-major nv_j × nv_j)`.
-    fn lie_blocks(
-        &self,
-        out: &mut DMatrix<f64>,
-        mut block: impl FnMut(usize, usize, usize, &mut [f64]),
-    ) -> Result<()> {
-        if out.shape() != (self.nv, self.nv) {
-            return Err(Error::Dimension {
-                what: "out (nv × nv) rows × cols".into(),
-                expected: self.nv * self.nv,
-                got: out.nrows() * out.ncols(),
-            });
-        }
-        out.fill(0.0);
-        let mut blk = [0.0; 36];
-        for j in 1..self.full.njoints() {
-            if let Some((a, b)) = self.reduced_idx[j] {
-                let m = self.full.nvs()[j];
-                block(j, a, b, &mut blk);
-                for c in 0..m {
-                    for r in 0..m {
-                        out[(b + r, b + c)] = blk[c * m + r];
-                    }
-                }
-            }
-        }
-        Ok(())
-    }
-    /// Checks a reduced configuration: length `nq`, finite, unit quaternions (the last naming
-    /// the joint).
-    ///
-    /// # Errors
-    /// [`Error::Dimension`], [`Error::NotFinite`] (reduced index) or
-    /// [`Error::InvalidConfiguration`].
-    pub fn check_q(&self, q: &DVector<f64>) -> Result<()> {
-        crate::model::check_vec("q", q, self.nq)?;
-        for i in 1..self.full.njoints() {
-            if let Some((a, _)) = self.reduced_idx[i] {
-                let n = self.full.nqs()[i];
-                self.full.joints()[i].check_configuration(&q.as_slice()[a..a + n]).map_err(
-                    |reason| Error::InvalidConfiguration {
-                        joint: self.full.names()[i].clone(),
-                        reason: format!("{reason} (q indices {a}..{})", a + n),
-                    },
-                )?;
-            }
-        }
-        Ok(())
-    }
-    /// Checks a velocity-sized vector: length `nv`, finite.
-    ///
-    /// # Errors
-    /// [`Error::Dimension`] or [`Error::NotFinite`] naming `what`.
-    pub fn check_v(&self, what: &str, x: &DVector<f64>) -> Result<()> {
-        crate::model::check_vec(what, x, self.nv)
-    }
-    /// `out = Gᵀ x G` (`x`: `full().nv()` square, `out`: `nv()` square).
-    fn reduce_matrix(&self, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
-        out.fill(0.0);
-        let nf = self.full.nv();
-        let (xs, n) = (x.as_slice(), self.nv);
-        let os = out.as_mut_slice();
-        for b in 0..nf {
-            let (cb, mb) = (self.g_col[b], self.g_coef[b]);
-            for a in 0..nf {
-                os[self.g_col[a] + n * cb] += self.g_coef[a] * mb * xs[a + nf * b];
-            }
-        }
-    }
-    /// `out[r, s, t] = Σ G[i, r] G[j, s] G[k, t] x[i, j, k]`.
-    fn reduce_tensor(&self, x: &Tensor3, out: &mut Tensor3) {
-        out.fill(0.0);
-        let nf = self.full.nv();
-        let n = self.nv;
-        let xs = x.as_slice();
-        let os = out.as_mut_slice();
-        for k in 0..nf {
-            let (ck, mk) = (self.g_col[k], self.g_coef[k]);
-            for j in 0..nf {
-                let (cj, mj) = (self.g_col[j], self.g_coef[j]);
-                let m = mk * mj;
-                let src = &xs[nf * (j + nf * k)..nf * (j + nf * k + 1)];
-                let dst = n * (cj + n * ck);
-                for ((&xi, &ci), &mi) in src.iter().zip(&self.g_col).zip(&self.g_coef) {
-                    os[dst + ci] += m * mi * xi;
-                }
-            }
-        }
-    }
-}
 
 /// Workspace of the first-order algorithms of a [`MimicModel`] (the full model's [`Data`] and
 /// the reduced results), allocated once by [`MimicData::new`].
@@ -595,6 +91,8 @@ pub struct MimicData {
     v: DVector<f64>,
     a: DVector<f64>,
     tau: DVector<f64>,
+    /// `b` of [`nonlinear_effects`].
+    nle: DVector<f64>,
     qdd: DVector<f64>,
     m: DMatrix<f64>,
     ldl: DMatrix<f64>,
@@ -627,6 +125,7 @@ impl MimicData {
             v: DVector::zeros(f.nv()),
             a: DVector::zeros(f.nv()),
             tau: DVector::zeros(n),
+            nle: DVector::zeros(n),
             qdd: DVector::zeros(n),
             m: sq(),
             ldl: sq(),
@@ -643,7 +142,7 @@ impl MimicData {
             key: model.key,
         }
     }
-    fn check(&self, model: &MimicModel) -> Result<()> {
+    pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
         if self.key != model.key || self.tau.len() != model.nv {
             return Err(Error::Workspace(format!(
                 "MimicData was made for another model; make it with MimicData::new for the \
@@ -670,9 +169,13 @@ impl MimicData {
         &self.a
     }
     /// `τ` (reduced): of [`rnea`], [`id_derivatives`], [`id_so_derivatives`], and of inverse
-    /// dynamics at `q̈` for the forward-dynamics derivatives; `b` of [`nonlinear_effects`].
+    /// dynamics at `q̈` for the forward-dynamics derivatives.
     pub fn tau(&self) -> &DVector<f64> {
         &self.tau
+    }
+    /// `b` of [`nonlinear_effects`].
+    pub fn nle(&self) -> &DVector<f64> {
+        &self.nle
     }
     /// `q̈` of [`aba`], [`fd_derivatives`], [`fd_so_derivatives`].
     pub fn qdd(&self) -> &DVector<f64> {
@@ -744,7 +247,7 @@ impl MimicSoData {
             key: model.key,
         }
     }
-    fn check(&self, model: &MimicModel) -> Result<()> {
+    pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
         if self.key != model.key || self.page.nrows() != model.nv {
             return Err(Error::Workspace(format!(
                 "MimicSoData was made for another model; make it with MimicSoData::new for the \
@@ -785,6 +288,26 @@ impl MimicSoData {
     /// `T[(i, j, k)] = ∂(M⁻¹)_ij/∂q_k`.
     pub fn d2qdd_dtaudq(&self) -> &Tensor3 {
         &self.d2qdd_dtaudq
+    }
+}
+
+/// The reduced-coordinate part of a workspace (`what`: [`crate::deriv::SoData`],
+/// [`crate::algo::Centroidal`], …) of a reduced `model`.
+///
+/// # Errors
+/// [`Error::Workspace`] if the workspace was made for a model without mimic joints.
+pub(crate) fn reduced_ws<'a, T>(
+    red: &'a mut Option<Box<T>>,
+    what: &str,
+    model: &crate::model::Model,
+) -> Result<&'a mut T> {
+    match red {
+        Some(so) => Ok(so),
+        None => Err(Error::Workspace(format!(
+            "{what} was made for a model without mimic joints, model \"{}\" is in reduced \
+             coordinates; make it with {what}::new for this model",
+            model.name()
+        ))),
     }
 }
 
@@ -835,7 +358,7 @@ pub fn rnea<'a>(
 
 /// Nonlinear effects `b = Gᵀ b_full(expand(q), G v)` (`b_full = C_full q̇_full + g_full`, minus
 /// the generalised `fext`: the full model's RNEA at `G q̈ = 0`), i.e. [`rnea`] at `a = 0`.
-/// Returns `data.tau()`; leaves `data.a_full()` zero.
+/// Returns `data.nle()`; leaves `data.a_full()` zero.
 ///
 /// # Errors
 /// As [`rnea`] (`q`, `v`, `fext`).
@@ -847,9 +370,9 @@ pub fn nonlinear_effects<'a>(
     fext: Option<&[Force]>,
 ) -> Result<&'a DVector<f64>> {
     prepare(model, data, q, Some(v), None)?;
-    let MimicData { full, q, v, a, tau, .. } = data;
-    bias_into(model, full, q, v, a, fext, tau.as_mut_slice())?;
-    Ok(&data.tau)
+    let MimicData { full, q, v, a, nle, .. } = data;
+    bias_into(model, full, q, v, a, fext, nle.as_mut_slice())?;
+    Ok(&data.nle)
 }
 
 /// `out = Gᵀ b_full(q_full, v_full)` (the full model's RNEA with `a_full ← 0`).
@@ -1184,7 +707,9 @@ fn mat_vec(a: &[f64], x: &[f64], out: &mut [f64]) {
     }
 }
 
-/// `out = a b` (column-major `n × n`).
+/// `out = a b` (column-major `n × n`). The column loop skips the zero entries of `b`
+/// (block-diagonal `M⁻¹` of robots with several branches): `crate::linalg::gemm` measured
+/// slower on such a model (Baxter, `fd_so`).
 fn mat_mul(a: &[f64], b: &[f64], out: &mut [f64], n: usize) {
     for c in 0..n {
         mat_vec(a, &b[n * c..n * (c + 1)], &mut out[n * c..n * (c + 1)]);
@@ -1323,14 +848,8 @@ pub struct MimicKktData {
 /// `nv × nv × nv` for `q̈`, `m × nv × nv` for `λ`) and their workspace.
 #[derive(Clone, Debug)]
 pub struct MimicKktSo {
-    d2qdd_dq2: Tensor3,
-    d2qdd_dv2: Tensor3,
-    d2qdd_dqdv: Tensor3,
-    d2qdd_dtaudq: Tensor3,
-    d2lambda_dq2: Tensor3,
-    d2lambda_dv2: Tensor3,
-    d2lambda_dqdv: Tensor3,
-    d2lambda_dtaudq: Tensor3,
+    /// The result tensors.
+    pub(crate) res: crate::deriv::KktSo,
     /// The full tree's tensors contracted with `G` on `(j, k)` (`nv_f × nv × nv`,
     /// `m × nv × nv`).
     ta: Tensor3,
@@ -1349,35 +868,35 @@ pub struct MimicKktSo {
 impl MimicKktSo {
     /// `∂²q̈/∂q²`.
     pub fn d2qdd_dq2(&self) -> &Tensor3 {
-        &self.d2qdd_dq2
+        &self.res.d2qdd_dq2
     }
     /// `∂²q̈/∂v²`.
     pub fn d2qdd_dv2(&self) -> &Tensor3 {
-        &self.d2qdd_dv2
+        &self.res.d2qdd_dv2
     }
     /// `T[(i, j, k)] = ∂/∂v_k (∂q̈_i/∂q_j)`.
     pub fn d2qdd_dqdv(&self) -> &Tensor3 {
-        &self.d2qdd_dqdv
+        &self.res.d2qdd_dqdv
     }
     /// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂τ_j)`.
     pub fn d2qdd_dtaudq(&self) -> &Tensor3 {
-        &self.d2qdd_dtaudq
+        &self.res.d2qdd_dtaudq
     }
     /// `∂²λ/∂q²`.
     pub fn d2lambda_dq2(&self) -> &Tensor3 {
-        &self.d2lambda_dq2
+        &self.res.d2lambda_dq2
     }
     /// `∂²λ/∂v²`.
     pub fn d2lambda_dv2(&self) -> &Tensor3 {
-        &self.d2lambda_dv2
+        &self.res.d2lambda_dv2
     }
     /// `T[(i, j, k)] = ∂/∂v_k (∂λ_i/∂q_j)`.
     pub fn d2lambda_dqdv(&self) -> &Tensor3 {
-        &self.d2lambda_dqdv
+        &self.res.d2lambda_dqdv
     }
     /// `T[(i, j, k)] = ∂/∂q_k (∂λ_i/∂τ_j)`.
     pub fn d2lambda_dtaudq(&self) -> &Tensor3 {
-        &self.d2lambda_dtaudq
+        &self.res.d2lambda_dtaudq
     }
 }
 
@@ -1388,14 +907,7 @@ impl MimicKktData {
         let t = |r| Tensor3::zeros(r, n, n);
         self.full = self.full.with_second_order(&model.full);
         self.so = Some(Box::new(MimicKktSo {
-            d2qdd_dq2: t(n),
-            d2qdd_dv2: t(n),
-            d2qdd_dqdv: t(n),
-            d2qdd_dtaudq: t(n),
-            d2lambda_dq2: t(m),
-            d2lambda_dv2: t(m),
-            d2lambda_dqdv: t(m),
-            d2lambda_dtaudq: t(m),
+            res: crate::deriv::KktSo::results(n, m),
             ta: t(nf),
             tl: t(m),
             sa: t(n),
@@ -1416,10 +928,14 @@ impl MimicKktData {
     /// Those of [`ContactData::new`] for the full tree (an unknown frame, a contact on the
     /// world, a redundant set).
     pub fn new(model: &MimicModel, contacts: &[crate::model::Contact]) -> Result<Self> {
-        let cd = ContactData::new(&model.full, contacts)?;
+        Ok(Self::from_contacts(model, ContactData::new(&model.full, contacts)?))
+    }
+    /// Workspace for the contacts `cd` (made for the full tree or for the reduced model).
+    pub(crate) fn from_contacts(model: &MimicModel, mut cd: ContactData) -> Self {
+        cd.reduced_key = None;
         let (n, nf, m) = (model.nv, model.full.nv(), cd.dim());
         let mat = |r, c| DMatrix::zeros(r, c);
-        Ok(Self {
+        Self {
             full: KktData::new(&model.full, cd),
             key: model.key,
             jr: mat(m, n),
@@ -1444,9 +960,13 @@ impl MimicKktData {
             col_n: DVector::zeros(n),
             col_m: DVector::zeros(m),
             so: None,
-        })
+        }
     }
-    fn check(&self, model: &MimicModel) -> Result<()> {
+    /// The full tree's KKT workspace (its contacts).
+    pub(crate) fn full_kd(&self) -> &KktData {
+        &self.full
+    }
+    pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
         if self.key != model.key || self.qdd.len() != model.nv {
             return Err(Error::Workspace(format!(
                 "MimicKktData was made for another model; make it with MimicKktData::new for \
@@ -1894,10 +1414,10 @@ fn kkt_so_reduce(
         }
         // T = −R_y⁻¹ S, column by column.
         let (oa, ol) = match pair {
-            0 => (&mut so.d2qdd_dq2, &mut so.d2lambda_dq2),
-            1 => (&mut so.d2qdd_dv2, &mut so.d2lambda_dv2),
-            2 => (&mut so.d2qdd_dqdv, &mut so.d2lambda_dqdv),
-            _ => (&mut so.d2qdd_dtaudq, &mut so.d2lambda_dtaudq),
+            0 => (&mut so.res.d2qdd_dq2, &mut so.res.d2lambda_dq2),
+            1 => (&mut so.res.d2qdd_dv2, &mut so.res.d2lambda_dv2),
+            2 => (&mut so.res.d2qdd_dqdv, &mut so.res.d2lambda_dqdv),
+            _ => (&mut so.res.d2qdd_dtaudq, &mut so.res.d2lambda_dtaudq),
         };
         for k in 0..n {
             for j in 0..n {
@@ -1975,10 +1495,24 @@ pub fn constrained_id_derivatives(
     lambda: &DVector<f64>,
 ) -> Result<()> {
     kd.check(model)?;
+    constrained_id_cd(model, data, &mut kd.full.cd, so, q, v, a, lambda)
+}
+
+/// [`constrained_id_derivatives`] with the full tree's contact workspace `cd`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn constrained_id_cd(
+    model: &MimicModel,
+    data: &mut MimicData,
+    cd: &mut ContactData,
+    so: Option<&mut MimicSoData>,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    lambda: &DVector<f64>,
+) -> Result<()> {
     prepare(model, data, q, Some(v), Some(("a", a)))?;
-    crate::model::check_vec("lambda", lambda, kd.dim())?;
+    crate::model::check_vec("lambda", lambda, cd.dim())?;
     model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
-    let cd = &mut kd.full.cd;
     match so {
         None => crate::deriv::constrained_id_derivatives(
             &model.full,
@@ -2044,10 +1578,8 @@ pub struct MimicImpactData {
 /// their workspace.
 #[derive(Clone, Debug)]
 pub struct MimicImpactSo {
-    d2vplus_dq2: Tensor3,
-    d2vplus_dqdvminus: Tensor3,
-    d2impulse_dq2: Tensor3,
-    d2impulse_dqdvminus: Tensor3,
+    /// The result tensors.
+    pub(crate) res: crate::deriv::ImpactSo,
     /// IDSOZA of the full tree (`∂²(M Δ)/∂q²`).
     id: SoData,
     /// The full tree's `R_qq` at fixed `(Δ, λ̂, w)` (`(nv_f + m) × nv_f × nv_f`).
@@ -2066,19 +1598,19 @@ pub struct MimicImpactSo {
 impl MimicImpactSo {
     /// `∂²q̇⁺/∂q²`.
     pub fn d2vplus_dq2(&self) -> &Tensor3 {
-        &self.d2vplus_dq2
+        &self.res.d2vplus_dq2
     }
     /// `T[(i, j, k)] = ∂/∂q̇⁻_k (∂q̇⁺_i/∂q_j)`.
     pub fn d2vplus_dqdvminus(&self) -> &Tensor3 {
-        &self.d2vplus_dqdvminus
+        &self.res.d2vplus_dqdvminus
     }
     /// `∂²λ̂/∂q²`.
     pub fn d2impulse_dq2(&self) -> &Tensor3 {
-        &self.d2impulse_dq2
+        &self.res.d2impulse_dq2
     }
     /// `T[(i, j, k)] = ∂/∂q̇⁻_k (∂λ̂_i/∂q_j)`.
     pub fn d2impulse_dqdvminus(&self) -> &Tensor3 {
-        &self.d2impulse_dqdvminus
+        &self.res.d2impulse_dqdvminus
     }
 }
 
@@ -2087,10 +1619,7 @@ impl MimicImpactData {
     pub fn with_second_order(mut self, model: &MimicModel) -> Self {
         let (n, nf, m) = (model.nv, model.full.nv(), self.dim());
         self.so = Some(Box::new(MimicImpactSo {
-            d2vplus_dq2: Tensor3::zeros(n, n, n),
-            d2vplus_dqdvminus: Tensor3::zeros(n, n, n),
-            d2impulse_dq2: Tensor3::zeros(m, n, n),
-            d2impulse_dqdvminus: Tensor3::zeros(m, n, n),
+            res: crate::deriv::ImpactSo::results(n, m),
             id: SoData::without_dm_dq(&model.full),
             rf: Tensor3::zeros(nf + m, nf, nf),
             sqq: Tensor3::zeros(n + m, n, n),
@@ -2112,10 +1641,14 @@ impl MimicImpactData {
     /// # Errors
     /// As [`MimicKktData::new`].
     pub fn new(model: &MimicModel, contacts: &[crate::model::Contact]) -> Result<Self> {
-        let cd = ContactData::new(&model.full, contacts)?;
+        Ok(Self::from_contacts(model, ContactData::new(&model.full, contacts)?))
+    }
+    /// Workspace for the contacts `cd` (made for the full tree or for the reduced model).
+    pub(crate) fn from_contacts(model: &MimicModel, mut cd: ContactData) -> Self {
+        cd.reduced_key = None;
         let (n, nf, m) = (model.nv, model.full.nv(), cd.dim());
         let mat = |r, c| DMatrix::zeros(r, c);
-        Ok(Self {
+        Self {
             cd,
             key: model.key,
             restitution: 0.0,
@@ -2137,7 +1670,15 @@ impl MimicImpactData {
             col_n: DVector::zeros(n),
             col_m: DVector::zeros(m),
             so: None,
-        })
+        }
+    }
+    /// The full tree's contact workspace.
+    pub(crate) fn cd(&self) -> &ContactData {
+        &self.cd
+    }
+    /// Coefficient of restitution `e`.
+    pub(crate) fn restitution(&self) -> f64 {
+        self.restitution
     }
     /// Sets the coefficient of restitution `e` (`q̇⁺` of the contact rows is `−e` times `q̇⁻`'s).
     ///
@@ -2483,9 +2024,9 @@ fn impact_so_reduce(
                     cm.as_mut_slice(),
                 );
                 let (oa, ol) = if pass == 0 {
-                    (&mut so.d2vplus_dq2, &mut so.d2impulse_dq2)
+                    (&mut so.res.d2vplus_dq2, &mut so.res.d2impulse_dq2)
                 } else {
-                    (&mut so.d2vplus_dqdvminus, &mut so.d2impulse_dqdvminus)
+                    (&mut so.res.d2vplus_dqdvminus, &mut so.res.d2impulse_dqdvminus)
                 };
                 for i in 0..n {
                     oa[(i, j, k)] = cn[i];
@@ -2537,7 +2078,7 @@ impl MimicContractedData {
             tmp: z(),
         }
     }
-    fn check(&self, model: &MimicModel) -> Result<()> {
+    pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
         if self.key != model.key || self.mu.len() != model.nv {
             return Err(Error::Workspace(format!(
                 "MimicContractedData was made for another model; make it with \
@@ -2726,31 +2267,6 @@ impl MimicKktContracted {
     /// `C_τq[(j, k)] = ∂/∂q_k (∂(ωᵀy)/∂τ_j)`.
     pub fn c_tauq(&self) -> &DMatrix<f64> {
         &self.tq
-    }
-}
-
-impl MimicModel {
-    /// `out[(u, c0 + l)] += s Σ_{f, i} G[f, u] G[i, l] g[(i, f)]`: the transpose of
-    /// `Gᵀ g_top G` (`g_top` the first `nv_f` rows of `g`, `nv_f` columns).
-    fn add_top_t(&self, g: &DMatrix<f64>, s: f64, out: &mut DMatrix<f64>, c0: usize) {
-        let nf = self.full.nv();
-        for f in 0..nf {
-            let (u, gu) = (self.g_col[f], s * self.g_coef[f]);
-            for i in 0..nf {
-                out[(u, c0 + self.g_col[i])] += gu * self.g_coef[i] * g[(i, f)];
-            }
-        }
-    }
-    /// `out[(u, c0 + r)] += s Σ_f G[f, u] g[(nf + r, f)]` for `r < m`: the transpose of
-    /// `g_bottom G`.
-    fn add_bottom_t(&self, g: &DMatrix<f64>, m: usize, s: f64, out: &mut DMatrix<f64>, c0: usize) {
-        let nf = self.full.nv();
-        for f in 0..nf {
-            let (u, gu) = (self.g_col[f], s * self.g_coef[f]);
-            for r in 0..m {
-                out[(u, c0 + r)] += gu * g[(nf + r, f)];
-            }
-        }
     }
 }
 
@@ -3040,36 +2556,6 @@ pub fn impact_so_contracted(
 // ---------------------------------------------------------------------------------------------
 // Frames, kinematics and centre of mass.
 
-impl MimicModel {
-    /// `out = x G` for a `R × full().nv()` matrix `x` (`out`: `R × nv()`).
-    fn reduce_cols<R: nalgebra::Dim, S1, S2>(
-        &self,
-        x: &nalgebra::Matrix<f64, R, nalgebra::Dyn, S1>,
-        out: &mut nalgebra::Matrix<f64, R, nalgebra::Dyn, S2>,
-    ) where
-        S1: nalgebra::storage::Storage<f64, R, nalgebra::Dyn>,
-        S2: nalgebra::storage::StorageMut<f64, R, nalgebra::Dyn>,
-    {
-        out.fill(0.0);
-        for (f, (&c, &m)) in self.g_col.iter().zip(&self.g_coef).enumerate() {
-            for r in 0..x.nrows() {
-                out[(r, c)] += m * x[(r, f)];
-            }
-        }
-    }
-    /// Checks a frame index of the full tree.
-    fn check_frame(&self, frame: usize) -> Result<()> {
-        let n = self.full.frames().len();
-        if frame >= n {
-            return Err(Error::Argument {
-                name: "frame".into(),
-                reason: format!("frame index {frame} out of range (the model has {n} frames)"),
-            });
-        }
-        Ok(())
-    }
-}
-
 fn check_ncols(what: &str, got: usize, expected: usize) -> Result<()> {
     if got != expected {
         return Err(Error::Dimension { what: what.into(), expected, got });
@@ -3322,24 +2808,6 @@ pub fn frame_placement_hessian(
     crate::algo::frame_placement_hessian(&model.full, &mut data.full, &data.q, frame, t, w)?;
     model.reduce_tensor_cols(t, out);
     Ok(())
-}
-
-impl MimicModel {
-    /// `out[r, c, k] = Σ G[f, c] G[g, k] t[r, f, g]` (`t`: `R × nv_full × nv_full`).
-    fn reduce_tensor_cols(&self, t: &Tensor3, out: &mut Tensor3) {
-        out.fill(0.0);
-        let nf = self.full.nv();
-        let rows = t.dims().0;
-        for g in 0..nf {
-            let (cg, mg) = (self.g_col[g], self.g_coef[g]);
-            for f in 0..nf {
-                let (cf, m) = (self.g_col[f], self.g_coef[f] * mg);
-                for r in 0..rows {
-                    out[(r, cf, cg)] += m * t[(r, f, g)];
-                }
-            }
-        }
-    }
 }
 
 /// Centre of mass position at `expand(q)` (world frame).

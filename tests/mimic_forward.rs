@@ -99,7 +99,7 @@ fn nonlinear_effects_equal_rnea_at_zero_acceleration_and_reduced_full_bias() {
             let f = fext(full, &mut rng);
             for (k, fx) in [None, Some(f.as_slice())].into_iter().enumerate() {
                 let b = mimic::nonlinear_effects(&m, &mut md, &q, &v, fx).unwrap().clone();
-                assert_eq!(md.tau(), &b);
+                assert_eq!(md.nle(), &b);
                 assert_eq!(md.a_full().amax(), 0.0);
                 let t = mimic::rnea(&m, &mut md, &q, &v, &zero, fx).unwrap();
                 worst[k] = worst[k].max(err(&b, t));

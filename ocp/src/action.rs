@@ -247,9 +247,11 @@ impl ActionModel {
     /// Buffers for this knot.
     ///
     /// # Errors
-    /// A rank-deficient or otherwise invalid active contact set.
+    /// A rank-deficient or otherwise invalid active contact set; a model in reduced coordinates
+    /// (mimic joints).
     pub fn create_data(&self) -> Result<ActionData> {
         let m = self.model();
+        crate::state::check_not_reduced(m)?;
         let (nv, nu, ndx) = (m.nv(), self.nu(), self.state.ndx());
         let active = active_contacts(self.contacts());
         let nc: usize = active.iter().map(|c| c.dim()).sum();

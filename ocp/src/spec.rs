@@ -359,6 +359,7 @@ impl ActionModelDraft {
 /// # Errors
 /// Naming `path` (the node) and the key.
 pub fn action_model(model: &Arc<Model>, n: &Value, path: &str) -> Result<ActionModel> {
+    crate::state::check_not_reduced(model)?;
     check_keys(
         n,
         &["type", "dt", "actuation", "contacts", "damping", "restitution", "costs", "u_lb", "u_ub"],

@@ -30,6 +30,20 @@ pub struct StateScratch {
     pub(crate) jq: DMatrix<f64>,
 }
 
+/// sodyn-ocp works on the full tree: a model in reduced coordinates (mimic joints) is refused.
+///
+/// # Errors
+/// A reduced model.
+pub(crate) fn check_not_reduced(model: &Model) -> Result<()> {
+    if model.is_reduced() {
+        return Err(OcpError::new(
+            "the model has mimic joints in reduced coordinates (UrdfOptions { mimic: true }): \
+             sodyn-ocp does not support them yet; load it without mimic",
+        ));
+    }
+    Ok(())
+}
+
 impl StateMultibody {
     /// The state of `model`.
     pub fn new(model: Arc<Model>) -> Self {

@@ -126,7 +126,7 @@ pub(crate) fn mimic_nle<'py>(
     let PyData { q, v, mimic: Some(ws), .. } = d else { unreachable!() };
     let md = &mut ws.d;
     py.detach(|| mimic::nonlinear_effects(mm, md, q, v, None).map(|_| ())).map_err(core_err)?;
-    Ok(out_vec(py, md.tau()))
+    Ok(out_vec(py, md.nle()))
 }
 
 #[allow(clippy::too_many_arguments)]

@@ -53,8 +53,11 @@ pub fn aba<'a>(
     tau: &DVector<f64>,
     fext: Option<&[Force]>,
 ) -> Result<&'a DVector<f64>> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::aba(r, data.reduced(model)?, q, v, tau, fext);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("tau", tau, model.nv)?;
     check_fext(model, fext)?;

@@ -35,37 +35,62 @@ pub struct Centroidal {
     dh_dq: DMatrix<f64>,
     dhdot_dq: DMatrix<f64>,
     dhdot_dv: DMatrix<f64>,
+    /// For a model in reduced coordinates: the full tree's results and the reduced ones,
+    /// which the accessors return (the fields above are then empty).
+    pub(crate) red: Option<Box<crate::mimic::MimicCentroidal>>,
 }
 
 impl Centroidal {
     /// Results for `model`.
     pub fn new(model: &Model) -> Self {
-        let z = || DMatrix::zeros(6, model.nv);
-        Self { h: [0.0; 6], hdot: [0.0; 6], ag: z(), dh_dq: z(), dhdot_dq: z(), dhdot_dv: z() }
+        let (nv, red) = match &model.reduction {
+            Some(r) => (0, Some(Box::new(crate::mimic::MimicCentroidal::new(r)))),
+            None => (model.nv, None),
+        };
+        let z = || DMatrix::zeros(6, nv);
+        Self { h: [0.0; 6], hdot: [0.0; 6], ag: z(), dh_dq: z(), dhdot_dq: z(), dhdot_dv: z(), red }
     }
     /// Centroidal momentum `h_G`.
     pub fn h(&self) -> &[f64; 6] {
-        &self.h
+        match &self.red {
+            Some(r) => r.h(),
+            None => &self.h,
+        }
     }
     /// Its time derivative `ḣ_G` (no gravity).
     pub fn hdot(&self) -> &[f64; 6] {
-        &self.hdot
+        match &self.red {
+            Some(r) => r.hdot(),
+            None => &self.hdot,
+        }
     }
     /// Centroidal momentum matrix `A_G` (`6 × nv`): `h_G = A_G q̇`; also `∂ḣ_G/∂q̈`.
     pub fn ag(&self) -> &DMatrix<f64> {
-        &self.ag
+        match &self.red {
+            Some(r) => r.ag(),
+            None => &self.ag,
+        }
     }
     /// `∂h_G/∂q` (`6 × nv`, tangent space).
     pub fn dh_dq(&self) -> &DMatrix<f64> {
-        &self.dh_dq
+        match &self.red {
+            Some(r) => r.dh_dq(),
+            None => &self.dh_dq,
+        }
     }
     /// `∂ḣ_G/∂q` (`6 × nv`).
     pub fn dhdot_dq(&self) -> &DMatrix<f64> {
-        &self.dhdot_dq
+        match &self.red {
+            Some(r) => r.dhdot_dq(),
+            None => &self.dhdot_dq,
+        }
     }
     /// `∂ḣ_G/∂q̇` (`6 × nv`).
     pub fn dhdot_dv(&self) -> &DMatrix<f64> {
-        &self.dhdot_dv
+        match &self.red {
+            Some(r) => r.dhdot_dv(),
+            None => &self.dhdot_dv,
+        }
     }
 }
 
@@ -92,6 +117,9 @@ pub fn centroidal_momentum(
     q: &DVector<f64>,
     v: &DVector<f64>,
 ) -> Result<[f64; 6]> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::centroidal_momentum(r, data.reduced(model)?, q, v);
+    }
     forward_kinematics(model, data, q, Some(v), None)?;
     let (mut h, mut mass, mut mc) = (Force::zero(), 0.0, Vector3::zeros());
     for i in 1..model.njoints() {
@@ -123,8 +151,19 @@ pub fn centroidal_dynamics_derivatives(
     v: &DVector<f64>,
     a: &DVector<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        let out_r = crate::mimic::reduced_ws(&mut out.red, "Centroidal", model)?;
+        return crate::mimic::centroidal_dynamics_derivatives(
+            r,
+            data.reduced(model)?,
+            out_r,
+            q,
+            v,
+            a,
+        );
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     if out.ag.ncols() != model.nv {
         return Err(Error::Workspace(format!(
             "Centroidal was made for nv = {}, this model has nv = {}; make it with \

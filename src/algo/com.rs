@@ -58,8 +58,11 @@ fn world(data: &Data, i: usize, m: &Motion) -> Motion {
 /// # Errors
 /// As [`Model::check_q`]; a model without mass.
 pub fn center_of_mass(model: &Model, data: &mut Data, q: &DVector<f64>) -> Result<Vector3<f64>> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::center_of_mass(r, data.reduced(model)?, q);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     placements(model, data, q);
     let mass = inertias(model, data)?;
     Ok(data.ic_world[0].h / mass)
@@ -76,6 +79,9 @@ pub fn center_of_mass_motion(
     v: &DVector<f64>,
     a: Option<&DVector<f64>>,
 ) -> Result<(Vector3<f64>, Vector3<f64>, Vector3<f64>)> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::center_of_mass_motion(r, data.reduced(model)?, q, v, a);
+    }
     forward_kinematics(model, data, q, Some(v), a)?;
     let mass = inertias(model, data)?;
     let (mut hl, mut fl) = (Vector3::zeros(), Vector3::zeros());
@@ -103,6 +109,9 @@ pub fn center_of_mass_jacobian(
     q: &DVector<f64>,
     jac: &mut Matrix3xX<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::center_of_mass_jacobian(r, data.reduced(model)?, q, jac);
+    }
     if jac.ncols() != model.nv {
         return Err(Error::Dimension {
             what: "jacobian columns".into(),
@@ -136,6 +145,15 @@ pub fn center_of_mass_velocity_derivatives(
     v: &DVector<f64>,
     out: &mut Matrix3xX<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::center_of_mass_velocity_derivatives(
+            r,
+            data.reduced(model)?,
+            q,
+            v,
+            out,
+        );
+    }
     if out.ncols() != model.nv {
         return Err(Error::Dimension {
             what: "derivative columns".into(),

@@ -43,8 +43,11 @@ use nalgebra::{DMatrix, DVector};
 /// (callgrind counts in `docs/performance.md`, section "Optimisations that mattered", paragraph
 /// "CRBA: two kernels").
 pub fn crba<'a>(model: &Model, data: &'a mut Data, q: &DVector<f64>) -> Result<&'a DMatrix<f64>> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::crba(r, data.reduced(model)?, q);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     #[cfg(target_arch = "x86_64")]
     if model.nv <= LOCAL_CRBA_MAX_NV && crate::simd::avx2_fma() {
         // SAFETY: the CPU supports AVX2 and FMA (checked just above).

@@ -93,6 +93,10 @@ pub struct Data {
     /// Its number of joints and degrees of freedom (for the error message of [`Data::check`]).
     pub(crate) njoints: usize,
     pub(crate) nv: usize,
+    /// For a model in reduced coordinates ([`Model::is_reduced`]): the full tree's workspace and
+    /// the reduced results, which the accessors return (the fields above are then an empty
+    /// shell).
+    pub(crate) red: Option<Box<crate::mimic::MimicData>>,
 }
 
 /// The message of a workspace used with another model: what differs.
@@ -120,149 +124,284 @@ pub(crate) fn workspace_mismatch(what: &str, njoints: usize, nv: usize, model: &
 
 impl Data {
     /// Pose of body `i` in its parent body's frame, `λ(i)M_i = placement_i · X_J(q_i)`.
+    /// For a reduced model: the full tree's.
     pub fn li_m_i(&self) -> &Vec<Transform> {
-        &self.li_m_i
+        match &self.red {
+            Some(r) => r.full().li_m_i(),
+            None => &self.li_m_i,
+        }
     }
     /// Pose of body `i` in the world.
+    /// For a reduced model: the full tree's.
     pub fn o_m_i(&self) -> &Vec<Transform> {
-        &self.o_m_i
+        match &self.red {
+            Some(r) => r.full().o_m_i(),
+            None => &self.o_m_i,
+        }
     }
     /// Body spatial velocities, body frame.
+    /// For a reduced model: the full tree's.
     pub fn v(&self) -> &Vec<Motion> {
-        &self.v
+        match &self.red {
+            Some(r) => r.full().v(),
+            None => &self.v,
+        }
     }
     /// Body spatial accelerations, body frame (RNEA: including the gravity offset `−a_g`).
+    /// For a reduced model: the full tree's.
     pub fn a(&self) -> &Vec<Motion> {
-        &self.a
+        match &self.red {
+            Some(r) => r.full().a(),
+            None => &self.a,
+        }
     }
     /// Net body forces (RNEA) / transmitted forces after the backward pass, body frame.
+    /// For a reduced model: the full tree's.
     pub fn f(&self) -> &Vec<Force> {
-        &self.f
+        match &self.red {
+            Some(r) => r.full().f(),
+            None => &self.f,
+        }
     }
     /// Joint torques (RNEA output).
     pub fn tau(&self) -> &DVector<f64> {
-        &self.tau
+        match &self.red {
+            Some(r) => r.tau(),
+            None => &self.tau,
+        }
     }
     /// Nonlinear effects `b = C q̇ + g`.
     pub fn nle(&self) -> &DVector<f64> {
-        &self.nle
+        match &self.red {
+            Some(r) => r.nle(),
+            None => &self.nle,
+        }
     }
     /// Motion-subspace columns in the world frame, one per degree of freedom.
+    /// For a reduced model: the full tree's.
     pub fn s_world(&self) -> &Vec<Motion> {
-        &self.s_world
+        match &self.red {
+            Some(r) => r.full().s_world(),
+            None => &self.s_world,
+        }
     }
     /// Composite rigid-body inertias `I^C_i` in the world frame.
+    /// For a reduced model: the full tree's.
     pub fn ic_world(&self) -> &Vec<Inertia> {
-        &self.ic_world
+        match &self.red {
+            Some(r) => r.full().ic_world(),
+            None => &self.ic_world,
+        }
     }
     /// Composite rigid-body inertias `I^C_i` in the body frames (the local-frame CRBA of small
     /// trees, see [`crba`](super::crba)).
+    /// For a reduced model: the full tree's.
     pub fn ic_local(&self) -> &Vec<Inertia> {
-        &self.ic_local
+        match &self.red {
+            Some(r) => r.full().ic_local(),
+            None => &self.ic_local,
+        }
     }
     /// Joint-space mass matrix (full symmetric).
     pub fn m(&self) -> &DMatrix<f64> {
-        &self.m
+        match &self.red {
+            Some(r) => r.m(),
+            None => &self.m,
+        }
     }
     /// Tree-sparse `LᵀDL` factor of `M` (unit `L` below the diagonal, `D` on it).
+    /// For a reduced model: the full tree's.
     pub fn ltl(&self) -> &DMatrix<f64> {
-        &self.ltl
+        match &self.red {
+            Some(r) => r.full().ltl(),
+            None => &self.ltl,
+        }
     }
     /// Articulated-body inertias (ABA), body frame.
+    /// For a reduced model: the full tree's.
     pub fn ia(&self) -> &Vec<Matrix6<f64>> {
-        &self.ia
+        match &self.red {
+            Some(r) => r.full().ia(),
+            None => &self.ia,
+        }
     }
     /// Articulated bias forces (ABA), body frame.
+    /// For a reduced model: the full tree's.
     pub fn pa(&self) -> &Vec<Force> {
-        &self.pa
+        match &self.red {
+            Some(r) => r.full().pa(),
+            None => &self.pa,
+        }
     }
     /// Velocity-product accelerations `v_i × v_J` (ABA), body frame.
+    /// For a reduced model: the full tree's.
     pub fn c(&self) -> &Vec<Motion> {
-        &self.c
+        match &self.red {
+            Some(r) => r.full().c(),
+            None => &self.c,
+        }
     }
     /// `U = I^A S`, one force column per degree of freedom (ABA).
+    /// For a reduced model: the full tree's.
     pub fn u_cols(&self) -> &Vec<Force> {
-        &self.u_cols
+        match &self.red {
+            Some(r) => r.full().u_cols(),
+            None => &self.u_cols,
+        }
     }
     /// `D⁻¹ = (Sᵀ U)⁻¹` per joint, in the leading `nv×nv` block (ABA).
+    /// For a reduced model: the full tree's.
     pub fn d_inv(&self) -> &Vec<Matrix6<f64>> {
-        &self.d_inv
+        match &self.red {
+            Some(r) => r.full().d_inv(),
+            None => &self.d_inv,
+        }
     }
     /// `u = τ − Sᵀ p^A` (ABA).
+    /// For a reduced model: the full tree's.
     pub fn u(&self) -> &DVector<f64> {
-        &self.u
+        match &self.red {
+            Some(r) => r.full().u(),
+            None => &self.u,
+        }
     }
     /// Joint accelerations (ABA output).
     pub fn qdd(&self) -> &DVector<f64> {
-        &self.qdd
+        match &self.red {
+            Some(r) => r.qdd(),
+            None => &self.qdd,
+        }
     }
     /// Scratch vector of length `nv`.
+    /// For a reduced model: the full tree's.
     pub fn tmp_v(&self) -> &DVector<f64> {
-        &self.tmp_v
+        match &self.red {
+            Some(r) => r.full().tmp_v(),
+            None => &self.tmp_v,
+        }
     }
     /// Body spatial velocities in the world frame (derivative algorithms).
+    /// For a reduced model: the full tree's.
     pub fn ov(&self) -> &Vec<Motion> {
-        &self.ov
+        match &self.red {
+            Some(r) => r.full().ov(),
+            None => &self.ov,
+        }
     }
     /// Body spatial accelerations in the world frame, including `a_0 = −a_g`.
+    /// For a reduced model: the full tree's.
     pub fn oa(&self) -> &Vec<Motion> {
-        &self.oa
+        match &self.red {
+            Some(r) => r.full().oa(),
+            None => &self.oa,
+        }
     }
     /// Composite forces `f^C_i = Σ_{k⪰i} f_k`, world frame.
+    /// For a reduced model: the full tree's.
     pub fn ofc(&self) -> &Vec<Force> {
-        &self.ofc
+        match &self.red {
+            Some(r) => r.full().ofc(),
+            None => &self.ofc,
+        }
     }
     /// Composite body-level Coriolis matrices `B^C_i = Σ_{k⪰i} B(I_k, v_k)`, world frame.
+    /// For a reduced model: the full tree's.
     pub fn bc(&self) -> &Vec<Matrix6<f64>> {
-        &self.bc
+        match &self.red {
+            Some(r) => r.full().bc(),
+            None => &self.bc,
+        }
     }
     /// `Ψ̇ = v_λ × S` per degree of freedom (eq. psidot_psidotdot_defn), world frame.
+    /// For a reduced model: the full tree's.
     pub fn psid(&self) -> &Vec<Motion> {
-        &self.psid
+        match &self.red {
+            Some(r) => r.full().psid(),
+            None => &self.psid,
+        }
     }
     /// `Ψ̈ = a_λ × S + v_λ × Ψ̇` per degree of freedom (eq. psidot_psidotdot_defn).
+    /// For a reduced model: the full tree's.
     pub fn psidd(&self) -> &Vec<Motion> {
-        &self.psidd
+        match &self.red {
+            Some(r) => r.full().psidd(),
+            None => &self.psidd,
+        }
     }
     /// `Ṡ = v × S` per degree of freedom.
+    /// For a reduced model: the full tree's.
     pub fn sdot(&self) -> &Vec<Motion> {
-        &self.sdot
+        match &self.red {
+            Some(r) => r.full().sdot(),
+            None => &self.sdot,
+        }
     }
     /// `∂τ/∂q` (tangent space).
     pub fn dtau_dq(&self) -> &DMatrix<f64> {
-        &self.dtau_dq
+        match &self.red {
+            Some(r) => r.dtau_dq(),
+            None => &self.dtau_dq,
+        }
     }
     /// `∂τ/∂q̇`.
     pub fn dtau_dv(&self) -> &DMatrix<f64> {
-        &self.dtau_dv
+        match &self.red {
+            Some(r) => r.dtau_dv(),
+            None => &self.dtau_dv,
+        }
     }
     /// `∂q̈/∂q` of forward dynamics.
     pub fn dqdd_dq(&self) -> &DMatrix<f64> {
-        &self.dqdd_dq
+        match &self.red {
+            Some(r) => r.dqdd_dq(),
+            None => &self.dqdd_dq,
+        }
     }
     /// `∂q̈/∂q̇` of forward dynamics.
     pub fn dqdd_dv(&self) -> &DMatrix<f64> {
-        &self.dqdd_dv
+        match &self.red {
+            Some(r) => r.dqdd_dv(),
+            None => &self.dqdd_dv,
+        }
     }
     /// `M⁻¹ = ∂q̈/∂τ`.
     pub fn minv(&self) -> &DMatrix<f64> {
-        &self.minv
+        match &self.red {
+            Some(r) => r.minv(),
+            None => &self.minv,
+        }
     }
     /// Body inertias in the world frame.
+    /// For a reduced model: the full tree's.
     pub fn oinertia(&self) -> &Vec<Inertia> {
-        &self.oinertia
+        match &self.red {
+            Some(r) => r.full().oinertia(),
+            None => &self.oinertia,
+        }
     }
     /// IDFOZA workspace: accelerations (world, no gravity).
+    /// For a reduced model: the full tree's.
     pub fn z_a(&self) -> &Vec<Motion> {
-        &self.z_a
+        match &self.red {
+            Some(r) => r.full().z_a(),
+            None => &self.z_a,
+        }
     }
     /// IDFOZA workspace: `Ψ̈ = a_λ × S` per degree of freedom.
+    /// For a reduced model: the full tree's.
     pub fn z_psidd(&self) -> &Vec<Motion> {
-        &self.z_psidd
+        match &self.red {
+            Some(r) => r.full().z_psidd(),
+            None => &self.z_psidd,
+        }
     }
     /// IDFOZA workspace: composite forces.
+    /// For a reduced model: the full tree's.
     pub fn z_fc(&self) -> &Vec<Force> {
-        &self.z_fc
+        match &self.red {
+            Some(r) => r.full().z_fc(),
+            None => &self.z_fc,
+        }
     }
 }
 
@@ -273,6 +412,24 @@ impl Data {
     /// # Errors
     /// [`Error::Workspace`](crate::Error::Workspace) naming what differs.
     pub fn check(&self, model: &Model) -> crate::error::Result<()> {
+        match (&model.reduction, &self.red) {
+            (Some(r), Some(md)) => return md.check(r),
+            (Some(_), None) => {
+                return Err(crate::error::Error::Workspace(format!(
+                    "Data was made for a model without mimic joints, model \"{}\" is in \
+                     reduced coordinates; make it with Data::new for this model",
+                    model.name()
+                )));
+            }
+            (None, Some(_)) => {
+                return Err(crate::error::Error::Workspace(format!(
+                    "Data was made for a model in reduced coordinates (mimic joints), model \
+                     \"{}\" is not; make it with Data::new for this model",
+                    model.name()
+                )));
+            }
+            (None, None) => {}
+        }
         if self.model_key == model.key {
             return Ok(());
         }
@@ -283,8 +440,43 @@ impl Data {
             model,
         )))
     }
-    /// A workspace for `model`.
+    /// [`Data::check`] for the algorithms of the tree: an error for a reduced model (whose
+    /// algorithms run on the full tree's workspace inside this one).
+    pub(crate) fn check_tree(&self, model: &Model) -> crate::error::Result<()> {
+        if model.reduction.is_some() || self.red.is_some() {
+            return Err(crate::error::Error::Workspace(format!(
+                "model \"{}\" is in reduced coordinates (mimic joints): this function takes \
+                 the full tree (Model::full_tree) and its own workspace",
+                model.name()
+            )));
+        }
+        self.check(model)
+    }
+    /// The reduced-coordinate workspace of a reduced model's `Data`.
+    ///
+    /// # Errors
+    /// [`Error::Workspace`](crate::Error::Workspace) if this workspace was made for a model
+    /// without mimic joints.
+    pub(crate) fn reduced(
+        &mut self,
+        model: &Model,
+    ) -> crate::error::Result<&mut crate::mimic::MimicData> {
+        match &mut self.red {
+            Some(md) => Ok(md),
+            None => Err(crate::error::Error::Workspace(format!(
+                "Data was made for a model without mimic joints, model \"{}\" is in reduced \
+                 coordinates; make it with Data::new for this model",
+                model.name()
+            ))),
+        }
+    }
+    /// A workspace for `model` (for a reduced model: the full tree's and the reduced results).
     pub fn new(model: &Model) -> Self {
+        if let Some(r) = &model.reduction {
+            let mut d = Self::new(crate::model::tree::shell_model());
+            d.red = Some(Box::new(crate::mimic::MimicData::new(r)));
+            return d;
+        }
         let n = model.njoints();
         let nv = model.nv;
         Data {
@@ -330,6 +522,7 @@ impl Data {
             model_key: model.key,
             njoints: model.njoints(),
             nv: model.nv(),
+            red: None,
         }
     }
 }

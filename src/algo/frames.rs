@@ -79,7 +79,7 @@ fn path_kinematics(
     frame: usize,
 ) -> Result<()> {
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_frame(model, frame)?;
     if let Some(v) = v {
         check_vec("v", v, model.nv)?;
@@ -148,6 +148,9 @@ pub fn frame_placement(
     q: &DVector<f64>,
     frame: usize,
 ) -> Result<Transform> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::frame_placement(r, data.reduced(model)?, q, frame);
+    }
     path_kinematics(model, data, q, None, None, frame)?;
     Ok(placed(model, data, frame).1)
 }
@@ -165,6 +168,9 @@ pub fn frame_jacobian(
     rf: ReferenceFrame,
     jac: &mut Matrix6xX<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::frame_jacobian(r, data.reduced(model)?, q, frame, rf, jac);
+    }
     if jac.ncols() != model.nv {
         return Err(Error::Dimension {
             what: "jacobian columns".into(),
@@ -215,6 +221,9 @@ pub fn frame_velocity(
     frame: usize,
     rf: ReferenceFrame,
 ) -> Result<Motion> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::frame_velocity(r, data.reduced(model)?, q, v, frame, rf);
+    }
     path_kinematics(model, data, q, Some(v), None, frame)?;
     let (i, omf) = placed(model, data, frame);
     let vf = model.frames[frame].placement.inv_act_motion(&data.v[i]);
@@ -234,6 +243,9 @@ pub fn frame_acceleration(
     frame: usize,
     rf: ReferenceFrame,
 ) -> Result<Motion> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::frame_acceleration(r, data.reduced(model)?, q, v, a, frame, rf);
+    }
     path_kinematics(model, data, q, Some(v), Some(a), frame)?;
     let (i, omf) = placed(model, data, frame);
     let af = model.frames[frame].placement.inv_act_motion(&data.a[i]);
@@ -254,6 +266,17 @@ pub fn frame_classical_acceleration(
     frame: usize,
     rf: ReferenceFrame,
 ) -> Result<Motion> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::frame_classical_acceleration(
+            r,
+            data.reduced(model)?,
+            q,
+            v,
+            a,
+            frame,
+            rf,
+        );
+    }
     let acc = frame_acceleration(model, data, q, v, a, frame, rf)?;
     let (i, omf) = placed(model, data, frame);
     let vf = express(&model.frames[frame].placement.inv_act_motion(&data.v[i]), &omf, rf);
@@ -374,6 +397,18 @@ pub fn frame_velocity_derivatives(
     dv_dq: &mut Matrix6xX<f64>,
     dv_dv: &mut Matrix6xX<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::frame_velocity_derivatives(
+            r,
+            data.reduced(model)?,
+            q,
+            v,
+            frame,
+            rf,
+            dv_dq,
+            dv_dv,
+        );
+    }
     check_frame(model, frame)?;
     check_cols(model, &[dv_dq, dv_dv])?;
     path_kinematics(model, data, q, Some(v), None, frame)?;
@@ -399,6 +434,20 @@ pub fn frame_acceleration_derivatives(
     da_dv: &mut Matrix6xX<f64>,
     da_da: &mut Matrix6xX<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::frame_acceleration_derivatives(
+            r,
+            data.reduced(model)?,
+            q,
+            v,
+            a,
+            frame,
+            rf,
+            da_dq,
+            da_dv,
+            da_da,
+        );
+    }
     check_frame(model, frame)?;
     check_cols(model, &[da_dq, da_dv, da_da])?;
     path_kinematics(model, data, q, Some(v), Some(a), frame)?;
@@ -434,6 +483,9 @@ pub fn frame_jacobian_derivative(
     rf: ReferenceFrame,
     out: &mut crate::tensor::Tensor3,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::frame_jacobian_derivative(r, data.reduced(model)?, q, frame, rf, out);
+    }
     let n = model.nv;
     if out.dims() != (6, n, n) {
         let (a, b, c) = out.dims();
@@ -496,6 +548,10 @@ pub fn frame_placement_hessian(
     out: &mut crate::tensor::Tensor3,
     work: &mut crate::tensor::Tensor3,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        let _ = work;
+        return crate::mimic::frame_placement_hessian(r, data.reduced(model)?, q, frame, out);
+    }
     let n = model.nv;
     if work.dims() != (6, n, n) {
         let (a, b, c) = work.dims();

@@ -35,8 +35,11 @@ pub fn point_position(
     frame: usize,
     point: &Vector3<f64>,
 ) -> Result<Vector3<f64>> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::point_position(r, data.reduced(model)?, q, frame, point);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_frame(model, frame, point)?;
     placements(model, data, q);
     Ok(frame_point_world(model, data, frame, point).2)
@@ -52,8 +55,11 @@ pub fn point_jacobian(
     point: &Vector3<f64>,
     jac: &mut Matrix3xX<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::point_jacobian(r, data.reduced(model)?, q, frame, point, jac);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_frame(model, frame, point)?;
     if jac.ncols() != model.nv {
         return Err(Error::Dimension {
@@ -88,8 +94,11 @@ pub fn point_drift(
     frame: usize,
     point: &Vector3<f64>,
 ) -> Result<Vector3<f64>> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::point_drift(r, data.reduced(model)?, q, v, frame, point);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("v", v, model.nv)?;
     check_frame(model, frame, point)?;
     data.tmp_v.fill(0.0);

@@ -177,8 +177,11 @@ pub fn forward_kinematics(
     v: Option<&DVector<f64>>,
     a: Option<&DVector<f64>>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::forward_kinematics(r, data.reduced(model)?, q, v, a);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     if let Some(v) = v {
         check_vec("v", v, model.nv)?;
     }

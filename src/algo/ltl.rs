@@ -40,7 +40,7 @@ use std::mem::MaybeUninit;
 /// pivot is at most `1e-14` times the largest one (`min_k d_k ≤ 1e-14 · max_k d_k`), e.g. for a
 /// massless leaf body or a massless link between two joints whose motions then coincide.
 pub fn factorize_ltl(model: &Model, data: &mut Data) -> Result<()> {
-    data.check(model)?;
+    data.check_tree(model)?;
     data.ltl.copy_from(&data.m);
     ltl_in_place(model, &mut data.ltl)
 }
@@ -151,7 +151,7 @@ pub(crate) fn ltl_in_place(model: &Model, h: &mut DMatrix<f64>) -> Result<()> {
 
 /// Solves `M x = b` in place with the factor in `data.ltl` (see [`factorize_ltl`]).
 pub fn solve_ltl(model: &Model, data: &Data, b: &mut DVector<f64>) -> Result<()> {
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("b", b, model.nv)?;
     ltl_solve_in_place(model, &data.ltl, b.as_mut_slice());
     Ok(())
@@ -188,7 +188,7 @@ pub(crate) fn ltl_solve_in_place(model: &Model, h: &DMatrix<f64>, x: &mut [f64])
 
 /// Solves `M X = B` column by column in place.
 pub fn solve_ltl_matrix(model: &Model, data: &Data, b: &mut DMatrix<f64>) -> Result<()> {
-    data.check(model)?;
+    data.check_tree(model)?;
     if b.nrows() != model.nv {
         return Err(Error::Dimension { what: "B rows".into(), expected: model.nv, got: b.nrows() });
     }

@@ -57,8 +57,11 @@ pub fn rnea<'a>(
     a: &DVector<f64>,
     fext: Option<&[Force]>,
 ) -> Result<&'a DVector<f64>> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::rnea(r, data.reduced(model)?, q, v, a, fext);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("a", a, model.nv)?;
     check_fext(model, fext)?;
@@ -127,8 +130,11 @@ pub fn nonlinear_effects<'a>(
     q: &DVector<f64>,
     v: &DVector<f64>,
 ) -> Result<&'a DVector<f64>> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::nonlinear_effects(r, data.reduced(model)?, q, v, None);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("v", v, model.nv)?;
     let zero = std::mem::replace(&mut data.tmp_v, DVector::zeros(0));
     let mut zero = zero;

@@ -150,9 +150,17 @@ pub struct ContactData {
     pub(crate) model_key: u64,
     pub(crate) model_njoints: usize,
     pub(crate) model_nv: usize,
+    /// `Some(key)` of the reduced model these contacts were made for (see [`Model::is_reduced`]).
+    pub(crate) reduced_key: Option<u64>,
 }
 
 impl ContactData {
+    /// No contacts on the world-only model: the contact part of the shell of a reduced
+    /// model's workspaces.
+    pub(crate) fn empty() -> Self {
+        Self::new(crate::model::tree::shell_model(), &[])
+            .expect("an empty contact set on the world-only model is valid")
+    }
     /// The contacts.
     pub fn contacts(&self) -> &Vec<Contact> {
         &self.contacts
@@ -181,6 +189,13 @@ impl ContactData {
     /// [`Error::Argument`] for more than [`MAX_CONTACTS`] contacts or a Baumgarte gain that is
     /// negative or not finite; [`Error::Unknown`] for a contact whose frame is not in `model`; [`Error::Singular`] for a contact on the world.
     pub fn new(model: &Model, contacts: &[Contact]) -> Result<Self> {
+        if let Some(r) = &model.reduction {
+            // The contacts of the full tree (its frames and Jacobians), marked for the reduced
+            // model.
+            let mut cd = Self::new(&r.full, contacts)?;
+            cd.reduced_key = Some(r.key);
+            return Ok(cd);
+        }
         if contacts.len() > MAX_CONTACTS {
             return Err(Error::Argument {
                 name: "contacts".into(),
@@ -299,6 +314,7 @@ impl ContactData {
             damping: 0.0,
             redundant: crate::model::redundancy(model, contacts),
             model_key: model.key,
+            reduced_key: None,
             model_njoints: model.njoints(),
             model_nv: model.nv(),
         })
@@ -325,6 +341,17 @@ impl ContactData {
     /// # Errors
     /// [`Error::Workspace`] naming what differs.
     pub fn check(&self, model: &Model) -> Result<()> {
+        if let Some(r) = &model.reduction {
+            if self.reduced_key == Some(r.key) {
+                return Ok(());
+            }
+            return Err(Error::Workspace(format!(
+                "ContactData was made for another model; model \"{}\" is in reduced \
+                 coordinates (mimic joints): make it with ContactData::new for this model",
+                model.name()
+            )));
+        }
+        // A reduced model's contacts are also those of its full tree.
         if self.model_key == model.key {
             return Ok(());
         }

@@ -60,11 +60,19 @@ pub struct ContractedData {
     /// `qq`, `vv`, `qv`, `mq` are zero where DoFs are on no common root path (the entries
     /// the reverse-mode pass does not write); false after [`fd_so_contracted`].
     clean: bool,
+    /// For a model in reduced coordinates: the full tree's workspace and the reduced results,
+    /// which the accessors return (the fields above are then an empty shell).
+    pub(crate) red: Option<Box<crate::mimic::MimicContractedData>>,
 }
 
 impl ContractedData {
     /// Workspace for `model`.
     pub fn new(model: &Model) -> Self {
+        if let Some(r) = &model.reduction {
+            let mut w = Self::new(crate::model::tree::shell_model());
+            w.red = Some(Box::new(crate::mimic::MimicContractedData::new(r)));
+            return w;
+        }
         let n = model.nv;
         let z = || DMatrix::zeros(n, n);
         Self {
@@ -79,27 +87,43 @@ impl ContractedData {
             tmp: z(),
             dt: z(),
             clean: true,
+            red: None,
         }
     }
     /// `C_qq[(j, k)] = Σ_i w_i ∂/∂q_k (∂y_i/∂q_j)` (`y = τ` or `q̈`, of the last call).
     pub fn c_qq(&self) -> &DMatrix<f64> {
-        &self.qq
+        match &self.red {
+            Some(r) => r.c_qq(),
+            None => &self.qq,
+        }
     }
     /// `C_vv[(j, k)] = Σ_i w_i ∂²y_i/∂q̇_j∂q̇_k`.
     pub fn c_vv(&self) -> &DMatrix<f64> {
-        &self.vv
+        match &self.red {
+            Some(r) => r.c_vv(),
+            None => &self.vv,
+        }
     }
     /// `C_qv[(j, k)] = Σ_i w_i ∂/∂q̇_k (∂y_i/∂q_j)`.
     pub fn c_qv(&self) -> &DMatrix<f64> {
-        &self.qv
+        match &self.red {
+            Some(r) => r.c_qv(),
+            None => &self.qv,
+        }
     }
     /// Inverse dynamics: `C_Mq[(j, k)] = Σ_i w_i ∂M_ij/∂q_k = ∂(M w)_j/∂q_k`.
     pub fn c_mq(&self) -> &DMatrix<f64> {
-        &self.mq
+        match &self.red {
+            Some(r) => r.c_mq(),
+            None => &self.mq,
+        }
     }
     /// Forward dynamics: `C_τq[(j, k)] = Σ_i w_i ∂/∂q_k (∂q̈_i/∂τ_j)`.
     pub fn c_tauq(&self) -> &DMatrix<f64> {
-        &self.tq
+        match &self.red {
+            Some(r) => r.c_tauq(),
+            None => &self.tq,
+        }
     }
     fn check(&self, model: &Model) -> Result<()> {
         self.ws.check(model, "ContractedData")
@@ -121,8 +145,12 @@ pub fn id_so_contracted(
     a: &DVector<f64>,
     w: &DVector<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        let cd_r = crate::mimic::reduced_ws(&mut cd.red, "ContractedData", model)?;
+        return crate::mimic::id_so_contracted(r, data.reduced(model)?, cd_r, q, v, a, w);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("a", a, model.nv)?;
     check_vec("w", w, model.nv)?;
@@ -155,6 +183,10 @@ pub fn fd_so_contracted(
     tau: &DVector<f64>,
     w: &DVector<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        let cd_r = crate::mimic::reduced_ws(&mut cd.red, "ContractedData", model)?;
+        return crate::mimic::fd_so_contracted(r, data.reduced(model)?, cd_r, q, v, tau, w);
+    }
     check_vec("w", w, model.nv)?;
     cd.check(model)?;
     fd_derivatives(model, data, q, v, tau, None)?;

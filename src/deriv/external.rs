@@ -55,8 +55,13 @@ pub fn constrained_id_derivatives(
     a: &DVector<f64>,
     lambda: &DVector<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        cd.check(model)?;
+        let md = data.reduced(model)?;
+        return crate::mimic::constrained_id_cd(r, md, cd, None, q, v, a, lambda);
+    }
     check(model, cd, v, a, lambda, q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     id_derivatives_unchecked(model, data, q, v, a, None);
     contact_terms_fo(model, data, cd, lambda);
     Ok(())
@@ -82,9 +87,15 @@ pub fn constrained_id_so_derivatives(
     a: &DVector<f64>,
     lambda: &DVector<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        cd.check(model)?;
+        let so = crate::mimic::reduced_ws(&mut so.red, "SoData", model)?;
+        let md = data.reduced(model)?;
+        return crate::mimic::constrained_id_cd(r, md, cd, Some(so), q, v, a, lambda);
+    }
     check(model, cd, v, a, lambda, q)?;
-    data.check(model)?;
-    so.check(model)?;
+    data.check_tree(model)?;
+    so.check_tree(model)?;
     id_so_unchecked(model, data, so, q, v, a, None, -model.gravity);
     contact_terms_fo(model, data, cd, lambda);
     let b = base(model, data, cd);

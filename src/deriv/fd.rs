@@ -168,8 +168,11 @@ pub fn fd_derivatives(
     tau: &DVector<f64>,
     fext: Option<&[Force]>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::fd_derivatives(r, data.reduced(model)?, q, v, tau, fext);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("tau", tau, model.nv)?;
     check_fext(model, fext)?;
@@ -253,11 +256,19 @@ pub struct FdSoData {
     /// One group's non-zero right-hand-side rows (`nv` values) and their values (4 per row).
     idx: Vec<u32>,
     rhs: Vec<f64>,
+    /// For a model in reduced coordinates: the full tree's workspace and the reduced tensors,
+    /// which the accessors return (the fields above are then an empty shell).
+    pub(crate) red: Option<Box<crate::mimic::MimicSoData>>,
 }
 
 impl FdSoData {
     /// Workspace for `model`.
     pub fn new(model: &Model) -> Self {
+        if let Some(r) = &model.reduction {
+            let mut so = Self::new(crate::model::tree::shell_model());
+            so.red = Some(Box::new(crate::mimic::MimicSoData::new(r)));
+            return so;
+        }
         let n = model.nv;
         let words = n.div_ceil(64).max(1);
         let mut related = vec![0u64; n * words];
@@ -322,23 +333,36 @@ impl FdSoData {
             set: vec![0; words],
             idx: vec![0; n],
             rhs: vec![0.0; 4 * n],
+            red: None,
         }
     }
     /// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂q_j)`.
     pub fn d2qdd_dq2(&self) -> &Tensor3 {
-        &self.d2qdd_dq2
+        match &self.red {
+            Some(r) => r.d2qdd_dq2(),
+            None => &self.d2qdd_dq2,
+        }
     }
     /// `T[(i, j, k)] = ∂²q̈_i/∂q̇_j∂q̇_k`.
     pub fn d2qdd_dv2(&self) -> &Tensor3 {
-        &self.d2qdd_dv2
+        match &self.red {
+            Some(r) => r.d2qdd_dv2(),
+            None => &self.d2qdd_dv2,
+        }
     }
     /// `T[(i, j, k)] = ∂/∂q̇_k (∂q̈_i/∂q_j)`.
     pub fn d2qdd_dqdv(&self) -> &Tensor3 {
-        &self.d2qdd_dqdv
+        match &self.red {
+            Some(r) => r.d2qdd_dqdv(),
+            None => &self.d2qdd_dqdv,
+        }
     }
     /// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂τ_j) = ∂(M⁻¹)_ij/∂q_k`.
     pub fn d2qdd_dtaudq(&self) -> &Tensor3 {
-        &self.d2qdd_dtaudq
+        match &self.red {
+            Some(r) => r.d2qdd_dtaudq(),
+            None => &self.d2qdd_dtaudq,
+        }
     }
 }
 
@@ -670,12 +694,16 @@ pub fn fd_so_derivatives(
     tau: &DVector<f64>,
     fext: Option<&[Force]>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        let so = crate::mimic::reduced_ws(&mut fso.red, "FdSoData", model)?;
+        return crate::mimic::fd_so_derivatives(r, data.reduced(model)?, so, q, v, tau, fext);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("tau", tau, model.nv)?;
     check_fext(model, fext)?;
-    fso.id.check(model)?;
+    fso.id.check_tree(model)?;
     if fso.d2qdd_dq2.dims() != (model.nv, model.nv, model.nv) {
         return Err(crate::error::Error::Dimension {
             what: "FdSoData (built for another model): nv".into(),

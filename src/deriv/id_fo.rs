@@ -67,8 +67,11 @@ pub fn id_derivatives(
     a: &DVector<f64>,
     fext: Option<&[Force]>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::id_derivatives(r, data.reduced(model)?, q, v, a, fext);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("a", a, model.nv)?;
     check_fext(model, fext)?;

@@ -43,6 +43,9 @@ pub struct SoData {
     /// The tree this workspace was built for (checked on every call).
     parents: Vec<usize>,
     nvs: Vec<usize>,
+    /// For a model in reduced coordinates: the full tree's workspace and the reduced tensors,
+    /// which the accessors return (the fields above are then an empty shell).
+    pub(crate) red: Option<Box<crate::mimic::MimicSoData>>,
 }
 
 impl SoData {
@@ -69,6 +72,11 @@ impl SoData {
         Self::build(model, false, true)
     }
     fn build(model: &Model, with_dm_dq: bool, upper: bool) -> Self {
+        if let Some(r) = &model.reduction {
+            let mut so = Self::build(crate::model::tree::shell_model(), with_dm_dq, upper);
+            so.red = Some(Box::new(crate::mimic::MimicSoData::new(r)));
+            return so;
+        }
         let n = model.nv;
         let nd = if with_dm_dq { n } else { 0 };
         let mut anc_dofs = vec![];
@@ -95,10 +103,32 @@ impl SoData {
             anc_start,
             parents: model.parents.clone(),
             nvs: model.nvs.clone(),
+            red: None,
         }
     }
     /// Checks that this workspace was built for `model` (same tree and degrees of freedom).
     pub fn check(&self, model: &Model) -> Result<()> {
+        match (&model.reduction, &self.red) {
+            (Some(r), Some(so)) => so.check(r),
+            (Some(_), None) | (None, Some(_)) => Err(crate::error::Error::Workspace(format!(
+                "SoData was made for a model {} mimic joints, model \"{}\" {}; make it with \
+                 SoData::new for this model",
+                if self.red.is_some() { "with" } else { "without" },
+                model.name(),
+                if self.red.is_some() { "has none" } else { "is in reduced coordinates" },
+            ))),
+            (None, None) => self.check_tree(model),
+        }
+    }
+    /// [`SoData::check`] for the algorithms of the tree: an error for a reduced model.
+    pub(crate) fn check_tree(&self, model: &Model) -> Result<()> {
+        if model.reduction.is_some() || self.red.is_some() {
+            return Err(crate::error::Error::Workspace(format!(
+                "model \"{}\" is in reduced coordinates (mimic joints): this function takes \
+                 the full tree (Model::full_tree) and its own workspaces",
+                model.name()
+            )));
+        }
         let n = model.nv;
         if self.parents.len() == model.parents.len()
             && (self.parents != model.parents || self.nvs != model.nvs)
@@ -132,23 +162,35 @@ impl SoData {
     /// `T[(i, j, k)] = ∂/∂q_k (∂τ_i/∂q_j)` (tangent space; not symmetric in `j, k` within a
     /// multi-DoF joint).
     pub fn d2tau_dq2(&self) -> &Tensor3 {
-        &self.d2tau_dq2
+        match &self.red {
+            Some(r) => r.d2tau_dq2(),
+            None => &self.d2tau_dq2,
+        }
     }
     pub(crate) fn d2tau_dq2_mut(&mut self) -> &mut Tensor3 {
         &mut self.d2tau_dq2
     }
     /// `T[(i, j, k)] = ∂²τ_i/∂q̇_j∂q̇_k`.
     pub fn d2tau_dv2(&self) -> &Tensor3 {
-        &self.d2tau_dv2
+        match &self.red {
+            Some(r) => r.d2tau_dv2(),
+            None => &self.d2tau_dv2,
+        }
     }
     /// `T[(i, j, k)] = ∂/∂q̇_k (∂τ_i/∂q_j)`.
     pub fn d2tau_dqdv(&self) -> &Tensor3 {
-        &self.d2tau_dqdv
+        match &self.red {
+            Some(r) => r.d2tau_dqdv(),
+            None => &self.d2tau_dqdv,
+        }
     }
     /// `T[(i, j, k)] = ∂M_ij/∂q_k`. Empty (`0×0×0`) in the workspace inside
     /// [`FdSoData`](super::FdSoData), whose forward-dynamics derivatives do not need it.
     pub fn dm_dq(&self) -> &Tensor3 {
-        &self.dm_dq
+        match &self.red {
+            Some(r) => r.dm_dq(),
+            None => &self.dm_dq,
+        }
     }
 }
 
@@ -163,12 +205,16 @@ pub fn id_so_derivatives(
     a: &DVector<f64>,
     fext: Option<&[Force]>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        let so = crate::mimic::reduced_ws(&mut so.red, "SoData", model)?;
+        return crate::mimic::id_so_derivatives(r, data.reduced(model)?, so, q, v, a, fext);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("a", a, model.nv)?;
     check_fext(model, fext)?;
-    so.check(model)?;
+    so.check_tree(model)?;
     id_so_unchecked(model, data, so, q, v, a, fext, -model.gravity);
     Ok(())
 }

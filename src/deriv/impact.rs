@@ -67,22 +67,39 @@ pub struct ImpactData {
     dv: DVector<f64>,
     w: DVector<f64>,
     zero: DVector<f64>,
+    /// For a model in reduced coordinates: the full tree's workspace and the reduced results, which
+    /// the accessors return (the fields above are then an empty shell).
+    pub(crate) red: Option<Box<crate::mimic::MimicImpactData>>,
 }
 
 impl ImpactData {
     /// Contact workspace.
     pub fn cd(&self) -> &ContactData {
-        &self.cd
+        match &self.red {
+            Some(r) => r.cd(),
+            None => &self.cd,
+        }
     }
     /// Coefficient of restitution `e` (default 0): `J_c q̇⁺ = −e J_c q̇⁻`.
     pub fn restitution(&self) -> f64 {
-        self.restitution
+        match &self.red {
+            Some(r) => r.restitution(),
+            None => self.restitution,
+        }
     }
     /// Sets the damping of the Delassus solve (see [`ContactData::set_damping`]).
     ///
     /// # Errors
     /// As [`ContactData::set_damping`].
     pub fn set_damping(&mut self, damping: f64) -> Result<()> {
+        if self.red.is_some() && damping != 0.0 {
+            return Err(Error::Argument {
+                name: "damping".into(),
+                reason: "the impact dynamics of a model in reduced coordinates (mimic joints) \
+                         solve the Delassus system without damping"
+                    .into(),
+            });
+        }
         self.cd.set_damping(damping)
     }
     /// Sets the coefficient of restitution `e ≥ 0`.
@@ -90,6 +107,9 @@ impl ImpactData {
     /// # Errors
     /// [`Error::Argument`] for a NaN, infinite or negative `e` (the value is unchanged).
     pub fn set_restitution(&mut self, e: f64) -> Result<()> {
+        if let Some(r) = &mut self.red {
+            return r.set_restitution(e);
+        }
         if !e.is_finite() || e < 0.0 {
             return Err(Error::Argument {
                 name: "restitution".into(),
@@ -101,32 +121,53 @@ impl ImpactData {
     }
     /// Post-impact velocity `q̇⁺`.
     pub fn vplus(&self) -> &DVector<f64> {
-        &self.vplus
+        match &self.red {
+            Some(r) => r.vplus(),
+            None => &self.vplus,
+        }
     }
     /// Contact impulses applied to the robot, `m` rows (3 per 3-D contact, 6 per 6-D contact,
     /// in each contact's axes).
     pub fn impulse(&self) -> &DVector<f64> {
-        &self.impulse
+        match &self.red {
+            Some(r) => r.impulse(),
+            None => &self.impulse,
+        }
     }
     /// `∂q̇⁺/∂q`.
     pub fn dvplus_dq(&self) -> &DMatrix<f64> {
-        &self.dvplus_dq
+        match &self.red {
+            Some(r) => r.dvplus_dq(),
+            None => &self.dvplus_dq,
+        }
     }
     /// `∂q̇⁺/∂q̇⁻`.
     pub fn dvplus_dvminus(&self) -> &DMatrix<f64> {
-        &self.dvplus_dvminus
+        match &self.red {
+            Some(r) => r.dvplus_dvminus(),
+            None => &self.dvplus_dvminus,
+        }
     }
     /// `∂λ̂/∂q`.
     pub fn dimpulse_dq(&self) -> &DMatrix<f64> {
-        &self.dimpulse_dq
+        match &self.red {
+            Some(r) => r.dimpulse_dq(),
+            None => &self.dimpulse_dq,
+        }
     }
     /// `∂λ̂/∂q̇⁻`.
     pub fn dimpulse_dvminus(&self) -> &DMatrix<f64> {
-        &self.dimpulse_dvminus
+        match &self.red {
+            Some(r) => r.dimpulse_dvminus(),
+            None => &self.dimpulse_dvminus,
+        }
     }
     /// Second-order results (allocated by [`ImpactData::with_second_order`]).
     pub fn so(&self) -> Option<&ImpactSo> {
-        self.so.as_ref()
+        match &self.red {
+            Some(r) => r.so().map(|s| &s.res),
+            None => self.so.as_ref(),
+        }
     }
 }
 
@@ -153,6 +194,24 @@ pub struct ImpactSo {
 }
 
 impl ImpactSo {
+    /// The four result tensors (`n` DoFs, `m` rows) with the scratch of the world-only model:
+    /// the second-order results of a reduced model's [`ImpactData`].
+    pub(crate) fn results(n: usize, m: usize) -> Self {
+        let shell = crate::model::tree::shell_model();
+        let t = |r| Tensor3::zeros(r, n, n);
+        ImpactSo {
+            d2vplus_dq2: t(n),
+            d2vplus_dqdvminus: t(n),
+            d2impulse_dq2: t(m),
+            d2impulse_dqdvminus: t(m),
+            id: SoData::without_dm_dq(shell),
+            r: [Tensor3::zeros(0, 0, 0), Tensor3::zeros(0, 0, 0)],
+            ycol: DVector::zeros(0),
+            dv_minus_one: DMatrix::zeros(0, 0),
+            batch: IdfozaBatch::new(shell),
+            ends_q: symmetric_ends(shell, true),
+        }
+    }
     /// `∂/∂q_k (∂q̇⁺_i/∂q_j)`.
     pub fn d2vplus_dq2(&self) -> &Tensor3 {
         &self.d2vplus_dq2
@@ -174,6 +233,11 @@ impl ImpactSo {
 impl ImpactData {
     /// Workspace (first order) for `model` and the contacts of `cd`, restitution 0.
     pub fn new(model: &Model, cd: ContactData) -> Self {
+        if let Some(r) = &model.reduction {
+            let mut im = Self::new(crate::model::tree::shell_model(), ContactData::empty());
+            im.red = Some(Box::new(crate::mimic::MimicImpactData::from_contacts(r, cd)));
+            return im;
+        }
         let (n, m) = (model.nv, cd.dim());
         Self {
             restitution: 0.0,
@@ -195,10 +259,15 @@ impl ImpactData {
             w: DVector::zeros(n),
             zero: DVector::zeros(n),
             cd,
+            red: None,
         }
     }
     /// Also allocates the second-order tensors.
     pub fn with_second_order(mut self, model: &Model) -> Self {
+        if let (Some(r), Some(red)) = (&model.reduction, self.red.take()) {
+            self.red = Some(Box::new(red.with_second_order(r)));
+            return self;
+        }
         let (n, m) = (model.nv, self.cd.dim());
         let t = |r| Tensor3::zeros(r, n, n);
         self.so = Some(ImpactSo {
@@ -225,6 +294,10 @@ pub fn impact_dynamics(
     q: &DVector<f64>,
     vminus: &DVector<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        let im_r = crate::mimic::reduced_ws(&mut im.red, "ImpactData", model)?;
+        return crate::mimic::impact_dynamics(r, data.reduced(model)?, im_r, q, vminus);
+    }
     solve(model, data, im, q, vminus, false)
 }
 
@@ -238,7 +311,7 @@ fn solve(
     full: bool,
 ) -> Result<()> {
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("vminus", vminus, model.nv)?;
     im.cd.check(model)?;
     if im.vplus.len() != model.nv || im.cd.jac.ncols() != model.nv {
@@ -249,7 +322,7 @@ fn solve(
         });
     }
     if let Some(so) = &im.so {
-        so.id.check(model)?;
+        so.id.check_tree(model)?;
     }
     if !im.restitution.is_finite() || im.restitution < 0.0 {
         return Err(Error::Argument {
@@ -293,6 +366,10 @@ pub fn impact_derivatives(
     q: &DVector<f64>,
     vminus: &DVector<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        let im_r = crate::mimic::reduced_ws(&mut im.red, "ImpactData", model)?;
+        return crate::mimic::impact_derivatives(r, data.reduced(model)?, im_r, q, vminus);
+    }
     impact_dynamics(model, data, im, q, vminus)?;
     first_order(model, data, im);
     Ok(())
@@ -365,6 +442,10 @@ pub fn impact_so_derivatives(
     q: &DVector<f64>,
     vminus: &DVector<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        let im_r = crate::mimic::reduced_ws(&mut im.red, "ImpactData", model)?;
+        return crate::mimic::impact_so_derivatives(r, data.reduced(model)?, im_r, q, vminus);
+    }
     let mut so = im.so.take().ok_or_else(|| {
         Error::Workspace(
             "impact_so_derivatives: ImpactData was created without second order".into(),
@@ -459,11 +540,20 @@ pub struct ImpactContracted {
     neg_z2: DVector<f64>,
     zeros_m: DVector<f64>,
     zeros_n: DVector<f64>,
+    /// For a model in reduced coordinates: the full tree's workspace and the reduced results, which
+    /// the accessors return (the fields above are then an empty shell).
+    pub(crate) red: Option<Box<crate::mimic::MimicImpactContracted>>,
 }
 
 impl ImpactContracted {
     /// Workspace for `model` and the contacts of `im`.
     pub fn new(model: &Model, im: &ImpactData) -> Self {
+        if let Some(r) = &model.reduction {
+            let mut ic = Self::with_rows(crate::model::tree::shell_model(), 0);
+            ic.red =
+                im.red.as_ref().map(|i| Box::new(crate::mimic::MimicImpactContracted::new(r, i)));
+            return ic;
+        }
         Self::with_rows(model, im.cd.dim())
     }
     /// Workspace for `model` and `m` contact rows.
@@ -487,15 +577,22 @@ impl ImpactContracted {
             neg_z2: DVector::zeros(m),
             zeros_m: DVector::zeros(m),
             zeros_n: DVector::zeros(n),
+            red: None,
         }
     }
     /// `C_qq[(j, k)] = ∂/∂q_k (∂(ωᵀy)/∂q_j)` with `ωᵀy = w_v⁺ᵀ q̇⁺ + w_Λᵀ λ̂`.
     pub fn c_qq(&self) -> &DMatrix<f64> {
-        &self.qq
+        match &self.red {
+            Some(r) => r.c_qq(),
+            None => &self.qq,
+        }
     }
     /// `C_qv[(j, k)] = ∂/∂q̇⁻_k (∂(ωᵀy)/∂q_j)` (`y` is linear in `q̇⁻`: no `q̇⁻q̇⁻` block).
     pub fn c_qvminus(&self) -> &DMatrix<f64> {
-        &self.qv
+        match &self.red {
+            Some(r) => r.c_qvminus(),
+            None => &self.qv,
+        }
     }
     /// The adjoint `ζ` (`nv + m`), set by [`crate::mimic::impact_so_contracted`] before
     /// [`zeta_rqq`].
@@ -544,6 +641,20 @@ pub fn impact_so_contracted(
     w_vplus: &DVector<f64>,
     w_impulse: &DVector<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        let im_r = crate::mimic::reduced_ws(&mut im.red, "ImpactData", model)?;
+        let ic_r = crate::mimic::reduced_ws(&mut ic.red, "ImpactContracted", model)?;
+        return crate::mimic::impact_so_contracted(
+            r,
+            data.reduced(model)?,
+            im_r,
+            ic_r,
+            q,
+            vminus,
+            w_vplus,
+            w_impulse,
+        );
+    }
     let (n, m) = (model.nv, im.cd.dim());
     check_vec("w_vplus", w_vplus, n)?;
     check_vec("w_impulse", w_impulse, m)?;

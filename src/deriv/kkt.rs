@@ -64,49 +64,82 @@ pub struct KktData {
     tmp_v: DVector<f64>,
     /// `∂(J_c q̇)/∂q` (`m × nv`) for the Baumgarte terms.
     bg: DMatrix<f64>,
+    /// For a model in reduced coordinates: the full tree's workspace and the reduced results, which
+    /// the accessors return (the fields above are then an empty shell).
+    pub(crate) red: Option<Box<crate::mimic::MimicKktData>>,
 }
 
 impl KktData {
     /// Contact workspace (Jacobian, Delassus factorisation, damping option).
     pub fn cd(&self) -> &ContactData {
-        &self.cd
+        match &self.red {
+            Some(r) => r.full_kd().cd(),
+            None => &self.cd,
+        }
     }
     /// Constrained joint accelerations.
     pub fn qdd(&self) -> &DVector<f64> {
-        &self.qdd
+        match &self.red {
+            Some(r) => r.qdd(),
+            None => &self.qdd,
+        }
     }
     /// Contact forces applied to the robot, `m` rows (3 per 3-D contact, 6 per 6-D contact, in
     /// each contact's axes).
     pub fn lambda(&self) -> &DVector<f64> {
-        &self.lambda
+        match &self.red {
+            Some(r) => r.lambda(),
+            None => &self.lambda,
+        }
     }
     /// `∂q̈/∂q`.
     pub fn dqdd_dq(&self) -> &DMatrix<f64> {
-        &self.dqdd_dq
+        match &self.red {
+            Some(r) => r.dqdd_dq(),
+            None => &self.dqdd_dq,
+        }
     }
     /// `∂q̈/∂q̇`.
     pub fn dqdd_dv(&self) -> &DMatrix<f64> {
-        &self.dqdd_dv
+        match &self.red {
+            Some(r) => r.dqdd_dv(),
+            None => &self.dqdd_dv,
+        }
     }
     /// `∂q̈/∂τ`.
     pub fn dqdd_dtau(&self) -> &DMatrix<f64> {
-        &self.dqdd_dtau
+        match &self.red {
+            Some(r) => r.dqdd_dtau(),
+            None => &self.dqdd_dtau,
+        }
     }
     /// `∂λ/∂q`.
     pub fn dlambda_dq(&self) -> &DMatrix<f64> {
-        &self.dlambda_dq
+        match &self.red {
+            Some(r) => r.dlambda_dq(),
+            None => &self.dlambda_dq,
+        }
     }
     /// `∂λ/∂q̇`.
     pub fn dlambda_dv(&self) -> &DMatrix<f64> {
-        &self.dlambda_dv
+        match &self.red {
+            Some(r) => r.dlambda_dv(),
+            None => &self.dlambda_dv,
+        }
     }
     /// `∂λ/∂τ`.
     pub fn dlambda_dtau(&self) -> &DMatrix<f64> {
-        &self.dlambda_dtau
+        match &self.red {
+            Some(r) => r.dlambda_dtau(),
+            None => &self.dlambda_dtau,
+        }
     }
     /// Second-order results (allocated by [`KktData::with_second_order`]).
     pub fn so(&self) -> Option<&KktSo> {
-        self.so.as_ref()
+        match &self.red {
+            Some(r) => r.so().map(|s| &s.res),
+            None => self.so.as_ref(),
+        }
     }
 }
 
@@ -145,6 +178,33 @@ pub struct KktSo {
 }
 
 impl KktSo {
+    /// The eight result tensors (`n` DoFs, `m` rows) with the scratch of the world-only model:
+    /// the second-order results of a reduced model's [`KktData`].
+    pub(crate) fn results(n: usize, m: usize) -> Self {
+        let shell = crate::model::tree::shell_model();
+        let t = |r| Tensor3::zeros(r, n, n);
+        let e = || Tensor3::zeros(0, 0, 0);
+        KktSo {
+            d2qdd_dq2: t(n),
+            d2qdd_dv2: t(n),
+            d2qdd_dqdv: t(n),
+            d2qdd_dtaudq: t(n),
+            d2lambda_dq2: t(m),
+            d2lambda_dv2: t(m),
+            d2lambda_dqdv: t(m),
+            d2lambda_dtaudq: t(m),
+            id: SoData::without_dm_dq(shell),
+            r: [e(), e(), e(), e()],
+            ycol: DVector::zeros(0),
+            batch: IdfozaBatch::new(shell),
+            pw: vec![],
+            pu: vec![],
+            jb: vec![],
+            je: vec![],
+            ends_q: symmetric_ends(shell, true),
+            ends_v: symmetric_ends(shell, false),
+        }
+    }
     /// `∂/∂q_k (∂q̈_i/∂q_j)`.
     pub fn d2qdd_dq2(&self) -> &Tensor3 {
         &self.d2qdd_dq2
@@ -180,15 +240,32 @@ impl KktSo {
 }
 
 impl KktData {
+    /// The first-order workspace of no contacts on the world-only model (a shell).
+    fn empty() -> Self {
+        Self::new(crate::model::tree::shell_model(), ContactData::empty())
+    }
     /// Sets the damping of the Delassus solve (see [`ContactData::set_damping`]).
     ///
     /// # Errors
     /// As [`ContactData::set_damping`].
     pub fn set_damping(&mut self, damping: f64) -> Result<()> {
+        if self.red.is_some() && damping != 0.0 {
+            return Err(crate::error::Error::Argument {
+                name: "damping".into(),
+                reason: "the KKT dynamics of a model in reduced coordinates (mimic joints) \
+                         solve the Delassus system without damping"
+                    .into(),
+            });
+        }
         self.cd.set_damping(damping)
     }
     /// Workspace for `model` with contact workspace `cd` (first order only).
     pub fn new(model: &Model, cd: ContactData) -> Self {
+        if let Some(r) = &model.reduction {
+            let mut kd = Self::new(crate::model::tree::shell_model(), ContactData::empty());
+            kd.red = Some(Box::new(crate::mimic::MimicKktData::from_contacts(r, cd)));
+            return kd;
+        }
         let (n, m) = (model.nv, cd.dim());
         Self {
             qdd: DVector::zeros(n),
@@ -205,10 +282,15 @@ impl KktData {
             tmp_v: DVector::zeros(n),
             bg: DMatrix::zeros(m, n),
             cd,
+            red: None,
         }
     }
     /// Also allocates the second-order tensors.
     pub fn with_second_order(mut self, model: &Model) -> Self {
+        if let (Some(r), Some(red)) = (&model.reduction, self.red.take()) {
+            self.red = Some(Box::new(red.with_second_order(r)));
+            return self;
+        }
         let (n, m) = (model.nv, self.cd.dim());
         let t = |r| Tensor3::zeros(r, n, n);
         self.so = Some(KktSo {
@@ -246,6 +328,10 @@ pub fn kkt_dynamics(
     v: &DVector<f64>,
     tau: &DVector<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        let kd_r = crate::mimic::reduced_ws(&mut kd.red, "KktData", model)?;
+        return crate::mimic::kkt_dynamics(r, data.reduced(model)?, kd_r, q, v, tau);
+    }
     check_inputs(model, data, kd, q, v, tau)?;
     solve_unchecked(model, data, kd, q, v, tau, true)
 }
@@ -259,7 +345,7 @@ fn check_inputs(
     tau: &DVector<f64>,
 ) -> Result<()> {
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("v", v, model.nv)?;
     check_vec("tau", tau, model.nv)?;
     kd.cd.check(model)?;
@@ -271,7 +357,7 @@ fn check_inputs(
         });
     }
     if let Some(so) = &kd.so {
-        so.id.check(model)?;
+        so.id.check_tree(model)?;
     }
     Ok(())
 }
@@ -339,6 +425,10 @@ pub fn kkt_derivatives(
     v: &DVector<f64>,
     tau: &DVector<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        let kd_r = crate::mimic::reduced_ws(&mut kd.red, "KktData", model)?;
+        return crate::mimic::kkt_derivatives(r, data.reduced(model)?, kd_r, q, v, tau);
+    }
     check_inputs(model, data, kd, q, v, tau)?;
     solve_unchecked(model, data, kd, q, v, tau, false)?;
     let qdd = std::mem::replace(&mut kd.qdd, DVector::zeros(0));
@@ -458,6 +548,10 @@ pub fn kkt_so_derivatives(
     v: &DVector<f64>,
     tau: &DVector<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        let kd_r = crate::mimic::reduced_ws(&mut kd.red, "KktData", model)?;
+        return crate::mimic::kkt_so_derivatives(r, data.reduced(model)?, kd_r, q, v, tau);
+    }
     let mut so = kd.so.take().ok_or_else(|| {
         crate::error::Error::Workspace(
             "kkt_so_derivatives: KktData was created without second order".into(),
@@ -835,11 +929,19 @@ pub struct KktContracted {
     h: DMatrix<f64>,
     /// `−ζ₂`.
     neg_z2: DVector<f64>,
+    /// For a model in reduced coordinates: the full tree's workspace and the reduced results, which
+    /// the accessors return (the fields above are then an empty shell).
+    pub(crate) red: Option<Box<crate::mimic::MimicKktContracted>>,
 }
 
 impl KktContracted {
     /// Workspace for `model` and the contacts of `kd`.
     pub fn new(model: &Model, kd: &KktData) -> Self {
+        if let Some(r) = &model.reduction {
+            let mut kc = Self::new(crate::model::tree::shell_model(), &KktData::empty());
+            kc.red = kd.red.as_ref().map(|k| Box::new(crate::mimic::MimicKktContracted::new(r, k)));
+            return kc;
+        }
         let (n, m) = (model.nv, kd.cd.dim());
         let z = || DMatrix::zeros(n, n);
         Self {
@@ -855,23 +957,36 @@ impl KktContracted {
             a: DMatrix::zeros(n, n + m),
             h: z(),
             neg_z2: DVector::zeros(m),
+            red: None,
         }
     }
     /// `C_qq[(j, k)] = ∂/∂q_k (∂(ωᵀy)/∂q_j)` with `ωᵀy = w_q̈ᵀ q̈ + w_λᵀ λ`.
     pub fn c_qq(&self) -> &DMatrix<f64> {
-        &self.qq
+        match &self.red {
+            Some(r) => r.c_qq(),
+            None => &self.qq,
+        }
     }
     /// `C_vv[(j, k)] = ∂²(ωᵀy)/∂q̇_j∂q̇_k`.
     pub fn c_vv(&self) -> &DMatrix<f64> {
-        &self.vv
+        match &self.red {
+            Some(r) => r.c_vv(),
+            None => &self.vv,
+        }
     }
     /// `C_qv[(j, k)] = ∂/∂q̇_k (∂(ωᵀy)/∂q_j)`.
     pub fn c_qv(&self) -> &DMatrix<f64> {
-        &self.qv
+        match &self.red {
+            Some(r) => r.c_qv(),
+            None => &self.qv,
+        }
     }
     /// `C_τq[(j, k)] = ∂/∂q_k (∂(ωᵀy)/∂τ_j)`.
     pub fn c_tauq(&self) -> &DMatrix<f64> {
-        &self.tq
+        match &self.red {
+            Some(r) => r.c_tauq(),
+            None => &self.tq,
+        }
     }
     /// The adjoint `ζ` (`nv + m`), set by [`crate::mimic::kkt_so_contracted`] before
     /// [`zeta_residual_hessians`].
@@ -924,6 +1039,21 @@ pub fn kkt_so_contracted(
     w_qdd: &DVector<f64>,
     w_lambda: &DVector<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        let kd_r = crate::mimic::reduced_ws(&mut kd.red, "KktData", model)?;
+        let kc_r = crate::mimic::reduced_ws(&mut kc.red, "KktContracted", model)?;
+        return crate::mimic::kkt_so_contracted(
+            r,
+            data.reduced(model)?,
+            kd_r,
+            kc_r,
+            q,
+            v,
+            tau,
+            w_qdd,
+            w_lambda,
+        );
+    }
     check_inputs(model, data, kd, q, v, tau)?;
     let (n, m) = (model.nv, kd.cd.dim());
     check_vec("w_qdd", w_qdd, n)?;

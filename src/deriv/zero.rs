@@ -44,8 +44,11 @@ pub fn idfoza(
     x: &DVector<f64>,
     out: &mut DMatrix<f64>,
 ) -> Result<()> {
+    if let Some(r) = &model.reduction {
+        return crate::mimic::idfoza(r, data.reduced(model)?, q, x, out);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("x", x, model.nv)?;
     if out.shape() != (model.nv, model.nv) {
         return Err(Error::Dimension {
@@ -159,10 +162,14 @@ pub fn idsoza<'a>(
     q: &DVector<f64>,
     x: &DVector<f64>,
 ) -> Result<&'a Tensor3> {
+    if let Some(r) = &model.reduction {
+        let so = crate::mimic::reduced_ws(&mut so.red, "SoData", model)?;
+        return crate::mimic::idsoza(r, data.reduced(model)?, so, q, x);
+    }
     model.check_q(q)?;
-    data.check(model)?;
+    data.check_tree(model)?;
     check_vec("x", x, model.nv)?;
-    so.check(model)?;
+    so.check_tree(model)?;
     let mut zero = std::mem::replace(&mut data.tmp_v, DVector::zeros(0));
     zero.fill(0.0);
     id_so_unchecked(model, data, so, q, &zero, x, None, Motion::zero());

@@ -426,7 +426,7 @@ impl Model {
         delta: &DVector<f64>,
         arg: Arg,
     ) -> Result<DMatrix<f64>> {
-        let mut out = DMatrix::zeros(self.nv, self.nv);
+        let mut out = DMatrix::zeros(self.nv(), self.nv());
         self.d_integrate_into(q, delta, arg, &mut out)?;
         Ok(out)
     }
@@ -442,6 +442,9 @@ impl Model {
         arg: Arg,
         out: &mut DMatrix<f64>,
     ) -> Result<()> {
+        if let Some(r) = &self.reduction {
+            return r.d_integrate_into(q, delta, arg, out);
+        }
         self.check_square(out)?;
         out.as_mut_slice().fill(0.0);
         self.d_integrate_blocks_into(q, delta, arg, out)
@@ -460,6 +463,10 @@ impl Model {
         arg: Arg,
         out: &mut DMatrix<f64>,
     ) -> Result<()> {
+        if let Some(r) = &self.reduction {
+            // The reduced blocks are written with the zeros between them.
+            return r.d_integrate_into(q, delta, arg, out);
+        }
         self.check_q(q)?;
         self.check_v("delta", delta)?;
         self.check_square(out)?;
@@ -495,7 +502,7 @@ impl Model {
         q1: &DVector<f64>,
         arg: Arg,
     ) -> Result<DMatrix<f64>> {
-        let mut out = DMatrix::zeros(self.nv, self.nv);
+        let mut out = DMatrix::zeros(self.nv(), self.nv());
         self.d_difference_into(q0, q1, arg, &mut out)?;
         Ok(out)
     }
@@ -511,6 +518,9 @@ impl Model {
         arg: Arg,
         out: &mut DMatrix<f64>,
     ) -> Result<()> {
+        if let Some(r) = &self.reduction {
+            return r.d_difference_into(q0, q1, arg, out);
+        }
         self.check_q(q0)?;
         self.check_q(q1).map_err(|e| match e {
             crate::error::Error::Dimension { expected, got, .. } => {
@@ -536,6 +546,10 @@ impl Model {
         arg: Arg,
         out: &mut DMatrix<f64>,
     ) -> Result<()> {
+        if let Some(r) = &self.reduction {
+            // The reduced blocks are written with the zeros between them.
+            return r.d_difference_into(q0, q1, arg, out);
+        }
         self.check_q(q0)?;
         self.check_q(q1).map_err(|e| match e {
             crate::error::Error::Dimension { expected, got, .. } => {
@@ -574,6 +588,9 @@ impl Model {
         q1: &DVector<f64>,
         out: &mut DVector<f64>,
     ) -> Result<()> {
+        if let Some(r) = &self.reduction {
+            return r.difference_into(q0, q1, out);
+        }
         self.check_q(q0)?;
         self.check_q(q1).map_err(|e| match e {
             crate::error::Error::Dimension { expected, got, .. } => {

@@ -5,6 +5,7 @@ mod contact;
 pub mod joint;
 pub mod lie;
 pub mod mjcf;
+pub(crate) mod reduction;
 pub mod tree;
 pub mod urdf;
 
@@ -13,6 +14,7 @@ pub(crate) use contact::{contact_label, redundancy};
 pub use joint::JointType;
 pub use lie::{Arg, exp6, jlog6, log6};
 pub use mjcf::{MjcfOptions, SpatialWrap, Tendon, TendonPath, load_mjcf_file, load_mjcf_str};
+pub use reduction::MimicJoint;
 pub(crate) use tree::JointKin;
 pub use tree::{Frame, Model, ModelBuilder, check_vec};
 pub use urdf::{MAX_URDF_DOFS, ROOT_JOINT_NAME, UrdfOptions, load_urdf_file, load_urdf_str};

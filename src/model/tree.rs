@@ -91,7 +91,11 @@ pub struct Model {
     pub(crate) mimic: Vec<Option<String>>,
     /// The mimic constraints read with [`UrdfOptions::mimic`](super::UrdfOptions::mimic)
     /// (checked, by increasing joint index; empty otherwise).
-    pub(crate) mimic_joints: Vec<crate::mimic::MimicJoint>,
+    pub(crate) mimic_joints: Vec<super::reduction::MimicJoint>,
+    /// The reduced coordinates, when the mimic joints follow their references (see
+    /// [`Model::full_tree`]): the full tree (this model's own joint-level fields, without a
+    /// reduction) and the map `G`. `None` for a model in which every joint is independent.
+    pub(crate) reduction: Option<std::sync::Arc<super::reduction::MimicModel>>,
     /// What the loader accepted with a reservation (see [`Model::warnings`]).
     pub(crate) warnings: Vec<String>,
     /// The tendons read by the MJCF loader (see [`Model::tendons`]).
@@ -173,15 +177,142 @@ impl Model {
     pub fn nvs(&self) -> &[usize] {
         &self.nvs
     }
-    /// Total configuration dimension.
+    /// Configuration dimension: that of the reduced coordinates for a model with mimic joints
+    /// (see [`Model::full_tree`]), the tree's otherwise.
     #[inline]
     pub fn nq(&self) -> usize {
-        self.nq
+        match &self.reduction {
+            Some(r) => r.nq,
+            None => self.nq,
+        }
     }
-    /// Total velocity dimension (number of degrees of freedom).
+    /// Velocity dimension (number of degrees of freedom): that of the reduced coordinates for
+    /// a model with mimic joints, the tree's otherwise (Pinocchio's `nv`).
     #[inline]
     pub fn nv(&self) -> usize {
+        match &self.reduction {
+            Some(r) => r.nv,
+            None => self.nv,
+        }
+    }
+    /// Configuration dimension of the full tree, every joint independent (mimic joints
+    /// included); [`Model::nq`] if the model has no mimic joints.
+    #[inline]
+    pub fn nq_full(&self) -> usize {
+        self.nq
+    }
+    /// Velocity dimension of the full tree (Pinocchio's `nvExtended`); [`Model::nv`] if the
+    /// model has no mimic joints.
+    #[inline]
+    pub fn nv_full(&self) -> usize {
         self.nv
+    }
+    /// Whether the model is in reduced coordinates (its mimic joints follow their references:
+    /// loaded with [`UrdfOptions::mimic`](super::UrdfOptions::mimic), or made by
+    /// [`Model::with_mimic_joints`]).
+    #[inline]
+    pub fn is_reduced(&self) -> bool {
+        self.reduction.is_some()
+    }
+    /// The full tree, every joint independent: the model itself unless it is reduced. Its
+    /// joint-level accessors ([`Model::idx_q`], [`Model::idx_v`], [`Model::nvs`],
+    /// [`Model::dof_joint`], [`Model::armature`], …) are those of this model too: for a
+    /// reduced model they index the full tree's coordinates, and [`Model::reduced_idx`] gives a
+    /// joint's reduced indices.
+    pub fn full_tree(&self) -> &Model {
+        match &self.reduction {
+            Some(r) => &r.full,
+            None => self,
+        }
+    }
+    /// The model in reduced coordinates: this model's tree with the constraints `mimics`
+    /// (`q[joint] = multiplier · q[reference] + offset`, joint indices of [`Model::names`]).
+    /// Every algorithm of the crate takes the result with the usual workspaces; its `q`, `v`,
+    /// `τ` are the reduced ones. An empty `mimics` gives the tree itself.
+    ///
+    /// # Errors
+    /// [`Error::Build`] naming the joint if a constraint names a joint index that does not
+    /// exist or the world, a joint mimics itself, a joint is constrained twice, a reference
+    /// joint is itself a mimic joint, either joint is not a one-DoF revolute, continuous or
+    /// prismatic joint, the two are not of one kind, or the multiplier or offset is not finite.
+    pub fn with_mimic_joints(&self, mimics: &[super::reduction::MimicJoint]) -> Result<Model> {
+        let mut tree = self.full_tree().clone();
+        if mimics.is_empty() {
+            return Ok(tree);
+        }
+        let r = super::reduction::MimicModel::new(tree.clone(), mimics)?;
+        tree.key = r.key;
+        tree.mimic_joints = r.mimics.clone();
+        tree.reduction = Some(std::sync::Arc::new(r));
+        Ok(tree)
+    }
+    /// Per joint of the full tree, its first reduced configuration and velocity indices
+    /// `(idx_q, idx_v)`, or `None` for a mimic joint of a reduced model (`Some((idx_q[j],
+    /// idx_v[j]))` for every joint of a model that is not reduced). `None` also for an index
+    /// out of range.
+    pub fn reduced_idx(&self, joint: usize) -> Option<(usize, usize)> {
+        match &self.reduction {
+            Some(r) => r.reduced_idx.get(joint).copied().flatten(),
+            None => (joint < self.njoints()).then(|| (self.idx_q[joint], self.idx_v[joint])),
+        }
+    }
+    /// The full tree's configuration of a configuration of this model: `expand(q)` (each mimic
+    /// joint at `multiplier · q_ref + offset`) for a reduced model, a copy otherwise.
+    ///
+    /// # Errors
+    /// As [`Model::check_q`].
+    pub fn expand_q(&self, q: &DVector<f64>) -> Result<DVector<f64>> {
+        match &self.reduction {
+            Some(r) => r.expand_q(q),
+            None => {
+                self.check_q(q)?;
+                Ok(q.clone())
+            }
+        }
+    }
+    /// The reduced configuration of a configuration of the full tree (its independent
+    /// coordinates; the mimic joints' values are dropped, not checked); a copy for a model
+    /// that is not reduced.
+    ///
+    /// # Errors
+    /// [`Error::Dimension`] if `q_full.len() != nq_full()`.
+    pub fn reduce_q(&self, q_full: &DVector<f64>) -> Result<DVector<f64>> {
+        match &self.reduction {
+            Some(r) => r.reduce_q(q_full),
+            None => {
+                if q_full.len() != self.nq {
+                    return Err(Error::Dimension {
+                        what: "q_full".into(),
+                        expected: self.nq,
+                        got: q_full.len(),
+                    });
+                }
+                Ok(q_full.clone())
+            }
+        }
+    }
+    /// The map `G` (`nv_full() × nv()`) with `v_full = G v` (the identity for a model that is
+    /// not reduced), as a dense matrix (allocates).
+    pub fn velocity_map(&self) -> DMatrix<f64> {
+        match &self.reduction {
+            Some(r) => r.g(),
+            None => DMatrix::identity(self.nv, self.nv),
+        }
+    }
+    /// The full tree's velocity index of each reduced velocity coordinate (`0..nv` for a model
+    /// that is not reduced).
+    pub fn v_keep(&self) -> Vec<usize> {
+        match &self.reduction {
+            Some(r) => r.v_keep.clone(),
+            None => (0..self.nv).collect(),
+        }
+    }
+    /// The full tree's configuration index of each reduced configuration coordinate.
+    pub fn q_keep(&self) -> Vec<usize> {
+        match &self.reduction {
+            Some(r) => r.q_keep.clone(),
+            None => (0..self.nq).collect(),
+        }
     }
     /// Joint owning each velocity coordinate.
     pub fn dof_joint(&self) -> &[usize] {
@@ -210,13 +341,17 @@ impl Model {
         self.has_armature
     }
     /// A copy of the model with the armature `a` (one entry per velocity coordinate, as
-    /// [`Model::armature`]); the rest of the model is unchanged, and workspaces made for this
-    /// model serve the new one.
+    /// [`Model::armature`]: of the full tree for a reduced model); the rest of the model is
+    /// unchanged, and workspaces made for this model serve the new one.
     ///
     /// # Errors
     /// [`Error::Dimension`] if `a.len() != nv`; [`Error::Build`] naming the degree of freedom,
     /// its joint and the value if an entry is negative or not finite.
     pub fn with_armature(&self, a: &[f64]) -> Result<Model> {
+        if let Some(r) = &self.reduction {
+            let tree = r.full.with_armature(a)?;
+            return tree.with_mimic_joints(&r.mimics);
+        }
         if a.len() != self.nv {
             return Err(Error::Dimension {
                 what: "armature".into(),
@@ -282,28 +417,38 @@ impl Model {
         if let Some(index) = g.iter().position(|x| !x.is_finite()) {
             return Err(Error::NotFinite { what: "gravity".into(), index });
         }
+        if let Some(r) = &mut self.reduction {
+            std::sync::Arc::make_mut(r).full.set_gravity(g)?;
+        }
         self.gravity = Motion::new(Vector3::zeros(), g);
         Ok(())
     }
-    /// Lower configuration limits (−∞ where absent).
+    /// Lower configuration limits (−∞ where absent; of the reduced coordinates for a reduced
+    /// model).
     pub fn lower(&self) -> &DVector<f64> {
-        &self.lower
+        match &self.reduction {
+            Some(r) => &r.lower,
+            None => &self.lower,
+        }
     }
-    /// Upper configuration limits (+∞ where absent).
+    /// Upper configuration limits (+∞ where absent; of the reduced coordinates for a reduced
+    /// model).
     pub fn upper(&self) -> &DVector<f64> {
-        &self.upper
+        match &self.reduction {
+            Some(r) => &r.upper,
+            None => &self.upper,
+        }
     }
-    /// For joints loaded from a URDF `<mimic>`: the name of the mimicked joint. In this model
-    /// the joint is independent; [`crate::mimic::MimicModel`] is the model in which it follows
-    /// its reference joint.
+    /// For joints loaded from a URDF `<mimic>`: the name of the mimicked joint (independent
+    /// in a model that is not reduced; see [`Model::is_reduced`]).
     pub fn mimic(&self) -> &[Option<String>] {
         &self.mimic
     }
     /// The mimic constraints `q_joint = multiplier · q_reference + offset` read by the URDF
     /// loader with [`UrdfOptions::mimic`](super::UrdfOptions::mimic) (checked; by increasing
-    /// joint index), from which [`crate::mimic::MimicModel::from_model`] makes the reduced
+    /// joint index); a reduced model's own constraints. From them the loader makes the reduced
     /// model. Empty without that option and for models made otherwise.
-    pub fn mimic_joints(&self) -> &[crate::mimic::MimicJoint] {
+    pub fn mimic_joints(&self) -> &[super::reduction::MimicJoint] {
         &self.mimic_joints
     }
     /// What the URDF or MJCF loader accepted with a reservation, one message per item in the
@@ -413,6 +558,9 @@ impl Model {
     }
     /// The neutral configuration.
     pub fn neutral(&self) -> DVector<f64> {
+        if let Some(r) = &self.reduction {
+            return r.neutral();
+        }
         let mut q = DVector::zeros(self.nq);
         for i in 1..self.njoints() {
             let (a, n) = (self.idx_q[i], self.nqs[i]);
@@ -422,6 +570,9 @@ impl Model {
     }
     /// A random valid configuration (see [`JointType::random`]).
     pub fn random_configuration(&self, rng: &mut Rng) -> DVector<f64> {
+        if let Some(r) = &self.reduction {
+            return r.random_configuration(rng);
+        }
         let mut q = DVector::zeros(self.nq);
         for i in 1..self.njoints() {
             let (a, n) = (self.idx_q[i], self.nqs[i]);
@@ -436,6 +587,9 @@ impl Model {
     }
     /// `q ⊕ δ` (right, body-frame perturbation per joint).
     pub fn integrate(&self, q: &DVector<f64>, delta: &DVector<f64>) -> Result<DVector<f64>> {
+        if let Some(r) = &self.reduction {
+            return r.integrate(q, delta);
+        }
         self.check_q(q)?;
         self.check_v("delta", delta)?;
         let mut out = q.clone();
@@ -455,6 +609,9 @@ impl Model {
     /// # Errors
     /// As [`Self::check_q`] for `q0` and `q1`.
     pub fn difference(&self, q0: &DVector<f64>, q1: &DVector<f64>) -> Result<DVector<f64>> {
+        if let Some(r) = &self.reduction {
+            return r.difference(q0, q1);
+        }
         self.check_q(q0)?;
         self.check_q(q1).map_err(|e| match e {
             Error::Dimension { expected, got, .. } => {
@@ -480,6 +637,9 @@ impl Model {
         // quaternion joint, spherical or free-flyer, has nq = nv + 1 and every other joint
         // nq = nv, so there is none when nq = nv). Anything else goes through the per-joint
         // checks, which name the joint and the problem.
+        if let Some(r) = &self.reduction {
+            return r.check_q(q);
+        }
         let qs = q.as_slice();
         if qs.len() == self.nq && all_finite(qs) && (self.nq == self.nv || self.quats_valid(qs)) {
             return Ok(());
@@ -531,7 +691,7 @@ impl Model {
     }
     /// Checks a velocity-sized vector: length `nv`, finite.
     pub fn check_v(&self, what: &str, x: &DVector<f64>) -> Result<()> {
-        check_vec(what, x, self.nv)
+        check_vec(what, x, self.nv())
     }
 }
 
@@ -574,6 +734,13 @@ pub fn check_vec(what: &str, x: &DVector<f64>, n: usize) -> Result<()> {
         return Err(Error::NotFinite { what: what.into(), index });
     }
     Ok(())
+}
+
+/// A model of the world only (no joint, no degree of freedom): the shell of the workspaces of
+/// reduced models, whose own fields are not used.
+pub(crate) fn shell_model() -> &'static Model {
+    static SHELL: std::sync::OnceLock<Model> = std::sync::OnceLock::new();
+    SHELL.get_or_init(|| ModelBuilder::new("").build_unchecked())
 }
 
 /// Builds a [`Model`] joint by joint. Joints must be added after their parent, which makes the
@@ -643,6 +810,7 @@ impl ModelBuilder {
             upper: DVector::zeros(0),
             mimic: vec![None],
             mimic_joints: vec![],
+            reduction: None,
             warnings: vec![],
             tendons: vec![],
             frames: vec![Frame {

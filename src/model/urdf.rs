@@ -60,9 +60,10 @@
 //!   [`Model::mimic_joints`]: the reference must be another joint of the file, not itself a
 //!   mimic joint, and both must be one-DoF joints of one kind (`revolute`/`continuous`, or
 //!   `prismatic`); anything else is an error naming the file, line and joint. The returned
-//!   [`Model`] is still the full tree;
-//!   [`MimicModel`](crate::mimic::MimicModel) is the model in the reduced coordinates (the
-//!   mimic joints without degrees of freedom).
+//!   [`Model`] is then in reduced coordinates ([`Model::is_reduced`]): the mimic joints have no
+//!   degrees of freedom, [`Model::nq`] and [`Model::nv`] count the independent coordinates,
+//!   [`Model::full_tree`] is the tree with every joint independent, and every algorithm takes
+//!   the model with its usual workspaces.
 //! * Nothing is printed: warnings are returned in [`Model::warnings`] (the command-line tool
 //!   prints them on standard error).
 //! * `<visual>`, `<collision>`, `<transmission>`, `<gazebo>`, `<material>` and every other unknown
@@ -77,9 +78,9 @@
 //! `joint "knee"`) and the reason.
 
 use super::joint::JointType;
+use super::reduction::MimicJoint;
 use super::tree::{Model, ModelBuilder, inertia_defect};
 use crate::error::{Error, Result};
-use crate::mimic::MimicJoint;
 use crate::spatial::InertiaDefect;
 use crate::spatial::{Inertia, Transform};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
@@ -99,11 +100,9 @@ pub struct UrdfOptions {
     pub strict_inertia: bool,
     /// Read `<mimic joint multiplier offset>` as a constraint `q = multiplier · q_ref + offset`
     /// (see the module documentation): every `<mimic>` is checked (an error otherwise) and
-    /// recorded in [`Model::mimic_joints`]. The [`Model`] returned is still the full tree,
-    /// every joint independent; [`MimicModel`](crate::mimic::MimicModel) (made by
-    /// [`MimicModel::load_urdf_file`](crate::mimic::MimicModel::load_urdf_file), or
-    /// [`MimicModel::from_model`](crate::mimic::MimicModel::from_model) of this model) is the
-    /// model in the reduced coordinates, without the mimic joints' degrees of freedom.
+    /// recorded in [`Model::mimic_joints`]. The [`Model`] returned is in reduced coordinates
+    /// (see [`Model::full_tree`]) when the file has a `<mimic>`: the mimic joints follow their
+    /// references and have no degrees of freedom.
     pub mimic: bool,
 }
 
@@ -819,6 +818,16 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
             reason: e.to_string(),
         })?;
         model.warnings = self.warnings.take();
+        if !model.mimic_joints.is_empty() {
+            let mimics = std::mem::take(&mut model.mimic_joints);
+            let reduced = model.with_mimic_joints(&mimics).map_err(|e| Error::Model {
+                file: self.file.to_string(),
+                line: None,
+                element: format!("robot \"{}\"", model.name),
+                reason: e.to_string(),
+            })?;
+            return Ok(reduced);
+        }
         Ok(model)
     }
 
