@@ -230,3 +230,38 @@ fn bad_input_is_an_error() {
     let e = am.second_order(&mut d, &x, Some(&u), &bad).unwrap_err();
     assert!(e.message.contains("vx_next[4] is NaN"), "{}", e.message);
 }
+
+/// The dynamics' part of `hzz` on a fixed-base chain (every `⊕` affine, no costs) against the
+/// hyper-dual oracle of `sodyn::reference` (`contracted_aba_hessians` at the weight `w_a = dt λ_v
+/// + dt² λ_q`): `H_qq = sym(C_qq)`, `H_qv = C_qv`, `H_vv = C_vv`, `H_qu = C_τqᵀ`.
+#[test]
+fn euler_dynamics_term_matches_the_hyper_dual_oracle() {
+    let m = Arc::new(builtin::serial_chain(4));
+    let dt = 0.05;
+    let am = node(&m, json!({"type": "euler", "dt": dt, "actuation": "full", "costs": []}));
+    let (x, u) = random_point(&m, 9, m.nv());
+    let n = m.nv();
+    let mut rng = Rng::new(19);
+    let lam = DVector::from_fn(2 * n, |_, _| 2.0 * rng.uniform() - 1.0);
+    let mut d = am.create_data().expect("data");
+    am.calc_diff(&mut d, &x, Some(&u)).expect("calc_diff");
+    am.second_order(&mut d, &x, Some(&u), &lam).expect("second_order");
+    let w: Vec<f64> = (0..n).map(|i| dt * lam[n + i] + dt * dt * lam[i]).collect();
+    let (q, v) = (x.rows(0, m.nq()).into_owned(), x.rows(m.nq(), n).into_owned());
+    let [cqq, cvv, cqv, ctq] =
+        sodyn::reference::contracted_aba_hessians(&m, &w, q.as_slice(), v.as_slice(), u.as_slice());
+    let mut h = DMatrix::zeros(3 * n, 3 * n);
+    for j in 0..n {
+        for k in 0..n {
+            h[(j, k)] = 0.5 * (cqq[(j, k)] + cqq[(k, j)]);
+            h[(j, n + k)] = cqv[(j, k)];
+            h[(n + k, j)] = cqv[(j, k)];
+            h[(n + j, n + k)] = 0.5 * (cvv[(j, k)] + cvv[(k, j)]);
+            h[(k, 2 * n + j)] = ctq[(j, k)];
+            h[(2 * n + j, k)] = ctq[(j, k)];
+        }
+    }
+    let err = (&d.hzz - &h).amax() / h.amax();
+    eprintln!("hyper-dual oracle: relative error {err:.2e}");
+    assert!(err < 1e-10, "{err:e}");
+}
