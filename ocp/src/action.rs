@@ -436,7 +436,8 @@ impl ActionModel {
     /// 3. every knot: the costs' residual curvature (times `dt` on an Euler knot).
     ///
     /// # Errors
-    /// `vx_next` of the wrong length or not finite; a planar joint; the dynamics' errors.
+    /// `vx_next` or `x` of the wrong length, `vx_next` not finite, data of another knot; a planar
+    /// joint; the dynamics' errors.
     pub fn second_order(
         &self,
         d: &mut ActionData,
@@ -455,6 +456,14 @@ impl ActionModel {
         }
         if let Some(i) = vx_next.iter().position(|v| !v.is_finite()) {
             return Err(OcpError::new(format!("second_order: vx_next[{i}] is {}", vx_next[i])));
+        }
+        if d.hzz.nrows() != ndx + self.nu() || d.a.len() != nv || x.len() != self.state.nx() {
+            return Err(OcpError::new(format!(
+                "second_order: x has length {} (expected nx = {}) or the data was made for \
+                 another knot (make it with this knot's create_data)",
+                x.len(),
+                self.state.nx()
+            )));
         }
         if let Some(j) = &d.so.planar {
             return Err(OcpError::new(format!(

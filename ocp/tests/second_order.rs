@@ -229,6 +229,10 @@ fn bad_input_is_an_error() {
     bad[4] = f64::NAN;
     let e = am.second_order(&mut d, &x, Some(&u), &bad).unwrap_err();
     assert!(e.message.contains("vx_next[4] is NaN"), "{}", e.message);
+    let term = node(&m, json!({"type": "euler", "dt": 0.0, "actuation": "full", "costs": []}));
+    let mut other = term.create_data().expect("data");
+    let e = am.second_order(&mut other, &x, Some(&u), &DVector::zeros(36)).unwrap_err();
+    assert!(e.message.contains("another knot"), "{}", e.message);
 }
 
 /// The dynamics' part of `hzz` on a fixed-base chain (every `⊕` affine, no costs) against the
