@@ -43,8 +43,182 @@ use std::hint::black_box;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-/// The description of `sodyn bench --help`.
-pub(crate) const LONG_ABOUT: &str = "\
+/// An algorithm of `sodyn bench`; [`CATALOGUE`] gives its name, family and help line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Algo {
+    Rnea,
+    Crba,
+    Aba,
+    IdFo,
+    FdFo,
+    IdSo,
+    FdSo,
+    IdSoC,
+    FdSoC,
+    FramePlacement,
+    FrameJacobianLocal,
+    FrameJacobianWorld,
+    FrameJacobianLwa,
+    FrameVelocity,
+    FrameAcceleration,
+    FrameClassicalAcceleration,
+    FrameVelocityDerivatives,
+    FrameVelocityDerivativesWorld,
+    FrameAccelerationDerivatives,
+    FrameAccelerationDerivativesWorld,
+    FrameJacobianDerivative,
+    FramePlacementHessian,
+    Com,
+    ComJacobian,
+    ComVelocityDerivatives,
+    CentroidalMomentum,
+    CentroidalDynamicsDerivatives,
+    Difference,
+    DIntegrateQ,
+    DIntegrateV,
+    DDifferenceQ0,
+    DDifferenceQ1,
+    BatchRnea,
+    BatchAba,
+    BatchIdFo,
+    BatchFdFo,
+    KktFo,
+    KktSo,
+    KktSoC,
+    ImpactFo,
+    ImpactSo,
+    ImpactSoC,
+}
+
+/// What an algorithm of [`CATALOGUE`] needs and how it is timed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Family {
+    /// One state per call, the dynamics workspaces ([`time_algo`]; `--ratio-to` takes it).
+    Dynamics,
+    /// One state per call, the kinematics of `--frame` or of the model ([`time_kin`]).
+    Kinematics,
+    /// All the states in one batched call on the `--threads` pool (time per state).
+    Batch,
+    /// One state per call, the contacts of `--contacts` (the derivative timings include the
+    /// forward solve; `--ratio-to` takes it).
+    Contact,
+}
+
+/// One entry of the algorithm catalogue.
+struct Entry {
+    algo: Algo,
+    /// The name in `--algos`, `--ratio-to` and the output's `algo=`.
+    name: &'static str,
+    family: Family,
+    /// The line of `sodyn bench --help`.
+    help: &'static str,
+}
+
+/// Every algorithm `sodyn bench` times, in output order: the one place that names them (the
+/// `--help` text, `--algos`, `--ratio-to` and the README's list are made from or checked
+/// against it).
+const CATALOGUE: &[Entry] = {
+    use Algo::*;
+    use Family::{Batch, Contact, Dynamics, Kinematics};
+    const fn e(algo: Algo, name: &'static str, family: Family, help: &'static str) -> Entry {
+        Entry { algo, name, family, help }
+    }
+    &[
+        e(Rnea, "rnea", Dynamics, "inverse dynamics (RNEA)"),
+        e(Crba, "crba", Dynamics, "mass matrix (CRBA)"),
+        e(Aba, "aba", Dynamics, "forward dynamics (ABA)"),
+        e(IdFo, "id_fo", Dynamics, "first-order inverse-dynamics derivatives (IDSVA)"),
+        e(FdFo, "fd_fo", Dynamics, "first-order forward-dynamics derivatives"),
+        e(IdSo, "id_so", Dynamics, "second-order inverse-dynamics derivatives"),
+        e(FdSo, "fd_so", Dynamics, "second-order forward-dynamics derivatives"),
+        e(IdSoC, "id_so_c", Dynamics, "contracted second-order ID (random weights)"),
+        e(FdSoC, "fd_so_c", Dynamics, "contracted second-order FD (random weights)"),
+        e(FramePlacement, "frame_placement", Kinematics, "placement of --frame"),
+        e(FrameJacobianLocal, "frame_jacobian_local", Kinematics, "its Jacobian, local"),
+        e(FrameJacobianWorld, "frame_jacobian_world", Kinematics, "its Jacobian, world"),
+        e(FrameJacobianLwa, "frame_jacobian_lwa", Kinematics, "its Jacobian, LWA axes"),
+        e(FrameVelocity, "frame_velocity", Kinematics, "its velocity (local axes)"),
+        e(FrameAcceleration, "frame_acceleration", Kinematics, "its spatial acceleration"),
+        e(
+            FrameClassicalAcceleration,
+            "frame_classical_acceleration",
+            Kinematics,
+            "its classical acceleration",
+        ),
+        e(
+            FrameVelocityDerivatives,
+            "frame_velocity_derivatives",
+            Kinematics,
+            "∂v/∂q, ∂v/∂v (local axes)",
+        ),
+        e(
+            FrameVelocityDerivativesWorld,
+            "frame_velocity_derivatives_world",
+            Kinematics,
+            "∂v/∂q, ∂v/∂v (world axes)",
+        ),
+        e(
+            FrameAccelerationDerivatives,
+            "frame_acceleration_derivatives",
+            Kinematics,
+            "∂a/∂q, ∂a/∂v, ∂a/∂a (local axes)",
+        ),
+        e(
+            FrameAccelerationDerivativesWorld,
+            "frame_acceleration_derivatives_world",
+            Kinematics,
+            "∂a/∂q, ∂a/∂v, ∂a/∂a (world axes)",
+        ),
+        e(FrameJacobianDerivative, "frame_jacobian_derivative", Kinematics, "∂J/∂q (local)"),
+        e(FramePlacementHessian, "frame_placement_hessian", Kinematics, "∂²(placement)/∂q²"),
+        e(Com, "com", Kinematics, "centre of mass"),
+        e(ComJacobian, "com_jacobian", Kinematics, "its Jacobian"),
+        e(ComVelocityDerivatives, "com_velocity_derivatives", Kinematics, "∂ċ/∂q"),
+        e(CentroidalMomentum, "centroidal_momentum", Kinematics, "centroidal momentum"),
+        e(
+            CentroidalDynamicsDerivatives,
+            "centroidal_dynamics_derivatives",
+            Kinematics,
+            "its derivatives",
+        ),
+        e(Difference, "difference", Kinematics, "q1 ⊖ q0 (q1: the next state's q)"),
+        e(DIntegrateQ, "d_integrate_q", Kinematics, "∂(q ⊕ v)/∂q, diagonal blocks"),
+        e(DIntegrateV, "d_integrate_v", Kinematics, "∂(q ⊕ v)/∂v, diagonal blocks"),
+        e(DDifferenceQ0, "d_difference_q0", Kinematics, "∂(q1 ⊖ q0)/∂q0, diagonal blocks"),
+        e(DDifferenceQ1, "d_difference_q1", Kinematics, "∂(q1 ⊖ q0)/∂q1, diagonal blocks"),
+        e(BatchRnea, "batch_rnea", Batch, "rnea over all the states (time per state)"),
+        e(BatchAba, "batch_aba", Batch, "aba over all the states"),
+        e(BatchIdFo, "batch_id_fo", Batch, "id_fo over all the states"),
+        e(BatchFdFo, "batch_fd_fo", Batch, "fd_fo over all the states"),
+        e(KktFo, "kkt_fo", Contact, "KKT contact dynamics, first order"),
+        e(KktSo, "kkt_so", Contact, "KKT contact dynamics, first and second order"),
+        e(KktSoC, "kkt_so_c", Contact, "contracted second-order KKT (random weights)"),
+        e(ImpactFo, "impact_fo", Contact, "impact dynamics, first order"),
+        e(ImpactSo, "impact_so", Contact, "impact dynamics, first and second order"),
+        e(ImpactSoC, "impact_so_c", Contact, "contracted second-order impact"),
+    ]
+};
+
+impl Entry {
+    /// The entry called `name`.
+    fn named(name: &str) -> Option<&'static Entry> {
+        CATALOGUE.iter().find(|e| e.name == name)
+    }
+    /// Whether `--ratio-to` can pair it (one state per call, the dynamics workspaces).
+    fn single(&self) -> bool {
+        matches!(self.family, Family::Dynamics | Family::Contact)
+    }
+}
+
+/// The names of the catalogue's entries that satisfy `f`, comma-separated.
+fn names(f: impl Fn(&Entry) -> bool) -> String {
+    CATALOGUE.iter().filter(|e| f(e)).map(|e| e.name).collect::<Vec<_>>().join(", ")
+}
+
+/// The description of `sodyn bench --help`, with the catalogue's algorithms.
+pub(crate) fn long_about() -> String {
+    let mut s = String::from(
+        "\
 Time the algorithms per call, one line per algorithm
 
 Times the algorithms as ../shared/peer/pin_bench.cpp times Pinocchio (random states generated \
@@ -55,77 +229,22 @@ and the 10th and 90th percentiles per call) and prints its line format:
 
 The batch_* lines add threads=, per=state and cpu_util= (process CPU time / wall time); \
 --paired-threads and --ratio-to add the fields their help names. A first line starting with # \
-records the model, the options and the timer's overhead.
+records the model, the options and the timer's overhead. The frame_* algorithms take --frame \
+(default: the deepest frame); difference and d_difference_* take the next state's q as q1; \
+d_integrate_* and d_difference_* write the diagonal blocks only, as Pinocchio's dIntegrate and \
+dDifference do (the suffix names the argument, Pinocchio's ARG0/ARG1). The contact algorithms \
+need --contacts. With --mimic (a URDF's <mimic> joints as constraints) every algorithm runs in \
+the reduced coordinates, contacts on frames of the full tree.
 
-Algorithms: rnea, crba, aba, id_fo, fd_fo, id_so, fd_so, id_so_c, fd_so_c (the contracted \
-second order, random weights), the kinematics of --frame (frame_placement, \
-frame_jacobian_local, frame_jacobian_world, frame_jacobian_lwa, frame_velocity, \
-frame_acceleration, frame_classical_acceleration (these three in the frame's local axes), \
-frame_velocity_derivatives, frame_acceleration_derivatives (local axes), \
-frame_velocity_derivatives_world, frame_acceleration_derivatives_world, \
-frame_jacobian_derivative (local), frame_placement_hessian), com, com_jacobian, \
-com_velocity_derivatives, centroidal_momentum, centroidal_dynamics_derivatives, difference, \
-d_integrate_q, d_integrate_v, d_difference_q0, d_difference_q1 (the q1 of difference and \
-d_difference_* is the next state's q; the _q/_v/_q0/_q1 suffix names the argument, Pinocchio's \
-ARG0/ARG1; d_integrate_* and d_difference_* time Model::d_integrate_blocks_into and \
-d_difference_blocks_into, which write the diagonal blocks only, as Pinocchio's dIntegrate and \
-dDifference do), batch_rnea, batch_aba, batch_id_fo, batch_fd_fo (the batched \
-entry points, time per state) and, with --contacts, kkt_fo, kkt_so, kkt_so_c, impact_fo, \
-impact_so, impact_so_c. With --mimic (a URDF's <mimic> joints as constraints, the reduced \
-coordinates): rnea, crba, aba, id_fo, fd_fo, id_so, fd_so, id_so_c, fd_so_c and, with \
---contacts (frames of the full tree), kkt_fo, kkt_so, kkt_so_c, impact_fo, impact_so, \
-impact_so_c, single-threaded (no --frame, --threads, --paired-threads, --ratio-to).";
-
-/// Algorithms that can be timed, in output order.
-const ALGOS: &[&str] = &[
-    "rnea",
-    "crba",
-    "aba",
-    "id_fo",
-    "fd_fo",
-    "id_so",
-    "fd_so",
-    "id_so_c",
-    "fd_so_c",
-    "frame_placement",
-    "frame_jacobian_local",
-    "frame_jacobian_world",
-    "frame_jacobian_lwa",
-    "frame_velocity",
-    "frame_acceleration",
-    "frame_classical_acceleration",
-    "frame_velocity_derivatives",
-    "frame_velocity_derivatives_world",
-    "frame_acceleration_derivatives",
-    "frame_acceleration_derivatives_world",
-    "frame_jacobian_derivative",
-    "frame_placement_hessian",
-    "com",
-    "com_jacobian",
-    "com_velocity_derivatives",
-    "centroidal_momentum",
-    "centroidal_dynamics_derivatives",
-    "difference",
-    "d_integrate_q",
-    "d_integrate_v",
-    "d_difference_q0",
-    "d_difference_q1",
-    "batch_rnea",
-    "batch_aba",
-    "batch_id_fo",
-    "batch_fd_fo",
-    "kkt_fo",
-    "kkt_so",
-    "kkt_so_c",
-    "impact_fo",
-    "impact_so",
-    "impact_so_c",
-];
-
-/// Contact algorithms: they need `--contacts` (contacts at the frame origins, 3-D points by
-/// default; the derivative timings include the forward solve).
-const CONTACT_ALGOS: &[&str] =
-    &["kkt_fo", "kkt_so", "kkt_so_c", "impact_fo", "impact_so", "impact_so_c"];
+Algorithms:
+",
+    );
+    for e in CATALOGUE {
+        let needs = if e.family == Family::Contact { " [--contacts]" } else { "" };
+        s += &format!("  {:<38} {}{needs}\n", e.name, e.help);
+    }
+    s
+}
 
 /// Options of `sodyn bench`.
 #[derive(Clone, Debug, Args)]
@@ -276,31 +395,31 @@ fn non_negative(s: &str) -> std::result::Result<f64, String> {
 
 /// Checks the `--algos` list; returns the algorithms to run, in [`ALGOS`] order. Without
 /// `--algos`, the contact algorithms run only when contacts are given.
-fn select_algos(requested: Option<&[String]>, has_contacts: bool) -> Result<Vec<&'static str>> {
+fn select_algos(requested: Option<&[String]>, has_contacts: bool) -> Result<Vec<&'static Entry>> {
+    let usable = |e: &Entry| has_contacts || e.family != Family::Contact;
     let Some(req) = requested else {
-        return Ok(ALGOS
-            .iter()
-            .copied()
-            .filter(|a| has_contacts || !CONTACT_ALGOS.contains(a))
-            .collect());
+        return Ok(CATALOGUE.iter().filter(|e| usable(e)).collect());
     };
     if req.is_empty() {
-        return Err(Error::Io("--algos: empty list".into()));
+        return Err(Error::Argument { name: "--algos".into(), reason: "empty list".into() });
     }
     for a in req {
-        if !ALGOS.contains(&a.as_str()) {
-            return Err(Error::Io(format!(
-                "unknown algorithm \"{a}\"; known algorithms: {}",
-                ALGOS.join(", ")
-            )));
-        }
-        if CONTACT_ALGOS.contains(&a.as_str()) && !has_contacts {
-            return Err(Error::Io(format!(
-                "algorithm \"{a}\" needs contacts: give --contacts F1,F2,... (frame names)"
-            )));
+        let Some(e) = Entry::named(a) else {
+            return Err(Error::Argument {
+                name: "--algos".into(),
+                reason: format!("unknown algorithm \"{a}\"; known algorithms: {}", names(|_| true)),
+            });
+        };
+        if e.family == Family::Contact && !has_contacts {
+            return Err(Error::Argument {
+                name: "--algos".into(),
+                reason: format!(
+                    "algorithm \"{a}\" needs contacts: give --contacts F1,F2,... (frame names)"
+                ),
+            });
         }
     }
-    Ok(ALGOS.iter().copied().filter(|a| req.iter().any(|r| r == a)).collect())
+    Ok(CATALOGUE.iter().filter(|e| req.iter().any(|r| r == e.name)).collect())
 }
 
 /// Sampling bounds of pin_bench (`sampling_bounds`): the URDF limits where finite, within
@@ -341,21 +460,24 @@ struct States {
 
 impl States {
     fn new(model: &Model, n: usize, seed: u64) -> Self {
-        let (lo, hi) = sampling_bounds(model);
+        // A model in reduced coordinates: the full tree's configuration, its independent
+        // coordinates kept.
+        let tree = model.full_tree();
+        let (lo, hi) = sampling_bounds(tree);
         let mut rng = Rng::new(seed);
         let mut s = States { q: vec![], v: vec![], a: vec![], tau: vec![] };
         for _ in 0..n {
-            let mut q = DVector::zeros(model.nq());
-            for j in 1..model.njoints() {
-                let (a, m) = (model.idx_q()[j], model.nqs()[j]);
-                model.joints()[j].random(
+            let mut q = DVector::zeros(tree.nq());
+            for j in 1..tree.njoints() {
+                let (a, m) = (tree.idx_q()[j], tree.nqs()[j]);
+                tree.joints()[j].random(
                     &mut rng,
                     &lo.as_slice()[a..a + m],
                     &hi.as_slice()[a..a + m],
                     &mut q.as_mut_slice()[a..a + m],
                 );
             }
-            s.q.push(q);
+            s.q.push(model.reduce_q(&q).expect("a configuration of the full tree"));
             let mut r = || DVector::from_fn(model.nv(), |_, _| rng.range(-1.0, 1.0));
             s.v.push(r());
             s.a.push(r());
@@ -873,7 +995,7 @@ fn default_frame(model: &Model) -> usize {
 
 /// Times one kinematics algorithm, if `algo` is one.
 fn time_kin(
-    algo: &str,
+    algo: Algo,
     m: &Model,
     st: &States,
     d: &mut Data,
@@ -892,14 +1014,14 @@ fn time_kin(
         }
     };
     Some(match algo {
-        "frame_placement" => measure(plan, |i| {
+        Algo::FramePlacement => measure(plan, |i| {
             black_box(frame_placement(m, d, &q[i], f)?);
             Ok(())
         }),
-        "frame_jacobian_local" | "frame_jacobian_world" | "frame_jacobian_lwa" => {
+        Algo::FrameJacobianLocal | Algo::FrameJacobianWorld | Algo::FrameJacobianLwa => {
             let rf = match algo {
-                "frame_jacobian_local" => local,
-                "frame_jacobian_world" => world,
+                Algo::FrameJacobianLocal => local,
+                Algo::FrameJacobianWorld => world,
                 _ => ReferenceFrame::LocalWorldAligned,
             };
             let g = jac(rf);
@@ -909,35 +1031,35 @@ fn time_kin(
                 Ok(())
             })
         }
-        "frame_velocity" => measure(plan, |i| {
+        Algo::FrameVelocity => measure(plan, |i| {
             black_box(frame_velocity(m, d, &q[i], &v[i], f, local)?);
             Ok(())
         }),
-        "frame_acceleration" => measure(plan, |i| {
+        Algo::FrameAcceleration => measure(plan, |i| {
             black_box(frame_acceleration(m, d, &q[i], &v[i], &a[i], f, local)?);
             Ok(())
         }),
-        "frame_classical_acceleration" => measure(plan, |i| {
+        Algo::FrameClassicalAcceleration => measure(plan, |i| {
             black_box(frame_classical_acceleration(m, d, &q[i], &v[i], &a[i], f, local)?);
             Ok(())
         }),
-        "frame_velocity_derivatives" | "frame_velocity_derivatives_world" => {
-            let rf = if algo.ends_with("_world") { world } else { local };
+        Algo::FrameVelocityDerivatives | Algo::FrameVelocityDerivativesWorld => {
+            let rf = if algo == Algo::FrameVelocityDerivativesWorld { world } else { local };
             measure(plan, |i| {
                 frame_velocity_derivatives(m, d, &q[i], &v[i], f, rf, j1, j2)?;
                 black_box((&*j1, &*j2));
                 Ok(())
             })
         }
-        "frame_acceleration_derivatives" | "frame_acceleration_derivatives_world" => {
-            let rf = if algo.ends_with("_world") { world } else { local };
+        Algo::FrameAccelerationDerivatives | Algo::FrameAccelerationDerivativesWorld => {
+            let rf = if algo == Algo::FrameAccelerationDerivativesWorld { world } else { local };
             measure(plan, |i| {
                 frame_acceleration_derivatives(m, d, &q[i], &v[i], &a[i], f, rf, j1, j2, jx)?;
                 black_box((&*j1, &*j2, &*jx));
                 Ok(())
             })
         }
-        "frame_jacobian_derivative" => {
+        Algo::FrameJacobianDerivative => {
             let [t, _] = t3;
             measure(plan, |i| {
                 frame_jacobian_derivative(m, d, &q[i], f, local, t)?;
@@ -945,7 +1067,7 @@ fn time_kin(
                 Ok(())
             })
         }
-        "frame_placement_hessian" => {
+        Algo::FramePlacementHessian => {
             let [t, w] = t3;
             measure(plan, |i| {
                 frame_placement_hessian(m, d, &q[i], f, t, w)?;
@@ -953,44 +1075,44 @@ fn time_kin(
                 Ok(())
             })
         }
-        "com" => measure(plan, |i| {
+        Algo::Com => measure(plan, |i| {
             black_box(center_of_mass(m, d, &q[i])?);
             Ok(())
         }),
-        "com_jacobian" => measure(plan, |i| {
+        Algo::ComJacobian => measure(plan, |i| {
             center_of_mass_jacobian(m, d, &q[i], j3)?;
             black_box(&*j3);
             Ok(())
         }),
-        "com_velocity_derivatives" => measure(plan, |i| {
+        Algo::ComVelocityDerivatives => measure(plan, |i| {
             center_of_mass_velocity_derivatives(m, d, &q[i], &v[i], j3)?;
             black_box(&*j3);
             Ok(())
         }),
-        "centroidal_momentum" => measure(plan, |i| {
+        Algo::CentroidalMomentum => measure(plan, |i| {
             black_box(centroidal_momentum(m, d, &q[i], &v[i])?);
             Ok(())
         }),
-        "centroidal_dynamics_derivatives" => measure(plan, |i| {
+        Algo::CentroidalDynamicsDerivatives => measure(plan, |i| {
             centroidal_dynamics_derivatives(m, d, cen, &q[i], &v[i], &a[i])?;
             black_box(&*cen);
             Ok(())
         }),
-        "difference" => measure(plan, |i| {
+        Algo::Difference => measure(plan, |i| {
             m.difference_into(&q[i], &q[(i + 1) % n], vec)?;
             black_box(&*vec);
             Ok(())
         }),
-        "d_integrate_q" | "d_integrate_v" => {
-            let arg = if algo == "d_integrate_q" { Arg::First } else { Arg::Second };
+        Algo::DIntegrateQ | Algo::DIntegrateV => {
+            let arg = if algo == Algo::DIntegrateQ { Arg::First } else { Arg::Second };
             measure(plan, |i| {
                 m.d_integrate_blocks_into(&q[i], &v[i], arg, nn)?;
                 black_box(&*nn);
                 Ok(())
             })
         }
-        "d_difference_q0" | "d_difference_q1" => {
-            let arg = if algo == "d_difference_q0" { Arg::First } else { Arg::Second };
+        Algo::DDifferenceQ0 | Algo::DDifferenceQ1 => {
+            let arg = if algo == Algo::DDifferenceQ0 { Arg::First } else { Arg::Second };
             measure(plan, |i| {
                 m.d_difference_blocks_into(&q[i], &q[(i + 1) % n], arg, nn)?;
                 black_box(&*nn);
@@ -1003,7 +1125,7 @@ fn time_kin(
 
 /// Times one algorithm.
 fn time_algo(
-    algo: &str,
+    algo: Algo,
     m: &Model,
     st: &States,
     ws: &mut Workspaces,
@@ -1045,79 +1167,79 @@ fn time_algo(
         }
     };
     let single = |s: Result<Stats>| s.map(|stats| Timed { stats, paired: None });
-    let no_contacts = || Error::Io(format!("{algo} needs --contacts"));
+    let no_contacts = || Error::Io(format!("{algo:?} needs --contacts"));
     single(match algo {
-        "rnea" => measure(plan, |i| {
+        Algo::Rnea => measure(plan, |i| {
             black_box(rnea(m, d, &q[i], &v[i], &a[i], None)?);
             Ok(())
         }),
-        "crba" => measure(plan, |i| {
+        Algo::Crba => measure(plan, |i| {
             black_box(crba(m, d, &q[i])?);
             Ok(())
         }),
-        "aba" => measure(plan, |i| {
+        Algo::Aba => measure(plan, |i| {
             black_box(aba(m, d, &q[i], &v[i], &tau[i], None)?);
             Ok(())
         }),
-        "id_fo" => measure(plan, |i| {
+        Algo::IdFo => measure(plan, |i| {
             id_derivatives(m, d, &q[i], &v[i], &a[i], None)?;
             black_box(d.dtau_dq());
             Ok(())
         }),
-        "fd_fo" => measure(plan, |i| {
+        Algo::FdFo => measure(plan, |i| {
             fd_derivatives(m, d, &q[i], &v[i], &tau[i], None)?;
             black_box(d.dqdd_dq());
             Ok(())
         }),
-        "id_so" => measure(plan, |i| {
+        Algo::IdSo => measure(plan, |i| {
             id_so_derivatives(m, d, so, &q[i], &v[i], &a[i], None)?;
             black_box(&*so);
             Ok(())
         }),
-        "fd_so" => measure(plan, |i| {
+        Algo::FdSo => measure(plan, |i| {
             fd_so_derivatives(m, d, fso, &q[i], &v[i], &tau[i], None)?;
             black_box(&*fso);
             Ok(())
         }),
-        "id_so_c" => measure(plan, |i| {
+        Algo::IdSoC => measure(plan, |i| {
             id_so_contracted(m, d, con, &q[i], &v[i], &a[i], w)?;
             black_box(&*con);
             Ok(())
         }),
-        "fd_so_c" => measure(plan, |i| {
+        Algo::FdSoC => measure(plan, |i| {
             fd_so_contracted(m, d, con, &q[i], &v[i], &tau[i], w)?;
             black_box(&*con);
             Ok(())
         }),
-        "batch_rnea" => {
+        Algo::BatchRnea => {
             return batched(&mut |bd| {
                 rnea_batch(m, bd, q, v, a, out_vec)?;
                 black_box(&*out_vec);
                 Ok(())
             });
         }
-        "batch_aba" => {
+        Algo::BatchAba => {
             return batched(&mut |bd| {
                 aba_batch(m, bd, q, v, tau, out_vec)?;
                 black_box(&*out_vec);
                 Ok(())
             });
         }
-        "batch_id_fo" => {
+        Algo::BatchIdFo => {
             return batched(&mut |bd| {
                 id_derivatives_batch(m, bd, q, v, a, out_m1, out_m2)?;
                 black_box(&*out_m1);
                 Ok(())
             });
         }
-        "batch_fd_fo" => {
+        Algo::BatchFdFo => {
             return batched(&mut |bd| {
                 fd_derivatives_batch(m, bd, q, v, tau, out_m1, out_m2)?;
                 black_box(&*out_m1);
                 Ok(())
             });
         }
-        "kkt_fo" => {
+        Algo::KktFo => {
             let kd = kkt.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
                 kkt_derivatives(m, d, kd, &q[i], &v[i], &tau[i])?;
@@ -1125,7 +1247,7 @@ fn time_algo(
                 Ok(())
             })
         }
-        "kkt_so" => {
+        Algo::KktSo => {
             let kd = kkt.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
                 kkt_so_derivatives(m, d, kd, &q[i], &v[i], &tau[i])?;
@@ -1133,7 +1255,7 @@ fn time_algo(
                 Ok(())
             })
         }
-        "impact_fo" => {
+        Algo::ImpactFo => {
             let im = impact.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
                 impact_derivatives(m, d, im, &q[i], &v[i])?;
@@ -1141,7 +1263,7 @@ fn time_algo(
                 Ok(())
             })
         }
-        "impact_so" => {
+        Algo::ImpactSo => {
             let im = impact.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
                 impact_so_derivatives(m, d, im, &q[i], &v[i])?;
@@ -1149,7 +1271,7 @@ fn time_algo(
                 Ok(())
             })
         }
-        "kkt_so_c" => {
+        Algo::KktSoC => {
             let (kd, kc) = kktc.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
                 kkt_so_contracted(m, d, kd, kc, &q[i], &v[i], &tau[i], w, wl)?;
@@ -1157,7 +1279,7 @@ fn time_algo(
                 Ok(())
             })
         }
-        "impact_so_c" => {
+        Algo::ImpactSoC => {
             let (im, ic) = impc.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
                 impact_so_contracted(m, d, im, ic, &q[i], &v[i], w, wl)?;
@@ -1165,107 +1287,63 @@ fn time_algo(
                 Ok(())
             })
         }
-        other => Err(Error::Io(format!("internal: no timing code for \"{other}\""))),
+        other => Err(Error::Io(format!("internal: no timing code for {other:?}"))),
     })
-}
-
-/// A single-state algorithm, resolved once from its name (for [`call_single`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Single {
-    Rnea,
-    Crba,
-    Aba,
-    IdFo,
-    FdFo,
-    IdSo,
-    FdSo,
-    IdSoc,
-    FdSoc,
-    KktSoc,
-    ImpactSoc,
-    KktFo,
-    KktSo,
-    ImpactFo,
-    ImpactSo,
-}
-
-impl Single {
-    /// The single-state algorithm called `name`, if it is one.
-    fn from_name(name: &str) -> Option<Self> {
-        Some(match name {
-            "rnea" => Single::Rnea,
-            "crba" => Single::Crba,
-            "aba" => Single::Aba,
-            "id_fo" => Single::IdFo,
-            "fd_fo" => Single::FdFo,
-            "id_so" => Single::IdSo,
-            "fd_so" => Single::FdSo,
-            "id_so_c" => Single::IdSoc,
-            "fd_so_c" => Single::FdSoc,
-            "kkt_so_c" => Single::KktSoc,
-            "impact_so_c" => Single::ImpactSoc,
-            "kkt_fo" => Single::KktFo,
-            "kkt_so" => Single::KktSo,
-            "impact_fo" => Single::ImpactFo,
-            "impact_so" => Single::ImpactSo,
-            _ => return None,
-        })
-    }
 }
 
 /// One call of a single-state algorithm at state `i`, writing into the same workspaces as its
 /// timing in [`time_algo`] (used by `--ratio-to`, which alternates two algorithms).
-fn call_single(algo: Single, m: &Model, st: &States, ws: &mut Workspaces, i: usize) -> Result<()> {
+fn call_single(algo: Algo, m: &Model, st: &States, ws: &mut Workspaces, i: usize) -> Result<()> {
     let (q, v, a, tau) = (&st.q[i], &st.v[i], &st.a[i], &st.tau[i]);
     let d = &mut ws.data;
     let no_contacts = || Error::Io(format!("{algo:?} needs --contacts"));
     match algo {
-        Single::Rnea => {
+        Algo::Rnea => {
             black_box(rnea(m, d, q, v, a, None)?);
         }
-        Single::Crba => {
+        Algo::Crba => {
             black_box(crba(m, d, q)?);
         }
-        Single::Aba => {
+        Algo::Aba => {
             black_box(aba(m, d, q, v, tau, None)?);
         }
-        Single::IdFo => {
+        Algo::IdFo => {
             id_derivatives(m, d, q, v, a, None)?;
             black_box(d.dtau_dq());
         }
-        Single::FdFo => {
+        Algo::FdFo => {
             fd_derivatives(m, d, q, v, tau, None)?;
             black_box(d.dqdd_dq());
         }
-        Single::IdSo => {
+        Algo::IdSo => {
             id_so_derivatives(m, d, &mut ws.so, q, v, a, None)?;
             black_box(&ws.so);
         }
-        Single::FdSo => {
+        Algo::FdSo => {
             fd_so_derivatives(m, d, &mut ws.fso, q, v, tau, None)?;
             black_box(&ws.fso);
         }
-        Single::IdSoc => {
+        Algo::IdSoC => {
             id_so_contracted(m, d, &mut ws.con, q, v, a, &ws.w)?;
             black_box(&ws.con);
         }
-        Single::FdSoc => {
+        Algo::FdSoC => {
             fd_so_contracted(m, d, &mut ws.con, q, v, tau, &ws.w)?;
             black_box(&ws.con);
         }
-        Single::KktSoc => {
+        Algo::KktSoC => {
             let (kd, kc) = ws.kktc.as_mut().ok_or_else(no_contacts)?;
             kkt_so_contracted(m, d, kd, kc, q, v, tau, &ws.w, &ws.wl)?;
             black_box(&*kc);
         }
-        Single::ImpactSoc => {
+        Algo::ImpactSoC => {
             let (im, ic) = ws.impc.as_mut().ok_or_else(no_contacts)?;
             impact_so_contracted(m, d, im, ic, q, v, &ws.w, &ws.wl)?;
             black_box(&*ic);
         }
-        Single::KktFo | Single::KktSo => {
+        Algo::KktFo | Algo::KktSo => {
             let kd = ws.kkt.as_mut().ok_or_else(no_contacts)?;
-            if algo == Single::KktFo {
+            if algo == Algo::KktFo {
                 kkt_derivatives(m, d, kd, q, v, tau)?;
                 black_box(kd.dqdd_dq());
             } else {
@@ -1273,15 +1351,18 @@ fn call_single(algo: Single, m: &Model, st: &States, ws: &mut Workspaces, i: usi
                 black_box(kd.so());
             }
         }
-        Single::ImpactFo | Single::ImpactSo => {
+        Algo::ImpactFo | Algo::ImpactSo => {
             let im = ws.impact.as_mut().ok_or_else(no_contacts)?;
-            if algo == Single::ImpactFo {
+            if algo == Algo::ImpactFo {
                 impact_derivatives(m, d, im, q, v)?;
                 black_box(im.dvplus_dq());
             } else {
                 impact_so_derivatives(m, d, im, q, v)?;
                 black_box(im.so());
             }
+        }
+        other => {
+            return Err(Error::Io(format!("internal: {other:?} is not a single-state algorithm")));
         }
     }
     Ok(())
@@ -1296,16 +1377,13 @@ struct Timed {
 
 /// Runs `sodyn bench`.
 pub(crate) fn run(o: &BenchArgs) -> Result<()> {
-    if o.model.mimic {
-        return run_mimic(o);
-    }
     let (spec, floating_base) = (o.model.model.as_str(), o.model.floating_base);
     let contacts: &[String] = o.contacts.as_ref().map_or(&[], |l| &l.0);
+    let model = load_model(&o.model)?;
     let algos = select_algos(o.algos.as_ref().map(|l| l.0.as_slice()), !contacts.is_empty())?;
     let pin_cpus = o.pin_cpus.as_ref().map(|c| c.0.as_slice());
     let rayon = o.pool == Pool::Rayon;
     let spin = Duration::from_nanos((o.spin_us * 1e3).round() as u64);
-    let model = load_model(&o.model)?;
     sodyn::simd::set_thread_level(o.simd);
     for c in contacts {
         model.frame_id(c).map_err(|_| {
@@ -1329,22 +1407,30 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
     let ratio_to = match &o.ratio_to {
         None => None,
         Some(r) => {
-            let known = Single::from_name(r).ok_or_else(|| {
-                Error::Io(format!(
-                    "--ratio-to: \"{r}\" is not a single-state algorithm (one of rnea, crba, \
-                     aba, id_fo, fd_fo, id_so, fd_so, id_so_c, fd_so_c, kkt_fo, kkt_so, kkt_so_c, impact_fo, impact_so, impact_so_c)"
-                ))
+            let known = Entry::named(r).filter(|e| e.single()).ok_or_else(|| Error::Argument {
+                name: "--ratio-to".into(),
+                reason: format!(
+                    "\"{r}\" is not a single-state algorithm (one of {})",
+                    names(Entry::single)
+                ),
             })?;
-            if CONTACT_ALGOS.contains(&r.as_str()) && contacts.is_empty() {
-                return Err(Error::Io(format!("--ratio-to: \"{r}\" needs --contacts")));
+            if known.family == Family::Contact && contacts.is_empty() {
+                return Err(Error::Argument {
+                    name: "--ratio-to".into(),
+                    reason: format!("\"{r}\" needs --contacts"),
+                });
             }
-            if let Some(a) = algos.iter().find(|a| Single::from_name(a).is_none() || *a == r) {
-                return Err(Error::Io(format!(
-                    "--ratio-to {r}: \"{a}\" cannot be timed against it (the algorithms must \
-                     be single-state ones other than {r})"
-                )));
+            if let Some(a) = algos.iter().find(|a| !a.single() || a.name == r) {
+                return Err(Error::Argument {
+                    name: "--ratio-to".into(),
+                    reason: format!(
+                        "{r}: \"{}\" cannot be timed against it (the algorithms must be \
+                         single-state ones other than {r})",
+                        a.name
+                    ),
+                });
             }
-            Some((r.clone(), known))
+            Some(known)
         }
     };
     // The model's name as `info` and `eval` give it (blanks replaced: one field of the line).
@@ -1382,8 +1468,8 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
     let pool_threads: Vec<usize> = pools.iter().map(BatchPool::threads).collect();
     let nv = model.nv();
     let needs = |p: &str| {
-        algos.iter().any(|a| a.starts_with(p))
-            || ratio_to.as_ref().is_some_and(|(r, _)| r.starts_with(p))
+        algos.iter().any(|a| a.name.starts_with(p))
+            || ratio_to.is_some_and(|r| r.name.starts_with(p))
     };
     let mut ws = Workspaces {
         data: Data::new(&model),
@@ -1448,9 +1534,19 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
         smoke: o.smoke,
         calls: o.calls,
     };
+    let reduced = if model.is_reduced() {
+        format!(
+            " mimic={} full_nq={} full_nv={}",
+            model.mimic_joints().len(),
+            model.nq_full(),
+            model.nv_full()
+        )
+    } else {
+        String::new()
+    };
     outln!(
-        "# model={name} source={spec} base={} nq={} nv={} njoints={} nstates={nstates} seed={} \
-         timer_overhead_ns={:.1} contacts={} frame={} threads={} pool={} smoke={} simd={}",
+        "# model={name} source={spec} base={} nq={} nv={} njoints={}{reduced} nstates={nstates} \
+         seed={} timer_overhead_ns={:.1} contacts={} frame={} threads={} pool={} smoke={} simd={}",
         if floating_base { "ff" } else { "fixed" },
         model.nq(),
         model.nv(),
@@ -1475,11 +1571,13 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
         o.smoke as u8,
         sodyn::simd::level().name(),
     );
-    for algo in algos {
-        if let Some((r, reference)) = &ratio_to {
-            let a = Single::from_name(algo).expect("checked above");
+    for entry in algos {
+        let algo = entry.name;
+        if let Some(reference) = ratio_to {
+            let r = reference.name;
             let t = measure_ratio(&plan, |side, i| {
-                call_single(if side == 0 { a } else { *reference }, &model, &st, &mut ws, i)
+                let a = if side == 0 { entry.algo } else { reference.algo };
+                call_single(a, &model, &st, &mut ws, i)
             })
             .map_err(|e| Error::Io(format!("bench {algo} against {r} on {name}: {e}")))?;
             let [s, sr] = t.stats;
@@ -1504,9 +1602,9 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
             let _ = std::io::stdout().flush();
             continue;
         }
-        let t = time_algo(algo, &model, &st, &mut ws, &plan)
+        let t = time_algo(entry.algo, &model, &st, &mut ws, &plan)
             .map_err(|e| Error::Io(format!("bench {algo} on {name}: {e}")))?;
-        let batched = algo.starts_with("batch_");
+        let batched = entry.family == Family::Batch;
         let mut lines = vec![(t.stats, pool_threads[0], None)];
         if let Some(p) = t.paired {
             let per_cpu: Vec<String> =
@@ -1548,275 +1646,40 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// The algorithms `bench --mimic` times (those of `sodyn::mimic` and `sodyn::mimic::batch`; the
-/// contact ones, those of [`CONTACT_ALGOS`], with `--contacts`).
-const MIMIC_ALGOS: &[&str] = &[
-    "rnea",
-    "crba",
-    "aba",
-    "id_fo",
-    "fd_fo",
-    "id_so",
-    "fd_so",
-    "batch_rnea",
-    "batch_aba",
-    "batch_id_fo",
-    "batch_fd_fo",
-    "id_so_c",
-    "fd_so_c",
-    "kkt_fo",
-    "kkt_so",
-    "kkt_so_c",
-    "impact_fo",
-    "impact_so",
-    "impact_so_c",
-];
-
-/// `bench --mimic`: the algorithms of `sodyn::mimic` on the reduced model, timed as the others
-/// (states round robin, warm-up, median and p10/p90 per call), one line each; the batched ones
-/// (`sodyn::mimic::batch`) on a pool of `--threads` (`--pool`, `--spin-us`), time per state.
-fn run_mimic(o: &BenchArgs) -> Result<()> {
-    use sodyn::mimic::{
-        self, MimicContractedData, MimicData, MimicImpactContracted, MimicImpactData,
-        MimicKktContracted, MimicKktData, MimicSoData, batch,
-    };
-    let unsupported = [
-        (o.paired_threads.is_some(), "--paired-threads"),
-        (o.ratio_to.is_some(), "--ratio-to"),
-        (o.frame.is_some(), "--frame"),
-        (o.pin_cpus.is_some(), "--pin-cpus"),
-    ];
-    if let Some((_, opt)) = unsupported.iter().find(|(on, _)| *on) {
-        return Err(Error::Io(format!(
-            "{opt} is not supported with --mimic (bench --mimic times {})",
-            MIMIC_ALGOS.join(", ")
-        )));
-    }
-    let contacts: &[String] = o.contacts.as_ref().map_or(&[], |l| &l.0);
-    let algos: Vec<&str> = match o.algos.as_ref().map(|l| l.0.as_slice()) {
-        None => MIMIC_ALGOS
-            .iter()
-            .copied()
-            .filter(|a| !contacts.is_empty() || !CONTACT_ALGOS.contains(a))
-            .collect(),
-        Some(req) => {
-            if let Some(a) = req.iter().find(|a| !MIMIC_ALGOS.contains(&a.as_str())) {
-                return Err(Error::Io(format!(
-                    "algorithm \"{a}\" is not available with --mimic (available: {})",
-                    MIMIC_ALGOS.join(", ")
-                )));
-            }
-            if let Some(a) = req.iter().find(|a| CONTACT_ALGOS.contains(&a.as_str()))
-                && contacts.is_empty()
-            {
-                return Err(Error::Io(format!(
-                    "algorithm \"{a}\" needs contacts: give --contacts F1,F2,... (frame names \
-                     of the full tree)"
-                )));
-            }
-            MIMIC_ALGOS.iter().copied().filter(|a| req.iter().any(|r| r == a)).collect()
-        }
-    };
-    let m = super::mimic_cli::load(&o.model)?;
-    sodyn::simd::set_thread_level(o.simd);
-    let name = o.name.clone().unwrap_or_else(|| m.name().to_string());
-    let (kind, reference) = (o.contact_type, o.contact_reference);
-    let contact_list = contacts
-        .iter()
-        .map(|f| {
-            m.full().frame_id(f).map_err(|_| {
-                Error::Io(format!(
-                    "--contacts: unknown frame \"{f}\" in model \"{}\" ({})",
-                    m.name(),
-                    o.model.model
-                ))
-            })?;
-            Contact::new(m.full(), f, Vector3::zeros())
-                .map(|c| Contact { kind, ..c.with_reference(reference) })
-        })
-        .collect::<Result<Vec<_>>>()?;
-    let nstates = o.states.unwrap_or(if o.smoke { 8 } else { 1000 });
-    // pin_bench's configurations of the full tree (its sampling bounds), reduced.
-    let full = States::new(m.full(), nstates, o.seed);
-    let qs: Vec<DVector<f64>> =
-        full.q.iter().map(|q| m.reduce_q(q).expect("a full configuration")).collect();
-    let mut rng = Rng::new(o.seed ^ 0x313);
-    let mut r = |n: usize| DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
-    let vs: Vec<DVector<f64>> = (0..nstates).map(|_| r(m.nv())).collect();
-    let xs: Vec<DVector<f64>> = (0..nstates).map(|_| r(m.nv())).collect();
-    // Random weights of the contracted second order (reduced nv; contact rows).
-    let w = r(m.nv());
-    let plan = Plan {
-        nstates,
-        iters: o.iters,
-        max_seconds: o.max_seconds,
-        min_samples: 200,
-        per_call: 1,
-        smoke: o.smoke,
-        calls: o.calls,
-    };
-    let spin = Duration::from_nanos((o.spin_us * 1e3).round() as u64);
-    let (pool, pool_desc) = match o.pool {
-        Pool::Rayon => (BatchPool::with_rayon(o.threads)?, "rayon".to_string()),
-        Pool::Spin => {
-            (BatchPool::with_spin(o.threads, spin)?, format!("spin({}us)", spin.as_micros()))
-        }
-    };
-    let batched = algos.iter().any(|a| a.starts_with("batch_"));
-    let mut bd = batch::batch_data_with_pool(&m, Arc::new(pool));
-    let nb = if batched { nstates } else { 0 };
-    let mut out_vec = vec![DVector::zeros(m.nv()); nb];
-    let mut out_m1 = vec![DMatrix::zeros(m.nv(), m.nv()); nb];
-    let mut out_m2 = out_m1.clone();
-    let batch_plan = Plan { per_call: nstates, min_samples: plan.min_samples.min(20), ..plan };
-    outln!(
-        "# model={name} source={} base={} nq={} nv={} njoints={} nstates={nstates} seed={} \
-         timer_overhead_ns={:.1} mimic={} full_nq={} full_nv={} contacts={} threads={} \
-         pool={pool_desc} smoke={} simd={}",
-        o.model.model,
-        if o.model.floating_base { "ff" } else { "fixed" },
-        m.nq(),
-        m.nv(),
-        m.full().njoints(),
-        o.seed,
-        timer_overhead_ns(),
-        m.mimics().len(),
-        m.full().nq(),
-        m.full().nv(),
-        if contacts.is_empty() { "none".to_string() } else { contacts.join(",") },
-        o.threads,
-        o.smoke as u8,
-        sodyn::simd::level().name(),
-    );
-    let mut d = MimicData::new(&m);
-    let mut so = MimicSoData::new(&m);
-    let mut con = MimicContractedData::new(&m);
-    // The contact workspaces (made once, with the contacts).
-    let needs = |p: &str| algos.iter().any(|a| a.starts_with(p));
-    let mut kkt = None;
-    let mut impact = None;
-    let mut kktc = None;
-    let mut impc = None;
-    let mut wl = DVector::zeros(0);
-    if !contact_list.is_empty() {
-        if needs("kkt_") {
-            kkt = Some(MimicKktData::new(&m, &contact_list)?.with_second_order(&m));
-        }
-        if needs("impact_") {
-            impact = Some(MimicImpactData::new(&m, &contact_list)?.with_second_order(&m));
-        }
-        if needs("kkt_so_c") {
-            let kd = MimicKktData::new(&m, &contact_list)?;
-            let kc = MimicKktContracted::new(&m, &kd);
-            kktc = Some((kd, kc));
-        }
-        if needs("impact_so_c") {
-            let im = MimicImpactData::new(&m, &contact_list)?;
-            let ic = MimicImpactContracted::new(&m, &im);
-            impc = Some((im, ic));
-        }
-        let rows = contact_list.iter().map(|c| c.dim()).sum::<usize>();
-        let mut rng = Rng::new(o.seed ^ 0x5eed);
-        wl = DVector::from_fn(rows, |_, _| rng.range(-1.0, 1.0));
-    }
-    let no_contacts = |algo: &str| Error::Io(format!("{algo} needs --contacts"));
-    for algo in algos {
-        let (ov, o1, o2) = (&mut out_vec, &mut out_m1, &mut out_m2);
-        let t = match algo {
-            "batch_rnea" => measure(&batch_plan, |_| {
-                batch::rnea_batch(&m, &mut bd, &qs, &vs, &xs, ov)?;
-                black_box(&*ov);
-                Ok(())
-            }),
-            "batch_aba" => measure(&batch_plan, |_| {
-                batch::aba_batch(&m, &mut bd, &qs, &vs, &xs, ov)?;
-                black_box(&*ov);
-                Ok(())
-            }),
-            "batch_id_fo" => measure(&batch_plan, |_| {
-                batch::id_derivatives_batch(&m, &mut bd, &qs, &vs, &xs, o1, o2)?;
-                black_box(&*o1);
-                Ok(())
-            }),
-            "batch_fd_fo" => measure(&batch_plan, |_| {
-                batch::fd_derivatives_batch(&m, &mut bd, &qs, &vs, &xs, o1, o2)?;
-                black_box(&*o1);
-                Ok(())
-            }),
-            _ => measure(&plan, |i| {
-                let (q, v, x) = (&qs[i], &vs[i], &xs[i]);
-                match algo {
-                    "rnea" => mimic::rnea(&m, &mut d, q, v, x, None).map(|_| ()),
-                    "crba" => mimic::crba(&m, &mut d, q).map(|_| ()),
-                    "aba" => mimic::aba(&m, &mut d, q, v, x, None).map(|_| ()),
-                    "id_fo" => mimic::id_derivatives(&m, &mut d, q, v, x, None),
-                    "fd_fo" => mimic::fd_derivatives(&m, &mut d, q, v, x, None),
-                    "id_so" => mimic::id_so_derivatives(&m, &mut d, &mut so, q, v, x, None),
-                    "fd_so" => mimic::fd_so_derivatives(&m, &mut d, &mut so, q, v, x, None),
-                    "id_so_c" => mimic::id_so_contracted(&m, &mut d, &mut con, q, v, x, &w),
-                    "fd_so_c" => mimic::fd_so_contracted(&m, &mut d, &mut con, q, v, x, &w),
-                    "kkt_fo" | "kkt_so" => {
-                        let kd = kkt.as_mut().ok_or_else(|| no_contacts(algo))?;
-                        if algo == "kkt_fo" {
-                            mimic::kkt_derivatives(&m, &mut d, kd, q, v, x)
-                        } else {
-                            mimic::kkt_so_derivatives(&m, &mut d, kd, q, v, x)
-                        }
-                    }
-                    "impact_fo" | "impact_so" => {
-                        let im = impact.as_mut().ok_or_else(|| no_contacts(algo))?;
-                        if algo == "impact_fo" {
-                            mimic::impact_derivatives(&m, &mut d, im, q, v)
-                        } else {
-                            mimic::impact_so_derivatives(&m, &mut d, im, q, v)
-                        }
-                    }
-                    "kkt_so_c" => {
-                        let (kd, kc) = kktc.as_mut().ok_or_else(|| no_contacts(algo))?;
-                        mimic::kkt_so_contracted(&m, &mut d, kd, kc, q, v, x, &w, &wl)
-                    }
-                    _ => {
-                        let (im, ic) = impc.as_mut().ok_or_else(|| no_contacts(algo))?;
-                        mimic::impact_so_contracted(&m, &mut d, im, ic, q, v, &w, &wl)
-                    }
-                }
-            }),
-        }
-        .map_err(|e| Error::Io(format!("bench {algo} --mimic on {name}: {e}")))?;
-        let extra = if algo.starts_with("batch_") {
-            let util = t.cpu_util.map(|u| format!(" cpu_util={u:.2}")).unwrap_or_default();
-            format!(" threads={} per=state{util}", o.threads)
-        } else {
-            String::new()
-        };
-        outln!(
-            "model={name} nq={} nv={} algo={algo} median_us={:.4} p10_us={:.4} p90_us={:.4} \
-             batch={} samples={} mimic={}{extra}",
-            m.nq(),
-            m.nv(),
-            t.med,
-            t.p10,
-            t.p90,
-            t.batch,
-            t.samples,
-            m.mimics().len()
-        );
-        use std::io::Write;
-        let _ = std::io::stdout().flush();
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
-    use super::{ALGOS, LONG_ABOUT};
+    use super::CATALOGUE;
 
+    /// The README's `bench` paragraph names exactly the catalogue's algorithms.
     #[test]
-    fn the_help_names_every_algorithm() {
-        let words: Vec<&str> =
-            LONG_ABOUT.split(|c: char| !(c.is_ascii_alphanumeric() || c == '_')).collect();
-        for a in ALGOS {
-            assert!(words.contains(a), "{a} is missing from the help of bench");
+    fn the_readme_lists_the_catalogue() {
+        let readme = include_str!("../../../README.md");
+        let start = readme.find("`bench` times ").expect("the README's bench paragraph");
+        let end = start + readme[start..].find("--help` lists them").expect("its end");
+        let para = &readme[start..end];
+        let words: Vec<&str> = para
+            .split(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+            .filter(|w| w.contains('_') || ["rnea", "crba", "aba", "com", "difference"].contains(w))
+            .collect();
+        for e in CATALOGUE {
+            assert!(words.contains(&e.name), "the README's bench paragraph lacks {}", e.name);
+        }
+        for w in words {
+            let option = CATALOGUE.iter().any(|e| e.name == w);
+            let other = ["local_world_aligned", "pin_bench"].contains(&w);
+            assert!(option || other, "the README's bench paragraph names {w}, not an algorithm");
+        }
+    }
+
+    /// Names are unique.
+    #[test]
+    fn the_catalogue_names_each_algorithm_once() {
+        for (i, e) in CATALOGUE.iter().enumerate() {
+            assert!(
+                CATALOGUE[..i].iter().all(|f| f.name != e.name && f.algo != e.algo),
+                "{}",
+                e.name
+            );
         }
     }
 }

@@ -101,20 +101,9 @@ impl State {
     }
 }
 
-/// The top-level keys of a state file with `--mimic`.
-pub const STATE_KEYS: [&str; 9] =
-    ["q", "v", "a", "tau", "contacts", "lambda", "restitution", "weights", "frames"];
-
-/// The top-level keys of a state file without `--mimic`: [`STATE_KEYS`] and `"damping"` (the
-/// mimic model's reduced-coordinate contact solve has no regularised variant).
-pub const FULL_STATE_KEYS: [&str; 10] =
+/// The top-level keys of a state file.
+pub const STATE_KEYS: [&str; 10] =
     ["q", "v", "a", "tau", "contacts", "lambda", "restitution", "damping", "weights", "frames"];
-
-/// An unknown top-level key of a state file with `--mimic` is an error naming it and the
-/// known ones (a typo such as `"vel"` would otherwise evaluate at zero velocity).
-pub fn check_state_keys(obj: &Map<String, Value>, file: &str) -> Result<()> {
-    check_keys(obj, file, &STATE_KEYS)
-}
 
 fn check_keys(obj: &Map<String, Value>, file: &str, known: &[&str]) -> Result<()> {
     match obj.keys().find(|k| !known.contains(&k.as_str())) {
@@ -172,7 +161,7 @@ pub fn load_state(
     let obj = val
         .as_object()
         .ok_or_else(|| Error::Io(format!("{file}: the state must be a JSON object")))?;
-    check_keys(obj, file, &FULL_STATE_KEYS)?;
+    check_keys(obj, file, &STATE_KEYS)?;
     let nq = model.nq();
     let q_len = obj.get("q").and_then(Value::as_array).map(Vec::len);
     let q = read_vec(obj, "q", nq, file)
@@ -424,19 +413,7 @@ pub fn eval_json(model: &Model, s: &State, order: u32) -> Result<Value> {
     let m = crba(model, &mut data, &s.q)?.clone();
     let qdd =
         defined(aba(model, &mut data, &s.q, &s.v, &s.tau, None).cloned(), &["qdd"], &mut errors)?;
-    let joints: Vec<Value> = (1..model.njoints())
-        .map(|i| {
-            json!({
-                "name": model.names()[i],
-                "type": model.joints()[i].name(),
-                "parent": model.names()[model.parents()[i]],
-                "idx_q": model.idx_q()[i],
-                "nq": model.nqs()[i],
-                "idx_v": model.idx_v()[i],
-                "nv": model.nvs()[i],
-            })
-        })
-        .collect();
+    let joints: Vec<Value> = (1..model.njoints()).map(|i| joint_json(model, i)).collect();
     let g = model.gravity().to_vec6();
     id_derivatives(model, &mut data, &s.q, &s.v, &s.a, None)?;
     let (dtau_dq, dtau_dv) = (mat_json(data.dtau_dq()), mat_json(data.dtau_dv()));
@@ -493,6 +470,40 @@ pub fn eval_json(model: &Model, s: &State, order: u32) -> Result<Value> {
         o.insert("errors".into(), Value::Object(errors));
     }
     Ok(out)
+}
+
+/// The `"joints"` entry of joint `i`: its name, type, parent and indices (those of the reduced
+/// coordinates for a model with mimic joints; a mimic joint has `nq = nv = 0` and a `"mimic"`
+/// object naming its reference joint, multiplier and offset).
+fn joint_json(model: &Model, i: usize) -> Value {
+    let mut j = json!({
+        "name": model.names()[i],
+        "type": model.joints()[i].name(),
+        "parent": model.names()[model.parents()[i]],
+    });
+    let o = j.as_object_mut().expect("object");
+    match model.reduced_idx(i) {
+        Some((iq, iv)) => {
+            o.insert("idx_q".into(), json!(iq));
+            o.insert("nq".into(), json!(model.nqs()[i]));
+            o.insert("idx_v".into(), json!(iv));
+            o.insert("nv".into(), json!(model.nvs()[i]));
+        }
+        None => {
+            let c = model.mimic_joints().iter().find(|c| c.joint == i).expect("a mimic joint");
+            o.insert("nq".into(), json!(0));
+            o.insert("nv".into(), json!(0));
+            o.insert(
+                "mimic".into(),
+                json!({
+                    "joint": model.names()[c.reference],
+                    "multiplier": c.multiplier,
+                    "offset": c.offset,
+                }),
+            );
+        }
+    }
+    j
 }
 
 /// `[ang; lin]` of a motion.

@@ -16,7 +16,6 @@ mod out;
 mod bench;
 mod demo;
 mod eval;
-mod mimic_cli;
 
 use clap::{Args, CommandFactory, Parser, Subcommand};
 use serde_json::Value;
@@ -57,7 +56,7 @@ enum Command {
     #[command(after_help = AFTER_HELP)]
     Eval(EvalArgs),
     /// Time the algorithms per call, one line per algorithm
-    #[command(long_about = bench::LONG_ABOUT, after_help = AFTER_HELP)]
+    #[command(long_about = bench::long_about(), after_help = AFTER_HELP)]
     Bench(bench::BenchArgs),
 }
 
@@ -208,20 +207,11 @@ fn run(cli: Cli) -> Result<Outcome> {
         return Ok(Outcome::Done);
     };
     match command {
-        Command::Demo(o) if o.mimic => mimic_cli::run_demo(&o),
         Command::Demo(o) => demo::run_demo(&o),
-        Command::Info(o) if o.model.mimic => {
-            out!("{}", mimic_cli::joint_table(&mimic_cli::load(&o.model)?));
-            Ok(())
-        }
         Command::Info(o) => {
             let m = load_model(&o.model)?;
             out!("{}", joint_table(&m));
             Ok(())
-        }
-        Command::RandomState(o) if o.model.mimic => {
-            let m = mimic_cli::load(&o.model)?;
-            write_output(o.output.as_deref(), &mimic_cli::random_state_json(&m, o.seed))
         }
         Command::RandomState(o) => {
             let m = load_model(&o.model)?;
@@ -239,18 +229,11 @@ fn run(cli: Cli) -> Result<Outcome> {
 /// (then `Outcome::Partial`, and a message on standard error listing them).
 fn run_eval(o: &EvalArgs) -> Result<Outcome> {
     let path = &o.state;
-    let out = if o.model.mimic {
-        let m = mimic_cli::load(&o.model)?;
-        let text = std::fs::read_to_string(path).map_err(|e| Error::Io(format!("{path}: {e}")))?;
-        let st = mimic_cli::load_state(&m, &text, path)?;
-        mimic_cli::eval_json(&m, &st, o.order)?
-    } else {
-        let m = load_model(&o.model)?;
-        let text = std::fs::read_to_string(path).map_err(|e| Error::Io(format!("{path}: {e}")))?;
-        let base = (!o.model.model.starts_with("builtin:")).then_some(o.model.floating_base);
-        let st = eval::load_state(&m, &text, path, base)?;
-        eval::eval_json(&m, &st, o.order)?
-    };
+    let m = load_model(&o.model)?;
+    let text = std::fs::read_to_string(path).map_err(|e| Error::Io(format!("{path}: {e}")))?;
+    let base = (!o.model.model.starts_with("builtin:")).then_some(o.model.floating_base);
+    let st = eval::load_state(&m, &text, path, base)?;
+    let out = eval::eval_json(&m, &st, o.order)?;
     write_output(o.output.as_deref(), &out)?;
     match out.get("errors").and_then(Value::as_object) {
         Some(errors) => {
@@ -267,15 +250,26 @@ fn run_eval(o: &EvalArgs) -> Result<Outcome> {
     }
 }
 
-/// Loads a model from `builtin:NAME`, an MJCF path (`.xml`) or a URDF path.
+/// Loads a model from `builtin:NAME`, an MJCF path (`.xml`) or a URDF path; with `--mimic`, a
+/// URDF's model in the reduced coordinates of its `<mimic>` joints (`--armature` then gives the
+/// full tree's DoFs).
 fn load_model(o: &ModelArgs) -> Result<Model> {
+    if o.mimic && (o.model.starts_with("builtin:") || is_mjcf(&o.model)) {
+        return Err(Error::Argument {
+            name: "--mimic".into(),
+            reason: format!("applies to URDF files (their <mimic> elements); {} has none", o.model),
+        });
+    }
     let opts = UrdfOptions {
         floating_base: o.floating_base,
         strict_inertia: o.strict_inertia,
-        mimic: false,
+        mimic: o.mimic,
     };
     let model = load_model_spec(&o.model, &opts)?;
     match &o.armature {
+        Some(a) if model.is_reduced() => {
+            with_armature_arg(model.full_tree(), a)?.with_mimic_joints(model.mimic_joints())
+        }
         Some(a) => with_armature_arg(&model, a),
         None => Ok(model),
     }
@@ -358,9 +352,23 @@ fn write_output(path: Option<&str>, v: &Value) -> Result<()> {
 
 /// The joint table of a model as printed by `sodyn info`.
 fn joint_table(model: &Model) -> String {
+    let reduced = if model.is_reduced() {
+        format!(
+            " (reduced coordinates; full tree nq = {}, nv = {})",
+            model.nq_full(),
+            model.nv_full()
+        )
+    } else {
+        String::new()
+    };
+    let nmimic = if model.is_reduced() {
+        format!("; {} mimic", model.mimic_joints().len())
+    } else {
+        String::new()
+    };
     let mut s = format!(
-        "model \"{}\": nq = {}, nv = {}, njoints = {} (the world joint 0 included, as \
-         Pinocchio's njoints), {} frames\n",
+        "model \"{}\": nq = {}, nv = {}{reduced}, njoints = {} (the world joint 0 included, as \
+         Pinocchio's njoints{nmimic}), {} frames\n",
         model.name(),
         model.nq(),
         model.nv(),
@@ -373,26 +381,43 @@ fn joint_table(model: &Model) -> String {
     );
     for i in 1..model.njoints() {
         let p = model.parents()[i];
+        let (iq, nq, iv, nv, mimic) = match model.reduced_idx(i) {
+            Some((a, b)) => {
+                let note = match (&model.mimic()[i], model.is_reduced()) {
+                    (Some(m), false) => format!("mimics \"{m}\" (independent without --mimic)"),
+                    _ => String::new(),
+                };
+                (a.to_string(), model.nqs()[i], b.to_string(), model.nvs()[i], note)
+            }
+            None => {
+                let c = model.mimic_joints().iter().find(|c| c.joint == i).expect("a mimic joint");
+                let rule = format!(
+                    "q = {} * q[\"{}\"] + {}",
+                    c.multiplier,
+                    model.names()[c.reference],
+                    c.offset
+                );
+                ("-".into(), 0, "-".into(), 0, rule)
+            }
+        };
         s += &format!(
             "{:>4}  {:<32} {:<11} {:<28} {:>5} {:>3} {:>5} {:>3}  {:>9.4}  {}\n",
             i,
             model.names()[i],
             model.joints()[i].name(),
             model.names()[p],
-            model.idx_q()[i],
-            model.nqs()[i],
-            model.idx_v()[i],
-            model.nvs()[i],
+            iq,
+            nq,
+            iv,
+            nv,
             model.inertias()[i].mass,
-            model.mimic()[i]
-                .as_ref()
-                .map(|m| format!("mimics \"{m}\" (independent without --mimic)"))
-                .unwrap_or_default()
+            mimic
         );
     }
     if model.has_armature() {
         let a: Vec<String> = model.armature().iter().map(|x| format!("{x}")).collect();
-        s += &format!("armature (per velocity coordinate): [{}]\n", a.join(", "));
+        let of = if model.is_reduced() { " of the full tree" } else { "" };
+        s += &format!("armature (per velocity coordinate{of}): [{}]\n", a.join(", "));
     }
     s
 }
