@@ -2,9 +2,9 @@
 //! released.
 
 use crate::convert::{
-    Rows, array_over, buffer_pool, core_err, fortran_strides, read_batch, value_err,
+    Rows, array_over, buffer_pool, core_err, fortran_strides, nq_what, nv_what, read_batch,
+    value_err,
 };
-use crate::mimic::{MimicBatch, mimic_batch};
 use crate::model::PyModel;
 use nalgebra::DVector;
 use numpy::PyArrayDyn;
@@ -117,10 +117,10 @@ pub(crate) fn batch_qvx(
     x: &Bound<'_, PyAny>,
     xname: &str,
 ) -> PyResult<[Rows; 3]> {
-    let qs = read_batch(q, "q", m.nq(), "nq", None)?;
+    let qs = read_batch(q, "q", m.nq(), nq_what(m), None)?;
     let n = qs.count;
-    let vs = read_batch(v, "v", m.nv(), "nv", Some(n))?;
-    let xs = read_batch(x, xname, m.nv(), "nv", Some(n))?;
+    let vs = read_batch(v, "v", m.nv(), nv_what(m), Some(n))?;
+    let xs = read_batch(x, xname, m.nv(), nv_what(m), Some(n))?;
     Ok([qs, vs, xs])
 }
 
@@ -162,10 +162,7 @@ pub(crate) fn batch_rnea<'py>(
     a: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_batch(py, &mm, threads, MimicBatch::Rnea, q, Some(v), Some((a, "a")));
-    }
-    let m = model.full_only("batch_rnea")?;
+    let m = &model.m;
     let ins = batch_qvx(m, q, v, a, "a")?;
     batch_call(py, threads, Data::new(m), &ins, 1, &[m.nv()], |d, st, o| {
         copy_output(o[0], algo::rnea(m, d, &st[0], &st[1], &st[2], None)?.as_slice());
@@ -184,10 +181,7 @@ pub(crate) fn batch_aba<'py>(
     tau: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_batch(py, &mm, threads, MimicBatch::Aba, q, Some(v), Some((tau, "tau")));
-    }
-    let m = model.full_only("batch_aba")?;
+    let m = &model.m;
     let ins = batch_qvx(m, q, v, tau, "tau")?;
     batch_call(py, threads, Data::new(m), &ins, 1, &[m.nv()], |d, st, o| {
         copy_output(o[0], algo::aba(m, d, &st[0], &st[1], &st[2], None)?.as_slice());
@@ -205,12 +199,9 @@ pub(crate) fn batch_nonlinear_effects<'py>(
     v: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_batch(py, &mm, threads, MimicBatch::Nle, q, Some(v), None);
-    }
-    let m = model.full_only("batch_nonlinear_effects")?;
-    let qs = read_batch(q, "q", m.nq(), "nq", None)?;
-    let vs = read_batch(v, "v", m.nv(), "nv", Some(qs.count))?;
+    let m = &model.m;
+    let qs = read_batch(q, "q", m.nq(), nq_what(m), None)?;
+    let vs = read_batch(v, "v", m.nv(), nv_what(m), Some(qs.count))?;
     batch_call(py, threads, Data::new(m), &[qs, vs], 1, &[m.nv()], |d, st, o| {
         copy_output(o[0], algo::nonlinear_effects(m, d, &st[0], &st[1])?.as_slice());
         Ok(())
@@ -226,11 +217,8 @@ pub(crate) fn batch_crba<'py>(
     q: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_batch(py, &mm, threads, MimicBatch::Crba, q, None, None);
-    }
-    let m = model.full_only("batch_crba")?;
-    let qs = read_batch(q, "q", m.nq(), "nq", None)?;
+    let m = &model.m;
+    let qs = read_batch(q, "q", m.nq(), nq_what(m), None)?;
     batch_call(py, threads, Data::new(m), &[qs], 1, &[m.nv(), m.nv()], |d, st, o| {
         copy_output(o[0], algo::crba(m, d, &st[0])?.as_slice());
         Ok(())
@@ -248,10 +236,7 @@ pub(crate) fn batch_id_derivatives<'py>(
     a: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_batch(py, &mm, threads, MimicBatch::IdFo, q, Some(v), Some((a, "a")));
-    }
-    let m = model.full_only("batch_id_derivatives")?;
+    let m = &model.m;
     let ins = batch_qvx(m, q, v, a, "a")?;
     batch_call(py, threads, Data::new(m), &ins, 2, &[m.nv(), m.nv()], |d, st, o| {
         id_derivatives(m, d, &st[0], &st[1], &st[2], None)?;
@@ -272,10 +257,7 @@ pub(crate) fn batch_fd_derivatives<'py>(
     tau: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_batch(py, &mm, threads, MimicBatch::FdFo, q, Some(v), Some((tau, "tau")));
-    }
-    let m = model.full_only("batch_fd_derivatives")?;
+    let m = &model.m;
     let ins = batch_qvx(m, q, v, tau, "tau")?;
     batch_call(py, threads, Data::new(m), &ins, 3, &[m.nv(), m.nv()], |d, st, o| {
         fd_derivatives(m, d, &st[0], &st[1], &st[2], None)?;
@@ -297,10 +279,7 @@ pub(crate) fn batch_id_so_derivatives<'py>(
     a: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_batch(py, &mm, threads, MimicBatch::IdSo, q, Some(v), Some((a, "a")));
-    }
-    let m = model.full_only("batch_id_so_derivatives")?;
+    let m = &model.m;
     let ins = batch_qvx(m, q, v, a, "a")?;
     let (nv, ws) = (m.nv(), (Data::new(m), SoData::new(m)));
     batch_call(py, threads, ws, &ins, 4, &[nv, nv, nv], |(d, so), st, o| {
@@ -324,10 +303,7 @@ pub(crate) fn batch_fd_so_derivatives<'py>(
     tau: &Bound<'py, PyAny>,
     threads: Option<i64>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_batch(py, &mm, threads, MimicBatch::FdSo, q, Some(v), Some((tau, "tau")));
-    }
-    let m = model.full_only("batch_fd_so_derivatives")?;
+    let m = &model.m;
     let ins = batch_qvx(m, q, v, tau, "tau")?;
     let (nv, ws) = (m.nv(), (Data::new(m), FdSoData::new(m)));
     batch_call(py, threads, ws, &ins, 4, &[nv, nv, nv], |(d, f), st, o| {

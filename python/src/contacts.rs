@@ -2,12 +2,9 @@
 //! derivatives.
 
 use crate::convert::{
-    core_err, out_mat, out_tensor, out_vec, read_placement, read_q, read_vec, value_err,
+    core_err, nv_what, out_mat, out_tensor, out_vec, read_placement, read_q, read_vec, value_err,
 };
 use crate::data::{ContactKey, PyData, read_qvx};
-use crate::mimic::{
-    mimic_constrained_id, mimic_impact, mimic_impact_contracted, mimic_kkt, mimic_kkt_contracted,
-};
 use crate::model::PyModel;
 use nalgebra::{DMatrix, DVector, Vector3};
 use numpy::PyArray1;
@@ -80,8 +77,7 @@ pub(crate) fn impact_dict<'py>(
     Ok(out)
 }
 
-/// [`kkt_dict`] of a KKT workspace `kd` (`KktData` or `MimicKktData`, which have the same
-/// accessors), its tensors at `order == 2`.
+/// [`kkt_dict`] of a KKT workspace `kd`, its tensors at `order == 2`.
 macro_rules! kkt_dict_of {
     ($py:expr, $kd:expr, $order:expr) => {{
         let kd = &$kd;
@@ -109,8 +105,7 @@ macro_rules! kkt_dict_of {
     }};
 }
 
-/// [`impact_dict`] of an impact workspace `im` (`ImpactData` or `MimicImpactData`), its tensors
-/// at `order == 2`.
+/// [`impact_dict`] of an impact workspace `im`, its tensors at `order == 2`.
 macro_rules! impact_dict_of {
     ($py:expr, $im:expr, $order:expr) => {{
         let im = &$im;
@@ -121,9 +116,6 @@ macro_rules! impact_dict_of {
         impact_dict($py, im.vplus(), im.impulse(), fo, so)
     }};
 }
-
-pub(crate) use impact_dict_of;
-pub(crate) use kkt_dict_of;
 
 /// A contact (Pinocchio's `RigidConstraintModel`): the contact frame at `point` (a 3-D
 /// contact's point) or `placement` (a `(4, 4)` homogeneous matrix) in the frame named `frame`,
@@ -337,19 +329,6 @@ pub(crate) fn check_order(order: i64) -> PyResult<()> {
     }
 }
 
-/// The `damping` argument of a KKT or impact function on a model with mimic joints: only 0
-/// (the reduced-coordinate solve has no regularised variant). On other models the core checks
-/// it (finite, `>= 0`) when it is set on the workspace.
-fn mimic_damping(damping: f64, function: &str) -> PyResult<()> {
-    if damping == 0.0 {
-        return Ok(());
-    }
-    Err(value_err(format!(
-        "{function}: `damping` is {damping}, but a model loaded with mimic=True has no \
-         regularised contact solve; give damping=0 (the default)"
-    )))
-}
-
 /// Constrained inverse dynamics `tau = M a + b − J_cᵀ λ` at `(q, v, a, λ)` and its
 /// derivatives (λ, 3 or 6 rows per contact, held fixed in each contact's axes): keys `tau,
 /// dtau_dq, dtau_dv` (+ `d2tau_dq2`).
@@ -368,10 +347,7 @@ pub(crate) fn py_constrained_id_derivatives<'py>(
     order: i64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_constrained_id(py, &mm, &model.m, &mut data, q, v, a, &contacts, lam, order);
-    }
-    let m = model.full_only("constrained_id_derivatives")?;
+    let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
     let (cs, key) = resolve(m, &contacts)?;
@@ -417,11 +393,7 @@ pub(crate) fn py_kkt_derivatives<'py>(
     damping: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
-    if let Some(mm) = model.mimic.clone() {
-        mimic_damping(damping, "kkt_derivatives")?;
-        return mimic_kkt(py, &mm, &model.m, &mut data, q, v, tau, &contacts, order);
-    }
-    let m = model.full_only("kkt_derivatives")?;
+    let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
     let (cs, key) = resolve(m, &contacts)?;
@@ -462,24 +434,10 @@ pub(crate) fn py_impact_derivatives<'py>(
     damping: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
-    if let Some(mm) = model.mimic.clone() {
-        mimic_damping(damping, "impact_derivatives")?;
-        return mimic_impact(
-            py,
-            &mm,
-            &model.m,
-            &mut data,
-            q,
-            v_minus,
-            &contacts,
-            restitution,
-            order,
-        );
-    }
-    let m = model.full_only("impact_derivatives")?;
+    let m = &model.m;
     let d = &mut *data;
     read_q(q, "q", m, &mut d.q)?;
-    read_vec(v_minus, "v_minus", m.nv(), "nv", &mut d.v)?;
+    read_vec(v_minus, "v_minus", m.nv(), nv_what(m), &mut d.v)?;
     let (cs, key) = resolve(m, &contacts)?;
     let fits = |k: &ImpactData, key2: &ContactKey| *key2 == key && (order == 1 || k.so().is_some());
     if d.impact.as_ref().is_none_or(|(k2, im)| !fits(im, k2)) {
@@ -518,17 +476,11 @@ pub(crate) fn kkt_so_contracted<'py>(
     w_lambda: &Bound<'py, PyAny>,
     damping: f64,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    if let Some(mm) = model.mimic.clone() {
-        mimic_damping(damping, "kkt_so_contracted")?;
-        return mimic_kkt_contracted(
-            py, &mm, &model.m, &mut data, q, v, tau, &contacts, w_qdd, w_lambda,
-        );
-    }
-    let m = model.full_only("kkt_so_contracted")?;
+    let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
     let (cs, key) = resolve(m, &contacts)?;
-    read_vec(w_qdd, "w_qdd", m.nv(), "nv", &mut d.w)?;
+    read_vec(w_qdd, "w_qdd", m.nv(), nv_what(m), &mut d.w)?;
     read_vec(w_lambda, "w_lambda", rows_of(&cs), "3 or 6 rows per contact", &mut d.wl)?;
     if d.kktc.as_ref().is_none_or(|(k, _, _)| *k != key) {
         let kd = KktData::new(m, ContactData::new(m, &cs).map_err(core_err)?);
@@ -568,27 +520,12 @@ pub(crate) fn impact_so_contracted<'py>(
     restitution: f64,
     damping: f64,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    if let Some(mm) = model.mimic.clone() {
-        mimic_damping(damping, "impact_so_contracted")?;
-        return mimic_impact_contracted(
-            py,
-            &mm,
-            &model.m,
-            &mut data,
-            q,
-            v_minus,
-            &contacts,
-            w_vplus,
-            w_impulse,
-            restitution,
-        );
-    }
-    let m = model.full_only("impact_so_contracted")?;
+    let m = &model.m;
     let d = &mut *data;
     read_q(q, "q", m, &mut d.q)?;
-    read_vec(v_minus, "v_minus", m.nv(), "nv", &mut d.v)?;
+    read_vec(v_minus, "v_minus", m.nv(), nv_what(m), &mut d.v)?;
     let (cs, key) = resolve(m, &contacts)?;
-    read_vec(w_vplus, "w_vplus", m.nv(), "nv", &mut d.w)?;
+    read_vec(w_vplus, "w_vplus", m.nv(), nv_what(m), &mut d.w)?;
     read_vec(w_impulse, "w_impulse", rows_of(&cs), "3 or 6 rows per contact", &mut d.wl)?;
     if d.impc.as_ref().is_none_or(|(k, _, _)| *k != key) {
         let im = ImpactData::new(m, ContactData::new(m, &cs).map_err(core_err)?);

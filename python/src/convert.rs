@@ -83,6 +83,16 @@ pub(crate) fn shape_str(s: &[usize]) -> String {
     }
 }
 
+/// The name of `nq` in a length error: the reduced coordinates' for a model with mimic joints.
+pub(crate) fn nq_what(m: &Model) -> &'static str {
+    if m.is_reduced() { "nq (reduced coordinates: mimic joints excluded)" } else { "nq" }
+}
+
+/// The name of `nv` in a length error: the reduced coordinates' for a model with mimic joints.
+pub(crate) fn nv_what(m: &Model) -> &'static str {
+    if m.is_reduced() { "nv (reduced coordinates: mimic joints excluded)" } else { "nv" }
+}
+
 /// Copies a vector argument of length `n` into `out` (resized only if its length differs).
 pub(crate) fn read_vec(
     obj: &Bound<'_, PyAny>,
@@ -131,7 +141,7 @@ pub(crate) fn read_q(
     m: &Model,
     out: &mut DVector<f64>,
 ) -> PyResult<()> {
-    read_vec(obj, name, m.nq(), "nq", out).map_err(|e| {
+    read_vec(obj, name, m.nq(), nq_what(m), out).map_err(|e| {
         let len = array(obj, name).ok().map(|a| a.shape().to_vec());
         match len.as_deref() {
             Some([l]) if *l == m.nq() + 7 => value_err(format!(

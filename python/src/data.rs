@@ -1,7 +1,6 @@
 //! `Data`: the workspaces of one model and the input buffers.
 
-use crate::convert::{read_q, read_vec};
-use crate::mimic::MimicWs;
+use crate::convert::{nv_what, read_q, read_vec};
 use crate::model::PyModel;
 use nalgebra::DVector;
 use pyo3::prelude::*;
@@ -10,7 +9,6 @@ use sodyn::deriv::{
     ContactData, ContractedData, FdSoData, ImpactContracted, ImpactData, KktContracted, KktData,
     SoData,
 };
-use sodyn::mimic::MimicData;
 use sodyn::model::Model;
 use sodyn::spatial::Force;
 
@@ -38,8 +36,6 @@ pub(crate) struct PyData {
     pub(crate) kktc: Option<(ContactKey, KktData, KktContracted)>,
     pub(crate) impc: Option<(ContactKey, ImpactData, ImpactContracted)>,
     pub(crate) wl: DVector<f64>,
-    /// The workspaces of a model loaded with `mimic=True` (the others made on first use).
-    pub(crate) mimic: Option<Box<MimicWs>>,
 }
 
 impl PyData {
@@ -61,23 +57,10 @@ impl PyData {
             kktc: None,
             impc: None,
             wl: DVector::zeros(0),
-            mimic: None,
         }
     }
     pub(crate) fn for_py_model(m: &PyModel) -> Self {
-        let mut d = Self::for_model(&m.m);
-        d.mimic = m.mimic.as_ref().map(|mm| {
-            Box::new(MimicWs {
-                d: MimicData::new(mm),
-                so: None,
-                con: None,
-                kkt: None,
-                impact: None,
-                kktc: None,
-                impc: None,
-            })
-        });
-        d
+        Self::for_model(&m.m)
     }
 }
 
@@ -99,8 +82,8 @@ pub(crate) fn read_qvx(
     xname: &str,
 ) -> PyResult<()> {
     read_q(q, "q", m, &mut d.q)?;
-    read_vec(v, "v", m.nv(), "nv", &mut d.v)?;
-    read_vec(x, xname, m.nv(), "nv", &mut d.a)
+    read_vec(v, "v", m.nv(), nv_what(m), &mut d.v)?;
+    read_vec(x, xname, m.nv(), nv_what(m), &mut d.a)
 }
 
 /// Adds this family's classes and functions to the module.

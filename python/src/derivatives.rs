@@ -2,13 +2,9 @@
 //! order, IDFOZA and IDSOZA.
 
 use crate::convert::{
-    check_out, core_err, out_mat, out_tensor, read_fext, read_q, read_vec, write_out,
+    check_out, core_err, nv_what, out_mat, out_tensor, read_fext, read_q, read_vec, write_out,
 };
 use crate::data::{PyData, read_qvx};
-use crate::mimic::{
-    mimic_contracted, mimic_fd_fo, mimic_fd_so, mimic_id_fo, mimic_id_so, mimic_idfoza,
-    mimic_idsoza,
-};
 use crate::model::PyModel;
 use nalgebra::DMatrix;
 use pyo3::prelude::*;
@@ -30,9 +26,6 @@ pub(crate) fn py_id_derivatives<'py>(
     a: &Bound<'py, PyAny>,
     fext: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_id_fo(py, &mm, &mut data, q, v, a, fext);
-    }
     let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
@@ -55,9 +48,6 @@ pub(crate) fn py_fd_derivatives<'py>(
     tau: &Bound<'py, PyAny>,
     fext: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_fd_fo(py, &mm, &mut data, q, v, tau, fext);
-    }
     let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
@@ -81,9 +71,6 @@ pub(crate) fn py_id_so_derivatives<'py>(
     a: &Bound<'py, PyAny>,
     out: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_id_so(py, &mm, &mut data, q, v, a, out);
-    }
     let m = &model.m;
     let out = out.filter(|o| !o.is_none()).map(|o| check_out(o, m.nv())).transpose()?;
     let d = &mut *data;
@@ -118,9 +105,6 @@ pub(crate) fn py_fd_so_derivatives<'py>(
     tau: &Bound<'py, PyAny>,
     out: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_fd_so(py, &mm, &mut data, q, v, tau, out);
-    }
     let m = &model.m;
     let out = out.filter(|o| !o.is_none()).map(|o| check_out(o, m.nv())).transpose()?;
     let d = &mut *data;
@@ -158,13 +142,10 @@ pub(crate) fn id_so_contracted<'py>(
     a: &Bound<'py, PyAny>,
     w: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_contracted(py, &mm, &mut data, q, v, a, w, false);
-    }
-    let m = model.full_only("id_so_contracted")?;
+    let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
-    read_vec(w, "w", m.nv(), "nv", &mut d.w)?;
+    read_vec(w, "w", m.nv(), nv_what(m), &mut d.w)?;
     let PyData { d, q, v, a, w, con, .. } = d;
     let c = con.get_or_insert_with(|| ContractedData::new(m));
     py.detach(|| deriv::id_so_contracted(m, d, c, q, v, a, w)).map_err(core_err)?;
@@ -191,13 +172,10 @@ pub(crate) fn fd_so_contracted<'py>(
     tau: &Bound<'py, PyAny>,
     w: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_contracted(py, &mm, &mut data, q, v, tau, w, true);
-    }
-    let m = model.full_only("fd_so_contracted")?;
+    let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
-    read_vec(w, "w", m.nv(), "nv", &mut d.w)?;
+    read_vec(w, "w", m.nv(), nv_what(m), &mut d.w)?;
     let PyData { d, q, v, a, w, con, .. } = d;
     let c = con.get_or_insert_with(|| ContractedData::new(m));
     py.detach(|| deriv::fd_so_contracted(m, d, c, q, v, a, w)).map_err(core_err)?;
@@ -221,13 +199,10 @@ pub(crate) fn idfoza<'py>(
     q: &Bound<'py, PyAny>,
     x: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_idfoza(py, &mm, &mut data, q, x);
-    }
-    let m = model.full_only("idfoza")?;
+    let m = &model.m;
     let PyData { d, q: qb, a: xb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
-    read_vec(x, "x", m.nv(), "nv", xb)?;
+    read_vec(x, "x", m.nv(), nv_what(m), xb)?;
     let mut out = DMatrix::zeros(m.nv(), m.nv());
     py.detach(|| deriv::idfoza(m, d, qb, xb, &mut out)).map_err(core_err)?;
     Ok(out_mat(py, &out))
@@ -242,13 +217,10 @@ pub(crate) fn idsoza<'py>(
     q: &Bound<'py, PyAny>,
     x: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_idsoza(py, &mm, &mut data, q, x);
-    }
-    let m = model.full_only("idsoza")?;
+    let m = &model.m;
     let PyData { d, q: qb, a: xb, so, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
-    read_vec(x, "x", m.nv(), "nv", xb)?;
+    read_vec(x, "x", m.nv(), nv_what(m), xb)?;
     let so = so.get_or_insert_with(|| SoData::new(m));
     py.detach(|| deriv::idsoza(m, d, so, qb, xb).map(|_| ())).map_err(core_err)?;
     Ok(out_tensor(py, so.d2tau_dq2()))

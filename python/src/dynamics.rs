@@ -1,8 +1,7 @@
 //! Dynamics: RNEA, CRBA, ABA and the nonlinear effects.
 
-use crate::convert::{core_err, out_mat, out_vec, read_fext, read_q, read_vec};
+use crate::convert::{core_err, nv_what, out_mat, out_vec, read_fext, read_q, read_vec};
 use crate::data::{PyData, read_qvx};
-use crate::mimic::{mimic_aba, mimic_crba, mimic_nle, mimic_rnea};
 use crate::model::PyModel;
 use pyo3::prelude::*;
 use sodyn::algo;
@@ -19,9 +18,6 @@ pub(crate) fn rnea<'py>(
     a: &Bound<'py, PyAny>,
     fext: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_rnea(py, &mm, &mut data, q, v, a, fext);
-    }
     let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
@@ -40,9 +36,6 @@ pub(crate) fn crba<'py>(
     mut data: PyRefMut<'py, PyData>,
     q: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_crba(py, &mm, &mut data, q);
-    }
     let m = &model.m;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
@@ -62,9 +55,6 @@ pub(crate) fn aba<'py>(
     tau: &Bound<'py, PyAny>,
     fext: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_aba(py, &mm, &mut data, q, v, tau, fext);
-    }
     let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
@@ -84,13 +74,10 @@ pub(crate) fn nonlinear_effects<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        return mimic_nle(py, &mm, &mut data, q, v);
-    }
     let m = &model.m;
     let PyData { d, q: qb, v: vb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
-    read_vec(v, "v", m.nv(), "nv", vb)?;
+    read_vec(v, "v", m.nv(), nv_what(m), vb)?;
     py.detach(|| algo::nonlinear_effects(m, d, qb, vb).map(|_| ())).map_err(core_err)?;
     Ok(out_vec(py, d.nle()))
 }

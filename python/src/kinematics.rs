@@ -2,16 +2,14 @@
 //! centre of mass, centroidal dynamics and the SE(3) exponential and logarithm.
 
 use crate::convert::{
-    core_err, out_mat, out_tensor, out_vec, read_placement, read_q, read_vec, value_err,
+    core_err, nv_what, out_mat, out_tensor, out_vec, read_placement, read_q, read_vec, value_err,
 };
 use crate::data::{PyData, read_qvx};
-use crate::mimic::{mimic_read, mimic_ws};
 use crate::model::PyModel;
 use nalgebra::{DMatrix, DVector, Vector3};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use sodyn::algo;
-use sodyn::mimic;
 use sodyn::model::Model;
 use sodyn::tensor::Tensor3;
 
@@ -47,14 +45,7 @@ pub(crate) fn frame_placement<'py>(
     q: &Bound<'py, PyAny>,
     frame: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let t = if let Some(mm) = model.mimic.clone() {
-        let f = frame_arg(mm.full(), frame)?;
-        let d = &mut *data;
-        mimic_read(&mm, d, q, None, None)?;
-        mimic_ws(d)?;
-        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
-        mimic::frame_placement(&mm, &mut ws.d, q, f).map_err(core_err)?
-    } else {
+    let t = {
         let m = &model.m;
         let f = frame_arg(m, frame)?;
         let PyData { d, q: qb, .. } = &mut *data;
@@ -80,16 +71,6 @@ pub(crate) fn frame_jacobian<'py>(
     reference: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
     let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
-    if let Some(mm) = model.mimic.clone() {
-        let f = frame_arg(mm.full(), frame)?;
-        let d = &mut *data;
-        mimic_read(&mm, d, q, None, None)?;
-        mimic_ws(d)?;
-        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
-        let mut jac = nalgebra::Matrix6xX::zeros(mm.nv());
-        mimic::frame_jacobian(&mm, &mut ws.d, q, f, rf, &mut jac).map_err(core_err)?;
-        return Ok(out_mat(py, &DMatrix::from_column_slice(6, mm.nv(), jac.as_slice())));
-    }
     let m = &model.m;
     let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, .. } = &mut *data;
@@ -112,20 +93,11 @@ pub(crate) fn frame_velocity<'py>(
     reference: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
     let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
-    if let Some(mm) = model.mimic.clone() {
-        let f = frame_arg(mm.full(), frame)?;
-        let d = &mut *data;
-        mimic_read(&mm, d, q, Some(v), None)?;
-        mimic_ws(d)?;
-        let PyData { q, v, mimic: Some(ws), .. } = d else { unreachable!() };
-        let r = mimic::frame_velocity(&mm, &mut ws.d, q, v, f, rf).map_err(core_err)?;
-        return Ok(out_motion(py, &r));
-    }
     let m = &model.m;
     let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, v: vb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
-    read_vec(v, "v", m.nv(), "nv", vb)?;
+    read_vec(v, "v", m.nv(), nv_what(m), vb)?;
     Ok(out_motion(py, &algo::frame_velocity(m, d, qb, vb, f, rf).map_err(core_err)?))
 }
 
@@ -147,19 +119,6 @@ pub(crate) fn frame_acceleration<'py>(
     classical: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
     let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
-    if let Some(mm) = model.mimic.clone() {
-        let f = frame_arg(mm.full(), frame)?;
-        let d = &mut *data;
-        mimic_read(&mm, d, q, Some(v), Some((a, "a")))?;
-        mimic_ws(d)?;
-        let PyData { q, v, a, mimic: Some(ws), .. } = d else { unreachable!() };
-        let r = if classical {
-            mimic::frame_classical_acceleration(&mm, &mut ws.d, q, v, a, f, rf)
-        } else {
-            mimic::frame_acceleration(&mm, &mut ws.d, q, v, a, f, rf)
-        };
-        return Ok(out_motion(py, &r.map_err(core_err)?));
-    }
     let m = &model.m;
     let f = frame_arg(m, frame)?;
     let d = &mut *data;
@@ -187,26 +146,11 @@ pub(crate) fn frame_velocity_derivatives<'py>(
     reference: &str,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
-    if let Some(mm) = model.mimic.clone() {
-        let f = frame_arg(mm.full(), frame)?;
-        let d = &mut *data;
-        mimic_read(&mm, d, q, Some(v), None)?;
-        mimic_ws(d)?;
-        let PyData { q, v, mimic: Some(ws), .. } = d else { unreachable!() };
-        let n = mm.nv();
-        let (mut x, mut y) = (nalgebra::Matrix6xX::zeros(n), nalgebra::Matrix6xX::zeros(n));
-        mimic::frame_velocity_derivatives(&mm, &mut ws.d, q, v, f, rf, &mut x, &mut y)
-            .map_err(core_err)?;
-        let o = |z: &nalgebra::Matrix6xX<f64>| {
-            out_mat(py, &DMatrix::from_column_slice(6, n, z.as_slice()))
-        };
-        return PyTuple::new(py, [o(&x), o(&y)]);
-    }
     let m = &model.m;
     let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, v: vb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
-    read_vec(v, "v", m.nv(), "nv", vb)?;
+    read_vec(v, "v", m.nv(), nv_what(m), vb)?;
     let n = m.nv();
     let (mut x, mut y) = (nalgebra::Matrix6xX::zeros(n), nalgebra::Matrix6xX::zeros(n));
     algo::frame_velocity_derivatives(m, d, qb, vb, f, rf, &mut x, &mut y).map_err(core_err)?;
@@ -231,24 +175,6 @@ pub(crate) fn frame_acceleration_derivatives<'py>(
     reference: &str,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
-    if let Some(mm) = model.mimic.clone() {
-        let f = frame_arg(mm.full(), frame)?;
-        let d = &mut *data;
-        mimic_read(&mm, d, q, Some(v), Some((a, "a")))?;
-        mimic_ws(d)?;
-        let PyData { q, v, a, mimic: Some(ws), .. } = d else { unreachable!() };
-        let n = mm.nv();
-        let z = || nalgebra::Matrix6xX::zeros(n);
-        let (mut x, mut y, mut w) = (z(), z(), z());
-        mimic::frame_acceleration_derivatives(
-            &mm, &mut ws.d, q, v, a, f, rf, &mut x, &mut y, &mut w,
-        )
-        .map_err(core_err)?;
-        let o = |z: &nalgebra::Matrix6xX<f64>| {
-            out_mat(py, &DMatrix::from_column_slice(6, n, z.as_slice()))
-        };
-        return PyTuple::new(py, [o(&x), o(&y), o(&w)]);
-    }
     let m = &model.m;
     let f = frame_arg(m, frame)?;
     let d = &mut *data;
@@ -272,14 +198,6 @@ pub(crate) fn center_of_mass<'py>(
     mut data: PyRefMut<'py, PyData>,
     q: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        let d = &mut *data;
-        mimic_read(&mm, d, q, None, None)?;
-        mimic_ws(d)?;
-        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
-        let c = mimic::center_of_mass(&mm, &mut ws.d, q).map_err(core_err)?;
-        return Ok(out_vec(py, &DVector::from_column_slice(c.as_slice())));
-    }
     let m = &model.m;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
@@ -301,21 +219,12 @@ pub(crate) fn center_of_mass_motion<'py>(
     a: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyTuple>> {
     let o = |x: &Vector3<f64>| out_vec(py, &DVector::from_column_slice(x.as_slice()));
-    if let Some(mm) = model.mimic.clone() {
-        let d = &mut *data;
-        mimic_read(&mm, d, q, Some(v), a.map(|a| (a, "a")))?;
-        mimic_ws(d)?;
-        let PyData { q, v, a: ab, mimic: Some(ws), .. } = d else { unreachable!() };
-        let (c, vc, ac) = mimic::center_of_mass_motion(&mm, &mut ws.d, q, v, a.map(|_| &*ab))
-            .map_err(core_err)?;
-        return PyTuple::new(py, [o(&c), o(&vc), o(&ac)]);
-    }
     let m = &model.m;
     let PyData { d, q: qb, v: vb, a: ab, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
-    read_vec(v, "v", m.nv(), "nv", vb)?;
+    read_vec(v, "v", m.nv(), nv_what(m), vb)?;
     if let Some(a) = a {
-        read_vec(a, "a", m.nv(), "nv", ab)?;
+        read_vec(a, "a", m.nv(), nv_what(m), ab)?;
     }
     let (c, vc, ac) =
         algo::center_of_mass_motion(m, d, qb, vb, a.map(|_| &*ab)).map_err(core_err)?;
@@ -330,15 +239,6 @@ pub(crate) fn center_of_mass_jacobian<'py>(
     mut data: PyRefMut<'py, PyData>,
     q: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        let d = &mut *data;
-        mimic_read(&mm, d, q, None, None)?;
-        mimic_ws(d)?;
-        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
-        let mut j = nalgebra::Matrix3xX::zeros(mm.nv());
-        mimic::center_of_mass_jacobian(&mm, &mut ws.d, q, &mut j).map_err(core_err)?;
-        return Ok(out_mat(py, &DMatrix::from_column_slice(3, mm.nv(), j.as_slice())));
-    }
     let m = &model.m;
     let PyData { d, q: qb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
@@ -356,20 +256,10 @@ pub(crate) fn center_of_mass_velocity_derivatives<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        let d = &mut *data;
-        mimic_read(&mm, d, q, Some(v), None)?;
-        mimic_ws(d)?;
-        let PyData { q, v, mimic: Some(ws), .. } = d else { unreachable!() };
-        let mut j = nalgebra::Matrix3xX::zeros(mm.nv());
-        mimic::center_of_mass_velocity_derivatives(&mm, &mut ws.d, q, v, &mut j)
-            .map_err(core_err)?;
-        return Ok(out_mat(py, &DMatrix::from_column_slice(3, mm.nv(), j.as_slice())));
-    }
     let m = &model.m;
     let PyData { d, q: qb, v: vb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
-    read_vec(v, "v", m.nv(), "nv", vb)?;
+    read_vec(v, "v", m.nv(), nv_what(m), vb)?;
     let mut j = nalgebra::Matrix3xX::zeros(m.nv());
     algo::center_of_mass_velocity_derivatives(m, d, qb, vb, &mut j).map_err(core_err)?;
     Ok(out_mat(py, &DMatrix::from_column_slice(3, m.nv(), j.as_slice())))
@@ -389,22 +279,6 @@ pub(crate) fn centroidal_dynamics_derivatives<'py>(
     a: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let out = PyDict::new(py);
-    if let Some(mm) = model.mimic.clone() {
-        let d = &mut *data;
-        mimic_read(&mm, d, q, Some(v), Some((a, "a")))?;
-        mimic_ws(d)?;
-        let PyData { q, v, a, mimic: Some(ws), .. } = d else { unreachable!() };
-        let mut c = mimic::MimicCentroidal::new(&mm);
-        mimic::centroidal_dynamics_derivatives(&mm, &mut ws.d, &mut c, q, v, a)
-            .map_err(core_err)?;
-        out.set_item("h", out_vec(py, &DVector::from_column_slice(c.h())))?;
-        out.set_item("hdot", out_vec(py, &DVector::from_column_slice(c.hdot())))?;
-        out.set_item("Ag", out_mat(py, c.ag()))?;
-        out.set_item("dh_dq", out_mat(py, c.dh_dq()))?;
-        out.set_item("dhdot_dq", out_mat(py, c.dhdot_dq()))?;
-        out.set_item("dhdot_dv", out_mat(py, c.dhdot_dv()))?;
-        return Ok(out);
-    }
     let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
@@ -433,16 +307,6 @@ pub(crate) fn frame_jacobian_derivative<'py>(
     reference: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
     let rf = algo::ReferenceFrame::parse(reference).map_err(core_err)?;
-    if let Some(mm) = model.mimic.clone() {
-        let f = frame_arg(mm.full(), frame)?;
-        let d = &mut *data;
-        mimic_read(&mm, d, q, None, None)?;
-        mimic_ws(d)?;
-        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
-        let mut t = Tensor3::zeros(6, mm.nv(), mm.nv());
-        mimic::frame_jacobian_derivative(&mm, &mut ws.d, q, f, rf, &mut t).map_err(core_err)?;
-        return Ok(out_tensor(py, &t));
-    }
     let m = &model.m;
     let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, .. } = &mut *data;
@@ -462,16 +326,6 @@ pub(crate) fn frame_placement_hessian<'py>(
     q: &Bound<'py, PyAny>,
     frame: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    if let Some(mm) = model.mimic.clone() {
-        let f = frame_arg(mm.full(), frame)?;
-        let d = &mut *data;
-        mimic_read(&mm, d, q, None, None)?;
-        mimic_ws(d)?;
-        let PyData { q, mimic: Some(ws), .. } = d else { unreachable!() };
-        let mut t = Tensor3::zeros(6, mm.nv(), mm.nv());
-        mimic::frame_placement_hessian(&mm, &mut ws.d, q, f, &mut t).map_err(core_err)?;
-        return Ok(out_tensor(py, &t));
-    }
     let m = &model.m;
     let f = frame_arg(m, frame)?;
     let PyData { d, q: qb, .. } = &mut *data;

@@ -23,7 +23,6 @@ mod data;
 mod derivatives;
 mod dynamics;
 mod kinematics;
-mod mimic;
 mod model;
 mod ocp;
 mod pinocchio;

@@ -2,8 +2,8 @@
 //! descriptions rebuilt through `ModelBuilder`).
 
 use crate::convert::{
-    array, core_err, lie_arg, out_mat, out_vec, python_message, read_q, read_vec, shape_str,
-    value_err,
+    array, core_err, lie_arg, nq_what, nv_what, out_mat, out_vec, python_message, read_q, read_vec,
+    shape_str, value_err,
 };
 use crate::data::PyData;
 use nalgebra::{DVector, Matrix3, Vector3};
@@ -12,11 +12,10 @@ use numpy::PyUntypedArrayMethods;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use sodyn::Error;
-use sodyn::mimic::{MimicJoint, MimicModel};
+use sodyn::model::MimicJoint;
 use sodyn::model::{JointType, MjcfOptions, Model, ModelBuilder, UrdfOptions, builtin};
 use sodyn::rng::Rng;
 use sodyn::spatial::{Inertia, Transform};
-use std::sync::Arc;
 
 /// One row of the joint table.
 #[pyclass(name = "Joint", module = "sodyn._sodyn", frozen, get_all)]
@@ -58,24 +57,19 @@ impl PyJoint {
 /// Immutable description of a kinematic tree (Pinocchio's `Model`); only gravity may be set.
 #[pyclass(name = "Model", module = "sodyn._sodyn")]
 pub(crate) struct PyModel {
-    /// The model; with mimic joints, the full tree (every joint independent).
+    /// The model; in reduced coordinates for `Model.from_urdf(..., mimic=True)` (its `nq`,
+    /// `nv`, states and outputs are the reduced ones; its joint table is the full tree's).
     pub(crate) m: Model,
-    /// `Model.from_urdf(..., mimic=True)`: the reduced model, whose coordinates the Python
-    /// model has (`nq`, `nv`, states and outputs).
-    pub(crate) mimic: Option<Arc<MimicModel>>,
 }
 
 impl PyModel {
     pub(crate) fn plain(m: Model) -> Self {
-        Self { m, mimic: None }
-    }
-    pub(crate) fn with_mimic(mm: MimicModel) -> Self {
-        Self { m: mm.full().clone(), mimic: Some(Arc::new(mm)) }
+        Self { m }
     }
     /// The model for the functions that do not support mimic joints: an error naming `what`
     /// for a model loaded with `mimic=True`.
     pub(crate) fn full_only(&self, what: &str) -> PyResult<&Model> {
-        if self.mimic.is_some() {
+        if self.m.is_reduced() {
             return Err(core_err(Error::Argument {
                 name: "model".into(),
                 reason: format!(
@@ -98,16 +92,6 @@ pub(crate) fn fresh_seed() -> u64 {
     t ^ COUNTER.fetch_add(0x9e37_79b9_7f4a_7c15, Ordering::Relaxed)
 }
 
-impl PyModel {
-    pub(crate) fn loaded(m: Model, mimic: bool) -> PyResult<Self> {
-        if mimic {
-            Ok(Self::with_mimic(MimicModel::from_model(m).map_err(core_err)?))
-        } else {
-            Ok(Self::plain(m))
-        }
-    }
-}
-
 #[pymethods]
 impl PyModel {
     /// Loads a URDF file; `floating_base=True` adds a free-flyer root joint `root_joint`;
@@ -126,7 +110,7 @@ impl PyModel {
     ) -> PyResult<Self> {
         let opts = UrdfOptions { floating_base, strict_inertia, mimic };
         let m = py.detach(|| sodyn::model::load_urdf_file(&path, &opts)).map_err(core_err)?;
-        Self::loaded(m, mimic)
+        Ok(Self::plain(m))
     }
 
     /// Loads a URDF document given as a string.
@@ -140,7 +124,7 @@ impl PyModel {
     ) -> PyResult<Self> {
         let opts = UrdfOptions { floating_base, strict_inertia, mimic };
         let m = sodyn::model::load_urdf_str(xml, "<string>", &opts).map_err(core_err)?;
-        Self::loaded(m, mimic)
+        Ok(Self::plain(m))
     }
 
     /// Loads an MJCF (MuJoCo XML) file: bodies, hinge/slide/ball/free joints, default classes,
@@ -196,29 +180,29 @@ impl PyModel {
     }
     #[getter]
     fn nq(&self) -> usize {
-        self.mimic.as_ref().map_or(self.m.nq(), |mm| mm.nq())
+        self.m.nq()
     }
     #[getter]
     fn nv(&self) -> usize {
-        self.mimic.as_ref().map_or(self.m.nv(), |mm| mm.nv())
+        self.m.nv()
     }
     /// Whether the model was loaded with `mimic=True` (its mimic joints then follow their
     /// reference joints and have no degree of freedom).
     #[getter]
     fn has_mimic(&self) -> bool {
-        self.mimic.is_some()
+        self.m.is_reduced()
     }
     /// The full tree of a model loaded with `mimic=True` (every joint independent, as with
     /// `mimic=False`); `None` otherwise.
     #[getter]
     fn full_model(&self) -> Option<Self> {
-        self.mimic.as_ref().map(|_| Self::plain(self.m.clone()))
+        self.m.is_reduced().then(|| Self::plain(self.m.full_tree().clone()))
     }
     /// The constraint map `G` (`(full nv, nv)`, `v_full = G v`) of a model loaded with
     /// `mimic=True`; `None` otherwise.
     #[getter]
     fn mimic_map<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {
-        self.mimic.as_ref().map(|mm| out_mat(py, &mm.g()))
+        self.m.is_reduced().then(|| out_mat(py, &self.m.velocity_map()))
     }
     /// `q_full` of a reduced configuration `q` (a model loaded with `mimic=True`).
     fn expand_configuration<'py>(
@@ -226,12 +210,14 @@ impl PyModel {
         py: Python<'py>,
         q: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let mm = self.mimic.as_ref().ok_or_else(|| {
-            value_err("expand_configuration: the model was not loaded with mimic=True".into())
-        })?;
+        if !self.m.is_reduced() {
+            return Err(value_err(
+                "expand_configuration: the model was not loaded with mimic=True".into(),
+            ));
+        }
         let mut qv = DVector::zeros(0);
-        read_vec(q, "q", mm.nq(), "nq", &mut qv)?;
-        Ok(out_vec(py, &mm.expand_q(&qv).map_err(core_err)?))
+        read_vec(q, "q", self.m.nq(), nq_what(&self.m), &mut qv)?;
+        Ok(out_vec(py, &self.m.expand_q(&qv).map_err(core_err)?))
     }
     #[getter]
     fn njoints(&self) -> usize {
@@ -305,19 +291,15 @@ impl PyModel {
     fn with_armature(&self, a: &Bound<'_, PyAny>) -> PyResult<Self> {
         // With mimic joints: the full tree's DoFs (mimic joints included).
         let arr = array(a, "armature")?;
-        if arr.shape() != [self.m.nv()] {
+        if arr.shape() != [self.m.nv_full()] {
             return Err(value_err(format!(
                 "`armature` must have shape ({},), got shape {}",
-                self.m.nv(),
+                self.m.nv_full(),
                 shape_str(arr.shape())
             )));
         }
         let v: Vec<f64> = arr.as_array().iter().copied().collect();
-        let m = self.m.with_armature(&v).map_err(core_err)?;
-        match &self.mimic {
-            None => Ok(Self::plain(m)),
-            Some(mm) => Ok(Self::with_mimic(MimicModel::new(m, mm.mimics()).map_err(core_err)?)),
-        }
+        Ok(Self::plain(self.m.with_armature(&v).map_err(core_err)?))
     }
 
     /// Spatial gravity `[0, 0, 0, gx, gy, gz]` (angular first).
@@ -348,11 +330,7 @@ impl PyModel {
                 )));
             }
         };
-        self.m.set_gravity(lin).map_err(core_err)?;
-        if let Some(mm) = &mut self.mimic {
-            Arc::make_mut(mm).set_gravity(lin).map_err(core_err)?;
-        }
-        Ok(())
+        self.m.set_gravity(lin).map_err(core_err)
     }
 
     /// The joint table (joints 1..njoints-1; the world, joint 0, excluded).
@@ -373,15 +351,15 @@ impl PyModel {
                     multiplier: 1.0,
                     offset: 0.0,
                 };
-                if let Some(mm) = &self.mimic {
+                if m.is_reduced() {
                     // Reduced indices; a mimic joint has none of its own (nq = nv = 0, the
                     // indices of its reference joint, as Pinocchio's JointModelMimic).
-                    match mm.reduced_idx()[i] {
+                    match m.reduced_idx(i) {
                         Some((a, b)) => (j.idx_q, j.idx_v) = (a, b),
                         None => {
-                            let c = mm.mimics().iter().find(|c| c.joint == i);
+                            let c = m.mimic_joints().iter().find(|c| c.joint == i);
                             if let Some(c) = c {
-                                let (a, b) = mm.reduced_idx()[c.reference].unwrap_or((0, 0));
+                                let (a, b) = m.reduced_idx(c.reference).unwrap_or((0, 0));
                                 (j.idx_q, j.idx_v, j.nq, j.nv) = (a, b, 0, 0);
                                 j.mimic = Some(m.names()[c.reference].clone());
                                 (j.multiplier, j.offset) = (c.multiplier, c.offset);
@@ -403,18 +381,12 @@ impl PyModel {
     /// Lower configuration limits (−inf where absent).
     #[getter]
     fn lower_limits<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
-        if let Some(mm) = &self.mimic {
-            return out_vec(py, &mm.reduce_q(self.m.lower()).expect("full length"));
-        }
         out_vec(py, self.m.lower())
     }
 
     /// Upper configuration limits (+inf where absent).
     #[getter]
     fn upper_limits<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
-        if let Some(mm) = &self.mimic {
-            return out_vec(py, &mm.reduce_q(self.m.upper()).expect("full length"));
-        }
         out_vec(py, self.m.upper())
     }
 
@@ -430,10 +402,7 @@ impl PyModel {
 
     /// The neutral configuration (zero angles, identity quaternions).
     fn neutral<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
-        match &self.mimic {
-            Some(mm) => out_vec(py, &mm.neutral()),
-            None => out_vec(py, &self.m.neutral()),
-        }
+        out_vec(py, &self.m.neutral())
     }
 
     /// A random configuration within the limits (uniform quaternions; `[-π, π]` or `[-1, 1]`
@@ -452,10 +421,7 @@ impl PyModel {
             })?,
         };
         let mut rng = Rng::new(seed);
-        match &self.mimic {
-            Some(mm) => Ok(out_vec(py, &mm.random_configuration(&mut rng))),
-            None => Ok(out_vec(py, &self.m.random_configuration(&mut rng))),
-        }
+        Ok(out_vec(py, &self.m.random_configuration(&mut rng)))
     }
 
     /// `q ⊕ dq`: integrates the tangent vector `dq` (length nv) from `q` (joint-local
@@ -467,13 +433,8 @@ impl PyModel {
         dq: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let (mut qv, mut dv) = (DVector::zeros(0), DVector::zeros(0));
-        if let Some(mm) = &self.mimic {
-            read_vec(q, "q", mm.nq(), "nq", &mut qv)?;
-            read_vec(dq, "dq", mm.nv(), "nv", &mut dv)?;
-            return Ok(out_vec(py, &mm.integrate(&qv, &dv).map_err(core_err)?));
-        }
         read_q(q, "q", &self.m, &mut qv)?;
-        read_vec(dq, "dq", self.m.nv(), "nv", &mut dv)?;
+        read_vec(dq, "dq", self.m.nv(), nv_what(&self.m), &mut dv)?;
         Ok(out_vec(py, &self.m.integrate(&qv, &dv).map_err(core_err)?))
     }
 
@@ -486,11 +447,6 @@ impl PyModel {
         q1: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let (mut a, mut b) = (DVector::zeros(0), DVector::zeros(0));
-        if let Some(mm) = &self.mimic {
-            read_vec(q0, "q0", mm.nq(), "nq", &mut a)?;
-            read_vec(q1, "q1", mm.nq(), "nq", &mut b)?;
-            return Ok(out_vec(py, &mm.difference(&a, &b).map_err(core_err)?));
-        }
         read_q(q0, "q0", &self.m, &mut a)?;
         read_q(q1, "q1", &self.m, &mut b)?;
         Ok(out_vec(py, &self.m.difference(&a, &b).map_err(core_err)?))
@@ -508,13 +464,8 @@ impl PyModel {
     ) -> PyResult<Bound<'py, PyAny>> {
         let arg = lie_arg(arg)?;
         let (mut qv, mut dv) = (DVector::zeros(0), DVector::zeros(0));
-        if let Some(mm) = &self.mimic {
-            read_vec(q, "q", mm.nq(), "nq", &mut qv)?;
-            read_vec(dq, "dq", mm.nv(), "nv", &mut dv)?;
-            return Ok(out_mat(py, &mm.d_integrate(&qv, &dv, arg).map_err(core_err)?));
-        }
         read_q(q, "q", &self.m, &mut qv)?;
-        read_vec(dq, "dq", self.m.nv(), "nv", &mut dv)?;
+        read_vec(dq, "dq", self.m.nv(), nv_what(&self.m), &mut dv)?;
         Ok(out_mat(py, &self.m.d_integrate(&qv, &dv, arg).map_err(core_err)?))
     }
 
@@ -530,11 +481,6 @@ impl PyModel {
     ) -> PyResult<Bound<'py, PyAny>> {
         let arg = lie_arg(arg)?;
         let (mut a, mut b) = (DVector::zeros(0), DVector::zeros(0));
-        if let Some(mm) = &self.mimic {
-            read_vec(q0, "q0", mm.nq(), "nq", &mut a)?;
-            read_vec(q1, "q1", mm.nq(), "nq", &mut b)?;
-            return Ok(out_mat(py, &mm.d_difference(&a, &b, arg).map_err(core_err)?));
-        }
         read_q(q0, "q0", &self.m, &mut a)?;
         read_q(q1, "q1", &self.m, &mut b)?;
         Ok(out_mat(py, &self.m.d_difference(&a, &b, arg).map_err(core_err)?))
@@ -547,10 +493,11 @@ impl PyModel {
 
     /// The model as plain Python data (for pickling; `_model_from_description` rebuilds it).
     fn _description<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let d = describe(py, &self.m)?;
-        if let Some(mm) = &self.mimic {
-            let l: Vec<(usize, usize, f64, f64)> = mm
-                .mimics()
+        let d = describe(py, self.m.full_tree())?;
+        if self.m.is_reduced() {
+            let l: Vec<(usize, usize, f64, f64)> = self
+                .m
+                .mimic_joints()
                 .iter()
                 .map(|c| (c.joint, c.reference, c.multiplier, c.offset))
                 .collect();
@@ -572,9 +519,10 @@ impl PyModel {
             self.nq(),
             self.nv(),
             self.m.njoints(),
-            match &self.mimic {
-                Some(mm) => format!(", mimic joints={}", mm.mimics().len()),
-                None => String::new(),
+            if self.m.is_reduced() {
+                format!(", mimic joints={}", self.m.mimic_joints().len())
+            } else {
+                String::new()
             }
         )
     }
@@ -740,7 +688,7 @@ pub(crate) fn rebuild_py(desc: &Bound<'_, PyDict>) -> PyResult<PyModel> {
             offset,
         })
         .collect();
-    Ok(PyModel::with_mimic(MimicModel::new(m, &c).map_err(core_err)?))
+    Ok(PyModel::plain(m.with_mimic_joints(&c).map_err(core_err)?))
 }
 
 /// Rebuilds a pickled model (see `Model._description`).
