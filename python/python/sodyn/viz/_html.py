@@ -70,12 +70,21 @@ def document(cmds: Iterable[Any], center: Sequence[float], radius: float, durati
 var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
 (function () {{
   var commands = {payload};
+  var failed = [];
   for (var i = 0; i < commands.length; i++) {{
     var s = atob(commands[i]);
     var bytes = new Uint8Array(s.length);
     for (var k = 0; k < s.length; k++) bytes[k] = s.charCodeAt(k);
-    viewer.handle_command_bytearray(bytes);
+    try {{
+      viewer.handle_command_bytearray(bytes);
+    }} catch (e) {{
+      // one object the viewer cannot build (a mesh its loader refuses) must not stop the
+      // rest of the scene, the camera and the animation
+      failed.push(String(e));
+      console.error("sodyn: command " + i + " failed: " + e);
+    }}
   }}
+  document.body.setAttribute("data-sodyn-failed", String(failed.length));
   var cfg = {json.dumps(cfg)};
   // The distance at which the sphere fills the narrower of the two fields of view.
   var cam = viewer.camera;
