@@ -2,7 +2,8 @@
 //!
 //! With `g(q) = RNEA(q, 0, 0)`, `S` the actuation matrix and `J_c` the active contacts'
 //! Jacobian: `[S J_cᵀ] [u; λ] = g(q)` in the least-squares, least-norm sense
-//! (Moore-Penrose pseudo-inverse), and `u` its control rows.
+//! (Moore-Penrose pseudo-inverse), and `u` its control rows. The contact Jacobian comes from
+//! the knot's KKT workspace, with the knot's damping.
 
 use nalgebra::{DMatrix, DVector};
 use sodyn::algo::{Data, rnea};
@@ -21,11 +22,11 @@ pub(crate) fn quasi_static(m: &ActionModel, x: &DVector<f64>) -> Result<DVector<
     let zero = DVector::zeros(nv);
     let mut data = Data::new(model);
     let g = rnea(model, &mut data, &q, &zero, &zero, None)?.clone();
-    let active: Vec<_> = match &m.kind {
-        ActionKind::Euler { contacts, .. } => {
-            contacts.iter().filter(|c| c.active).map(|c| c.contact.clone()).collect()
+    let (active, damping): (Vec<_>, f64) = match &m.kind {
+        ActionKind::Euler { contacts, damping, .. } => {
+            (contacts.iter().filter(|c| c.active).map(|c| c.contact.clone()).collect(), *damping)
         }
-        ActionKind::Impulse { .. } => Vec::new(),
+        ActionKind::Impulse { .. } => (Vec::new(), 0.0),
     };
     let nc: usize = active.iter().map(|c| c.dim()).sum();
     let mut a = DMatrix::zeros(nv, nu + nc);
@@ -35,6 +36,11 @@ pub(crate) fn quasi_static(m: &ActionModel, x: &DVector<f64>) -> Result<DVector<
     }
     if nc > 0 {
         let mut kd = KktData::new(model, ContactData::new(model, &active)?);
+        // The knot's damping, as its dynamics uses it: a redundant contact set that the
+        // knot regularises is accepted here too (only the Jacobian is used).
+        if damping > 0.0 {
+            kd.set_damping(damping)?;
+        }
         kkt_dynamics(model, &mut data, &mut kd, &q, &zero, &zero)?;
         a.columns_mut(nu, nc).copy_from(&kd.cd().jac().transpose());
     }

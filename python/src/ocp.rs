@@ -13,6 +13,7 @@ use sodyn_ocp::{ActionData, SecondOrder, Solver, SolverKind, Termination, spec};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use crate::convert::python_message;
 use crate::model::PyModel;
 
 pyo3::create_exception!(
@@ -24,7 +25,25 @@ pyo3::create_exception!(
 );
 
 fn ocp_err(e: sodyn_ocp::OcpError) -> PyErr {
-    OcpError::new_err(e.message)
+    OcpError::new_err(ocp_message(e.message))
+}
+
+/// An optimal-control message in `sodyn.ocp`'s terms: the regularised contact solve that the
+/// core's KKT error suggests (`ContactData::set_damping`) is a knot's `JMinvJt_damping=`
+/// argument here; any other Rust path is rewritten as for the rest of the binding
+/// ([`python_message`]).
+pub(crate) fn ocp_message(s: String) -> String {
+    const DAMPING: &str = "ContactData::set_damping";
+    let s = if s.contains(DAMPING) {
+        s.replace(
+            DAMPING,
+            "the `JMinvJt_damping=` argument of DifferentialActionModelContactFwdDynamics or \
+             ActionModelImpulseFwdDynamics",
+        )
+    } else {
+        s
+    };
+    python_message(s)
 }
 
 fn vec_py<'py>(py: Python<'py>, v: &DVector<f64>) -> Bound<'py, PyArray1<f64>> {
@@ -250,7 +269,7 @@ impl PySolver {
             Termination::MaxIterations => "maxiter".into(),
             Termination::MaxRegularization => "max_regularization".into(),
             Termination::Interrupted => "interrupted".into(),
-            Termination::Failed(m) => format!("failed: {m}"),
+            Termination::Failed(m) => format!("failed: {}", ocp_message(m.clone())),
         }
     }
     /// One dict per iteration: iter, cost, stop, grad, step, preg, ffeas.

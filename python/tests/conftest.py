@@ -14,7 +14,8 @@
 * The error metric: ``max |ours − theirs| / max(1, max |theirs|)`` (NaN counts as infinite).
 * Error messages speak Python: every exception a test expects (``pytest.raises``,
   :func:`expect_value_error`) fails the test if its message names a Rust path (``::``, as in
-  ``Type::method``), so the whole bad-input suite checks it.
+  ``Type::method``), so the whole bad-input suite checks it, ``sodyn.ocp``'s ``OcpError``
+  included (``test_ocp.py``'s redundant contact set reaches the core's damping advice).
 """
 
 import functools

@@ -1,5 +1,6 @@
 """sodyn.ocp's native builder (no Crocoddyl): a quadruped problem solved by FDDP, DDP and
-box-FDDP, warm starts, and bad input named by node and part."""
+box-FDDP, warm starts, bad input named by node and part, and Crocoddyl's ANYmal trot built
+natively (``gait_problems.py``) against Crocoddyl's numbers."""
 
 from __future__ import annotations
 
@@ -8,6 +9,9 @@ import pytest
 
 import sodyn
 from sodyn import ocp
+
+import gait_problems
+from conftest import HAVE_SHARED, MODELS_DIR
 
 
 def _problem(T=10, with_bounds=False):
@@ -123,3 +127,64 @@ def test_second_order_option_is_checked():
     with pytest.raises(ValueError, match="second_order"):
         s.second_order = 1
     assert s.second_order is False
+
+
+def _redundant_problem(damping):
+    """The quadruped with a second point contact on LF_FOOT: a rank-deficient contact set."""
+    m = sodyn.Model.builtin("quadruped")
+    st = ocp.StateMultibody(m)
+    act = ocp.ActuationModelFloatingBase(st)
+    x0 = st.zero()
+
+    def node(dt):
+        c = ocp.ContactModelMultiple(st, act.nu)
+        for f in ["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"]:
+            c.addContact(f, ocp.ContactModel3D(st, f, gains=(0.0, 30.0)))
+        c.addContact("LF_again", ocp.ContactModel3D(st, "LF_FOOT", gains=(0.0, 30.0)))
+        costs = ocp.CostModelSum(st, act.nu)
+        costs.addCost("x", ocp.CostModelResidual(st, ocp.ResidualModelState(st, x0)), 1.0)
+        costs.addCost("u", ocp.CostModelResidual(st, ocp.ResidualModelControl(st, act.nu)), 1e-3)
+        d = ocp.DifferentialActionModelContactFwdDynamics(st, act, c, costs, damping)
+        return ocp.IntegratedActionModelEuler(d, dt)
+
+    return ocp.ShootingProblem(x0, [node(0.02) for _ in range(3)], node(0.0)), x0, act.nu
+
+
+def test_redundant_contacts_name_the_python_damping():
+    # The core's advice (a damping > 0) is given as sodyn.ocp takes it: the knot's
+    # JMinvJt_damping= argument (conftest's guard checks that no Rust path is named).
+    p, x0, nu = _redundant_problem(0.0)
+    msg = r"node 0: contact set is singular.*JMinvJt_damping=.*DifferentialActionModelContactFwdDynamics"
+    with pytest.raises(ocp.OcpError, match=msg):
+        p.quasiStatic([x0] * 3)
+    with pytest.raises(ocp.OcpError, match=msg):
+        ocp.SolverFDDP(p).solve([x0] * 4, [np.zeros(nu)] * 3, 10)
+    # With that damping the same problem solves, and quasiStatic uses it too.
+    p, x0, nu = _redundant_problem(1e-6)
+    us = p.quasiStatic([x0] * 3)
+    assert len(us) == 3 and all(np.isfinite(u).all() for u in us)
+    s = ocp.SolverFDDP(p)
+    assert s.solve([x0] * 4, us, 50), s.termination
+
+
+@pytest.mark.skipif(not HAVE_SHARED, reason="../shared/models is absent")
+def test_native_anymal_trot_matches_crocoddyl():
+    # Crocoddyl's trot of quadrupedal_gaits_fwddyn.py built with sodyn.ocp alone
+    # (gait_problems.py); Crocoddyl 3.1 solves its own problem in 7 FDDP iterations to
+    # 231.792478 (../shared/peer/setup-crocoddyl.sh prints it).
+    model, p, xs, us = gait_problems.anymal_trot(MODELS_DIR / "anymal.urdf")
+    assert p.T == 56
+    s = ocp.SolverFDDP(p)
+    assert s.solve(xs, us, 100), s.termination
+    assert s.iter == 7
+    assert s.cost == pytest.approx(231.792478, rel=1e-8)
+    # The feet end one step ahead: RF and LH by half a step (0.075 m), LF and RH by 0.15 m
+    # (within 5 mm; the contacts hold velocities only, kp = 0, so a landed foot may sit up to
+    # 1 cm off the ground: RF ends 7.8 mm up).
+    data = model.create_data()
+    q0, qT = xs[0][: model.nq], s.xs[-1][: model.nq]
+    for foot, dx in (("RF_FOOT", 0.075), ("LH_FOOT", 0.075), ("LF_FOOT", 0.15), ("RH_FOOT", 0.15)):
+        moved = (sodyn.frame_placement(model, data, qT, foot)[:3, 3]
+                 - sodyn.frame_placement(model, data, q0, foot)[:3, 3])
+        np.testing.assert_allclose(moved[:2], [dx, 0.0], atol=5e-3, err_msg=foot)
+        assert abs(moved[2]) < 1e-2, (foot, moved)

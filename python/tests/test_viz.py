@@ -495,6 +495,18 @@ def assert_robot_drawn(img, bg, what):
     assert 0.1 < box[1] <= 1.0 and 0.05 < box[0] <= 1.0, f"{what}: bounding box {box}"
 
 
+def assert_whole_robot_in_view(img, bg, what, margin=3):
+    """No pixel of the robot on the image's border (left, right, bottom, and the top below
+    meshcat's 24-pixel control bar): the camera framing shows all of it."""
+    diff = np.abs(img - bg).sum(axis=2) > 60
+    diff[:24, :] = False
+    ys, xs = np.nonzero(diff)
+    h, w = diff.shape
+    assert xs.min() >= margin and xs.max() < w - margin, f"{what}: cut at the side ({xs.min()}, {xs.max()})"
+    assert ys.min() >= 24 + margin and ys.max() < h - margin, \
+        f"{what}: cut at the top or bottom ({ys.min()}, {ys.max()})"
+
+
 @needs_chromium
 @pytest.mark.skipif(not HAVE_SHARED, reason="../shared/models is absent")
 def test_browser_talos_fallback_drawing_and_animation(tmp_path):
@@ -517,6 +529,8 @@ def test_browser_talos_fallback_drawing_and_animation(tmp_path):
     last = render(html, tmp_path / "talos-t1.png", "#t=1")
     assert_robot_drawn(first, bg, "talos t=0")
     assert_robot_drawn(last, bg, "talos t=1")
+    assert_whole_robot_in_view(first, bg, "talos t=0")
+    assert_whole_robot_in_view(last, bg, "talos t=1")
     moved = (np.abs(first - last).sum(axis=2) > 60).sum()
     assert moved > 500, f"the two animation frames differ in {moved} pixels only"
     # "#t=1" pauses the animation there: a render 1.25 s (of page time) later is the same
@@ -524,6 +538,54 @@ def test_browser_talos_fallback_drawing_and_animation(tmp_path):
     later = render(html, tmp_path / "talos-t1-later.png", "#t=1", budget_ms=6250)
     changed = (np.abs(later - last).sum(axis=2) > 60).sum()
     assert changed < 50, f"the paused frame changed in {changed} pixels"
+
+
+def solved_trot():
+    """Crocoddyl's ANYmal trot built with sodyn.ocp (``gait_problems.py``) and solved by
+    sodyn's FDDP: ``(model, problem, solver)``."""
+    from sodyn import ocp
+
+    import gait_problems
+
+    model, problem, xs, us = gait_problems.anymal_trot(MODELS_DIR / "anymal.urdf")
+    solver = ocp.SolverFDDP(problem)
+    assert solver.solve(xs, us, 100), solver.termination
+    return model, problem, solver
+
+
+@needs_chromium
+@pytest.mark.skipif(not HAVE_SHARED, reason="../shared/models is absent")
+def test_browser_solved_anymal_trot(tmp_path):
+    model, problem, solver = solved_trot()
+    urdf = MODELS_DIR / "anymal.urdf"
+    with pytest.warns(viz.VizWarning, match="not found"):  # the shared files have no meshes
+        v = viz.Visualizer(model, urdf, viewer=False)
+    solver.display(v)  # Crocoddyl's habit: viz.play(solver.xs, dt) with the knots' dt
+    html = v.save_html(tmp_path / "trot.html")
+    text = html.read_text()
+    # the document animates the solver's states: the base at each knot where
+    # frame_placement puts it, one knot every 10 ms (the problem's dt)
+    anim = next(c for c in decode_commands(text) if c["type"] == "set_animation")
+    clips = {a["path"]: a["clip"] for a in anim["animations"]}
+    base = clips["/meshcat/sodyn/links/base"]
+    assert abs(base["fps"] - 100.0) < 1e-9
+    pos = next(t for t in base["tracks"] if t["name"] == ".position")
+    xs = solver.xs
+    assert len(pos["keys"]) == len(xs) == problem.T + 1
+    data = sodyn.Data(model)
+    for k in (0, 20, len(xs) - 1):
+        expected = sodyn.frame_placement(model, data, xs[k][: model.nq], "base")[:3, 3]
+        np.testing.assert_allclose(pos["keys"][k]["value"], expected, atol=1e-12)
+    # renders: the robot drawn and whole at the start and at the top of the first swing (RF
+    # and LH lifted), and the two frames differ
+    bg = background_of(text, tmp_path, "trot")
+    first = render(html, tmp_path / "trot-t0.png", "#t=0")
+    swing = render(html, tmp_path / "trot-swing.png", "#t=0.145")
+    for img, what in ((first, "trot t=0"), (swing, "trot t=0.145")):
+        assert_robot_drawn(img, bg, what)
+        assert_whole_robot_in_view(img, bg, what)
+    moved = (np.abs(first - swing).sum(axis=2) > 60).sum()
+    assert moved > 300, f"the two animation frames differ in {moved} pixels only"
 
 
 @needs_chromium
@@ -566,7 +628,9 @@ def test_browser_panda_with_meshes(tmp_path):
     v.display([0, -0.5, 0, -2.0, 0, 1.5, 0.8, 0.02, 0.02])
     html = v.save_html(tmp_path / "panda.html")
     img = render(html, tmp_path / "panda.png")
-    assert_robot_drawn(img, background_of(html.read_text(), tmp_path, "panda"), "panda")
+    bg = background_of(html.read_text(), tmp_path, "panda")
+    assert_robot_drawn(img, bg, "panda")
+    assert_whole_robot_in_view(img, bg, "panda")
 
 
 # ------------------------------------------------------------------------------------------
@@ -601,10 +665,27 @@ def test_live_viewer_receives_the_scene(arm):
 
 
 # ------------------------------------------------------------------------------------------
-# The screenshot of docs/viz.md: python tests/test_viz.py --docs ../docs/viz-screenshot.png
-# (the renders above: the panda with its meshes, then three frames of a talos_full_v2 motion
-# drawn without meshes).
+# The screenshots of docs/viz.md, made with the renders above:
+#   python tests/test_viz.py --docs ../docs/viz-screenshot.png --trot ../docs/viz-trot.png
+# viz-screenshot.png: the panda with its meshes (when example-robot-data is installed), then
+# three frames of a scripted talos_full_v2 motion drawn without meshes; viz-trot.png: five
+# frames of the solved ANYmal trot (solved_trot(), as test_browser_solved_anymal_trot), drawn
+# without meshes as that test draws it, with the feet frames' axes.
 # ------------------------------------------------------------------------------------------
+
+def _strip(panels, out, height):
+    from PIL import Image
+
+    width = sum(p.width for p in panels)
+    strip = Image.new("RGB", (width, height))
+    x = 0
+    for p in panels:
+        strip.paste(p.crop((0, p.height - height, p.width, p.height)), (x, 0))
+        x += p.width
+    strip = strip.quantize(colors=256)
+    strip.save(out, optimize=True)
+    print(f"wrote {out} ({Path(out).stat().st_size} bytes)")
+
 
 def docs_screenshot(out):
     import tempfile
@@ -649,20 +730,47 @@ def docs_screenshot(out):
         png = tmp / f"talos{k}.png"
         render(html, png, f"#t={t}", size=(300, 360))
         panels.append(Image.open(png).convert("RGB").crop((0, 24, 300, 360)))
-    width = sum(p.width for p in panels)
-    strip = Image.new("RGB", (width, 336))
-    x = 0
-    for p in panels:
-        strip.paste(p.crop((0, p.height - 336, p.width, p.height)), (x, 0))
-        x += p.width
-    strip = strip.quantize(colors=256)
-    strip.save(out, optimize=True)
-    print(f"wrote {out} ({Path(out).stat().st_size} bytes)")
+    _strip(panels, out, 336)
+
+
+# The frames of viz-trot.png: the start, the top of each swing (RF-LH, then LF-RH), the
+# middle four-foot support and the end (knots 0, 14, 30, 44, 56 at 10 ms per knot).
+TROT_FRAMES = (0.0, 0.14, 0.29, 0.43, 0.56)
+
+
+def docs_trot_screenshot(out):
+    import tempfile
+
+    from PIL import Image
+
+    assert CHROMIUM is not None, "chromium is not installed"
+    tmp = Path(tempfile.mkdtemp())
+    model, problem, solver = solved_trot()
+    print(f"trot: T = {problem.T}, {solver.iter} FDDP iterations, cost {solver.cost:.6f}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", viz.VizWarning)  # no meshes: the fallback drawing
+        v = viz.Visualizer(model, MODELS_DIR / "anymal.urdf", viewer=False)
+    v.show_frames(["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"])
+    solver.display(v)
+    html = v.save_html(tmp / "trot.html")
+    panels = []
+    for k, t in enumerate(TROT_FRAMES):
+        png = tmp / f"trot{k}.png"
+        render(html, png, f"#t={t}", size=(280, 300))
+        panels.append(Image.open(png).convert("RGB").crop((0, 24, 280, 300)))
+    _strip(panels, out, 276)
 
 
 if __name__ == "__main__":
     import argparse
 
     parser = argparse.ArgumentParser()
-    parser.add_argument("--docs", required=True, metavar="OUT.png")
-    docs_screenshot(parser.parse_args().docs)
+    parser.add_argument("--docs", metavar="OUT.png", help="the model screenshot")
+    parser.add_argument("--trot", metavar="OUT.png", help="the strip of the solved trot")
+    args = parser.parse_args()
+    if not (args.docs or args.trot):
+        parser.error("give --docs and/or --trot")
+    if args.docs:
+        docs_screenshot(args.docs)
+    if args.trot:
+        docs_trot_screenshot(args.trot)

@@ -14,6 +14,11 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 
+# The framed sphere's radius is the scene's (half the diagonal of the box of every link and
+# joint origin over the motion) times this, for the drawn geometry around those origins.
+FIT_MARGIN = 1.15
+
+
 def viewer_js() -> str:
     """meshcat's bundled viewer script (three.js included)."""
     import meshcat
@@ -31,17 +36,20 @@ def _b64(cmd: Any) -> str:
 
 def document(cmds: Iterable[Any], center: Sequence[float], radius: float, duration: float,
              title: str = "sodyn") -> str:
-    """The HTML text: the viewer, the commands, a camera looking at ``center`` from a
-    distance that shows a sphere of ``radius``."""
+    """The HTML text: the viewer, the commands, a camera looking at ``center`` from the
+    distance at which a sphere of ``radius`` (times ``FIT_MARGIN``) fits the window's
+    narrower field of view (computed in the page, from the camera's vertical field of view
+    and the window's aspect ratio, so a tall or a wide window shows the whole sphere)."""
     c = np.asarray(center, dtype=float)
     # A three-quarter view from +x, +y, above. meshcat turns its z-up scene into three.js's
     # y-up world, where the orbit target and (through "/Cameras/default/rotated") the camera
     # position live: world (x, y, z) is three.js (x, z, -y).
     direction = np.array([0.8, 0.5, 0.55])
-    eye = c + 1.7 * radius * direction / np.linalg.norm(direction)
+    direction = direction / np.linalg.norm(direction)
     cfg = {
         "target": [c[0], c[2], -c[1]],
-        "eye": [eye[0], eye[2], -eye[1]],
+        "direction": [direction[0], direction[2], -direction[1]],
+        "fit": FIT_MARGIN,
         "duration": float(duration),
         "center": [float(x) for x in c],
         "radius": float(radius),
@@ -62,14 +70,31 @@ def document(cmds: Iterable[Any], center: Sequence[float], radius: float, durati
 var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
 (function () {{
   var commands = {payload};
+  var failed = [];
   for (var i = 0; i < commands.length; i++) {{
     var s = atob(commands[i]);
     var bytes = new Uint8Array(s.length);
     for (var k = 0; k < s.length; k++) bytes[k] = s.charCodeAt(k);
-    viewer.handle_command_bytearray(bytes);
+    try {{
+      viewer.handle_command_bytearray(bytes);
+    }} catch (e) {{
+      // one object the viewer cannot build (a mesh its loader refuses) must not stop the
+      // rest of the scene, the camera and the animation
+      failed.push(String(e));
+      console.error("sodyn: command " + i + " failed: " + e);
+    }}
   }}
+  document.body.setAttribute("data-sodyn-failed", String(failed.length));
   var cfg = {json.dumps(cfg)};
-  viewer.camera.position.set(cfg.eye[0], cfg.eye[1], cfg.eye[2]);
+  // The distance at which the sphere fills the narrower of the two fields of view.
+  var cam = viewer.camera;
+  var aspect = window.innerWidth > 0 && window.innerHeight > 0
+    ? window.innerWidth / window.innerHeight : 1.0;
+  var vfov = cam.fov * Math.PI / 180;
+  var hfov = 2 * Math.atan(Math.tan(vfov / 2) * aspect);
+  var dist = cfg.fit * cfg.radius / Math.sin(Math.min(vfov, hfov) / 2);
+  var d = cfg.direction, t = cfg.target;
+  cam.position.set(t[0] + dist * d[0], t[1] + dist * d[1], t[2] + dist * d[2]);
   viewer.controls.target.set(cfg.target[0], cfg.target[1], cfg.target[2]);
   viewer.controls.update();
   function seekFromHash() {{
