@@ -1115,10 +1115,11 @@ fn armature_option() {
 }
 
 /// `--mimic`: info, random-state and eval in the reduced coordinates, the outputs equal to the
-/// library's `sodyn::mimic`; unsupported inputs are clean errors.
+/// library's on the reduced `Model`; unsupported inputs are clean errors.
 #[test]
 fn mimic_commands_use_the_reduced_coordinates() {
-    use sodyn::mimic::{self, MimicData, MimicModel, MimicSoData};
+    use sodyn::algo::{self, Data};
+    use sodyn::deriv::{self, ContactData, FdSoData};
     let urdf = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_arm.urdf");
     let u = urdf.to_str().unwrap();
     let o = sodyn(&["info", "--model", u, "--mimic", "--floating-base"]);
@@ -1141,14 +1142,15 @@ fn mimic_commands_use_the_reduced_coordinates() {
     let state: Value = serde_json::from_str(&std::fs::read_to_string(&st).unwrap()).unwrap();
     let (q, vel) = (vector(&state, "q", nq as usize), vector(&state, "v", nv as usize));
     let (a, tau) = (vector(&state, "a", nv as usize), vector(&state, "tau", nv as usize));
-    let opts = sodyn::model::UrdfOptions { floating_base: true, ..Default::default() };
-    let m = MimicModel::load_urdf_file(&urdf, &opts).unwrap();
-    let mut d = MimicData::new(&m);
-    let mut so = MimicSoData::new(&m);
+    let opts = sodyn::model::UrdfOptions { floating_base: true, mimic: true, ..Default::default() };
+    let m = sodyn::model::load_urdf_file(&urdf, &opts).unwrap();
+    assert!(m.is_reduced());
+    let mut d = Data::new(&m);
+    let mut so = FdSoData::new(&m);
     let n = nv as usize;
-    let t = mimic::rnea(&m, &mut d, &q, &vel, &a, None).unwrap().clone();
+    let t = algo::rnea(&m, &mut d, &q, &vel, &a, None).unwrap().clone();
     assert!((vector(&v, "tau", n) - t).amax() < 1e-12);
-    mimic::fd_so_derivatives(&m, &mut d, &mut so, &q, &vel, &tau, None).unwrap();
+    deriv::fd_so_derivatives(&m, &mut d, &mut so, &q, &vel, &tau, None).unwrap();
     assert!((vector(&v, "qdd", n) - d.qdd()).amax() < 1e-12);
     assert!((matrix(&v, "dqdd_dq", n) - d.dqdd_dq()).amax() < 1e-12);
     assert!((matrix(&v, "Minv", n) - d.minv()).amax() < 1e-12);
@@ -1177,45 +1179,46 @@ fn mimic_commands_use_the_reduced_coordinates() {
         sodyn(&["eval", "--model", u, "--mimic", "--floating-base", "--state", wc, "--order", "2"]);
     assert_ok(&o, "eval --mimic with contacts");
     let v2: Value = serde_json::from_str(&stdout(&o)).unwrap();
-    let full = m.full();
+    let full = m.full_tree();
     let contacts = vec![
         sodyn::model::Contact::new(full, "tool", nalgebra::Vector3::zeros()).unwrap(),
         sodyn::model::Contact::new_6d(full, "thumb_tip", None).unwrap(),
     ];
-    let mut kd = mimic::MimicKktData::new(&m, &contacts).unwrap().with_second_order(&m);
-    mimic::kkt_so_derivatives(&m, &mut d, &mut kd, &q, &vel, &tau).unwrap();
+    let mut kd =
+        deriv::KktData::new(&m, ContactData::new(&m, &contacts).unwrap()).with_second_order(&m);
+    deriv::kkt_so_derivatives(&m, &mut d, &mut kd, &q, &vel, &tau).unwrap();
     assert!((matrix(&v2["kkt"], "dqdd_dq", n) - kd.dqdd_dq()).amax() < 1e-12);
     check_tensor_shape(&v2["kkt"], "d2qdd_dq2", n);
-    let mut im = mimic::MimicImpactData::new(&m, &contacts).unwrap();
+    let mut im = deriv::ImpactData::new(&m, ContactData::new(&m, &contacts).unwrap());
     im.set_restitution(0.3).unwrap();
-    mimic::impact_derivatives(&m, &mut d, &mut im, &q, &vel).unwrap();
+    deriv::impact_derivatives(&m, &mut d, &mut im, &q, &vel).unwrap();
     assert!((vector(&v2["impact"], "vplus", n) - im.vplus()).amax() < 1e-12);
     check_tensor_shape(&v2["impact"], "d2vplus_dq2", n);
     check_tensor_shape(&v2["constrained_id"], "d2tau_dq2", n);
-    let mut cc = mimic::MimicContractedData::new(&m);
-    mimic::fd_so_contracted(&m, &mut d, &mut cc, &q, &vel, &tau, &DVector::from_element(n, 0.5))
+    let mut cc = deriv::ContractedData::new(&m);
+    deriv::fd_so_contracted(&m, &mut d, &mut cc, &q, &vel, &tau, &DVector::from_element(n, 0.5))
         .unwrap();
     assert!((matrix(&v2["contracted"]["fd"], "d2qdd_dq2", n) - cc.c_qq()).amax() < 1e-12);
     // The contracted KKT and impact second order, one weight at a time, as the library.
     let (wn, w9) = (|x: f64| DVector::from_element(n, x), |x: f64| DVector::from_element(9, x));
-    let mut kd = mimic::MimicKktData::new(&m, &contacts).unwrap();
-    let mut kc = mimic::MimicKktContracted::new(&m, &kd);
-    mimic::kkt_so_contracted(&m, &mut d, &mut kd, &mut kc, &q, &vel, &tau, &wn(0.0), &w9(0.25))
+    let mut kd = deriv::KktData::new(&m, ContactData::new(&m, &contacts).unwrap());
+    let mut kc = deriv::KktContracted::new(&m, &kd);
+    deriv::kkt_so_contracted(&m, &mut d, &mut kd, &mut kc, &q, &vel, &tau, &wn(0.0), &w9(0.25))
         .unwrap();
     let ck = &v2["contracted"]["kkt"];
     assert!((matrix(ck, "d2lambda_dq2", n) - kc.c_qq()).amax() < 1e-12);
     assert!((matrix(ck, "d2lambda_dtaudq", n) - kc.c_tauq()).amax() < 1e-12);
-    mimic::kkt_so_contracted(&m, &mut d, &mut kd, &mut kc, &q, &vel, &tau, &wn(0.5), &w9(0.0))
+    deriv::kkt_so_contracted(&m, &mut d, &mut kd, &mut kc, &q, &vel, &tau, &wn(0.5), &w9(0.0))
         .unwrap();
     assert!((matrix(ck, "d2qdd_dv2", n) - kc.c_vv()).amax() < 1e-12);
-    let mut im = mimic::MimicImpactData::new(&m, &contacts).unwrap();
+    let mut im = deriv::ImpactData::new(&m, ContactData::new(&m, &contacts).unwrap());
     im.set_restitution(0.3).unwrap();
-    let mut ic = mimic::MimicImpactContracted::new(&m, &im);
-    mimic::impact_so_contracted(&m, &mut d, &mut im, &mut ic, &q, &vel, &wn(-0.5), &w9(0.0))
+    let mut ic = deriv::ImpactContracted::new(&m, &im);
+    deriv::impact_so_contracted(&m, &mut d, &mut im, &mut ic, &q, &vel, &wn(-0.5), &w9(0.0))
         .unwrap();
     let ci = &v2["contracted"]["impact"];
     assert!((matrix(ci, "d2vplus_dq2", n) - ic.c_qq()).amax() < 1e-12);
-    mimic::impact_so_contracted(&m, &mut d, &mut im, &mut ic, &q, &vel, &wn(0.0), &w9(0.75))
+    deriv::impact_so_contracted(&m, &mut d, &mut im, &mut ic, &q, &vel, &wn(0.0), &w9(0.75))
         .unwrap();
     assert!((matrix(ci, "d2impulse_dqdvminus", n) - ic.c_qvminus()).amax() < 1e-12);
     // Frames (of the full tree), in the reduced coordinates, as the library.
@@ -1229,13 +1232,13 @@ fn mimic_commands_use_the_reduced_coordinates() {
     assert_ok(&o, "eval --mimic with frames");
     let v3: Value = serde_json::from_str(&stdout(&o)).unwrap();
     let rf = sodyn::algo::ReferenceFrame::World;
-    let f = m.full().frame_id("finger_r").unwrap();
+    let f = m.frame_id("finger_r").unwrap();
     let (mut x, mut y, mut w) = (
         nalgebra::Matrix6xX::zeros(n),
         nalgebra::Matrix6xX::zeros(n),
         nalgebra::Matrix6xX::zeros(n),
     );
-    mimic::frame_acceleration_derivatives(&m, &mut d, &q, &vel, &a, f, rf, &mut x, &mut y, &mut w)
+    algo::frame_acceleration_derivatives(&m, &mut d, &q, &vel, &a, f, rf, &mut x, &mut y, &mut w)
         .unwrap();
     let got = &v3["frames"]["finger_r"]["dacceleration_dq"]["world"];
     for r in 0..6 {
@@ -1244,8 +1247,8 @@ fn mimic_commands_use_the_reduced_coordinates() {
         }
     }
     assert_eq!(v3["frames"]["tool"]["jacobian"]["local"].as_array().unwrap().len(), 6);
-    let mut cen = mimic::MimicCentroidal::new(&m);
-    mimic::centroidal_dynamics_derivatives(&m, &mut d, &mut cen, &q, &vel, &a).unwrap();
+    let mut cen = algo::Centroidal::new(&m);
+    algo::centroidal_dynamics_derivatives(&m, &mut d, &mut cen, &q, &vel, &a).unwrap();
     let got = &v3["centroidal"]["dhdot_dq"];
     for r in 0..6 {
         for c in 0..n {
@@ -1254,7 +1257,7 @@ fn mimic_commands_use_the_reduced_coordinates() {
     }
     assert_eq!(v3["com"]["jacobian"].as_array().unwrap().len(), 3);
     let mut t = sodyn::tensor::Tensor3::zeros(6, n, n);
-    mimic::frame_jacobian_derivative(&m, &mut d, &q, f, rf, &mut t).unwrap();
+    algo::frame_jacobian_derivative(&m, &mut d, &q, f, rf, &mut t).unwrap();
     let got = &v3["frames"]["finger_r"]["djacobian_dq"]["world"];
     assert!((got[2][3][4].as_f64().unwrap() - t[(2, 3, 4)]).abs() < 1e-12);
     // Unsupported inputs and models.
@@ -1322,9 +1325,9 @@ fn mimic_commands_use_the_reduced_coordinates() {
     assert_ok(&sodyn(&["info", "--model", b]), "unknown reference without --mimic");
 }
 
-/// `bench --mimic` times the batched algorithms of `sodyn::mimic::batch` on a pool of
-/// `--threads` (the batch_* lines with threads= and per=state); the options it does not
-/// support are clean errors.
+/// `bench --mimic` times the batched algorithms of `sodyn::batch` on the reduced model, on a
+/// pool of `--threads` (the batch_* lines with threads= and per=state); the options it does
+/// not support are clean errors.
 #[test]
 fn bench_mimic_times_the_batched_algorithms() {
     let urdf = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_arm.urdf");

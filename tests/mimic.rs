@@ -1,4 +1,5 @@
-//! Mimic joints (`sodyn::mimic`): every algorithm in the reduced coordinates against the AD
+//! Mimic joints: every algorithm on a `Model` in reduced coordinates (`UrdfOptions { mimic:
+//! true }`, `Model::with_mimic_joints`) with the usual workspaces, against the AD
 //! oracle (`reference::mimic`, the reference dynamics composed with the mimic expansion in
 //! dual / hyper-dual numbers), central finite differences, and the loader's checks.
 //!
@@ -6,12 +7,13 @@
 
 use nalgebra::{DMatrix, DVector};
 use sodyn::Error;
-use sodyn::mimic::{self, MimicData, MimicJoint, MimicModel, MimicSoData};
-use sodyn::model::{Model, UrdfOptions, load_urdf_file};
+use sodyn::algo::{self, Data};
+use sodyn::deriv::{self, ContactData, FdSoData, SoData};
+use sodyn::model::{MimicJoint, Model, UrdfOptions, load_urdf_file};
 use sodyn::rng::Rng;
 use sodyn::tensor::Tensor3;
 use std::path::PathBuf;
-use util::mimic::{arm_path, ff_models, models, opts, oracle, state};
+use util::mimic::{arm_path, ff_models, impact_data, kkt_data, models, opts, oracle, state};
 
 mod util;
 
@@ -40,23 +42,23 @@ const TOL: f64 = 1e-10;
 
 #[test]
 fn loads_the_reduced_coordinates() {
-    let fixed = MimicModel::load_urdf_file(&arm_path(), &opts(false)).unwrap();
-    assert_eq!((fixed.full().nq(), fixed.full().nv()), (10, 10));
+    let fixed = load_urdf_file(&arm_path(), &opts(false)).unwrap();
+    assert_eq!((fixed.nq_full(), fixed.nv_full()), (10, 10));
     assert_eq!((fixed.nq(), fixed.nv()), (7, 7));
-    assert_eq!(fixed.mimics().len(), 3);
-    let names = fixed.full().names();
+    assert_eq!(fixed.mimic_joints().len(), 3);
+    let names = fixed.full_tree().names();
     let by = |n: &str| names.iter().position(|x| x == n).unwrap();
-    let fr = fixed.mimics().iter().find(|m| m.joint == by("finger_r_joint")).unwrap();
+    let fr = fixed.mimic_joints().iter().find(|m| m.joint == by("finger_r_joint")).unwrap();
     assert_eq!((fr.reference, fr.multiplier, fr.offset), (by("finger_l_joint"), -1.0, 0.01));
-    assert!(fixed.reduced_idx()[by("finger_r_joint")].is_none());
-    let ff = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
+    assert!(fixed.reduced_idx(by("finger_r_joint")).is_none());
+    let ff = load_urdf_file(&arm_path(), &opts(true)).unwrap();
     assert_eq!((ff.nq(), ff.nv()), (14, 13));
     // Without the option the model is the full one and records no constraint.
     let plain = load_urdf_file(&arm_path(), &UrdfOptions::default()).unwrap();
     assert!(plain.mimic_joints().is_empty());
     assert_eq!(plain.mimic().iter().filter(|m| m.is_some()).count(), 3);
     // G: one non-zero per row, the multiplier for the mimic DoFs.
-    let g = fixed.g();
+    let g = fixed.velocity_map();
     assert_eq!(g.shape(), (10, 7));
     for f in 0..10 {
         assert_eq!(g.row(f).iter().filter(|x| **x != 0.0).count(), 1);
@@ -65,8 +67,10 @@ fn loads_the_reduced_coordinates() {
     let mut rng = Rng::new(1);
     let q = ff.random_configuration(&mut rng);
     let qf = ff.expand_q(&q).unwrap();
-    let (a, r) =
-        (ff.full().idx_q()[by("finger_r_joint") + 1], ff.full().idx_q()[by("finger_l_joint") + 1]);
+    let (a, r) = (
+        ff.full_tree().idx_q()[by("finger_r_joint") + 1],
+        ff.full_tree().idx_q()[by("finger_l_joint") + 1],
+    );
     assert!((qf[a] - (-qf[r] + 0.01)).abs() < 1e-15);
     assert_eq!(ff.reduce_q(&qf).unwrap(), q);
     let d = DVector::from_fn(ff.nv(), |_, _| rng.range(-0.3, 0.3));
@@ -79,23 +83,23 @@ fn first_order_matches_dual_oracle() {
     let mut worst = [0.0f64; 9];
     for m in models() {
         let r = oracle(&m);
-        let mut data = MimicData::new(&m);
+        let mut data = Data::new(&m);
         let mut rng = Rng::new(7);
         for _ in 0..3 {
             let [q, v, x] = state(&m, &mut rng);
             let (qs, vs, xs) = (q.as_slice(), v.as_slice(), x.as_slice());
-            let tau = mimic::rnea(&m, &mut data, &q, &v, &x, None).unwrap().clone();
+            let tau = algo::rnea(&m, &mut data, &q, &v, &x, None).unwrap().clone();
             worst[0] = worst[0].max(vec_err(&tau, &r.rnea(qs, vs, xs)));
-            let mm = mimic::crba(&m, &mut data, &q).unwrap().clone();
+            let mm = algo::crba(&m, &mut data, &q).unwrap().clone();
             worst[1] = worst[1].max(mat_err(&mm, &nested(&r.mass_matrix(qs))));
-            let qdd = mimic::aba(&m, &mut data, &q, &v, &x, None).unwrap().clone();
+            let qdd = algo::aba(&m, &mut data, &q, &v, &x, None).unwrap().clone();
             worst[2] = worst[2].max(vec_err(&qdd, &r.aba(qs, vs, xs)));
-            mimic::id_derivatives(&m, &mut data, &q, &v, &x, None).unwrap();
+            deriv::id_derivatives(&m, &mut data, &q, &v, &x, None).unwrap();
             worst[3] = worst[3].max(mat_err(data.dtau_dq(), &r.d_rnea_dq(qs, vs, xs)));
             worst[4] = worst[4].max(mat_err(data.dtau_dv(), &r.d_rnea_dv(qs, vs, xs)));
             worst[1] = worst[1].max(mat_err(data.m(), &mm));
             worst[0] = worst[0].max(vec_err(data.tau(), tau.as_slice()));
-            mimic::fd_derivatives(&m, &mut data, &q, &v, &x, None).unwrap();
+            deriv::fd_derivatives(&m, &mut data, &q, &v, &x, None).unwrap();
             worst[5] = worst[5].max(vec_err(data.qdd(), qdd.as_slice()));
             worst[6] = worst[6].max(mat_err(data.dqdd_dq(), &r.d_aba_dq(qs, vs, xs)));
             worst[7] = worst[7].max(mat_err(data.dqdd_dv(), &r.d_aba_dv(qs, vs, xs)));
@@ -115,22 +119,22 @@ fn second_order_matches_hyper_dual_oracle() {
     let mut worst = [0.0f64; 8];
     for m in models() {
         let r = oracle(&m);
-        let mut data = MimicData::new(&m);
-        let mut so = MimicSoData::new(&m);
+        let mut data = Data::new(&m);
+        let (mut so, mut fso) = (SoData::new(&m), FdSoData::new(&m));
         let mut rng = Rng::new(8);
         for _ in 0..2 {
             let [q, v, x] = state(&m, &mut rng);
             let (qs, vs, xs) = (q.as_slice(), v.as_slice(), x.as_slice());
-            mimic::id_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
+            deriv::id_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
             worst[0] = worst[0].max(ten_err(so.d2tau_dq2(), &r.d2_rnea_dq2(qs, vs, xs)));
             worst[1] = worst[1].max(ten_err(so.d2tau_dv2(), &r.d2_rnea_dv2(qs, vs, xs)));
             worst[2] = worst[2].max(ten_err(so.d2tau_dqdv(), &r.d2_rnea_dqdv(qs, vs, xs)));
             worst[3] = worst[3].max(ten_err(so.dm_dq(), &r.dM_dq(qs)));
-            mimic::fd_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
-            worst[4] = worst[4].max(ten_err(so.d2qdd_dq2(), &r.d2_aba_dq2(qs, vs, xs)));
-            worst[5] = worst[5].max(ten_err(so.d2qdd_dv2(), &r.d2_aba_dv2(qs, vs, xs)));
-            worst[6] = worst[6].max(ten_err(so.d2qdd_dqdv(), &r.d2_aba_dqdv(qs, vs, xs)));
-            worst[7] = worst[7].max(ten_err(so.d2qdd_dtaudq(), &r.d2_aba_dtaudq(qs, vs, xs)));
+            deriv::fd_so_derivatives(&m, &mut data, &mut fso, &q, &v, &x, None).unwrap();
+            worst[4] = worst[4].max(ten_err(fso.d2qdd_dq2(), &r.d2_aba_dq2(qs, vs, xs)));
+            worst[5] = worst[5].max(ten_err(fso.d2qdd_dv2(), &r.d2_aba_dv2(qs, vs, xs)));
+            worst[6] = worst[6].max(ten_err(fso.d2qdd_dqdv(), &r.d2_aba_dqdv(qs, vs, xs)));
+            worst[7] = worst[7].max(ten_err(fso.d2qdd_dtaudq(), &r.d2_aba_dtaudq(qs, vs, xs)));
         }
     }
     eprintln!(
@@ -146,10 +150,10 @@ fn second_order_matches_hyper_dual_oracle() {
 /// `∂²q̈/∂q²` (differences of `∂q̈/∂q` along `q_k`, nested as the convention).
 #[test]
 fn matches_central_finite_differences() {
-    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
+    let m = load_urdf_file(&arm_path(), &opts(true)).unwrap();
     let n = m.nv();
-    let mut data = MimicData::new(&m);
-    let mut so = MimicSoData::new(&m);
+    let mut data = Data::new(&m);
+    let mut so = FdSoData::new(&m);
     let mut rng = Rng::new(9);
     let [q, v, tau] = state(&m, &mut rng);
     let h = 1e-6;
@@ -158,32 +162,32 @@ fn matches_central_finite_differences() {
         d[k] = s;
         m.integrate(&q, &d).unwrap()
     };
-    mimic::fd_so_derivatives(&m, &mut data, &mut so, &q, &v, &tau, None).unwrap();
+    deriv::fd_so_derivatives(&m, &mut data, &mut so, &q, &v, &tau, None).unwrap();
     let (dqdd_dq, dqdd_dv) = (data.dqdd_dq().clone(), data.dqdd_dv().clone());
     let a = data.qdd().clone();
-    mimic::id_derivatives(&m, &mut data, &q, &v, &a, None).unwrap();
+    deriv::id_derivatives(&m, &mut data, &q, &v, &a, None).unwrap();
     let dtau_dq = data.dtau_dq().clone();
     let (mut e_tau, mut e_fd, mut e_fdv, mut e_so) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
     let mut tq = Tensor3::zeros(n, n, n);
     for k in 0..n {
         let (qp, qm) = (step(k, h), step(k, -h));
-        let tp = mimic::rnea(&m, &mut data, &qp, &v, &a, None).unwrap().clone();
-        let tm = mimic::rnea(&m, &mut data, &qm, &v, &a, None).unwrap().clone();
+        let tp = algo::rnea(&m, &mut data, &qp, &v, &a, None).unwrap().clone();
+        let tm = algo::rnea(&m, &mut data, &qm, &v, &a, None).unwrap().clone();
         e_tau = e_tau.max(((tp - tm) / (2.0 * h) - dtau_dq.column(k)).amax());
-        let ap = mimic::aba(&m, &mut data, &qp, &v, &tau, None).unwrap().clone();
-        let am = mimic::aba(&m, &mut data, &qm, &v, &tau, None).unwrap().clone();
+        let ap = algo::aba(&m, &mut data, &qp, &v, &tau, None).unwrap().clone();
+        let am = algo::aba(&m, &mut data, &qm, &v, &tau, None).unwrap().clone();
         e_fd = e_fd.max(((ap - am) / (2.0 * h) - dqdd_dq.column(k)).amax());
         let mut vp = v.clone();
         vp[k] += h;
         let mut vm = v.clone();
         vm[k] -= h;
-        let ap = mimic::aba(&m, &mut data, &q, &vp, &tau, None).unwrap().clone();
-        let am = mimic::aba(&m, &mut data, &q, &vm, &tau, None).unwrap().clone();
+        let ap = algo::aba(&m, &mut data, &q, &vp, &tau, None).unwrap().clone();
+        let am = algo::aba(&m, &mut data, &q, &vm, &tau, None).unwrap().clone();
         e_fdv = e_fdv.max(((ap - am) / (2.0 * h) - dqdd_dv.column(k)).amax());
         // ∂/∂q_k of ∂q̈/∂q: the outer perturbation first.
-        mimic::fd_derivatives(&m, &mut data, &qp, &v, &tau, None).unwrap();
+        deriv::fd_derivatives(&m, &mut data, &qp, &v, &tau, None).unwrap();
         let xp = data.dqdd_dq().clone();
-        mimic::fd_derivatives(&m, &mut data, &qm, &v, &tau, None).unwrap();
+        deriv::fd_derivatives(&m, &mut data, &qm, &v, &tau, None).unwrap();
         let xm = data.dqdd_dq().clone();
         let d = (xp - xm) / (2.0 * h);
         for j in 0..n {
@@ -202,34 +206,36 @@ fn matches_central_finite_differences() {
     assert!(e_so < 1e-5);
 }
 
-/// Without constraints the reduced model is the full one: the same numbers, bit for bit where
-/// the paths coincide.
+/// Without constraints `Model::with_mimic_joints` gives the tree itself: not reduced, the same
+/// counts, and the workspaces of one serve the other with the same numbers.
 #[test]
 fn without_mimics_equals_the_full_model() {
     let full =
         load_urdf_file(&arm_path(), &UrdfOptions { floating_base: true, ..Default::default() })
             .unwrap();
-    let m = MimicModel::new(full.clone(), &[]).unwrap();
+    let m = full.with_mimic_joints(&[]).unwrap();
+    assert!(!m.is_reduced());
     assert_eq!((m.nq(), m.nv()), (full.nq(), full.nv()));
     let mut rng = Rng::new(3);
     let [q, v, x] = state(&m, &mut rng);
-    let mut d = sodyn::algo::Data::new(&full);
-    let mut md = MimicData::new(&m);
-    let t = sodyn::algo::rnea(&full, &mut d, &q, &v, &x, None).unwrap().clone();
-    assert_eq!(mimic::rnea(&m, &mut md, &q, &v, &x, None).unwrap(), &t);
-    let a = sodyn::algo::aba(&full, &mut d, &q, &v, &x, None).unwrap().clone();
-    let am = mimic::aba(&m, &mut md, &q, &v, &x, None).unwrap().clone();
+    let mut d = Data::new(&full);
+    let mut md = Data::new(&m);
+    assert!(md.check(&full).is_ok() && d.check(&m).is_ok());
+    let t = algo::rnea(&full, &mut d, &q, &v, &x, None).unwrap().clone();
+    assert_eq!(algo::rnea(&m, &mut md, &q, &v, &x, None).unwrap(), &t);
+    let a = algo::aba(&full, &mut d, &q, &v, &x, None).unwrap().clone();
+    let am = algo::aba(&m, &mut md, &q, &v, &x, None).unwrap().clone();
     assert!((am - a).amax() < 1e-10);
-    sodyn::deriv::fd_derivatives(&full, &mut d, &q, &v, &x, None).unwrap();
-    mimic::fd_derivatives(&m, &mut md, &q, &v, &x, None).unwrap();
+    deriv::fd_derivatives(&full, &mut d, &q, &v, &x, None).unwrap();
+    deriv::fd_derivatives(&m, &mut md, &q, &v, &x, None).unwrap();
     assert!(mat_err(md.dqdd_dq(), d.dqdd_dq()) < 1e-10);
 }
 
 /// External forces (full-model joints, mimic joints included) pass through to the full model.
 #[test]
 fn external_forces_match_the_full_model() {
-    let m = MimicModel::load_urdf_file(&arm_path(), &opts(false)).unwrap();
-    let full = m.full();
+    let m = load_urdf_file(&arm_path(), &opts(false)).unwrap();
+    let full = m.full_tree();
     let mut rng = Rng::new(4);
     let [q, v, x] = state(&m, &mut rng);
     let fext: Vec<sodyn::spatial::Force> = (0..full.njoints())
@@ -240,50 +246,50 @@ fn external_forces_match_the_full_model() {
             )
         })
         .collect();
-    let mut md = MimicData::new(&m);
-    let mut d = sodyn::algo::Data::new(full);
-    let tau = mimic::rnea(&m, &mut md, &q, &v, &x, Some(&fext)).unwrap().clone();
-    let (qf, vf, af) = (md.q_full().clone(), md.v_full().clone(), md.a_full().clone());
-    let tf = sodyn::algo::rnea(full, &mut d, &qf, &vf, &af, Some(&fext)).unwrap();
-    let g = m.g();
+    let mut md = Data::new(&m);
+    let mut d = Data::new(full);
+    let tau = algo::rnea(&m, &mut md, &q, &v, &x, Some(&fext)).unwrap().clone();
+    let g = m.velocity_map();
+    let (qf, vf, af) = (m.expand_q(&q).unwrap(), &g * &v, &g * &x);
+    let tf = algo::rnea(full, &mut d, &qf, &vf, &af, Some(&fext)).unwrap();
     assert!((g.transpose() * tf - &tau).amax() < 1e-12);
     // Forward dynamics is its inverse.
-    let qdd = mimic::aba(&m, &mut md, &q, &v, &tau, Some(&fext)).unwrap();
+    let qdd = algo::aba(&m, &mut md, &q, &v, &tau, Some(&fext)).unwrap();
     assert!((qdd - &x).amax() < 1e-9);
 }
 
 #[test]
 fn bad_inputs_are_errors() {
-    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
-    let mut data = MimicData::new(&m);
-    let mut so = MimicSoData::new(&m);
+    let m = load_urdf_file(&arm_path(), &opts(true)).unwrap();
+    let mut data = Data::new(&m);
+    let mut so = FdSoData::new(&m);
     let mut rng = Rng::new(5);
     let [q, v, x] = state(&m, &mut rng);
     // The full model's lengths are wrong lengths.
-    let e = mimic::rnea(&m, &mut data, &m.expand_q(&q).unwrap(), &v, &x, None).unwrap_err();
+    let e = algo::rnea(&m, &mut data, &m.expand_q(&q).unwrap(), &v, &x, None).unwrap_err();
     assert!(
         matches!(e, Error::Dimension { ref what, expected: 14, got: 17 } if what == "q"),
         "{e}"
     );
-    let e = mimic::aba(&m, &mut data, &q, &v, &DVector::zeros(16), None).unwrap_err();
+    let e = algo::aba(&m, &mut data, &q, &v, &DVector::zeros(16), None).unwrap_err();
     assert!(matches!(e, Error::Dimension { ref what, expected: 13, .. } if what == "tau"), "{e}");
     let mut bad = v.clone();
     bad[4] = f64::NAN;
-    let e = mimic::fd_derivatives(&m, &mut data, &q, &bad, &x, None).unwrap_err();
+    let e = deriv::fd_derivatives(&m, &mut data, &q, &bad, &x, None).unwrap_err();
     assert!(matches!(e, Error::NotFinite { ref what, index: 4 } if what == "v"), "{e}");
     let mut badq = q.clone();
     badq[3] = 2.0; // not a unit quaternion
-    let e = mimic::crba(&m, &mut data, &badq).unwrap_err();
+    let e = algo::crba(&m, &mut data, &badq).unwrap_err();
     assert!(e.to_string().contains("root_joint"), "{e}");
     // A workspace of another model.
-    let other = MimicModel::load_urdf_file(&arm_path(), &opts(false)).unwrap();
-    let mut od = MimicData::new(&other);
-    let e = mimic::rnea(&m, &mut od, &q, &v, &x, None).unwrap_err();
+    let other = load_urdf_file(&arm_path(), &opts(false)).unwrap();
+    let mut od = Data::new(&other);
+    let e = algo::rnea(&m, &mut od, &q, &v, &x, None).unwrap_err();
     assert!(matches!(e, Error::Workspace(_)), "{e}");
-    let mut oso = MimicSoData::new(&other);
-    let e = mimic::fd_so_derivatives(&m, &mut data, &mut oso, &q, &v, &x, None).unwrap_err();
+    let mut oso = FdSoData::new(&other);
+    let e = deriv::fd_so_derivatives(&m, &mut data, &mut oso, &q, &v, &x, None).unwrap_err();
     assert!(matches!(e, Error::Workspace(_)), "{e}");
-    mimic::fd_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
+    deriv::fd_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
 }
 
 fn mimic_urdf(finger_r: &str, mimic: &str) -> String {
@@ -303,12 +309,12 @@ fn mimic_urdf(finger_r: &str, mimic: &str) -> String {
 }
 
 fn load_err(xml: &str) -> String {
-    MimicModel::load_urdf_str(xml, "t.urdf", &opts(false)).unwrap_err().to_string()
+    sodyn::model::load_urdf_str(xml, "t.urdf", &opts(false)).unwrap_err().to_string()
 }
 
 #[test]
 fn bad_mimic_elements_are_errors_naming_the_joint() {
-    let ok = MimicModel::load_urdf_str(
+    let ok = sodyn::model::load_urdf_str(
         &mimic_urdf("continuous", r#"<mimic joint="ja" multiplier="2" offset="0.5"/>"#),
         "t.urdf",
         &opts(false),
@@ -369,7 +375,7 @@ fn bad_constraints_of_the_api_are_errors() {
             "must be finite",
         ),
     ] {
-        let e = MimicModel::new(full.clone(), &ms).unwrap_err().to_string();
+        let e = full.with_mimic_joints(&ms).unwrap_err().to_string();
         assert!(e.contains(expect), "{ms:?}: {e}");
     }
 }
@@ -386,10 +392,10 @@ fn singular_reduced_mass_matrix_is_an_error() {
   <joint name="ja" type="prismatic"><parent link="base"/><child link="a"/><axis xyz="1 0 0"/></joint>
   <joint name="jb" type="prismatic"><parent link="a"/><child link="b"/><axis xyz="-1 0 0"/><mimic joint="ja"/></joint>
 </robot>"#;
-    let m = MimicModel::load_urdf_str(xml, "t.urdf", &opts(false)).unwrap();
-    let mut d = MimicData::new(&m);
+    let m = sodyn::model::load_urdf_str(xml, "t.urdf", &opts(false)).unwrap();
+    let mut d = Data::new(&m);
     let z = DVector::zeros(1);
-    let e = mimic::aba(&m, &mut d, &DVector::zeros(1), &z, &z, None).unwrap_err();
+    let e = algo::aba(&m, &mut d, &DVector::zeros(1), &z, &z, None).unwrap_err();
     assert!(matches!(e, Error::Singular { .. }) && e.to_string().contains("\"ja\""), "{e}");
 }
 
@@ -404,20 +410,20 @@ fn matches_pinocchio_fixtures() {
         let text = std::fs::read_to_string(root.join(format!("tests/fixtures/mimic_{name}.json")))
             .unwrap();
         let fx: serde_json::Value = serde_json::from_str(&text).unwrap();
-        let m = MimicModel::load_urdf_file(
+        let m = load_urdf_file(
             &root.join(fx["urdf"].as_str().unwrap()),
             &UrdfOptions { mimic: true, ..Default::default() },
         )
         .unwrap();
         assert_eq!(m.nv() as u64, fx["nv"].as_u64().unwrap(), "{name}");
-        let full = m.full();
+        let full = m.full_tree();
         // perm[ours] = Pinocchio's velocity index; q entries likewise (one per joint here).
         let mut perm = vec![usize::MAX; m.nv()];
         let mut qmap = vec![];
         for j in fx["joints"].as_array().unwrap() {
             let id = full.joint_id(j["name"].as_str().unwrap()).unwrap();
             let (pv, nv) = (j["idx_v"].as_u64().unwrap() as usize, j["nv"].as_u64().unwrap());
-            match m.reduced_idx()[id] {
+            match m.reduced_idx(id) {
                 None => assert_eq!(nv, 0, "{name}: {j} is a mimic joint in sodyn"),
                 Some((rq, rv)) => {
                     assert_eq!(nv, 1, "{name}: {j}");
@@ -429,7 +435,7 @@ fn matches_pinocchio_fixtures() {
             }
         }
         assert!(perm.iter().all(|&p| p < m.nv()), "{name}: {perm:?}");
-        let mut data = MimicData::new(&m);
+        let mut data = Data::new(&m);
         let mut worst = 0.0f64;
         for st in fx["states"].as_array().unwrap() {
             let get = |k: &str| -> Vec<f64> {
@@ -442,10 +448,10 @@ fn matches_pinocchio_fixtures() {
             }
             let v = DVector::from_fn(m.nv(), |r, _| pv[perm[r]]);
             let a = DVector::from_fn(m.nv(), |r, _| pa[perm[r]]);
-            let tau = mimic::rnea(&m, &mut data, &q, &v, &a, None).unwrap().clone();
+            let tau = algo::rnea(&m, &mut data, &q, &v, &a, None).unwrap().clone();
             let expect: Vec<f64> = (0..m.nv()).map(|r| ptau[perm[r]]).collect();
             worst = worst.max(vec_err(&tau, &expect));
-            let mm = mimic::crba(&m, &mut data, &q).unwrap().clone();
+            let mm = algo::crba(&m, &mut data, &q).unwrap().clone();
             let pm = st["M"].as_array().unwrap();
             let expect = DMatrix::from_fn(m.nv(), m.nv(), |r, c| {
                 pm[perm[r]].as_array().unwrap()[perm[c]].as_f64().unwrap()
@@ -461,7 +467,7 @@ fn matches_pinocchio_fixtures() {
 /// joint that mimics the shoulder) and a 6-D local contact on the thumb tip (below the mimic
 /// thumb base) with Baumgarte gains (9 rows for 13 DoFs); with `finger`, also a 3-D local point
 /// on the mimic right finger (12 rows: a stiffer, worse-conditioned system).
-fn arm_contacts_with(m: &MimicModel, finger: bool) -> Vec<sodyn::model::Contact> {
+fn arm_contacts_with(m: &Model, finger: bool) -> Vec<sodyn::model::Contact> {
     let mut c = arm_contacts(m);
     if !finger {
         c.pop();
@@ -470,9 +476,9 @@ fn arm_contacts_with(m: &MimicModel, finger: bool) -> Vec<sodyn::model::Contact>
 }
 
 /// [`arm_contacts_with`] with the finger.
-fn arm_contacts(m: &MimicModel) -> Vec<sodyn::model::Contact> {
+fn arm_contacts(m: &Model) -> Vec<sodyn::model::Contact> {
     use sodyn::model::{Contact, ContactReference, ContactType};
-    let full = m.full();
+    let full = m.full_tree();
     let p = nalgebra::Vector3::new(0.01, -0.02, 0.03);
     vec![
         Contact::new(full, "tool", p).unwrap(),
@@ -499,26 +505,25 @@ fn kkt_first_order_matches_dual_oracle() {
     }
 }
 
-fn kkt_first_order_case(m: &MimicModel, finger: bool) {
-    use sodyn::mimic::MimicKktData;
+fn kkt_first_order_case(m: &Model, finger: bool) {
     let contacts = arm_contacts_with(m, finger);
     let r = oracle(m);
-    let mut data = MimicData::new(m);
-    let mut kd = MimicKktData::new(m, &contacts).unwrap();
-    assert_eq!(kd.dim(), if finger { 12 } else { 9 });
+    let mut data = Data::new(m);
+    let mut kd = kkt_data(m, &contacts).unwrap();
+    assert_eq!(kd.cd().dim(), if finger { 12 } else { 9 });
     let n = m.nv();
     let mut rng = Rng::new(21);
     let mut worst = [0.0f64; 8];
     for _ in 0..3 {
         let [q, v, tau] = state(m, &mut rng);
         let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
-        mimic::kkt_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        deriv::kkt_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
         let (qdd, lam) = r.kkt(qs, vs, ts, &contacts);
         worst[0] = worst[0].max(vec_err(kd.qdd(), &qdd));
         worst[1] = worst[1].max(vec_err(kd.lambda(), &lam));
         let [dq, dv, dt] = r.kkt_fo(qs, vs, ts, &contacts);
         let rows = |x: &DMatrix<f64>, a: usize, b: usize| x.rows(a, b).into_owned();
-        let mm = kd.dim();
+        let mm = kd.cd().dim();
         for (k, (ours, theirs)) in [
             (kd.dqdd_dq(), rows(&dq, 0, n)),
             (kd.dqdd_dv(), rows(&dv, 0, n)),
@@ -544,7 +549,7 @@ fn kkt_first_order_case(m: &MimicModel, finger: bool) {
         "mimic KKT FO vs dual oracle ({} rows; relative): qdd {:.1e} lambda {:.1e} dqdd_dq \
          {:.1e} dqdd_dv {:.1e} dqdd_dtau {:.1e} dlambda_dq {:.1e} dlambda_dv {:.1e} dlambda_dtau \
          {:.1e}",
-        kd.dim(),
+        kd.cd().dim(),
         worst[0],
         worst[1],
         worst[2],
@@ -559,20 +564,19 @@ fn kkt_first_order_case(m: &MimicModel, finger: bool) {
 
 #[test]
 fn constrained_id_matches_oracle() {
-    use sodyn::mimic::MimicKktData;
-    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
+    let m = load_urdf_file(&arm_path(), &opts(true)).unwrap();
     let contacts = arm_contacts(&m);
     let r = oracle(&m);
-    let mut data = MimicData::new(&m);
-    let mut so = MimicSoData::new(&m);
-    let mut kd = MimicKktData::new(&m, &contacts).unwrap();
+    let mut data = Data::new(&m);
+    let mut so = SoData::new(&m);
+    let mut cd = ContactData::new(&m, &contacts).unwrap();
     let mut rng = Rng::new(22);
     let mut worst = [0.0f64; 4];
     for _ in 0..2 {
         let [q, v, a] = state(&m, &mut rng);
-        let lam = DVector::from_fn(kd.dim(), |_, _| rng.range(-5.0, 5.0));
+        let lam = DVector::from_fn(cd.dim(), |_, _| rng.range(-5.0, 5.0));
         let (qs, vs, as_, ls) = (q.as_slice(), v.as_slice(), a.as_slice(), lam.as_slice());
-        mimic::constrained_id_derivatives(&m, &mut data, &mut kd, Some(&mut so), &q, &v, &a, &lam)
+        deriv::constrained_id_so_derivatives(&m, &mut data, &mut cd, &mut so, &q, &v, &a, &lam)
             .unwrap();
         worst[0] =
             worst[0].max(vec_err(data.tau(), &r.constrained_rnea(qs, vs, as_, &contacts, ls)));
@@ -583,7 +587,7 @@ fn constrained_id_matches_oracle() {
             .max(ten_err(so.d2tau_dq2(), &r.d2_constrained_rnea_dq2(qs, vs, as_, &contacts, ls)));
         // Without `so`: the same first order.
         let t = data.dtau_dq().clone();
-        mimic::constrained_id_derivatives(&m, &mut data, &mut kd, None, &q, &v, &a, &lam).unwrap();
+        deriv::constrained_id_derivatives(&m, &mut data, &mut cd, &q, &v, &a, &lam).unwrap();
         assert_eq!(data.dtau_dq(), &t);
     }
     eprintln!(
@@ -594,17 +598,9 @@ fn constrained_id_matches_oracle() {
     assert!(worst.iter().all(|&e| e < TOL), "{worst:?}");
     // A wrong λ length is an error naming it.
     let [q, v, a] = state(&m, &mut rng);
-    let e = mimic::constrained_id_derivatives(
-        &m,
-        &mut data,
-        &mut kd,
-        None,
-        &q,
-        &v,
-        &a,
-        &DVector::zeros(3),
-    )
-    .unwrap_err();
+    let e =
+        deriv::constrained_id_derivatives(&m, &mut data, &mut cd, &q, &v, &a, &DVector::zeros(3))
+            .unwrap_err();
     assert!(e.to_string().contains("lambda"), "{e}");
 }
 
@@ -615,12 +611,11 @@ fn kkt_second_order_matches_hyper_dual_oracle() {
     }
 }
 
-fn kkt_second_order_case(m: &MimicModel) {
-    use sodyn::mimic::MimicKktData;
+fn kkt_second_order_case(m: &Model) {
     let r = oracle(m);
-    let mut data = MimicData::new(m);
+    let mut data = Data::new(m);
     let contacts = arm_contacts_with(m, false);
-    let mut kd = MimicKktData::new(m, &contacts).unwrap().with_second_order(m);
+    let mut kd = kkt_data(m, &contacts).unwrap().with_second_order(m);
     let n = m.nv();
     let mut rng = Rng::new(23);
     let mut worst = [0.0f64; 8];
@@ -629,9 +624,9 @@ fn kkt_second_order_case(m: &MimicModel) {
     for _ in 0..2 {
         let [q, v, tau] = state(m, &mut rng);
         let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
-        mimic::kkt_so_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        deriv::kkt_so_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
         let so = kd.so().unwrap();
-        let mm = kd.dim();
+        let mm = kd.cd().dim();
         let oracle = r.kkt_so(qs, vs, ts, &contacts);
         let ours_a = [so.d2qdd_dq2(), so.d2qdd_dv2(), so.d2qdd_dqdv(), so.d2qdd_dtaudq()];
         let ours_l =
@@ -642,7 +637,7 @@ fn kkt_second_order_case(m: &MimicModel) {
         }
         // The first order of the same call equals kkt_derivatives'.
         let d1 = kd.dqdd_dq().clone();
-        mimic::kkt_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        deriv::kkt_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
         let e = mat_err(kd.dqdd_dq(), &d1);
         assert!(e < 1e-11, "{e:e}");
     }
@@ -654,36 +649,35 @@ fn kkt_second_order_case(m: &MimicModel) {
     );
     assert!(worst.iter().all(|&e| e < TOL), "{worst:?}");
     // Without the second-order workspace: an error.
-    let mut kd1 = MimicKktData::new(m, &contacts).unwrap();
+    let mut kd1 = kkt_data(m, &contacts).unwrap();
     let [q, v, tau] = state(m, &mut rng);
-    let e = mimic::kkt_so_derivatives(m, &mut data, &mut kd1, &q, &v, &tau).unwrap_err();
+    let e = deriv::kkt_so_derivatives(m, &mut data, &mut kd1, &q, &v, &tau).unwrap_err();
     assert!(e.to_string().contains("with_second_order"), "{e}");
 }
 
 #[test]
 fn impact_first_order_matches_dual_oracle() {
-    use sodyn::mimic::MimicImpactData;
-    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
+    let m = load_urdf_file(&arm_path(), &opts(true)).unwrap();
     let r = oracle(&m);
-    let mut data = MimicData::new(&m);
+    let mut data = Data::new(&m);
     let n = m.nv();
     let mut worst = [0.0f64; 6];
     // (The 12-row set with the finger is ill-conditioned at these states: errors up to 4e-10
     // there, in the oracle's dense elimination as much as in ours.)
     for e in [0.0, 0.4] {
         let contacts = arm_contacts_with(&m, false);
-        let mut im = MimicImpactData::new(&m, &contacts).unwrap();
+        let mut im = impact_data(&m, &contacts).unwrap();
         im.set_restitution(e).unwrap();
         let mut rng = Rng::new(24);
         for _ in 0..2 {
             let [q, vm, _] = state(&m, &mut rng);
             let (qs, vs) = (q.as_slice(), vm.as_slice());
-            mimic::impact_derivatives(&m, &mut data, &mut im, &q, &vm).unwrap();
+            deriv::impact_derivatives(&m, &mut data, &mut im, &q, &vm).unwrap();
             let (vp, imp) = r.impact(qs, vs, &contacts, e);
             worst[0] = worst[0].max(vec_err(im.vplus(), &vp));
             worst[1] = worst[1].max(vec_err(im.impulse(), &imp));
             let [dq, dv] = r.impact_fo(qs, vs, &contacts, e);
-            let mm = im.dim();
+            let mm = im.cd().dim();
             worst[2] = worst[2].max(mat_err(im.dvplus_dq(), &dq.rows(0, n).into_owned()));
             worst[3] = worst[3].max(mat_err(im.dvplus_dvminus(), &dv.rows(0, n).into_owned()));
             worst[4] = worst[4].max(mat_err(im.dimpulse_dq(), &dq.rows(n, mm).into_owned()));
@@ -696,7 +690,7 @@ fn impact_first_order_matches_dual_oracle() {
         worst[0], worst[1], worst[2], worst[3], worst[4], worst[5]
     );
     assert!(worst.iter().all(|&e| e < TOL), "{worst:?}");
-    let mut im = MimicImpactData::new(&m, &arm_contacts(&m)).unwrap();
+    let mut im = impact_data(&m, &arm_contacts(&m)).unwrap();
     assert!(im.set_restitution(-1.0).unwrap_err().to_string().contains("restitution"));
 }
 
@@ -707,26 +701,25 @@ fn impact_second_order_matches_hyper_dual_oracle() {
     }
 }
 
-fn impact_second_order_case(m: &MimicModel) {
-    use sodyn::mimic::MimicImpactData;
+fn impact_second_order_case(m: &Model) {
     let r = oracle(m);
-    let mut data = MimicData::new(m);
+    let mut data = Data::new(m);
     let n = m.nv();
     let contacts = arm_contacts_with(m, false);
     let rows =
         |t: &Tensor3, a: usize, b: usize| Tensor3::from_fn(b, n, n, |i, j, k| t[(a + i, j, k)]);
     let mut worst = [0.0f64; 4];
     for e in [0.0, 0.4] {
-        let mut im = MimicImpactData::new(m, &contacts).unwrap().with_second_order(m);
+        let mut im = impact_data(m, &contacts).unwrap().with_second_order(m);
         im.set_restitution(e).unwrap();
         let mut rng = Rng::new(25);
         for _ in 0..2 {
             let [q, vm, _] = state(m, &mut rng);
             let (qs, vs) = (q.as_slice(), vm.as_slice());
-            mimic::impact_so_derivatives(m, &mut data, &mut im, &q, &vm).unwrap();
+            deriv::impact_so_derivatives(m, &mut data, &mut im, &q, &vm).unwrap();
             let so = im.so().unwrap();
             let [dq2, dqdv] = r.impact_so(qs, vs, &contacts, e);
-            let mm = im.dim();
+            let mm = im.cd().dim();
             worst[0] = worst[0].max(ten_err(so.d2vplus_dq2(), &rows(&dq2, 0, n)));
             worst[1] = worst[1].max(ten_err(so.d2vplus_dqdvminus(), &rows(&dqdv, 0, n)));
             worst[2] = worst[2].max(ten_err(so.d2impulse_dq2(), &rows(&dq2, n, mm)));
@@ -745,32 +738,32 @@ fn impact_second_order_case(m: &MimicModel) {
 /// reduced tensors (themselves checked against the hyper-dual oracle above).
 #[test]
 fn contracted_second_order_equals_contracted_tensors() {
-    use sodyn::mimic::MimicContractedData;
+    use sodyn::deriv::ContractedData;
     let contract = |t: &Tensor3, w: &DVector<f64>| {
         let (n1, n2, n3) = t.dims();
         DMatrix::from_fn(n2, n3, |j, k| (0..n1).map(|i| w[i] * t[(i, j, k)]).sum())
     };
     let mut worst = [0.0f64; 8];
     for m in models() {
-        let mut data = MimicData::new(&m);
-        let mut so = MimicSoData::new(&m);
-        let mut cd = MimicContractedData::new(&m);
+        let mut data = Data::new(&m);
+        let (mut so, mut fso) = (SoData::new(&m), FdSoData::new(&m));
+        let mut cd = ContractedData::new(&m);
         let mut rng = Rng::new(31);
         for _ in 0..2 {
             let [q, v, x] = state(&m, &mut rng);
             let w = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
-            mimic::id_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
-            mimic::id_so_contracted(&m, &mut data, &mut cd, &q, &v, &x, &w).unwrap();
+            deriv::id_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
+            deriv::id_so_contracted(&m, &mut data, &mut cd, &q, &v, &x, &w).unwrap();
             worst[0] = worst[0].max(mat_err(cd.c_qq(), &contract(so.d2tau_dq2(), &w)));
             worst[1] = worst[1].max(mat_err(cd.c_vv(), &contract(so.d2tau_dv2(), &w)));
             worst[2] = worst[2].max(mat_err(cd.c_qv(), &contract(so.d2tau_dqdv(), &w)));
             worst[3] = worst[3].max(mat_err(cd.c_mq(), &contract(so.dm_dq(), &w)));
-            mimic::fd_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
-            mimic::fd_so_contracted(&m, &mut data, &mut cd, &q, &v, &x, &w).unwrap();
-            worst[4] = worst[4].max(mat_err(cd.c_qq(), &contract(so.d2qdd_dq2(), &w)));
-            worst[5] = worst[5].max(mat_err(cd.c_vv(), &contract(so.d2qdd_dv2(), &w)));
-            worst[6] = worst[6].max(mat_err(cd.c_qv(), &contract(so.d2qdd_dqdv(), &w)));
-            worst[7] = worst[7].max(mat_err(cd.c_tauq(), &contract(so.d2qdd_dtaudq(), &w)));
+            deriv::fd_so_derivatives(&m, &mut data, &mut fso, &q, &v, &x, None).unwrap();
+            deriv::fd_so_contracted(&m, &mut data, &mut cd, &q, &v, &x, &w).unwrap();
+            worst[4] = worst[4].max(mat_err(cd.c_qq(), &contract(fso.d2qdd_dq2(), &w)));
+            worst[5] = worst[5].max(mat_err(cd.c_vv(), &contract(fso.d2qdd_dv2(), &w)));
+            worst[6] = worst[6].max(mat_err(cd.c_qv(), &contract(fso.d2qdd_dqdv(), &w)));
+            worst[7] = worst[7].max(mat_err(cd.c_tauq(), &contract(fso.d2qdd_dtaudq(), &w)));
         }
     }
     eprintln!(

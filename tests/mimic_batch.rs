@@ -1,13 +1,13 @@
-//! The batched API of mimic models (`sodyn::mimic::batch`): results bit for bit those of the
-//! sequential `sodyn::mimic` calls, whatever the number of threads; errors name the failing
-//! state, the argument or the output.
+//! The batched API (`sodyn::batch`) on models in reduced coordinates (mimic joints): results
+//! bit for bit those of the sequential `sodyn::algo` / `sodyn::deriv` calls, whatever the
+//! number of threads; errors name the failing state, the argument or the output.
 
 use nalgebra::{DMatrix, DVector};
 use sodyn::Error;
-use sodyn::batch::{BatchData, BatchPool};
-use sodyn::mimic::batch::{self, batch_data, batch_data_with_pool};
-use sodyn::mimic::{self, MimicData, MimicModel, MimicSoData};
-use sodyn::model::UrdfOptions;
+use sodyn::algo::{self, Data};
+use sodyn::batch::{self, BatchData, BatchPool};
+use sodyn::deriv::{self, FdSoData, SoData};
+use sodyn::model::{Model, UrdfOptions, load_urdf_file};
 use sodyn::rng::Rng;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -19,12 +19,12 @@ fn data(name: &str) -> PathBuf {
 /// The test arm (fixed and floating: a prismatic pair, a continuous joint mimicking a revolute
 /// one, a joint mimicking an ancestor) and the panda with a finger mimic of multiplier −0.6 and
 /// offset 0.02.
-fn models() -> Vec<MimicModel> {
+fn models() -> Vec<Model> {
     let o = |floating_base| UrdfOptions { floating_base, strict_inertia: false, mimic: true };
     vec![
-        MimicModel::load_urdf_file(&data("mimic_arm.urdf"), &o(false)).unwrap(),
-        MimicModel::load_urdf_file(&data("mimic_arm.urdf"), &o(true)).unwrap(),
-        MimicModel::load_urdf_file(&data("mimic_panda_coeffs.urdf"), &o(false)).unwrap(),
+        load_urdf_file(&data("mimic_arm.urdf"), &o(false)).unwrap(),
+        load_urdf_file(&data("mimic_arm.urdf"), &o(true)).unwrap(),
+        load_urdf_file(&data("mimic_panda_coeffs.urdf"), &o(false)).unwrap(),
     ]
 }
 
@@ -35,7 +35,7 @@ struct States {
     tau: Vec<DVector<f64>>,
 }
 
-fn states(m: &MimicModel, n: usize, seed: u64) -> States {
+fn states(m: &Model, n: usize, seed: u64) -> States {
     let mut rng = Rng::new(seed);
     let mut s = States { q: vec![], v: vec![], a: vec![], tau: vec![] };
     for _ in 0..n {
@@ -48,16 +48,16 @@ fn states(m: &MimicModel, n: usize, seed: u64) -> States {
     s
 }
 
-fn vecs(m: &MimicModel, n: usize) -> Vec<DVector<f64>> {
+fn vecs(m: &Model, n: usize) -> Vec<DVector<f64>> {
     vec![DVector::zeros(m.nv()); n]
 }
 
-fn mats(m: &MimicModel, n: usize) -> Vec<DMatrix<f64>> {
+fn mats(m: &Model, n: usize) -> Vec<DMatrix<f64>> {
     vec![DMatrix::zeros(m.nv(), m.nv()); n]
 }
 
 /// Every mimic batched function on `bd`'s pool against the sequential calls, bit for bit.
-fn check_identical(m: &MimicModel, s: &States, bd: &mut BatchData<MimicData>, label: &str) {
+fn check_identical(m: &Model, s: &States, bd: &mut BatchData, label: &str) {
     let n = s.q.len();
     let mut tau = vecs(m, n);
     batch::rnea_batch(m, bd, &s.q, &s.v, &s.a, &mut tau).unwrap();
@@ -69,39 +69,37 @@ fn check_identical(m: &MimicModel, s: &States, bd: &mut BatchData<MimicData>, la
     batch::id_derivatives_batch(m, bd, &s.q, &s.v, &s.a, &mut idq, &mut idv).unwrap();
     let (mut fdq, mut fdv) = (mats(m, n), mats(m, n));
     batch::fd_derivatives_batch(m, bd, &s.q, &s.v, &s.tau, &mut fdq, &mut fdv).unwrap();
-    let mut so = vec![MimicSoData::new(m); n];
+    let mut so = vec![SoData::new(m); n];
     batch::id_so_derivatives_batch(m, bd, &s.q, &s.v, &s.a, &mut so).unwrap();
-    let mut fso = vec![MimicSoData::new(m); n];
+    let mut fso = vec![FdSoData::new(m); n];
     batch::fd_so_derivatives_batch(m, bd, &s.q, &s.v, &s.tau, &mut fso).unwrap();
 
-    let mut d = MimicData::new(m);
-    let mut so1 = MimicSoData::new(m);
+    let mut d = Data::new(m);
+    let (mut so1, mut fso1) = (SoData::new(m), FdSoData::new(m));
     for k in 0..n {
         let at = format!("{label}: model {} state {k}", m.name());
         let (q, v, a, t) = (&s.q[k], &s.v[k], &s.a[k], &s.tau[k]);
-        assert_eq!(tau[k], *mimic::rnea(m, &mut d, q, v, a, None).unwrap(), "rnea {at}");
-        assert_eq!(mm[k], *mimic::crba(m, &mut d, q).unwrap(), "crba {at}");
-        assert_eq!(qdd[k], *mimic::aba(m, &mut d, q, v, t, None).unwrap(), "aba {at}");
-        mimic::id_derivatives(m, &mut d, q, v, a, None).unwrap();
+        assert_eq!(tau[k], *algo::rnea(m, &mut d, q, v, a, None).unwrap(), "rnea {at}");
+        assert_eq!(mm[k], *algo::crba(m, &mut d, q).unwrap(), "crba {at}");
+        assert_eq!(qdd[k], *algo::aba(m, &mut d, q, v, t, None).unwrap(), "aba {at}");
+        deriv::id_derivatives(m, &mut d, q, v, a, None).unwrap();
         assert_eq!(&idq[k], d.dtau_dq(), "dtau_dq {at}");
         assert_eq!(&idv[k], d.dtau_dv(), "dtau_dv {at}");
-        mimic::fd_derivatives(m, &mut d, q, v, t, None).unwrap();
+        deriv::fd_derivatives(m, &mut d, q, v, t, None).unwrap();
         assert_eq!(&fdq[k], d.dqdd_dq(), "dqdd_dq {at}");
         assert_eq!(&fdv[k], d.dqdd_dv(), "dqdd_dv {at}");
-        mimic::id_so_derivatives(m, &mut d, &mut so1, q, v, a, None).unwrap();
+        deriv::id_so_derivatives(m, &mut d, &mut so1, q, v, a, None).unwrap();
         let (b, r) = (&so[k], &so1);
         assert_eq!(b.d2tau_dq2().as_slice(), r.d2tau_dq2().as_slice(), "d2tau_dq2 {at}");
         assert_eq!(b.d2tau_dv2().as_slice(), r.d2tau_dv2().as_slice(), "d2tau_dv2 {at}");
         assert_eq!(b.d2tau_dqdv().as_slice(), r.d2tau_dqdv().as_slice(), "d2tau_dqdv {at}");
         assert_eq!(b.dm_dq().as_slice(), r.dm_dq().as_slice(), "dM_dq {at}");
-        mimic::fd_so_derivatives(m, &mut d, &mut so1, q, v, t, None).unwrap();
-        let (b, r) = (&fso[k], &so1);
+        deriv::fd_so_derivatives(m, &mut d, &mut fso1, q, v, t, None).unwrap();
+        let (b, r) = (&fso[k], &fso1);
         assert_eq!(b.d2qdd_dq2().as_slice(), r.d2qdd_dq2().as_slice(), "d2qdd_dq2 {at}");
         assert_eq!(b.d2qdd_dv2().as_slice(), r.d2qdd_dv2().as_slice(), "d2qdd_dv2 {at}");
         assert_eq!(b.d2qdd_dqdv().as_slice(), r.d2qdd_dqdv().as_slice(), "d2qdd_dqdv {at}");
         assert_eq!(b.d2qdd_dtaudq().as_slice(), r.d2qdd_dtaudq().as_slice(), "d2qdd_dtaudq {at}");
-        // The batch's inverse-dynamics tensors at (q, v, q̈) too.
-        assert_eq!(b.d2tau_dq2().as_slice(), r.d2tau_dq2().as_slice(), "fd: d2tau_dq2 {at}");
     }
 }
 
@@ -111,14 +109,14 @@ fn check_identical(m: &MimicModel, s: &States, bd: &mut BatchData<MimicData>, la
 fn mimic_batch_equals_sequential_one_and_two_threads() {
     for (i, m) in models().iter().enumerate() {
         for threads in [1, 2, 3] {
-            let mut bd = batch_data_with_pool(m, Arc::new(BatchPool::new(threads).unwrap()));
+            let mut bd = BatchData::with_pool(m, Arc::new(BatchPool::new(threads).unwrap()));
             assert_eq!(bd.threads(), threads);
             for n in [1, 2, 5, 41] {
                 let s = states(m, n, 100 * i as u64 + n as u64);
                 check_identical(m, &s, &mut bd, &format!("{threads} threads, {n} states"));
             }
         }
-        let mut bd = batch_data(m);
+        let mut bd = BatchData::new(m);
         check_identical(m, &states(m, 23, 7 + i as u64), &mut bd, "shared pool");
     }
 }
@@ -126,7 +124,7 @@ fn mimic_batch_equals_sequential_one_and_two_threads() {
 #[test]
 fn mimic_empty_batch_is_ok() {
     let m = &models()[0];
-    let mut bd = batch_data(m);
+    let mut bd = BatchData::new(m);
     batch::rnea_batch(m, &mut bd, &[], &[], &[], &mut []).unwrap();
     batch::crba_batch(m, &mut bd, &[], &mut []).unwrap();
     let (mut a, mut b): (Vec<DMatrix<f64>>, Vec<DMatrix<f64>>) = (vec![], vec![]);
@@ -149,7 +147,7 @@ fn mimic_invalid_configuration_names_the_state() {
         let msg = e.to_string();
         assert!(msg.contains(&format!("state {k}")), "message names state {k}: {msg}");
     };
-    let mut bd = batch_data_with_pool(m, Arc::new(BatchPool::new(2).unwrap()));
+    let mut bd = BatchData::with_pool(m, Arc::new(BatchPool::new(2).unwrap()));
     check(batch::rnea_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut vecs(m, n)).unwrap_err());
     check(batch::crba_batch(m, &mut bd, &s.q, &mut mats(m, n)).unwrap_err());
     check(batch::aba_batch(m, &mut bd, &s.q, &s.v, &s.tau, &mut vecs(m, n)).unwrap_err());
@@ -169,9 +167,10 @@ fn mimic_invalid_configuration_names_the_state() {
         )
         .unwrap_err(),
     );
-    let mut so = vec![MimicSoData::new(m); n];
+    let mut so = vec![SoData::new(m); n];
     check(batch::id_so_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut so).unwrap_err());
-    check(batch::fd_so_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.tau, &mut so).unwrap_err());
+    let mut fso = vec![FdSoData::new(m); n];
+    check(batch::fd_so_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.tau, &mut fso).unwrap_err());
 }
 
 /// NaN, infinite and wrong-length inputs: the lowest failing state wins, whatever the thread
@@ -186,7 +185,7 @@ fn mimic_first_failing_state_is_reported() {
     s.a[44][0] = f64::INFINITY;
     s.tau[9][1] = f64::NAN;
     for threads in [1, 2] {
-        let mut bd = batch_data_with_pool(m, Arc::new(BatchPool::new(threads).unwrap()));
+        let mut bd = BatchData::with_pool(m, Arc::new(BatchPool::new(threads).unwrap()));
         for _ in 0..10 {
             let (mut dq, mut dv) = (mats(m, n), mats(m, n));
             let e = batch::id_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut dq, &mut dv)
@@ -200,7 +199,7 @@ fn mimic_first_failing_state_is_reported() {
             assert!(msg.contains("tau") && msg.contains("state 9"), "{threads} threads: {msg}");
         }
     }
-    let mut bd = batch_data_with_pool(m, Arc::new(BatchPool::new(2).unwrap()));
+    let mut bd = BatchData::with_pool(m, Arc::new(BatchPool::new(2).unwrap()));
     s.a[12][0] = 0.0;
     s.a[44][0] = 0.0;
     let e = batch::rnea_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut vecs(m, n)).unwrap_err();
@@ -211,10 +210,10 @@ fn mimic_first_failing_state_is_reported() {
     assert!(e.to_string().contains("state 31"), "{e}");
     // A configuration of the full tree (mimic joints included) in state 3.
     s.v[31] = DVector::zeros(m.nv());
-    s.q[3] = DVector::zeros(m.full().nq());
+    s.q[3] = DVector::zeros(m.nq_full());
     let e = batch::crba_batch(m, &mut bd, &s.q, &mut mats(m, n)).unwrap_err();
     assert!(
-        matches!(e, Error::Dimension { expected, got, .. } if expected == m.nq() && got == m.full().nq()),
+        matches!(e, Error::Dimension { expected, got, .. } if expected == m.nq() && got == m.nq_full()),
         "{e:?}"
     );
     assert!(e.to_string().contains("state 3"), "{e}");
@@ -225,13 +224,13 @@ fn mimic_inconsistent_lengths_shapes_and_workspaces_are_errors() {
     let ms = models();
     let (m, other) = (&ms[1], &ms[2]);
     let s = states(m, 5, 6);
-    let mut bd = batch_data_with_pool(m, Arc::new(BatchPool::new(2).unwrap()));
+    let mut bd = BatchData::with_pool(m, Arc::new(BatchPool::new(2).unwrap()));
     let e = batch::rnea_batch(m, &mut bd, &s.q, &s.v[..4], &s.a, &mut vecs(m, 5)).unwrap_err();
     assert!(e.to_string().contains("vs"), "{e}");
     let e = batch::aba_batch(m, &mut bd, &s.q, &s.v, &s.tau[..3], &mut vecs(m, 5)).unwrap_err();
     assert!(e.to_string().contains("taus"), "{e}");
     let mut short = vecs(m, 5);
-    short[2] = DVector::zeros(m.full().nv());
+    short[2] = DVector::zeros(m.nv_full());
     let e = batch::rnea_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut short).unwrap_err();
     assert!(e.to_string().contains("out_tau[2]"), "{e}");
     let e =
@@ -239,7 +238,7 @@ fn mimic_inconsistent_lengths_shapes_and_workspaces_are_errors() {
             .unwrap_err();
     assert!(e.to_string().contains("out_dq"), "{e}");
     let mut dv = mats(m, 5);
-    dv[3] = DMatrix::zeros(m.full().nv(), m.full().nv());
+    dv[3] = DMatrix::zeros(m.nv_full(), m.nv_full());
     let e = batch::fd_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.tau, &mut mats(m, 5), &mut dv)
         .unwrap_err();
     assert!(e.to_string().contains("out_dv[3]"), "{e}");
@@ -247,13 +246,16 @@ fn mimic_inconsistent_lengths_shapes_and_workspaces_are_errors() {
     mm[4] = DMatrix::zeros(m.nv(), m.nv() + 1);
     let e = batch::crba_batch(m, &mut bd, &s.q, &mut mm).unwrap_err();
     assert!(e.to_string().contains("out_m[4]"), "{e}");
-    // Tensor outputs made for another mimic model (and one for this model among them).
-    let mut so = vec![MimicSoData::new(m); 5];
-    so[1] = MimicSoData::new(other);
+    // Tensor outputs made for another mimic model (and one for this model among them): the
+    // plain batches' dimension check names the output.
+    let mut so = vec![SoData::new(m); 5];
+    so[1] = SoData::new(other);
+    let mut fso = vec![FdSoData::new(m); 5];
+    fso[1] = FdSoData::new(other);
     let e = batch::id_so_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut so).unwrap_err();
-    assert!(matches!(e, Error::Workspace(_)), "{e:?}");
-    assert!(e.to_string().contains("out[1]") && e.to_string().contains("MimicSoData"), "{e}");
-    let e = batch::fd_so_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.tau, &mut so).unwrap_err();
+    assert!(matches!(e, Error::Dimension { .. }), "{e:?}");
+    assert!(e.to_string().contains("out[1]") && e.to_string().contains("nv = 8"), "{e}");
+    let e = batch::fd_so_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.tau, &mut fso).unwrap_err();
     assert!(e.to_string().contains("out[1]"), "{e}");
     // Workspaces made for another model: an error naming it, the outputs untouched.
     let so_other = states(other, 5, 8);
@@ -261,7 +263,7 @@ fn mimic_inconsistent_lengths_shapes_and_workspaces_are_errors() {
     let e = batch::rnea_batch(other, &mut bd, &so_other.q, &so_other.v, &so_other.a, &mut out)
         .unwrap_err();
     assert!(matches!(e, Error::Workspace(_)), "{e:?}");
-    assert!(e.to_string().contains("MimicData"), "{e}");
+    assert!(e.to_string().contains("Data"), "{e}");
     assert!(out.iter().all(|x| x.iter().all(|&y| y == 3.0)), "outputs untouched");
 }
 
@@ -278,9 +280,9 @@ fn mimic_batch_reports_a_singular_mass_matrix() {
   <joint name="jb" type="prismatic"><parent link="a"/><child link="b"/><axis xyz="-1 0 0"/><mimic joint="ja"/></joint>
 </robot>"#;
     let o = UrdfOptions { floating_base: false, strict_inertia: false, mimic: true };
-    let m = MimicModel::load_urdf_str(xml, "t.urdf", &o).unwrap();
+    let m = sodyn::model::load_urdf_str(xml, "t.urdf", &o).unwrap();
     let s = states(&m, 6, 9);
-    let mut bd = batch_data_with_pool(&m, Arc::new(BatchPool::new(2).unwrap()));
+    let mut bd = BatchData::with_pool(&m, Arc::new(BatchPool::new(2).unwrap()));
     let check = |e: Error| {
         assert!(matches!(e, Error::Singular { .. }), "{e:?}");
         assert!(e.to_string().contains("state 0") && e.to_string().contains("\"ja\""), "{e}");
@@ -298,7 +300,7 @@ fn mimic_batch_reports_a_singular_mass_matrix() {
         )
         .unwrap_err(),
     );
-    let mut so = vec![MimicSoData::new(&m); 6];
+    let mut so = vec![FdSoData::new(&m); 6];
     check(batch::fd_so_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.tau, &mut so).unwrap_err());
     // The inverse dynamics is defined there.
     batch::rnea_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut vecs(&m, 6)).unwrap();

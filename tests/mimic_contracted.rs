@@ -7,22 +7,20 @@
 
 use nalgebra::{DMatrix, DVector};
 use sodyn::Error;
-use sodyn::mimic::{
-    self, MimicData, MimicImpactContracted, MimicImpactData, MimicJoint, MimicKktContracted,
-    MimicKktData, MimicModel, MimicSoData,
-};
-use sodyn::model::{Contact, Model, UrdfOptions};
+use sodyn::algo::{self, Data};
+use sodyn::deriv::{self, ImpactContracted, ImpactData, KktContracted, KktData, SoData};
+use sodyn::model::{Contact, MimicJoint, Model, UrdfOptions, load_urdf_file};
 use sodyn::rng::Rng;
 use sodyn::tensor::Tensor3;
-use util::mimic::{arm_path, ff_models, models, opts, oracle, state};
+use util::mimic::{arm_path, ff_models, impact_data, kkt_data, models, opts, oracle, state};
 
 mod util;
 
 /// A 3-D world point on the tool, a 6-D local contact on the thumb tip with the Baumgarte gains
 /// `kp` and 0.5, and with `finger` a 3-D local point on the mimic right finger.
-fn arm_contacts_kp(m: &MimicModel, finger: bool, kp: f64) -> Vec<Contact> {
+fn arm_contacts_kp(m: &Model, finger: bool, kp: f64) -> Vec<Contact> {
     use sodyn::model::{ContactReference, ContactType};
-    let full = m.full();
+    let full = m.full_tree();
     let p = nalgebra::Vector3::new(0.01, -0.02, 0.03);
     let mut c = vec![
         Contact::new(full, "tool", p).unwrap(),
@@ -42,7 +40,7 @@ fn arm_contacts_kp(m: &MimicModel, finger: bool, kp: f64) -> Vec<Contact> {
 }
 
 /// [`arm_contacts_kp`] with `kp = 3`.
-fn arm_contacts(m: &MimicModel, finger: bool) -> Vec<Contact> {
+fn arm_contacts(m: &Model, finger: bool) -> Vec<Contact> {
     arm_contacts_kp(m, finger, 3.0)
 }
 
@@ -81,7 +79,7 @@ fn cat(a: &DVector<f64>, b: &DVector<f64>) -> Vec<f64> {
 const TOL: f64 = 1e-10;
 
 /// `q ⊕ s e_k`.
-fn step(m: &MimicModel, q: &DVector<f64>, k: usize, s: f64) -> DVector<f64> {
+fn step(m: &Model, q: &DVector<f64>, k: usize, s: f64) -> DVector<f64> {
     let mut d = DVector::zeros(m.nv());
     d[k] = s;
     m.integrate(q, &d).unwrap()
@@ -92,19 +90,19 @@ fn idfoza_idsoza_match_ad_oracle_tensors_and_differences() {
     let mut worst = [0.0f64; 5];
     for m in models() {
         let (r, n) = (oracle(&m), m.nv());
-        let mut data = MimicData::new(&m);
-        let mut so = MimicSoData::new(&m);
+        let mut data = Data::new(&m);
+        let mut so = SoData::new(&m);
         let mut out = DMatrix::zeros(n, n);
         let mut rng = Rng::new(41);
         for _ in 0..2 {
             let [q, v, x] = state(&m, &mut rng);
             let (qs, xs) = (q.as_slice(), x.as_slice());
-            mimic::idfoza(&m, &mut data, &q, &x, &mut out).unwrap();
+            deriv::idfoza(&m, &mut data, &q, &x, &mut out).unwrap();
             worst[0] = worst[0].max(mat_err(&out, &r.d_mass_times_dq(qs, xs)));
-            let t = mimic::idsoza(&m, &mut data, &mut so, &q, &x).unwrap().clone();
+            let t = deriv::idsoza(&m, &mut data, &mut so, &q, &x).unwrap().clone();
             worst[1] = worst[1].max(ten_err(&t, &r.d2_mass_times_dq2(qs, xs)));
             // ∂(M x)/∂q[i, k] = Σ_j ∂M_ij/∂q_k x_j, from the dense ∂M/∂q of id_so_derivatives.
-            mimic::id_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
+            deriv::id_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
             let dm = so.dm_dq();
             let by_dm = DMatrix::from_fn(n, n, |i, k| (0..n).map(|j| dm[(i, j, k)] * x[j]).sum());
             worst[2] = worst[2].max(mat_err(&out, &by_dm));
@@ -117,11 +115,11 @@ fn idfoza_idsoza_match_ad_oracle_tensors_and_differences() {
             let mut om = DMatrix::zeros(n, n);
             for k in 0..n {
                 let (qp, qm) = (step(&m, &q, k, h), step(&m, &q, k, -h));
-                let mp = mimic::crba(&m, &mut data, &qp).unwrap() * &x;
-                let mm = mimic::crba(&m, &mut data, &qm).unwrap() * &x;
+                let mp = algo::crba(&m, &mut data, &qp).unwrap() * &x;
+                let mm = algo::crba(&m, &mut data, &qm).unwrap() * &x;
                 fd1.set_column(k, &((mp - mm) / (2.0 * h)));
-                mimic::idfoza(&m, &mut data, &qp, &x, &mut op).unwrap();
-                mimic::idfoza(&m, &mut data, &qm, &x, &mut om).unwrap();
+                deriv::idfoza(&m, &mut data, &qp, &x, &mut op).unwrap();
+                deriv::idfoza(&m, &mut data, &qm, &x, &mut om).unwrap();
                 for j in 0..n {
                     for i in 0..n {
                         fd2.set(i, j, k, (op[(i, j)] - om[(i, j)]) / (2.0 * h));
@@ -177,12 +175,12 @@ fn kkt_contracted_matches_oracle_tensors_and_differences() {
     assert!(finger[..8].iter().chain(&finger[12..]).all(|&e| e < 1e-8), "{finger:?}");
 }
 
-fn kkt_case(m: &MimicModel, contacts: &[Contact], diff: bool, worst: &mut [f64; 13]) {
+fn kkt_case(m: &Model, contacts: &[Contact], diff: bool, worst: &mut [f64; 13]) {
     let (r, n) = (oracle(m), m.nv());
-    let mut data = MimicData::new(m);
-    let mut kd = MimicKktData::new(m, contacts).unwrap().with_second_order(m);
-    let mut kc = MimicKktContracted::new(m, &kd);
-    let nc = kd.dim();
+    let mut data = Data::new(m);
+    let mut kd = kkt_data(m, contacts).unwrap().with_second_order(m);
+    let mut kc = KktContracted::new(m, &kd);
+    let nc = kd.cd().dim();
     let mut rng = Rng::new(42);
     for _ in 0..2 {
         let [q, v, tau] = state(m, &mut rng);
@@ -190,7 +188,7 @@ fn kkt_case(m: &MimicModel, contacts: &[Contact], diff: bool, worst: &mut [f64; 
         let wl = DVector::from_fn(nc, |_, _| rng.range(-1.0, 1.0));
         let w = cat(&wa, &wl);
         let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
-        mimic::kkt_so_contracted(m, &mut data, &mut kd, &mut kc, &q, &v, &tau, &wa, &wl).unwrap();
+        deriv::kkt_so_contracted(m, &mut data, &mut kd, &mut kc, &q, &v, &tau, &wa, &wl).unwrap();
         let ours = [kc.c_qq().clone(), kc.c_vv().clone(), kc.c_qv().clone(), kc.c_tauq().clone()];
         // The first order of the same call is kkt_derivatives'.
         let y1 = [kd.dqdd_dq().clone(), kd.dlambda_dq().clone()];
@@ -201,7 +199,7 @@ fn kkt_case(m: &MimicModel, contacts: &[Contact], diff: bool, worst: &mut [f64; 
             worst[p] = worst[p].max(mat_err(&ours[p], &t[p]));
         }
         // The dense reduced tensors, contracted.
-        mimic::kkt_so_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        deriv::kkt_so_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
         let so = kd.so().unwrap();
         let dense = [
             stack(so.d2qdd_dq2(), so.d2lambda_dq2()),
@@ -214,7 +212,7 @@ fn kkt_case(m: &MimicModel, contacts: &[Contact], diff: bool, worst: &mut [f64; 
             worst[4 + p] = worst[4 + p].max(mat_err(&ours[p], &d));
             worst[12] = worst[12].max(mat_err(&d, &t[p]));
         }
-        mimic::kkt_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        deriv::kkt_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
         assert!(mat_err(kd.dqdd_dq(), &y1[0]) < 1e-12 && mat_err(kd.dlambda_dq(), &y1[1]) < 1e-12);
         if !diff {
             continue;
@@ -222,7 +220,7 @@ fn kkt_case(m: &MimicModel, contacts: &[Contact], diff: bool, worst: &mut [f64; 
         // Central differences of Yᵀω (Y = [∂q̈/∂x; ∂λ/∂x], the first order, tested against the
         // dual oracle): C_qq and C_τq along q_k, C_vv and C_qv along v_k.
         let h = 1e-6;
-        let wy = |kd: &MimicKktData, wrt: usize| -> DVector<f64> {
+        let wy = |kd: &KktData, wrt: usize| -> DVector<f64> {
             let (a, l) = match wrt {
                 0 => (kd.dqdd_dq(), kd.dlambda_dq()),
                 1 => (kd.dqdd_dv(), kd.dlambda_dv()),
@@ -243,9 +241,9 @@ fn kkt_case(m: &MimicModel, contacts: &[Contact], diff: bool, worst: &mut [f64; 
                 (2, (&q, &vp), (&q, &vm), 0),
                 (3, (&qp, &v), (&qm, &v), 2),
             ] {
-                mimic::kkt_derivatives(m, &mut data, &mut kd, q1, v1, &tau).unwrap();
+                deriv::kkt_derivatives(m, &mut data, &mut kd, q1, v1, &tau).unwrap();
                 let a = wy(&kd, wrt);
-                mimic::kkt_derivatives(m, &mut data, &mut kd, q2, v2, &tau).unwrap();
+                deriv::kkt_derivatives(m, &mut data, &mut kd, q2, v2, &tau).unwrap();
                 let b = wy(&kd, wrt);
                 fd[p].set_column(k, &((a - b) / (2.0 * h)));
             }
@@ -262,19 +260,19 @@ fn impact_contracted_matches_oracle_tensors_and_differences() {
     for m in ff_models() {
         let (r, n) = (oracle(&m), m.nv());
         let contacts = arm_contacts(&m, false);
-        let mut data = MimicData::new(&m);
+        let mut data = Data::new(&m);
         for e in [0.0, 0.4] {
-            let mut im = MimicImpactData::new(&m, &contacts).unwrap().with_second_order(&m);
+            let mut im = impact_data(&m, &contacts).unwrap().with_second_order(&m);
             im.set_restitution(e).unwrap();
-            let mut ic = MimicImpactContracted::new(&m, &im);
-            let nc = im.dim();
+            let mut ic = ImpactContracted::new(&m, &im);
+            let nc = im.cd().dim();
             let mut rng = Rng::new(43);
             for _ in 0..2 {
                 let [q, vm, _] = state(&m, &mut rng);
                 let wv = DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
                 let wl = DVector::from_fn(nc, |_, _| rng.range(-1.0, 1.0));
                 let w = cat(&wv, &wl);
-                mimic::impact_so_contracted(&m, &mut data, &mut im, &mut ic, &q, &vm, &wv, &wl)
+                deriv::impact_so_contracted(&m, &mut data, &mut im, &mut ic, &q, &vm, &wv, &wl)
                     .unwrap();
                 let ours = [ic.c_qq().clone(), ic.c_qvminus().clone()];
                 let y1 = im.dvplus_dq().clone();
@@ -282,7 +280,7 @@ fn impact_contracted_matches_oracle_tensors_and_differences() {
                 for p in 0..2 {
                     worst[p] = worst[p].max(mat_err(&ours[p], &contract(&t[p], &w)));
                 }
-                mimic::impact_so_derivatives(&m, &mut data, &mut im, &q, &vm).unwrap();
+                deriv::impact_so_derivatives(&m, &mut data, &mut im, &q, &vm).unwrap();
                 let so = im.so().unwrap();
                 let dense = [
                     stack(so.d2vplus_dq2(), so.d2impulse_dq2()),
@@ -294,7 +292,7 @@ fn impact_contracted_matches_oracle_tensors_and_differences() {
                 assert!(mat_err(im.dvplus_dq(), &y1) < 1e-12);
                 // Central differences of ω-weighted ∂y/∂q along q_k and along q̇⁻_k.
                 let h = 1e-6;
-                let wy = |im: &MimicImpactData| -> DVector<f64> {
+                let wy = |im: &ImpactData| -> DVector<f64> {
                     im.dvplus_dq().transpose() * &wv + im.dimpulse_dq().transpose() * &wl
                 };
                 let mut fd: [DMatrix<f64>; 2] = std::array::from_fn(|_| DMatrix::zeros(n, n));
@@ -306,9 +304,9 @@ fn impact_contracted_matches_oracle_tensors_and_differences() {
                     for (p, (q1, v1), (q2, v2)) in
                         [(0, (&qp, &vm), (&qm, &vm)), (1, (&q, &vp), (&q, &vmm))]
                     {
-                        mimic::impact_derivatives(&m, &mut data, &mut im, q1, v1).unwrap();
+                        deriv::impact_derivatives(&m, &mut data, &mut im, q1, v1).unwrap();
                         let a = wy(&im);
-                        mimic::impact_derivatives(&m, &mut data, &mut im, q2, v2).unwrap();
+                        deriv::impact_derivatives(&m, &mut data, &mut im, q2, v2).unwrap();
                         let b = wy(&im);
                         fd[p].set_column(k, &((a - b) / (2.0 * h)));
                     }
@@ -329,43 +327,42 @@ fn impact_contracted_matches_oracle_tensors_and_differences() {
     assert!(worst[4..].iter().all(|&e| e < 1e-5), "{worst:?}");
 }
 
-/// Without constraints the reduced model is the full one: the same contracted Hessians as the
-/// plain [`sodyn::deriv`] functions.
+/// Without constraints `Model::with_mimic_joints` gives the tree itself: the same contracted
+/// Hessians as the tree's, with the workspaces of either.
 #[test]
 fn without_mimics_equals_the_full_model() {
-    let full: Model = sodyn::model::load_urdf_file(
-        &arm_path(),
-        &UrdfOptions { floating_base: true, ..Default::default() },
-    )
-    .unwrap();
-    let m = MimicModel::new(full.clone(), &[] as &[MimicJoint]).unwrap();
+    let full: Model =
+        load_urdf_file(&arm_path(), &UrdfOptions { floating_base: true, ..Default::default() })
+            .unwrap();
+    let m = full.with_mimic_joints(&[] as &[MimicJoint]).unwrap();
+    assert!(!m.is_reduced());
     let n = m.nv();
     let mut rng = Rng::new(44);
     let [q, v, x] = state(&m, &mut rng);
     let contacts = arm_contacts(&m, false);
-    let mut d = sodyn::algo::Data::new(&full);
-    let mut md = MimicData::new(&m);
+    let mut d = Data::new(&full);
+    let mut md = Data::new(&m);
     // IDFOZA / IDSOZA.
     let mut o1 = DMatrix::zeros(n, n);
     let mut o2 = DMatrix::zeros(n, n);
-    sodyn::deriv::idfoza(&full, &mut d, &q, &x, &mut o1).unwrap();
-    mimic::idfoza(&m, &mut md, &q, &x, &mut o2).unwrap();
+    deriv::idfoza(&full, &mut d, &q, &x, &mut o1).unwrap();
+    deriv::idfoza(&m, &mut md, &q, &x, &mut o2).unwrap();
     assert!(mat_err(&o2, &o1) < 1e-12);
-    let mut so = sodyn::deriv::SoData::new(&full);
-    let mut mso = MimicSoData::new(&m);
-    let t1 = sodyn::deriv::idsoza(&full, &mut d, &mut so, &q, &x).unwrap().clone();
-    let t2 = mimic::idsoza(&m, &mut md, &mut mso, &q, &x).unwrap();
+    let mut so = deriv::SoData::new(&full);
+    let mut mso = SoData::new(&m);
+    let t1 = deriv::idsoza(&full, &mut d, &mut so, &q, &x).unwrap().clone();
+    let t2 = deriv::idsoza(&m, &mut md, &mut mso, &q, &x).unwrap();
     assert!(ten_err(t2, &t1) < 1e-12);
     // KKT.
-    let cd = sodyn::deriv::ContactData::new(&full, &contacts).unwrap();
-    let mut kd = sodyn::deriv::KktData::new(&full, cd);
-    let mut kc = sodyn::deriv::KktContracted::new(&full, &kd);
-    let mut mkd = MimicKktData::new(&m, &contacts).unwrap();
-    let mut mkc = MimicKktContracted::new(&m, &mkd);
+    let cd = deriv::ContactData::new(&full, &contacts).unwrap();
+    let mut kd = deriv::KktData::new(&full, cd);
+    let mut kc = deriv::KktContracted::new(&full, &kd);
+    let mut mkd = kkt_data(&m, &contacts).unwrap();
+    let mut mkc = KktContracted::new(&m, &mkd);
     let wa = DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
-    let wl = DVector::from_fn(mkd.dim(), |_, _| rng.range(-1.0, 1.0));
-    sodyn::deriv::kkt_so_contracted(&full, &mut d, &mut kd, &mut kc, &q, &v, &x, &wa, &wl).unwrap();
-    mimic::kkt_so_contracted(&m, &mut md, &mut mkd, &mut mkc, &q, &v, &x, &wa, &wl).unwrap();
+    let wl = DVector::from_fn(mkd.cd().dim(), |_, _| rng.range(-1.0, 1.0));
+    deriv::kkt_so_contracted(&full, &mut d, &mut kd, &mut kc, &q, &v, &x, &wa, &wl).unwrap();
+    deriv::kkt_so_contracted(&m, &mut md, &mut mkd, &mut mkc, &q, &v, &x, &wa, &wl).unwrap();
     let e = [
         mat_err(mkc.c_qq(), kc.c_qq()),
         mat_err(mkc.c_vv(), kc.c_vv()),
@@ -374,83 +371,83 @@ fn without_mimics_equals_the_full_model() {
     ];
     assert!(e.iter().all(|&e| e < 1e-10), "{e:?}");
     // Impact.
-    let cd = sodyn::deriv::ContactData::new(&full, &contacts).unwrap();
-    let mut im = sodyn::deriv::ImpactData::new(&full, cd);
+    let cd = deriv::ContactData::new(&full, &contacts).unwrap();
+    let mut im = deriv::ImpactData::new(&full, cd);
     im.set_restitution(0.3).unwrap();
-    let mut ic = sodyn::deriv::ImpactContracted::new(&full, &im);
-    let mut mim = MimicImpactData::new(&m, &contacts).unwrap();
+    let mut ic = deriv::ImpactContracted::new(&full, &im);
+    let mut mim = impact_data(&m, &contacts).unwrap();
     mim.set_restitution(0.3).unwrap();
-    let mut mic = MimicImpactContracted::new(&m, &mim);
-    sodyn::deriv::impact_so_contracted(&full, &mut d, &mut im, &mut ic, &q, &v, &wa, &wl).unwrap();
-    mimic::impact_so_contracted(&m, &mut md, &mut mim, &mut mic, &q, &v, &wa, &wl).unwrap();
+    let mut mic = ImpactContracted::new(&m, &mim);
+    deriv::impact_so_contracted(&full, &mut d, &mut im, &mut ic, &q, &v, &wa, &wl).unwrap();
+    deriv::impact_so_contracted(&m, &mut md, &mut mim, &mut mic, &q, &v, &wa, &wl).unwrap();
     let e = [mat_err(mic.c_qq(), ic.c_qq()), mat_err(mic.c_qvminus(), ic.c_qvminus())];
     assert!(e.iter().all(|&e| e < 1e-10), "{e:?}");
 }
 
 #[test]
 fn bad_inputs_are_errors() {
-    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
-    let other = MimicModel::load_urdf_file(&arm_path(), &opts(false)).unwrap();
+    let m = load_urdf_file(&arm_path(), &opts(true)).unwrap();
+    let other = load_urdf_file(&arm_path(), &opts(false)).unwrap();
     let n = m.nv();
-    let mut data = MimicData::new(&m);
+    let mut data = Data::new(&m);
     let mut rng = Rng::new(45);
     let [q, v, x] = state(&m, &mut rng);
     // IDFOZA / IDSOZA: lengths, NaN, output shape, workspaces.
     let mut out = DMatrix::zeros(n, n);
-    let e = mimic::idfoza(&m, &mut data, &q, &DVector::zeros(n + 1), &mut out).unwrap_err();
+    let e = deriv::idfoza(&m, &mut data, &q, &DVector::zeros(n + 1), &mut out).unwrap_err();
     assert!(matches!(e, Error::Dimension { ref what, .. } if what == "x"), "{e}");
     let mut bad = x.clone();
     bad[2] = f64::NAN;
-    let e = mimic::idfoza(&m, &mut data, &q, &bad, &mut out).unwrap_err();
+    let e = deriv::idfoza(&m, &mut data, &q, &bad, &mut out).unwrap_err();
     assert!(matches!(e, Error::NotFinite { ref what, index: 2 } if what == "x"), "{e}");
-    let e = mimic::idfoza(&m, &mut data, &q, &x, &mut DMatrix::zeros(n, n + 1)).unwrap_err();
+    let e = deriv::idfoza(&m, &mut data, &q, &x, &mut DMatrix::zeros(n, n + 1)).unwrap_err();
     assert!(e.to_string().contains("out"), "{e}");
-    let e = mimic::idfoza(&m, &mut MimicData::new(&other), &q, &x, &mut out).unwrap_err();
+    let e = deriv::idfoza(&m, &mut Data::new(&other), &q, &x, &mut out).unwrap_err();
     assert!(matches!(e, Error::Workspace(_)), "{e}");
-    let e = mimic::idsoza(&m, &mut data, &mut MimicSoData::new(&other), &q, &x).unwrap_err();
+    let e = deriv::idsoza(&m, &mut data, &mut SoData::new(&other), &q, &x).unwrap_err();
     assert!(matches!(e, Error::Workspace(_)), "{e}");
-    let e = mimic::idsoza(&m, &mut data, &mut MimicSoData::new(&m), &v, &x).unwrap_err();
+    let e = deriv::idsoza(&m, &mut data, &mut SoData::new(&m), &v, &x).unwrap_err();
     assert!(matches!(e, Error::Dimension { ref what, .. } if what == "q"), "{e}");
     // KKT: weights, workspaces of another model or contact set.
     let contacts = arm_contacts(&m, false);
-    let mut kd = MimicKktData::new(&m, &contacts).unwrap();
-    let mut kc = MimicKktContracted::new(&m, &kd);
-    let (wa, wl) = (DVector::from_element(n, 0.5), DVector::from_element(kd.dim(), 0.5));
-    let e = mimic::kkt_so_contracted(&m, &mut data, &mut kd, &mut kc, &q, &v, &x, &wl, &wl)
+    let mut kd = kkt_data(&m, &contacts).unwrap();
+    let mut kc = KktContracted::new(&m, &kd);
+    let (wa, wl) = (DVector::from_element(n, 0.5), DVector::from_element(kd.cd().dim(), 0.5));
+    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd, &mut kc, &q, &v, &x, &wl, &wl)
         .unwrap_err();
     assert!(matches!(e, Error::Dimension { ref what, .. } if what == "w_qdd"), "{e}");
     let mut badl = wl.clone();
     badl[0] = f64::INFINITY;
-    let e = mimic::kkt_so_contracted(&m, &mut data, &mut kd, &mut kc, &q, &v, &x, &wa, &badl)
+    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd, &mut kc, &q, &v, &x, &wa, &badl)
         .unwrap_err();
     assert!(matches!(e, Error::NotFinite { ref what, index: 0 } if what == "w_lambda"), "{e}");
-    let mut kd3 = MimicKktData::new(&m, &arm_contacts(&m, true)).unwrap();
-    let e = mimic::kkt_so_contracted(&m, &mut data, &mut kd3, &mut kc, &q, &v, &x, &wa, &wl)
+    let mut kd3 = kkt_data(&m, &arm_contacts(&m, true)).unwrap();
+    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd3, &mut kc, &q, &v, &x, &wa, &wl)
         .unwrap_err();
-    assert!(e.to_string().contains("MimicKktContracted"), "{e}");
-    let okd = MimicKktData::new(&other, &arm_contacts(&other, false)).unwrap();
-    let mut okc = MimicKktContracted::new(&other, &okd);
-    let e = mimic::kkt_so_contracted(&m, &mut data, &mut kd, &mut okc, &q, &v, &x, &wa, &wl)
+    assert!(e.to_string().contains("KktContracted"), "{e}");
+    let okd = kkt_data(&other, &arm_contacts(&other, false)).unwrap();
+    let mut okc = KktContracted::new(&other, &okd);
+    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd, &mut okc, &q, &v, &x, &wa, &wl)
         .unwrap_err();
     assert!(matches!(e, Error::Workspace(_)), "{e}");
-    mimic::kkt_so_contracted(&m, &mut data, &mut kd, &mut kc, &q, &v, &x, &wa, &wl).unwrap();
+    deriv::kkt_so_contracted(&m, &mut data, &mut kd, &mut kc, &q, &v, &x, &wa, &wl).unwrap();
     // Impact: the same.
-    let mut im = MimicImpactData::new(&m, &contacts).unwrap();
-    let mut ic = MimicImpactContracted::new(&m, &im);
+    let mut im = impact_data(&m, &contacts).unwrap();
+    let mut ic = ImpactContracted::new(&m, &im);
     let e =
-        mimic::impact_so_contracted(&m, &mut data, &mut im, &mut ic, &q, &v, &wa, &wa).unwrap_err();
+        deriv::impact_so_contracted(&m, &mut data, &mut im, &mut ic, &q, &v, &wa, &wa).unwrap_err();
     assert!(matches!(e, Error::Dimension { ref what, .. } if what == "w_impulse"), "{e}");
     let mut badv = wa.clone();
     badv[n - 1] = f64::NAN;
-    let e = mimic::impact_so_contracted(&m, &mut data, &mut im, &mut ic, &q, &v, &badv, &wl)
+    let e = deriv::impact_so_contracted(&m, &mut data, &mut im, &mut ic, &q, &v, &badv, &wl)
         .unwrap_err();
     assert!(matches!(e, Error::NotFinite { ref what, .. } if what == "w_vplus"), "{e}");
-    let e = mimic::impact_so_contracted(&m, &mut data, &mut im, &mut ic, &q, &wl, &wa, &wl)
+    let e = deriv::impact_so_contracted(&m, &mut data, &mut im, &mut ic, &q, &wl, &wa, &wl)
         .unwrap_err();
     assert!(matches!(e, Error::Dimension { ref what, .. } if what == "vminus"), "{e}");
-    let mut im3 = MimicImpactData::new(&m, &arm_contacts(&m, true)).unwrap();
-    let e = mimic::impact_so_contracted(&m, &mut data, &mut im3, &mut ic, &q, &v, &wa, &wl)
+    let mut im3 = impact_data(&m, &arm_contacts(&m, true)).unwrap();
+    let e = deriv::impact_so_contracted(&m, &mut data, &mut im3, &mut ic, &q, &v, &wa, &wl)
         .unwrap_err();
-    assert!(e.to_string().contains("MimicImpactContracted"), "{e}");
-    mimic::impact_so_contracted(&m, &mut data, &mut im, &mut ic, &q, &v, &wa, &wl).unwrap();
+    assert!(e.to_string().contains("ImpactContracted"), "{e}");
+    deriv::impact_so_contracted(&m, &mut data, &mut im, &mut ic, &q, &v, &wa, &wl).unwrap();
 }

@@ -1,7 +1,8 @@
 //! Frames, kinematics, centre of mass and configuration Jacobians (`d_integrate`,
-//! `d_difference`) of a mimic model (`sodyn::mimic::frame_*`,
-//! `center_of_mass*`, `centroidal_dynamics_derivatives`) in the reduced coordinates against hyper-hyper-dual differentiation of
-//! the reference placements composed with the mimic expansion (`reference::mimic::Reduced`):
+//! `d_difference`) of a model in reduced coordinates (mimic joints; `sodyn::algo::frame_*`,
+//! `center_of_mass*`, `centroidal_dynamics_derivatives`) against hyper-hyper-dual
+//! differentiation of the reference placements composed with the mimic expansion
+//! (`reference::mimic::Reduced`):
 //! `q(t, ε) = (q ⊕ ε e_k) ⊕ (t q̇ + ½t² q̈)` in the reduced coordinates, then
 //! `expand`, then the reference forward kinematics of the full tree; and central differences.
 //!
@@ -11,9 +12,8 @@ mod util;
 
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix3xX, Matrix6xX, Vector3};
 use num_dual::{Dual64 as D, HyperHyperDual64 as H};
-use sodyn::algo::ReferenceFrame;
-use sodyn::mimic::{self, MimicData, MimicModel};
-use sodyn::model::UrdfOptions;
+use sodyn::algo::{self, Data, ReferenceFrame};
+use sodyn::model::{Model, UrdfOptions};
 use sodyn::reference::kinematics::{forward_kinematics, frame_placement as ref_placement};
 use sodyn::reference::mimic::Reduced;
 use sodyn::rng::Rng;
@@ -26,14 +26,14 @@ const RFS: [ReferenceFrame; 3] =
 
 /// The test arm (a prismatic pair, a continuous joint mimicking a revolute one, a joint
 /// mimicking an ancestor), fixed and floating.
-fn models() -> Vec<MimicModel> {
+fn models() -> Vec<Model> {
     let path =
         std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_arm.urdf");
     [false, true]
         .iter()
         .map(|&floating_base| {
             let o = UrdfOptions { floating_base, strict_inertia: false, mimic: true };
-            MimicModel::load_urdf_file(&path, &o).unwrap()
+            sodyn::model::load_urdf_file(&path, &o).unwrap()
         })
         .collect()
 }
@@ -99,8 +99,8 @@ fn mimic_frames_match_hyper_dual_oracle() {
     ];
     let mut rng = Rng::new(301);
     for m in &models() {
-        let red = Reduced { full: m.full(), mimics: m.mimics() };
-        let mut d = MimicData::new(m);
+        let red = Reduced { full: m.full_tree(), mimics: m.mimic_joints() };
+        let mut d = Data::new(m);
         let n = m.nv();
         for _ in 0..3 {
             let [q, v, a] = state(m, &mut rng);
@@ -111,11 +111,11 @@ fn mimic_frames_match_hyper_dual_oracle() {
             let qts: Vec<Vec<H>> = (0..n)
                 .map(|k| red.expand_q(&red.integrate(&red.integrate(&qh, &unit(n, k)), &tv)))
                 .collect();
-            for f in 0..m.full().frames().len() {
-                let omf = mimic::frame_placement(m, &mut d, &q, f).unwrap();
+            for f in 0..m.full_tree().frames().len() {
+                let omf = algo::frame_placement(m, &mut d, &q, f).unwrap();
                 let mut poses = Vec::with_capacity(n);
                 for qt in &qts {
-                    let (rh, ph) = ref_placement(m.full(), qt, f);
+                    let (rh, ph) = ref_placement(m.full_tree(), qt, f);
                     let dm = |g: fn(&H) -> f64, h: fn(&H) -> f64| {
                         (
                             Matrix3::from_fn(|i, j| D::new(g(&rh[(i, j)]), h(&rh[(i, j)]))),
@@ -128,7 +128,7 @@ fn mimic_frames_match_hyper_dual_oracle() {
                     let (rdd, pdd) = dm(|x| x.eps1eps2, |x| x.eps1eps2eps3);
                     poses.push((r, p, rd, pd, rdd, pdd));
                 }
-                let at = format!("{} frame {}", m.name(), m.full().frames()[f].name);
+                let at = format!("{} frame {}", m.name(), m.full_tree().frames()[f].name);
                 if let Some((r, p, ..)) = poses.first() {
                     let e = (omf.rot - r.map(|x| x.re))
                         .amax()
@@ -138,18 +138,18 @@ fn mimic_frames_match_hyper_dual_oracle() {
                 for rf in RFS {
                     let at = format!("{at} {rf:?}");
                     let mut jac = Matrix6xX::zeros(n);
-                    mimic::frame_jacobian(m, &mut d, &q, f, rf, &mut jac).unwrap();
-                    let vel = mimic::frame_velocity(m, &mut d, &q, &v, f, rf).unwrap();
-                    let acc = mimic::frame_acceleration(m, &mut d, &q, &v, &a, f, rf).unwrap();
+                    algo::frame_jacobian(m, &mut d, &q, f, rf, &mut jac).unwrap();
+                    let vel = algo::frame_velocity(m, &mut d, &q, &v, f, rf).unwrap();
+                    let acc = algo::frame_acceleration(m, &mut d, &q, &v, &a, f, rf).unwrap();
                     let cla =
-                        mimic::frame_classical_acceleration(m, &mut d, &q, &v, &a, f, rf).unwrap();
+                        algo::frame_classical_acceleration(m, &mut d, &q, &v, &a, f, rf).unwrap();
                     let mut dvq = Matrix6xX::zeros(n);
                     let mut dvv = Matrix6xX::zeros(n);
-                    mimic::frame_velocity_derivatives(m, &mut d, &q, &v, f, rf, &mut dvq, &mut dvv)
+                    algo::frame_velocity_derivatives(m, &mut d, &q, &v, f, rf, &mut dvq, &mut dvv)
                         .unwrap();
                     let (mut daq, mut dav, mut daa) =
                         (Matrix6xX::zeros(n), Matrix6xX::zeros(n), Matrix6xX::zeros(n));
-                    mimic::frame_acceleration_derivatives(
+                    algo::frame_acceleration_derivatives(
                         m, &mut d, &q, &v, &a, f, rf, &mut daq, &mut dav, &mut daa,
                     )
                     .unwrap();
@@ -200,9 +200,9 @@ fn mimic_frames_match_hyper_dual_oracle() {
                     for k in 0..n {
                         let mut vp = v.clone();
                         vp[k] += h;
-                        let ap = mimic::frame_acceleration(m, &mut d, &q, &vp, &a, f, rf).unwrap();
+                        let ap = algo::frame_acceleration(m, &mut d, &q, &vp, &a, f, rf).unwrap();
                         vp[k] -= 2.0 * h;
-                        let am = mimic::frame_acceleration(m, &mut d, &q, &vp, &a, f, rf).unwrap();
+                        let am = algo::frame_acceleration(m, &mut d, &q, &vp, &a, f, rf).unwrap();
                         let (ap, am) = (col(&ap), col(&am));
                         for i in 0..6 {
                             wav[(i, k)] = (ap[i] - am[i]) / (2.0 * h);
@@ -220,26 +220,26 @@ fn mimic_frames_match_hyper_dual_oracle() {
     }
 }
 
-/// Central differences along the reduced tangent space (`MimicModel::integrate`) of the frame
+/// Central differences along the reduced tangent space (`Model::integrate`) of the frame
 /// velocity and acceleration, against `∂/∂q`.
 #[test]
 fn mimic_frame_derivatives_match_central_differences() {
     let mut w = [Worst::new("dv/dq (central diff.)"), Worst::new("da/dq (central diff.)")];
     let mut rng = Rng::new(302);
     for m in &models() {
-        let mut d = MimicData::new(m);
+        let mut d = Data::new(m);
         let n = m.nv();
         let [q, v, a] = state(m, &mut rng);
         let h = 1e-5;
-        for f in 0..m.full().frames().len() {
+        for f in 0..m.full_tree().frames().len() {
             for rf in RFS {
-                let at = format!("{} frame {} {rf:?}", m.name(), m.full().frames()[f].name);
+                let at = format!("{} frame {} {rf:?}", m.name(), m.full_tree().frames()[f].name);
                 let (mut dvq, mut dvv) = (Matrix6xX::zeros(n), Matrix6xX::zeros(n));
-                mimic::frame_velocity_derivatives(m, &mut d, &q, &v, f, rf, &mut dvq, &mut dvv)
+                algo::frame_velocity_derivatives(m, &mut d, &q, &v, f, rf, &mut dvq, &mut dvv)
                     .unwrap();
                 let (mut daq, mut dav, mut daa) =
                     (Matrix6xX::zeros(n), Matrix6xX::zeros(n), Matrix6xX::zeros(n));
-                mimic::frame_acceleration_derivatives(
+                algo::frame_acceleration_derivatives(
                     m, &mut d, &q, &v, &a, f, rf, &mut daq, &mut dav, &mut daa,
                 )
                 .unwrap();
@@ -248,12 +248,10 @@ fn mimic_frame_derivatives_match_central_differences() {
                     let mut e = DVector::zeros(n);
                     e[k] = h;
                     let (qp, qm) = (m.integrate(&q, &e).unwrap(), m.integrate(&q, &-&e).unwrap());
-                    let vp = col(&mimic::frame_velocity(m, &mut d, &qp, &v, f, rf).unwrap());
-                    let vm = col(&mimic::frame_velocity(m, &mut d, &qm, &v, f, rf).unwrap());
-                    let ap =
-                        col(&mimic::frame_acceleration(m, &mut d, &qp, &v, &a, f, rf).unwrap());
-                    let am =
-                        col(&mimic::frame_acceleration(m, &mut d, &qm, &v, &a, f, rf).unwrap());
+                    let vp = col(&algo::frame_velocity(m, &mut d, &qp, &v, f, rf).unwrap());
+                    let vm = col(&algo::frame_velocity(m, &mut d, &qm, &v, f, rf).unwrap());
+                    let ap = col(&algo::frame_acceleration(m, &mut d, &qp, &v, &a, f, rf).unwrap());
+                    let am = col(&algo::frame_acceleration(m, &mut d, &qm, &v, &a, f, rf).unwrap());
                     for i in 0..6 {
                         fv[(i, k)] = (vp[i] - vm[i]) / (2.0 * h);
                         fa[(i, k)] = (ap[i] - am[i]) / (2.0 * h);
@@ -295,17 +293,17 @@ fn mimic_center_of_mass_matches_hyper_dual_oracle() {
     ];
     let mut rng = Rng::new(303);
     for m in &models() {
-        let red = Reduced { full: m.full(), mimics: m.mimics() };
-        let mut d = MimicData::new(m);
+        let red = Reduced { full: m.full_tree(), mimics: m.mimic_joints() };
+        let mut d = Data::new(m);
         let n = m.nv();
         for _ in 0..5 {
             let [q, ..] = state(m, &mut rng);
             let qh: Vec<H> = q.iter().map(|&x| H::from_re(x)).collect();
-            let c = mimic::center_of_mass(m, &mut d, &q).unwrap();
+            let c = algo::center_of_mass(m, &mut d, &q).unwrap();
             let want = com_h(&red, &qh).map(|x| x.re);
             w[0].add((c - want).amax() / (1.0 + want.amax()), m.name());
             let mut jac = Matrix3xX::zeros(n);
-            mimic::center_of_mass_jacobian(m, &mut d, &q, &mut jac).unwrap();
+            algo::center_of_mass_jacobian(m, &mut d, &q, &mut jac).unwrap();
             let mut wj = Matrix3xX::zeros(n);
             for k in 0..n {
                 let ck = com_h(&red, &red.integrate(&qh, &unit(n, k)));
@@ -317,11 +315,11 @@ fn mimic_center_of_mass_matches_hyper_dual_oracle() {
             let a = DVector::from_fn(n, |_, _| rng.range(-2.0, 2.0));
             let tv: Vec<H> =
                 (0..n).map(|j| H::new(0.0, v[j], v[j], 0.0, a[j], 0.0, 0.0, 0.0)).collect();
-            let (c1, vc, ac) = mimic::center_of_mass_motion(m, &mut d, &q, &v, Some(&a)).unwrap();
-            let (c2, vc2, ac2) = mimic::center_of_mass_motion(m, &mut d, &q, &v, None).unwrap();
+            let (c1, vc, ac) = algo::center_of_mass_motion(m, &mut d, &q, &v, Some(&a)).unwrap();
+            let (c2, vc2, ac2) = algo::center_of_mass_motion(m, &mut d, &q, &v, None).unwrap();
             assert_eq!((c1, c2, vc2, ac2), (c, c, vc, Vector3::zeros()));
             let mut dq = Matrix3xX::zeros(n);
-            mimic::center_of_mass_velocity_derivatives(m, &mut d, &q, &v, &mut dq).unwrap();
+            algo::center_of_mass_velocity_derivatives(m, &mut d, &q, &v, &mut dq).unwrap();
             let mut wdq = Matrix3xX::zeros(n);
             for k in 0..n {
                 let ck = com_h(&red, &red.integrate(&red.integrate(&qh, &unit(n, k)), &tv));
@@ -343,35 +341,33 @@ fn mimic_center_of_mass_matches_hyper_dual_oracle() {
 #[test]
 fn mimic_kinematics_inputs_are_errors() {
     let m = &models()[0];
-    let mut d = MimicData::new(m);
+    let mut d = Data::new(m);
     let q = m.neutral();
-    let nf = m.full().frames().len();
-    let e = mimic::frame_placement(m, &mut d, &q, nf).unwrap_err().to_string();
+    let nf = m.full_tree().frames().len();
+    let e = algo::frame_placement(m, &mut d, &q, nf).unwrap_err().to_string();
     assert!(e.contains("frame"), "{e}");
-    let mut full_cols = Matrix6xX::zeros(m.full().nv());
-    let e = mimic::frame_jacobian(m, &mut d, &q, 0, ReferenceFrame::World, &mut full_cols)
+    let mut full_cols = Matrix6xX::zeros(m.full_tree().nv());
+    let e = algo::frame_jacobian(m, &mut d, &q, 0, ReferenceFrame::World, &mut full_cols)
         .unwrap_err()
         .to_string();
     assert!(e.contains("columns"), "{e}");
     let short = DVector::zeros(m.nv() - 1);
-    assert!(mimic::frame_velocity(m, &mut d, &q, &short, 0, ReferenceFrame::Local).is_err());
+    assert!(algo::frame_velocity(m, &mut d, &q, &short, 0, ReferenceFrame::Local).is_err());
     let v = DVector::zeros(m.nv());
-    assert!(
-        mimic::frame_acceleration(m, &mut d, &q, &v, &short, 0, ReferenceFrame::Local).is_err()
-    );
+    assert!(algo::frame_acceleration(m, &mut d, &q, &v, &short, 0, ReferenceFrame::Local).is_err());
     let mut nan = q.clone();
     nan[0] = f64::NAN;
-    assert!(mimic::center_of_mass(m, &mut d, &nan).is_err());
+    assert!(algo::center_of_mass(m, &mut d, &nan).is_err());
     let mut j3 = Matrix3xX::zeros(m.nv() + 1);
-    assert!(mimic::center_of_mass_jacobian(m, &mut d, &q, &mut j3).is_err());
+    assert!(algo::center_of_mass_jacobian(m, &mut d, &q, &mut j3).is_err());
     let other = &models()[1];
-    let mut d2 = MimicData::new(other);
-    assert!(mimic::frame_placement(m, &mut d2, &q, 0).is_err());
-    let mut c2 = mimic::MimicCentroidal::new(other);
-    let e = mimic::centroidal_dynamics_derivatives(m, &mut d, &mut c2, &q, &v, &v)
+    let mut d2 = Data::new(other);
+    assert!(algo::frame_placement(m, &mut d2, &q, 0).is_err());
+    let mut c2 = algo::Centroidal::new(other);
+    let e = algo::centroidal_dynamics_derivatives(m, &mut d, &mut c2, &q, &v, &v)
         .unwrap_err()
         .to_string();
-    assert!(e.contains("MimicCentroidal"), "{e}");
+    assert!(e.contains("Centroidal"), "{e}");
 }
 
 /// `∂ coords(f(ε))/∂ε` at 0 for each of `n` seeds, `f` evaluated with dual numbers.
@@ -408,9 +404,9 @@ fn mimic_d_integrate_matches_dual_oracle_and_full_model() {
     ];
     let mut rng = Rng::new(304);
     for m in &models() {
-        let red = Reduced { full: m.full(), mimics: m.mimics() };
+        let red = Reduced { full: m.full_tree(), mimics: m.mimic_joints() };
         let n = m.nv();
-        let g = m.g();
+        let g = m.velocity_map();
         let keep = m.v_keep();
         let sub = |x: &nalgebra::DMatrix<f64>| {
             nalgebra::DMatrix::from_fn(n, n, |r, c| x[(keep[r], keep[c])])
@@ -439,9 +435,9 @@ fn mimic_d_integrate_matches_dual_oracle_and_full_model() {
             let (qf, df) = (m.expand_q(&q).unwrap(), &g * &d);
             let q1f = m.expand_q(&r).unwrap();
             for arg in [Arg::First, Arg::Second] {
-                let want = sub(&m.full().d_integrate(&qf, &df, arg).unwrap());
+                let want = sub(&m.full_tree().d_integrate(&qf, &df, arg).unwrap());
                 w[2].add(mat_rel(&m.d_integrate(&q, &d, arg).unwrap(), &want), &at);
-                let want = sub(&m.full().d_difference(&qf, &q1f, arg).unwrap());
+                let want = sub(&m.full_tree().d_difference(&qf, &q1f, arg).unwrap());
                 w[3].add(mat_rel(&m.d_difference(&q, &r, arg).unwrap(), &want), &at);
             }
         }
@@ -454,7 +450,7 @@ fn mimic_d_integrate_matches_dual_oracle_and_full_model() {
     }
 }
 
-/// `d_difference` against central differences of `MimicModel::difference` along tangent
+/// `d_difference` against central differences of `Model::difference` along tangent
 /// perturbations, and the identities with `d_integrate` (`q₁ = q₀ ⊕ d`:
 /// `∂d/∂q₁ = (∂(q₀ ⊕ d)/∂d)⁻¹`, `∂d/∂q₀ = −that · ∂(q₀ ⊕ d)/∂q₀`).
 #[test]
@@ -541,13 +537,13 @@ fn mimic_centroidal_matches_hyper_dual_oracle() {
     ];
     let mut rng = Rng::new(306);
     for m in &models() {
-        let red = Reduced { full: m.full(), mimics: m.mimics() };
-        let mut d = MimicData::new(m);
-        let mut cd = mimic::MimicCentroidal::new(m);
+        let red = Reduced { full: m.full_tree(), mimics: m.mimic_joints() };
+        let mut d = Data::new(m);
+        let mut cd = algo::Centroidal::new(m);
         let n = m.nv();
         for _ in 0..3 {
             let [q, v, a] = state(m, &mut rng);
-            mimic::centroidal_dynamics_derivatives(m, &mut d, &mut cd, &q, &v, &a).unwrap();
+            algo::centroidal_dynamics_derivatives(m, &mut d, &mut cd, &q, &v, &a).unwrap();
             let qh: Vec<H> = q.iter().map(|&x| H::from_re(x)).collect();
             let tv: Vec<H> =
                 (0..n).map(|j| H::new(0.0, v[j], v[j], 0.0, a[j], 0.0, 0.0, 0.0)).collect();
@@ -578,14 +574,14 @@ fn mimic_centroidal_matches_hyper_dual_oracle() {
             w[4].add(mat_rel(&DMatrix::from_column_slice(6, 1, agv.as_slice()), &hv), at);
             // ∂ḣ/∂q̇: quadratic in q̇, central differences exact up to rounding.
             let (h, mut num) = (1e-3, DMatrix::zeros(6, n));
-            let mut c2 = mimic::MimicCentroidal::new(m);
+            let mut c2 = algo::Centroidal::new(m);
             for k in 0..n {
                 let mut vp = v.clone();
                 vp[k] += h;
-                mimic::centroidal_dynamics_derivatives(m, &mut d, &mut c2, &q, &vp, &a).unwrap();
+                algo::centroidal_dynamics_derivatives(m, &mut d, &mut c2, &q, &vp, &a).unwrap();
                 let p = *c2.hdot();
                 vp[k] -= 2.0 * h;
-                mimic::centroidal_dynamics_derivatives(m, &mut d, &mut c2, &q, &vp, &a).unwrap();
+                algo::centroidal_dynamics_derivatives(m, &mut d, &mut c2, &q, &vp, &a).unwrap();
                 for r in 0..6 {
                     num[(r, k)] = (p[r] - c2.hdot()[r]) / (2.0 * h);
                 }
@@ -634,19 +630,19 @@ fn mimic_frame_jacobian_derivative_matches_hyper_dual_oracle() {
     let mut w = Worst::new("dJ/dq");
     let mut rng = Rng::new(307);
     for m in &models() {
-        let red = Reduced { full: m.full(), mimics: m.mimics() };
-        let mut d = MimicData::new(m);
+        let red = Reduced { full: m.full_tree(), mimics: m.mimic_joints() };
+        let mut d = Data::new(m);
         let n = m.nv();
         let [q, ..] = state(m, &mut rng);
         let poses = hyper_dual_configurations(&red, &q, n);
-        for f in 0..m.full().frames().len() {
+        for f in 0..m.full_tree().frames().len() {
             for rf in RFS {
-                let at = format!("{} frame {} {rf:?}", m.name(), m.full().frames()[f].name);
+                let at = format!("{} frame {} {rf:?}", m.name(), m.full_tree().frames()[f].name);
                 let mut t = sodyn::tensor::Tensor3::zeros(6, n, n);
-                mimic::frame_jacobian_derivative(m, &mut d, &q, f, rf, &mut t).unwrap();
+                algo::frame_jacobian_derivative(m, &mut d, &q, f, rf, &mut t).unwrap();
                 let (mut worst, mut scale): (f64, f64) = (0.0, 1.0);
                 for (k, c, qt) in &poses {
-                    let (rh, ph) = ref_placement(m.full(), qt, f);
+                    let (rh, ph) = ref_placement(m.full_tree(), qt, f);
                     let r = Matrix3::from_fn(|i, j| D::new(rh[(i, j)].re, rh[(i, j)].eps2));
                     let rd = Matrix3::from_fn(|i, j| D::new(rh[(i, j)].eps1, rh[(i, j)].eps1eps2));
                     let p = Vector3::from_fn(|i, _| D::new(ph[i].re, ph[i].eps2));
@@ -674,20 +670,21 @@ fn mimic_frame_placement_hessian_matches_hyper_dual_oracle() {
     let mut w = Worst::new("placement Hessian");
     let mut rng = Rng::new(308);
     for m in &models() {
-        let red = Reduced { full: m.full(), mimics: m.mimics() };
-        let mut d = MimicData::new(m);
+        let red = Reduced { full: m.full_tree(), mimics: m.mimic_joints() };
+        let mut d = Data::new(m);
         let n = m.nv();
         let [q, ..] = state(m, &mut rng);
         let poses = hyper_dual_configurations(&red, &q, n);
-        for f in 0..m.full().frames().len() {
-            let at = format!("{} frame {}", m.name(), m.full().frames()[f].name);
+        for f in 0..m.full_tree().frames().len() {
+            let at = format!("{} frame {}", m.name(), m.full_tree().frames()[f].name);
             let mut t = sodyn::tensor::Tensor3::zeros(6, n, n);
-            mimic::frame_placement_hessian(m, &mut d, &q, f, &mut t).unwrap();
-            let r0 = mimic::frame_placement(m, &mut d, &q, f).unwrap().rot;
+            let mut work = sodyn::tensor::Tensor3::zeros(6, n, n);
+            algo::frame_placement_hessian(m, &mut d, &q, f, &mut t, &mut work).unwrap();
+            let r0 = algo::frame_placement(m, &mut d, &q, f).unwrap().rot;
             let r0h = Matrix3::from_fn(|i, j| HD::from_re(r0[(i, j)]));
             let (mut worst, mut scale): (f64, f64) = (0.0, 1.0);
             for &(k, j, ref qt) in &poses {
-                let (r, p) = ref_placement(m.full(), qt, f);
+                let (r, p) = ref_placement(m.full_tree(), qt, f);
                 let rel = r0h.transpose() * r;
                 let e = (rel - rel.transpose()) * HD::from_re(0.5);
                 let y = [e[(2, 1)], e[(0, 2)], e[(1, 0)], p[0], p[1], p[2]];

@@ -1,6 +1,6 @@
-//! Forward kinematics, point kinematics and the centroidal momentum of a mimic model
-//! (`sodyn::mimic::{forward_kinematics, point_position, point_jacobian, point_drift,
-//! centroidal_momentum}`) in the reduced coordinates:
+//! Forward kinematics, point kinematics and the centroidal momentum of a model in reduced
+//! coordinates (mimic joints; `sodyn::algo::{forward_kinematics, point_position,
+//! point_jacobian, point_drift, centroidal_momentum}`):
 //!
 //! * against dual and hyper-dual differentiation of the reference kinematics of the full tree
 //!   composed with the mimic expansion (`reference::mimic::Reduced`): the position along
@@ -8,7 +8,7 @@
 //!   accelerations, the drift at `q̈ = 0`);
 //! * against the full model's functions (`sodyn::algo`) at `expand(q)`, `G q̇`, `G q̈`, bit for
 //!   bit, and its Jacobian times `G`;
-//! * against central differences in the reduced coordinates (`MimicModel::integrate`).
+//! * against central differences in the reduced coordinates (`Model::integrate`).
 //!
 //! Run with `--nocapture` to see the maximum errors.
 
@@ -18,8 +18,7 @@ use nalgebra::{DMatrix, DVector, Matrix3, Matrix3xX, Vector3};
 use num_dual::{Dual64 as D, HyperDual64 as H};
 use sodyn::Error;
 use sodyn::algo::{self, Data};
-use sodyn::mimic::{self, MimicData, MimicModel};
-use sodyn::model::UrdfOptions;
+use sodyn::model::{Model, UrdfOptions, load_urdf_file};
 use sodyn::reference::kinematics::{forward_kinematics as ref_fk, point_position as ref_point};
 use sodyn::reference::mimic::Reduced;
 use sodyn::rng::Rng;
@@ -32,12 +31,12 @@ fn data(name: &str) -> std::path::PathBuf {
 
 /// The test arm fixed and floating, and the panda with its finger mimic (multiplier −0.6,
 /// offset 0.02).
-fn models() -> Vec<MimicModel> {
+fn models() -> Vec<Model> {
     let o = |floating_base| UrdfOptions { floating_base, strict_inertia: false, mimic: true };
     vec![
-        MimicModel::load_urdf_file(&data("mimic_arm.urdf"), &o(false)).unwrap(),
-        MimicModel::load_urdf_file(&data("mimic_arm.urdf"), &o(true)).unwrap(),
-        MimicModel::load_urdf_file(&data("mimic_panda_coeffs.urdf"), &o(true)).unwrap(),
+        load_urdf_file(&data("mimic_arm.urdf"), &o(false)).unwrap(),
+        load_urdf_file(&data("mimic_arm.urdf"), &o(true)).unwrap(),
+        load_urdf_file(&data("mimic_panda_coeffs.urdf"), &o(true)).unwrap(),
     ]
 }
 
@@ -76,29 +75,34 @@ fn mimic_point_kinematics_match_the_dual_oracle() {
     ];
     let mut rng = Rng::new(401);
     for m in &models() {
-        let red = Reduced { full: m.full(), mimics: m.mimics() };
-        let mut d = MimicData::new(m);
+        let red = Reduced { full: m.full_tree(), mimics: m.mimic_joints() };
+        let mut d = Data::new(m);
         let n = m.nv();
         let mut jac = Matrix3xX::zeros(n);
         for _ in 0..4 {
             let [q, v, _] = state(m, &mut rng);
-            for f in 0..m.full().frames().len() {
+            for f in 0..m.full_tree().frames().len() {
                 for p in POINTS {
                     let at = format!("{} frame {f} point {p:?}", m.name());
                     let pv = Vector3::from(p);
-                    let pos = mimic::point_position(m, &mut d, &q, f, &pv).unwrap();
+                    let pos = algo::point_position(m, &mut d, &q, f, &pv).unwrap();
                     let qh: Vec<f64> = red.expand_q(q.as_slice());
-                    let want = Vector3::from(ref_point(m.full(), &qh, f, &p));
+                    let want = Vector3::from(ref_point(m.full_tree(), &qh, f, &p));
                     w[0].add(rel3(&pos, &want), &at);
                     // Jacobian column k: ∂/∂ε p(expand(q ⊕ ε e_k)).
-                    mimic::point_jacobian(m, &mut d, &q, f, &pv, &mut jac).unwrap();
+                    algo::point_jacobian(m, &mut d, &q, f, &pv, &mut jac).unwrap();
                     let qd: Vec<D> = q.iter().map(|&x| D::from_re(x)).collect();
                     let pd = p.map(D::from);
                     let mut wj = Matrix3xX::zeros(n);
                     for k in 0..n {
                         let e: Vec<D> =
                             (0..n).map(|j| D::new(0.0, (j == k) as u8 as f64)).collect();
-                        let x = ref_point(m.full(), &red.expand_q(&red.integrate(&qd, &e)), f, &pd);
+                        let x = ref_point(
+                            m.full_tree(),
+                            &red.expand_q(&red.integrate(&qd, &e)),
+                            f,
+                            &pd,
+                        );
                         wj.set_column(k, &Vector3::new(x[0].eps, x[1].eps, x[2].eps));
                     }
                     w[1].add(rel_mat(&jac, &wj), &at);
@@ -106,10 +110,11 @@ fn mimic_point_kinematics_match_the_dual_oracle() {
                     let qh: Vec<H> = q.iter().map(|&x| H::from_re(x)).collect();
                     let tv: Vec<H> = v.iter().map(|&x| H::new(0.0, x, x, 0.0)).collect();
                     let ph = p.map(H::from);
-                    let x = ref_point(m.full(), &red.expand_q(&red.integrate(&qh, &tv)), f, &ph);
+                    let x =
+                        ref_point(m.full_tree(), &red.expand_q(&red.integrate(&qh, &tv)), f, &ph);
                     let vel = Vector3::new(x[0].eps1, x[1].eps1, x[2].eps1);
                     w[2].add(rel3(&(&jac * &v), &vel), &at);
-                    let drift = mimic::point_drift(m, &mut d, &q, &v, f, &pv).unwrap();
+                    let drift = algo::point_drift(m, &mut d, &q, &v, f, &pv).unwrap();
                     let wd = Vector3::new(x[0].eps1eps2, x[1].eps1eps2, x[2].eps1eps2);
                     w[3].add(rel3(&drift, &wd), &at);
                 }
@@ -121,7 +126,7 @@ fn mimic_point_kinematics_match_the_dual_oracle() {
     }
 }
 
-/// Body velocities and accelerations of `mimic::forward_kinematics` against the reference
+/// Body velocities and accelerations of `algo::forward_kinematics` against the reference
 /// placements differentiated along `q ⊕ (t q̇ + ½t² q̈)`: `ω = vee(Rᵀ Ṙ)`, `v = Rᵀ ṗ`,
 /// `ω̇ = vee(skew(Rᵀ R̈))`, `v̇ = Ṙᵀ ṗ + Rᵀ p̈` (body frame).
 #[test]
@@ -133,14 +138,14 @@ fn mimic_forward_kinematics_matches_the_hyper_dual_oracle() {
     ];
     let mut rng = Rng::new(402);
     for m in &models() {
-        let red = Reduced { full: m.full(), mimics: m.mimics() };
-        let mut d = MimicData::new(m);
+        let red = Reduced { full: m.full_tree(), mimics: m.mimic_joints() };
+        let mut d = Data::new(m);
         for _ in 0..4 {
             let [q, v, a] = state(m, &mut rng);
-            mimic::forward_kinematics(m, &mut d, &q, Some(&v), Some(&a)).unwrap();
+            algo::forward_kinematics(m, &mut d, &q, Some(&v), Some(&a)).unwrap();
             let qh: Vec<H> = q.iter().map(|&x| H::from_re(x)).collect();
             let tv: Vec<H> = (0..m.nv()).map(|j| H::new(0.0, v[j], v[j], a[j])).collect();
-            let poses = ref_fk(m.full(), &red.expand_q(&red.integrate(&qh, &tv)));
+            let poses = ref_fk(m.full_tree(), &red.expand_q(&red.integrate(&qh, &tv)));
             for (i, pose) in poses.iter().enumerate().skip(1) {
                 let at = format!("{} body {i}", m.name());
                 let g = |f: fn(&H) -> f64| {
@@ -149,17 +154,17 @@ fn mimic_forward_kinematics_matches_the_hyper_dual_oracle() {
                 let (r, p) = g(|x| x.re);
                 let (rd, pd) = g(|x| x.eps1);
                 let (rdd, pdd) = g(|x| x.eps1eps2);
-                let x = &d.full().o_m_i()[i];
+                let x = &d.o_m_i()[i];
                 let e = (x.rot - r).amax().max((x.trans - p).amax());
                 w[0].add(e / (1.0 + p.amax()), &at);
                 let (wb, vb) = (vee(&(r.transpose() * rd)), r.transpose() * pd);
-                let got = &d.full().v()[i];
+                let got = &d.v()[i];
                 w[1].add(rel3(&got.ang, &wb).max(rel3(&got.lin, &vb)), &at);
                 // d/dt (Rᵀ Ṙ) = Ṙᵀ Ṙ + Rᵀ R̈ is skew, Ṙᵀ Ṙ symmetric: the skew part of Rᵀ R̈.
                 let x = r.transpose() * rdd;
                 let wdb = vee(&((x - x.transpose()) * 0.5));
                 let vdb = rd.transpose() * pd + r.transpose() * pdd;
-                let got = &d.full().a()[i];
+                let got = &d.a()[i];
                 w[2].add(rel3(&got.ang, &wdb).max(rel3(&got.lin, &vdb)), &at);
             }
         }
@@ -180,18 +185,18 @@ fn mimic_centroidal_momentum_matches_the_dual_oracle() {
     ];
     let mut rng = Rng::new(403);
     for m in &models() {
-        let red = Reduced { full: m.full(), mimics: m.mimics() };
-        let mut d = MimicData::new(m);
-        let mut cen = mimic::MimicCentroidal::new(m);
+        let red = Reduced { full: m.full_tree(), mimics: m.mimic_joints() };
+        let mut d = Data::new(m);
+        let mut cen = algo::Centroidal::new(m);
         for _ in 0..4 {
             let [q, v, a] = state(m, &mut rng);
-            let h = mimic::centroidal_momentum(m, &mut d, &q, &v).unwrap();
+            let h = algo::centroidal_momentum(m, &mut d, &q, &v).unwrap();
             let qd: Vec<D> = q.iter().map(|&x| D::from_re(x)).collect();
             let tv: Vec<D> = v.iter().map(|&x| D::new(0.0, x)).collect();
-            let poses = ref_fk(m.full(), &red.expand_q(&red.integrate(&qd, &tv)));
+            let poses = ref_fk(m.full_tree(), &red.expand_q(&red.integrate(&qd, &tv)));
             let (mut mass, mut mc, mut mcd) = (0.0, Vector3::zeros(), Vector3::zeros());
             let mut bodies = vec![];
-            for (i, inertia) in m.full().inertias().iter().enumerate().skip(1) {
+            for (i, inertia) in m.full_tree().inertias().iter().enumerate().skip(1) {
                 let c = inertia.com().map(D::from);
                 let ci = poses[i].act_point(&c);
                 let (c0, c1) = (ci.map(|x| x.re), ci.map(|x| x.eps));
@@ -212,7 +217,7 @@ fn mimic_centroidal_momentum_matches_the_dual_oracle() {
             let got = DMatrix::from_column_slice(6, 1, &h);
             w[0].add(rel_mat(&got, &want), m.name());
             // The h and A_G of centroidal_dynamics_derivatives (summed in another order).
-            mimic::centroidal_dynamics_derivatives(m, &mut d, &mut cen, &q, &v, &a).unwrap();
+            algo::centroidal_dynamics_derivatives(m, &mut d, &mut cen, &q, &v, &a).unwrap();
             let hc = DMatrix::from_column_slice(6, 1, cen.h());
             w[1].add(rel_mat(&hc, &got), m.name());
             let agv = cen.ag() * &v;
@@ -231,38 +236,37 @@ fn mimic_point_kinematics_are_the_full_trees_at_the_expanded_state() {
     let mut w = Worst::new("J = J_full G");
     let mut rng = Rng::new(404);
     for m in &models() {
-        let (full, g) = (m.full(), m.g());
-        let mut d = MimicData::new(m);
+        let (full, g) = (m.full_tree(), m.velocity_map());
+        let mut d = Data::new(m);
         let mut df = Data::new(full);
         let (mut jac, mut jf) = (Matrix3xX::zeros(m.nv()), Matrix3xX::zeros(full.nv()));
         for _ in 0..3 {
             let [q, v, a] = state(m, &mut rng);
             let qf = m.expand_q(&q).unwrap();
             let (vf, af) = (&g * &v, &g * &a);
-            mimic::forward_kinematics(m, &mut d, &q, Some(&v), Some(&a)).unwrap();
+            algo::forward_kinematics(m, &mut d, &q, Some(&v), Some(&a)).unwrap();
             algo::forward_kinematics(full, &mut df, &qf, Some(&vf), Some(&af)).unwrap();
-            assert_eq!(d.full().o_m_i(), df.o_m_i(), "{}", m.name());
-            assert_eq!(d.full().v(), df.v(), "{}", m.name());
-            assert_eq!(d.full().a(), df.a(), "{}", m.name());
-            assert_eq!((d.q_full(), d.v_full(), d.a_full()), (&qf, &vf, &af), "{}", m.name());
+            assert_eq!(d.o_m_i(), df.o_m_i(), "{}", m.name());
+            assert_eq!(d.v(), df.v(), "{}", m.name());
+            assert_eq!(d.a(), df.a(), "{}", m.name());
             // Placements only (no v): the placements alone are recomputed.
-            mimic::forward_kinematics(m, &mut d, &q, None, None).unwrap();
-            assert_eq!(d.full().o_m_i(), df.o_m_i(), "{}", m.name());
+            algo::forward_kinematics(m, &mut d, &q, None, None).unwrap();
+            assert_eq!(d.o_m_i(), df.o_m_i(), "{}", m.name());
             let f = full.frames().len() - 1;
             let p = Vector3::new(0.01, 0.02, -0.03);
             assert_eq!(
-                mimic::point_position(m, &mut d, &q, f, &p).unwrap(),
+                algo::point_position(m, &mut d, &q, f, &p).unwrap(),
                 algo::point_position(full, &mut df, &qf, f, &p).unwrap()
             );
             assert_eq!(
-                mimic::point_drift(m, &mut d, &q, &v, f, &p).unwrap(),
+                algo::point_drift(m, &mut d, &q, &v, f, &p).unwrap(),
                 algo::point_drift(full, &mut df, &qf, &vf, f, &p).unwrap()
             );
             assert_eq!(
-                mimic::centroidal_momentum(m, &mut d, &q, &v).unwrap(),
+                algo::centroidal_momentum(m, &mut d, &q, &v).unwrap(),
                 algo::centroidal_momentum(full, &mut df, &qf, &vf).unwrap()
             );
-            mimic::point_jacobian(m, &mut d, &q, f, &p, &mut jac).unwrap();
+            algo::point_jacobian(m, &mut d, &q, f, &p, &mut jac).unwrap();
             algo::point_jacobian(full, &mut df, &qf, f, &p, &mut jf).unwrap();
             w.add(rel_mat(&jac, &(&jf * &g)), m.name());
         }
@@ -277,14 +281,14 @@ fn mimic_point_kinematics_match_central_differences() {
     let mut w = [Worst::new("jacobian (central diff.)"), Worst::new("drift (central diff.)")];
     let mut rng = Rng::new(405);
     for m in &models() {
-        let mut d = MimicData::new(m);
+        let mut d = Data::new(m);
         let n = m.nv();
         let mut jac = Matrix3xX::zeros(n);
-        let f = m.full().frames().len() - 1;
+        let f = m.full_tree().frames().len() - 1;
         let p = Vector3::new(0.02, -0.01, 0.05);
         for _ in 0..3 {
             let [q, v, _] = state(m, &mut rng);
-            let mut pos = |x: &DVector<f64>| mimic::point_position(m, &mut d, x, f, &p).unwrap();
+            let mut pos = |x: &DVector<f64>| algo::point_position(m, &mut d, x, f, &p).unwrap();
             let h = 1e-6;
             let mut num = Matrix3xX::zeros(n);
             for k in 0..n {
@@ -299,9 +303,9 @@ fn mimic_point_kinematics_match_central_differences() {
             let pp = pos(&m.integrate(&q, &(&v * h2)).unwrap());
             let pm = pos(&m.integrate(&q, &(&v * -h2)).unwrap());
             let dd = (pp - 2.0 * p0 + pm) / (h2 * h2);
-            mimic::point_jacobian(m, &mut d, &q, f, &p, &mut jac).unwrap();
+            algo::point_jacobian(m, &mut d, &q, f, &p, &mut jac).unwrap();
             w[0].add(rel_mat(&jac, &num), m.name());
-            let drift = mimic::point_drift(m, &mut d, &q, &v, f, &p).unwrap();
+            let drift = algo::point_drift(m, &mut d, &q, &v, f, &p).unwrap();
             w[1].add(rel3(&drift, &dd), m.name());
         }
     }
@@ -313,44 +317,44 @@ fn mimic_point_kinematics_match_central_differences() {
 fn mimic_point_kinematics_inputs_are_errors() {
     let ms = models();
     let m = &ms[1];
-    let mut d = MimicData::new(m);
+    let mut d = Data::new(m);
     let q = m.neutral();
     let v = DVector::zeros(m.nv());
     let p = Vector3::zeros();
-    let nf = m.full().frames().len();
-    let e = mimic::point_position(m, &mut d, &q, nf, &p).unwrap_err().to_string();
+    let nf = m.full_tree().frames().len();
+    let e = algo::point_position(m, &mut d, &q, nf, &p).unwrap_err().to_string();
     assert!(e.contains("frame"), "{e}");
-    let e = mimic::point_drift(m, &mut d, &q, &v, nf, &p).unwrap_err().to_string();
+    let e = algo::point_drift(m, &mut d, &q, &v, nf, &p).unwrap_err().to_string();
     assert!(e.contains("frame"), "{e}");
-    let e = mimic::point_position(m, &mut d, &q, 0, &Vector3::new(0.0, f64::NAN, 0.0)).unwrap_err();
+    let e = algo::point_position(m, &mut d, &q, 0, &Vector3::new(0.0, f64::NAN, 0.0)).unwrap_err();
     assert!(matches!(e, Error::NotFinite { ref what, index: 1 } if what == "point"), "{e:?}");
-    let mut full_cols = Matrix3xX::zeros(m.full().nv());
-    let e = mimic::point_jacobian(m, &mut d, &q, 0, &p, &mut full_cols).unwrap_err().to_string();
+    let mut full_cols = Matrix3xX::zeros(m.full_tree().nv());
+    let e = algo::point_jacobian(m, &mut d, &q, 0, &p, &mut full_cols).unwrap_err().to_string();
     assert!(e.contains("columns"), "{e}");
     let short = DVector::zeros(m.nv() - 1);
-    let e = mimic::point_drift(m, &mut d, &q, &short, 0, &p).unwrap_err();
+    let e = algo::point_drift(m, &mut d, &q, &short, 0, &p).unwrap_err();
     assert!(matches!(e, Error::Dimension { ref what, .. } if what == "v"), "{e:?}");
-    let e = mimic::centroidal_momentum(m, &mut d, &q, &short).unwrap_err();
+    let e = algo::centroidal_momentum(m, &mut d, &q, &short).unwrap_err();
     assert!(matches!(e, Error::Dimension { .. }), "{e:?}");
-    let e = mimic::forward_kinematics(m, &mut d, &q, Some(&v), Some(&short)).unwrap_err();
+    let e = algo::forward_kinematics(m, &mut d, &q, Some(&v), Some(&short)).unwrap_err();
     assert!(e.to_string().contains('a'), "{e}");
     let mut nan = q.clone();
     nan[m.nq() - 1] = f64::NAN;
-    let e = mimic::forward_kinematics(m, &mut d, &nan, None, None).unwrap_err();
+    let e = algo::forward_kinematics(m, &mut d, &nan, None, None).unwrap_err();
     assert!(matches!(e, Error::NotFinite { index, .. } if index == m.nq() - 1), "{e:?}");
     // A configuration of the full tree's length.
     let qf = m.expand_q(&q).unwrap();
-    let e = mimic::point_position(m, &mut d, &qf, 0, &p).unwrap_err();
+    let e = algo::point_position(m, &mut d, &qf, 0, &p).unwrap_err();
     assert!(matches!(e, Error::Dimension { expected, .. } if expected == m.nq()), "{e:?}");
     // A non-unit quaternion of the floating base.
     let mut bad = q.clone();
     bad[6] = 2.0;
-    let e = mimic::centroidal_momentum(m, &mut d, &bad, &v).unwrap_err();
+    let e = algo::centroidal_momentum(m, &mut d, &bad, &v).unwrap_err();
     assert!(matches!(e, Error::InvalidConfiguration { .. }), "{e:?}");
     // A workspace of another model.
-    let mut d2 = MimicData::new(&ms[0]);
-    let e = mimic::point_position(m, &mut d2, &q, 0, &p).unwrap_err();
+    let mut d2 = Data::new(&ms[0]);
+    let e = algo::point_position(m, &mut d2, &q, 0, &p).unwrap_err();
     assert!(matches!(e, Error::Workspace(_)), "{e:?}");
-    let e = mimic::forward_kinematics(m, &mut d2, &q, None, None).unwrap_err();
+    let e = algo::forward_kinematics(m, &mut d2, &q, None, None).unwrap_err();
     assert!(matches!(e, Error::Workspace(_)), "{e:?}");
 }

@@ -204,18 +204,15 @@ fn algorithms_do_not_allocate() {
 }
 
 #[test]
-fn mimic_algorithms_do_not_allocate() {
-    use sodyn::mimic::{self, MimicData, MimicModel, MimicSoData};
-    let path =
-        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_arm.urdf");
-    let opts = sodyn::model::UrdfOptions { floating_base: true, ..Default::default() };
-    let m = MimicModel::load_urdf_file(&path, &opts).unwrap();
+fn reduced_model_algorithms_do_not_allocate() {
+    let m = reduced_arm();
     let mut rng = Rng::new(2);
     let q = m.random_configuration(&mut rng);
     let v = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
     let a = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
-    let mut d = MimicData::new(&m);
-    let mut so = MimicSoData::new(&m);
+    let mut d = Data::new(&m);
+    let mut so = SoData::new(&m);
+    let mut fso = FdSoData::new(&m);
     let mut report = vec![];
     let mut check = |name: &str, f: &mut dyn FnMut()| {
         f(); // warm-up
@@ -224,79 +221,77 @@ fn mimic_algorithms_do_not_allocate() {
             report.push(format!("{name}: {n}"));
         }
     };
-    check("mimic::rnea", &mut || {
-        mimic::rnea(&m, &mut d, &q, &v, &a, None).unwrap();
+    check("reduced: rnea", &mut || {
+        rnea(&m, &mut d, &q, &v, &a, None).unwrap();
     });
-    check("mimic::nonlinear_effects", &mut || {
-        mimic::nonlinear_effects(&m, &mut d, &q, &v, None).unwrap();
+    check("reduced: nonlinear_effects", &mut || {
+        nonlinear_effects(&m, &mut d, &q, &v).unwrap();
     });
     let fext = vec![
         sodyn::spatial::Force::new(Vector3::new(0.1, -0.2, 0.3), Vector3::zeros());
-        m.full().njoints()
+        m.full_tree().njoints()
     ];
-    check("mimic::nonlinear_effects (fext)", &mut || {
-        mimic::nonlinear_effects(&m, &mut d, &q, &v, Some(&fext)).unwrap();
+    check("reduced: rnea (fext)", &mut || {
+        rnea(&m, &mut d, &q, &v, &a, Some(&fext)).unwrap();
     });
-    check("mimic::crba", &mut || {
-        mimic::crba(&m, &mut d, &q).unwrap();
+    check("reduced: aba (fext)", &mut || {
+        aba(&m, &mut d, &q, &v, &a, Some(&fext)).unwrap();
     });
-    check("mimic::aba", &mut || {
-        mimic::aba(&m, &mut d, &q, &v, &a, None).unwrap();
+    check("reduced: crba", &mut || {
+        crba(&m, &mut d, &q).unwrap();
     });
-    check("mimic::id_derivatives", &mut || {
-        mimic::id_derivatives(&m, &mut d, &q, &v, &a, None).unwrap()
+    check("reduced: aba", &mut || {
+        aba(&m, &mut d, &q, &v, &a, None).unwrap();
     });
-    check("mimic::fd_derivatives", &mut || {
-        mimic::fd_derivatives(&m, &mut d, &q, &v, &a, None).unwrap()
+    check("reduced: id_derivatives", &mut || id_derivatives(&m, &mut d, &q, &v, &a, None).unwrap());
+    check("reduced: fd_derivatives", &mut || fd_derivatives(&m, &mut d, &q, &v, &a, None).unwrap());
+    check("reduced: id_so_derivatives", &mut || {
+        id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None).unwrap()
     });
-    check("mimic::id_so_derivatives", &mut || {
-        mimic::id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None).unwrap()
+    check("reduced: fd_so_derivatives", &mut || {
+        fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &a, None).unwrap()
     });
-    check("mimic::fd_so_derivatives", &mut || {
-        mimic::fd_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None).unwrap()
-    });
-    let full = m.full();
+    let full = m.full_tree();
     let p = nalgebra::Vector3::new(0.0, 0.0, 0.02);
     let contacts = vec![
         Contact::new(full, "tool", p).unwrap(),
         Contact::new(full, "finger_r", p).unwrap().with_baumgarte(1.0, 0.5).unwrap(),
     ];
-    let mut kd = mimic::MimicKktData::new(&m, &contacts).unwrap();
-    let lam = DVector::from_element(kd.dim(), 0.5);
-    check("mimic::kkt_dynamics", &mut || {
-        mimic::kkt_dynamics(&m, &mut d, &mut kd, &q, &v, &a).unwrap()
+    let mut cd = ContactData::new(&m, &contacts).unwrap();
+    let mut kd = KktData::new(&m, cd.clone());
+    let lam = DVector::from_element(cd.dim(), 0.5);
+    check("reduced: kkt_dynamics", &mut || kkt_dynamics(&m, &mut d, &mut kd, &q, &v, &a).unwrap());
+    check("reduced: kkt_derivatives", &mut || {
+        kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &a).unwrap()
     });
-    check("mimic::kkt_derivatives", &mut || {
-        mimic::kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &a).unwrap()
+    let mut kd2 = KktData::new(&m, cd.clone()).with_second_order(&m);
+    check("reduced: kkt_so_derivatives", &mut || {
+        kkt_so_derivatives(&m, &mut d, &mut kd2, &q, &v, &a).unwrap()
     });
-    let mut kd2 = mimic::MimicKktData::new(&m, &contacts).unwrap().with_second_order(&m);
-    check("mimic::kkt_so_derivatives", &mut || {
-        mimic::kkt_so_derivatives(&m, &mut d, &mut kd2, &q, &v, &a).unwrap()
-    });
-    let mut im = mimic::MimicImpactData::new(&m, &contacts).unwrap();
+    let mut im = ImpactData::new(&m, cd.clone());
     im.set_restitution(0.3).unwrap();
-    check("mimic::impact_dynamics", &mut || {
-        mimic::impact_dynamics(&m, &mut d, &mut im, &q, &v).unwrap()
+    check("reduced: impact_dynamics", &mut || {
+        impact_dynamics(&m, &mut d, &mut im, &q, &v).unwrap()
     });
-    check("mimic::impact_derivatives", &mut || {
-        mimic::impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap()
+    check("reduced: impact_derivatives", &mut || {
+        impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap()
     });
-    let mut im2 = mimic::MimicImpactData::new(&m, &contacts).unwrap().with_second_order(&m);
+    let mut im2 = ImpactData::new(&m, cd.clone()).with_second_order(&m);
     im2.set_restitution(0.3).unwrap();
-    check("mimic::impact_so_derivatives", &mut || {
-        mimic::impact_so_derivatives(&m, &mut d, &mut im2, &q, &v).unwrap()
+    check("reduced: impact_so_derivatives", &mut || {
+        impact_so_derivatives(&m, &mut d, &mut im2, &q, &v).unwrap()
     });
-    let mut cc = mimic::MimicContractedData::new(&m);
-    check("mimic::id_so_contracted", &mut || {
-        mimic::id_so_contracted(&m, &mut d, &mut cc, &q, &v, &a, &v).unwrap()
+    let mut cc = ContractedData::new(&m);
+    check("reduced: id_so_contracted", &mut || {
+        id_so_contracted(&m, &mut d, &mut cc, &q, &v, &a, &v).unwrap()
     });
-    check("mimic::fd_so_contracted", &mut || {
-        mimic::fd_so_contracted(&m, &mut d, &mut cc, &q, &v, &a, &v).unwrap()
+    check("reduced: fd_so_contracted", &mut || {
+        fd_so_contracted(&m, &mut d, &mut cc, &q, &v, &a, &v).unwrap()
     });
     let mut xo = nalgebra::DMatrix::zeros(m.nv(), m.nv());
-    check("mimic::idfoza", &mut || mimic::idfoza(&m, &mut d, &q, &a, &mut xo).unwrap());
-    check("mimic::idsoza", &mut || {
-        mimic::idsoza(&m, &mut d, &mut so, &q, &a).unwrap();
+    check("reduced: idfoza", &mut || idfoza(&m, &mut d, &q, &a, &mut xo).unwrap());
+    check("reduced: idsoza", &mut || {
+        idsoza(&m, &mut d, &mut so, &q, &a).unwrap();
     });
     // The contracted KKT and impact second order, with these contacts (3-D world points, one
     // with Baumgarte gains) and with a 6-D local contact (the generic path).
@@ -312,91 +307,96 @@ fn mimic_algorithms_do_not_allocate() {
         },
     ];
     for (set, cs) in [("3-D", &contacts), ("6-D", &six)] {
-        let mut kd3 = mimic::MimicKktData::new(&m, cs).unwrap();
-        let mut kc = mimic::MimicKktContracted::new(&m, &kd3);
-        let wl = DVector::from_element(kd3.dim(), 0.5);
-        check(&format!("mimic::kkt_so_contracted ({set})"), &mut || {
-            mimic::kkt_so_contracted(&m, &mut d, &mut kd3, &mut kc, &q, &v, &a, &v, &wl).unwrap()
+        let mut kd3 = KktData::new(&m, ContactData::new(&m, cs).unwrap());
+        let mut kc = KktContracted::new(&m, &kd3);
+        let wl = DVector::from_element(kd3.cd().dim(), 0.5);
+        check(&format!("reduced: kkt_so_contracted ({set})"), &mut || {
+            kkt_so_contracted(&m, &mut d, &mut kd3, &mut kc, &q, &v, &a, &v, &wl).unwrap()
         });
-        let mut im3 = mimic::MimicImpactData::new(&m, cs).unwrap();
+        let mut im3 = ImpactData::new(&m, ContactData::new(&m, cs).unwrap());
         im3.set_restitution(0.3).unwrap();
-        let mut ic = mimic::MimicImpactContracted::new(&m, &im3);
-        check(&format!("mimic::impact_so_contracted ({set})"), &mut || {
-            mimic::impact_so_contracted(&m, &mut d, &mut im3, &mut ic, &q, &v, &a, &wl).unwrap()
+        let mut ic = ImpactContracted::new(&m, &im3);
+        check(&format!("reduced: impact_so_contracted ({set})"), &mut || {
+            impact_so_contracted(&m, &mut d, &mut im3, &mut ic, &q, &v, &a, &wl).unwrap()
         });
     }
-    check("mimic::constrained_id_derivatives", &mut || {
-        mimic::constrained_id_derivatives(&m, &mut d, &mut kd, Some(&mut so), &q, &v, &a, &lam)
-            .unwrap()
+    check("reduced: constrained_id_derivatives", &mut || {
+        constrained_id_so_derivatives(&m, &mut d, &mut cd, &mut so, &q, &v, &a, &lam).unwrap()
+    });
+    check("reduced: constrained_id_derivatives", &mut || {
+        constrained_id_derivatives(&m, &mut d, &mut cd, &q, &v, &a, &lam).unwrap()
     });
     let rf = sodyn::algo::ReferenceFrame::LocalWorldAligned;
-    let fr = m.full().frames().len() - 1;
+    let fr = m.frames().len() - 1;
     let mut j6 = [
         nalgebra::Matrix6xX::zeros(m.nv()),
         nalgebra::Matrix6xX::zeros(m.nv()),
         nalgebra::Matrix6xX::zeros(m.nv()),
     ];
     let mut j3 = nalgebra::Matrix3xX::zeros(m.nv());
-    check("mimic::frame_placement", &mut || {
-        mimic::frame_placement(&m, &mut d, &q, fr).unwrap();
+    check("reduced: frame_placement", &mut || {
+        frame_placement(&m, &mut d, &q, fr).unwrap();
     });
-    check("mimic::frame_jacobian", &mut || {
-        mimic::frame_jacobian(&m, &mut d, &q, fr, rf, &mut j6[0]).unwrap()
+    check("reduced: frame_jacobian", &mut || {
+        frame_jacobian(&m, &mut d, &q, fr, rf, &mut j6[0]).unwrap()
     });
-    check("mimic::frame_classical_acceleration", &mut || {
-        mimic::frame_classical_acceleration(&m, &mut d, &q, &v, &a, fr, rf).unwrap();
+    check("reduced: frame_classical_acceleration", &mut || {
+        frame_classical_acceleration(&m, &mut d, &q, &v, &a, fr, rf).unwrap();
     });
-    check("mimic::frame_velocity_derivatives", &mut || {
+    check("reduced: frame_velocity_derivatives", &mut || {
         let [x, y, _] = &mut j6;
-        mimic::frame_velocity_derivatives(&m, &mut d, &q, &v, fr, rf, x, y).unwrap()
+        frame_velocity_derivatives(&m, &mut d, &q, &v, fr, rf, x, y).unwrap()
     });
-    check("mimic::frame_acceleration_derivatives", &mut || {
+    check("reduced: frame_acceleration_derivatives", &mut || {
         let [x, y, z] = &mut j6;
-        mimic::frame_acceleration_derivatives(&m, &mut d, &q, &v, &a, fr, rf, x, y, z).unwrap()
+        frame_acceleration_derivatives(&m, &mut d, &q, &v, &a, fr, rf, x, y, z).unwrap()
     });
-    check("mimic::center_of_mass_jacobian", &mut || {
-        mimic::center_of_mass_jacobian(&m, &mut d, &q, &mut j3).unwrap()
+    check("reduced: center_of_mass_jacobian", &mut || {
+        center_of_mass_jacobian(&m, &mut d, &q, &mut j3).unwrap()
     });
     let mut sq = nalgebra::DMatrix::zeros(m.nv(), m.nv());
     let q1 = m.random_configuration(&mut Rng::new(3));
-    check("MimicModel::d_integrate_into", &mut || {
+    check("Model::d_integrate_into (reduced)", &mut || {
         m.d_integrate_into(&q, &v, sodyn::model::Arg::First, &mut sq).unwrap()
     });
-    check("MimicModel::d_difference_into", &mut || {
+    check("Model::d_difference_into (reduced)", &mut || {
         m.d_difference_into(&q, &q1, sodyn::model::Arg::Second, &mut sq).unwrap()
     });
-    check("mimic::center_of_mass_motion", &mut || {
-        mimic::center_of_mass_motion(&m, &mut d, &q, &v, Some(&a)).unwrap();
+    check("reduced: center_of_mass_motion", &mut || {
+        center_of_mass_motion(&m, &mut d, &q, &v, Some(&a)).unwrap();
     });
-    check("mimic::center_of_mass_velocity_derivatives", &mut || {
-        mimic::center_of_mass_velocity_derivatives(&m, &mut d, &q, &v, &mut j3).unwrap()
+    check("reduced: center_of_mass_velocity_derivatives", &mut || {
+        center_of_mass_velocity_derivatives(&m, &mut d, &q, &v, &mut j3).unwrap()
     });
     let mut t6 = sodyn::tensor::Tensor3::zeros(6, m.nv(), m.nv());
-    check("mimic::frame_jacobian_derivative", &mut || {
-        mimic::frame_jacobian_derivative(&m, &mut d, &q, fr, rf, &mut t6).unwrap()
+    check("reduced: frame_jacobian_derivative", &mut || {
+        frame_jacobian_derivative(&m, &mut d, &q, fr, rf, &mut t6).unwrap()
     });
-    check("mimic::frame_placement_hessian", &mut || {
-        mimic::frame_placement_hessian(&m, &mut d, &q, fr, &mut t6).unwrap()
+    let mut t6w = t6.clone();
+    check("reduced: frame_placement_hessian", &mut || {
+        frame_placement_hessian(&m, &mut d, &q, fr, &mut t6, &mut t6w).unwrap()
     });
-    let mut cen = mimic::MimicCentroidal::new(&m);
-    check("mimic::centroidal_dynamics_derivatives", &mut || {
-        mimic::centroidal_dynamics_derivatives(&m, &mut d, &mut cen, &q, &v, &a).unwrap()
+    let mut cen = Centroidal::new(&m);
+    check("reduced: centroidal_dynamics_derivatives", &mut || {
+        centroidal_dynamics_derivatives(&m, &mut d, &mut cen, &q, &v, &a).unwrap()
     });
-    assert!(report.is_empty(), "heap allocations in mimic hot paths: {}", report.join(", "));
+    assert!(
+        report.is_empty(),
+        "heap allocations in the hot paths of a reduced model: {}",
+        report.join(", ")
+    );
 }
 
-/// The point kinematics and centroidal momentum of a mimic model, and its batched functions on
+/// The point kinematics and centroidal momentum of a model in reduced coordinates (mimic
+/// joints), and its batched functions on
 /// a one-thread pool (the caller alone: no thread hand-off), allocate nothing.
 #[test]
-fn mimic_kinematics_and_batches_do_not_allocate() {
+fn reduced_model_kinematics_and_batches_do_not_allocate() {
     use nalgebra::{DMatrix, Matrix3xX};
     use sodyn::batch::BatchPool;
-    use sodyn::mimic::{self, MimicData, MimicModel, MimicSoData, batch};
+    use sodyn::batch::{self, BatchData};
     use std::sync::Arc;
-    let path =
-        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_arm.urdf");
-    let opts = sodyn::model::UrdfOptions { floating_base: true, ..Default::default() };
-    let m = MimicModel::load_urdf_file(&path, &opts).unwrap();
+    let m = reduced_arm();
     let mut rng = Rng::new(5);
     let n = 6;
     let qs: Vec<_> = (0..n).map(|_| m.random_configuration(&mut rng)).collect();
@@ -404,15 +404,16 @@ fn mimic_kinematics_and_batches_do_not_allocate() {
     let vs: Vec<_> = (0..n).map(|_| r()).collect();
     let xs: Vec<_> = (0..n).map(|_| r()).collect();
     let (q, v, a) = (&qs[0], &vs[0], &xs[0]);
-    let mut d = MimicData::new(&m);
-    let fr = m.full().frames().len() - 1;
+    let mut d = Data::new(&m);
+    let fr = m.frames().len() - 1;
     let p = Vector3::new(0.01, 0.02, 0.03);
     let mut j3 = Matrix3xX::zeros(m.nv());
-    let mut bd = batch::batch_data_with_pool(&m, Arc::new(BatchPool::new(1).unwrap()));
+    let mut bd = BatchData::with_pool(&m, Arc::new(BatchPool::new(1).unwrap()));
     let mut out_v = vec![DVector::zeros(m.nv()); n];
     let mut out_m1 = vec![DMatrix::zeros(m.nv(), m.nv()); n];
     let mut out_m2 = out_m1.clone();
-    let mut out_so = vec![MimicSoData::new(&m); n];
+    let mut out_so = vec![SoData::new(&m); n];
+    let mut out_fso = vec![FdSoData::new(&m); n];
     let mut report = vec![];
     let mut check = |name: &str, f: &mut dyn FnMut()| {
         f(); // warm-up
@@ -421,41 +422,45 @@ fn mimic_kinematics_and_batches_do_not_allocate() {
             report.push(format!("{name}: {n}"));
         }
     };
-    check("mimic::forward_kinematics", &mut || {
-        mimic::forward_kinematics(&m, &mut d, q, Some(v), Some(a)).unwrap()
+    check("reduced: forward_kinematics", &mut || {
+        forward_kinematics(&m, &mut d, q, Some(v), Some(a)).unwrap()
     });
-    check("mimic::point_position", &mut || {
-        mimic::point_position(&m, &mut d, q, fr, &p).unwrap();
+    check("reduced: point_position", &mut || {
+        point_position(&m, &mut d, q, fr, &p).unwrap();
     });
-    check("mimic::point_jacobian", &mut || {
-        mimic::point_jacobian(&m, &mut d, q, fr, &p, &mut j3).unwrap()
+    check("reduced: point_jacobian", &mut || {
+        point_jacobian(&m, &mut d, q, fr, &p, &mut j3).unwrap()
     });
-    check("mimic::point_drift", &mut || {
-        mimic::point_drift(&m, &mut d, q, v, fr, &p).unwrap();
+    check("reduced: point_drift", &mut || {
+        point_drift(&m, &mut d, q, v, fr, &p).unwrap();
     });
-    check("mimic::centroidal_momentum", &mut || {
-        mimic::centroidal_momentum(&m, &mut d, q, v).unwrap();
+    check("reduced: centroidal_momentum", &mut || {
+        centroidal_momentum(&m, &mut d, q, v).unwrap();
     });
-    check("mimic::batch::rnea_batch", &mut || {
+    check("reduced: batch::rnea_batch", &mut || {
         batch::rnea_batch(&m, &mut bd, &qs, &vs, &xs, &mut out_v).unwrap()
     });
-    check("mimic::batch::crba_batch", &mut || {
+    check("reduced: batch::crba_batch", &mut || {
         batch::crba_batch(&m, &mut bd, &qs, &mut out_m1).unwrap()
     });
-    check("mimic::batch::aba_batch", &mut || {
+    check("reduced: batch::aba_batch", &mut || {
         batch::aba_batch(&m, &mut bd, &qs, &vs, &xs, &mut out_v).unwrap()
     });
-    check("mimic::batch::id_derivatives_batch", &mut || {
+    check("reduced: batch::id_derivatives_batch", &mut || {
         batch::id_derivatives_batch(&m, &mut bd, &qs, &vs, &xs, &mut out_m1, &mut out_m2).unwrap()
     });
-    check("mimic::batch::fd_derivatives_batch", &mut || {
+    check("reduced: batch::fd_derivatives_batch", &mut || {
         batch::fd_derivatives_batch(&m, &mut bd, &qs, &vs, &xs, &mut out_m1, &mut out_m2).unwrap()
     });
-    check("mimic::batch::id_so_derivatives_batch", &mut || {
+    check("reduced: batch::id_so_derivatives_batch", &mut || {
         batch::id_so_derivatives_batch(&m, &mut bd, &qs, &vs, &xs, &mut out_so).unwrap()
     });
-    check("mimic::batch::fd_so_derivatives_batch", &mut || {
-        batch::fd_so_derivatives_batch(&m, &mut bd, &qs, &vs, &xs, &mut out_so).unwrap()
+    check("reduced: batch::fd_so_derivatives_batch", &mut || {
+        batch::fd_so_derivatives_batch(&m, &mut bd, &qs, &vs, &xs, &mut out_fso).unwrap()
     });
-    assert!(report.is_empty(), "heap allocations in mimic hot paths: {}", report.join(", "));
+    assert!(
+        report.is_empty(),
+        "heap allocations in the hot paths of a reduced model: {}",
+        report.join(", ")
+    );
 }

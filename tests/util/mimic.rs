@@ -1,9 +1,9 @@
-//! Shared helpers of the mimic-joint tests: the test arm (`tests/data/mimic_arm.urdf`) and
-//! random states.
+//! Shared helpers of the mimic-joint tests: the test arm (`tests/data/mimic_arm.urdf`) as a
+//! `Model` in reduced coordinates, its AD oracle and random states.
 
 use nalgebra::DVector;
-use sodyn::mimic::MimicModel;
-use sodyn::model::UrdfOptions;
+use sodyn::deriv::{ContactData, ImpactData, KktData};
+use sodyn::model::{Model, UrdfOptions, load_urdf_file};
 use sodyn::reference::mimic::Reduced;
 use sodyn::rng::Rng;
 use std::path::PathBuf;
@@ -18,37 +18,54 @@ pub fn opts(floating_base: bool) -> UrdfOptions {
     UrdfOptions { floating_base, strict_inertia: false, mimic: true }
 }
 
+/// The test arm in reduced coordinates (`opts(floating_base)`).
+pub fn arm(floating_base: bool) -> Model {
+    load_urdf_file(&arm_path(), &opts(floating_base)).unwrap()
+}
+
+/// The reduced model of `m`'s tree with the armature `a` (one entry per DoF of the full tree)
+/// and `m`'s mimic constraints.
+pub fn with_armature(m: &Model, a: &[f64]) -> Model {
+    m.full_tree().with_armature(a).unwrap().with_mimic_joints(m.mimic_joints()).unwrap()
+}
+
 /// The test arm, fixed and floating, plus the fixed one with an armature.
-pub fn models() -> Vec<MimicModel> {
-    let mut out = Vec::new();
-    for ff in [false, true] {
-        out.push(MimicModel::load_urdf_file(&arm_path(), &opts(ff)).unwrap());
-    }
-    let full = out[0].full().clone();
-    let arm: Vec<f64> = (0..full.nv()).map(|k| 0.01 * (k + 1) as f64).collect();
-    let mims = out[0].mimics().to_vec();
-    out.push(MimicModel::new(full.with_armature(&arm).unwrap(), &mims).unwrap());
+pub fn models() -> Vec<Model> {
+    let mut out = vec![arm(false), arm(true)];
+    let arm: Vec<f64> = (0..out[0].nv_full()).map(|k| 0.01 * (k + 1) as f64).collect();
+    out.push(with_armature(&out[0], &arm));
     out
 }
 
 /// The floating arm, and the same with an armature on every DoF of the full tree.
-pub fn ff_models() -> Vec<MimicModel> {
-    let m = MimicModel::load_urdf_file(&arm_path(), &opts(true)).unwrap();
-    let arm: Vec<f64> = (0..m.full().nv()).map(|k| 0.02 * (k % 3) as f64).collect();
-    let with = MimicModel::new(m.full().with_armature(&arm).unwrap(), m.mimics()).unwrap();
+pub fn ff_models() -> Vec<Model> {
+    let m = arm(true);
+    let arm: Vec<f64> = (0..m.nv_full()).map(|k| 0.02 * (k % 3) as f64).collect();
+    let with = with_armature(&m, &arm);
     vec![m, with]
 }
 
-/// The AD oracle of `m` (`reference::mimic`).
-pub fn oracle(m: &MimicModel) -> Reduced<'_> {
-    Reduced { full: m.full(), mimics: m.mimics() }
+/// The AD oracle of the reduced model `m` (`reference::mimic`).
+pub fn oracle(m: &Model) -> Reduced<'_> {
+    assert!(m.is_reduced(), "{} is not in reduced coordinates", m.name());
+    Reduced { full: m.full_tree(), mimics: m.mimic_joints() }
 }
 
 /// A random configuration and two vectors with entries in [-2, 2] (`q̇` and `q̈`, `τ` or a
 /// direction).
-pub fn state(m: &MimicModel, rng: &mut Rng) -> [DVector<f64>; 3] {
+pub fn state(m: &Model, rng: &mut Rng) -> [DVector<f64>; 3] {
     let q = m.random_configuration(rng);
     let v = DVector::from_fn(m.nv(), |_, _| rng.range(-2.0, 2.0));
     let x = DVector::from_fn(m.nv(), |_, _| rng.range(-2.0, 2.0));
     [q, v, x]
+}
+
+/// The KKT workspace of `contacts` on `m` (`KktData::new` with its `ContactData`).
+pub fn kkt_data(m: &Model, contacts: &[sodyn::model::Contact]) -> sodyn::Result<KktData> {
+    Ok(KktData::new(m, ContactData::new(m, contacts)?))
+}
+
+/// The impact workspace of `contacts` on `m` (`ImpactData::new` with its `ContactData`).
+pub fn impact_data(m: &Model, contacts: &[sodyn::model::Contact]) -> sodyn::Result<ImpactData> {
+    Ok(ImpactData::new(m, ContactData::new(m, contacts)?))
 }
