@@ -7,8 +7,8 @@
 //! [`BatchData`]: one [`Data`] per thread and the [`BatchPool`] whose threads it runs on, kept
 //! by the caller between calls (MuJoCo binds a thread pool to its `mjData` the same way).
 //! [`map_states`] batches any other per-state computation (the contact dynamics, say) on
-//! per-thread workspaces of any type, with the same scheduling and error reporting. The
-//! batched functions of a model with mimic joints are in [`crate::mimic::batch`].
+//! per-thread workspaces of any type, with the same scheduling and error reporting. A model in
+//! reduced coordinates (mimic joints) runs every batched function too.
 //!
 //! A [`BatchPool`] of `T` threads is the calling thread plus `T − 1` helper threads: the caller
 //! starts on the states at once and the helpers join as soon as they are awake, and a 1-thread

@@ -19,7 +19,7 @@ pub mod bench_internals;
 pub mod deriv;
 pub mod error;
 mod linalg;
-pub mod mimic;
+pub(crate) mod mimic;
 pub mod model;
 pub mod reference;
 pub mod rng;

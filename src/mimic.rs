@@ -74,9 +74,7 @@ use crate::spatial::{Force, Motion, Transform};
 use crate::tensor::Tensor3;
 use nalgebra::{DMatrix, DVector, Matrix3xX, Matrix6xX, Vector3};
 
-pub mod batch;
 pub mod kinematics;
-pub use crate::model::MimicJoint;
 pub use crate::model::reduction::MimicModel;
 pub use kinematics::{
     centroidal_momentum, forward_kinematics, point_drift, point_jacobian, point_position,
@@ -155,18 +153,6 @@ impl MimicData {
     /// The full model's workspace at the last call (its state is the expanded one).
     pub fn full(&self) -> &Data {
         &self.full
-    }
-    /// `expand(q)` of the last call.
-    pub fn q_full(&self) -> &DVector<f64> {
-        &self.q
-    }
-    /// `G v` of the last call.
-    pub fn v_full(&self) -> &DVector<f64> {
-        &self.v
-    }
-    /// `G a` of the last call (`G q̈` for the forward dynamics).
-    pub fn a_full(&self) -> &DVector<f64> {
-        &self.a
     }
     /// `τ` (reduced): of [`rnea`], [`id_derivatives`], [`id_so_derivatives`], and of inverse
     /// dynamics at `q̈` for the forward-dynamics derivatives.
@@ -865,41 +851,6 @@ pub struct MimicKktSo {
     vf: DVector<f64>,
 }
 
-impl MimicKktSo {
-    /// `∂²q̈/∂q²`.
-    pub fn d2qdd_dq2(&self) -> &Tensor3 {
-        &self.res.d2qdd_dq2
-    }
-    /// `∂²q̈/∂v²`.
-    pub fn d2qdd_dv2(&self) -> &Tensor3 {
-        &self.res.d2qdd_dv2
-    }
-    /// `T[(i, j, k)] = ∂/∂v_k (∂q̈_i/∂q_j)`.
-    pub fn d2qdd_dqdv(&self) -> &Tensor3 {
-        &self.res.d2qdd_dqdv
-    }
-    /// `T[(i, j, k)] = ∂/∂q_k (∂q̈_i/∂τ_j)`.
-    pub fn d2qdd_dtaudq(&self) -> &Tensor3 {
-        &self.res.d2qdd_dtaudq
-    }
-    /// `∂²λ/∂q²`.
-    pub fn d2lambda_dq2(&self) -> &Tensor3 {
-        &self.res.d2lambda_dq2
-    }
-    /// `∂²λ/∂v²`.
-    pub fn d2lambda_dv2(&self) -> &Tensor3 {
-        &self.res.d2lambda_dv2
-    }
-    /// `T[(i, j, k)] = ∂/∂v_k (∂λ_i/∂q_j)`.
-    pub fn d2lambda_dqdv(&self) -> &Tensor3 {
-        &self.res.d2lambda_dqdv
-    }
-    /// `T[(i, j, k)] = ∂/∂q_k (∂λ_i/∂τ_j)`.
-    pub fn d2lambda_dtaudq(&self) -> &Tensor3 {
-        &self.res.d2lambda_dtaudq
-    }
-}
-
 impl MimicKktData {
     /// Adds the second-order workspace (for [`kkt_so_derivatives`]).
     pub fn with_second_order(mut self, model: &MimicModel) -> Self {
@@ -921,14 +872,6 @@ impl MimicKktData {
     /// The second-order results (with [`MimicKktData::with_second_order`]).
     pub fn so(&self) -> Option<&MimicKktSo> {
         self.so.as_deref()
-    }
-    /// Workspace for `contacts` on `model` (their frames are frames of the full tree).
-    ///
-    /// # Errors
-    /// Those of [`ContactData::new`] for the full tree (an unknown frame, a contact on the
-    /// world, a redundant set).
-    pub fn new(model: &MimicModel, contacts: &[crate::model::Contact]) -> Result<Self> {
-        Ok(Self::from_contacts(model, ContactData::new(&model.full, contacts)?))
     }
     /// Workspace for the contacts `cd` (made for the full tree or for the reduced model).
     pub(crate) fn from_contacts(model: &MimicModel, mut cd: ContactData) -> Self {
@@ -979,10 +922,6 @@ impl MimicKktData {
     /// Number of contact rows `m`.
     pub fn dim(&self) -> usize {
         self.lambda.len()
-    }
-    /// The contact Jacobian in the reduced coordinates, `J G` (`m × nv`).
-    pub fn jac(&self) -> &DMatrix<f64> {
-        &self.jr
     }
     /// Constrained accelerations `q̈`.
     pub fn qdd(&self) -> &DVector<f64> {
@@ -1475,30 +1414,7 @@ fn delassus_in_place(h: &mut DMatrix<f64>) -> Result<()> {
     Ok(())
 }
 
-/// Constrained inverse dynamics in the reduced coordinates, `τ = Gᵀ(τ_f(expand(q), G v, G a) −
-/// Jᵀλ)`, and its first-order derivatives (the full tree's
-/// [`crate::deriv::constrained_id_derivatives`] contracted with `G`), `λ` held fixed in each
-/// contact's axes: `data.tau()`, `data.dtau_dq()`, `data.dtau_dv()`, `data.m()`; and with `so`,
-/// also the second-order tensors (IDSVA-SOc, `d2tau_dq2` with `−∂²(Jᵀλ)/∂q²`) in `so`.
-///
-/// # Errors
-/// As [`rnea`], and a `lambda` whose length is not the contacts' row count.
-#[allow(clippy::too_many_arguments)]
-pub fn constrained_id_derivatives(
-    model: &MimicModel,
-    data: &mut MimicData,
-    kd: &mut MimicKktData,
-    so: Option<&mut MimicSoData>,
-    q: &DVector<f64>,
-    v: &DVector<f64>,
-    a: &DVector<f64>,
-    lambda: &DVector<f64>,
-) -> Result<()> {
-    kd.check(model)?;
-    constrained_id_cd(model, data, &mut kd.full.cd, so, q, v, a, lambda)
-}
-
-/// [`constrained_id_derivatives`] with the full tree's contact workspace `cd`.
+/// `constrained_id_derivatives` of a reduced model with the full tree's contact workspace `cd`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn constrained_id_cd(
     model: &MimicModel,
@@ -1595,25 +1511,6 @@ pub struct MimicImpactSo {
     zero: DVector<f64>,
 }
 
-impl MimicImpactSo {
-    /// `∂²q̇⁺/∂q²`.
-    pub fn d2vplus_dq2(&self) -> &Tensor3 {
-        &self.res.d2vplus_dq2
-    }
-    /// `T[(i, j, k)] = ∂/∂q̇⁻_k (∂q̇⁺_i/∂q_j)`.
-    pub fn d2vplus_dqdvminus(&self) -> &Tensor3 {
-        &self.res.d2vplus_dqdvminus
-    }
-    /// `∂²λ̂/∂q²`.
-    pub fn d2impulse_dq2(&self) -> &Tensor3 {
-        &self.res.d2impulse_dq2
-    }
-    /// `T[(i, j, k)] = ∂/∂q̇⁻_k (∂λ̂_i/∂q_j)`.
-    pub fn d2impulse_dqdvminus(&self) -> &Tensor3 {
-        &self.res.d2impulse_dqdvminus
-    }
-}
-
 impl MimicImpactData {
     /// Adds the second-order workspace (for [`impact_so_derivatives`]).
     pub fn with_second_order(mut self, model: &MimicModel) -> Self {
@@ -1635,13 +1532,6 @@ impl MimicImpactData {
     /// The second-order results (with [`MimicImpactData::with_second_order`]).
     pub fn so(&self) -> Option<&MimicImpactSo> {
         self.so.as_deref()
-    }
-    /// Workspace for `contacts` on `model` (frames of the full tree), restitution `0`.
-    ///
-    /// # Errors
-    /// As [`MimicKktData::new`].
-    pub fn new(model: &MimicModel, contacts: &[crate::model::Contact]) -> Result<Self> {
-        Ok(Self::from_contacts(model, ContactData::new(&model.full, contacts)?))
     }
     /// Workspace for the contacts `cd` (made for the full tree or for the reduced model).
     pub(crate) fn from_contacts(model: &MimicModel, mut cd: ContactData) -> Self {

@@ -11,11 +11,10 @@
 //! `a_full = G a`, and `expand(q ⊕ δ) = expand(q) ⊕ G δ`.
 
 use crate::error::{Error, Result};
-use crate::model::{JointType, Model, UrdfOptions};
+use crate::model::{JointType, Model};
 use crate::rng::Rng;
 use crate::tensor::Tensor3;
 use nalgebra::{DMatrix, DVector};
-use std::path::Path;
 
 /// One mimic constraint `q[joint] = multiplier · q[reference] + offset` between two one-DoF
 /// joints of the full model (indices of [`Model::names`]).
@@ -210,79 +209,9 @@ impl MimicModel {
         })
     }
 
-    /// The reduced model of `full` with its own constraints ([`Model::mimic_joints`], read by
-    /// the URDF loader with [`UrdfOptions::mimic`]); none for other models.
-    ///
-    /// # Errors
-    /// As [`MimicModel::new`].
-    pub fn from_model(full: Model) -> Result<Self> {
-        if let Some(r) = &full.reduction {
-            return Ok((**r).clone());
-        }
-        let mimics = full.mimic_joints().to_vec();
-        Self::new(full, &mimics)
-    }
-
-    /// Loads a URDF file with its `<mimic>` constraints (the options with
-    /// [`UrdfOptions::mimic`] set; see [`crate::model::urdf`]).
-    ///
-    /// # Errors
-    /// Those of [`crate::model::load_urdf_file`], among them a `<mimic>` whose reference joint
-    /// is unknown, is itself a mimic joint, or is not a one-DoF joint of the mimic joint's kind
-    /// (naming the file, line and joint).
-    pub fn load_urdf_file(path: &Path, opts: &UrdfOptions) -> Result<Self> {
-        let opts = UrdfOptions { mimic: true, ..*opts };
-        Self::from_model(crate::model::load_urdf_file(path, &opts)?)
-    }
-
-    /// As [`MimicModel::load_urdf_file`] from a string (`source_name` names it in errors).
-    ///
-    /// # Errors
-    /// As [`MimicModel::load_urdf_file`].
-    pub fn load_urdf_str(xml: &str, source_name: &str, opts: &UrdfOptions) -> Result<Self> {
-        let opts = UrdfOptions { mimic: true, ..*opts };
-        Self::from_model(crate::model::load_urdf_str(xml, source_name, &opts)?)
-    }
-
-    /// Sets gravity (a linear acceleration in the world frame), as [`Model::set_gravity`].
-    ///
-    /// # Errors
-    /// [`Error::NotFinite`] if an entry is not finite (the model is unchanged).
-    pub fn set_gravity(&mut self, g: nalgebra::Vector3<f64>) -> Result<()> {
-        self.full.set_gravity(g)
-    }
-    /// The full tree, every joint independent (its `nq`, `nv` count the mimic joints).
-    pub fn full(&self) -> &Model {
-        &self.full
-    }
-    /// The constraints, by increasing joint index.
-    pub fn mimics(&self) -> &[MimicJoint] {
-        &self.mimics
-    }
     /// The model name.
     pub fn name(&self) -> &str {
         self.full.name()
-    }
-    /// Reduced configuration dimension.
-    pub fn nq(&self) -> usize {
-        self.nq
-    }
-    /// Reduced velocity dimension (degrees of freedom).
-    pub fn nv(&self) -> usize {
-        self.nv
-    }
-    /// Per joint of the full model, its first reduced configuration and velocity indices
-    /// `(idx_q, idx_v)`, or `None` for a mimic joint (index 0, the world: `Some((0, 0))`).
-    pub fn reduced_idx(&self) -> &[Option<(usize, usize)>] {
-        &self.reduced_idx
-    }
-    /// The full velocity index of each reduced velocity coordinate.
-    pub fn v_keep(&self) -> &[usize] {
-        &self.v_keep
-    }
-    /// The full configuration index of each reduced configuration coordinate.
-    pub fn q_keep(&self) -> &[usize] {
-        &self.q_keep
     }
     /// The map `G` (`full().nv() × nv()`), `v_full = G v`, as a dense matrix (allocates).
     pub fn g(&self) -> DMatrix<f64> {
@@ -377,24 +306,6 @@ impl MimicModel {
         })?;
         Ok(self.select_v(&self.full.difference(&q0f, &q1f)?))
     }
-    /// `∂(q ⊕ δ)/∂q` (`arg = First`) or `∂(q ⊕ δ)/∂δ` (`Second`) in the reduced coordinates
-    /// (`nv × nv`): the reduced configuration space is the product of the independent joints'
-    /// spaces, so this is block diagonal by independent joint, each block that of
-    /// [`Model::d_integrate`] (the rows and columns of the independent DoFs of the full
-    /// model's at `expand(q)`, `G δ`). [`MimicModel::d_integrate_into`] does not allocate.
-    ///
-    /// # Errors
-    /// As [`MimicModel::check_q`]; `delta` of the wrong length or not finite.
-    pub fn d_integrate(
-        &self,
-        q: &DVector<f64>,
-        delta: &DVector<f64>,
-        arg: crate::model::Arg,
-    ) -> Result<DMatrix<f64>> {
-        let mut out = DMatrix::zeros(self.nv, self.nv);
-        self.d_integrate_into(q, delta, arg, &mut out)?;
-        Ok(out)
-    }
     /// [`MimicModel::d_integrate`] into `out` (`nv × nv`; every entry written).
     ///
     /// # Errors
@@ -417,22 +328,6 @@ impl MimicModel {
                 blk,
             );
         })
-    }
-    /// `∂(q₁ ⊖ q₀)/∂q₀` (`arg = First`) or `∂(q₁ ⊖ q₀)/∂q₁` (`Second`) in the reduced
-    /// coordinates (`nv × nv`, block diagonal by independent joint, each block that of
-    /// [`Model::d_difference`]). [`MimicModel::d_difference_into`] does not allocate.
-    ///
-    /// # Errors
-    /// As [`MimicModel::check_q`] for `q0` and `q1`.
-    pub fn d_difference(
-        &self,
-        q0: &DVector<f64>,
-        q1: &DVector<f64>,
-        arg: crate::model::Arg,
-    ) -> Result<DMatrix<f64>> {
-        let mut out = DMatrix::zeros(self.nv, self.nv);
-        self.d_difference_into(q0, q1, arg, &mut out)?;
-        Ok(out)
     }
     /// [`MimicModel::d_difference`] into `out` (`nv × nv`; every entry written).
     ///

@@ -1,8 +1,9 @@
-//! The oracle of [`crate::mimic`]: the reference dynamics of the full tree composed with the
-//! mimic expansion, in any scalar.
+//! The oracle of the models in reduced coordinates (mimic joints,
+//! [`Model::with_mimic_joints`](crate::model::Model::with_mimic_joints)): the reference dynamics
+//! of the full tree composed with the mimic expansion, in any scalar.
 //!
 //! [`Reduced`] re-derives the reduced coordinates from the list of [`MimicJoint`]s and the
-//! model's index tables alone (not from [`crate::mimic::MimicModel`]): `q_full = expand(q)`
+//! model's index tables alone (not from the reduction that a reduced [`Model`] carries): `q_full = expand(q)`
 //! (independent coordinates copied, `m · q_ref + c` for each mimic joint), `v_full = G v`,
 //! `τ = Gᵀ τ_full`. Its `f64` oracles differentiate these compositions with dual and
 //! hyper-dual numbers, `q` in the tangent space of the reduced configuration
@@ -13,7 +14,7 @@ use super::derivatives::{eps, eps1, eps2, hessian, jacobian};
 use super::dynamics::{rnea, rnea_with_gravity, solve};
 use super::kinematics::{forward_kinematics, integrate};
 use super::{AdScalar, lift};
-use crate::mimic::MimicJoint;
+use crate::model::MimicJoint;
 use crate::model::{Contact, Model};
 use crate::tensor::Tensor3;
 use nalgebra::DMatrix;
@@ -244,13 +245,13 @@ impl Reduced<'_> {
         let f = rnea_with_gravity(self.full, &qf, &zero, &self.expand_v(x), None, false);
         self.reduce_force(&f)
     }
-    /// `∂(M x)/∂q` (tangent; the oracle of [`crate::mimic::idfoza`]).
+    /// `∂(M x)/∂q` (tangent; the oracle of [`crate::deriv::idfoza`] on a reduced model).
     pub fn d_mass_times_dq(&self, q: &[f64], x: &[f64]) -> DMatrix<f64> {
         let n = self.nv();
         let xd = lift::<Dual64>(x);
         jacobian(n, n, |j| self.mass_times(&self.perturb(&lift::<Dual64>(q), j, eps()), &xd))
     }
-    /// `∂²(M x)/∂q²` (nested tangent; the oracle of [`crate::mimic::idsoza`]).
+    /// `∂²(M x)/∂q²` (nested tangent; the oracle of [`crate::deriv::idsoza`] on a reduced model).
     pub fn d2_mass_times_dq2(&self, q: &[f64], x: &[f64]) -> Tensor3 {
         let n = self.nv();
         let xh = lift::<HyperDual64>(x);
@@ -292,8 +293,8 @@ impl Reduced<'_> {
     }
 }
 
-/// Contact dynamics in the reduced coordinates (the oracle of [`crate::mimic::kkt_derivatives`]
-/// and [`crate::mimic::constrained_id_derivatives`]).
+/// Contact dynamics in the reduced coordinates (the oracle of [`crate::deriv::kkt_derivatives`]
+/// and [`crate::deriv::constrained_id_derivatives`] on a reduced model).
 impl Reduced<'_> {
     /// `J(expand(q)) G` (rows of a `Vec`), the contact Jacobian of the reduced coordinates.
     pub fn contact_jacobian<T: AdScalar>(&self, q: &[T], contacts: &[Contact]) -> Vec<Vec<T>> {
