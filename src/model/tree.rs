@@ -1,11 +1,15 @@
 //! The kinematic tree: Model (immutable description) and its builder.
 
 use super::joint::{JointType, unit_axis};
-use super::urdf::INERTIA_ROUNDOFF_ABS;
 use crate::error::{Error, Result};
 use crate::rng::Rng;
 use crate::spatial::{Inertia, InertiaDefect, Motion, Transform};
 use nalgebra::{DMatrix, DVector, Vector3};
+
+/// Absolute round-off tolerance of the URDF loader (kg m²): a principal moment negative by at
+/// most this much is taken as zero, whatever the other moments (e.g. the all-zero inertia
+/// written `ixx="-5.42101e-20" iyy="-5.42101e-20"` by a CAD export).
+pub const INERTIA_ROUNDOFF_ABS: f64 = 1e-15;
 
 /// A named frame rigidly attached to a joint's body: every URDF link is one (also the links
 /// merged into their parent body by fixed joints).
@@ -99,7 +103,7 @@ pub struct Model {
     /// What the loader accepted with a reservation (see [`Model::warnings`]).
     pub(crate) warnings: Vec<String>,
     /// The tendons read by the MJCF loader (see [`Model::tendons`]).
-    pub(crate) tendons: Vec<super::mjcf::Tendon>,
+    pub(crate) tendons: Vec<super::tendon::Tendon>,
     /// Frames (URDF links), first one the world.
     pub(crate) frames: Vec<Frame>,
     /// Per joint, its indices and kind packed for the kinematics kernels (see [`JointKin`]);
@@ -462,8 +466,8 @@ impl Model {
         &self.warnings
     }
     /// The `<tendon>`s of an MJCF model, in document order (data only: they do not enter the
-    /// dynamics; see [`Tendon`](super::mjcf::Tendon)). Empty for other models.
-    pub fn tendons(&self) -> &[super::mjcf::Tendon] {
+    /// dynamics; see [`Tendon`](super::tendon::Tendon)). Empty for other models.
+    pub fn tendons(&self) -> &[super::tendon::Tendon] {
         &self.tendons
     }
     /// Frames (URDF links), the first one the world.

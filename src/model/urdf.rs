@@ -111,10 +111,7 @@ pub struct UrdfOptions {
 /// at most [`INERTIA_ROUNDOFF_ABS`]) is taken as zero.
 pub const INERTIA_ROUNDOFF_REL: f64 = 1e-12;
 
-/// Absolute round-off tolerance of the URDF loader (kg m²): a principal moment negative by at
-/// most this much is taken as zero, whatever the other moments (e.g. the all-zero inertia
-/// written `ixx="-5.42101e-20" iyy="-5.42101e-20"` by a CAD export).
-pub const INERTIA_ROUNDOFF_ABS: f64 = 1e-15;
+pub use super::tree::INERTIA_ROUNDOFF_ABS;
 
 /// `i_com` with its principal moments that are negative by round-off (see
 /// [`INERTIA_ROUNDOFF_REL`], [`INERTIA_ROUNDOFF_ABS`]) set to zero, rebuilt from its principal
