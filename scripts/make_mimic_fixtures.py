@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Generate the Pinocchio mimic-joint fixtures tests/fixtures/mimic_<name>.json (read by
-tests/mimic.rs).
+tests/all/derivatives/mimic.rs).
 
 Run with a Python that has pin==4.1.0 (e.g. the venv of python/tests/requirements.txt), from
 anywhere:

@@ -1,8 +1,7 @@
-//! What the fuzz targets check, in one place: the targets (`urdf.rs`, `mjcf.rs`, `state.rs`) call these
-//! functions on the fuzzer's bytes, and `tests/fuzz_regressions.rs` includes this file (with
-//! `#[path]`) to replay the reproducers of `tests/data/fuzz/` through the same checks in a
-//! normal `cargo test`. A check fails by panicking; every library call must return `Ok` or
-//! `Err`.
+//! What the fuzz targets check, in one place: the targets (`urdf.rs`, `mjcf.rs`, `state.rs`) call
+//! these functions on the fuzzer's bytes, and `tests/all/api/fuzz_regressions.rs` includes this
+//! file (with `#[path]`) to replay the reproducers of `tests/data/fuzz/` through the same checks in
+//! a normal `cargo test`. A check fails by panicking; every library call must return `Ok` or `Err`.
 
 use nalgebra::DVector;
 use sodyn::algo::{Data, aba, crba, nonlinear_effects, rnea};

@@ -1,0 +1,3 @@
+//! The `sodyn` binary (feature `cli`).
+
+mod commands;

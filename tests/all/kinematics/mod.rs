@@ -1,0 +1,10 @@
+//! Kinematics: frames, points, centre of mass, centroidal momentum, configuration-space Jacobians
+//! and spatial identities.
+
+mod centroidal;
+mod com;
+mod frames;
+mod lie;
+mod mimic_kinematics;
+mod mimic_points;
+mod spatial_identities;

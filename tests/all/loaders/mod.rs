@@ -1,0 +1,5 @@
+//! Model loaders: URDF, MJCF and the built-in models.
+
+mod builtin;
+mod mjcf;
+mod urdf;

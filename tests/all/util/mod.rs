@@ -1,0 +1,211 @@
+//! Shared helpers for the oracle tests.
+#![allow(dead_code)]
+
+pub mod mimic;
+
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use num_dual::{Dual64 as D, HyperHyperDual64 as H};
+use sodyn::model::{Model, builtin};
+use sodyn::reference::kinematics::forward_kinematics;
+use sodyn::rng::Rng;
+use sodyn::tensor::Tensor3;
+
+/// Relative error `max|a − b| / max(1, max|b|)`.
+pub fn rel_err_mat(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
+    assert_eq!(a.shape(), b.shape());
+    (a - b).amax() / b.amax().max(1.0)
+}
+
+/// Relative error of vectors.
+pub fn rel_err_vec(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
+    assert_eq!(a.len(), b.len());
+    (a - b).amax() / b.amax().max(1.0)
+}
+
+/// Relative error of tensors.
+pub fn rel_err_tensor(a: &Tensor3, b: &Tensor3) -> f64 {
+    assert_eq!(a.dims(), b.dims());
+    a.max_abs_diff(b) / b.max_abs().max(1.0)
+}
+
+/// A random state (q, v, a-or-tau) for `model`.
+pub fn random_state(model: &Model, rng: &mut Rng) -> (DVector<f64>, DVector<f64>, DVector<f64>) {
+    let q = model.random_configuration(rng);
+    let v = DVector::from_fn(model.nv(), |_, _| rng.range(-1.0, 1.0));
+    let a = DVector::from_fn(model.nv(), |_, _| rng.range(-1.0, 1.0));
+    (q, v, a)
+}
+
+/// Test models: chains, the built-in robots and random trees mixing every joint type, fixed and
+/// floating base, up to `max_dof` degrees of freedom.
+pub fn test_models(max_dof: usize) -> Vec<Model> {
+    let mut out = vec![builtin::serial_chain(1), builtin::serial_chain(7), builtin::pendulum(2)];
+    out.push(builtin::quadruped());
+    out.push(builtin::humanoid());
+    out.push(with_random_armature(&builtin::quadruped(), 1, true));
+    for seed in 0..6u64 {
+        for &n in &[3usize, 8, 15, 24, 35] {
+            for &ff in &[false, true] {
+                let m = builtin::random_tree(n, seed * 31 + n as u64, ff);
+                // Half of the random trees with an armature (seeds 1, 3, 5), on the free
+                // flyer's DoFs too for seed 3.
+                let m = if seed % 2 == 1 {
+                    with_random_armature(&m, seed + n as u64, seed == 3)
+                } else {
+                    m
+                };
+                out.push(m);
+            }
+        }
+    }
+    out.retain(|m| m.nv() <= max_dof);
+    out
+}
+
+/// `m` with a random armature in `[0, 0.5)` on each DoF (except a root free flyer's six unless
+/// `root`), about one DoF in five left at zero.
+pub fn with_random_armature(m: &Model, seed: u64, root: bool) -> Model {
+    let mut rng = Rng::new(1000 + seed);
+    let ff = matches!(m.joints().get(1), Some(sodyn::model::JointType::FreeFlyer));
+    let a: Vec<f64> = (0..m.nv())
+        .map(|k| {
+            let x = rng.range(0.0, 0.5);
+            let y = rng.range(0.0, 1.0);
+            if (ff && k < 6 && !root) || y < 0.2 { 0.0 } else { x }
+        })
+        .collect();
+    m.with_armature(&a).unwrap()
+}
+
+/// Tracks and reports the worst relative error of a quantity.
+pub struct Worst {
+    pub name: &'static str,
+    pub err: f64,
+    pub at: String,
+}
+
+impl Worst {
+    pub fn new(name: &'static str) -> Self {
+        Self { name, err: 0.0, at: String::new() }
+    }
+    pub fn add(&mut self, err: f64, at: &str) {
+        assert!(err.is_finite(), "{}: non-finite error at {at}", self.name);
+        if err > self.err {
+            self.err = err;
+            self.at = at.to_string();
+        }
+    }
+    /// Prints and asserts the worst error is at most `tol`.
+    pub fn check(&self, tol: f64) {
+        eprintln!(
+            "{:<28} max rel err {:.3e} (at {}), tolerance {:e}",
+            self.name, self.err, self.at, tol
+        );
+        assert!(
+            self.err <= tol,
+            "{}: max rel err {:e} > {:e} at {}",
+            self.name,
+            self.err,
+            tol,
+            self.at
+        );
+    }
+}
+
+/// (model, contact frames) cases: fixed and floating base, 1–4 contacts.
+pub fn contact_cases() -> Vec<(Model, Vec<&'static str>)> {
+    vec![
+        (builtin::quadruped(), vec!["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"]),
+        (with_random_armature(&builtin::quadruped(), 2, true), vec!["LF_FOOT", "RH_FOOT"]),
+        (builtin::serial_chain(6), vec!["ee"]),
+        (
+            with_random_armature(&builtin::random_tree(8, 3, true), 3, false),
+            vec!["body_5", "body_7", "body_2"],
+        ),
+        (builtin::random_tree(10, 21, false), vec!["body_9", "body_4"]),
+    ]
+}
+
+/// A case with nv ≥ 32, where the KKT and impact second order take their symmetric products
+/// (`kkt::SYM_MIN_NV`); its hyper-dual oracle takes seconds, so only those tests run it.
+pub fn large_contact_case() -> (Model, Vec<&'static str>) {
+    (builtin::random_tree(28, 5, true), vec!["body_27", "body_13"])
+}
+
+/// Contacts on `frames`, each at a random point within about 5 cm of the frame origin.
+pub fn contacts_of(m: &Model, frames: &[&str], rng: &mut Rng) -> Vec<sodyn::algo::Contact> {
+    frames
+        .iter()
+        .map(|f| {
+            sodyn::algo::Contact::new(
+                m,
+                f,
+                nalgebra::Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.05,
+            )
+            .unwrap()
+        })
+        .collect()
+}
+
+/// The centroidal oracle of `tests/all/kinematics/centroidal.rs` and
+/// `tests/all/kinematics/mimic_kinematics.rs`, written independently from the reference placements:
+/// `[k; l]` about the centre of mass and its `t`-derivative, each with its `ε`-derivative, from the
+/// `H` placements (`t`: `ε₁`, `ε₂`; `ε`: `ε₃`).
+pub fn centroidal_momentum_oracle(m: &Model, q: &[H]) -> [[f64; 4]; 6] {
+    // Returns for each of the 6 components: [value, ∂/∂t, ∂/∂ε, ∂²/∂t∂ε].
+    let world = forward_kinematics(m, q);
+    // Split an H into (f, f_ε) for the value and the t-derivative: value part re/eps3,
+    // t-derivative eps1/eps1eps3, second t-derivative eps1eps2/eps1eps2eps3.
+    let d0 = |x: &H| D::new(x.re, x.eps3);
+    let d1 = |x: &H| D::new(x.eps1, x.eps1eps3);
+    let d2 = |x: &H| D::new(x.eps1eps2, x.eps1eps2eps3);
+    let mut mass = 0.0;
+    let mut mc = [Vector3::<D>::zeros(); 3]; // Σ m c, its 1st and 2nd t-derivatives
+    let mut bodies = vec![];
+    for (i, inertia) in m.inertias().iter().enumerate().skip(1) {
+        let cl = inertia.com();
+        let clh = Vector3::new(H::from_re(cl.x), H::from_re(cl.y), H::from_re(cl.z));
+        let ci = world[i].act_point(&clh);
+        let r = &world[i].rot;
+        let pick = |f: &dyn Fn(&H) -> D| {
+            (Matrix3::from_fn(|a, b| f(&r[(a, b)])), Vector3::from_fn(|a, _| f(&ci[a])))
+        };
+        let (r0, c0) = pick(&d0);
+        let (r1, c1) = pick(&d1);
+        let (r2, c2) = pick(&d2);
+        for (acc, x) in mc.iter_mut().zip([c0, c1, c2]) {
+            *acc += x * D::from(inertia.mass);
+        }
+        mass += inertia.mass;
+        let ibar = inertia.inertia_about_com();
+        let ib = Matrix3::from_fn(|a, b| D::from(ibar[(a, b)]));
+        bodies.push((inertia.mass, ib, r0, r1, r2, c0, c1, c2));
+    }
+    let c = mc[0] / D::from(mass);
+    let cd = mc[1] / D::from(mass);
+    let cdd = mc[2] / D::from(mass);
+    // k = Σ R Ī Rᵀ ω + m (c_i − c) × ċ_i; its t-derivative by the product rule.
+    let (mut k, mut kd) = (Vector3::<D>::zeros(), Vector3::<D>::zeros());
+    for (mi, ib, r0, r1, r2, c0, c1, c2) in bodies {
+        let w = Vector3::new(
+            (r1 * r0.transpose())[(2, 1)],
+            (r1 * r0.transpose())[(0, 2)],
+            (r1 * r0.transpose())[(1, 0)],
+        );
+        let wdm = r2 * r0.transpose() + r1 * r1.transpose();
+        let wd = Vector3::new(wdm[(2, 1)], wdm[(0, 2)], wdm[(1, 0)]);
+        let iw = r0 * ib * r0.transpose();
+        let iwd = r1 * ib * r0.transpose() + r0 * ib * r1.transpose();
+        let m_ = D::from(mi);
+        k += iw * w + (c0 - c).cross(&c1) * m_;
+        kd += iwd * w + iw * wd + ((c1 - cd).cross(&c1) + (c0 - c).cross(&c2)) * m_;
+    }
+    let l = cd * D::from(mass);
+    let ld = cdd * D::from(mass);
+    let mut out = [[0.0; 4]; 6];
+    for j in 0..3 {
+        out[j] = [k[j].re, kd[j].re, k[j].eps, kd[j].eps];
+        out[3 + j] = [l[j].re, ld[j].re, l[j].eps, ld[j].eps];
+    }
+    out
+}
