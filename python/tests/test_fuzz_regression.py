@@ -110,3 +110,28 @@ def test_foreign_data_is_detected():
     m = fuzz_api.MODELS["humanoid"]
     assert fuzz_api.foreign_data(m, fuzz_api.DATAS["pendulum2"])
     assert not fuzz_api.foreign_data(m, fuzz_api.DATAS["humanoid"])
+
+
+def test_from_pinocchio_refuses_bad_indices_and_non_models():
+    # Findings of the fuzz target: a joint index near 2**64 wrapped and panicked; a missing
+    # attribute was an AttributeError.
+    def fake():
+        pm = fuzz_api.fake_pinocchio_model(fuzz_api.Src(b""))  # one joint, nq = nv = 1
+        pm.joints[1].short = "JointModelRX"
+        return pm
+
+    pm = fake()
+    assert sodyn.Model.from_pinocchio(pm).nv == pm.nv
+    for field, value in (("idx_q", 2**64 - 1), ("idx_q", 2**64 - 2), ("idx_v", 5)):
+        pm = fake()
+        setattr(pm.joints[1], field, value)
+        with pytest.raises(sodyn.SodynError, match="joint"):
+            sodyn.Model.from_pinocchio(pm)
+    pm = fake()
+    pm.armature = np.zeros(pm.nv + 1)
+    pm.nv += 1  # nv larger than the joints' velocity coordinates
+    with pytest.raises(sodyn.SodynError):
+        sodyn.Model.from_pinocchio(pm)
+    for obj in (None, object(), sodyn.Model.builtin("pendulum2")):
+        with pytest.raises(TypeError, match="pinocchio.Model"):
+            sodyn.Model.from_pinocchio(obj)
