@@ -19,6 +19,7 @@ use crate::convert::core_err;
 use crate::model::PyModel;
 use nalgebra::{Matrix3, Vector3};
 use numpy::PyArray1;
+use pyo3::exceptions::{PyAttributeError, PyTypeError};
 use pyo3::prelude::*;
 use sodyn::Error;
 use sodyn::model::{JointType, ModelBuilder};
@@ -167,11 +168,19 @@ pub(crate) fn model_from_pinocchio(py: Python<'_>, pm: &Bound<'_, PyAny>) -> PyR
             JointType::Planar => 4,
             k => k.nq(),
         };
-        if nq != pin_nq || jnv != kind.nv() || idx_v != nv || idx_q + nq > nq_pin {
+        if nq != pin_nq || jnv != kind.nv() || idx_v != nv {
             return Err(build_err(format!(
                 "{who}: {shortname} with idx_q {idx_q}, nq {nq}, idx_v {idx_v}, nv {jnv} \
                  (expected nq {pin_nq}, nv {}, idx_v {nv})",
                 kind.nv()
+            )));
+        }
+        // The joint's coordinates must lie inside the model's q and v (checked sums: the
+        // indices are read from a duck-typed object and may be anything up to u64::MAX).
+        if idx_q.checked_add(nq).is_none_or(|end| end > nq_pin) || nv + jnv > nv_pin {
+            return Err(build_err(format!(
+                "{who}: {shortname} with idx_q {idx_q}, nq {nq}, idx_v {idx_v}, nv {jnv} \
+                 lies outside the model's nq {nq_pin}, nv {nv_pin}"
             )));
         }
         let parent: usize = parents.get_item(i)?.extract()?;
@@ -260,6 +269,17 @@ impl PyModel {
     /// Jacobians between the two layouts.
     #[staticmethod]
     fn from_pinocchio(py: Python<'_>, pin_model: &Bound<'_, PyAny>) -> PyResult<Self> {
-        model_from_pinocchio(py, pin_model)
+        // A missing attribute means the object is not a Pinocchio model: a `TypeError`.
+        model_from_pinocchio(py, pin_model).map_err(|e| {
+            if e.is_instance_of::<PyAttributeError>(py) {
+                PyTypeError::new_err(format!(
+                    "Model.from_pinocchio: expected a pinocchio.Model, got {}: {}",
+                    pin_model.get_type().name().map_or_else(|_| "?".into(), |n| n.to_string()),
+                    e.value(py)
+                ))
+            } else {
+                e
+            }
+        })
     }
 }

@@ -580,7 +580,10 @@ impl Solver {
     }
 
     fn increase_regularization(&mut self) {
-        self.preg = (self.preg * self.reg_factor).min(self.reg_max);
+        // From `preg = 0` (`init_reg = 0`) the product stays 0 and a failing backward pass
+        // would be retried forever: the next value is at least `reg_min` (and positive).
+        let floor = self.reg_min.max(f64::MIN_POSITIVE);
+        self.preg = (self.preg * self.reg_factor).max(floor).min(self.reg_max);
     }
     fn decrease_regularization(&mut self) {
         self.preg = (self.preg / self.reg_factor).max(self.reg_min);
