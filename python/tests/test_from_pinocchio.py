@@ -338,5 +338,5 @@ def test_unsupported_joint_is_an_error():
 
 
 def test_not_a_pinocchio_model():
-    with pytest.raises(AttributeError):
+    with pytest.raises(TypeError, match="expected a pinocchio.Model"):
         sodyn.Model.from_pinocchio(object())
