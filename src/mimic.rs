@@ -81,7 +81,7 @@ pub use kinematics::{
 };
 
 /// Workspace of the first-order algorithms of a [`MimicModel`] (the full model's [`Data`] and
-/// the reduced results), allocated once by [`MimicData::new`].
+/// the reduced results), allocated once by [`Data::new`].
 #[derive(Clone, Debug)]
 pub struct MimicData {
     full: Data,
@@ -143,8 +143,8 @@ impl MimicData {
     pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
         if self.key != model.key || self.tau.len() != model.nv {
             return Err(Error::Workspace(format!(
-                "MimicData was made for another model; make it with MimicData::new for the \
-                 mimic model \"{}\"",
+                "Data was made for another model; make it with Data::new for the \
+                 reduced model \"{}\"",
                 model.name()
             )));
         }
@@ -236,8 +236,8 @@ impl MimicSoData {
     pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
         if self.key != model.key || self.page.nrows() != model.nv {
             return Err(Error::Workspace(format!(
-                "MimicSoData was made for another model; make it with MimicSoData::new for the \
-                 mimic model \"{}\"",
+                "SoData was made for another model; make it with SoData::new for the \
+                 reduced model \"{}\"",
                 model.name()
             )));
         }
@@ -912,7 +912,7 @@ impl MimicKktData {
     pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
         if self.key != model.key || self.qdd.len() != model.nv {
             return Err(Error::Workspace(format!(
-                "MimicKktData was made for another model; make it with MimicKktData::new for \
+                "KktData was made for another model; make it with KktData::new for \
                  the mimic model \"{}\"",
                 model.name()
             )));
@@ -1207,9 +1207,7 @@ pub fn kkt_so_derivatives(
     tau: &DVector<f64>,
 ) -> Result<()> {
     let mut so = kd.so.take().ok_or_else(|| {
-        Error::Workspace(
-            "kkt_so_derivatives: MimicKktData was made without with_second_order".into(),
-        )
+        Error::Workspace("kkt_so_derivatives: KktData was made without with_second_order".into())
     })?;
     let r = kkt_inner(model, data, kd, q, v, tau, true)
         .map(|()| kkt_so_reduce(model, data, kd, &mut so));
@@ -1632,8 +1630,8 @@ pub fn impact_dynamics(
 ) -> Result<()> {
     if im.key != model.key || im.vplus.len() != model.nv {
         return Err(Error::Workspace(format!(
-            "MimicImpactData was made for another model; make it with MimicImpactData::new \
-             for the mimic model \"{}\"",
+            "ImpactData was made for another model; make it with ImpactData::new \
+             for the reduced model \"{}\"",
             model.name()
         )));
     }
@@ -1772,7 +1770,7 @@ pub fn impact_so_derivatives(
 ) -> Result<()> {
     let mut so = im.so.take().ok_or_else(|| {
         Error::Workspace(
-            "impact_so_derivatives: MimicImpactData was made without with_second_order".into(),
+            "impact_so_derivatives: ImpactData was made without with_second_order".into(),
         )
     })?;
     let r = impact_derivatives(model, data, im, q, vminus)
@@ -1971,8 +1969,8 @@ impl MimicContractedData {
     pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
         if self.key != model.key || self.mu.len() != model.nv {
             return Err(Error::Workspace(format!(
-                "MimicContractedData was made for another model; make it with \
-                 MimicContractedData::new for the mimic model \"{}\"",
+                "ContractedData was made for another model; make it with \
+                 ContractedData::new for the reduced model \"{}\"",
                 model.name()
             )));
         }
@@ -2135,8 +2133,8 @@ impl MimicKktContracted {
     fn check(&self, model: &MimicModel, m: usize) -> Result<()> {
         if self.key != model.key || self.zeta.len() != model.nv + m {
             return Err(Error::Workspace(format!(
-                "MimicKktContracted was made for another model or contact set; make it with \
-                 MimicKktContracted::new for the mimic model \"{}\" and this MimicKktData",
+                "KktContracted was made for another model or contact set; make it with \
+                 KktContracted::new for the reduced model \"{}\" and this KktData",
                 model.name()
             )));
         }
@@ -2321,8 +2319,8 @@ impl MimicImpactContracted {
     fn check(&self, model: &MimicModel, m: usize) -> Result<()> {
         if self.key != model.key || self.zeta.len() != model.nv + m {
             return Err(Error::Workspace(format!(
-                "MimicImpactContracted was made for another model or contact set; make it with \
-                 MimicImpactContracted::new for the mimic model \"{}\" and this MimicImpactData",
+                "ImpactContracted was made for another model or contact set; make it with \
+                 ImpactContracted::new for the reduced model \"{}\" and this ImpactData",
                 model.name()
             )));
         }
@@ -2845,7 +2843,7 @@ pub fn centroidal_dynamics_derivatives(
 ) -> Result<()> {
     if out.key != model.key || out.ag.ncols() != model.nv {
         return Err(Error::Workspace(format!(
-            "MimicCentroidal was made for another model; make it with MimicCentroidal::new for \
+            "Centroidal was made for another model; make it with Centroidal::new for \
              the mimic model \"{}\"",
             model.name()
         )));
