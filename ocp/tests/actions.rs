@@ -321,3 +321,46 @@ fn a_model_in_reduced_coordinates_is_refused() {
         .unwrap_err();
     assert!(e.message.contains("mimic joints in reduced coordinates"), "{}", e.message);
 }
+
+/// A backward pass that fails at zero regularisation (no cost at all: `Q_uu = 0`) from
+/// `init_reg = 0` raises the regularisation to `reg_min` and solves, instead of retrying at 0
+/// forever; a regularisation schedule that cannot grow is an error.
+#[test]
+fn zero_initial_regularisation_and_bad_schedules() {
+    let m = model();
+    let st = StateMultibody::new(Arc::new((*m).clone()));
+    let x0 = st.zero();
+    let run = json!({"type": "euler", "dt": 0.02, "actuation": "floating_base",
+        "contacts": contact_list(&FEET, false), "costs": []});
+    let term = json!({"type": "euler", "dt": 0.0, "actuation": "floating_base",
+        "contacts": contact_list(&FEET, false), "costs": []});
+    let doc = json!({"x0": x0.as_slice(), "running": vec![run; 3], "terminal": term}).to_string();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let m2 = m.clone();
+    let doc2 = doc.clone();
+    std::thread::spawn(move || {
+        let p = spec::problem_from_json(m2, &doc2).expect("problem");
+        let mut s = Solver::new(p, SolverKind::Fddp);
+        let x0 = s.problem.x0().clone();
+        let xs = vec![x0; 4];
+        let us = s.problem.quasi_static(&xs[..3]).expect("quasi_static");
+        let r = s.solve(&xs, &us, 5, false, Some(0.0)).map(|_| s.cost());
+        let _ = tx.send(r);
+    });
+    let r = rx.recv_timeout(std::time::Duration::from_secs(120)).expect("the solve returns");
+    assert!(r.expect("solve").is_finite());
+    let p = spec::problem_from_json(m.clone(), &doc).expect("problem");
+    let mut s = Solver::new(p, SolverKind::Fddp);
+    let x0 = s.problem.x0().clone();
+    let (xs, us) = (vec![x0; 4], vec![DVector::zeros(12); 3]);
+    for (f, lo, hi, what) in [
+        (1.0, 1e-9, 1e9, "reg_factor"),
+        (f64::NAN, 1e-9, 1e9, "reg_factor"),
+        (10.0, 1.0, 0.5, "reg_min"),
+        (10.0, 1e-9, f64::INFINITY, "reg_max"),
+    ] {
+        (s.reg_factor, s.reg_min, s.reg_max) = (f, lo, hi);
+        let e = s.solve(&xs, &us, 5, false, None).expect_err(what).to_string();
+        assert!(e.contains(what), "{e}");
+    }
+}

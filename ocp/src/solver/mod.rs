@@ -423,6 +423,16 @@ impl Solver {
         {
             return Err(OcpError::new(format!("init_reg: {r} must be finite and >= 0")));
         }
+        // The regularisation schedule terminates only if it grows geometrically to reg_max.
+        let (lo, hi, f) = (self.reg_min, self.reg_max, self.reg_factor);
+        if !(lo.is_finite() && hi.is_finite() && lo >= 0.0 && lo <= hi) {
+            return Err(OcpError::new(format!(
+                "reg_min = {lo}, reg_max = {hi}: they must be finite with 0 <= reg_min <= reg_max"
+            )));
+        }
+        if !(f.is_finite() && f > 1.0) {
+            return Err(OcpError::new(format!("reg_factor = {f} must be finite and > 1")));
+        }
         self.xs_try[0].copy_from(self.problem.x0());
         self.set_candidate(init_xs, init_us, is_feasible)?;
         self.preg = init_reg.unwrap_or(self.reg_min);
