@@ -4,7 +4,7 @@
 ↔ ``rnea − J_cᵀλ`` (Pinocchio's frame Jacobians) and the KKT solution, and every order-2 output
 against central differences of the order-1 calls.
 
-Mapping (as in tests/pinocchio_contacts.rs): Pinocchio ``RigidConstraintModel(CONTACT_3D, model,
+Mapping (as in tests/all/pinocchio/contacts.rs): Pinocchio ``RigidConstraintModel(CONTACT_3D, model,
 frame.parentJoint, frame.placement · SE3(I, point), LOCAL_WORLD_ALIGNED)`` per contact gives
 world-axis forces/impulses applied on the robot, in contact order: our ``λ``; rows compared
 unpermuted, dof columns through the joint permutation. Pinocchio's ``data.ddq_dv`` after the

@@ -10,7 +10,7 @@ name: Pinocchio orders siblings alphabetically and gives a mimic joint ``nq = nv
 in ``Model.joints``); continuous joints are ``[cos, sin]`` in Pinocchio's ``q``.
 
 The derivatives (first and second order, forward dynamics) are checked against central
-differences here and against the automatic-differentiation oracle in ``tests/mimic.rs``.
+differences here and against the automatic-differentiation oracle in ``tests/all/derivatives/mimic.rs``.
 
 Skips, saying why, when example-robot-data 6.0.0 is not installed.
 """
@@ -372,7 +372,7 @@ def test_bad_inputs_raise_and_batches_accept_mimic_models():
 
 def test_contacts_match_central_differences():
     """KKT (first and second order), impact and constrained inverse dynamics of a mimic model:
-    central differences of the outputs (the AD oracle is in tests/mimic.rs). No kp: its
+    central differences of the outputs (the AD oracle is in tests/all/derivatives/mimic.rs). No kp: its
     reference placement is the one at each call's q, so differences across calls miss its term."""
     model = sodyn.Model.from_urdf(str(ARM), floating_base=True, mimic=True)
     d = model.create_data()
@@ -473,7 +473,7 @@ def test_idfoza_idsoza_match_tensors_and_differences():
 def test_contact_contracted_equals_contracted_tensors():
     """kkt_so_contracted and impact_so_contracted of a mimic model against the contraction of
     the dense second order of kkt_derivatives and impact_derivatives (order=2; both checked
-    against the AD oracle in tests/mimic.rs and tests/mimic_contracted.rs)."""
+    against the AD oracle in tests/all/derivatives/mimic.rs and tests/all/derivatives/mimic_contracted.rs)."""
     model = sodyn.Model.from_urdf(str(ARM), floating_base=True, mimic=True)
     d = model.create_data()
     n = model.nv
