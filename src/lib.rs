@@ -19,7 +19,6 @@ pub mod bench_internals;
 pub mod deriv;
 pub mod error;
 mod linalg;
-pub(crate) mod mimic;
 pub mod model;
 pub mod reference;
 pub mod rng;

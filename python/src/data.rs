@@ -72,6 +72,16 @@ impl PyData {
     }
 }
 
+// `Model.create_data` is defined here, beside the class it makes, so that the model module does
+// not import this one (pyo3's `multiple-pymethods`).
+#[pymethods]
+impl PyModel {
+    /// A workspace for this model (same as `Data(model)`).
+    fn create_data(&self) -> PyData {
+        PyData::for_py_model(self)
+    }
+}
+
 /// Reads `(q, v, x)` into the data's buffers (`x` is `a` or `tau`).
 pub(crate) fn read_qvx(
     m: &Model,

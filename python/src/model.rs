@@ -5,7 +5,6 @@ use crate::convert::{
     array, core_err, lie_arg, nq_what, nv_what, out_mat, out_vec, python_message, read_q, read_vec,
     shape_str, value_err,
 };
-use crate::data::PyData;
 use nalgebra::{DVector, Matrix3, Vector3};
 use numpy::PyArray1;
 use numpy::PyUntypedArrayMethods;
@@ -484,11 +483,6 @@ impl PyModel {
         read_q(q0, "q0", &self.m, &mut a)?;
         read_q(q1, "q1", &self.m, &mut b)?;
         Ok(out_mat(py, &self.m.d_difference(&a, &b, arg).map_err(core_err)?))
-    }
-
-    /// A workspace for this model (same as `Data(model)`).
-    fn create_data(&self) -> PyData {
-        PyData::for_py_model(self)
     }
 
     /// The model as plain Python data (for pickling; `_model_from_description` rebuilds it).

@@ -54,7 +54,7 @@ pub fn aba<'a>(
     fext: Option<&[Force]>,
 ) -> Result<&'a DVector<f64>> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::aba(r, data.reduced(model)?, q, v, tau, fext);
+        return crate::algo::aba::reduced::aba(r, data.reduced(model)?, q, v, tau, fext);
     }
     model.check_q(q)?;
     data.check_tree(model)?;
@@ -476,4 +476,54 @@ fn invert_small(
         }
     }
     Ok(out)
+}
+
+/// The reduced coordinates of a model with mimic joints ([`crate::model::Model::is_reduced`]):
+/// the full tree's functions of this family at `q_full = expand(q)`, `G v`, `G a`, reduced
+/// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
+pub(crate) mod reduced {
+
+    use crate::error::Result;
+    use crate::spatial::Force;
+
+    use crate::algo::data::reduced::MimicData;
+    use crate::algo::data::reduced::ldl_in_place;
+    use crate::algo::data::reduced::ldl_solve;
+    use crate::algo::data::reduced::prepare;
+    use crate::algo::rnea::reduced::bias_into;
+    use crate::model::reduction::MimicModel;
+    use nalgebra::DVector;
+
+    /// Forward dynamics `q̈ = M⁻¹(τ − Gᵀ b_full(expand(q), G v))`, `M = Gᵀ M_full G` factorised
+    /// densely (`L D Lᵀ`). Returns `data.qdd()`; leaves `M` in `data.m()` and `G q̈` in
+    /// `data.a_full()`.
+    ///
+    /// # Errors
+    /// As [`rnea`], and [`Error::Singular`] (naming the pivot, its reduced velocity index and
+    /// joint) when `M` is singular: a pivot not positive and finite, or the smallest at most
+    /// `1e-14` times the largest.
+    pub fn aba<'a>(
+        model: &MimicModel,
+        data: &'a mut MimicData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        tau: &DVector<f64>,
+        fext: Option<&[Force]>,
+    ) -> Result<&'a DVector<f64>> {
+        prepare(model, data, q, Some(v), Some(("tau", tau)))?;
+        {
+            let MimicData { full, q, v, a, qdd, .. } = &mut *data;
+            bias_into(model, full, q, v, a, fext, qdd.as_mut_slice())?;
+        }
+        for (x, &t) in data.qdd.iter_mut().zip(tau.iter()) {
+            *x = t - *x;
+        }
+        let m = crate::algo::crba(&model.full, &mut data.full, &data.q)?;
+        model.reduce_matrix(m, &mut data.m);
+        data.ldl.copy_from(&data.m);
+        ldl_in_place(model, &mut data.ldl)?;
+        ldl_solve(&data.ldl, data.qdd.as_mut_slice());
+        model.expand_v_into(data.qdd.as_slice(), data.a.as_mut_slice());
+        Ok(&data.qdd)
+    }
 }

@@ -37,14 +37,16 @@ pub struct Centroidal {
     dhdot_dv: DMatrix<f64>,
     /// For a model in reduced coordinates: the full tree's results and the reduced ones,
     /// which the accessors return (the fields above are then empty).
-    pub(crate) red: Option<Box<crate::mimic::MimicCentroidal>>,
+    pub(crate) red: Option<Box<crate::algo::centroidal::reduced::MimicCentroidal>>,
 }
 
 impl Centroidal {
     /// Results for `model`.
     pub fn new(model: &Model) -> Self {
         let (nv, red) = match &model.reduction {
-            Some(r) => (0, Some(Box::new(crate::mimic::MimicCentroidal::new(r)))),
+            Some(r) => {
+                (0, Some(Box::new(crate::algo::centroidal::reduced::MimicCentroidal::new(r))))
+            }
             None => (model.nv, None),
         };
         let z = || DMatrix::zeros(6, nv);
@@ -118,7 +120,12 @@ pub fn centroidal_momentum(
     v: &DVector<f64>,
 ) -> Result<[f64; 6]> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::centroidal_momentum(r, data.reduced(model)?, q, v);
+        return crate::algo::kinematics::reduced::centroidal_momentum(
+            r,
+            data.reduced(model)?,
+            q,
+            v,
+        );
     }
     forward_kinematics(model, data, q, Some(v), None)?;
     let (mut h, mut mass, mut mc) = (Force::zero(), 0.0, Vector3::zeros());
@@ -152,8 +159,8 @@ pub fn centroidal_dynamics_derivatives(
     a: &DVector<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        let out_r = crate::mimic::reduced_ws(&mut out.red, "Centroidal", model)?;
-        return crate::mimic::centroidal_dynamics_derivatives(
+        let out_r = crate::algo::data::reduced::reduced_ws(&mut out.red, "Centroidal", model)?;
+        return crate::algo::centroidal::reduced::centroidal_dynamics_derivatives(
             r,
             data.reduced(model)?,
             out_r,
@@ -245,4 +252,108 @@ pub fn centroidal_dynamics_derivatives(
         }
     }
     Ok(())
+}
+
+/// The reduced coordinates of a model with mimic joints ([`crate::model::Model::is_reduced`]):
+/// the full tree's functions of this family at `q_full = expand(q)`, `G v`, `G a`, reduced
+/// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
+pub(crate) mod reduced {
+
+    use crate::error::{Error, Result};
+
+    use crate::algo::data::reduced::MimicData;
+    use crate::algo::data::reduced::prepare;
+    use crate::model::reduction::MimicModel;
+    use nalgebra::{DMatrix, DVector};
+
+    /// Results of [`centroidal_dynamics_derivatives`] for a [`MimicModel`]: the full tree's
+    /// [`crate::algo::Centroidal`] and its matrices times `G` (`6 × nv`, reduced), allocated once.
+    #[derive(Clone, Debug)]
+    pub struct MimicCentroidal {
+        pub(crate) full: crate::algo::Centroidal,
+        pub(crate) ag: DMatrix<f64>,
+        pub(crate) dh_dq: DMatrix<f64>,
+        pub(crate) dhdot_dq: DMatrix<f64>,
+        pub(crate) dhdot_dv: DMatrix<f64>,
+        pub(crate) key: u64,
+    }
+
+    impl MimicCentroidal {
+        /// Results for `model`.
+        pub fn new(model: &MimicModel) -> Self {
+            let z = || DMatrix::zeros(6, model.nv);
+            Self {
+                full: crate::algo::Centroidal::new(&model.full),
+                ag: z(),
+                dh_dq: z(),
+                dhdot_dq: z(),
+                dhdot_dv: z(),
+                key: model.key,
+            }
+        }
+        /// Centroidal momentum `h_G` (that of the full tree at `expand(q)`, `G q̇`).
+        pub fn h(&self) -> &[f64; 6] {
+            self.full.h()
+        }
+        /// Its time derivative `ḣ_G` (no gravity).
+        pub fn hdot(&self) -> &[f64; 6] {
+            self.full.hdot()
+        }
+        /// Centroidal momentum matrix `A_G = A_G,full G` (`6 × nv`): `h_G = A_G q̇`; also `∂ḣ_G/∂q̈`.
+        pub fn ag(&self) -> &DMatrix<f64> {
+            &self.ag
+        }
+        /// `∂h_G/∂q` (`6 × nv`, tangent space of the reduced configuration).
+        pub fn dh_dq(&self) -> &DMatrix<f64> {
+            &self.dh_dq
+        }
+        /// `∂ḣ_G/∂q` (`6 × nv`).
+        pub fn dhdot_dq(&self) -> &DMatrix<f64> {
+            &self.dhdot_dq
+        }
+        /// `∂ḣ_G/∂q̇` (`6 × nv`).
+        pub fn dhdot_dv(&self) -> &DMatrix<f64> {
+            &self.dhdot_dv
+        }
+    }
+
+    /// Centroidal momentum, its time derivative, `A_G` and their derivatives at `(q, q̇, q̈)` into
+    /// `out`: [`crate::algo::centroidal_dynamics_derivatives`] of the full tree at `expand(q)`,
+    /// `G q̇`, `G q̈`, its matrices times `G`. Allocates nothing.
+    ///
+    /// # Errors
+    /// As [`MimicModel::check_q`]; `v`, `a` of the wrong length or not finite; workspaces of
+    /// another model; a model without mass.
+    pub fn centroidal_dynamics_derivatives(
+        model: &MimicModel,
+        data: &mut MimicData,
+        out: &mut MimicCentroidal,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        a: &DVector<f64>,
+    ) -> Result<()> {
+        if out.key != model.key || out.ag.ncols() != model.nv {
+            return Err(Error::Workspace(format!(
+                "Centroidal was made for another model; make it with Centroidal::new for \
+                 the mimic model \"{}\"",
+                model.name()
+            )));
+        }
+        prepare(model, data, q, Some(v), Some(("a", a)))?;
+        model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+        let c = &mut out.full;
+        crate::algo::centroidal_dynamics_derivatives(
+            &model.full,
+            &mut data.full,
+            c,
+            &data.q,
+            &data.v,
+            &data.a,
+        )?;
+        model.reduce_cols(c.ag(), &mut out.ag);
+        model.reduce_cols(c.dh_dq(), &mut out.dh_dq);
+        model.reduce_cols(c.dhdot_dq(), &mut out.dhdot_dq);
+        model.reduce_cols(c.dhdot_dv(), &mut out.dhdot_dv);
+        Ok(())
+    }
 }

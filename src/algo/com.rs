@@ -59,7 +59,7 @@ fn world(data: &Data, i: usize, m: &Motion) -> Motion {
 /// As [`Model::check_q`]; a model without mass.
 pub fn center_of_mass(model: &Model, data: &mut Data, q: &DVector<f64>) -> Result<Vector3<f64>> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::center_of_mass(r, data.reduced(model)?, q);
+        return crate::algo::com::reduced::center_of_mass(r, data.reduced(model)?, q);
     }
     model.check_q(q)?;
     data.check_tree(model)?;
@@ -80,7 +80,7 @@ pub fn center_of_mass_motion(
     a: Option<&DVector<f64>>,
 ) -> Result<(Vector3<f64>, Vector3<f64>, Vector3<f64>)> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::center_of_mass_motion(r, data.reduced(model)?, q, v, a);
+        return crate::algo::com::reduced::center_of_mass_motion(r, data.reduced(model)?, q, v, a);
     }
     forward_kinematics(model, data, q, Some(v), a)?;
     let mass = inertias(model, data)?;
@@ -110,7 +110,7 @@ pub fn center_of_mass_jacobian(
     jac: &mut Matrix3xX<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::center_of_mass_jacobian(r, data.reduced(model)?, q, jac);
+        return crate::algo::com::reduced::center_of_mass_jacobian(r, data.reduced(model)?, q, jac);
     }
     if jac.ncols() != model.nv {
         return Err(Error::Dimension {
@@ -146,7 +146,7 @@ pub fn center_of_mass_velocity_derivatives(
     out: &mut Matrix3xX<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::center_of_mass_velocity_derivatives(
+        return crate::algo::com::reduced::center_of_mass_velocity_derivatives(
             r,
             data.reduced(model)?,
             q,
@@ -187,4 +187,95 @@ pub fn center_of_mass_velocity_derivatives(
         }
     }
     Ok(())
+}
+
+/// The reduced coordinates of a model with mimic joints ([`crate::model::Model::is_reduced`]):
+/// the full tree's functions of this family at `q_full = expand(q)`, `G v`, `G a`, reduced
+/// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
+pub(crate) mod reduced {
+
+    use crate::error::Result;
+
+    use crate::algo::data::reduced::MimicData;
+    use crate::algo::data::reduced::check_ncols;
+    use crate::algo::data::reduced::prepare;
+    use crate::model::reduction::MimicModel;
+    use nalgebra::{DVector, Matrix3xX, Vector3};
+
+    /// Centre of mass position at `expand(q)` (world frame).
+    ///
+    /// # Errors
+    /// As [`MimicModel::check_q`]; a model without mass; a workspace of another model.
+    pub fn center_of_mass(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+    ) -> Result<Vector3<f64>> {
+        prepare(model, data, q, None, None)?;
+        crate::algo::center_of_mass(&model.full, &mut data.full, &data.q)
+    }
+
+    /// Writes the `3 × nv` centre-of-mass Jacobian `J_com,full G` at `q` into `jac`
+    /// (`ċ = jac q̇`, world frame).
+    ///
+    /// # Errors
+    /// As [`center_of_mass`]; `jac` without `nv` columns.
+    pub fn center_of_mass_jacobian(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        jac: &mut Matrix3xX<f64>,
+    ) -> Result<()> {
+        check_ncols("jacobian columns", jac.ncols(), model.nv)?;
+        prepare(model, data, q, None, None)?;
+        crate::algo::center_of_mass_jacobian(&model.full, &mut data.full, &data.q, &mut data.j3)?;
+        model.reduce_cols(&data.j3, jac);
+        Ok(())
+    }
+
+    /// Centre of mass position, velocity and (with `a`) acceleration without gravity, world frame:
+    /// [`crate::algo::center_of_mass_motion`] of the full tree at `expand(q)`, `G q̇`, `G q̈`.
+    ///
+    /// # Errors
+    /// As [`center_of_mass`]; `v` or `a` of the wrong length or not finite.
+    pub fn center_of_mass_motion(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        a: Option<&DVector<f64>>,
+    ) -> Result<(Vector3<f64>, Vector3<f64>, Vector3<f64>)> {
+        prepare(model, data, q, Some(v), a.map(|a| ("a", a)))?;
+        if let Some(a) = a {
+            model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+        }
+        let a_full = a.map(|_| &data.a);
+        crate::algo::center_of_mass_motion(&model.full, &mut data.full, &data.q, &data.v, a_full)
+    }
+
+    /// `∂ċ/∂q` (`3 × nv`, tangent space of the reduced configuration) of the centre-of-mass
+    /// velocity at `(q, q̇)`: the full tree's at `expand(q)`, `G q̇` times `G`; `∂ċ/∂q̇` is
+    /// [`center_of_mass_jacobian`].
+    ///
+    /// # Errors
+    /// As [`center_of_mass_motion`]; `out` without `nv` columns.
+    pub fn center_of_mass_velocity_derivatives(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        out: &mut Matrix3xX<f64>,
+    ) -> Result<()> {
+        check_ncols("derivative columns", out.ncols(), model.nv)?;
+        prepare(model, data, q, Some(v), None)?;
+        crate::algo::center_of_mass_velocity_derivatives(
+            &model.full,
+            &mut data.full,
+            &data.q,
+            &data.v,
+            &mut data.j3,
+        )?;
+        model.reduce_cols(&data.j3, out);
+        Ok(())
+    }
 }

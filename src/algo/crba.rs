@@ -44,7 +44,7 @@ use nalgebra::{DMatrix, DVector};
 /// "CRBA: two kernels").
 pub fn crba<'a>(model: &Model, data: &'a mut Data, q: &DVector<f64>) -> Result<&'a DMatrix<f64>> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::crba(r, data.reduced(model)?, q);
+        return crate::algo::crba::reduced::crba(r, data.reduced(model)?, q);
     }
     model.check_q(q)?;
     data.check_tree(model)?;
@@ -755,5 +755,33 @@ mod tests {
                 assert!((a.ang - b.ang).amax() <= 1e-12 && (a.lin - b.lin).amax() <= 1e-12);
             }
         }
+    }
+}
+
+/// The reduced coordinates of a model with mimic joints ([`crate::model::Model::is_reduced`]):
+/// the full tree's functions of this family at `q_full = expand(q)`, `G v`, `G a`, reduced
+/// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
+pub(crate) mod reduced {
+
+    use crate::error::Result;
+
+    use crate::algo::data::reduced::MimicData;
+    use crate::algo::data::reduced::prepare;
+    use crate::model::reduction::MimicModel;
+    use nalgebra::{DMatrix, DVector};
+
+    /// Mass matrix `M = Gᵀ M_full(expand(q)) G` (CRBA of the full model). Returns `data.m()`.
+    ///
+    /// # Errors
+    /// As [`rnea`] for `q`.
+    pub fn crba<'a>(
+        model: &MimicModel,
+        data: &'a mut MimicData,
+        q: &DVector<f64>,
+    ) -> Result<&'a DMatrix<f64>> {
+        prepare(model, data, q, None, None)?;
+        let m = crate::algo::crba(&model.full, &mut data.full, &data.q)?;
+        model.reduce_matrix(m, &mut data.m);
+        Ok(&data.m)
     }
 }

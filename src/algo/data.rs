@@ -96,7 +96,7 @@ pub struct Data {
     /// For a model in reduced coordinates ([`Model::is_reduced`]): the full tree's workspace and
     /// the reduced results, which the accessors return (the fields above are then an empty
     /// shell).
-    pub(crate) red: Option<Box<crate::mimic::MimicData>>,
+    pub(crate) red: Option<Box<crate::algo::data::reduced::MimicData>>,
 }
 
 /// The message of a workspace used with another model: what differs.
@@ -272,14 +272,6 @@ impl Data {
             None => &self.qdd,
         }
     }
-    /// Scratch vector of length `nv`.
-    /// For a reduced model: the full tree's.
-    pub fn tmp_v(&self) -> &DVector<f64> {
-        match &self.red {
-            Some(r) => r.full().tmp_v(),
-            None => &self.tmp_v,
-        }
-    }
     /// Body spatial velocities in the world frame (derivative algorithms).
     /// For a reduced model: the full tree's.
     pub fn ov(&self) -> &Vec<Motion> {
@@ -379,30 +371,6 @@ impl Data {
             None => &self.oinertia,
         }
     }
-    /// IDFOZA workspace: accelerations (world, no gravity).
-    /// For a reduced model: the full tree's.
-    pub fn z_a(&self) -> &Vec<Motion> {
-        match &self.red {
-            Some(r) => r.full().z_a(),
-            None => &self.z_a,
-        }
-    }
-    /// IDFOZA workspace: `Ψ̈ = a_λ × S` per degree of freedom.
-    /// For a reduced model: the full tree's.
-    pub fn z_psidd(&self) -> &Vec<Motion> {
-        match &self.red {
-            Some(r) => r.full().z_psidd(),
-            None => &self.z_psidd,
-        }
-    }
-    /// IDFOZA workspace: composite forces.
-    /// For a reduced model: the full tree's.
-    pub fn z_fc(&self) -> &Vec<Force> {
-        match &self.red {
-            Some(r) => r.full().z_fc(),
-            None => &self.z_fc,
-        }
-    }
 }
 
 impl Data {
@@ -460,7 +428,7 @@ impl Data {
     pub(crate) fn reduced(
         &mut self,
         model: &Model,
-    ) -> crate::error::Result<&mut crate::mimic::MimicData> {
+    ) -> crate::error::Result<&mut crate::algo::data::reduced::MimicData> {
         match &mut self.red {
             Some(md) => Ok(md),
             None => Err(crate::error::Error::Workspace(format!(
@@ -474,7 +442,7 @@ impl Data {
     pub fn new(model: &Model) -> Self {
         if let Some(r) = &model.reduction {
             let mut d = Self::new(crate::model::tree::shell_model());
-            d.red = Some(Box::new(crate::mimic::MimicData::new(r)));
+            d.red = Some(Box::new(crate::algo::data::reduced::MimicData::new(r)));
             return d;
         }
         let n = model.njoints();
@@ -524,5 +492,290 @@ impl Data {
             nv: model.nv(),
             red: None,
         }
+    }
+}
+
+/// The reduced coordinates of a model with mimic joints ([`crate::model::Model::is_reduced`]):
+/// the full tree's functions of this family at `q_full = expand(q)`, `G v`, `G a`, reduced
+/// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
+pub(crate) mod reduced {
+
+    use crate::algo::Data;
+
+    use crate::error::{Error, Result};
+
+    use crate::model::reduction::MimicModel;
+    use crate::tensor::Tensor3;
+    use nalgebra::{DMatrix, DVector, Matrix3xX, Matrix6xX};
+
+    /// Workspace of the first-order algorithms of a [`MimicModel`] (the full model's [`Data`] and
+    /// the reduced results), allocated once by [`Data::new`].
+    #[derive(Clone, Debug)]
+    pub struct MimicData {
+        pub(crate) full: Data,
+        pub(crate) q: DVector<f64>,
+        pub(crate) v: DVector<f64>,
+        pub(crate) a: DVector<f64>,
+        pub(crate) tau: DVector<f64>,
+        /// `b` of [`nonlinear_effects`].
+        pub(crate) nle: DVector<f64>,
+        pub(crate) qdd: DVector<f64>,
+        pub(crate) m: DMatrix<f64>,
+        pub(crate) ldl: DMatrix<f64>,
+        pub(crate) dtau_dq: DMatrix<f64>,
+        pub(crate) dtau_dv: DMatrix<f64>,
+        pub(crate) dqdd_dq: DMatrix<f64>,
+        pub(crate) dqdd_dv: DMatrix<f64>,
+        pub(crate) minv: DMatrix<f64>,
+        /// `6 × full().nv()` scratch of the frame Jacobians and derivatives.
+        pub(crate) j6: [Matrix6xX<f64>; 3],
+        /// `3 × full().nv()` scratch of the centre-of-mass Jacobian.
+        pub(crate) j3: Matrix3xX<f64>,
+        /// `6 × full().nv() × full().nv()` scratch of the frame Jacobian derivative and placement
+        /// Hessian (two).
+        pub(crate) t6: Tensor3,
+        pub(crate) t6b: Tensor3,
+        /// `full().nv()` square scratch of [`idfoza`].
+        pub(crate) mf: DMatrix<f64>,
+        pub(crate) key: u64,
+    }
+
+    impl MimicData {
+        /// Workspace for `model`.
+        pub fn new(model: &MimicModel) -> Self {
+            let (n, f) = (model.nv, &model.full);
+            let sq = || DMatrix::zeros(n, n);
+            Self {
+                full: Data::new(f),
+                q: DVector::zeros(f.nq()),
+                v: DVector::zeros(f.nv()),
+                a: DVector::zeros(f.nv()),
+                tau: DVector::zeros(n),
+                nle: DVector::zeros(n),
+                qdd: DVector::zeros(n),
+                m: sq(),
+                ldl: sq(),
+                dtau_dq: sq(),
+                dtau_dv: sq(),
+                dqdd_dq: sq(),
+                dqdd_dv: sq(),
+                minv: sq(),
+                j6: std::array::from_fn(|_| Matrix6xX::zeros(f.nv())),
+                j3: Matrix3xX::zeros(f.nv()),
+                t6: Tensor3::zeros(6, f.nv(), f.nv()),
+                t6b: Tensor3::zeros(6, f.nv(), f.nv()),
+                mf: DMatrix::zeros(f.nv(), f.nv()),
+                key: model.key,
+            }
+        }
+        pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
+            if self.key != model.key || self.tau.len() != model.nv {
+                return Err(Error::Workspace(format!(
+                    "Data was made for another model; make it with Data::new for the \
+                     reduced model \"{}\"",
+                    model.name()
+                )));
+            }
+            Ok(())
+        }
+        /// The full model's workspace at the last call (its state is the expanded one).
+        pub fn full(&self) -> &Data {
+            &self.full
+        }
+        /// `τ` (reduced): of [`rnea`], [`id_derivatives`], [`id_so_derivatives`], and of inverse
+        /// dynamics at `q̈` for the forward-dynamics derivatives.
+        pub fn tau(&self) -> &DVector<f64> {
+            &self.tau
+        }
+        /// `b` of [`nonlinear_effects`].
+        pub fn nle(&self) -> &DVector<f64> {
+            &self.nle
+        }
+        /// `q̈` of [`aba`], [`fd_derivatives`], [`fd_so_derivatives`].
+        pub fn qdd(&self) -> &DVector<f64> {
+            &self.qdd
+        }
+        /// `M = Gᵀ M_full G`.
+        pub fn m(&self) -> &DMatrix<f64> {
+            &self.m
+        }
+        /// `∂τ/∂q` (tangent space).
+        pub fn dtau_dq(&self) -> &DMatrix<f64> {
+            &self.dtau_dq
+        }
+        /// `∂τ/∂v`.
+        pub fn dtau_dv(&self) -> &DMatrix<f64> {
+            &self.dtau_dv
+        }
+        /// `∂q̈/∂q` (tangent space).
+        pub fn dqdd_dq(&self) -> &DMatrix<f64> {
+            &self.dqdd_dq
+        }
+        /// `∂q̈/∂v`.
+        pub fn dqdd_dv(&self) -> &DMatrix<f64> {
+            &self.dqdd_dv
+        }
+        /// `∂q̈/∂τ = M⁻¹`.
+        pub fn minv(&self) -> &DMatrix<f64> {
+            &self.minv
+        }
+    }
+
+    /// The reduced-coordinate part of a workspace (`what`: [`crate::deriv::SoData`],
+    /// [`crate::algo::Centroidal`], …) of a reduced `model`.
+    ///
+    /// # Errors
+    /// [`Error::Workspace`] if the workspace was made for a model without mimic joints.
+    pub(crate) fn reduced_ws<'a, T>(
+        red: &'a mut Option<Box<T>>,
+        what: &str,
+        model: &crate::model::Model,
+    ) -> Result<&'a mut T> {
+        match red {
+            Some(so) => Ok(so),
+            None => Err(Error::Workspace(format!(
+                "{what} was made for a model without mimic joints, model \"{}\" is in reduced \
+                 coordinates; make it with {what}::new for this model",
+                model.name()
+            ))),
+        }
+    }
+
+    /// Checks `q` and `x` (`v`, `a` or `τ`) and the workspace, and expands `q`, `v` into `data`.
+    pub(crate) fn prepare(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        v: Option<&DVector<f64>>,
+        x: Option<(&str, &DVector<f64>)>,
+    ) -> Result<()> {
+        data.check(model)?;
+        model.check_q(q)?;
+        if let Some(v) = v {
+            model.check_v("v", v)?;
+        }
+        if let Some((what, x)) = x {
+            model.check_v(what, x)?;
+        }
+        model.expand_q_into(q.as_slice(), data.q.as_mut_slice());
+        match v {
+            Some(v) => model.expand_v_into(v.as_slice(), data.v.as_mut_slice()),
+            None => data.v.fill(0.0),
+        }
+        Ok(())
+    }
+
+    /// `out = a x` (`a` column-major `n × n`, `n = x.len()`).
+    pub(crate) fn mat_vec(a: &[f64], x: &[f64], out: &mut [f64]) {
+        let n = x.len();
+        out.fill(0.0);
+        for (c, &xc) in x.iter().enumerate() {
+            if xc != 0.0 {
+                for (o, &ac) in out.iter_mut().zip(&a[n * c..n * (c + 1)]) {
+                    *o += ac * xc;
+                }
+            }
+        }
+    }
+
+    /// `out = a b` (column-major `n × n`). The column loop skips the zero entries of `b`
+    /// (block-diagonal `M⁻¹` of robots with several branches): `crate::linalg::gemm` measured
+    /// slower on such a model (Baxter, `fd_so`).
+    pub(crate) fn mat_mul(a: &[f64], b: &[f64], out: &mut [f64], n: usize) {
+        for c in 0..n {
+            mat_vec(a, &b[n * c..n * (c + 1)], &mut out[n * c..n * (c + 1)]);
+        }
+    }
+
+    /// `out = −a b` (column-major `n × n`).
+    pub(crate) fn neg_mat_mul(a: &[f64], b: &[f64], out: &mut [f64], n: usize) {
+        mat_mul(a, b, out, n);
+        for o in out.iter_mut() {
+            *o = -*o;
+        }
+    }
+
+    /// `h ←` its `L D Lᵀ` factorisation (`L` unit lower triangular below the diagonal, `D` on it;
+    /// the strict upper triangle is left as is), with the pivot test of the tree-sparse one.
+    pub(crate) fn ldl_in_place(model: &MimicModel, h: &mut DMatrix<f64>) -> Result<()> {
+        let n = h.nrows();
+        let mut dmax: f64 = 0.0;
+        for j in 0..n {
+            let mut d = h[(j, j)];
+            for k in 0..j {
+                let l = h[(j, k)];
+                d -= l * l * h[(k, k)];
+            }
+            if !(d > 0.0 && d.is_finite()) {
+                return Err(pivot_error(model, j, d, None));
+            }
+            dmax = dmax.max(d);
+            h[(j, j)] = d;
+            for i in j + 1..n {
+                let mut x = h[(i, j)];
+                for k in 0..j {
+                    x -= h[(i, k)] * h[(j, k)] * h[(k, k)];
+                }
+                h[(i, j)] = x / d;
+            }
+        }
+        for j in 0..n {
+            let d = h[(j, j)];
+            if d <= crate::algo::internal::PIVOT_RTOL * dmax {
+                return Err(pivot_error(model, j, d, Some(dmax)));
+            }
+        }
+        Ok(())
+    }
+
+    /// `x ← M⁻¹ x` with `h` the factor of [`ldl_in_place`].
+    pub(crate) fn ldl_solve(h: &DMatrix<f64>, x: &mut [f64]) {
+        let n = h.nrows();
+        for i in 0..n {
+            let mut s = x[i];
+            for k in 0..i {
+                s -= h[(i, k)] * x[k];
+            }
+            x[i] = s;
+        }
+        for i in 0..n {
+            x[i] /= h[(i, i)];
+        }
+        for i in (0..n).rev() {
+            let mut s = x[i];
+            for k in i + 1..n {
+                s -= h[(k, i)] * x[k];
+            }
+            x[i] = s;
+        }
+    }
+
+    #[cold]
+    pub(crate) fn pivot_error(model: &MimicModel, k: usize, d: f64, max: Option<f64>) -> Error {
+        let why = match max {
+            None => "is not positive and finite".to_string(),
+            Some(m) => {
+                format!(
+                    "is at most {:e} times the largest pivot {m:e}",
+                    crate::algo::internal::PIVOT_RTOL
+                )
+            }
+        };
+        let joint = model.full.dof_joint()[model.v_keep[k]];
+        Error::Singular {
+            what: "mass matrix (reduced coordinates of the mimic joints)".into(),
+            detail: format!(
+                "pivot {d:e} at reduced velocity index {k} (joint \"{}\") {why}; a massless \
+                 subtree, or a massless link between joints whose motions coincide?",
+                model.full.names()[joint]
+            ),
+        }
+    }
+
+    pub(crate) fn check_ncols(what: &str, got: usize, expected: usize) -> Result<()> {
+        if got != expected {
+            return Err(Error::Dimension { what: what.into(), expected, got });
+        }
+        Ok(())
     }
 }

@@ -149,7 +149,7 @@ pub fn frame_placement(
     frame: usize,
 ) -> Result<Transform> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::frame_placement(r, data.reduced(model)?, q, frame);
+        return crate::algo::frames::reduced::frame_placement(r, data.reduced(model)?, q, frame);
     }
     path_kinematics(model, data, q, None, None, frame)?;
     Ok(placed(model, data, frame).1)
@@ -169,7 +169,14 @@ pub fn frame_jacobian(
     jac: &mut Matrix6xX<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::frame_jacobian(r, data.reduced(model)?, q, frame, rf, jac);
+        return crate::algo::frames::reduced::frame_jacobian(
+            r,
+            data.reduced(model)?,
+            q,
+            frame,
+            rf,
+            jac,
+        );
     }
     if jac.ncols() != model.nv {
         return Err(Error::Dimension {
@@ -222,7 +229,14 @@ pub fn frame_velocity(
     rf: ReferenceFrame,
 ) -> Result<Motion> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::frame_velocity(r, data.reduced(model)?, q, v, frame, rf);
+        return crate::algo::frames::reduced::frame_velocity(
+            r,
+            data.reduced(model)?,
+            q,
+            v,
+            frame,
+            rf,
+        );
     }
     path_kinematics(model, data, q, Some(v), None, frame)?;
     let (i, omf) = placed(model, data, frame);
@@ -244,7 +258,15 @@ pub fn frame_acceleration(
     rf: ReferenceFrame,
 ) -> Result<Motion> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::frame_acceleration(r, data.reduced(model)?, q, v, a, frame, rf);
+        return crate::algo::frames::reduced::frame_acceleration(
+            r,
+            data.reduced(model)?,
+            q,
+            v,
+            a,
+            frame,
+            rf,
+        );
     }
     path_kinematics(model, data, q, Some(v), Some(a), frame)?;
     let (i, omf) = placed(model, data, frame);
@@ -267,7 +289,7 @@ pub fn frame_classical_acceleration(
     rf: ReferenceFrame,
 ) -> Result<Motion> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::frame_classical_acceleration(
+        return crate::algo::frames::reduced::frame_classical_acceleration(
             r,
             data.reduced(model)?,
             q,
@@ -398,7 +420,7 @@ pub fn frame_velocity_derivatives(
     dv_dv: &mut Matrix6xX<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::frame_velocity_derivatives(
+        return crate::algo::frames::reduced::frame_velocity_derivatives(
             r,
             data.reduced(model)?,
             q,
@@ -435,7 +457,7 @@ pub fn frame_acceleration_derivatives(
     da_da: &mut Matrix6xX<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::frame_acceleration_derivatives(
+        return crate::algo::frames::reduced::frame_acceleration_derivatives(
             r,
             data.reduced(model)?,
             q,
@@ -484,7 +506,14 @@ pub fn frame_jacobian_derivative(
     out: &mut crate::tensor::Tensor3,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::frame_jacobian_derivative(r, data.reduced(model)?, q, frame, rf, out);
+        return crate::algo::frames::reduced::frame_jacobian_derivative(
+            r,
+            data.reduced(model)?,
+            q,
+            frame,
+            rf,
+            out,
+        );
     }
     let n = model.nv;
     if out.dims() != (6, n, n) {
@@ -550,7 +579,13 @@ pub fn frame_placement_hessian(
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
         let _ = work;
-        return crate::mimic::frame_placement_hessian(r, data.reduced(model)?, q, frame, out);
+        return crate::algo::frames::reduced::frame_placement_hessian(
+            r,
+            data.reduced(model)?,
+            q,
+            frame,
+            out,
+        );
     }
     let n = model.nv;
     if work.dims() != (6, n, n) {
@@ -587,4 +622,275 @@ pub fn frame_placement_hessian(
         }
     }
     Ok(())
+}
+
+/// The reduced coordinates of a model with mimic joints ([`crate::model::Model::is_reduced`]):
+/// the full tree's functions of this family at `q_full = expand(q)`, `G v`, `G a`, reduced
+/// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
+pub(crate) mod reduced {
+
+    use crate::algo::ReferenceFrame;
+
+    use crate::algo::data::reduced::MimicData;
+    use crate::algo::data::reduced::check_ncols;
+    use crate::algo::data::reduced::prepare;
+    use crate::error::{Error, Result};
+    use crate::model::reduction::MimicModel;
+    use crate::spatial::{Motion, Transform};
+    use crate::tensor::Tensor3;
+    use nalgebra::{DVector, Matrix6xX};
+
+    /// World placement `⁰M_f` of frame `frame` (a frame of the full tree) at `expand(q)`
+    /// ([`crate::algo::frame_placement`]).
+    ///
+    /// # Errors
+    /// As [`MimicModel::check_q`]; a frame index out of range; a workspace of another model.
+    pub fn frame_placement(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        frame: usize,
+    ) -> Result<Transform> {
+        model.check_frame(frame)?;
+        prepare(model, data, q, None, None)?;
+        crate::algo::frame_placement(&model.full, &mut data.full, &data.q, frame)
+    }
+
+    /// Writes into `jac` (`6 × nv`, reduced) the Jacobian `J_full G` of frame `frame` at `q` in
+    /// `rf`: the frame's spatial velocity in `rf` is `jac q̇`.
+    ///
+    /// # Errors
+    /// As [`frame_placement`]; `jac` without `nv` columns.
+    pub fn frame_jacobian(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        frame: usize,
+        rf: ReferenceFrame,
+        jac: &mut Matrix6xX<f64>,
+    ) -> Result<()> {
+        check_ncols("jacobian columns", jac.ncols(), model.nv)?;
+        model.check_frame(frame)?;
+        prepare(model, data, q, None, None)?;
+        crate::algo::frame_jacobian(
+            &model.full,
+            &mut data.full,
+            &data.q,
+            frame,
+            rf,
+            &mut data.j6[0],
+        )?;
+        model.reduce_cols(&data.j6[0], jac);
+        Ok(())
+    }
+
+    /// Spatial velocity of frame `frame` at `(q, q̇)` in `rf`: the full tree's at
+    /// `(expand(q), G q̇)`.
+    ///
+    /// # Errors
+    /// As [`frame_placement`]; `v` of the wrong length or not finite.
+    pub fn frame_velocity(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        frame: usize,
+        rf: ReferenceFrame,
+    ) -> Result<Motion> {
+        model.check_frame(frame)?;
+        prepare(model, data, q, Some(v), None)?;
+        crate::algo::frame_velocity(&model.full, &mut data.full, &data.q, &data.v, frame, rf)
+    }
+
+    /// Expands `a` into `data.a` after [`prepare`].
+    pub(crate) fn prepare_a(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        a: &DVector<f64>,
+        frame: usize,
+    ) -> Result<()> {
+        model.check_frame(frame)?;
+        prepare(model, data, q, Some(v), Some(("a", a)))?;
+        model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+        Ok(())
+    }
+
+    /// Spatial acceleration (no gravity) of frame `frame` at `(q, q̇, q̈)` in `rf`: the full tree's
+    /// at `(expand(q), G q̇, G q̈)`.
+    ///
+    /// # Errors
+    /// As [`frame_velocity`]; `a` of the wrong length or not finite.
+    pub fn frame_acceleration(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        a: &DVector<f64>,
+        frame: usize,
+        rf: ReferenceFrame,
+    ) -> Result<Motion> {
+        prepare_a(model, data, q, v, a, frame)?;
+        let (f, d) = (&model.full, &mut data.full);
+        crate::algo::frame_acceleration(f, d, &data.q, &data.v, &data.a, frame, rf)
+    }
+
+    /// Classical acceleration of frame `frame`'s origin at `(q, q̇, q̈)` in `rf`
+    /// ([`crate::algo::frame_classical_acceleration`] at `(expand(q), G q̇, G q̈)`).
+    ///
+    /// # Errors
+    /// As [`frame_acceleration`].
+    pub fn frame_classical_acceleration(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        a: &DVector<f64>,
+        frame: usize,
+        rf: ReferenceFrame,
+    ) -> Result<Motion> {
+        prepare_a(model, data, q, v, a, frame)?;
+        let (f, d) = (&model.full, &mut data.full);
+        crate::algo::frame_classical_acceleration(f, d, &data.q, &data.v, &data.a, frame, rf)
+    }
+
+    /// `∂v_f/∂q` (tangent space of the reduced configuration) and `∂v_f/∂q̇` (`6 × nv` each) of
+    /// frame `frame`'s spatial velocity in `rf`: the full tree's at `(expand(q), G q̇)` times `G`
+    /// (`expand(q ⊕ δ) = expand(q) ⊕ G δ`).
+    ///
+    /// # Errors
+    /// As [`frame_velocity`]; outputs without `nv` columns.
+    #[allow(clippy::too_many_arguments)]
+    pub fn frame_velocity_derivatives(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        frame: usize,
+        rf: ReferenceFrame,
+        dv_dq: &mut Matrix6xX<f64>,
+        dv_dv: &mut Matrix6xX<f64>,
+    ) -> Result<()> {
+        check_ncols("derivative columns", dv_dq.ncols(), model.nv)?;
+        check_ncols("derivative columns", dv_dv.ncols(), model.nv)?;
+        model.check_frame(frame)?;
+        prepare(model, data, q, Some(v), None)?;
+        let [j0, j1, _] = &mut data.j6;
+        crate::algo::frame_velocity_derivatives(
+            &model.full,
+            &mut data.full,
+            &data.q,
+            &data.v,
+            frame,
+            rf,
+            j0,
+            j1,
+        )?;
+        model.reduce_cols(j0, dv_dq);
+        model.reduce_cols(j1, dv_dv);
+        Ok(())
+    }
+
+    /// `∂a_f/∂q` (tangent space), `∂a_f/∂q̇`, `∂a_f/∂q̈` (`6 × nv` each) of frame `frame`'s spatial
+    /// acceleration (no gravity) in `rf`: the full tree's at `(expand(q), G q̇, G q̈)` times `G`.
+    ///
+    /// # Errors
+    /// As [`frame_acceleration`]; outputs without `nv` columns.
+    #[allow(clippy::too_many_arguments)]
+    pub fn frame_acceleration_derivatives(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        a: &DVector<f64>,
+        frame: usize,
+        rf: ReferenceFrame,
+        da_dq: &mut Matrix6xX<f64>,
+        da_dv: &mut Matrix6xX<f64>,
+        da_da: &mut Matrix6xX<f64>,
+    ) -> Result<()> {
+        for m in [&*da_dq, &*da_dv, &*da_da] {
+            check_ncols("derivative columns", m.ncols(), model.nv)?;
+        }
+        prepare_a(model, data, q, v, a, frame)?;
+        let [j0, j1, j2] = &mut data.j6;
+        crate::algo::frame_acceleration_derivatives(
+            &model.full,
+            &mut data.full,
+            &data.q,
+            &data.v,
+            &data.a,
+            frame,
+            rf,
+            j0,
+            j1,
+            j2,
+        )?;
+        model.reduce_cols(j0, da_dq);
+        model.reduce_cols(j1, da_dv);
+        model.reduce_cols(j2, da_da);
+        Ok(())
+    }
+
+    /// `∂J/∂q` of frame `frame`'s reduced Jacobian `J G` in `rf`: `out[(r, c, k)] = ∂J[r][c]/∂q_k`
+    /// (`6 × nv × nv`, reduced tangent space, the outer perturbation `q_k` applied first): the full
+    /// tree's [`crate::algo::frame_jacobian_derivative`] at `expand(q)` contracted with `G` on its
+    /// column and derivative indices (`G` is constant and `expand(q ⊕ δ) = expand(q) ⊕ G δ`).
+    ///
+    /// # Errors
+    /// As [`frame_placement`]; `out` not `6 × nv × nv`.
+    pub fn frame_jacobian_derivative(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        frame: usize,
+        rf: ReferenceFrame,
+        out: &mut Tensor3,
+    ) -> Result<()> {
+        let n = model.nv;
+        if out.dims() != (6, n, n) {
+            let (a, b, c) = out.dims();
+            return Err(Error::Argument {
+                name: "out".into(),
+                reason: format!("a 6×{n}×{n} tensor is needed, got {a}×{b}×{c}"),
+            });
+        }
+        model.check_frame(frame)?;
+        prepare(model, data, q, None, None)?;
+        let t = &mut data.t6;
+        crate::algo::frame_jacobian_derivative(&model.full, &mut data.full, &data.q, frame, rf, t)?;
+        model.reduce_tensor_cols(t, out);
+        Ok(())
+    }
+
+    /// The `6 × nv × nv` Hessian of frame `frame`'s placement at `q` in the reduced tangent space
+    /// ([`crate::algo::frame_placement_hessian`]: `out[(r, j, k)] = ∂/∂q_k (∂y_r/∂q_j)` of
+    /// `y(q') = [log₃(R_f(q)ᵀ R_f(q')); p_f(q')]` at `q' = q`): the full tree's at `expand(q)`
+    /// contracted with `G` on its two derivative indices.
+    ///
+    /// # Errors
+    /// As [`frame_jacobian_derivative`].
+    pub fn frame_placement_hessian(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        frame: usize,
+        out: &mut Tensor3,
+    ) -> Result<()> {
+        let n = model.nv;
+        if out.dims() != (6, n, n) {
+            let (a, b, c) = out.dims();
+            return Err(Error::Argument {
+                name: "out".into(),
+                reason: format!("a 6×{n}×{n} tensor is needed, got {a}×{b}×{c}"),
+            });
+        }
+        model.check_frame(frame)?;
+        prepare(model, data, q, None, None)?;
+        let (t, w) = (&mut data.t6, &mut data.t6b);
+        crate::algo::frame_placement_hessian(&model.full, &mut data.full, &data.q, frame, t, w)?;
+        model.reduce_tensor_cols(t, out);
+        Ok(())
+    }
 }

@@ -36,7 +36,13 @@ pub fn point_position(
     point: &Vector3<f64>,
 ) -> Result<Vector3<f64>> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::point_position(r, data.reduced(model)?, q, frame, point);
+        return crate::algo::kinematics::reduced::point_position(
+            r,
+            data.reduced(model)?,
+            q,
+            frame,
+            point,
+        );
     }
     model.check_q(q)?;
     data.check_tree(model)?;
@@ -56,7 +62,14 @@ pub fn point_jacobian(
     jac: &mut Matrix3xX<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::point_jacobian(r, data.reduced(model)?, q, frame, point, jac);
+        return crate::algo::kinematics::reduced::point_jacobian(
+            r,
+            data.reduced(model)?,
+            q,
+            frame,
+            point,
+            jac,
+        );
     }
     model.check_q(q)?;
     data.check_tree(model)?;
@@ -95,7 +108,14 @@ pub fn point_drift(
     point: &Vector3<f64>,
 ) -> Result<Vector3<f64>> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::point_drift(r, data.reduced(model)?, q, v, frame, point);
+        return crate::algo::kinematics::reduced::point_drift(
+            r,
+            data.reduced(model)?,
+            q,
+            v,
+            frame,
+            point,
+        );
     }
     model.check_q(q)?;
     data.check_tree(model)?;

@@ -1,15 +1,15 @@
 //! Algorithms: kinematics, RNEA, CRBA, ABA, the tree-sparse `LᵀDL` factorisation, Jacobians.
 
-mod aba;
-mod centroidal;
-mod com;
-mod crba;
+pub(crate) mod aba;
+pub(crate) mod centroidal;
+pub(crate) mod com;
+pub(crate) mod crba;
 pub(crate) mod data;
-mod frames;
-mod jacobian;
-mod kinematics;
+pub(crate) mod frames;
+pub(crate) mod jacobian;
+pub(crate) mod kinematics;
 mod ltl;
-mod rnea;
+pub(crate) mod rnea;
 
 /// Re-export of [`crate::model::Contact`] (the contact description is a model-level type).
 pub use crate::model::{Contact, ContactReference, ContactType};

@@ -58,7 +58,7 @@ pub fn rnea<'a>(
     fext: Option<&[Force]>,
 ) -> Result<&'a DVector<f64>> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::rnea(r, data.reduced(model)?, q, v, a, fext);
+        return crate::algo::rnea::reduced::rnea(r, data.reduced(model)?, q, v, a, fext);
     }
     model.check_q(q)?;
     data.check_tree(model)?;
@@ -131,7 +131,7 @@ pub fn nonlinear_effects<'a>(
     v: &DVector<f64>,
 ) -> Result<&'a DVector<f64>> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::nonlinear_effects(r, data.reduced(model)?, q, v, None);
+        return crate::algo::rnea::reduced::nonlinear_effects(r, data.reduced(model)?, q, v, None);
     }
     model.check_q(q)?;
     data.check_tree(model)?;
@@ -143,4 +143,76 @@ pub fn nonlinear_effects<'a>(
     data.tmp_v = zero;
     data.nle.copy_from(&data.tau);
     Ok(&data.nle)
+}
+
+/// The reduced coordinates of a model with mimic joints ([`crate::model::Model::is_reduced`]):
+/// the full tree's functions of this family at `q_full = expand(q)`, `G v`, `G a`, reduced
+/// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
+pub(crate) mod reduced {
+
+    use crate::algo::Data;
+
+    use crate::error::Result;
+    use crate::spatial::Force;
+
+    use crate::algo::data::reduced::MimicData;
+    use crate::algo::data::reduced::prepare;
+    use crate::model::reduction::MimicModel;
+    use nalgebra::DVector;
+
+    /// Inverse dynamics `τ = Gᵀ τ_full(expand(q), G v, G a)` (RNEA of the full model). Returns
+    /// `data.tau()`.
+    ///
+    /// # Errors
+    /// A wrong length, a non-finite entry, a non-unit quaternion (naming the argument or joint),
+    /// a workspace of another model, or an error of [`crate::algo::rnea()`] (`fext`).
+    pub fn rnea<'a>(
+        model: &MimicModel,
+        data: &'a mut MimicData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        a: &DVector<f64>,
+        fext: Option<&[Force]>,
+    ) -> Result<&'a DVector<f64>> {
+        prepare(model, data, q, Some(v), Some(("a", a)))?;
+        model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+        let t = crate::algo::rnea(&model.full, &mut data.full, &data.q, &data.v, &data.a, fext)?;
+        model.reduce_force_into(t.as_slice(), data.tau.as_mut_slice());
+        Ok(&data.tau)
+    }
+
+    /// Nonlinear effects `b = Gᵀ b_full(expand(q), G v)` (`b_full = C_full q̇_full + g_full`, minus
+    /// the generalised `fext`: the full model's RNEA at `G q̈ = 0`), i.e. [`rnea`] at `a = 0`.
+    /// Returns `data.nle()`; leaves `data.a_full()` zero.
+    ///
+    /// # Errors
+    /// As [`rnea`] (`q`, `v`, `fext`).
+    pub fn nonlinear_effects<'a>(
+        model: &MimicModel,
+        data: &'a mut MimicData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        fext: Option<&[Force]>,
+    ) -> Result<&'a DVector<f64>> {
+        prepare(model, data, q, Some(v), None)?;
+        let MimicData { full, q, v, a, nle, .. } = data;
+        bias_into(model, full, q, v, a, fext, nle.as_mut_slice())?;
+        Ok(&data.nle)
+    }
+
+    /// `out = Gᵀ b_full(q_full, v_full)` (the full model's RNEA with `a_full ← 0`).
+    pub(crate) fn bias_into(
+        model: &MimicModel,
+        full: &mut Data,
+        q_full: &DVector<f64>,
+        v_full: &DVector<f64>,
+        a_full: &mut DVector<f64>,
+        fext: Option<&[Force]>,
+        out: &mut [f64],
+    ) -> Result<()> {
+        a_full.fill(0.0);
+        let b = crate::algo::rnea(&model.full, full, q_full, v_full, a_full, fext)?;
+        model.reduce_force_into(b.as_slice(), out);
+        Ok(())
+    }
 }

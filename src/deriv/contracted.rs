@@ -62,7 +62,7 @@ pub struct ContractedData {
     clean: bool,
     /// For a model in reduced coordinates: the full tree's workspace and the reduced results,
     /// which the accessors return (the fields above are then an empty shell).
-    pub(crate) red: Option<Box<crate::mimic::MimicContractedData>>,
+    pub(crate) red: Option<Box<crate::deriv::contracted::reduced::MimicContractedData>>,
 }
 
 impl ContractedData {
@@ -70,7 +70,7 @@ impl ContractedData {
     pub fn new(model: &Model) -> Self {
         if let Some(r) = &model.reduction {
             let mut w = Self::new(crate::model::tree::shell_model());
-            w.red = Some(Box::new(crate::mimic::MimicContractedData::new(r)));
+            w.red = Some(Box::new(crate::deriv::contracted::reduced::MimicContractedData::new(r)));
             return w;
         }
         let n = model.nv;
@@ -146,8 +146,16 @@ pub fn id_so_contracted(
     w: &DVector<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        let cd_r = crate::mimic::reduced_ws(&mut cd.red, "ContractedData", model)?;
-        return crate::mimic::id_so_contracted(r, data.reduced(model)?, cd_r, q, v, a, w);
+        let cd_r = crate::algo::data::reduced::reduced_ws(&mut cd.red, "ContractedData", model)?;
+        return crate::deriv::contracted::reduced::id_so_contracted(
+            r,
+            data.reduced(model)?,
+            cd_r,
+            q,
+            v,
+            a,
+            w,
+        );
     }
     model.check_q(q)?;
     data.check_tree(model)?;
@@ -184,8 +192,16 @@ pub fn fd_so_contracted(
     w: &DVector<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        let cd_r = crate::mimic::reduced_ws(&mut cd.red, "ContractedData", model)?;
-        return crate::mimic::fd_so_contracted(r, data.reduced(model)?, cd_r, q, v, tau, w);
+        let cd_r = crate::algo::data::reduced::reduced_ws(&mut cd.red, "ContractedData", model)?;
+        return crate::deriv::contracted::reduced::fd_so_contracted(
+            r,
+            data.reduced(model)?,
+            cd_r,
+            q,
+            v,
+            tau,
+            w,
+        );
     }
     check_vec("w", w, model.nv)?;
     cd.check(model)?;
@@ -819,5 +835,180 @@ pub(crate) fn point_hessians(
             }
         }
         t0 = t1;
+    }
+}
+
+/// The reduced coordinates of a model with mimic joints ([`crate::model::Model::is_reduced`]):
+/// the full tree's functions of this family at `q_full = expand(q)`, `G v`, `G a`, reduced
+/// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
+pub(crate) mod reduced {
+
+    use crate::error::{Error, Result};
+
+    use crate::model::reduction::MimicModel;
+    use nalgebra::{DMatrix, DVector};
+
+    use crate::algo::data::reduced::MimicData;
+    use crate::algo::data::reduced::ldl_solve;
+    use crate::algo::data::reduced::prepare;
+
+    use crate::deriv::fd::reduced::fd_derivatives;
+
+    /// Results and workspace of [`id_so_contracted`] and [`fd_so_contracted`] for a
+    /// [`MimicModel`]: `nv × nv` Hessians `C[(j, k)] = Σ_i w_i T[(i, j, k)]` of the reduced tensors.
+    #[derive(Clone, Debug)]
+    pub struct MimicContractedData {
+        pub(crate) full: crate::deriv::ContractedData,
+        pub(crate) key: u64,
+        pub(crate) wf: DVector<f64>,
+        pub(crate) mu: DVector<f64>,
+        pub(crate) qq: DMatrix<f64>,
+        pub(crate) vv: DMatrix<f64>,
+        pub(crate) qv: DMatrix<f64>,
+        pub(crate) mq: DMatrix<f64>,
+        pub(crate) tauq: DMatrix<f64>,
+        pub(crate) tmp: DMatrix<f64>,
+    }
+
+    impl MimicContractedData {
+        /// Workspace for `model`.
+        pub fn new(model: &MimicModel) -> Self {
+            let n = model.nv;
+            let z = || DMatrix::zeros(n, n);
+            Self {
+                full: crate::deriv::ContractedData::new(&model.full),
+                key: model.key,
+                wf: DVector::zeros(model.full.nv()),
+                mu: DVector::zeros(n),
+                qq: z(),
+                vv: z(),
+                qv: z(),
+                mq: z(),
+                tauq: z(),
+                tmp: z(),
+            }
+        }
+        pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
+            if self.key != model.key || self.mu.len() != model.nv {
+                return Err(Error::Workspace(format!(
+                    "ContractedData was made for another model; make it with \
+                     ContractedData::new for the reduced model \"{}\"",
+                    model.name()
+                )));
+            }
+            Ok(())
+        }
+        /// `C_qq` (of `∂²τ/∂q²` or `∂²q̈/∂q²`).
+        pub fn c_qq(&self) -> &DMatrix<f64> {
+            &self.qq
+        }
+        /// `C_vv`.
+        pub fn c_vv(&self) -> &DMatrix<f64> {
+            &self.vv
+        }
+        /// `C_qv` (`[(j, k)]`: `q_j` inner, `v_k` outer).
+        pub fn c_qv(&self) -> &DMatrix<f64> {
+            &self.qv
+        }
+        /// `C_Mq` of `∂M/∂q` ([`id_so_contracted`]).
+        pub fn c_mq(&self) -> &DMatrix<f64> {
+            &self.mq
+        }
+        /// `C_τq` of `∂²q̈/∂τ∂q` ([`fd_so_contracted`]).
+        pub fn c_tauq(&self) -> &DMatrix<f64> {
+            &self.tauq
+        }
+    }
+
+    /// The full tree's contracted ID Hessians at `data.q, data.v, data.a` with the weight `G w`,
+    /// reduced: `C = Gᵀ C_f G` (as `Σ_i w_i T_r[i, j, k] = Σ_{b,c} G_bj G_ck Σ_a (G w)_a T_f[a, b, c]`).
+    pub(crate) fn id_contracted_reduced(
+        model: &MimicModel,
+        data: &mut MimicData,
+        cd: &mut MimicContractedData,
+        w: &[f64],
+    ) -> Result<()> {
+        model.expand_v_into(w, cd.wf.as_mut_slice());
+        crate::deriv::id_so_contracted(
+            &model.full,
+            &mut data.full,
+            &mut cd.full,
+            &data.q,
+            &data.v,
+            &data.a,
+            &cd.wf,
+        )?;
+        model.reduce_matrix(cd.full.c_qq(), &mut cd.qq);
+        model.reduce_matrix(cd.full.c_vv(), &mut cd.vv);
+        model.reduce_matrix(cd.full.c_qv(), &mut cd.qv);
+        model.reduce_matrix(cd.full.c_mq(), &mut cd.mq);
+        Ok(())
+    }
+
+    /// The Hessians of `wᵀτ(q, v, a)` in the reduced coordinates (`C_qq`, `C_vv`, `C_qv`, `C_Mq`):
+    /// the full tree's [`crate::deriv::id_so_contracted`] with the weight `G w`, reduced
+    /// `Gᵀ C G`.
+    ///
+    /// # Errors
+    /// As [`rnea`], a `w` of the wrong length or not finite, a workspace of another model.
+    #[allow(clippy::too_many_arguments)]
+    pub fn id_so_contracted(
+        model: &MimicModel,
+        data: &mut MimicData,
+        cd: &mut MimicContractedData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        a: &DVector<f64>,
+        w: &DVector<f64>,
+    ) -> Result<()> {
+        cd.check(model)?;
+        model.check_v("w", w)?;
+        prepare(model, data, q, Some(v), Some(("a", a)))?;
+        model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+        id_contracted_reduced(model, data, cd, w.as_slice())
+    }
+
+    /// The Hessians of `wᵀq̈(q, v, τ)` in the reduced coordinates (`C_qq`, `C_vv`, `C_qv`,
+    /// `C_τq`), as [`crate::deriv::fd_so_contracted`]: with `μ = M⁻¹ w`, `X_q`, `X_v` of
+    /// [`fd_derivatives`] and the reduced contracted ID Hessians `C^ID` and `D = C^ID_Mq` (`= ∂(M μ)/∂q`)
+    /// at `(q, v, q̈)` with the weight `μ`: `C_qq = −(C^ID_qq + Dᵀ X_q + X_qᵀ D)`,
+    /// `C_vv = −C^ID_vv`, `C_qv = −(C^ID_qv + Dᵀ X_v)`, `C_τq = −M⁻¹ D`. Also leaves the
+    /// first-order results of [`fd_derivatives`] in `data`.
+    ///
+    /// # Errors
+    /// As [`aba`], a `w` of the wrong length or not finite, a workspace of another model.
+    #[allow(clippy::too_many_arguments)]
+    pub fn fd_so_contracted(
+        model: &MimicModel,
+        data: &mut MimicData,
+        cd: &mut MimicContractedData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        tau: &DVector<f64>,
+        w: &DVector<f64>,
+    ) -> Result<()> {
+        cd.check(model)?;
+        model.check_v("w", w)?;
+        fd_derivatives(model, data, q, v, tau, None)?;
+        // μ = M⁻¹ w; data.a is G q̈ (aba).
+        cd.mu.copy_from(w);
+        ldl_solve(&data.ldl, cd.mu.as_mut_slice());
+        let mu = std::mem::take(&mut cd.mu);
+        let r = id_contracted_reduced(model, data, cd, mu.as_slice());
+        cd.mu = mu;
+        r?;
+        // D = C^ID_Mq (in cd.mq); C_qq = −(C^ID_qq + Dᵀ X_q + X_qᵀ D), …
+        cd.tmp.gemm_tr(1.0, &cd.mq, &data.dqdd_dq, 0.0);
+        for j in 0..model.nv {
+            for k in 0..model.nv {
+                cd.qq[(j, k)] = -(cd.qq[(j, k)] + cd.tmp[(j, k)] + cd.tmp[(k, j)]);
+            }
+        }
+        cd.vv.neg_mut();
+        cd.tmp.gemm_tr(1.0, &cd.mq, &data.dqdd_dv, 0.0);
+        cd.qv += &cd.tmp;
+        cd.qv.neg_mut();
+        crate::linalg::gemm(-1.0, &data.minv, &cd.mq, 0.0, &mut cd.tauq);
+        Ok(())
     }
 }

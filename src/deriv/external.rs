@@ -58,7 +58,7 @@ pub fn constrained_id_derivatives(
     if let Some(r) = &model.reduction {
         cd.check(model)?;
         let md = data.reduced(model)?;
-        return crate::mimic::constrained_id_cd(r, md, cd, None, q, v, a, lambda);
+        return crate::deriv::kkt::reduced::constrained_id_cd(r, md, cd, None, q, v, a, lambda);
     }
     check(model, cd, v, a, lambda, q)?;
     data.check_tree(model)?;
@@ -89,9 +89,9 @@ pub fn constrained_id_so_derivatives(
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
         cd.check(model)?;
-        let so = crate::mimic::reduced_ws(&mut so.red, "SoData", model)?;
+        let so = crate::algo::data::reduced::reduced_ws(&mut so.red, "SoData", model)?;
         let md = data.reduced(model)?;
-        return crate::mimic::constrained_id_cd(r, md, cd, Some(so), q, v, a, lambda);
+        return crate::deriv::kkt::reduced::constrained_id_cd(r, md, cd, Some(so), q, v, a, lambda);
     }
     check(model, cd, v, a, lambda, q)?;
     data.check_tree(model)?;

@@ -169,7 +169,7 @@ pub fn fd_derivatives(
     fext: Option<&[Force]>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::fd_derivatives(r, data.reduced(model)?, q, v, tau, fext);
+        return crate::deriv::fd::reduced::fd_derivatives(r, data.reduced(model)?, q, v, tau, fext);
     }
     model.check_q(q)?;
     data.check_tree(model)?;
@@ -258,7 +258,7 @@ pub struct FdSoData {
     rhs: Vec<f64>,
     /// For a model in reduced coordinates: the full tree's workspace and the reduced tensors,
     /// which the accessors return (the fields above are then an empty shell).
-    pub(crate) red: Option<Box<crate::mimic::MimicSoData>>,
+    pub(crate) red: Option<Box<crate::deriv::id_so::reduced::MimicSoData>>,
 }
 
 impl FdSoData {
@@ -266,7 +266,7 @@ impl FdSoData {
     pub fn new(model: &Model) -> Self {
         if let Some(r) = &model.reduction {
             let mut so = Self::new(crate::model::tree::shell_model());
-            so.red = Some(Box::new(crate::mimic::MimicSoData::new(r)));
+            so.red = Some(Box::new(crate::deriv::id_so::reduced::MimicSoData::new(r)));
             return so;
         }
         let n = model.nv;
@@ -695,8 +695,16 @@ pub fn fd_so_derivatives(
     fext: Option<&[Force]>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        let so = crate::mimic::reduced_ws(&mut fso.red, "FdSoData", model)?;
-        return crate::mimic::fd_so_derivatives(r, data.reduced(model)?, so, q, v, tau, fext);
+        let so = crate::algo::data::reduced::reduced_ws(&mut fso.red, "FdSoData", model)?;
+        return crate::deriv::fd::reduced::fd_so_derivatives(
+            r,
+            data.reduced(model)?,
+            so,
+            q,
+            v,
+            tau,
+            fext,
+        );
     }
     model.check_q(q)?;
     data.check_tree(model)?;
@@ -1609,5 +1617,129 @@ mod tests {
             let mut fso = FdSoData::new(m);
             fd_so_derivatives(m, &mut d, &mut fso, &q, &v, &v, None).unwrap();
         }
+    }
+}
+
+/// The reduced coordinates of a model with mimic joints ([`crate::model::Model::is_reduced`]):
+/// the full tree's functions of this family at `q_full = expand(q)`, `G v`, `G a`, reduced
+/// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
+pub(crate) mod reduced {
+
+    use crate::error::Result;
+    use crate::spatial::Force;
+
+    use crate::algo::aba::reduced::aba;
+    use crate::algo::data::reduced::MimicData;
+    use crate::algo::data::reduced::mat_mul;
+    use crate::algo::data::reduced::mat_vec;
+    use crate::algo::data::reduced::neg_mat_mul;
+    use crate::deriv::id_fo::reduced::fd_fo_from_id;
+    use crate::deriv::id_fo::reduced::id_fo_reduced;
+    use crate::deriv::id_so::reduced::MimicSoData;
+    use crate::deriv::id_so::reduced::id_so_reduced;
+    use crate::model::reduction::MimicModel;
+    use nalgebra::DVector;
+
+    /// First-order forward-dynamics derivatives at `q̈ = FD(q, v, τ)` ([`aba`]):
+    /// `data.qdd()`, `data.dqdd_dq() = −M⁻¹ ∂τ/∂q`, `data.dqdd_dv() = −M⁻¹ ∂τ/∂v`,
+    /// `data.minv() = M⁻¹`, and the inverse-dynamics derivatives at `(q, v, q̈)` (`dtau_dq`,
+    /// `dtau_dv`, `m`).
+    ///
+    /// # Errors
+    /// As [`aba`].
+    pub fn fd_derivatives(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        tau: &DVector<f64>,
+        fext: Option<&[Force]>,
+    ) -> Result<()> {
+        aba(model, data, q, v, tau, fext)?;
+        id_fo_reduced(model, data, fext)?;
+        fd_fo_from_id(data);
+        Ok(())
+    }
+
+    /// Second-order forward-dynamics derivatives at `q̈ = FD(q, v, τ)` (eq. eqn_FD_SO_43, with the
+    /// reduced inverse-dynamics tensors at `(q, v, q̈)` and `X_q = ∂q̈/∂q`, `X_v = ∂q̈/∂v`):
+    /// * `∂²q̈/∂q²[:, j, k] = −M⁻¹(∂²τ/∂q²[:, j, k] + ∂M/∂q_j X_q[:, k] + ∂M/∂q_k X_q[:, j])`,
+    /// * `∂²q̈/∂v²[:, j, k] = −M⁻¹ ∂²τ/∂v²[:, j, k]`,
+    /// * `∂²q̈/∂q∂v[:, j, k] = −M⁻¹(∂²τ/∂q∂v[:, j, k] + ∂M/∂q_j X_v[:, k])`,
+    /// * `∂²q̈/∂τ∂q[:, j, k] = ∂(M⁻¹)_{:j}/∂q_k = −(M⁻¹ ∂M/∂q_k M⁻¹)[:, j]`,
+    ///
+    /// in `so`; the first-order results of [`fd_derivatives`] in `data`, and the inverse-dynamics
+    /// tensors at `(q, v, q̈)` in `so` (`d2tau_*`, `dm_dq`).
+    ///
+    /// # Errors
+    /// As [`aba`], or an `so` made for another model.
+    pub fn fd_so_derivatives(
+        model: &MimicModel,
+        data: &mut MimicData,
+        so: &mut MimicSoData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        tau: &DVector<f64>,
+        fext: Option<&[Force]>,
+    ) -> Result<()> {
+        so.check(model)?;
+        aba(model, data, q, v, tau, fext)?;
+        id_so_reduced(model, data, so, fext)?;
+        fd_fo_from_id(data);
+        let n = model.nv;
+        let minv = data.minv.as_slice();
+        let xq = data.dqdd_dq.as_slice();
+        let xv = data.dqdd_dv.as_slice();
+        let dm = so.dm_dq.as_slice();
+        // y[:, j, k] = ∂M/∂q_k X_q[:, j].
+        {
+            let y = so.y.as_mut_slice();
+            for k in 0..n {
+                let page = &dm[n * n * k..n * n * (k + 1)];
+                for j in 0..n {
+                    let out = &mut y[n * (j + n * k)..n * (j + n * k + 1)];
+                    mat_vec(page, &xq[n * j..n * (j + 1)], out);
+                }
+            }
+        }
+        // ∂²q̈/∂q².
+        let rhs = so.page.as_mut_slice();
+        for k in 0..n {
+            for j in 0..n {
+                let (ys, ts) = (so.y.as_slice(), so.d2tau_dq2.as_slice());
+                for i in 0..n {
+                    rhs[i + n * j] =
+                        ts[i + n * (j + n * k)] + ys[i + n * (j + n * k)] + ys[i + n * (k + n * j)];
+                }
+            }
+            let out = &mut so.d2qdd_dq2.as_mut_slice()[n * n * k..n * n * (k + 1)];
+            neg_mat_mul(minv, rhs, out, n);
+        }
+        // ∂²q̈/∂v².
+        for k in 0..n {
+            let src = &so.d2tau_dv2.as_slice()[n * n * k..n * n * (k + 1)];
+            let out = &mut so.d2qdd_dv2.as_mut_slice()[n * n * k..n * n * (k + 1)];
+            neg_mat_mul(minv, src, out, n);
+        }
+        // ∂²q̈/∂q∂v: rhs[:, j] = ∂²τ/∂q∂v[:, j, k] + ∂M/∂q_j X_v[:, k].
+        for k in 0..n {
+            let ts = so.d2tau_dqdv.as_slice();
+            for j in 0..n {
+                let col = &mut rhs[n * j..n * (j + 1)];
+                mat_vec(&dm[n * n * j..n * n * (j + 1)], &xv[n * k..n * (k + 1)], col);
+                for (i, c) in col.iter_mut().enumerate() {
+                    *c += ts[i + n * (j + n * k)];
+                }
+            }
+            let out = &mut so.d2qdd_dqdv.as_mut_slice()[n * n * k..n * n * (k + 1)];
+            neg_mat_mul(minv, rhs, out, n);
+        }
+        // ∂(M⁻¹)/∂q_k = −M⁻¹ ∂M/∂q_k M⁻¹.
+        for k in 0..n {
+            neg_mat_mul(&dm[n * n * k..n * n * (k + 1)], minv, rhs, n);
+            let out = &mut so.d2qdd_dtaudq.as_mut_slice()[n * n * k..n * n * (k + 1)];
+            mat_mul(minv, rhs, out, n);
+        }
+        Ok(())
     }
 }

@@ -68,7 +68,14 @@ pub fn id_derivatives(
     fext: Option<&[Force]>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::id_derivatives(r, data.reduced(model)?, q, v, a, fext);
+        return crate::deriv::id_fo::reduced::id_derivatives(
+            r,
+            data.reduced(model)?,
+            q,
+            v,
+            a,
+            fext,
+        );
     }
     model.check_q(q)?;
     data.check_tree(model)?;
@@ -893,6 +900,82 @@ mod lanes {
             v1o.1.store3_strided(dv.add(c + 3 * nv), nv);
             m1.0.store3_strided(mm.add(c), nv);
             m1.1.store3_strided(mm.add(c + 3 * nv), nv);
+        }
+    }
+}
+
+/// The reduced coordinates of a model with mimic joints ([`crate::model::Model::is_reduced`]):
+/// the full tree's functions of this family at `q_full = expand(q)`, `G v`, `G a`, reduced
+/// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
+pub(crate) mod reduced {
+
+    use crate::error::Result;
+    use crate::spatial::Force;
+
+    use crate::algo::data::reduced::MimicData;
+    use crate::algo::data::reduced::ldl_solve;
+    use crate::algo::data::reduced::prepare;
+    use crate::model::reduction::MimicModel;
+    use nalgebra::DVector;
+
+    /// First-order inverse-dynamics derivatives at `(q, v, a)`: `data.dtau_dq()`,
+    /// `data.dtau_dv()`, `data.m()` (`= ∂τ/∂a`) and `data.tau()`, from
+    /// [`crate::deriv::id_derivatives`] of the full model at `(expand(q), G v, G a)`.
+    ///
+    /// # Errors
+    /// As [`rnea`].
+    pub fn id_derivatives(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        a: &DVector<f64>,
+        fext: Option<&[Force]>,
+    ) -> Result<()> {
+        prepare(model, data, q, Some(v), Some(("a", a)))?;
+        model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+        id_fo_reduced(model, data, fext)
+    }
+
+    /// The full model's first-order ID derivatives at `data.q, data.v, data.a`, reduced.
+    pub(crate) fn id_fo_reduced(
+        model: &MimicModel,
+        data: &mut MimicData,
+        fext: Option<&[Force]>,
+    ) -> Result<()> {
+        crate::deriv::id_derivatives(&model.full, &mut data.full, &data.q, &data.v, &data.a, fext)?;
+        reduce_fo(model, data);
+        Ok(())
+    }
+
+    /// `τ`, `M`, `∂τ/∂q`, `∂τ/∂v` of `data.full` reduced.
+    pub(crate) fn reduce_fo(model: &MimicModel, data: &mut MimicData) {
+        model.reduce_force_into(data.full.tau().as_slice(), data.tau.as_mut_slice());
+        model.reduce_matrix(data.full.m(), &mut data.m);
+        model.reduce_matrix(data.full.dtau_dq(), &mut data.dtau_dq);
+        model.reduce_matrix(data.full.dtau_dv(), &mut data.dtau_dv);
+    }
+
+    /// `∂q̈/∂q = −M⁻¹ ∂τ/∂q`, `∂q̈/∂v = −M⁻¹ ∂τ/∂v`, `M⁻¹`, from `data.ldl` (factorised).
+    pub(crate) fn fd_fo_from_id(data: &mut MimicData) {
+        let n = data.m.nrows();
+        data.dqdd_dq.copy_from(&data.dtau_dq);
+        data.dqdd_dv.copy_from(&data.dtau_dv);
+        data.minv.fill_with_identity();
+        for c in 0..n {
+            ldl_solve(&data.ldl, data.dqdd_dq.column_mut(c).as_mut_slice());
+            ldl_solve(&data.ldl, data.dqdd_dv.column_mut(c).as_mut_slice());
+            ldl_solve(&data.ldl, data.minv.column_mut(c).as_mut_slice());
+        }
+        data.dqdd_dq.neg_mut();
+        data.dqdd_dv.neg_mut();
+        // Exactly symmetric M⁻¹.
+        for c in 0..n {
+            for r in c + 1..n {
+                let x = 0.5 * (data.minv[(r, c)] + data.minv[(c, r)]);
+                data.minv[(r, c)] = x;
+                data.minv[(c, r)] = x;
+            }
         }
     }
 }

@@ -45,7 +45,7 @@ pub struct SoData {
     nvs: Vec<usize>,
     /// For a model in reduced coordinates: the full tree's workspace and the reduced tensors,
     /// which the accessors return (the fields above are then an empty shell).
-    pub(crate) red: Option<Box<crate::mimic::MimicSoData>>,
+    pub(crate) red: Option<Box<crate::deriv::id_so::reduced::MimicSoData>>,
 }
 
 impl SoData {
@@ -74,7 +74,7 @@ impl SoData {
     fn build(model: &Model, with_dm_dq: bool, upper: bool) -> Self {
         if let Some(r) = &model.reduction {
             let mut so = Self::build(crate::model::tree::shell_model(), with_dm_dq, upper);
-            so.red = Some(Box::new(crate::mimic::MimicSoData::new(r)));
+            so.red = Some(Box::new(crate::deriv::id_so::reduced::MimicSoData::new(r)));
             return so;
         }
         let n = model.nv;
@@ -206,8 +206,16 @@ pub fn id_so_derivatives(
     fext: Option<&[Force]>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        let so = crate::mimic::reduced_ws(&mut so.red, "SoData", model)?;
-        return crate::mimic::id_so_derivatives(r, data.reduced(model)?, so, q, v, a, fext);
+        let so = crate::algo::data::reduced::reduced_ws(&mut so.red, "SoData", model)?;
+        return crate::deriv::id_so::reduced::id_so_derivatives(
+            r,
+            data.reduced(model)?,
+            so,
+            q,
+            v,
+            a,
+            fext,
+        );
     }
     model.check_q(q)?;
     data.check_tree(model)?;
@@ -850,5 +858,150 @@ mod tests {
                 assert_eq!(written, chain && !root, "tree {seed}: entry ({i}, {j}, {k})");
             }
         }
+    }
+}
+
+/// The reduced coordinates of a model with mimic joints ([`crate::model::Model::is_reduced`]):
+/// the full tree's functions of this family at `q_full = expand(q)`, `G v`, `G a`, reduced
+/// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
+pub(crate) mod reduced {
+
+    use crate::algo::data::reduced::MimicData;
+    use crate::algo::data::reduced::prepare;
+    use crate::deriv::SoData;
+    use crate::error::{Error, Result};
+    use crate::model::reduction::MimicModel;
+    use crate::spatial::Force;
+    use crate::tensor::Tensor3;
+    use nalgebra::{DMatrix, DVector};
+
+    use crate::deriv::id_fo::reduced::reduce_fo;
+
+    /// Workspace and results of the second-order algorithms of a [`MimicModel`] (layout
+    /// `T[(i, j, k)] = ∂/∂x_k (∂y_i/∂u_j)`, `nv × nv × nv`).
+    #[derive(Clone, Debug)]
+    pub struct MimicSoData {
+        pub(crate) full: SoData,
+        pub(crate) d2tau_dq2: Tensor3,
+        pub(crate) d2tau_dv2: Tensor3,
+        pub(crate) d2tau_dqdv: Tensor3,
+        pub(crate) dm_dq: Tensor3,
+        pub(crate) d2qdd_dq2: Tensor3,
+        pub(crate) d2qdd_dv2: Tensor3,
+        pub(crate) d2qdd_dqdv: Tensor3,
+        pub(crate) d2qdd_dtaudq: Tensor3,
+        /// Scratch: `∂M/∂q_k X[:, j]` at `(·, j, k)`.
+        pub(crate) y: Tensor3,
+        /// Scratch: one `nv × nv` page.
+        pub(crate) page: DMatrix<f64>,
+        pub(crate) key: u64,
+    }
+
+    impl MimicSoData {
+        /// Workspace for `model`.
+        pub fn new(model: &MimicModel) -> Self {
+            let n = model.nv;
+            let t = || Tensor3::zeros(n, n, n);
+            Self {
+                full: SoData::new(&model.full),
+                d2tau_dq2: t(),
+                d2tau_dv2: t(),
+                d2tau_dqdv: t(),
+                dm_dq: t(),
+                d2qdd_dq2: t(),
+                d2qdd_dv2: t(),
+                d2qdd_dqdv: t(),
+                d2qdd_dtaudq: t(),
+                y: t(),
+                page: DMatrix::zeros(n, n),
+                key: model.key,
+            }
+        }
+        pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
+            if self.key != model.key || self.page.nrows() != model.nv {
+                return Err(Error::Workspace(format!(
+                    "SoData was made for another model; make it with SoData::new for the \
+                     reduced model \"{}\"",
+                    model.name()
+                )));
+            }
+            Ok(())
+        }
+        /// `∂²τ/∂q²`: `T[(i, j, k)] = ∂/∂q_k (∂τ_i/∂q_j)`.
+        pub fn d2tau_dq2(&self) -> &Tensor3 {
+            &self.d2tau_dq2
+        }
+        /// `∂²τ/∂v²`.
+        pub fn d2tau_dv2(&self) -> &Tensor3 {
+            &self.d2tau_dv2
+        }
+        /// `T[(i, j, k)] = ∂/∂v_k (∂τ_i/∂q_j)`.
+        pub fn d2tau_dqdv(&self) -> &Tensor3 {
+            &self.d2tau_dqdv
+        }
+        /// `T[(i, j, k)] = ∂M_ij/∂q_k`.
+        pub fn dm_dq(&self) -> &Tensor3 {
+            &self.dm_dq
+        }
+        /// `∂²q̈/∂q²`.
+        pub fn d2qdd_dq2(&self) -> &Tensor3 {
+            &self.d2qdd_dq2
+        }
+        /// `∂²q̈/∂v²`.
+        pub fn d2qdd_dv2(&self) -> &Tensor3 {
+            &self.d2qdd_dv2
+        }
+        /// `T[(i, j, k)] = ∂/∂v_k (∂q̈_i/∂q_j)`.
+        pub fn d2qdd_dqdv(&self) -> &Tensor3 {
+            &self.d2qdd_dqdv
+        }
+        /// `T[(i, j, k)] = ∂(M⁻¹)_ij/∂q_k`.
+        pub fn d2qdd_dtaudq(&self) -> &Tensor3 {
+            &self.d2qdd_dtaudq
+        }
+    }
+
+    /// Second-order inverse-dynamics derivatives at `(q, v, a)` (the full model's
+    /// [`crate::deriv::id_so_derivatives`] contracted with `G`): the tensors of `so` and the
+    /// first-order results in `data` (as [`id_derivatives`]).
+    ///
+    /// # Errors
+    /// As [`rnea`], or an `so` made for another model.
+    pub fn id_so_derivatives(
+        model: &MimicModel,
+        data: &mut MimicData,
+        so: &mut MimicSoData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        a: &DVector<f64>,
+        fext: Option<&[Force]>,
+    ) -> Result<()> {
+        so.check(model)?;
+        prepare(model, data, q, Some(v), Some(("a", a)))?;
+        model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+        id_so_reduced(model, data, so, fext)
+    }
+
+    pub(crate) fn id_so_reduced(
+        model: &MimicModel,
+        data: &mut MimicData,
+        so: &mut MimicSoData,
+        fext: Option<&[Force]>,
+    ) -> Result<()> {
+        crate::deriv::id_so_derivatives(
+            &model.full,
+            &mut data.full,
+            &mut so.full,
+            &data.q,
+            &data.v,
+            &data.a,
+            fext,
+        )?;
+        reduce_fo(model, data);
+        model.reduce_tensor(so.full.d2tau_dq2(), &mut so.d2tau_dq2);
+        model.reduce_tensor(so.full.d2tau_dv2(), &mut so.d2tau_dv2);
+        model.reduce_tensor(so.full.d2tau_dqdv(), &mut so.d2tau_dqdv);
+        model.reduce_tensor(so.full.dm_dq(), &mut so.dm_dq);
+        Ok(())
     }
 }

@@ -69,7 +69,7 @@ pub struct ImpactData {
     zero: DVector<f64>,
     /// For a model in reduced coordinates: the full tree's workspace and the reduced results, which
     /// the accessors return (the fields above are then an empty shell).
-    pub(crate) red: Option<Box<crate::mimic::MimicImpactData>>,
+    pub(crate) red: Option<Box<crate::deriv::impact::reduced::MimicImpactData>>,
 }
 
 impl ImpactData {
@@ -235,7 +235,9 @@ impl ImpactData {
     pub fn new(model: &Model, cd: ContactData) -> Self {
         if let Some(r) = &model.reduction {
             let mut im = Self::new(crate::model::tree::shell_model(), ContactData::empty());
-            im.red = Some(Box::new(crate::mimic::MimicImpactData::from_contacts(r, cd)));
+            im.red = Some(Box::new(crate::deriv::impact::reduced::MimicImpactData::from_contacts(
+                r, cd,
+            )));
             return im;
         }
         let (n, m) = (model.nv, cd.dim());
@@ -295,8 +297,14 @@ pub fn impact_dynamics(
     vminus: &DVector<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        let im_r = crate::mimic::reduced_ws(&mut im.red, "ImpactData", model)?;
-        return crate::mimic::impact_dynamics(r, data.reduced(model)?, im_r, q, vminus);
+        let im_r = crate::algo::data::reduced::reduced_ws(&mut im.red, "ImpactData", model)?;
+        return crate::deriv::impact::reduced::impact_dynamics(
+            r,
+            data.reduced(model)?,
+            im_r,
+            q,
+            vminus,
+        );
     }
     solve(model, data, im, q, vminus, false)
 }
@@ -367,8 +375,14 @@ pub fn impact_derivatives(
     vminus: &DVector<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        let im_r = crate::mimic::reduced_ws(&mut im.red, "ImpactData", model)?;
-        return crate::mimic::impact_derivatives(r, data.reduced(model)?, im_r, q, vminus);
+        let im_r = crate::algo::data::reduced::reduced_ws(&mut im.red, "ImpactData", model)?;
+        return crate::deriv::impact::reduced::impact_derivatives(
+            r,
+            data.reduced(model)?,
+            im_r,
+            q,
+            vminus,
+        );
     }
     impact_dynamics(model, data, im, q, vminus)?;
     first_order(model, data, im);
@@ -443,8 +457,14 @@ pub fn impact_so_derivatives(
     vminus: &DVector<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        let im_r = crate::mimic::reduced_ws(&mut im.red, "ImpactData", model)?;
-        return crate::mimic::impact_so_derivatives(r, data.reduced(model)?, im_r, q, vminus);
+        let im_r = crate::algo::data::reduced::reduced_ws(&mut im.red, "ImpactData", model)?;
+        return crate::deriv::impact::reduced::impact_so_derivatives(
+            r,
+            data.reduced(model)?,
+            im_r,
+            q,
+            vminus,
+        );
     }
     let mut so = im.so.take().ok_or_else(|| {
         Error::Workspace(
@@ -542,7 +562,7 @@ pub struct ImpactContracted {
     zeros_n: DVector<f64>,
     /// For a model in reduced coordinates: the full tree's workspace and the reduced results, which
     /// the accessors return (the fields above are then an empty shell).
-    pub(crate) red: Option<Box<crate::mimic::MimicImpactContracted>>,
+    pub(crate) red: Option<Box<crate::deriv::impact::reduced::MimicImpactContracted>>,
 }
 
 impl ImpactContracted {
@@ -550,8 +570,10 @@ impl ImpactContracted {
     pub fn new(model: &Model, im: &ImpactData) -> Self {
         if let Some(r) = &model.reduction {
             let mut ic = Self::with_rows(crate::model::tree::shell_model(), 0);
-            ic.red =
-                im.red.as_ref().map(|i| Box::new(crate::mimic::MimicImpactContracted::new(r, i)));
+            ic.red = im
+                .red
+                .as_ref()
+                .map(|i| Box::new(crate::deriv::impact::reduced::MimicImpactContracted::new(r, i)));
             return ic;
         }
         Self::with_rows(model, im.cd.dim())
@@ -594,7 +616,7 @@ impl ImpactContracted {
             None => &self.qv,
         }
     }
-    /// The adjoint `ζ` (`nv + m`), set by [`crate::mimic::impact_so_contracted`] before
+    /// The adjoint `ζ` (`nv + m`), set by [`crate::deriv::impact::reduced::impact_so_contracted`] before
     /// [`zeta_rqq`].
     pub(crate) fn zeta_mut(&mut self) -> &mut DVector<f64> {
         &mut self.zeta
@@ -642,9 +664,9 @@ pub fn impact_so_contracted(
     w_impulse: &DVector<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        let im_r = crate::mimic::reduced_ws(&mut im.red, "ImpactData", model)?;
-        let ic_r = crate::mimic::reduced_ws(&mut ic.red, "ImpactContracted", model)?;
-        return crate::mimic::impact_so_contracted(
+        let im_r = crate::algo::data::reduced::reduced_ws(&mut im.red, "ImpactData", model)?;
+        let ic_r = crate::algo::data::reduced::reduced_ws(&mut ic.red, "ImpactContracted", model)?;
+        return crate::deriv::impact::reduced::impact_so_contracted(
             r,
             data.reduced(model)?,
             im_r,
@@ -710,7 +732,7 @@ pub fn impact_so_contracted(
 /// with the placements of the last first-order solve in `data` and the contact points of
 /// [`update_points`]: the `q`-Hessian of `ζ₁ᵀ M(q) Δv` (reverse mode at `q̇ = 0`, `q̈ = Δv`, no
 /// gravity), minus that of `λ̂·(J_c ζ₁)`, plus that of `ζ₂·(J_c w)`. Shared with
-/// [`crate::mimic::impact_so_contracted`] (the full tree's at `ζ = (G ζ₁, ζ₂)`).
+/// [`crate::deriv::impact::reduced::impact_so_contracted`] (the full tree's at `ζ = (G ζ₁, ζ₂)`).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn zeta_rqq(
     model: &Model,
@@ -762,7 +784,7 @@ pub(crate) fn zeta_rqq(
 /// `0..nv` of `rqq` and writes `∂²(J_c w)/∂q²` into its contact rows `nv..nv + m` (every path
 /// pair `(l, k)`), at the contact points of the last [`update_points`]; `impulse` (`m`) and `w`
 /// (`nv`) fixed. Shared by [`impact_so_derivatives`] and the impact of
-/// [`crate::mimic::impact_so_derivatives`].
+/// [`crate::deriv::impact::reduced::impact_so_derivatives`].
 pub(crate) fn add_contact_rqq(
     model: &Model,
     cd: &ContactData,
@@ -839,5 +861,667 @@ pub(crate) fn add_contact_rqq(
                 }
             }
         }
+    }
+}
+
+/// The reduced coordinates of a model with mimic joints ([`crate::model::Model::is_reduced`]):
+/// the full tree's functions of this family at `q_full = expand(q)`, `G v`, `G a`, reduced
+/// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
+pub(crate) mod reduced {
+
+    use crate::deriv::{ContactData, SoData};
+    use crate::error::{Error, Result};
+    use crate::model::reduction::MimicModel;
+    use crate::spatial::Motion;
+    use crate::tensor::Tensor3;
+    use nalgebra::{DMatrix, DVector};
+
+    use crate::algo::data::reduced::MimicData;
+    use crate::algo::data::reduced::ldl_in_place;
+    use crate::algo::data::reduced::ldl_solve;
+    use crate::algo::data::reduced::prepare;
+    use crate::deriv::kkt::reduced::delassus_in_place;
+    use crate::deriv::kkt::reduced::kkt_solve_with;
+
+    /// Workspace and results of the impact dynamics of a [`MimicModel`] ([`impact_dynamics`],
+    /// [`impact_derivatives`]).
+    #[derive(Clone, Debug)]
+    pub struct MimicImpactData {
+        pub(crate) cd: ContactData,
+        pub(crate) key: u64,
+        pub(crate) restitution: f64,
+        pub(crate) jr: DMatrix<f64>,
+        pub(crate) minv_jt: DMatrix<f64>,
+        pub(crate) del: DMatrix<f64>,
+        pub(crate) vplus: DVector<f64>,
+        pub(crate) impulse: DVector<f64>,
+        pub(crate) dvplus_dq: DMatrix<f64>,
+        pub(crate) dvplus_dvminus: DMatrix<f64>,
+        pub(crate) dimpulse_dq: DMatrix<f64>,
+        pub(crate) dimpulse_dvminus: DMatrix<f64>,
+        /// `G (q̇⁺ − q̇⁻)` and `G (q̇⁺ + e q̇⁻)` (full tree).
+        pub(crate) dvf: DVector<f64>,
+        pub(crate) wf: DVector<f64>,
+        /// `∂(M Δv)/∂q − ∂(Jᵀλ̂)/∂q` (`nv_f × nv_f`), `∂(J w)/∂q` (`m × nv_f`), reduced blocks.
+        pub(crate) rq: DMatrix<f64>,
+        pub(crate) cq: DMatrix<f64>,
+        pub(crate) r_top: DMatrix<f64>,
+        pub(crate) r_bot: DMatrix<f64>,
+        pub(crate) col_n: DVector<f64>,
+        pub(crate) col_m: DVector<f64>,
+        pub(crate) so: Option<Box<MimicImpactSo>>,
+    }
+
+    /// Second-order results of [`impact_so_derivatives`] (`T[(i, j, k)] = ∂/∂x_k (∂y_i/∂q_j)`) and
+    /// their workspace.
+    #[derive(Clone, Debug)]
+    pub struct MimicImpactSo {
+        /// The result tensors.
+        pub(crate) res: crate::deriv::ImpactSo,
+        /// IDSOZA of the full tree (`∂²(M Δ)/∂q²`).
+        pub(crate) id: SoData,
+        /// The full tree's `R_qq` at fixed `(Δ, λ̂, w)` (`(nv_f + m) × nv_f × nv_f`).
+        pub(crate) rf: Tensor3,
+        /// Reduced right-hand sides (`(nv + m) × nv × nv`), `qq` and `q q̇⁻`.
+        pub(crate) sqq: Tensor3,
+        pub(crate) sqv: Tensor3,
+        /// Scratch: full-tree vectors, one reduced `G` product, zeros.
+        pub(crate) za: DVector<f64>,
+        pub(crate) zj: DVector<f64>,
+        pub(crate) zl: DVector<f64>,
+        pub(crate) c: DMatrix<f64>,
+        pub(crate) zero: DVector<f64>,
+    }
+
+    impl MimicImpactData {
+        /// Adds the second-order workspace (for [`impact_so_derivatives`]).
+        pub fn with_second_order(mut self, model: &MimicModel) -> Self {
+            let (n, nf, m) = (model.nv, model.full.nv(), self.dim());
+            self.so = Some(Box::new(MimicImpactSo {
+                res: crate::deriv::ImpactSo::results(n, m),
+                id: SoData::without_dm_dq(&model.full),
+                rf: Tensor3::zeros(nf + m, nf, nf),
+                sqq: Tensor3::zeros(n + m, n, n),
+                sqv: Tensor3::zeros(n + m, n, n),
+                za: DVector::zeros(nf),
+                zj: DVector::zeros(nf),
+                zl: DVector::zeros(m),
+                c: DMatrix::zeros(n + m, n),
+                zero: DVector::zeros(nf),
+            }));
+            self
+        }
+        /// The second-order results (with [`MimicImpactData::with_second_order`]).
+        pub fn so(&self) -> Option<&MimicImpactSo> {
+            self.so.as_deref()
+        }
+        /// Workspace for the contacts `cd` (made for the full tree or for the reduced model).
+        pub(crate) fn from_contacts(model: &MimicModel, mut cd: ContactData) -> Self {
+            cd.reduced_key = None;
+            let (n, nf, m) = (model.nv, model.full.nv(), cd.dim());
+            let mat = |r, c| DMatrix::zeros(r, c);
+            Self {
+                cd,
+                key: model.key,
+                restitution: 0.0,
+                jr: mat(m, n),
+                minv_jt: mat(n, m),
+                del: mat(m, m),
+                vplus: DVector::zeros(n),
+                impulse: DVector::zeros(m),
+                dvplus_dq: mat(n, n),
+                dvplus_dvminus: mat(n, n),
+                dimpulse_dq: mat(m, n),
+                dimpulse_dvminus: mat(m, n),
+                dvf: DVector::zeros(nf),
+                wf: DVector::zeros(nf),
+                rq: mat(nf, nf),
+                cq: mat(m, nf),
+                r_top: mat(n, n),
+                r_bot: mat(m, n),
+                col_n: DVector::zeros(n),
+                col_m: DVector::zeros(m),
+                so: None,
+            }
+        }
+        /// The full tree's contact workspace.
+        pub(crate) fn cd(&self) -> &ContactData {
+            &self.cd
+        }
+        /// Coefficient of restitution `e`.
+        pub(crate) fn restitution(&self) -> f64 {
+            self.restitution
+        }
+        /// Sets the coefficient of restitution `e` (`q̇⁺` of the contact rows is `−e` times `q̇⁻`'s).
+        ///
+        /// # Errors
+        /// [`Error::Argument`] if `e` is negative or not finite.
+        pub fn set_restitution(&mut self, e: f64) -> Result<()> {
+            if !e.is_finite() || e < 0.0 {
+                return Err(Error::Argument {
+                    name: "restitution".into(),
+                    reason: format!("{e} must be finite and non-negative"),
+                });
+            }
+            self.restitution = e;
+            Ok(())
+        }
+        /// Number of contact rows `m`.
+        pub fn dim(&self) -> usize {
+            self.impulse.len()
+        }
+        /// `q̇⁺`.
+        pub fn vplus(&self) -> &DVector<f64> {
+            &self.vplus
+        }
+        /// Contact impulses `λ̂` applied to the robot.
+        pub fn impulse(&self) -> &DVector<f64> {
+            &self.impulse
+        }
+        /// `∂q̇⁺/∂q` (tangent).
+        pub fn dvplus_dq(&self) -> &DMatrix<f64> {
+            &self.dvplus_dq
+        }
+        /// `∂q̇⁺/∂q̇⁻`.
+        pub fn dvplus_dvminus(&self) -> &DMatrix<f64> {
+            &self.dvplus_dvminus
+        }
+        /// `∂λ̂/∂q` (tangent).
+        pub fn dimpulse_dq(&self) -> &DMatrix<f64> {
+            &self.dimpulse_dq
+        }
+        /// `∂λ̂/∂q̇⁻`.
+        pub fn dimpulse_dvminus(&self) -> &DMatrix<f64> {
+            &self.dimpulse_dvminus
+        }
+    }
+
+    /// Impact dynamics in the reduced coordinates at `(q, q̇⁻)`, without derivatives:
+    /// `M (q̇⁺ − q̇⁻) = (J G)ᵀ λ̂`, `J G q̇⁺ = −e J G q̇⁻` (`M = Gᵀ M_f G`, `J` the full tree's contact
+    /// Jacobian at `expand(q)`, `e` the restitution), by block elimination on the dense factors of
+    /// `M` and of the Delassus matrix `J G M⁻¹ (J G)ᵀ`. Results: `im.vplus()`, `im.impulse()`;
+    /// `data.m()` is `M`. The forward part of [`impact_derivatives`], whose `q̇⁺`, `λ̂` are these.
+    ///
+    /// # Errors
+    /// As [`crba`] for `q`, a `vminus` of the wrong length or not finite, [`Error::Singular`] for a
+    /// singular `M` or Delassus matrix, a workspace of another model.
+    pub fn impact_dynamics(
+        model: &MimicModel,
+        data: &mut MimicData,
+        im: &mut MimicImpactData,
+        q: &DVector<f64>,
+        vminus: &DVector<f64>,
+    ) -> Result<()> {
+        if im.key != model.key || im.vplus.len() != model.nv {
+            return Err(Error::Workspace(format!(
+                "ImpactData was made for another model; make it with ImpactData::new \
+                 for the reduced model \"{}\"",
+                model.name()
+            )));
+        }
+        prepare(model, data, q, None, Some(("vminus", vminus)))?;
+        let (n, nf, m) = (model.nv, model.full.nv(), im.dim());
+        let full = &model.full;
+        let e = im.restitution;
+        // M (with the composite inertias), J.
+        crate::algo::internal::crba_unchecked(full, &mut data.full, &data.q);
+        crate::deriv::contact::path_kinematics(full, &data.full, &mut im.cd, None);
+        model.reduce_matrix(data.full.m(), &mut data.m);
+        data.ldl.copy_from(&data.m);
+        ldl_in_place(model, &mut data.ldl)?;
+        im.jr.fill(0.0);
+        for f in 0..nf {
+            let (c, g) = (model.g_col[f], model.g_coef[f]);
+            for r in 0..m {
+                im.jr[(r, c)] += g * im.cd.jac[(r, f)];
+            }
+        }
+        for r in 0..m {
+            let mut col = im.minv_jt.column_mut(r);
+            for c in 0..n {
+                col[c] = im.jr[(r, c)];
+            }
+            ldl_solve(&data.ldl, col.as_mut_slice());
+        }
+        crate::linalg::gemm(1.0, &im.jr, &im.minv_jt, 0.0, &mut im.del);
+        delassus_in_place(&mut im.del)?;
+        // λ̂ = −(1 + e) D⁻¹ J_r q̇⁻, q̇⁺ = q̇⁻ + M⁻¹ J_rᵀ λ̂.
+        im.impulse.gemv(-(1.0 + e), &im.jr, vminus, 0.0);
+        ldl_solve(&im.del, im.impulse.as_mut_slice());
+        im.vplus.copy_from(vminus);
+        im.vplus.gemv(1.0, &im.minv_jt, &im.impulse, 1.0);
+        Ok(())
+    }
+
+    /// Impact dynamics in the reduced coordinates and its first-order derivatives:
+    /// `M (q̇⁺ − q̇⁻) = (J G)ᵀ λ̂`, `J G q̇⁺ = −e J G q̇⁻` (`M = Gᵀ M_f G`, `J` the full tree's contact
+    /// Jacobian at `expand(q)`), then `∂y/∂x = −R_y⁻¹ R_x` for `y = (q̇⁺, λ̂)`, `x = (q, q̇⁻)` with
+    /// `R_q = [Gᵀ(∂(M_f Δ)/∂q − ∂(Jᵀλ̂)/∂q) G; ∂(J w)/∂q G]` (`Δ = G(q̇⁺ − q̇⁻)`,
+    /// `w = G(q̇⁺ + e q̇⁻)`, the full tree's IDFOZA and contact products) and
+    /// `R_q̇⁻ = [−M; e J G]`.
+    ///
+    /// # Errors
+    /// As [`crba`] for `q`, a `vminus` of the wrong length or not finite, [`Error::Singular`] for a
+    /// singular `M` or Delassus matrix, a workspace of another model.
+    pub fn impact_derivatives(
+        model: &MimicModel,
+        data: &mut MimicData,
+        im: &mut MimicImpactData,
+        q: &DVector<f64>,
+        vminus: &DVector<f64>,
+    ) -> Result<()> {
+        impact_dynamics(model, data, im, q, vminus)?;
+        let (n, nf, m) = (model.nv, model.full.nv(), im.dim());
+        let full = &model.full;
+        let e = im.restitution;
+        // The body inertias for IDFOZA (the placements are those of impact_dynamics' CRBA).
+        for i in 1..full.njoints() {
+            data.full.oinertia[i] = data.full.o_m_i[i].act_inertia(&full.inertias[i]);
+        }
+        // R_q of the full tree at Δ, λ̂, w, reduced.
+        for f in 0..nf {
+            let (c, g) = (model.g_col[f], model.g_coef[f]);
+            im.dvf[f] = g * (im.vplus[c] - vminus[c]);
+            im.wf[f] = g * (im.vplus[c] + e * vminus[c]);
+        }
+        crate::deriv::zero::idfoza_core(full, &mut data.full, im.dvf.as_slice(), &mut im.rq);
+        let s = std::mem::take(&mut im.cd.s);
+        crate::deriv::contact::sub_djtl_dq_tree(
+            full,
+            &s,
+            &mut im.cd,
+            im.impulse.as_slice(),
+            &mut im.rq,
+        );
+        im.cd.s = s;
+        im.cq.fill(0.0);
+        crate::deriv::contact::djw_dq(full, &mut im.cd, im.wf.as_slice(), &mut im.cq);
+        model.reduce_matrix(&im.rq, &mut im.r_top);
+        im.r_bot.fill(0.0);
+        for f in 0..nf {
+            let (c, g) = (model.g_col[f], model.g_coef[f]);
+            for r in 0..m {
+                im.r_bot[(r, c)] += g * im.cq[(r, f)];
+            }
+        }
+        // ∂y/∂q = −R_y⁻¹ R_q; ∂y/∂q̇⁻ = −R_y⁻¹ [−M; e J_r].
+        for wrt in 0..2 {
+            for c in 0..n {
+                for i in 0..n {
+                    im.col_n[i] = if wrt == 0 { -im.r_top[(i, c)] } else { data.m[(i, c)] };
+                }
+                for r in 0..m {
+                    im.col_m[r] = if wrt == 0 { -im.r_bot[(r, c)] } else { -e * im.jr[(r, c)] };
+                }
+                let (mut cn, mut cm) =
+                    (std::mem::take(&mut im.col_n), std::mem::take(&mut im.col_m));
+                kkt_solve_with(
+                    &data.ldl,
+                    &im.jr,
+                    &im.minv_jt,
+                    &im.del,
+                    cn.as_mut_slice(),
+                    cm.as_mut_slice(),
+                );
+                let (oa, ol) = if wrt == 0 {
+                    (&mut im.dvplus_dq, &mut im.dimpulse_dq)
+                } else {
+                    (&mut im.dvplus_dvminus, &mut im.dimpulse_dvminus)
+                };
+                oa.column_mut(c).copy_from(&cn);
+                ol.column_mut(c).copy_from(&cm);
+                (im.col_n, im.col_m) = (cn, cm);
+            }
+        }
+        Ok(())
+    }
+
+    /// Second-order derivatives of the impact dynamics in the reduced coordinates (and the first
+    /// order, as [`impact_derivatives`]): `∂²y/∂u∂w = −R_y⁻¹ (R_uw + G(∂y/∂w)[·, u] +
+    /// G(∂y/∂u)[·, w])` on the reduced residual, with `R_qq = P R^f_qq G G` (the full tree's
+    /// `∂²(M_f Δ)/∂q² − ∂²(Jᵀλ̂)/∂q²` and `∂²(J w)/∂q²` at `Δ = G(q̇⁺ − q̇⁻)`, `λ̂`,
+    /// `w = G(q̇⁺ + e q̇⁻)`: IDSOZA and the contact-point kinematics; rows `P = diag(Gᵀ, I)`,
+    /// `q` indices contracted with `G`) and the `G` products of the expanded reduced derivatives
+    /// (`∂q̈`-type vectors mapped by `G`). Results in `im.so()`.
+    ///
+    /// # Errors
+    /// As [`impact_derivatives`], and a workspace without [`MimicImpactData::with_second_order`].
+    pub fn impact_so_derivatives(
+        model: &MimicModel,
+        data: &mut MimicData,
+        im: &mut MimicImpactData,
+        q: &DVector<f64>,
+        vminus: &DVector<f64>,
+    ) -> Result<()> {
+        let mut so = im.so.take().ok_or_else(|| {
+            Error::Workspace(
+                "impact_so_derivatives: ImpactData was made without with_second_order".into(),
+            )
+        })?;
+        let r = impact_derivatives(model, data, im, q, vminus)
+            .map(|()| impact_so_reduce(model, data, im, &mut so));
+        im.so = Some(so);
+        r
+    }
+
+    pub(crate) fn impact_so_reduce(
+        model: &MimicModel,
+        data: &mut MimicData,
+        im: &mut MimicImpactData,
+        so: &mut MimicImpactSo,
+    ) {
+        use crate::deriv::contact::{g_matrix_split, update_points};
+        use crate::spatial::Motion;
+        let full = &model.full;
+        let (n, nf, m) = (model.nv, full.nv(), im.dim());
+        let (gc, gk) = (&model.g_col, &model.g_coef);
+        let e = im.restitution;
+        // IDSOZA: ∂²(M Δ)/∂q² (zero velocity, no gravity, q̈ = Δ).
+        crate::deriv::id_so::id_so_unchecked(
+            full,
+            &mut data.full,
+            &mut so.id,
+            &data.q,
+            &so.zero,
+            &im.dvf,
+            None,
+            Motion::zero(),
+        );
+        update_points(full, &data.full, &mut im.cd, Motion::zero());
+        let rf = &mut so.rf;
+        rf.fill(0.0);
+        {
+            let t = so.id.d2tau_dq2();
+            for k in 0..nf {
+                for j in 0..nf {
+                    for i in 0..nf {
+                        rf[(i, j, k)] = t[(i, j, k)];
+                    }
+                }
+            }
+        }
+        // − ∂²(Jᵀλ̂)/∂q² and ∂²(J w)/∂q² (as the full tree's impact second order).
+        crate::deriv::impact::add_contact_rqq(
+            full,
+            &im.cd,
+            im.impulse.as_slice(),
+            im.wf.as_slice(),
+            rf,
+        );
+        // R_qq reduced: rows by P, (j, k) by G.
+        so.sqq.fill(0.0);
+        so.sqv.fill(0.0);
+        for k in 0..nf {
+            for j in 0..nf {
+                let c = gk[j] * gk[k];
+                let (jr, kr) = (gc[j], gc[k]);
+                for i in 0..nf {
+                    so.sqq[(gc[i], jr, kr)] += gk[i] * c * rf[(i, j, k)];
+                }
+                for r in 0..m {
+                    so.sqq[(n + r, jr, kr)] += c * rf[(nf + r, j, k)];
+                }
+            }
+        }
+        // The G products: (q, q) of the columns of ∂y/∂q, both orders; (q, q̇⁻_k) with
+        // z_m = G(∂q̇⁺/∂q̇⁻_k − e_k), z_J = G(∂q̇⁺/∂q̇⁻_k + e e_k), z₂ = ∂λ̂/∂q̇⁻_k.
+        for pass in 0..2 {
+            for k in 0..n {
+                for f in 0..nf {
+                    let (c, g) = (gc[f], gk[f]);
+                    if pass == 0 {
+                        so.za[f] = g * im.dvplus_dq[(c, k)];
+                        so.zj[f] = so.za[f];
+                    } else {
+                        let x = im.dvplus_dvminus[(c, k)];
+                        let d = if c == k { 1.0 } else { 0.0 };
+                        so.za[f] = g * (x - d);
+                        so.zj[f] = g * (x + e * d);
+                    }
+                }
+                for r in 0..m {
+                    so.zl[r] = if pass == 0 {
+                        im.dimpulse_dq[(r, k)]
+                    } else {
+                        im.dimpulse_dvminus[(r, k)]
+                    };
+                }
+                g_matrix_split(
+                    full,
+                    &mut data.full,
+                    &mut im.cd,
+                    so.za.as_slice(),
+                    so.zl.as_slice(),
+                    so.zj.as_slice(),
+                );
+                let g = &im.cd.g;
+                so.c.fill(0.0);
+                for u in 0..nf {
+                    let (ur, gu) = (gc[u], gk[u]);
+                    for f in 0..nf {
+                        so.c[(gc[f], ur)] += gk[f] * gu * g[(f, u)];
+                    }
+                    for r in 0..m {
+                        so.c[(n + r, ur)] += gu * g[(nf + r, u)];
+                    }
+                }
+                for u in 0..n {
+                    for i in 0..n + m {
+                        let x = so.c[(i, u)];
+                        if pass == 0 {
+                            so.sqq[(i, u, k)] += x;
+                            so.sqq[(i, k, u)] += x;
+                        } else {
+                            so.sqv[(i, u, k)] += x;
+                        }
+                    }
+                }
+            }
+        }
+        // T = −R_y⁻¹ S.
+        for pass in 0..2 {
+            for k in 0..n {
+                for j in 0..n {
+                    let src = if pass == 0 { &so.sqq } else { &so.sqv };
+                    for i in 0..n {
+                        im.col_n[i] = -src[(i, j, k)];
+                    }
+                    for r in 0..m {
+                        im.col_m[r] = -src[(n + r, j, k)];
+                    }
+                    let (mut cn, mut cm) =
+                        (std::mem::take(&mut im.col_n), std::mem::take(&mut im.col_m));
+                    kkt_solve_with(
+                        &data.ldl,
+                        &im.jr,
+                        &im.minv_jt,
+                        &im.del,
+                        cn.as_mut_slice(),
+                        cm.as_mut_slice(),
+                    );
+                    let (oa, ol) = if pass == 0 {
+                        (&mut so.res.d2vplus_dq2, &mut so.res.d2impulse_dq2)
+                    } else {
+                        (&mut so.res.d2vplus_dqdvminus, &mut so.res.d2impulse_dqdvminus)
+                    };
+                    for i in 0..n {
+                        oa[(i, j, k)] = cn[i];
+                    }
+                    for r in 0..m {
+                        ol[(r, j, k)] = cm[r];
+                    }
+                    (im.col_n, im.col_m) = (cn, cm);
+                }
+            }
+        }
+    }
+
+    /// Results and workspace of [`impact_so_contracted`] for a [`MimicModel`] and the contacts of
+    /// a [`MimicImpactData`] (`O(nv² + nv_f²)`, allocated once).
+    #[derive(Clone, Debug)]
+    pub struct MimicImpactContracted {
+        pub(crate) full: crate::deriv::ImpactContracted,
+        pub(crate) key: u64,
+        pub(crate) zeta: DVector<f64>,
+        /// `G ζ₁`, `−ζ₂` and zeros (`nv_f`, `m`).
+        pub(crate) zf: DVector<f64>,
+        pub(crate) neg_z2: DVector<f64>,
+        pub(crate) zeros_f: DVector<f64>,
+        pub(crate) zeros_m: DVector<f64>,
+        /// `Dᵀ`, `Kᵀ` (`nv × nv`), `Eᵀ` (`nv × m`) in the reduced coordinates.
+        pub(crate) dt: DMatrix<f64>,
+        pub(crate) kt: DMatrix<f64>,
+        pub(crate) et: DMatrix<f64>,
+        pub(crate) s: DMatrix<f64>,
+        pub(crate) h: DMatrix<f64>,
+        pub(crate) qq: DMatrix<f64>,
+        pub(crate) qv: DMatrix<f64>,
+    }
+
+    impl MimicImpactContracted {
+        /// Workspace for `model` and the contacts of `im`.
+        pub fn new(model: &MimicModel, im: &MimicImpactData) -> Self {
+            let (n, nf, m) = (model.nv, model.full.nv(), im.dim());
+            let z = || DMatrix::zeros(n, n);
+            Self {
+                full: crate::deriv::ImpactContracted::with_rows(&model.full, m),
+                key: model.key,
+                zeta: DVector::zeros(n + m),
+                zf: DVector::zeros(nf),
+                neg_z2: DVector::zeros(m),
+                zeros_f: DVector::zeros(nf),
+                zeros_m: DVector::zeros(m),
+                dt: z(),
+                kt: z(),
+                et: DMatrix::zeros(n, m),
+                s: z(),
+                h: z(),
+                qq: z(),
+                qv: z(),
+            }
+        }
+        fn check(&self, model: &MimicModel, m: usize) -> Result<()> {
+            if self.key != model.key || self.zeta.len() != model.nv + m {
+                return Err(Error::Workspace(format!(
+                    "ImpactContracted was made for another model or contact set; make it with \
+                     ImpactContracted::new for the reduced model \"{}\" and this ImpactData",
+                    model.name()
+                )));
+            }
+            Ok(())
+        }
+        /// `C_qq[(j, k)] = ∂/∂q_k (∂(ωᵀy)/∂q_j)` with `ωᵀy = w_v⁺ᵀ q̇⁺ + w_Λᵀ λ̂` (reduced).
+        pub fn c_qq(&self) -> &DMatrix<f64> {
+            &self.qq
+        }
+        /// `C_qv[(j, k)] = ∂/∂q̇⁻_k (∂(ωᵀy)/∂q_j)` (`y` is linear in `q̇⁻`).
+        pub fn c_qvminus(&self) -> &DMatrix<f64> {
+            &self.qv
+        }
+    }
+
+    /// The Hessians of `ωᵀy = w_v⁺ᵀ q̇⁺ + w_Λᵀ λ̂` of the impact dynamics in the reduced
+    /// coordinates (as [`crate::deriv::impact_so_contracted`]) at `(q, q̇⁻)`, without an `nv³`
+    /// tensor; also the first-order derivatives into `im` (as [`impact_derivatives`]).
+    ///
+    /// With `ζ = R_y⁻ᵀ ω` (the reduced residual of [`impact_derivatives`]), `ζ_f = (G ζ₁, ζ₂)` and
+    /// the full tree's `D_f = ∂(M_f G ζ₁)/∂q`, `K_f = ∂(Jᵀζ₂)/∂q`, `E_f = ∂(J G ζ₁)/∂q`:
+    /// 1. first order, `R_y` factorised; `ζ`;
+    /// 2. `ζᵀR_qq = Gᵀ(ζ_fᵀR^f_qq)G`: the full tree's `q`-Hessian of `ζ_f₁ᵀ M_f Δ`
+    ///    (`Δ = G(q̇⁺ − q̇⁻)`, reverse mode) minus that of `λ̂·(J ζ_f₁)` plus that of
+    ///    `ζ₂·(J w)` (`w = G(q̇⁺ + e q̇⁻)`), reduced;
+    /// 3. the reduced `D = Gᵀ D_f G`, `K = Gᵀ K_f G`, `E = E_f G` (two `G` evaluations of the full
+    ///    tree), `H_q = (D + K)ᵀ Y_q − Eᵀ Y_Λq`;
+    /// 4. `C_qq = −(ζᵀR_qq + H_q + H_qᵀ)`, `C_qv = −(Dᵀ (Y_v − I) + Kᵀ (Y_v + e I) − Eᵀ Y_Λv)`.
+    ///
+    /// Allocates nothing.
+    ///
+    /// # Errors
+    /// As [`impact_derivatives`]; `w_vplus` (length `nv`) or `w_impulse` (length `m`) of the wrong
+    /// length or not finite; `ic` made for another model or contact set.
+    #[allow(clippy::too_many_arguments)]
+    pub fn impact_so_contracted(
+        model: &MimicModel,
+        data: &mut MimicData,
+        im: &mut MimicImpactData,
+        ic: &mut MimicImpactContracted,
+        q: &DVector<f64>,
+        vminus: &DVector<f64>,
+        w_vplus: &DVector<f64>,
+        w_impulse: &DVector<f64>,
+    ) -> Result<()> {
+        let (n, nf, m) = (model.nv, model.full.nv(), im.dim());
+        ic.check(model, m)?;
+        model.check_v("w_vplus", w_vplus)?;
+        crate::model::check_vec("w_impulse", w_impulse, m)?;
+        // 1. First order; ζ.
+        impact_derivatives(model, data, im, q, vminus)?;
+        let full = &model.full;
+        {
+            let (z1, z2) = ic.zeta.as_mut_slice().split_at_mut(n);
+            z1.copy_from_slice(w_vplus.as_slice());
+            for (z, w) in z2.iter_mut().zip(w_impulse.iter()) {
+                *z = -w;
+            }
+            kkt_solve_with(&data.ldl, &im.jr, &im.minv_jt, &im.del, z1, z2);
+            for z in z2.iter_mut() {
+                *z = -*z;
+            }
+        }
+        let (z1, z2) = ic.zeta.as_slice().split_at(n);
+        // 2. ζᵀR_qq = Gᵀ(ζ_fᵀR^f_qq)G.
+        {
+            let zf = ic.full.zeta_mut();
+            model.expand_v_into(z1, &mut zf.as_mut_slice()[..nf]);
+            zf.as_mut_slice()[nf..].copy_from_slice(z2);
+        }
+        crate::deriv::contact::update_points(full, &data.full, &mut im.cd, Motion::zero());
+        crate::deriv::impact::zeta_rqq(
+            full,
+            &mut data.full,
+            &mut im.cd,
+            &mut ic.full,
+            &data.q,
+            &im.dvf,
+            &im.wf,
+            &im.impulse,
+        );
+        model.reduce_matrix(ic.full.c_qq(), &mut ic.qq);
+        // 3. D, E from one G evaluation with z₂ = 0, K from one with z_M = z_J = 0, z₂ = −ζ₂.
+        model.expand_v_into(z1, ic.zf.as_mut_slice());
+        let zf = ic.zf.as_slice();
+        let g_split = crate::deriv::contact::g_matrix_split;
+        g_split(full, &mut data.full, &mut im.cd, zf, ic.zeros_m.as_slice(), zf);
+        ic.dt.fill(0.0);
+        model.add_top_t(&im.cd.g, 1.0, &mut ic.dt, 0);
+        ic.et.fill(0.0);
+        model.add_bottom_t(&im.cd.g, m, 1.0, &mut ic.et, 0);
+        for (o, x) in ic.neg_z2.iter_mut().zip(z2) {
+            *o = -x;
+        }
+        let zo = ic.zeros_f.as_slice();
+        g_split(full, &mut data.full, &mut im.cd, zo, ic.neg_z2.as_slice(), zo);
+        ic.kt.fill(0.0);
+        model.add_top_t(&im.cd.g, 1.0, &mut ic.kt, 0);
+        // 4. With S = Dᵀ + Kᵀ: H_q = S Y_q − Eᵀ Y_Λq, and
+        //    Dᵀ(Y_v − I) + Kᵀ(Y_v + e I) = S Y_v − Dᵀ + e Kᵀ.
+        let MimicImpactContracted { dt, kt, et, s, h, qq, qv, .. } = ic;
+        for ((o, d), k) in s.iter_mut().zip(dt.iter()).zip(kt.iter()) {
+            *o = d + k;
+        }
+        crate::linalg::gemm(1.0, &*s, &im.dvplus_dq, 0.0, h);
+        crate::linalg::gemm(-1.0, &*et, &im.dimpulse_dq, 1.0, h);
+        for j in 0..n {
+            for k in 0..n {
+                qq[(j, k)] = -(qq[(j, k)] + h[(j, k)] + h[(k, j)]);
+            }
+        }
+        let e = im.restitution;
+        for ((o, d), k) in qv.iter_mut().zip(dt.iter()).zip(kt.iter()) {
+            *o = d - e * k;
+        }
+        crate::linalg::gemm(-1.0, &*s, &im.dvplus_dvminus, 1.0, qv);
+        crate::linalg::gemm(1.0, &*et, &im.dimpulse_dvminus, 1.0, qv);
+        Ok(())
     }
 }

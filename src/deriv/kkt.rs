@@ -66,7 +66,7 @@ pub struct KktData {
     bg: DMatrix<f64>,
     /// For a model in reduced coordinates: the full tree's workspace and the reduced results, which
     /// the accessors return (the fields above are then an empty shell).
-    pub(crate) red: Option<Box<crate::mimic::MimicKktData>>,
+    pub(crate) red: Option<Box<crate::deriv::kkt::reduced::MimicKktData>>,
 }
 
 impl KktData {
@@ -263,7 +263,7 @@ impl KktData {
     pub fn new(model: &Model, cd: ContactData) -> Self {
         if let Some(r) = &model.reduction {
             let mut kd = Self::new(crate::model::tree::shell_model(), ContactData::empty());
-            kd.red = Some(Box::new(crate::mimic::MimicKktData::from_contacts(r, cd)));
+            kd.red = Some(Box::new(crate::deriv::kkt::reduced::MimicKktData::from_contacts(r, cd)));
             return kd;
         }
         let (n, m) = (model.nv, cd.dim());
@@ -329,8 +329,8 @@ pub fn kkt_dynamics(
     tau: &DVector<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        let kd_r = crate::mimic::reduced_ws(&mut kd.red, "KktData", model)?;
-        return crate::mimic::kkt_dynamics(r, data.reduced(model)?, kd_r, q, v, tau);
+        let kd_r = crate::algo::data::reduced::reduced_ws(&mut kd.red, "KktData", model)?;
+        return crate::deriv::kkt::reduced::kkt_dynamics(r, data.reduced(model)?, kd_r, q, v, tau);
     }
     check_inputs(model, data, kd, q, v, tau)?;
     solve_unchecked(model, data, kd, q, v, tau, true)
@@ -426,8 +426,15 @@ pub fn kkt_derivatives(
     tau: &DVector<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        let kd_r = crate::mimic::reduced_ws(&mut kd.red, "KktData", model)?;
-        return crate::mimic::kkt_derivatives(r, data.reduced(model)?, kd_r, q, v, tau);
+        let kd_r = crate::algo::data::reduced::reduced_ws(&mut kd.red, "KktData", model)?;
+        return crate::deriv::kkt::reduced::kkt_derivatives(
+            r,
+            data.reduced(model)?,
+            kd_r,
+            q,
+            v,
+            tau,
+        );
     }
     check_inputs(model, data, kd, q, v, tau)?;
     solve_unchecked(model, data, kd, q, v, tau, false)?;
@@ -549,8 +556,15 @@ pub fn kkt_so_derivatives(
     tau: &DVector<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        let kd_r = crate::mimic::reduced_ws(&mut kd.red, "KktData", model)?;
-        return crate::mimic::kkt_so_derivatives(r, data.reduced(model)?, kd_r, q, v, tau);
+        let kd_r = crate::algo::data::reduced::reduced_ws(&mut kd.red, "KktData", model)?;
+        return crate::deriv::kkt::reduced::kkt_so_derivatives(
+            r,
+            data.reduced(model)?,
+            kd_r,
+            q,
+            v,
+            tau,
+        );
     }
     let mut so = kd.so.take().ok_or_else(|| {
         crate::error::Error::Workspace(
@@ -931,7 +945,7 @@ pub struct KktContracted {
     neg_z2: DVector<f64>,
     /// For a model in reduced coordinates: the full tree's workspace and the reduced results, which
     /// the accessors return (the fields above are then an empty shell).
-    pub(crate) red: Option<Box<crate::mimic::MimicKktContracted>>,
+    pub(crate) red: Option<Box<crate::deriv::kkt::reduced::MimicKktContracted>>,
 }
 
 impl KktContracted {
@@ -939,7 +953,10 @@ impl KktContracted {
     pub fn new(model: &Model, kd: &KktData) -> Self {
         if let Some(r) = &model.reduction {
             let mut kc = Self::new(crate::model::tree::shell_model(), &KktData::empty());
-            kc.red = kd.red.as_ref().map(|k| Box::new(crate::mimic::MimicKktContracted::new(r, k)));
+            kc.red = kd
+                .red
+                .as_ref()
+                .map(|k| Box::new(crate::deriv::kkt::reduced::MimicKktContracted::new(r, k)));
             return kc;
         }
         let (n, m) = (model.nv, kd.cd.dim());
@@ -988,7 +1005,7 @@ impl KktContracted {
             None => &self.tq,
         }
     }
-    /// The adjoint `ζ` (`nv + m`), set by [`crate::mimic::kkt_so_contracted`] before
+    /// The adjoint `ζ` (`nv + m`), set by [`crate::deriv::kkt::reduced::kkt_so_contracted`] before
     /// [`zeta_residual_hessians`].
     pub(crate) fn zeta_mut(&mut self) -> &mut DVector<f64> {
         &mut self.zeta
@@ -1040,9 +1057,9 @@ pub fn kkt_so_contracted(
     w_lambda: &DVector<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        let kd_r = crate::mimic::reduced_ws(&mut kd.red, "KktData", model)?;
-        let kc_r = crate::mimic::reduced_ws(&mut kc.red, "KktContracted", model)?;
-        return crate::mimic::kkt_so_contracted(
+        let kd_r = crate::algo::data::reduced::reduced_ws(&mut kd.red, "KktData", model)?;
+        let kc_r = crate::algo::data::reduced::reduced_ws(&mut kc.red, "KktContracted", model)?;
+        return crate::deriv::kkt::reduced::kkt_so_contracted(
             r,
             data.reduced(model)?,
             kd_r,
@@ -1122,7 +1139,7 @@ pub fn kkt_so_contracted(
 /// state of the last first-order solve in `data` and `kd` (`kd.qdd`, `kd.lambda`) with the
 /// contact points of [`update_points`] at `−a_g`: the Hessians of `ζ₁ᵀτ` at `(q, q̇, q̈)` by
 /// reverse mode, minus the `q`-Hessian of `λ·(J_c ζ₁)`, plus those of `ζ₂·a_p` (and the
-/// Baumgarte terms) per contact. Shared with [`crate::mimic::kkt_so_contracted`] (the full
+/// Baumgarte terms) per contact. Shared with [`crate::deriv::kkt::reduced::kkt_so_contracted`] (the full
 /// tree's at `ζ = (G ζ₁, ζ₂)`).
 pub(crate) fn zeta_residual_hessians(
     model: &Model,
@@ -1193,4 +1210,878 @@ pub(crate) fn zeta_residual_hessians(
         }
     }
     kd.cd.zc = zc;
+}
+
+/// The reduced coordinates of a model with mimic joints ([`crate::model::Model::is_reduced`]):
+/// the full tree's functions of this family at `q_full = expand(q)`, `G v`, `G a`, reduced
+/// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
+pub(crate) mod reduced {
+
+    use crate::deriv::{ContactData, KktData};
+    use crate::error::{Error, Result};
+
+    use crate::model::reduction::MimicModel;
+    use crate::tensor::Tensor3;
+    use nalgebra::{DMatrix, DVector};
+
+    use crate::algo::data::reduced::MimicData;
+    use crate::algo::data::reduced::ldl_in_place;
+    use crate::algo::data::reduced::ldl_solve;
+    use crate::algo::data::reduced::prepare;
+    use crate::algo::rnea::reduced::bias_into;
+    use crate::deriv::id_fo::reduced::reduce_fo;
+    use crate::deriv::id_so::reduced::MimicSoData;
+
+    /// Workspace and results of the contact algorithms of a [`MimicModel`] ([`kkt_dynamics`],
+    /// [`kkt_derivatives`], [`constrained_id_derivatives`]): the contacts (frames of the full tree,
+    /// see [`crate::model::Contact`]), the full tree's KKT workspace, and the reduced results
+    /// (`m` contact rows).
+    #[derive(Clone, Debug)]
+    pub struct MimicKktData {
+        pub(crate) full: KktData,
+        pub(crate) key: u64,
+        /// `J G` (`m × nv`).
+        pub(crate) jr: DMatrix<f64>,
+        /// `γ`: the contact rows at `q̈ = 0` (drift and Baumgarte terms), `J q̈ + γ = 0`.
+        pub(crate) gamma: DVector<f64>,
+        pub(crate) tau_f: DVector<f64>,
+        pub(crate) x0: DVector<f64>,
+        pub(crate) lm: DVector<f64>,
+        pub(crate) qdd: DVector<f64>,
+        pub(crate) lambda: DVector<f64>,
+        pub(crate) dqdd_dq: DMatrix<f64>,
+        pub(crate) dqdd_dv: DMatrix<f64>,
+        pub(crate) dqdd_dtau: DMatrix<f64>,
+        pub(crate) dlambda_dq: DMatrix<f64>,
+        pub(crate) dlambda_dv: DMatrix<f64>,
+        pub(crate) dlambda_dtau: DMatrix<f64>,
+        /// `M⁻¹ (J G)ᵀ` (`nv × m`) and the Delassus matrix `J G M⁻¹ (J G)ᵀ`, factorised (`m × m`).
+        pub(crate) minv_jt: DMatrix<f64>,
+        pub(crate) del: DMatrix<f64>,
+        /// Residual derivatives of the full tree (`nv_f × nv_f`, `m × nv_f`) and reduced
+        /// (`nv × nv`, `m × nv`).
+        pub(crate) rf_top: DMatrix<f64>,
+        pub(crate) rf_bot: DMatrix<f64>,
+        pub(crate) r_top: DMatrix<f64>,
+        pub(crate) r_bot: DMatrix<f64>,
+        /// Scratch: one column of each block.
+        pub(crate) col_n: DVector<f64>,
+        pub(crate) col_m: DVector<f64>,
+        /// Second-order results and workspace ([`MimicKktData::with_second_order`]).
+        pub(crate) so: Option<Box<MimicKktSo>>,
+    }
+
+    /// Second-order results of [`kkt_so_derivatives`] (layout `T[(i, j, k)] = ∂/∂x_k (∂y_i/∂u_j)`,
+    /// `nv × nv × nv` for `q̈`, `m × nv × nv` for `λ`) and their workspace.
+    #[derive(Clone, Debug)]
+    pub struct MimicKktSo {
+        /// The result tensors.
+        pub(crate) res: crate::deriv::KktSo,
+        /// The full tree's tensors contracted with `G` on `(j, k)` (`nv_f × nv × nv`,
+        /// `m × nv × nv`).
+        pub(crate) ta: Tensor3,
+        pub(crate) tl: Tensor3,
+        /// The reduced right-hand sides `R_uw + G(∂y/∂w)[·, u] + G(∂y/∂u)[·, w]`, `q̈` rows
+        /// (`nv × nv × nv`) and contact rows (`m × nv × nv`).
+        pub(crate) sa: Tensor3,
+        pub(crate) sl: Tensor3,
+        /// One `Δ` column (`nv_f + m`).
+        pub(crate) delta: DVector<f64>,
+        /// One reduced `G` product (`(nv + m) × nv`) and a full-length vector.
+        pub(crate) c: DMatrix<f64>,
+        pub(crate) vf: DVector<f64>,
+    }
+
+    impl MimicKktData {
+        /// Adds the second-order workspace (for [`kkt_so_derivatives`]).
+        pub fn with_second_order(mut self, model: &MimicModel) -> Self {
+            let (n, nf, m) = (model.nv, model.full.nv(), self.dim());
+            let t = |r| Tensor3::zeros(r, n, n);
+            self.full = self.full.with_second_order(&model.full);
+            self.so = Some(Box::new(MimicKktSo {
+                res: crate::deriv::KktSo::results(n, m),
+                ta: t(nf),
+                tl: t(m),
+                sa: t(n),
+                sl: t(m),
+                delta: DVector::zeros(nf + m),
+                c: DMatrix::zeros(n + m, n),
+                vf: DVector::zeros(nf),
+            }));
+            self
+        }
+        /// The second-order results (with [`MimicKktData::with_second_order`]).
+        pub fn so(&self) -> Option<&MimicKktSo> {
+            self.so.as_deref()
+        }
+        /// Workspace for the contacts `cd` (made for the full tree or for the reduced model).
+        pub(crate) fn from_contacts(model: &MimicModel, mut cd: ContactData) -> Self {
+            cd.reduced_key = None;
+            let (n, nf, m) = (model.nv, model.full.nv(), cd.dim());
+            let mat = |r, c| DMatrix::zeros(r, c);
+            Self {
+                full: KktData::new(&model.full, cd),
+                key: model.key,
+                jr: mat(m, n),
+                gamma: DVector::zeros(m),
+                tau_f: DVector::zeros(nf),
+                x0: DVector::zeros(n),
+                lm: DVector::zeros(m),
+                qdd: DVector::zeros(n),
+                lambda: DVector::zeros(m),
+                dqdd_dq: mat(n, n),
+                dqdd_dv: mat(n, n),
+                dqdd_dtau: mat(n, n),
+                dlambda_dq: mat(m, n),
+                dlambda_dv: mat(m, n),
+                dlambda_dtau: mat(m, n),
+                minv_jt: mat(n, m),
+                del: mat(m, m),
+                rf_top: mat(nf, nf),
+                rf_bot: mat(m, nf),
+                r_top: mat(n, n),
+                r_bot: mat(m, n),
+                col_n: DVector::zeros(n),
+                col_m: DVector::zeros(m),
+                so: None,
+            }
+        }
+        /// The full tree's KKT workspace (its contacts).
+        pub(crate) fn full_kd(&self) -> &KktData {
+            &self.full
+        }
+        pub(crate) fn check(&self, model: &MimicModel) -> Result<()> {
+            if self.key != model.key || self.qdd.len() != model.nv {
+                return Err(Error::Workspace(format!(
+                    "KktData was made for another model; make it with KktData::new for \
+                     the mimic model \"{}\"",
+                    model.name()
+                )));
+            }
+            Ok(())
+        }
+        /// Number of contact rows `m`.
+        pub fn dim(&self) -> usize {
+            self.lambda.len()
+        }
+        /// Constrained accelerations `q̈`.
+        pub fn qdd(&self) -> &DVector<f64> {
+            &self.qdd
+        }
+        /// Contact forces `λ` applied to the robot (`m` rows, each contact's axes).
+        pub fn lambda(&self) -> &DVector<f64> {
+            &self.lambda
+        }
+        /// `∂q̈/∂q` (tangent).
+        pub fn dqdd_dq(&self) -> &DMatrix<f64> {
+            &self.dqdd_dq
+        }
+        /// `∂q̈/∂v`.
+        pub fn dqdd_dv(&self) -> &DMatrix<f64> {
+            &self.dqdd_dv
+        }
+        /// `∂q̈/∂τ`.
+        pub fn dqdd_dtau(&self) -> &DMatrix<f64> {
+            &self.dqdd_dtau
+        }
+        /// `∂λ/∂q` (tangent).
+        pub fn dlambda_dq(&self) -> &DMatrix<f64> {
+            &self.dlambda_dq
+        }
+        /// `∂λ/∂v`.
+        pub fn dlambda_dv(&self) -> &DMatrix<f64> {
+            &self.dlambda_dv
+        }
+        /// `∂λ/∂τ`.
+        pub fn dlambda_dtau(&self) -> &DMatrix<f64> {
+            &self.dlambda_dtau
+        }
+    }
+
+    /// `x ← M⁻¹ J_rᵀ l`-type solve of the reduced KKT system `[M, −J_rᵀ; J_r, 0] [x; l] = [r1; r2]`
+    /// (the Jacobian of the residual with respect to `(q̈, λ)`): `l = D⁻¹(r2 − J_r M⁻¹ r1)`,
+    /// `x = M⁻¹(r1 + J_rᵀ l)`, with `M` factorised in `ldl`, `D` in `del` and `M⁻¹ J_rᵀ` in
+    /// `minv_jt`. `r1` is overwritten by `x`, `r2` by `l`.
+    pub(crate) fn kkt_solve(ldl: &DMatrix<f64>, kd: &MimicKktData, r1: &mut [f64], r2: &mut [f64]) {
+        kkt_solve_with(ldl, &kd.jr, &kd.minv_jt, &kd.del, r1, r2);
+    }
+
+    /// [`kkt_solve`] with its matrices given.
+    pub(crate) fn kkt_solve_with(
+        ldl: &DMatrix<f64>,
+        jr: &DMatrix<f64>,
+        minv_jt: &DMatrix<f64>,
+        del: &DMatrix<f64>,
+        r1: &mut [f64],
+        r2: &mut [f64],
+    ) {
+        ldl_solve(ldl, r1);
+        // r2 − J_r M⁻¹ r1
+        for (r, x) in r2.iter_mut().enumerate() {
+            let s: f64 = (0..r1.len()).map(|c| jr[(r, c)] * r1[c]).sum();
+            *x -= s;
+        }
+        ldl_solve(del, r2);
+        // x = M⁻¹ r1 + (M⁻¹ J_rᵀ) l
+        for (i, x) in r1.iter_mut().enumerate() {
+            let s: f64 = (0..r2.len()).map(|r| minv_jt[(i, r)] * r2[r]).sum();
+            *x += s;
+        }
+    }
+
+    /// KKT contact dynamics in the reduced coordinates and its first-order derivatives at
+    /// `(q, v, τ)`: `[M, (J G)ᵀ; J G, 0] [q̈; −λ] = [τ − b; −γ]` (`M`, `b` as in [`aba`]; `J` and
+    /// `γ`, the contact rows at `q̈ = 0` with their Baumgarte terms, those of the full tree at
+    /// `(expand(q), G v)`), then `∂y/∂x = −R_y⁻¹ R_x` for `y = (q̈, λ)`, `x = (q, v, τ)` with the
+    /// reduced residual `R = [Gᵀ(M_f G q̈ + b_f − Jᵀλ) − τ; J G q̈ + γ]`.
+    ///
+    /// `R_x` is the full tree's residual derivative contracted with `G`, obtained from the full
+    /// tree's KKT derivatives ([`crate::deriv::kkt_derivatives`]) at the torque
+    /// `τ_f = M_f G q̈ + b_f − Jᵀλ`, whose solution is `(G q̈, λ)`: `R_x^f = −R_y^f ∂y^f/∂x`. The
+    /// full tree's mass matrix must therefore be regular too (it is unless a massless body moves
+    /// with a mimic joint). Results in `kd`; `data.m()` is `M`, `data.qdd()` the constrained `q̈`.
+    ///
+    /// # Errors
+    /// As [`aba`]; [`Error::Singular`] if the reduced Delassus matrix `J G M⁻¹ (J G)ᵀ` is singular
+    /// (a redundant contact set in the reduced coordinates) or the full tree's KKT system is;
+    /// a workspace of another model.
+    pub fn kkt_derivatives(
+        model: &MimicModel,
+        data: &mut MimicData,
+        kd: &mut MimicKktData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        tau: &DVector<f64>,
+    ) -> Result<()> {
+        kkt_inner(model, data, kd, q, v, tau, false)
+    }
+
+    /// KKT contact dynamics in the reduced coordinates at `(q, v, τ)`, without derivatives:
+    /// `[M, (J G)ᵀ; J G, 0] [q̈; −λ] = [τ − b; −γ]` (`M`, `b` as in [`aba`]; `J` and `γ`, the contact
+    /// rows at `q̈ = 0` with their Baumgarte terms, those of the full tree at `(expand(q), G v)`),
+    /// by block elimination on the dense factors of `M` and of the Delassus matrix
+    /// `J G M⁻¹ (J G)ᵀ`. Results: `kd.qdd()`, `kd.lambda()`, `kd.jac()`; `data.m()` is `M`,
+    /// `data.qdd()` the constrained `q̈` and `data.a_full()` `G q̈`. The forward part of
+    /// [`kkt_derivatives`], whose `q̈`, `λ` are these.
+    ///
+    /// # Errors
+    /// As [`aba`]; [`Error::Singular`] if the reduced Delassus matrix is singular (a redundant
+    /// contact set in the reduced coordinates); a workspace of another model.
+    pub fn kkt_dynamics(
+        model: &MimicModel,
+        data: &mut MimicData,
+        kd: &mut MimicKktData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        tau: &DVector<f64>,
+    ) -> Result<()> {
+        kd.check(model)?;
+        prepare(model, data, q, Some(v), Some(("tau", tau)))?;
+        let (n, nf, m) = (model.nv, model.full.nv(), kd.dim());
+        let full = &model.full;
+        // b, M (reduced) and M's factor.
+        {
+            let MimicData { full: fd, q, v, a, .. } = &mut *data;
+            bias_into(model, fd, q, v, a, None, kd.x0.as_mut_slice())?;
+        }
+        for (x, &t) in kd.x0.iter_mut().zip(tau.iter()) {
+            *x = t - *x;
+        }
+        // The world-frame CRBA: M_f, and the placements and world subspaces of the path kinematics.
+        crate::algo::internal::crba_unchecked(full, &mut data.full, &data.q);
+        model.reduce_matrix(data.full.m(), &mut data.m);
+        data.ldl.copy_from(&data.m);
+        ldl_in_place(model, &mut data.ldl)?;
+        // J and γ: the drift J̇ v_f and the Baumgarte terms kd J v_f (the position error is zero
+        // at this q), as the full tree's KKT dynamics.
+        let cd = &mut kd.full.cd;
+        crate::deriv::contact::path_kinematics(full, &data.full, cd, Some(data.v.as_slice()));
+        kd.gamma.copy_from(&cd.drift);
+        for (c, contact) in cd.contacts.iter().enumerate() {
+            if contact.kd != 0.0 {
+                for r in cd.row0[c]..cd.row0[c] + contact.dim() {
+                    let jv: f64 = (0..nf).map(|k| cd.jac[(r, k)] * data.v[k]).sum();
+                    kd.gamma[r] += contact.kd * jv;
+                }
+            }
+        }
+        let jac = &cd.jac;
+        kd.jr.fill(0.0);
+        for f in 0..nf {
+            let (c, g) = (model.g_col[f], model.g_coef[f]);
+            for r in 0..m {
+                kd.jr[(r, c)] += g * jac[(r, f)];
+            }
+        }
+        // M⁻¹ J_rᵀ, the Delassus matrix and its factor.
+        for r in 0..m {
+            let mut col = kd.minv_jt.column_mut(r);
+            for c in 0..n {
+                col[c] = kd.jr[(r, c)];
+            }
+            ldl_solve(&data.ldl, col.as_mut_slice());
+        }
+        crate::linalg::gemm(1.0, &kd.jr, &kd.minv_jt, 0.0, &mut kd.del);
+        delassus_in_place(&mut kd.del)?;
+        // q̈ = x0 + M⁻¹ J_rᵀ λ, λ = −D⁻¹(J_r x0 + γ) with x0 = M⁻¹(τ − b).
+        ldl_solve(&data.ldl, kd.x0.as_mut_slice());
+        kd.lm.copy_from(&kd.gamma);
+        kd.lm.gemv(1.0, &kd.jr, &kd.x0, 1.0);
+        ldl_solve(&kd.del, kd.lm.as_mut_slice());
+        kd.lambda.copy_from(&kd.lm);
+        kd.lambda.neg_mut();
+        kd.qdd.copy_from(&kd.x0);
+        kd.qdd.gemv(1.0, &kd.minv_jt, &kd.lambda, 1.0);
+        data.qdd.copy_from(&kd.qdd);
+        model.expand_v_into(kd.qdd.as_slice(), data.a.as_mut_slice());
+        Ok(())
+    }
+
+    /// [`kkt_derivatives`], with `so` also the full tree's second order at `τ_f`.
+    pub(crate) fn kkt_inner(
+        model: &MimicModel,
+        data: &mut MimicData,
+        kd: &mut MimicKktData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        tau: &DVector<f64>,
+        so: bool,
+    ) -> Result<()> {
+        kkt_dynamics(model, data, kd, q, v, tau)?;
+        let (n, nf, m) = (model.nv, model.full.nv(), kd.dim());
+        let full = &model.full;
+        // τ_f = M_f G q̈ + b_f − Jᵀλ, at which the full tree's KKT solution is (G q̈, λ).
+        let t = crate::algo::rnea(full, &mut data.full, &data.q, &data.v, &data.a, None)?;
+        kd.tau_f.copy_from(t);
+        kd.tau_f.gemv_tr(-1.0, kd.full.cd().jac(), &kd.lambda, 1.0);
+        if so {
+            crate::deriv::kkt_so_derivatives(
+                full,
+                &mut data.full,
+                &mut kd.full,
+                &data.q,
+                &data.v,
+                &kd.tau_f,
+            )?;
+        } else {
+            crate::deriv::kkt_derivatives(
+                full,
+                &mut data.full,
+                &mut kd.full,
+                &data.q,
+                &data.v,
+                &kd.tau_f,
+            )?;
+        }
+        // ∂y/∂q, ∂y/∂v.
+        for wrt in 0..2 {
+            let (dq, dl) = if wrt == 0 {
+                (kd.full.dqdd_dq(), kd.full.dlambda_dq())
+            } else {
+                (kd.full.dqdd_dv(), kd.full.dlambda_dv())
+            };
+            // R_x^f = −[M_f, −Jᵀ; J, 0] [∂q̈/∂x; ∂λ/∂x].
+            crate::linalg::gemm(-1.0, data.full.m(), dq, 0.0, &mut kd.rf_top);
+            kd.rf_top.gemm_tr(1.0, kd.full.cd().jac(), dl, 1.0);
+            crate::linalg::gemm(-1.0, kd.full.cd().jac(), dq, 0.0, &mut kd.rf_bot);
+            model.reduce_matrix(&kd.rf_top, &mut kd.r_top);
+            kd.r_bot.fill(0.0);
+            for f in 0..nf {
+                let (c, g) = (model.g_col[f], model.g_coef[f]);
+                for r in 0..m {
+                    kd.r_bot[(r, c)] += g * kd.rf_bot[(r, f)];
+                }
+            }
+            // ∂y/∂x = −R_y⁻¹ R_x, column by column.
+            for c in 0..n {
+                for i in 0..n {
+                    kd.col_n[i] = -kd.r_top[(i, c)];
+                }
+                for r in 0..m {
+                    kd.col_m[r] = -kd.r_bot[(r, c)];
+                }
+                let (mut cn, mut cm) =
+                    (std::mem::take(&mut kd.col_n), std::mem::take(&mut kd.col_m));
+                kkt_solve(&data.ldl, kd, cn.as_mut_slice(), cm.as_mut_slice());
+                let (oq, ol) = if wrt == 0 {
+                    (&mut kd.dqdd_dq, &mut kd.dlambda_dq)
+                } else {
+                    (&mut kd.dqdd_dv, &mut kd.dlambda_dv)
+                };
+                oq.column_mut(c).copy_from(&cn);
+                ol.column_mut(c).copy_from(&cm);
+                (kd.col_n, kd.col_m) = (cn, cm);
+            }
+        }
+        // ∂y/∂τ = R_y⁻¹ [I; 0].
+        for c in 0..n {
+            kd.col_n.fill(0.0);
+            kd.col_n[c] = 1.0;
+            kd.col_m.fill(0.0);
+            let (mut cn, mut cm) = (std::mem::take(&mut kd.col_n), std::mem::take(&mut kd.col_m));
+            kkt_solve(&data.ldl, kd, cn.as_mut_slice(), cm.as_mut_slice());
+            kd.dqdd_dtau.column_mut(c).copy_from(&cn);
+            kd.dlambda_dtau.column_mut(c).copy_from(&cm);
+            (kd.col_n, kd.col_m) = (cn, cm);
+        }
+        Ok(())
+    }
+
+    /// Second-order derivatives of the KKT dynamics in the reduced coordinates (and the first
+    /// order, as [`kkt_derivatives`]), by eq. SO_general_eqn
+    /// `∂²y/∂u∂w = −R_y⁻¹ (R_uw + G(∂y/∂w)[·, u] + G(∂y/∂u)[·, w])` on the reduced residual. With
+    /// the full tree's second order `T^f` at `τ_f` (see [`kkt_derivatives`]),
+    /// `R^f_uw + G^f(∂y^f/∂w)[·, u] + G^f(∂y^f/∂u)[·, w] = −R^f_y T^f[·, u, w]`, so the reduced
+    /// right-hand side is that contracted with `G` (rows by `Gᵀ` for the dynamics, `u`, `w` by `G`)
+    /// plus the `G` products, linear in their vector, of `Δ = (G ∂q̈/∂w, ∂λ/∂w) − ∂y^f/∂w^f G`
+    /// (the reduced solution's derivative expanded, minus the full tree's along `G`): `G(z)[·, u]`
+    /// is `[∂(M z₁)/∂q_u − ∂(Jᵀ z₂)/∂q_u; ∂(J z₁)/∂q_u]` (`q` only; `M` and `J` do not depend on
+    /// `v`), and `∂²y/∂τ∂q` is `−R_y⁻¹ G(∂y/∂τ_j)[·, k]` directly. Results in `kd.so()`.
+    ///
+    /// # Errors
+    /// As [`kkt_derivatives`], and a workspace without [`MimicKktData::with_second_order`].
+    pub fn kkt_so_derivatives(
+        model: &MimicModel,
+        data: &mut MimicData,
+        kd: &mut MimicKktData,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        tau: &DVector<f64>,
+    ) -> Result<()> {
+        let mut so = kd.so.take().ok_or_else(|| {
+            Error::Workspace(
+                "kkt_so_derivatives: KktData was made without with_second_order".into(),
+            )
+        })?;
+        let r = kkt_inner(model, data, kd, q, v, tau, true)
+            .map(|()| kkt_so_reduce(model, data, kd, &mut so));
+        kd.so = Some(so);
+        r
+    }
+
+    /// The reduced second order from the full tree's (see [`kkt_so_derivatives`]).
+    pub(crate) fn kkt_so_reduce(
+        model: &MimicModel,
+        data: &mut MimicData,
+        kd: &mut MimicKktData,
+        so: &mut MimicKktSo,
+    ) {
+        let (n, nf, m) = (model.nv, model.full.nv(), kd.dim());
+        let (gc, gk) = (&model.g_col, &model.g_coef);
+        // Pairs: (full q̈ tensor, full λ tensor, reduced outputs, which G products).
+        for pair in 0..4 {
+            so.sa.fill(0.0);
+            so.sl.fill(0.0);
+            if pair < 3 {
+                let fso = kd.full.so().expect("made with second order");
+                let (tfa, tfl) = match pair {
+                    0 => (fso.d2qdd_dq2(), fso.d2lambda_dq2()),
+                    1 => (fso.d2qdd_dv2(), fso.d2lambda_dv2()),
+                    _ => (fso.d2qdd_dqdv(), fso.d2lambda_dqdv()),
+                };
+                // T^f contracted with G on (j, k).
+                so.ta.fill(0.0);
+                so.tl.fill(0.0);
+                for k in 0..nf {
+                    for j in 0..nf {
+                        let c = gk[j] * gk[k];
+                        let (jr, kr) = (gc[j], gc[k]);
+                        for i in 0..nf {
+                            so.ta[(i, jr, kr)] += c * tfa[(i, j, k)];
+                        }
+                        for i in 0..m {
+                            so.tl[(i, jr, kr)] += c * tfl[(i, j, k)];
+                        }
+                    }
+                }
+                // −R^f_y applied: rows −(M_f t_a − Jᵀ t_λ) (then Gᵀ) and −J t_a.
+                let jac = kd.full.cd().jac();
+                let mf = data.full.m();
+                for k in 0..n {
+                    for j in 0..n {
+                        let ta = so.ta.fibre(j, k);
+                        let tl = so.tl.fibre(j, k);
+                        so.vf.gemv(-1.0, mf, &ta, 0.0);
+                        so.vf.gemv_tr(1.0, jac, &tl, 1.0);
+                        for f in 0..nf {
+                            so.sa[(gc[f], j, k)] += gk[f] * so.vf[f];
+                        }
+                        for r in 0..m {
+                            let s: f64 = (0..nf).map(|f| jac[(r, f)] * ta[f]).sum();
+                            so.sl[(r, j, k)] = -s;
+                        }
+                    }
+                }
+            }
+            // The G products of Δ (q directions only): qq (both orders), qv (the v column), τq.
+            if pair != 1 {
+                for w in 0..n {
+                    // Δ = E ∂y/∂w − ∂y^f/∂x^f G[:, w] (τ: E ∂y/∂τ_w alone).
+                    let (ya, yl) = match pair {
+                        0 => (&kd.dqdd_dq, &kd.dlambda_dq),
+                        2 => (&kd.dqdd_dv, &kd.dlambda_dv),
+                        _ => (&kd.dqdd_dtau, &kd.dlambda_dtau),
+                    };
+                    for f in 0..nf {
+                        so.delta[f] = gk[f] * ya[(gc[f], w)];
+                    }
+                    for r in 0..m {
+                        so.delta[nf + r] = yl[(r, w)];
+                    }
+                    if pair != 3 {
+                        let (yfa, yfl) = if pair == 0 {
+                            (kd.full.dqdd_dq(), kd.full.dlambda_dq())
+                        } else {
+                            (kd.full.dqdd_dv(), kd.full.dlambda_dv())
+                        };
+                        for f in 0..nf {
+                            if gc[f] == w {
+                                let g = gk[f];
+                                for i in 0..nf {
+                                    so.delta[i] -= g * yfa[(i, f)];
+                                }
+                                for r in 0..m {
+                                    so.delta[nf + r] -= g * yfl[(r, f)];
+                                }
+                            }
+                        }
+                    }
+                    let (za, zl) = so.delta.as_slice().split_at(nf);
+                    crate::deriv::contact::g_matrix_split(
+                        &model.full,
+                        &mut data.full,
+                        &mut kd.full.cd,
+                        za,
+                        zl,
+                        za,
+                    );
+                    // C = P g G: rows by Gᵀ (dynamics) and as is (contacts), columns by G.
+                    let g = &kd.full.cd.g;
+                    so.c.fill(0.0);
+                    for u in 0..nf {
+                        let (ur, gu) = (gc[u], gk[u]);
+                        for f in 0..nf {
+                            so.c[(gc[f], ur)] += gk[f] * gu * g[(f, u)];
+                        }
+                        for r in 0..m {
+                            so.c[(n + r, ur)] += gu * g[(nf + r, u)];
+                        }
+                    }
+                    for u in 0..n {
+                        for i in 0..n {
+                            let x = so.c[(i, u)];
+                            match pair {
+                                0 => {
+                                    so.sa[(i, u, w)] += x;
+                                    so.sa[(i, w, u)] += x;
+                                }
+                                2 => so.sa[(i, u, w)] += x,
+                                _ => so.sa[(i, w, u)] += x,
+                            }
+                        }
+                        for r in 0..m {
+                            let x = so.c[(n + r, u)];
+                            match pair {
+                                0 => {
+                                    so.sl[(r, u, w)] += x;
+                                    so.sl[(r, w, u)] += x;
+                                }
+                                2 => so.sl[(r, u, w)] += x,
+                                _ => so.sl[(r, w, u)] += x,
+                            }
+                        }
+                    }
+                }
+            }
+            // T = −R_y⁻¹ S, column by column.
+            let (oa, ol) = match pair {
+                0 => (&mut so.res.d2qdd_dq2, &mut so.res.d2lambda_dq2),
+                1 => (&mut so.res.d2qdd_dv2, &mut so.res.d2lambda_dv2),
+                2 => (&mut so.res.d2qdd_dqdv, &mut so.res.d2lambda_dqdv),
+                _ => (&mut so.res.d2qdd_dtaudq, &mut so.res.d2lambda_dtaudq),
+            };
+            for k in 0..n {
+                for j in 0..n {
+                    for i in 0..n {
+                        kd.col_n[i] = -so.sa[(i, j, k)];
+                    }
+                    for r in 0..m {
+                        kd.col_m[r] = -so.sl[(r, j, k)];
+                    }
+                    let (mut cn, mut cm) =
+                        (std::mem::take(&mut kd.col_n), std::mem::take(&mut kd.col_m));
+                    kkt_solve(&data.ldl, kd, cn.as_mut_slice(), cm.as_mut_slice());
+                    for i in 0..n {
+                        oa[(i, j, k)] = cn[i];
+                    }
+                    for r in 0..m {
+                        ol[(r, j, k)] = cm[r];
+                    }
+                    (kd.col_n, kd.col_m) = (cn, cm);
+                }
+            }
+        }
+    }
+
+    /// `h ←` its `L D Lᵀ` factor (as [`ldl_in_place`]), for the Delassus matrix: a pivot that is not
+    /// positive and finite, or at most `1e-12` of the largest, is a singular (redundant) set.
+    pub(crate) fn delassus_in_place(h: &mut DMatrix<f64>) -> Result<()> {
+        let n = h.nrows();
+        let mut dmax: f64 = 0.0;
+        for j in 0..n {
+            let mut d = h[(j, j)];
+            for k in 0..j {
+                d -= h[(j, k)] * h[(j, k)] * h[(k, k)];
+            }
+            if !(d > 0.0 && d.is_finite()) || d <= 1e-12 * dmax {
+                return Err(Error::Singular {
+                    what: "contact set".into(),
+                    detail: format!(
+                        "the Delassus matrix J G M⁻¹ (J G)ᵀ of the reduced coordinates (mimic \
+                         joints) has the pivot {d:e} at contact row {j}: the contacts are redundant \
+                         or do not move in the reduced coordinates"
+                    ),
+                });
+            }
+            dmax = dmax.max(d);
+            h[(j, j)] = d;
+            for i in j + 1..n {
+                let mut x = h[(i, j)];
+                for k in 0..j {
+                    x -= h[(i, k)] * h[(j, k)] * h[(k, k)];
+                }
+                h[(i, j)] = x / d;
+            }
+        }
+        Ok(())
+    }
+
+    /// `constrained_id_derivatives` of a reduced model with the full tree's contact workspace `cd`.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn constrained_id_cd(
+        model: &MimicModel,
+        data: &mut MimicData,
+        cd: &mut ContactData,
+        so: Option<&mut MimicSoData>,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        a: &DVector<f64>,
+        lambda: &DVector<f64>,
+    ) -> Result<()> {
+        prepare(model, data, q, Some(v), Some(("a", a)))?;
+        crate::model::check_vec("lambda", lambda, cd.dim())?;
+        model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+        match so {
+            None => crate::deriv::constrained_id_derivatives(
+                &model.full,
+                &mut data.full,
+                cd,
+                &data.q,
+                &data.v,
+                &data.a,
+                lambda,
+            )?,
+            Some(so) => {
+                so.check(model)?;
+                crate::deriv::constrained_id_so_derivatives(
+                    &model.full,
+                    &mut data.full,
+                    cd,
+                    &mut so.full,
+                    &data.q,
+                    &data.v,
+                    &data.a,
+                    lambda,
+                )?;
+                model.reduce_tensor(so.full.d2tau_dq2(), &mut so.d2tau_dq2);
+                model.reduce_tensor(so.full.d2tau_dv2(), &mut so.d2tau_dv2);
+                model.reduce_tensor(so.full.d2tau_dqdv(), &mut so.d2tau_dqdv);
+                model.reduce_tensor(so.full.dm_dq(), &mut so.dm_dq);
+            }
+        }
+        reduce_fo(model, data);
+        Ok(())
+    }
+
+    /// Results and workspace of [`kkt_so_contracted`] for a [`MimicModel`] and the contacts of a
+    /// [`MimicKktData`]: the full tree's [`crate::deriv::KktContracted`] and the reduced
+    /// `nv × nv` Hessians (`O(nv² + nv_f²)`, allocated once).
+    #[derive(Clone, Debug)]
+    pub struct MimicKktContracted {
+        pub(crate) full: crate::deriv::KktContracted,
+        pub(crate) key: u64,
+        /// `ζ = R_y⁻ᵀ ω` (reduced, `nv + m`).
+        pub(crate) zeta: DVector<f64>,
+        /// `G ζ₁` (`nv_f`) and `−ζ₂` (`m`).
+        pub(crate) zf: DVector<f64>,
+        pub(crate) neg_z2: DVector<f64>,
+        /// `A` (`nv × (nv + m)`), with `ζᵀ G(z) = (A z)ᵀ` in the reduced coordinates.
+        pub(crate) a: DMatrix<f64>,
+        pub(crate) h: DMatrix<f64>,
+        pub(crate) qq: DMatrix<f64>,
+        pub(crate) vv: DMatrix<f64>,
+        pub(crate) qv: DMatrix<f64>,
+        pub(crate) tq: DMatrix<f64>,
+    }
+
+    impl MimicKktContracted {
+        /// Workspace for `model` and the contacts of `kd`.
+        pub fn new(model: &MimicModel, kd: &MimicKktData) -> Self {
+            let (n, nf, m) = (model.nv, model.full.nv(), kd.dim());
+            let z = || DMatrix::zeros(n, n);
+            Self {
+                full: crate::deriv::KktContracted::new(&model.full, &kd.full),
+                key: model.key,
+                zeta: DVector::zeros(n + m),
+                zf: DVector::zeros(nf),
+                neg_z2: DVector::zeros(m),
+                a: DMatrix::zeros(n, n + m),
+                h: z(),
+                qq: z(),
+                vv: z(),
+                qv: z(),
+                tq: z(),
+            }
+        }
+        fn check(&self, model: &MimicModel, m: usize) -> Result<()> {
+            if self.key != model.key || self.zeta.len() != model.nv + m {
+                return Err(Error::Workspace(format!(
+                    "KktContracted was made for another model or contact set; make it with \
+                     KktContracted::new for the reduced model \"{}\" and this KktData",
+                    model.name()
+                )));
+            }
+            Ok(())
+        }
+        /// `C_qq[(j, k)] = ∂/∂q_k (∂(ωᵀy)/∂q_j)` with `ωᵀy = w_q̈ᵀ q̈ + w_λᵀ λ` (reduced).
+        pub fn c_qq(&self) -> &DMatrix<f64> {
+            &self.qq
+        }
+        /// `C_vv[(j, k)] = ∂²(ωᵀy)/∂v_j∂v_k`.
+        pub fn c_vv(&self) -> &DMatrix<f64> {
+            &self.vv
+        }
+        /// `C_qv[(j, k)] = ∂/∂v_k (∂(ωᵀy)/∂q_j)`.
+        pub fn c_qv(&self) -> &DMatrix<f64> {
+            &self.qv
+        }
+        /// `C_τq[(j, k)] = ∂/∂q_k (∂(ωᵀy)/∂τ_j)`.
+        pub fn c_tauq(&self) -> &DMatrix<f64> {
+            &self.tq
+        }
+    }
+
+    /// The Hessians of `ωᵀy = w_q̈ᵀ q̈ + w_λᵀ λ` of the KKT dynamics in the reduced coordinates (as
+    /// [`crate::deriv::kkt_so_contracted`]) at `(q, v, τ)`, without an `nv³` tensor; also the
+    /// first-order derivatives into `kd` (as [`kkt_derivatives`]).
+    ///
+    /// Contracting eq. SO_general_eqn of the reduced residual (see [`kkt_so_derivatives`]) with
+    /// `ω`, and with `P = diag(Gᵀ, I)` its rows from the full tree's:
+    /// 1. first order, `M` and the Delassus matrix factorised ([`kkt_derivatives`]);
+    /// 2. the adjoint `ζ = R_y⁻ᵀ ω` (reduced `R_y = [M, −(J G)ᵀ; J G, 0]`);
+    /// 3. `ζᵀR_uw = Gᵀ (ζ_fᵀ R^f_uw) G` with `ζ_f = Pᵀζ = (G ζ₁, ζ₂)`: the full tree's contraction
+    ///    (the reverse-mode ID Hessians of `ζ_f₁ᵀτ` at `(expand(q), G v, G q̈)`, the contact
+    ///    terms at `λ`) reduced;
+    /// 4. `ζᵀ P G_f(G z₁, z₂) G = (A z)ᵀ` with `A = Gᵀ A_f diag(G, I)`, `A_f` the full tree's
+    ///    `[(∂(M ζ_f₁)/∂q + ∂(Jᵀζ₂)/∂q)ᵀ | −(∂(J ζ_f₁)/∂q)ᵀ]` (one `G` evaluation);
+    /// 5. `C_qq = −(ζᵀR_qq + A Y_q + (A Y_q)ᵀ)`, `C_vv = −ζᵀR_vv`, `C_qv = −(ζᵀR_qv + A Y_v)`,
+    ///    `C_τq = −(A Y_τ)ᵀ` (`Y_x = [∂q̈/∂x; ∂λ/∂x]`, reduced).
+    ///
+    /// Allocates nothing.
+    ///
+    /// # Errors
+    /// As [`kkt_derivatives`]; `w_qdd` (length `nv`) or `w_lambda` (length `m`) of the wrong
+    /// length or not finite; `kc` made for another model or contact set.
+    #[allow(clippy::too_many_arguments)]
+    pub fn kkt_so_contracted(
+        model: &MimicModel,
+        data: &mut MimicData,
+        kd: &mut MimicKktData,
+        kc: &mut MimicKktContracted,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        tau: &DVector<f64>,
+        w_qdd: &DVector<f64>,
+        w_lambda: &DVector<f64>,
+    ) -> Result<()> {
+        kd.check(model)?;
+        let (n, nf, m) = (model.nv, model.full.nv(), kd.dim());
+        kc.check(model, m)?;
+        model.check_v("w_qdd", w_qdd)?;
+        crate::model::check_vec("w_lambda", w_lambda, m)?;
+        // 1. First order.
+        kkt_inner(model, data, kd, q, v, tau, false)?;
+        let full = &model.full;
+        // 2. ζ: R_yᵀ ζ = ω ⇔ R_y (ζ₁, −ζ₂) = (w_q̈, −w_λ).
+        {
+            let (z1, z2) = kc.zeta.as_mut_slice().split_at_mut(n);
+            z1.copy_from_slice(w_qdd.as_slice());
+            for (z, w) in z2.iter_mut().zip(w_lambda.iter()) {
+                *z = -w;
+            }
+            kkt_solve(&data.ldl, kd, z1, z2);
+            for z in z2.iter_mut() {
+                *z = -*z;
+            }
+        }
+        let (z1, z2) = kc.zeta.as_slice().split_at(n);
+        // 3. ζᵀR_uw = Gᵀ(ζ_fᵀR^f_uw)G at the full tree's state of step 1.
+        {
+            let zf = kc.full.zeta_mut();
+            model.expand_v_into(z1, &mut zf.as_mut_slice()[..nf]);
+            zf.as_mut_slice()[nf..].copy_from_slice(z2);
+        }
+        crate::deriv::contact::update_points(full, &data.full, &mut kd.full.cd, -full.gravity);
+        crate::deriv::kkt::zeta_residual_hessians(
+            full,
+            &mut data.full,
+            &mut kd.full,
+            &mut kc.full,
+            &data.q,
+            &data.v,
+        );
+        model.reduce_matrix(kc.full.c_qq(), &mut kc.qq);
+        model.reduce_matrix(kc.full.c_vv(), &mut kc.vv);
+        model.reduce_matrix(kc.full.c_qv(), &mut kc.qv);
+        // 4. A = Gᵀ A_f diag(G, I) from one G evaluation G_f(G ζ₁; −ζ₂).
+        model.expand_v_into(z1, kc.zf.as_mut_slice());
+        for (o, x) in kc.neg_z2.iter_mut().zip(z2) {
+            *o = -x;
+        }
+        let zf = kc.zf.as_slice();
+        crate::deriv::contact::g_matrix_split(
+            full,
+            &mut data.full,
+            &mut kd.full.cd,
+            zf,
+            kc.neg_z2.as_slice(),
+            zf,
+        );
+        kc.a.fill(0.0);
+        model.add_top_t(&kd.full.cd.g, 1.0, &mut kc.a, 0);
+        model.add_bottom_t(&kd.full.cd.g, m, -1.0, &mut kc.a, n);
+        // 5. The product terms and the signs.
+        let MimicKktContracted { a, h, qq, vv, qv, tq, .. } = kc;
+        let y = |top: &DMatrix<f64>, bottom: &DMatrix<f64>, h: &mut DMatrix<f64>| {
+            crate::linalg::gemm(1.0, &a.columns(0, n), top, 0.0, h);
+            crate::linalg::gemm(1.0, &a.columns(n, m), bottom, 1.0, h);
+        };
+        y(&kd.dqdd_dq, &kd.dlambda_dq, h);
+        for j in 0..n {
+            for k in 0..n {
+                qq[(j, k)] = -(qq[(j, k)] + h[(j, k)] + h[(k, j)]);
+            }
+        }
+        vv.neg_mut();
+        y(&kd.dqdd_dv, &kd.dlambda_dv, h);
+        *qv += &*h;
+        qv.neg_mut();
+        y(&kd.dqdd_dtau, &kd.dlambda_dtau, h);
+        for j in 0..n {
+            for k in 0..n {
+                tq[(j, k)] = -h[(k, j)];
+            }
+        }
+        Ok(())
+    }
 }

@@ -45,7 +45,7 @@ pub fn idfoza(
     out: &mut DMatrix<f64>,
 ) -> Result<()> {
     if let Some(r) = &model.reduction {
-        return crate::mimic::idfoza(r, data.reduced(model)?, q, x, out);
+        return crate::deriv::zero::reduced::idfoza(r, data.reduced(model)?, q, x, out);
     }
     model.check_q(q)?;
     data.check_tree(model)?;
@@ -163,8 +163,8 @@ pub fn idsoza<'a>(
     x: &DVector<f64>,
 ) -> Result<&'a Tensor3> {
     if let Some(r) = &model.reduction {
-        let so = crate::mimic::reduced_ws(&mut so.red, "SoData", model)?;
-        return crate::mimic::idsoza(r, data.reduced(model)?, so, q, x);
+        let so = crate::algo::data::reduced::reduced_ws(&mut so.red, "SoData", model)?;
+        return crate::deriv::zero::reduced::idsoza(r, data.reduced(model)?, so, q, x);
     }
     model.check_q(q)?;
     data.check_tree(model)?;
@@ -393,5 +393,72 @@ pub(crate) fn idfoza_lanes_core<V: Lanes>(
             }
             ws.fc[p] = st6(&fp);
         }
+    }
+}
+
+/// The reduced coordinates of a model with mimic joints ([`crate::model::Model::is_reduced`]):
+/// the full tree's functions of this family at `q_full = expand(q)`, `G v`, `G a`, reduced
+/// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
+pub(crate) mod reduced {
+
+    use crate::error::{Error, Result};
+
+    use crate::model::reduction::MimicModel;
+    use crate::tensor::Tensor3;
+    use nalgebra::{DMatrix, DVector};
+
+    use crate::algo::data::reduced::MimicData;
+    use crate::algo::data::reduced::prepare;
+    use crate::deriv::id_so::reduced::MimicSoData;
+
+    /// IDFOZA in the reduced coordinates: `out[(i, k)] = ∂(M(q) x)_i/∂q_k` (`nv × nv`, tangent
+    /// space), with `M = Gᵀ M_full(expand(q)) G`: `out = Gᵀ [∂(M_full y)/∂q_full] G` at `y = G x`
+    /// (the full tree's [`crate::deriv::idfoza`]). Leaves `expand(q)`, zero velocity and `G x` in
+    /// `data.q_full()`, `data.v_full()`, `data.a_full()`. Allocates nothing.
+    ///
+    /// # Errors
+    /// As [`crba`] for `q`; `x` of the wrong length or not finite; `out` not `nv × nv`.
+    pub fn idfoza(
+        model: &MimicModel,
+        data: &mut MimicData,
+        q: &DVector<f64>,
+        x: &DVector<f64>,
+        out: &mut DMatrix<f64>,
+    ) -> Result<()> {
+        prepare(model, data, q, None, Some(("x", x)))?;
+        if out.shape() != (model.nv, model.nv) {
+            return Err(Error::Dimension {
+                what: "out (rows·cols)".into(),
+                expected: model.nv * model.nv,
+                got: out.len(),
+            });
+        }
+        model.expand_v_into(x.as_slice(), data.a.as_mut_slice());
+        crate::deriv::idfoza(&model.full, &mut data.full, &data.q, &data.a, &mut data.mf)?;
+        model.reduce_matrix(&data.mf, out);
+        Ok(())
+    }
+
+    /// IDSOZA in the reduced coordinates: `T[(i, j, k)] = ∂/∂q_k ∂(M(q) x)_i/∂q_j` (tangent
+    /// space, nested as the other second-order tensors), the full tree's
+    /// [`crate::deriv::idsoza`] at `expand(q)`, `y = G x` contracted with `Gᵀ` on `i` and `G` on
+    /// `j` and `k`. Writes and returns `so.d2tau_dq2()` (the other tensors of `so` are not
+    /// written); the state in `data` as [`idfoza`]. Allocates nothing.
+    ///
+    /// # Errors
+    /// As [`idfoza`] for `q` and `x`; an `so` made for another model.
+    pub fn idsoza<'a>(
+        model: &MimicModel,
+        data: &mut MimicData,
+        so: &'a mut MimicSoData,
+        q: &DVector<f64>,
+        x: &DVector<f64>,
+    ) -> Result<&'a Tensor3> {
+        so.check(model)?;
+        prepare(model, data, q, None, Some(("x", x)))?;
+        model.expand_v_into(x.as_slice(), data.a.as_mut_slice());
+        crate::deriv::idsoza(&model.full, &mut data.full, &mut so.full, &data.q, &data.a)?;
+        model.reduce_tensor(so.full.d2tau_dq2(), &mut so.d2tau_dq2);
+        Ok(&so.d2tau_dq2)
     }
 }

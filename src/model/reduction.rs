@@ -9,6 +9,27 @@
 //! (rotational: revolute or continuous; or prismatic), so that `q_full = expand(q)` (the
 //! independent coordinates copied, `m · q_ref + c` for each mimic joint), `v_full = G v`,
 //! `a_full = G a`, and `expand(q ⊕ δ) = expand(q) ⊕ G δ`.
+//!
+//! Every algorithm runs on such a model with the usual workspaces; its reduced-coordinate
+//! implementation sits in the algorithm's own file (a `reduced` module beside the tree's code):
+//! * the tangent derivatives of the reduced model are those of the full model times `G` for
+//!   every `q`, `v` or `a` index;
+//! * `τ = Gᵀ τ_full(q_full, G v, G a)` (the generalised forces of the reduced coordinates, by
+//!   virtual work), `M = Gᵀ M_full G`, `∂τ/∂q = Gᵀ (∂τ_full/∂q) G`, `∂τ/∂v = Gᵀ (∂τ_full/∂v) G`;
+//! * the second-order tensors are those of the full model contracted with `G` on each of their
+//!   three indices (`∂M/∂q` too);
+//! * forward dynamics `q̈ = M⁻¹(τ − Gᵀ b_full(q_full, G v))` by a dense `L D Lᵀ` factorisation
+//!   (`M` is not tree-sparse) with the singularity test of the tree-sparse one (a pivot not
+//!   positive and finite, or at most `1e-14` times the largest); its derivatives from the
+//!   reduced inverse-dynamics derivatives at `a_full = G q̈`: `∂q̈/∂u = −M⁻¹ ∂τ/∂u`,
+//!   `∂q̈/∂τ = M⁻¹`, and the second order by eq. eqn_FD_SO_43 with `∂M/∂q` above;
+//! * the contracted second order: the adjoint `ζ` of the reduced residual, the full tree's
+//!   contraction at `ζ_f = (G ζ₁, ζ₂)` reduced with `G`, no `nv³` tensor;
+//! * frames and the centre of mass: the full tree's at `expand(q)`, `G v`, `G a`, Jacobians
+//!   times `G`, Hessians contracted with `G` twice.
+//!
+//! External forces `fext` are those of the full model (one per joint of the full tree, mimic
+//! joints included); contact frames are frames of the full tree.
 
 use crate::error::{Error, Result};
 use crate::model::{JointType, Model};
