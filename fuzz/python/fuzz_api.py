@@ -714,6 +714,7 @@ GEN: Dict[str, Callable[[Ctx], Any]] = {
     "w_qdd": nv_vec,
     "w_vplus": nv_vec,
     "lam": nc_vec,
+    "lambda_": nc_vec,
     "w_lambda": nc_vec,
     "w_impulse": nc_vec,
     "contacts": contact_list,

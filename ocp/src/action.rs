@@ -172,7 +172,7 @@ pub struct ActionData {
     /// the Gauss-Newton `[ℓ_xx ℓ_xu; ℓ_ux ℓ_uu]` plus this.
     pub hzz: DMatrix<f64>,
     /// How many cost terms of the last [`ActionModel::second_order`] kept their Gauss-Newton
-    /// Hessian (`FrameVelocity`).
+    /// Hessian (0: every residual has its exact curvature).
     pub gauss_newton_terms: usize,
     so: SoWork,
 }

@@ -8,7 +8,8 @@ use nalgebra::{DMatrix, DVector};
 
 use nalgebra::Matrix6;
 use nalgebra::Vector3;
-use sodyn::algo::{ReferenceFrame, center_of_mass, frame_jacobian_derivative};
+use sodyn::algo::{ReferenceFrame, center_of_mass, frame_jacobian_derivative, frame_velocity};
+use sodyn::spatial::{Force, Motion};
 use sodyn::tensor::Tensor3;
 
 use crate::activation::Activation;
@@ -73,6 +74,11 @@ pub(crate) struct CurvatureWork {
     psub: Vec<Vector3<f64>>,
     /// Per DoF: the world motion column.
     sw: Vec<sodyn::spatial::Motion>,
+    /// Per DoF on a frame's path (`FrameVelocity`): `W_c = V_i − V_λ(c)` and `∂f/∂q_c`.
+    wv: Vec<Motion>,
+    df: Vec<Force>,
+    /// The DoFs on a frame's path, in increasing order.
+    path: Vec<usize>,
 }
 
 impl CurvatureWork {
@@ -85,6 +91,9 @@ impl CurvatureWork {
             fsub: vec![0.0; nj],
             psub: vec![Vector3::zeros(); nj],
             sw: vec![sodyn::spatial::Motion::zero(); nv],
+            wv: vec![Motion::zero(); nv],
+            df: vec![Force::zero(); nv],
+            path: Vec::with_capacity(nv),
         }
     }
 }
@@ -228,7 +237,9 @@ impl CostModelSum {
     /// `FrameTranslation` (`sym(∂J/∂q)`, the frame Jacobian's derivative), the linear residuals
     /// (`Control`, `JointEffort`), `FramePlacement` (`log6`'s curvature and the local
     /// Jacobian's derivative), `CoMPosition` (the bodies' centres of mass) and the force
-    /// residuals; `FrameVelocity` keeps its Gauss-Newton Hessian. Returns how many active terms did.
+    /// residuals and `FrameVelocity` (path kinematics in world coordinates, see
+    /// [`frame_velocity_curvature`]). Returns how many active terms kept their Gauss-Newton
+    /// Hessian (none today).
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn curvature(
         &self,
@@ -242,7 +253,7 @@ impl CostModelSum {
         with_u: bool,
     ) -> sodyn::Result<usize> {
         let nv = n.model.nv();
-        let mut gauss_newton = 0;
+        let gauss_newton = 0;
         for (k, c) in self.items.iter().enumerate() {
             if !c.active || (!with_u && !c.residual.depends_on_x()) {
                 continue;
@@ -425,9 +436,119 @@ impl CostModelSum {
                         }
                     }
                 }
-                Residual::FrameVelocity { .. } => gauss_newton += 1,
+                Residual::FrameVelocity { frame, rf, .. } => {
+                    let mu = [w * ar[0], w * ar[1], w * ar[2], w * ar[3], w * ar[4], w * ar[5]];
+                    frame_velocity_curvature(n, *frame, *rf, &mu, hzz, ws)?;
+                }
             }
         }
         Ok(gauss_newton)
     }
+}
+
+/// The curvature `∇²_{(q, q̇)} μᵀ v_f(q, q̇)` of a frame velocity (frame `frame` on joint `i`, in
+/// `rf`, rows `[angular; linear]`), added to the `(δq, δq̇)` blocks of `hzz` (symmetric part).
+///
+/// Inputs: `μ` (6), the node's `(q, q̇)`. Outputs: `hzz[q, q]`, `hzz[q, q̇]`, `hzz[q̇, q]` `+=`.
+/// In world coordinates (`S_c` the world column of DoF `c`, `V_J` the world spatial velocity
+/// of joint `J`'s body, `c ⪯ i` the DoFs on the frame's path, `λ(c)` the parent of `c`'s joint):
+/// 1. `μᵀ v_f = f(q)ᵀ V_i`, `V_i = Σ_{c ⪯ i} S_c q̇_c`, with the world covector
+///    `f = ⁰X_f* μ` (LOCAL), `μ` (WORLD), `[μ_a + p × μ_l; μ_l]` (LOCAL_WORLD_ALIGNED, `p` the
+///    frame's origin);
+/// 2. `∂S_c/∂q_k = S_k × S_c` if `k`'s joint `⪯` `c`'s (0 otherwise), so
+///    `∂V_i/∂q_k = S_k × W_k`, `W_k = V_i − V_λ(k)`;
+/// 3. `∂f/∂q_k = S_k ×* f` (LOCAL), 0 (WORLD), `[u_k × μ_l; 0]` with `u_k = S_k.lin + S_k.ang × p`
+///    (LOCAL_WORLD_ALIGNED);
+/// 4. `∂²/∂q_l∂q̇_c = (∂f/∂q_l)ᵀ S_c + [l ⪯ c] fᵀ (S_l × S_c)`;
+/// 5. `∂²/∂q_k∂q_l = (∂²f/∂q_k∂q_l)ᵀ V_i + (∂f/∂q_l)ᵀ (S_k × W_k) + (∂f/∂q_k)ᵀ (S_l × W_l)
+///    + [k ⪯ l] fᵀ ((S_k × S_l) × W_l) + fᵀ (S_l × (S_k × W_d))`, `d` the deeper of `k`, `l`;
+///    the Hessian is its symmetric part.
+fn frame_velocity_curvature(
+    n: &mut NodeView<'_>,
+    frame: usize,
+    rf: ReferenceFrame,
+    mu: &[f64; 6],
+    hzz: &mut DMatrix<f64>,
+    ws: &mut CurvatureWork,
+) -> sodyn::Result<()> {
+    let m = n.model;
+    let nv = m.nv();
+    // Path kinematics at (q, q̇): placements and body velocities of the frame's ancestors.
+    frame_velocity(m, n.data, n.q, n.v, frame, rf)?;
+    let i = m.frames()[frame].joint;
+    if i == 0 {
+        return Ok(());
+    }
+    let omf = n.data.o_m_i()[i].compose(&m.frames()[frame].placement);
+    let world_v = |j: usize| -> Motion {
+        if j == 0 { Motion::zero() } else { n.data.o_m_i()[j].act_motion(&n.data.v()[j]) }
+    };
+    let vi = world_v(i);
+    let (mu_a, mu_l) = (Vector3::new(mu[0], mu[1], mu[2]), Vector3::new(mu[3], mu[4], mu[5]));
+    let p = omf.trans;
+    // 1. The covector f.
+    let f = match rf {
+        ReferenceFrame::Local => omf.act_force(&Force::new(mu_a, mu_l)),
+        ReferenceFrame::World => Force::new(mu_a, mu_l),
+        ReferenceFrame::LocalWorldAligned => Force::new(mu_a + p.cross(&mu_l), mu_l),
+    };
+    let dofs = &mut ws.path;
+    dofs.clear();
+    dofs.extend((0..nv).filter(|&c| m.is_ancestor(m.dof_joint()[c], i)));
+    // S_c, W_c and ∂f/∂q_c on the path (step 2, 3).
+    for &c in dofs.iter() {
+        let j = m.dof_joint()[c];
+        let s = n.data.o_m_i()[j].act_motion(&m.subspace()[c]);
+        ws.sw[c] = s;
+        ws.wv[c] = vi - world_v(m.parents()[j]);
+        ws.df[c] = match rf {
+            ReferenceFrame::Local => s.cross_force(&f),
+            ReferenceFrame::World => Force::zero(),
+            ReferenceFrame::LocalWorldAligned => {
+                Force::new((s.lin + s.ang.cross(&p)).cross(&mu_l), Vector3::zeros())
+            }
+        };
+    }
+    let (sw, wv, df) = (&ws.sw, &ws.wv, &ws.df);
+    for &l in dofs.iter() {
+        let jl = m.dof_joint()[l];
+        let (sl, wl, dfl) = (sw[l], wv[l], df[l]);
+        // 4. The (q, q̇) block.
+        for &c in dofs.iter() {
+            let mut h = dfl.dot(&sw[c]);
+            if m.is_ancestor(jl, m.dof_joint()[c]) {
+                h += f.dot(&sl.cross(&sw[c]));
+            }
+            hzz[(l, nv + c)] += h;
+            hzz[(nv + c, l)] += h;
+        }
+        // 5. The (q, q) block, row l of the raw second derivative ∂/∂q_k (∂/∂q_l).
+        for &k in dofs.iter() {
+            let jk = m.dof_joint()[k];
+            let (sk, wk, dfk) = (sw[k], wv[k], df[k]);
+            let k_above_l = m.is_ancestor(jk, jl);
+            // ∂S_l/∂q_k.
+            let dsl = if k_above_l { sk.cross(&sl) } else { Motion::zero() };
+            let d2f = match rf {
+                ReferenceFrame::Local => dsl.cross_force(&f) + sl.cross_force(&sk.cross_force(&f)),
+                ReferenceFrame::World => Force::zero(),
+                ReferenceFrame::LocalWorldAligned => {
+                    let uk = sk.lin + sk.ang.cross(&p);
+                    let dul = dsl.lin + dsl.ang.cross(&p) + sl.ang.cross(&uk);
+                    Force::new(dul.cross(&mu_l), Vector3::zeros())
+                }
+            };
+            let wd = if k_above_l { wl } else { wk };
+            let mut h = d2f.dot(&vi)
+                + dfl.dot(&sk.cross(&wk))
+                + dfk.dot(&sl.cross(&wl))
+                + f.dot(&sl.cross(&sk.cross(&wd)));
+            if k_above_l {
+                h += f.dot(&dsl.cross(&wl));
+            }
+            hzz[(l, k)] += 0.5 * h;
+            hzz[(k, l)] += 0.5 * h;
+        }
+    }
+    Ok(())
 }

@@ -18,8 +18,9 @@ fn node(m: &Arc<sodyn::model::Model>, v: serde_json::Value) -> ActionModel {
     spec::action_model(m, &v, "node").expect("node")
 }
 
-/// Costs whose residual curvature is exact (state on the manifold, control, frame translation
-/// and placement, centre of mass, contact forces and cones).
+/// Costs whose residual curvature is exact (state on the manifold, control, frame translation,
+/// placement and velocity in the three reference frames, centre of mass, contact forces and
+/// cones).
 fn costs(x0: &DVector<f64>, nu: usize, contacts: &[&str], foot: &str) -> serde_json::Value {
     let mut c = vec![
         json!({"name": "x", "weight": 3.0, "residual": {"type": "state", "xref": x0.as_slice()}}),
@@ -27,6 +28,12 @@ fn costs(x0: &DVector<f64>, nu: usize, contacts: &[&str], foot: &str) -> serde_j
         json!({"name": "com", "weight": 7.0, "residual": {"type": "com_position", "cref": [0.1, -0.2, 0.3]}}),
         json!({"name": "place", "weight": 4.0, "residual": {"type": "frame_placement", "frame": foot,
                "rotation": [0.36, 0.48, -0.8, -0.8, 0.6, 0.0, 0.48, 0.64, 0.6], "translation": [-0.3, -0.2, 0.1]}}),
+        json!({"name": "vel_local", "weight": 2.0, "residual": {"type": "frame_velocity", "frame": foot,
+               "vref": [0.1, -0.2, 0.3, 0.5, -0.4, 0.2], "reference": "local"}}),
+        json!({"name": "vel_world", "weight": 1.5, "residual": {"type": "frame_velocity", "frame": foot,
+               "vref": [-0.3, 0.2, 0.1, 0.0, 0.4, -0.6], "reference": "world"}}),
+        json!({"name": "vel_lwa", "weight": 2.5, "residual": {"type": "frame_velocity", "frame": foot,
+               "vref": [0.2, 0.1, -0.1, 0.3, 0.3, 0.1], "reference": "local_world_aligned"}}),
     ];
     if nu > 0 {
         c.push(json!({"name": "u", "weight": 0.1, "residual": {"type": "control", "uref": vec![0.3; nu]}}));

@@ -333,7 +333,7 @@ pub(crate) fn check_order(order: i64) -> PyResult<()> {
 /// derivatives (λ, 3 or 6 rows per contact, held fixed in each contact's axes): keys `tau,
 /// dtau_dq, dtau_dv` (+ `d2tau_dq2`).
 #[pyfunction(name = "constrained_id_derivatives")]
-#[pyo3(signature = (model, data, q, v, a, contacts, lam, order = 1))]
+#[pyo3(signature = (model, data, q, v, a, contacts, lambda_, order = 1))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn py_constrained_id_derivatives<'py>(
     py: Python<'py>,
@@ -343,7 +343,7 @@ pub(crate) fn py_constrained_id_derivatives<'py>(
     v: &Bound<'py, PyAny>,
     a: &Bound<'py, PyAny>,
     contacts: Vec<PyRef<'py, PyContact>>,
-    lam: &Bound<'py, PyAny>,
+    lambda_: &Bound<'py, PyAny>,
     order: i64,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_order(order)?;
@@ -351,9 +351,9 @@ pub(crate) fn py_constrained_id_derivatives<'py>(
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
     let (cs, key) = resolve(m, &contacts)?;
-    read_vec(lam, "lam", rows_of(&cs), "3 or 6 rows per contact", &mut d.lam)?;
+    read_vec(lambda_, "lambda_", rows_of(&cs), "3 or 6 rows per contact", &mut d.lam)?;
     if let Some(index) = d.lam.iter().position(|x| !x.is_finite()) {
-        return Err(core_err(Error::NotFinite { what: "lam".into(), index }));
+        return Err(core_err(Error::NotFinite { what: "lambda_".into(), index }));
     }
     if d.cid.as_ref().is_none_or(|(k, _)| *k != key) {
         d.cid = Some((key, ContactData::new(m, &cs).map_err(core_err)?));

@@ -14,6 +14,7 @@ Every error of the core raises :class:`SodynError`, a subclass of :class:`ValueE
 from __future__ import annotations
 
 import copyreg
+import warnings
 from typing import Any, Dict, Optional, Sequence
 
 import numpy as np
@@ -31,7 +32,6 @@ from ._sodyn import (
     center_of_mass_jacobian,
     center_of_mass_motion,
     center_of_mass_velocity_derivatives,
-    centroidal_dynamics_derivatives,
     clear_buffer_pool,
     crba,
     exp6,
@@ -110,6 +110,7 @@ def impact_so_contracted(
 
 __all__ = [
     "OcpError",
+    "CentroidalResult",
     "Contact",
     "ConstrainedIdResult",
     "Data",
@@ -172,8 +173,44 @@ class _Result:
         """The output names present (``lambda_`` for the key ``lambda``)."""
         return [k for k in vars(self)]
 
+    def __getitem__(self, key: str) -> np.ndarray:
+        """``r["qdd"]``: the mapping access of earlier releases, by the JSON key (``"lambda"`` or
+        ``"lambda_"``); the same arrays as the attributes."""
+        name = "lambda_" if key == "lambda" else key
+        try:
+            return getattr(self, name)
+        except AttributeError:
+            raise KeyError(key) from None
+
+    def __contains__(self, key: object) -> bool:
+        return isinstance(key, str) and hasattr(self, "lambda_" if key == "lambda" else key)
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}({', '.join(self.keys())})"
+
+
+class CentroidalResult(_Result):
+    """``h, hdot`` ``(6,)`` and ``Ag, dh_dq, dhdot_dq, dhdot_dv`` ``(6, nv)``: the centroidal
+    momentum about the centre of mass (world axes, rows ``[angular; linear]``), its time
+    derivative without gravity, the centroidal momentum matrix and their derivatives."""
+
+    h: np.ndarray
+    hdot: np.ndarray
+    Ag: np.ndarray
+    dh_dq: np.ndarray
+    dhdot_dq: np.ndarray
+    dhdot_dv: np.ndarray
+
+
+def centroidal_dynamics_derivatives(
+    model: Model, data: Data, q: Any, v: Any, a: Any
+) -> CentroidalResult:
+    """Centroidal momentum about the centre of mass (world axes, rows ``[angular; linear]``):
+    ``h``, ``hdot`` (no gravity), ``Ag`` (``h = Ag v``, ``dhdot/da``), ``dh_dq``, ``dhdot_dq``,
+    ``dhdot_dv`` (Pinocchio's ``computeCentroidalDynamicsDerivatives``, rows ``[linear;
+    angular]`` there). With ``mimic=True`` the matrices are ``(6, nv)`` in the reduced
+    coordinates (the full tree's times ``G``)."""
+    return CentroidalResult(_sodyn.centroidal_dynamics_derivatives(model, data, q, v, a))
 
 
 class ConstrainedIdResult(_Result):
@@ -231,15 +268,29 @@ def constrained_id_derivatives(
     v: Any,
     a: Any,
     contacts: Sequence[Contact],
-    lam: Any,
+    lambda_: Any = None,
     order: int = 1,
+    *,
+    lam: Any = None,
 ) -> ConstrainedIdResult:
-    """Constrained inverse dynamics ``tau = M a + b - J_c^T lam`` at ``(q, v, a, lam)`` and its
-    derivatives, ``lam`` (3 rows per 3-D contact, 6 ``[moment; force]`` per 6-D contact: the
-    forces applied to the robot in each contact's axes) held fixed in those axes. ``order=2``
-    adds ``d2tau_dq2``."""
+    """Constrained inverse dynamics ``tau = M a + b - J_c^T lambda_`` at ``(q, v, a, lambda_)``
+    and its derivatives, ``lambda_`` (3 rows per 3-D contact, 6 ``[moment; force]`` per 6-D
+    contact: the forces applied to the robot in each contact's axes, as ``KktResult.lambda_``)
+    held fixed in those axes. ``order=2`` adds ``d2tau_dq2``. ``lam=`` is the deprecated name of
+    ``lambda_`` (it warns, and will be removed in the next release)."""
+    if lam is not None:
+        if lambda_ is not None:
+            raise TypeError("constrained_id_derivatives: give lambda_ or lam (deprecated), not both")
+        warnings.warn(
+            "constrained_id_derivatives(lam=...) is deprecated: use lambda_=...",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        lambda_ = lam
+    if lambda_ is None:
+        raise TypeError("constrained_id_derivatives: missing argument lambda_ (the contact forces)")
     return ConstrainedIdResult(
-        _sodyn.constrained_id_derivatives(model, data, q, v, a, list(contacts), lam, order)
+        _sodyn.constrained_id_derivatives(model, data, q, v, a, list(contacts), lambda_, order)
     )
 
 

@@ -254,10 +254,11 @@ def idsoza(model: Model, data: Data, q: ArrayLike, x: ArrayLike) -> Tensor:
     """IDSOZA: ``d2(M(q) x)/dq2``, ``(nv, nv, nv)``, ``T[i, j, k] = d/dq_k d(M x)_i/dq_j``
     (with ``mimic=True``: in the reduced coordinates)."""
 def constrained_id_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike,
-                               a: ArrayLike, contacts: Sequence[Contact], lam: ArrayLike,
+                               a: ArrayLike, contacts: Sequence[Contact], lambda_: ArrayLike,
                                order: int = 1) -> dict[str, Vector]:
-    """``tau = M a + b - J_c^T lam`` and its derivatives, ``lam`` with 3 or 6 rows per contact
-    (held fixed in each contact's axes)."""
+    """``tau = M a + b - J_c^T lambda_`` and its derivatives, ``lambda_`` with 3 or 6 rows per
+    contact (held fixed in each contact's axes); ``sodyn.constrained_id_derivatives`` wraps the
+    dict in a ``ConstrainedIdResult``."""
 def kkt_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike, tau: ArrayLike,
                     contacts: Sequence[Contact], order: int = 1,
                     damping: float = 0.0) -> dict[str, Vector]:

@@ -700,7 +700,8 @@ class _SolverBase:
         """Over the last solve: ``exact_passes``, ``gauss_newton_passes`` (backward passes of
         each kind), ``exact_failures`` (exact passes whose ``Q_uu`` was not positive definite),
         ``seconds`` spent in the second-order terms, ``gauss_newton_terms`` (cost terms, summed
-        over the knots, whose residual curvature stays Gauss-Newton: frame velocity)."""
+        over the knots, whose residual curvature stays Gauss-Newton: none since every residual
+        has its exact curvature, so 0)."""
         return self._s.hessian_stats
 
     def setCallbacks(self, callbacks: Sequence[Any]) -> None:
