@@ -353,8 +353,12 @@ fn run_state(
 ) -> sodyn::Result<()> {
     let Ws { d, so, fso, x: [q, v, x] } = w;
     match (f, order) {
-        (Func::Rnea, Order::Value) => out[0].copy_from_slice(algo::rnea(m, d, q, v, x, None)?.as_slice()),
-        (Func::Aba, Order::Value) => out[0].copy_from_slice(algo::aba(m, d, q, v, x, None)?.as_slice()),
+        (Func::Rnea, Order::Value) => {
+            out[0].copy_from_slice(algo::rnea(m, d, q, v, x, None)?.as_slice())
+        }
+        (Func::Aba, Order::Value) => {
+            out[0].copy_from_slice(algo::aba(m, d, q, v, x, None)?.as_slice())
+        }
         (Func::Rnea, Order::First) => {
             out[0].copy_from_slice(algo::rnea(m, d, q, v, x, None)?.as_slice());
             id_derivatives(m, d, q, v, x, None)?;
@@ -545,15 +549,18 @@ unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
             cf.rets.size
         )));
     }
-    let mut outs: Vec<(&mut [f64], usize)> = Vec::with_capacity(4);
+    let mut outs: [&mut [f64]; 4] = [&mut [], &mut [], &mut [], &mut []];
+    let mut blocks = [0usize; 4];
     for (r, &rank) in ranks.iter().enumerate() {
         let what = || format!("{fname} ({}): result {r}", order.what());
         // SAFETY: `r < size`.
         let b = unsafe { buffer(&cf.rets, r, RET_BUFFER, &what)? };
         // SAFETY: XLA's buffer.
         let d = unsafe { dims_of(b) };
-        let want: Vec<i64> = lead.iter().copied().chain(std::iter::repeat_n(nv as i64, rank)).collect();
-        if d != want.as_slice() {
+        let (dl, dt) = d.split_at(d.len().min(lead.len()));
+        if dl != lead || dt.len() != rank || dt.iter().any(|&x| x != nv as i64) {
+            let want: Vec<i64> =
+                lead.iter().copied().chain(std::iter::repeat_n(nv as i64, rank)).collect();
             return Err(invalid(format!(
                 "{} has shape {}, expected {}",
                 what(),
@@ -561,17 +568,17 @@ unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
                 shape_str(&want)
             )));
         }
-        let block = nv.pow(rank as u32);
-        let len = block * count;
-        let s: &mut [f64] = if len == 0 {
+        blocks[r] = nv.pow(rank as u32);
+        let len = blocks[r] * count;
+        outs[r] = if len == 0 {
             &mut []
         } else {
             // SAFETY: an F64 result buffer of these dimensions holds `len` doubles at `data`,
             // written by this call only, distinct from the arguments (no aliasing requested).
             unsafe { std::slice::from_raw_parts_mut(b.data.cast::<f64>(), len) }
         };
-        outs.push((s, block));
     }
+    let nret = ranks.len();
     let fail = |e: sodyn::Error| {
         invalid(format!("{fname}: {}", crate::convert::python_message(e.to_string())))
     };
@@ -584,8 +591,7 @@ unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
         for (x, src) in w.x.iter_mut().zip(ins) {
             x.as_mut_slice().copy_from_slice(src);
         }
-        let mut o: Vec<&mut [f64]> = outs.into_iter().map(|(s, _)| s).collect();
-        let r = run_state(f, order, m, &mut w, &mut o);
+        let r = run_state(f, order, m, &mut w, &mut outs[..nret]);
         entry.spare.lock().unwrap_or_else(|e| e.into_inner()).push(w);
         return r.map_err(fail);
     }
@@ -594,7 +600,12 @@ unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
     }
     // Several states: sodyn's batch pool, as `sodyn.batch`.
     let mut per_state: Vec<[&mut [f64]; 4]> = Vec::with_capacity(count);
-    let mut iters: Vec<_> = outs.into_iter().map(|(s, b)| s.chunks_exact_mut(b.max(1))).collect();
+    let mut i = 0;
+    let mut iters = outs.map(|s| {
+        let it = s.chunks_exact_mut(blocks[i].max(1));
+        i += 1;
+        it
+    });
     for _ in 0..count {
         let mut row: [&mut [f64]; 4] = [&mut [], &mut [], &mut [], &mut []];
         for (slot, it) in row.iter_mut().zip(iters.iter_mut()) {
@@ -603,8 +614,8 @@ unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
         per_state.push(row);
     }
     let taken = entry.batch.lock().unwrap_or_else(|e| e.into_inner()).take();
-    let mut bd = taken.unwrap_or_else(|| BatchData::from_workspace(BatchPool::shared(), Ws::new(m)));
-    let nret = ranks.len();
+    let mut bd =
+        taken.unwrap_or_else(|| BatchData::from_workspace(BatchPool::shared(), Ws::new(m)));
     let (lq, lv) = (nq, nv);
     let r = map_states(&mut bd, &mut per_state, |w, k, o| {
         let lens = [lq, lv, lv];
@@ -696,7 +707,8 @@ unsafe fn handle(cf: *mut CallFrame, f: Func, order: Order) -> *mut XlaError {
         // SAFETY: XLA's call frame at the execute stage.
         unsafe { execute(cf, f, order) }
     }));
-    let r = r.unwrap_or_else(|_| Err(Fail(ERROR_INTERNAL, format!("{}: internal panic", f.name()))));
+    let r =
+        r.unwrap_or_else(|_| Err(Fail(ERROR_INTERNAL, format!("{}: internal panic", f.name()))));
     match r {
         Ok(()) => std::ptr::null_mut(),
         // SAFETY: XLA's API table.
