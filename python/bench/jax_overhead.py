@@ -9,7 +9,8 @@ gives the median over rounds of the per-round time and of the per-round differen
 the direct call. Rows:
 
 * ``jit(aba)``: one jitted call from Python (``block_until_ready``), i.e. JAX's dispatch of an
-  executable plus the call; ``jit(x * 2)`` is JAX's dispatch alone on the same arguments;
+  executable plus the call; ``jit(q * 2 + v + t)`` is JAX's dispatch alone on the same three
+  arguments (the row also gives ``jit(aba)`` minus it);
 * ``in jit, per call``: a jitted ``lax.fori_loop`` of K dependent calls (call k + 1 takes
   ``tau + 0 * qdd_k``, the same state), divided by K, against K direct calls from Python;
 * ``jit(vmap(aba))`` over N states against ``sodyn.batch.aba``; ``jit(vmap(first))`` (the
@@ -92,7 +93,7 @@ def main():
 
     one, many = (qj, vj, tj), (Qj, Vj, Tj)
     paths = {"ffi": build(model, True, K, one, many), "callback": build(model, False, K, one, many)}
-    twice = jax.jit(lambda x: x * 2)
+    twice = jax.jit(lambda q, v, t: q * 2 + v + t)  # JAX's dispatch of 3 arguments
 
     def direct_chain():
         for _ in range(K):
@@ -106,7 +107,7 @@ def main():
         np.testing.assert_array_equal(np.asarray(fk(qj, vj, tj)), direct_chain())
         np.testing.assert_array_equal(np.asarray(fb(Qj, Vj, Tj)), sodyn.batch.aba(model, Q, V, T))
         jax.block_until_ready((fj(Qj, Vj, Tj), jb(Qj, Vj, Tj)))
-    twice(qj).block_until_ready()
+    twice(qj, vj, tj).block_until_ready()
 
     inner1 = 2000
     innerb = max(1, 20000 // n)
@@ -117,7 +118,7 @@ def main():
 
     for _ in range(args.rounds):
         add("direct", once(lambda: sodyn.aba(model, data, q, v, tau), inner1))
-        add("twice", once(lambda: twice(qj).block_until_ready(), inner1))
+        add("twice", once(lambda: twice(qj, vj, tj).block_until_ready(), inner1))
         add("direct_chain", once(direct_chain, max(1, inner1 // K)) / K)
         add("batch", once(lambda: sodyn.batch.aba(model, Q, V, T), innerb))
         add(
@@ -144,11 +145,15 @@ def main():
 
     us = 1e6
     print(f"model {model.name}, nv = {nv}, jax {jax.__version__}, {args.rounds} rounds")
-    print(f"sodyn.aba direct: {med(rows['direct']) * us:.2f} us; jit(x * 2): {med(rows['twice']) * us:.2f} us")
+    print(
+        f"sodyn.aba direct: {med(rows['direct']) * us:.2f} us; jit(q * 2 + v + t): "
+        f"{med(rows['twice']) * us:.2f} us"
+    )
     for name in paths:
         print(
             f"[{name}] jit(aba) {med(rows[(name, 'jit')]) * us:.2f} us, over direct "
-            f"{diff((name, 'jit'), 'direct') * us:+.2f} us; in jit per call "
+            f"{diff((name, 'jit'), 'direct') * us:+.2f} us, over jit(q * 2 + v + t) "
+            f"{diff((name, 'jit'), 'twice') * us:+.2f} us; in jit per call "
             f"{med(rows[(name, 'chain')]) * us:.2f} us against direct {med(rows['direct_chain']) * us:.2f} us: "
             f"{diff((name, 'chain'), 'direct_chain') * us:+.2f} us"
         )
