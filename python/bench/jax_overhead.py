@@ -109,7 +109,11 @@ def main():
         jax.block_until_ready((fj(Qj, Vj, Tj), jb(Qj, Vj, Tj)))
     twice(qj, vj, tj).block_until_ready()
 
+    def batch_first():
+        return sodyn.batch.aba(model, Q, V, T), sodyn.batch.fd_derivatives(model, Q, V, T)
+
     inner1 = 2000
+    innerk = max(1, inner1 // K)
     innerb = max(1, 20000 // n)
     rows: dict = {}
 
@@ -119,18 +123,12 @@ def main():
     for _ in range(args.rounds):
         add("direct", once(lambda: sodyn.aba(model, data, q, v, tau), inner1))
         add("twice", once(lambda: twice(qj, vj, tj).block_until_ready(), inner1))
-        add("direct_chain", once(direct_chain, max(1, inner1 // K)) / K)
+        add("direct_chain", once(direct_chain, innerk) / K)
         add("batch", once(lambda: sodyn.batch.aba(model, Q, V, T), innerb))
-        add(
-            "batch_first",
-            once(
-                lambda: (sodyn.batch.aba(model, Q, V, T), sodyn.batch.fd_derivatives(model, Q, V, T)),
-                innerb,
-            ),
-        )
+        add("batch_first", once(lambda: batch_first(), innerb))
         for name, (f, fk, fb, fj, jb) in paths.items():
             add((name, "jit"), once(lambda: f(qj, vj, tj).block_until_ready(), inner1))
-            add((name, "chain"), once(lambda: fk(qj, vj, tj).block_until_ready(), max(1, inner1 // K)) / K)
+            add((name, "chain"), once(lambda: fk(qj, vj, tj).block_until_ready(), innerk) / K)
             add((name, "vmap"), once(lambda: fb(Qj, Vj, Tj).block_until_ready(), innerb))
             add((name, "first"), once(lambda: jax.block_until_ready(fj(Qj, Vj, Tj)), innerb))
             add((name, "jacfwd"), once(lambda: jax.block_until_ready(jb(Qj, Vj, Tj)), innerb))
@@ -154,16 +152,20 @@ def main():
             f"[{name}] jit(aba) {med(rows[(name, 'jit')]) * us:.2f} us, over direct "
             f"{diff((name, 'jit'), 'direct') * us:+.2f} us, over jit(q * 2 + v + t) "
             f"{diff((name, 'jit'), 'twice') * us:+.2f} us; in jit per call "
-            f"{med(rows[(name, 'chain')]) * us:.2f} us against direct {med(rows['direct_chain']) * us:.2f} us: "
+            f"{med(rows[(name, 'chain')]) * us:.2f} us against direct "
+            f"{med(rows['direct_chain']) * us:.2f} us: "
             f"{diff((name, 'chain'), 'direct_chain') * us:+.2f} us"
         )
-    print(f"N = {n}: batch.aba {med(rows['batch']) * 1e3:.3f} ms, batch.aba + batch.fd_derivatives "
-          f"{med(rows['batch_first']) * 1e3:.3f} ms")
+    print(
+        f"N = {n}: batch.aba {med(rows['batch']) * 1e3:.3f} ms, batch.aba + "
+        f"batch.fd_derivatives {med(rows['batch_first']) * 1e3:.3f} ms"
+    )
     for name in paths:
         print(
             f"[{name}] jit(vmap(aba)) {med(rows[(name, 'vmap')]) * 1e3:.3f} ms "
             f"({(ratio((name, 'vmap'), 'batch') - 1) * 100:+.1f} %); jit(vmap(first)) "
-            f"{med(rows[(name, 'first')]) * 1e3:.3f} ms ({(ratio((name, 'first'), 'batch_first') - 1) * 100:+.1f} %); "
+            f"{med(rows[(name, 'first')]) * 1e3:.3f} ms "
+            f"({(ratio((name, 'first'), 'batch_first') - 1) * 100:+.1f} %); "
             f"jit(vmap(jacfwd(aba))) {med(rows[(name, 'jacfwd')]) * 1e3:.3f} ms "
             f"({(ratio((name, 'jacfwd'), 'batch_first') - 1) * 100:+.1f} %)"
         )

@@ -165,10 +165,12 @@ def test_a_wrong_call_of_a_handler_is_an_error_not_a_crash():
     x = np.zeros(nv)
     # a correct raw call works and equals the direct call
     got = _raw("sodyn_aba", h, (x, x, x), [(nv,)])
-    np.testing.assert_array_equal(np.asarray(got[0]), sodyn.aba(model, model.create_data(), x, x, x))
+    want = sodyn.aba(model, model.create_data(), x, x, x)
+    np.testing.assert_array_equal(np.asarray(got[0]), want)
     with pytest.raises(RuntimeErr, match="argument 'v'.*float64"):
         _raw("sodyn_aba", h, (x, x.astype(np.float32), x), [(nv,)])
-    with pytest.raises(RuntimeErr, match=r"argument 'tau' has shape \(7,\), expected \(\.\.\., 6\)"):
+    shape_msg = r"argument 'tau' has shape \(7,\), expected \(\.\.\., 6\)"
+    with pytest.raises(RuntimeErr, match=shape_msg):
         _raw("sodyn_aba", h, (x, x, np.zeros(nv + 1)), [(nv,)])
     with pytest.raises(RuntimeErr, match="argument 'v' has leading dimensions"):
         _raw("sodyn_aba", h, (np.zeros((2, nv)), np.zeros((3, nv)), np.zeros((2, nv))), [(2, nv)])
@@ -227,3 +229,86 @@ def test_snapshot_follows_gravity_and_is_released_with_the_model():
     gc.collect()
     with pytest.raises(RuntimeErr, match="no model with handle"):
         _raw("sodyn_rnea", h, (x, x, x), [(6,)])
+
+
+def test_handlers_answer_the_metadata_query_and_skip_the_other_stages():
+    """Each handler called as XLA calls it (ctypes call frames laid out as
+    ``xla/ffi/api/c_api.h``): the metadata query gets FFI API 0.3 and no traits; the
+    instantiate, prepare and initialize stages return success without reading a buffer."""
+    import ctypes as C
+
+    class ExtBase(C.Structure):
+        _fields_ = [("struct_size", C.c_size_t), ("type", C.c_int), ("next", C.c_void_p)]
+
+    class ApiVersion(C.Structure):
+        _fields_ = [
+            ("struct_size", C.c_size_t),
+            ("extension_start", C.c_void_p),
+            ("major_version", C.c_int),
+            ("minor_version", C.c_int),
+        ]
+
+    class Metadata(C.Structure):
+        _fields_ = [
+            ("struct_size", C.c_size_t),
+            ("api_version", ApiVersion),
+            ("traits", C.c_uint32),
+            ("state_type_id", C.c_int64),
+        ]
+
+    class MetadataExt(C.Structure):
+        _fields_ = [("extension_base", ExtBase), ("metadata", C.POINTER(Metadata))]
+
+    class Lst(C.Structure):
+        _fields_ = [
+            ("struct_size", C.c_size_t),
+            ("extension_start", C.c_void_p),
+            ("size", C.c_int64),
+            ("types", C.c_void_p),
+            ("items", C.c_void_p),
+        ]
+
+    class Attrs(C.Structure):
+        _fields_ = Lst._fields_[:4] + [("names", C.c_void_p), ("attrs", C.c_void_p)]
+
+    class CallFrame(C.Structure):
+        _fields_ = [
+            ("struct_size", C.c_size_t),
+            ("extension_start", C.c_void_p),
+            ("api", C.c_void_p),
+            ("ctx", C.c_void_p),
+            ("stage", C.c_int),
+            ("args", Lst),
+            ("rets", Lst),
+            ("attrs", Attrs),
+            ("future", C.c_void_p),
+        ]
+
+    get = C.pythonapi.PyCapsule_GetPointer
+    get.restype, get.argtypes = C.c_void_p, [C.py_object, C.c_char_p]
+    name_of = C.pythonapi.PyCapsule_GetName
+    name_of.restype, name_of.argtypes = C.c_char_p, [C.py_object]
+    handler_t = C.CFUNCTYPE(C.c_void_p, C.POINTER(CallFrame))
+    targets = _sodyn._jax_ffi_targets()
+    assert sorted(targets) == [
+        "sodyn_aba",
+        "sodyn_aba_first",
+        "sodyn_aba_second",
+        "sodyn_rnea",
+        "sodyn_rnea_first",
+        "sodyn_rnea_second",
+    ]
+    frame_size = CallFrame.future.offset  # XLA_FFI_STRUCT_SIZE(XLA_FFI_CallFrame, attrs)
+    for cap in targets.values():
+        handler = handler_t(get(cap, name_of(cap)))
+        md = Metadata(struct_size=C.sizeof(Metadata), traits=77, state_type_id=5)
+        base = ExtBase(struct_size=C.sizeof(MetadataExt), type=1)
+        ext = MetadataExt(extension_base=base, metadata=C.pointer(md))
+        cf = CallFrame(struct_size=frame_size, extension_start=C.addressof(ext), stage=3)
+        assert handler(C.byref(cf)) is None
+        assert (md.api_version.major_version, md.api_version.minor_version) == (0, 3)
+        assert md.api_version.struct_size == C.sizeof(ApiVersion)
+        assert md.traits == 0 and md.state_type_id == 0
+        for stage in (0, 1, 2):  # no arguments at all: nothing may be read
+            cf = CallFrame(struct_size=frame_size, stage=stage)
+            assert handler(C.byref(cf)) is None
