@@ -1,6 +1,6 @@
-//! XLA FFI handlers of `sodyn.jax`: RNEA and ABA, their first-order Jacobians and their dense
-//! second order as typed-FFI custom calls, so that a jitted `sodyn.jax` function runs sodyn
-//! without entering Python.
+//! XLA FFI handlers of `sodyn.jax`: RNEA, ABA and the nonlinear effects (value, first-order
+//! Jacobians, dense second order) and CRBA (value, `dM/dq`) as typed-FFI custom calls, so that
+//! a jitted `sodyn.jax` function runs sodyn without entering Python.
 //!
 //! The handlers follow the C ABI of XLA's typed FFI (`xla/ffi/api/c_api.h`, API 0.x, shipped
 //! with jaxlib): `XLA_FFI_Error* handler(XLA_FFI_CallFrame*)`. The few structures they read are
@@ -9,7 +9,7 @@
 //! * answers the metadata query (a call frame carrying the metadata extension) with the API
 //!   version it was written against and no traits;
 //! * returns success without work for the instantiate, prepare and initialize stages;
-//! * at the execute stage checks every argument (buffer type, `F64`, rank, the trailing
+//! * at the execute stage checks every argument (count, buffer type, `F64`, rank, the trailing
 //!   dimension `nq` / `nv`, the same leading dimensions for all) and every result (count,
 //!   `F64`, dimensions) before reading or writing memory, and the `model` attribute (an `S64`
 //!   handle of this module's registry): a wrong call is an XLA error naming what is wrong,
@@ -273,15 +273,20 @@ impl Drop for Link {
 enum Func {
     Rnea,
     Aba,
+    /// `nonlinear_effects(q, v)`: RNEA at `a = 0`.
+    Nle,
+    /// `crba(q)`: value and first order (`dM/dq` from `id_so_derivatives` at `v = a = 0`).
+    Crba,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Order {
-    /// The value (`tau` or `qdd`).
+    /// The value (`tau`, `qdd`, `b` or `M`).
     Value,
-    /// The value and its three Jacobian blocks (`d/dq`, `d/dv`, `d/da` or `d/dtau`).
+    /// The value and its Jacobian blocks (one per argument).
     First,
-    /// The four dense second-order tensors of `id_so_derivatives` / `fd_so_derivatives`.
+    /// The dense second-order tensors of `id_so_derivatives` / `fd_so_derivatives` (the
+    /// first three at `a = 0` for `Nle`; none for `Crba`).
     Second,
 }
 
@@ -290,12 +295,29 @@ impl Func {
         match self {
             Func::Rnea => "sodyn.jax.rnea",
             Func::Aba => "sodyn.jax.aba",
+            Func::Nle => "sodyn.jax.nonlinear_effects",
+            Func::Crba => "sodyn.jax.crba",
         }
     }
-    fn arg_names(self) -> [&'static str; 3] {
+    fn arg_names(self) -> &'static [&'static str] {
         match self {
-            Func::Rnea => ["q", "v", "a"],
-            Func::Aba => ["q", "v", "tau"],
+            Func::Rnea => &["q", "v", "a"],
+            Func::Aba => &["q", "v", "tau"],
+            Func::Nle => &["q", "v"],
+            Func::Crba => &["q"],
+        }
+    }
+    /// The per-state result shapes: the rank of each (every dimension is `nv`).
+    fn ret_ranks(self, order: Order) -> &'static [usize] {
+        match (self, order) {
+            (Func::Rnea | Func::Aba, Order::Value) | (Func::Nle, Order::Value) => &[1],
+            (Func::Rnea | Func::Aba, Order::First) => &[1, 2, 2, 2],
+            (Func::Rnea | Func::Aba, Order::Second) => &[3, 3, 3, 3],
+            (Func::Nle, Order::First) => &[1, 2, 2],
+            (Func::Nle, Order::Second) => &[3, 3, 3],
+            (Func::Crba, Order::Value) => &[2],
+            (Func::Crba, Order::First) => &[2, 3],
+            (Func::Crba, Order::Second) => &[],
         }
     }
 }
@@ -306,14 +328,6 @@ impl Order {
             Order::Value => "value",
             Order::First => "first order",
             Order::Second => "second order",
-        }
-    }
-    /// The per-state result shapes: rank of each (every dimension is `nv`).
-    fn ret_ranks(self) -> &'static [usize] {
-        match self {
-            Order::Value => &[1],
-            Order::First => &[1, 2, 2, 2],
-            Order::Second => &[3, 3, 3, 3],
         }
     }
 }
@@ -343,7 +357,8 @@ fn write_tensor(dst: &mut [f64], src: &Tensor3) {
     }
 }
 
-/// One state: the inputs are in `w.x`, the results go to `out` (one row-major block each).
+/// One state: the inputs are in `w.x` (zeros after the function's arguments), the results go
+/// to `out` (one row-major block each).
 fn run_state(
     f: Func,
     order: Order,
@@ -389,6 +404,30 @@ fn run_state(
                 write_tensor(dst, t);
             }
         }
+        (Func::Nle, Order::Value) => {
+            out[0].copy_from_slice(algo::nonlinear_effects(m, d, q, v)?.as_slice())
+        }
+        (Func::Nle, Order::First) => {
+            out[0].copy_from_slice(algo::nonlinear_effects(m, d, q, v)?.as_slice());
+            id_derivatives(m, d, q, v, x, None)?;
+            write_matrix(out[1], d.dtau_dq());
+            write_matrix(out[2], d.dtau_dv());
+        }
+        (Func::Nle, Order::Second) => {
+            let so = so.get_or_insert_with(|| SoData::new(m));
+            id_so_derivatives(m, d, so, q, v, x, None)?;
+            for (dst, t) in out.iter_mut().zip([so.d2tau_dq2(), so.d2tau_dv2(), so.d2tau_dqdv()]) {
+                write_tensor(dst, t);
+            }
+        }
+        (Func::Crba, Order::Value) => write_matrix(out[0], algo::crba(m, d, q)?),
+        (Func::Crba, Order::First) => {
+            write_matrix(out[0], algo::crba(m, d, q)?);
+            let so = so.get_or_insert_with(|| SoData::new(m));
+            id_so_derivatives(m, d, so, q, v, x, None)?;
+            write_tensor(out[1], so.dm_dq());
+        }
+        (Func::Crba, Order::Second) => {}
     }
     Ok(())
 }
@@ -492,15 +531,16 @@ unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
     let m = &entry.model;
     let (nq, nv) = (m.nq(), m.nv());
     let names = f.arg_names();
-    if cf.args.size != 3 {
-        return Err(invalid(format!("{fname}: expected 3 arguments, got {}", cf.args.size)));
+    let nargs = names.len();
+    if usize::try_from(cf.args.size).ok() != Some(nargs) {
+        return Err(invalid(format!("{fname}: expected {nargs} arguments, got {}", cf.args.size)));
     }
     // The arguments: same leading dimensions, trailing nq / nv.
     let mut lead: Option<&[i64]> = None;
     let mut ins: [&[f64]; 3] = [&[], &[], &[]];
     for (a, name) in names.iter().enumerate() {
         let what = || format!("{fname}: argument '{name}'");
-        // SAFETY: `a < 3 == size`.
+        // SAFETY: `a < nargs == size`.
         let b = unsafe { buffer(&cf.args, a, ARG_BUFFER, &what)? };
         // SAFETY: XLA's buffer.
         let d = unsafe { dims_of(b) };
@@ -540,7 +580,7 @@ unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
     let lead = lead.unwrap_or(&[]);
     let count: usize = lead.iter().map(|&x| x as usize).product();
     // The results: lead + (nv,) * rank.
-    let ranks = order.ret_ranks();
+    let ranks = f.ret_ranks(order);
     if usize::try_from(cf.rets.size).ok() != Some(ranks.len()) {
         return Err(invalid(format!(
             "{fname} ({}): expected {} results, got {}",
@@ -588,8 +628,12 @@ unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
             spare.pop()
         }
         .unwrap_or_else(|| Ws::new(m));
-        for (x, src) in w.x.iter_mut().zip(ins) {
-            x.as_mut_slice().copy_from_slice(src);
+        for (a, x) in w.x.iter_mut().enumerate() {
+            if a < nargs {
+                x.as_mut_slice().copy_from_slice(ins[a]);
+            } else {
+                x.fill(0.0);
+            }
         }
         let r = run_state(f, order, m, &mut w, &mut outs[..nret]);
         entry.spare.lock().unwrap_or_else(|e| e.into_inner()).push(w);
@@ -619,8 +663,12 @@ unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
     let (lq, lv) = (nq, nv);
     let r = map_states(&mut bd, &mut per_state, |w, k, o| {
         let lens = [lq, lv, lv];
-        for ((x, src), n) in w.x.iter_mut().zip(ins).zip(lens) {
-            x.as_mut_slice().copy_from_slice(&src[k * n..(k + 1) * n]);
+        for (a, (x, n)) in w.x.iter_mut().zip(lens).enumerate() {
+            if a < nargs {
+                x.as_mut_slice().copy_from_slice(&ins[a][k * n..(k + 1) * n]);
+            } else {
+                x.fill(0.0);
+            }
         }
         run_state(f, order, m, w, &mut o[..nret])
     });
@@ -738,6 +786,11 @@ handlers! {
     aba_value: Func::Aba, Order::Value;
     aba_first: Func::Aba, Order::First;
     aba_second: Func::Aba, Order::Second;
+    nle_value: Func::Nle, Order::Value;
+    nle_first: Func::Nle, Order::First;
+    nle_second: Func::Nle, Order::Second;
+    crba_value: Func::Crba, Order::Value;
+    crba_first: Func::Crba, Order::First;
 }
 
 type Handler = unsafe extern "C" fn(*mut CallFrame) -> *mut XlaError;
@@ -746,13 +799,18 @@ type Handler = unsafe extern "C" fn(*mut CallFrame) -> *mut XlaError;
 /// api_version=1)`.
 #[pyfunction]
 fn _jax_ffi_targets(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
-    let table: [(&str, &'static CStr, Handler); 6] = [
+    let table: [(&str, &'static CStr, Handler); 11] = [
         ("sodyn_rnea", c"sodyn.jax_ffi.rnea", rnea_value),
         ("sodyn_rnea_first", c"sodyn.jax_ffi.rnea_first", rnea_first),
         ("sodyn_rnea_second", c"sodyn.jax_ffi.rnea_second", rnea_second),
         ("sodyn_aba", c"sodyn.jax_ffi.aba", aba_value),
         ("sodyn_aba_first", c"sodyn.jax_ffi.aba_first", aba_first),
         ("sodyn_aba_second", c"sodyn.jax_ffi.aba_second", aba_second),
+        ("sodyn_nonlinear_effects", c"sodyn.jax_ffi.nonlinear_effects", nle_value),
+        ("sodyn_nonlinear_effects_first", c"sodyn.jax_ffi.nonlinear_effects_first", nle_first),
+        ("sodyn_nonlinear_effects_second", c"sodyn.jax_ffi.nonlinear_effects_second", nle_second),
+        ("sodyn_crba", c"sodyn.jax_ffi.crba", crba_value),
+        ("sodyn_crba_first", c"sodyn.jax_ffi.crba_first", crba_first),
     ];
     let d = PyDict::new(py);
     for (name, cname, h) in table {

@@ -132,6 +132,49 @@ def test_vmap_equals_batch_api_and_sequential_bit_for_bit(name):
     np.testing.assert_array_equal(np.asarray(got3).reshape(36, -1), np.asarray(got)[:36])
 
 
+@pytest.mark.parametrize("mname", list(MODELS))
+def test_nonlinear_effects_and_crba_equal_direct_calls_bit_for_bit(mname):
+    model = MODELS[mname]()
+    data = model.create_data()
+    q, v, _ = _state(model, 7)
+    zero = np.zeros(model.nv)
+    nle = lambda q_, v_: sj.nonlinear_effects(model, q_, v_)  # noqa: E731
+    crba = lambda q_: sj.crba(model, q_)  # noqa: E731
+    np.testing.assert_array_equal(
+        np.asarray(jax.jit(nle)(q, v)), sodyn.nonlinear_effects(model, data, q, v)
+    )
+    dq, dv = sodyn.id_derivatives(model, data, q, v, zero)
+    for jac in (jax.jacfwd, jax.jacrev):
+        got = jax.jit(jac(nle, argnums=(0, 1)))(q, v)
+        np.testing.assert_array_equal(np.asarray(got[0]), dq)
+        np.testing.assert_array_equal(np.asarray(got[1]), dv)
+    qq, vv, qv, dmdq = sodyn.id_so_derivatives(model, data, q, v, zero)
+    H = jax.jit(jax.jacfwd(jax.jacfwd(nle, argnums=(0, 1)), argnums=(0, 1)))(q, v)
+    np.testing.assert_array_equal(np.asarray(H[0][0]), qq)
+    np.testing.assert_array_equal(np.asarray(H[1][1]), vv)
+    np.testing.assert_array_equal(np.asarray(H[0][1]), qv)
+    np.testing.assert_array_equal(np.asarray(H[1][0]), np.swapaxes(qv, -1, -2))
+    np.testing.assert_array_equal(np.asarray(jax.jit(crba)(q)), sodyn.crba(model, data, q))
+    dm = sodyn.id_so_derivatives(model, data, q, zero, zero)[3]
+    np.testing.assert_array_equal(np.asarray(jax.jit(jax.jacfwd(crba))(q)), dm)
+    # crba's second order is the callback's (idsoza): it composes with the FFI first order
+    d2 = np.asarray(jax.jit(jax.jacfwd(jax.jacfwd(crba)))(q))
+    for j in range(model.nv):
+        np.testing.assert_array_equal(d2[:, j], sodyn.idsoza(model, data, q, np.eye(model.nv)[j]))
+    # vmap: the batch API
+    Q, V, _ = _state(model, 8, 21)
+    np.testing.assert_array_equal(
+        np.asarray(jax.jit(jax.vmap(nle))(Q, V)), sodyn.batch.nonlinear_effects(model, Q, V)
+    )
+    got = jax.jit(jax.vmap(crba))(Q)
+    np.testing.assert_array_equal(np.asarray(got), sodyn.batch.crba(model, Q))
+    jb = jax.jit(jax.vmap(jax.jacfwd(crba)))(Q)
+    for k in (0, 20):
+        np.testing.assert_array_equal(
+            np.asarray(jb)[k], sodyn.id_so_derivatives(model, data, Q[k], zero, zero)[3]
+        )
+
+
 def test_ffi_and_callback_paths_agree_bit_for_bit():
     model = chain()
     xs = _state(model, 4)
@@ -294,6 +337,11 @@ def test_handlers_answer_the_metadata_query_and_skip_the_other_stages():
         "sodyn_aba",
         "sodyn_aba_first",
         "sodyn_aba_second",
+        "sodyn_crba",
+        "sodyn_crba_first",
+        "sodyn_nonlinear_effects",
+        "sodyn_nonlinear_effects_first",
+        "sodyn_nonlinear_effects_second",
         "sodyn_rnea",
         "sodyn_rnea_first",
         "sodyn_rnea_second",

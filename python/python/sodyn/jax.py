@@ -11,11 +11,12 @@ restitution are static, the arrays traced) and returns ``jax.Array`` values::
     qdd = jax.jit(lambda q, v, tau: sj.aba(model, q, v, tau))(q, v, tau)
 
 How it is built: the values and derivatives are sodyn's, wrapped in ``jax.custom_jvp`` rules.
-``rnea`` and ``aba`` (value, first and second order) are XLA FFI custom calls registered from
-the Rust extension (``jax.ffi.ffi_call``; no Python runs inside the jitted function); the other
-functions call sodyn through ``jax.pure_callback``. ``SODYN_JAX_FFI=0`` in the environment (or
-a JAX without ``jax.ffi``) puts ``rnea`` and ``aba`` on ``jax.pure_callback`` too;
-:func:`uses_ffi` says which is in use.
+``rnea``, ``aba``, ``nonlinear_effects`` (value, first and second order) and ``crba`` (value and
+first order) are XLA FFI custom calls registered from the Rust extension (``jax.ffi.ffi_call``;
+no Python runs inside the jitted function); the other functions, and the second order of
+``crba``, call sodyn through ``jax.pure_callback``. ``SODYN_JAX_FFI=0`` in the environment (or a
+JAX without ``jax.ffi``) puts everything on ``jax.pure_callback``; :func:`uses_ffi` says which
+is in use.
 
 * first order: ``fd_derivatives``, ``id_derivatives``, ``kkt_derivatives``,
   ``impact_derivatives``, ``frame_jacobian``, ``center_of_mass_jacobian`` (reverse mode is
@@ -26,10 +27,10 @@ a JAX without ``jax.ffi``) puts ``rnea`` and ``aba`` on ``jax.pure_callback`` to
   ``center_of_mass_velocity_derivatives``, ``idsoza``) contracted with the tangent; the third
   order raises an error;
 * ``jax.vmap``: the custom calls and callbacks use ``vmap_method="broadcast_all"`` and receive
-  the stacked states at once; ``rnea`` and ``aba`` (FFI) run them on sodyn's batch pool inside
-  the handler, ``crba`` and ``nonlinear_effects`` (and ``rnea``, ``aba`` on the callback path)
-  go to ``sodyn.batch`` (threads, GIL released; bit for bit the sequential calls), the others
-  loop over the states in Python.
+  the stacked states at once; the FFI handlers run them on sodyn's batch pool, the callbacks
+  of ``rnea``, ``aba``, ``crba``, ``nonlinear_effects`` go to ``sodyn.batch`` (threads, GIL
+  released; both bit for bit the sequential calls), the others loop over the states in
+  Python.
 
 Only float64 is accepted: enable it with ``jax.config.update("jax_enable_x64", True)`` (or the
 environment variable ``JAX_ENABLE_X64=1``) before creating arrays. Derivatives with respect to
@@ -96,13 +97,14 @@ def _register_ffi() -> Tuple[bool, str]:
 
 
 _FFI_OK, _FFI_REASON = _register_ffi()
-# The functions whose value, first and second order are FFI custom calls.
-_FFI_FUNCTIONS = ("rnea", "aba")
+# The functions that are FFI custom calls: value, first order and (but for crba) second order.
+_FFI_FUNCTIONS = ("rnea", "aba", "nonlinear_effects", "crba")
 _use_ffi = _FFI_OK
 
 
 def uses_ffi() -> bool:
-    """Whether ``rnea`` and ``aba`` run as XLA FFI custom calls (else ``jax.pure_callback``)."""
+    """Whether ``rnea``, ``aba``, ``nonlinear_effects`` and ``crba`` run as XLA FFI custom
+    calls (else ``jax.pure_callback``)."""
     return _use_ffi
 
 
@@ -111,30 +113,33 @@ def _swap_last(t):
 
 
 def _ffi_calls(spec: _interop.Spec, out_sds, jac_sds):
-    """The value, first-order and second-order functions of ``rnea`` / ``aba`` as FFI calls
-    (the model is the ``model`` attribute: its handle in the extension's registry)."""
+    """The value, first-order and second-order functions of a spec of ``_FFI_FUNCTIONS`` as
+    FFI calls (the model is the ``model`` attribute: its handle in the extension's registry);
+    the second order is ``None`` for ``crba`` (its callback stays)."""
     handle = np.int64(_sodyn._jax_ffi_model(spec.model))
     nv = spec.model.nv
-    t3 = tuple(jax.ShapeDtypeStruct((nv, nv, nv), jnp.float64) for _ in range(4))
     target = f"sodyn_{spec.name}"
 
     def make(suffix, sds):
         call = jax.ffi.ffi_call(target + suffix, sds, vmap_method="broadcast_all")
         return lambda *xs: tuple(call(*xs, model=handle))
 
-    value, first, dense = make("", out_sds), make("_first", out_sds + jac_sds), make("_second", t3)
+    value, first = make("", out_sds), make("_first", out_sds + jac_sds)
+    if spec.name == "crba":
+        return value, first, None
+    # (d2/dq2, d2/dv2, d2/dqdv[, d2/dxdq]) of id_so_derivatives / fd_so_derivatives
+    ntensors = 3 if spec.name == "nonlinear_effects" else 4
+    t3 = jax.ShapeDtypeStruct((nv, nv, nv), jnp.float64)
+    dense = make("_second", (t3,) * ntensors)
 
     def second(*xs):
-        # (qq, vv, qv, mq) as the blocks of Rnea._hess / Aba._hess
-        qq, vv, qv, mq = dense(*xs)
-        blocks = {
-            (0, 0, 0): qq,
-            (0, 1, 1): vv,
-            (0, 0, 1): qv,
-            (0, 1, 0): _swap_last(qv),
-            (0, 2, 0): mq,
-            (0, 0, 2): _swap_last(mq),
-        }
+        # the blocks of Rnea._hess / Aba._hess / NonlinearEffects._hess
+        ts = dense(*xs)
+        blocks = {(0, 0, 0): ts[0], (0, 1, 1): ts[1], (0, 0, 1): ts[2]}
+        blocks[(0, 1, 0)] = _swap_last(ts[2])
+        if ntensors == 4:
+            blocks[(0, 2, 0)] = ts[3]
+            blocks[(0, 0, 2)] = _swap_last(ts[3])
         return tuple(blocks[k] for k in spec.hess_blocks)
 
     return value, first, second
