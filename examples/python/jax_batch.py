@@ -1,5 +1,5 @@
 """sodyn.jax against direct sodyn calls: the per-call overhead of a jitted ``sodyn.jax.aba``
-(``jax.pure_callback``) over ``sodyn.aba``, and ``jit(vmap(aba))`` / ``jit(vmap(jacfwd(aba)))``
+(an XLA FFI custom call; ``SODYN_JAX_FFI=0``: ``jax.pure_callback``) over ``sodyn.aba``, and ``jit(vmap(aba))`` / ``jit(vmap(jacfwd(aba)))``
 over N states against ``sodyn.batch.aba`` / ``sodyn.batch.fd_derivatives``.
 
     python examples/python/jax_batch.py [--model panda.urdf] [--n 10000] [--repeat 7]

@@ -22,6 +22,7 @@ mod convert;
 mod data;
 mod derivatives;
 mod dynamics;
+mod jax_ffi;
 mod kinematics;
 mod model;
 mod ocp;
@@ -39,5 +40,6 @@ fn _sodyn(m: &Bound<'_, PyModule>) -> PyResult<()> {
     kinematics::register(m)?;
     batch::register(m)?;
     ocp::register(m)?;
+    jax_ffi::register(m)?;
     Ok(())
 }

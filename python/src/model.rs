@@ -59,11 +59,13 @@ pub(crate) struct PyModel {
     /// The model; in reduced coordinates for `Model.from_urdf(..., mimic=True)` (its `nq`,
     /// `nv`, states and outputs are the reduced ones; its joint table is the full tree's).
     pub(crate) m: Model,
+    /// Its snapshot for the XLA FFI handlers of `sodyn.jax` (made on first use).
+    pub(crate) ffi: crate::jax_ffi::Link,
 }
 
 impl PyModel {
     pub(crate) fn plain(m: Model) -> Self {
-        Self { m }
+        Self { m, ffi: Default::default() }
     }
     /// The model for the functions that do not support mimic joints: an error naming `what`
     /// for a model loaded with `mimic=True`.
@@ -329,7 +331,9 @@ impl PyModel {
                 )));
             }
         };
-        self.m.set_gravity(lin).map_err(core_err)
+        self.m.set_gravity(lin).map_err(core_err)?;
+        self.ffi.changed(&self.m);
+        Ok(())
     }
 
     /// The joint table (joints 1..njoints-1; the world, joint 0, excluded).

@@ -10,8 +10,13 @@ restitution are static, the arrays traced) and returns ``jax.Array`` values::
     model = sodyn.Model.builtin("chain6")
     qdd = jax.jit(lambda q, v, tau: sj.aba(model, q, v, tau))(q, v, tau)
 
-How it is built: the values and derivatives are sodyn's, called through ``jax.pure_callback``
-(no XLA FFI custom call), wrapped in ``jax.custom_jvp`` rules:
+How it is built: the values and derivatives are sodyn's, wrapped in ``jax.custom_jvp`` rules.
+``rnea``, ``aba``, ``nonlinear_effects`` (value, first and second order) and ``crba`` (value and
+first order) are XLA FFI custom calls registered from the Rust extension (``jax.ffi.ffi_call``;
+no Python runs inside the jitted function); the other functions, and the second order of
+``crba``, call sodyn through ``jax.pure_callback``. ``SODYN_JAX_FFI=0`` in the environment (or a
+JAX without ``jax.ffi``) puts everything on ``jax.pure_callback``; :func:`uses_ffi` says which
+is in use.
 
 * first order: ``fd_derivatives``, ``id_derivatives``, ``kkt_derivatives``,
   ``impact_derivatives``, ``frame_jacobian``, ``center_of_mass_jacobian`` (reverse mode is
@@ -21,10 +26,11 @@ How it is built: the values and derivatives are sodyn's, called through ``jax.pu
   / ``impact_derivatives`` with ``order=2``, ``frame_jacobian_derivative``,
   ``center_of_mass_velocity_derivatives``, ``idsoza``) contracted with the tangent; the third
   order raises an error;
-* ``jax.vmap``: the callbacks use ``vmap_method="broadcast_all"`` and receive the stacked
-  states at once; ``rnea``, ``aba``, ``crba``, ``nonlinear_effects`` and their first and
-  second derivatives go to ``sodyn.batch`` (threads, GIL released; bit for bit the sequential
-  calls), the others loop over the states in Python.
+* ``jax.vmap``: the custom calls and callbacks use ``vmap_method="broadcast_all"`` and receive
+  the stacked states at once; the FFI handlers run them on sodyn's batch pool, the callbacks
+  of ``rnea``, ``aba``, ``crba``, ``nonlinear_effects`` go to ``sodyn.batch`` (threads, GIL
+  released; both bit for bit the sequential calls), the others loop over the states in
+  Python.
 
 Only float64 is accepted: enable it with ``jax.config.update("jax_enable_x64", True)`` (or the
 environment variable ``JAX_ENABLE_X64=1``) before creating arrays. Derivatives with respect to
@@ -37,6 +43,7 @@ the derivatives with respect to the other arguments work. See docs/interop.md.
 from __future__ import annotations
 
 import math
+import os
 from typing import Any, Sequence, Tuple
 
 try:
@@ -51,7 +58,7 @@ except ImportError as exc:  # pragma: no cover - exercised by test_interop_missi
 
 import numpy as np
 
-from . import _interop
+from . import _interop, _sodyn
 from ._interop import data_for
 from ._sodyn import Contact, Model
 
@@ -65,12 +72,77 @@ __all__ = [
     "kkt_dynamics",
     "nonlinear_effects",
     "rnea",
+    "uses_ffi",
 ]
 
 X64_HINT = (
     "sodyn.jax computes in float64 only: enable 64-bit JAX with "
     "jax.config.update('jax_enable_x64', True) (or JAX_ENABLE_X64=1) before creating arrays"
 )
+
+
+def _register_ffi() -> Tuple[bool, str]:
+    """Registers the Rust extension's XLA FFI handlers with JAX (CPU): ``(ok, reason)``."""
+    if os.environ.get("SODYN_JAX_FFI", "1") == "0":
+        return False, "disabled by SODYN_JAX_FFI=0"
+    ffi = getattr(jax, "ffi", None)
+    if ffi is None or not hasattr(ffi, "ffi_call"):
+        return False, f"jax {jax.__version__} has no jax.ffi"
+    try:
+        for name, capsule in _sodyn._jax_ffi_targets().items():
+            ffi.register_ffi_target(name, capsule, platform="cpu", api_version=1)
+    except Exception as exc:  # pragma: no cover - depends on the installed jaxlib
+        return False, f"registering the FFI handlers failed: {exc}"
+    return True, ""
+
+
+_FFI_OK, _FFI_REASON = _register_ffi()
+# The functions that are FFI custom calls: value, first order and (but for crba) second order.
+_FFI_FUNCTIONS = ("rnea", "aba", "nonlinear_effects", "crba")
+_use_ffi = _FFI_OK
+
+
+def uses_ffi() -> bool:
+    """Whether ``rnea``, ``aba``, ``nonlinear_effects`` and ``crba`` run as XLA FFI custom
+    calls (else ``jax.pure_callback``)."""
+    return _use_ffi
+
+
+def _swap_last(t):
+    return jnp.swapaxes(t, -1, -2)
+
+
+def _ffi_calls(spec: _interop.Spec, out_sds, jac_sds):
+    """The value, first-order and second-order functions of a spec of ``_FFI_FUNCTIONS`` as
+    FFI calls (the model is the ``model`` attribute: its handle in the extension's registry);
+    the second order is ``None`` for ``crba`` (its callback stays)."""
+    handle = np.int64(_sodyn._jax_ffi_model(spec.model))
+    nv = spec.model.nv
+    target = f"sodyn_{spec.name}"
+
+    def make(suffix, sds):
+        call = jax.ffi.ffi_call(target + suffix, sds, vmap_method="broadcast_all")
+        return lambda *xs: tuple(call(*xs, model=handle))
+
+    value, first = make("", out_sds), make("_first", out_sds + jac_sds)
+    if spec.name == "crba":
+        return value, first, None
+    # (d2/dq2, d2/dv2, d2/dqdv[, d2/dxdq]) of id_so_derivatives / fd_so_derivatives
+    ntensors = 3 if spec.name == "nonlinear_effects" else 4
+    t3 = jax.ShapeDtypeStruct((nv, nv, nv), jnp.float64)
+    dense = make("_second", (t3,) * ntensors)
+
+    def second(*xs):
+        # the blocks of Rnea._hess / Aba._hess / NonlinearEffects._hess
+        ts = dense(*xs)
+        blocks = {(0, 0, 0): ts[0], (0, 1, 1): ts[1], (0, 0, 1): ts[2]}
+        blocks[(0, 1, 0)] = _swap_last(ts[2])
+        if ntensors == 4:
+            blocks[(0, 2, 0)] = ts[3]
+            blocks[(0, 0, 2)] = _swap_last(ts[3])
+        return tuple(blocks[k] for k in spec.hess_blocks)
+
+    return value, first, second
 
 
 def _run(spec: _interop.Spec, kind: str, xs) -> tuple:
@@ -136,8 +208,15 @@ def _build(spec: _interop.Spec):
     def cb(kind):
         return lambda *xs: _run(spec, kind, xs)
 
+    if _use_ffi and spec.name in _FFI_FUNCTIONS:
+        ffi_value, ffi_first, ffi_second = _ffi_calls(spec, out_sds, jac_sds)
+    else:
+        ffi_value = ffi_first = ffi_second = None
+
     @jax.custom_jvp
     def second(*xs):
+        if ffi_second is not None:
+            return ffi_second(*xs)
         return jax.pure_callback(cb("second"), hess_sds, *xs, vmap_method="broadcast_all")
 
     @second.defjvp
@@ -146,6 +225,8 @@ def _build(spec: _interop.Spec):
 
     @jax.custom_jvp
     def first(*xs):
+        if ffi_first is not None:
+            return ffi_first(*xs)
         return jax.pure_callback(cb("first"), out_sds + jac_sds, *xs, vmap_method="broadcast_all")
 
     def _first_jvp(primals, tangents):
@@ -175,6 +256,8 @@ def _build(spec: _interop.Spec):
 
     @jax.custom_jvp
     def value(*xs):
+        if ffi_value is not None:
+            return ffi_value(*xs)
         return jax.pure_callback(cb("primal"), out_sds, *xs, vmap_method="broadcast_all")
 
     def _value_jvp(primals, tangents):
@@ -191,6 +274,7 @@ def _build(spec: _interop.Spec):
         return tuple(outs), tuple(t_out)
 
     value.defjvp(_value_jvp, symbolic_zeros=True)
+    value.first = first  # the first-order call (values and Jacobian blocks), for benchmarks
     return value
 
 
@@ -204,7 +288,7 @@ def _static_key(static) -> tuple:
 def _function(cls, model: Model, static=()):
     if not isinstance(model, Model):
         raise TypeError(f"sodyn.jax.{cls.name}: 'model' must be a sodyn.Model, got {type(model)!r}")
-    key = (cls.name, id(model), _static_key(static))
+    key = (cls.name, id(model), _static_key(static), _use_ffi)
     hit = _CACHE.get(key)
     if hit is not None and hit[0] is model and hit[1] == static:
         return hit[2]

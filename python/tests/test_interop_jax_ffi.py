@@ -1,0 +1,362 @@
+"""``sodyn.jax``'s XLA FFI custom calls (``rnea``, ``aba``: value, first and second order):
+``jit``, ``jacfwd``, ``jacrev``, second-order ``jacfwd`` and ``vmap`` through them equal the
+direct numpy calls, ``sodyn.batch`` and the ``jax.pure_callback`` path bit for bit; a wrong
+call of a handler (float32, bad shapes, unknown model handle, no ``model`` attribute) is an
+XLA error, not a crash; the model's snapshot follows ``Model.gravity`` and is released with
+the model."""
+
+from __future__ import annotations
+
+import gc
+
+import numpy as np
+import pytest
+
+jax = pytest.importorskip(
+    "jax", reason="JAX is not installed: pip install 'sodyn[jax]' runs these tests"
+)
+import jax.numpy as jnp  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+
+import sodyn  # noqa: E402
+import sodyn.jax as sj  # noqa: E402
+from sodyn import _sodyn  # noqa: E402
+
+from interop_cases import arm, chain  # noqa: E402
+
+pytestmark = pytest.mark.skipif(
+    not sj.uses_ffi(), reason=f"the FFI path is not in use: {sj._FFI_REASON}"
+)
+
+# An error status of a handler reaches Python as jax.errors.JaxRuntimeError, or as ValueError
+# (INVALID_ARGUMENT) when JAX reruns an executable it has cached.
+RuntimeErr = (getattr(jax.errors, "JaxRuntimeError", RuntimeError), ValueError)
+
+MODELS = {"chain6": chain, "arm": lambda: arm()[0]}
+DIRECT = {
+    "aba": (sodyn.aba, sodyn.fd_derivatives, sodyn.fd_so_derivatives),
+    "rnea": (sodyn.rnea, sodyn.id_derivatives, sodyn.id_so_derivatives),
+}
+
+
+def _state(model, seed, n=None):
+    rng = np.random.default_rng(seed)
+    shape = (model.nv,) if n is None else (n, model.nv)
+    return tuple(rng.uniform(-1, 1, shape) for _ in range(3))
+
+
+def _callback_path(fn):
+    """Runs ``fn`` with ``sodyn.jax`` on ``jax.pure_callback`` (traced inside)."""
+    sj._use_ffi = False
+    try:
+        return fn()
+    finally:
+        sj._use_ffi = sj._FFI_OK
+
+
+@pytest.mark.parametrize("name", ["aba", "rnea"])
+@pytest.mark.parametrize("mname", list(MODELS))
+def test_jit_and_jacobians_equal_direct_calls_bit_for_bit(name, mname):
+    model = MODELS[mname]()
+    data = model.create_data()
+    value, first, second = DIRECT[name]
+    xs = _state(model, 1)
+    f = lambda *a: getattr(sj, name)(model, *a)  # noqa: E731
+    np.testing.assert_array_equal(np.asarray(jax.jit(f)(*xs)), value(model, data, *xs))
+    want = list(first(model, data, *xs))
+    if name == "rnea":
+        want.append(sodyn.crba(model, data, xs[0]))
+    for jac in (jax.jacfwd, jax.jacrev):
+        got = jax.jit(jac(f, argnums=(0, 1, 2)))(*xs)
+        for a in range(3):
+            np.testing.assert_array_equal(np.asarray(got[a]), want[a])
+    # second order: d/dx_b (d y / d x_a) from the dense tensors
+    qq, vv, qv, xq = second(model, data, *xs)
+    H = jax.jit(jax.jacfwd(jax.jacfwd(f, argnums=(0, 1, 2)), argnums=(0, 1, 2)))(*xs)
+    np.testing.assert_array_equal(np.asarray(H[0][0]), qq)
+    np.testing.assert_array_equal(np.asarray(H[1][1]), vv)
+    np.testing.assert_array_equal(np.asarray(H[0][1]), qv)
+    np.testing.assert_array_equal(np.asarray(H[1][0]), np.swapaxes(qv, -1, -2))
+    np.testing.assert_array_equal(np.asarray(H[2][0]), xq)
+    np.testing.assert_array_equal(np.asarray(H[0][2]), np.swapaxes(xq, -1, -2))
+    np.testing.assert_array_equal(np.asarray(H[2][2]), np.zeros_like(qq))
+
+
+@pytest.mark.parametrize("name", ["aba", "rnea"])
+def test_grad_and_hessian_equal_callback_path_and_direct(name):
+    model = arm()[0]
+    data = model.create_data()
+    xs = _state(model, 2)
+    w = np.random.default_rng(9).uniform(-1, 1, model.nv)
+
+    def build():
+        L = lambda *a: jnp.dot(w, getattr(sj, name)(model, *a))  # noqa: E731
+        return jax.jit(jax.grad(L, argnums=(0, 1, 2))), jax.jit(jax.hessian(L, argnums=(0, 1)))
+
+    g, h = build()
+    got_g, got_h = g(*xs), h(*xs)
+    cg, ch = _callback_path(lambda: tuple(f(*xs) for f in build()))
+    for a in range(3):
+        np.testing.assert_array_equal(np.asarray(got_g[a]), np.asarray(cg[a]))
+    for a in range(2):
+        for b in range(2):
+            np.testing.assert_array_equal(np.asarray(got_h[a][b]), np.asarray(ch[a][b]))
+    first = DIRECT[name][1](model, data, *xs)
+    np.testing.assert_allclose(np.asarray(got_g[0]), w @ first[0], rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["aba", "rnea"])
+def test_vmap_equals_batch_api_and_sequential_bit_for_bit(name):
+    model = arm()[0]
+    n = 37
+    Q, V, X = _state(model, 3, n)
+    f = lambda *a: getattr(sj, name)(model, *a)  # noqa: E731
+    got = jax.jit(jax.vmap(f))(Q, V, X)
+    np.testing.assert_array_equal(np.asarray(got), getattr(sodyn.batch, name)(model, Q, V, X))
+    jac = jax.jit(jax.vmap(jax.jacfwd(f, argnums=(0, 1, 2))))(Q, V, X)
+    hess = jax.jit(jax.vmap(jax.jacfwd(jax.jacfwd(f))))(Q, V, X)
+    one_j = jax.jit(jax.jacfwd(f, argnums=(0, 1, 2)))
+    one_h = jax.jit(jax.jacfwd(jax.jacfwd(f)))
+    for k in (0, 17, n - 1):
+        for a, j in enumerate(one_j(Q[k], V[k], X[k])):
+            np.testing.assert_array_equal(np.asarray(jac[a])[k], np.asarray(j))
+        np.testing.assert_array_equal(np.asarray(hess)[k], np.asarray(one_h(Q[k], V[k], X[k])))
+    # an unbatched argument is broadcast; nested vmap maps two leading axes
+    got2 = jax.vmap(lambda q, v: f(q, v, X[0]))(Q, V)
+    np.testing.assert_array_equal(
+        np.asarray(got2), getattr(sodyn.batch, name)(model, Q, V, np.tile(X[0], (n, 1)))
+    )
+    Q4, V4, X4 = (x[:36].reshape(6, 6, -1) for x in (Q, V, X))
+    got3 = jax.jit(jax.vmap(jax.vmap(f)))(Q4, V4, X4)
+    np.testing.assert_array_equal(np.asarray(got3).reshape(36, -1), np.asarray(got)[:36])
+
+
+@pytest.mark.parametrize("mname", list(MODELS))
+def test_nonlinear_effects_and_crba_equal_direct_calls_bit_for_bit(mname):
+    model = MODELS[mname]()
+    data = model.create_data()
+    q, v, _ = _state(model, 7)
+    zero = np.zeros(model.nv)
+    nle = lambda q_, v_: sj.nonlinear_effects(model, q_, v_)  # noqa: E731
+    crba = lambda q_: sj.crba(model, q_)  # noqa: E731
+    np.testing.assert_array_equal(
+        np.asarray(jax.jit(nle)(q, v)), sodyn.nonlinear_effects(model, data, q, v)
+    )
+    dq, dv = sodyn.id_derivatives(model, data, q, v, zero)
+    for jac in (jax.jacfwd, jax.jacrev):
+        got = jax.jit(jac(nle, argnums=(0, 1)))(q, v)
+        np.testing.assert_array_equal(np.asarray(got[0]), dq)
+        np.testing.assert_array_equal(np.asarray(got[1]), dv)
+    qq, vv, qv, dmdq = sodyn.id_so_derivatives(model, data, q, v, zero)
+    H = jax.jit(jax.jacfwd(jax.jacfwd(nle, argnums=(0, 1)), argnums=(0, 1)))(q, v)
+    np.testing.assert_array_equal(np.asarray(H[0][0]), qq)
+    np.testing.assert_array_equal(np.asarray(H[1][1]), vv)
+    np.testing.assert_array_equal(np.asarray(H[0][1]), qv)
+    np.testing.assert_array_equal(np.asarray(H[1][0]), np.swapaxes(qv, -1, -2))
+    np.testing.assert_array_equal(np.asarray(jax.jit(crba)(q)), sodyn.crba(model, data, q))
+    dm = sodyn.id_so_derivatives(model, data, q, zero, zero)[3]
+    np.testing.assert_array_equal(np.asarray(jax.jit(jax.jacfwd(crba))(q)), dm)
+    # crba's second order is the callback's (idsoza): it composes with the FFI first order
+    d2 = np.asarray(jax.jit(jax.jacfwd(jax.jacfwd(crba)))(q))
+    for j in range(model.nv):
+        np.testing.assert_array_equal(d2[:, j], sodyn.idsoza(model, data, q, np.eye(model.nv)[j]))
+    # vmap: the batch API
+    Q, V, _ = _state(model, 8, 21)
+    np.testing.assert_array_equal(
+        np.asarray(jax.jit(jax.vmap(nle))(Q, V)), sodyn.batch.nonlinear_effects(model, Q, V)
+    )
+    got = jax.jit(jax.vmap(crba))(Q)
+    np.testing.assert_array_equal(np.asarray(got), sodyn.batch.crba(model, Q))
+    jb = jax.jit(jax.vmap(jax.jacfwd(crba)))(Q)
+    for k in (0, 20):
+        np.testing.assert_array_equal(
+            np.asarray(jb)[k], sodyn.id_so_derivatives(model, data, Q[k], zero, zero)[3]
+        )
+
+
+def test_ffi_and_callback_paths_agree_bit_for_bit():
+    model = chain()
+    xs = _state(model, 4)
+    Xs = _state(model, 5, 8)
+
+    def build():
+        f = lambda q, v, t: sj.aba(model, q, v, t)  # noqa: E731
+        return (
+            np.asarray(jax.jit(f)(*xs)),
+            np.asarray(jax.jit(jax.vmap(f))(*Xs)),
+            [np.asarray(j) for j in jax.jit(jax.jacrev(f, argnums=(0, 1, 2)))(*xs)],
+        )
+
+    a, b = build(), _callback_path(build)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
+    for x, y in zip(a[2], b[2]):
+        np.testing.assert_array_equal(x, y)
+
+
+def _raw(target, model_handle, args, out_shapes, **extra):
+    sds = [jax.ShapeDtypeStruct(s, jnp.float64) for s in out_shapes]
+    attrs = {} if model_handle is None else {"model": np.int64(model_handle)}
+    return jax.ffi.ffi_call(target, sds)(*args, **attrs, **extra)
+
+
+def test_a_wrong_call_of_a_handler_is_an_error_not_a_crash():
+    model = chain()
+    nv = model.nv
+    h = _sodyn._jax_ffi_model(model)
+    x = np.zeros(nv)
+    # a correct raw call works and equals the direct call
+    got = _raw("sodyn_aba", h, (x, x, x), [(nv,)])
+    want = sodyn.aba(model, model.create_data(), x, x, x)
+    np.testing.assert_array_equal(np.asarray(got[0]), want)
+    with pytest.raises(RuntimeErr, match="argument 'v'.*float64"):
+        _raw("sodyn_aba", h, (x, x.astype(np.float32), x), [(nv,)])
+    shape_msg = r"argument 'tau' has shape \(7,\), expected \(\.\.\., 6\)"
+    with pytest.raises(RuntimeErr, match=shape_msg):
+        _raw("sodyn_aba", h, (x, x, np.zeros(nv + 1)), [(nv,)])
+    with pytest.raises(RuntimeErr, match="argument 'v' has leading dimensions"):
+        _raw("sodyn_aba", h, (np.zeros((2, nv)), np.zeros((3, nv)), np.zeros((2, nv))), [(2, nv)])
+    with pytest.raises(RuntimeErr, match="argument 'q' is a scalar"):
+        _raw("sodyn_rnea", h, (np.float64(0.0), x, x), [(nv,)])
+    with pytest.raises(RuntimeErr, match="expected 3 arguments"):
+        _raw("sodyn_aba", h, (x, x), [(nv,)])
+    with pytest.raises(RuntimeErr, match=r"result 0 has shape \(5,\), expected \(6,\)"):
+        _raw("sodyn_aba", h, (x, x, x), [(nv - 1,)])
+    with pytest.raises(RuntimeErr, match="expected 4 results"):
+        _raw("sodyn_aba_first", h, (x, x, x), [(nv,)])
+    with pytest.raises(RuntimeErr, match="no model with handle"):
+        _raw("sodyn_aba", 10**12, (x, x, x), [(nv,)])
+    with pytest.raises(RuntimeErr, match="no model with handle"):
+        _raw("sodyn_aba", -1, (x, x, x), [(nv,)])
+    with pytest.raises(RuntimeErr, match="no `model` attribute"):
+        _raw("sodyn_aba", None, (x, x, x), [(nv,)])
+    with pytest.raises(RuntimeErr, match="`model` attribute is not an int64"):
+        _raw("sodyn_aba", None, (x, x, x), [(nv,)], model=np.float32(h + 0.5))
+    # sodyn's own checks reach the caller through XLA with sodyn's message
+    bad = x.copy()
+    bad[2] = np.nan
+    with pytest.raises(RuntimeErr, match="sodyn.jax.aba: .*non-finite"):
+        jax.jit(lambda t: sj.aba(model, x, x, t))(bad).block_until_ready()
+    # ... in a batch too, naming the state
+    B = np.zeros((4, nv))
+    B[3, 1] = np.inf
+    with pytest.raises(RuntimeErr, match="state 3"):
+        jax.jit(jax.vmap(lambda t: sj.rnea(model, x, x, t)))(B).block_until_ready()
+
+
+def test_float32_through_the_public_function_names_the_fix():
+    model = chain()
+    x = jnp.zeros(model.nv, dtype=jnp.float32)
+    with pytest.raises(TypeError, match="jax_enable_x64"):
+        jax.jit(lambda t: sj.aba(model, t, t, t))(x)
+
+
+def test_snapshot_follows_gravity_and_is_released_with_the_model():
+    model = sodyn.Model.builtin("chain6")
+    data = model.create_data()
+    xs = _state(model, 6)
+    f = jax.jit(lambda q, v, t: sj.rnea(model, q, v, t))
+    before = np.asarray(f(*xs))
+    np.testing.assert_array_equal(before, sodyn.rnea(model, data, *xs))
+    model.gravity = [0.0, 0.0, -3.7]
+    after = np.asarray(f(*xs))  # compiled before the change, sees it (as a callback would)
+    np.testing.assert_array_equal(after, sodyn.rnea(model, data, *xs))
+    assert np.abs(after - before).max() > 1e-3
+    h = _sodyn._jax_ffi_model(model)
+    assert _sodyn._jax_ffi_model(model) == h  # one handle per model
+    x = np.zeros(model.nv)
+    _raw("sodyn_rnea", h, (x, x, x), [(model.nv,)])
+    del f, model
+    sj._CACHE.clear()
+    gc.collect()
+    with pytest.raises(RuntimeErr, match="no model with handle"):
+        _raw("sodyn_rnea", h, (x, x, x), [(6,)])
+
+
+def test_handlers_answer_the_metadata_query_and_skip_the_other_stages():
+    """Each handler called as XLA calls it (ctypes call frames laid out as
+    ``xla/ffi/api/c_api.h``): the metadata query gets FFI API 0.3 and no traits; the
+    instantiate, prepare and initialize stages return success without reading a buffer."""
+    import ctypes as C
+
+    class ExtBase(C.Structure):
+        _fields_ = [("struct_size", C.c_size_t), ("type", C.c_int), ("next", C.c_void_p)]
+
+    class ApiVersion(C.Structure):
+        _fields_ = [
+            ("struct_size", C.c_size_t),
+            ("extension_start", C.c_void_p),
+            ("major_version", C.c_int),
+            ("minor_version", C.c_int),
+        ]
+
+    class Metadata(C.Structure):
+        _fields_ = [
+            ("struct_size", C.c_size_t),
+            ("api_version", ApiVersion),
+            ("traits", C.c_uint32),
+            ("state_type_id", C.c_int64),
+        ]
+
+    class MetadataExt(C.Structure):
+        _fields_ = [("extension_base", ExtBase), ("metadata", C.POINTER(Metadata))]
+
+    class Lst(C.Structure):
+        _fields_ = [
+            ("struct_size", C.c_size_t),
+            ("extension_start", C.c_void_p),
+            ("size", C.c_int64),
+            ("types", C.c_void_p),
+            ("items", C.c_void_p),
+        ]
+
+    class Attrs(C.Structure):
+        _fields_ = Lst._fields_[:4] + [("names", C.c_void_p), ("attrs", C.c_void_p)]
+
+    class CallFrame(C.Structure):
+        _fields_ = [
+            ("struct_size", C.c_size_t),
+            ("extension_start", C.c_void_p),
+            ("api", C.c_void_p),
+            ("ctx", C.c_void_p),
+            ("stage", C.c_int),
+            ("args", Lst),
+            ("rets", Lst),
+            ("attrs", Attrs),
+            ("future", C.c_void_p),
+        ]
+
+    get = C.pythonapi.PyCapsule_GetPointer
+    get.restype, get.argtypes = C.c_void_p, [C.py_object, C.c_char_p]
+    name_of = C.pythonapi.PyCapsule_GetName
+    name_of.restype, name_of.argtypes = C.c_char_p, [C.py_object]
+    handler_t = C.CFUNCTYPE(C.c_void_p, C.POINTER(CallFrame))
+    targets = _sodyn._jax_ffi_targets()
+    assert sorted(targets) == [
+        "sodyn_aba",
+        "sodyn_aba_first",
+        "sodyn_aba_second",
+        "sodyn_crba",
+        "sodyn_crba_first",
+        "sodyn_nonlinear_effects",
+        "sodyn_nonlinear_effects_first",
+        "sodyn_nonlinear_effects_second",
+        "sodyn_rnea",
+        "sodyn_rnea_first",
+        "sodyn_rnea_second",
+    ]
+    frame_size = CallFrame.future.offset  # XLA_FFI_STRUCT_SIZE(XLA_FFI_CallFrame, attrs)
+    for cap in targets.values():
+        handler = handler_t(get(cap, name_of(cap)))
+        md = Metadata(struct_size=C.sizeof(Metadata), traits=77, state_type_id=5)
+        base = ExtBase(struct_size=C.sizeof(MetadataExt), type=1)
+        ext = MetadataExt(extension_base=base, metadata=C.pointer(md))
+        cf = CallFrame(struct_size=frame_size, extension_start=C.addressof(ext), stage=3)
+        assert handler(C.byref(cf)) is None
+        assert (md.api_version.major_version, md.api_version.minor_version) == (0, 3)
+        assert md.api_version.struct_size == C.sizeof(ApiVersion)
+        assert md.traits == 0 and md.state_type_id == 0
+        for stage in (0, 1, 2):  # no arguments at all: nothing may be read
+            cf = CallFrame(struct_size=frame_size, stage=stage)
+            assert handler(C.byref(cf)) is None
