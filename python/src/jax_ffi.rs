@@ -26,7 +26,6 @@
 //! snapshot, and dropping the Python `Model` removes it (a compiled function that still names
 //! the handle then gets an XLA error, not a dangling model).
 
-use crate::model::PyModel;
 use nalgebra::{DMatrix, DVector};
 use pyo3::prelude::*;
 use pyo3::types::{PyCapsule, PyDict};
@@ -241,7 +240,7 @@ pub(crate) struct Link(OnceLock<u64>);
 
 impl Link {
     /// The model's handle, registering a snapshot of `m` on first use.
-    fn handle(&self, m: &Model) -> u64 {
+    pub(crate) fn handle(&self, m: &Model) -> u64 {
         *self.0.get_or_init(|| {
             static NEXT: AtomicU64 = AtomicU64::new(1);
             let h = NEXT.fetch_add(1, Ordering::Relaxed);
@@ -822,16 +821,8 @@ fn _jax_ffi_targets(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     Ok(d)
 }
 
-/// The registry handle of `model` for the `model` attribute of the FFI calls (registered on
-/// first use, removed with the model).
-#[pyfunction]
-fn _jax_ffi_model(model: PyRef<'_, PyModel>) -> i64 {
-    model.ffi.handle(&model.m) as i64
-}
-
 /// Adds this family's functions to the module.
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_jax_ffi_targets, m)?)?;
-    m.add_function(wrap_pyfunction!(_jax_ffi_model, m)?)?;
     Ok(())
 }

@@ -695,10 +695,18 @@ pub(crate) fn _model_from_description(desc: &Bound<'_, PyDict>) -> PyResult<PyMo
     rebuild_py(desc)
 }
 
+/// The registry handle of `model` for the `model` attribute of `sodyn.jax`'s FFI calls
+/// (registered on first use, removed with the model).
+#[pyfunction]
+fn _jax_ffi_model(model: PyRef<'_, PyModel>) -> i64 {
+    model.ffi.handle(&model.m) as i64
+}
+
 /// Adds this family's classes and functions to the module.
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyJoint>()?;
     m.add_class::<PyModel>()?;
     m.add_function(wrap_pyfunction!(_model_from_description, m)?)?;
+    m.add_function(wrap_pyfunction!(_jax_ffi_model, m)?)?;
     Ok(())
 }
