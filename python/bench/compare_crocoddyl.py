@@ -9,7 +9,7 @@ Each problem is built by Crocoddyl's example code (``python/tests/crocoddyl_prob
 gaits chained as the examples chain them, each from the previous gait's last state), converted
 once with ``sodyn.ocp.from_crocoddyl``, and solved from the example's initial guess by
 Crocoddyl's FDDP (box-FDDP for ``humanoid_taichi.py``, with the examples' ``maxiter`` and
-``init_reg``; the reaches of ``examples/ddp.rs``, ``panda_reach`` and ``tiago_reach``, with
+``init_reg``; the reaches of ``ocp/examples/ddp.rs``, ``panda_reach`` and ``tiago_reach``, with
 ``maxiter = 500``) and by sodyn's on 1 and 2 threads, interleaved over the rounds.
 Reported per problem: iterations, final cost, solve time and time per iteration (median over
 rounds), and the median of the per-round ratios sodyn/Crocoddyl and 2 threads/1 thread.

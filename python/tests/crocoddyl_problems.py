@@ -130,7 +130,7 @@ def kinova_reach():
 
 
 def ddp_example_reach(urdf: str, frame: str, offset, horizon: int, dt: float, q0=None):
-    """A reach of ``examples/ddp.rs`` as a Crocoddyl problem: the frame moves by ``offset`` from
+    """A reach of ``ocp/examples/ddp.rs`` as a Crocoddyl problem: the frame moves by ``offset`` from
     its position at the start pose (rest, ``q0`` or the neutral configuration) with the example's
     costs: running ``dt (½ 1e-2 |q − q0|² + ½ 0.1 |v|² + ½ 1e-3 |u|²)``, terminal
     ``½ 1e-2 |q − q0|² + ½ 10 |v|² + ½ 1e3 |p − p*|²``; the robot from ``../shared/models``."""
@@ -199,7 +199,7 @@ PROBLEMS: Dict[str, Callable[..., Any]] = {
     "humanoid_taichi": lambda short=False, x0=None: _from_example("humanoid_taichi.py"),
 }
 
-# The reaches of examples/ddp.rs (its panda and tiago tasks; the benchmark only).
+# The reaches of ocp/examples/ddp.rs (its panda and tiago tasks; the benchmark only).
 DDP_EXAMPLE_PROBLEMS: Dict[str, Callable[..., Any]] = {
     "panda_reach": lambda short=False, x0=None: ddp_example_reach(
         "panda.urdf", "panda_hand", [0.1, 0.4, -0.2], 100, 0.01,

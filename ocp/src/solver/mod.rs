@@ -74,8 +74,8 @@ pub struct HessianStats {
     pub exact_failures: usize,
     /// Seconds spent in the second-order terms ([`crate::ActionModel::second_order`]).
     pub seconds: f64,
-    /// Cost terms per evaluation whose residual curvature is Gauss-Newton (at the last exact
-    /// pass: `FrameVelocity`), summed over the knots.
+    /// Cost terms per evaluation whose residual curvature is Gauss-Newton, summed over the
+    /// knots (0: every residual has its exact curvature).
     pub gauss_newton_terms: usize,
 }
 
