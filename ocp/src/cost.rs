@@ -460,8 +460,8 @@ impl CostModelSum {
 /// 3. `∂f/∂q_k = S_k ×* f` (LOCAL), 0 (WORLD), `[u_k × μ_l; 0]` with `u_k = S_k.lin + S_k.ang × p`
 ///    (LOCAL_WORLD_ALIGNED);
 /// 4. `∂²/∂q_l∂q̇_c = (∂f/∂q_l)ᵀ S_c + [l ⪯ c] fᵀ (S_l × S_c)`;
-/// 5. `∂²/∂q_k∂q_l = (∂²f/∂q_k∂q_l)ᵀ V_i + (∂f/∂q_l)ᵀ (S_k × W_k) + (∂f/∂q_k)ᵀ (S_l × W_l)
-///    + [k ⪯ l] fᵀ ((S_k × S_l) × W_l) + fᵀ (S_l × (S_k × W_d))`, `d` the deeper of `k`, `l`;
+/// 5. `∂²/∂q_k∂q_l = (∂²f/∂q_k∂q_l)ᵀ V_i + (∂f/∂q_l)ᵀ (S_k × W_k) + (∂f/∂q_k)ᵀ (S_l × W_l) +
+///    [k ⪯ l] fᵀ ((S_k × S_l) × W_l) + fᵀ (S_l × (S_k × W_d))`, `d` the deeper of `k`, `l`;
 ///    the Hessian is its symmetric part.
 fn frame_velocity_curvature(
     n: &mut NodeView<'_>,
