@@ -80,22 +80,9 @@ mkdir -p "$OUT"
 cp "$SODYN" "$OUT/sodyn"
 SODYN="$OUT/sodyn"
 
-# name | base | contact frames (3D point contacts, for the contact algorithms later;
-# ../shared/models/README.md). Both programs get --name = the URDF stem (sodyn bench would
-# default to the robot name, e.g. "solo" for solo12.urdf), which the table is keyed by.
-MODEL_TABLE="
-double_pendulum_continuous|fixed|
-ur5_robot|fixed|
-kinova|fixed|
-panda|fixed|
-baxter|fixed|
-tiago|fixed|
-solo12|ff|FL_FOOT,FR_FOOT,HL_FOOT,HR_FOOT
-hyq_no_sensors|ff|lf_foot,rf_foot,lh_foot,rh_foot
-anymal|ff|LF_FOOT,RF_FOOT,LH_FOOT,RH_FOOT
-talos_reduced|ff|left_sole_link,right_sole_link
-talos_full_v2|ff|left_sole_link,right_sole_link
-"
+# The robots timed: MODEL_TABLE (name|base|contact frames).
+# shellcheck source=bench-models.sh
+source "$HERE/bench-models.sh"
 # sodyn algorithm <-> pin_bench algorithm; fd_so has no Pinocchio counterpart (timed against
 # our own id_so, in one process: bench --ratio-to id_so).
 PAIRS="rnea:rnea crba:crba aba:aba id_fo:computeRNEADerivatives fd_fo:computeABADerivatives

@@ -44,15 +44,13 @@ pub(crate) fn gemm<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
 }
 
 /// Whether an `m×k` by `k×n` [`gemm`] runs the hand-written AVX2/FMA kernel rather than
-/// faer's. Measured (faer 0.24.4, AMD EPYC with AVX-512, 2026-11-26; interleaved, one run,
-/// `examples/linalg_vs_faer.rs`; faer time / hand-written time): with faer's AVX2 back end
-/// 0.84–1.69× over the 23 products benchmarked, above 1.05× on 14, so AVX2-only CPUs keep the
-/// kernel; with AVX-512 0.53–0.96×, except the products of at most 16³ multiply-adds (faer's
-/// `nano-gemm` range: 1.72× at 8×50 by 50×6, the Delassus product of two point contacts).
-/// Products with a shallow inner dimension (`k < 16`: `k` = 3 × contacts) took 0.69–0.96×
-/// alone, but with faer `sodyn bench` impact_fo on talos_full_v2 went from 14.5–14.9 to 16.5 µs
-/// with two contacts and impact_so_c from 74 to 84 µs with four (binaries alternated, one run),
-/// so they stay hand-written too.
+/// faer's (`examples/linalg_vs_faer.rs`, interleaved). With faer's AVX2 back end the
+/// hand-written kernel is faster on most products, so AVX2-only CPUs keep it. With AVX-512
+/// faer is faster, except on the products of at most 16³ multiply-adds (faer's `nano-gemm`
+/// range, e.g. the Delassus product of two point contacts) and, end to end, on those with a
+/// shallow inner dimension (`k < 16`: `k` = 3 × contacts; faster alone in faer, but
+/// `impact_fo` and `impact_so_c` ran slower with it), which stay hand-written too. Figures in
+/// `docs/performance.md`, "Dense products from faer".
 #[cfg(target_arch = "x86_64")]
 #[inline]
 fn hand_written(m: usize, n: usize, k: usize) -> bool {
@@ -60,10 +58,10 @@ fn hand_written(m: usize, n: usize, k: usize) -> bool {
 }
 
 /// Whether [`gemm_masked`] runs the hand-written AVX2/FMA kernels rather than faer's: on
-/// AVX2-only CPUs and for products of at most 16³ multiply-adds (faer 1.32× at 100×6 by 6×6,
-/// 0.59–0.84× above, shallow ones included: KKT-FO, its caller, took 29–31 µs with them by
-/// faer against 32.4–32.5 µs hand-written, talos_full_v2 with four contacts; setup as
-/// [`hand_written`]).
+/// AVX2-only CPUs and for products of at most 16³ multiply-adds, where faer is slower. Above,
+/// shallow products included, faer is faster, also end to end in `kkt_fo`, the caller (unlike
+/// [`hand_written`]'s shallow case). Figures in `docs/performance.md`, "Dense products from
+/// faer".
 #[cfg(target_arch = "x86_64")]
 #[inline]
 fn hand_written_masked(m: usize, n: usize, k: usize) -> bool {
@@ -183,8 +181,8 @@ pub(crate) fn gemm_avx2<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
 
 /// `dst[j + ldd·i] ← src[i + lds·j]` for `i < m`, `j < n`: the transposition of an `m×n`
 /// column-major block with leading dimension `lds` into one with leading dimension `ldd`.
-/// Hand-written: faer 0.24.4's `copy_from(src.transpose())` took 1.68–1.82× its time (50×50,
-/// 50×12, 12×50; interleaved, one run, 2026-11-26, AMD EPYC with AVX-512).
+/// Hand-written: faer's `copy_from(src.transpose())` is slower at the sizes used (50×50, 50×12,
+/// 12×50; see `docs/performance.md`, "Dense products from faer").
 pub(crate) fn transpose_strided(
     src: &[f64],
     lds: usize,
@@ -244,10 +242,10 @@ unsafe fn transpose_tiles(
 
 /// Whether [`spd_inverse`] of an `m×m` matrix uses faer's Cholesky factorisation and inverse:
 /// where the hand-written Gauss–Jordan [`spd_inverse_in_place`] was not faster by more than
-/// 5 %. faer 0.24.4's time over it (`LLᵀ` + inverse, interleaved, one run, 2026-11-26, AMD EPYC
-/// with AVX-512, `examples/linalg_vs_faer.rs`): m = 6, 12, 18, 24: 2.48, 5.76, 1.23, 2.17×;
-/// m = 36: 2.07×; m = 30, 42, 50: 0.84, 0.78, 0.75× (the hand-written kernel's masked tail
-/// loads are slow beyond its register-resident sizes m ≤ 16 when m is not a multiple of 4).
+/// 5 % (`LLᵀ` + inverse against it, interleaved, `examples/linalg_vs_faer.rs`): faer is slower
+/// up to m = 24 and at multiples of 4 (m = 36), faster at m = 30, 42, 50, where the hand-written
+/// kernel's masked tail loads are slow beyond its register-resident sizes m ≤ 16. Figures in
+/// `docs/performance.md`, "Dense products from faer".
 #[inline]
 fn spd_by_faer(m: usize) -> bool {
     m > 24 && !m.is_multiple_of(4)

@@ -857,10 +857,9 @@ pub(crate) fn symmetric_ends(model: &Model, joints: bool) -> Vec<usize> {
 }
 
 /// Below this `nv`, [`premultiply_sym`] is one [`premultiply`]: its `nv` smaller products per
-/// tensor measured slower than the one whole product on solo12 (`nv` = 18, four feet:
-/// `kkt_so` 151 → 158 µs) and faster on talos_reduced (`nv` = 38, two soles: 511 → 495 µs)
-/// and talos_full_v2 (`nv` = 50: 1251 → 1120 µs) (AMD EPYC with AVX-512, 2026-11-26, the two
-/// binaries alternated in one run).
+/// tensor measured slower than the one whole product on solo12 (`nv` = 18) and faster on
+/// talos_reduced (`nv` = 38) and talos_full_v2 (`nv` = 50); figures in `docs/performance.md`,
+/// "Dense contact second order".
 const SYM_MIN_NV: usize = 32;
 
 /// [`premultiply`] of a tensor `r` whose column `(j, k)` equals its column `(k, j)` for

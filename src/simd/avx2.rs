@@ -259,9 +259,9 @@ pub(crate) fn sin_cos_arrays(x: &[f64; 4]) -> ([f64; 4], [f64; 4]) {
     (s.store(), c.store())
 }
 
-/// `C ← β C + α A B` (column-major, unit row strides), 8×6 register blocks. Kept where faer
-/// 0.24.4's product measured slower (see `crate::linalg::hand_written`: up to 1.69× its time
-/// with faer's AVX2 back end; interleaved, one run, 2026-11-26, AMD EPYC).
+/// `C ← β C + α A B` (column-major, unit row strides), 8×6 register blocks. Kept where faer's
+/// product measured slower (see `crate::linalg::hand_written` and `docs/performance.md`,
+/// "Dense products from faer").
 ///
 /// # Safety
 /// AVX2 and FMA available; `a` (`m × k`, leading dimension `lda`), `b` (`k × n`, `ldb`) and `c`

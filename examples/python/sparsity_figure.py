@@ -1,6 +1,6 @@
 """Draws the sparsity of d2tau/dq2 (IDSVA-SO) of talos_full_v2 with a free-flyer, from Python.
 
-    python python/examples/sparsity_figure.py [URDF] [--out docs/python-d2tau-sparsity.png]
+    python examples/python/sparsity_figure.py [URDF] [--out docs/python-d2tau-sparsity.png]
 
 Each panel is one page k of the (nv, nv, nv) tensor T[i, j, k] = d/dq_k (dtau_i/dq_j); the
 last panel counts, for every (i, j), the pages k where the entry is non-zero.
