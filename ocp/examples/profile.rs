@@ -56,10 +56,11 @@ fn main() {
     let dt = t.elapsed().as_secs_f64() / n as f64;
     if calls.is_none() {
         println!(
-            "{phase}: {:.3} ms per call (T = {}, iterations of the last solve: {})",
+            "{phase}: {:.3} ms per call (T = {}, iterations of the last solve: {}, cost {:?})",
             dt * 1e3,
             solver.problem.horizon(),
-            solver.iter()
+            solver.iter(),
+            solver.cost()
         );
     }
 }
