@@ -183,9 +183,14 @@ impl Residual {
     /// Buffers for this residual.
     pub fn create_data(&self, nv: usize, nu: usize) -> ResidualData {
         let nr = self.nr(2 * nv, nu);
+        let mut rx = DMatrix::zeros(nr, 2 * nv);
+        if let Residual::State { .. } = self {
+            // R_x = blockdiag(∂(q ⊖ q_ref)/∂q, I): `calc_diff` writes only the first block.
+            rx.view_mut((nv, nv), (nv, nv)).fill_diagonal(1.0);
+        }
         ResidualData {
             r: DVector::zeros(nr),
-            rx: DMatrix::zeros(nr, 2 * nv),
+            rx,
             ru: DMatrix::zeros(nr, nu),
             j6a: Matrix6xX::zeros(nv),
             j6b: Matrix6xX::zeros(nv),
@@ -251,7 +256,9 @@ impl Residual {
         let nv = n.model.nv();
         match self {
             Residual::State { xref } => {
-                n.state.jdiff(n.sc, xref, n.x, Arg::Second, &mut rd.rx);
+                // The other blocks of R_x (zero, and I for the velocities) are set at creation.
+                n.state.jdiff_q(n.sc, xref, n.x, Arg::Second);
+                rd.rx.view_mut((0, 0), (nv, nv)).copy_from(&n.sc.jq);
             }
             Residual::Control { .. } | Residual::JointEffort { .. } => {
                 rd.ru.fill(0.0);
