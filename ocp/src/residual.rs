@@ -261,14 +261,14 @@ impl Residual {
                 rd.rx.view_mut((0, 0), (nv, nv)).copy_from(&n.sc.jq);
             }
             Residual::Control { .. } | Residual::JointEffort { .. } => {
-                rd.ru.fill(0.0);
+                rd.ru.as_mut_slice().fill(0.0);
                 rd.ru.fill_diagonal(1.0);
             }
             Residual::FramePlacement { frame, mref } => {
                 let omf = frame_placement(n.model, n.data, n.q, *frame)?;
                 let jl = jlog6(&mref.inverse().compose(&omf));
                 frame_jacobian(n.model, n.data, n.q, *frame, ReferenceFrame::Local, &mut rd.j6a)?;
-                rd.rx.fill(0.0);
+                rd.rx.as_mut_slice().fill(0.0);
                 let mut rq = rd.rx.view_mut((0, 0), (6, nv));
                 gemm_nn(&mut rq, 1.0, &jl, &rd.j6a, 0.0);
             }
@@ -281,7 +281,7 @@ impl Residual {
                     ReferenceFrame::LocalWorldAligned,
                     &mut rd.j6a,
                 )?;
-                rd.rx.fill(0.0);
+                rd.rx.as_mut_slice().fill(0.0);
                 rd.rx.view_mut((0, 0), (3, nv)).copy_from(&rd.j6a.rows(3, 3));
             }
             Residual::FrameVelocity { frame, rf, .. } => {
@@ -300,7 +300,7 @@ impl Residual {
             }
             Residual::CoMPosition { .. } => {
                 center_of_mass_jacobian(n.model, n.data, n.q, &mut rd.j3)?;
-                rd.rx.fill(0.0);
+                rd.rx.as_mut_slice().fill(0.0);
                 rd.rx.view_mut((0, 0), (3, nv)).copy_from(&rd.j3);
             }
             Residual::ContactForce { contact, .. } => match (n.forces, contact.offset) {
@@ -309,8 +309,8 @@ impl Residual {
                     rd.ru.copy_from(&du.rows(o, contact.dim));
                 }
                 _ => {
-                    rd.rx.fill(0.0);
-                    rd.ru.fill(0.0);
+                    rd.rx.as_mut_slice().fill(0.0);
+                    rd.ru.as_mut_slice().fill(0.0);
                 }
             },
             Residual::ContactCone { contact, a } => match (n.forces, contact.offset) {
@@ -319,8 +319,8 @@ impl Residual {
                     gemm_nn(&mut rd.ru, 1.0, a, &du.rows(o, contact.dim), 0.0);
                 }
                 _ => {
-                    rd.rx.fill(0.0);
-                    rd.ru.fill(0.0);
+                    rd.rx.as_mut_slice().fill(0.0);
+                    rd.ru.as_mut_slice().fill(0.0);
                 }
             },
         }
