@@ -265,9 +265,12 @@ impl Residual {
                 rd.ru.fill_diagonal(1.0);
             }
             Residual::FramePlacement { frame, mref } => {
-                let omf = frame_placement(n.model, n.data, n.q, *frame)?;
-                let jl = jlog6(&mref.inverse().compose(&omf));
                 frame_jacobian(n.model, n.data, n.q, *frame, ReferenceFrame::Local, &mut rd.j6a)?;
+                // The Jacobian's kinematics pass left the frame's joint placement in `data`:
+                // `⁰M_f` from it (what `frame_placement` computes), without a second pass.
+                let f = &n.model.frames()[*frame];
+                let omf = n.data.o_m_i()[f.joint].compose(&f.placement);
+                let jl = jlog6(&mref.inverse().compose(&omf));
                 rd.rx.as_mut_slice().fill(0.0);
                 let mut rq = rd.rx.view_mut((0, 0), (6, nv));
                 gemm_nn(&mut rq, 1.0, &jl, &rd.j6a, 0.0);
