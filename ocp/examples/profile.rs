@@ -1,7 +1,7 @@
 //! Times (or, with `--calls N`, just runs for callgrind) the phases of an FDDP solve on a
 //! problem file: `{"problem": <spec JSON>, "xs": [...], "us": [...]}` and a URDF model.
 //!
-//! `cargo run --release -p sodyn-ocp --example profile -- MODEL.urdf PROBLEM.json [--calls N]`
+//! `cargo run --release -p sodyn-ocp --example profile -- MODEL.urdf PROBLEM.json [--calls N] [--fixed-base]`
 
 use nalgebra::DVector;
 use sodyn::model::{UrdfOptions, load_urdf_file};
@@ -12,10 +12,13 @@ use std::time::Instant;
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if args.len() < 3 {
-        eprintln!("usage: profile MODEL.urdf PROBLEM.json [--calls N] [--phase calc_diff|solve]");
+        eprintln!(
+            "usage: profile MODEL.urdf PROBLEM.json [--calls N] [--phase calc_diff|solve] [--fixed-base]"
+        );
         std::process::exit(2);
     }
-    let opts = UrdfOptions { floating_base: true, ..Default::default() };
+    let floating_base = !args.iter().any(|a| a == "--fixed-base");
+    let opts = UrdfOptions { floating_base, ..Default::default() };
     let model = Arc::new(load_urdf_file(std::path::Path::new(&args[1]), &opts).expect("model"));
     let doc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&args[2]).expect("file")).expect("json");
@@ -56,10 +59,11 @@ fn main() {
     let dt = t.elapsed().as_secs_f64() / n as f64;
     if calls.is_none() {
         println!(
-            "{phase}: {:.3} ms per call (T = {}, iterations of the last solve: {})",
+            "{phase}: {:.3} ms per call (T = {}, iterations of the last solve: {}, cost {:?})",
             dt * 1e3,
             solver.problem.horizon(),
-            solver.iter()
+            solver.iter(),
+            solver.cost()
         );
     }
 }

@@ -776,11 +776,11 @@ impl ActionModel {
         let c = self.costs.calc(&mut d.costs, &mut view, eval_all)?;
         d.cost = scale * c;
         if diff {
-            d.lx.fill(0.0);
-            d.lu.fill(0.0);
-            d.lxx.fill(0.0);
-            d.lxu.fill(0.0);
-            d.luu.fill(0.0);
+            d.lx.as_mut_slice().fill(0.0);
+            d.lu.as_mut_slice().fill(0.0);
+            d.lxx.as_mut_slice().fill(0.0);
+            d.lxu.as_mut_slice().fill(0.0);
+            d.luu.as_mut_slice().fill(0.0);
             let mut derivs = CostDerivs {
                 lx: &mut d.lx,
                 lu: &mut d.lu,
@@ -790,11 +790,11 @@ impl ActionModel {
             };
             self.costs.calc_diff(&mut d.costs, &mut view, &mut derivs, eval_all)?;
             if scale != 1.0 {
-                d.lx *= scale;
-                d.lu *= scale;
-                d.lxx *= scale;
-                d.lxu *= scale;
-                d.luu *= scale;
+                d.lx.as_mut_slice().iter_mut().for_each(|x| *x *= scale);
+                d.lu.as_mut_slice().iter_mut().for_each(|x| *x *= scale);
+                d.lxx.as_mut_slice().iter_mut().for_each(|x| *x *= scale);
+                d.lxu.as_mut_slice().iter_mut().for_each(|x| *x *= scale);
+                d.luu.as_mut_slice().iter_mut().for_each(|x| *x *= scale);
             }
         }
         Ok(())

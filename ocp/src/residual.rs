@@ -183,9 +183,14 @@ impl Residual {
     /// Buffers for this residual.
     pub fn create_data(&self, nv: usize, nu: usize) -> ResidualData {
         let nr = self.nr(2 * nv, nu);
+        let mut rx = DMatrix::zeros(nr, 2 * nv);
+        if let Residual::State { .. } = self {
+            // R_x = blockdiag(∂(q ⊖ q_ref)/∂q, I): `calc_diff` writes only the first block.
+            rx.view_mut((nv, nv), (nv, nv)).fill_diagonal(1.0);
+        }
         ResidualData {
             r: DVector::zeros(nr),
-            rx: DMatrix::zeros(nr, 2 * nv),
+            rx,
             ru: DMatrix::zeros(nr, nu),
             j6a: Matrix6xX::zeros(nv),
             j6b: Matrix6xX::zeros(nv),
@@ -251,17 +256,22 @@ impl Residual {
         let nv = n.model.nv();
         match self {
             Residual::State { xref } => {
-                n.state.jdiff(n.sc, xref, n.x, Arg::Second, &mut rd.rx);
+                // The other blocks of R_x (zero, and I for the velocities) are set at creation.
+                n.state.jdiff_q(n.sc, xref, n.x, Arg::Second);
+                rd.rx.view_mut((0, 0), (nv, nv)).copy_from(&n.sc.jq);
             }
             Residual::Control { .. } | Residual::JointEffort { .. } => {
-                rd.ru.fill(0.0);
+                rd.ru.as_mut_slice().fill(0.0);
                 rd.ru.fill_diagonal(1.0);
             }
             Residual::FramePlacement { frame, mref } => {
-                let omf = frame_placement(n.model, n.data, n.q, *frame)?;
-                let jl = jlog6(&mref.inverse().compose(&omf));
                 frame_jacobian(n.model, n.data, n.q, *frame, ReferenceFrame::Local, &mut rd.j6a)?;
-                rd.rx.fill(0.0);
+                // The Jacobian's kinematics pass left the frame's joint placement in `data`:
+                // `⁰M_f` from it (what `frame_placement` computes), without a second pass.
+                let f = &n.model.frames()[*frame];
+                let omf = n.data.o_m_i()[f.joint].compose(&f.placement);
+                let jl = jlog6(&mref.inverse().compose(&omf));
+                rd.rx.as_mut_slice().fill(0.0);
                 let mut rq = rd.rx.view_mut((0, 0), (6, nv));
                 gemm_nn(&mut rq, 1.0, &jl, &rd.j6a, 0.0);
             }
@@ -274,7 +284,7 @@ impl Residual {
                     ReferenceFrame::LocalWorldAligned,
                     &mut rd.j6a,
                 )?;
-                rd.rx.fill(0.0);
+                rd.rx.as_mut_slice().fill(0.0);
                 rd.rx.view_mut((0, 0), (3, nv)).copy_from(&rd.j6a.rows(3, 3));
             }
             Residual::FrameVelocity { frame, rf, .. } => {
@@ -293,7 +303,7 @@ impl Residual {
             }
             Residual::CoMPosition { .. } => {
                 center_of_mass_jacobian(n.model, n.data, n.q, &mut rd.j3)?;
-                rd.rx.fill(0.0);
+                rd.rx.as_mut_slice().fill(0.0);
                 rd.rx.view_mut((0, 0), (3, nv)).copy_from(&rd.j3);
             }
             Residual::ContactForce { contact, .. } => match (n.forces, contact.offset) {
@@ -302,8 +312,8 @@ impl Residual {
                     rd.ru.copy_from(&du.rows(o, contact.dim));
                 }
                 _ => {
-                    rd.rx.fill(0.0);
-                    rd.ru.fill(0.0);
+                    rd.rx.as_mut_slice().fill(0.0);
+                    rd.ru.as_mut_slice().fill(0.0);
                 }
             },
             Residual::ContactCone { contact, a } => match (n.forces, contact.offset) {
@@ -312,8 +322,8 @@ impl Residual {
                     gemm_nn(&mut rd.ru, 1.0, a, &du.rows(o, contact.dim), 0.0);
                 }
                 _ => {
-                    rd.rx.fill(0.0);
-                    rd.ru.fill(0.0);
+                    rd.rx.as_mut_slice().fill(0.0);
+                    rd.ru.as_mut_slice().fill(0.0);
                 }
             },
         }

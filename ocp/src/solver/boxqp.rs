@@ -219,6 +219,64 @@ pub(crate) fn cholesky_solve<
     }
 }
 
+/// [`cholesky_solve`] for the right-hand sides stored as the rows of `bt` (`m × n`: column `i`
+/// holds entry `i` of all `m` systems), vectorised across the systems. Each system takes
+/// exactly the operations of [`cholesky_solve`] in its order (a multiply, then a subtract), so
+/// the solutions are the same to the bit.
+pub(crate) fn cholesky_solve_rows(l: &DMatrix<f64>, bt: &mut DMatrix<f64>) {
+    let n = l.nrows();
+    let m = bt.nrows();
+    assert!(bt.ncols() == n, "cholesky_solve_rows: {} columns, expected {n}", bt.ncols());
+    #[cfg(target_arch = "x86_64")]
+    if is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2 (checked at run time).
+        unsafe { solve_rows_avx2(l, bt.as_mut_slice(), m, n) };
+        return;
+    }
+    solve_rows(l, bt.as_mut_slice(), m, n);
+}
+
+#[inline(always)]
+fn solve_rows(l: &DMatrix<f64>, b: &mut [f64], m: usize, n: usize) {
+    // Forward: column i -= L_ik column k (k < i), then /= L_ii.
+    for i in 0..n {
+        let (head, tail) = b.split_at_mut(i * m);
+        let ci = &mut tail[..m];
+        for k in 0..i {
+            let lik = l[(i, k)];
+            for (x, y) in ci.iter_mut().zip(&head[k * m..(k + 1) * m]) {
+                *x -= lik * y;
+            }
+        }
+        let d = l[(i, i)];
+        ci.iter_mut().for_each(|x| *x /= d);
+    }
+    // Backward: column i -= L_ki column k (k > i), then /= L_ii.
+    for i in (0..n).rev() {
+        let (head, tail) = b.split_at_mut((i + 1) * m);
+        let ci = &mut head[i * m..];
+        for k in i + 1..n {
+            let lki = l[(k, i)];
+            let off = (k - i - 1) * m;
+            for (x, y) in ci.iter_mut().zip(&tail[off..off + m]) {
+                *x -= lki * y;
+            }
+        }
+        let d = l[(i, i)];
+        ci.iter_mut().for_each(|x| *x /= d);
+    }
+}
+
+/// [`solve_rows`] compiled for AVX2 (no FMA: the multiply and the subtract stay two roundings).
+///
+/// # Safety
+/// The CPU must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn solve_rows_avx2(l: &DMatrix<f64>, b: &mut [f64], m: usize, n: usize) {
+    solve_rows(l, b, m, n);
+}
+
 /// The inverse of the leading `n × n` block of `a` (symmetric positive definite) into `inv`,
 /// by an in-place Cholesky factorisation `a = L Lᵀ`; `false` when it is not positive definite.
 fn cholesky_inverse(a: &mut DMatrix<f64>, inv: &mut DMatrix<f64>, n: usize) -> bool {

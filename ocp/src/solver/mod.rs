@@ -32,6 +32,27 @@ use crate::problem::ShootingProblem;
 
 pub use boxqp::{BoxQp, BoxQpResult};
 
+/// `a ← ½ (a + aᵀ) + μ I` in place (square, column-major): each pair of entries gets the same
+/// `½ (a_ij + a_ji)`.
+fn symmetrize_add_diagonal(a: &mut DMatrix<f64>, mu: f64) {
+    let n = a.nrows();
+    let s = a.as_mut_slice();
+    for j in 0..n {
+        for i in j + 1..n {
+            let v = 0.5 * (s[i + j * n] + s[j + i * n]);
+            s[i + j * n] = v;
+            s[j + i * n] = v;
+        }
+        let d = &mut s[j + j * n];
+        *d = 0.5 * (*d + *d) + mu;
+    }
+}
+
+/// Whether a slice holds a NaN (branch-free over the slice, so it vectorises).
+fn any_nan(x: &[f64]) -> bool {
+    x.iter().fold(false, |acc, v| acc | v.is_nan())
+}
+
 /// Which algorithm a [`Solver`] runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SolverKind {
@@ -146,6 +167,7 @@ pub struct Solver {
     quuk: Vec<DVector<f64>>,
     k: Vec<DVector<f64>>,
     kk: Vec<DMatrix<f64>>,
+    kt: Vec<DMatrix<f64>>,
     llt: Vec<DMatrix<f64>>,
     fxt_vxx: DMatrix<f64>,
     fut_vxx: Vec<DMatrix<f64>>,
@@ -246,6 +268,7 @@ impl Solver {
             quuk: vecs(t_len, |t| nus[t]),
             k: vecs(t_len, |t| nus[t]),
             kk: mats(&|t| (nus[t], ndx)),
+            kt: mats(&|t| (ndx, nus[t])),
             llt: mats(&|t| (nus[t], nus[t])),
             fxt_vxx: DMatrix::zeros(ndx, ndx),
             fut_vxx: mats(&|t| (nus[t], ndx)),
@@ -725,18 +748,11 @@ impl Solver {
                 self.vx[t].gemv_tr(-1.0, &self.kk[t], &self.qu[t], 1.0);
                 gemm_nn(&mut self.vxx[t], -1.0, &self.qxu[t], &self.kk[t], 1.0);
             }
-            self.vxx_tmp.copy_from(&self.vxx[t]);
-            let n = self.vxx_tmp.nrows();
-            for i in 0..n {
-                for j in 0..n {
-                    self.vxx[t][(i, j)] = 0.5 * (self.vxx_tmp[(i, j)] + self.vxx_tmp[(j, i)]);
-                }
-                self.vxx[t][(i, i)] += preg;
-            }
+            symmetrize_add_diagonal(&mut self.vxx[t], preg);
             if !self.is_feasible {
                 self.vx[t].gemv(1.0, &self.vxx[t], &self.fs[t], 1.0);
             }
-            if self.vx[t].iter().any(|v| v.is_nan()) || self.vxx[t].iter().any(|v| v.is_nan()) {
+            if any_nan(self.vx[t].as_slice()) || any_nan(self.vxx[t].as_slice()) {
                 return false;
             }
         }
@@ -751,8 +767,10 @@ impl Solver {
         if !boxqp::cholesky_in_place(&mut self.llt[t], nu) {
             return false;
         }
-        self.kk[t].tr_copy_from(&self.qxu[t]);
-        boxqp::cholesky_solve(&self.llt[t], &mut self.kk[t]);
+        // Kᵀ = Q_xu Q_uu⁻¹: the rows of K solved together, vectorised across them.
+        self.kt[t].copy_from(&self.qxu[t]);
+        boxqp::cholesky_solve_rows(&self.llt[t], &mut self.kt[t]);
+        self.kk[t].tr_copy_from(&self.kt[t]);
         self.k[t].copy_from(&self.qu[t]);
         boxqp::cholesky_solve(&self.llt[t], &mut self.k[t]);
         true
