@@ -296,7 +296,6 @@ pub fn impact_dynamics(
     q: &DVector<f64>,
     vminus: &DVector<f64>,
 ) -> Result<()> {
-    im.cd.refuse_loops(model, "impact_dynamics")?;
     if let Some(r) = &model.reduction {
         let im_r = crate::algo::data::reduced::reduced_ws(&mut im.red, "ImpactData", model)?;
         return crate::deriv::impact::reduced::impact_dynamics(
@@ -375,7 +374,6 @@ pub fn impact_derivatives(
     q: &DVector<f64>,
     vminus: &DVector<f64>,
 ) -> Result<()> {
-    im.cd.refuse_loops(model, "impact_derivatives")?;
     if let Some(r) = &model.reduction {
         let im_r = crate::algo::data::reduced::reduced_ws(&mut im.red, "ImpactData", model)?;
         return crate::deriv::impact::reduced::impact_derivatives(

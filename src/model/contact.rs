@@ -31,6 +31,22 @@
 //! `ᵒM_ref` fixed): `3d` `local_world_aligned`: `e = p − p_ref`; `3d` `local`: `Rᵀ(p − p_ref)`;
 //! `6d` `local`: `e = log6(ᵒM_ref⁻¹ ᵒM_c)`; `6d` `local_world_aligned`: `e = diag(R, R) log6(ᵒM_ref⁻¹ ᵒM_c)`.
 //! Impulses and constrained inverse dynamics do not use the gains.
+//!
+//! # Two-frame constraints
+//!
+//! With [`Contact::frame2`] set ([`Contact::with_frame2`]) the constraint joins frame A (the
+//! contact frame above, `(R₁, p₁)` on body `a`) to frame B (`(point2, rotation2)` in `frame2`'s
+//! coordinates, `(R₂, p₂)` on body `b`): Pinocchio's `RigidConstraintModel(type, model, joint1,
+//! placement1, joint2, placement2, reference)`. With `V`, `A` the world spatial velocities and
+//! accelerations of the bodies and `R' = R₁ᵀ` (local) or `I` (world-aligned): `3d` rows
+//! `R'(v_{p₁} − v_{p₂})` (accelerations `R'(a_{p₁} − a_{p₂})`, classical); `6d` rows the relative
+//! motion `V_a − V_b` about `p₁` in frame A's axes (local) or the world's (world-aligned), whose
+//! accelerations are `A_a − A_b` (world-aligned) and `¹X_o(A_a − A_b + (V_a − V_b) × V_b)`
+//! (local, the time derivative of the velocity rows). `λ` acts on body `a` and `−λ` on body `b`
+//! (3-D: forces at `p₁` and `p₂`; 6-D: a wrench at `p₁`), so `τ + J_cᵀλ` holds as for world
+//! contacts. Baumgarte: `kd` on every loop; `kp` only on `3d` world-aligned loops, against the
+//! actual error `e = p₁ − p₂` (placement 2 enters no other quantity). docs/conventions.md
+//! lists the algorithms that take them.
 
 use crate::error::{Error, Result};
 use crate::model::Model;

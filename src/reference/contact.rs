@@ -308,11 +308,8 @@ pub fn constrained_rnea<T: AdScalar>(
         if contact.is_loop() {
             // λ acts on frame A's body, −λ on frame B's: a 3-D force at each frame's own point,
             // a 6-D wrench at frame A's point (the transposed rows of `loop_jacobian_rows`).
+            // (n, f) are already world-aligned (frame A's rotation is `pose.rot`).
             let (pa, pb) = loop_poses(model, &world, contact);
-            let (n, f) = match contact.reference {
-                ContactReference::LocalWorldAligned => (n, f),
-                ContactReference::Local => (&pa.rot * n, &pa.rot * f),
-            };
             let (a, _) = body_pose::<T>(model, contact);
             let (b, _) = body_pose2::<T>(model, contact);
             let fa = Sv::new(&n + pa.trans.cross(&f), f.clone());

@@ -249,13 +249,13 @@ fn loop_errors_name_the_problem() {
     }
     // Algorithms without loop support refuse them with an error naming the constraint.
     let cd = ContactData::new(&m, std::slice::from_ref(&six)).unwrap();
-    let mut im = ImpactData::new(&m, cd.clone());
+    let mut im = ImpactData::new(&m, cd.clone()).with_second_order(&m);
     let (q, v) = (m.neutral(), DVector::zeros(m.nv()));
     let mut d = Data::new(&m);
-    match impact_dynamics(&m, &mut d, &mut im, &q, &v) {
+    match impact_so_derivatives(&m, &mut d, &mut im, &q, &v) {
         Err(Error::Argument { name, reason }) => {
             assert!(name.contains("\"LF_FOOT\" to \"RF_FOOT\""), "{name}");
-            assert!(reason.contains("impact_dynamics"), "{reason}");
+            assert!(reason.contains("impact_so_derivatives"), "{reason}");
         }
         other => panic!("expected a refusal, got {other:?}"),
     }
@@ -265,4 +265,99 @@ fn loop_errors_name_the_problem() {
         kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau),
         Err(Error::Argument { .. })
     ));
+}
+
+#[test]
+fn impact_first_order_with_loops_matches_oracle_and_central_differences() {
+    let names = [
+        "vplus",
+        "impulse",
+        "dvplus_dq",
+        "dvplus_dvminus",
+        "dimpulse_dq",
+        "dimpulse_dvminus",
+        "FD dvplus_dq",
+        "FD dimpulse_dq",
+        "FD dvplus_dvminus",
+        "FD dimpulse_dvminus",
+    ];
+    let mut w: Vec<Worst> = names.iter().map(|n| Worst::new(n)).collect();
+    let mut rng = Rng::new(47);
+    for e in [0.0, 0.4] {
+        for (m, spec) in cases() {
+            let cs = constraints(&m, &spec, &mut rng);
+            let (q, vm, _) = random_state(&m, &mut rng);
+            let mut d = Data::new(&m);
+            let mk = || {
+                let mut im = ImpactData::new(&m, ContactData::new(&m, &cs).unwrap());
+                im.set_restitution(e).unwrap();
+                im
+            };
+            let mut im = mk();
+            impact_derivatives(&m, &mut d, &mut im, &q, &vm).unwrap();
+            let (qs, vs) = (q.as_slice(), vm.as_slice());
+            let at = format!("{} {:?} e = {e}", m.name(), spec);
+            let (vp, imp) = oracle::impact::<f64>(&m, qs, vs, &cs, e);
+            w[0].add(rel_err_vec(im.vplus(), &DVector::from_vec(vp)), &at);
+            w[1].add(rel_err_vec(im.impulse(), &DVector::from_vec(imp)), &at);
+            let fo = oracle::impact_fo(&m, qs, vs, &cs, e);
+            w[2].add(rel_err_mat(im.dvplus_dq(), &fo.dvplus_dq), &at);
+            w[3].add(rel_err_mat(im.dvplus_dvminus(), &fo.dvplus_dvminus), &at);
+            w[4].add(rel_err_mat(im.dimpulse_dq(), &fo.dimpulse_dq), &at);
+            w[5].add(rel_err_mat(im.dimpulse_dvminus(), &fo.dimpulse_dvminus), &at);
+            // Central differences of impact_dynamics.
+            let (n, nl) = (m.nv(), im.impulse().len());
+            let h = 1e-6;
+            let (mut ip, mut imn) = (mk(), mk());
+            let (mut fq, mut fl) = (DMatrix::zeros(n, n), DMatrix::zeros(nl, n));
+            let (mut fqv, mut flv) = (DMatrix::zeros(n, n), DMatrix::zeros(nl, n));
+            for k in 0..n {
+                let mut ek = DVector::zeros(n);
+                ek[k] = h;
+                let (qp, qm) = (m.integrate(&q, &ek).unwrap(), m.integrate(&q, &-&ek).unwrap());
+                impact_dynamics(&m, &mut d, &mut ip, &qp, &vm).unwrap();
+                impact_dynamics(&m, &mut d, &mut imn, &qm, &vm).unwrap();
+                fq.set_column(k, &((ip.vplus() - imn.vplus()) / (2.0 * h)));
+                fl.set_column(k, &((ip.impulse() - imn.impulse()) / (2.0 * h)));
+                impact_dynamics(&m, &mut d, &mut ip, &q, &(&vm + &ek)).unwrap();
+                impact_dynamics(&m, &mut d, &mut imn, &q, &(&vm - &ek)).unwrap();
+                fqv.set_column(k, &((ip.vplus() - imn.vplus()) / (2.0 * h)));
+                flv.set_column(k, &((ip.impulse() - imn.impulse()) / (2.0 * h)));
+            }
+            w[6].add(rel_err_mat(im.dvplus_dq(), &fq), &at);
+            w[7].add(rel_err_mat(im.dimpulse_dq(), &fl), &at);
+            w[8].add(rel_err_mat(im.dvplus_dvminus(), &fqv), &at);
+            w[9].add(rel_err_mat(im.dimpulse_dvminus(), &flv), &at);
+        }
+    }
+    for x in &w[..6] {
+        x.check(1e-10);
+    }
+    for x in &w[6..] {
+        x.check(1e-5);
+    }
+}
+
+#[test]
+fn constrained_id_first_order_with_loops_matches_oracle() {
+    let mut w = [Worst::new("constrained tau"), Worst::new("constrained dtau_dq")];
+    let mut rng = Rng::new(48);
+    for (m, spec) in cases() {
+        let cs = constraints(&m, &spec, &mut rng);
+        let (q, v, a) = random_state(&m, &mut rng);
+        let nl: usize = cs.iter().map(Contact::dim).sum();
+        let lam = DVector::from_fn(nl, |_, _| rng.normal() * 10.0);
+        let mut d = Data::new(&m);
+        let mut cd = ContactData::new(&m, &cs).unwrap();
+        constrained_id_derivatives(&m, &mut d, &mut cd, &q, &v, &a, &lam).unwrap();
+        let (qs, vs, as_, ls) = (q.as_slice(), v.as_slice(), a.as_slice(), lam.as_slice());
+        let at = format!("{} {:?}", m.name(), spec);
+        let tau = oracle::constrained_rnea::<f64>(&m, qs, vs, as_, &cs, ls);
+        w[0].add(rel_err_vec(d.tau(), &DVector::from_vec(tau)), &at);
+        let dq = oracle::d_constrained_rnea_dq(&m, qs, vs, as_, &cs, ls);
+        w[1].add(rel_err_mat(d.dtau_dq(), &dq), &at);
+    }
+    for x in &w {
+        x.check(1e-10);
+    }
 }
