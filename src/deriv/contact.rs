@@ -51,6 +51,7 @@ use super::contact_kin::{
     Base, Dir, Geo, Path, PointCol, acc_rows, dacc_dq, dacc_dv, djac_col_dq, djz_dq_parts,
     djz_dq_rows, jac_col, put_rows, rows_dot,
 };
+use super::contact_loop::{Loop, loop_acc_rows, loop_jac_col};
 use super::zero::{IdfozaWs, idfoza_core, idfoza_lanes_core};
 use crate::algo::internal::ltl_solve_rows_desc;
 use crate::algo::{Contact, Data};
@@ -120,6 +121,9 @@ pub struct ContactData {
     pub(crate) row0: Vec<usize>,
     /// Shape of each contact's rows.
     pub(crate) geo: Vec<Geo>,
+    /// Per contact, the two chains of a two-frame constraint (`None`: a world contact). Its
+    /// `paths` entry then holds the union of the two chains' joints and DoFs (not a chain).
+    pub(crate) loops: Vec<Option<Loop>>,
     /// Number of constraint rows.
     m: usize,
     /// Copies of the model's DoF → joint and joint → parent tables (for the base quantities
@@ -190,6 +194,16 @@ impl ContactData {
     /// negative or not finite; [`Error::Unknown`] for a contact whose frame is not in `model`; [`Error::Singular`] for a contact on the world.
     pub fn new(model: &Model, contacts: &[Contact]) -> Result<Self> {
         if let Some(r) = &model.reduction {
+            if let Some(i) = contacts.iter().position(Contact::is_loop) {
+                return Err(Error::Argument {
+                    name: contact_label(&r.full, contacts, i),
+                    reason: format!(
+                        "two-frame constraints are not supported on models in reduced \
+                         coordinates (mimic joints; model \"{}\")",
+                        model.name()
+                    ),
+                });
+            }
             // The contacts of the full tree (its frames and Jacobians), marked for the reduced
             // model.
             let mut cd = Self::new(&r.full, contacts)?;
@@ -222,6 +236,32 @@ impl ContactData {
                 },
                 e => e,
             })?;
+            if let Some(f2) = c.frame2 {
+                if f2 >= model.frames.len() {
+                    return Err(Error::Unknown {
+                        kind: "frame index".into(),
+                        name: format!("{f2} (frame2 of contacts[{i}])"),
+                    });
+                }
+                if let Some(reason) = c.loop_problem(model) {
+                    return Err(Error::Argument {
+                        name: contact_label(model, contacts, i),
+                        reason,
+                    });
+                }
+                if c.kp != 0.0
+                    && !(c.kind == crate::model::ContactType::D3
+                        && c.reference == crate::model::ContactReference::LocalWorldAligned)
+                {
+                    return Err(Error::Argument {
+                        name: format!("kp of {}", contact_label(model, contacts, i)),
+                        reason: "a position gain kp on a two-frame constraint is supported for \
+                                 3d local_world_aligned constraints only (kd is supported for \
+                                 all)"
+                            .into(),
+                    });
+                }
+            }
             let (body, _) = c.body_point(model);
             if body == 0 {
                 return Err(Error::Singular {
@@ -233,22 +273,27 @@ impl ContactData {
                     ),
                 });
             }
-            let mut joints = vec![];
-            let mut j = body;
-            while j > 0 {
-                joints.push(j);
-                j = model.parents[j];
-            }
-            joints.reverse();
-            let mut path = Path { joints, ..Path::default() };
-            for &j in &path.joints {
-                for x in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
-                    path.dofs.push(x);
-                    path.dof_joint.push(j);
-                    path.dof_parent.push(model.parents[j]);
+            paths.push(root_path(model, body));
+        }
+        let loops: Vec<Option<Loop>> = contacts
+            .iter()
+            .zip(&paths)
+            .map(|(c, pa)| {
+                c.frame2.map(|_| {
+                    let local_b = c.body_placement2(model);
+                    Loop { a: pa.clone(), b: root_path(model, local_b.0), local_b }
+                })
+            })
+            .collect();
+        for (path, lp) in paths.iter_mut().zip(&loops) {
+            if let Some(lp) = lp {
+                let mut on = vec![false; model.njoints()];
+                for &j in lp.a.joints.iter().chain(&lp.b.joints) {
+                    on[j] = true;
                 }
+                let joints: Vec<usize> = (1..model.njoints()).filter(|&j| on[j]).collect();
+                *path = path_of_joints(model, joints);
             }
-            paths.push(path);
         }
         let mut on_path = vec![false; model.njoints()];
         for p in &paths {
@@ -281,6 +326,7 @@ impl ContactData {
             local,
             row0,
             geo,
+            loops,
             m,
             dof_joint: model.dof_joint.clone(),
             parents: model.parents.clone(),
@@ -368,6 +414,24 @@ impl ContactData {
         self.m
     }
 
+    /// An error naming the first two-frame constraint if there is one: `what` (an algorithm)
+    /// does not support them.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] naming the constraint and `what`.
+    pub(crate) fn refuse_loops(&self, model: &Model, what: &str) -> Result<()> {
+        match self.contacts.iter().position(Contact::is_loop) {
+            None => Ok(()),
+            Some(i) => Err(Error::Argument {
+                name: contact_label(model, &self.contacts, i),
+                reason: format!(
+                    "two-frame (closed-loop) constraints are not supported by {what} yet \
+                     (kkt_dynamics and kkt_derivatives support them)"
+                ),
+            }),
+        }
+    }
+
     /// Contact names for error messages.
     fn names(&self, model: &Model) -> String {
         self.contacts
@@ -376,6 +440,31 @@ impl ContactData {
             .collect::<Vec<_>>()
             .join(", ")
     }
+}
+
+/// The root path of body `body` (empty for the world).
+fn root_path(model: &Model, body: usize) -> Path {
+    let mut joints = vec![];
+    let mut j = body;
+    while j > 0 {
+        joints.push(j);
+        j = model.parents[j];
+    }
+    joints.reverse();
+    path_of_joints(model, joints)
+}
+
+/// A path over `joints` (ascending) with their DoFs.
+fn path_of_joints(model: &Model, joints: Vec<usize>) -> Path {
+    let mut path = Path { joints, ..Path::default() };
+    for &j in &path.joints {
+        for x in model.idx_v[j]..model.idx_v[j] + model.nvs[j] {
+            path.dofs.push(x);
+            path.dof_joint.push(j);
+            path.dof_parent.push(model.parents[j]);
+        }
+    }
+    path
 }
 
 /// `dst ← src[r0.., c0..]` (block of the size of `dst`), by contiguous column slices.
@@ -418,6 +507,14 @@ pub(crate) fn update_points(model: &Model, data: &Data, cd: &mut ContactData, a0
         cd.paths[c].p = pose.trans;
         cd.paths[c].rot = pose.rot;
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        if geo.two {
+            set_loop_poses(data, cd, c, &pose);
+            let mut jac = std::mem::replace(&mut cd.jac, DMatrix::zeros(0, 0));
+            let b = base(model, data, cd);
+            loop_rows(&b, cd, c, &mut jac, None);
+            cd.jac = jac;
+            continue;
+        }
         for (pc, &x) in cd.pcols[c].iter_mut().zip(&cd.paths[c].dofs) {
             let s = data.s_world[x];
             let u = s.lin + s.ang.cross(&pose.trans);
@@ -473,6 +570,15 @@ pub(crate) fn path_kinematics(model: &Model, data: &Data, cd: &mut ContactData, 
         let path = &mut cd.paths[c];
         path.p = p;
         path.rot = pose.rot;
+        if geo.two {
+            set_loop_poses(data, cd, c, &pose);
+            let mut jac = std::mem::replace(&mut cd.jac, DMatrix::zeros(0, 0));
+            let mut drift = std::mem::replace(&mut cd.drift, DVector::zeros(0));
+            let b = path_base(model, cd);
+            loop_rows(&b, cd, c, &mut jac, v.is_some().then_some(&mut drift));
+            (cd.jac, cd.drift) = (jac, drift);
+            continue;
+        }
         if !geo.is_point() {
             generic_rows(model, cd, c, v.is_some());
             continue;
@@ -503,6 +609,42 @@ fn path_base<'a>(model: &'a Model, cd: &'a ContactData) -> Base<'a> {
         acc: &cd.kacc,
         dof_joint: &model.dof_joint,
         parents: &model.parents,
+    }
+}
+
+/// Frame A's (`pose`) and frame B's world placements of the two-frame constraint `c`.
+fn set_loop_poses(data: &Data, cd: &mut ContactData, c: usize, pose: &Transform) {
+    let lp = cd.loops[c].as_mut().expect("a two-frame constraint");
+    lp.a.p = pose.trans;
+    lp.a.rot = pose.rot;
+    let (body_b, local_b) = &lp.local_b;
+    let pose_b = data.o_m_i[*body_b].compose(local_b);
+    lp.b.p = pose_b.trans;
+    lp.b.rot = pose_b.rot;
+}
+
+/// Jacobian rows (and with `drift`, the acceleration rows at the base accelerations of `b`)
+/// of the two-frame constraint `c` into `jac` (and `drift`).
+fn loop_rows(
+    b: &Base,
+    cd: &ContactData,
+    c: usize,
+    jac: &mut DMatrix<f64>,
+    drift: Option<&mut DVector<f64>>,
+) {
+    let (geo, r0) = (cd.geo[c], cd.row0[c]);
+    let lp = cd.loops[c].as_ref().expect("a two-frame constraint");
+    let d = geo.dim();
+    let mut col = [0.0; 6];
+    for &x in &cd.paths[c].dofs {
+        put_rows(geo, &loop_jac_col(b, geo, lp, x, Dir::None), false, &mut col);
+        for (r, v) in col[..d].iter().enumerate() {
+            jac[(r0 + r, x)] = *v;
+        }
+    }
+    if let Some(drift) = drift {
+        put_rows(geo, &loop_acc_rows(b, geo, lp, Dir::None), false, &mut col);
+        drift.as_mut_slice()[r0..r0 + d].copy_from_slice(&col[..d]);
     }
 }
 
@@ -720,6 +862,25 @@ pub(crate) fn accel_derivatives_t(cd: &ContactData, cxt: &mut DMatrix<f64>) {
     for (c, path) in cd.paths.iter().enumerate() {
         let body = *path.joints.last().expect("path");
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        if let Some(lp) = &cd.loops[c] {
+            let b = Base {
+                s: &cd.s,
+                vel: &cd.kvel,
+                acc: &cd.kacc,
+                dof_joint: &cd.dof_joint,
+                parents: &cd.parents,
+            };
+            let (mut rq, mut rv) = ([0.0; 6], [0.0; 6]);
+            for &l in &path.dofs {
+                put_rows(geo, &loop_acc_rows(&b, geo, lp, Dir::Q(l)), true, &mut rq);
+                put_rows(geo, &loop_acc_rows(&b, geo, lp, Dir::V(l)), true, &mut rv);
+                for r in 0..geo.dim() {
+                    cxt[(l, r0 + r)] = rq[r];
+                    cxt[(n + l, r0 + r)] = rv[r];
+                }
+            }
+            continue;
+        }
         if !geo.is_point() {
             let b = Base {
                 s: &cd.s,
@@ -786,6 +947,29 @@ pub(crate) fn djw_dq(model: &Model, cd: &mut ContactData, w: &[f64], out: &mut D
     for (c, path) in cd.paths.iter().enumerate() {
         let body = *path.joints.last().expect("path");
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        if let Some(lp) = &cd.loops[c] {
+            let b = Base {
+                s: &cd.s,
+                vel: &cd.kvel,
+                acc: &cd.kacc,
+                dof_joint: &cd.dof_joint,
+                parents: &cd.parents,
+            };
+            let mut col = [0.0; 6];
+            for &l in &path.dofs {
+                let mut sum = [0.0; 6];
+                for &x in &path.dofs {
+                    put_rows(geo, &loop_jac_col(&b, geo, lp, x, Dir::Q(l)), true, &mut col);
+                    for (s, v) in sum.iter_mut().zip(&col) {
+                        *s += w[x] * v;
+                    }
+                }
+                for k in 0..geo.dim() {
+                    out[(r0 + k, l)] = sum[k];
+                }
+            }
+            continue;
+        }
         if !geo.is_point() {
             let b = Base {
                 s: &cd.s,
@@ -894,6 +1078,22 @@ fn sub_djtl_dq_generic(
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
         let lam = &lambda[r0..r0 + geo.dim()];
         if geo.is_point() || lam.iter().all(|x| *x == 0.0) {
+            continue;
+        }
+        if let Some(lp) = &cd.loops[c] {
+            let b = Base {
+                s,
+                vel: &cd.kvel,
+                acc: &cd.kacc,
+                dof_joint: &cd.dof_joint,
+                parents: &cd.parents,
+            };
+            for &l in &path.dofs {
+                for &x in &path.dofs {
+                    let e = rows_dot(geo, &loop_jac_col(&b, geo, lp, x, Dir::Q(l)), lam).1;
+                    o[rs * x + cs * l] -= e;
+                }
+            }
             continue;
         }
         let part = |i: usize| Vector3::new(lam[i], lam[i + 1], lam[i + 2]);

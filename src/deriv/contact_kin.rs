@@ -486,6 +486,8 @@ pub(crate) struct Geo {
     pub six: bool,
     /// Contact axes (otherwise world axes).
     pub local: bool,
+    /// A two-frame (closed-loop) constraint (`super::contact_loop`).
+    pub two: bool,
 }
 
 impl Geo {
@@ -494,12 +496,13 @@ impl Geo {
         Geo {
             six: c.kind == crate::model::ContactType::D6,
             local: c.reference == crate::model::ContactReference::Local,
+            two: c.frame2.is_some(),
         }
     }
     /// A 3-D world-aligned point (the specialised code paths).
     #[inline]
     pub fn is_point(self) -> bool {
-        !self.six && !self.local
+        !self.six && !self.local && !self.two
     }
     /// Number of rows.
     #[inline]

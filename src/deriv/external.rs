@@ -94,6 +94,7 @@ pub fn constrained_id_so_derivatives(
         return crate::deriv::kkt::reduced::constrained_id_cd(r, md, cd, Some(so), q, v, a, lambda);
     }
     check(model, cd, v, a, lambda, q)?;
+    cd.refuse_loops(model, "constrained_id_so_derivatives")?;
     data.check_tree(model)?;
     so.check_tree(model)?;
     id_so_unchecked(model, data, so, q, v, a, None, -model.gravity);

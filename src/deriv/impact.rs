@@ -456,6 +456,7 @@ pub fn impact_so_derivatives(
     q: &DVector<f64>,
     vminus: &DVector<f64>,
 ) -> Result<()> {
+    im.cd.refuse_loops(model, "impact_so_derivatives")?;
     if let Some(r) = &model.reduction {
         let im_r = crate::algo::data::reduced::reduced_ws(&mut im.red, "ImpactData", model)?;
         return crate::deriv::impact::reduced::impact_so_derivatives(
@@ -663,6 +664,7 @@ pub fn impact_so_contracted(
     w_vplus: &DVector<f64>,
     w_impulse: &DVector<f64>,
 ) -> Result<()> {
+    im.cd.refuse_loops(model, "impact_so_contracted")?;
     if let Some(r) = &model.reduction {
         let im_r = crate::algo::data::reduced::reduced_ws(&mut im.red, "ImpactData", model)?;
         let ic_r = crate::algo::data::reduced::reduced_ws(&mut ic.red, "ImpactContracted", model)?;

@@ -411,6 +411,16 @@ fn solve_unchecked(
             }
         }
     }
+    // Two-frame constraints: + kp e with the placement error e = p₁ − p₂ (3-D world-aligned
+    // only; `ContactData::new` refuses kp on the others).
+    for (c, contact) in cd.contacts.iter().enumerate() {
+        if let (Some(lp), true) = (&cd.loops[c], contact.kp != 0.0) {
+            let e = lp.a.p - lp.b.p;
+            for r in 0..3 {
+                cd.sol[cd.row0[c] + r] += contact.kp * e[r];
+            }
+        }
+    }
     kd.lambda.gemv(-1.0, &cd.lam, &cd.sol.rows(0, m), 0.0);
     kd.qdd.gemv(1.0, &cd.y.rows(0, n), &kd.lambda, 1.0);
     Ok(())
@@ -566,6 +576,7 @@ pub fn kkt_so_derivatives(
             tau,
         );
     }
+    kd.cd.refuse_loops(model, "kkt_so_derivatives")?;
     let mut so = kd.so.take().ok_or_else(|| {
         crate::error::Error::Workspace(
             "kkt_so_derivatives: KktData was created without second order".into(),
@@ -1071,6 +1082,7 @@ pub fn kkt_so_contracted(
         );
     }
     check_inputs(model, data, kd, q, v, tau)?;
+    kd.cd.refuse_loops(model, "kkt_so_contracted")?;
     let (n, m) = (model.nv, kd.cd.dim());
     check_vec("w_qdd", w_qdd, n)?;
     check_vec("w_lambda", w_lambda, m)?;

@@ -32,3 +32,4 @@ pub use kkt::{
 };
 pub use zero::{idfoza, idsoza};
 pub(crate) mod contact_kin;
+pub(crate) mod contact_loop;

@@ -1,5 +1,6 @@
 //! Built-in robot models, written in code (no URDF needed): a serial chain, an n-link planar
-//! pendulum, random kinematic trees, a quadruped and a humanoid.
+//! pendulum, random kinematic trees, a quadruped, a humanoid and a four-bar linkage (a closed
+//! kinematic chain).
 //!
 //! | name (for [`by_name`])          | builder                          | floating | nq   | nv   |
 //! |---------------------------------|----------------------------------|----------|------|------|
@@ -8,6 +9,7 @@
 //! | `chain<N>`, `serial_chain<N>`   | [`serial_chain`]`(N)`            | no       | N    | N    |
 //! | `pendulum<N>`                   | [`pendulum`]`(N)`                | no       | N    | N    |
 //! | `random_tree<N>[_ff][_s<SEED>]` | [`random_tree`]`(N, SEED, _ff?)` | if `_ff` | var. | var. |
+//! | `fourbar`                       | [`fourbar`]`()`                  | no       | 6    | 5    |
 //!
 //! Every body of every built-in model carries mass and a physically valid rotational inertia
 //! (principal moments satisfying the triangle inequality; all positive except for the point
@@ -205,6 +207,68 @@ pub fn pendulum(n: usize) -> Model {
     }
     b.frame("tip", parent, at(0.0, 0.0, -1.0));
     b.build()
+}
+
+/// A four-bar linkage in the x–z plane, its loop closed by a 3-D connect (nq = 6, nv = 5).
+///
+/// The tree: `crank` (revolute `crank_joint` about y at the world origin, 0.2 m long, hanging
+/// along −z at q = 0), `coupler` (ball joint `coupler_joint` at the crank tip, frame
+/// `crank_tip`) and `rocker` (revolute `rocker_joint` about y at the ground pivot (0.3, 0, 0),
+/// 0.25 m long, 0.3 rad from −z towards +x at q = 0). The loop: frame `coupler_tip` on the
+/// coupler and frame `rocker_tip` on the rocker coincide at the neutral configuration (q = 0,
+/// the ball joint's quaternion the identity); [`fourbar_loop`] is that constraint. The
+/// coupler's ball joint (instead of a third hinge) keeps the connect's three rows independent:
+/// with three parallel hinges, the out-of-plane row of a 3-D connect is identically zero. The
+/// mechanism has two DoF: the crank angle and the coupler's spin about the line through its
+/// two ends. Every link is a solid box with its own mass and inertia.
+pub fn fourbar() -> Model {
+    let (l1, l3, pivot, tilt) = (0.2, 0.25, 0.3, 0.3f64);
+    let b_pt = v3(0.0, 0.0, -l1);
+    let c_pt = v3(pivot + l3 * tilt.sin(), 0.0, -l3 * tilt.cos());
+    let coupler = c_pt - b_pt;
+    let mut b = Builder::new("fourbar");
+    let hinge = JointType::Revolute { axis: Vector3::y() };
+    let crank = b.body(
+        0,
+        "crank_joint",
+        hinge,
+        Transform::identity(),
+        "crank",
+        box_body(0.5, b_pt * 0.5, [0.02, 0.03, l1]),
+    );
+    let coupler_id = b.body(
+        crank,
+        "coupler_joint",
+        JointType::Spherical,
+        Transform::from_translation(b_pt),
+        "coupler",
+        box_body(0.8, coupler * 0.5 + v3(0.0, 0.01, 0.0), [coupler.norm(), 0.03, 0.02]),
+    );
+    let rocker = b.body(
+        0,
+        "rocker_joint",
+        hinge,
+        at(pivot, 0.0, 0.0),
+        "rocker",
+        box_body(0.6, (c_pt - v3(pivot, 0.0, 0.0)) * 0.5, [0.02, 0.04, l3]),
+    );
+    b.frame("crank_tip", crank, Transform::from_translation(b_pt));
+    b.frame("coupler_tip", coupler_id, Transform::from_translation(coupler));
+    b.frame("rocker_tip", rocker, Transform::from_translation(c_pt - v3(pivot, 0.0, 0.0)));
+    b.build()
+}
+
+/// The loop constraint of [`fourbar`]: a 3-D connect of frame `coupler_tip` to frame
+/// `rocker_tip` (`local_world_aligned`).
+///
+/// # Errors
+/// [`crate::error::Error::Unknown`] if `model` lacks those frames (not a four-bar).
+pub fn fourbar_loop(model: &Model) -> crate::error::Result<super::Contact> {
+    super::Contact::new(model, "coupler_tip", Vector3::zeros())?.with_frame2(
+        model,
+        "rocker_tip",
+        None,
+    )
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -701,6 +765,7 @@ pub fn names() -> &'static [&'static str] {
     &[
         "humanoid",
         "quadruped",
+        "fourbar",
         "chain6",
         "serial_chain12",
         "pendulum2",
@@ -721,7 +786,8 @@ fn parse_count(s: &str) -> Option<usize> {
 
 /// A built-in model by name (exact, lower case), `None` if the name is not recognised:
 ///
-/// * `humanoid` → [`humanoid`]`()`, `quadruped` → [`quadruped`]`()`;
+/// * `humanoid` → [`humanoid`]`()`, `quadruped` → [`quadruped`]`()`, `fourbar` →
+///   [`fourbar`]`()`;
 /// * `chain<N>` or `serial_chain<N>` → [`serial_chain`]`(N)`, e.g. `chain6`;
 /// * `pendulum<N>` → [`pendulum`]`(N)`, e.g. `pendulum2`;
 /// * `random_tree<N>[_ff][_s<SEED>]` → [`random_tree`]`(N, SEED, ff)`: `_ff` gives a floating
@@ -732,6 +798,7 @@ pub fn by_name(name: &str) -> Option<Model> {
     match name {
         "humanoid" => return Some(humanoid()),
         "quadruped" => return Some(quadruped()),
+        "fourbar" => return Some(fourbar()),
         _ => {}
     }
     if let Some(rest) = name.strip_prefix("serial_chain").or_else(|| name.strip_prefix("chain")) {

@@ -31,6 +31,22 @@
 //! `ᵒM_ref` fixed): `3d` `local_world_aligned`: `e = p − p_ref`; `3d` `local`: `Rᵀ(p − p_ref)`;
 //! `6d` `local`: `e = log6(ᵒM_ref⁻¹ ᵒM_c)`; `6d` `local_world_aligned`: `e = diag(R, R) log6(ᵒM_ref⁻¹ ᵒM_c)`.
 //! Impulses and constrained inverse dynamics do not use the gains.
+//!
+//! # Two-frame constraints
+//!
+//! With [`Contact::frame2`] set ([`Contact::with_frame2`]) the constraint joins frame A (the
+//! contact frame above, `(R₁, p₁)` on body `a`) to frame B (`(point2, rotation2)` in `frame2`'s
+//! coordinates, `(R₂, p₂)` on body `b`): Pinocchio's `RigidConstraintModel(type, model, joint1,
+//! placement1, joint2, placement2, reference)`. With `V`, `A` the world spatial velocities and
+//! accelerations of the bodies and `R' = R₁ᵀ` (local) or `I` (world-aligned): `3d` rows
+//! `R'(v_{p₁} − v_{p₂})` (accelerations `R'(a_{p₁} − a_{p₂})`, classical); `6d` rows the relative
+//! motion `V_a − V_b` about `p₁` in frame A's axes (local) or the world's (world-aligned), whose
+//! accelerations are `A_a − A_b` (world-aligned) and `¹X_o(A_a − A_b + (V_a − V_b) × V_b)`
+//! (local, the time derivative of the velocity rows). `λ` acts on body `a` and `−λ` on body `b`
+//! (3-D: forces at `p₁` and `p₂`; 6-D: a wrench at `p₁`), so `τ + J_cᵀλ` holds as for world
+//! contacts. Baumgarte: `kd` on every loop; `kp` only on `3d` world-aligned loops, against the
+//! actual error `e = p₁ − p₂` (placement 2 enters no other quantity). docs/conventions.md
+//! lists the algorithms that take them.
 
 use crate::error::{Error, Result};
 use crate::model::Model;
@@ -133,6 +149,15 @@ pub struct Contact {
     pub kp: f64,
     /// Baumgarte velocity gain `kd ≥ 0` (default 0).
     pub kd: f64,
+    /// Frame B of a two-frame (closed-loop) constraint, an index in `model.frames()`; `None`
+    /// (the default) for a contact with the fixed world. (Module documentation, "Two-frame
+    /// constraints".)
+    pub frame2: Option<usize>,
+    /// Origin of the frame-B contact frame in `frame2`'s coordinates (zero by default).
+    pub point2: Vector3<f64>,
+    /// Orientation of the frame-B contact frame in `frame2`'s coordinates (identity by default;
+    /// only the placement error of a `6d` constraint uses it).
+    pub rotation2: Matrix3<f64>,
 }
 
 impl Contact {
@@ -154,6 +179,9 @@ impl Contact {
             reference: ContactReference::LocalWorldAligned,
             kp: 0.0,
             kd: 0.0,
+            frame2: None,
+            point2: Vector3::zeros(),
+            rotation2: Matrix3::identity(),
         })
     }
     /// A 6-D contact holding the frame named `frame` at `placement` (in the frame's coordinates;
@@ -176,25 +204,75 @@ impl Contact {
     /// that is not a rotation (`RᵀR ≠ I` or `det R ≠ 1` beyond `1e-9`).
     pub fn with_placement(mut self, model: &Model, placement: &Transform) -> Result<Contact> {
         let name = &model.frames[self.frame.min(model.frames.len().saturating_sub(1))].name;
-        let what = format!("placement of contact \"{name}\"");
-        if let Some(index) = placement.trans.iter().position(|x| !x.is_finite()) {
-            return Err(Error::NotFinite { what, index });
-        }
-        if let Some(index) = placement.rot.iter().position(|x| !x.is_finite()) {
-            return Err(Error::NotFinite { what, index: 3 + index });
-        }
-        let r = &placement.rot;
-        if (r.transpose() * r - Matrix3::identity()).amax() > 1e-9
-            || (r.determinant() - 1.0).abs() > 1e-9
-        {
-            return Err(Error::Argument {
-                name: what,
-                reason: "the rotation block is not a rotation matrix".into(),
-            });
-        }
+        check_placement(placement, &format!("placement of contact \"{name}\""))?;
         self.point = placement.trans;
         self.rotation = placement.rot;
         Ok(self)
+    }
+    /// The same constraint closed on frame B, the frame named `frame2` of the robot, with the
+    /// frame-B contact frame at `placement2` in `frame2`'s coordinates (`None`: the frame
+    /// itself; a `3d` constraint uses only its translation, `point2`). The constraint then
+    /// joins the two contact frames instead of holding frame A in the world (module
+    /// documentation, "Two-frame constraints").
+    ///
+    /// # Errors
+    /// [`Error::Unknown`] for an unknown frame; [`Error::NotFinite`] or [`Error::Argument`] for
+    /// a bad placement (as [`Contact::with_placement`]); [`Error::Argument`] if both frames are
+    /// on the same body (bodies merged by fixed joints are one body), or frame A is on the
+    /// world.
+    pub fn with_frame2(
+        mut self,
+        model: &Model,
+        frame2: &str,
+        placement2: Option<&Transform>,
+    ) -> Result<Contact> {
+        let id = model.frame_id(frame2)?;
+        if let Some(p) = placement2 {
+            check_placement(p, &format!("placement2 of contact \"{frame2}\""))?;
+            self.point2 = p.trans;
+            self.rotation2 = p.rot;
+        }
+        self.frame2 = Some(id);
+        if let Some(reason) = self.loop_problem(model) {
+            return Err(Error::Argument { name: "frame2".into(), reason });
+        }
+        Ok(self)
+    }
+    /// Whether this is a two-frame (closed-loop) constraint.
+    pub fn is_loop(&self) -> bool {
+        self.frame2.is_some()
+    }
+    /// What is wrong with this two-frame constraint on `model`, `None` if nothing is (or if it
+    /// is a world contact). The frame indices must be valid.
+    pub(crate) fn loop_problem(&self, model: &Model) -> Option<String> {
+        let f2 = self.frame2?;
+        let (fa, fb) = (&model.frames[self.frame], &model.frames[f2]);
+        if fa.joint == fb.joint {
+            return Some(format!(
+                "frames \"{}\" and \"{}\" are on the same body \"{}\": the constraint \
+                 between them constrains nothing",
+                fa.name,
+                fb.name,
+                model.names.get(fa.joint).map_or("?", |s| s.as_str())
+            ));
+        }
+        if fa.joint == 0 {
+            return Some(format!(
+                "frame \"{}\" (frame A) is on the fixed world: give the world frame as frame2 \
+                 instead",
+                fa.name
+            ));
+        }
+        None
+    }
+    /// The joint whose body carries frame B (0: the world) and the frame-B contact frame's
+    /// placement in that joint's frame.
+    ///
+    /// # Panics
+    /// If [`Contact::frame2`] is `None` or not a frame index of `model`.
+    pub fn body_placement2(&self, model: &Model) -> (usize, Transform) {
+        let f = &model.frames[self.frame2.expect("a two-frame constraint")];
+        (f.joint, f.placement.compose(&Transform::new(self.rotation2, self.point2)))
     }
     /// The same contact with rows in `reference`.
     pub fn with_reference(mut self, reference: ContactReference) -> Contact {
@@ -263,11 +341,38 @@ impl Contact {
     }
 }
 
+/// Checks that `placement` is finite and its rotation block a rotation (`what` names it).
+fn check_placement(placement: &Transform, what: &str) -> Result<()> {
+    let what = what.to_string();
+    if let Some(index) = placement.trans.iter().position(|x| !x.is_finite()) {
+        return Err(Error::NotFinite { what, index });
+    }
+    if let Some(index) = placement.rot.iter().position(|x| !x.is_finite()) {
+        return Err(Error::NotFinite { what, index: 3 + index });
+    }
+    let r = &placement.rot;
+    if (r.transpose() * r - Matrix3::identity()).amax() > 1e-9
+        || (r.determinant() - 1.0).abs() > 1e-9
+    {
+        return Err(Error::Argument {
+            name: what,
+            reason: "the rotation block is not a rotation matrix".into(),
+        });
+    }
+    Ok(())
+}
+
 /// A description of contact `i` for messages: `contacts[i] ("frame", 6d)`.
 pub(crate) fn contact_label(model: &Model, contacts: &[Contact], i: usize) -> String {
     let c = &contacts[i];
     let name = model.frames.get(c.frame).map_or("?", |f| f.name.as_str());
-    format!("contacts[{i}] (\"{name}\", {})", c.kind.name())
+    match c.frame2 {
+        Some(f2) => {
+            let name2 = model.frames.get(f2).map_or("?", |f| f.name.as_str());
+            format!("contacts[{i}] (\"{name}\" to \"{name2}\", {})", c.kind.name())
+        }
+        None => format!("contacts[{i}] (\"{name}\", {})", c.kind.name()),
+    }
 }
 
 /// A structurally redundant contact set: a body held by a 6-D contact that carries another
@@ -277,11 +382,11 @@ pub(crate) fn contact_label(model: &Model, contacts: &[Contact], i: usize) -> St
 pub(crate) fn redundancy(model: &Model, contacts: &[Contact]) -> Option<String> {
     let body = |c: &Contact| model.frames[c.frame].joint;
     for (i, ci) in contacts.iter().enumerate() {
-        if ci.kind != ContactType::D6 {
+        if ci.kind != ContactType::D6 || ci.is_loop() {
             continue;
         }
         for (j, cj) in contacts.iter().enumerate() {
-            if j != i && body(cj) == body(ci) {
+            if j != i && !cj.is_loop() && body(cj) == body(ci) {
                 let (a, b) = (i.min(j), i.max(j));
                 return Some(format!(
                     "{} and {} are on the same body \"{}\", which the 6-D contact already holds: \

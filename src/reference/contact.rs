@@ -45,6 +45,25 @@ fn body_pose<T: AdScalar>(model: &Model, contact: &Contact) -> (usize, Pose<T>) 
     (f.joint, Pose::<T>::lift(&f.placement).compose(&local))
 }
 
+/// Frame B's body and the frame-B contact frame's placement in its joint frame (two-frame
+/// constraints only).
+fn body_pose2<T: AdScalar>(model: &Model, contact: &Contact) -> (usize, Pose<T>) {
+    let f = &model.frames[contact.frame2.expect("a two-frame constraint")];
+    let local = Pose::new(lift_m3(&contact.rotation2), lift_v3(&contact.point2));
+    (f.joint, Pose::<T>::lift(&f.placement).compose(&local))
+}
+
+/// The world placements of frame A's and frame B's contact frames of a two-frame constraint.
+fn loop_poses<T: AdScalar>(
+    model: &Model,
+    world: &[Pose<T>],
+    contact: &Contact,
+) -> (Pose<T>, Pose<T>) {
+    let (a, la) = body_pose::<T>(model, contact);
+    let (b, lb) = body_pose2::<T>(model, contact);
+    (world[a].compose(&la), world[b].compose(&lb))
+}
+
 /// Total number of constraint rows (3 per 3-D contact, 6 per 6-D contact).
 fn dim(contacts: &[Contact]) -> usize {
     contacts.iter().map(|c| c.kind.dim()).sum()
@@ -87,6 +106,11 @@ fn jacobian_from_poses<T: AdScalar>(
     let mut jac = vec![vec![T::zero(); model.nv]; dim(contacts)];
     let mut row0 = 0;
     for contact in contacts {
+        if contact.is_loop() {
+            loop_jacobian_rows(model, world, contact, row0, &mut jac);
+            row0 += contact.kind.dim();
+            continue;
+        }
         let (body, local) = body_pose::<T>(model, contact);
         let pose = world[body].compose(&local);
         let p = pose.trans.clone();
@@ -110,6 +134,41 @@ fn jacobian_from_poses<T: AdScalar>(
     jac
 }
 
+/// A two-frame constraint's Jacobian rows `row0..` (added into the zero rows of `jac`): the
+/// chain of frame A's body with sign `+1`, that of frame B's body with `−1` (DoFs on both
+/// cancel for `6d`); a `3d` row takes each chain's subspace at its own point, a `6d` row
+/// both at frame A's point (Pinocchio's two-joint `RigidConstraintModel`).
+fn loop_jacobian_rows<T: AdScalar>(
+    model: &Model,
+    world: &[Pose<T>],
+    contact: &Contact,
+    row0: usize,
+    jac: &mut [Vec<T>],
+) {
+    let (pa, pb) = loop_poses(model, world, contact);
+    let chains = [
+        (body_pose::<T>(model, contact).0, &pa.trans, 1.0),
+        (body_pose2::<T>(model, contact).0, &pb.trans, -1.0),
+    ];
+    for (body, p, sign) in chains {
+        let mut j = body;
+        while j > 0 {
+            for col in 0..model.nvs[j] {
+                let s = world[j].act_motion(&subspace_sv::<T>(model, j, col));
+                let at = if contact.kind == ContactType::D6 { &pa.trans } else { p };
+                let vp = &s.lin + s.ang.cross(at);
+                let mut rows = Vec::with_capacity(6);
+                push_rows(contact, &pa.rot, s.ang * cst::<T>(sign), vp * cst::<T>(sign), &mut rows);
+                for (r, x) in rows.into_iter().enumerate() {
+                    let e = &mut jac[row0 + r][model.idx_v[j] + col];
+                    *e = e.clone() + x;
+                }
+            }
+            j = model.parents[j];
+        }
+    }
+}
+
 /// Contact drift `J̇ q̇` given the parent-relative and world poses of the bodies.
 fn drift_from_poses<T: AdScalar>(
     model: &Model,
@@ -131,6 +190,29 @@ fn drift_from_poses<T: AdScalar>(
     }
     let mut out = Vec::with_capacity(dim(contacts));
     for contact in contacts {
+        if contact.is_loop() {
+            let (pa, pb) = loop_poses(model, world, contact);
+            let (a, _) = body_pose::<T>(model, contact);
+            let (b, _) = body_pose2::<T>(model, contact);
+            // World spatial velocities and accelerations (about the world origin).
+            let (va, aa) = (world[a].act_motion(&vel[a]), world[a].act_motion(&acc[a]));
+            let (vb, ab) = (world[b].act_motion(&vel[b]), world[b].act_motion(&acc[b]));
+            let classical = |v: &Sv<T>, acc: &Sv<T>, p: &Vector3<T>| {
+                &acc.lin + acc.ang.cross(p) + v.ang.cross(&(&v.lin + v.ang.cross(p)))
+            };
+            if contact.kind == ContactType::D3 {
+                let lin = classical(&va, &aa, &pa.trans) - classical(&vb, &ab, &pb.trans);
+                push_rows(contact, &pa.rot, Vector3::zeros(), lin, &mut out);
+            } else {
+                let mut w = aa.sub(&ab);
+                if contact.reference == ContactReference::Local {
+                    w = w.add(&va.sub(&vb).cross_motion(&vb));
+                }
+                let lin = &w.lin + w.ang.cross(&pa.trans);
+                push_rows(contact, &pa.rot, w.ang, lin, &mut out);
+            }
+            continue;
+        }
         let (body, local) = body_pose::<T>(model, contact);
         let r = local.trans.clone();
         let (vb, ab) = (&vel[body], &acc[body]);
@@ -223,6 +305,23 @@ pub fn constrained_rnea<T: AdScalar>(
             ContactReference::LocalWorldAligned => (n, f),
             ContactReference::Local => (&pose.rot * n, &pose.rot * f),
         };
+        if contact.is_loop() {
+            // λ acts on frame A's body, −λ on frame B's: a 3-D force at each frame's own point,
+            // a 6-D wrench at frame A's point (the transposed rows of `loop_jacobian_rows`).
+            // (n, f) are already world-aligned (frame A's rotation is `pose.rot`).
+            let (pa, pb) = loop_poses(model, &world, contact);
+            let (a, _) = body_pose::<T>(model, contact);
+            let (b, _) = body_pose2::<T>(model, contact);
+            let fa = Sv::new(&n + pa.trans.cross(&f), f.clone());
+            let at_b = if d == 6 { &pa.trans } else { &pb.trans };
+            let fb = Sv::new(n + at_b.cross(&f), f).scale(&cst::<T>(-1.0));
+            fext[a] = Sv::from_array(&fext[a]).add(&fa).to_array();
+            if b > 0 {
+                fext[b] = Sv::from_array(&fext[b]).add(&fb).to_array();
+            }
+            row0 += d;
+            continue;
+        }
         let fw = Sv::new(n + p.cross(&f), f);
         fext[body] = Sv::from_array(&fext[body]).add(&fw).to_array();
         row0 += d;
@@ -298,6 +397,27 @@ pub(crate) fn baumgarte<T: AdScalar>(
     let world_ref = forward_kinematics(model, &real(q));
     let mut row0 = 0;
     for contact in contacts {
+        if contact.is_loop() {
+            // e = p₁ − p₂ (3-D; Pinocchio's −translation of ¹M₂ rotated to the world).
+            assert!(
+                contact.kp == 0.0 || contact.kind == ContactType::D3,
+                "reference::contact: kp on a 6-D two-frame constraint is not implemented"
+            );
+            let (pa, pb) = loop_poses(model, world, contact);
+            let e = match contact.reference {
+                ContactReference::LocalWorldAligned => &pa.trans - &pb.trans,
+                ContactReference::Local => pa.rot.transpose() * (&pa.trans - &pb.trans),
+            };
+            for k in 0..contact.kind.dim() {
+                let r = row0 + k;
+                let jv =
+                    jac[r].iter().zip(v).fold(T::zero(), |s, (j, x)| s + j.clone() * x.clone());
+                let ek = if contact.kp != 0.0 { e[k].clone() * contact.kp } else { T::zero() };
+                rows[r] = rows[r].clone() + jv * contact.kd + ek;
+            }
+            row0 += contact.kind.dim();
+            continue;
+        }
         let (body, local) = body_pose::<T>(model, contact);
         let pose = world[body].compose(&local);
         let (_, local0) = body_pose::<f64>(model, contact);

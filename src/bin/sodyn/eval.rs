@@ -15,9 +15,10 @@ use sodyn::algo::{
 };
 use sodyn::deriv::{
     ContactData, ContractedData, FdSoData, ImpactContracted, ImpactData, KktContracted, KktData,
-    SoData, constrained_id_so_derivatives, fd_derivatives, fd_so_contracted, fd_so_derivatives,
-    id_derivatives, id_so_contracted, id_so_derivatives, impact_derivatives, impact_so_contracted,
-    impact_so_derivatives, kkt_derivatives, kkt_so_contracted, kkt_so_derivatives,
+    SoData, constrained_id_derivatives, constrained_id_so_derivatives, fd_derivatives,
+    fd_so_contracted, fd_so_derivatives, id_derivatives, id_so_contracted, id_so_derivatives,
+    impact_derivatives, impact_so_contracted, impact_so_derivatives, kkt_derivatives,
+    kkt_so_contracted, kkt_so_derivatives,
 };
 use sodyn::error::{Error, Result};
 use sodyn::model::{ContactReference, ContactType, Model};
@@ -189,7 +190,18 @@ pub fn load_state(
             let obj_c = c.as_object().ok_or_else(|| {
                 Error::Io(format!("{file}: contacts[{i}] must be an object with a \"frame\""))
             })?;
-            let known = ["frame", "type", "reference", "point", "placement", "kp", "kd"];
+            let known = [
+                "frame",
+                "type",
+                "reference",
+                "point",
+                "placement",
+                "kp",
+                "kd",
+                "frame2",
+                "point2",
+                "placement2",
+            ];
             if let Some(k) = obj_c.keys().find(|k| !known.contains(&k.as_str())) {
                 return Err(Error::Io(format!(
                     "{file}: unknown key \"contacts[{i}].{k}\" (known: {})",
@@ -227,33 +239,36 @@ pub fn load_state(
             };
             // The contact frame in the link frame: "point" (a 3-D contact's point) or
             // "placement": {"xyz", "rpy"} (URDF convention; either may be left out).
-            let placement = match (c.get("point"), c.get("placement")) {
-                (Some(_), Some(_)) => {
-                    return Err(Error::Io(format!(
-                        "{file}: contacts[{i}] has both \"point\" and \"placement\": give one"
-                    )));
-                }
-                (Some(p), None) => Transform::from_translation(vec3(p, "point")?),
-                (None, Some(pl)) => {
-                    let o = pl.as_object().ok_or_else(|| {
-                        Error::Io(format!(
-                            "{file}: contacts[{i}].placement must be an object {{\"xyz\", \"rpy\"}}"
-                        ))
-                    })?;
-                    if let Some(k) = o.keys().find(|k| !["xyz", "rpy"].contains(&k.as_str())) {
+            let placement_of = |pk: &str, plk: &str| -> Result<Transform> {
+                Ok(match (c.get(pk), c.get(plk)) {
+                    (Some(_), Some(_)) => {
                         return Err(Error::Io(format!(
-                            "{file}: unknown key \"contacts[{i}].placement.{k}\" (known: xyz, rpy)"
+                            "{file}: contacts[{i}] has both \"{pk}\" and \"{plk}\": give one"
                         )));
                     }
-                    let get = |k: &str| match o.get(k) {
-                        None => Ok(Vector3::zeros()),
-                        Some(x) => vec3(x, &format!("placement.{k}")),
-                    };
-                    let (xyz, rpy) = (get("xyz")?, get("rpy")?);
-                    Transform::from_rpy_xyz([rpy.x, rpy.y, rpy.z], [xyz.x, xyz.y, xyz.z])
-                }
-                (None, None) => Transform::identity(),
+                    (Some(p), None) => Transform::from_translation(vec3(p, pk)?),
+                    (None, Some(pl)) => {
+                        let o = pl.as_object().ok_or_else(|| {
+                            Error::Io(format!(
+                                "{file}: contacts[{i}].{plk} must be an object {{\"xyz\", \"rpy\"}}"
+                            ))
+                        })?;
+                        if let Some(k) = o.keys().find(|k| !["xyz", "rpy"].contains(&k.as_str())) {
+                            return Err(Error::Io(format!(
+                                "{file}: unknown key \"contacts[{i}].{plk}.{k}\" (known: xyz, rpy)"
+                            )));
+                        }
+                        let get = |k: &str| match o.get(k) {
+                            None => Ok(Vector3::zeros()),
+                            Some(x) => vec3(x, &format!("{plk}.{k}")),
+                        };
+                        let (xyz, rpy) = (get("xyz")?, get("rpy")?);
+                        Transform::from_rpy_xyz([rpy.x, rpy.y, rpy.z], [xyz.x, xyz.y, xyz.z])
+                    }
+                    (None, None) => Transform::identity(),
+                })
             };
+            let placement = placement_of("point", "placement")?;
             let gain = |key: &str| -> Result<f64> {
                 match c.get(key) {
                     None => Ok(0.0),
@@ -266,10 +281,29 @@ pub fn load_state(
                 }
             };
             let (kp, kd) = (gain("kp")?, gain("kd")?);
-            let contact = Contact::new(model, frame, Vector3::zeros())
+            let mut contact = Contact::new(model, frame, Vector3::zeros())
                 .and_then(|c| c.with_placement(model, &placement))
                 .and_then(|c| c.with_baumgarte(kp, kd))
                 .map_err(at)?;
+            // A two-frame (closed-loop) constraint: "frame2" with "point2" or "placement2" in
+            // frame2's coordinates.
+            match c.get("frame2") {
+                None => {
+                    if let Some(k) = ["point2", "placement2"].iter().find(|k| c.get(**k).is_some())
+                    {
+                        return Err(Error::Io(format!(
+                            "{file}: contacts[{i}].{k} needs a \"frame2\""
+                        )));
+                    }
+                }
+                Some(f2) => {
+                    let f2 = f2.as_str().ok_or_else(|| {
+                        Error::Io(format!("{file}: contacts[{i}].frame2 must be a string"))
+                    })?;
+                    let placement2 = placement_of("point2", "placement2")?;
+                    contact = contact.with_frame2(model, f2, Some(&placement2)).map_err(at)?;
+                }
+            }
             contacts.push(Contact { kind, ..contact.with_reference(reference) });
         }
     }
@@ -724,17 +758,44 @@ fn contact_outputs(
     errors: &mut Map<String, Value>,
 ) -> Result<()> {
     let mut cd = ContactData::new(model, &s.contacts)?;
-    let mut so = SoData::new(model);
-    constrained_id_so_derivatives(model, data, &mut cd, &mut so, &s.q, &s.v, &s.a, &s.lambda)?;
-    o.insert(
-        "constrained_id".into(),
-        json!({
-            "tau": data.tau().as_slice(),
-            "dtau_dq": mat_json(data.dtau_dq()),
-            "dtau_dv": mat_json(data.dtau_dv()),
-            "d2tau_dq2": tensor_json(so.d2tau_dq2()),
-        }),
-    );
+    // Two-frame (closed-loop) constraints have first-order derivatives only: the second-order
+    // outputs are left out and `errors` says why.
+    let loops = s.contacts.iter().any(Contact::is_loop);
+    let order = if loops {
+        if order >= 2 {
+            let why = "two-frame (closed-loop) constraints: the second-order contact outputs are \
+                       not supported yet (first order written)";
+            for k in ["constrained_id.d2tau_dq2", "kkt.second_order", "impact.second_order"] {
+                errors.insert(k.into(), Value::String(why.into()));
+            }
+        }
+        1
+    } else {
+        order
+    };
+    if !loops {
+        let mut so = SoData::new(model);
+        constrained_id_so_derivatives(model, data, &mut cd, &mut so, &s.q, &s.v, &s.a, &s.lambda)?;
+        o.insert(
+            "constrained_id".into(),
+            json!({
+                "tau": data.tau().as_slice(),
+                "dtau_dq": mat_json(data.dtau_dq()),
+                "dtau_dv": mat_json(data.dtau_dv()),
+                "d2tau_dq2": tensor_json(so.d2tau_dq2()),
+            }),
+        );
+    } else {
+        constrained_id_derivatives(model, data, &mut cd, &s.q, &s.v, &s.a, &s.lambda)?;
+        o.insert(
+            "constrained_id".into(),
+            json!({
+                "tau": data.tau().as_slice(),
+                "dtau_dq": mat_json(data.dtau_dq()),
+                "dtau_dv": mat_json(data.dtau_dv()),
+            }),
+        );
+    }
     let mut kd = KktData::new(model, cd.clone());
     kd.set_damping(s.damping)?;
     let r = if order >= 2 {

@@ -1397,7 +1397,7 @@ fn unknown_state_keys_are_errors_at_every_level() {
         (
             r#"{"contacts": [{"frame": "link2", "kp": 1, "gain": 2}]}"#,
             "unknown key \"contacts[0].gain\" (known: frame, type, reference, point, placement, \
-             kp, kd)"
+             kp, kd, frame2, point2, placement2)"
                 .to_string(),
         ),
         (
@@ -1614,4 +1614,81 @@ fn demo_takes_the_model_and_contact_options() {
     let err =
         assert_clean_failure(&sodyn(&["demo", "--floating-base"]), "--floating-base built-in");
     assert!(err.contains("--floating-base applies to URDF files"), "{err}");
+}
+
+#[test]
+fn eval_takes_two_frame_constraints() {
+    use sodyn::algo::{Contact, Data};
+    use sodyn::deriv::{ContactData, ImpactData, KktData, impact_derivatives, kkt_derivatives};
+    use sodyn::spatial::Transform;
+    let m = sodyn::model::builtin::quadruped();
+    let nv = m.nv();
+    let vals = |s: f64| -> Vec<f64> { (0..nv).map(|i| s * (i as f64 + 1.0) / nv as f64).collect() };
+    let (v, tau) = (vals(0.4), vals(0.5));
+    // Bent legs (at the neutral configuration they are straight: singular loops).
+    let mut q = m.neutral();
+    for i in 7..m.nq() {
+        q[i] = 0.2 + 0.05 * i as f64;
+    }
+    let qv: Vec<f64> = q.iter().copied().collect();
+    let run = |feet: &str, name: &str| {
+        let state = tmp(name);
+        let body = format!(r#"{{"q": {qv:?}, "v": {v:?}, "tau": {tau:?}, "contacts": {feet}}}"#);
+        std::fs::write(&state, body).unwrap();
+        sodyn(&["eval", "--model", "builtin:quadruped", "--state", state.to_str().unwrap()])
+    };
+    let feet = r#"[{"frame": "LF_FOOT", "frame2": "RH_FOOT", "point2": [0, 0.01, 0], "kd": 2},
+        {"frame": "RF_FOOT", "type": "6d", "frame2": "LH_FOOT",
+         "placement2": {"xyz": [0.01, 0, -0.02], "rpy": [0.1, -0.2, 0.3]}}]"#;
+    let o = run(feet, "loops.json");
+    assert_ok(&o, "eval with two-frame constraints");
+    let out: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let contacts = vec![
+        Contact::new(&m, "LF_FOOT", nalgebra::Vector3::zeros())
+            .unwrap()
+            .with_baumgarte(0.0, 2.0)
+            .unwrap()
+            .with_frame2(
+                &m,
+                "RH_FOOT",
+                Some(&Transform::from_translation(nalgebra::Vector3::new(0.0, 0.01, 0.0))),
+            )
+            .unwrap(),
+        Contact {
+            kind: sodyn::algo::ContactType::D6,
+            ..Contact::new(&m, "RF_FOOT", nalgebra::Vector3::zeros())
+                .unwrap()
+                .with_frame2(
+                    &m,
+                    "LH_FOOT",
+                    Some(&Transform::from_rpy_xyz([0.1, -0.2, 0.3], [0.01, 0.0, -0.02])),
+                )
+                .unwrap()
+        },
+    ];
+    let cd = ContactData::new(&m, &contacts).unwrap();
+    let mut kd = KktData::new(&m, cd.clone());
+    let (v, tau) = (DVector::from_vec(v.clone()), DVector::from_vec(tau.clone()));
+    let mut d = Data::new(&m);
+    kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+    let lam = vector(&out["kkt"], "lambda", 9);
+    assert!((&lam - kd.lambda()).amax() < 1e-12 * (1.0 + kd.lambda().amax()));
+    let dq = matrix(&out["kkt"], "dqdd_dq", nv);
+    assert!((&dq - kd.dqdd_dq()).amax() < 1e-12 * (1.0 + kd.dqdd_dq().amax()));
+    let mut im = ImpactData::new(&m, cd);
+    impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap();
+    let imp = vector(&out["impact"], "impulse", 9);
+    assert!((&imp - im.impulse()).amax() < 1e-12 * (1.0 + im.impulse().amax()));
+    assert_eq!(out["constrained_id"]["tau"].as_array().unwrap().len(), nv);
+    // Bad input names the contact and the key.
+    for (feet, needle) in [
+        (r#"[{"frame": "LF_FOOT", "point2": [0, 0, 0]}]"#, "contacts[0].point2 needs a \"frame2\""),
+        (r#"[{"frame": "LF_FOOT", "frame2": "NOPE"}]"#, "NOPE"),
+        (r#"[{"frame": "LF_FOOT", "frame2": "LF_FOOT"}]"#, "same body"),
+        (r#"[{"frame": "LF_FOOT", "frame2": "RH_FOOT", "point2": [0, 0]}]"#, "contacts[0].point2"),
+    ] {
+        let o = run(feet, "bad_loop.json");
+        let e = assert_clean_failure(&o, feet);
+        assert!(e.contains(needle), "{feet}: {e}");
+    }
 }

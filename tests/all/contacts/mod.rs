@@ -3,3 +3,4 @@
 
 mod contacts6d;
 mod kkt_impact;
+mod loops;

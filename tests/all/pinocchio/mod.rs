@@ -3,5 +3,6 @@
 mod contacts;
 mod contacts6d;
 mod dynamics;
+mod loops;
 mod pin_map;
 mod second_order;

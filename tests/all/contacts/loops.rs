@@ -1,0 +1,363 @@
+//! Two-frame (closed-loop) constraints (issue 46): KKT dynamics and its first-order derivatives
+//! against the dual-number oracle of `reference::contact` and against central differences of
+//! `kkt_dynamics`, on the four-bar and on loops mixed with world contacts (3-D and 6-D,
+//! world-aligned and local, frames placed at random in their links); the error cases.
+
+use crate::util::*;
+use nalgebra::{DMatrix, DVector, Vector3};
+use sodyn::Error;
+use sodyn::algo::{Contact, ContactReference, ContactType, Data};
+use sodyn::deriv::*;
+use sodyn::model::{Model, builtin, exp6};
+use sodyn::reference::contact as oracle;
+use sodyn::rng::Rng;
+use sodyn::spatial::{Motion, Transform};
+
+use ContactReference::{Local, LocalWorldAligned as Lwa};
+use ContactType::{D3, D6};
+
+/// A constraint: frame A, optional frame B, type, reference.
+type Spec = (&'static str, Option<&'static str>, ContactType, ContactReference);
+
+fn cases() -> Vec<(Model, Vec<Spec>)> {
+    vec![
+        (builtin::fourbar(), vec![("coupler_tip", Some("rocker_tip"), D3, Lwa)]),
+        (builtin::fourbar(), vec![("coupler_tip", Some("rocker_tip"), D3, Local)]),
+        (
+            builtin::quadruped(),
+            vec![
+                ("LF_FOOT", Some("RH_FOOT"), D3, Lwa),
+                ("RF_FOOT", None, D3, Lwa),
+                ("LH_FOOT", None, D3, Local),
+            ],
+        ),
+        (
+            builtin::quadruped(),
+            vec![("LF_FOOT", Some("RF_FOOT"), D6, Lwa), ("RH_FOOT", None, D3, Lwa)],
+        ),
+        (
+            builtin::quadruped(),
+            vec![("RH_FOOT", Some("LF_FOOT"), D6, Local), ("LH_FOOT", None, D6, Lwa)],
+        ),
+        (
+            builtin::humanoid(),
+            vec![
+                ("left_hand", Some("right_hand"), D6, Local),
+                ("left_sole", None, D6, Lwa),
+                ("right_sole", None, D6, Local),
+            ],
+        ),
+        (
+            builtin::random_tree(10, 4, true),
+            vec![("body_9", Some("body_5"), D3, Local), ("body_7", None, D6, Lwa)],
+        ),
+    ]
+}
+
+fn random_placement(rng: &mut Rng) -> Transform {
+    exp6(&Motion::new(
+        Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.7,
+        Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.05,
+    ))
+}
+
+/// The constraints of a case, each frame placed at random within about 5 cm of its link frame.
+fn constraints(m: &Model, spec: &[Spec], rng: &mut Rng) -> Vec<Contact> {
+    spec.iter()
+        .map(|&(a, b, kind, reference)| {
+            let mut c = Contact::new(m, a, Vector3::zeros())
+                .unwrap()
+                .with_placement(m, &random_placement(rng))
+                .unwrap()
+                .with_reference(reference);
+            c.kind = kind;
+            match b {
+                Some(b) => c.with_frame2(m, b, Some(&random_placement(rng))).unwrap(),
+                None => c,
+            }
+        })
+        .collect()
+}
+
+/// Velocity gains on every constraint, a position gain on the 3-D world-aligned loops (the
+/// only loops that take one). A world contact's position error is measured from its
+/// placement at the `q` of each call, which central differences of `kkt_dynamics` cannot
+/// see, so world contacts get none here (`contacts6d.rs` tests them against the oracle).
+fn with_gains(cs: &[Contact], rng: &mut Rng) -> Vec<Contact> {
+    cs.iter()
+        .map(|c| {
+            let kp_ok = c.is_loop() && c.kind == D3 && c.reference == Lwa;
+            let kp = if kp_ok { rng.range(0.0, 50.0) } else { 0.0 };
+            c.clone().with_baumgarte(kp, rng.range(0.0, 10.0)).unwrap()
+        })
+        .collect()
+}
+
+#[test]
+fn kkt_first_order_with_loops_matches_oracle_and_central_differences() {
+    let names = [
+        "qdd",
+        "lambda",
+        "dqdd_dq",
+        "dqdd_dv",
+        "dqdd_dtau",
+        "dlambda_dq",
+        "dlambda_dv",
+        "dlambda_dtau",
+        "FD dqdd_dq",
+        "FD dlambda_dq",
+        "FD dqdd_dv",
+        "FD dlambda_dv",
+    ];
+    let mut w: Vec<Worst> = names.iter().map(|n| Worst::new(n)).collect();
+    let mut rng = Rng::new(46);
+    for gains in [false, true] {
+        for (m, spec) in cases() {
+            let mut cs = constraints(&m, &spec, &mut rng);
+            if gains {
+                cs = with_gains(&cs, &mut rng);
+            }
+            let (q, v, tau) = random_state(&m, &mut rng);
+            let mut d = Data::new(&m);
+            let mut kd = KktData::new(&m, ContactData::new(&m, &cs).unwrap());
+            kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+            let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
+            let at = format!("{} {:?} gains {gains}", m.name(), spec);
+            let (qr, lr) = oracle::kkt::<f64>(&m, qs, vs, ts, &cs);
+            w[0].add(rel_err_vec(kd.qdd(), &DVector::from_vec(qr)), &at);
+            w[1].add(rel_err_vec(kd.lambda(), &DVector::from_vec(lr)), &at);
+            let fo = oracle::kkt_fo(&m, qs, vs, ts, &cs);
+            let pairs: [(&DMatrix<f64>, &DMatrix<f64>); 6] = [
+                (kd.dqdd_dq(), &fo.dqdd_dq),
+                (kd.dqdd_dv(), &fo.dqdd_dv),
+                (kd.dqdd_dtau(), &fo.dqdd_dtau),
+                (kd.dlambda_dq(), &fo.dlambda_dq),
+                (kd.dlambda_dv(), &fo.dlambda_dv),
+                (kd.dlambda_dtau(), &fo.dlambda_dtau),
+            ];
+            for (i, (a, b)) in pairs.iter().enumerate() {
+                w[2 + i].add(rel_err_mat(a, b), &at);
+            }
+            // Central differences of kkt_dynamics (tangent perturbations of q).
+            let (n, nl) = (m.nv(), kd.lambda().len());
+            let h = 1e-6;
+            let mut kpl = KktData::new(&m, ContactData::new(&m, &cs).unwrap());
+            let mut kmi = KktData::new(&m, ContactData::new(&m, &cs).unwrap());
+            let (mut fq, mut fl) = (DMatrix::zeros(n, n), DMatrix::zeros(nl, n));
+            let (mut fqv, mut flv) = (DMatrix::zeros(n, n), DMatrix::zeros(nl, n));
+            for k in 0..n {
+                let mut e = DVector::zeros(n);
+                e[k] = h;
+                let (qp, qm) = (m.integrate(&q, &e).unwrap(), m.integrate(&q, &-&e).unwrap());
+                kkt_dynamics(&m, &mut d, &mut kpl, &qp, &v, &tau).unwrap();
+                kkt_dynamics(&m, &mut d, &mut kmi, &qm, &v, &tau).unwrap();
+                fq.set_column(k, &((kpl.qdd() - kmi.qdd()) / (2.0 * h)));
+                fl.set_column(k, &((kpl.lambda() - kmi.lambda()) / (2.0 * h)));
+                kkt_dynamics(&m, &mut d, &mut kpl, &q, &(&v + &e), &tau).unwrap();
+                kkt_dynamics(&m, &mut d, &mut kmi, &q, &(&v - &e), &tau).unwrap();
+                fqv.set_column(k, &((kpl.qdd() - kmi.qdd()) / (2.0 * h)));
+                flv.set_column(k, &((kpl.lambda() - kmi.lambda()) / (2.0 * h)));
+            }
+            w[8].add(rel_err_mat(kd.dqdd_dq(), &fq), &at);
+            w[9].add(rel_err_mat(kd.dlambda_dq(), &fl), &at);
+            w[10].add(rel_err_mat(kd.dqdd_dv(), &fqv), &at);
+            w[11].add(rel_err_mat(kd.dlambda_dv(), &flv), &at);
+        }
+    }
+    for x in &w[..8] {
+        x.check(1e-10);
+    }
+    for x in &w[8..] {
+        x.check(1e-5);
+    }
+}
+
+/// The four-bar's loop closes at the neutral configuration, and its KKT acceleration keeps it
+/// closed: `J q̈ + J̇ q̇ = 0` with `J q̇ = 0`.
+#[test]
+fn fourbar_is_assembled_and_its_loop_holds() {
+    let m = builtin::fourbar();
+    assert_eq!((m.nq(), m.nv()), (6, 5));
+    let c = builtin::fourbar_loop(&m).unwrap();
+    let q0 = m.neutral();
+    let (pa, pb) = (
+        sodyn::algo::frame_placement(&m, &mut Data::new(&m), &q0, c.frame).unwrap().trans,
+        sodyn::algo::frame_placement(&m, &mut Data::new(&m), &q0, c.frame2.unwrap()).unwrap().trans,
+    );
+    assert!((pa - pb).norm() < 1e-15, "loop open at q0 by {}", (pa - pb).norm());
+    let cd = ContactData::new(&m, std::slice::from_ref(&c)).unwrap();
+    let mut kd = KktData::new(&m, cd);
+    let mut d = Data::new(&m);
+    let mut rng = Rng::new(3);
+    // A velocity in the null space of J (the mechanism's two DoF).
+    let (_, v0, tau) = random_state(&m, &mut rng);
+    kkt_dynamics(&m, &mut d, &mut kd, &q0, &v0, &tau).unwrap();
+    let j = kd.cd().jac().clone();
+    // The eigenvectors of JᵀJ with zero eigenvalue (ascending order after sorting).
+    let eig = (j.transpose() * &j).symmetric_eigen();
+    let mut order: Vec<usize> = (0..5).collect();
+    order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
+    assert!(eig.eigenvalues[order[1]] < 1e-12 && eig.eigenvalues[order[2]] > 1e-6);
+    let v = eig.eigenvectors.column(order[0]) * 0.7 + eig.eigenvectors.column(order[1]) * -1.3;
+    assert!((&j * &v).amax() < 1e-12);
+    kkt_dynamics(&m, &mut d, &mut kd, &q0, &v, &tau).unwrap();
+    let acc = &j * kd.qdd() + kd.cd().drift();
+    assert!(acc.amax() < 1e-10, "constraint acceleration {}", acc.amax());
+}
+
+#[test]
+fn loop_errors_name_the_problem() {
+    let m = builtin::quadruped();
+    let c = Contact::new(&m, "LF_FOOT", Vector3::zeros()).unwrap();
+    // Unknown frame B.
+    match c.clone().with_frame2(&m, "NO_SUCH_FRAME", None) {
+        Err(Error::Unknown { name, .. }) => assert_eq!(name, "NO_SUCH_FRAME"),
+        other => panic!("expected an unknown frame, got {other:?}"),
+    }
+    // Both frames on one body.
+    let fb = builtin::fourbar();
+    let c4 = Contact::new(&fb, "crank_tip", Vector3::zeros()).unwrap();
+    match c4.clone().with_frame2(&fb, "crank", None) {
+        Err(Error::Argument { name, reason }) => {
+            assert_eq!(name, "frame2");
+            assert!(reason.contains("same body"), "{reason}");
+        }
+        other => panic!("expected a same-body error, got {other:?}"),
+    }
+    // The same, built field by field, is refused by ContactData::new and names the contact.
+    let mut bad = c4.clone();
+    bad.frame2 = Some(fb.frame_id("crank").unwrap());
+    match ContactData::new(&fb, &[bad]) {
+        Err(Error::Argument { name, reason }) => {
+            assert!(name.contains("contacts[0]") && name.contains("crank_tip"), "{name}");
+            assert!(reason.contains("same body"), "{reason}");
+        }
+        other => panic!("expected a same-body error, got {other:?}"),
+    }
+    let mut bad = c.clone();
+    bad.frame2 = Some(10_000);
+    assert!(matches!(ContactData::new(&m, &[bad]), Err(Error::Unknown { .. })));
+    // kp on a 6-D loop.
+    let mut six = c.clone().with_frame2(&m, "RF_FOOT", None).unwrap();
+    six.kind = D6;
+    let six_kp = six.clone().with_baumgarte(1.0, 0.0).unwrap();
+    match ContactData::new(&m, &[six_kp]) {
+        Err(Error::Argument { name, .. }) => {
+            assert!(name.starts_with("kp of contacts[0]"), "{name}")
+        }
+        other => panic!("expected a kp error, got {other:?}"),
+    }
+    // Algorithms without loop support refuse them with an error naming the constraint.
+    let cd = ContactData::new(&m, std::slice::from_ref(&six)).unwrap();
+    let mut im = ImpactData::new(&m, cd.clone()).with_second_order(&m);
+    let (q, v) = (m.neutral(), DVector::zeros(m.nv()));
+    let mut d = Data::new(&m);
+    match impact_so_derivatives(&m, &mut d, &mut im, &q, &v) {
+        Err(Error::Argument { name, reason }) => {
+            assert!(name.contains("\"LF_FOOT\" to \"RF_FOOT\""), "{name}");
+            assert!(reason.contains("impact_so_derivatives"), "{reason}");
+        }
+        other => panic!("expected a refusal, got {other:?}"),
+    }
+    let mut kd = KktData::new(&m, cd).with_second_order(&m);
+    let tau = DVector::zeros(m.nv());
+    assert!(matches!(
+        kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau),
+        Err(Error::Argument { .. })
+    ));
+}
+
+#[test]
+fn impact_first_order_with_loops_matches_oracle_and_central_differences() {
+    let names = [
+        "vplus",
+        "impulse",
+        "dvplus_dq",
+        "dvplus_dvminus",
+        "dimpulse_dq",
+        "dimpulse_dvminus",
+        "FD dvplus_dq",
+        "FD dimpulse_dq",
+        "FD dvplus_dvminus",
+        "FD dimpulse_dvminus",
+    ];
+    let mut w: Vec<Worst> = names.iter().map(|n| Worst::new(n)).collect();
+    let mut rng = Rng::new(47);
+    for e in [0.0, 0.4] {
+        for (m, spec) in cases() {
+            let cs = constraints(&m, &spec, &mut rng);
+            let (q, vm, _) = random_state(&m, &mut rng);
+            let mut d = Data::new(&m);
+            let mk = || {
+                let mut im = ImpactData::new(&m, ContactData::new(&m, &cs).unwrap());
+                im.set_restitution(e).unwrap();
+                im
+            };
+            let mut im = mk();
+            impact_derivatives(&m, &mut d, &mut im, &q, &vm).unwrap();
+            let (qs, vs) = (q.as_slice(), vm.as_slice());
+            let at = format!("{} {:?} e = {e}", m.name(), spec);
+            let (vp, imp) = oracle::impact::<f64>(&m, qs, vs, &cs, e);
+            w[0].add(rel_err_vec(im.vplus(), &DVector::from_vec(vp)), &at);
+            w[1].add(rel_err_vec(im.impulse(), &DVector::from_vec(imp)), &at);
+            let fo = oracle::impact_fo(&m, qs, vs, &cs, e);
+            w[2].add(rel_err_mat(im.dvplus_dq(), &fo.dvplus_dq), &at);
+            w[3].add(rel_err_mat(im.dvplus_dvminus(), &fo.dvplus_dvminus), &at);
+            w[4].add(rel_err_mat(im.dimpulse_dq(), &fo.dimpulse_dq), &at);
+            w[5].add(rel_err_mat(im.dimpulse_dvminus(), &fo.dimpulse_dvminus), &at);
+            // Central differences of impact_dynamics.
+            let (n, nl) = (m.nv(), im.impulse().len());
+            let h = 1e-6;
+            let (mut ip, mut imn) = (mk(), mk());
+            let (mut fq, mut fl) = (DMatrix::zeros(n, n), DMatrix::zeros(nl, n));
+            let (mut fqv, mut flv) = (DMatrix::zeros(n, n), DMatrix::zeros(nl, n));
+            for k in 0..n {
+                let mut ek = DVector::zeros(n);
+                ek[k] = h;
+                let (qp, qm) = (m.integrate(&q, &ek).unwrap(), m.integrate(&q, &-&ek).unwrap());
+                impact_dynamics(&m, &mut d, &mut ip, &qp, &vm).unwrap();
+                impact_dynamics(&m, &mut d, &mut imn, &qm, &vm).unwrap();
+                fq.set_column(k, &((ip.vplus() - imn.vplus()) / (2.0 * h)));
+                fl.set_column(k, &((ip.impulse() - imn.impulse()) / (2.0 * h)));
+                impact_dynamics(&m, &mut d, &mut ip, &q, &(&vm + &ek)).unwrap();
+                impact_dynamics(&m, &mut d, &mut imn, &q, &(&vm - &ek)).unwrap();
+                fqv.set_column(k, &((ip.vplus() - imn.vplus()) / (2.0 * h)));
+                flv.set_column(k, &((ip.impulse() - imn.impulse()) / (2.0 * h)));
+            }
+            w[6].add(rel_err_mat(im.dvplus_dq(), &fq), &at);
+            w[7].add(rel_err_mat(im.dimpulse_dq(), &fl), &at);
+            w[8].add(rel_err_mat(im.dvplus_dvminus(), &fqv), &at);
+            w[9].add(rel_err_mat(im.dimpulse_dvminus(), &flv), &at);
+        }
+    }
+    for x in &w[..6] {
+        x.check(1e-10);
+    }
+    for x in &w[6..] {
+        x.check(1e-5);
+    }
+}
+
+#[test]
+fn constrained_id_first_order_with_loops_matches_oracle() {
+    let mut w = [Worst::new("constrained tau"), Worst::new("constrained dtau_dq")];
+    let mut rng = Rng::new(48);
+    for (m, spec) in cases() {
+        let cs = constraints(&m, &spec, &mut rng);
+        let (q, v, a) = random_state(&m, &mut rng);
+        let nl: usize = cs.iter().map(Contact::dim).sum();
+        let lam = DVector::from_fn(nl, |_, _| rng.normal() * 10.0);
+        let mut d = Data::new(&m);
+        let mut cd = ContactData::new(&m, &cs).unwrap();
+        constrained_id_derivatives(&m, &mut d, &mut cd, &q, &v, &a, &lam).unwrap();
+        let (qs, vs, as_, ls) = (q.as_slice(), v.as_slice(), a.as_slice(), lam.as_slice());
+        let at = format!("{} {:?}", m.name(), spec);
+        let tau = oracle::constrained_rnea::<f64>(&m, qs, vs, as_, &cs, ls);
+        w[0].add(rel_err_vec(d.tau(), &DVector::from_vec(tau)), &at);
+        let dq = oracle::d_constrained_rnea_dq(&m, qs, vs, as_, &cs, ls);
+        w[1].add(rel_err_mat(d.dtau_dq(), &dq), &at);
+    }
+    for x in &w {
+        x.check(1e-10);
+    }
+}
