@@ -243,10 +243,16 @@ impl Contact {
         self.frame2.is_some()
     }
     /// What is wrong with this two-frame constraint on `model`, `None` if nothing is (or if it
-    /// is a world contact). The frame indices must be valid.
+    /// is a world contact); an index out of the model's frames is a problem too.
     pub(crate) fn loop_problem(&self, model: &Model) -> Option<String> {
         let f2 = self.frame2?;
-        let (fa, fb) = (&model.frames[self.frame], &model.frames[f2]);
+        let n = model.frames.len();
+        let (Some(fa), Some(fb)) = (model.frames.get(self.frame), model.frames.get(f2)) else {
+            return Some(format!(
+                "frame index {} or frame2 index {f2} is out of range (the model has {n} frames)",
+                self.frame
+            ));
+        };
         if fa.joint == fb.joint {
             return Some(format!(
                 "frames \"{}\" and \"{}\" are on the same body \"{}\": the constraint \

@@ -214,6 +214,16 @@ fn loop_errors_name_the_problem() {
         Err(Error::Unknown { name, .. }) => assert_eq!(name, "NO_SUCH_FRAME"),
         other => panic!("expected an unknown frame, got {other:?}"),
     }
+    // A contact whose own frame index (a public field) is out of range: an error, no panic.
+    let mut bad = c.clone();
+    bad.frame = 10_000;
+    match bad.with_frame2(&m, "RF_FOOT", None) {
+        Err(Error::Argument { name, reason }) => {
+            assert_eq!(name, "frame2");
+            assert!(reason.contains("out of range"), "{reason}");
+        }
+        other => panic!("expected an out-of-range frame, got {other:?}"),
+    }
     // Both frames on one body.
     let fb = builtin::fourbar();
     let c4 = Contact::new(&fb, "crank_tip", Vector3::zeros()).unwrap();
