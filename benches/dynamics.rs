@@ -5,9 +5,7 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::DVector;
 use sodyn::algo::{Data, aba, crba, rnea};
-use sodyn::deriv::{
-    FdSoData, SoData, fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives,
-};
+use sodyn::deriv::{fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives};
 use sodyn::model::{Model, builtin, urdf};
 use sodyn::rng::Rng;
 use std::hint::black_box;
@@ -68,9 +66,7 @@ impl States {
 fn bench(c: &mut Criterion) {
     for (name, m) in models() {
         let mut g = c.benchmark_group(name.clone());
-        let mut d = Data::new(&m);
-        let mut so = SoData::new(&m);
-        let mut fso = FdSoData::new(&m);
+        let mut d = Data::with_second_order(&m);
         let mut st = States::new(&m, 100);
         g.bench_function("rnea", |b| {
             b.iter(|| {
@@ -105,13 +101,13 @@ fn bench(c: &mut Criterion) {
         g.bench_function("id_so", |b| {
             b.iter(|| {
                 let (q, v, a) = st.next();
-                id_so_derivatives(&m, &mut d, &mut so, q, v, a, None).unwrap();
+                black_box(id_so_derivatives(&m, &mut d, q, v, a, None).unwrap());
             })
         });
         g.bench_function("fd_so", |b| {
             b.iter(|| {
                 let (q, v, a) = st.next();
-                fd_so_derivatives(&m, &mut d, &mut fso, q, v, a, None).unwrap();
+                black_box(fd_so_derivatives(&m, &mut d, q, v, a, None).unwrap());
             })
         });
         g.finish();

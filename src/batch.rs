@@ -2,7 +2,7 @@
 //!
 //! Every function evaluates one algorithm at the states `k = 0..n` given by the `k`-th entries
 //! of its input slices and writes result `k` into entry `k` of the caller's output slices, which
-//! must already have the right shapes (`vec![DMatrix::zeros(nv, nv); n]`, `vec![SoData::new(&model);
+//! must already have the right shapes (`vec![DMatrix::zeros(nv, nv); n]`, `vec![IdSoResult::zeros(&model);
 //! n]`, ...). As the single-state algorithms take a [`Data`], the batched ones take a
 //! [`BatchData`]: one [`Data`] per thread and the [`BatchPool`] whose threads it runs on, kept
 //! by the caller between calls (MuJoCo binds a thread pool to its `mjData` the same way).
@@ -58,11 +58,10 @@
 //! ```
 
 use crate::algo::{Data, aba, crba, rnea};
-use crate::deriv::{
-    FdSoData, SoData, fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives,
-};
+use crate::deriv::{fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives};
 use crate::error::{Error, Result};
 use crate::model::Model;
+use crate::tensor::Tensor3;
 use nalgebra::{DMatrix, DVector};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
@@ -192,6 +191,11 @@ impl BatchData<Data> {
     pub fn with_pool(model: &Model, pool: Arc<BatchPool>) -> Self {
         Self::from_workspace(pool, Data::new(model))
     }
+    /// Workspaces with dense second-order capacity ([`Data::with_second_order`]) for the
+    /// batched second-order functions, on the shared pool.
+    pub fn with_second_order(model: &Model) -> Self {
+        Self::from_workspace(BatchPool::shared(), Data::with_second_order(model))
+    }
     /// Checks that these workspaces were made for `model`.
     fn check(&self, model: &Model) -> Result<()> {
         self.data.iter().try_for_each(|d| d.check(model))
@@ -240,22 +244,21 @@ impl<W> BatchData<W> {
 /// use nalgebra::{DMatrix, DVector, Vector3};
 /// use sodyn::algo::{Contact, Data};
 /// use sodyn::batch::{BatchData, BatchPool, map_states};
-/// use sodyn::deriv::{ContactData, KktData, kkt_derivatives};
+/// use sodyn::deriv::{ContactData, kkt_derivatives};
 /// use sodyn::{model::builtin, rng::Rng};
 /// use std::sync::Arc;
 /// let m = builtin::quadruped();
 /// let feet = ["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"];
 /// let contacts: Vec<Contact> =
 ///     feet.iter().map(|f| Contact::new(&m, f, Vector3::zeros())).collect::<Result<_, _>>()?;
-/// let kd = KktData::new(&m, ContactData::new(&m, &contacts)?);
-/// let mut bd = BatchData::from_workspace(Arc::new(BatchPool::new(2)?), (Data::new(&m), kd));
+/// let cd = ContactData::new(&m, &contacts)?;
+/// let mut bd = BatchData::from_workspace(Arc::new(BatchPool::new(2)?), (Data::new(&m), cd));
 /// let mut rng = Rng::new(3);
 /// let qs: Vec<_> = (0..8).map(|_| m.random_configuration(&mut rng)).collect();
 /// let (v, tau) = (DVector::zeros(m.nv()), DVector::zeros(m.nv()));
 /// let mut dqdd_dq = vec![DMatrix::zeros(m.nv(), m.nv()); 8];
-/// map_states(&mut bd, &mut dqdd_dq, |(d, kd), k, out| {
-///     kkt_derivatives(&m, d, kd, &qs[k], &v, &tau)?;
-///     out.copy_from(kd.dqdd_dq());
+/// map_states(&mut bd, &mut dqdd_dq, |(d, cd), k, out| {
+///     out.copy_from(kkt_derivatives(&m, d, cd, &qs[k], &v, &tau)?.dqdd_dq());
 ///     Ok(())
 /// })?;
 /// # Ok::<(), sodyn::Error>(())
@@ -618,52 +621,127 @@ fn check_tensor_dims(what: &str, k: usize, dims: (usize, usize, usize), nv: usiz
     Ok(())
 }
 
+/// The second-order inverse-dynamics derivatives of one state: a result of
+/// [`id_so_derivatives_batch`] (`nv×nv×nv` each, indexed as the getters of
+/// [`crate::deriv::SoData`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct IdSoResult {
+    /// `∂/∂q_k (∂τ_i/∂q_j)`.
+    pub d2tau_dq2: Tensor3,
+    /// `∂²τ_i/∂q̇_j∂q̇_k`.
+    pub d2tau_dv2: Tensor3,
+    /// `∂/∂q̇_k (∂τ_i/∂q_j)`.
+    pub d2tau_dqdv: Tensor3,
+    /// `∂M_ij/∂q_k`.
+    pub dm_dq: Tensor3,
+}
+
+impl IdSoResult {
+    /// Zero tensors for `model`.
+    pub fn zeros(model: &Model) -> Self {
+        let n = model.nv();
+        let z = || Tensor3::zeros(n, n, n);
+        Self { d2tau_dq2: z(), d2tau_dv2: z(), d2tau_dqdv: z(), dm_dq: z() }
+    }
+}
+
+/// The second-order forward-dynamics derivatives of one state: a result of
+/// [`fd_so_derivatives_batch`] (`nv×nv×nv` each, indexed as the getters of
+/// [`crate::deriv::FdSoData`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FdSoResult {
+    /// `∂/∂q_k (∂q̈_i/∂q_j)`.
+    pub d2qdd_dq2: Tensor3,
+    /// `∂²q̈_i/∂q̇_j∂q̇_k`.
+    pub d2qdd_dv2: Tensor3,
+    /// `∂/∂q̇_k (∂q̈_i/∂q_j)`.
+    pub d2qdd_dqdv: Tensor3,
+    /// `∂/∂q_k (∂q̈_i/∂τ_j)`.
+    pub d2qdd_dtaudq: Tensor3,
+}
+
+impl FdSoResult {
+    /// Zero tensors for `model`.
+    pub fn zeros(model: &Model) -> Self {
+        let n = model.nv();
+        let z = || Tensor3::zeros(n, n, n);
+        Self { d2qdd_dq2: z(), d2qdd_dv2: z(), d2qdd_dqdv: z(), d2qdd_dtaudq: z() }
+    }
+}
+
+/// Checks that the batch workspaces have dense second-order capacity.
+fn check_second_order(bd: &BatchData, function: &str) -> Result<()> {
+    if bd.data.iter().all(Data::has_second_order) {
+        return Ok(());
+    }
+    Err(Error::Workspace(format!(
+        "{function} needs BatchData with dense second-order capacity: make it with \
+         BatchData::with_second_order(&model) or BatchData::from_workspace(pool, \
+         Data::with_second_order(&model))"
+    )))
+}
+
 /// Second-order inverse-dynamics derivatives ([`id_so_derivatives`], no external forces) at
-/// every state, written directly into `out[k]` (each made by `SoData::new(model)`).
+/// every state, into `out[k]` (each made by [`IdSoResult::zeros`]); `bd` made with
+/// [`BatchData::with_second_order`].
 pub fn id_so_derivatives_batch(
     model: &Model,
     bd: &mut BatchData,
     qs: &[DVector<f64>],
     vs: &[DVector<f64>],
     as_: &[DVector<f64>],
-    out: &mut [SoData],
+    out: &mut [IdSoResult],
 ) -> Result<()> {
     let n = qs.len();
     check_count("vs", vs.len(), n)?;
     check_count("as_", as_.len(), n)?;
     check_count("out", out.len(), n)?;
-    for (k, so) in out.iter().enumerate() {
-        check_tensor_dims("out", k, so.d2tau_dq2().dims(), model.nv())?;
+    for (k, r) in out.iter().enumerate() {
+        for t in [&r.d2tau_dq2, &r.d2tau_dv2, &r.d2tau_dqdv, &r.dm_dq] {
+            check_tensor_dims("out", k, t.dims(), model.nv())?;
+        }
     }
     bd.check(model)?;
+    check_second_order(bd, "id_so_derivatives_batch")?;
     drive(bd, n, out, &mut vec![(); n], |data, k, out, _| {
-        id_so_derivatives(model, data, &mut *out, &qs[k], &vs[k], &as_[k], None)
+        let so = id_so_derivatives(model, data, &qs[k], &vs[k], &as_[k], None)?;
+        copy_output(out.d2tau_dq2.as_mut_slice(), so.d2tau_dq2().as_slice());
+        copy_output(out.d2tau_dv2.as_mut_slice(), so.d2tau_dv2().as_slice());
+        copy_output(out.d2tau_dqdv.as_mut_slice(), so.d2tau_dqdv().as_slice());
+        copy_output(out.dm_dq.as_mut_slice(), so.dm_dq().as_slice());
+        Ok(())
     })
 }
 
 /// Second-order forward-dynamics derivatives ([`fd_so_derivatives`], no external forces) at
-/// every state, written directly into `out[k]` (each made by `FdSoData::new(model)`).
+/// every state, into `out[k]` (each made by [`FdSoResult::zeros`]); `bd` made with
+/// [`BatchData::with_second_order`].
 pub fn fd_so_derivatives_batch(
     model: &Model,
     bd: &mut BatchData,
     qs: &[DVector<f64>],
     vs: &[DVector<f64>],
     taus: &[DVector<f64>],
-    out: &mut [FdSoData],
+    out: &mut [FdSoResult],
 ) -> Result<()> {
     let n = qs.len();
     check_count("vs", vs.len(), n)?;
     check_count("taus", taus.len(), n)?;
     check_count("out", out.len(), n)?;
-    for (k, f) in out.iter().enumerate() {
-        check_tensor_dims("out", k, f.d2qdd_dq2().dims(), model.nv())?;
-        if f.red.is_none() {
-            check_tensor_dims("out", k, f.id.d2tau_dq2().dims(), model.nv())?;
+    for (k, r) in out.iter().enumerate() {
+        for t in [&r.d2qdd_dq2, &r.d2qdd_dv2, &r.d2qdd_dqdv, &r.d2qdd_dtaudq] {
+            check_tensor_dims("out", k, t.dims(), model.nv())?;
         }
     }
     bd.check(model)?;
+    check_second_order(bd, "fd_so_derivatives_batch")?;
     drive(bd, n, out, &mut vec![(); n], |data, k, out, _| {
-        fd_so_derivatives(model, data, &mut *out, &qs[k], &vs[k], &taus[k], None)
+        let so = fd_so_derivatives(model, data, &qs[k], &vs[k], &taus[k], None)?;
+        copy_output(out.d2qdd_dq2.as_mut_slice(), so.d2qdd_dq2().as_slice());
+        copy_output(out.d2qdd_dv2.as_mut_slice(), so.d2qdd_dv2().as_slice());
+        copy_output(out.d2qdd_dqdv.as_mut_slice(), so.d2qdd_dqdv().as_slice());
+        copy_output(out.d2qdd_dtaudq.as_mut_slice(), so.d2qdd_dtaudq().as_slice());
+        Ok(())
     })
 }
 

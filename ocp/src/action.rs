@@ -20,9 +20,8 @@
 use nalgebra::{DMatrix, DVector, Matrix6};
 use sodyn::algo::{Data, aba};
 use sodyn::deriv::{
-    ContactData, ContractedData, ImpactContracted, ImpactData, KktContracted, KktData,
-    fd_derivatives, fd_so_contracted, impact_derivatives, impact_dynamics, impact_so_contracted,
-    kkt_derivatives, kkt_dynamics, kkt_so_contracted,
+    ContactData, fd_derivatives, fd_so_contracted, impact_derivatives, impact_dynamics,
+    impact_so_contracted, kkt_derivatives, kkt_dynamics, kkt_so_contracted,
 };
 use sodyn::model::lie::Arg;
 use sodyn::model::{Contact, JointType, Model};
@@ -163,8 +162,8 @@ pub struct ActionData {
     jq_x: DMatrix<f64>,
     jq_dx: DMatrix<f64>,
     data: Data,
-    kkt: Option<KktData>,
-    imp: Option<ImpactData>,
+    /// The active contact set's data (KKT or impact, with contracted capacity).
+    contacts: Option<ContactData>,
     sc: StateScratch,
     /// The second-order term of the last [`ActionModel::second_order`]: the Hessian of
     /// `V′ₓᵀ (f(x ⊕ δx, u + δu) ⊖ f(x, u))` plus the residual curvature of the costs, in
@@ -180,9 +179,6 @@ pub struct ActionData {
 /// Buffers of [`ActionModel::second_order`].
 #[derive(Clone, Debug)]
 struct SoWork {
-    fd: ContractedData,
-    kc: Option<KktContracted>,
-    ic: Option<ImpactContracted>,
     w_a: DVector<f64>,
     w_lambda: DVector<f64>,
     groups: Vec<(usize, Group)>,
@@ -255,35 +251,26 @@ impl ActionModel {
         let (nv, nu, ndx) = (m.nv(), self.nu(), self.state.ndx());
         let active = active_contacts(self.contacts());
         let nc: usize = active.iter().map(|c| c.dim()).sum();
-        let (mut kkt, mut imp) = (None, None);
+        let mut contacts = None;
         if !active.is_empty() {
-            let cd = ContactData::new(m, &active)?;
-            match &self.kind {
-                ActionKind::Euler { damping, .. } => {
-                    let mut k = KktData::new(m, cd);
-                    if *damping > 0.0 {
-                        k.set_damping(*damping)?;
-                    }
-                    kkt = Some(k);
-                }
+            let mut cd = ContactData::with_contracted(m, &active)?;
+            let damping = match &self.kind {
+                ActionKind::Euler { damping, .. } => *damping,
                 ActionKind::Impulse { restitution, damping, .. } => {
-                    let mut i = ImpactData::new(m, cd);
-                    i.set_restitution(*restitution)?;
-                    if *damping > 0.0 {
-                        i.set_damping(*damping)?;
-                    }
-                    imp = Some(i);
+                    cd.set_restitution(*restitution)?;
+                    *damping
                 }
+            };
+            if damping > 0.0 {
+                cd.set_damping(damping)?;
             }
+            contacts = Some(cd);
         }
         let mut fx = DMatrix::identity(ndx, ndx);
         fx.fill_diagonal(1.0);
         let (groups, planar) = lie_groups(m);
         let nz = ndx + nu;
         let so = SoWork {
-            fd: ContractedData::new(m),
-            kc: kkt.as_ref().map(|k| KktContracted::new(m, k)),
-            ic: imp.as_ref().map(|i| ImpactContracted::new(m, i)),
             w_a: DVector::zeros(nv),
             w_lambda: DVector::zeros(nc),
             groups,
@@ -320,9 +307,8 @@ impl ActionModel {
             da_du: DMatrix::zeros(nv, nu),
             jq_x: DMatrix::zeros(nv, nv),
             jq_dx: DMatrix::zeros(nv, nv),
-            data: Data::new(m),
-            kkt,
-            imp,
+            data: Data::with_contracted(m),
+            contacts,
             sc: self.state.scratch(),
         })
     }
@@ -517,13 +503,12 @@ impl ActionModel {
                 so.w_a *= dt;
                 so.w_a.gemv_tr(dt * dt, &d.jq_dx, &lq, 1.0);
                 let (off, nu) = (self.actuation.offset(), self.nu());
-                let (cqq, cqv, cvv, ctq) = match (d.kkt.as_mut(), so.kc.as_mut()) {
-                    (Some(k), Some(kc)) => {
-                        kkt_so_contracted(
+                let (cqq, cqv, cvv, ctq) = match d.contacts.as_mut() {
+                    Some(cd) => {
+                        let kc = kkt_so_contracted(
                             m,
                             &mut d.data,
-                            k,
-                            kc,
+                            cd,
                             &d.q,
                             &d.v,
                             &d.tau,
@@ -532,9 +517,9 @@ impl ActionModel {
                         )?;
                         (kc.c_qq(), kc.c_qv(), kc.c_vv(), kc.c_tauq())
                     }
-                    _ => {
-                        fd_so_contracted(m, &mut d.data, &mut so.fd, &d.q, &d.v, &d.tau, &so.w_a)?;
-                        (so.fd.c_qq(), so.fd.c_qv(), so.fd.c_vv(), so.fd.c_tauq())
+                    None => {
+                        let c = fd_so_contracted(m, &mut d.data, &d.q, &d.v, &d.tau, &so.w_a)?;
+                        (c.c_qq(), c.c_qv(), c.c_vv(), c.c_tauq())
                     }
                 };
                 for j in 0..nv {
@@ -620,13 +605,12 @@ impl ActionModel {
                 }
             }
             ActionKind::Impulse { .. } => {
-                if let (Some(im), Some(ic)) = (d.imp.as_mut(), so.ic.as_mut()) {
+                if let Some(cd) = d.contacts.as_mut() {
                     so.w_a.copy_from(&lv);
-                    impact_so_contracted(
+                    let ic = impact_so_contracted(
                         m,
                         &mut d.data,
-                        im,
-                        ic,
+                        cd,
                         &d.q,
                         &d.v,
                         &so.w_a,
@@ -649,7 +633,7 @@ impl ActionModel {
     /// `a = FD(q, v, τ)` (and `∂a/∂x`, `∂a/∂u`, `λ` and its derivatives with contacts).
     fn forward_dynamics(&self, m: &Model, d: &mut ActionData, diff: bool) -> Result<()> {
         let (nv, nu, off) = (m.nv(), self.nu(), self.actuation.offset());
-        match d.kkt.as_mut() {
+        match d.contacts.as_mut() {
             None => {
                 if diff {
                     fd_derivatives(m, &mut d.data, &d.q, &d.v, &d.tau, None)?;
@@ -662,9 +646,9 @@ impl ActionModel {
                     d.a.copy_from(a);
                 }
             }
-            Some(k) => {
-                if diff {
-                    kkt_derivatives(m, &mut d.data, k, &d.q, &d.v, &d.tau)?;
+            Some(cd) => {
+                let k = if diff {
+                    let k = kkt_derivatives(m, &mut d.data, cd, &d.q, &d.v, &d.tau)?;
                     d.da_dx.view_mut((0, 0), (nv, nv)).copy_from(k.dqdd_dq());
                     d.da_dx.view_mut((0, nv), (nv, nv)).copy_from(k.dqdd_dv());
                     d.da_du.copy_from(&k.dqdd_dtau().columns(off, nu));
@@ -672,9 +656,10 @@ impl ActionModel {
                     d.dlambda_dx.view_mut((0, 0), (nc, nv)).copy_from(k.dlambda_dq());
                     d.dlambda_dx.view_mut((0, nv), (nc, nv)).copy_from(k.dlambda_dv());
                     d.dlambda_du.copy_from(&k.dlambda_dtau().columns(off, nu));
+                    k
                 } else {
-                    kkt_dynamics(m, &mut d.data, k, &d.q, &d.v, &d.tau)?;
-                }
+                    kkt_dynamics(m, &mut d.data, cd, &d.q, &d.v, &d.tau)?
+                };
                 d.a.copy_from(k.qdd());
                 d.lambda.copy_from(k.lambda());
             }
@@ -685,7 +670,7 @@ impl ActionModel {
     /// `v⁺` into `d.a`, the impulses into `d.lambda` (and their derivatives).
     fn impulse_dynamics(&self, m: &Model, d: &mut ActionData, diff: bool) -> Result<()> {
         let nv = m.nv();
-        match d.imp.as_mut() {
+        match d.contacts.as_mut() {
             None => {
                 d.a.copy_from(&d.v);
                 if diff {
@@ -695,17 +680,18 @@ impl ActionModel {
                     }
                 }
             }
-            Some(im) => {
-                if diff {
-                    impact_derivatives(m, &mut d.data, im, &d.q, &d.v)?;
+            Some(cd) => {
+                let im = if diff {
+                    let im = impact_derivatives(m, &mut d.data, cd, &d.q, &d.v)?;
                     d.da_dx.view_mut((0, 0), (nv, nv)).copy_from(im.dvplus_dq());
                     d.da_dx.view_mut((0, nv), (nv, nv)).copy_from(im.dvplus_dvminus());
                     let nc = d.lambda.len();
                     d.dlambda_dx.view_mut((0, 0), (nc, nv)).copy_from(im.dimpulse_dq());
                     d.dlambda_dx.view_mut((0, nv), (nc, nv)).copy_from(im.dimpulse_dvminus());
+                    im
                 } else {
-                    impact_dynamics(m, &mut d.data, im, &d.q, &d.v)?;
-                }
+                    impact_dynamics(m, &mut d.data, cd, &d.q, &d.v)?
+                };
                 d.a.copy_from(im.vplus());
                 d.lambda.copy_from(im.impulse());
             }

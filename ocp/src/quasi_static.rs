@@ -7,7 +7,7 @@
 
 use nalgebra::{DMatrix, DVector};
 use sodyn::algo::{Data, rnea};
-use sodyn::deriv::{ContactData, KktData, kkt_dynamics};
+use sodyn::deriv::{ContactData, kkt_dynamics};
 
 use crate::action::{ActionKind, ActionModel};
 use crate::error::{OcpError, Result};
@@ -35,14 +35,14 @@ pub(crate) fn quasi_static(m: &ActionModel, x: &DVector<f64>) -> Result<DVector<
         a[(off + j, j)] = 1.0;
     }
     if nc > 0 {
-        let mut kd = KktData::new(model, ContactData::new(model, &active)?);
+        let mut cd = ContactData::new(model, &active)?;
         // The knot's damping, as its dynamics uses it: a redundant contact set that the
         // knot regularises is accepted here too (only the Jacobian is used).
         if damping > 0.0 {
-            kd.set_damping(damping)?;
+            cd.set_damping(damping)?;
         }
-        kkt_dynamics(model, &mut data, &mut kd, &q, &zero, &zero)?;
-        a.columns_mut(nu, nc).copy_from(&kd.cd().jac().transpose());
+        kkt_dynamics(model, &mut data, &mut cd, &q, &zero, &zero)?;
+        a.columns_mut(nu, nc).copy_from(&cd.jac().transpose());
     }
     let pinv = a.pseudo_inverse(1e-12).map_err(|e| OcpError::new(format!("quasi_static: {e}")))?;
     Ok((pinv * g).rows(0, nu).into_owned())

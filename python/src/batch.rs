@@ -12,9 +12,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 use sodyn::algo::{self, Data};
 use sodyn::batch::{BatchData, BatchPool, copy_output, map_states};
-use sodyn::deriv::{
-    FdSoData, SoData, fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives,
-};
+use sodyn::deriv::{fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives};
 use sodyn::model::Model;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
@@ -281,9 +279,9 @@ pub(crate) fn batch_id_so_derivatives<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
     let ins = batch_qvx(m, q, v, a, "a")?;
-    let (nv, ws) = (m.nv(), (Data::new(m), SoData::new(m)));
-    batch_call(py, threads, ws, &ins, 4, &[nv, nv, nv], |(d, so), st, o| {
-        id_so_derivatives(m, d, so, &st[0], &st[1], &st[2], None)?;
+    let (nv, ws) = (m.nv(), Data::with_second_order(m));
+    batch_call(py, threads, ws, &ins, 4, &[nv, nv, nv], |d, st, o| {
+        let so = id_so_derivatives(m, d, &st[0], &st[1], &st[2], None)?;
         let ts = [so.d2tau_dq2(), so.d2tau_dv2(), so.d2tau_dqdv(), so.dm_dq()];
         for (dst, src) in o.iter_mut().zip(ts) {
             copy_output(dst, src.as_slice());
@@ -305,9 +303,9 @@ pub(crate) fn batch_fd_so_derivatives<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
     let ins = batch_qvx(m, q, v, tau, "tau")?;
-    let (nv, ws) = (m.nv(), (Data::new(m), FdSoData::new(m)));
-    batch_call(py, threads, ws, &ins, 4, &[nv, nv, nv], |(d, f), st, o| {
-        fd_so_derivatives(m, d, f, &st[0], &st[1], &st[2], None)?;
+    let (nv, ws) = (m.nv(), Data::with_second_order(m));
+    batch_call(py, threads, ws, &ins, 4, &[nv, nv, nv], |d, st, o| {
+        let f = fd_so_derivatives(m, d, &st[0], &st[1], &st[2], None)?;
         let ts = [f.d2qdd_dq2(), f.d2qdd_dv2(), f.d2qdd_dqdv(), f.d2qdd_dtaudq()];
         for (dst, src) in o.iter_mut().zip(ts) {
             copy_output(dst, src.as_slice());

@@ -4,7 +4,7 @@
 use crate::convert::{
     core_err, nv_what, out_mat, out_tensor, out_vec, read_placement, read_q, read_vec, value_err,
 };
-use crate::data::{ContactKey, PyData, read_qvx};
+use crate::data::{ContactKey, PyData, contact_data, read_qvx};
 use crate::model::PyModel;
 use nalgebra::{DMatrix, DVector, Vector3};
 use numpy::PyArray1;
@@ -13,8 +13,7 @@ use pyo3::types::{PyDict, PyTuple};
 use sodyn::Error;
 use sodyn::algo::Contact;
 use sodyn::deriv::{
-    self, ContactData, ImpactContracted, ImpactData, KktContracted, KktData, SoData,
-    constrained_id_derivatives, constrained_id_so_derivatives, impact_derivatives,
+    self, constrained_id_derivatives, constrained_id_so_derivatives, impact_derivatives,
     impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
 };
 use sodyn::model::{ContactReference, ContactType, Model};
@@ -355,15 +354,13 @@ pub(crate) fn py_constrained_id_derivatives<'py>(
     if let Some(index) = d.lam.iter().position(|x| !x.is_finite()) {
         return Err(core_err(Error::NotFinite { what: "lambda_".into(), index }));
     }
-    if d.cid.as_ref().is_none_or(|(k, _)| *k != key) {
-        d.cid = Some((key, ContactData::new(m, &cs).map_err(core_err)?));
-    }
-    let PyData { d, q, v, a, lam, so, cid, .. } = d;
-    let cd = &mut cid.as_mut().expect("set above").1;
+    let PyData { d, q, v, a, lam, contacts, .. } = d;
+    let cd = contact_data(contacts, m, &cs, key, 1, false)?;
     let out = PyDict::new(py);
     if order == 2 {
-        let so = so.get_or_insert_with(|| SoData::new(m));
-        py.detach(|| constrained_id_so_derivatives(m, d, cd, so, q, v, a, lam))
+        d.reserve_second_order(m).map_err(core_err)?;
+        let so = py
+            .detach(|| constrained_id_so_derivatives(m, d, cd, q, v, a, lam))
             .map_err(core_err)?;
         out.set_item("d2tau_dq2", out_tensor(py, so.d2tau_dq2()))?;
     } else {
@@ -397,22 +394,14 @@ pub(crate) fn py_kkt_derivatives<'py>(
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
     let (cs, key) = resolve(m, &contacts)?;
-    let fits = |k: &KktData, key2: &ContactKey| *key2 == key && (order == 1 || k.so().is_some());
-    if d.kkt.as_ref().is_none_or(|(k2, kd)| !fits(kd, k2)) {
-        let mut kd = KktData::new(m, ContactData::new(m, &cs).map_err(core_err)?);
-        if order == 2 {
-            kd = kd.with_second_order(m);
-        }
-        d.kkt = Some((key, kd));
-    }
-    let PyData { d, q, v, a, kkt, .. } = d;
-    let kd = &mut kkt.as_mut().expect("set above").1;
-    kd.set_damping(damping).map_err(core_err)?;
-    if order == 2 {
-        py.detach(|| kkt_so_derivatives(m, d, kd, q, v, a)).map_err(core_err)?;
+    let PyData { d, q, v, a, contacts, .. } = d;
+    let cd = contact_data(contacts, m, &cs, key, order, false)?;
+    cd.set_damping(damping).map_err(core_err)?;
+    let kd = if order == 2 {
+        py.detach(|| kkt_so_derivatives(m, d, cd, q, v, a)).map_err(core_err)?
     } else {
-        py.detach(|| kkt_derivatives(m, d, kd, q, v, a)).map_err(core_err)?;
-    }
+        py.detach(|| kkt_derivatives(m, d, cd, q, v, a)).map_err(core_err)?
+    };
     kkt_dict_of!(py, kd, order)
 }
 
@@ -439,23 +428,15 @@ pub(crate) fn py_impact_derivatives<'py>(
     read_q(q, "q", m, &mut d.q)?;
     read_vec(v_minus, "v_minus", m.nv(), nv_what(m), &mut d.v)?;
     let (cs, key) = resolve(m, &contacts)?;
-    let fits = |k: &ImpactData, key2: &ContactKey| *key2 == key && (order == 1 || k.so().is_some());
-    if d.impact.as_ref().is_none_or(|(k2, im)| !fits(im, k2)) {
-        let mut im = ImpactData::new(m, ContactData::new(m, &cs).map_err(core_err)?);
-        if order == 2 {
-            im = im.with_second_order(m);
-        }
-        d.impact = Some((key, im));
-    }
-    let PyData { d, q, v, impact, .. } = d;
-    let im = &mut impact.as_mut().expect("set above").1;
-    im.set_restitution(restitution).map_err(core_err)?;
-    im.set_damping(damping).map_err(core_err)?;
-    if order == 2 {
-        py.detach(|| impact_so_derivatives(m, d, im, q, v)).map_err(core_err)?;
+    let PyData { d, q, v, contacts, .. } = d;
+    let cd = contact_data(contacts, m, &cs, key, order, false)?;
+    cd.set_restitution(restitution).map_err(core_err)?;
+    cd.set_damping(damping).map_err(core_err)?;
+    let im = if order == 2 {
+        py.detach(|| impact_so_derivatives(m, d, cd, q, v)).map_err(core_err)?
     } else {
-        py.detach(|| impact_derivatives(m, d, im, q, v)).map_err(core_err)?;
-    }
+        py.detach(|| impact_derivatives(m, d, cd, q, v)).map_err(core_err)?
+    };
     impact_dict_of!(py, im, order)
 }
 
@@ -482,15 +463,10 @@ pub(crate) fn kkt_so_contracted<'py>(
     let (cs, key) = resolve(m, &contacts)?;
     read_vec(w_qdd, "w_qdd", m.nv(), nv_what(m), &mut d.w)?;
     read_vec(w_lambda, "w_lambda", rows_of(&cs), "3 or 6 rows per contact", &mut d.wl)?;
-    if d.kktc.as_ref().is_none_or(|(k, _, _)| *k != key) {
-        let kd = KktData::new(m, ContactData::new(m, &cs).map_err(core_err)?);
-        let kc = KktContracted::new(m, &kd);
-        d.kktc = Some((key, kd, kc));
-    }
-    let PyData { d, q, v, a, w, wl, kktc, .. } = d;
-    let (_, kd, kc) = kktc.as_mut().expect("set above");
-    kd.set_damping(damping).map_err(core_err)?;
-    py.detach(|| deriv::kkt_so_contracted(m, d, kd, kc, q, v, a, w, wl)).map_err(core_err)?;
+    let PyData { d, q, v, a, w, wl, contacts, .. } = d;
+    let cd = contact_data(contacts, m, &cs, key, 1, true)?;
+    cd.set_damping(damping).map_err(core_err)?;
+    let kc = py.detach(|| deriv::kkt_so_contracted(m, d, cd, q, v, a, w, wl)).map_err(core_err)?;
     PyTuple::new(
         py,
         [
@@ -527,16 +503,11 @@ pub(crate) fn impact_so_contracted<'py>(
     let (cs, key) = resolve(m, &contacts)?;
     read_vec(w_vplus, "w_vplus", m.nv(), nv_what(m), &mut d.w)?;
     read_vec(w_impulse, "w_impulse", rows_of(&cs), "3 or 6 rows per contact", &mut d.wl)?;
-    if d.impc.as_ref().is_none_or(|(k, _, _)| *k != key) {
-        let im = ImpactData::new(m, ContactData::new(m, &cs).map_err(core_err)?);
-        let ic = ImpactContracted::new(m, &im);
-        d.impc = Some((key, im, ic));
-    }
-    let PyData { d, q, v, w, wl, impc, .. } = d;
-    let (_, im, ic) = impc.as_mut().expect("set above");
-    im.set_restitution(restitution).map_err(core_err)?;
-    im.set_damping(damping).map_err(core_err)?;
-    py.detach(|| deriv::impact_so_contracted(m, d, im, ic, q, v, w, wl)).map_err(core_err)?;
+    let PyData { d, q, v, w, wl, contacts, .. } = d;
+    let cd = contact_data(contacts, m, &cs, key, 1, true)?;
+    cd.set_restitution(restitution).map_err(core_err)?;
+    cd.set_damping(damping).map_err(core_err)?;
+    let ic = py.detach(|| deriv::impact_so_contracted(m, d, cd, q, v, w, wl)).map_err(core_err)?;
     PyTuple::new(py, [out_mat(py, ic.c_qq()), out_mat(py, ic.c_qvminus())])
 }
 

@@ -31,8 +31,9 @@ pub(crate) fn core_err(e: Error) -> PyErr {
 }
 
 /// A core message with the Rust API it names (`Type::method`) rewritten for Python: a
-/// workspace constructor (`SoData::new`, `Data::new`, ...) becomes `model.create_data()` (a
-/// Python `Data` holds every workspace), the regularised solve's setter
+/// workspace constructor (`Data::new`, `Data::with_second_order`, `ContactData::new`, ...)
+/// becomes `model.create_data()` (a Python `Data` holds every workspace and adds capacity on
+/// first use), the regularised solve's setter
 /// (`ContactData::set_damping`) the `damping=` argument of the KKT and impact functions, a
 /// `Model` accessor (`Model::tendons`) the `Model` attribute, any other `Type::name` `name`.
 pub(crate) fn python_message(s: String) -> String {
@@ -48,7 +49,9 @@ pub(crate) fn python_message(s: String) -> String {
         let end = tail.find(|c: char| !ident(c)).unwrap_or(tail.len());
         out.push_str(&rest[..start]);
         match (&rest[start..p], &tail[..end]) {
-            (_, "new") => out.push_str("model.create_data()"),
+            (_, "new" | "with_second_order" | "with_contracted") => {
+                out.push_str("model.create_data()")
+            }
             (_, "set_damping") => out.push_str("the `damping=` argument"),
             ("Model", name) => {
                 out.push_str("Model.");

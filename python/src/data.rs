@@ -4,19 +4,18 @@ use crate::convert::{nv_what, read_q, read_vec};
 use crate::model::PyModel;
 use nalgebra::DVector;
 use pyo3::prelude::*;
+use sodyn::algo::Contact;
 use sodyn::algo::Data;
-use sodyn::deriv::{
-    ContactData, ContractedData, FdSoData, ImpactContracted, ImpactData, KktContracted, KktData,
-    SoData,
-};
+use sodyn::deriv::ContactData;
 use sodyn::model::Model;
 use sodyn::spatial::Force;
 
 /// A contact set resolved against a model: (frame index, point) per contact.
 pub(crate) type ContactKey = Vec<(usize, [u64; 16])>;
 
-/// Workspace of one model: sodyn's `Data`, the second-order and contact workspaces (made on
-/// first use) and the input buffers. One thread at a time (a second thread using the same
+/// Workspace of one model: sodyn's `Data` (its second-order capacity added on first use), the
+/// `ContactData` of the last contact set (made on first use, kept while the set is the same)
+/// and the input buffers. One thread at a time (a second thread using the same
 /// `Data` concurrently gets a `RuntimeError`, "already borrowed").
 #[pyclass(name = "Data", module = "sodyn._sodyn")]
 pub(crate) struct PyData {
@@ -26,16 +25,9 @@ pub(crate) struct PyData {
     pub(crate) a: DVector<f64>,
     pub(crate) fext: Vec<Force>,
     pub(crate) lam: DVector<f64>,
-    pub(crate) so: Option<SoData>,
-    pub(crate) fso: Option<FdSoData>,
-    pub(crate) con: Option<ContractedData>,
     pub(crate) w: DVector<f64>,
-    pub(crate) cid: Option<(ContactKey, ContactData)>,
-    pub(crate) kkt: Option<(ContactKey, KktData)>,
-    pub(crate) impact: Option<(ContactKey, ImpactData)>,
-    pub(crate) kktc: Option<(ContactKey, KktData, KktContracted)>,
-    pub(crate) impc: Option<(ContactKey, ImpactData, ImpactContracted)>,
     pub(crate) wl: DVector<f64>,
+    pub(crate) contacts: Option<(ContactKey, ContactData)>,
 }
 
 impl PyData {
@@ -47,16 +39,9 @@ impl PyData {
             a: DVector::zeros(m.nv()),
             fext: Vec::new(),
             lam: DVector::zeros(0),
-            so: None,
-            fso: None,
-            con: None,
             w: DVector::zeros(m.nv()),
-            cid: None,
-            kkt: None,
-            impact: None,
-            kktc: None,
-            impc: None,
             wl: DVector::zeros(0),
+            contacts: None,
         }
     }
     pub(crate) fn for_py_model(m: &PyModel) -> Self {
@@ -80,6 +65,30 @@ impl PyModel {
     fn create_data(&self) -> PyData {
         PyData::for_py_model(self)
     }
+}
+
+/// The `ContactData` of contact set `cs` (whose key is `key`) in `slot`: the cached one when
+/// the set is the same, else a new one; with the dense (`order == 2`) or contracted
+/// (`contracted`) second-order capacity added on first use.
+pub(crate) fn contact_data<'a>(
+    slot: &'a mut Option<(ContactKey, ContactData)>,
+    m: &Model,
+    cs: &[Contact],
+    key: ContactKey,
+    order: i64,
+    contracted: bool,
+) -> PyResult<&'a mut ContactData> {
+    let entry = match slot.take() {
+        Some((k, cd)) if k == key => (k, cd),
+        _ => (key, ContactData::new(m, cs).map_err(crate::convert::core_err)?),
+    };
+    let cd = &mut slot.insert(entry).1;
+    if order == 2 {
+        cd.reserve_second_order(m).map_err(crate::convert::core_err)?;
+    } else if contracted {
+        cd.reserve_contracted(m).map_err(crate::convert::core_err)?;
+    }
+    Ok(cd)
 }
 
 /// Reads `(q, v, x)` into the data's buffers (`x` is `a` or `tau`).

@@ -9,10 +9,7 @@ use crate::model::PyModel;
 use nalgebra::DMatrix;
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
-use sodyn::deriv::{
-    self, ContractedData, FdSoData, SoData, fd_derivatives, fd_so_derivatives, id_derivatives,
-    id_so_derivatives,
-};
+use sodyn::deriv::{self, fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives};
 
 /// First-order inverse-dynamics derivatives (IDSVA): `(dtau_dq, dtau_dv)`; `dtau_da = M`.
 #[pyfunction(name = "id_derivatives")]
@@ -75,9 +72,9 @@ pub(crate) fn py_id_so_derivatives<'py>(
     let out = out.filter(|o| !o.is_none()).map(|o| check_out(o, m.nv())).transpose()?;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
-    let PyData { d, q, v, a, so, .. } = d;
-    let so = so.get_or_insert_with(|| SoData::new(m));
-    py.detach(|| id_so_derivatives(m, d, so, q, v, a, None)).map_err(core_err)?;
+    let PyData { d, q, v, a, .. } = d;
+    d.reserve_second_order(m).map_err(core_err)?;
+    let so = py.detach(|| id_so_derivatives(m, d, q, v, a, None)).map_err(core_err)?;
     if let Some(out) = out {
         return write_out(out, [so.d2tau_dq2(), so.d2tau_dv2(), so.d2tau_dqdv(), so.dm_dq()]);
     }
@@ -109,9 +106,9 @@ pub(crate) fn py_fd_so_derivatives<'py>(
     let out = out.filter(|o| !o.is_none()).map(|o| check_out(o, m.nv())).transpose()?;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
-    let PyData { d, q, v, a, fso, .. } = d;
-    let fso = fso.get_or_insert_with(|| FdSoData::new(m));
-    py.detach(|| fd_so_derivatives(m, d, fso, q, v, a, None)).map_err(core_err)?;
+    let PyData { d, q, v, a, .. } = d;
+    d.reserve_second_order(m).map_err(core_err)?;
+    let fso = py.detach(|| fd_so_derivatives(m, d, q, v, a, None)).map_err(core_err)?;
     if let Some(out) = out {
         return write_out(
             out,
@@ -146,9 +143,9 @@ pub(crate) fn id_so_contracted<'py>(
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
     read_vec(w, "w", m.nv(), nv_what(m), &mut d.w)?;
-    let PyData { d, q, v, a, w, con, .. } = d;
-    let c = con.get_or_insert_with(|| ContractedData::new(m));
-    py.detach(|| deriv::id_so_contracted(m, d, c, q, v, a, w)).map_err(core_err)?;
+    let PyData { d, q, v, a, w, .. } = d;
+    d.reserve_contracted(m).map_err(core_err)?;
+    let c = py.detach(|| deriv::id_so_contracted(m, d, q, v, a, w)).map_err(core_err)?;
     PyTuple::new(
         py,
         [
@@ -176,9 +173,9 @@ pub(crate) fn fd_so_contracted<'py>(
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
     read_vec(w, "w", m.nv(), nv_what(m), &mut d.w)?;
-    let PyData { d, q, v, a, w, con, .. } = d;
-    let c = con.get_or_insert_with(|| ContractedData::new(m));
-    py.detach(|| deriv::fd_so_contracted(m, d, c, q, v, a, w)).map_err(core_err)?;
+    let PyData { d, q, v, a, w, .. } = d;
+    d.reserve_contracted(m).map_err(core_err)?;
+    let c = py.detach(|| deriv::fd_so_contracted(m, d, q, v, a, w)).map_err(core_err)?;
     PyTuple::new(
         py,
         [
@@ -218,12 +215,12 @@ pub(crate) fn idsoza<'py>(
     x: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let m = &model.m;
-    let PyData { d, q: qb, a: xb, so, .. } = &mut *data;
+    let PyData { d, q: qb, a: xb, .. } = &mut *data;
     read_q(q, "q", m, qb)?;
     read_vec(x, "x", m.nv(), nv_what(m), xb)?;
-    let so = so.get_or_insert_with(|| SoData::new(m));
-    py.detach(|| deriv::idsoza(m, d, so, qb, xb).map(|_| ())).map_err(core_err)?;
-    Ok(out_tensor(py, so.d2tau_dq2()))
+    d.reserve_second_order(m).map_err(core_err)?;
+    let t = py.detach(|| deriv::idsoza(m, d, qb, xb)).map_err(core_err)?;
+    Ok(out_tensor(py, t))
 }
 
 /// Adds this family's classes and functions to the module.

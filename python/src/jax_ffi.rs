@@ -31,9 +31,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyCapsule, PyDict};
 use sodyn::algo::{self, Data};
 use sodyn::batch::{BatchData, BatchPool, map_states};
-use sodyn::deriv::{
-    FdSoData, SoData, fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives,
-};
+use sodyn::deriv::{fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives};
 use sodyn::model::Model;
 use sodyn::tensor::Tensor3;
 use std::collections::HashMap;
@@ -189,13 +187,11 @@ const API_MIN_SIZE: usize = struct_size!(
 // ---------------------------------------------------------------------------------------------
 // The model registry
 
-/// One state's workspace: sodyn's `Data`, the second-order workspaces (made on first use) and
+/// One state's workspace: sodyn's `Data` (its second-order capacity added on first use) and
 /// the three input vectors.
 #[derive(Clone)]
 struct Ws {
     d: Data,
-    so: Option<SoData>,
-    fso: Option<FdSoData>,
     x: [DVector<f64>; 3],
 }
 
@@ -203,8 +199,6 @@ impl Ws {
     fn new(m: &Model) -> Self {
         Self {
             d: Data::new(m),
-            so: None,
-            fso: None,
             x: [DVector::zeros(m.nq()), DVector::zeros(m.nv()), DVector::zeros(m.nv())],
         }
     }
@@ -365,7 +359,7 @@ fn run_state(
     w: &mut Ws,
     out: &mut [&mut [f64]],
 ) -> sodyn::Result<()> {
-    let Ws { d, so, fso, x: [q, v, x] } = w;
+    let Ws { d, x: [q, v, x] } = w;
     match (f, order) {
         (Func::Rnea, Order::Value) => {
             out[0].copy_from_slice(algo::rnea(m, d, q, v, x, None)?.as_slice())
@@ -388,16 +382,16 @@ fn run_state(
             write_matrix(out[3], d.minv());
         }
         (Func::Rnea, Order::Second) => {
-            let so = so.get_or_insert_with(|| SoData::new(m));
-            id_so_derivatives(m, d, so, q, v, x, None)?;
+            d.reserve_second_order(m)?;
+            let so = id_so_derivatives(m, d, q, v, x, None)?;
             let ts = [so.d2tau_dq2(), so.d2tau_dv2(), so.d2tau_dqdv(), so.dm_dq()];
             for (dst, t) in out.iter_mut().zip(ts) {
                 write_tensor(dst, t);
             }
         }
         (Func::Aba, Order::Second) => {
-            let fso = fso.get_or_insert_with(|| FdSoData::new(m));
-            fd_so_derivatives(m, d, fso, q, v, x, None)?;
+            d.reserve_second_order(m)?;
+            let fso = fd_so_derivatives(m, d, q, v, x, None)?;
             let ts = [fso.d2qdd_dq2(), fso.d2qdd_dv2(), fso.d2qdd_dqdv(), fso.d2qdd_dtaudq()];
             for (dst, t) in out.iter_mut().zip(ts) {
                 write_tensor(dst, t);
@@ -413,8 +407,8 @@ fn run_state(
             write_matrix(out[2], d.dtau_dv());
         }
         (Func::Nle, Order::Second) => {
-            let so = so.get_or_insert_with(|| SoData::new(m));
-            id_so_derivatives(m, d, so, q, v, x, None)?;
+            d.reserve_second_order(m)?;
+            let so = id_so_derivatives(m, d, q, v, x, None)?;
             for (dst, t) in out.iter_mut().zip([so.d2tau_dq2(), so.d2tau_dv2(), so.d2tau_dqdv()]) {
                 write_tensor(dst, t);
             }
@@ -422,8 +416,8 @@ fn run_state(
         (Func::Crba, Order::Value) => write_matrix(out[0], algo::crba(m, d, q)?),
         (Func::Crba, Order::First) => {
             write_matrix(out[0], algo::crba(m, d, q)?);
-            let so = so.get_or_insert_with(|| SoData::new(m));
-            id_so_derivatives(m, d, so, q, v, x, None)?;
+            d.reserve_second_order(m)?;
+            let so = id_so_derivatives(m, d, q, v, x, None)?;
             write_tensor(out[1], so.dm_dq());
         }
         (Func::Crba, Order::Second) => {}

@@ -97,6 +97,106 @@ pub struct Data {
     /// the reduced results, which the accessors return (the fields above are then an empty
     /// shell).
     pub(crate) red: Option<Box<crate::algo::data::reduced::MimicData>>,
+    /// The second-order parts ([`Part`]), allocated by the constructors of `crate::deriv`
+    /// (`Data::with_contracted`, `Data::with_second_order`); `None` in a first-order `Data`.
+    pub(crate) parts: [Option<Box<dyn DataPart>>; 3],
+}
+
+/// A part of a [`Data`] that a higher layer allocates and fills: the second-order workspaces
+/// and results of `crate::deriv` (IDSVA-SO, the forward-dynamics second order, the contracted
+/// second order). Held type-erased, so that this layer does not import the layers above it;
+/// the owning family downcasts it with [`Data::with_part`] and [`Data::part`].
+pub(crate) trait DataPart: std::any::Any + std::fmt::Debug + Send + Sync {
+    /// A boxed clone (for `Data: Clone`).
+    fn clone_part(&self) -> Box<dyn DataPart>;
+    /// `self` as `Any`, for downcasting.
+    fn as_any(&self) -> &dyn std::any::Any;
+    /// `self` as `Any`, mutably.
+    fn as_any_mut(&mut self) -> &mut dyn std::any::Any;
+}
+
+/// Implements [`DataPart`] for the named types (each `Clone + Debug + Send + Sync + 'static`).
+/// Not a blanket impl: that would cover `Box<dyn DataPart>` itself, whose `as_any` would then
+/// answer for the box rather than the part.
+macro_rules! impl_data_part {
+    ($($t:ty),+ $(,)?) => {$(
+        impl $crate::algo::data::DataPart for $t {
+            fn clone_part(&self) -> Box<dyn $crate::algo::data::DataPart> {
+                Box::new(self.clone())
+            }
+            fn as_any(&self) -> &dyn std::any::Any {
+                self
+            }
+            fn as_any_mut(&mut self) -> &mut dyn std::any::Any {
+                self
+            }
+        }
+    )+};
+}
+pub(crate) use impl_data_part;
+
+impl Clone for Box<dyn DataPart> {
+    fn clone(&self) -> Self {
+        (**self).clone_part()
+    }
+}
+
+/// The slots of [`Data`]'s second-order parts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Part {
+    /// `SoData` (IDSVA-SO, `∂M/∂q`).
+    IdSo = 0,
+    /// `FdSoData` (second-order forward dynamics).
+    FdSo = 1,
+    /// `ContractedData` (the contracted second order).
+    Contracted = 2,
+}
+
+impl Data {
+    /// The part in slot `p`, if this workspace has it.
+    pub(crate) fn part<T: 'static>(&self, p: Part) -> Option<&T> {
+        self.parts[p as usize].as_deref().and_then(|b| b.as_any().downcast_ref::<T>())
+    }
+    /// Runs `f` with this workspace and its part in slot `p` borrowed apart (the part is moved
+    /// out of its slot for the call and back after it: no allocation).
+    ///
+    /// # Errors
+    /// [`Error::Workspace`](crate::Error::Workspace) naming `function` and the constructor
+    /// `make` when this workspace has no such part; `f`'s error.
+    pub(crate) fn with_part<T: 'static, R>(
+        &mut self,
+        p: Part,
+        function: &str,
+        make: &str,
+        f: impl FnOnce(&mut Data, &mut T) -> crate::error::Result<R>,
+    ) -> crate::error::Result<R> {
+        let missing = || {
+            crate::error::Error::Workspace(format!(
+                "{function} needs a Data with {} capacity: make it with {make}(&model)",
+                match p {
+                    Part::Contracted => "contracted second-order",
+                    Part::IdSo | Part::FdSo => "dense second-order",
+                }
+            ))
+        };
+        let mut b = self.parts[p as usize].take().ok_or_else(missing)?;
+        let r = match (*b).as_any_mut().downcast_mut::<T>() {
+            Some(t) => f(self, t),
+            None => Err(missing()),
+        };
+        self.parts[p as usize] = Some(b);
+        r
+    }
+    /// The part in slot `p`, or the error of [`Data::with_part`] naming `function`.
+    pub(crate) fn part_or<T: 'static>(&self, p: Part, function: &str) -> crate::error::Result<&T> {
+        self.part(p).ok_or_else(|| {
+            crate::error::Error::Workspace(format!("{function}: this Data has no {p:?} part"))
+        })
+    }
+    /// Whether this workspace has the part in slot `p`.
+    pub(crate) fn has_part(&self, p: Part) -> bool {
+        self.parts[p as usize].is_some()
+    }
 }
 
 /// The message of a workspace used with another model: what differs.
@@ -491,6 +591,7 @@ impl Data {
             njoints: model.njoints(),
             nv: model.nv(),
             red: None,
+            parts: [None, None, None],
         }
     }
 }

@@ -3,7 +3,7 @@
 //! `R = [[M, −J_cᵀ], [J_c, 0]]` (unknowns `(q̈, λ)` or `(q̇⁺, λ̂)`), and the product terms
 //! `G(z)` of the second-order implicit-function formulas.
 //!
-//! [`ContactData::new`]: inputs model, contacts (`crate::model::Contact`: frame, placement,
+//! `ContactWs::new`: inputs model, contacts (`crate::model::Contact`: frame, placement,
 //! type, reference, gains). Outputs the workspace: per contact its path (the joints and DoFs
 //! from the root to its body), the contact frame's placement in that body's frame, its first
 //! row, and buffers sized for `m` constraint rows (3 per 3-D contact, 6 per 6-D contact); an
@@ -64,7 +64,7 @@ use crate::spatial::Transform;
 use crate::spatial::{Force, Motion};
 use nalgebra::{DMatrix, DVector, Vector3};
 
-/// The largest number of point contacts [`ContactData::new`] accepts (`m` constraint rows).
+/// The largest number of point contacts a [`super::ContactData`] accepts (`m` constraint rows).
 /// The contact workspaces hold several `(nv + m)²` matrices and the KKT and impact solves
 /// take `O(nc²·nv)` time, so without a limit a contact list read from a file could make them
 /// allocate gigabytes: 3,000 contacts on the quadruped (a 63 KB state file for the command
@@ -74,7 +74,7 @@ pub const MAX_CONTACTS: usize = 256;
 
 /// Workspace for a fixed set of point contacts on one model (allocated once).
 #[derive(Clone, Debug)]
-pub struct ContactData {
+pub(crate) struct ContactWs {
     /// The contacts.
     pub(crate) contacts: Vec<Contact>,
     pub(crate) paths: Vec<Path>,
@@ -158,7 +158,7 @@ pub struct ContactData {
     pub(crate) reduced_key: Option<u64>,
 }
 
-impl ContactData {
+impl ContactWs {
     /// No contacts on the world-only model: the contact part of the shell of a reduced
     /// model's workspaces.
     pub(crate) fn empty() -> Self {
@@ -186,7 +186,7 @@ impl ContactData {
     }
 }
 
-impl ContactData {
+impl ContactWs {
     /// Workspace for `contacts` on `model`. A contact on the fixed world is an error.
     ///
     /// # Errors
@@ -484,7 +484,7 @@ pub(crate) fn padded_rows(r: usize) -> usize {
 }
 
 /// Base quantities of the current state (after `forward_pass_world` and [`update_points`]).
-pub(crate) fn base<'a>(model: &'a Model, data: &'a Data, cd: &'a ContactData) -> Base<'a> {
+pub(crate) fn base<'a>(model: &'a Model, data: &'a Data, cd: &'a ContactWs) -> Base<'a> {
     Base {
         s: &data.s_world,
         vel: &data.ov,
@@ -496,7 +496,7 @@ pub(crate) fn base<'a>(model: &'a Model, data: &'a Data, cd: &'a ContactData) ->
 
 /// World contact points, accelerations without gravity and the Jacobian, from the current
 /// `o_m_i`, `s_world`, `oa` (with base acceleration `a0`).
-pub(crate) fn update_points(model: &Model, data: &Data, cd: &mut ContactData, a0: Motion) {
+pub(crate) fn update_points(model: &Model, data: &Data, cd: &mut ContactWs, a0: Motion) {
     for j in 0..model.njoints() {
         cd.acc[j] = if j == 0 { Motion::zero() } else { data.oa[j] - a0 };
     }
@@ -545,7 +545,7 @@ pub(crate) fn update_points(model: &Model, data: &Data, cd: &mut ContactData, a0
 /// CRBA). With `v`, also the body velocities `cd.kvel` and accelerations `cd.kacc` at `q̈ = 0`
 /// without gravity of the path joints, and the drift `J̇q̇` (classical point accelerations at
 /// `q̈ = 0`) into `cd.drift` (without `v` these are not touched).
-pub(crate) fn path_kinematics(model: &Model, data: &Data, cd: &mut ContactData, v: Option<&[f64]>) {
+pub(crate) fn path_kinematics(model: &Model, data: &Data, cd: &mut ContactWs, v: Option<&[f64]>) {
     for &j in &cd.union_joints {
         let iv = model.idx_v[j];
         let nj = model.nvs[j];
@@ -602,7 +602,7 @@ pub(crate) fn path_kinematics(model: &Model, data: &Data, cd: &mut ContactData, 
 }
 
 /// The base quantities of the path kinematics (`cd.s`, `cd.kvel`, `cd.kacc`).
-fn path_base<'a>(model: &'a Model, cd: &'a ContactData) -> Base<'a> {
+fn path_base<'a>(model: &'a Model, cd: &'a ContactWs) -> Base<'a> {
     Base {
         s: &cd.s,
         vel: &cd.kvel,
@@ -613,7 +613,7 @@ fn path_base<'a>(model: &'a Model, cd: &'a ContactData) -> Base<'a> {
 }
 
 /// Frame A's (`pose`) and frame B's world placements of the two-frame constraint `c`.
-fn set_loop_poses(data: &Data, cd: &mut ContactData, c: usize, pose: &Transform) {
+fn set_loop_poses(data: &Data, cd: &mut ContactWs, c: usize, pose: &Transform) {
     let lp = cd.loops[c].as_mut().expect("a two-frame constraint");
     lp.a.p = pose.trans;
     lp.a.rot = pose.rot;
@@ -627,7 +627,7 @@ fn set_loop_poses(data: &Data, cd: &mut ContactData, c: usize, pose: &Transform)
 /// of the two-frame constraint `c` into `jac` (and `drift`).
 fn loop_rows(
     b: &Base,
-    cd: &ContactData,
+    cd: &ContactWs,
     c: usize,
     jac: &mut DMatrix<f64>,
     drift: Option<&mut DVector<f64>>,
@@ -650,7 +650,7 @@ fn loop_rows(
 
 /// Jacobian rows (and with `drift`, the acceleration rows at the current `cd.kacc`) of the
 /// generic contact `c` (6-D or local) from the path kinematics.
-fn generic_rows(model: &Model, cd: &mut ContactData, c: usize, drift: bool) {
+fn generic_rows(model: &Model, cd: &mut ContactWs, c: usize, drift: bool) {
     let (geo, r0) = (cd.geo[c], cd.row0[c]);
     let d = geo.dim();
     let mut jac = std::mem::replace(&mut cd.jac, DMatrix::zeros(0, 0));
@@ -674,7 +674,7 @@ fn generic_rows(model: &Model, cd: &mut ContactData, c: usize, drift: bool) {
 }
 
 /// Adds `Σ_{x ⪯ j} S_x q̈_x` to the path accelerations `cd.kacc` (after [`path_kinematics`]).
-pub(crate) fn add_qdd_to_path_acc(model: &Model, cd: &mut ContactData, qdd: &[f64]) {
+pub(crate) fn add_qdd_to_path_acc(model: &Model, cd: &mut ContactWs, qdd: &[f64]) {
     cd.zc[0] = Motion::zero();
     for &j in &cd.union_joints {
         let mut z = cd.zc[model.parents[j]];
@@ -693,7 +693,7 @@ pub(crate) fn add_qdd_to_path_acc(model: &Model, cd: &mut ContactData, qdd: &[f6
 /// `P = M⁻¹ − YΛYᵀ`, i.e. `R⁻¹ = [[P, Q], [−Qᵀ, Λ]]` by column blocks in `cd.r1`, `cd.r2`
 /// (and `Λ` in `cd.lam`). A rank-deficient contact set is an error naming the contacts (unless
 /// damped).
-pub(crate) fn factor_kkt(model: &Model, data: &mut Data, cd: &mut ContactData) -> Result<()> {
+pub(crate) fn factor_kkt(model: &Model, data: &mut Data, cd: &mut ContactWs) -> Result<()> {
     let n = model.nv;
     let m = cd.dim();
     factor_delassus(model, data, cd, true)?;
@@ -738,7 +738,7 @@ pub(crate) fn transpose_into(
 pub(crate) fn factor_delassus(
     model: &Model,
     data: &Data,
-    cd: &mut ContactData,
+    cd: &mut ContactWs,
     with_q: bool,
 ) -> Result<()> {
     let n = model.nv;
@@ -808,7 +808,7 @@ pub(crate) fn factor_delassus(
 /// `M⁻¹ = L⁻¹ D⁻¹ L⁻ᵀ` into `data.minv` from the `LᵀDL` factor in `data.ltl`: rows of `L⁻¹`
 /// by `(L⁻¹)_i = e_i − Σ_{k ≺ i} L_ik (L⁻¹)_k` (tree-sparse), then one dense product
 /// `(L⁻¹D⁻¹)(L⁻¹)ᵀ`.
-fn minv_from_ltl(model: &Model, data: &mut Data, cd: &mut ContactData) {
+fn minv_from_ltl(model: &Model, data: &mut Data, cd: &mut ContactWs) {
     let n = model.nv;
     let h = data.ltl.as_slice();
     let g = cd.gt.as_mut_slice();
@@ -845,7 +845,7 @@ fn minv_from_ltl(model: &Model, data: &mut Data, cd: &mut ContactData) {
 }
 
 /// `R⁻¹ = [[P, Q], [−Qᵀ, Λ]]` densely into `cd.rinv` (after [`factor_kkt`]; second order only).
-pub(crate) fn fill_rinv(cd: &mut ContactData) {
+pub(crate) fn fill_rinv(cd: &mut ContactWs) {
     let (n, m) = (cd.r1.ncols(), cd.dim());
     cd.rinv.columns_mut(0, n).copy_from(&cd.r1.rows(0, n + m));
     cd.rinv.columns_mut(n, m).copy_from(&cd.r2.rows(0, n + m));
@@ -857,7 +857,7 @@ pub(crate) fn fill_rinv(cd: &mut ContactData) {
 /// `D A_m = (A_λ − A_m) × S_l + (V_λ − V_m) × Ψ̇_l` (J6, J7), `D p = u_l`; along `q̇_l`,
 /// `D V_m = S_l` (J8), `D A_m = (V_λ + V_l − V_m) × S_l` (J9).
 /// `(∂a_p/∂q)ᵀ` is stored in rows `0..nv` of `cxt` (`2nv × m`), `(∂a_p/∂q̇)ᵀ` in rows `nv..2nv`.
-pub(crate) fn accel_derivatives_t(cd: &ContactData, cxt: &mut DMatrix<f64>) {
+pub(crate) fn accel_derivatives_t(cd: &ContactWs, cxt: &mut DMatrix<f64>) {
     let n = cd.s.len();
     for (c, path) in cd.paths.iter().enumerate() {
         let body = *path.joints.last().expect("path");
@@ -934,7 +934,7 @@ pub(crate) fn accel_derivatives_t(cd: &ContactData, cxt: &mut DMatrix<f64>) {
 
 /// Rows `∂(J_c w)/∂q` at fixed `w` into `out` (`m × nv`, only path columns written):
 /// with `Z_j = Σ_{x ⪯ j} S_x w_x`, `D Z_m = S_l × (Z_m − Z_λ)` and `D p = u_l`.
-pub(crate) fn djw_dq(model: &Model, cd: &mut ContactData, w: &[f64], out: &mut DMatrix<f64>) {
+pub(crate) fn djw_dq(model: &Model, cd: &mut ContactWs, w: &[f64], out: &mut DMatrix<f64>) {
     cd.zc[0] = Motion::zero();
     for &j in &cd.union_joints {
         let mut z = cd.zc[model.parents[j]];
@@ -1009,7 +1009,7 @@ pub(crate) fn djw_dq(model: &Model, cd: &mut ContactData, w: &[f64], out: &mut D
 /// (`D u_x = w_x × u_l`), so the entry is `w_l·(u_x × λ)` resp. `w_x·(u_l × λ)`.
 pub(crate) fn sub_djtl_dq(
     s: &[Motion],
-    cd: &mut ContactData,
+    cd: &mut ContactWs,
     lambda: &[f64],
     out: &mut DMatrix<f64>,
 ) {
@@ -1068,7 +1068,7 @@ pub(crate) fn sub_djtl_dq(
 /// derivative (used by the second order).
 fn sub_djtl_dq_generic(
     s: &[Motion],
-    cd: &ContactData,
+    cd: &ContactWs,
     lambda: &[f64],
     o: &mut [f64],
     rs: usize,
@@ -1136,7 +1136,7 @@ fn sub_djtl_dq_generic(
 pub(crate) fn sub_djtl_dq_tree(
     model: &Model,
     s: &[Motion],
-    cd: &mut ContactData,
+    cd: &mut ContactWs,
     lambda: &[f64],
     out: &mut DMatrix<f64>,
 ) {
@@ -1149,7 +1149,7 @@ pub(crate) fn sub_djtl_dq_tree(
 pub(crate) fn sub_djtl_dq_strided(
     model: &Model,
     s: &[Motion],
-    cd: &mut ContactData,
+    cd: &mut ContactWs,
     lambda: &[f64],
     o: &mut [f64],
     rs: usize,
@@ -1204,7 +1204,7 @@ pub(crate) fn sub_djtl_dq_strided(
 pub(crate) fn g_matrix_split(
     model: &Model,
     data: &mut Data,
-    cd: &mut ContactData,
+    cd: &mut ContactWs,
     z_m: &[f64],
     z2: &[f64],
     z: &[f64],
@@ -1342,7 +1342,7 @@ unsafe fn idfoza_batch_avx512(
 pub(crate) fn g_matrix_with(
     model: &Model,
     data: &mut Data,
-    cd: &mut ContactData,
+    cd: &mut ContactWs,
     zmat: &DMatrix<f64>,
     z2: &[f64],
     z: &[f64],
@@ -1391,7 +1391,7 @@ pub(crate) fn g_matrix_with(
 /// (`∂u_j/∂q_k = w_k × u_j`, J1 with `∂p/∂q_k = u_k`) and otherwise only moves the point
 /// (`w_j × u_k`), `w = S.ang`. Uses `cd.s` and the points of the last [`path_kinematics`].
 pub(crate) fn point_jacobian_dq(
-    cd: &ContactData,
+    cd: &ContactWs,
     c: usize,
     zeta: &Vector3<f64>,
     mut f: impl FnMut(usize, usize, f64),
@@ -1425,7 +1425,7 @@ pub(crate) fn point_jacobian_dq(
 /// * 6-D world-aligned: `e = diag(R, R) e_local`, `∂²e = ∂J_j/∂q_k + w_j × J_k + ½ J_k × J_j`
 ///   (`w_j ×` on both halves).
 pub(crate) fn contact_hessians(
-    cd: &ContactData,
+    cd: &ContactWs,
     c: usize,
     zeta: &[f64],
     mut f: impl FnMut(usize, usize, f64, f64),
@@ -1474,7 +1474,7 @@ pub(crate) fn contact_hessians(
 }
 
 /// `zc[j] = Σ_{x ⪯ j} S_x z_x` (world subspaces of `data`) for the joints of contact `c`'s path.
-fn path_sums(model: &Model, data: &Data, cd: &ContactData, c: usize, z: &[f64], zc: &mut [Motion]) {
+fn path_sums(model: &Model, data: &Data, cd: &ContactWs, c: usize, z: &[f64], zc: &mut [Motion]) {
     zc[0] = Motion::zero();
     for &j in &cd.paths[c].joints {
         let mut zj = zc[model.parents[j]];
@@ -1495,7 +1495,7 @@ fn path_sums(model: &Model, data: &Data, cd: &ContactData, c: usize, z: &[f64], 
 pub(crate) fn add_jz_hessian(
     model: &Model,
     data: &Data,
-    cd: &ContactData,
+    cd: &ContactWs,
     c: usize,
     z: &[f64],
     wts: &[f64],
@@ -1521,7 +1521,7 @@ pub(crate) fn add_jz_hessian(
 pub(crate) fn add_acc_hessians(
     model: &Model,
     data: &Data,
-    cd: &ContactData,
+    cd: &ContactWs,
     c: usize,
     zeta: &[f64],
     (qq, vv, qv): (&mut DMatrix<f64>, &mut DMatrix<f64>, &mut DMatrix<f64>),

@@ -34,6 +34,7 @@ use super::id_fo::{accumulate_to_parent, forward_pass_world, mul_b, mul_b_tr_ang
 use super::zero::Avx4;
 use super::zero::Lanes;
 use crate::algo::Data;
+use crate::algo::data::Part;
 use crate::algo::data::workspace_mismatch;
 use crate::algo::internal::root_free_flyer;
 use crate::error::{Error, Result};
@@ -67,7 +68,7 @@ pub struct ContractedData {
 
 impl ContractedData {
     /// Workspace for `model`.
-    pub fn new(model: &Model) -> Self {
+    pub(crate) fn new(model: &Model) -> Self {
         if let Some(r) = &model.reduction {
             let mut w = Self::new(crate::model::tree::shell_model());
             w.red = Some(Box::new(crate::deriv::contracted::reduced::MimicContractedData::new(r)));
@@ -130,13 +131,108 @@ impl ContractedData {
     }
 }
 
+crate::algo::data::impl_data_part!(super::id_so::SoData, super::fd::FdSoData, ContractedData);
+
+/// Second-order capacity of a [`Data`], chosen when it is made: the contracted second order
+/// (`O(nv²)`) with [`Data::with_contracted`], and also the dense `nv³` tensors with
+/// [`Data::with_second_order`]. A [`Data::new`] has first-order capacity only.
+impl Data {
+    /// A workspace for `model` with the contracted second order ([`id_so_contracted`],
+    /// [`fd_so_contracted`]) besides everything [`Data::new`] computes.
+    pub fn with_contracted(model: &Model) -> Self {
+        let mut d = Data::new(model);
+        d.parts[Part::Contracted as usize] = Some(Box::new(ContractedData::new(model)));
+        d
+    }
+    /// A workspace for `model` with the dense second order ([`super::id_so_derivatives`],
+    /// [`super::fd_so_derivatives`], [`super::constrained_id_so_derivatives`]: `nv³` tensors)
+    /// and the contracted second order, besides everything [`Data::new`] computes.
+    pub fn with_second_order(model: &Model) -> Self {
+        let mut d = Data::with_contracted(model);
+        d.parts[Part::IdSo as usize] = Some(Box::new(super::id_so::SoData::new(model)));
+        d.parts[Part::FdSo as usize] = Some(Box::new(super::fd::FdSoData::new(model)));
+        d
+    }
+    /// Adds the contracted second-order capacity of [`Data::with_contracted`] if this workspace
+    /// lacks it (one allocation, then none; for callers that learn late what they need, as the
+    /// Python binding).
+    ///
+    /// # Errors
+    /// [`crate::Error::Workspace`] for a workspace of another model (nothing is added).
+    pub fn reserve_contracted(&mut self, model: &Model) -> Result<()> {
+        self.check(model)?;
+        if !self.has_part(Part::Contracted) {
+            self.parts[Part::Contracted as usize] = Some(Box::new(ContractedData::new(model)));
+        }
+        Ok(())
+    }
+    /// Adds the capacity of [`Data::with_second_order`] if this workspace lacks it.
+    ///
+    /// # Errors
+    /// As [`Data::reserve_contracted`].
+    pub fn reserve_second_order(&mut self, model: &Model) -> Result<()> {
+        self.reserve_contracted(model)?;
+        if !self.has_part(Part::IdSo) {
+            self.parts[Part::IdSo as usize] = Some(Box::new(super::id_so::SoData::new(model)));
+            self.parts[Part::FdSo as usize] = Some(Box::new(super::fd::FdSoData::new(model)));
+        }
+        Ok(())
+    }
+    /// The results of the last [`super::id_so_derivatives`] (or
+    /// [`super::constrained_id_so_derivatives`]); `None` without dense second-order capacity.
+    pub fn id_so(&self) -> Option<&super::id_so::SoData> {
+        self.part(Part::IdSo)
+    }
+    /// The results of the last [`super::fd_so_derivatives`]; `None` without dense second-order
+    /// capacity.
+    pub fn fd_so(&self) -> Option<&super::fd::FdSoData> {
+        self.part(Part::FdSo)
+    }
+    /// The results of the last [`id_so_contracted`] or [`fd_so_contracted`]; `None` without
+    /// contracted second-order capacity.
+    pub fn contracted(&self) -> Option<&ContractedData> {
+        self.part(Part::Contracted)
+    }
+    /// Whether this workspace has dense second-order capacity ([`Data::with_second_order`]).
+    pub fn has_second_order(&self) -> bool {
+        self.has_part(Part::IdSo)
+    }
+    /// Whether this workspace has contracted second-order capacity.
+    pub fn has_contracted(&self) -> bool {
+        self.has_part(Part::Contracted)
+    }
+}
+
 /// The Hessians of `wᵀτ(q, q̇, q̈)` (inverse dynamics, no external forces): `cd.c_qq()`,
 /// `cd.c_vv()`, `cd.c_qv()`, `cd.c_mq()`. The first-order derivatives are
 /// [`super::id_derivatives`]'s; this call does not compute them.
 ///
+/// `data` made by [`Data::with_contracted`] or [`Data::with_second_order`]; the results are
+/// returned (and `data.contracted()` later).
+///
 /// # Errors
-/// As [`super::id_so_derivatives`]; `w` of the wrong length or not finite.
-pub fn id_so_contracted(
+/// As [`super::id_so_derivatives`]; `w` of the wrong length or not finite;
+/// [`crate::Error::Workspace`] without contracted capacity.
+pub fn id_so_contracted<'a>(
+    model: &Model,
+    data: &'a mut Data,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    w: &DVector<f64>,
+) -> Result<&'a ContractedData> {
+    data.with_part(
+        Part::Contracted,
+        "id_so_contracted",
+        "Data::with_contracted",
+        |data, cd: &mut ContractedData| id_so_contracted_ws(model, data, cd, q, v, a, w),
+    )?;
+    data.part_or(Part::Contracted, "id_so_contracted")
+}
+
+/// [`id_so_contracted`] with its workspace part passed apart (the crate's callers that hold it).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn id_so_contracted_ws(
     model: &Model,
     data: &mut Data,
     cd: &mut ContractedData,
@@ -180,9 +276,31 @@ pub fn id_so_contracted(
 /// `cd.c_vv()`, `cd.c_qv()`, `cd.c_tauq()`; also the first-order forward-dynamics derivatives
 /// into `data` (`qdd`, `dqdd_dq`, `dqdd_dv`, `minv`, as [`super::fd_derivatives`]).
 ///
+/// `data` made by [`Data::with_contracted`] or [`Data::with_second_order`].
+///
 /// # Errors
-/// As [`super::fd_so_derivatives`]; `w` of the wrong length or not finite.
-pub fn fd_so_contracted(
+/// As [`super::fd_so_derivatives`]; `w` of the wrong length or not finite;
+/// [`crate::Error::Workspace`] without contracted capacity.
+pub fn fd_so_contracted<'a>(
+    model: &Model,
+    data: &'a mut Data,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+    w: &DVector<f64>,
+) -> Result<&'a ContractedData> {
+    data.with_part(
+        Part::Contracted,
+        "fd_so_contracted",
+        "Data::with_contracted",
+        |data, cd: &mut ContractedData| fd_so_contracted_ws(model, data, cd, q, v, tau, w),
+    )?;
+    data.part_or(Part::Contracted, "fd_so_contracted")
+}
+
+/// [`fd_so_contracted`] with its workspace part passed apart (the crate's callers that hold it).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn fd_so_contracted_ws(
     model: &Model,
     data: &mut Data,
     cd: &mut ContractedData,
@@ -929,7 +1047,7 @@ pub(crate) mod reduced {
         w: &[f64],
     ) -> Result<()> {
         model.expand_v_into(w, cd.wf.as_mut_slice());
-        crate::deriv::id_so_contracted(
+        crate::deriv::contracted::id_so_contracted_ws(
             &model.full,
             &mut data.full,
             &mut cd.full,

@@ -12,7 +12,7 @@
 //! those axes when differentiating) and the entry is `λ · ∂(J_c column x)/∂q_l` from the
 //! generic row kinematics (`djac_col_dq`).
 
-use super::contact::{ContactData, base, sub_djtl_dq, update_points};
+use super::contact::{ContactWs, base, sub_djtl_dq, update_points};
 use super::contact_kin::{Dir, djac_col_dq, djtl_dq, rows_dot};
 use super::id_fo::id_derivatives_unchecked;
 use super::id_so::{SoData, id_so_unchecked};
@@ -23,7 +23,7 @@ use nalgebra::{DVector, Vector3};
 
 fn check(
     model: &Model,
-    cd: &ContactData,
+    cd: &ContactWs,
     v: &DVector<f64>,
     a: &DVector<f64>,
     lambda: &DVector<f64>,
@@ -46,10 +46,10 @@ fn check(
 
 /// First-order derivatives of constrained inverse dynamics at `(q, q̇, q̈, λ)`: fills
 /// `data.tau` (`= RNEA − J_cᵀλ`), `data.dtau_dq`, `data.dtau_dv`, `data.m` and `cd.jac`.
-pub fn constrained_id_derivatives(
+pub(crate) fn constrained_id_derivatives_ws(
     model: &Model,
     data: &mut Data,
-    cd: &mut ContactData,
+    cd: &mut ContactWs,
     q: &DVector<f64>,
     v: &DVector<f64>,
     a: &DVector<f64>,
@@ -58,7 +58,7 @@ pub fn constrained_id_derivatives(
     if let Some(r) = &model.reduction {
         cd.check(model)?;
         let md = data.reduced(model)?;
-        return crate::deriv::kkt::reduced::constrained_id_cd(r, md, cd, None, q, v, a, lambda);
+        return reduced::constrained_id_cd(r, md, cd, None, q, v, a, lambda);
     }
     check(model, cd, v, a, lambda, q)?;
     data.check_tree(model)?;
@@ -67,7 +67,7 @@ pub fn constrained_id_derivatives(
     Ok(())
 }
 
-fn contact_terms_fo(model: &Model, data: &mut Data, cd: &mut ContactData, lambda: &DVector<f64>) {
+fn contact_terms_fo(model: &Model, data: &mut Data, cd: &mut ContactWs, lambda: &DVector<f64>) {
     update_points(model, data, cd, -model.gravity);
     data.tau.gemv_tr(-1.0, &cd.jac, lambda, 1.0);
     sub_djtl_dq(&data.s_world, cd, lambda.as_slice(), &mut data.dtau_dq);
@@ -77,10 +77,10 @@ fn contact_terms_fo(model: &Model, data: &mut Data, cd: &mut ContactData, lambda
 /// [`constrained_id_derivatives`], plus `so` (IDSVA-SOc): `so.d2tau_dq2()` includes
 /// `−∂²(J_cᵀλ)/∂q²`; `d2tau_dv2`, `d2tau_dqdv` and `dm_dq` do not depend on `λ`.
 #[allow(clippy::too_many_arguments)]
-pub fn constrained_id_so_derivatives(
+pub(crate) fn constrained_id_so_derivatives_ws(
     model: &Model,
     data: &mut Data,
-    cd: &mut ContactData,
+    cd: &mut ContactWs,
     so: &mut SoData,
     q: &DVector<f64>,
     v: &DVector<f64>,
@@ -91,7 +91,7 @@ pub fn constrained_id_so_derivatives(
         cd.check(model)?;
         let so = crate::algo::data::reduced::reduced_ws(&mut so.red, "SoData", model)?;
         let md = data.reduced(model)?;
-        return crate::deriv::kkt::reduced::constrained_id_cd(r, md, cd, Some(so), q, v, a, lambda);
+        return reduced::constrained_id_cd(r, md, cd, Some(so), q, v, a, lambda);
     }
     check(model, cd, v, a, lambda, q)?;
     cd.refuse_loops(model, "constrained_id_so_derivatives")?;
@@ -125,4 +125,63 @@ pub fn constrained_id_so_derivatives(
         }
     }
     Ok(())
+}
+
+/// Constrained inverse dynamics of a model in reduced coordinates (mimic joints): the full
+/// tree's, reduced with `G`.
+mod reduced {
+    use crate::algo::data::reduced::{MimicData, prepare};
+    use crate::deriv::contact::ContactWs;
+    use crate::deriv::id_fo::reduced::reduce_fo;
+    use crate::deriv::id_so::reduced::MimicSoData;
+    use crate::error::Result;
+    use crate::model::reduction::MimicModel;
+    use nalgebra::DVector;
+
+    /// `constrained_id_derivatives` of a reduced model with the full tree's contact workspace `cd`.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn constrained_id_cd(
+        model: &MimicModel,
+        data: &mut MimicData,
+        cd: &mut ContactWs,
+        so: Option<&mut MimicSoData>,
+        q: &DVector<f64>,
+        v: &DVector<f64>,
+        a: &DVector<f64>,
+        lambda: &DVector<f64>,
+    ) -> Result<()> {
+        prepare(model, data, q, Some(v), Some(("a", a)))?;
+        crate::model::check_vec("lambda", lambda, cd.dim())?;
+        model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
+        match so {
+            None => super::constrained_id_derivatives_ws(
+                &model.full,
+                &mut data.full,
+                cd,
+                &data.q,
+                &data.v,
+                &data.a,
+                lambda,
+            )?,
+            Some(so) => {
+                so.check(model)?;
+                super::constrained_id_so_derivatives_ws(
+                    &model.full,
+                    &mut data.full,
+                    cd,
+                    &mut so.full,
+                    &data.q,
+                    &data.v,
+                    &data.a,
+                    lambda,
+                )?;
+                model.reduce_tensor(so.full.d2tau_dq2(), &mut so.d2tau_dq2);
+                model.reduce_tensor(so.full.d2tau_dv2(), &mut so.d2tau_dv2);
+                model.reduce_tensor(so.full.d2tau_dqdv(), &mut so.d2tau_dqdv);
+                model.reduce_tensor(so.full.dm_dq(), &mut so.dm_dq);
+            }
+        }
+        reduce_fo(model, data);
+        Ok(())
+    }
 }

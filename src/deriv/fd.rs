@@ -43,6 +43,7 @@ use super::id_so::{SoData, id_so_unchecked, qv_offset};
 use super::zero::{Avx4, Avx8};
 use super::zero::{Lanes, cross_force_lanes, v6};
 use crate::algo::Data;
+use crate::algo::data::Part;
 use crate::algo::internal::{aba_unchecked, check_fext, ltl_in_place, ltl_solve_fd};
 use crate::error::Result;
 use crate::linalg::{Gemm4, Gemm4Term, neg_gemm4_sparse, transpose_strided};
@@ -263,7 +264,7 @@ pub struct FdSoData {
 
 impl FdSoData {
     /// Workspace for `model`.
-    pub fn new(model: &Model) -> Self {
+    pub(crate) fn new(model: &Model) -> Self {
         if let Some(r) = &model.reduction {
             let mut so = Self::new(crate::model::tree::shell_model());
             so.red = Some(Box::new(crate::deriv::id_so::reduced::MimicSoData::new(r)));
@@ -685,7 +686,33 @@ struct RankTerm<'a> {
 /// then its row `l` unless `l` is related to both. Symmetries cut the columns:
 /// `∂²q̈/∂q̇²` is symmetric in `(j, k)`, and so is `∂²q̈/∂q²` for DoFs of different joints (the
 /// configuration space is a product over joints).
-pub fn fd_so_derivatives(
+///
+/// The results are in `data` made by [`Data::with_second_order`] (returned, and
+/// `data.fd_so()` later).
+///
+/// # Errors
+/// As [`crate::algo::aba`]; [`crate::Error::Workspace`] for a `data` of another model or
+/// without dense second-order capacity.
+pub fn fd_so_derivatives<'a>(
+    model: &Model,
+    data: &'a mut Data,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    tau: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<&'a FdSoData> {
+    data.with_part(
+        Part::FdSo,
+        "fd_so_derivatives",
+        "Data::with_second_order",
+        |data, fso: &mut FdSoData| fd_so_derivatives_ws(model, data, fso, q, v, tau, fext),
+    )?;
+    data.part_or(Part::FdSo, "fd_so_derivatives")
+}
+
+/// [`fd_so_derivatives`] with its workspace part passed apart (the crate's callers that hold it).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn fd_so_derivatives_ws(
     model: &Model,
     data: &mut Data,
     fso: &mut FdSoData,
@@ -1475,7 +1502,7 @@ mod tests {
             // Without external forces, ∂²q̈/∂q² (its translation entries left out) against the
             // hyper-dual oracle.
             let (mut d, mut fso) = (Data::new(&m), FdSoData::new(&m));
-            fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &tau, None).unwrap();
+            fd_so_derivatives_ws(&m, &mut d, &mut fso, &q, &v, &tau, None).unwrap();
             let err = fso.d2qdd_dq2().max_abs_diff(&tqq);
             assert!(err < 1e-11 * scale, "∂²q̈/∂q² against the oracle: {err:e}");
             // With external forces: against central differences of the first-order results.
@@ -1485,7 +1512,7 @@ mod tests {
             let fe = Some(&fext[..]);
             let mut d = Data::new(&m);
             let mut fso = FdSoData::new(&m);
-            fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &tau, fe).unwrap();
+            fd_so_derivatives_ws(&m, &mut d, &mut fso, &q, &v, &tau, fe).unwrap();
             let h = 1e-5;
             let (mut dp, mut dm) = (Data::new(&m), Data::new(&m));
             for k in 0..n {
@@ -1548,9 +1575,10 @@ mod tests {
                     })
                     .collect();
                 let fext = (call % 2 == 1).then_some(&fext[..]);
-                fd_so_derivatives(&m, &mut d, &mut reused, &q, &v, &tau, fext).unwrap();
+                fd_so_derivatives_ws(&m, &mut d, &mut reused, &q, &v, &tau, fext).unwrap();
                 let mut fresh = FdSoData::new(&m);
-                fd_so_derivatives(&m, &mut Data::new(&m), &mut fresh, &q, &v, &tau, fext).unwrap();
+                fd_so_derivatives_ws(&m, &mut Data::new(&m), &mut fresh, &q, &v, &tau, fext)
+                    .unwrap();
                 for (a, b) in [
                     (reused.d2qdd_dq2(), fresh.d2qdd_dq2()),
                     (reused.d2qdd_dv2(), fresh.d2qdd_dv2()),
@@ -1577,12 +1605,12 @@ mod tests {
         let v = DVector::from_fn(a.nv, |_, _| rng.range(-1.0, 1.0));
         let mut d = Data::new(&a);
         let mut fso = FdSoData::new(&b);
-        let e = fd_so_derivatives(&a, &mut d, &mut fso, &q, &v, &v, None).unwrap_err();
+        let e = fd_so_derivatives_ws(&a, &mut d, &mut fso, &q, &v, &v, None).unwrap_err();
         let e = e.to_string();
         assert!(e.contains("another model") && e.contains("different joint tree"), "{e}");
         assert!(fso.d2qdd_dv2().as_slice().iter().all(|x| *x == 0.0));
         let mut fso = FdSoData::new(&a);
-        fd_so_derivatives(&a, &mut d, &mut fso, &q, &v, &v, None).unwrap();
+        fd_so_derivatives_ws(&a, &mut d, &mut fso, &q, &v, &v, None).unwrap();
     }
 
     /// A workspace made for the same tree with a translation at the root (whose ∂²q̈/∂q²
@@ -1610,12 +1638,12 @@ mod tests {
             let v = DVector::from_fn(m.nv, |_, _| rng.range(-1.0, 1.0));
             let mut d = Data::new(m);
             let mut fso = FdSoData::new(other);
-            let e = fd_so_derivatives(m, &mut d, &mut fso, &q, &v, &v, None).unwrap_err();
+            let e = fd_so_derivatives_ws(m, &mut d, &mut fso, &q, &v, &v, None).unwrap_err();
             let e = e.to_string();
             assert!(e.contains("another model") && e.contains("DoF 0"), "{e}");
             assert!(fso.d2qdd_dq2().as_slice().iter().all(|x| *x == 0.0));
             let mut fso = FdSoData::new(m);
-            fd_so_derivatives(m, &mut d, &mut fso, &q, &v, &v, None).unwrap();
+            fd_so_derivatives_ws(m, &mut d, &mut fso, &q, &v, &v, None).unwrap();
         }
     }
 }

@@ -8,6 +8,7 @@
 
 use super::id_fo::{accumulate_to_parent, add_armature, backward_step_fo, forward_pass_world};
 use crate::algo::Data;
+use crate::algo::data::Part;
 use crate::algo::internal::check_fext;
 use crate::error::Result;
 use crate::model::{Model, check_vec};
@@ -17,7 +18,9 @@ use crate::tensor::Tensor3;
 use nalgebra::{DVector, Matrix6, Vector3};
 
 /// Second-order inverse-dynamics derivatives, `nv×nv×nv` each, `T[(i, j, k)]` as documented on
-/// the getters. Allocated once by [`SoData::new`]; only [`id_so_derivatives`] writes them, and
+/// the getters. Allocated once in a [`crate::algo::Data`] made by
+/// [`Data::with_second_order`](crate::algo::Data::with_second_order); only [`id_so_derivatives`]
+/// writes them, and
 /// it writes every entry that is not structurally zero (entries whose DoFs are not all on one
 /// root path stay zero from construction).
 #[derive(Clone, Debug)]
@@ -50,7 +53,7 @@ pub struct SoData {
 
 impl SoData {
     /// Workspace for `model`.
-    pub fn new(model: &Model) -> Self {
+    pub(crate) fn new(model: &Model) -> Self {
         Self::build(model, true, false)
     }
     /// Workspace for `model` that does not compute `∂M/∂q` (its [`SoData::dm_dq`] is an empty
@@ -194,9 +197,33 @@ impl SoData {
     }
 }
 
-/// Second-order derivatives of inverse dynamics at `(q, q̇, q̈)` (IDSVA-SO). Also computes the
+/// Second-order derivatives of inverse dynamics at `(q, q̇, q̈)` (IDSVA-SO), into `data` made by
+/// [`Data::with_second_order`] (returned, and `data.id_so()` later). Also computes the
 /// first-order ones (`data.dtau_dq`, `data.dtau_dv`, `data.m`, `data.tau`) in the same pass.
-pub fn id_so_derivatives(
+///
+/// # Errors
+/// As [`crate::algo::rnea`]; [`crate::Error::Workspace`] for a `data` of another model or
+/// without dense second-order capacity.
+pub fn id_so_derivatives<'a>(
+    model: &Model,
+    data: &'a mut Data,
+    q: &DVector<f64>,
+    v: &DVector<f64>,
+    a: &DVector<f64>,
+    fext: Option<&[Force]>,
+) -> Result<&'a SoData> {
+    data.with_part(
+        Part::IdSo,
+        "id_so_derivatives",
+        "Data::with_second_order",
+        |data, so: &mut SoData| id_so_derivatives_ws(model, data, so, q, v, a, fext),
+    )?;
+    data.part_or(Part::IdSo, "id_so_derivatives")
+}
+
+/// [`id_so_derivatives`] with its workspace part passed apart (the crate's callers that hold it).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn id_so_derivatives_ws(
     model: &Model,
     data: &mut Data,
     so: &mut SoData,
@@ -796,8 +823,8 @@ mod tests {
             let a = DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
             let (mut d, mut full, mut up) =
                 (Data::new(&m), SoData::new(&m), SoData::upper_halves(&m));
-            id_so_derivatives(&m, &mut d, &mut full, &q, &v, &a, None).unwrap();
-            id_so_derivatives(&m, &mut d, &mut up, &q, &v, &a, None).unwrap();
+            id_so_derivatives_ws(&m, &mut d, &mut full, &q, &v, &a, None).unwrap();
+            id_so_derivatives_ws(&m, &mut d, &mut up, &q, &v, &a, None).unwrap();
             let joint = |j: usize| m.dof_joint[j];
             let qv_max = full.d2tau_dqdv().as_slice().iter().fold(0.0f64, |a, x| a.max(x.abs()));
             let (mut lower_nonzero, mut joint_lower) = (0, 0);
@@ -850,7 +877,7 @@ mod tests {
             let a = DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
             let (mut d, mut up) = (Data::new(&m), SoData::upper_halves(&m));
             up.d2tau_dqdv.as_mut_slice().fill(f64::NAN);
-            id_so_derivatives(&m, &mut d, &mut up, &q, &v, &a, None).unwrap();
+            id_so_derivatives_ws(&m, &mut d, &mut up, &q, &v, &a, None).unwrap();
             for (i, j, k) in (0..n * n * n).map(|x| (x % n, x / n % n, x / (n * n))) {
                 let chain = related(i, j) && related(i, k) && related(j, k);
                 let root = m.parents[m.dof_joint[j]] == 0;
@@ -988,7 +1015,7 @@ pub(crate) mod reduced {
         so: &mut MimicSoData,
         fext: Option<&[Force]>,
     ) -> Result<()> {
-        crate::deriv::id_so_derivatives(
+        crate::deriv::id_so::id_so_derivatives_ws(
             &model.full,
             &mut data.full,
             &mut so.full,

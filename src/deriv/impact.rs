@@ -10,7 +10,7 @@
 //! `q̇⁻`, so `∂²y/∂q̇⁻²` = 0.
 
 use super::contact::{
-    ContactData, IdfozaBatch, add_jz_hessian, copy_block, djw_dq, factor_delassus, factor_kkt,
+    ContactWs, IdfozaBatch, add_jz_hessian, copy_block, djw_dq, factor_delassus, factor_kkt,
     fill_rinv, g_matrix_split, g_matrix_with, idfoza_batch, padded_rows, path_kinematics,
     sub_djtl_dq_tree, transpose_into, update_points,
 };
@@ -34,7 +34,7 @@ use nalgebra::{DMatrix, DVector, Vector3};
 #[derive(Clone, Debug)]
 pub struct ImpactData {
     /// Contact workspace.
-    pub(crate) cd: ContactData,
+    pub(crate) cd: ContactWs,
     /// Coefficient of restitution `e` (default 0): `J_c q̇⁺ = −e J_c q̇⁻`.
     pub(crate) restitution: f64,
     /// Post-impact velocity `q̇⁺`.
@@ -50,7 +50,7 @@ pub struct ImpactData {
     pub(crate) dimpulse_dq: DMatrix<f64>,
     /// `∂λ̂/∂q̇⁻`.
     pub(crate) dimpulse_dvminus: DMatrix<f64>,
-    /// Second-order results (allocated by [`ImpactData::with_second_order`]).
+    /// Second-order results (allocated by [`super::ContactData::with_second_order`]).
     pub(crate) so: Option<ImpactSo>,
     rq: DMatrix<f64>,
     cq: DMatrix<f64>,
@@ -73,8 +73,18 @@ pub struct ImpactData {
 }
 
 impl ImpactData {
+    /// Whether the second-order tensors are allocated.
+    pub(crate) fn has_so(&self) -> bool {
+        match &self.red {
+            Some(r) => r.so().is_some(),
+            None => self.so.is_some(),
+        }
+    }
+}
+
+impl ImpactData {
     /// Contact workspace.
-    pub fn cd(&self) -> &ContactData {
+    pub(crate) fn cd(&self) -> &ContactWs {
         match &self.red {
             Some(r) => r.cd(),
             None => &self.cd,
@@ -87,11 +97,11 @@ impl ImpactData {
             None => self.restitution,
         }
     }
-    /// Sets the damping of the Delassus solve (see [`ContactData::set_damping`]).
+    /// Sets the damping of the Delassus solve (see [`ContactWs::set_damping`]).
     ///
     /// # Errors
-    /// As [`ContactData::set_damping`].
-    pub fn set_damping(&mut self, damping: f64) -> Result<()> {
+    /// As [`ContactWs::set_damping`].
+    pub(crate) fn set_damping(&mut self, damping: f64) -> Result<()> {
         if self.red.is_some() && damping != 0.0 {
             return Err(Error::Argument {
                 name: "damping".into(),
@@ -106,7 +116,7 @@ impl ImpactData {
     ///
     /// # Errors
     /// [`Error::Argument`] for a NaN, infinite or negative `e` (the value is unchanged).
-    pub fn set_restitution(&mut self, e: f64) -> Result<()> {
+    pub(crate) fn set_restitution(&mut self, e: f64) -> Result<()> {
         if let Some(r) = &mut self.red {
             return r.set_restitution(e);
         }
@@ -162,7 +172,7 @@ impl ImpactData {
             None => &self.dimpulse_dvminus,
         }
     }
-    /// Second-order results (allocated by [`ImpactData::with_second_order`]).
+    /// Second-order results (allocated by [`super::ContactData::with_second_order`]).
     pub fn so(&self) -> Option<&ImpactSo> {
         match &self.red {
             Some(r) => r.so().map(|s| &s.res),
@@ -232,9 +242,9 @@ impl ImpactSo {
 
 impl ImpactData {
     /// Workspace (first order) for `model` and the contacts of `cd`, restitution 0.
-    pub fn new(model: &Model, cd: ContactData) -> Self {
+    pub(crate) fn new(model: &Model, cd: ContactWs) -> Self {
         if let Some(r) = &model.reduction {
-            let mut im = Self::new(crate::model::tree::shell_model(), ContactData::empty());
+            let mut im = Self::new(crate::model::tree::shell_model(), ContactWs::empty());
             im.red = Some(Box::new(crate::deriv::impact::reduced::MimicImpactData::from_contacts(
                 r, cd,
             )));
@@ -265,7 +275,7 @@ impl ImpactData {
         }
     }
     /// Also allocates the second-order tensors.
-    pub fn with_second_order(mut self, model: &Model) -> Self {
+    pub(crate) fn with_second_order(mut self, model: &Model) -> Self {
         if let (Some(r), Some(red)) = (&model.reduction, self.red.take()) {
             self.red = Some(Box::new(red.with_second_order(r)));
             return self;
@@ -289,7 +299,7 @@ impl ImpactData {
 }
 
 /// Solves the impact dynamics at `(q, q̇⁻)`: fills `vplus`, `impulse`, `cd.jac`.
-pub fn impact_dynamics(
+pub(crate) fn impact_dynamics_ws(
     model: &Model,
     data: &mut Data,
     im: &mut ImpactData,
@@ -367,7 +377,7 @@ fn solve(
 }
 
 /// First-order derivatives of the impact dynamics (also solves it).
-pub fn impact_derivatives(
+pub(crate) fn impact_derivatives_ws(
     model: &Model,
     data: &mut Data,
     im: &mut ImpactData,
@@ -384,7 +394,7 @@ pub fn impact_derivatives(
             vminus,
         );
     }
-    impact_dynamics(model, data, im, q, vminus)?;
+    impact_dynamics_ws(model, data, im, q, vminus)?;
     first_order(model, data, im);
     Ok(())
 }
@@ -449,7 +459,7 @@ fn first_order(model: &Model, data: &mut Data, im: &mut ImpactData) {
 
 /// First- and second-order derivatives of the impact dynamics. `im` must have been created
 /// [`ImpactData::with_second_order`].
-pub fn impact_so_derivatives(
+pub(crate) fn impact_so_derivatives_ws(
     model: &Model,
     data: &mut Data,
     im: &mut ImpactData,
@@ -536,7 +546,7 @@ fn so_inner(
     Ok(())
 }
 
-/// Results and workspace of [`impact_so_contracted`] for one model and contact set (`O(nv²)`,
+/// Results and workspace of [`super::impact_so_contracted`] for one model and contact set (`O(nv²)`,
 /// allocated once).
 #[derive(Clone, Debug)]
 pub struct ImpactContracted {
@@ -568,7 +578,7 @@ pub struct ImpactContracted {
 
 impl ImpactContracted {
     /// Workspace for `model` and the contacts of `im`.
-    pub fn new(model: &Model, im: &ImpactData) -> Self {
+    pub(crate) fn new(model: &Model, im: &ImpactData) -> Self {
         if let Some(r) = &model.reduction {
             let mut ic = Self::with_rows(crate::model::tree::shell_model(), 0);
             ic.red = im
@@ -654,7 +664,7 @@ impl ImpactContracted {
 /// As [`impact_derivatives`]; weights of the wrong length or not finite; `ic` made for another
 /// model or contact count.
 #[allow(clippy::too_many_arguments)]
-pub fn impact_so_contracted(
+pub(crate) fn impact_so_contracted_ws(
     model: &Model,
     data: &mut Data,
     im: &mut ImpactData,
@@ -739,7 +749,7 @@ pub fn impact_so_contracted(
 pub(crate) fn zeta_rqq(
     model: &Model,
     data: &mut Data,
-    cd: &mut ContactData,
+    cd: &mut ContactWs,
     ic: &mut ImpactContracted,
     q: &DVector<f64>,
     dv: &DVector<f64>,
@@ -789,7 +799,7 @@ pub(crate) fn zeta_rqq(
 /// [`crate::deriv::impact::reduced::impact_so_derivatives`].
 pub(crate) fn add_contact_rqq(
     model: &Model,
-    cd: &ContactData,
+    cd: &ContactWs,
     impulse: &[f64],
     w: &[f64],
     rqq: &mut Tensor3,
@@ -871,7 +881,8 @@ pub(crate) fn add_contact_rqq(
 /// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
 pub(crate) mod reduced {
 
-    use crate::deriv::{ContactData, SoData};
+    use crate::deriv::SoData;
+    use crate::deriv::contact::ContactWs;
     use crate::error::{Error, Result};
     use crate::model::reduction::MimicModel;
     use crate::spatial::Motion;
@@ -889,7 +900,7 @@ pub(crate) mod reduced {
     /// [`impact_derivatives`]).
     #[derive(Clone, Debug)]
     pub struct MimicImpactData {
-        pub(crate) cd: ContactData,
+        pub(crate) cd: ContactWs,
         pub(crate) key: u64,
         pub(crate) restitution: f64,
         pub(crate) jr: DMatrix<f64>,
@@ -958,7 +969,7 @@ pub(crate) mod reduced {
             self.so.as_deref()
         }
         /// Workspace for the contacts `cd` (made for the full tree or for the reduced model).
-        pub(crate) fn from_contacts(model: &MimicModel, mut cd: ContactData) -> Self {
+        pub(crate) fn from_contacts(model: &MimicModel, mut cd: ContactWs) -> Self {
             cd.reduced_key = None;
             let (n, nf, m) = (model.nv, model.full.nv(), cd.dim());
             let mat = |r, c| DMatrix::zeros(r, c);
@@ -987,7 +998,7 @@ pub(crate) mod reduced {
             }
         }
         /// The full tree's contact workspace.
-        pub(crate) fn cd(&self) -> &ContactData {
+        pub(crate) fn cd(&self) -> &ContactWs {
             &self.cd
         }
         /// Coefficient of restitution `e`.
@@ -1358,7 +1369,7 @@ pub(crate) mod reduced {
         }
     }
 
-    /// Results and workspace of [`impact_so_contracted`] for a [`MimicModel`] and the contacts of
+    /// Results and workspace of [`super::impact_so_contracted`] for a [`MimicModel`] and the contacts of
     /// a [`MimicImpactData`] (`O(nv² + nv_f²)`, allocated once).
     #[derive(Clone, Debug)]
     pub struct MimicImpactContracted {

@@ -11,7 +11,7 @@
 //! an SPD inverse of the Delassus matrix (no dense inverse of the KKT matrix).
 
 use super::contact::{
-    ContactData, IdfozaBatch, accel_derivatives_t, add_acc_hessians, add_jz_hessian,
+    ContactWs, IdfozaBatch, accel_derivatives_t, add_acc_hessians, add_jz_hessian,
     add_qdd_to_path_acc, base, contact_hessians, djw_dq, factor_delassus, factor_kkt, fill_rinv,
     g_matrix_split, g_matrix_with, idfoza_batch, path_kinematics, point_jacobian_dq,
     sub_djtl_dq_strided, update_points,
@@ -37,7 +37,7 @@ use nalgebra::{DMatrix, DMatrixView, DMatrixViewMut, DVector, Vector3};
 #[derive(Clone, Debug)]
 pub struct KktData {
     /// Contact workspace (Jacobian, Delassus factorisation, damping option).
-    pub(crate) cd: ContactData,
+    pub(crate) cd: ContactWs,
     /// Constrained joint accelerations.
     pub(crate) qdd: DVector<f64>,
     /// Contact forces applied to the robot, `m` rows (3 per 3-D contact, 6 per 6-D contact, in
@@ -55,7 +55,7 @@ pub struct KktData {
     pub(crate) dlambda_dv: DMatrix<f64>,
     /// `∂λ/∂τ`.
     pub(crate) dlambda_dtau: DMatrix<f64>,
-    /// Second-order results (allocated by [`KktData::with_second_order`]).
+    /// Second-order results (allocated by [`super::ContactData::with_second_order`]).
     pub(crate) so: Option<KktSo>,
     /// `Wᵀ = (J X + C)ᵀ` (`2 nv × m`) for `X = −M⁻¹ [a_q | a_v]`, `C = [c_q | c_v]`.
     wt: DMatrix<f64>,
@@ -70,8 +70,18 @@ pub struct KktData {
 }
 
 impl KktData {
+    /// Whether the second-order tensors are allocated.
+    pub(crate) fn has_so(&self) -> bool {
+        match &self.red {
+            Some(r) => r.so().is_some(),
+            None => self.so.is_some(),
+        }
+    }
+}
+
+impl KktData {
     /// Contact workspace (Jacobian, Delassus factorisation, damping option).
-    pub fn cd(&self) -> &ContactData {
+    pub(crate) fn cd(&self) -> &ContactWs {
         match &self.red {
             Some(r) => r.full_kd().cd(),
             None => &self.cd,
@@ -134,7 +144,7 @@ impl KktData {
             None => &self.dlambda_dtau,
         }
     }
-    /// Second-order results (allocated by [`KktData::with_second_order`]).
+    /// Second-order results (allocated by [`super::ContactData::with_second_order`]).
     pub fn so(&self) -> Option<&KktSo> {
         match &self.red {
             Some(r) => r.so().map(|s| &s.res),
@@ -242,13 +252,13 @@ impl KktSo {
 impl KktData {
     /// The first-order workspace of no contacts on the world-only model (a shell).
     fn empty() -> Self {
-        Self::new(crate::model::tree::shell_model(), ContactData::empty())
+        Self::new(crate::model::tree::shell_model(), ContactWs::empty())
     }
-    /// Sets the damping of the Delassus solve (see [`ContactData::set_damping`]).
+    /// Sets the damping of the Delassus solve (see [`ContactWs::set_damping`]).
     ///
     /// # Errors
-    /// As [`ContactData::set_damping`].
-    pub fn set_damping(&mut self, damping: f64) -> Result<()> {
+    /// As [`ContactWs::set_damping`].
+    pub(crate) fn set_damping(&mut self, damping: f64) -> Result<()> {
         if self.red.is_some() && damping != 0.0 {
             return Err(crate::error::Error::Argument {
                 name: "damping".into(),
@@ -260,9 +270,9 @@ impl KktData {
         self.cd.set_damping(damping)
     }
     /// Workspace for `model` with contact workspace `cd` (first order only).
-    pub fn new(model: &Model, cd: ContactData) -> Self {
+    pub(crate) fn new(model: &Model, cd: ContactWs) -> Self {
         if let Some(r) = &model.reduction {
-            let mut kd = Self::new(crate::model::tree::shell_model(), ContactData::empty());
+            let mut kd = Self::new(crate::model::tree::shell_model(), ContactWs::empty());
             kd.red = Some(Box::new(crate::deriv::kkt::reduced::MimicKktData::from_contacts(r, cd)));
             return kd;
         }
@@ -286,7 +296,7 @@ impl KktData {
         }
     }
     /// Also allocates the second-order tensors.
-    pub fn with_second_order(mut self, model: &Model) -> Self {
+    pub(crate) fn with_second_order(mut self, model: &Model) -> Self {
         if let (Some(r), Some(red)) = (&model.reduction, self.red.take()) {
             self.red = Some(Box::new(red.with_second_order(r)));
             return self;
@@ -320,7 +330,7 @@ impl KktData {
 /// Solves the KKT dynamics at `(q, q̇, τ)`: fills `kd.qdd`, `kd.lambda`, `kd.cd.jac`,
 /// `kd.cd.drift`, and leaves `M` factorised with `M⁻¹` (`data.minv`) and the blocks of `R⁻¹`
 /// in the workspaces.
-pub fn kkt_dynamics(
+pub(crate) fn kkt_dynamics_ws(
     model: &Model,
     data: &mut Data,
     kd: &mut KktData,
@@ -412,7 +422,7 @@ fn solve_unchecked(
         }
     }
     // Two-frame constraints: + kp e with the placement error e = p₁ − p₂ (3-D world-aligned
-    // only; `ContactData::new` refuses kp on the others).
+    // only; `ContactWs::new` refuses kp on the others).
     for (c, contact) in cd.contacts.iter().enumerate() {
         if let (Some(lp), true) = (&cd.loops[c], contact.kp != 0.0) {
             let e = lp.a.p - lp.b.p;
@@ -427,7 +437,7 @@ fn solve_unchecked(
 }
 
 /// First-order derivatives of the KKT dynamics at `(q, q̇, τ)` (also solves it).
-pub fn kkt_derivatives(
+pub(crate) fn kkt_derivatives_ws(
     model: &Model,
     data: &mut Data,
     kd: &mut KktData,
@@ -557,7 +567,7 @@ fn first_order_by_solve(model: &Model, data: &mut Data, kd: &mut KktData, v: &[f
 
 /// First- and second-order derivatives of the KKT dynamics at `(q, q̇, τ)`. `kd` must have been
 /// created [`KktData::with_second_order`].
-pub fn kkt_so_derivatives(
+pub(crate) fn kkt_so_derivatives_ws(
     model: &Model,
     data: &mut Data,
     kd: &mut KktData,
@@ -596,7 +606,7 @@ fn kkt_so_inner(
     v: &DVector<f64>,
     tau: &DVector<f64>,
 ) -> Result<()> {
-    kkt_dynamics(model, data, kd, q, v, tau)?;
+    kkt_dynamics_ws(model, data, kd, q, v, tau)?;
     let n = model.nv;
     let m = kd.cd.dim();
     let qdd = std::mem::replace(&mut kd.qdd, DVector::zeros(0));
@@ -932,7 +942,7 @@ pub(crate) fn premultiply<S>(
     gemm(-1.0, a, &view, 0.0, &mut ov);
 }
 
-/// Results and workspace of [`kkt_so_contracted`] for one model and contact set (`O(nv²)`,
+/// Results and workspace of [`super::kkt_so_contracted`] for one model and contact set (`O(nv²)`,
 /// allocated once).
 #[derive(Clone, Debug)]
 pub struct KktContracted {
@@ -960,7 +970,7 @@ pub struct KktContracted {
 
 impl KktContracted {
     /// Workspace for `model` and the contacts of `kd`.
-    pub fn new(model: &Model, kd: &KktData) -> Self {
+    pub(crate) fn new(model: &Model, kd: &KktData) -> Self {
         if let Some(r) = &model.reduction {
             let mut kc = Self::new(crate::model::tree::shell_model(), &KktData::empty());
             kc.red = kd
@@ -1055,7 +1065,7 @@ impl KktContracted {
 /// As [`kkt_derivatives`]; weights of the wrong length or not finite; `kc` made for another
 /// model or contact count.
 #[allow(clippy::too_many_arguments)]
-pub fn kkt_so_contracted(
+pub(crate) fn kkt_so_contracted_ws(
     model: &Model,
     data: &mut Data,
     kd: &mut KktData,
@@ -1228,7 +1238,8 @@ pub(crate) fn zeta_residual_hessians(
 /// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
 pub(crate) mod reduced {
 
-    use crate::deriv::{ContactData, KktData};
+    use crate::deriv::KktData;
+    use crate::deriv::contact::ContactWs;
     use crate::error::{Error, Result};
 
     use crate::model::reduction::MimicModel;
@@ -1240,8 +1251,6 @@ pub(crate) mod reduced {
     use crate::algo::data::reduced::ldl_solve;
     use crate::algo::data::reduced::prepare;
     use crate::algo::rnea::reduced::bias_into;
-    use crate::deriv::id_fo::reduced::reduce_fo;
-    use crate::deriv::id_so::reduced::MimicSoData;
 
     /// Workspace and results of the contact algorithms of a [`MimicModel`] ([`kkt_dynamics`],
     /// [`kkt_derivatives`], [`constrained_id_derivatives`]): the contacts (frames of the full tree,
@@ -1326,7 +1335,7 @@ pub(crate) mod reduced {
             self.so.as_deref()
         }
         /// Workspace for the contacts `cd` (made for the full tree or for the reduced model).
-        pub(crate) fn from_contacts(model: &MimicModel, mut cd: ContactData) -> Self {
+        pub(crate) fn from_contacts(model: &MimicModel, mut cd: ContactWs) -> Self {
             cd.reduced_key = None;
             let (n, nf, m) = (model.nv, model.full.nv(), cd.dim());
             let mat = |r, c| DMatrix::zeros(r, c);
@@ -1566,7 +1575,7 @@ pub(crate) mod reduced {
         kd.tau_f.copy_from(t);
         kd.tau_f.gemv_tr(-1.0, kd.full.cd().jac(), &kd.lambda, 1.0);
         if so {
-            crate::deriv::kkt_so_derivatives(
+            crate::deriv::kkt::kkt_so_derivatives_ws(
                 full,
                 &mut data.full,
                 &mut kd.full,
@@ -1575,7 +1584,7 @@ pub(crate) mod reduced {
                 &kd.tau_f,
             )?;
         } else {
-            crate::deriv::kkt_derivatives(
+            crate::deriv::kkt::kkt_derivatives_ws(
                 full,
                 &mut data.full,
                 &mut kd.full,
@@ -1867,54 +1876,7 @@ pub(crate) mod reduced {
         Ok(())
     }
 
-    /// `constrained_id_derivatives` of a reduced model with the full tree's contact workspace `cd`.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn constrained_id_cd(
-        model: &MimicModel,
-        data: &mut MimicData,
-        cd: &mut ContactData,
-        so: Option<&mut MimicSoData>,
-        q: &DVector<f64>,
-        v: &DVector<f64>,
-        a: &DVector<f64>,
-        lambda: &DVector<f64>,
-    ) -> Result<()> {
-        prepare(model, data, q, Some(v), Some(("a", a)))?;
-        crate::model::check_vec("lambda", lambda, cd.dim())?;
-        model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
-        match so {
-            None => crate::deriv::constrained_id_derivatives(
-                &model.full,
-                &mut data.full,
-                cd,
-                &data.q,
-                &data.v,
-                &data.a,
-                lambda,
-            )?,
-            Some(so) => {
-                so.check(model)?;
-                crate::deriv::constrained_id_so_derivatives(
-                    &model.full,
-                    &mut data.full,
-                    cd,
-                    &mut so.full,
-                    &data.q,
-                    &data.v,
-                    &data.a,
-                    lambda,
-                )?;
-                model.reduce_tensor(so.full.d2tau_dq2(), &mut so.d2tau_dq2);
-                model.reduce_tensor(so.full.d2tau_dv2(), &mut so.d2tau_dv2);
-                model.reduce_tensor(so.full.d2tau_dqdv(), &mut so.d2tau_dqdv);
-                model.reduce_tensor(so.full.dm_dq(), &mut so.dm_dq);
-            }
-        }
-        reduce_fo(model, data);
-        Ok(())
-    }
-
-    /// Results and workspace of [`kkt_so_contracted`] for a [`MimicModel`] and the contacts of a
+    /// Results and workspace of [`super::kkt_so_contracted`] for a [`MimicModel`] and the contacts of a
     /// [`MimicKktData`]: the full tree's [`crate::deriv::KktContracted`] and the reduced
     /// `nv × nv` Hessians (`O(nv² + nv_f²)`, allocated once).
     #[derive(Clone, Debug)]

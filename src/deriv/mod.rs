@@ -7,6 +7,7 @@
 //! * [`contracted`]: the second-order derivatives contracted with a weight vector (DDP).
 
 pub mod contact;
+pub mod contact_set;
 pub mod contracted;
 pub mod external;
 pub mod fd;
@@ -16,20 +17,18 @@ pub mod impact;
 pub mod kkt;
 pub mod zero;
 
-pub use contact::ContactData;
+pub use contact::MAX_CONTACTS;
+pub use contact_set::{
+    ContactData, constrained_id_derivatives, constrained_id_so_derivatives, impact_derivatives,
+    impact_dynamics, impact_so_contracted, impact_so_derivatives, kkt_derivatives, kkt_dynamics,
+    kkt_so_contracted, kkt_so_derivatives,
+};
 pub use contracted::{ContractedData, fd_so_contracted, id_so_contracted};
-pub use external::{constrained_id_derivatives, constrained_id_so_derivatives};
 pub use fd::{FdSoData, fd_derivatives, fd_so_derivatives};
 pub use id_fo::id_derivatives;
 pub use id_so::{SoData, id_so_derivatives};
-pub use impact::{
-    ImpactContracted, ImpactData, ImpactSo, impact_derivatives, impact_dynamics,
-    impact_so_contracted, impact_so_derivatives,
-};
-pub use kkt::{
-    KktContracted, KktData, KktSo, kkt_derivatives, kkt_dynamics, kkt_so_contracted,
-    kkt_so_derivatives,
-};
+pub use impact::{ImpactContracted, ImpactData, ImpactSo};
+pub use kkt::{KktContracted, KktData, KktSo};
 pub use zero::{idfoza, idsoza};
 pub(crate) mod contact_kin;
 pub(crate) mod contact_loop;

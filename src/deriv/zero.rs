@@ -24,6 +24,7 @@
 
 use super::id_so::{SoData, id_so_unchecked};
 use crate::algo::Data;
+use crate::algo::data::Part;
 use crate::algo::internal::placements;
 use crate::error::{Error, Result};
 use crate::model::{Model, check_vec};
@@ -153,9 +154,27 @@ pub(crate) fn idfoza_core_with(
 }
 
 /// IDSOZA: `out[(i, j, k)] = ∂/∂q_k ∂(M(q) x)_i/∂q_j` (eq. eqn_IDSOZAc with `λ = 0`), from
-/// IDSVA-SO at `q̇ = 0`, no gravity, `q̈ = x`. Uses `so` as workspace and returns its
-/// `d2tau_dq2` tensor.
+/// IDSVA-SO at `q̇ = 0`, no gravity, `q̈ = x`; `data` made by [`Data::with_second_order`]
+/// (whose `d2tau_dq2` tensor it fills and returns).
+///
+/// # Errors
+/// As [`Model::check_q`]; `x` of the wrong length or not finite; [`crate::Error::Workspace`]
+/// for a `data` of another model or without second-order capacity.
 pub fn idsoza<'a>(
+    model: &Model,
+    data: &'a mut Data,
+    q: &DVector<f64>,
+    x: &DVector<f64>,
+) -> Result<&'a Tensor3> {
+    let f = "idsoza";
+    data.with_part(Part::IdSo, f, "Data::with_second_order", |data, so: &mut SoData| {
+        idsoza_ws(model, data, so, q, x).map(|_| ())
+    })?;
+    Ok(data.part_or::<SoData>(Part::IdSo, f)?.d2tau_dq2())
+}
+
+/// [`idsoza`] with its workspace part passed apart.
+pub(crate) fn idsoza_ws<'a>(
     model: &Model,
     data: &mut Data,
     so: &'a mut SoData,
@@ -457,7 +476,7 @@ pub(crate) mod reduced {
         so.check(model)?;
         prepare(model, data, q, None, Some(("x", x)))?;
         model.expand_v_into(x.as_slice(), data.a.as_mut_slice());
-        crate::deriv::idsoza(&model.full, &mut data.full, &mut so.full, &data.q, &data.a)?;
+        crate::deriv::zero::idsoza_ws(&model.full, &mut data.full, &mut so.full, &data.q, &data.a)?;
         model.reduce_tensor(so.full.d2tau_dq2(), &mut so.d2tau_dq2);
         Ok(&so.d2tau_dq2)
     }

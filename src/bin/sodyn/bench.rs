@@ -30,10 +30,9 @@ use sodyn::batch::{
     BatchData, BatchPool, aba_batch, fd_derivatives_batch, id_derivatives_batch, rnea_batch,
 };
 use sodyn::deriv::{
-    ContactData, ContractedData, FdSoData, ImpactContracted, ImpactData, KktContracted, KktData,
-    SoData, fd_derivatives, fd_so_contracted, fd_so_derivatives, id_derivatives, id_so_contracted,
-    id_so_derivatives, impact_derivatives, impact_so_contracted, impact_so_derivatives,
-    kkt_derivatives, kkt_so_contracted, kkt_so_derivatives,
+    ContactData, fd_derivatives, fd_so_contracted, fd_so_derivatives, id_derivatives,
+    id_so_contracted, id_so_derivatives, impact_derivatives, impact_so_contracted,
+    impact_so_derivatives, kkt_derivatives, kkt_so_contracted, kkt_so_derivatives,
 };
 use sodyn::error::{Error, Result};
 use sodyn::model::{Arg, JointType, Model};
@@ -921,20 +920,16 @@ fn timer_overhead_ns() -> f64 {
 
 /// Workspaces shared by the algorithms (allocated once).
 struct Workspaces {
+    /// The model's data, with second-order capacity.
     data: Data,
-    so: SoData,
-    fso: FdSoData,
-    /// Contracted second order (`*_so_c`) and its weight vectors (random, fixed per run).
-    con: ContractedData,
+    /// The weight vectors of the contracted second order (`*_so_c`; random, fixed per run).
     w: DVector<f64>,
     wl: DVector<f64>,
-    kktc: Option<(KktData, KktContracted)>,
-    impc: Option<(ImpactData, ImpactContracted)>,
+    /// The contact set's data (with `--contacts`), with second-order capacity.
+    cd: Option<ContactData>,
     out_vec: Vec<DVector<f64>>,
     out_m1: Vec<DMatrix<f64>>,
     out_m2: Vec<DMatrix<f64>>,
-    kkt: Option<KktData>,
-    impact: Option<ImpactData>,
     /// The kinematics algorithms' frame, outputs and workspaces (allocated once).
     kin: Kin,
     /// Batched workspaces: one pool of `--threads`, or with `--paired-threads T`, pools of one
@@ -1133,24 +1128,7 @@ fn time_algo(
 ) -> Result<Timed> {
     let (q, v, a, tau) = (&st.q, &st.v, &st.a, &st.tau);
     let batch_plan = Plan { per_call: st.q.len(), min_samples: plan.min_samples.min(20), ..*plan };
-    let Workspaces {
-        data: d,
-        so,
-        fso,
-        con,
-        w,
-        wl,
-        kktc,
-        impc,
-        out_vec,
-        out_m1,
-        out_m2,
-        kkt,
-        impact,
-        kin,
-        batch,
-        baseline_cpus,
-    } = ws;
+    let Workspaces { data: d, w, wl, cd, out_vec, out_m1, out_m2, kin, batch, baseline_cpus } = ws;
     if let Some(s) = time_kin(algo, m, st, d, kin, plan) {
         return s.map(|stats| Timed { stats, paired: None });
     }
@@ -1192,23 +1170,19 @@ fn time_algo(
             Ok(())
         }),
         Algo::IdSo => measure(plan, |i| {
-            id_so_derivatives(m, d, so, &q[i], &v[i], &a[i], None)?;
-            black_box(&*so);
+            black_box(id_so_derivatives(m, d, &q[i], &v[i], &a[i], None)?);
             Ok(())
         }),
         Algo::FdSo => measure(plan, |i| {
-            fd_so_derivatives(m, d, fso, &q[i], &v[i], &tau[i], None)?;
-            black_box(&*fso);
+            black_box(fd_so_derivatives(m, d, &q[i], &v[i], &tau[i], None)?);
             Ok(())
         }),
         Algo::IdSoC => measure(plan, |i| {
-            id_so_contracted(m, d, con, &q[i], &v[i], &a[i], w)?;
-            black_box(&*con);
+            black_box(id_so_contracted(m, d, &q[i], &v[i], &a[i], w)?);
             Ok(())
         }),
         Algo::FdSoC => measure(plan, |i| {
-            fd_so_contracted(m, d, con, &q[i], &v[i], &tau[i], w)?;
-            black_box(&*con);
+            black_box(fd_so_contracted(m, d, &q[i], &v[i], &tau[i], w)?);
             Ok(())
         }),
         Algo::BatchRnea => {
@@ -1240,50 +1214,48 @@ fn time_algo(
             });
         }
         Algo::KktFo => {
-            let kd = kkt.as_mut().ok_or_else(no_contacts)?;
+            let cd = cd.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
-                kkt_derivatives(m, d, kd, &q[i], &v[i], &tau[i])?;
+                let kd = kkt_derivatives(m, d, cd, &q[i], &v[i], &tau[i])?;
                 black_box(kd.dqdd_dq());
                 Ok(())
             })
         }
         Algo::KktSo => {
-            let kd = kkt.as_mut().ok_or_else(no_contacts)?;
+            let cd = cd.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
-                kkt_so_derivatives(m, d, kd, &q[i], &v[i], &tau[i])?;
+                let kd = kkt_so_derivatives(m, d, cd, &q[i], &v[i], &tau[i])?;
                 black_box(kd.so());
                 Ok(())
             })
         }
         Algo::ImpactFo => {
-            let im = impact.as_mut().ok_or_else(no_contacts)?;
+            let cd = cd.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
-                impact_derivatives(m, d, im, &q[i], &v[i])?;
+                let im = impact_derivatives(m, d, cd, &q[i], &v[i])?;
                 black_box(im.dvplus_dq());
                 Ok(())
             })
         }
         Algo::ImpactSo => {
-            let im = impact.as_mut().ok_or_else(no_contacts)?;
+            let cd = cd.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
-                impact_so_derivatives(m, d, im, &q[i], &v[i])?;
+                let im = impact_so_derivatives(m, d, cd, &q[i], &v[i])?;
                 black_box(im.so());
                 Ok(())
             })
         }
         Algo::KktSoC => {
-            let (kd, kc) = kktc.as_mut().ok_or_else(no_contacts)?;
+            let cd = cd.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
-                kkt_so_contracted(m, d, kd, kc, &q[i], &v[i], &tau[i], w, wl)?;
-                black_box(&*kc);
+                black_box(kkt_so_contracted(m, d, cd, &q[i], &v[i], &tau[i], w, wl)?);
                 Ok(())
             })
         }
         Algo::ImpactSoC => {
-            let (im, ic) = impc.as_mut().ok_or_else(no_contacts)?;
+            let cd = cd.as_mut().ok_or_else(no_contacts)?;
             measure(plan, |i| {
-                impact_so_contracted(m, d, im, ic, &q[i], &v[i], w, wl)?;
-                black_box(&*ic);
+                black_box(impact_so_contracted(m, d, cd, &q[i], &v[i], w, wl)?);
                 Ok(())
             })
         }
@@ -1316,49 +1288,39 @@ fn call_single(algo: Algo, m: &Model, st: &States, ws: &mut Workspaces, i: usize
             black_box(d.dqdd_dq());
         }
         Algo::IdSo => {
-            id_so_derivatives(m, d, &mut ws.so, q, v, a, None)?;
-            black_box(&ws.so);
+            black_box(id_so_derivatives(m, d, q, v, a, None)?);
         }
         Algo::FdSo => {
-            fd_so_derivatives(m, d, &mut ws.fso, q, v, tau, None)?;
-            black_box(&ws.fso);
+            black_box(fd_so_derivatives(m, d, q, v, tau, None)?);
         }
         Algo::IdSoC => {
-            id_so_contracted(m, d, &mut ws.con, q, v, a, &ws.w)?;
-            black_box(&ws.con);
+            black_box(id_so_contracted(m, d, q, v, a, &ws.w)?);
         }
         Algo::FdSoC => {
-            fd_so_contracted(m, d, &mut ws.con, q, v, tau, &ws.w)?;
-            black_box(&ws.con);
+            black_box(fd_so_contracted(m, d, q, v, tau, &ws.w)?);
         }
         Algo::KktSoC => {
-            let (kd, kc) = ws.kktc.as_mut().ok_or_else(no_contacts)?;
-            kkt_so_contracted(m, d, kd, kc, q, v, tau, &ws.w, &ws.wl)?;
-            black_box(&*kc);
+            let cd = ws.cd.as_mut().ok_or_else(no_contacts)?;
+            black_box(kkt_so_contracted(m, d, cd, q, v, tau, &ws.w, &ws.wl)?);
         }
         Algo::ImpactSoC => {
-            let (im, ic) = ws.impc.as_mut().ok_or_else(no_contacts)?;
-            impact_so_contracted(m, d, im, ic, q, v, &ws.w, &ws.wl)?;
-            black_box(&*ic);
+            let cd = ws.cd.as_mut().ok_or_else(no_contacts)?;
+            black_box(impact_so_contracted(m, d, cd, q, v, &ws.w, &ws.wl)?);
         }
         Algo::KktFo | Algo::KktSo => {
-            let kd = ws.kkt.as_mut().ok_or_else(no_contacts)?;
+            let cd = ws.cd.as_mut().ok_or_else(no_contacts)?;
             if algo == Algo::KktFo {
-                kkt_derivatives(m, d, kd, q, v, tau)?;
-                black_box(kd.dqdd_dq());
+                black_box(kkt_derivatives(m, d, cd, q, v, tau)?.dqdd_dq());
             } else {
-                kkt_so_derivatives(m, d, kd, q, v, tau)?;
-                black_box(kd.so());
+                black_box(kkt_so_derivatives(m, d, cd, q, v, tau)?.so());
             }
         }
         Algo::ImpactFo | Algo::ImpactSo => {
-            let im = ws.impact.as_mut().ok_or_else(no_contacts)?;
+            let cd = ws.cd.as_mut().ok_or_else(no_contacts)?;
             if algo == Algo::ImpactFo {
-                impact_derivatives(m, d, im, q, v)?;
-                black_box(im.dvplus_dq());
+                black_box(impact_derivatives(m, d, cd, q, v)?.dvplus_dq());
             } else {
-                impact_so_derivatives(m, d, im, q, v)?;
-                black_box(im.so());
+                black_box(impact_so_derivatives(m, d, cd, q, v)?.so());
             }
         }
         other => {
@@ -1472,22 +1434,16 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
             || ratio_to.is_some_and(|r| r.name.starts_with(p))
     };
     let mut ws = Workspaces {
-        data: Data::new(&model),
-        so: SoData::new(&model),
-        fso: FdSoData::new(&model),
-        con: ContractedData::new(&model),
+        data: Data::with_second_order(&model),
         w: {
             let mut rng = Rng::new(o.seed ^ 0xc0de);
             DVector::from_fn(nv, |_, _| rng.range(-1.0, 1.0))
         },
         wl: DVector::zeros(0),
-        kktc: None,
-        impc: None,
+        cd: None,
         out_vec: if needs("batch_") { vec![DVector::zeros(nv); nstates] } else { vec![] },
         out_m1: if needs("batch_") { vec![DMatrix::zeros(nv, nv); nstates] } else { vec![] },
         out_m2: if needs("batch_") { vec![DMatrix::zeros(nv, nv); nstates] } else { vec![] },
-        kkt: None,
-        impact: None,
         kin: Kin::new(
             &model,
             frame,
@@ -1505,25 +1461,10 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
                     .map(|c| Contact { kind, ..c.with_reference(reference) })
             })
             .collect::<Result<Vec<_>>>()?;
-        let cd = ContactData::new(&model, &contacts)?;
-        if needs("kkt_") {
-            ws.kkt = Some(KktData::new(&model, cd.clone()).with_second_order(&model));
-        }
-        if needs("impact_") {
-            ws.impact = Some(ImpactData::new(&model, cd.clone()).with_second_order(&model));
-        }
-        if needs("kkt_so_c") {
-            let kd = KktData::new(&model, cd.clone());
-            let kc = KktContracted::new(&model, &kd);
-            ws.kktc = Some((kd, kc));
-        }
-        if needs("impact_so_c") {
-            let im = ImpactData::new(&model, cd.clone());
-            let ic = ImpactContracted::new(&model, &im);
-            ws.impc = Some((im, ic));
-        }
+        let cd = ContactData::with_second_order(&model, &contacts)?;
         let mut rng = Rng::new(o.seed ^ 0x5eed);
         ws.wl = DVector::from_fn(cd.dim(), |_, _| rng.range(-1.0, 1.0));
+        ws.cd = Some(cd);
     }
     let plan = Plan {
         nstates,

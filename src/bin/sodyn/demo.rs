@@ -4,9 +4,7 @@
 use super::{DemoArgs, load_model};
 use nalgebra::{DMatrix, DVector, Matrix3xX, Vector3};
 use sodyn::algo::{Data, aba, crba, factorize_ltl, point_jacobian, rnea, solve_ltl};
-use sodyn::deriv::{
-    FdSoData, SoData, fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives,
-};
+use sodyn::deriv::{fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives};
 use sodyn::error::{Error, Result};
 use sodyn::reference;
 use sodyn::rng::Rng;
@@ -70,9 +68,7 @@ pub(crate) fn run_demo(o: &DemoArgs) -> Result<()> {
         "errors: max |ours − oracle| / max(1, max |oracle|); oracle = reference code with f64 / dual / hyper-dual numbers\n"
     );
     outln!("{:<34} {:>12} {:>14}", "algorithm", "median µs", "max rel err");
-    let mut d = Data::new(&m);
-    let mut so = SoData::new(&m);
-    let mut fso = FdSoData::new(&m);
+    let mut d = Data::with_second_order(&m);
     let mut worst: f64 = 0.0;
     let mut row = |name: &str, us: f64, err: f64| {
         worst = worst.max(err);
@@ -148,10 +144,10 @@ pub(crate) fn run_demo(o: &DemoArgs) -> Result<()> {
     row("      dqdd/dtau = M⁻¹", t, rel(d.minv(), &reference::d_aba_dtau(&m, qs, vs, ts)));
 
     let t = time_us(|| {
-        id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None)?;
+        id_so_derivatives(&m, &mut d, &q, &v, &a, None)?;
         Ok(())
     })?;
-    id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None)?;
+    let so = id_so_derivatives(&m, &mut d, &q, &v, &a, None)?;
     row(
         "id_so (IDSVA-SO) d2tau/dq2",
         t,
@@ -162,10 +158,10 @@ pub(crate) fn run_demo(o: &DemoArgs) -> Result<()> {
     row("      dM/dq", t, rel_t(so.dm_dq(), &reference::dM_dq(&m, qs)));
 
     let t = time_us(|| {
-        fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &tau, None)?;
+        fd_so_derivatives(&m, &mut d, &q, &v, &tau, None)?;
         Ok(())
     })?;
-    fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &tau, None)?;
+    let fso = fd_so_derivatives(&m, &mut d, &q, &v, &tau, None)?;
     let big = m.nv() > 40;
     if big {
         row("fd_so (timing only; oracle > 40 DoF)", t, 0.0);
@@ -207,8 +203,7 @@ pub(crate) fn run_demo(o: &DemoArgs) -> Result<()> {
     if !frames.is_empty() {
         use sodyn::algo::Contact;
         use sodyn::deriv::{
-            ContactData, ImpactData, KktData, constrained_id_so_derivatives, impact_so_derivatives,
-            kkt_so_derivatives,
+            ContactData, constrained_id_so_derivatives, impact_so_derivatives, kkt_so_derivatives,
         };
         use sodyn::reference::contact as oracle;
         let (kind, reference) = (o.contact_type, o.contact_reference);
@@ -227,14 +222,14 @@ pub(crate) fn run_demo(o: &DemoArgs) -> Result<()> {
             "\ncontacts{what} on {} (oracle for second order only up to 20 DoF)",
             frames.join(", ")
         );
-        let cd = ContactData::new(&m, &contacts)?;
+        let mut cd = ContactData::with_second_order(&m, &contacts)?;
         let lam = DVector::from_fn(cd.dim(), |i, _| if i % 3 == 2 { 50.0 } else { 5.0 });
-        let mut cd1 = cd.clone();
         let t = time_us(|| {
-            constrained_id_so_derivatives(&m, &mut d, &mut cd1, &mut so, &q, &v, &a, &lam)?;
+            constrained_id_so_derivatives(&m, &mut d, &mut cd, &q, &v, &a, &lam)?;
             Ok(())
         })?;
-        constrained_id_so_derivatives(&m, &mut d, &mut cd1, &mut so, &q, &v, &a, &lam)?;
+        constrained_id_so_derivatives(&m, &mut d, &mut cd, &q, &v, &a, &lam)?;
+        let so = d.id_so().ok_or_else(|| Error::Io("internal: no second order".into()))?;
         let ls = lam.as_slice();
         row(
             "constrained ID (IDSVA(-SO)c) dtau/dq",
@@ -246,12 +241,11 @@ pub(crate) fn run_demo(o: &DemoArgs) -> Result<()> {
             t,
             rel_t(so.d2tau_dq2(), &oracle::d2_constrained_rnea_dq2(&m, qs, vs, as_, &contacts, ls)),
         );
-        let mut kd = KktData::new(&m, cd.clone()).with_second_order(&m);
         let t = time_us(|| {
-            kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau)?;
+            kkt_so_derivatives(&m, &mut d, &mut cd, &q, &v, &tau)?;
             Ok(())
         })?;
-        kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau)?;
+        let kd = kkt_so_derivatives(&m, &mut d, &mut cd, &q, &v, &tau)?;
         let fo = oracle::kkt_fo(&m, qs, vs, ts, &contacts);
         row("kkt FO+SO dqdd/dq", t, rel(kd.dqdd_dq(), &fo.dqdd_dq));
         row("      dlambda/dq", t, rel(kd.dlambda_dq(), &fo.dlambda_dq));
@@ -266,12 +260,11 @@ pub(crate) fn run_demo(o: &DemoArgs) -> Result<()> {
             row("      d2qdd/dq2", t, rel_t(k.d2qdd_dq2(), &so_ref.d2qdd_dq2));
             row("      d2lambda/dq2", t, rel_t(k.d2lambda_dq2(), &so_ref.d2lambda_dq2));
         }
-        let mut im = ImpactData::new(&m, cd).with_second_order(&m);
         let t = time_us(|| {
-            impact_so_derivatives(&m, &mut d, &mut im, &q, &v)?;
+            impact_so_derivatives(&m, &mut d, &mut cd, &q, &v)?;
             Ok(())
         })?;
-        impact_so_derivatives(&m, &mut d, &mut im, &q, &v)?;
+        let im = impact_so_derivatives(&m, &mut d, &mut cd, &q, &v)?;
         let fo = oracle::impact_fo(&m, qs, vs, &contacts, 0.0);
         row("impact FO+SO dvplus/dq", t, rel(im.dvplus_dq(), &fo.dvplus_dq));
         row("      dimpulse/dq", t, rel(im.dimpulse_dq(), &fo.dimpulse_dq));
@@ -302,22 +295,20 @@ pub(crate) fn run_demo(o: &DemoArgs) -> Result<()> {
 6-D contacts (local axes, kp 10, kd 2) on {}",
                 soles.join(", ")
             );
-            let cd = ContactData::new(&m, &contacts)?;
-            let mut kd = KktData::new(&m, cd.clone()).with_second_order(&m);
+            let mut cd = ContactData::with_second_order(&m, &contacts)?;
             let t = time_us(|| {
-                kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau)?;
+                kkt_so_derivatives(&m, &mut d, &mut cd, &q, &v, &tau)?;
                 Ok(())
             })?;
-            kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau)?;
+            let kd = kkt_so_derivatives(&m, &mut d, &mut cd, &q, &v, &tau)?;
             let fo = oracle::kkt_fo(&m, qs, vs, ts, &contacts);
             row("kkt FO+SO dqdd/dq", t, rel(kd.dqdd_dq(), &fo.dqdd_dq));
             row("      dlambda/dq", t, rel(kd.dlambda_dq(), &fo.dlambda_dq));
-            let mut im = ImpactData::new(&m, cd).with_second_order(&m);
             let t = time_us(|| {
-                impact_so_derivatives(&m, &mut d, &mut im, &q, &v)?;
+                impact_so_derivatives(&m, &mut d, &mut cd, &q, &v)?;
                 Ok(())
             })?;
-            impact_so_derivatives(&m, &mut d, &mut im, &q, &v)?;
+            let im = impact_so_derivatives(&m, &mut d, &mut cd, &q, &v)?;
             let fo = oracle::impact_fo(&m, qs, vs, &contacts, 0.0);
             row("impact FO+SO dvplus/dq", t, rel(im.dvplus_dq(), &fo.dvplus_dq));
             row("      dimpulse/dq", t, rel(im.dimpulse_dq(), &fo.dimpulse_dq));
@@ -362,9 +353,7 @@ fn run_reduced_demo(o: &DemoArgs, m: &sodyn::model::Model) -> Result<()> {
          with the mimic expansion, f64 / dual / hyper-dual numbers\n"
     );
     outln!("{:<34} {:>12} {:>14}", "algorithm", "median µs", "max rel err");
-    let mut d = Data::new(m);
-    let mut so = SoData::new(m);
-    let mut fso = FdSoData::new(m);
+    let mut d = Data::with_second_order(m);
     let mut worst: f64 = 0.0;
     let mut row = |name: &str, us: f64, err: f64| {
         worst = worst.max(err);
@@ -387,12 +376,14 @@ fn run_reduced_demo(o: &DemoArgs, m: &sodyn::model::Model) -> Result<()> {
     row("fd_fo dqdd/dq", t, rel(d.dqdd_dq(), &r.d_aba_dq(qs, vs, ts)));
     row("      dqdd/dv", t, rel(d.dqdd_dv(), &r.d_aba_dv(qs, vs, ts)));
     row("      dqdd/dtau = M⁻¹", t, rel(d.minv(), &r.d_aba_dtau(qs, vs, ts)));
-    let t = time_us(|| id_so_derivatives(m, &mut d, &mut so, &q, &v, &a, None))?;
+    let t = time_us(|| id_so_derivatives(m, &mut d, &q, &v, &a, None).map(|_| ()))?;
+    let so = id_so_derivatives(m, &mut d, &q, &v, &a, None)?;
     row("id_so d2tau/dq2", t, rel_t(so.d2tau_dq2(), &r.d2_rnea_dq2(qs, vs, as_)));
     row("      d2tau/dv2", t, rel_t(so.d2tau_dv2(), &r.d2_rnea_dv2(qs, vs, as_)));
     row("      d2tau/dqdv", t, rel_t(so.d2tau_dqdv(), &r.d2_rnea_dqdv(qs, vs, as_)));
     row("      dM/dq", t, rel_t(so.dm_dq(), &r.dM_dq(qs)));
-    let t = time_us(|| fd_so_derivatives(m, &mut d, &mut fso, &q, &v, &tau, None))?;
+    let t = time_us(|| fd_so_derivatives(m, &mut d, &q, &v, &tau, None).map(|_| ()))?;
+    let fso = fd_so_derivatives(m, &mut d, &q, &v, &tau, None)?;
     if m.nv() > 40 {
         row("fd_so (timing only; oracle > 40 DoF)", t, 0.0);
     } else {

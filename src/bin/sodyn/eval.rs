@@ -14,11 +14,10 @@ use sodyn::algo::{
     nonlinear_effects, rnea,
 };
 use sodyn::deriv::{
-    ContactData, ContractedData, FdSoData, ImpactContracted, ImpactData, KktContracted, KktData,
-    SoData, constrained_id_derivatives, constrained_id_so_derivatives, fd_derivatives,
-    fd_so_contracted, fd_so_derivatives, id_derivatives, id_so_contracted, id_so_derivatives,
-    impact_derivatives, impact_so_contracted, impact_so_derivatives, kkt_derivatives,
-    kkt_so_contracted, kkt_so_derivatives,
+    ContactData, ImpactData, KktData, constrained_id_derivatives, constrained_id_so_derivatives,
+    fd_derivatives, fd_so_contracted, fd_so_derivatives, id_derivatives, id_so_contracted,
+    id_so_derivatives, impact_derivatives, impact_so_contracted, impact_so_derivatives,
+    kkt_derivatives, kkt_so_contracted, kkt_so_derivatives,
 };
 use sodyn::error::{Error, Result};
 use sodyn::model::{ContactReference, ContactType, Model};
@@ -441,7 +440,8 @@ fn defined<T>(r: Result<T>, keys: &[&str], errors: &mut Map<String, Value>) -> R
 /// other failure is an `Err`.
 pub fn eval_json(model: &Model, s: &State, order: u32) -> Result<Value> {
     let mut errors = Map::new();
-    let mut data = Data::new(model);
+    // Every output of the schema, the second order included (`eval` is not a hot path).
+    let mut data = Data::with_second_order(model);
     let tau = rnea(model, &mut data, &s.q, &s.v, &s.a, None)?.clone();
     let b = nonlinear_effects(model, &mut data, &s.q, &s.v)?.clone();
     let m = crba(model, &mut data, &s.q)?.clone();
@@ -476,16 +476,14 @@ pub fn eval_json(model: &Model, s: &State, order: u32) -> Result<Value> {
         }
     }
     if order >= 2 {
-        let mut so = SoData::new(model);
-        id_so_derivatives(model, &mut data, &mut so, &s.q, &s.v, &s.a, None)?;
+        let so = id_so_derivatives(model, &mut data, &s.q, &s.v, &s.a, None)?;
         o.insert("d2tau_dq2".into(), tensor_json(so.d2tau_dq2()));
         o.insert("d2tau_dv2".into(), tensor_json(so.d2tau_dv2()));
         o.insert("d2tau_dqdv".into(), tensor_json(so.d2tau_dqdv()));
         o.insert("dM_dq".into(), tensor_json(so.dm_dq()));
-        let mut f = FdSoData::new(model);
         let keys = ["d2qdd_dq2", "d2qdd_dv2", "d2qdd_dqdv", "d2qdd_dtaudq"];
-        let r = fd_so_derivatives(model, &mut data, &mut f, &s.q, &s.v, &s.tau, None);
-        if defined(r, &keys, &mut errors)?.is_some() {
+        let r = fd_so_derivatives(model, &mut data, &s.q, &s.v, &s.tau, None);
+        if let Some(f) = defined(r, &keys, &mut errors)? {
             let t = [f.d2qdd_dq2(), f.d2qdd_dv2(), f.d2qdd_dqdv(), f.d2qdd_dtaudq()];
             for (k, x) in keys.iter().zip(t) {
                 o.insert((*k).into(), tensor_json(x));
@@ -659,9 +657,8 @@ fn contracted_outputs(
 ) -> Result<Value> {
     let w = &s.weights;
     let mut out = Map::new();
-    let mut con = ContractedData::new(model);
     if let Some(wt) = &w.tau {
-        id_so_contracted(model, data, &mut con, &s.q, &s.v, &s.a, wt)?;
+        let con = id_so_contracted(model, data, &s.q, &s.v, &s.a, wt)?;
         out.insert(
             "id".into(),
             json!({
@@ -673,12 +670,11 @@ fn contracted_outputs(
         );
     }
     if let Some(wq) = &w.qdd
-        && defined(
-            fd_so_contracted(model, data, &mut con, &s.q, &s.v, &s.tau, wq),
+        && let Some(con) = defined(
+            fd_so_contracted(model, data, &s.q, &s.v, &s.tau, wq),
             &["contracted.fd"],
             errors,
         )?
-        .is_some()
     {
         out.insert(
             "fd".into(),
@@ -692,9 +688,8 @@ fn contracted_outputs(
     }
     let (nv, nc3) = (model.nv(), s.contacts.iter().map(|c| c.dim()).sum::<usize>());
     if w.kkt_qdd.is_some() || w.kkt_lambda.is_some() {
-        let mut kd = KktData::new(model, ContactData::new(model, &s.contacts)?);
-        kd.set_damping(s.damping)?;
-        let mut kc = KktContracted::new(model, &kd);
+        let mut cd = ContactData::with_contracted(model, &s.contacts)?;
+        cd.set_damping(s.damping)?;
         let mut o = Map::new();
         let mut ok = true;
         for (weight, prefix) in [(&w.kkt_qdd, "d2qdd"), (&w.kkt_lambda, "d2lambda")] {
@@ -704,11 +699,11 @@ fn contracted_outputs(
             } else {
                 (DVector::zeros(nv), x.clone())
             };
-            let r = kkt_so_contracted(model, data, &mut kd, &mut kc, &s.q, &s.v, &s.tau, &wq, &wl);
-            if defined(r, &["contracted.kkt"], errors)?.is_none() {
+            let r = kkt_so_contracted(model, data, &mut cd, &s.q, &s.v, &s.tau, &wq, &wl);
+            let Some(kc) = defined(r, &["contracted.kkt"], errors)? else {
                 ok = false;
                 break;
-            }
+            };
             o.insert(format!("{prefix}_dq2"), mat_json(kc.c_qq()));
             o.insert(format!("{prefix}_dv2"), mat_json(kc.c_vv()));
             o.insert(format!("{prefix}_dqdv"), mat_json(kc.c_qv()));
@@ -719,10 +714,9 @@ fn contracted_outputs(
         }
     }
     if w.impact_vplus.is_some() || w.impact_impulse.is_some() {
-        let mut im = ImpactData::new(model, ContactData::new(model, &s.contacts)?);
-        im.set_restitution(s.restitution)?;
-        im.set_damping(s.damping)?;
-        let mut ic = ImpactContracted::new(model, &im);
+        let mut cd = ContactData::with_contracted(model, &s.contacts)?;
+        cd.set_restitution(s.restitution)?;
+        cd.set_damping(s.damping)?;
         let mut o = Map::new();
         let mut ok = true;
         for (weight, prefix) in [(&w.impact_vplus, "d2vplus"), (&w.impact_impulse, "d2impulse")] {
@@ -732,11 +726,11 @@ fn contracted_outputs(
             } else {
                 (DVector::zeros(nv), x.clone())
             };
-            let r = impact_so_contracted(model, data, &mut im, &mut ic, &s.q, &s.v, &wv, &wl);
-            if defined(r, &["contracted.impact"], errors)?.is_none() {
+            let r = impact_so_contracted(model, data, &mut cd, &s.q, &s.v, &wv, &wl);
+            let Some(ic) = defined(r, &["contracted.impact"], errors)? else {
                 ok = false;
                 break;
-            }
+            };
             o.insert(format!("{prefix}_dq2"), mat_json(ic.c_qq()));
             o.insert(format!("{prefix}_dqdvminus"), mat_json(ic.c_qvminus()));
         }
@@ -757,7 +751,13 @@ fn contact_outputs(
     o: &mut Map<String, Value>,
     errors: &mut Map<String, Value>,
 ) -> Result<()> {
-    let mut cd = ContactData::new(model, &s.contacts)?;
+    let mut cd = if order >= 2 {
+        ContactData::with_second_order(model, &s.contacts)?
+    } else {
+        ContactData::new(model, &s.contacts)?
+    };
+    cd.set_damping(s.damping)?;
+    cd.set_restitution(s.restitution)?;
     // Two-frame (closed-loop) constraints have first-order derivatives only: the second-order
     // outputs are left out and `errors` says why.
     let loops = s.contacts.iter().any(Contact::is_loop);
@@ -774,8 +774,8 @@ fn contact_outputs(
         order
     };
     if !loops {
-        let mut so = SoData::new(model);
-        constrained_id_so_derivatives(model, data, &mut cd, &mut so, &s.q, &s.v, &s.a, &s.lambda)?;
+        constrained_id_so_derivatives(model, data, &mut cd, &s.q, &s.v, &s.a, &s.lambda)?;
+        let so = data.id_so().ok_or_else(|| Error::Io("internal: no second order".into()))?;
         o.insert(
             "constrained_id".into(),
             json!({
@@ -796,28 +796,21 @@ fn contact_outputs(
             }),
         );
     }
-    let mut kd = KktData::new(model, cd.clone());
-    kd.set_damping(s.damping)?;
     let r = if order >= 2 {
-        kd = kd.with_second_order(model);
-        kkt_so_derivatives(model, data, &mut kd, &s.q, &s.v, &s.tau)
+        kkt_so_derivatives(model, data, &mut cd, &s.q, &s.v, &s.tau)
     } else {
-        kkt_derivatives(model, data, &mut kd, &s.q, &s.v, &s.tau)
+        kkt_derivatives(model, data, &mut cd, &s.q, &s.v, &s.tau)
     };
-    if defined(r, &["kkt"], errors)?.is_some() {
-        o.insert("kkt".into(), kkt_json(&kd));
+    if let Some(kd) = defined(r, &["kkt"], errors)? {
+        o.insert("kkt".into(), kkt_json(kd));
     }
-    let mut im = ImpactData::new(model, cd);
-    im.set_restitution(s.restitution)?;
-    im.set_damping(s.damping)?;
     let r = if order >= 2 {
-        im = im.with_second_order(model);
-        impact_so_derivatives(model, data, &mut im, &s.q, &s.v)
+        impact_so_derivatives(model, data, &mut cd, &s.q, &s.v)
     } else {
-        impact_derivatives(model, data, &mut im, &s.q, &s.v)
+        impact_derivatives(model, data, &mut cd, &s.q, &s.v)
     };
-    if defined(r, &["impact"], errors)?.is_some() {
-        o.insert("impact".into(), impact_json(&im));
+    if let Some(im) = defined(r, &["impact"], errors)? {
+        o.insert("impact".into(), impact_json(im));
     }
     Ok(())
 }

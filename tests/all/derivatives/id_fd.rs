@@ -111,10 +111,9 @@ fn id_second_order_matches_hyper_dual_oracle() {
     let mut asym = 0.0f64;
     let mut rng = Rng::new(14);
     for m in so_models() {
-        let mut d = Data::new(&m);
-        let mut so = SoData::new(&m);
+        let mut d = Data::with_second_order(&m);
         let (q, v, a) = random_state(&m, &mut rng);
-        id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None).unwrap();
+        let so = id_so_derivatives(&m, &mut d, &q, &v, &a, None).unwrap();
         let (qs, vs, as_) = (q.as_slice(), v.as_slice(), a.as_slice());
         let at = format!("{} nv={}", m.name(), m.nv());
         w[0].add(rel_err_tensor(so.d2tau_dq2(), &reference::d2_rnea_dq2(&m, qs, vs, as_)), &at);
@@ -142,10 +141,9 @@ fn fd_second_order_matches_hyper_dual_oracle() {
     ];
     let mut rng = Rng::new(15);
     for m in so_models().into_iter().step_by(2) {
-        let mut d = Data::new(&m);
-        let mut f = FdSoData::new(&m);
+        let mut d = Data::with_second_order(&m);
         let (q, v, tau) = random_state(&m, &mut rng);
-        fd_so_derivatives(&m, &mut d, &mut f, &q, &v, &tau, None).unwrap();
+        let f = fd_so_derivatives(&m, &mut d, &q, &v, &tau, None).unwrap();
         let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
         let at = format!("{} nv={}", m.name(), m.nv());
         w[0].add(rel_err_tensor(f.d2qdd_dq2(), &reference::d2_aba_dq2(&m, qs, vs, ts)), &at);
@@ -165,9 +163,8 @@ fn fd_second_order_matches_differences_of_first_order() {
     let mut rng = Rng::new(16);
     for m in [builtin::quadruped(), builtin::random_tree(10, 2, true), builtin::serial_chain(6)] {
         let (q, v, tau) = random_state(&m, &mut rng);
-        let mut d = Data::new(&m);
-        let mut f = FdSoData::new(&m);
-        fd_so_derivatives(&m, &mut d, &mut f, &q, &v, &tau, None).unwrap();
+        let mut d = Data::with_second_order(&m);
+        let f = fd_so_derivatives(&m, &mut d, &q, &v, &tau, None).unwrap().clone();
         let n = m.nv();
         // h balances truncation (h²) against round-off of the first-order results (ε/h).
         let h = 1e-5;
@@ -207,8 +204,7 @@ fn idfoza_and_idsoza_equal_contractions_of_dense_tensors() {
     for m in so_models().into_iter().step_by(3) {
         let n = m.nv();
         let (q, _, x) = random_state(&m, &mut rng);
-        let mut d = Data::new(&m);
-        let mut so = SoData::new(&m);
+        let mut d = Data::with_second_order(&m);
         let mut out = DMatrix::from_element(n, n, 7.0); // must be fully overwritten
         idfoza(&m, &mut d, &q, &x, &mut out).unwrap();
         let dm = reference::dM_dq(&m, q.as_slice());
@@ -217,7 +213,7 @@ fn idfoza_and_idsoza_equal_contractions_of_dense_tensors() {
         let at = format!("{} nv={}", m.name(), n);
         w1.add(rel_err_mat(&out, &expect), &at);
         // IDSOZA: ∂²(M x)/∂q² = d2tau_dq2 of RNEA without gravity/velocity at a = x.
-        let t = idsoza(&m, &mut d, &mut so, &q, &x).unwrap().clone();
+        let t = idsoza(&m, &mut d, &q, &x).unwrap().clone();
         let mut m0 = m.clone();
         m0.set_gravity(nalgebra::Vector3::zeros()).unwrap();
         let zero = vec![0.0; n];

@@ -34,7 +34,7 @@ use super::pin_map::{
 use nalgebra::{DMatrix, DVector, Vector3};
 use serde_json::Value;
 use sodyn::algo::{Contact, Data};
-use sodyn::deriv::{ContactData, ImpactData, KktData, impact_derivatives, kkt_derivatives};
+use sodyn::deriv::{ContactData, impact_derivatives, kkt_derivatives};
 use sodyn::model::Model;
 
 /// Tolerance (relative, see the module doc) for every compared quantity.
@@ -257,9 +257,7 @@ fn run(model_name: &str, fixture: &str) {
         .iter()
         .map(|f| Contact::new(&model, f, Vector3::zeros()).expect("contact"))
         .collect();
-    let cd = ContactData::new(&model, &contacts).expect("contact data");
-    let mut kd = KktData::new(&model, cd.clone());
-    let mut im = ImpactData::new(&model, cd);
+    let mut cd = ContactData::new(&model, &contacts).expect("contact data");
     let mut data = Data::new(&model);
     let mut report = Report { model: model_name.into(), rows: vec![] };
     let nv = model.nv();
@@ -274,7 +272,8 @@ fn run(model_name: &str, fixture: &str) {
 
         // Constraint (KKT) dynamics.
         let c = &out["constraint_dynamics"];
-        kkt_derivatives(&model, &mut data, &mut kd, &q, &v, &tau).expect("kkt_derivatives");
+        let kd =
+            kkt_derivatives(&model, &mut data, &mut cd, &q, &v, &tau).expect("kkt_derivatives");
         let vd = |k: &str| permute_vec(&map, &vec_of(&c[k]));
         let vr = |k: &str| DVector::from_vec(vec_of(&c[k]));
         let md = |k: &str| permute_mat(&map, &mat_of(&c[k]));
@@ -291,8 +290,9 @@ fn run(model_name: &str, fixture: &str) {
         // Impact dynamics, per restitution coefficient.
         let mut vplus_runs: Vec<(f64, DVector<f64>)> = vec![];
         for (e, r) in impulse_runs(out) {
-            im.set_restitution(e).unwrap();
-            impact_derivatives(&model, &mut data, &mut im, &q, &v).expect("impact_derivatives");
+            cd.set_restitution(e).unwrap();
+            let im =
+                impact_derivatives(&model, &mut data, &mut cd, &q, &v).expect("impact_derivatives");
             let vd = |k: &str| permute_vec(&map, &vec_of(&r[k]));
             let vr = |k: &str| DVector::from_vec(vec_of(&r[k]));
             let md = |k: &str| permute_mat(&map, &mat_of(&r[k]));

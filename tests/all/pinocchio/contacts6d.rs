@@ -19,7 +19,7 @@ use super::pin_map::{
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use serde_json::Value;
 use sodyn::algo::{Contact, ContactReference, ContactType, Data};
-use sodyn::deriv::{ContactData, ImpactData, KktData, impact_derivatives, kkt_derivatives};
+use sodyn::deriv::{ContactData, impact_derivatives, kkt_derivatives};
 use sodyn::model::Model;
 use sodyn::spatial::Transform;
 
@@ -148,16 +148,15 @@ fn optimised(
         DVector::from_column_slice(v),
         DVector::from_column_slice(tau),
     );
-    let cd = ContactData::new(model, contacts).expect("contact data");
+    let mut cd = ContactData::new(model, contacts).expect("contact data");
     let mut data = Data::new(model);
-    let mut kd = KktData::new(model, cd.clone());
-    kkt_derivatives(model, &mut data, &mut kd, &q, &v, &tau).expect("kkt_derivatives");
-    let mut im = ImpactData::new(model, cd);
+    kkt_derivatives(model, &mut data, &mut cd, &q, &v, &tau).expect("kkt_derivatives");
     let imp = es
         .iter()
         .map(|&e| {
-            im.set_restitution(e).unwrap();
-            impact_derivatives(model, &mut data, &mut im, &q, &v).expect("impact_derivatives");
+            cd.set_restitution(e).unwrap();
+            let im =
+                impact_derivatives(model, &mut data, &mut cd, &q, &v).expect("impact_derivatives");
             (
                 im.vplus().clone(),
                 im.impulse().clone(),
@@ -170,6 +169,8 @@ fn optimised(
             )
         })
         .collect();
+    // The KKT results stay in `cd` through the impact calls.
+    let kd = cd.kkt();
     Out {
         qdd: kd.qdd().clone(),
         lambda: kd.lambda().clone(),

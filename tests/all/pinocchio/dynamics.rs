@@ -35,7 +35,7 @@ use super::pin_map::{
 };
 use nalgebra::{DMatrix, DVector};
 use sodyn::algo::{Data, aba, crba, rnea};
-use sodyn::deriv::{SoData, fd_derivatives, id_derivatives, id_so_derivatives};
+use sodyn::deriv::{fd_derivatives, id_derivatives, id_so_derivatives};
 use sodyn::tensor::Tensor3;
 
 /// Tolerance for `τ`, `M`, `q̈`.
@@ -115,8 +115,7 @@ fn run(model_name: &str) {
 
     let map = build_mapping(&model, &fx);
     let mut report = Report { model: model_name.into(), rows: vec![] };
-    let mut data = Data::new(&model);
-    let mut so = SoData::new(&model);
+    let mut data = Data::with_second_order(&model);
 
     for (s, state) in fx["states"].as_array().expect("states").iter().enumerate() {
         let out = &state["outputs"];
@@ -197,8 +196,8 @@ fn run(model_name: &str) {
         );
 
         if !out["d2tau_dqdq"].is_null() {
-            id_so_derivatives(&model, &mut data, &mut so, &q, &v, &a, None)
-                .expect("id_so_derivatives");
+            let so =
+                id_so_derivatives(&model, &mut data, &q, &v, &a, None).expect("id_so_derivatives");
             let pairs: [(&'static str, &str, &Tensor3); 4] = [
                 ("d2tau_dqdq", "d2tau_dqdq", so.d2tau_dq2()),
                 ("d2tau_dvdv", "d2tau_dvdv", so.d2tau_dv2()),

@@ -14,7 +14,7 @@ use super::pin_map::{
 use nalgebra::{DMatrix, DVector, Vector3};
 use serde_json::Value;
 use sodyn::algo::{Contact, ContactReference, ContactType, Data};
-use sodyn::deriv::{ContactData, KktData, kkt_derivatives};
+use sodyn::deriv::{ContactData, kkt_derivatives};
 use sodyn::model::Model;
 use sodyn::reference::contact as oracle;
 use sodyn::spatial::Transform;
@@ -105,8 +105,8 @@ fn run(model_name: &str) {
         let qdd_t = permute_vec(&map, &vec_of(&c["ddq"]));
         let lam_t = rows(&vec_of(&c["lambda_c"]));
         let mut d = Data::new(&model);
-        let mut kd = KktData::new(&model, ContactData::new(&model, &cs).unwrap());
-        kkt_derivatives(&model, &mut d, &mut kd, &q, &v, &tau).unwrap();
+        let mut cd = ContactData::new(&model, &cs).unwrap();
+        let kd = kkt_derivatives(&model, &mut d, &mut cd, &q, &v, &tau).unwrap();
         let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
         let fo = oracle::kkt_fo(&model, qs, vs, ts, &cs);
         let (qr, lr) = oracle::kkt::<f64>(&model, qs, vs, ts, &cs);

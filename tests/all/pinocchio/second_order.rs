@@ -130,14 +130,13 @@ fn run(model_name: &str) {
     let tau_ref = permute_vec(&map, &vec_of(&state["outputs"]["rnea_tau"]));
     let tau_err = rel_err((&tau - &tau_ref).amax(), tau_ref.amax());
 
-    let mut data = Data::new(&model);
-    let mut so = SoData::new(&model);
-    id_so_derivatives(&model, &mut data, &mut so, &q, &v, &a, None).expect("id_so_derivatives");
+    let mut data = Data::with_second_order(&model);
+    let so = id_so_derivatives(&model, &mut data, &q, &v, &a, None).expect("id_so_derivatives");
     let ours: [&Tensor3; 4] = [so.d2tau_dq2(), so.d2tau_dv2(), so.d2tau_dqdv(), so.dm_dq()];
     let samples = &state["samples"];
     let rows: Vec<TensorCmp> =
         SO_KEYS.iter().zip(ours).map(|(&k, t)| cmp_samples(k, &map, t, &samples[k])).collect();
-    negative_controls(model_name, &model, &map, &so, samples);
+    negative_controls(model_name, &model, &map, so, samples);
 
     let size = std::fs::metadata(fixture_path(&file)).map(|m| m.len()).unwrap_or(0);
     let moved = map.perm.iter().enumerate().filter(|(i, p)| i != *p).count();

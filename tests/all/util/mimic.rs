@@ -2,7 +2,7 @@
 //! `Model` in reduced coordinates, its AD oracle and random states.
 
 use nalgebra::DVector;
-use sodyn::deriv::{ContactData, ImpactData, KktData};
+use sodyn::deriv::ContactData;
 use sodyn::model::{Model, UrdfOptions, load_urdf_file};
 use sodyn::reference::mimic::Reduced;
 use sodyn::rng::Rng;
@@ -60,12 +60,12 @@ pub fn state(m: &Model, rng: &mut Rng) -> [DVector<f64>; 3] {
     [q, v, x]
 }
 
-/// The KKT workspace of `contacts` on `m` (`KktData::new` with its `ContactData`).
-pub fn kkt_data(m: &Model, contacts: &[sodyn::model::Contact]) -> sodyn::Result<KktData> {
-    Ok(KktData::new(m, ContactData::new(m, contacts)?))
+/// The contact-set workspace of `contacts` on `m` for the KKT functions (`ContactData::new`).
+pub fn kkt_data(m: &Model, contacts: &[sodyn::model::Contact]) -> sodyn::Result<ContactData> {
+    ContactData::new(m, contacts)
 }
 
-/// The impact workspace of `contacts` on `m` (`ImpactData::new` with its `ContactData`).
-pub fn impact_data(m: &Model, contacts: &[sodyn::model::Contact]) -> sodyn::Result<ImpactData> {
-    Ok(ImpactData::new(m, ContactData::new(m, contacts)?))
+/// The contact-set workspace of `contacts` on `m` for the impact functions (`ContactData::new`).
+pub fn impact_data(m: &Model, contacts: &[sodyn::model::Contact]) -> sodyn::Result<ContactData> {
+    ContactData::new(m, contacts)
 }
