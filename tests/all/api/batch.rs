@@ -5,9 +5,7 @@ use nalgebra::{DMatrix, DVector};
 use sodyn::Error;
 use sodyn::algo::{Data, aba, crba, rnea};
 use sodyn::batch::*;
-use sodyn::deriv::{
-    FdSoData, SoData, fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives,
-};
+use sodyn::deriv::{fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives};
 use sodyn::model::{Model, builtin};
 use sodyn::rng::Rng;
 use std::sync::Arc;
@@ -80,29 +78,28 @@ fn check_identical(m: &Model, s: &States, mut bd: BatchData, label: &str) {
     }
 }
 
-/// Second-order batched functions against sequential calls (small models: nv³ tensors).
+/// Second-order batched functions against sequential calls (small models: nv³ tensors); `bd`
+/// made with dense second-order capacity.
 fn check_identical_so(m: &Model, s: &States, mut bd: BatchData, label: &str) {
     let n = s.q.len();
-    let mut d = Data::new(m);
-    let mut so = vec![SoData::new(m); n];
+    let mut d = Data::with_second_order(m);
+    let mut so = vec![IdSoResult::zeros(m); n];
     id_so_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut so).unwrap();
-    let mut fso = vec![FdSoData::new(m); n];
+    let mut fso = vec![FdSoResult::zeros(m); n];
     fd_so_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.tau, &mut fso).unwrap();
-    let mut so1 = SoData::new(m);
-    let mut fso1 = FdSoData::new(m);
     for k in 0..n {
         let at = format!("{label}: model {} state {k}", m.name());
-        id_so_derivatives(m, &mut d, &mut so1, &s.q[k], &s.v[k], &s.a[k], None).unwrap();
-        assert_eq!(so[k].d2tau_dq2().as_slice(), so1.d2tau_dq2().as_slice(), "d2tau_dq2 {at}");
-        assert_eq!(so[k].d2tau_dv2().as_slice(), so1.d2tau_dv2().as_slice(), "d2tau_dv2 {at}");
-        assert_eq!(so[k].d2tau_dqdv().as_slice(), so1.d2tau_dqdv().as_slice(), "d2tau_dqdv {at}");
-        assert_eq!(so[k].dm_dq().as_slice(), so1.dm_dq().as_slice(), "dM_dq {at}");
-        fd_so_derivatives(m, &mut d, &mut fso1, &s.q[k], &s.v[k], &s.tau[k], None).unwrap();
-        assert_eq!(fso[k].d2qdd_dq2().as_slice(), fso1.d2qdd_dq2().as_slice(), "d2qdd_dq2 {at}");
-        assert_eq!(fso[k].d2qdd_dv2().as_slice(), fso1.d2qdd_dv2().as_slice(), "d2qdd_dv2 {at}");
-        assert_eq!(fso[k].d2qdd_dqdv().as_slice(), fso1.d2qdd_dqdv().as_slice(), "d2qdd_dqdv {at}");
+        let so1 = id_so_derivatives(m, &mut d, &s.q[k], &s.v[k], &s.a[k], None).unwrap();
+        assert_eq!(so[k].d2tau_dq2.as_slice(), so1.d2tau_dq2().as_slice(), "d2tau_dq2 {at}");
+        assert_eq!(so[k].d2tau_dv2.as_slice(), so1.d2tau_dv2().as_slice(), "d2tau_dv2 {at}");
+        assert_eq!(so[k].d2tau_dqdv.as_slice(), so1.d2tau_dqdv().as_slice(), "d2tau_dqdv {at}");
+        assert_eq!(so[k].dm_dq.as_slice(), so1.dm_dq().as_slice(), "dM_dq {at}");
+        let fso1 = fd_so_derivatives(m, &mut d, &s.q[k], &s.v[k], &s.tau[k], None).unwrap();
+        assert_eq!(fso[k].d2qdd_dq2.as_slice(), fso1.d2qdd_dq2().as_slice(), "d2qdd_dq2 {at}");
+        assert_eq!(fso[k].d2qdd_dv2.as_slice(), fso1.d2qdd_dv2().as_slice(), "d2qdd_dv2 {at}");
+        assert_eq!(fso[k].d2qdd_dqdv.as_slice(), fso1.d2qdd_dqdv().as_slice(), "d2qdd_dqdv {at}");
         assert_eq!(
-            fso[k].d2qdd_dtaudq().as_slice(),
+            fso[k].d2qdd_dtaudq.as_slice(),
             fso1.d2qdd_dtaudq().as_slice(),
             "d2qdd_dtaudq {at}"
         );
@@ -146,8 +143,9 @@ fn batch_second_order_equals_sequential() {
     let pool = Arc::new(BatchPool::new(2).unwrap());
     for m in [builtin::quadruped(), builtin::random_tree(8, 7, true)] {
         let s = states(&m, 9, 30);
-        check_identical_so(&m, &s, BatchData::new(&m), "shared pool");
-        check_identical_so(&m, &s, BatchData::with_pool(&m, pool.clone()), "2 threads");
+        check_identical_so(&m, &s, BatchData::with_second_order(&m), "shared pool");
+        let bd = BatchData::from_workspace(pool.clone(), Data::with_second_order(&m));
+        check_identical_so(&m, &s, bd, "2 threads");
     }
 }
 
@@ -177,7 +175,9 @@ fn invalid_configuration_names_the_state() {
         let msg = e.to_string();
         assert!(msg.contains(&format!("state {k}")), "message names state {k}: {msg}");
     };
-    let mut bd = BatchData::with_pool(&m, Arc::new(BatchPool::new(2).unwrap()));
+    // Dense second-order capacity, for id_so_derivatives_batch below.
+    let pool = Arc::new(BatchPool::new(2).unwrap());
+    let mut bd = BatchData::from_workspace(pool, Data::with_second_order(&m));
     check(
         id_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut mats(&m, n), &mut mats(&m, n))
             .unwrap_err(),
@@ -190,7 +190,7 @@ fn invalid_configuration_names_the_state() {
     check(aba_batch(&m, &mut bd, &s.q, &s.v, &s.tau, &mut vecs(&m, n)).unwrap_err());
     check(crba_batch(&m, &mut bd, &s.q, &mut mats(&m, n)).unwrap_err());
     check(
-        id_so_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut vec![SoData::new(&m); n])
+        id_so_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut vec![IdSoResult::zeros(&m); n])
             .unwrap_err(),
     );
 }
@@ -239,7 +239,8 @@ fn first_failing_state_is_reported() {
 fn inconsistent_lengths_and_shapes_are_errors() {
     let m = builtin::quadruped();
     let s = states(&m, 5, 6);
-    let mut bd = BatchData::new(&m);
+    // Dense second-order capacity: only the tensor outputs below are wrong.
+    let mut bd = BatchData::with_second_order(&m);
     // One velocity too few.
     let e = rnea_batch(&m, &mut bd, &s.q, &s.v[..4], &s.a, &mut vecs(&m, 5)).unwrap_err();
     assert!(e.to_string().contains("vs"), "{e}");
@@ -255,9 +256,8 @@ fn inconsistent_lengths_and_shapes_are_errors() {
     assert!(e.to_string().contains("out_dv[3]"), "{e}");
     // Tensor workspaces made for another model.
     let other = builtin::humanoid();
-    let e =
-        id_so_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut vec![SoData::new(&other); 5])
-            .unwrap_err();
+    let mut wrong = vec![IdSoResult::zeros(&other); 5];
+    let e = id_so_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut wrong).unwrap_err();
     assert!(e.to_string().contains("out[0]"), "{e}");
     assert!(BatchPool::new(0).is_err());
 }
@@ -318,35 +318,32 @@ fn clones_share_the_pool_from_several_threads() {
 }
 
 /// `map_states` batches the contact dynamics (KKT and impact, first and second order) on
-/// per-thread `(Data, KktData)` / `(Data, ImpactData)` workspaces: bit for bit the sequential
+/// per-thread `(Data, ContactData)` workspaces: bit for bit the sequential
 /// results on 1, 2 and 3 threads, and the first failing state named.
 #[test]
 fn map_states_batches_the_contact_dynamics() {
     use nalgebra::Vector3;
     use sodyn::algo::Contact;
     use sodyn::deriv::{
-        ContactData, ImpactData, KktData, impact_derivatives, impact_so_derivatives,
-        kkt_derivatives, kkt_so_derivatives,
+        ContactData, impact_derivatives, impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
     };
     let m = builtin::quadruped();
     let feet = ["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"];
     let contacts: Vec<Contact> =
         feet.iter().map(|f| Contact::new(&m, f, Vector3::new(0.01, 0.0, -0.02)).unwrap()).collect();
-    let cd = ContactData::new(&m, &contacts).unwrap();
-    let kd = KktData::new(&m, cd.clone()).with_second_order(&m);
-    let im = ImpactData::new(&m, cd).with_second_order(&m);
+    let cd = ContactData::with_second_order(&m, &contacts).unwrap();
     let n = 29;
     let mut s = states(&m, n, 60);
-    let (mut d, mut kd1, mut im1) = (Data::new(&m), kd.clone(), im.clone());
+    let (mut d, mut cd1) = (Data::new(&m), cd.clone());
     for threads in [1, 2, 3] {
         let pool = Arc::new(BatchPool::new(threads).unwrap());
-        let mut bk = BatchData::from_workspace(pool.clone(), (Data::new(&m), kd.clone()));
-        let mut bi = BatchData::from_workspace(pool, (Data::new(&m), im.clone()));
+        let mut bk = BatchData::from_workspace(pool.clone(), (Data::new(&m), cd.clone()));
+        let mut bi = BatchData::from_workspace(pool, (Data::new(&m), cd.clone()));
         assert_eq!(bk.threads(), threads);
         let mut kout = vec![(DMatrix::zeros(0, 0), DMatrix::zeros(0, 0), vec![]); n];
-        map_states(&mut bk, &mut kout, |(d, kd), k, o| {
-            kkt_derivatives(&m, d, kd, &s.q[k], &s.v[k], &s.tau[k])?;
-            kkt_so_derivatives(&m, d, kd, &s.q[k], &s.v[k], &s.tau[k])?;
+        map_states(&mut bk, &mut kout, |(d, cd), k, o| {
+            kkt_derivatives(&m, d, cd, &s.q[k], &s.v[k], &s.tau[k])?;
+            let kd = kkt_so_derivatives(&m, d, cd, &s.q[k], &s.v[k], &s.tau[k])?;
             *o = (
                 kd.dqdd_dq().clone(),
                 kd.dlambda_dq().clone(),
@@ -356,9 +353,9 @@ fn map_states_batches_the_contact_dynamics() {
         })
         .unwrap();
         let mut iout = vec![(DMatrix::zeros(0, 0), DMatrix::zeros(0, 0), vec![]); n];
-        map_states(&mut bi, &mut iout, |(d, im), k, o| {
-            impact_derivatives(&m, d, im, &s.q[k], &s.v[k])?;
-            impact_so_derivatives(&m, d, im, &s.q[k], &s.v[k])?;
+        map_states(&mut bi, &mut iout, |(d, cd), k, o| {
+            impact_derivatives(&m, d, cd, &s.q[k], &s.v[k])?;
+            let im = impact_so_derivatives(&m, d, cd, &s.q[k], &s.v[k])?;
             *o = (
                 im.dvplus_dq().clone(),
                 im.dimpulse_dq().clone(),
@@ -368,13 +365,14 @@ fn map_states_batches_the_contact_dynamics() {
         })
         .unwrap();
         for k in 0..n {
-            kkt_derivatives(&m, &mut d, &mut kd1, &s.q[k], &s.v[k], &s.tau[k]).unwrap();
-            kkt_so_derivatives(&m, &mut d, &mut kd1, &s.q[k], &s.v[k], &s.tau[k]).unwrap();
+            kkt_derivatives(&m, &mut d, &mut cd1, &s.q[k], &s.v[k], &s.tau[k]).unwrap();
+            let kd1 =
+                kkt_so_derivatives(&m, &mut d, &mut cd1, &s.q[k], &s.v[k], &s.tau[k]).unwrap();
             assert_eq!(&kout[k].0, kd1.dqdd_dq(), "{threads} threads, state {k}");
             assert_eq!(&kout[k].1, kd1.dlambda_dq(), "{threads} threads, state {k}");
             assert_eq!(kout[k].2, kd1.so().unwrap().d2qdd_dq2().as_slice(), "state {k}");
-            impact_derivatives(&m, &mut d, &mut im1, &s.q[k], &s.v[k]).unwrap();
-            impact_so_derivatives(&m, &mut d, &mut im1, &s.q[k], &s.v[k]).unwrap();
+            impact_derivatives(&m, &mut d, &mut cd1, &s.q[k], &s.v[k]).unwrap();
+            let im1 = impact_so_derivatives(&m, &mut d, &mut cd1, &s.q[k], &s.v[k]).unwrap();
             assert_eq!(&iout[k].0, im1.dvplus_dq(), "{threads} threads, state {k}");
             assert_eq!(&iout[k].1, im1.dimpulse_dq(), "{threads} threads, state {k}");
             assert_eq!(iout[k].2, im1.so().unwrap().d2vplus_dq2().as_slice(), "state {k}");
@@ -382,9 +380,9 @@ fn map_states_batches_the_contact_dynamics() {
     }
     // A non-finite torque in state 17: the error names it.
     s.tau[17][2] = f64::NAN;
-    let mut bk = BatchData::from_workspace(Arc::new(BatchPool::new(2).unwrap()), (d, kd));
-    let e = map_states(&mut bk, &mut vec![(); n], |(d, kd), k, _| {
-        kkt_derivatives(&m, d, kd, &s.q[k], &s.v[k], &s.tau[k])
+    let mut bk = BatchData::from_workspace(Arc::new(BatchPool::new(2).unwrap()), (d, cd));
+    let e = map_states(&mut bk, &mut vec![(); n], |(d, cd), k, _| {
+        kkt_derivatives(&m, d, cd, &s.q[k], &s.v[k], &s.tau[k]).map(|_| ())
     })
     .unwrap_err();
     assert!(matches!(e, Error::NotFinite { .. }), "{e:?}");

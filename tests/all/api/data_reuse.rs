@@ -1,7 +1,9 @@
 //! Workspace reuse (issue 32, item 6): every public algorithm, called in several orders and at
-//! several states on ONE set of workspaces (`Data`, `SoData`, `FdSoData`, `ContractedData`,
-//! `ContactData`, `KktData`, `ImpactData`, `KktContracted`, `ImpactContracted`), gives bit for bit what it gives on fresh
-//! workspaces. A difference means state leaking from one call into the next. Also: the model
+//! several states on ONE set of workspaces (a `Data` with second-order capacity, holding the
+//! `SoData`, `FdSoData` and `ContractedData` results, and a `ContactData` with second-order
+//! capacity, holding the `KktData`, `ImpactData`, `KktContracted` and `ImpactContracted`
+//! results), gives bit for bit what it gives on fresh workspaces made with only the capacity
+//! the call needs. A difference means state leaking from one call into the next. Also: the model
 //! and the workspaces are `Send + Sync` (checked at compile time), and threads that share one
 //! `&Model`, each with its own workspaces, reproduce the same bits.
 //!
@@ -131,61 +133,61 @@ const CONTACT: [Algo; 10] = [
 
 /// One set of workspaces.
 struct Ws {
+    /// With the capacity chosen when made (its second-order results live in it).
     data: Data,
-    so: SoData,
-    fso: FdSoData,
-    con: ContractedData,
     /// IDFOZA's output (filled with garbage when made: IDFOZA must overwrite all of it).
     out: DMatrix<f64>,
-    /// With contacts only.
+    /// With contacts only (the KKT, impact and constrained-ID results live in it).
     cd: Option<ContactData>,
-    kkt: Option<KktData>,
-    imp: Option<ImpactData>,
-    kc: Option<KktContracted>,
-    ic: Option<ImpactContracted>,
 }
 
 const RESTITUTION: f64 = 0.4;
 
+/// The second-order capacity of a workspace.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Cap {
+    FirstOrder,
+    Contracted,
+    SecondOrder,
+}
+
 impl Ws {
-    /// Workspaces for `model` and `contacts`; `kkt_so` / `imp_so`: the KKT / impact workspaces
-    /// with the second-order tensors.
-    fn new(model: &Model, contacts: &[Contact], kkt_so: bool, imp_so: bool) -> Ws {
+    /// Workspaces for `model` and `contacts`, `data` with capacity `data_cap` and the contact
+    /// data with `cd_cap`.
+    fn new(model: &Model, contacts: &[Contact], data_cap: Cap, cd_cap: Cap) -> Ws {
         let nv = model.nv();
-        let (cd, kkt, imp, kc, ic) = if contacts.is_empty() {
-            (None, None, None, None, None)
-        } else {
-            let cd = ContactData::new(model, contacts).unwrap();
-            let mut kkt = KktData::new(model, cd.clone());
-            if kkt_so {
-                kkt = kkt.with_second_order(model);
+        let cd = (!contacts.is_empty()).then(|| {
+            let mut cd = match cd_cap {
+                Cap::FirstOrder => ContactData::new(model, contacts),
+                Cap::Contracted => ContactData::with_contracted(model, contacts),
+                Cap::SecondOrder => ContactData::with_second_order(model, contacts),
             }
-            let mut imp = ImpactData::new(model, cd.clone());
-            if imp_so {
-                imp = imp.with_second_order(model);
-            }
-            imp.set_restitution(RESTITUTION).unwrap();
-            let kc = KktContracted::new(model, &kkt);
-            let ic = ImpactContracted::new(model, &imp);
-            (Some(cd), Some(kkt), Some(imp), Some(kc), Some(ic))
+            .unwrap();
+            cd.set_restitution(RESTITUTION).unwrap();
+            cd
+        });
+        let data = match data_cap {
+            Cap::FirstOrder => Data::new(model),
+            Cap::Contracted => Data::with_contracted(model),
+            Cap::SecondOrder => Data::with_second_order(model),
         };
-        Ws {
-            data: Data::new(model),
-            so: SoData::new(model),
-            fso: FdSoData::new(model),
-            con: ContractedData::new(model),
-            out: DMatrix::from_element(nv, nv, f64::NAN),
-            cd,
-            kkt,
-            imp,
-            kc,
-            ic,
-        }
+        Ws { data, out: DMatrix::from_element(nv, nv, f64::NAN), cd }
     }
 
-    /// The workspaces a user would make for this one call of `algo`.
+    /// The workspaces a user would make for this one call of `algo`: only the capacity it
+    /// needs.
     fn fresh(model: &Model, contacts: &[Contact], algo: Algo) -> Ws {
-        Ws::new(model, contacts, algo == Algo::KktSo, algo == Algo::ImpSo)
+        let data_cap = match algo {
+            Algo::IdSo | Algo::FdSo | Algo::Idsoza | Algo::CidSo => Cap::SecondOrder,
+            Algo::IdSoC | Algo::FdSoC => Cap::Contracted,
+            _ => Cap::FirstOrder,
+        };
+        let cd_cap = match algo {
+            Algo::KktSo | Algo::ImpSo => Cap::SecondOrder,
+            Algo::KktSoC | Algo::ImpSoC => Cap::Contracted,
+            _ => Cap::FirstOrder,
+        };
+        Ws::new(model, contacts, data_cap, cd_cap)
     }
 }
 
@@ -203,7 +205,7 @@ fn t3(t: &Tensor3) -> Vec<u64> {
 /// Runs `algo` at `s` on `ws` and collects everything it documents as its output.
 fn run(algo: Algo, model: &Model, ws: &mut Ws, s: &State) -> Outputs {
     let e = |e: sodyn::Error| e.to_string();
-    let Ws { data, so, fso, con, out, cd, kkt, imp, kc, ic } = ws;
+    let Ws { data, out, cd } = ws;
     let mut o: Vec<(&'static str, Vec<u64>)> = Vec::new();
     // The first-order ID outputs in `data` (id_derivatives and the algorithms that also fill
     // them).
@@ -225,16 +227,16 @@ fn run(algo: Algo, model: &Model, ws: &mut Ws, s: &State) -> Outputs {
         o.push(("so.d2tau_dqdv", t3(so.d2tau_dqdv())));
         o.push(("so.dm_dq", t3(so.dm_dq())));
     };
-    let kkt_fo = |kd: &KktData, o: &mut Vec<(&'static str, Vec<u64>)>| {
-        o.push(("kkt.qdd", bits(kd.qdd().as_slice())));
-        o.push(("kkt.lambda", bits(kd.lambda().as_slice())));
-        o.push(("kkt.cd.jac", bits(kd.cd().jac().as_slice())));
-        o.push(("kkt.cd.drift", bits(kd.cd().drift().as_slice())));
+    let kkt_fo = |cd: &ContactData, o: &mut Vec<(&'static str, Vec<u64>)>| {
+        o.push(("kkt.qdd", bits(cd.kkt().qdd().as_slice())));
+        o.push(("kkt.lambda", bits(cd.kkt().lambda().as_slice())));
+        o.push(("kkt.cd.jac", bits(cd.jac().as_slice())));
+        o.push(("kkt.cd.drift", bits(cd.drift().as_slice())));
     };
-    let imp_fo = |im: &ImpactData, o: &mut Vec<(&'static str, Vec<u64>)>| {
-        o.push(("impact.vplus", bits(im.vplus().as_slice())));
-        o.push(("impact.impulse", bits(im.impulse().as_slice())));
-        o.push(("impact.cd.jac", bits(im.cd().jac().as_slice())));
+    let imp_fo = |cd: &ContactData, o: &mut Vec<(&'static str, Vec<u64>)>| {
+        o.push(("impact.vplus", bits(cd.impact().vplus().as_slice())));
+        o.push(("impact.impulse", bits(cd.impact().impulse().as_slice())));
+        o.push(("impact.cd.jac", bits(cd.jac().as_slice())));
     };
     match algo {
         Algo::Fk => {
@@ -280,12 +282,12 @@ fn run(algo: Algo, model: &Model, ws: &mut Ws, s: &State) -> Outputs {
             fd_fo(data, &mut o);
         }
         Algo::IdSo => {
-            id_so_derivatives(model, data, so, &s.q, &s.v, &s.a, None).map_err(e)?;
+            id_so_derivatives(model, data, &s.q, &s.v, &s.a, None).map_err(e)?;
             id_fo(data, &mut o);
-            id_so(so, &mut o);
+            id_so(data.id_so().unwrap(), &mut o);
         }
         Algo::FdSo => {
-            fd_so_derivatives(model, data, fso, &s.q, &s.v, &s.tau, None).map_err(e)?;
+            let fso = fd_so_derivatives(model, data, &s.q, &s.v, &s.tau, None).map_err(e)?;
             o.push(("fso.d2qdd_dq2", t3(fso.d2qdd_dq2())));
             o.push(("fso.d2qdd_dv2", t3(fso.d2qdd_dv2())));
             o.push(("fso.d2qdd_dqdv", t3(fso.d2qdd_dqdv())));
@@ -296,18 +298,19 @@ fn run(algo: Algo, model: &Model, ws: &mut Ws, s: &State) -> Outputs {
             o.push(("idfoza", bits(out.as_slice())));
         }
         Algo::Idsoza => {
-            let t = idsoza(model, data, so, &s.q, &s.x).map_err(e)?;
+            let t = idsoza(model, data, &s.q, &s.x).map_err(e)?;
             o.push(("idsoza", t3(t)));
         }
         Algo::IdSoC => {
-            id_so_contracted(model, data, con, &s.q, &s.v, &s.a, &s.w).map_err(e)?;
+            let con = id_so_contracted(model, data, &s.q, &s.v, &s.a, &s.w).map_err(e)?;
             o.push(("con.c_qq", bits(con.c_qq().as_slice())));
             o.push(("con.c_vv", bits(con.c_vv().as_slice())));
             o.push(("con.c_qv", bits(con.c_qv().as_slice())));
             o.push(("con.c_mq", bits(con.c_mq().as_slice())));
         }
         Algo::FdSoC => {
-            fd_so_contracted(model, data, con, &s.q, &s.v, &s.tau, &s.w).map_err(e)?;
+            fd_so_contracted(model, data, &s.q, &s.v, &s.tau, &s.w).map_err(e)?;
+            let con = data.contracted().unwrap();
             o.push(("con.c_qq", bits(con.c_qq().as_slice())));
             o.push(("con.c_vv", bits(con.c_vv().as_slice())));
             o.push(("con.c_qv", bits(con.c_qv().as_slice())));
@@ -322,34 +325,34 @@ fn run(algo: Algo, model: &Model, ws: &mut Ws, s: &State) -> Outputs {
         }
         Algo::CidSo => {
             let cd = cd.as_mut().unwrap();
-            constrained_id_so_derivatives(model, data, cd, so, &s.q, &s.v, &s.a, &s.lambda)
+            constrained_id_so_derivatives(model, data, cd, &s.q, &s.v, &s.a, &s.lambda)
                 .map_err(e)?;
             id_fo(data, &mut o);
             o.push(("cd.jac", bits(cd.jac().as_slice())));
-            id_so(so, &mut o);
+            id_so(data.id_so().unwrap(), &mut o);
         }
         Algo::KktDyn => {
-            let kd = kkt.as_mut().unwrap();
-            kkt_dynamics(model, data, kd, &s.q, &s.v, &s.tau).map_err(e)?;
-            kkt_fo(kd, &mut o);
+            let cd = cd.as_mut().unwrap();
+            kkt_dynamics(model, data, cd, &s.q, &s.v, &s.tau).map_err(e)?;
+            kkt_fo(cd, &mut o);
             o.push(("data.minv", bits(data.minv().as_slice())));
         }
         Algo::Kkt | Algo::KktSo | Algo::KktSoC => {
-            let kd = kkt.as_mut().unwrap();
+            let cd = cd.as_mut().unwrap();
             if algo == Algo::Kkt {
-                kkt_derivatives(model, data, kd, &s.q, &s.v, &s.tau).map_err(e)?;
+                kkt_derivatives(model, data, cd, &s.q, &s.v, &s.tau).map_err(e)?;
             } else if algo == Algo::KktSoC {
-                let kc = kc.as_mut().unwrap();
-                kkt_so_contracted(model, data, kd, kc, &s.q, &s.v, &s.tau, &s.w, &s.w_c)
+                let kc = kkt_so_contracted(model, data, cd, &s.q, &s.v, &s.tau, &s.w, &s.w_c)
                     .map_err(e)?;
                 o.push(("kc.c_qq", bits(kc.c_qq().as_slice())));
                 o.push(("kc.c_vv", bits(kc.c_vv().as_slice())));
                 o.push(("kc.c_qv", bits(kc.c_qv().as_slice())));
                 o.push(("kc.c_tauq", bits(kc.c_tauq().as_slice())));
             } else {
-                kkt_so_derivatives(model, data, kd, &s.q, &s.v, &s.tau).map_err(e)?;
+                kkt_so_derivatives(model, data, cd, &s.q, &s.v, &s.tau).map_err(e)?;
             }
-            kkt_fo(kd, &mut o);
+            kkt_fo(cd, &mut o);
+            let kd = cd.kkt();
             o.push(("kkt.dqdd_dq", bits(kd.dqdd_dq().as_slice())));
             o.push(("kkt.dqdd_dv", bits(kd.dqdd_dv().as_slice())));
             o.push(("kkt.dqdd_dtau", bits(kd.dqdd_dtau().as_slice())));
@@ -369,23 +372,24 @@ fn run(algo: Algo, model: &Model, ws: &mut Ws, s: &State) -> Outputs {
             }
         }
         Algo::ImpDyn => {
-            let im = imp.as_mut().unwrap();
-            impact_dynamics(model, data, im, &s.q, &s.v).map_err(e)?;
-            imp_fo(im, &mut o);
+            let cd = cd.as_mut().unwrap();
+            impact_dynamics(model, data, cd, &s.q, &s.v).map_err(e)?;
+            imp_fo(cd, &mut o);
         }
         Algo::Imp | Algo::ImpSo | Algo::ImpSoC => {
-            let im = imp.as_mut().unwrap();
+            let cd = cd.as_mut().unwrap();
             if algo == Algo::Imp {
-                impact_derivatives(model, data, im, &s.q, &s.v).map_err(e)?;
+                impact_derivatives(model, data, cd, &s.q, &s.v).map_err(e)?;
             } else if algo == Algo::ImpSoC {
-                let ic = ic.as_mut().unwrap();
-                impact_so_contracted(model, data, im, ic, &s.q, &s.v, &s.w, &s.w_c).map_err(e)?;
+                let ic =
+                    impact_so_contracted(model, data, cd, &s.q, &s.v, &s.w, &s.w_c).map_err(e)?;
                 o.push(("ic.c_qq", bits(ic.c_qq().as_slice())));
                 o.push(("ic.c_qvminus", bits(ic.c_qvminus().as_slice())));
             } else {
-                impact_so_derivatives(model, data, im, &s.q, &s.v).map_err(e)?;
+                impact_so_derivatives(model, data, cd, &s.q, &s.v).map_err(e)?;
             }
-            imp_fo(im, &mut o);
+            imp_fo(cd, &mut o);
+            let im = cd.impact();
             o.push(("impact.dvplus_dq", bits(im.dvplus_dq().as_slice())));
             o.push(("impact.dvplus_dvminus", bits(im.dvplus_dvminus().as_slice())));
             o.push(("impact.dimpulse_dq", bits(im.dimpulse_dq().as_slice())));
@@ -475,10 +479,11 @@ impl Case {
         Case { name, model, contacts, states, algos, fresh }
     }
 
-    /// Runs `calls` (algorithm index, state index) in order on one set of workspaces (with the
-    /// second-order KKT and impact tensors); returns the differences from the fresh results.
+    /// Runs `calls` (algorithm index, state index) in order on one set of workspaces (with all
+    /// the second-order capacity: every algorithm runs on it); returns the differences from the
+    /// fresh results.
     fn replay(&self, order: &str, calls: &[(usize, usize)]) -> Vec<String> {
-        let mut ws = Ws::new(&self.model, &self.contacts, true, true);
+        let mut ws = Ws::new(&self.model, &self.contacts, Cap::SecondOrder, Cap::SecondOrder);
         let mut bad = Vec::new();
         for (n, &(a, s)) in calls.iter().enumerate() {
             let algo = self.algos[a];

@@ -5,8 +5,8 @@
 use nalgebra::{DMatrix, DVector};
 use sodyn::Error;
 use sodyn::algo::{self, Data};
-use sodyn::batch::{self, BatchData, BatchPool};
-use sodyn::deriv::{self, FdSoData, SoData};
+use sodyn::batch::{self, BatchData, BatchPool, FdSoResult, IdSoResult};
+use sodyn::deriv;
 use sodyn::model::{Model, UrdfOptions, load_urdf_file};
 use sodyn::rng::Rng;
 use std::path::PathBuf;
@@ -56,7 +56,16 @@ fn mats(m: &Model, n: usize) -> Vec<DMatrix<f64>> {
     vec![DMatrix::zeros(m.nv(), m.nv()); n]
 }
 
-/// Every mimic batched function on `bd`'s pool against the sequential calls, bit for bit.
+/// Batch workspaces with dense second-order capacity on a pool of `threads` threads.
+fn so_batch(m: &Model, threads: usize) -> BatchData {
+    BatchData::from_workspace(
+        Arc::new(BatchPool::new(threads).unwrap()),
+        Data::with_second_order(m),
+    )
+}
+
+/// Every mimic batched function on `bd`'s pool against the sequential calls, bit for bit
+/// (`bd` with dense second-order capacity).
 fn check_identical(m: &Model, s: &States, bd: &mut BatchData, label: &str) {
     let n = s.q.len();
     let mut tau = vecs(m, n);
@@ -69,13 +78,12 @@ fn check_identical(m: &Model, s: &States, bd: &mut BatchData, label: &str) {
     batch::id_derivatives_batch(m, bd, &s.q, &s.v, &s.a, &mut idq, &mut idv).unwrap();
     let (mut fdq, mut fdv) = (mats(m, n), mats(m, n));
     batch::fd_derivatives_batch(m, bd, &s.q, &s.v, &s.tau, &mut fdq, &mut fdv).unwrap();
-    let mut so = vec![SoData::new(m); n];
+    let mut so = vec![IdSoResult::zeros(m); n];
     batch::id_so_derivatives_batch(m, bd, &s.q, &s.v, &s.a, &mut so).unwrap();
-    let mut fso = vec![FdSoData::new(m); n];
+    let mut fso = vec![FdSoResult::zeros(m); n];
     batch::fd_so_derivatives_batch(m, bd, &s.q, &s.v, &s.tau, &mut fso).unwrap();
 
-    let mut d = Data::new(m);
-    let (mut so1, mut fso1) = (SoData::new(m), FdSoData::new(m));
+    let mut d = Data::with_second_order(m);
     for k in 0..n {
         let at = format!("{label}: model {} state {k}", m.name());
         let (q, v, a, t) = (&s.q[k], &s.v[k], &s.a[k], &s.tau[k]);
@@ -88,18 +96,16 @@ fn check_identical(m: &Model, s: &States, bd: &mut BatchData, label: &str) {
         deriv::fd_derivatives(m, &mut d, q, v, t, None).unwrap();
         assert_eq!(&fdq[k], d.dqdd_dq(), "dqdd_dq {at}");
         assert_eq!(&fdv[k], d.dqdd_dv(), "dqdd_dv {at}");
-        deriv::id_so_derivatives(m, &mut d, &mut so1, q, v, a, None).unwrap();
-        let (b, r) = (&so[k], &so1);
-        assert_eq!(b.d2tau_dq2().as_slice(), r.d2tau_dq2().as_slice(), "d2tau_dq2 {at}");
-        assert_eq!(b.d2tau_dv2().as_slice(), r.d2tau_dv2().as_slice(), "d2tau_dv2 {at}");
-        assert_eq!(b.d2tau_dqdv().as_slice(), r.d2tau_dqdv().as_slice(), "d2tau_dqdv {at}");
-        assert_eq!(b.dm_dq().as_slice(), r.dm_dq().as_slice(), "dM_dq {at}");
-        deriv::fd_so_derivatives(m, &mut d, &mut fso1, q, v, t, None).unwrap();
-        let (b, r) = (&fso[k], &fso1);
-        assert_eq!(b.d2qdd_dq2().as_slice(), r.d2qdd_dq2().as_slice(), "d2qdd_dq2 {at}");
-        assert_eq!(b.d2qdd_dv2().as_slice(), r.d2qdd_dv2().as_slice(), "d2qdd_dv2 {at}");
-        assert_eq!(b.d2qdd_dqdv().as_slice(), r.d2qdd_dqdv().as_slice(), "d2qdd_dqdv {at}");
-        assert_eq!(b.d2qdd_dtaudq().as_slice(), r.d2qdd_dtaudq().as_slice(), "d2qdd_dtaudq {at}");
+        let (b, r) = (&so[k], deriv::id_so_derivatives(m, &mut d, q, v, a, None).unwrap());
+        assert_eq!(b.d2tau_dq2.as_slice(), r.d2tau_dq2().as_slice(), "d2tau_dq2 {at}");
+        assert_eq!(b.d2tau_dv2.as_slice(), r.d2tau_dv2().as_slice(), "d2tau_dv2 {at}");
+        assert_eq!(b.d2tau_dqdv.as_slice(), r.d2tau_dqdv().as_slice(), "d2tau_dqdv {at}");
+        assert_eq!(b.dm_dq.as_slice(), r.dm_dq().as_slice(), "dM_dq {at}");
+        let (b, r) = (&fso[k], deriv::fd_so_derivatives(m, &mut d, q, v, t, None).unwrap());
+        assert_eq!(b.d2qdd_dq2.as_slice(), r.d2qdd_dq2().as_slice(), "d2qdd_dq2 {at}");
+        assert_eq!(b.d2qdd_dv2.as_slice(), r.d2qdd_dv2().as_slice(), "d2qdd_dv2 {at}");
+        assert_eq!(b.d2qdd_dqdv.as_slice(), r.d2qdd_dqdv().as_slice(), "d2qdd_dqdv {at}");
+        assert_eq!(b.d2qdd_dtaudq.as_slice(), r.d2qdd_dtaudq().as_slice(), "d2qdd_dtaudq {at}");
     }
 }
 
@@ -109,14 +115,14 @@ fn check_identical(m: &Model, s: &States, bd: &mut BatchData, label: &str) {
 fn mimic_batch_equals_sequential_one_and_two_threads() {
     for (i, m) in models().iter().enumerate() {
         for threads in [1, 2, 3] {
-            let mut bd = BatchData::with_pool(m, Arc::new(BatchPool::new(threads).unwrap()));
+            let mut bd = so_batch(m, threads);
             assert_eq!(bd.threads(), threads);
             for n in [1, 2, 5, 41] {
                 let s = states(m, n, 100 * i as u64 + n as u64);
                 check_identical(m, &s, &mut bd, &format!("{threads} threads, {n} states"));
             }
         }
-        let mut bd = BatchData::new(m);
+        let mut bd = BatchData::with_second_order(m);
         check_identical(m, &states(m, 23, 7 + i as u64), &mut bd, "shared pool");
     }
 }
@@ -124,7 +130,7 @@ fn mimic_batch_equals_sequential_one_and_two_threads() {
 #[test]
 fn mimic_empty_batch_is_ok() {
     let m = &models()[0];
-    let mut bd = BatchData::new(m);
+    let mut bd = BatchData::with_second_order(m);
     batch::rnea_batch(m, &mut bd, &[], &[], &[], &mut []).unwrap();
     batch::crba_batch(m, &mut bd, &[], &mut []).unwrap();
     let (mut a, mut b): (Vec<DMatrix<f64>>, Vec<DMatrix<f64>>) = (vec![], vec![]);
@@ -147,7 +153,7 @@ fn mimic_invalid_configuration_names_the_state() {
         let msg = e.to_string();
         assert!(msg.contains(&format!("state {k}")), "message names state {k}: {msg}");
     };
-    let mut bd = BatchData::with_pool(m, Arc::new(BatchPool::new(2).unwrap()));
+    let mut bd = so_batch(m, 2);
     check(batch::rnea_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut vecs(m, n)).unwrap_err());
     check(batch::crba_batch(m, &mut bd, &s.q, &mut mats(m, n)).unwrap_err());
     check(batch::aba_batch(m, &mut bd, &s.q, &s.v, &s.tau, &mut vecs(m, n)).unwrap_err());
@@ -167,9 +173,9 @@ fn mimic_invalid_configuration_names_the_state() {
         )
         .unwrap_err(),
     );
-    let mut so = vec![SoData::new(m); n];
+    let mut so = vec![IdSoResult::zeros(m); n];
     check(batch::id_so_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut so).unwrap_err());
-    let mut fso = vec![FdSoData::new(m); n];
+    let mut fso = vec![FdSoResult::zeros(m); n];
     check(batch::fd_so_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.tau, &mut fso).unwrap_err());
 }
 
@@ -224,7 +230,8 @@ fn mimic_inconsistent_lengths_shapes_and_workspaces_are_errors() {
     let ms = models();
     let (m, other) = (&ms[1], &ms[2]);
     let s = states(m, 5, 6);
-    let mut bd = BatchData::with_pool(m, Arc::new(BatchPool::new(2).unwrap()));
+    // Dense second-order capacity: only the tensor outputs below are wrong.
+    let mut bd = so_batch(m, 2);
     let e = batch::rnea_batch(m, &mut bd, &s.q, &s.v[..4], &s.a, &mut vecs(m, 5)).unwrap_err();
     assert!(e.to_string().contains("vs"), "{e}");
     let e = batch::aba_batch(m, &mut bd, &s.q, &s.v, &s.tau[..3], &mut vecs(m, 5)).unwrap_err();
@@ -248,10 +255,10 @@ fn mimic_inconsistent_lengths_shapes_and_workspaces_are_errors() {
     assert!(e.to_string().contains("out_m[4]"), "{e}");
     // Tensor outputs made for another mimic model (and one for this model among them): the
     // plain batches' dimension check names the output.
-    let mut so = vec![SoData::new(m); 5];
-    so[1] = SoData::new(other);
-    let mut fso = vec![FdSoData::new(m); 5];
-    fso[1] = FdSoData::new(other);
+    let mut so = vec![IdSoResult::zeros(m); 5];
+    so[1] = IdSoResult::zeros(other);
+    let mut fso = vec![FdSoResult::zeros(m); 5];
+    fso[1] = FdSoResult::zeros(other);
     let e = batch::id_so_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut so).unwrap_err();
     assert!(matches!(e, Error::Dimension { .. }), "{e:?}");
     assert!(e.to_string().contains("out[1]") && e.to_string().contains("nv = 8"), "{e}");
@@ -282,7 +289,7 @@ fn mimic_batch_reports_a_singular_mass_matrix() {
     let o = UrdfOptions { floating_base: false, strict_inertia: false, mimic: true };
     let m = sodyn::model::load_urdf_str(xml, "t.urdf", &o).unwrap();
     let s = states(&m, 6, 9);
-    let mut bd = BatchData::with_pool(&m, Arc::new(BatchPool::new(2).unwrap()));
+    let mut bd = so_batch(&m, 2);
     let check = |e: Error| {
         assert!(matches!(e, Error::Singular { .. }), "{e:?}");
         assert!(e.to_string().contains("state 0") && e.to_string().contains("\"ja\""), "{e}");
@@ -300,7 +307,7 @@ fn mimic_batch_reports_a_singular_mass_matrix() {
         )
         .unwrap_err(),
     );
-    let mut so = vec![FdSoData::new(&m); 6];
+    let mut so = vec![FdSoResult::zeros(&m); 6];
     check(batch::fd_so_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.tau, &mut so).unwrap_err());
     // The inverse dynamics is defined there.
     batch::rnea_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut vecs(&m, 6)).unwrap();

@@ -70,9 +70,7 @@ fn algorithms_do_not_allocate() {
         let q = m.random_configuration(&mut rng);
         let v = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
         let a = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
-        let mut d = Data::new(&m);
-        let mut so = SoData::new(&m);
-        let mut fso = FdSoData::new(&m);
+        let mut d = Data::with_second_order(&m);
         let contacts: Vec<Contact> = frames
             .iter()
             .map(|f| {
@@ -80,9 +78,7 @@ fn algorithms_do_not_allocate() {
                 Contact { kind, ..c.with_baumgarte(gains, gains).unwrap() }
             })
             .collect();
-        let mut cd = ContactData::new(&m, &contacts).unwrap();
-        let mut kd = KktData::new(&m, cd.clone()).with_second_order(&m);
-        let mut im = ImpactData::new(&m, cd.clone()).with_second_order(&m);
+        let mut cd = ContactData::with_second_order(&m, &contacts).unwrap();
         let lam = DVector::from_element(cd.dim(), 1.0);
         let mut jac = nalgebra::Matrix3xX::zeros(m.nv());
         // Each algorithm twice: the first call may touch lazily initialised state.
@@ -119,33 +115,42 @@ fn algorithms_do_not_allocate() {
         });
         check("id_fo", &mut || id_derivatives(&m, &mut d, &q, &v, &a, None).unwrap());
         check("fd_fo", &mut || fd_derivatives(&m, &mut d, &q, &v, &a, None).unwrap());
-        check("id_so", &mut || id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None).unwrap());
-        check("fd_so", &mut || fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &a, None).unwrap());
+        check("id_so", &mut || {
+            id_so_derivatives(&m, &mut d, &q, &v, &a, None).unwrap();
+        });
+        check("fd_so", &mut || {
+            fd_so_derivatives(&m, &mut d, &q, &v, &a, None).unwrap();
+        });
         check("constrained_id", &mut || {
             constrained_id_derivatives(&m, &mut d, &mut cd, &q, &v, &a, &lam).unwrap()
         });
-        check("kkt_fo", &mut || kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &a).unwrap());
-        check("kkt_so", &mut || kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &a).unwrap());
-        check("impact_fo", &mut || impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap());
-        check("impact_so", &mut || impact_so_derivatives(&m, &mut d, &mut im, &q, &v).unwrap());
-        let mut con = ContractedData::new(&m);
+        check("kkt_fo", &mut || {
+            kkt_derivatives(&m, &mut d, &mut cd, &q, &v, &a).unwrap();
+        });
+        check("kkt_so", &mut || {
+            kkt_so_derivatives(&m, &mut d, &mut cd, &q, &v, &a).unwrap();
+        });
+        check("impact_fo", &mut || {
+            impact_derivatives(&m, &mut d, &mut cd, &q, &v).unwrap();
+        });
+        check("impact_so", &mut || {
+            impact_so_derivatives(&m, &mut d, &mut cd, &q, &v).unwrap();
+        });
         let w = DVector::from_fn(m.nv(), |i, _| 1.0 / (1.0 + i as f64));
         let wl = DVector::from_element(cd.dim(), 0.5);
         check("id_so_contracted", &mut || {
-            id_so_contracted(&m, &mut d, &mut con, &q, &v, &a, &w).unwrap()
+            id_so_contracted(&m, &mut d, &q, &v, &a, &w).unwrap();
         });
         check("fd_so_contracted", &mut || {
-            fd_so_contracted(&m, &mut d, &mut con, &q, &v, &a, &w).unwrap()
+            fd_so_contracted(&m, &mut d, &q, &v, &a, &w).unwrap();
         });
-        let mut kd1 = KktData::new(&m, cd.clone());
-        let mut kc = KktContracted::new(&m, &kd1);
+        // The contracted second order on a contact set made with only that capacity.
+        let mut cdc = ContactData::with_contracted(&m, &contacts).unwrap();
         check("kkt_so_contracted", &mut || {
-            kkt_so_contracted(&m, &mut d, &mut kd1, &mut kc, &q, &v, &a, &w, &wl).unwrap()
+            kkt_so_contracted(&m, &mut d, &mut cdc, &q, &v, &a, &w, &wl).unwrap();
         });
-        let mut im1 = ImpactData::new(&m, cd.clone());
-        let mut ic = ImpactContracted::new(&m, &im1);
         check("impact_so_contracted", &mut || {
-            impact_so_contracted(&m, &mut d, &mut im1, &mut ic, &q, &v, &w, &wl).unwrap()
+            impact_so_contracted(&m, &mut d, &mut cdc, &q, &v, &w, &wl).unwrap();
         });
         // Kinematics for costs: frames, centre of mass, centroidal momentum, configuration space.
         let f = m.frame_id(frames[0]).unwrap();
@@ -210,9 +215,7 @@ fn reduced_model_algorithms_do_not_allocate() {
     let q = m.random_configuration(&mut rng);
     let v = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
     let a = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
-    let mut d = Data::new(&m);
-    let mut so = SoData::new(&m);
-    let mut fso = FdSoData::new(&m);
+    let mut d = Data::with_second_order(&m);
     let mut report = vec![];
     let mut check = |name: &str, f: &mut dyn FnMut()| {
         f(); // warm-up
@@ -246,10 +249,10 @@ fn reduced_model_algorithms_do_not_allocate() {
     check("reduced: id_derivatives", &mut || id_derivatives(&m, &mut d, &q, &v, &a, None).unwrap());
     check("reduced: fd_derivatives", &mut || fd_derivatives(&m, &mut d, &q, &v, &a, None).unwrap());
     check("reduced: id_so_derivatives", &mut || {
-        id_so_derivatives(&m, &mut d, &mut so, &q, &v, &a, None).unwrap()
+        id_so_derivatives(&m, &mut d, &q, &v, &a, None).unwrap();
     });
     check("reduced: fd_so_derivatives", &mut || {
-        fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &a, None).unwrap()
+        fd_so_derivatives(&m, &mut d, &q, &v, &a, None).unwrap();
     });
     let full = m.full_tree();
     let p = nalgebra::Vector3::new(0.0, 0.0, 0.02);
@@ -258,40 +261,38 @@ fn reduced_model_algorithms_do_not_allocate() {
         Contact::new(full, "finger_r", p).unwrap().with_baumgarte(1.0, 0.5).unwrap(),
     ];
     let mut cd = ContactData::new(&m, &contacts).unwrap();
-    let mut kd = KktData::new(&m, cd.clone());
     let lam = DVector::from_element(cd.dim(), 0.5);
-    check("reduced: kkt_dynamics", &mut || kkt_dynamics(&m, &mut d, &mut kd, &q, &v, &a).unwrap());
+    check("reduced: kkt_dynamics", &mut || {
+        kkt_dynamics(&m, &mut d, &mut cd, &q, &v, &a).unwrap();
+    });
     check("reduced: kkt_derivatives", &mut || {
-        kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &a).unwrap()
+        kkt_derivatives(&m, &mut d, &mut cd, &q, &v, &a).unwrap();
     });
-    let mut kd2 = KktData::new(&m, cd.clone()).with_second_order(&m);
+    let mut cd2 = ContactData::with_second_order(&m, &contacts).unwrap();
     check("reduced: kkt_so_derivatives", &mut || {
-        kkt_so_derivatives(&m, &mut d, &mut kd2, &q, &v, &a).unwrap()
+        kkt_so_derivatives(&m, &mut d, &mut cd2, &q, &v, &a).unwrap();
     });
-    let mut im = ImpactData::new(&m, cd.clone());
-    im.set_restitution(0.3).unwrap();
+    cd.set_restitution(0.3).unwrap();
     check("reduced: impact_dynamics", &mut || {
-        impact_dynamics(&m, &mut d, &mut im, &q, &v).unwrap()
+        impact_dynamics(&m, &mut d, &mut cd, &q, &v).unwrap();
     });
     check("reduced: impact_derivatives", &mut || {
-        impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap()
+        impact_derivatives(&m, &mut d, &mut cd, &q, &v).unwrap();
     });
-    let mut im2 = ImpactData::new(&m, cd.clone()).with_second_order(&m);
-    im2.set_restitution(0.3).unwrap();
+    cd2.set_restitution(0.3).unwrap();
     check("reduced: impact_so_derivatives", &mut || {
-        impact_so_derivatives(&m, &mut d, &mut im2, &q, &v).unwrap()
+        impact_so_derivatives(&m, &mut d, &mut cd2, &q, &v).unwrap();
     });
-    let mut cc = ContractedData::new(&m);
     check("reduced: id_so_contracted", &mut || {
-        id_so_contracted(&m, &mut d, &mut cc, &q, &v, &a, &v).unwrap()
+        id_so_contracted(&m, &mut d, &q, &v, &a, &v).unwrap();
     });
     check("reduced: fd_so_contracted", &mut || {
-        fd_so_contracted(&m, &mut d, &mut cc, &q, &v, &a, &v).unwrap()
+        fd_so_contracted(&m, &mut d, &q, &v, &a, &v).unwrap();
     });
     let mut xo = nalgebra::DMatrix::zeros(m.nv(), m.nv());
     check("reduced: idfoza", &mut || idfoza(&m, &mut d, &q, &a, &mut xo).unwrap());
     check("reduced: idsoza", &mut || {
-        idsoza(&m, &mut d, &mut so, &q, &a).unwrap();
+        idsoza(&m, &mut d, &q, &a).unwrap();
     });
     // The contracted KKT and impact second order, with these contacts (3-D world points, one
     // with Baumgarte gains) and with a 6-D local contact (the generic path).
@@ -307,21 +308,18 @@ fn reduced_model_algorithms_do_not_allocate() {
         },
     ];
     for (set, cs) in [("3-D", &contacts), ("6-D", &six)] {
-        let mut kd3 = KktData::new(&m, ContactData::new(&m, cs).unwrap());
-        let mut kc = KktContracted::new(&m, &kd3);
-        let wl = DVector::from_element(kd3.cd().dim(), 0.5);
+        let mut cd3 = ContactData::with_contracted(&m, cs).unwrap();
+        let wl = DVector::from_element(cd3.dim(), 0.5);
         check(&format!("reduced: kkt_so_contracted ({set})"), &mut || {
-            kkt_so_contracted(&m, &mut d, &mut kd3, &mut kc, &q, &v, &a, &v, &wl).unwrap()
+            kkt_so_contracted(&m, &mut d, &mut cd3, &q, &v, &a, &v, &wl).unwrap();
         });
-        let mut im3 = ImpactData::new(&m, ContactData::new(&m, cs).unwrap());
-        im3.set_restitution(0.3).unwrap();
-        let mut ic = ImpactContracted::new(&m, &im3);
+        cd3.set_restitution(0.3).unwrap();
         check(&format!("reduced: impact_so_contracted ({set})"), &mut || {
-            impact_so_contracted(&m, &mut d, &mut im3, &mut ic, &q, &v, &a, &wl).unwrap()
+            impact_so_contracted(&m, &mut d, &mut cd3, &q, &v, &a, &wl).unwrap();
         });
     }
     check("reduced: constrained_id_derivatives", &mut || {
-        constrained_id_so_derivatives(&m, &mut d, &mut cd, &mut so, &q, &v, &a, &lam).unwrap()
+        constrained_id_so_derivatives(&m, &mut d, &mut cd, &q, &v, &a, &lam).unwrap();
     });
     check("reduced: constrained_id_derivatives", &mut || {
         constrained_id_derivatives(&m, &mut d, &mut cd, &q, &v, &a, &lam).unwrap()
@@ -408,12 +406,13 @@ fn reduced_model_kinematics_and_batches_do_not_allocate() {
     let fr = m.frames().len() - 1;
     let p = Vector3::new(0.01, 0.02, 0.03);
     let mut j3 = Matrix3xX::zeros(m.nv());
-    let mut bd = BatchData::with_pool(&m, Arc::new(BatchPool::new(1).unwrap()));
+    let pool = Arc::new(BatchPool::new(1).unwrap());
+    let mut bd = BatchData::from_workspace(pool, Data::with_second_order(&m));
     let mut out_v = vec![DVector::zeros(m.nv()); n];
     let mut out_m1 = vec![DMatrix::zeros(m.nv(), m.nv()); n];
     let mut out_m2 = out_m1.clone();
-    let mut out_so = vec![SoData::new(&m); n];
-    let mut out_fso = vec![FdSoData::new(&m); n];
+    let mut out_so = vec![batch::IdSoResult::zeros(&m); n];
+    let mut out_fso = vec![batch::FdSoResult::zeros(&m); n];
     let mut report = vec![];
     let mut check = |name: &str, f: &mut dyn FnMut()| {
         f(); // warm-up

@@ -1,14 +1,14 @@
 //! A URDF loaded with `UrdfOptions { mimic: true }` is a `Model` in reduced coordinates: its
 //! counts and configuration-space operations against the reduction's oracle
-//! (`reference::mimic::Reduced`), the plain algorithms with the usual workspaces (`Data`,
-//! `SoData`, `FdSoData`, contact, batch and centroidal workspaces) against the full tree's at
+//! (`reference::mimic::Reduced`), the plain algorithms with the usual workspaces (`Data`, with
+//! its second-order capacity, `ContactData`, batch and centroidal workspaces) against the full tree's at
 //! the expanded state (`Gᵀ τ_full(expand(q), G v, G a)`, `Gᵀ M_full G`, the placements bit for
 //! bit, `J = J_full G`), and the workspaces of the other model refused. The reduced algorithms
 //! against the AD oracle are `tests/mimic*.rs`.
 
 use nalgebra::{DMatrix, DVector};
 use sodyn::algo::{self, Data};
-use sodyn::deriv::{self, FdSoData, SoData};
+use sodyn::deriv;
 use sodyn::model::{Arg, UrdfOptions, load_urdf_file};
 use sodyn::reference::mimic::Reduced;
 use sodyn::rng::Rng;
@@ -86,8 +86,7 @@ fn plain_functions_are_the_full_trees_through_g() {
         let m = load_urdf_file(&arm(), &opts(ff, true)).unwrap();
         let full = m.full_tree();
         let g = m.velocity_map();
-        let (mut d, mut df) = (Data::new(&m), Data::new(full));
-        let (mut so, mut fso) = (SoData::new(&m), FdSoData::new(&m));
+        let (mut d, mut df) = (Data::with_second_order(&m), Data::new(full));
         let mut rng = Rng::new(11);
         let q = m.random_configuration(&mut rng);
         let v = DVector::from_fn(m.nv(), |_, _| rng.range(-2.0, 2.0));
@@ -113,16 +112,15 @@ fn plain_functions_are_the_full_trees_through_g() {
         assert_eq!(d.qdd(), &qdd);
         assert!(rel(&(d.minv() * &mass), &DMatrix::identity(m.nv(), m.nv())) < 1e-10);
         // The second-order workspaces and the zero-acceleration functions, against each other.
-        deriv::id_so_derivatives(&m, &mut d, &mut so, &q, &v, &x, None).unwrap();
+        let dm = deriv::id_so_derivatives(&m, &mut d, &q, &v, &x, None).unwrap().dm_dq().clone();
         let mut out = DMatrix::zeros(m.nv(), m.nv());
         deriv::idfoza(&m, &mut d, &q, &x, &mut out).unwrap();
         let n = m.nv();
-        let dm = so.dm_dq();
         let by_dm = DMatrix::from_fn(n, n, |i, k| (0..n).map(|j| dm[(i, j, k)] * x[j]).sum());
         assert!(rel(&out, &by_dm) < 1e-10);
-        let t3: Tensor3 = deriv::idsoza(&m, &mut d, &mut so, &q, &x).unwrap().clone();
+        let t3: Tensor3 = deriv::idsoza(&m, &mut d, &q, &x).unwrap().clone();
         assert_eq!(t3.dims(), (n, n, n));
-        deriv::fd_so_derivatives(&m, &mut d, &mut fso, &q, &v, &x, None).unwrap();
+        let fso = deriv::fd_so_derivatives(&m, &mut d, &q, &v, &x, None).unwrap();
         assert_eq!(fso.d2qdd_dq2().dims(), (n, n, n));
     }
 }
@@ -140,9 +138,13 @@ fn workspaces_of_the_other_model_are_errors() {
     let e = algo::rnea(&full, &mut d_red, &qf, &vf, &vf, None).unwrap_err();
     assert!(matches!(e, Error::Workspace(_)), "{e}");
     assert!(d_red.check(&m).is_ok() && d_red.check(&full).is_err());
-    let mut so_full = SoData::new(&full);
+    // Second-order capacity made for the other model: refused, whether made with the `Data` or
+    // added to one of this model.
+    let mut so_full = Data::with_second_order(&full);
+    let e = deriv::id_so_derivatives(&m, &mut so_full, &q, &v, &v, None).unwrap_err();
+    assert!(matches!(e, Error::Workspace(_)), "{e}");
     let mut d = Data::new(&m);
-    let e = deriv::id_so_derivatives(&m, &mut d, &mut so_full, &q, &v, &v, None).unwrap_err();
+    let e = d.reserve_second_order(&full).unwrap_err();
     assert!(matches!(e, Error::Workspace(_)), "{e}");
     // A wrong length is an error naming the argument, not a panic.
     let e = algo::aba(&m, &mut d, &qf, &v, &v, None).unwrap_err();
@@ -239,21 +241,21 @@ fn kinematics_are_the_full_trees_and_full_tree_workspaces_are_errors() {
     assert!(batch::aba_batch(&m, &mut bd_full, &qs, &vs, &vs, &mut o).is_err());
     // Contacts: the damping of the reduced KKT solve is refused; contacts made for the full
     // tree are an error with the reduced model; the restitution is kept.
-    use sodyn::deriv::{ContactData, ImpactData, KktData};
+    use sodyn::deriv::ContactData;
     let cs = contacts(&m);
     let tau = DVector::from_fn(n, |_, _| rng.range(-2.0, 2.0));
-    let mut kd = KktData::new(&m, ContactData::new(&m, &cs).unwrap());
-    deriv::kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+    let mut cd = ContactData::new(&m, &cs).unwrap();
+    let kd = deriv::kkt_derivatives(&m, &mut d, &mut cd, &q, &v, &tau).unwrap();
     assert_eq!((kd.qdd().len(), kd.dqdd_dq().shape()), (n, (n, n)));
-    assert!(kd.set_damping(1e-3).is_err());
-    let lam = DVector::from_element(kd.cd().dim(), 0.3);
+    assert!(cd.set_damping(1e-3).is_err());
+    let lam = DVector::from_element(cd.dim(), 0.3);
     let mut cd_full = ContactData::new(full, &cs).unwrap();
     assert!(
         deriv::constrained_id_derivatives(&m, &mut d, &mut cd_full, &q, &v, &tau, &lam).is_err()
     );
-    let mut im = ImpactData::new(&m, ContactData::new(&m, &cs).unwrap());
-    im.set_restitution(0.4).unwrap();
-    assert_eq!(im.restitution(), 0.4);
-    deriv::impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap();
+    let mut ci = ContactData::new(&m, &cs).unwrap();
+    ci.set_restitution(0.4).unwrap();
+    assert_eq!(ci.restitution(), 0.4);
+    let im = deriv::impact_derivatives(&m, &mut d, &mut ci, &q, &v).unwrap();
     assert_eq!(im.dvplus_dq().shape(), (n, n));
 }

@@ -4,9 +4,8 @@
 
 use sodyn::algo::{Contact, Data};
 use sodyn::deriv::{
-    ContactData, FdSoData, ImpactData, KktData, SoData, fd_derivatives, fd_so_derivatives,
-    id_derivatives, id_so_derivatives, impact_derivatives, impact_so_derivatives, kkt_derivatives,
-    kkt_so_derivatives,
+    ContactData, fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives,
+    impact_derivatives, impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
 };
 use sodyn::model::Model;
 use sodyn::model::builtin::{pendulum, quadruped, random_tree, serial_chain};
@@ -26,18 +25,16 @@ fn outputs(
     let mat = |x: &DMatrix<f64>| x.as_slice().to_vec();
     let ten = |x: &Tensor3| x.as_slice().to_vec();
     let mut out = vec![];
-    let mut d = Data::new(m);
+    let mut d = Data::with_second_order(m);
     out.push(mat(sodyn::algo::crba(m, &mut d, q).unwrap()));
     out.push(sodyn::algo::aba(m, &mut d, q, v, u, None).unwrap().as_slice().to_vec());
     id_derivatives(m, &mut d, q, v, u, None).unwrap();
     out.extend([mat(d.dtau_dq()), mat(d.dtau_dv()), mat(d.m())]);
-    let mut so = SoData::new(m);
-    id_so_derivatives(m, &mut d, &mut so, q, v, u, None).unwrap();
+    let so = id_so_derivatives(m, &mut d, q, v, u, None).unwrap();
     out.extend([ten(so.d2tau_dq2()), ten(so.d2tau_dv2()), ten(so.d2tau_dqdv()), ten(so.dm_dq())]);
     fd_derivatives(m, &mut d, q, v, u, None).unwrap();
     out.extend([mat(d.dqdd_dq()), mat(d.dqdd_dv()), mat(d.minv())]);
-    let mut fso = FdSoData::new(m);
-    fd_so_derivatives(m, &mut d, &mut fso, q, v, u, None).unwrap();
+    let fso = fd_so_derivatives(m, &mut d, q, v, u, None).unwrap();
     out.extend([
         ten(fso.d2qdd_dq2()),
         ten(fso.d2qdd_dv2()),
@@ -47,9 +44,8 @@ fn outputs(
     if !feet.is_empty() {
         let cs: Vec<Contact> =
             feet.iter().map(|f| Contact::new(m, f, Vector3::zeros()).unwrap()).collect();
-        let cd = ContactData::new(m, &cs).unwrap();
-        let mut kd = KktData::new(m, cd.clone());
-        kkt_derivatives(m, &mut d, &mut kd, q, v, u).unwrap();
+        let mut cd = ContactData::new(m, &cs).unwrap();
+        let kd = kkt_derivatives(m, &mut d, &mut cd, q, v, u).unwrap();
         out.extend([
             mat(kd.dqdd_dq()),
             mat(kd.dqdd_dv()),
@@ -58,8 +54,7 @@ fn outputs(
             mat(kd.dlambda_dv()),
             mat(kd.dlambda_dtau()),
         ]);
-        let mut im = ImpactData::new(m, cd.clone());
-        impact_derivatives(m, &mut d, &mut im, q, v).unwrap();
+        let im = impact_derivatives(m, &mut d, &mut cd, q, v).unwrap();
         out.extend([
             mat(im.dvplus_dq()),
             mat(im.dvplus_dvminus()),
@@ -69,8 +64,8 @@ fn outputs(
         ]);
         // Second order: the IDFOZA parts of the G products run eight, four or one-by-four
         // columns at a time by level.
-        let mut kd = KktData::new(m, cd.clone()).with_second_order(m);
-        kkt_so_derivatives(m, &mut d, &mut kd, q, v, u).unwrap();
+        let mut cd = ContactData::with_second_order(m, &cs).unwrap();
+        let kd = kkt_so_derivatives(m, &mut d, &mut cd, q, v, u).unwrap();
         let k = kd.so().unwrap();
         out.extend([
             ten(k.d2qdd_dq2()),
@@ -80,8 +75,7 @@ fn outputs(
             ten(k.d2lambda_dq2()),
             ten(k.d2lambda_dtaudq()),
         ]);
-        let mut im = ImpactData::new(m, cd).with_second_order(m);
-        impact_so_derivatives(m, &mut d, &mut im, q, v).unwrap();
+        let im = impact_so_derivatives(m, &mut d, &mut cd, q, v).unwrap();
         let s = im.so().unwrap();
         out.extend([
             ten(s.d2vplus_dq2()),

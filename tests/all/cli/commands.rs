@@ -848,7 +848,7 @@ fn demo_on_a_singular_mass_matrix_is_a_clean_error() {
 #[test]
 fn eval_takes_baumgarte_gains_per_contact() {
     use sodyn::algo::{Contact, Data};
-    use sodyn::deriv::{ContactData, KktData, kkt_derivatives};
+    use sodyn::deriv::{ContactData, kkt_derivatives};
     let m = sodyn::model::builtin::quadruped();
     let nv = m.nv();
     let vals = |s: f64| -> Vec<f64> { (0..nv).map(|i| s * (i as f64 + 1.0) / nv as f64).collect() };
@@ -870,9 +870,9 @@ fn eval_takes_baumgarte_gains_per_contact() {
             .unwrap(),
         Contact::new(&m, "RH_FOOT", nalgebra::Vector3::zeros()).unwrap(),
     ];
-    let mut kd = KktData::new(&m, ContactData::new(&m, &contacts).unwrap());
+    let mut cd = ContactData::new(&m, &contacts).unwrap();
     let (q, v, tau) = (m.neutral(), DVector::from_vec(v.clone()), DVector::from_vec(tau.clone()));
-    kkt_derivatives(&m, &mut Data::new(&m), &mut kd, &q, &v, &tau).unwrap();
+    let kd = kkt_derivatives(&m, &mut Data::new(&m), &mut cd, &q, &v, &tau).unwrap();
     let qdd = vector(&out["kkt"], "qdd", nv);
     assert!((&qdd - kd.qdd()).amax() < 1e-12 * (1.0 + kd.qdd().amax()));
     let dq = matrix(&out["kkt"], "dqdd_dq", nv);
@@ -886,7 +886,7 @@ fn eval_takes_baumgarte_gains_per_contact() {
 #[test]
 fn eval_takes_6d_and_local_contacts() {
     use sodyn::algo::{Contact, ContactReference, ContactType, Data};
-    use sodyn::deriv::{ContactData, ImpactData, KktData, impact_derivatives, kkt_derivatives};
+    use sodyn::deriv::{ContactData, impact_derivatives, kkt_derivatives};
     use sodyn::spatial::Transform;
     let m = sodyn::model::builtin::quadruped();
     let nv = m.nv();
@@ -919,19 +919,17 @@ fn eval_takes_6d_and_local_contacts() {
             .unwrap()
             .with_reference(ContactReference::Local),
     ];
-    let cd = ContactData::new(&m, &contacts).unwrap();
-    let mut kd = KktData::new(&m, cd.clone());
+    let mut cd = ContactData::new(&m, &contacts).unwrap();
     let (q, v, tau) = (m.neutral(), DVector::from_vec(v.clone()), DVector::from_vec(tau.clone()));
     let mut d = Data::new(&m);
-    kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+    let kd = kkt_derivatives(&m, &mut d, &mut cd, &q, &v, &tau).unwrap();
     let close = |a: &DMatrix<f64>, b: &DMatrix<f64>| (a - b).amax() < 1e-12 * (1.0 + b.amax());
     let lam = vector(&out["kkt"], "lambda", 9);
     assert!((&lam - kd.lambda()).amax() < 1e-12 * (1.0 + kd.lambda().amax()));
     let dl = DMatrix::from_fn(9, nv, |i, j| out["kkt"]["dlambda_dq"][i][j].as_f64().unwrap());
     assert!(close(&dl, kd.dlambda_dq()));
-    let mut im = ImpactData::new(&m, cd);
-    im.set_restitution(0.2).unwrap();
-    impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap();
+    cd.set_restitution(0.2).unwrap();
+    let im = impact_derivatives(&m, &mut d, &mut cd, &q, &v).unwrap();
     let imp = vector(&out["impact"], "impulse", 9);
     assert!((&imp - im.impulse()).amax() < 1e-12 * (1.0 + im.impulse().amax()));
     assert_eq!(out["constrained_id"]["tau"].as_array().unwrap().len(), nv);
@@ -1119,7 +1117,7 @@ fn armature_option() {
 #[test]
 fn mimic_commands_use_the_reduced_coordinates() {
     use sodyn::algo::{self, Data};
-    use sodyn::deriv::{self, ContactData, FdSoData};
+    use sodyn::deriv::{self, ContactData};
     let urdf = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_arm.urdf");
     let u = urdf.to_str().unwrap();
     let o = sodyn(&["info", "--model", u, "--mimic", "--floating-base"]);
@@ -1145,12 +1143,11 @@ fn mimic_commands_use_the_reduced_coordinates() {
     let opts = sodyn::model::UrdfOptions { floating_base: true, mimic: true, ..Default::default() };
     let m = sodyn::model::load_urdf_file(&urdf, &opts).unwrap();
     assert!(m.is_reduced());
-    let mut d = Data::new(&m);
-    let mut so = FdSoData::new(&m);
+    let mut d = Data::with_second_order(&m);
     let n = nv as usize;
     let t = algo::rnea(&m, &mut d, &q, &vel, &a, None).unwrap().clone();
     assert!((vector(&v, "tau", n) - t).amax() < 1e-12);
-    deriv::fd_so_derivatives(&m, &mut d, &mut so, &q, &vel, &tau, None).unwrap();
+    deriv::fd_so_derivatives(&m, &mut d, &q, &vel, &tau, None).unwrap();
     assert!((vector(&v, "qdd", n) - d.qdd()).amax() < 1e-12);
     assert!((matrix(&v, "dqdd_dq", n) - d.dqdd_dq()).amax() < 1e-12);
     assert!((matrix(&v, "Minv", n) - d.minv()).amax() < 1e-12);
@@ -1184,42 +1181,38 @@ fn mimic_commands_use_the_reduced_coordinates() {
         sodyn::model::Contact::new(full, "tool", nalgebra::Vector3::zeros()).unwrap(),
         sodyn::model::Contact::new_6d(full, "thumb_tip", None).unwrap(),
     ];
-    let mut kd =
-        deriv::KktData::new(&m, ContactData::new(&m, &contacts).unwrap()).with_second_order(&m);
-    deriv::kkt_so_derivatives(&m, &mut d, &mut kd, &q, &vel, &tau).unwrap();
+    let mut cd = ContactData::with_second_order(&m, &contacts).unwrap();
+    let kd = deriv::kkt_so_derivatives(&m, &mut d, &mut cd, &q, &vel, &tau).unwrap();
     assert!((matrix(&v2["kkt"], "dqdd_dq", n) - kd.dqdd_dq()).amax() < 1e-12);
     check_tensor_shape(&v2["kkt"], "d2qdd_dq2", n);
-    let mut im = deriv::ImpactData::new(&m, ContactData::new(&m, &contacts).unwrap());
-    im.set_restitution(0.3).unwrap();
-    deriv::impact_derivatives(&m, &mut d, &mut im, &q, &vel).unwrap();
+    let mut cd = ContactData::new(&m, &contacts).unwrap();
+    cd.set_restitution(0.3).unwrap();
+    let im = deriv::impact_derivatives(&m, &mut d, &mut cd, &q, &vel).unwrap();
     assert!((vector(&v2["impact"], "vplus", n) - im.vplus()).amax() < 1e-12);
     check_tensor_shape(&v2["impact"], "d2vplus_dq2", n);
     check_tensor_shape(&v2["constrained_id"], "d2tau_dq2", n);
-    let mut cc = deriv::ContractedData::new(&m);
-    deriv::fd_so_contracted(&m, &mut d, &mut cc, &q, &vel, &tau, &DVector::from_element(n, 0.5))
+    let cc = deriv::fd_so_contracted(&m, &mut d, &q, &vel, &tau, &DVector::from_element(n, 0.5))
         .unwrap();
     assert!((matrix(&v2["contracted"]["fd"], "d2qdd_dq2", n) - cc.c_qq()).amax() < 1e-12);
     // The contracted KKT and impact second order, one weight at a time, as the library.
     let (wn, w9) = (|x: f64| DVector::from_element(n, x), |x: f64| DVector::from_element(9, x));
-    let mut kd = deriv::KktData::new(&m, ContactData::new(&m, &contacts).unwrap());
-    let mut kc = deriv::KktContracted::new(&m, &kd);
-    deriv::kkt_so_contracted(&m, &mut d, &mut kd, &mut kc, &q, &vel, &tau, &wn(0.0), &w9(0.25))
-        .unwrap();
+    let mut cd = ContactData::with_contracted(&m, &contacts).unwrap();
+    let kc =
+        deriv::kkt_so_contracted(&m, &mut d, &mut cd, &q, &vel, &tau, &wn(0.0), &w9(0.25)).unwrap();
     let ck = &v2["contracted"]["kkt"];
     assert!((matrix(ck, "d2lambda_dq2", n) - kc.c_qq()).amax() < 1e-12);
     assert!((matrix(ck, "d2lambda_dtaudq", n) - kc.c_tauq()).amax() < 1e-12);
-    deriv::kkt_so_contracted(&m, &mut d, &mut kd, &mut kc, &q, &vel, &tau, &wn(0.5), &w9(0.0))
-        .unwrap();
+    let kc =
+        deriv::kkt_so_contracted(&m, &mut d, &mut cd, &q, &vel, &tau, &wn(0.5), &w9(0.0)).unwrap();
     assert!((matrix(ck, "d2qdd_dv2", n) - kc.c_vv()).amax() < 1e-12);
-    let mut im = deriv::ImpactData::new(&m, ContactData::new(&m, &contacts).unwrap());
-    im.set_restitution(0.3).unwrap();
-    let mut ic = deriv::ImpactContracted::new(&m, &im);
-    deriv::impact_so_contracted(&m, &mut d, &mut im, &mut ic, &q, &vel, &wn(-0.5), &w9(0.0))
-        .unwrap();
+    let mut cd = ContactData::with_contracted(&m, &contacts).unwrap();
+    cd.set_restitution(0.3).unwrap();
+    let ic =
+        deriv::impact_so_contracted(&m, &mut d, &mut cd, &q, &vel, &wn(-0.5), &w9(0.0)).unwrap();
     let ci = &v2["contracted"]["impact"];
     assert!((matrix(ci, "d2vplus_dq2", n) - ic.c_qq()).amax() < 1e-12);
-    deriv::impact_so_contracted(&m, &mut d, &mut im, &mut ic, &q, &vel, &wn(0.0), &w9(0.75))
-        .unwrap();
+    let ic =
+        deriv::impact_so_contracted(&m, &mut d, &mut cd, &q, &vel, &wn(0.0), &w9(0.75)).unwrap();
     assert!((matrix(ci, "d2impulse_dqdvminus", n) - ic.c_qvminus()).amax() < 1e-12);
     // Frames (of the full tree), in the reduced coordinates, as the library.
     let with_frames = tmp("mimic-frames.json");
@@ -1619,7 +1612,7 @@ fn demo_takes_the_model_and_contact_options() {
 #[test]
 fn eval_takes_two_frame_constraints() {
     use sodyn::algo::{Contact, Data};
-    use sodyn::deriv::{ContactData, ImpactData, KktData, impact_derivatives, kkt_derivatives};
+    use sodyn::deriv::{ContactData, impact_derivatives, kkt_derivatives};
     use sodyn::spatial::Transform;
     let m = sodyn::model::builtin::quadruped();
     let nv = m.nv();
@@ -1666,17 +1659,15 @@ fn eval_takes_two_frame_constraints() {
                 .unwrap()
         },
     ];
-    let cd = ContactData::new(&m, &contacts).unwrap();
-    let mut kd = KktData::new(&m, cd.clone());
+    let mut cd = ContactData::new(&m, &contacts).unwrap();
     let (v, tau) = (DVector::from_vec(v.clone()), DVector::from_vec(tau.clone()));
     let mut d = Data::new(&m);
-    kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+    let kd = kkt_derivatives(&m, &mut d, &mut cd, &q, &v, &tau).unwrap();
     let lam = vector(&out["kkt"], "lambda", 9);
     assert!((&lam - kd.lambda()).amax() < 1e-12 * (1.0 + kd.lambda().amax()));
     let dq = matrix(&out["kkt"], "dqdd_dq", nv);
     assert!((&dq - kd.dqdd_dq()).amax() < 1e-12 * (1.0 + kd.dqdd_dq().amax()));
-    let mut im = ImpactData::new(&m, cd);
-    impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap();
+    let im = impact_derivatives(&m, &mut d, &mut cd, &q, &v).unwrap();
     let imp = vector(&out["impact"], "impulse", 9);
     assert!((&imp - im.impulse()).amax() < 1e-12 * (1.0 + im.impulse().amax()));
     assert_eq!(out["constrained_id"]["tau"].as_array().unwrap().len(), nv);

@@ -115,8 +115,8 @@ fn kkt_first_and_second_order_match_oracle() {
             }
             let (q, v, tau) = random_state(&m, &mut rng);
             let mut d = Data::new(&m);
-            let mut kd = KktData::new(&m, ContactData::new(&m, &cs).unwrap()).with_second_order(&m);
-            kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+            let mut cd = ContactData::with_second_order(&m, &cs).unwrap();
+            let kd = kkt_so_derivatives(&m, &mut d, &mut cd, &q, &v, &tau).unwrap();
             let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
             let at = format!("{} {:?} gains {gains}", m.name(), spec);
             let (qr, lr) = oracle::kkt::<f64>(&m, qs, vs, ts, &cs);
@@ -135,8 +135,8 @@ fn kkt_first_and_second_order_match_oracle() {
                 w[2 + i].add(rel_err_mat(a, b), &at);
             }
             // The first order without the second-order workspace agrees.
-            let mut k1 = KktData::new(&m, ContactData::new(&m, &cs).unwrap());
-            kkt_derivatives(&m, &mut d, &mut k1, &q, &v, &tau).unwrap();
+            let mut c1 = ContactData::new(&m, &cs).unwrap();
+            let k1 = kkt_derivatives(&m, &mut d, &mut c1, &q, &v, &tau).unwrap();
             w[16].add(rel_err_mat(k1.dqdd_dq(), &fo.dqdd_dq), &at);
             w[17].add(rel_err_mat(k1.dlambda_dq(), &fo.dlambda_dq), &at);
             let so = oracle::kkt_so(&m, qs, vs, ts, &cs);
@@ -183,10 +183,9 @@ fn impact_first_and_second_order_match_oracle() {
             let cs = contacts(&m, &spec, &mut rng);
             let (q, vminus, _) = random_state(&m, &mut rng);
             let mut d = Data::new(&m);
-            let mut im =
-                ImpactData::new(&m, ContactData::new(&m, &cs).unwrap()).with_second_order(&m);
-            im.set_restitution(e).unwrap();
-            impact_so_derivatives(&m, &mut d, &mut im, &q, &vminus).unwrap();
+            let mut cd = ContactData::with_second_order(&m, &cs).unwrap();
+            cd.set_restitution(e).unwrap();
+            let im = impact_so_derivatives(&m, &mut d, &mut cd, &q, &vminus).unwrap();
             let (qs, vs) = (q.as_slice(), vminus.as_slice());
             let at = format!("{} {:?} e = {e}", m.name(), spec);
             let (vp, imp) = oracle::impact::<f64>(&m, qs, vs, &cs, e);
@@ -224,10 +223,10 @@ fn constrained_id_first_and_second_order_match_oracle() {
         let (q, v, a) = random_state(&m, &mut rng);
         let nrows: usize = cs.iter().map(|c| c.dim()).sum();
         let lam = DVector::from_fn(nrows, |_, _| rng.range(-20.0, 20.0));
-        let mut d = Data::new(&m);
+        let mut d = Data::with_second_order(&m);
         let mut cd = ContactData::new(&m, &cs).unwrap();
-        let mut so = SoData::new(&m);
-        constrained_id_so_derivatives(&m, &mut d, &mut cd, &mut so, &q, &v, &a, &lam).unwrap();
+        constrained_id_so_derivatives(&m, &mut d, &mut cd, &q, &v, &a, &lam).unwrap();
+        let so = d.id_so().unwrap();
         let (qs, vs, as_, ls) = (q.as_slice(), v.as_slice(), a.as_slice(), lam.as_slice());
         let at = format!("{} {:?}", m.name(), spec);
         let tau = oracle::constrained_rnea::<f64>(&m, qs, vs, as_, &cs, ls);
@@ -272,9 +271,8 @@ fn contracted_kkt_matches_ad() {
             let nrows: usize = cs.iter().map(|c| c.dim()).sum();
             let (wq, wl) = (weight(m.nv(), &mut rng), weight(nrows, &mut rng));
             let mut d = Data::new(&m);
-            let mut kd = KktData::new(&m, ContactData::new(&m, &cs).unwrap());
-            let mut kc = KktContracted::new(&m, &kd);
-            kkt_so_contracted(&m, &mut d, &mut kd, &mut kc, &q, &v, &tau, &wq, &wl).unwrap();
+            let mut cd = ContactData::with_contracted(&m, &cs).unwrap();
+            let kc = kkt_so_contracted(&m, &mut d, &mut cd, &q, &v, &tau, &wq, &wl).unwrap();
             let got = [kc.c_qq(), kc.c_vv(), kc.c_qv(), kc.c_tauq()];
             let r = oracle::kkt_so(&m, q.as_slice(), v.as_slice(), tau.as_slice(), &cs);
             let refs = [
@@ -306,10 +304,9 @@ fn contracted_impact_matches_ad() {
             let nrows: usize = cs.iter().map(|c| c.dim()).sum();
             let (wv, wl) = (weight(m.nv(), &mut rng), weight(nrows, &mut rng));
             let mut d = Data::new(&m);
-            let mut im = ImpactData::new(&m, ContactData::new(&m, &cs).unwrap());
-            im.set_restitution(e).unwrap();
-            let mut ic = ImpactContracted::new(&m, &im);
-            impact_so_contracted(&m, &mut d, &mut im, &mut ic, &q, &v, &wv, &wl).unwrap();
+            let mut cd = ContactData::with_contracted(&m, &cs).unwrap();
+            cd.set_restitution(e).unwrap();
+            let ic = impact_so_contracted(&m, &mut d, &mut cd, &q, &v, &wv, &wl).unwrap();
             let r = oracle::impact_so(&m, q.as_slice(), v.as_slice(), &cs, e);
             let refs = [
                 (&r.d2vplus_dq2, &r.d2impulse_dq2),
@@ -343,8 +340,8 @@ fn second_order_matches_differences_of_first_order() {
     let n = m.nv();
     let nr: usize = cs.iter().map(|c| c.dim()).sum();
     let mut d = Data::new(&m);
-    let mk = || KktData::new(&m, ContactData::new(&m, &cs).unwrap());
-    let mut kd = mk().with_second_order(&m);
+    let mk = || ContactData::new(&m, &cs).unwrap();
+    let mut kd = ContactData::with_second_order(&m, &cs).unwrap();
     kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
     let (mut kp, mut km) = (mk(), mk());
     let h = 1e-5;
@@ -354,37 +351,40 @@ fn second_order_matches_differences_of_first_order() {
         e[k] = h;
         kkt_derivatives(&m, &mut d, &mut kp, &m.integrate(&q, &e).unwrap(), &v, &tau).unwrap();
         kkt_derivatives(&m, &mut d, &mut km, &m.integrate(&q, &-&e).unwrap(), &v, &tau).unwrap();
-        t[0].page_mut(k).copy_from(&((kp.dqdd_dq() - km.dqdd_dq()) / (2.0 * h)));
-        t[1].page_mut(k).copy_from(&((kp.dlambda_dq() - km.dlambda_dq()) / (2.0 * h)));
+        let (plus, minus) = (kp.kkt(), km.kkt());
+        t[0].page_mut(k).copy_from(&((plus.dqdd_dq() - minus.dqdd_dq()) / (2.0 * h)));
+        t[1].page_mut(k).copy_from(&((plus.dlambda_dq() - minus.dlambda_dq()) / (2.0 * h)));
         kkt_derivatives(&m, &mut d, &mut kp, &q, &(&v + &e), &tau).unwrap();
         kkt_derivatives(&m, &mut d, &mut km, &q, &(&v - &e), &tau).unwrap();
-        t[2].page_mut(k).copy_from(&((kp.dqdd_dq() - km.dqdd_dq()) / (2.0 * h)));
+        let (plus, minus) = (kp.kkt(), km.kkt());
+        t[2].page_mut(k).copy_from(&((plus.dqdd_dq() - minus.dqdd_dq()) / (2.0 * h)));
     }
-    let so = kd.so().unwrap();
+    let so = kd.kkt().so().unwrap();
     w.add(rel_err_tensor(so.d2qdd_dq2(), &t[0]), "kkt d2qdd_dq2");
     w.add(rel_err_tensor(so.d2lambda_dq2(), &t[1]), "kkt d2lambda_dq2");
     w.add(rel_err_tensor(so.d2qdd_dqdv(), &t[2]), "kkt d2qdd_dqdv");
     // Impact, with the 6-D world-aligned contact.
     let cs = contacts(&m, &spec[1..], &mut rng);
     let nr: usize = cs.iter().map(|c| c.dim()).sum();
-    let mk = || {
-        let mut im = ImpactData::new(&m, ContactData::new(&m, &cs).unwrap());
+    let mk = |make: fn(&Model, &[Contact]) -> sodyn::Result<ContactData>| {
+        let mut im = make(&m, &cs).unwrap();
         im.set_restitution(0.3).unwrap();
         im
     };
-    let mut im = mk().with_second_order(&m);
+    let mut im = mk(ContactData::with_second_order);
     impact_so_derivatives(&m, &mut d, &mut im, &q, &v).unwrap();
-    let (mut ip, mut imm) = (mk(), mk());
+    let (mut ip, mut imm) = (mk(ContactData::new), mk(ContactData::new));
     let (mut tv, mut ti) = (Tensor3::zeros(n, n, n), Tensor3::zeros(nr, n, n));
     for k in 0..n {
         let mut e = DVector::zeros(n);
         e[k] = h;
         impact_derivatives(&m, &mut d, &mut ip, &m.integrate(&q, &e).unwrap(), &v).unwrap();
         impact_derivatives(&m, &mut d, &mut imm, &m.integrate(&q, &-&e).unwrap(), &v).unwrap();
-        tv.page_mut(k).copy_from(&((ip.dvplus_dq() - imm.dvplus_dq()) / (2.0 * h)));
-        ti.page_mut(k).copy_from(&((ip.dimpulse_dq() - imm.dimpulse_dq()) / (2.0 * h)));
+        let (plus, minus) = (ip.impact(), imm.impact());
+        tv.page_mut(k).copy_from(&((plus.dvplus_dq() - minus.dvplus_dq()) / (2.0 * h)));
+        ti.page_mut(k).copy_from(&((plus.dimpulse_dq() - minus.dimpulse_dq()) / (2.0 * h)));
     }
-    let so = im.so().unwrap();
+    let so = im.impact().so().unwrap();
     w.add(rel_err_tensor(so.d2vplus_dq2(), &tv), "impact d2vplus_dq2");
     w.add(rel_err_tensor(so.d2impulse_dq2(), &ti), "impact d2impulse_dq2");
     w.check(1e-6);
@@ -404,17 +404,17 @@ fn contact_model_errors_name_the_contacts() {
         (vec![three("RF_FOOT"), six("LF_FOOT"), six("LF_FOOT")], ["contacts[1]", "contacts[2]"]),
         (vec![three("LF_FOOT"), six("LF_FOOT")], ["contacts[0]", "contacts[1]"]),
     ] {
-        let mut kd = KktData::new(&m, ContactData::new(&m, &set).unwrap());
+        let mut kd = ContactData::new(&m, &set).unwrap();
         let e = kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap_err().to_string();
         assert!(
             names.iter().all(|n| e.contains(n)) && e.contains("LF_FOOT") && e.contains("redundant"),
             "{e}"
         );
-        let mut im = ImpactData::new(&m, ContactData::new(&m, &set).unwrap());
+        let mut im = ContactData::new(&m, &set).unwrap();
         let e = impact_derivatives(&m, &mut d, &mut im, &q, &v).unwrap_err().to_string();
         assert!(names.iter().all(|n| e.contains(n)), "{e}");
         kd.set_damping(1e-6).unwrap();
-        kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+        let kd = kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
         assert!(kd.qdd().iter().chain(kd.lambda().iter()).all(|x| x.is_finite()));
         assert_eq!(kd.lambda().len(), set.iter().map(|c| c.dim()).sum::<usize>());
     }
@@ -442,7 +442,7 @@ fn contact_model_errors_name_the_contacts() {
     assert!(c.with_placement(&m, &bad).is_err());
 }
 
-/// The batch API (`map_states` over per-thread `(Data, KktData)` workspaces) with 6-D and local
+/// The batch API (`map_states` over per-thread `(Data, ContactData)` workspaces) with 6-D and local
 /// contacts gives the single-call results, state by state.
 #[test]
 fn batched_contact_dynamics_match_single_calls() {
@@ -452,14 +452,14 @@ fn batched_contact_dynamics_match_single_calls() {
     let mut rng = Rng::new(68);
     let cs = contacts(&m, &[("LF_FOOT", D6, Local), ("RH_FOOT", D3, Local)], &mut rng);
     let cs = with_gains(&cs, &mut rng);
-    let kd = KktData::new(&m, ContactData::new(&m, &cs).unwrap());
+    let kd = ContactData::new(&m, &cs).unwrap();
     let pool = Arc::new(BatchPool::new(2).unwrap());
     let mut bd = BatchData::from_workspace(pool, (Data::new(&m), kd.clone()));
     let states: Vec<_> = (0..6).map(|_| random_state(&m, &mut rng)).collect();
     let mut out = vec![(DMatrix::zeros(9, m.nv()), DMatrix::zeros(m.nv(), m.nv())); 6];
     map_states(&mut bd, &mut out, |(d, kd), k, o| {
         let (q, v, tau) = &states[k];
-        kkt_derivatives(&m, d, kd, q, v, tau)?;
+        let kd = kkt_derivatives(&m, d, kd, q, v, tau)?;
         o.0.copy_from(kd.dlambda_dq());
         o.1.copy_from(kd.dqdd_dq());
         Ok(())
@@ -467,7 +467,7 @@ fn batched_contact_dynamics_match_single_calls() {
     .unwrap();
     let (mut d, mut k1) = (Data::new(&m), kd);
     for ((q, v, tau), (dl, dq)) in states.iter().zip(&out) {
-        kkt_derivatives(&m, &mut d, &mut k1, q, v, tau).unwrap();
+        let k1 = kkt_derivatives(&m, &mut d, &mut k1, q, v, tau).unwrap();
         assert_eq!(dl, k1.dlambda_dq());
         assert_eq!(dq, k1.dqdd_dq());
     }

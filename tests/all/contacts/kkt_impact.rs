@@ -50,15 +50,14 @@ fn kkt_first_and_second_order_match_oracle() {
         }
         let (q, v, tau) = random_state(&m, &mut rng);
         let mut d = Data::new(&m);
-        let mut kd =
-            KktData::new(&m, ContactData::new(&m, &contacts).unwrap()).with_second_order(&m);
-        kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+        let mut cd = ContactData::with_second_order(&m, &contacts).unwrap();
+        let kd = kkt_so_derivatives(&m, &mut d, &mut cd, &q, &v, &tau).unwrap();
         if gains {
             // The gains change the dynamics (so the comparisons below see them).
             let plain: Vec<Contact> =
                 contacts.iter().map(|c| Contact { kp: 0.0, kd: 0.0, ..c.clone() }).collect();
-            let mut k0 = KktData::new(&m, ContactData::new(&m, &plain).unwrap());
-            kkt_derivatives(&m, &mut d, &mut k0, &q, &v, &tau).unwrap();
+            let mut c0 = ContactData::new(&m, &plain).unwrap();
+            let k0 = kkt_derivatives(&m, &mut d, &mut c0, &q, &v, &tau).unwrap();
             assert!(rel_err_vec(kd.qdd(), k0.qdd()) > 1e-6);
             assert!(rel_err_mat(kd.dqdd_dq(), k0.dqdd_dq()) > 1e-6);
             assert!(rel_err_mat(kd.dqdd_dv(), k0.dqdd_dv()) > 1e-6);
@@ -124,10 +123,9 @@ fn impact_first_and_second_order_match_oracle() {
             let contacts = contacts_of(&m, &frames, &mut rng);
             let (q, vminus, _) = random_state(&m, &mut rng);
             let mut d = Data::new(&m);
-            let mut im =
-                ImpactData::new(&m, ContactData::new(&m, &contacts).unwrap()).with_second_order(&m);
-            im.set_restitution(e).unwrap();
-            impact_so_derivatives(&m, &mut d, &mut im, &q, &vminus).unwrap();
+            let mut cd = ContactData::with_second_order(&m, &contacts).unwrap();
+            cd.set_restitution(e).unwrap();
+            let im = impact_so_derivatives(&m, &mut d, &mut cd, &q, &vminus).unwrap();
             let (qs, vs) = (q.as_slice(), vminus.as_slice());
             let at = format!("{} with {} contacts, e = {e}", m.name(), contacts.len());
             let (vp, imp) = oracle::impact::<f64>(&m, qs, vs, &contacts, e);
@@ -164,10 +162,10 @@ fn constrained_id_first_and_second_order_match_oracle() {
         let contacts = contacts_of(&m, &frames, &mut rng);
         let (q, v, a) = random_state(&m, &mut rng);
         let lam = DVector::from_fn(3 * contacts.len(), |_, _| rng.range(-20.0, 20.0));
-        let mut d = Data::new(&m);
+        let mut d = Data::with_second_order(&m);
         let mut cd = ContactData::new(&m, &contacts).unwrap();
-        let mut so = SoData::new(&m);
-        constrained_id_so_derivatives(&m, &mut d, &mut cd, &mut so, &q, &v, &a, &lam).unwrap();
+        constrained_id_so_derivatives(&m, &mut d, &mut cd, &q, &v, &a, &lam).unwrap();
+        let so = d.id_so().unwrap();
         let (qs, vs, as_, ls) = (q.as_slice(), v.as_slice(), a.as_slice(), lam.as_slice());
         let at = format!("{} with {} contacts", m.name(), contacts.len());
         w[0].add(
@@ -218,18 +216,19 @@ fn kkt_second_order_matches_differences_of_first_order() {
     let contacts = contacts_of(&m, &["LF_FOOT", "RF_FOOT", "RH_FOOT"], &mut rng);
     let (q, v, tau) = random_state(&m, &mut rng);
     let mut d = Data::new(&m);
-    let mut kd = KktData::new(&m, ContactData::new(&m, &contacts).unwrap()).with_second_order(&m);
-    kkt_so_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+    let mut cd = ContactData::with_second_order(&m, &contacts).unwrap();
+    let kd = kkt_so_derivatives(&m, &mut d, &mut cd, &q, &v, &tau).unwrap();
     let n = m.nv();
     let h = 1e-5;
-    let mut kp = KktData::new(&m, ContactData::new(&m, &contacts).unwrap());
-    let mut km = KktData::new(&m, ContactData::new(&m, &contacts).unwrap());
+    let mut kp = ContactData::new(&m, &contacts).unwrap();
+    let mut km = ContactData::new(&m, &contacts).unwrap();
     let (mut tq, mut tl) = (Tensor3::zeros(n, n, n), Tensor3::zeros(3 * contacts.len(), n, n));
     for k in 0..n {
         let mut e = DVector::zeros(n);
         e[k] = h;
         kkt_derivatives(&m, &mut d, &mut kp, &m.integrate(&q, &e).unwrap(), &v, &tau).unwrap();
         kkt_derivatives(&m, &mut d, &mut km, &m.integrate(&q, &-&e).unwrap(), &v, &tau).unwrap();
+        let (kp, km) = (kp.kkt(), km.kkt());
         tq.page_mut(k).copy_from(&((kp.dqdd_dq() - km.dqdd_dq()) / (2.0 * h)));
         tl.page_mut(k).copy_from(&((kp.dlambda_dq() - km.dlambda_dq()) / (2.0 * h)));
     }
@@ -259,7 +258,7 @@ fn contact_errors_name_the_problem() {
     let mut rng = Rng::new(35);
     let (q, v, tau) = random_state(&m, &mut rng);
     let mut d = Data::new(&m);
-    let mut kd = KktData::new(&m, ContactData::new(&m, &contacts).unwrap());
+    let mut kd = ContactData::new(&m, &contacts).unwrap();
     let e = kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap_err();
     let s = e.to_string();
     assert!(
@@ -268,13 +267,13 @@ fn contact_errors_name_the_problem() {
             && s.contains("rank deficient"),
         "{s}"
     );
-    let mut im = ImpactData::new(&m, ContactData::new(&m, &contacts).unwrap());
+    let mut im = ContactData::new(&m, &contacts).unwrap();
     assert!(impact_derivatives(&m, &mut d, &mut im, &q, &v).is_err());
     // ... unless the caller opts into damping: then the solve is regularised and finite.
     kd.set_damping(1e-6).unwrap();
     assert!(kd.set_damping(-1.0).is_err() && kd.set_damping(f64::NAN).is_err());
-    kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
-    assert!(kd.qdd().iter().chain(kd.lambda().iter()).all(|x| x.is_finite()));
+    let k = kkt_derivatives(&m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+    assert!(k.qdd().iter().chain(k.lambda().iter()).all(|x| x.is_finite()));
     // wrong lambda length for constrained ID
     let mut cd = ContactData::new(&m, &[lf]).unwrap();
     let r: Result<()> =
@@ -286,7 +285,7 @@ fn contact_errors_name_the_problem() {
         other => panic!("expected a dimension error, got {other:?}"),
     }
     // negative restitution
-    let mut im = ImpactData::new(&m, ContactData::new(&m, &contacts[..1]).unwrap());
+    let mut im = ContactData::new(&m, &contacts[..1]).unwrap();
     assert!(im.set_restitution(-0.5).unwrap_err().to_string().contains("restitution"));
     assert!(im.set_restitution(f64::INFINITY).is_err());
     assert_eq!(im.restitution(), 0.0);
@@ -302,10 +301,9 @@ fn repeated_calls_on_reused_workspaces_are_identical() {
     let contacts = contacts_of(&m, &["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"], &mut rng);
     let (q, v, tau) = random_state(&m, &mut rng);
     let (q2, v2, tau2) = random_state(&m, &mut rng);
-    let cd = ContactData::new(&m, &contacts).unwrap();
     let mut d = Data::new(&m);
-    let mut kd = KktData::new(&m, cd.clone()).with_second_order(&m);
-    let mut im = ImpactData::new(&m, cd.clone()).with_second_order(&m);
+    let mut kd = ContactData::with_second_order(&m, &contacts).unwrap();
+    let mut im = ContactData::with_second_order(&m, &contacts).unwrap();
     kkt_so_derivatives(&m, &mut d, &mut kd, &q2, &v2, &tau2).unwrap();
     impact_so_derivatives(&m, &mut d, &mut im, &q2, &v2).unwrap();
     for _ in 0..2 {
@@ -313,10 +311,12 @@ fn repeated_calls_on_reused_workspaces_are_identical() {
         impact_so_derivatives(&m, &mut d, &mut im, &q, &v).unwrap();
     }
     let mut fresh_d = Data::new(&m);
-    let mut fresh_k = KktData::new(&m, cd.clone()).with_second_order(&m);
-    let mut fresh_i = ImpactData::new(&m, cd).with_second_order(&m);
+    let mut fresh_k = ContactData::with_second_order(&m, &contacts).unwrap();
+    let mut fresh_i = ContactData::with_second_order(&m, &contacts).unwrap();
     kkt_so_derivatives(&m, &mut fresh_d, &mut fresh_k, &q, &v, &tau).unwrap();
     impact_so_derivatives(&m, &mut fresh_d, &mut fresh_i, &q, &v).unwrap();
+    let (kd, fresh_k) = (kd.kkt(), fresh_k.kkt());
+    let (im, fresh_i) = (im.impact(), fresh_i.impact());
     let (a, b) = (kd.so().unwrap(), fresh_k.so().unwrap());
     for (x, y) in [
         (a.d2qdd_dq2(), b.d2qdd_dq2()),

@@ -30,12 +30,12 @@ fn contracted_id_matches_dense_tensors_and_ad() {
     let mut rng = Rng::new(21);
     let models: Vec<Model> = test_models(40);
     for (mi, m) in models.iter().enumerate() {
-        let (mut d, mut so, mut cd) = (Data::new(m), SoData::new(m), ContractedData::new(m));
+        let mut d = Data::with_second_order(m);
         let (q, v, a) = random_state(m, &mut rng);
         let w = weight(m.nv(), &mut rng);
-        id_so_contracted(m, &mut d, &mut cd, &q, &v, &a, &w).unwrap();
+        let cd = id_so_contracted(m, &mut d, &q, &v, &a, &w).unwrap();
         let got = [cd.c_qq().clone(), cd.c_vv().clone(), cd.c_qv().clone(), cd.c_mq().clone()];
-        id_so_derivatives(m, &mut d, &mut so, &q, &v, &a, None).unwrap();
+        let so = id_so_derivatives(m, &mut d, &q, &v, &a, None).unwrap();
         let at = format!("{} nv={}", m.name(), m.nv());
         let tensors = [so.d2tau_dq2(), so.d2tau_dv2(), so.d2tau_dqdv(), so.dm_dq()];
         for ((wst, t), g) in dense.iter_mut().zip(tensors).zip(&got) {
@@ -67,17 +67,18 @@ fn contracted_fd_matches_dense_tensors_and_ad() {
     let mut rng = Rng::new(22);
     let models: Vec<Model> = test_models(40);
     for m in &models {
-        let (mut d, mut fso, mut cd) = (Data::new(m), FdSoData::new(m), ContractedData::new(m));
+        let mut d = Data::with_second_order(m);
         let (q, v, tau) = random_state(m, &mut rng);
         let w = weight(m.nv(), &mut rng);
-        fd_so_contracted(m, &mut d, &mut cd, &q, &v, &tau, &w).unwrap();
+        let cd = fd_so_contracted(m, &mut d, &q, &v, &tau, &w).unwrap();
         let got = [cd.c_qq().clone(), cd.c_vv().clone(), cd.c_qv().clone(), cd.c_tauq().clone()];
         let fo = [d.dqdd_dq().clone(), d.dqdd_dv().clone(), d.minv().clone()];
-        fd_so_derivatives(m, &mut d, &mut fso, &q, &v, &tau, None).unwrap();
+        fd_so_derivatives(m, &mut d, &q, &v, &tau, None).unwrap();
         // `data` holds the first-order forward-dynamics results after the contracted call.
         for (x, y) in fo.iter().zip([d.dqdd_dq(), d.dqdd_dv(), d.minv()]) {
             assert!(rel_err_mat(x, y) < 1e-13, "{}", m.name());
         }
+        let fso = d.fd_so().unwrap();
         let at = format!("{} nv={}", m.name(), m.nv());
         let tensors = [fso.d2qdd_dq2(), fso.d2qdd_dv2(), fso.d2qdd_dqdv(), fso.d2qdd_dtaudq()];
         for ((wst, t), g) in dense.iter_mut().zip(tensors).zip(&got) {
@@ -107,18 +108,18 @@ fn contracted_inputs_are_checked() {
     let other = builtin::serial_chain(4);
     let mut rng = Rng::new(3);
     let (q, v, a) = random_state(&m, &mut rng);
-    let mut d = Data::new(&m);
-    let mut cd = ContractedData::new(&m);
-    let e = id_so_contracted(&m, &mut d, &mut cd, &q, &v, &a, &DVector::zeros(3)).unwrap_err();
+    let mut d = Data::with_contracted(&m);
+    let e = id_so_contracted(&m, &mut d, &q, &v, &a, &DVector::zeros(3)).unwrap_err();
     assert!(e.to_string().contains("`w`"), "{e}");
     let mut w = weight(m.nv(), &mut rng);
     w[2] = f64::NAN;
-    assert!(fd_so_contracted(&m, &mut d, &mut cd, &q, &v, &a, &w).is_err());
-    let mut cd_other = ContractedData::new(&other);
+    assert!(fd_so_contracted(&m, &mut d, &q, &v, &a, &w).is_err());
+    // A contracted workspace made for another model is refused.
+    let mut d_other = Data::with_contracted(&other);
     let w = weight(m.nv(), &mut rng);
-    let e = id_so_contracted(&m, &mut d, &mut cd_other, &q, &v, &a, &w).unwrap_err();
+    let e = id_so_contracted(&m, &mut d_other, &q, &v, &a, &w).unwrap_err();
     assert!(matches!(e, sodyn::Error::Workspace(_)), "{e}");
-    let e = fd_so_contracted(&m, &mut d, &mut cd_other, &q, &v, &a, &w).unwrap_err();
+    let e = fd_so_contracted(&m, &mut d_other, &q, &v, &a, &w).unwrap_err();
     assert!(matches!(e, sodyn::Error::Workspace(_)), "{e}");
 }
 
@@ -144,14 +145,12 @@ fn contracted_kkt_matches_dense_tensors_and_ad() {
         let nc3 = 3 * contacts.len();
         let (wq, wl) = (weight(m.nv(), &mut rng), weight(nc3, &mut rng));
         let mut d = Data::new(&m);
-        let cd = ContactData::new(&m, &contacts).unwrap();
-        let mut kd = KktData::new(&m, cd.clone());
-        let mut kc = KktContracted::new(&m, &kd);
-        kkt_so_contracted(&m, &mut d, &mut kd, &mut kc, &q, &v, &tau, &wq, &wl).unwrap();
+        let mut kd = ContactData::with_contracted(&m, &contacts).unwrap();
+        let kc = kkt_so_contracted(&m, &mut d, &mut kd, &q, &v, &tau, &wq, &wl).unwrap();
         let got = [kc.c_qq().clone(), kc.c_vv().clone(), kc.c_qv().clone(), kc.c_tauq().clone()];
-        let fo = kd.dqdd_dq().clone();
-        let mut full = KktData::new(&m, cd).with_second_order(&m);
-        kkt_so_derivatives(&m, &mut d, &mut full, &q, &v, &tau).unwrap();
+        let fo = kd.kkt().dqdd_dq().clone();
+        let mut full_cd = ContactData::with_second_order(&m, &contacts).unwrap();
+        let full = kkt_so_derivatives(&m, &mut d, &mut full_cd, &q, &v, &tau).unwrap();
         assert!(rel_err_mat(&fo, full.dqdd_dq()) < 1e-13, "first order in kd");
         let t = full.so().unwrap();
         let ours = [
@@ -196,15 +195,14 @@ fn contracted_impact_matches_dense_tensors_and_ad() {
             let nc3 = 3 * contacts.len();
             let (wv, wl) = (weight(m.nv(), &mut rng), weight(nc3, &mut rng));
             let mut d = Data::new(&m);
-            let cd = ContactData::new(&m, &contacts).unwrap();
-            let mut im = ImpactData::new(&m, cd.clone());
+            let mut im = ContactData::with_contracted(&m, &contacts).unwrap();
             im.set_restitution(e).unwrap();
-            let mut ic = ImpactContracted::new(&m, &im);
-            impact_so_contracted(&m, &mut d, &mut im, &mut ic, &q, &v, &wv, &wl).unwrap();
+            let ic = impact_so_contracted(&m, &mut d, &mut im, &q, &v, &wv, &wl).unwrap();
             let got = [ic.c_qq().clone(), ic.c_qvminus().clone()];
-            let mut full = ImpactData::new(&m, cd).with_second_order(&m);
-            full.set_restitution(e).unwrap();
-            impact_so_derivatives(&m, &mut d, &mut full, &q, &v).unwrap();
+            let mut full_cd = ContactData::with_second_order(&m, &contacts).unwrap();
+            full_cd.set_restitution(e).unwrap();
+            let full = impact_so_derivatives(&m, &mut d, &mut full_cd, &q, &v).unwrap();
+            let im = im.impact();
             assert!(rel_err_mat(im.dvplus_dq(), full.dvplus_dq()) < 1e-13, "first order in im");
             let t = full.so().unwrap();
             let ours = [

@@ -9,7 +9,7 @@ use crate::util::mimic::{arm_path, ff_models, impact_data, kkt_data, models, opt
 use nalgebra::{DMatrix, DVector};
 use sodyn::Error;
 use sodyn::algo::{self, Data};
-use sodyn::deriv::{self, ContactData, FdSoData, SoData};
+use sodyn::deriv::{self, ContactData};
 use sodyn::model::{MimicJoint, Model, UrdfOptions, load_urdf_file};
 use sodyn::rng::Rng;
 use sodyn::tensor::Tensor3;
@@ -117,18 +117,17 @@ fn second_order_matches_hyper_dual_oracle() {
     let mut worst = [0.0f64; 8];
     for m in models() {
         let r = oracle(&m);
-        let mut data = Data::new(&m);
-        let (mut so, mut fso) = (SoData::new(&m), FdSoData::new(&m));
+        let mut data = Data::with_second_order(&m);
         let mut rng = Rng::new(8);
         for _ in 0..2 {
             let [q, v, x] = state(&m, &mut rng);
             let (qs, vs, xs) = (q.as_slice(), v.as_slice(), x.as_slice());
-            deriv::id_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
+            let so = deriv::id_so_derivatives(&m, &mut data, &q, &v, &x, None).unwrap();
             worst[0] = worst[0].max(ten_err(so.d2tau_dq2(), &r.d2_rnea_dq2(qs, vs, xs)));
             worst[1] = worst[1].max(ten_err(so.d2tau_dv2(), &r.d2_rnea_dv2(qs, vs, xs)));
             worst[2] = worst[2].max(ten_err(so.d2tau_dqdv(), &r.d2_rnea_dqdv(qs, vs, xs)));
             worst[3] = worst[3].max(ten_err(so.dm_dq(), &r.dM_dq(qs)));
-            deriv::fd_so_derivatives(&m, &mut data, &mut fso, &q, &v, &x, None).unwrap();
+            let fso = deriv::fd_so_derivatives(&m, &mut data, &q, &v, &x, None).unwrap();
             worst[4] = worst[4].max(ten_err(fso.d2qdd_dq2(), &r.d2_aba_dq2(qs, vs, xs)));
             worst[5] = worst[5].max(ten_err(fso.d2qdd_dv2(), &r.d2_aba_dv2(qs, vs, xs)));
             worst[6] = worst[6].max(ten_err(fso.d2qdd_dqdv(), &r.d2_aba_dqdv(qs, vs, xs)));
@@ -150,8 +149,7 @@ fn second_order_matches_hyper_dual_oracle() {
 fn matches_central_finite_differences() {
     let m = load_urdf_file(&arm_path(), &opts(true)).unwrap();
     let n = m.nv();
-    let mut data = Data::new(&m);
-    let mut so = FdSoData::new(&m);
+    let mut data = Data::with_second_order(&m);
     let mut rng = Rng::new(9);
     let [q, v, tau] = state(&m, &mut rng);
     let h = 1e-6;
@@ -160,7 +158,7 @@ fn matches_central_finite_differences() {
         d[k] = s;
         m.integrate(&q, &d).unwrap()
     };
-    deriv::fd_so_derivatives(&m, &mut data, &mut so, &q, &v, &tau, None).unwrap();
+    let so = deriv::fd_so_derivatives(&m, &mut data, &q, &v, &tau, None).unwrap().clone();
     let (dqdd_dq, dqdd_dv) = (data.dqdd_dq().clone(), data.dqdd_dv().clone());
     let a = data.qdd().clone();
     deriv::id_derivatives(&m, &mut data, &q, &v, &a, None).unwrap();
@@ -259,8 +257,7 @@ fn external_forces_match_the_full_model() {
 #[test]
 fn bad_inputs_are_errors() {
     let m = load_urdf_file(&arm_path(), &opts(true)).unwrap();
-    let mut data = Data::new(&m);
-    let mut so = FdSoData::new(&m);
+    let mut data = Data::with_second_order(&m);
     let mut rng = Rng::new(5);
     let [q, v, x] = state(&m, &mut rng);
     // The full model's lengths are wrong lengths.
@@ -284,10 +281,11 @@ fn bad_inputs_are_errors() {
     let mut od = Data::new(&other);
     let e = algo::rnea(&m, &mut od, &q, &v, &x, None).unwrap_err();
     assert!(matches!(e, Error::Workspace(_)), "{e}");
-    let mut oso = FdSoData::new(&other);
-    let e = deriv::fd_so_derivatives(&m, &mut data, &mut oso, &q, &v, &x, None).unwrap_err();
+    // A second-order workspace of another model.
+    let mut oso = Data::with_second_order(&other);
+    let e = deriv::fd_so_derivatives(&m, &mut oso, &q, &v, &x, None).unwrap_err();
     assert!(matches!(e, Error::Workspace(_)), "{e}");
-    deriv::fd_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
+    deriv::fd_so_derivatives(&m, &mut data, &q, &v, &x, None).unwrap();
 }
 
 fn mimic_urdf(finger_r: &str, mimic: &str) -> String {
@@ -507,21 +505,21 @@ fn kkt_first_order_case(m: &Model, finger: bool) {
     let contacts = arm_contacts_with(m, finger);
     let r = oracle(m);
     let mut data = Data::new(m);
-    let mut kd = kkt_data(m, &contacts).unwrap();
-    assert_eq!(kd.cd().dim(), if finger { 12 } else { 9 });
+    let mut cd = kkt_data(m, &contacts).unwrap();
+    assert_eq!(cd.dim(), if finger { 12 } else { 9 });
     let n = m.nv();
     let mut rng = Rng::new(21);
     let mut worst = [0.0f64; 8];
     for _ in 0..3 {
         let [q, v, tau] = state(m, &mut rng);
+        let mm = cd.dim();
         let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
-        deriv::kkt_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        let kd = deriv::kkt_derivatives(m, &mut data, &mut cd, &q, &v, &tau).unwrap();
         let (qdd, lam) = r.kkt(qs, vs, ts, &contacts);
         worst[0] = worst[0].max(vec_err(kd.qdd(), &qdd));
         worst[1] = worst[1].max(vec_err(kd.lambda(), &lam));
         let [dq, dv, dt] = r.kkt_fo(qs, vs, ts, &contacts);
         let rows = |x: &DMatrix<f64>, a: usize, b: usize| x.rows(a, b).into_owned();
-        let mm = kd.cd().dim();
         for (k, (ours, theirs)) in [
             (kd.dqdd_dq(), rows(&dq, 0, n)),
             (kd.dqdd_dv(), rows(&dv, 0, n)),
@@ -547,7 +545,7 @@ fn kkt_first_order_case(m: &Model, finger: bool) {
         "mimic KKT FO vs dual oracle ({} rows; relative): qdd {:.1e} lambda {:.1e} dqdd_dq \
          {:.1e} dqdd_dv {:.1e} dqdd_dtau {:.1e} dlambda_dq {:.1e} dlambda_dv {:.1e} dlambda_dtau \
          {:.1e}",
-        kd.cd().dim(),
+        cd.dim(),
         worst[0],
         worst[1],
         worst[2],
@@ -565,8 +563,7 @@ fn constrained_id_matches_oracle() {
     let m = load_urdf_file(&arm_path(), &opts(true)).unwrap();
     let contacts = arm_contacts(&m);
     let r = oracle(&m);
-    let mut data = Data::new(&m);
-    let mut so = SoData::new(&m);
+    let mut data = Data::with_second_order(&m);
     let mut cd = ContactData::new(&m, &contacts).unwrap();
     let mut rng = Rng::new(22);
     let mut worst = [0.0f64; 4];
@@ -574,8 +571,8 @@ fn constrained_id_matches_oracle() {
         let [q, v, a] = state(&m, &mut rng);
         let lam = DVector::from_fn(cd.dim(), |_, _| rng.range(-5.0, 5.0));
         let (qs, vs, as_, ls) = (q.as_slice(), v.as_slice(), a.as_slice(), lam.as_slice());
-        deriv::constrained_id_so_derivatives(&m, &mut data, &mut cd, &mut so, &q, &v, &a, &lam)
-            .unwrap();
+        deriv::constrained_id_so_derivatives(&m, &mut data, &mut cd, &q, &v, &a, &lam).unwrap();
+        let so = data.id_so().unwrap();
         worst[0] =
             worst[0].max(vec_err(data.tau(), &r.constrained_rnea(qs, vs, as_, &contacts, ls)));
         let [dq, dv] = r.d_constrained_rnea(qs, vs, as_, &contacts, ls);
@@ -613,7 +610,7 @@ fn kkt_second_order_case(m: &Model) {
     let r = oracle(m);
     let mut data = Data::new(m);
     let contacts = arm_contacts_with(m, false);
-    let mut kd = kkt_data(m, &contacts).unwrap().with_second_order(m);
+    let mut cd = ContactData::with_second_order(m, &contacts).unwrap();
     let n = m.nv();
     let mut rng = Rng::new(23);
     let mut worst = [0.0f64; 8];
@@ -621,10 +618,10 @@ fn kkt_second_order_case(m: &Model) {
         |t: &Tensor3, a: usize, b: usize| Tensor3::from_fn(b, n, n, |i, j, k| t[(a + i, j, k)]);
     for _ in 0..2 {
         let [q, v, tau] = state(m, &mut rng);
+        let mm = cd.dim();
         let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
-        deriv::kkt_so_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        let kd = deriv::kkt_so_derivatives(m, &mut data, &mut cd, &q, &v, &tau).unwrap();
         let so = kd.so().unwrap();
-        let mm = kd.cd().dim();
         let oracle = r.kkt_so(qs, vs, ts, &contacts);
         let ours_a = [so.d2qdd_dq2(), so.d2qdd_dv2(), so.d2qdd_dqdv(), so.d2qdd_dtaudq()];
         let ours_l =
@@ -635,7 +632,7 @@ fn kkt_second_order_case(m: &Model) {
         }
         // The first order of the same call equals kkt_derivatives'.
         let d1 = kd.dqdd_dq().clone();
-        deriv::kkt_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        let kd = deriv::kkt_derivatives(m, &mut data, &mut cd, &q, &v, &tau).unwrap();
         let e = mat_err(kd.dqdd_dq(), &d1);
         assert!(e < 1e-11, "{e:e}");
     }
@@ -664,18 +661,18 @@ fn impact_first_order_matches_dual_oracle() {
     // there, in the oracle's dense elimination as much as in ours.)
     for e in [0.0, 0.4] {
         let contacts = arm_contacts_with(&m, false);
-        let mut im = impact_data(&m, &contacts).unwrap();
-        im.set_restitution(e).unwrap();
+        let mut cd = impact_data(&m, &contacts).unwrap();
+        cd.set_restitution(e).unwrap();
         let mut rng = Rng::new(24);
         for _ in 0..2 {
             let [q, vm, _] = state(&m, &mut rng);
+            let mm = cd.dim();
             let (qs, vs) = (q.as_slice(), vm.as_slice());
-            deriv::impact_derivatives(&m, &mut data, &mut im, &q, &vm).unwrap();
+            let im = deriv::impact_derivatives(&m, &mut data, &mut cd, &q, &vm).unwrap();
             let (vp, imp) = r.impact(qs, vs, &contacts, e);
             worst[0] = worst[0].max(vec_err(im.vplus(), &vp));
             worst[1] = worst[1].max(vec_err(im.impulse(), &imp));
             let [dq, dv] = r.impact_fo(qs, vs, &contacts, e);
-            let mm = im.cd().dim();
             worst[2] = worst[2].max(mat_err(im.dvplus_dq(), &dq.rows(0, n).into_owned()));
             worst[3] = worst[3].max(mat_err(im.dvplus_dvminus(), &dv.rows(0, n).into_owned()));
             worst[4] = worst[4].max(mat_err(im.dimpulse_dq(), &dq.rows(n, mm).into_owned()));
@@ -708,16 +705,16 @@ fn impact_second_order_case(m: &Model) {
         |t: &Tensor3, a: usize, b: usize| Tensor3::from_fn(b, n, n, |i, j, k| t[(a + i, j, k)]);
     let mut worst = [0.0f64; 4];
     for e in [0.0, 0.4] {
-        let mut im = impact_data(m, &contacts).unwrap().with_second_order(m);
-        im.set_restitution(e).unwrap();
+        let mut cd = ContactData::with_second_order(m, &contacts).unwrap();
+        cd.set_restitution(e).unwrap();
         let mut rng = Rng::new(25);
         for _ in 0..2 {
             let [q, vm, _] = state(m, &mut rng);
+            let mm = cd.dim();
             let (qs, vs) = (q.as_slice(), vm.as_slice());
-            deriv::impact_so_derivatives(m, &mut data, &mut im, &q, &vm).unwrap();
+            let im = deriv::impact_so_derivatives(m, &mut data, &mut cd, &q, &vm).unwrap();
             let so = im.so().unwrap();
             let [dq2, dqdv] = r.impact_so(qs, vs, &contacts, e);
-            let mm = im.cd().dim();
             worst[0] = worst[0].max(ten_err(so.d2vplus_dq2(), &rows(&dq2, 0, n)));
             worst[1] = worst[1].max(ten_err(so.d2vplus_dqdvminus(), &rows(&dqdv, 0, n)));
             worst[2] = worst[2].max(ten_err(so.d2impulse_dq2(), &rows(&dq2, n, mm)));
@@ -736,28 +733,25 @@ fn impact_second_order_case(m: &Model) {
 /// reduced tensors (themselves checked against the hyper-dual oracle above).
 #[test]
 fn contracted_second_order_equals_contracted_tensors() {
-    use sodyn::deriv::ContractedData;
     let contract = |t: &Tensor3, w: &DVector<f64>| {
         let (n1, n2, n3) = t.dims();
         DMatrix::from_fn(n2, n3, |j, k| (0..n1).map(|i| w[i] * t[(i, j, k)]).sum())
     };
     let mut worst = [0.0f64; 8];
     for m in models() {
-        let mut data = Data::new(&m);
-        let (mut so, mut fso) = (SoData::new(&m), FdSoData::new(&m));
-        let mut cd = ContractedData::new(&m);
+        let mut data = Data::with_second_order(&m);
         let mut rng = Rng::new(31);
         for _ in 0..2 {
             let [q, v, x] = state(&m, &mut rng);
             let w = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
-            deriv::id_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
-            deriv::id_so_contracted(&m, &mut data, &mut cd, &q, &v, &x, &w).unwrap();
+            let so = deriv::id_so_derivatives(&m, &mut data, &q, &v, &x, None).unwrap().clone();
+            let cd = deriv::id_so_contracted(&m, &mut data, &q, &v, &x, &w).unwrap();
             worst[0] = worst[0].max(mat_err(cd.c_qq(), &contract(so.d2tau_dq2(), &w)));
             worst[1] = worst[1].max(mat_err(cd.c_vv(), &contract(so.d2tau_dv2(), &w)));
             worst[2] = worst[2].max(mat_err(cd.c_qv(), &contract(so.d2tau_dqdv(), &w)));
             worst[3] = worst[3].max(mat_err(cd.c_mq(), &contract(so.dm_dq(), &w)));
-            deriv::fd_so_derivatives(&m, &mut data, &mut fso, &q, &v, &x, None).unwrap();
-            deriv::fd_so_contracted(&m, &mut data, &mut cd, &q, &v, &x, &w).unwrap();
+            let fso = deriv::fd_so_derivatives(&m, &mut data, &q, &v, &x, None).unwrap().clone();
+            let cd = deriv::fd_so_contracted(&m, &mut data, &q, &v, &x, &w).unwrap();
             worst[4] = worst[4].max(mat_err(cd.c_qq(), &contract(fso.d2qdd_dq2(), &w)));
             worst[5] = worst[5].max(mat_err(cd.c_vv(), &contract(fso.d2qdd_dv2(), &w)));
             worst[6] = worst[6].max(mat_err(cd.c_qv(), &contract(fso.d2qdd_dqdv(), &w)));

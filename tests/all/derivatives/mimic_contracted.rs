@@ -10,7 +10,7 @@ use crate::util::mimic::{arm_path, ff_models, impact_data, kkt_data, models, opt
 use nalgebra::{DMatrix, DVector};
 use sodyn::Error;
 use sodyn::algo::{self, Data};
-use sodyn::deriv::{self, ImpactContracted, ImpactData, KktContracted, KktData, SoData};
+use sodyn::deriv::{self, ContactData, ImpactData, KktData};
 use sodyn::model::{Contact, MimicJoint, Model, UrdfOptions, load_urdf_file};
 use sodyn::rng::Rng;
 use sodyn::tensor::Tensor3;
@@ -89,8 +89,7 @@ fn idfoza_idsoza_match_ad_oracle_tensors_and_differences() {
     let mut worst = [0.0f64; 5];
     for m in models() {
         let (r, n) = (oracle(&m), m.nv());
-        let mut data = Data::new(&m);
-        let mut so = SoData::new(&m);
+        let mut data = Data::with_second_order(&m);
         let mut out = DMatrix::zeros(n, n);
         let mut rng = Rng::new(41);
         for _ in 0..2 {
@@ -98,10 +97,10 @@ fn idfoza_idsoza_match_ad_oracle_tensors_and_differences() {
             let (qs, xs) = (q.as_slice(), x.as_slice());
             deriv::idfoza(&m, &mut data, &q, &x, &mut out).unwrap();
             worst[0] = worst[0].max(mat_err(&out, &r.d_mass_times_dq(qs, xs)));
-            let t = deriv::idsoza(&m, &mut data, &mut so, &q, &x).unwrap().clone();
+            let t = deriv::idsoza(&m, &mut data, &q, &x).unwrap().clone();
             worst[1] = worst[1].max(ten_err(&t, &r.d2_mass_times_dq2(qs, xs)));
             // ∂(M x)/∂q[i, k] = Σ_j ∂M_ij/∂q_k x_j, from the dense ∂M/∂q of id_so_derivatives.
-            deriv::id_so_derivatives(&m, &mut data, &mut so, &q, &v, &x, None).unwrap();
+            let so = deriv::id_so_derivatives(&m, &mut data, &q, &v, &x, None).unwrap();
             let dm = so.dm_dq();
             let by_dm = DMatrix::from_fn(n, n, |i, k| (0..n).map(|j| dm[(i, j, k)] * x[j]).sum());
             worst[2] = worst[2].max(mat_err(&out, &by_dm));
@@ -177,9 +176,8 @@ fn kkt_contracted_matches_oracle_tensors_and_differences() {
 fn kkt_case(m: &Model, contacts: &[Contact], diff: bool, worst: &mut [f64; 13]) {
     let (r, n) = (oracle(m), m.nv());
     let mut data = Data::new(m);
-    let mut kd = kkt_data(m, contacts).unwrap().with_second_order(m);
-    let mut kc = KktContracted::new(m, &kd);
-    let nc = kd.cd().dim();
+    let mut cd = ContactData::with_second_order(m, contacts).unwrap();
+    let nc = cd.dim();
     let mut rng = Rng::new(42);
     for _ in 0..2 {
         let [q, v, tau] = state(m, &mut rng);
@@ -187,10 +185,10 @@ fn kkt_case(m: &Model, contacts: &[Contact], diff: bool, worst: &mut [f64; 13]) 
         let wl = DVector::from_fn(nc, |_, _| rng.range(-1.0, 1.0));
         let w = cat(&wa, &wl);
         let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
-        deriv::kkt_so_contracted(m, &mut data, &mut kd, &mut kc, &q, &v, &tau, &wa, &wl).unwrap();
+        let kc = deriv::kkt_so_contracted(m, &mut data, &mut cd, &q, &v, &tau, &wa, &wl).unwrap();
         let ours = [kc.c_qq().clone(), kc.c_vv().clone(), kc.c_qv().clone(), kc.c_tauq().clone()];
         // The first order of the same call is kkt_derivatives'.
-        let y1 = [kd.dqdd_dq().clone(), kd.dlambda_dq().clone()];
+        let y1 = [cd.kkt().dqdd_dq().clone(), cd.kkt().dlambda_dq().clone()];
         // The AD oracle, contracted.
         let t = r.kkt_so(qs, vs, ts, contacts);
         let t: [DMatrix<f64>; 4] = std::array::from_fn(|p| contract(&t[p], &w));
@@ -198,7 +196,7 @@ fn kkt_case(m: &Model, contacts: &[Contact], diff: bool, worst: &mut [f64; 13]) 
             worst[p] = worst[p].max(mat_err(&ours[p], &t[p]));
         }
         // The dense reduced tensors, contracted.
-        deriv::kkt_so_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        let kd = deriv::kkt_so_derivatives(m, &mut data, &mut cd, &q, &v, &tau).unwrap();
         let so = kd.so().unwrap();
         let dense = [
             stack(so.d2qdd_dq2(), so.d2lambda_dq2()),
@@ -211,7 +209,7 @@ fn kkt_case(m: &Model, contacts: &[Contact], diff: bool, worst: &mut [f64; 13]) 
             worst[4 + p] = worst[4 + p].max(mat_err(&ours[p], &d));
             worst[12] = worst[12].max(mat_err(&d, &t[p]));
         }
-        deriv::kkt_derivatives(m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+        let kd = deriv::kkt_derivatives(m, &mut data, &mut cd, &q, &v, &tau).unwrap();
         assert!(mat_err(kd.dqdd_dq(), &y1[0]) < 1e-12 && mat_err(kd.dlambda_dq(), &y1[1]) < 1e-12);
         if !diff {
             continue;
@@ -240,10 +238,10 @@ fn kkt_case(m: &Model, contacts: &[Contact], diff: bool, worst: &mut [f64; 13]) 
                 (2, (&q, &vp), (&q, &vm), 0),
                 (3, (&qp, &v), (&qm, &v), 2),
             ] {
-                deriv::kkt_derivatives(m, &mut data, &mut kd, q1, v1, &tau).unwrap();
-                let a = wy(&kd, wrt);
-                deriv::kkt_derivatives(m, &mut data, &mut kd, q2, v2, &tau).unwrap();
-                let b = wy(&kd, wrt);
+                let kd = deriv::kkt_derivatives(m, &mut data, &mut cd, q1, v1, &tau).unwrap();
+                let a = wy(kd, wrt);
+                let kd = deriv::kkt_derivatives(m, &mut data, &mut cd, q2, v2, &tau).unwrap();
+                let b = wy(kd, wrt);
                 fd[p].set_column(k, &((a - b) / (2.0 * h)));
             }
         }
@@ -261,25 +259,24 @@ fn impact_contracted_matches_oracle_tensors_and_differences() {
         let contacts = arm_contacts(&m, false);
         let mut data = Data::new(&m);
         for e in [0.0, 0.4] {
-            let mut im = impact_data(&m, &contacts).unwrap().with_second_order(&m);
-            im.set_restitution(e).unwrap();
-            let mut ic = ImpactContracted::new(&m, &im);
-            let nc = im.cd().dim();
+            let mut cd = ContactData::with_second_order(&m, &contacts).unwrap();
+            cd.set_restitution(e).unwrap();
+            let nc = cd.dim();
             let mut rng = Rng::new(43);
             for _ in 0..2 {
                 let [q, vm, _] = state(&m, &mut rng);
                 let wv = DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
                 let wl = DVector::from_fn(nc, |_, _| rng.range(-1.0, 1.0));
                 let w = cat(&wv, &wl);
-                deriv::impact_so_contracted(&m, &mut data, &mut im, &mut ic, &q, &vm, &wv, &wl)
-                    .unwrap();
+                let ic =
+                    deriv::impact_so_contracted(&m, &mut data, &mut cd, &q, &vm, &wv, &wl).unwrap();
                 let ours = [ic.c_qq().clone(), ic.c_qvminus().clone()];
-                let y1 = im.dvplus_dq().clone();
+                let y1 = cd.impact().dvplus_dq().clone();
                 let t = r.impact_so(q.as_slice(), vm.as_slice(), &contacts, e);
                 for p in 0..2 {
                     worst[p] = worst[p].max(mat_err(&ours[p], &contract(&t[p], &w)));
                 }
-                deriv::impact_so_derivatives(&m, &mut data, &mut im, &q, &vm).unwrap();
+                let im = deriv::impact_so_derivatives(&m, &mut data, &mut cd, &q, &vm).unwrap();
                 let so = im.so().unwrap();
                 let dense = [
                     stack(so.d2vplus_dq2(), so.d2impulse_dq2()),
@@ -303,10 +300,10 @@ fn impact_contracted_matches_oracle_tensors_and_differences() {
                     for (p, (q1, v1), (q2, v2)) in
                         [(0, (&qp, &vm), (&qm, &vm)), (1, (&q, &vp), (&q, &vmm))]
                     {
-                        deriv::impact_derivatives(&m, &mut data, &mut im, q1, v1).unwrap();
-                        let a = wy(&im);
-                        deriv::impact_derivatives(&m, &mut data, &mut im, q2, v2).unwrap();
-                        let b = wy(&im);
+                        let im = deriv::impact_derivatives(&m, &mut data, &mut cd, q1, v1).unwrap();
+                        let a = wy(im);
+                        let im = deriv::impact_derivatives(&m, &mut data, &mut cd, q2, v2).unwrap();
+                        let b = wy(im);
                         fd[p].set_column(k, &((a - b) / (2.0 * h)));
                     }
                 }
@@ -339,29 +336,24 @@ fn without_mimics_equals_the_full_model() {
     let mut rng = Rng::new(44);
     let [q, v, x] = state(&m, &mut rng);
     let contacts = arm_contacts(&m, false);
-    let mut d = Data::new(&full);
-    let mut md = Data::new(&m);
+    let mut d = Data::with_second_order(&full);
+    let mut md = Data::with_second_order(&m);
     // IDFOZA / IDSOZA.
     let mut o1 = DMatrix::zeros(n, n);
     let mut o2 = DMatrix::zeros(n, n);
     deriv::idfoza(&full, &mut d, &q, &x, &mut o1).unwrap();
     deriv::idfoza(&m, &mut md, &q, &x, &mut o2).unwrap();
     assert!(mat_err(&o2, &o1) < 1e-12);
-    let mut so = deriv::SoData::new(&full);
-    let mut mso = SoData::new(&m);
-    let t1 = deriv::idsoza(&full, &mut d, &mut so, &q, &x).unwrap().clone();
-    let t2 = deriv::idsoza(&m, &mut md, &mut mso, &q, &x).unwrap();
+    let t1 = deriv::idsoza(&full, &mut d, &q, &x).unwrap().clone();
+    let t2 = deriv::idsoza(&m, &mut md, &q, &x).unwrap();
     assert!(ten_err(t2, &t1) < 1e-12);
     // KKT.
-    let cd = deriv::ContactData::new(&full, &contacts).unwrap();
-    let mut kd = deriv::KktData::new(&full, cd);
-    let mut kc = deriv::KktContracted::new(&full, &kd);
-    let mut mkd = kkt_data(&m, &contacts).unwrap();
-    let mut mkc = KktContracted::new(&m, &mkd);
+    let mut kd = ContactData::with_contracted(&full, &contacts).unwrap();
+    let mut mkd = ContactData::with_contracted(&m, &contacts).unwrap();
     let wa = DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
-    let wl = DVector::from_fn(mkd.cd().dim(), |_, _| rng.range(-1.0, 1.0));
-    deriv::kkt_so_contracted(&full, &mut d, &mut kd, &mut kc, &q, &v, &x, &wa, &wl).unwrap();
-    deriv::kkt_so_contracted(&m, &mut md, &mut mkd, &mut mkc, &q, &v, &x, &wa, &wl).unwrap();
+    let wl = DVector::from_fn(mkd.dim(), |_, _| rng.range(-1.0, 1.0));
+    let kc = deriv::kkt_so_contracted(&full, &mut d, &mut kd, &q, &v, &x, &wa, &wl).unwrap();
+    let mkc = deriv::kkt_so_contracted(&m, &mut md, &mut mkd, &q, &v, &x, &wa, &wl).unwrap();
     let e = [
         mat_err(mkc.c_qq(), kc.c_qq()),
         mat_err(mkc.c_vv(), kc.c_vv()),
@@ -370,15 +362,12 @@ fn without_mimics_equals_the_full_model() {
     ];
     assert!(e.iter().all(|&e| e < 1e-10), "{e:?}");
     // Impact.
-    let cd = deriv::ContactData::new(&full, &contacts).unwrap();
-    let mut im = deriv::ImpactData::new(&full, cd);
+    let mut im = ContactData::with_contracted(&full, &contacts).unwrap();
     im.set_restitution(0.3).unwrap();
-    let mut ic = deriv::ImpactContracted::new(&full, &im);
-    let mut mim = impact_data(&m, &contacts).unwrap();
+    let mut mim = ContactData::with_contracted(&m, &contacts).unwrap();
     mim.set_restitution(0.3).unwrap();
-    let mut mic = ImpactContracted::new(&m, &mim);
-    deriv::impact_so_contracted(&full, &mut d, &mut im, &mut ic, &q, &v, &wa, &wl).unwrap();
-    deriv::impact_so_contracted(&m, &mut md, &mut mim, &mut mic, &q, &v, &wa, &wl).unwrap();
+    let ic = deriv::impact_so_contracted(&full, &mut d, &mut im, &q, &v, &wa, &wl).unwrap();
+    let mic = deriv::impact_so_contracted(&m, &mut md, &mut mim, &q, &v, &wa, &wl).unwrap();
     let e = [mat_err(mic.c_qq(), ic.c_qq()), mat_err(mic.c_qvminus(), ic.c_qvminus())];
     assert!(e.iter().all(|&e| e < 1e-10), "{e:?}");
 }
@@ -388,7 +377,7 @@ fn bad_inputs_are_errors() {
     let m = load_urdf_file(&arm_path(), &opts(true)).unwrap();
     let other = load_urdf_file(&arm_path(), &opts(false)).unwrap();
     let n = m.nv();
-    let mut data = Data::new(&m);
+    let mut data = Data::with_second_order(&m);
     let mut rng = Rng::new(45);
     let [q, v, x] = state(&m, &mut rng);
     // IDFOZA / IDSOZA: lengths, NaN, output shape, workspaces.
@@ -403,50 +392,53 @@ fn bad_inputs_are_errors() {
     assert!(e.to_string().contains("out"), "{e}");
     let e = deriv::idfoza(&m, &mut Data::new(&other), &q, &x, &mut out).unwrap_err();
     assert!(matches!(e, Error::Workspace(_)), "{e}");
-    let e = deriv::idsoza(&m, &mut data, &mut SoData::new(&other), &q, &x).unwrap_err();
+    let e = deriv::idsoza(&m, &mut Data::with_second_order(&other), &q, &x).unwrap_err();
     assert!(matches!(e, Error::Workspace(_)), "{e}");
-    let e = deriv::idsoza(&m, &mut data, &mut SoData::new(&m), &v, &x).unwrap_err();
+    let e = deriv::idsoza(&m, &mut data, &v, &x).unwrap_err();
     assert!(matches!(e, Error::Dimension { ref what, .. } if what == "q"), "{e}");
     // KKT: weights, workspaces of another model or contact set.
     let contacts = arm_contacts(&m, false);
     let mut kd = kkt_data(&m, &contacts).unwrap();
-    let mut kc = KktContracted::new(&m, &kd);
-    let (wa, wl) = (DVector::from_element(n, 0.5), DVector::from_element(kd.cd().dim(), 0.5));
-    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd, &mut kc, &q, &v, &x, &wl, &wl)
-        .unwrap_err();
+    kd.reserve_contracted(&m).unwrap();
+    let (wa, wl) = (DVector::from_element(n, 0.5), DVector::from_element(kd.dim(), 0.5));
+    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd, &q, &v, &x, &wl, &wl).unwrap_err();
     assert!(matches!(e, Error::Dimension { ref what, .. } if what == "w_qdd"), "{e}");
     let mut badl = wl.clone();
     badl[0] = f64::INFINITY;
-    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd, &mut kc, &q, &v, &x, &wa, &badl)
-        .unwrap_err();
+    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd, &q, &v, &x, &wa, &badl).unwrap_err();
     assert!(matches!(e, Error::NotFinite { ref what, index: 0 } if what == "w_lambda"), "{e}");
+    // (The contracted workspace now lives in the ContactData, so it cannot belong to another
+    // contact set: a ContactData without contracted capacity, then the 9-row weights on the
+    // 12-row set, then a ContactData of another model.)
     let mut kd3 = kkt_data(&m, &arm_contacts(&m, true)).unwrap();
-    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd3, &mut kc, &q, &v, &x, &wa, &wl)
-        .unwrap_err();
-    assert!(e.to_string().contains("KktContracted"), "{e}");
-    let okd = kkt_data(&other, &arm_contacts(&other, false)).unwrap();
-    let mut okc = KktContracted::new(&other, &okd);
-    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd, &mut okc, &q, &v, &x, &wa, &wl)
-        .unwrap_err();
-    assert!(matches!(e, Error::Workspace(_)), "{e}");
-    deriv::kkt_so_contracted(&m, &mut data, &mut kd, &mut kc, &q, &v, &x, &wa, &wl).unwrap();
+    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd3, &q, &v, &x, &wa, &wl).unwrap_err();
+    assert!(matches!(&e, Error::Workspace(s) if s.contains("ContactData::with_contracted")), "{e}");
+    kd3.reserve_contracted(&m).unwrap();
+    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd3, &q, &v, &x, &wa, &wl).unwrap_err();
+    assert!(matches!(e, Error::Dimension { ref what, .. } if what == "w_lambda"), "{e}");
+    let mut okd = ContactData::with_contracted(&other, &arm_contacts(&other, false)).unwrap();
+    let e = deriv::kkt_so_contracted(&m, &mut data, &mut okd, &q, &v, &x, &wa, &wl).unwrap_err();
+    assert!(matches!(&e, Error::Workspace(s) if s.contains("ContactData")), "{e}");
+    deriv::kkt_so_contracted(&m, &mut data, &mut kd, &q, &v, &x, &wa, &wl).unwrap();
     // Impact: the same.
     let mut im = impact_data(&m, &contacts).unwrap();
-    let mut ic = ImpactContracted::new(&m, &im);
-    let e =
-        deriv::impact_so_contracted(&m, &mut data, &mut im, &mut ic, &q, &v, &wa, &wa).unwrap_err();
+    im.reserve_contracted(&m).unwrap();
+    let e = deriv::impact_so_contracted(&m, &mut data, &mut im, &q, &v, &wa, &wa).unwrap_err();
     assert!(matches!(e, Error::Dimension { ref what, .. } if what == "w_impulse"), "{e}");
     let mut badv = wa.clone();
     badv[n - 1] = f64::NAN;
-    let e = deriv::impact_so_contracted(&m, &mut data, &mut im, &mut ic, &q, &v, &badv, &wl)
-        .unwrap_err();
+    let e = deriv::impact_so_contracted(&m, &mut data, &mut im, &q, &v, &badv, &wl).unwrap_err();
     assert!(matches!(e, Error::NotFinite { ref what, .. } if what == "w_vplus"), "{e}");
-    let e = deriv::impact_so_contracted(&m, &mut data, &mut im, &mut ic, &q, &wl, &wa, &wl)
-        .unwrap_err();
+    let e = deriv::impact_so_contracted(&m, &mut data, &mut im, &q, &wl, &wa, &wl).unwrap_err();
     assert!(matches!(e, Error::Dimension { ref what, .. } if what == "vminus"), "{e}");
     let mut im3 = impact_data(&m, &arm_contacts(&m, true)).unwrap();
-    let e = deriv::impact_so_contracted(&m, &mut data, &mut im3, &mut ic, &q, &v, &wa, &wl)
-        .unwrap_err();
-    assert!(e.to_string().contains("ImpactContracted"), "{e}");
-    deriv::impact_so_contracted(&m, &mut data, &mut im, &mut ic, &q, &v, &wa, &wl).unwrap();
+    let e = deriv::impact_so_contracted(&m, &mut data, &mut im3, &q, &v, &wa, &wl).unwrap_err();
+    assert!(matches!(&e, Error::Workspace(s) if s.contains("ContactData::with_contracted")), "{e}");
+    im3.reserve_contracted(&m).unwrap();
+    let e = deriv::impact_so_contracted(&m, &mut data, &mut im3, &q, &v, &wa, &wl).unwrap_err();
+    assert!(matches!(e, Error::Dimension { ref what, .. } if what == "w_impulse"), "{e}");
+    let mut oim = ContactData::with_contracted(&other, &arm_contacts(&other, false)).unwrap();
+    let e = deriv::impact_so_contracted(&m, &mut data, &mut oim, &q, &v, &wa, &wl).unwrap_err();
+    assert!(matches!(&e, Error::Workspace(s) if s.contains("ContactData")), "{e}");
+    deriv::impact_so_contracted(&m, &mut data, &mut im, &q, &v, &wa, &wl).unwrap();
 }

@@ -167,9 +167,10 @@ fn armature_relations_on_every_level() {
                 &at,
             );
             w[2].add(rel_err_vec(d.qdd(), &qdd), &at);
-            let (mut s0, mut s) = (SoData::new(&m0), SoData::new(&m));
-            id_so_derivatives(&m0, &mut d0, &mut s0, &q, &v, &a, None).unwrap();
-            id_so_derivatives(&m, &mut d, &mut s, &q, &v, &a, None).unwrap();
+            d0.reserve_second_order(&m0).unwrap();
+            d.reserve_second_order(&m).unwrap();
+            let s0 = id_so_derivatives(&m0, &mut d0, &q, &v, &a, None).unwrap().clone();
+            let s = id_so_derivatives(&m, &mut d, &q, &v, &a, None).unwrap().clone();
             let e = [
                 rel_err_tensor(s.d2tau_dq2(), s0.d2tau_dq2()),
                 rel_err_tensor(s.d2tau_dv2(), s0.d2tau_dv2()),
@@ -182,8 +183,8 @@ fn armature_relations_on_every_level() {
             idfoza(&m0, &mut d0, &q, &a, &mut z0).unwrap();
             idfoza(&m, &mut d, &q, &a, &mut z).unwrap();
             let mut e = rel_err_mat(&z, &z0);
-            let t0 = idsoza(&m0, &mut d0, &mut s0, &q, &a).unwrap().clone();
-            let t1 = idsoza(&m, &mut d, &mut s, &q, &a).unwrap().clone();
+            let t0 = idsoza(&m0, &mut d0, &q, &a).unwrap().clone();
+            let t1 = idsoza(&m, &mut d, &q, &a).unwrap().clone();
             e = e.max(rel_err_tensor(&t1, &t0));
             w[9].add(e, &at);
         }
@@ -285,7 +286,7 @@ fn armature_models_match_the_ad_oracle() {
         let tau = a.clone();
         let (qs, vs, as_) = (q.as_slice(), v.as_slice(), a.as_slice());
         let at = format!("{} nv={}", m.name(), m.nv());
-        let mut d = Data::new(m);
+        let mut d = Data::with_second_order(m);
         id_derivatives(m, &mut d, &q, &v, &a, None).unwrap();
         let mref = reference::mass_matrix::<f64>(m, qs);
         let mref = DMatrix::from_fn(m.nv(), m.nv(), |i, j| mref[i][j]);
@@ -293,8 +294,7 @@ fn armature_models_match_the_ad_oracle() {
             .max(rel_err_mat(d.dtau_dv(), &reference::d_rnea_dv(m, qs, vs, as_)))
             .max(rel_err_mat(d.m(), &mref));
         w[0].add(e, &at);
-        let mut so = SoData::new(m);
-        id_so_derivatives(m, &mut d, &mut so, &q, &v, &a, None).unwrap();
+        let so = id_so_derivatives(m, &mut d, &q, &v, &a, None).unwrap();
         let e = rel_err_tensor(so.d2tau_dq2(), &reference::d2_rnea_dq2(m, qs, vs, as_))
             .max(rel_err_tensor(so.d2tau_dv2(), &reference::d2_rnea_dv2(m, qs, vs, as_)))
             .max(rel_err_tensor(so.d2tau_dqdv(), &reference::d2_rnea_dqdv(m, qs, vs, as_)))
@@ -306,23 +306,21 @@ fn armature_models_match_the_ad_oracle() {
             .max(rel_err_mat(d.dqdd_dv(), &reference::d_aba_dv(m, qs, vs, ts)))
             .max(rel_err_mat(d.minv(), &reference::d_aba_dtau(m, qs, vs, ts)));
         w[2].add(e, &at);
-        let mut f = FdSoData::new(m);
-        fd_so_derivatives(m, &mut d, &mut f, &q, &v, &tau, None).unwrap();
+        let f = fd_so_derivatives(m, &mut d, &q, &v, &tau, None).unwrap();
         let e = rel_err_tensor(f.d2qdd_dq2(), &reference::d2_aba_dq2(m, qs, vs, ts))
             .max(rel_err_tensor(f.d2qdd_dv2(), &reference::d2_aba_dv2(m, qs, vs, ts)))
             .max(rel_err_tensor(f.d2qdd_dqdv(), &reference::d2_aba_dqdv(m, qs, vs, ts)))
             .max(rel_err_tensor(f.d2qdd_dtaudq(), &reference::d2_aba_dtaudq(m, qs, vs, ts)));
         w[3].add(e, &at);
         let wt = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
-        let mut cd = ContractedData::new(m);
-        id_so_contracted(m, &mut d, &mut cd, &q, &v, &a, &wt).unwrap();
+        let cd = id_so_contracted(m, &mut d, &q, &v, &a, &wt).unwrap();
         let r = reference::contracted_rnea_hessians(m, wt.as_slice(), qs, vs, as_);
         let mut e = [cd.c_qq(), cd.c_vv(), cd.c_qv(), cd.c_mq()]
             .iter()
             .zip(&r)
             .map(|(x, y)| rel_err_mat(x, y))
             .fold(0.0, f64::max);
-        fd_so_contracted(m, &mut d, &mut cd, &q, &v, &tau, &wt).unwrap();
+        let cd = fd_so_contracted(m, &mut d, &q, &v, &tau, &wt).unwrap();
         let r = reference::contracted_aba_hessians(m, wt.as_slice(), qs, vs, ts);
         e = [cd.c_qq(), cd.c_vv(), cd.c_qv(), cd.c_tauq()]
             .iter()
@@ -351,8 +349,8 @@ fn armature_models_match_the_ad_oracle() {
         let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
         let at = format!("{} {spec:?}", m.name());
         let mut d = Data::new(m);
-        let mut kd = KktData::new(m, ContactData::new(m, &contacts).unwrap()).with_second_order(m);
-        kkt_so_derivatives(m, &mut d, &mut kd, &q, &v, &tau).unwrap();
+        let mut cs = ContactData::with_second_order(m, &contacts).unwrap();
+        let kd = kkt_so_derivatives(m, &mut d, &mut cs, &q, &v, &tau).unwrap();
         let (qr, lr) = oracle::kkt::<f64>(m, qs, vs, ts, &contacts);
         let fo = oracle::kkt_fo(m, qs, vs, ts, &contacts);
         let e = [
@@ -380,10 +378,8 @@ fn armature_models_match_the_ad_oracle() {
         ];
         w[6].add(e.into_iter().fold(0.0, f64::max), &at);
         let e = 0.3;
-        let mut im =
-            ImpactData::new(m, ContactData::new(m, &contacts).unwrap()).with_second_order(m);
-        im.set_restitution(e).unwrap();
-        impact_so_derivatives(m, &mut d, &mut im, &q, &v).unwrap();
+        cs.set_restitution(e).unwrap();
+        let im = impact_so_derivatives(m, &mut d, &mut cs, &q, &v).unwrap();
         let (vp, imp) = oracle::impact::<f64>(m, qs, vs, &contacts, e);
         let fo = oracle::impact_fo(m, qs, vs, &contacts, e);
         let err = [

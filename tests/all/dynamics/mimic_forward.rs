@@ -114,11 +114,11 @@ fn kkt_dynamics_equals_kkt_derivatives() {
             let [q, v, tau] = state(&m, &mut rng);
             deriv::kkt_dynamics(&m, &mut d1, &mut kd1, &q, &v, &tau).unwrap();
             deriv::kkt_derivatives(&m, &mut d2, &mut kd2, &q, &v, &tau).unwrap();
-            assert!(kd1.qdd().amax() > 0.0 && kd1.lambda().amax() > 0.0);
-            worst[0] = worst[0].max(err(kd1.qdd(), kd2.qdd()));
-            worst[1] = worst[1].max(err(kd1.lambda(), kd2.lambda()));
-            worst[2] = worst[2].max(mat_err(kd1.cd().jac(), kd2.cd().jac()));
-            worst[3] = worst[3].max(err(d1.qdd(), kd1.qdd()));
+            assert!(kd1.kkt().qdd().amax() > 0.0 && kd1.kkt().lambda().amax() > 0.0);
+            worst[0] = worst[0].max(err(kd1.kkt().qdd(), kd2.kkt().qdd()));
+            worst[1] = worst[1].max(err(kd1.kkt().lambda(), kd2.kkt().lambda()));
+            worst[2] = worst[2].max(mat_err(kd1.jac(), kd2.jac()));
+            worst[3] = worst[3].max(err(d1.qdd(), kd1.kkt().qdd()));
         }
     }
     eprintln!(
@@ -146,12 +146,12 @@ fn impact_dynamics_equals_impact_derivatives() {
                 let [q, vm, _] = state(&m, &mut rng);
                 deriv::impact_dynamics(&m, &mut d1, &mut im1, &q, &vm).unwrap();
                 deriv::impact_derivatives(&m, &mut d2, &mut im2, &q, &vm).unwrap();
-                assert!(im1.impulse().amax() > 0.0);
-                worst[0] = worst[0].max(err(im1.vplus(), im2.vplus()));
-                worst[1] = worst[1].max(err(im1.impulse(), im2.impulse()));
+                assert!(im1.impact().impulse().amax() > 0.0);
+                worst[0] = worst[0].max(err(im1.impact().vplus(), im2.impact().vplus()));
+                worst[1] = worst[1].max(err(im1.impact().impulse(), im2.impact().impulse()));
                 // The contact rows of q̇⁺ are −e times q̇⁻'s.
                 let jr = kkt_rows(&m, &cs, &q);
-                assert!((&jr * im1.vplus() + e * (&jr * &vm)).amax() < 1e-10);
+                assert!((&jr * im1.impact().vplus() + e * (&jr * &vm)).amax() < 1e-10);
             }
         }
     }
@@ -168,7 +168,7 @@ fn kkt_rows(m: &Model, cs: &[Contact], q: &DVector<f64>) -> DMatrix<f64> {
     let mut kd = kkt_data(m, cs).unwrap();
     let z = DVector::zeros(m.nv());
     deriv::kkt_dynamics(m, &mut d, &mut kd, q, &z, &z).unwrap();
-    kd.cd().jac() * m.velocity_map()
+    kd.jac() * m.velocity_map()
 }
 
 fn is_dim(e: &Error, name: &str) -> bool {
@@ -238,7 +238,7 @@ fn bad_inputs_are_errors_naming_the_argument() {
     assert!(matches!(e, Error::Workspace(ref s) if s.contains("Data")), "{e}");
     let mut okd = kkt_data(&other, &contacts(other.full_tree(), false)).unwrap();
     let e = deriv::kkt_dynamics(&m, &mut data, &mut okd, &q, &v, &tau).unwrap_err();
-    assert!(matches!(e, Error::Workspace(ref s) if s.contains("KktData")), "{e}");
+    assert!(matches!(e, Error::Workspace(ref s) if s.contains("ContactData")), "{e}");
 
     // impact_dynamics
     let e = deriv::impact_dynamics(&m, &mut data, &mut im, &long_q, &v).unwrap_err();
@@ -253,7 +253,7 @@ fn bad_inputs_are_errors_naming_the_argument() {
     assert!(matches!(e, Error::Workspace(ref s) if s.contains("Data")), "{e}");
     let mut oim = impact_data(&other, &contacts(other.full_tree(), false)).unwrap();
     let e = deriv::impact_dynamics(&m, &mut data, &mut oim, &q, &v).unwrap_err();
-    assert!(matches!(e, Error::Workspace(ref s) if s.contains("ImpactData")), "{e}");
+    assert!(matches!(e, Error::Workspace(ref s) if s.contains("ContactData")), "{e}");
 
     // The workspaces still work after the errors.
     algo::rnea(&m, &mut data, &q, &v, &zero, Some(&f)).unwrap();
