@@ -283,8 +283,7 @@ pub(crate) fn centroidal_dynamics_derivatives<'py>(
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
     let PyData { d, q, v, a, .. } = d;
-    let mut c = algo::Centroidal::new(m);
-    algo::centroidal_dynamics_derivatives(m, d, &mut c, q, v, a).map_err(core_err)?;
+    let c = algo::centroidal_dynamics_derivatives(m, d, q, v, a).map_err(core_err)?;
     out.set_item("h", out_vec(py, &DVector::from_column_slice(c.h())))?;
     out.set_item("hdot", out_vec(py, &DVector::from_column_slice(c.hdot())))?;
     out.set_item("Ag", out_mat(py, c.ag()))?;

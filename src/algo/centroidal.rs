@@ -19,82 +19,12 @@
 //!    `∂c/∂q_k` the centre-of-mass Jacobian column.
 
 use super::Data;
+use super::data::Centroidal;
 use super::kinematics::{forward_kinematics, joint_motion, placements};
 use crate::error::{Error, Result};
 use crate::model::{Model, check_vec};
 use crate::spatial::{Force, Inertia, Motion, coriolis_b};
 use nalgebra::{DMatrix, DVector, Matrix6, Vector3};
-
-/// Results of [`centroidal_dynamics_derivatives`] (all about the centre of mass, world axes,
-/// rows `[angular; linear]`), allocated once for a model.
-#[derive(Clone, Debug)]
-pub struct Centroidal {
-    h: [f64; 6],
-    hdot: [f64; 6],
-    ag: DMatrix<f64>,
-    dh_dq: DMatrix<f64>,
-    dhdot_dq: DMatrix<f64>,
-    dhdot_dv: DMatrix<f64>,
-    /// For a model in reduced coordinates: the full tree's results and the reduced ones,
-    /// which the accessors return (the fields above are then empty).
-    pub(crate) red: Option<Box<crate::algo::centroidal::reduced::MimicCentroidal>>,
-}
-
-impl Centroidal {
-    /// Results for `model`.
-    pub fn new(model: &Model) -> Self {
-        let (nv, red) = match &model.reduction {
-            Some(r) => {
-                (0, Some(Box::new(crate::algo::centroidal::reduced::MimicCentroidal::new(r))))
-            }
-            None => (model.nv, None),
-        };
-        let z = || DMatrix::zeros(6, nv);
-        Self { h: [0.0; 6], hdot: [0.0; 6], ag: z(), dh_dq: z(), dhdot_dq: z(), dhdot_dv: z(), red }
-    }
-    /// Centroidal momentum `h_G`.
-    pub fn h(&self) -> &[f64; 6] {
-        match &self.red {
-            Some(r) => r.h(),
-            None => &self.h,
-        }
-    }
-    /// Its time derivative `ḣ_G` (no gravity).
-    pub fn hdot(&self) -> &[f64; 6] {
-        match &self.red {
-            Some(r) => r.hdot(),
-            None => &self.hdot,
-        }
-    }
-    /// Centroidal momentum matrix `A_G` (`6 × nv`): `h_G = A_G q̇`; also `∂ḣ_G/∂q̈`.
-    pub fn ag(&self) -> &DMatrix<f64> {
-        match &self.red {
-            Some(r) => r.ag(),
-            None => &self.ag,
-        }
-    }
-    /// `∂h_G/∂q` (`6 × nv`, tangent space).
-    pub fn dh_dq(&self) -> &DMatrix<f64> {
-        match &self.red {
-            Some(r) => r.dh_dq(),
-            None => &self.dh_dq,
-        }
-    }
-    /// `∂ḣ_G/∂q` (`6 × nv`).
-    pub fn dhdot_dq(&self) -> &DMatrix<f64> {
-        match &self.red {
-            Some(r) => r.dhdot_dq(),
-            None => &self.dhdot_dq,
-        }
-    }
-    /// `∂ḣ_G/∂q̇` (`6 × nv`).
-    pub fn dhdot_dv(&self) -> &DMatrix<f64> {
-        match &self.red {
-            Some(r) => r.dhdot_dv(),
-            None => &self.dhdot_dv,
-        }
-    }
-}
 
 fn shift(x: &Force, c: &Vector3<f64>) -> [f64; 6] {
     let k = x.ang - c.cross(&x.lin);
@@ -150,41 +80,38 @@ pub fn centroidal_momentum(
 /// # Errors
 /// As [`Model::check_q`]; `v`, `a` of the wrong length or not finite; `out` made for another
 /// `nv`; a model without mass.
-pub fn centroidal_dynamics_derivatives(
+pub fn centroidal_dynamics_derivatives<'d>(
     model: &Model,
-    data: &mut Data,
-    out: &mut Centroidal,
+    data: &'d mut Data,
     q: &DVector<f64>,
     v: &DVector<f64>,
     a: &DVector<f64>,
-) -> Result<()> {
+) -> Result<&'d Centroidal> {
     if let Some(r) = &model.reduction {
-        let out_r = crate::algo::data::reduced::reduced_ws(&mut out.red, "Centroidal", model)?;
-        return crate::algo::centroidal::reduced::centroidal_dynamics_derivatives(
+        // The reduced results are moved out of their slot for the call and back (no allocation).
+        let mut out = std::mem::replace(&mut data.centroidal, Centroidal::zeros(0));
+        let res = crate::algo::centroidal::reduced::centroidal_dynamics_derivatives(
             r,
-            data.reduced(model)?,
-            out_r,
+            data.reduced(model),
+            &mut out,
             q,
             v,
             a,
         );
+        data.centroidal = out;
+        res?;
+        return Ok(&data.centroidal);
     }
     model.check_q(q)?;
     data.check_tree(model)?;
-    if out.ag.ncols() != model.nv {
-        return Err(Error::Workspace(format!(
-            "Centroidal was made for nv = {}, this model has nv = {}; make it with \
-             Centroidal::new for this model",
-            out.ag.ncols(),
-            model.nv
-        )));
-    }
     check_vec("v", v, model.nv)?;
     check_vec("a", a, model.nv)?;
     placements(model, data, q);
     let n = model.njoints();
     // Forward pass (world, no gravity), in the workspace's ground-frame arrays.
-    let Data { ov: vel, oa: acc, z_fc: hc, ofc: fc, ic_world: ic, bc, o_m_i, .. } = data;
+    let Data {
+        ov: vel, oa: acc, z_fc: hc, ofc: fc, ic_world: ic, bc, o_m_i, centroidal: out, ..
+    } = &mut *data;
     vel[0] = Motion::zero();
     acc[0] = Motion::zero();
     for i in 1..n {
@@ -251,7 +178,7 @@ pub fn centroidal_dynamics_derivatives(
             put(&mut out.dhdot_dv, k, &shift(&dhv, &c));
         }
     }
-    Ok(())
+    Ok(&data.centroidal)
 }
 
 /// The reduced coordinates of a model with mimic joints ([`crate::model::Model::is_reduced`]):
@@ -259,63 +186,13 @@ pub fn centroidal_dynamics_derivatives(
 /// with `G` (see `crate::model::reduction` and docs/conventions.md, "Mimic joints").
 pub(crate) mod reduced {
 
-    use crate::error::{Error, Result};
+    use crate::error::Result;
 
+    use crate::algo::data::Centroidal;
     use crate::algo::data::reduced::MimicData;
     use crate::algo::data::reduced::prepare;
     use crate::model::reduction::MimicModel;
-    use nalgebra::{DMatrix, DVector};
-
-    /// Results of [`centroidal_dynamics_derivatives`] for a [`MimicModel`]: the full tree's
-    /// [`crate::algo::Centroidal`] and its matrices times `G` (`6 × nv`, reduced), allocated once.
-    #[derive(Clone, Debug)]
-    pub struct MimicCentroidal {
-        pub(crate) full: crate::algo::Centroidal,
-        pub(crate) ag: DMatrix<f64>,
-        pub(crate) dh_dq: DMatrix<f64>,
-        pub(crate) dhdot_dq: DMatrix<f64>,
-        pub(crate) dhdot_dv: DMatrix<f64>,
-        pub(crate) key: u64,
-    }
-
-    impl MimicCentroidal {
-        /// Results for `model`.
-        pub fn new(model: &MimicModel) -> Self {
-            let z = || DMatrix::zeros(6, model.nv);
-            Self {
-                full: crate::algo::Centroidal::new(&model.full),
-                ag: z(),
-                dh_dq: z(),
-                dhdot_dq: z(),
-                dhdot_dv: z(),
-                key: model.key,
-            }
-        }
-        /// Centroidal momentum `h_G` (that of the full tree at `expand(q)`, `G q̇`).
-        pub fn h(&self) -> &[f64; 6] {
-            self.full.h()
-        }
-        /// Its time derivative `ḣ_G` (no gravity).
-        pub fn hdot(&self) -> &[f64; 6] {
-            self.full.hdot()
-        }
-        /// Centroidal momentum matrix `A_G = A_G,full G` (`6 × nv`): `h_G = A_G q̇`; also `∂ḣ_G/∂q̈`.
-        pub fn ag(&self) -> &DMatrix<f64> {
-            &self.ag
-        }
-        /// `∂h_G/∂q` (`6 × nv`, tangent space of the reduced configuration).
-        pub fn dh_dq(&self) -> &DMatrix<f64> {
-            &self.dh_dq
-        }
-        /// `∂ḣ_G/∂q` (`6 × nv`).
-        pub fn dhdot_dq(&self) -> &DMatrix<f64> {
-            &self.dhdot_dq
-        }
-        /// `∂ḣ_G/∂q̇` (`6 × nv`).
-        pub fn dhdot_dv(&self) -> &DMatrix<f64> {
-            &self.dhdot_dv
-        }
-    }
+    use nalgebra::DVector;
 
     /// Centroidal momentum, its time derivative, `A_G` and their derivatives at `(q, q̇, q̈)` into
     /// `out`: [`crate::algo::centroidal_dynamics_derivatives`] of the full tree at `expand(q)`,
@@ -326,30 +203,24 @@ pub(crate) mod reduced {
     /// another model; a model without mass.
     pub fn centroidal_dynamics_derivatives(
         model: &MimicModel,
-        data: &mut MimicData,
-        out: &mut MimicCentroidal,
+        data: Result<&mut MimicData>,
+        out: &mut Centroidal,
         q: &DVector<f64>,
         v: &DVector<f64>,
         a: &DVector<f64>,
     ) -> Result<()> {
-        if out.key != model.key || out.ag.ncols() != model.nv {
-            return Err(Error::Workspace(format!(
-                "Centroidal was made for another model; make it with Centroidal::new for \
-                 the mimic model \"{}\"",
-                model.name()
-            )));
-        }
+        let data = data?;
         prepare(model, data, q, Some(v), Some(("a", a)))?;
         model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
-        let c = &mut out.full;
-        crate::algo::centroidal_dynamics_derivatives(
+        let c = crate::algo::centroidal_dynamics_derivatives(
             &model.full,
             &mut data.full,
-            c,
             &data.q,
             &data.v,
             &data.a,
         )?;
+        out.h = c.h;
+        out.hdot = c.hdot;
         model.reduce_cols(c.ag(), &mut out.ag);
         model.reduce_cols(c.dh_dq(), &mut out.dh_dq);
         model.reduce_cols(c.dhdot_dq(), &mut out.dhdot_dq);

@@ -100,6 +100,54 @@ pub struct Data {
     /// The second-order parts ([`Part`]), allocated by the constructors of `crate::deriv`
     /// (`Data::with_contracted`, `Data::with_second_order`); `None` in a first-order `Data`.
     pub(crate) parts: [Option<Box<dyn DataPart>>; 3],
+    /// Results of [`centroidal_dynamics_derivatives`](super::centroidal_dynamics_derivatives)
+    /// (for a reduced model: the reduced ones; the full tree's are in the inner workspace).
+    pub(crate) centroidal: Centroidal,
+}
+
+/// Results of [`centroidal_dynamics_derivatives`](super::centroidal_dynamics_derivatives),
+/// part of a [`Data`] ([`Data::centroidal`]): all about the centre of mass, world axes, rows
+/// `[angular; linear]`.
+#[derive(Clone, Debug)]
+pub struct Centroidal {
+    pub(crate) h: [f64; 6],
+    pub(crate) hdot: [f64; 6],
+    pub(crate) ag: DMatrix<f64>,
+    pub(crate) dh_dq: DMatrix<f64>,
+    pub(crate) dhdot_dq: DMatrix<f64>,
+    pub(crate) dhdot_dv: DMatrix<f64>,
+}
+
+impl Centroidal {
+    /// Zero results for `nv` degrees of freedom (`nv = 0` allocates nothing).
+    pub(crate) fn zeros(nv: usize) -> Self {
+        let z = || DMatrix::zeros(6, nv);
+        Self { h: [0.0; 6], hdot: [0.0; 6], ag: z(), dh_dq: z(), dhdot_dq: z(), dhdot_dv: z() }
+    }
+    /// Centroidal momentum `h_G`.
+    pub fn h(&self) -> &[f64; 6] {
+        &self.h
+    }
+    /// Its time derivative `ḣ_G` (no gravity).
+    pub fn hdot(&self) -> &[f64; 6] {
+        &self.hdot
+    }
+    /// Centroidal momentum matrix `A_G` (`6 × nv`): `h_G = A_G q̇`; also `∂ḣ_G/∂q̈`.
+    pub fn ag(&self) -> &DMatrix<f64> {
+        &self.ag
+    }
+    /// `∂h_G/∂q` (`6 × nv`, tangent space).
+    pub fn dh_dq(&self) -> &DMatrix<f64> {
+        &self.dh_dq
+    }
+    /// `∂ḣ_G/∂q` (`6 × nv`).
+    pub fn dhdot_dq(&self) -> &DMatrix<f64> {
+        &self.dhdot_dq
+    }
+    /// `∂ḣ_G/∂q̇` (`6 × nv`).
+    pub fn dhdot_dv(&self) -> &DMatrix<f64> {
+        &self.dhdot_dv
+    }
 }
 
 /// A part of a [`Data`] that a higher layer allocates and fills: the second-order workspaces
@@ -269,6 +317,11 @@ impl Data {
             Some(r) => r.tau(),
             None => &self.tau,
         }
+    }
+    /// The results of the last
+    /// [`centroidal_dynamics_derivatives`](super::centroidal_dynamics_derivatives).
+    pub fn centroidal(&self) -> &Centroidal {
+        &self.centroidal
     }
     /// Nonlinear effects `b = C q̇ + g`.
     pub fn nle(&self) -> &DVector<f64> {
@@ -543,6 +596,7 @@ impl Data {
         if let Some(r) = &model.reduction {
             let mut d = Self::new(crate::model::tree::shell_model());
             d.red = Some(Box::new(crate::algo::data::reduced::MimicData::new(r)));
+            d.centroidal = Centroidal::zeros(model.nv());
             return d;
         }
         let n = model.njoints();
@@ -592,6 +646,7 @@ impl Data {
             nv: model.nv(),
             red: None,
             parts: [None, None, None],
+            centroidal: Centroidal::zeros(nv),
         }
     }
 }

@@ -314,7 +314,7 @@ pub(crate) mod reduced {
     /// Centroidal momentum `h_G = [k; l]` at `(q, q̇)` (about the centre of mass, world axes):
     /// [`crate::algo::centroidal_momentum`] of the full tree at `expand(q)`, `G q̇`. The
     /// centroidal momentum matrix of the reduced model, `A_G = A_G,full G` (`h_G = A_G q̇`), is
-    /// [`super::MimicCentroidal::ag`].
+    /// [`crate::algo::Centroidal::ag`] of [`crate::algo::centroidal_dynamics_derivatives`].
     ///
     /// # Errors
     /// As [`MimicModel::check_q`]; `v` of the wrong length or not finite; a model without mass; a

@@ -14,12 +14,13 @@ pub(crate) mod rnea;
 /// Re-export of [`crate::model::Contact`] (the contact description is a model-level type).
 pub use crate::model::{Contact, ContactReference, ContactType};
 pub use aba::aba;
-pub use centroidal::{Centroidal, centroidal_dynamics_derivatives, centroidal_momentum};
+pub use centroidal::{centroidal_dynamics_derivatives, centroidal_momentum};
 pub use com::{
     center_of_mass, center_of_mass_jacobian, center_of_mass_motion,
     center_of_mass_velocity_derivatives,
 };
 pub use crba::crba;
+pub use data::Centroidal;
 pub use data::Data;
 pub use frames::{
     ReferenceFrame, frame_acceleration, frame_acceleration_derivatives,

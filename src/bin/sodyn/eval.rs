@@ -7,7 +7,7 @@
 use nalgebra::{DMatrix, DVector, Matrix3xX, Matrix6xX, Vector3};
 use serde_json::{Map, Value, json};
 use sodyn::algo::{
-    Centroidal, Contact, Data, ReferenceFrame, aba, center_of_mass_jacobian, center_of_mass_motion,
+    Contact, Data, ReferenceFrame, aba, center_of_mass_jacobian, center_of_mass_motion,
     center_of_mass_velocity_derivatives, centroidal_dynamics_derivatives, crba, frame_acceleration,
     frame_acceleration_derivatives, frame_classical_acceleration, frame_jacobian,
     frame_jacobian_derivative, frame_placement, frame_velocity, frame_velocity_derivatives,
@@ -635,8 +635,7 @@ fn kinematics_outputs(
             json!({"position": c.as_slice(), "velocity": vc.as_slice(),
                    "acceleration": ac.as_slice(), "jacobian": jm, "dvelocity_dq": dm}),
         );
-        let mut cen = Centroidal::new(model);
-        centroidal_dynamics_derivatives(model, data, &mut cen, &s.q, &s.v, &s.a)?;
+        let cen = centroidal_dynamics_derivatives(model, data, &s.q, &s.v, &s.a)?;
         o.insert(
             "centroidal".into(),
             json!({"h": cen.h().as_slice(), "hdot": cen.hdot().as_slice(), "Ag": mat_json(cen.ag()),

@@ -217,20 +217,9 @@ fn kinematics_are_the_full_trees_and_full_tree_workspaces_are_errors() {
         algo::center_of_mass(&m, &mut d, &q).unwrap(),
         algo::center_of_mass(full, &mut df, &qf).unwrap()
     );
-    let mut c = algo::Centroidal::new(&m);
-    algo::centroidal_dynamics_derivatives(&m, &mut d, &mut c, &q, &v, &a).unwrap();
+    let c = algo::centroidal_dynamics_derivatives(&m, &mut d, &q, &v, &a).unwrap();
     assert_eq!((c.ag().shape(), c.dh_dq().shape()), ((6, n), (6, n)));
-    assert!(
-        algo::centroidal_dynamics_derivatives(
-            &m,
-            &mut d,
-            &mut algo::Centroidal::new(full),
-            &q,
-            &v,
-            &a
-        )
-        .is_err()
-    );
+    assert!(algo::centroidal_dynamics_derivatives(&m, &mut Data::new(full), &q, &v, &a).is_err());
     // Batches: the reduced model's workspace, not the full tree's.
     let k = 3;
     let qs: Vec<_> = (0..k).map(|_| m.random_configuration(&mut rng)).collect();

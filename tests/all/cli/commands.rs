@@ -1240,8 +1240,7 @@ fn mimic_commands_use_the_reduced_coordinates() {
         }
     }
     assert_eq!(v3["frames"]["tool"]["jacobian"]["local"].as_array().unwrap().len(), 6);
-    let mut cen = algo::Centroidal::new(&m);
-    algo::centroidal_dynamics_derivatives(&m, &mut d, &mut cen, &q, &vel, &a).unwrap();
+    let cen = algo::centroidal_dynamics_derivatives(&m, &mut d, &q, &vel, &a).unwrap().clone();
     let got = &v3["centroidal"]["dhdot_dq"];
     for r in 0..6 {
         for c in 0..n {

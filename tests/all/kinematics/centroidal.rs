@@ -7,7 +7,7 @@
 use crate::util::*;
 use nalgebra::DMatrix;
 use num_dual::HyperHyperDual64 as H;
-use sodyn::algo::{Centroidal, Data, centroidal_dynamics_derivatives};
+use sodyn::algo::{Data, centroidal_dynamics_derivatives};
 use sodyn::reference::kinematics::integrate;
 use sodyn::rng::Rng;
 
@@ -24,9 +24,8 @@ fn centroidal_matches_dual_numbers() {
     let mut rng = Rng::new(93);
     for m in &test_models(30) {
         let mut d = Data::new(m);
-        let mut cd = Centroidal::new(m);
         let (q, v, a) = random_state(m, &mut rng);
-        centroidal_dynamics_derivatives(m, &mut d, &mut cd, &q, &v, &a).unwrap();
+        let cd = centroidal_dynamics_derivatives(m, &mut d, &q, &v, &a).unwrap().clone();
         let n = m.nv();
         let at = m.name().to_string();
         let qh: Vec<H> = q.iter().map(|&x| H::from_re(x)).collect();
@@ -59,14 +58,12 @@ fn centroidal_matches_dual_numbers() {
         w[4].add(err6(&hv, 0), &at);
         // ∂ḣ/∂q̇ by central differences (ḣ is quadratic in q̇: exact up to rounding).
         let mut want_dv = DMatrix::zeros(6, n);
-        let mut c2 = Centroidal::new(m);
         for k in 0..n {
             let mut vp = v.clone();
             vp[k] += 1e-3;
-            centroidal_dynamics_derivatives(m, &mut d, &mut c2, &q, &vp, &a).unwrap();
-            let hp = *c2.hdot();
+            let hp = *centroidal_dynamics_derivatives(m, &mut d, &q, &vp, &a).unwrap().hdot();
             vp[k] -= 2e-3;
-            centroidal_dynamics_derivatives(m, &mut d, &mut c2, &q, &vp, &a).unwrap();
+            let c2 = centroidal_dynamics_derivatives(m, &mut d, &q, &vp, &a).unwrap();
             for r in 0..6 {
                 want_dv[(r, k)] = (hp[r] - c2.hdot()[r]) / 2e-3;
             }
@@ -88,8 +85,7 @@ fn centroidal_momentum_and_difference_into_agree() {
         let mut data = Data::new(&m);
         let (q, v, a) = random_state(&m, &mut rng);
         let (q1, _, _) = random_state(&m, &mut rng);
-        let mut out = Centroidal::new(&m);
-        centroidal_dynamics_derivatives(&m, &mut data, &mut out, &q, &v, &a).unwrap();
+        let out = centroidal_dynamics_derivatives(&m, &mut data, &q, &v, &a).unwrap().clone();
         let h = sodyn::algo::centroidal_momentum(&m, &mut data, &q, &v).unwrap();
         let scale = out.h().iter().fold(1.0f64, |s, x| s.max(x.abs()));
         for (r, (x, y)) in h.iter().zip(out.h()).enumerate() {
