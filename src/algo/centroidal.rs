@@ -75,11 +75,12 @@ pub fn centroidal_momentum(
 }
 
 /// Centroidal momentum, its time derivative, the centroidal momentum matrix and their
-/// derivatives at `(q, q̇, q̈)` into `out` (module documentation); allocates nothing.
+/// derivatives at `(q, q̇, q̈)` (module documentation), returned as the
+/// [`Centroidal`] part of `data` (later also [`Data::centroidal`]); allocates nothing.
 ///
 /// # Errors
-/// As [`Model::check_q`]; `v`, `a` of the wrong length or not finite; `out` made for another
-/// `nv`; a model without mass.
+/// As [`Model::check_q`]; `v`, `a` of the wrong length or not finite; `data` made for another
+/// model; a model without mass.
 pub fn centroidal_dynamics_derivatives<'d>(
     model: &Model,
     data: &'d mut Data,
@@ -90,14 +91,11 @@ pub fn centroidal_dynamics_derivatives<'d>(
     if let Some(r) = &model.reduction {
         // The reduced results are moved out of their slot for the call and back (no allocation).
         let mut out = std::mem::replace(&mut data.centroidal, Centroidal::zeros(0));
-        let res = crate::algo::centroidal::reduced::centroidal_dynamics_derivatives(
-            r,
-            data.reduced(model),
-            &mut out,
-            q,
-            v,
-            a,
-        );
+        let res = data.reduced(model).and_then(|md| {
+            crate::algo::centroidal::reduced::centroidal_dynamics_derivatives(
+                r, md, &mut out, q, v, a,
+            )
+        });
         data.centroidal = out;
         res?;
         return Ok(&data.centroidal);
@@ -203,13 +201,12 @@ pub(crate) mod reduced {
     /// another model; a model without mass.
     pub fn centroidal_dynamics_derivatives(
         model: &MimicModel,
-        data: Result<&mut MimicData>,
+        data: &mut MimicData,
         out: &mut Centroidal,
         q: &DVector<f64>,
         v: &DVector<f64>,
         a: &DVector<f64>,
     ) -> Result<()> {
-        let data = data?;
         prepare(model, data, q, Some(v), Some(("a", a)))?;
         model.expand_v_into(a.as_slice(), data.a.as_mut_slice());
         let c = crate::algo::centroidal_dynamics_derivatives(
