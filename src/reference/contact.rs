@@ -25,6 +25,7 @@
 use super::derivatives::{eps, eps1, eps2, hessian, jacobian, nested_q, perturb_q, seeded};
 use super::dynamics::{mass_matrix, nle, rnea, solve};
 use super::kinematics::{forward_kinematics, parent_poses, subspace_column, subspace_mul};
+use super::mimic::Reduced;
 use super::spatial::{Pose, Sv, cst, lift_m3, lift_v3};
 use super::{AdScalar, lift, real};
 use crate::model::Model;
@@ -230,9 +231,9 @@ fn drift_from_poses<T: AdScalar>(
 }
 
 fn check_lengths(model: &Model, q: usize, v: &[(&str, usize)]) {
-    assert_eq!(q, model.nq, "reference::contact: q has the wrong length");
+    assert_eq!(q, model.nq(), "reference::contact: q has the wrong length");
     for (what, n) in v {
-        assert_eq!(*n, model.nv, "reference::contact: {what} has the wrong length");
+        assert_eq!(*n, model.nv(), "reference::contact: {what} has the wrong length");
     }
 }
 
@@ -247,6 +248,11 @@ fn check_lengths(model: &Model, q: usize, v: &[(&str, usize)]) {
 /// If `q` has the wrong length or a contact's frame index is out of range.
 pub fn contact_jacobian<T: AdScalar>(model: &Model, q: &[T], contacts: &[Contact]) -> Vec<Vec<T>> {
     check_lengths(model, q.len(), &[]);
+    if let Some(r) = Reduced::of(model) {
+        // J_full(expand(q)) G, row by row as Gᵀ of the row.
+        let jf = contact_jacobian(r.full, &r.expand_q(q), contacts);
+        return jf.iter().map(|row| r.reduce_force(row)).collect();
+    }
     jacobian_from_poses(model, &forward_kinematics(model, q), contacts)
 }
 
@@ -261,6 +267,10 @@ pub fn contact_jacobian<T: AdScalar>(model: &Model, q: &[T], contacts: &[Contact
 /// If `q` or `v` has the wrong length or a contact's frame index is out of range.
 pub fn contact_drift<T: AdScalar>(model: &Model, q: &[T], v: &[T], contacts: &[Contact]) -> Vec<T> {
     check_lengths(model, q.len(), &[("v", v.len())]);
+    if let Some(r) = Reduced::of(model) {
+        // G is constant: J̇ q̇ of the full tree at expand(q), G q̇.
+        return contact_drift(r.full, &r.expand_q(q), &r.expand_v(v), contacts);
+    }
     let xs = parent_poses(model, q);
     let world = forward_kinematics(model, q);
     drift_from_poses(model, &xs, &world, v, contacts)
@@ -284,6 +294,11 @@ pub fn constrained_rnea<T: AdScalar>(
 ) -> Vec<T> {
     check_lengths(model, q.len(), &[("v", v.len()), ("a", a.len())]);
     assert_eq!(lambda.len(), dim(contacts), "reference::contact: lambda needs one entry per row");
+    if let Some(r) = Reduced::of(model) {
+        // Gᵀ (rnea_full − J_fullᵀ λ).
+        let (qf, vf, af) = (r.expand_q(q), r.expand_v(v), r.expand_v(a));
+        return r.reduce_force(&constrained_rnea(r.full, &qf, &vf, &af, contacts, lambda));
+    }
     let world = forward_kinematics(model, q);
     let mut fext: Vec<[T; 6]> = vec![std::array::from_fn(|_| T::zero()); model.joints.len()];
     let mut row0 = 0;
@@ -368,6 +383,19 @@ pub fn kkt<T: AdScalar>(
     contacts: &[Contact],
 ) -> (Vec<T>, Vec<T>) {
     check_lengths(model, q.len(), &[("v", v.len()), ("tau", tau.len())]);
+    if let Some(r) = Reduced::of(model) {
+        // The full tree's drift and Baumgarte terms at expand(q), G q̇; J = J_full G.
+        let (qf, vf) = (r.expand_q(q), r.expand_v(v));
+        let world = forward_kinematics(r.full, &qf);
+        let jf = jacobian_from_poses(r.full, &world, contacts);
+        let mut drift = contact_drift(r.full, &qf, &vf, contacts);
+        baumgarte(r.full, &qf, &vf, contacts, &world, &jf, &mut drift);
+        let jac: Vec<Vec<T>> = jf.iter().map(|row| r.reduce_force(row)).collect();
+        let b = nle(model, q, v);
+        let mut rhs: Vec<T> = tau.iter().zip(b).map(|(t, b)| t.clone() - b).collect();
+        rhs.extend(drift.into_iter().map(|x| -x));
+        return split_solution(solve(kkt_matrix(mass_matrix(model, q), &jac), rhs), model.nv());
+    }
     let xs = parent_poses(model, q);
     let world = forward_kinematics(model, q);
     let jac = jacobian_from_poses(model, &world, contacts);
@@ -376,7 +404,7 @@ pub fn kkt<T: AdScalar>(
     let b = nle(model, q, v);
     let mut rhs: Vec<T> = tau.iter().zip(b).map(|(t, b)| t.clone() - b).collect();
     rhs.extend(drift.into_iter().map(|x| -x));
-    split_solution(solve(kkt_matrix(mass_matrix(model, q), &jac), rhs), model.nv)
+    split_solution(solve(kkt_matrix(mass_matrix(model, q), &jac), rhs), model.nv())
 }
 
 /// Adds the Baumgarte terms `kd J q̇ + kp e` to the contact rows `rows`, with the reference
@@ -506,7 +534,7 @@ pub fn impact<T: AdScalar>(
     };
     let mut rhs = matvec(&m);
     rhs.extend(matvec(&jac).into_iter().map(|x| x * (-e)));
-    split_solution(solve(kkt_matrix(m, &jac), rhs), model.nv)
+    split_solution(solve(kkt_matrix(m, &jac), rhs), model.nv())
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -537,7 +565,7 @@ pub fn d_constrained_rnea_dq(
     lambda: &[f64],
 ) -> DMatrix<f64> {
     let (v, a, l) = (lift::<Dual64>(v), lift::<Dual64>(a), lift::<Dual64>(lambda));
-    jacobian(model.nv, model.nv, |j| {
+    jacobian(model.nv(), model.nv(), |j| {
         let qd = perturb_q(model, &lift::<Dual64>(q), j, eps());
         constrained_rnea(model, &qd, &v, &a, contacts, &l)
     })
@@ -556,7 +584,7 @@ pub fn d_constrained_rnea_dv(
     lambda: &[f64],
 ) -> DMatrix<f64> {
     let (qd, a, l) = (lift::<Dual64>(q), lift::<Dual64>(a), lift::<Dual64>(lambda));
-    jacobian(model.nv, model.nv, |j| {
+    jacobian(model.nv(), model.nv(), |j| {
         constrained_rnea(model, &qd, &seeded(v, j, eps()), &a, contacts, &l)
     })
 }
@@ -574,7 +602,7 @@ pub fn d2_constrained_rnea_dq2(
     contacts: &[Contact],
     lambda: &[f64],
 ) -> Tensor3 {
-    let n = model.nv;
+    let n = model.nv();
     let (v, a) = (lift::<HyperDual64>(v), lift::<HyperDual64>(a));
     let l = lift::<HyperDual64>(lambda);
     hessian(n, n, n, |j, k| {
@@ -640,7 +668,7 @@ fn kkt_stacked<T: AdScalar>(
 /// # Panics
 /// As [`kkt`].
 pub fn kkt_fo(model: &Model, q: &[f64], v: &[f64], tau: &[f64], contacts: &[Contact]) -> KktFo {
-    let (nv, nout) = (model.nv, model.nv + dim(contacts));
+    let (nv, nout) = (model.nv(), model.nv() + dim(contacts));
     let (qd, vd, taud) = (lift::<Dual64>(q), lift::<Dual64>(v), lift::<Dual64>(tau));
     let dq = jacobian(nout, nv, |j| {
         kkt_stacked(model, &perturb_q(model, &qd, j, eps()), &vd, &taud, contacts)
@@ -664,7 +692,7 @@ pub fn kkt_fo(model: &Model, q: &[f64], v: &[f64], tau: &[f64], contacts: &[Cont
 /// # Panics
 /// As [`kkt`].
 pub fn kkt_so(model: &Model, q: &[f64], v: &[f64], tau: &[f64], contacts: &[Contact]) -> KktSo {
-    let (n, nout) = (model.nv, model.nv + dim(contacts));
+    let (n, nout) = (model.nv(), model.nv() + dim(contacts));
     let (qh, vh, tauh) = (lift::<HyperDual64>(q), lift::<HyperDual64>(v), lift::<HyperDual64>(tau));
     let dq2 = hessian(nout, n, n, |j, k| {
         kkt_stacked(model, &nested_q(model, q, j, k), &vh, &tauh, contacts)
@@ -748,7 +776,7 @@ pub fn impact_fo(
     contacts: &[Contact],
     e: f64,
 ) -> ImpactFo {
-    let (nv, nout) = (model.nv, model.nv + dim(contacts));
+    let (nv, nout) = (model.nv(), model.nv() + dim(contacts));
     let (qd, vd) = (lift::<Dual64>(q), lift::<Dual64>(vminus));
     let dq = jacobian(nout, nv, |j| {
         impact_stacked(model, &perturb_q(model, &qd, j, eps()), &vd, contacts, e)
@@ -775,7 +803,7 @@ pub fn impact_so(
     contacts: &[Contact],
     e: f64,
 ) -> ImpactSo {
-    let (n, nout) = (model.nv, model.nv + dim(contacts));
+    let (n, nout) = (model.nv(), model.nv() + dim(contacts));
     let (qh, vh) = (lift::<HyperDual64>(q), lift::<HyperDual64>(vminus));
     let dq2 = hessian(nout, n, n, |j, k| {
         impact_stacked(model, &nested_q(model, q, j, k), &vh, contacts, e)

@@ -32,7 +32,7 @@ pub(crate) fn seeded<T: AdScalar>(x: &[f64], j: usize, d: T) -> Vec<T> {
 
 /// `q ⊕ (d e_j)` with `q` of scalar type `T`.
 pub(crate) fn perturb_q<T: AdScalar>(model: &Model, q: &[T], j: usize, d: T) -> Vec<T> {
-    let mut delta = vec![T::zero(); model.nv];
+    let mut delta = vec![T::zero(); model.nv()];
     delta[j] = d;
     integrate(model, q, &delta)
 }
@@ -96,7 +96,7 @@ pub(crate) fn nested_q(model: &Model, q: &[f64], j: usize, k: usize) -> Vec<Hype
 /// If a slice length does not match the model (`q`: `nq`; `v`, `a`: `nv`).
 pub fn d_rnea_dq(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> DMatrix<f64> {
     let (v, a) = (lift::<Dual64>(v), lift::<Dual64>(a));
-    jacobian(model.nv, model.nv, |j| {
+    jacobian(model.nv(), model.nv(), |j| {
         let qd = perturb_q(model, &lift::<Dual64>(q), j, eps());
         rnea(model, &qd, &v, &a, None)
     })
@@ -108,7 +108,7 @@ pub fn d_rnea_dq(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> DMatrix<f64>
 /// If a slice length does not match the model (`q`: `nq`; `v`, `a`: `nv`).
 pub fn d_rnea_dv(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> DMatrix<f64> {
     let (qd, a) = (lift::<Dual64>(q), lift::<Dual64>(a));
-    jacobian(model.nv, model.nv, |j| rnea(model, &qd, &seeded(v, j, eps()), &a, None))
+    jacobian(model.nv(), model.nv(), |j| rnea(model, &qd, &seeded(v, j, eps()), &a, None))
 }
 
 /// `∂q̈/∂q` (`nv × nv`, tangent) of forward dynamics [`aba`].
@@ -118,7 +118,7 @@ pub fn d_rnea_dv(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> DMatrix<f64>
 /// is exactly singular (see [`super::dynamics::solve`]).
 pub fn d_aba_dq(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64> {
     let (v, tau) = (lift::<Dual64>(v), lift::<Dual64>(tau));
-    jacobian(model.nv, model.nv, |j| {
+    jacobian(model.nv(), model.nv(), |j| {
         let qd = perturb_q(model, &lift::<Dual64>(q), j, eps());
         aba(model, &qd, &v, &tau, None)
     })
@@ -131,7 +131,7 @@ pub fn d_aba_dq(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64
 /// is exactly singular (see [`super::dynamics::solve`]).
 pub fn d_aba_dv(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64> {
     let (qd, tau) = (lift::<Dual64>(q), lift::<Dual64>(tau));
-    jacobian(model.nv, model.nv, |j| aba(model, &qd, &seeded(v, j, eps()), &tau, None))
+    jacobian(model.nv(), model.nv(), |j| aba(model, &qd, &seeded(v, j, eps()), &tau, None))
 }
 
 /// `∂q̈/∂τ = M⁻¹` (`nv × nv`) of [`aba`] (independent of `v`, computed through the same path).
@@ -141,7 +141,7 @@ pub fn d_aba_dv(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64
 /// is exactly singular (see [`super::dynamics::solve`]).
 pub fn d_aba_dtau(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> DMatrix<f64> {
     let (qd, v) = (lift::<Dual64>(q), lift::<Dual64>(v));
-    jacobian(model.nv, model.nv, |j| aba(model, &qd, &v, &seeded(tau, j, eps()), None))
+    jacobian(model.nv(), model.nv(), |j| aba(model, &qd, &v, &seeded(tau, j, eps()), None))
 }
 
 /// `∂p/∂q` (`3 × nv`, tangent): the Jacobian of the world position `p` of the point with
@@ -157,8 +157,8 @@ pub fn d_point_position_dq(
     point: &[f64; 3],
 ) -> Matrix3xX<f64> {
     let pt = point.map(Dual64::from);
-    let mut jac = Matrix3xX::zeros(model.nv);
-    for j in 0..model.nv {
+    let mut jac = Matrix3xX::zeros(model.nv());
+    for j in 0..model.nv() {
         let qd = perturb_q(model, &lift::<Dual64>(q), j, eps());
         let p = point_position(model, &qd, frame_id, &pt);
         for (r, x) in p.iter().enumerate() {
@@ -178,7 +178,7 @@ pub fn d_point_position_dq(
 /// # Panics
 /// If a slice length does not match the model (`q`: `nq`; `v`, `a`: `nv`).
 pub fn d2_rnea_dq2(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
-    let n = model.nv;
+    let n = model.nv();
     let (v, a) = (lift::<HyperDual64>(v), lift::<HyperDual64>(a));
     hessian(n, n, n, |j, k| rnea(model, &nested_q(model, q, j, k), &v, &a, None))
 }
@@ -188,7 +188,7 @@ pub fn d2_rnea_dq2(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
 /// # Panics
 /// If a slice length does not match the model (`q`: `nq`; `v`, `a`: `nv`).
 pub fn d2_rnea_dv2(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
-    let n = model.nv;
+    let n = model.nv();
     let (qh, a) = (lift::<HyperDual64>(q), lift::<HyperDual64>(a));
     hessian(n, n, n, |j, k| {
         let mut vh = seeded(v, j, eps1());
@@ -202,7 +202,7 @@ pub fn d2_rnea_dv2(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
 /// # Panics
 /// If a slice length does not match the model (`q`: `nq`; `v`, `a`: `nv`).
 pub fn d2_rnea_dqdv(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
-    let n = model.nv;
+    let n = model.nv();
     let a = lift::<HyperDual64>(a);
     hessian(n, n, n, |j, k| {
         let qh = perturb_q(model, &lift::<HyperDual64>(q), j, eps1());
@@ -216,7 +216,7 @@ pub fn d2_rnea_dqdv(model: &Model, q: &[f64], v: &[f64], a: &[f64]) -> Tensor3 {
 /// If `q.len() != nq`.
 #[allow(non_snake_case)]
 pub fn dM_dq(model: &Model, q: &[f64]) -> Tensor3 {
-    let n = model.nv;
+    let n = model.nv();
     let mut t = Tensor3::zeros(n, n, n);
     for k in 0..n {
         let qd = perturb_q(model, &lift::<Dual64>(q), k, eps());
@@ -236,7 +236,7 @@ pub fn dM_dq(model: &Model, q: &[f64]) -> Tensor3 {
 /// If a slice length does not match the model (`q`: `nq`; `v`, `tau`: `nv`), or `M(q)`
 /// is exactly singular (see [`super::dynamics::solve`]).
 pub fn d2_aba_dq2(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
-    let n = model.nv;
+    let n = model.nv();
     let (v, tau) = (lift::<HyperDual64>(v), lift::<HyperDual64>(tau));
     hessian(n, n, n, |j, k| aba(model, &nested_q(model, q, j, k), &v, &tau, None))
 }
@@ -247,7 +247,7 @@ pub fn d2_aba_dq2(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
 /// If a slice length does not match the model (`q`: `nq`; `v`, `tau`: `nv`), or `M(q)`
 /// is exactly singular (see [`super::dynamics::solve`]).
 pub fn d2_aba_dv2(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
-    let n = model.nv;
+    let n = model.nv();
     let (qh, tau) = (lift::<HyperDual64>(q), lift::<HyperDual64>(tau));
     hessian(n, n, n, |j, k| {
         let mut vh = seeded(v, j, eps1());
@@ -262,7 +262,7 @@ pub fn d2_aba_dv2(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
 /// If a slice length does not match the model (`q`: `nq`; `v`, `tau`: `nv`), or `M(q)`
 /// is exactly singular (see [`super::dynamics::solve`]).
 pub fn d2_aba_dqdv(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
-    let n = model.nv;
+    let n = model.nv();
     let tau = lift::<HyperDual64>(tau);
     hessian(n, n, n, |j, k| {
         let qh = perturb_q(model, &lift::<HyperDual64>(q), j, eps1());
@@ -276,7 +276,7 @@ pub fn d2_aba_dqdv(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 
 /// If a slice length does not match the model (`q`: `nq`; `v`, `tau`: `nv`), or `M(q)`
 /// is exactly singular (see [`super::dynamics::solve`]).
 pub fn d2_aba_dtaudq(model: &Model, q: &[f64], v: &[f64], tau: &[f64]) -> Tensor3 {
-    let n = model.nv;
+    let n = model.nv();
     let v = lift::<HyperDual64>(v);
     hessian(n, n, n, |j, k| {
         let qh = perturb_q(model, &lift::<HyperDual64>(q), k, eps2());
@@ -312,7 +312,7 @@ pub fn contracted_rnea_hessians(
     v: &[f64],
     a: &[f64],
 ) -> [DMatrix<f64>; 4] {
-    let n = model.nv;
+    let n = model.nv();
     let (vh, ah) = (lift::<HyperDual64>(v), lift::<HyperDual64>(a));
     let qq = contracted(w, n, n, |j, k| rnea(model, &nested_q(model, q, j, k), &vh, &ah, None));
     let qh = lift::<HyperDual64>(q);
@@ -346,7 +346,7 @@ pub fn contracted_aba_hessians(
     v: &[f64],
     tau: &[f64],
 ) -> [DMatrix<f64>; 4] {
-    let n = model.nv;
+    let n = model.nv();
     let (vh, th) = (lift::<HyperDual64>(v), lift::<HyperDual64>(tau));
     let qq = contracted(w, n, n, |j, k| aba(model, &nested_q(model, q, j, k), &vh, &th, None));
     let qh = lift::<HyperDual64>(q);

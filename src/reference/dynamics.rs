@@ -3,6 +3,7 @@
 
 use super::AdScalar;
 use super::kinematics::{forward_kinematics, parent_poses, subspace_mul, subspace_tr_mul};
+use super::mimic::Reduced;
 use super::spatial::{Pose, SpInertia, Sv, cst, lift_v3};
 use crate::model::Model;
 
@@ -39,6 +40,11 @@ pub fn rnea_with_gravity<T: AdScalar>(
     fext: Option<&[[T; 6]]>,
     gravity: bool,
 ) -> Vec<T> {
+    if let Some(r) = Reduced::of(model) {
+        // Gᵀ τ_full(expand(q), G v, G a).
+        let (qf, vf, af) = (r.expand_q(q), r.expand_v(v), r.expand_v(a));
+        return r.reduce_force(&rnea_with_gravity(r.full, &qf, &vf, &af, fext, gravity));
+    }
     let n = model.joints.len();
     assert_eq!(q.len(), model.nq, "reference::rnea: q has the wrong length");
     assert_eq!(v.len(), model.nv, "reference::rnea: v has the wrong length");
@@ -122,6 +128,21 @@ fn newton_euler<T: AdScalar>(
 /// # Panics
 /// If `q.len() != nq`.
 pub fn mass_matrix<T: AdScalar>(model: &Model, q: &[T]) -> Vec<Vec<T>> {
+    if model.is_reduced() {
+        // Gᵀ M_full G, column j by the unit reduced acceleration e_j.
+        let n = model.nv();
+        let zero = vec![T::zero(); n];
+        let mut m = vec![vec![T::zero(); n]; n];
+        for j in 0..n {
+            let mut e = vec![T::zero(); n];
+            e[j] = T::one();
+            let col = rnea_with_gravity(model, q, &zero, &e, None, false);
+            for (i, x) in col.into_iter().enumerate() {
+                m[i][j] = x;
+            }
+        }
+        return m;
+    }
     let nv = model.nv;
     let xs = parent_poses(model, q);
     let inertias = lift_inertias(model);
@@ -143,7 +164,7 @@ pub fn mass_matrix<T: AdScalar>(model: &Model, q: &[T]) -> Vec<Vec<T>> {
 /// # Panics
 /// If the slice lengths do not match the model (as [`rnea`]).
 pub fn nle<T: AdScalar>(model: &Model, q: &[T], v: &[T]) -> Vec<T> {
-    let zero = vec![T::zero(); model.nv];
+    let zero = vec![T::zero(); model.nv()];
     rnea(model, q, v, &zero, None)
 }
 
@@ -160,8 +181,8 @@ pub fn aba<T: AdScalar>(
     tau: &[T],
     fext: Option<&[[T; 6]]>,
 ) -> Vec<T> {
-    assert_eq!(tau.len(), model.nv, "reference::aba: tau has the wrong length");
-    let zero = vec![T::zero(); model.nv];
+    assert_eq!(tau.len(), model.nv(), "reference::aba: tau has the wrong length");
+    let zero = vec![T::zero(); model.nv()];
     let b = rnea(model, q, v, &zero, fext);
     let rhs: Vec<T> = tau.iter().zip(b).map(|(t, b)| t.clone() - b).collect();
     solve(mass_matrix(model, q), rhs)

@@ -7,6 +7,7 @@
 //! exact first and second derivatives; otherwise the closed forms are used.
 
 use super::AdScalar;
+use super::mimic::Reduced;
 use super::spatial::{Pose, Sv, cst, lift_v3, skew};
 use crate::model::{JointType, Model};
 use nalgebra::{Matrix3, Vector3};
@@ -304,6 +305,18 @@ pub fn integrate_joint<T: AdScalar>(joint: &JointType, q: &[T], delta: &[T]) -> 
 /// # Panics
 /// If the slice lengths do not match the model.
 pub fn integrate<T: AdScalar>(model: &Model, q: &[T], delta: &[T]) -> Vec<T> {
+    if let Some(r) = Reduced::of(model) {
+        // The independent coordinates of expand(q) ⊕ G δ.
+        let (m, qf) = (r.full, integrate(r.full, &r.expand_q(q), &r.expand_v(delta)));
+        let mut out = Vec::with_capacity(q.len());
+        for i in 1..m.njoints() {
+            if !r.mimics.iter().any(|mm| mm.joint == i) {
+                let a = m.idx_q[i];
+                out.extend_from_slice(&qf[a..a + m.nqs[i]]);
+            }
+        }
+        return out;
+    }
     assert_eq!(q.len(), model.nq, "reference::integrate: q has the wrong length");
     assert_eq!(delta.len(), model.nv, "reference::integrate: delta has the wrong length");
     let mut out = q.to_vec();
@@ -321,6 +334,9 @@ pub fn integrate<T: AdScalar>(model: &Model, q: &[T], delta: &[T]) -> Vec<T> {
 /// # Panics
 /// If `q.len() != nq`.
 pub fn parent_poses<T: AdScalar>(model: &Model, q: &[T]) -> Vec<Pose<T>> {
+    if let Some(r) = Reduced::of(model) {
+        return parent_poses(r.full, &r.expand_q(q));
+    }
     assert_eq!(q.len(), model.nq, "reference: q has the wrong length");
     let mut out = vec![Pose::identity()];
     for i in 1..model.joints.len() {

@@ -21,8 +21,9 @@
 //!   dense solve ([`aba`]);
 //! * [`contact`]: point-contact Jacobians and drifts, constrained inverse dynamics, KKT and
 //!   impact dynamics, and their first/second-order `f64` oracles;
-//! * [`mimic`]: the dynamics in the reduced coordinates of mimic joints (the reference
-//!   algorithms composed with the mimic expansion) and its derivative oracles;
+//! * [`mimic`]: the mimic expansion of a model in reduced coordinates (mimic joints), through
+//!   which every function here takes such a model too: the reference algorithms run on the full
+//!   tree at `expand(q)`, `G v`, and return the reduced quantities;
 //! * [`derivatives`]: `f64`-valued convenience oracles, first order with [`num_dual::Dual64`]
 //!   and second order with [`num_dual::HyperDual64`].
 //!

@@ -48,9 +48,6 @@ pub(crate) fn rel_v(a: &DVector<f64>, b: &[f64]) -> f64 {
 pub(crate) fn run_demo(o: &DemoArgs) -> Result<()> {
     let (spec, seed) = (o.model.as_str(), o.seed);
     let m = load_model(&o.model_args())?;
-    if m.is_reduced() {
-        return run_reduced_demo(o, &m);
-    }
     let mut rng = Rng::new(seed);
     let q = m.random_configuration(&mut rng);
     let v = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
@@ -102,15 +99,18 @@ pub(crate) fn run_demo(o: &DemoArgs) -> Result<()> {
     let qdd_ref = reference::aba::<f64>(&m, qs, vs, ts, None);
     row("aba (forward dynamics)", t, rel_v(&qdd, &qdd_ref));
 
-    crba(&m, &mut d, &q)?;
-    let t = time_us(|| {
-        factorize_ltl(&m, &mut d)?;
-        Ok(())
-    })?;
-    let b = reference::nle::<f64>(&m, qs, vs);
-    let mut x = &tau - DVector::from_vec(b);
-    solve_ltl(&m, &d, &mut x)?;
-    row("LᵀDL factorisation + solve", t, rel_v(&x, &qdd_ref));
+    // The sparse LᵀDL factorisation has the full tree's sparsity: not for reduced models.
+    if !m.is_reduced() {
+        crba(&m, &mut d, &q)?;
+        let t = time_us(|| {
+            factorize_ltl(&m, &mut d)?;
+            Ok(())
+        })?;
+        let b = reference::nle::<f64>(&m, qs, vs);
+        let mut x = &tau - DVector::from_vec(b);
+        solve_ltl(&m, &d, &mut x)?;
+        row("LᵀDL factorisation + solve", t, rel_v(&x, &qdd_ref));
+    }
 
     let frame = m.frames().len() - 1;
     let mut jac = Matrix3xX::zeros(m.nv());
@@ -313,84 +313,6 @@ pub(crate) fn run_demo(o: &DemoArgs) -> Result<()> {
             row("impact FO+SO dvplus/dq", t, rel(im.dvplus_dq(), &fo.dvplus_dq));
             row("      dimpulse/dq", t, rel(im.dimpulse_dq(), &fo.dimpulse_dq));
         }
-    }
-    outln!("\nmaximum relative error against the oracle: {worst:.2e}");
-    Ok(())
-}
-
-/// The demo of a model in reduced coordinates (`--mimic`): the dynamics and its derivatives at
-/// a random state, against the oracle of [`sodyn::reference::mimic`] (the reference code
-/// composed with the mimic expansion). No contacts.
-fn run_reduced_demo(o: &DemoArgs, m: &sodyn::model::Model) -> Result<()> {
-    use sodyn::reference::mimic::Reduced;
-    if o.contacts.is_some() {
-        return Err(Error::Argument {
-            name: "--contacts".into(),
-            reason: "is not supported with demo --mimic (bench --mimic and eval --mimic take \
-                     contacts)"
-                .into(),
-        });
-    }
-    let (spec, seed) = (o.model.as_str(), o.seed);
-    let r = Reduced { full: m.full_tree(), mimics: m.mimic_joints() };
-    let mut rng = Rng::new(seed);
-    let q = m.random_configuration(&mut rng);
-    let mut rv = || DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
-    let (v, a, tau) = (rv(), rv(), rv());
-    let (qs, vs, as_, ts) = (q.as_slice(), v.as_slice(), a.as_slice(), tau.as_slice());
-    outln!(
-        "sodyn demo --mimic: model \"{}\" ({spec}), reduced nq = {}, nv = {} (full tree nq = {}, \
-         nv = {}, {} mimic joints), seed {seed}",
-        m.name(),
-        m.nq(),
-        m.nv(),
-        m.nq_full(),
-        m.nv_full(),
-        m.mimic_joints().len()
-    );
-    outln!(
-        "errors: max |ours − oracle| / max(1, max |oracle|); oracle = reference code composed \
-         with the mimic expansion, f64 / dual / hyper-dual numbers\n"
-    );
-    outln!("{:<34} {:>12} {:>14}", "algorithm", "median µs", "max rel err");
-    let mut d = Data::with_second_order(m);
-    let mut worst: f64 = 0.0;
-    let mut row = |name: &str, us: f64, err: f64| {
-        worst = worst.max(err);
-        outln!("{name:<34} {us:>12.2} {err:>14.2e}");
-    };
-    let t = time_us(|| rnea(m, &mut d, &q, &v, &a, None).map(|_| ()))?;
-    let tau_id = rnea(m, &mut d, &q, &v, &a, None)?.clone();
-    row("rnea", t, rel_v(&tau_id, &r.rnea(qs, vs, as_)));
-    let t = time_us(|| crba(m, &mut d, &q).map(|_| ()))?;
-    let mm = crba(m, &mut d, &q)?.clone();
-    let mref = r.mass_matrix(qs);
-    row("crba", t, rel(&mm, &DMatrix::from_fn(m.nv(), m.nv(), |i, j| mref[i][j])));
-    let t = time_us(|| aba(m, &mut d, &q, &v, &tau, None).map(|_| ()))?;
-    let qdd = aba(m, &mut d, &q, &v, &tau, None)?.clone();
-    row("aba (dense LDLᵀ)", t, rel_v(&qdd, &r.aba(qs, vs, ts)));
-    let t = time_us(|| id_derivatives(m, &mut d, &q, &v, &a, None))?;
-    row("id_fo dtau/dq", t, rel(d.dtau_dq(), &r.d_rnea_dq(qs, vs, as_)));
-    row("      dtau/dv", t, rel(d.dtau_dv(), &r.d_rnea_dv(qs, vs, as_)));
-    let t = time_us(|| fd_derivatives(m, &mut d, &q, &v, &tau, None))?;
-    row("fd_fo dqdd/dq", t, rel(d.dqdd_dq(), &r.d_aba_dq(qs, vs, ts)));
-    row("      dqdd/dv", t, rel(d.dqdd_dv(), &r.d_aba_dv(qs, vs, ts)));
-    row("      dqdd/dtau = M⁻¹", t, rel(d.minv(), &r.d_aba_dtau(qs, vs, ts)));
-    let t = time_us(|| id_so_derivatives(m, &mut d, &q, &v, &a, None).map(|_| ()))?;
-    let so = id_so_derivatives(m, &mut d, &q, &v, &a, None)?;
-    row("id_so d2tau/dq2", t, rel_t(so.d2tau_dq2(), &r.d2_rnea_dq2(qs, vs, as_)));
-    row("      d2tau/dv2", t, rel_t(so.d2tau_dv2(), &r.d2_rnea_dv2(qs, vs, as_)));
-    row("      d2tau/dqdv", t, rel_t(so.d2tau_dqdv(), &r.d2_rnea_dqdv(qs, vs, as_)));
-    row("      dM/dq", t, rel_t(so.dm_dq(), &r.dM_dq(qs)));
-    let t = time_us(|| fd_so_derivatives(m, &mut d, &q, &v, &tau, None).map(|_| ()))?;
-    let fso = fd_so_derivatives(m, &mut d, &q, &v, &tau, None)?;
-    if m.nv() > 40 {
-        row("fd_so (timing only; oracle > 40 DoF)", t, 0.0);
-    } else {
-        row("fd_so d2qdd/dq2", t, rel_t(fso.d2qdd_dq2(), &r.d2_aba_dq2(qs, vs, ts)));
-        row("      d2qdd/dv2", t, rel_t(fso.d2qdd_dv2(), &r.d2_aba_dv2(qs, vs, ts)));
-        row("      d2qdd/dqdv", t, rel_t(fso.d2qdd_dqdv(), &r.d2_aba_dqdv(qs, vs, ts)));
-        row("      d2qdd/dtau dq", t, rel_t(fso.d2qdd_dtaudq(), &r.d2_aba_dtaudq(qs, vs, ts)));
     }
     outln!("\nmaximum relative error against the oracle: {worst:.2e}");
     Ok(())

@@ -32,12 +32,31 @@ fn states(m: &Model, n: usize, seed: u64) -> States {
 }
 
 fn models() -> Vec<Model> {
-    vec![
+    let mut out = vec![
         builtin::quadruped(),
         builtin::humanoid(),
         builtin::random_tree(12, 3, true),
         builtin::random_tree(9, 5, false),
-    ]
+    ];
+    out.extend(mimic_models());
+    out
+}
+
+/// Models in reduced coordinates: the mimic arm fixed and floating (`util::mimic`), and the
+/// panda with a finger mimic of multiplier −0.6 and offset 0.02.
+fn mimic_models() -> Vec<Model> {
+    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/mimic_panda_coeffs.urdf");
+    let panda = sodyn::model::load_urdf_file(&path, &crate::util::mimic::opts(false)).unwrap();
+    vec![crate::util::mimic::arm(false), crate::util::mimic::arm(true), panda]
+}
+
+/// Batch workspaces with dense second-order capacity on a pool of `threads` threads.
+fn so_batch(m: &Model, threads: usize) -> BatchData {
+    BatchData::from_workspace(
+        Arc::new(BatchPool::new(threads).unwrap()),
+        Data::with_second_order(m),
+    )
 }
 
 fn vecs(m: &Model, n: usize) -> Vec<DVector<f64>> {
@@ -141,7 +160,8 @@ fn batch_equals_sequential_one_two_and_three_threads() {
 #[test]
 fn batch_second_order_equals_sequential() {
     let pool = Arc::new(BatchPool::new(2).unwrap());
-    for m in [builtin::quadruped(), builtin::random_tree(8, 7, true)] {
+    let plain = [builtin::quadruped(), builtin::random_tree(8, 7, true)];
+    for m in plain.into_iter().chain(mimic_models()) {
         let s = states(&m, 9, 30);
         check_identical_so(&m, &s, BatchData::with_second_order(&m), "shared pool");
         let bd = BatchData::from_workspace(pool.clone(), Data::with_second_order(&m));
@@ -533,4 +553,83 @@ fn check_pinned(cpus: Vec<usize>) {
     })
     .join()
     .unwrap();
+}
+
+#[test]
+fn reduced_models_lengths_shapes_and_workspaces_are_errors() {
+    let ms = mimic_models();
+    let (m, other) = (&ms[1], &ms[2]);
+    let s = states(m, 5, 6);
+    // Dense second-order capacity: only the tensor outputs below are wrong.
+    let mut bd = so_batch(m, 2);
+    let e = rnea_batch(m, &mut bd, &s.q, &s.v[..4], &s.a, &mut vecs(m, 5)).unwrap_err();
+    assert!(e.to_string().contains("vs"), "{e}");
+    let e = aba_batch(m, &mut bd, &s.q, &s.v, &s.tau[..3], &mut vecs(m, 5)).unwrap_err();
+    assert!(e.to_string().contains("taus"), "{e}");
+    let mut short = vecs(m, 5);
+    short[2] = DVector::zeros(m.nv_full());
+    let e = rnea_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut short).unwrap_err();
+    assert!(e.to_string().contains("out_tau[2]"), "{e}");
+    let e = id_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut mats(m, 4), &mut mats(m, 5))
+        .unwrap_err();
+    assert!(e.to_string().contains("out_dq"), "{e}");
+    let mut dv = mats(m, 5);
+    dv[3] = DMatrix::zeros(m.nv_full(), m.nv_full());
+    let e =
+        fd_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.tau, &mut mats(m, 5), &mut dv).unwrap_err();
+    assert!(e.to_string().contains("out_dv[3]"), "{e}");
+    let mut mm = mats(m, 5);
+    mm[4] = DMatrix::zeros(m.nv(), m.nv() + 1);
+    let e = crba_batch(m, &mut bd, &s.q, &mut mm).unwrap_err();
+    assert!(e.to_string().contains("out_m[4]"), "{e}");
+    // Tensor outputs made for another mimic model (and one for this model among them): the
+    // plain batches' dimension check names the output.
+    let mut so = vec![IdSoResult::zeros(m); 5];
+    so[1] = IdSoResult::zeros(other);
+    let mut fso = vec![FdSoResult::zeros(m); 5];
+    fso[1] = FdSoResult::zeros(other);
+    let e = id_so_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.a, &mut so).unwrap_err();
+    assert!(matches!(e, Error::Dimension { .. }), "{e:?}");
+    assert!(e.to_string().contains("out[1]") && e.to_string().contains("nv = 8"), "{e}");
+    let e = fd_so_derivatives_batch(m, &mut bd, &s.q, &s.v, &s.tau, &mut fso).unwrap_err();
+    assert!(e.to_string().contains("out[1]"), "{e}");
+    // Workspaces made for another model: an error naming it, the outputs untouched.
+    let so_other = states(other, 5, 8);
+    let mut out = vec![DVector::from_element(other.nv(), 3.0); 5];
+    let e =
+        rnea_batch(other, &mut bd, &so_other.q, &so_other.v, &so_other.a, &mut out).unwrap_err();
+    assert!(matches!(e, Error::Workspace(_)), "{e:?}");
+    assert!(e.to_string().contains("Data"), "{e}");
+    assert!(out.iter().all(|x| x.iter().all(|&y| y == 3.0)), "outputs untouched");
+}
+
+/// A singular reduced mass matrix (two opposite prismatic joints, one mimicking the other:
+/// the reduced DoF moves nothing) is the error of its state, in the forward dynamics and its
+/// derivatives.
+#[test]
+fn a_singular_reduced_mass_matrix_names_the_state() {
+    let xml = r#"<robot name="t">
+  <link name="base"/>
+  <link name="a"/>
+  <link name="b"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+  <joint name="ja" type="prismatic"><parent link="base"/><child link="a"/><axis xyz="1 0 0"/></joint>
+  <joint name="jb" type="prismatic"><parent link="a"/><child link="b"/><axis xyz="-1 0 0"/><mimic joint="ja"/></joint>
+</robot>"#;
+    let o = sodyn::model::UrdfOptions { floating_base: false, strict_inertia: false, mimic: true };
+    let m = sodyn::model::load_urdf_str(xml, "t.urdf", &o).unwrap();
+    let s = states(&m, 6, 9);
+    let mut bd = so_batch(&m, 2);
+    let check = |e: Error| {
+        assert!(matches!(e, Error::Singular { .. }), "{e:?}");
+        assert!(e.to_string().contains("state 0") && e.to_string().contains("\"ja\""), "{e}");
+    };
+    check(aba_batch(&m, &mut bd, &s.q, &s.v, &s.tau, &mut vecs(&m, 6)).unwrap_err());
+    check(
+        fd_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.tau, &mut mats(&m, 6), &mut mats(&m, 6))
+            .unwrap_err(),
+    );
+    let mut so = vec![FdSoResult::zeros(&m); 6];
+    check(fd_so_derivatives_batch(&m, &mut bd, &s.q, &s.v, &s.tau, &mut so).unwrap_err());
+    // The inverse dynamics is defined there.
+    rnea_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut vecs(&m, 6)).unwrap();
 }

@@ -5,7 +5,6 @@ mod batch;
 mod data_reuse;
 mod fuzz_regressions;
 mod house;
-mod mimic_batch;
 mod no_alloc;
 mod reduced_model;
 mod simd_levels;

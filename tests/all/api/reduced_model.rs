@@ -6,11 +6,13 @@
 //! bit, `J = J_full G`), and the workspaces of the other model refused. The reduced algorithms
 //! against the AD oracle are `tests/mimic*.rs`.
 
+use crate::util::mimic as um;
 use nalgebra::{DMatrix, DVector};
 use sodyn::algo::{self, Data};
 use sodyn::deriv;
-use sodyn::model::{Arg, UrdfOptions, load_urdf_file};
-use sodyn::reference::mimic::Reduced;
+use sodyn::deriv::ContactData;
+use sodyn::model::{Arg, MimicJoint, Model, UrdfOptions, load_urdf_file};
+use sodyn::reference::{self, mimic::Reduced};
 use sodyn::rng::Rng;
 use sodyn::{Error, tensor::Tensor3};
 use std::path::PathBuf;
@@ -58,7 +60,7 @@ fn counts_and_configuration_space() {
         let qf = m.expand_q(&q0).unwrap();
         assert!((&qf - DVector::from_vec(red.expand_q(q0.as_slice()))).amax() < 1e-15);
         let qi = m.integrate(&q0, &d).unwrap();
-        let want = DVector::from_vec(red.integrate(q0.as_slice(), d.as_slice()));
+        let want = DVector::from_vec(reference::integrate(&m, q0.as_slice(), d.as_slice()));
         assert!((&qi - want).amax() < 1e-14);
         assert!((m.difference(&q0, &qi).unwrap() - &d).amax() < 1e-12);
         let mut out = DVector::zeros(m.nv());
@@ -247,4 +249,355 @@ fn kinematics_are_the_full_trees_and_full_tree_workspaces_are_errors() {
     assert_eq!(ci.restitution(), 0.4);
     let im = deriv::impact_derivatives(&m, &mut d, &mut ci, &q, &v).unwrap();
     assert_eq!(im.dvplus_dq().shape(), (n, n));
+}
+
+// ---------------------------------------------------------------------------------------------
+// The reduced model's own API: loading, `Model::with_mimic_joints`, external forces, inputs and
+// workspaces (the reduced algorithms against the AD oracle are the family tests: the mimic arm
+// is one of `util::test_models` and `util::contact_cases`).
+// ---------------------------------------------------------------------------------------------
+
+/// Error relative to the larger of 1 and the reference's largest entry.
+fn mat_err(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
+    rel(a, b)
+}
+fn ten_err(a: &Tensor3, b: &Tensor3) -> f64 {
+    assert_eq!(a.dims(), b.dims());
+    a.max_abs_diff(b) / b.max_abs().max(1.0)
+}
+
+#[test]
+fn loads_the_reduced_coordinates() {
+    let fixed = load_urdf_file(&um::arm_path(), &um::opts(false)).unwrap();
+    assert_eq!((fixed.nq_full(), fixed.nv_full()), (10, 10));
+    assert_eq!((fixed.nq(), fixed.nv()), (7, 7));
+    assert_eq!(fixed.mimic_joints().len(), 3);
+    let names = fixed.full_tree().names();
+    let by = |n: &str| names.iter().position(|x| x == n).unwrap();
+    let fr = fixed.mimic_joints().iter().find(|m| m.joint == by("finger_r_joint")).unwrap();
+    assert_eq!((fr.reference, fr.multiplier, fr.offset), (by("finger_l_joint"), -1.0, 0.01));
+    assert!(fixed.reduced_idx(by("finger_r_joint")).is_none());
+    let ff = load_urdf_file(&um::arm_path(), &um::opts(true)).unwrap();
+    assert_eq!((ff.nq(), ff.nv()), (14, 13));
+    // Without the option the model is the full one and records no constraint.
+    let plain = load_urdf_file(&um::arm_path(), &UrdfOptions::default()).unwrap();
+    assert!(plain.mimic_joints().is_empty());
+    assert_eq!(plain.mimic().iter().filter(|m| m.is_some()).count(), 3);
+    // G: one non-zero per row, the multiplier for the mimic DoFs.
+    let g = fixed.velocity_map();
+    assert_eq!(g.shape(), (10, 7));
+    for f in 0..10 {
+        assert_eq!(g.row(f).iter().filter(|x| **x != 0.0).count(), 1);
+    }
+    // expand / integrate / difference.
+    let mut rng = Rng::new(1);
+    let q = ff.random_configuration(&mut rng);
+    let qf = ff.expand_q(&q).unwrap();
+    let (a, r) = (
+        ff.full_tree().idx_q()[by("finger_r_joint") + 1],
+        ff.full_tree().idx_q()[by("finger_l_joint") + 1],
+    );
+    assert!((qf[a] - (-qf[r] + 0.01)).abs() < 1e-15);
+    assert_eq!(ff.reduce_q(&qf).unwrap(), q);
+    let d = DVector::from_fn(ff.nv(), |_, _| rng.range(-0.3, 0.3));
+    let q1 = ff.integrate(&q, &d).unwrap();
+    assert!((ff.difference(&q, &q1).unwrap() - d).amax() < 1e-12);
+}
+
+/// Without constraints `Model::with_mimic_joints` gives the tree itself: not reduced, the same
+/// counts, and the workspaces of one serve the other with the same numbers.
+#[test]
+fn without_mimics_equals_the_full_model() {
+    let full =
+        load_urdf_file(&um::arm_path(), &UrdfOptions { floating_base: true, ..Default::default() })
+            .unwrap();
+    let m = full.with_mimic_joints(&[]).unwrap();
+    assert!(!m.is_reduced());
+    assert_eq!((m.nq(), m.nv()), (full.nq(), full.nv()));
+    let mut rng = Rng::new(3);
+    let [q, v, x] = um::state(&m, &mut rng);
+    let mut d = Data::new(&full);
+    let mut md = Data::new(&m);
+    assert!(md.check(&full).is_ok() && d.check(&m).is_ok());
+    let t = algo::rnea(&full, &mut d, &q, &v, &x, None).unwrap().clone();
+    assert_eq!(algo::rnea(&m, &mut md, &q, &v, &x, None).unwrap(), &t);
+    let a = algo::aba(&full, &mut d, &q, &v, &x, None).unwrap().clone();
+    let am = algo::aba(&m, &mut md, &q, &v, &x, None).unwrap().clone();
+    assert!((am - a).amax() < 1e-10);
+    deriv::fd_derivatives(&full, &mut d, &q, &v, &x, None).unwrap();
+    deriv::fd_derivatives(&m, &mut md, &q, &v, &x, None).unwrap();
+    assert!(mat_err(md.dqdd_dq(), d.dqdd_dq()) < 1e-10);
+}
+
+/// External forces (full-model joints, mimic joints included) pass through to the full model.
+#[test]
+fn external_forces_match_the_full_model() {
+    let m = load_urdf_file(&um::arm_path(), &um::opts(false)).unwrap();
+    let full = m.full_tree();
+    let mut rng = Rng::new(4);
+    let [q, v, x] = um::state(&m, &mut rng);
+    let fext: Vec<sodyn::spatial::Force> = (0..full.njoints())
+        .map(|_| {
+            sodyn::spatial::Force::new(
+                nalgebra::Vector3::from_fn(|_, _| rng.range(-1.0, 1.0)),
+                nalgebra::Vector3::from_fn(|_, _| rng.range(-1.0, 1.0)),
+            )
+        })
+        .collect();
+    let mut md = Data::new(&m);
+    let mut d = Data::new(full);
+    let tau = algo::rnea(&m, &mut md, &q, &v, &x, Some(&fext)).unwrap().clone();
+    let g = m.velocity_map();
+    let (qf, vf, af) = (m.expand_q(&q).unwrap(), &g * &v, &g * &x);
+    let tf = algo::rnea(full, &mut d, &qf, &vf, &af, Some(&fext)).unwrap();
+    assert!((g.transpose() * tf - &tau).amax() < 1e-12);
+    // Forward dynamics is its inverse.
+    let qdd = algo::aba(&m, &mut md, &q, &v, &tau, Some(&fext)).unwrap();
+    assert!((qdd - &x).amax() < 1e-9);
+}
+
+#[test]
+fn bad_inputs_are_errors() {
+    let m = load_urdf_file(&um::arm_path(), &um::opts(true)).unwrap();
+    let mut data = Data::with_second_order(&m);
+    let mut rng = Rng::new(5);
+    let [q, v, x] = um::state(&m, &mut rng);
+    // The full model's lengths are wrong lengths.
+    let e = algo::rnea(&m, &mut data, &m.expand_q(&q).unwrap(), &v, &x, None).unwrap_err();
+    assert!(
+        matches!(e, Error::Dimension { ref what, expected: 14, got: 17 } if what == "q"),
+        "{e}"
+    );
+    let e = algo::aba(&m, &mut data, &q, &v, &DVector::zeros(16), None).unwrap_err();
+    assert!(matches!(e, Error::Dimension { ref what, expected: 13, .. } if what == "tau"), "{e}");
+    let mut bad = v.clone();
+    bad[4] = f64::NAN;
+    let e = deriv::fd_derivatives(&m, &mut data, &q, &bad, &x, None).unwrap_err();
+    assert!(matches!(e, Error::NotFinite { ref what, index: 4 } if what == "v"), "{e}");
+    let mut badq = q.clone();
+    badq[3] = 2.0; // not a unit quaternion
+    let e = algo::crba(&m, &mut data, &badq).unwrap_err();
+    assert!(e.to_string().contains("root_joint"), "{e}");
+    // A workspace of another model.
+    let other = load_urdf_file(&um::arm_path(), &um::opts(false)).unwrap();
+    let mut od = Data::new(&other);
+    let e = algo::rnea(&m, &mut od, &q, &v, &x, None).unwrap_err();
+    assert!(matches!(e, Error::Workspace(_)), "{e}");
+    // A second-order workspace of another model.
+    let mut oso = Data::with_second_order(&other);
+    let e = deriv::fd_so_derivatives(&m, &mut oso, &q, &v, &x, None).unwrap_err();
+    assert!(matches!(e, Error::Workspace(_)), "{e}");
+    deriv::fd_so_derivatives(&m, &mut data, &q, &v, &x, None).unwrap();
+}
+
+#[test]
+fn bad_constraints_of_the_api_are_errors() {
+    let full: Model =
+        load_urdf_file(&um::arm_path(), &UrdfOptions { floating_base: true, ..Default::default() })
+            .unwrap();
+    let by = |n: &str| full.joint_id(n).unwrap();
+    let mk = |joint, reference| MimicJoint { joint, reference, multiplier: 1.0, offset: 0.0 };
+    for (ms, expect) in [
+        (vec![mk(99, 2)], "joint index 99"),
+        (vec![mk(by("elbow"), 0)], "reference joint index 0"),
+        (vec![mk(by("elbow"), by("root_joint"))], "is free_flyer"),
+        (vec![mk(by("elbow"), by("elbow"))], "cannot mimic itself"),
+        (vec![mk(by("elbow"), by("shoulder")), mk(by("wrist"), by("elbow"))], "itself a mimic"),
+        (vec![mk(by("elbow"), by("shoulder")), mk(by("elbow"), by("wrist"))], "constrained twice"),
+        (vec![mk(by("tool_joint"), by("shoulder"))], "both must be rotational"),
+        (
+            vec![MimicJoint { multiplier: f64::INFINITY, ..mk(by("elbow"), by("shoulder")) }],
+            "must be finite",
+        ),
+    ] {
+        let e = full.with_mimic_joints(&ms).unwrap_err().to_string();
+        assert!(e.contains(expect), "{ms:?}: {e}");
+    }
+}
+
+/// A reduced mass matrix that is singular is an error naming the DoF, not a panic.
+#[test]
+fn singular_reduced_mass_matrix_is_an_error() {
+    // Two massless prismatic joints in opposite directions, one mimicking the other with
+    // multiplier 1: their motions cancel, so the reduced DoF moves nothing.
+    let xml = r#"<robot name="t">
+  <link name="base"/>
+  <link name="a"/>
+  <link name="b"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+  <joint name="ja" type="prismatic"><parent link="base"/><child link="a"/><axis xyz="1 0 0"/></joint>
+  <joint name="jb" type="prismatic"><parent link="a"/><child link="b"/><axis xyz="-1 0 0"/><mimic joint="ja"/></joint>
+</robot>"#;
+    let m = sodyn::model::load_urdf_str(xml, "t.urdf", &um::opts(false)).unwrap();
+    let mut d = Data::new(&m);
+    let z = DVector::zeros(1);
+    let e = algo::aba(&m, &mut d, &DVector::zeros(1), &z, &z, None).unwrap_err();
+    assert!(matches!(e, Error::Singular { .. }) && e.to_string().contains("\"ja\""), "{e}");
+}
+
+/// Without constraints `Model::with_mimic_joints` gives the tree itself: the same contracted
+/// Hessians as the tree's, with the workspaces of either.
+#[test]
+fn without_mimics_the_contracted_hessians_are_the_trees() {
+    let full: Model =
+        load_urdf_file(&um::arm_path(), &UrdfOptions { floating_base: true, ..Default::default() })
+            .unwrap();
+    let m = full.with_mimic_joints(&[] as &[MimicJoint]).unwrap();
+    assert!(!m.is_reduced());
+    let n = m.nv();
+    let mut rng = Rng::new(44);
+    let [q, v, x] = um::state(&m, &mut rng);
+    let contacts = um::arm_contacts(&m, false);
+    let mut d = Data::with_second_order(&full);
+    let mut md = Data::with_second_order(&m);
+    // IDFOZA / IDSOZA.
+    let mut o1 = DMatrix::zeros(n, n);
+    let mut o2 = DMatrix::zeros(n, n);
+    deriv::idfoza(&full, &mut d, &q, &x, &mut o1).unwrap();
+    deriv::idfoza(&m, &mut md, &q, &x, &mut o2).unwrap();
+    assert!(mat_err(&o2, &o1) < 1e-12);
+    let t1 = deriv::idsoza(&full, &mut d, &q, &x).unwrap().clone();
+    let t2 = deriv::idsoza(&m, &mut md, &q, &x).unwrap();
+    assert!(ten_err(t2, &t1) < 1e-12);
+    // KKT.
+    let mut kd = ContactData::with_contracted(&full, &contacts).unwrap();
+    let mut mkd = ContactData::with_contracted(&m, &contacts).unwrap();
+    let wa = DVector::from_fn(n, |_, _| rng.range(-1.0, 1.0));
+    let wl = DVector::from_fn(mkd.dim(), |_, _| rng.range(-1.0, 1.0));
+    let kc = deriv::kkt_so_contracted(&full, &mut d, &mut kd, &q, &v, &x, &wa, &wl).unwrap();
+    let mkc = deriv::kkt_so_contracted(&m, &mut md, &mut mkd, &q, &v, &x, &wa, &wl).unwrap();
+    let e = [
+        mat_err(mkc.c_qq(), kc.c_qq()),
+        mat_err(mkc.c_vv(), kc.c_vv()),
+        mat_err(mkc.c_qv(), kc.c_qv()),
+        mat_err(mkc.c_tauq(), kc.c_tauq()),
+    ];
+    assert!(e.iter().all(|&e| e < 1e-10), "{e:?}");
+    // Impact.
+    let mut im = ContactData::with_contracted(&full, &contacts).unwrap();
+    im.set_restitution(0.3).unwrap();
+    let mut mim = ContactData::with_contracted(&m, &contacts).unwrap();
+    mim.set_restitution(0.3).unwrap();
+    let ic = deriv::impact_so_contracted(&full, &mut d, &mut im, &q, &v, &wa, &wl).unwrap();
+    let mic = deriv::impact_so_contracted(&m, &mut md, &mut mim, &q, &v, &wa, &wl).unwrap();
+    let e = [mat_err(mic.c_qq(), ic.c_qq()), mat_err(mic.c_qvminus(), ic.c_qvminus())];
+    assert!(e.iter().all(|&e| e < 1e-10), "{e:?}");
+}
+
+#[test]
+fn bad_contracted_inputs_are_errors() {
+    let m = load_urdf_file(&um::arm_path(), &um::opts(true)).unwrap();
+    let other = load_urdf_file(&um::arm_path(), &um::opts(false)).unwrap();
+    let n = m.nv();
+    let mut data = Data::with_second_order(&m);
+    let mut rng = Rng::new(45);
+    let [q, v, x] = um::state(&m, &mut rng);
+    // IDFOZA / IDSOZA: lengths, NaN, output shape, workspaces.
+    let mut out = DMatrix::zeros(n, n);
+    let e = deriv::idfoza(&m, &mut data, &q, &DVector::zeros(n + 1), &mut out).unwrap_err();
+    assert!(matches!(e, Error::Dimension { ref what, .. } if what == "x"), "{e}");
+    let mut bad = x.clone();
+    bad[2] = f64::NAN;
+    let e = deriv::idfoza(&m, &mut data, &q, &bad, &mut out).unwrap_err();
+    assert!(matches!(e, Error::NotFinite { ref what, index: 2 } if what == "x"), "{e}");
+    let e = deriv::idfoza(&m, &mut data, &q, &x, &mut DMatrix::zeros(n, n + 1)).unwrap_err();
+    assert!(e.to_string().contains("out"), "{e}");
+    let e = deriv::idfoza(&m, &mut Data::new(&other), &q, &x, &mut out).unwrap_err();
+    assert!(matches!(e, Error::Workspace(_)), "{e}");
+    let e = deriv::idsoza(&m, &mut Data::with_second_order(&other), &q, &x).unwrap_err();
+    assert!(matches!(e, Error::Workspace(_)), "{e}");
+    let e = deriv::idsoza(&m, &mut data, &v, &x).unwrap_err();
+    assert!(matches!(e, Error::Dimension { ref what, .. } if what == "q"), "{e}");
+    // KKT: weights, workspaces of another model or contact set.
+    let contacts = um::arm_contacts(&m, false);
+    let mut kd = um::kkt_data(&m, &contacts).unwrap();
+    kd.reserve_contracted(&m).unwrap();
+    let (wa, wl) = (DVector::from_element(n, 0.5), DVector::from_element(kd.dim(), 0.5));
+    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd, &q, &v, &x, &wl, &wl).unwrap_err();
+    assert!(matches!(e, Error::Dimension { ref what, .. } if what == "w_qdd"), "{e}");
+    let mut badl = wl.clone();
+    badl[0] = f64::INFINITY;
+    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd, &q, &v, &x, &wa, &badl).unwrap_err();
+    assert!(matches!(e, Error::NotFinite { ref what, index: 0 } if what == "w_lambda"), "{e}");
+    // (The contracted workspace now lives in the ContactData, so it cannot belong to another
+    // contact set: a ContactData without contracted capacity, then the 9-row weights on the
+    // 12-row set, then a ContactData of another model.)
+    let mut kd3 = um::kkt_data(&m, &um::arm_contacts(&m, true)).unwrap();
+    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd3, &q, &v, &x, &wa, &wl).unwrap_err();
+    assert!(matches!(&e, Error::Workspace(s) if s.contains("ContactData::with_contracted")), "{e}");
+    kd3.reserve_contracted(&m).unwrap();
+    let e = deriv::kkt_so_contracted(&m, &mut data, &mut kd3, &q, &v, &x, &wa, &wl).unwrap_err();
+    assert!(matches!(e, Error::Dimension { ref what, .. } if what == "w_lambda"), "{e}");
+    let mut okd = ContactData::with_contracted(&other, &um::arm_contacts(&other, false)).unwrap();
+    let e = deriv::kkt_so_contracted(&m, &mut data, &mut okd, &q, &v, &x, &wa, &wl).unwrap_err();
+    assert!(matches!(&e, Error::Workspace(s) if s.contains("ContactData")), "{e}");
+    deriv::kkt_so_contracted(&m, &mut data, &mut kd, &q, &v, &x, &wa, &wl).unwrap();
+    // Impact: the same.
+    let mut im = um::impact_data(&m, &contacts).unwrap();
+    im.reserve_contracted(&m).unwrap();
+    let e = deriv::impact_so_contracted(&m, &mut data, &mut im, &q, &v, &wa, &wa).unwrap_err();
+    assert!(matches!(e, Error::Dimension { ref what, .. } if what == "w_impulse"), "{e}");
+    let mut badv = wa.clone();
+    badv[n - 1] = f64::NAN;
+    let e = deriv::impact_so_contracted(&m, &mut data, &mut im, &q, &v, &badv, &wl).unwrap_err();
+    assert!(matches!(e, Error::NotFinite { ref what, .. } if what == "w_vplus"), "{e}");
+    let e = deriv::impact_so_contracted(&m, &mut data, &mut im, &q, &wl, &wa, &wl).unwrap_err();
+    assert!(matches!(e, Error::Dimension { ref what, .. } if what == "vminus"), "{e}");
+    let mut im3 = um::impact_data(&m, &um::arm_contacts(&m, true)).unwrap();
+    let e = deriv::impact_so_contracted(&m, &mut data, &mut im3, &q, &v, &wa, &wl).unwrap_err();
+    assert!(matches!(&e, Error::Workspace(s) if s.contains("ContactData::with_contracted")), "{e}");
+    im3.reserve_contracted(&m).unwrap();
+    let e = deriv::impact_so_contracted(&m, &mut data, &mut im3, &q, &v, &wa, &wl).unwrap_err();
+    assert!(matches!(e, Error::Dimension { ref what, .. } if what == "w_impulse"), "{e}");
+    let mut oim = ContactData::with_contracted(&other, &um::arm_contacts(&other, false)).unwrap();
+    let e = deriv::impact_so_contracted(&m, &mut data, &mut oim, &q, &v, &wa, &wl).unwrap_err();
+    assert!(matches!(&e, Error::Workspace(s) if s.contains("ContactData")), "{e}");
+    deriv::impact_so_contracted(&m, &mut data, &mut im, &q, &v, &wa, &wl).unwrap();
+}
+
+#[test]
+fn kinematics_inputs_are_errors() {
+    let m = &um::arm(false);
+    let mut d = Data::new(m);
+    let q = m.neutral();
+    let nf = m.full_tree().frames().len();
+    let e = algo::frame_placement(m, &mut d, &q, nf).unwrap_err().to_string();
+    assert!(e.contains("frame"), "{e}");
+    let mut full_cols = nalgebra::Matrix6xX::zeros(m.full_tree().nv());
+    let e = algo::frame_jacobian(m, &mut d, &q, 0, algo::ReferenceFrame::World, &mut full_cols)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("columns"), "{e}");
+    let short = DVector::zeros(m.nv() - 1);
+    assert!(algo::frame_velocity(m, &mut d, &q, &short, 0, algo::ReferenceFrame::Local).is_err());
+    let v = DVector::zeros(m.nv());
+    assert!(
+        algo::frame_acceleration(m, &mut d, &q, &v, &short, 0, algo::ReferenceFrame::Local)
+            .is_err()
+    );
+    let mut nan = q.clone();
+    nan[0] = f64::NAN;
+    assert!(algo::center_of_mass(m, &mut d, &nan).is_err());
+    let mut j3 = nalgebra::Matrix3xX::zeros(m.nv() + 1);
+    assert!(algo::center_of_mass_jacobian(m, &mut d, &q, &mut j3).is_err());
+    let other = &um::arm(true);
+    let mut d2 = Data::new(other);
+    assert!(algo::frame_placement(m, &mut d2, &q, 0).is_err());
+    let e = algo::centroidal_dynamics_derivatives(m, &mut d2, &q, &v, &v).unwrap_err().to_string();
+    assert!(e.contains("Data"), "{e}");
+}
+
+#[test]
+fn configuration_jacobians_check_inputs() {
+    use sodyn::model::Arg;
+    let m = &um::arm(true);
+    let q = m.neutral();
+    let e = m.d_integrate(&q, &DVector::zeros(3), Arg::First).unwrap_err().to_string();
+    assert!(e.contains("delta"), "{e}");
+    let e = m.d_difference(&q, &DVector::zeros(2), Arg::Second).unwrap_err().to_string();
+    assert!(e.contains("q1"), "{e}");
+    let mut bad = q.clone();
+    bad[3] = 2.0; // not a unit quaternion
+    assert!(m.d_integrate(&bad, &DVector::zeros(m.nv()), Arg::First).is_err());
+    let mut out = nalgebra::DMatrix::zeros(m.nv(), m.nv() + 1);
+    assert!(m.d_integrate_into(&q, &DVector::zeros(m.nv()), Arg::First, &mut out).is_err());
 }

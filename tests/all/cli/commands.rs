@@ -1588,19 +1588,18 @@ fn demo_takes_the_model_and_contact_options() {
     );
     assert_ok(&base, "demo quadruped");
     assert_ok(&no_armature, "demo quadruped --armature 0");
-    // Errors: an unknown contact frame, contacts with --mimic, --contact-type without
+    // Errors: an unknown contact frame, --contact-type without
     // --contacts, a floating base on a built-in model.
     let err = assert_clean_failure(
         &sodyn(&["demo", "--model", solo, "--contacts", "FL_FOOT,NOSE"]),
         "unknown contact frame",
     );
     assert!(err.contains("--contacts: unknown frame \"NOSE\""), "{err}");
+    // A model in reduced coordinates takes contacts like any other.
     let mimic = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/mimic_arm.urdf");
-    let err = assert_clean_failure(
-        &sodyn(&["demo", "--model", mimic, "--mimic", "--contacts", "palm"]),
-        "contacts with --mimic",
-    );
-    assert!(err.contains("`--contacts`: is not supported with demo --mimic"), "{err}");
+    let o = sodyn(&["demo", "--model", mimic, "--mimic", "--floating-base", "--contacts", "tool"]);
+    assert_ok(&o, "demo --mimic with contacts");
+    assert!(stdout(&o).contains(" on tool") && stdout(&o).contains("kkt"), "{}", stdout(&o));
     let err = assert_usage_error(&sodyn(&["demo", "--contact-type", "6d"]), "--contact-type alone");
     assert!(err.contains("--contacts"), "{err}");
     let err =

@@ -48,7 +48,7 @@ fn fd_first_order_matches_dual_oracle() {
     models.push(builtin::random_tree(40, 12, false));
     // nv ≤ 3 takes the small-model solve of `fd_derivatives`.
     let small = [builtin::serial_chain(1), builtin::serial_chain(2), builtin::serial_chain(3)];
-    for m in models.iter().filter(|m| m.nv() <= 60).step_by(2).chain(&small) {
+    for m in every(models, 2).iter().chain(&small) {
         let mut d = Data::new(m);
         let (q, v, tau) = random_state(m, &mut rng);
         fd_derivatives(m, &mut d, &q, &v, &tau, None).unwrap();
@@ -68,7 +68,7 @@ fn fd_first_order_matches_dual_oracle() {
 fn id_first_order_matches_finite_differences() {
     let mut w = Worst::new("dtau_dq/dv vs central FD");
     let mut rng = Rng::new(13);
-    for m in test_models(30).iter().step_by(4) {
+    for m in &every(test_models(30), 4) {
         let (q, v, a) = random_state(m, &mut rng);
         let mut d = Data::new(m);
         id_derivatives(m, &mut d, &q, &v, &a, None).unwrap();
@@ -94,7 +94,7 @@ fn id_first_order_matches_finite_differences() {
 }
 
 fn so_models() -> Vec<Model> {
-    let mut v: Vec<Model> = test_models(40).into_iter().step_by(2).collect();
+    let mut v: Vec<Model> = every(test_models(40), 2);
     v.push(builtin::random_tree(24, 5, true));
     v.retain(|m| m.nv() <= 40);
     v
@@ -140,7 +140,7 @@ fn fd_second_order_matches_hyper_dual_oracle() {
         Worst::new("d2qdd_dtaudq vs hyper-dual"),
     ];
     let mut rng = Rng::new(15);
-    for m in so_models().into_iter().step_by(2) {
+    for m in every(so_models(), 2) {
         let mut d = Data::with_second_order(&m);
         let (q, v, tau) = random_state(&m, &mut rng);
         let f = fd_so_derivatives(&m, &mut d, &q, &v, &tau, None).unwrap();
@@ -201,7 +201,7 @@ fn idfoza_and_idsoza_equal_contractions_of_dense_tensors() {
     let mut w1 = Worst::new("IDFOZA vs dM_dq · x");
     let mut w2 = Worst::new("IDSOZA vs d2M_dq2 · x");
     let mut rng = Rng::new(17);
-    for m in so_models().into_iter().step_by(3) {
+    for m in every(so_models(), 3) {
         let n = m.nv();
         let (q, _, x) = random_state(&m, &mut rng);
         let mut d = Data::with_second_order(&m);

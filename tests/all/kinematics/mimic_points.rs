@@ -20,7 +20,7 @@ use sodyn::Error;
 use sodyn::algo::{self, Data};
 use sodyn::model::{Model, UrdfOptions, load_urdf_file};
 use sodyn::reference::kinematics::{forward_kinematics as ref_fk, point_position as ref_point};
-use sodyn::reference::mimic::Reduced;
+use sodyn::reference::{self, mimic::Reduced};
 use sodyn::rng::Rng;
 
 fn data(name: &str) -> std::path::PathBuf {
@@ -97,7 +97,7 @@ fn mimic_point_kinematics_match_the_dual_oracle() {
                             (0..n).map(|j| D::new(0.0, (j == k) as u8 as f64)).collect();
                         let x = ref_point(
                             m.full_tree(),
-                            &red.expand_q(&red.integrate(&qd, &e)),
+                            &red.expand_q(&reference::integrate(m, &qd, &e)),
                             f,
                             &pd,
                         );
@@ -108,8 +108,12 @@ fn mimic_point_kinematics_match_the_dual_oracle() {
                     let qh: Vec<H> = q.iter().map(|&x| H::from_re(x)).collect();
                     let tv: Vec<H> = v.iter().map(|&x| H::new(0.0, x, x, 0.0)).collect();
                     let ph = p.map(H::from);
-                    let x =
-                        ref_point(m.full_tree(), &red.expand_q(&red.integrate(&qh, &tv)), f, &ph);
+                    let x = ref_point(
+                        m.full_tree(),
+                        &red.expand_q(&reference::integrate(m, &qh, &tv)),
+                        f,
+                        &ph,
+                    );
                     let vel = Vector3::new(x[0].eps1, x[1].eps1, x[2].eps1);
                     w[2].add(rel3(&(&jac * &v), &vel), &at);
                     let drift = algo::point_drift(m, &mut d, &q, &v, f, &pv).unwrap();
@@ -143,7 +147,7 @@ fn mimic_forward_kinematics_matches_the_hyper_dual_oracle() {
             algo::forward_kinematics(m, &mut d, &q, Some(&v), Some(&a)).unwrap();
             let qh: Vec<H> = q.iter().map(|&x| H::from_re(x)).collect();
             let tv: Vec<H> = (0..m.nv()).map(|j| H::new(0.0, v[j], v[j], a[j])).collect();
-            let poses = ref_fk(m.full_tree(), &red.expand_q(&red.integrate(&qh, &tv)));
+            let poses = ref_fk(m.full_tree(), &red.expand_q(&reference::integrate(m, &qh, &tv)));
             for (i, pose) in poses.iter().enumerate().skip(1) {
                 let at = format!("{} body {i}", m.name());
                 let g = |f: fn(&H) -> f64| {
@@ -190,7 +194,7 @@ fn mimic_centroidal_momentum_matches_the_dual_oracle() {
             let h = algo::centroidal_momentum(m, &mut d, &q, &v).unwrap();
             let qd: Vec<D> = q.iter().map(|&x| D::from_re(x)).collect();
             let tv: Vec<D> = v.iter().map(|&x| D::new(0.0, x)).collect();
-            let poses = ref_fk(m.full_tree(), &red.expand_q(&red.integrate(&qd, &tv)));
+            let poses = ref_fk(m.full_tree(), &red.expand_q(&reference::integrate(m, &qd, &tv)));
             let (mut mass, mut mc, mut mcd) = (0.0, Vector3::zeros(), Vector3::zeros());
             let mut bodies = vec![];
             for (i, inertia) in m.full_tree().inertias().iter().enumerate().skip(1) {

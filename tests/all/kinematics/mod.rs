@@ -5,6 +5,5 @@ mod centroidal;
 mod com;
 mod frames;
 mod lie;
-mod mimic_kinematics;
 mod mimic_points;
 mod spatial_identities;

@@ -1236,3 +1236,68 @@ fn mjcf_xml_declaration_after_whitespace_loads() {
     let e = load_mjcf_str(&bad, "m.xml", Path::new("."), &opts).unwrap_err().to_string();
     assert!(e.starts_with("m.xml:6:"), "{e}");
 }
+
+fn mimic_urdf(finger_r: &str, mimic: &str) -> String {
+    format!(
+        r#"<robot name="t">
+  <link name="base"/>
+  <link name="a"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+  <link name="b"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+  <link name="c"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+  <joint name="ja" type="revolute"><parent link="base"/><child link="a"/><axis xyz="0 0 1"/></joint>
+  <joint name="jb" type="prismatic"><parent link="a"/><child link="b"/><axis xyz="1 0 0"/></joint>
+  <joint name="jc" type="{finger_r}"><parent link="b"/><child link="c"/><axis xyz="0 1 0"/>
+    {mimic}
+  </joint>
+</robot>"#
+    )
+}
+
+fn load_err(xml: &str) -> String {
+    sodyn::model::load_urdf_str(xml, "t.urdf", &crate::util::mimic::opts(false))
+        .unwrap_err()
+        .to_string()
+}
+
+#[test]
+fn bad_mimic_elements_are_errors_naming_the_joint() {
+    let ok = sodyn::model::load_urdf_str(
+        &mimic_urdf("continuous", r#"<mimic joint="ja" multiplier="2" offset="0.5"/>"#),
+        "t.urdf",
+        &crate::util::mimic::opts(false),
+    )
+    .unwrap();
+    assert_eq!((ok.nq(), ok.nv()), (2, 2));
+    for (kind, mimic, expect) in [
+        ("revolute", r#"<mimic joint="nope"/>"#, "\"nope\" is not a joint of the file"),
+        ("revolute", r#"<mimic joint="jc"/>"#, "cannot mimic itself"),
+        ("revolute", r#"<mimic joint="jb"/>"#, "both must be rotational"),
+        ("prismatic", r#"<mimic joint="ja"/>"#, "both must be rotational"),
+        ("floating", r#"<mimic joint="ja"/>"#, "must be revolute, continuous or prismatic"),
+        ("revolute", r#"<mimic joint="ja" multiplier="x"/>"#, "is not a number"),
+        ("revolute", r#"<mimic joint="ja" offset="nan"/>"#, "offset"),
+    ] {
+        let e = load_err(&mimic_urdf(kind, mimic));
+        assert!(e.contains("joint \"jc\"") && e.contains(expect), "{kind} {mimic}: {e}");
+        assert!(e.contains("t.urdf:"), "{e}");
+    }
+    // A reference that is itself a mimic joint; a fixed reference.
+    let chain = mimic_urdf("revolute", r#"<mimic joint="ja"/>"#).replace(
+        r#"<child link="a"/><axis xyz="0 0 1"/>"#,
+        r#"<child link="a"/><axis xyz="0 0 1"/><mimic joint="jc"/>"#,
+    );
+    let e = load_err(&chain);
+    assert!(e.contains("is itself a mimic joint"), "{e}");
+    let fixed_ref = mimic_urdf("revolute", r#"<mimic joint="ja"/>"#)
+        .replace(r#"name="ja" type="revolute""#, r#"name="ja" type="fixed""#);
+    let e = load_err(&fixed_ref);
+    assert!(e.contains("joint \"jc\"") && e.contains("is fixed"), "{e}");
+    // Without the option, the same files load (unknown references as a warning).
+    let plain = sodyn::model::load_urdf_str(
+        &mimic_urdf("revolute", r#"<mimic joint="nope"/>"#),
+        "t.urdf",
+        &UrdfOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(plain.warnings().len(), 1);
+}

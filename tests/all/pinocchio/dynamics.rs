@@ -36,7 +36,9 @@ use super::pin_map::{
 use nalgebra::{DMatrix, DVector};
 use sodyn::algo::{Data, aba, crba, rnea};
 use sodyn::deriv::{fd_derivatives, id_derivatives, id_so_derivatives};
+use sodyn::model::{UrdfOptions, load_urdf_file};
 use sodyn::tensor::Tensor3;
+use std::path::PathBuf;
 
 /// Tolerance for `τ`, `M`, `q̈`.
 const TOL_DYN: f64 = 1e-10;
@@ -267,4 +269,79 @@ pin_tests! {
     pinocchio_anymal => "anymal",
     pinocchio_talos_reduced => "talos_reduced",
     pinocchio_talos_full_v2 => "talos_full_v2",
+}
+
+/// τ and `M` against Pinocchio 4.1's `buildModelFromUrdf(path, mimic=True)` (its RNEA and CRBA
+/// support mimic joints): the fixtures `tests/fixtures/mimic_*.json` of
+/// `scripts/make_mimic_fixtures.py`, joints mapped by name (Pinocchio orders siblings by name;
+/// a continuous joint's `q` is `[cos, sin]` there).
+#[test]
+fn mimic_models_match_pinocchio_fixtures() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    for name in ["baxter", "panda", "panda_coeffs"] {
+        let text = std::fs::read_to_string(root.join(format!("tests/fixtures/mimic_{name}.json")))
+            .unwrap();
+        let fx: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let m = load_urdf_file(
+            &root.join(fx["urdf"].as_str().unwrap()),
+            &UrdfOptions { mimic: true, ..Default::default() },
+        )
+        .unwrap();
+        assert_eq!(m.nv() as u64, fx["nv"].as_u64().unwrap(), "{name}");
+        let full = m.full_tree();
+        // perm[ours] = Pinocchio's velocity index; q entries likewise (one per joint here).
+        let mut perm = vec![usize::MAX; m.nv()];
+        let mut qmap = vec![];
+        for j in fx["joints"].as_array().unwrap() {
+            let id = full.joint_id(j["name"].as_str().unwrap()).unwrap();
+            let (pv, nv) = (j["idx_v"].as_u64().unwrap() as usize, j["nv"].as_u64().unwrap());
+            match m.reduced_idx(id) {
+                None => assert_eq!(nv, 0, "{name}: {j} is a mimic joint in sodyn"),
+                Some((rq, rv)) => {
+                    assert_eq!(nv, 1, "{name}: {j}");
+                    perm[rv] = pv;
+                    let pq = j["idx_q"].as_u64().unwrap() as usize;
+                    let rub = j["type"].as_str().unwrap().contains("RUB");
+                    qmap.push((rq, pq, rub));
+                }
+            }
+        }
+        assert!(perm.iter().all(|&p| p < m.nv()), "{name}: {perm:?}");
+        let mut data = Data::new(&m);
+        let mut worst = 0.0f64;
+        for st in fx["states"].as_array().unwrap() {
+            let get = |k: &str| -> Vec<f64> {
+                st[k].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()
+            };
+            let (pq, pv, pa, ptau) = (get("q"), get("v"), get("a"), get("tau"));
+            let mut q = DVector::zeros(m.nq());
+            for &(rq, p, rub) in &qmap {
+                q[rq] = if rub { pq[p + 1].atan2(pq[p]) } else { pq[p] };
+            }
+            let v = DVector::from_fn(m.nv(), |r, _| pv[perm[r]]);
+            let a = DVector::from_fn(m.nv(), |r, _| pa[perm[r]]);
+            let tau = rnea(&m, &mut data, &q, &v, &a, None).unwrap().clone();
+            let expect: Vec<f64> = (0..m.nv()).map(|r| ptau[perm[r]]).collect();
+            worst = worst.max(vec_err(&tau, &expect));
+            let mm = crba(&m, &mut data, &q).unwrap().clone();
+            let pm = st["M"].as_array().unwrap();
+            let expect = DMatrix::from_fn(m.nv(), m.nv(), |r, c| {
+                pm[perm[r]].as_array().unwrap()[perm[c]].as_f64().unwrap()
+            });
+            worst = worst.max(mat_err(&mm, &expect));
+        }
+        eprintln!("mimic {name} vs Pinocchio 4.1 (tau, M; relative): {worst:.1e}");
+        assert!(worst < 1e-9, "{name}: {worst:e}");
+    }
+}
+
+/// Error relative to the larger of 1 and the reference's largest entry.
+fn mat_err(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
+    assert_eq!(a.shape(), b.shape());
+    (a - b).amax() / b.amax().max(1.0)
+}
+fn vec_err(a: &DVector<f64>, b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    let e = a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+    e / b.iter().fold(0.0, |s: f64, y| s.max(y.abs())).max(1.0)
 }

@@ -69,3 +69,28 @@ pub fn kkt_data(m: &Model, contacts: &[sodyn::model::Contact]) -> sodyn::Result<
 pub fn impact_data(m: &Model, contacts: &[sodyn::model::Contact]) -> sodyn::Result<ContactData> {
     ContactData::new(m, contacts)
 }
+
+/// Contacts on the arm `m`: a 3-D world-aligned point on the tool (below the joint that mimics
+/// the shoulder) and a 6-D local contact on the thumb tip (below the mimic thumb base) with the
+/// Baumgarte gains 3 and 0.5 (9 rows); with `finger`, also a 3-D local point on the mimic right
+/// finger (12 rows).
+pub fn arm_contacts(m: &Model, finger: bool) -> Vec<sodyn::model::Contact> {
+    use sodyn::model::{Contact, ContactReference, ContactType};
+    let full = m.full_tree();
+    let p = nalgebra::Vector3::new(0.01, -0.02, 0.03);
+    let mut c = vec![
+        Contact::new(full, "tool", p).unwrap(),
+        Contact {
+            kind: ContactType::D6,
+            ..Contact::new(full, "thumb_tip", p)
+                .unwrap()
+                .with_reference(ContactReference::Local)
+                .with_baumgarte(3.0, 0.5)
+                .unwrap()
+        },
+    ];
+    if finger {
+        c.push(Contact::new(full, "finger_r", -p).unwrap().with_reference(ContactReference::Local));
+    }
+    c
+}

@@ -3,11 +3,15 @@
 
 pub mod mimic;
 
+use ContactReference::{Local, LocalWorldAligned as Lwa};
+use ContactType::{D3, D6};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use num_dual::{Dual64 as D, HyperHyperDual64 as H};
-use sodyn::model::{Model, builtin};
+use sodyn::algo::{Contact, ContactReference, ContactType};
+use sodyn::model::{Model, builtin, exp6};
 use sodyn::reference::kinematics::forward_kinematics;
 use sodyn::rng::Rng;
+use sodyn::spatial::Motion;
 use sodyn::tensor::Tensor3;
 
 /// Relative error `max|a − b| / max(1, max|b|)`.
@@ -37,7 +41,9 @@ pub fn random_state(model: &Model, rng: &mut Rng) -> (DVector<f64>, DVector<f64>
 }
 
 /// Test models: chains, the built-in robots and random trees mixing every joint type, fixed and
-/// floating base, up to `max_dof` degrees of freedom.
+/// floating base, with and without armature, and the mimic arm in reduced coordinates
+/// (`mimic::models`: fixed, floating, fixed with an armature), up to `max_dof` degrees of
+/// freedom.
 pub fn test_models(max_dof: usize) -> Vec<Model> {
     let mut out = vec![builtin::serial_chain(1), builtin::serial_chain(7), builtin::pendulum(2)];
     out.push(builtin::quadruped());
@@ -58,8 +64,20 @@ pub fn test_models(max_dof: usize) -> Vec<Model> {
             }
         }
     }
+    out.extend(mimic::models());
     out.retain(|m| m.nv() <= max_dof);
     out
+}
+
+/// Every `k`-th model of `models`, and every model in reduced coordinates among the others (so
+/// that each family test sees the mimic models however it samples).
+pub fn every(models: Vec<Model>, k: usize) -> Vec<Model> {
+    models
+        .into_iter()
+        .enumerate()
+        .filter(|(i, m)| i % k == 0 || m.is_reduced())
+        .map(|(_, m)| m)
+        .collect()
 }
 
 /// `m` with a random armature in `[0, 0.5)` on each DoF (except a root free flyer's six unless
@@ -112,38 +130,93 @@ impl Worst {
     }
 }
 
-/// (model, contact frames) cases: fixed and floating base, 1–4 contacts.
-pub fn contact_cases() -> Vec<(Model, Vec<&'static str>)> {
+/// A contact of a test case: its frame, type and reference.
+pub type ContactSpec = (&'static str, ContactType, ContactReference);
+
+/// The (model, contacts) cases of the contact-family tests (KKT, impact and constrained inverse
+/// dynamics, dense and contracted): 3-D and 6-D contacts, world-aligned and local, alone and
+/// mixed; models with and without armature; and the mimic arm in reduced coordinates
+/// (`util::mimic::ff_models`: floating, without and with an armature), its contacts below mimic
+/// joints.
+pub fn contact_cases() -> Vec<(Model, Vec<ContactSpec>)> {
+    let arms = mimic::ff_models();
     vec![
-        (builtin::quadruped(), vec!["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"]),
-        (with_random_armature(&builtin::quadruped(), 2, true), vec!["LF_FOOT", "RH_FOOT"]),
-        (builtin::serial_chain(6), vec!["ee"]),
+        (
+            builtin::quadruped(),
+            vec![
+                ("LF_FOOT", D3, Lwa),
+                ("RF_FOOT", D3, Lwa),
+                ("LH_FOOT", D3, Lwa),
+                ("RH_FOOT", D3, Lwa),
+            ],
+        ),
+        (
+            with_random_armature(&builtin::quadruped(), 2, true),
+            vec![("LF_FOOT", D3, Lwa), ("RH_FOOT", D3, Lwa)],
+        ),
+        (builtin::serial_chain(6), vec![("ee", D3, Lwa)]),
         (
             with_random_armature(&builtin::random_tree(8, 3, true), 3, false),
-            vec!["body_5", "body_7", "body_2"],
+            vec![("body_5", D3, Lwa), ("body_7", D3, Lwa), ("body_2", D3, Lwa)],
         ),
-        (builtin::random_tree(10, 21, false), vec!["body_9", "body_4"]),
+        (builtin::random_tree(10, 21, false), vec![("body_9", D3, Lwa), ("body_4", D3, Lwa)]),
+        (
+            builtin::quadruped(),
+            vec![("LF_FOOT", D3, Local), ("RF_FOOT", D3, Lwa), ("RH_FOOT", D3, Local)],
+        ),
+        (
+            builtin::quadruped(),
+            vec![("LF_FOOT", D6, Lwa), ("RF_FOOT", D3, Local), ("RH_FOOT", D3, Local)],
+        ),
+        (
+            with_random_armature(&builtin::quadruped(), 4, true),
+            vec![("RH_FOOT", D6, Local), ("LF_FOOT", D3, Lwa)],
+        ),
+        (with_random_armature(&builtin::serial_chain(9), 5, false), vec![("ee", D6, Lwa)]),
+        (builtin::serial_chain(8), vec![("ee", D6, Local)]),
+        (builtin::random_tree(8, 3, true), vec![("body_5", D6, Local), ("body_2", D3, Local)]),
+        (
+            with_random_armature(&builtin::random_tree(10, 21, false), 6, false),
+            vec![("body_9", D3, Local), ("body_4", D3, Lwa)],
+        ),
+        // The floating mimic arm (`util::mimic::ff_models`): the tool below the joint that
+        // mimics the shoulder, the thumb tip below the mimic thumb base.
+        (arms[0].clone(), vec![("tool", D3, Lwa), ("thumb_tip", D6, Local)]),
+        (arms[1].clone(), vec![("tool", D3, Local), ("thumb_tip", D6, Lwa)]),
     ]
 }
 
 /// A case with nv ≥ 32, where the KKT and impact second order take their symmetric products
 /// (`kkt::SYM_MIN_NV`); its hyper-dual oracle takes seconds, so only those tests run it.
-pub fn large_contact_case() -> (Model, Vec<&'static str>) {
-    (builtin::random_tree(28, 5, true), vec!["body_27", "body_13"])
+pub fn large_contact_case() -> (Model, Vec<ContactSpec>) {
+    (builtin::random_tree(28, 5, true), vec![("body_27", D6, Lwa), ("body_20", D3, Local)])
 }
 
-/// Contacts on `frames`, each at a random point within about 5 cm of the frame origin.
-pub fn contacts_of(m: &Model, frames: &[&str], rng: &mut Rng) -> Vec<sodyn::algo::Contact> {
-    frames
-        .iter()
-        .map(|f| {
-            sodyn::algo::Contact::new(
-                m,
-                f,
-                nalgebra::Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.05,
-            )
-            .unwrap()
+/// The contacts of `spec` on `m`, each frame placed at a random point within about 5 cm and a
+/// random rotation of its link frame.
+pub fn contacts_of(m: &Model, spec: &[ContactSpec], rng: &mut Rng) -> Vec<Contact> {
+    spec.iter()
+        .map(|&(f, kind, reference)| {
+            let xi = Motion::new(
+                Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.7,
+                Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.05,
+            );
+            let mut c = Contact::new(m, f, Vector3::zeros())
+                .unwrap()
+                .with_placement(m, &exp6(&xi))
+                .unwrap()
+                .with_reference(reference);
+            c.kind = kind;
+            c
         })
+        .collect()
+}
+
+/// `contacts` with random Baumgarte gains (`kp` in [0, 50), `kd` in [0, 10)).
+pub fn with_gains(contacts: &[Contact], rng: &mut Rng) -> Vec<Contact> {
+    contacts
+        .iter()
+        .map(|c| c.clone().with_baumgarte(rng.range(0.0, 50.0), rng.range(0.0, 10.0)).unwrap())
         .collect()
 }
 
