@@ -273,3 +273,18 @@ def test_rk4_second_order_is_refused_by_name():
         s = ocp.SolverFDDP(sp, second_order=so)
         with pytest.raises(ocp.OcpError, match=r"node 0: RK4"):
             s.solve(xs, us, 10, False)
+
+
+def test_rk_terminal_node_is_its_cost():
+    """An IntegratedActionModelRK terminal knot (time_step 0, calc(x)) converts to the cost
+    ℓ(x) without dynamics (Crocoddyl leaves the terminal F_x untouched, so it is not compared)."""
+    p0, _, _ = PROBLEMS["double_pendulum"](short=True)
+    p1, xs, us = with_rk(p0)
+    tm = crocoddyl.IntegratedActionModelRK(p0.terminalModel.differential, crocoddyl.RKType.four, 0.0)
+    p = crocoddyl.ShootingProblem(p0.x0, list(p1.runningModels), tm)
+    sp = ocp.from_crocoddyl(p)
+    assert sp.terminalModel.spec()["type"] == "rk4"
+    _compare_nodes(p, sp, xs, us, loose={**LOOSE, "Fx": np.inf})
+    cs, s = crocoddyl.SolverFDDP(p), ocp.SolverFDDP(sp)
+    assert cs.solve(xs, us, 100, False) == s.solve(xs, us, 100, False)
+    assert abs(s.iter - cs.iter) <= 1 and abs(s.cost - cs.cost) <= 1e-6 * abs(cs.cost)
