@@ -12,7 +12,11 @@
 //!    `v′ = v + dt a`, `q′ = q ⊕ dt v′`, `ℓ = dt ℓ_c(x, u)`;
 //!    - `F_x = ∂(x ⊕ δ)/∂x + ∂(x ⊕ δ)/∂δ ∂δ/∂x` with `δ = (dt v + dt² a, dt a)`;
 //!    - a node without control (the terminal node) has no dynamics: `x′ = x`, `ℓ = ℓ_c(x)`.
-//! 2. [`ActionKind::Impulse`]: impulse dynamics at a contact switch (Crocoddyl's
+//! 2. [`ActionKind::RungeKutta`]: the same differential dynamics integrated by an explicit
+//!    Runge-Kutta scheme ([`RkType`]: Crocoddyl's `IntegratedActionModelRK`), the derivatives by
+//!    the chain rule through the stages and `⊕` (exact first order; Gauss-Newton cost Hessian);
+//!    no second order ([`ActionModel::second_order`] refuses such a knot);
+//! 3. [`ActionKind::Impulse`]: impulse dynamics at a contact switch (Crocoddyl's
 //!    `ActionModelImpulseFwdDynamics`): `x′ = (q, v⁺)`, `v⁺` from
 //!    [`sodyn::deriv::impact_dynamics`], `ℓ = ℓ_c(x)` with the impulses as contact forces; no
 //!    control.
@@ -29,7 +33,7 @@ use sodyn::model::{Contact, JointType, Model};
 use crate::cost::{CostData, CostDerivs, CostModelSum, CurvatureWork};
 use crate::curvature::{Group, bracket_form, djr_t};
 use crate::error::{OcpError, Result};
-use crate::linalg::gemm_nn;
+use crate::linalg::{gemm_nn, gemm_tn};
 use crate::residual::NodeView;
 use crate::state::{StateMultibody, StateScratch};
 
@@ -94,6 +98,18 @@ pub enum ActionKind {
         /// Damping of the Delassus solve (Crocoddyl's `JMinvJt_damping`; 0: exact).
         damping: f64,
     },
+    /// Differential dynamics integrated by an explicit Runge-Kutta scheme over `dt`
+    /// (Crocoddyl's `IntegratedActionModelRK`, `PolyZero` controls; see [`RkType`]).
+    RungeKutta {
+        /// The scheme.
+        rk: RkType,
+        /// The time step (`0` for a terminal node).
+        dt: f64,
+        /// The contacts (empty: free dynamics, ABA).
+        contacts: Vec<NamedContact>,
+        /// Damping of the Delassus solve (Crocoddyl's `JMinvJt_damping`; 0: exact).
+        damping: f64,
+    },
     /// Impulse dynamics at a contact switch.
     Impulse {
         /// The impulse contacts.
@@ -103,6 +119,45 @@ pub enum ActionKind {
         /// Damping of the Delassus solve.
         damping: f64,
     },
+}
+
+/// An explicit Runge-Kutta scheme of Crocoddyl's `IntegratedActionModelRK` (`RKType`), with
+/// stages `y_0 = x`, `y_i = x ⊕ dt c_i k_{i−1}` (every stage from `x`), `k_i = (v(y_i), a(y_i, u))`
+/// the tangent of the stage (its velocity and acceleration), `x′ = x ⊕ dt Σ b_i k_i` and the
+/// cost `dt Σ b_i ℓ_c(y_i, u)`:
+///
+/// | scheme | `c` | `b` |
+/// |---|---|---|
+/// | [`RkType::Two`] | `0, ½` | `0, 1` |
+/// | [`RkType::Three`] | `0, ⅓, ⅔` | `¼, 0, ¾` |
+/// | [`RkType::Four`] | `0, ½, ½, 1` | `⅙, ⅓, ⅓, ⅙` |
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RkType {
+    /// Two stages (the midpoint rule).
+    Two,
+    /// Three stages (Heun's third order).
+    Three,
+    /// Four stages (the classical RK4).
+    Four,
+}
+
+impl RkType {
+    /// The nodes `c` and weights `b` (the table of [`RkType`]).
+    pub fn tableau(self) -> (&'static [f64], &'static [f64]) {
+        match self {
+            RkType::Two => (&[0.0, 0.5], &[0.0, 1.0]),
+            RkType::Three => (&[0.0, 1.0 / 3.0, 2.0 / 3.0], &[0.25, 0.0, 0.75]),
+            RkType::Four => (&[0.0, 0.5, 0.5, 1.0], &[1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0]),
+        }
+    }
+    /// `"RK2"`, `"RK3"` or `"RK4"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            RkType::Two => "RK2",
+            RkType::Three => "RK3",
+            RkType::Four => "RK4",
+        }
+    }
 }
 
 /// One knot: state, actuation, dynamics, costs, control bounds.
@@ -165,6 +220,8 @@ pub struct ActionData {
     /// The active contact set's data (KKT or impact, with contracted capacity).
     contacts: Option<ContactData>,
     sc: StateScratch,
+    /// Runge-Kutta buffers (Runge-Kutta knots only).
+    rk: Option<Box<RkWork>>,
     /// The second-order term of the last [`ActionModel::second_order`]: the Hessian of
     /// `V′ₓᵀ (f(x ⊕ δx, u + δu) ⊖ f(x, u))` plus the residual curvature of the costs, in
     /// `z = (δx, δu)` (`(ndx + nu)²`); the exact Hessian of the knot's term in the Q-function is
@@ -174,6 +231,54 @@ pub struct ActionData {
     /// Hessian (0: every residual has its exact curvature).
     pub gauss_newton_terms: usize,
     so: SoWork,
+}
+
+/// Buffers of a Runge-Kutta knot: the stage state `y`, its tangent `k`, `δ = dt Σ b_i k_i`, the
+/// stage step `dt c_i k`, and the derivatives `∂y/∂(x, u)`, `∂k/∂(x, u)`, `∂δ/∂(x, u)`; the
+/// cost terms' accumulators.
+#[derive(Clone, Debug)]
+struct RkWork {
+    y: DVector<f64>,
+    k: DVector<f64>,
+    delta: DVector<f64>,
+    step: DVector<f64>,
+    dy_dx: DMatrix<f64>,
+    dy_du: DMatrix<f64>,
+    dk_dx: DMatrix<f64>,
+    dk_du: DMatrix<f64>,
+    ddelta_dx: DMatrix<f64>,
+    ddelta_du: DMatrix<f64>,
+    lxx_dy: DMatrix<f64>,
+    lxx_du: DMatrix<f64>,
+    lx: DVector<f64>,
+    lu: DVector<f64>,
+    lxx: DMatrix<f64>,
+    lxu: DMatrix<f64>,
+    luu: DMatrix<f64>,
+}
+
+impl RkWork {
+    fn new(nx: usize, ndx: usize, nu: usize) -> RkWork {
+        RkWork {
+            y: DVector::zeros(nx),
+            k: DVector::zeros(ndx),
+            delta: DVector::zeros(ndx),
+            step: DVector::zeros(ndx),
+            dy_dx: DMatrix::zeros(ndx, ndx),
+            dy_du: DMatrix::zeros(ndx, nu),
+            dk_dx: DMatrix::zeros(ndx, ndx),
+            dk_du: DMatrix::zeros(ndx, nu),
+            ddelta_dx: DMatrix::zeros(ndx, ndx),
+            ddelta_du: DMatrix::zeros(ndx, nu),
+            lxx_dy: DMatrix::zeros(ndx, ndx),
+            lxx_du: DMatrix::zeros(ndx, nu),
+            lx: DVector::zeros(ndx),
+            lu: DVector::zeros(nu),
+            lxx: DMatrix::zeros(ndx, ndx),
+            lxu: DMatrix::zeros(ndx, nu),
+            luu: DMatrix::zeros(nu, nu),
+        }
+    }
 }
 
 /// Buffers of [`ActionModel::second_order`].
@@ -217,14 +322,22 @@ impl ActionModel {
     /// The control dimension (0 at an impulse node).
     pub fn nu(&self) -> usize {
         match self.kind {
-            ActionKind::Euler { .. } => self.actuation.nu(self.model()),
+            ActionKind::Euler { .. } | ActionKind::RungeKutta { .. } => {
+                self.actuation.nu(self.model())
+            }
             ActionKind::Impulse { .. } => 0,
         }
+    }
+    /// Whether the knot's dynamics take a control (Euler and Runge-Kutta knots).
+    fn controlled(&self) -> bool {
+        !matches!(self.kind, ActionKind::Impulse { .. })
     }
     /// The contacts of the knot.
     pub fn contacts(&self) -> &[NamedContact] {
         match &self.kind {
-            ActionKind::Euler { contacts, .. } | ActionKind::Impulse { contacts, .. } => contacts,
+            ActionKind::Euler { contacts, .. }
+            | ActionKind::RungeKutta { contacts, .. }
+            | ActionKind::Impulse { contacts, .. } => contacts,
         }
     }
     /// The row offset of contact `name` among the active contacts' stacked forces.
@@ -255,7 +368,9 @@ impl ActionModel {
         if !active.is_empty() {
             let mut cd = ContactData::with_contracted(m, &active)?;
             let damping = match &self.kind {
-                ActionKind::Euler { damping, .. } => *damping,
+                ActionKind::Euler { damping, .. } | ActionKind::RungeKutta { damping, .. } => {
+                    *damping
+                }
                 ActionKind::Impulse { restitution, damping, .. } => {
                     cd.set_restitution(*restitution)?;
                     *damping
@@ -310,6 +425,8 @@ impl ActionModel {
             data: Data::with_contracted(m),
             contacts,
             sc: self.state.scratch(),
+            rk: matches!(self.kind, ActionKind::RungeKutta { .. })
+                .then(|| Box::new(RkWork::new(self.state.nx(), ndx, nu))),
         })
     }
 
@@ -384,6 +501,23 @@ impl ActionModel {
                 }
                 with_dynamics = true;
                 self.eval_costs(d, x, u, with_dynamics, diff, cost_scale)
+            }
+            ActionKind::RungeKutta { rk, dt, .. } => {
+                let Some(u) = u else {
+                    d.xnext.copy_from(x);
+                    d.a.fill(0.0);
+                    if diff {
+                        d.fx.fill(0.0);
+                        d.fx.fill_diagonal(1.0);
+                    }
+                    return self.eval_costs(d, x, &zero_u, false, diff, 1.0);
+                };
+                let mut w = d.rk.take().ok_or_else(|| {
+                    OcpError::new("Runge-Kutta knot: the data was made for another knot")
+                })?;
+                let r = self.eval_rk(m, d, &mut w, *rk, *dt, x, u, diff);
+                d.rk = Some(w);
+                r
             }
             ActionKind::Impulse { .. } => {
                 self.impulse_dynamics(m, d, diff)?;
@@ -461,12 +595,19 @@ impl ActionModel {
         let zero_u = DVector::zeros(0);
         let (dt, dynamics) = match (&self.kind, u) {
             (ActionKind::Euler { dt, .. }, Some(_)) => (*dt, true),
-            (ActionKind::Euler { .. }, None) => (1.0, false),
+            (ActionKind::Euler { .. } | ActionKind::RungeKutta { .. }, None) => (1.0, false),
+            (ActionKind::RungeKutta { rk, .. }, Some(_)) => {
+                return Err(OcpError::new(format!(
+                    "{} integrator: the exact second order (second_order = True / \"auto\") of \
+                     a Runge-Kutta knot is not implemented; solve with second_order = False",
+                    rk.name()
+                )));
+            }
             (ActionKind::Impulse { .. }, _) => (1.0, true),
         };
         // 3. The costs' curvature (and their weight on the forces).
         {
-            let with_u = dynamics && matches!(self.kind, ActionKind::Euler { .. });
+            let with_u = dynamics && self.controlled();
             let forces = dynamics.then_some((&d.lambda, &d.dlambda_dx, &d.dlambda_du));
             let mut view = NodeView {
                 model: self.state.model(),
@@ -604,6 +745,8 @@ impl ActionModel {
                     }
                 }
             }
+            // Refused above (a Runge-Kutta knot with a control).
+            ActionKind::RungeKutta { .. } => {}
             ActionKind::Impulse { .. } => {
                 if let Some(cd) = d.contacts.as_mut() {
                     so.w_a.copy_from(&lv);
@@ -699,6 +842,169 @@ impl ActionModel {
         Ok(())
     }
 
+    /// A Runge-Kutta knot ([`RkType`]) at `(x, u)`, with the exact first-order chain rule
+    /// through `⊕` and the stages:
+    /// - `∂y_0/∂x = I`; `∂y_i/∂x = J₁(x, s_i) + J₂(x, s_i) dt c_i ∂k_{i−1}/∂x` with
+    ///   `s_i = dt c_i k_{i−1}`, `J₁ = ∂(x ⊕ s)/∂x`, `J₂ = ∂(x ⊕ s)/∂s` (and `∂y_i/∂u =
+    ///   J₂ dt c_i ∂k_{i−1}/∂u`);
+    /// - `∂k_i/∂x = [∂v(y_i)/∂x; a_y ∂y_i/∂x]`, `∂k_i/∂u = [∂v(y_i)/∂u; a_y ∂y_i/∂u + a_u]`;
+    /// - `F_x = J₁(x, δ) + J₂(x, δ) ∂δ/∂x`, `F_u = J₂(x, δ) ∂δ/∂u`, `δ = dt Σ b_i k_i`;
+    /// - the cost derivatives, with `w_i = dt b_i` and `Y_x = ∂y_i/∂x`, `Y_u = ∂y_i/∂u`:
+    ///   `ℓ_x = Σ w_i Y_xᵀ ℓ_y`, `ℓ_u = Σ w_i (Y_uᵀ ℓ_y + ℓ_u)` and the Gauss-Newton Hessian
+    ///   `ℓ_xx = Σ w_i Y_xᵀ ℓ_yy Y_x`, `ℓ_xu = Σ w_i Y_xᵀ (ℓ_yy Y_u + ℓ_yu)`,
+    ///   `ℓ_uu = Σ w_i (Y_uᵀ ℓ_yy Y_u + Y_uᵀ ℓ_yu + ℓ_uy Y_u + ℓ_uu)` (the stages' curvature
+    ///   `ℓ_yᵀ ∂²y_i` left out, as Crocoddyl does).
+    ///
+    /// Afterwards `d.a`, `d.lambda` (and their derivatives) are those of the last stage.
+    #[allow(clippy::too_many_arguments)]
+    fn eval_rk(
+        &self,
+        m: &Model,
+        d: &mut ActionData,
+        w: &mut RkWork,
+        rk: RkType,
+        dt: f64,
+        x: &DVector<f64>,
+        u: &DVector<f64>,
+        diff: bool,
+    ) -> Result<()> {
+        let (nq, nv) = (m.nq(), m.nv());
+        let (c, b) = rk.tableau();
+        let off = self.actuation.offset();
+        d.tau.fill(0.0);
+        d.tau.rows_mut(off, u.len()).copy_from(u);
+        w.delta.fill(0.0);
+        let mut cost = 0.0;
+        if diff {
+            w.ddelta_dx.fill(0.0);
+            w.ddelta_du.fill(0.0);
+            w.lx.fill(0.0);
+            w.lu.fill(0.0);
+            w.lxx.fill(0.0);
+            w.lxu.fill(0.0);
+            w.luu.fill(0.0);
+        }
+        for i in 0..c.len() {
+            if i == 0 {
+                w.y.copy_from(x);
+                if diff {
+                    w.dy_dx.fill(0.0);
+                    w.dy_dx.fill_diagonal(1.0);
+                    w.dy_du.fill(0.0);
+                }
+            } else {
+                let h = dt * c[i];
+                w.step.copy_from(&w.k);
+                w.step *= h;
+                self.state.integrate(x, &w.step, &mut w.y);
+                if diff {
+                    self.state.jintegrate_q(&mut d.sc, x, &w.step, Arg::First)?;
+                    d.jq_x.copy_from(&d.sc.jq);
+                    self.state.jintegrate_q(&mut d.sc, x, &w.step, Arg::Second)?;
+                    // q rows: J_q^s h ∂k_q/∂(x, u) (+ J_q^x on the q columns); v rows: h ∂k_v + [0 I].
+                    {
+                        let mut top = w.dy_dx.rows_mut(0, nv);
+                        gemm_nn(&mut top, h, &d.sc.jq, &w.dk_dx.rows(0, nv), 0.0);
+                        let mut tl = top.view_mut((0, 0), (nv, nv));
+                        tl += &d.jq_x;
+                    }
+                    {
+                        let mut top = w.dy_du.rows_mut(0, nv);
+                        gemm_nn(&mut top, h, &d.sc.jq, &w.dk_du.rows(0, nv), 0.0);
+                    }
+                    for r in nv..2 * nv {
+                        for col in 0..2 * nv {
+                            w.dy_dx[(r, col)] = h * w.dk_dx[(r, col)];
+                        }
+                        w.dy_dx[(r, r)] += 1.0;
+                        for col in 0..w.dy_du.ncols() {
+                            w.dy_du[(r, col)] = h * w.dk_du[(r, col)];
+                        }
+                    }
+                }
+            }
+            d.q.copy_from(&w.y.rows(0, nq));
+            d.v.copy_from(&w.y.rows(nq, nv));
+            self.forward_dynamics(m, d, diff).map_err(|e| {
+                e.context(&format!("{} stage {} (of {})", rk.name(), i + 1, c.len()))
+            })?;
+            w.k.rows_mut(0, nv).copy_from(&d.v);
+            w.k.rows_mut(nv, nv).copy_from(&d.a);
+            w.delta.axpy(dt * b[i], &w.k, 1.0);
+            if diff {
+                // ∂k/∂(x, u) = [∂v_y; a_y ∂y + (0, a_u)].
+                for r in 0..nv {
+                    for col in 0..2 * nv {
+                        w.dk_dx[(r, col)] = w.dy_dx[(nv + r, col)];
+                    }
+                    for col in 0..w.dy_du.ncols() {
+                        w.dk_du[(r, col)] = w.dy_du[(nv + r, col)];
+                    }
+                }
+                {
+                    let mut bot = w.dk_dx.rows_mut(nv, nv);
+                    gemm_nn(&mut bot, 1.0, &d.da_dx, &w.dy_dx, 0.0);
+                }
+                {
+                    let mut bot = w.dk_du.rows_mut(nv, nv);
+                    bot.copy_from(&d.da_du);
+                    gemm_nn(&mut bot, 1.0, &d.da_dx, &w.dy_du, 1.0);
+                }
+                w.ddelta_dx.zip_apply(&w.dk_dx, |a, k| *a += dt * b[i] * k);
+                w.ddelta_du.zip_apply(&w.dk_du, |a, k| *a += dt * b[i] * k);
+            }
+            if b[i] == 0.0 {
+                continue;
+            }
+            let wi = dt * b[i];
+            self.eval_costs(d, &w.y, u, true, diff, 1.0)?;
+            cost += wi * d.cost;
+            if diff {
+                w.lx.gemv_tr(wi, &w.dy_dx, &d.lx, 1.0);
+                w.lu.gemv_tr(wi, &w.dy_du, &d.lx, 1.0);
+                w.lu.axpy(wi, &d.lu, 1.0);
+                gemm_nn(&mut w.lxx_dy, 1.0, &d.lxx, &w.dy_dx, 0.0);
+                gemm_nn(&mut w.lxx_du, 1.0, &d.lxx, &w.dy_du, 0.0);
+                w.lxx_du += &d.lxu;
+                gemm_tn(&mut w.lxx, wi, &w.dy_dx, &w.lxx_dy, 1.0);
+                gemm_tn(&mut w.lxu, wi, &w.dy_dx, &w.lxx_du, 1.0);
+                // ℓ_uu: Y_uᵀ (ℓ_yy Y_u + ℓ_yu) + ℓ_uyᵀ... = Y_uᵀ lxx_du + ℓ_yuᵀ Y_u + ℓ_uu.
+                gemm_tn(&mut w.luu, wi, &w.dy_du, &w.lxx_du, 1.0);
+                gemm_tn(&mut w.luu, wi, &d.lxu, &w.dy_du, 1.0);
+                w.luu.zip_apply(&d.luu, |a, l| *a += wi * l);
+            }
+        }
+        self.state.integrate(x, &w.delta, &mut d.xnext);
+        d.cost = cost;
+        if diff {
+            d.lx.copy_from(&w.lx);
+            d.lu.copy_from(&w.lu);
+            d.lxx.copy_from(&w.lxx);
+            d.lxu.copy_from(&w.lxu);
+            d.luu.copy_from(&w.luu);
+            self.state.jintegrate_q(&mut d.sc, x, &w.delta, Arg::First)?;
+            d.jq_x.copy_from(&d.sc.jq);
+            self.state.jintegrate_q(&mut d.sc, x, &w.delta, Arg::Second)?;
+            d.jq_dx.copy_from(&d.sc.jq);
+            {
+                let mut top = d.fx.rows_mut(0, nv);
+                gemm_nn(&mut top, 1.0, &d.jq_dx, &w.ddelta_dx.rows(0, nv), 0.0);
+                let mut tl = top.view_mut((0, 0), (nv, nv));
+                tl += &d.jq_x;
+            }
+            {
+                let mut top = d.fu.rows_mut(0, nv);
+                gemm_nn(&mut top, 1.0, &d.jq_dx, &w.ddelta_du.rows(0, nv), 0.0);
+            }
+            d.fx.rows_mut(nv, nv).copy_from(&w.ddelta_dx.rows(nv, nv));
+            for j in 0..nv {
+                d.fx[(nv + j, nv + j)] += 1.0;
+            }
+            d.fu.rows_mut(nv, nv).copy_from(&w.ddelta_du.rows(nv, nv));
+        }
+        Ok(())
+    }
+
     /// `F_x`, `F_u` of symplectic Euler from `∂a/∂x`, `∂a/∂u`:
     /// - `∂δ/∂x = (dt² a_x + dt [0 I], dt a_x)`, `∂δ/∂u = (dt² a_u, dt a_u)`;
     /// - `F_x = [J_q^x [I 0] + J_q^δ ∂δ_q/∂x; [0 I] + dt a_x]`, `F_u = [J_q^δ dt² a_u; dt a_u]`,
@@ -744,7 +1050,7 @@ impl ActionModel {
         diff: bool,
         scale: f64,
     ) -> Result<()> {
-        let with_u = with_dynamics && matches!(self.kind, ActionKind::Euler { .. });
+        let with_u = with_dynamics && self.controlled();
         let forces = with_dynamics.then_some((&d.lambda, &d.dlambda_dx, &d.dlambda_du));
         let mut view = NodeView {
             model: self.state.model(),

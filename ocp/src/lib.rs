@@ -2,7 +2,7 @@
 //!
 //! Optimal control on [`sodyn`]: Crocoddyl's shooting problems (multibody state on the
 //! configuration manifold, full or floating-base actuation, free and contact forward dynamics
-//! integrated by symplectic Euler, impulse dynamics at contact switches, weighted sums of
+//! integrated by symplectic Euler or explicit Runge-Kutta (RK2/3/4), impulse dynamics at contact switches, weighted sums of
 //! activated residuals) and the DDP, FDDP and box-FDDP solvers with Crocoddyl's semantics.
 //! Conventions are sodyn's (`docs/conventions.md`: spatial vectors `[angular; linear]`,
 //! free-flyer `v = [ω; v]` in the body frame); `docs/ocp.md` maps Crocoddyl's layout.
@@ -25,7 +25,7 @@ pub mod solver;
 pub mod spec;
 pub mod state;
 
-pub use action::{ActionData, ActionKind, ActionModel, Actuation, NamedContact};
+pub use action::{ActionData, ActionKind, ActionModel, Actuation, NamedContact, RkType};
 pub use activation::Activation;
 pub use cost::{CostItem, CostModelSum};
 pub use error::{OcpError, Result};

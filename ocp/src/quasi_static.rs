@@ -23,7 +23,8 @@ pub(crate) fn quasi_static(m: &ActionModel, x: &DVector<f64>) -> Result<DVector<
     let mut data = Data::new(model);
     let g = rnea(model, &mut data, &q, &zero, &zero, None)?.clone();
     let (active, damping): (Vec<_>, f64) = match &m.kind {
-        ActionKind::Euler { contacts, damping, .. } => {
+        ActionKind::Euler { contacts, damping, .. }
+        | ActionKind::RungeKutta { contacts, damping, .. } => {
             (contacts.iter().filter(|c| c.active).map(|c| c.contact.clone()).collect(), *damping)
         }
         ActionKind::Impulse { .. } => (Vec::new(), 0.0),

@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! { "x0": [nx], "running": [NODE, ...], "terminal": NODE }
-//! NODE     = { "type": "euler" | "impulse", "dt": DT, "actuation": "full" | "floating_base",
+//! NODE     = { "type": "euler" | "rk2" | "rk3" | "rk4" | "impulse", "dt": DT, "actuation": "full" | "floating_base",
 //!              "contacts": [CONTACT...], "damping": 0, "restitution": 0,
 //!              "costs": [COST...], "u_lb": [nu], "u_ub": [nu] }
 //! CONTACT  = { "name": S, "frame": NAME | INDEX, "type": "3d" | "6d",
@@ -22,6 +22,11 @@
 //!          | {"type": "quad_barrier", "lb": [nr], "ub": [nr]}
 //!          | {"type": "weighted_quad_barrier", "lb": [nr], "ub": [nr], "weights": [nr]}
 //! ```
+//! `"euler"` is symplectic Euler (Crocoddyl's `IntegratedActionModelEuler`), `"rk2"`, `"rk3"`,
+//! `"rk4"` the explicit Runge-Kutta schemes of Crocoddyl's `IntegratedActionModelRK` with
+//! `RKType.two / three / four` ([`crate::action::RkType`]); both with `PolyZero` controls.
+//! A contact's `kp` must be 0 (a position gain against a world reference is not supported).
+//!
 //! Numbers may be given as the strings `"inf"`, `"-inf"` (bounds).
 
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
@@ -31,7 +36,7 @@ use sodyn::model::{Contact, ContactReference, ContactType, Model};
 use sodyn::spatial::{Motion, Transform};
 use std::sync::Arc;
 
-use crate::action::{ActionKind, ActionModel, Actuation, NamedContact};
+use crate::action::{ActionKind, ActionModel, Actuation, NamedContact, RkType};
 use crate::activation::Activation;
 use crate::cost::{CostItem, CostModelSum};
 use crate::error::{OcpError, Result};
@@ -402,6 +407,18 @@ pub fn action_model(model: &Arc<Model>, n: &Value, path: &str) -> Result<ActionM
             }
             ActionKind::Euler { dt, contacts: contacts.clone(), damping }
         }
+        "rk2" | "rk3" | "rk4" => {
+            let dt = opt_num(n, "dt", 0.0, path)?;
+            if dt < 0.0 {
+                return Err(err(&format!("{path}.dt"), format!("{dt} must be >= 0")));
+            }
+            let rk = match kind {
+                "rk2" => RkType::Two,
+                "rk3" => RkType::Three,
+                _ => RkType::Four,
+            };
+            ActionKind::RungeKutta { rk, dt, contacts: contacts.clone(), damping }
+        }
         "impulse" => {
             let restitution = opt_num(n, "restitution", 0.0, path)?;
             if restitution < 0.0 {
@@ -412,10 +429,15 @@ pub fn action_model(model: &Arc<Model>, n: &Value, path: &str) -> Result<ActionM
             }
             ActionKind::Impulse { contacts: contacts.clone(), restitution, damping }
         }
-        k => return Err(err(path, format!("unknown node type \"{k}\" (known: euler, impulse)"))),
+        k => {
+            return Err(err(
+                path,
+                format!("unknown node type \"{k}\" (known: euler, rk2, rk3, rk4, impulse)"),
+            ));
+        }
     };
     let nu = match kind {
-        ActionKind::Euler { .. } => actuation.nu(model),
+        ActionKind::Euler { .. } | ActionKind::RungeKutta { .. } => actuation.nu(model),
         ActionKind::Impulse { .. } => 0,
     };
     let draft = ActionModelDraft { contacts };

@@ -182,6 +182,84 @@ fn impulse_and_terminal_nodes_match_finite_differences() {
     }
 }
 
+#[test]
+fn runge_kutta_free_dynamics_matches_finite_differences() {
+    let m = model();
+    let x0 = StateMultibody::new(m.clone()).zero();
+    let mut worst: f64 = 0.0;
+    for kind in ["rk2", "rk3", "rk4"] {
+        let am = node(
+            &m,
+            json!({"type": kind, "dt": 0.02, "actuation": "floating_base", "costs": costs(&x0, 12, &[])}),
+        );
+        for seed in 0..2 {
+            let (x, u) = random_point(&m, 30 + seed, 12);
+            let e = check_fd(&am, &x, &u, true);
+            assert!(e < 1e-6, "{kind} seed {seed}: {e:e}");
+            worst = worst.max(e);
+        }
+    }
+    println!("RK free: max relative error {worst:e}");
+}
+
+#[test]
+fn runge_kutta_contact_dynamics_matches_finite_differences() {
+    let m = model();
+    let x0 = StateMultibody::new(m.clone()).zero();
+    let mut worst: f64 = 0.0;
+    for six_d in [false, true] {
+        let feet: &[&str] = if six_d { &FEET[..2] } else { &FEET };
+        let am = node(
+            &m,
+            json!({"type": "rk4", "dt": 0.01, "actuation": "floating_base",
+            "contacts": contact_list(feet, six_d), "costs": costs(&x0, 12, if six_d { &[] } else { feet })}),
+        );
+        for seed in 0..2 {
+            let (x, u) = random_point(&m, 40 + seed, 12);
+            let e = check_fd(&am, &x, &u, true);
+            assert!(e < 1e-6, "rk4 6d {six_d} seed {seed}: {e:e}");
+            worst = worst.max(e);
+        }
+    }
+    println!("RK4 contact: max relative error {worst:e}");
+}
+
+#[test]
+fn runge_kutta_problem_solves_and_refuses_second_order() {
+    use sodyn_ocp::SecondOrder;
+    let m = model();
+    let doc: serde_json::Value = serde_json::from_str(&problem_json(&m, 8)).unwrap();
+    let mut v = doc.clone();
+    for n in v["running"].as_array_mut().unwrap() {
+        n["type"] = json!("rk4");
+    }
+    let p = spec::problem_from_json(m.clone(), &v.to_string()).expect("problem");
+    let mut s = Solver::new(p, SolverKind::Fddp);
+    let x0 = s.problem.x0().clone();
+    let xs = vec![x0.clone(); 9];
+    let us = s.problem.quasi_static(&xs[..8]).expect("quasi_static");
+    for so in [SecondOrder::On, SecondOrder::Auto] {
+        s.second_order = so;
+        let e = s.solve(&xs, &us, 50, false, None).expect_err("second order of RK4 refused");
+        assert!(e.message.contains("node 0") && e.message.contains("RK4"), "{}", e.message);
+    }
+    s.second_order = SecondOrder::Off;
+    let ok = s.solve(&xs, &us, 200, false, None).expect("solve");
+    assert!(ok, "{:?} after {} iterations", s.termination(), s.iter());
+    let us = s.us().to_vec();
+    let xs2 = s.problem.rollout(&us).expect("rollout");
+    let err = xs2.iter().zip(s.xs()).map(|(a, b)| (a - b).amax()).fold(0.0, f64::max);
+    assert!(err < 1e-9, "rollout differs by {err:e}");
+    // The knot's own second_order names the scheme too.
+    let rk = &s.problem.running_models()[0];
+    let mut d = rk.create_data().expect("data");
+    rk.calc_diff(&mut d, &xs[0], Some(&us[0])).expect("calc_diff");
+    let e = rk
+        .second_order(&mut d, &xs[0], Some(&us[0]), &DVector::zeros(rk.state.ndx()))
+        .expect_err("refused");
+    assert!(e.message.contains("RK4"), "{}", e.message);
+}
+
 fn problem_json(m: &sodyn::model::Model, t: usize) -> String {
     let st = StateMultibody::new(Arc::new(m.clone()));
     let mut x0 = st.zero();

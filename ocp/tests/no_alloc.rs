@@ -33,7 +33,7 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
-fn problem(m: &Arc<sodyn::model::Model>) -> String {
+fn problem(m: &Arc<sodyn::model::Model>, rk: bool) -> String {
     let x0 = StateMultibody::new(m.clone()).zero();
     let feet = ["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"];
     let contacts: Vec<_> =
@@ -53,23 +53,28 @@ fn problem(m: &Arc<sodyn::model::Model>) -> String {
     let run = json!({"type": "euler", "dt": 0.02, "actuation": "floating_base", "contacts": contacts,
         "costs": costs, "u_lb": vec![-30.0; 12], "u_ub": vec![30.0; 12]});
     let imp = json!({"type": "impulse", "contacts": contacts, "costs": [costs[0].clone()]});
-    let mut running = vec![run.clone(); 6];
+    let mut rk4 = run.clone();
+    rk4["type"] = json!("rk4");
+    let body = if rk { rk4 } else { run.clone() };
+    let mut running = vec![body.clone(); 6];
     running.push(imp);
-    running.extend(vec![run.clone(); 5]);
+    running.extend(vec![body; 5]);
     json!({"x0": x0.as_slice(), "running": running, "terminal": run}).to_string()
 }
 
 #[test]
 fn solver_iterations_allocate_nothing() {
     let m = Arc::new(builtin::quadruped());
-    let doc = problem(&m);
-    for (kind, so) in [
-        (SolverKind::Fddp, SecondOrder::Off),
-        (SolverKind::Ddp, SecondOrder::Off),
-        (SolverKind::BoxFddp, SecondOrder::Off),
-        (SolverKind::Fddp, SecondOrder::On),
-        (SolverKind::Ddp, SecondOrder::On),
+    for (kind, so, rk) in [
+        (SolverKind::Fddp, SecondOrder::Off, false),
+        (SolverKind::Ddp, SecondOrder::Off, false),
+        (SolverKind::BoxFddp, SecondOrder::Off, false),
+        (SolverKind::Fddp, SecondOrder::On, false),
+        (SolverKind::Ddp, SecondOrder::On, false),
+        // Runge-Kutta knots (RK4) in the same problem.
+        (SolverKind::Fddp, SecondOrder::Off, true),
     ] {
+        let doc = problem(&m, rk);
         let mut s = Solver::new(spec::problem_from_json(m.clone(), &doc).unwrap(), kind);
         s.second_order = so;
         s.th_stop = 1e-300; // run every iteration
@@ -84,7 +89,7 @@ fn solver_iterations_allocate_nothing() {
         };
         count(&mut s, 8); // warm-up: the log's capacity
         let (a3, a6) = (count(&mut s, 3), count(&mut s, 6));
-        assert_eq!(s.iter(), 6, "{kind:?} {so:?} stopped early: {:?}", s.termination());
-        assert_eq!(a3, a6, "{kind:?} {so:?}: {a3} allocations in 3 iterations, {a6} in 6");
+        assert_eq!(s.iter(), 6, "{kind:?} {so:?} rk {rk} stopped early: {:?}", s.termination());
+        assert_eq!(a3, a6, "{kind:?} {so:?} rk {rk}: {a3} allocations in 3 iterations, {a6} in 6");
     }
 }

@@ -185,6 +185,25 @@ def _from_example(filename: str):
     return (p, *_guess(p))
 
 
+def with_rk(problem: Any, rk_type: Any = None) -> Tuple[Any, List[np.ndarray], List[np.ndarray]]:
+    """The same problem with every running ``IntegratedActionModelEuler`` replaced by
+    ``IntegratedActionModelRK(differential, rk_type, dt)`` (default ``RKType.four``; the same
+    control bounds), the terminal and impulse knots kept; with the example's initial guess."""
+    import crocoddyl
+
+    rk_type = crocoddyl.RKType.four if rk_type is None else rk_type
+    running = []
+    for m in problem.runningModels:
+        if type(m).__name__ == "IntegratedActionModelEuler":
+            r = crocoddyl.IntegratedActionModelRK(m.differential, rk_type, m.dt)
+            if m.has_control_limits:
+                r.u_lb, r.u_ub = m.u_lb, m.u_ub
+            m = r
+        running.append(m)
+    p = crocoddyl.ShootingProblem(problem.x0, running, problem.terminalModel)
+    return (p, *_guess(p))
+
+
 PROBLEMS: Dict[str, Callable[..., Any]] = {
     "anymal_walk": lambda short=False, x0=None: anymal("walk", short, x0),
     "anymal_trot": lambda short=False, x0=None: anymal("trot", short, x0),

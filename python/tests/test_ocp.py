@@ -14,7 +14,7 @@ import gait_problems
 from conftest import HAVE_SHARED, MODELS_DIR
 
 
-def _problem(T=10, with_bounds=False):
+def _problem(T=10, with_bounds=False, rk=None):
     m = sodyn.Model.builtin("quadruped")
     st = ocp.StateMultibody(m)
     act = ocp.ActuationModelFloatingBase(st)
@@ -36,7 +36,7 @@ def _problem(T=10, with_bounds=False):
                 st, ocp.ActivationModelQuadraticBarrier(ocp.ActivationBounds(cone.lb, cone.ub)),
                 ocp.ResidualModelContactFrictionCone(st, f, cone)), 10.0)
         d = ocp.DifferentialActionModelContactFwdDynamics(st, act, contacts, costs)
-        n = ocp.IntegratedActionModelEuler(d, dt)
+        n = ocp.IntegratedActionModelEuler(d, dt) if rk is None or dt == 0 else ocp.IntegratedActionModelRK(d, rk, dt)
         if with_bounds:
             n.u_lb, n.u_ub = -15 * np.ones(act.nu), 15 * np.ones(act.nu)
         return n
@@ -188,3 +188,27 @@ def test_native_anymal_trot_matches_crocoddyl():
                  - sodyn.frame_placement(model, data, q0, foot)[:3, 3])
         np.testing.assert_allclose(moved[:2], [dx, 0.0], atol=5e-3, err_msg=foot)
         assert abs(moved[2]) < 1e-2, (foot, moved)
+
+
+@pytest.mark.parametrize("rk", [ocp.RKType.two, ocp.RKType.three, ocp.RKType.four])
+def test_native_runge_kutta_problem_converges(rk):
+    p, x0 = _problem(rk=rk)
+    assert p.runningModels[0].spec()["type"] == "rk" + {"two": "2", "three": "3", "four": "4"}[rk]
+    s = ocp.SolverFDDP(p)
+    assert s.solve([x0] * 11, p.quasiStatic([x0] * 10), 100), s.termination
+    xs = p.rollout(s.us)
+    assert max(np.abs(a - b).max() for a, b in zip(xs, s.xs)) < 1e-9
+    s2 = ocp.SolverFDDP(p, second_order="auto")
+    with pytest.raises(ocp.OcpError, match=r"node 0: RK\d integrator"):
+        s2.solve([x0] * 11, p.quasiStatic([x0] * 10), 10)
+
+
+def test_runge_kutta_type_is_checked():
+    p, _ = _problem(T=1)
+    d = p.runningModels[0].differential
+    for ok, n in [(4, 4), ("rk3", 3), ("two", 2)]:
+        assert ocp.IntegratedActionModelRK(d, ok, 0.01).stages == n
+    with pytest.raises(ocp.OcpError, match="unknown rk_type 5"):
+        ocp.IntegratedActionModelRK(d, 5, 0.01)
+    with pytest.raises(ocp.OcpError, match="time_step"):
+        ocp.IntegratedActionModelRK(d, ocp.RKType.four, -1.0)

@@ -17,7 +17,7 @@ crocoddyl = pytest.importorskip("crocoddyl", reason="crocoddyl is not installed 
 pytest.importorskip("example_robot_data", reason="example-robot-data is not installed")
 
 sys.path.insert(0, os.path.dirname(__file__))
-from crocoddyl_problems import PROBLEMS  # noqa: E402
+from crocoddyl_problems import PROBLEMS, with_rk  # noqa: E402
 
 from sodyn import ocp  # noqa: E402
 
@@ -170,3 +170,121 @@ def test_unsupported_crocoddyl_types_are_named():
     p = crocoddyl.ShootingProblem(np.zeros(4), [m] * 3, m)
     with pytest.raises(ocp.OcpError, match=r"node 0 .*ActuationModelDoublePendulum"):
         ocp.from_crocoddyl(p)
+
+
+# Runge-Kutta knots (IntegratedActionModelRK). Crocoddyl 3.1's RK derivatives take the stage-1
+# q-step's Jacobian ∂(q ⊕ s)/∂s as the identity and its factor as dt/2 (right for RK2 and RK4 on
+# joints whose ⊕ is affine, as the Kinova's and the double pendulum's revolute joints; not on a
+# free flyer that rotates, nor for RK3, whose c_1 is 1/3); ours are the exact chain rule. So
+# fixed-base RK2/RK4 knots are compared to 1e-9, and where Crocoddyl's F_x is off, central
+# differences of Crocoddyl's own calc side with ours.
+
+
+def _fd_fx(p, t, x, u):
+    """Central differences on the manifold of Crocoddyl's own next state at knot t, sodyn's
+    tangent order."""
+    m, d = p.runningModels[t], p.runningModels[t].createData()
+    st = m.state
+    m.calc(d, x, u)
+    xn = d.xnext.copy()
+    h, fd = 1e-6, np.zeros((st.ndx, st.ndx))
+    for i in range(st.ndx):
+        e = np.zeros(st.ndx)
+        e[i] = h
+        m.calc(d, st.integrate(x, e), u)
+        xp = d.xnext.copy()
+        m.calc(d, st.integrate(x, -e), u)
+        fd[:, i] = (st.diff(xn, xp) - st.diff(xn, d.xnext)) / (2 * h)
+    m.calc(d, x, u)
+    m.calcDiff(d, x, u)
+    return fd, np.asarray(d.Fx)
+
+
+@pytest.mark.parametrize("name,rk", [("kinova_reach", "four"), ("kinova_reach", "two"),
+                                     ("double_pendulum", "four")])
+def test_rk_knots_match_crocoddyl_fixed_base(name, rk):
+    p, xs, us = with_rk(PROBLEMS[name](short=True)[0], getattr(crocoddyl.RKType, rk))
+    sp = ocp.from_crocoddyl(p)
+    assert type(sp.runningModels[0]).__name__ == "IntegratedActionModelRK"
+    _compare_nodes(p, sp, xs, us, loose=LOOSE)
+    cs = crocoddyl.SolverFDDP(p)
+    cs.solve(xs, us, 100, False)
+    _compare_nodes(p, sp, list(cs.xs), list(cs.us), loose=LOOSE)
+
+
+def test_rk_free_flyer_knots_match_crocoddyl_and_central_differences():
+    p, xs, us = with_rk(PROBLEMS["anymal_trot"](short=True)[0])
+    sp = ocp.from_crocoddyl(p)
+    # At the initial guess (v = 0: the stage-1 step is zero) Crocoddyl's RK4 derivatives are exact.
+    _compare_nodes(p, sp, xs, us, loose=LOOSE)
+    cs = crocoddyl.SolverFDDP(p)
+    c_ok = cs.solve(xs, us, 100, False)
+    # Per solve: the same iterations (±1) and cost (1e-6) despite Crocoddyl's F_x error.
+    so = ocp.SolverFDDP(sp)
+    assert so.solve(xs, us, 100, False) == c_ok, so.termination
+    assert abs(so.iter - cs.iter) <= 1 and abs(so.cost - cs.cost) <= 1e-6 * abs(cs.cost)
+    w = _compare_nodes(p, sp, list(cs.xs), list(cs.us),
+                       loose={**LOOSE, "Fx": 1e-6, "Lxu": 1e-6})
+    t = w["Fx"][1]
+    x, u = cs.xs[t], cs.us[t]
+    fd, theirs = _fd_fx(p, t, x, u)
+    lay = sp.layout
+    s = ocp.SolverFDDP(sp)
+    xs_in = [list(lay.x_in(v)) for v in cs.xs]
+    s._s.calc_diff(xs_in, [list(lay.u_in(k, v)) for k, v in enumerate(cs.us)])
+    ours = s._s.node_data(t)["Fx"]
+    P = lay.perm_dx
+    e_ours = np.abs(ours - fd[np.ix_(P, P)]).max()
+    e_theirs = np.abs(theirs - fd).max()
+    assert e_ours < 1e-7, e_ours
+    assert e_theirs > 10 * e_ours, (e_theirs, e_ours)
+
+
+def test_rk3_fx_sides_with_central_differences():
+    p, xs, us = with_rk(PROBLEMS["kinova_reach"]()[0], crocoddyl.RKType.three)
+    sp = ocp.from_crocoddyl(p)
+    _compare_nodes(p, sp, xs, us, loose={**LOOSE, "Fx": 1e-6, "Lxu": 1e-6})
+    fd, theirs = _fd_fx(p, 0, xs[0], us[0])
+    s = ocp.SolverFDDP(sp)
+    lay = sp.layout
+    s._s.calc_diff([list(lay.x_in(v)) for v in xs], [list(lay.u_in(k, v)) for k, v in enumerate(us)])
+    P = lay.perm_dx
+    e_ours = np.abs(s._s.node_data(0)["Fx"] - fd[np.ix_(P, P)]).max()
+    assert e_ours < 1e-7 and np.abs(theirs - fd).max() > 10 * e_ours
+
+
+@pytest.mark.parametrize("name", ["kinova_reach", "double_pendulum"])
+def test_rk4_fddp_matches_crocoddyl(name):
+    p, xs, us = with_rk(PROBLEMS[name](short=True)[0])
+    sp = ocp.from_crocoddyl(p)
+    cs = crocoddyl.SolverFDDP(p)
+    c_ok = cs.solve(xs, us, 100, False)
+    s = ocp.SolverFDDP(sp)
+    ok = s.solve(xs, us, 100, False)
+    assert ok == c_ok, (name, s.termination)
+    assert abs(s.iter - cs.iter) <= 1, (name, s.iter, cs.iter)
+    assert abs(s.cost - cs.cost) <= 1e-6 * abs(cs.cost), (name, s.cost, cs.cost)
+
+
+def test_rk4_second_order_is_refused_by_name():
+    p, xs, us = with_rk(PROBLEMS["double_pendulum"](short=True)[0])
+    sp = ocp.from_crocoddyl(p)
+    for so in (True, "auto"):
+        s = ocp.SolverFDDP(sp, second_order=so)
+        with pytest.raises(ocp.OcpError, match=r"node 0: RK4"):
+            s.solve(xs, us, 10, False)
+
+
+def test_rk_terminal_node_is_its_cost():
+    """An IntegratedActionModelRK terminal knot (time_step 0, calc(x)) converts to the cost
+    ℓ(x) without dynamics (Crocoddyl leaves the terminal F_x untouched, so it is not compared)."""
+    p0, _, _ = PROBLEMS["double_pendulum"](short=True)
+    p1, xs, us = with_rk(p0)
+    tm = crocoddyl.IntegratedActionModelRK(p0.terminalModel.differential, crocoddyl.RKType.four, 0.0)
+    p = crocoddyl.ShootingProblem(p0.x0, list(p1.runningModels), tm)
+    sp = ocp.from_crocoddyl(p)
+    assert sp.terminalModel.spec()["type"] == "rk4"
+    _compare_nodes(p, sp, xs, us, loose={**LOOSE, "Fx": np.inf})
+    cs, s = crocoddyl.SolverFDDP(p), ocp.SolverFDDP(sp)
+    assert cs.solve(xs, us, 100, False) == s.solve(xs, us, 100, False)
+    assert abs(s.iter - cs.iter) <= 1 and abs(s.cost - cs.cost) <= 1e-6 * abs(cs.cost)

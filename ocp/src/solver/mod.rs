@@ -456,6 +456,21 @@ impl Solver {
         if !(f.is_finite() && f > 1.0) {
             return Err(OcpError::new(format!("reg_factor = {f} must be finite and > 1")));
         }
+        // The exact Hessian of a Runge-Kutta knot is not implemented: refuse it by name rather
+        // than fall back to Gauss-Newton there.
+        if self.second_order != SecondOrder::Off {
+            for (t, m) in self.problem.running_models().iter().enumerate() {
+                if let crate::action::ActionKind::RungeKutta { rk, .. } = &m.kind {
+                    return Err(OcpError::new(format!(
+                        "node {t}: {} integrator: the exact second order (second_order = {:?}) \
+                         of a Runge-Kutta knot is not implemented; solve with second_order = \
+                         Off (False)",
+                        rk.name(),
+                        self.second_order
+                    )));
+                }
+            }
+        }
         self.xs_try[0].copy_from(self.problem.x0());
         self.set_candidate(init_xs, init_us, is_feasible)?;
         self.preg = init_reg.unwrap_or(self.reg_min);

@@ -58,6 +58,8 @@ __all__ = [
     "DifferentialActionModelFreeFwdDynamics",
     "DifferentialActionModelContactFwdDynamics",
     "IntegratedActionModelEuler",
+    "IntegratedActionModelRK",
+    "RKType",
     "ActionModelImpulseFwdDynamics",
     "ShootingProblem",
     "SolverDDP",
@@ -581,6 +583,58 @@ class IntegratedActionModelEuler(_Node):
             s["u_lb"] = _vec(self.u_lb, self.nu, "u_lb")
         if self.u_ub is not None:
             s["u_ub"] = _vec(self.u_ub, self.nu, "u_ub")
+        return s
+
+
+class RKType:
+    """The explicit Runge-Kutta schemes of :class:`IntegratedActionModelRK` (Crocoddyl's
+    ``crocoddyl.RKType``): ``two`` (midpoint), ``three`` (Heun's third order), ``four`` (the
+    classical RK4)."""
+
+    two = "two"
+    three = "three"
+    four = "four"
+
+
+_RK_STAGES = {"two": 2, "three": 3, "four": 4}
+
+
+def _rk_stages(rk_type: Any) -> int:
+    """2, 3 or 4 from :class:`RKType`, ``crocoddyl.RKType``, ``"rk4"``-style strings or ints."""
+    if isinstance(rk_type, (int, np.integer)) and not isinstance(rk_type, bool) and int(rk_type) in (2, 3, 4):
+        return int(rk_type)
+    name = getattr(rk_type, "name", None) or str(rk_type)
+    name = name.split(".")[-1].lower()
+    if name in _RK_STAGES:
+        return _RK_STAGES[name]
+    if name in ("rk2", "rk3", "rk4"):
+        return int(name[2])
+    raise OcpError(f"IntegratedActionModelRK: unknown rk_type {rk_type!r} (use RKType.two, three or four)")
+
+
+class IntegratedActionModelRK(IntegratedActionModelEuler):
+    """Explicit Runge-Kutta over ``time_step`` (Crocoddyl's ``IntegratedActionModelRK`` with
+    ``PolyZero`` controls): stages ``y_0 = x``, ``y_i = x ⊕ dt c_i k_{i-1}``, ``k_i = (v(y_i),
+    a(y_i, u))``, ``x′ = x ⊕ dt Σ b_i k_i``, cost ``dt Σ b_i ℓ(y_i, u)`` (``c``, ``b``:
+    RK2 ``(0, ½)``, ``(0, 1)``; RK3 ``(0, ⅓, ⅔)``, ``(¼, 0, ¾)``; RK4 ``(0, ½, ½, 1)``,
+    ``(⅙, ⅓, ⅓, ⅙)``). Exact first-order derivatives, the Gauss-Newton cost Hessian; a solver
+    with ``second_order=True`` or ``"auto"`` refuses a problem with such a knot (naming it)."""
+
+    def __init__(self, differential, rk_type: Any = RKType.four, time_step: float = 1e-3,
+                 with_cost_residual: bool = True) -> None:
+        self.stages = _rk_stages(rk_type)
+        if not (time_step >= 0 and math.isfinite(time_step)):
+            raise OcpError(f"IntegratedActionModelRK: time_step {time_step} must be finite and >= 0")
+        super().__init__(differential, time_step, with_cost_residual)
+
+    @property
+    def rk_type(self) -> str:
+        """``"two"``, ``"three"`` or ``"four"``."""
+        return {2: "two", 3: "three", 4: "four"}[self.stages]
+
+    def spec(self) -> Dict[str, Any]:
+        s = super().spec()
+        s["type"] = f"rk{self.stages}"
         return s
 
 

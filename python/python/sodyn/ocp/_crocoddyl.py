@@ -33,6 +33,7 @@ from . import (
     DifferentialActionModelContactFwdDynamics,
     DifferentialActionModelFreeFwdDynamics,
     IntegratedActionModelEuler,
+    IntegratedActionModelRK,
     OcpError,
     ResidualModelCoMPosition,
     ResidualModelContactCone,
@@ -218,7 +219,7 @@ class _Converter:
 
     def node(self, m: Any, what: str):
         n = _name(m)
-        if n == "IntegratedActionModelEuler":
+        if n in ("IntegratedActionModelEuler", "IntegratedActionModelRK"):
             ctrl = getattr(m, "control", None)
             if ctrl is not None and _name(ctrl) != "ControlParametrizationModelPolyZero":
                 raise OcpError(f"{what}: unsupported control parametrization {_name(ctrl)}")
@@ -235,7 +236,10 @@ class _Converter:
                     self.state, act, cm, costs, float(d.JMinvJt_damping))
             else:
                 raise OcpError(f"{what}: unsupported differential action model {dn}")
-            out = IntegratedActionModelEuler(diff, float(m.dt))
+            if n == "IntegratedActionModelRK":
+                out = IntegratedActionModelRK(diff, int(m.ni), float(m.dt))  # ni: the stages
+            else:
+                out = IntegratedActionModelEuler(diff, float(m.dt))
             perm = self.lay.u_perm(act.nu)
             lb, ub = np.asarray(m.u_lb, float), np.asarray(m.u_ub, float)
             if lb.size == act.nu:
@@ -254,7 +258,8 @@ def from_crocoddyl(problem: Any, model: Optional[Any] = None) -> ShootingProblem
     Crocoddyl's layout (``problem.layout`` maps them). ``model`` defaults to
     ``sodyn.Model.from_pinocchio`` of the problem's Pinocchio model.
 
-    Supported: ``IntegratedActionModelEuler`` (``PolyZero`` controls) of
+    Supported: ``IntegratedActionModelEuler`` and ``IntegratedActionModelRK`` (``RKType.two``,
+    ``three``, ``four``; ``PolyZero`` controls) of
     ``DifferentialActionModelFreeFwdDynamics`` / ``ContactFwdDynamics``,
     ``ActionModelImpulseFwdDynamics``; ``ActuationModelFull`` / ``FloatingBase``;
     ``ContactModel3D/6D``, ``ImpulseModel3D/6D``; ``CostModelResidual`` with the residuals
