@@ -697,7 +697,8 @@ class ArraySpec(Spec):
             if (o, iq) in jac:
                 J = jac[(o, iq)]
                 n = J.shape[0]
-                g = g + np.einsum("ni,nij->nj", np.reshape(w, (n, -1)), J.reshape((n, -1, J.shape[-1])))
+                Jf = J.reshape((n, -1, J.shape[-1]))
+                g = g + np.einsum("ni,nij->nj", np.reshape(w, (n, -1)), Jf)
         for (a, b), c in C.items():
             if a == iq and b == iq:
                 cs = 0.5 * (c + _swap(c))
