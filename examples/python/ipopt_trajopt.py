@@ -121,23 +121,35 @@ def build(model, xml, frame, n, dt, target, backend):
 
 
 def _qmul(a, b):
-    """Hamilton product of quaternions ``[x y z w]``."""
-    av, aw, bv, bw = a[:3], a[3], b[:3], b[3]
-    return ca.vertcat(aw * bv + bw * av + ca.cross(av, bv), aw * bw - ca.dot(av, bv))
+    """Hamilton products of quaternions ``[x y z w]`` stored as columns (``4 × n``)."""
+    ax, ay, az, aw = a[0, :], a[1, :], a[2, :], a[3, :]
+    bx, by, bz, bw = b[0, :], b[1, :], b[2, :], b[3, :]
+    return ca.vertcat(
+        aw * bx + bw * ax + ay * bz - az * by,
+        aw * by + bw * ay + az * bx - ax * bz,
+        aw * bz + bw * az + ax * by - ay * bx,
+        aw * bw - ax * bx - ay * by - az * bz,
+    )
 
 
 def _qconj(a):
-    return ca.vertcat(-a[:3], a[3])
+    return ca.vertcat(-a[:3, :], a[3, :])
 
 
-def _qrot(n):
-    """Rotation matrix of a unit quaternion ``[x y z w]``."""
-    x, y, z, w = n[0], n[1], n[2], n[3]
-    return ca.vertcat(
-        ca.horzcat(1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)),
-        ca.horzcat(2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)),
-        ca.horzcat(2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)),
-    )
+def _qrot_apply(n, v):
+    """``R(n) v`` column by column (``n`` unit quaternions ``4 × n``, ``v`` ``3 × n``):
+    ``v + 2 w (u × v) + 2 u × (u × v)`` with ``u = n[:3]``."""
+    u, w = n[:3, :], n[3, :]
+
+    def cross(a, b):
+        return ca.vertcat(
+            a[1, :] * b[2, :] - a[2, :] * b[1, :],
+            a[2, :] * b[0, :] - a[0, :] * b[2, :],
+            a[0, :] * b[1, :] - a[1, :] * b[0, :],
+        )
+
+    t = cross(u, v)
+    return v + 2 * ca.repmat(w, 3, 1) * t + 2 * cross(u, t)
 
 
 def solo12_start(model):
@@ -161,17 +173,15 @@ def build_squat(model, n, dt, depth, tau_max):
     QN = ca.vertcat(Q[:3, :], quat / ca.repmat(norms, 4, 1), Q[7:, :])
     tau = ca.vertcat(ca.DM.zeros(6, n), U)
     A, _lam = f(QN[:, :n], V[:, :n], tau)
-    g = [ca.vec(V[:, 1:] - V[:, :n] - dt * A)]
-    for k in range(n):
-        nk, nk1 = QN[3:7, k], QN[3:7, k + 1]
-        w1, v1 = V[:3, k + 1], V[3:6, k + 1]
-        r = _qmul(_qconj(nk), nk1)
-        g += [
-            Q[:3, k + 1] - Q[:3, k] - dt * ca.mtimes(_qrot(nk), v1),
-            r[:3] - 0.5 * dt * w1 * r[3],
-            ca.dot(quat[:, k + 1], quat[:, k + 1]) - 1,
-            Q[7:, k + 1] - Q[7:, k] - dt * V[6:, k + 1],
-        ]
+    N0, N1 = QN[3:7, :n], QN[3:7, 1:]
+    r = _qmul(_qconj(N0), N1)  # relative rotations of the steps
+    g = [
+        ca.vec(V[:, 1:] - V[:, :n] - dt * A),
+        ca.vec(Q[:3, 1:] - Q[:3, :n] - dt * _qrot_apply(N0, V[3:6, 1:])),
+        ca.vec(r[:3, :] - 0.5 * dt * V[:3, 1:] * ca.repmat(r[3, :], 3, 1)),
+        ca.vec(ca.sum1(quat[:, 1:] * quat[:, 1:]) - 1),
+        ca.vec(Q[7:, 1:] - Q[7:, :n] - dt * V[6:, 1:]),
+    ]
     q0 = solo12_start(model)
     mid = n // 2
     g += [Q[:, 0] - q0, V[:, 0], Q[2, mid] - (q0[2] - depth), Q[2, n] - q0[2], V[:, n]]

@@ -679,8 +679,13 @@ class ArraySpec(Spec):
         for (o, a, b), h in H.items():
             if a == iq and b == iq:
                 hs = 0.5 * (h + _swap(h))
-                out[(o, a, b)] = np.einsum("n...jk,nja,nkb->n...ab", hs, P, P) + np.einsum(
-                    "n...m,nmab->n...ab", jac[(o, iq)], D2
+                n, lead = h.shape[0], h.shape[1:-2]
+                hs = hs.reshape((n, -1) + hs.shape[-2:])
+                PtHP = np.swapaxes(P, 1, 2)[:, None] @ hs @ P[:, None]
+                J = jac[(o, iq)].reshape((n, -1, P.shape[1]))
+                D2f = D2.reshape((n, P.shape[1], -1))
+                out[(o, a, b)] = (PtHP + (J @ D2f).reshape(PtHP.shape)).reshape(
+                    (n,) + lead + PtHP.shape[-2:]
                 )
             elif a == iq:
                 out[(o, a, b)] = np.einsum("n...jk,nja->n...ak", h, P)
@@ -702,13 +707,13 @@ class ArraySpec(Spec):
         for (a, b), c in C.items():
             if a == iq and b == iq:
                 cs = 0.5 * (c + _swap(c))
-                out[(a, b)] = np.einsum("njk,nja,nkb->nab", cs, P, P) + np.einsum(
-                    "nm,nmab->nab", g, D2
-                )
+                n, nq = P.shape[0], P.shape[2]
+                gD2 = (g[:, None, :] @ D2.reshape((n, -1, nq * nq))).reshape((n, nq, nq))
+                out[(a, b)] = np.swapaxes(P, 1, 2) @ cs @ P + gD2
             elif a == iq:
-                out[(a, b)] = np.einsum("njk,nja->nak", c, P)
+                out[(a, b)] = np.swapaxes(P, 1, 2) @ c
             elif b == iq:
-                out[(a, b)] = np.einsum("njk,nkb->njb", c, P)
+                out[(a, b)] = c @ P
             else:
                 out[(a, b)] = c
         return out
