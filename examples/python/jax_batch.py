@@ -227,9 +227,8 @@ def compare_mjx(n, repeat, jac_n=0):
     print(f"max |MJX qacc - sodyn.jax|: {float(np.abs(np.asarray(rm) - np.asarray(rs)).max()):.3g}")
     if not jac_n:
         return
-    # MJX's Jacobian is slow to compile and to run on the CPU (docs/interop.md: not done after 8 minutes
-    # over 10,000 states): opt-in, one
-    # round, on the first jac_n states
+    # MJX's Jacobian is slow to compile and to run on the CPU (docs/interop.md: not done after
+    # 8 minutes over 10,000 states): opt-in, one round, on the first jac_n states
     jm = timed(
         "MJX jit(vmap(jacfwd(forward.qacc)))",
         jax.jit(jax.vmap(jax.jacfwd(mjx_qacc, argnums=(0, 1, 2)))),
