@@ -8,7 +8,12 @@ Prints median times (of ``--repeat`` rounds). ``--adam URDF`` adds adam-robotics
 on that (fixed-base) URDF: ``qdd = solve(M, tau - h)`` from its ``mass_matrix`` and
 ``bias_force``, under ``jit(lax.map(...))`` (its arrays fail under ``jax.vmap`` and ``jacfwd``
 with jax 0.10.2), against ``sodyn.jax.aba`` under the same ``lax.map`` and under ``vmap``, on
-the model loaded from the same URDF. MuJoCo MJX is not part of this script (docs/interop.md).
+the model loaded from the same URDF. ``--mjx`` compares MuJoCo MJX on the CPU
+(``pip install mujoco mujoco-mjx``): ``qacc`` of ``mjx.forward`` without contacts (the same
+quantity as ``aba``: ``qfrc_applied`` as ``tau``, no damping, armature or limits) under
+``jit(vmap(...))`` over ``--n`` states (``--mjx-jacobian N``: also its ``jacfwd`` over N
+states, which is slow), against ``sodyn.batch`` and
+``sodyn.jax`` on the same MJCF model (a 6-hinge chain, loaded by ``Model.from_mjcf_string``).
 """
 
 from __future__ import annotations
@@ -44,7 +49,15 @@ def main():
     ap.add_argument("--repeat", type=int, default=7)
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--adam", default=None, metavar="URDF", help="compare with adam-robotics")
+    ap.add_argument("--mjx", action="store_true", help="compare with MuJoCo MJX (CPU)")
+    ap.add_argument(
+        "--mjx-jacobian", type=int, default=0, metavar="N",
+        help="with --mjx, also time MJX's jacfwd on N states (slow)",
+    )
     args = ap.parse_args()
+    if args.mjx:
+        compare_mjx(args.n, args.repeat, args.mjx_jacobian)
+        return
     if args.adam:
         compare_adam(args.adam, 1000)
         return
@@ -146,6 +159,84 @@ def compare_adam(urdf, n):
             timed(name, f)
         except Exception as exc:  # adam-robotics 0.5.0 with jax 0.10.2
             print(f"{name}: fails: {type(exc).__name__}: {str(exc).splitlines()[0]}")
+
+
+def mjx_chain_xml(n=6):
+    """An ``n``-hinge chain (axes cycling y, x, z; capsules off the axes), contacts disabled,
+    joints unlimited: MuJoCo's ``qacc`` is then sodyn's ``aba`` with ``tau = qfrc_applied``."""
+    axes = ["0 1 0", "1 0 0", "0 0 1"]
+    body = ""
+    for i in range(n):
+        body += (
+            f'<body name="b{i}" pos="0 0 {0.0 if i == 0 else 0.3}">'
+            f'<joint name="j{i}" type="hinge" axis="{axes[i % 3]}" limited="false"/>'
+            f'<geom type="capsule" fromto="0 0 0 0.05 0.02 0.3" size="0.04" mass="{1 + 0.1 * i}"/>'
+        )
+    body += "</body>" * n
+    return (
+        '<mujoco><option timestep="0.01"><flag contact="disable"/></option>'
+        f"<worldbody>{body}</worldbody></mujoco>"
+    )
+
+
+def compare_mjx(n, repeat, jac_n=0):
+    """MuJoCo MJX (CPU) ``jit(vmap(forward)).qacc`` and its ``jacfwd`` against sodyn.batch and
+    sodyn.jax on the same MJCF chain, N states."""
+    import mujoco
+    from mujoco import mjx
+
+    xml = mjx_chain_xml()
+    mm = mujoco.MjModel.from_xml_string(xml)
+    model = sodyn.Model.from_mjcf_string(xml)
+    mx = mjx.put_model(mm)
+    nv = model.nv
+    rng = np.random.default_rng(0)
+    Q, V, T = (rng.uniform(-1, 1, (n, nv)) for _ in range(3))
+
+    def mjx_qacc(q, v, t):
+        d = mjx.make_data(mx).replace(qpos=q, qvel=v, qfrc_applied=t)
+        return mjx.forward(mx, d).qacc
+
+    def sodyn_aba(q, v, t):
+        return sj.aba(model, q, v, t)
+
+    def timed(name, f, rounds=repeat, m=n):
+        X = (Q[:m], V[:m], T[:m])
+        t0 = time.perf_counter()
+        out = jax.block_until_ready(f(*X))
+        first = time.perf_counter() - t0
+        t = median_time(lambda: jax.block_until_ready(f(*X)), rounds, 1)
+        print(f"| {name}, N={m} | {first:.2f} s | {t * 1e3:.2f} ms |")
+        return out
+
+    print(f"MJCF chain, nv={nv}, N={n} states; mujoco {mujoco.__version__}, jax {jax.__version__}")
+    print("| computation | first call (trace + compile) | then |")
+    print("|---|---:|---:|")
+    t = median_time(lambda: sodyn.batch.aba(model, Q, V, T), repeat, 1)
+    print(f"| sodyn.batch.aba | | {t * 1e3:.2f} ms |")
+    t = median_time(lambda: sodyn.batch.fd_derivatives(model, Q, V, T), repeat, 1)
+    print(f"| sodyn.batch.fd_derivatives | | {t * 1e3:.2f} ms |")
+    rs = timed("sodyn.jax jit(vmap(aba))", jax.jit(jax.vmap(sodyn_aba)))
+    jac = jax.jit(jax.vmap(jax.jacfwd(sodyn_aba, argnums=(0, 1, 2))))
+    js = timed("sodyn.jax jit(vmap(jacfwd(aba)))", jac)
+    rm = timed("MJX jit(vmap(forward)).qacc", jax.jit(jax.vmap(mjx_qacc)))
+    md = mujoco.MjData(mm)
+    md.qpos[:], md.qvel[:], md.qfrc_applied[:] = Q[0], V[0], T[0]
+    mujoco.mj_forward(mm, md)
+    print(f"max |mj_forward qacc - sodyn| (state 0): {np.abs(md.qacc - np.asarray(rs[0])).max():.3g}")
+    print(f"max |MJX qacc - sodyn.jax|: {float(np.abs(np.asarray(rm) - np.asarray(rs)).max()):.3g}")
+    if not jac_n:
+        return
+    # MJX's Jacobian is slow to compile and to run on the CPU (docs/interop.md: not done after
+    # 8 minutes over 10,000 states): opt-in, one round, on the first jac_n states
+    jm = timed(
+        "MJX jit(vmap(jacfwd(forward.qacc)))",
+        jax.jit(jax.vmap(jax.jacfwd(mjx_qacc, argnums=(0, 1, 2)))),
+        1,
+        jac_n,
+    )
+    err = max(float(np.abs(np.asarray(a) - np.asarray(b[:jac_n])).max()) for a, b in zip(jm, js))
+    print(f"max |MJX Jacobian - sodyn.jax Jacobian|: {err:.3g}")
 
 
 if __name__ == "__main__":

@@ -219,3 +219,160 @@ def state_of(case: Case, seed: int):
     q = m.random_configuration(seed=seed)
     rest = [rng.uniform(-1, 1, m.nv) for _ in range(case.n_args - 1)]
     return [q] + rest
+
+
+# --------------------------------------------------------------------------------------------
+# Models with quaternion (free flyer, spherical) and planar coordinates: derivatives with
+# respect to the q array, against central differences of f(N(q)) (N normalises each quaternion
+# block), the definition in docs/interop.md.
+# --------------------------------------------------------------------------------------------
+
+
+@functools.lru_cache(maxsize=None)
+def flyer():
+    """solo12 (free flyer, nq = 19, nv = 18) with its four feet when ../shared is present, else
+    the fallback URDF on a free flyer with its foot."""
+    if HAVE_SHARED:
+        m = sodyn.Model.from_urdf(MODELS_DIR / "solo12.urdf", floating_base=True)
+        return m, ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]
+    return sodyn.Model.from_urdf_string(FALLBACK_URDF, floating_base=True), ["foot"]
+
+
+# A built-in random tree on a free flyer with spherical and planar joints (checked below).
+SPHERICAL_TREE = "random_tree5_ff_s0"
+
+
+@functools.lru_cache(maxsize=None)
+def tree():
+    m = sodyn.Model.builtin(SPHERICAL_TREE)
+    kinds = {j.type for j in m.joints}
+    assert {"free_flyer", "spherical", "planar"} <= kinds, (SPHERICAL_TREE, kinds)
+    return m
+
+
+def flyer_contacts():
+    return [sodyn.Contact(f, point=(0.0, 0.0, 0.0)) for f in flyer()[1]]
+
+
+def normalised(model, q):
+    """``N(q)``: every quaternion block of ``q`` divided by its norm."""
+    q = np.array(q, dtype=float)
+    for j in model.joints:
+        if j.type == "free_flyer":
+            s = slice(j.idx_q + 3, j.idx_q + 7)
+        elif j.type == "spherical":
+            s = slice(j.idx_q, j.idx_q + 4)
+        else:
+            continue
+        q[s] /= np.linalg.norm(q[s])
+    return q
+
+
+def _flyer():
+    return flyer()[0]
+
+
+QCASES = [
+    Case("aba-flyer", "aba", _flyer, lambda: (), 3),
+    Case("aba-tree", "aba", tree, lambda: (), 3),
+    Case("rnea-flyer", "rnea", _flyer, lambda: (), 3),
+    Case("rnea-tree", "rnea", tree, lambda: (), 3),
+    Case("nle-tree", "nonlinear_effects", tree, lambda: (), 2),
+    Case("crba-tree", "crba", tree, lambda: (), 1),
+    Case("kkt-flyer", "kkt_dynamics", _flyer, lambda: (flyer_contacts(),), 3),
+    Case("impact-flyer", "impact_dynamics", _flyer, lambda: (flyer_contacts(), 0.3), 2),
+    Case("frame_placement-flyer", "frame_placement", _flyer, lambda: (flyer()[1][0],), 1),
+    Case("frame_translation-tree", "frame_translation", tree, lambda: (tree().frames[-1],), 1),
+    Case("com-flyer", "center_of_mass", _flyer, lambda: (), 1),
+]
+
+
+def direct_normalised(case: Case, *xs):
+    """The direct numpy value at ``N(q)``."""
+    return case.direct(normalised(case.model(), xs[0]), *xs[1:])
+
+
+def array_jacobians_fd(case: Case, xs, h: float = 1e-6):
+    """Central differences of ``f(N(q), ...)`` with respect to each argument array."""
+    return [
+        central_jacobian(lambda x: direct_normalised(case, *xs[:a], x, *xs[a + 1 :]), xs[a], h)
+        for a in range(len(xs))
+    ]
+
+
+def array_hessian_fd(case: Case, xs, w, h: float = 2e-3):
+    """``H[a][b]`` of ``w @ f(N(q), ...)`` by central second differences of the values over
+    the concatenated arguments (independent of sodyn's derivatives and of the chart), steps
+    ``h`` and ``h / 2`` combined by Richardson extrapolation (error O(h⁴))."""
+    sizes = [x.size for x in xs]
+    x0 = np.concatenate(xs)
+    cuts = np.cumsum(sizes)[:-1]
+
+    def L(x):
+        return float(w @ direct_normalised(case, *np.split(x, cuts)))
+
+    n = x0.size
+
+    def second(step):
+        H = np.empty((n, n))
+        E = np.eye(n) * step
+        for i in range(n):
+            for j in range(i, n):
+                H[i, j] = H[j, i] = (
+                    L(x0 + E[i] + E[j])
+                    - L(x0 + E[i] - E[j])
+                    - L(x0 - E[i] + E[j])
+                    + L(x0 - E[i] - E[j])
+                ) / (4 * step * step)
+        return H
+
+    H = (4 * second(h / 2) - second(h)) / 3
+    edges = np.concatenate([[0], np.cumsum(sizes)])
+    return [
+        [H[edges[a] : edges[a + 1], edges[b] : edges[b + 1]] for b in range(len(xs))]
+        for a in range(len(xs))
+    ]
+
+
+def rel_err(got, ref) -> float:
+    """``max |got − ref| / max(1, max |ref|)``."""
+    got, ref = np.asarray(got, dtype=float), np.asarray(ref, dtype=float)
+    assert got.shape == ref.shape, (got.shape, ref.shape)
+    return float(np.abs(got - ref).max(initial=0.0) / max(1.0, np.abs(ref).max(initial=0.0)))
+
+
+QCASE_BY_ID = {c.id: c for c in QCASES}
+
+
+@functools.lru_cache(maxsize=None)
+def q_oracle(case_id: str):
+    """``(xs, w, J, H)`` of a case of ``QCASES``: a state (unit quaternions), output weights,
+    central-difference Jacobians ``J[a]`` of ``f(N(q), ...)`` (flattened outputs, tuples
+    concatenated) and the Hessian blocks ``H[a][b]`` of ``w @ f(N(q), ...)`` by central second
+    differences (shared by the three frameworks' tests)."""
+    case = QCASE_BY_ID[case_id]
+    xs = state_of(case, 6)
+    w = np.random.default_rng(11).uniform(-1, 1, case.direct(*xs).size)
+    return xs, w, array_jacobians_fd(case, xs), array_hessian_fd(case, xs, w)
+
+
+# Tolerances against the central differences above (relative to the largest entry): the
+# measured errors are <= 1.2e-7 (Jacobians) and <= 6e-7 (Hessians).
+Q_JAC_TOL = 1e-6
+Q_HESS_TOL = 2e-6
+
+
+def check_q_case(case: Case, value, J, H):
+    """Asserts a framework's value, Jacobians ``J[a]`` and Hessian blocks ``H[a][b]`` of a
+    ``QCASES`` case against :func:`q_oracle`; returns the largest relative errors."""
+    xs, w, Jfd, Hfd = q_oracle(case.id)
+    assert close(value, case.direct(*xs), 1e-12), case.id
+    ej = max(rel_err(J[a], Jfd[a]) for a in range(len(xs)))
+    eh = max(rel_err(H[a][b], Hfd[a][b]) for a in range(len(xs)) for b in range(len(xs)))
+    assert ej <= Q_JAC_TOL, (case.id, ej)
+    assert eh <= Q_HESS_TOL, (case.id, eh)
+    # the derivatives with respect to v / tau / a are the numpy API's
+    direct = case.direct_jacobians(*xs)
+    for a in range(1, len(xs)):
+        assert close(J[a], direct[a], 1e-10), (case.id, a)
+    return ej, eh

@@ -19,7 +19,11 @@ import sodyn.jax as sj  # noqa: E402
 
 from interop_cases import (  # noqa: E402
     CASES,
+    QCASE_BY_ID,
+    QCASES,
     central_jacobian,
+    check_q_case,
+    q_oracle,
     close,
     model_of,
     state_of,
@@ -170,19 +174,57 @@ def test_bad_shapes_and_arguments_are_clear_errors():
         sj.kkt_dynamics(model, x, x, x, ["foot"])
 
 
-def test_quaternion_model_differentiates_v_and_tau_and_refuses_q():
+def test_quaternion_model_values_and_v_tau_derivatives_equal_the_numpy_api():
     model = sodyn.Model.builtin("quadruped")
     assert model.nq != model.nv
     data = model.create_data()
     rng = np.random.default_rng(5)
     q = model.random_configuration(seed=5)
     v, t = rng.uniform(-1, 1, model.nv), rng.uniform(-1, 1, model.nv)
-    f = lambda v_, t_: sj.aba(model, q, v_, t_)  # noqa: E731
-    jv, jt = jax.jit(jax.jacrev(f, argnums=(0, 1)))(v, t)
+    f = lambda q_, v_, t_: sj.aba(model, q_, v_, t_)  # noqa: E731
+    np.testing.assert_array_equal(np.asarray(jax.jit(f)(q, v, t)), sodyn.aba(model, data, q, v, t))
+    jq, jv, jt = jax.jit(jax.jacrev(f, argnums=(0, 1, 2)))(q, v, t)
     dq, dv, minv = sodyn.fd_derivatives(model, data, q, v, t)
     assert close(np.asarray(jv), dv, 1e-10) and close(np.asarray(jt), minv, 1e-10)
-    with pytest.raises(ValueError, match="nq == nv"):
-        jax.jacfwd(lambda q_: sj.aba(model, q_, v, t))(q)
+    # nq columns; the quaternion's radial direction is ignored (f(q) := f(N(q)))
+    assert jq.shape == (model.nv, model.nq)
+    assert np.abs(np.asarray(jq)[:, 3:7] @ q[3:7]).max() <= 1e-12 * np.abs(dq).max()
+
+
+@pytest.mark.parametrize("case", QCASES, ids=lambda c: c.id)
+def test_q_array_jacobians_and_hessians_equal_central_differences(case):
+    """``jacfwd``, ``jacrev`` and ``hessian`` with respect to the ``q`` array of quaternion and
+    planar coordinates against central differences of ``f(N(q))`` (docs/interop.md)."""
+    xs, w, _, _ = q_oracle(case.id)
+    f = _jfn(case)
+    n_args = len(xs)
+    g = lambda *a: _flat(f(*a))  # noqa: E731
+    arg = tuple(range(n_args))
+    fwd = jax.jit(jax.jacfwd(g, argnums=arg))(*xs)
+    rev = jax.jit(jax.jacrev(g, argnums=arg))(*xs)
+    L = lambda *a: jnp.dot(jnp.asarray(w), g(*a))  # noqa: E731
+    H = jax.jit(jax.hessian(L, argnums=arg))(*xs)
+    Hn = [[np.asarray(H[a][b]) for b in arg] for a in arg]
+    check_q_case(case, np.asarray(g(*xs)), [np.asarray(j) for j in fwd], Hn)
+    for a in arg:
+        assert close(np.asarray(rev[a]), np.asarray(fwd[a]), 1e-12)
+    # forward-over-reverse Hessian-vector product equals the Hessian
+    t = [np.random.default_rng(8 + i).uniform(-1, 1, x.shape) for i, x in enumerate(xs)]
+    _, hvp = jax.jvp(jax.grad(L, argnums=arg), tuple(xs), tuple(t))
+    for a in arg:
+        assert close(np.asarray(hvp[a]), sum(Hn[a][b] @ t[b] for b in arg), 1e-10)
+
+
+def test_q_array_vmap_equals_sequential_bit_for_bit():
+    case = QCASE_BY_ID["aba-flyer"]
+    f = _jfn(case)
+    states = [state_of(case, 70 + n) for n in range(4)]
+    stacked = [np.stack([s[a] for s in states]) for a in range(3)]
+    jac = jax.jit(jax.vmap(jax.jacfwd(f, argnums=(0, 1, 2))))(*stacked)
+    one = jax.jit(jax.jacfwd(f, argnums=(0, 1, 2)))
+    for n, s in enumerate(states):
+        for got, want in zip(jac, one(*s)):
+            np.testing.assert_array_equal(np.asarray(got)[n], np.asarray(want))
 
 
 def test_third_order_is_refused():

@@ -15,7 +15,17 @@ torch = pytest.importorskip(
 import sodyn  # noqa: E402
 import sodyn.torch as st  # noqa: E402
 
-from interop_cases import CASES, central_jacobian, close, model_of, state_of  # noqa: E402
+from interop_cases import (  # noqa: E402
+    CASES,
+    QCASE_BY_ID,
+    QCASES,
+    central_jacobian,
+    check_q_case,
+    close,
+    model_of,
+    q_oracle,
+    state_of,
+)
 
 
 def _tfn(case):
@@ -118,7 +128,7 @@ def test_third_order_is_refused():
         torch.autograd.grad(h.sum(), q)
 
 
-def test_cuda_float32_shapes_and_quaternion_q_are_refused():
+def test_cuda_float32_and_shapes_are_refused_quaternion_q_differentiates():
     model = sodyn.Model.builtin("chain6")
     x = torch.zeros(model.nv, dtype=torch.float64)
     with pytest.raises(TypeError, match=r"\.double\(\)"):
@@ -137,9 +147,52 @@ def test_cuda_float32_shapes_and_quaternion_q_are_refused():
     q = torch.tensor(quad.random_configuration(seed=2), requires_grad=True)
     tau = torch.zeros(quad.nv, dtype=torch.float64, requires_grad=True)
     v = torch.zeros(quad.nv, dtype=torch.float64)
-    (gt,) = torch.autograd.grad(st.aba(quad, q.detach(), v, tau).sum(), tau)
+    gq, gt = torch.autograd.grad(st.aba(quad, q, v, tau).sum(), (q, tau))
     data = quad.create_data()
     minv = sodyn.fd_derivatives(quad, data, q.detach().numpy(), v.numpy(), tau.detach().numpy())[2]
     assert close(gt.numpy(), minv.sum(axis=0), 1e-10)
-    with pytest.raises(ValueError, match="nq == nv"):
-        torch.autograd.grad(st.aba(quad, q, v, tau).sum(), q)
+    # q derivatives are with respect to the q array (nq entries, radial direction ignored)
+    assert gq.shape == (quad.nq,)
+    assert abs(float(gq[3:7] @ q.detach()[3:7])) <= 1e-12 * max(1.0, float(gq.abs().max()))
+
+
+@pytest.mark.parametrize("case", QCASES, ids=lambda c: c.id)
+def test_q_array_derivatives_equal_central_differences(case):
+    """``autograd.grad`` and double backward with respect to the ``q`` array of quaternion
+    and planar coordinates against central differences of ``f(N(q))`` (docs/interop.md).
+    ``gradcheck`` is not used here: it perturbs the quaternion off the unit sphere, where the
+    values are refused."""
+    xs, w, _, _ = q_oracle(case.id)
+    f = _tfn(case)
+    n_args = len(xs)
+    ts = [torch.tensor(x, requires_grad=True) for x in xs]
+    y = _flat(f(*ts))
+    rows = [torch.autograd.grad(y[i], ts, retain_graph=True) for i in range(y.numel())]
+    J = [np.stack([r[a].numpy() for r in rows]) for a in range(n_args)]
+    L = torch.dot(torch.tensor(w), y)
+    g = torch.autograd.grad(L, ts, create_graph=True)
+    H = [[None] * n_args for _ in range(n_args)]
+    for a in range(n_args):
+        H_rows = [
+            torch.autograd.grad(g[a][j], ts, retain_graph=True, allow_unused=True)
+            for j in range(g[a].numel())
+        ]
+        for b in range(n_args):
+            H[a][b] = np.stack(
+                [np.zeros(xs[b].size) if r[b] is None else r[b].numpy() for r in H_rows]
+            )
+    check_q_case(case, y.detach().numpy(), J, H)
+
+
+def test_q_array_batch_dimension_equals_sequential_calls_bit_for_bit():
+    case = QCASE_BY_ID["kkt-flyer"]
+    f = _tfn(case)
+    states = [state_of(case, 80 + k) for k in range(3)]
+    stacked = [torch.tensor(np.stack([s[a] for s in states]), requires_grad=True) for a in range(3)]
+    qdd, lam = f(*stacked)
+    gb = torch.autograd.grad(qdd.sum() + lam.sum(), stacked)
+    for k, s in enumerate(states):
+        ts = [torch.tensor(x, requires_grad=True) for x in s]
+        a1, l1 = f(*ts)
+        for a, b in zip(gb, torch.autograd.grad(a1.sum() + l1.sum(), ts)):
+            assert torch.equal(a[k], b)

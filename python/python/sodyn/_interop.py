@@ -12,7 +12,10 @@ Derivative blocks are keyed by input and output positions:
 * ``C[(a, b)]``: ``(tan_dim[a], tan_dim[b])``, ``sum_o sum_i w_o[i] H[(o, a, b)][i, j, k]``.
 
 Blocks that are identically zero are absent (``jac_blocks`` / ``hess_blocks`` list the others).
-Derivatives with respect to ``q`` are sodyn's tangent-space ones (``tan_dim`` is ``nv``).
+A spec's own derivatives with respect to ``q`` are sodyn's tangent-space ones (``tan_dim`` is
+``nv``); :func:`for_arrays` wraps it in :class:`ArraySpec`, whose ``q`` derivatives are with
+respect to the ``q`` array (``tan_dim`` is ``nq``) through the chart of :class:`Chart`, which is
+what ``sodyn.jax``, ``sodyn.torch`` and ``sodyn.casadi`` use.
 """
 
 from __future__ import annotations
@@ -507,6 +510,273 @@ class CenterOfMass(Spec):
                 self.model, data, xs[0], np.eye(nv)[k]
             )
         return {(0, 0): C}
+
+
+
+# --------------------------------------------------------------------------------------------
+# Derivatives with respect to the q array (quaternion and planar coordinates)
+# --------------------------------------------------------------------------------------------
+
+
+def _quat_rotation(n: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(N, 3, 3)`` of unit quaternions ``n (N, 4) = [x y z w]``."""
+    x, y, z, w = n[:, 0], n[:, 1], n[:, 2], n[:, 3]
+    R = np.empty((n.shape[0], 3, 3))
+    R[:, 0, 0] = 1 - 2 * (y * y + z * z)
+    R[:, 0, 1] = 2 * (x * y - z * w)
+    R[:, 0, 2] = 2 * (x * z + y * w)
+    R[:, 1, 0] = 2 * (x * y + z * w)
+    R[:, 1, 1] = 1 - 2 * (x * x + z * z)
+    R[:, 1, 2] = 2 * (y * z - x * w)
+    R[:, 2, 0] = 2 * (x * z - y * w)
+    R[:, 2, 1] = 2 * (y * z + x * w)
+    R[:, 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
+def _quat_left_conj(n: np.ndarray) -> np.ndarray:
+    """``L (N, 3, 4)`` with ``L d = vec(conj(n) ⊗ d)`` (Hamilton product, ``[x y z w]``):
+    ``[w I − [v]×, −v]``."""
+    v, w = n[:, :3], n[:, 3]
+    L = np.zeros((n.shape[0], 3, 4))
+    L[:, :, :3] = w[:, None, None] * np.eye(3) - _skew(v)
+    L[:, :, 3] = -v
+    return L
+
+
+class Chart:
+    """The map between sodyn's tangent space and the ``q`` array at a configuration.
+
+    The functions of ``sodyn.jax`` / ``sodyn.torch`` / ``sodyn.casadi`` are extended off the
+    unit sphere by normalising each quaternion block, ``f(q) := f(N(q))``. Near a configuration
+    ``q0`` write ``N(q) = q0 ⊕ θ(q)`` (sodyn's right, body-frame perturbation: SO(3) exponential
+    for a spherical joint, SE(3) for a free flyer, SE(2) for a planar joint), so that ``f(q) =
+    g(θ(q))`` with ``g(θ) = f(q0 ⊕ θ)``:
+
+    * ``df/dq = (dg/dθ) P`` with ``P = dθ/dq`` (``(nv, nq)``, :meth:`jacobian`);
+    * ``d²f/dq² = Pᵀ (d²g/dθ²) P + Σ_m (dg/dθ_m) D2[m]`` with ``D2 = d²θ/dq²`` (``(nv, nq,
+      nq)``, :meth:`hessian`). sodyn's second order ``T[j, k] = ∂/∂δ_k ∂/∂ε_j f((q0 ⊕ δ) ⊕ ε)``
+      differs from ``d²g/dθ²`` by ``½ (dg/dθ) · [e_k, e_j]`` (the group's bracket, by the
+      Baker–Campbell–Hausdorff formula), which is antisymmetric: ``d²g/dθ² = ½ (T + Tᵀ)``.
+
+    Per joint, with ``n`` the unit quaternion, ``L d = vec(conj(n) ⊗ d)``, ``R`` its rotation:
+
+    * quaternion (spherical, and the free flyer's ``[qx qy qz qw]``): ``ω = 2 L d − 2 (n · d)
+      L d + O(|d|³)``, so ``P = 2 L`` (``/|q|`` off the sphere) and ``d²ω_m/dd_α dd_β =
+      −2 (n_α L_mβ + n_β L_mα)``;
+    * free-flyer translation: ``v = V(ω)⁻¹ Rᵀ Δp = Rᵀ Δp − (L d) × (Rᵀ Δp) + O(3)``, so ``P =
+      Rᵀ`` and ``d²v/dd_α dΔp = −[L e_α]× Rᵀ`` (the SE(3) exponential couples them);
+    * planar ``[x y θ]``: ``[vx vy] = V(Δθ)⁻¹ R(θ0)ᵀ Δp = R(θ0)ᵀ Δp − ½ Δθ J R(θ0)ᵀ Δp + O(3)``
+      (``J = [[0, −1], [1, 0]]``), so ``P = diag(R(θ0)ᵀ, 1)`` and ``d²[vx vy]/dθ dΔp = −½ J
+      R(θ0)ᵀ``;
+    * every other joint: ``P = I``, ``D2 = 0``.
+    """
+
+    KINDS = ("free_flyer", "spherical", "planar")
+
+    def __init__(self, model):
+        self.nq, self.nv = model.nq, model.nv
+        self.joints = [(j.type, j.idx_q, j.idx_v, j.nq, j.nv) for j in model.joints if j.nv > 0]
+        self.active = any(kind in self.KINDS for kind, *_ in self.joints)
+
+    def jacobian(self, Q: np.ndarray) -> np.ndarray:
+        """``P (N, nv, nq) = dθ/dq`` at the configurations ``Q (N, nq)``."""
+        N = Q.shape[0]
+        P = np.zeros((N, self.nv, self.nq))
+        for kind, iq, iv, _, nv in self.joints:
+            if kind == "free_flyer":
+                s = np.linalg.norm(Q[:, iq + 3 : iq + 7], axis=1)
+                n = Q[:, iq + 3 : iq + 7] / s[:, None]
+                P[:, iv : iv + 3, iq + 3 : iq + 7] = 2 * _quat_left_conj(n) / s[:, None, None]
+                P[:, iv + 3 : iv + 6, iq : iq + 3] = np.swapaxes(_quat_rotation(n), 1, 2)
+            elif kind == "spherical":
+                s = np.linalg.norm(Q[:, iq : iq + 4], axis=1)
+                n = Q[:, iq : iq + 4] / s[:, None]
+                P[:, iv : iv + 3, iq : iq + 4] = 2 * _quat_left_conj(n) / s[:, None, None]
+            elif kind == "planar":
+                c, sn = np.cos(Q[:, iq + 2]), np.sin(Q[:, iq + 2])
+                P[:, iv, iq], P[:, iv, iq + 1] = c, sn
+                P[:, iv + 1, iq], P[:, iv + 1, iq + 1] = -sn, c
+                P[:, iv + 2, iq + 2] = 1.0
+            else:
+                for k in range(nv):
+                    P[:, iv + k, iq + k] = 1.0
+        return P
+
+    @staticmethod
+    def _quat_hessian(D2, n, rows, cols) -> None:
+        """``d²ω_m/dd_α dd_β = −2 (n_α L_mβ + n_β L_mα)`` into ``D2[:, rows, cols, cols]``."""
+        L = _quat_left_conj(n)
+        t = np.einsum("na,nmb->nmab", n, L)
+        D2[:, rows, cols, cols] = -2 * (t + np.swapaxes(t, 2, 3))
+
+    def hessian(self, Q: np.ndarray) -> np.ndarray:
+        """``D2 (N, nv, nq, nq) = d²θ/dq²`` at the configurations ``Q (N, nq)`` (unit
+        quaternions)."""
+        N = Q.shape[0]
+        D2 = np.zeros((N, self.nv, self.nq, self.nq))
+        for kind, iq, iv, _, _ in self.joints:
+            if kind == "free_flyer":
+                n = Q[:, iq + 3 : iq + 7] / np.linalg.norm(Q[:, iq + 3 : iq + 7], axis=1)[:, None]
+                rq, cq = slice(iv, iv + 3), slice(iq + 3, iq + 7)
+                self._quat_hessian(D2, n, rq, cq)
+                L = _quat_left_conj(n)  # (N, 3, 4)
+                RT = np.swapaxes(_quat_rotation(n), 1, 2)
+                # X[:, m, α, β] = −([L e_α]× Rᵀ)[m, β]
+                X = -np.einsum("namc,ncb->nmab", _skew(np.swapaxes(L, 1, 2)), RT)
+                D2[:, iv + 3 : iv + 6, iq + 3 : iq + 7, iq : iq + 3] = X
+                D2[:, iv + 3 : iv + 6, iq : iq + 3, iq + 3 : iq + 7] = np.swapaxes(X, 2, 3)
+            elif kind == "spherical":
+                n = Q[:, iq : iq + 4] / np.linalg.norm(Q[:, iq : iq + 4], axis=1)[:, None]
+                self._quat_hessian(D2, n, slice(iv, iv + 3), slice(iq, iq + 4))
+            elif kind == "planar":
+                c, sn = np.cos(Q[:, iq + 2]), np.sin(Q[:, iq + 2])
+                # −½ J R(θ0)ᵀ, J = [[0, −1], [1, 0]], R(θ0)ᵀ = [[c, s], [−s, c]]
+                X = np.empty((N, 2, 2))
+                X[:, 0, 0], X[:, 0, 1] = -0.5 * sn, 0.5 * c
+                X[:, 1, 0], X[:, 1, 1] = -0.5 * c, -0.5 * sn
+                D2[:, iv : iv + 2, iq + 2, iq : iq + 2] = X
+                D2[:, iv : iv + 2, iq : iq + 2, iq + 2] = X
+        return D2
+
+
+class ArraySpec(Spec):
+    """A :class:`Spec` whose ``q`` derivatives are with respect to the ``q`` array, through
+    :class:`Chart` (``tan_dims`` gives ``nq`` for ``q``); values are the wrapped spec's."""
+
+    def __init__(self, spec: Spec, chart: Chart):
+        Spec.__init__(self, spec.model, spec.static)
+        self.spec, self.chart = spec, chart
+        self.name, self.inputs, self.outputs = spec.name, spec.inputs, spec.outputs
+        self.jac_blocks, self.hess_blocks = spec.jac_blocks, spec.hess_blocks
+        self.iq = spec.inputs.index("q")
+
+    def in_dims(self):
+        return self.spec.in_dims()
+
+    def tan_dims(self):
+        m = self.model
+        return [m.nq if name == "q" else m.nv for name in self.inputs]
+
+    def out_shapes(self):
+        return self.spec.out_shapes()
+
+    def primal(self, data, xs):
+        return self.spec.primal(data, xs)
+
+    def primal_batch(self, xs):
+        return self.spec.primal_batch(xs)
+
+    # --- the chart, over a leading axis N
+    def _jac(self, jac, P):
+        iq = self.iq
+        return {
+            k: np.einsum("n...j,nja->n...a", J, P) if k[1] == iq else J for k, J in jac.items()
+        }
+
+    def _hess(self, H, jac, P, D2):
+        iq, out = self.iq, {}
+        for (o, a, b), h in H.items():
+            if a == iq and b == iq:
+                hs = 0.5 * (h + _swap(h))
+                n, lead = h.shape[0], h.shape[1:-2]
+                hs = hs.reshape((n, -1) + hs.shape[-2:])
+                PtHP = np.swapaxes(P, 1, 2)[:, None] @ hs @ P[:, None]
+                J = jac[(o, iq)].reshape((n, -1, P.shape[1]))
+                D2f = D2.reshape((n, P.shape[1], -1))
+                out[(o, a, b)] = (PtHP + (J @ D2f).reshape(PtHP.shape)).reshape(
+                    (n,) + lead + PtHP.shape[-2:]
+                )
+            elif a == iq:
+                out[(o, a, b)] = np.einsum("n...jk,nja->n...ak", h, P)
+            elif b == iq:
+                out[(o, a, b)] = np.einsum("n...jk,nkb->n...jb", h, P)
+            else:
+                out[(o, a, b)] = h
+        return out
+
+    def _contracted(self, C, jac, ws, P, D2):
+        iq, out = self.iq, {}
+        g = 0.0
+        for o, w in enumerate(ws):
+            if (o, iq) in jac:
+                J = jac[(o, iq)]
+                n = J.shape[0]
+                Jf = J.reshape((n, -1, J.shape[-1]))
+                g = g + np.einsum("ni,nij->nj", np.reshape(w, (n, -1)), Jf)
+        for (a, b), c in C.items():
+            if a == iq and b == iq:
+                cs = 0.5 * (c + _swap(c))
+                n, nq = P.shape[0], P.shape[2]
+                gD2 = (g[:, None, :] @ D2.reshape((n, -1, nq * nq))).reshape((n, nq, nq))
+                out[(a, b)] = np.swapaxes(P, 1, 2) @ cs @ P + gD2
+            elif a == iq:
+                out[(a, b)] = np.swapaxes(P, 1, 2) @ c
+            elif b == iq:
+                out[(a, b)] = c @ P
+            else:
+                out[(a, b)] = c
+        return out
+
+    # --- single state
+    def first(self, data, xs):
+        outs, jac = self.spec.first(data, xs)
+        P = self.chart.jacobian(np.asarray(xs[self.iq], dtype=np.float64)[None])
+        jac = self._jac({k: np.asarray(v)[None] for k, v in jac.items()}, P)
+        return outs, {k: v[0] for k, v in jac.items()}
+
+    def second(self, data, xs):
+        _, jac = self.spec.first(data, xs)
+        H = self.spec.second(data, xs)
+        Q = np.asarray(xs[self.iq], dtype=np.float64)[None]
+        H = self._hess(
+            {k: np.asarray(v)[None] for k, v in H.items()},
+            {k: np.asarray(v)[None] for k, v in jac.items()},
+            self.chart.jacobian(Q),
+            self.chart.hessian(Q),
+        )
+        return {k: v[0] for k, v in H.items()}
+
+    def contracted(self, data, xs, ws):
+        _, jac = self.spec.first(data, xs)
+        C = self.spec.contracted(data, xs, ws)
+        Q = np.asarray(xs[self.iq], dtype=np.float64)[None]
+        C = self._contracted(
+            {k: np.asarray(v)[None] for k, v in C.items()},
+            {k: np.asarray(v)[None] for k, v in jac.items()},
+            [np.asarray(w, dtype=np.float64)[None] for w in ws],
+            self.chart.jacobian(Q),
+            self.chart.hessian(Q),
+        )
+        return {k: v[0] for k, v in C.items()}
+
+    # --- stacked states
+    def first_batch(self, xs):
+        outs, jac = self.spec.first_batch(xs)
+        return outs, self._jac(jac, self.chart.jacobian(np.asarray(xs[self.iq])))
+
+    def second_batch(self, xs):
+        _, jac = self.spec.first_batch(xs)
+        H = self.spec.second_batch(xs)
+        Q = np.asarray(xs[self.iq])
+        return self._hess(H, jac, self.chart.jacobian(Q), self.chart.hessian(Q))
+
+    def contracted_batch(self, xs, ws):
+        _, jac = self.spec.first_batch(xs)
+        C = self.spec.contracted_batch(xs, ws)
+        Q = np.asarray(xs[self.iq])
+        ws = [np.asarray(w, dtype=np.float64) for w in ws]
+        return self._contracted(C, jac, ws, self.chart.jacobian(Q), self.chart.hessian(Q))
+
+
+def for_arrays(spec: Spec) -> Spec:
+    """``spec`` with derivatives with respect to the ``q`` array: ``spec`` itself when every
+    joint's ``q`` derivative is the array's (revolute, continuous, prismatic joints), else an
+    :class:`ArraySpec` through the model's :class:`Chart`."""
+    if "q" not in spec.inputs:
+        return spec
+    chart = Chart(spec.model)
+    return ArraySpec(spec, chart) if chart.active else spec
 
 
 SPECS = {

@@ -19,8 +19,11 @@ Derivatives:
   the Hessian of the Lagrangian from it, so ``nlpsol("ipopt", ...)`` runs with
   ``hessian_approximation = "exact"`` on problems that use these Functions.
 
-The third order is not available. Derivatives with respect to ``q`` need ``nq == nv``
-(sodyn's ``q`` derivatives are tangent-space); for other models the Jacobian raises an error.
+The third order is not available. Derivatives with respect to ``q`` are with respect to the
+``q`` array: for quaternion coordinates (free flyer, spherical joint) through the chart of
+``f(q) := f(N(q))``, ``N`` normalising each quaternion block, and for planar joints through
+the SE(2) chart (``sodyn._interop.Chart``, docs/interop.md); values still need unit
+quaternions (within 1e-6), so an NLP passes ``N(q)`` or constrains ``|quat|² = 1``.
 Keep a reference to each Function while CasADi uses it (a Python ``Callback``).
 """
 
@@ -94,7 +97,7 @@ class _Pattern:
     def dm(self, values: np.ndarray) -> Any:
         nz = np.zeros(self.sp.nnz())
         nz[self.nz] = np.ravel(values)
-        return _ca.DM(self.sp, nz)
+        return _ca.DM(self.sp, nz.tolist())  # a list converts about twice as fast
 
 
 class _Base(_ca.Callback):
@@ -113,15 +116,6 @@ class _Base(_ca.Callback):
     # stacked inputs (rows, n) -> (n, rows)
     def _states(self, args, count: int) -> List[np.ndarray]:
         return [np.ascontiguousarray(np.asarray(args[a], dtype=np.float64).T) for a in range(count)]
-
-    def _require_q_tangent(self) -> None:
-        m = self.spec.model
-        if "q" in self.spec.inputs and m.nq != m.nv:
-            raise ValueError(
-                f"sodyn.casadi.{self.spec.name}: derivatives with respect to 'q' need nq == nv; "
-                f"this model has nq = {m.nq}, nv = {m.nv} (quaternion coordinates); see "
-                "docs/interop.md"
-            )
 
 
 class _Function(_Base):
@@ -174,7 +168,6 @@ class _Function(_Base):
         return True
 
     def get_jacobian(self, name, inames, onames, opts):
-        self._require_q_tangent()
         fn = _Jacobian(name, self, list(inames), list(onames), opts)
         self._keep.append(fn)
         return fn
@@ -301,7 +294,6 @@ class _Reverse(_Base):
         return {k: _colmajor_rows(np.asarray(v), self.osh[k[0]]) for k, v in jac.items()}
 
     def eval(self, args):
-        self._require_q_tangent()
         xs = self._states(args, len(self.in_dims))
         seeds = self._seeds(args)
         jac = self._jacobians(xs)
@@ -442,7 +434,8 @@ def _make(cls, model: Model, n: int, static=(), name: str = "") -> _Function:
         )
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise ValueError(f"sodyn.casadi.{cls.name}: 'n' must be a positive integer, got {n!r}")
-    return _Function(name or f"sodyn_{cls.name}", cls(model, static), int(n), {})
+    spec = _interop.for_arrays(cls(model, static))
+    return _Function(name or f"sodyn_{cls.name}", spec, int(n), {})
 
 
 def aba(model: Model, n: int = 1) -> _Function:

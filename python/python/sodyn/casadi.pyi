@@ -1,5 +1,8 @@
 """Type stubs of ``sodyn.casadi`` (see its docstring and docs/interop.md). Each function
-returns a ``casadi.Function`` (a ``casadi.Callback``) over ``n`` states stacked as columns."""
+returns a ``casadi.Function`` (a ``casadi.Callback``) over ``n`` states stacked as columns.
+Derivatives with respect to ``q`` are with respect to the ``q`` array (``nq`` entries): for
+quaternion coordinates those of ``f(N(q))`` (each quaternion block normalised) at unit
+quaternions, for planar joints through the SE(2) chart (docs/interop.md)."""
 
 from typing import Sequence, Union
 

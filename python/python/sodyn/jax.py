@@ -34,10 +34,11 @@ is in use.
 
 Only float64 is accepted: enable it with ``jax.config.update("jax_enable_x64", True)`` (or the
 environment variable ``JAX_ENABLE_X64=1``) before creating arrays. Derivatives with respect to
-``q`` are those with respect to the ``q`` array when ``model.nq == model.nv``; for a model with
-quaternion coordinates (free flyer, spherical, planar joints) differentiating with respect to
-``q`` raises ``ValueError`` (sodyn's ``q`` derivatives are tangent-space, ``nv`` columns) while
-the derivatives with respect to the other arguments work. See docs/interop.md.
+``q`` are with respect to the ``q`` array (``nq`` columns): for quaternion coordinates (free
+flyer, spherical joint) those of ``f(q) := f(N(q))``, ``N`` normalising each quaternion block,
+at unit quaternions; for planar joints through the SE(2) chart (``sodyn._interop.Chart``). For
+such models the first and second order run through ``jax.pure_callback`` (the chart is applied
+in numpy), the value stays an FFI call. See docs/interop.md.
 """
 
 from __future__ import annotations
@@ -188,19 +189,7 @@ def _build(spec: _interop.Spec):
     hess_sds = tuple(
         jax.ShapeDtypeStruct(osh[o] + (tan[a], tan[b]), f64) for o, a, b in spec.hess_blocks
     )
-    q_pos = [i for i, name in enumerate(spec.inputs) if name == "q"]
-    q_is_tangent = spec.model.nq == spec.model.nv
     fname = f"sodyn.jax.{spec.name}"
-
-    def check_q(tangents) -> None:
-        for i in q_pos:
-            if not q_is_tangent and not _is_zero(tangents[i]):
-                raise ValueError(
-                    f"{fname}: derivatives with respect to 'q' need nq == nv; this model has "
-                    f"nq = {spec.model.nq}, nv = {spec.model.nv} (quaternion coordinates), and "
-                    "sodyn's q derivatives are tangent-space (nv columns): differentiate with "
-                    "respect to v / tau, or parametrise q by a tangent increment (docs/interop.md)"
-                )
 
     def contract(block, t):
         return jnp.tensordot(block, t, axes=1)
@@ -210,6 +199,9 @@ def _build(spec: _interop.Spec):
 
     if _use_ffi and spec.name in _FFI_FUNCTIONS:
         ffi_value, ffi_first, ffi_second = _ffi_calls(spec, out_sds, jac_sds)
+        if isinstance(spec, _interop.ArraySpec):
+            # the handlers return tangent-space q derivatives: the chart runs in the callback
+            ffi_first = ffi_second = None
     else:
         ffi_value = ffi_first = ffi_second = None
 
@@ -230,7 +222,6 @@ def _build(spec: _interop.Spec):
         return jax.pure_callback(cb("first"), out_sds + jac_sds, *xs, vmap_method="broadcast_all")
 
     def _first_jvp(primals, tangents):
-        check_q(tangents)
         res = first(*primals)
         jacs = dict(zip(spec.jac_blocks, res[nout:]))
         H = None
@@ -261,7 +252,6 @@ def _build(spec: _interop.Spec):
         return jax.pure_callback(cb("primal"), out_sds, *xs, vmap_method="broadcast_all")
 
     def _value_jvp(primals, tangents):
-        check_q(tangents)
         res = first(*primals)
         outs, jacs = res[:nout], dict(zip(spec.jac_blocks, res[nout:]))
         t_out = []
@@ -292,7 +282,7 @@ def _function(cls, model: Model, static=()):
     hit = _CACHE.get(key)
     if hit is not None and hit[0] is model and hit[1] == static:
         return hit[2]
-    fn = _build(cls(model, static))
+    fn = _build(_interop.for_arrays(cls(model, static)))
     if len(_CACHE) > 256:
         _CACHE.clear()
     _CACHE[key] = (model, static, fn)

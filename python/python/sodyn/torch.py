@@ -14,9 +14,10 @@ supported: the Functions call numpy code (``setup_context``/``vmap`` rules are n
 use the leading batch dimension instead.
 
 A CUDA tensor raises ``ValueError`` (sodyn computes on the CPU: pass ``x.cpu()``), a float32
-tensor ``TypeError`` (pass ``x.double()``). Derivatives with respect to ``q`` need
-``model.nq == model.nv`` (sodyn's ``q`` derivatives are tangent-space); for a quaternion model
-a ``q`` that requires grad raises ``ValueError`` in backward. See docs/interop.md.
+tensor ``TypeError`` (pass ``x.double()``). Derivatives with respect to ``q`` are with respect
+to the ``q`` array: for quaternion coordinates (free flyer, spherical joint) those of
+``f(q) := f(N(q))``, ``N`` normalising each quaternion block, at unit quaternions, and for
+planar joints through the SE(2) chart (``sodyn._interop.Chart``). See docs/interop.md.
 """
 
 from __future__ import annotations
@@ -66,17 +67,6 @@ def _first(spec: _interop.Spec, xs: Sequence[np.ndarray], batched: bool):
     return [o[None] for o in outs], {k: v[None] for k, v in jac.items()}
 
 
-def _check_q(spec: _interop.Spec, needs) -> None:
-    m = spec.model
-    for i, name in enumerate(spec.inputs):
-        if name == "q" and needs[i] and m.nq != m.nv:
-            raise ValueError(
-                f"sodyn.torch.{spec.name}: derivatives with respect to 'q' need nq == nv; this "
-                f"model has nq = {m.nq}, nv = {m.nv} (quaternion coordinates), and sodyn's q "
-                "derivatives are tangent-space (docs/interop.md); detach q"
-            )
-
-
 class _Value(torch.autograd.Function):
     """``y = f(x)``; backward ``x_bar = J^T y_bar`` by :class:`_Vjp`."""
 
@@ -94,7 +84,6 @@ class _Value(torch.autograd.Function):
     @staticmethod
     def backward(ctx, *ws):
         spec = ctx.spec
-        _check_q(spec, ctx.needs_input_grad[2:])
         xs = ctx.saved_tensors
         adj = _Vjp.apply(spec, ctx.batched, len(xs), *xs, *ws)
         return (None, None) + tuple(adj)
@@ -141,7 +130,6 @@ class _Vjp(torch.autograd.Function):
         needs = ctx.needs_input_grad[3:]
         gx = [np.zeros((N, d)) for d in spec.tan_dims()]
         if any(needs[:n_in]):
-            _check_q(spec, needs[:n_in])
             C = spec.contracted_batch(ax, aw)
             for (a, b), c in C.items():
                 gx[b] += np.einsum("nj,njk->nk", au[a], c)
@@ -182,7 +170,7 @@ def _call(cls, model: Model, args, static=()):
     fname = f"sodyn.torch.{cls.name}"
     if not isinstance(model, Model):
         raise TypeError(f"{fname}: 'model' must be a sodyn.Model, got {type(model)!r}")
-    spec = cls(model, static)
+    spec = _interop.for_arrays(cls(model, static))
     xs = [_tensor(name, x, fname) for name, x in zip(cls.inputs, args)]
     batched = xs[0].ndim == 2
     lead = tuple(xs[0].shape[:-1]) if xs[0].ndim else ()

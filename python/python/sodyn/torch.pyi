@@ -1,4 +1,7 @@
-"""Type stubs of ``sodyn.torch`` (see its docstring and docs/interop.md)."""
+"""Type stubs of ``sodyn.torch`` (see its docstring and docs/interop.md).
+Derivatives with respect to ``q`` are with respect to the ``q`` array (``nq`` entries): for
+quaternion coordinates those of ``f(N(q))`` (each quaternion block normalised) at unit
+quaternions, for planar joints through the SE(2) chart (docs/interop.md)."""
 
 from typing import Any, Sequence, Tuple, Union
 
