@@ -360,7 +360,11 @@ fn z_onto(d: &Vector3<f64>) -> Matrix3<f64> {
     let axis = z.cross(d);
     let (s, c) = (axis.norm(), z.dot(d));
     if s < 1e-12 {
-        return if c > 0.0 { Matrix3::identity() } else { Matrix3::from_diagonal(&v3(1.0, -1.0, -1.0)) };
+        return if c > 0.0 {
+            Matrix3::identity()
+        } else {
+            Matrix3::from_diagonal(&v3(1.0, -1.0, -1.0))
+        };
     }
     let r = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), s.atan2(c));
     *r.matrix()

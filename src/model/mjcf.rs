@@ -1227,15 +1227,17 @@ impl Loader {
         } else {
             let (lines, mimics): (Vec<_>, Vec<_>) = mimics.into_iter().unzip();
             model.with_mimic_joints(&mimics).map_err(|e| {
-                // "mimic constraint K: ..." names the K-th <joint> equality.
-                let msg = e.to_string();
-                let k = msg
-                    .split_once("mimic constraint ")
-                    .and_then(|(_, r)| r.split(':').next())
-                    .and_then(|n| n.trim().parse::<usize>().ok())
-                    .unwrap_or(0);
-                let (file, line, element): &(Rc<str>, u32, String) = &lines[k];
-                model_err(file, *line, element, msg)
+                // "mimic constraint K: REASON" names the K-th <joint> equality.
+                let Error::Build(full) = &e else { return e };
+                let (k, msg) = full
+                    .strip_prefix("mimic constraint ")
+                    .and_then(|r| r.split_once(": "))
+                    .and_then(|(n, why)| Some((n.parse::<usize>().ok()?, why.to_string())))
+                    .unwrap_or((0, full.clone()));
+                match lines.get(k).or(lines.first()) {
+                    Some((file, line, element)) => model_err(file, *line, element, msg),
+                    None => e,
+                }
             })?
         };
         model.warnings = std::mem::take(&mut self.warnings);

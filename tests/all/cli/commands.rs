@@ -1704,8 +1704,9 @@ fn eval_defaults_to_the_model_constraints() {
     let kkt = &out["kkt"];
     let (q, v) = (m.neutral(), DVector::zeros(nv));
     let mut cd = ContactData::new(&m, m.constraints()).unwrap();
-    let kd = kkt_derivatives(&m, &mut Data::new(&m), &mut cd, &q, &v, &DVector::from_vec(tau.clone()))
-        .unwrap();
+    let kd =
+        kkt_derivatives(&m, &mut Data::new(&m), &mut cd, &q, &v, &DVector::from_vec(tau.clone()))
+            .unwrap();
     assert!((vector(kkt, "lambda", 9) - kd.lambda()).amax() <= 1e-12 * kd.lambda().amax());
     assert!((vector(kkt, "qdd", nv) - kd.qdd()).amax() <= 1e-12 * kd.qdd().amax().max(1.0));
     let o = run(r#", "contacts": []"#, "builtin:delta", "delta-none.json");

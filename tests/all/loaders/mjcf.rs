@@ -929,7 +929,10 @@ fn weld_relpose_places_frame_a() {
     let c = &m.constraints()[0];
     // A half turn about z: (0, 0.2, 0) → (0, −0.2, 0), plus (0.5, 0, 0).
     assert!((c.point - Vector3::new(0.5, -0.2, 0.0)).norm() < 1e-15, "{:?}", c.point);
-    assert!((c.rotation - nalgebra::Matrix3::from_diagonal(&Vector3::new(-1.0, -1.0, 1.0))).amax() < 1e-15);
+    assert!(
+        (c.rotation - nalgebra::Matrix3::from_diagonal(&Vector3::new(-1.0, -1.0, 1.0))).amax()
+            < 1e-15
+    );
     assert_eq!(c.point2, Vector3::new(0.0, 0.2, 0.0));
     // Default: b's pose in a at q = 0 (a turn of 90° about z, 1 m along x).
     let m = load_str(&xml("")).unwrap();
@@ -948,7 +951,9 @@ fn equality_errors_name_element_and_line() {
 <body name="b" pos="1 0 0"><joint name="jb" type="slide"/><geom size="0.1"/></body>
 <body name="c" pos="2 0 0"><joint name="jc"/><geom size="0.1"/></body>
 </worldbody>"#;
-    let case = |eq: &str| error_of(&format!("<mujoco>\n{bodies}\n<equality>\n{eq}\n</equality>\n</mujoco>"));
+    let case = |eq: &str| {
+        error_of(&format!("<mujoco>\n{bodies}\n<equality>\n{eq}\n</equality>\n</mujoco>"))
+    };
     // The equality element is on line 9.
     let (line, el, why) = case(r#"<joint name="sq" joint1="jc" joint2="ja" polycoef="0 1 0.5"/>"#);
     assert_eq!((line, el.as_str()), (Some(9), "<joint> \"sq\""));
