@@ -119,7 +119,9 @@ macro_rules! impact_dict_of {
 /// A contact (Pinocchio's `RigidConstraintModel`): the contact frame at `point` (a 3-D
 /// contact's point) or `placement` (a `(4, 4)` homogeneous matrix) in the frame named `frame`,
 /// of type `"3d"` or `"6d"`, with rows in the `"local_world_aligned"` or `"local"` reference,
-/// with optional Baumgarte gains `kp`, `kd` (used by the KKT dynamics).
+/// with optional Baumgarte gains `kp`, `kd` (used by the KKT dynamics); with `frame2`, a
+/// two-frame (closed-loop) constraint whose frame B sits at `point2` or `placement2` in
+/// `frame2`'s coordinates.
 #[pyclass(name = "Contact", module = "sodyn._sodyn", frozen)]
 #[derive(Clone)]
 pub(crate) struct PyContact {
@@ -131,6 +133,72 @@ pub(crate) struct PyContact {
     pub(crate) reference: ContactReference,
     pub(crate) kp: f64,
     pub(crate) kd: f64,
+    /// Frame B of a two-frame constraint, its point and rotation (row-major) in that frame.
+    pub(crate) frame2: Option<String>,
+    pub(crate) point2: [f64; 3],
+    pub(crate) rot2: [f64; 9],
+}
+
+/// `point` or `placement` (not both) of a contact as (point, row-major rotation); `what`
+/// names them in errors.
+fn read_point_or_placement(
+    frame: &str,
+    point: Option<&Bound<'_, PyAny>>,
+    placement: Option<&Bound<'_, PyAny>>,
+    names: (&str, &str),
+) -> PyResult<([f64; 3], [f64; 9])> {
+    let (pn, pln) = names;
+    let mut p = [0.0; 3];
+    let mut rot = IDENTITY9;
+    match (point, placement) {
+        (Some(_), Some(_)) => {
+            return Err(value_err(format!(
+                "contact \"{frame}\": give `{pn}` or `{pln}`, not both"
+            )));
+        }
+        (Some(obj), None) => {
+            let mut v = DVector::zeros(3);
+            read_vec(obj, pn, 3, "x, y, z", &mut v)?;
+            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                return Err(core_err(Error::NotFinite {
+                    what: format!("{pn} of contact \"{frame}\""),
+                    index: i,
+                }));
+            }
+            p.copy_from_slice(v.as_slice());
+        }
+        (None, Some(obj)) => {
+            let t = read_placement(obj)
+                .map_err(|e| value_err(format!("`{pln}` of contact \"{frame}\": {e}")))?;
+            let r = &t.rot;
+            if (r.transpose() * r - nalgebra::Matrix3::identity()).amax() > 1e-9
+                || (r.determinant() - 1.0).abs() > 1e-9
+            {
+                return Err(value_err(format!(
+                    "`{pln}` of contact \"{frame}\": the rotation block is not a \
+                     rotation matrix (to 1e-9)"
+                )));
+            }
+            p.copy_from_slice(t.trans.as_slice());
+            for i in 0..3 {
+                for j in 0..3 {
+                    rot[3 * i + j] = r[(i, j)];
+                }
+            }
+        }
+        (None, None) => {}
+    }
+    Ok((p, rot))
+}
+
+/// A homogeneous `(4, 4)` matrix of a point and a row-major rotation.
+fn homogeneous(point: &[f64; 3], rot: &[f64; 9]) -> DMatrix<f64> {
+    DMatrix::from_fn(4, 4, |i, j| match (i, j) {
+        (3, 3) => 1.0,
+        (3, _) => 0.0,
+        (_, 3) => point[i],
+        _ => rot[3 * i + j],
+    })
 }
 
 pub(crate) const IDENTITY9: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
@@ -139,7 +207,8 @@ pub(crate) const IDENTITY9: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 
 impl PyContact {
     #[new]
     #[pyo3(signature = (frame, point = None, kp = 0.0, kd = 0.0, r#type = "3d",
-                        reference = "local_world_aligned", placement = None))]
+                        reference = "local_world_aligned", placement = None, frame2 = None,
+                        point2 = None, placement2 = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         frame: String,
@@ -149,50 +218,21 @@ impl PyContact {
         r#type: &str,
         reference: &str,
         placement: Option<&Bound<'_, PyAny>>,
+        frame2: Option<String>,
+        point2: Option<&Bound<'_, PyAny>>,
+        placement2: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let what = |e: Error| value_err(format!("contact \"{frame}\": {e}"));
         let kind = ContactType::parse(r#type).map_err(what)?;
         let reference = ContactReference::parse(reference).map_err(what)?;
-        let mut p = [0.0; 3];
-        let mut rot = IDENTITY9;
-        match (point, placement) {
-            (Some(_), Some(_)) => {
-                return Err(value_err(format!(
-                    "contact \"{frame}\": give `point` or `placement`, not both"
-                )));
-            }
-            (Some(obj), None) => {
-                let mut v = DVector::zeros(3);
-                read_vec(obj, "point", 3, "x, y, z", &mut v)?;
-                if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-                    return Err(core_err(Error::NotFinite {
-                        what: format!("point of contact \"{frame}\""),
-                        index: i,
-                    }));
-                }
-                p.copy_from_slice(v.as_slice());
-            }
-            (None, Some(obj)) => {
-                let t = read_placement(obj)
-                    .map_err(|e| value_err(format!("`placement` of contact \"{frame}\": {e}")))?;
-                let r = &t.rot;
-                if (r.transpose() * r - nalgebra::Matrix3::identity()).amax() > 1e-9
-                    || (r.determinant() - 1.0).abs() > 1e-9
-                {
-                    return Err(value_err(format!(
-                        "`placement` of contact \"{frame}\": the rotation block is not a \
-                         rotation matrix (to 1e-9)"
-                    )));
-                }
-                p.copy_from_slice(t.trans.as_slice());
-                for i in 0..3 {
-                    for j in 0..3 {
-                        rot[3 * i + j] = r[(i, j)];
-                    }
-                }
-            }
-            (None, None) => {}
+        let (p, rot) = read_point_or_placement(&frame, point, placement, ("point", "placement"))?;
+        if frame2.is_none() && (point2.is_some() || placement2.is_some()) {
+            return Err(value_err(format!(
+                "contact \"{frame}\": `point2` and `placement2` need `frame2`"
+            )));
         }
+        let (point2, rot2) =
+            read_point_or_placement(&frame, point2, placement2, ("point2", "placement2"))?;
         for (name, g) in [("kp", kp), ("kd", kd)] {
             if !(g.is_finite() && g >= 0.0) {
                 return Err(value_err(format!(
@@ -200,7 +240,7 @@ impl PyContact {
                 )));
             }
         }
-        Ok(Self { frame, point: p, rot, kind, reference, kp, kd })
+        Ok(Self { frame, point: p, rot, kind, reference, kp, kd, frame2, point2, rot2 })
     }
     #[getter]
     fn frame(&self) -> &str {
@@ -231,6 +271,21 @@ impl PyContact {
     fn kd(&self) -> f64 {
         self.kd
     }
+    /// Frame B of a two-frame (closed-loop) constraint, `None` for a contact with the world.
+    #[getter]
+    fn frame2(&self) -> Option<&str> {
+        self.frame2.as_deref()
+    }
+    /// Origin of frame B's contact frame in `frame2`'s coordinates `(3,)`.
+    #[getter]
+    fn point2<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        PyArray1::from_slice(py, &self.point2).into_any()
+    }
+    /// Frame B's contact frame in `frame2`'s coordinates, a `(4, 4)` homogeneous matrix.
+    #[getter]
+    fn placement2<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        out_mat(py, &homogeneous(&self.point2, &self.rot2))
+    }
     fn __repr__(&self) -> String {
         let mut extra = String::new();
         if self.kind != ContactType::D3 {
@@ -244,6 +299,13 @@ impl PyContact {
         }
         if self.kp != 0.0 || self.kd != 0.0 {
             extra += &format!(", kp={}, kd={}", self.kp, self.kd);
+        }
+        if let Some(f2) = &self.frame2 {
+            let p = &self.point2;
+            extra += &format!(", frame2={f2:?}, point2=({}, {}, {})", p[0], p[1], p[2]);
+            if self.rot2 != IDENTITY9 {
+                extra += &format!(", rotation2={:?}", self.rot2);
+            }
         }
         format!(
             "Contact(frame={:?}, point=({}, {}, {}){extra})",
@@ -263,6 +325,12 @@ impl PyContact {
                 c.kind.name().into_pyobject(py)?.into_any(),
                 c.reference.name().into_pyobject(py)?.into_any(),
                 out_mat(py, &c.placement_matrix()),
+                c.frame2.clone().into_pyobject(py)?.into_any(),
+                py.None().into_bound(py),
+                match c.frame2 {
+                    Some(_) => out_mat(py, &homogeneous(&c.point2, &c.rot2)),
+                    None => py.None().into_bound(py),
+                },
             ],
         )?;
         PyTuple::new(py, [slf.get_type().into_any(), args.into_any()])
@@ -271,12 +339,32 @@ impl PyContact {
 
 impl PyContact {
     pub(crate) fn placement_matrix(&self) -> DMatrix<f64> {
-        DMatrix::from_fn(4, 4, |i, j| match (i, j) {
-            (3, 3) => 1.0,
-            (3, _) => 0.0,
-            (_, 3) => self.point[i],
-            _ => self.rot[3 * i + j],
-        })
+        homogeneous(&self.point, &self.rot)
+    }
+    /// The Python contact of a model's constraint.
+    pub(crate) fn of(m: &Model, c: &Contact) -> Self {
+        let rows = |r: &nalgebra::Matrix3<f64>| {
+            let mut o = [0.0; 9];
+            for i in 0..3 {
+                for j in 0..3 {
+                    o[3 * i + j] = r[(i, j)];
+                }
+            }
+            o
+        };
+        let name = |f: usize| m.frames().get(f).map_or(String::new(), |x| x.name.clone());
+        Self {
+            frame: name(c.frame),
+            point: [c.point.x, c.point.y, c.point.z],
+            rot: rows(&c.rotation),
+            kind: c.kind,
+            reference: c.reference,
+            kp: c.kp,
+            kd: c.kd,
+            frame2: c.frame2.map(name),
+            point2: [c.point2.x, c.point2.y, c.point2.z],
+            rot2: rows(&c.rotation2),
+        }
     }
     pub(crate) fn transform(&self) -> sodyn::spatial::Transform {
         sodyn::spatial::Transform::new(
@@ -286,31 +374,56 @@ impl PyContact {
     }
 }
 
-/// Resolves the contacts against the model.
+/// Resolves the contacts against the model; `None`: the model's own constraints
+/// (`Model.constraints`).
 pub(crate) fn resolve(
     m: &Model,
-    contacts: &[PyRef<'_, PyContact>],
+    contacts: Option<&[PyRef<'_, PyContact>]>,
 ) -> PyResult<(Vec<Contact>, ContactKey)> {
+    let own = contacts.is_none();
+    let contacts: Vec<PyContact> = match contacts {
+        Some(l) => l.iter().map(|c| (**c).clone()).collect(),
+        None => m.constraints().iter().map(|c| PyContact::of(m, c)).collect(),
+    };
     let mut cs = Vec::with_capacity(contacts.len());
     let mut key = Vec::with_capacity(contacts.len());
-    for c in contacts {
+    for c in &contacts {
         let contact = Contact::new(m, &c.frame, Vector3::zeros())
             .and_then(|x| x.with_placement(m, &c.transform()))
             .and_then(|x| x.with_baumgarte(c.kp, c.kd))
             .map_err(core_err)?
             .with_reference(c.reference);
-        let contact = Contact { kind: c.kind, ..contact };
-        let mut k = [0u64; 16];
+        let mut contact = Contact { kind: c.kind, ..contact };
+        if let Some(f2) = &c.frame2 {
+            let p2 = sodyn::spatial::Transform::new(
+                nalgebra::Matrix3::from_row_slice(&c.rot2),
+                Vector3::new(c.point2[0], c.point2[1], c.point2[2]),
+            );
+            contact = contact
+                .with_frame2(m, f2, Some(&p2))
+                .map_err(|e| value_err(format!("contact \"{}\": {e}", c.frame)))?;
+        }
+        let mut k = vec![0u64; 16];
         for (o, x) in k.iter_mut().zip(c.point.iter().chain(&c.rot).chain([&c.kp, &c.kd])) {
             *o = x.to_bits();
         }
         k[14] = c.kind.dim() as u64;
         k[15] = (c.reference == ContactReference::Local) as u64;
+        if let Some(f2) = contact.frame2 {
+            k.push(f2 as u64);
+            k.extend(c.point2.iter().chain(&c.rot2).map(|x| x.to_bits()));
+        }
         key.push((contact.frame, k));
         cs.push(contact);
     }
     if cs.is_empty() {
-        return Err(value_err("`contacts` is empty: give at least one sodyn.Contact".into()));
+        return Err(value_err(if own {
+            "no `contacts` given and the model has no constraints (Model.constraints): give \
+             at least one sodyn.Contact"
+                .into()
+        } else {
+            "`contacts` is empty: give at least one sodyn.Contact".into()
+        }));
     }
     Ok((cs, key))
 }
@@ -341,7 +454,7 @@ pub(crate) fn py_constrained_id_derivatives<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
     a: &Bound<'py, PyAny>,
-    contacts: Vec<PyRef<'py, PyContact>>,
+    contacts: Option<Vec<PyRef<'py, PyContact>>>,
     lambda_: &Bound<'py, PyAny>,
     order: i64,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -349,7 +462,7 @@ pub(crate) fn py_constrained_id_derivatives<'py>(
     let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, a, "a")?;
-    let (cs, key) = resolve(m, &contacts)?;
+    let (cs, key) = resolve(m, contacts.as_deref())?;
     read_vec(lambda_, "lambda_", rows_of(&cs), "3 or 6 rows per contact", &mut d.lam)?;
     if let Some(index) = d.lam.iter().position(|x| !x.is_finite()) {
         return Err(core_err(Error::NotFinite { what: "lambda_".into(), index }));
@@ -376,7 +489,7 @@ pub(crate) fn py_constrained_id_derivatives<'py>(
 /// derivatives; the damping `μ = damping` (default 0, the exact solve) regularises a redundant
 /// contact set.
 #[pyfunction(name = "kkt_derivatives")]
-#[pyo3(signature = (model, data, q, v, tau, contacts, order = 1, damping = 0.0))]
+#[pyo3(signature = (model, data, q, v, tau, contacts = None, order = 1, damping = 0.0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn py_kkt_derivatives<'py>(
     py: Python<'py>,
@@ -385,7 +498,7 @@ pub(crate) fn py_kkt_derivatives<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
     tau: &Bound<'py, PyAny>,
-    contacts: Vec<PyRef<'py, PyContact>>,
+    contacts: Option<Vec<PyRef<'py, PyContact>>>,
     order: i64,
     damping: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -393,7 +506,7 @@ pub(crate) fn py_kkt_derivatives<'py>(
     let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
-    let (cs, key) = resolve(m, &contacts)?;
+    let (cs, key) = resolve(m, contacts.as_deref())?;
     let PyData { d, q, v, a, contacts, .. } = d;
     let cd = contact_data(contacts, m, &cs, key, order, false)?;
     cd.set_damping(damping).map_err(core_err)?;
@@ -408,7 +521,7 @@ pub(crate) fn py_kkt_derivatives<'py>(
 /// Impact dynamics `[M J_cᵀ; J_c −μI][v⁺; −Λ] = [M v⁻; −e J_c v⁻]` and its derivatives
 /// (`μ = damping`, as for the KKT dynamics).
 #[pyfunction(name = "impact_derivatives")]
-#[pyo3(signature = (model, data, q, v_minus, contacts, restitution = 0.0, order = 1,
+#[pyo3(signature = (model, data, q, v_minus, contacts = None, restitution = 0.0, order = 1,
                     damping = 0.0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn py_impact_derivatives<'py>(
@@ -417,7 +530,7 @@ pub(crate) fn py_impact_derivatives<'py>(
     mut data: PyRefMut<'py, PyData>,
     q: &Bound<'py, PyAny>,
     v_minus: &Bound<'py, PyAny>,
-    contacts: Vec<PyRef<'py, PyContact>>,
+    contacts: Option<Vec<PyRef<'py, PyContact>>>,
     restitution: f64,
     order: i64,
     damping: f64,
@@ -427,7 +540,7 @@ pub(crate) fn py_impact_derivatives<'py>(
     let d = &mut *data;
     read_q(q, "q", m, &mut d.q)?;
     read_vec(v_minus, "v_minus", m.nv(), nv_what(m), &mut d.v)?;
-    let (cs, key) = resolve(m, &contacts)?;
+    let (cs, key) = resolve(m, contacts.as_deref())?;
     let PyData { d, q, v, contacts, .. } = d;
     let cd = contact_data(contacts, m, &cs, key, order, false)?;
     cd.set_restitution(restitution).map_err(core_err)?;
@@ -452,7 +565,7 @@ pub(crate) fn kkt_so_contracted<'py>(
     q: &Bound<'py, PyAny>,
     v: &Bound<'py, PyAny>,
     tau: &Bound<'py, PyAny>,
-    contacts: Vec<PyRef<'py, PyContact>>,
+    contacts: Option<Vec<PyRef<'py, PyContact>>>,
     w_qdd: &Bound<'py, PyAny>,
     w_lambda: &Bound<'py, PyAny>,
     damping: f64,
@@ -460,7 +573,7 @@ pub(crate) fn kkt_so_contracted<'py>(
     let m = &model.m;
     let d = &mut *data;
     read_qvx(m, d, q, v, tau, "tau")?;
-    let (cs, key) = resolve(m, &contacts)?;
+    let (cs, key) = resolve(m, contacts.as_deref())?;
     read_vec(w_qdd, "w_qdd", m.nv(), nv_what(m), &mut d.w)?;
     read_vec(w_lambda, "w_lambda", rows_of(&cs), "3 or 6 rows per contact", &mut d.wl)?;
     let PyData { d, q, v, a, w, wl, contacts, .. } = d;
@@ -490,7 +603,7 @@ pub(crate) fn impact_so_contracted<'py>(
     mut data: PyRefMut<'py, PyData>,
     q: &Bound<'py, PyAny>,
     v_minus: &Bound<'py, PyAny>,
-    contacts: Vec<PyRef<'py, PyContact>>,
+    contacts: Option<Vec<PyRef<'py, PyContact>>>,
     w_vplus: &Bound<'py, PyAny>,
     w_impulse: &Bound<'py, PyAny>,
     restitution: f64,
@@ -500,7 +613,7 @@ pub(crate) fn impact_so_contracted<'py>(
     let d = &mut *data;
     read_q(q, "q", m, &mut d.q)?;
     read_vec(v_minus, "v_minus", m.nv(), nv_what(m), &mut d.v)?;
-    let (cs, key) = resolve(m, &contacts)?;
+    let (cs, key) = resolve(m, contacts.as_deref())?;
     read_vec(w_vplus, "w_vplus", m.nv(), nv_what(m), &mut d.w)?;
     read_vec(w_impulse, "w_impulse", rows_of(&cs), "3 or 6 rows per contact", &mut d.wl)?;
     let PyData { d, q, v, w, wl, contacts, .. } = d;

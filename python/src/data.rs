@@ -11,7 +11,7 @@ use sodyn::model::Model;
 use sodyn::spatial::Force;
 
 /// A contact set resolved against a model: (frame index, point) per contact.
-pub(crate) type ContactKey = Vec<(usize, [u64; 16])>;
+pub(crate) type ContactKey = Vec<(usize, Vec<u64>)>;
 
 /// Workspace of one model: sodyn's `Data` (its second-order capacity added on first use), the
 /// `ContactData` of the last contact set (made on first use, kept while the set is the same)

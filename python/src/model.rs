@@ -233,6 +233,15 @@ impl PyModel {
         self.m.warnings().iter().map(|w| python_message(w.clone())).collect()
     }
 
+    /// The model's own constraints (a fresh list of `sodyn.Contact`): MJCF `<equality>`
+    /// `<connect>` (3-D) and `<weld>` (6-D) as two-frame constraints (`frame2` `"universe"` for
+    /// the world), the loops of `builtin:fourbar` and `builtin:delta`; empty for other models.
+    /// The contact functions use them when called with `contacts=None`.
+    #[getter]
+    fn constraints(&self) -> Vec<crate::contacts::PyContact> {
+        self.m.constraints().iter().map(|c| crate::contacts::PyContact::of(&self.m, c)).collect()
+    }
+
     /// The MJCF `<tendon>`s in document order (data only: they do not enter the dynamics), one
     /// dict each: `name` (`None` if unnamed), `type` (`"fixed"` or `"spatial"`) and `path`:
     /// `(joint name, coef)` pairs for a fixed tendon; `("site", name)`,
@@ -501,6 +510,9 @@ impl PyModel {
                 .collect();
             d.set_item("mimic_constraints", l)?;
         }
+        if !self.m.constraints().is_empty() {
+            d.set_item("constraints", constraints_desc(self.m.constraints()))?;
+        }
         Ok(d)
     }
 
@@ -670,9 +682,57 @@ pub(crate) fn rebuild(desc: &Bound<'_, PyDict>) -> PyResult<Model> {
     b.build().map_err(core_err)
 }
 
-/// [`rebuild`], with the mimic constraints of a model loaded with `mimic=True`.
+/// A model's constraints as plain data: per constraint `(frame, point, rotation, type,
+/// reference, kp, kd, frame2, point2, rotation2)` (rotations column-major).
+type ConstraintDesc =
+    (usize, Vec<f64>, Vec<f64>, String, String, f64, f64, Option<usize>, Vec<f64>, Vec<f64>);
+
+fn constraints_desc(cs: &[sodyn::model::Contact]) -> Vec<ConstraintDesc> {
+    cs.iter()
+        .map(|c| {
+            (
+                c.frame,
+                c.point.as_slice().to_vec(),
+                c.rotation.as_slice().to_vec(),
+                c.kind.name().to_string(),
+                c.reference.name().to_string(),
+                c.kp,
+                c.kd,
+                c.frame2,
+                c.point2.as_slice().to_vec(),
+                c.rotation2.as_slice().to_vec(),
+            )
+        })
+        .collect()
+}
+
+fn constraints_from(l: Vec<ConstraintDesc>) -> PyResult<Vec<sodyn::model::Contact>> {
+    use sodyn::model::{Contact, ContactReference, ContactType};
+    l.into_iter()
+        .map(|(frame, p, r, kind, reference, kp, kd, frame2, p2, r2)| {
+            Ok(Contact {
+                frame,
+                point: v3(&p, "constraint point")?,
+                rotation: m3(&r, "constraint rotation")?,
+                kind: ContactType::parse(&kind).map_err(core_err)?,
+                reference: ContactReference::parse(&reference).map_err(core_err)?,
+                kp,
+                kd,
+                frame2,
+                point2: v3(&p2, "constraint point2")?,
+                rotation2: m3(&r2, "constraint rotation2")?,
+            })
+        })
+        .collect()
+}
+
+/// [`rebuild`], with the constraints and the mimic constraints of the description.
 pub(crate) fn rebuild_py(desc: &Bound<'_, PyDict>) -> PyResult<PyModel> {
-    let m = rebuild(desc)?;
+    let mut m = rebuild(desc)?;
+    if desc.contains("constraints")? {
+        let cs = constraints_from(item(desc, "constraints")?)?;
+        m = m.with_constraints(&cs).map_err(core_err)?;
+    }
     if !desc.contains("mimic_constraints")? {
         return Ok(PyModel::plain(m));
     }

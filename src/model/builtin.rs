@@ -1,6 +1,6 @@
 //! Built-in robot models, written in code (no URDF needed): a serial chain, an n-link planar
-//! pendulum, random kinematic trees, a quadruped, a humanoid and a four-bar linkage (a closed
-//! kinematic chain).
+//! pendulum, random kinematic trees, a quadruped, a humanoid, a four-bar linkage and a
+//! delta-type parallel robot (closed kinematic chains, their loops in [`Model::constraints`]).
 //!
 //! | name (for [`by_name`])          | builder                          | floating | nq   | nv   |
 //! |---------------------------------|----------------------------------|----------|------|------|
@@ -10,6 +10,10 @@
 //! | `pendulum<N>`                   | [`pendulum`]`(N)`                | no       | N    | N    |
 //! | `random_tree<N>[_ff][_s<SEED>]` | [`random_tree`]`(N, SEED, _ff?)` | if `_ff` | var. | var. |
 //! | `fourbar`                       | [`fourbar`]`()`                  | no       | 6    | 5    |
+//! | `delta`                         | [`delta`]`()`                    | no¹      | 22   | 18   |
+//!
+//! ¹ The base is fixed; the delta's moving platform is on a free-flyer joint, held by the
+//! model's three loops.
 //!
 //! Every body of every built-in model carries mass and a physically valid rotational inertia
 //! (principal moments satisfying the triangle inequality; all positive except for the point
@@ -255,11 +259,13 @@ pub fn fourbar() -> Model {
     b.frame("crank_tip", crank, Transform::from_translation(b_pt));
     b.frame("coupler_tip", coupler_id, Transform::from_translation(coupler));
     b.frame("rocker_tip", rocker, Transform::from_translation(c_pt - v3(pivot, 0.0, 0.0)));
-    b.build()
+    let m = b.build();
+    let c = fourbar_loop(&m).unwrap_or_else(|e| panic!("built-in model: fourbar loop: {e}"));
+    m.with_constraints(&[c]).unwrap_or_else(|e| panic!("built-in model: fourbar loop: {e}"))
 }
 
-/// The loop constraint of [`fourbar`]: a 3-D connect of frame `coupler_tip` to frame
-/// `rocker_tip` (`local_world_aligned`).
+/// The loop constraint of [`fourbar`] (also its [`Model::constraints`]): a 3-D connect of frame
+/// `coupler_tip` to frame `rocker_tip` (`local_world_aligned`).
 ///
 /// # Errors
 /// [`crate::error::Error::Unknown`] if `model` lacks those frames (not a four-bar).
@@ -269,6 +275,116 @@ pub fn fourbar_loop(model: &Model) -> crate::error::Result<super::Contact> {
         "rocker_tip",
         None,
     )
+}
+
+/// Radius of the delta's base circle (the shoulder hinges), its platform circle (the wrists),
+/// the upper-arm length and the platform's depth below the base at the neutral configuration.
+const DELTA: (f64, f64, f64, f64) = (0.2, 0.05, 0.2, 0.4);
+
+/// A delta-type parallel robot: three arms 120° apart close three loops on a moving platform
+/// (nq = 22, nv = 18; three 3-D connects, [`delta_loops`], which are also the model's
+/// [`Model::constraints`]).
+///
+/// Arm `k` (`k` = 1, 2, 3, at the angle `φ = 2π(k − 1)/3` about z, radial direction
+/// `e = (cos φ, sin φ, 0)`): `shoulder_k` (revolute, the actuated joint, about the tangent
+/// `(−sin φ, cos φ, 0)` at `0.2 e` on the base, limits ±1.2 rad) moves `upper_arm_k` (0.2 m
+/// along `e`, horizontal at q = 0); `elbow_k` (a ball joint at the upper arm's tip, frame
+/// `elbow_k`) moves `forearm_k`, which reaches from the elbow to the platform (0.35 m inwards,
+/// 0.4 m down: 0.532 m), its far end the frame `forearm_tip_k`. The platform (`platform_joint`,
+/// a free flyer placed 0.4 m below the base's origin, body `platform`) carries the frames
+/// `platform_k` at `0.05 e`. Loop `k` joins `forearm_tip_k` to `platform_k`; at the neutral
+/// configuration (every joint at zero, quaternions the identity) all three are closed.
+///
+/// The forearms are single rods with spherical ends (a 3-RSS mechanism) instead of the
+/// parallelograms of a real delta, so the platform's orientation is not held constant: with the
+/// shoulders locked, the platform keeps three DoF, and each forearm's spin about its own axis is
+/// a further (unactuated, inertial) DoF. The nine loop rows are independent away from the
+/// mechanism's singular poses (18 − 9 = 9 DoF). Every link is a solid box (the forearms flat
+/// bars 8 cm wide, standing for the parallelograms' width) or a disc (the platform).
+pub fn delta() -> Model {
+    let (rb, rp, l1, h) = DELTA;
+    let mut b = Builder::new("delta");
+    let platform = b.body(
+        0,
+        "platform_joint",
+        JointType::FreeFlyer,
+        at(0.0, 0.0, -h),
+        "platform",
+        Inertia::from_com(0.3, v3(0.0, 0.0, -0.005), cylinder_z_rot(0.3, rp + 0.01, 0.01)),
+    );
+    for k in 0..3 {
+        let phi = 2.0 * PI * k as f64 / 3.0;
+        let (c, s) = (phi.cos(), phi.sin());
+        let e = v3(c, s, 0.0);
+        // Link frames: x along e, y along the shoulder axis, z up.
+        let rot = Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0);
+        let n = |part: &str| format!("{part}_{}", k + 1);
+        let upper = b.revolute(
+            0,
+            &n("shoulder"),
+            Vector3::y(),
+            Transform::new(rot, e * rb),
+            &n("upper_arm"),
+            box_body(0.4, v3(0.5 * l1, 0.0, 0.0), [l1, 0.03, 0.02]),
+            -1.2,
+            1.2,
+        );
+        // The forearm in the link frame: from the elbow to the platform point.
+        let reach = v3(rp - rb - l1, 0.0, -h);
+        let len = reach.norm();
+        let dir = reach / len;
+        // A flat bar along `dir`, 8 cm wide along the shoulder axis (the width of a delta's
+        // parallelogram), 1 cm thick: a box in a frame turned from z onto `dir` (the turn is
+        // about the y axis, so the width stays along y).
+        let turn = z_onto(&dir);
+        let bar = turn * box_rot(0.2, [0.01, 0.08, len]) * turn.transpose();
+        let forearm = b.body(
+            upper,
+            &n("elbow"),
+            JointType::Spherical,
+            at(l1, 0.0, 0.0),
+            &n("forearm"),
+            Inertia::from_com(0.2, reach * 0.5, bar),
+        );
+        b.frame(&n("forearm_tip"), forearm, Transform::from_translation(reach));
+        b.frame(&n("platform"), platform, Transform::from_translation(e * rp));
+    }
+    let m = b.build();
+    let loops = delta_loops(&m).unwrap_or_else(|e| panic!("built-in model: delta loops: {e}"));
+    m.with_constraints(&loops).unwrap_or_else(|e| panic!("built-in model: delta loops: {e}"))
+}
+
+/// A rotation taking z onto the unit vector `d`.
+fn z_onto(d: &Vector3<f64>) -> Matrix3<f64> {
+    let z = Vector3::z();
+    let axis = z.cross(d);
+    let (s, c) = (axis.norm(), z.dot(d));
+    if s < 1e-12 {
+        return if c > 0.0 {
+            Matrix3::identity()
+        } else {
+            Matrix3::from_diagonal(&v3(1.0, -1.0, -1.0))
+        };
+    }
+    let r = nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), s.atan2(c));
+    *r.matrix()
+}
+
+/// The three loop constraints of [`delta`] (also its [`Model::constraints`]): 3-D connects
+/// (`local_world_aligned`) of frame `forearm_tip_k` to frame `platform_k`, `k` = 1, 2, 3.
+///
+/// # Errors
+/// [`crate::error::Error::Unknown`] if `model` lacks those frames (not a delta).
+pub fn delta_loops(model: &Model) -> crate::error::Result<Vec<super::Contact>> {
+    (1..=3)
+        .map(|k| {
+            super::Contact::new(model, &format!("forearm_tip_{k}"), Vector3::zeros())?.with_frame2(
+                model,
+                &format!("platform_{k}"),
+                None,
+            )
+        })
+        .collect()
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -766,6 +882,7 @@ pub fn names() -> &'static [&'static str] {
         "humanoid",
         "quadruped",
         "fourbar",
+        "delta",
         "chain6",
         "serial_chain12",
         "pendulum2",
@@ -787,7 +904,7 @@ fn parse_count(s: &str) -> Option<usize> {
 /// A built-in model by name (exact, lower case), `None` if the name is not recognised:
 ///
 /// * `humanoid` → [`humanoid`]`()`, `quadruped` → [`quadruped`]`()`, `fourbar` →
-///   [`fourbar`]`()`;
+///   [`fourbar`]`()`, `delta` → [`delta`]`()`;
 /// * `chain<N>` or `serial_chain<N>` → [`serial_chain`]`(N)`, e.g. `chain6`;
 /// * `pendulum<N>` → [`pendulum`]`(N)`, e.g. `pendulum2`;
 /// * `random_tree<N>[_ff][_s<SEED>]` → [`random_tree`]`(N, SEED, ff)`: `_ff` gives a floating
@@ -799,6 +916,7 @@ pub fn by_name(name: &str) -> Option<Model> {
         "humanoid" => return Some(humanoid()),
         "quadruped" => return Some(quadruped()),
         "fourbar" => return Some(fourbar()),
+        "delta" => return Some(delta()),
         _ => {}
     }
     if let Some(rest) = name.strip_prefix("serial_chain").or_else(|| name.strip_prefix("chain")) {

@@ -56,8 +56,23 @@
 //!   with the bodies welded to it, must have positive mass and principal moments (MuJoCo's
 //!   rule); negative masses, densities or sizes, a non-physical `<inertial>`, and a plane in a
 //!   moving body are errors.
-//! * Joint `damping`, `stiffness`, `frictionloss`, actuators, contacts, equality
-//!   constraints, sensors and every element irrelevant to the rigid-body dynamics are ignored;
+//! * `<equality>` (each constraint with `active="false"`, own or from its class, is skipped;
+//!   `solref`, `solimp` and `torquescale` are ignored: the constraints are rigid):
+//!   `<connect body1 body2 anchor>` is a 3-D two-frame constraint ([`Model::constraints`]):
+//!   frame A at `anchor` in body1's frame, frame B at the point of body2 where the anchor is at
+//!   MuJoCo's reference configuration `qpos0` (hinges and slides at their `ref`, ball joints at
+//!   the identity, free joints at their body's pose); `<weld body1 body2 anchor relpose>` a 6-D
+//!   one: frame B at `anchor` in body2's frame, frame A at `relpose · anchor` in body1's frame
+//!   (`relpose`, `pos` then `quat`, the pose of body2 in body1; by default, or with a zero
+//!   quaternion, the relative pose at `qpos0`). A missing body2, or `"world"`, is the world
+//!   (frame `"universe"`); with body1 on the world, frame A is body2's side. `<joint joint1
+//!   joint2 polycoef>` with a linear polynomial (`q1 − q1₀ = c0 + c1 (q2 − q2₀)`, `₀` at
+//!   `qpos0`) is a mimic constraint: the model is in reduced coordinates
+//!   ([`Model::with_mimic_joints`]). A non-linear polynomial, a `<joint>` without joint2, a
+//!   constraint between sites, an unknown body or joint, both frames on one body, and every
+//!   other element (`<tendon>`, `<flex>`, …) are errors naming the element and its line.
+//! * Joint `damping`, `stiffness`, `frictionloss`, actuators, contacts, sensors and every
+//!   element irrelevant to the rigid-body dynamics are ignored;
 //!   a nonzero body `gravcomp` is ignored with a warning in [`Model::warnings`]. A joint's
 //!   `armature` (with the class defaults; none for a `<freejoint>`, as in MuJoCo) is the
 //!   armature of each of its DoFs ([`Model::armature`]); a negative one is an error. On a
@@ -66,8 +81,7 @@
 //!   differs by `armature · (ω × v)` in the translation rows. Limits (`range` of limited hinge and slide joints) are
 //!   recorded as data.
 //! * Elements that would add bodies or degrees of freedom that sodyn cannot represent
-//!   (`<composite>`, `<flexcomp>`, `<replicate>`, `<attach>`) are errors. `<equality>`
-//!   constraints are ignored with a warning (the model is the kinematic tree).
+//!   (`<composite>`, `<flexcomp>`, `<replicate>`, `<attach>`) are errors.
 //!
 //! Every failure is an [`Error::Model`] naming the file (the included file for an element read
 //! from one), the 1-based line, the element and the reason. At most [`MAX_URDF_DOFS`] degrees
@@ -931,17 +945,6 @@ impl Loader {
 
     fn build(&mut self, root: &El, opts: &MjcfOptions) -> Result<Model> {
         let model_name = root.attr("model").map_or("MuJoCo Model".to_string(), |a| a.value.clone());
-        for eq in root.elems("equality") {
-            for c in &eq.children {
-                let name = c.attr("name").map_or(String::new(), |a| format!(" \"{}\"", a.value));
-                self.warn(
-                    &c.file.clone(),
-                    c.line,
-                    &format!("<{}>{name}", c.tag),
-                    "equality constraint ignored (the model is the kinematic tree)",
-                );
-            }
-        }
         // Gravity.
         let empty = Class::default();
         let mut gravity = Vector3::new(0.0, 0.0, -9.81);
@@ -1037,6 +1040,15 @@ impl Loader {
 
         // (sodyn joint, placement of the body frame in that joint's frame) per body.
         let mut at: Vec<(usize, Transform)> = Vec::with_capacity(self.bodies.len());
+        // MuJoCo's qpos0 (the reference configuration of the equality constraints), per sodyn
+        // joint: a free joint at its body's pose, a hinge or slide at its `ref`; ball joints at
+        // the identity.
+        let mut qpos0: Vec<(usize, Vec<f64>)> = Vec::new();
+        let pose7 = |t: &Transform| {
+            let r = UnitQuaternion::from_matrix(&t.rot);
+            let c = r.coords;
+            vec![t.trans.x, t.trans.y, t.trans.z, c.x, c.y, c.z, c.w]
+        };
         let mut jid = 0usize;
         let mut nv = 0usize;
         for i in 0..self.bodies.len() {
@@ -1057,6 +1069,7 @@ impl Loader {
                     .add_joint(0, ROOT_JOINT_NAME, JointType::FreeFlyer, Transform::identity())
                     .map_err(wrap)?;
                 nv += 6;
+                qpos0.push((id, pose7(&place)));
                 cur = (id, Transform::identity());
             }
             // Anchor of the previous joint in the body frame (the chain's offset).
@@ -1108,6 +1121,7 @@ impl Loader {
                         .add_joint(0, &name, JointType::FreeFlyer, Transform::identity())
                         .map_err(jwrap)?;
                     b.set_armature(id, &[j.armature; 6]).map_err(jwrap)?;
+                    qpos0.push((id, pose7(&place)));
                     cur = (id, Transform::identity());
                     continue;
                 }
@@ -1148,6 +1162,9 @@ impl Loader {
                     b.set_limits(id, &[lo], &[hi]).map_err(jwrap)?;
                 }
                 b.set_armature(id, &vec![j.armature; kind.nv()]).map_err(jwrap)?;
+                if matches!(j.kind, JKind::Hinge | JKind::Slide) {
+                    qpos0.push((id, vec![j.refpos]));
+                }
                 anchor = c;
                 cur = (id, Transform::identity());
             }
@@ -1198,8 +1215,236 @@ impl Loader {
             reason: e.to_string(),
         })?;
         model.tendons = self.tendons(root, &model)?;
+        let mut q0 = model.neutral();
+        for (j, x) in &qpos0 {
+            let a = model.idx_q[*j];
+            q0.as_mut_slice()[a..a + x.len()].copy_from_slice(x);
+        }
+        let (constraints, mimics) = self.equality(root, &model, &q0)?;
+        model.constraints = constraints;
+        let mut model = if mimics.is_empty() {
+            model
+        } else {
+            let (lines, mimics): (Vec<_>, Vec<_>) = mimics.into_iter().unzip();
+            model.with_mimic_joints(&mimics).map_err(|e| {
+                // "mimic constraint K: REASON" names the K-th <joint> equality.
+                let Error::Build(full) = &e else { return e };
+                let (k, msg) = full
+                    .strip_prefix("mimic constraint ")
+                    .and_then(|r| r.split_once(": "))
+                    .and_then(|(n, why)| Some((n.parse::<usize>().ok()?, why.to_string())))
+                    .unwrap_or((0, full.clone()));
+                match lines.get(k).or(lines.first()) {
+                    Some((file, line, element)) => model_err(file, *line, element, msg),
+                    None => e,
+                }
+            })?
+        };
         model.warnings = std::mem::take(&mut self.warnings);
         Ok(model)
+    }
+
+    /// The `<equality>` constraints: the `<connect>`s and `<weld>`s as two-frame constraints
+    /// (frame B the world frame for a constraint with the world), placed from MuJoCo's reference
+    /// configuration `q0` (qpos0), and the linear `<joint>` couplings as mimic constraints
+    /// (each with its file, line and element, for the errors of the reduction).
+    #[allow(clippy::type_complexity)]
+    fn equality(
+        &mut self,
+        root: &El,
+        model: &Model,
+        q0: &nalgebra::DVector<f64>,
+    ) -> Result<(Vec<super::Contact>, Vec<((Rc<str>, u32, String), super::MimicJoint)>)> {
+        use super::{Contact, ContactType, MimicJoint};
+        let mut contacts = Vec::new();
+        let mut mimics = Vec::new();
+        let mut data = crate::algo::Data::new(model);
+        let world = |f: usize, data: &mut crate::algo::Data| -> Result<Transform> {
+            crate::algo::frames::frame_placement(model, data, q0, f)
+        };
+        for eq in root.elems("equality") {
+            for c in &eq.children {
+                let name = c.attr("name").map_or(String::new(), |a| format!(" \"{}\"", a.value));
+                let elem = format!("<{}>{name}", c.tag);
+                let class = self.class_of(c, "main", &elem)?;
+                // Attributes of the element, else of its class's <equality> defaults.
+                let get = |key: &str| -> Option<&Attr> {
+                    c.attr(key).or_else(|| {
+                        class
+                            .attrs
+                            .get("equality")
+                            .and_then(|v| v.iter().find(|a| a.name == key))
+                            .map(|a| &**a)
+                    })
+                };
+                if let Some(a) = get("active")
+                    && !parse_bool(c, a, &elem)?
+                {
+                    continue;
+                }
+                let nums = |key: &str, n: usize, default: &[f64]| -> Result<Vec<f64>> {
+                    match get(key) {
+                        Some(a) => parse_numbers(c, a, &elem, n, n),
+                        None => Ok(default.to_vec()),
+                    }
+                };
+                let at_attr = |key: &str| get(key).map_or(c.line, |a| a.line);
+                // A body named by attribute `key`: (its frame, its name) — the world's for
+                // "world" (or no attribute, when `optional`).
+                let body = |key: &str, optional: bool| -> Result<usize> {
+                    let Some(a) = c.attr(key) else {
+                        if optional {
+                            return Ok(0);
+                        }
+                        return Err(err_at(c, &elem, format!("attribute {key} is missing")));
+                    };
+                    if a.value == "world" {
+                        return Ok(0);
+                    }
+                    let named = self.bodies.iter().any(|b| b.name.as_deref() == Some(&a.value));
+                    match model.frame_id(&a.value) {
+                        Ok(f) if named => Ok(f),
+                        _ => Err(model_err(
+                            &c.file,
+                            a.line,
+                            &elem,
+                            format!("{key}=\"{}\": unknown body", a.value),
+                        )),
+                    }
+                };
+                match c.tag.as_str() {
+                    "connect" | "weld" => {
+                        if let Some(a) = c.attr("site1").or_else(|| c.attr("site2")) {
+                            return Err(model_err(
+                                &c.file,
+                                a.line,
+                                &elem,
+                                format!(
+                                    "attribute {}: constraints between sites are not supported \
+                                     (give body1, body2 and anchor)",
+                                    a.name
+                                ),
+                            ));
+                        }
+                        let (f1, f2) = (body("body1", false)?, body("body2", true)?);
+                        let anchor = nums("anchor", 3, &[0.0; 3])?;
+                        let anchor = Vector3::new(anchor[0], anchor[1], anchor[2]);
+                        let (x1, x2) = (world(f1, &mut data)?, world(f2, &mut data)?);
+                        // Frame A (on body1) and frame B (on body2) placements.
+                        let (pa, pb, kind) = if c.tag == "connect" {
+                            let pb = x2.inverse().act_point(&x1.act_point(&anchor));
+                            (
+                                Transform::from_translation(anchor),
+                                Transform::from_translation(pb),
+                                ContactType::D3,
+                            )
+                        } else {
+                            let rp = nums("relpose", 7, &[0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0])?;
+                            let rel = if rp[3..].iter().all(|&x| x == 0.0) {
+                                x1.inverse().compose(&x2)
+                            } else {
+                                let Some(r) = quat_wxyz(rp[3], rp[4], rp[5], rp[6]) else {
+                                    return Err(model_err(
+                                        &c.file,
+                                        at_attr("relpose"),
+                                        &elem,
+                                        "relpose: the quaternion is not finite",
+                                    ));
+                                };
+                                unit_transform(&r, Vector3::new(rp[0], rp[1], rp[2]))
+                            };
+                            let pb = Transform::from_translation(anchor);
+                            (rel.compose(&pb), pb, ContactType::D6)
+                        };
+                        // Frame A must move: a constraint whose body1 is on the world is held
+                        // from body2's side.
+                        let (fa, pa, fb, pb) = if model.frames()[f1].joint == 0 {
+                            (f2, pb, f1, pa)
+                        } else {
+                            (f1, pa, f2, pb)
+                        };
+                        let fname = |f: usize| model.frames()[f].name.clone();
+                        let cst = Contact::new(model, &fname(fa), Vector3::zeros())
+                            .and_then(|x| x.with_placement(model, &pa))
+                            .map(|x| Contact { kind, ..x })
+                            .and_then(|x| x.with_frame2(model, &fname(fb), Some(&pb)))
+                            .map_err(|e| {
+                                let why = match e {
+                                    Error::Argument { reason, .. } => reason,
+                                    e => e.to_string(),
+                                };
+                                err_at(c, &elem, why)
+                            })?;
+                        contacts.push(cst);
+                    }
+                    "joint" => {
+                        let joint = |key: &str| -> Result<Option<usize>> {
+                            let Some(a) = c.attr(key) else { return Ok(None) };
+                            model.joint_id(&a.value).map(Some).map_err(|_| {
+                                model_err(
+                                    &c.file,
+                                    a.line,
+                                    &elem,
+                                    format!("{key}=\"{}\": unknown joint", a.value),
+                                )
+                            })
+                        };
+                        let Some(j1) = joint("joint1")? else {
+                            return Err(err_at(c, &elem, "attribute joint1 is missing"));
+                        };
+                        let Some(j2) = joint("joint2")? else {
+                            return Err(err_at(
+                                c,
+                                &elem,
+                                "no joint2: a joint held at a constant value is not supported \
+                                 (only the coupling joint1 = c0 + c1 · joint2)",
+                            ));
+                        };
+                        let line = at_attr("polycoef");
+                        let p = match get("polycoef") {
+                            Some(a) => parse_numbers(c, a, &elem, 1, 5)?,
+                            None => vec![0.0, 1.0],
+                        };
+                        let coef = |i: usize| p.get(i).copied().unwrap_or(0.0);
+                        if let Some(i) = (2..5).find(|&i| coef(i) != 0.0) {
+                            return Err(model_err(
+                                &c.file,
+                                line,
+                                &elem,
+                                format!(
+                                    "polycoef: coefficient {i} is {}: only a linear coupling \
+                                     (c0 + c1 · joint2) is supported",
+                                    coef(i)
+                                ),
+                            ));
+                        }
+                        // MuJoCo: q1 − q1(qpos0) = c0 + c1 (q2 − q2(qpos0)).
+                        let (r1, r2) = (q0[model.idx_q[j1]], q0[model.idx_q[j2]]);
+                        let (c0, c1) = (coef(0), coef(1));
+                        mimics.push((
+                            (c.file.clone(), c.line, elem.clone()),
+                            MimicJoint {
+                                joint: j1,
+                                reference: j2,
+                                multiplier: c1,
+                                offset: c0 + r1 - c1 * r2,
+                            },
+                        ));
+                    }
+                    other => {
+                        return Err(err_at(
+                            c,
+                            &elem,
+                            format!(
+                                "<{other}> equality constraints are not supported (only \
+                                 <connect>, <weld> and linear <joint> couplings)"
+                            ),
+                        ));
+                    }
+                }
+            }
+        }
+        Ok((contacts, mimics))
     }
 
     /// Reads the bodies of a `<worldbody>` depth-first in document order (MuJoCo's order),

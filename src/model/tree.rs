@@ -104,6 +104,8 @@ pub struct Model {
     pub(crate) warnings: Vec<String>,
     /// The tendons read by the MJCF loader (see [`Model::tendons`]).
     pub(crate) tendons: Vec<super::tendon::Tendon>,
+    /// The constraints the model's loader read (see [`Model::constraints`]).
+    pub(crate) constraints: Vec<super::Contact>,
     /// Frames (URDF links), first one the world.
     pub(crate) frames: Vec<Frame>,
     /// Per joint, its indices and kind packed for the kinematics kernels (see [`JointKin`]);
@@ -242,9 +244,11 @@ impl Model {
     pub fn with_mimic_joints(&self, mimics: &[super::reduction::MimicJoint]) -> Result<Model> {
         let mut tree = self.full_tree().clone();
         if mimics.is_empty() {
+            tree.constraints = self.constraints.clone();
             return Ok(tree);
         }
         let r = super::reduction::MimicModel::new(tree.clone(), mimics)?;
+        tree.constraints = self.constraints.clone();
         tree.key = r.key;
         tree.mimic_joints = r.mimics.clone();
         tree.reduction = Some(std::sync::Arc::new(r));
@@ -458,7 +462,7 @@ impl Model {
     /// What the URDF or MJCF loader accepted with a reservation, one message per item in the
     /// format of its errors (`FILE:LINE: ELEMENT: REASON`): a link inertia that is not physical
     /// but harmless, a `<mimic>` naming an unknown joint (see [`crate::model::urdf`]); an
-    /// ignored gravity compensation or equality constraint, the armature of a free joint (see
+    /// ignored gravity compensation, the armature of a free joint (see
     /// [`crate::model::mjcf`]). Empty for a
     /// model made with [`ModelBuilder`]. The library prints nothing; the command-line tool
     /// prints these on standard error.
@@ -469,6 +473,48 @@ impl Model {
     /// dynamics; see [`Tendon`](super::tendon::Tendon)). Empty for other models.
     pub fn tendons(&self) -> &[super::tendon::Tendon] {
         &self.tendons
+    }
+    /// The model's own constraints: the closed loops and world attachments its description
+    /// holds (MJCF `<equality>` `<connect>` and `<weld>`, the loops of the built-in
+    /// [`fourbar`](super::builtin::fourbar) and [`delta`](super::builtin::delta)), as
+    /// [`Contact`](super::Contact)s on frames of [`Model::full_tree`] (two-frame constraints,
+    /// frame B the world frame `"universe"` for an attachment to the world). Empty for other
+    /// models. The algorithms take contact sets as arguments and do not read this list; the
+    /// command-line tool and the Python package use it when a call gives no contacts.
+    pub fn constraints(&self) -> &[super::Contact] {
+        &self.constraints
+    }
+    /// The same model with `constraints` as its own constraints ([`Model::constraints`]).
+    ///
+    /// # Errors
+    /// [`Error::Argument`] naming the constraint (`constraints[i] (...)`) if a frame index is
+    /// out of range, a Baumgarte gain is negative or not finite, or a two-frame constraint is
+    /// invalid (both frames on one body, frame A on the world).
+    pub fn with_constraints(&self, constraints: &[super::Contact]) -> Result<Model> {
+        for (i, c) in constraints.iter().enumerate() {
+            let label = || {
+                super::contact_label(self, constraints, i).replacen("contacts[", "constraints[", 1)
+            };
+            let n = self.frames.len();
+            if c.frame >= n || c.frame2.is_some_and(|f| f >= n) {
+                return Err(Error::Argument {
+                    name: format!("constraints[{i}]"),
+                    reason: format!(
+                        "frame index {} or frame2 index {:?} is out of range (the model has {n} \
+                         frames)",
+                        c.frame, c.frame2
+                    ),
+                });
+            }
+            c.check_gains()
+                .map_err(|e| Error::Argument { name: label(), reason: e.to_string() })?;
+            if let Some(reason) = c.loop_problem(self) {
+                return Err(Error::Argument { name: label(), reason });
+            }
+        }
+        let mut m = self.clone();
+        m.constraints = constraints.to_vec();
+        Ok(m)
     }
     /// Frames (URDF links), the first one the world.
     pub fn frames(&self) -> &[Frame] {
@@ -817,6 +863,7 @@ impl ModelBuilder {
             reduction: None,
             warnings: vec![],
             tendons: vec![],
+            constraints: vec![],
             frames: vec![Frame {
                 name: "universe".into(),
                 joint: 0,

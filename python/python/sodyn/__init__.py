@@ -261,13 +261,18 @@ class ImpactResult(_Result):
     d2impulse_dqdvminus: np.ndarray
 
 
+def _contacts(contacts: Optional[Sequence[Contact]]) -> Optional[list]:
+    """``None`` (the model's own constraints) or the contacts as a list."""
+    return None if contacts is None else list(contacts)
+
+
 def constrained_id_derivatives(
     model: Model,
     data: Data,
     q: Any,
     v: Any,
     a: Any,
-    contacts: Sequence[Contact],
+    contacts: Optional[Sequence[Contact]] = None,
     lambda_: Any = None,
     order: int = 1,
     *,
@@ -276,7 +281,8 @@ def constrained_id_derivatives(
     """Constrained inverse dynamics ``tau = M a + b - J_c^T lambda_`` at ``(q, v, a, lambda_)``
     and its derivatives, ``lambda_`` (3 rows per 3-D contact, 6 ``[moment; force]`` per 6-D
     contact: the forces applied to the robot in each contact's axes, as ``KktResult.lambda_``)
-    held fixed in those axes. ``order=2`` adds ``d2tau_dq2``. ``lam=`` is the deprecated name of
+    held fixed in those axes. ``order=2`` adds ``d2tau_dq2``. ``contacts=None``: the model's
+    own constraints (``Model.constraints``). ``lam=`` is the deprecated name of
     ``lambda_`` (it warns, and will be removed in the next release)."""
     if lam is not None:
         if lambda_ is not None:
@@ -290,7 +296,7 @@ def constrained_id_derivatives(
     if lambda_ is None:
         raise TypeError("constrained_id_derivatives: missing argument lambda_ (the contact forces)")
     return ConstrainedIdResult(
-        _sodyn.constrained_id_derivatives(model, data, q, v, a, list(contacts), lambda_, order)
+        _sodyn.constrained_id_derivatives(model, data, q, v, a, _contacts(contacts), lambda_, order)
     )
 
 
@@ -300,7 +306,7 @@ def kkt_derivatives(
     q: Any,
     v: Any,
     tau: Any,
-    contacts: Sequence[Contact],
+    contacts: Optional[Sequence[Contact]] = None,
     order: int = 1,
     *,
     damping: float = 0.0,
@@ -309,6 +315,8 @@ def kkt_derivatives(
     ``(q, v, tau)`` and its first (``order=1``) or first and second (``order=2``) derivatives.
     ``lambda_`` holds the contact forces applied to the robot, 3 rows per 3-D contact and 6
     (``[moment; force]``) per 6-D contact, in each contact's axes (``Contact.reference``).
+    ``contacts=None`` takes the model's own constraints (``Model.constraints``: MJCF equality
+    constraints, the loops of ``builtin:fourbar`` and ``builtin:delta``).
 
     ``damping`` is ``mu >= 0``, added to the diagonal of the Delassus matrix
     ``J_c M^-1 J_c^T`` (Pinocchio's ``inv_damping``, Crocoddyl's ``JMinvJt_damping``). The
@@ -317,7 +325,7 @@ def kkt_derivatives(
     regularised, and the derivatives are those of the regularised solve. Models loaded with
     ``mimic=True`` take only ``damping=0``."""
     return KktResult(
-        _sodyn.kkt_derivatives(model, data, q, v, tau, list(contacts), order, float(damping))
+        _sodyn.kkt_derivatives(model, data, q, v, tau, _contacts(contacts), order, float(damping))
     )
 
 
@@ -326,18 +334,18 @@ def impact_derivatives(
     data: Data,
     q: Any,
     v_minus: Any,
-    contacts: Sequence[Contact],
+    contacts: Optional[Sequence[Contact]] = None,
     restitution: float = 0.0,
     order: int = 1,
     *,
     damping: float = 0.0,
 ) -> ImpactResult:
     """Impact dynamics ``[M J_c^T; J_c -mu I][v+; -impulse] = [M v-; -e J_c v-]`` and its
-    derivatives with respect to ``q`` and ``v_minus``; ``damping`` (``mu``) as in
-    :func:`kkt_derivatives`."""
+    derivatives with respect to ``q`` and ``v_minus``; ``damping`` (``mu``) and
+    ``contacts=None`` as in :func:`kkt_derivatives`."""
     return ImpactResult(
         _sodyn.impact_derivatives(
-            model, data, q, v_minus, list(contacts), float(restitution), order, float(damping)
+            model, data, q, v_minus, _contacts(contacts), float(restitution), order, float(damping)
         )
     )
 

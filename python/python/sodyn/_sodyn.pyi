@@ -120,6 +120,12 @@ class Model:
     def expand_configuration(self, q: ArrayLike) -> Vector:
         """The full tree's configuration of a reduced one (``mimic=True`` models only)."""
     @property
+    def constraints(self) -> list[Contact]:
+        """The model's own constraints: MJCF ``<equality>`` ``<connect>`` (3-D) and ``<weld>``
+        (6-D) as two-frame constraints (``frame2`` ``"universe"`` for the world), the loops of
+        ``builtin:fourbar`` and ``builtin:delta``; empty for other models. The contact
+        functions take them when called with ``contacts=None``."""
+    @property
     def tendons(self) -> list[dict[str, Any]]:
         """The MJCF ``<tendon>``s in document order (data only: they do not enter the
         dynamics), one dict each: ``name`` (``None`` if unnamed), ``type`` (``"fixed"`` or
@@ -130,7 +136,7 @@ class Model:
     def warnings(self) -> list[str]:
         """What the URDF or MJCF loader accepted with a reservation, one ``"FILE:LINE: ELEMENT:
         REASON"`` string each: a non-physical but harmless link inertia, a ``<mimic>`` naming an
-        unknown joint, an ignored MJCF ``gravcomp`` or ``<equality>``, the armature of an MJCF
+        unknown joint, an ignored MJCF ``gravcomp``, the armature of an MJCF
         free joint (see docs/conventions.md). Empty for built-in models; nothing is printed."""
     @property
     def armature(self) -> Vector:
@@ -196,11 +202,27 @@ class Contact:
     the reference placement fixed where the contact frame is at the ``q`` of the call
     (``e_c``: the position error for 3-D, ``log6`` of the placement error for 6-D). Impacts
     ignore the gains. A body held by a 6-D contact that carries another contact is a redundant
-    set: an error naming the contacts."""
+    set: an error naming the contacts.
+
+    With ``frame2`` (a frame name) the constraint is a two-frame (closed-loop) one: frame A
+    (``point``/``placement`` in ``frame``) is held on frame B, given by ``point2`` (3-D) or
+    ``placement2`` (a ``(4, 4)`` matrix) in ``frame2``'s coordinates (docs/conventions.md);
+    both frames on one body is a ``ValueError``. ``Model.constraints`` lists a model's own."""
 
     def __init__(self, frame: str, point: Optional[ArrayLike] = None, kp: float = 0.0,
                  kd: float = 0.0, type: str = "3d", reference: str = "local_world_aligned",
-                 placement: Optional[ArrayLike] = None) -> None: ...
+                 placement: Optional[ArrayLike] = None, frame2: Optional[str] = None,
+                 point2: Optional[ArrayLike] = None,
+                 placement2: Optional[ArrayLike] = None) -> None: ...
+    @property
+    def frame2(self) -> Optional[str]:
+        """Frame B of a two-frame constraint, ``None`` for a contact with the world."""
+    @property
+    def point2(self) -> Vector:
+        """Origin of frame B's contact frame in ``frame2``'s coordinates ``(3,)``."""
+    @property
+    def placement2(self) -> Matrix:
+        """Frame B's contact frame in ``frame2``'s coordinates, ``(4, 4)`` homogeneous matrix."""
     @property
     def frame(self) -> str: ...
     @property
@@ -254,29 +276,30 @@ def idsoza(model: Model, data: Data, q: ArrayLike, x: ArrayLike) -> Tensor:
     """IDSOZA: ``d2(M(q) x)/dq2``, ``(nv, nv, nv)``, ``T[i, j, k] = d/dq_k d(M x)_i/dq_j``
     (with ``mimic=True``: in the reduced coordinates)."""
 def constrained_id_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike,
-                               a: ArrayLike, contacts: Sequence[Contact], lambda_: ArrayLike,
+                               a: ArrayLike, contacts: Optional[Sequence[Contact]], lambda_: ArrayLike,
                                order: int = 1) -> dict[str, Vector]:
     """``tau = M a + b - J_c^T lambda_`` and its derivatives, ``lambda_`` with 3 or 6 rows per
     contact (held fixed in each contact's axes); ``sodyn.constrained_id_derivatives`` wraps the
     dict in a ``ConstrainedIdResult``."""
 def kkt_derivatives(model: Model, data: Data, q: ArrayLike, v: ArrayLike, tau: ArrayLike,
-                    contacts: Sequence[Contact], order: int = 1,
+                    contacts: Optional[Sequence[Contact]] = None, order: int = 1,
                     damping: float = 0.0) -> dict[str, Vector]:
     """The KKT contact dynamics and its derivatives (``sodyn.kkt_derivatives``), ``damping``
     added to the Delassus matrix's diagonal."""
 def impact_derivatives(model: Model, data: Data, q: ArrayLike, v_minus: ArrayLike,
-                       contacts: Sequence[Contact], restitution: float = 0.0,
+                       contacts: Optional[Sequence[Contact]] = None, restitution: float = 0.0,
                        order: int = 1, damping: float = 0.0) -> dict[str, Vector]:
     """The impact dynamics and its derivatives (``sodyn.impact_derivatives``), ``damping``
     added to the Delassus matrix's diagonal."""
 
 def kkt_so_contracted(model: Model, data: Data, q: ArrayLike, v: ArrayLike, tau: ArrayLike,
-                      contacts: Sequence[Contact], w_qdd: ArrayLike, w_lambda: ArrayLike,
+                      contacts: Optional[Sequence[Contact]], w_qdd: ArrayLike, w_lambda: ArrayLike,
                       damping: float = 0.0) -> Tuple[Matrix, Matrix, Matrix, Matrix]:
     """Hessians of ``w_qdd @ qdd + w_lambda @ lambda`` of the KKT dynamics:
     ``(C_qq, C_vv, C_qv, C_tauq)``; ``w_lambda`` has 3 or 6 rows per contact."""
 def impact_so_contracted(model: Model, data: Data, q: ArrayLike, v_minus: ArrayLike,
-                         contacts: Sequence[Contact], w_vplus: ArrayLike, w_impulse: ArrayLike,
+                         contacts: Optional[Sequence[Contact]], w_vplus: ArrayLike,
+                         w_impulse: ArrayLike,
                          restitution: float = 0.0,
                          damping: float = 0.0) -> Tuple[Matrix, Matrix]:
     """Hessians of ``w_vplus @ vplus + w_impulse @ impulse`` of the impact dynamics:

@@ -36,8 +36,12 @@ pub struct State {
     pub a: DVector<f64>,
     /// Joint torque (length nv).
     pub tau: DVector<f64>,
-    /// Point contacts (empty: no contact outputs).
+    /// Point contacts (empty: no contact outputs). Without a `"contacts"` key in the state
+    /// file, the model's own constraints ([`Model::constraints`]).
     pub contacts: Vec<Contact>,
+    /// Whether `contacts` are the model's own constraints (no `"contacts"` key): then an
+    /// algorithm that cannot take them reports it in `"errors"` instead of failing.
+    pub model_contacts: bool,
     /// Contact forces for constrained inverse dynamics (3 or 6 rows per contact).
     pub lambda: DVector<f64>,
     /// Coefficient of restitution of the impact.
@@ -92,6 +96,7 @@ impl State {
             a,
             tau,
             contacts: vec![],
+            model_contacts: false,
             lambda: DVector::zeros(0),
             restitution: 0.0,
             damping: 0.0,
@@ -179,6 +184,10 @@ pub fn load_state(
     model.check_q(&q)?;
     let z = || DVector::zeros(model.nv());
     let mut contacts = vec![];
+    let model_contacts = !obj.contains_key("contacts");
+    if model_contacts {
+        contacts = model.constraints().to_vec();
+    }
     if let Some(list) = obj.get("contacts") {
         let list = list.as_array().ok_or_else(|| {
             Error::Io(format!(
@@ -388,6 +397,7 @@ pub fn load_state(
         a: read_vec(obj, "a", model.nv(), file)?.unwrap_or_else(z),
         tau: read_vec(obj, "tau", model.nv(), file)?.unwrap_or_else(z),
         contacts,
+        model_contacts,
         lambda,
         restitution,
         damping,
@@ -491,7 +501,13 @@ pub fn eval_json(model: &Model, s: &State, order: u32) -> Result<Value> {
         }
     }
     if !s.contacts.is_empty() {
-        contact_outputs(model, s, order, &mut data, o, &mut errors)?;
+        match contact_outputs(model, s, order, &mut data, o, &mut errors) {
+            Err(e) if s.model_contacts => {
+                let why = format!("the model's constraints (the state gives no \"contacts\"): {e}");
+                errors.insert("contacts".into(), Value::String(why));
+            }
+            r => r?,
+        }
     }
     if s.weights.any() {
         let c = contracted_outputs(model, s, &mut data, &mut errors)?;

@@ -164,7 +164,8 @@ struct EvalArgs {
     #[command(flatten)]
     model: ModelArgs,
     /// The state: a JSON file with q, v, a, tau (and optionally contacts, lambda, restitution,
-    /// damping, weights, frames)
+    /// damping, weights, frames); without contacts, the model's own constraints (MJCF
+    /// equality constraints, the loops of builtin:fourbar and builtin:delta)
     #[arg(long, value_name = "FILE")]
     state: String,
     /// 1: values and first-order derivatives; 2: also the second-order tensors

@@ -1681,3 +1681,44 @@ fn eval_takes_two_frame_constraints() {
         assert!(e.contains(needle), "{feet}: {e}");
     }
 }
+
+/// A state file without `"contacts"` takes the model's own constraints (builtin:delta's three
+/// loops: the KKT outputs match the library's with `Model::constraints`); `"contacts": []` means
+/// none; a reduced MJCF model with loops reports the refusal in `errors`.
+#[test]
+fn eval_defaults_to_the_model_constraints() {
+    use sodyn::algo::Data;
+    use sodyn::deriv::{ContactData, kkt_derivatives};
+    let m = sodyn::model::builtin::delta();
+    let nv = m.nv();
+    let tau: Vec<f64> = (0..nv).map(|i| 0.1 * i as f64 - 0.5).collect();
+    let run = |extra: &str, model: &str, name: &str| {
+        let state = tmp(name);
+        std::fs::write(&state, format!(r#"{{"tau": {tau:?}{extra}}}"#)).unwrap();
+        sodyn(&["eval", "--model", model, "--state", state.to_str().unwrap()])
+    };
+    let o = run("", "builtin:delta", "delta-own.json");
+    assert_ok(&o, "eval with the model's constraints");
+    let out: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let kkt = &out["kkt"];
+    let (q, v) = (m.neutral(), DVector::zeros(nv));
+    let mut cd = ContactData::new(&m, m.constraints()).unwrap();
+    let kd =
+        kkt_derivatives(&m, &mut Data::new(&m), &mut cd, &q, &v, &DVector::from_vec(tau.clone()))
+            .unwrap();
+    assert!((vector(kkt, "lambda", 9) - kd.lambda()).amax() <= 1e-12 * kd.lambda().amax());
+    assert!((vector(kkt, "qdd", nv) - kd.qdd()).amax() <= 1e-12 * kd.qdd().amax().max(1.0));
+    let o = run(r#", "contacts": []"#, "builtin:delta", "delta-none.json");
+    assert_ok(&o, "eval without contacts");
+    let out: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert!(out.get("kkt").is_none());
+    // equality.xml: a joint coupling (reduced coordinates) and loops.
+    let xml = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/mjcf/equality.xml");
+    let state = tmp("equality-own.json");
+    std::fs::write(&state, "{}").unwrap();
+    let o = sodyn(&["eval", "--model", xml, "--state", state.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    let out: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let why = out["errors"]["contacts"].as_str().unwrap();
+    assert!(why.contains("model's constraints") && why.contains("reduced coordinates"), "{why}");
+}

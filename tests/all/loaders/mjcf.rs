@@ -449,7 +449,7 @@ fn deep_nesting_is_bounded() {
 }
 
 /// A static body's mesh geoms do not matter (its inertia never reaches the dynamics), nor do
-/// massless mesh geoms of a moving one; equality constraints load with a warning.
+/// massless mesh geoms of a moving one; a `<connect>` loads as the model's constraint.
 #[test]
 fn static_meshes_and_equality_constraints() {
     let m = load_str(&wrap(
@@ -468,8 +468,11 @@ fn static_meshes_and_equality_constraints() {
     let (s, c) = 30f64.to_radians().sin_cos();
     let x = Vector3::new(0.5 * c, 0.0, 1.0 - 0.5 * s);
     assert!((f.placement.trans - x).norm() < 1e-15);
-    assert_eq!(m.warnings().len(), 1, "{:?}", m.warnings());
-    assert!(m.warnings()[0].contains("<connect> \"loop\": equality constraint ignored"));
+    assert!(m.warnings().is_empty(), "{:?}", m.warnings());
+    assert_eq!(m.constraints().len(), 1);
+    let c = &m.constraints()[0];
+    assert_eq!(m.frames()[c.frame].name, "chain2");
+    assert_eq!(m.frames()[c.frame2.unwrap()].name, "masses");
 }
 
 /// MuJoCo's default classes (each accepted case's armature is MuJoCo 4.0's `dof_armature`;
@@ -653,9 +656,8 @@ fn tendons_are_data() {
     let w: Vec<&String> = m.warnings().iter().filter(|w| w.contains("<tendon>")).collect();
     assert_eq!(w.len(), 1);
     assert!(w[0].contains("tendons.xml:49: <tendon>: 3 tendons (1 fixed, 2 spatial)"), "{}", w[0]);
-    assert!(
-        m.warnings().iter().any(|w| w.contains("<joint> \"pair\": equality constraint ignored"))
-    );
+    // The joint equality is inactive: no reduction.
+    assert!(!m.is_reduced() && m.constraints().is_empty());
     // Without the tendons: the same M and τ, bit for bit.
     let text = std::fs::read_to_string(data_dir().join("tendons.xml")).unwrap();
     let (a, b) = (text.find("<tendon>").unwrap(), text.find("</tendon>").unwrap() + 9);
@@ -800,4 +802,188 @@ fn tendon_errors_as_mujoco() {
 fn nested_include_fallback() {
     let m = Model::from_mjcf(data_dir().join("nested_include/main.xml")).unwrap();
     assert_eq!(m.names()[1..], ["shoulder".to_string(), "hip".to_string()]);
+}
+
+/// World placement of a constraint's frame A and frame B contact frames at `q` (full tree).
+fn constraint_frames(
+    m: &Model,
+    c: &sodyn::model::Contact,
+    q: &DVector<f64>,
+) -> (sodyn::spatial::Transform, sodyn::spatial::Transform) {
+    let mut d = Data::new(m);
+    let xa = frame_placement(m, &mut d, q, c.frame).unwrap().compose(&c.placement());
+    let xb = frame_placement(m, &mut d, q, c.frame2.unwrap())
+        .unwrap()
+        .compose(&sodyn::spatial::Transform::new(c.rotation2, c.point2));
+    (xa, xb)
+}
+
+/// `equality.xml`: MuJoCo's qpos0 in sodyn's full-tree coordinates (hinges at their `ref`, free
+/// joints at their bodies' poses, `[p; x y z w]`).
+fn equality_qpos0(full: &Model) -> DVector<f64> {
+    let mut q = full.neutral();
+    let mut set = |joint: &str, x: &[f64]| {
+        let a = full.idx_q()[full.joint_id(joint).unwrap()];
+        q.as_mut_slice()[a..a + x.len()].copy_from_slice(x);
+    };
+    set("j1", &[10f64.to_radians()]);
+    set("j6", &[5f64.to_radians()]);
+    let quat = |w: f64, x: f64, y: f64, z: f64| {
+        let n = (w * w + x * x + y * y + z * z).sqrt();
+        [x / n, y / n, z / n, w / n]
+    };
+    let b = quat(0.9, 0.1, 0.3, 0.2);
+    set("box_free", &[0.6, 0.1, 0.8, b[0], b[1], b[2], b[3]]);
+    let l = quat(0.8, 0.0, 0.6, 0.0);
+    // The unnamed free joints are named joint<i> (MuJoCo's joint index).
+    set("joint5", &[-0.5, 0.0, 0.5, 0.0, 0.0, 0.0, 1.0]);
+    set("joint6", &[0.0, 0.5, 0.3, l[0], l[1], l[2], l[3]]);
+    q
+}
+
+/// `<equality>`: the constraints' frames, points and placements, each closed (zero residual) at
+/// MuJoCo's reference configuration qpos0, the loop's point computed by hand; the joint
+/// coupling as the model's mimic reduction; the inactive constraint skipped.
+#[test]
+fn equality_constraints_load_closed_at_qpos0() {
+    use sodyn::model::ContactType;
+    let m = Model::from_mjcf(data_dir().join("equality.xml")).unwrap();
+    assert!(m.warnings().is_empty(), "{:?}", m.warnings());
+    // The coupling j6 = 0.1 + ref6 + 0.5 (j1 − ref1): a reduced model without j6's DoF.
+    assert!(m.is_reduced());
+    let full = m.full_tree();
+    assert_eq!((full.nq(), full.nv()), (28, 24));
+    assert_eq!((m.nq(), m.nv()), (27, 23));
+    let mj = m.mimic_joints();
+    assert_eq!(mj.len(), 1);
+    assert_eq!(
+        (full.names()[mj[0].joint].as_str(), full.names()[mj[0].reference].as_str()),
+        ("j6", "j1")
+    );
+    assert_eq!(mj[0].multiplier, 0.5);
+    let offset = 0.1 + 5f64.to_radians() - 0.5 * 10f64.to_radians();
+    assert!((mj[0].offset - offset).abs() < 1e-15, "{}", mj[0].offset);
+    // Four active constraints (the fifth is inactive), in document order.
+    let cs = m.constraints();
+    assert_eq!(cs.len(), 4);
+    assert_eq!(full.constraints(), cs);
+    let name = |f: usize| full.frames()[f].name.as_str();
+    let who: Vec<(&str, &str, ContactType)> =
+        cs.iter().map(|c| (name(c.frame), name(c.frame2.unwrap()), c.kind)).collect();
+    assert_eq!(
+        who,
+        [
+            ("link2", "link3", ContactType::D3),
+            ("link3", "box", ContactType::D6),
+            ("puck", "universe", ContactType::D3),
+            // body1 is the world: frame A is the lid's side.
+            ("lid", "universe", ContactType::D6),
+        ]
+    );
+    // The loop: anchor (0.3, 0, 0) in link2, and by hand its point in link3 at qpos0, where
+    // the bodies are placed as the file writes them (j1 at its ref = 10°): the link2 tip at
+    // (0, 0, 1) + (0, 0, −0.3) + (0.3, 0, 0), link3's frame at (0.3, 0, 1).
+    assert_eq!(cs[0].point, Vector3::new(0.3, 0.0, 0.0));
+    let tip = Vector3::new(0.0, 0.0, 1.0) + Vector3::new(0.3, 0.0, -0.3);
+    let point2 = tip - Vector3::new(0.3, 0.0, 1.0);
+    assert!((cs[0].point2 - point2).norm() < 1e-15, "{:?} vs {point2:?}", cs[0].point2);
+    // The weld to the box: frame B at the anchor in the box's frame.
+    assert_eq!(cs[1].point2, Vector3::new(0.05, 0.0, 0.0));
+    assert_eq!(cs[1].rotation2, nalgebra::Matrix3::identity());
+    // The puck's pin: the anchor, and its world position at qpos0.
+    assert_eq!(cs[2].point, Vector3::new(0.1, 0.0, 0.0));
+    assert!((cs[2].point2 - Vector3::new(-0.4, 0.0, 0.5)).norm() < 1e-15);
+    // The lid: held at relpose in the world.
+    assert!((cs[3].point2 - Vector3::new(0.0, 0.5, 0.3)).norm() < 1e-15);
+    // Every constraint is closed at qpos0: points coincide (3-D), frames coincide (6-D).
+    let q0 = equality_qpos0(full);
+    for (i, c) in cs.iter().enumerate() {
+        let (xa, xb) = constraint_frames(full, c, &q0);
+        let dp = (xa.trans - xb.trans).norm();
+        assert!(dp < 1e-14, "constraint {i}: points apart by {dp}");
+        if c.kind == ContactType::D6 {
+            let dr = (xa.rot - xb.rot).amax();
+            assert!(dr < 1e-14, "constraint {i}: frames turned by {dr}");
+        }
+    }
+    // And open elsewhere (the residual is not zero by construction).
+    let mut q = q0.clone();
+    q[full.idx_q()[full.joint_id("j3").unwrap()]] += 0.1;
+    let (xa, xb) = constraint_frames(full, &cs[0], &q);
+    assert!((xa.trans - xb.trans).norm() > 1e-3);
+}
+
+/// An explicit weld `relpose` places frame A at `relpose · anchor` in body1; its default is the
+/// relative pose at qpos0.
+#[test]
+fn weld_relpose_places_frame_a() {
+    let xml = |relpose: &str| {
+        format!(
+            r#"<mujoco><worldbody>
+<body name="a" pos="0 0 1"><joint axis="0 1 0"/><geom size="0.1"/></body>
+<body name="b" pos="1 0 1" euler="0 0 90"><joint axis="1 0 0"/><geom size="0.1"/></body>
+</worldbody><equality><weld body1="a" body2="b" anchor="0 0.2 0" {relpose}/></equality></mujoco>"#
+        )
+    };
+    let m = load_str(&xml(r#"relpose="0.5 0 0 0 0 0 1""#)).unwrap();
+    let c = &m.constraints()[0];
+    // A half turn about z: (0, 0.2, 0) → (0, −0.2, 0), plus (0.5, 0, 0).
+    assert!((c.point - Vector3::new(0.5, -0.2, 0.0)).norm() < 1e-15, "{:?}", c.point);
+    assert!(
+        (c.rotation - nalgebra::Matrix3::from_diagonal(&Vector3::new(-1.0, -1.0, 1.0))).amax()
+            < 1e-15
+    );
+    assert_eq!(c.point2, Vector3::new(0.0, 0.2, 0.0));
+    // Default: b's pose in a at q = 0 (a turn of 90° about z, 1 m along x).
+    let m = load_str(&xml("")).unwrap();
+    let c = &m.constraints()[0];
+    assert!((c.point - Vector3::new(0.8, 0.0, 0.0)).norm() < 1e-15, "{:?}", c.point);
+    let (xa, xb) = constraint_frames(&m, c, &m.neutral());
+    assert!((xa.trans - xb.trans).norm() < 1e-15 && (xa.rot - xb.rot).amax() < 1e-15);
+}
+
+/// Bad `<equality>` elements: an error naming the element and its line.
+#[test]
+fn equality_errors_name_element_and_line() {
+    let bodies = r#"<worldbody>
+<body name="a"><joint name="ja" axis="0 1 0"/><geom size="0.1"/>
+  <body name="a2"><geom size="0.1"/></body></body>
+<body name="b" pos="1 0 0"><joint name="jb" type="slide"/><geom size="0.1"/></body>
+<body name="c" pos="2 0 0"><joint name="jc"/><geom size="0.1"/></body>
+</worldbody>"#;
+    let case = |eq: &str| {
+        error_of(&format!("<mujoco>\n{bodies}\n<equality>\n{eq}\n</equality>\n</mujoco>"))
+    };
+    // The equality element is on line 9.
+    let (line, el, why) = case(r#"<joint name="sq" joint1="jc" joint2="ja" polycoef="0 1 0.5"/>"#);
+    assert_eq!((line, el.as_str()), (Some(9), "<joint> \"sq\""));
+    assert!(why.contains("coefficient 2 is 0.5") && why.contains("linear"), "{why}");
+    let (line, el, why) = case(r#"<tendon name="t" tendon1="x"/>"#);
+    assert_eq!((line, el.as_str()), (Some(9), "<tendon> \"t\""));
+    assert!(why.contains("not supported"), "{why}");
+    let (line, el, why) = case(r#"<flex flex="f"/>"#);
+    assert_eq!((line, el.as_str()), (Some(9), "<flex>"));
+    assert!(why.contains("not supported"), "{why}");
+    let (line, el, why) = case(r#"<connect name="x" body1="a" body2="nobody" anchor="0 0 0"/>"#);
+    assert_eq!((line, el.as_str()), (Some(9), "<connect> \"x\""));
+    assert!(why.contains("body2=\"nobody\": unknown body"), "{why}");
+    let (_, _, why) = case(r#"<weld body1="a" body2="a2"/>"#);
+    assert!(why.contains("same body"), "{why}");
+    let (_, el, why) = case(r#"<joint joint1="ja" joint2="jb"/>"#);
+    assert_eq!(el, "<joint>");
+    assert!(why.contains("rotational") && why.contains("prismatic"), "{why}");
+    let (_, _, why) = case(r#"<joint joint1="ja"/>"#);
+    assert!(why.contains("no joint2"), "{why}");
+    let (_, _, why) = case(r#"<joint joint1="nojoint" joint2="jc"/>"#);
+    assert!(why.contains("joint1=\"nojoint\": unknown joint"), "{why}");
+    let (_, _, why) = case(r#"<connect site1="s" site2="t"/>"#);
+    assert!(why.contains("sites"), "{why}");
+    // Inactive: skipped, whatever it is (here a tendon equality, and through its class).
+    let xml = format!(
+        "<mujoco><default><equality active=\"false\"/></default>\n{bodies}\n<equality>\
+         <tendon tendon1=\"x\"/><connect body1=\"a\" body2=\"b\" anchor=\"0 0 0\" active=\"true\"/>\
+         </equality></mujoco>"
+    );
+    let m = load_str(&xml).unwrap();
+    assert_eq!(m.constraints().len(), 1);
 }
