@@ -1,7 +1,8 @@
 //! The repository's DDP example on the sodyn-ocp solvers: a double-pendulum swing-up and two
 //! arm reaches, each solved by FDDP with the three backward passes of
 //! [`SecondOrder`](sodyn_ocp::SecondOrder): Gauss-Newton (`Off`, Crocoddyl's), the exact Hessian
-//! every iteration (`On`) and `Auto` (Gauss-Newton until it converges linearly, then exact).
+//! every iteration (`On`) and `Auto` (Gauss-Newton until two full
+//! feasible steps in a row, then exact while the full steps continue).
 //!
 //! `cargo run --release -p sodyn-ocp --example ddp [-- --quick] [--csv PATH]`
 //!

@@ -375,7 +375,7 @@ fn second_order_variants_reach_the_gauss_newton_solution() {
             match so {
                 SecondOrder::Off => assert_eq!(st.exact_passes, 0),
                 SecondOrder::On => assert_eq!(st.gauss_newton_passes, 0),
-                // Gauss-Newton converges fast here: Auto has no reason to switch.
+                // Auto runs Gauss-Newton passes at least until its first two full steps.
                 SecondOrder::Auto => {
                     assert!(st.exact_passes + st.gauss_newton_passes > s.iter(), "{st:?}")
                 }

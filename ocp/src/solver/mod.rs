@@ -75,12 +75,12 @@ pub enum SecondOrder {
     /// ([`crate::ActionModel::second_order`]); a `Q_uu` that is not positive definite raises
     /// the regularisation `μ` as in Gauss-Newton (Levenberg).
     On,
-    /// Gauss-Newton while it converges fast, the exact Hessian once it converges linearly:
-    /// after an iteration that took the full step on a feasible trajectory and whose cost
-    /// decrease is more than half the previous one's (`½ < ΔJ_k / ΔJ_{k−1} < 1`, the
-    /// signature of a large-residual problem), and from then on while the exact iterations
-    /// keep taking full steps. An exact backward pass that fails at the current `μ` is redone
-    /// with Gauss-Newton in the same iteration, and Gauss-Newton resumes.
+    /// Gauss-Newton far from the solution, the exact Hessian in the local phase: after two
+    /// consecutive iterations that took the full step (`α = 1`) on a feasible trajectory, and
+    /// from then on while the exact iterations keep taking full steps on a feasible
+    /// trajectory. An exact backward pass whose `Q_uu` is not positive definite at the current
+    /// `μ` is redone with Gauss-Newton in the same iteration, and the count of full steps
+    /// restarts from zero.
     Auto,
 }
 
@@ -483,8 +483,8 @@ impl Solver {
         self.stats = HessianStats::default();
         self.so_error = None;
         let mut exact_next = self.second_order == SecondOrder::On;
-        // Auto: the previous accepted iteration's cost decrease.
-        let mut prev_decrease = f64::NAN;
+        // Auto: consecutive full feasible steps since the last failed exact pass.
+        let mut full_steps = 0usize;
         while self.iter < maxiter {
             if let Some(f) = &self.interrupt
                 && f.load(Ordering::Relaxed)
@@ -495,6 +495,7 @@ impl Solver {
             // 1–2. Derivatives and backward pass; a failed factorisation raises μ (after, in
             //      `Auto`, a Gauss-Newton retry of a failed exact pass).
             let mut exact = exact_next;
+            let mut exact_failed = false;
             loop {
                 if recalc && let Err(e) = self.calc_diff() {
                     if self.iter == 0 {
@@ -516,6 +517,7 @@ impl Solver {
                     self.stats.exact_failures += 1;
                     if self.second_order == SecondOrder::Auto {
                         exact = false;
+                        exact_failed = true;
                         continue;
                     }
                 }
@@ -532,7 +534,6 @@ impl Solver {
             }
             // 4. Line search.
             recalc = false;
-            let cost_before = self.cost;
             for n in 0..self.alphas.len() {
                 let alpha = self.alphas[n];
                 self.steplength = alpha;
@@ -575,14 +576,11 @@ impl Solver {
                 SecondOrder::Off => false,
                 SecondOrder::On => true,
                 SecondOrder::Auto => {
+                    // Exact while the exact iterations take full steps; from Gauss-Newton after
+                    // two full steps in a row (a failed exact pass restarts the count).
                     let full = recalc && self.steplength == 1.0 && self.is_feasible;
-                    let decrease = cost_before - self.cost;
-                    let r = decrease / prev_decrease;
-                    let linear = prev_decrease > 0.0 && r > 0.5 && r < 1.0;
-                    if recalc {
-                        prev_decrease = decrease;
-                    }
-                    full && (exact || linear)
+                    full_steps = if exact_failed || !full { 0 } else { full_steps + 1 };
+                    full && (exact || full_steps >= 2)
                 }
             };
             if self.steplength > 0.5 {

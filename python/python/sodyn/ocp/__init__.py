@@ -737,7 +737,8 @@ class _SolverBase:
     def second_order(self) -> Union[bool, str]:
         """Which Hessian the backward pass uses: ``False`` Gauss-Newton (Crocoddyl's), ``True``
         the exact Hessian of dynamics and costs every iteration, ``"auto"`` Gauss-Newton until
-        a full step on a feasible trajectory, then exact (see ``docs/ocp.md``)."""
+        two consecutive full steps on a feasible trajectory, then exact while the full steps
+        continue (see ``docs/ocp.md``)."""
         return {"off": False, "on": True, "auto": "auto"}[self._s.second_order]
 
     @second_order.setter
