@@ -374,6 +374,20 @@ impl PyContact {
     }
 }
 
+// `Model.constraints` is defined here, beside the class it returns, so that the model module
+// does not import this one (pyo3's `multiple-pymethods`, as `Model.create_data` in `data`).
+#[pymethods]
+impl PyModel {
+    /// The model's own constraints (a fresh list of `sodyn.Contact`): MJCF `<equality>`
+    /// `<connect>` (3-D) and `<weld>` (6-D) as two-frame constraints (`frame2` `"universe"` for
+    /// the world), the loops of `builtin:fourbar` and `builtin:delta`; empty for other models.
+    /// The contact functions use them when called with `contacts=None`.
+    #[getter]
+    fn constraints(&self) -> Vec<PyContact> {
+        self.m.constraints().iter().map(|c| PyContact::of(&self.m, c)).collect()
+    }
+}
+
 /// Resolves the contacts against the model; `None`: the model's own constraints
 /// (`Model.constraints`).
 pub(crate) fn resolve(
