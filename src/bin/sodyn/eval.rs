@@ -176,8 +176,9 @@ pub fn load_state(
     floating_base: Option<bool>,
 ) -> Result<State> {
     let val: Value = serde_json::from_str(text).map_err(|e| json_error(file, &e))?;
-    let obj =
-        val.as_object().ok_or_else(|| input(file, format!("the state must be a JSON object")))?;
+    let obj = val
+        .as_object()
+        .ok_or_else(|| input(file, "the state must be a JSON object".to_string()))?;
     check_keys(obj, file, &STATE_KEYS)?;
     let nq = model.nq();
     let q_len = obj.get("q").and_then(Value::as_array).map(Vec::len);
@@ -212,7 +213,7 @@ pub fn load_state(
         let list = list.as_array().ok_or_else(|| {
             input(
                 file,
-                format!("key \"contacts\" must be a list of {{\"frame\", \"point\"}} objects"),
+                "key \"contacts\" must be a list of {\"frame\", \"point\"} objects".to_string(),
             )
         })?;
         for (i, c) in list.iter().enumerate() {
@@ -348,21 +349,20 @@ pub fn load_state(
     let restitution = match obj.get("restitution") {
         None => 0.0,
         Some(r) => r.as_f64().filter(|e| e.is_finite() && *e >= 0.0).ok_or_else(|| {
-            input(file, format!("key \"restitution\" must be a non-negative number"))
+            input(file, "key \"restitution\" must be a non-negative number".to_string())
         })?,
     };
     let damping = match obj.get("damping") {
         None => 0.0,
-        Some(r) => r
-            .as_f64()
-            .filter(|e| e.is_finite() && *e >= 0.0)
-            .ok_or_else(|| input(file, format!("key \"damping\" must be a non-negative number")))?,
+        Some(r) => r.as_f64().filter(|e| e.is_finite() && *e >= 0.0).ok_or_else(|| {
+            input(file, "key \"damping\" must be a non-negative number".to_string())
+        })?,
     };
     let weights = match obj.get("weights") {
         None => Weights::default(),
         Some(w) => {
             let w = w.as_object().ok_or_else(|| {
-                input(file, format!("key \"weights\" must be an object of number lists"))
+                input(file, "key \"weights\" must be an object of number lists".to_string())
             })?;
             let known = ["tau", "qdd", "kkt_qdd", "kkt_lambda", "impact_vplus", "impact_impulse"];
             if let Some(k) = w.keys().find(|k| !known.contains(&k.as_str())) {
@@ -397,7 +397,7 @@ pub fn load_state(
             if contact_weight && contacts.is_empty() {
                 return Err(input(
                     file,
-                    format!("the weights kkt_* and impact_* need \"contacts\""),
+                    "the weights kkt_* and impact_* need \"contacts\"".to_string(),
                 ));
             }
             weights
@@ -407,7 +407,7 @@ pub fn load_state(
         None => vec![],
         Some(list) => {
             let list = list.as_array().ok_or_else(|| {
-                input(file, format!("key \"frames\" must be a list of frame names"))
+                input(file, "key \"frames\" must be a list of frame names".to_string())
             })?;
             let mut ids = Vec::with_capacity(list.len());
             for (i, f) in list.iter().enumerate() {
