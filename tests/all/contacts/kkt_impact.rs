@@ -43,6 +43,12 @@ fn kkt_first_and_second_order_match_oracle() {
         "dlambda_dq (first order only)",
     ];
     let mut w: Vec<Worst> = names.iter().map(|n| Worst::new(n)).collect();
+    // Two computations of one formula: the forward-only `kkt_dynamics` against the forward
+    // outputs of `kkt_derivatives` (qdd, lambda, the contact Jacobian, `data.qdd()`).
+    // Reduced models at 1e-14 (their forward and first-order solves share the reduced
+    // factorisation); the others, whose two paths sum in another order, at 1e-13.
+    let mut w_fwd = Worst::new("kkt_dynamics = kkt_derivatives");
+    let mut w_fwd_reduced = Worst::new("kkt_dynamics = kkt_der. (reduced)");
     let mut rng = Rng::new(61);
     for gains in [false, true] {
         let large = (!gains).then(large_contact_case);
@@ -87,6 +93,21 @@ fn kkt_first_and_second_order_match_oracle() {
             let k1 = kkt_derivatives(&m, &mut d, &mut c1, &q, &v, &tau).unwrap();
             w[16].add(rel_err_mat(k1.dqdd_dq(), &fo.dqdd_dq), &at);
             w[17].add(rel_err_mat(k1.dlambda_dq(), &fo.dlambda_dq), &at);
+            let mut d2 = Data::new(&m);
+            let mut c2 = ContactData::new(&m, &cs).unwrap();
+            kkt_dynamics(&m, &mut d2, &mut c2, &q, &v, &tau).unwrap();
+            let k2 = c2.kkt();
+            assert!(k2.qdd().amax() > 0.0 && k2.lambda().amax() > 0.0, "{at}");
+            let mut e = rel_err_vec(k2.qdd(), c1.kkt().qdd())
+                .max(rel_err_vec(k2.lambda(), c1.kkt().lambda()))
+                .max(rel_err_mat(c2.jac(), c1.jac()));
+            if m.is_reduced() {
+                // A reduced model's `kkt_dynamics` also leaves `q̈` in `data.qdd()`.
+                e = e.max(rel_err_vec(d2.qdd(), c2.kkt().qdd()));
+                w_fwd_reduced.add(e, &at);
+            } else {
+                w_fwd.add(e, &at);
+            }
             let so = oracle::kkt_so(&m, qs, vs, ts, &cs);
             let k = kd.so().unwrap();
             let tensors: [(&Tensor3, &Tensor3); 8] = [
@@ -107,6 +128,8 @@ fn kkt_first_and_second_order_match_oracle() {
     for x in &w {
         x.check(1e-10);
     }
+    w_fwd.check(1e-13);
+    w_fwd_reduced.check(1e-14);
 }
 
 #[test]
@@ -124,6 +147,8 @@ fn impact_first_and_second_order_match_oracle() {
         "d2impulse_dqdvminus",
     ];
     let mut w: Vec<Worst> = names.iter().map(|n| Worst::new(n)).collect();
+    // The forward-only `impact_dynamics` against the forward outputs of `impact_derivatives`.
+    let mut w_fwd = Worst::new("impact_dynamics = impact_der.");
     let mut rng = Rng::new(62);
     for (m, spec) in contact_cases().into_iter().chain(std::iter::once(large_contact_case())) {
         let large = m.nv() >= 32;
@@ -150,11 +175,29 @@ fn impact_first_and_second_order_match_oracle() {
             w[7].add(rel_err_tensor(k.d2vplus_dqdvminus(), &so.d2vplus_dqdvminus), &at);
             w[8].add(rel_err_tensor(k.d2impulse_dq2(), &so.d2impulse_dq2), &at);
             w[9].add(rel_err_tensor(k.d2impulse_dqdvminus(), &so.d2impulse_dqdvminus), &at);
+            let (mut c1, mut c2) =
+                (ContactData::new(&m, &cs).unwrap(), ContactData::new(&m, &cs).unwrap());
+            c1.set_restitution(e).unwrap();
+            c2.set_restitution(e).unwrap();
+            let i1 = impact_dynamics(&m, &mut d, &mut c1, &q, &vminus).unwrap();
+            assert!(i1.impulse().amax() > 0.0, "{at}");
+            let (vp1, imp1) = (i1.vplus().clone(), i1.impulse().clone());
+            let i2 = impact_derivatives(&m, &mut d, &mut c2, &q, &vminus).unwrap();
+            w_fwd.add(rel_err_vec(&vp1, i2.vplus()).max(rel_err_vec(&imp1, i2.impulse())), &at);
+            // The contact rows of q̇⁺ are −e times q̇⁻'s (`J G`, the Jacobian of `kkt_dynamics`
+            // in the reduced velocities).
+            let mut ck = ContactData::new(&m, &cs).unwrap();
+            let z = DVector::zeros(m.nv());
+            kkt_dynamics(&m, &mut Data::new(&m), &mut ck, &q, &z, &z).unwrap();
+            let jr = ck.jac() * m.velocity_map();
+            let rows = &jr * &vp1 + e * (&jr * &vminus);
+            assert!(rows.amax() < 1e-10, "{at}: J vplus + e J vminus = {}", rows.amax());
         }
     }
     for x in &w {
         x.check(1e-10);
     }
+    w_fwd.check(1e-14);
 }
 
 #[test]
