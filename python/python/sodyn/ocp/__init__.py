@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any, Dict, List, Optional, Sequence, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -80,6 +80,15 @@ def _vec(x: Any, n: Optional[int], what: str) -> List[float]:
     if np.isnan(a).any():
         raise OcpError(f"{what}: contains NaN")
     return [("inf" if v > 0 else "-inf") if math.isinf(v) else float(v) for v in a]
+
+
+def _finite(x: Any, n: Optional[int], what: str) -> List[float]:
+    a = np.asarray(x, dtype=float).reshape(-1)
+    if n is not None and a.size != n:
+        raise OcpError(f"{what}: length {a.size} (expected {n})")
+    if not np.isfinite(a).all():
+        raise OcpError(f"{what}: entry {int(np.flatnonzero(~np.isfinite(a))[0])} is not finite")
+    return [float(v) for v in a]
 
 
 def _rot(r: Any, what: str) -> List[float]:
@@ -837,6 +846,116 @@ class _SolverBase:
     @property
     def isFeasible(self) -> bool:
         return self._s.is_feasible
+
+    # Receding-horizon (MPC) updates: the solver's own copy of the problem changes, without a
+    # rebuild; ``self.problem`` (the description it was built from) does not.
+
+    @property
+    def x0(self) -> np.ndarray:
+        """The initial state (in the problem's layout: Crocoddyl's for a converted problem).
+        Setting it is the MPC update of the measured state; the next ``solve`` starts there."""
+        lay = self.problem.layout
+        x0 = self._s.x0
+        return lay.x_out(x0) if lay else x0
+
+    @x0.setter
+    def x0(self, x0: Any) -> None:
+        lay = self.problem.layout
+        x = lay.x_in(x0) if lay else np.asarray(x0, float).reshape(-1)
+        self._s.set_x0(_finite(x, None, "x0"))
+
+    def set_reference(self, t: int, cost: str, reference: Any) -> None:
+        """Replaces the reference of cost ``cost`` at node ``t`` (``problem.T``: the terminal
+        node) without rebuilding the problem. ``reference`` is what the residual's constructor
+        takes, in the problem's layout:
+
+        - ``ResidualModelState``: a state; ``ResidualModelControl`` / ``JointEffort``: a control;
+        - ``ResidualModelFramePlacement``: ``(R, p)``, a 4×4 homogeneous matrix, or an object
+          with ``rotation`` and ``translation`` (``pinocchio.SE3``);
+        - ``ResidualModelFrameTranslation``, ``ResidualModelCoMPosition``: a point;
+        - ``ResidualModelFrameVelocity``: an object with ``angular`` and ``linear``
+          (``pinocchio.Motion``), or a 6-vector (``[angular; linear]``; Crocoddyl's
+          ``[linear; angular]`` on a converted problem);
+        - ``ResidualModelContactForce``: an object with ``linear`` and ``angular``
+          (``pinocchio.Force``), or the contact's 3 or 6 rows (6-D: ``[angular; linear]``;
+          ``[linear; angular]`` on a converted problem).
+
+        Raises :class:`OcpError` naming the node and the cost for an unknown node or cost, a
+        wrong length, NaN/inf, a non-unit quaternion or a non-rotation (nothing changes then);
+        a cone has no reference."""
+        kind, current = self._s.cost_reference(int(t), cost)
+        try:
+            flat = self._flat_reference(int(t), kind, current, reference, cost)
+        except OcpError:
+            raise
+        except (TypeError, ValueError, IndexError) as e:
+            raise OcpError(f"node {t}: cost {cost!r}: reference: {e}") from None
+        self._s.set_cost_reference(int(t), cost, flat)
+
+    def reference(self, t: int, cost: str) -> Any:
+        """The reference of cost ``cost`` at node ``t``, in the form :meth:`set_reference` takes
+        (a placement as ``(R, p)``, 6-vectors in the problem's layout); ``None`` for a cone."""
+        kind, r = self._s.cost_reference(int(t), cost)
+        if r is None:
+            return None
+        lay = self.problem.layout
+        if kind == "ResidualModelState":
+            return lay.x_out(r) if lay else r
+        if kind in ("ResidualModelControl", "ResidualModelJointEffort"):
+            return lay.u_out(int(t), r) if lay else r
+        if kind == "ResidualModelFramePlacement":
+            return r[3:].reshape(3, 3), r[:3]
+        if lay and r.size == 6:
+            return np.concatenate([r[3:], r[:3]])
+        return r
+
+    def set_cost_weight(self, t: int, cost: str, weight: float) -> None:
+        """Sets the weight of cost ``cost`` at node ``t`` (finite, ≥ 0)."""
+        self._s.set_cost_weight(int(t), cost, float(weight))
+
+    def set_cost_active(self, t: int, cost: str, active: bool) -> None:
+        """Switches cost ``cost`` at node ``t`` on or off (Crocoddyl's ``changeCostStatus``)."""
+        self._s.set_cost_active(int(t), cost, bool(active))
+
+    def cost_status(self, t: int, cost: str) -> Tuple[float, bool]:
+        """``(weight, active)`` of cost ``cost`` at node ``t``."""
+        return self._s.cost_status(int(t), cost)
+
+    def _flat_reference(self, t: int, kind: str, current: Any, ref: Any, cost: str) -> List[float]:
+        lay = self.problem.layout
+        what = f"node {t}: cost {cost!r}: reference"
+        if current is None:
+            raise OcpError(f"node {t}: cost {cost!r}: a {kind} has no reference")
+        if kind in ("ResidualModelState", "ResidualModelControl", "ResidualModelJointEffort"):
+            a = np.asarray(ref, float).reshape(-1)
+            if a.size != current.size:
+                raise OcpError(f"{what}: length {a.size} (expected {current.size})")
+            if lay:
+                a = lay.x_in(a) if kind == "ResidualModelState" else lay.u_in(t, a)
+            return _finite(a, current.size, what)
+        if kind == "ResidualModelFramePlacement":
+            if hasattr(ref, "rotation") and hasattr(ref, "translation"):
+                R, p = ref.rotation, ref.translation
+            elif isinstance(ref, (tuple, list)) and len(ref) == 2:
+                R, p = ref
+            else:
+                a = np.asarray(ref, float)
+                if a.shape != (4, 4):
+                    raise OcpError(f"{what}: (R, p), a 4x4 matrix or an SE3, not shape {a.shape}")
+                R, p = a[:3, :3], a[:3, 3]
+            if np.shape(R) != (3, 3):
+                raise OcpError(f"{what} rotation: shape {np.shape(R)} (expected (3, 3))")
+            return _finite(p, 3, f"{what} translation") + _finite(R, 9, f"{what} rotation")
+        if kind in ("ResidualModelFrameVelocity", "ResidualModelContactForce"):
+            n = current.size
+            if hasattr(ref, "linear") and hasattr(ref, "angular"):
+                lin, ang = np.asarray(ref.linear, float), np.asarray(ref.angular, float)
+                return _finite(lin if n == 3 else np.concatenate([ang, lin]), n, what)
+            a = np.asarray(ref, float).reshape(-1)
+            if lay and a.size == 6:
+                a = np.concatenate([a[3:], a[:3]]) if n == 6 else a[:3]
+            return _finite(a, n, what)
+        return _finite(ref, current.size, what)
 
     def display(self, viz: Any, dt: Optional[float] = None) -> None:
         """Plays the solution on a :class:`sodyn.viz.Visualizer` (``viz.play(xs, dt)``)."""
