@@ -457,6 +457,18 @@ impl ActionModel {
         self.eval(d, x, u, true)
     }
 
+    /// A knot without control: no dynamics (`x′ = x`, `F_x = I`), the costs of `x` alone
+    /// (Crocoddyl's terminal `calc(x)`), for every integrator.
+    fn eval_terminal(&self, d: &mut ActionData, x: &DVector<f64>, diff: bool) -> Result<()> {
+        d.xnext.copy_from(x);
+        d.a.fill(0.0);
+        if diff {
+            d.fx.fill(0.0);
+            d.fx.fill_diagonal(1.0);
+        }
+        self.eval_costs(d, x, &DVector::zeros(0), false, diff, 1.0)
+    }
+
     fn eval(
         &self,
         d: &mut ActionData,
@@ -475,14 +487,7 @@ impl ActionModel {
         match &self.kind {
             ActionKind::Euler { dt, .. } => {
                 let Some(u) = u else {
-                    // No control: no dynamics (Crocoddyl's terminal calc(x)).
-                    d.xnext.copy_from(x);
-                    d.a.fill(0.0);
-                    if diff {
-                        d.fx.fill(0.0);
-                        d.fx.fill_diagonal(1.0);
-                    }
-                    return self.eval_costs(d, x, &zero_u, false, diff, 1.0);
+                    return self.eval_terminal(d, x, diff);
                 };
                 let dt = *dt;
                 cost_scale = dt;
@@ -504,13 +509,7 @@ impl ActionModel {
             }
             ActionKind::RungeKutta { rk, dt, .. } => {
                 let Some(u) = u else {
-                    d.xnext.copy_from(x);
-                    d.a.fill(0.0);
-                    if diff {
-                        d.fx.fill(0.0);
-                        d.fx.fill_diagonal(1.0);
-                    }
-                    return self.eval_costs(d, x, &zero_u, false, diff, 1.0);
+                    return self.eval_terminal(d, x, diff);
                 };
                 let mut w = d.rk.take().ok_or_else(|| {
                     OcpError::new("Runge-Kutta knot: the data was made for another knot")

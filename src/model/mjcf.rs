@@ -1258,9 +1258,18 @@ impl Loader {
         use super::{Contact, ContactType, MimicJoint};
         let mut contacts = Vec::new();
         let mut mimics = Vec::new();
-        let mut data = crate::algo::Data::new(model);
-        let world = |f: usize, data: &mut crate::algo::Data| -> Result<Transform> {
-            crate::algo::frames::frame_placement(model, data, q0, f)
+        // World placements of the joints at q0 (`ᵖM_i = placement_i · X_J(q_i)`, composed
+        // from the root), then of the frames.
+        let mut joint_world = vec![Transform::identity(); model.njoints()];
+        for i in 1..model.njoints() {
+            let (a, n) = (model.idx_q[i], model.nqs[i]);
+            let local =
+                model.placements[i].compose(&model.joints[i].transform(&q0.as_slice()[a..a + n]));
+            joint_world[i] = joint_world[model.parents[i]].compose(&local);
+        }
+        let world = |f: usize| -> Transform {
+            let frame = &model.frames[f];
+            joint_world[frame.joint].compose(&frame.placement)
         };
         for eq in root.elems("equality") {
             for c in &eq.children {
@@ -1329,7 +1338,7 @@ impl Loader {
                         let (f1, f2) = (body("body1", false)?, body("body2", true)?);
                         let anchor = nums("anchor", 3, &[0.0; 3])?;
                         let anchor = Vector3::new(anchor[0], anchor[1], anchor[2]);
-                        let (x1, x2) = (world(f1, &mut data)?, world(f2, &mut data)?);
+                        let (x1, x2) = (world(f1), world(f2));
                         // Frame A (on body1) and frame B (on body2) placements.
                         let (pa, pb, kind) = if c.tag == "connect" {
                             let pb = x2.inverse().act_point(&x1.act_point(&anchor));

@@ -120,7 +120,7 @@ class Model:
     def expand_configuration(self, q: ArrayLike) -> Vector:
         """The full tree's configuration of a reduced one (``mimic=True`` models only)."""
     @property
-    def constraints(self) -> list[Contact]:
+    def constraints(self) -> list["Contact"]:
         """The model's own constraints: MJCF ``<equality>`` ``<connect>`` (3-D) and ``<weld>``
         (6-D) as two-frame constraints (``frame2`` ``"universe"`` for the world), the loops of
         ``builtin:fourbar`` and ``builtin:delta``; empty for other models. The contact

@@ -608,15 +608,7 @@ fn reduced_models_lengths_shapes_and_workspaces_are_errors() {
 /// derivatives.
 #[test]
 fn a_singular_reduced_mass_matrix_names_the_state() {
-    let xml = r#"<robot name="t">
-  <link name="base"/>
-  <link name="a"/>
-  <link name="b"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
-  <joint name="ja" type="prismatic"><parent link="base"/><child link="a"/><axis xyz="1 0 0"/></joint>
-  <joint name="jb" type="prismatic"><parent link="a"/><child link="b"/><axis xyz="-1 0 0"/><mimic joint="ja"/></joint>
-</robot>"#;
-    let o = sodyn::model::UrdfOptions { floating_base: false, strict_inertia: false, mimic: true };
-    let m = sodyn::model::load_urdf_str(xml, "t.urdf", &o).unwrap();
+    let m = crate::util::mimic::cancelling_pair();
     let s = states(&m, 6, 9);
     let mut bd = so_batch(&m, 2);
     let check = |e: Error| {

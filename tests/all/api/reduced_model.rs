@@ -418,16 +418,7 @@ fn bad_constraints_of_the_api_are_errors() {
 /// A reduced mass matrix that is singular is an error naming the DoF, not a panic.
 #[test]
 fn singular_reduced_mass_matrix_is_an_error() {
-    // Two massless prismatic joints in opposite directions, one mimicking the other with
-    // multiplier 1: their motions cancel, so the reduced DoF moves nothing.
-    let xml = r#"<robot name="t">
-  <link name="base"/>
-  <link name="a"/>
-  <link name="b"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
-  <joint name="ja" type="prismatic"><parent link="base"/><child link="a"/><axis xyz="1 0 0"/></joint>
-  <joint name="jb" type="prismatic"><parent link="a"/><child link="b"/><axis xyz="-1 0 0"/><mimic joint="ja"/></joint>
-</robot>"#;
-    let m = sodyn::model::load_urdf_str(xml, "t.urdf", &um::opts(false)).unwrap();
+    let m = crate::util::mimic::cancelling_pair();
     let mut d = Data::new(&m);
     let z = DVector::zeros(1);
     let e = algo::aba(&m, &mut d, &DVector::zeros(1), &z, &z, None).unwrap_err();
@@ -584,20 +575,4 @@ fn kinematics_inputs_are_errors() {
     assert!(algo::frame_placement(m, &mut d2, &q, 0).is_err());
     let e = algo::centroidal_dynamics_derivatives(m, &mut d2, &q, &v, &v).unwrap_err().to_string();
     assert!(e.contains("Data"), "{e}");
-}
-
-#[test]
-fn configuration_jacobians_check_inputs() {
-    use sodyn::model::Arg;
-    let m = &um::arm(true);
-    let q = m.neutral();
-    let e = m.d_integrate(&q, &DVector::zeros(3), Arg::First).unwrap_err().to_string();
-    assert!(e.contains("delta"), "{e}");
-    let e = m.d_difference(&q, &DVector::zeros(2), Arg::Second).unwrap_err().to_string();
-    assert!(e.contains("q1"), "{e}");
-    let mut bad = q.clone();
-    bad[3] = 2.0; // not a unit quaternion
-    assert!(m.d_integrate(&bad, &DVector::zeros(m.nv()), Arg::First).is_err());
-    let mut out = nalgebra::DMatrix::zeros(m.nv(), m.nv() + 1);
-    assert!(m.d_integrate_into(&q, &DVector::zeros(m.nv()), Arg::First, &mut out).is_err());
 }

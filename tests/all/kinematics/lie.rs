@@ -170,17 +170,24 @@ fn exp6_log6_jlog6() {
     }
 }
 
+/// Wrong lengths, a non-finite or non-unit quaternion and a wrongly shaped output are errors,
+/// on a free-flyer model and on the floating mimic arm in reduced coordinates.
 #[test]
 fn configuration_jacobians_check_inputs() {
-    let m = builtin::quadruped();
-    let q = m.neutral();
-    let e = m.d_integrate(&q, &DVector::zeros(3), Arg::First).unwrap_err().to_string();
-    assert!(e.contains("delta"), "{e}");
-    let e = m.d_difference(&q, &DVector::zeros(2), Arg::Second).unwrap_err().to_string();
-    assert!(e.contains("q1"), "{e}");
-    let mut bad = q.clone();
-    bad[3] = f64::NAN;
-    assert!(m.d_integrate(&bad, &DVector::zeros(m.nv()), Arg::First).is_err());
+    for m in [builtin::quadruped(), crate::util::mimic::arm(true)] {
+        let q = m.neutral();
+        let e = m.d_integrate(&q, &DVector::zeros(3), Arg::First).unwrap_err().to_string();
+        assert!(e.contains("delta"), "{e}");
+        let e = m.d_difference(&q, &DVector::zeros(2), Arg::Second).unwrap_err().to_string();
+        assert!(e.contains("q1"), "{e}");
+        for x in [f64::NAN, 2.0] {
+            let mut bad = q.clone();
+            bad[3] = x; // a quaternion entry of the root free flyer
+            assert!(m.d_integrate(&bad, &DVector::zeros(m.nv()), Arg::First).is_err());
+        }
+        let mut out = DMatrix::zeros(m.nv(), m.nv() + 1);
+        assert!(m.d_integrate_into(&q, &DVector::zeros(m.nv()), Arg::First, &mut out).is_err());
+    }
 }
 
 #[test]

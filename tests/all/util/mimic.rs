@@ -94,3 +94,17 @@ pub fn arm_contacts(m: &Model, finger: bool) -> Vec<sodyn::model::Contact> {
     }
     c
 }
+
+/// Two massless prismatic joints in opposite directions, one mimicking the other with
+/// multiplier 1: their motions cancel, so the one reduced DoF moves nothing and the reduced mass
+/// matrix is singular (fixed base, reduced coordinates).
+pub fn cancelling_pair() -> Model {
+    let xml = r#"<robot name="t">
+  <link name="base"/>
+  <link name="a"/>
+  <link name="b"><inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+  <joint name="ja" type="prismatic"><parent link="base"/><child link="a"/><axis xyz="1 0 0"/></joint>
+  <joint name="jb" type="prismatic"><parent link="a"/><child link="b"/><axis xyz="-1 0 0"/><mimic joint="ja"/></joint>
+</robot>"#;
+    sodyn::model::load_urdf_str(xml, "t.urdf", &opts(false)).unwrap()
+}
