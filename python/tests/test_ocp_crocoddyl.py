@@ -17,7 +17,7 @@ crocoddyl = pytest.importorskip("crocoddyl", reason="crocoddyl is not installed 
 pytest.importorskip("example_robot_data", reason="example-robot-data is not installed")
 
 sys.path.insert(0, os.path.dirname(__file__))
-from crocoddyl_problems import PROBLEMS, with_rk  # noqa: E402
+from crocoddyl_problems import PROBLEMS, with_contact_gains, with_rk  # noqa: E402
 
 from sodyn import ocp  # noqa: E402
 
@@ -26,9 +26,19 @@ from sodyn import ocp  # noqa: E402
 CASES = ["anymal_trot", "anymal_jump", "talos_legs_walk", "double_pendulum", "kinova_reach"]
 
 
+_SHORT = {}
+
+
+def _short(name):
+    """``PROBLEMS[name](short=True)``, built once per session (the ANYmal's takes seconds)."""
+    if name not in _SHORT:
+        _SHORT[name] = PROBLEMS[name](short=True)
+    return _SHORT[name]
+
+
 @pytest.fixture(scope="module", params=CASES)
 def case(request):
-    p, xs, us = PROBLEMS[request.param](short=True)
+    p, xs, us = _short(request.param)
     return request.param, p, xs, us, ocp.from_crocoddyl(p)
 
 
@@ -148,7 +158,7 @@ def test_box_fddp_and_ddp_match_crocoddyl():
 
 
 def test_quasi_static_matches_crocoddyl():
-    p, xs, us = PROBLEMS["anymal_trot"](short=True)
+    p, xs, us = _short("anymal_trot")
     sp = ocp.from_crocoddyl(p)
     ours = sp.quasiStatic([p.x0] * p.T)
     for a, b in zip(us, ours):
@@ -363,3 +373,52 @@ def test_mpc_reference_weight_and_status_updates_match_crocoddyl(name):
     x1 = np.asarray(cs.xs[1])
     s.x0 = x1
     assert np.allclose(s.x0, x1, atol=1e-15)
+
+
+# Baumgarte gains [kp, kd] with kp != 0 against a reference fixed in the world (Crocoddyl's
+# ContactModel3D/6D xref): the legged problems rebuilt with gains and references off the feet's
+# placements at x0 (crocoddyl_problems.with_contact_gains), both contact reference frames.
+
+
+def _gains_problem(name, ref):
+    import pinocchio
+
+    p0 = _short(name)[0]
+    gains = [20.0, 40.0] if name.startswith("anymal") else [15.0, 30.0]
+    return with_contact_gains(p0, gains, getattr(pinocchio.ReferenceFrame, ref))
+
+
+def _perturbed(p, xs, us, seed=0):
+    """States moved on the manifold (positions and velocities) and controls shifted."""
+    rng = np.random.default_rng(seed)
+    st = p.runningModels[0].state
+    xs = [st.integrate(x, 0.05 * rng.standard_normal(st.ndx)) for x in xs]
+    us = [u + 0.5 * rng.standard_normal(u.size) for u in us]
+    return xs, us
+
+
+@pytest.mark.parametrize("name,ref", [("anymal_trot", "LOCAL_WORLD_ALIGNED"), ("anymal_trot", "LOCAL"),
+                                      ("talos_legs_walk", "LOCAL_WORLD_ALIGNED"),
+                                      ("talos_legs_walk", "LOCAL")])
+def test_contact_gains_with_a_world_reference_match_crocoddyl(name, ref):
+    p, xs, us = _gains_problem(name, ref)
+    sp = ocp.from_crocoddyl(p)
+    node = next(m for m in sp.runningModels if getattr(m, "differential", None) is not None
+                and m.differential.contacts is not None and m.differential.contacts.contacts)
+    c = next(iter(node.differential.contacts.contacts.values()))
+    assert c.gains[0] > 0 and c.xref is not None and c.reference == ref.lower()
+    _compare_nodes(p, sp, xs, us, loose=LOOSE)
+    _compare_nodes(p, sp, *_perturbed(p, xs, us), loose=LOOSE)
+
+
+def test_contact_gains_fddp_matches_crocoddyl():
+    p, xs, us = _gains_problem("anymal_trot", "LOCAL_WORLD_ALIGNED")
+    sp = ocp.from_crocoddyl(p)
+    cs = crocoddyl.SolverFDDP(p)
+    c_ok = cs.solve(xs, us, 100, False)
+    s = ocp.SolverFDDP(sp)
+    assert s.solve(xs, us, 100, False) == c_ok, s.termination
+    assert abs(s.iter - cs.iter) <= 1, (s.iter, cs.iter)
+    assert abs(s.cost - cs.cost) <= 1e-6 * abs(cs.cost), (s.cost, cs.cost)
+    with pytest.raises(ocp.OcpError, match=r"node \d+: contact '.*'.*xref"):
+        ocp.SolverFDDP(sp, second_order=True).solve(xs, us, 10, False)

@@ -98,6 +98,51 @@ def _rot(r: Any, what: str) -> List[float]:
     return _vec(a.reshape(-1), 9, what)
 
 
+def _point(x: Any, what: str) -> np.ndarray:
+    """A finite 3-vector, or an :class:`OcpError` naming ``what``."""
+    try:
+        a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        raise OcpError(f"{what}: a 3-vector [x, y, z], not {type(x).__name__}") from None
+    if a.shape not in ((3,), (3, 1)):
+        raise OcpError(f"{what}: shape {a.shape} (expected (3,): a point [x, y, z])")
+    if not np.isfinite(a).all():
+        raise OcpError(f"{what}: contains NaN or inf")
+    return a.reshape(3).copy()
+
+
+def _placement(m: Any, what: str) -> Tuple[np.ndarray, np.ndarray]:
+    """``(R, p)`` of a placement given as ``(R, p)`` (the form of
+    :class:`ResidualModelFramePlacement`), an object with ``rotation`` and ``translation``
+    (``pinocchio.SE3``) or a ``(4, 4)`` homogeneous matrix; an :class:`OcpError` naming
+    ``what`` for a wrong shape, a non-finite entry or a rotation that is not one (1e-9)."""
+    if hasattr(m, "rotation") and hasattr(m, "translation"):
+        r, p = m.rotation, m.translation
+    elif isinstance(m, (tuple, list)) and len(m) == 2:
+        r, p = m
+    else:
+        try:
+            h = np.asarray(m, dtype=float)
+        except (TypeError, ValueError):
+            h = None
+        if h is None or h.shape != (4, 4):
+            shape = getattr(h, "shape", None)
+            raise OcpError(f"{what}: a placement (R, p), an SE3 or a (4, 4) homogeneous matrix, "
+                           f"not {type(m).__name__}" + (f" of shape {shape}" if shape is not None else ""))
+        r, p = h[:3, :3], h[:3, 3]
+    try:
+        r = np.asarray(r, dtype=float)
+    except (TypeError, ValueError):
+        raise OcpError(f"{what}: rotation is not a (3, 3) array") from None
+    if r.shape != (3, 3):
+        raise OcpError(f"{what}: rotation of shape {r.shape} (expected (3, 3))")
+    if not np.isfinite(r).all():
+        raise OcpError(f"{what}: rotation contains NaN or inf")
+    if np.abs(r.T @ r - np.eye(3)).max() > 1e-9 or abs(np.linalg.det(r) - 1.0) > 1e-9:
+        raise OcpError(f"{what}: rotation is not a rotation matrix (RᵀR ≠ I or det R ≠ 1 beyond 1e-9)")
+    return r.copy(), _point(p, f"{what} translation")
+
+
 def _frame(model: Any, f: Union[int, str], what: str) -> Union[int, str]:
     if isinstance(f, str):
         model.frame_id(f)  # raises SodynError naming the frame
@@ -163,7 +208,7 @@ class ActuationModelFloatingBase:
 class _Contact:
     dim = 3
 
-    def __init__(self, state, frame, rotation, translation, reference, gains) -> None:
+    def __init__(self, state, frame, rotation, translation, reference, gains, xref=None) -> None:
         self.state = state
         self.frame = _frame(state.model, frame, "frame")
         self.rotation = np.eye(3) if rotation is None else np.asarray(rotation, float)
@@ -172,10 +217,19 @@ class _Contact:
         g = np.asarray(gains, float).reshape(-1)
         if g.size != 2:
             raise OcpError(f"gains: length {g.size} (expected 2: kp, kd)")
+        if not (np.isfinite(g).all() and (g >= 0).all()):
+            raise OcpError(f"gains: {[float(x) for x in g]} (kp and kd must be finite and >= 0)")
         self.gains = g
+        # The world reference of kp: a point (3-D) or (R, p) (6-D).
+        self.xref: Any = None
+        if xref is not None:
+            self.xref = _point(xref, "xref") if self.dim == 3 else _placement(xref, "xref")
+        if g[0] != 0 and self.xref is None:
+            what = "a point [x, y, z]" if self.dim == 3 else "a placement (R, p)"
+            raise OcpError(f"gains: kp = {g[0]} != 0 needs its world reference xref ({what})")
 
     def spec(self, name: str, active: bool) -> Dict[str, Any]:
-        return {
+        s: Dict[str, Any] = {
             "name": name,
             "frame": self.frame,
             "type": "3d" if self.dim == 3 else "6d",
@@ -186,25 +240,50 @@ class _Contact:
             "kd": float(self.gains[1]),
             "active": bool(active),
         }
+        if self.xref is not None:
+            if self.dim == 3:
+                s["xref"] = _vec(self.xref, 3, f"contact {name}: xref")
+            else:
+                s["xref"] = {"rotation": _rot(self.xref[0], f"contact {name}: xref rotation"),
+                             "translation": _vec(self.xref[1], 3, f"contact {name}: xref translation")}
+        return s
 
 
 class ContactModel3D(_Contact):
     """A point contact at ``translation`` in frame ``frame`` (rows in ``type``'s axes), with
-    Baumgarte gains ``(kp, kd)`` (``kp`` must be 0 for now)."""
+    Baumgarte gains ``(kp, kd)``: the contact dynamics hold ``a_c + kd v_c + kp e_c = 0``.
+
+    ``kp`` acts against ``xref`` (keyword; required when ``kp != 0``), a point ``[x, y, z]``
+    fixed in the world, as Crocoddyl's ``ContactModel3D`` ``xref``: ``e_c = p − xref`` in
+    ``local_world_aligned`` rows, ``Rᵀ(p − xref)`` in ``local`` rows (``p``, ``R``: the contact
+    point and its frame's rotation). A wrong shape or a non-finite entry is an
+    :class:`OcpError` naming ``xref``. The first-order derivatives are exact; a solver with
+    ``second_order=True`` or ``"auto"`` refuses a node with such a contact (naming the node and
+    the contact)."""
 
     dim = 3
 
-    def __init__(self, state, frame, translation=None, type=_LWA, nu=None, gains=(0.0, 0.0)):
-        super().__init__(state, frame, None, translation, type, gains)
+    def __init__(self, state, frame, translation=None, type=_LWA, nu=None, gains=(0.0, 0.0), *, xref=None):
+        super().__init__(state, frame, None, translation, type, gains, xref)
 
 
 class ContactModel6D(_Contact):
-    """A frame contact holding the frame ``(rotation, translation)`` of ``frame``."""
+    """A frame contact holding the frame ``(rotation, translation)`` of ``frame``, with
+    Baumgarte gains ``(kp, kd)``: ``a_c + kd v_c + kp e_c = 0`` (``[angular; linear]`` rows).
+
+    ``kp`` acts against ``xref`` (keyword; required when ``kp != 0``), a placement fixed in the
+    world given as ``(R, p)`` (as :class:`ResidualModelFramePlacement`'s ``placement``), a
+    ``pinocchio.SE3`` or a ``(4, 4)`` homogeneous matrix, as Crocoddyl's ``ContactModel6D``
+    ``xref``: ``e_c = log6(xref⁻¹ M)`` in ``local`` rows, ``diag(R, R) log6(xref⁻¹ M)`` in
+    ``local_world_aligned`` rows (``M = (R, p)``: the contact frame's placement). A wrong
+    shape, a non-finite entry or a rotation that is not one is an :class:`OcpError` naming
+    ``xref``; second order as :class:`ContactModel3D`."""
 
     dim = 6
 
-    def __init__(self, state, frame, rotation=None, translation=None, type=_LWA, nu=None, gains=(0.0, 0.0)):
-        super().__init__(state, frame, rotation, translation, type, gains)
+    def __init__(self, state, frame, rotation=None, translation=None, type=_LWA, nu=None, gains=(0.0, 0.0), *,
+                 xref=None):
+        super().__init__(state, frame, rotation, translation, type, gains, xref)
 
 
 class ImpulseModel3D(ContactModel3D):
