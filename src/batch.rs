@@ -299,6 +299,9 @@ fn at_state(e: Error, k: usize) -> Error {
         Error::Unknown { kind, name } => {
             Error::Unknown { kind: format!("{kind} (state {k})"), name }
         }
+        Error::Input { file, at, reason } => {
+            Error::Input { file, at, reason: format!("{reason} (state {k})") }
+        }
         Error::Io(s) => Error::Io(format!("state {k}: {s}")),
     }
 }

@@ -64,7 +64,19 @@ pub enum Error {
     },
     /// A workspace (`Data`, `ContactData`, …) used with a model it was not made for.
     Workspace(String),
-    /// Input/output or parse failure outside the model (state files, JSON).
+    /// The content of an input file outside the model (a state file, a JSON document) is
+    /// invalid: a syntax error, an unknown key, a value of the wrong kind or length.
+    Input {
+        /// The file.
+        file: String,
+        /// 1-based line and column of the problem in the file, where known (JSON syntax and
+        /// type errors).
+        at: Option<(usize, usize)>,
+        /// Why.
+        reason: String,
+    },
+    /// An input/output failure: a file that cannot be read or written, a thread that cannot be
+    /// started or pinned.
     Io(String),
 }
 
@@ -89,6 +101,10 @@ impl fmt::Display for Error {
             Error::Unknown { kind, name } => write!(f, "unknown {kind} \"{name}\""),
             Error::Argument { name, reason } => write!(f, "`{name}`: {reason}"),
             Error::Workspace(s) => write!(f, "workspace mismatch: {s}"),
+            Error::Input { file, at, reason } => match at {
+                Some((line, column)) => write!(f, "{file}:{line}:{column}: {reason}"),
+                None => write!(f, "{file}: {reason}"),
+            },
             Error::Io(s) => write!(f, "{s}"),
         }
     }

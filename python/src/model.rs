@@ -233,15 +233,6 @@ impl PyModel {
         self.m.warnings().iter().map(|w| python_message(w.clone())).collect()
     }
 
-    /// The model's own constraints (a fresh list of `sodyn.Contact`): MJCF `<equality>`
-    /// `<connect>` (3-D) and `<weld>` (6-D) as two-frame constraints (`frame2` `"universe"` for
-    /// the world), the loops of `builtin:fourbar` and `builtin:delta`; empty for other models.
-    /// The contact functions use them when called with `contacts=None`.
-    #[getter]
-    fn constraints(&self) -> Vec<crate::contacts::PyContact> {
-        self.m.constraints().iter().map(|c| crate::contacts::PyContact::of(&self.m, c)).collect()
-    }
-
     /// The MJCF `<tendon>`s in document order (data only: they do not enter the dynamics), one
     /// dict each: `name` (`None` if unnamed), `type` (`"fixed"` or `"spatial"`) and `path`:
     /// `(joint name, coef)` pairs for a fixed tendon; `("site", name)`,
@@ -721,6 +712,7 @@ fn constraints_from(l: Vec<ConstraintDesc>) -> PyResult<Vec<sodyn::model::Contac
                 frame2,
                 point2: v3(&p2, "constraint point2")?,
                 rotation2: m3(&r2, "constraint rotation2")?,
+                world_ref: None,
             })
         })
         .collect()

@@ -1142,7 +1142,10 @@ fn time_algo(
         }
     };
     let single = |s: Result<Stats>| s.map(|stats| Timed { stats, paired: None });
-    let no_contacts = || Error::Io(format!("{algo:?} needs --contacts"));
+    let no_contacts = || Error::Argument {
+        name: "--contacts".into(),
+        reason: format!("{algo:?} needs contacts: give --contacts"),
+    };
     single(match algo {
         Algo::Rnea => measure(plan, |i| {
             black_box(rnea(m, d, &q[i], &v[i], &a[i], None)?);
@@ -1256,7 +1259,10 @@ fn time_algo(
                 Ok(())
             })
         }
-        other => Err(Error::Io(format!("internal: no timing code for {other:?}"))),
+        other => Err(Error::Argument {
+            name: "--algos".into(),
+            reason: format!("internal: no timing code for {other:?}"),
+        }),
     })
 }
 
@@ -1265,7 +1271,10 @@ fn time_algo(
 fn call_single(algo: Algo, m: &Model, st: &States, ws: &mut Workspaces, i: usize) -> Result<()> {
     let (q, v, a, tau) = (&st.q[i], &st.v[i], &st.a[i], &st.tau[i]);
     let d = &mut ws.data;
-    let no_contacts = || Error::Io(format!("{algo:?} needs --contacts"));
+    let no_contacts = || Error::Argument {
+        name: "--contacts".into(),
+        reason: format!("{algo:?} needs contacts: give --contacts"),
+    };
     match algo {
         Algo::Rnea => {
             black_box(rnea(m, d, q, v, a, None)?);
@@ -1321,7 +1330,10 @@ fn call_single(algo: Algo, m: &Model, st: &States, ws: &mut Workspaces, i: usize
             }
         }
         other => {
-            return Err(Error::Io(format!("internal: {other:?} is not a single-state algorithm")));
+            return Err(Error::Argument {
+                name: "--ratio-to".into(),
+                reason: format!("internal: {other:?} is not a single-state algorithm"),
+            });
         }
     }
     Ok(())
@@ -1345,19 +1357,15 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
     let spin = Duration::from_nanos((o.spin_us * 1e3).round() as u64);
     sodyn::simd::set_thread_level(o.simd);
     for c in contacts {
-        model.frame_id(c).map_err(|_| {
-            Error::Io(format!(
-                "--contacts: unknown frame \"{c}\" in model \"{}\" ({spec})",
-                model.name()
-            ))
+        model.frame_id(c).map_err(|_| Error::Argument {
+            name: "--contacts".into(),
+            reason: format!("unknown frame \"{c}\" in model \"{}\" ({spec})", model.name()),
         })?;
     }
     let frame = match &o.frame {
-        Some(f) => model.frame_id(f).map_err(|_| {
-            Error::Io(format!(
-                "--frame: unknown frame \"{f}\" in model \"{}\" ({spec})",
-                model.name()
-            ))
+        Some(f) => model.frame_id(f).map_err(|_| Error::Argument {
+            name: "--frame".into(),
+            reason: format!("unknown frame \"{f}\" in model \"{}\" ({spec})", model.name()),
         })?,
         None => default_frame(&model),
     };
@@ -1402,15 +1410,16 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
     let max_threads = o.paired_threads.unwrap_or(o.threads);
     if let Some(cpus) = pin_cpus {
         if rayon {
-            return Err(Error::Io(
-                "--pin-cpus applies to the spinning pool, not --pool rayon".into(),
-            ));
+            return Err(Error::Argument {
+                name: "--pin-cpus".into(),
+                reason: "applies to the spinning pool, not --pool rayon".into(),
+            });
         }
         if cpus.len() < max_threads {
-            return Err(Error::Io(format!(
-                "--pin-cpus: {} CPUs given for {max_threads} threads",
-                cpus.len()
-            )));
+            return Err(Error::Argument {
+                name: "--pin-cpus".into(),
+                reason: format!("{} CPUs given for {max_threads} threads", cpus.len()),
+            });
         }
         sodyn::batch::pin_current_thread(cpus[0])
             .map_err(|e| Error::Io(format!("--pin-cpus: {e}")))?;

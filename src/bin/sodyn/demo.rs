@@ -186,11 +186,9 @@ pub(crate) fn run_demo(o: &DemoArgs) -> Result<()> {
     let frames: Vec<&str> = match given {
         Some(list) => {
             for f in list {
-                m.frame_id(f).map_err(|_| {
-                    Error::Io(format!(
-                        "--contacts: unknown frame \"{f}\" in model \"{}\" ({spec})",
-                        m.name()
-                    ))
+                m.frame_id(f).map_err(|_| Error::Argument {
+                    name: "--contacts".into(),
+                    reason: format!("unknown frame \"{f}\" in model \"{}\" ({spec})", m.name()),
                 })?;
             }
             list.iter().map(String::as_str).collect()
@@ -229,7 +227,9 @@ pub(crate) fn run_demo(o: &DemoArgs) -> Result<()> {
             Ok(())
         })?;
         constrained_id_so_derivatives(&m, &mut d, &mut cd, &q, &v, &a, &lam)?;
-        let so = d.id_so().ok_or_else(|| Error::Io("internal: no second order".into()))?;
+        let so = d
+            .id_so()
+            .ok_or_else(|| Error::Workspace("internal: no second-order results in Data".into()))?;
         let ls = lam.as_slice();
         row(
             "constrained ID (IDSVA(-SO)c) dtau/dq",

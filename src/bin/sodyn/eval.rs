@@ -110,11 +110,27 @@ impl State {
 pub const STATE_KEYS: [&str; 10] =
     ["q", "v", "a", "tau", "contacts", "lambda", "restitution", "damping", "weights", "frames"];
 
+/// A problem of the content of the state file `file` (`Error::Input`).
+fn input(file: &str, reason: String) -> Error {
+    Error::Input { file: file.to_string(), at: None, reason }
+}
+
+/// A JSON syntax or data error of the state file `file`, at serde_json's line and column
+/// (1-based; none for an error without a position).
+fn json_error(file: &str, e: &serde_json::Error) -> Error {
+    let at = (e.line() > 0).then(|| (e.line(), e.column()));
+    let msg = e.to_string();
+    let suffix = format!(" at line {} column {}", e.line(), e.column());
+    let reason = match at {
+        Some(_) => msg.strip_suffix(&suffix).unwrap_or(msg.as_str()),
+        None => msg.as_str(),
+    };
+    Error::Input { file: file.to_string(), at, reason: format!("invalid JSON: {reason}") }
+}
+
 fn check_keys(obj: &Map<String, Value>, file: &str, known: &[&str]) -> Result<()> {
     match obj.keys().find(|k| !known.contains(&k.as_str())) {
-        Some(k) => {
-            Err(Error::Io(format!("{file}: unknown key \"{k}\" (known: {})", known.join(", "))))
-        }
+        Some(k) => Err(input(file, format!("unknown key \"{k}\" (known: {})", known.join(", ")))),
         None => Ok(()),
     }
 }
@@ -133,18 +149,16 @@ fn read_vec(
     let Some(val) = obj.get(key) else { return Ok(None) };
     let arr = val
         .as_array()
-        .ok_or_else(|| Error::Io(format!("{file}: key \"{key}\" must be a list of numbers")))?;
+        .ok_or_else(|| input(file, format!("key \"{key}\" must be a list of numbers")))?;
     if arr.len() != n {
-        return Err(Error::Io(format!(
-            "{file}: key \"{key}\" has length {}, expected {n}",
-            arr.len()
-        )));
+        return Err(input(file, format!("key \"{key}\" has length {}, expected {n}", arr.len())));
     }
     let mut out = DVector::zeros(n);
     for (i, x) in arr.iter().enumerate() {
-        out[i] = x.as_f64().filter(|x| x.is_finite()).ok_or_else(|| {
-            Error::Io(format!("{file}: key \"{key}\"[{i}] is not a finite number"))
-        })?;
+        out[i] = x
+            .as_f64()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| input(file, format!("key \"{key}\"[{i}] is not a finite number")))?;
     }
     Ok(Some(out))
 }
@@ -161,24 +175,31 @@ pub fn load_state(
     file: &str,
     floating_base: Option<bool>,
 ) -> Result<State> {
-    let val: Value =
-        serde_json::from_str(text).map_err(|e| Error::Io(format!("{file}: invalid JSON: {e}")))?;
+    let val: Value = serde_json::from_str(text).map_err(|e| json_error(file, &e))?;
     let obj = val
         .as_object()
-        .ok_or_else(|| Error::Io(format!("{file}: the state must be a JSON object")))?;
+        .ok_or_else(|| input(file, "the state must be a JSON object".to_string()))?;
     check_keys(obj, file, &STATE_KEYS)?;
     let nq = model.nq();
     let q_len = obj.get("q").and_then(Value::as_array).map(Vec::len);
     let q = read_vec(obj, "q", nq, file)
-        .map_err(|e| match (q_len, floating_base) {
-            (Some(n), Some(false)) if n == nq + 7 => Error::Io(format!(
-                "{e} ({n} is nq of this model file with a free-flyer root: add --floating-base)"
-            )),
-            (Some(n), Some(true)) if n + 7 == nq => Error::Io(format!(
-                "{e} ({n} is nq of this model file without the free-flyer root: leave out \
-                 --floating-base)"
-            )),
-            _ => e,
+        .map_err(|e| {
+            let hint = match (q_len, floating_base) {
+                (Some(n), Some(false)) if n == nq + 7 => format!(
+                    "{n} is nq of this model file with a free-flyer root: add --floating-base"
+                ),
+                (Some(n), Some(true)) if n + 7 == nq => format!(
+                    "{n} is nq of this model file without the free-flyer root: leave out \
+                     --floating-base"
+                ),
+                _ => return e,
+            };
+            match e {
+                Error::Input { file, at, reason } => {
+                    Error::Input { file, at, reason: format!("{reason} ({hint})") }
+                }
+                e => e,
+            }
         })?
         .unwrap_or_else(|| model.neutral());
     model.check_q(&q)?;
@@ -190,13 +211,14 @@ pub fn load_state(
     }
     if let Some(list) = obj.get("contacts") {
         let list = list.as_array().ok_or_else(|| {
-            Error::Io(format!(
-                "{file}: key \"contacts\" must be a list of {{\"frame\", \"point\"}} objects"
-            ))
+            input(
+                file,
+                "key \"contacts\" must be a list of {\"frame\", \"point\"} objects".to_string(),
+            )
         })?;
         for (i, c) in list.iter().enumerate() {
             let obj_c = c.as_object().ok_or_else(|| {
-                Error::Io(format!("{file}: contacts[{i}] must be an object with a \"frame\""))
+                input(file, format!("contacts[{i}] must be an object with a \"frame\""))
             })?;
             let known = [
                 "frame",
@@ -211,36 +233,35 @@ pub fn load_state(
                 "placement2",
             ];
             if let Some(k) = obj_c.keys().find(|k| !known.contains(&k.as_str())) {
-                return Err(Error::Io(format!(
-                    "{file}: unknown key \"contacts[{i}].{k}\" (known: {})",
-                    known.join(", ")
-                )));
+                return Err(input(
+                    file,
+                    format!("unknown key \"contacts[{i}].{k}\" (known: {})", known.join(", ")),
+                ));
             }
-            let frame = c.get("frame").and_then(|f| f.as_str()).ok_or_else(|| {
-                Error::Io(format!("{file}: contacts[{i}] needs a string \"frame\""))
-            })?;
+            let frame = c
+                .get("frame")
+                .and_then(|f| f.as_str())
+                .ok_or_else(|| input(file, format!("contacts[{i}] needs a string \"frame\"")))?;
             let string = |key: &str, default: &'static str| -> Result<String> {
                 match c.get(key) {
                     None => Ok(default.to_string()),
                     Some(x) => x.as_str().map(str::to_string).ok_or_else(|| {
-                        Error::Io(format!("{file}: contacts[{i}].{key} must be a string"))
+                        input(file, format!("contacts[{i}].{key} must be a string"))
                     }),
                 }
             };
-            let at = |e: Error| Error::Io(format!("{file}: contacts[{i}]: {e}"));
+            let at = |e: Error| input(file, format!("contacts[{i}]: {e}"));
             let kind = ContactType::parse(&string("type", "3d")?).map_err(at)?;
             let reference = ContactReference::parse(&string("reference", "local_world_aligned")?)
                 .map_err(at)?;
             let vec3 = |x: &Value, what: &str| -> Result<Vector3<f64>> {
                 let arr = x.as_array().filter(|a| a.len() == 3).ok_or_else(|| {
-                    Error::Io(format!("{file}: contacts[{i}].{what} must be a list of 3 numbers"))
+                    input(file, format!("contacts[{i}].{what} must be a list of 3 numbers"))
                 })?;
                 let mut v = Vector3::zeros();
                 for (r, val) in arr.iter().enumerate() {
                     v[r] = val.as_f64().filter(|v| v.is_finite()).ok_or_else(|| {
-                        Error::Io(format!(
-                            "{file}: contacts[{i}].{what}[{r}] is not a finite number"
-                        ))
+                        input(file, format!("contacts[{i}].{what}[{r}] is not a finite number"))
                     })?;
                 }
                 Ok(v)
@@ -250,21 +271,28 @@ pub fn load_state(
             let placement_of = |pk: &str, plk: &str| -> Result<Transform> {
                 Ok(match (c.get(pk), c.get(plk)) {
                     (Some(_), Some(_)) => {
-                        return Err(Error::Io(format!(
-                            "{file}: contacts[{i}] has both \"{pk}\" and \"{plk}\": give one"
-                        )));
+                        return Err(input(
+                            file,
+                            format!("contacts[{i}] has both \"{pk}\" and \"{plk}\": give one"),
+                        ));
                     }
                     (Some(p), None) => Transform::from_translation(vec3(p, pk)?),
                     (None, Some(pl)) => {
                         let o = pl.as_object().ok_or_else(|| {
-                            Error::Io(format!(
-                                "{file}: contacts[{i}].{plk} must be an object {{\"xyz\", \"rpy\"}}"
-                            ))
+                            input(
+                                file,
+                                format!(
+                                    "contacts[{i}].{plk} must be an object {{\"xyz\", \"rpy\"}}"
+                                ),
+                            )
                         })?;
                         if let Some(k) = o.keys().find(|k| !["xyz", "rpy"].contains(&k.as_str())) {
-                            return Err(Error::Io(format!(
-                                "{file}: unknown key \"contacts[{i}].{plk}.{k}\" (known: xyz, rpy)"
-                            )));
+                            return Err(input(
+                                file,
+                                format!(
+                                    "unknown key \"contacts[{i}].{plk}.{k}\" (known: xyz, rpy)"
+                                ),
+                            ));
                         }
                         let get = |k: &str| match o.get(k) {
                             None => Ok(Vector3::zeros()),
@@ -281,10 +309,13 @@ pub fn load_state(
                 match c.get(key) {
                     None => Ok(0.0),
                     Some(g) => g.as_f64().filter(|v| v.is_finite() && *v >= 0.0).ok_or_else(|| {
-                        Error::Io(format!(
-                            "{file}: contacts[{i}].{key} (a Baumgarte gain) must be a finite \
+                        input(
+                            file,
+                            format!(
+                                "contacts[{i}].{key} (a Baumgarte gain) must be a finite \
                              number >= 0"
-                        ))
+                            ),
+                        )
                     }),
                 }
             };
@@ -299,14 +330,12 @@ pub fn load_state(
                 None => {
                     if let Some(k) = ["point2", "placement2"].iter().find(|k| c.get(**k).is_some())
                     {
-                        return Err(Error::Io(format!(
-                            "{file}: contacts[{i}].{k} needs a \"frame2\""
-                        )));
+                        return Err(input(file, format!("contacts[{i}].{k} needs a \"frame2\"")));
                     }
                 }
                 Some(f2) => {
                     let f2 = f2.as_str().ok_or_else(|| {
-                        Error::Io(format!("{file}: contacts[{i}].frame2 must be a string"))
+                        input(file, format!("contacts[{i}].frame2 must be a string"))
                     })?;
                     let placement2 = placement_of("point2", "placement2")?;
                     contact = contact.with_frame2(model, f2, Some(&placement2)).map_err(at)?;
@@ -320,32 +349,36 @@ pub fn load_state(
     let restitution = match obj.get("restitution") {
         None => 0.0,
         Some(r) => r.as_f64().filter(|e| e.is_finite() && *e >= 0.0).ok_or_else(|| {
-            Error::Io(format!("{file}: key \"restitution\" must be a non-negative number"))
+            input(file, "key \"restitution\" must be a non-negative number".to_string())
         })?,
     };
     let damping = match obj.get("damping") {
         None => 0.0,
         Some(r) => r.as_f64().filter(|e| e.is_finite() && *e >= 0.0).ok_or_else(|| {
-            Error::Io(format!("{file}: key \"damping\" must be a non-negative number"))
+            input(file, "key \"damping\" must be a non-negative number".to_string())
         })?,
     };
     let weights = match obj.get("weights") {
         None => Weights::default(),
         Some(w) => {
             let w = w.as_object().ok_or_else(|| {
-                Error::Io(format!("{file}: key \"weights\" must be an object of number lists"))
+                input(file, "key \"weights\" must be an object of number lists".to_string())
             })?;
             let known = ["tau", "qdd", "kkt_qdd", "kkt_lambda", "impact_vplus", "impact_impulse"];
             if let Some(k) = w.keys().find(|k| !known.contains(&k.as_str())) {
-                return Err(Error::Io(format!(
-                    "{file}: unknown key \"weights.{k}\" (known: {})",
-                    known.join(", ")
-                )));
+                return Err(input(
+                    file,
+                    format!("unknown key \"weights.{k}\" (known: {})", known.join(", ")),
+                ));
             }
             let (nv, nc3) = (model.nv(), nrows);
             let get = |key: &str, n: usize| {
                 read_vec(w, key, n, file).map_err(|e| match e {
-                    Error::Io(m) => Error::Io(m.replace("key \"", "key \"weights.")),
+                    Error::Input { file, at, reason } => Error::Input {
+                        file,
+                        at,
+                        reason: reason.replace("key \"", "key \"weights."),
+                    },
                     e => e,
                 })
             };
@@ -362,9 +395,10 @@ pub fn load_state(
                 || weights.impact_vplus.is_some()
                 || weights.impact_impulse.is_some();
             if contact_weight && contacts.is_empty() {
-                return Err(Error::Io(format!(
-                    "{file}: the weights kkt_* and impact_* need \"contacts\""
-                )));
+                return Err(input(
+                    file,
+                    "the weights kkt_* and impact_* need \"contacts\"".to_string(),
+                ));
             }
             weights
         }
@@ -373,17 +407,15 @@ pub fn load_state(
         None => vec![],
         Some(list) => {
             let list = list.as_array().ok_or_else(|| {
-                Error::Io(format!("{file}: key \"frames\" must be a list of frame names"))
+                input(file, "key \"frames\" must be a list of frame names".to_string())
             })?;
             let mut ids = Vec::with_capacity(list.len());
             for (i, f) in list.iter().enumerate() {
                 let name = f.as_str().ok_or_else(|| {
-                    Error::Io(format!("{file}: frames[{i}] must be a frame name (a string)"))
+                    input(file, format!("frames[{i}] must be a frame name (a string)"))
                 })?;
                 ids.push(
-                    model
-                        .frame_id(name)
-                        .map_err(|e| Error::Io(format!("{file}: frames[{i}]: {e}")))?,
+                    model.frame_id(name).map_err(|e| input(file, format!("frames[{i}]: {e}")))?,
                 );
             }
             ids
@@ -790,7 +822,9 @@ fn contact_outputs(
     };
     if !loops {
         constrained_id_so_derivatives(model, data, &mut cd, &s.q, &s.v, &s.a, &s.lambda)?;
-        let so = data.id_so().ok_or_else(|| Error::Io("internal: no second order".into()))?;
+        let so = data
+            .id_so()
+            .ok_or_else(|| Error::Workspace("internal: no second-order results in Data".into()))?;
         o.insert(
             "constrained_id".into(),
             json!({

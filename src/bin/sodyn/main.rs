@@ -282,8 +282,9 @@ fn with_armature_arg(model: &Model, arg: &str) -> Result<Model> {
     let vals = arg
         .split(',')
         .map(|x| {
-            x.trim().parse::<f64>().map_err(|e| {
-                Error::Io(format!("--armature: \"{}\" is not a number ({e})", x.trim()))
+            x.trim().parse::<f64>().map_err(|e| Error::Argument {
+                name: "--armature".into(),
+                reason: format!("\"{}\" is not a number ({e})", x.trim()),
             })
         })
         .collect::<Result<Vec<f64>>>()?;
@@ -291,12 +292,15 @@ fn with_armature_arg(model: &Model, arg: &str) -> Result<Model> {
         [x] => vec![*x; model.nv()],
         _ if vals.len() == model.nv() => vals,
         _ => {
-            return Err(Error::Io(format!(
-                "--armature: {} values for a model with nv = {} (give one value, or nv values \
-                 in velocity order)",
-                vals.len(),
-                model.nv()
-            )));
+            return Err(Error::Argument {
+                name: "--armature".into(),
+                reason: format!(
+                    "{} values for a model with nv = {} (give one value, or nv values in \
+                     velocity order)",
+                    vals.len(),
+                    model.nv()
+                ),
+            });
         }
     };
     model.with_armature(&a)
@@ -308,18 +312,24 @@ fn with_armature_arg(model: &Model, arg: &str) -> Result<Model> {
 fn load_model_spec(spec: &str, opts: &UrdfOptions) -> Result<Model> {
     let model = if let Some(name) = spec.strip_prefix("builtin:") {
         if opts.floating_base {
-            return Err(Error::Io(format!(
-                "--floating-base applies to URDF files; built-in model \"{name}\" defines its own base"
-            )));
+            return Err(Error::Argument {
+                name: "--floating-base".into(),
+                reason: format!(
+                    "applies to URDF files; built-in model \"{name}\" defines its own base"
+                ),
+            });
         }
         sodyn::model::builtin::by_name(name)
             .ok_or_else(|| Error::Unknown { kind: "built-in model".into(), name: name.into() })?
     } else if is_mjcf(spec) {
         if opts.strict_inertia {
-            return Err(Error::Io(format!(
-                "--strict-inertia applies to URDF files; the MJCF loader refuses every \
-                 non-physical inertia ({spec})"
-            )));
+            return Err(Error::Argument {
+                name: "--strict-inertia".into(),
+                reason: format!(
+                    "applies to URDF files; the MJCF loader refuses every non-physical inertia \
+                     ({spec})"
+                ),
+            });
         }
         let mo = MjcfOptions { floating_base: opts.floating_base };
         sodyn::model::mjcf::load_mjcf_file(Path::new(spec), &mo)?

@@ -625,3 +625,25 @@ fn a_singular_reduced_mass_matrix_names_the_state() {
     // The inverse dynamics is defined there.
     rnea_batch(&m, &mut bd, &s.q, &s.v, &s.a, &mut vecs(&m, 6)).unwrap();
 }
+
+/// The batch API goes through the same algorithms.
+#[test]
+fn batch_has_armature() {
+    use crate::util::{random_state, with_random_armature};
+    let m = with_random_armature(&builtin::humanoid(), 9, true);
+    let mut rng = Rng::new(2);
+    let states: Vec<_> = (0..5).map(|_| random_state(&m, &mut rng)).collect();
+    let qs: Vec<_> = states.iter().map(|s| s.0.clone()).collect();
+    let vs: Vec<_> = states.iter().map(|s| s.1.clone()).collect();
+    let ts: Vec<_> = states.iter().map(|s| s.2.clone()).collect();
+    let mut bd = BatchData::new(&m);
+    let mut ms = vec![DMatrix::zeros(m.nv(), m.nv()); 5];
+    let mut qdds = vec![DVector::zeros(m.nv()); 5];
+    crba_batch(&m, &mut bd, &qs, &mut ms).unwrap();
+    aba_batch(&m, &mut bd, &qs, &vs, &ts, &mut qdds).unwrap();
+    let mut d = Data::new(&m);
+    for k in 0..5 {
+        assert_eq!(&ms[k], crba(&m, &mut d, &qs[k]).unwrap());
+        assert_eq!(&qdds[k], aba(&m, &mut d, &qs[k], &vs[k], &ts[k], None).unwrap());
+    }
+}

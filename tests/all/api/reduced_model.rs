@@ -3,8 +3,10 @@
 //! (`reference::mimic::Reduced`), the plain algorithms with the usual workspaces (`Data`, with
 //! its second-order capacity, `ContactData`, batch and centroidal workspaces) against the full tree's at
 //! the expanded state (`Gᵀ τ_full(expand(q), G v, G a)`, `Gᵀ M_full G`, the placements bit for
-//! bit, `J = J_full G`), and the workspaces of the other model refused. The reduced algorithms
-//! against the AD oracle are `tests/mimic*.rs`.
+//! bit, `J = J_full G`), point kinematics against central differences in the reduced coordinates,
+//! and bad inputs and the workspaces of the other model refused. The reduced algorithms against
+//! the AD oracle are the family tests, whose models include the mimic arm (`util::test_models`,
+//! `util::contact_cases`).
 
 use crate::util::mimic as um;
 use nalgebra::{DMatrix, DVector};
@@ -14,6 +16,7 @@ use sodyn::deriv::ContactData;
 use sodyn::model::{Arg, MimicJoint, Model, UrdfOptions, load_urdf_file};
 use sodyn::reference::{self, mimic::Reduced};
 use sodyn::rng::Rng;
+use sodyn::spatial::Force;
 use sodyn::{Error, tensor::Tensor3};
 use std::path::PathBuf;
 
@@ -575,4 +578,269 @@ fn kinematics_inputs_are_errors() {
     assert!(algo::frame_placement(m, &mut d2, &q, 0).is_err());
     let e = algo::centroidal_dynamics_derivatives(m, &mut d2, &q, &v, &v).unwrap_err().to_string();
     assert!(e.contains("Data"), "{e}");
+}
+
+/// The arm fixed and floating, and the panda with its finger mimic (multiplier −0.6, offset
+/// 0.02), for the kinematics of reduced models.
+fn kin_models() -> Vec<Model> {
+    vec![um::arm(false), um::arm(true), um::panda()]
+}
+
+fn rel3(a: &nalgebra::Vector3<f64>, b: &nalgebra::Vector3<f64>) -> f64 {
+    (a - b).amax() / (1.0 + b.amax())
+}
+
+/// Relative max-norm error of two matrices of one shape (any storage).
+fn rel_any<R: nalgebra::Dim, C: nalgebra::Dim, S1, S2>(
+    a: &nalgebra::Matrix<f64, R, C, S1>,
+    b: &nalgebra::Matrix<f64, R, C, S2>,
+) -> f64
+where
+    S1: nalgebra::storage::RawStorage<f64, R, C>,
+    S2: nalgebra::storage::RawStorage<f64, R, C>,
+{
+    assert_eq!(a.shape(), b.shape());
+    let e = a.iter().zip(b.iter()).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+    e / (1.0 + b.iter().fold(0.0, |s: f64, y| s.max(y.abs())))
+}
+
+/// The full model's functions at `expand(q)`, `G q̇`, `G q̈`: the same results bit for bit, and
+/// the Jacobian the full one times `G`.
+#[test]
+fn mimic_point_kinematics_are_the_full_trees_at_the_expanded_state() {
+    let mut w = crate::util::Worst::new("J = J_full G");
+    let mut rng = Rng::new(404);
+    for m in &kin_models() {
+        let (full, g) = (m.full_tree(), m.velocity_map());
+        let mut d = Data::new(m);
+        let mut df = Data::new(full);
+        let (mut jac, mut jf) =
+            (nalgebra::Matrix3xX::zeros(m.nv()), nalgebra::Matrix3xX::zeros(full.nv()));
+        for _ in 0..3 {
+            let [q, v, a] = um::state(m, &mut rng);
+            let qf = m.expand_q(&q).unwrap();
+            let (vf, af) = (&g * &v, &g * &a);
+            algo::forward_kinematics(m, &mut d, &q, Some(&v), Some(&a)).unwrap();
+            algo::forward_kinematics(full, &mut df, &qf, Some(&vf), Some(&af)).unwrap();
+            assert_eq!(d.o_m_i(), df.o_m_i(), "{}", m.name());
+            assert_eq!(d.v(), df.v(), "{}", m.name());
+            assert_eq!(d.a(), df.a(), "{}", m.name());
+            // Placements only (no v): the placements alone are recomputed.
+            algo::forward_kinematics(m, &mut d, &q, None, None).unwrap();
+            assert_eq!(d.o_m_i(), df.o_m_i(), "{}", m.name());
+            let f = full.frames().len() - 1;
+            let p = nalgebra::Vector3::new(0.01, 0.02, -0.03);
+            assert_eq!(
+                algo::point_position(m, &mut d, &q, f, &p).unwrap(),
+                algo::point_position(full, &mut df, &qf, f, &p).unwrap()
+            );
+            assert_eq!(
+                algo::point_drift(m, &mut d, &q, &v, f, &p).unwrap(),
+                algo::point_drift(full, &mut df, &qf, &vf, f, &p).unwrap()
+            );
+            assert_eq!(
+                algo::centroidal_momentum(m, &mut d, &q, &v).unwrap(),
+                algo::centroidal_momentum(full, &mut df, &qf, &vf).unwrap()
+            );
+            algo::point_jacobian(m, &mut d, &q, f, &p, &mut jac).unwrap();
+            algo::point_jacobian(full, &mut df, &qf, f, &p, &mut jf).unwrap();
+            w.add(rel_any(&jac, &(&jf * &g)), m.name());
+        }
+    }
+    w.check(1e-15);
+}
+
+/// Central differences in the reduced coordinates: `J[:, k] ≈ (p(q ⊕ h e_k) − p(q ⊖ h e_k))
+/// / 2h`, `J̇ q̇ ≈ (p(q ⊕ h q̇) − 2 p(q) + p(q ⊕ −h q̇)) / h²`.
+#[test]
+fn mimic_point_kinematics_match_central_differences() {
+    let mut w = [
+        crate::util::Worst::new("jacobian (central diff.)"),
+        crate::util::Worst::new("drift (central diff.)"),
+    ];
+    let mut rng = Rng::new(405);
+    for m in &kin_models() {
+        let mut d = Data::new(m);
+        let n = m.nv();
+        let mut jac = nalgebra::Matrix3xX::zeros(n);
+        let f = m.full_tree().frames().len() - 1;
+        let p = nalgebra::Vector3::new(0.02, -0.01, 0.05);
+        for _ in 0..3 {
+            let [q, v, _] = um::state(m, &mut rng);
+            let mut pos = |x: &DVector<f64>| algo::point_position(m, &mut d, x, f, &p).unwrap();
+            let h = 1e-6;
+            let mut num = nalgebra::Matrix3xX::zeros(n);
+            for k in 0..n {
+                let mut e = DVector::zeros(n);
+                e[k] = h;
+                let plus = pos(&m.integrate(&q, &e).unwrap());
+                let minus = pos(&m.integrate(&q, &(-&e)).unwrap());
+                num.set_column(k, &((plus - minus) / (2.0 * h)));
+            }
+            let h2 = 1e-4;
+            let p0 = pos(&q);
+            let pp = pos(&m.integrate(&q, &(&v * h2)).unwrap());
+            let pm = pos(&m.integrate(&q, &(&v * -h2)).unwrap());
+            let dd = (pp - 2.0 * p0 + pm) / (h2 * h2);
+            algo::point_jacobian(m, &mut d, &q, f, &p, &mut jac).unwrap();
+            w[0].add(rel_any(&jac, &num), m.name());
+            let drift = algo::point_drift(m, &mut d, &q, &v, f, &p).unwrap();
+            w[1].add(rel3(&drift, &dd), m.name());
+        }
+    }
+    w[0].check(1e-8);
+    w[1].check(1e-5);
+}
+
+#[test]
+fn mimic_point_kinematics_inputs_are_errors() {
+    let ms = kin_models();
+    let m = &ms[1];
+    let mut d = Data::new(m);
+    let q = m.neutral();
+    let v = DVector::zeros(m.nv());
+    let p = nalgebra::Vector3::zeros();
+    let nf = m.full_tree().frames().len();
+    let e = algo::point_position(m, &mut d, &q, nf, &p).unwrap_err().to_string();
+    assert!(e.contains("frame"), "{e}");
+    let e = algo::point_drift(m, &mut d, &q, &v, nf, &p).unwrap_err().to_string();
+    assert!(e.contains("frame"), "{e}");
+    let e = algo::point_position(m, &mut d, &q, 0, &nalgebra::Vector3::new(0.0, f64::NAN, 0.0))
+        .unwrap_err();
+    assert!(matches!(e, Error::NotFinite { ref what, index: 1 } if what == "point"), "{e:?}");
+    let mut full_cols = nalgebra::Matrix3xX::zeros(m.full_tree().nv());
+    let e = algo::point_jacobian(m, &mut d, &q, 0, &p, &mut full_cols).unwrap_err().to_string();
+    assert!(e.contains("columns"), "{e}");
+    let short = DVector::zeros(m.nv() - 1);
+    let e = algo::point_drift(m, &mut d, &q, &short, 0, &p).unwrap_err();
+    assert!(matches!(e, Error::Dimension { ref what, .. } if what == "v"), "{e:?}");
+    let e = algo::centroidal_momentum(m, &mut d, &q, &short).unwrap_err();
+    assert!(matches!(e, Error::Dimension { .. }), "{e:?}");
+    let e = algo::forward_kinematics(m, &mut d, &q, Some(&v), Some(&short)).unwrap_err();
+    assert!(e.to_string().contains('a'), "{e}");
+    let mut nan = q.clone();
+    nan[m.nq() - 1] = f64::NAN;
+    let e = algo::forward_kinematics(m, &mut d, &nan, None, None).unwrap_err();
+    assert!(matches!(e, Error::NotFinite { index, .. } if index == m.nq() - 1), "{e:?}");
+    // A configuration of the full tree's length.
+    let qf = m.expand_q(&q).unwrap();
+    let e = algo::point_position(m, &mut d, &qf, 0, &p).unwrap_err();
+    assert!(matches!(e, Error::Dimension { expected, .. } if expected == m.nq()), "{e:?}");
+    // A non-unit quaternion of the floating base.
+    let mut bad = q.clone();
+    bad[6] = 2.0;
+    let e = algo::centroidal_momentum(m, &mut d, &bad, &v).unwrap_err();
+    assert!(matches!(e, Error::InvalidConfiguration { .. }), "{e:?}");
+    // A workspace of another model.
+    let mut d2 = Data::new(&ms[0]);
+    let e = algo::point_position(m, &mut d2, &q, 0, &p).unwrap_err();
+    assert!(matches!(e, Error::Workspace(_)), "{e:?}");
+    let e = algo::forward_kinematics(m, &mut d2, &q, None, None).unwrap_err();
+    assert!(matches!(e, Error::Workspace(_)), "{e:?}");
+}
+
+/// Random external forces, one per joint of `full`.
+fn random_fext(full: &Model, rng: &mut Rng) -> Vec<Force> {
+    (0..full.njoints())
+        .map(|_| {
+            Force::new(
+                nalgebra::Vector3::from_fn(|_, _| rng.range(-1.0, 1.0)),
+                nalgebra::Vector3::from_fn(|_, _| rng.range(-1.0, 1.0)),
+            )
+        })
+        .collect()
+}
+
+fn is_dim(e: &Error, name: &str) -> bool {
+    matches!(e, Error::Dimension { what, .. } if what == name)
+}
+fn is_nan(e: &Error, name: &str, at: usize) -> bool {
+    matches!(e, Error::NotFinite { what, index } if what == name && *index == at)
+}
+
+/// The forward-only functions (`nonlinear_effects`, `kkt_dynamics`, `impact_dynamics`) and
+/// `rnea`'s external forces on the floating arm: each bad input an error naming the argument,
+/// and the workspaces usable afterwards.
+#[test]
+fn forward_only_bad_inputs_are_errors_naming_the_argument() {
+    let m = um::arm(true);
+    let other = um::arm(false);
+    let cs = um::arm_contacts(&m, true);
+    let mut data = Data::new(&m);
+    let mut kd = um::kkt_data(&m, &cs).unwrap();
+    let mut im = um::impact_data(&m, &cs).unwrap();
+    let mut rng = Rng::new(35);
+    let [q, v, tau] = um::state(&m, &mut rng);
+    let long_q = m.expand_q(&q).unwrap();
+    let short = DVector::zeros(m.nv() - 1);
+    let mut nan_v = v.clone();
+    nan_v[5] = f64::NAN;
+    let mut nan_q = q.clone();
+    nan_q[8] = f64::INFINITY;
+    let mut bad_quat = q.clone();
+    bad_quat[3] = 2.0;
+
+    // nonlinear_effects
+    let e = algo::nonlinear_effects(&m, &mut data, &long_q, &v).unwrap_err();
+    assert!(is_dim(&e, "q"), "{e}");
+    let e = algo::nonlinear_effects(&m, &mut data, &q, &short).unwrap_err();
+    assert!(is_dim(&e, "v"), "{e}");
+    let e = algo::nonlinear_effects(&m, &mut data, &q, &nan_v).unwrap_err();
+    assert!(is_nan(&e, "v", 5), "{e}");
+    let e = algo::nonlinear_effects(&m, &mut data, &nan_q, &v).unwrap_err();
+    assert!(is_nan(&e, "q", 8), "{e}");
+    let e = algo::nonlinear_effects(&m, &mut data, &bad_quat, &v).unwrap_err();
+    assert!(e.to_string().contains("root_joint"), "{e}");
+    // External forces (`algo::nonlinear_effects` takes none: those of `rnea` at `a = 0`).
+    let f = random_fext(m.full_tree(), &mut rng);
+    let zero = DVector::zeros(m.nv());
+    let e = algo::rnea(&m, &mut data, &q, &v, &zero, Some(&f[1..])).unwrap_err();
+    assert!(is_dim(&e, "fext"), "{e}");
+    let mut fnan = f.clone();
+    fnan[2] = Force::new(nalgebra::Vector3::new(f64::NAN, 0.0, 0.0), nalgebra::Vector3::zeros());
+    let e = algo::rnea(&m, &mut data, &q, &v, &zero, Some(&fnan)).unwrap_err();
+    assert!(e.to_string().contains("fext"), "{e}");
+    let mut od = Data::new(&other);
+    let e = algo::nonlinear_effects(&m, &mut od, &q, &v).unwrap_err();
+    assert!(matches!(e, Error::Workspace(ref s) if s.contains("Data")), "{e}");
+
+    // kkt_dynamics
+    let e = deriv::kkt_dynamics(&m, &mut data, &mut kd, &long_q, &v, &tau).unwrap_err();
+    assert!(is_dim(&e, "q"), "{e}");
+    let e = deriv::kkt_dynamics(&m, &mut data, &mut kd, &q, &short, &tau).unwrap_err();
+    assert!(is_dim(&e, "v"), "{e}");
+    let e = deriv::kkt_dynamics(&m, &mut data, &mut kd, &q, &v, &short).unwrap_err();
+    assert!(is_dim(&e, "tau"), "{e}");
+    let e = deriv::kkt_dynamics(&m, &mut data, &mut kd, &q, &nan_v, &tau).unwrap_err();
+    assert!(is_nan(&e, "v", 5), "{e}");
+    let e = deriv::kkt_dynamics(&m, &mut data, &mut kd, &q, &v, &nan_v).unwrap_err();
+    assert!(is_nan(&e, "tau", 5), "{e}");
+    let e = deriv::kkt_dynamics(&m, &mut data, &mut kd, &nan_q, &v, &tau).unwrap_err();
+    assert!(is_nan(&e, "q", 8), "{e}");
+    let e = deriv::kkt_dynamics(&m, &mut od, &mut kd, &q, &v, &tau).unwrap_err();
+    assert!(matches!(e, Error::Workspace(ref s) if s.contains("Data")), "{e}");
+    let mut okd = um::kkt_data(&other, &um::arm_contacts(&other, false)).unwrap();
+    let e = deriv::kkt_dynamics(&m, &mut data, &mut okd, &q, &v, &tau).unwrap_err();
+    assert!(matches!(e, Error::Workspace(ref s) if s.contains("ContactData")), "{e}");
+
+    // impact_dynamics
+    let e = deriv::impact_dynamics(&m, &mut data, &mut im, &long_q, &v).unwrap_err();
+    assert!(is_dim(&e, "q"), "{e}");
+    let e = deriv::impact_dynamics(&m, &mut data, &mut im, &q, &short).unwrap_err();
+    assert!(is_dim(&e, "vminus"), "{e}");
+    let e = deriv::impact_dynamics(&m, &mut data, &mut im, &q, &nan_v).unwrap_err();
+    assert!(is_nan(&e, "vminus", 5), "{e}");
+    let e = deriv::impact_dynamics(&m, &mut data, &mut im, &bad_quat, &v).unwrap_err();
+    assert!(e.to_string().contains("root_joint"), "{e}");
+    let e = deriv::impact_dynamics(&m, &mut od, &mut im, &q, &v).unwrap_err();
+    assert!(matches!(e, Error::Workspace(ref s) if s.contains("Data")), "{e}");
+    let mut oim = um::impact_data(&other, &um::arm_contacts(&other, false)).unwrap();
+    let e = deriv::impact_dynamics(&m, &mut data, &mut oim, &q, &v).unwrap_err();
+    assert!(matches!(e, Error::Workspace(ref s) if s.contains("ContactData")), "{e}");
+
+    // The workspaces still work after the errors.
+    algo::rnea(&m, &mut data, &q, &v, &zero, Some(&f)).unwrap();
+    algo::nonlinear_effects(&m, &mut data, &q, &v).unwrap();
+    deriv::kkt_dynamics(&m, &mut data, &mut kd, &q, &v, &tau).unwrap();
+    deriv::impact_dynamics(&m, &mut data, &mut im, &q, &v).unwrap();
 }

@@ -1056,7 +1056,7 @@ fn mjcf_models_load_by_extension() {
     assert!(stdout(&o).contains("root_joint"));
     let o = sodyn(&["info", "--model", radian, "--strict-inertia"]);
     let err = assert_clean_failure(&o, "--strict-inertia on MJCF");
-    assert!(err.contains("--strict-inertia applies to URDF files"), "{err}");
+    assert!(err.contains("`--strict-inertia`: applies to URDF files"), "{err}");
     let bad = tmp("bad.xml");
     std::fs::write(
         &bad,
@@ -1404,6 +1404,12 @@ fn unknown_state_keys_are_errors_at_every_level() {
         assert!(err.contains(&format!("{st}: {needle}")), "{body}: {err}");
         assert!(stdout(&o).is_empty(), "{body}");
     }
+    // Invalid JSON: the file, serde_json's line and column, and what it expected.
+    std::fs::write(&state, "{\"q\": [0,\n  nope]}").unwrap();
+    let o = sodyn(&["eval", "--model", "builtin:pendulum2", "--state", st]);
+    let err = assert_clean_failure(&o, "invalid JSON");
+    assert!(err.contains(&format!("{st}:2:")) && err.contains(": invalid JSON: "), "{err}");
+    assert!(!err.contains(" at line "), "{err}");
     // With --mimic: the same keys; a "damping" > 0 with contacts is refused (the reduced
     // coordinates' contact solve has no regularised variant).
     std::fs::write(&state, r#"{"v": [], "vel": []}"#).unwrap();
@@ -1594,7 +1600,7 @@ fn demo_takes_the_model_and_contact_options() {
         &sodyn(&["demo", "--model", solo, "--contacts", "FL_FOOT,NOSE"]),
         "unknown contact frame",
     );
-    assert!(err.contains("--contacts: unknown frame \"NOSE\""), "{err}");
+    assert!(err.contains("`--contacts`: unknown frame \"NOSE\""), "{err}");
     // A model in reduced coordinates takes contacts like any other.
     let mimic = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/mimic_arm.urdf");
     let o = sodyn(&["demo", "--model", mimic, "--mimic", "--floating-base", "--contacts", "tool"]);
@@ -1604,7 +1610,7 @@ fn demo_takes_the_model_and_contact_options() {
     assert!(err.contains("--contacts"), "{err}");
     let err =
         assert_clean_failure(&sodyn(&["demo", "--floating-base"]), "--floating-base built-in");
-    assert!(err.contains("--floating-base applies to URDF files"), "{err}");
+    assert!(err.contains("`--floating-base`: applies to URDF files"), "{err}");
 }
 
 #[test]

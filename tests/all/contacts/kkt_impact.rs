@@ -43,6 +43,12 @@ fn kkt_first_and_second_order_match_oracle() {
         "dlambda_dq (first order only)",
     ];
     let mut w: Vec<Worst> = names.iter().map(|n| Worst::new(n)).collect();
+    // Two computations of one formula: the forward-only `kkt_dynamics` against the forward
+    // outputs of `kkt_derivatives` (qdd, lambda, the contact Jacobian, `data.qdd()`).
+    // Reduced models at 1e-14 (their forward and first-order solves share the reduced
+    // factorisation); the others, whose two paths sum in another order, at 1e-13.
+    let mut w_fwd = Worst::new("kkt_dynamics = kkt_derivatives");
+    let mut w_fwd_reduced = Worst::new("kkt_dynamics = kkt_der. (reduced)");
     let mut rng = Rng::new(61);
     for gains in [false, true] {
         let large = (!gains).then(large_contact_case);
@@ -87,6 +93,21 @@ fn kkt_first_and_second_order_match_oracle() {
             let k1 = kkt_derivatives(&m, &mut d, &mut c1, &q, &v, &tau).unwrap();
             w[16].add(rel_err_mat(k1.dqdd_dq(), &fo.dqdd_dq), &at);
             w[17].add(rel_err_mat(k1.dlambda_dq(), &fo.dlambda_dq), &at);
+            let mut d2 = Data::new(&m);
+            let mut c2 = ContactData::new(&m, &cs).unwrap();
+            kkt_dynamics(&m, &mut d2, &mut c2, &q, &v, &tau).unwrap();
+            let k2 = c2.kkt();
+            assert!(k2.qdd().amax() > 0.0 && k2.lambda().amax() > 0.0, "{at}");
+            let mut e = rel_err_vec(k2.qdd(), c1.kkt().qdd())
+                .max(rel_err_vec(k2.lambda(), c1.kkt().lambda()))
+                .max(rel_err_mat(c2.jac(), c1.jac()));
+            if m.is_reduced() {
+                // A reduced model's `kkt_dynamics` also leaves `q̈` in `data.qdd()`.
+                e = e.max(rel_err_vec(d2.qdd(), c2.kkt().qdd()));
+                w_fwd_reduced.add(e, &at);
+            } else {
+                w_fwd.add(e, &at);
+            }
             let so = oracle::kkt_so(&m, qs, vs, ts, &cs);
             let k = kd.so().unwrap();
             let tensors: [(&Tensor3, &Tensor3); 8] = [
@@ -107,6 +128,8 @@ fn kkt_first_and_second_order_match_oracle() {
     for x in &w {
         x.check(1e-10);
     }
+    w_fwd.check(1e-13);
+    w_fwd_reduced.check(1e-14);
 }
 
 #[test]
@@ -124,6 +147,8 @@ fn impact_first_and_second_order_match_oracle() {
         "d2impulse_dqdvminus",
     ];
     let mut w: Vec<Worst> = names.iter().map(|n| Worst::new(n)).collect();
+    // The forward-only `impact_dynamics` against the forward outputs of `impact_derivatives`.
+    let mut w_fwd = Worst::new("impact_dynamics = impact_der.");
     let mut rng = Rng::new(62);
     for (m, spec) in contact_cases().into_iter().chain(std::iter::once(large_contact_case())) {
         let large = m.nv() >= 32;
@@ -150,11 +175,29 @@ fn impact_first_and_second_order_match_oracle() {
             w[7].add(rel_err_tensor(k.d2vplus_dqdvminus(), &so.d2vplus_dqdvminus), &at);
             w[8].add(rel_err_tensor(k.d2impulse_dq2(), &so.d2impulse_dq2), &at);
             w[9].add(rel_err_tensor(k.d2impulse_dqdvminus(), &so.d2impulse_dqdvminus), &at);
+            let (mut c1, mut c2) =
+                (ContactData::new(&m, &cs).unwrap(), ContactData::new(&m, &cs).unwrap());
+            c1.set_restitution(e).unwrap();
+            c2.set_restitution(e).unwrap();
+            let i1 = impact_dynamics(&m, &mut d, &mut c1, &q, &vminus).unwrap();
+            assert!(i1.impulse().amax() > 0.0, "{at}");
+            let (vp1, imp1) = (i1.vplus().clone(), i1.impulse().clone());
+            let i2 = impact_derivatives(&m, &mut d, &mut c2, &q, &vminus).unwrap();
+            w_fwd.add(rel_err_vec(&vp1, i2.vplus()).max(rel_err_vec(&imp1, i2.impulse())), &at);
+            // The contact rows of q̇⁺ are −e times q̇⁻'s (`J G`, the Jacobian of `kkt_dynamics`
+            // in the reduced velocities).
+            let mut ck = ContactData::new(&m, &cs).unwrap();
+            let z = DVector::zeros(m.nv());
+            kkt_dynamics(&m, &mut Data::new(&m), &mut ck, &q, &z, &z).unwrap();
+            let jr = ck.jac() * m.velocity_map();
+            let rows = &jr * &vp1 + e * (&jr * &vminus);
+            assert!(rows.amax() < 1e-10, "{at}: J vplus + e J vminus = {}", rows.amax());
         }
     }
     for x in &w {
         x.check(1e-10);
     }
+    w_fwd.check(1e-14);
 }
 
 #[test]
@@ -457,4 +500,98 @@ fn batched_contact_dynamics_match_single_calls() {
         assert_eq!(dl, k1.dlambda_dq());
         assert_eq!(dq, k1.dqdd_dq());
     }
+}
+
+/// `contacts` with gains `kp ∈ [5, 50)`, `kd ∈ [0, 10)` and a random world reference near the
+/// contact frame's placement at `q` (3-D: a point within about 10 cm; 6-D: a placement within
+/// about 0.5 rad and 10 cm).
+fn with_world_refs(m: &Model, cs: &[Contact], q: &DVector<f64>, rng: &mut Rng) -> Vec<Contact> {
+    let mut d = Data::new(m);
+    cs.iter()
+        .map(|c| {
+            let c = c.clone().with_baumgarte(rng.range(5.0, 50.0), rng.range(0.0, 10.0)).unwrap();
+            let pose = sodyn::algo::frame_placement(m, &mut d, q, c.frame)
+                .unwrap()
+                .compose(&c.placement());
+            let xi = Motion::new(
+                Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.3,
+                Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.06,
+            );
+            let xref = pose.compose(&exp6(&xi));
+            match c.kind {
+                D3 => c.with_reference_point(m, xref.trans).unwrap(),
+                D6 => c.with_reference_placement(m, &xref).unwrap(),
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn kkt_world_reference_matches_oracle_and_differences() {
+    let names = ["qdd", "lambda", "dqdd_dq", "dqdd_dv", "dlambda_dq", "dlambda_dv"];
+    let mut w: Vec<Worst> = names.iter().map(|n| Worst::new(n)).collect();
+    let mut fd = Worst::new("dqdd_dq, dlambda_dq vs central differences");
+    let mut rng = Rng::new(43);
+    let mut solved = 0;
+    let cases = contact_cases();
+    for (m, spec) in &cases {
+        let cs0 = contacts_of(m, spec, &mut rng);
+        let (q, v, tau) = random_state(m, &mut rng);
+        let cs = with_world_refs(m, &cs0, &q, &mut rng);
+        let mut cd = match ContactData::new(m, &cs) {
+            Ok(cd) => cd,
+            Err(e) => {
+                // Models in reduced coordinates (the mimic arms) refuse it, naming the contact.
+                let msg = e.to_string();
+                assert!(msg.contains("world reference") && msg.contains("contacts[0]"), "{msg}");
+                continue;
+            }
+        };
+        let mut d = Data::new(m);
+        let kd = kkt_derivatives(m, &mut d, &mut cd, &q, &v, &tau).unwrap();
+        // The reference changes the dynamics (the kp e term is not zero).
+        let plain: Vec<Contact> =
+            cs.iter().map(|c| Contact { world_ref: None, ..c.clone() }).collect();
+        let mut c0 = ContactData::new(m, &plain).unwrap();
+        let k0 = kkt_derivatives(m, &mut d, &mut c0, &q, &v, &tau).unwrap();
+        assert!(rel_err_vec(kd.lambda(), k0.lambda()) > 1e-4);
+        assert!(rel_err_mat(kd.dlambda_dq(), k0.dlambda_dq()) > 1e-4);
+        let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
+        let at = format!("{} {:?}", m.name(), spec);
+        let (qr, lr) = oracle::kkt::<f64>(m, qs, vs, ts, &cs);
+        w[0].add(rel_err_vec(kd.qdd(), &DVector::from_vec(qr)), &at);
+        w[1].add(rel_err_vec(kd.lambda(), &DVector::from_vec(lr)), &at);
+        let fo = oracle::kkt_fo(m, qs, vs, ts, &cs);
+        w[2].add(rel_err_mat(kd.dqdd_dq(), &fo.dqdd_dq), &at);
+        w[3].add(rel_err_mat(kd.dqdd_dv(), &fo.dqdd_dv), &at);
+        w[4].add(rel_err_mat(kd.dlambda_dq(), &fo.dlambda_dq), &at);
+        w[5].add(rel_err_mat(kd.dlambda_dv(), &fo.dlambda_dv), &at);
+        // Central differences in the tangent space of q.
+        let (dqdd, dlam) = (kd.dqdd_dq().clone(), kd.dlambda_dq().clone());
+        let n = m.nv();
+        let h = 1e-6;
+        let (mut nq, mut nl) = (DMatrix::zeros(n, n), DMatrix::zeros(cd.dim(), n));
+        for k in 0..n {
+            let mut e = DVector::zeros(n);
+            e[k] = h;
+            let qp = m.integrate(&q, &e).unwrap();
+            let qm = m.integrate(&q, &(-&e)).unwrap();
+            let rp = kkt_dynamics(m, &mut d, &mut cd, &qp, &v, &tau).unwrap();
+            let (ap, lp) = (rp.qdd().clone(), rp.lambda().clone());
+            let rm = kkt_dynamics(m, &mut d, &mut cd, &qm, &v, &tau).unwrap();
+            nq.set_column(k, &((&ap - rm.qdd()) / (2.0 * h)));
+            nl.set_column(k, &((&lp - rm.lambda()) / (2.0 * h)));
+        }
+        fd.add(rel_err_mat(&dqdd, &nq).max(rel_err_mat(&dlam, &nl)), &at);
+        // The second order refuses it, naming the contact.
+        let mut c2 = ContactData::with_second_order(m, &cs).unwrap();
+        let e = kkt_so_derivatives(m, &mut d, &mut c2, &q, &v, &tau).unwrap_err().to_string();
+        assert!(e.contains("contacts[0]") && e.contains("kkt_so_derivatives"), "{e}");
+        solved += 1;
+    }
+    assert_eq!(solved, cases.len() - 2);
+    for x in &w {
+        x.check(1e-10);
+    }
+    fd.check(1e-5);
 }

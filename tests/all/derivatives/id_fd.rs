@@ -223,3 +223,29 @@ fn idfoza_and_idsoza_equal_contractions_of_dense_tensors() {
     w1.check(1e-11);
     w2.check(1e-10);
 }
+
+/// The model sets that the derivative families sample include models with armature (the AD
+/// oracle's RNEA has it: `τ = M q̈ + b + diag(a) q̈`), so that the
+/// oracle comparisons of first and second order, dense and contracted (`contracted.rs`), and
+/// of the contact dynamics (`contacts/kkt_impact.rs`, 3-D and 6-D) cover the armature.
+#[test]
+fn every_family_sampling_has_armature_models() {
+    let with = |ms: &[Model]| ms.iter().filter(|m| m.has_armature()).count();
+    for (what, ms) in [
+        ("id/fd first order, contracted", test_models(60)),
+        ("fd first order", every(test_models(60), 2)),
+        ("id first order vs differences", every(test_models(30), 4)),
+        ("id second order", so_models()),
+        ("fd second order", every(so_models(), 2)),
+        ("fd second order vs differences", every(so_models(), 3)),
+    ] {
+        assert!(with(&ms) >= 2, "{what}: {} models with armature", with(&ms));
+    }
+    let cases = contact_cases();
+    for kind in [sodyn::algo::ContactType::D3, sodyn::algo::ContactType::D6] {
+        assert!(
+            cases.iter().any(|(m, spec)| m.has_armature() && spec.iter().any(|c| c.1 == kind)),
+            "no contact case with armature and a {kind:?} contact"
+        );
+    }
+}

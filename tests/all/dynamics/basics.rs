@@ -1,5 +1,7 @@
-//! Core dynamics: RNEA vs CRBA, ABA vs M⁻¹(τ − b), LᵀDL vs dense solves, Jacobians and drift vs
-//! dual numbers, energy balance along an integrated trajectory, input errors.
+//! Core dynamics: RNEA vs CRBA, the nonlinear effects vs RNEA at `q̈ = 0` and the full tree's,
+//! ABA vs M⁻¹(τ − b), LᵀDL vs dense solves, point positions, Jacobians and drift vs dual numbers,
+//! energy balance along an integrated trajectory, input errors; the armature (`M_a = M +
+//! diag(a)`) against the same model without it, on every SIMD level.
 
 use crate::util::*;
 use nalgebra::{DMatrix, DVector, Matrix3xX, Vector3};
@@ -40,15 +42,26 @@ fn rnea_equals_crba_times_qdd_plus_nle_and_reference() {
     let mut w_id = Worst::new("tau = M qdd + b");
     let mut w_ref = Worst::new("rnea vs reference rnea");
     let mut w_sym = Worst::new("M symmetric");
+    // Two computations of one formula: `b` against RNEA at `q̈ = 0`, and against the full tree's
+    // `Gᵀ b_full(expand(q), G q̇)` (the same for a model that is not reduced).
+    let mut w_nle = Worst::new("nle = rnea(a = 0)");
+    let mut w_nle_full = Worst::new("nle = G^T b_full");
     let mut rng = Rng::new(1);
     for m in big_models() {
         let mut d = Data::new(&m);
+        let mut d_full = Data::new(m.full_tree());
+        let (g, zero) = (m.velocity_map(), DVector::zeros(m.nv()));
         for s in 0..3 {
             let (q, v, a) = random_state(&m, &mut rng);
             let tau = rnea(&m, &mut d, &q, &v, &a, None).unwrap().clone();
             let b = nonlinear_effects(&m, &mut d, &q, &v).unwrap().clone();
-            let mm = crba(&m, &mut d, &q).unwrap().clone();
+            assert_eq!(d.nle(), &b);
             let at = format!("{} nv={} state {s}", m.name(), m.nv());
+            w_nle.add(rel_err_vec(&b, rnea(&m, &mut d, &q, &v, &zero, None).unwrap()), &at);
+            let (qf, vf) = (m.expand_q(&q).unwrap(), &g * &v);
+            let bf = nonlinear_effects(m.full_tree(), &mut d_full, &qf, &vf).unwrap();
+            w_nle_full.add(rel_err_vec(&b, &(g.transpose() * bf)), &at);
+            let mm = crba(&m, &mut d, &q).unwrap().clone();
             w_id.add(rel_err_vec(&(&mm * &a + &b), &tau), &at);
             w_sym.add(rel_err_mat(&mm, &mm.transpose()), &at);
             let r = reference::rnea::<f64>(&m, q.as_slice(), v.as_slice(), a.as_slice(), None);
@@ -60,6 +73,8 @@ fn rnea_equals_crba_times_qdd_plus_nle_and_reference() {
     w_id.check(1e-12);
     w_ref.check(1e-12);
     w_sym.check(0.0);
+    w_nle.check(1e-14);
+    w_nle_full.check(1e-14);
 }
 
 #[test]
@@ -135,12 +150,20 @@ fn external_forces_match_reference_and_jacobian_transpose() {
     w.check(1e-10);
 }
 
+/// Point position, Jacobian, velocity `J q̇` and drift against the reference point position
+/// and its dual / hyper-dual derivatives, on every frame of the test models and of the panda in
+/// reduced coordinates (its finger mimic with multiplier −0.6 and offset 0.02).
 #[test]
 fn point_jacobian_and_drift_match_dual_numbers() {
+    let mut wp = Worst::new("point position vs reference");
     let mut wj = Worst::new("point jacobian vs dual");
+    let mut wv = Worst::new("point velocity J v vs dual");
     let mut wd = Worst::new("point drift vs hyper-dual");
+    let mut wd_reduced = Worst::new("point drift (reduced) vs h.-d.");
     let mut rng = Rng::new(4);
-    for m in test_models(40) {
+    let mut models = test_models(40);
+    models.push(mimic::panda());
+    for m in models {
         let mut d = Data::new(&m);
         let (q, v, _) = random_state(&m, &mut rng);
         for f in 1..m.frames().len() {
@@ -151,19 +174,29 @@ fn point_jacobian_and_drift_match_dual_numbers() {
             let at = format!("{} frame {}", m.name(), m.frames()[f].name);
             let jref = reference::d_point_position_dq(&m, q.as_slice(), f, &pt);
             wj.add((&jac - &jref).amax() / jref.amax().max(1.0), &at);
-            // drift: d²/dt² p(q ⊕ t v) at t = 0 (q̈ = 0 along the exponential curve)
+            let pos = point_position(&m, &mut d, &q, f, &point).unwrap();
+            let pref = Vector3::from(reference::point_position(&m, q.as_slice(), f, &pt));
+            wp.add((pos - pref).amax() / (1.0 + pref.amax()), &at);
+            // drift: d²/dt² p(q ⊕ t v) at t = 0 (q̈ = 0 along the exponential curve); velocity:
+            // its first derivative
             let drift = point_drift(&m, &mut d, &q, &v, f, &point).unwrap();
             let t = HyperDual64::new(0.0, 1.0, 1.0, 0.0);
             let qh: Vec<HyperDual64> = q.iter().map(|&x| HyperDual64::from(x)).collect();
             let delta: Vec<HyperDual64> = v.iter().map(|&x| t * x).collect();
             let qq = reference::integrate(&m, &qh, &delta);
             let p = reference::point_position(&m, &qq, f, &pt.map(HyperDual64::from));
+            let vref = Vector3::new(p[0].eps1, p[1].eps1, p[2].eps1);
+            wv.add((&jac * &v - vref).amax() / (1.0 + vref.amax()), &at);
             let dref = Vector3::new(p[0].eps1eps2, p[1].eps1eps2, p[2].eps1eps2);
-            wd.add((drift - dref).amax() / dref.amax().max(1.0), &at);
+            let e = (drift - dref).amax() / dref.amax().max(1.0);
+            if m.is_reduced() { wd_reduced.add(e, &at) } else { wd.add(e, &at) }
         }
     }
+    wp.check(1e-12);
     wj.check(1e-12);
+    wv.check(1e-12);
     wd.check(1e-11);
+    wd_reduced.check(1e-12);
 }
 
 /// Energy balance along a trajectory integrated with RK4 on the configuration manifold:
@@ -403,4 +436,119 @@ fn workspaces_of_another_model_are_rejected() {
     let mut d = Data::new(&big);
     let e = deriv::fd_so_derivatives(&big, &mut d, &q, &v, &a, None).unwrap_err();
     assert!(matches!(&e, Error::Workspace(s) if s.contains("Data::with_second_order")), "{e}");
+}
+
+/// Zero armature set explicitly changes nothing, bit for bit.
+#[test]
+fn zero_armature_is_bitwise_the_same() {
+    use sodyn::deriv::fd_derivatives;
+    let mut rng = Rng::new(3);
+    for m in [builtin::humanoid(), builtin::random_tree(15, 2, false)] {
+        let z = m.with_armature(&vec![0.0; m.nv()]).unwrap();
+        let (q, v, a) = random_state(&m, &mut rng);
+        let (mut d0, mut d1) = (Data::new(&m), Data::new(&m));
+        assert_eq!(
+            rnea(&m, &mut d0, &q, &v, &a, None).unwrap(),
+            rnea(&z, &mut d1, &q, &v, &a, None).unwrap()
+        );
+        assert_eq!(crba(&m, &mut d0, &q).unwrap(), crba(&z, &mut d1, &q).unwrap());
+        assert_eq!(
+            aba(&m, &mut d0, &q, &v, &a, None).unwrap(),
+            aba(&z, &mut d1, &q, &v, &a, None).unwrap()
+        );
+        fd_derivatives(&m, &mut d0, &q, &v, &a, None).unwrap();
+        fd_derivatives(&z, &mut d1, &q, &v, &a, None).unwrap();
+        assert_eq!(d0.dqdd_dq(), d1.dqdd_dq());
+        assert_eq!(d0.minv(), d1.minv());
+    }
+}
+
+/// The relations of the armature against the same model without it, on every SIMD level:
+/// `τ_a = τ + a∘q̈`, `M_a = M + diag(a)`, ABA's `q̈ = M_a⁻¹(τ − b)`, `LᵀDL` of `M_a`,
+/// IDSVA's `∂τ/∂q`, `∂τ/∂q̇` unchanged and `∂τ/∂q̈ = M_a`, FD's
+/// `∂q̈/∂τ = M_a⁻¹`, `∂q̈/∂q = −M_a⁻¹ ∂τ/∂q`, IDSVA-SO's tensors unchanged, IDFOZA/IDSOZA
+/// (`∂(M x)/∂q`) unchanged.
+#[test]
+fn armature_relations_on_every_level() {
+    use sodyn::deriv::{fd_derivatives, id_derivatives, id_so_derivatives, idfoza, idsoza};
+    use sodyn::simd::{Level, set_thread_level};
+    let levels = [Level::Portable, Level::Avx2, Level::Avx512];
+    let mut w = [
+        Worst::new("tau_a - tau - a*qdd"),
+        Worst::new("M_a - M - diag(a)"),
+        Worst::new("M_a qdd_aba - (tau - b)"),
+        Worst::new("LDL solve vs ABA"),
+        Worst::new("IDSVA dtau unchanged"),
+        Worst::new("IDSVA M = M_a, tau"),
+        Worst::new("FD Minv M_a - I"),
+        Worst::new("FD dqdd vs -Minv dtau"),
+        Worst::new("IDSVA-SO unchanged"),
+        Worst::new("IDFOZA/IDSOZA unchanged"),
+    ];
+    let mut rng = Rng::new(17);
+    for lvl in levels {
+        set_thread_level(Some(lvl));
+        for (m0, m) in armature_pairs() {
+            let n = m.nv();
+            let arm = DVector::from_column_slice(m.armature());
+            let at = format!("{} nv={n} {lvl:?}", m.name());
+            let (q, v, a) = random_state(&m, &mut rng);
+            let (mut d0, mut d) = (Data::new(&m0), Data::new(&m));
+            let t0 = rnea(&m0, &mut d0, &q, &v, &a, None).unwrap().clone();
+            let t = rnea(&m, &mut d, &q, &v, &a, None).unwrap().clone();
+            w[0].add(rel_err_vec(&(&t - &t0), &arm.component_mul(&a)), &at);
+            let mm0 = crba(&m0, &mut d0, &q).unwrap().clone();
+            let mm = crba(&m, &mut d, &q).unwrap().clone();
+            w[1].add(rel_err_mat(&(&mm - &mm0), &DMatrix::from_diagonal(&arm)), &at);
+            let b = nonlinear_effects(&m, &mut d, &q, &v).unwrap().clone();
+            let tau = DVector::from_fn(n, |_, _| rng.range(-2.0, 2.0));
+            let qdd = aba(&m, &mut d, &q, &v, &tau, None).unwrap().clone();
+            w[2].add(rel_err_vec(&(&mm * &qdd), &(&tau - &b)), &at);
+            crba(&m, &mut d, &q).unwrap();
+            factorize_ltl(&m, &mut d).unwrap();
+            let mut x = &tau - &b;
+            solve_ltl(&m, &d, &mut x).unwrap();
+            w[3].add(rel_err_vec(&x, &qdd), &at);
+            id_derivatives(&m0, &mut d0, &q, &v, &a, None).unwrap();
+            id_derivatives(&m, &mut d, &q, &v, &a, None).unwrap();
+            w[4].add(
+                rel_err_mat(d.dtau_dq(), d0.dtau_dq()).max(rel_err_mat(d.dtau_dv(), d0.dtau_dv())),
+                &at,
+            );
+            w[5].add(rel_err_mat(d.m(), &mm).max(rel_err_vec(d.tau(), &t)), &at);
+            fd_derivatives(&m, &mut d, &q, &v, &tau, None).unwrap();
+            w[6].add(rel_err_mat(&(d.minv() * &mm), &DMatrix::identity(n, n)), &at);
+            let (dq, dv) = (d.dtau_dq().clone(), d.dtau_dv().clone());
+            w[7].add(
+                rel_err_mat(d.dqdd_dq(), &(-d.minv() * dq))
+                    .max(rel_err_mat(d.dqdd_dv(), &(-d.minv() * dv))),
+                &at,
+            );
+            w[2].add(rel_err_vec(d.qdd(), &qdd), &at);
+            d0.reserve_second_order(&m0).unwrap();
+            d.reserve_second_order(&m).unwrap();
+            let s0 = id_so_derivatives(&m0, &mut d0, &q, &v, &a, None).unwrap().clone();
+            let s = id_so_derivatives(&m, &mut d, &q, &v, &a, None).unwrap().clone();
+            let e = [
+                rel_err_tensor(s.d2tau_dq2(), s0.d2tau_dq2()),
+                rel_err_tensor(s.d2tau_dv2(), s0.d2tau_dv2()),
+                rel_err_tensor(s.d2tau_dqdv(), s0.d2tau_dqdv()),
+                rel_err_tensor(s.dm_dq(), s0.dm_dq()),
+            ];
+            w[8].add(e.into_iter().fold(0.0, f64::max), &at);
+            w[5].add(rel_err_mat(d.m(), &mm).max(rel_err_vec(d.tau(), &t)), &at);
+            let (mut z0, mut z) = (DMatrix::zeros(n, n), DMatrix::zeros(n, n));
+            idfoza(&m0, &mut d0, &q, &a, &mut z0).unwrap();
+            idfoza(&m, &mut d, &q, &a, &mut z).unwrap();
+            let mut e = rel_err_mat(&z, &z0);
+            let t0 = idsoza(&m0, &mut d0, &q, &a).unwrap().clone();
+            let t1 = idsoza(&m, &mut d, &q, &a).unwrap().clone();
+            e = e.max(rel_err_tensor(&t1, &t0));
+            w[9].add(e, &at);
+        }
+    }
+    set_thread_level(None);
+    for x in &w {
+        x.check(1e-11);
+    }
 }

@@ -1,7 +1,5 @@
-//! Dynamics: RNEA, CRBA, ABA, the LᵀDL factorisation, armature, singular mass matrices and the
-//! forward-only functions of reduced models.
+//! Dynamics: RNEA, CRBA, ABA, the nonlinear effects, the LᵀDL factorisation, the armature's
+//! relations and singular mass matrices, on every test model (reduced ones included).
 
-mod armature;
 mod basics;
-mod mimic_forward;
 mod singular;

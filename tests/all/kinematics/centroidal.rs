@@ -22,7 +22,9 @@ fn centroidal_matches_dual_numbers() {
         Worst::new("dhdot_dv (central differences)"),
     ];
     let mut rng = Rng::new(93);
-    for m in &test_models(30) {
+    let mut models = test_models(30);
+    models.push(mimic::panda());
+    for m in &models {
         let mut d = Data::new(m);
         let (q, v, a) = random_state(m, &mut rng);
         let cd = centroidal_dynamics_derivatives(m, &mut d, &q, &v, &a).unwrap().clone();
@@ -81,7 +83,9 @@ fn centroidal_matches_dual_numbers() {
 #[test]
 fn centroidal_momentum_and_difference_into_agree() {
     let mut rng = Rng::new(7);
-    for m in test_models(40) {
+    let mut models = test_models(40);
+    models.push(mimic::panda());
+    for m in models {
         let mut data = Data::new(&m);
         let (q, v, a) = random_state(&m, &mut rng);
         let (q1, _, _) = random_state(&m, &mut rng);

@@ -7,11 +7,13 @@ use crate::util::*;
 use nalgebra::{DVector, Matrix3, Matrix6xX, Vector3};
 use num_dual::{Dual64, HyperDual64};
 use sodyn::algo::{
-    Data, ReferenceFrame, frame_acceleration, frame_classical_acceleration, frame_jacobian,
-    frame_placement, frame_velocity,
+    Data, ReferenceFrame, forward_kinematics, frame_acceleration, frame_classical_acceleration,
+    frame_jacobian, frame_placement, frame_velocity,
 };
 use sodyn::model::Model;
-use sodyn::reference::kinematics::{frame_placement as ref_placement, integrate};
+use sodyn::reference::kinematics::{
+    forward_kinematics as ref_fk, frame_placement as ref_placement, integrate,
+};
 use sodyn::rng::Rng;
 use sodyn::spatial::{Motion, Transform};
 
@@ -49,6 +51,10 @@ fn err(a: &Motion, b: &Motion) -> f64 {
     ((a.ang - b.ang).amax().max((a.lin - b.lin).amax())) / (1.0 + b.ang.amax().max(b.lin.amax()))
 }
 
+/// Every frame of the test models and of the panda in reduced coordinates (its finger mimic
+/// with multiplier −0.6 and offset 0.02); and the body placements, velocities and accelerations
+/// of `forward_kinematics` against the reference body placements along the same curve
+/// (`ω = vee(Rᵀ Ṙ)`, `v = Rᵀ ṗ`, `ω̇ = vee(skew(Rᵀ R̈))`, `v̇ = Ṙᵀ ṗ + Rᵀ p̈`, body frame).
 #[test]
 fn frames_match_dual_numbers() {
     let mut w = [
@@ -57,9 +63,13 @@ fn frames_match_dual_numbers() {
         Worst::new("velocity"),
         Worst::new("acceleration"),
         Worst::new("classical acceleration"),
+        Worst::new("fk body placement"),
+        Worst::new("fk body velocity"),
+        Worst::new("fk body acceleration"),
     ];
     let mut rng = Rng::new(81);
-    let models: Vec<Model> = test_models(30);
+    let mut models: Vec<Model> = test_models(30);
+    models.push(crate::util::mimic::panda());
     for m in &models {
         let mut d = Data::new(m);
         let (q, v, a) = random_state(m, &mut rng);
@@ -111,6 +121,28 @@ fn frames_match_dual_numbers() {
                     w[1].add(err(&got, &col), &at);
                 }
             }
+        }
+        forward_kinematics(m, &mut d, &q, Some(&v), Some(&a)).unwrap();
+        for (i, pose) in ref_fk(m, &qt).iter().enumerate().skip(1) {
+            let at = format!("{} body {i}", m.name());
+            let g = |f: fn(&HyperDual64) -> f64| {
+                (pose.rot.map(|x| f(&x)), Vector3::from_fn(|r, _| f(&pose.trans[r])))
+            };
+            let (r, p) = g(|x| x.re);
+            let (rd, pd) = g(|x| x.eps1);
+            let (rdd, pdd) = g(|x| x.eps1eps2);
+            let x = &d.o_m_i()[i];
+            w[5].add((x.rot - r).amax().max((x.trans - p).amax()) / (1.0 + p.amax()), &at);
+            let rel3 = |a: &Vector3<f64>, b: &Vector3<f64>| (a - b).amax() / (1.0 + b.amax());
+            let (wb, vb) = (vee(&(r.transpose() * rd)), r.transpose() * pd);
+            let got = &d.v()[i];
+            w[6].add(rel3(&got.ang, &wb).max(rel3(&got.lin, &vb)), &at);
+            // d/dt (Rᵀ Ṙ) = Ṙᵀ Ṙ + Rᵀ R̈ is skew, Ṙᵀ Ṙ symmetric: the skew part of Rᵀ R̈.
+            let x = r.transpose() * rdd;
+            let wdb = vee(&((x - x.transpose()) * 0.5));
+            let vdb = rd.transpose() * pd + r.transpose() * pdd;
+            let got = &d.a()[i];
+            w[7].add(rel3(&got.ang, &wdb).max(rel3(&got.lin, &vdb)), &at);
         }
     }
     for x in &w {

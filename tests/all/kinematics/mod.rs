@@ -5,5 +5,4 @@ mod centroidal;
 mod com;
 mod frames;
 mod lie;
-mod mimic_points;
 mod spatial_identities;

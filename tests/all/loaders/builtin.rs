@@ -409,3 +409,54 @@ fn lookup_by_name() {
         assert!(by_name(bad).is_none(), "{bad:?} accepted");
     }
 }
+
+/// Armature (rotor inertia): `Model::with_armature` and `ModelBuilder::set_armature` check it
+/// (length, sign, finiteness, naming the joint and coordinate); URDF and built-in models have none.
+#[test]
+fn armature_is_validated() {
+    use sodyn::algo::{Data, crba};
+    use sodyn::error::Error;
+    use sodyn::model::{ModelBuilder, builtin};
+    use sodyn::spatial::Inertia;
+    let m = builtin::quadruped();
+    assert!(!m.has_armature() && m.armature().iter().all(|&x| x == 0.0));
+    assert_eq!(m.armature().len(), m.nv());
+    match m.with_armature(&[0.1; 3]) {
+        Err(Error::Dimension { expected, got, .. }) => assert_eq!((expected, got), (18, 3)),
+        r => panic!("{r:?}"),
+    }
+    let mut a = vec![0.1; 18];
+    a[8] = -0.5;
+    let e = m.with_armature(&a).unwrap_err().to_string();
+    let j = m.names()[m.dof_joint()[8]].clone();
+    assert!(e.contains(&format!("joint \"{j}\"")) && e.contains("-0.5") && e.contains("8"), "{e}");
+    a[8] = f64::NAN;
+    let e = m.with_armature(&a).unwrap_err().to_string();
+    assert!(e.contains("NaN") && e.contains("armature"), "{e}");
+    a[8] = f64::INFINITY;
+    assert!(m.with_armature(&a).is_err());
+    // Zeros: no armature; the model is otherwise the same and its workspaces serve.
+    let z = m.with_armature(&[0.0; 18]).unwrap();
+    assert!(!z.has_armature());
+    let b = m.with_armature(&[0.25; 18]).unwrap();
+    assert!(b.has_armature() && b.armature() == [0.25; 18]);
+    let mut d = Data::new(&m);
+    crba(&b, &mut d, &b.neutral()).unwrap();
+    // The builder: per joint, checked at build.
+    let mut mb = ModelBuilder::new("t");
+    let i = Inertia::from_com(1.0, nalgebra::Vector3::x(), nalgebra::Matrix3::identity());
+    let j1 = mb.add_body(0, "j1", JointType::Spherical, Transform::identity(), "b1", i).unwrap();
+    assert!(mb.set_armature(j1, &[0.1]).is_err(), "wrong length");
+    assert!(mb.set_armature(0, &[]).is_err(), "the world");
+    assert!(mb.set_armature(7, &[0.1]).is_err(), "no such joint");
+    mb.set_armature(j1, &[0.1, 0.2, 0.3]).unwrap();
+    let built = mb.clone().build().unwrap();
+    assert_eq!(built.armature(), [0.1, 0.2, 0.3]);
+    assert!(built.has_armature());
+    mb.set_armature(j1, &[0.1, -0.2, 0.3]).unwrap();
+    let e = mb.build().unwrap_err().to_string();
+    assert!(e.contains("joint \"j1\"") && e.contains("-0.2") && e.contains("coordinate 1"), "{e}");
+    // URDF: zeros.
+    let u = builtin::serial_chain(3);
+    assert!(u.armature() == [0.0; 3]);
+}

@@ -987,3 +987,20 @@ fn equality_errors_name_element_and_line() {
     let m = load_str(&xml).unwrap();
     assert_eq!(m.constraints().len(), 1);
 }
+
+/// MJCF: `armature` sets the model's, with the defaults; a `<freejoint>` takes none (as in
+/// MuJoCo); a negative one is an error naming the line.
+#[test]
+fn mjcf_armature() {
+    let xml = r#"<mujoco><default><joint armature="0.3"/></default><worldbody>
+<body><freejoint/><geom size=".1"/>
+<body pos="0 0 1"><joint type="ball"/><geom size=".1"/>
+<body pos="0 0 1"><joint axis="1 0 0" armature="0.7"/><geom size=".1"/></body></body></body>
+</worldbody></mujoco>"#;
+    let m = Model::from_mjcf_str(xml, ".").unwrap();
+    assert_eq!(m.armature(), [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3, 0.3, 0.3, 0.7]);
+    assert!(m.warnings().is_empty(), "{:?}", m.warnings());
+    let bad = "<mujoco><worldbody><body>\n<joint armature=\"-1\"/><geom size=\".1\"/></body></worldbody></mujoco>";
+    let e = Model::from_mjcf_str(bad, ".").unwrap_err().to_string();
+    assert!(e.contains(":2:") && e.contains("armature=\"-1\" is negative"), "{e}");
+}

@@ -925,3 +925,31 @@ fn frame_placement_and_point_jacobian() {
     let (rd, _) = r::frame_placement(&model, &r::lift::<Dual64>(&q), tool);
     assert_eq!(rd.map(|x| x.re), rot);
 }
+
+/// The AD oracle has the armature: its RNEA adds `a∘q̈`, its mass matrix `diag(a)`, its
+/// forward dynamics solves with `M_a`.
+#[test]
+fn reference_includes_armature() {
+    use crate::util::{random_state, rel_err_vec};
+    use sodyn::algo::{Data, aba};
+    use sodyn::reference;
+    let mut rng = Rng::new(5);
+    for (m0, m) in crate::util::armature_pairs() {
+        let (q, v, a) = random_state(&m, &mut rng);
+        let (qs, vs, as_) = (q.as_slice(), v.as_slice(), a.as_slice());
+        let t0 = reference::rnea::<f64>(&m0, qs, vs, as_, None);
+        let t = reference::rnea::<f64>(&m, qs, vs, as_, None);
+        for k in 0..m.nv() {
+            assert!((t[k] - t0[k] - m.armature()[k] * a[k]).abs() < 1e-12);
+        }
+        let mm = reference::mass_matrix::<f64>(&m, qs);
+        let mm0 = reference::mass_matrix::<f64>(&m0, qs);
+        for k in 0..m.nv() {
+            assert!((mm[k][k] - mm0[k][k] - m.armature()[k]).abs() < 1e-12);
+        }
+        let qdd = reference::aba::<f64>(&m, qs, vs, as_, None);
+        let mut d = Data::new(&m);
+        let ours = aba(&m, &mut d, &q, &v, &a, None).unwrap();
+        assert!(rel_err_vec(ours, &DVector::from_vec(qdd)) < 1e-11);
+    }
+}

@@ -29,6 +29,13 @@ pub fn with_armature(m: &Model, a: &[f64]) -> Model {
     m.full_tree().with_armature(a).unwrap().with_mimic_joints(m.mimic_joints()).unwrap()
 }
 
+/// The panda (`tests/data/mimic_panda_coeffs.urdf`) on a floating base in reduced coordinates:
+/// its second finger mimics the first with multiplier −0.6 and offset 0.02.
+pub fn panda() -> Model {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mimic_panda_coeffs.urdf");
+    load_urdf_file(&path, &opts(true)).unwrap()
+}
+
 /// The test arm, fixed and floating, plus the fixed one with an armature.
 pub fn models() -> Vec<Model> {
     let mut out = vec![arm(false), arm(true)];

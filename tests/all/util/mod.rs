@@ -220,8 +220,8 @@ pub fn with_gains(contacts: &[Contact], rng: &mut Rng) -> Vec<Contact> {
         .collect()
 }
 
-/// The centroidal oracle of `tests/all/kinematics/centroidal.rs` and
-/// `tests/all/kinematics/mimic_kinematics.rs`, written independently from the reference placements:
+/// The centroidal oracle of `tests/all/kinematics/centroidal.rs`, written independently from the
+/// reference placements:
 /// `[k; l]` about the centre of mass and its `t`-derivative, each with its `ε`-derivative, from the
 /// `H` placements (`t`: `ε₁`, `ε₂`; `ε`: `ε₃`).
 pub fn centroidal_momentum_oracle(m: &Model, q: &[H]) -> [[f64; 4]; 6] {
@@ -279,6 +279,27 @@ pub fn centroidal_momentum_oracle(m: &Model, q: &[H]) -> [[f64; 4]; 6] {
     for j in 0..3 {
         out[j] = [k[j].re, kd[j].re, k[j].eps, kd[j].eps];
         out[3 + j] = [l[j].re, ld[j].re, l[j].eps, ld[j].eps];
+    }
+    out
+}
+
+/// Models with a random armature (fixed and floating base, the free flyer's DoFs included for
+/// some), with their zero-armature originals.
+pub fn armature_pairs() -> Vec<(Model, Model)> {
+    let mut out = vec![];
+    let bases = [
+        builtin::serial_chain(1),
+        builtin::serial_chain(4),
+        builtin::serial_chain(9),
+        builtin::quadruped(),
+        builtin::humanoid(),
+        builtin::random_tree(12, 5, false),
+        builtin::random_tree(20, 6, true),
+        builtin::random_tree(30, 7, true),
+    ];
+    for (k, m) in bases.into_iter().enumerate() {
+        let a = with_random_armature(&m, 50 + k as u64, k % 2 == 1);
+        out.push((m, a));
     }
     out
 }
