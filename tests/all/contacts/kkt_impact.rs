@@ -45,9 +45,9 @@ fn kkt_first_and_second_order_match_oracle() {
     let mut w: Vec<Worst> = names.iter().map(|n| Worst::new(n)).collect();
     let mut rng = Rng::new(61);
     for gains in [false, true] {
-        let large = (!gains).then(large_contact_case);
-        for (m, spec) in contact_cases().into_iter().chain(large) {
-            let mut cs = contacts_of(&m, &spec, &mut rng);
+        let large = (!gains).then(large_contact_case).map(|(m, s)| (m, as_loop_spec(&s)));
+        for (m, spec) in family_cases().into_iter().chain(large) {
+            let mut cs = constraints_of(&m, &spec, &mut rng);
             if gains {
                 cs = with_gains(&cs, &mut rng);
             }

@@ -133,9 +133,9 @@ fn contracted_kkt_matches_dense_tensors_and_ad() {
     let mut ad = names.map(Worst::new);
     let mut rng = Rng::new(41);
     for (gains, (m, spec)) in
-        [false, true].into_iter().flat_map(|g| contact_cases().into_iter().map(move |c| (g, c)))
+        [false, true].into_iter().flat_map(|g| family_cases().into_iter().map(move |c| (g, c)))
     {
-        let mut contacts = contacts_of(&m, &spec, &mut rng);
+        let mut contacts = constraints_of(&m, &spec, &mut rng);
         if gains {
             contacts = with_gains(&contacts, &mut rng);
         }
