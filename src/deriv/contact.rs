@@ -416,22 +416,11 @@ impl ContactWs {
         self.m
     }
 
-    /// An error naming the first two-frame constraint if there is one: `what` (an algorithm)
-    /// does not support them.
-    ///
-    /// # Errors
-    /// [`Error::Argument`] naming the constraint and `what`.
-    pub(crate) fn refuse_loops(&self, model: &Model, what: &str) -> Result<()> {
-        match self.contacts.iter().position(Contact::is_loop) {
-            None => Ok(()),
-            Some(i) => Err(Error::Argument {
-                name: contact_label(model, &self.contacts, i),
-                reason: format!(
-                    "two-frame (closed-loop) constraints are not supported by {what} yet \
-                     (kkt_dynamics and kkt_derivatives support them)"
-                ),
-            }),
-        }
+    /// Whether the set holds a two-frame (closed-loop) constraint. Their contact terms have
+    /// entries between DoFs of their two chains (on no common root path), where the
+    /// tree-structured ID and IDFOZA results write nothing: callers clear those first.
+    pub(crate) fn has_loops(&self) -> bool {
+        self.loops.iter().any(Option::is_some)
     }
 
     /// Contact names for error messages.

@@ -125,10 +125,12 @@ fn impact_first_and_second_order_match_oracle() {
     ];
     let mut w: Vec<Worst> = names.iter().map(|n| Worst::new(n)).collect();
     let mut rng = Rng::new(62);
-    for (m, spec) in contact_cases().into_iter().chain(std::iter::once(large_contact_case())) {
+    let large = large_contact_case();
+    let large = (large.0, as_loop_spec(&large.1));
+    for (m, spec) in family_cases().into_iter().chain(std::iter::once(large)) {
         let large = m.nv() >= 32;
         for e in [0.0, 0.4].into_iter().filter(|&e| !large || e > 0.0) {
-            let cs = contacts_of(&m, &spec, &mut rng);
+            let cs = constraints_of(&m, &spec, &mut rng);
             let (q, vminus, _) = random_state(&m, &mut rng);
             let mut d = Data::new(&m);
             let mut cd = ContactData::with_second_order(&m, &cs).unwrap();
@@ -166,8 +168,8 @@ fn constrained_id_first_and_second_order_match_oracle() {
         Worst::new("constrained d2tau_dq2"),
     ];
     let mut rng = Rng::new(63);
-    for (m, spec) in contact_cases() {
-        let cs = contacts_of(&m, &spec, &mut rng);
+    for (m, spec) in family_cases() {
+        let cs = constraints_of(&m, &spec, &mut rng);
         let (q, v, a) = random_state(&m, &mut rng);
         let nrows: usize = cs.iter().map(|c| c.dim()).sum();
         let lam = DVector::from_fn(nrows, |_, _| rng.range(-20.0, 20.0));
