@@ -589,6 +589,19 @@ impl ActionModel {
                 "joint '{j}': the second order of a planar joint's integrator is not implemented"
             )));
         }
+        if let (ActionKind::Euler { .. }, Some(_)) = (&self.kind, u)
+            && let Some(c) = self
+                .contacts()
+                .iter()
+                .find(|c| c.active && c.contact.world_ref.is_some() && c.contact.kp != 0.0)
+        {
+            return Err(OcpError::new(format!(
+                "contact '{}': the exact second order (second_order = True / \"auto\") of a \
+                 Baumgarte position gain kp against a world reference (xref) is not \
+                 implemented; solve with second_order = False",
+                c.name
+            )));
+        }
         d.hzz.fill(0.0);
         d.so.w_lambda.fill(0.0);
         let zero_u = DVector::zeros(0);

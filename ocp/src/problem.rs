@@ -5,7 +5,9 @@ use nalgebra::DVector;
 use rayon::prelude::*;
 
 use crate::action::{ActionData, ActionModel};
+use crate::cost::CostItem;
 use crate::error::{OcpError, Result};
+use crate::state::StateMultibody;
 
 /// A shooting problem with its per-knot data.
 #[derive(Debug)]
@@ -95,6 +97,80 @@ impl ShootingProblem {
     pub fn set_x0(&mut self, x0: DVector<f64>) -> Result<()> {
         self.terminal.state.check_x("x0", &x0)?;
         self.x0 = x0;
+        Ok(())
+    }
+    /// Knot `t` (`0..T` running, `T` the terminal knot), for the updates below.
+    fn knot_mut(&mut self, t: usize) -> Result<&mut ActionModel> {
+        let n = self.running.len();
+        match t.cmp(&n) {
+            std::cmp::Ordering::Less => Ok(&mut self.running[t]),
+            std::cmp::Ordering::Equal => Ok(&mut self.terminal),
+            std::cmp::Ordering::Greater => Err(node_out_of_range(t, n)),
+        }
+    }
+    /// Knot `t`'s state space and its cost term `name`.
+    fn cost_item_mut(&mut self, t: usize, name: &str) -> Result<(&StateMultibody, &mut CostItem)> {
+        let n = self.running.len();
+        let knot = self.knot_mut(t)?;
+        let (state, items) = (&knot.state, &mut knot.costs.items);
+        match items.iter().position(|c| c.name == name) {
+            Some(i) => Ok((state, &mut items[i])),
+            None => Err(no_cost(t, n, name, items)),
+        }
+    }
+    /// The cost term `name` of knot `t` (`T`: the terminal knot); its residual's
+    /// [`reference`](crate::residual::Residual::reference) is what
+    /// [`ShootingProblem::set_cost_reference`] replaces.
+    ///
+    /// # Errors
+    /// No knot `t`, or no cost `name` there.
+    pub fn cost_item(&self, t: usize, name: &str) -> Result<&CostItem> {
+        let n = self.running.len();
+        let knot = match t.cmp(&n) {
+            std::cmp::Ordering::Less => &self.running[t],
+            std::cmp::Ordering::Equal => &self.terminal,
+            std::cmp::Ordering::Greater => return Err(node_out_of_range(t, n)),
+        };
+        knot.costs
+            .items
+            .iter()
+            .find(|c| c.name == name)
+            .ok_or_else(|| no_cost(t, n, name, &knot.costs.items))
+    }
+    /// Replaces the reference of cost `name` at knot `t` (`T`: the terminal knot) without
+    /// rebuilding the problem: the receding-horizon (MPC) update. `value` is laid out as
+    /// [`Residual::set_reference`](crate::residual::Residual::set_reference) says.
+    ///
+    /// # Errors
+    /// No knot `t` or no cost `name` there, or a bad `value` (naming the node and the cost);
+    /// the problem is then unchanged.
+    pub fn set_cost_reference(&mut self, t: usize, name: &str, value: &[f64]) -> Result<()> {
+        let label = if t == self.running.len() { " (terminal)" } else { "" };
+        let (state, item) = self.cost_item_mut(t, name)?;
+        item.residual
+            .set_reference(value, state)
+            .map_err(|e| OcpError::new(format!("node {t}{label}: cost \"{name}\": {e}")))
+    }
+    /// Sets the weight of cost `name` at knot `t`.
+    ///
+    /// # Errors
+    /// No knot `t` or no cost `name`, or a weight that is negative or not finite; the problem is
+    /// then unchanged.
+    pub fn set_cost_weight(&mut self, t: usize, name: &str, weight: f64) -> Result<()> {
+        if !(weight.is_finite() && weight >= 0.0) {
+            return Err(OcpError::new(format!(
+                "node {t}: cost \"{name}\": weight {weight} (must be finite and ≥ 0)"
+            )));
+        }
+        self.cost_item_mut(t, name)?.1.weight = weight;
+        Ok(())
+    }
+    /// Switches cost `name` at knot `t` on or off (Crocoddyl's `changeCostStatus`).
+    ///
+    /// # Errors
+    /// No knot `t` or no cost `name`.
+    pub fn set_cost_active(&mut self, t: usize, name: &str, active: bool) -> Result<()> {
+        self.cost_item_mut(t, name)?.1.active = active;
         Ok(())
     }
     /// The running knots.
@@ -265,4 +341,21 @@ impl ShootingProblem {
         }
         Ok(us)
     }
+}
+
+/// The error of a knot index beyond the terminal knot `n`.
+fn node_out_of_range(t: usize, n: usize) -> OcpError {
+    OcpError::new(format!(
+        "node {t}: out of range (the problem has nodes 0..={n}, {n} the terminal one)"
+    ))
+}
+
+/// The error of a cost name that knot `t` (of `n` running knots) does not have.
+fn no_cost(t: usize, n: usize, name: &str, items: &[CostItem]) -> OcpError {
+    let label = if t == n { format!("node {t} (terminal)") } else { format!("node {t}") };
+    let known: Vec<String> = items.iter().map(|c| format!("\"{}\"", c.name)).collect();
+    OcpError::new(format!(
+        "{label}: no cost named \"{name}\" (known: {})",
+        if known.is_empty() { "none".to_string() } else { known.join(", ") }
+    ))
 }

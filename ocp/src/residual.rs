@@ -155,6 +155,98 @@ impl Residual {
             Residual::ContactCone { a, .. } => a.nrows(),
         }
     }
+    /// The reference as a flat vector, in the layout [`Residual::set_reference`] takes; `None`
+    /// for `ContactCone`, which has none.
+    pub fn reference(&self) -> Option<DVector<f64>> {
+        Some(match self {
+            Residual::State { xref } => xref.clone(),
+            Residual::Control { uref } | Residual::JointEffort { uref } => uref.clone(),
+            Residual::FramePlacement { mref, .. } => {
+                let mut v = DVector::zeros(12);
+                v.rows_mut(0, 3).copy_from(&mref.trans);
+                for i in 0..3 {
+                    for j in 0..3 {
+                        v[3 + 3 * i + j] = mref.rot[(i, j)];
+                    }
+                }
+                v
+            }
+            Residual::FrameTranslation { pref: p, .. } | Residual::CoMPosition { cref: p } => {
+                DVector::from_column_slice(p.as_slice())
+            }
+            Residual::FrameVelocity { vref, .. } => {
+                DVector::from_iterator(6, vref.ang.iter().chain(vref.lin.iter()).copied())
+            }
+            Residual::ContactForce { fref, .. } => fref.clone(),
+            Residual::ContactCone { .. } => return None,
+        })
+    }
+    /// Replaces the reference (a receding-horizon update without rebuilding the problem):
+    ///
+    /// | residual | `value` |
+    /// |---|---|
+    /// | `State` | `x_ref` (`nx`) |
+    /// | `Control`, `JointEffort` | `u_ref` (`nu`) |
+    /// | `FramePlacement` | `[p; R₀₀, R₀₁, …, R₂₂]` (translation, then the rotation row by row: 12) |
+    /// | `FrameTranslation`, `CoMPosition` | the point (3) |
+    /// | `FrameVelocity` | `[ω; v]` (6) |
+    /// | `ContactForce` | `λ_ref` (the contact's 3 or 6 rows) |
+    ///
+    /// # Errors
+    /// A message if `value` has the wrong length or a non-finite entry, a state reference has a
+    /// non-unit quaternion, a placement's rotation is not one (`RᵀR ≠ I` or `det R ≠ 1` beyond
+    /// 1e-9), or the residual is a `ContactCone` (no reference); the residual is then unchanged.
+    pub fn set_reference(
+        &mut self,
+        value: &[f64],
+        state: &StateMultibody,
+    ) -> std::result::Result<(), String> {
+        let expected = match self {
+            Residual::State { xref } => xref.len(),
+            Residual::Control { uref } | Residual::JointEffort { uref } => uref.len(),
+            Residual::FramePlacement { .. } => 12,
+            Residual::FrameTranslation { .. } | Residual::CoMPosition { .. } => 3,
+            Residual::FrameVelocity { .. } => 6,
+            Residual::ContactForce { fref, .. } => fref.len(),
+            Residual::ContactCone { .. } => {
+                return Err(format!("a {} has no reference", self.name()));
+            }
+        };
+        if value.len() != expected {
+            return Err(format!("reference of length {} (expected {expected})", value.len()));
+        }
+        if let Some(i) = value.iter().position(|v| !v.is_finite()) {
+            return Err(format!("reference entry {i} is {}", value[i]));
+        }
+        let v3 = |k: usize| Vector3::new(value[k], value[k + 1], value[k + 2]);
+        match self {
+            Residual::State { xref } => {
+                let x = DVector::from_column_slice(value);
+                state.check_x("reference", &x).map_err(|e| e.message)?;
+                *xref = x;
+            }
+            Residual::Control { uref } | Residual::JointEffort { uref } => {
+                uref.copy_from_slice(value);
+            }
+            Residual::FramePlacement { mref, .. } => {
+                let r = nalgebra::Matrix3::from_row_slice(&value[3..12]);
+                let e = (r.transpose() * r - nalgebra::Matrix3::identity()).amax();
+                if e > 1e-9 || (r.determinant() - 1.0).abs() > 1e-9 {
+                    return Err("reference rotation is not a rotation matrix (RᵀR ≠ I or \
+                                det R ≠ 1 beyond 1e-9)"
+                        .into());
+                }
+                *mref = Transform::new(r, v3(0));
+            }
+            Residual::FrameTranslation { pref: p, .. } | Residual::CoMPosition { cref: p } => {
+                *p = v3(0);
+            }
+            Residual::FrameVelocity { vref, .. } => *vref = Motion::new(v3(0), v3(3)),
+            Residual::ContactForce { fref, .. } => fref.copy_from_slice(value),
+            Residual::ContactCone { .. } => unreachable!("refused above"),
+        }
+        Ok(())
+    }
     /// Whether `r` depends on `u` (so it is zero-derivative at a node without control).
     pub fn depends_on_u(&self) -> bool {
         matches!(

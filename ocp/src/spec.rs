@@ -8,7 +8,9 @@
 //!              "costs": [COST...], "u_lb": [nu], "u_ub": [nu] }
 //! CONTACT  = { "name": S, "frame": NAME | INDEX, "type": "3d" | "6d",
 //!              "reference": "local" | "local_world_aligned",
-//!              "rotation": [9, row-major], "translation": [3], "kp": 0, "kd": 0, "active": true }
+//!              "rotation": [9, row-major], "translation": [3], "kp": 0, "kd": 0, "active": true,
+//!              "xref": [3] (3d) | {"rotation": [9], "translation": [3]} (6d) }
+//!            (`xref`: the world reference of `kp`, Crocoddyl's; required when `kp != 0`)
 //! COST     = { "name": S, "weight": W, "active": true, "residual": RESIDUAL, "activation": ACT }
 //! RESIDUAL = {"type": "state", "xref": [nx]} | {"type": "control", "uref": [nu]}
 //!          | {"type": "joint_effort", "uref": [nu]}
@@ -146,7 +148,18 @@ fn opt_num(o: &Value, key: &str, default: f64, path: &str) -> Result<f64> {
 fn contact(model: &Model, c: &Value, path: &str) -> Result<NamedContact> {
     check_keys(
         c,
-        &["name", "frame", "type", "reference", "rotation", "translation", "kp", "kd", "active"],
+        &[
+            "name",
+            "frame",
+            "type",
+            "reference",
+            "rotation",
+            "translation",
+            "kp",
+            "kd",
+            "xref",
+            "active",
+        ],
         path,
     )?;
     let name = string(get(c, "name", path)?, &format!("{path}.name"))?.to_string();
@@ -180,11 +193,38 @@ fn contact(model: &Model, c: &Value, path: &str) -> Result<NamedContact> {
         .with_reference(reference)
         .with_baumgarte(opt_num(c, "kp", 0.0, &path)?, opt_num(c, "kd", 0.0, &path)?)
         .map_err(|e| err(&path, e))?;
-    if contact.kp != 0.0 {
+    // The world reference of kp (Crocoddyl's xref): 3d a point [x, y, z], 6d
+    // {"rotation": …, "translation": …}.
+    let contact = match c.get("xref") {
+        None => contact,
+        Some(x) => {
+            let xpath = format!("{path}.xref");
+            match kind {
+                ContactType::D3 => contact
+                    .with_reference_point(model, vec3(x, &xpath)?)
+                    .map_err(|e| err(&path, e))?,
+                ContactType::D6 => {
+                    check_keys(x, &["rotation", "translation"], &xpath)?;
+                    let r = match x.get("rotation") {
+                        None => Matrix3::identity(),
+                        Some(r) => rotation(r, &format!("{xpath}.rotation"))?,
+                    };
+                    let t = match x.get("translation") {
+                        None => Vector3::zeros(),
+                        Some(t) => vec3(t, &format!("{xpath}.translation"))?,
+                    };
+                    contact
+                        .with_reference_placement(model, &Transform::new(r, t))
+                        .map_err(|e| err(&path, e))?
+                }
+            }
+        }
+    };
+    if contact.kp != 0.0 && contact.world_ref.is_none() {
         return Err(err(
             &path,
-            "a position Baumgarte gain kp != 0 against a world reference is not supported yet \
-             (kd is)",
+            "a position Baumgarte gain kp != 0 needs its world reference \"xref\" (3d: a point \
+             [x, y, z]; 6d: {\"rotation\": ..., \"translation\": ...})",
         ));
     }
     if model.frames()[f].joint == 0 {

@@ -442,3 +442,39 @@ fn zero_initial_regularisation_and_bad_schedules() {
         assert!(e.contains(what), "{e}");
     }
 }
+
+#[test]
+fn world_reference_gain_problem_solves_and_refuses_second_order() {
+    use sodyn_ocp::SecondOrder;
+    let m = model();
+    let doc: serde_json::Value = serde_json::from_str(&problem_json(&m, 8)).unwrap();
+    let mut v = doc.clone();
+    let mut with_ref = 0;
+    for n in v["running"].as_array_mut().unwrap() {
+        if let Some(cs) = n.get_mut("contacts").and_then(|c| c.as_array_mut()) {
+            for c in cs {
+                c["kp"] = json!(20.0);
+                c["xref"] = if c.get("type").and_then(|t| t.as_str()) == Some("6d") {
+                    json!({"translation": [0.0, 0.0, 0.0]})
+                } else {
+                    json!([0.0, 0.0, 0.0])
+                };
+                with_ref += 1;
+            }
+        }
+    }
+    assert!(with_ref > 0, "the problem has contacts");
+    let p = spec::problem_from_json(m.clone(), &v.to_string()).expect("problem");
+    let mut s = Solver::new(p, SolverKind::Fddp);
+    let x0 = s.problem.x0().clone();
+    let xs = vec![x0.clone(); 9];
+    let us = s.problem.quasi_static(&xs[..8]).expect("quasi_static");
+    for so in [SecondOrder::On, SecondOrder::Auto] {
+        s.second_order = so;
+        let e = s.solve(&xs, &us, 50, false, None).expect_err("second order refused");
+        assert!(e.message.contains("node ") && e.message.contains("xref"), "{}", e.message);
+    }
+    s.second_order = SecondOrder::Off;
+    s.solve(&xs, &us, 20, false, None).expect("solve");
+    assert!(s.cost().is_finite());
+}

@@ -276,3 +276,31 @@ fn euler_dynamics_term_matches_the_hyper_dual_oracle() {
     eprintln!("hyper-dual oracle: relative error {err:.2e}");
     assert!(err < 1e-10, "{err:e}");
 }
+
+/// A knot whose contacts have a position gain against a world reference (spec key `xref`):
+/// the first order runs, the second order is an error naming the contact; kp without `xref`
+/// is an error of the spec.
+#[test]
+fn world_reference_gain_first_order_only() {
+    let m = Arc::new(builtin::quadruped());
+    let x0 = StateMultibody::new(m.clone()).zero();
+    let cs = json!([
+        {"name": "LF_FOOT", "frame": "LF_FOOT", "kp": 30.0, "kd": 10.0, "xref": [0.3, 0.2, -0.5]},
+        {"name": "RF_FOOT", "frame": "RF_FOOT", "type": "6d", "reference": "local", "kp": 30.0,
+         "xref": {"rotation": [0.36, 0.48, -0.8, -0.8, 0.6, 0.0, 0.48, 0.64, 0.6], "translation": [0.3, -0.2, -0.5]}}
+    ]);
+    let am = node(
+        &m,
+        json!({"type": "euler", "dt": 0.05, "actuation": "floating_base", "contacts": cs,
+               "costs": costs(&x0, 12, &[], "RH_FOOT")}),
+    );
+    let (x, u) = random_point(&m, 50, 12);
+    let mut d = am.create_data().expect("data");
+    am.calc_diff(&mut d, &x, Some(&u)).expect("calc_diff");
+    let e = am.second_order(&mut d, &x, Some(&u), &DVector::zeros(36)).unwrap_err();
+    assert!(e.message.contains("contact 'LF_FOOT'") && e.message.contains("xref"), "{}", e.message);
+    let bad = json!({"type": "euler", "dt": 0.05, "actuation": "floating_base", "costs": [],
+        "contacts": [{"name": "LF_FOOT", "frame": "LF_FOOT", "kp": 30.0}]});
+    let e = spec::action_model(&m, &bad, "node").unwrap_err().to_string();
+    assert!(e.contains("xref"), "{e}");
+}

@@ -119,9 +119,10 @@ macro_rules! impact_dict_of {
 /// A contact (Pinocchio's `RigidConstraintModel`): the contact frame at `point` (a 3-D
 /// contact's point) or `placement` (a `(4, 4)` homogeneous matrix) in the frame named `frame`,
 /// of type `"3d"` or `"6d"`, with rows in the `"local_world_aligned"` or `"local"` reference,
-/// with optional Baumgarte gains `kp`, `kd` (used by the KKT dynamics); with `frame2`, a
-/// two-frame (closed-loop) constraint whose frame B sits at `point2` or `placement2` in
-/// `frame2`'s coordinates.
+/// with optional Baumgarte gains `kp`, `kd` (used by the KKT dynamics) and, for `kp`, an
+/// optional reference fixed in the world `xref` (a 3-D contact: a point; a 6-D contact: a
+/// `(4, 4)` placement); with `frame2`, a two-frame (closed-loop) constraint whose frame B sits
+/// at `point2` or `placement2` in `frame2`'s coordinates.
 #[pyclass(name = "Contact", module = "sodyn._sodyn", frozen)]
 #[derive(Clone)]
 pub(crate) struct PyContact {
@@ -137,6 +138,9 @@ pub(crate) struct PyContact {
     pub(crate) frame2: Option<String>,
     pub(crate) point2: [f64; 3],
     pub(crate) rot2: [f64; 9],
+    /// The world reference of `kp` (`Contact::world_ref`): its translation and row-major
+    /// rotation (the identity for a 3-D contact's point).
+    pub(crate) xref: Option<([f64; 3], [f64; 9])>,
 }
 
 /// `point` or `placement` (not both) of a contact as (point, row-major rotation); `what`
@@ -208,7 +212,7 @@ impl PyContact {
     #[new]
     #[pyo3(signature = (frame, point = None, kp = 0.0, kd = 0.0, r#type = "3d",
                         reference = "local_world_aligned", placement = None, frame2 = None,
-                        point2 = None, placement2 = None))]
+                        point2 = None, placement2 = None, xref = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         frame: String,
@@ -221,6 +225,7 @@ impl PyContact {
         frame2: Option<String>,
         point2: Option<&Bound<'_, PyAny>>,
         placement2: Option<&Bound<'_, PyAny>>,
+        xref: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let what = |e: Error| value_err(format!("contact \"{frame}\": {e}"));
         let kind = ContactType::parse(r#type).map_err(what)?;
@@ -240,7 +245,27 @@ impl PyContact {
                 )));
             }
         }
-        Ok(Self { frame, point: p, rot, kind, reference, kp, kd, frame2, point2, rot2 })
+        let xref = match xref {
+            None => None,
+            Some(_) if frame2.is_some() => {
+                return Err(value_err(format!(
+                    "contact \"{frame}\": `xref` (a world reference) and `frame2` (a two-frame \
+                     constraint) exclude each other"
+                )));
+            }
+            // A 3-D contact's reference is a point, a 6-D contact's a (4, 4) placement.
+            Some(x) if kind == ContactType::D3 => {
+                Some(read_point_or_placement(&frame, Some(x), None, ("xref", "xref"))?)
+            }
+            Some(x) => Some(read_point_or_placement(&frame, None, Some(x), ("xref", "xref"))?),
+        };
+        Ok(Self { frame, point: p, rot, kind, reference, kp, kd, frame2, point2, rot2, xref })
+    }
+    /// The world reference of `kp`: `None`, a 3-D contact's point `(3,)` or a 6-D contact's
+    /// placement, a `(4, 4)` homogeneous matrix.
+    #[getter]
+    fn xref<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {
+        self.xref_object(py)
     }
     #[getter]
     fn frame(&self) -> &str {
@@ -307,6 +332,12 @@ impl PyContact {
                 extra += &format!(", rotation2={:?}", self.rot2);
             }
         }
+        if let Some((p, r)) = &self.xref {
+            extra += &format!(", xref=({}, {}, {})", p[0], p[1], p[2]);
+            if *r != IDENTITY9 {
+                extra += &format!(", xref_rotation={r:?}");
+            }
+        }
         format!(
             "Contact(frame={:?}, point=({}, {}, {}){extra})",
             self.frame, self.point[0], self.point[1], self.point[2]
@@ -331,6 +362,7 @@ impl PyContact {
                     Some(_) => out_mat(py, &homogeneous(&c.point2, &c.rot2)),
                     None => py.None().into_bound(py),
                 },
+                c.xref_object(py).unwrap_or_else(|| py.None().into_bound(py)),
             ],
         )?;
         PyTuple::new(py, [slf.get_type().into_any(), args.into_any()])
@@ -340,6 +372,13 @@ impl PyContact {
 impl PyContact {
     pub(crate) fn placement_matrix(&self) -> DMatrix<f64> {
         homogeneous(&self.point, &self.rot)
+    }
+    /// [`PyContact::xref`] as Python takes it: a point `(3,)` (3-D) or a `(4, 4)` matrix.
+    fn xref_object<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {
+        self.xref.as_ref().map(|(p, r)| match self.kind {
+            ContactType::D3 => PyArray1::from_slice(py, p).into_any(),
+            _ => out_mat(py, &homogeneous(p, r)),
+        })
     }
     /// The Python contact of a model's constraint.
     pub(crate) fn of(m: &Model, c: &Contact) -> Self {
@@ -364,6 +403,7 @@ impl PyContact {
             frame2: c.frame2.map(name),
             point2: [c.point2.x, c.point2.y, c.point2.z],
             rot2: rows(&c.rotation2),
+            xref: c.world_ref.as_ref().map(|t| ([t.trans.x, t.trans.y, t.trans.z], rows(&t.rot))),
         }
     }
     pub(crate) fn transform(&self) -> sodyn::spatial::Transform {
@@ -394,6 +434,17 @@ pub(crate) fn resolve(
             .map_err(core_err)?
             .with_reference(c.reference);
         let mut contact = Contact { kind: c.kind, ..contact };
+        if let Some((p, r)) = &c.xref {
+            let p = Vector3::new(p[0], p[1], p[2]);
+            contact = match c.kind {
+                ContactType::D3 => contact.with_reference_point(m, p),
+                _ => contact.with_reference_placement(
+                    m,
+                    &sodyn::spatial::Transform::new(nalgebra::Matrix3::from_row_slice(r), p),
+                ),
+            }
+            .map_err(|e| value_err(format!("contact \"{}\": {e}", c.frame)))?;
+        }
         if let Some(f2) = &c.frame2 {
             let p2 = sodyn::spatial::Transform::new(
                 nalgebra::Matrix3::from_row_slice(&c.rot2),
@@ -412,6 +463,10 @@ pub(crate) fn resolve(
         if let Some(f2) = contact.frame2 {
             k.push(f2 as u64);
             k.extend(c.point2.iter().chain(&c.rot2).map(|x| x.to_bits()));
+        }
+        if let Some((p, r)) = &c.xref {
+            k.push(u64::MAX); // no frame index: the world reference follows
+            k.extend(p.iter().chain(r).map(|x| x.to_bits()));
         }
         key.push((contact.frame, k));
         cs.push(contact);

@@ -721,6 +721,7 @@ fn constraints_from(l: Vec<ConstraintDesc>) -> PyResult<Vec<sodyn::model::Contac
                 frame2,
                 point2: v3(&p2, "constraint point2")?,
                 rotation2: m3(&r2, "constraint rotation2")?,
+                world_ref: None,
             })
         })
         .collect()

@@ -370,6 +370,38 @@ impl PySolver {
     fn set_x0(&mut self, x0: Vec<f64>) -> PyResult<()> {
         self.solver.problem.set_x0(DVector::from_vec(x0)).map_err(ocp_err)
     }
+    /// The initial state.
+    #[getter]
+    fn x0<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        vec_py(py, self.solver.problem.x0())
+    }
+    /// `(residual class name, flat reference or None)` of cost `name` at node `t`.
+    fn cost_reference<'py>(
+        &self,
+        py: Python<'py>,
+        t: usize,
+        name: &str,
+    ) -> PyResult<(&'static str, Option<Bound<'py, PyArray1<f64>>>)> {
+        let item = self.solver.problem.cost_item(t, name).map_err(ocp_err)?;
+        Ok((item.residual.name(), item.residual.reference().map(|r| vec_py(py, &r))))
+    }
+    /// Replaces the reference of cost `name` at node `t` (flat, `Residual::set_reference`'s layout).
+    fn set_cost_reference(&mut self, t: usize, name: &str, value: Vec<f64>) -> PyResult<()> {
+        self.solver.problem.set_cost_reference(t, name, &value).map_err(ocp_err)
+    }
+    /// `(weight, active)` of cost `name` at node `t`.
+    fn cost_status(&self, t: usize, name: &str) -> PyResult<(f64, bool)> {
+        let item = self.solver.problem.cost_item(t, name).map_err(ocp_err)?;
+        Ok((item.weight, item.active))
+    }
+    /// Sets the weight of cost `name` at node `t`.
+    fn set_cost_weight(&mut self, t: usize, name: &str, weight: f64) -> PyResult<()> {
+        self.solver.problem.set_cost_weight(t, name, weight).map_err(ocp_err)
+    }
+    /// Switches cost `name` at node `t` on or off.
+    fn set_cost_active(&mut self, t: usize, name: &str, active: bool) -> PyResult<()> {
+        self.solver.problem.set_cost_active(t, name, active).map_err(ocp_err)
+    }
     /// `T`.
     #[getter]
     fn horizon(&self) -> usize {

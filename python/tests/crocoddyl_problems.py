@@ -204,6 +204,64 @@ def with_rk(problem: Any, rk_type: Any = None) -> Tuple[Any, List[np.ndarray], L
     return (p, *_guess(p))
 
 
+def with_contact_gains(problem: Any, gains, reference_type: Any = None, seed: int = 0):
+    """The same problem with every ``ContactModel3D/6D`` of its Euler knots rebuilt with
+    Baumgarte ``gains`` ``[kp, kd]``, a reference off the foot's placement at ``x0`` (3-D: the
+    foot position shifted by 1 to 3 cm; 6-D: also rotated by up to 0.1 rad) and, if given,
+    ``reference_type`` (``pinocchio.LOCAL`` / ``LOCAL_WORLD_ALIGNED``); costs, actuation,
+    damping, time steps and impulse knots kept. Returns ``(problem, init_xs, init_us)``."""
+    import crocoddyl
+    import pinocchio
+
+    state = problem.runningModels[0].state
+    pmodel = state.pinocchio
+    pdata = pmodel.createData()
+    pinocchio.framesForwardKinematics(pmodel, pdata, problem.x0[: pmodel.nq])
+    rng = np.random.default_rng(seed)
+    refs: Dict[int, Any] = {}
+
+    def reference(fid: int, six: bool):
+        if fid not in refs:
+            shift = rng.uniform(0.01, 0.03, 3) * rng.choice([-1.0, 1.0], 3)
+            turn = pinocchio.exp3(rng.uniform(-0.06, 0.06, 3))
+            m = pdata.oMf[fid]
+            refs[fid] = pinocchio.SE3(m.rotation @ turn, m.translation + shift)
+        return refs[fid].copy() if six else refs[fid].translation.copy()
+
+    done: Dict[int, Any] = {}
+
+    def rebuild(m: Any):
+        if id(m) in done:
+            return done[id(m)]
+        d = getattr(m, "differential", None)
+        if type(m).__name__ != "IntegratedActionModelEuler" or \
+                type(d).__name__ != "DifferentialActionModelContactFwdDynamics":
+            done[id(m)] = m
+            return m
+        nu = d.actuation.nu
+        cm = crocoddyl.ContactModelMultiple(state, nu)
+        for name, item in d.contacts.contacts.todict().items():
+            c = item.contact
+            rt = c.type if reference_type is None else reference_type
+            g = np.asarray(gains, float)
+            if type(c).__name__ == "ContactModel3D":
+                cc = crocoddyl.ContactModel3D(state, c.id, reference(c.id, False), rt, nu, g)
+            else:
+                cc = crocoddyl.ContactModel6D(state, c.id, reference(c.id, True), rt, nu, g)
+            cm.addContact(name, cc, item.active)
+        dam = crocoddyl.DifferentialActionModelContactFwdDynamics(
+            state, d.actuation, cm, d.costs, d.JMinvJt_damping, True)
+        out = crocoddyl.IntegratedActionModelEuler(dam, m.dt)
+        if m.has_control_limits:
+            out.u_lb, out.u_ub = m.u_lb, m.u_ub
+        done[id(m)] = out
+        return out
+
+    running = [rebuild(m) for m in problem.runningModels]
+    p = crocoddyl.ShootingProblem(problem.x0, running, rebuild(problem.terminalModel))
+    return (p, *_guess(p))
+
+
 PROBLEMS: Dict[str, Callable[..., Any]] = {
     "anymal_walk": lambda short=False, x0=None: anymal("walk", short, x0),
     "anymal_trot": lambda short=False, x0=None: anymal("trot", short, x0),

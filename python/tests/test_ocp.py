@@ -212,3 +212,91 @@ def test_runge_kutta_type_is_checked():
         ocp.IntegratedActionModelRK(d, 5, 0.01)
     with pytest.raises(ocp.OcpError, match="time_step"):
         ocp.IntegratedActionModelRK(d, ocp.RKType.four, -1.0)
+
+
+def _xref_problem(six: bool, T=6):
+    """The quadruped standing, knees bent, on LF/RF/LH/RH (RF a 6-D contact when ``six``) with gains
+    ``[kp, kd]`` against references off the feet's placements at ``x0``."""
+    m = sodyn.Model.builtin("quadruped")
+    st = ocp.StateMultibody(m)
+    act = ocp.ActuationModelFloatingBase(st)
+    x0 = st.zero()
+    x0[7:19] = [0.0, 0.6, -1.2] * 4  # bent knees: a 6-D foot and three point feet are independent
+    d = m.create_data()
+    feet = ["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"]
+    refs = {}
+    for i, f in enumerate(feet):
+        M = np.asarray(sodyn.frame_placement(m, d, x0[: m.nq], f))
+        refs[f] = M @ sodyn.exp6(np.array([0.05, -0.04, 0.03, 0.01 * (i + 1), -0.02, 0.015]))
+
+    def node(dt):
+        contacts = ocp.ContactModelMultiple(st, act.nu)
+        for f in feet:
+            R, p = refs[f][:3, :3], refs[f][:3, 3]
+            if six and f == "RF_FOOT":
+                c = ocp.ContactModel6D(st, f, type="local", gains=(20.0, 10.0), xref=(R, p))
+            else:
+                c = ocp.ContactModel3D(st, f, gains=[20.0, 10.0], xref=p)
+            contacts.addContact(f, c)
+        costs = ocp.CostModelSum(st, act.nu)
+        costs.addCost("x", ocp.CostModelResidual(st, ocp.ResidualModelState(st, x0)), 10.0)
+        costs.addCost("u", ocp.CostModelResidual(st, ocp.ResidualModelControl(st, act.nu)), 1e-3)
+        diff = ocp.DifferentialActionModelContactFwdDynamics(st, act, contacts, costs)
+        return ocp.IntegratedActionModelEuler(diff, dt)
+
+    return ocp.ShootingProblem(x0, [node(0.02) for _ in range(T)], node(0.0)), x0
+
+
+@pytest.mark.parametrize("six", [False, True])
+def test_contact_gains_against_a_world_reference(six):
+    """``ContactModel3D/6D(..., gains=[kp, kd], xref=...)``: the spec carries ``xref``, FDDP
+    converges (Gauss-Newton), the second order is refused naming the node and the contact."""
+    p, x0 = _xref_problem(six)
+    spec = p.runningModels[0].spec()["contacts"]
+    assert spec[0]["kp"] == 20.0 and len(spec[0]["xref"]) == 3
+    if six:
+        assert set(spec[1]["xref"]) == {"rotation", "translation"}
+    s = ocp.SolverFDDP(p)
+    assert s.solve([x0] * 7, p.quasiStatic([x0] * 6), 200), s.termination
+    assert np.isfinite(s.cost)
+    # kp matters: without it (kd kept) the same problem has another optimum.
+    for n in p.runningModels + [p.terminalModel]:
+        for c in n.differential.contacts.contacts.values():
+            c.gains = np.array([0.0, 10.0])
+    p0 = ocp.ShootingProblem(x0, p.runningModels, p.terminalModel)
+    s0 = ocp.SolverFDDP(p0)
+    s0.solve([x0] * 7, p0.quasiStatic([x0] * 6), 200)
+    assert abs(s0.cost - s.cost) > 1e-6 * abs(s.cost)
+    p, x0 = _xref_problem(six)
+    for so in (True, "auto"):
+        s = ocp.SolverFDDP(p, second_order=so)
+        with pytest.raises(ocp.OcpError, match=r"node 0: contact 'LF_FOOT'.*xref"):
+            s.solve([x0] * 7, p.quasiStatic([x0] * 6), 10)
+
+
+def test_contact_xref_is_checked():
+    m = sodyn.Model.builtin("quadruped")
+    st = ocp.StateMultibody(m)
+    # Existing signatures keep working (translation is the third positional argument).
+    c = ocp.ContactModel3D(st, "LF_FOOT", [0.0, 0.0, 0.01], "local", 12, [0.0, 5.0])
+    assert c.xref is None and "xref" not in c.spec("LF", True)
+    assert ocp.ContactModel6D(st, "LF_FOOT", np.eye(3), np.zeros(3), "local", 12, [0.0, 5.0]).xref is None
+    with pytest.raises(ocp.OcpError, match="gains: kp = 5.0 != 0 needs its world reference xref"):
+        ocp.ContactModel3D(st, "LF_FOOT", gains=[5.0, 1.0])
+    with pytest.raises(ocp.OcpError, match="gains"):
+        ocp.ContactModel3D(st, "LF_FOOT", gains=[-1.0, 1.0], xref=np.zeros(3))
+    R = np.asarray(sodyn.exp6(np.array([0.1, 0.2, -0.3, 0.0, 0.0, 0.0])))[:3, :3]
+    ok = [(R, [0.1, 0.2, 0.3]), np.block([[R, np.ones((3, 1))], [np.zeros((1, 3)), np.ones((1, 1))]])]
+    for x in ok:
+        c = ocp.ContactModel6D(st, "LF_FOOT", gains=[5.0, 1.0], xref=x)
+        assert np.abs(c.xref[0] - R).max() < 1e-15
+        assert np.abs(np.reshape(c.spec("LF", True)["xref"]["rotation"], (3, 3)) - R).max() < 1e-15
+    bad3 = [[0.0, 1.0], [0.0, np.nan, 1.0], np.zeros((3, 3)), "abc"]
+    for x in bad3:
+        with pytest.raises(ocp.OcpError, match="xref"):
+            ocp.ContactModel3D(st, "LF_FOOT", gains=[5.0, 1.0], xref=x)
+    bad6 = [np.zeros(3), (1.01 * R, np.zeros(3)), (R, [0.0, np.inf, 0.0]), (R[:2], np.zeros(3)),
+            (np.diag([1.0, 1.0, -1.0]), np.zeros(3)), (np.full((3, 3), np.nan), np.zeros(3))]
+    for x in bad6:
+        with pytest.raises(ocp.OcpError, match="xref"):
+            ocp.ContactModel6D(st, "LF_FOOT", gains=[5.0, 1.0], xref=x)

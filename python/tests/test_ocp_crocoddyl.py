@@ -17,7 +17,7 @@ crocoddyl = pytest.importorskip("crocoddyl", reason="crocoddyl is not installed 
 pytest.importorskip("example_robot_data", reason="example-robot-data is not installed")
 
 sys.path.insert(0, os.path.dirname(__file__))
-from crocoddyl_problems import PROBLEMS, with_rk  # noqa: E402
+from crocoddyl_problems import PROBLEMS, with_contact_gains, with_rk  # noqa: E402
 
 from sodyn import ocp  # noqa: E402
 
@@ -26,16 +26,27 @@ from sodyn import ocp  # noqa: E402
 CASES = ["anymal_trot", "anymal_jump", "talos_legs_walk", "double_pendulum", "kinova_reach"]
 
 
+_SHORT = {}
+
+
+def _short(name):
+    """``PROBLEMS[name](short=True)``, built once per session (the ANYmal's takes seconds)."""
+    if name not in _SHORT:
+        _SHORT[name] = PROBLEMS[name](short=True)
+    return _SHORT[name]
+
+
 @pytest.fixture(scope="module", params=CASES)
 def case(request):
-    p, xs, us = PROBLEMS[request.param](short=True)
+    p, xs, us = _short(request.param)
     return request.param, p, xs, us, ocp.from_crocoddyl(p)
 
 
-def _compare_nodes(p, sp, xs, us, tol=1e-9, loose=None):
-    """Max relative error of every knot's quantities at (xs, us), Crocoddyl's layout mapped."""
+def _compare_nodes(p, sp, xs, us, tol=1e-9, loose=None, s=None):
+    """Max relative error of every knot's quantities at (xs, us), Crocoddyl's layout mapped
+    (``s``: the sodyn solver to read, default a new one of ``sp``)."""
     lay = sp.layout
-    s = ocp.SolverFDDP(sp)
+    s = s or ocp.SolverFDDP(sp)
     p.calc(xs, us)
     p.calcDiff(xs, us)
     s._s.calc_diff([list(lay.x_in(x)) for x in xs], [list(lay.u_in(t, u)) for t, u in enumerate(us)])
@@ -147,7 +158,7 @@ def test_box_fddp_and_ddp_match_crocoddyl():
 
 
 def test_quasi_static_matches_crocoddyl():
-    p, xs, us = PROBLEMS["anymal_trot"](short=True)
+    p, xs, us = _short("anymal_trot")
     sp = ocp.from_crocoddyl(p)
     ours = sp.quasiStatic([p.x0] * p.T)
     for a, b in zip(us, ours):
@@ -288,3 +299,126 @@ def test_rk_terminal_node_is_its_cost():
     cs, s = crocoddyl.SolverFDDP(p), ocp.SolverFDDP(sp)
     assert cs.solve(xs, us, 100, False) == s.solve(xs, us, 100, False)
     assert abs(s.iter - cs.iter) <= 1 and abs(s.cost - cs.cost) <= 1e-6 * abs(cs.cost)
+
+
+def _croc_costs(m):
+    return m.differential.costs if hasattr(m, "differential") else m.costs
+
+
+def _moved_reference(pin, state, ref, rng):
+    """``ref`` moved a little, of the same kind (a state stays on its manifold)."""
+    if isinstance(ref, pin.SE3):
+        return ref * pin.exp6(pin.Motion(0.05 * rng.standard_normal(6)))
+    if isinstance(ref, pin.Motion):
+        return pin.Motion(ref.vector + 0.3 * rng.standard_normal(6))
+    if isinstance(ref, pin.Force):
+        return pin.Force(ref.vector + 5.0 * rng.standard_normal(6))
+    ref = np.asarray(ref, float)
+    if ref.size == state.nx:
+        return state.integrate(ref, 0.05 * rng.standard_normal(state.ndx))
+    return ref + 0.05 * rng.standard_normal(ref.size)
+
+
+@pytest.mark.parametrize("name", ["anymal_trot", "talos_legs_walk"])
+def test_mpc_reference_weight_and_status_updates_match_crocoddyl(name):
+    """The receding-horizon updates (set_reference, set_cost_weight, set_cost_active) of a
+    converted problem, against Crocoddyl's problem with the same changes made to its costs:
+    every knot's calc/calcDiff agrees (1e-9), and an FDDP solve from there reaches Crocoddyl's
+    cost in its iterations."""
+    import pinocchio as pin
+
+    p, xs, us = PROBLEMS[name](short=True)
+    sp = ocp.from_crocoddyl(p)
+    s = ocp.SolverFDDP(sp)
+    rng = np.random.default_rng(3)
+    kinds = set()
+    nodes = list(p.runningModels) + [p.terminalModel]
+    # Change Crocoddyl's costs first (its examples share cost objects between knots, so one
+    # change can reach several), then give sodyn every knot's resulting reference, weight and
+    # status, as an MPC loop mirroring a Crocoddyl problem would.
+    for t, m in enumerate(nodes):
+        for cname, item in _croc_costs(m).costs.todict().items():
+            res = item.cost.residual
+            if not hasattr(res, "reference") or "Cone" in type(res).__name__:
+                continue
+            res.reference = _moved_reference(pin, m.state, res.reference, rng)
+            if t % 3 == 0:
+                item.weight *= 2.0
+            if t % 5 == 1:
+                _croc_costs(m).changeCostStatus(cname, False)
+    for t, m in enumerate(nodes):
+        for cname, item in _croc_costs(m).costs.todict().items():
+            res = item.cost.residual
+            if hasattr(res, "reference") and "Cone" not in type(res).__name__:
+                new = res.reference
+                s.set_reference(t, cname, new)
+                kinds.add(type(res).__name__)
+                back = s.reference(t, cname)
+                if isinstance(new, pin.SE3):
+                    assert np.allclose(back[0], new.rotation) and np.allclose(back[1], new.translation)
+                elif not isinstance(new, (pin.Motion, pin.Force)):
+                    assert np.allclose(back, new, atol=1e-12), (t, cname)
+            s.set_cost_weight(t, cname, item.weight)
+            s.set_cost_active(t, cname, item.active)
+            assert s.cost_status(t, cname) == (item.weight, item.active)
+    # State, control, centre of mass, and the feet's translation (ANYmal) or placement (Talos).
+    assert {"ResidualModelState", "ResidualModelControl", "ResidualModelCoMPosition"} < kinds, kinds
+    _compare_nodes(p, sp, xs, us, loose=LOOSE, s=s)
+    cs = crocoddyl.SolverFDDP(p)
+    c_ok = cs.solve(xs, us, 100, False)
+    ok = s.solve(xs, us, 100, False)
+    assert ok == c_ok and abs(s.iter - cs.iter) <= 1, (s.iter, cs.iter, s.termination)
+    assert abs(s.cost - cs.cost) <= 1e-6 * abs(cs.cost), (s.cost, cs.cost)
+    # x0 in Crocoddyl's layout: the measured state of the next MPC step.
+    x1 = np.asarray(cs.xs[1])
+    s.x0 = x1
+    assert np.allclose(s.x0, x1, atol=1e-15)
+
+
+# Baumgarte gains [kp, kd] with kp != 0 against a reference fixed in the world (Crocoddyl's
+# ContactModel3D/6D xref): the legged problems rebuilt with gains and references off the feet's
+# placements at x0 (crocoddyl_problems.with_contact_gains), both contact reference frames.
+
+
+def _gains_problem(name, ref):
+    import pinocchio
+
+    p0 = _short(name)[0]
+    gains = [20.0, 40.0] if name.startswith("anymal") else [15.0, 30.0]
+    return with_contact_gains(p0, gains, getattr(pinocchio.ReferenceFrame, ref))
+
+
+def _perturbed(p, xs, us, seed=0):
+    """States moved on the manifold (positions and velocities) and controls shifted."""
+    rng = np.random.default_rng(seed)
+    st = p.runningModels[0].state
+    xs = [st.integrate(x, 0.05 * rng.standard_normal(st.ndx)) for x in xs]
+    us = [u + 0.5 * rng.standard_normal(u.size) for u in us]
+    return xs, us
+
+
+@pytest.mark.parametrize("name,ref", [("anymal_trot", "LOCAL_WORLD_ALIGNED"), ("anymal_trot", "LOCAL"),
+                                      ("talos_legs_walk", "LOCAL_WORLD_ALIGNED"),
+                                      ("talos_legs_walk", "LOCAL")])
+def test_contact_gains_with_a_world_reference_match_crocoddyl(name, ref):
+    p, xs, us = _gains_problem(name, ref)
+    sp = ocp.from_crocoddyl(p)
+    node = next(m for m in sp.runningModels if getattr(m, "differential", None) is not None
+                and m.differential.contacts is not None and m.differential.contacts.contacts)
+    c = next(iter(node.differential.contacts.contacts.values()))
+    assert c.gains[0] > 0 and c.xref is not None and c.reference == ref.lower()
+    _compare_nodes(p, sp, xs, us, loose=LOOSE)
+    _compare_nodes(p, sp, *_perturbed(p, xs, us), loose=LOOSE)
+
+
+def test_contact_gains_fddp_matches_crocoddyl():
+    p, xs, us = _gains_problem("anymal_trot", "LOCAL_WORLD_ALIGNED")
+    sp = ocp.from_crocoddyl(p)
+    cs = crocoddyl.SolverFDDP(p)
+    c_ok = cs.solve(xs, us, 100, False)
+    s = ocp.SolverFDDP(sp)
+    assert s.solve(xs, us, 100, False) == c_ok, s.termination
+    assert abs(s.iter - cs.iter) <= 1, (s.iter, cs.iter)
+    assert abs(s.cost - cs.cost) <= 1e-6 * abs(cs.cost), (s.cost, cs.cost)
+    with pytest.raises(ocp.OcpError, match=r"node \d+: contact '.*'.*xref"):
+        ocp.SolverFDDP(sp, second_order=True).solve(xs, us, 10, False)

@@ -196,6 +196,16 @@ impl ContactWs {
     /// negative or not finite; [`Error::Unknown`] for a contact whose frame is not in `model`; [`Error::Singular`] for a contact on the world.
     pub fn new(model: &Model, contacts: &[Contact]) -> Result<Self> {
         if let Some(r) = &model.reduction {
+            if let Some(i) = contacts.iter().position(|c| c.world_ref.is_some() && c.kp != 0.0) {
+                return Err(Error::Argument {
+                    name: contact_label(&r.full, contacts, i),
+                    reason: format!(
+                        "a position gain kp against a world reference (xref) is not supported \
+                         on models in reduced coordinates (mimic joints; model \"{}\")",
+                        model.name()
+                    ),
+                });
+            }
             if let Some(i) = contacts.iter().position(Contact::is_loop) {
                 return Err(Error::Argument {
                     name: contact_label(&r.full, contacts, i),
@@ -239,6 +249,12 @@ impl ContactWs {
                 e => e,
             })?;
             if let Some(f2) = c.frame2 {
+                if c.world_ref.is_some() {
+                    return Err(Error::Argument {
+                        name: format!("xref of {}", contact_label(model, contacts, i)),
+                        reason: "a two-frame constraint takes no world reference".into(),
+                    });
+                }
                 if f2 >= model.frames.len() {
                     return Err(Error::Unknown {
                         kind: "frame index".into(),
@@ -421,6 +437,24 @@ impl ContactWs {
     /// tree-structured ID and IDFOZA results write nothing: callers clear those first.
     pub(crate) fn has_loops(&self) -> bool {
         self.loops.iter().any(Option::is_some)
+    }
+
+    /// An error naming the first contact with a world reference and `kp ≠ 0`, for the
+    /// algorithms (`what`) that do not take its position error yet.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] naming the contact and `what`.
+    pub(crate) fn refuse_world_ref(&self, model: &Model, what: &str) -> Result<()> {
+        match self.contacts.iter().position(|c| c.world_ref.is_some() && c.kp != 0.0) {
+            None => Ok(()),
+            Some(i) => Err(Error::Argument {
+                name: contact_label(model, &self.contacts, i),
+                reason: format!(
+                    "a position gain kp against a world reference (xref) is not supported by \
+                     {what} yet (kkt_dynamics and kkt_derivatives support it)"
+                ),
+            }),
+        }
     }
 
     /// Contact names for error messages.

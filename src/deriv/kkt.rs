@@ -422,6 +422,18 @@ fn solve_unchecked(
             }
         }
     }
+    // World references: + kp e with e the error from the fixed reference (crate::model::contact,
+    // "World reference").
+    for (c, contact) in cd.contacts.iter().enumerate() {
+        if contact.kp == 0.0 {
+            continue;
+        }
+        if let Some((e, _)) = world_ref_error(contact, &cd.paths[c].rot, &cd.paths[c].p) {
+            for (r, x) in e[..contact.dim()].iter().enumerate() {
+                cd.sol[cd.row0[c] + r] += contact.kp * x;
+            }
+        }
+    }
     // Two-frame constraints: + kp e with the placement error e = p₁ − p₂ (3-D world-aligned
     // only; `ContactWs::new` refuses kp on the others).
     for (c, contact) in cd.contacts.iter().enumerate() {
@@ -493,13 +505,106 @@ fn residual_derivatives(
         djw_dq(model, cd, v, &mut kd.bg);
         for (c, contact) in cd.contacts.iter().enumerate() {
             let (kp, kdg) = (contact.kp, contact.kd);
-            for row in cd.row0[c]..cd.row0[c] + contact.dim() {
-                for &k in &cd.paths[c].dofs {
-                    let j = cd.jac[(row, k)];
-                    kd.wt[(k, row)] += kdg * kd.bg[(row, k)] + kp * j;
+            let r0 = cd.row0[c];
+            let wr = if kp != 0.0 {
+                world_ref_error(contact, &cd.paths[c].rot, &cd.paths[c].p)
+            } else {
+                None
+            };
+            for &k in &cd.paths[c].dofs {
+                let mut de = [0.0; 6];
+                for (r, d) in de[..contact.dim()].iter_mut().enumerate() {
+                    *d = cd.jac[(r0 + r, k)];
+                }
+                if let Some((e, b)) = &wr {
+                    world_ref_error_dq(contact, &cd.paths[c].rot, e, b, &cd.s[k].ang, &mut de);
+                }
+                for (r, d) in de[..contact.dim()].iter().enumerate() {
+                    let (row, j) = (r0 + r, cd.jac[(r0 + r, k)]);
+                    kd.wt[(k, row)] += kdg * kd.bg[(row, k)] + kp * d;
                     kd.wt[(n + k, row)] += kdg * j;
                 }
             }
+        }
+    }
+}
+
+/// The position error `e` of a contact with a world reference (`None` without one) at the
+/// contact frame's world placement `(rot, p)`, in the contact's rows (crate::model::contact,
+/// "World reference"), and for a `6d` contact the matrix `B` of its `q`-derivative
+/// (`Jlog6(ᵒM_ref⁻¹ ᵒM_c)`, world-aligned: `diag(R, R) Jlog6 diag(Rᵀ, Rᵀ)`), which
+/// [`world_ref_error_dq`] applies.
+fn world_ref_error(
+    contact: &crate::model::Contact,
+    rot: &nalgebra::Matrix3<f64>,
+    p: &Vector3<f64>,
+) -> Option<([f64; 6], nalgebra::Matrix6<f64>)> {
+    use crate::model::{ContactReference, ContactType};
+    let xref = contact.world_ref.as_ref()?;
+    let mut e = [0.0; 6];
+    let mut b = nalgebra::Matrix6::identity();
+    let lwa = contact.reference == ContactReference::LocalWorldAligned;
+    match contact.kind {
+        ContactType::D3 => {
+            let d = p - xref.trans;
+            let d = if lwa { d } else { rot.transpose() * d };
+            e[..3].copy_from_slice(d.as_slice());
+        }
+        ContactType::D6 => {
+            let rt = xref.rot.transpose();
+            let rel = crate::spatial::Transform::new(rt * rot, rt * (p - xref.trans));
+            let xi = crate::model::lie::log6(&rel);
+            let jl = crate::model::lie::jlog6(&rel);
+            let (a, l) = if lwa { (rot * xi.ang, rot * xi.lin) } else { (xi.ang, xi.lin) };
+            e[..3].copy_from_slice(a.as_slice());
+            e[3..].copy_from_slice(l.as_slice());
+            b = jl;
+            if lwa {
+                let mut d = nalgebra::Matrix6::zeros();
+                d.fixed_view_mut::<3, 3>(0, 0).copy_from(rot);
+                d.fixed_view_mut::<3, 3>(3, 3).copy_from(rot);
+                b = d * jl * d.transpose();
+            }
+        }
+    }
+    Some((e, b))
+}
+
+/// Turns the Jacobian column `de` (rows of DoF `x`, world angular velocity `w`) of a contact
+/// with a world reference into the column of `∂e/∂q_x` ([`world_ref_error`]'s `e`, `b`).
+fn world_ref_error_dq(
+    contact: &crate::model::Contact,
+    rot: &nalgebra::Matrix3<f64>,
+    e: &[f64; 6],
+    b: &nalgebra::Matrix6<f64>,
+    w: &Vector3<f64>,
+    de: &mut [f64; 6],
+) {
+    use crate::model::{ContactReference, ContactType};
+    let lwa = contact.reference == ContactReference::LocalWorldAligned;
+    match contact.kind {
+        ContactType::D3 => {
+            if !lwa {
+                // d(Rᵀ(p − p_ref)) = J + e × Rᵀω.
+                let t = Vector3::new(e[0], e[1], e[2]).cross(&(rot.transpose() * w));
+                for r in 0..3 {
+                    de[r] += t[r];
+                }
+            }
+        }
+        ContactType::D6 => {
+            let j = nalgebra::Vector6::from_column_slice(de);
+            let mut out = b * j;
+            if lwa {
+                // d(diag(R, R) e_ℓ) adds ω × e per half.
+                let ta = w.cross(&Vector3::new(e[0], e[1], e[2]));
+                let tl = w.cross(&Vector3::new(e[3], e[4], e[5]));
+                for r in 0..3 {
+                    out[r] += ta[r];
+                    out[3 + r] += tl[r];
+                }
+            }
+            de.copy_from_slice(out.as_slice());
         }
     }
 }
@@ -587,6 +692,7 @@ pub(crate) fn kkt_so_derivatives_ws(
             tau,
         );
     }
+    kd.cd.refuse_world_ref(model, "kkt_so_derivatives")?;
     let mut so = kd.so.take().ok_or_else(|| {
         crate::error::Error::Workspace(
             "kkt_so_derivatives: KktData was created without second order".into(),
@@ -1124,6 +1230,7 @@ pub(crate) fn kkt_so_contracted_ws(
         );
     }
     check_inputs(model, data, kd, q, v, tau)?;
+    kd.cd.refuse_world_ref(model, "kkt_so_contracted")?;
     let (n, m) = (model.nv, kd.cd.dim());
     check_vec("w_qdd", w_qdd, n)?;
     check_vec("w_lambda", w_lambda, m)?;

@@ -32,6 +32,19 @@
 //! `6d` `local`: `e = log6(ᵒM_ref⁻¹ ᵒM_c)`; `6d` `local_world_aligned`: `e = diag(R, R) log6(ᵒM_ref⁻¹ ᵒM_c)`.
 //! Impulses and constrained inverse dynamics do not use the gains.
 //!
+//! # World reference
+//!
+//! With [`Contact::world_ref`] set ([`Contact::with_reference_point`],
+//! [`Contact::with_reference_placement`]) `ᵒM_ref` is that fixed placement instead, as
+//! Crocoddyl's `ContactModel3D/6D` `xref` (3-D: only its translation `p_ref`), so `e_c ≠ 0` in
+//! general: the KKT drift holds `kp e_c` and the first-order derivatives its exact
+//! `q`-derivative (tangent `δ`, `J_ℓ` the local rows `Rᵀ[ω; v_p]` per unit `δ`, `ω_x` the
+//! world angular velocity of DoF `x`): `3d` `local_world_aligned`: `J`; `3d` `local`:
+//! `J + [e]× Rᵀω_x`; `6d` `local`: `Jlog6(ᵒM_ref⁻¹ ᵒM_c) J_ℓ`; `6d` `local_world_aligned`:
+//! `diag(R, R) Jlog6 J_ℓ + [ω_x × e_ang; ω_x × e_lin]`. The second-order algorithms
+//! (`kkt_so_derivatives`, `kkt_so_contracted`) refuse a contact with a world reference and
+//! `kp ≠ 0`. Two-frame constraints take no world reference.
+//!
 //! # Two-frame constraints
 //!
 //! With [`Contact::frame2`] set ([`Contact::with_frame2`]) the constraint joins frame A (the
@@ -158,6 +171,11 @@ pub struct Contact {
     /// Orientation of the frame-B contact frame in `frame2`'s coordinates (identity by default;
     /// only the placement error of a `6d` constraint uses it).
     pub rotation2: Matrix3<f64>,
+    /// A reference placement fixed in the world for the position gain `kp` (Crocoddyl's
+    /// `xref`; `None`, the default: the contact frame's placement at the `q` of each call, so
+    /// the position error is zero there). A `3d` contact uses only its translation (the point
+    /// `xref`). Module documentation, "World reference".
+    pub world_ref: Option<Transform>,
 }
 
 impl Contact {
@@ -182,6 +200,7 @@ impl Contact {
             frame2: None,
             point2: Vector3::zeros(),
             rotation2: Matrix3::identity(),
+            world_ref: None,
         })
     }
     /// A 6-D contact holding the frame named `frame` at `placement` (in the frame's coordinates;
@@ -233,6 +252,13 @@ impl Contact {
             self.rotation2 = p.rot;
         }
         self.frame2 = Some(id);
+        if self.world_ref.is_some() {
+            return Err(Error::Argument {
+                name: "frame2".into(),
+                reason: "a contact with a world reference (xref) cannot be a two-frame constraint"
+                    .into(),
+            });
+        }
         if let Some(reason) = self.loop_problem(model) {
             return Err(Error::Argument { name: "frame2".into(), reason });
         }
@@ -279,6 +305,63 @@ impl Contact {
     pub fn body_placement2(&self, model: &Model) -> (usize, Transform) {
         let f = &model.frames[self.frame2.expect("a two-frame constraint")];
         (f.joint, f.placement.compose(&Transform::new(self.rotation2, self.point2)))
+    }
+    /// The same `3d` contact with the position gain acting against the point `xref` fixed in
+    /// the world (Crocoddyl's `ContactModel3D` `xref`; module documentation, "World
+    /// reference").
+    ///
+    /// # Errors
+    /// [`Error::NotFinite`] for a non-finite point; [`Error::Argument`] for a `6d` contact (use
+    /// [`Contact::with_reference_placement`]) or a two-frame constraint.
+    pub fn with_reference_point(mut self, model: &Model, xref: Vector3<f64>) -> Result<Contact> {
+        let name = &model.frames[self.frame.min(model.frames.len().saturating_sub(1))].name;
+        if let Some(index) = xref.iter().position(|x| !x.is_finite()) {
+            return Err(Error::NotFinite { what: format!("xref of contact \"{name}\""), index });
+        }
+        if self.kind != ContactType::D3 {
+            return Err(Error::Argument {
+                name: format!("xref of contact \"{name}\""),
+                reason: "a 6d contact takes a reference placement \
+                         (Contact::with_reference_placement), not a point"
+                    .into(),
+            });
+        }
+        self.world_ref = Some(Transform::new(Matrix3::identity(), xref));
+        self.check_world_ref(name)?;
+        Ok(self)
+    }
+    /// The same `6d` contact with the position gain acting against the placement `xref` fixed
+    /// in the world (Crocoddyl's `ContactModel6D` `xref`; module documentation, "World
+    /// reference").
+    ///
+    /// # Errors
+    /// [`Error::NotFinite`] or [`Error::Argument`] for a bad placement (as
+    /// [`Contact::with_placement`]); [`Error::Argument`] for a `3d` contact (use
+    /// [`Contact::with_reference_point`]) or a two-frame constraint.
+    pub fn with_reference_placement(mut self, model: &Model, xref: &Transform) -> Result<Contact> {
+        let name = &model.frames[self.frame.min(model.frames.len().saturating_sub(1))].name;
+        check_placement(xref, &format!("xref of contact \"{name}\""))?;
+        if self.kind != ContactType::D6 {
+            return Err(Error::Argument {
+                name: format!("xref of contact \"{name}\""),
+                reason: "a 3d contact takes a reference point (Contact::with_reference_point), \
+                         not a placement"
+                    .into(),
+            });
+        }
+        self.world_ref = Some(*xref);
+        self.check_world_ref(name)?;
+        Ok(self)
+    }
+    /// A world reference on a two-frame constraint is an error.
+    fn check_world_ref(&self, name: &str) -> Result<()> {
+        if self.world_ref.is_some() && self.is_loop() {
+            return Err(Error::Argument {
+                name: format!("xref of contact \"{name}\""),
+                reason: "a two-frame constraint takes no world reference".into(),
+            });
+        }
+        Ok(())
     }
     /// The same contact with rows in `reference`.
     pub fn with_reference(mut self, reference: ContactReference) -> Contact {

@@ -408,7 +408,8 @@ pub fn kkt<T: AdScalar>(
 }
 
 /// Adds the Baumgarte terms `kd J q̇ + kp e` to the contact rows `rows`, with the reference
-/// placement the contact frame's placement at the real part of `q` (fixed); `e` as in the
+/// placement [`Contact::world_ref`] or else the contact frame's placement at the real part of
+/// `q` (fixed); `e` as in the
 /// documentation of [`crate::model::Contact`]'s module.
 pub(crate) fn baumgarte<T: AdScalar>(
     model: &Model,
@@ -449,7 +450,11 @@ pub(crate) fn baumgarte<T: AdScalar>(
         let (body, local) = body_pose::<T>(model, contact);
         let pose = world[body].compose(&local);
         let (_, local0) = body_pose::<f64>(model, contact);
-        let pose0 = world_ref[body].compose(&local0);
+        // The fixed reference: the contact's world reference, or its placement at real(q).
+        let (pose0, general) = match &contact.world_ref {
+            Some(x) => (Pose { rot: x.rot, trans: x.trans }, true),
+            None => (world_ref[body].compose(&local0), false),
+        };
         let (rc, p) = (&pose.rot, &pose.trans);
         let dp = p - lift_v3(&pose0.trans);
         let mut e = Vec::with_capacity(6);
@@ -463,7 +468,11 @@ pub(crate) fn baumgarte<T: AdScalar>(
             }
             ContactType::D6 => {
                 let r0t = lift_m3(&pose0.rot.transpose());
-                let (phi, rho) = log6_near_identity(&(&r0t * rc), &(r0t * dp));
+                let (phi, rho) = if general {
+                    log6_general(&(&r0t * rc), &(r0t * dp))
+                } else {
+                    log6_near_identity(&(&r0t * rc), &(r0t * dp))
+                };
                 let (phi, rho) = match contact.reference {
                     ContactReference::Local => (phi, rho),
                     ContactReference::LocalWorldAligned => (rc * phi, rc * rho),
@@ -506,6 +515,33 @@ fn log6_near_identity<T: AdScalar>(r: &Matrix3<T>, t: &Vector3<T>) -> (Vector3<T
     let c = cst::<T>(1.0 / 12.0)
         + th2.clone() * cst::<T>(1.0 / 720.0)
         + th2.clone() * th2 * cst::<T>(1.0 / 30240.0);
+    let pt = phi.cross(t);
+    let rho = t - pt.clone() * cst::<T>(0.5) + phi.cross(&pt) * c;
+    (phi, rho)
+}
+
+/// `log6` of a placement `(R, t)` with a rotation angle `θ` in `(0, π)` (a world reference:
+/// in general not the identity): `φ = 2 atan(|v|/w) v/|v|` from the quaternion `(w, v)` of `R`
+/// and `ρ` as in [`log6_near_identity`] with `c` in closed form; for a real angle below
+/// `1e-3` the near-identity series instead.
+fn log6_general<T: AdScalar>(r: &Matrix3<T>, t: &Vector3<T>) -> (Vector3<T>, Vector3<T>) {
+    let tr = r[(0, 0)].clone() + r[(1, 1)].clone() + r[(2, 2)].clone();
+    let w = (tr + cst::<T>(1.0)).sqrt() * cst::<T>(0.5);
+    let four_w = w.clone() * cst::<T>(4.0);
+    let v = Vector3::new(
+        (r[(2, 1)].clone() - r[(1, 2)].clone()) / four_w.clone(),
+        (r[(0, 2)].clone() - r[(2, 0)].clone()) / four_w.clone(),
+        (r[(1, 0)].clone() - r[(0, 1)].clone()) / four_w,
+    );
+    let s = v.dot(&v).sqrt();
+    if s.re() < 5e-4 {
+        return log6_near_identity(r, t);
+    }
+    let th = (s.clone() / w).atan() * cst::<T>(2.0);
+    let phi = v * (th.clone() / s);
+    let th2 = th.clone() * th.clone();
+    let c = (cst::<T>(1.0) - th.clone() * th.sin() / ((cst::<T>(1.0) - th.cos()) * cst::<T>(2.0)))
+        / th2;
     let pt = phi.cross(t);
     let rho = t - pt.clone() * cst::<T>(0.5) + phi.cross(&pt) * c;
     (phi, rho)

@@ -469,6 +469,19 @@ impl Solver {
                         self.second_order
                     )));
                 }
+                // Nor that of a position gain against a world reference (kp with xref).
+                if let Some(c) = m
+                    .contacts()
+                    .iter()
+                    .find(|c| c.active && c.contact.world_ref.is_some() && c.contact.kp != 0.0)
+                {
+                    return Err(OcpError::new(format!(
+                        "node {t}: contact '{}': the exact second order (second_order = {:?}) \
+                         of a Baumgarte position gain kp against a world reference (xref) is \
+                         not implemented; solve with second_order = Off (False)",
+                        c.name, self.second_order
+                    )));
+                }
             }
         }
         self.xs_try[0].copy_from(self.problem.x0());

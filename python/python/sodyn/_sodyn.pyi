@@ -200,8 +200,14 @@ class Contact:
     axes (docs/conventions.md, "Contacts"). Baumgarte gains ``kp``, ``kd`` >= 0 (default 0;
     Pinocchio's ``corrector``): the KKT dynamics then hold ``a_c + kd v_c + kp e_c = 0`` with
     the reference placement fixed where the contact frame is at the ``q`` of the call
-    (``e_c``: the position error for 3-D, ``log6`` of the placement error for 6-D). Impacts
-    ignore the gains. A body held by a 6-D contact that carries another contact is a redundant
+    (``e_c``: the position error for 3-D, ``log6`` of the placement error for 6-D), or, with
+    ``xref``, fixed in the world (Crocoddyl's ``ContactModel3D/6D`` ``xref``): a 3-D contact
+    takes a point ``(3,)`` (``e_c = p − xref``, in ``local`` rows ``Rᵀ(p − xref)``), a 6-D
+    contact a ``(4, 4)`` placement (``e_c = log6(xref⁻¹ M)``, ``local_world_aligned`` rows
+    rotated by ``diag(R, R)``); a wrong shape, a non-finite entry or a rotation block that is
+    not a rotation is a ``ValueError`` naming ``xref``. ``kkt_derivatives`` differentiates
+    that term exactly; the second order (``order=2``, ``kkt_so_contracted``), mimic models and
+    two-frame constraints refuse a world reference with ``kp > 0``. Impacts ignore the gains. A body held by a 6-D contact that carries another contact is a redundant
     set: an error naming the contacts.
 
     With ``frame2`` (a frame name) the constraint is a two-frame (closed-loop) one: frame A
@@ -213,7 +219,8 @@ class Contact:
                  kd: float = 0.0, type: str = "3d", reference: str = "local_world_aligned",
                  placement: Optional[ArrayLike] = None, frame2: Optional[str] = None,
                  point2: Optional[ArrayLike] = None,
-                 placement2: Optional[ArrayLike] = None) -> None: ...
+                 placement2: Optional[ArrayLike] = None,
+                 xref: Optional[ArrayLike] = None) -> None: ...
     @property
     def frame2(self) -> Optional[str]:
         """Frame B of a two-frame constraint, ``None`` for a contact with the world."""
@@ -241,6 +248,10 @@ class Contact:
     def kp(self) -> float: ...
     @property
     def kd(self) -> float: ...
+    @property
+    def xref(self) -> Optional[Union[Vector, Matrix]]:
+        """The world reference of ``kp``: ``None``, a 3-D contact's point ``(3,)`` or a 6-D
+        contact's placement ``(4, 4)``."""
 
 def rnea(model: Model, data: Data, q: ArrayLike, v: ArrayLike, a: ArrayLike,
          fext: Optional[ArrayLike] = None) -> Vector: ...

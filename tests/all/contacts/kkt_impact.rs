@@ -460,3 +460,97 @@ fn batched_contact_dynamics_match_single_calls() {
         assert_eq!(dq, k1.dqdd_dq());
     }
 }
+
+/// `contacts` with gains `kp ∈ [5, 50)`, `kd ∈ [0, 10)` and a random world reference near the
+/// contact frame's placement at `q` (3-D: a point within about 10 cm; 6-D: a placement within
+/// about 0.5 rad and 10 cm).
+fn with_world_refs(m: &Model, cs: &[Contact], q: &DVector<f64>, rng: &mut Rng) -> Vec<Contact> {
+    let mut d = Data::new(m);
+    cs.iter()
+        .map(|c| {
+            let c = c.clone().with_baumgarte(rng.range(5.0, 50.0), rng.range(0.0, 10.0)).unwrap();
+            let pose = sodyn::algo::frame_placement(m, &mut d, q, c.frame)
+                .unwrap()
+                .compose(&c.placement());
+            let xi = Motion::new(
+                Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.3,
+                Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.06,
+            );
+            let xref = pose.compose(&exp6(&xi));
+            match c.kind {
+                D3 => c.with_reference_point(m, xref.trans).unwrap(),
+                D6 => c.with_reference_placement(m, &xref).unwrap(),
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn kkt_world_reference_matches_oracle_and_differences() {
+    let names = ["qdd", "lambda", "dqdd_dq", "dqdd_dv", "dlambda_dq", "dlambda_dv"];
+    let mut w: Vec<Worst> = names.iter().map(|n| Worst::new(n)).collect();
+    let mut fd = Worst::new("dqdd_dq, dlambda_dq vs central differences");
+    let mut rng = Rng::new(43);
+    let mut solved = 0;
+    let cases = contact_cases();
+    for (m, spec) in &cases {
+        let cs0 = contacts_of(m, spec, &mut rng);
+        let (q, v, tau) = random_state(m, &mut rng);
+        let cs = with_world_refs(m, &cs0, &q, &mut rng);
+        let mut cd = match ContactData::new(m, &cs) {
+            Ok(cd) => cd,
+            Err(e) => {
+                // Models in reduced coordinates (the mimic arms) refuse it, naming the contact.
+                let msg = e.to_string();
+                assert!(msg.contains("world reference") && msg.contains("contacts[0]"), "{msg}");
+                continue;
+            }
+        };
+        let mut d = Data::new(m);
+        let kd = kkt_derivatives(m, &mut d, &mut cd, &q, &v, &tau).unwrap();
+        // The reference changes the dynamics (the kp e term is not zero).
+        let plain: Vec<Contact> =
+            cs.iter().map(|c| Contact { world_ref: None, ..c.clone() }).collect();
+        let mut c0 = ContactData::new(m, &plain).unwrap();
+        let k0 = kkt_derivatives(m, &mut d, &mut c0, &q, &v, &tau).unwrap();
+        assert!(rel_err_vec(kd.lambda(), k0.lambda()) > 1e-4);
+        assert!(rel_err_mat(kd.dlambda_dq(), k0.dlambda_dq()) > 1e-4);
+        let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
+        let at = format!("{} {:?}", m.name(), spec);
+        let (qr, lr) = oracle::kkt::<f64>(m, qs, vs, ts, &cs);
+        w[0].add(rel_err_vec(kd.qdd(), &DVector::from_vec(qr)), &at);
+        w[1].add(rel_err_vec(kd.lambda(), &DVector::from_vec(lr)), &at);
+        let fo = oracle::kkt_fo(m, qs, vs, ts, &cs);
+        w[2].add(rel_err_mat(kd.dqdd_dq(), &fo.dqdd_dq), &at);
+        w[3].add(rel_err_mat(kd.dqdd_dv(), &fo.dqdd_dv), &at);
+        w[4].add(rel_err_mat(kd.dlambda_dq(), &fo.dlambda_dq), &at);
+        w[5].add(rel_err_mat(kd.dlambda_dv(), &fo.dlambda_dv), &at);
+        // Central differences in the tangent space of q.
+        let (dqdd, dlam) = (kd.dqdd_dq().clone(), kd.dlambda_dq().clone());
+        let n = m.nv();
+        let h = 1e-6;
+        let (mut nq, mut nl) = (DMatrix::zeros(n, n), DMatrix::zeros(cd.dim(), n));
+        for k in 0..n {
+            let mut e = DVector::zeros(n);
+            e[k] = h;
+            let qp = m.integrate(&q, &e).unwrap();
+            let qm = m.integrate(&q, &(-&e)).unwrap();
+            let rp = kkt_dynamics(m, &mut d, &mut cd, &qp, &v, &tau).unwrap();
+            let (ap, lp) = (rp.qdd().clone(), rp.lambda().clone());
+            let rm = kkt_dynamics(m, &mut d, &mut cd, &qm, &v, &tau).unwrap();
+            nq.set_column(k, &((&ap - rm.qdd()) / (2.0 * h)));
+            nl.set_column(k, &((&lp - rm.lambda()) / (2.0 * h)));
+        }
+        fd.add(rel_err_mat(&dqdd, &nq).max(rel_err_mat(&dlam, &nl)), &at);
+        // The second order refuses it, naming the contact.
+        let mut c2 = ContactData::with_second_order(m, &cs).unwrap();
+        let e = kkt_so_derivatives(m, &mut d, &mut c2, &q, &v, &tau).unwrap_err().to_string();
+        assert!(e.contains("contacts[0]") && e.contains("kkt_so_derivatives"), "{e}");
+        solved += 1;
+    }
+    assert_eq!(solved, cases.len() - 2);
+    for x in &w {
+        x.check(1e-10);
+    }
+    fd.check(1e-5);
+}

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any, Dict, List, Optional, Sequence, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -82,11 +82,65 @@ def _vec(x: Any, n: Optional[int], what: str) -> List[float]:
     return [("inf" if v > 0 else "-inf") if math.isinf(v) else float(v) for v in a]
 
 
+def _finite(x: Any, n: Optional[int], what: str) -> List[float]:
+    a = np.asarray(x, dtype=float).reshape(-1)
+    if n is not None and a.size != n:
+        raise OcpError(f"{what}: length {a.size} (expected {n})")
+    if not np.isfinite(a).all():
+        raise OcpError(f"{what}: entry {int(np.flatnonzero(~np.isfinite(a))[0])} is not finite")
+    return [float(v) for v in a]
+
+
 def _rot(r: Any, what: str) -> List[float]:
     a = np.asarray(r, dtype=float)
     if a.shape != (3, 3):
         raise OcpError(f"{what}: shape {a.shape} (expected (3, 3))")
     return _vec(a.reshape(-1), 9, what)
+
+
+def _point(x: Any, what: str) -> np.ndarray:
+    """A finite 3-vector, or an :class:`OcpError` naming ``what``."""
+    try:
+        a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        raise OcpError(f"{what}: a 3-vector [x, y, z], not {type(x).__name__}") from None
+    if a.shape not in ((3,), (3, 1)):
+        raise OcpError(f"{what}: shape {a.shape} (expected (3,): a point [x, y, z])")
+    if not np.isfinite(a).all():
+        raise OcpError(f"{what}: contains NaN or inf")
+    return a.reshape(3).copy()
+
+
+def _placement(m: Any, what: str) -> Tuple[np.ndarray, np.ndarray]:
+    """``(R, p)`` of a placement given as ``(R, p)`` (the form of
+    :class:`ResidualModelFramePlacement`), an object with ``rotation`` and ``translation``
+    (``pinocchio.SE3``) or a ``(4, 4)`` homogeneous matrix; an :class:`OcpError` naming
+    ``what`` for a wrong shape, a non-finite entry or a rotation that is not one (1e-9)."""
+    if hasattr(m, "rotation") and hasattr(m, "translation"):
+        r, p = m.rotation, m.translation
+    elif isinstance(m, (tuple, list)) and len(m) == 2:
+        r, p = m
+    else:
+        try:
+            h = np.asarray(m, dtype=float)
+        except (TypeError, ValueError):
+            h = None
+        if h is None or h.shape != (4, 4):
+            shape = getattr(h, "shape", None)
+            raise OcpError(f"{what}: a placement (R, p), an SE3 or a (4, 4) homogeneous matrix, "
+                           f"not {type(m).__name__}" + (f" of shape {shape}" if shape is not None else ""))
+        r, p = h[:3, :3], h[:3, 3]
+    try:
+        r = np.asarray(r, dtype=float)
+    except (TypeError, ValueError):
+        raise OcpError(f"{what}: rotation is not a (3, 3) array") from None
+    if r.shape != (3, 3):
+        raise OcpError(f"{what}: rotation of shape {r.shape} (expected (3, 3))")
+    if not np.isfinite(r).all():
+        raise OcpError(f"{what}: rotation contains NaN or inf")
+    if np.abs(r.T @ r - np.eye(3)).max() > 1e-9 or abs(np.linalg.det(r) - 1.0) > 1e-9:
+        raise OcpError(f"{what}: rotation is not a rotation matrix (RᵀR ≠ I or det R ≠ 1 beyond 1e-9)")
+    return r.copy(), _point(p, f"{what} translation")
 
 
 def _frame(model: Any, f: Union[int, str], what: str) -> Union[int, str]:
@@ -154,7 +208,7 @@ class ActuationModelFloatingBase:
 class _Contact:
     dim = 3
 
-    def __init__(self, state, frame, rotation, translation, reference, gains) -> None:
+    def __init__(self, state, frame, rotation, translation, reference, gains, xref=None) -> None:
         self.state = state
         self.frame = _frame(state.model, frame, "frame")
         self.rotation = np.eye(3) if rotation is None else np.asarray(rotation, float)
@@ -163,10 +217,19 @@ class _Contact:
         g = np.asarray(gains, float).reshape(-1)
         if g.size != 2:
             raise OcpError(f"gains: length {g.size} (expected 2: kp, kd)")
+        if not (np.isfinite(g).all() and (g >= 0).all()):
+            raise OcpError(f"gains: {[float(x) for x in g]} (kp and kd must be finite and >= 0)")
         self.gains = g
+        # The world reference of kp: a point (3-D) or (R, p) (6-D).
+        self.xref: Any = None
+        if xref is not None:
+            self.xref = _point(xref, "xref") if self.dim == 3 else _placement(xref, "xref")
+        if g[0] != 0 and self.xref is None:
+            what = "a point [x, y, z]" if self.dim == 3 else "a placement (R, p)"
+            raise OcpError(f"gains: kp = {g[0]} != 0 needs its world reference xref ({what})")
 
     def spec(self, name: str, active: bool) -> Dict[str, Any]:
-        return {
+        s: Dict[str, Any] = {
             "name": name,
             "frame": self.frame,
             "type": "3d" if self.dim == 3 else "6d",
@@ -177,25 +240,50 @@ class _Contact:
             "kd": float(self.gains[1]),
             "active": bool(active),
         }
+        if self.xref is not None:
+            if self.dim == 3:
+                s["xref"] = _vec(self.xref, 3, f"contact {name}: xref")
+            else:
+                s["xref"] = {"rotation": _rot(self.xref[0], f"contact {name}: xref rotation"),
+                             "translation": _vec(self.xref[1], 3, f"contact {name}: xref translation")}
+        return s
 
 
 class ContactModel3D(_Contact):
     """A point contact at ``translation`` in frame ``frame`` (rows in ``type``'s axes), with
-    Baumgarte gains ``(kp, kd)`` (``kp`` must be 0 for now)."""
+    Baumgarte gains ``(kp, kd)``: the contact dynamics hold ``a_c + kd v_c + kp e_c = 0``.
+
+    ``kp`` acts against ``xref`` (keyword; required when ``kp != 0``), a point ``[x, y, z]``
+    fixed in the world, as Crocoddyl's ``ContactModel3D`` ``xref``: ``e_c = p − xref`` in
+    ``local_world_aligned`` rows, ``Rᵀ(p − xref)`` in ``local`` rows (``p``, ``R``: the contact
+    point and its frame's rotation). A wrong shape or a non-finite entry is an
+    :class:`OcpError` naming ``xref``. The first-order derivatives are exact; a solver with
+    ``second_order=True`` or ``"auto"`` refuses a node with such a contact (naming the node and
+    the contact)."""
 
     dim = 3
 
-    def __init__(self, state, frame, translation=None, type=_LWA, nu=None, gains=(0.0, 0.0)):
-        super().__init__(state, frame, None, translation, type, gains)
+    def __init__(self, state, frame, translation=None, type=_LWA, nu=None, gains=(0.0, 0.0), *, xref=None):
+        super().__init__(state, frame, None, translation, type, gains, xref)
 
 
 class ContactModel6D(_Contact):
-    """A frame contact holding the frame ``(rotation, translation)`` of ``frame``."""
+    """A frame contact holding the frame ``(rotation, translation)`` of ``frame``, with
+    Baumgarte gains ``(kp, kd)``: ``a_c + kd v_c + kp e_c = 0`` (``[angular; linear]`` rows).
+
+    ``kp`` acts against ``xref`` (keyword; required when ``kp != 0``), a placement fixed in the
+    world given as ``(R, p)`` (as :class:`ResidualModelFramePlacement`'s ``placement``), a
+    ``pinocchio.SE3`` or a ``(4, 4)`` homogeneous matrix, as Crocoddyl's ``ContactModel6D``
+    ``xref``: ``e_c = log6(xref⁻¹ M)`` in ``local`` rows, ``diag(R, R) log6(xref⁻¹ M)`` in
+    ``local_world_aligned`` rows (``M = (R, p)``: the contact frame's placement). A wrong
+    shape, a non-finite entry or a rotation that is not one is an :class:`OcpError` naming
+    ``xref``; second order as :class:`ContactModel3D`."""
 
     dim = 6
 
-    def __init__(self, state, frame, rotation=None, translation=None, type=_LWA, nu=None, gains=(0.0, 0.0)):
-        super().__init__(state, frame, rotation, translation, type, gains)
+    def __init__(self, state, frame, rotation=None, translation=None, type=_LWA, nu=None, gains=(0.0, 0.0), *,
+                 xref=None):
+        super().__init__(state, frame, rotation, translation, type, gains, xref)
 
 
 class ImpulseModel3D(ContactModel3D):
@@ -837,6 +925,116 @@ class _SolverBase:
     @property
     def isFeasible(self) -> bool:
         return self._s.is_feasible
+
+    # Receding-horizon (MPC) updates: the solver's own copy of the problem changes, without a
+    # rebuild; ``self.problem`` (the description it was built from) does not.
+
+    @property
+    def x0(self) -> np.ndarray:
+        """The initial state (in the problem's layout: Crocoddyl's for a converted problem).
+        Setting it is the MPC update of the measured state; the next ``solve`` starts there."""
+        lay = self.problem.layout
+        x0 = self._s.x0
+        return lay.x_out(x0) if lay else x0
+
+    @x0.setter
+    def x0(self, x0: Any) -> None:
+        lay = self.problem.layout
+        x = lay.x_in(x0) if lay else np.asarray(x0, float).reshape(-1)
+        self._s.set_x0(_finite(x, None, "x0"))
+
+    def set_reference(self, t: int, cost: str, reference: Any) -> None:
+        """Replaces the reference of cost ``cost`` at node ``t`` (``problem.T``: the terminal
+        node) without rebuilding the problem. ``reference`` is what the residual's constructor
+        takes, in the problem's layout:
+
+        - ``ResidualModelState``: a state; ``ResidualModelControl`` / ``JointEffort``: a control;
+        - ``ResidualModelFramePlacement``: ``(R, p)``, a 4×4 homogeneous matrix, or an object
+          with ``rotation`` and ``translation`` (``pinocchio.SE3``);
+        - ``ResidualModelFrameTranslation``, ``ResidualModelCoMPosition``: a point;
+        - ``ResidualModelFrameVelocity``: an object with ``angular`` and ``linear``
+          (``pinocchio.Motion``), or a 6-vector (``[angular; linear]``; Crocoddyl's
+          ``[linear; angular]`` on a converted problem);
+        - ``ResidualModelContactForce``: an object with ``linear`` and ``angular``
+          (``pinocchio.Force``), or the contact's 3 or 6 rows (6-D: ``[angular; linear]``;
+          ``[linear; angular]`` on a converted problem).
+
+        Raises :class:`OcpError` naming the node and the cost for an unknown node or cost, a
+        wrong length, NaN/inf, a non-unit quaternion or a non-rotation (nothing changes then);
+        a cone has no reference."""
+        kind, current = self._s.cost_reference(int(t), cost)
+        try:
+            flat = self._flat_reference(int(t), kind, current, reference, cost)
+        except OcpError:
+            raise
+        except (TypeError, ValueError, IndexError) as e:
+            raise OcpError(f"node {t}: cost {cost!r}: reference: {e}") from None
+        self._s.set_cost_reference(int(t), cost, flat)
+
+    def reference(self, t: int, cost: str) -> Any:
+        """The reference of cost ``cost`` at node ``t``, in the form :meth:`set_reference` takes
+        (a placement as ``(R, p)``, 6-vectors in the problem's layout); ``None`` for a cone."""
+        kind, r = self._s.cost_reference(int(t), cost)
+        if r is None:
+            return None
+        lay = self.problem.layout
+        if kind == "ResidualModelState":
+            return lay.x_out(r) if lay else r
+        if kind in ("ResidualModelControl", "ResidualModelJointEffort"):
+            return lay.u_out(int(t), r) if lay else r
+        if kind == "ResidualModelFramePlacement":
+            return r[3:].reshape(3, 3), r[:3]
+        if lay and r.size == 6:
+            return np.concatenate([r[3:], r[:3]])
+        return r
+
+    def set_cost_weight(self, t: int, cost: str, weight: float) -> None:
+        """Sets the weight of cost ``cost`` at node ``t`` (finite, ≥ 0)."""
+        self._s.set_cost_weight(int(t), cost, float(weight))
+
+    def set_cost_active(self, t: int, cost: str, active: bool) -> None:
+        """Switches cost ``cost`` at node ``t`` on or off (Crocoddyl's ``changeCostStatus``)."""
+        self._s.set_cost_active(int(t), cost, bool(active))
+
+    def cost_status(self, t: int, cost: str) -> Tuple[float, bool]:
+        """``(weight, active)`` of cost ``cost`` at node ``t``."""
+        return self._s.cost_status(int(t), cost)
+
+    def _flat_reference(self, t: int, kind: str, current: Any, ref: Any, cost: str) -> List[float]:
+        lay = self.problem.layout
+        what = f"node {t}: cost {cost!r}: reference"
+        if current is None:
+            raise OcpError(f"node {t}: cost {cost!r}: a {kind} has no reference")
+        if kind in ("ResidualModelState", "ResidualModelControl", "ResidualModelJointEffort"):
+            a = np.asarray(ref, float).reshape(-1)
+            if a.size != current.size:
+                raise OcpError(f"{what}: length {a.size} (expected {current.size})")
+            if lay:
+                a = lay.x_in(a) if kind == "ResidualModelState" else lay.u_in(t, a)
+            return _finite(a, current.size, what)
+        if kind == "ResidualModelFramePlacement":
+            if hasattr(ref, "rotation") and hasattr(ref, "translation"):
+                R, p = ref.rotation, ref.translation
+            elif isinstance(ref, (tuple, list)) and len(ref) == 2:
+                R, p = ref
+            else:
+                a = np.asarray(ref, float)
+                if a.shape != (4, 4):
+                    raise OcpError(f"{what}: (R, p), a 4x4 matrix or an SE3, not shape {a.shape}")
+                R, p = a[:3, :3], a[:3, 3]
+            if np.shape(R) != (3, 3):
+                raise OcpError(f"{what} rotation: shape {np.shape(R)} (expected (3, 3))")
+            return _finite(p, 3, f"{what} translation") + _finite(R, 9, f"{what} rotation")
+        if kind in ("ResidualModelFrameVelocity", "ResidualModelContactForce"):
+            n = current.size
+            if hasattr(ref, "linear") and hasattr(ref, "angular"):
+                lin, ang = np.asarray(ref.linear, float), np.asarray(ref.angular, float)
+                return _finite(lin if n == 3 else np.concatenate([ang, lin]), n, what)
+            a = np.asarray(ref, float).reshape(-1)
+            if lay and a.size == 6:
+                a = np.concatenate([a[3:], a[:3]]) if n == 6 else a[:3]
+            return _finite(a, n, what)
+        return _finite(ref, current.size, what)
 
     def display(self, viz: Any, dt: Optional[float] = None) -> None:
         """Plays the solution on a :class:`sodyn.viz.Visualizer` (``viz.play(xs, dt)``)."""

@@ -127,18 +127,26 @@ class _Converter:
             w = f"{what}: contact {name!r} ({cn})"
             ref = _REF[str(c.type).split(".")[-1]] if not isinstance(c.type, str) else c.type
             frame = self.frame(c.id, w)
-            if cn in ("ContactModel3D", "ImpulseModel3D"):
-                gains = np.asarray(getattr(c, "gains", np.zeros(2)), float)
-                if gains[0] != 0:
-                    raise OcpError(f"{w}: gains[0] (position Baumgarte) != 0 is not supported yet")
-                cc = ContactModel3D(self.state, frame, None, ref, gains=gains)
-            elif cn in ("ContactModel6D", "ImpulseModel6D"):
-                gains = np.asarray(getattr(c, "gains", np.zeros(2)), float)
-                if gains[0] != 0:
-                    raise OcpError(f"{w}: gains[0] (position Baumgarte) != 0 is not supported yet")
-                cc = ContactModel6D(self.state, frame, None, None, ref, gains=gains)
-            else:
-                raise OcpError(f"{w}: unsupported contact type")
+            # Crocoddyl's contact point is the frame origin; its `gains` are (kp, kd) and kp
+            # acts against `reference`, fixed in the world (3-D: a point, 6-D: an SE3), which
+            # is converted only where kp != 0 (with kp = 0 it has no effect).
+            gains = np.asarray(getattr(c, "gains", np.zeros(2)), float)
+            xref = None
+            try:
+                if cn in ("ContactModel3D", "ImpulseModel3D"):
+                    if gains[0] != 0:
+                        r = c.reference
+                        xref = np.asarray(getattr(r, "translation", r), float)
+                    cc = ContactModel3D(self.state, frame, None, ref, gains=gains, xref=xref)
+                elif cn in ("ContactModel6D", "ImpulseModel6D"):
+                    if gains[0] != 0:
+                        r = c.reference
+                        xref = (np.asarray(r.rotation, float), np.asarray(r.translation, float))
+                    cc = ContactModel6D(self.state, frame, None, None, ref, gains=gains, xref=xref)
+                else:
+                    raise OcpError("unsupported contact type")
+            except OcpError as e:
+                raise OcpError(f"{w}: {e}") from None
             out.addContact(name, cc, bool(item.active))
             by_frame[int(c.id)] = name
         return out, by_frame
@@ -262,7 +270,8 @@ def from_crocoddyl(problem: Any, model: Optional[Any] = None) -> ShootingProblem
     ``three``, ``four``; ``PolyZero`` controls) of
     ``DifferentialActionModelFreeFwdDynamics`` / ``ContactFwdDynamics``,
     ``ActionModelImpulseFwdDynamics``; ``ActuationModelFull`` / ``FloatingBase``;
-    ``ContactModel3D/6D``, ``ImpulseModel3D/6D``; ``CostModelResidual`` with the residuals
+    ``ContactModel3D/6D`` (with their Baumgarte ``gains`` and, for ``kp != 0``, their world
+    ``reference`` as ``xref``), ``ImpulseModel3D/6D``; ``CostModelResidual`` with the residuals
     State, Control, JointEffort, FramePlacement, FrameTranslation, FrameVelocity, CoMPosition,
     ContactForce, ContactFrictionCone, ContactWrenchCone and the activations Quad, WeightedQuad,
     QuadraticBarrier, WeightedQuadraticBarrier. Anything else is an :class:`OcpError` naming the
