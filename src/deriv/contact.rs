@@ -51,7 +51,9 @@ use super::contact_kin::{
     Base, Dir, Geo, Path, PointCol, acc_rows, dacc_dq, dacc_dv, djac_col_dq, djz_dq_parts,
     djz_dq_rows, jac_col, put_rows, rows_dot,
 };
-use super::contact_loop::{Loop, loop_acc_rows, loop_jac_col};
+use super::contact_loop::{
+    Loop, loop_acc_rows, loop_dacc_dq, loop_dacc_dv, loop_djz_dq_rows, loop_jac_col,
+};
 use super::zero::{IdfozaWs, idfoza_core, idfoza_lanes_core};
 use crate::algo::internal::ltl_solve_rows_desc;
 use crate::algo::{Contact, Data};
@@ -430,22 +432,11 @@ impl ContactWs {
         self.m
     }
 
-    /// An error naming the first two-frame constraint if there is one: `what` (an algorithm)
-    /// does not support them.
-    ///
-    /// # Errors
-    /// [`Error::Argument`] naming the constraint and `what`.
-    pub(crate) fn refuse_loops(&self, model: &Model, what: &str) -> Result<()> {
-        match self.contacts.iter().position(Contact::is_loop) {
-            None => Ok(()),
-            Some(i) => Err(Error::Argument {
-                name: contact_label(model, &self.contacts, i),
-                reason: format!(
-                    "two-frame (closed-loop) constraints are not supported by {what} yet \
-                     (kkt_dynamics and kkt_derivatives support them)"
-                ),
-            }),
-        }
+    /// Whether the set holds a two-frame (closed-loop) constraint. Their contact terms have
+    /// entries between DoFs of their two chains (on no common root path), where the
+    /// tree-structured ID and IDFOZA results write nothing: callers clear those first.
+    pub(crate) fn has_loops(&self) -> bool {
+        self.loops.iter().any(Option::is_some)
     }
 
     /// An error naming the first contact with a world reference and `kp ≠ 0`, for the
@@ -1385,9 +1376,26 @@ pub(crate) fn g_matrix_with(
     cd.g.view_mut((0, 0), (n, n)).copy_from(zmat);
     let mut g = std::mem::replace(&mut cd.g, DMatrix::zeros(0, 0));
     sub_djtl_dq_tree(model, &data.s_world, cd, z2, &mut g);
-    // ∂(J z₁)/∂q rows, by running sums along each contact's path.
+    // ∂(J z₁)/∂q rows, by running sums along each contact's path (two-frame constraints:
+    // by the cumulative sums of z₁ on both chains, `loop_djz_dq_rows`).
+    let mut zc = std::mem::take(&mut cd.zc);
+    for (c, lp) in cd.loops.iter().enumerate() {
+        let Some(lp) = lp else { continue };
+        path_sums(model, data, cd, c, z, &mut zc);
+        let b = base(model, data, cd);
+        let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        let mut col = [0.0; 6];
+        for &l in &cd.paths[c].dofs {
+            put_rows(geo, &loop_djz_dq_rows(&b, geo, lp, &zc, l, Dir::None), false, &mut col);
+            g.column_mut(l).rows_mut(n + r0, geo.dim()).copy_from_slice(&col[..geo.dim()]);
+        }
+    }
+    cd.zc = zc;
     for (c, path) in cd.paths.iter().enumerate() {
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        if geo.two {
+            continue;
+        }
         let rot = path.rot;
         let cols = cd.pcols[c].iter().zip(&path.dofs).map(|(pc, &x)| (*pc, z[x]));
         // The value J z (world-aligned) for the local axes' D(Rᵀ y) = Rᵀ(D y − w_l × y).
@@ -1478,6 +1486,17 @@ pub(crate) fn contact_hessians(
         parents: &cd.parents,
     };
     let path = &cd.paths[c];
+    if let Some(lp) = &cd.loops[c] {
+        // Two-frame constraints take kp only as 3-D world-aligned loops, whose error
+        // e = p₁ − p₂ has ∂e/∂q = J_c exactly: x_e = x_j (x_e is unused for the others).
+        for &j in &path.dofs {
+            for &k in &path.dofs {
+                let xj = rows_dot(geo, &loop_jac_col(&b, geo, lp, j, Dir::Q(k)), zeta).1;
+                f(j, k, xj, xj);
+            }
+        }
+        return;
+    }
     let (r, p) = (&path.rot, &path.p);
     let part = |o: usize| Vector3::new(zeta[o], zeta[o + 1], zeta[o + 2]);
     let (za, zl) = if geo.six { (part(0), part(3)) } else { (Vector3::zeros(), part(0)) };
@@ -1540,6 +1559,15 @@ pub(crate) fn add_jz_hessian(
     path_sums(model, data, cd, c, z, zc);
     let b = base(model, data, cd);
     let (path, geo) = (&cd.paths[c], cd.geo[c]);
+    if let Some(lp) = &cd.loops[c] {
+        for &k in &path.dofs {
+            for &l in &path.dofs {
+                let rows = loop_djz_dq_rows(&b, geo, lp, zc, l, Dir::Q(k));
+                h[(l, k)] += scale * rows_dot(geo, &rows, wts).1;
+            }
+        }
+        return;
+    }
     let body = *path.joints.last().expect("path");
     for &k in &path.dofs {
         for &l in &path.dofs {
@@ -1562,6 +1590,16 @@ pub(crate) fn add_acc_hessians(
 ) {
     let b = base(model, data, cd);
     let (path, geo) = (&cd.paths[c], cd.geo[c]);
+    if let Some(lp) = &cd.loops[c] {
+        for &k in &path.dofs {
+            for &l in &path.dofs {
+                qq[(l, k)] += rows_dot(geo, &loop_dacc_dq(&b, geo, lp, l, Dir::Q(k)), zeta).1;
+                vv[(l, k)] += rows_dot(geo, &loop_dacc_dv(&b, geo, lp, l, Dir::V(k)), zeta).1;
+                qv[(l, k)] += rows_dot(geo, &loop_dacc_dq(&b, geo, lp, l, Dir::V(k)), zeta).1;
+            }
+        }
+        return;
+    }
     let body = *path.joints.last().expect("path");
     let (r, p) = (&path.rot, &path.p);
     for &k in &path.dofs {

@@ -538,7 +538,7 @@ pub(crate) fn rows(geo: Geo, r: &D33, ang: D3, lin: D3) -> Rows {
 /// Inner derivative along `q_l` of the rows of world-aligned parts `(ang, lin)` with inner
 /// derivatives `(dang, dlin)`; `wl` = `S_l.ang` (dual).
 #[inline]
-fn d_rows(geo: Geo, r: &D33, (ang, lin): Rows, (dang, dlin): Rows, wl: &D3) -> Rows {
+pub(crate) fn d_rows(geo: Geo, r: &D33, (ang, lin): Rows, (dang, dlin): Rows, wl: &D3) -> Rows {
     if geo.local {
         (r.tr_mul(&(dang - wl.cross(&ang))), r.tr_mul(&(dlin - wl.cross(&lin))))
     } else {
@@ -609,7 +609,7 @@ pub(crate) fn djac_col_dq(
 /// `(α, a_p)` for 3-D (classical), from `V_m`, `A_m`, `p` (and the inner derivatives given
 /// `D V`, `D A`, `D p`).
 #[inline]
-fn acc_parts(geo: Geo, vm: &Dm, am: &Dm, pp: &D3) -> Rows {
+pub(crate) fn acc_parts(geo: Geo, vm: &Dm, am: &Dm, pp: &D3) -> Rows {
     let a_s = at_point(am, pp);
     if geo.six {
         (am.ang(), a_s)
@@ -621,7 +621,7 @@ fn acc_parts(geo: Geo, vm: &Dm, am: &Dm, pp: &D3) -> Rows {
 
 #[inline]
 #[allow(clippy::too_many_arguments)]
-fn d_acc_parts(geo: Geo, vm: &Dm, am: &Dm, pp: &D3, dv: &Dm, da: &Dm, dp: &D3) -> Rows {
+pub(crate) fn d_acc_parts(geo: Geo, vm: &Dm, am: &Dm, pp: &D3, dv: &Dm, da: &Dm, dp: &D3) -> Rows {
     let da_s = at_point(da, pp) + am.ang().cross(dp);
     if geo.six {
         (da.ang(), da_s)

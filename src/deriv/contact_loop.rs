@@ -16,8 +16,17 @@
 //! the chain(s) that hold it: each chain's base quantities are differentiated with the chain's
 //! own direction (`Dir::None` when the DoF is off that chain), so the single-path rules of
 //! [`Base`] stay valid.
+//!
+//! Second order: the inner derivatives along `q_l` (or `q̇_l`) are written out as expressions
+//! in dual base quantities ([`loop_djac_col_dq`], [`loop_djz_dq_rows`], [`loop_dacc_dq`],
+//! [`loop_dacc_dv`]), whose tangents along the outer direction are the second derivatives. A
+//! chain's quantities move along `q_l` only if `l` is on that chain (`contact_kin`'s rules J1,
+//! J2, J6, J7, J8, J9 on the chain), frame A's point `p₁` and rotation `R₁` with chain A,
+//! `p₂` with chain B; `D(R₁ᵀ y) = R₁ᵀ(D y − w_l × y)` for `l` on chain A.
 
-use super::contact_kin::{Base, D3, Dir, Dm, Geo, Path, Rows, at_point, rows};
+use super::contact_kin::{
+    Base, D3, Dir, Dm, Geo, Path, Rows, acc_parts, at_point, d_acc_parts, d_rows, rows,
+};
 use crate::spatial::Transform;
 
 /// The two chains of a two-frame constraint.
@@ -103,5 +112,202 @@ pub(crate) fn loop_acc_rows(b: &Base, geo: Geo, lp: &Loop, dir: Dir) -> Rows {
         let pb = b.p(&lp.b.p, db);
         let acc = |v: &Dm, a: &Dm, p: &D3| at_point(a, p) + v.ang().cross(&at_point(v, p));
         rows(geo, &ra, D3::default(), acc(&va, &aa, &pa) - acc(&vb, &ab, &pb))
+    }
+}
+
+/// One chain's body velocity `V`, acceleration `A` (no gravity) and contact point `p`, or
+/// their inner derivatives along one direction (all zero for a DoF off the chain).
+#[derive(Clone, Copy, Debug, Default)]
+struct Side {
+    v: Dm,
+    a: Dm,
+    p: D3,
+}
+
+impl Loop {
+    /// The two chains' quantities with the tangents of their directions `(da, db)`.
+    #[inline]
+    fn sides(&self, b: &Base, (da, db): (Dir, Dir)) -> (Side, Side) {
+        let (ma, mb) = (self.body_a(), self.body_b());
+        let sa = Side { v: b.vel(ma, da), a: b.acc(ma, da), p: b.p(&self.a.p, da) };
+        let sb = Side { v: b.vel(mb, db), a: b.acc(mb, db), p: b.p(&self.b.p, db) };
+        (sa, sb)
+    }
+}
+
+/// Inner derivative along `q_l` (`l` on the chain of `s`, the root path of its body) with the
+/// chain's outer direction `dir`: `D V = S_l × (V − V_λ)` (J2),
+/// `D A = (A_λ − A) × S_l + (V_λ − V) × Ψ̇_l` (J6, J7), `D p = S_l.lin + S_l.ang × p`.
+#[inline]
+fn side_dq(b: &Base, s: &Side, l: usize, dir: Dir) -> Side {
+    let ll = b.parents[b.dof_joint[l]];
+    let sl = b.s(l, dir);
+    let (vl, al) = (b.vel(ll, dir), b.acc(ll, dir));
+    let psid = vl.cross(&sl);
+    Side {
+        v: sl.cross(&(s.v - vl)),
+        a: (al - s.a).cross(&sl) + (vl - s.v).cross(&psid),
+        p: at_point(&sl, &s.p),
+    }
+}
+
+/// Inner derivative along `q̇_l` (`l` on the chain of `s`): `D V = S_l` (J8),
+/// `D A = (V_λ + V_l − V) × S_l` (J9), `D p = 0`.
+#[inline]
+fn side_dv(b: &Base, s: &Side, l: usize, dir: Dir) -> Side {
+    let jl = b.dof_joint[l];
+    let sl = b.s(l, dir);
+    let (vl, vj) = (b.vel(b.parents[jl], dir), b.vel(jl, dir));
+    Side { v: sl, a: vl.cross(&sl) + vj.cross(&sl) - s.v.cross(&sl), p: D3::default() }
+}
+
+/// The inner derivative of the acceleration rows (module documentation) from the chains'
+/// quantities `sa`, `sb`, their inner derivatives `dsa`, `dsb` and `wl` (`S_l.ang` for `l` on
+/// chain A, which turns `R₁`; zero otherwise).
+fn d_acc_rows(geo: Geo, ra: &super::contact_kin::D33, sides: [&Side; 4], wl: &D3) -> Rows {
+    let [sa, sb, dsa, dsb] = sides;
+    if geo.six {
+        let (mut w, mut dw) = (sa.a - sb.a, dsa.a - dsb.a);
+        if geo.local {
+            let rel = sa.v - sb.v;
+            w = w + rel.cross(&sb.v);
+            dw = dw + (dsa.v - dsb.v).cross(&sb.v) + rel.cross(&dsb.v);
+        }
+        let base = (w.ang(), at_point(&w, &sa.p));
+        let d = (dw.ang(), at_point(&dw, &sa.p) + w.ang().cross(&dsa.p));
+        d_rows(geo, ra, base, d, wl)
+    } else {
+        let la = acc_parts(geo, &sa.v, &sa.a, &sa.p).1;
+        let lb = acc_parts(geo, &sb.v, &sb.a, &sb.p).1;
+        let dla = d_acc_parts(geo, &sa.v, &sa.a, &sa.p, &dsa.v, &dsa.a, &dsa.p).1;
+        let dlb = d_acc_parts(geo, &sb.v, &sb.a, &sb.p, &dsb.v, &dsb.a, &dsb.p).1;
+        d_rows(geo, ra, (D3::default(), la - lb), (D3::default(), dla - dlb), wl)
+    }
+}
+
+/// `∂a_c/∂q_l` of the acceleration rows (module documentation) at the current base
+/// accelerations, with its tangent along `dir`.
+pub(crate) fn loop_dacc_dq(b: &Base, geo: Geo, lp: &Loop, l: usize, dir: Dir) -> Rows {
+    let (da, db) = lp.dirs(dir);
+    let (sa, sb) = lp.sides(b, (da, db));
+    let ra = b.rot(&lp.a.rot, da);
+    let (dsa, wl) = if lp.in_a(l) {
+        (side_dq(b, &sa, l, da), b.s(l, da).ang())
+    } else {
+        (Side::default(), D3::default())
+    };
+    let dsb = if lp.in_b(l) { side_dq(b, &sb, l, db) } else { Side::default() };
+    d_acc_rows(geo, &ra, [&sa, &sb, &dsa, &dsb], &wl)
+}
+
+/// `∂a_c/∂q̇_l` of the acceleration rows, with its tangent along `dir`.
+pub(crate) fn loop_dacc_dv(b: &Base, geo: Geo, lp: &Loop, l: usize, dir: Dir) -> Rows {
+    let (da, db) = lp.dirs(dir);
+    let (sa, sb) = lp.sides(b, (da, db));
+    let ra = b.rot(&lp.a.rot, da);
+    let dsa = if lp.in_a(l) { side_dv(b, &sa, l, da) } else { Side::default() };
+    let dsb = if lp.in_b(l) { side_dv(b, &sb, l, db) } else { Side::default() };
+    d_acc_rows(geo, &ra, [&sa, &sb, &dsa, &dsb], &D3::default())
+}
+
+/// `∂J_x/∂q_l` of the Jacobian column of DoF `x` ([`loop_jac_col`]), with its tangent along
+/// `dir`: `D S_x = [l ⪯ x] S_l × S_x` (J1; `l ⪯ x` puts `l` on every chain that holds `x`),
+/// `D p_i = u_l^i` for `l` on chain `i`, `D R₁ = [w_l]× R₁` for `l` on chain A.
+pub(crate) fn loop_djac_col_dq(
+    b: &Base,
+    geo: Geo,
+    lp: &Loop,
+    x: usize,
+    l: usize,
+    dir: Dir,
+) -> Rows {
+    let (da, db) = lp.dirs(dir);
+    let (ia, ib) = (lp.in_a(x), lp.in_b(x));
+    let (la, lb) = (lp.in_a(l), lp.in_b(l));
+    let anc = b.dof_joint[l] <= b.dof_joint[x];
+    let pa = b.p(&lp.a.p, da);
+    let ra = b.rot(&lp.a.rot, da);
+    let (wl, dpa) = if la {
+        let sl = b.s(l, da);
+        (sl.ang(), at_point(&sl, &pa))
+    } else {
+        (D3::default(), D3::default())
+    };
+    // S_x and its inner derivative, differentiated along chain `d`'s direction (`on`: `l` on
+    // that chain).
+    let col = |d: Dir, on: bool| {
+        let sx = b.s(x, d);
+        let dsx = if on && anc { b.s(l, d).cross(&sx) } else { Dm::default() };
+        (sx, dsx)
+    };
+    if geo.six {
+        if ia == ib {
+            return (D3::default(), D3::default());
+        }
+        let (sx, dsx) = if ia { col(da, la) } else { col(db, lb) };
+        let sigma = if ia { 1.0 } else { -1.0 };
+        let (w, dw) = (sx * sigma, dsx * sigma);
+        let base = (w.ang(), at_point(&w, &pa));
+        let d = (dw.ang(), at_point(&dw, &pa) + w.ang().cross(&dpa));
+        d_rows(geo, &ra, base, d, &wl)
+    } else {
+        let (mut lin, mut dlin) = (D3::default(), D3::default());
+        if ia {
+            let (sx, dsx) = col(da, la);
+            lin = lin + at_point(&sx, &pa);
+            dlin = dlin + at_point(&dsx, &pa) + sx.ang().cross(&dpa);
+        }
+        if ib {
+            let pb = b.p(&lp.b.p, db);
+            let (sx, dsx) = col(db, lb);
+            let dpb = if lb { at_point(&b.s(l, db), &pb) } else { D3::default() };
+            lin = lin - at_point(&sx, &pb);
+            dlin = dlin - (at_point(&dsx, &pb) + sx.ang().cross(&dpb));
+        }
+        d_rows(geo, &ra, (D3::default(), lin), (D3::default(), dlin), &wl)
+    }
+}
+
+/// `∂(J_c z)/∂q_l` of the constraint's rows for the cumulative sums `zc`
+/// (`Z_j = Σ_{x ⪯ j} S_x z_x` on both chains, `zc[0] = 0`), with its tangent along `dir`:
+/// `J_c z` is the rows of `Z_a − Z_b` at `p₁` (6-D) or `R'(Z_a.lin + Z_a.ang × p₁ − Z_b.lin −
+/// Z_b.ang × p₂)` (3-D), and along `q_l` on a chain, `D Z = S_l × (Z − Z_λ)`, `D p = u_l`.
+pub(crate) fn loop_djz_dq_rows(
+    b: &Base,
+    geo: Geo,
+    lp: &Loop,
+    zc: &[crate::spatial::Motion],
+    l: usize,
+    dir: Dir,
+) -> Rows {
+    let (da, db) = lp.dirs(dir);
+    let (ma, mb) = (lp.body_a(), lp.body_b());
+    let (za, zb) = (b.cum(zc, ma, da, false), b.cum(zc, mb, db, false));
+    let pa = b.p(&lp.a.p, da);
+    let ra = b.rot(&lp.a.rot, da);
+    let ll = b.parents[b.dof_joint[l]];
+    let dz = |z: &Dm, d: Dir| {
+        let sl = b.s(l, d);
+        (sl.cross(&(*z - b.cum(zc, ll, d, false))), sl)
+    };
+    let (dza, wl, dpa) = if lp.in_a(l) {
+        let (dza, sl) = dz(&za, da);
+        (dza, sl.ang(), at_point(&sl, &pa))
+    } else {
+        (Dm::default(), D3::default(), D3::default())
+    };
+    let (dzb, slb) = if lp.in_b(l) { dz(&zb, db) } else { (Dm::default(), Dm::default()) };
+    if geo.six {
+        let (w, dw) = (za - zb, dza - dzb);
+        let base = (w.ang(), at_point(&w, &pa));
+        let d = (dw.ang(), at_point(&dw, &pa) + w.ang().cross(&dpa));
+        d_rows(geo, &ra, base, d, &wl)
+    } else {
+        let pb = b.p(&lp.b.p, db);
+        let dpb = at_point(&slb, &pb);
+        let lin = at_point(&za, &pa) - at_point(&zb, &pb);
+        let dlin = at_point(&dza, &pa) + za.ang().cross(&dpa)
+            - (at_point(&dzb, &pb) + zb.ang().cross(&dpb));
+        d_rows(geo, &ra, (D3::default(), lin), (D3::default(), dlin), &wl)
     }
 }

@@ -14,6 +14,7 @@
 
 use super::contact::{ContactWs, base, sub_djtl_dq, update_points};
 use super::contact_kin::{Dir, djac_col_dq, djtl_dq, rows_dot};
+use super::contact_loop::loop_djac_col_dq;
 use super::id_fo::id_derivatives_unchecked;
 use super::id_so::{SoData, id_so_unchecked};
 use crate::algo::Data;
@@ -62,6 +63,11 @@ pub(crate) fn constrained_id_derivatives_ws(
     }
     check(model, cd, v, a, lambda, q)?;
     data.check_tree(model)?;
+    // IDSVA writes the entries of DoFs on one root path only; a loop's contact term also has
+    // entries between its two chains, cleared first (`ContactWs::has_loops`).
+    if cd.has_loops() {
+        data.dtau_dq.fill(0.0);
+    }
     id_derivatives_unchecked(model, data, q, v, a, None);
     contact_terms_fo(model, data, cd, lambda);
     Ok(())
@@ -94,15 +100,31 @@ pub(crate) fn constrained_id_so_derivatives_ws(
         return reduced::constrained_id_cd(r, md, cd, Some(so), q, v, a, lambda);
     }
     check(model, cd, v, a, lambda, q)?;
-    cd.refuse_loops(model, "constrained_id_so_derivatives")?;
     data.check_tree(model)?;
     so.check_tree(model)?;
+    if cd.has_loops() {
+        data.dtau_dq.fill(0.0);
+        so.d2tau_dq2_mut().as_mut_slice().fill(0.0);
+    }
     id_so_unchecked(model, data, so, q, v, a, None, -model.gravity);
     contact_terms_fo(model, data, cd, lambda);
     let b = base(model, data, cd);
     let t = so.d2tau_dq2_mut();
     for (c, path) in cd.paths.iter().enumerate() {
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
+        if let Some(lp) = &cd.loops[c] {
+            // Two-frame constraints: λ · ∂²J_x/∂q_l∂q_k from `contact_loop`'s row kinematics.
+            let lam = &lambda.as_slice()[r0..r0 + geo.dim()];
+            for &k in &path.dofs {
+                for &l in &path.dofs {
+                    for &x in &path.dofs {
+                        let d = loop_djac_col_dq(&b, geo, lp, x, l, Dir::Q(k));
+                        t[(x, l, k)] -= rows_dot(geo, &d, lam).1;
+                    }
+                }
+            }
+            continue;
+        }
         if !geo.is_point() {
             let lam = &lambda.as_slice()[r0..r0 + geo.dim()];
             for &k in &path.dofs {

@@ -14,7 +14,8 @@ use super::contact::{
     fill_rinv, g_matrix_split, g_matrix_with, idfoza_batch, padded_rows, path_kinematics,
     sub_djtl_dq_tree, transpose_into, update_points,
 };
-use super::contact_kin::{djac_dq2, du_dq2, world_weights};
+use super::contact_kin::{Base, Dir, djac_dq2, du_dq2, put_rows, rows_dot, world_weights};
+use super::contact_loop::loop_djac_col_dq;
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_so::{SoData, id_so_unchecked};
 use super::kkt::{
@@ -406,6 +407,11 @@ fn first_order(model: &Model, data: &mut Data, im: &mut ImpactData) {
     let n = model.nv;
     let m = im.cd.dim();
     let cd = &mut im.cd;
+    // IDFOZA writes its structurally non-zero entries (DoFs on one root path) only; a loop's
+    // ∂(J_cᵀλ̂)/∂q also has entries between its two chains, so those are cleared first.
+    if cd.has_loops() {
+        im.rq.fill(0.0);
+    }
     idfoza_core(model, data, im.dv.as_slice(), &mut im.rq);
     let s = std::mem::take(&mut cd.s);
     sub_djtl_dq_tree(model, &s, cd, im.impulse.as_slice(), &mut im.rq);
@@ -466,7 +472,6 @@ pub(crate) fn impact_so_derivatives_ws(
     q: &DVector<f64>,
     vminus: &DVector<f64>,
 ) -> Result<()> {
-    im.cd.refuse_loops(model, "impact_so_derivatives")?;
     if let Some(r) = &model.reduction {
         let im_r = crate::algo::data::reduced::reduced_ws(&mut im.red, "ImpactData", model)?;
         return crate::deriv::impact::reduced::impact_so_derivatives(
@@ -674,7 +679,6 @@ pub(crate) fn impact_so_contracted_ws(
     w_vplus: &DVector<f64>,
     w_impulse: &DVector<f64>,
 ) -> Result<()> {
-    im.cd.refuse_loops(model, "impact_so_contracted")?;
     if let Some(r) = &model.reduction {
         let im_r = crate::algo::data::reduced::reduced_ws(&mut im.red, "ImpactData", model)?;
         let ic_r = crate::algo::data::reduced::reduced_ws(&mut ic.red, "ImpactContracted", model)?;
@@ -808,6 +812,36 @@ pub(crate) fn add_contact_rqq(
     for (c, path) in cd.paths.iter().enumerate() {
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
         let cols = &cd.pcols[c];
+        if let Some(lp) = &cd.loops[c] {
+            // Two-frame constraints: ∂²J_x/∂q_l∂q_k from the dual-base row kinematics of
+            // `contact_loop` (the path subspaces of the last `path_kinematics`), every pair.
+            let b = Base {
+                s: &cd.s,
+                vel: &cd.kvel,
+                acc: &cd.kacc,
+                dof_joint: &model.dof_joint,
+                parents: &model.parents,
+            };
+            let lam = &impulse[r0..r0 + geo.dim()];
+            let (d, mut col) = (geo.dim(), [0.0; 6]);
+            for &k in &path.dofs {
+                for &l in &path.dofs {
+                    let mut sum = [0.0; 6];
+                    for &x in &path.dofs {
+                        let rows = loop_djac_col_dq(&b, geo, lp, x, l, Dir::Q(k));
+                        rqq[(x, l, k)] -= rows_dot(geo, &rows, lam).1;
+                        put_rows(geo, &rows, true, &mut col);
+                        for (s, y) in sum[..d].iter_mut().zip(&col) {
+                            *s += w[x] * y;
+                        }
+                    }
+                    for (r, y) in sum[..d].iter().enumerate() {
+                        rqq[(n + r0 + r, l, k)] = *y;
+                    }
+                }
+            }
+            continue;
+        }
         if !geo.is_point() {
             // ∂²(J_cᵀλ)/∂q² and ∂²(J_c w)/∂q² from the closed form of ∂²J_x/∂q_l∂q_k,
             // symmetric in (l, k) for DoFs of different joints (the pairs l > k are the

@@ -18,8 +18,9 @@ use super::contact::{
 };
 use super::contact_kin::{
     BodyAt, Dir, PathSums, dacc_dq, dacc_dv, dap_dq, dap_dqdv, djac_dq2, djz_dq_rows, du_dq,
-    du_dq2, fill_path_sums, put_rows, world_weights,
+    du_dq2, fill_path_sums, put_rows, rows_dot, world_weights,
 };
+use super::contact_loop::{loop_dacc_dq, loop_dacc_dv, loop_djac_col_dq, loop_djz_dq_rows};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_fo::id_derivatives_unchecked;
 use super::id_so::{SoData, id_so_unchecked};
@@ -691,7 +692,6 @@ pub(crate) fn kkt_so_derivatives_ws(
             tau,
         );
     }
-    kd.cd.refuse_loops(model, "kkt_so_derivatives")?;
     kd.cd.refuse_world_ref(model, "kkt_so_derivatives")?;
     let mut so = kd.so.take().ok_or_else(|| {
         crate::error::Error::Workspace(
@@ -739,6 +739,33 @@ fn kkt_so_inner(
         let cols = &kd.cd.pcols[c];
         let body = *path.joints.last().expect("path");
         let (geo, r0) = (kd.cd.geo[c], kd.cd.row0[c]);
+        if let Some(lp) = &kd.cd.loops[c] {
+            // Two-frame constraints: −λ·∂²J_x/∂q_l∂q_k and the acceleration rows' second
+            // derivatives from the dual-base row kinematics of `contact_loop`, every pair.
+            let lam = &kd.lambda.as_slice()[r0..r0 + geo.dim()];
+            let mut col = [0.0; 6];
+            for &k in &path.dofs {
+                let (dq, dv) = (Dir::Q(k), Dir::V(k));
+                for &l in &path.dofs {
+                    for &x in &path.dofs {
+                        let t = rows_dot(geo, &loop_djac_col_dq(&b, geo, lp, x, l, dq), lam).1;
+                        rqq[(x, l, k)] -= t;
+                    }
+                    let rows = [
+                        (&mut *rqv, loop_dacc_dq(&b, geo, lp, l, dv)),
+                        (&mut *rvv, loop_dacc_dv(&b, geo, lp, l, dv)),
+                        (&mut *rqq, loop_dacc_dq(&b, geo, lp, l, dq)),
+                    ];
+                    for (t, rows) in rows {
+                        put_rows(geo, &rows, true, &mut col);
+                        for (r, x) in col[..geo.dim()].iter().enumerate() {
+                            t[(n + r0 + r, l, k)] = *x;
+                        }
+                    }
+                }
+            }
+            continue;
+        }
         if !geo.is_point() {
             let lam = &kd.lambda.as_slice()[r0..r0 + geo.dim()];
             let (rot, p) = (&path.rot, &path.p);
@@ -849,10 +876,15 @@ fn kkt_so_inner(
         let (kp, kdg) = (contact.kp, contact.kd);
         if kdg != 0.0 {
             let mut col = [0.0; 6];
+            let lp = kd.cd.loops[c].as_ref();
             for &k in &path.dofs {
                 for &l in &path.dofs {
-                    let rows =
-                        djz_dq_rows(&b, geo, &path.rot, &data.ov, body, &path.p, l, Dir::Q(k));
+                    let rows = match lp {
+                        Some(lp) => loop_djz_dq_rows(&b, geo, lp, &data.ov, l, Dir::Q(k)),
+                        None => {
+                            djz_dq_rows(&b, geo, &path.rot, &data.ov, body, &path.p, l, Dir::Q(k))
+                        }
+                    };
                     put_rows(geo, &rows, true, &mut col);
                     for (r, x) in col[..geo.dim()].iter().enumerate() {
                         rqq[(n + r0 + r, l, k)] += kdg * x;
@@ -1198,7 +1230,6 @@ pub(crate) fn kkt_so_contracted_ws(
         );
     }
     check_inputs(model, data, kd, q, v, tau)?;
-    kd.cd.refuse_loops(model, "kkt_so_contracted")?;
     kd.cd.refuse_world_ref(model, "kkt_so_contracted")?;
     let (n, m) = (model.nv, kd.cd.dim());
     check_vec("w_qdd", w_qdd, n)?;

@@ -51,9 +51,9 @@ fn kkt_first_and_second_order_match_oracle() {
     let mut w_fwd_reduced = Worst::new("kkt_dynamics = kkt_der. (reduced)");
     let mut rng = Rng::new(61);
     for gains in [false, true] {
-        let large = (!gains).then(large_contact_case);
-        for (m, spec) in contact_cases().into_iter().chain(large) {
-            let mut cs = contacts_of(&m, &spec, &mut rng);
+        let large = (!gains).then(large_contact_case).map(|(m, s)| (m, as_loop_spec(&s)));
+        for (m, spec) in family_cases().into_iter().chain(large) {
+            let mut cs = constraints_of(&m, &spec, &mut rng);
             if gains {
                 cs = with_gains(&cs, &mut rng);
             }
@@ -150,10 +150,12 @@ fn impact_first_and_second_order_match_oracle() {
     // The forward-only `impact_dynamics` against the forward outputs of `impact_derivatives`.
     let mut w_fwd = Worst::new("impact_dynamics = impact_der.");
     let mut rng = Rng::new(62);
-    for (m, spec) in contact_cases().into_iter().chain(std::iter::once(large_contact_case())) {
+    let large = large_contact_case();
+    let large = (large.0, as_loop_spec(&large.1));
+    for (m, spec) in family_cases().into_iter().chain(std::iter::once(large)) {
         let large = m.nv() >= 32;
         for e in [0.0, 0.4].into_iter().filter(|&e| !large || e > 0.0) {
-            let cs = contacts_of(&m, &spec, &mut rng);
+            let cs = constraints_of(&m, &spec, &mut rng);
             let (q, vminus, _) = random_state(&m, &mut rng);
             let mut d = Data::new(&m);
             let mut cd = ContactData::with_second_order(&m, &cs).unwrap();
@@ -209,8 +211,8 @@ fn constrained_id_first_and_second_order_match_oracle() {
         Worst::new("constrained d2tau_dq2"),
     ];
     let mut rng = Rng::new(63);
-    for (m, spec) in contact_cases() {
-        let cs = contacts_of(&m, &spec, &mut rng);
+    for (m, spec) in family_cases() {
+        let cs = constraints_of(&m, &spec, &mut rng);
         let (q, v, a) = random_state(&m, &mut rng);
         let nrows: usize = cs.iter().map(|c| c.dim()).sum();
         let lam = DVector::from_fn(nrows, |_, _| rng.range(-20.0, 20.0));

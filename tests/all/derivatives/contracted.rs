@@ -5,7 +5,7 @@
 
 use crate::util::*;
 use nalgebra::{DMatrix, DVector};
-use sodyn::algo::Data;
+use sodyn::algo::{Contact, Data};
 use sodyn::deriv::*;
 use sodyn::model::{Model, builtin};
 use sodyn::reference;
@@ -133,9 +133,9 @@ fn contracted_kkt_matches_dense_tensors_and_ad() {
     let mut ad = names.map(Worst::new);
     let mut rng = Rng::new(41);
     for (gains, (m, spec)) in
-        [false, true].into_iter().flat_map(|g| contact_cases().into_iter().map(move |c| (g, c)))
+        [false, true].into_iter().flat_map(|g| family_cases().into_iter().map(move |c| (g, c)))
     {
-        let mut contacts = contacts_of(&m, &spec, &mut rng);
+        let mut contacts = constraints_of(&m, &spec, &mut rng);
         if gains {
             contacts = with_gains(&contacts, &mut rng);
         }
@@ -186,10 +186,11 @@ fn contracted_impact_matches_dense_tensors_and_ad() {
     let names = ["C_qq", "C_qvminus"];
     let mut dense = names.map(Worst::new);
     let mut ad = names.map(Worst::new);
+    let mut ad_loops = ["C_qq (loops)", "C_qvminus (loops)"].map(Worst::new);
     let mut rng = Rng::new(43);
-    for (m, spec) in contact_cases() {
+    for (m, spec) in family_cases() {
         for e in [0.0, 0.4] {
-            let contacts = contacts_of(&m, &spec, &mut rng);
+            let contacts = constraints_of(&m, &spec, &mut rng);
             let (q, v, _) = random_state(&m, &mut rng);
             let nrows: usize = contacts.iter().map(|c| c.dim()).sum();
             let (wv, wl) = (weight(m.nv(), &mut rng), weight(nrows, &mut rng));
@@ -217,6 +218,7 @@ fn contracted_impact_matches_dense_tensors_and_ad() {
                 (&r.d2vplus_dq2, &r.d2impulse_dq2),
                 (&r.d2vplus_dqdvminus, &r.d2impulse_dqdvminus),
             ];
+            let ad = if contacts.iter().any(Contact::is_loop) { &mut ad_loops } else { &mut ad };
             for ((wst, (tv, tl)), g) in ad.iter_mut().zip(refs).zip(&got) {
                 wst.add(rel_err_mat(g, &(contract(tv, &wv) + contract(tl, &wl))), &at);
             }
@@ -224,5 +226,11 @@ fn contracted_impact_matches_dense_tensors_and_ad() {
     }
     for x in dense.iter().chain(&ad) {
         x.check(1e-11);
+    }
+    // The loop cases against the oracle at the dense tests' 1e-10: the humanoid's welded hands
+    // with its feet joined by a 3-D loop measured 6.6e-11 there, where our contracted and
+    // dense results agree to 1e-13 (the solve's conditioning, not a missing term).
+    for x in &ad_loops {
+        x.check(1e-10);
     }
 }

@@ -186,6 +186,102 @@ pub fn contact_cases() -> Vec<(Model, Vec<ContactSpec>)> {
     ]
 }
 
+/// A constraint of a test case that may close a loop: frame A, frame B (`None`: the world),
+/// type, reference.
+pub type LoopSpec = (&'static str, Option<&'static str>, ContactType, ContactReference);
+
+/// The two-frame (closed-loop) cases of the contact-family tests: the four-bar (3-D, both
+/// references), the delta's three loops, 3-D loops between the quadruped's feet mixed with
+/// 3-D and 6-D world contacts, 6-D loops along a serial chain (both references), the
+/// humanoid's hands welded together (6-D, both references) standing on both soles or with its
+/// feet joined by a 3-D loop, and a random tree with a local 3-D loop and a 6-D world contact.
+/// (A 6-D weld between two of the quadruped's 3-DoF feet holds six rows with six DoFs and is
+/// ill-conditioned: the oracle and the first order then differ by 1e-10.)
+pub fn loop_cases() -> Vec<(Model, Vec<LoopSpec>)> {
+    vec![
+        (builtin::fourbar(), vec![("coupler_tip", Some("rocker_tip"), D3, Lwa)]),
+        (builtin::fourbar(), vec![("coupler_tip", Some("rocker_tip"), D3, Local)]),
+        (
+            builtin::delta(),
+            vec![
+                ("forearm_tip_1", Some("platform_1"), D3, Lwa),
+                ("forearm_tip_2", Some("platform_2"), D3, Local),
+                ("forearm_tip_3", Some("platform_3"), D3, Lwa),
+            ],
+        ),
+        (
+            builtin::quadruped(),
+            vec![
+                ("LF_FOOT", Some("RH_FOOT"), D3, Lwa),
+                ("RF_FOOT", None, D3, Lwa),
+                ("LH_FOOT", None, D3, Local),
+            ],
+        ),
+        (
+            with_random_armature(&builtin::quadruped(), 7, true),
+            vec![("LF_FOOT", Some("RF_FOOT"), D3, Local), ("RH_FOOT", None, D6, Lwa)],
+        ),
+        (builtin::serial_chain(10), vec![("ee", Some("link_2"), D6, Local)]),
+        (
+            with_random_armature(&builtin::serial_chain(10), 8, false),
+            vec![("ee", Some("link_3"), D6, Lwa)],
+        ),
+        (
+            builtin::humanoid(),
+            vec![
+                ("left_hand", Some("right_hand"), D6, Local),
+                ("left_sole", None, D6, Lwa),
+                ("right_sole", None, D6, Local),
+            ],
+        ),
+        (
+            builtin::humanoid(),
+            vec![
+                ("right_hand", Some("left_hand"), D6, Lwa),
+                ("left_sole", Some("right_sole"), D3, Local),
+            ],
+        ),
+        (
+            builtin::random_tree(10, 4, true),
+            vec![("body_9", Some("body_5"), D3, Local), ("body_7", None, D6, Lwa)],
+        ),
+    ]
+}
+
+/// World contacts as [`LoopSpec`]s.
+pub fn as_loop_spec(spec: &[ContactSpec]) -> Vec<LoopSpec> {
+    spec.iter().map(|&(f, kind, reference)| (f, None, kind, reference)).collect()
+}
+
+/// [`contact_cases`] (world contacts, as [`LoopSpec`]s) followed by [`loop_cases`].
+pub fn family_cases() -> Vec<(Model, Vec<LoopSpec>)> {
+    let world = contact_cases().into_iter().map(|(m, spec)| (m, as_loop_spec(&spec)));
+    world.chain(loop_cases()).collect()
+}
+
+/// The constraints of `spec` on `m`: as [`contacts_of`] (the same random draws for a world
+/// contact), and for a loop frame B's contact frame placed at random within about 5 cm and a
+/// random rotation of its link frame too.
+pub fn constraints_of(m: &Model, spec: &[LoopSpec], rng: &mut Rng) -> Vec<Contact> {
+    spec.iter()
+        .map(|&(a, b, kind, reference)| {
+            let c = contacts_of(m, &[(a, kind, reference)], rng).remove(0);
+            match b {
+                Some(b) => c.with_frame2(m, b, Some(&random_placement(rng))).unwrap(),
+                None => c,
+            }
+        })
+        .collect()
+}
+
+/// A placement within about 5 cm of the identity, with a random rotation.
+pub fn random_placement(rng: &mut Rng) -> sodyn::spatial::Transform {
+    exp6(&Motion::new(
+        Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.7,
+        Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.05,
+    ))
+}
+
 /// A case with nv ≥ 32, where the KKT and impact second order take their symmetric products
 /// (`kkt::SYM_MIN_NV`); its hyper-dual oracle takes seconds, so only those tests run it.
 pub fn large_contact_case() -> (Model, Vec<ContactSpec>) {
@@ -212,11 +308,16 @@ pub fn contacts_of(m: &Model, spec: &[ContactSpec], rng: &mut Rng) -> Vec<Contac
         .collect()
 }
 
-/// `contacts` with random Baumgarte gains (`kp` in [0, 50), `kd` in [0, 10)).
+/// `contacts` with random Baumgarte gains (`kp` in [0, 50), `kd` in [0, 10)); `kp` is zero on
+/// the two-frame constraints that take none (all but the 3-D world-aligned loops).
 pub fn with_gains(contacts: &[Contact], rng: &mut Rng) -> Vec<Contact> {
     contacts
         .iter()
-        .map(|c| c.clone().with_baumgarte(rng.range(0.0, 50.0), rng.range(0.0, 10.0)).unwrap())
+        .map(|c| {
+            let (kp, kd) = (rng.range(0.0, 50.0), rng.range(0.0, 10.0));
+            let kp_ok = !c.is_loop() || (c.kind == D3 && c.reference == Lwa);
+            c.clone().with_baumgarte(if kp_ok { kp } else { 0.0 }, kd).unwrap()
+        })
         .collect()
 }
 
