@@ -65,6 +65,10 @@ pub struct Data {
     pub(crate) sdot: Vec<Motion>,
     /// `∂τ/∂q` (tangent space).
     pub(crate) dtau_dq: DMatrix<f64>,
+    /// `dtau_dq` holds entries between two chains (the contact term of a two-frame
+    /// constraint) that the tree algorithms, which write root-path entries only, would leave
+    /// stale: the next inverse-dynamics derivative clears the matrix first.
+    pub(crate) dtau_dq_off_path: bool,
     /// `∂τ/∂q̇`.
     pub(crate) dtau_dv: DMatrix<f64>,
     /// `∂q̈/∂q` of forward dynamics.
@@ -630,6 +634,7 @@ impl Data {
             psidd: vec![Motion::zero(); nv],
             sdot: vec![Motion::zero(); nv],
             dtau_dq: DMatrix::zeros(nv, nv),
+            dtau_dq_off_path: false,
             dtau_dv: DMatrix::zeros(nv, nv),
             dqdd_dq: DMatrix::zeros(nv, nv),
             dqdd_dv: DMatrix::zeros(nv, nv),

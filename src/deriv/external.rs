@@ -70,6 +70,7 @@ pub(crate) fn constrained_id_derivatives_ws(
     }
     id_derivatives_unchecked(model, data, q, v, a, None);
     contact_terms_fo(model, data, cd, lambda);
+    data.dtau_dq_off_path = cd.has_loops();
     Ok(())
 }
 
@@ -108,6 +109,8 @@ pub(crate) fn constrained_id_so_derivatives_ws(
     }
     id_so_unchecked(model, data, so, q, v, a, None, -model.gravity);
     contact_terms_fo(model, data, cd, lambda);
+    data.dtau_dq_off_path = cd.has_loops();
+    so.d2tau_dq2_off_path = cd.has_loops();
     let b = base(model, data, cd);
     let t = so.d2tau_dq2_mut();
     for (c, path) in cd.paths.iter().enumerate() {

@@ -107,6 +107,9 @@ pub(crate) fn id_derivatives_placed(
     a: &DVector<f64>,
     fext: Option<&[Force]>,
 ) {
+    if std::mem::take(&mut data.dtau_dq_off_path) {
+        data.dtau_dq.fill(0.0);
+    }
     forward_pass_world_placed(model, data, v, a, fext, -model.gravity);
     for i in (1..model.njoints()).rev() {
         backward_step_fo(model, data, i);

@@ -36,6 +36,8 @@ pub struct SoData {
     /// stay zero); and `∂²τ/∂q∂q̇` is stored by blocks of eight pages (see [`qv_offset`]), not
     /// column-major.
     upper: bool,
+    /// As `Data::dtau_dq_off_path`, for `d2tau_dq2`.
+    pub(crate) d2tau_dq2_off_path: bool,
     /// `root[j]`: DoF `j` belongs to a joint attached to the world.
     root: Vec<bool>,
     /// Per DoF, contiguous: `[S, Ψ̇, Ψ̈, Ψ̇ + Ṡ]` (ground frame), refreshed on every call.
@@ -100,6 +102,7 @@ impl SoData {
             d2tau_dqdv: Tensor3::zeros(n, n, n),
             dm_dq: Tensor3::zeros(nd, nd, nd),
             upper,
+            d2tau_dq2_off_path: false,
             root: (0..n).map(|k| model.parents[model.dof_joint[k]] == 0).collect(),
             dof: vec![[[0.0; 6]; 4]; n],
             anc_dofs,
@@ -266,6 +269,12 @@ pub(crate) fn id_so_unchecked(
     fext: Option<&[Force]>,
     a0: Motion,
 ) {
+    if std::mem::take(&mut data.dtau_dq_off_path) {
+        data.dtau_dq.fill(0.0);
+    }
+    if std::mem::take(&mut so.d2tau_dq2_off_path) {
+        so.d2tau_dq2.as_mut_slice().fill(0.0);
+    }
     forward_pass_world(model, data, q, v, a, fext, a0);
     fill_dof(data, so);
     let n = model.nv;

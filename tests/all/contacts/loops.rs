@@ -599,3 +599,37 @@ fn loops_on_reused_workspaces_match_fresh_ones() {
     let e = rel_err_tensor(d1.id_so().unwrap().d2tau_dq2(), &t);
     assert!(e < 1e-12, "constrained ID d2tau_dq2: {e:e}");
 }
+
+/// After constrained inverse dynamics with a 6-D loop (entries between its two chains in
+/// `∂τ/∂q` and `∂²τ/∂q²`), plain inverse-dynamics derivatives, their second order and the
+/// forward-dynamics derivatives on the same `Data` equal those of a fresh `Data`: the tree
+/// algorithms write root-path entries only, so the loop's entries must not stay behind.
+#[test]
+fn tree_derivatives_after_loops_on_one_data_match_a_fresh_data() {
+    let mut rng = Rng::new(168);
+    let m = builtin::humanoid();
+    let spec = [("left_hand", Some("right_hand"), D6, Local)];
+    let cs = constraints(&m, &spec, &mut rng);
+    let (q, v, a) = random_state(&m, &mut rng);
+    let lam = DVector::from_fn(6, |_, _| rng.normal() * 10.0);
+    let mut fresh = Data::with_second_order(&m);
+    id_derivatives(&m, &mut fresh, &q, &v, &a, None).unwrap();
+    let want_id = fresh.dtau_dq().clone();
+    let want_so = id_so_derivatives(&m, &mut fresh, &q, &v, &a, None).unwrap().d2tau_dq2().clone();
+    fd_derivatives(&m, &mut fresh, &q, &v, &a, None).unwrap();
+    let want_fd = fresh.dqdd_dq().clone();
+
+    let (mut d, mut cd) = (Data::with_second_order(&m), ContactData::new(&m, &cs).unwrap());
+    constrained_id_derivatives(&m, &mut d, &mut cd, &q, &v, &a, &lam).unwrap();
+    id_derivatives(&m, &mut d, &q, &v, &a, None).unwrap();
+    assert!((d.dtau_dq() - &want_id).amax() < 1e-12, "id_derivatives after constrained ID");
+    constrained_id_so_derivatives(&m, &mut d, &mut cd, &q, &v, &a, &lam).unwrap();
+    let e = rel_err_tensor(
+        id_so_derivatives(&m, &mut d, &q, &v, &a, None).unwrap().d2tau_dq2(),
+        &want_so,
+    );
+    assert!(e < 1e-12, "id_so_derivatives after constrained ID SO: {e:e}");
+    constrained_id_derivatives(&m, &mut d, &mut cd, &q, &v, &a, &lam).unwrap();
+    fd_derivatives(&m, &mut d, &q, &v, &a, None).unwrap();
+    assert!((d.dqdd_dq() - &want_fd).amax() < 1e-10, "fd_derivatives after constrained ID");
+}
