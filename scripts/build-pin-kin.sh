@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
-# Build scripts/pin_kin_bench.cpp (Pinocchio 4.1 kinematics timings) against the headers and
+# Build scripts/pin_kin_bench.cpp (Pinocchio 4.1 kinematics timings), or another harness of
+# scripts/ (pin_loop_bench: the constrained dynamics with loops), against the headers and
 # shared libraries of the PyPI wheels in $PEER_VENV, with the flags of ../shared/peer/build.sh
 # (its `native` variant: Pinocchio's templates instantiated here, -O3 -march=native).
 #
-#   scripts/build-pin-kin.sh           # -> $PEER_BUILD/pin_kin_bench (default /tmp/peer/build)
+#   scripts/build-pin-kin.sh                   # -> $PEER_BUILD/pin_kin_bench (default /tmp/peer/build)
+#   scripts/build-pin-kin.sh pin_loop_bench    # -> $PEER_BUILD/pin_loop_bench
 #
 # As build.sh explains: the wheel's libraries are built without AVX, so Eigen's alignment there
 # is 16 bytes and its aligned_malloc is plain malloc; a Model filled inside libpinocchio_parsers
@@ -16,6 +18,8 @@ HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 PEER_VENV="${PEER_VENV:-/tmp/peer/venv}"
 OUT_DIR="${PEER_BUILD:-/tmp/peer/build}"
 CXX="${CXX:-g++}"
+NAME="${1:-pin_kin_bench}"
+[ -f "$HERE/$NAME.cpp" ] || { echo "no $HERE/$NAME.cpp" >&2; exit 1; }
 
 PY="$PEER_VENV/bin/python"
 SITE="$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
@@ -53,8 +57,8 @@ LINK=(
   -lurdfdom_model -lboost_filesystem -lboost_serialization
 )
 mkdir -p "$OUT_DIR"
-echo "building $OUT_DIR/pin_kin_bench ..." >&2
-"$CXX" "${OPT[@]}" "${DEFINES[@]}" "${INCLUDES[@]}" "$HERE/pin_kin_bench.cpp" \
-  -o "$OUT_DIR/pin_kin_bench.tmp" "${LINK[@]}"
-mv "$OUT_DIR/pin_kin_bench.tmp" "$OUT_DIR/pin_kin_bench"
-echo "done: $OUT_DIR/pin_kin_bench" >&2
+echo "building $OUT_DIR/$NAME ..." >&2
+"$CXX" "${OPT[@]}" "${DEFINES[@]}" "${INCLUDES[@]}" "$HERE/$NAME.cpp" \
+  -o "$OUT_DIR/$NAME.tmp" "${LINK[@]}"
+mv "$OUT_DIR/$NAME.tmp" "$OUT_DIR/$NAME"
+echo "done: $OUT_DIR/$NAME" >&2
