@@ -99,13 +99,24 @@ def _register_ffi() -> Tuple[bool, str]:
 
 _FFI_OK, _FFI_REASON = _register_ffi()
 # The functions that are FFI custom calls: value, first order and (but for crba) second order.
-_FFI_FUNCTIONS = ("rnea", "aba", "nonlinear_effects", "crba")
+_FFI_FUNCTIONS = (
+    "rnea",
+    "aba",
+    "nonlinear_effects",
+    "crba",
+    "kkt_dynamics",
+    "impact_dynamics",
+    "frame_translation",
+    "frame_placement",
+    "center_of_mass",
+)
 _use_ffi = _FFI_OK
 
 
 def uses_ffi() -> bool:
-    """Whether ``rnea``, ``aba``, ``nonlinear_effects`` and ``crba`` run as XLA FFI custom
-    calls (else ``jax.pure_callback``)."""
+    """Whether the functions run as XLA FFI custom calls (else ``jax.pure_callback``): all of
+    them, value, first and second order, but the second order of ``crba`` and, for models
+    with quaternion or planar coordinates, the first and second order (docs/interop.md)."""
     return _use_ffi
 
 
@@ -113,34 +124,81 @@ def _swap_last(t):
     return jnp.swapaxes(t, -1, -2)
 
 
+def _ffi_attrs(spec: _interop.Spec) -> dict:
+    """The static attributes of a spec's custom calls: the model's handle in the extension's
+    registry, and the contact set's handle or the frame index."""
+    attrs = {"model": np.int64(_sodyn._jax_ffi_model(spec.model))}
+    if spec.name == "kkt_dynamics":
+        attrs["contacts"] = np.int64(_sodyn._jax_ffi_contacts(spec.model, list(spec.static[0])))
+    elif spec.name == "impact_dynamics":
+        contacts, e = spec.static
+        attrs["contacts"] = np.int64(
+            _sodyn._jax_ffi_contacts(spec.model, list(contacts), float(e))
+        )
+    elif spec.name in ("frame_translation", "frame_placement"):
+        attrs["frame"] = np.int64(spec.static[0])
+    return attrs
+
+
+def _ffi_hessian_blocks(name: str, ts) -> dict:
+    """The ``hess_blocks`` of a spec from the dense tensors of its ``_second`` handler (the
+    order of ``id_so_derivatives``, ``fd_so_derivatives``, ``kkt_derivatives(order=2)``,
+    ``impact_derivatives(order=2)``; one tensor for the frame functions and the centre of
+    mass)."""
+    if name in ("rnea", "aba", "nonlinear_effects", "kkt_dynamics"):
+        per = 3 if name == "nonlinear_effects" else 4
+        blocks = {}
+        for o in range(len(ts) // per):
+            t = ts[per * o : per * (o + 1)]
+            blocks[(o, 0, 0)], blocks[(o, 1, 1)], blocks[(o, 0, 1)] = t[0], t[1], t[2]
+            blocks[(o, 1, 0)] = _swap_last(t[2])
+            if per == 4:
+                blocks[(o, 2, 0)] = t[3]
+                blocks[(o, 0, 2)] = _swap_last(t[3])
+        return blocks
+    if name == "impact_dynamics":
+        blocks = {}
+        for o in range(2):
+            blocks[(o, 0, 0)], blocks[(o, 0, 1)] = ts[2 * o], ts[2 * o + 1]
+            blocks[(o, 1, 0)] = _swap_last(ts[2 * o + 1])
+        return blocks
+    return {(0, 0, 0): ts[0]}
+
+
 def _ffi_calls(spec: _interop.Spec, out_sds, jac_sds):
     """The value, first-order and second-order functions of a spec of ``_FFI_FUNCTIONS`` as
-    FFI calls (the model is the ``model`` attribute: its handle in the extension's registry);
-    the second order is ``None`` for ``crba`` (its callback stays)."""
-    handle = np.int64(_sodyn._jax_ffi_model(spec.model))
+    FFI calls (static data as attributes: :func:`_ffi_attrs`); the second order is ``None``
+    for ``crba`` (its callback stays)."""
+    attrs = _ffi_attrs(spec)
     nv = spec.model.nv
     target = f"sodyn_{spec.name}"
 
     def make(suffix, sds):
         call = jax.ffi.ffi_call(target + suffix, sds, vmap_method="broadcast_all")
-        return lambda *xs: tuple(call(*xs, model=handle))
+        return lambda *xs: tuple(call(*xs, **attrs))
 
     value, first = make("", out_sds), make("_first", out_sds + jac_sds)
     if spec.name == "crba":
         return value, first, None
-    # (d2/dq2, d2/dv2, d2/dqdv[, d2/dxdq]) of id_so_derivatives / fd_so_derivatives
-    ntensors = 3 if spec.name == "nonlinear_effects" else 4
-    t3 = jax.ShapeDtypeStruct((nv, nv, nv), jnp.float64)
-    dense = make("_second", (t3,) * ntensors)
+    f64 = jnp.float64
+    if spec.name in ("rnea", "aba", "nonlinear_effects"):
+        t3 = jax.ShapeDtypeStruct((nv, nv, nv), f64)
+        tensors = (t3,) * (3 if spec.name == "nonlinear_effects" else 4)
+    elif spec.name == "kkt_dynamics":
+        (nl,) = out_sds[1].shape
+        tensors = (jax.ShapeDtypeStruct((nv, nv, nv), f64),) * 4 + (
+            jax.ShapeDtypeStruct((nl, nv, nv), f64),
+        ) * 4
+    elif spec.name == "impact_dynamics":
+        (nl,) = out_sds[1].shape
+        tv, tl = (jax.ShapeDtypeStruct((n, nv, nv), f64) for n in (nv, nl))
+        tensors = (tv, tv, tl, tl)
+    else:  # frame_translation, frame_placement, center_of_mass: d2y/dq2
+        tensors = (jax.ShapeDtypeStruct(out_sds[0].shape + (nv, nv), f64),)
+    dense = make("_second", tensors)
 
     def second(*xs):
-        # the blocks of Rnea._hess / Aba._hess / NonlinearEffects._hess
-        ts = dense(*xs)
-        blocks = {(0, 0, 0): ts[0], (0, 1, 1): ts[1], (0, 0, 1): ts[2]}
-        blocks[(0, 1, 0)] = _swap_last(ts[2])
-        if ntensors == 4:
-            blocks[(0, 2, 0)] = ts[3]
-            blocks[(0, 0, 2)] = _swap_last(ts[3])
+        blocks = _ffi_hessian_blocks(spec.name, dense(*xs))
         return tuple(blocks[k] for k in spec.hess_blocks)
 
     return value, first, second
