@@ -24,7 +24,9 @@ The FFI and callback paths are two builds of the same ``sodyn.jax`` functions in
 ``--functions kkt_dynamics,impact_dynamics,frame_translation,frame_placement,center_of_mass``
 (or ``--functions new``) measures those functions instead of ``aba`` (on the model's last frame,
 a 3-D contact at ``(0, 0.02, 0.1)`` in it, restitution 0.5 for the impact), with the same
-interleaved rounds. ``direct`` is the numpy API's call computing the value (``kkt_derivatives``
+interleaved rounds; each variant's time in a round is the median of 5 blocks (3 for the batched
+rows) of 200 calls (20 on the callback path; 1 for the chains and batches), so that a block that
+lost the CPU to another process does not decide the round. ``direct`` is the numpy API's call computing the value (``kkt_derivatives``
 / ``impact_derivatives``, which the callback path also uses for the value, ``frame_placement``,
 ``center_of_mass``) and ``direct first`` the calls of the value and first derivatives
 (``kkt_derivatives``, ``impact_derivatives``, ``frame_placement`` + ``frame_jacobian``,
@@ -58,6 +60,12 @@ def once(fn, inner):
     for _ in range(inner):
         fn()
     return (time.perf_counter() - t0) / inner
+
+
+def blocks(fn, inner, reps=5):
+    """The median over ``reps`` blocks of ``inner`` calls, per call (a block that lost the CPU
+    to another process on the shared machine does not decide the round)."""
+    return statistics.median(once(fn, inner) for _ in range(reps))
 
 
 def build(model, ffi: bool, K: int, one, many):
@@ -195,23 +203,23 @@ def bench_functions(model, names, args):
             for k in range(n):
                 first(*[x[k] for x in many_np])
 
-        inner = {"ffi": 1000, "callback": 100}
+        inner = {"ffi": 200, "callback": 20}
         rows: dict = {}
 
         def add(key, t):
             rows.setdefault(key, []).append(t)
 
         for _ in range(args.rounds):
-            add("direct", once(lambda: direct(*one_np), 1000))
-            add("trivial", once(lambda: trivial(*one).block_until_ready(), 1000))
-            add("direct_chain", once(direct_chain, max(1, 1000 // K)) / K)
-            add("direct_many", once(direct_many, 1))
-            add("first_many", once(first_many, 1))
+            add("direct", blocks(lambda: direct(*one_np), 200))
+            add("trivial", blocks(lambda: trivial(*one).block_until_ready(), 200))
+            add("direct_chain", blocks(direct_chain, 1) / K)
+            add("direct_many", blocks(direct_many, 1, 3))
+            add("first_many", blocks(first_many, 1, 3))
             for p, (fj, fk, fb, ff) in paths.items():
-                add((p, "jit"), once(lambda: jax.block_until_ready(fj(*one)), inner[p]))
-                add((p, "chain"), once(lambda: fk(*one).block_until_ready(), 2) / K)
-                add((p, "vmap"), once(lambda: jax.block_until_ready(fb(*many)), 2))
-                add((p, "first"), once(lambda: jax.block_until_ready(ff(*many)), 2))
+                add((p, "jit"), blocks(lambda: jax.block_until_ready(fj(*one)), inner[p]))
+                add((p, "chain"), blocks(lambda: fk(*one).block_until_ready(), 1) / K)
+                add((p, "vmap"), blocks(lambda: jax.block_until_ready(fb(*many)), 1, 3))
+                add((p, "first"), blocks(lambda: jax.block_until_ready(ff(*many)), 1, 3))
 
         med = statistics.median
 

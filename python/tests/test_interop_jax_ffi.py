@@ -28,6 +28,9 @@ from sodyn import _sodyn  # noqa: E402
 
 from interop_cases import (  # noqa: E402
     CASES,
+    QCASE_BY_ID,
+    QCASES,
+    q_oracle,
     arm,
     central_jacobian,
     chain,
@@ -628,3 +631,59 @@ def test_a_wrong_call_of_a_new_handler_is_an_error_not_a_crash():
         jax.block_until_ready(jax.jit(jax.vmap(f))(B))
     with pytest.raises(RuntimeErr, match="center_of_mass: .*coordinate 0 is not finite"):
         jax.block_until_ready(jax.jit(lambda q_: sj.center_of_mass(model, q_))(np.full(nq, np.nan)))
+
+
+# ------------------------------------------------------------------------------------------
+# Quaternion and planar coordinates: the chart in JAX operations around the FFI calls
+# ------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("case", QCASES, ids=lambda c: c.id)
+def test_chart_runs_on_the_ffi_path_and_equals_the_callback_path(case):
+    """For models with quaternion or planar coordinates the first and second order are FFI
+    calls (tangent-space blocks) with the chart (``P``, ``d²θ/dq²``) applied in JAX operations:
+    no callback (but crba's second order), and the same Jacobians and Hessians as the callback
+    path (chart in numpy) to 1e-12 relative; the central-difference checks of
+    ``test_interop_jax.py`` run on this path."""
+    xs, w, _, _ = q_oracle(case.id)
+    f = _jfn(case)
+    args = tuple(range(len(xs)))
+    g = lambda *a: _flat(f(*a))  # noqa: E731
+    L = lambda *a: jnp.dot(jnp.asarray(w), g(*a))  # noqa: E731
+
+    def run():
+        return (
+            _leaves(jax.jit(jax.jacfwd(g, argnums=args))(*xs)),
+            _leaves(jax.jit(jax.jacrev(g, argnums=args))(*xs)),
+            _leaves(jax.jit(jax.hessian(L, argnums=args))(*xs)),
+        )
+
+    text = str(jax.make_jaxpr(jax.jacfwd(jax.jacfwd(g)))(*xs))
+    if case.fn == "crba":
+        assert "ffi_call" in text
+    else:
+        assert "pure_callback" not in text and "ffi_call" in text
+    got, want = run(), _callback_path(run)
+    worst = 0.0
+    for gs, ws in zip(got, want):
+        for a, b in zip(gs, ws):
+            err = float(np.abs(a - b).max(initial=0.0) / max(1.0, np.abs(b).max(initial=0.0)))
+            worst = max(worst, err)
+    assert worst <= 1e-12, (case.id, worst)
+
+
+def test_chart_on_the_ffi_path_vmap_equals_sequential():
+    """vmap of the chart path against sequential calls: the FFI blocks bit for bit, the
+    chart's XLA products to 1e-14 relative."""
+    for cid in ("kkt-flyer", "aba-tree", "frame_placement-flyer"):
+        case = QCASE_BY_ID[cid]
+        f = _jfn(case)
+        states = [state_of(case, 80 + n) for n in range(4)]
+        stacked = [np.stack([s[a] for s in states]) for a in range(len(states[0]))]
+        args = tuple(range(len(stacked)))
+        jac = _leaves(jax.jit(jax.vmap(jax.jacfwd(f, argnums=args)))(*stacked))
+        one = jax.jit(jax.jacfwd(f, argnums=args))
+        for n, s in enumerate(states):
+            for got, want in zip(jac, _leaves(one(*s))):
+                err = np.abs(got[n] - want).max(initial=0.0) / max(1.0, np.abs(want).max())
+                assert err <= 1e-14, (cid, n, err)

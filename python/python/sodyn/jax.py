@@ -204,6 +204,114 @@ def _ffi_calls(spec: _interop.Spec, out_sds, jac_sds):
     return value, first, second
 
 
+def _quat_parts(n):
+    """``(L, R)`` of a unit quaternion ``n = [x y z w]``: ``L d = vec(conj(n) ⊗ d)`` (3×4) and
+    the rotation matrix (the numpy chart's ``_quat_left_conj``, ``_quat_rotation``)."""
+    x, y, z, w = n[0], n[1], n[2], n[3]
+    v = n[:3]
+    L = jnp.concatenate([w * jnp.eye(3) - _skew3(v), -v[:, None]], axis=1)
+    R = jnp.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    return L, R
+
+
+def _skew3(w):
+    z = jnp.zeros((), w.dtype)
+    return jnp.array([[z, -w[2], w[1]], [w[2], z, -w[0]], [-w[1], w[0], z]])
+
+
+def _chart_jacobian(chart: _interop.Chart, q):
+    """``P (nv, nq) = dθ/dq`` at one configuration, in JAX operations (``Chart.jacobian``)."""
+    P = jnp.zeros((chart.nv, chart.nq), q.dtype)
+    for kind, iq, iv, _, nv in chart.joints:
+        if kind in ("free_flyer", "spherical"):
+            o = iq + 3 if kind == "free_flyer" else iq
+            quat = q[o : o + 4]
+            s = jnp.linalg.norm(quat)
+            L, R = _quat_parts(quat / s)
+            P = P.at[iv : iv + 3, o : o + 4].set(2 * L / s)
+            if kind == "free_flyer":
+                P = P.at[iv + 3 : iv + 6, iq : iq + 3].set(R.T)
+        elif kind == "planar":
+            c, sn = jnp.cos(q[iq + 2]), jnp.sin(q[iq + 2])
+            P = P.at[iv : iv + 2, iq : iq + 2].set(jnp.array([[c, sn], [-sn, c]]))
+            P = P.at[iv + 2, iq + 2].set(1.0)
+        else:
+            for k in range(nv):
+                P = P.at[iv + k, iq + k].set(1.0)
+    return P
+
+
+def _chart_hessian(chart: _interop.Chart, q):
+    """``D2 (nv, nq, nq) = d²θ/dq²`` at one configuration (unit quaternions), in JAX
+    operations (``Chart.hessian``)."""
+    D2 = jnp.zeros((chart.nv, chart.nq, chart.nq), q.dtype)
+    for kind, iq, iv, _, _ in chart.joints:
+        if kind in ("free_flyer", "spherical"):
+            o = iq + 3 if kind == "free_flyer" else iq
+            n = q[o : o + 4] / jnp.linalg.norm(q[o : o + 4])
+            L, R = _quat_parts(n)
+            t = jnp.einsum("a,mb->mab", n, L)
+            D2 = D2.at[iv : iv + 3, o : o + 4, o : o + 4].set(-2 * (t + jnp.swapaxes(t, 1, 2)))
+            if kind == "free_flyer":
+                # X[m, α, β] = −([L e_α]× Rᵀ)[m, β]
+                S = jax.vmap(_skew3)(L.T)  # (4, 3, 3)
+                X = -jnp.einsum("amc,cb->mab", S, R.T)
+                D2 = D2.at[iv + 3 : iv + 6, o : o + 4, iq : iq + 3].set(X)
+                D2 = D2.at[iv + 3 : iv + 6, iq : iq + 3, o : o + 4].set(jnp.swapaxes(X, 1, 2))
+        elif kind == "planar":
+            c, sn = jnp.cos(q[iq + 2]), jnp.sin(q[iq + 2])
+            X = jnp.array([[-0.5 * sn, 0.5 * c], [-0.5 * c, -0.5 * sn]])
+            D2 = D2.at[iv : iv + 2, iq + 2, iq : iq + 2].set(X)
+            D2 = D2.at[iv : iv + 2, iq : iq + 2, iq + 2].set(X)
+    return D2
+
+
+def _chart_calls(spec: _interop.ArraySpec, t_first, t_second):
+    """The first and second order with respect to the ``q`` array from the tangent-space FFI
+    calls, the chart applied in JAX operations (``ArraySpec._jac`` / ``_hess``); the second
+    order is ``None`` when ``t_second`` is."""
+    chart, iq, nout = spec.chart, spec.iq, len(spec.outputs)
+
+    def first(*xs):
+        res = t_first(*xs)
+        P = _chart_jacobian(chart, xs[iq])
+        jacs = [
+            jnp.tensordot(J, P, axes=1) if a == iq else J
+            for (_, a), J in zip(spec.jac_blocks, res[nout:])
+        ]
+        return tuple(res[:nout]) + tuple(jacs)
+
+    if t_second is None:
+        return first, None
+
+    def second(*xs):
+        jac = dict(zip(spec.jac_blocks, t_first(*xs)[nout:]))
+        H = t_second(*xs)
+        q = xs[iq]
+        P, D2 = _chart_jacobian(chart, q), _chart_hessian(chart, q)
+        out = []
+        for (o, a, b), h in zip(spec.hess_blocks, H):
+            if a == iq and b == iq:
+                hs = 0.5 * (h + _swap_last(h))
+                PtHP = jnp.einsum("ja,...jk,kb->...ab", P, hs, P)
+                out.append(PtHP + jnp.tensordot(jac[(o, iq)], D2, axes=1))
+            elif a == iq:
+                out.append(jnp.einsum("...jk,ja->...ak", h, P))
+            elif b == iq:
+                out.append(jnp.einsum("...jk,kb->...jb", h, P))
+            else:
+                out.append(h)
+        return tuple(out)
+
+    return first, second
+
+
 def _run(spec: _interop.Spec, kind: str, xs) -> tuple:
     """The numpy side of a callback: single state or stacked leading axes."""
     xs = [np.asarray(x, dtype=np.float64) for x in xs]
@@ -255,11 +363,14 @@ def _build(spec: _interop.Spec):
     def cb(kind):
         return lambda *xs: _run(spec, kind, xs)
 
-    if _use_ffi and spec.name in _FFI_FUNCTIONS:
+    if _use_ffi and spec.name in _FFI_FUNCTIONS and isinstance(spec, _interop.ArraySpec):
+        # the handlers return tangent-space q derivatives: the chart runs in JAX operations
+        nv = spec.model.nv
+        tjac = tuple(jax.ShapeDtypeStruct(osh[o] + (nv,), f64) for o, _ in spec.jac_blocks)
+        ffi_value, t_first, t_second = _ffi_calls(spec.spec, out_sds, tjac)
+        ffi_first, ffi_second = _chart_calls(spec, t_first, t_second)
+    elif _use_ffi and spec.name in _FFI_FUNCTIONS:
         ffi_value, ffi_first, ffi_second = _ffi_calls(spec, out_sds, jac_sds)
-        if isinstance(spec, _interop.ArraySpec):
-            # the handlers return tangent-space q derivatives: the chart runs in the callback
-            ffi_first = ffi_second = None
     else:
         ffi_value = ffi_first = ffi_second = None
 
