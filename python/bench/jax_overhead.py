@@ -34,7 +34,8 @@ lost the CPU to another process does not decide the round. ``direct`` is the num
 ``in jit, per call`` (a ``fori_loop`` of K dependent calls, the last argument plus ``0 *`` the
 sum of the first output), and over N states ``jit(vmap(f))`` and ``jit(vmap(first))`` (the
 first-order call) against N direct calls in a Python loop (sodyn.batch has no entry point for
-these functions), for both paths.
+these functions), for both paths. ``--floating-base`` loads the URDF on a free flyer (the
+quaternion chart: on the FFI path in JAX operations, on the callback path in numpy).
 """
 
 from __future__ import annotations
@@ -182,8 +183,8 @@ def bench_functions(model, names, args):
             "callback": build_function(model, name, False, K, one, many),
         }
         nargs = len(one)
-        trivial = jax.jit(lambda *xs: sum(x * 2 for x in xs))  # JAX's dispatch of the args
-        trivial(*one).block_until_ready()
+        trivial = jax.jit(lambda *xs: tuple(x * 2 for x in xs))  # JAX's dispatch of the args
+        jax.block_until_ready(trivial(*one))
         # the two paths agree bit for bit
         a = jax.tree_util.tree_leaves(paths["ffi"][2](*many))
         b = jax.tree_util.tree_leaves(paths["callback"][2](*many))
@@ -211,7 +212,7 @@ def bench_functions(model, names, args):
 
         for _ in range(args.rounds):
             add("direct", blocks(lambda: direct(*one_np), 200))
-            add("trivial", blocks(lambda: trivial(*one).block_until_ready(), 200))
+            add("trivial", blocks(lambda: jax.block_until_ready(trivial(*one)), 200))
             add("direct_chain", blocks(direct_chain, 1) / K)
             add("direct_many", blocks(direct_many, 1, 3))
             add("first_many", blocks(first_many, 1, 3))
@@ -268,6 +269,9 @@ def main():
     ap.add_argument("--n", type=int, default=1000, help="states of the batched rows")
     ap.add_argument("--k", type=int, default=200, help="chained calls of the in-jit row")
     ap.add_argument(
+        "--floating-base", action="store_true", help="load --model on a free flyer"
+    )
+    ap.add_argument(
         "--functions",
         default="aba",
         help="aba (default), or a comma-separated list of " + ", ".join(NEW) + " (or 'new')",
@@ -275,7 +279,11 @@ def main():
     args = ap.parse_args()
     if not sj._FFI_OK:
         raise SystemExit(f"the FFI path is not available: {sj._FFI_REASON}")
-    model = sodyn.Model.from_urdf(args.model) if args.model else sodyn.Model.builtin("chain6")
+    model = (
+        sodyn.Model.from_urdf(args.model, floating_base=args.floating_base)
+        if args.model
+        else sodyn.Model.builtin("chain6")
+    )
     if args.functions != "aba":
         names = NEW if args.functions == "new" else tuple(args.functions.split(","))
         bench_functions(model, names, args)

@@ -11,12 +11,13 @@ restitution are static, the arrays traced) and returns ``jax.Array`` values::
     qdd = jax.jit(lambda q, v, tau: sj.aba(model, q, v, tau))(q, v, tau)
 
 How it is built: the values and derivatives are sodyn's, wrapped in ``jax.custom_jvp`` rules.
-``rnea``, ``aba``, ``nonlinear_effects`` (value, first and second order) and ``crba`` (value and
-first order) are XLA FFI custom calls registered from the Rust extension (``jax.ffi.ffi_call``;
-no Python runs inside the jitted function); the other functions, and the second order of
-``crba``, call sodyn through ``jax.pure_callback``. ``SODYN_JAX_FFI=0`` in the environment (or a
-JAX without ``jax.ffi``) puts everything on ``jax.pure_callback``; :func:`uses_ffi` says which
-is in use.
+Every function (value, first and second order; ``crba``: value and first order) is an XLA FFI
+custom call registered from the Rust extension (``jax.ffi.ffi_call``; no Python runs inside the
+jitted function; the static model, contact set and frame are attributes of the call); the
+second order of ``crba`` calls sodyn through ``jax.pure_callback``. For models with quaternion
+or planar coordinates the FFI calls return tangent-space blocks and the chart to the ``q``
+array is applied in JAX operations. ``SODYN_JAX_FFI=0`` in the environment (or a JAX without
+``jax.ffi``) puts everything on ``jax.pure_callback``; :func:`uses_ffi` says which is in use.
 
 * first order: ``fd_derivatives``, ``id_derivatives``, ``kkt_derivatives``,
   ``impact_derivatives``, ``frame_jacobian``, ``center_of_mass_jacobian`` (reverse mode is
@@ -29,16 +30,15 @@ is in use.
 * ``jax.vmap``: the custom calls and callbacks use ``vmap_method="broadcast_all"`` and receive
   the stacked states at once; the FFI handlers run them on sodyn's batch pool, the callbacks
   of ``rnea``, ``aba``, ``crba``, ``nonlinear_effects`` go to ``sodyn.batch`` (threads, GIL
-  released; both bit for bit the sequential calls), the others loop over the states in
-  Python.
+  released; both bit for bit the sequential calls), the other callbacks loop over the states
+  in Python.
 
 Only float64 is accepted: enable it with ``jax.config.update("jax_enable_x64", True)`` (or the
 environment variable ``JAX_ENABLE_X64=1``) before creating arrays. Derivatives with respect to
 ``q`` are with respect to the ``q`` array (``nq`` columns): for quaternion coordinates (free
 flyer, spherical joint) those of ``f(q) := f(N(q))``, ``N`` normalising each quaternion block,
-at unit quaternions; for planar joints through the SE(2) chart (``sodyn._interop.Chart``). For
-such models the first and second order run through ``jax.pure_callback`` (the chart is applied
-in numpy), the value stays an FFI call. See docs/interop.md.
+at unit quaternions; for planar joints through the SE(2) chart (``sodyn._interop.Chart``, in
+JAX operations on the FFI path, in numpy on the callback path). See docs/interop.md.
 """
 
 from __future__ import annotations
