@@ -25,17 +25,18 @@ The FFI and callback paths are two builds of the same ``sodyn.jax`` functions in
 (or ``--functions new``) measures those functions instead of ``aba`` (on the model's last frame,
 a 3-D contact at ``(0, 0.02, 0.1)`` in it, restitution 0.5 for the impact), with the same
 interleaved rounds; each variant's time in a round is the median of 5 blocks (3 for the batched
-rows) of 200 calls (20 on the callback path; 1 for the chains and batches), so that a block that
-lost the CPU to another process does not decide the round. ``direct`` is the numpy API's call computing the value (``kkt_derivatives``
-/ ``impact_derivatives``, which the callback path also uses for the value, ``frame_placement``,
-``center_of_mass``) and ``direct first`` the calls of the value and first derivatives
-(``kkt_derivatives``, ``impact_derivatives``, ``frame_placement`` + ``frame_jacobian``,
-``center_of_mass`` + ``center_of_mass_jacobian``). Rows: ``jit(f)`` (one call from Python),
-``in jit, per call`` (a ``fori_loop`` of K dependent calls, the last argument plus ``0 *`` the
-sum of the first output), and over N states ``jit(vmap(f))`` and ``jit(vmap(first))`` (the
-first-order call) against N direct calls in a Python loop (sodyn.batch has no entry point for
-these functions), for both paths. ``--floating-base`` loads the URDF on a free flyer (the
-quaternion chart: on the FFI path in JAX operations, on the callback path in numpy).
+rows) of 200 calls (20 on the callback path; one call for the chains and batches), so that a
+block that lost the CPU to another process does not decide the round. ``direct`` is the numpy
+API's call computing the value (``kkt_derivatives`` / ``impact_derivatives``, which the callback
+path also uses for the value, ``frame_placement``, ``center_of_mass``) and ``direct first`` the
+calls of the value and first derivatives (``kkt_derivatives``, ``impact_derivatives``,
+``frame_placement`` + ``frame_jacobian``, ``center_of_mass`` + ``center_of_mass_jacobian``).
+Rows: ``jit(f)`` (one call from Python), ``in jit, per call`` (a ``fori_loop`` of K dependent
+calls, the last argument plus ``0 *`` the sum of the first output), and over N states
+``jit(vmap(f))`` and ``jit(vmap(first))`` (the first-order call) against N direct calls in a
+Python loop (sodyn.batch has no entry point for these functions), for both paths.
+``--floating-base`` loads the URDF on a free flyer (the quaternion chart: on the FFI path in JAX
+operations, on the callback path in numpy).
 """
 
 from __future__ import annotations
