@@ -1,6 +1,9 @@
-//! XLA FFI handlers of `sodyn.jax`: RNEA, ABA and the nonlinear effects (value, first-order
-//! Jacobians, dense second order) and CRBA (value, `dM/dq`) as typed-FFI custom calls, so that
-//! a jitted `sodyn.jax` function runs sodyn without entering Python.
+//! XLA FFI handlers of `sodyn.jax`: RNEA, ABA, the nonlinear effects, the KKT and impact
+//! dynamics, frame translation and placement and the centre of mass (value, first-order
+//! Jacobian blocks, dense second order) and CRBA (value, `dM/dq`) as typed-FFI custom calls, so
+//! that a jitted `sodyn.jax` function runs sodyn without entering Python. Each computes what
+//! the numpy side of the `jax.pure_callback` path (`sodyn._interop`) computes, with the same
+//! sodyn calls in the same order, so the two paths agree bit for bit.
 //!
 //! The handlers follow the C ABI of XLA's typed FFI (`xla/ffi/api/c_api.h`, API 0.x, shipped
 //! with jaxlib): `XLA_FFI_Error* handler(XLA_FFI_CallFrame*)`. The few structures they read are
@@ -11,9 +14,11 @@
 //! * returns success without work for the instantiate, prepare and initialize stages;
 //! * at the execute stage checks every argument (count, buffer type, `F64`, rank, the trailing
 //!   dimension `nq` / `nv`, the same leading dimensions for all) and every result (count,
-//!   `F64`, dimensions) before reading or writing memory, and the `model` attribute (an `S64`
-//!   handle of this module's registry): a wrong call is an XLA error naming what is wrong,
-//!   never an out-of-bounds access;
+//!   `F64`, dimensions) before reading or writing memory, and the attributes (`S64`): `model`
+//!   (a handle of this module's registry), `contacts` for the KKT and impact dynamics (a
+//!   contact-set handle of that model) and `frame` for the frame functions (an index below
+//!   the model's frame count): a wrong call is an XLA error naming what is wrong, never an
+//!   out-of-bounds access;
 //! * runs one state on a workspace kept per model, several (the leading dimensions of a
 //!   `jax.vmap` with `vmap_method="broadcast_all"`) on sodyn's shared batch pool, exactly as
 //!   `sodyn.batch` does, so the results are bit for bit those of the direct calls.
@@ -24,14 +29,25 @@
 //! Models reach the handlers through a registry of snapshots: `_jax_ffi_model(model)` clones
 //! the model once and returns its handle (never reused); `Model.gravity = ...` replaces the
 //! snapshot, and dropping the Python `Model` removes it (a compiled function that still names
-//! the handle then gets an XLA error, not a dangling model).
+//! the handle then gets an XLA error, not a dangling model). Contact sets (with their
+//! restitution) are registered by `_jax_ffi_contacts(model, contacts, restitution)`, resolved
+//! and checked there, one handle per distinct set and model, removed with the model; each
+//! model entry keeps its workspaces (`Data`, `ContactData`) per contact set.
 
-use nalgebra::{DMatrix, DVector};
+use crate::contacts::{PyContact, resolve};
+use crate::convert::core_err;
+use crate::data::ContactKey;
+use crate::model::PyModel;
+use nalgebra::{DVector, Matrix3xX, Matrix6xX};
 use pyo3::prelude::*;
 use pyo3::types::{PyCapsule, PyDict};
-use sodyn::algo::{self, Data};
+use sodyn::algo::{self, Contact, Data};
 use sodyn::batch::{BatchData, BatchPool, map_states};
-use sodyn::deriv::{fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives};
+use sodyn::deriv::{
+    ContactData, fd_derivatives, fd_so_derivatives, id_derivatives, id_so_derivatives,
+    impact_derivatives, impact_dynamics, impact_so_derivatives, kkt_derivatives,
+    kkt_so_derivatives,
+};
 use sodyn::model::Model;
 use sodyn::tensor::Tensor3;
 use std::collections::HashMap;
@@ -185,36 +201,66 @@ const API_MIN_SIZE: usize = struct_size!(
 );
 
 // ---------------------------------------------------------------------------------------------
-// The model registry
+// The model and contact-set registries
 
-/// One state's workspace: sodyn's `Data` (its second-order capacity added on first use) and
-/// the three input vectors.
+/// One state's workspace: sodyn's `Data` (its second-order capacity added on first use), the
+/// three input vectors, the contact set's `ContactData` (contact functions) and the frame and
+/// centre-of-mass buffers (made on first use).
 #[derive(Clone)]
 struct Ws {
     d: Data,
     x: [DVector<f64>; 3],
+    cd: Option<ContactData>,
+    j6: Option<Matrix6xX<f64>>,
+    j3: Option<Matrix3xX<f64>>,
+    t6: Option<Tensor3>,
 }
 
 impl Ws {
-    fn new(m: &Model) -> Self {
-        Self {
+    fn new(m: &Model, cset: Option<&CSet>) -> sodyn::Result<Self> {
+        let cd = match cset {
+            Some(c) => {
+                let mut cd = ContactData::new(m, &c.contacts)?;
+                cd.set_restitution(c.restitution)?;
+                Some(cd)
+            }
+            None => None,
+        };
+        Ok(Self {
             d: Data::new(m),
             x: [DVector::zeros(m.nq()), DVector::zeros(m.nv()), DVector::zeros(m.nv())],
-        }
+            cd,
+            j6: None,
+            j3: None,
+            t6: None,
+        })
     }
 }
 
-/// A registered model: its snapshot, spare single-state workspaces and a batch workspace.
+/// A registered model: its snapshot, spare single-state workspaces and a batch workspace, per
+/// contact set (key 0: none).
 struct Entry {
     model: Model,
-    spare: Mutex<Vec<Ws>>,
-    batch: Mutex<Option<BatchData<Ws>>>,
+    spare: Mutex<HashMap<u64, Vec<Ws>>>,
+    batch: Mutex<HashMap<u64, BatchData<Ws>>>,
 }
 
 impl Entry {
     fn new(model: Model) -> Arc<Self> {
-        Arc::new(Self { model, spare: Mutex::new(Vec::new()), batch: Mutex::new(None) })
+        Arc::new(Self { model, spare: Default::default(), batch: Default::default() })
     }
+}
+
+/// A registered contact set (the static `contacts` and `restitution` of `kkt_dynamics` /
+/// `impact_dynamics`), resolved against the model of handle `model`.
+struct CSet {
+    model: u64,
+    contacts: Vec<Contact>,
+    restitution: f64,
+    /// The contact rows (3 per 3-D contact, 6 per 6-D contact).
+    rows: usize,
+    /// What identifies the set: its resolved contacts and the restitution's bits.
+    key: (ContactKey, u64),
 }
 
 fn registry() -> &'static RwLock<HashMap<u64, Arc<Entry>>> {
@@ -222,13 +268,33 @@ fn registry() -> &'static RwLock<HashMap<u64, Arc<Entry>>> {
     R.get_or_init(Default::default)
 }
 
+fn csets() -> &'static RwLock<HashMap<u64, Arc<CSet>>> {
+    static R: OnceLock<RwLock<HashMap<u64, Arc<CSet>>>> = OnceLock::new();
+    R.get_or_init(Default::default)
+}
+
+/// A fresh handle (models and contact sets share the counter; never reused).
+fn next_handle() -> u64 {
+    static NEXT: AtomicU64 = AtomicU64::new(1);
+    NEXT.fetch_add(1, Ordering::Relaxed)
+}
+
 fn lookup(handle: i64) -> Option<Arc<Entry>> {
     let r = registry().read().unwrap_or_else(|e| e.into_inner());
     u64::try_from(handle).ok().and_then(|h| r.get(&h).cloned())
 }
 
+fn cs_handle(h: i64) -> u64 {
+    u64::try_from(h).unwrap_or(0)
+}
+
+fn lookup_cset(handle: i64) -> Option<Arc<CSet>> {
+    let r = csets().read().unwrap_or_else(|e| e.into_inner());
+    u64::try_from(handle).ok().and_then(|h| r.get(&h).cloned())
+}
+
 /// The registry handle of a Python `Model` (none until `sodyn.jax` first needs it); dropping
-/// it removes the snapshot.
+/// it removes the snapshot and the model's contact sets.
 #[derive(Default)]
 pub(crate) struct Link(OnceLock<u64>);
 
@@ -236,8 +302,7 @@ impl Link {
     /// The model's handle, registering a snapshot of `m` on first use.
     pub(crate) fn handle(&self, m: &Model) -> u64 {
         *self.0.get_or_init(|| {
-            static NEXT: AtomicU64 = AtomicU64::new(1);
-            let h = NEXT.fetch_add(1, Ordering::Relaxed);
+            let h = next_handle();
             registry().write().unwrap_or_else(|e| e.into_inner()).insert(h, Entry::new(m.clone()));
             h
         })
@@ -255,8 +320,36 @@ impl Drop for Link {
     fn drop(&mut self) {
         if let Some(h) = self.0.get() {
             registry().write().unwrap_or_else(|e| e.into_inner()).remove(h);
+            csets().write().unwrap_or_else(|e| e.into_inner()).retain(|_, c| c.model != *h);
         }
     }
+}
+
+/// The registry handle of a contact set on a model (the `contacts` attribute of the KKT and
+/// impact handlers): the same contacts and restitution on the same model get the same handle.
+/// The contacts are resolved and checked here (unknown frame, a contact on the world, a bad
+/// restitution or Baumgarte gain: `SodynError`, as the numpy API's calls).
+#[pyfunction]
+#[pyo3(signature = (model, contacts, restitution = 0.0))]
+fn _jax_ffi_contacts(
+    model: PyRef<'_, PyModel>,
+    contacts: Vec<PyRef<'_, PyContact>>,
+    restitution: f64,
+) -> PyResult<i64> {
+    let m = &model.m;
+    let (cs, ckey) = resolve(m, Some(&contacts))?;
+    let mut cd = ContactData::new(m, &cs).map_err(core_err)?;
+    cd.set_restitution(restitution).map_err(core_err)?;
+    let h = model.ffi.handle(m);
+    let key = (ckey, restitution.to_bits());
+    let mut reg = csets().write().unwrap_or_else(|e| e.into_inner());
+    if let Some((k, _)) = reg.iter().find(|(_, c)| c.model == h && c.key == key) {
+        return Ok(*k as i64);
+    }
+    let k = next_handle();
+    let rows = cs.iter().map(|c| c.dim()).sum();
+    reg.insert(k, Arc::new(CSet { model: h, contacts: cs, restitution, rows, key }));
+    Ok(k as i64)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -270,18 +363,36 @@ enum Func {
     Nle,
     /// `crba(q)`: value and first order (`dM/dq` from `id_so_derivatives` at `v = a = 0`).
     Crba,
+    /// `kkt_dynamics(q, v, tau)` with the `contacts` attribute's set.
+    Kkt,
+    /// `impact_dynamics(q, v_minus)` with the `contacts` attribute's set and restitution.
+    Impact,
+    /// `frame_translation(q)` of the `frame` attribute's frame.
+    FrameTranslation,
+    /// `frame_placement(q)`, `(4, 4)`, of the `frame` attribute's frame.
+    FramePlacement,
+    /// `center_of_mass(q)`.
+    Com,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Order {
-    /// The value (`tau`, `qdd`, `b` or `M`).
+    /// The values.
     Value,
-    /// The value and its Jacobian blocks (one per argument).
+    /// The values and their Jacobian blocks (`Spec.jac_blocks` of `sodyn._interop`).
     First,
-    /// The dense second-order tensors of `id_so_derivatives` / `fd_so_derivatives` (the
-    /// first three at `a = 0` for `Nle`; none for `Crba`).
+    /// The dense second-order tensors (the first three at `a = 0` for `Nle`; none for `Crba`).
     Second,
 }
+
+/// A dimension of a result: `nv`, the contact rows, or a constant.
+#[derive(Clone, Copy)]
+enum Dim {
+    V,
+    L,
+    K(usize),
+}
+use Dim::{K, L, V};
 
 impl Func {
     fn name(self) -> &'static str {
@@ -290,28 +401,64 @@ impl Func {
             Func::Aba => "sodyn.jax.aba",
             Func::Nle => "sodyn.jax.nonlinear_effects",
             Func::Crba => "sodyn.jax.crba",
+            Func::Kkt => "sodyn.jax.kkt_dynamics",
+            Func::Impact => "sodyn.jax.impact_dynamics",
+            Func::FrameTranslation => "sodyn.jax.frame_translation",
+            Func::FramePlacement => "sodyn.jax.frame_placement",
+            Func::Com => "sodyn.jax.center_of_mass",
         }
     }
     fn arg_names(self) -> &'static [&'static str] {
         match self {
             Func::Rnea => &["q", "v", "a"],
-            Func::Aba => &["q", "v", "tau"],
+            Func::Aba | Func::Kkt => &["q", "v", "tau"],
             Func::Nle => &["q", "v"],
-            Func::Crba => &["q"],
+            Func::Impact => &["q", "v_minus"],
+            Func::Crba | Func::FrameTranslation | Func::FramePlacement | Func::Com => &["q"],
         }
     }
-    /// The per-state result shapes: the rank of each (every dimension is `nv`).
-    fn ret_ranks(self, order: Order) -> &'static [usize] {
+    /// The per-state result shapes.
+    fn ret_dims(self, order: Order) -> &'static [&'static [Dim]] {
         match (self, order) {
-            (Func::Rnea | Func::Aba, Order::Value) | (Func::Nle, Order::Value) => &[1],
-            (Func::Rnea | Func::Aba, Order::First) => &[1, 2, 2, 2],
-            (Func::Rnea | Func::Aba, Order::Second) => &[3, 3, 3, 3],
-            (Func::Nle, Order::First) => &[1, 2, 2],
-            (Func::Nle, Order::Second) => &[3, 3, 3],
-            (Func::Crba, Order::Value) => &[2],
-            (Func::Crba, Order::First) => &[2, 3],
+            (Func::Rnea | Func::Aba | Func::Nle, Order::Value) => &[&[V]],
+            (Func::Rnea | Func::Aba, Order::First) => &[&[V], &[V, V], &[V, V], &[V, V]],
+            (Func::Rnea | Func::Aba, Order::Second) => {
+                &[&[V, V, V], &[V, V, V], &[V, V, V], &[V, V, V]]
+            }
+            (Func::Nle, Order::First) => &[&[V], &[V, V], &[V, V]],
+            (Func::Nle, Order::Second) => &[&[V, V, V], &[V, V, V], &[V, V, V]],
+            (Func::Crba, Order::Value) => &[&[V, V]],
+            (Func::Crba, Order::First) => &[&[V, V], &[V, V, V]],
             (Func::Crba, Order::Second) => &[],
+            (Func::Kkt | Func::Impact, Order::Value) => &[&[V], &[L]],
+            (Func::Kkt, Order::First) => {
+                &[&[V], &[L], &[V, V], &[V, V], &[V, V], &[L, V], &[L, V], &[L, V]]
+            }
+            (Func::Kkt, Order::Second) => &[
+                &[V, V, V],
+                &[V, V, V],
+                &[V, V, V],
+                &[V, V, V],
+                &[L, V, V],
+                &[L, V, V],
+                &[L, V, V],
+                &[L, V, V],
+            ],
+            (Func::Impact, Order::First) => &[&[V], &[L], &[V, V], &[V, V], &[L, V], &[L, V]],
+            (Func::Impact, Order::Second) => &[&[V, V, V], &[V, V, V], &[L, V, V], &[L, V, V]],
+            (Func::FrameTranslation | Func::Com, Order::Value) => &[&[K(3)]],
+            (Func::FrameTranslation | Func::Com, Order::First) => &[&[K(3)], &[K(3), V]],
+            (Func::FrameTranslation | Func::Com, Order::Second) => &[&[K(3), V, V]],
+            (Func::FramePlacement, Order::Value) => &[&[K(4), K(4)]],
+            (Func::FramePlacement, Order::First) => &[&[K(4), K(4)], &[K(4), K(4), V]],
+            (Func::FramePlacement, Order::Second) => &[&[K(4), K(4), V, V]],
         }
+    }
+    fn has_contacts(self) -> bool {
+        matches!(self, Func::Kkt | Func::Impact)
+    }
+    fn has_frame(self) -> bool {
+        matches!(self, Func::FrameTranslation | Func::FramePlacement)
     }
 }
 
@@ -325,22 +472,43 @@ impl Order {
     }
 }
 
-/// Copies a column-major `n × n` matrix into a row-major block.
-fn write_matrix(dst: &mut [f64], src: &DMatrix<f64>) {
-    let n = src.nrows();
-    for (i, row) in dst.chunks_exact_mut(n.max(1)).enumerate().take(n) {
+/// The most results of a handler (the KKT dynamics' first and second order).
+const MAX_RETS: usize = 8;
+
+/// Copies a column-major `r × c` matrix into a row-major block.
+fn write_matrix<S: nalgebra::RawStorage<f64, nalgebra::Dyn, nalgebra::Dyn>>(
+    dst: &mut [f64],
+    src: &nalgebra::Matrix<f64, nalgebra::Dyn, nalgebra::Dyn, S>,
+) {
+    let c = src.ncols();
+    for (i, row) in dst.chunks_exact_mut(c.max(1)).enumerate().take(src.nrows()) {
         for (j, x) in row.iter_mut().enumerate() {
             *x = src[(i, j)];
         }
     }
 }
 
-/// Copies a column-major `n × n × n` tensor into a row-major block.
-fn write_tensor(dst: &mut [f64], src: &Tensor3) {
+/// Copies the rows `rows` of a column-major `r × c` matrix (fixed rows) into a row-major block.
+fn write_rows<R: nalgebra::Dim, S: nalgebra::RawStorage<f64, R, nalgebra::Dyn>>(
+    dst: &mut [f64],
+    src: &nalgebra::Matrix<f64, R, nalgebra::Dyn, S>,
+    rows: std::ops::Range<usize>,
+) {
+    let c = src.ncols();
+    for (row, i) in dst.chunks_exact_mut(c.max(1)).zip(rows) {
+        for (j, x) in row.iter_mut().enumerate() {
+            *x = src[(i, j)];
+        }
+    }
+}
+
+/// Copies the slices `rows` of the first index of a column-major tensor into a row-major
+/// block.
+fn write_tensor_rows(dst: &mut [f64], src: &Tensor3, rows: std::ops::Range<usize>) {
     let (a, b, c) = src.dims();
     let s = src.as_slice();
     let mut o = 0;
-    for i in 0..a {
+    for i in rows {
         for j in 0..b {
             for k in 0..c {
                 dst[o] = s[i + a * (j + b * k)];
@@ -350,17 +518,45 @@ fn write_tensor(dst: &mut [f64], src: &Tensor3) {
     }
 }
 
-/// One state: the inputs are in `w.x` (zeros after the function's arguments), the results go
-/// to `out` (one row-major block each).
-fn run_state(
+/// Copies a column-major tensor into a row-major block.
+fn write_tensor(dst: &mut [f64], src: &Tensor3) {
+    write_tensor_rows(dst, src, 0..src.dims().0)
+}
+
+/// `[w]×` as rows.
+fn skew(w: [f64; 3]) -> [[f64; 3]; 3] {
+    [[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]]
+}
+
+/// What a call computes: the function, its order and its static attributes.
+struct Call {
     f: Func,
     order: Order,
-    m: &Model,
-    w: &mut Ws,
-    out: &mut [&mut [f64]],
-) -> sodyn::Result<()> {
-    let Ws { d, x: [q, v, x] } = w;
-    match (f, order) {
+    cset: Option<Arc<CSet>>,
+    /// The contact set's handle (0: none), the key of its workspaces in the model's entry.
+    ckey: u64,
+    frame: usize,
+}
+
+/// A frame function's Jacobian and Jacobian-derivative buffers.
+fn frame_bufs<'a>(
+    j6: &'a mut Option<Matrix6xX<f64>>,
+    t6: &'a mut Option<Tensor3>,
+    nv: usize,
+) -> (&'a mut Matrix6xX<f64>, &'a mut Tensor3) {
+    (
+        j6.get_or_insert_with(|| Matrix6xX::zeros(nv)),
+        t6.get_or_insert_with(|| Tensor3::zeros(6, nv, nv)),
+    )
+}
+
+/// One state: the inputs are in `w.x` (zeros after the function's arguments), the results go
+/// to `out` (one row-major block each).
+fn run_state(c: &Call, m: &Model, w: &mut Ws, out: &mut [&mut [f64]]) -> sodyn::Result<()> {
+    let nv = m.nv();
+    let Ws { d, x: [q, v, x], cd, j6, j3, t6 } = w;
+    let lwa = algo::ReferenceFrame::LocalWorldAligned;
+    match (c.f, c.order) {
         (Func::Rnea, Order::Value) => {
             out[0].copy_from_slice(algo::rnea(m, d, q, v, x, None)?.as_slice())
         }
@@ -421,6 +617,211 @@ fn run_state(
             write_tensor(out[1], so.dm_dq());
         }
         (Func::Crba, Order::Second) => {}
+        (Func::Kkt | Func::Impact, _) => {
+            let cd = cd.as_mut().ok_or_else(|| {
+                sodyn::Error::Workspace("no contact workspace (internal error)".into())
+            })?;
+            run_contacts(c, m, d, cd, [q, v, x], out)?;
+        }
+        (Func::FrameTranslation, order) => {
+            let p = algo::frame_placement(m, d, q, c.frame)?;
+            if order != Order::Second {
+                out[0].copy_from_slice(p.trans.as_slice());
+            }
+            let (j6, t6) = frame_bufs(j6, t6, nv);
+            match order {
+                Order::Value => {}
+                Order::First => {
+                    algo::frame_jacobian(m, d, q, c.frame, lwa, j6)?;
+                    write_rows(out[1], j6, 3..6);
+                }
+                Order::Second => {
+                    algo::frame_jacobian_derivative(m, d, q, c.frame, lwa, t6)?;
+                    write_tensor_rows(out[0], t6, 3..6);
+                }
+            }
+        }
+        (Func::FramePlacement, order) => {
+            let p = algo::frame_placement(m, d, q, c.frame)?;
+            let r = &p.rot;
+            if order != Order::Second {
+                let h = &mut out[0];
+                h.fill(0.0);
+                for a in 0..3 {
+                    for b in 0..3 {
+                        h[4 * a + b] = r[(a, b)];
+                    }
+                    h[4 * a + 3] = p.trans[a];
+                }
+                h[15] = 1.0;
+            }
+            if order == Order::Value {
+                return Ok(());
+            }
+            let (j6, t6) = frame_bufs(j6, t6, nv);
+            algo::frame_jacobian(m, d, q, c.frame, lwa, j6)?;
+            let wj = |j: usize| skew([j6[(0, j)], j6[(1, j)], j6[(2, j)]]);
+            if order == Order::First {
+                // D[a, c, j] = sum_b [w_j]x[a, b] R[b, c]; D[a, 3, j] = v_j[a]
+                let dd = &mut out[1];
+                dd.fill(0.0);
+                for j in 0..nv {
+                    let wm = wj(j);
+                    for a in 0..3 {
+                        for cc in 0..3 {
+                            let mut s = 0.0;
+                            for b in 0..3 {
+                                s += wm[a][b] * r[(b, cc)];
+                            }
+                            dd[(4 * a + cc) * nv + j] = s;
+                        }
+                        dd[(4 * a + 3) * nv + j] = j6[(3 + a, j)];
+                    }
+                }
+                return Ok(());
+            }
+            algo::frame_jacobian_derivative(m, d, q, c.frame, lwa, t6)?;
+            // H[a, c, j, k] = sum_b [dw_j/dq_k]x[a, b] R[b, c]
+            //               + sum_b sum_e [w_j]x[a, b] [w_k]x[b, e] R[e, c];
+            // H[a, 3, j, k] = dv_j/dq_k[a]
+            let hh = &mut out[0];
+            hh.fill(0.0);
+            for j in 0..nv {
+                let wjm = wj(j);
+                for k in 0..nv {
+                    let wkm = wj(k);
+                    let dw = skew([t6[(0, j, k)], t6[(1, j, k)], t6[(2, j, k)]]);
+                    for a in 0..3 {
+                        for cc in 0..3 {
+                            let mut s1 = 0.0;
+                            for b in 0..3 {
+                                s1 += dw[a][b] * r[(b, cc)];
+                            }
+                            let mut s2 = 0.0;
+                            for b in 0..3 {
+                                for e in 0..3 {
+                                    s2 += wjm[a][b] * wkm[b][e] * r[(e, cc)];
+                                }
+                            }
+                            hh[((4 * a + cc) * nv + j) * nv + k] = s1 + s2;
+                        }
+                        hh[((4 * a + 3) * nv + j) * nv + k] = t6[(3 + a, j, k)];
+                    }
+                }
+            }
+        }
+        (Func::Com, Order::Value) => {
+            out[0].copy_from_slice(algo::center_of_mass(m, d, q)?.as_slice());
+        }
+        (Func::Com, Order::First) => {
+            out[0].copy_from_slice(algo::center_of_mass(m, d, q)?.as_slice());
+            let j3 = j3.get_or_insert_with(|| Matrix3xX::zeros(nv));
+            algo::center_of_mass_jacobian(m, d, q, j3)?;
+            write_rows(out[1], j3, 0..3);
+        }
+        (Func::Com, Order::Second) => {
+            // H[i, j, k] = d vcom_i / dq_j at v = e_k
+            let j3 = j3.get_or_insert_with(|| Matrix3xX::zeros(nv));
+            let h = &mut out[0];
+            for k in 0..nv {
+                v.fill(0.0);
+                v[k] = 1.0;
+                algo::center_of_mass_velocity_derivatives(m, d, q, v, j3)?;
+                for i in 0..3 {
+                    for j in 0..nv {
+                        h[(i * nv + j) * nv + k] = j3[(i, j)];
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The KKT and impact dynamics of one state (as `kkt_derivatives` / `impact_derivatives` of
+/// the numpy API with `order` 1 or 2).
+fn run_contacts(
+    c: &Call,
+    m: &Model,
+    d: &mut Data,
+    cd: &mut ContactData,
+    [q, v, x]: [&mut DVector<f64>; 3],
+    out: &mut [&mut [f64]],
+) -> sodyn::Result<()> {
+    if c.order == Order::Second {
+        cd.reserve_second_order(m)?;
+    }
+    match (c.f, c.order) {
+        (Func::Kkt, Order::Value) => {
+            // the numpy API's value (kkt_derivatives): kkt_dynamics rounds differently
+            let kd = kkt_derivatives(m, d, cd, q, v, x)?;
+            out[0].copy_from_slice(kd.qdd().as_slice());
+            out[1].copy_from_slice(kd.lambda().as_slice());
+        }
+        (Func::Kkt, Order::First) => {
+            let kd = kkt_derivatives(m, d, cd, q, v, x)?;
+            out[0].copy_from_slice(kd.qdd().as_slice());
+            out[1].copy_from_slice(kd.lambda().as_slice());
+            let fo = [
+                kd.dqdd_dq(),
+                kd.dqdd_dv(),
+                kd.dqdd_dtau(),
+                kd.dlambda_dq(),
+                kd.dlambda_dv(),
+                kd.dlambda_dtau(),
+            ];
+            for (dst, j) in out[2..].iter_mut().zip(fo) {
+                write_matrix(dst, j);
+            }
+        }
+        (Func::Kkt, _) => {
+            let kd = kkt_so_derivatives(m, d, cd, q, v, x)?;
+            let t = kd.so().ok_or_else(|| {
+                sodyn::Error::Workspace("kkt_so_derivatives gave no tensors".into())
+            })?;
+            let ts = [
+                t.d2qdd_dq2(),
+                t.d2qdd_dv2(),
+                t.d2qdd_dqdv(),
+                t.d2qdd_dtaudq(),
+                t.d2lambda_dq2(),
+                t.d2lambda_dv2(),
+                t.d2lambda_dqdv(),
+                t.d2lambda_dtaudq(),
+            ];
+            for (dst, t) in out.iter_mut().zip(ts) {
+                write_tensor(dst, t);
+            }
+        }
+        (_, Order::Value) => {
+            let im = impact_dynamics(m, d, cd, q, v)?;
+            out[0].copy_from_slice(im.vplus().as_slice());
+            out[1].copy_from_slice(im.impulse().as_slice());
+        }
+        (_, Order::First) => {
+            let im = impact_derivatives(m, d, cd, q, v)?;
+            out[0].copy_from_slice(im.vplus().as_slice());
+            out[1].copy_from_slice(im.impulse().as_slice());
+            let fo = [im.dvplus_dq(), im.dvplus_dvminus(), im.dimpulse_dq(), im.dimpulse_dvminus()];
+            for (dst, j) in out[2..].iter_mut().zip(fo) {
+                write_matrix(dst, j);
+            }
+        }
+        (_, Order::Second) => {
+            let im = impact_so_derivatives(m, d, cd, q, v)?;
+            let t = im.so().ok_or_else(|| {
+                sodyn::Error::Workspace("impact_so_derivatives gave no tensors".into())
+            })?;
+            let ts = [
+                t.d2vplus_dq2(),
+                t.d2vplus_dqdvminus(),
+                t.d2impulse_dq2(),
+                t.d2impulse_dqdvminus(),
+            ];
+            for (dst, t) in out.iter_mut().zip(ts) {
+                write_tensor(dst, t);
+            }
+        }
     }
     Ok(())
 }
@@ -435,31 +836,31 @@ fn invalid(msg: String) -> Fail {
     Fail(ERROR_INVALID_ARGUMENT, msg)
 }
 
-/// The `model` attribute: an `S64` scalar.
+/// The attribute `key`: an `S64` scalar (`None` if absent).
 ///
 /// # Safety
 /// `a` is the attributes of a call frame given by XLA (sizes and pointers consistent).
-unsafe fn model_attr(a: &Attrs, fname: &str) -> Result<i64, Fail> {
+unsafe fn int_attr(a: &Attrs, key: &str, fname: &str) -> Result<Option<i64>, Fail> {
     for i in 0..usize::try_from(a.size).unwrap_or(0) {
         // SAFETY: `i < size`, and XLA gives `size` names, types and attributes.
         let (name, kind, attr) = unsafe { (&**a.names.add(i), *a.types.add(i), *a.attrs.add(i)) };
         // SAFETY: a byte span of XLA's, `len` bytes at `ptr`.
         let name = unsafe { std::slice::from_raw_parts(name.ptr.cast::<u8>(), name.len) };
-        if name != b"model" {
+        if name != key.as_bytes() {
             continue;
         }
         if kind != ATTR_SCALAR {
-            return Err(invalid(format!("{fname}: the `model` attribute is not a scalar")));
+            return Err(invalid(format!("{fname}: the `{key}` attribute is not a scalar")));
         }
         // SAFETY: a scalar attribute points to an `XLA_FFI_Scalar`.
         let s = unsafe { &*attr.cast::<Scalar>() };
         if s.dtype != DTYPE_S64 || s.value.is_null() {
-            return Err(invalid(format!("{fname}: the `model` attribute is not an int64")));
+            return Err(invalid(format!("{fname}: the `{key}` attribute is not an int64")));
         }
         // SAFETY: an `S64` scalar's value is an `i64`.
-        return Ok(unsafe { *s.value.cast::<i64>() });
+        return Ok(Some(unsafe { *s.value.cast::<i64>() }));
     }
-    Err(invalid(format!("{fname}: the call has no `model` attribute")))
+    Ok(None)
 }
 
 /// The dimensions of buffer `b`.
@@ -507,6 +908,57 @@ fn shape_str(d: &[i64]) -> String {
     format!("({}{})", parts.join(", "), if d.len() == 1 { "," } else { "" })
 }
 
+/// The static attributes of a call: the model's entry, the contact set and the frame.
+///
+/// # Safety
+/// `a` is the attributes of a call frame given by XLA.
+unsafe fn statics(a: &Attrs, f: Func, order: Order) -> Result<(Arc<Entry>, Call), Fail> {
+    let fname = f.name();
+    // SAFETY: XLA's attributes.
+    let handle = unsafe { int_attr(a, "model", fname)? }
+        .ok_or_else(|| invalid(format!("{fname}: the call has no `model` attribute")))?;
+    let entry = lookup(handle).ok_or_else(|| {
+        invalid(format!(
+            "{fname}: no model with handle {handle} (it was released: the sodyn.Model of this \
+             compiled function no longer exists)"
+        ))
+    })?;
+    let mut call = Call { f, order, cset: None, ckey: 0, frame: 0 };
+    if f.has_contacts() {
+        // SAFETY: XLA's attributes.
+        let h = unsafe { int_attr(a, "contacts", fname)? }
+            .ok_or_else(|| invalid(format!("{fname}: the call has no `contacts` attribute")))?;
+        let cs = lookup_cset(h).filter(|c| c.model as i64 == handle).ok_or_else(|| {
+            invalid(format!(
+                "{fname}: no contact set with handle {h} on model {handle} (it was released \
+                 with its sodyn.Model, or belongs to another model)"
+            ))
+        })?;
+        call.ckey = cs_handle(h);
+        call.cset = Some(cs);
+    }
+    if f.has_frame() {
+        // SAFETY: XLA's attributes.
+        let i = unsafe { int_attr(a, "frame", fname)? }
+            .ok_or_else(|| invalid(format!("{fname}: the call has no `frame` attribute")))?;
+        let n = entry.model.frames().len();
+        call.frame = match usize::try_from(i) {
+            Ok(i) if i < n => i,
+            Ok(_) => {
+                return Err(invalid(format!(
+                    "{fname}: `frame` index {i} is out of range: the model has {n} frames"
+                )));
+            }
+            Err(_) => {
+                return Err(invalid(format!(
+                    "{fname}: `frame` must be a frame name or index, got {i}"
+                )));
+            }
+        };
+    }
+    Ok((entry, call))
+}
+
 /// Decodes, checks and runs one call.
 ///
 /// # Safety
@@ -514,15 +966,10 @@ fn shape_str(d: &[i64]) -> String {
 unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
     let fname = f.name();
     // SAFETY: XLA's attributes.
-    let handle = unsafe { model_attr(&cf.attrs, fname)? };
-    let entry = lookup(handle).ok_or_else(|| {
-        invalid(format!(
-            "{fname}: no model with handle {handle} (it was released: the sodyn.Model of this \
-             compiled function no longer exists)"
-        ))
-    })?;
+    let (entry, call) = unsafe { statics(&cf.attrs, f, order)? };
     let m = &entry.model;
     let (nq, nv) = (m.nq(), m.nv());
+    let nl = call.cset.as_ref().map_or(0, |c| c.rows);
     let names = f.arg_names();
     let nargs = names.len();
     if usize::try_from(cf.args.size).ok() != Some(nargs) {
@@ -572,28 +1019,35 @@ unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
     }
     let lead = lead.unwrap_or(&[]);
     let count: usize = lead.iter().map(|&x| x as usize).product();
-    // The results: lead + (nv,) * rank.
-    let ranks = f.ret_ranks(order);
-    if usize::try_from(cf.rets.size).ok() != Some(ranks.len()) {
+    // The results: lead + the per-state shape.
+    let shapes = f.ret_dims(order);
+    if usize::try_from(cf.rets.size).ok() != Some(shapes.len()) {
         return Err(invalid(format!(
             "{fname} ({}): expected {} results, got {}",
             order.what(),
-            ranks.len(),
+            shapes.len(),
             cf.rets.size
         )));
     }
-    let mut outs: [&mut [f64]; 4] = [&mut [], &mut [], &mut [], &mut []];
-    let mut blocks = [0usize; 4];
-    for (r, &rank) in ranks.iter().enumerate() {
+    let mut outs: [&mut [f64]; MAX_RETS] = Default::default();
+    let mut blocks = [0usize; MAX_RETS];
+    for (r, &shape) in shapes.iter().enumerate() {
         let what = || format!("{fname} ({}): result {r}", order.what());
         // SAFETY: `r < size`.
         let b = unsafe { buffer(&cf.rets, r, RET_BUFFER, &what)? };
         // SAFETY: XLA's buffer.
         let d = unsafe { dims_of(b) };
+        let want = shape.iter().map(|x| match x {
+            V => nv,
+            L => nl,
+            K(k) => *k,
+        });
         let (dl, dt) = d.split_at(d.len().min(lead.len()));
-        if dl != lead || dt.len() != rank || dt.iter().any(|&x| x != nv as i64) {
-            let want: Vec<i64> =
-                lead.iter().copied().chain(std::iter::repeat_n(nv as i64, rank)).collect();
+        if dl != lead
+            || dt.len() != shape.len()
+            || dt.iter().zip(want.clone()).any(|(&x, w)| x != w as i64)
+        {
+            let want: Vec<i64> = lead.iter().copied().chain(want.map(|w| w as i64)).collect();
             return Err(invalid(format!(
                 "{} has shape {}, expected {}",
                 what(),
@@ -601,7 +1055,7 @@ unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
                 shape_str(&want)
             )));
         }
-        blocks[r] = nv.pow(rank as u32);
+        blocks[r] = want.product();
         let len = blocks[r] * count;
         outs[r] = if len == 0 {
             &mut []
@@ -611,16 +1065,21 @@ unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
             unsafe { std::slice::from_raw_parts_mut(b.data.cast::<f64>(), len) }
         };
     }
-    let nret = ranks.len();
+    let nret = shapes.len();
     let fail = |e: sodyn::Error| {
         invalid(format!("{fname}: {}", crate::convert::python_message(e.to_string())))
     };
+    let ckey = call.ckey;
+    let new_ws = || Ws::new(m, call.cset.as_deref());
     if count == 1 {
-        let mut w = {
+        let w = {
             let mut spare = entry.spare.lock().unwrap_or_else(|e| e.into_inner());
-            spare.pop()
-        }
-        .unwrap_or_else(|| Ws::new(m));
+            spare.get_mut(&ckey).and_then(|v| v.pop())
+        };
+        let mut w = match w {
+            Some(w) => w,
+            None => new_ws().map_err(fail)?,
+        };
         for (a, x) in w.x.iter_mut().enumerate() {
             if a < nargs {
                 x.as_mut_slice().copy_from_slice(ins[a]);
@@ -628,15 +1087,15 @@ unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
                 x.fill(0.0);
             }
         }
-        let r = run_state(f, order, m, &mut w, &mut outs[..nret]);
-        entry.spare.lock().unwrap_or_else(|e| e.into_inner()).push(w);
+        let r = run_state(&call, m, &mut w, &mut outs[..nret]);
+        entry.spare.lock().unwrap_or_else(|e| e.into_inner()).entry(ckey).or_default().push(w);
         return r.map_err(fail);
     }
     if count == 0 {
         return Ok(());
     }
     // Several states: sodyn's batch pool, as `sodyn.batch`.
-    let mut per_state: Vec<[&mut [f64]; 4]> = Vec::with_capacity(count);
+    let mut per_state: Vec<[&mut [f64]; MAX_RETS]> = Vec::with_capacity(count);
     let mut i = 0;
     let mut iters = outs.map(|s| {
         let it = s.chunks_exact_mut(blocks[i].max(1));
@@ -644,15 +1103,17 @@ unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
         it
     });
     for _ in 0..count {
-        let mut row: [&mut [f64]; 4] = [&mut [], &mut [], &mut [], &mut []];
+        let mut row: [&mut [f64]; MAX_RETS] = Default::default();
         for (slot, it) in row.iter_mut().zip(iters.iter_mut()) {
             *slot = it.next().unwrap_or(&mut []);
         }
         per_state.push(row);
     }
-    let taken = entry.batch.lock().unwrap_or_else(|e| e.into_inner()).take();
-    let mut bd =
-        taken.unwrap_or_else(|| BatchData::from_workspace(BatchPool::shared(), Ws::new(m)));
+    let taken = entry.batch.lock().unwrap_or_else(|e| e.into_inner()).remove(&ckey);
+    let mut bd = match taken {
+        Some(bd) => bd,
+        None => BatchData::from_workspace(BatchPool::shared(), new_ws().map_err(fail)?),
+    };
     let (lq, lv) = (nq, nv);
     let r = map_states(&mut bd, &mut per_state, |w, k, o| {
         let lens = [lq, lv, lv];
@@ -663,9 +1124,9 @@ unsafe fn execute(cf: &CallFrame, f: Func, order: Order) -> Result<(), Fail> {
                 x.fill(0.0);
             }
         }
-        run_state(f, order, m, w, &mut o[..nret])
+        run_state(&call, m, w, &mut o[..nret])
     });
-    *entry.batch.lock().unwrap_or_else(|e| e.into_inner()) = Some(bd);
+    entry.batch.lock().unwrap_or_else(|e| e.into_inner()).insert(ckey, bd);
     r.map_err(fail)
 }
 
@@ -784,6 +1245,21 @@ handlers! {
     nle_second: Func::Nle, Order::Second;
     crba_value: Func::Crba, Order::Value;
     crba_first: Func::Crba, Order::First;
+    kkt_value: Func::Kkt, Order::Value;
+    kkt_first: Func::Kkt, Order::First;
+    kkt_second: Func::Kkt, Order::Second;
+    impact_value: Func::Impact, Order::Value;
+    impact_first: Func::Impact, Order::First;
+    impact_second: Func::Impact, Order::Second;
+    ft_value: Func::FrameTranslation, Order::Value;
+    ft_first: Func::FrameTranslation, Order::First;
+    ft_second: Func::FrameTranslation, Order::Second;
+    fp_value: Func::FramePlacement, Order::Value;
+    fp_first: Func::FramePlacement, Order::First;
+    fp_second: Func::FramePlacement, Order::Second;
+    com_value: Func::Com, Order::Value;
+    com_first: Func::Com, Order::First;
+    com_second: Func::Com, Order::Second;
 }
 
 type Handler = unsafe extern "C" fn(*mut CallFrame) -> *mut XlaError;
@@ -792,7 +1268,7 @@ type Handler = unsafe extern "C" fn(*mut CallFrame) -> *mut XlaError;
 /// api_version=1)`.
 #[pyfunction]
 fn _jax_ffi_targets(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
-    let table: [(&str, &'static CStr, Handler); 11] = [
+    let table: [(&str, &'static CStr, Handler); 26] = [
         ("sodyn_rnea", c"sodyn.jax_ffi.rnea", rnea_value),
         ("sodyn_rnea_first", c"sodyn.jax_ffi.rnea_first", rnea_first),
         ("sodyn_rnea_second", c"sodyn.jax_ffi.rnea_second", rnea_second),
@@ -804,6 +1280,21 @@ fn _jax_ffi_targets(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
         ("sodyn_nonlinear_effects_second", c"sodyn.jax_ffi.nonlinear_effects_second", nle_second),
         ("sodyn_crba", c"sodyn.jax_ffi.crba", crba_value),
         ("sodyn_crba_first", c"sodyn.jax_ffi.crba_first", crba_first),
+        ("sodyn_kkt_dynamics", c"sodyn.jax_ffi.kkt_dynamics", kkt_value),
+        ("sodyn_kkt_dynamics_first", c"sodyn.jax_ffi.kkt_dynamics_first", kkt_first),
+        ("sodyn_kkt_dynamics_second", c"sodyn.jax_ffi.kkt_dynamics_second", kkt_second),
+        ("sodyn_impact_dynamics", c"sodyn.jax_ffi.impact_dynamics", impact_value),
+        ("sodyn_impact_dynamics_first", c"sodyn.jax_ffi.impact_dynamics_first", impact_first),
+        ("sodyn_impact_dynamics_second", c"sodyn.jax_ffi.impact_dynamics_second", impact_second),
+        ("sodyn_frame_translation", c"sodyn.jax_ffi.frame_translation", ft_value),
+        ("sodyn_frame_translation_first", c"sodyn.jax_ffi.frame_translation_first", ft_first),
+        ("sodyn_frame_translation_second", c"sodyn.jax_ffi.frame_translation_second", ft_second),
+        ("sodyn_frame_placement", c"sodyn.jax_ffi.frame_placement", fp_value),
+        ("sodyn_frame_placement_first", c"sodyn.jax_ffi.frame_placement_first", fp_first),
+        ("sodyn_frame_placement_second", c"sodyn.jax_ffi.frame_placement_second", fp_second),
+        ("sodyn_center_of_mass", c"sodyn.jax_ffi.center_of_mass", com_value),
+        ("sodyn_center_of_mass_first", c"sodyn.jax_ffi.center_of_mass_first", com_first),
+        ("sodyn_center_of_mass_second", c"sodyn.jax_ffi.center_of_mass_second", com_second),
     ];
     let d = PyDict::new(py);
     for (name, cname, h) in table {
@@ -818,5 +1309,6 @@ fn _jax_ffi_targets(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
 /// Adds this family's functions to the module.
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_jax_ffi_targets, m)?)?;
+    m.add_function(wrap_pyfunction!(_jax_ffi_contacts, m)?)?;
     Ok(())
 }

@@ -1,9 +1,12 @@
-"""``sodyn.jax``'s XLA FFI custom calls (``rnea``, ``aba``: value, first and second order):
-``jit``, ``jacfwd``, ``jacrev``, second-order ``jacfwd`` and ``vmap`` through them equal the
-direct numpy calls, ``sodyn.batch`` and the ``jax.pure_callback`` path bit for bit; a wrong
-call of a handler (float32, bad shapes, unknown model handle, no ``model`` attribute) is an
-XLA error, not a crash; the model's snapshot follows ``Model.gravity`` and is released with
-the model."""
+"""``sodyn.jax``'s XLA FFI custom calls (value, first and second order of ``rnea``, ``aba``,
+``nonlinear_effects``, ``kkt_dynamics``, ``impact_dynamics``, ``frame_translation``,
+``frame_placement``, ``center_of_mass``; value and first order of ``crba``): ``jit``,
+``jacfwd``, ``jacrev``, second-order ``jacfwd`` and ``vmap`` through them equal the direct numpy
+calls, ``sodyn.batch`` and the ``jax.pure_callback`` path bit for bit (and the numpy API's
+contracted second order and central differences to the tolerances of test_interop_jax.py); a
+wrong call of a handler (float32, bad shapes, unknown model, contact-set or frame handle,
+missing attribute) is an XLA error, not a crash; the model's snapshot follows ``Model.gravity``
+and is released with the model, its contact sets too."""
 
 from __future__ import annotations
 
@@ -23,7 +26,19 @@ import sodyn  # noqa: E402
 import sodyn.jax as sj  # noqa: E402
 from sodyn import _sodyn  # noqa: E402
 
-from interop_cases import arm, chain  # noqa: E402
+from interop_cases import (  # noqa: E402
+    CASES,
+    QCASE_BY_ID,
+    QCASES,
+    q_oracle,
+    arm,
+    central_jacobian,
+    chain,
+    close,
+    contacts,
+    model_of,
+    state_of,
+)
 
 pytestmark = pytest.mark.skipif(
     not sj.uses_ffi(), reason=f"the FFI path is not in use: {sj._FFI_REASON}"
@@ -333,19 +348,26 @@ def test_handlers_answer_the_metadata_query_and_skip_the_other_stages():
     name_of.restype, name_of.argtypes = C.c_char_p, [C.py_object]
     handler_t = C.CFUNCTYPE(C.c_void_p, C.POINTER(CallFrame))
     targets = _sodyn._jax_ffi_targets()
-    assert sorted(targets) == [
-        "sodyn_aba",
-        "sodyn_aba_first",
-        "sodyn_aba_second",
-        "sodyn_crba",
-        "sodyn_crba_first",
-        "sodyn_nonlinear_effects",
-        "sodyn_nonlinear_effects_first",
-        "sodyn_nonlinear_effects_second",
-        "sodyn_rnea",
-        "sodyn_rnea_first",
-        "sodyn_rnea_second",
-    ]
+    assert sorted(targets) == sorted(
+        [
+            f"sodyn_{name}{suffix}"
+        for name in sorted(
+            [
+                "aba",
+                "center_of_mass",
+                "frame_placement",
+                "frame_translation",
+                "impact_dynamics",
+                "kkt_dynamics",
+                "nonlinear_effects",
+                "rnea",
+            ]
+        )
+            for suffix in ("", "_first", "_second")
+        ]
+        + ["sodyn_crba", "sodyn_crba_first"]
+    )
+    assert len(targets) == 26
     frame_size = CallFrame.future.offset  # XLA_FFI_STRUCT_SIZE(XLA_FFI_CallFrame, attrs)
     for cap in targets.values():
         handler = handler_t(get(cap, name_of(cap)))
@@ -360,3 +382,308 @@ def test_handlers_answer_the_metadata_query_and_skip_the_other_stages():
         for stage in (0, 1, 2):  # no arguments at all: nothing may be read
             cf = CallFrame(struct_size=frame_size, stage=stage)
             assert handler(C.byref(cf)) is None
+
+
+
+# ------------------------------------------------------------------------------------------
+# kkt_dynamics, impact_dynamics, frame_translation, frame_placement, center_of_mass
+# ------------------------------------------------------------------------------------------
+
+NEW = ("kkt_dynamics", "impact_dynamics", "frame_translation", "frame_placement", "center_of_mass")
+NEW_CASES = [c for c in CASES if c.fn in NEW]
+
+
+def _jfn(case):
+    model, static = model_of(case)
+    fn = getattr(sj, case.fn)
+    return lambda *xs: fn(model, *xs, *static)
+
+
+def _flat(outs):
+    if isinstance(outs, (tuple, list)):
+        return jnp.concatenate([jnp.ravel(o) for o in outs])
+    return jnp.ravel(outs)
+
+
+def _leaves(x):
+    return [np.asarray(a) for a in jax.tree_util.tree_leaves(x)]
+
+
+def _all_orders(case, xs, Xs):
+    """Value, jacfwd, jacrev, second-order jacfwd, hessian of ``w @ f``, vmapped value and
+    vmapped jacfwd: every leaf as numpy."""
+    f = _jfn(case)
+    args = tuple(range(len(xs)))
+    w = np.random.default_rng(5).uniform(-1, 1, np.asarray(_flat(jax.jit(f)(*xs))).size)
+    L = lambda *a: jnp.dot(w, _flat(f(*a)))  # noqa: E731
+    return [
+        _leaves(jax.jit(f)(*xs)),
+        _leaves(jax.jit(jax.jacfwd(f, argnums=args))(*xs)),
+        _leaves(jax.jit(jax.jacrev(f, argnums=args))(*xs)),
+        _leaves(jax.jit(jax.jacfwd(jax.jacfwd(f, argnums=args), argnums=args))(*xs)),
+        _leaves(jax.jit(jax.hessian(L, argnums=args))(*xs)),
+        _leaves(jax.jit(jax.vmap(f))(*Xs)),
+        _leaves(jax.jit(jax.vmap(jax.jacfwd(f, argnums=args)))(*Xs)),
+    ]
+
+
+def _stacked(case, seeds):
+    states = [state_of(case, s) for s in seeds]
+    return [np.stack([st[a] for st in states]) for a in range(len(states[0]))]
+
+
+@pytest.mark.parametrize("case", NEW_CASES, ids=lambda c: c.id)
+def test_new_functions_run_as_ffi_calls_not_callbacks(case):
+    f = _jfn(case)
+    xs = state_of(case, 0)
+    args = tuple(range(len(xs)))
+    for g in (f, jax.jacfwd(f, argnums=args), jax.jacfwd(jax.jacfwd(f, argnums=args))):
+        text = str(jax.make_jaxpr(g)(*xs))
+        assert "pure_callback" not in text and "ffi_call" in text, text[:400]
+    text = _callback_path(lambda: str(jax.make_jaxpr(jax.jacfwd(f, argnums=args))(*xs)))
+    assert "pure_callback" in text and "ffi_call" not in text
+
+
+@pytest.mark.parametrize("case", NEW_CASES, ids=lambda c: c.id)
+def test_new_functions_equal_the_callback_path_bit_for_bit(case):
+    xs = state_of(case, 1)
+    Xs = _stacked(case, range(20, 26))
+    got = _all_orders(case, xs, Xs)
+    want = _callback_path(lambda: _all_orders(case, xs, Xs))
+    for kind, (g, w) in enumerate(zip(got, want)):
+        assert len(g) == len(w)
+        for a, b in zip(g, w):
+            np.testing.assert_array_equal(a, b, err_msg=f"{case.id} kind {kind}")
+
+
+@pytest.mark.parametrize("case", NEW_CASES, ids=lambda c: c.id)
+def test_new_functions_equal_direct_calls_and_central_differences(case):
+    f = _jfn(case)
+    xs = state_of(case, 2)
+    n = len(xs)
+    args = tuple(range(n))
+    assert close(np.asarray(_flat(jax.jit(f)(*xs))), case.direct(*xs), 1e-10)
+    g = lambda *a: _flat(f(*a))  # noqa: E731
+    fwd = jax.jit(jax.jacfwd(g, argnums=args))(*xs)
+    rev = jax.jit(jax.jacrev(g, argnums=args))(*xs)
+    direct = case.direct_jacobians(*xs)
+    for a in range(n):
+        assert close(np.asarray(fwd[a]), direct[a], 1e-10), (case.id, a)
+        assert close(np.asarray(rev[a]), direct[a], 1e-10), (case.id, a)
+        fd = central_jacobian(lambda x: case.direct(*xs[:a], x, *xs[a + 1 :]), xs[a])
+        assert close(np.asarray(fwd[a]), fd, 1e-6), (case.id, a)
+    w = np.random.default_rng(7).uniform(-1, 1, case.direct(*xs).size)
+    L = lambda *a: jnp.dot(jnp.asarray(w), g(*a))  # noqa: E731
+    H = jax.jit(jax.hessian(L, argnums=args))(*xs)
+    ref = case.contracted(xs, w)
+    for a in range(n):
+        grad_a = lambda *a_: np.asarray(w @ case.direct_jacobians(*a_)[a])  # noqa: E731
+        for b in range(n):
+            got = np.asarray(H[a][b])
+            assert close(got, ref[a][b], 1e-10), (case.id, a, b)
+            fd = central_jacobian(lambda x: grad_a(*xs[:b], x, *xs[b + 1 :]), xs[b])
+            assert close(got, fd, 1e-5), (case.id, a, b)
+
+
+@pytest.mark.parametrize("case", NEW_CASES, ids=lambda c: c.id)
+def test_new_functions_vmap_equals_sequential_bit_for_bit(case):
+    f = _jfn(case)
+    seeds = list(range(30, 37))
+    Xs = _stacked(case, seeds)
+    args = tuple(range(len(Xs)))
+    batched = [
+        _leaves(jax.jit(jax.vmap(f))(*Xs)),
+        _leaves(jax.jit(jax.vmap(jax.jacfwd(f, argnums=args)))(*Xs)),
+        _leaves(jax.jit(jax.vmap(jax.jacfwd(jax.jacfwd(f, argnums=args), argnums=args)))(*Xs)),
+    ]
+    one = [
+        jax.jit(f),
+        jax.jit(jax.jacfwd(f, argnums=args)),
+        jax.jit(jax.jacfwd(jax.jacfwd(f, argnums=args), argnums=args)),
+    ]
+    for k in range(len(seeds)):
+        xs = [x[k] for x in Xs]
+        for got, fn in zip(batched, one):
+            for a, b in zip(got, _leaves(fn(*xs))):
+                np.testing.assert_array_equal(a[k], b)
+    # nested vmap over (2, 3) states and a broadcast (unbatched) argument
+    X6 = [x[:6].reshape((2, 3) + x.shape[1:]) for x in Xs]
+    nested = _leaves(jax.jit(jax.vmap(jax.vmap(f)))(*X6))
+    for a, b in zip(nested, batched[0]):
+        np.testing.assert_array_equal(a.reshape((6,) + a.shape[2:]), b[:6])
+    if len(Xs) > 1:
+        part = _leaves(jax.vmap(lambda q: f(q, *[x[0] for x in Xs[1:]]))(Xs[0]))
+        for k in (0, 4):
+            for a, b in zip(part, _leaves(one[0](Xs[0][k], *[x[0] for x in Xs[1:]]))):
+                np.testing.assert_array_equal(a[k], b)
+
+
+@pytest.mark.parametrize("case", NEW_CASES, ids=lambda c: c.id)
+def test_new_functions_jit_trace_once_and_rerun(case):
+    f = _jfn(case)
+    traces = []
+
+    def g(*xs):
+        traces.append(1)
+        return f(*xs)
+
+    jg = jax.jit(g)
+    for seed in (3, 4, 5):
+        xs = state_of(case, seed)
+        np.testing.assert_array_equal(
+            np.asarray(_flat(jg(*xs))), np.asarray(_flat(jax.jit(f)(*xs)))
+        )
+    assert len(traces) == 1
+
+
+def test_contact_sets_are_shared_checked_and_released_with_the_model():
+    from conftest import FALLBACK_URDF, HAVE_SHARED, MODELS_DIR
+
+    if HAVE_SHARED:
+        model = sodyn.Model.from_urdf(MODELS_DIR / "panda.urdf")
+    else:
+        model = sodyn.Model.from_urdf_string(FALLBACK_URDF)
+    cs = contacts()
+    h = _sodyn._jax_ffi_contacts(model, cs)
+    assert _sodyn._jax_ffi_contacts(model, list(cs)) == h  # same set, same handle
+    assert _sodyn._jax_ffi_contacts(model, cs, 0.5) != h  # another restitution
+    with pytest.raises(ValueError):
+        _sodyn._jax_ffi_contacts(model, [])
+    with pytest.raises(ValueError, match="nope"):
+        _sodyn._jax_ffi_contacts(model, [sodyn.Contact("nope", point=(0.0, 0.0, 0.0))])
+    with pytest.raises(ValueError):
+        _sodyn._jax_ffi_contacts(model, cs, -1.0)
+    mh = _sodyn._jax_ffi_model(model)
+    nv = model.nv
+    x = np.zeros(nv)
+    out = [(nv,), (3,)]
+    got = _raw("sodyn_kkt_dynamics", mh, (x, x, x), out, contacts=np.int64(h))
+    r = sodyn.kkt_derivatives(model, model.create_data(), x, x, x, cs)
+    np.testing.assert_array_equal(np.asarray(got[0]), r.qdd)
+    np.testing.assert_array_equal(np.asarray(got[1]), r.lambda_)
+    del model, got
+    sj._CACHE.clear()
+    gc.collect()
+    with pytest.raises(RuntimeErr, match="no model with handle"):
+        _raw("sodyn_kkt_dynamics", mh, (x, x, x), out, contacts=np.int64(h))
+
+
+def test_a_wrong_call_of_a_new_handler_is_an_error_not_a_crash():
+    model, frame = arm()
+    nv, nq = model.nv, model.nq
+    mh = _sodyn._jax_ffi_model(model)
+    cs = contacts()
+    ch = _sodyn._jax_ffi_contacts(model, cs)
+    x = np.zeros(nv)
+    q = model.random_configuration(seed=3)
+    kkt = "sodyn_kkt_dynamics"
+    # correct calls equal the numpy API
+    got = _raw(kkt, mh, (q, x, x), [(nv,), (3,)], contacts=np.int64(ch))
+    r = sodyn.kkt_derivatives(model, model.create_data(), q, x, x, cs)
+    np.testing.assert_array_equal(np.asarray(got[1]), r.lambda_)
+    fid = model.frame_id(frame)
+    got = _raw("sodyn_frame_translation", mh, (q,), [(3,)], frame=np.int64(fid))
+    T = sodyn.frame_placement(model, model.create_data(), q, frame)
+    np.testing.assert_array_equal(np.asarray(got[0]), T[:3, 3])
+    with pytest.raises(RuntimeErr, match="no `contacts` attribute"):
+        _raw(kkt, mh, (q, x, x), [(nv,), (3,)])
+    with pytest.raises(RuntimeErr, match="no contact set with handle"):
+        _raw(kkt, mh, (q, x, x), [(nv,), (3,)], contacts=np.int64(10**12))
+    other = sodyn.Model.builtin("chain6")
+    oh = _sodyn._jax_ffi_model(other)
+    with pytest.raises(RuntimeErr, match="no contact set with handle"):
+        _raw(kkt, oh, (x[:6], x[:6], x[:6]), [(6,), (3,)], contacts=np.int64(ch))
+    with pytest.raises(RuntimeErr, match=r"result 1 has shape \(6,\), expected \(3,\)"):
+        _raw(kkt, mh, (q, x, x), [(nv,), (6,)], contacts=np.int64(ch))
+    with pytest.raises(RuntimeErr, match="expected 8 results"):
+        _raw(kkt + "_first", mh, (q, x, x), [(nv,), (3,)], contacts=np.int64(ch))
+    with pytest.raises(RuntimeErr, match="argument 'v_minus'.*float64"):
+        _raw(
+            "sodyn_impact_dynamics",
+            mh,
+            (q, x.astype(np.float32)),
+            [(nv,), (3,)],
+            contacts=np.int64(ch),
+        )
+    with pytest.raises(RuntimeErr, match="expected 2 arguments"):
+        _raw("sodyn_impact_dynamics", mh, (q, x, x), [(nv,), (3,)], contacts=np.int64(ch))
+    with pytest.raises(RuntimeErr, match="no `frame` attribute"):
+        _raw("sodyn_frame_placement", mh, (q,), [(4, 4)])
+    with pytest.raises(RuntimeErr, match="out of range"):
+        _raw("sodyn_frame_placement", mh, (q,), [(4, 4)], frame=np.int64(10**6))
+    with pytest.raises(RuntimeErr, match="must be a frame name or index"):
+        _raw("sodyn_frame_placement", mh, (q,), [(4, 4)], frame=np.int64(-1))
+    with pytest.raises(RuntimeErr, match=r"result 1 has shape \(4, 4, 3\)"):
+        _raw("sodyn_frame_placement_first", mh, (q,), [(4, 4), (4, 4, 3)], frame=np.int64(fid))
+    with pytest.raises(RuntimeErr, match=r"result 0 has shape \(4,\), expected \(3,\)"):
+        _raw("sodyn_center_of_mass", mh, (q,), [(4,)])
+    with pytest.raises(RuntimeErr, match="argument 'q' has shape"):
+        _raw("sodyn_center_of_mass", mh, (np.zeros(nq + 1),), [(3,)])
+    # sodyn's own refusals, in a batch too
+    bad = x.copy()
+    bad[0] = np.nan
+    f = lambda t: sj.kkt_dynamics(model, q, x, t, cs)  # noqa: E731
+    with pytest.raises(RuntimeErr, match="sodyn.jax.kkt_dynamics: .*non-finite"):
+        jax.block_until_ready(jax.jit(f)(bad))
+    B = np.zeros((3, nv))
+    B[2, 1] = np.inf
+    with pytest.raises(RuntimeErr, match="state 2"):
+        jax.block_until_ready(jax.jit(jax.vmap(f))(B))
+    with pytest.raises(RuntimeErr, match="center_of_mass: .*coordinate 0 is not finite"):
+        jax.block_until_ready(jax.jit(lambda q_: sj.center_of_mass(model, q_))(np.full(nq, np.nan)))
+
+
+# ------------------------------------------------------------------------------------------
+# Quaternion and planar coordinates: the chart in JAX operations around the FFI calls
+# ------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("case", QCASES, ids=lambda c: c.id)
+def test_chart_runs_on_the_ffi_path_and_equals_the_callback_path(case):
+    """For models with quaternion or planar coordinates the first and second order are FFI
+    calls (tangent-space blocks) with the chart (``P``, ``d²θ/dq²``) applied in JAX operations:
+    no callback (but crba's second order), and the same Jacobians and Hessians as the callback
+    path (chart in numpy) to 1e-12 relative; the central-difference checks of
+    ``test_interop_jax.py`` run on this path."""
+    xs, w, _, _ = q_oracle(case.id)
+    f = _jfn(case)
+    args = tuple(range(len(xs)))
+    g = lambda *a: _flat(f(*a))  # noqa: E731
+    L = lambda *a: jnp.dot(jnp.asarray(w), g(*a))  # noqa: E731
+
+    def run():
+        return (
+            _leaves(jax.jit(jax.jacfwd(g, argnums=args))(*xs)),
+            _leaves(jax.jit(jax.jacrev(g, argnums=args))(*xs)),
+            _leaves(jax.jit(jax.hessian(L, argnums=args))(*xs)),
+        )
+
+    text = str(jax.make_jaxpr(jax.jacfwd(jax.jacfwd(g)))(*xs))
+    if case.fn == "crba":
+        assert "ffi_call" in text
+    else:
+        assert "pure_callback" not in text and "ffi_call" in text
+    got, want = run(), _callback_path(run)
+    worst = 0.0
+    for gs, ws in zip(got, want):
+        for a, b in zip(gs, ws):
+            err = float(np.abs(a - b).max(initial=0.0) / max(1.0, np.abs(b).max(initial=0.0)))
+            worst = max(worst, err)
+    assert worst <= 1e-12, (case.id, worst)
+
+
+def test_chart_on_the_ffi_path_vmap_equals_sequential():
+    """vmap of the chart path against sequential calls: the FFI blocks bit for bit, the
+    chart's XLA products to 1e-14 relative."""
+    for cid in ("kkt-flyer", "aba-tree", "frame_placement-flyer"):
+        case = QCASE_BY_ID[cid]
+        f = _jfn(case)
+        states = [state_of(case, 80 + n) for n in range(4)]
+        stacked = [np.stack([s[a] for s in states]) for a in range(len(states[0]))]
+        args = tuple(range(len(stacked)))
+        jac = _leaves(jax.jit(jax.vmap(jax.jacfwd(f, argnums=args)))(*stacked))
+        one = jax.jit(jax.jacfwd(f, argnums=args))
+        for n, s in enumerate(states):
+            for got, want in zip(jac, _leaves(one(*s))):
+                err = np.abs(got[n] - want).max(initial=0.0) / max(1.0, np.abs(want).max())
+                assert err <= 1e-14, (cid, n, err)

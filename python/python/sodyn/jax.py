@@ -11,12 +11,13 @@ restitution are static, the arrays traced) and returns ``jax.Array`` values::
     qdd = jax.jit(lambda q, v, tau: sj.aba(model, q, v, tau))(q, v, tau)
 
 How it is built: the values and derivatives are sodyn's, wrapped in ``jax.custom_jvp`` rules.
-``rnea``, ``aba``, ``nonlinear_effects`` (value, first and second order) and ``crba`` (value and
-first order) are XLA FFI custom calls registered from the Rust extension (``jax.ffi.ffi_call``;
-no Python runs inside the jitted function); the other functions, and the second order of
-``crba``, call sodyn through ``jax.pure_callback``. ``SODYN_JAX_FFI=0`` in the environment (or a
-JAX without ``jax.ffi``) puts everything on ``jax.pure_callback``; :func:`uses_ffi` says which
-is in use.
+Every function (value, first and second order; ``crba``: value and first order) is an XLA FFI
+custom call registered from the Rust extension (``jax.ffi.ffi_call``; no Python runs inside the
+jitted function; the static model, contact set and frame are attributes of the call); the
+second order of ``crba`` calls sodyn through ``jax.pure_callback``. For models with quaternion
+or planar coordinates the FFI calls return tangent-space blocks and the chart to the ``q``
+array is applied in JAX operations. ``SODYN_JAX_FFI=0`` in the environment (or a JAX without
+``jax.ffi``) puts everything on ``jax.pure_callback``; :func:`uses_ffi` says which is in use.
 
 * first order: ``fd_derivatives``, ``id_derivatives``, ``kkt_derivatives``,
   ``impact_derivatives``, ``frame_jacobian``, ``center_of_mass_jacobian`` (reverse mode is
@@ -29,16 +30,15 @@ is in use.
 * ``jax.vmap``: the custom calls and callbacks use ``vmap_method="broadcast_all"`` and receive
   the stacked states at once; the FFI handlers run them on sodyn's batch pool, the callbacks
   of ``rnea``, ``aba``, ``crba``, ``nonlinear_effects`` go to ``sodyn.batch`` (threads, GIL
-  released; both bit for bit the sequential calls), the others loop over the states in
-  Python.
+  released; both bit for bit the sequential calls), the other callbacks loop over the states
+  in Python.
 
 Only float64 is accepted: enable it with ``jax.config.update("jax_enable_x64", True)`` (or the
 environment variable ``JAX_ENABLE_X64=1``) before creating arrays. Derivatives with respect to
 ``q`` are with respect to the ``q`` array (``nq`` columns): for quaternion coordinates (free
 flyer, spherical joint) those of ``f(q) := f(N(q))``, ``N`` normalising each quaternion block,
-at unit quaternions; for planar joints through the SE(2) chart (``sodyn._interop.Chart``). For
-such models the first and second order run through ``jax.pure_callback`` (the chart is applied
-in numpy), the value stays an FFI call. See docs/interop.md.
+at unit quaternions; for planar joints through the SE(2) chart (``sodyn._interop.Chart``, in
+JAX operations on the FFI path, in numpy on the callback path). See docs/interop.md.
 """
 
 from __future__ import annotations
@@ -99,13 +99,24 @@ def _register_ffi() -> Tuple[bool, str]:
 
 _FFI_OK, _FFI_REASON = _register_ffi()
 # The functions that are FFI custom calls: value, first order and (but for crba) second order.
-_FFI_FUNCTIONS = ("rnea", "aba", "nonlinear_effects", "crba")
+_FFI_FUNCTIONS = (
+    "rnea",
+    "aba",
+    "nonlinear_effects",
+    "crba",
+    "kkt_dynamics",
+    "impact_dynamics",
+    "frame_translation",
+    "frame_placement",
+    "center_of_mass",
+)
 _use_ffi = _FFI_OK
 
 
 def uses_ffi() -> bool:
-    """Whether ``rnea``, ``aba``, ``nonlinear_effects`` and ``crba`` run as XLA FFI custom
-    calls (else ``jax.pure_callback``)."""
+    """Whether the functions run as XLA FFI custom calls (else ``jax.pure_callback``): all of
+    them, value, first and second order, but the second order of ``crba`` and, for models
+    with quaternion or planar coordinates, the first and second order (docs/interop.md)."""
     return _use_ffi
 
 
@@ -113,37 +124,192 @@ def _swap_last(t):
     return jnp.swapaxes(t, -1, -2)
 
 
+def _ffi_attrs(spec: _interop.Spec) -> dict:
+    """The static attributes of a spec's custom calls: the model's handle in the extension's
+    registry, and the contact set's handle or the frame index."""
+    attrs = {"model": np.int64(_sodyn._jax_ffi_model(spec.model))}
+    if spec.name == "kkt_dynamics":
+        attrs["contacts"] = np.int64(_sodyn._jax_ffi_contacts(spec.model, list(spec.static[0])))
+    elif spec.name == "impact_dynamics":
+        contacts, e = spec.static
+        attrs["contacts"] = np.int64(
+            _sodyn._jax_ffi_contacts(spec.model, list(contacts), float(e))
+        )
+    elif spec.name in ("frame_translation", "frame_placement"):
+        attrs["frame"] = np.int64(spec.static[0])
+    return attrs
+
+
+def _ffi_hessian_blocks(name: str, ts) -> dict:
+    """The ``hess_blocks`` of a spec from the dense tensors of its ``_second`` handler (the
+    order of ``id_so_derivatives``, ``fd_so_derivatives``, ``kkt_derivatives(order=2)``,
+    ``impact_derivatives(order=2)``; one tensor for the frame functions and the centre of
+    mass)."""
+    if name in ("rnea", "aba", "nonlinear_effects", "kkt_dynamics"):
+        per = 3 if name == "nonlinear_effects" else 4
+        blocks = {}
+        for o in range(len(ts) // per):
+            t = ts[per * o : per * (o + 1)]
+            blocks[(o, 0, 0)], blocks[(o, 1, 1)], blocks[(o, 0, 1)] = t[0], t[1], t[2]
+            blocks[(o, 1, 0)] = _swap_last(t[2])
+            if per == 4:
+                blocks[(o, 2, 0)] = t[3]
+                blocks[(o, 0, 2)] = _swap_last(t[3])
+        return blocks
+    if name == "impact_dynamics":
+        blocks = {}
+        for o in range(2):
+            blocks[(o, 0, 0)], blocks[(o, 0, 1)] = ts[2 * o], ts[2 * o + 1]
+            blocks[(o, 1, 0)] = _swap_last(ts[2 * o + 1])
+        return blocks
+    return {(0, 0, 0): ts[0]}
+
+
 def _ffi_calls(spec: _interop.Spec, out_sds, jac_sds):
     """The value, first-order and second-order functions of a spec of ``_FFI_FUNCTIONS`` as
-    FFI calls (the model is the ``model`` attribute: its handle in the extension's registry);
-    the second order is ``None`` for ``crba`` (its callback stays)."""
-    handle = np.int64(_sodyn._jax_ffi_model(spec.model))
+    FFI calls (static data as attributes: :func:`_ffi_attrs`); the second order is ``None``
+    for ``crba`` (its callback stays)."""
+    attrs = _ffi_attrs(spec)
     nv = spec.model.nv
     target = f"sodyn_{spec.name}"
 
     def make(suffix, sds):
         call = jax.ffi.ffi_call(target + suffix, sds, vmap_method="broadcast_all")
-        return lambda *xs: tuple(call(*xs, model=handle))
+        return lambda *xs: tuple(call(*xs, **attrs))
 
     value, first = make("", out_sds), make("_first", out_sds + jac_sds)
     if spec.name == "crba":
         return value, first, None
-    # (d2/dq2, d2/dv2, d2/dqdv[, d2/dxdq]) of id_so_derivatives / fd_so_derivatives
-    ntensors = 3 if spec.name == "nonlinear_effects" else 4
-    t3 = jax.ShapeDtypeStruct((nv, nv, nv), jnp.float64)
-    dense = make("_second", (t3,) * ntensors)
+    f64 = jnp.float64
+    if spec.name in ("rnea", "aba", "nonlinear_effects"):
+        t3 = jax.ShapeDtypeStruct((nv, nv, nv), f64)
+        tensors = (t3,) * (3 if spec.name == "nonlinear_effects" else 4)
+    elif spec.name == "kkt_dynamics":
+        (nl,) = out_sds[1].shape
+        tensors = (jax.ShapeDtypeStruct((nv, nv, nv), f64),) * 4 + (
+            jax.ShapeDtypeStruct((nl, nv, nv), f64),
+        ) * 4
+    elif spec.name == "impact_dynamics":
+        (nl,) = out_sds[1].shape
+        tv, tl = (jax.ShapeDtypeStruct((n, nv, nv), f64) for n in (nv, nl))
+        tensors = (tv, tv, tl, tl)
+    else:  # frame_translation, frame_placement, center_of_mass: d2y/dq2
+        tensors = (jax.ShapeDtypeStruct(out_sds[0].shape + (nv, nv), f64),)
+    dense = make("_second", tensors)
 
     def second(*xs):
-        # the blocks of Rnea._hess / Aba._hess / NonlinearEffects._hess
-        ts = dense(*xs)
-        blocks = {(0, 0, 0): ts[0], (0, 1, 1): ts[1], (0, 0, 1): ts[2]}
-        blocks[(0, 1, 0)] = _swap_last(ts[2])
-        if ntensors == 4:
-            blocks[(0, 2, 0)] = ts[3]
-            blocks[(0, 0, 2)] = _swap_last(ts[3])
+        blocks = _ffi_hessian_blocks(spec.name, dense(*xs))
         return tuple(blocks[k] for k in spec.hess_blocks)
 
     return value, first, second
+
+
+def _quat_parts(n):
+    """``(L, R)`` of a unit quaternion ``n = [x y z w]``: ``L d = vec(conj(n) ⊗ d)`` (3×4) and
+    the rotation matrix (the numpy chart's ``_quat_left_conj``, ``_quat_rotation``)."""
+    x, y, z, w = n[0], n[1], n[2], n[3]
+    v = n[:3]
+    L = jnp.concatenate([w * jnp.eye(3) - _skew3(v), -v[:, None]], axis=1)
+    R = jnp.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    return L, R
+
+
+def _skew3(w):
+    z = jnp.zeros((), w.dtype)
+    return jnp.array([[z, -w[2], w[1]], [w[2], z, -w[0]], [-w[1], w[0], z]])
+
+
+def _chart_jacobian(chart: _interop.Chart, q):
+    """``P (nv, nq) = dθ/dq`` at one configuration, in JAX operations (``Chart.jacobian``)."""
+    P = jnp.zeros((chart.nv, chart.nq), q.dtype)
+    for kind, iq, iv, _, nv in chart.joints:
+        if kind in ("free_flyer", "spherical"):
+            o = iq + 3 if kind == "free_flyer" else iq
+            quat = q[o : o + 4]
+            s = jnp.linalg.norm(quat)
+            L, R = _quat_parts(quat / s)
+            P = P.at[iv : iv + 3, o : o + 4].set(2 * L / s)
+            if kind == "free_flyer":
+                P = P.at[iv + 3 : iv + 6, iq : iq + 3].set(R.T)
+        elif kind == "planar":
+            c, sn = jnp.cos(q[iq + 2]), jnp.sin(q[iq + 2])
+            P = P.at[iv : iv + 2, iq : iq + 2].set(jnp.array([[c, sn], [-sn, c]]))
+            P = P.at[iv + 2, iq + 2].set(1.0)
+        else:
+            for k in range(nv):
+                P = P.at[iv + k, iq + k].set(1.0)
+    return P
+
+
+def _chart_hessian(chart: _interop.Chart, q):
+    """``D2 (nv, nq, nq) = d²θ/dq²`` at one configuration (unit quaternions), in JAX
+    operations (``Chart.hessian``)."""
+    D2 = jnp.zeros((chart.nv, chart.nq, chart.nq), q.dtype)
+    for kind, iq, iv, _, _ in chart.joints:
+        if kind in ("free_flyer", "spherical"):
+            o = iq + 3 if kind == "free_flyer" else iq
+            n = q[o : o + 4] / jnp.linalg.norm(q[o : o + 4])
+            L, R = _quat_parts(n)
+            t = jnp.einsum("a,mb->mab", n, L)
+            D2 = D2.at[iv : iv + 3, o : o + 4, o : o + 4].set(-2 * (t + jnp.swapaxes(t, 1, 2)))
+            if kind == "free_flyer":
+                # X[m, α, β] = −([L e_α]× Rᵀ)[m, β]
+                S = jax.vmap(_skew3)(L.T)  # (4, 3, 3)
+                X = -jnp.einsum("amc,cb->mab", S, R.T)
+                D2 = D2.at[iv + 3 : iv + 6, o : o + 4, iq : iq + 3].set(X)
+                D2 = D2.at[iv + 3 : iv + 6, iq : iq + 3, o : o + 4].set(jnp.swapaxes(X, 1, 2))
+        elif kind == "planar":
+            c, sn = jnp.cos(q[iq + 2]), jnp.sin(q[iq + 2])
+            X = jnp.array([[-0.5 * sn, 0.5 * c], [-0.5 * c, -0.5 * sn]])
+            D2 = D2.at[iv : iv + 2, iq + 2, iq : iq + 2].set(X)
+            D2 = D2.at[iv : iv + 2, iq : iq + 2, iq + 2].set(X)
+    return D2
+
+
+def _chart_calls(spec: _interop.ArraySpec, t_first, t_second):
+    """The first and second order with respect to the ``q`` array from the tangent-space FFI
+    calls, the chart applied in JAX operations (``ArraySpec._jac`` / ``_hess``); the second
+    order is ``None`` when ``t_second`` is."""
+    chart, iq, nout = spec.chart, spec.iq, len(spec.outputs)
+
+    def first(*xs):
+        res = t_first(*xs)
+        P = _chart_jacobian(chart, xs[iq])
+        jacs = [
+            jnp.tensordot(J, P, axes=1) if a == iq else J
+            for (_, a), J in zip(spec.jac_blocks, res[nout:])
+        ]
+        return tuple(res[:nout]) + tuple(jacs)
+
+    if t_second is None:
+        return first, None
+
+    def second(*xs):
+        jac = dict(zip(spec.jac_blocks, t_first(*xs)[nout:]))
+        H = t_second(*xs)
+        q = xs[iq]
+        P, D2 = _chart_jacobian(chart, q), _chart_hessian(chart, q)
+        out = []
+        for (o, a, b), h in zip(spec.hess_blocks, H):
+            if a == iq and b == iq:
+                hs = 0.5 * (h + _swap_last(h))
+                PtHP = jnp.einsum("ja,...jk,kb->...ab", P, hs, P)
+                out.append(PtHP + jnp.tensordot(jac[(o, iq)], D2, axes=1))
+            elif a == iq:
+                out.append(jnp.einsum("...jk,ja->...ak", h, P))
+            elif b == iq:
+                out.append(jnp.einsum("...jk,kb->...jb", h, P))
+            else:
+                out.append(h)
+        return tuple(out)
+
+    return first, second
 
 
 def _run(spec: _interop.Spec, kind: str, xs) -> tuple:
@@ -197,11 +363,14 @@ def _build(spec: _interop.Spec):
     def cb(kind):
         return lambda *xs: _run(spec, kind, xs)
 
-    if _use_ffi and spec.name in _FFI_FUNCTIONS:
+    if _use_ffi and spec.name in _FFI_FUNCTIONS and isinstance(spec, _interop.ArraySpec):
+        # the handlers return tangent-space q derivatives: the chart runs in JAX operations
+        nv = spec.model.nv
+        tjac = tuple(jax.ShapeDtypeStruct(osh[o] + (nv,), f64) for o, _ in spec.jac_blocks)
+        ffi_value, t_first, t_second = _ffi_calls(spec.spec, out_sds, tjac)
+        ffi_first, ffi_second = _chart_calls(spec, t_first, t_second)
+    elif _use_ffi and spec.name in _FFI_FUNCTIONS:
         ffi_value, ffi_first, ffi_second = _ffi_calls(spec, out_sds, jac_sds)
-        if isinstance(spec, _interop.ArraySpec):
-            # the handlers return tangent-space q derivatives: the chart runs in the callback
-            ffi_first = ffi_second = None
     else:
         ffi_value = ffi_first = ffi_second = None
 
