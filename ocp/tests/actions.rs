@@ -390,9 +390,9 @@ fn second_order_variants_reach_the_gauss_newton_solution() {
 
 #[test]
 fn a_model_in_reduced_coordinates_is_refused() {
-    use sodyn::model::MimicJoint;
+    use sodyn::model::JointCoupling;
     let full = builtin::serial_chain(3);
-    let mimic = MimicJoint { joint: 3, reference: 2, multiplier: 0.5, offset: 0.1 };
+    let mimic = JointCoupling { joint: 3, reference: 2, multiplier: 0.5, offset: 0.1 };
     let m = Arc::new(full.with_mimic_joints(&[mimic]).expect("reduced"));
     assert!(m.is_reduced());
     let e = spec::action_model(&m, &json!({"type": "euler", "dt": 0.01, "costs": []}), "node 0")

@@ -11,7 +11,7 @@ use numpy::PyUntypedArrayMethods;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use sodyn::Error;
-use sodyn::model::MimicJoint;
+use sodyn::model::JointCoupling;
 use sodyn::model::{JointType, MjcfOptions, Model, ModelBuilder, UrdfOptions, builtin};
 use sodyn::rng::Rng;
 use sodyn::spatial::{Inertia, Transform};
@@ -729,9 +729,9 @@ pub(crate) fn rebuild_py(desc: &Bound<'_, PyDict>) -> PyResult<PyModel> {
         return Ok(PyModel::plain(m));
     }
     let l: Vec<(usize, usize, f64, f64)> = item(desc, "mimic_constraints")?;
-    let c: Vec<MimicJoint> = l
+    let c: Vec<JointCoupling> = l
         .into_iter()
-        .map(|(joint, reference, multiplier, offset)| MimicJoint {
+        .map(|(joint, reference, multiplier, offset)| JointCoupling {
             joint,
             reference,
             multiplier,

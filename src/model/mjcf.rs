@@ -1254,8 +1254,8 @@ impl Loader {
         root: &El,
         model: &Model,
         q0: &nalgebra::DVector<f64>,
-    ) -> Result<(Vec<super::Contact>, Vec<((Rc<str>, u32, String), super::MimicJoint)>)> {
-        use super::{Contact, ContactType, MimicJoint};
+    ) -> Result<(Vec<super::Contact>, Vec<((Rc<str>, u32, String), super::JointCoupling)>)> {
+        use super::{Contact, ContactType, JointCoupling};
         let mut contacts = Vec::new();
         let mut mimics = Vec::new();
         // World placements of the joints at q0 (`ᵖM_i = placement_i · X_J(q_i)`, composed
@@ -1432,7 +1432,7 @@ impl Loader {
                         let (c0, c1) = (coef(0), coef(1));
                         mimics.push((
                             (c.file.clone(), c.line, elem.clone()),
-                            MimicJoint {
+                            JointCoupling {
                                 joint: j1,
                                 reference: j2,
                                 multiplier: c1,

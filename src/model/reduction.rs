@@ -40,7 +40,7 @@ use nalgebra::{DMatrix, DVector};
 /// One mimic constraint `q[joint] = multiplier · q[reference] + offset` between two one-DoF
 /// joints of the full model (indices of [`Model::names`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MimicJoint {
+pub struct JointCoupling {
     /// The mimic joint (it has no degree of freedom in the reduced model).
     pub joint: usize,
     /// The joint it follows (an independent joint).
@@ -56,7 +56,7 @@ pub struct MimicJoint {
 #[derive(Clone, Debug)]
 pub struct MimicModel {
     pub(crate) full: Model,
-    pub(crate) mimics: Vec<MimicJoint>,
+    pub(crate) mimics: Vec<JointCoupling>,
     pub(crate) nq: usize,
     pub(crate) nv: usize,
     /// Per full configuration coordinate: `(reduced index, coefficient, offset)`.
@@ -97,7 +97,7 @@ impl MimicModel {
     /// joint is itself a mimic joint, either joint is not a one-DoF revolute, continuous or
     /// prismatic joint, the two are not of one kind (both rotational or both prismatic), or
     /// the multiplier or offset is not finite.
-    pub fn new(full: Model, mimics: &[MimicJoint]) -> Result<Self> {
+    pub fn new(full: Model, mimics: &[JointCoupling]) -> Result<Self> {
         // The constraints name joints of the full tree.
         let full = match &full.reduction {
             Some(r) => r.full.clone(),

@@ -95,7 +95,7 @@ pub struct Model {
     pub(crate) mimic: Vec<Option<String>>,
     /// The mimic constraints read with [`UrdfOptions::mimic`](super::UrdfOptions::mimic)
     /// (checked, by increasing joint index; empty otherwise).
-    pub(crate) mimic_joints: Vec<super::reduction::MimicJoint>,
+    pub(crate) mimic_joints: Vec<super::reduction::JointCoupling>,
     /// The reduced coordinates, when the mimic joints follow their references (see
     /// [`Model::full_tree`]): the full tree (this model's own joint-level fields, without a
     /// reduction) and the map `G`. `None` for a model in which every joint is independent.
@@ -241,7 +241,7 @@ impl Model {
     /// exist or the world, a joint mimics itself, a joint is constrained twice, a reference
     /// joint is itself a mimic joint, either joint is not a one-DoF revolute, continuous or
     /// prismatic joint, the two are not of one kind, or the multiplier or offset is not finite.
-    pub fn with_mimic_joints(&self, mimics: &[super::reduction::MimicJoint]) -> Result<Model> {
+    pub fn with_mimic_joints(&self, mimics: &[super::reduction::JointCoupling]) -> Result<Model> {
         let mut tree = self.full_tree().clone();
         if mimics.is_empty() {
             tree.constraints = self.constraints.clone();
@@ -456,7 +456,7 @@ impl Model {
     /// loader with [`UrdfOptions::mimic`](super::UrdfOptions::mimic) (checked; by increasing
     /// joint index); a reduced model's own constraints. From them the loader makes the reduced
     /// model. Empty without that option and for models made otherwise.
-    pub fn mimic_joints(&self) -> &[super::reduction::MimicJoint] {
+    pub fn mimic_joints(&self) -> &[super::reduction::JointCoupling] {
         &self.mimic_joints
     }
     /// What the URDF or MJCF loader accepted with a reservation, one message per item in the

@@ -78,7 +78,7 @@
 //! `joint "knee"`) and the reason.
 
 use super::joint::JointType;
-use super::reduction::MimicJoint;
+use super::reduction::JointCoupling;
 use super::tree::{Model, ModelBuilder, inertia_defect};
 use crate::error::{Error, Result};
 use crate::spatial::InertiaDefect;
@@ -796,7 +796,7 @@ impl<'d, 'a, 'i> Parser<'d, 'a, 'i> {
             for j in &joints {
                 let Some((of, _)) = &j.mimic else { continue };
                 let id = |n: &str| b_names.get(n).copied().expect("movable joints are in the tree");
-                mimics.push(MimicJoint {
+                mimics.push(JointCoupling {
                     joint: id(&j.name),
                     reference: id(of),
                     multiplier: j.mimic_coeffs.0,

@@ -25,7 +25,7 @@
 use super::derivatives::{eps, eps1, eps2, hessian, jacobian, nested_q, perturb_q, seeded};
 use super::dynamics::{mass_matrix, nle, rnea, solve};
 use super::kinematics::{forward_kinematics, parent_poses, subspace_column, subspace_mul};
-use super::mimic::Reduced;
+use super::reduced::Reduced;
 use super::spatial::{Pose, Sv, cst, lift_m3, lift_v3};
 use super::{AdScalar, lift, real};
 use crate::model::Model;

@@ -3,7 +3,7 @@
 
 use super::AdScalar;
 use super::kinematics::{forward_kinematics, parent_poses, subspace_mul, subspace_tr_mul};
-use super::mimic::Reduced;
+use super::reduced::Reduced;
 use super::spatial::{Pose, SpInertia, Sv, cst, lift_v3};
 use crate::model::Model;
 

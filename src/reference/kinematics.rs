@@ -7,7 +7,7 @@
 //! exact first and second derivatives; otherwise the closed forms are used.
 
 use super::AdScalar;
-use super::mimic::Reduced;
+use super::reduced::Reduced;
 use super::spatial::{Pose, Sv, cst, lift_v3, skew};
 use crate::model::{JointType, Model};
 use nalgebra::{Matrix3, Vector3};

@@ -21,7 +21,7 @@
 //!   dense solve ([`aba`]);
 //! * [`contact`]: point-contact Jacobians and drifts, constrained inverse dynamics, KKT and
 //!   impact dynamics, and their first/second-order `f64` oracles;
-//! * [`mimic`]: the mimic expansion of a model in reduced coordinates (mimic joints), through
+//! * [`reduced`]: the mimic expansion of a model in reduced coordinates (mimic joints), through
 //!   which every function here takes such a model too: the reference algorithms run on the full
 //!   tree at `expand(q)`, `G v`, and return the reduced quantities;
 //! * [`derivatives`]: `f64`-valued convenience oracles, first order with [`num_dual::Dual64`]
@@ -39,7 +39,7 @@ pub mod contact;
 pub mod derivatives;
 pub mod dynamics;
 pub mod kinematics;
-pub mod mimic;
+pub mod reduced;
 pub mod spatial;
 
 pub use contact::{

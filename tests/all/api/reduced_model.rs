@@ -1,6 +1,6 @@
 //! A URDF loaded with `UrdfOptions { mimic: true }` is a `Model` in reduced coordinates: its
 //! counts and configuration-space operations against the reduction's oracle
-//! (`reference::mimic::Reduced`), the plain algorithms with the usual workspaces (`Data`, with
+//! (`reference::reduced::Reduced`), the plain algorithms with the usual workspaces (`Data`, with
 //! its second-order capacity, `ContactData`, batch and centroidal workspaces) against the full tree's at
 //! the expanded state (`Gᵀ τ_full(expand(q), G v, G a)`, `Gᵀ M_full G`, the placements bit for
 //! bit, `J = J_full G`), point kinematics against central differences in the reduced coordinates,
@@ -13,8 +13,8 @@ use nalgebra::{DMatrix, DVector};
 use sodyn::algo::{self, Data};
 use sodyn::deriv;
 use sodyn::deriv::ContactData;
-use sodyn::model::{Arg, MimicJoint, Model, UrdfOptions, load_urdf_file};
-use sodyn::reference::{self, mimic::Reduced};
+use sodyn::model::{Arg, JointCoupling, Model, UrdfOptions, load_urdf_file};
+use sodyn::reference::{self, reduced::Reduced};
 use sodyn::rng::Rng;
 use sodyn::spatial::Force;
 use sodyn::{Error, tensor::Tensor3};
@@ -399,7 +399,7 @@ fn bad_constraints_of_the_api_are_errors() {
         load_urdf_file(&um::arm_path(), &UrdfOptions { floating_base: true, ..Default::default() })
             .unwrap();
     let by = |n: &str| full.joint_id(n).unwrap();
-    let mk = |joint, reference| MimicJoint { joint, reference, multiplier: 1.0, offset: 0.0 };
+    let mk = |joint, reference| JointCoupling { joint, reference, multiplier: 1.0, offset: 0.0 };
     for (ms, expect) in [
         (vec![mk(99, 2)], "joint index 99"),
         (vec![mk(by("elbow"), 0)], "reference joint index 0"),
@@ -409,7 +409,7 @@ fn bad_constraints_of_the_api_are_errors() {
         (vec![mk(by("elbow"), by("shoulder")), mk(by("elbow"), by("wrist"))], "constrained twice"),
         (vec![mk(by("tool_joint"), by("shoulder"))], "both must be rotational"),
         (
-            vec![MimicJoint { multiplier: f64::INFINITY, ..mk(by("elbow"), by("shoulder")) }],
+            vec![JointCoupling { multiplier: f64::INFINITY, ..mk(by("elbow"), by("shoulder")) }],
             "must be finite",
         ),
     ] {
@@ -435,7 +435,7 @@ fn without_mimics_the_contracted_hessians_are_the_trees() {
     let full: Model =
         load_urdf_file(&um::arm_path(), &UrdfOptions { floating_base: true, ..Default::default() })
             .unwrap();
-    let m = full.with_mimic_joints(&[] as &[MimicJoint]).unwrap();
+    let m = full.with_mimic_joints(&[] as &[JointCoupling]).unwrap();
     assert!(!m.is_reduced());
     let n = m.nv();
     let mut rng = Rng::new(44);

@@ -4,7 +4,7 @@
 use nalgebra::DVector;
 use sodyn::deriv::ContactData;
 use sodyn::model::{Model, UrdfOptions, load_urdf_file};
-use sodyn::reference::mimic::Reduced;
+use sodyn::reference::reduced::Reduced;
 use sodyn::rng::Rng;
 use std::path::PathBuf;
 
@@ -52,7 +52,7 @@ pub fn ff_models() -> Vec<Model> {
     vec![m, with]
 }
 
-/// The AD oracle of the reduced model `m` (`reference::mimic`).
+/// The AD oracle of the reduced model `m` (`reference::reduced`).
 pub fn oracle(m: &Model) -> Reduced<'_> {
     assert!(m.is_reduced(), "{} is not in reduced coordinates", m.name());
     Reduced { full: m.full_tree(), mimics: m.mimic_joints() }

@@ -1,7 +1,7 @@
 //! The mimic expansion of a model in reduced coordinates (mimic joints,
 //! [`Model::with_mimic_joints`](crate::model::Model::with_mimic_joints)), as the oracle sees it.
 //!
-//! [`Reduced`] re-derives the reduced coordinates from the list of [`MimicJoint`]s and the
+//! [`Reduced`] re-derives the reduced coordinates from the list of [`JointCoupling`]s and the
 //! model's index tables alone (not from the reduction that a reduced [`Model`] carries):
 //! `q_full = expand(q)` (independent coordinates copied, `m · q_ref + c` for each mimic joint),
 //! `v_full = G v`, `τ = Gᵀ τ_full`. Every function of the oracle that takes a [`Model`] takes a
@@ -11,7 +11,7 @@
 //! configuration (`(q ⊕ δ_k) ⊕ ε_j` for the second order, as [`super::derivatives`]).
 
 use super::AdScalar;
-use crate::model::{MimicJoint, Model};
+use crate::model::{JointCoupling, Model};
 
 /// A full model and its mimic constraints, seen in the reduced coordinates.
 #[derive(Clone, Copy, Debug)]
@@ -19,7 +19,7 @@ pub struct Reduced<'a> {
     /// The full tree (every joint independent).
     pub full: &'a Model,
     /// The constraints.
-    pub mimics: &'a [MimicJoint],
+    pub mimics: &'a [JointCoupling],
 }
 
 impl<'a> Reduced<'a> {
@@ -31,7 +31,7 @@ impl<'a> Reduced<'a> {
             .then(|| Reduced { full: model.full_tree(), mimics: model.mimic_joints() })
     }
     /// The constraint of joint `i`, if it is a mimic joint.
-    fn mimic_of(&self, i: usize) -> Option<&MimicJoint> {
+    fn mimic_of(&self, i: usize) -> Option<&JointCoupling> {
         self.mimics.iter().find(|m| m.joint == i)
     }
     /// Reduced `(idx_q, idx_v)` of each joint (`None` for a mimic joint), and `(nq, nv)`.
