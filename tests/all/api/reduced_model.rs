@@ -39,7 +39,7 @@ fn counts_and_configuration_space() {
     for ff in [false, true] {
         let full = load_urdf_file(&arm(), &opts(ff, false)).unwrap();
         let m = load_urdf_file(&arm(), &opts(ff, true)).unwrap();
-        let red = Reduced { full: m.full_tree(), mimics: m.mimic_joints() };
+        let red = Reduced { full: m.full_tree(), mimics: m.linear_couplings() };
         assert!(m.is_reduced() && !full.is_reduced());
         assert_eq!((m.nq(), m.nv()), (red.nq(), red.nv()));
         assert_eq!((m.nq_full(), m.nv_full()), (full.nq(), full.nv()));

@@ -41,9 +41,9 @@ pub fn random_state(model: &Model, rng: &mut Rng) -> (DVector<f64>, DVector<f64>
 }
 
 /// Test models: chains, the built-in robots and random trees mixing every joint type, fixed and
-/// floating base, with and without armature, and the mimic arm in reduced coordinates
-/// (`mimic::models`: fixed, floating, fixed with an armature), up to `max_dof` degrees of
-/// freedom.
+/// floating base, with and without armature, and the models in reduced coordinates
+/// (`mimic::models`: the mimic arm fixed, floating, fixed with an armature, and the MJCF model
+/// with tendon couplings), up to `max_dof` degrees of freedom.
 pub fn test_models(max_dof: usize) -> Vec<Model> {
     let mut out = vec![builtin::serial_chain(1), builtin::serial_chain(7), builtin::pendulum(2)];
     out.push(builtin::quadruped());
@@ -137,9 +137,10 @@ pub type ContactSpec = (&'static str, ContactType, ContactReference);
 /// dynamics, dense and contracted): 3-D and 6-D contacts, world-aligned and local, alone and
 /// mixed; models with and without armature; and the mimic arm in reduced coordinates
 /// (`util::mimic::ff_models`: floating, without and with an armature), its contacts below mimic
-/// joints.
+/// joints; the MJCF model with tendon couplings (`util::mimic::tendon_models`).
 pub fn contact_cases() -> Vec<(Model, Vec<ContactSpec>)> {
     let arms = mimic::ff_models();
+    let tendons = mimic::tendon_models();
     vec![
         (
             builtin::quadruped(),
@@ -183,6 +184,11 @@ pub fn contact_cases() -> Vec<(Model, Vec<ContactSpec>)> {
         // mimics the shoulder, the thumb tip below the mimic thumb base.
         (arms[0].clone(), vec![("tool", D3, Lwa), ("thumb_tip", D6, Local)]),
         (arms[1].clone(), vec![("tool", D3, Local), ("thumb_tip", D6, Lwa)]),
+        // The MJCF model with tendon couplings (`util::mimic::tendon_models`): the tip below
+        // the hinge eliminated by a three-joint coupling, the foot below two hinges eliminated
+        // through chained couplings.
+        (tendons[0].clone(), vec![("tip", D3, Lwa), ("foot", D6, Local)]),
+        (tendons[1].clone(), vec![("tip", D3, Local), ("foot", D3, Lwa)]),
     ]
 }
 
