@@ -94,6 +94,8 @@ pub struct MimicModel {
     pub(crate) g_ptr: Vec<usize>,
     pub(crate) g_idx: Vec<usize>,
     pub(crate) g_val: Vec<f64>,
+    /// Whether a row of `G` has several entries.
+    pub(crate) multi_term: bool,
     /// The full index of each reduced configuration coordinate / velocity coordinate.
     pub(crate) q_keep: Vec<usize>,
     pub(crate) v_keep: Vec<usize>,
@@ -358,6 +360,7 @@ impl MimicModel {
             .collect();
         let lower = DVector::from_iterator(nq, q_keep.iter().map(|&f| full.lower[f]));
         let upper = DVector::from_iterator(nq, q_keep.iter().map(|&f| full.upper[f]));
+        let multi_term = couplings.iter().any(|c| c.terms.len() > 1);
         Self {
             full,
             mimics,
@@ -371,6 +374,7 @@ impl MimicModel {
             g_ptr,
             g_idx,
             g_val,
+            multi_term,
             q_keep,
             v_keep,
             reduced_idx,
@@ -640,7 +644,9 @@ impl MimicModel {
     pub fn check_v(&self, what: &str, x: &DVector<f64>) -> Result<()> {
         crate::model::check_vec(what, x, self.nv)
     }
-    /// `out = Gᵀ x G` (`x`: `full().nv()` square, `out`: `nv()` square).
+    /// `out = Gᵀ x G` (`x`: `full().nv()` square, `out`: `nv()` square); exactly symmetric
+    /// for an exactly symmetric `x` (the upper triangle mirrored: with several entries in a
+    /// row of `G` the two triangles are sums in different orders).
     pub(crate) fn reduce_matrix(&self, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
         out.fill(0.0);
         let nf = self.full.nv();
@@ -651,6 +657,16 @@ impl MimicModel {
                 for a in 0..nf {
                     for (ca, ma) in self.g_row(a) {
                         os[ca + n * cb] += ma * mb * xs[a + nf * b];
+                    }
+                }
+            }
+        }
+        if self.multi_term {
+            let symmetric = (0..nf).all(|b| (0..b).all(|a| xs[a + nf * b] == xs[b + nf * a]));
+            if symmetric {
+                for c in 0..n {
+                    for r in 0..c {
+                        os[c + n * r] = os[r + n * c];
                     }
                 }
             }

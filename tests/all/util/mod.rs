@@ -137,10 +137,9 @@ pub type ContactSpec = (&'static str, ContactType, ContactReference);
 /// dynamics, dense and contracted): 3-D and 6-D contacts, world-aligned and local, alone and
 /// mixed; models with and without armature; and the mimic arm in reduced coordinates
 /// (`util::mimic::ff_models`: floating, without and with an armature), its contacts below mimic
-/// joints; the MJCF model with tendon couplings (`util::mimic::tendon_models`).
+/// joints.
 pub fn contact_cases() -> Vec<(Model, Vec<ContactSpec>)> {
     let arms = mimic::ff_models();
-    let tendons = mimic::tendon_models();
     vec![
         (
             builtin::quadruped(),
@@ -184,11 +183,6 @@ pub fn contact_cases() -> Vec<(Model, Vec<ContactSpec>)> {
         // mimics the shoulder, the thumb tip below the mimic thumb base.
         (arms[0].clone(), vec![("tool", D3, Lwa), ("thumb_tip", D6, Local)]),
         (arms[1].clone(), vec![("tool", D3, Local), ("thumb_tip", D6, Lwa)]),
-        // The MJCF model with tendon couplings (`util::mimic::tendon_models`): the tip below
-        // the hinge eliminated by a three-joint coupling, the foot below two hinges eliminated
-        // through chained couplings.
-        (tendons[0].clone(), vec![("tip", D3, Lwa), ("foot", D6, Local)]),
-        (tendons[1].clone(), vec![("tip", D3, Local), ("foot", D3, Lwa)]),
     ]
 }
 
