@@ -20,7 +20,8 @@
 //!   and `<frame>`); what MuJoCo refuses is an error (see `docs/mjcf.md`).
 //! * `<tendon>`: `<fixed>` and `<spatial>` tendons are recorded ([`Model::tendons`], see
 //!   [`Tendon`]), checked as MuJoCo checks them, with one warning that they do not enter the
-//!   dynamics; a nonzero tendon `armature` (which MuJoCo adds to `M`) is an error.
+//!   dynamics (except as the couplings of an `<equality><tendon>`, below); a nonzero tendon
+//!   `armature` (which MuJoCo adds to `M`) is an error.
 //! * `<body pos quat|axisangle|euler|xyaxes|zaxis>`, `<frame>` (a placement of its children),
 //!   `<inertial pos orientation mass diaginertia|fullinertia>`, `<joint>` of type `hinge`,
 //!   `slide`, `ball` and `free`, `<freejoint>`, `<geom>` (for inertias) and named `<site>`s (as
@@ -68,9 +69,17 @@
 //!   (frame `"universe"`); with body1 on the world, frame A is body2's side. `<joint joint1
 //!   joint2 polycoef>` with a linear polynomial (`q1 − q1₀ = c0 + c1 (q2 − q2₀)`, `₀` at
 //!   `qpos0`) is a mimic constraint: the model is in reduced coordinates
-//!   ([`Model::with_mimic_joints`]). A non-linear polynomial, a `<joint>` without joint2, a
-//!   constraint between sites, an unknown body or joint, both frames on one body, and every
-//!   other element (`<tendon>`, `<flex>`, …) are errors naming the element and its line.
+//!   ([`Model::with_mimic_joints`]). `<tendon tendon1 tendon2 polycoef>` on fixed tendons
+//!   (`L = Σ coef · q`) with a linear polynomial is the constraint `L1 − L1₀ = c0 + c1 (L2 −
+//!   L2₀)` (`L1 − L1₀ = c0` without tendon2), linear in the joint coordinates: with one, every
+//!   `<joint>` and `<tendon>` coupling is eliminated in document order, each eliminating
+//!   tendon1's last joint with a nonzero net coefficient (else tendon2's last; joint1, else
+//!   joint2, for a `<joint>`) after the joints eliminated before it are replaced by their
+//!   expressions, into couplings of several joints ([`Model::with_linear_couplings`]). A
+//!   non-linear polynomial, a `<joint>` without joint2, a constraint between sites, an unknown
+//!   body, joint or tendon, a spatial tendon, a coupling that is dependent on or inconsistent
+//!   with those before it, both frames on one body, and every other element (`<flex>`, …) are
+//!   errors naming the element and its line.
 //! * Joint `damping`, `stiffness`, `frictionloss`, actuators, contacts, sensors and every
 //!   element irrelevant to the rigid-body dynamics are ignored;
 //!   a nonzero body `gravcomp` is ignored with a warning in [`Model::warnings`]. A joint's

@@ -10,6 +10,11 @@
 //! independent coordinates copied, `m · q_ref + c` for each mimic joint), `v_full = G v`,
 //! `a_full = G a`, and `expand(q ⊕ δ) = expand(q) ⊕ G δ`.
 //!
+//! A linear coupling of several joints ([`LinearCoupling`], `q_joint = Σₖ cₖ · q_jₖ + c`, from
+//! [`Model::with_linear_couplings`] or an MJCF `<equality><tendon>`) is the same with one entry
+//! `cₖ` per term in the eliminated joint's row of `G` (stored by rows): everything below holds
+//! for any constant `G` whose independent rows are unit rows.
+//!
 //! Every algorithm runs on such a model with the usual workspaces; its reduced-coordinate
 //! implementation sits in the algorithm's own file (a `reduced` module beside the tree's code):
 //! * the tangent derivatives of the reduced model are those of the full model times `G` for
