@@ -232,7 +232,7 @@ records the model, the options and the timer's overhead. The frame_* algorithms 
 (default: the deepest frame); difference and d_difference_* take the next state's q as q1; \
 d_integrate_* and d_difference_* write the diagonal blocks only, as Pinocchio's dIntegrate and \
 dDifference do (the suffix names the argument, Pinocchio's ARG0/ARG1). The contact algorithms \
-need --contacts. With --mimic (a URDF's <mimic> joints as constraints) every algorithm runs in \
+need --contacts (or --model-constraints). With --mimic (a URDF's <mimic> joints as constraints) every algorithm runs in \
 the reduced coordinates, contacts on frames of the full tree.
 
 Algorithms:
@@ -251,9 +251,14 @@ pub(crate) struct BenchArgs {
     #[command(flatten)]
     model: ModelArgs,
     /// Contacts at the origins of these frames (of --contact-type, in --contact-reference);
-    /// needed by kkt_*, impact_*
-    #[arg(long, value_name = "F1,F2,...", value_parser = parse_list)]
+    /// needed by kkt_*, impact_*. An entry A:B is a two-frame (closed-loop) constraint joining
+    /// frame A's origin (its axes, for 6d) to frame B's
+    #[arg(long, value_name = "F1,F2,A:B,...", value_parser = parse_list)]
     contacts: Option<List>,
+    /// Put the model's own constraints (builtin:fourbar's and builtin:delta's loops, an
+    /// MJCF's <equality> connects and welds) first in the contact set, before --contacts
+    #[arg(long)]
+    model_constraints: bool,
     /// Type of the --contacts: 3d (points) or 6d (the whole frames)
     #[arg(long, value_name = "3d|6d", default_value = "3d",
           value_parser = |s: &str| ContactType::parse(s).map_err(|e| e.to_string()))]
@@ -771,6 +776,32 @@ struct Ratio {
 /// ~10 µs are timed in batches of consecutive calls as in [`measure`]. Each side runs its own
 /// round robin over the states. Timing stops after `--max-seconds` once each side has
 /// `min_samples` samples and there are at least 10 pairs.
+/// `e` with `ctx` ("bench ALGO on MODEL") in front of its description, keeping its kind: an
+/// algorithm's error met while timing stays that error (a singular contact set stays
+/// [`Error::Singular`]), only the message says where it happened.
+fn in_context(e: Error, ctx: &str) -> Error {
+    let pre = |s: String| format!("{ctx}: {s}");
+    match e {
+        Error::Model { file, line, element, reason } => {
+            Error::Model { file, line, element, reason: pre(reason) }
+        }
+        Error::Build(s) => Error::Build(pre(s)),
+        Error::Dimension { what, expected, got } => {
+            Error::Dimension { what: pre(what), expected, got }
+        }
+        Error::NotFinite { what, index } => Error::NotFinite { what: pre(what), index },
+        Error::InvalidConfiguration { joint, reason } => {
+            Error::InvalidConfiguration { joint, reason: pre(reason) }
+        }
+        Error::Singular { what, detail } => Error::Singular { what: pre(what), detail },
+        Error::Unknown { kind, name } => Error::Unknown { kind: pre(kind), name },
+        Error::Argument { name, reason } => Error::Argument { name, reason: pre(reason) },
+        Error::Workspace(s) => Error::Workspace(pre(s)),
+        Error::Input { file, at, reason } => Error::Input { file, at, reason: pre(reason) },
+        Error::Io(s) => Error::Io(pre(s)),
+    }
+}
+
 fn measure_ratio(plan: &Plan, mut f: impl FnMut(usize, usize) -> Result<()>) -> Result<Ratio> {
     let n = plan.nstates;
     let mut idx = [0usize; 2];
@@ -1351,16 +1382,29 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
     let (spec, floating_base) = (o.model.model.as_str(), o.model.floating_base);
     let contacts: &[String] = o.contacts.as_ref().map_or(&[], |l| &l.0);
     let model = load_model(&o.model)?;
-    let algos = select_algos(o.algos.as_ref().map(|l| l.0.as_slice()), !contacts.is_empty())?;
+    if o.model_constraints && model.constraints().is_empty() {
+        return Err(Error::Argument {
+            name: "--model-constraints".into(),
+            reason: format!("model \"{}\" ({spec}) has no constraints", model.name()),
+        });
+    }
+    let has_contacts = !contacts.is_empty() || o.model_constraints;
+    let algos = select_algos(o.algos.as_ref().map(|l| l.0.as_slice()), has_contacts)?;
     let pin_cpus = o.pin_cpus.as_ref().map(|c| c.0.as_slice());
     let rayon = o.pool == Pool::Rayon;
     let spin = Duration::from_nanos((o.spin_us * 1e3).round() as u64);
     sodyn::simd::set_thread_level(o.simd);
-    for c in contacts {
+    for c in contacts.iter().flat_map(|c| c.split(':')) {
         model.frame_id(c).map_err(|_| Error::Argument {
             name: "--contacts".into(),
             reason: format!("unknown frame \"{c}\" in model \"{}\" ({spec})", model.name()),
         })?;
+    }
+    if let Some(c) = contacts.iter().find(|c| c.split(':').count() > 2) {
+        return Err(Error::Argument {
+            name: "--contacts".into(),
+            reason: format!("\"{c}\": a two-frame constraint is A:B (two frames)"),
+        });
     }
     let frame = match &o.frame {
         Some(f) => model.frame_id(f).map_err(|_| Error::Argument {
@@ -1381,7 +1425,7 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
                     names(Entry::single)
                 ),
             })?;
-            if known.family == Family::Contact && contacts.is_empty() {
+            if known.family == Family::Contact && !has_contacts {
                 return Err(Error::Argument {
                     name: "--ratio-to".into(),
                     reason: format!("\"{r}\" needs --contacts"),
@@ -1458,15 +1502,25 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
         batch: pools.into_iter().map(|p| BatchData::with_pool(&model, Arc::new(p))).collect(),
         baseline_cpus: pin_cpus.map(|c| c[..max_threads].to_vec()),
     };
-    if !contacts.is_empty() {
+    if has_contacts {
         let (kind, reference) = (o.contact_type, o.contact_reference);
-        let contacts = contacts
-            .iter()
-            .map(|f| {
-                Contact::new(&model, f, Vector3::zeros())
-                    .map(|c| Contact { kind, ..c.with_reference(reference) })
-            })
-            .collect::<Result<Vec<_>>>()?;
+        let own = if o.model_constraints { model.constraints() } else { &[] };
+        let given = contacts.iter().map(|f| {
+            let (a, b) = match f.split_once(':') {
+                Some((a, b)) => (a, Some(b)),
+                None => (f.as_str(), None),
+            };
+            let c = Contact::new(&model, a, Vector3::zeros())
+                .map(|c| Contact { kind, ..c.with_reference(reference) })?;
+            match b {
+                Some(b) => c.with_frame2(&model, b, None).map_err(|e| Error::Argument {
+                    name: "--contacts".into(),
+                    reason: format!("\"{f}\": {e}"),
+                }),
+                None => Ok(c),
+            }
+        });
+        let contacts = own.iter().cloned().map(Ok).chain(given).collect::<Result<Vec<_>>>()?;
         let cd = ContactData::with_second_order(&model, &contacts)?;
         let mut rng = Rng::new(o.seed ^ 0x5eed);
         ws.wl = DVector::from_fn(cd.dim(), |_, _| rng.range(-1.0, 1.0));
@@ -1500,7 +1554,12 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
         model.njoints(),
         o.seed,
         timer_overhead_ns(),
-        if contacts.is_empty() { "none".to_string() } else { contacts.join(",") },
+        match (o.model_constraints, contacts.is_empty()) {
+            (false, true) => "none".to_string(),
+            (false, false) => contacts.join(","),
+            (true, true) => format!("model({})", model.constraints().len()),
+            (true, false) => format!("model({}),{}", model.constraints().len(), contacts.join(",")),
+        },
         model.frames()[frame].name,
         match o.paired_threads {
             Some(t) => format!("1,{t}(paired)"),
@@ -1526,7 +1585,7 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
                 let a = if side == 0 { entry.algo } else { reference.algo };
                 call_single(a, &model, &st, &mut ws, i)
             })
-            .map_err(|e| Error::Io(format!("bench {algo} against {r} on {name}: {e}")))?;
+            .map_err(|e| in_context(e, &format!("bench {algo} against {r} on {name}")))?;
             let [s, sr] = t.stats;
             outln!(
                 "model={name} nq={} nv={} algo={algo} median_us={:.4} p10_us={:.4} \
@@ -1550,7 +1609,7 @@ pub(crate) fn run(o: &BenchArgs) -> Result<()> {
             continue;
         }
         let t = time_algo(entry.algo, &model, &st, &mut ws, &plan)
-            .map_err(|e| Error::Io(format!("bench {algo} on {name}: {e}")))?;
+            .map_err(|e| in_context(e, &format!("bench {algo} on {name}")))?;
         let batched = entry.family == Family::Batch;
         let mut lines = vec![(t.stats, pool_threads[0], None)];
         if let Some(p) = t.paired {

@@ -14,10 +14,10 @@ use sodyn::algo::{
     nonlinear_effects, rnea,
 };
 use sodyn::deriv::{
-    ContactData, ImpactData, KktData, constrained_id_derivatives, constrained_id_so_derivatives,
-    fd_derivatives, fd_so_contracted, fd_so_derivatives, id_derivatives, id_so_contracted,
-    id_so_derivatives, impact_derivatives, impact_so_contracted, impact_so_derivatives,
-    kkt_derivatives, kkt_so_contracted, kkt_so_derivatives,
+    ContactData, ImpactData, KktData, constrained_id_so_derivatives, fd_derivatives,
+    fd_so_contracted, fd_so_derivatives, id_derivatives, id_so_contracted, id_so_derivatives,
+    impact_derivatives, impact_so_contracted, impact_so_derivatives, kkt_derivatives,
+    kkt_so_contracted, kkt_so_derivatives,
 };
 use sodyn::error::{Error, Result};
 use sodyn::model::{ContactReference, ContactType, Model};
@@ -805,46 +805,19 @@ fn contact_outputs(
     };
     cd.set_damping(s.damping)?;
     cd.set_restitution(s.restitution)?;
-    // Two-frame (closed-loop) constraints have first-order derivatives only: the second-order
-    // outputs are left out and `errors` says why.
-    let loops = s.contacts.iter().any(Contact::is_loop);
-    let order = if loops {
-        if order >= 2 {
-            let why = "two-frame (closed-loop) constraints: the second-order contact outputs are \
-                       not supported yet (first order written)";
-            for k in ["constrained_id.d2tau_dq2", "kkt.second_order", "impact.second_order"] {
-                errors.insert(k.into(), Value::String(why.into()));
-            }
-        }
-        1
-    } else {
-        order
-    };
-    if !loops {
-        constrained_id_so_derivatives(model, data, &mut cd, &s.q, &s.v, &s.a, &s.lambda)?;
-        let so = data
-            .id_so()
-            .ok_or_else(|| Error::Workspace("internal: no second-order results in Data".into()))?;
-        o.insert(
-            "constrained_id".into(),
-            json!({
-                "tau": data.tau().as_slice(),
-                "dtau_dq": mat_json(data.dtau_dq()),
-                "dtau_dv": mat_json(data.dtau_dv()),
-                "d2tau_dq2": tensor_json(so.d2tau_dq2()),
-            }),
-        );
-    } else {
-        constrained_id_derivatives(model, data, &mut cd, &s.q, &s.v, &s.a, &s.lambda)?;
-        o.insert(
-            "constrained_id".into(),
-            json!({
-                "tau": data.tau().as_slice(),
-                "dtau_dq": mat_json(data.dtau_dq()),
-                "dtau_dv": mat_json(data.dtau_dv()),
-            }),
-        );
-    }
+    constrained_id_so_derivatives(model, data, &mut cd, &s.q, &s.v, &s.a, &s.lambda)?;
+    let so = data
+        .id_so()
+        .ok_or_else(|| Error::Workspace("internal: no second-order results in Data".into()))?;
+    o.insert(
+        "constrained_id".into(),
+        json!({
+            "tau": data.tau().as_slice(),
+            "dtau_dq": mat_json(data.dtau_dq()),
+            "dtau_dv": mat_json(data.dtau_dv()),
+            "d2tau_dq2": tensor_json(so.d2tau_dq2()),
+        }),
+    );
     let r = if order >= 2 {
         kkt_so_derivatives(model, data, &mut cd, &s.q, &s.v, &s.tau)
     } else {

@@ -448,6 +448,29 @@ fn bench_options_are_validated() {
         assert!(out.contains(&format!("algo={a} ")), "{a} missing:\n{out}");
     }
 
+    // Two-frame constraints: A:B entries, and the model's own constraints.
+    let o = with(&["--contacts", "LF_FOOT:RH_FOOT,RF_FOOT", "--algos", "kkt_fo,impact_so"]);
+    assert_ok(&o, "bench with a loop");
+    let out = stdout(&o);
+    assert!(out.contains("contacts=LF_FOOT:RH_FOOT,RF_FOOT"), "{out}");
+    assert!(out.contains("algo=kkt_fo ") && out.contains("algo=impact_so "), "{out}");
+    for (arg, needle) in [
+        ("LF_FOOT:NOPE", "NOPE"),
+        ("LF_FOOT:RH_FOOT:RF_FOOT", "two frames"),
+        ("LF_FOOT:LF_FOOT", "same body"),
+    ] {
+        let err = assert_clean_failure(&with(&["--contacts", arg, "--algos", "kkt_fo"]), arg);
+        assert!(err.contains(needle) && err.contains("--contacts"), "{arg}: {err}");
+    }
+    let err = assert_clean_failure(&with(&["--model-constraints"]), "no model constraints");
+    assert!(err.contains("--model-constraints") && err.contains("no constraints"), "{err}");
+    let delta = ["bench", "--model", "builtin:delta", "--smoke", "--model-constraints"];
+    let o = sodyn(&[&delta[..], &["--algos", "kkt_fo,kkt_so,impact_fo"]].concat());
+    assert_ok(&o, "bench --model-constraints");
+    let out = stdout(&o);
+    assert!(out.contains("contacts=model(3)"), "{out}");
+    assert_eq!(out.lines().filter(|l| l.starts_with("model=")).count(), 3, "{out}");
+
     // --paired-threads: two lines per batched algorithm (1 and T threads, the second with the
     // paired speed-up), one for the others.
     let o = with(&["--paired-threads", "2", "--algos", "rnea,batch_rnea"]);
@@ -1616,7 +1639,9 @@ fn demo_takes_the_model_and_contact_options() {
 #[test]
 fn eval_takes_two_frame_constraints() {
     use sodyn::algo::{Contact, Data};
-    use sodyn::deriv::{ContactData, impact_derivatives, kkt_derivatives};
+    use sodyn::deriv::{
+        ContactData, impact_derivatives, impact_so_derivatives, kkt_derivatives, kkt_so_derivatives,
+    };
     use sodyn::spatial::Transform;
     let m = sodyn::model::builtin::quadruped();
     let nv = m.nv();
@@ -1675,6 +1700,51 @@ fn eval_takes_two_frame_constraints() {
     let imp = vector(&out["impact"], "impulse", 9);
     assert!((&imp - im.impulse()).amax() < 1e-12 * (1.0 + im.impulse().amax()));
     assert_eq!(out["constrained_id"]["tau"].as_array().unwrap().len(), nv);
+    // `--order 2`: the second-order tensors with loops, those of the library.
+    let state = tmp("loops-order2.json");
+    let body = format!(
+        r#"{{"q": {qv:?}, "v": {:?}, "tau": {:?}, "contacts": {feet}}}"#,
+        v.as_slice(),
+        tau.as_slice()
+    );
+    std::fs::write(&state, body).unwrap();
+    let o = sodyn(&[
+        "eval",
+        "--model",
+        "builtin:quadruped",
+        "--state",
+        state.to_str().unwrap(),
+        "--order",
+        "2",
+    ]);
+    assert_ok(&o, "eval --order 2 with two-frame constraints");
+    let out2: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert!(out2.get("errors").is_none(), "{}", out2["errors"]);
+    let mut cd2 = ContactData::with_second_order(&m, &contacts).unwrap();
+    let mut d2 = Data::with_second_order(&m);
+    let close = |got: &Value, want: &sodyn::tensor::Tensor3, what: &str| {
+        let t = sodyn::tensor::Tensor3::from_nested(
+            &serde_json::from_value::<Vec<Vec<Vec<f64>>>>(got.clone()).unwrap(),
+        )
+        .unwrap_or_else(|| panic!("{what}: not a tensor"));
+        assert_eq!(t.dims(), want.dims(), "{what}");
+        let err = t.as_slice().iter().zip(want.as_slice()).map(|(a, b)| (a - b).abs());
+        let scale = want.as_slice().iter().fold(1.0f64, |s, x| s.max(x.abs()));
+        let err = err.fold(0.0f64, f64::max);
+        assert!(err <= 1e-12 * scale, "{what}: {err:e} (scale {scale:e})");
+    };
+    let ks = kkt_so_derivatives(&m, &mut d2, &mut cd2, &q, &v, &tau).unwrap().so().unwrap().clone();
+    close(&out2["kkt"]["d2qdd_dq2"], ks.d2qdd_dq2(), "kkt.d2qdd_dq2");
+    close(&out2["kkt"]["d2lambda_dqdv"], ks.d2lambda_dqdv(), "kkt.d2lambda_dqdv");
+    let is = impact_so_derivatives(&m, &mut d2, &mut cd2, &q, &v).unwrap().so().unwrap().clone();
+    close(&out2["impact"]["d2vplus_dq2"], is.d2vplus_dq2(), "impact.d2vplus_dq2");
+    close(
+        &out2["impact"]["d2impulse_dqdvminus"],
+        is.d2impulse_dqdvminus(),
+        "impact.d2impulse_dqdvminus",
+    );
+    let d2tau = &out2["constrained_id"]["d2tau_dq2"];
+    assert_eq!(d2tau.as_array().map(Vec::len), Some(nv), "constrained_id.d2tau_dq2");
     // Bad input names the contact and the key.
     for (feet, needle) in [
         (r#"[{"frame": "LF_FOOT", "point2": [0, 0, 0]}]"#, "contacts[0].point2 needs a \"frame2\""),
