@@ -326,7 +326,7 @@ def compare(path, seeds=(0, 1, 2)):
         worst["placement"] = max(worst["placement"], e_p)
     worst.update(errs)
     if reduced.has_mimic:
-        worst["coupling"] = check_couplings(reduced, path)
+        worst.update(check_couplings(reduced, path))
     return reduced, worst
 
 
@@ -340,7 +340,7 @@ def check_couplings(ours, path, seeds=(0, 1, 2)):
     ``efc_pos`` of those rows is 0, and from MuJoCo's tendon lengths
     ``L1 − L1(qpos0) − c0 − c1 (L2 − L2(qpos0)) = 0`` (joint positions for a ``<joint>``
     equality), to 1e-12. The reduced ``M`` and ``τ`` are ``Gᵀ`` MuJoCo's ``G`` at those states
-    (equality constraints off). Returns the worst residual."""
+    (equality constraints off). Returns the worst residual and ``row · P G``."""
     m = mujoco.MjModel.from_xml_path(str(path))
     dis = mujoco.mjtDisableBit
     for flag in ("mjDSBL_CONTACT", "mjDSBL_LIMIT", "mjDSBL_FRICTIONLOSS"):
@@ -354,9 +354,9 @@ def check_couplings(ours, path, seeds=(0, 1, 2)):
     assert g.shape == (nf, ours.nv)
     eqt = mujoco.mjtEq
     coupling_eqs = [k for k in range(m.neq) if m.eq_active0[k]
-                    and m.eq_type[k] in (eqt.mjEQ_JOINT, eqt.mjEQ_TENDON)]
+                    and int(m.eq_type[k]) in (int(eqt.mjEQ_JOINT), int(eqt.mjEQ_TENDON))]
     assert len(coupling_eqs) == nf - ours.nv
-    worst = 0.0
+    worst, worst_ann = 0.0, 0.0
     mm = mj_load(path)
     dm = mujoco.MjData(mm)
     dr = ours.create_data()
@@ -367,13 +367,15 @@ def check_couplings(ours, path, seeds=(0, 1, 2)):
         d.qpos[:] = qpos
         d.qvel[:] = 0
         mujoco.mj_forward(m, d)
-        rows = [r for r in range(d.nefc) if d.efc_type[r] == mujoco.mjtConstraint.mjCNSTR_EQUALITY
+        rows = [r for r in range(d.nefc)
+                if int(d.efc_type[r]) == int(mujoco.mjtConstraint.mjCNSTR_EQUALITY)
                 and int(d.efc_id[r]) in coupling_eqs]
         assert len(rows) == len(coupling_eqs)
         jac = np.array(d.efc_J).reshape(d.nefc, m.nv)[rows] @ mp.p_matrix(qpos)
         scale = max(1.0, float(np.abs(jac).max()))
         ann = float(np.abs(jac @ g).max()) / scale
         assert ann <= 1e-12, f"{path.name} seed {seed}: efc_J rows · P G = {ann:.3e}"
+        worst_ann = max(worst_ann, ann)
         assert np.linalg.matrix_rank(jac, tol=1e-9 * scale) == nf - ours.nv
         pos = float(np.abs(d.efc_pos[rows]).max())
         assert pos <= 1e-12, f"{path.name} seed {seed}: efc_pos of the couplings {pos:.3e}"
@@ -382,7 +384,7 @@ def check_couplings(ours, path, seeds=(0, 1, 2)):
             c0, c1 = m.eq_data[k][0], m.eq_data[k][1]
             assert not np.any(m.eq_data[k][2:5]), "linear polycoef"
             a, b = int(m.eq_obj1id[k]), int(m.eq_obj2id[k])
-            if m.eq_type[k] == eqt.mjEQ_TENDON:
+            if int(m.eq_type[k]) == int(eqt.mjEQ_TENDON):
                 l1 = d.ten_length[a] - m.tendon_length0[a]
                 l2 = d.ten_length[b] - m.tendon_length0[b] if b >= 0 else 0.0
             else:
@@ -398,13 +400,13 @@ def check_couplings(ours, path, seeds=(0, 1, 2)):
         mpm = Mapping(mm)
         tau_ref = g.T @ mj_tau(mm, dm, mpm, qf, g @ v, g @ a)
         full_m = np.zeros((mm.nv, mm.nv))
-        mujoco.mj_fullM(mm, full_m, dm.qM)
+        mujoco.mj_fullM(mm, full_m, dm.qM) if hasattr(dm, "qM") else mujoco.mj_fullM(mm, dm, full_m)
         p = mpm.p_matrix(qpos)
         m_ref = g.T @ (p.T @ full_m @ p) @ g
         assert_close(sodyn.crba(ours, dr, q), m_ref, TOL, f"{path.name} seed {seed}: reduced M")
         assert_close(sodyn.rnea(ours, dr, q, v, a), tau_ref, TOL,
                      f"{path.name} seed {seed}: reduced tau")
-    return worst
+    return {"residual": float(worst), "efc_J G": worst_ann}
 
 
 def check_tendons(ours, m):
@@ -764,16 +766,37 @@ def test_tendon_couplings_match_mujoco(tmp_path):
         print(f"{name}: nv {ours.full_model.nv} -> {ours.nv}, worst {worst}")
 
 
+def test_tendon_coupled_model_pickles_and_lists_its_joints():
+    """A model with couplings of several joints survives pickling (the same reduced
+    coordinates and dynamics) and lists its eliminated joints with no coordinate."""
+    import pickle
+
+    ours = sodyn.Model.from_mjcf_string(TENDON_COUPLED)
+    back = pickle.loads(pickle.dumps(ours))
+    assert (back.nq, back.nv) == (ours.nq, ours.nv) == (14, 12)
+    assert np.array_equal(back.mimic_map, ours.mimic_map)
+    q = ours.random_configuration(seed=4)
+    v = np.random.default_rng(4).normal(size=ours.nv)
+    assert np.array_equal(sodyn.rnea(back, back.create_data(), q, v, v),
+                          sodyn.rnea(ours, ours.create_data(), q, v, v))
+    joints = {j.name: j for j in ours.joints}
+    for name in ("j3", "j4", "j5", "j6"):
+        assert (joints[name].nq, joints[name].nv) == (0, 0), name
+    assert joints["j6"].mimic == "j1" and joints["j6"].multiplier == -0.5
+    assert joints["j3"].mimic is None
+
+
 def test_tendon_coupling_errors_name_element_and_line():
     """A spatial tendon in an equality and a non-linear polycoef are errors naming the element
     and its line (MuJoCo loads both)."""
     bodies = ('<worldbody><body><joint name="a"/><geom size="0.1"/><site name="s1"/>'
               '<body pos="1 0 0"><joint name="b"/><geom size="0.1"/><site name="s2"/>'
               '</body></body></worldbody>\n<tendon><fixed name="f"><joint joint="a" coef="1"/>'
-              '<joint joint="b" coef="1"/></fixed><spatial name="sp"><site site="s1"/>'
+              '<joint joint="b" coef="1"/></fixed><fixed name="g"><joint joint="b" coef="1"/>'
+              '</fixed><spatial name="sp"><site site="s1"/>'
               '<site site="s2"/></spatial></tendon>\n')
     for eq, match in [('<tendon name="x" tendon1="sp"/>', r"<string>:4: <tendon> \"x\": tendon1=\"sp\" is a spatial tendon"),
-                      ('<tendon name="y" tendon1="f" tendon2="f" polycoef="0 1 1"/>',
+                      ('<tendon name="y" tendon1="f" tendon2="g" polycoef="0 1 1"/>',
                        r"<string>:4: <tendon> \"y\": polycoef: coefficient 2 is 1")]:
         xml = f"<mujoco>{bodies}<equality>\n{eq}</equality></mujoco>"
         mujoco.MjModel.from_xml_string(xml)

@@ -1595,7 +1595,9 @@ impl Loader {
                                 .tendons
                                 .iter()
                                 .find(|t| t.name.as_deref() == Some(a.value.as_str()))
-                                .ok_or_else(|| at(format!("{key}=\"{}\": unknown tendon", a.value)))?;
+                                .ok_or_else(|| {
+                                    at(format!("{key}=\"{}\": unknown tendon", a.value))
+                                })?;
                             match &t.path {
                                 super::TendonPath::Fixed(p) => {
                                     if let Some(&(j, _)) = p.iter().find(|&&(j, _)| {
@@ -1671,11 +1673,10 @@ impl Loader {
                                 "polycoef and the tendon coefficients must be finite",
                             ));
                         }
-                        rows.push(((c.file.clone(), c.line, elem.clone()), LinearRow {
-                            terms,
-                            rhs,
-                            prefer,
-                        }));
+                        rows.push((
+                            (c.file.clone(), c.line, elem.clone()),
+                            LinearRow { terms, rhs, prefer },
+                        ));
                     }
                     other => {
                         return Err(err_at(

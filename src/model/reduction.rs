@@ -73,7 +73,11 @@ pub struct LinearCoupling {
 
 impl From<JointCoupling> for LinearCoupling {
     fn from(c: JointCoupling) -> Self {
-        LinearCoupling { joint: c.joint, terms: vec![(c.reference, c.multiplier)], offset: c.offset }
+        LinearCoupling {
+            joint: c.joint,
+            terms: vec![(c.reference, c.multiplier)],
+            offset: c.offset,
+        }
     }
 }
 
@@ -231,7 +235,9 @@ impl MimicModel {
             let bad = |why: String| Error::Build(format!("coupling {k}: {why}"));
             let scalar = |j: usize, what: &str| -> Result<()> {
                 if j == 0 || j >= nj {
-                    return Err(bad(format!("{what} index {j} is not a moving joint of the model")));
+                    return Err(bad(format!(
+                        "{what} index {j} is not a moving joint of the model"
+                    )));
                 }
                 if one_dof_kind(&full.joints()[j]).is_none() {
                     return Err(bad(format!(

@@ -893,10 +893,8 @@ fn tendon_couplings_contact_algorithms_match_the_oracle() {
             let kd = deriv::kkt_so_derivatives(&m, &mut d, &mut cd, &q, &v, &tau).unwrap();
             let (qr, lr) = oracle::kkt::<f64>(&m, qs, vs, ts, &cs);
             w[0].add(
-                rel_vec(kd.qdd(), &DVector::from_vec(qr)).max(rel_vec(
-                    kd.lambda(),
-                    &DVector::from_vec(lr),
-                )),
+                rel_vec(kd.qdd(), &DVector::from_vec(qr))
+                    .max(rel_vec(kd.lambda(), &DVector::from_vec(lr))),
                 &at,
             );
             let fo = oracle::kkt_fo(&m, qs, vs, ts, &cs);
@@ -1025,7 +1023,10 @@ fn linear_couplings_of_one_term_are_the_mimic_joints() {
         (vec![mk(by("elbow"), vec![(by("shoulder"), 1.0), (by("shoulder"), 2.0)])], "twice a term"),
         (vec![mk(by("elbow"), vec![(by("shoulder"), 1.0)]), mk(by("elbow"), vec![])], "twice"),
         (
-            vec![mk(by("elbow"), vec![(by("shoulder"), 1.0)]), mk(by("wrist"), vec![(by("elbow"), 1.0)])],
+            vec![
+                mk(by("elbow"), vec![(by("shoulder"), 1.0)]),
+                mk(by("wrist"), vec![(by("elbow"), 1.0)]),
+            ],
             "coupling 1: joint \"wrist\"",
         ),
         (vec![mk(by("elbow"), vec![(by("shoulder"), f64::NAN)])], "must be finite"),
@@ -1035,7 +1036,8 @@ fn linear_couplings_of_one_term_are_the_mimic_joints() {
         assert!(e.contains(expect), "{cs:?}: {e}");
     }
     // A joint held at its offset (no term): one DoF less, G's row zero.
-    let held = full.with_linear_couplings(&[LinearCoupling { offset: 0.3, ..mk(by("elbow"), vec![]) }]);
+    let held =
+        full.with_linear_couplings(&[LinearCoupling { offset: 0.3, ..mk(by("elbow"), vec![]) }]);
     let held = held.unwrap();
     assert_eq!(held.nv(), full.nv() - 1);
     let qf = held.expand_q(&held.neutral()).unwrap();

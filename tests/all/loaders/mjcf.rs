@@ -1133,7 +1133,8 @@ fn tendon_equality_errors_name_element_and_line() {
     assert!(why.contains("tendon1=\"sp\" is a spatial tendon"), "{why}");
     let (line, _, why) = case(r#"<tendon tendon1="f1" tendon2="sp"/>"#);
     assert!(line == Some(12) && why.contains("tendon2=\"sp\" is a spatial tendon"), "{why}");
-    let (line, el, why) = case(r#"<tendon name="p" tendon1="f1" tendon2="f2" polycoef="0 1 0.5"/>"#);
+    let (line, el, why) =
+        case(r#"<tendon name="p" tendon1="f1" tendon2="f2" polycoef="0 1 0.5"/>"#);
     assert_eq!((line, el.as_str()), (Some(12), "<tendon> \"p\""));
     assert!(why.contains("coefficient 2 is 0.5") && why.contains("linear"), "{why}");
     let (_, _, why) = case(r#"<tendon tendon1="f1" tendon2="nope"/>"#);
@@ -1155,9 +1156,8 @@ fn tendon_equality_errors_name_element_and_line() {
     assert_eq!((line, el.as_str()), (Some(13), "<tendon> \"x\""));
     assert!(why.contains("inconsistent"), "{why}");
     // With a <joint> coupling: that coupling's own checks first, naming it.
-    let (_, el, why) = case(
-        "<tendon tendon1=\"f2\"/>\n<joint name=\"jj\" joint1=\"ja\" joint2=\"jb\"/>",
-    );
+    let (_, el, why) =
+        case("<tendon tendon1=\"f2\"/>\n<joint name=\"jj\" joint1=\"ja\" joint2=\"jb\"/>");
     assert_eq!(el, "<joint> \"jj\"");
     assert!(why.contains("rotational") && why.contains("prismatic"), "{why}");
     // A <joint> coupling with a tendon coupling: chained through the elimination (jc from f2,
