@@ -6,7 +6,9 @@
 //! bit, `J = J_full G`), point kinematics against central differences in the reduced coordinates,
 //! and bad inputs and the workspaces of the other model refused. The reduced algorithms against
 //! the AD oracle are the family tests, whose models include the mimic arm (`util::test_models`,
-//! `util::contact_cases`).
+//! `util::contact_cases`) and the MJCF model with tendon couplings (`util::test_models`; its
+//! contact algorithms against the oracle here), and couplings of several joints through
+//! `Model::with_linear_couplings` (one term: the mimic joints, bit for bit; bad ones refused).
 
 use crate::util::mimic as um;
 use nalgebra::{DMatrix, DVector};
