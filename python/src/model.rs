@@ -505,7 +505,7 @@ impl PyModel {
             d.set_item("mimic_constraints", l)?;
             let lc = self.m.linear_couplings();
             if lc.iter().any(|c| c.terms.len() != 1) {
-                let l: Vec<(usize, Vec<(usize, f64)>, f64)> =
+                let l: Vec<CouplingDesc> =
                     lc.iter().map(|c| (c.joint, c.terms.clone(), c.offset)).collect();
                 d.set_item("linear_couplings", l)?;
             }
@@ -727,6 +727,9 @@ fn constraints_from(l: Vec<ConstraintDesc>) -> PyResult<Vec<sodyn::model::Contac
         .collect()
 }
 
+/// A linear coupling in a pickled description: `(joint, [(joint, coefficient)], offset)`.
+type CouplingDesc = (usize, Vec<(usize, f64)>, f64);
+
 /// [`rebuild`], with the constraints and the mimic constraints of the description.
 pub(crate) fn rebuild_py(desc: &Bound<'_, PyDict>) -> PyResult<PyModel> {
     let mut m = rebuild(desc)?;
@@ -735,7 +738,7 @@ pub(crate) fn rebuild_py(desc: &Bound<'_, PyDict>) -> PyResult<PyModel> {
         m = m.with_constraints(&cs).map_err(core_err)?;
     }
     if desc.contains("linear_couplings")? {
-        let l: Vec<(usize, Vec<(usize, f64)>, f64)> = item(desc, "linear_couplings")?;
+        let l: Vec<CouplingDesc> = item(desc, "linear_couplings")?;
         let c: Vec<sodyn::model::LinearCoupling> = l
             .into_iter()
             .map(|(joint, terms, offset)| sodyn::model::LinearCoupling { joint, terms, offset })

@@ -121,6 +121,9 @@ pub use super::tendon::{SpatialWrap, Tendon, TendonPath};
 /// Where an equality element is: its file, line and element description.
 type Loc = (Rc<str>, u32, String);
 
+/// `(joint index, coefficient)` pairs.
+type Terms = Vec<(usize, f64)>;
+
 /// A linear equality constraint `Σ terms = rhs` on one-DoF joints (joint index, coefficient),
 /// and the joints to eliminate by it, in order of preference.
 struct LinearRow {
@@ -166,7 +169,7 @@ fn mimic_error(e: Error, lines: &[Loc]) -> Error {
 /// naming the element and its line.
 fn eliminate(rows: Vec<(Loc, LinearRow)>) -> Result<Vec<(Loc, super::LinearCoupling)>> {
     // Eliminated joint → (its terms on independent joints, offset), with its element.
-    let mut exprs: Vec<(usize, Vec<(usize, f64)>, f64, Loc)> = Vec::new();
+    let mut exprs: Vec<(usize, Terms, f64, Loc)> = Vec::new();
     for (loc, row) in rows {
         let scale = row.terms.iter().fold(0.0f64, |m, t| m.max(t.1.abs()));
         let mut terms: Vec<(usize, f64)> = Vec::new();
