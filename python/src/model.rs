@@ -360,6 +360,9 @@ impl PyModel {
                     match m.reduced_idx(i) {
                         Some((a, b)) => (j.idx_q, j.idx_v) = (a, b),
                         None => {
+                            // Eliminated: no coordinate of its own (a coupling of several
+                            // joints, an MJCF tendon coupling, has no single reference).
+                            (j.nq, j.nv) = (0, 0);
                             let c = m.mimic_joints().iter().find(|c| c.joint == i);
                             if let Some(c) = c {
                                 let (a, b) = m.reduced_idx(c.reference).unwrap_or((0, 0));
@@ -500,6 +503,12 @@ impl PyModel {
                 .map(|c| (c.joint, c.reference, c.multiplier, c.offset))
                 .collect();
             d.set_item("mimic_constraints", l)?;
+            let lc = self.m.linear_couplings();
+            if lc.iter().any(|c| c.terms.len() != 1) {
+                let l: Vec<CouplingDesc> =
+                    lc.iter().map(|c| (c.joint, c.terms.clone(), c.offset)).collect();
+                d.set_item("linear_couplings", l)?;
+            }
         }
         if !self.m.constraints().is_empty() {
             d.set_item("constraints", constraints_desc(self.m.constraints()))?;
@@ -718,12 +727,23 @@ fn constraints_from(l: Vec<ConstraintDesc>) -> PyResult<Vec<sodyn::model::Contac
         .collect()
 }
 
+/// A linear coupling in a pickled description: `(joint, [(joint, coefficient)], offset)`.
+type CouplingDesc = (usize, Vec<(usize, f64)>, f64);
+
 /// [`rebuild`], with the constraints and the mimic constraints of the description.
 pub(crate) fn rebuild_py(desc: &Bound<'_, PyDict>) -> PyResult<PyModel> {
     let mut m = rebuild(desc)?;
     if desc.contains("constraints")? {
         let cs = constraints_from(item(desc, "constraints")?)?;
         m = m.with_constraints(&cs).map_err(core_err)?;
+    }
+    if desc.contains("linear_couplings")? {
+        let l: Vec<CouplingDesc> = item(desc, "linear_couplings")?;
+        let c: Vec<sodyn::model::LinearCoupling> = l
+            .into_iter()
+            .map(|(joint, terms, offset)| sodyn::model::LinearCoupling { joint, terms, offset })
+            .collect();
+        return Ok(PyModel::plain(m.with_linear_couplings(&c).map_err(core_err)?));
     }
     if !desc.contains("mimic_constraints")? {
         return Ok(PyModel::plain(m));

@@ -112,12 +112,7 @@ CORPUS.update(WHEEL_CORPUS)
 
 # Corpus models that sodyn refuses, with the reason (the test checks the error message).
 MESH = r"the body.s inertia would come from a mesh geom"
-TENDON_EQ = r"<tendon> equality constraints are not supported"
 CORPUS_REFUSED = {
-    # <equality><tendon>: a constraint sodyn does not model (docs/mjcf.md).
-    "dm_control/manipulator": r"manipulator.xml:192: <tendon> \"coupling\": " + TENDON_EQ,
-    "dm_control/quadruped": r"quadruped.xml:272: <tendon> \"coupling_front_left\": " + TENDON_EQ,
-    "dm_control/stacker": r"stacker.xml:174: <tendon> \"coupling\": " + TENDON_EQ,
     "gymnasium_robotics/envs/assets/kitchen_franka/kitchen_assets/kitchen_env_model":
         r"chain.xml:9: body \"panda0_link1\": " + MESH,
     "metaworld/assets/objects/thermos": r"thermos.xml:2: unnamed body: " + MESH,
@@ -238,8 +233,10 @@ def free_armature_term(m, mp, v):
 
 def compare(path, seeds=(0, 1, 2)):
     """Loads ``path`` in both, checks masses, body placements, M and tau; returns the worst
-    relative errors."""
-    ours = sodyn.Model.from_mjcf(path)
+    relative errors. A model in reduced coordinates (``<equality>`` couplings of joints or
+    fixed tendons) is compared on its full tree, then its couplings by ``check_couplings``."""
+    reduced = sodyn.Model.from_mjcf(path)
+    ours = reduced.full_model if reduced.has_mimic else reduced
     m = mj_load(path)
     d = mujoco.MjData(m)
     assert (ours.nq, ours.nv) == (m.nq, m.nv)
@@ -328,7 +325,88 @@ def compare(path, seeds=(0, 1, 2)):
         worst["tau"] = max(worst["tau"], e_t)
         worst["placement"] = max(worst["placement"], e_p)
     worst.update(errs)
-    return ours, worst
+    if reduced.has_mimic:
+        worst.update(check_couplings(reduced, path))
+    return reduced, worst
+
+
+def check_couplings(ours, path, seeds=(0, 1, 2)):
+    """A model in reduced coordinates against MuJoCo's equality constraints: at expanded
+    configurations ``q_full = expand(q)`` of random reduced ``q``, ``mj_forward`` (equality
+    constraints on, contacts and limits off, dense Jacobian) gives the rows of ``efc_J`` of the
+    ``<joint>`` and ``<tendon>`` equalities; mapped to sodyn's tangent coordinates
+    (``qvel = P v``: the row times ``P``) they are annihilated by ``G`` (``row · P G = 0`` to
+    1e-12, relative to the row) and have rank ``nv_full − nv``; the constraints hold:
+    ``efc_pos`` of those rows is 0, and from MuJoCo's tendon lengths
+    ``L1 − L1(qpos0) − c0 − c1 (L2 − L2(qpos0)) = 0`` (joint positions for a ``<joint>``
+    equality), to 1e-12. The reduced ``M`` and ``τ`` are ``Gᵀ`` MuJoCo's ``G`` at those states
+    (equality constraints off). Returns the worst residual and ``row · P G``."""
+    m = mujoco.MjModel.from_xml_path(str(path))
+    dis = mujoco.mjtDisableBit
+    for flag in ("mjDSBL_CONTACT", "mjDSBL_LIMIT", "mjDSBL_FRICTIONLOSS"):
+        m.opt.disableflags |= int(getattr(dis, flag))
+    m.opt.jacobian = int(mujoco.mjtJacobian.mjJAC_DENSE)
+    d = mujoco.MjData(m)
+    mp = Mapping(m)
+    full = ours.full_model
+    g = ours.mimic_map
+    nf = full.nv
+    assert g.shape == (nf, ours.nv)
+    eqt = mujoco.mjtEq
+    coupling_eqs = [k for k in range(m.neq) if m.eq_active0[k]
+                    and int(m.eq_type[k]) in (int(eqt.mjEQ_JOINT), int(eqt.mjEQ_TENDON))]
+    assert len(coupling_eqs) == nf - ours.nv
+    worst, worst_ann = 0.0, 0.0
+    mm = mj_load(path)
+    dm = mujoco.MjData(mm)
+    dr = ours.create_data()
+    for seed in seeds:
+        q = ours.random_configuration(seed=seed)
+        qf = ours.expand_configuration(q)
+        qpos = mp.qpos(qf)
+        d.qpos[:] = qpos
+        d.qvel[:] = 0
+        mujoco.mj_forward(m, d)
+        rows = [r for r in range(d.nefc)
+                if int(d.efc_type[r]) == int(mujoco.mjtConstraint.mjCNSTR_EQUALITY)
+                and int(d.efc_id[r]) in coupling_eqs]
+        assert len(rows) == len(coupling_eqs)
+        jac = np.array(d.efc_J).reshape(d.nefc, m.nv)[rows] @ mp.p_matrix(qpos)
+        scale = max(1.0, float(np.abs(jac).max()))
+        ann = float(np.abs(jac @ g).max()) / scale
+        assert ann <= 1e-12, f"{path.name} seed {seed}: efc_J rows · P G = {ann:.3e}"
+        worst_ann = max(worst_ann, ann)
+        assert np.linalg.matrix_rank(jac, tol=1e-9 * scale) == nf - ours.nv
+        pos = float(np.abs(d.efc_pos[rows]).max())
+        assert pos <= 1e-12, f"{path.name} seed {seed}: efc_pos of the couplings {pos:.3e}"
+        # The constraints from MuJoCo's lengths and MuJoCo's polycoef.
+        for k in coupling_eqs:
+            c0, c1 = m.eq_data[k][0], m.eq_data[k][1]
+            assert not np.any(m.eq_data[k][2:5]), "linear polycoef"
+            a, b = int(m.eq_obj1id[k]), int(m.eq_obj2id[k])
+            if int(m.eq_type[k]) == int(eqt.mjEQ_TENDON):
+                l1 = d.ten_length[a] - m.tendon_length0[a]
+                l2 = d.ten_length[b] - m.tendon_length0[b] if b >= 0 else 0.0
+            else:
+                qa = int(m.jnt_qposadr[a])
+                l1 = d.qpos[qa] - m.qpos0[qa]
+                l2 = d.qpos[int(m.jnt_qposadr[b])] - m.qpos0[int(m.jnt_qposadr[b])] if b >= 0 else 0.0
+            r = abs(l1 - c0 - (c1 * l2 if b >= 0 else 0.0))
+            assert r <= 1e-12, f"{path.name} seed {seed}: equality {k} residual {r:.3e}"
+            worst = max(worst, r, pos)
+        # The reduced dynamics: Gᵀ (MuJoCo's, in sodyn's coordinates) G.
+        rng = np.random.default_rng(seed)
+        v, a = rng.normal(size=ours.nv), rng.normal(size=ours.nv)
+        mpm = Mapping(mm)
+        tau_ref = g.T @ mj_tau(mm, dm, mpm, qf, g @ v, g @ a)
+        full_m = np.zeros((mm.nv, mm.nv))
+        mujoco.mj_fullM(mm, full_m, dm.qM) if hasattr(dm, "qM") else mujoco.mj_fullM(mm, dm, full_m)
+        p = mpm.p_matrix(qpos)
+        m_ref = g.T @ (p.T @ full_m @ p) @ g
+        assert_close(sodyn.crba(ours, dr, q), m_ref, TOL, f"{path.name} seed {seed}: reduced M")
+        assert_close(sodyn.rnea(ours, dr, q, v, a), tau_ref, TOL,
+                     f"{path.name} seed {seed}: reduced tau")
+    return {"residual": float(worst), "efc_J G": worst_ann}
 
 
 def check_tendons(ours, m):
@@ -605,3 +683,122 @@ def test_tendon_armature_is_refused(tmp_path):
     assert mujoco.MjModel.from_xml_string(xml).tendon_armature[0] == 0.5
     with pytest.raises(sodyn.SodynError, match=r"<string>:3: tendon \"t\": tendon armature"):
         sodyn.Model.from_mjcf_string(xml)
+
+
+# A floating model whose <equality> couples its joints linearly (tests/all/util/mimic.rs,
+# TENDON_MJCF, the same file): a three-joint fixed tendon coupled to a second one that shares a
+# joint, a <joint> coupling, a tendon held at an offset through a joint eliminated before it, and
+# one through two.
+TENDON_COUPLED = """<mujoco model="tendon_coupled">
+  <compiler angle="radian"/>
+  <default><geom type="capsule" size="0.03"/></default>
+  <worldbody>
+    <body name="base" pos="0 0 1">
+      <freejoint name="root"/>
+      <geom type="box" size="0.1 0.1 0.05"/>
+      <body name="l1" pos="0.1 0 0">
+        <joint name="j1" axis="0 1 0" ref="0.3"/>
+        <geom fromto="0 0 0 0.3 0 0"/>
+        <body name="l2" pos="0.3 0 0">
+          <joint name="j2" axis="1 0 0"/>
+          <geom fromto="0 0 0 0.25 0 0"/>
+          <body name="l3" pos="0.25 0 0">
+            <joint name="j3" axis="0 0 1" ref="-0.2"/>
+            <geom fromto="0 0 0 0.2 0 0"/>
+            <site name="tip" pos="0.2 0 0"/>
+          </body>
+        </body>
+        <body name="slider" pos="0.1 0.1 0">
+          <joint name="s1" type="slide" axis="0 1 0"/>
+          <geom type="box" size="0.04 0.04 0.04"/>
+        </body>
+      </body>
+      <body name="l4" pos="-0.1 0 0">
+        <joint name="b" type="ball"/>
+        <geom fromto="0 0 0 -0.2 0 0"/>
+        <body name="l5" pos="-0.2 0 0">
+          <joint name="j4" axis="0 1 0"/>
+          <joint name="j5" axis="1 0 0" pos="0 0 0.02"/>
+          <geom fromto="0 0 0 -0.2 0 0"/>
+          <site name="foot" pos="-0.2 0 0"/>
+        </body>
+      </body>
+      <body name="l6" pos="0 0.1 0">
+        <joint name="j6" axis="0 0 1" ref="0.1"/>
+        <geom fromto="0 0 0 0 0.2 0"/>
+      </body>
+    </body>
+  </worldbody>
+  <tendon>
+    <fixed name="t1"><joint joint="j1" coef="0.5"/><joint joint="j2" coef="1"/><joint joint="j3" coef="-0.7"/></fixed>
+    <fixed name="t2"><joint joint="j2" coef="0.3"/><joint joint="s1" coef="2"/></fixed>
+    <fixed name="t3"><joint joint="j4" coef="1"/><joint joint="j5" coef="2"/></fixed>
+    <fixed name="t4"><joint joint="j3" coef="1"/><joint joint="j4" coef="-1"/></fixed>
+    <spatial name="sp"><site site="tip"/><site site="foot"/></spatial>
+  </tendon>
+  <equality>
+    <tendon name="e1" tendon1="t1" tendon2="t2" polycoef="0.1 0.4 0 0 0"/>
+    <joint name="e2" joint1="j6" joint2="j1" polycoef="0.05 -0.5"/>
+    <tendon name="e3" tendon1="t4" polycoef="0.02"/>
+    <tendon name="e4" tendon1="t3"/>
+  </equality>
+</mujoco>
+"""
+
+
+def test_tendon_couplings_match_mujoco(tmp_path):
+    """``<equality><tendon>`` on fixed tendons: the model is in reduced coordinates (four joints
+    eliminated, several entries in their rows of ``G``); ``compare`` checks the full tree
+    against MuJoCo and ``check_couplings`` MuJoCo's equality rows, residuals and the reduced
+    dynamics. The three dm_control models with tendon couplings load and match (the corpus
+    test runs them through ``compare`` too)."""
+    path = tmp_path / "tendon_coupled.xml"
+    path.write_text(TENDON_COUPLED)
+    ours, worst = compare(path)
+    assert (ours.full_model.nv, ours.nv) == (16, 12)
+    g = ours.mimic_map
+    assert max(int(np.count_nonzero(row)) for row in g) == 3
+    print(f"tendon_coupled: worst {worst}")
+    for name, dofs in [("dm_control/manipulator", (14, 13)), ("dm_control/stacker", (20, 19)),
+                       ("dm_control/quadruped", (28, 24))]:
+        ours, worst = compare(CORPUS[name], seeds=(0,))
+        assert (ours.full_model.nv, ours.nv) == dofs, (name, ours.full_model.nv, ours.nv)
+        print(f"{name}: nv {ours.full_model.nv} -> {ours.nv}, worst {worst}")
+
+
+def test_tendon_coupled_model_pickles_and_lists_its_joints():
+    """A model with couplings of several joints survives pickling (the same reduced
+    coordinates and dynamics) and lists its eliminated joints with no coordinate."""
+    import pickle
+
+    ours = sodyn.Model.from_mjcf_string(TENDON_COUPLED)
+    back = pickle.loads(pickle.dumps(ours))
+    assert (back.nq, back.nv) == (ours.nq, ours.nv) == (14, 12)
+    assert np.array_equal(back.mimic_map, ours.mimic_map)
+    q = ours.random_configuration(seed=4)
+    v = np.random.default_rng(4).normal(size=ours.nv)
+    assert np.array_equal(sodyn.rnea(back, back.create_data(), q, v, v),
+                          sodyn.rnea(ours, ours.create_data(), q, v, v))
+    joints = {j.name: j for j in ours.joints}
+    for name in ("j3", "j4", "j5", "j6"):
+        assert (joints[name].nq, joints[name].nv) == (0, 0), name
+    assert joints["j6"].mimic == "j1" and joints["j6"].multiplier == -0.5
+    assert joints["j3"].mimic is None
+
+
+def test_tendon_coupling_errors_name_element_and_line():
+    """A spatial tendon in an equality and a non-linear polycoef are errors naming the element
+    and its line (MuJoCo loads both)."""
+    bodies = ('<worldbody><body><joint name="a"/><geom size="0.1"/><site name="s1"/>'
+              '<body pos="1 0 0"><joint name="b"/><geom size="0.1"/><site name="s2"/>'
+              '</body></body></worldbody>\n<tendon><fixed name="f"><joint joint="a" coef="1"/>'
+              '<joint joint="b" coef="1"/></fixed><fixed name="g"><joint joint="b" coef="1"/>'
+              '</fixed><spatial name="sp"><site site="s1"/>'
+              '<site site="s2"/></spatial></tendon>\n')
+    for eq, match in [('<tendon name="x" tendon1="sp"/>', r"<string>:4: <tendon> \"x\": tendon1=\"sp\" is a spatial tendon"),
+                      ('<tendon name="y" tendon1="f" tendon2="g" polycoef="0 1 1"/>',
+                       r"<string>:4: <tendon> \"y\": polycoef: coefficient 2 is 1")]:
+        xml = f"<mujoco>{bodies}<equality>\n{eq}</equality></mujoco>"
+        mujoco.MjModel.from_xml_string(xml)
+        with pytest.raises(sodyn.SodynError, match=match):
+            sodyn.Model.from_mjcf_string(xml)

@@ -1118,9 +1118,10 @@ pub(crate) mod reduced {
         ldl_in_place(model, &mut data.ldl)?;
         im.jr.fill(0.0);
         for f in 0..nf {
-            let (c, g) = (model.g_col[f], model.g_coef[f]);
-            for r in 0..m {
-                im.jr[(r, c)] += g * im.cd.jac[(r, f)];
+            for (c, g) in model.g_row(f) {
+                for r in 0..m {
+                    im.jr[(r, c)] += g * im.cd.jac[(r, f)];
+                }
             }
         }
         for r in 0..m {
@@ -1167,9 +1168,12 @@ pub(crate) mod reduced {
         }
         // R_q of the full tree at Δ, λ̂, w, reduced.
         for f in 0..nf {
-            let (c, g) = (model.g_col[f], model.g_coef[f]);
-            im.dvf[f] = g * (im.vplus[c] - vminus[c]);
-            im.wf[f] = g * (im.vplus[c] + e * vminus[c]);
+            let (mut dv, mut w) = (0.0, 0.0);
+            for (c, g) in model.g_row(f) {
+                dv += g * (im.vplus[c] - vminus[c]);
+                w += g * (im.vplus[c] + e * vminus[c]);
+            }
+            (im.dvf[f], im.wf[f]) = (dv, w);
         }
         crate::deriv::zero::idfoza_core(full, &mut data.full, im.dvf.as_slice(), &mut im.rq);
         let s = std::mem::take(&mut im.cd.s);
@@ -1186,9 +1190,10 @@ pub(crate) mod reduced {
         model.reduce_matrix(&im.rq, &mut im.r_top);
         im.r_bot.fill(0.0);
         for f in 0..nf {
-            let (c, g) = (model.g_col[f], model.g_coef[f]);
-            for r in 0..m {
-                im.r_bot[(r, c)] += g * im.cq[(r, f)];
+            for (c, g) in model.g_row(f) {
+                for r in 0..m {
+                    im.r_bot[(r, c)] += g * im.cq[(r, f)];
+                }
             }
         }
         // ∂y/∂q = −R_y⁻¹ R_q; ∂y/∂q̇⁻ = −R_y⁻¹ [−M; e J_r].
@@ -1261,7 +1266,6 @@ pub(crate) mod reduced {
         use crate::spatial::Motion;
         let full = &model.full;
         let (n, nf, m) = (model.nv, full.nv(), im.dim());
-        let (gc, gk) = (&model.g_col, &model.g_coef);
         let e = im.restitution;
         // IDSOZA: ∂²(M Δ)/∂q² (zero velocity, no gravity, q̈ = Δ).
         crate::deriv::id_so::id_so_unchecked(
@@ -1299,14 +1303,19 @@ pub(crate) mod reduced {
         so.sqq.fill(0.0);
         so.sqv.fill(0.0);
         for k in 0..nf {
-            for j in 0..nf {
-                let c = gk[j] * gk[k];
-                let (jr, kr) = (gc[j], gc[k]);
-                for i in 0..nf {
-                    so.sqq[(gc[i], jr, kr)] += gk[i] * c * rf[(i, j, k)];
-                }
-                for r in 0..m {
-                    so.sqq[(n + r, jr, kr)] += c * rf[(nf + r, j, k)];
+            for (kr, gkk) in model.g_row(k) {
+                for j in 0..nf {
+                    for (jr, gj) in model.g_row(j) {
+                        let c = gj * gkk;
+                        for i in 0..nf {
+                            for (ir, gi) in model.g_row(i) {
+                                so.sqq[(ir, jr, kr)] += gi * c * rf[(i, j, k)];
+                            }
+                        }
+                        for r in 0..m {
+                            so.sqq[(n + r, jr, kr)] += c * rf[(nf + r, j, k)];
+                        }
+                    }
                 }
             }
         }
@@ -1315,16 +1324,19 @@ pub(crate) mod reduced {
         for pass in 0..2 {
             for k in 0..n {
                 for f in 0..nf {
-                    let (c, g) = (gc[f], gk[f]);
-                    if pass == 0 {
-                        so.za[f] = g * im.dvplus_dq[(c, k)];
-                        so.zj[f] = so.za[f];
-                    } else {
-                        let x = im.dvplus_dvminus[(c, k)];
-                        let d = if c == k { 1.0 } else { 0.0 };
-                        so.za[f] = g * (x - d);
-                        so.zj[f] = g * (x + e * d);
+                    let (mut za, mut zj) = (0.0, 0.0);
+                    for (c, g) in model.g_row(f) {
+                        if pass == 0 {
+                            za += g * im.dvplus_dq[(c, k)];
+                            zj = za;
+                        } else {
+                            let x = im.dvplus_dvminus[(c, k)];
+                            let d = if c == k { 1.0 } else { 0.0 };
+                            za += g * (x - d);
+                            zj += g * (x + e * d);
+                        }
                     }
+                    (so.za[f], so.zj[f]) = (za, zj);
                 }
                 for r in 0..m {
                     so.zl[r] = if pass == 0 {
@@ -1344,12 +1356,15 @@ pub(crate) mod reduced {
                 let g = &im.cd.g;
                 so.c.fill(0.0);
                 for u in 0..nf {
-                    let (ur, gu) = (gc[u], gk[u]);
-                    for f in 0..nf {
-                        so.c[(gc[f], ur)] += gk[f] * gu * g[(f, u)];
-                    }
-                    for r in 0..m {
-                        so.c[(n + r, ur)] += gu * g[(nf + r, u)];
+                    for (ur, gu) in model.g_row(u) {
+                        for f in 0..nf {
+                            for (fr, gf) in model.g_row(f) {
+                                so.c[(fr, ur)] += gf * gu * g[(f, u)];
+                            }
+                        }
+                        for r in 0..m {
+                            so.c[(n + r, ur)] += gu * g[(nf + r, u)];
+                        }
                     }
                 }
                 for u in 0..n {

@@ -1666,9 +1666,10 @@ pub(crate) mod reduced {
         let jac = &cd.jac;
         kd.jr.fill(0.0);
         for f in 0..nf {
-            let (c, g) = (model.g_col[f], model.g_coef[f]);
-            for r in 0..m {
-                kd.jr[(r, c)] += g * jac[(r, f)];
+            for (c, g) in model.g_row(f) {
+                for r in 0..m {
+                    kd.jr[(r, c)] += g * jac[(r, f)];
+                }
             }
         }
         // M⁻¹ J_rᵀ, the Delassus matrix and its factor.
@@ -1745,9 +1746,10 @@ pub(crate) mod reduced {
             model.reduce_matrix(&kd.rf_top, &mut kd.r_top);
             kd.r_bot.fill(0.0);
             for f in 0..nf {
-                let (c, g) = (model.g_col[f], model.g_coef[f]);
-                for r in 0..m {
-                    kd.r_bot[(r, c)] += g * kd.rf_bot[(r, f)];
+                for (c, g) in model.g_row(f) {
+                    for r in 0..m {
+                        kd.r_bot[(r, c)] += g * kd.rf_bot[(r, f)];
+                    }
                 }
             }
             // ∂y/∂x = −R_y⁻¹ R_x, column by column.
@@ -1825,7 +1827,6 @@ pub(crate) mod reduced {
         so: &mut MimicKktSo,
     ) {
         let (n, nf, m) = (model.nv, model.full.nv(), kd.dim());
-        let (gc, gk) = (&model.g_col, &model.g_coef);
         // Pairs: (full q̈ tensor, full λ tensor, reduced outputs, which G products).
         for pair in 0..4 {
             so.sa.fill(0.0);
@@ -1841,14 +1842,17 @@ pub(crate) mod reduced {
                 so.ta.fill(0.0);
                 so.tl.fill(0.0);
                 for k in 0..nf {
-                    for j in 0..nf {
-                        let c = gk[j] * gk[k];
-                        let (jr, kr) = (gc[j], gc[k]);
-                        for i in 0..nf {
-                            so.ta[(i, jr, kr)] += c * tfa[(i, j, k)];
-                        }
-                        for i in 0..m {
-                            so.tl[(i, jr, kr)] += c * tfl[(i, j, k)];
+                    for (kr, gkk) in model.g_row(k) {
+                        for j in 0..nf {
+                            for (jr, gj) in model.g_row(j) {
+                                let c = gj * gkk;
+                                for i in 0..nf {
+                                    so.ta[(i, jr, kr)] += c * tfa[(i, j, k)];
+                                }
+                                for i in 0..m {
+                                    so.tl[(i, jr, kr)] += c * tfl[(i, j, k)];
+                                }
+                            }
                         }
                     }
                 }
@@ -1862,7 +1866,9 @@ pub(crate) mod reduced {
                         so.vf.gemv(-1.0, mf, &ta, 0.0);
                         so.vf.gemv_tr(1.0, jac, &tl, 1.0);
                         for f in 0..nf {
-                            so.sa[(gc[f], j, k)] += gk[f] * so.vf[f];
+                            for (c, g) in model.g_row(f) {
+                                so.sa[(c, j, k)] += g * so.vf[f];
+                            }
                         }
                         for r in 0..m {
                             let s: f64 = (0..nf).map(|f| jac[(r, f)] * ta[f]).sum();
@@ -1881,7 +1887,7 @@ pub(crate) mod reduced {
                         _ => (&kd.dqdd_dtau, &kd.dlambda_dtau),
                     };
                     for f in 0..nf {
-                        so.delta[f] = gk[f] * ya[(gc[f], w)];
+                        so.delta[f] = model.g_row(f).map(|(c, g)| g * ya[(c, w)]).sum();
                     }
                     for r in 0..m {
                         so.delta[nf + r] = yl[(r, w)];
@@ -1893,13 +1899,14 @@ pub(crate) mod reduced {
                             (kd.full.dqdd_dv(), kd.full.dlambda_dv())
                         };
                         for f in 0..nf {
-                            if gc[f] == w {
-                                let g = gk[f];
-                                for i in 0..nf {
-                                    so.delta[i] -= g * yfa[(i, f)];
-                                }
-                                for r in 0..m {
-                                    so.delta[nf + r] -= g * yfl[(r, f)];
+                            for (c, g) in model.g_row(f) {
+                                if c == w {
+                                    for i in 0..nf {
+                                        so.delta[i] -= g * yfa[(i, f)];
+                                    }
+                                    for r in 0..m {
+                                        so.delta[nf + r] -= g * yfl[(r, f)];
+                                    }
                                 }
                             }
                         }
@@ -1917,12 +1924,15 @@ pub(crate) mod reduced {
                     let g = &kd.full.cd.g;
                     so.c.fill(0.0);
                     for u in 0..nf {
-                        let (ur, gu) = (gc[u], gk[u]);
-                        for f in 0..nf {
-                            so.c[(gc[f], ur)] += gk[f] * gu * g[(f, u)];
-                        }
-                        for r in 0..m {
-                            so.c[(n + r, ur)] += gu * g[(nf + r, u)];
+                        for (ur, gu) in model.g_row(u) {
+                            for f in 0..nf {
+                                for (fr, gf) in model.g_row(f) {
+                                    so.c[(fr, ur)] += gf * gu * g[(f, u)];
+                                }
+                            }
+                            for r in 0..m {
+                                so.c[(n + r, ur)] += gu * g[(nf + r, u)];
+                            }
                         }
                     }
                     for u in 0..n {

@@ -20,7 +20,8 @@
 //!   and `<frame>`); what MuJoCo refuses is an error (see `docs/mjcf.md`).
 //! * `<tendon>`: `<fixed>` and `<spatial>` tendons are recorded ([`Model::tendons`], see
 //!   [`Tendon`]), checked as MuJoCo checks them, with one warning that they do not enter the
-//!   dynamics; a nonzero tendon `armature` (which MuJoCo adds to `M`) is an error.
+//!   dynamics (except as the couplings of an `<equality><tendon>`, below); a nonzero tendon
+//!   `armature` (which MuJoCo adds to `M`) is an error.
 //! * `<body pos quat|axisangle|euler|xyaxes|zaxis>`, `<frame>` (a placement of its children),
 //!   `<inertial pos orientation mass diaginertia|fullinertia>`, `<joint>` of type `hinge`,
 //!   `slide`, `ball` and `free`, `<freejoint>`, `<geom>` (for inertias) and named `<site>`s (as
@@ -68,9 +69,17 @@
 //!   (frame `"universe"`); with body1 on the world, frame A is body2's side. `<joint joint1
 //!   joint2 polycoef>` with a linear polynomial (`q1 − q1₀ = c0 + c1 (q2 − q2₀)`, `₀` at
 //!   `qpos0`) is a mimic constraint: the model is in reduced coordinates
-//!   ([`Model::with_mimic_joints`]). A non-linear polynomial, a `<joint>` without joint2, a
-//!   constraint between sites, an unknown body or joint, both frames on one body, and every
-//!   other element (`<tendon>`, `<flex>`, …) are errors naming the element and its line.
+//!   ([`Model::with_mimic_joints`]). `<tendon tendon1 tendon2 polycoef>` on fixed tendons
+//!   (`L = Σ coef · q`) with a linear polynomial is the constraint `L1 − L1₀ = c0 + c1 (L2 −
+//!   L2₀)` (`L1 − L1₀ = c0` without tendon2), linear in the joint coordinates: with one, every
+//!   `<joint>` and `<tendon>` coupling is eliminated in document order, each eliminating
+//!   tendon1's last joint with a nonzero net coefficient (else tendon2's last; joint1, else
+//!   joint2, for a `<joint>`) after the joints eliminated before it are replaced by their
+//!   expressions, into couplings of several joints ([`Model::with_linear_couplings`]). A
+//!   non-linear polynomial, a `<joint>` without joint2, a constraint between sites, an unknown
+//!   body, joint or tendon, a spatial tendon, a coupling that is dependent on or inconsistent
+//!   with those before it, both frames on one body, and every other element (`<flex>`, …) are
+//!   errors naming the element and its line.
 //! * Joint `damping`, `stiffness`, `frictionloss`, actuators, contacts, sensors and every
 //!   element irrelevant to the rigid-body dynamics are ignored;
 //!   a nonzero body `gravcomp` is ignored with a warning in [`Model::warnings`]. A joint's
@@ -108,6 +117,128 @@ pub struct MjcfOptions {
 }
 
 pub use super::tendon::{SpatialWrap, Tendon, TendonPath};
+
+/// Where an equality element is: its file, line and element description.
+type Loc = (Rc<str>, u32, String);
+
+/// `(joint index, coefficient)` pairs.
+type Terms = Vec<(usize, f64)>;
+
+/// A linear equality constraint `Σ terms = rhs` on one-DoF joints (joint index, coefficient),
+/// and the joints to eliminate by it, in order of preference.
+struct LinearRow {
+    terms: Vec<(usize, f64)>,
+    rhs: f64,
+    prefer: Vec<usize>,
+}
+
+/// The `<equality>` constraints: two-frame constraints, the `<joint>` couplings as mimic
+/// constraints, and (when a `<tendon>` coupling is present, empty otherwise) every linear
+/// constraint in document order.
+struct Equalities {
+    contacts: Vec<super::Contact>,
+    mimics: Vec<(Loc, super::JointCoupling)>,
+    rows: Vec<(Loc, LinearRow)>,
+}
+
+/// "mimic constraint K: REASON" of [`Model::with_mimic_joints`] as the error of the K-th
+/// `<joint>` equality.
+fn mimic_error(e: Error, lines: &[Loc]) -> Error {
+    let Error::Build(full) = &e else { return e };
+    let (k, msg) = full
+        .strip_prefix("mimic constraint ")
+        .and_then(|r| r.split_once(": "))
+        .and_then(|(n, why)| Some((n.parse::<usize>().ok()?, why.to_string())))
+        .unwrap_or((0, full.clone()));
+    match lines.get(k).or(lines.first()) {
+        Some((file, line, element)) => model_err(file, *line, element, msg),
+        None => e,
+    }
+}
+
+/// Gauss–Jordan elimination of linear joint constraints, in document order: each constraint,
+/// with the joints eliminated before it replaced by their expressions, eliminates the first
+/// joint of its preference list (for a tendon coupling, tendon1's joints from the last, then
+/// tendon2's) whose net coefficient is not zero (else the last such joint of the model); the
+/// expressions before it are updated. Returns each eliminated joint as a coupling on the
+/// independent joints, with the element that eliminated it.
+///
+/// # Errors
+/// A constraint whose net coefficients all vanish (relative to `1e-12` of the largest): it
+/// follows from those before it (dependent) or contradicts them (inconsistent), an error
+/// naming the element and its line.
+fn eliminate(rows: Vec<(Loc, LinearRow)>) -> Result<Vec<(Loc, super::LinearCoupling)>> {
+    // Eliminated joint → (its terms on independent joints, offset), with its element.
+    let mut exprs: Vec<(usize, Terms, f64, Loc)> = Vec::new();
+    for (loc, row) in rows {
+        let scale = row.terms.iter().fold(0.0f64, |m, t| m.max(t.1.abs()));
+        let mut terms: Vec<(usize, f64)> = Vec::new();
+        let mut rhs = row.rhs;
+        let add = |terms: &mut Vec<(usize, f64)>, j: usize, x: f64| match terms
+            .iter_mut()
+            .find(|t| t.0 == j)
+        {
+            Some(t) => t.1 += x,
+            None => terms.push((j, x)),
+        };
+        for &(j, a) in &row.terms {
+            match exprs.iter().find(|e| e.0 == j) {
+                Some((_, et, eo, _)) => {
+                    for &(i, x) in et {
+                        add(&mut terms, i, a * x);
+                    }
+                    rhs -= a * eo;
+                }
+                None => add(&mut terms, j, a),
+            }
+        }
+        let tol = 1e-12 * scale.max(f64::MIN_POSITIVE);
+        terms.retain(|t| t.1.abs() > tol);
+        let (file, line, element) = &loc;
+        if terms.is_empty() {
+            let why = if rhs.abs() <= 1e-12 * (1.0 + row.rhs.abs()) {
+                "its joints' net coefficients cancel, with the equality constraints before it:                  the constraint is dependent (it follows from them and constrains nothing)"
+                    .to_string()
+            } else {
+                format!(
+                    "its joints' net coefficients cancel, with the equality constraints before                      it, and it requires 0 = {rhs}: the constraint set is inconsistent"
+                )
+            };
+            return Err(model_err(file, *line, element, why));
+        }
+        let pivot = row
+            .prefer
+            .iter()
+            .copied()
+            .find(|&j| terms.iter().any(|t| t.0 == j))
+            .unwrap_or_else(|| terms.iter().map(|t| t.0).max().expect("not empty"));
+        let ap = terms.iter().find(|t| t.0 == pivot).expect("a term").1;
+        // q_p = (rhs − Σ_{j≠p} a_j q_j) / a_p.
+        let mut expr: Vec<(usize, f64)> =
+            terms.iter().filter(|t| t.0 != pivot).map(|&(j, a)| (j, -a / ap)).collect();
+        expr.sort_by_key(|t| t.0);
+        let off = rhs / ap;
+        for (_, et, eo, _) in exprs.iter_mut() {
+            if let Some(k) = et.iter().position(|t| t.0 == pivot) {
+                let x = et.remove(k).1;
+                for &(j, y) in &expr {
+                    match et.iter_mut().find(|t| t.0 == j) {
+                        Some(t) => t.1 += x * y,
+                        None => et.push((j, x * y)),
+                    }
+                }
+                et.retain(|t| t.1 != 0.0);
+                et.sort_by_key(|t| t.0);
+                *eo += x * off;
+            }
+        }
+        exprs.push((pivot, expr, off, loc));
+    }
+    Ok(exprs
+        .into_iter()
+        .map(|(joint, terms, offset, loc)| (loc, super::LinearCoupling { joint, terms, offset }))
+        .collect())
+}
 
 /// Nesting limit of `<include>` (an include cycle is reported before it).
 const MAX_INCLUDE_DEPTH: usize = 32;
@@ -1220,17 +1351,22 @@ impl Loader {
             let a = model.idx_q[*j];
             q0.as_mut_slice()[a..a + x.len()].copy_from_slice(x);
         }
-        let (constraints, mimics) = self.equality(root, &model, &q0)?;
+        let Equalities { contacts: constraints, mimics, rows } =
+            self.equality(root, &model, &q0)?;
         model.constraints = constraints;
-        let mut model = if mimics.is_empty() {
-            model
-        } else {
-            let (lines, mimics): (Vec<_>, Vec<_>) = mimics.into_iter().unzip();
-            model.with_mimic_joints(&mimics).map_err(|e| {
-                // "mimic constraint K: REASON" names the K-th <joint> equality.
+        let mut model = if !rows.is_empty() {
+            // With a tendon coupling: the joint couplings are checked as mimic constraints
+            // first (their errors), then every linear constraint is eliminated in turn.
+            if !mimics.is_empty() {
+                let (lines, ms): (Vec<_>, Vec<_>) = mimics.into_iter().unzip();
+                model.with_mimic_joints(&ms).map_err(|e| mimic_error(e, &lines))?;
+            }
+            let (lines, couplings): (Vec<_>, Vec<_>) = eliminate(rows)?.into_iter().unzip();
+            model.with_linear_couplings(&couplings).map_err(|e| {
+                // "coupling K: REASON" names the constraint that eliminated the K-th joint.
                 let Error::Build(full) = &e else { return e };
                 let (k, msg) = full
-                    .strip_prefix("mimic constraint ")
+                    .strip_prefix("coupling ")
                     .and_then(|r| r.split_once(": "))
                     .and_then(|(n, why)| Some((n.parse::<usize>().ok()?, why.to_string())))
                     .unwrap_or((0, full.clone()));
@@ -1239,6 +1375,11 @@ impl Loader {
                     None => e,
                 }
             })?
+        } else if mimics.is_empty() {
+            model
+        } else {
+            let (lines, mimics): (Vec<_>, Vec<_>) = mimics.into_iter().unzip();
+            model.with_mimic_joints(&mimics).map_err(|e| mimic_error(e, &lines))?
         };
         model.warnings = std::mem::take(&mut self.warnings);
         Ok(model)
@@ -1254,10 +1395,12 @@ impl Loader {
         root: &El,
         model: &Model,
         q0: &nalgebra::DVector<f64>,
-    ) -> Result<(Vec<super::Contact>, Vec<((Rc<str>, u32, String), super::JointCoupling)>)> {
+    ) -> Result<Equalities> {
         use super::{Contact, ContactType, JointCoupling};
         let mut contacts = Vec::new();
         let mut mimics = Vec::new();
+        let mut rows = Vec::new();
+        let mut any_tendon = false;
         // World placements of the joints at q0 (`ᵖM_i = placement_i · X_J(q_i)`, composed
         // from the root), then of the frames.
         let mut joint_world = vec![Transform::identity(); model.njoints()];
@@ -1430,14 +1573,112 @@ impl Loader {
                         // MuJoCo: q1 − q1(qpos0) = c0 + c1 (q2 − q2(qpos0)).
                         let (r1, r2) = (q0[model.idx_q[j1]], q0[model.idx_q[j2]]);
                         let (c0, c1) = (coef(0), coef(1));
-                        mimics.push((
-                            (c.file.clone(), c.line, elem.clone()),
-                            JointCoupling {
-                                joint: j1,
-                                reference: j2,
-                                multiplier: c1,
-                                offset: c0 + r1 - c1 * r2,
+                        let loc = (c.file.clone(), c.line, elem.clone());
+                        let offset = c0 + r1 - c1 * r2;
+                        rows.push((
+                            loc.clone(),
+                            LinearRow {
+                                terms: vec![(j1, 1.0), (j2, -c1)],
+                                rhs: offset,
+                                prefer: vec![j1, j2],
                             },
+                        ));
+                        mimics.push((
+                            loc,
+                            JointCoupling { joint: j1, reference: j2, multiplier: c1, offset },
+                        ));
+                    }
+                    "tendon" => {
+                        any_tendon = true;
+                        // A fixed tendon named by attribute `key`: its (joint, coef) path.
+                        let tendon = |key: &str| -> Result<Option<&[(usize, f64)]>> {
+                            let Some(a) = c.attr(key) else { return Ok(None) };
+                            let at = |why: String| model_err(&c.file, a.line, &elem, why);
+                            let t = model
+                                .tendons
+                                .iter()
+                                .find(|t| t.name.as_deref() == Some(a.value.as_str()))
+                                .ok_or_else(|| {
+                                    at(format!("{key}=\"{}\": unknown tendon", a.value))
+                                })?;
+                            match &t.path {
+                                super::TendonPath::Fixed(p) => {
+                                    if let Some(&(j, _)) = p.iter().find(|&&(j, _)| {
+                                        !matches!(
+                                            model.joints[j],
+                                            JointType::Revolute { .. }
+                                                | JointType::Continuous { .. }
+                                                | JointType::Prismatic { .. }
+                                        )
+                                    }) {
+                                        return Err(at(format!(
+                                            "{key}=\"{}\": joint \"{}\" of the tendon is not a \
+                                             scalar (hinge or slide) joint",
+                                            a.value, model.names[j]
+                                        )));
+                                    }
+                                    Ok(Some(p.as_slice()))
+                                }
+                                super::TendonPath::Spatial(_) => Err(at(format!(
+                                    "{key}=\"{}\" is a spatial tendon: only fixed tendons \
+                                     (linear in the joint coordinates) are supported in an \
+                                     equality constraint",
+                                    a.value
+                                ))),
+                            }
+                        };
+                        let Some(t1) = tendon("tendon1")? else {
+                            return Err(err_at(c, &elem, "attribute tendon1 is missing"));
+                        };
+                        let t2 = tendon("tendon2")?;
+                        let line = at_attr("polycoef");
+                        let p = match get("polycoef") {
+                            Some(a) => parse_numbers(c, a, &elem, 1, 5)?,
+                            None => vec![0.0, 1.0],
+                        };
+                        let coef = |i: usize| p.get(i).copied().unwrap_or(0.0);
+                        if let Some(i) = (2..5).find(|&i| coef(i) != 0.0) {
+                            return Err(model_err(
+                                &c.file,
+                                line,
+                                &elem,
+                                format!(
+                                    "polycoef: coefficient {i} is {}: only a linear coupling \
+                                     (c0 + c1 · tendon2) is supported",
+                                    coef(i)
+                                ),
+                            ));
+                        }
+                        // MuJoCo: L1 − L1(qpos0) = c0 + c1 (L2 − L2(qpos0)), L = Σ coef · q;
+                        // without tendon2, L1 − L1(qpos0) = c0.
+                        let (c0, c1) = (coef(0), if t2.is_some() { coef(1) } else { 0.0 });
+                        let length = |t: &[(usize, f64)]| -> f64 {
+                            t.iter().map(|&(j, x)| x * q0[model.idx_q[j]]).sum()
+                        };
+                        let mut terms: Vec<(usize, f64)> = t1.to_vec();
+                        let mut rhs = c0 + length(t1);
+                        let mut prefer: Vec<usize> = t1.iter().rev().map(|&(j, _)| j).collect();
+                        if let Some(t2) = t2 {
+                            rhs -= c1 * length(t2);
+                            for &(j, x) in t2 {
+                                match terms.iter_mut().find(|(i, _)| *i == j) {
+                                    Some(t) => t.1 -= c1 * x,
+                                    None => terms.push((j, -c1 * x)),
+                                }
+                            }
+                            prefer.extend(t2.iter().rev().map(|&(j, _)| j));
+                        }
+                        if !rhs.is_finite() || terms.iter().any(|t| !t.1.is_finite()) {
+                            return Err(model_err(
+                                &c.file,
+                                line,
+                                &elem,
+                                "polycoef and the tendon coefficients must be finite",
+                            ));
+                        }
+                        rows.push((
+                            (c.file.clone(), c.line, elem.clone()),
+                            LinearRow { terms, rhs, prefer },
                         ));
                     }
                     other => {
@@ -1446,14 +1687,15 @@ impl Loader {
                             &elem,
                             format!(
                                 "<{other}> equality constraints are not supported (only \
-                                 <connect>, <weld> and linear <joint> couplings)"
+                                 <connect>, <weld>, and linear <joint> and fixed-<tendon> \
+                                 couplings)"
                             ),
                         ));
                     }
                 }
             }
         }
-        Ok((contacts, mimics))
+        Ok(Equalities { contacts, mimics, rows: if any_tendon { rows } else { Vec::new() } })
     }
 
     /// Reads the bodies of a `<worldbody>` depth-first in document order (MuJoCo's order),

@@ -15,7 +15,7 @@ pub(crate) use contact::{contact_label, redundancy};
 pub use joint::JointType;
 pub use lie::{Arg, exp6, jlog6, log6};
 pub use mjcf::{MjcfOptions, load_mjcf_file, load_mjcf_str};
-pub use reduction::JointCoupling;
+pub use reduction::{JointCoupling, LinearCoupling};
 pub use tendon::{SpatialWrap, Tendon, TendonPath};
 pub(crate) use tree::JointKin;
 pub use tree::{Frame, Model, ModelBuilder, check_vec};

@@ -10,6 +10,11 @@
 //! independent coordinates copied, `m · q_ref + c` for each mimic joint), `v_full = G v`,
 //! `a_full = G a`, and `expand(q ⊕ δ) = expand(q) ⊕ G δ`.
 //!
+//! A linear coupling of several joints ([`LinearCoupling`], `q_joint = Σₖ cₖ · q_jₖ + c`, from
+//! [`Model::with_linear_couplings`] or an MJCF `<equality><tendon>`) is the same with one entry
+//! `cₖ` per term in the eliminated joint's row of `G` (stored by rows): everything below holds
+//! for any constant `G` whose independent rows are unit rows.
+//!
 //! Every algorithm runs on such a model with the usual workspaces; its reduced-coordinate
 //! implementation sits in the algorithm's own file (a `reduced` module beside the tree's code):
 //! * the tangent derivatives of the reduced model are those of the full model times `G` for
@@ -51,19 +56,55 @@ pub struct JointCoupling {
     pub offset: f64,
 }
 
+/// A linear coupling of several joints: `q[joint] = Σₖ cₖ · q[jₖ] + offset` for the terms
+/// `(jₖ, cₖ)`, every joint a one-DoF (revolute, continuous or prismatic) joint of the full
+/// model (indices of [`Model::names`]), the `jₖ` independent. The mimic constraint
+/// ([`JointCoupling`]) is the case of one term; no term holds `joint` at `offset`. The MJCF
+/// loader makes them from `<equality><tendon>` on fixed tendons.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinearCoupling {
+    /// The eliminated joint (it has no degree of freedom in the reduced model).
+    pub joint: usize,
+    /// `(joint index, coefficient)` of each independent joint it follows.
+    pub terms: Vec<(usize, f64)>,
+    /// The constant term.
+    pub offset: f64,
+}
+
+impl From<JointCoupling> for LinearCoupling {
+    fn from(c: JointCoupling) -> Self {
+        LinearCoupling {
+            joint: c.joint,
+            terms: vec![(c.reference, c.multiplier)],
+            offset: c.offset,
+        }
+    }
+}
+
 /// A model with mimic joints, in the reduced coordinates (see the documentation of
 /// [`crate::mimic`]): the full tree ([`MimicModel::full`]) and the map `G`.
 #[derive(Clone, Debug)]
 pub struct MimicModel {
     pub(crate) full: Model,
+    /// The single-term couplings (sorted by joint).
     pub(crate) mimics: Vec<JointCoupling>,
+    /// Every coupling (sorted by joint).
+    pub(crate) couplings: Vec<LinearCoupling>,
     pub(crate) nq: usize,
     pub(crate) nv: usize,
-    /// Per full configuration coordinate: `(reduced index, coefficient, offset)`.
-    pub(crate) q_map: Vec<(usize, f64, f64)>,
-    /// Row `f` of `G`: its one non-zero entry `g_coef[f]` is in column `g_col[f]`.
-    pub(crate) g_col: Vec<usize>,
-    pub(crate) g_coef: Vec<f64>,
+    /// `expand(q)`: full configuration coordinate `f` is `Σ q_val[e] q[q_idx[e]] + q_off[f]`
+    /// over `e` in `q_ptr[f]..q_ptr[f + 1]`.
+    pub(crate) q_ptr: Vec<usize>,
+    pub(crate) q_idx: Vec<usize>,
+    pub(crate) q_val: Vec<f64>,
+    pub(crate) q_off: Vec<f64>,
+    /// `G` by rows: row `f` has the entries `g_val[e]` in columns `g_idx[e]`, `e` in
+    /// `g_ptr[f]..g_ptr[f + 1]`.
+    pub(crate) g_ptr: Vec<usize>,
+    pub(crate) g_idx: Vec<usize>,
+    pub(crate) g_val: Vec<f64>,
+    /// Whether a row of `G` has several entries.
+    pub(crate) multi_term: bool,
     /// The full index of each reduced configuration coordinate / velocity coordinate.
     pub(crate) q_keep: Vec<usize>,
     pub(crate) v_keep: Vec<usize>,
@@ -170,13 +211,112 @@ impl MimicModel {
                 )));
             }
         }
+        let couplings: Vec<LinearCoupling> = mimics.iter().map(|&m| m.into()).collect();
+        Ok(Self::build(full, couplings))
+    }
+
+    /// The reduced model of `full` with the linear couplings `couplings`.
+    ///
+    /// # Errors
+    /// [`Error::Build`] naming the coupling (`coupling K`) and the joint if a coupling names a
+    /// joint index that does not exist or the world, a joint is constrained twice, a joint is a
+    /// term of its own coupling or twice a term of one coupling, a joint is not a one-DoF
+    /// revolute, continuous or prismatic joint, a term's joint is itself eliminated by a
+    /// coupling, or a coefficient or the offset is not finite.
+    pub fn with_couplings(full: Model, couplings: &[LinearCoupling]) -> Result<Self> {
+        let full = match &full.reduction {
+            Some(r) => r.full.clone(),
+            None => full,
+        };
+        let nj = full.njoints();
+        let name = |i: usize| full.names()[i].clone();
+        let mut eliminated = vec![false; nj];
+        for (k, c) in couplings.iter().enumerate() {
+            let bad = |why: String| Error::Build(format!("coupling {k}: {why}"));
+            let scalar = |j: usize, what: &str| -> Result<()> {
+                if j == 0 || j >= nj {
+                    return Err(bad(format!(
+                        "{what} index {j} is not a moving joint of the model"
+                    )));
+                }
+                if one_dof_kind(&full.joints()[j]).is_none() {
+                    return Err(bad(format!(
+                        "{what} \"{}\" (index {j}) is {}: a coupled joint must be revolute, \
+                         continuous or prismatic",
+                        name(j),
+                        full.joints()[j].name()
+                    )));
+                }
+                Ok(())
+            };
+            scalar(c.joint, "joint")?;
+            let who = format!("joint \"{}\" (index {})", name(c.joint), c.joint);
+            if eliminated[c.joint] {
+                return Err(bad(format!("{who} is constrained twice")));
+            }
+            eliminated[c.joint] = true;
+            if !c.offset.is_finite() {
+                return Err(bad(format!("{who}: offset {} must be finite", c.offset)));
+            }
+            for (t, &(j, x)) in c.terms.iter().enumerate() {
+                scalar(j, "term joint")?;
+                if j == c.joint {
+                    return Err(bad(format!("{who} is a term of its own coupling")));
+                }
+                if c.terms[..t].iter().any(|&(i, _)| i == j) {
+                    return Err(bad(format!("{who}: joint \"{}\" is twice a term", name(j))));
+                }
+                if !x.is_finite() {
+                    return Err(bad(format!(
+                        "{who}: the coefficient {x} of joint \"{}\" must be finite",
+                        name(j)
+                    )));
+                }
+            }
+        }
+        for (k, c) in couplings.iter().enumerate() {
+            if let Some(&(j, _)) = c.terms.iter().find(|&&(j, _)| eliminated[j]) {
+                return Err(Error::Build(format!(
+                    "coupling {k}: joint \"{}\" (index {}): the term joint \"{}\" is itself \
+                     eliminated by a coupling",
+                    name(c.joint),
+                    c.joint,
+                    name(j)
+                )));
+            }
+        }
+        Ok(Self::build(full, couplings.to_vec()))
+    }
+
+    /// The reduction of checked couplings.
+    fn build(full: Model, mut couplings: Vec<LinearCoupling>) -> Self {
+        let nj = full.njoints();
+        let key = {
+            use std::hash::{Hash, Hasher};
+            let mut h = std::collections::hash_map::DefaultHasher::new();
+            (full.nq(), full.nv(), full.parents()).hash(&mut h);
+            let mut sorted: Vec<&LinearCoupling> = couplings.iter().collect();
+            sorted.sort_by_key(|c| c.joint);
+            for c in sorted {
+                (c.joint, c.offset.to_bits()).hash(&mut h);
+                for &(j, x) in &c.terms {
+                    (j, x.to_bits()).hash(&mut h);
+                }
+            }
+            h.finish()
+        };
+        couplings.sort_by_key(|c| c.joint);
+        let mut of = vec![None; nj];
+        for (k, c) in couplings.iter().enumerate() {
+            of[c.joint] = Some(k);
+        }
         // Reduced indices of the independent joints, in the order of the full model.
         let mut reduced_idx = vec![None; nj];
         let (mut nq, mut nv) = (0, 0);
         let (mut q_keep, mut v_keep) = (Vec::new(), Vec::new());
         reduced_idx[0] = Some((0, 0));
         for i in 1..nj {
-            if is_mimic[i] {
+            if of[i].is_some() {
                 continue;
             }
             reduced_idx[i] = Some((nq, nv));
@@ -185,49 +325,81 @@ impl MimicModel {
             nq += full.nqs()[i];
             nv += full.nvs()[i];
         }
-        let mut q_map = vec![(0, 1.0, 0.0); full.nq()];
-        let mut g_col = vec![0; full.nv()];
-        let mut g_coef = vec![1.0; full.nv()];
-        for (r, &f) in q_keep.iter().enumerate() {
-            q_map[f] = (r, 1.0, 0.0);
-        }
-        for (r, &f) in v_keep.iter().enumerate() {
-            g_col[f] = r;
-        }
-        for m in mimics {
-            let (rq, rv) = reduced_idx[m.reference].expect("a reference joint is independent");
-            q_map[full.idx_q()[m.joint]] = (rq, m.multiplier, m.offset);
-            g_col[full.idx_v()[m.joint]] = rv;
-            g_coef[full.idx_v()[m.joint]] = m.multiplier;
-        }
-        let key = {
-            use std::hash::{Hash, Hasher};
-            let mut h = std::collections::hash_map::DefaultHasher::new();
-            (full.nq(), full.nv(), full.parents()).hash(&mut h);
-            for m in mimics {
-                (m.joint, m.reference, m.multiplier.to_bits(), m.offset.to_bits()).hash(&mut h);
+        let (mut q_ptr, mut q_idx, mut q_val) = (vec![0], Vec::new(), Vec::new());
+        let mut q_off = vec![0.0; full.nq()];
+        let (mut g_ptr, mut g_idx, mut g_val) = (vec![0], Vec::new(), Vec::new());
+        for i in 1..nj {
+            match of[i] {
+                None => {
+                    let (rq, rv) = reduced_idx[i].expect("an independent joint");
+                    for c in 0..full.nqs()[i] {
+                        q_idx.push(rq + c);
+                        q_val.push(1.0);
+                        q_ptr.push(q_idx.len());
+                    }
+                    for c in 0..full.nvs()[i] {
+                        g_idx.push(rv + c);
+                        g_val.push(1.0);
+                        g_ptr.push(g_idx.len());
+                    }
+                }
+                Some(k) => {
+                    // One-DoF joints: one configuration and one velocity coordinate each.
+                    let c = &couplings[k];
+                    for &(j, x) in &c.terms {
+                        let (rq, rv) = reduced_idx[j].expect("a term joint is independent");
+                        q_idx.push(rq);
+                        q_val.push(x);
+                        g_idx.push(rv);
+                        g_val.push(x);
+                    }
+                    q_off[full.idx_q()[i]] = c.offset;
+                    q_ptr.push(q_idx.len());
+                    g_ptr.push(g_idx.len());
+                }
             }
-            h.finish()
-        };
-        let mut mimics = mimics.to_vec();
-        mimics.sort_by_key(|m| m.joint);
+        }
+        let mimics = couplings
+            .iter()
+            .filter(|c| c.terms.len() == 1)
+            .map(|c| JointCoupling {
+                joint: c.joint,
+                reference: c.terms[0].0,
+                multiplier: c.terms[0].1,
+                offset: c.offset,
+            })
+            .collect();
         let lower = DVector::from_iterator(nq, q_keep.iter().map(|&f| full.lower[f]));
         let upper = DVector::from_iterator(nq, q_keep.iter().map(|&f| full.upper[f]));
-        Ok(Self {
+        let multi_term = couplings.iter().any(|c| c.terms.len() > 1);
+        Self {
             full,
             mimics,
+            couplings,
             nq,
             nv,
-            q_map,
-            g_col,
-            g_coef,
+            q_ptr,
+            q_idx,
+            q_val,
+            q_off,
+            g_ptr,
+            g_idx,
+            g_val,
+            multi_term,
             q_keep,
             v_keep,
             reduced_idx,
             key,
             lower,
             upper,
-        })
+        }
+    }
+
+    /// The non-zero entries `(column, value)` of row `f` of `G` (`f < full().nv()`).
+    #[inline]
+    pub(crate) fn g_row(&self, f: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
+        let r = self.g_ptr[f]..self.g_ptr[f + 1];
+        self.g_idx[r.clone()].iter().copied().zip(self.g_val[r].iter().copied())
     }
 
     /// The model name.
@@ -237,28 +409,41 @@ impl MimicModel {
     /// The map `G` (`full().nv() × nv()`), `v_full = G v`, as a dense matrix (allocates).
     pub fn g(&self) -> DMatrix<f64> {
         let mut g = DMatrix::zeros(self.full.nv(), self.nv);
-        for (f, (&c, &x)) in self.g_col.iter().zip(&self.g_coef).enumerate() {
-            g[(f, c)] = x;
+        for f in 0..self.full.nv() {
+            for (c, x) in self.g_row(f) {
+                g[(f, c)] = x;
+            }
         }
         g
     }
     /// `q_full = expand(q)` into `out` (length `full().nq()`). Lengths are not checked.
     pub fn expand_q_into(&self, q: &[f64], out: &mut [f64]) {
-        for (o, &(r, m, c)) in out.iter_mut().zip(&self.q_map) {
-            *o = m * q[r] + c;
+        for (f, (o, &c)) in out.iter_mut().zip(&self.q_off).enumerate() {
+            let r = self.q_ptr[f]..self.q_ptr[f + 1];
+            let mut s = 0.0;
+            for (&i, &m) in self.q_idx[r.clone()].iter().zip(&self.q_val[r]) {
+                s += m * q[i];
+            }
+            *o = s + c;
         }
     }
     /// `v_full = G v` into `out` (length `full().nv()`). Lengths are not checked.
     pub fn expand_v_into(&self, v: &[f64], out: &mut [f64]) {
-        for ((o, &r), &m) in out.iter_mut().zip(&self.g_col).zip(&self.g_coef) {
-            *o = m * v[r];
+        for (f, o) in out.iter_mut().enumerate() {
+            let mut s = 0.0;
+            for (r, m) in self.g_row(f) {
+                s += m * v[r];
+            }
+            *o = s;
         }
     }
     /// `y = Gᵀ x` (`x` of length `full().nv()`, `y` of length `nv()`). Lengths are not checked.
     pub fn reduce_force_into(&self, x: &[f64], y: &mut [f64]) {
         y.fill(0.0);
-        for ((&xf, &r), &m) in x.iter().zip(&self.g_col).zip(&self.g_coef) {
-            y[r] += m * xf;
+        for (f, &xf) in x.iter().enumerate() {
+            for (r, m) in self.g_row(f) {
+                y[r] += m * xf;
+            }
         }
     }
     /// `expand(q)` (allocates).
@@ -470,16 +655,31 @@ impl MimicModel {
     pub fn check_v(&self, what: &str, x: &DVector<f64>) -> Result<()> {
         crate::model::check_vec(what, x, self.nv)
     }
-    /// `out = Gᵀ x G` (`x`: `full().nv()` square, `out`: `nv()` square).
+    /// `out = Gᵀ x G` (`x`: `full().nv()` square, `out`: `nv()` square); exactly symmetric
+    /// for an exactly symmetric `x` (the upper triangle mirrored: with several entries in a
+    /// row of `G` the two triangles are sums in different orders).
     pub(crate) fn reduce_matrix(&self, x: &DMatrix<f64>, out: &mut DMatrix<f64>) {
         out.fill(0.0);
         let nf = self.full.nv();
         let (xs, n) = (x.as_slice(), self.nv);
         let os = out.as_mut_slice();
         for b in 0..nf {
-            let (cb, mb) = (self.g_col[b], self.g_coef[b]);
-            for a in 0..nf {
-                os[self.g_col[a] + n * cb] += self.g_coef[a] * mb * xs[a + nf * b];
+            for (cb, mb) in self.g_row(b) {
+                for a in 0..nf {
+                    for (ca, ma) in self.g_row(a) {
+                        os[ca + n * cb] += ma * mb * xs[a + nf * b];
+                    }
+                }
+            }
+        }
+        if self.multi_term {
+            let symmetric = (0..nf).all(|b| (0..b).all(|a| xs[a + nf * b] == xs[b + nf * a]));
+            if symmetric {
+                for c in 0..n {
+                    for r in 0..c {
+                        os[c + n * r] = os[r + n * c];
+                    }
+                }
             }
         }
     }
@@ -491,14 +691,18 @@ impl MimicModel {
         let xs = x.as_slice();
         let os = out.as_mut_slice();
         for k in 0..nf {
-            let (ck, mk) = (self.g_col[k], self.g_coef[k]);
-            for j in 0..nf {
-                let (cj, mj) = (self.g_col[j], self.g_coef[j]);
-                let m = mk * mj;
-                let src = &xs[nf * (j + nf * k)..nf * (j + nf * k + 1)];
-                let dst = n * (cj + n * ck);
-                for ((&xi, &ci), &mi) in src.iter().zip(&self.g_col).zip(&self.g_coef) {
-                    os[dst + ci] += m * mi * xi;
+            for (ck, mk) in self.g_row(k) {
+                for j in 0..nf {
+                    for (cj, mj) in self.g_row(j) {
+                        let m = mk * mj;
+                        let src = &xs[nf * (j + nf * k)..nf * (j + nf * k + 1)];
+                        let dst = n * (cj + n * ck);
+                        for (i, &xi) in src.iter().enumerate() {
+                            for (ci, mi) in self.g_row(i) {
+                                os[dst + ci] += m * mi * xi;
+                            }
+                        }
+                    }
                 }
             }
         }
@@ -511,9 +715,13 @@ impl MimicModel {
     pub(crate) fn add_top_t(&self, g: &DMatrix<f64>, s: f64, out: &mut DMatrix<f64>, c0: usize) {
         let nf = self.full.nv();
         for f in 0..nf {
-            let (u, gu) = (self.g_col[f], s * self.g_coef[f]);
-            for i in 0..nf {
-                out[(u, c0 + self.g_col[i])] += gu * self.g_coef[i] * g[(i, f)];
+            for (u, gf) in self.g_row(f) {
+                let gu = s * gf;
+                for i in 0..nf {
+                    for (ci, gi) in self.g_row(i) {
+                        out[(u, c0 + ci)] += gu * gi * g[(i, f)];
+                    }
+                }
             }
         }
     }
@@ -529,9 +737,11 @@ impl MimicModel {
     ) {
         let nf = self.full.nv();
         for f in 0..nf {
-            let (u, gu) = (self.g_col[f], s * self.g_coef[f]);
-            for r in 0..m {
-                out[(u, c0 + r)] += gu * g[(nf + r, f)];
+            for (u, gf) in self.g_row(f) {
+                let gu = s * gf;
+                for r in 0..m {
+                    out[(u, c0 + r)] += gu * g[(nf + r, f)];
+                }
             }
         }
     }
@@ -548,9 +758,11 @@ impl MimicModel {
         S2: nalgebra::storage::StorageMut<f64, R, nalgebra::Dyn>,
     {
         out.fill(0.0);
-        for (f, (&c, &m)) in self.g_col.iter().zip(&self.g_coef).enumerate() {
-            for r in 0..x.nrows() {
-                out[(r, c)] += m * x[(r, f)];
+        for f in 0..self.full.nv() {
+            for (c, m) in self.g_row(f) {
+                for r in 0..x.nrows() {
+                    out[(r, c)] += m * x[(r, f)];
+                }
             }
         }
     }
@@ -574,11 +786,14 @@ impl MimicModel {
         let nf = self.full.nv();
         let rows = t.dims().0;
         for g in 0..nf {
-            let (cg, mg) = (self.g_col[g], self.g_coef[g]);
-            for f in 0..nf {
-                let (cf, m) = (self.g_col[f], self.g_coef[f] * mg);
-                for r in 0..rows {
-                    out[(r, cf, cg)] += m * t[(r, f, g)];
+            for (cg, mg) in self.g_row(g) {
+                for f in 0..nf {
+                    for (cf, mf) in self.g_row(f) {
+                        let m = mf * mg;
+                        for r in 0..rows {
+                            out[(r, cf, cg)] += m * t[(r, f, g)];
+                        }
+                    }
                 }
             }
         }

@@ -254,6 +254,42 @@ impl Model {
         tree.reduction = Some(std::sync::Arc::new(r));
         Ok(tree)
     }
+    /// The model in reduced coordinates: this model's tree with the linear couplings
+    /// `couplings` (`q[joint] = Σₖ cₖ · q[jₖ] + offset` over the terms `(jₖ, cₖ)`, joint indices
+    /// of [`Model::names`]), as [`Model::with_mimic_joints`] for couplings of several joints:
+    /// the row of `G` of an eliminated joint has one entry per term. An empty `couplings`
+    /// gives the tree itself.
+    ///
+    /// # Errors
+    /// [`Error::Build`] naming the coupling and the joint if a coupling names a joint index
+    /// that does not exist or the world, a joint is constrained twice, a joint is a term of
+    /// its own coupling or twice a term of one coupling, a joint is not a one-DoF revolute,
+    /// continuous or prismatic joint, a term's joint is itself eliminated, or a coefficient or
+    /// the offset is not finite.
+    pub fn with_linear_couplings(
+        &self,
+        couplings: &[super::reduction::LinearCoupling],
+    ) -> Result<Model> {
+        let mut tree = self.full_tree().clone();
+        if couplings.is_empty() {
+            tree.constraints = self.constraints.clone();
+            return Ok(tree);
+        }
+        let r = super::reduction::MimicModel::with_couplings(tree.clone(), couplings)?;
+        tree.constraints = self.constraints.clone();
+        tree.key = r.key;
+        tree.mimic_joints = r.mimics.clone();
+        tree.reduction = Some(std::sync::Arc::new(r));
+        Ok(tree)
+    }
+    /// Every coupling of a reduced model, by increasing joint index (the mimic joints as
+    /// couplings of one term); empty for a model that is not reduced.
+    pub fn linear_couplings(&self) -> &[super::reduction::LinearCoupling] {
+        match &self.reduction {
+            Some(r) => &r.couplings,
+            None => &[],
+        }
+    }
     /// Per joint of the full tree, its first reduced configuration and velocity indices
     /// `(idx_q, idx_v)`, or `None` for a mimic joint of a reduced model (`Some((idx_q[j],
     /// idx_v[j]))` for every joint of a model that is not reduced). `None` also for an index
@@ -358,7 +394,7 @@ impl Model {
     pub fn with_armature(&self, a: &[f64]) -> Result<Model> {
         if let Some(r) = &self.reduction {
             let tree = r.full.with_armature(a)?;
-            return tree.with_mimic_joints(&r.mimics);
+            return tree.with_linear_couplings(&r.couplings);
         }
         if a.len() != self.nv {
             return Err(Error::Dimension {
@@ -454,8 +490,10 @@ impl Model {
     }
     /// The mimic constraints `q_joint = multiplier · q_reference + offset` read by the URDF
     /// loader with [`UrdfOptions::mimic`](super::UrdfOptions::mimic) (checked; by increasing
-    /// joint index); a reduced model's own constraints. From them the loader makes the reduced
-    /// model. Empty without that option and for models made otherwise.
+    /// joint index); a reduced model's own constraints of one term (those of several terms,
+    /// from [`Model::with_linear_couplings`] or an MJCF `<equality><tendon>`, are only in
+    /// [`Model::linear_couplings`], which has them all). From them the loader makes the
+    /// reduced model. Empty without that option and for models made otherwise.
     pub fn mimic_joints(&self) -> &[super::reduction::JointCoupling] {
         &self.mimic_joints
     }

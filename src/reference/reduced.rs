@@ -1,9 +1,11 @@
 //! The mimic expansion of a model in reduced coordinates (mimic joints,
 //! [`Model::with_mimic_joints`](crate::model::Model::with_mimic_joints)), as the oracle sees it.
 //!
-//! [`Reduced`] re-derives the reduced coordinates from the list of [`JointCoupling`]s and the
-//! model's index tables alone (not from the reduction that a reduced [`Model`] carries):
-//! `q_full = expand(q)` (independent coordinates copied, `m · q_ref + c` for each mimic joint),
+//! [`Reduced`] re-derives the reduced coordinates from the list of couplings
+//! ([`LinearCoupling`]s: the mimic joints, [`crate::model::JointCoupling`], as one term, and the
+//! couplings of several joints of [`Model::with_linear_couplings`]) and the model's index
+//! tables alone (not from the reduction that a reduced [`Model`] carries): `q_full = expand(q)`
+//! (independent coordinates copied, `Σ c · q_term + offset` for each eliminated joint),
 //! `v_full = G v`, `τ = Gᵀ τ_full`. Every function of the oracle that takes a [`Model`] takes a
 //! reduced one too, through these maps: its reference algorithms run on the full tree at
 //! `expand(q)`, `G v`, `G a` and return the reduced quantities (`Gᵀ τ_full`, `J_full G`, …), and
@@ -11,27 +13,28 @@
 //! configuration (`(q ⊕ δ_k) ⊕ ε_j` for the second order, as [`super::derivatives`]).
 
 use super::AdScalar;
-use crate::model::{JointCoupling, Model};
+use crate::model::{LinearCoupling, Model};
 
-/// A full model and its mimic constraints, seen in the reduced coordinates.
+/// A full model and its couplings (mimic joints and couplings of several joints), seen in the
+/// reduced coordinates.
 #[derive(Clone, Copy, Debug)]
 pub struct Reduced<'a> {
     /// The full tree (every joint independent).
     pub full: &'a Model,
-    /// The constraints.
-    pub mimics: &'a [JointCoupling],
+    /// The couplings (`q[joint] = Σ c q[term] + offset`; a mimic joint is one term).
+    pub mimics: &'a [LinearCoupling],
 }
 
 impl<'a> Reduced<'a> {
     /// The oracle's view of `model` if it is in reduced coordinates
-    /// ([`Model::is_reduced`]): its full tree and its mimic constraints.
+    /// ([`Model::is_reduced`]): its full tree and its couplings.
     pub fn of(model: &'a Model) -> Option<Self> {
         model
             .is_reduced()
-            .then(|| Reduced { full: model.full_tree(), mimics: model.mimic_joints() })
+            .then(|| Reduced { full: model.full_tree(), mimics: model.linear_couplings() })
     }
-    /// The constraint of joint `i`, if it is a mimic joint.
-    fn mimic_of(&self, i: usize) -> Option<&JointCoupling> {
+    /// The coupling of joint `i`, if it is an eliminated joint.
+    fn mimic_of(&self, i: usize) -> Option<&LinearCoupling> {
         self.mimics.iter().find(|m| m.joint == i)
     }
     /// Reduced `(idx_q, idx_v)` of each joint (`None` for a mimic joint), and `(nq, nv)`.
@@ -66,8 +69,12 @@ impl<'a> Reduced<'a> {
             match (lay[i], self.mimic_of(i)) {
                 (Some((r, _)), _) => out[a..a + m.nqs()[i]].clone_from_slice(&q[r..r + m.nqs()[i]]),
                 (None, Some(mm)) => {
-                    let (r, _) = lay[mm.reference].expect("reference joints are independent");
-                    out[a] = q[r].clone() * mm.multiplier + mm.offset;
+                    let mut x = T::zero();
+                    for &(j, c) in &mm.terms {
+                        let (r, _) = lay[j].expect("term joints are independent");
+                        x += q[r].clone() * c;
+                    }
+                    out[a] = x + mm.offset;
                 }
                 (None, None) => unreachable!(),
             }
@@ -84,8 +91,12 @@ impl<'a> Reduced<'a> {
             match (lay[i], self.mimic_of(i)) {
                 (Some((_, r)), _) => out[a..a + m.nvs()[i]].clone_from_slice(&v[r..r + m.nvs()[i]]),
                 (None, Some(mm)) => {
-                    let (_, r) = lay[mm.reference].expect("reference joints are independent");
-                    out[a] = v[r].clone() * mm.multiplier;
+                    let mut x = T::zero();
+                    for &(j, c) in &mm.terms {
+                        let (_, r) = lay[j].expect("term joints are independent");
+                        x += v[r].clone() * c;
+                    }
+                    out[a] = x;
                 }
                 (None, None) => unreachable!(),
             }
@@ -106,8 +117,10 @@ impl<'a> Reduced<'a> {
                     }
                 }
                 (None, Some(mm)) => {
-                    let (_, r) = lay[mm.reference].expect("reference joints are independent");
-                    out[r] += f[a].clone() * mm.multiplier;
+                    for &(j, c) in &mm.terms {
+                        let (_, r) = lay[j].expect("term joints are independent");
+                        out[r] += f[a].clone() * c;
+                    }
                 }
                 (None, None) => unreachable!(),
             }

@@ -570,17 +570,23 @@ fn joint_json(model: &Model, i: usize) -> Value {
             o.insert("nv".into(), json!(model.nvs()[i]));
         }
         None => {
-            let c = model.mimic_joints().iter().find(|c| c.joint == i).expect("a mimic joint");
             o.insert("nq".into(), json!(0));
             o.insert("nv".into(), json!(0));
-            o.insert(
-                "mimic".into(),
-                json!({
-                    "joint": model.names()[c.reference],
-                    "multiplier": c.multiplier,
-                    "offset": c.offset,
-                }),
-            );
+            if let Some(c) = model.mimic_joints().iter().find(|c| c.joint == i) {
+                o.insert(
+                    "mimic".into(),
+                    json!({
+                        "joint": model.names()[c.reference],
+                        "multiplier": c.multiplier,
+                        "offset": c.offset,
+                    }),
+                );
+            } else if let Some(c) = model.linear_couplings().iter().find(|c| c.joint == i) {
+                // A coupling of several joints (an MJCF tendon coupling).
+                let terms: Vec<Value> =
+                    c.terms.iter().map(|&(j, x)| json!([model.names()[j], x])).collect();
+                o.insert("coupling".into(), json!({ "terms": terms, "offset": c.offset }));
+            }
         }
     }
     j

@@ -401,13 +401,19 @@ fn joint_table(model: &Model) -> String {
                 (a.to_string(), model.nqs()[i], b.to_string(), model.nvs()[i], note)
             }
             None => {
-                let c = model.mimic_joints().iter().find(|c| c.joint == i).expect("a mimic joint");
-                let rule = format!(
-                    "q = {} * q[\"{}\"] + {}",
-                    c.multiplier,
-                    model.names()[c.reference],
-                    c.offset
-                );
+                // An eliminated joint: q = Σ c · q[term] + offset (a mimic joint: one term).
+                let rule = match model.linear_couplings().iter().find(|c| c.joint == i) {
+                    Some(c) => {
+                        let mut r: Vec<String> = c
+                            .terms
+                            .iter()
+                            .map(|&(j, x)| format!("{x} * q[\"{}\"]", model.names()[j]))
+                            .collect();
+                        r.push(c.offset.to_string());
+                        format!("q = {}", r.join(" + "))
+                    }
+                    None => String::new(),
+                };
                 ("-".into(), 0, "-".into(), 0, rule)
             }
         };

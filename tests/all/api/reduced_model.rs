@@ -6,7 +6,9 @@
 //! bit, `J = J_full G`), point kinematics against central differences in the reduced coordinates,
 //! and bad inputs and the workspaces of the other model refused. The reduced algorithms against
 //! the AD oracle are the family tests, whose models include the mimic arm (`util::test_models`,
-//! `util::contact_cases`).
+//! `util::contact_cases`) and the MJCF model with tendon couplings (`util::test_models`; its
+//! contact algorithms against the oracle here), and couplings of several joints through
+//! `Model::with_linear_couplings` (one term: the mimic joints, bit for bit; bad ones refused).
 
 use crate::util::mimic as um;
 use nalgebra::{DMatrix, DVector};
@@ -39,7 +41,7 @@ fn counts_and_configuration_space() {
     for ff in [false, true] {
         let full = load_urdf_file(&arm(), &opts(ff, false)).unwrap();
         let m = load_urdf_file(&arm(), &opts(ff, true)).unwrap();
-        let red = Reduced { full: m.full_tree(), mimics: m.mimic_joints() };
+        let red = Reduced { full: m.full_tree(), mimics: m.linear_couplings() };
         assert!(m.is_reduced() && !full.is_reduced());
         assert_eq!((m.nq(), m.nv()), (red.nq(), red.nv()));
         assert_eq!((m.nq_full(), m.nv_full()), (full.nq(), full.nv()));
@@ -843,4 +845,204 @@ fn forward_only_bad_inputs_are_errors_naming_the_argument() {
     algo::nonlinear_effects(&m, &mut data, &q, &v).unwrap();
     deriv::kkt_dynamics(&m, &mut data, &mut kd, &q, &v, &tau).unwrap();
     deriv::impact_dynamics(&m, &mut data, &mut im, &q, &v).unwrap();
+}
+
+/// `Σ_i w_i t[(i, j, k)]`.
+fn contract(t: &Tensor3, w: &DVector<f64>) -> DMatrix<f64> {
+    let (n, a, b) = t.dims();
+    DMatrix::from_fn(a, b, |j, k| (0..n).map(|i| w[i] * t[(i, j, k)]).sum())
+}
+
+/// The MJCF model with tendon couplings (rows of `G` with several entries: `util::mimic::
+/// tendon_models`, without and with an armature) with contacts below eliminated joints (the
+/// tip below `j3`, the foot below `j4` and `j5`): KKT dynamics, impact dynamics and constrained
+/// inverse dynamics, first and second order, against the AD oracle (which re-derives the
+/// reduced coordinates from the coupling list), and the contracted second order against the
+/// dense tensors. (Its dynamics, first- and second-order derivatives, kinematics and
+/// configuration space are in the family tests through `util::test_models`.)
+#[test]
+fn tendon_couplings_contact_algorithms_match_the_oracle() {
+    use sodyn::algo::{Contact, ContactReference, ContactType};
+    use sodyn::reference::contact as oracle;
+    let mut w = [
+        crate::util::Worst::new("tendon kkt fwd"),
+        crate::util::Worst::new("tendon kkt first order"),
+        crate::util::Worst::new("tendon kkt second order"),
+        crate::util::Worst::new("tendon kkt contracted"),
+        crate::util::Worst::new("tendon impact fwd"),
+        crate::util::Worst::new("tendon impact first order"),
+        crate::util::Worst::new("tendon impact second order"),
+        crate::util::Worst::new("tendon constrained id"),
+    ];
+    let mut rng = Rng::new(46);
+    for m in um::tendon_models() {
+        assert!(m.linear_couplings().iter().any(|c| c.terms.len() > 1));
+        let full = m.full_tree();
+        let p = nalgebra::Vector3::new(0.02, -0.01, 0.03);
+        let cs = vec![
+            Contact::new(full, "tip", p).unwrap(),
+            Contact {
+                kind: ContactType::D3,
+                ..Contact::new(full, "foot", -p).unwrap().with_reference(ContactReference::Local)
+            },
+        ];
+        for trial in 0..2 {
+            let [q, v, tau] = um::state(&m, &mut rng);
+            let at = format!("{} trial {trial}", m.name());
+            let (qs, vs, ts) = (q.as_slice(), v.as_slice(), tau.as_slice());
+            let mut d = Data::new(&m);
+            let mut cd = ContactData::with_second_order(&m, &cs).unwrap();
+            let kd = deriv::kkt_so_derivatives(&m, &mut d, &mut cd, &q, &v, &tau).unwrap();
+            let (qr, lr) = oracle::kkt::<f64>(&m, qs, vs, ts, &cs);
+            w[0].add(
+                rel_vec(kd.qdd(), &DVector::from_vec(qr))
+                    .max(rel_vec(kd.lambda(), &DVector::from_vec(lr))),
+                &at,
+            );
+            let fo = oracle::kkt_fo(&m, qs, vs, ts, &cs);
+            for (a, b) in [
+                (kd.dqdd_dq(), &fo.dqdd_dq),
+                (kd.dqdd_dv(), &fo.dqdd_dv),
+                (kd.dqdd_dtau(), &fo.dqdd_dtau),
+                (kd.dlambda_dq(), &fo.dlambda_dq),
+                (kd.dlambda_dv(), &fo.dlambda_dv),
+                (kd.dlambda_dtau(), &fo.dlambda_dtau),
+            ] {
+                w[1].add(rel(a, b), &at);
+            }
+            let so = oracle::kkt_so(&m, qs, vs, ts, &cs);
+            let k = kd.so().unwrap();
+            for (a, b) in [
+                (k.d2qdd_dq2(), &so.d2qdd_dq2),
+                (k.d2qdd_dv2(), &so.d2qdd_dv2),
+                (k.d2qdd_dqdv(), &so.d2qdd_dqdv),
+                (k.d2qdd_dtaudq(), &so.d2qdd_dtaudq),
+                (k.d2lambda_dq2(), &so.d2lambda_dq2),
+                (k.d2lambda_dv2(), &so.d2lambda_dv2),
+                (k.d2lambda_dqdv(), &so.d2lambda_dqdv),
+                (k.d2lambda_dtaudq(), &so.d2lambda_dtaudq),
+            ] {
+                w[2].add(ten_err(a, b), &at);
+            }
+            // The contracted second order: Σ wq d²q̈ + Σ wλ d²λ of the dense tensors.
+            let nrows = 6;
+            let wq = DVector::from_fn(m.nv(), |_, _| rng.range(-1.0, 1.0));
+            let wl = DVector::from_fn(nrows, |_, _| rng.range(-1.0, 1.0));
+            let mut kc = ContactData::with_contracted(&m, &cs).unwrap();
+            let c = deriv::kkt_so_contracted(&m, &mut d, &mut kc, &q, &v, &tau, &wq, &wl).unwrap();
+            for (got, (ta, tl)) in [c.c_qq(), c.c_vv(), c.c_qv(), c.c_tauq()].into_iter().zip([
+                (&so.d2qdd_dq2, &so.d2lambda_dq2),
+                (&so.d2qdd_dv2, &so.d2lambda_dv2),
+                (&so.d2qdd_dqdv, &so.d2lambda_dqdv),
+                (&so.d2qdd_dtaudq, &so.d2lambda_dtaudq),
+            ]) {
+                w[3].add(rel(got, &(contract(ta, &wq) + contract(tl, &wl))), &at);
+            }
+            // Impact dynamics with restitution 0.3.
+            let e = 0.3;
+            let mut ci = ContactData::with_second_order(&m, &cs).unwrap();
+            ci.set_restitution(e).unwrap();
+            let im = deriv::impact_so_derivatives(&m, &mut d, &mut ci, &q, &v).unwrap();
+            let (vp, imp) = oracle::impact::<f64>(&m, qs, vs, &cs, e);
+            w[4].add(
+                rel_vec(im.vplus(), &DVector::from_vec(vp))
+                    .max(rel_vec(im.impulse(), &DVector::from_vec(imp))),
+                &at,
+            );
+            let fo = oracle::impact_fo(&m, qs, vs, &cs, e);
+            for (a, b) in [
+                (im.dvplus_dq(), &fo.dvplus_dq),
+                (im.dvplus_dvminus(), &fo.dvplus_dvminus),
+                (im.dimpulse_dq(), &fo.dimpulse_dq),
+                (im.dimpulse_dvminus(), &fo.dimpulse_dvminus),
+            ] {
+                w[5].add(rel(a, b), &at);
+            }
+            let so = oracle::impact_so(&m, qs, vs, &cs, e);
+            let k = im.so().unwrap();
+            for (a, b) in [
+                (k.d2vplus_dq2(), &so.d2vplus_dq2),
+                (k.d2vplus_dqdvminus(), &so.d2vplus_dqdvminus),
+                (k.d2impulse_dq2(), &so.d2impulse_dq2),
+                (k.d2impulse_dqdvminus(), &so.d2impulse_dqdvminus),
+            ] {
+                w[6].add(ten_err(a, b), &at);
+            }
+            // Constrained inverse dynamics, first and second order.
+            let lam = DVector::from_fn(nrows, |_, _| rng.range(-5.0, 5.0));
+            let a = tau;
+            let mut d2 = Data::with_second_order(&m);
+            let mut cc = ContactData::new(&m, &cs).unwrap();
+            deriv::constrained_id_so_derivatives(&m, &mut d2, &mut cc, &q, &v, &a, &lam).unwrap();
+            let (as_, ls) = (a.as_slice(), lam.as_slice());
+            let t = oracle::constrained_rnea::<f64>(&m, qs, vs, as_, &cs, ls);
+            let mut e = rel_vec(d2.tau(), &DVector::from_vec(t));
+            e = e.max(rel(d2.dtau_dq(), &oracle::d_constrained_rnea_dq(&m, qs, vs, as_, &cs, ls)));
+            e = e.max(rel(d2.dtau_dv(), &oracle::d_constrained_rnea_dv(&m, qs, vs, as_, &cs, ls)));
+            let t2 = oracle::d2_constrained_rnea_dq2(&m, qs, vs, as_, &cs, ls);
+            e = e.max(ten_err(d2.id_so().unwrap().d2tau_dq2(), &t2));
+            w[7].add(e, &at);
+        }
+    }
+    for x in &w {
+        x.check(1e-10);
+    }
+}
+
+fn rel_vec(a: &DVector<f64>, b: &DVector<f64>) -> f64 {
+    (a - b).amax() / b.amax().max(1.0)
+}
+
+/// Couplings of one term through `Model::with_linear_couplings` are the mimic joints of
+/// `Model::with_mimic_joints`: the same `G`, bit for bit the same dynamics; bad couplings are
+/// errors naming the coupling and the joint.
+#[test]
+fn linear_couplings_of_one_term_are_the_mimic_joints() {
+    use sodyn::model::LinearCoupling;
+    let m = um::arm(true);
+    let lc: Vec<LinearCoupling> = m.mimic_joints().iter().map(|&c| c.into()).collect();
+    let m2 = m.full_tree().with_linear_couplings(&lc).unwrap();
+    assert_eq!(m2.linear_couplings(), m.linear_couplings());
+    assert_eq!(m2.mimic_joints(), m.mimic_joints());
+    assert_eq!(m2.velocity_map(), m.velocity_map());
+    let mut rng = Rng::new(3);
+    let [q, v, a] = um::state(&m, &mut rng);
+    let (mut d1, mut d2) = (Data::new(&m), Data::new(&m2));
+    assert_eq!(
+        algo::rnea(&m, &mut d1, &q, &v, &a, None).unwrap(),
+        algo::rnea(&m2, &mut d2, &q, &v, &a, None).unwrap()
+    );
+    assert_eq!(algo::crba(&m, &mut d1, &q).unwrap(), algo::crba(&m2, &mut d2, &q).unwrap());
+    // The workspaces of one serve the other (one key).
+    assert!(algo::crba(&m2, &mut d1, &q).is_ok());
+    let full = m.full_tree();
+    let by = |n: &str| full.joint_id(n).unwrap();
+    let mk = |joint: usize, terms: Vec<(usize, f64)>| LinearCoupling { joint, terms, offset: 0.0 };
+    for (cs, expect) in [
+        (vec![mk(99, vec![])], "coupling 0: joint index 99"),
+        (vec![mk(by("root_joint"), vec![])], "is free_flyer"),
+        (vec![mk(by("elbow"), vec![(by("shoulder"), 1.0), (by("elbow"), 1.0)])], "its own"),
+        (vec![mk(by("elbow"), vec![(by("shoulder"), 1.0), (by("shoulder"), 2.0)])], "twice a term"),
+        (vec![mk(by("elbow"), vec![(by("shoulder"), 1.0)]), mk(by("elbow"), vec![])], "twice"),
+        (
+            vec![
+                mk(by("elbow"), vec![(by("shoulder"), 1.0)]),
+                mk(by("wrist"), vec![(by("elbow"), 1.0)]),
+            ],
+            "coupling 1: joint \"wrist\"",
+        ),
+        (vec![mk(by("elbow"), vec![(by("shoulder"), f64::NAN)])], "must be finite"),
+        (vec![LinearCoupling { offset: f64::INFINITY, ..mk(by("elbow"), vec![]) }], "offset"),
+    ] {
+        let e = full.with_linear_couplings(&cs).unwrap_err().to_string();
+        assert!(e.contains(expect), "{cs:?}: {e}");
+    }
+    // A joint held at its offset (no term): one DoF less, G's row zero.
+    let held =
+        full.with_linear_couplings(&[LinearCoupling { offset: 0.3, ..mk(by("elbow"), vec![]) }]);
+    let held = held.unwrap();
+    assert_eq!(held.nv(), full.nv() - 1);
+    let qf = held.expand_q(&held.neutral()).unwrap();
+    assert_eq!(qf[full.idx_q()[by("elbow")]], 0.3);
+    assert!(held.velocity_map().row(full.idx_v()[by("elbow")]).iter().all(|x| *x == 0.0));
 }

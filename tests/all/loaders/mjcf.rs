@@ -960,7 +960,7 @@ fn equality_errors_name_element_and_line() {
     assert!(why.contains("coefficient 2 is 0.5") && why.contains("linear"), "{why}");
     let (line, el, why) = case(r#"<tendon name="t" tendon1="x"/>"#);
     assert_eq!((line, el.as_str()), (Some(9), "<tendon> \"t\""));
-    assert!(why.contains("not supported"), "{why}");
+    assert!(why.contains("tendon1=\"x\": unknown tendon"), "{why}");
     let (line, el, why) = case(r#"<flex flex="f"/>"#);
     assert_eq!((line, el.as_str()), (Some(9), "<flex>"));
     assert!(why.contains("not supported"), "{why}");
@@ -1003,4 +1003,182 @@ fn mjcf_armature() {
     let bad = "<mujoco><worldbody><body>\n<joint armature=\"-1\"/><geom size=\".1\"/></body></worldbody></mujoco>";
     let e = Model::from_mjcf_str(bad, ".").unwrap_err().to_string();
     assert!(e.contains(":2:") && e.contains("armature=\"-1\" is negative"), "{e}");
+}
+
+/// The tendon lengths `L = Σ coef · q` of the fixed tendons of `m` at the full configuration
+/// `qf`, by name (from the loader's records, not from the reduction).
+fn tendon_lengths(m: &Model, qf: &DVector<f64>) -> std::collections::HashMap<String, f64> {
+    use sodyn::model::TendonPath;
+    let full = m.full_tree();
+    m.tendons()
+        .iter()
+        .filter_map(|t| match &t.path {
+            TendonPath::Fixed(p) => Some((
+                t.name.clone().unwrap(),
+                p.iter().map(|&(j, c)| c * qf[full.idx_q()[j]]).sum(),
+            )),
+            TendonPath::Spatial(_) => None,
+        })
+        .collect()
+}
+
+/// `<equality><tendon>` on fixed tendons (and a `<joint>` coupling among them): the loader
+/// eliminates one joint per constraint (tendon1's last joint with a nonzero net coefficient;
+/// through the couplings before it), `G` has several entries in those rows, and every
+/// constraint holds on the expanded configurations, `L1 − L1₀ = c0 + c1 (L2 − L2₀)` with `₀`
+/// at qpos0, evaluated from the tendon records; its velocity row annihilates `G`.
+#[test]
+fn tendon_equalities_load_as_linear_couplings() {
+    let m = crate::util::mimic::tendon_model();
+    let full = m.full_tree();
+    assert_eq!((full.nq(), full.nv(), m.nq(), m.nv()), (18, 16, 14, 12));
+    assert!(m.constraints().is_empty());
+    let name = |j: usize| full.names()[j].as_str();
+    let cs = m.linear_couplings();
+    let elim: Vec<&str> = cs.iter().map(|c| name(c.joint)).collect();
+    assert_eq!(elim, ["j3", "j4", "j5", "j6"]);
+    let terms = |k: usize| -> Vec<&str> { cs[k].terms.iter().map(|t| name(t.0)).collect() };
+    // j3 from e1 on j1, j2, s1; j4 (e3) and j5 (e4) through j3; j6 = −0.5 j1 + …
+    assert_eq!(terms(0), ["j1", "j2", "s1"]);
+    assert_eq!(terms(1), ["j1", "j2", "s1"]);
+    assert_eq!(terms(2), ["j1", "j2", "s1"]);
+    assert_eq!(terms(3), ["j1"]);
+    // Net coefficients of e1: j1 0.5, j2 1 − 0.4 · 0.3, j3 −0.7, s1 −0.4 · 2.
+    let t = &cs[0].terms;
+    for (k, x) in [0.5 / 0.7, 0.88 / 0.7, -0.8 / 0.7].into_iter().enumerate() {
+        assert!((t[k].1 - x).abs() < 1e-15, "{:?}", t);
+    }
+    // The mimic list has the one single-term coupling.
+    let mj = m.mimic_joints();
+    assert_eq!(mj.len(), 1);
+    assert_eq!((name(mj[0].joint), name(mj[0].reference), mj[0].multiplier), ("j6", "j1", -0.5));
+    // G: several entries in the eliminated rows; rank nv.
+    let g = m.velocity_map();
+    let row = |j: &str| full.idx_v()[full.joint_id(j).unwrap()];
+    assert_eq!(g.row(row("j4")).iter().filter(|x| **x != 0.0).count(), 3);
+    assert_eq!(g.clone().svd(false, false).rank(1e-12), m.nv());
+    // qpos0 of the full tree (hinges at their ref).
+    let mut q0 = full.neutral();
+    for (j, r) in [("j1", 0.3), ("j3", -0.2), ("j6", 0.1)] {
+        q0[full.idx_q()[full.joint_id(j).unwrap()]] = r;
+    }
+    let l0 = tendon_lengths(&m, &q0);
+    let qj = |qf: &DVector<f64>, j: &str| qf[full.idx_q()[full.joint_id(j).unwrap()]];
+    // The constraints' residuals and their rows (∂/∂v_full, constant).
+    let residuals = |qf: &DVector<f64>| -> [f64; 4] {
+        let l = tendon_lengths(&m, qf);
+        let d = |t: &str| l[t] - l0[t];
+        [
+            d("t1") - 0.1 - 0.4 * d("t2"),
+            (qj(qf, "j6") - 0.1) - 0.05 + 0.5 * (qj(qf, "j1") - 0.3),
+            d("t4") - 0.02,
+            d("t3"),
+        ]
+    };
+    let mut rows = nalgebra::DMatrix::zeros(4, full.nv());
+    for k in 0..full.nv() {
+        let mut e = DVector::zeros(full.nv());
+        e[k] = 1.0;
+        let r = residuals(&full.integrate(&q0, &e).unwrap());
+        let r0 = residuals(&q0);
+        for i in 0..4 {
+            rows[(i, k)] = r[i] - r0[i];
+        }
+    }
+    let rg = &rows * &g;
+    assert!(rg.amax() < 1e-13, "constraint rows · G = {rg}");
+    assert_eq!(rows.clone().svd(false, false).rank(1e-9), 4);
+    let mut rng = sodyn::rng::Rng::new(7);
+    let mut worst = 0.0f64;
+    for _ in 0..20 {
+        let q = m.random_configuration(&mut rng);
+        let qf = m.expand_q(&q).unwrap();
+        for r in residuals(&qf) {
+            worst = worst.max(r.abs());
+        }
+        // The independent coordinates are q's.
+        assert_eq!(m.reduce_q(&qf).unwrap(), q);
+    }
+    assert!(worst < 1e-14, "residual {worst:e}");
+    // At qpos0 the residuals are −c0 (MuJoCo's qpos0 need not satisfy the constraints).
+    let r0 = residuals(&q0);
+    for (r, c0) in r0.iter().zip([-0.1, -0.05, -0.02, 0.0]) {
+        assert!((r - c0).abs() < 1e-15, "{r0:?}");
+    }
+    // with_armature keeps the couplings.
+    let a: Vec<f64> = (0..full.nv()).map(|k| 0.01 * k as f64).collect();
+    let ma = m.with_armature(&a).unwrap();
+    assert_eq!(ma.linear_couplings(), m.linear_couplings());
+    assert_eq!(ma.nv(), 12);
+}
+
+/// Bad `<equality><tendon>`s: an error naming the element and its line.
+#[test]
+fn tendon_equality_errors_name_element_and_line() {
+    let bodies = r#"<worldbody>
+<body name="a"><joint name="ja" axis="0 1 0"/><geom size="0.1"/><site name="sa"/>
+<body name="b" pos="1 0 0"><joint name="jb" type="slide"/><geom size="0.1"/><site name="sb"/>
+<body name="c" pos="1 0 0"><joint name="jc"/><geom size="0.1"/></body></body></body>
+</worldbody>
+<tendon><fixed name="f1"><joint joint="ja" coef="1"/><joint joint="jb" coef="2"/></fixed>
+<fixed name="f2"><joint joint="jb" coef="1"/><joint joint="jc" coef="-1"/></fixed>
+<fixed name="f3"><joint joint="ja" coef="2"/><joint joint="jb" coef="4"/></fixed>
+<spatial name="sp"><site site="sa"/><site site="sb"/></spatial></tendon>"#;
+    let case = |eq: &str| {
+        error_of(&format!("<mujoco>\n{bodies}\n<equality>\n{eq}\n</equality>\n</mujoco>"))
+    };
+    // The (first) equality element is on line 12.
+    let (line, el, why) = case(r#"<tendon name="s" tendon1="sp"/>"#);
+    assert_eq!((line, el.as_str()), (Some(12), "<tendon> \"s\""));
+    assert!(why.contains("tendon1=\"sp\" is a spatial tendon"), "{why}");
+    let (line, _, why) = case(r#"<tendon tendon1="f1" tendon2="sp"/>"#);
+    assert!(line == Some(12) && why.contains("tendon2=\"sp\" is a spatial tendon"), "{why}");
+    let (line, el, why) =
+        case(r#"<tendon name="p" tendon1="f1" tendon2="f2" polycoef="0 1 0.5"/>"#);
+    assert_eq!((line, el.as_str()), (Some(12), "<tendon> \"p\""));
+    assert!(why.contains("coefficient 2 is 0.5") && why.contains("linear"), "{why}");
+    let (_, _, why) = case(r#"<tendon tendon1="f1" tendon2="nope"/>"#);
+    assert!(why.contains("tendon2=\"nope\": unknown tendon"), "{why}");
+    let (_, _, why) = case(r#"<tendon tendon2="f1"/>"#);
+    assert!(why.contains("attribute tendon1 is missing"), "{why}");
+    // Dependent: f3 = 2 f1, so f3 − 2 f1 constrains nothing; and a constraint that follows
+    // from the one before it.
+    let (line, el, why) = case(r#"<tendon name="d" tendon1="f3" tendon2="f1" polycoef="0 2"/>"#);
+    assert_eq!((line, el.as_str()), (Some(12), "<tendon> \"d\""));
+    assert!(why.contains("dependent"), "{why}");
+    let (line, el, why) = case("<tendon tendon1=\"f1\"/>\n<tendon name=\"again\" tendon1=\"f3\"/>");
+    assert_eq!((line, el.as_str()), (Some(13), "<tendon> \"again\""));
+    assert!(why.contains("dependent"), "{why}");
+    // Inconsistent: f1 held at 0.1 from its qpos0 length, f3 = 2 f1 at 0.5.
+    let (line, el, why) = case(
+        "<tendon tendon1=\"f1\" polycoef=\"0.1\"/>\n<tendon name=\"x\" tendon1=\"f3\" polycoef=\"0.5\"/>",
+    );
+    assert_eq!((line, el.as_str()), (Some(13), "<tendon> \"x\""));
+    assert!(why.contains("inconsistent"), "{why}");
+    // With a <joint> coupling: that coupling's own checks first, naming it.
+    let (_, el, why) =
+        case("<tendon tendon1=\"f2\"/>\n<joint name=\"jj\" joint1=\"ja\" joint2=\"jb\"/>");
+    assert_eq!(el, "<joint> \"jj\"");
+    assert!(why.contains("rotational") && why.contains("prismatic"), "{why}");
+    // A <joint> coupling with a tendon coupling: chained through the elimination (jc from f2,
+    // then ja = 0.5 jc), one DoF left.
+    let xml = format!(
+        "<mujoco>\n{bodies}\n<equality><tendon tendon1=\"f2\"/>\
+         <joint joint1=\"ja\" joint2=\"jc\" polycoef=\"0 0.5\"/></equality></mujoco>"
+    );
+    let m = load_str(&xml).unwrap();
+    assert_eq!(m.nv(), 1);
+    let full = m.full_tree();
+    let names: Vec<&str> =
+        m.linear_couplings().iter().map(|c| full.names()[c.joint].as_str()).collect();
+    assert_eq!(names, ["ja", "jc"]);
+    // ja = 0.5 jc = 0.5 jb (f2: jb − jc = 0).
+    let q = DVector::from_element(1, 0.4);
+    let qf = m.expand_q(&q).unwrap();
+    assert!((qf[0] - 0.2).abs() < 1e-15 && qf[1] == 0.4 && (qf[2] - 0.4).abs() < 1e-15, "{qf}");
+    // Inactive: skipped.
+    let xml = format!(
+        "<mujoco>\n{bodies}\n<equality><tendon tendon1=\"sp\" active=\"false\"/></equality></mujoco>"
+    );
+    assert!(!load_str(&xml).unwrap().is_reduced());
 }

@@ -1,5 +1,6 @@
 //! Shared helpers of the mimic-joint tests: the test arm (`tests/data/mimic_arm.urdf`) as a
-//! `Model` in reduced coordinates, its AD oracle and random states.
+//! `Model` in reduced coordinates, the MJCF model with tendon couplings ([`TENDON_MJCF`]), their
+//! AD oracle and random states.
 
 use nalgebra::DVector;
 use sodyn::deriv::ContactData;
@@ -26,7 +27,75 @@ pub fn arm(floating_base: bool) -> Model {
 /// The reduced model of `m`'s tree with the armature `a` (one entry per DoF of the full tree)
 /// and `m`'s mimic constraints.
 pub fn with_armature(m: &Model, a: &[f64]) -> Model {
-    m.full_tree().with_armature(a).unwrap().with_mimic_joints(m.mimic_joints()).unwrap()
+    m.full_tree().with_armature(a).unwrap().with_linear_couplings(m.linear_couplings()).unwrap()
+}
+
+/// A floating MJCF model whose `<equality>` couples its joints linearly: `e1` couples the
+/// three-joint fixed tendon `t1` (hinges `j1`, `j2`, `j3`) to `t2` (the hinge `j2`, shared, and
+/// the slide `s1`) with `polycoef="0.1 0.4"`, `e2` is a `<joint>` coupling (`j6` on `j1`), `e3`
+/// holds `t4` (`j3 − j4`, `j3` eliminated by `e1`) at `0.02` from its `qpos0` length, and `e4`
+/// holds `t3` (`j4 + 2 j5`, `j4` eliminated by `e3`). Hinges with a `ref` (`j1`, `j3`, `j6`), a
+/// ball joint, two hinges in one body, a spatial tendon (recorded only). The loader eliminates
+/// `j3`, `j6`, `j4` and `j5`: `nv` 16 → 12.
+pub const TENDON_MJCF: &str = r#"<mujoco model="tendon_coupled">
+  <compiler angle="radian"/>
+  <default><geom type="capsule" size="0.03"/></default>
+  <worldbody>
+    <body name="base" pos="0 0 1">
+      <freejoint name="root"/>
+      <geom type="box" size="0.1 0.1 0.05"/>
+      <body name="l1" pos="0.1 0 0">
+        <joint name="j1" axis="0 1 0" ref="0.3"/>
+        <geom fromto="0 0 0 0.3 0 0"/>
+        <body name="l2" pos="0.3 0 0">
+          <joint name="j2" axis="1 0 0"/>
+          <geom fromto="0 0 0 0.25 0 0"/>
+          <body name="l3" pos="0.25 0 0">
+            <joint name="j3" axis="0 0 1" ref="-0.2"/>
+            <geom fromto="0 0 0 0.2 0 0"/>
+            <site name="tip" pos="0.2 0 0"/>
+          </body>
+        </body>
+        <body name="slider" pos="0.1 0.1 0">
+          <joint name="s1" type="slide" axis="0 1 0"/>
+          <geom type="box" size="0.04 0.04 0.04"/>
+        </body>
+      </body>
+      <body name="l4" pos="-0.1 0 0">
+        <joint name="b" type="ball"/>
+        <geom fromto="0 0 0 -0.2 0 0"/>
+        <body name="l5" pos="-0.2 0 0">
+          <joint name="j4" axis="0 1 0"/>
+          <joint name="j5" axis="1 0 0" pos="0 0 0.02"/>
+          <geom fromto="0 0 0 -0.2 0 0"/>
+          <site name="foot" pos="-0.2 0 0"/>
+        </body>
+      </body>
+      <body name="l6" pos="0 0.1 0">
+        <joint name="j6" axis="0 0 1" ref="0.1"/>
+        <geom fromto="0 0 0 0 0.2 0"/>
+      </body>
+    </body>
+  </worldbody>
+  <tendon>
+    <fixed name="t1"><joint joint="j1" coef="0.5"/><joint joint="j2" coef="1"/><joint joint="j3" coef="-0.7"/></fixed>
+    <fixed name="t2"><joint joint="j2" coef="0.3"/><joint joint="s1" coef="2"/></fixed>
+    <fixed name="t3"><joint joint="j4" coef="1"/><joint joint="j5" coef="2"/></fixed>
+    <fixed name="t4"><joint joint="j3" coef="1"/><joint joint="j4" coef="-1"/></fixed>
+    <spatial name="sp"><site site="tip"/><site site="foot"/></spatial>
+  </tendon>
+  <equality>
+    <tendon name="e1" tendon1="t1" tendon2="t2" polycoef="0.1 0.4 0 0 0"/>
+    <joint name="e2" joint1="j6" joint2="j1" polycoef="0.05 -0.5"/>
+    <tendon name="e3" tendon1="t4" polycoef="0.02"/>
+    <tendon name="e4" tendon1="t3"/>
+  </equality>
+</mujoco>
+"#;
+
+/// [`TENDON_MJCF`] loaded: a model in reduced coordinates with couplings of several joints.
+pub fn tendon_model() -> Model {
+    Model::from_mjcf_str(TENDON_MJCF, ".").unwrap()
 }
 
 /// The panda (`tests/data/mimic_panda_coeffs.urdf`) on a floating base in reduced coordinates:
@@ -41,6 +110,7 @@ pub fn models() -> Vec<Model> {
     let mut out = vec![arm(false), arm(true)];
     let arm: Vec<f64> = (0..out[0].nv_full()).map(|k| 0.01 * (k + 1) as f64).collect();
     out.push(with_armature(&out[0], &arm));
+    out.push(tendon_model());
     out
 }
 
@@ -52,10 +122,18 @@ pub fn ff_models() -> Vec<Model> {
     vec![m, with]
 }
 
+/// [`tendon_model`] and the same with an armature on every DoF of the full tree.
+pub fn tendon_models() -> Vec<Model> {
+    let m = tendon_model();
+    let arm: Vec<f64> = (0..m.nv_full()).map(|k| 0.01 * (k % 4) as f64).collect();
+    let with = with_armature(&m, &arm);
+    vec![m, with]
+}
+
 /// The AD oracle of the reduced model `m` (`reference::reduced`).
 pub fn oracle(m: &Model) -> Reduced<'_> {
     assert!(m.is_reduced(), "{} is not in reduced coordinates", m.name());
-    Reduced { full: m.full_tree(), mimics: m.mimic_joints() }
+    Reduced { full: m.full_tree(), mimics: m.linear_couplings() }
 }
 
 /// A random configuration and two vectors with entries in [-2, 2] (`q̇` and `q̈`, `τ` or a

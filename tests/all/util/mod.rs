@@ -41,9 +41,9 @@ pub fn random_state(model: &Model, rng: &mut Rng) -> (DVector<f64>, DVector<f64>
 }
 
 /// Test models: chains, the built-in robots and random trees mixing every joint type, fixed and
-/// floating base, with and without armature, and the mimic arm in reduced coordinates
-/// (`mimic::models`: fixed, floating, fixed with an armature), up to `max_dof` degrees of
-/// freedom.
+/// floating base, with and without armature, and the models in reduced coordinates
+/// (`mimic::models`: the mimic arm fixed, floating, fixed with an armature, and the MJCF model
+/// with tendon couplings), up to `max_dof` degrees of freedom.
 pub fn test_models(max_dof: usize) -> Vec<Model> {
     let mut out = vec![builtin::serial_chain(1), builtin::serial_chain(7), builtin::pendulum(2)];
     out.push(builtin::quadruped());
