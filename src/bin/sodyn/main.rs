@@ -269,7 +269,7 @@ fn load_model(o: &ModelArgs) -> Result<Model> {
     let model = load_model_spec(&o.model, &opts)?;
     match &o.armature {
         Some(a) if model.is_reduced() => {
-            with_armature_arg(model.full_tree(), a)?.with_mimic_joints(model.mimic_joints())
+            with_armature_arg(model.full_tree(), a)?.with_linear_couplings(model.linear_couplings())
         }
         Some(a) => with_armature_arg(&model, a),
         None => Ok(model),

@@ -1798,3 +1798,50 @@ fn eval_defaults_to_the_model_constraints() {
     let why = out["errors"]["contacts"].as_str().unwrap();
     assert!(why.contains("model's constraints") && why.contains("reduced coordinates"), "{why}");
 }
+
+/// An MJCF model whose `<equality><tendon>` couples several joints: `info` prints each
+/// eliminated joint's rule, `eval` gives it a `"coupling"` object and writes the reduced
+/// outputs (those of the library), and `--armature` keeps every coupling.
+#[test]
+fn cli_on_tendon_couplings() {
+    let xml = tmp("tendon_coupled.xml");
+    std::fs::write(&xml, crate::util::mimic::TENDON_MJCF).unwrap();
+    let xml = xml.to_str().unwrap();
+    let m = crate::util::mimic::tendon_model();
+    let (nv, nq) = (m.nv(), m.nq());
+    assert!(m.linear_couplings().iter().any(|c| c.terms.len() > 1));
+    let o = sodyn(&["info", "--model", xml]);
+    assert_ok(&o, "info on a tendon-coupled model");
+    let out = stdout(&o);
+    assert!(out.contains(&format!("nq = {nq}, nv = {nv}")), "{out}");
+    // j3 is eliminated by the coupling of t1 (j1, j2, j3) to t2 (j2, s1).
+    let j3 = out.lines().find(|l| l.contains("j3")).expect("a line for j3");
+    assert!(j3.contains("q = ") && j3.contains("q[\"j1\"]") && j3.contains("q[\"s1\"]"), "{j3}");
+    let state = tmp("tendon_state.json");
+    let q: Vec<f64> = m.neutral().iter().copied().collect();
+    let tau: Vec<f64> = (0..nv).map(|i| 0.1 * i as f64 - 0.3).collect();
+    std::fs::write(&state, format!(r#"{{"q": {q:?}, "tau": {tau:?}}}"#)).unwrap();
+    let eval = |extra: &[&str]| {
+        let base = ["eval", "--model", xml, "--state", state.to_str().unwrap()];
+        sodyn(&[&base[..], extra].concat())
+    };
+    let o = eval(&[]);
+    assert_ok(&o, "eval on a tendon-coupled model");
+    let out: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let joints = out["joints"].as_array().unwrap();
+    let j3 = joints.iter().find(|j| j["name"] == "j3").unwrap();
+    assert_eq!(j3["nv"], 0, "{j3}");
+    let terms = j3["coupling"]["terms"].as_array().expect("a coupling object");
+    assert!(terms.len() > 1, "{j3}");
+    let mut d = sodyn::algo::Data::new(&m);
+    let v = DVector::zeros(nv);
+    let qdd = sodyn::algo::aba(&m, &mut d, &m.neutral(), &v, &DVector::from_vec(tau), None)
+        .unwrap()
+        .clone();
+    assert!((vector(&out, "qdd", nv) - &qdd).amax() <= 1e-12 * qdd.amax().max(1.0));
+    // --armature (one value per DoF of the full tree) keeps every coupling: nv unchanged.
+    let o = eval(&["--armature", "0.01"]);
+    assert_ok(&o, "eval --armature on a tendon-coupled model");
+    let out: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(out["nv"], nv, "{}", out["nv"]);
+}
