@@ -177,11 +177,23 @@ impl CostModelSum {
                 for (i, mut row) in wq.row_iter_mut().enumerate() {
                     row *= w * arr[i];
                 }
-                let mut lqq = d.lxx.view_mut((0, 0), (nv, nv));
-                let jqt = &mut cd.rxt[k];
-                let mut jqt = jqt.view_mut((0, 0), (nv, nv));
-                jqt.tr_copy_from(&jq);
-                gemm_nn(&mut lqq, 1.0, &jqt, &wq, 1.0);
+                // J_q is block diagonal (joint by joint), and so is J_qᵀ A_rr,q J_q: each
+                // diagonal block summed over its own rows, in the order (and with the fused
+                // multiply-adds) of the dense product, whose other terms are exact zeros.
+                let m = n.model;
+                let (idx_v, nvs) = (m.idx_v(), m.nvs());
+                for jt in 1..m.njoints() {
+                    let (o, nb) = (idx_v[jt], nvs[jt]);
+                    for j in o..o + nb {
+                        for i in o..o + nb {
+                            let mut x = d.lxx[(i, j)];
+                            for l in o..o + nb {
+                                x = wq[(l, j)].mul_add(jq[(l, i)], x);
+                            }
+                            d.lxx[(i, j)] = x;
+                        }
+                    }
+                }
                 for j in 0..nv {
                     d.lx[nv + j] += w * ar[nv + j];
                     d.lxx[(nv + j, nv + j)] += w * arr[nv + j];

@@ -296,9 +296,31 @@ impl ShootingProblem {
         (&self.running, &mut self.running_data, &self.terminal, &mut self.terminal_data)
     }
 
-    fn total_cost(&self) -> f64 {
+    /// The sum of the knots' costs in their data (what [`ShootingProblem::calc`] returns).
+    pub(crate) fn total_cost(&self) -> f64 {
         self.running_data.iter().map(|d| d.cost).sum::<f64>() + self.terminal_data.cost
     }
+
+    /// [`ShootingProblem::split_mut`] and the thread pool (`None` on one thread).
+    #[allow(clippy::type_complexity)]
+    pub(crate) fn split_mut_pool(
+        &mut self,
+    ) -> (
+        &[ActionModel],
+        &mut [ActionData],
+        &ActionModel,
+        &mut ActionData,
+        Option<&rayon::ThreadPool>,
+    ) {
+        (
+            &self.running,
+            &mut self.running_data,
+            &self.terminal,
+            &mut self.terminal_data,
+            self.pool.as_ref(),
+        )
+    }
+
 
     /// The rollout of `us` from `x0`: `xs[0] = x0`, `xs[t+1] = f_t(xs[t], us[t])`.
     ///
