@@ -171,26 +171,24 @@ impl CostModelSum {
                 let jq = rd.rx.view((0, 0), (nv, nv));
                 let mut lq = d.lx.rows_mut(0, nv);
                 lq.gemv_tr(w, &jq, &ar.rows(0, nv), 1.0);
-                let wrx = &mut cd.wrx[k];
-                let mut wq = wrx.view_mut((0, 0), (nv, nv));
-                wq.copy_from(&jq);
-                for (i, mut row) in wq.row_iter_mut().enumerate() {
-                    row *= w * arr[i];
-                }
                 // J_q is block diagonal (joint by joint), and so is J_qᵀ A_rr,q J_q: each
                 // diagonal block summed over its own rows, in the order (and with the fused
-                // multiply-adds) of the dense product, whose other terms are exact zeros.
+                // multiply-adds) of the dense product `J_qᵀ (w A_rr,q J_q)`, whose other terms
+                // are exact zeros.
                 let m = n.model;
                 let (idx_v, nvs) = (m.idx_v(), m.nvs());
+                let (ldl, ldj) = (d.lxx.nrows(), rd.rx.nrows());
+                let (lxx, jqs) = (d.lxx.as_mut_slice(), rd.rx.as_slice());
                 for jt in 1..m.njoints() {
                     let (o, nb) = (idx_v[jt], nvs[jt]);
                     for j in o..o + nb {
                         for i in o..o + nb {
-                            let mut x = d.lxx[(i, j)];
+                            let mut x = lxx[i + j * ldl];
                             for l in o..o + nb {
-                                x = wq[(l, j)].mul_add(jq[(l, i)], x);
+                                let wq_lj = jqs[l + j * ldj] * (w * arr[l]);
+                                x = wq_lj.mul_add(jqs[l + i * ldj], x);
                             }
-                            d.lxx[(i, j)] = x;
+                            lxx[i + j * ldl] = x;
                         }
                     }
                 }

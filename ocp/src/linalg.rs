@@ -248,22 +248,32 @@ pub(crate) fn gemm_nn_blockdiag<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
         b.shape(),
         c.shape()
     );
+    let ((ars, acs), (brs, bcs), (crs, ccs)) = (a.strides(), b.strides(), c.strides());
+    let (pa, pb, pc) = (a.data.ptr(), b.data.ptr(), c.data.ptr_mut());
     let (idx_v, nvs) = (model.idx_v(), model.nvs());
-    for j in 0..n {
-        for jt in 1..model.njoints() {
-            let (o, w) = (idx_v[jt], nvs[jt]);
+    for jt in 1..model.njoints() {
+        let (o, w) = (idx_v[jt], nvs[jt]);
+        assert!(o + w <= m, "gemm_nn_blockdiag: joint {jt}'s block is outside nv = {m}");
+        for j in 0..n {
             for i in o..o + w {
-                let mut x = if beta == 0.0 {
-                    0.0
-                } else if beta == 1.0 {
-                    c[(i, j)]
-                } else {
-                    c[(i, j)] * beta
-                };
-                for l in o..o + w {
-                    x = (alpha * b[(l, j)]).mul_add(a[(i, l)], x);
+                // SAFETY: `i, l < m` and `j < n` with each matrix's own strides address
+                // entries of `a` (`m × m`), `b` (`m × n`) and `c` (`m × n`, borrowed mutably,
+                // aliasing neither input), as the shapes asserted above.
+                unsafe {
+                    let cij = pc.add(i * crs + j * ccs);
+                    let mut x = if beta == 0.0 {
+                        0.0
+                    } else if beta == 1.0 {
+                        *cij
+                    } else {
+                        *cij * beta
+                    };
+                    for l in o..o + w {
+                        x = (alpha * *pb.add(l * brs + j * bcs))
+                            .mul_add(*pa.add(i * ars + l * acs), x);
+                    }
+                    *cij = x;
                 }
-                c[(i, j)] = x;
             }
         }
     }

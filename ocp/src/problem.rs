@@ -17,7 +17,7 @@ pub struct ShootingProblem {
     terminal: ActionModel,
     pub(crate) running_data: Vec<ActionData>,
     pub(crate) terminal_data: ActionData,
-    pool: Option<rayon::ThreadPool>,
+    pool: Option<std::sync::Arc<rayon::ThreadPool>>,
     threads: usize,
 }
 
@@ -68,12 +68,12 @@ impl ShootingProblem {
         self.pool = if n == 1 {
             None
         } else {
-            Some(
+            Some(std::sync::Arc::new(
                 rayon::ThreadPoolBuilder::new()
                     .num_threads(n)
                     .build()
                     .map_err(|e| OcpError::new(format!("threads: {e}")))?,
-            )
+            ))
         };
         self.threads = n;
         Ok(())
@@ -317,10 +317,14 @@ impl ShootingProblem {
             &mut self.running_data,
             &self.terminal,
             &mut self.terminal_data,
-            self.pool.as_ref(),
+            self.pool.as_deref(),
         )
     }
 
+    /// The thread pool (`None` on one thread), shared.
+    pub(crate) fn pool_handle(&self) -> Option<std::sync::Arc<rayon::ThreadPool>> {
+        self.pool.clone()
+    }
 
     /// The rollout of `us` from `x0`: `xs[0] = x0`, `xs[t+1] = f_t(xs[t], us[t])`.
     ///

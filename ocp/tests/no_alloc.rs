@@ -95,7 +95,15 @@ fn solver_iterations_allocate_nothing() {
         };
         count(&mut s, 8); // warm-up: the log's capacity
         let (a3, a6) = (count(&mut s, 3), count(&mut s, 6));
-        assert_eq!(s.iter(), 6, "{kind:?} {so:?} rk {rk} threads {threads} stopped early: {:?}", s.termination());
-        assert_eq!(a3, a6, "{kind:?} {so:?} rk {rk} threads {threads}: {a3} allocations in 3 iterations, {a6} in 6");
+        assert_eq!(
+            s.iter(),
+            6,
+            "{kind:?} {so:?} rk {rk} threads {threads} stopped early: {:?}",
+            s.termination()
+        );
+        assert_eq!(
+            a3, a6,
+            "{kind:?} {so:?} rk {rk} threads {threads}: {a3} allocations in 3 iterations, {a6} in 6"
+        );
     }
 }

@@ -55,7 +55,14 @@ fn one_and_two_threads_give_identical_solves() {
                 s.solve(&xs, &us, 30, false, None).unwrap();
             }
             assert!(s.iter() > 2, "{kind:?}: {} iterations ({:?})", s.iter(), s.termination());
-            runs.push((s.iter(), s.cost(), s.stop(), s.xs().to_vec(), s.us().to_vec(), s.log().to_vec()));
+            runs.push((
+                s.iter(),
+                s.cost(),
+                s.stop(),
+                s.xs().to_vec(),
+                s.us().to_vec(),
+                s.log().to_vec(),
+            ));
         }
         let (a, b) = (&runs[0], &runs[1]);
         assert_eq!(a.0, b.0, "{kind:?}: iterations differ");

@@ -454,6 +454,25 @@ impl Solver {
         is_feasible: bool,
         init_reg: Option<f64>,
     ) -> Result<bool> {
+        // On two or more threads the whole solve runs on the pool: its parallel parts then
+        // start from a worker thread (no job injected from outside per iteration, which would
+        // make rayon allocate a block of its injector queue every 63 of them).
+        match self.problem.pool_handle() {
+            Some(p) => {
+                p.install(|| self.solve_on(init_xs, init_us, maxiter, is_feasible, init_reg))
+            }
+            None => self.solve_on(init_xs, init_us, maxiter, is_feasible, init_reg),
+        }
+    }
+
+    fn solve_on(
+        &mut self,
+        init_xs: &[DVector<f64>],
+        init_us: &[DVector<f64>],
+        maxiter: usize,
+        is_feasible: bool,
+        init_reg: Option<f64>,
+    ) -> Result<bool> {
         if let Some(r) = init_reg
             && !(r.is_finite() && r >= 0.0)
         {
@@ -939,15 +958,16 @@ impl Solver {
         self.xnext.copy_from(self.problem.x0());
         let state = self.problem.terminal_model().state.clone();
         let t_len = self.problem.horizon();
-        let Solver { problem, xs, us, xs_try, us_try, fs, dx, k, kk, tmp_x, xnext, vxx, .. } =
-            self;
+        let Solver { problem, xs, us, xs_try, us_try, fs, dx, k, kk, tmp_x, xnext, vxx, .. } = self;
         let (models, datas, tm, td, pool) = problem.split_mut_pool();
         let (knots, term) = sp.split();
         let a_side = || {
-            let r = Rollout { kind, gaps_closed: feasible, alpha, state: &state, xs, us, fs, k, kk };
-            let rolled = r.run(models, datas, tm, td, xs_try, us_try, dx, tmp_x, xnext, |t, x, u| {
-                knots.publish(t, x, u)
-            });
+            let r =
+                Rollout { kind, gaps_closed: feasible, alpha, state: &state, xs, us, fs, k, kk };
+            let rolled =
+                r.run(models, datas, tm, td, xs_try, us_try, dx, tmp_x, xnext, |t, x, u| {
+                    knots.publish(t, x, u)
+                });
             let Some(cost_try) = rolled else {
                 knots.stop();
                 return None;
@@ -955,11 +975,8 @@ impl Solver {
             let (d, dv) = if kind == SolverKind::Ddp {
                 (d_now, 0.0)
             } else {
-                let dv = if feasible {
-                    0.0
-                } else {
-                    gap_term(&state, xs_try, xs, vxx, fs, dx, tmp_x)
-                };
+                let dv =
+                    if feasible { 0.0 } else { gap_term(&state, xs_try, xs, vxx, fs, dx, tmp_x) };
                 ([dg + dv, dq - 2.0 * dv], dv)
             };
             let accept = rule.accepts(alpha, d, cost - cost_try);
@@ -1067,9 +1084,7 @@ impl AcceptRule {
                 || (self.kind == SolverKind::Ddp && !self.is_feasible)
                 || dv > self.th_acceptstep * dv_exp
         } else {
-            self.kind != SolverKind::Ddp
-                && !self.is_feasible
-                && dv > self.th_acceptnegstep * dv_exp
+            self.kind != SolverKind::Ddp && !self.is_feasible && dv > self.th_acceptnegstep * dv_exp
         }
     }
 }
