@@ -14,7 +14,7 @@ use sodyn::tensor::Tensor3;
 
 use crate::activation::Activation;
 use crate::curvature::{Group, djr_t};
-use crate::linalg::gemm_nn;
+use crate::linalg::{gemm_nn, gemm_nn_blockdiag};
 use crate::residual::{NodeView, Residual, ResidualData};
 
 /// One named term `w a(r(x, u))`.
@@ -171,27 +171,19 @@ impl CostModelSum {
                 let jq = rd.rx.view((0, 0), (nv, nv));
                 let mut lq = d.lx.rows_mut(0, nv);
                 lq.gemv_tr(w, &jq, &ar.rows(0, nv), 1.0);
-                // J_q is block diagonal (joint by joint), and so is J_qᵀ A_rr,q J_q: each
-                // diagonal block summed over its own rows, in the order (and with the fused
-                // multiply-adds) of the dense product `J_qᵀ (w A_rr,q J_q)`, whose other terms
-                // are exact zeros.
-                let m = n.model;
-                let (idx_v, nvs) = (m.idx_v(), m.nvs());
-                let (ldl, ldj) = (d.lxx.nrows(), rd.rx.nrows());
-                let (lxx, jqs) = (d.lxx.as_mut_slice(), rd.rx.as_slice());
-                for jt in 1..m.njoints() {
-                    let (o, nb) = (idx_v[jt], nvs[jt]);
-                    for j in o..o + nb {
-                        for i in o..o + nb {
-                            let mut x = lxx[i + j * ldl];
-                            for l in o..o + nb {
-                                let wq_lj = jqs[l + j * ldj] * (w * arr[l]);
-                                x = wq_lj.mul_add(jqs[l + i * ldj], x);
-                            }
-                            lxx[i + j * ldl] = x;
-                        }
-                    }
+                let wrx = &mut cd.wrx[k];
+                let mut wq = wrx.view_mut((0, 0), (nv, nv));
+                wq.copy_from(&jq);
+                for (i, mut row) in wq.row_iter_mut().enumerate() {
+                    row *= w * arr[i];
                 }
+                let mut lqq = d.lxx.view_mut((0, 0), (nv, nv));
+                let jqt = &mut cd.rxt[k];
+                let mut jqt = jqt.view_mut((0, 0), (nv, nv));
+                jqt.tr_copy_from(&jq);
+                // J_qᵀ is block diagonal (joint by joint): the dense product's operations on
+                // its blocks only.
+                gemm_nn_blockdiag(n.model, &mut lqq, 1.0, &jqt, &wq, 1.0);
                 for j in 0..nv {
                     d.lx[nv + j] += w * ar[nv + j];
                     d.lxx[(nv + j, nv + j)] += w * arr[nv + j];

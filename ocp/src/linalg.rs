@@ -27,63 +27,6 @@ pub(crate) fn gemm_tn<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
     C3: Dim,
     S3: RawStorageMut<f64, R3, C3>,
 {
-    gemm_tn_impl(c, alpha, a, b, beta, false);
-}
-
-/// `c = alpha aᵀ b + beta c` for a product known to be symmetric (`aᵀ b = bᵀ a`, e.g.
-/// `Fᵀ (V F)` with `V` symmetric) and a symmetric `c`: the entries on and below the diagonal
-/// are computed as [`gemm_tn`] computes them (the register blocks that straddle the diagonal
-/// compute a few entries above it too), then mirrored above it, so the result is exactly
-/// symmetric, with about half the operations.
-///
-/// # Panics
-/// As [`gemm_tn`]; `c` not square.
-pub(crate) fn gemm_tn_sym<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
-    c: &mut Matrix<f64, R3, C3, S3>,
-    alpha: f64,
-    a: &Matrix<f64, R1, C1, S1>,
-    b: &Matrix<f64, R2, C2, S2>,
-    beta: f64,
-) where
-    R1: Dim,
-    C1: Dim,
-    S1: RawStorage<f64, R1, C1>,
-    R2: Dim,
-    C2: Dim,
-    S2: RawStorage<f64, R2, C2>,
-    R3: Dim,
-    C3: Dim,
-    S3: RawStorageMut<f64, R3, C3>,
-{
-    let n = c.nrows();
-    assert!(c.ncols() == n, "gemm_tn_sym: c is {:?}, not square", c.shape());
-    gemm_tn_impl(c, alpha, a, b, beta, true);
-    for j in 1..n {
-        for i in 0..j {
-            c[(i, j)] = c[(j, i)];
-        }
-    }
-}
-
-/// [`gemm_tn`], or with `lower` only (at least) the entries `i ≥ j`.
-fn gemm_tn_impl<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
-    c: &mut Matrix<f64, R3, C3, S3>,
-    alpha: f64,
-    a: &Matrix<f64, R1, C1, S1>,
-    b: &Matrix<f64, R2, C2, S2>,
-    beta: f64,
-    lower: bool,
-) where
-    R1: Dim,
-    C1: Dim,
-    S1: RawStorage<f64, R1, C1>,
-    R2: Dim,
-    C2: Dim,
-    S2: RawStorage<f64, R2, C2>,
-    R3: Dim,
-    C3: Dim,
-    S3: RawStorageMut<f64, R3, C3>,
-{
     let (k, m) = a.shape();
     let (k2, n) = b.shape();
     assert!(
@@ -112,14 +55,14 @@ fn gemm_tn_impl<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
     if has_avx2_fma() {
         // SAFETY: the CPU has AVX2 and FMA (checked at run time); the pointers, shapes and
         // strides are those checked above.
-        unsafe { gemm_tn_fma(m, n, k, alpha, pa, acs, pb, bcs, beta, pc, crs, ccs, lower) };
+        unsafe { gemm_tn_fma(m, n, k, alpha, pa, acs, pb, bcs, beta, pc, crs, ccs) };
         return;
     }
     for j in 0..n {
         // SAFETY: column `j` of `b` holds `k` contiguous entries at `j * bcs` (row stride 1,
         // checked above), inside `b`'s storage.
         let bj = unsafe { std::slice::from_raw_parts(pb.add(j * bcs), k) };
-        for i in if lower { j.min(m) } else { 0 }..m {
+        for i in 0..m {
             // SAFETY: as for `bj`, column `i` of `a`.
             let ai = unsafe { std::slice::from_raw_parts(pa.add(i * acs), k) };
             let sum = dot(ai, bj);
@@ -254,25 +197,87 @@ pub(crate) fn gemm_nn_blockdiag<R1, C1, S1, R2, C2, S2, R3, C3, S3>(
     for jt in 1..model.njoints() {
         let (o, w) = (idx_v[jt], nvs[jt]);
         assert!(o + w <= m, "gemm_nn_blockdiag: joint {jt}'s block is outside nv = {m}");
-        for j in 0..n {
-            for i in o..o + w {
-                // SAFETY: `i, l < m` and `j < n` with each matrix's own strides address
-                // entries of `a` (`m × m`), `b` (`m × n`) and `c` (`m × n`, borrowed mutably,
-                // aliasing neither input), as the shapes asserted above.
-                unsafe {
-                    let cij = pc.add(i * crs + j * ccs);
-                    let mut x = if beta == 0.0 {
-                        0.0
-                    } else if beta == 1.0 {
-                        *cij
-                    } else {
-                        *cij * beta
-                    };
-                    for l in o..o + w {
-                        x = (alpha * *pb.add(l * brs + j * bcs))
-                            .mul_add(*pa.add(i * ars + l * acs), x);
+        let blk = Block { o, w, n, alpha, beta, ars, acs, brs, bcs, crs, ccs };
+        #[cfg(target_arch = "x86_64")]
+        if has_avx2_fma() {
+            // SAFETY: the CPU has FMA (checked at run time); the block lies inside the shapes
+            // asserted above, with each matrix's own strides.
+            unsafe { blockdiag_fma(&blk, pa, pb, pc) };
+            continue;
+        }
+        // SAFETY: as above.
+        unsafe { blockdiag_portable(&blk, pa, pb, pc) };
+    }
+}
+
+/// One diagonal block of [`gemm_nn_blockdiag`]: rows and columns `o..o + w` of `a`, rows
+/// `o..o + w` of `b` and `c`, `n` columns.
+struct Block {
+    o: usize,
+    w: usize,
+    n: usize,
+    alpha: f64,
+    beta: f64,
+    ars: usize,
+    acs: usize,
+    brs: usize,
+    bcs: usize,
+    crs: usize,
+    ccs: usize,
+}
+
+/// [`gemm_nn_blockdiag`]'s block with fused multiply-adds (the AVX2/FMA [`gemm_nn`]'s
+/// operations on the block's entries).
+///
+/// # Safety
+/// The CPU must have FMA; the block's entries of `a`, `b`, `c` must be valid, `c` not aliasing
+/// `a` or `b`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn blockdiag_fma(k: &Block, pa: *const f64, pb: *const f64, pc: *mut f64) {
+    for j in 0..k.n {
+        for i in k.o..k.o + k.w {
+            // SAFETY: the caller's contract.
+            unsafe {
+                let cij = pc.add(i * k.crs + j * k.ccs);
+                let mut x = if k.beta == 0.0 {
+                    0.0
+                } else if k.beta == 1.0 {
+                    *cij
+                } else {
+                    *cij * k.beta
+                };
+                for l in k.o..k.o + k.w {
+                    let s = k.alpha * *pb.add(l * k.brs + j * k.bcs);
+                    x = s.mul_add(*pa.add(i * k.ars + l * k.acs), x);
+                }
+                *cij = x;
+            }
+        }
+    }
+}
+
+/// [`gemm_nn_blockdiag`]'s block without fused multiply-adds (the portable [`gemm_nn`]'s
+/// operations).
+///
+/// # Safety
+/// As [`blockdiag_fma`], without the CPU requirement.
+unsafe fn blockdiag_portable(k: &Block, pa: *const f64, pb: *const f64, pc: *mut f64) {
+    for j in 0..k.n {
+        for i in k.o..k.o + k.w {
+            // SAFETY: the caller's contract.
+            unsafe {
+                let cij = pc.add(i * k.crs + j * k.ccs);
+                if k.beta == 0.0 {
+                    *cij = 0.0;
+                } else if k.beta != 1.0 {
+                    *cij *= k.beta;
+                }
+                for l in k.o..k.o + k.w {
+                    let s = k.alpha * *pb.add(l * k.brs + j * k.bcs);
+                    if s != 0.0 {
+                        *cij += s * *pa.add(i * k.ars + l * k.acs);
                     }
-                    *cij = x;
                 }
             }
         }
@@ -313,7 +318,6 @@ unsafe fn gemm_tn_fma(
     pc: *mut f64,
     crs: usize,
     ccs: usize,
-    lower: bool,
 ) {
     // 2 × 4 blocks of `c` from register-blocked dot products (each column chunk of `a` and `b`
     // is loaded once per block, not once per entry); the edges entry by entry. Every entry is
@@ -322,8 +326,7 @@ unsafe fn gemm_tn_fma(
     let (m2, n4) = (m - m % 2, n - n % 4);
     let mut j = 0;
     while j < n4 {
-        // With `lower`, the blocks from the one holding the diagonal entry `(j, j)`.
-        let mut i = if lower { (j - j % 2).min(m2) } else { 0 };
+        let mut i = 0;
         while i < m2 {
             // SAFETY: columns `i, i + 1` of `a` and `j..j + 4` of `b`, entries of `c` (the
             // caller's contract).
@@ -361,7 +364,7 @@ unsafe fn gemm_tn_fma(
         j += 4;
     }
     for j in n4..n {
-        for i in if lower { j.min(m) } else { 0 }..m {
+        for i in 0..m {
             // SAFETY: as above.
             unsafe {
                 tn_entry(
@@ -833,26 +836,29 @@ mod tests {
     }
 
     #[test]
-    fn symmetric_product_is_the_lower_triangle_mirrored() {
+    fn block_diagonal_product_is_the_dense_product() {
+        // A free flyer (a 6 × 6 block) and revolute joints (1 × 1), as `⊕`'s Jacobians.
+        let model = sodyn::model::builtin::quadruped();
+        let nv = model.nv();
+        let (idx_v, nvs) = (model.idx_v(), model.nvs());
+        let full = mat(nv, nv, 0.7);
+        let mut a = DMatrix::zeros(nv, nv);
+        for jt in 1..model.njoints() {
+            let (o, w) = (idx_v[jt], nvs[jt]);
+            a.view_mut((o, o), (w, w)).copy_from(&full.view((o, o), (w, w)));
+        }
         for portable in [false, true] {
             PORTABLE.with(|p| p.set(portable));
-            for n in [1, 2, 3, 4, 5, 7, 8, 12, 13, 18, 36] {
-                for k in [0, 1, 3, 4, 12, 36] {
-                    for (alpha, beta) in [(1.0, 0.0), (1.0, 1.0), (-1.0, 1.0), (0.7, 0.4)] {
-                        let (a, b, c0) = (mat(k, n, 0.1), mat(k, n, 0.2), mat(n, n, 0.3));
-                        let (mut c, mut full) = (c0.clone(), c0.clone());
-                        gemm_tn_sym(&mut c, alpha, &a, &b, beta);
-                        gemm_tn(&mut full, alpha, &a, &b, beta);
-                        for j in 0..n {
-                            for i in 0..n {
-                                let want = if i >= j { full[(i, j)] } else { full[(j, i)] };
-                                assert!(
-                                    c[(i, j)] == want,
-                                    "gemm_tn_sym {n}x{k} ({i}, {j}) portable={portable}"
-                                );
-                            }
-                        }
-                    }
+            for n in [1, 5, 12, 2 * nv] {
+                for (alpha, beta) in [(1.0, 0.0), (1.0, 1.0), (0.02, 0.0), (-0.7, 0.4)] {
+                    let (b, c0) = (mat(nv, n, 0.2), mat(nv, n, 0.3));
+                    let (mut c, mut want) = (c0.clone(), c0.clone());
+                    gemm_nn_blockdiag(&model, &mut c, alpha, &a, &b, beta);
+                    gemm_nn(&mut want, alpha, &a, &b, beta);
+                    assert!(
+                        c == want,
+                        "n = {n}, alpha = {alpha}, beta = {beta}, portable = {portable}"
+                    );
                 }
             }
         }

@@ -28,7 +28,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use crate::error::{OcpError, Result};
-use crate::linalg::{gemm_tn, gemm_tn_sym};
+use crate::linalg::{gemm_nn, gemm_tn};
 use crate::problem::ShootingProblem;
 use crate::state::StateMultibody;
 use speculate::Speculation;
@@ -172,9 +172,8 @@ pub struct Solver {
     kk: Vec<DMatrix<f64>>,
     kt: Vec<DMatrix<f64>>,
     llt: Vec<DMatrix<f64>>,
-    vxx_fx: DMatrix<f64>,
-    vxx_fu: Vec<DMatrix<f64>>,
-    qux: Vec<DMatrix<f64>>,
+    fxt_vxx: DMatrix<f64>,
+    fut_vxx: Vec<DMatrix<f64>>,
     vxx_tmp: DMatrix<f64>,
     tmp_x: DVector<f64>,
     boxqp: Vec<BoxQp>,
@@ -280,9 +279,8 @@ impl Solver {
             kk: mats(&|t| (nus[t], ndx)),
             kt: mats(&|t| (ndx, nus[t])),
             llt: mats(&|t| (nus[t], nus[t])),
-            vxx_fx: DMatrix::zeros(ndx, ndx),
-            vxx_fu: mats(&|t| (ndx, nus[t])),
-            qux: mats(&|t| (nus[t], ndx)),
+            fxt_vxx: DMatrix::zeros(ndx, ndx),
+            fut_vxx: mats(&|t| (nus[t], ndx)),
             vxx_tmp: DMatrix::zeros(ndx, ndx),
             tmp_x: DVector::zeros(ndx),
             boxqp: (0..t_len).map(|t| BoxQp::new(nus[t], ndx)).collect(),
@@ -756,8 +754,9 @@ impl Solver {
             self.vxx[t_len] += dt_term.hzz.view((0, 0), (ndx, ndx));
         }
         self.vx[t_len].copy_from(&dt_term.lx);
-        // Exactly symmetric (the products below use V′ₓₓᵀ = V′ₓₓ), + μI.
-        symmetrize_add_diagonal(&mut self.vxx[t_len], preg);
+        for i in 0..self.vxx_tmp.nrows() {
+            self.vxx[t_len][(i, i)] += preg;
+        }
         if !self.is_feasible {
             self.vx[t_len].gemv(1.0, &self.vxx[t_len], &self.fs[t_len], 1.0);
         }
@@ -770,18 +769,17 @@ impl Solver {
             let nu = m.nu();
             let ndx = d.fx.nrows();
             let (vx_next, vxx_next) = (&self.vx[t + 1], &self.vxx[t + 1]);
-            // Q-function, with V′ₓₓ symmetric: W = V′ₓₓ [F_x F_u], then the symmetric
-            // Q_xx = ℓ_xx + F_xᵀ W_x and Q_uu = ℓ_uu + F_uᵀ W_u from their lower triangles.
-            gemm_tn(&mut self.vxx_fx, 1.0, vxx_next, &d.fx, 0.0);
+            // Q-function.
+            gemm_tn(&mut self.fxt_vxx, 1.0, &d.fx, vxx_next, 0.0);
             self.qx[t].copy_from(&d.lx);
             self.qx[t].gemv_tr(1.0, &d.fx, vx_next, 1.0);
             self.qxx[t].copy_from(&d.lxx);
             if exact {
                 self.qxx[t] += d.hzz.view((0, 0), (ndx, ndx));
             }
-            gemm_tn_sym(&mut self.qxx[t], 1.0, &d.fx, &self.vxx_fx, 1.0);
+            gemm_nn(&mut self.qxx[t], 1.0, &self.fxt_vxx, &d.fx, 1.0);
             if nu > 0 {
-                gemm_tn(&mut self.vxx_fu[t], 1.0, vxx_next, &d.fu, 0.0);
+                gemm_tn(&mut self.fut_vxx[t], 1.0, &d.fu, vxx_next, 0.0);
                 self.qu[t].copy_from(&d.lu);
                 self.qu[t].gemv_tr(1.0, &d.fu, vx_next, 1.0);
                 self.quu[t].copy_from(&d.luu);
@@ -790,8 +788,8 @@ impl Solver {
                     self.quu[t] += d.hzz.view((ndx, ndx), (nu, nu));
                     self.qxu[t] += d.hzz.view((0, ndx), (ndx, nu));
                 }
-                gemm_tn_sym(&mut self.quu[t], 1.0, &d.fu, &self.vxx_fu[t], 1.0);
-                gemm_tn(&mut self.qxu[t], 1.0, &d.fx, &self.vxx_fu[t], 1.0);
+                gemm_nn(&mut self.quu[t], 1.0, &self.fut_vxx[t], &d.fu, 1.0);
+                gemm_nn(&mut self.qxu[t], 1.0, &self.fxt_vxx, &d.fu, 1.0);
                 for i in 0..nu {
                     self.quu[t][(i, i)] += preg;
                 }
@@ -812,14 +810,9 @@ impl Solver {
             if nu > 0 {
                 self.quuk[t].gemv(1.0, &self.quu[t], &self.k[t], 0.0);
                 self.vx[t].gemv_tr(-1.0, &self.kk[t], &self.qu[t], 1.0);
-                // Q_xu K = Q_xu Q_uu⁻¹ Q_ux is symmetric: (Q_xu K)ᵢⱼ = Q_ux[:, i] · K[:, j].
-                self.qux[t].tr_copy_from(&self.qxu[t]);
-                gemm_tn_sym(&mut self.vxx[t], -1.0, &self.qux[t], &self.kk[t], 1.0);
+                gemm_nn(&mut self.vxx[t], -1.0, &self.qxu[t], &self.kk[t], 1.0);
             }
-            // Symmetric already (Q_xx and Q_xu K from their lower triangles): + μI.
-            for i in 0..ndx {
-                self.vxx[t][(i, i)] += preg;
-            }
+            symmetrize_add_diagonal(&mut self.vxx[t], preg);
             if !self.is_feasible {
                 self.vx[t].gemv(1.0, &self.vxx[t], &self.fs[t], 1.0);
             }
