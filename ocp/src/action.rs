@@ -33,7 +33,7 @@ use sodyn::model::{Contact, JointType, Model};
 use crate::cost::{CostData, CostDerivs, CostModelSum, CurvatureWork};
 use crate::curvature::{Group, bracket_form, djr_t};
 use crate::error::{OcpError, Result};
-use crate::linalg::{gemm_nn, gemm_nn_blockdiag, gemm_tn};
+use crate::linalg::{gemm_nn, gemm_tn};
 use crate::residual::NodeView;
 use crate::state::{StateMultibody, StateScratch};
 
@@ -1044,16 +1044,14 @@ impl ActionModel {
             bu *= dt;
         }
         // Top rows: ∂δ_q/∂x = dt × (bottom rows) (= dt² a_x + dt [0 I]).
-        // (J_Δ is block diagonal, joint by joint.)
-        let m: &Model = self.state.model();
         let (top, bottom) = d.fx.rows_range_pair_mut(0..nv, nv..2 * nv);
         let mut top = top;
-        gemm_nn_blockdiag(m, &mut top, dt, &d.jq_dx, &bottom, 0.0);
+        gemm_nn(&mut top, dt, &d.jq_dx, &bottom, 0.0);
         let mut tl = top.view_mut((0, 0), (nv, nv));
         tl += &d.jq_x;
         let (tu, bu) = d.fu.rows_range_pair_mut(0..nv, nv..2 * nv);
         let mut tu = tu;
-        gemm_nn_blockdiag(m, &mut tu, dt, &d.jq_dx, &bu, 0.0);
+        gemm_nn(&mut tu, dt, &d.jq_dx, &bu, 0.0);
         Ok(())
     }
 

@@ -14,7 +14,7 @@ use sodyn::tensor::Tensor3;
 
 use crate::activation::Activation;
 use crate::curvature::{Group, djr_t};
-use crate::linalg::{gemm_nn, gemm_nn_blockdiag};
+use crate::linalg::gemm_nn;
 use crate::residual::{NodeView, Residual, ResidualData};
 
 /// One named term `w a(r(x, u))`.
@@ -181,9 +181,7 @@ impl CostModelSum {
                 let jqt = &mut cd.rxt[k];
                 let mut jqt = jqt.view_mut((0, 0), (nv, nv));
                 jqt.tr_copy_from(&jq);
-                // J_qᵀ is block diagonal (joint by joint): the dense product's operations on
-                // its blocks only.
-                gemm_nn_blockdiag(n.model, &mut lqq, 1.0, &jqt, &wq, 1.0);
+                gemm_nn(&mut lqq, 1.0, &jqt, &wq, 1.0);
                 for j in 0..nv {
                     d.lx[nv + j] += w * ar[nv + j];
                     d.lxx[(nv + j, nv + j)] += w * arr[nv + j];
