@@ -17,7 +17,7 @@ pub struct ShootingProblem {
     terminal: ActionModel,
     pub(crate) running_data: Vec<ActionData>,
     pub(crate) terminal_data: ActionData,
-    pool: Option<std::sync::Arc<rayon::ThreadPool>>,
+    pool: Option<rayon::ThreadPool>,
     threads: usize,
 }
 
@@ -68,12 +68,12 @@ impl ShootingProblem {
         self.pool = if n == 1 {
             None
         } else {
-            Some(std::sync::Arc::new(
+            Some(
                 rayon::ThreadPoolBuilder::new()
                     .num_threads(n)
                     .build()
                     .map_err(|e| OcpError::new(format!("threads: {e}")))?,
-            ))
+            )
         };
         self.threads = n;
         Ok(())
@@ -296,34 +296,8 @@ impl ShootingProblem {
         (&self.running, &mut self.running_data, &self.terminal, &mut self.terminal_data)
     }
 
-    /// The sum of the knots' costs in their data (what [`ShootingProblem::calc`] returns).
-    pub(crate) fn total_cost(&self) -> f64 {
+    fn total_cost(&self) -> f64 {
         self.running_data.iter().map(|d| d.cost).sum::<f64>() + self.terminal_data.cost
-    }
-
-    /// [`ShootingProblem::split_mut`] and the thread pool (`None` on one thread).
-    #[allow(clippy::type_complexity)]
-    pub(crate) fn split_mut_pool(
-        &mut self,
-    ) -> (
-        &[ActionModel],
-        &mut [ActionData],
-        &ActionModel,
-        &mut ActionData,
-        Option<&rayon::ThreadPool>,
-    ) {
-        (
-            &self.running,
-            &mut self.running_data,
-            &self.terminal,
-            &mut self.terminal_data,
-            self.pool.as_deref(),
-        )
-    }
-
-    /// The thread pool (`None` on one thread), shared.
-    pub(crate) fn pool_handle(&self) -> Option<std::sync::Arc<rayon::ThreadPool>> {
-        self.pool.clone()
     }
 
     /// The rollout of `us` from `x0`: `xs[0] = x0`, `xs[t+1] = f_t(xs[t], us[t])`.

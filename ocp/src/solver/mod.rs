@@ -21,7 +21,6 @@
 //! Nothing is allocated per iteration (the Cholesky factors reuse their buffers).
 
 mod boxqp;
-mod speculate;
 
 use nalgebra::{DMatrix, DVector};
 use std::sync::Arc;
@@ -30,8 +29,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use crate::error::{OcpError, Result};
 use crate::linalg::{gemm_nn, gemm_tn};
 use crate::problem::ShootingProblem;
-use crate::state::StateMultibody;
-use speculate::Speculation;
 
 pub use boxqp::{BoxQp, BoxQpResult};
 
@@ -216,12 +213,6 @@ pub struct Solver {
     so_error: Option<String>,
     vx_zero: DVector<f64>,
     vx_so: DVector<f64>,
-    /// On two or more threads: the buffers of the trial trajectory's derivatives, evaluated
-    /// on the second thread while the line search rolls it out.
-    spec: Option<Box<Speculation>>,
-    /// The knots' derivatives at `(xs, us)` are in the problem's data already (from the
-    /// speculation of the accepted step), with the first knot error if one failed.
-    derivs_ready: Option<Option<crate::error::OcpError>>,
 }
 
 /// A per-iteration callback: it sees the iteration's log entry and returns `false` to stop the
@@ -316,8 +307,6 @@ impl Solver {
             so_error: None,
             vx_zero: DVector::zeros(ndx),
             vx_so: DVector::zeros(ndx),
-            spec: None,
-            derivs_ready: None,
         }
     }
     /// The algorithm.
@@ -452,25 +441,6 @@ impl Solver {
         is_feasible: bool,
         init_reg: Option<f64>,
     ) -> Result<bool> {
-        // On two or more threads the whole solve runs on the pool: its parallel parts then
-        // start from a worker thread (no job injected from outside per iteration, which would
-        // make rayon allocate a block of its injector queue every 63 of them).
-        match self.problem.pool_handle() {
-            Some(p) => {
-                p.install(|| self.solve_on(init_xs, init_us, maxiter, is_feasible, init_reg))
-            }
-            None => self.solve_on(init_xs, init_us, maxiter, is_feasible, init_reg),
-        }
-    }
-
-    fn solve_on(
-        &mut self,
-        init_xs: &[DVector<f64>],
-        init_us: &[DVector<f64>],
-        maxiter: usize,
-        is_feasible: bool,
-        init_reg: Option<f64>,
-    ) -> Result<bool> {
         if let Some(r) = init_reg
             && !(r.is_finite() && r >= 0.0)
         {
@@ -526,10 +496,6 @@ impl Solver {
         self.stats = HessianStats::default();
         self.so_error = None;
         let mut exact_next = self.second_order == SecondOrder::On;
-        // Two threads: the trial steps' derivatives are evaluated during their rollouts (the
-        // buffers, copies of the knots' data, made once per solve).
-        self.derivs_ready = None;
-        self.spec = (self.problem.threads() > 1).then(|| Box::new(Speculation::new(&self.problem)));
         // Auto: consecutive full feasible steps since the last failed exact pass.
         let mut full_steps = 0usize;
         while self.iter < maxiter {
@@ -584,24 +550,25 @@ impl Solver {
             for n in 0..self.alphas.len() {
                 let alpha = self.alphas[n];
                 self.steplength = alpha;
-                let (ok, accept) = if self.spec.is_some() {
-                    self.trial_two_threads(alpha)
-                } else {
-                    let ok = self.forward_pass(alpha);
-                    if ok && self.kind != SolverKind::Ddp {
-                        self.expected_improvement_fddp();
-                    }
-                    (ok, ok && self.accepts(alpha))
-                };
+                let ok = self.forward_pass(alpha);
                 if !ok {
                     continue;
                 }
+                let dv = self.cost - self.cost_try;
+                if self.kind != SolverKind::Ddp {
+                    self.expected_improvement_fddp();
+                }
+                let dv_exp = alpha * (self.d[0] + 0.5 * alpha * self.d[1]);
+                let accept = if dv_exp >= 0.0 {
+                    self.d[0].abs() < self.th_grad
+                        || (self.kind == SolverKind::Ddp && !self.is_feasible)
+                        || dv > self.th_acceptstep * dv_exp
+                } else {
+                    self.kind != SolverKind::Ddp
+                        && !self.is_feasible
+                        && dv > self.th_acceptnegstep * dv_exp
+                };
                 if accept {
-                    if let Some(sp) = self.spec.as_mut() {
-                        // The accepted trajectory's derivatives: the speculation's.
-                        let (_, datas, _, td) = self.problem.split_mut();
-                        self.derivs_ready = Some(sp.adopt(datas, td));
-                    }
                     self.was_feasible = self.is_feasible;
                     let feasible = match self.kind {
                         SolverKind::Ddp => true,
@@ -683,12 +650,7 @@ impl Solver {
 
     /// Derivatives at `(xs, us)` and the gaps.
     fn calc_diff(&mut self) -> Result<()> {
-        match self.derivs_ready.take() {
-            // Evaluated during the rollout that produced (xs, us): the same operations.
-            Some(Some(e)) => return Err(e),
-            Some(None) => self.cost = self.problem.total_cost(),
-            None => self.cost = self.problem.calc_diff(&self.xs, &self.us)?,
-        }
+        self.cost = self.problem.calc_diff(&self.xs, &self.us)?;
         let t_len = self.problem.horizon();
         let state = self.problem.terminal_model().state.clone();
         state.diff(&self.xs[0], self.problem.x0(), &mut self.fs[0]);
@@ -901,278 +863,80 @@ impl Solver {
     fn expected_improvement_fddp(&mut self) {
         self.dv = 0.0;
         if !self.is_feasible {
-            let state = &self.problem.terminal_model().state;
-            self.dv = gap_term(
-                state,
-                &self.xs_try,
-                &self.xs,
-                &self.vxx,
-                &self.fs,
-                &mut self.dx,
-                &mut self.tmp_x,
-            );
+            let t_len = self.problem.horizon();
+            let state = self.problem.terminal_model().state.clone();
+            // Crocoddyl writes the terminal difference into the last element of dx.
+            for t in (0..=t_len).rev() {
+                state.diff(&self.xs_try[t], &self.xs[t], &mut self.dx[t]);
+                self.tmp_x.gemv(1.0, &self.vxx[t], &self.dx[t], 0.0);
+                self.dv -= self.fs[t].dot(&self.tmp_x);
+            }
         }
         self.d = [self.dg + self.dv, self.dq - 2.0 * self.dv];
-    }
-
-    /// Whether the trial step `α` (rolled out, with `d` its expected improvement's terms) is
-    /// accepted.
-    fn accepts(&self, alpha: f64) -> bool {
-        let rule = AcceptRule {
-            kind: self.kind,
-            is_feasible: self.is_feasible,
-            th_grad: self.th_grad,
-            th_acceptstep: self.th_acceptstep,
-            th_acceptnegstep: self.th_acceptnegstep,
-        };
-        rule.accepts(alpha, self.d, self.cost - self.cost_try)
-    }
-
-    /// A trial step on two threads: this thread rolls out `α` and decides the step; the
-    /// other evaluates the derivatives of each rolled-out knot of the trial trajectory
-    /// (`calc_diff` at `(x̂_t, û_t)`, what the next iteration would evaluate) as soon as the
-    /// rollout has passed it, and once the step is accepted this thread evaluates the
-    /// remaining knots from the end. A rejected or failed trial stops the other thread.
-    /// Returns (rolled out, accepted), as [`Solver::forward_pass`] and [`Solver::accepts`].
-    fn trial_two_threads(&mut self, alpha: f64) -> (bool, bool) {
-        let Some(mut sp) = self.spec.take() else {
-            return (false, false);
-        };
-        sp.reset();
-        let rule = AcceptRule {
-            kind: self.kind,
-            is_feasible: self.is_feasible,
-            th_grad: self.th_grad,
-            th_acceptstep: self.th_acceptstep,
-            th_acceptnegstep: self.th_acceptnegstep,
-        };
-        let (kind, feasible, cost, dg, dq, d_now) =
-            (self.kind, self.is_feasible, self.cost, self.dg, self.dq, self.d);
-        self.xnext.copy_from(self.problem.x0());
-        let state = self.problem.terminal_model().state.clone();
-        let t_len = self.problem.horizon();
-        let Solver { problem, xs, us, xs_try, us_try, fs, dx, k, kk, tmp_x, xnext, vxx, .. } = self;
-        let (models, datas, tm, td, pool) = problem.split_mut_pool();
-        let (knots, term) = sp.split();
-        let a_side = || {
-            let r =
-                Rollout { kind, gaps_closed: feasible, alpha, state: &state, xs, us, fs, k, kk };
-            let rolled =
-                r.run(models, datas, tm, td, xs_try, us_try, dx, tmp_x, xnext, |t, x, u| {
-                    knots.publish(t, x, u)
-                });
-            let Some(cost_try) = rolled else {
-                knots.stop();
-                return None;
-            };
-            let (d, dv) = if kind == SolverKind::Ddp {
-                (d_now, 0.0)
-            } else {
-                let dv =
-                    if feasible { 0.0 } else { gap_term(&state, xs_try, xs, vxx, fs, dx, tmp_x) };
-                ([dg + dv, dq - 2.0 * dv], dv)
-            };
-            let accept = rule.accepts(alpha, d, cost - cost_try);
-            if accept {
-                knots.finish_from_end(models, xs_try, us_try);
-                term.eval(tm, &xs_try[t_len], t_len);
-            } else {
-                knots.stop();
-            }
-            Some((cost_try, d, dv, accept))
-        };
-        let b_side = || knots.follow(models);
-        let out = match pool {
-            Some(p) => p.install(|| rayon::join(a_side, b_side)).0,
-            None => rayon::join(a_side, b_side).0,
-        };
-        self.spec = Some(sp);
-        match out {
-            None => (false, false),
-            Some((cost_try, d, dv, accept)) => {
-                self.cost_try = cost_try;
-                if self.kind != SolverKind::Ddp {
-                    self.d = d;
-                    self.dv = dv;
-                }
-                (true, accept)
-            }
-        }
     }
 
     /// The rollout of step `α` into `xs_try`, `us_try`, `cost_try`; `false` on a failed knot or
     /// a NaN.
     fn forward_pass(&mut self, alpha: f64) -> bool {
-        self.xnext.copy_from(self.problem.x0());
+        let t_len = self.problem.horizon();
         let state = self.problem.terminal_model().state.clone();
-        let r = Rollout {
-            kind: self.kind,
-            gaps_closed: self.is_feasible,
-            alpha,
-            state: &state,
-            xs: &self.xs,
-            us: &self.us,
-            fs: &self.fs,
-            k: &self.k,
-            kk: &self.kk,
-        };
-        let (models, datas, tm, td) = self.problem.split_mut();
-        match r.run(
-            models,
-            datas,
-            tm,
-            td,
-            &mut self.xs_try,
-            &mut self.us_try,
-            &mut self.dx,
-            &mut self.tmp_x,
-            &mut self.xnext,
-            |_, _, _| {},
-        ) {
-            Some(c) => {
-                self.cost_try = c;
-                true
-            }
-            None => false,
-        }
-    }
-}
-
-/// FDDP's gap term of a trial step's expected improvement, `−Σ_t f_tᵀ V_xx,t (x̂_t ⊖ x_t)` (the
-/// differences into `dx`; Crocoddyl writes the terminal one into its last element).
-fn gap_term(
-    state: &StateMultibody,
-    xs_try: &[DVector<f64>],
-    xs: &[DVector<f64>],
-    vxx: &[DMatrix<f64>],
-    fs: &[DVector<f64>],
-    dx: &mut [DVector<f64>],
-    tmp_x: &mut DVector<f64>,
-) -> f64 {
-    let mut dv = 0.0;
-    for t in (0..xs.len()).rev() {
-        state.diff(&xs_try[t], &xs[t], &mut dx[t]);
-        tmp_x.gemv(1.0, &vxx[t], &dx[t], 0.0);
-        dv -= fs[t].dot(tmp_x);
-    }
-    dv
-}
-
-/// The line search's acceptance rule (Crocoddyl's).
-struct AcceptRule {
-    kind: SolverKind,
-    is_feasible: bool,
-    th_grad: f64,
-    th_acceptstep: f64,
-    th_acceptnegstep: f64,
-}
-
-impl AcceptRule {
-    /// Whether step `α` with expected-improvement terms `d` and actual improvement `dv` is
-    /// accepted.
-    fn accepts(&self, alpha: f64, d: [f64; 2], dv: f64) -> bool {
-        let dv_exp = alpha * (d[0] + 0.5 * alpha * d[1]);
-        if dv_exp >= 0.0 {
-            d[0].abs() < self.th_grad
-                || (self.kind == SolverKind::Ddp && !self.is_feasible)
-                || dv > self.th_acceptstep * dv_exp
-        } else {
-            self.kind != SolverKind::Ddp && !self.is_feasible && dv > self.th_acceptnegstep * dv_exp
-        }
-    }
-}
-
-/// The inputs of a rollout of step `α` from the current trajectory.
-struct Rollout<'a> {
-    kind: SolverKind,
-    /// The current trajectory is feasible (its gaps are closed).
-    gaps_closed: bool,
-    alpha: f64,
-    state: &'a StateMultibody,
-    xs: &'a [DVector<f64>],
-    us: &'a [DVector<f64>],
-    fs: &'a [DVector<f64>],
-    k: &'a [DVector<f64>],
-    kk: &'a [DMatrix<f64>],
-}
-
-impl Rollout<'_> {
-    /// The rollout into `xs_try`, `us_try` (from `xnext = x₀`), calling `publish(t, x̂_t, û_t)`
-    /// once knot `t`'s state and control are set; the trial cost, `None` on a failed knot or a
-    /// NaN.
-    #[allow(clippy::too_many_arguments)]
-    fn run(
-        &self,
-        models: &[crate::action::ActionModel],
-        datas: &mut [crate::action::ActionData],
-        tm: &crate::action::ActionModel,
-        td: &mut crate::action::ActionData,
-        xs_try: &mut [DVector<f64>],
-        us_try: &mut [DVector<f64>],
-        dx: &mut [DVector<f64>],
-        tmp_x: &mut DVector<f64>,
-        xnext: &mut DVector<f64>,
-        mut publish: impl FnMut(usize, &DVector<f64>, &DVector<f64>),
-    ) -> Option<f64> {
-        let (alpha, state) = (self.alpha, self.state);
-        let t_len = models.len();
-        let mut cost_try = 0.0;
+        self.cost_try = 0.0;
         let fddp = self.kind != SolverKind::Ddp;
-        let gaps_open = fddp && !(self.gaps_closed || alpha == 1.0);
+        let gaps_open = fddp && !(self.is_feasible || alpha == 1.0);
+        self.xnext.copy_from(self.problem.x0());
+        let (models, datas, tm, td) = self.problem.split_mut();
         for t in 0..t_len {
             let m = &models[t];
             if fddp {
                 if gaps_open {
                     // x̂_t = x̂′ ⊕ (α − 1) f_t
-                    tmp_x.copy_from(&self.fs[t]);
-                    *tmp_x *= alpha - 1.0;
-                    state.integrate(xnext, tmp_x, &mut xs_try[t]);
+                    self.tmp_x.copy_from(&self.fs[t]);
+                    self.tmp_x *= alpha - 1.0;
+                    state.integrate(&self.xnext, &self.tmp_x, &mut self.xs_try[t]);
                 } else {
-                    xs_try[t].copy_from(xnext);
+                    self.xs_try[t].copy_from(&self.xnext);
                 }
             }
-            state.diff(&self.xs[t], &xs_try[t], &mut dx[t]);
+            state.diff(&self.xs[t], &self.xs_try[t], &mut self.dx[t]);
             let nu = m.nu();
             if nu > 0 {
-                let ut = &mut us_try[t];
-                ut.copy_from(&self.us[t]);
-                ut.axpy(-alpha, &self.k[t], 1.0);
-                ut.gemv(-1.0, &self.kk[t], &dx[t], 1.0);
+                self.us_try[t].copy_from(&self.us[t]);
+                self.us_try[t].axpy(-alpha, &self.k[t], 1.0);
+                self.us_try[t].gemv(-1.0, &self.kk[t], &self.dx[t], 1.0);
                 if self.kind == SolverKind::BoxFddp {
                     for i in 0..nu {
-                        ut[i] = ut[i].clamp(m.u_lb[i], m.u_ub[i]);
+                        self.us_try[t][i] = self.us_try[t][i].clamp(m.u_lb[i], m.u_ub[i]);
                     }
                 }
             }
-            publish(t, &xs_try[t], &us_try[t]);
             let d = &mut datas[t];
-            let u = (nu > 0).then_some(&us_try[t]);
-            if m.calc(d, &xs_try[t], u).is_err() {
-                return None;
+            let u = (nu > 0).then_some(&self.us_try[t]);
+            if m.calc(d, &self.xs_try[t], u).is_err() {
+                return false;
             }
-            cost_try += d.cost;
-            if cost_try.is_nan() || d.xnext.iter().any(|v| v.is_nan()) {
-                return None;
+            self.cost_try += d.cost;
+            if self.cost_try.is_nan() || d.xnext.iter().any(|v| v.is_nan()) {
+                return false;
             }
             if fddp {
-                xnext.copy_from(&d.xnext);
+                self.xnext.copy_from(&d.xnext);
             } else {
-                xs_try[t + 1].copy_from(&d.xnext);
+                self.xs_try[t + 1].copy_from(&d.xnext);
             }
         }
         if fddp {
             if gaps_open {
-                tmp_x.copy_from(&self.fs[t_len]);
-                *tmp_x *= alpha - 1.0;
-                state.integrate(xnext, tmp_x, &mut xs_try[t_len]);
+                self.tmp_x.copy_from(&self.fs[t_len]);
+                self.tmp_x *= alpha - 1.0;
+                state.integrate(&self.xnext, &self.tmp_x, &mut self.xs_try[t_len]);
             } else {
-                xs_try[t_len].copy_from(xnext);
+                self.xs_try[t_len].copy_from(&self.xnext);
             }
         }
-        if tm.calc(td, &xs_try[t_len], None).is_err() {
-            return None;
+        if tm.calc(td, &self.xs_try[t_len], None).is_err() {
+            return false;
         }
-        cost_try += td.cost;
-        (!cost_try.is_nan()).then_some(cost_try)
+        self.cost_try += td.cost;
+        !self.cost_try.is_nan()
     }
 }
