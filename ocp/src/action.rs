@@ -476,8 +476,9 @@ impl ActionModel {
         u: Option<&DVector<f64>>,
         diff: bool,
     ) -> Result<()> {
-        let m = self.state.model().clone();
-        let m = &*m;
+        // A borrow (no Arc clone: the knots share one Model, whose reference count would
+        // bounce between the threads evaluating them).
+        let m: &Model = self.state.model();
         let (nq, nv) = (m.nq(), m.nv());
         d.q.copy_from(&x.rows(0, nq));
         d.v.copy_from(&x.rows(nq, nv));
@@ -564,8 +565,9 @@ impl ActionModel {
         u: Option<&DVector<f64>>,
         vx_next: &DVector<f64>,
     ) -> Result<()> {
-        let m = self.state.model().clone();
-        let m = &*m;
+        // A borrow (no Arc clone: the knots share one Model, whose reference count would
+        // bounce between the threads evaluating them).
+        let m: &Model = self.state.model();
         let (nv, ndx) = (m.nv(), self.state.ndx());
         if vx_next.len() != ndx {
             return Err(OcpError::new(format!(
