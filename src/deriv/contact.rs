@@ -52,7 +52,7 @@ use super::contact_kin::{
     djz_dq_rows, jac_col, put_rows, rows_dot,
 };
 use super::contact_loop::{
-    Loop, loop_acc_rows, loop_dacc_dq, loop_dacc_dv, loop_djz_dq_rows, loop_jac_col,
+    Loop, loop_acc_rows, loop_dacc_dq, loop_dacc_dv, loop_djtl_dq, loop_djz_dq_rows, loop_jac_col,
 };
 use super::zero::{IdfozaWs, idfoza_core, idfoza_lanes_core};
 use crate::algo::internal::ltl_solve_rows_desc;
@@ -293,17 +293,17 @@ impl ContactWs {
             }
             paths.push(root_path(model, body));
         }
-        let loops: Vec<Option<Loop>> = contacts
+        let mut loops: Vec<Option<Loop>> = contacts
             .iter()
             .zip(&paths)
             .map(|(c, pa)| {
                 c.frame2.map(|_| {
                     let local_b = c.body_placement2(model);
-                    Loop { a: pa.clone(), b: root_path(model, local_b.0), local_b }
+                    Loop { a: pa.clone(), b: root_path(model, local_b.0), local_b, on: Vec::new() }
                 })
             })
             .collect();
-        for (path, lp) in paths.iter_mut().zip(&loops) {
+        for (path, lp) in paths.iter_mut().zip(&mut loops) {
             if let Some(lp) = lp {
                 let mut on = vec![false; model.njoints()];
                 for &j in lp.a.joints.iter().chain(&lp.b.joints) {
@@ -311,6 +311,7 @@ impl ContactWs {
                 }
                 let joints: Vec<usize> = (1..model.njoints()).filter(|&j| on[j]).collect();
                 *path = path_of_joints(model, joints);
+                lp.set_sides(&path.dofs);
             }
         }
         let mut on_path = vec![false; model.njoints()];
@@ -980,17 +981,12 @@ pub(crate) fn djw_dq(model: &Model, cd: &mut ContactWs, w: &[f64], out: &mut DMa
                 dof_joint: &cd.dof_joint,
                 parents: &cd.parents,
             };
+            // By the cumulative sums of w on both chains (`loop_djz_dq_rows`).
             let mut col = [0.0; 6];
             for &l in &path.dofs {
-                let mut sum = [0.0; 6];
-                for &x in &path.dofs {
-                    put_rows(geo, &loop_jac_col(&b, geo, lp, x, Dir::Q(l)), true, &mut col);
-                    for (s, v) in sum.iter_mut().zip(&col) {
-                        *s += w[x] * v;
-                    }
-                }
+                put_rows(geo, &loop_djz_dq_rows(&b, geo, lp, &cd.zc, l, Dir::None), false, &mut col);
                 for k in 0..geo.dim() {
-                    out[(r0 + k, l)] = sum[k];
+                    out[(r0 + k, l)] = col[k];
                 }
             }
             continue;
@@ -1106,19 +1102,9 @@ fn sub_djtl_dq_generic(
             continue;
         }
         if let Some(lp) = &cd.loops[c] {
-            let b = Base {
-                s,
-                vel: &cd.kvel,
-                acc: &cd.kacc,
-                dof_joint: &cd.dof_joint,
-                parents: &cd.parents,
-            };
-            for &l in &path.dofs {
-                for &x in &path.dofs {
-                    let e = rows_dot(geo, &loop_jac_col(&b, geo, lp, x, Dir::Q(l)), lam).1;
-                    o[rs * x + cs * l] -= e;
-                }
-            }
+            loop_djtl_dq(s, geo, lp, (&path.dofs, &path.dof_joint), lam, |x, l, e| {
+                o[rs * x + cs * l] -= e;
+            });
             continue;
         }
         let part = |i: usize| Vector3::new(lam[i], lam[i + 1], lam[i + 2]);
@@ -1489,12 +1475,9 @@ pub(crate) fn contact_hessians(
     if let Some(lp) = &cd.loops[c] {
         // Two-frame constraints take kp only as 3-D world-aligned loops, whose error
         // e = p₁ − p₂ has ∂e/∂q = J_c exactly: x_e = x_j (x_e is unused for the others).
-        for &j in &path.dofs {
-            for &k in &path.dofs {
-                let xj = rows_dot(geo, &loop_jac_col(&b, geo, lp, j, Dir::Q(k)), zeta).1;
-                f(j, k, xj, xj);
-            }
-        }
+        loop_djtl_dq(&cd.s, geo, lp, (&path.dofs, &path.dof_joint), zeta, |j, k, xj| {
+            f(j, k, xj, xj);
+        });
         return;
     }
     let (r, p) = (&path.rot, &path.p);

@@ -27,7 +27,8 @@
 use super::contact_kin::{
     Base, D3, Dir, Dm, Geo, Path, Rows, acc_parts, at_point, d_acc_parts, d_rows, rows,
 };
-use crate::spatial::Transform;
+use crate::spatial::{Force, Motion, Transform};
+use nalgebra::Vector3;
 
 /// The two chains of a two-frame constraint.
 #[derive(Clone, Debug, Default)]
@@ -38,6 +39,9 @@ pub(crate) struct Loop {
     pub b: Path,
     /// Frame B's body and its contact frame's placement in that body's frame.
     pub local_b: (usize, Transform),
+    /// For each DoF of the union of both chains (ascending, the constraint's path in
+    /// `ContactWs`): whether it is on chain A and on chain B ([`Loop::set_sides`]).
+    pub on: Vec<(bool, bool)>,
 }
 
 impl Loop {
@@ -48,6 +52,10 @@ impl Loop {
     /// Frame B's body (0: the world).
     pub fn body_b(&self) -> usize {
         self.b.joints.last().copied().unwrap_or(0)
+    }
+    /// Fills [`Loop::on`] for `dofs`, the union of both chains' DoFs (ascending).
+    pub fn set_sides(&mut self, dofs: &[usize]) {
+        self.on = dofs.iter().map(|&x| (self.in_a(x), self.in_b(x))).collect();
     }
     #[inline]
     fn in_a(&self, x: usize) -> bool {
@@ -309,5 +317,70 @@ pub(crate) fn loop_djz_dq_rows(
         let dlin = at_point(&dza, &pa) + za.ang().cross(&dpa)
             - (at_point(&dzb, &pb) + zb.ang().cross(&dpb));
         d_rows(geo, &ra, (D3::default(), lin), (D3::default(), dlin), &wl)
+    }
+}
+
+/// `λ·∂J_x/∂q_l` (the `(x, l)` entry of `∂(J_cᵀλ)/∂q`) for every pair of DoFs `x`, `l` of the
+/// constraint's path `dofs` (the union of both chains, joints `dof_joint`, sides [`Loop::on`]),
+/// passed to `f(x, l, e)`, in closed form from the world subspaces `s`. With `(n, f)` the
+/// weights `λ` in world axes (`R₁λ` for `local`) and the spatial forces about the world origin
+/// `F_A = [n + p₁ × f; f]`, `F_B = [n + p_B × f; f]` (`p_B = p₁` for 6-D, `p₂` for 3-D; `n = 0`
+/// for 3-D), the module documentation's rows give `(J_cᵀλ)_x = [x ∈ A] S_x·F_A − [x ∈ B] S_x·F_B`
+/// (6-D: the common DoFs cancel). Along `q_l`: `D S_x = [l ⪯ x] S_l × S_x` (J1, `l` then on
+/// `x`'s chain) with `(S_l × S_x)·F = −S_x·(S_l ×* F)`; `R₁` turns and `p₁` moves with chain A
+/// (`D(R₁y) = w_l × R₁y`, `D p₁ = u_l¹` for `l ∈ A`), `p₂` with chain B (`D p₂ = u_l²` for
+/// `l ∈ B`), so `D F_X = [D n + D p_X × f + p_X × D f; D f]`. The entry is
+/// `[x ∈ A] S_x·(D F_A − [l ⪯ x] S_l ×* F_A) − [x ∈ B] S_x·(D F_B − [l ⪯ x] S_l ×* F_B)`:
+/// per `l` two forces of each kind, per pair at most two dot products.
+pub(crate) fn loop_djtl_dq(
+    s: &[Motion],
+    geo: Geo,
+    lp: &Loop,
+    (dofs, dof_joint): (&[usize], &[usize]),
+    lam: &[f64],
+    mut f: impl FnMut(usize, usize, f64),
+) {
+    let (n, fw) = super::contact_kin::world_weights(geo, &lp.a.rot, lam);
+    let p1 = lp.a.p;
+    let pb = if geo.six { p1 } else { lp.b.p };
+    let fa = Force { ang: n + p1.cross(&fw), lin: fw };
+    let fb = Force { ang: n + pb.cross(&fw), lin: fw };
+    let zero = Force { ang: Vector3::zeros(), lin: Vector3::zeros() };
+    assert!(dofs.len() == dof_joint.len() && lp.on.len() == dofs.len());
+    for (il, &l) in dofs.iter().enumerate() {
+        let (la, lb) = lp.on[il];
+        let jl = dof_joint[il];
+        let sl = s[l];
+        let (w, v) = (sl.ang, sl.lin);
+        let (dn, df) =
+            if geo.local && la { (w.cross(&n), w.cross(&fw)) } else { (Vector3::zeros(), Vector3::zeros()) };
+        let dpa = if la { v + w.cross(&p1) } else { Vector3::zeros() };
+        let dpb = if geo.six {
+            dpa
+        } else if lb {
+            v + w.cross(&pb)
+        } else {
+            Vector3::zeros()
+        };
+        let dfa = Force { ang: dn + dpa.cross(&fw) + p1.cross(&df), lin: df };
+        let dfb = Force { ang: dn + dpb.cross(&fw) + pb.cross(&df), lin: df };
+        // D F − S_l ×* F for x below l on its chain.
+        let ga = if la { dfa - sl.cross_force(&fa) } else { zero };
+        let gb = if lb { dfb - sl.cross_force(&fb) } else { zero };
+        for (ix, &x) in dofs.iter().enumerate() {
+            let (xa, xb) = lp.on[ix];
+            if geo.six && xa == xb {
+                continue;
+            }
+            let (sx, anc) = (s[x], jl <= dof_joint[ix]);
+            let mut e = 0.0;
+            if xa {
+                e += sx.dot(if la && anc { &ga } else { &dfa });
+            }
+            if xb {
+                e -= sx.dot(if lb && anc { &gb } else { &dfb });
+            }
+            f(x, l, e);
+        }
     }
 }
