@@ -52,7 +52,8 @@ use super::contact_kin::{
     djz_dq_rows, jac_col, put_rows, rows_dot,
 };
 use super::contact_loop::{
-    Loop, loop_acc_rows, loop_dacc_dq, loop_dacc_dv, loop_djtl_dq, loop_djz_dq_rows, loop_jac_col,
+    Loop, djz_dq_plain, loop_acc_rows, loop_dacc_dq, loop_dacc_dv, loop_djtl_dq, loop_djz_dq_rows,
+    loop_jac_col,
 };
 use super::zero::{IdfozaWs, idfoza_core, idfoza_lanes_core};
 use crate::algo::internal::ltl_solve_rows_desc;
@@ -973,40 +974,24 @@ pub(crate) fn djw_dq(model: &Model, cd: &mut ContactWs, w: &[f64], out: &mut DMa
     for (c, path) in cd.paths.iter().enumerate() {
         let body = *path.joints.last().expect("path");
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
-        if let Some(lp) = &cd.loops[c] {
-            let b = Base {
-                s: &cd.s,
-                vel: &cd.kvel,
-                acc: &cd.kacc,
-                dof_joint: &cd.dof_joint,
-                parents: &cd.parents,
-            };
-            // By the cumulative sums of w on both chains (`loop_djz_dq_rows`).
-            let mut col = [0.0; 6];
-            for &l in &path.dofs {
-                put_rows(geo, &loop_djz_dq_rows(&b, geo, lp, &cd.zc, l, Dir::None), false, &mut col);
-                for k in 0..geo.dim() {
-                    out[(r0 + k, l)] = col[k];
-                }
+        // Two-frame constraints and generic world contacts: by the cumulative sums of w on the
+        // chains (`djz_dq_plain`).
+        let mut put = |l: usize, col: &[f64; 6]| {
+            for k in 0..geo.dim() {
+                out[(r0 + k, l)] = col[k];
             }
+        };
+        let pd = (&path.dofs[..], &path.dof_parent[..]);
+        if let Some(lp) = &cd.loops[c] {
+            let a = (lp.body_a(), &lp.a.p, &lp.a.rot);
+            let on = |il: usize| lp.on[il];
+            djz_dq_plain(&cd.s, geo, a, (lp.body_b(), &lp.b.p), pd, on, &cd.zc, &mut put);
             continue;
         }
         if !geo.is_point() {
-            let b = Base {
-                s: &cd.s,
-                vel: &cd.kvel,
-                acc: &cd.kacc,
-                dof_joint: &cd.dof_joint,
-                parents: &cd.parents,
-            };
-            let mut col = [0.0; 6];
-            for &l in &path.dofs {
-                let rows = djz_dq_rows(&b, geo, &path.rot, &cd.zc, body, &path.p, l, Dir::None);
-                put_rows(geo, &rows, false, &mut col);
-                for k in 0..geo.dim() {
-                    out[(r0 + k, l)] = col[k];
-                }
-            }
+            let a = (body, &path.p, &path.rot);
+            let on = |_: usize| (true, false);
+            djz_dq_plain(&cd.s, geo, a, (0, &path.p), pd, on, &cd.zc, &mut put);
             continue;
         }
         let p = path.p;

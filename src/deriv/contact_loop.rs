@@ -384,3 +384,64 @@ pub(crate) fn loop_djtl_dq(
         }
     }
 }
+
+/// `∂(J_c z)/∂q_l` for every DoF `l` of a constraint's path (position `il`, DoF `dofs[il]`,
+/// parent joint `dof_parent[il]`, sides `on(il)`), passed to `f(l, rows)` (`rows[..dim]`), in
+/// plain arithmetic from the cumulative sums `zc` (`Z_j = Σ_{x ⪯ j} S_x z_x`, `zc[0] = 0`) and
+/// the world subspaces `s`: the value and inner derivative of [`loop_djz_dq_rows`] without a
+/// tangent. Frame A `(R₁, p₁)` on body `ma`, frame B's point `p₂` on body `mb` (0 for a world
+/// contact, whose rows are then those of `contact_kin`'s generic contacts). `J_c z` is the rows
+/// of `W = Z_a − Z_b` at `p₁` (6-D) or `Z_a.lin + Z_a.ang × p₁ − Z_b.lin − Z_b.ang × p₂` (3-D),
+/// in `R₁`'s axes for `local`; along `q_l`: `D Z = S_l × (Z − Z_λ)` on `l`'s chains,
+/// `D p_i = u_l^i`, `D(R₁ᵀ y) = R₁ᵀ(D y − w_l × y)` for `l` on chain A.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn djz_dq_plain(
+    s: &[Motion],
+    geo: Geo,
+    (ma, p1, r1): (usize, &Vector3<f64>, &nalgebra::Matrix3<f64>),
+    (mb, p2): (usize, &Vector3<f64>),
+    (dofs, dof_parent): (&[usize], &[usize]),
+    on: impl Fn(usize) -> (bool, bool),
+    zc: &[Motion],
+    mut f: impl FnMut(usize, &[f64; 6]),
+) {
+    let (za, zb) = (zc[ma], zc[mb]);
+    let wv = za - zb;
+    let (y_ang, y_lin) = if geo.six {
+        (wv.ang, wv.lin + wv.ang.cross(p1))
+    } else {
+        (Vector3::zeros(), za.lin + za.ang.cross(p1) - zb.lin - zb.ang.cross(p2))
+    };
+    let z3 = Vector3::zeros();
+    let mut out = [0.0; 6];
+    for (il, &l) in dofs.iter().enumerate() {
+        let (la, lb) = on(il);
+        let sl = s[l];
+        let zl = zc[dof_parent[il]];
+        let dza = if la { sl.cross(&(za - zl)) } else { Motion::zero() };
+        let dzb = if lb { sl.cross(&(zb - zl)) } else { Motion::zero() };
+        let dp1 = if la { sl.lin + sl.ang.cross(p1) } else { z3 };
+        let (mut d_ang, mut d_lin) = if geo.six {
+            let dw = dza - dzb;
+            (dw.ang, dw.lin + dw.ang.cross(p1) + wv.ang.cross(&dp1))
+        } else {
+            let dp2 = if lb { sl.lin + sl.ang.cross(p2) } else { z3 };
+            let a = dza.lin + dza.ang.cross(p1) + za.ang.cross(&dp1);
+            (z3, a - (dzb.lin + dzb.ang.cross(p2) + zb.ang.cross(&dp2)))
+        };
+        if geo.local {
+            let wl = if la { sl.ang } else { z3 };
+            d_lin = r1.tr_mul(&(d_lin - wl.cross(&y_lin)));
+            if geo.six {
+                d_ang = r1.tr_mul(&(d_ang - wl.cross(&y_ang)));
+            }
+        }
+        if geo.six {
+            out[..3].copy_from_slice(d_ang.as_slice());
+            out[3..6].copy_from_slice(d_lin.as_slice());
+        } else {
+            out[..3].copy_from_slice(d_lin.as_slice());
+        }
+        f(l, &out);
+    }
+}
