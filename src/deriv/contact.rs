@@ -959,18 +959,26 @@ pub(crate) fn accel_derivatives_t(cd: &ContactWs, cxt: &mut DMatrix<f64>) {
     }
 }
 
-/// Rows `∂(J_c w)/∂q` at fixed `w` into `out` (`m × nv`, only path columns written):
-/// with `Z_j = Σ_{x ⪯ j} S_x w_x`, `D Z_m = S_l × (Z_m − Z_λ)` and `D p = u_l`.
-pub(crate) fn djw_dq(model: &Model, cd: &mut ContactWs, w: &[f64], out: &mut DMatrix<f64>) {
-    cd.zc[0] = Motion::zero();
+/// `zc[j] = Σ_{x ⪯ j} S_x w_x` (`zc[0] = 0`, subspaces `cd.s`) for the joints on the
+/// contacts' paths.
+pub(crate) fn union_sums(model: &Model, cd: &ContactWs, w: &[f64], zc: &mut [Motion]) {
+    zc[0] = Motion::zero();
     for &j in &cd.union_joints {
-        let mut z = cd.zc[model.parents[j]];
+        let mut z = zc[model.parents[j]];
         let iv = model.idx_v[j];
         for (s, x) in cd.s[iv..iv + model.nvs[j]].iter().zip(&w[iv..iv + model.nvs[j]]) {
             z += *s * *x;
         }
-        cd.zc[j] = z;
+        zc[j] = z;
     }
+}
+
+/// Rows `∂(J_c w)/∂q` at fixed `w` into `out` (`m × nv`, only path columns written):
+/// with `Z_j = Σ_{x ⪯ j} S_x w_x`, `D Z_m = S_l × (Z_m − Z_λ)` and `D p = u_l`.
+pub(crate) fn djw_dq(model: &Model, cd: &mut ContactWs, w: &[f64], out: &mut DMatrix<f64>) {
+    let mut zc = std::mem::take(&mut cd.zc);
+    union_sums(model, cd, w, &mut zc);
+    cd.zc = zc;
     for (c, path) in cd.paths.iter().enumerate() {
         let body = *path.joints.last().expect("path");
         let (geo, r0) = (cd.geo[c], cd.row0[c]);

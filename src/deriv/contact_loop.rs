@@ -352,8 +352,11 @@ pub(crate) fn loop_djtl_dq(
         let jl = dof_joint[il];
         let sl = s[l];
         let (w, v) = (sl.ang, sl.lin);
-        let (dn, df) =
-            if geo.local && la { (w.cross(&n), w.cross(&fw)) } else { (Vector3::zeros(), Vector3::zeros()) };
+        let (dn, df) = if geo.local && la {
+            (w.cross(&n), w.cross(&fw))
+        } else {
+            (Vector3::zeros(), Vector3::zeros())
+        };
         let dpa = if la { v + w.cross(&p1) } else { Vector3::zeros() };
         let dpb = if geo.six {
             dpa
@@ -443,5 +446,87 @@ pub(crate) fn djz_dq_plain(
             out[..3].copy_from_slice(d_lin.as_slice());
         }
         f(l, &out);
+    }
+}
+
+/// A spatial force (or motion) with a tangent, as `(ang, lin)`.
+type DF = (D3, D3);
+
+/// `S ×* F = [w × F.ang + v × F.lin; w × F.lin]` with tangents.
+#[inline]
+fn cross_force(s: &Dm, f: &DF) -> DF {
+    let (w, v) = (s.ang(), s.lin());
+    (w.cross(&f.0) + v.cross(&f.1), w.cross(&f.1))
+}
+
+/// The tangent of `S·F`.
+#[inline]
+fn dot_d(s: &Dm, f: &DF) -> f64 {
+    s.d.ang.dot(&f.0.v) + s.v.ang.dot(&f.0.d) + s.d.lin.dot(&f.1.v) + s.v.lin.dot(&f.1.d)
+}
+
+/// `λ·∂²J_x/∂q_l∂q_k` (inner `l`, outer `k`) for every pair of DoFs `x`, `l` of the constraint's
+/// path, passed to `f(x, l, e)`: the tangent along `q_k` of [`loop_djtl_dq`]'s closed form,
+/// evaluated with dual base quantities (`S_x`, `S_l`, `p₁`, `p₂` and `R₁λ` with their
+/// tangents on the chains that hold `k`; the indicators `[l ⪯ x]` are fixed).
+pub(crate) fn loop_djtl_dq2(
+    b: &Base,
+    geo: Geo,
+    lp: &Loop,
+    (dofs, dof_joint): (&[usize], &[usize]),
+    lam: &[f64],
+    k: usize,
+    mut f: impl FnMut(usize, usize, f64),
+) {
+    let (da, db) = lp.dirs(Dir::Q(k));
+    let part = |i: usize| Vector3::new(lam[i], lam[i + 1], lam[i + 2]);
+    let (n0, f0) = if geo.six { (part(0), part(3)) } else { (Vector3::zeros(), part(0)) };
+    let z3 = D3::default();
+    let (n, fw) = if geo.local {
+        let r = b.rot(&lp.a.rot, da);
+        (D3 { v: r.v * n0, d: r.d * n0 }, D3 { v: r.v * f0, d: r.d * f0 })
+    } else {
+        (D3 { v: n0, d: Vector3::zeros() }, D3 { v: f0, d: Vector3::zeros() })
+    };
+    let p1 = b.p(&lp.a.p, da);
+    let pb = if geo.six { p1 } else { b.p(&lp.b.p, db) };
+    let fa: DF = (n + p1.cross(&fw), fw);
+    let fb: DF = (n + pb.cross(&fw), fw);
+    assert!(dofs.len() == dof_joint.len() && lp.on.len() == dofs.len());
+    for (il, &l) in dofs.iter().enumerate() {
+        let (la, lb) = lp.on[il];
+        let jl = dof_joint[il];
+        let sl = b.s(l, if la { da } else { db });
+        let (w, v) = (sl.ang(), sl.lin());
+        let (dn, df) = if geo.local && la { (w.cross(&n), w.cross(&fw)) } else { (z3, z3) };
+        let dpa = if la { v + w.cross(&p1) } else { z3 };
+        let dpb = if geo.six {
+            dpa
+        } else if lb {
+            v + w.cross(&pb)
+        } else {
+            z3
+        };
+        let dfa: DF = (dn + dpa.cross(&fw) + p1.cross(&df), df);
+        let dfb: DF = (dn + dpb.cross(&fw) + pb.cross(&df), df);
+        let sub = |x: DF, y: DF| (x.0 - y.0, x.1 - y.1);
+        let ga = if la { sub(dfa, cross_force(&sl, &fa)) } else { (z3, z3) };
+        let gb = if lb { sub(dfb, cross_force(&sl, &fb)) } else { (z3, z3) };
+        for (ix, &x) in dofs.iter().enumerate() {
+            let (xa, xb) = lp.on[ix];
+            if geo.six && xa == xb {
+                continue;
+            }
+            let sx = b.s(x, if xa { da } else { db });
+            let anc = jl <= dof_joint[ix];
+            let mut e = 0.0;
+            if xa {
+                e += dot_d(&sx, if la && anc { &ga } else { &dfa });
+            }
+            if xb {
+                e -= dot_d(&sx, if lb && anc { &gb } else { &dfb });
+            }
+            f(x, l, e);
+        }
     }
 }
