@@ -23,6 +23,11 @@
 //! chain's quantities move along `q_l` only if `l` is on that chain (`contact_kin`'s rules J1,
 //! J2, J6, J7, J8, J9 on the chain), frame A's point `p₁` and rotation `R₁` with chain A,
 //! `p₂` with chain B; `D(R₁ᵀ y) = R₁ᵀ(D y − w_l × y)` for `l` on chain A.
+//!
+//! The pair loops of the KKT and impact derivatives use closed forms instead of a dual
+//! evaluation per pair: `∂(J_cᵀλ)/∂q` from the two chains' spatial forces ([`loop_djtl_dq`];
+//! its tangent [`loop_djtl_dq2`] for `λ·∂²J_c/∂q²`) and `∂(J_c z)/∂q` from cumulative sums in
+//! plain arithmetic ([`djz_dq_plain`]).
 
 use super::contact_kin::{
     Base, D3, Dir, Dm, Geo, Path, Rows, acc_parts, at_point, d_acc_parts, d_rows, rows,
