@@ -52,7 +52,8 @@ use super::contact_kin::{
     djz_dq_rows, jac_col, put_rows, rows_dot,
 };
 use super::contact_loop::{
-    Loop, loop_acc_rows, loop_dacc_dq, loop_dacc_dv, loop_djz_dq_rows, loop_jac_col,
+    Loop, djz_dq_plain, loop_acc_rows, loop_dacc_dq, loop_dacc_dv, loop_djtl_dq, loop_djz_dq_rows,
+    loop_jac_col,
 };
 use super::zero::{IdfozaWs, idfoza_core, idfoza_lanes_core};
 use crate::algo::internal::ltl_solve_rows_desc;
@@ -293,17 +294,17 @@ impl ContactWs {
             }
             paths.push(root_path(model, body));
         }
-        let loops: Vec<Option<Loop>> = contacts
+        let mut loops: Vec<Option<Loop>> = contacts
             .iter()
             .zip(&paths)
             .map(|(c, pa)| {
                 c.frame2.map(|_| {
                     let local_b = c.body_placement2(model);
-                    Loop { a: pa.clone(), b: root_path(model, local_b.0), local_b }
+                    Loop { a: pa.clone(), b: root_path(model, local_b.0), local_b, on: Vec::new() }
                 })
             })
             .collect();
-        for (path, lp) in paths.iter_mut().zip(&loops) {
+        for (path, lp) in paths.iter_mut().zip(&mut loops) {
             if let Some(lp) = lp {
                 let mut on = vec![false; model.njoints()];
                 for &j in lp.a.joints.iter().chain(&lp.b.joints) {
@@ -311,6 +312,7 @@ impl ContactWs {
                 }
                 let joints: Vec<usize> = (1..model.njoints()).filter(|&j| on[j]).collect();
                 *path = path_of_joints(model, joints);
+                lp.set_sides(&path.dofs);
             }
         }
         let mut on_path = vec![false; model.njoints()];
@@ -957,60 +959,47 @@ pub(crate) fn accel_derivatives_t(cd: &ContactWs, cxt: &mut DMatrix<f64>) {
     }
 }
 
-/// Rows `∂(J_c w)/∂q` at fixed `w` into `out` (`m × nv`, only path columns written):
-/// with `Z_j = Σ_{x ⪯ j} S_x w_x`, `D Z_m = S_l × (Z_m − Z_λ)` and `D p = u_l`.
-pub(crate) fn djw_dq(model: &Model, cd: &mut ContactWs, w: &[f64], out: &mut DMatrix<f64>) {
-    cd.zc[0] = Motion::zero();
+/// `zc[j] = Σ_{x ⪯ j} S_x w_x` (`zc[0] = 0`, subspaces `cd.s`) for the joints on the
+/// contacts' paths.
+pub(crate) fn union_sums(model: &Model, cd: &ContactWs, w: &[f64], zc: &mut [Motion]) {
+    zc[0] = Motion::zero();
     for &j in &cd.union_joints {
-        let mut z = cd.zc[model.parents[j]];
+        let mut z = zc[model.parents[j]];
         let iv = model.idx_v[j];
         for (s, x) in cd.s[iv..iv + model.nvs[j]].iter().zip(&w[iv..iv + model.nvs[j]]) {
             z += *s * *x;
         }
-        cd.zc[j] = z;
+        zc[j] = z;
     }
+}
+
+/// Rows `∂(J_c w)/∂q` at fixed `w` into `out` (`m × nv`, only path columns written):
+/// with `Z_j = Σ_{x ⪯ j} S_x w_x`, `D Z_m = S_l × (Z_m − Z_λ)` and `D p = u_l`.
+pub(crate) fn djw_dq(model: &Model, cd: &mut ContactWs, w: &[f64], out: &mut DMatrix<f64>) {
+    let mut zc = std::mem::take(&mut cd.zc);
+    union_sums(model, cd, w, &mut zc);
+    cd.zc = zc;
     for (c, path) in cd.paths.iter().enumerate() {
         let body = *path.joints.last().expect("path");
         let (geo, r0) = (cd.geo[c], cd.row0[c]);
-        if let Some(lp) = &cd.loops[c] {
-            let b = Base {
-                s: &cd.s,
-                vel: &cd.kvel,
-                acc: &cd.kacc,
-                dof_joint: &cd.dof_joint,
-                parents: &cd.parents,
-            };
-            let mut col = [0.0; 6];
-            for &l in &path.dofs {
-                let mut sum = [0.0; 6];
-                for &x in &path.dofs {
-                    put_rows(geo, &loop_jac_col(&b, geo, lp, x, Dir::Q(l)), true, &mut col);
-                    for (s, v) in sum.iter_mut().zip(&col) {
-                        *s += w[x] * v;
-                    }
-                }
-                for k in 0..geo.dim() {
-                    out[(r0 + k, l)] = sum[k];
-                }
+        // Two-frame constraints and generic world contacts: by the cumulative sums of w on the
+        // chains (`djz_dq_plain`).
+        let mut put = |l: usize, col: &[f64; 6]| {
+            for k in 0..geo.dim() {
+                out[(r0 + k, l)] = col[k];
             }
+        };
+        let pd = (&path.dofs[..], &path.dof_parent[..]);
+        if let Some(lp) = &cd.loops[c] {
+            let a = (lp.body_a(), &lp.a.p, &lp.a.rot);
+            let on = |il: usize| lp.on[il];
+            djz_dq_plain(&cd.s, geo, a, (lp.body_b(), &lp.b.p), pd, on, &cd.zc, &mut put);
             continue;
         }
         if !geo.is_point() {
-            let b = Base {
-                s: &cd.s,
-                vel: &cd.kvel,
-                acc: &cd.kacc,
-                dof_joint: &cd.dof_joint,
-                parents: &cd.parents,
-            };
-            let mut col = [0.0; 6];
-            for &l in &path.dofs {
-                let rows = djz_dq_rows(&b, geo, &path.rot, &cd.zc, body, &path.p, l, Dir::None);
-                put_rows(geo, &rows, false, &mut col);
-                for k in 0..geo.dim() {
-                    out[(r0 + k, l)] = col[k];
-                }
-            }
+            let a = (body, &path.p, &path.rot);
+            let on = |_: usize| (true, false);
+            djz_dq_plain(&cd.s, geo, a, (0, &path.p), pd, on, &cd.zc, &mut put);
             continue;
         }
         let p = path.p;
@@ -1106,19 +1095,9 @@ fn sub_djtl_dq_generic(
             continue;
         }
         if let Some(lp) = &cd.loops[c] {
-            let b = Base {
-                s,
-                vel: &cd.kvel,
-                acc: &cd.kacc,
-                dof_joint: &cd.dof_joint,
-                parents: &cd.parents,
-            };
-            for &l in &path.dofs {
-                for &x in &path.dofs {
-                    let e = rows_dot(geo, &loop_jac_col(&b, geo, lp, x, Dir::Q(l)), lam).1;
-                    o[rs * x + cs * l] -= e;
-                }
-            }
+            loop_djtl_dq(s, geo, lp, (&path.dofs, &path.dof_joint), lam, |x, l, e| {
+                o[rs * x + cs * l] -= e;
+            });
             continue;
         }
         let part = |i: usize| Vector3::new(lam[i], lam[i + 1], lam[i + 2]);
@@ -1489,12 +1468,9 @@ pub(crate) fn contact_hessians(
     if let Some(lp) = &cd.loops[c] {
         // Two-frame constraints take kp only as 3-D world-aligned loops, whose error
         // e = p₁ − p₂ has ∂e/∂q = J_c exactly: x_e = x_j (x_e is unused for the others).
-        for &j in &path.dofs {
-            for &k in &path.dofs {
-                let xj = rows_dot(geo, &loop_jac_col(&b, geo, lp, j, Dir::Q(k)), zeta).1;
-                f(j, k, xj, xj);
-            }
-        }
+        loop_djtl_dq(&cd.s, geo, lp, (&path.dofs, &path.dof_joint), zeta, |j, k, xj| {
+            f(j, k, xj, xj);
+        });
         return;
     }
     let (r, p) = (&path.rot, &path.p);

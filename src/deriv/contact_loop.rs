@@ -23,11 +23,17 @@
 //! chain's quantities move along `q_l` only if `l` is on that chain (`contact_kin`'s rules J1,
 //! J2, J6, J7, J8, J9 on the chain), frame A's point `p₁` and rotation `R₁` with chain A,
 //! `p₂` with chain B; `D(R₁ᵀ y) = R₁ᵀ(D y − w_l × y)` for `l` on chain A.
+//!
+//! The pair loops of the KKT and impact derivatives use closed forms instead of a dual
+//! evaluation per pair: `∂(J_cᵀλ)/∂q` from the two chains' spatial forces ([`loop_djtl_dq`];
+//! its tangent [`loop_djtl_dq2`] for `λ·∂²J_c/∂q²`) and `∂(J_c z)/∂q` from cumulative sums in
+//! plain arithmetic ([`djz_dq_plain`]).
 
 use super::contact_kin::{
     Base, D3, Dir, Dm, Geo, Path, Rows, acc_parts, at_point, d_acc_parts, d_rows, rows,
 };
-use crate::spatial::Transform;
+use crate::spatial::{Force, Motion, Transform};
+use nalgebra::Vector3;
 
 /// The two chains of a two-frame constraint.
 #[derive(Clone, Debug, Default)]
@@ -38,6 +44,9 @@ pub(crate) struct Loop {
     pub b: Path,
     /// Frame B's body and its contact frame's placement in that body's frame.
     pub local_b: (usize, Transform),
+    /// For each DoF of the union of both chains (ascending, the constraint's path in
+    /// `ContactWs`): whether it is on chain A and on chain B ([`Loop::set_sides`]).
+    pub on: Vec<(bool, bool)>,
 }
 
 impl Loop {
@@ -48,6 +57,10 @@ impl Loop {
     /// Frame B's body (0: the world).
     pub fn body_b(&self) -> usize {
         self.b.joints.last().copied().unwrap_or(0)
+    }
+    /// Fills [`Loop::on`] for `dofs`, the union of both chains' DoFs (ascending).
+    pub fn set_sides(&mut self, dofs: &[usize]) {
+        self.on = dofs.iter().map(|&x| (self.in_a(x), self.in_b(x))).collect();
     }
     #[inline]
     fn in_a(&self, x: usize) -> bool {
@@ -309,5 +322,216 @@ pub(crate) fn loop_djz_dq_rows(
         let dlin = at_point(&dza, &pa) + za.ang().cross(&dpa)
             - (at_point(&dzb, &pb) + zb.ang().cross(&dpb));
         d_rows(geo, &ra, (D3::default(), lin), (D3::default(), dlin), &wl)
+    }
+}
+
+/// `λ·∂J_x/∂q_l` (the `(x, l)` entry of `∂(J_cᵀλ)/∂q`) for every pair of DoFs `x`, `l` of the
+/// constraint's path `dofs` (the union of both chains, joints `dof_joint`, sides [`Loop::on`]),
+/// passed to `f(x, l, e)`, in closed form from the world subspaces `s`. With `(n, f)` the
+/// weights `λ` in world axes (`R₁λ` for `local`) and the spatial forces about the world origin
+/// `F_A = [n + p₁ × f; f]`, `F_B = [n + p_B × f; f]` (`p_B = p₁` for 6-D, `p₂` for 3-D; `n = 0`
+/// for 3-D), the module documentation's rows give `(J_cᵀλ)_x = [x ∈ A] S_x·F_A − [x ∈ B] S_x·F_B`
+/// (6-D: the common DoFs cancel). Along `q_l`: `D S_x = [l ⪯ x] S_l × S_x` (J1, `l` then on
+/// `x`'s chain) with `(S_l × S_x)·F = −S_x·(S_l ×* F)`; `R₁` turns and `p₁` moves with chain A
+/// (`D(R₁y) = w_l × R₁y`, `D p₁ = u_l¹` for `l ∈ A`), `p₂` with chain B (`D p₂ = u_l²` for
+/// `l ∈ B`), so `D F_X = [D n + D p_X × f + p_X × D f; D f]`. The entry is
+/// `[x ∈ A] S_x·(D F_A − [l ⪯ x] S_l ×* F_A) − [x ∈ B] S_x·(D F_B − [l ⪯ x] S_l ×* F_B)`:
+/// per `l` two forces of each kind, per pair at most two dot products.
+pub(crate) fn loop_djtl_dq(
+    s: &[Motion],
+    geo: Geo,
+    lp: &Loop,
+    (dofs, dof_joint): (&[usize], &[usize]),
+    lam: &[f64],
+    mut f: impl FnMut(usize, usize, f64),
+) {
+    let (n, fw) = super::contact_kin::world_weights(geo, &lp.a.rot, lam);
+    let p1 = lp.a.p;
+    let pb = if geo.six { p1 } else { lp.b.p };
+    let fa = Force { ang: n + p1.cross(&fw), lin: fw };
+    let fb = Force { ang: n + pb.cross(&fw), lin: fw };
+    let zero = Force { ang: Vector3::zeros(), lin: Vector3::zeros() };
+    assert!(dofs.len() == dof_joint.len() && lp.on.len() == dofs.len());
+    for (il, &l) in dofs.iter().enumerate() {
+        let (la, lb) = lp.on[il];
+        let jl = dof_joint[il];
+        let sl = s[l];
+        let (w, v) = (sl.ang, sl.lin);
+        let (dn, df) = if geo.local && la {
+            (w.cross(&n), w.cross(&fw))
+        } else {
+            (Vector3::zeros(), Vector3::zeros())
+        };
+        let dpa = if la { v + w.cross(&p1) } else { Vector3::zeros() };
+        let dpb = if geo.six {
+            dpa
+        } else if lb {
+            v + w.cross(&pb)
+        } else {
+            Vector3::zeros()
+        };
+        let dfa = Force { ang: dn + dpa.cross(&fw) + p1.cross(&df), lin: df };
+        let dfb = Force { ang: dn + dpb.cross(&fw) + pb.cross(&df), lin: df };
+        // D F − S_l ×* F for x below l on its chain.
+        let ga = if la { dfa - sl.cross_force(&fa) } else { zero };
+        let gb = if lb { dfb - sl.cross_force(&fb) } else { zero };
+        for (ix, &x) in dofs.iter().enumerate() {
+            let (xa, xb) = lp.on[ix];
+            if geo.six && xa == xb {
+                continue;
+            }
+            let (sx, anc) = (s[x], jl <= dof_joint[ix]);
+            let mut e = 0.0;
+            if xa {
+                e += sx.dot(if la && anc { &ga } else { &dfa });
+            }
+            if xb {
+                e -= sx.dot(if lb && anc { &gb } else { &dfb });
+            }
+            f(x, l, e);
+        }
+    }
+}
+
+/// `∂(J_c z)/∂q_l` for every DoF `l` of a constraint's path (position `il`, DoF `dofs[il]`,
+/// parent joint `dof_parent[il]`, sides `on(il)`), passed to `f(l, rows)` (`rows[..dim]`), in
+/// plain arithmetic from the cumulative sums `zc` (`Z_j = Σ_{x ⪯ j} S_x z_x`, `zc[0] = 0`) and
+/// the world subspaces `s`: the value and inner derivative of [`loop_djz_dq_rows`] without a
+/// tangent. Frame A `(R₁, p₁)` on body `ma`, frame B's point `p₂` on body `mb` (0 for a world
+/// contact, whose rows are then those of `contact_kin`'s generic contacts). `J_c z` is the rows
+/// of `W = Z_a − Z_b` at `p₁` (6-D) or `Z_a.lin + Z_a.ang × p₁ − Z_b.lin − Z_b.ang × p₂` (3-D),
+/// in `R₁`'s axes for `local`; along `q_l`: `D Z = S_l × (Z − Z_λ)` on `l`'s chains,
+/// `D p_i = u_l^i`, `D(R₁ᵀ y) = R₁ᵀ(D y − w_l × y)` for `l` on chain A.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn djz_dq_plain(
+    s: &[Motion],
+    geo: Geo,
+    (ma, p1, r1): (usize, &Vector3<f64>, &nalgebra::Matrix3<f64>),
+    (mb, p2): (usize, &Vector3<f64>),
+    (dofs, dof_parent): (&[usize], &[usize]),
+    on: impl Fn(usize) -> (bool, bool),
+    zc: &[Motion],
+    mut f: impl FnMut(usize, &[f64; 6]),
+) {
+    let (za, zb) = (zc[ma], zc[mb]);
+    let wv = za - zb;
+    let (y_ang, y_lin) = if geo.six {
+        (wv.ang, wv.lin + wv.ang.cross(p1))
+    } else {
+        (Vector3::zeros(), za.lin + za.ang.cross(p1) - zb.lin - zb.ang.cross(p2))
+    };
+    let z3 = Vector3::zeros();
+    let mut out = [0.0; 6];
+    for (il, &l) in dofs.iter().enumerate() {
+        let (la, lb) = on(il);
+        let sl = s[l];
+        let zl = zc[dof_parent[il]];
+        let dza = if la { sl.cross(&(za - zl)) } else { Motion::zero() };
+        let dzb = if lb { sl.cross(&(zb - zl)) } else { Motion::zero() };
+        let dp1 = if la { sl.lin + sl.ang.cross(p1) } else { z3 };
+        let (mut d_ang, mut d_lin) = if geo.six {
+            let dw = dza - dzb;
+            (dw.ang, dw.lin + dw.ang.cross(p1) + wv.ang.cross(&dp1))
+        } else {
+            let dp2 = if lb { sl.lin + sl.ang.cross(p2) } else { z3 };
+            let a = dza.lin + dza.ang.cross(p1) + za.ang.cross(&dp1);
+            (z3, a - (dzb.lin + dzb.ang.cross(p2) + zb.ang.cross(&dp2)))
+        };
+        if geo.local {
+            let wl = if la { sl.ang } else { z3 };
+            d_lin = r1.tr_mul(&(d_lin - wl.cross(&y_lin)));
+            if geo.six {
+                d_ang = r1.tr_mul(&(d_ang - wl.cross(&y_ang)));
+            }
+        }
+        if geo.six {
+            out[..3].copy_from_slice(d_ang.as_slice());
+            out[3..6].copy_from_slice(d_lin.as_slice());
+        } else {
+            out[..3].copy_from_slice(d_lin.as_slice());
+        }
+        f(l, &out);
+    }
+}
+
+/// A spatial force (or motion) with a tangent, as `(ang, lin)`.
+type DF = (D3, D3);
+
+/// `S ×* F = [w × F.ang + v × F.lin; w × F.lin]` with tangents.
+#[inline]
+fn cross_force(s: &Dm, f: &DF) -> DF {
+    let (w, v) = (s.ang(), s.lin());
+    (w.cross(&f.0) + v.cross(&f.1), w.cross(&f.1))
+}
+
+/// The tangent of `S·F`.
+#[inline]
+fn dot_d(s: &Dm, f: &DF) -> f64 {
+    s.d.ang.dot(&f.0.v) + s.v.ang.dot(&f.0.d) + s.d.lin.dot(&f.1.v) + s.v.lin.dot(&f.1.d)
+}
+
+/// `λ·∂²J_x/∂q_l∂q_k` (inner `l`, outer `k`) for every pair of DoFs `x`, `l` of the constraint's
+/// path, passed to `f(x, l, e)`: the tangent along `q_k` of [`loop_djtl_dq`]'s closed form,
+/// evaluated with dual base quantities (`S_x`, `S_l`, `p₁`, `p₂` and `R₁λ` with their
+/// tangents on the chains that hold `k`; the indicators `[l ⪯ x]` are fixed).
+pub(crate) fn loop_djtl_dq2(
+    b: &Base,
+    geo: Geo,
+    lp: &Loop,
+    (dofs, dof_joint): (&[usize], &[usize]),
+    lam: &[f64],
+    k: usize,
+    mut f: impl FnMut(usize, usize, f64),
+) {
+    let (da, db) = lp.dirs(Dir::Q(k));
+    let part = |i: usize| Vector3::new(lam[i], lam[i + 1], lam[i + 2]);
+    let (n0, f0) = if geo.six { (part(0), part(3)) } else { (Vector3::zeros(), part(0)) };
+    let z3 = D3::default();
+    let (n, fw) = if geo.local {
+        let r = b.rot(&lp.a.rot, da);
+        (D3 { v: r.v * n0, d: r.d * n0 }, D3 { v: r.v * f0, d: r.d * f0 })
+    } else {
+        (D3 { v: n0, d: Vector3::zeros() }, D3 { v: f0, d: Vector3::zeros() })
+    };
+    let p1 = b.p(&lp.a.p, da);
+    let pb = if geo.six { p1 } else { b.p(&lp.b.p, db) };
+    let fa: DF = (n + p1.cross(&fw), fw);
+    let fb: DF = (n + pb.cross(&fw), fw);
+    assert!(dofs.len() == dof_joint.len() && lp.on.len() == dofs.len());
+    for (il, &l) in dofs.iter().enumerate() {
+        let (la, lb) = lp.on[il];
+        let jl = dof_joint[il];
+        let sl = b.s(l, if la { da } else { db });
+        let (w, v) = (sl.ang(), sl.lin());
+        let (dn, df) = if geo.local && la { (w.cross(&n), w.cross(&fw)) } else { (z3, z3) };
+        let dpa = if la { v + w.cross(&p1) } else { z3 };
+        let dpb = if geo.six {
+            dpa
+        } else if lb {
+            v + w.cross(&pb)
+        } else {
+            z3
+        };
+        let dfa: DF = (dn + dpa.cross(&fw) + p1.cross(&df), df);
+        let dfb: DF = (dn + dpb.cross(&fw) + pb.cross(&df), df);
+        let sub = |x: DF, y: DF| (x.0 - y.0, x.1 - y.1);
+        let ga = if la { sub(dfa, cross_force(&sl, &fa)) } else { (z3, z3) };
+        let gb = if lb { sub(dfb, cross_force(&sl, &fb)) } else { (z3, z3) };
+        for (ix, &x) in dofs.iter().enumerate() {
+            let (xa, xb) = lp.on[ix];
+            if geo.six && xa == xb {
+                continue;
+            }
+            let sx = b.s(x, if xa { da } else { db });
+            let anc = jl <= dof_joint[ix];
+            let mut e = 0.0;
+            if xa {
+                e += dot_d(&sx, if la && anc { &ga } else { &dfa });
+            }
+            if xb {
+                e -= dot_d(&sx, if lb && anc { &gb } else { &dfb });
+            }
+            f(x, l, e);
+        }
     }
 }

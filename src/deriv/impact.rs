@@ -14,8 +14,8 @@ use super::contact::{
     fill_rinv, g_matrix_split, g_matrix_with, idfoza_batch, padded_rows, path_kinematics,
     sub_djtl_dq_tree, transpose_into, update_points,
 };
-use super::contact_kin::{Base, Dir, djac_dq2, du_dq2, put_rows, rows_dot, world_weights};
-use super::contact_loop::loop_djac_col_dq;
+use super::contact_kin::{Base, Dir, djac_dq2, du_dq2, put_rows, world_weights};
+use super::contact_loop::{loop_djtl_dq2, loop_djz_dq_rows};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_so::{SoData, id_so_unchecked};
 use super::kkt::{
@@ -512,7 +512,7 @@ fn so_inner(
     // Every entry is rewritten (contact rows zeroed: the G products add to all of them).
     copy_rows_zero_rest(rqq, so.id.d2tau_dq2(), n);
     // − ∂²(Jᵀλ̂)/∂q² and ∂²(J w)/∂q².
-    add_contact_rqq(model, &im.cd, im.impulse.as_slice(), im.w.as_slice(), rqq);
+    add_contact_rqq(model, &mut im.cd, im.impulse.as_slice(), im.w.as_slice(), rqq);
     // G terms, the IDFOZA parts of eight (or four) columns k at a time.
     so.dv_minus_one.copy_from(&im.dvplus_dvminus);
     for k in 0..n {
@@ -803,9 +803,27 @@ pub(crate) fn zeta_rqq(
 /// [`crate::deriv::impact::reduced::impact_so_derivatives`].
 pub(crate) fn add_contact_rqq(
     model: &Model,
+    cd: &mut ContactWs,
+    impulse: &[f64],
+    w: &[f64],
+    rqq: &mut Tensor3,
+) {
+    // Two-frame constraints: the cumulative sums of w on their chains (`cd.zc` as scratch).
+    let mut zc = std::mem::take(&mut cd.zc);
+    if cd.has_loops() {
+        super::contact::union_sums(model, cd, w, &mut zc);
+    }
+    add_contact_rqq_with(model, cd, impulse, w, &zc, rqq);
+    cd.zc = zc;
+}
+
+/// [`add_contact_rqq`] with the two-frame constraints' cumulative sums `zc` of `w`.
+fn add_contact_rqq_with(
+    model: &Model,
     cd: &ContactWs,
     impulse: &[f64],
     w: &[f64],
+    zc: &[Motion],
     rqq: &mut Tensor3,
 ) {
     let n = model.nv;
@@ -824,18 +842,12 @@ pub(crate) fn add_contact_rqq(
             };
             let lam = &impulse[r0..r0 + geo.dim()];
             let (d, mut col) = (geo.dim(), [0.0; 6]);
+            let pd = (&path.dofs[..], &path.dof_joint[..]);
             for &k in &path.dofs {
+                loop_djtl_dq2(&b, geo, lp, pd, lam, k, |x, l, e| rqq[(x, l, k)] -= e);
                 for &l in &path.dofs {
-                    let mut sum = [0.0; 6];
-                    for &x in &path.dofs {
-                        let rows = loop_djac_col_dq(&b, geo, lp, x, l, Dir::Q(k));
-                        rqq[(x, l, k)] -= rows_dot(geo, &rows, lam).1;
-                        put_rows(geo, &rows, true, &mut col);
-                        for (s, y) in sum[..d].iter_mut().zip(&col) {
-                            *s += w[x] * y;
-                        }
-                    }
-                    for (r, y) in sum[..d].iter().enumerate() {
+                    put_rows(geo, &loop_djz_dq_rows(&b, geo, lp, zc, l, Dir::Q(k)), true, &mut col);
+                    for (r, y) in col[..d].iter().enumerate() {
                         rqq[(n + r0 + r, l, k)] = *y;
                     }
                 }
@@ -1294,7 +1306,7 @@ pub(crate) mod reduced {
         // − ∂²(Jᵀλ̂)/∂q² and ∂²(J w)/∂q² (as the full tree's impact second order).
         crate::deriv::impact::add_contact_rqq(
             full,
-            &im.cd,
+            &mut im.cd,
             im.impulse.as_slice(),
             im.wf.as_slice(),
             rf,

@@ -18,9 +18,9 @@ use super::contact::{
 };
 use super::contact_kin::{
     BodyAt, Dir, PathSums, dacc_dq, dacc_dv, dap_dq, dap_dqdv, djac_dq2, djz_dq_rows, du_dq,
-    du_dq2, fill_path_sums, put_rows, rows_dot, world_weights,
+    du_dq2, fill_path_sums, put_rows, world_weights,
 };
-use super::contact_loop::{loop_dacc_dq, loop_dacc_dv, loop_djac_col_dq, loop_djz_dq_rows};
+use super::contact_loop::{loop_dacc_dq, loop_dacc_dv, loop_djtl_dq2, loop_djz_dq_rows};
 use super::contracted::{IdContractWs, PointWs, id_contract_unchecked, point_hessians};
 use super::id_fo::id_derivatives_unchecked;
 use super::id_so::{SoData, id_so_unchecked};
@@ -744,13 +744,11 @@ fn kkt_so_inner(
             // derivatives from the dual-base row kinematics of `contact_loop`, every pair.
             let lam = &kd.lambda.as_slice()[r0..r0 + geo.dim()];
             let mut col = [0.0; 6];
+            let pd = (&path.dofs[..], &path.dof_joint[..]);
             for &k in &path.dofs {
                 let (dq, dv) = (Dir::Q(k), Dir::V(k));
+                loop_djtl_dq2(&b, geo, lp, pd, lam, k, |x, l, t| rqq[(x, l, k)] -= t);
                 for &l in &path.dofs {
-                    for &x in &path.dofs {
-                        let t = rows_dot(geo, &loop_djac_col_dq(&b, geo, lp, x, l, dq), lam).1;
-                        rqq[(x, l, k)] -= t;
-                    }
                     let rows = [
                         (&mut *rqv, loop_dacc_dq(&b, geo, lp, l, dv)),
                         (&mut *rvv, loop_dacc_dv(&b, geo, lp, l, dv)),
