@@ -2,7 +2,8 @@
 //! and a terminal knot, with the knots' data, evaluated in parallel over the knots.
 
 use nalgebra::DVector;
-use rayon::prelude::*;
+use sodyn::batch::{BatchData, BatchPool, map_states};
+use std::sync::{Arc, Mutex};
 
 use crate::action::{ActionData, ActionModel};
 use crate::cost::CostItem;
@@ -17,7 +18,9 @@ pub struct ShootingProblem {
     terminal: ActionModel,
     pub(crate) running_data: Vec<ActionData>,
     pub(crate) terminal_data: ActionData,
-    pool: Option<rayon::ThreadPool>,
+    /// The knots' threads: sodyn's batch pool (the caller and `threads − 1` helpers), `None`
+    /// on one thread.
+    pool: Option<BatchData<()>>,
     threads: usize,
 }
 
@@ -68,12 +71,8 @@ impl ShootingProblem {
         self.pool = if n == 1 {
             None
         } else {
-            Some(
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(n)
-                    .build()
-                    .map_err(|e| OcpError::new(format!("threads: {e}")))?,
-            )
+            let pool = BatchPool::new(n).map_err(|e| OcpError::new(format!("threads: {e}")))?;
+            Some(BatchData::from_workspace(Arc::new(pool), ()))
         };
         self.threads = n;
         Ok(())
@@ -237,16 +236,27 @@ impl ShootingProblem {
         F: Fn(usize, &ActionModel, &mut ActionData) -> Result<()> + Sync,
     {
         let (running, datas) = (&self.running, &mut self.running_data);
-        let work = || {
-            running
-                .par_iter()
-                .zip(datas.par_iter_mut())
-                .enumerate()
-                .with_min_len(1)
-                .try_for_each(|(t, (m, d))| f(t, m, d))
-        };
-        match &self.pool {
-            Some(p) => p.install(work),
+        match &mut self.pool {
+            // The knots on sodyn's batch pool: the calling thread takes its share, and the
+            // helpers poll briefly and then sleep, so they do not compete with the sequential
+            // backward pass and rollouts that follow. The lowest failing knot's error is kept
+            // (the pool's own error only stops the other threads).
+            Some(bd) => {
+                let first = Mutex::new(None::<(usize, OcpError)>);
+                let r = map_states(bd, datas, |_, t, d| {
+                    f(t, &running[t], d).map_err(|e| {
+                        let mut g = first.lock().unwrap_or_else(|p| p.into_inner());
+                        if g.as_ref().is_none_or(|(t0, _)| t < *t0) {
+                            *g = Some((t, e));
+                        }
+                        sodyn::Error::Workspace(String::new())
+                    })
+                });
+                match first.into_inner().unwrap_or_else(|p| p.into_inner()) {
+                    Some((_, e)) => Err(e),
+                    None => r.map_err(|e| OcpError::new(format!("threads: {e}"))),
+                }
+            }
             None => running
                 .iter()
                 .zip(datas.iter_mut())

@@ -65,17 +65,22 @@ fn problem(m: &Arc<sodyn::model::Model>, rk: bool) -> String {
 #[test]
 fn solver_iterations_allocate_nothing() {
     let m = Arc::new(builtin::quadruped());
-    for (kind, so, rk) in [
-        (SolverKind::Fddp, SecondOrder::Off, false),
-        (SolverKind::Ddp, SecondOrder::Off, false),
-        (SolverKind::BoxFddp, SecondOrder::Off, false),
-        (SolverKind::Fddp, SecondOrder::On, false),
-        (SolverKind::Ddp, SecondOrder::On, false),
+    for (kind, so, rk, threads) in [
+        (SolverKind::Fddp, SecondOrder::Off, false, 1),
+        (SolverKind::Ddp, SecondOrder::Off, false, 1),
+        (SolverKind::BoxFddp, SecondOrder::Off, false, 1),
+        (SolverKind::Fddp, SecondOrder::On, false, 1),
+        (SolverKind::Ddp, SecondOrder::On, false, 1),
         // Runge-Kutta knots (RK4) in the same problem.
-        (SolverKind::Fddp, SecondOrder::Off, true),
+        (SolverKind::Fddp, SecondOrder::Off, true, 1),
+        // The knots on two threads (sodyn's batch pool).
+        (SolverKind::Fddp, SecondOrder::Off, false, 2),
+        (SolverKind::Fddp, SecondOrder::On, false, 2),
     ] {
         let doc = problem(&m, rk);
-        let mut s = Solver::new(spec::problem_from_json(m.clone(), &doc).unwrap(), kind);
+        let mut p = spec::problem_from_json(m.clone(), &doc).unwrap();
+        p.set_threads(threads).unwrap();
+        let mut s = Solver::new(p, kind);
         s.second_order = so;
         s.th_stop = 1e-300; // run every iteration
         let x0 = s.problem.x0().clone();
@@ -89,7 +94,8 @@ fn solver_iterations_allocate_nothing() {
         };
         count(&mut s, 8); // warm-up: the log's capacity
         let (a3, a6) = (count(&mut s, 3), count(&mut s, 6));
-        assert_eq!(s.iter(), 6, "{kind:?} {so:?} rk {rk} stopped early: {:?}", s.termination());
-        assert_eq!(a3, a6, "{kind:?} {so:?} rk {rk}: {a3} allocations in 3 iterations, {a6} in 6");
+        let what = format!("{kind:?} {so:?} rk {rk} threads {threads}");
+        assert_eq!(s.iter(), 6, "{what} stopped early: {:?}", s.termination());
+        assert_eq!(a3, a6, "{what}: {a3} allocations in 3 iterations, {a6} in 6");
     }
 }
