@@ -2,9 +2,10 @@
 //! derivatives.
 
 use crate::convert::{
-    core_err, nv_what, out_mat, out_tensor, out_vec, read_placement, read_q, read_vec, value_err,
+    ContactKey, core_err, nv_what, out_mat, out_tensor, out_vec, read_placement, read_q, read_vec,
+    value_err,
 };
-use crate::data::{ContactKey, PyData, contact_data, read_qvx};
+use crate::data::{PyData, contact_data, read_qvx};
 use crate::model::PyModel;
 use nalgebra::{DMatrix, DVector, Vector3};
 use numpy::PyArray1;
@@ -693,6 +694,24 @@ pub(crate) fn impact_so_contracted<'py>(
     PyTuple::new(py, [out_mat(py, ic.c_qq()), out_mat(py, ic.c_qvminus())])
 }
 
+/// The registry handle of a contact set on a model for the `contacts` attribute of
+/// `sodyn.jax`'s KKT and impact FFI calls (`jax_ffi::register_contacts`). The contacts are
+/// resolved and checked here (unknown frame, a contact on the world, a bad restitution or
+/// Baumgarte gain: `SodynError`, as the numpy API's calls).
+#[pyfunction]
+#[pyo3(signature = (model, contacts, restitution = 0.0))]
+fn _jax_ffi_contacts(
+    model: PyRef<'_, PyModel>,
+    contacts: Vec<PyRef<'_, PyContact>>,
+    restitution: f64,
+) -> PyResult<i64> {
+    let m = &model.m;
+    let (cs, ckey) = resolve(m, Some(&contacts))?;
+    let h = crate::jax_ffi::register_contacts(m, &model.ffi, cs, ckey, restitution)
+        .map_err(core_err)?;
+    Ok(h as i64)
+}
+
 /// Adds this family's classes and functions to the module.
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyContact>()?;
@@ -701,5 +720,6 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(py_impact_derivatives, m)?)?;
     m.add_function(wrap_pyfunction!(kkt_so_contracted, m)?)?;
     m.add_function(wrap_pyfunction!(impact_so_contracted, m)?)?;
+    m.add_function(wrap_pyfunction!(_jax_ffi_contacts, m)?)?;
     Ok(())
 }

@@ -16,6 +16,9 @@ use sodyn::tensor::Tensor3;
 use std::collections::HashMap;
 use std::sync::{Mutex, OnceLock};
 
+/// A contact set resolved against a model: (frame index, point) per contact.
+pub(crate) type ContactKey = Vec<(usize, Vec<u64>)>;
+
 create_exception!(
     _sodyn,
     SodynError,

@@ -1,6 +1,6 @@
 //! `Data`: the workspaces of one model and the input buffers.
 
-use crate::convert::{nv_what, read_q, read_vec};
+use crate::convert::{ContactKey, nv_what, read_q, read_vec};
 use crate::model::PyModel;
 use nalgebra::DVector;
 use pyo3::prelude::*;
@@ -9,9 +9,6 @@ use sodyn::algo::Data;
 use sodyn::deriv::ContactData;
 use sodyn::model::Model;
 use sodyn::spatial::Force;
-
-/// A contact set resolved against a model: (frame index, point) per contact.
-pub(crate) type ContactKey = Vec<(usize, Vec<u64>)>;
 
 /// Workspace of one model: sodyn's `Data` (its second-order capacity added on first use), the
 /// `ContactData` of the last contact set (made on first use, kept while the set is the same)

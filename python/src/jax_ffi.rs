@@ -34,10 +34,7 @@
 //! and checked there, one handle per distinct set and model, removed with the model; each
 //! model entry keeps its workspaces (`Data`, `ContactData`) per contact set.
 
-use crate::contacts::{PyContact, resolve};
-use crate::convert::core_err;
-use crate::data::ContactKey;
-use crate::model::PyModel;
+use crate::convert::ContactKey;
 use nalgebra::{DVector, Matrix3xX, Matrix6xX};
 use pyo3::prelude::*;
 use pyo3::types::{PyCapsule, PyDict};
@@ -325,31 +322,29 @@ impl Drop for Link {
     }
 }
 
-/// The registry handle of a contact set on a model (the `contacts` attribute of the KKT and
-/// impact handlers): the same contacts and restitution on the same model get the same handle.
-/// The contacts are resolved and checked here (unknown frame, a contact on the world, a bad
-/// restitution or Baumgarte gain: `SodynError`, as the numpy API's calls).
-#[pyfunction]
-#[pyo3(signature = (model, contacts, restitution = 0.0))]
-fn _jax_ffi_contacts(
-    model: PyRef<'_, PyModel>,
-    contacts: Vec<PyRef<'_, PyContact>>,
+/// The registry handle of the contact set `cs` (resolved and checked by the caller, with its
+/// key `ckey`) and `restitution` on the model registered by `link`: the same contacts and
+/// restitution on the same model get the same handle (the `contacts` attribute of the KKT and
+/// impact handlers; `_jax_ffi_contacts` in `contacts.rs`).
+pub(crate) fn register_contacts(
+    m: &Model,
+    link: &Link,
+    cs: Vec<Contact>,
+    ckey: ContactKey,
     restitution: f64,
-) -> PyResult<i64> {
-    let m = &model.m;
-    let (cs, ckey) = resolve(m, Some(&contacts))?;
-    let mut cd = ContactData::new(m, &cs).map_err(core_err)?;
-    cd.set_restitution(restitution).map_err(core_err)?;
-    let h = model.ffi.handle(m);
+) -> sodyn::Result<u64> {
+    let mut cd = ContactData::new(m, &cs)?;
+    cd.set_restitution(restitution)?;
+    let h = link.handle(m);
     let key = (ckey, restitution.to_bits());
     let mut reg = csets().write().unwrap_or_else(|e| e.into_inner());
     if let Some((k, _)) = reg.iter().find(|(_, c)| c.model == h && c.key == key) {
-        return Ok(*k as i64);
+        return Ok(*k);
     }
     let k = next_handle();
     let rows = cs.iter().map(|c| c.dim()).sum();
     reg.insert(k, Arc::new(CSet { model: h, contacts: cs, restitution, rows, key }));
-    Ok(k as i64)
+    Ok(k)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1309,6 +1304,5 @@ fn _jax_ffi_targets(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
 /// Adds this family's functions to the module.
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_jax_ffi_targets, m)?)?;
-    m.add_function(wrap_pyfunction!(_jax_ffi_contacts, m)?)?;
     Ok(())
 }

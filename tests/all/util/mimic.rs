@@ -37,61 +37,8 @@ pub fn with_armature(m: &Model, a: &[f64]) -> Model {
 /// holds `t3` (`j4 + 2 j5`, `j4` eliminated by `e3`). Hinges with a `ref` (`j1`, `j3`, `j6`), a
 /// ball joint, two hinges in one body, a spatial tendon (recorded only). The loader eliminates
 /// `j3`, `j6`, `j4` and `j5`: `nv` 16 → 12.
-pub const TENDON_MJCF: &str = r#"<mujoco model="tendon_coupled">
-  <compiler angle="radian"/>
-  <default><geom type="capsule" size="0.03"/></default>
-  <worldbody>
-    <body name="base" pos="0 0 1">
-      <freejoint name="root"/>
-      <geom type="box" size="0.1 0.1 0.05"/>
-      <body name="l1" pos="0.1 0 0">
-        <joint name="j1" axis="0 1 0" ref="0.3"/>
-        <geom fromto="0 0 0 0.3 0 0"/>
-        <body name="l2" pos="0.3 0 0">
-          <joint name="j2" axis="1 0 0"/>
-          <geom fromto="0 0 0 0.25 0 0"/>
-          <body name="l3" pos="0.25 0 0">
-            <joint name="j3" axis="0 0 1" ref="-0.2"/>
-            <geom fromto="0 0 0 0.2 0 0"/>
-            <site name="tip" pos="0.2 0 0"/>
-          </body>
-        </body>
-        <body name="slider" pos="0.1 0.1 0">
-          <joint name="s1" type="slide" axis="0 1 0"/>
-          <geom type="box" size="0.04 0.04 0.04"/>
-        </body>
-      </body>
-      <body name="l4" pos="-0.1 0 0">
-        <joint name="b" type="ball"/>
-        <geom fromto="0 0 0 -0.2 0 0"/>
-        <body name="l5" pos="-0.2 0 0">
-          <joint name="j4" axis="0 1 0"/>
-          <joint name="j5" axis="1 0 0" pos="0 0 0.02"/>
-          <geom fromto="0 0 0 -0.2 0 0"/>
-          <site name="foot" pos="-0.2 0 0"/>
-        </body>
-      </body>
-      <body name="l6" pos="0 0.1 0">
-        <joint name="j6" axis="0 0 1" ref="0.1"/>
-        <geom fromto="0 0 0 0 0.2 0"/>
-      </body>
-    </body>
-  </worldbody>
-  <tendon>
-    <fixed name="t1"><joint joint="j1" coef="0.5"/><joint joint="j2" coef="1"/><joint joint="j3" coef="-0.7"/></fixed>
-    <fixed name="t2"><joint joint="j2" coef="0.3"/><joint joint="s1" coef="2"/></fixed>
-    <fixed name="t3"><joint joint="j4" coef="1"/><joint joint="j5" coef="2"/></fixed>
-    <fixed name="t4"><joint joint="j3" coef="1"/><joint joint="j4" coef="-1"/></fixed>
-    <spatial name="sp"><site site="tip"/><site site="foot"/></spatial>
-  </tendon>
-  <equality>
-    <tendon name="e1" tendon1="t1" tendon2="t2" polycoef="0.1 0.4 0 0 0"/>
-    <joint name="e2" joint1="j6" joint2="j1" polycoef="0.05 -0.5"/>
-    <tendon name="e3" tendon1="t4" polycoef="0.02"/>
-    <tendon name="e4" tendon1="t3"/>
-  </equality>
-</mujoco>
-"#;
+pub const TENDON_MJCF: &str =
+    include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/mjcf/tendon_coupled.xml"));
 
 /// [`TENDON_MJCF`] loaded: a model in reduced coordinates with couplings of several joints.
 pub fn tendon_model() -> Model {
