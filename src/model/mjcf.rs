@@ -1441,6 +1441,28 @@ impl Loader {
                     }
                 };
                 let at_attr = |key: &str| get(key).map_or(c.line, |a| a.line);
+                // `polycoef` (default `0 1`) of a linear coupling: its coefficients (0 past the
+                // fifth), or an error naming the first nonzero non-linear one.
+                let linear_polycoef = |other: &str| -> Result<[f64; 5]> {
+                    let mut p = match get("polycoef") {
+                        Some(a) => parse_numbers(c, a, &elem, 1, 5)?,
+                        None => vec![0.0, 1.0],
+                    };
+                    p.resize(5, 0.0);
+                    if let Some(i) = (2..5).find(|&i| p[i] != 0.0) {
+                        return Err(model_err(
+                            &c.file,
+                            at_attr("polycoef"),
+                            &elem,
+                            format!(
+                                "polycoef: coefficient {i} is {}: only a linear coupling \
+                                 (c0 + c1 · {other}) is supported",
+                                p[i]
+                            ),
+                        ));
+                    }
+                    Ok([p[0], p[1], p[2], p[3], p[4]])
+                };
                 // A body named by attribute `key`: (its frame, its name) — the world's for
                 // "world" (or no attribute, when `optional`).
                 let body = |key: &str, optional: bool| -> Result<usize> {
@@ -1552,27 +1574,10 @@ impl Loader {
                                  (only the coupling joint1 = c0 + c1 · joint2)",
                             ));
                         };
-                        let line = at_attr("polycoef");
-                        let p = match get("polycoef") {
-                            Some(a) => parse_numbers(c, a, &elem, 1, 5)?,
-                            None => vec![0.0, 1.0],
-                        };
-                        let coef = |i: usize| p.get(i).copied().unwrap_or(0.0);
-                        if let Some(i) = (2..5).find(|&i| coef(i) != 0.0) {
-                            return Err(model_err(
-                                &c.file,
-                                line,
-                                &elem,
-                                format!(
-                                    "polycoef: coefficient {i} is {}: only a linear coupling \
-                                     (c0 + c1 · joint2) is supported",
-                                    coef(i)
-                                ),
-                            ));
-                        }
+                        let coef = linear_polycoef("joint2")?;
                         // MuJoCo: q1 − q1(qpos0) = c0 + c1 (q2 − q2(qpos0)).
                         let (r1, r2) = (q0[model.idx_q[j1]], q0[model.idx_q[j2]]);
-                        let (c0, c1) = (coef(0), coef(1));
+                        let (c0, c1) = (coef[0], coef[1]);
                         let loc = (c.file.clone(), c.line, elem.clone());
                         let offset = c0 + r1 - c1 * r2;
                         rows.push((
@@ -1631,27 +1636,10 @@ impl Loader {
                             return Err(err_at(c, &elem, "attribute tendon1 is missing"));
                         };
                         let t2 = tendon("tendon2")?;
-                        let line = at_attr("polycoef");
-                        let p = match get("polycoef") {
-                            Some(a) => parse_numbers(c, a, &elem, 1, 5)?,
-                            None => vec![0.0, 1.0],
-                        };
-                        let coef = |i: usize| p.get(i).copied().unwrap_or(0.0);
-                        if let Some(i) = (2..5).find(|&i| coef(i) != 0.0) {
-                            return Err(model_err(
-                                &c.file,
-                                line,
-                                &elem,
-                                format!(
-                                    "polycoef: coefficient {i} is {}: only a linear coupling \
-                                     (c0 + c1 · tendon2) is supported",
-                                    coef(i)
-                                ),
-                            ));
-                        }
+                        let coef = linear_polycoef("tendon2")?;
                         // MuJoCo: L1 − L1(qpos0) = c0 + c1 (L2 − L2(qpos0)), L = Σ coef · q;
                         // without tendon2, L1 − L1(qpos0) = c0.
-                        let (c0, c1) = (coef(0), if t2.is_some() { coef(1) } else { 0.0 });
+                        let (c0, c1) = (coef[0], if t2.is_some() { coef[1] } else { 0.0 });
                         let length = |t: &[(usize, f64)]| -> f64 {
                             t.iter().map(|&(j, x)| x * q0[model.idx_q[j]]).sum()
                         };
@@ -1671,7 +1659,7 @@ impl Loader {
                         if !rhs.is_finite() || terms.iter().any(|t| !t.1.is_finite()) {
                             return Err(model_err(
                                 &c.file,
-                                line,
+                                at_attr("polycoef"),
                                 &elem,
                                 "polycoef and the tendon coefficients must be finite",
                             ));
