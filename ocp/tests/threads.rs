@@ -3,37 +3,14 @@
 //! either thread; only where they run differs).
 
 use nalgebra::DVector;
-use serde_json::json;
 use sodyn::model::builtin;
-use sodyn_ocp::{Solver, SolverKind, StateMultibody, spec};
+use sodyn_ocp::{Solver, SolverKind, spec};
 use std::sync::Arc;
 
-/// A quadruped on four 3-D contacts (every cost type the gaits use), an impulse knot, and box
-/// bounds on the controls.
+mod common;
+
 fn problem(m: &Arc<sodyn::model::Model>) -> String {
-    let x0 = StateMultibody::new(m.clone()).zero();
-    let feet = ["LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT"];
-    let contacts: Vec<_> =
-        feet.iter().map(|f| json!({"name": f, "frame": f, "kd": 30.0})).collect();
-    let mut costs = vec![
-        json!({"name": "x", "weight": 10.0, "residual": {"type": "state", "xref": x0.as_slice()}}),
-        json!({"name": "u", "weight": 1e-3, "residual": {"type": "control", "uref": vec![0.0; 12]}}),
-        json!({"name": "com", "weight": 1e3, "residual": {"type": "com_position", "cref": [0.05, 0.0, 0.0]}}),
-        json!({"name": "foot", "weight": 1.0, "residual": {"type": "frame_placement", "frame": "LF_FOOT",
-               "rotation": [1, 0, 0, 0, 1, 0, 0, 0, 1], "translation": [0.2, 0.1, -0.2]}}),
-    ];
-    for f in feet {
-        costs.push(json!({"name": format!("{f}_cone"), "weight": 10.0,
-            "residual": {"type": "contact_cone", "contact": f, "A": [[1.0, 0.0, -0.6], [0.0, 0.0, 1.0]]},
-            "activation": {"type": "quad_barrier", "lb": ["-inf", 0.0], "ub": [0.0, "inf"]}}));
-    }
-    let run = json!({"type": "euler", "dt": 0.02, "actuation": "floating_base", "contacts": contacts,
-        "costs": costs, "u_lb": vec![-30.0; 12], "u_ub": vec![30.0; 12]});
-    let imp = json!({"type": "impulse", "contacts": contacts, "costs": [costs[0].clone()]});
-    let mut running = vec![run.clone(); 10];
-    running.push(imp);
-    running.extend(vec![run.clone(); 9]);
-    json!({"x0": x0.as_slice(), "running": running, "terminal": run}).to_string()
+    common::quadruped_problem(m, false, 10, 9)
 }
 
 #[test]

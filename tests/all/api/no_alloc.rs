@@ -65,6 +65,20 @@ fn algorithms_do_not_allocate() {
         (builtin::quadruped().with_armature(&[0.1; 18]).unwrap(), feet(), D3, Local, 2.0),
         // A model in reduced coordinates (mimic joints) through the same functions.
         (reduced_arm(), vec!["tool", "thumb_tip"], D3, Local, 2.0),
+        // Two-frame (closed-loop) constraints, "A:B", mixed with a world contact.
+        (builtin::quadruped(), vec!["LF_FOOT:RH_FOOT", "RF_FOOT"], D3, Lwa, 0.0),
+        (builtin::quadruped(), vec!["LF_FOOT:RH_FOOT", "RF_FOOT"], D6, Local, 0.0),
+        (
+            builtin::delta(),
+            vec![
+                "forearm_tip_1:platform_1",
+                "forearm_tip_2:platform_2",
+                "forearm_tip_3:platform_3",
+            ],
+            D3,
+            Lwa,
+            0.0,
+        ),
     ] {
         let mut rng = Rng::new(1);
         let q = m.random_configuration(&mut rng);
@@ -74,8 +88,13 @@ fn algorithms_do_not_allocate() {
         let contacts: Vec<Contact> = frames
             .iter()
             .map(|f| {
-                let c = Contact::new(&m, f, Vector3::zeros()).unwrap().with_reference(reference);
-                Contact { kind, ..c.with_baumgarte(gains, gains).unwrap() }
+                let (a, b) = f.split_once(':').map_or((*f, None), |(a, b)| (a, Some(b)));
+                let c = Contact::new(&m, a, Vector3::zeros()).unwrap().with_reference(reference);
+                let c = Contact { kind, ..c.with_baumgarte(gains, gains).unwrap() };
+                match b {
+                    Some(b) => c.with_frame2(&m, b, None).unwrap(),
+                    None => c,
+                }
             })
             .collect();
         let mut cd = ContactData::with_second_order(&m, &contacts).unwrap();
@@ -153,7 +172,7 @@ fn algorithms_do_not_allocate() {
             impact_so_contracted(&m, &mut d, &mut cdc, &q, &v, &w, &wl).unwrap();
         });
         // Kinematics for costs: frames, centre of mass, centroidal momentum, configuration space.
-        let f = m.frame_id(frames[0]).unwrap();
+        let f = m.frame_id(frames[0].split(':').next().unwrap_or_default()).unwrap();
         let mut j6 = nalgebra::Matrix6xX::zeros(m.nv());
         let (mut j6b, mut j6c) = (j6.clone(), j6.clone());
         for rf in [ReferenceFrame::Local, ReferenceFrame::World, ReferenceFrame::LocalWorldAligned]
